@@ -1,0 +1,82 @@
+"""Energy bookkeeping of a run, and the energy swing that sizes a flywheel.
+
+Energy balance (physics.md section 1, energy form): the work of all moments equals the change of
+kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. The works are integrated
+by Gauss-Legendre quadrature on every solver step of the dense output, so the residual measures
+the integration error of the run, not a sampling error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mech_regulator.model import MachineModel
+from mech_regulator.solvers import Trajectory
+
+GAUSS_NODES, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(4)
+
+
+@dataclass(frozen=True)
+class EnergyBalance:
+    """Works of the moments over the run [J], change of kinetic energy [J] and the residual
+    `sum(works) - delta_kinetic` [J], also relative to the largest energy involved."""
+
+    works: dict[str, float]
+    delta_kinetic: float
+    residual: float
+    relative_residual: float
+
+
+def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance:
+    """Integrate M_k omega over every step of the trajectory and compare with the kinetic energy change."""
+    edges = _step_edges(trajectory)
+    left, width = edges[:-1], np.diff(edges)
+    nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
+    weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
+    columns = model.columns(nodes, trajectory(nodes))
+    power_columns = [name for name in columns if name.startswith("M_") and name not in ("M_load",)]
+    works = {name[2:]: float(np.sum(weights * columns[name] * columns["omega"])) for name in power_columns}
+    ends = model.columns(np.array([edges[0], edges[-1]]), trajectory(np.array([edges[0], edges[-1]])))
+    delta_kinetic = float(ends["E_kinetic"][1] - ends["E_kinetic"][0])
+    residual = sum(works.values()) - delta_kinetic
+    scale = max(sum(abs(w) for w in works.values()), float(np.max(ends["E_kinetic"])), 1e-300)
+    return EnergyBalance(works, delta_kinetic, residual, residual / scale)
+
+
+def _step_edges(trajectory: Trajectory) -> np.ndarray:
+    """All step boundaries of the trajectory: the pieces' own knots where a piece spans many steps."""
+    edges = [np.asarray(trajectory.piece_edges[:1])]
+    for interpolant, end in zip(trajectory.interpolants, trajectory.piece_edges[1:]):
+        knots = getattr(interpolant, "x", None)
+        edges.append(np.asarray(knots[1:]) if knots is not None else np.array([end]))
+    return np.concatenate(edges)
+
+
+def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, points: int = 7200
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """dE(phi) = integral_{phi_start}^{phi} (M_d + M_c) dphi over one dynamic period [J] at a fixed speed
+    omega [rad/s] and t = 0 (for moments that read omega, the swing at that speed).
+
+    Midpoint rule on a grid that contains every switch angle, so on-off moments integrate exactly.
+    Returns (phi [rad], dE [J]).
+    """
+    period = model.dynamic_period()
+    grid = np.linspace(phi_start, phi_start + period, points + 1)
+    for angle, switch_period in model.switch_angles():
+        first = angle + switch_period * math.ceil((phi_start - angle) / switch_period)
+        grid = np.union1d(grid, np.arange(first, phi_start + period, switch_period))
+    middles = 0.5 * (grid[:-1] + grid[1:])
+    states = np.vstack([middles, np.full_like(middles, omega)])
+    columns = model.columns(np.zeros_like(middles), states)
+    net = columns["M_drive"] + columns["M_load"] + columns.get("M_weight", 0.0)
+    return grid, np.concatenate([[0.0], np.cumsum(net * np.diff(grid))])
+
+
+def flywheel_for_constant_inertia(energy_swing_max: float, omega_m: float, delta: float, inertia: float) -> float:
+    """Flywheel inertia [kg m^2] for a constant-J machine: `J_fw = dE_max / (omega_m^2 [delta]) - J0`
+    (physics.md section 2); exact when the moments do not depend on omega, since
+    omega_max^2 - omega_min^2 = 2 delta omega_m^2 with omega_m = (omega_max + omega_min) / 2."""
+    return energy_swing_max / (omega_m ** 2 * delta) - inertia

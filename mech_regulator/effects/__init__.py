@@ -1,0 +1,130 @@
+"""Effects: the moments that act on the machine, each reduced to the crank.
+
+An effect is built once from its scene entry into a plain closure
+`moment(t, phi, omega, q, dq) -> M [N m]` over constants, where q is the mechanism's output
+coordinate (slider position x [m] or rocker angle th4 [rad]) and dq = dq/dphi its velocity ratio.
+A force F on the output link becomes the reduced moment `F dq` (same power, physics.md section 1).
+Only the effects a scene names are built; the right-hand side calls exactly these.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+from mech_regulator.effects.tables import clamped_linear, periodic_linear
+from mech_regulator.scene import schema
+
+MomentFunction = Callable[[float, float, float, float, float], float]
+
+TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One moment acting on the machine, ready for the hot path.
+
+    name: column name in outputs; role: 'drive' or 'load'; moment: the closure;
+    depends_on: which of 't', 'phi', 'omega' it reads ('phi' includes the output coordinate);
+    period: its period in phi [rad] if it depends on phi; switch_angles: angles in [0, period)
+    where it jumps [rad]; formula: what it computes, for `describe`.
+    """
+
+    name: str
+    role: str
+    moment: MomentFunction
+    depends_on: frozenset[str]
+    formula: str
+    period: float | None = None
+    switch_angles: tuple[float, ...] = ()
+
+
+def build_drive(drive: schema.Drive, kinematic_period: float | None) -> Effect:
+    """The driving moment M_d of a scene's `machine.drive`."""
+    if isinstance(drive, schema.ConstantDrive):
+        torque = drive.torque
+        return Effect("drive", "drive", lambda t, phi, omega, q, dq: torque, frozenset(),
+                      f"constant: M_d = {torque:g} N m")
+    if isinstance(drive, schema.LinearMotor):
+        stall, no_load = drive.stall_torque, drive.no_load_speed
+        return Effect("drive", "drive", lambda t, phi, omega, q, dq: stall * (1.0 - omega / no_load),
+                      frozenset({"omega"}), f"linear motor: M_d = {stall:g} (1 - omega / {no_load:g}) N m")
+    if isinstance(drive, schema.TableDrive):
+        table = periodic_linear([math.radians(a) for a in drive.angle_deg], drive.torque, math.radians(drive.period_deg))
+        return Effect("drive", "drive", lambda t, phi, omega, q, dq: table(phi), frozenset({"phi"}),
+                      f"table M_d(phi), {len(drive.torque)} points over {drive.period_deg:g} deg",
+                      period=math.radians(drive.period_deg))
+    if isinstance(drive, schema.Engine):
+        area = math.pi * drive.bore ** 2 / 4.0
+        phase = math.radians(drive.phase_deg)
+        pressure = periodic_linear([math.radians(a) for a in drive.angle_deg], drive.pressure,
+                                   math.radians(drive.cycle_deg))
+        # Gas pushes the piston towards the crank axis: F_x = -p A, reduced moment F_x dx/dphi.
+        return Effect("drive", "drive", lambda t, phi, omega, q, dq: -pressure(phi + phase) * area * dq,
+                      frozenset({"phi"}), f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, "
+                                          f"{drive.cycle_deg:g} deg cycle", period=math.radians(drive.cycle_deg))
+    raise TypeError(f"no drive effect for {type(drive).__name__}")
+
+
+def _cutting(load: schema.CuttingLoad) -> Effect:
+    """On-off load: -torque while (phi mod period) lies in one of the intervals [start, end)."""
+    period = math.radians(load.period_deg)
+    start = math.radians(load.intervals_deg[0][0])
+    bounds = [math.radians(edge) - start for interval in load.intervals_deg for edge in interval]
+    torque = load.torque
+
+    def moment(t: float, phi: float, omega: float, q: float, dq: float) -> float:
+        u = math.fmod(phi - start, period)
+        if u < 0.0:
+            u += period
+        return -torque if bisect.bisect_right(bounds, u) % 2 == 1 else 0.0
+
+    switches = tuple(sorted({(edge + start) % period for edge in bounds}))
+    return Effect("cutting", "load", moment, frozenset({"phi"}),
+                  f"cutting: M_c = -{torque:g} N m over {load.intervals_deg} deg", period=period,
+                  switch_angles=switches)
+
+
+def build_load(load: schema.Load, kinematic_period: float | None) -> Effect:
+    """A resisting moment or force of a scene's `machine.loads` entry."""
+    if isinstance(load, schema.ConstantLoad):
+        torque = load.torque
+        return Effect("constant", "load", lambda t, phi, omega, q, dq: -torque, frozenset(),
+                      f"constant: M_c = -{torque:g} N m")
+    if isinstance(load, schema.ViscousLoad):
+        c = load.coefficient
+        return Effect("viscous", "load", lambda t, phi, omega, q, dq: -c * omega, frozenset({"omega"}),
+                      f"viscous: M_c = -{c:g} omega")
+    if isinstance(load, schema.FanLoad):
+        k = load.coefficient
+        return Effect("fan", "load", lambda t, phi, omega, q, dq: -k * omega * abs(omega), frozenset({"omega"}),
+                      f"fan: M_c = -{k:g} omega |omega|")
+    if isinstance(load, schema.TableLoad):
+        table = periodic_linear([math.radians(a) for a in load.angle_deg], load.torque, math.radians(load.period_deg))
+        return Effect("table", "load", lambda t, phi, omega, q, dq: -table(phi), frozenset({"phi"}),
+                      f"table: M_c = -M(phi), {len(load.torque)} points over {load.period_deg:g} deg",
+                      period=math.radians(load.period_deg))
+    if isinstance(load, schema.CuttingLoad):
+        return _cutting(load)
+    on = "slider" if load.type.startswith("slider") else "rocker"
+    if isinstance(load, (schema.SliderConstant, schema.RockerConstant)):
+        value = load.force if isinstance(load, schema.SliderConstant) else load.torque
+        return Effect(load.type, "load", lambda t, phi, omega, q, dq: value * dq, frozenset({"phi"}),
+                      f"constant on the {on}: M = {value:g} dq/dphi", period=kinematic_period)
+    if isinstance(load, schema.OutputViscous):
+        c = load.coefficient
+        return Effect(load.type, "load", lambda t, phi, omega, q, dq: -c * dq * dq * omega,
+                      frozenset({"phi", "omega"}), f"viscous on the {on}: M = -{c:g} (dq/dphi)^2 omega",
+                      period=kinematic_period)
+    if isinstance(load, schema.OutputSpring):
+        k, free = load.stiffness, load.free_position
+        return Effect(load.type, "load", lambda t, phi, omega, q, dq: -k * (q - free) * dq, frozenset({"phi"}),
+                      f"spring on the {on}: M = -{k:g} (q - {free:g}) dq/dphi", period=kinematic_period)
+    if isinstance(load, schema.SliderTable):
+        force = clamped_linear(load.position, load.force)
+        return Effect("slider_table", "load", lambda t, phi, omega, q, dq: force(q) * dq, frozenset({"phi"}),
+                      f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi",
+                      period=kinematic_period)
+    raise TypeError(f"no load effect for {type(load).__name__}")

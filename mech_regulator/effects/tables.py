@@ -1,0 +1,47 @@
+"""Tabulated characteristics evaluated in the hot path: periodic and clamped piecewise-linear tables.
+
+`np.interp` does the same for arrays; these closures do it for one scalar per call without array
+allocation, which matters because they run on every right-hand-side evaluation.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from typing import Callable, Sequence
+
+
+def periodic_linear(xs: Sequence[float], ys: Sequence[float], period: float) -> Callable[[float], float]:
+    """Return y(x): linear between the points, periodic with `period`, wrapping from the last point to
+    the first plus one period (equals np.interp(x, xs, ys, period=period))."""
+    x0 = xs[0]
+    knots = [x - x0 for x in xs] + [period]
+    values = list(ys) + [ys[0]]
+    slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(len(xs))]
+
+    def table(x: float) -> float:
+        u = math.fmod(x - x0, period)
+        if u < 0.0:
+            u += period
+        i = bisect.bisect_right(knots, u) - 1
+        if i >= len(slopes):  # u rounded up to exactly one period
+            i = len(slopes) - 1
+        return values[i] + slopes[i] * (u - knots[i])
+
+    return table
+
+
+def clamped_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[[float], float]:
+    """Return y(x): linear between the points, constant beyond the first and last (as np.interp)."""
+    knots, values = list(xs), list(ys)
+    slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(len(knots) - 1)]
+
+    def table(x: float) -> float:
+        if x <= knots[0]:
+            return values[0]
+        if x >= knots[-1]:
+            return values[-1]
+        i = bisect.bisect_right(knots, x) - 1
+        return values[i] + slopes[i] * (x - knots[i])
+
+    return table

@@ -1,0 +1,258 @@
+"""The machine model: a scene assembled once into an immutable model and its right-hand side.
+
+The model (like MuJoCo's mjModel) holds everything that does not change during a run; the state
+(phi [rad], omega [rad/s]) lives in the solvers. The equation of motion is the moment form of
+physics.md section 1,
+
+    J(phi) domega/dt + 1/2 J'(phi) omega^2 = M_d + M_c,
+
+with J = J0 + J_flywheel ratio^2 + J_links(phi). The right-hand side is specialised to the scene:
+a machine without a mechanism has no J(phi), no J' term and no kinematics call at all.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from typing import Callable
+
+import numpy as np
+
+from mech_regulator.effects import Effect, build_drive, build_load
+from mech_regulator.mechanisms import build_reduced
+from mech_regulator.scene.schema import Scene
+
+Reduced = Callable[[float], tuple[float, float, float, float, float]]
+RightHandSide = Callable[[float, np.ndarray], tuple[float, float]]
+
+
+@dataclass(frozen=True)
+class LoadPiece:
+    """The external load moment on [start, end): value(t) = offset + slope * t [N m], opposing motion."""
+
+    start: float
+    end: float
+    offset: float
+    slope: float
+
+
+@dataclass(frozen=True)
+class MachineModel:
+    """A scene assembled for simulation.
+
+    inertia_constant: J0 + J_flywheel ratio^2 [kg m^2]; reduced: the mechanism's
+    phi -> (J_links, dJ_links/dphi, M_weight, q, dq/dphi), or None for a constant-J machine;
+    effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none.
+    """
+
+    scene: Scene
+    inertia_constant: float
+    reduced: Reduced | None
+    has_weight: bool
+    effects: tuple[Effect, ...]
+    load_pieces: tuple[LoadPiece, ...]
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return ("phi", "omega")
+
+    def breakpoints(self) -> list[float]:
+        """Times where the external load has a kink or a jump: integration never steps across them."""
+        return sorted({piece.start for piece in self.load_pieces[1:]})
+
+    def piece_at(self, t: float) -> LoadPiece | None:
+        """The external-load piece in force from t on (None if the scene has no external load)."""
+        if not self.load_pieces:
+            return None
+        starts = [piece.start for piece in self.load_pieces]
+        return self.load_pieces[max(0, int(np.searchsorted(starts, t, side="right")) - 1)]
+
+    def external_load(self, t: float) -> float:
+        """External load moment magnitude at time t [N m] (the moment on the crank is minus this)."""
+        piece = self.piece_at(t)
+        return 0.0 if piece is None else piece.offset + piece.slope * t
+
+    def switch_angles(self) -> list[tuple[float, float]]:
+        """(angle, period) pairs [rad] where some moment jumps with phi."""
+        return [(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+
+    def dynamic_period(self) -> float:
+        """Phi_omega = lcm of the kinematic period and the effects' periods [rad] (physics.md section 1).
+
+        Periods are taken as rational multiples of 2 pi; a machine with nothing periodic in phi gets 2 pi.
+        """
+        turns = [Fraction(1)]
+        turns += [Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
+                  for effect in self.effects if effect.period is not None]
+        lcm = turns[0]
+        for turn in turns[1:]:
+            numerator = math.lcm(lcm.numerator * turn.denominator, turn.numerator * lcm.denominator)
+            lcm = Fraction(numerator, lcm.denominator * turn.denominator)
+        return float(lcm) * 2.0 * math.pi
+
+    def depends_on(self) -> frozenset[str]:
+        """Which of 't', 'phi', 'omega' the net moment reads."""
+        reads = set().union(*(effect.depends_on for effect in self.effects)) if self.effects else set()
+        if self.has_weight:
+            reads.add("phi")
+        if self.load_pieces:
+            reads.add("t")
+        return frozenset(reads)
+
+    def inertia(self, phi: float) -> tuple[float, float]:
+        """Reduced inertia J(phi) [kg m^2] and dJ/dphi [kg m^2/rad]."""
+        if self.reduced is None:
+            return self.inertia_constant, 0.0
+        J_links, dJ, *_ = self.reduced(phi)
+        return self.inertia_constant + J_links, dJ
+
+    def switch_grid(self) -> list[float]:
+        """All switch angles within one dynamic period, sorted, in [0, Phi_omega) [rad]."""
+        period = self.dynamic_period()
+        angles = set()
+        for angle, switch_period in self.switch_angles():
+            for k in range(int(round(period / switch_period))):
+                angles.add(round((angle + k * switch_period) % period, 12))
+        return sorted(angles)
+
+    def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None) -> RightHandSide:
+        """The right-hand side `f(t, [phi, omega]) = (omega, epsilon)` for one external-load piece.
+
+        epsilon = (M_d + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1).
+        window = (lo, hi): the crank-angle interval between two switch angles the solver is in; effects
+        that jump at switch angles then see phi clamped into it, so they keep their mode across the
+        switch until the solver has located the crossing and restarted (no step straddles a jump).
+        """
+        switched = tuple(effect.moment for effect in self.effects if effect.switch_angles)
+        smooth = tuple(effect.moment for effect in self.effects if not effect.switch_angles)
+        if window is None:
+            smooth, switched = smooth + switched, ()
+            lo = hi = 0.0
+        else:
+            margin = 1e-9 * (window[1] - window[0])
+            lo, hi = window[0] + margin, window[1] - margin
+        offset, slope = (piece.offset, piece.slope) if piece is not None else (0.0, 0.0)
+        J0 = self.inertia_constant
+        reduced = self.reduced
+
+        if reduced is None:
+            def constant_inertia(t: float, y: np.ndarray) -> tuple[float, float]:
+                phi, omega = y[0], y[1]
+                total = -(offset + slope * t)
+                for moment in smooth:
+                    total += moment(t, phi, omega, 0.0, 0.0)
+                for moment in switched:
+                    total += moment(t, min(max(phi, lo), hi), omega, 0.0, 0.0)
+                return omega, total / J0
+
+            return constant_inertia
+
+        def variable_inertia(t: float, y: np.ndarray) -> tuple[float, float]:
+            phi, omega = y[0], y[1]
+            J_links, dJ, weight, q, dq = reduced(phi)
+            total = weight - (offset + slope * t)
+            for moment in smooth:
+                total += moment(t, phi, omega, q, dq)
+            for moment in switched:
+                total += moment(t, min(max(phi, lo), hi), omega, q, dq)
+            return omega, (total - 0.5 * dJ * omega * omega) / (J0 + J_links)
+
+        return variable_inertia
+
+    def columns(self, t: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
+        """Output columns at sample times t [s] for states y (shape 2 x n).
+
+        t, phi, omega, epsilon, J, dJ_dphi, M_drive, M_load (sum of all resisting moments and the
+        external load), one M_<effect> column per effect (and M_weight, M_external when present),
+        E_kinetic = 1/2 J omega^2, and the output coordinate with its speed (x, v for a slider,
+        theta4, omega4 for a rocker).
+        """
+        n = t.size
+        names = [effect.name for effect in self.effects]
+        per_effect = np.zeros((len(names), n))
+        J = np.full(n, self.inertia_constant)
+        dJ = np.zeros(n)
+        weight = np.zeros(n)
+        q = np.zeros(n)
+        dq = np.zeros(n)
+        external = np.array([self.external_load(ti) for ti in t])
+        for i in range(n):
+            phi, omega = y[0, i], y[1, i]
+            if self.reduced is not None:
+                J_links, dJ[i], weight[i], q[i], dq[i] = self.reduced(phi)
+                J[i] += J_links
+            for k, effect in enumerate(self.effects):
+                per_effect[k, i] = effect.moment(t[i], phi, omega, q[i], dq[i])
+        omega = y[1]
+        drive = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
+        load = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "load"), np.zeros(n)) - external
+        net = drive + load + weight
+        out = {"t": t, "phi": y[0], "omega": omega, "epsilon": (net - 0.5 * dJ * omega ** 2) / J, "J": J,
+               "dJ_dphi": dJ, "M_drive": drive, "M_load": load}
+        for k, name in enumerate(names):
+            if self.effects[k].role == "load":
+                out[f"M_{name}"] = per_effect[k]
+        if self.has_weight:
+            out["M_weight"] = weight
+        if self.load_pieces:
+            out["M_external"] = -external
+        out["E_kinetic"] = 0.5 * J * omega ** 2
+        kind = self.scene.machine.mechanism.type if self.scene.machine.mechanism is not None else None
+        if kind == "crank_slider":
+            out["x_slider"], out["v_slider"] = q, dq * omega
+        elif kind == "four_bar":
+            out["theta4"], out["omega4"] = q, dq * omega
+        return out
+
+
+def _load_pieces(scene: Scene) -> tuple[LoadPiece, ...]:
+    """Split the scenario's external load into pieces that are constant or linear in time."""
+    scenario = scene.scenario
+    if scenario.external_load == 0.0 and not scenario.load_events:
+        return ()
+    pieces: list[LoadPiece] = []
+    now, value = 0.0, scenario.external_load
+    for event in scenario.load_events:
+        if event.time > now:
+            pieces.append(LoadPiece(now, event.time, value, 0.0))
+        if event.ramp > 0.0:
+            slope = (event.torque - value) / event.ramp
+            pieces.append(LoadPiece(event.time, event.time + event.ramp, value - slope * event.time, slope))
+        now, value = event.time + event.ramp, event.torque
+    if now < scenario.duration or not pieces:
+        pieces.append(LoadPiece(now, scenario.duration, value, 0.0))
+    return tuple(pieces)
+
+
+def build_model(scene: Scene) -> MachineModel:
+    """Assemble a validated scene into a MachineModel: only the effects the scene names are built."""
+    machine = scene.machine
+    flywheel = machine.flywheel.inertia * machine.flywheel.ratio ** 2 if machine.flywheel else 0.0
+    gravity = tuple(machine.gravity) if machine.gravity is not None else None
+    has_weight = machine.mechanism is not None and gravity is not None and any(gravity) and _has_mass(machine.mechanism)
+    reduced = build_reduced(machine.mechanism, gravity if has_weight else None) if machine.mechanism else None
+    kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
+    effects = []
+    if machine.drive is not None:
+        effects.append(build_drive(machine.drive, kinematic_period))
+    effects += [build_load(load, kinematic_period) for load in machine.loads]
+    effects = _unique_names(effects)
+    return MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
+                        has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene))
+
+
+def _has_mass(mechanism) -> bool:
+    return any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass"))
+
+
+def _unique_names(effects: list[Effect]) -> list[Effect]:
+    """Rename repeated effect names to name_2, name_3, ... so output columns stay distinct."""
+    seen: dict[str, int] = {}
+    unique = []
+    for effect in effects:
+        seen[effect.name] = seen.get(effect.name, 0) + 1
+        if seen[effect.name] > 1:
+            effect = Effect(**{**effect.__dict__, "name": f"{effect.name}_{seen[effect.name]}"})
+        unique.append(effect)
+    return unique

@@ -1,0 +1,266 @@
+"""Reading scene files: YAML, `--set` overrides, bundled scenes, and clear validation messages.
+
+Every mistake in a scene becomes a SceneError whose message names the key (as a dotted path), the
+value given and what is expected, with the closest valid key for a misspelt one.
+"""
+
+from __future__ import annotations
+
+import difflib
+import re
+import sys
+import types
+import typing
+from pathlib import Path
+from typing import Any
+
+import pydantic
+import yaml
+
+from mech_regulator.scene.schema import Scene
+
+
+class SceneError(Exception):
+    """A scene that cannot be used; str(error) is the message for the user (one or more lines)."""
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader that also reads YAML 1.2 floats such as 1e-3 (PyYAML alone reads them as strings)."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                   |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                   |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                   |[-+]?\.(?:inf|Inf|INF)
+                   |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def parse_yaml(text: str, source: str) -> Any:
+    """Parse YAML text; a syntax error becomes a SceneError naming the line and column."""
+    try:
+        return yaml.load(text, Loader=_Loader)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(error, "problem", None) or str(error)
+        raise SceneError(f"{source}: not valid YAML{where}: {problem}") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# Bundled configuration
+
+
+def config_dir() -> Path:
+    """The bundled `config/` folder: next to the package in a source tree or editable install, else
+    `share/mech_regulator/config` under an install prefix (pip, colcon), else from ament_index."""
+    here = Path(__file__).resolve()
+    candidates = [here.parents[2] / "config"]
+    candidates += [parent / "share" / "mech_regulator" / "config" for parent in (Path(sys.prefix), *here.parents)]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        candidates.append(Path(get_package_share_directory("mech_regulator")) / "config")
+    except (ImportError, LookupError):  # ament_index is optional: a plain pip install has no ROS index
+        pass
+    for candidate in candidates:
+        if (candidate / "scenes").is_dir():
+            return candidate
+    raise SceneError("the bundled config/ folder was not found; looked in: " + ", ".join(map(str, candidates)))
+
+
+def bundled_scenes() -> dict[str, Path]:
+    """Bundled scene names (file stems) and their paths."""
+    return {path.stem: path for path in sorted((config_dir() / "scenes").glob("*.yaml"))}
+
+
+def resolve_scene_path(name_or_path: str) -> Path:
+    """A scene file given as a path, or as the name of a bundled scene (with or without .yaml)."""
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    bundled = bundled_scenes()
+    stem = path.name[:-5] if path.name.endswith(".yaml") else path.name
+    if stem in bundled and len(path.parts) == 1:
+        return bundled[stem]
+    close = difflib.get_close_matches(stem, bundled, n=1)
+    hint = f"; did you mean the bundled scene '{close[0]}'?" if close else ""
+    raise SceneError(f"scene '{name_or_path}': no such file, nor a bundled scene (bundled: "
+                     f"{', '.join(bundled)}){hint}")
+
+
+# ---------------------------------------------------------------------------------------------
+# Overrides
+
+
+def apply_override(data: dict, assignment: str) -> None:
+    """Apply one `dotted.key=value` override in place; the value is read as YAML (numbers, lists...).
+
+    List entries are addressed by index: `machine.loads.0.coefficient=0.02`.
+    """
+    if "=" not in assignment:
+        raise SceneError(f"--set '{assignment}': expected dotted.key=value, e.g. machine.inertia=0.1")
+    dotted, raw = assignment.split("=", 1)
+    keys = dotted.strip().split(".")
+    if not all(keys):
+        raise SceneError(f"--set '{assignment}': the key '{dotted}' has an empty part")
+    value = parse_yaml(raw, f"--set {dotted}")
+    node: Any = data
+    for depth, key in enumerate(keys[:-1]):
+        node = _child(node, key, keys[: depth + 1], assignment, create=True)
+    last = keys[-1]
+    if isinstance(node, list):
+        node[_index(node, last, keys, assignment)] = value
+    elif isinstance(node, dict):
+        node[last] = value
+    else:
+        raise SceneError(f"--set '{assignment}': '{'.'.join(keys[:-1])}' holds {node!r}, not a section")
+
+
+def _index(node: list, key: str, path: list[str], assignment: str) -> int:
+    if not key.isdigit() or int(key) >= len(node):
+        raise SceneError(f"--set '{assignment}': '{'.'.join(path)}' must index the list "
+                         f"(0 to {len(node) - 1}), got '{key}'")
+    return int(key)
+
+
+def _child(node: Any, key: str, path: list[str], assignment: str, create: bool) -> Any:
+    if isinstance(node, list):
+        return node[_index(node, key, path, assignment)]
+    if isinstance(node, dict):
+        if node.get(key) is None and create:
+            node[key] = {}
+        return node[key]
+    raise SceneError(f"--set '{assignment}': '{'.'.join(path[:-1])}' holds {node!r}, not a section")
+
+
+# ---------------------------------------------------------------------------------------------
+# Validation and messages
+
+
+def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
+    """Read, override and validate a scene; any problem raises SceneError with a clear message."""
+    path = resolve_scene_path(name_or_path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as error:
+        raise SceneError(f"scene '{path}': cannot be read: {error.strerror}") from None
+    data = parse_yaml(text, str(path))
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise SceneError(f"{path}: expected a mapping of sections (machine, scenario, solver), got {type(data).__name__}")
+    for assignment in overrides:
+        apply_override(data, assignment)
+    data.setdefault("name", path.stem)
+    return validate_scene(data, str(path))
+
+
+def validate_scene(data: dict, source: str = "scene") -> Scene:
+    """Validate a scene mapping; SceneError lists every problem, one per line."""
+    try:
+        return Scene.model_validate(data)
+    except pydantic.ValidationError as error:
+        lines = [describe_error(item, data) for item in error.errors(include_url=False)]
+        raise SceneError(f"{source}: {len(lines)} problem{'s' if len(lines) > 1 else ''}:\n  "
+                         + "\n  ".join(dict.fromkeys(lines))) from None
+
+
+def describe_error(item: dict, data: Any) -> str:
+    """One line for one pydantic error: dotted key, the value given, and what is expected."""
+    loc = _data_path(item["loc"], data)
+    key = ".".join(str(part) for part in loc) or "(top level)"
+    kind, message = item["type"], item["msg"]
+    if kind == "extra_forbidden":
+        valid = _valid_keys(loc[:-1], data)
+        close = difflib.get_close_matches(str(loc[-1]), valid, n=1, cutoff=0.5)
+        hint = f"; did you mean '{close[0]}'?" if close else ""
+        return f"{key}: unknown key{hint} (valid keys here: {', '.join(valid)})"
+    if kind == "missing":
+        return f"{key}: missing; {_field_description(loc, data) or 'this key is required'}"
+    if kind == "union_tag_invalid":
+        expected = item.get("ctx", {}).get("expected_tags", "")
+        return f"{key}.type = {item['input'].get('type')!r}: unknown type; expected one of {expected}"
+    if kind == "union_tag_not_found":
+        return f"{key}: missing 'type'; expected one of {item.get('ctx', {}).get('expected_tags', '')}"
+    if message.startswith("Value error, "):
+        return f"{key}: {message[len('Value error, '):]}"
+    if kind == "finite_number":
+        message = "expected a finite number (not NaN or infinity)"
+    description = _field_description(loc, data)
+    unit = f" ({description})" if description else ""
+    return f"{key} = {item['input']!r}: {message[0].lower() + message[1:]}{unit}"
+
+
+def _data_path(loc: tuple, data: Any) -> list:
+    """Drop the union tags pydantic inserts into locations (machine.loads.0.viscous.coefficient
+    -> machine.loads.0.coefficient), keeping the path as the user wrote it."""
+    path, node = [], data
+    for part in loc:
+        if isinstance(node, dict) and part in node:
+            path.append(part)
+            node = node[part]
+        elif isinstance(node, list) and isinstance(part, int) and part < len(node):
+            path.append(part)
+            node = node[part]
+        elif isinstance(node, dict) and node.get("type") == part:
+            continue
+        else:
+            path.append(part)
+            node = None
+    return path
+
+
+def _model_at(loc: list, data: Any) -> type[pydantic.BaseModel] | None:
+    """The pydantic model class that validates the section at loc (following list items and type tags)."""
+    annotation: Any = Scene
+    node = data
+    for part in loc:
+        annotation = _resolve(annotation, node)
+        if isinstance(part, int):
+            if typing.get_origin(annotation) is not list:
+                return None
+            annotation = typing.get_args(annotation)[0]
+            node = node[part] if isinstance(node, list) and part < len(node) else None
+        else:
+            if not (isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel)):
+                return None
+            field = annotation.model_fields.get(part)
+            if field is None:
+                return None
+            annotation = field.annotation
+            node = node.get(part) if isinstance(node, dict) else None
+    annotation = _resolve(annotation, node)
+    return annotation if isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel) else None
+
+
+def _resolve(annotation: Any, node: Any) -> Any:
+    """Strip Optional and Annotated from an annotation; pick a union member by the node's 'type' tag."""
+    origin = typing.get_origin(annotation)
+    if origin is typing.Annotated:
+        return _resolve(typing.get_args(annotation)[0], node)
+    if origin in (typing.Union, types.UnionType):
+        members = [m for m in typing.get_args(annotation) if m is not type(None)]
+        if len(members) == 1:
+            return _resolve(members[0], node)
+        tag = node.get("type") if isinstance(node, dict) else None
+        for member in members:
+            literal = getattr(member, "model_fields", {}).get("type")
+            if literal is not None and tag in typing.get_args(literal.annotation):
+                return member
+        return None
+    return annotation
+
+
+def _valid_keys(loc: list, data: Any) -> list[str]:
+    model = _model_at(loc, data)
+    return list(model.model_fields) if model is not None else []
+
+
+def _field_description(loc: list, data: Any) -> str:
+    if not loc or not isinstance(loc[-1], str):
+        return ""
+    model = _model_at(loc[:-1], data)
+    field = model.model_fields.get(loc[-1]) if model is not None else None
+    return (field.description or "") if field is not None else ""

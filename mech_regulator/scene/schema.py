@@ -1,0 +1,368 @@
+"""The scene format: one YAML file describing a machine, what acts on it, the scenario and the solver.
+
+The pydantic models below are the single source of truth for the format: validation, the JSON
+Schema (`mech-regulator schema`) and the key tables of `docs/scenes.md` all come from them.
+Every field's description states its unit (SI unless the key name says `_deg`).
+
+Conventions: the crank angle phi is measured counter-clockwise from the +x axis, the crank pin is
+at `B = (R cos phi, R sin phi)`; positive moments turn the crank counter-clockwise (the working
+direction); load values are resisting magnitudes unless a description says "signed".
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+Positive = Annotated[float, Field(gt=0)]
+NonNegative = Annotated[float, Field(ge=0)]
+
+
+class SceneModel(BaseModel):
+    """Base of every scene section: unknown keys, NaN and infinities are errors; ints pass as floats."""
+
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False, strict=True, frozen=True)
+
+
+def _check_table(angles_deg: list[float], values: list[float], period_deg: float, what: str) -> None:
+    """Check a periodic table: equal lengths, strictly increasing angles inside one period."""
+    if len(angles_deg) != len(values):
+        raise ValueError(f"{what}: angle_deg has {len(angles_deg)} entries but the values have {len(values)}; "
+                         "expected one value per angle")
+    if any(b <= a for a, b in zip(angles_deg, angles_deg[1:])):
+        raise ValueError(f"{what}: angle_deg = {angles_deg} must be strictly increasing")
+    if angles_deg[-1] - angles_deg[0] >= period_deg:
+        raise ValueError(f"{what}: angle_deg spans {angles_deg[-1] - angles_deg[0]} deg; "
+                         f"expected less than one period ({period_deg} deg)")
+
+
+# --------------------------------------------------------------------------------------------
+# Machine: inertia and mechanism
+
+
+class Flywheel(SceneModel):
+    inertia: NonNegative = Field(description="moment of inertia of the flywheel about its own shaft [kg m^2]")
+    ratio: float = Field(1.0, description="omega_flywheel / omega (gear ratio to the crank); the flywheel adds "
+                                          "inertia * ratio^2 to the reduced inertia [-]")
+
+
+class CrankSlider(SceneModel):
+    """Crank–slider: crank pin B = R(cos phi, sin phi), slider on the line y = offset on the +x side."""
+
+    type: Literal["crank_slider"]
+    crank: Positive = Field(description="crank radius R [m]")
+    rod: Positive = Field(description="connecting-rod length l [m]; must exceed crank + |offset|")
+    offset: float = Field(0.0, description="offset e of the stroke line y = e (desaxe) [m]")
+    crank_mass: NonNegative = Field(0.0, description="crank mass, used for its weight only (its inertia is in "
+                                                     "machine.inertia) [kg]")
+    crank_cg: float = Field(0.0, description="distance of the crank's centre of mass from the axis, towards the pin [m]")
+    rod_mass: NonNegative = Field(0.0, description="connecting-rod mass [kg]")
+    rod_cg: NonNegative = Field(0.0, description="distance of the rod's centre of mass from the crank pin, along the rod [m]")
+    rod_inertia: NonNegative = Field(0.0, description="rod moment of inertia about its centre of mass [kg m^2]")
+    slider_mass: NonNegative = Field(0.0, description="slider (piston) mass [kg]")
+
+    @model_validator(mode="after")
+    def _assembles(self) -> CrankSlider:
+        reach = self.crank + abs(self.offset)
+        if self.rod <= reach:
+            raise ValueError(f"rod = {self.rod} m is too short: the crank turns fully only if rod > crank + |offset| "
+                             f"= {reach:g} m")
+        if self.rod_cg > self.rod:
+            raise ValueError(f"rod_cg = {self.rod_cg} m lies beyond the rod (rod = {self.rod} m); "
+                             "expected 0 <= rod_cg <= rod")
+        return self
+
+
+class FourBar(SceneModel):
+    """Four-bar: crank a about A = (0, 0), coupler b, rocker c about D = frame * (cos th1, sin th1).
+
+    Loop closure `a e^{i th2} + b e^{i th3} = d e^{i th1} + c e^{i th4}` with th2 = phi."""
+
+    type: Literal["four_bar"]
+    crank: Positive = Field(description="crank length a (A to B) [m]")
+    coupler: Positive = Field(description="coupler length b (B to C) [m]")
+    rocker: Positive = Field(description="rocker length c (D to C) [m]")
+    frame: Positive = Field(description="frame length d (A to D) [m]")
+    frame_angle_deg: float = Field(0.0, description="direction th1 of the frame line A->D from the +x axis [deg]")
+    branch: Literal["open", "crossed"] = Field("open", description="assembly branch: 'open' puts C to the right "
+                                                                    "of the directed line D->B, 'crossed' to the left")
+    crank_mass: NonNegative = Field(0.0, description="crank mass, for its weight only [kg]")
+    crank_cg: float = Field(0.0, description="distance of the crank's centre of mass from A towards B [m]")
+    coupler_mass: NonNegative = Field(0.0, description="coupler mass [kg]")
+    coupler_cg: float = Field(0.0, description="distance of the coupler's centre of mass from B towards C [m]")
+    coupler_inertia: NonNegative = Field(0.0, description="coupler moment of inertia about its centre of mass [kg m^2]")
+    rocker_mass: NonNegative = Field(0.0, description="rocker mass [kg]")
+    rocker_cg: float = Field(0.0, description="distance of the rocker's centre of mass from D towards C [m]")
+    rocker_inertia: NonNegative = Field(0.0, description="rocker moment of inertia about its centre of mass [kg m^2]")
+
+    @model_validator(mode="after")
+    def _assembles(self) -> FourBar:
+        from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
+
+        ranges = unassemblable_crank_ranges(self.crank, self.coupler, self.rocker, self.frame,
+                                            math.radians(self.frame_angle_deg))
+        if ranges:
+            spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
+            raise ValueError(
+                f"the four-bar (crank {self.crank}, coupler {self.coupler}, rocker {self.rocker}, frame {self.frame} m) "
+                f"cannot be assembled for crank angles {spans}; the crank must turn fully: expected a Grashof "
+                "crank (shortest link = crank, and shortest + longest < sum of the other two)")
+        return self
+
+
+Mechanism = Annotated[Union[CrankSlider, FourBar], Field(discriminator="type")]
+
+
+# --------------------------------------------------------------------------------------------
+# Drives (positive moments drive the crank)
+
+
+class ConstantDrive(SceneModel):
+    type: Literal["constant"]
+    torque: float = Field(description="driving moment M_d on the crank, signed [N m]")
+
+
+class LinearMotor(SceneModel):
+    """Motor with a linear characteristic M = stall_torque * (1 - omega / no_load_speed)."""
+
+    type: Literal["linear_motor"]
+    stall_torque: Positive = Field(description="starting (stall) moment M0 at omega = 0 [N m]")
+    no_load_speed: Positive = Field(description="speed omega0 at which the moment falls to zero [rad/s]")
+
+
+class TableDrive(SceneModel):
+    """Periodic table of the driving moment over the crank angle, linear between points."""
+
+    type: Literal["table"]
+    angle_deg: list[float] = Field(min_length=2, description="crank angles of the table points [deg]")
+    torque: list[float] = Field(min_length=2, description="driving moment at each angle, signed [N m]")
+    period_deg: Positive = Field(360.0, description="period of the table in crank angle (720 for a four-stroke cycle) [deg]")
+
+    @model_validator(mode="after")
+    def _table(self) -> TableDrive:
+        _check_table(self.angle_deg, self.torque, self.period_deg, "table drive")
+        return self
+
+
+class Engine(SceneModel):
+    """Gas force of an engine cylinder acting on the slider of a crank–slider: F_x = -p(angle) * area."""
+
+    type: Literal["engine"]
+    bore: Positive = Field(description="cylinder bore; the piston area is pi bore^2 / 4 [m]")
+    angle_deg: list[float] = Field(min_length=2, description="cycle angles of the indicator-diagram points, 0 = a top "
+                                                            "dead centre at the start of intake [deg]")
+    pressure: list[float] = Field(min_length=2, description="gauge gas pressure at each cycle angle [Pa]")
+    cycle_deg: Literal[360.0, 720.0] = Field(720.0, description="length of the working cycle: 720 four-stroke, 360 two-stroke [deg]")
+    phase_deg: float = Field(0.0, description="cycle angle at crank angle phi = 0 [deg]")
+
+    @model_validator(mode="after")
+    def _table(self) -> Engine:
+        _check_table(self.angle_deg, self.pressure, self.cycle_deg, "engine pressure")
+        return self
+
+
+Drive = Annotated[Union[ConstantDrive, LinearMotor, TableDrive, Engine], Field(discriminator="type")]
+
+
+# --------------------------------------------------------------------------------------------
+# Loads
+
+
+class ConstantLoad(SceneModel):
+    type: Literal["constant"]
+    torque: NonNegative = Field(description="resisting moment M_c, acting against the working direction: "
+                                            "moment = -torque [N m]")
+
+
+class ViscousLoad(SceneModel):
+    type: Literal["viscous"]
+    coefficient: NonNegative = Field(description="viscous coefficient c on the crank: moment = -c omega [N m s/rad]")
+
+
+class FanLoad(SceneModel):
+    type: Literal["fan"]
+    coefficient: NonNegative = Field(description="fan coefficient k: moment = -k omega |omega| [N m s^2/rad^2]")
+
+
+class TableLoad(SceneModel):
+    """Periodic table of the resisting moment over the crank angle, linear between points."""
+
+    type: Literal["table"]
+    angle_deg: list[float] = Field(min_length=2, description="crank angles of the table points [deg]")
+    torque: list[float] = Field(min_length=2, description="resisting moment at each angle: moment = -torque [N m]")
+    period_deg: Positive = Field(360.0, description="period of the table in crank angle [deg]")
+
+    @model_validator(mode="after")
+    def _table(self) -> TableLoad:
+        _check_table(self.angle_deg, self.torque, self.period_deg, "table load")
+        return self
+
+
+class CuttingLoad(SceneModel):
+    """On-off technological load (the lathe of physics.md section 2): -torque inside the intervals, 0 outside."""
+
+    type: Literal["cutting"]
+    torque: NonNegative = Field(description="resisting moment while cutting, F r [N m]")
+    intervals_deg: list[list[float]] = Field(min_length=1, description="crank-angle intervals [start, end) in which "
+                                                                        "the tool cuts, within one period [deg]")
+    period_deg: Positive = Field(360.0, description="period of the cutting pattern [deg]")
+
+    @model_validator(mode="after")
+    def _intervals(self) -> CuttingLoad:
+        flat = []
+        for interval in self.intervals_deg:
+            if len(interval) != 2 or interval[1] <= interval[0]:
+                raise ValueError(f"intervals_deg entry {interval} must be [start, end] with end > start")
+            flat += interval
+        if any(b < a for a, b in zip(flat, flat[1:])) or flat[-1] - flat[0] > self.period_deg:
+            raise ValueError(f"intervals_deg = {self.intervals_deg} must be sorted, not overlap, and lie within "
+                             f"one period ({self.period_deg} deg)")
+        return self
+
+
+class SliderConstant(SceneModel):
+    type: Literal["slider_constant"]
+    force: float = Field(description="constant force on the slider along +x, signed [N]")
+
+
+class RockerConstant(SceneModel):
+    type: Literal["rocker_constant"]
+    torque: float = Field(description="constant moment on the rocker, counter-clockwise positive, signed [N m]")
+
+
+class OutputViscous(SceneModel):
+    type: Literal["slider_viscous", "rocker_viscous"]
+    coefficient: NonNegative = Field(description="viscous coefficient on the slider, -c v [N s/m], or on the rocker, "
+                                                 "-c omega_rocker [N m s/rad]")
+
+
+class OutputSpring(SceneModel):
+    type: Literal["slider_spring", "rocker_spring"]
+    stiffness: NonNegative = Field(description="spring stiffness on the slider, -k (x - x0) [N/m], or on the rocker, "
+                                               "-k (theta4 - theta0) [N m/rad]")
+    free_position: float = Field(0.0, description="free slider position x0 [m], or free rocker angle theta0 [rad]")
+
+
+class SliderTable(SceneModel):
+    """Force on the slider tabulated over its position, linear between points, constant beyond the ends."""
+
+    type: Literal["slider_table"]
+    position: list[float] = Field(min_length=2, description="slider positions x, strictly increasing [m]")
+    force: list[float] = Field(min_length=2, description="signed force along +x at each position [N]")
+
+    @model_validator(mode="after")
+    def _table(self) -> SliderTable:
+        if len(self.position) != len(self.force):
+            raise ValueError(f"slider_table: {len(self.position)} positions but {len(self.force)} forces; "
+                             "expected one force per position")
+        if any(b <= a for a, b in zip(self.position, self.position[1:])):
+            raise ValueError(f"slider_table: position = {self.position} must be strictly increasing")
+        return self
+
+
+Load = Annotated[
+    Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, CuttingLoad, SliderConstant, RockerConstant, OutputViscous,
+          OutputSpring, SliderTable],
+    Field(discriminator="type"),
+]
+
+
+class Machine(SceneModel):
+    """The machine reduced to its driving link (the crank)."""
+
+    inertia: NonNegative = Field(description="constant part J0 of the reduced inertia about the crank axis (rotor, "
+                                             "crank, gears) [kg m^2]")
+    flywheel: Flywheel | None = Field(None, description="optional flywheel; adds inertia * ratio^2")
+    gravity: list[float] | None = Field(None, min_length=2, max_length=2,
+                                        description="gravity vector [gx, gy] in the mechanism plane; weights of the "
+                                                    "links become reduced moments [m/s^2]")
+    mechanism: Mechanism | None = Field(None, description="linkage driven by the crank; without one J is constant")
+    drive: Drive | None = Field(None, description="driving moment M_d")
+    loads: list[Load] = Field(default_factory=list, description="resisting moments and forces M_c")
+
+    @model_validator(mode="after")
+    def _effects_fit_mechanism(self) -> Machine:
+        kind = self.mechanism.type if self.mechanism is not None else None
+        needs = {"slider": "crank_slider", "rocker": "four_bar"}
+        for index, load in enumerate(self.loads):
+            prefix = load.type.split("_")[0]
+            if prefix in needs and kind != needs[prefix]:
+                raise ValueError(f"loads[{index}] type '{load.type}' acts on the {prefix}: it needs mechanism.type: "
+                                 f"{needs[prefix]} (the machine has {kind or 'no mechanism'})")
+        if isinstance(self.drive, Engine) and kind != "crank_slider":
+            raise ValueError(f"drive type 'engine' pushes a piston: it needs mechanism.type: crank_slider "
+                             f"(the machine has {kind or 'no mechanism'})")
+        flywheel = self.flywheel.inertia * self.flywheel.ratio ** 2 if self.flywheel else 0.0
+        if self.inertia + flywheel <= 0 and self.mechanism is None:
+            raise ValueError("the machine has no inertia: give machine.inertia > 0 or a flywheel")
+        return self
+
+
+# --------------------------------------------------------------------------------------------
+# Scenario and solver
+
+
+class InitialState(SceneModel):
+    phi: float = Field(0.0, description="initial crank angle [rad]")
+    omega: float = Field(0.0, description="initial crank speed [rad/s]")
+
+
+class LoadEvent(SceneModel):
+    """A change of the external load moment (opposing motion) at a time, as a step or a linear ramp."""
+
+    time: NonNegative = Field(description="time at which the change starts [s]")
+    torque: float = Field(description="new external load moment reached at time + ramp; moment = -torque [N m]")
+    ramp: NonNegative = Field(0.0, description="duration of a linear ramp to the new value; 0 = step [s]")
+
+
+class Scenario(SceneModel):
+    initial: InitialState = Field(default_factory=InitialState, description="initial state of the crank")
+    duration: Positive = Field(description="simulated time [s]")
+    external_load: float = Field(0.0, description="external load moment at t = 0, opposing motion: moment = -value [N m]")
+    load_events: list[LoadEvent] = Field(default_factory=list, description="changes of the external load in time")
+
+    @model_validator(mode="after")
+    def _events_in_order(self) -> Scenario:
+        end_previous = 0.0
+        for index, event in enumerate(self.load_events):
+            if event.time < end_previous:
+                raise ValueError(f"load_events[{index}].time = {event.time} s starts before the previous change ends "
+                                 f"({end_previous} s); expected events in time order that do not overlap")
+            end_previous = event.time + event.ramp
+            if end_previous > self.duration:
+                raise ValueError(f"load_events[{index}] ends at {end_previous} s, after the scenario's duration "
+                                 f"{self.duration} s")
+        return self
+
+
+SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
+
+
+class Solver(SceneModel):
+    method: Literal["RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA", "RK4", "energy"] = Field(
+        "DOP853", description="scipy.integrate method (adaptive, in time), RK4 (fixed step in time) or energy (the "
+                              "textbook energy method, fixed step in phi)")
+    rtol: Positive = Field(1e-8, description="relative tolerance of the adaptive methods [-]")
+    atol: Positive = Field(1e-10, description="absolute tolerance of the adaptive methods, on phi [rad] and omega [rad/s]")
+    max_step: Positive | None = Field(None, description="largest step of the adaptive methods; none = unlimited [s]")
+    step: Positive = Field(1e-4, description="time step of RK4 [s]")
+    phi_step_deg: Positive = Field(1.0, description="crank-angle step of the energy method [deg]")
+    sample_rate: Positive = Field(1000.0, description="rate of the output samples (dense output) [Hz]")
+
+
+class Analysis(SceneModel):
+    steady_tolerance: Positive = Field(1e-4, description="steady when omega at the start of successive dynamic periods "
+                                                         "differs by less than this fraction of omega_m [-]")
+
+
+class Scene(SceneModel):
+    """A complete scene: machine, scenario, solver and analysis settings."""
+
+    name: str | None = Field(None, description="short name of the scene, used in outputs")
+    description: str | None = Field(None, description="free text describing the scene")
+    machine: Machine = Field(description="the machine reduced to its crank")
+    scenario: Scenario = Field(description="initial state, duration and load changes")
+    solver: Solver = Field(default_factory=Solver, description="integration method and accuracy")
+    analysis: Analysis = Field(default_factory=Analysis, description="settings of the post-run analysis")

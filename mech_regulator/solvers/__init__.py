@@ -1,0 +1,19 @@
+"""Solvers: integration in time (scipy's adaptive methods, fixed-step RK4) and the textbook energy
+method in phi. All return a dense Trajectory with the solver's statistics."""
+
+from __future__ import annotations
+
+from mech_regulator.model import MachineModel
+from mech_regulator.solvers.energy_method import integrate_energy_method
+from mech_regulator.solvers.time_domain import integrate_time_domain
+from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
+
+
+def simulate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
+    """Run the scene's scenario with the scene's solver (solver.method)."""
+    if model.scene.solver.method == "energy":
+        return integrate_energy_method(model, progress)
+    return integrate_time_domain(model, progress)
+
+
+__all__ = ["SolverStats", "Trajectory", "simulate"]

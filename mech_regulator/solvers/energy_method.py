@@ -1,0 +1,102 @@
+"""The textbook energy (table) method: fixed steps in the crank angle (physics.md section 1).
+
+    E_{i+1} = E_i + 1/2 (M_i + M_{i+1}) (phi_{i+1} - phi_i),    omega_{i+1} = sqrt(2 E_{i+1} / J_{i+1}),
+    t_{i+1} = t_i + 2 (phi_{i+1} - phi_i) / (omega_i + omega_{i+1}),
+
+with E = 1/2 J omega^2 and M the net moment without the J' term (the energy form accounts for it).
+Moments that read omega or t make the step implicit; it is solved by fixed-point iteration. A start
+from rest (omega_0 = 0) is exact for a constant net moment; a machine that stops or turns back
+(E reaching 0) cannot be followed in phi, and the method stops there with a clear message.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+
+from mech_regulator.model import MachineModel
+from mech_regulator.solvers.trajectory import Progress, Trajectory
+
+MAX_ITERATIONS = 100
+
+
+def integrate_energy_method(model: MachineModel, progress: Progress | None = None) -> Trajectory:
+    """Step the scene in phi until its duration is reached; returns the (possibly partial) trajectory.
+
+    Load events in time are resolved only to the phi step (the method has no time breakpoints).
+    """
+    scenario = model.scene.scenario
+    dphi = math.radians(model.scene.solver.phi_step_deg)
+    implicit = bool(model.depends_on() & {"omega", "t"})
+    trajectory = Trajectory(method="energy", t_start=0.0)
+    t, phi, omega = 0.0, scenario.initial.phi, scenario.initial.omega
+    if omega < 0.0:
+        trajectory.status = "failed"
+        trajectory.message = (f"energy method: initial omega = {omega} rad/s; the method steps forward in phi and "
+                              "needs omega >= 0 (use a time-domain method such as DOP853)")
+        return trajectory
+
+    def moment_and_derivative(t: float, phi: float, omega: float) -> tuple[float, float, float]:
+        """(net moment M [N m], J [kg m^2], epsilon [rad/s^2]) from the model's right-hand side:
+        M = J epsilon + 1/2 J' omega^2."""
+        _, epsilon = model.rhs(model.piece_at(t))(t, (phi, omega))
+        J, dJ = model.inertia(phi)
+        trajectory.stats.nfev += 1
+        return J * epsilon + 0.5 * dJ * omega * omega, J, epsilon
+
+    M, J, epsilon = moment_and_derivative(t, phi, omega)
+    energy = 0.5 * J * omega * omega
+    times, states, slopes = [t], [(phi, omega)], [(omega, epsilon)]
+    try:
+        while t < scenario.duration:
+            phi_next = phi + dphi
+            J_next, _ = model.inertia(phi_next)
+            guess = math.sqrt(max(2.0 * (energy + M * dphi), 0.0) / J_next) if omega == 0.0 else omega
+            for _ in range(MAX_ITERATIONS):
+                if omega + guess <= 0.0:
+                    raise _Stopped(t, phi, omega)
+                t_next = t + 2.0 * dphi / (omega + guess)
+                M_next, _, epsilon_next = moment_and_derivative(t_next, phi_next, guess)
+                energy_next = energy + 0.5 * (M + M_next) * dphi
+                if energy_next <= 0.0:
+                    raise _Stopped(t, phi, omega)
+                omega_next = math.sqrt(2.0 * energy_next / J_next)
+                converged = abs(omega_next - guess) <= 1e-14 * omega_next
+                guess = omega_next
+                if not implicit or converged:
+                    break
+            else:
+                trajectory.status = "failed"
+                trajectory.message = (f"energy method: the implicit step did not converge at phi = {phi_next:.6g} rad; "
+                                      "use a smaller solver.phi_step_deg or a time-domain method")
+                break
+            t = t + 2.0 * dphi / (omega + omega_next)
+            phi, omega, M, energy = phi_next, omega_next, M_next, energy_next
+            if implicit:  # the slope at the accepted time and speed
+                M, _, epsilon_next = moment_and_derivative(t, phi, omega)
+            times.append(t)
+            states.append((phi, omega))
+            slopes.append((omega, epsilon_next))
+            trajectory.stats.steps += 1
+            if progress is not None and trajectory.stats.steps % 1000 == 0:
+                progress(min(t, scenario.duration))
+    except _Stopped as stop:
+        trajectory.status = "failed"
+        trajectory.message = (f"energy method: the machine stops (kinetic energy reaches 0) just after t = {stop.t:.6g} s, "
+                              f"phi = {stop.phi:.6g} rad, omega = {stop.omega:.6g} rad/s; stepping in phi cannot follow "
+                              "a stop or a reversal: use a time-domain method such as DOP853")
+    except KeyboardInterrupt:
+        trajectory.status = "interrupted"
+        trajectory.message = f"interrupted by the user at t = {t:.6g} s"
+    if len(times) > 1:
+        trajectory.add_piece(times[0], min(times[-1], scenario.duration), CubicHermiteSpline(np.array(times), np.array(states).T,
+                                                                      np.array(slopes).T, axis=1))
+    return trajectory
+
+
+class _Stopped(Exception):
+    def __init__(self, t: float, phi: float, omega: float):
+        super().__init__()
+        self.t, self.phi, self.omega = t, phi, omega

@@ -1,0 +1,67 @@
+"""The result of an integration: a dense, piecewise trajectory with the solver's statistics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.integrate import OdeSolution
+
+Progress = Callable[[float], None]
+
+
+@dataclass
+class SolverStats:
+    """Work done by a solver: right-hand-side evaluations (for the energy method: moment evaluations),
+    Jacobian evaluations, LU decompositions, accepted steps, restarts at breakpoints and switches."""
+
+    nfev: int = 0
+    njev: int = 0
+    nlu: int = 0
+    steps: int = 0
+    restarts: int = 0
+    switches: int = 0
+
+
+@dataclass
+class Trajectory:
+    """Dense output of a run: `trajectory(t)` gives the state (phi [rad], omega [rad/s]) at times t.
+
+    status is 'complete', 'failed' (message says why and where) or 'interrupted'; a trajectory that
+    did not complete still covers [t_start, t_end] and nothing computed is lost.
+    """
+
+    method: str
+    t_start: float
+    piece_edges: list[float] = field(default_factory=list)
+    interpolants: list[Callable] = field(default_factory=list)
+    stats: SolverStats = field(default_factory=SolverStats)
+    status: str = "complete"
+    message: str = ""
+    _solution: OdeSolution | None = field(default=None, repr=False)
+
+    def add_piece(self, t_start: float, t_end: float, interpolant: Callable) -> None:
+        """Append the interpolant valid on [t_start, t_end] (pieces are contiguous in time)."""
+        if t_end <= t_start:
+            return
+        if not self.piece_edges:
+            self.piece_edges.append(t_start)
+        self.piece_edges.append(t_end)
+        self.interpolants.append(interpolant)
+        self._solution = None
+
+    @property
+    def t_end(self) -> float:
+        return self.piece_edges[-1] if self.piece_edges else self.t_start
+
+    def __call__(self, t: float | np.ndarray) -> np.ndarray:
+        """State at t: shape (2,) for a scalar, (2, n) for an array of times within [t_start, t_end]."""
+        if self._solution is None:
+            self._solution = OdeSolution(np.asarray(self.piece_edges), self.interpolants)
+        return self._solution(t)
+
+    def samples(self, sample_rate: float) -> np.ndarray:
+        """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end, both ends included."""
+        count = max(2, int(round((self.t_end - self.t_start) * sample_rate)) + 1)
+        return np.linspace(self.t_start, self.t_end, count)

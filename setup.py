@@ -1,0 +1,44 @@
+"""mech_regulator: an ament_python ROS 2 package that also installs with plain pip."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "mech_regulator"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
+        (f"share/{package_name}", ["package.xml"]),
+        (f"share/{package_name}/config/scenes", glob("config/scenes/*.yaml")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.26",
+        "scipy>=1.11",
+        "pyyaml>=6.0",
+        "pydantic>=2.6",
+        "rerun-sdk>=0.41,<0.42",
+        "matplotlib>=3.8",
+        "tqdm>=4.66",
+    ],
+    extras_require={
+        "test": ["pytest>=8"],
+        "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
+        "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-sensor-msgs",
+                "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
+    },
+    zip_safe=True,
+    maintainer="mech_regulator developers",
+    maintainer_email="mech-regulator@example.org",
+    description="Real motion of machines and the regulation of their speed (theory of machines)",
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            "mech-regulator = mech_regulator.cli.main:main",
+        ],
+    },
+)
