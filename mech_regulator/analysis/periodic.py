@@ -7,6 +7,7 @@ Steady (periodic) motion: omega at the start of successive dynamic periods repea
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,9 +65,11 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     if np.any(omega[1:] <= 0.0):  # a start from rest is not a stop
         t_stop = times[1 + np.argmax(omega[1:] <= 0.0)]
         return SteadyState(False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)")
-    levels = phi[0] + period * np.arange(1, int((phi[-1] - phi[0]) / period) + 1)
-    starts = np.concatenate([[t_from], [_time_at_angle(trajectory, times, phi, level) for level in levels]])
-    periods = starts.size - 1
+    # Periods start at whole multiples of Phi_omega, so each one begins at the same phase of the cycle
+    # (for an engine: cycle angle 0 at phi = 0).
+    levels = period * np.arange(math.ceil(phi[0] / period), math.floor(phi[-1] / period) + 1)
+    starts = np.array([_time_at_angle(trajectory, times, phi, level) for level in levels])
+    periods = max(starts.size - 1, 0)
     if periods < 1:
         return SteadyState(None, None, period, 0, None, "less than one dynamic period simulated after the last load change")
     last = _period_speeds(trajectory, starts[-2], starts[-1], period)

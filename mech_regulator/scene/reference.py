@@ -34,7 +34,7 @@ def schema_markdown() -> str:
         for name, field in model.model_fields.items():
             default = "required" if field.is_required() else _format_default(field)
             rows.append(f"| `{name}` | {_type_name(field.annotation)} | {default} | "
-                        f"{(field.description or '').replace('|', '/')} |")
+                        f"{(field.description or '').replace('|', chr(92) + '|')} |")
             for child in _models_in(field.annotation):
                 suffix = "[]" if typing.get_origin(_strip(field.annotation)) is list else ""
                 nested.append((child, f"{path}.{name}{suffix}" if path else name + suffix))
@@ -78,9 +78,11 @@ def _type_name(annotation) -> str:
     if origin is list:
         return f"list of {_type_name(typing.get_args(annotation)[0])}"
     if origin in (typing.Union, types.UnionType):
-        names = [_type_name(a) for a in typing.get_args(annotation) if a is not type(None)]
-        optional = type(None) in typing.get_args(annotation)
-        return " or ".join(names) + (" (optional)" if optional else "")
+        members = [a for a in typing.get_args(annotation) if a is not type(None)]
+        optional = " (optional)" if type(None) in typing.get_args(annotation) else ""
+        if len(members) > 1 and all(_models_in(m) == [m] for m in members):
+            return "section, chosen by `type`" + optional
+        return " or ".join(_type_name(m) for m in members) + optional
     if isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel):
         return "section"
     return {float: "number", str: "text", int: "integer", bool: "true/false"}.get(annotation, str(annotation))

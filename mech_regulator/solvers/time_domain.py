@@ -154,6 +154,8 @@ def _switch_window(grid: list[float], period: float, phi: float, forward: bool) 
     """The interval between consecutive switch angles that the motion from phi (in [0, period)) is in:
     on a switch angle, the one ahead in the direction of motion."""
     tolerance = 1e-9 * period
+    if phi > period - tolerance:  # a whole period that floor() left unwrapped by round-off
+        phi -= period
     i = bisect.bisect_right(grid, phi + tolerance) - 1 if forward else bisect.bisect_left(grid, phi - tolerance) - 1
     lo = grid[i] if i >= 0 else grid[-1] - period
     hi = grid[i + 1] if i + 1 < len(grid) else grid[0] + period

@@ -36,13 +36,17 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     speed.legend(loc="lower right")
 
     moments = axes[0, 1]
-    moments.plot(times, columns["M_drive"], lw=0.8, label="M_drive")
-    moments.plot(times, columns["M_load"], lw=0.8, label="M_load (all resisting)")
-    if "M_weight" in columns:
-        moments.plot(times, columns["M_weight"], lw=0.8, label="M_weight")
-    moments.plot(times, columns["J"] * columns["epsilon"], lw=0.6, color="0.5", label="J epsilon")
-    moments.set(xlabel="t [s]", ylabel="reduced moment [N m]", title="moments on the crank")
-    moments.legend(loc="lower right")
+    if last is not None:  # one dynamic period is readable; a whole run of an engine is a comb
+        window = np.linspace(last["t_start"], last["t_end"], 1500)
+        period_columns = model.columns(window, trajectory(window))
+        angle = np.degrees(period_columns["phi"] - period_columns["phi"][0])
+        moments.plot(angle, period_columns["M_drive"], lw=1.0, label="M_drive")
+        moments.plot(angle, period_columns["M_load"], lw=1.0, label="M_load (all resisting)")
+        if "M_weight" in period_columns:
+            moments.plot(angle, period_columns["M_weight"], lw=1.0, label="M_weight")
+        moments.legend(loc="lower right")
+    moments.set(xlabel="crank angle within the last dynamic period [deg]", ylabel="reduced moment [N m]",
+                title="moments on the crank")
 
     cycle = axes[1, 0]
     if last is not None:
@@ -59,10 +63,11 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     if model.reduced is not None:
         phi = np.linspace(0.0, 2.0 * math.pi, 721)
         inertia = np.array([model.inertia(p) for p in phi])
-        right.plot(np.degrees(phi), inertia[:, 0], label="J(phi) [kg m^2]")
-        right.plot(np.degrees(phi), inertia[:, 1], label="dJ/dphi [kg m^2/rad]")
-        right.set(xlabel="crank angle [deg]", title="reduced inertia")
-        right.legend(loc="lower right")
+        right.plot(np.degrees(phi), inertia[:, 0], color="tab:blue")
+        right.set(xlabel="crank angle [deg]", ylabel="J(phi) [kg m^2]", title="reduced inertia and its derivative")
+        slope = right.twinx()
+        slope.plot(np.degrees(phi), inertia[:, 1], color="tab:red", lw=0.8)
+        slope.set_ylabel("dJ/dphi [kg m^2/rad]", color="tab:red")
     else:
         works = summary["energy"]["works"]
         right.barh(list(works), list(works.values()), color="tab:green")
