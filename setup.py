@@ -28,7 +28,7 @@ setup(
         "tqdm>=4.66",
     ],
     extras_require={
-        "test": ["pytest>=8"],
+        "test": ["pytest>=8", "jsonschema>=4"],
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
         "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-sensor-msgs",
                 "ros-rosgraph-msgs", "ros-diagnostic-msgs"],

@@ -63,10 +63,11 @@ def test_constant_moments_give_uniform_acceleration(method):
     eps = (M_d - M_c) / J
     # quadratic phi(t): reproduced by every RK of order >= 2 to round-off; the implicit / multistep
     # methods (Radau's Newton iteration, LSODA's order-1 start) are only exact to their tolerances
-    # (rtol 1e-11, atol 1e-12 -> 1e-9 leaves margin for the accumulation over 2 s).
-    tol = 1e-12 if method in ("DOP853", "RK45", "RK4") else 1e-9
-    np.testing.assert_allclose(omega, omega0 + eps * t, rtol=0, atol=tol * 10)
-    np.testing.assert_allclose(phi, phi0 + omega0 * t + 0.5 * eps * t ** 2, rtol=0, atol=tol * 10)
+    # (rtol 1e-11, atol 1e-12 on values ~10: 1e-8 leaves margin for the accumulation over 2 s).
+    # Explicit RK: round-off over <= 200 steps of values ~10, 1e-11.
+    tol = 1e-11 if method in ("DOP853", "RK45", "RK4") else 1e-8
+    np.testing.assert_allclose(omega, omega0 + eps * t, rtol=0, atol=tol)
+    np.testing.assert_allclose(phi, phi0 + omega0 * t + 0.5 * eps * t ** 2, rtol=0, atol=tol)
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -163,7 +164,7 @@ def test_load_step_and_ramp_piecewise_closed_form(method, t1, t2):
     # at rtol 1e-6 would give errors ~1e-6). 1e-10 = round-off over ~1e3 steps with margin.
     np.testing.assert_allclose(omega, omega_exact, rtol=0, atol=1e-10)
     np.testing.assert_allclose(phi, phi_exact, rtol=0, atol=1e-10)
-    assert tr.stats.restarts >= 3 if method != "RK4" else True
+    assert tr.stats.restarts >= 3                              # one restart at each of t1, t2, t2 + ramp
 
 
 # ---------------------------------------------------------------------------------------------

@@ -68,8 +68,8 @@ def run(capsys, *argv: str) -> tuple[int, str, str]:
 def run_bad(capsys, tmp_path: Path, text: str, *options: str, command: str = "simulate") -> str:
     """Run a broken scene; check exit code 2 and no traceback; return stderr."""
     path = write(tmp_path, text)
-    code, out, err = run(capsys, command, str(path), "--quiet", *options) if command == "simulate" else \
-        run(capsys, command, str(path), *options)
+    quiet = ["--quiet"] if command == "simulate" else []
+    code, out, err = run(capsys, command, str(path), *quiet, *options)
     assert code == 2, f"exit code {code}; stderr:\n{err}"
     assert "Traceback" not in out + err
     assert err.startswith("mech-regulator: "), err
@@ -115,9 +115,6 @@ def test_unknown_key_inside_list_item(tmp_path, capsys):
     assert_all_in(err, "machine.loads.0.coeficient", "did you mean 'coefficient'?")
 
 
-@pytest.mark.xfail(strict=True, reason="loading._data_path: a key spelt like the section's type tag (e.g. "
-                                       "{type: fan, fan: 0.01}) is taken for pydantic's union tag: the path "
-                                       "becomes machine.loads.0.fan.fan and 'valid keys here' is empty")
 def test_unknown_key_spelt_like_the_type_tag(tmp_path, capsys):
     err = run_bad(capsys, tmp_path, edited(("{type: viscous, coefficient: 0.01}", "{type: fan, fan: 0.01}")))
     assert_all_in(err, "machine.loads.0.fan:", "machine.loads.0.coefficient: missing", "valid keys here: type, coefficient")
@@ -137,9 +134,6 @@ def test_unknown_type_lists_valid_types(tmp_path, capsys, old, new, path, bad, v
     assert_all_in(err, path, bad, "unknown type", "expected one of", *valid)
 
 
-@pytest.mark.xfail(strict=True, reason="loading.describe_error: for a section without 'type' pydantic's "
-                                       "union_tag_not_found ctx has no 'expected_tags', so the message ends in "
-                                       "'expected one of ' with nothing listed")
 def test_missing_type_lists_valid_types(tmp_path, capsys):
     err = run_bad(capsys, tmp_path, edited(("{type: viscous, coefficient: 0.01}", "{coefficient: 0.01}")))
     assert_all_in(err, "machine.loads.0", "type", "'viscous'", "'fan'")
@@ -278,8 +272,6 @@ def test_exponent_without_dot_is_a_number(tmp_path, capsys, written, value):
     assert code == 0, err
 
 
-@pytest.mark.xfail(strict=True, reason="loading._Loader: YAML 1.2 floats with a sign and no leading digit "
-                                       "(-.01, +.5) are still read as strings")
 @pytest.mark.parametrize("written, value", [("-.01", -0.01), ("+.01", 0.01)])
 def test_signed_float_without_leading_digit_is_a_number(tmp_path, written, value):
     path = write(tmp_path, edited(("offset: 0.0", f"offset: {written}")))
@@ -315,8 +307,6 @@ def test_empty_file_reports_missing_sections(tmp_path, capsys):
     assert_all_in(err, "machine: missing", "scenario: missing")
 
 
-@pytest.mark.xfail(strict=True, reason="loading.load_scene catches only OSError around read_text: a file that "
-                                       "is not UTF-8 raises UnicodeDecodeError (traceback) instead of SceneError")
 def test_file_not_utf8(tmp_path, capsys):
     path = tmp_path / "scene.yaml"
     path.write_bytes(BASE.replace("name: mini", "name: mini\ndescription: caf\xe9").encode("latin-1"))
@@ -492,9 +482,6 @@ def test_output_folder_missing(tmp_path, capsys, option):
     assert not target.parent.exists()
 
 
-@pytest.mark.xfail(strict=True, reason="cli.main._simulate checks only that the --out folder exists: a folder "
-                                       "that is a file raises NotADirectoryError from np.savetxt after the run "
-                                       "(traceback, exit 1)")
 def test_output_folder_is_a_file(tmp_path, capsys):
     blocker = tmp_path / "blocker"
     blocker.write_text("not a folder")
@@ -502,8 +489,6 @@ def test_output_folder_is_a_file(tmp_path, capsys):
     assert_all_in(err, "cannot write", str(blocker))
 
 
-@pytest.mark.xfail(strict=True, reason="cli.main._simulate: --out naming an existing folder raises "
-                                       "IsADirectoryError from np.savetxt after the run (traceback, exit 1)")
 def test_output_path_is_a_folder(tmp_path, capsys):
     folder = tmp_path / "results"
     folder.mkdir()

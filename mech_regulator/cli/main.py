@@ -87,9 +87,12 @@ def _simulate(scene, args) -> int:
     from mech_regulator.model import build_model
     from mech_regulator.solvers import simulate
 
+    if args.plot is not None and not args.plot.suffix:
+        args.plot = args.plot.with_suffix(".png")
     for path in (args.out, args.plot):
-        if path is not None and not path.parent.exists():
-            raise SceneError(f"cannot write '{path}': the folder '{path.parent}' does not exist")
+        if path is not None and (path.is_dir() or not path.parent.is_dir()):
+            problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
+            raise SceneError(f"cannot write '{path}': {problem}")
     model = build_model(scene)
     duration = scene.scenario.duration
     with tqdm(total=duration, unit="s sim", disable=True if args.quiet else None, file=sys.stderr,

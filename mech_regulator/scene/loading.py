@@ -32,7 +32,7 @@ _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
                    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
-                   |\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                   |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
                    |[-+]?\.(?:inf|Inf|INF)
                    |\.(?:nan|NaN|NAN))$""", re.X),
     list("-+0123456789."))
@@ -146,6 +146,9 @@ def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
         text = path.read_text(encoding="utf-8")
     except OSError as error:
         raise SceneError(f"scene '{path}': cannot be read: {error.strerror}") from None
+    except UnicodeDecodeError as error:
+        raise SceneError(f"scene '{path}': not UTF-8 text (byte {error.start}: {error.reason}); "
+                         "save the file as UTF-8") from None
     data = parse_yaml(text, str(path))
     if data is None:
         data = {}
@@ -179,11 +182,11 @@ def describe_error(item: dict, data: Any) -> str:
         return f"{key}: unknown key{hint} (valid keys here: {', '.join(valid)})"
     if kind == "missing":
         return f"{key}: missing; {_field_description(loc, data) or 'this key is required'}"
-    if kind == "union_tag_invalid":
-        expected = item.get("ctx", {}).get("expected_tags", "")
+    if kind in ("union_tag_invalid", "union_tag_not_found"):
+        expected = ", ".join(f"'{tag}'" for tag in _type_tags(loc, data))
+        if kind == "union_tag_not_found":
+            return f"{key}: missing 'type'; expected one of {expected}"
         return f"{key}.type = {item['input'].get('type')!r}: unknown type; expected one of {expected}"
-    if kind == "union_tag_not_found":
-        return f"{key}: missing 'type'; expected one of {item.get('ctx', {}).get('expected_tags', '')}"
     if message.startswith("Value error, "):
         return f"{key}: {message[len('Value error, '):]}"
     if kind == "finite_number":
@@ -196,24 +199,24 @@ def describe_error(item: dict, data: Any) -> str:
 def _data_path(loc: tuple, data: Any) -> list:
     """Drop the union tags pydantic inserts into locations (machine.loads.0.viscous.coefficient
     -> machine.loads.0.coefficient), keeping the path as the user wrote it."""
-    path, node = [], data
+    path, node, tag_skipped = [], data, False
     for part in loc:
+        if isinstance(node, dict) and node.get("type") == part and not tag_skipped:
+            tag_skipped = True
+            continue
+        tag_skipped = False
         if isinstance(node, dict) and part in node:
-            path.append(part)
             node = node[part]
         elif isinstance(node, list) and isinstance(part, int) and part < len(node):
-            path.append(part)
             node = node[part]
-        elif isinstance(node, dict) and node.get("type") == part:
-            continue
         else:
-            path.append(part)
             node = None
+        path.append(part)
     return path
 
 
-def _model_at(loc: list, data: Any) -> type[pydantic.BaseModel] | None:
-    """The pydantic model class that validates the section at loc (following list items and type tags)."""
+def _annotation_at(loc: list, data: Any) -> Any:
+    """The type annotation that validates the value at loc (following list items and type tags)."""
     annotation: Any = Scene
     node = data
     for part in loc:
@@ -231,8 +234,32 @@ def _model_at(loc: list, data: Any) -> type[pydantic.BaseModel] | None:
                 return None
             annotation = field.annotation
             node = node.get(part) if isinstance(node, dict) else None
-    annotation = _resolve(annotation, node)
+    return annotation
+
+
+def _model_at(loc: list, data: Any) -> type[pydantic.BaseModel] | None:
+    """The pydantic model class that validates the section at loc."""
+    node: Any = data
+    for part in loc:
+        node = node.get(part) if isinstance(node, dict) else (
+            node[part] if isinstance(node, list) and isinstance(part, int) and part < len(node) else None)
+    annotation = _resolve(_annotation_at(loc, data), node)
     return annotation if isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel) else None
+
+
+def _type_tags(loc: list, data: Any) -> list[str]:
+    """The values 'type' may take for the section at loc."""
+    tags: list[str] = []
+    annotation = _annotation_at(loc, data)
+    pending = [annotation]
+    while pending:
+        current = pending.pop()
+        if isinstance(current, type) and issubclass(current, pydantic.BaseModel):
+            literal = current.model_fields.get("type")
+            tags += list(typing.get_args(literal.annotation)) if literal is not None else []
+        else:
+            pending += list(reversed(typing.get_args(current)))
+    return tags
 
 
 def _resolve(annotation: Any, node: Any) -> Any:
