@@ -136,10 +136,6 @@ def test_cli_exit_code_message_and_csv_on_failure(tmp_path, capsys):
     assert np.all(data["omega"] > 0) and data["omega"][0] == pytest.approx(10.0)
 
 
-@pytest.mark.xfail(strict=True, reason="package bug: the energy method refuses omega < 0 before any step, so the "
-                                       "trajectory has no piece; cli/main.py _simulate -> summarise -> energy_balance "
-                                       "calls trajectory(...) on an empty OdeSolution and raises ValueError "
-                                       "(trajectory.py:61) instead of exiting with code 1")
 def test_cli_negative_initial_speed_exits_with_code_1(tmp_path, capsys):
     scene = {"machine": RUN_DOWN, "scenario": {"initial": {"omega": -3.0}, "duration": 1.0},
              "solver": {"method": "energy"}}

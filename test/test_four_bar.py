@@ -337,9 +337,6 @@ def test_never_assemblable():
             link_angles(phi, a, b, c, d, th1, -1.0)
 
 
-@pytest.mark.xfail(strict=True, raises=ZeroDivisionError,
-                   reason="package bug: link_angles divides by |B - D| = 0 before its assemblability check "
-                          "(four_bar.py, cos_gamma line) and raises ZeroDivisionError instead of ValueError")
 def test_crank_pin_on_rocker_pivot_raises_value_error():
     """a = d and phi = th1 put B on D; with b != c the loop cannot close (0 < |b - c|), the range function
     says so, and link_angles should raise ValueError like everywhere else in that range."""

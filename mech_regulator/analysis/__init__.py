@@ -13,6 +13,11 @@ from mech_regulator.solvers import Trajectory
 
 def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
     """Everything the summary reports, as plain data (JSON-ready)."""
+    if not trajectory.interpolants:  # the solver refused before its first step
+        return {"scene": model.scene.name, "status": trajectory.status, "message": trajectory.message,
+                "t_end": trajectory.t_start, "phi_end": model.scene.scenario.initial.phi,
+                "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None,
+                "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)}}
     steady = analyse_steady_state(model, trajectory)
     balance = energy_balance(model, trajectory)
     end = trajectory(trajectory.t_end)

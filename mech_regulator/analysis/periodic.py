@@ -108,10 +108,12 @@ def _period_speeds(trajectory: Trajectory, t_start: float, t_end: float, period:
 
 
 def _refine(trajectory: Trajectory, times: np.ndarray, index: int, sign: float) -> float:
-    """Local extremum of omega near times[index] (sign -1 for a maximum, +1 for a minimum) [rad/s]."""
+    """Local extremum of omega near times[index] (sign -1 for a maximum, +1 for a minimum) [rad/s].
+
+    Minimised over tau = t - lo, so the tolerance is relative to the bracket, not to the run's time."""
     lo, hi = times[max(index - 1, 0)], times[min(index + 1, times.size - 1)]
     sampled = trajectory(times[index])[1]
-    result = optimize.minimize_scalar(lambda t: sign * trajectory(t)[1], bounds=(lo, hi), method="bounded",
-                                      options={"xatol": 1e-12 * max(1.0, hi)})
+    result = optimize.minimize_scalar(lambda tau: sign * trajectory(lo + tau)[1], bounds=(0.0, hi - lo),
+                                      method="bounded", options={"xatol": 1e-10 * (hi - lo)})
     refined = sign * result.fun
     return float(refined if sign * refined < sign * sampled else sampled)

@@ -100,6 +100,8 @@ def _simulate(scene, args) -> int:
         trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory)
+    if not trajectory.interpolants:
+        args.out = args.plot = None  # nothing to write
     if args.out is not None:
         columns = model.columns(*_samples(model, trajectory))
         np.savetxt(args.out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),

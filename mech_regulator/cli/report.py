@@ -56,6 +56,8 @@ def format_summary(model: MachineModel, summary: dict) -> str:
     lines = [f"scene {summary['scene']}: {summary['status']} at t = {summary['t_end']:.6g} s, "
              f"phi = {summary['phi_end']:.6g} rad, omega = {summary['omega_end']:.6g} rad/s"]
     steady = summary["steady"]
+    if steady is None:
+        return lines[0] + "\nnothing was computed: " + summary["message"]
     last = steady["last_period"]
     if steady["steady"]:
         lines.append(f"steady motion from t = {steady['t_steady']:.4g} s "

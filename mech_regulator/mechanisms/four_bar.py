@@ -49,7 +49,7 @@ def link_angles(phi: float, a: float, b: float, c: float, d: float, th1: float, 
     B = a * cmath.exp(1j * phi)
     p = B - d * cmath.exp(1j * th1)
     f = abs(p)
-    cos_gamma = (c * c + f * f - b * b) / (2.0 * c * f)
+    cos_gamma = (c * c + f * f - b * b) / (2.0 * c * f) if f > 0.0 else math.inf  # B on D: no triangle
     if not -1.0 <= cos_gamma <= 1.0:
         raise ValueError(f"four-bar cannot be assembled at crank angle {math.degrees(phi):.3f} deg")
     th4 = cmath.phase(p) + branch_sign * math.acos(cos_gamma)
