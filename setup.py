@@ -2,16 +2,14 @@
 
 from glob import glob
 
-from setuptools import find_namespace_packages, setup
+from setuptools import find_packages, setup
 
 package_name = "mech_regulator"
 
 setup(
     name=package_name,
     version="0.1.0",
-    # Namespace-aware discovery: a subpackage without __init__.py (mech_regulator/viz today) is still
-    # installed by pip and colcon; plain find_packages() silently dropped it from non-editable installs.
-    packages=find_namespace_packages(include=[package_name, f"{package_name}.*"], exclude=["*.__pycache__"]),
+    packages=find_packages(exclude=["test", "test.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),

@@ -58,7 +58,8 @@ def config_dir() -> Path:
     `share/mech_regulator/config` under an install prefix (pip, colcon), else from ament_index."""
     here = Path(__file__).resolve()
     candidates = [here.parents[2] / "config"]
-    candidates += [parent / "share" / "mech_regulator" / "config" for parent in (Path(sys.prefix), *here.parents)]
+    # The install prefix this very package sits in comes before the interpreter's own prefix.
+    candidates += [parent / "share" / "mech_regulator" / "config" for parent in (*here.parents, Path(sys.prefix))]
     try:
         from ament_index_python.packages import get_package_share_directory
         candidates.append(Path(get_package_share_directory("mech_regulator")) / "config")

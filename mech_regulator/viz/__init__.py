@@ -1,0 +1,1 @@
+"""Pictures of runs (matplotlib PNG); a thin layer over the physics core."""
