@@ -132,18 +132,23 @@ class LinearMotor(SceneModel):
     no_load_speed: Positive = Field(description="speed omega0 at which the moment falls to zero [rad/s]")
 
 
-class TableDrive(SceneModel):
-    """Periodic table of the driving moment over the crank angle, linear between points."""
+class _TorqueTable(SceneModel):
+    """Periodic table of a moment over the crank angle, linear between points."""
 
-    type: Literal["table"]
     angle_deg: list[float] = Field(min_length=2, description="crank angles of the table points [deg]")
     torque: list[float] = Field(min_length=2, description="driving moment at each angle, signed [N m]")
     period_deg: Positive = Field(360.0, description="period of the table in crank angle (720 for a four-stroke cycle) [deg]")
 
     @model_validator(mode="after")
-    def _table(self) -> TableDrive:
-        _check_table(self.angle_deg, self.torque, self.period_deg, "table drive")
+    def _table(self) -> _TorqueTable:
+        _check_table(self.angle_deg, self.torque, self.period_deg, "torque table")
         return self
+
+
+class TableDrive(_TorqueTable):
+    """Periodic table of the driving moment over the crank angle, linear between points."""
+
+    type: Literal["table"]
 
 
 class Engine(SceneModel):
@@ -186,18 +191,11 @@ class FanLoad(SceneModel):
     coefficient: NonNegative = Field(description="fan coefficient k: moment = -k omega |omega| [N m s^2/rad^2]")
 
 
-class TableLoad(SceneModel):
+class TableLoad(_TorqueTable):
     """Periodic table of the resisting moment over the crank angle, linear between points."""
 
     type: Literal["table"]
-    angle_deg: list[float] = Field(min_length=2, description="crank angles of the table points [deg]")
     torque: list[float] = Field(min_length=2, description="resisting moment at each angle: moment = -torque [N m]")
-    period_deg: Positive = Field(360.0, description="period of the table in crank angle [deg]")
-
-    @model_validator(mode="after")
-    def _table(self) -> TableLoad:
-        _check_table(self.angle_deg, self.torque, self.period_deg, "table load")
-        return self
 
 
 class CuttingLoad(SceneModel):
