@@ -39,7 +39,8 @@ def link_angles(phi: float, a: float, b: float, c: float, d: float, th1: float, 
                 ) -> tuple[float, ...]:
     """Coupler and rocker angles with their first two derivatives with respect to phi.
 
-    Position: with p = B - D, f = |p|, the rocker angle is `th4 = arg p + sign * acos((c^2 + f^2 - b^2) / (2 c f))`.
+    Position: with p = B - D, f = |p|, the rocker angle is `th4 = arg p + sign * acos((c^2 + f^2 - b^2) / (2 c f))`,
+    arg p taken continuous around the direction D->A.
     Velocity ratios (source 004): `th3' = a sin(th4 - th2) / (b sin(th3 - th4))`,
     `th4' = a sin(th2 - th3) / (c sin(th4 - th3))`. Second derivatives from the twice-differentiated loop
     `i b th3'' e^{i th3} - i c th4'' e^{i th4} = a e^{i th2} + b th3'^2 e^{i th3} - c th4'^2 e^{i th4} =: r`:
@@ -52,7 +53,10 @@ def link_angles(phi: float, a: float, b: float, c: float, d: float, th1: float, 
     cos_gamma = (c * c + f * f - b * b) / (2.0 * c * f) if f > 0.0 else math.inf  # B on D: no triangle
     if not -1.0 <= cos_gamma <= 1.0:
         raise ValueError(f"four-bar cannot be assembled at crank angle {math.degrees(phi):.3f} deg")
-    th4 = cmath.phase(p) + branch_sign * math.acos(cos_gamma)
+    # arg p measured from the direction D->A, where it stays within (-pi/2, pi/2) while the crank is
+    # shorter than the frame: th4 is then continuous (no 2 pi jump when the rocker points along -x).
+    towards_A = th1 + math.pi
+    th4 = towards_A + cmath.phase(p * cmath.exp(-1j * towards_A)) + branch_sign * math.acos(cos_gamma)
     C = d * cmath.exp(1j * th1) + c * cmath.exp(1j * th4)
     th3 = cmath.phase(C - B)
     sin34 = math.sin(th3 - th4)
