@@ -35,15 +35,20 @@ CASES = [
 ]
 
 
-@pytest.mark.parametrize("mechanism, load, potential", CASES, ids=[c[1]["type"] for c in CASES])
-def test_conservative_output_load_keeps_energy(mechanism, load, potential):
+def _run(mechanism, load, duration, samples):
+    """Simulate the mechanism coasting from 30 rad/s against one output-link load; the output columns."""
     scene = validate_scene({"machine": {"inertia": 0.02, "mechanism": mechanism, "loads": [load]},
-                            "scenario": {"initial": {"omega": 30.0}, "duration": 1.0},
+                            "scenario": {"initial": {"omega": 30.0}, "duration": duration},
                             "solver": {"rtol": 1e-11, "atol": 1e-12}})
     model = build_model(scene)
     trajectory = simulate(model)
-    times = np.linspace(0.0, trajectory.t_end, 400)
-    columns = model.columns(times, trajectory(times))
+    times = np.linspace(0.0, trajectory.t_end, samples)
+    return times, model.columns(times, trajectory(times))
+
+
+@pytest.mark.parametrize("mechanism, load, potential", CASES, ids=[c[1]["type"] for c in CASES])
+def test_conservative_output_load_keeps_energy(mechanism, load, potential):
+    _, columns = _run(mechanism, load, duration=1.0, samples=400)
     q = columns["x_slider"] if "x_slider" in columns else columns["theta4"]
     energy = columns["E_kinetic"] + potential(q)
     swing = np.ptp(columns["E_kinetic"])
@@ -57,13 +62,7 @@ def test_conservative_output_load_keeps_energy(mechanism, load, potential):
     (FOUR_BAR, {"type": "rocker_viscous", "coefficient": 0.2}, "omega4"),
 ])
 def test_viscous_output_load_dissipates_c_v_squared(mechanism, load, speed_column):
-    scene = validate_scene({"machine": {"inertia": 0.02, "mechanism": mechanism, "loads": [load]},
-                            "scenario": {"initial": {"omega": 30.0}, "duration": 0.5},
-                            "solver": {"rtol": 1e-11, "atol": 1e-12}})
-    model = build_model(scene)
-    trajectory = simulate(model)
-    times = np.linspace(0.0, trajectory.t_end, 20001)
-    columns = model.columns(times, trajectory(times))
+    times, columns = _run(mechanism, load, duration=0.5, samples=20001)
     power = columns[f"M_{load['type']}"] * columns["omega"]
     np.testing.assert_allclose(power, -load["coefficient"] * columns[speed_column] ** 2, rtol=1e-12, atol=1e-12)
     dissipated = -np.trapezoid(power, times)

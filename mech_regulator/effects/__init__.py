@@ -41,7 +41,7 @@ class Effect:
     switch_angles: tuple[float, ...] = ()
 
 
-def build_drive(drive: schema.Drive, kinematic_period: float | None) -> Effect:
+def build_drive(drive: schema.Drive) -> Effect:
     """The driving moment M_d of a scene's `machine.drive`."""
     if isinstance(drive, schema.ConstantDrive):
         torque = drive.torque
@@ -88,7 +88,8 @@ def _cutting(load: schema.CuttingLoad) -> Effect:
 
 
 def build_load(load: schema.Load, kinematic_period: float | None) -> Effect:
-    """A resisting moment or force of a scene's `machine.loads` entry."""
+    """A resisting moment or force of a scene's `machine.loads` entry; loads on the output link are
+    periodic with the mechanism (kinematic_period [rad])."""
     if isinstance(load, schema.ConstantLoad):
         torque = load.torque
         return Effect("constant", "load", lambda t, phi, omega, q, dq: -torque, frozenset(),

@@ -12,6 +12,7 @@ a machine without a mechanism has no J(phi), no J' term and no kinematics call a
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -53,10 +54,6 @@ class MachineModel:
     effects: tuple[Effect, ...]
     load_pieces: tuple[LoadPiece, ...]
 
-    @property
-    def state_names(self) -> tuple[str, ...]:
-        return ("phi", "omega")
-
     def breakpoints(self) -> list[float]:
         """Times where the external load has a kink or a jump: integration never steps across them."""
         return sorted({piece.start for piece in self.load_pieces[1:]})
@@ -65,8 +62,8 @@ class MachineModel:
         """The external-load piece in force from t on (None if the scene has no external load)."""
         if not self.load_pieces:
             return None
-        starts = [piece.start for piece in self.load_pieces]
-        return self.load_pieces[max(0, int(np.searchsorted(starts, t, side="right")) - 1)]
+        index = bisect.bisect_right(self.load_pieces, t, key=lambda piece: piece.start) - 1
+        return self.load_pieces[max(index, 0)]
 
     def external_load(self, t: float) -> float:
         """External load moment magnitude at time t [N m] (the moment on the crank is minus this)."""
@@ -235,7 +232,7 @@ def build_model(scene: Scene) -> MachineModel:
     kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
     effects = []
     if machine.drive is not None:
-        effects.append(build_drive(machine.drive, kinematic_period))
+        effects.append(build_drive(machine.drive))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
     return MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,

@@ -335,9 +335,6 @@ class Scenario(SceneModel):
         return self
 
 
-SCIPY_METHODS = ("RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA")
-
-
 class Solver(SceneModel):
     method: Literal["RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA", "RK4", "energy"] = Field(
         "DOP853", description="scipy.integrate method (adaptive, in time), RK4 (fixed step in time) or energy (the "

@@ -38,10 +38,12 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
                               "needs omega >= 0 (use a time-domain method such as DOP853)")
         return trajectory
 
+    rhs_of_piece = {piece: model.rhs(piece) for piece in model.load_pieces or (None,)}
+
     def moment_and_derivative(t: float, phi: float, omega: float) -> tuple[float, float, float]:
         """(net moment M [N m], J [kg m^2], epsilon [rad/s^2]) from the model's right-hand side:
         M = J epsilon + 1/2 J' omega^2."""
-        _, epsilon = model.rhs(model.piece_at(t))(t, (phi, omega))
+        _, epsilon = rhs_of_piece[model.piece_at(t)](t, (phi, omega))
         J, dJ = model.inertia(phi)
         trajectory.stats.nfev += 1
         return J * epsilon + 0.5 * dJ * omega * omega, J, epsilon
