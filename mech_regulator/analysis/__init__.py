@@ -1,12 +1,18 @@
 """Analysis of a run: steady state and speed fluctuation over the dynamic period, energy balance,
-and the flywheel formulas; `summarise` gathers them for the command line."""
+the flywheel formulas, a governor's statics and stability and its answer to load changes;
+`summarise` and `analyse_governor` gather them for the command line."""
 
 from __future__ import annotations
 
 import dataclasses
 
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
+from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
+from mech_regulator.analysis.stability import (FloquetStability, LinearStability, critical_damping,
+                                               floquet_stability, is_periodic, linear_stability)
+from mech_regulator.analysis.statics import (Droop, OperatingPoint, StaticCharacteristic, droop, operating_point,
+                                             static_characteristic)
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 
@@ -16,7 +22,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
     if not trajectory.interpolants:  # the solver refused before its first step
         return {"scene": model.scene.name, "status": trajectory.status, "message": trajectory.message,
                 "t_end": trajectory.t_start, "phi_end": model.scene.scenario.initial.phi,
-                "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None,
+                "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None, "governor": None,
                 "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)}}
     steady = analyse_steady_state(model, trajectory)
     balance = energy_balance(model, trajectory)
@@ -38,8 +44,70 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         },
         "energy": dataclasses.asdict(balance),
         "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
+        "governor": _governed_run(model, trajectory) if model.governor is not None else None,
     }
 
 
-__all__ = ["EnergyBalance", "PeriodSpeeds", "SteadyState", "analyse_steady_state", "energy_balance", "energy_swing",
-           "flywheel_for_constant_inertia", "summarise"]
+def _governed_run(model: MachineModel, trajectory: Trajectory) -> dict:
+    """The governor's part of a run's summary: its predicted operating point, its answer to each load
+    change and how often it changed mode."""
+    return {
+        "operating_point": dataclasses.asdict(operating_point(model, model.external_load(0.0))),
+        "load_responses": [dataclasses.asdict(response) for response in load_responses(model, trajectory)],
+        "events": len(trajectory.events),
+    }
+
+
+def analyse_governor(model: MachineModel) -> dict:
+    """Statics and stability of a governed scene, as plain data (JSON-ready): static characteristic,
+    statism, insensitivity, operating points for every load level of the scenario, droop, linear
+    stability of the averaged model (eigenvalues, dominant mode, Vyshnegradsky A and B, critical sleeve
+    damping) and, for a machine periodic in phi, the Floquet multipliers of the periodic orbit."""
+    governor = model.governor
+    characteristic = static_characteristic(governor)
+    load = model.external_load(0.0)
+    point = operating_point(model, load)
+    levels = [load] + [event.torque for event in model.scene.scenario.load_events]
+    linear = linear_stability(model, point)
+    z = point.sleeve
+    sensor = governor.sensor
+    result = {
+        "scene": model.scene.name,
+        "kind": governor.kind,
+        "feedback": governor.feedback if governor.kind == "indirect" else None,
+        "set_speed": governor.set_speed(),
+        "characteristic": {key: value.tolist() if hasattr(value, "tolist") else value
+                           for key, value in dataclasses.asdict(characteristic).items()},
+        "statism": characteristic.statism,
+        "insensitivity_at_operating_point": (sensor.equilibrium_speed(z, sensor.static_friction)
+                                             - sensor.equilibrium_speed(z, -sensor.static_friction)) / point.speed,
+        "operating_points": [dataclasses.asdict(operating_point(model, level)) for level in levels],
+        "droop": dataclasses.asdict(droop(model)),
+        "linear": {
+            "state_names": list(linear.state_names),
+            "eigenvalues": [[value.real, value.imag] for value in linear.eigenvalues],
+            "dominant": [linear.dominant.real, linear.dominant.imag],
+            "damping_ratio": linear.damping_ratio,
+            "period": linear.period,
+            "stable": linear.stable,
+            "polynomial": linear.polynomial.tolist(),
+            "vyshnegradsky": list(linear.vyshnegradsky) if linear.vyshnegradsky else None,
+            "critical_damping": critical_damping(model, point),
+        },
+        "floquet": None,
+    }
+    if is_periodic(model):
+        floquet = floquet_stability(model, point, linear)
+        result["floquet"] = {
+            "cycle_time": floquet.cycle_time, "mean_speed": floquet.mean_speed, "residual": floquet.residual,
+            "multipliers": [[value.real, value.imag] for value in floquet.multipliers],
+            "averaged_multipliers": [[value.real, value.imag] for value in floquet.averaged_multipliers],
+            "stable": floquet.stable, "orbit": floquet.orbit.tolist()}
+    return result
+
+
+__all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "LoadResponse", "OperatingPoint",
+           "PeriodSpeeds", "StaticCharacteristic", "SteadyState", "analyse_governor", "analyse_steady_state",
+           "critical_damping", "cycle_mean_speed", "droop", "energy_balance", "energy_swing",
+           "flywheel_for_constant_inertia", "floquet_stability", "is_periodic", "linear_stability", "load_responses",
+           "operating_point", "static_characteristic", "summarise"]

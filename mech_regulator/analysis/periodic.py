@@ -61,7 +61,7 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     phi_from, phi_to = trajectory(np.array([t_from, t_to]))[0]
     count = int(min(2_000_000, max(4000, SAMPLES_PER_PERIOD * abs(phi_to - phi_from) / period)))
     times = np.linspace(t_from, t_to, count)
-    phi, omega = trajectory(times)
+    phi, omega = trajectory(times)[:2]
     if np.any(omega[1:] <= 0.0):  # a start from rest is not a stop
         t_stop = times[1 + np.argmax(omega[1:] <= 0.0)]
         return SteadyState(False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)")

@@ -43,6 +43,11 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--json", action="store_true", help="print the summary as JSON")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
     scene_command("describe", "print the effects, state vector and solver a scene uses, without running it")
+    governor = scene_command("governor", "statics and stability of a governed scene: static characteristic, "
+                                         "statism, insensitivity, operating points, droop, eigenvalues, "
+                                         "Vyshnegradsky A and B, Floquet multipliers")
+    governor.add_argument("--plot", type=Path, help="write a PNG picture of the statics and stability")
+    governor.add_argument("--json", action="store_true", help="print the analysis as JSON")
     schema = commands.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
     schema.add_argument("--format", choices=("json", "markdown"), default="json",
                         help="json: the JSON Schema; markdown: the key tables of docs/scenes.md")
@@ -66,6 +71,8 @@ def main(argv: list[str] | None = None) -> int:
 
             print(describe(build_model(scene)))
             return 0
+        if args.command == "governor":
+            return _governor(scene, args)
         return _simulate(scene, args)
     except SceneError as error:
         print(f"mech-regulator: {error}", file=sys.stderr)
@@ -87,12 +94,7 @@ def _simulate(scene, args) -> int:
     from mech_regulator.model import build_model
     from mech_regulator.solvers import simulate
 
-    if args.plot is not None and not args.plot.suffix:
-        args.plot = args.plot.with_suffix(".png")
-    for path in (args.out, args.plot):
-        if path is not None and (path.is_dir() or not path.parent.is_dir()):
-            problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
-            raise SceneError(f"cannot write '{path}': {problem}")
+    _check_outputs(args, args.out)
     model = build_model(scene)
     duration = scene.scenario.duration
     with tqdm(total=duration, unit="s sim", disable=True if args.quiet else None, file=sys.stderr,
@@ -119,6 +121,35 @@ def _simulate(scene, args) -> int:
     if trajectory.status == "interrupted":
         print(f"mech-regulator: {trajectory.message}; the outputs hold the run up to there", file=sys.stderr)
         return EXIT_INTERRUPTED
+    return 0
+
+
+def _check_outputs(args, *others: Path | None) -> None:
+    """Give the plot a .png suffix and refuse, before any work, output paths that cannot be written."""
+    if args.plot is not None and not args.plot.suffix:
+        args.plot = args.plot.with_suffix(".png")
+    for path in (*others, args.plot):
+        if path is not None and (path.is_dir() or not path.parent.is_dir()):
+            problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
+            raise SceneError(f"cannot write '{path}': {problem}")
+
+
+def _governor(scene, args) -> int:
+    from mech_regulator.analysis import analyse_governor
+    from mech_regulator.cli.report import format_governor
+    from mech_regulator.model import build_model
+
+    if scene.governor is None:
+        raise SceneError(f"scene '{scene.name}' has no governor: add a 'governor:' section (see docs/scenes.md)")
+    _check_outputs(args)
+    model = build_model(scene)
+    analysis = analyse_governor(model)
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_governor
+
+        plot_governor(model, analysis, args.plot)
+        analysis["plot"] = str(args.plot)
+    print(json.dumps(analysis, indent=2, default=_json_default) if args.json else format_governor(analysis))
     return 0
 
 

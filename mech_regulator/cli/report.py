@@ -14,7 +14,9 @@ def describe(model: MachineModel) -> str:
     lines = [f"scene: {scene.name}"]
     if scene.description:
         lines.append(f"  {scene.description.strip()}")
-    lines.append("state vector: phi [rad], omega [rad/s]")
+    units = {"phi": "rad", "omega": "rad/s", "arm_angle": "rad", "arm_rate": "rad/s", "servo": "-",
+             "feedback_shift": "m"}
+    lines.append("state vector: " + ", ".join(f"{name} [{units[name]}]" for name in model.state_names()))
     if model.reduced is None:
         lines.append(f"inertia: constant J = {model.inertia_constant:g} kg m^2 (no mechanism: no dJ/dphi term)")
     else:
@@ -32,6 +34,9 @@ def describe(model: MachineModel) -> str:
         lines.append(f"  - load  external load moment (N m) by time: {changes}   [reads t]")
     if not model.effects and not model.has_weight and not model.load_pieces:
         lines.append("  (none: the machine coasts)")
+    if model.governor is not None:
+        lines.append("governor (M_d = throttle * drive; hybrid modes with exact stick, break-away and stops):")
+        lines += [f"  {line}" for line in model.governor.describe()]
     lines.append(f"dynamic period: {math.degrees(model.dynamic_period()):g} deg of crank angle")
     if model.switch_angles():
         angles = ", ".join(f"{math.degrees(a):g}" for a, _ in model.switch_angles())
@@ -78,8 +83,83 @@ def format_summary(model: MachineModel, summary: dict) -> str:
     lines.append(f"solver {solver['method']}: {solver['steps']} steps, {solver['nfev']} rhs evaluations"
                  + (f", {solver['njev']} jacobians, {solver['nlu']} LU" if solver["njev"] else "")
                  + (f", {solver['switches']} switches located" if solver["switches"] else "")
-                 + (f", {solver['restarts']} restarts" if solver["restarts"] else ""))
+                 + (f", {solver['restarts']} restarts" if solver["restarts"] else "")
+                 + (f", {solver['events']} governor events" if solver["events"] else ""))
+    if summary.get("governor"):
+        lines += _governed_lines(summary["governor"])
     for key in ("csv", "plot"):
         if key in summary:
             lines.append(f"wrote {summary[key]}")
     return "\n".join(lines)
+
+
+def _governed_lines(governed: dict) -> list[str]:
+    """The governor's part of a run summary: operating point and one line per load change."""
+    point = governed["operating_point"]
+    lines = [f"governor: predicted operating point at the initial load {point['external_load']:.4g} N m: "
+             f"omega {point['speed']:.6g} rad/s, sleeve {point['sleeve'] * 1000:.4g} mm, throttle "
+             f"{point['throttle']:.4g}" + (f" ({point['limited']})" if point["limited"] else "")]
+    for response in governed["load_responses"]:
+        settling = (f"settles in {response['settling_time']:.3g} s" if response["settling_time"] is not None
+                    else "not settled by the end of the window")
+        lines.append(
+            f"  load {response['load_before']:.4g} -> {response['load_after']:.4g} N m at {response['time']:.4g} s: "
+            f"peak deviation {response['peak_deviation']:+.4g} rad/s after {response['peak_time']:.3g} s, {settling}, "
+            f"overshoot {response['overshoot']:.3g} %, new speed {response['speed_after']:.6g} rad/s, static error "
+            f"{response['static_error']:+.4g} rad/s (statics: {response['predicted_static_error']:+.4g})"
+            + (f"; limits: {', '.join(response['limits'])}" if response["limits"] else ""))
+    return lines
+
+
+def format_governor(analysis: dict) -> str:
+    """The human-readable statics and stability of a governed scene."""
+    kind = analysis["kind"] + (f", {analysis['feedback']} feedback" if analysis["feedback"] else "")
+    characteristic = analysis["characteristic"]
+    speeds = characteristic["speed"]
+    lines = [f"scene {analysis['scene']}: {kind} governor",
+             f"static characteristic: omega = {speeds[0]:.5g} rad/s at z = {characteristic['sleeve'][0] * 1000:.4g} mm "
+             f"to {speeds[-1]:.5g} rad/s at z = {characteristic['sleeve'][-1] * 1000:.4g} mm; "
+             f"statism (degree of non-uniformity) {analysis['statism']:.4g}",
+             f"insensitivity (sleeve friction) at the operating point: {analysis['insensitivity_at_operating_point']:.4g}"]
+    if analysis["kind"] == "indirect":
+        lines.append(f"set speed (sleeve at the pilot's neutral): {analysis['set_speed']:.6g} rad/s")
+    lines.append("operating points (cycle-averaged machine):")
+    for point in analysis["operating_points"]:
+        servo = f", servo {point['servo']:.4g}" if point["servo"] == point["servo"] else ""
+        lines.append(f"  load {point['external_load']:8.4g} N m: omega {point['speed']:.6g} rad/s "
+                     f"({point['speed'] * 30 / math.pi:.5g} rpm), sleeve {point['sleeve'] * 1000:.4g} mm, "
+                     f"throttle {point['throttle']:.4g}{servo}" + (f"  [{point['limited']}]" if point["limited"] else ""))
+    droop = analysis["droop"]
+    lines.append(f"droop: {droop['per_unit_load']:+.4g} rad/s per N m of load"
+                 + (f"; load events leave {', '.join(f'{v:+.4g}' for v in droop['per_event'])} rad/s"
+                    if droop["per_event"] else ""))
+    linear = analysis["linear"]
+    eigen = ", ".join(_complex(re, im) for re, im in linear["eigenvalues"])
+    lines.append(f"linear stability of the averaged model ({', '.join(linear['state_names'])}): "
+                 f"{'stable' if linear['stable'] else 'UNSTABLE'}")
+    lines.append(f"  eigenvalues [1/s]: {eigen}")
+    re, im = linear["dominant"]
+    lines.append(f"  dominant mode {_complex(re, im)}: damping ratio {linear['damping_ratio']:.4g}, "
+                 + (f"period {linear['period']:.4g} s" if im else "not oscillating")
+                 + (f", amplitude x{math.exp(re * linear['period']):.3g} per period" if im else ""))
+    if linear["vyshnegradsky"]:
+        A, B = linear["vyshnegradsky"]
+        lines.append(f"  Vyshnegradsky: A = {A:.4g}, B = {B:.4g}, A B = {A * B:.4g} "
+                     f"({'> 1: stable' if A * B > 1 else '<= 1: unstable'})")
+    if linear["critical_damping"] is not None:
+        lines.append(f"  sleeve damping at the stability boundary: {linear['critical_damping']:.5g} N s/m")
+    floquet = analysis["floquet"]
+    if floquet is not None:
+        lines.append(f"periodic steady state (Floquet, orbit residual {floquet['residual']:.1g}): "
+                     f"{'stable' if floquet['stable'] else 'UNSTABLE'}, cycle {floquet['cycle_time'] * 1000:.4g} ms, "
+                     f"mean speed {floquet['mean_speed']:.6g} rad/s")
+        lines.append("  multipliers |mu|: " + ", ".join(f"{math.hypot(*m):.5g}" for m in floquet["multipliers"]))
+        lines.append("  averaged model exp(lambda T): " + ", ".join(f"{math.hypot(*m):.5g}"
+                                                                     for m in floquet["averaged_multipliers"]))
+    if "plot" in analysis:
+        lines.append(f"wrote {analysis['plot']}")
+    return "\n".join(lines)
+
+
+def _complex(re: float, im: float) -> str:
+    return f"{re:.4g}" if im == 0 else f"{re:.4g} {'+' if im > 0 else '-'} {abs(im):.4g}i"

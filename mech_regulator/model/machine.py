@@ -13,6 +13,7 @@ a machine without a mechanism has no J(phi), no J' term and no kinematics call a
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -21,11 +22,12 @@ from typing import Callable
 import numpy as np
 
 from mech_regulator.effects import Effect, build_drive, build_load
+from mech_regulator.governors import Governor, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
 from mech_regulator.scene.schema import Scene
 
 Reduced = Callable[[float], tuple[float, float, float, float, float]]
-RightHandSide = Callable[[float, np.ndarray], tuple[float, float]]
+RightHandSide = Callable[[float, np.ndarray], tuple[float, float] | list[float]]
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,8 @@ class MachineModel:
 
     inertia_constant: J0 + J_flywheel ratio^2 [kg m^2]; reduced: the mechanism's
     phi -> (J_links, dJ_links/dphi, M_weight, q, dq/dphi), or None for a constant-J machine;
-    effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none.
+    effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none;
+    governor: the speed governor whose throttle scales the drive, or None.
     """
 
     scene: Scene
@@ -53,6 +56,7 @@ class MachineModel:
     has_weight: bool
     effects: tuple[Effect, ...]
     load_pieces: tuple[LoadPiece, ...]
+    governor: Governor | None = None
 
     def breakpoints(self) -> list[float]:
         """Times where the external load has a kink or a jump: integration never steps across them."""
@@ -113,16 +117,23 @@ class MachineModel:
                 angles.add(round((angle + k * switch_period) % period, 12))
         return sorted(angles)
 
-    def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None) -> RightHandSide:
-        """The right-hand side `f(t, [phi, omega]) = (omega, epsilon)` for one external-load piece.
+    def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
+            mode: Mode | None = None, ideal: bool = False) -> RightHandSide:
+        """The right-hand side `f(t, y) = dy/dt` for one external-load piece and governor mode.
 
-        epsilon = (M_d + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1).
-        window = (lo, hi): the crank-angle interval between two switch angles the solver is in; effects
-        that jump at switch angles then see phi clamped into it, so they keep their mode across the
-        switch until the solver has located the crossing and restarted (no step straddles a jump).
+        y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is
+        epsilon = (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with
+        throttle = 1 without a governor. window = (lo, hi): the crank-angle interval between two switch
+        angles the solver is in; effects that jump at switch angles then see phi clamped into it, so
+        they keep their mode across the switch until the solver has located the crossing and restarted
+        (no step straddles a jump). ideal: the governor without friction, limits and stops (the smooth
+        model of the stability analysis).
         """
-        switched = tuple(effect.moment for effect in self.effects if effect.switch_angles)
-        smooth = tuple(effect.moment for effect in self.effects if not effect.switch_angles)
+        governor = self.governor
+        scaled = tuple(effect.moment for effect in self.effects if governor is not None and effect.role == "drive")
+        rest = [effect for effect in self.effects if not (governor is not None and effect.role == "drive")]
+        switched = tuple(effect.moment for effect in rest if effect.switch_angles)
+        smooth = tuple(effect.moment for effect in rest if not effect.switch_angles)
         if window is None:
             smooth, switched = smooth + switched, ()
             lo = hi = 0.0
@@ -132,38 +143,98 @@ class MachineModel:
         offset, slope = (piece.offset, piece.slope) if piece is not None else (0.0, 0.0)
         J0 = self.inertia_constant
         reduced = self.reduced
+        throttle = governor.throttle if governor is not None else None
+        governor_rates = governor.derivatives(mode, ideal) if governor is not None else None
 
-        if reduced is None:
-            def constant_inertia(t: float, y: np.ndarray) -> tuple[float, float]:
-                phi, omega = y[0], y[1]
-                total = -(offset + slope * t)
-                for moment in smooth:
-                    total += moment(t, phi, omega, 0.0, 0.0)
-                for moment in switched:
-                    total += moment(t, min(max(phi, lo), hi), omega, 0.0, 0.0)
-                return omega, total / J0
-
-            return constant_inertia
-
-        def variable_inertia(t: float, y: np.ndarray) -> tuple[float, float]:
+        def machine(t: float, y: np.ndarray):
             phi, omega = y[0], y[1]
-            J_links, dJ, weight, q, dq = reduced(phi)
-            total = weight - (offset + slope * t)
+            if reduced is None:
+                J, dJ, total, q, dq = J0, 0.0, 0.0, 0.0, 0.0
+            else:
+                J_links, dJ, total, q, dq = reduced(phi)
+                J = J0 + J_links
+            total -= offset + slope * t
             for moment in smooth:
                 total += moment(t, phi, omega, q, dq)
             for moment in switched:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
-            return omega, (total - 0.5 * dJ * omega * omega) / (J0 + J_links)
+            if governor_rates is None:
+                return omega, (total - 0.5 * dJ * omega * omega) / J
+            opening = throttle(y)
+            for moment in scaled:
+                total += opening * moment(t, phi, omega, q, dq)
+            return [omega, (total - 0.5 * dJ * omega * omega) / J, *governor_rates(y)]
 
-        return variable_inertia
+        return machine
+
+    def state_names(self) -> tuple[str, ...]:
+        """Names of the entries of the state vector y."""
+        return ("phi", "omega") + (self.governor.state_names if self.governor is not None else ())
+
+    def initial_state(self) -> np.ndarray:
+        """The state at t = 0 from the scenario (governor at rest in equilibrium unless the scene says)."""
+        initial = self.scene.scenario.initial
+        y = np.array([initial.phi, initial.omega], dtype=float)
+        if self.governor is None:
+            return y
+        governor_state = self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
+                                                     lambda omega: self.balance_throttle(omega, self.external_load(0.0)))
+        return np.concatenate([y, governor_state])
+
+    def initial_mode(self, y: np.ndarray) -> Mode | None:
+        """The governor's mode at a state with the governor at rest (None without a governor)."""
+        return self.governor.initial_mode(y) if self.governor is not None else None
+
+    def guards(self, mode: Mode | None) -> list:
+        """The governor's guards in a mode (none without a governor)."""
+        return self.governor.guards(mode) if self.governor is not None else []
+
+    def cycle_averages(self, omega: float, external: float = 0.0, points_per_turn: int = 1440
+                       ) -> tuple[float, float, float]:
+        """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
+        mean M_drive at full throttle [N m], mean of all other moments with the external load `external`
+        [N m], which opposes motion).
+
+        The weight moment averages out over a turn; the J' omega^2 / 2 term averages to zero at constant
+        speed. These define the cycle-averaged model J_m omega' = throttle M_d(omega) + M_c(omega) used by
+        the governor's statics and linear stability.
+        """
+        period = self.dynamic_period()
+        count = max(1, int(round(period / (2.0 * math.pi)))) * points_per_turn
+        if self.reduced is None and "phi" not in self.depends_on():
+            count = 1  # nothing varies over the cycle
+        phis = np.arange(count) * (period / count)
+        inertia = drive = other = 0.0
+        t = 0.0
+        for phi in phis:
+            J, _ = self.inertia(phi)
+            q, dq, weight = 0.0, 0.0, 0.0
+            if self.reduced is not None:
+                _, _, weight, q, dq = self.reduced(phi)
+            inertia += J
+            other += weight - external
+            for effect in self.effects:
+                value = effect.moment(t, phi, omega, q, dq)
+                if effect.role == "drive":
+                    drive += value
+                else:
+                    other += value
+        return inertia / count, drive / count, other / count
+
+    def balance_throttle(self, omega: float, external: float) -> float:
+        """Throttle at which the cycle-averaged drive balances the load (with external load `external`
+        [N m]) at speed omega [-]; may lie outside 0..1 if no throttle can."""
+        _, drive, other = self.cycle_averages(omega, external)
+        return -other / drive if drive != 0.0 else math.nan
 
     def columns(self, t: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
-        """Output columns at sample times t [s] for states y (shape 2 x n).
+        """Output columns at sample times t [s] for states y (shape n_states x n).
 
-        t, phi, omega, epsilon, J, dJ_dphi, M_drive, M_load (sum of all resisting moments and the
-        external load), one M_<effect> column per effect (and M_weight, M_external when present),
-        E_kinetic = 1/2 J omega^2, and the output coordinate with its speed (x, v for a slider,
-        theta4, omega4 for a rocker).
+        t, phi, omega, epsilon, J, dJ_dphi, M_drive (as applied, throttle included), M_load (sum of
+        all resisting moments and the external load), one M_<effect> column per load (and M_weight,
+        M_external when present), E_kinetic = 1/2 J omega^2, the output coordinate with its speed
+        (x, v for a slider, theta4, omega4 for a rocker) and, governed: throttle, sleeve z [m],
+        sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and feedback_shift [m] where present.
         """
         n = t.size
         names = [effect.name for effect in self.effects]
@@ -174,6 +245,7 @@ class MachineModel:
         q = np.zeros(n)
         dq = np.zeros(n)
         external = np.array([self.external_load(ti) for ti in t])
+        throttle = np.ones(n)
         for i in range(n):
             phi, omega = y[0, i], y[1, i]
             if self.reduced is not None:
@@ -181,8 +253,10 @@ class MachineModel:
                 J[i] += J_links
             for k, effect in enumerate(self.effects):
                 per_effect[k, i] = effect.moment(t[i], phi, omega, q[i], dq[i])
+            if self.governor is not None:
+                throttle[i] = self.governor.throttle(y[:, i])
         omega = y[1]
-        drive = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
+        drive = throttle * sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
         load = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "load"), np.zeros(n)) - external
         net = drive + load + weight
         out = {"t": t, "phi": y[0], "omega": omega, "epsilon": (net - 0.5 * dJ * omega ** 2) / J, "J": J,
@@ -200,6 +274,15 @@ class MachineModel:
             out["x_slider"], out["v_slider"] = q, dq * omega
         elif kind == "four_bar":
             out["theta4"], out["omega4"] = q, dq * omega
+        if self.governor is not None:
+            arm, arm_rate = y[2], y[3]
+            arm_length = self.governor.sensor.arm_length
+            out["throttle"] = throttle
+            out["sleeve"] = 2.0 * arm_length * (1.0 - np.cos(arm))
+            out["sleeve_velocity"] = 2.0 * arm_length * np.sin(arm) * arm_rate
+            out["arm_angle"] = arm
+            for index, name in enumerate(self.governor.state_names[2:], start=4):
+                out[name] = y[index]
         return out
 
 
@@ -235,8 +318,12 @@ def build_model(scene: Scene) -> MachineModel:
         effects.append(build_drive(machine.drive))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
-    return MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
-                        has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene))
+    model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
+                         has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene))
+    if scene.governor is None:
+        return model
+    governor = build_governor(scene.governor, lambda omega: model.balance_throttle(omega, model.external_load(0.0)))
+    return dataclasses.replace(model, governor=governor)
 
 
 def _has_mass(mechanism) -> bool:

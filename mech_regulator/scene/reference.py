@@ -3,6 +3,7 @@ docs/scenes.md (a test keeps the document in step with the schema)."""
 
 from __future__ import annotations
 
+import inspect
 import json
 import types
 import typing
@@ -42,7 +43,7 @@ def schema_markdown() -> str:
         kind = model.model_fields.get("type")
         if kind is not None:
             title += f" — type `{'` / `'.join(typing.get_args(kind.annotation))}`"
-        doc = (model.__doc__ or "").strip().split("\n\n")[0].replace("\n", " ")
+        doc = " ".join(inspect.cleandoc(model.__doc__ or "").split("\n\n")[0].split())
         header = f"### {title}\n\n" + (f"{doc}\n\n" if doc and model.__module__.endswith("schema") else "")
         sections.append(header + "\n".join(rows) + "\n")
         for child, child_path in nested:
@@ -80,7 +81,7 @@ def _type_name(annotation) -> str:
     if origin in (typing.Union, types.UnionType):
         members = [a for a in typing.get_args(annotation) if a is not type(None)]
         optional = " (optional)" if type(None) in typing.get_args(annotation) else ""
-        if len(members) > 1 and all(_models_in(m) == [m] for m in members):
+        if len(members) > 1 and all(_models_in(_strip(m)) == [_strip(m)] for m in members):
             return "section, chosen by `type`" + optional
         return " or ".join(_type_name(m) for m in members) + optional
     if isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel):

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
 Positive = Annotated[float, Field(gt=0)]
 NonNegative = Annotated[float, Field(ge=0)]
@@ -299,12 +299,164 @@ class Machine(SceneModel):
 
 
 # --------------------------------------------------------------------------------------------
+# Governor (physics.md section 3): a centrifugal sensor whose sleeve sets the throttle, directly
+# through a valve or indirectly through a pilot valve and a servo-motor. M_d = throttle * M_drive.
+
+
+class SleeveSpring(SceneModel):
+    stiffness: NonNegative = Field(description="spring rate k; the spring pushes the sleeve down with k (z - "
+                                               "free_position) [N/m]")
+    free_position: float = Field(0.0, description="sleeve position z at which the spring is relaxed [m]")
+
+
+class LinearValve(SceneModel):
+    """Throttle linear in the sleeve position between two positions, clipped to 0..1."""
+
+    type: Literal["linear"] = "linear"
+    open_at: float = Field(description="sleeve position with the valve fully open, throttle 1 [m]")
+    closed_at: float = Field(description="sleeve position with the valve closed, throttle 0 [m]")
+
+    @model_validator(mode="after")
+    def _distinct(self) -> LinearValve:
+        if self.open_at == self.closed_at:
+            raise ValueError(f"open_at = closed_at = {self.open_at} m; expected two different sleeve positions")
+        return self
+
+
+class TableValve(SceneModel):
+    """Throttle as a table over the sleeve position, linear between points, held constant beyond them."""
+
+    type: Literal["table"]
+    sleeve: list[float] = Field(min_length=2, description="sleeve positions, strictly increasing [m]")
+    throttle: list[float] = Field(min_length=2, description="throttle at each sleeve position, 0 (closed) to 1 (open) [-]")
+
+    @model_validator(mode="after")
+    def _table(self) -> TableValve:
+        if len(self.sleeve) != len(self.throttle):
+            raise ValueError(f"sleeve has {len(self.sleeve)} entries but throttle has {len(self.throttle)}; "
+                             "expected one throttle value per sleeve position")
+        if any(b <= a for a, b in zip(self.sleeve, self.sleeve[1:])):
+            raise ValueError(f"sleeve = {self.sleeve} must be strictly increasing")
+        if any(not 0.0 <= value <= 1.0 for value in self.throttle):
+            raise ValueError(f"throttle = {self.throttle}; expected values between 0 and 1")
+        return self
+
+
+def _valve_type(value) -> str | None:
+    return value.get("type", "linear") if isinstance(value, dict) else getattr(value, "type", None)
+
+
+Valve = Annotated[Union[Annotated[LinearValve, Tag("linear")], Annotated[TableValve, Tag("table")]],
+                  Discriminator(_valve_type)]
+
+
+class _CentrifugalGovernor(SceneModel):
+    """Porter-type centrifugal sensor: two balls on arms of length l (links equal to the arms), sleeve rise
+    z = 2 l (1 - cos a); Watt's governor is sleeve_mass 0, a spring-loaded one adds a spring."""
+
+    ball_mass: Positive = Field(description="mass m of each of the two balls [kg]")
+    arm_length: Positive = Field(description="arm (and link) length l [m]")
+    sleeve_mass: NonNegative = Field(0.0, description="sleeve mass M; 0 = Watt's governor [kg]")
+    spring: SleeveSpring | None = Field(None, description="optional spring on the sleeve")
+    damping: NonNegative = Field(0.0, description="viscous damping on the sleeve, force c z' [N s/m]")
+    friction: NonNegative = Field(0.0, description="Coulomb (kinetic) friction force on the moving sleeve [N]")
+    static_friction: NonNegative | None = Field(None, description="friction force the sleeve must overcome to start "
+                                                                  "moving; none = friction [N]")
+    ratio: Positive = Field(1.0, description="spindle speed / crank speed [-]")
+    stroke: list[float] = Field([0.01, 0.08], min_length=2, max_length=2,
+                                description="sleeve travel [z_low, z_high] between inelastic hard stops [m]")
+    gravity: Positive = Field(9.81, description="gravity along the spindle [m/s^2]")
+
+    @model_validator(mode="after")
+    def _sensor(self) -> _CentrifugalGovernor:
+        low, high = self.stroke
+        if not 0.0 < low < high < 2.0 * self.arm_length:
+            raise ValueError(
+                f"stroke = {self.stroke} m; expected 0 < z_low < z_high < 2 arm_length = {2 * self.arm_length:g} m "
+                "(at z = 0 the arms hang along the spindle and the balls have no lever to lift the sleeve; at "
+                "z = 2 arm_length the arms are horizontal)")
+        if self.static_friction is not None and self.static_friction < self.friction:
+            raise ValueError(f"static_friction = {self.static_friction} N is below friction = {self.friction} N; "
+                             "expected static_friction >= friction")
+        return self
+
+
+class DirectGovernor(_CentrifugalGovernor):
+    """Direct action: the sleeve moves the regulating element (valve) itself."""
+
+    type: Literal["direct"]
+    valve: Valve = Field(description="throttle as a function of the sleeve position")
+
+
+class Servo(SceneModel):
+    """Hydraulic servo-motor: piston speed proportional to the pilot-valve opening."""
+
+    gain: Positive = Field(description="servo speed per pilot-valve opening: throttle' = -gain * opening [1/(m s)]")
+    max_speed: Positive | None = Field(None, description="largest servo speed; none = unlimited [1/s]")
+    dead_band: NonNegative = Field(0.0, description="pilot-valve overlap: openings smaller than this move nothing [m]")
+    travel: list[float] = Field([0.0, 1.0], min_length=2, max_length=2,
+                                description="servo travel [low, high] in throttle, between hard stops, within 0..1 [-]")
+
+    @model_validator(mode="after")
+    def _travel(self) -> Servo:
+        low, high = self.travel
+        if not 0.0 <= low < high <= 1.0:
+            raise ValueError(f"travel = {self.travel}; expected 0 <= low < high <= 1 (throttle)")
+        return self
+
+
+class Feedback(SceneModel):
+    """Feedback from the servo to the pilot valve: none (hunts), rigid (droop) or isodromic (astatic)."""
+
+    type: Literal["none", "rigid", "isodromic"] = Field("none", description="kind of feedback")
+    gain: NonNegative = Field(0.0, description="pilot-valve shift per unit of servo travel, rho [m]")
+    time_constant: Positive | None = Field(None, description="isodromic dashpot time constant T_i [s]")
+    reference: float | None = Field(None, description="rigid feedback: servo position at which the pilot is neutral "
+                                                      "at pilot_neutral; none = the throttle that balances the "
+                                                      "initial load at the set speed [-]")
+
+    @model_validator(mode="after")
+    def _complete(self) -> Feedback:
+        if self.type != "none" and self.gain <= 0.0:
+            raise ValueError(f"feedback type '{self.type}' needs gain > 0 (got {self.gain}) [m]")
+        if self.type == "isodromic" and self.time_constant is None:
+            raise ValueError("feedback type 'isodromic' needs time_constant (the dashpot's T_i) [s]")
+        return self
+
+
+class IndirectGovernor(_CentrifugalGovernor):
+    """Indirect action: the sleeve moves a pilot valve; a servo-motor moves the regulating element.
+    Pilot opening = z - pilot_neutral + feedback; the servo position is the throttle."""
+
+    type: Literal["indirect"]
+    pilot_neutral: float = Field(description="sleeve position at which the pilot valve is closed; sets the speed "
+                                             "the governor holds [m]")
+    servo: Servo = Field(description="the servo-motor")
+    feedback: Feedback = Field(default_factory=Feedback, description="feedback from the servo to the pilot valve")
+
+    @model_validator(mode="after")
+    def _pilot_in_stroke(self) -> IndirectGovernor:
+        low, high = self.stroke
+        if not low < self.pilot_neutral < high:
+            raise ValueError(f"pilot_neutral = {self.pilot_neutral} m lies outside the stroke {self.stroke} m; "
+                             "expected a sleeve position strictly inside it")
+        return self
+
+
+Governor = Annotated[Union[DirectGovernor, IndirectGovernor], Field(discriminator="type")]
+
+
+# --------------------------------------------------------------------------------------------
 # Scenario and solver
 
 
 class InitialState(SceneModel):
     phi: float = Field(0.0, description="initial crank angle [rad]")
     omega: float = Field(0.0, description="initial crank speed [rad/s]")
+    sleeve: float | None = Field(None, description="initial governor sleeve position z, at rest; none = the "
+                                                   "equilibrium position at the initial speed [m]")
+    servo: float | None = Field(None, description="initial servo-motor position (throttle, indirect governor); none = "
+                                                  "the throttle that balances the initial load at the initial speed [-]")
 
 
 class LoadEvent(SceneModel):
@@ -350,6 +502,8 @@ class Solver(SceneModel):
 class Analysis(SceneModel):
     steady_tolerance: Positive = Field(1e-4, description="steady when omega at the start of successive dynamic periods "
                                                          "differs by less than this fraction of omega_m [-]")
+    settling_band: Positive = Field(0.002, description="a load change has settled once the cycle-mean speed stays "
+                                                       "within this fraction of the new steady speed [-]")
 
 
 class Scene(SceneModel):
@@ -358,6 +512,33 @@ class Scene(SceneModel):
     name: str | None = Field(None, description="short name of the scene, used in outputs")
     description: str | None = Field(None, description="free text describing the scene")
     machine: Machine = Field(description="the machine reduced to its crank")
+    governor: Governor | None = Field(None, description="centrifugal speed governor; its throttle scales the drive")
     scenario: Scenario = Field(description="initial state, duration and load changes")
     solver: Solver = Field(default_factory=Solver, description="integration method and accuracy")
     analysis: Analysis = Field(default_factory=Analysis, description="settings of the post-run analysis")
+
+    @model_validator(mode="after")
+    def _governed(self) -> Scene:
+        initial = self.scenario.initial
+        if self.governor is None:
+            for key in ("sleeve", "servo"):
+                if getattr(initial, key) is not None:
+                    raise ValueError(f"scenario.initial.{key} is set but the scene has no governor")
+            return self
+        if self.machine.drive is None:
+            raise ValueError("the governor scales the driving moment, but machine.drive is missing")
+        if self.solver.method == "energy":
+            raise ValueError("solver.method 'energy' integrates the machine alone in phi; a governed scene needs a "
+                             "method in time (DOP853, RK45, RK23, Radau, BDF, LSODA or RK4)")
+        low, high = self.governor.stroke
+        if initial.sleeve is not None and not low <= initial.sleeve <= high:
+            raise ValueError(f"scenario.initial.sleeve = {initial.sleeve} m lies outside the governor's stroke "
+                             f"{self.governor.stroke} m")
+        if initial.servo is not None:
+            if self.governor.type != "indirect":
+                raise ValueError("scenario.initial.servo is set but the governor is 'direct' (it has no servo-motor)")
+            low, high = self.governor.servo.travel
+            if not low <= initial.servo <= high:
+                raise ValueError(f"scenario.initial.servo = {initial.servo} lies outside the servo travel "
+                                 f"{self.governor.servo.travel}")
+        return self

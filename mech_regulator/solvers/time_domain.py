@@ -15,13 +15,14 @@ import math
 
 import numpy as np
 from scipy import integrate, optimize
-from scipy.interpolate import CubicHermiteSpline
 
 from mech_regulator.model import MachineModel
+from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 PROBES_PER_STEP = 4  # interior points of each step checked for a switch crossing
 RESTART_PERIODS = 4  # the solver's wrapped crank angle stays within this many dynamic periods
+MAX_INSTANT_EVENTS = 20  # governor mode changes allowed at one instant before the run is declared stuck
 
 
 def integrate_time_domain(model: MachineModel, progress: Progress | None = None) -> Trajectory:
@@ -29,15 +30,14 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None)
     solver = model.scene.solver
     scenario = model.scene.scenario
     trajectory = Trajectory(method=solver.method, t_start=0.0)
-    y = np.array([scenario.initial.phi, scenario.initial.omega], dtype=float)
+    y = model.initial_state()
+    mode = model.initial_mode(y)
+    if mode is not None:
+        trajectory.modes.append((0.0, mode))
     edges = [0.0] + [t for t in model.breakpoints() if 0.0 < t < scenario.duration] + [scenario.duration]
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
-            piece = model.piece_at(t_start)
-            if solver.method == "RK4":
-                y = _rk4_segment(model.rhs(piece), t_start, t_end, y, solver.step, trajectory, progress)
-            else:
-                y = _adaptive_segment(model, piece, t_start, t_end, y, trajectory, progress)
+            y, mode = _segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2
@@ -47,43 +47,10 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None)
     return trajectory
 
 
-def _rk4_segment(rhs, t_start: float, t_end: float, y: np.ndarray, step: float, trajectory: Trajectory,
-                 progress: Progress | None) -> np.ndarray:
-    """Classic fixed-step RK4 on [t_start, t_end] with the step shortened to divide the segment evenly;
-    dense output by cubic Hermite interpolation of the states and their derivatives."""
-    count = max(1, math.ceil((t_end - t_start) / step - 1e-9))
-    h = (t_end - t_start) / count
-    times = t_start + h * np.arange(count + 1)
-    states = np.empty((count + 1, 2))
-    slopes = np.empty((count + 1, 2))
-    states[0] = y
-    slopes[0] = k1 = np.asarray(rhs(t_start, y))
-    for i in range(count):
-        t = times[i]
-        k2 = np.asarray(rhs(t + 0.5 * h, y + 0.5 * h * k1))
-        k3 = np.asarray(rhs(t + 0.5 * h, y + 0.5 * h * k2))
-        k4 = np.asarray(rhs(t + h, y + h * k3))
-        y = y + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        if not np.all(np.isfinite(y)):
-            trajectory.status = "failed"
-            trajectory.message = f"RK4: the state became non-finite at t = {times[i + 1]:.6g} s; use a smaller step"
-            count = i
-            break
-        k1 = np.asarray(rhs(times[i + 1], y))
-        states[i + 1], slopes[i + 1] = y, k1
-        if progress is not None and i % 1000 == 0:
-            progress(times[i + 1])
-    trajectory.stats.nfev += 4 * count + 1
-    trajectory.stats.steps += count
-    if count > 0:
-        spline = CubicHermiteSpline(times[: count + 1], states[: count + 1].T, slopes[: count + 1].T, axis=1)
-        trajectory.add_piece(times[0], times[count], spline)
-    return states[count]
-
-
-def _adaptive_segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.ndarray, trajectory: Trajectory,
-                      progress: Progress | None) -> np.ndarray:
-    """Step a scipy OdeSolver over [t_start, t_end], restarting it exactly at every switch crossing.
+def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.ndarray, mode, trajectory: Trajectory,
+             progress: Progress | None) -> tuple[np.ndarray, tuple | None]:
+    """Step the scene's solver over [t_start, t_end], restarting it exactly at every switch crossing and
+    every governor event; returns the state and mode at the end.
 
     The solver integrates the crank angle wrapped by whole dynamic periods (the right-hand side is
     periodic in them): a growing phi would otherwise loosen the relative tolerance on the phase step
@@ -91,18 +58,26 @@ def _adaptive_segment(model: MachineModel, piece, t_start: float, t_end: float, 
     periods; outputs carry the unwrapped angle.
     """
     settings = model.scene.solver
-    solver_class = getattr(integrate, settings.method)
     switches = _unique_switches(model.switch_angles())
     grid = model.switch_grid()
     period = model.dynamic_period()
     t, first_step = t_start, None
     counts = _switch_counts(y[0], switches)
     while t < t_end and trajectory.status == "complete":
+        y, mode = _settle_mode(model, t, y, mode, trajectory)
+        if trajectory.status != "complete":
+            break
+        guards = model.guards(mode)
         offset = period * math.floor(y[0] / period)
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
-        rhs = model.rhs(piece, window)
-        solver = solver_class(rhs, t, y - (offset, 0.0), t_end, rtol=settings.rtol, atol=settings.atol,
-                              max_step=settings.max_step or np.inf, first_step=first_step)
+        rhs = model.rhs(piece, window, mode)
+        y_wrapped = y - np.concatenate([[offset], np.zeros(y.size - 1)])
+        if settings.method == "RK4":
+            solver = RK4(rhs, t, y_wrapped, t_end, step=settings.step)
+        else:
+            solver = getattr(integrate, settings.method)(rhs, t, y_wrapped, t_end, rtol=settings.rtol,
+                                                         atol=settings.atol, max_step=settings.max_step or np.inf,
+                                                         first_step=first_step)
         restart = False
         while solver.status == "running" and not restart:
             message = solver.step()
@@ -112,17 +87,22 @@ def _adaptive_segment(model: MachineModel, piece, t_start: float, t_end: float, 
                 break
             if not np.all(np.isfinite(solver.y)):
                 trajectory.status = "failed"
-                trajectory.message = f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s"
+                advice = "use a smaller step" if settings.method == "RK4" else "tighten rtol/atol or limit max_step"
+                trajectory.message = (f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s; "
+                                      f"{advice}")
                 break
             dense = _Shifted(solver.dense_output(), offset)
-            t_step, y_step = solver.t, solver.y + (offset, 0.0)
-            if switches:
-                t_cross, boundary, counts = _first_crossing(dense, solver.t_old, solver.t, counts, switches)
-                if t_cross is not None:
-                    t_step, y_step = t_cross, dense(t_cross)
-                    y_step[0] = boundary
-                    trajectory.stats.switches += 1
-                    restart = t_step < t_end
+            t_step, y_step = solver.t, dense(solver.t)
+            if switches or guards:
+                crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards)
+                if crossing is not None:
+                    t_step, y_step, counts, transition, name = crossing
+                    if transition is None:
+                        trajectory.stats.switches += 1
+                    else:
+                        mode, y_step = transition(y_step)
+                        _log_event(trajectory, t_step, name, mode)
+                    restart = t_step < t_end or transition is not None
             trajectory.add_piece(solver.t_old, t_step, dense)
             trajectory.stats.steps += 1
             t, y = t_step, np.array(y_step, dtype=float)
@@ -135,7 +115,30 @@ def _adaptive_segment(model: MachineModel, piece, t_start: float, t_end: float, 
         trajectory.stats.nlu += int(solver.nlu)
         if restart:
             trajectory.stats.restarts += 1
-    return y
+    return y, mode
+
+
+def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory: Trajectory
+                 ) -> tuple[np.ndarray, tuple | None]:
+    """Apply, at one instant, the transitions of guards that are already violated on entering a mode
+    (a sleeve that comes to rest exactly where the forces pull it off, a stop reached as the motion
+    reverses). More than MAX_INSTANT_EVENTS in a row means the governor's modes contradict each other."""
+    for _ in range(MAX_INSTANT_EVENTS):
+        violated = next((guard for guard in model.guards(mode) if guard.value(y) < 0.0), None)
+        if violated is None:
+            return y, mode
+        mode, y = violated.transition(y)
+        _log_event(trajectory, t, violated.name, mode)
+    trajectory.status = "failed"
+    trajectory.message = (f"the governor changed mode {MAX_INSTANT_EVENTS} times at t = {t:.6g} s without moving "
+                          f"(last: {trajectory.events[-1][1]}); its friction, stops or limits contradict each other")
+    return y, mode
+
+
+def _log_event(trajectory: Trajectory, t: float, name: str, mode) -> None:
+    trajectory.events.append((t, name))
+    trajectory.modes.append((t, mode))
+    trajectory.stats.events += 1
 
 
 class _Shifted:
@@ -175,36 +178,45 @@ def _switch_counts(phi: float, switches: list[tuple[float, float]]) -> list[int]
     return [math.floor((phi - angle) / period) for angle, period in switches]
 
 
-def _first_crossing(dense, t_old: float, t_new: float, counts_old: list[int], switches: list[tuple[float, float]]
-                    ) -> tuple[float | None, float, list[int]]:
-    """Earliest time in (t_old, t_new] at which phi reaches a switch angle: (time, angle, counts after it),
-    or (None, nan, counts at t_new) if the step crosses none.
+def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switches: list[tuple[float, float]],
+                 guards: list) -> tuple | None:
+    """The earliest event in (t_old, t_new]: phi reaching a switch angle or a governor guard turning negative.
 
-    The step is probed at interior points so a crossing and return within one step is not missed;
-    the crossing is then located by Brent's method on the dense output. Counts are carried, not
-    recomputed from phi, so a restart exactly on a switch angle is never taken for a new crossing.
+    Returns (time, state, switch counts after it, guard transition or None for a switch, what happened),
+    or None if the step has no event. The step is probed at interior points so an event and its undoing
+    within one step is not missed; the event is then located by Brent's method on the dense output.
+    Switch counts are carried, not recomputed from phi, so a restart exactly on a switch angle is never
+    taken for a new crossing.
     """
     probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
-    phis = dense(probe_times)[0]
+    states = dense(probe_times)
     previous = counts_old
     for i in range(1, probe_times.size):
-        current = _switch_counts(phis[i], switches)
-        changed = [j for j in range(len(switches)) if current[j] != previous[j]]
-        if changed:
-            forward = phis[i] > phis[i - 1]
-            earliest = None
-            for j in changed:
-                angle, period = switches[j]
-                boundary = angle + period * (previous[j] + 1 if forward else previous[j])
-                t_cross = _root(lambda tau: dense(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
+        earliest = None
+        current = _switch_counts(states[0, i], switches)
+        forward = states[0, i] > states[0, i - 1]
+        for j in [j for j in range(len(switches)) if current[j] != previous[j]]:
+            angle, period = switches[j]
+            boundary = angle + period * (previous[j] + 1 if forward else previous[j])
+            t_cross = _root(lambda tau: dense(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
+            if earliest is None or t_cross < earliest[0]:
+                earliest = (t_cross, j, boundary)
+        for guard in guards:
+            if guard.value(states[:, i]) < 0.0:
+                t_cross = _root(lambda tau: guard.value(dense(tau)), probe_times[i - 1], probe_times[i])
                 if earliest is None or t_cross < earliest[0]:
-                    earliest = (t_cross, boundary, j)
-            t_cross, boundary, j = earliest
+                    earliest = (t_cross, guard, None)
+        if earliest is not None:
+            t_cross, what, boundary = earliest
+            y = dense(t_cross)
+            if boundary is None:
+                return t_cross, y, _switch_counts(y[0], switches) if switches else previous, what.transition, what.name
             after = list(previous)
-            after[j] += 1 if forward else -1
-            return t_cross, boundary, after
+            after[what] += 1 if forward else -1
+            y[0] = boundary
+            return t_cross, y, after, None, "switch"
         previous = current
-    return None, math.nan, previous
+    return None
 
 
 def _root(function, a: float, b: float) -> float:

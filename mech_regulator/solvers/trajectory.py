@@ -14,7 +14,8 @@ Progress = Callable[[float], None]
 @dataclass
 class SolverStats:
     """Work done by a solver: right-hand-side evaluations (for the energy method: moment evaluations),
-    Jacobian evaluations, LU decompositions, accepted steps, restarts at breakpoints and switches."""
+    Jacobian evaluations, LU decompositions, accepted steps, restarts at breakpoints and switches,
+    and governor mode changes (events)."""
 
     nfev: int = 0
     njev: int = 0
@@ -22,14 +23,17 @@ class SolverStats:
     steps: int = 0
     restarts: int = 0
     switches: int = 0
+    events: int = 0
 
 
 @dataclass
 class Trajectory:
-    """Dense output of a run: `trajectory(t)` gives the state (phi [rad], omega [rad/s]) at times t.
+    """Dense output of a run: `trajectory(t)` gives the state y (phi [rad], omega [rad/s], then the
+    governor's states) at times t.
 
     status is 'complete', 'failed' (message says why and where) or 'interrupted'; a trajectory that
-    did not complete still covers [t_start, t_end] and nothing computed is lost.
+    did not complete still covers [t_start, t_end] and nothing computed is lost. modes: (start time,
+    governor mode) of each stretch in one mode; events: (time, what happened) of every mode change.
     """
 
     method: str
@@ -37,6 +41,8 @@ class Trajectory:
     piece_edges: list[float] = field(default_factory=list)
     interpolants: list[Callable] = field(default_factory=list)
     stats: SolverStats = field(default_factory=SolverStats)
+    modes: list[tuple[float, tuple[str, str]]] = field(default_factory=list)
+    events: list[tuple[float, str]] = field(default_factory=list)
     status: str = "complete"
     message: str = ""
     _solution: OdeSolution | None = field(default=None, repr=False)
@@ -56,7 +62,7 @@ class Trajectory:
         return self.piece_edges[-1] if self.piece_edges else self.t_start
 
     def __call__(self, t: float | np.ndarray) -> np.ndarray:
-        """State at t: shape (2,) for a scalar, (2, n) for an array of times within [t_start, t_end]."""
+        """State at t: shape (n_states,) for a scalar, (n_states, n) for an array of times in [t_start, t_end]."""
         if self._solution is None:
             self._solution = OdeSolution(np.asarray(self.piece_edges), self.interpolants)
         return self._solution(t)
@@ -65,3 +71,12 @@ class Trajectory:
         """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end, both ends included."""
         count = max(2, int(round((self.t_end - self.t_start) * sample_rate)) + 1)
         return np.linspace(self.t_start, self.t_end, count)
+
+    def mode_at(self, t: float) -> tuple[str, str] | None:
+        """The governor's mode in force at time t (None without a governor)."""
+        current = None
+        for start, mode in self.modes:
+            if start > t:
+                break
+            current = mode
+        return current

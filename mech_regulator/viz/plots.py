@@ -51,7 +51,7 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     cycle = axes[1, 0]
     if last is not None:
         window = np.linspace(last["t_start"], last["t_end"], 1000)
-        phi, omega = trajectory(window)
+        phi, omega = trajectory(window)[:2]
         cycle.plot(np.degrees(phi - phi[0]), omega, color="tab:blue")
         cycle.axhline(last["omega_max"], color="tab:orange", lw=0.8, ls="--", label="omega_max, omega_min")
         cycle.axhline(last["omega_min"], color="tab:orange", lw=0.8, ls="--")
@@ -60,7 +60,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
               title="speed over the last dynamic period")
 
     right = axes[1, 1]
-    if model.reduced is not None:
+    if model.governor is not None:
+        _plot_governor_run(model, trajectory, summary, times, columns, speed, right)
+    elif model.reduced is not None:
         phi = np.linspace(0.0, 2.0 * math.pi, 721)
         inertia = np.array([model.inertia(p) for p in phi])
         right.plot(np.degrees(phi), inertia[:, 0], color="tab:blue")
@@ -73,5 +75,101 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
         right.barh(list(works), list(works.values()), color="tab:green")
         right.set(xlabel="work over the run [J]", title=f"works (energy residual "
                                                          f"{summary['energy']['relative_residual']:.1g} relative)")
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray,
+                       columns: dict, speed, panel) -> None:
+    """Governed run: the cycle-mean speed and predicted operating speeds on the speed panel; sleeve
+    position and throttle against time, with the governor's mode changes, on `panel`."""
+    from mech_regulator.analysis import cycle_mean_speed, operating_point
+
+    speed.plot(times, cycle_mean_speed(model, trajectory, times), color="k", lw=1.2, label="cycle mean")
+    levels = [model.external_load(0.0)] + [event.torque for event in model.scene.scenario.load_events]
+    for level in dict.fromkeys(levels):
+        predicted = operating_point(model, level).speed
+        speed.axhline(predicted, color="tab:green", lw=0.8, ls="-.")
+        speed.annotate(f"statics, load {level:g} N m", (times[0], predicted), fontsize=7, color="tab:green",
+                       va="bottom")
+    speed.legend(loc="lower right")
+    stroke = model.governor.sensor.stroke
+    panel.plot(times, columns["sleeve"] * 1000.0, color="tab:purple", lw=1.0, label="sleeve z")
+    for stop in stroke:
+        panel.axhline(stop * 1000.0, color="tab:purple", lw=0.6, ls=":")
+    panel.set(xlabel="t [s]", ylabel="sleeve z [mm] (dotted: stops)", title="governor")
+    throttle = panel.twinx()
+    throttle.plot(times, columns["throttle"], color="tab:red", lw=1.0, label="throttle")
+    throttle.set_ylim(-0.05, 1.05)
+    throttle.set_ylabel("throttle [-]", color="tab:red")
+    events = [t for t, _ in trajectory.events]
+    if events:
+        panel.plot(events, np.interp(events, times, columns["sleeve"] * 1000.0), "k|", ms=6,
+                   label=f"mode changes ({len(events)})")
+    panel.legend(loc="upper left")
+
+
+def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
+    """Statics and stability of a governor: static characteristic with the insensitivity band and the
+    operating points, throttle against speed at the operating points, eigenvalues of the averaged model
+    and (periodic machines) the Floquet multipliers against exp(lambda T)."""
+    characteristic = analysis["characteristic"]
+    sleeve = np.array(characteristic["sleeve"]) * 1000.0
+    figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
+    figure.suptitle(f"{model.scene.name}: {analysis['kind']} governor"
+                    + (f", {analysis['feedback']} feedback" if analysis["feedback"] else ""))
+
+    static = axes[0, 0]
+    static.fill_betweenx(sleeve, characteristic["speed_low"], characteristic["speed_high"], color="tab:orange",
+                         alpha=0.3, label="insensitivity band (static friction)")
+    static.plot(characteristic["speed"], sleeve, color="tab:blue", label=f"equilibrium, statism {analysis['statism']:.3g}")
+    for point in analysis["operating_points"]:
+        static.plot(point["speed"], point["sleeve"] * 1000.0, "o", ms=6,
+                    label=f"load {point['external_load']:g} N m: {point['speed']:.4g} rad/s")
+    static.set(xlabel="crank speed omega [rad/s]", ylabel="sleeve z [mm]", title="static characteristic")
+    static.legend(loc="upper left", fontsize=8)
+
+    balance = axes[0, 1]
+    speeds = np.linspace(np.nanmin(characteristic["speed_low"]), np.nanmax(characteristic["speed_high"]), 60)
+    averages = np.array([model.cycle_averages(w)[1:] for w in speeds])
+    for point in analysis["operating_points"]:
+        load = np.array([-model.cycle_averages(w, point["external_load"])[2] for w in speeds])
+        balance.plot(speeds, load / averages[:, 0], lw=1.0, label=f"throttle needed, load {point['external_load']:g} N m")
+        balance.plot(point["speed"], point["throttle"], "o", ms=6)
+    if model.governor.kind == "direct":
+        balance.plot(characteristic["speed"], [model.governor.valve(z / 1000.0) for z in sleeve], color="k",
+                     label="valve on the static characteristic")
+    balance.set(xlabel="crank speed omega [rad/s]", ylabel="throttle [-]", ylim=(-0.05, 1.1),
+                title="balance of the cycle-averaged machine")
+    balance.legend(loc="best", fontsize=8)
+
+    linear = analysis["linear"]
+    plane = axes[1, 0]
+    eigen = np.array(linear["eigenvalues"])
+    plane.axvline(0.0, color="k", lw=0.8)
+    plane.plot(eigen[:, 0], eigen[:, 1], "x", ms=9, mew=2, color="tab:red" if not linear["stable"] else "tab:blue")
+    title = f"eigenvalues of the averaged model ({'stable' if linear['stable'] else 'unstable'})"
+    if linear["vyshnegradsky"]:
+        A, B = linear["vyshnegradsky"]
+        title += f"\nVyshnegradsky A = {A:.3g}, B = {B:.3g}, AB = {A * B:.3g}"
+    plane.set(xlabel="Re lambda [1/s]", ylabel="Im lambda [rad/s]", title=title)
+    plane.grid(alpha=0.3)
+
+    circle = axes[1, 1]
+    floquet = analysis["floquet"]
+    angle = np.linspace(0.0, 2.0 * math.pi, 361)
+    circle.plot(np.cos(angle), np.sin(angle), color="k", lw=0.8)
+    if floquet is not None:
+        multipliers = np.array(floquet["multipliers"])
+        averaged = np.array(floquet["averaged_multipliers"])
+        circle.plot(multipliers[:, 0], multipliers[:, 1], "x", ms=9, mew=2, label="Floquet multipliers")
+        circle.plot(averaged[:, 0], averaged[:, 1], "o", mfc="none", ms=10, label="exp(lambda T), averaged model")
+        circle.legend(loc="lower left", fontsize=8)
+        circle.set_title(f"periodic orbit ({'stable' if floquet['stable'] else 'unstable'}), "
+                         f"T = {floquet['cycle_time'] * 1000:.3g} ms")
+    else:
+        circle.set_title("Floquet multipliers: the machine is not periodic in phi")
+    circle.set(xlabel="Re mu", ylabel="Im mu", aspect="equal")
+    circle.grid(alpha=0.3)
     figure.savefig(path, dpi=100)
     plt.close(figure)

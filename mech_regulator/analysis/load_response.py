@@ -1,0 +1,118 @@
+"""How a governed machine answers the scenario's load changes: peak speed deviation, settling time,
+overshoot, new steady speed and static error, and whether the governor saturated or hit a stop.
+
+Speeds are cycle means, omega_bar(t) = Phi / (time the crank took for the last dynamic period Phi), so
+the speed fluctuation inside a cycle (the flywheel's business) does not count as regulation error.
+A machine with nothing periodic in phi uses omega itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mech_regulator.analysis.stability import is_periodic
+from mech_regulator.analysis.statics import operating_point
+from mech_regulator.model import MachineModel
+from mech_regulator.solvers import Trajectory
+
+THROTTLE_LIMIT = 1e-9  # a throttle this close to 0 or 1 counts as saturated
+
+
+def cycle_mean_speed(model: MachineModel, trajectory: Trajectory, times: np.ndarray) -> np.ndarray:
+    """Cycle-mean crank speed [rad/s] at each time: Phi / (t - t(phi(t) - Phi)); NaN during the first
+    cycle. For a machine with nothing periodic in phi, omega(t)."""
+    states = trajectory(times)
+    if not is_periodic(model):
+        return states[1]
+    period = model.dynamic_period()
+    phi = np.maximum.accumulate(states[0])  # the crank angle of a turning machine; flat where it stops
+    earlier = np.interp(phi - period, phi, times, left=math.nan)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return period / (times - earlier)
+
+
+@dataclass(frozen=True)
+class LoadResponse:
+    """The answer to one load change (all speeds cycle means).
+
+    time [s] the change starts; load_before, load_after [N m]; speed_before [rad/s] at the change;
+    peak_deviation [rad/s] (signed, largest |speed - speed_before|) at peak_time [s after the change];
+    speed_after [rad/s] at the end of the window (next change or end of run); static_error =
+    speed_after - speed_before [rad/s]; predicted_static_error from the statics [rad/s];
+    settling_time [s after the change] when the speed enters and stays within the settling band of
+    speed_after (None if it had not settled by the end of the window); overshoot [%] past speed_after
+    relative to the peak's distance from it; limits: stops and saturations met in the window.
+    """
+
+    time: float
+    load_before: float
+    load_after: float
+    speed_before: float
+    peak_deviation: float
+    peak_time: float
+    speed_after: float
+    static_error: float
+    predicted_static_error: float
+    settling_time: float | None
+    overshoot: float
+    limits: list[str] = field(default_factory=list)
+
+
+def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: float = 2000.0) -> list[LoadResponse]:
+    """Analyse every load event of the scenario that the trajectory reached."""
+    scenario = model.scene.scenario
+    band = model.scene.analysis.settling_band
+    responses = []
+    events = scenario.load_events
+    loads = [scenario.external_load] + [event.torque for event in events]
+    for index, event in enumerate(events):
+        start = event.time
+        end = min(events[index + 1].time if index + 1 < len(events) else scenario.duration, trajectory.t_end)
+        if end <= start:
+            break
+        times = np.linspace(start, end, max(int((end - start) * sample_rate), 50) + 1)
+        speed = cycle_mean_speed(model, trajectory, times)
+        before = speed[0]
+        after = speed[-1]
+        deviation = speed - before
+        peak = int(np.nanargmax(np.abs(deviation)))
+        from_final = speed - after
+        outside = np.nonzero(np.abs(from_final) > band * abs(after))[0]
+        last_cycle = model.dynamic_period() / max(abs(after), 1e-12)
+        settled = outside.size == 0 or times[outside[-1]] < end - last_cycle
+        settling = (times[outside[-1]] - start if outside.size else 0.0) if settled else None
+        direction = math.copysign(1.0, from_final[peak]) if from_final[peak] != 0.0 else 1.0
+        overshoot = max(0.0, float(np.nanmax(-direction * from_final[peak:])))
+        overshoot_percent = 100.0 * overshoot / abs(from_final[peak]) if from_final[peak] != 0.0 else 0.0
+        predicted = (operating_point(model, loads[index + 1]).speed - operating_point(model, loads[index]).speed)
+        responses.append(LoadResponse(
+            time=start, load_before=loads[index], load_after=loads[index + 1], speed_before=float(before),
+            peak_deviation=float(deviation[peak]), peak_time=float(times[peak] - start), speed_after=float(after),
+            static_error=float(after - before), predicted_static_error=float(predicted),
+            settling_time=None if settling is None else float(settling), overshoot=overshoot_percent,
+            limits=_limits(model, trajectory, start, end, times)))
+    return responses
+
+
+def _limits(model: MachineModel, trajectory: Trajectory, start: float, end: float, times: np.ndarray) -> list[str]:
+    """Stops and saturations of the governor within [start, end]."""
+    found: list[str] = []
+    names = {"low": "on its low stop", "high": "on its high stop"}
+    spans = [(t, mode) for t, mode in trajectory.modes if t < end]
+    for position, (t, mode) in enumerate(spans):
+        t_next = spans[position + 1][0] if position + 1 < len(spans) else end
+        if t_next <= start:
+            continue
+        for part, label in zip(mode, ("sleeve", "servo")):
+            if part in names and f"{label} {names[part]}" not in found:
+                found.append(f"{label} {names[part]}")
+    states = trajectory(times)
+    throttle = np.array([model.governor.throttle(states[:, i]) for i in range(times.size)])
+    if np.any(throttle >= 1.0 - THROTTLE_LIMIT):
+        found.append("throttle fully open")
+    if np.any(throttle <= THROTTLE_LIMIT):
+        found.append("throttle closed")
+    return found

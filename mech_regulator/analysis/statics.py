@@ -1,0 +1,157 @@
+"""Statics of a governed machine (physics.md section 3): the governor's static characteristic, its
+degree of non-uniformity and insensitivity, and the operating point of the cycle-averaged machine
+for a given load, with the static error (droop) a load change leaves.
+
+The machine is cycle-averaged at constant speed (MachineModel.cycle_averages): in steady operation
+throttle * M_d(omega) + M_c(omega) = 0 in the mean over a dynamic period.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import optimize
+
+from mech_regulator.governors import Governor
+from mech_regulator.model import MachineModel
+
+
+@dataclass(frozen=True)
+class StaticCharacteristic:
+    """Equilibrium crank speed against sleeve position over the stroke.
+
+    sleeve [m]; speed [rad/s] (no friction); speed_low / speed_high [rad/s]: the band within which
+    static friction holds the sleeve; statism = (omega(z_high) - omega(z_low)) / omega_mean over the
+    stroke [-]; insensitivity = (speed_high - speed_low) / speed at each sleeve position [-].
+    """
+
+    sleeve: np.ndarray
+    speed: np.ndarray
+    speed_low: np.ndarray
+    speed_high: np.ndarray
+    statism: float
+    insensitivity: np.ndarray
+
+
+def static_characteristic(governor: Governor, points: int = 101) -> StaticCharacteristic:
+    """The sensor's static characteristic omega_g^2 = ((m + M) g + F_spring(z) +- F_s) / (m l cos a)."""
+    sensor = governor.sensor
+    sleeve = np.linspace(sensor.stroke[0], sensor.stroke[1], points)
+    static = sensor.static_friction
+    speed = np.array([sensor.equilibrium_speed(z) for z in sleeve])
+    low = np.array([sensor.equilibrium_speed(z, -static) for z in sleeve])
+    high = np.array([sensor.equilibrium_speed(z, static) for z in sleeve])
+    statism = (speed[-1] - speed[0]) / (0.5 * (speed[-1] + speed[0]))
+    return StaticCharacteristic(sleeve, speed, low, high, statism, (high - low) / speed)
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """Steady operation of the cycle-averaged governed machine under an external load.
+
+    external_load [N m]; speed [rad/s]; sleeve [m]; throttle [-]; servo [-] (indirect, else NaN);
+    limited: what holds the point instead of the governor ('' when the governor regulates), e.g.
+    'sleeve on its high stop' or 'servo on its low stop'; mean_inertia [kg m^2].
+    """
+
+    external_load: float
+    speed: float
+    sleeve: float
+    throttle: float
+    servo: float
+    limited: str
+    mean_inertia: float
+
+
+def operating_point(model: MachineModel, external_load: float) -> OperatingPoint:
+    """Solve throttle * M_d(omega) + M_c(omega) = 0 together with the governor's statics.
+
+    direct: omega = omega(z) on the static characteristic, throttle = valve(z), one equation in z;
+    indirect without or with isodromic feedback: z = pilot_neutral (astatic), throttle from the balance;
+    rigid feedback: pilot closed at z = pilot_neutral - rho (s - s_ref), one equation in z.
+    If the balance needs a sleeve or servo beyond its stops, the point sits on the stop and the speed
+    follows from the machine's own balance at that throttle.
+    """
+    governor = model.governor
+    sensor = governor.sensor
+    z_low, z_high = sensor.stroke
+    mean_inertia = model.cycle_averages(sensor.equilibrium_speed(z_low), external_load)[0]
+
+    def surplus(throttle: float, omega: float) -> float:
+        _, drive, other = model.cycle_averages(omega, external_load)
+        return throttle * drive + other
+
+    def point(z: float, throttle: float, servo: float, limited: str = "") -> OperatingPoint:
+        omega = sensor.equilibrium_speed(z)
+        if limited:
+            omega = _machine_speed(lambda w: surplus(throttle, w), omega)
+            z = sensor.equilibrium_sleeve(omega)
+            if governor.kind == "direct":
+                throttle = governor.valve(z)
+        return OperatingPoint(external_load, omega, z, throttle, servo, limited, mean_inertia)
+
+    if governor.kind == "direct":
+        def balance(z: float) -> float:
+            return surplus(governor.valve(z), sensor.equilibrium_speed(z))
+        if balance(z_high) > 0.0:
+            return point(z_high, governor.valve(z_high), math.nan, "sleeve on its high stop")
+        if balance(z_low) < 0.0:
+            return point(z_low, governor.valve(z_low), math.nan, "sleeve on its low stop")
+        z = optimize.brentq(balance, z_low, z_high, xtol=1e-14)
+        return point(z, governor.valve(z), math.nan)
+
+    s_low, s_high = governor.travel
+    if governor.feedback == "rigid":
+        def servo_at(z: float) -> float:
+            return governor.feedback_reference - (z - governor.pilot_neutral) / governor.feedback_gain
+    else:
+        def servo_at(z: float) -> float:
+            return model.balance_throttle(sensor.equilibrium_speed(z), external_load)
+
+    def balance_servo(z: float) -> float:
+        return surplus(min(max(servo_at(z), s_low), s_high), sensor.equilibrium_speed(z))
+
+    z = governor.pilot_neutral
+    if governor.feedback == "rigid":
+        if balance_servo(z_high) > 0.0 or balance_servo(z_low) < 0.0:
+            z = z_high if balance_servo(z_high) > 0.0 else z_low
+        else:
+            z = optimize.brentq(balance_servo, z_low, z_high, xtol=1e-14)
+    servo = servo_at(z)
+    if servo > s_high:
+        return point(z, s_high, s_high, "servo on its high stop")
+    if servo < s_low:
+        return point(z, s_low, s_low, "servo on its low stop")
+    return point(z, servo, servo)
+
+
+def _machine_speed(surplus, guess: float) -> float:
+    """Speed [rad/s] where the averaged machine balances at a fixed throttle: root of surplus(omega)
+    bracketed outward from guess (NaN if the machine has no steady speed)."""
+    lo, hi = guess, guess
+    for _ in range(60):
+        if surplus(lo) > 0.0 > surplus(hi) or surplus(lo) < 0.0 < surplus(hi):
+            return optimize.brentq(surplus, lo, hi, xtol=1e-12)
+        lo, hi = lo / 1.25, hi * 1.25
+    return math.nan
+
+
+@dataclass(frozen=True)
+class Droop:
+    """Static error of the governed machine: slope d omega / d load [rad/s per N m] at the scene's
+    initial load and the speed change [rad/s] each of the scenario's load events will leave."""
+
+    per_unit_load: float
+    per_event: list[float]
+
+
+def droop(model: MachineModel) -> Droop:
+    """Speed change per unit of external load, and per load event, from operating points."""
+    load = model.external_load(0.0)
+    step = max(1e-3, 1e-3 * abs(load))
+    slope = (operating_point(model, load + step).speed - operating_point(model, load - step).speed) / (2 * step)
+    levels = [load] + [event.torque for event in model.scene.scenario.load_events]
+    speeds = [operating_point(model, level).speed for level in levels]
+    return Droop(slope, [after - before for before, after in zip(speeds, speeds[1:])])
