@@ -19,17 +19,22 @@ from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 
 THROTTLE_LIMIT = 1e-9  # a throttle this close to 0 or 1 counts as saturated
+GRID_PER_CYCLE = 400  # samples per dynamic period for reading the time a cycle took
 
 
 def cycle_mean_speed(model: MachineModel, trajectory: Trajectory, times: np.ndarray) -> np.ndarray:
-    """Cycle-mean crank speed [rad/s] at each time: Phi / (t - t(phi(t) - Phi)); NaN during the first
-    cycle. For a machine with nothing periodic in phi, omega(t)."""
+    """Cycle-mean crank speed [rad/s] at each time: Phi / (t - t(phi(t) - Phi)), where t(phi) is read
+    from the run sampled at GRID_PER_CYCLE points per dynamic period; NaN during the first cycle. For
+    a machine with nothing periodic in phi, omega(t)."""
     states = trajectory(times)
     if not is_periodic(model):
         return states[1]
     period = model.dynamic_period()
-    phi = np.maximum.accumulate(states[0])  # the crank angle of a turning machine; flat where it stops
-    earlier = np.interp(phi - period, phi, times, left=math.nan)
+    start, end = trajectory.t_start, float(times[-1])
+    turns = abs(trajectory(end)[0] - trajectory(start)[0]) / period
+    grid = np.linspace(start, end, max(2000, int(GRID_PER_CYCLE * turns)))
+    phi = np.maximum.accumulate(trajectory(grid)[0])  # the angle of a turning crank; flat where it stops
+    earlier = np.interp(states[0] - period, phi, grid, left=math.nan)
     with np.errstate(invalid="ignore", divide="ignore"):
         return period / (times - earlier)
 

@@ -25,6 +25,9 @@ from mech_regulator.analysis.statics import OperatingPoint
 from mech_regulator.model import LoadPiece, MachineModel
 
 
+SHOOTING_TOLERANCE = 1e-8  # the periodic orbit is found when |P(x) - x| is below this, relative to x's scale
+
+
 @dataclass(frozen=True)
 class LinearStability:
     """Eigen-analysis of the linearised cycle-averaged model at an operating point.
@@ -153,13 +156,13 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
 
     x = equilibrium_state(model, point)
     scale = np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[: x.size]
-    for _ in range(20):
-        end, _ = cycle(x)
-        residual = end - x
-        monodromy = _map_jacobian(cycle, x, scale)
-        if np.all(np.abs(residual) < 1e-9 * scale):
+    monodromy = _map_jacobian(cycle, x, scale)
+    for _ in range(30):  # chord Newton: the map's Jacobian hardly changes between the guess and the orbit
+        residual = cycle(x)[0] - x
+        if np.all(np.abs(residual) < SHOOTING_TOLERANCE * scale):
             break
         x = x - np.linalg.solve(monodromy - np.eye(x.size), residual)
+    monodromy = _map_jacobian(cycle, x, scale)
     end, cycle_time = cycle(x)
     multipliers = np.linalg.eigvals(monodromy)
     return FloquetStability(

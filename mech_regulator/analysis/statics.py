@@ -115,10 +115,12 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
 
     z = governor.pilot_neutral
     if governor.feedback == "rigid":
-        if balance_servo(z_high) > 0.0 or balance_servo(z_low) < 0.0:
-            z = z_high if balance_servo(z_high) > 0.0 else z_low
-        else:
-            z = optimize.brentq(balance_servo, z_low, z_high, xtol=1e-14)
+        for stop, name, outside in ((z_high, "high", balance_servo(z_high) > 0.0),
+                                    (z_low, "low", balance_servo(z_low) < 0.0)):
+            if outside:
+                servo = min(max(servo_at(stop), s_low), s_high)
+                return point(stop, servo, servo, f"sleeve on its {name} stop")
+        z = optimize.brentq(balance_servo, z_low, z_high, xtol=1e-14)
     servo = servo_at(z)
     if servo > s_high:
         return point(z, s_high, s_high, "servo on its high stop")

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
 from scipy import optimize
 
 
@@ -95,7 +96,7 @@ class PorterSensor:
             return low
         if lift_at(high) >= 0.0:
             return high
-        return optimize.brentq(lift_at, low, high, xtol=1e-15, rtol=4e-16)
+        return optimize.brentq(lift_at, low, high, xtol=1e-15, rtol=4 * np.finfo(float).eps)
 
     def effective_mass(self, arm_angle: float) -> float:
         """Mass reduced to the sleeve, (2 m l^2 + 4 M l^2 sin^2 a) / (2 l sin a)^2 [kg]."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import bisect
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from fractions import Fraction
@@ -25,6 +26,8 @@ from mech_regulator.effects import Effect, build_drive, build_load
 from mech_regulator.governors import Governor, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
 from mech_regulator.scene.schema import Scene
+
+CYCLE_POINTS_PER_TURN = 720  # samples per turn of the cycle averages of the governor's statics
 
 Reduced = Callable[[float], tuple[float, float, float, float, float]]
 RightHandSide = Callable[[float, np.ndarray], tuple[float, float] | list[float]]
@@ -189,37 +192,41 @@ class MachineModel:
         """The governor's guards in a mode (none without a governor)."""
         return self.governor.guards(mode) if self.governor is not None else []
 
-    def cycle_averages(self, omega: float, external: float = 0.0, points_per_turn: int = 1440
-                       ) -> tuple[float, float, float]:
+    def cycle_averages(self, omega: float, external: float = 0.0) -> tuple[float, float, float]:
         """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
         mean M_drive at full throttle [N m], mean of all other moments with the external load `external`
         [N m], which opposes motion).
 
         The weight moment averages out over a turn; the J' omega^2 / 2 term averages to zero at constant
         speed. These define the cycle-averaged model J_m omega' = throttle M_d(omega) + M_c(omega) used by
-        the governor's statics and linear stability.
+        the governor's statics and linear stability. Mean of CYCLE_POINTS_PER_TURN samples per turn.
         """
-        period = self.dynamic_period()
-        count = max(1, int(round(period / (2.0 * math.pi)))) * points_per_turn
-        if self.reduced is None and "phi" not in self.depends_on():
-            count = 1  # nothing varies over the cycle
-        phis = np.arange(count) * (period / count)
-        inertia = drive = other = 0.0
-        t = 0.0
-        for phi in phis:
-            J, _ = self.inertia(phi)
-            q, dq, weight = 0.0, 0.0, 0.0
-            if self.reduced is not None:
-                _, _, weight, q, dq = self.reduced(phi)
-            inertia += J
-            other += weight - external
+        phis, inertia, weight, q, dq = self._cycle_grid
+        drive = other = 0.0
+        for i, phi in enumerate(phis):
             for effect in self.effects:
-                value = effect.moment(t, phi, omega, q, dq)
+                value = effect.moment(0.0, phi, omega, q[i], dq[i])
                 if effect.role == "drive":
                     drive += value
                 else:
                     other += value
-        return inertia / count, drive / count, other / count
+        count = len(phis)
+        return inertia, drive / count, other / count + weight - external
+
+    @functools.cached_property
+    def _cycle_grid(self) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
+        """Crank angles over one dynamic period with the mean J and weight moment and q, dq/dphi there
+        (one angle if nothing varies with phi)."""
+        period = self.dynamic_period()
+        count = max(1, int(round(period / (2.0 * math.pi)))) * CYCLE_POINTS_PER_TURN
+        if self.reduced is None and "phi" not in self.depends_on():
+            count = 1
+        phis = np.arange(count) * (period / count)
+        if self.reduced is None:
+            return phis, self.inertia_constant, 0.0, np.zeros(count), np.zeros(count)
+        values = np.array([self.reduced(phi) for phi in phis])
+        return (phis, self.inertia_constant + float(np.mean(values[:, 0])), float(np.mean(values[:, 2])),
+                values[:, 3], values[:, 4])
 
     def balance_throttle(self, omega: float, external: float) -> float:
         """Throttle at which the cycle-averaged drive balances the load (with external load `external`

@@ -143,6 +143,17 @@ def _child(node: Any, key: str, path: list[str], assignment: str, create: bool) 
 def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
     """Read, override and validate a scene; any problem raises SceneError with a clear message."""
     path = resolve_scene_path(name_or_path)
+    data = read_scene_data(path)
+    for assignment in overrides:
+        apply_override(data, assignment)
+    data.setdefault("name", path.stem)
+    return validate_scene(data, str(path))
+
+
+def read_scene_data(path: Path, derived_from: tuple[Path, ...] = ()) -> dict:
+    """The mapping of a scene file; a file with `base: SCENE` starts from that scene (a bundled name or a
+    path relative to the file) and changes it: mappings merge key by key, null removes a key, anything else
+    is replaced."""
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as error:
@@ -155,10 +166,32 @@ def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
         data = {}
     if not isinstance(data, dict):
         raise SceneError(f"{path}: expected a mapping of sections (machine, scenario, solver), got {type(data).__name__}")
-    for assignment in overrides:
-        apply_override(data, assignment)
-    data.setdefault("name", path.stem)
-    return validate_scene(data, str(path))
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise SceneError(f"{path}: base = {base!r}; expected the name of a bundled scene or a path to a scene file")
+    relative = path.parent / base
+    base_path = relative if relative.is_file() else resolve_scene_path(base)
+    if base_path.resolve() in derived_from + (path.resolve(),):
+        raise SceneError(f"{path}: base = '{base}' leads back to itself; expected a chain of scenes without a loop")
+    merged = read_scene_data(base_path, derived_from + (path.resolve(),))
+    merged.pop("name", None)
+    merged.pop("description", None)
+    return _merge(merged, data)
+
+
+def _merge(base: dict, changes: dict) -> dict:
+    """base changed by changes: nested mappings merge key by key, null removes a key, other values replace."""
+    merged = dict(base)
+    for key, value in changes.items():
+        if value is None:
+            merged.pop(key, None)
+        elif isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
 
 
 def validate_scene(data: dict, source: str = "scene") -> Scene:
