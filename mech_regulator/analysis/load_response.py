@@ -47,9 +47,10 @@ class LoadResponse:
     peak_deviation [rad/s] (signed, largest |speed - speed_before|) at peak_time [s after the change];
     speed_after [rad/s] at the end of the window (next change or end of run); static_error =
     speed_after - speed_before [rad/s]; predicted_static_error from the statics [rad/s];
-    settling_time [s after the change] when the speed enters and stays within the settling band of
-    speed_after (None if it had not settled by the end of the window); overshoot [%] past speed_after
-    relative to the peak's distance from it; limits: stops and saturations met in the window.
+    settling_time [s after the change] when the speed enters and stays within the settling band around
+    the new steady speed the statics predict (around speed_after if the governor is saturated there);
+    None if it had not settled by the end of the window; overshoot [%] past that speed relative to the
+    peak's distance from it; limits: stops and saturations met in the window.
     """
 
     time: float
@@ -84,15 +85,17 @@ def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: flo
         after = speed[-1]
         deviation = speed - before
         peak = int(np.nanargmax(np.abs(deviation)))
-        from_final = speed - after
-        outside = np.nonzero(np.abs(from_final) > band * abs(after))[0]
+        old_point, new_point = operating_point(model, loads[index]), operating_point(model, loads[index + 1])
+        target = after if new_point.limited else new_point.speed
+        from_final = speed - target
+        outside = np.nonzero(np.abs(from_final) > band * abs(target))[0]
         last_cycle = model.dynamic_period() / max(abs(after), 1e-12)
         settled = outside.size == 0 or times[outside[-1]] < end - last_cycle
         settling = (times[outside[-1]] - start if outside.size else 0.0) if settled else None
         direction = math.copysign(1.0, from_final[peak]) if from_final[peak] != 0.0 else 1.0
         overshoot = max(0.0, float(np.nanmax(-direction * from_final[peak:])))
         overshoot_percent = 100.0 * overshoot / abs(from_final[peak]) if from_final[peak] != 0.0 else 0.0
-        predicted = (operating_point(model, loads[index + 1]).speed - operating_point(model, loads[index]).speed)
+        predicted = new_point.speed - old_point.speed
         responses.append(LoadResponse(
             time=start, load_before=loads[index], load_after=loads[index + 1], speed_before=float(before),
             peak_deviation=float(deviation[peak]), peak_time=float(times[peak] - start), speed_after=float(after),

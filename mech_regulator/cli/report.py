@@ -152,7 +152,8 @@ def format_governor(analysis: dict) -> str:
     if floquet is not None:
         lines.append(f"periodic steady state (Floquet, orbit residual {floquet['residual']:.1g}): "
                      f"{'stable' if floquet['stable'] else 'UNSTABLE'}, cycle {floquet['cycle_time'] * 1000:.4g} ms, "
-                     f"mean speed {floquet['mean_speed']:.6g} rad/s")
+                     f"mean speed {floquet['mean_speed']:.6g} rad/s; it passes phi = 0 at omega = "
+                     f"{floquet['orbit'][0]:.6g} rad/s (start a run there to begin in steady state)")
         lines.append("  multipliers |mu|: " + ", ".join(f"{math.hypot(*m):.5g}" for m in floquet["multipliers"]))
         lines.append("  averaged model exp(lambda T): " + ", ".join(f"{math.hypot(*m):.5g}"
                                                                      for m in floquet["averaged_multipliers"]))

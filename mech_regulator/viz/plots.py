@@ -90,8 +90,8 @@ def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dic
     for level in dict.fromkeys(levels):
         predicted = operating_point(model, level).speed
         speed.axhline(predicted, color="tab:green", lw=0.8, ls="-.")
-        speed.annotate(f"statics, load {level:g} N m", (times[0], predicted), fontsize=7, color="tab:green",
-                       va="bottom")
+        speed.annotate(f"statics, load {level:g} N m", (times[-1], predicted), fontsize=7, color="tab:green",
+                       va="bottom", ha="right")
     speed.legend(loc="lower right")
     stroke = model.governor.sensor.stroke
     panel.plot(times, columns["sleeve"] * 1000.0, color="tab:purple", lw=1.0, label="sleeve z")
@@ -134,8 +134,9 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
     averages = np.array([model.cycle_averages(w)[1:] for w in speeds])
     for point in analysis["operating_points"]:
         load = np.array([-model.cycle_averages(w, point["external_load"])[2] for w in speeds])
-        balance.plot(speeds, load / averages[:, 0], lw=1.0, label=f"throttle needed, load {point['external_load']:g} N m")
-        balance.plot(point["speed"], point["throttle"], "o", ms=6)
+        line, = balance.plot(speeds, load / averages[:, 0], lw=1.0,
+                             label=f"throttle needed, load {point['external_load']:g} N m")
+        balance.plot(point["speed"], point["throttle"], "o", ms=6, color=line.get_color())
     if model.governor.kind == "direct":
         balance.plot(characteristic["speed"], [model.governor.valve(z / 1000.0) for z in sleeve], color="k",
                      label="valve on the static characteristic")
