@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from mech_regulator.cli.main import main
-from mech_regulator.scene.loading import parse_yaml
+from mech_regulator.scene.loading import read_scene_data
 
 SCENES_DIR = Path(__file__).resolve().parents[1] / "config" / "scenes"
 BUNDLED = sorted(path.stem for path in SCENES_DIR.glob("*.yaml"))
@@ -44,13 +44,14 @@ def read_csv(path: Path) -> tuple[list[str], list[list[float]]]:
 
 
 def bundled_data(name: str) -> dict:
-    """A bundled scene as plain data, read with the package's YAML reader (1e-3 is a number)."""
-    path = SCENES_DIR / f"{name}.yaml"
-    return parse_yaml(path.read_text(encoding="utf-8"), str(path))
+    """A bundled scene as plain data, read with the package's YAML reader (1e-3 is a number) and with
+    its `base:` scene merged in."""
+    return read_scene_data(SCENES_DIR / f"{name}.yaml")
 
 
 def test_bundled_scenes_present():
-    assert BUNDLED == ["compressor", "engine", "four_bar_rocker", "lathe"]
+    assert BUNDLED == ["compressor", "engine", "engine_direct", "engine_indirect_isodromic", "engine_indirect_none",
+                       "engine_indirect_rigid", "four_bar_rocker", "lathe"]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -97,9 +97,3 @@ class PorterSensor:
         if lift_at(high) >= 0.0:
             return high
         return optimize.brentq(lift_at, low, high, xtol=1e-15, rtol=4 * np.finfo(float).eps)
-
-    def effective_mass(self, arm_angle: float) -> float:
-        """Mass reduced to the sleeve, (2 m l^2 + 4 M l^2 sin^2 a) / (2 l sin a)^2 [kg]."""
-        lever = 2.0 * self.arm_length * math.sin(arm_angle)
-        l = self.arm_length
-        return (2.0 * self.ball_mass * l * l + 4.0 * self.sleeve_mass * l * l * math.sin(arm_angle) ** 2) / lever ** 2

@@ -71,12 +71,3 @@ class Trajectory:
         """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end, both ends included."""
         count = max(2, int(round((self.t_end - self.t_start) * sample_rate)) + 1)
         return np.linspace(self.t_start, self.t_end, count)
-
-    def mode_at(self, t: float) -> tuple[str, str] | None:
-        """The governor's mode in force at time t (None without a governor)."""
-        current = None
-        for start, mode in self.modes:
-            if start > t:
-                break
-            current = mode
-        return current
