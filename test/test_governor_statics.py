@@ -13,8 +13,10 @@ Tolerance conventions:
 - root finds (the package's brentq and the test's brentq with xtol 1e-15) agree to ~1e-12 relative;
   1e-9 relative on operating points is the brief's requirement and leaves three orders of margin;
 - integrations of the sensor alone use solve_ivp DOP853 at rtol 1e-11, atol 1e-13: the global error
-  over a few oscillation periods is a few rtol, so the Jacobi integral is conserved to ~1e-10 of its
-  kinetic scale; 1e-9 is the tolerance;
+  over a few oscillation periods (2 s) is a few rtol, so the Jacobi integral stays constant to ~1e-10
+  of the sum of the magnitudes of its terms (observed 1e-13 to 1e-10); 1e-9 is the tolerance. A wrong
+  factor on the sleeve-inertia term drifts by > 1e-1 on the same measure (checked in a test);
+- the dissipation identity dE/dt = -(c z' + F) z' holds pointwise: 1e-12 of the magnitude of its terms;
 - governed simulations settle towards the operating point with the eigenvalues of the linearised
   averaged model (linear_stability's Jacobian, eigen-decomposed here): a deviation dx0 decays at most
   as sum_k |V[i, k] (V^-1 dx0)_k| exp(Re lambda_k t). The tolerance is twice that linear envelope
@@ -25,7 +27,6 @@ Tolerance conventions:
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 
@@ -102,17 +103,25 @@ def balance_throttle(omega: float, load: float) -> float:
     return (C * omega + load) / (M0 * (1.0 - omega / W0))
 
 
-def hand_direct_point(governor: dict, load: float) -> tuple[float, float, float]:
-    """(speed, sleeve, throttle) of a direct governor with a linear valve: root in z of
-    valve(z) M0 (1 - w(z)/W0) - C w(z) - L, w(z) from the closed form."""
+def valve_of(governor: dict):
+    """The throttle(z) of a governor's valve entry, written independently (np.interp for a table)."""
     valve = governor["valve"]
+    if valve.get("type", "linear") == "table":
+        return lambda z: float(np.interp(z, valve["sleeve"], valve["throttle"]))
+    return lambda z: linear_valve(z, valve["open_at"], valve["closed_at"])
+
+
+def hand_direct_point(governor: dict, load: float) -> tuple[float, float, float]:
+    """(speed, sleeve, throttle) of a direct governor: root in z of valve(z) M0 (1 - w(z)/W0) - C w(z) - L,
+    w(z) from the closed form."""
+    valve = valve_of(governor)
 
     def balance(z: float) -> float:
-        return motor_surplus(linear_valve(z, valve["open_at"], valve["closed_at"]), speed_closed_form(governor, z), load)
+        return motor_surplus(valve(z), speed_closed_form(governor, z), load)
 
     z_low, z_high = governor["stroke"]
     z = optimize.brentq(balance, z_low, z_high, xtol=1e-15, rtol=4 * np.finfo(float).eps)
-    return speed_closed_form(governor, z), z, linear_valve(z, valve["open_at"], valve["closed_at"])
+    return speed_closed_form(governor, z), z, valve(z)
 
 
 def envelope(jacobian: np.ndarray, dx0: np.ndarray, t: float, index: int = 0) -> float:
@@ -202,7 +211,8 @@ def jacobi_rate(sensor, a: float, a_dot: float, a_ddot: float, omega: float) -> 
     return dE_da * a_dot + dE_dadot * a_ddot, abs(dE_da * a_dot) + abs(dE_dadot * a_ddot)
 
 
-def energy_drift(sensor, acceleration, omega: float, a0: float, a_dot0: float, duration: float) -> tuple[float, np.ndarray]:
+def energy_drift(sensor, acceleration, omega: float, a0: float, a_dot0: float,
+                 duration: float) -> tuple[float, np.ndarray]:
     """Largest |E(t) - E(0)| relative to the sum of |terms of E| at t = 0, and the arm angles visited."""
     solution = integrate.solve_ivp(lambda t, y: [y[1], acceleration(y[0], y[1])], (0.0, duration), [a0, a_dot0],
                                    method="DOP853", rtol=1e-11, atol=1e-13, dense_output=True)
@@ -357,8 +367,12 @@ def test_drive_is_scaled_by_the_valve():
 # 6. Operating point of a direct governor
 
 
-@pytest.mark.parametrize("governor", [PORTER, {**SPRUNG, "valve": {"open_at": 0.03, "closed_at": 0.07}}],
-                         ids=["porter", "spring-narrow-valve"])
+TABLE_VALVE = {"type": "table", "sleeve": [0.02, 0.04, 0.06, 0.08], "throttle": [1.0, 0.8, 0.3, 0.0]}  # [m], [-]
+
+
+@pytest.mark.parametrize("governor", [PORTER, {**SPRUNG, "valve": {"open_at": 0.03, "closed_at": 0.07}},
+                                      {**WATT, "ratio": 0.07, "valve": TABLE_VALVE}],
+                         ids=["porter", "spring-narrow-valve", "watt-table-valve"])
 @pytest.mark.parametrize("load", [0.0, 5.0, 10.0])  # [N m]
 def test_direct_operating_point_matches_hand_solution(governor, load):
     model = governed_model(governor)
@@ -371,6 +385,19 @@ def test_direct_operating_point_matches_hand_solution(governor, load):
     assert math.isnan(point.servo)
     assert point.mean_inertia == 0.5
     assert abs(motor_surplus(throttle, speed, load)) < 1e-9  # the hand solution really balances
+
+
+def test_droop_slope_matches_implicit_derivative():
+    # f(z, L) = v(z) M0 (1 - w(z)/W0) - C w(z) - L = 0 gives dz/dL = 1 / f_z and d omega / dL = w'(z) / f_z, with
+    # w ~ h^(-1/2), h = l - z/2: w' = w / (4 h); v' = -1 / (closed_at - open_at). droop() takes a central
+    # difference over +-1e-3 N m: its error is ~(1e-3)^2 relative to the curvature scale, far below 1e-6.
+    load = 4.0  # [N m]
+    model = governed_model(PORTER, scenario={"initial": {"omega": 110.0}, "duration": 1.0, "external_load": load})
+    speed, z, throttle = hand_direct_point(PORTER, load)
+    dw_dz = speed / (4.0 * (PORTER["arm_length"] - 0.5 * z))
+    dv_dz = -1.0 / (PORTER["valve"]["closed_at"] - PORTER["valve"]["open_at"])
+    f_z = dv_dz * M0 * (1.0 - speed / W0) - (throttle * M0 / W0 + C) * dw_dz
+    assert droop(model).per_unit_load == pytest.approx(dw_dz / f_z, rel=1e-6)
 
 
 def test_direct_operating_point_on_the_low_stop_runs_at_full_throttle():
@@ -561,7 +588,8 @@ def test_rigid_feedback_run_settles_at_the_predicted_droop():
     dx0 = np.array([speed_0 - speed_1, sensor.arm_angle(sleeve_0) - sensor.arm_angle(sleeve_1), 0.0,
                     servo_0 - servo_1])
     tol = 2 * envelope(linear.jacobian, dx0, duration - t_step) + 1e-6
+    tol_servo = 2 * envelope(linear.jacobian, dx0, duration - t_step, index=3) + 1e-8
     assert tol < 1e-3 * abs(speed_1 - speed_0)
     assert trajectory(t_step)[1] == pytest.approx(speed_0, abs=1e-6)
     assert trajectory(duration)[1] == pytest.approx(speed_1, abs=tol)
-    assert trajectory(duration)[4] == pytest.approx(servo_1, abs=1e-3)
+    assert trajectory(duration)[4] == pytest.approx(servo_1, abs=tol_servo)

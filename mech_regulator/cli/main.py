@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -77,12 +78,15 @@ def main(argv: list[str] | None = None) -> int:
     except SceneError as error:
         print(f"mech-regulator: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # the reader went away (`... | head`): not an error of ours
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 def _list_scenes() -> int:
     for name, path in bundled_scenes().items():
-        description = load_scene(str(path)).description or ""
-        print(f"{name:<16} {description.strip().splitlines()[0] if description else ''}")
+        description = " ".join((load_scene(str(path)).description or "").split())
+        print(f"{name:<26} {description.split('. ')[0]}")
     return 0
 
 
@@ -114,7 +118,7 @@ def _simulate(scene, args) -> int:
 
         plot_run(model, trajectory, summary, args.plot)
         summary["plot"] = str(args.plot)
-    print(json.dumps(summary, indent=2, default=_json_default) if args.json else format_summary(model, summary))
+    print(_to_json(summary) if args.json else format_summary(model, summary))
     if trajectory.status == "failed":
         print(f"mech-regulator: {trajectory.message}", file=sys.stderr)
         return EXIT_RUN_FAILED
@@ -149,7 +153,7 @@ def _governor(scene, args) -> int:
 
         plot_governor(model, analysis, args.plot)
         analysis["plot"] = str(args.plot)
-    print(json.dumps(analysis, indent=2, default=_json_default) if args.json else format_governor(analysis))
+    print(_to_json(analysis) if args.json else format_governor(analysis))
     return 0
 
 
@@ -159,12 +163,20 @@ def _samples(model, trajectory) -> tuple[np.ndarray, np.ndarray]:
     return times, trajectory(times)
 
 
-def _json_default(value):
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return str(value)
-    raise TypeError(f"not JSON serialisable: {value!r}")
+def _to_json(data) -> str:
+    """Strict JSON (no NaN or Infinity, which jq and JavaScript reject): non-finite numbers become null."""
+    def finite(value):
+        if isinstance(value, dict):
+            return {key: finite(item) for key, item in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [finite(item) for item in value]
+        if isinstance(value, (np.floating, np.integer)):
+            value = value.item()
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        return value
+
+    return json.dumps(finite(data), indent=2, allow_nan=False)
 
 
 if __name__ == "__main__":

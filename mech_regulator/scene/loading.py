@@ -172,9 +172,17 @@ def read_scene_data(path: Path, derived_from: tuple[Path, ...] = ()) -> dict:
     if not isinstance(base, str):
         raise SceneError(f"{path}: base = {base!r}; expected the name of a bundled scene or a path to a scene file")
     relative = path.parent / base
-    base_path = relative if relative.is_file() else resolve_scene_path(base)
+    bundled = bundled_scenes()
+    if relative.is_file():
+        base_path = relative
+    elif base.removesuffix(".yaml") in bundled and len(Path(base).parts) == 1:
+        base_path = bundled[base.removesuffix(".yaml")]
+    else:
+        raise SceneError(f"{path}: base = '{base}': no such file next to this scene ({relative}), nor a bundled "
+                         f"scene (bundled: {', '.join(bundled)})")
     if base_path.resolve() in derived_from + (path.resolve(),):
-        raise SceneError(f"{path}: base = '{base}' leads back to itself; expected a chain of scenes without a loop")
+        raise SceneError(f"{path}: base = '{base}' closes a loop of bases; expected a chain of scenes that ends "
+                         "in a scene without base")
     merged = read_scene_data(base_path, derived_from + (path.resolve(),))
     merged.pop("name", None)
     merged.pop("description", None)
@@ -234,8 +242,11 @@ def _data_path(loc: tuple, data: Any) -> list:
     """Drop the union tags pydantic inserts into locations (machine.loads.0.viscous.coefficient
     -> machine.loads.0.coefficient), keeping the path as the user wrote it."""
     path, node, tag_skipped = [], data, False
-    for part in loc:
-        if isinstance(node, dict) and node.get("type") == part and not tag_skipped:
+    for index, part in enumerate(loc):
+        # a tag: the node's own type, or the default type of a node that gives none (a valve)
+        default_tag = (isinstance(node, dict) and "type" not in node and isinstance(part, str) and part not in node
+                       and index < len(loc) - 1)
+        if isinstance(node, dict) and (node.get("type") == part or default_tag) and not tag_skipped:
             tag_skipped = True
             continue
         tag_skipped = False
@@ -307,9 +318,12 @@ def _resolve(annotation: Any, node: Any) -> Any:
             return _resolve(members[0], node)
         tag = node.get("type") if isinstance(node, dict) else None
         for member in members:
-            literal = getattr(member, "model_fields", {}).get("type")
-            if literal is not None and tag in typing.get_args(literal.annotation):
-                return member
+            model = _resolve(member, None) if typing.get_origin(member) is typing.Annotated else member
+            literal = getattr(model, "model_fields", {}).get("type")
+            if literal is None:
+                continue
+            if tag in typing.get_args(literal.annotation) or (tag is None and not literal.is_required()):
+                return model
         return None
     return annotation
 
