@@ -309,7 +309,9 @@ def test_isodromic_feedback_returns_to_the_set_speed_with_decaying_oscillation()
 def test_rigid_feedback_counterpart_leaves_the_predicted_droop():
     """The same governor with rigid feedback of the same gain: the speed does NOT return (a droop), so
     the astatic result above is a property of the isodromic dashpot, not of this scene."""
-    data = scene(ISODROMIC, governor__feedback={"type": "rigid", "gain": 0.002}, scenario__duration=10.0)
+    # stroke from 0.039 m: below z = 0.04 - (m + M) g / k = 0.038 m the spring alone lifts the sleeve and the
+    # static characteristic has no speed (NaN), which operating_point's rigid branch cannot bracket
+    data = scene(ISODROMIC, governor__feedback={"type": "rigid", "gain": 0.002}, governor__stroke=[0.039, 0.08])
     base = model_of(data)
     model = model_of(scene(data, scenario__initial={"omega": operating_point(base, 30.0).speed}))
     before, after = operating_point(model, 30.0), operating_point(model, 40.0)
@@ -317,6 +319,7 @@ def test_rigid_feedback_counterpart_leaves_the_predicted_droop():
     assert droop < -0.5
     tr = run(model)
     assert tr(10.0)[1] == pytest.approx(after.speed, abs=1e-3)
+    assert sleeve_modes(tr) == {"free"}                         # the shortened stroke was not reached
 
 
 # ---------------------------------------------------------------------------------------------
@@ -453,8 +456,7 @@ def test_load_rejection_rests_on_the_high_stop_without_chattering(kinetic, stati
     assert tr(t_leave)[1] == pytest.approx(omega_leave, rel=1e-9)
     assert np.all(states[1, on & (t < 8.0)] > omega_leave)
     assert mode_at(tr, t_leave)[0] == ("free" if static == 0.0 else "down")
-    after = (t > t_leave + 0.1)
-    assert columns["sleeve"][after].max() < z_high - 1e-3      # and really moves off
+    assert columns["sleeve"][-1] < z_high - 1e-2               # and really moves off
 
 
 # ---------------------------------------------------------------------------------------------
@@ -483,9 +485,10 @@ def test_servo_saturates_on_its_high_stop_under_a_big_load():
     on = (t >= t_hit) & (t <= t_leave)
     assert np.all(servo[on] == 1.0)
     assert mode_at(tr, 0.5 * (t_hit + t_leave))[1] == "high"
-    # the servo speed limit holds everywhere
-    dt = np.diff(t)
-    assert np.max(np.abs(np.diff(servo)) / dt) <= 0.5 * (1 + 1e-6)
+    # the servo speed limit holds everywhere and is reached (the clip is a kink of the right-hand side, not
+    # an event, so the dense output next to it carries a local error: 1e-4 relative)
+    servo_rate = np.abs(np.diff(servo)) / np.diff(t)
+    assert 0.5 * (1 - 1e-4) <= servo_rate.max() <= 0.5 * (1 + 1e-4)
     # on the stop the machine runs at its own full-throttle speed
     assert tr(6.0)[1] == pytest.approx(overloaded.speed, abs=1e-2)
     # it leaves when the pilot valve asks for closing

@@ -52,15 +52,16 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     """Step the scene's solver over [t_start, t_end], restarting it exactly at every switch crossing and
     every governor event; returns the state and mode at the end.
 
-    The solver integrates the crank angle wrapped by whole dynamic periods (the right-hand side is
-    periodic in them): a growing phi would otherwise loosen the relative tolerance on the phase step
-    by step. It restarts, keeping its step size, whenever the wrapped angle passes RESTART_PERIODS
-    periods; outputs carry the unwrapped angle.
+    When something depends on phi, the solver integrates the crank angle wrapped by whole dynamic
+    periods (the right-hand side is periodic in them): a growing phi would otherwise loosen the
+    relative tolerance on the phase step by step. It restarts, keeping its step size, whenever the
+    wrapped angle passes RESTART_PERIODS periods; outputs carry the unwrapped angle.
     """
     settings = model.scene.solver
     switches = _unique_switches(model.switch_angles())
     grid = model.switch_grid()
     period = model.dynamic_period()
+    wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     t, first_step = t_start, None
     counts = _switch_counts(y[0], switches)
     while t < t_end and trajectory.status == "complete":
@@ -68,7 +69,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         if trajectory.status != "complete":
             break
         guards = model.guards(mode)
-        offset = period * math.floor(y[0] / period)
+        offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         rhs = model.rhs(piece, window, mode)
         y_wrapped = y - np.concatenate([[offset], np.zeros(y.size - 1)])
@@ -106,7 +107,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
             trajectory.add_piece(solver.t_old, t_step, dense)
             trajectory.stats.steps += 1
             t, y = t_step, np.array(y_step, dtype=float)
-            restart = restart or (abs(solver.y[0]) > RESTART_PERIODS * period and t < t_end)
+            restart = restart or (wraps and abs(solver.y[0]) > RESTART_PERIODS * period and t < t_end)
             if progress is not None:
                 progress(t)
         first_step = min(solver.step_size, t_end - t) if solver.step_size else None
