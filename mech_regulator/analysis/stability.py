@@ -156,13 +156,14 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
 
     x = equilibrium_state(model, point)
     scale = np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[: x.size]
-    monodromy = _map_jacobian(cycle, x, scale)
+    step = rtol ** (1.0 / 3.0)  # central differences: truncation ~ step^2 balances integration noise ~ rtol / step
+    monodromy = _map_jacobian(cycle, x, step * scale)
     for _ in range(30):  # chord Newton: the map's Jacobian hardly changes between the guess and the orbit
         residual = cycle(x)[0] - x
         if np.all(np.abs(residual) < SHOOTING_TOLERANCE * scale):
             break
         x = x - np.linalg.solve(monodromy - np.eye(x.size), residual)
-    monodromy = _map_jacobian(cycle, x, scale)
+    monodromy = _map_jacobian(cycle, x, step * scale)
     end, cycle_time = cycle(x)
     multipliers = np.linalg.eigvals(monodromy)
     return FloquetStability(
@@ -171,11 +172,11 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
         stable=bool(np.all(np.abs(multipliers) < 1.0)), residual=float(np.max(np.abs(end - x) / scale)))
 
 
-def _map_jacobian(cycle, x: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """Jacobian of the period map by central differences."""
+def _map_jacobian(cycle, x: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Jacobian of the period map by central differences with the given step per state."""
     jacobian = np.empty((x.size, x.size))
     for j in range(x.size):
-        h = 1e-6 * scale[j]
+        h = steps[j]
         step = np.zeros(x.size)
         step[j] = h
         jacobian[:, j] = (cycle(x + step)[0] - cycle(x - step)[0]) / (2.0 * h)

@@ -20,7 +20,8 @@ from mech_regulator.model import MachineModel
 
 @dataclass(frozen=True)
 class StaticCharacteristic:
-    """Equilibrium crank speed against sleeve position over the stroke.
+    """Equilibrium crank speed against sleeve position over the stroke (the part of it where a speed can
+    hold the sleeve: PorterSensor.characteristic_range).
 
     sleeve [m]; speed [rad/s] (no friction); speed_low / speed_high [rad/s]: the band within which
     static friction holds the sleeve; statism = (omega(z_high) - omega(z_low)) / omega_mean over the
@@ -38,7 +39,7 @@ class StaticCharacteristic:
 def static_characteristic(governor: Governor, points: int = 101) -> StaticCharacteristic:
     """The sensor's static characteristic omega_g^2 = ((m + M) g + F_spring(z) +- F_s) / (m l cos a)."""
     sensor = governor.sensor
-    sleeve = np.linspace(sensor.stroke[0], sensor.stroke[1], points)
+    sleeve = np.linspace(*sensor.characteristic_range(), points)
     static = sensor.static_friction
     speed = np.array([sensor.equilibrium_speed(z) for z in sleeve])
     low = np.array([sensor.equilibrium_speed(z, -static) for z in sleeve])
@@ -76,7 +77,7 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
     """
     governor = model.governor
     sensor = governor.sensor
-    z_low, z_high = sensor.stroke
+    z_low, z_high = sensor.characteristic_range()
     mean_inertia = model.cycle_averages(sensor.equilibrium_speed(z_low), external_load)[0]
 
     def surplus(throttle: float, omega: float) -> float:
@@ -87,6 +88,9 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
         omega = sensor.equilibrium_speed(z)
         if limited:
             omega = _machine_speed(lambda w: surplus(throttle, w), omega)
+            if math.isnan(omega):
+                return OperatingPoint(external_load, omega, z, throttle, servo,
+                                      f"{limited}; no steady speed at that throttle", mean_inertia)
             z = sensor.equilibrium_sleeve(omega)
             if governor.kind == "direct":
                 throttle = governor.valve(z)

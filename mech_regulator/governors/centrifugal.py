@@ -84,6 +84,15 @@ class PorterSensor:
             return math.nan
         return math.sqrt(pull / (m * l * cos_a)) / self.ratio
 
+    def characteristic_range(self) -> tuple[float, float]:
+        """The part of the stroke [m] where some speed holds the sleeve: below z = z_free - (m + M) g / k
+        a spring in tension lifts the sleeve by itself, and the static characteristic starts above it."""
+        low, high = self.stroke
+        if self.stiffness > 0.0:
+            lifted_up_to = self.free_position - (self.ball_mass + self.sleeve_mass) * self.gravity / self.stiffness
+            low = max(low, lifted_up_to + 1e-9 * (high - low))
+        return low, high
+
     def equilibrium_sleeve(self, omega: float) -> float:
         """Sleeve position [m] where the lift vanishes at crank speed omega, clipped to the stroke
         (the lift falls monotonically with z, so the root is unique)."""

@@ -50,11 +50,11 @@ class HermiteStep(DenseOutput):
 
     def _call_impl(self, t):
         s = (np.asarray(t) - self.t_old) / self.h
-        h00 = (1 + 2 * s) * (1 - s) ** 2
         h10 = s * (1 - s) ** 2
         h01 = s * s * (3 - 2 * s)
         h11 = s * s * (s - 1)
+        # y0 + h01 (y1 - y0) + h (h10 f0 + h11 f1): a state frozen over the step (y1 = y0, f = 0) stays exact
+        change = self.y1 - self.y0
         if np.ndim(s) == 0:
-            return h00 * self.y0 + h10 * self.h * self.f0 + h01 * self.y1 + h11 * self.h * self.f1
-        return (np.outer(self.y0, h00) + np.outer(self.h * self.f0, h10) + np.outer(self.y1, h01)
-                + np.outer(self.h * self.f1, h11))
+            return self.y0 + h01 * change + self.h * (h10 * self.f0 + h11 * self.f1)
+        return (self.y0[:, None] + np.outer(change, h01) + self.h * (np.outer(self.f0, h10) + np.outer(self.f1, h11)))
