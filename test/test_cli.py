@@ -14,6 +14,7 @@ import pytest
 
 from mech_regulator.cli.main import main
 from mech_regulator.scene.loading import read_scene_data
+from support import run_cli as run
 
 SCENES_DIR = Path(__file__).resolve().parents[1] / "config" / "scenes"
 BUNDLED = sorted(path.stem for path in SCENES_DIR.glob("*.yaml"))
@@ -21,11 +22,6 @@ REQUIRED_COLUMNS = ["t", "phi", "omega", "epsilon", "J", "M_drive", "M_load"]
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.out + captured.err
-    return code, captured.out, captured.err
 
 
 def simulate_json(capsys, scene: str, *overrides: str) -> dict:

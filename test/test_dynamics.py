@@ -24,6 +24,7 @@ from mech_regulator.analysis import analyse_steady_state, energy_balance, energy
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
+from support import simulate_complete
 
 ADAPTIVE = ["DOP853", "RK45", "Radau", "LSODA"]
 METHODS = ADAPTIVE + ["RK4"]
@@ -39,13 +40,6 @@ def solver_settings(method: str, rtol: float = 1e-11, atol: float = 1e-12, step:
     return {"method": method, "rtol": rtol, "atol": atol}
 
 
-def run(model):
-    trajectory = simulate(model)
-    assert trajectory.status == "complete", trajectory.message
-    assert trajectory.t_end == pytest.approx(model.scene.scenario.duration, abs=1e-12)
-    return trajectory
-
-
 # ---------------------------------------------------------------------------------------------
 # 1-3: constant J, closed-form speed laws
 
@@ -57,7 +51,7 @@ def test_constant_moments_give_uniform_acceleration(method):
                         "loads": [{"type": "constant", "torque": M_c}]},
                        {"initial": {"phi": phi0, "omega": omega0}, "duration": 2.0},
                        solver_settings(method, step=0.01))
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.linspace(0.0, 2.0, 201)
     phi, omega = tr(t)
     eps = (M_d - M_c) / J
@@ -80,7 +74,7 @@ def test_linear_motor_with_viscous_load_exponential_run_up(method):
                         "loads": [{"type": "viscous", "coefficient": c}]},
                        {"initial": {"phi": 0.0, "omega": 0.0}, "duration": duration},
                        solver_settings(method, rtol=1e-10, atol=1e-10, step=1e-3))
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.linspace(0.0, duration, 301)
     phi, omega = tr(t)
     omega_exact = omega_ss * (1.0 - np.exp(-t / tau))
@@ -98,7 +92,7 @@ def test_fan_alone_hyperbolic_run_down(method):
     model = make_model({"inertia": J, "loads": [{"type": "fan", "coefficient": k}]},
                        {"initial": {"phi": 0.0, "omega": omega0}, "duration": duration},
                        solver_settings(method, rtol=1e-10, atol=1e-10, step=1e-3))
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.linspace(0.0, duration, 301)
     phi, omega = tr(t)
     a = k * omega0 / J                                         # 0.6 1/s
@@ -153,7 +147,7 @@ def test_load_step_and_ramp_piecewise_closed_form(method, t1, t2):
                         "load_events": [{"time": t1, "torque": L1}, {"time": t2, "torque": L2, "ramp": ramp}]},
                        # RK4 step 0.1 does not divide the "mid-step" event times: the segments must split there
                        solver_settings(method, rtol=1e-6, atol=1e-8, step=0.1))
-    tr = run(model)
+    tr = simulate_complete(model)
     # the breakpoints t1, t2, t2 + ramp are included together with points just either side of them
     t = np.unique(np.concatenate([np.linspace(0.0, duration, 401),
                                   [t1 - 1e-9, t1, t1 + 1e-9, t2 - 1e-9, t2, t2 + 1e-9, t2 + ramp]]))
@@ -184,7 +178,7 @@ def test_conservative_crank_slider_energy_and_revolution_time(method):
     model = make_model({"inertia": 0.02, "mechanism": CRANK_SLIDER},
                        {"initial": {"phi": 0.0, "omega": omega0}, "duration": 1.0},
                        solver_settings(method, rtol=1e-11, atol=1e-12))
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.linspace(0.0, 1.0, 1001)
     columns = model.columns(t, tr(t))
     E = columns["E_kinetic"]
@@ -247,7 +241,7 @@ def test_gravity_kinetic_plus_potential_is_conserved(mechanism, potential, gravi
     model = make_model({"inertia": 0.01, "gravity": gravity, "mechanism": mechanism},
                        {"initial": {"phi": 0.3, "omega": omega0}, "duration": 1.5},
                        {"method": "DOP853", "rtol": 1e-11, "atol": 1e-12})
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.linspace(0.0, 1.5, 1501)
     y = tr(t)
     columns = model.columns(t, y)
@@ -268,7 +262,7 @@ def test_slider_spring_kinetic_plus_elastic_is_conserved():
                         "loads": [{"type": "slider_spring", "stiffness": k, "free_position": x0}]},
                        {"initial": {"omega": omega0}, "duration": 1.5},
                        {"method": "DOP853", "rtol": 1e-11, "atol": 1e-12})
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.linspace(0.0, 1.5, 1501)
     y = tr(t)
     columns = model.columns(t, y)
@@ -398,7 +392,7 @@ def test_lathe_omega_of_phi_and_switches(lathe):
 
 def _compressor_balance(*overrides):
     model = build_model(load_scene("compressor", ["scenario.duration=1.0", *overrides]))
-    return energy_balance(model, run(model))
+    return energy_balance(model, simulate_complete(model))
 
 
 def test_compressor_energy_balance_tightens_with_rtol():
@@ -429,7 +423,7 @@ def test_steady_state_of_linear_motor_with_viscous_load():
     model = make_model({"inertia": J, "drive": {"type": "linear_motor", "stall_torque": M0, "no_load_speed": w0},
                         "loads": [{"type": "viscous", "coefficient": c}]},
                        {"duration": 25 * tau}, {"method": "DOP853", "rtol": 1e-10, "atol": 1e-10})
-    tr = run(model)
+    tr = simulate_complete(model)
     steady = analyse_steady_state(model, tr)
     assert steady.steady is True, steady.note
     # after 25 tau, exp(-25) ~ 1e-11: the last period's speeds equal omega_ss to the solver tolerance
@@ -442,7 +436,7 @@ def test_accelerating_machine_is_not_steady():
     model = make_model({"inertia": 1.0, "drive": {"type": "constant", "torque": 5.0},
                         "loads": [{"type": "constant", "torque": 2.0}]},
                        {"initial": {"omega": 10.0}, "duration": 5.0})
-    tr = run(model)
+    tr = simulate_complete(model)
     steady = analyse_steady_state(model, tr)
     assert steady.steady is False
     assert steady.periods >= 2

@@ -21,6 +21,7 @@ import pytest
 
 from mech_regulator.cli.main import main
 from mech_regulator.scene import load_scene
+from support import run_cli as run, write_scene as write
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -80,17 +81,8 @@ UNGOVERNED = edited((DIRECT[DIRECT.index("governor:"):DIRECT.index("scenario:")]
                     ("name: small_direct", "name: small_plain"))
 
 
-def write(folder: Path, text: str, name: str = "scene.yaml") -> Path:
-    path = folder / name
-    path.write_text(text, encoding="utf-8")
-    return path
 
 
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.out + captured.err
-    return code, captured.out, captured.err
 
 
 def run_quietly(*argv: str) -> tuple[int, str, str]:

@@ -44,7 +44,7 @@ from mech_regulator.analysis import (critical_damping, floquet_stability, is_per
                                      operating_point)
 from mech_regulator.model import LoadPiece, build_model
 from mech_regulator.scene import validate_scene
-from mech_regulator.solvers import simulate
+from support import simulate_complete
 
 TIGHT = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
 
@@ -86,13 +86,6 @@ def scene(base: dict, **changes) -> dict:
 
 def model_of(data: dict):
     return build_model(validate_scene(data))
-
-
-def run(model):
-    trajectory = simulate(model)
-    assert trajectory.status == "complete", trajectory.message
-    assert trajectory.t_end == pytest.approx(model.scene.scenario.duration, abs=1e-12)
-    return trajectory
 
 
 def extrema(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -143,7 +136,7 @@ def test_direct_governor_stability_boundary_growth_rate_and_period(factor):
     assert linear.stable == (factor > 1.0)
     fast = [value for value in linear.eigenvalues if value.imag == 0.0]
     assert len(fast) == 1 and fast[0].real < -5.0               # a fast real mode, gone after 3 s
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.arange(3.0, duration, 1e-3)
     states = tr(t)
     rate, period, count = envelope(t, states[1] - point.speed)
@@ -257,7 +250,7 @@ def test_indirect_without_feedback_hunts_with_the_predicted_period():
     slope = (sensor.equilibrium_speed(z0 + h) - sensor.equilibrium_speed(z0 - h)) / (2.0 * h)
     ideal = 2.0 * math.pi * math.sqrt(J * slope / (M * gain))
     assert linear.period == pytest.approx(ideal, rel=0.03)
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.arange(2.0, duration, 1e-3)
     states = tr(t)
     rate, period, count = envelope(t, states[1] - set_speed)
@@ -290,7 +283,7 @@ def test_isodromic_feedback_returns_to_the_set_speed_with_decaying_oscillation()
     assert after.servo > before.servo + 0.05
     linear = linear_stability(model, after)
     assert linear.stable and linear.period < 5.0
-    tr = run(model)
+    tr = simulate_complete(model)
     t = np.arange(0.5, 10.0, 1e-3)
     states = tr(t)
     # before the step the machine sits at the set speed
@@ -324,7 +317,7 @@ def test_rigid_feedback_counterpart_leaves_the_predicted_droop():
     before, after = operating_point(model, 30.0), operating_point(model, 40.0)
     droop = after.speed - before.speed
     assert droop < -0.5
-    tr = run(model)
+    tr = simulate_complete(model)
     assert tr(10.0)[1] == pytest.approx(after.speed, abs=1e-3)
     assert sleeve_modes(tr) == {"free"}                         # the shortened stroke was not reached
 
@@ -365,7 +358,7 @@ def test_sleeve_sticks_inside_the_insensitivity_band(size):
     model = model_of(scene(data, scenario__duration=duration,
                            scenario__initial={"omega": point.speed, "sleeve": point.sleeve},
                            scenario__load_events=[{"time": 0.2, "torque": load}]))
-    tr = run(model)
+    tr = simulate_complete(model)
     assert tr.modes[0] == (0.0, ("stuck", ""))
     t = np.linspace(0.0, duration, 20001)
     states = tr(t)
@@ -409,7 +402,7 @@ def test_static_friction_breakaway_time():
     # stuck trajectory: omega = omega_inf + (omega_0 - omega_inf) exp(-(t - t_step) / tau)
     def crossing(omega):
         return t_step + tau * math.log((point.speed - omega_inf) / (omega - omega_inf))
-    tr = run(model)
+    tr = simulate_complete(model)
     t_event, name = tr.events[0]
     assert name == "sleeve breaks away downwards"
     assert tr.modes[1] == (t_event, ("down", ""))
@@ -443,7 +436,7 @@ def stops_run(stop: str, kinetic: float = 0.0, static: float = 0.0, solver: dict
     assert loaded.limited == ""
     assert operating_point(base, data["scenario"]["load_events"][0]["torque"]).limited == f"sleeve on its {stop} stop"
     model = model_of(scene(data, scenario__initial={"omega": loaded.speed, "sleeve": loaded.sleeve}))
-    return model, run(model)
+    return model, simulate_complete(model)
 
 
 @pytest.mark.parametrize("kinetic, static", [(0.0, 0.0), (1.0, 1.5)], ids=["frictionless", "friction"])
@@ -510,7 +503,7 @@ def test_servo_saturates_on_its_high_stop_under_a_big_load():
     model = model_of(scene(data, scenario__initial={"omega": base.governor.set_speed()}))
     overloaded = operating_point(model, 100.0)
     assert overloaded.limited == "servo on its high stop" and overloaded.throttle == 1.0
-    tr = run(model)
+    tr = simulate_complete(model)
     assert tr.stats.events < 20
     hits = [time for time, name in tr.events if name == "servo reaches its high stop"]
     leaves = [time for time, name in tr.events if name == "servo leaves its high stop"]
@@ -542,12 +535,12 @@ def test_servo_saturates_on_its_high_stop_under_a_big_load():
 def test_rk4_converges_to_dop853_at_fourth_order():
     data = scene(DIRECT, scenario={"initial": {"omega": 112.86}, "duration": 3.0, "external_load": 0.0,
                                    "load_events": [{"time": 0.5, "torque": 10.0}]})
-    reference = run(model_of(scene(data, solver=TIGHT)))
+    reference = simulate_complete(model_of(scene(data, solver=TIGHT)))
     t = np.linspace(0.0, 3.0, 3001)
     exact = reference(t)
     errors = []
     for step in (4e-3, 2e-3):
-        tr = run(model_of(scene(data, solver={"method": "RK4", "step": step})))
+        tr = simulate_complete(model_of(scene(data, solver={"method": "RK4", "step": step})))
         errors.append(np.max(np.abs(tr(t) - exact), axis=1))
         # the run is governed for real: the sleeve moves by millimetres after the load step
         assert np.ptp(model_of(data).columns(t, tr(t))["sleeve"]) > 1e-3

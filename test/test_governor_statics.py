@@ -37,7 +37,7 @@ from scipy import integrate, optimize
 from mech_regulator.analysis import droop, linear_stability, load_responses, operating_point, static_characteristic
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, validate_scene
-from mech_regulator.solvers import simulate
+from support import simulate_complete
 
 G = 9.81  # [m/s^2]
 
@@ -130,12 +130,6 @@ def envelope(jacobian: np.ndarray, dx0: np.ndarray, t: float, index: int = 0) ->
     values, vectors = np.linalg.eig(jacobian)
     coefficients = np.linalg.solve(vectors, dx0.astype(complex))
     return float(np.sum(np.abs(vectors[index] * coefficients) * np.exp(values.real * t)))
-
-
-def run(model):
-    trajectory = simulate(model)
-    assert trajectory.status == "complete", trajectory.message
-    return trajectory
 
 
 # ---------------------------------------------------------------------------------------------
@@ -436,7 +430,7 @@ def test_direct_governor_settles_with_the_predicted_static_error():
     model = governed_model(PORTER, scenario={
         "initial": {"omega": speed_0 + kick, "sleeve": sleeve_0}, "duration": duration, "external_load": load_0,
         "load_events": [{"time": t_step, "torque": load_1}]})
-    trajectory = run(model)
+    trajectory = simulate_complete(model)
     assert trajectory.events == []  # frictionless and well inside the stroke: no stops, no mode changes
 
     point_0, point_1 = operating_point(model, load_0), operating_point(model, load_1)
@@ -545,7 +539,7 @@ def indirect_run(governor: dict, load_0: float, load_1: float, t_step: float, du
     model = governed_model(governor, inertia=INDIRECT_J, scenario={
         "initial": {"omega": set_speed_closed_form()}, "duration": duration, "external_load": load_0,
         "load_events": [{"time": t_step, "torque": load_1}]})
-    return model, run(model)
+    return model, simulate_complete(model)
 
 
 def test_isodromic_feedback_returns_to_the_set_speed():

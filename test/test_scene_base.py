@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from mech_regulator.cli.main import main
 from mech_regulator.scene import SceneError, load_scene
+from support import run_cli as run, write_scene
 
 LATHE_FLYWHEEL = 15.453292519943295
 
@@ -34,17 +34,9 @@ solver: {method: RK45, rtol: 1.0e-6, sample_rate: 100.0}
 
 
 def write(folder: Path, name: str, text: str) -> Path:
-    path = folder / name
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text, encoding="utf-8")
-    return path
+    return write_scene(folder, text, name)
 
 
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    assert "Traceback" not in captured.out + captured.err
-    return code, captured.out, captured.err
 
 
 def scene_error(path: Path) -> str:

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 import mech_regulator
-from mech_regulator.cli.main import main
 from mech_regulator.scene.loading import load_scene
+from support import run_cli as run, write_scene as write
 
 # A valid scene: a crank-slider with a flywheel, a constant drive and a viscous load.
 BASE = """\
@@ -53,16 +53,8 @@ def four_bar_line(crank, coupler, rocker, frame, extra="") -> str:
             f"frame: {frame}{extra}}}")
 
 
-def write(tmp_path: Path, text: str, name: str = "scene.yaml") -> Path:
-    path = tmp_path / name
-    path.write_text(text, encoding="utf-8")
-    return path
 
 
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def run_bad(capsys, tmp_path: Path, text: str, *options: str, command: str = "simulate") -> str:

@@ -1,0 +1,34 @@
+"""Helpers shared by the tests: run `mech-regulator` in-process, write scene files, simulate a model to the end."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mech_regulator.cli.main import main
+from mech_regulator.solvers import Trajectory, simulate
+
+
+def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
+    """Run the command with argv; returns (exit code, stdout, stderr). A traceback is always a failure."""
+    code = main(list(argv))
+    captured = capsys.readouterr()
+    assert "Traceback" not in captured.out + captured.err
+    return code, captured.out, captured.err
+
+
+def write_scene(folder: Path, text: str, name: str = "scene.yaml") -> Path:
+    """Write text to folder/name (creating subfolders) and return the path."""
+    path = folder / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def simulate_complete(model) -> Trajectory:
+    """Simulate a model's scenario and check the run completed over its whole duration."""
+    trajectory = simulate(model)
+    assert trajectory.status == "complete", trajectory.message
+    assert trajectory.t_end == pytest.approx(model.scene.scenario.duration, abs=1e-12)
+    return trajectory
