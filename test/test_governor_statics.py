@@ -394,27 +394,21 @@ def test_droop_slope_matches_implicit_derivative():
     assert droop(model).per_unit_load == pytest.approx(dw_dz / f_z, rel=1e-6)
 
 
-def test_direct_operating_point_on_the_low_stop_runs_at_full_throttle():
+@pytest.mark.parametrize("load, stop, throttle", [
+    (25.0, "low", 1.0),    # [N m]: more than the motor carries at the speed that lifts the sleeve off its low stop
+    (-40.0, "high", 0.0),  # [N m]: an overhauling load; throttle 0 leaves C w = -L
+])
+def test_direct_operating_point_on_a_stop(load, stop, throttle):
     model = governed_model(PORTER)
-    load = 25.0  # [N m]: more than the motor can carry at the speed that lifts the sleeve off its low stop
-    expected = full_throttle_speed(load)  # M0 (1 - w/W0) = C w + L
-    assert expected < speed_closed_form(PORTER, PORTER["stroke"][0])
+    stroke_end = PORTER["stroke"][0 if stop == "low" else 1]
+    expected = full_throttle_speed(load) if stop == "low" else -load / C  # M0 (1 - w/W0) = C w + L, or C w = -L
+    beyond = expected < speed_closed_form(PORTER, stroke_end) if stop == "low" else \
+        expected > speed_closed_form(PORTER, stroke_end)
+    assert beyond
     point = operating_point(model, load)
-    assert point.limited == "sleeve on its low stop"
-    assert point.throttle == 1.0
-    assert point.sleeve == PORTER["stroke"][0]
-    assert point.speed == pytest.approx(expected, rel=1e-9)
-
-
-def test_direct_operating_point_on_the_high_stop_with_a_driving_load():
-    model = governed_model(PORTER)
-    load = -40.0  # [N m]: an overhauling load; throttle 0 leaves C w = -L
-    expected = -load / C
-    assert expected > speed_closed_form(PORTER, PORTER["stroke"][1])
-    point = operating_point(model, load)
-    assert point.limited == "sleeve on its high stop"
-    assert point.throttle == 0.0
-    assert point.sleeve == PORTER["stroke"][1]
+    assert point.limited == f"sleeve on its {stop} stop"
+    assert point.throttle == throttle
+    assert point.sleeve == stroke_end
     assert point.speed == pytest.approx(expected, rel=1e-9)
 
 
