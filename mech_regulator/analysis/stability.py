@@ -79,7 +79,7 @@ def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStabil
     """Linearise the averaged model at the operating point and analyse its eigenvalues."""
     F = averaged_rhs(model, point.external_load)
     x0 = equilibrium_state(model, point)
-    scale = np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[: x0.size]
+    scale = _state_scale(model, point, x0.size)
     jacobian = np.empty((x0.size, x0.size))
     for j in range(x0.size):
         h = 1e-6 * scale[j]
@@ -155,7 +155,7 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
         return solution.y[:-1, -1], solution.y[-1, -1]
 
     x = equilibrium_state(model, point)
-    scale = np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[: x.size]
+    scale = _state_scale(model, point, x.size)
     step = rtol ** (1.0 / 3.0)  # central differences: truncation ~ step^2 balances integration noise ~ rtol / step
     monodromy = _map_jacobian(cycle, x, step * scale)
     for _ in range(30):  # chord Newton: the map's Jacobian hardly changes between the guess and the orbit
@@ -170,6 +170,11 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
         orbit=x, cycle_time=cycle_time, mean_speed=period / cycle_time, multipliers=multipliers,
         averaged_multipliers=np.exp(linear.eigenvalues * cycle_time),
         stable=bool(np.all(np.abs(multipliers) < 1.0)), residual=float(np.max(np.abs(end - x) / scale)))
+
+
+def _state_scale(model: MachineModel, point: OperatingPoint, size: int) -> np.ndarray:
+    """Typical size of each averaged-model state (omega, a, a', s, zeta) for difference steps and tolerances."""
+    return np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[:size]
 
 
 def _map_jacobian(cycle, x: np.ndarray, steps: np.ndarray) -> np.ndarray:

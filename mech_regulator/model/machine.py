@@ -163,9 +163,9 @@ class MachineModel:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
             if governor_rates is None:
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            opening = throttle(y)
+            share = throttle(y)
             for moment in scaled:
-                total += opening * moment(t, phi, omega, q, dq)
+                total += share * moment(t, phi, omega, q, dq)
             return [omega, (total - 0.5 * dJ * omega * omega) / J, *governor_rates(y)]
 
         return machine
@@ -181,7 +181,7 @@ class MachineModel:
         if self.governor is None:
             return y
         governor_state = self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
-                                                     lambda omega: self.balance_throttle(omega, self.external_load(0.0)))
+                                                     self.initial_balance_throttle)
         return np.concatenate([y, governor_state])
 
     def initial_mode(self, y: np.ndarray) -> Mode | None:
@@ -227,6 +227,10 @@ class MachineModel:
         values = np.array([self.reduced(phi) for phi in phis])
         return (phis, self.inertia_constant + float(np.mean(values[:, 0])), float(np.mean(values[:, 2])),
                 values[:, 3], values[:, 4])
+
+    def initial_balance_throttle(self, omega: float) -> float:
+        """balance_throttle at speed omega [rad/s] for the scenario's external load at t = 0."""
+        return self.balance_throttle(omega, self.external_load(0.0))
 
     def balance_throttle(self, omega: float, external: float) -> float:
         """Throttle at which the cycle-averaged drive balances the load (with external load `external`
@@ -329,7 +333,7 @@ def build_model(scene: Scene) -> MachineModel:
                          has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene))
     if scene.governor is None:
         return model
-    governor = build_governor(scene.governor, lambda omega: model.balance_throttle(omega, model.external_load(0.0)))
+    governor = build_governor(scene.governor, model.initial_balance_throttle)
     return dataclasses.replace(model, governor=governor)
 
 

@@ -72,7 +72,8 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         rhs = model.rhs(piece, window, mode)
-        y_wrapped = y - np.concatenate([[offset], np.zeros(y.size - 1)])
+        y_wrapped = y.copy()
+        y_wrapped[0] -= offset
         if settings.method == "RK4":
             solver = RK4(rhs, t, y_wrapped, t_end, step=settings.step)
         else:
