@@ -14,6 +14,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
         (f"share/{package_name}/config/scenes", glob("config/scenes/*.yaml")),
+        (f"share/{package_name}/config/params", glob("config/params/*.yaml")),
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -29,7 +30,7 @@ setup(
         "test": ["pytest>=8", "jsonschema>=4"],
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
         "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-sensor-msgs",
-                "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
+                "ros-geometry-msgs", "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
     },
     zip_safe=True,
     maintainer="mech_regulator developers",
@@ -39,6 +40,10 @@ setup(
     entry_points={
         "console_scripts": [
             "mech-regulator = mech_regulator.cli.main:main",
+            "machine_node = mech_regulator.nodes.machine:main",
+            "governor_node = mech_regulator.nodes.governor:main",
+            "scenario_node = mech_regulator.nodes.scenario:main",
+            "recorder_node = mech_regulator.nodes.recorder:main",
         ],
     },
 )

@@ -15,6 +15,7 @@ from mech_regulator.analysis.statics import (Droop, OperatingPoint, StaticCharac
                                              static_characteristic)
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
+from mech_regulator.solvers.cosim import CoSimulation
 
 
 def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
@@ -45,6 +46,24 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         "energy": dataclasses.asdict(balance),
         "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
         "governor": _governed_run(model, trajectory) if model.governor is not None else None,
+    }
+
+
+def summarise_cosimulation(model: MachineModel, run: CoSimulation, exchange_step: float) -> dict:
+    """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended,
+    the final speed, the governor's answer to each load change (from the run sampled at its exchange
+    times) and the overspeed trip."""
+    trajectory = run.trajectory(model)
+    return {
+        "scene": model.scene.name,
+        "status": run.status,
+        "message": run.message,
+        "exchange_step": exchange_step,
+        "samples": int(run.times.size),
+        "t_end": float(run.times[-1]),
+        "omega_end": float(run.states[1, -1]),
+        "tripped_at": run.tripped_at,
+        "governor": _governed_run(model, trajectory) if model.governor is not None and run.times.size > 1 else None,
     }
 
 
@@ -110,4 +129,4 @@ __all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "Loa
            "PeriodSpeeds", "StaticCharacteristic", "SteadyState", "analyse_governor", "analyse_steady_state",
            "critical_damping", "cycle_mean_speed", "droop", "energy_balance", "energy_swing",
            "flywheel_for_constant_inertia", "floquet_stability", "is_periodic", "linear_stability", "load_responses",
-           "operating_point", "static_characteristic", "summarise"]
+           "operating_point", "static_characteristic", "summarise", "summarise_cosimulation"]

@@ -7,8 +7,7 @@ that fails or is interrupted still writes what it computed.
 from __future__ import annotations
 
 import argparse
-import json
-import math
+import importlib.util
 import os
 import sys
 from pathlib import Path
@@ -18,6 +17,7 @@ import numpy as np
 from mech_regulator import __version__
 from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
+from mech_regulator.cli.report import progress_bar, to_json
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -43,12 +43,29 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--plot", type=Path, help="write a PNG picture of the run")
     simulate.add_argument("--json", action="store_true", help="print the summary as JSON")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
+    simulate.add_argument("--exchange-step", type=float, metavar="H",
+                          help="co-simulate machine and governor as the ROS nodes do in lockstep, exchanging "
+                               "speed, throttle and load every H seconds (the same numbers as `run`)")
     scene_command("describe", "print the effects, state vector and solver a scene uses, without running it")
     governor = scene_command("governor", "statics and stability of a governed scene: static characteristic, "
                                          "statism, insensitivity, operating points, droop, eigenvalues, "
                                          "Vyshnegradsky A and B, Floquet multipliers")
     governor.add_argument("--plot", type=Path, help="write a PNG picture of the statics and stability")
     governor.add_argument("--json", action="store_true", help="print the analysis as JSON")
+    main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
+                                    "separate processes on a private ROS domain, record the run to a Rerun file "
+                                    "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
+    main_job.add_argument("--exchange-step", type=float, default=1e-3, metavar="H",
+                          help="simulation time between exchanges of the nodes [s] (default 0.001)")
+    main_job.add_argument("--time-mode", choices=("lockstep", "realtime"), default="lockstep",
+                          help="lockstep: as fast as possible and reproducible; realtime: follow the wall clock")
+    main_job.add_argument("--real-time-factor", type=float, default=1.0, metavar="X",
+                          help="realtime: simulated seconds per wall-clock second")
+    main_job.add_argument("--overspeed-trip", type=float, metavar="OMEGA",
+                          help="trip speed [rad/s] (default 1.25 x the initial speed; 0: none)")
+    main_job.add_argument("--out", type=Path, help="the recording to write (default runs/<scene>-<time>.rrd)")
+    main_job.add_argument("--domain-id", type=int, help="ROS domain of the run (default: a random one in 1..101)")
+    main_job.add_argument("--quiet", action="store_true", help="no progress bar")
     schema = commands.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
     schema.add_argument("--format", choices=("json", "markdown"), default="json",
                         help="json: the JSON Schema; markdown: the key tables of docs/scenes.md")
@@ -74,6 +91,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "governor":
             return _governor(scene, args)
+        if args.command == "run":
+            return _main_job(scene, args)
         return _simulate(scene, args)
     except SceneError as error:
         print(f"mech-regulator: {error}", file=sys.stderr)
@@ -91,8 +110,6 @@ def _list_scenes() -> int:
 
 
 def _simulate(scene, args) -> int:
-    from tqdm import tqdm
-
     from mech_regulator.analysis import summarise
     from mech_regulator.cli.report import format_summary
     from mech_regulator.model import build_model
@@ -100,9 +117,10 @@ def _simulate(scene, args) -> int:
 
     _check_outputs(args, args.out)
     model = build_model(scene)
+    if args.exchange_step is not None:
+        return _cosimulate(model, args)
     duration = scene.scenario.duration
-    with tqdm(total=duration, unit="s sim", disable=True if args.quiet else None, file=sys.stderr,
-              bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]") as bar:
+    with progress_bar(duration, args.quiet) as bar:
         trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory)
@@ -118,7 +136,7 @@ def _simulate(scene, args) -> int:
 
         plot_run(model, trajectory, summary, args.plot)
         summary["plot"] = str(args.plot)
-    print(_to_json(summary) if args.json else format_summary(model, summary))
+    print(to_json(summary) if args.json else format_summary(model, summary))
     if trajectory.status == "failed":
         print(f"mech-regulator: {trajectory.message}", file=sys.stderr)
         return EXIT_RUN_FAILED
@@ -128,11 +146,36 @@ def _simulate(scene, args) -> int:
     return 0
 
 
+def _cosimulate(model, args) -> int:
+    """simulate --exchange-step: the lockstep co-simulation of the nodes, in this process."""
+    from mech_regulator.analysis import summarise_cosimulation
+    from mech_regulator.cli.report import format_cosimulation_summary
+    from mech_regulator.solvers.cosim import cosimulate
+
+    if not 1e-6 <= args.exchange_step <= 1.0:
+        raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    duration = model.scene.scenario.duration
+    with progress_bar(duration, args.quiet) as bar:
+        run = cosimulate(model, args.exchange_step, progress=lambda t: bar.update(min(t, duration) - bar.n))
+    summary = summarise_cosimulation(model, run, args.exchange_step)
+    if args.out is not None:
+        columns = model.columns(run.times, run.states, run.throttle, run.external_load)
+        np.savetxt(args.out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
+                   comments="", fmt="%.17g")
+        summary["csv"] = str(args.out)
+    print(to_json(summary) if args.json else format_cosimulation_summary(summary))
+    if run.status == "failed":
+        print(f"mech-regulator: {run.message}", file=sys.stderr)
+        return EXIT_RUN_FAILED
+    return EXIT_INTERRUPTED if run.status == "interrupted" else 0
+
+
 def _check_outputs(args, *others: Path | None) -> None:
     """Give the plot a .png suffix and refuse, before any work, output paths that cannot be written."""
-    if args.plot is not None and not args.plot.suffix:
-        args.plot = args.plot.with_suffix(".png")
-    for path in (*others, args.plot):
+    plot = getattr(args, "plot", None)
+    if plot is not None and not plot.suffix:
+        args.plot = plot = plot.with_suffix(".png")
+    for path in (*others, plot):
         if path is not None and (path.is_dir() or not path.parent.is_dir()):
             problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
             raise SceneError(f"cannot write '{path}': {problem}")
@@ -153,30 +196,31 @@ def _governor(scene, args) -> int:
 
         plot_governor(model, analysis, args.plot)
         analysis["plot"] = str(args.plot)
-    print(_to_json(analysis) if args.json else format_governor(analysis))
+    print(to_json(analysis) if args.json else format_governor(analysis))
     return 0
+
+
+def _main_job(scene, args) -> int:
+    if importlib.util.find_spec("rclpy") is None:
+        raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
+                         "pip install 'mech_regulator[ros]' for the wheels from the package index")
+    from mech_regulator.nodes.launch import main_job
+
+    if not 1e-6 <= args.exchange_step <= 1.0:
+        raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    if not 1e-3 <= args.real_time_factor <= 1e3:
+        raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
+    _check_outputs(args, args.out)
+    return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
+                    args.overspeed_trip, args.out, args.domain_id, args.quiet)
 
 
 def _samples(model, trajectory) -> tuple[np.ndarray, np.ndarray]:
     """Output sample times at the scene's sample rate and the states there."""
     times = trajectory.samples(model.scene.solver.sample_rate)
     return times, trajectory(times)
-
-
-def _to_json(data) -> str:
-    """Strict JSON (no NaN or Infinity, which jq and JavaScript reject): non-finite numbers become null."""
-    def finite(value):
-        if isinstance(value, dict):
-            return {key: finite(item) for key, item in value.items()}
-        if isinstance(value, (list, tuple)):
-            return [finite(item) for item in value]
-        if isinstance(value, (np.floating, np.integer)):
-            value = value.item()
-        if isinstance(value, float) and not math.isfinite(value):
-            return None
-        return value
-
-    return json.dumps(finite(data), indent=2, allow_nan=False)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,14 @@
-"""Text the command line prints: what a scene computes (`describe`) and the summary of a run."""
+"""What the command line shows: what a scene computes (`describe`), the summary of a run (text or strict
+JSON) and the progress bar over simulated time."""
 
 from __future__ import annotations
 
+import json
 import math
+
+import sys
+
+import numpy as np
 
 from mech_regulator.model import MachineModel
 
@@ -93,6 +99,23 @@ def format_summary(model: MachineModel, summary: dict) -> str:
     return "\n".join(lines)
 
 
+def format_cosimulation_summary(summary: dict) -> str:
+    """The human-readable summary of a co-simulated run (command line or ROS nodes)."""
+    lines = [f"scene {summary['scene']}: {summary['status']} at t = {summary['t_end']:.6g} s, omega = "
+             f"{summary['omega_end']:.6g} rad/s; co-simulated with exchange step {summary['exchange_step']:g} s "
+             f"({summary['samples']} exchanges)"]
+    if summary["message"]:
+        lines.append(summary["message"])
+    if summary["tripped_at"] is not None:
+        lines.append(f"overspeed trip at t = {summary['tripped_at']:.6g} s: throttle closed from then on")
+    if summary.get("governor"):
+        lines += _governed_lines(summary["governor"])
+    for key in ("csv", "recording"):
+        if key in summary:
+            lines.append(f"wrote {summary[key]}")
+    return "\n".join(lines)
+
+
 def _governed_lines(governed: dict) -> list[str]:
     """The governor's part of a run summary: operating point and one line per load change."""
     point = governed["operating_point"]
@@ -164,3 +187,27 @@ def format_governor(analysis: dict) -> str:
 
 def _complex(re: float, im: float) -> str:
     return f"{re:.4g}" if im == 0 else f"{re:.4g} {'+' if im > 0 else '-'} {abs(im):.4g}i"
+
+
+def to_json(data) -> str:
+    """Strict JSON (no NaN or Infinity, which jq and JavaScript reject): non-finite numbers become null."""
+    def finite(value):
+        if isinstance(value, dict):
+            return {key: finite(item) for key, item in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [finite(item) for item in value]
+        if isinstance(value, (np.floating, np.integer)):
+            value = value.item()
+        if isinstance(value, float) and not math.isfinite(value):
+            return None
+        return value
+
+    return json.dumps(finite(data), indent=2, allow_nan=False)
+
+
+def progress_bar(duration: float, quiet: bool):
+    """A tqdm progress bar over duration [s] of simulated time (on stderr; none when quiet)."""
+    from tqdm import tqdm
+
+    return tqdm(total=duration, unit="s sim", disable=True if quiet else None, file=sys.stderr,
+                bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")

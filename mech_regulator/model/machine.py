@@ -35,12 +35,15 @@ RightHandSide = Callable[[float, np.ndarray], tuple[float, float] | list[float]]
 
 @dataclass(frozen=True)
 class LoadPiece:
-    """The external load moment on [start, end): value(t) = offset + slope * t [N m], opposing motion."""
+    """The inputs held on [start, end): the external load moment value(t) = offset + slope * t [N m],
+    opposing motion, and, for a machine whose governor runs outside the model (co-simulation), the
+    throttle [-] that scales its drive (1 otherwise)."""
 
     start: float
     end: float
     offset: float
     slope: float
+    throttle: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -129,12 +132,15 @@ class MachineModel:
         throttle = 1 without a governor. window = (lo, hi): the crank-angle interval between two switch
         angles the solver is in; effects that jump at switch angles then see phi clamped into it, so
         they keep their mode across the switch until the solver has located the crossing and restarted
-        (no step straddles a jump). ideal: the governor without friction, limits and stops (the smooth
+        (no step straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine
+        co-simulated with an outside governor, by the piece's held throttle. ideal: the governor without friction, limits and stops (the smooth
         model of the stability analysis).
         """
         governor = self.governor
-        scaled = tuple(effect.moment for effect in self.effects if governor is not None and effect.role == "drive")
-        rest = [effect for effect in self.effects if not (governor is not None and effect.role == "drive")]
+        held_throttle = piece.throttle if piece is not None else 1.0
+        scale_drive = governor is not None or held_throttle != 1.0
+        scaled = tuple(effect.moment for effect in self.effects if scale_drive and effect.role == "drive")
+        rest = [effect for effect in self.effects if not (scale_drive and effect.role == "drive")]
         switched = tuple(effect.moment for effect in rest if effect.switch_angles)
         smooth = tuple(effect.moment for effect in rest if not effect.switch_angles)
         if window is None:
@@ -162,6 +168,8 @@ class MachineModel:
             for moment in switched:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
             if governor_rates is None:
+                for moment in scaled:
+                    total += held_throttle * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
             share = throttle(y)
             for moment in scaled:
@@ -238,8 +246,11 @@ class MachineModel:
         _, drive, other = self.cycle_averages(omega, external)
         return -other / drive if drive != 0.0 else math.nan
 
-    def columns(self, t: np.ndarray, y: np.ndarray) -> dict[str, np.ndarray]:
-        """Output columns at sample times t [s] for states y (shape n_states x n).
+    def columns(self, t: np.ndarray, y: np.ndarray, throttle: np.ndarray | None = None,
+                external: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Output columns at sample times t [s] for states y (shape n_states x n). throttle [-] and external
+        [N m] (the load's magnitude): inputs given from outside the model (co-simulation) at each sample,
+        in place of the governor's throttle and the scenario's load.
 
         t, phi, omega, epsilon, J, dJ_dphi, M_drive (as applied, throttle included), M_load (sum of
         all resisting moments and the external load), one M_<effect> column per load (and M_weight,
@@ -255,8 +266,10 @@ class MachineModel:
         weight = np.zeros(n)
         q = np.zeros(n)
         dq = np.zeros(n)
-        external = np.array([self.external_load(ti) for ti in t])
-        throttle = np.ones(n)
+        given = external is not None
+        external = np.array([self.external_load(ti) for ti in t]) if external is None else np.asarray(external)
+        outside_throttle = throttle is not None
+        throttle = np.ones(n) if throttle is None else np.array(throttle, dtype=float)
         for i in range(n):
             phi, omega = y[0, i], y[1, i]
             if self.reduced is not None:
@@ -264,7 +277,7 @@ class MachineModel:
                 J[i] += J_links
             for k, effect in enumerate(self.effects):
                 per_effect[k, i] = effect.moment(t[i], phi, omega, q[i], dq[i])
-            if self.governor is not None:
+            if self.governor is not None and not outside_throttle:
                 throttle[i] = self.governor.throttle(y[:, i])
         omega = y[1]
         drive = throttle * sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
@@ -277,7 +290,7 @@ class MachineModel:
                 out[f"M_{name}"] = per_effect[k]
         if self.has_weight:
             out["M_weight"] = weight
-        if self.load_pieces:
+        if self.load_pieces or given:
             out["M_external"] = -external
         out["E_kinetic"] = 0.5 * J * omega ** 2
         kind = self.scene.machine.mechanism.type if self.scene.machine.mechanism is not None else None

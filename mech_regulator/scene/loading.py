@@ -60,14 +60,16 @@ def config_dir() -> Path:
     candidates = [here.parents[2] / "config"]
     # The install prefix this very package sits in comes before the interpreter's own prefix.
     candidates += [parent / "share" / "mech_regulator" / "config" for parent in (*here.parents, Path(sys.prefix))]
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        candidates.append(Path(get_package_share_directory("mech_regulator")) / "config")
-    except (ImportError, LookupError):  # ament_index is optional: a plain pip install has no ROS index
-        pass
     for candidate in candidates:
         if (candidate / "scenes").is_dir():
             return candidate
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        candidates.append(Path(get_package_share_directory("mech_regulator")) / "config")
+    except (ImportError, LookupError, OSError):  # no ROS index (plain pip), or AMENT_PREFIX_PATH unset
+        pass
+    if (candidates[-1] / "scenes").is_dir():
+        return candidates[-1]
     raise SceneError("the bundled config/ folder was not found; looked in: " + ", ".join(map(str, candidates)))
 
 

@@ -504,6 +504,11 @@ class Analysis(SceneModel):
                                                          "differs by less than this fraction of omega_m [-]")
     settling_band: Positive = Field(0.002, description="a load change has settled once the cycle-mean speed stays "
                                                        "within this fraction of the new steady speed [-]")
+    permitted_delta: Positive | None = Field(None, description="coefficient of speed fluctuation "
+                                                             "(omega_max - omega_min) / omega_m that the machine's class "
+                                                             "permits [-], e.g. 0.0125 (1/80) for an engine driving a "
+                                                             "generator; recordings draw the band omega_set (1 +- "
+                                                             "delta / 2) around the set speed")
 
 
 class Scene(SceneModel):

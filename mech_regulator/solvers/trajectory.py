@@ -71,3 +71,23 @@ class Trajectory:
         """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end, both ends included."""
         count = max(2, int(round((self.t_end - self.t_start) * sample_rate)) + 1)
         return np.linspace(self.t_start, self.t_end, count)
+
+
+@dataclass
+class SampledTrajectory(Trajectory):
+    """A trajectory known only at sample times (a co-simulation's exchange times, a recording): the state
+    between samples is interpolated linearly. times [s] ascending, states shape (n_states, n)."""
+
+    times: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    states: np.ndarray = field(default_factory=lambda: np.zeros((2, 0)))
+
+    def __post_init__(self):
+        if self.times.size:
+            self.piece_edges = [float(self.times[0]), float(self.times[-1])]
+            self.interpolants = [self]
+
+    def __call__(self, t: float | np.ndarray) -> np.ndarray:
+        """State at t by linear interpolation between samples."""
+        if np.ndim(t) == 0:
+            return np.array([np.interp(t, self.times, row) for row in self.states])
+        return np.vstack([np.interp(t, self.times, row) for row in self.states])

@@ -1,0 +1,187 @@
+"""What the nodes share: parameters with descriptors, QoS, stamps, the scene, bad-message accounting,
+diagnostics, and the `main` wrapper that turns a user's mistake into a message instead of a traceback.
+
+The nodes are thin: every number they publish comes from the core (mech_regulator.solvers.cosim).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from typing import Callable
+
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from mech_regulator.model import MachineModel, build_model
+from mech_regulator.scene import SceneError, load_scene
+from mech_regulator.solvers.cosim import NANOSECONDS, seconds
+
+EXIT_BAD_INPUT = 2
+HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
+WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad messages
+
+# Commands (throttle, loads): reliable, only what arrives after subscribing counts.
+COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+# State streams (joint states, moments, governor state): reliable, and a subscriber that joins late (the
+# recorder) still receives the last HISTORY_DEPTH messages. Volatile subscribers match them too.
+STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def stamp(nanoseconds: int) -> Time:
+    """A builtin_interfaces/Time from whole nanoseconds of simulation time."""
+    return Time(sec=nanoseconds // NANOSECONDS, nanosec=nanoseconds % NANOSECONDS)
+
+
+def nanoseconds(time: Time) -> int:
+    """Whole nanoseconds of a builtin_interfaces/Time."""
+    return time.sec * NANOSECONDS + time.nanosec
+
+
+def float_parameter(node: Node, name: str, value: float, description: str, low: float, high: float,
+                    read_only: bool = False) -> float:
+    """Declare a double parameter with its range (ROS refuses values outside it) and return its value."""
+    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_DOUBLE, description=description,
+                                     read_only=read_only,
+                                     floating_point_range=[FloatingPointRange(from_value=low, to_value=high)])
+    return node.declare_parameter(name, float(value), descriptor).value
+
+
+def int_parameter(node: Node, name: str, value: int, description: str, low: int, high: int) -> int:
+    """Declare an integer parameter with its range and return its value."""
+    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_INTEGER, description=description,
+                                     read_only=True, integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
+    return node.declare_parameter(name, int(value), descriptor).value
+
+
+def text_parameter(node: Node, name: str, value: str, description: str, choices: tuple[str, ...] = (),
+                   read_only: bool = True) -> str:
+    """Declare a string parameter (choices: the allowed values, checked on every set) and return its value."""
+    if choices:
+        description += f" (one of: {', '.join(choices)})"
+        node.add_on_set_parameters_callback(_choice_check(name, choices))
+    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_STRING, description=description,
+                                     read_only=read_only, additional_constraints=
+                                     f"one of {', '.join(choices)}" if choices else "")
+    return node.declare_parameter(name, value, descriptor).value
+
+
+def list_parameter(node: Node, name: str, value: list[str], description: str) -> list[str]:
+    """Declare a read-only string-array parameter and return its value."""
+    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_STRING_ARRAY, description=description,
+                                     read_only=True)
+    return list(node.declare_parameter(name, value, descriptor).value)
+
+
+def bool_parameter(node: Node, name: str, value: bool, description: str) -> bool:
+    """Declare a read-only boolean parameter and return its value."""
+    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_BOOL, description=description,
+                                     read_only=True)
+    return node.declare_parameter(name, value, descriptor).value
+
+
+def _choice_check(name: str, choices: tuple[str, ...]) -> Callable:
+    def check(parameters) -> SetParametersResult:
+        for parameter in parameters:
+            if parameter.name == name and parameter.value not in choices:
+                return SetParametersResult(successful=False, reason=f"{name} = {parameter.value!r}: expected one of "
+                                                                    f"{', '.join(choices)}")
+        return SetParametersResult(successful=True)
+    return check
+
+
+def scene_model(node: Node) -> MachineModel:
+    """The scene named by the node's `scene_file` parameter (a path or a bundled name) with the
+    `overrides` parameter's KEY=VALUE changes, assembled by the core. Raises SceneError."""
+    scene_file = text_parameter(node, "scene_file", "engine_direct",
+                                "scene file (YAML path) or the name of a bundled scene")
+    overrides = list_parameter(node, "overrides", [""],
+                               "scene changes KEY=VALUE, as `mech-regulator --set` (e.g. governor.damping=300)")
+    return build_model(load_scene(scene_file, [item for item in overrides if item]))
+
+
+@dataclass
+class Rejections:
+    """Bad messages refused by a node, counted by reason; each reason warns at most every WARNING_PERIOD s."""
+
+    node: Node
+    counts: dict[str, int] = field(default_factory=dict)
+
+    def reject(self, reason: str, detail: str) -> None:
+        """Count a refused message under `reason` and warn (throttled) with what was wrong."""
+        self.counts[reason] = self.counts.get(reason, 0) + 1
+        self.node.get_logger().warning(f"rejected a message ({reason}): {detail}; the state is unchanged "
+                                       f"({self.counts[reason]} so far)", throttle_duration_sec=WARNING_PERIOD)
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def key_values(self) -> list[KeyValue]:
+        return [KeyValue(key="rejected_messages", value=str(self.total))] + [
+            KeyValue(key=f"rejected: {reason}", value=str(count)) for reason, count in sorted(self.counts.items())]
+
+
+def finite_in_range(value: float, limit: float) -> str | None:
+    """Why a received number is unacceptable (None if it is finite and |value| <= limit)."""
+    if not math.isfinite(value):
+        return "not finite"
+    if abs(value) > limit:
+        return "out of range"
+    return None
+
+
+def diagnostics(node: Node, level: bytes, message: str, values: dict[str, object]) -> DiagnosticArray:
+    """A DiagnosticArray with this node's status (hardware_id: the scene)."""
+    status = DiagnosticStatus(level=level, name=f"mech_regulator: {node.get_fully_qualified_name()}",
+                              message=message, hardware_id=str(values.pop("scene", "")),
+                              values=[KeyValue(key=key, value=str(value)) for key, value in values.items()])
+    array = DiagnosticArray(status=[status])
+    array.header.stamp = node.get_clock().now().to_msg()
+    return array
+
+
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
+    """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
+    then `work(node)` or spin. A bad scene or parameter ends with a message and exit code 2."""
+    rclpy.init(args=sys.argv)
+    node = None
+    try:
+        node = node_factory()
+        if work is not None:
+            work(node)
+        else:
+            rclpy.spin(node)
+        return 0
+    except SceneError as error:
+        print(f"mech_regulator: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C: a normal way to stop a node
+        return 0
+    except rclpy.exceptions.ParameterException as error:  # a parameter override outside its range or type
+        print(f"mech_regulator: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    finally:
+        if node is not None:
+            close = getattr(node, "close", None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+def sim_seconds(time: Time) -> float:
+    """Seconds of a builtin_interfaces/Time, by the same conversion the core uses for grid times."""
+    return seconds(nanoseconds(time))

@@ -1,0 +1,117 @@
+"""governor_node: the scene's direct or indirect governor, simulated by the core, answering the
+machine's speed with its throttle.
+
+Subscribes `joint_states` (joint "crank", velocity omega [rad/s], stamped with the simulation time).
+For each message it advances its own states to that time with the previous speed held, then publishes
+`throttle` (sensor_msgs/JointState, joint "throttle", position 0..1) stamped with the same time,
+`governor/state` (sensor_msgs/JointState: "sleeve" z [m] and z' [m/s], "arm" angle [rad] and rate
+[rad/s], "throttle", and for indirect action "servo" [-] (and "feedback_shift" [m])) and each mode
+change (a stop reached, the sleeve sticking or breaking away) on `governor/events` (std_msgs/String,
+JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosimulate.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, diagnostics,
+                                         finite_in_range, float_parameter, nanoseconds, run, scene_model, stamp)
+from mech_regulator.scene import SceneError
+from mech_regulator.solvers.cosim import GovernorStepper, seconds
+
+DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time
+
+
+class GovernorNode(Node):
+    """The governor of `scene_file` (see the module docstring)."""
+
+    def __init__(self):
+        super().__init__("governor")
+        model = scene_model(self)
+        if model.governor is None:
+            raise SceneError(f"scene '{model.scene.name}' has no governor: governor_node needs a scene with a "
+                             "'governor:' section")
+        self.scene_name = model.scene.name
+        self.max_speed = float_parameter(self, "max_speed", 1e4, "crank speeds beyond +- this [rad/s] are rejected",
+                                         0.0, 1e9)
+        self.stepper = GovernorStepper(model)
+        self.time_ns: int | None = None
+        self.reported_events = 0
+        self.rejections = Rejections(self)
+        self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
+        self.state_publisher = self.create_publisher(JointState, "governor/state", STATE_QOS)
+        self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
+        self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
+        self.create_timer(DIAGNOSTICS_PERIOD, self.report)
+
+    def on_joint_states(self, message: JointState) -> None:
+        """Answer the crank speed at a stamped time with the throttle at that time."""
+        names = list(message.name)
+        if "crank" not in names:
+            self.rejections.reject("wrong joint name", f"joint_states names {names}, expected a joint 'crank'")
+            return
+        index = names.index("crank")
+        if index >= len(message.velocity):
+            self.rejections.reject("no velocity", "joint_states has no velocity for joint 'crank'")
+            return
+        omega = message.velocity[index]
+        problem = finite_in_range(omega, self.max_speed)
+        if problem:
+            self.rejections.reject(problem, f"crank velocity = {omega!r} rad/s, expected a finite number within "
+                                            f"+-{self.max_speed:g} (parameter max_speed)")
+            return
+        when = nanoseconds(message.header.stamp)
+        if self.time_ns is not None and when < self.time_ns:
+            self.rejections.reject("out of order", f"joint_states stamped {seconds(when):.9g} s after "
+                                                   f"{seconds(self.time_ns):.9g} s")
+            return
+        self.time_ns = when
+        throttle = self.stepper.answer(seconds(when), omega)
+        for t, event, mode in self.stepper.events[self.reported_events:]:
+            self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
+        self.reported_events = len(self.stepper.events)
+        header_stamp = stamp(when)
+        answer = JointState(name=["throttle"], position=[throttle])
+        answer.header.stamp = header_stamp
+        self.throttle_publisher.publish(answer)
+        values = self.stepper.outputs()
+        state = JointState(name=["sleeve", "arm", "throttle"],
+                           position=[values["sleeve"], values["arm_angle"], values["throttle"]],
+                           velocity=[values["sleeve_velocity"], values["arm_rate"], 0.0])
+        for name in ("servo", "feedback_shift"):
+            if name in values:
+                state.name.append(name)
+                state.position.append(values[name])
+                state.velocity.append(0.0)
+        state.header.stamp = header_stamp
+        self.state_publisher.publish(state)
+        if self.stepper.status != "complete":
+            self.report()
+
+    def report(self) -> None:
+        level, text = OK, "running"
+        if self.stepper.status != "complete":
+            level, text = ERROR, self.stepper.message
+        elif self.rejections.total:
+            level, text = WARN, f"{self.rejections.total} bad messages rejected"
+        values = {"scene": self.scene_name, "sim_time": self.stepper.time, "throttle": self.stepper.throttle,
+                  "mode": "/".join(part for part in self.stepper.mode if part), "events": len(self.stepper.events)}
+        array = diagnostics(self, level, text, values)
+        array.status[0].values += self.rejections.key_values()
+        self.diagnostics_publisher.publish(array)
+
+
+def main() -> int:
+    """Entry point of governor_node."""
+    return run(GovernorNode)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

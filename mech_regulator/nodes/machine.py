@@ -1,0 +1,354 @@
+"""machine_node: the machine of a scene, simulated by the core, exchanging signals over ROS topics.
+
+Subscribes `throttle` (sensor_msgs/JointState, joint "throttle", position 0..1, stamped with the
+simulation time it applies from), `load_torque` (std_msgs/Float64 [N m], the external load moment
+opposing motion, from any publisher; applied from the next exchange time on) and
+`load_torque_stamped` (geometry_msgs/WrenchStamped, torque.z [N m] applying from its stamp: the
+scenario's load in lockstep). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
+effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
+scene has a mechanism), `machine/moments` (sensor_msgs/JointState whose efforts are the moments on
+the crank by source: drive, resistance, external, net [N m]), `/clock` and `/diagnostics`.
+
+Time modes: `lockstep` advances exchange step by exchange step, waiting at each exchange time for the
+inputs listed in `lockstep_inputs` stamped with that time (reproducible to the last digit, the same
+numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
+`real_time_factor` with the newest inputs. A governor that stays silent longer than `throttle_timeout`
+(realtime) or `peer_timeout` (lockstep) puts the machine on its fail-safe (`fail_safe`: hold the last
+throttle or close it); `overspeed_trip` closes the throttle for good above that speed.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, bool_parameter,
+                                         diagnostics, finite_in_range, float_parameter, int_parameter, list_parameter,
+                                         nanoseconds, run, scene_model, stamp, text_parameter)
+from mech_regulator.scene import SceneError
+from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
+
+LOCKSTEP_INPUTS = ("throttle", "load")
+DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between diagnostics
+SPIN_SLICE = 0.02  # [s] of wall time per wait for messages
+
+
+class MachineNode(Node):
+    """The machine of `scene_file` (see the module docstring for topics and parameters)."""
+
+    def __init__(self):
+        super().__init__("machine")
+        self.model = scene_model(self)
+        governed = self.model.governor is not None
+        self.time_mode = text_parameter(self, "time_mode", "lockstep", "how simulation time advances",
+                                        ("lockstep", "realtime"))
+        self.step_ns = to_nanoseconds(float_parameter(self, "exchange_step", 1e-3, "exchange step h [s]: inputs are "
+                                                      "held and outputs published every h of simulation time",
+                                                      1e-6, 1.0, read_only=True))
+        duration = float_parameter(self, "duration", 0.0, "simulated time [s] to run; 0: the scene's duration",
+                                   0.0, 1e7, read_only=True)
+        self.end_ns = to_nanoseconds(duration or self.model.scene.scenario.duration)
+        self.real_time_factor = float_parameter(self, "real_time_factor", 1.0, "realtime: simulated seconds per "
+                                                "wall-clock second", 1e-3, 1e3)
+        self.throttle_timeout = float_parameter(self, "throttle_timeout", 0.1, "realtime: fail-safe when the newest "
+                                                "throttle is older than this [s of simulation time]", 1e-6, 3600.0)
+        self.peer_timeout = float_parameter(self, "peer_timeout", 10.0, "lockstep: wall-clock seconds to wait for an "
+                                            "input before going on without it (fail-safe)", 0.01, 3600.0)
+        self.fail_safe = text_parameter(self, "fail_safe", "close", "throttle while the governor is silent",
+                                        ("hold", "close"), read_only=False)
+        self.max_load_torque = float_parameter(self, "max_load_torque", 1e5, "load messages beyond +- this [N m] "
+                                               "are rejected", 0.0, 1e12)
+        overspeed = float_parameter(self, "overspeed_trip", 0.0, "trip speed [rad/s]: above it the throttle closes "
+                                    "for good; 0: no trip", 0.0, 1e9, read_only=True)
+        inputs = list_parameter(self, "lockstep_inputs", ["throttle"] if governed else [""],
+                                "lockstep: inputs to wait for at every exchange time: throttle, load")
+        self.lockstep_inputs = [item for item in inputs if item]
+        unknown = [item for item in self.lockstep_inputs if item not in LOCKSTEP_INPUTS]
+        if unknown:
+            raise SceneError(f"parameter lockstep_inputs = {inputs}: unknown {unknown}; expected a list of "
+                             f"{', '.join(LOCKSTEP_INPUTS)}")
+        self.min_subscribers = int_parameter(self, "min_subscribers", len(self.lockstep_inputs), "lockstep: "
+                                             "subscribers of joint_states to wait for before the first step", 0, 100)
+        self.publish_clock = bool_parameter(self, "publish_clock", True, "publish the simulation time on /clock")
+
+        self.stepper = MachineStepper(self.model, overspeed)
+        initial = self.model.initial_state()
+        self.throttle = self.model.governor.throttle(initial) if governed else 1.0
+        self.load = self.model.external_load(0.0)
+        self.throttle_stamp: int | None = None  # stamp [ns] of the newest throttle received
+        self.stamped_throttle: dict[int, float] = {}
+        self.stamped_load: dict[int, float] = {}
+        self.last_stamped_load: float | None = None
+        self.pending_load: float | None = None
+        self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
+        self.failing_safe = False
+        self.rejections = Rejections(self)
+
+        self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.moments_publisher = self.create_publisher(JointState, "machine/moments", STATE_QOS)
+        self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
+        self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "throttle", self.on_throttle, COMMAND_QOS)
+        self.create_subscription(Float64, "load_torque", self.on_load, COMMAND_QOS)
+        self.create_subscription(WrenchStamped, "load_torque_stamped", self.on_stamped_load, COMMAND_QOS)
+        self.add_on_set_parameters_callback(self.on_parameters)
+        self.now_ns = 0
+        self.wall_start = time.monotonic()
+        self.last_diagnostics = -math.inf
+        kind = self.model.scene.machine.mechanism.type if self.model.scene.machine.mechanism else None
+        self.output_joint = {"crank_slider": ("slider", "x_slider", "v_slider"),
+                             "four_bar": ("rocker", "theta4", "omega4")}.get(kind)
+
+    # ---------------------------------------------------------------------------------------------
+    # Inputs: every message is checked before it touches anything.
+
+    def on_throttle(self, message: JointState) -> None:
+        if "throttle" not in message.name:
+            self.rejections.reject("wrong joint name", f"throttle message names {list(message.name)}, expected "
+                                                       "a joint 'throttle'")
+            return
+        index = list(message.name).index("throttle")
+        if index >= len(message.position):
+            self.rejections.reject("no position", "throttle message has no position for joint 'throttle'")
+            return
+        value = message.position[index]
+        if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+            self.rejections.reject("out of range" if math.isfinite(value) else "not finite",
+                                   f"throttle = {value!r}, expected a number in [0, 1]")
+            return
+        when = nanoseconds(message.header.stamp)
+        if self.throttle_stamp is not None and when < self.throttle_stamp:
+            self.rejections.reject("out of order", f"throttle stamped {seconds(when):.9g} s after one stamped "
+                                                   f"{seconds(self.throttle_stamp):.9g} s")
+            return
+        self.throttle_stamp = when
+        self.stamped_throttle[when] = value
+        self.silent.discard("throttle")
+
+    def on_load(self, message: Float64) -> None:
+        problem = finite_in_range(message.data, self.max_load_torque)
+        if problem:
+            self.rejections.reject(problem, f"load_torque = {message.data!r} N m, expected a finite number within "
+                                            f"+-{self.max_load_torque:g} (parameter max_load_torque)")
+            return
+        self.pending_load = message.data
+
+    def on_stamped_load(self, message: WrenchStamped) -> None:
+        value = message.wrench.torque.z
+        problem = finite_in_range(value, self.max_load_torque)
+        if problem:
+            self.rejections.reject(problem, f"load_torque_stamped torque.z = {value!r} N m, expected a finite "
+                                            f"number within +-{self.max_load_torque:g}")
+            return
+        self.stamped_load[nanoseconds(message.header.stamp)] = value
+        self.silent.discard("load")
+
+    def on_parameters(self, parameters) -> SetParametersResult:
+        """Apply changes of the parameters that may change while running (ranges are checked by ROS)."""
+        for parameter in parameters:
+            if parameter.name in ("real_time_factor", "throttle_timeout", "peer_timeout", "max_load_torque",
+                                  "fail_safe"):
+                if parameter.name == "real_time_factor":  # keep the simulation time continuous
+                    self.wall_start = time.monotonic() - seconds(self.now_ns) / parameter.value
+                setattr(self, parameter.name, parameter.value)
+        return SetParametersResult(successful=True)
+
+    # ---------------------------------------------------------------------------------------------
+    # The run
+
+    def run(self) -> None:
+        """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time."""
+        self.wait_for_subscribers()
+        self.wall_start = time.monotonic()
+        tick = 0
+        while rclpy.ok():
+            self.now_ns = min(tick * self.step_ns, self.end_ns)
+            self.publish_state()
+            self.collect_inputs()
+            self.publish_moments()
+            if self.now_ns >= self.end_ns or self.stepper.status != "complete":
+                break
+            tick += 1
+            if self.time_mode == "realtime":
+                self.wait_until(min(tick * self.step_ns, self.end_ns))
+            self.stepper.advance(seconds(min(tick * self.step_ns, self.end_ns)), self.applied_throttle(),
+                                 self.load)
+            self.report()
+        if rclpy.ok():
+            self.finish()
+
+    def wait_for_subscribers(self) -> None:
+        """Lockstep: spin until joint_states has min_subscribers matched subscribers (the peers)."""
+        if self.time_mode != "lockstep":
+            return
+        waited = time.monotonic()
+        while rclpy.ok() and self.joint_publisher.get_subscription_count() < self.min_subscribers:
+            rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+            if time.monotonic() - waited > self.peer_timeout:
+                self.get_logger().warning(f"waiting for {self.min_subscribers} subscribers of joint_states, "
+                                          f"{self.joint_publisher.get_subscription_count()} so far",
+                                          throttle_duration_sec=5.0)
+
+    def collect_inputs(self) -> None:
+        """Take the inputs for the current exchange time: in lockstep, wait for each listed input stamped
+        with it (or time out and go on without it); then apply the newest load."""
+        if self.time_mode == "lockstep":
+            waited = time.monotonic()
+            while rclpy.ok() and self.missing_inputs():
+                rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+                if time.monotonic() - waited > self.peer_timeout:
+                    missing = self.missing_inputs()
+                    self.silent.update(missing)
+                    self.get_logger().error(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
+                                            f"{self.peer_timeout:g} s (parameter peer_timeout); going on without "
+                                            "waiting, fail-safe applies; this run is no longer reproducible")
+                    self.report(force=True)
+        else:
+            rclpy.spin_once(self, timeout_sec=0.0)
+        if self.now_ns in self.stamped_load:
+            value = self.stamped_load.pop(self.now_ns)
+            if value != self.last_stamped_load:  # only the scenario's changes: a load typed in between stays
+                self.load = self.last_stamped_load = value
+        for when in [when for when in self.stamped_load if when < self.now_ns]:  # too late to apply
+            self.stamped_load.pop(when)
+        if self.pending_load is not None:
+            self.load, self.pending_load = self.pending_load, None
+
+    def missing_inputs(self) -> list[str]:
+        """The lockstep inputs not yet received for the current exchange time (and not given up on)."""
+        missing = []
+        if "throttle" in self.lockstep_inputs and "throttle" not in self.silent \
+                and self.now_ns not in self.stamped_throttle:
+            missing.append("throttle")
+        if "load" in self.lockstep_inputs and "load" not in self.silent and self.now_ns not in self.stamped_load:
+            missing.append("load")
+        return missing
+
+    def applied_throttle(self) -> float:
+        """The throttle held over the next step: the governor's for this exchange time (lockstep) or its
+        newest (realtime); the fail-safe if the governor is silent."""
+        if self.time_mode == "lockstep":
+            fresh = self.stamped_throttle.get(self.now_ns)
+        else:
+            fresh = self.stamped_throttle.get(self.throttle_stamp) if self.throttle_stamp is not None else None
+            if fresh is not None and seconds(self.now_ns - self.throttle_stamp) > self.throttle_timeout:
+                fresh = None
+        for when in [when for when in self.stamped_throttle if when < self.now_ns]:
+            self.stamped_throttle.pop(when)
+        expects_governor = "throttle" in self.lockstep_inputs or self.time_mode == "realtime" and \
+            self.model.governor is not None
+        if fresh is not None:
+            self.throttle = fresh
+        elif expects_governor:
+            if not self.failing_safe:
+                self.get_logger().error(f"no throttle for t = {seconds(self.now_ns):.6g} s: fail-safe "
+                                        f"'{self.fail_safe}'")
+            if self.fail_safe == "close":
+                self.throttle = 0.0
+        failing_safe = fresh is None and expects_governor
+        if failing_safe != self.failing_safe:
+            self.failing_safe = failing_safe
+            self.report(force=True)
+        return self.throttle
+
+    def wait_until(self, target_ns: int) -> None:
+        """Realtime: spin until the wall clock reaches the simulation time target_ns / real_time_factor."""
+        while rclpy.ok():
+            remaining = self.wall_start + seconds(target_ns) / self.real_time_factor - time.monotonic()
+            if remaining <= 0.0:
+                return
+            rclpy.spin_once(self, timeout_sec=min(remaining, SPIN_SLICE))
+
+    # ---------------------------------------------------------------------------------------------
+    # Outputs
+
+    def publish_state(self) -> None:
+        """/clock and joint_states at the current exchange time (effort: the net moment with the inputs
+        held over the step that ended here)."""
+        header_stamp = stamp(self.now_ns)
+        if self.clock_publisher is not None:
+            self.clock_publisher.publish(Clock(clock=header_stamp))
+        values = self.stepper.outputs(self.throttle, self.load)
+        message = JointState(name=["crank"], position=[float(self.stepper.state[0])],
+                             velocity=[float(self.stepper.state[1])], effort=[self.net_moment(values)])
+        message.header.stamp = header_stamp
+        if self.output_joint is not None:
+            name, position, velocity = self.output_joint
+            message.name.append(name)
+            message.position.append(values[position])
+            message.velocity.append(values[velocity])
+            message.effort.append(math.nan)  # not computed
+        self.joint_publisher.publish(message)
+
+    def publish_moments(self) -> None:
+        """machine/moments at the current exchange time, with the inputs that now hold."""
+        values = self.stepper.outputs(self.throttle, self.load)
+        resistance = values["M_load"] + values.get("M_weight", 0.0) - values["M_external"]
+        message = JointState(name=["drive", "resistance", "external", "net"],
+                             effort=[values["M_drive"], resistance, values["M_external"], self.net_moment(values)])
+        message.header.stamp = stamp(self.now_ns)
+        self.moments_publisher.publish(message)
+
+    @staticmethod
+    def net_moment(values: dict[str, float]) -> float:
+        """M_d + M_c [N m] = J epsilon + 1/2 J' omega^2 (physics.md section 1)."""
+        return values["J"] * values["epsilon"] + 0.5 * values["dJ_dphi"] * values["omega"] ** 2
+
+    def report(self, force: bool = False) -> None:
+        """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""
+        wall = time.monotonic()
+        if not force and wall - self.last_diagnostics < DIAGNOSTICS_PERIOD:
+            return
+        self.last_diagnostics = wall
+        self.diagnostics_publisher.publish(self.diagnostics())
+
+    def diagnostics(self, finished: bool = False) -> DiagnosticArray:
+        elapsed = max(time.monotonic() - self.wall_start, 1e-9)
+        level, message = OK, "running"
+        if self.stepper.status != "complete":
+            level, message = ERROR, self.stepper.message
+        elif self.stepper.tripped_at is not None:
+            level, message = ERROR, f"overspeed trip at t = {self.stepper.tripped_at:.6g} s: throttle closed"
+        elif self.failing_safe or self.silent:
+            level, message = WARN, f"fail-safe ({self.fail_safe}): no input from {', '.join(sorted(self.silent)) or 'the governor'}"
+        elif self.rejections.total:
+            level, message = WARN, f"{self.rejections.total} bad messages rejected"
+        if finished and level == OK:
+            message = "finished"
+        values = {"scene": self.model.scene.name, "time_mode": self.time_mode, "sim_time": seconds(self.now_ns),
+                  "end_time": seconds(self.end_ns), "real_time_factor": f"{seconds(self.now_ns) / elapsed:.4g}",
+                  "throttle": self.throttle, "external_load": self.load, "rhs_evaluations": self.stepper.stats.nfev,
+                  "fail_safe_active": self.failing_safe, "tripped_at": self.stepper.tripped_at}
+        if finished:
+            values["finished_at_ns"] = self.now_ns
+        array = diagnostics(self, level, message, values)
+        array.status[0].values += self.rejections.key_values()
+        return array
+
+    def finish(self) -> None:
+        """Say the run is over (diagnostics with finished_at_ns) once every subscriber has the last state."""
+        for publisher in (self.joint_publisher, self.moments_publisher):
+            publisher.wait_for_all_acked(Duration(seconds=5.0))
+        self.diagnostics_publisher.publish(self.diagnostics(finished=True))
+        self.diagnostics_publisher.wait_for_all_acked(Duration(seconds=5.0))
+        self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
+
+
+def main() -> int:
+    """Entry point of machine_node."""
+    return run(MachineNode, MachineNode.run)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

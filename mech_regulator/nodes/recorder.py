@@ -1,0 +1,180 @@
+"""recorder_node: records a run from the topics into a Rerun recording (a .rrd file and/or a live
+viewer) with its blueprint, and at the end writes the run's samples (CSV) and summary (JSON).
+
+Subscribes `joint_states`, `machine/moments`, `governor/state`, `governor/events` and `/diagnostics`.
+The text log gets every change of the applied load, the governor's mode changes and the machine's
+warnings (fail-safe, overspeed trip). When the machine says it finished (diagnostics `finished_at_ns`)
+the recorder waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it
+has, so the recording stays valid.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from mech_regulator.analysis import summarise_cosimulation
+from mech_regulator.cli.report import to_json
+from mech_regulator.nodes.common import STATE_QOS, float_parameter, nanoseconds, run, scene_model, text_parameter
+from mech_regulator.solvers.cosim import CoSimulation, seconds
+from mech_regulator.viz.recording import RunRecording
+
+FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
+LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
+
+
+def default_output(scene_name: str) -> Path:
+    """runs/<scene>-<local time>.rrd"""
+    return Path("runs") / f"{scene_name}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
+
+
+class RecorderNode(Node):
+    """Records the run (see the module docstring)."""
+
+    def __init__(self):
+        super().__init__("recorder")
+        self.model = scene_model(self)
+        output = text_parameter(self, "output", "", "the .rrd file to write ('' : runs/<scene>-<time>.rrd; 'none': "
+                                                    "no file)")
+        connect = text_parameter(self, "connect", "", "URL of a live Rerun viewer to stream to, e.g. "
+                                                      "rerun+http://127.0.0.1:9876/proxy ('' : none)")
+        rate = float_parameter(self, "animation_rate", 200.0, "frames of the animation per second of simulation "
+                                                              "time [Hz]", 1.0, 1e5, read_only=True)
+        self.exchange_step = float_parameter(self, "exchange_step", 1e-3, "the machine's exchange step [s], for the "
+                                                                          "summary", 1e-6, 1.0, read_only=True)
+        self.path = None if output == "none" else Path(output) if output else default_output(self.model.scene.name)
+        if self.path is not None:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate)
+        self.machine: dict[int, tuple[float, float]] = {}
+        self.moments: dict[int, tuple[float, float]] = {}  # stamp -> (throttle-scaled drive, external)
+        self.governor: dict[int, dict[str, float]] = {}
+        self.events: list[tuple[float, str, tuple[str, str]]] = []
+        self.last_external: float | None = None
+        self.machine_status = (DiagnosticStatus.OK, "")
+        self.finished_at: int | None = None
+        self.closed = False
+        self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
+        self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
+        self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
+        self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
+        self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
+        self.create_timer(FLUSH_PERIOD, self.recording.flush)
+        self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
+
+    def on_joint_states(self, message: JointState) -> None:
+        names = list(message.name)
+        if "crank" not in names:
+            return
+        index = names.index("crank")
+        when = nanoseconds(message.header.stamp)
+        phi, omega = message.position[index], message.velocity[index]
+        self.machine[when] = (phi, omega)
+        self.recording.add_machine(when, phi, omega)
+
+    def on_moments(self, message: JointState) -> None:
+        when = nanoseconds(message.header.stamp)
+        moments = dict(zip(message.name, message.effort))
+        self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"], moments["net"])
+        external = moments["external"]
+        if self.last_external is not None and external != self.last_external:
+            self.recording.add_event(when, f"load {-self.last_external:.6g} -> {-external:.6g} N m")
+        self.last_external = external
+        self.moments[when] = (moments["drive"], -external)
+
+    def on_governor(self, message: JointState) -> None:
+        when = nanoseconds(message.header.stamp)
+        positions = dict(zip(message.name, message.position))
+        velocities = dict(zip(message.name, message.velocity))
+        values = {"sleeve": positions["sleeve"], "sleeve_velocity": velocities["sleeve"],
+                  "arm_angle": positions["arm"], "arm_rate": velocities["arm"], "throttle": positions["throttle"]}
+        for name in ("servo", "feedback_shift"):
+            if name in positions:
+                values[name] = positions[name]
+        self.governor[when] = values
+        self.recording.add_governor(when, values)
+
+    def on_governor_event(self, message: String) -> None:
+        event = json.loads(message.data)
+        self.events.append((event["time"], event["event"], tuple(event["mode"])))
+        self.recording.add_event(int(round(event["time"] * 1e9)), f"governor: {event['event']}")
+
+    def on_diagnostics(self, message: DiagnosticArray) -> None:
+        for status in message.status:
+            if not status.name.endswith("/machine"):
+                continue
+            values = {item.key: item.value for item in status.values}
+            when = int(round(float(values.get("sim_time", 0.0)) * 1e9))
+            if (status.level, status.message) != self.machine_status and status.level in LEVELS:
+                self.recording.add_event(when, f"machine: {status.message}", LEVELS[status.level])
+            self.machine_status = (status.level, status.message)
+            if "finished_at_ns" in values:
+                self.finished_at = int(values["finished_at_ns"])
+
+    def complete(self) -> bool:
+        """Whether the machine finished and its last samples (and the governor's) are in."""
+        if self.finished_at is None or self.finished_at not in self.machine:
+            return False
+        return self.model.governor is None or self.finished_at in self.governor
+
+    def close(self) -> None:
+        """Finish the recording, then write the samples (CSV) and the summary (JSON) next to it."""
+        if self.closed:
+            return
+        self.closed = True
+        self.recording.close()
+        run_data = self.run_data()
+        if self.path is None or run_data is None:
+            return
+        summary = summarise_cosimulation(self.model, run_data, self.exchange_step)
+        if not self.complete():
+            summary["status"] = "interrupted"
+            summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
+        csv_path, summary_path = self.path.with_suffix(".csv"), self.path.with_suffix(".json")
+        columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
+        np.savetxt(csv_path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
+                   comments="", fmt="%.17g")
+        summary.update(recording=str(self.path), csv=str(csv_path))
+        summary_path.write_text(to_json(summary))
+
+    def run_data(self) -> CoSimulation | None:
+        """The run as the core's CoSimulation, from the exchange times all parts were received for."""
+        times = sorted(when for when in self.machine if when in self.moments
+                       and (self.model.governor is None or when in self.governor))
+        if not times:
+            return None
+        rows = []
+        for when in times:
+            row = list(self.machine[when])
+            if self.model.governor is not None:
+                values = self.governor[when]
+                row += [values["arm_angle"], values["arm_rate"]]
+                row += [values[name] for name in self.model.governor.state_names[2:]]
+            rows.append(row)
+        throttle = [self.governor[when]["throttle"] if self.model.governor is not None else 1.0 for when in times]
+        return CoSimulation(times=np.array([seconds(when) for when in times]), states=np.array(rows).T,
+                            throttle=np.array(throttle), external_load=np.array([self.moments[w][1] for w in times]),
+                            events=self.events, status="complete", message="", tripped_at=None)
+
+    def record(self) -> None:
+        """Spin until the machine has finished and everything is in (or Ctrl-C)."""
+        while rclpy.ok() and not self.complete():
+            rclpy.spin_once(self, timeout_sec=0.1)
+
+
+def main() -> int:
+    """Entry point of recorder_node."""
+    return run(RecorderNode, RecorderNode.record)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,199 @@
+"""Co-simulation of a machine and its governor as two subsystems exchanging signals at fixed times.
+
+This is what the ROS nodes do (machine_node and governor_node in separate processes), written once in
+the core so that a node, the command line and a test compute the same numbers. Time advances in
+exchange steps h on a grid of whole nanoseconds, t_k = k h (the stamps of ROS messages):
+
+- at t_k the machine gives its speed omega_k; the governor answers with its throttle u_k = u(g_k);
+  the scenario gives the external load L(t_k);
+- over [t_k, t_k+1] the machine integrates J(phi) omega' + 1/2 J' omega^2 = u_k M_d + M_c - L(t_k)
+  with u_k and L(t_k) held, and the governor integrates its own equations with omega_k held
+  (zero-order hold both ways, a Jacobi scheme: neither waits for the other's new value).
+
+Each subsystem is the monolithic model with the other part taken out, integrated by the same solver
+loop (modes, guards, switches), so the only difference from the monolithic simulation is the hold:
+the error is first order in h (docs/ros.md gives the measured constant).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mech_regulator.model import LoadPiece, MachineModel
+from mech_regulator.solvers.time_domain import _segment
+from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
+
+NANOSECONDS = 1_000_000_000
+
+
+def seconds(nanoseconds: int) -> float:
+    """A grid time in seconds from whole nanoseconds (the one conversion every party uses, so that a
+    time sent in a message stamp and the sender's own time are the same float)."""
+    return nanoseconds / NANOSECONDS
+
+
+def to_nanoseconds(time: float) -> int:
+    """A time [s] rounded to whole nanoseconds."""
+    return int(round(time * NANOSECONDS))
+
+
+class MachineStepper:
+    """The machine without its governor: (phi, omega) advanced over exchange steps with the throttle and
+    the external load held. overspeed_trip [rad/s] (0: none) closes the throttle for good once the
+    speed at an exchange time exceeds it, as the trip valve of a real engine does."""
+
+    def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
+        self.plant = dataclasses.replace(model, governor=None, load_pieces=())
+        self.state = model.initial_state()[:2]
+        self.time = 0.0
+        self.overspeed_trip = overspeed_trip
+        self.tripped_at: float | None = None
+        self.stats = SolverStats()
+        self.status, self.message = "complete", ""
+
+    def advance(self, t_end: float, throttle: float, external_load: float) -> Trajectory:
+        """Integrate from the current time to t_end [s] with the throttle [-] and the external load [N m]
+        held; returns that stretch's dense trajectory of (phi, omega). A tripped machine runs with the
+        throttle closed."""
+        if self.overspeed_trip > 0.0 and self.tripped_at is None and abs(self.state[1]) > self.overspeed_trip:
+            self.tripped_at = self.time
+        if self.tripped_at is not None:
+            throttle = 0.0
+        stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
+        piece = LoadPiece(self.time, t_end, external_load, 0.0, throttle)
+        self.state, _ = _segment(self.plant, piece, self.time, t_end, self.state, None, stretch, None)
+        self.time = stretch.t_end
+        self.status, self.message = _accumulate(self.stats, stretch)
+        return stretch
+
+    def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
+        """The machine's outputs at its current state with these inputs held: the columns of
+        MachineModel.columns (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...)."""
+        if self.tripped_at is not None:
+            throttle = 0.0
+        columns = self.plant.columns(np.array([self.time]), self.state[:, None], np.array([throttle]),
+                                     np.array([external_load]))
+        return {name: float(values[0]) for name, values in columns.items()}
+
+
+class GovernorStepper:
+    """The governor without the machine: its states advanced over exchange steps with the crank speed
+    held at the last value it was given (the machine's terms are absent, so omega' = 0 exactly)."""
+
+    def __init__(self, model: MachineModel):
+        if model.governor is None:
+            raise ValueError(f"scene '{model.scene.name}' has no governor")
+        self.regulator = dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False,
+                                             effects=(), load_pieces=())
+        self.governor = model.governor
+        self.state = model.initial_state()
+        self.mode = model.initial_mode(self.state)
+        self.time = 0.0
+        self.events: list[tuple[float, str, tuple[str, str]]] = []
+        self.stats = SolverStats()
+        self.status, self.message = "complete", ""
+
+    def answer(self, time: float, omega: float) -> float:
+        """Take the crank speed omega [rad/s] measured at `time` [s]: first advance from the last exchange
+        time to `time` with the previous speed held, then hold omega from here on; returns the
+        throttle [-] at `time`."""
+        if time > self.time:
+            stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
+            self.state, self.mode = _segment(self.regulator, None, self.time, time, self.state, self.mode,
+                                             stretch, None)
+            self.time = stretch.t_end
+            self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
+            self.status, self.message = _accumulate(self.stats, stretch)
+        self.state = self.state.copy()
+        self.state[1] = omega
+        return self.throttle
+
+    @property
+    def throttle(self) -> float:
+        """The throttle [-] the governor sets now."""
+        return self.governor.throttle(self.state)
+
+    def outputs(self) -> dict[str, float]:
+        """The governor's state now: sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], arm_rate
+        [rad/s], throttle [-] and, indirect, servo [-] (and feedback_shift [m])."""
+        sensor = self.governor.sensor
+        arm, arm_rate = self.state[2], self.state[3]
+        values = {"sleeve": sensor.sleeve(arm), "sleeve_velocity": 2.0 * sensor.arm_length * math.sin(arm) * arm_rate,
+                  "arm_angle": arm, "arm_rate": arm_rate, "throttle": self.throttle}
+        for index, name in enumerate(self.governor.state_names[2:], start=4):
+            values[name] = float(self.state[index])
+        return values
+
+
+def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
+    """Add a stretch's solver statistics to the running totals; returns its status and message."""
+    for item in dataclasses.fields(SolverStats):
+        setattr(stats, item.name, getattr(stats, item.name) + getattr(stretch.stats, item.name))
+    return stretch.status, stretch.message
+
+
+@dataclass
+class CoSimulation:
+    """A co-simulated run sampled at its exchange times: times [s], the full state there (machine
+    (phi, omega) then the governor's states, shape n_states x n), the throttle [-] and external load
+    [N m] held from each time on, the governor's mode changes (time, what, new mode), and how it ended."""
+
+    times: np.ndarray
+    states: np.ndarray
+    throttle: np.ndarray
+    external_load: np.ndarray
+    events: list[tuple[float, str, tuple[str, str]]]
+    status: str
+    message: str
+    tripped_at: float | None
+
+    def trajectory(self, model: MachineModel) -> SampledTrajectory:
+        """The run as a trajectory for the analysis functions (linear between exchange times)."""
+        initial = model.initial_mode(model.initial_state())
+        run = SampledTrajectory(method=f"co-simulation ({model.scene.solver.method})", t_start=float(self.times[0]),
+                                times=self.times, states=self.states, status=self.status, message=self.message)
+        run.modes = ([(0.0, initial)] if initial is not None else []) + [(t, mode) for t, _, mode in self.events]
+        run.events = [(t, name) for t, name, _ in self.events]
+        return run
+
+
+def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float = 0.0,
+               progress: Progress | None = None) -> CoSimulation:
+    """Run the scene's scenario as the nodes do in lockstep: machine and governor exchange omega and the
+    throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns)."""
+    step = to_nanoseconds(exchange_step)
+    if step <= 0:
+        raise ValueError(f"exchange_step = {exchange_step!r} s: expected at least 1 ns")
+    end = to_nanoseconds(model.scene.scenario.duration)
+    machine = MachineStepper(model, overspeed_trip)
+    governor = GovernorStepper(model) if model.governor is not None else None
+    rows, inputs = [], []
+    tick = 0
+    try:
+        while True:
+            now = seconds(min(tick * step, end))
+            throttle = governor.answer(now, float(machine.state[1])) if governor is not None else 1.0
+            load = model.external_load(now)
+            rows.append(np.concatenate([machine.state, governor.state[2:]]) if governor is not None
+                        else machine.state.copy())
+            inputs.append((now, throttle, load))
+            if tick * step >= end or machine.status != "complete" or (governor and governor.status != "complete"):
+                break
+            tick += 1
+            machine.advance(seconds(min(tick * step, end)), throttle, load)
+            if progress is not None:
+                progress(machine.time)
+        status, message = "complete", ""
+    except KeyboardInterrupt:
+        status, message = "interrupted", f"interrupted by the user at t = {machine.time:.6g} s"
+    for part in (machine, governor):
+        if part is not None and part.status != "complete":
+            status, message = part.status, part.message
+    times, throttles, loads = (np.array(column) for column in zip(*inputs))
+    return CoSimulation(times=times, states=np.array(rows).T, throttle=throttles, external_load=loads,
+                        events=governor.events if governor is not None else [], status=status, message=message,
+                        tripped_at=machine.tripped_at)
