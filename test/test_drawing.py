@@ -14,13 +14,14 @@ import numpy as np
 import pytest
 
 from mech_regulator.governors.centrifugal import PorterSensor
-from mech_regulator.governors.drawing import (
+from mech_regulator.governors.drawing import (COLLAR_RADIUS, 
     SLEEVE_HALF_HEIGHT,
     ball_radius,
     governor_bounds,
     governor_outline,
     sleeve_height,
 )
+from mech_regulator.mechanisms.crank_slider import dead_centres
 from mech_regulator.mechanisms.drawing import (
     BLOCK_HEIGHT_PER_CRANK,
     BLOCK_LENGTH_PER_CRANK,
@@ -29,11 +30,10 @@ from mech_regulator.mechanisms.drawing import (
     mechanism_bounds,
     mechanism_outline,
 )
-from mech_regulator.mechanisms.crank_slider import dead_centres
 from mech_regulator.scene.schema import CrankSlider, FourBar
 
 TOL = 1e-12
-# 997 crank angles over a turn, none on the 360-point grid the bounds are found on, plus two turns more
+# 997 crank angles over three turns (-2 pi to 4 pi), offset so that none lies on the bounds' 360-point grid
 ANGLES = np.linspace(-2.0 * math.pi, 4.0 * math.pi, 997) + 0.0123
 
 CRANK_SLIDERS = [
@@ -183,7 +183,7 @@ def stroke_angles(sensor: PorterSensor, count: int = 41) -> np.ndarray:
 
 
 @pytest.mark.parametrize("sensor", SENSORS)
-def test_governor_linkage_lengths_projection_and_sleeve_lift(sensor):
+def test_governor_linkage_lengths_and_sleeve_lift(sensor):
     l = sensor.arm_length
     for a in stroke_angles(sensor):
         for psi in SPINDLE_ANGLES:
@@ -196,18 +196,27 @@ def test_governor_linkage_lengths_projection_and_sleeve_lift(sensor):
                 assert np.allclose(hinge, 0.0, atol=TOL)
                 assert np.array_equal(ball, balls[side]) and np.array_equal(ball_link, balls[side])
                 assert np.allclose(sleeve_end, sleeve_centre, atol=TOL)
-                # the arm in space: horizontal l sin a (projected by cos psi), vertical l cos a below the hinge
-                assert abs(ball[0]) == pytest.approx(l * math.sin(a) * abs(math.cos(psi)), abs=TOL)
+                # the arm in the drawing plane: horizontal l sin a, vertical l cos a below the hinge
+                assert abs(ball[0]) == pytest.approx(l * math.sin(a), abs=TOL)
                 assert ball[1] == pytest.approx(-l * math.cos(a), abs=TOL)
-                # the lower link is as long as the arm (Porter) once its projection is undone
-                horizontal = (ball[0] - sleeve_end[0]) / math.cos(psi)
-                assert math.hypot(horizontal, ball[1] - sleeve_end[1]) == pytest.approx(l, abs=TOL)
+                # the lower link is as long as the arm (Porter)
+                assert math.hypot(*(ball - sleeve_end)) == pytest.approx(l, abs=TOL)
             assert balls[0, 0] == pytest.approx(-balls[1, 0], abs=TOL)
-            assert balls[0, 0] * math.cos(psi) >= 0.0   # ball 0 is the one on the +x side at psi = 0
+            assert balls[0, 0] >= 0.0   # ball 0 is the one on the +x side
             assert sleeve_centre[0] == pytest.approx(0.0, abs=TOL)
             # the sleeve's lift above its lowest possible position (arms along the spindle, centre at -2 l)
             assert sleeve_centre[1] + 2.0 * l == pytest.approx(sensor.sleeve(a), abs=TOL)
             assert sleeve_centre[1] == pytest.approx(sleeve_height(sensor, a), abs=TOL)
+
+
+@pytest.mark.parametrize("sensor", SENSORS)
+def test_governor_spindle_mark_goes_round_with_the_spindle(sensor):
+    """The mark's horizontal position is r cos psi: it turns once per turn of the spindle."""
+    a = sensor.stop_angles()[0]
+    marks = np.array([governor_outline(sensor, a, psi)["spindle_mark"][0] for psi in SPINDLE_ANGLES])
+    radius = COLLAR_RADIUS * sensor.arm_length
+    assert np.allclose(marks[:, 0], radius * np.cos(SPINDLE_ANGLES), atol=TOL)
+    assert np.ptp(marks[:, 1]) > 0.0   # it goes round an ellipse, not along a line
 
 
 @pytest.mark.parametrize("sensor", SENSORS)

@@ -50,16 +50,29 @@ def _colcon() -> str:
     return colcon
 
 
-def test_colcon_build_installs_a_working_executable(tmp_path):
+@pytest.fixture(scope="module")
+def colcon_install(tmp_path_factory) -> Path:
+    """The package built by colcon (ament_python) into a temporary install base; returns its prefix."""
     colcon = _colcon()
-    env = dict(os.environ, COLCON_HOME=str(tmp_path / "colcon_home"),  # no user defaults.yaml
+    folder = tmp_path_factory.mktemp("colcon")
+    env = dict(os.environ, COLCON_HOME=str(folder / "colcon_home"),  # no user defaults.yaml
                PATH=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]))
-    install = tmp_path / "install"
-    _run([colcon, "--log-base", str(tmp_path / "log"), "build", "--base-paths", str(ROOT),
-          "--packages-select", PACKAGE, "--build-base", str(tmp_path / "build"), "--install-base", str(install)],
-         timeout=180, cwd=tmp_path, env=env)
+    install = folder / "install"
+    _run([colcon, "--log-base", str(folder / "log"), "build", "--base-paths", str(ROOT),
+          "--packages-select", PACKAGE, "--build-base", str(folder / "build"), "--install-base", str(install)],
+         timeout=180, cwd=folder, env=env)
+    return install / PACKAGE
 
-    prefix = install / PACKAGE
+
+def _install_python_path(prefix: Path) -> str:
+    """PYTHONPATH for the colcon install without ROS: what its setup scripts would set up."""
+    site_packages = [path for path in prefix.glob("lib/python*/site-packages") if (path / PACKAGE).is_dir()]
+    assert len(site_packages) == 1, f"no single {PACKAGE} under {prefix}/lib/python*/site-packages"
+    return os.pathsep.join([str(site_packages[0]), *filter(None, [os.environ.get("PYTHONPATH")])])
+
+
+def test_colcon_build_installs_a_working_executable(colcon_install, tmp_path):
+    prefix = colcon_install
     executable = prefix / "lib" / PACKAGE / EXECUTABLE  # where `ros2 run mech_regulator mech-regulator` looks
     assert executable.is_file() and os.access(executable, os.X_OK), \
         f"no executable {executable}; lib/ holds {sorted(str(p.relative_to(prefix)) for p in (prefix / 'lib').rglob('*'))}"
@@ -121,3 +134,31 @@ def test_package_xml_matches_setup_py():
         f"versions differ: package.xml {version}, setup.py {_setup_py_version()}, "
         f"mech_regulator.__version__ {mech_regulator.__version__}")
     assert (ROOT / "resource" / PACKAGE).is_file(), "resource/mech_regulator is the ament index marker"
+
+
+NODES = ("machine_node", "governor_node", "scenario_node", "recorder_node")
+
+
+def test_colcon_install_runs_the_nodes(colcon_install, tmp_path):
+    pytest.importorskip("rclpy", reason="the nodes need rclpy (pip install 'mech_regulator[ros]')")
+    from ros_support import next_domain_id, ros_environment
+
+    lib = colcon_install / "lib" / PACKAGE  # where `ros2 run mech_regulator machine_node` looks
+    for node in NODES:
+        assert (lib / node).is_file() and os.access(lib / node, os.X_OK), \
+            f"no executable {lib / node}; {lib} holds {sorted(path.name for path in lib.iterdir())}"
+    env = dict(ros_environment(next_domain_id()), PYTHONPATH=_install_python_path(colcon_install))
+    machine = str(lib / "machine_node")
+    missing = tmp_path / "missing.yaml"
+    result = subprocess.run([machine, "--ros-args", "-p", f"scene_file:={missing}"], capture_output=True, text=True,
+                            timeout=60, cwd=tmp_path, env=env, start_new_session=True)
+    assert result.returncode == 2 and f"scene '{missing}': no such file" in result.stderr, \
+        f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    assert "Traceback" not in result.stderr
+    # a short run of the ungoverned lathe, waiting for nobody
+    result = _run([machine, "--ros-args", "-p", "scene_file:=lathe", "-p", "lockstep_inputs:=['']", "-p",
+                   "min_subscribers:=0", "-p", "duration:=0.01"], cwd=tmp_path, env=env, start_new_session=True)
+    assert "finished at t = 0.01 s: complete" in result.stdout + result.stderr, result.stderr
+    where = _run([sys.executable, "-c", "import mech_regulator.nodes.machine as m; print(m.__file__)"],
+                 cwd=tmp_path, env=env).stdout.strip()
+    assert Path(where).is_relative_to(colcon_install), f"machine_node imported {where}, not the colcon install"

@@ -41,6 +41,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate = scene_command("simulate", "simulate a scene and print its summary")
     simulate.add_argument("--out", type=Path, help="write the sampled run as CSV (t, phi, omega, epsilon, J, moments, ...)")
     simulate.add_argument("--plot", type=Path, help="write a PNG picture of the run")
+    simulate.add_argument("--record", type=Path, metavar="RUN.rrd",
+                          help="write a Rerun recording of the run (speed, throttle, sleeve, moments, the mechanism "
+                               "and governor animated, events); open it with `rerun RUN.rrd`")
     simulate.add_argument("--json", action="store_true", help="print the summary as JSON")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
     simulate.add_argument("--exchange-step", type=float, metavar="H",
@@ -115,7 +118,7 @@ def _simulate(scene, args) -> int:
     from mech_regulator.model import build_model
     from mech_regulator.solvers import simulate
 
-    _check_outputs(args, args.out)
+    _check_outputs(args, args.out, args.record)
     model = build_model(scene)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
@@ -125,7 +128,7 @@ def _simulate(scene, args) -> int:
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory)
     if not trajectory.interpolants:
-        args.out = args.plot = None  # nothing to write
+        args.out = args.plot = args.record = None  # nothing to write
     if args.out is not None:
         columns = model.columns(*_samples(model, trajectory))
         np.savetxt(args.out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
@@ -136,6 +139,11 @@ def _simulate(scene, args) -> int:
 
         plot_run(model, trajectory, summary, args.plot)
         summary["plot"] = str(args.plot)
+    if args.record is not None:
+        from mech_regulator.viz.recording import record_run
+
+        record_run(model, *_samples(model, trajectory), args.record)
+        summary["recording"] = str(args.record)
     print(to_json(summary) if args.json else format_summary(model, summary))
     if trajectory.status == "failed":
         print(f"mech-regulator: {trajectory.message}", file=sys.stderr)
@@ -163,6 +171,11 @@ def _cosimulate(model, args) -> int:
         np.savetxt(args.out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
                    comments="", fmt="%.17g")
         summary["csv"] = str(args.out)
+    if args.record is not None:
+        from mech_regulator.viz.recording import record_run
+
+        record_run(model, run.times, run.states, args.record)
+        summary["recording"] = str(args.record)
     print(to_json(summary) if args.json else format_cosimulation_summary(summary))
     if run.status == "failed":
         print(f"mech-regulator: {run.message}", file=sys.stderr)

@@ -93,7 +93,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
                  + (f", {solver['events']} governor events" if solver["events"] else ""))
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
-    for key in ("csv", "plot"):
+    for key in ("csv", "plot", "recording"):
         if key in summary:
             lines.append(f"wrote {summary[key]}")
     return "\n".join(lines)

@@ -1,10 +1,12 @@
 """Drawing geometry of the Porter governor (pure numpy): spindle, arms, balls, links, sleeve and stops.
 
-Coordinates are metres in the plane through the spindle, y UP, with the top hinge of the arms at the
-origin. The linkage turns with the spindle; the picture is its projection on that plane, so each ball
-sits at a horizontal distance l sin a cos(psi) from the spindle, psi being the spindle angle. Parts are
-polylines of shape (n, 2) or bundles of polylines of shape (k, n, 2); `balls` is a set of points, drawn
-with radius `ball_radius(sensor)`. MOVING_PARTS move with the arm angle; the others stay put.
+Coordinates are metres in the plane of the arms, y UP, with the top hinge of the arms at the origin:
+the linkage is drawn as in the textbooks, in the plane that turns with it, so the balls never hide
+each other. The spindle's turning is shown by a mark on a collar above the hinge, which goes round a
+flat ellipse (the collar seen slightly from above) at the spindle angle psi. Parts are polylines of
+shape (n, 2) or bundles of polylines of shape (k, n, 2); `balls` and `spindle_mark` are points, the
+balls drawn with radius `ball_radius(sensor)`. MOVING_PARTS move with the arm or spindle angle; the
+others stay put.
 """
 
 from __future__ import annotations
@@ -24,7 +26,10 @@ SLEEVE_HALF_HEIGHT = 0.06       # per arm length [-]
 STOP_HALF_WIDTH = 0.2           # half length of the stop collars, per arm length [-]
 BOUNDS_SAMPLES = 50             # arm angles sampled over the stroke to find the swept outline [-]
 
-MOVING_PARTS = ("upper_arms", "lower_links", "sleeve", "balls")
+COLLAR_RADIUS = 0.12            # radius of the collar that carries the spindle mark, per arm length [-]
+COLLAR_TILT = 0.35              # apparent height / width of the collar's ellipse (seen from above) [-]
+
+MOVING_PARTS = ("upper_arms", "lower_links", "sleeve", "balls", "spindle_mark")
 
 
 def ball_radius(sensor: PorterSensor) -> float:
@@ -41,14 +46,16 @@ def sleeve_height(sensor: PorterSensor, arm_angle: float) -> float:
 def governor_outline(sensor: PorterSensor, arm_angle: float, spindle_angle: float) -> dict[str, np.ndarray]:
     """The governor's parts at arm angle a [rad] (from the spindle) and spindle angle psi [rad], metres, y up.
 
-    Top hinge H = (0, 0); balls at (+-l sin a cos psi, -l cos a) on the upper arms H-ball; lower links
+    Top hinge H = (0, 0); balls at (+-l sin a, -l cos a) on the upper arms H-ball; lower links
     (length l, Porter: equal to the arms) from the balls to the sleeve's centre S = (0, -2 l cos a) on the
     spindle; the sleeve a rectangle around S; the stops two collars on the spindle, one under the sleeve's
     bottom at z_low and one over its top at z_high; the spindle from SPINDLE_ABOVE_HINGE l above H to
-    SPINDLE_BELOW_SLEEVE l below the sleeve's lowest possible centre (0, -2 l).
+    SPINDLE_BELOW_SLEEVE l below the sleeve's lowest possible centre (0, -2 l); the spindle mark at
+    (r cos psi, h + k r sin psi) with r = COLLAR_RADIUS l, k = COLLAR_TILT, h half way up the spindle's top.
     """
     l = sensor.arm_length
-    reach = l * math.sin(arm_angle) * math.cos(spindle_angle)
+    reach = l * math.sin(arm_angle)
+    collar = COLLAR_RADIUS * l
     ball_y = -l * math.cos(arm_angle)
     hinge = (0.0, 0.0)
     sleeve_y = sleeve_height(sensor, arm_angle)
@@ -64,13 +71,15 @@ def governor_outline(sensor: PorterSensor, arm_angle: float, spindle_angle: floa
         "lower_links": np.array([[balls[0], (0.0, sleeve_y)], [balls[1], (0.0, sleeve_y)]]),
         "sleeve": rectangle((0.0, sleeve_y), SLEEVE_HALF_WIDTH * l, half_height),
         "balls": balls,
+        "spindle_mark": np.array([[collar * math.cos(spindle_angle),
+                                   0.5 * SPINDLE_ABOVE_HINGE * l + COLLAR_TILT * collar * math.sin(spindle_angle)]]),
     }
 
 
 def governor_bounds(sensor: PorterSensor) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) [m, y up] framing the governor over its whole stroke: the extent of its
-    outline (balls with their radius) at BOUNDS_SAMPLES arm angles between the stops, spindle angle 0
-    (the widest projection), grown by the mechanisms' margin."""
+    outline (balls with their radius) at BOUNDS_SAMPLES arm angles between the stops, grown by the
+    mechanisms' margin."""
     angles = np.linspace(*sensor.stop_angles(), BOUNDS_SAMPLES)
     outlines = [governor_outline(sensor, arm_angle, 0.0) for arm_angle in angles]
     return with_margin(outline_extent(outlines, ball_radius(sensor)))

@@ -310,6 +310,16 @@ class MachineModel:
         return out
 
 
+def crank_moments(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The moments on the crank by source from MachineModel.columns [N m]: drive (throttle included),
+    resistance (the machine's own loads and the links' weight), external (minus the external load) and
+    net = M_d + M_c = J epsilon + 1/2 J' omega^2 (physics.md section 1)."""
+    external = columns.get("M_external", np.zeros_like(columns["omega"]))
+    return {"drive": columns["M_drive"], "resistance": columns["M_load"] - external + columns.get("M_weight", 0.0),
+            "external": external,
+            "net": columns["J"] * columns["epsilon"] + 0.5 * columns["dJ_dphi"] * columns["omega"] ** 2}
+
+
 def _load_pieces(scene: Scene) -> tuple[LoadPiece, ...]:
     """Split the scenario's external load into pieces that are constant or linear in time."""
     scenario = scene.scenario

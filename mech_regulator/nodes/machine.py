@@ -281,7 +281,7 @@ class MachineNode(Node):
             self.clock_publisher.publish(Clock(clock=header_stamp))
         values = self.stepper.outputs(self.throttle, self.load)
         message = JointState(name=["crank"], position=[float(self.stepper.state[0])],
-                             velocity=[float(self.stepper.state[1])], effort=[self.net_moment(values)])
+                             velocity=[float(self.stepper.state[1])], effort=[values["net"]])
         message.header.stamp = header_stamp
         if self.output_joint is not None:
             name, position, velocity = self.output_joint
@@ -293,17 +293,10 @@ class MachineNode(Node):
 
     def publish_moments(self) -> None:
         """machine/moments at the current exchange time, with the inputs that now hold."""
-        values = self.stepper.outputs(self.throttle, self.load)
-        resistance = values["M_load"] + values.get("M_weight", 0.0) - values["M_external"]
-        message = JointState(name=["drive", "resistance", "external", "net"],
-                             effort=[values["M_drive"], resistance, values["M_external"], self.net_moment(values)])
+        moments = self.stepper.moments(self.throttle, self.load)
+        message = JointState(name=list(moments), effort=list(moments.values()))
         message.header.stamp = stamp(self.now_ns)
         self.moments_publisher.publish(message)
-
-    @staticmethod
-    def net_moment(values: dict[str, float]) -> float:
-        """M_d + M_c [N m] = J epsilon + 1/2 J' omega^2 (physics.md section 1)."""
-        return values["J"] * values["epsilon"] + 0.5 * values["dJ_dphi"] * values["omega"] ** 2
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""

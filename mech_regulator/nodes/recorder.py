@@ -25,6 +25,7 @@ from std_msgs.msg import String
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json
 from mech_regulator.nodes.common import STATE_QOS, float_parameter, nanoseconds, run, scene_model, text_parameter
+from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
 from mech_regulator.viz.recording import RunRecording
 
@@ -52,6 +53,8 @@ class RecorderNode(Node):
         self.exchange_step = float_parameter(self, "exchange_step", 1e-3, "the machine's exchange step [s], for the "
                                                                           "summary", 1e-6, 1.0, read_only=True)
         self.path = None if output == "none" else Path(output) if output else default_output(self.model.scene.name)
+        if self.path is None and not connect:
+            raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate)

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mech_regulator.model import LoadPiece, MachineModel
+from mech_regulator.model import LoadPiece, MachineModel, crank_moments
 from mech_regulator.solvers.time_domain import _segment
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -72,12 +72,19 @@ class MachineStepper:
 
     def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
         """The machine's outputs at its current state with these inputs held: the columns of
-        MachineModel.columns (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...)."""
+        MachineModel.columns (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the
+        moments on the crank by source (drive, resistance, external, net; see crank_moments)."""
         if self.tripped_at is not None:
             throttle = 0.0
         columns = self.plant.columns(np.array([self.time]), self.state[:, None], np.array([throttle]),
                                      np.array([external_load]))
+        columns.update(crank_moments(columns))
         return {name: float(values[0]) for name, values in columns.items()}
+
+    def moments(self, throttle: float, external_load: float) -> dict[str, float]:
+        """The moments on the crank by source [N m] now, with these inputs held (see crank_moments)."""
+        outputs = self.outputs(throttle, external_load)
+        return {name: outputs[name] for name in ("drive", "resistance", "external", "net")}
 
 
 class GovernorStepper:

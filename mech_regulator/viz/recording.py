@@ -13,7 +13,7 @@ cycle-averaged machine at the current external load (`analysis.operating_point`)
 governor settles (it has a static error); a machine without a governor has no set point and no band.
 The band `speed/band_high`, `speed/band_low` is omega_set (1 +- delta / 2) with delta the scene's
 `analysis.permitted_delta` or, when the scene gives none, twice its `analysis.settling_band` (then the
-band is the settling band around omega_set); the series' names and the `about` document say which.
+band is the settling band around omega_set); the speed view's title and the `about` document say which.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PAR
 from mech_regulator.governors.drawing import ball_radius, governor_bounds, governor_outline
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
-from mech_regulator.model import MachineModel
+from mech_regulator.model import MachineModel, crank_moments
 from mech_regulator.solvers.trajectory import Progress
 
 APPLICATION_ID = "mech_regulator"
@@ -70,9 +70,9 @@ MECHANISM_STYLE = {
 }
 GOVERNOR_STYLE = {
     "spindle": (GREY, 2.5), "stops": (RED, 2.5), "upper_arms": (ORANGE, 2.5), "lower_links": (BLUE, 2.0),
-    "sleeve": (YELLOW, 2.0), "balls": ((200, 200, 215), None),
+    "sleeve": (YELLOW, 2.0), "balls": ((200, 200, 215), None), "spindle_mark": (ORANGE, 4.0),
 }
-POINT_PARTS = ("joints", "balls")
+POINT_PARTS = ("joints", "balls", "spindle_mark")
 FLIP_Y = np.array([1.0, -1.0])       # drawings have y up, Rerun's 2-D views y down
 
 
@@ -225,8 +225,8 @@ class RunRecording:
 
     def _send(self, entity: str, times: list[int], columns) -> None:
         """send_columns of one entity at times [ns] on the sim_time timeline; empties times."""
-        self._stream.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=np.array(times, dtype="timedelta64[ns]"))],
-                                  columns=columns)
+        stamps = rr.TimeColumn(TIMELINE, duration=np.array(times, dtype="timedelta64[ns]"))
+        self._stream.send_columns(entity, indexes=[stamps], columns=columns)
         times.clear()
 
     def _current_set_point(self, t_ns: int) -> float:
@@ -313,30 +313,36 @@ def recorded_series(model: MachineModel) -> list[str]:
 
 
 def about_text(model: MachineModel, delta: float, source: str) -> str:
-    """Markdown describing the scene and what the series mean (units, set point, band)."""
+    """Markdown describing the scene and what the series mean (units, set point, band, moments, drawings)."""
     scene = model.scene
     governor = model.governor
-    lines = [f"# {scene.name or 'run'}", "", scene.description or "", "",
-             "Time line `sim_time`: simulated time. Speeds in rad/s, moments in N m on the crank, "
-             "throttle and servo 0..1, sleeve and dashpot shift in mm."]
+    paragraphs = [f"# {scene.name or 'run'}"] + ([scene.description] if scene.description else [])
+    paragraphs.append("Time line `sim_time`: simulated time. Crank speed ω in rad/s; moments on the crank in N m: "
+                      "drive as applied (throttle included), resistance = the machine's loads and link weights, "
+                      "external = minus the external load, net = their sum = J ε + J' ω² / 2.")
     if governor is None:
-        lines.append("No governor: no set speed and no band are drawn.")
+        paragraphs.append("No governor: no set speed and no band are drawn.")
     else:
         if governor.kind == "indirect":
-            lines.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
-                         "(sleeve at the pilot valve's neutral).")
+            paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
+                              "(sleeve at the pilot valve's neutral). Throttle and servo s in 0..1 (the servo "
+                              "position is the throttle).")
         else:
-            lines.append("Set speed ω_set: where the direct governor settles under the present external load "
-                         "(operating point of the cycle-averaged machine; it moves with the load: static error).")
+            paragraphs.append("Set speed ω_set: where the direct governor settles under the present external load "
+                              "(operating point of the cycle-averaged machine; it moves with the load: the static "
+                              "error). Throttle in 0..1.")
         if source == "permitted":
-            lines.append(f"Band ω_set (1 ± δ/2) with the permitted coefficient of speed fluctuation δ = {delta:.4g} "
-                         "(analysis.permitted_delta).")
+            paragraphs.append(f"Band ω_set (1 ± δ/2) with the permitted coefficient of speed fluctuation "
+                              f"δ = {delta:.4g} (analysis.permitted_delta).")
         else:
-            lines.append(f"Band ω_set (1 ± {delta / 2:.3g}): the settling band (analysis.settling_band); the scene "
-                         "gives no analysis.permitted_delta.")
-    lines.append("Drawings to scale in metres (governor: steel balls of the ball mass; the picture is the "
-                 "linkage projected on a plane through the turning spindle).")
-    return "\n\n".join(lines)
+            paragraphs.append(f"Band ω_set (1 ± {delta / 2:.3g}): the settling band (analysis.settling_band); the "
+                              "scene gives no analysis.permitted_delta.")
+        paragraphs.append("Sleeve rise z (and the dashpot's shift ζ of isodromic feedback) in mm. The governor is "
+                          "drawn to scale, its balls as steel spheres of the ball mass, projected on a plane "
+                          "through the turning spindle.")
+    paragraphs.append("The mechanism is drawn to scale in metres." if scene.machine.mechanism is not None
+                      else "The machine has no mechanism: a schematic disc with a spoke shows the crank angle.")
+    return "\n\n".join(paragraphs)
 
 
 def run_blueprint(model: MachineModel) -> rrb.Blueprint:
@@ -388,8 +394,11 @@ def _bounds_y_down(bounds: tuple[float, float, float, float]) -> rrb.VisualBound
 
 
 def load_change_events(model: MachineModel) -> list[tuple[float, str]]:
-    """(time [s], text) of the scenario's external load: its value at t = 0 and each step or ramp."""
+    """(time [s], text) of the scenario's external load: its value at t = 0 and each step or ramp (none for a
+    scene without an external load)."""
     scenario = model.scene.scenario
+    if not model.load_pieces:
+        return []
     events = [(0.0, f"external load {scenario.external_load:g} N m")]
     for event in scenario.load_events:
         if event.ramp > 0.0:
@@ -410,9 +419,7 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
     """
     columns = model.columns(times, states)
     count = times.size
-    external = columns.get("M_external", np.zeros(count))
-    resistance = columns["M_load"] - external + columns.get("M_weight", 0.0)
-    net = columns["J"] * columns["epsilon"] + 0.5 * columns["dJ_dphi"] * columns["omega"] ** 2
+    moments = crank_moments(columns)
     governor_keys = [key for key in ("sleeve", "sleeve_velocity", "arm_angle", "throttle", "servo", "feedback_shift")
                      if key in columns]
     stamps = np.round(np.asarray(times) * NANOSECONDS).astype(np.int64)
@@ -422,8 +429,7 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
     for i in range(count):
         t_ns = int(stamps[i])
         recording.add_machine(t_ns, float(columns["phi"][i]), float(columns["omega"][i]))
-        recording.add_moments(t_ns, float(columns["M_drive"][i]), float(resistance[i]), float(external[i]),
-                              float(net[i]))
+        recording.add_moments(t_ns, *(float(moments[name][i]) for name in ("drive", "resistance", "external", "net")))
         if governor_keys:
             recording.add_governor(t_ns, {key: float(columns[key][i]) for key in governor_keys})
         if (i + 1) % RECORD_RUN_FLUSH_SAMPLES == 0:

@@ -1,0 +1,343 @@
+"""Helpers for the tests of the ROS 2 layer: a private ROS domain per test, node processes that are
+always stopped, and a test node (`Probe`) in the pytest process with its own rclpy Context.
+
+Nothing here measures wall-clock time: every wait polls for a condition, with a generous deadline
+that only turns a hang into a failure.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Callable
+
+import pytest
+import yaml
+
+rclpy = pytest.importorskip("rclpy", reason="the ROS 2 tests need rclpy (pip install 'mech_regulator[ros]')")
+
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
+
+WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a test measures)
+STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
+
+# Domains where no ports collide with the ephemeral range: 1..101 and 215..232. A test run takes
+# consecutive ones from a base derived from its pid, so two runs side by side rarely share one.
+DOMAIN_IDS = [*range(1, 102), *range(215, 233)]
+_domains = itertools.count((os.getpid() * 37) % len(DOMAIN_IDS))
+
+# What the test node listens with: reliable, deep enough never to drop a sample of a short run. State
+# streams (joint_states, machine/moments, governor/state) are transient local: the test node gets what
+# was published before its subscription matched. /diagnostics is volatile (as its publishers).
+LISTEN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.VOLATILE)
+STATE_LISTEN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000, reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# What the test node publishes commands with (the nodes' COMMAND_QOS).
+SEND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+NANOSECONDS = 1_000_000_000
+
+
+def next_domain_id() -> int:
+    """A ROS domain no other test of this run uses."""
+    return DOMAIN_IDS[next(_domains) % len(DOMAIN_IDS)]
+
+
+def ros_environment(domain_id: int) -> dict[str, str]:
+    """The environment of processes on a private domain: discovery on this machine only, the message
+    packages of this Python's prefix when no ROS is sourced, unbuffered output for the logs."""
+    environment = dict(os.environ)
+    environment.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
+    environment.setdefault("AMENT_PREFIX_PATH", sys.prefix)
+    environment.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    return environment
+
+
+def stamp_ns(stamp) -> int:
+    """Whole nanoseconds of a builtin_interfaces/Time."""
+    return stamp.sec * NANOSECONDS + stamp.nanosec
+
+
+def diagnostic_values(status) -> dict[str, str]:
+    """The KeyValues of a DiagnosticStatus as a dict."""
+    return {item.key: item.value for item in status.values}
+
+
+# -------------------------------------------------------------------------------------------------
+# Processes
+
+
+def _children(pid: int) -> list[int]:
+    """The live descendants of a process (Linux /proc), found through their parent pids."""
+    parents: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parents.setdefault(int(fields[1]), []).append(int(entry.name))
+    found, todo = [], [pid]
+    while todo:
+        for child in parents.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def _start_time(pid: int) -> str | None:
+    """A process's start time (field 22 of /proc/pid/stat), to tell it from a later one with its pid."""
+    try:
+        return (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return None
+
+
+def _signal(pid: int, number: int) -> None:
+    try:
+        os.kill(pid, number)
+    except ProcessLookupError:
+        pass
+
+
+class Processes:
+    """The processes a test starts (each in a session of its own), stopped at the end of the test by
+    `stop_all`: SIGINT to each and its descendants (the main job's nodes), then SIGKILL if they linger."""
+
+    def __init__(self, folder: Path, environment: dict[str, str]):
+        self.folder = folder
+        self.environment = environment
+        self.started: list[tuple[subprocess.Popen, Path]] = []
+
+    def start(self, command: list[str], name: str, **kwargs) -> subprocess.Popen:
+        """Start a command with the private environment; its output goes to <folder>/<name>.log."""
+        log_path = self.folder / f"{name}.log"
+        with open(log_path, "w") as log:
+            process = subprocess.Popen([str(part) for part in command], env=self.environment, stdout=log,
+                                       stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
+                                       cwd=kwargs.pop("cwd", self.folder), **kwargs)
+        self.started.append((process, log_path))
+        return process
+
+    def node(self, module: str, parameters: dict, name: str | None = None) -> subprocess.Popen:
+        """Start `python -m mech_regulator.nodes.<module>` with parameters (a dict, written as a
+        ros__parameters file so that YAML gives the types)."""
+        name = name or module
+        parameter_file = self.folder / f"{name}.params.yaml"
+        parameter_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": parameters}}))
+        return self.start([sys.executable, "-m", f"mech_regulator.nodes.{module}", "--ros-args", "--params-file",
+                           parameter_file], name)
+
+    def log(self, process: subprocess.Popen) -> str:
+        """What a process wrote so far."""
+        for started, path in self.started:
+            if started is process:
+                return path.read_text(errors="replace")
+        raise KeyError(process)
+
+    def logs(self) -> str:
+        """The last lines of every log, for failure messages."""
+        parts = []
+        for process, path in self.started:
+            text = path.read_text(errors="replace") if path.exists() else ""
+            parts.append(f"--- {path.name} (exit {process.poll()})\n" + "".join(text.splitlines(True)[-30:]))
+        return "\n".join(parts)
+
+    def wait(self, process: subprocess.Popen, timeout: float = WAIT) -> int:
+        """Wait for a process to end; a hang is a failure (with the logs)."""
+        try:
+            return process.wait(timeout)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"a process did not end within {timeout} s: {process.args}\n{self.logs()}")
+
+    def stop_all(self) -> None:
+        """SIGINT every process still running and its descendants; SIGKILL what is left after STOP_WAIT."""
+        targets: list[tuple[int, str | None]] = []
+        for process, _ in self.started:
+            if process.poll() is None:
+                targets += [(pid, _start_time(pid)) for pid in _children(process.pid)]
+        for process, _ in self.started:
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + STOP_WAIT
+        for process, _ in self.started:
+            try:
+                process.wait(max(deadline - time.monotonic(), 0.1))
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+        for pid, started in targets:  # the main job's nodes (sessions of their own): same pid, same process
+            if started is not None and _start_time(pid) == started:
+                _signal(pid, signal.SIGINT)
+        while any(started is not None and _start_time(pid) == started for pid, started in targets) \
+                and time.monotonic() < deadline:
+            time.sleep(0.1)
+        for pid, started in targets:
+            if started is not None and _start_time(pid) == started:
+                _signal(pid, signal.SIGKILL)
+
+
+@pytest.fixture
+def domain_id() -> int:
+    return next_domain_id()
+
+
+@pytest.fixture
+def processes(tmp_path, domain_id):
+    """Processes of this test on its private domain, always stopped at the end."""
+    started = Processes(tmp_path, ros_environment(domain_id))
+    try:
+        yield started
+    finally:
+        started.stop_all()
+
+
+# -------------------------------------------------------------------------------------------------
+# The test node
+
+
+class Probe:
+    """A node in the pytest process on the test's domain, with an rclpy Context of its own. Spinning
+    happens only inside `spin_until`, in this thread: callbacks never race the test's asserts."""
+
+    def __init__(self, domain_id: int, name: str = "probe"):
+        self.context = Context()
+        rclpy.init(context=self.context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_until(self, condition: Callable[[], object], what: str, timeout: float = WAIT,
+                   describe: Callable[[], str] = lambda: ""):
+        """Spin until condition() is true (returns its value); failing after timeout [s] of wall time."""
+        deadline = time.monotonic() + timeout
+        while True:
+            value = condition()
+            if value:
+                return value
+            if time.monotonic() > deadline:
+                pytest.fail(f"timed out after {timeout} s waiting for {what}\n{describe()}")
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def listen(self, message_type, topic: str, qos=LISTEN_QOS, callback: Callable | None = None,
+               publishers: int = 0, describe=lambda: "") -> list:
+        """Subscribe to topic; returns the list every received message is appended to (and passed to
+        callback). With publishers > 0, first wait until that many publishers have matched."""
+        received: list = []
+
+        def on_message(message) -> None:
+            received.append(message)
+            if callback is not None:
+                callback(message)
+
+        subscription = self.node.create_subscription(message_type, topic, on_message, qos)
+        if publishers:
+            self.spin_until(lambda: subscription.get_publisher_count() >= publishers,
+                            f"{publishers} publisher(s) of {topic}", describe=describe)
+        return received
+
+    def call(self, service_type, name: str, request, describe=lambda: ""):
+        """Call a service (waiting for it first) and return its response."""
+        client = self.node.create_client(service_type, name)
+        self.spin_until(client.service_is_ready, f"the service {name}", describe=describe)
+        future = client.call_async(request)
+        self.spin_until(future.done, f"the answer of {name}", describe=describe)
+        self.node.destroy_client(client)
+        return future.result()
+
+    def publisher(self, message_type, topic: str, subscribers: int = 1, qos=SEND_QOS, describe=lambda: ""):
+        """A publisher on topic, once it has matched `subscribers` subscriptions (so nothing is lost)."""
+        publisher = self.node.create_publisher(message_type, topic, qos)
+        self.spin_until(lambda: publisher.get_subscription_count() >= subscribers,
+                        f"{subscribers} subscriber(s) of {topic}", describe=describe)
+        return publisher
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+@pytest.fixture
+def probe(domain_id, monkeypatch):
+    """The test node on the test's domain (discovery on this machine only, as the nodes)."""
+    for key, value in ros_environment(domain_id).items():
+        if key.startswith(("ROS_", "RMW_", "AMENT_")):
+            monkeypatch.setenv(key, value)
+    node = Probe(domain_id, f"probe_{domain_id}")
+    try:
+        yield node
+    finally:
+        node.close()
+
+
+class RunListener:
+    """What the machine (and governor) publish, as the test node receives it. `open_gate` subscribes
+    to joint_states last: a lockstep machine waiting for that subscriber starts only then."""
+
+    def __init__(self, probe: Probe, governed: bool, diagnostics_publishers: int = 1, describe=lambda: ""):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import JointState
+
+        self.probe, self.describe = probe, describe
+        self.JointState = JointState
+        self.diagnostics = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS,
+                                        publishers=diagnostics_publishers, describe=describe)
+        self.moment_messages = probe.listen(JointState, "machine/moments", STATE_LISTEN_QOS)
+        self.governor_messages = probe.listen(JointState, "governor/state", STATE_LISTEN_QOS) if governed else None
+        self.joint_messages: list = []
+
+    def open_gate(self, callback: Callable | None = None) -> None:
+        self.joint_messages = self.probe.listen(self.JointState, "joint_states", STATE_LISTEN_QOS, callback=callback)
+
+    def statuses(self, suffix: str = "/machine") -> list[tuple[bytes, str, dict[str, str]]]:
+        """(level, message, values) of every status received from the node whose name ends with suffix."""
+        return [(status.level, status.message, diagnostic_values(status)) for array in self.diagnostics
+                for status in array.status if status.name.endswith(suffix)]
+
+    def finished(self) -> dict[str, str] | None:
+        """The machine's last diagnostics (with finished_at_ns), once received."""
+        ends = [values for _, _, values in self.statuses() if "finished_at_ns" in values]
+        return ends[-1] if ends else None
+
+    def final_status(self) -> tuple[bytes, str, dict[str, str]]:
+        return [status for status in self.statuses() if "finished_at_ns" in status[2]][-1]
+
+    @staticmethod
+    def by_stamp(messages: list) -> dict[int, object]:
+        return {stamp_ns(message.header.stamp): message for message in messages}
+
+    @property
+    def joints(self) -> dict[int, object]:
+        return self.by_stamp([message for message in self.joint_messages if "crank" in message.name])
+
+    @property
+    def moments(self) -> dict[int, dict[str, float]]:
+        return {when: dict(zip(message.name, message.effort)) for when, message in
+                self.by_stamp(self.moment_messages).items()}
+
+    @property
+    def governor(self) -> dict[int, object]:
+        return self.by_stamp(self.governor_messages)
+
+    def wait_finished(self) -> int:
+        """Spin until the machine said it finished and its (and the governor's) last samples are in;
+        returns the end time [ns]."""
+        finished = self.probe.spin_until(self.finished, "the machine's diagnostics saying it finished",
+                                         describe=self.describe)
+        end = int(finished["finished_at_ns"])
+        self.probe.spin_until(lambda: end in self.joints and end in self.moments
+                              and (self.governor_messages is None or end in self.governor),
+                              "the last samples of the run", describe=self.describe)
+        return end

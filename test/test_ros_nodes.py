@@ -1,0 +1,567 @@
+"""The ROS 2 layer: machine_node, governor_node, scenario_node, recorder_node and the main job
+(`mech-regulator run`), checked against the in-process co-simulation of the core
+(mech_regulator.solvers.cosim), which they promise to reproduce to the last bit in lockstep.
+
+Every test that starts nodes has a ROS domain of its own (ros_support.next_domain_id) with discovery
+on this machine only; its processes are stopped when it ends, pass or fail. A lockstep machine waits
+for its subscribers before the first step, so the tests subscribe last (RunListener.open_gate) and
+nothing depends on how fast the machine runs.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import shutil
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from ros_support import (STATE_LISTEN_QOS, WAIT, Processes, RunListener, diagnostic_values,  # noqa: F401
+                         domain_id, next_domain_id, probe, processes, ros_environment, stamp_ns)
+from support import run_cli
+
+from builtin_interfaces.msg import Time  # noqa: E402  (rclpy is there: ros_support skipped otherwise)
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
+from rcl_interfaces.msg import Parameter as ParameterMessage, ParameterType, ParameterValue  # noqa: E402
+from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
+from rclpy.duration import Duration  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64  # noqa: E402
+
+from mech_regulator.analysis import cycle_mean_speed, operating_point
+from mech_regulator.model import build_model
+from mech_regulator.scene import load_scene, validate_scene
+from mech_regulator.solvers import simulate
+from mech_regulator.solvers.cosim import cosimulate, seconds, to_nanoseconds
+from mech_regulator.solvers.trajectory import SampledTrajectory
+
+# engine_direct shortened to 1 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s): the main job's test scene
+SHORT_ENGINE = ["scenario.duration=1", "scenario.load_events.0.time=0.4", "scenario.load_events.1.time=0.7"]
+BASE_LOAD = 6.0  # [N m] of the constant-inertia scene below
+
+
+# -------------------------------------------------------------------------------------------------
+# Scenes
+
+
+@functools.cache
+def _steady_speed() -> float:
+    """The constant-inertia scene's operating point at BASE_LOAD: it starts there, at rest."""
+    return operating_point(build_model(validate_scene(_constant_inertia_data(100.0))), BASE_LOAD).speed
+
+
+def _constant_inertia_data(omega: float, **scenario) -> dict:
+    """A governed machine of constant inertia (cheap per step) with a direct-action Porter governor."""
+    return {
+        "name": "constant_inertia",
+        "machine": {"inertia": 0.5,
+                    "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+                    "loads": [{"type": "viscous", "coefficient": 0.3}]},
+        "governor": {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
+                     "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08],
+                     "valve": {"open_at": 0.02, "closed_at": 0.08}},
+        "scenario": {"initial": {"omega": omega}, "duration": 0.4, "external_load": BASE_LOAD,
+                     "load_events": [], **scenario},
+        "solver": {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11},
+    }
+
+
+def constant_inertia_scene(folder: Path, name: str = "scene.yaml", **scenario):
+    """Write the constant-inertia scene (scenario keys changed) to folder/name; returns (path, model)."""
+    data = _constant_inertia_data(_steady_speed(), **scenario)
+    path = folder / name
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path, build_model(validate_scene(data))
+
+
+def machine_parameters(scene: Path, **changes) -> dict:
+    """machine_node's parameters for a lockstep run of scene with the test node as one subscriber."""
+    return {"scene_file": str(scene), "time_mode": "lockstep", "exchange_step": 0.002,
+            "lockstep_inputs": ["throttle", "load"], "peer_timeout": 60.0, **changes}
+
+
+# -------------------------------------------------------------------------------------------------
+# Comparisons with the core
+
+
+def received_run(listener: RunListener, end: int):
+    """Exchange times [ns] and what the test node received there: state rows (phi, omega, arm angle,
+    arm rate), governor throttle, moments by name."""
+    joints, moments, governor = listener.joints, listener.moments, listener.governor
+    times = sorted(joints)
+    assert times[-1] == end and sorted(moments) == times and sorted(governor) == times, \
+        "joint_states, machine/moments and governor/state have different exchange times"
+    rows = np.array([[joints[t].position[0], joints[t].velocity[0],
+                      governor[t].position[list(governor[t].name).index("arm")],
+                      governor[t].velocity[list(governor[t].name).index("arm")]] for t in times]).T
+    throttle = np.array([governor[t].position[list(governor[t].name).index("throttle")] for t in times])
+    return times, rows, throttle, {name: np.array([moments[t][name] for t in times])
+                                   for name in ("drive", "resistance", "external", "net")}
+
+
+def assert_equals_cosimulation(listener: RunListener, end: int, run) -> None:
+    """The received run is the in-process co-simulation to the last bit: same exchange times, states,
+    throttle and external load."""
+    times, rows, throttle, moments = received_run(listener, end)
+    assert times == [to_nanoseconds(t) for t in run.times], "exchange times differ from the core's"
+    np.testing.assert_array_equal(rows[1], run.states[1], err_msg="omega differs from cosimulate")
+    np.testing.assert_array_equal(rows, run.states, err_msg="the state differs from cosimulate")
+    np.testing.assert_array_equal(throttle, run.throttle, err_msg="the governor's throttle differs from cosimulate")
+    np.testing.assert_array_equal(-moments["external"], run.external_load,
+                                  err_msg="the external load differs from cosimulate")
+
+
+# -------------------------------------------------------------------------------------------------
+# 2. Lockstep against the monolithic simulation (in process: the error of the exchange step itself)
+
+
+def test_lockstep_error_is_first_order_in_the_exchange_step():
+    model = build_model(load_scene("engine_direct", SHORT_ENGINE))
+    monolithic = simulate(model)
+    assert monolithic.status == "complete", monolithic.message
+    omega_error, mean_error, fair_mean_error = {}, {}, {}
+    for step in (1e-3, 2e-3):
+        run = cosimulate(model, step)
+        assert run.status == "complete" and run.times[-1] == 1.0
+        reference = monolithic(run.times)
+        omega_error[step] = np.max(np.abs(run.states[1] - reference[1]))
+        # the cycle-mean speed as a user reads it: the co-simulation (linear between exchange times)
+        # against the dense monolithic run ...
+        cosimulated_mean = cycle_mean_speed(model, run.trajectory(model), run.times)
+        mean_error[step] = np.nanmax(np.abs(cosimulated_mean - cycle_mean_speed(model, monolithic, run.times)))
+        # ... and against the monolithic run sampled at the same times (the interpolation, second order
+        # in h, is then the same on both sides: what is left is the exchange's error)
+        sampled = SampledTrajectory(method="monolithic sampled", t_start=0.0, times=run.times, states=reference,
+                                    status="complete", message="")
+        fair_mean_error[step] = np.nanmax(np.abs(cosimulated_mean - cycle_mean_speed(model, sampled, run.times)))
+        assert omega_error[step] <= 120.0 * step, f"h = {step}: omega error {omega_error[step]} > 120 h"
+        assert mean_error[step] <= 40.0 * step, f"h = {step}: cycle-mean speed error {mean_error[step]} > 40 h"
+        assert omega_error[step] > 0.0 and fair_mean_error[step] > 0.0
+    assert 1.8 <= omega_error[2e-3] / omega_error[1e-3] <= 2.2, omega_error
+    assert 1.8 <= fair_mean_error[2e-3] / fair_mean_error[1e-3] <= 2.2, fair_mean_error
+
+
+@pytest.mark.xfail(strict=True, reason="cosim: after an overspeed trip the run's throttle (and so the CSV's "
+                                       "M_drive, epsilon and throttle columns) stays the governor's, not the "
+                                       "closed throttle the machine applies", raises=AssertionError)
+def test_columns_after_an_overspeed_trip_show_the_closed_throttle(tmp_path):
+    _, model = constant_inertia_scene(tmp_path, load_events=[{"time": 0.1, "torque": 0.0}])
+    run = cosimulate(model, 0.002, overspeed_trip=_steady_speed() + 0.3)
+    assert run.tripped_at is not None
+    columns = model.columns(run.times, run.states, run.throttle, run.external_load)
+    after = run.times > run.tripped_at
+    np.testing.assert_array_equal(columns["M_drive"][after], 0.0)
+
+
+# -------------------------------------------------------------------------------------------------
+# 3. A load step published by the test node
+
+
+def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, processes, probe):
+    scene, model = constant_inertia_scene(tmp_path, duration=0.6)
+    # the test node is the machine's `load` input (the scenario's constant BASE_LOAD, stamped), so the
+    # machine waits for it at every exchange time; the step itself goes on load_torque (Float64)
+    processes.node("machine", machine_parameters(scene, min_subscribers=2))
+    processes.node("governor", {"scene_file": str(scene)})
+    stamped = probe.publisher(WrenchStamped, "load_torque_stamped", describe=processes.logs)
+    load = probe.publisher(Float64, "load_torque", describe=processes.logs)
+    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+    sent: list[int] = []
+
+    def answer(message: JointState) -> None:
+        when = stamp_ns(message.header.stamp)
+        if not sent and when >= 300_000_000:
+            load.publish(Float64(data=8.0))
+            assert load.wait_for_all_acked(Duration(seconds=WAIT))
+            sent.append(when)
+        reply = WrenchStamped()
+        reply.header.stamp = message.header.stamp
+        reply.wrench.torque.z = BASE_LOAD
+        stamped.publish(reply)
+
+    listener.open_gate(answer)
+    end = listener.wait_finished()
+    assert end == to_nanoseconds(0.6)
+    external = listener.moments
+    stepped = [when for when in sorted(external) if external[when]["external"] == -8.0]
+    assert stepped, f"the load 8 N m sent at {sent} was never applied"
+    step = stepped[0]
+    assert step >= sent[0], "the load applied before it was sent"
+    assert all((external[when]["external"] == -8.0) == (when >= step) for when in external)
+    # the same run in process, with the load event at that exchange time exactly
+    _, stepped_model = constant_inertia_scene(tmp_path, "stepped.yaml", duration=0.6,
+                                              load_events=[{"time": seconds(step), "torque": 8.0}])
+    run = cosimulate(stepped_model, 0.002)
+    assert_equals_cosimulation(listener, end, run)
+    # the governor lets the speed sag after the step (a direct governor's static error)
+    speed = cycle_mean_speed(stepped_model, run.trajectory(stepped_model), run.times)
+    at_step = speed[run.times == seconds(step)][0]
+    assert speed[-1] < at_step - 0.1 and np.all(speed[run.times > seconds(step)] < at_step)
+    assert listener.final_status()[0] == DiagnosticStatus.OK
+
+
+# -------------------------------------------------------------------------------------------------
+# 4. Bad messages are counted and change nothing
+
+
+def test_bad_messages_are_rejected_and_counted(tmp_path, processes, probe):
+    scene, model = constant_inertia_scene(tmp_path, duration=0.3, load_events=[{"time": 0.1, "torque": 8.0}])
+    processes.node("machine", machine_parameters(scene, min_subscribers=3, max_load_torque=1e3))
+    processes.node("governor", {"scene_file": str(scene)})
+    processes.node("scenario", {"scene_file": str(scene)})
+    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+    load = probe.publisher(Float64, "load_torque", describe=processes.logs)
+    throttle = probe.publisher(JointState, "throttle", describe=processes.logs)
+    speed = probe.publisher(JointState, "joint_states", subscribers=2, describe=processes.logs)  # governor, scenario
+    for value in (math.nan, math.inf, 1e9):
+        load.publish(Float64(data=value))
+    throttle.publish(JointState(name=["valve"], position=[0.5]))
+    throttle.publish(JointState(name=["throttle"], position=[1.5]))
+    speed.publish(JointState(name=["wheel"], position=[0.0], velocity=[100.0]))
+    for publisher in (load, throttle, speed):
+        assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
+    probe.node.destroy_publisher(speed)  # (volatile: it would only warn of the test node's own listener)
+    listener.open_gate()  # the machine's third subscriber: the run starts
+    end = listener.wait_finished()
+
+    level, message, values = listener.final_status()
+    assert level == DiagnosticStatus.WARN and message == "5 bad messages rejected", (level, message)
+    assert {key: value for key, value in values.items() if key.startswith("rejected")} == {
+        "rejected_messages": "5", "rejected: not finite": "2", "rejected: out of range": "2",
+        "rejected: wrong joint name": "1"}
+    governor = probe.spin_until(lambda: [values for _, _, values in listener.statuses("/governor")
+                                         if "rejected_messages" in values and values["rejected_messages"] != "0"],
+                                "the governor's diagnostics counting the bad message", describe=processes.logs)[-1]
+    assert governor["rejected_messages"] == "1" and governor["rejected: wrong joint name"] == "1", governor
+    # the state never saw them: the run is the in-process co-simulation to the last bit
+    assert_equals_cosimulation(listener, end, cosimulate(model, 0.002))
+
+
+@pytest.mark.xfail(strict=True, reason="machine_node: machine/moments at t_k is computed before the throttle for "
+                                       "t_k is applied (publish_moments runs before applied_throttle), so its "
+                                       "drive and net are those of the throttle held over the previous step",
+                   raises=AssertionError)
+def test_moments_are_those_of_the_inputs_held_from_their_time(tmp_path, processes, probe):
+    scene, model = constant_inertia_scene(tmp_path, duration=0.2, load_events=[{"time": 0.1, "torque": 8.0}])
+    processes.node("machine", machine_parameters(scene, min_subscribers=3))
+    processes.node("governor", {"scene_file": str(scene)})
+    processes.node("scenario", {"scene_file": str(scene)})
+    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+    listener.open_gate()
+    end = listener.wait_finished()
+    run = cosimulate(model, 0.002)
+    columns = model.columns(run.times, run.states, run.throttle, run.external_load)
+    _, _, _, moments = received_run(listener, end)
+    np.testing.assert_array_equal(moments["drive"], columns["M_drive"])
+
+
+# -------------------------------------------------------------------------------------------------
+# 5. Fail-safe (realtime) and overspeed trip (lockstep)
+
+
+def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, processes, probe):
+    scene, _ = constant_inertia_scene(tmp_path, duration=120.0)  # ended by the test, long before that
+    governor = processes.node("governor", {"scene_file": str(scene)})
+    # the governor first (a realtime machine does not wait for anyone): it listens and can answer
+    probe.spin_until(lambda: probe.node.count_subscribers("joint_states") >= 1
+                     and probe.node.count_publishers("throttle") >= 1, "the governor node", describe=processes.logs)
+    listener = RunListener(probe, governed=False, diagnostics_publishers=1, describe=processes.logs)
+    processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 1.0,
+                               "exchange_step": 0.005, "throttle_timeout": 0.05, "fail_safe": "close"})
+    moments = listener.moments
+
+    def governed_after(time_ns: int) -> bool:  # the governor's throttle is driving the machine at time_ns
+        nonlocal moments
+        moments = listener.moments
+        return bool(listener.statuses()) and any(when >= time_ns and values["drive"] > 0.0
+                                                 for when, values in moments.items())
+
+    probe.spin_until(lambda: governed_after(500_000_000), "the governed machine at 0.5 s", describe=processes.logs)
+    governor.kill()
+    assert governor.wait(WAIT) == -signal.SIGKILL
+    killed = max(listener.moments)  # the machine was at least this far when the governor died
+
+    def failing_safe():
+        return [(level, message) for level, message, values in listener.statuses() if values["fail_safe_active"]
+                == "True" and float(values["sim_time"]) > seconds(killed)]
+
+    level, message = probe.spin_until(failing_safe, "diagnostics saying fail-safe after the governor died",
+                                      describe=processes.logs)[0]
+    assert level == DiagnosticStatus.WARN and message.startswith("fail-safe (close)"), (level, message)
+    probe.spin_until(lambda: max(listener.moments) >= killed + 500_000_000, "0.5 s more of the run",
+                     describe=processes.logs)
+    moments = listener.moments
+    late = [values["drive"] for when, values in moments.items() if when >= killed + 300_000_000]
+    assert late and all(drive == 0.0 for drive in late), "the throttle did not stay closed"
+    before = [values["drive"] for when, values in moments.items() if when <= killed]
+    assert any(drive > 0.0 for drive in before)
+
+
+def test_overspeed_trip_closes_the_throttle_for_good(tmp_path, processes, probe):
+    scene, model = constant_inertia_scene(tmp_path, duration=0.4, load_events=[{"time": 0.1, "torque": 0.0}])
+    trip = _steady_speed() + 0.3  # just above the initial speed: the full load rejection reaches it
+    run = cosimulate(model, 0.002, overspeed_trip=trip)
+    assert run.tripped_at is not None and 0.1 < run.tripped_at < 0.4
+    processes.node("machine", machine_parameters(scene, min_subscribers=3, overspeed_trip=trip))
+    processes.node("governor", {"scene_file": str(scene)})
+    processes.node("scenario", {"scene_file": str(scene)})
+    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+    listener.open_gate()
+    end = listener.wait_finished()
+    level, message, values = listener.final_status()
+    assert level == DiagnosticStatus.ERROR and message.startswith("overspeed trip"), (level, message)
+    assert float(values["tripped_at"]) == run.tripped_at
+    tripped = to_nanoseconds(run.tripped_at)
+    drive = {when: values["drive"] for when, values in listener.moments.items()}
+    assert all(value > 0.0 for when, value in drive.items() if when < tripped)
+    assert all(value == 0.0 for when, value in drive.items() if when > tripped)
+    assert_equals_cosimulation(listener, end, run)
+
+
+# -------------------------------------------------------------------------------------------------
+# 6. Parameters
+
+
+def test_bad_parameters_end_the_node_with_a_message(tmp_path, processes):
+    missing = tmp_path / "missing.yaml"
+    cases = {  # name: (node, arguments, what the message must say)
+        "step": ("machine", ["exchange_step:=-1.0"], ["exchange_step", "out of range"]),
+        "mode": ("machine", ["time_mode:=fast"], ["time_mode", "'fast'", "lockstep, realtime"]),
+        "scene": ("machine", [f"scene_file:={missing}"], [str(missing), "no such file"]),
+        "inputs": ("machine", ["lockstep_inputs:=[throttle,speed]"], ["lockstep_inputs", "speed"]),
+        "ungoverned": ("governor", ["scene_file:=lathe"], ["lathe", "no governor"]),
+    }
+    started = {name: processes.start([sys.executable, "-m", f"mech_regulator.nodes.{node}", "--ros-args",
+                                      *[part for argument in arguments for part in ("-p", argument)]], name)
+               for name, (node, arguments, _) in cases.items()}
+    for name, process in started.items():
+        code = processes.wait(process)
+        output = processes.log(process)
+        assert code == 2, f"{name}: exit {code}\n{output}"
+        assert "Traceback" not in output, f"{name}:\n{output}"
+        assert all(part in output for part in cases[name][2]), f"{name}: expected {cases[name][2]} in\n{output}"
+
+
+def _parameter(name: str, value) -> ParameterMessage:
+    if isinstance(value, float):
+        return ParameterMessage(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
+                                                                double_value=value))
+    return ParameterMessage(name=name, value=ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value))
+
+
+def _set_parameter(probe, name: str, value, describe):
+    request = SetParameters.Request(parameters=[_parameter(name, value)])
+    return probe.call(SetParameters, "/machine/set_parameters", request, describe=describe).results[0]
+
+
+def _get_parameters(probe, names: list[str], describe) -> list:
+    response = probe.call(GetParameters, "/machine/get_parameters", GetParameters.Request(names=names),
+                          describe=describe)
+    return [value.double_value if value.type == ParameterType.PARAMETER_DOUBLE else value.string_value
+            for value in response.values]
+
+
+def test_parameters_set_at_run_time_are_checked(tmp_path, processes, probe):
+    scene, _ = constant_inertia_scene(tmp_path)
+    # waiting for 5 subscribers that never come: the node serves its parameters, nothing else happens
+    processes.node("machine", machine_parameters(scene, min_subscribers=5))
+    describe = processes.logs
+    accepted = _set_parameter(probe, "real_time_factor", 2.0, describe)
+    assert accepted.successful, accepted.reason
+    refused = _set_parameter(probe, "real_time_factor", 1e6, describe)
+    assert not refused.successful and "real_time_factor" in refused.reason and "range" in refused.reason, \
+        refused.reason
+    refused = _set_parameter(probe, "exchange_step", 0.01, describe)
+    assert not refused.successful and "read-only" in refused.reason, refused.reason
+    refused = _set_parameter(probe, "fail_safe", "open", describe)
+    assert not refused.successful and "fail_safe" in refused.reason and "hold, close" in refused.reason, \
+        refused.reason
+    assert _get_parameters(probe, ["real_time_factor", "exchange_step", "fail_safe"], describe) == [2.0, 0.002,
+                                                                                                  "close"]
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="machine_node: on_parameters runs before the fail_safe choice check (rclpy calls the "
+                          "callbacks added last first) and applies the value the check then refuses")
+def test_a_refused_fail_safe_is_not_applied(tmp_path, processes, probe):
+    scene, _ = constant_inertia_scene(tmp_path, duration=0.05)
+    # no governor: the machine waits peer_timeout for the throttle, then goes on fail-safe
+    processes.node("machine", machine_parameters(scene, lockstep_inputs=["throttle"], min_subscribers=1,
+                                                 peer_timeout=0.05, exchange_step=0.01))
+    refused = _set_parameter(probe, "fail_safe", "open", processes.logs)
+    assert not refused.successful, "ROS accepted fail_safe = 'open'"
+    listener = RunListener(probe, governed=False, describe=processes.logs)
+    listener.open_gate()
+    end = listener.wait_finished()
+    level, message, values = listener.final_status()
+    assert level == DiagnosticStatus.WARN and values["fail_safe_active"] == "True", (level, message)
+    assert listener.moments[end]["drive"] == 0.0 and message.startswith("fail-safe (close)"), message
+
+
+# -------------------------------------------------------------------------------------------------
+# 1 and 7. The main job: `mech-regulator run`, its CSV, summary and recording; Ctrl-C
+
+
+class MainJob:
+    """A `mech-regulator run` (its process, log and output paths)."""
+
+    def __init__(self, processes: Processes, folder: Path, scene_arguments: list[str], name: str,
+                 domain: int | None = None):
+        self.rrd = folder / name / "run.rrd"
+        self.rrd.parent.mkdir()
+        self.csv, self.json = self.rrd.with_suffix(".csv"), self.rrd.with_suffix(".json")
+        self.domain_id = domain if domain is not None else next_domain_id()
+        self.processes = processes
+        self.process = processes.start([sys.executable, "-m", "mech_regulator", "run", *scene_arguments,
+                                        "--out", self.rrd, "--domain-id", self.domain_id, "--quiet"], name)
+
+    @property
+    def log(self) -> str:
+        """The launcher's output."""
+        return self.processes.log(self.process)
+
+    @property
+    def node_log(self) -> str:
+        """The nodes' output (the launcher's <out>.log)."""
+        path = self.rrd.with_suffix(".log")
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def describe(self) -> str:
+        return f"--- launcher (exit {self.process.poll()})\n{self.log[-3000:]}\n--- nodes\n{self.node_log[-3000:]}"
+
+
+def _short_engine_arguments() -> list[str]:
+    return ["engine_direct", *[part for change in SHORT_ENGINE for part in ("--set", change)]]
+
+
+@pytest.fixture(scope="module")
+def main_jobs(tmp_path_factory):
+    """Two runs of the main job on the short engine_direct, side by side (each on its own domain)."""
+    folder = tmp_path_factory.mktemp("main_job")
+    started = Processes(folder, ros_environment(next_domain_id()))
+    try:
+        jobs = [MainJob(started, folder, _short_engine_arguments(), name) for name in ("first", "second")]
+        for job in jobs:
+            started.wait(job.process, 4 * WAIT)
+        yield jobs
+    finally:
+        started.stop_all()
+
+
+def test_main_job_reproduces_the_in_process_cosimulation(main_jobs, tmp_path, capsys):
+    for job in main_jobs:
+        assert job.process.returncode == 0, job.describe()
+        assert "Traceback" not in job.log + job.node_log, job.describe()
+    first, second = main_jobs
+    csv = tmp_path / "in_process.csv"
+    code, out, _ = run_cli(capsys, "simulate", *_short_engine_arguments(), "--exchange-step", "1e-3", "--out",
+                           str(csv), "--json", "--quiet")
+    assert code == 0
+    expected = csv.read_bytes()
+    assert expected.count(b"\n") == 1002  # the header and every exchange time
+    assert first.csv.read_bytes() == expected, "the ROS run's CSV differs from simulate --exchange-step"
+    assert second.csv.read_bytes() == expected, "a second ROS run gave another CSV"
+    summary, in_process = json.loads(first.json.read_text()), json.loads(out)
+    assert summary.pop("recording") == str(first.rrd) and summary.pop("csv") == str(first.csv)
+    in_process.pop("csv")
+    assert summary == in_process
+    responses = summary["governor"]["load_responses"]
+    assert [(item["time"], item["load_before"], item["load_after"]) for item in responses] == [(0.4, 6.0, 8.0),
+                                                                                               (0.7, 8.0, 0.0)]
+    assert responses[0]["static_error"] < 0.0 < responses[1]["static_error"]
+    assert summary["status"] == "complete" and summary["samples"] == 1001 and summary["tripped_at"] is None
+    assert f"open the recording with: rerun {first.rrd}" in first.log
+
+
+def _rerun() -> str:
+    rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+    assert rerun is not None, "no rerun executable next to this Python or on PATH (rerun-sdk installs it)"
+    return rerun
+
+
+def _verify(rrd: Path) -> None:
+    result = subprocess.run([_rerun(), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=WAIT)
+    assert result.returncode == 0 and "1 file verified" in result.stdout + result.stderr, \
+        f"rerun rrd verify {rrd}: exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+
+
+def _recorded_scalars(rrd: Path) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], set[str], set[str]]:
+    """The scalar series of a recording: entity -> (sim_time [ns], values), sorted by time; also every
+    entity path and every timeline name."""
+    from rerun.chunk import RrdReader
+
+    series: dict[str, list[tuple[int, float]]] = {}
+    entities, timelines = set(), set()
+    for chunk in RrdReader(str(rrd)).stream().to_chunks():
+        entities.add(chunk.entity_path)
+        timelines.update(chunk.timeline_names)
+        batch = chunk.to_record_batch()
+        if "Scalars:scalars" not in batch.schema.names:
+            continue
+        assert "sim_time" in batch.schema.names, f"{chunk.entity_path}: scalars off the sim_time timeline"
+        times = batch.column("sim_time").cast("int64").to_pylist()
+        values = batch.column("Scalars:scalars").to_pylist()
+        series.setdefault(chunk.entity_path, []).extend(
+            (when, value[0]) for when, value in zip(times, values) if value is not None)
+    return ({entity: tuple(np.array(column) for column in zip(*sorted(samples)))
+             for entity, samples in series.items()}, entities, timelines)
+
+
+def test_main_job_recording_holds_every_exchange(main_jobs):
+    first = main_jobs[0]
+    assert first.process.returncode == 0, first.describe()
+    _verify(first.rrd)
+    scalars, entities, timelines = _recorded_scalars(first.rrd)
+    assert "sim_time" in timelines
+    for entity in ("/speed/omega", "/throttle", "/governor/sleeve", "/moments/drive", "/moments/resistance",
+                   "/moments/external", "/moments/net"):
+        assert entity in scalars, f"no scalars at {entity}; the recording has {sorted(entities)}"
+    assert any(entity.startswith("/mechanism/") for entity in entities), sorted(entities)
+    assert any(entity.startswith("/governor/drawing") for entity in entities), sorted(entities)
+    csv = np.genfromtxt(first.csv, delimiter=",", names=True)
+    times, omega = scalars["/speed/omega"]
+    np.testing.assert_array_equal(times, [to_nanoseconds(t) for t in csv["t"]])
+    np.testing.assert_array_equal(omega, csv["omega"])
+    np.testing.assert_array_equal(scalars["/throttle"][1], csv["throttle"])
+    np.testing.assert_array_equal(scalars["/governor/sleeve"][1], 1e3 * csv["sleeve"])  # in mm
+    np.testing.assert_array_equal(scalars["/moments/external"][1], csv["M_external"])
+
+
+def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe, domain_id):
+    job = MainJob(processes, tmp_path, ["engine_direct"], "interrupted", domain_id)  # the whole 16 s scenario
+    listener = RunListener(probe, governed=False, diagnostics_publishers=0, describe=job.describe)
+
+    def running(after: float) -> bool:
+        return any(float(values["sim_time"]) >= after for _, _, values in listener.statuses()) \
+            and job.rrd.exists() and job.rrd.stat().st_size > 0
+
+    probe.spin_until(lambda: running(0.5), "the main job running past 0.5 s", describe=job.describe)
+    size = job.rrd.stat().st_size
+    probe.spin_until(lambda: job.rrd.stat().st_size > size, "the recording growing", describe=job.describe)
+    job.process.send_signal(signal.SIGINT)  # as Ctrl-C in a terminal (the nodes are in sessions of their own)
+    assert processes.wait(job.process, 4 * WAIT) == 130, job.describe()
+    assert "Traceback" not in job.log + job.node_log, job.describe()
+    _verify(job.rrd)
+    summary = json.loads(job.json.read_text())
+    assert summary["status"] == "interrupted" and summary["message"].startswith("the recording stops at"), summary
+    assert 0.0 < summary["t_end"] < 16.0 and f"open the recording with: rerun {job.rrd}" in job.log
+    csv = np.genfromtxt(job.csv, delimiter=",", names=True)
+    assert csv.size == summary["samples"] >= 2
+    scalars, _, _ = _recorded_scalars(job.rrd)
+    times, omega = scalars["/speed/omega"]
+    assert times.size >= csv.size  # the recording may hold a sample or two more than the complete rows
+    np.testing.assert_array_equal(omega[:csv.size], csv["omega"])
+    # what was run is the co-simulation of the scene: its start, in process
+    prefix = csv[csv["t"] <= 0.3]
+    model = build_model(load_scene("engine_direct", ["scenario.duration=0.3", "scenario.load_events=[]"]))
+    run = cosimulate(model, 1e-3)
+    np.testing.assert_array_equal(prefix["omega"], run.states[1, :prefix.size])
+    np.testing.assert_array_equal(prefix["throttle"], run.throttle[:prefix.size])
