@@ -7,11 +7,14 @@ that only turns a hang into a failure.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import itertools
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Callable
@@ -30,9 +33,12 @@ WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a t
 STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
 
 # Domains where no ports collide with the ephemeral range: 1..101 and 215..232. A test run takes
-# consecutive ones from a base derived from its pid, so two runs side by side rarely share one.
+# consecutive ones from a base derived from its pid, and claims each with a lock file that it holds
+# until it exits, so that two test runs side by side (two pytest processes) never share a domain.
 DOMAIN_IDS = [*range(1, 102), *range(215, 233)]
 _domains = itertools.count((os.getpid() * 37) % len(DOMAIN_IDS))
+_claimed: list = []  # the open lock files (closed, and so released, when this process ends)
+LOCK_FOLDER = Path(tempfile.gettempdir()) / "mech_regulator_ros_domains"
 
 # What the test node listens with: reliable, deep enough never to drop a sample of a short run. State
 # streams (joint_states, machine/moments, governor/state) are transient local: the test node gets what
@@ -49,8 +55,19 @@ NANOSECONDS = 1_000_000_000
 
 
 def next_domain_id() -> int:
-    """A ROS domain no other test of this run uses."""
-    return DOMAIN_IDS[next(_domains) % len(DOMAIN_IDS)]
+    """A ROS domain no other test of this run, nor any other test run on this machine, uses."""
+    LOCK_FOLDER.mkdir(exist_ok=True)
+    for _ in DOMAIN_IDS:
+        domain = DOMAIN_IDS[next(_domains) % len(DOMAIN_IDS)]
+        lock = open(LOCK_FOLDER / f"{domain}.lock", "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # another test run has it
+            lock.close()
+            continue
+        _claimed.append(lock)
+        return domain
+    raise RuntimeError(f"every ROS domain is claimed by other test runs (lock files in {LOCK_FOLDER})")
 
 
 def ros_environment(domain_id: int) -> dict[str, str]:
@@ -193,14 +210,21 @@ def domain_id() -> int:
     return next_domain_id()
 
 
-@pytest.fixture
-def processes(tmp_path, domain_id):
-    """Processes of this test on its private domain, always stopped at the end."""
-    started = Processes(tmp_path, ros_environment(domain_id))
+@contextlib.contextmanager
+def processes_on(folder: Path, domain: int):
+    """Processes on a private domain, always stopped at the end."""
+    started = Processes(folder, ros_environment(domain))
     try:
         yield started
     finally:
         started.stop_all()
+
+
+@pytest.fixture
+def processes(tmp_path, domain_id):
+    """Processes of this test on its private domain."""
+    with processes_on(tmp_path, domain_id) as started:
+        yield started
 
 
 # -------------------------------------------------------------------------------------------------
@@ -269,17 +293,25 @@ class Probe:
         rclpy.shutdown(context=self.context)
 
 
+@contextlib.contextmanager
+def probe_on(domain: int):
+    """A test node on a domain (discovery on this machine only, as the nodes), closed at the end."""
+    with pytest.MonkeyPatch.context() as patch:
+        for key, value in ros_environment(domain).items():
+            if key.startswith(("ROS_", "RMW_", "AMENT_")):
+                patch.setenv(key, value)
+        node = Probe(domain, f"probe_{domain}")
+        try:
+            yield node
+        finally:
+            node.close()
+
+
 @pytest.fixture
-def probe(domain_id, monkeypatch):
-    """The test node on the test's domain (discovery on this machine only, as the nodes)."""
-    for key, value in ros_environment(domain_id).items():
-        if key.startswith(("ROS_", "RMW_", "AMENT_")):
-            monkeypatch.setenv(key, value)
-    node = Probe(domain_id, f"probe_{domain_id}")
-    try:
+def probe(domain_id):
+    """The test node on the test's domain."""
+    with probe_on(domain_id) as node:
         yield node
-    finally:
-        node.close()
 
 
 class RunListener:

@@ -23,20 +23,20 @@ import numpy as np
 import pytest
 import yaml
 
-from ros_support import (STATE_LISTEN_QOS, WAIT, Processes, RunListener, diagnostic_values,  # noqa: F401
-                         domain_id, next_domain_id, probe, processes, ros_environment, stamp_ns)
+from ros_support import (WAIT, Processes, RunListener, domain_id, next_domain_id, probe,  # noqa: F401 (fixtures)
+                         probe_on, processes, processes_on, ros_environment, stamp_ns)
 from support import run_cli
 
-from builtin_interfaces.msg import Time  # noqa: E402  (rclpy is there: ros_support skipped otherwise)
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
-from geometry_msgs.msg import WrenchStamped  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMessage, ParameterType, ParameterValue  # noqa: E402
-from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
-from rclpy.duration import Duration  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64  # noqa: E402
+# after ros_support, which skips this module when rclpy is missing
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import Parameter as ParameterMessage, ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
+from rclpy.duration import Duration
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
 
-from mech_regulator.analysis import cycle_mean_speed, operating_point
+from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
@@ -54,7 +54,8 @@ BASE_LOAD = 6.0  # [N m] of the constant-inertia scene below
 
 @functools.cache
 def _steady_speed() -> float:
-    """The constant-inertia scene's operating point at BASE_LOAD: it starts there, at rest."""
+    """The constant-inertia scene's steady speed at BASE_LOAD (its operating point): the scene starts
+    there, so that any change of speed comes from what a test does."""
     return operating_point(build_model(validate_scene(_constant_inertia_data(100.0))), BASE_LOAD).speed
 
 
@@ -107,9 +108,9 @@ def received_run(listener: RunListener, end: int):
                                    for name in ("drive", "resistance", "external", "net")}
 
 
-def assert_equals_cosimulation(listener: RunListener, end: int, run) -> None:
+def assert_equals_cosimulation(listener: RunListener, end: int, model, run) -> None:
     """The received run is the in-process co-simulation to the last bit: same exchange times, states,
-    throttle and external load."""
+    throttle, external load and the machine's own resistance."""
     times, rows, throttle, moments = received_run(listener, end)
     assert times == [to_nanoseconds(t) for t in run.times], "exchange times differ from the core's"
     np.testing.assert_array_equal(rows[1], run.states[1], err_msg="omega differs from cosimulate")
@@ -117,6 +118,9 @@ def assert_equals_cosimulation(listener: RunListener, end: int, run) -> None:
     np.testing.assert_array_equal(throttle, run.throttle, err_msg="the governor's throttle differs from cosimulate")
     np.testing.assert_array_equal(-moments["external"], run.external_load,
                                   err_msg="the external load differs from cosimulate")
+    columns = model.columns(run.times, run.states, run.throttle, run.external_load)
+    np.testing.assert_array_equal(moments["resistance"], columns["M_load"] - columns["M_external"],
+                                  err_msg="the resistance differs from cosimulate")
 
 
 # -------------------------------------------------------------------------------------------------
@@ -124,9 +128,13 @@ def assert_equals_cosimulation(listener: RunListener, end: int, run) -> None:
 
 
 def test_lockstep_error_is_first_order_in_the_exchange_step():
+    """docs/ros.md: errors about 120 h on omega, 45 h on the cycle-mean speed, 30 h on the peak deviation
+    after a load change (measured on the whole engine_direct; checked here on its short version)."""
     model = build_model(load_scene("engine_direct", SHORT_ENGINE))
     monolithic = simulate(model)
     assert monolithic.status == "complete", monolithic.message
+    expected_responses = load_responses(model, monolithic)
+    assert len(expected_responses) == 2
     omega_error, mean_error, fair_mean_error = {}, {}, {}
     for step in (1e-3, 2e-3):
         run = cosimulate(model, step)
@@ -143,7 +151,9 @@ def test_lockstep_error_is_first_order_in_the_exchange_step():
                                     status="complete", message="")
         fair_mean_error[step] = np.nanmax(np.abs(cosimulated_mean - cycle_mean_speed(model, sampled, run.times)))
         assert omega_error[step] <= 120.0 * step, f"h = {step}: omega error {omega_error[step]} > 120 h"
-        assert mean_error[step] <= 40.0 * step, f"h = {step}: cycle-mean speed error {mean_error[step]} > 40 h"
+        assert mean_error[step] <= 45.0 * step, f"h = {step}: cycle-mean speed error {mean_error[step]} > 45 h"
+        for response, exact in zip(load_responses(model, run.trajectory(model)), expected_responses):
+            assert abs(response.peak_deviation - exact.peak_deviation) <= 30.0 * step, (step, response, exact)
         assert omega_error[step] > 0.0 and fair_mean_error[step] > 0.0
     assert 1.8 <= omega_error[2e-3] / omega_error[1e-3] <= 2.2, omega_error
     assert 1.8 <= fair_mean_error[2e-3] / fair_mean_error[1e-3] <= 2.2, fair_mean_error
@@ -200,7 +210,7 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
     _, stepped_model = constant_inertia_scene(tmp_path, "stepped.yaml", duration=0.6,
                                               load_events=[{"time": seconds(step), "torque": 8.0}])
     run = cosimulate(stepped_model, 0.002)
-    assert_equals_cosimulation(listener, end, run)
+    assert_equals_cosimulation(listener, end, stepped_model, run)
     # the governor lets the speed sag after the step (a direct governor's static error)
     speed = cycle_mean_speed(stepped_model, run.trajectory(stepped_model), run.times)
     at_step = speed[run.times == seconds(step)][0]
@@ -212,51 +222,55 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
 # 4. Bad messages are counted and change nothing
 
 
-def test_bad_messages_are_rejected_and_counted(tmp_path, processes, probe):
-    scene, model = constant_inertia_scene(tmp_path, duration=0.3, load_events=[{"time": 0.1, "torque": 8.0}])
-    processes.node("machine", machine_parameters(scene, min_subscribers=3, max_load_torque=1e3))
-    processes.node("governor", {"scene_file": str(scene)})
-    processes.node("scenario", {"scene_file": str(scene)})
-    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
-    load = probe.publisher(Float64, "load_torque", describe=processes.logs)
-    throttle = probe.publisher(JointState, "throttle", describe=processes.logs)
-    speed = probe.publisher(JointState, "joint_states", subscribers=2, describe=processes.logs)  # governor, scenario
-    for value in (math.nan, math.inf, 1e9):
-        load.publish(Float64(data=value))
-    throttle.publish(JointState(name=["valve"], position=[0.5]))
-    throttle.publish(JointState(name=["throttle"], position=[1.5]))
-    speed.publish(JointState(name=["wheel"], position=[0.0], velocity=[100.0]))
-    for publisher in (load, throttle, speed):
-        assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
-    probe.node.destroy_publisher(speed)  # (volatile: it would only warn of the test node's own listener)
-    listener.open_gate()  # the machine's third subscriber: the run starts
-    end = listener.wait_finished()
+@pytest.fixture(scope="module")
+def bad_messages_run(tmp_path_factory):
+    """A lockstep run (machine, governor, scenario) that got bad messages on every input before it
+    started: (listener, end [ns], model, the governor's last diagnostics values)."""
+    folder = tmp_path_factory.mktemp("bad_messages")
+    domain = next_domain_id()
+    with processes_on(folder, domain) as processes, probe_on(domain) as probe:
+        scene, model = constant_inertia_scene(folder, duration=0.3, load_events=[{"time": 0.1, "torque": 8.0}])
+        processes.node("machine", machine_parameters(scene, min_subscribers=3, max_load_torque=1e3))
+        processes.node("governor", {"scene_file": str(scene)})
+        processes.node("scenario", {"scene_file": str(scene)})
+        listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+        load = probe.publisher(Float64, "load_torque", describe=processes.logs)
+        throttle = probe.publisher(JointState, "throttle", describe=processes.logs)
+        speed = probe.publisher(JointState, "joint_states", subscribers=2, describe=processes.logs)  # governor, scenario
+        for value in (math.nan, math.inf, 1e9):
+            load.publish(Float64(data=value))
+        throttle.publish(JointState(name=["valve"], position=[0.5]))
+        throttle.publish(JointState(name=["throttle"], position=[1.5]))
+        speed.publish(JointState(name=["wheel"], position=[0.0], velocity=[100.0]))
+        for publisher in (load, throttle, speed):
+            assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
+        probe.node.destroy_publisher(speed)  # (volatile: it would only warn of the test node's own listener)
+        listener.open_gate()  # the machine's third subscriber: the run starts
+        end = listener.wait_finished()
+        governor = probe.spin_until(lambda: [values for _, _, values in listener.statuses("/governor")
+                                             if values.get("rejected_messages", "0") != "0"],
+                                    "the governor's diagnostics counting the bad message", describe=processes.logs)
+        yield listener, end, model, governor[-1]
 
+
+def test_bad_messages_are_rejected_and_counted(bad_messages_run):
+    listener, end, model, governor = bad_messages_run
     level, message, values = listener.final_status()
     assert level == DiagnosticStatus.WARN and message == "5 bad messages rejected", (level, message)
     assert {key: value for key, value in values.items() if key.startswith("rejected")} == {
         "rejected_messages": "5", "rejected: not finite": "2", "rejected: out of range": "2",
         "rejected: wrong joint name": "1"}
-    governor = probe.spin_until(lambda: [values for _, _, values in listener.statuses("/governor")
-                                         if "rejected_messages" in values and values["rejected_messages"] != "0"],
-                                "the governor's diagnostics counting the bad message", describe=processes.logs)[-1]
     assert governor["rejected_messages"] == "1" and governor["rejected: wrong joint name"] == "1", governor
     # the state never saw them: the run is the in-process co-simulation to the last bit
-    assert_equals_cosimulation(listener, end, cosimulate(model, 0.002))
+    assert_equals_cosimulation(listener, end, model, cosimulate(model, 0.002))
 
 
-@pytest.mark.xfail(strict=True, reason="machine_node: machine/moments at t_k is computed before the throttle for "
-                                       "t_k is applied (publish_moments runs before applied_throttle), so its "
-                                       "drive and net are those of the throttle held over the previous step",
-                   raises=AssertionError)
-def test_moments_are_those_of_the_inputs_held_from_their_time(tmp_path, processes, probe):
-    scene, model = constant_inertia_scene(tmp_path, duration=0.2, load_events=[{"time": 0.1, "torque": 8.0}])
-    processes.node("machine", machine_parameters(scene, min_subscribers=3))
-    processes.node("governor", {"scene_file": str(scene)})
-    processes.node("scenario", {"scene_file": str(scene)})
-    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
-    listener.open_gate()
-    end = listener.wait_finished()
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="machine_node: machine/moments at t_k is computed before the throttle for t_k is applied "
+                          "(publish_moments runs before applied_throttle), so its drive and net are those of the "
+                          "throttle held over the previous step")
+def test_moments_are_those_of_the_inputs_held_from_their_time(bad_messages_run):
+    listener, end, model, _ = bad_messages_run
     run = cosimulate(model, 0.002)
     columns = model.columns(run.times, run.states, run.throttle, run.external_load)
     _, _, _, moments = received_run(listener, end)
@@ -276,13 +290,10 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
     listener = RunListener(probe, governed=False, diagnostics_publishers=1, describe=processes.logs)
     processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 1.0,
                                "exchange_step": 0.005, "throttle_timeout": 0.05, "fail_safe": "close"})
-    moments = listener.moments
 
-    def governed_after(time_ns: int) -> bool:  # the governor's throttle is driving the machine at time_ns
-        nonlocal moments
-        moments = listener.moments
+    def governed_after(time_ns: int) -> bool:  # the governor's throttle drives the machine at time_ns
         return bool(listener.statuses()) and any(when >= time_ns and values["drive"] > 0.0
-                                                 for when, values in moments.items())
+                                                 for when, values in listener.moments.items())
 
     probe.spin_until(lambda: governed_after(500_000_000), "the governed machine at 0.5 s", describe=processes.logs)
     governor.kill()
@@ -290,32 +301,50 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
     killed = max(listener.moments)  # the machine was at least this far when the governor died
 
     def failing_safe():
-        return [(level, message) for level, message, values in listener.statuses() if values["fail_safe_active"]
-                == "True" and float(values["sim_time"]) > seconds(killed)]
+        return [(level, message, float(values["sim_time"])) for level, message, values in listener.statuses()
+                if values["fail_safe_active"] == "True" and float(values["sim_time"]) > seconds(killed)]
 
-    level, message = probe.spin_until(failing_safe, "diagnostics saying fail-safe after the governor died",
-                                      describe=processes.logs)[0]
+    level, message, since = probe.spin_until(failing_safe, "diagnostics saying fail-safe after the governor died",
+                                             describe=processes.logs)[0]
     assert level == DiagnosticStatus.WARN and message.startswith("fail-safe (close)"), (level, message)
-    probe.spin_until(lambda: max(listener.moments) >= killed + 500_000_000, "0.5 s more of the run",
+    assert listener.statuses()[-1][2]["throttle"] == "0.0"
+    since = to_nanoseconds(since)
+    probe.spin_until(lambda: max(listener.moments) >= since + 300_000_000, "0.3 s more of the run",
                      describe=processes.logs)
-    moments = listener.moments
-    late = [values["drive"] for when, values in moments.items() if when >= killed + 300_000_000]
-    assert late and all(drive == 0.0 for drive in late), "the throttle did not stay closed"
-    before = [values["drive"] for when, values in moments.items() if when <= killed]
-    assert any(drive > 0.0 for drive in before)
+    late = [values["drive"] for when, values in listener.moments.items() if when > since]
+    assert len(late) >= 50 and all(drive == 0.0 for drive in late), "the throttle did not stay closed"
 
 
-def test_overspeed_trip_closes_the_throttle_for_good(tmp_path, processes, probe):
-    scene, model = constant_inertia_scene(tmp_path, duration=0.4, load_events=[{"time": 0.1, "torque": 0.0}])
-    trip = _steady_speed() + 0.3  # just above the initial speed: the full load rejection reaches it
-    run = cosimulate(model, 0.002, overspeed_trip=trip)
-    assert run.tripped_at is not None and 0.1 < run.tripped_at < 0.4
-    processes.node("machine", machine_parameters(scene, min_subscribers=3, overspeed_trip=trip))
-    processes.node("governor", {"scene_file": str(scene)})
-    processes.node("scenario", {"scene_file": str(scene)})
-    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
-    listener.open_gate()
-    end = listener.wait_finished()
+TRIP_STEP = 0.002
+
+
+@pytest.fixture(scope="module")
+def overspeed_run(tmp_path_factory):
+    """A lockstep run (machine, governor, scenario, recorder) of a full load rejection with the trip just
+    above the initial speed: (listener, end [ns], model, the in-process run, the recorder's files)."""
+    folder = tmp_path_factory.mktemp("overspeed")
+    domain = next_domain_id()
+    with processes_on(folder, domain) as processes, probe_on(domain) as probe:
+        scene, model = constant_inertia_scene(folder, duration=0.4, load_events=[{"time": 0.1, "torque": 0.0}])
+        trip = _steady_speed() + 0.3  # the full load rejection reaches it
+        run = cosimulate(model, TRIP_STEP, overspeed_trip=trip)
+        assert run.tripped_at is not None and 0.1 < run.tripped_at < 0.4
+        processes.node("machine", machine_parameters(scene, min_subscribers=4, overspeed_trip=trip,
+                                                     exchange_step=TRIP_STEP))
+        processes.node("governor", {"scene_file": str(scene)})
+        processes.node("scenario", {"scene_file": str(scene)})
+        output = folder / "trip.rrd"
+        recorder = processes.node("recorder", {"scene_file": str(scene), "output": str(output),
+                                               "exchange_step": TRIP_STEP})
+        listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+        listener.open_gate()
+        end = listener.wait_finished()
+        assert processes.wait(recorder) == 0, processes.logs()
+        yield listener, end, model, run, output
+
+
+def test_overspeed_trip_closes_the_throttle_for_good(overspeed_run):
+    listener, end, model, run, output = overspeed_run
     level, message, values = listener.final_status()
     assert level == DiagnosticStatus.ERROR and message.startswith("overspeed trip"), (level, message)
     assert float(values["tripped_at"]) == run.tripped_at
@@ -323,7 +352,37 @@ def test_overspeed_trip_closes_the_throttle_for_good(tmp_path, processes, probe)
     drive = {when: values["drive"] for when, values in listener.moments.items()}
     assert all(value > 0.0 for when, value in drive.items() if when < tripped)
     assert all(value == 0.0 for when, value in drive.items() if when > tripped)
-    assert_equals_cosimulation(listener, end, run)
+    assert_equals_cosimulation(listener, end, model, run)
+    # the recorder's CSV holds the same run
+    csv = np.genfromtxt(output.with_suffix(".csv"), delimiter=",", names=True)
+    np.testing.assert_array_equal(csv["omega"], run.states[1])
+    np.testing.assert_array_equal(csv["t"], run.times)
+
+
+def _in_process_summary(model, run) -> dict:
+    from mech_regulator.analysis import summarise_cosimulation
+    from mech_regulator.cli.report import to_json
+
+    return json.loads(to_json(summarise_cosimulation(model, run, TRIP_STEP)))
+
+
+def test_recorder_summary_of_a_tripped_run(overspeed_run):
+    _, _, model, run, output = overspeed_run
+    summary = json.loads(output.with_suffix(".json").read_text())
+    expected = _in_process_summary(model, run)
+    for key in ("recording", "csv"):
+        summary.pop(key)
+    for item in (summary, expected):
+        item.pop("tripped_at")
+    assert summary == expected
+
+
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="recorder_node: run_data() builds its CoSimulation with tripped_at=None, so the JSON "
+                          "summary (and the main job's printout) of a ROS run never reports the overspeed trip")
+def test_recorder_summary_reports_the_trip(overspeed_run):
+    _, _, _, run, output = overspeed_run
+    assert json.loads(output.with_suffix(".json").read_text())["tripped_at"] == run.tripped_at
 
 
 # -------------------------------------------------------------------------------------------------
@@ -528,6 +587,7 @@ def test_main_job_recording_holds_every_exchange(main_jobs):
     assert any(entity.startswith("/governor/drawing") for entity in entities), sorted(entities)
     csv = np.genfromtxt(first.csv, delimiter=",", names=True)
     times, omega = scalars["/speed/omega"]
+    assert times.size == csv.size == 1001
     np.testing.assert_array_equal(times, [to_nanoseconds(t) for t in csv["t"]])
     np.testing.assert_array_equal(omega, csv["omega"])
     np.testing.assert_array_equal(scalars["/throttle"][1], csv["throttle"])

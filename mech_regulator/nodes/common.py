@@ -130,6 +130,34 @@ class Rejections:
             KeyValue(key=f"rejected: {reason}", value=str(count)) for reason, count in sorted(self.counts.items())]
 
 
+def joint_value(message, joint: str, field: str, low: float, high: float, what: str,
+                rejections: Rejections, last_stamp: int | None) -> tuple[int, float] | None:
+    """(stamp [ns], value) of `field` ('position' or 'velocity') of `joint` in a sensor_msgs/JointState;
+    None, with the message rejected and counted, when the joint is missing, the value is not finite or
+    outside [low, high] (`what` names the bound, e.g. 'parameter max_speed'), or the stamp is older
+    than last_stamp."""
+    names = list(message.name)
+    if joint not in names:
+        rejections.reject("wrong joint name", f"JointState names {names}, expected a joint '{joint}'")
+        return None
+    values = getattr(message, field)
+    index = names.index(joint)
+    if index >= len(values):
+        rejections.reject(f"no {field}", f"no {field} for joint '{joint}'")
+        return None
+    value = values[index]
+    if not math.isfinite(value) or not low <= value <= high:
+        rejections.reject("out of range" if math.isfinite(value) else "not finite",
+                          f"{joint} {field} = {value!r}, expected a finite number in [{low:g}, {high:g}] ({what})")
+        return None
+    when = nanoseconds(message.header.stamp)
+    if last_stamp is not None and when < last_stamp:
+        rejections.reject("out of order", f"{joint} stamped {seconds(when):.9g} s after one stamped "
+                                          f"{seconds(last_stamp):.9g} s")
+        return None
+    return when, value
+
+
 def finite_in_range(value: float, limit: float) -> str | None:
     """Why a received number is unacceptable (None if it is finite and |value| <= limit)."""
     if not math.isfinite(value):

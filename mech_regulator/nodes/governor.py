@@ -21,7 +21,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, diagnostics,
-                                         finite_in_range, float_parameter, nanoseconds, run, scene_model, stamp)
+                                         float_parameter, joint_value, run, scene_model, stamp)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -53,25 +53,11 @@ class GovernorNode(Node):
 
     def on_joint_states(self, message: JointState) -> None:
         """Answer the crank speed at a stamped time with the throttle at that time."""
-        names = list(message.name)
-        if "crank" not in names:
-            self.rejections.reject("wrong joint name", f"joint_states names {names}, expected a joint 'crank'")
+        received = joint_value(message, "crank", "velocity", -self.max_speed, self.max_speed, "parameter max_speed",
+                               self.rejections, self.time_ns)
+        if received is None:
             return
-        index = names.index("crank")
-        if index >= len(message.velocity):
-            self.rejections.reject("no velocity", "joint_states has no velocity for joint 'crank'")
-            return
-        omega = message.velocity[index]
-        problem = finite_in_range(omega, self.max_speed)
-        if problem:
-            self.rejections.reject(problem, f"crank velocity = {omega!r} rad/s, expected a finite number within "
-                                            f"+-{self.max_speed:g} (parameter max_speed)")
-            return
-        when = nanoseconds(message.header.stamp)
-        if self.time_ns is not None and when < self.time_ns:
-            self.rejections.reject("out of order", f"joint_states stamped {seconds(when):.9g} s after "
-                                                   f"{seconds(self.time_ns):.9g} s")
-            return
+        when, omega = received
         self.time_ns = when
         throttle = self.stepper.answer(seconds(when), omega)
         for t, event, mode in self.stepper.events[self.reported_events:]:

@@ -34,7 +34,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, bool_parameter,
-                                         diagnostics, finite_in_range, float_parameter, int_parameter, list_parameter,
+                                         diagnostics, finite_in_range, float_parameter, int_parameter, joint_value, list_parameter,
                                          nanoseconds, run, scene_model, stamp, text_parameter)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
@@ -114,24 +114,11 @@ class MachineNode(Node):
     # Inputs: every message is checked before it touches anything.
 
     def on_throttle(self, message: JointState) -> None:
-        if "throttle" not in message.name:
-            self.rejections.reject("wrong joint name", f"throttle message names {list(message.name)}, expected "
-                                                       "a joint 'throttle'")
+        received = joint_value(message, "throttle", "position", 0.0, 1.0, "a throttle opening", self.rejections,
+                               self.throttle_stamp)
+        if received is None:
             return
-        index = list(message.name).index("throttle")
-        if index >= len(message.position):
-            self.rejections.reject("no position", "throttle message has no position for joint 'throttle'")
-            return
-        value = message.position[index]
-        if not (math.isfinite(value) and 0.0 <= value <= 1.0):
-            self.rejections.reject("out of range" if math.isfinite(value) else "not finite",
-                                   f"throttle = {value!r}, expected a number in [0, 1]")
-            return
-        when = nanoseconds(message.header.stamp)
-        if self.throttle_stamp is not None and when < self.throttle_stamp:
-            self.rejections.reject("out of order", f"throttle stamped {seconds(when):.9g} s after one stamped "
-                                                   f"{seconds(self.throttle_stamp):.9g} s")
-            return
+        when, value = received
         self.throttle_stamp = when
         self.stamped_throttle[when] = value
         self.silent.discard("throttle")
