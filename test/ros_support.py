@@ -140,10 +140,19 @@ class Processes:
     def start(self, command: list[str], name: str, **kwargs) -> subprocess.Popen:
         """Start a command with the private environment; its output goes to <folder>/<name>.log."""
         log_path = self.folder / f"{name}.log"
-        with open(log_path, "w") as log:
-            process = subprocess.Popen([str(part) for part in command], env=self.environment, stdout=log,
-                                       stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True,
-                                       cwd=kwargs.pop("cwd", self.folder), **kwargs)
+        # A process inherits an ignored SIGINT (pytest started as a background job of a script): it could
+        # then not be stopped as by Ctrl-C. A handled signal is reset to its default by exec.
+        ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
+        if ignored:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+        try:
+            with open(log_path, "w") as log:
+                process = subprocess.Popen([str(part) for part in command], env=self.environment, stdout=log,
+                                           stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                           start_new_session=True, cwd=kwargs.pop("cwd", self.folder), **kwargs)
+        finally:
+            if ignored:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
         self.started.append((process, log_path))
         return process
 

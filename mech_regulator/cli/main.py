@@ -49,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--exchange-step", type=float, metavar="H",
                           help="co-simulate machine and governor as the ROS nodes do in lockstep, exchanging "
                                "speed, throttle and load every H seconds (the same numbers as `run`)")
+    simulate.add_argument("--overspeed-trip", type=float, default=0.0, metavar="OMEGA",
+                          help="with --exchange-step: trip speed [rad/s] closing the throttle for good, as `run` "
+                               "has (default 0: none; `run` uses 1.25 x the initial speed)")
     scene_command("describe", "print the effects, state vector and solver a scene uses, without running it")
     governor = scene_command("governor", "statics and stability of a governed scene: static characteristic, "
                                          "statism, insensitivity, operating points, droop, eigenvalues, "
@@ -162,9 +165,12 @@ def _cosimulate(model, args) -> int:
 
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    if not args.overspeed_trip >= 0.0:
+        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
     duration = model.scene.scenario.duration
     with progress_bar(duration, args.quiet) as bar:
-        run = cosimulate(model, args.exchange_step, progress=lambda t: bar.update(min(t, duration) - bar.n))
+        run = cosimulate(model, args.exchange_step, args.overspeed_trip,
+                         progress=lambda t: bar.update(min(t, duration) - bar.n))
     summary = summarise_cosimulation(model, run, args.exchange_step)
     if args.out is not None:
         columns = model.columns(run.times, run.states, run.throttle, run.external_load)

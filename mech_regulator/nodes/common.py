@@ -200,6 +200,10 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
     except rclpy.exceptions.ParameterException as error:  # a parameter override outside its range or type
         print(f"mech_regulator: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except Exception:
+        if not rclpy.ok():  # Ctrl-C shut the context down in the middle of a call into rclpy
+            return 0
+        raise
     finally:
         if node is not None:
             close = getattr(node, "close", None)

@@ -114,7 +114,7 @@ def _interrupt(signal_number, frame) -> None:
 def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
             quiet: bool) -> None:
     """Show the machine's progress (its /diagnostics sim_time) until its process ends, or until another
-    node ends first (it failed: the launcher then stops the others)."""
+    node fails first (the launcher then stops the others)."""
     machine = processes["machine"]
     os.environ.update({key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                           "AMENT_PREFIX_PATH")})
@@ -135,7 +135,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)
-                ended = [name for name, process in processes.items() if process.poll() is not None]
+                ended = [name for name, process in processes.items() if process.poll() not in (None, 0)]
                 if ended and machine.poll() is None:
                     print(f"\nmech-regulator: the {', '.join(ended)} node ended early; stopping the others",
                           file=sys.stderr)

@@ -26,7 +26,6 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -42,6 +41,7 @@ from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
 LOCKSTEP_INPUTS = ("throttle", "load")
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between diagnostics
 SPIN_SLICE = 0.02  # [s] of wall time per wait for messages
+RESEND_PERIOD = 1.0  # [s] of wall time after which a lockstep exchange time is published again
 
 
 class MachineNode(Node):
@@ -102,8 +102,9 @@ class MachineNode(Node):
         self.create_subscription(JointState, "throttle", self.on_throttle, COMMAND_QOS)
         self.create_subscription(Float64, "load_torque", self.on_load, COMMAND_QOS)
         self.create_subscription(WrenchStamped, "load_torque_stamped", self.on_stamped_load, COMMAND_QOS)
-        self.add_on_set_parameters_callback(self.on_parameters)
+        self.add_post_set_parameters_callback(self.on_parameters)
         self.now_ns = 0
+        self.state_message = JointState()
         self.wall_start = time.monotonic()
         self.last_diagnostics = -math.inf
         kind = self.model.scene.machine.mechanism.type if self.model.scene.machine.mechanism else None
@@ -141,15 +142,15 @@ class MachineNode(Node):
         self.stamped_load[nanoseconds(message.header.stamp)] = value
         self.silent.discard("load")
 
-    def on_parameters(self, parameters) -> SetParametersResult:
-        """Apply changes of the parameters that may change while running (ranges are checked by ROS)."""
+    def on_parameters(self, parameters) -> None:
+        """Apply the accepted changes (ranges and choices already checked) of the parameters that may
+        change while running."""
         for parameter in parameters:
             if parameter.name in ("real_time_factor", "throttle_timeout", "peer_timeout", "max_load_torque",
                                   "fail_safe"):
                 if parameter.name == "real_time_factor":  # keep the simulation time continuous
                     self.wall_start = time.monotonic() - seconds(self.now_ns) / parameter.value
                 setattr(self, parameter.name, parameter.value)
-        return SetParametersResult(successful=True)
 
     # ---------------------------------------------------------------------------------------------
     # The run
@@ -161,26 +162,36 @@ class MachineNode(Node):
         tick = 0
         while rclpy.ok():
             self.now_ns = min(tick * self.step_ns, self.end_ns)
+            next_ns = min((tick + 1) * self.step_ns, self.end_ns)
             self.publish_state()
+            if self.time_mode == "realtime" and next_ns > self.now_ns:
+                self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
+            throttle = self.stepper.applied_throttle(self.applied_throttle())
             self.publish_moments()
             if self.now_ns >= self.end_ns or self.stepper.status != "complete":
                 break
             tick += 1
-            if self.time_mode == "realtime":
-                self.wait_until(min(tick * self.step_ns, self.end_ns))
-            self.stepper.advance(seconds(min(tick * self.step_ns, self.end_ns)), self.applied_throttle(),
-                                 self.load)
+            self.stepper.advance(seconds(next_ns), throttle, self.load)
             self.report()
         if rclpy.ok():
             self.finish()
 
     def wait_for_subscribers(self) -> None:
-        """Lockstep: spin until joint_states has min_subscribers matched subscribers (the peers)."""
+        """Lockstep: spin until joint_states has min_subscribers matched subscribers (the peers) and, for
+        at most peer_timeout seconds, until each lockstep input has a publisher."""
         if self.time_mode != "lockstep":
             return
         waited = time.monotonic()
-        while rclpy.ok() and self.joint_publisher.get_subscription_count() < self.min_subscribers:
+        topics = {"throttle": "throttle", "load": "load_torque_stamped"}
+
+        def ready() -> bool:
+            if self.joint_publisher.get_subscription_count() < self.min_subscribers:
+                return False
+            return time.monotonic() - waited > self.peer_timeout or all(
+                self.count_publishers(topics[name]) > 0 for name in self.lockstep_inputs)
+
+        while rclpy.ok() and not ready():
             rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
             if time.monotonic() - waited > self.peer_timeout:
                 self.get_logger().warning(f"waiting for {self.min_subscribers} subscribers of joint_states, "
@@ -191,9 +202,12 @@ class MachineNode(Node):
         """Take the inputs for the current exchange time: in lockstep, wait for each listed input stamped
         with it (or time out and go on without it); then apply the newest load."""
         if self.time_mode == "lockstep":
-            waited = time.monotonic()
+            waited = sent = time.monotonic()
             while rclpy.ok() and self.missing_inputs():
                 rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+                if time.monotonic() - sent > RESEND_PERIOD:  # a peer that matched late missed it: say it again
+                    self.joint_publisher.publish(self.state_message)
+                    sent = time.monotonic()
                 if time.monotonic() - waited > self.peer_timeout:
                     missing = self.missing_inputs()
                     self.silent.update(missing)
@@ -277,6 +291,7 @@ class MachineNode(Node):
             message.velocity.append(values[velocity])
             message.effort.append(math.nan)  # not computed
         self.joint_publisher.publish(message)
+        self.state_message = message
 
     def publish_moments(self) -> None:
         """machine/moments at the current exchange time, with the inputs that now hold."""

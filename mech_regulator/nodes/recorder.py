@@ -59,12 +59,13 @@ class RecorderNode(Node):
             self.path.parent.mkdir(parents=True, exist_ok=True)
         self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate)
         self.machine: dict[int, tuple[float, float]] = {}
-        self.moments: dict[int, tuple[float, float]] = {}  # stamp -> (throttle-scaled drive, external)
+        self.moments: dict[int, tuple[float, float]] = {}  # stamp -> (drive, external load) [N m]
         self.governor: dict[int, dict[str, float]] = {}
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.last_external: float | None = None
         self.machine_status = (DiagnosticStatus.OK, "")
         self.finished_at: int | None = None
+        self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
         self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
         self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
@@ -120,6 +121,8 @@ class RecorderNode(Node):
             if (status.level, status.message) != self.machine_status and status.level in LEVELS:
                 self.recording.add_event(when, f"machine: {status.message}", LEVELS[status.level])
             self.machine_status = (status.level, status.message)
+            if values.get("tripped_at", "None") != "None":
+                self.tripped_at = float(values["tripped_at"])
             if "finished_at_ns" in values:
                 self.finished_at = int(values["finished_at_ns"])
 
@@ -163,10 +166,12 @@ class RecorderNode(Node):
                 row += [values["arm_angle"], values["arm_rate"]]
                 row += [values[name] for name in self.model.governor.state_names[2:]]
             rows.append(row)
-        throttle = [self.governor[when]["throttle"] if self.model.governor is not None else 1.0 for when in times]
+        tripped = self.tripped_at if self.tripped_at is not None else np.inf
+        throttle = [0.0 if seconds(when) >= tripped else
+                    self.governor[when]["throttle"] if self.model.governor is not None else 1.0 for when in times]
         return CoSimulation(times=np.array([seconds(when) for when in times]), states=np.array(rows).T,
                             throttle=np.array(throttle), external_load=np.array([self.moments[w][1] for w in times]),
-                            events=self.events, status="complete", message="", tripped_at=None)
+                            events=self.events, status="complete", message="", tripped_at=self.tripped_at)
 
     def record(self) -> None:
         """Spin until the machine has finished and everything is in (or Ctrl-C)."""

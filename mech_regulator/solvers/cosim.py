@@ -55,14 +55,17 @@ class MachineStepper:
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
 
-    def advance(self, t_end: float, throttle: float, external_load: float) -> Trajectory:
-        """Integrate from the current time to t_end [s] with the throttle [-] and the external load [N m]
-        held; returns that stretch's dense trajectory of (phi, omega). A tripped machine runs with the
-        throttle closed."""
+    def applied_throttle(self, throttle: float) -> float:
+        """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
+        checked here, at the exchange times: the speed now above overspeed_trip trips the machine."""
         if self.overspeed_trip > 0.0 and self.tripped_at is None and abs(self.state[1]) > self.overspeed_trip:
             self.tripped_at = self.time
-        if self.tripped_at is not None:
-            throttle = 0.0
+        return 0.0 if self.tripped_at is not None else throttle
+
+    def advance(self, t_end: float, throttle: float, external_load: float) -> Trajectory:
+        """Integrate from the current time to t_end [s] with the throttle [-] (as applied_throttle gives it)
+        and the external load [N m] held; returns that stretch's dense trajectory of (phi, omega)."""
+        throttle = self.applied_throttle(throttle)
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
         piece = LoadPiece(self.time, t_end, external_load, 0.0, throttle)
         self.state, _ = _segment(self.plant, piece, self.time, t_end, self.state, None, stretch, None)
@@ -74,8 +77,7 @@ class MachineStepper:
         """The machine's outputs at its current state with these inputs held: the columns of
         MachineModel.columns (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the
         moments on the crank by source (drive, resistance, external, net; see crank_moments)."""
-        if self.tripped_at is not None:
-            throttle = 0.0
+        throttle = self.applied_throttle(throttle)
         columns = self.plant.columns(np.array([self.time]), self.state[:, None], np.array([throttle]),
                                      np.array([external_load]))
         columns.update(crank_moments(columns))
@@ -184,6 +186,7 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
         while True:
             now = seconds(min(tick * step, end))
             throttle = governor.answer(now, float(machine.state[1])) if governor is not None else 1.0
+            throttle = machine.applied_throttle(throttle)
             load = model.external_load(now)
             rows.append(np.concatenate([machine.state, governor.state[2:]]) if governor is not None
                         else machine.state.copy())
