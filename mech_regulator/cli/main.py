@@ -17,7 +17,7 @@ import numpy as np
 from mech_regulator import __version__
 from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
-from mech_regulator.cli.report import progress_bar, to_json
+from mech_regulator.cli.report import progress_bar, to_json, write_csv
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -134,8 +134,7 @@ def _simulate(scene, args) -> int:
         args.out = args.plot = args.record = None  # nothing to write
     if args.out is not None:
         columns = model.columns(*_samples(model, trajectory))
-        np.savetxt(args.out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
-                   comments="", fmt="%.12g")
+        write_csv(args.out, columns)
         summary["csv"] = str(args.out)
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_run
@@ -174,8 +173,7 @@ def _cosimulate(model, args) -> int:
     summary = summarise_cosimulation(model, run, args.exchange_step)
     if args.out is not None:
         columns = model.columns(run.times, run.states, run.throttle, run.external_load)
-        np.savetxt(args.out, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
-                   comments="", fmt="%.17g")
+        write_csv(args.out, columns, digits=17)
         summary["csv"] = str(args.out)
     if args.record is not None:
         from mech_regulator.viz.recording import record_run

@@ -211,3 +211,10 @@ def progress_bar(duration: float, quiet: bool):
 
     return tqdm(total=duration, unit="s sim", disable=True if quiet else None, file=sys.stderr,
                 bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")
+
+
+def write_csv(path, columns: dict[str, np.ndarray], digits: int = 12) -> None:
+    """Write output columns as CSV with a header line (digits significant digits; 17 round-trips a double
+    exactly)."""
+    np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="",
+               fmt=f"%.{digits}g")

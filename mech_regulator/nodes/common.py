@@ -213,7 +213,3 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
         if rclpy.ok():
             rclpy.shutdown()
 
-
-def sim_seconds(time: Time) -> float:
-    """Seconds of a builtin_interfaces/Time, by the same conversion the core uses for grid times."""
-    return seconds(nanoseconds(time))

@@ -52,12 +52,16 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     return parameters
 
 
+def default_recording(scene_name: str) -> Path:
+    """runs/<scene>-<local time>.rrd"""
+    return Path("runs") / f"{scene_name}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
+
+
 def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
              quiet: bool) -> int:
     """Run the nodes on the scene; returns the exit code (0, 1 if a node failed, 130 if interrupted)."""
-    stem = f"{scene.name}-{time.strftime('%Y%m%d-%H%M%S')}"
-    output = output or Path("runs") / f"{stem}.rrd"
+    output = output or default_recording(scene.name)
     output.parent.mkdir(parents=True, exist_ok=True)
     if overspeed_trip is None:
         overspeed_trip = OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,19 +22,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
-from mech_regulator.cli.report import to_json
+from mech_regulator.cli.report import to_json, write_csv
 from mech_regulator.nodes.common import STATE_QOS, float_parameter, nanoseconds, run, scene_model, text_parameter
+from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
 from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
-
-
-def default_output(scene_name: str) -> Path:
-    """runs/<scene>-<local time>.rrd"""
-    return Path("runs") / f"{scene_name}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
 
 
 class RecorderNode(Node):
@@ -52,7 +47,7 @@ class RecorderNode(Node):
                                                               "time [Hz]", 1.0, 1e5, read_only=True)
         self.exchange_step = float_parameter(self, "exchange_step", 1e-3, "the machine's exchange step [s], for the "
                                                                           "summary", 1e-6, 1.0, read_only=True)
-        self.path = None if output == "none" else Path(output) if output else default_output(self.model.scene.name)
+        self.path = None if output == "none" else Path(output) if output else default_recording(self.model.scene.name)
         if self.path is None and not connect:
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
@@ -147,8 +142,7 @@ class RecorderNode(Node):
             summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
         csv_path, summary_path = self.path.with_suffix(".csv"), self.path.with_suffix(".json")
         columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
-        np.savetxt(csv_path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns),
-                   comments="", fmt="%.17g")
+        write_csv(csv_path, columns, digits=17)
         summary.update(recording=str(self.path), csv=str(csv_path))
         summary_path.write_text(to_json(summary))
 
