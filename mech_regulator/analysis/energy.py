@@ -1,7 +1,9 @@
 """Energy bookkeeping of a run, and the energy swing that sizes a flywheel.
 
 Energy balance (physics.md section 1, energy form): the work of all moments equals the change of
-kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. The works are integrated
+kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. A two-mass machine adds
+the driven part's works (at omega_driven), the coupling damper's work -c (omega - omega_driven)^2 and the
+coupling's elastic energy 1/2 k twist^2 to the stored energy. The works are integrated
 by Gauss-Legendre quadrature on every solver step of the dense output, so the residual measures
 the integration error of the run, not a sampling error.
 """
@@ -21,8 +23,9 @@ GAUSS_NODES, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(4)
 
 @dataclass(frozen=True)
 class EnergyBalance:
-    """Works of the moments over the run [J], change of kinetic energy [J] and the residual
-    `sum(works) - delta_kinetic` [J], also relative to the largest energy involved."""
+    """Works of the moments over the run [J], change of the stored energy (kinetic, plus the coupling's
+    elastic energy) [J] and the residual `sum(works) - delta_kinetic` [J], also relative to the largest
+    energy involved."""
 
     works: dict[str, float]
     delta_kinetic: float
@@ -37,13 +40,28 @@ def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance
     nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
     weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
     columns = model.columns(nodes, trajectory(nodes))
-    power_columns = [name for name in columns if name.startswith("M_") and name not in ("M_load",)]
-    works = {name[2:]: float(np.sum(weights * columns[name] * columns["omega"])) for name in power_columns}
+    works = {name: float(np.sum(weights * power)) for name, power in powers(model, columns).items()}
     ends = model.columns(np.array([edges[0], edges[-1]]), trajectory(np.array([edges[0], edges[-1]])))
-    delta_kinetic = float(ends["E_kinetic"][1] - ends["E_kinetic"][0])
+    stored = ends["E_kinetic"] + ends.get("E_elastic", 0.0)
+    delta_kinetic = float(stored[1] - stored[0])
     residual = sum(works.values()) - delta_kinetic
-    scale = max(sum(abs(w) for w in works.values()), float(np.max(ends["E_kinetic"])), 1e-300)
+    scale = max(sum(abs(w) for w in works.values()), float(np.max(stored)), 1e-300)
     return EnergyBalance(works, delta_kinetic, residual, residual / scale)
+
+
+def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The power of every moment that exchanges energy with the outside [W], by name: M_k omega for the
+    crank's moments, M_driven_k omega_driven for the driven part's, and -c (omega - omega_driven)^2 for the
+    coupling's damper (the coupling's spring only stores energy)."""
+    result = {}
+    for name, moment in columns.items():
+        if not name.startswith("M_") or name in ("M_load", "M_coupling"):
+            continue
+        speed = columns["omega_driven"] if name.startswith("M_driven_") else columns["omega"]
+        result[name[2:]] = moment * speed
+    if model.coupling is not None:
+        result["coupling_damping"] = -model.coupling.damping * (columns["omega"] - columns["omega_driven"]) ** 2
+    return result
 
 
 def _step_edges(trajectory: Trajectory) -> np.ndarray:
@@ -58,7 +76,8 @@ def _step_edges(trajectory: Trajectory) -> np.ndarray:
 def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, points: int = 7200
                  ) -> tuple[np.ndarray, np.ndarray]:
     """dE(phi) = integral_{phi_start}^{phi} (M_d + M_c) dphi over one dynamic period [J] at a fixed speed
-    omega [rad/s] and t = 0 (for moments that read omega, the swing at that speed).
+    omega [rad/s] and t = 0 (for moments that read omega, the swing at that speed). A coupled driven part
+    turns at omega too, its loads passed through the coupling.
 
     Midpoint rule on a grid that contains every switch angle, so on-off moments integrate exactly.
     Returns (phi [rad], dE [J]).
@@ -70,6 +89,8 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
         grid = np.union1d(grid, np.arange(first, phi_start + period, switch_period))
     middles = 0.5 * (grid[:-1] + grid[1:])
     states = np.vstack([middles, np.full_like(middles, omega)])
+    if model.coupling is not None:  # rigid at constant speed: the coupling carries the driven part's loads
+        states = np.vstack([states, np.full_like(middles, model.static_twist(omega)), np.full_like(middles, omega)])
     columns = model.columns(np.zeros_like(middles), states)
     net = columns["M_drive"] + columns["M_load"] + columns.get("M_weight", 0.0)
     return grid, np.concatenate([[0.0], np.cumsum(net * np.diff(grid))])

@@ -120,11 +120,15 @@ def _simulate(scene, args) -> int:
     from mech_regulator.cli.report import format_summary
     from mech_regulator.model import build_model
     from mech_regulator.solvers import simulate
+    from mech_regulator.solvers.advice import stiffness_advice
 
     _check_outputs(args, args.out, args.record)
     model = build_model(scene)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
+    advice = stiffness_advice(model)
+    if advice is not None:
+        print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
     with progress_bar(duration, args.quiet) as bar:
         trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
@@ -221,8 +225,10 @@ def _main_job(scene, args) -> int:
     if importlib.util.find_spec("rclpy") is None:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
+    from mech_regulator.nodes.common import check_scene_for_nodes
     from mech_regulator.nodes.launch import main_job
 
+    check_scene_for_nodes(scene, args.scene)
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
     if not 1e-3 <= args.real_time_factor <= 1e3:

@@ -11,6 +11,7 @@ import sys
 import numpy as np
 
 from mech_regulator.model import MachineModel
+from mech_regulator.solvers.advice import coupling_modes, stiffness_advice
 
 
 def describe(model: MachineModel) -> str:
@@ -21,7 +22,7 @@ def describe(model: MachineModel) -> str:
     if scene.description:
         lines.append(f"  {scene.description.strip()}")
     units = {"phi": "rad", "omega": "rad/s", "arm_angle": "rad", "arm_rate": "rad/s", "servo": "-",
-             "feedback_shift": "m"}
+             "feedback_shift": "m", "twist": "rad", "omega_driven": "rad/s"}
     lines.append("state vector: " + ", ".join(f"{name} [{units[name]}]" for name in model.state_names()))
     if model.reduced is None:
         lines.append(f"inertia: constant J = {model.inertia_constant:g} kg m^2 (no mechanism: no dJ/dphi term)")
@@ -40,6 +41,16 @@ def describe(model: MachineModel) -> str:
         lines.append(f"  - load  external load moment (N m) by time: {changes}   [reads t]")
     if not model.effects and not model.has_weight and not model.load_pieces:
         lines.append("  (none: the machine coasts)")
+    if model.coupling is not None:
+        coupling = model.coupling
+        modes = coupling_modes(model)
+        lines.append(f"coupling: M_m = {coupling.stiffness:g} twist + {coupling.damping:g} (omega - omega_driven) N m to "
+                     f"a driven part of I2 = {coupling.driven_inertia:g} kg m^2 (relative mode: natural frequency "
+                     f"{modes.natural_frequency:.4g} rad/s, damping ratio {modes.damping_ratio:.3g})")
+        for effect in coupling.driven_effects:
+            lines.append(f"  driven part's load: {effect.formula.replace('omega', 'omega_driven')}")
+        if model.load_pieces:
+            lines.append("  the external load acts on the driven part")
     if model.governor is not None:
         lines.append("governor (M_d = throttle * drive; hybrid modes with exact stick, break-away and stops):")
         lines += [f"  {line}" for line in model.governor.describe()]
@@ -57,6 +68,9 @@ def describe(model: MachineModel) -> str:
     else:
         detail = f"adaptive, rtol {solver.rtol:g}, atol {solver.atol:g}"
     lines.append(f"solver: {solver.method} ({detail}); output at {solver.sample_rate:g} Hz")
+    advice = stiffness_advice(model)
+    if advice is not None:
+        lines.append(f"note: {advice}")
     lines.append(f"scenario: {scene.scenario.duration:g} s from phi = {scene.scenario.initial.phi:g} rad, "
                  f"omega = {scene.scenario.initial.omega:g} rad/s")
     return "\n".join(lines)

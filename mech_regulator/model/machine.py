@@ -8,6 +8,11 @@ physics.md section 1,
 
 with J = J0 + J_flywheel ratio^2 + J_links(phi). The right-hand side is specialised to the scene:
 a machine without a mechanism has no J(phi), no J' term and no kinematics call at all.
+
+A machine with an elastic coupling is the two-mass machine of physics.md section 4: the crank (the
+driving part above) passes M_m = k (phi - phi2) + c (omega - omega2) to a driven part of constant
+inertia I2, I2 domega2/dt = M_m + M_c2(omega2) - M_external; its states, the twist phi - phi2 and
+omega2, come last in the state vector.
 """
 
 from __future__ import annotations
@@ -47,13 +52,34 @@ class LoadPiece:
 
 
 @dataclass(frozen=True)
+class CouplingModel:
+    """An elastic coupling and the driven part behind it: stiffness k [N m/rad], damping c [N m s/rad], the
+    driven part's inertia I2 [kg m^2] and its resisting moments (effects of omega_driven)."""
+
+    stiffness: float
+    damping: float
+    driven_inertia: float
+    driven_effects: tuple[Effect, ...]
+
+    def moment(self, twist: float, relative_speed: float) -> float:
+        """The moment the coupling passes to the driven part [N m]: M_m = k twist + c (omega - omega2)
+        (the crank feels -M_m)."""
+        return self.stiffness * twist + self.damping * relative_speed
+
+    def driven_moment(self, t: float, omega_driven: float) -> float:
+        """Sum of the driven part's own moments at speed omega_driven [rad/s] [N m] (negative: resisting)."""
+        return sum(effect.moment(t, 0.0, omega_driven, 0.0, 0.0) for effect in self.driven_effects)
+
+
+@dataclass(frozen=True)
 class MachineModel:
     """A scene assembled for simulation.
 
     inertia_constant: J0 + J_flywheel ratio^2 [kg m^2]; reduced: the mechanism's
     phi -> (J_links, dJ_links/dphi, M_weight, q, dq/dphi), or None for a constant-J machine;
     effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none;
-    governor: the speed governor whose throttle scales the drive, or None.
+    governor: the speed governor whose throttle scales the drive, or None; coupling: the elastic coupling
+    to a driven part (which then carries the external load), or None.
     """
 
     scene: Scene
@@ -63,6 +89,7 @@ class MachineModel:
     effects: tuple[Effect, ...]
     load_pieces: tuple[LoadPiece, ...]
     governor: Governor | None = None
+    coupling: CouplingModel | None = None
 
     def breakpoints(self) -> list[float]:
         """Times where the external load has a kink or a jump: integration never steps across them."""
@@ -100,7 +127,8 @@ class MachineModel:
 
     def depends_on(self) -> frozenset[str]:
         """Which of 't', 'phi', 'omega' the net moment reads."""
-        reads = set().union(*(effect.depends_on for effect in self.effects)) if self.effects else set()
+        effects = self.effects + (self.coupling.driven_effects if self.coupling is not None else ())
+        reads = set().union(*(effect.depends_on for effect in effects)) if effects else set()
         if self.has_weight:
             reads.add("phi")
         if self.load_pieces:
@@ -129,7 +157,9 @@ class MachineModel:
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is
         epsilon = (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with
-        throttle = 1 without a governor. window = (lo, hi): the crank-angle interval between two switch
+        throttle = 1 without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c
+        includes -M_m, the external load acts on the driven part, d twist/dt = omega - omega2 and
+        domega2/dt = (M_m + M_c2(omega2) - M_external) / I2 (physics.md section 4). window = (lo, hi): the crank-angle interval between two switch
         angles the solver is in; effects that jump at switch angles then see phi clamped into it, so
         they keep their mode across the switch until the solver has located the crossing and restarted
         (no step straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine
@@ -154,6 +184,12 @@ class MachineModel:
         reduced = self.reduced
         throttle = governor.throttle if governor is not None else None
         governor_rates = governor.derivatives(mode, ideal) if governor is not None else None
+        coupling = self.coupling
+        if coupling is not None:
+            k, c, I2 = coupling.stiffness, coupling.damping, coupling.driven_inertia
+            driven = tuple(effect.moment for effect in coupling.driven_effects)
+            index = self.coupling_index
+        plain = governor_rates is None and coupling is None
 
         def machine(t: float, y: np.ndarray):
             phi, omega = y[0], y[1]
@@ -162,35 +198,61 @@ class MachineModel:
             else:
                 J_links, dJ, total, q, dq = reduced(phi)
                 J = J0 + J_links
-            total -= offset + slope * t
+            if coupling is None:
+                total -= offset + slope * t
+            else:
+                passed = k * y[index] + c * (omega - y[index + 1])
+                total -= passed
             for moment in smooth:
                 total += moment(t, phi, omega, q, dq)
             for moment in switched:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
-            if governor_rates is None:
+            if plain:
                 for moment in scaled:
                     total += held_throttle * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            share = throttle(y)
+            share = held_throttle if governor_rates is None else throttle(y)
             for moment in scaled:
                 total += share * moment(t, phi, omega, q, dq)
-            return [omega, (total - 0.5 * dJ * omega * omega) / J, *governor_rates(y)]
+            rates = [omega, (total - 0.5 * dJ * omega * omega) / J]
+            if governor_rates is not None:
+                rates += governor_rates(y)
+            if coupling is not None:
+                omega2 = y[index + 1]
+                driven_total = passed - (offset + slope * t)
+                for moment in driven:
+                    driven_total += moment(t, 0.0, omega2, 0.0, 0.0)
+                rates += [omega - omega2, driven_total / I2]
+            return rates
 
         return machine
 
+    @property
+    def coupling_index(self) -> int:
+        """Index of the coupling's twist in the state vector (omega2 follows); the governor's states come before."""
+        return 2 + (len(self.governor.state_names) if self.governor is not None else 0)
+
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector y."""
-        return ("phi", "omega") + (self.governor.state_names if self.governor is not None else ())
+        return (("phi", "omega") + (self.governor.state_names if self.governor is not None else ())
+                + (("twist", "omega_driven") if self.coupling is not None else ()))
 
     def initial_state(self) -> np.ndarray:
         """The state at t = 0 from the scenario (governor at rest in equilibrium unless the scene says)."""
         initial = self.scene.scenario.initial
-        y = np.array([initial.phi, initial.omega], dtype=float)
-        if self.governor is None:
-            return y
-        governor_state = self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
-                                                     self.initial_balance_throttle)
-        return np.concatenate([y, governor_state])
+        parts = [np.array([initial.phi, initial.omega], dtype=float)]
+        if self.governor is not None:
+            parts.append(self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
+                                                     self.initial_balance_throttle))
+        if self.coupling is not None:
+            parts.append(np.array([self.static_twist(initial.omega) if initial.twist is None else initial.twist,
+                                   initial.omega]))
+        return np.concatenate(parts)
+
+    def static_twist(self, omega: float) -> float:
+        """The twist [rad] at which the coupling carries the driven part's loads and the external load at t = 0
+        at speed omega [rad/s]: k twist = M_external - M_c2(omega)."""
+        return (self.external_load(0.0) - self.coupling.driven_moment(0.0, omega)) / self.coupling.stiffness
 
     def initial_mode(self, y: np.ndarray) -> Mode | None:
         """The governor's mode at a state with the governor at rest (None without a governor)."""
@@ -203,7 +265,8 @@ class MachineModel:
     def cycle_averages(self, omega: float, external: float = 0.0) -> tuple[float, float, float]:
         """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
         mean M_drive at full throttle [N m], mean of all other moments with the external load `external`
-        [N m], which opposes motion).
+        [N m], which opposes motion). A coupled driven part turns with the crank in the mean: its inertia
+        and moments are added (the coupling is taken as rigid).
 
         The weight moment averages out over a turn; the J' omega^2 / 2 term averages to zero at constant
         speed. These define the cycle-averaged model J_m omega' = throttle M_d(omega) + M_c(omega) used by
@@ -219,6 +282,9 @@ class MachineModel:
                 else:
                     other += value
         count = len(phis)
+        if self.coupling is not None:
+            return (inertia + self.coupling.driven_inertia, drive / count,
+                    other / count + self.coupling.driven_moment(0.0, omega) + weight - external)
         return inertia, drive / count, other / count + weight - external
 
     @functools.cached_property
@@ -257,6 +323,9 @@ class MachineModel:
         M_external when present), E_kinetic = 1/2 J omega^2, the output coordinate with its speed
         (x, v for a slider, theta4, omega4 for a rocker) and, governed: throttle, sleeve z [m],
         sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and feedback_shift [m] where present.
+        With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
+        load is not), twist [rad], omega_driven [rad/s], M_driven_<effect> and M_driven_external (moments on
+        the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
         """
         n = t.size
         names = [effect.name for effect in self.effects]
@@ -281,7 +350,14 @@ class MachineModel:
                 throttle[i] = self.governor.throttle(y[:, i])
         omega = y[1]
         drive = throttle * sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
-        load = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "load"), np.zeros(n)) - external
+        load = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "load"), np.zeros(n))
+        coupling = self.coupling
+        if coupling is None:
+            load = load - external
+        else:
+            twist, omega_driven = y[self.coupling_index], y[self.coupling_index + 1]
+            passed = coupling.moment(twist, y[1] - omega_driven)
+            load = load - passed
         net = drive + load + weight
         out = {"t": t, "phi": y[0], "omega": omega, "epsilon": (net - 0.5 * dJ * omega ** 2) / J, "J": J,
                "dJ_dphi": dJ, "M_drive": drive, "M_load": load}
@@ -290,9 +366,19 @@ class MachineModel:
                 out[f"M_{name}"] = per_effect[k]
         if self.has_weight:
             out["M_weight"] = weight
-        if self.load_pieces or given:
-            out["M_external"] = -external
-        out["E_kinetic"] = 0.5 * J * omega ** 2
+        if coupling is not None:
+            out["M_coupling"] = -passed
+            for effect in coupling.driven_effects:
+                out[f"M_driven_{effect.name}"] = np.array([effect.moment(ti, 0.0, w, 0.0, 0.0)
+                                                           for ti, w in zip(t, omega_driven)])
+            out["M_driven_external"] = -external
+            out["twist"], out["omega_driven"] = twist, omega_driven
+            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * coupling.driven_inertia * omega_driven ** 2
+            out["E_elastic"] = 0.5 * coupling.stiffness * twist ** 2
+        else:
+            if self.load_pieces or given:
+                out["M_external"] = -external
+            out["E_kinetic"] = 0.5 * J * omega ** 2
         kind = self.scene.machine.mechanism.type if self.scene.machine.mechanism is not None else None
         if kind == "crank_slider":
             out["x_slider"], out["v_slider"] = q, dq * omega
@@ -352,8 +438,14 @@ def build_model(scene: Scene) -> MachineModel:
         effects.append(build_drive(machine.drive))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
+    coupling = None
+    if machine.coupling is not None:
+        driven = machine.coupling.driven
+        coupling = CouplingModel(machine.coupling.stiffness, machine.coupling.damping, driven.inertia,
+                                 tuple(_unique_names([build_load(load, None) for load in driven.loads])))
     model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
-                         has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene))
+                         has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene),
+                         coupling=coupling)
     if scene.governor is None:
         return model
     governor = build_governor(scene.governor, model.initial_balance_throttle)

@@ -21,6 +21,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
+from mech_regulator.scene.schema import Scene
 from mech_regulator.solvers.cosim import NANOSECONDS, seconds
 
 EXIT_BAD_INPUT = 2
@@ -105,7 +106,17 @@ def scene_model(node: Node) -> MachineModel:
                                 "scene file (YAML path) or the name of a bundled scene")
     overrides = list_parameter(node, "overrides", [""],
                                "scene changes KEY=VALUE, as `mech-regulator --set` (e.g. governor.damping=300)")
-    return build_model(load_scene(scene_file, [item for item in overrides if item]))
+    scene = load_scene(scene_file, [item for item in overrides if item])
+    check_scene_for_nodes(scene, scene_file)
+    return build_model(scene)
+
+
+def check_scene_for_nodes(scene: Scene, source: str) -> None:
+    """Raise SceneError for a scene the nodes cannot play: a two-mass machine (machine.coupling), whose driven
+    part's state the nodes' messages do not carry."""
+    if scene.machine.coupling is not None:
+        raise SceneError(f"{source}: machine.coupling is set, but the nodes exchange the crank's state only and "
+                         "cannot play a two-mass machine yet; simulate it with `mech-regulator simulate`")
 
 
 @dataclass

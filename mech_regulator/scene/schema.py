@@ -267,6 +267,27 @@ Load = Annotated[
 ]
 
 
+DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
+
+
+class DrivenPart(SceneModel):
+    """The driven part of a two-mass machine (physics.md section 4): a rotor of constant inertia with its own
+    resisting moments, turning at omega_driven; the scenario's external load acts on it."""
+
+    inertia: Positive = Field(description="moment of inertia I2 of the driven part, reduced to the crank shaft [kg m^2]")
+    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the driven part, of "
+                                                                      "omega_driven (constant, viscous, fan)")
+
+
+class Coupling(SceneModel):
+    """Elastic coupling between the crank (driving part) and the driven part: it passes the moment
+    M_m = stiffness * twist + damping * (omega - omega_driven), twist = phi - phi_driven."""
+
+    stiffness: Positive = Field(description="torsional stiffness k of the coupling [N m/rad]")
+    damping: NonNegative = Field(0.0, description="torsional damping c of the coupling [N m s/rad]")
+    driven: DrivenPart = Field(description="the driven part")
+
+
 class Machine(SceneModel):
     """The machine reduced to its driving link (the crank)."""
 
@@ -279,6 +300,8 @@ class Machine(SceneModel):
     mechanism: Mechanism | None = Field(None, description="linkage driven by the crank; without one J is constant")
     drive: Drive | None = Field(None, description="driving moment M_d")
     loads: list[Load] = Field(default_factory=list, description="resisting moments and forces M_c")
+    coupling: Coupling | None = Field(None, description="optional elastic coupling to a driven part (two-mass "
+                                                        "machine); the external load then acts on the driven part")
 
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
@@ -457,6 +480,9 @@ class InitialState(SceneModel):
                                                    "equilibrium position at the initial speed [m]")
     servo: float | None = Field(None, description="initial servo-motor position (throttle, indirect governor); none = "
                                                   "the throttle that balances the initial load at the initial speed [-]")
+    twist: float | None = Field(None, description="initial twist phi - phi_driven of the coupling, driven part turning "
+                                                  "at omega; none = the static twist that carries the driven part's "
+                                                  "loads at the initial speed [rad]")
 
 
 class LoadEvent(SceneModel):
@@ -525,6 +551,11 @@ class Scene(SceneModel):
     @model_validator(mode="after")
     def _governed(self) -> Scene:
         initial = self.scenario.initial
+        if self.machine.coupling is None and initial.twist is not None:
+            raise ValueError("scenario.initial.twist is set but the machine has no coupling")
+        if self.machine.coupling is not None and self.solver.method == "energy":
+            raise ValueError("solver.method 'energy' steps one crank angle; a machine with a coupling has two "
+                             "masses: use a method in time (Radau or BDF for a stiff coupling, else DOP853)")
         if self.governor is None:
             for key in ("sleeve", "servo"):
                 if getattr(initial, key) is not None:

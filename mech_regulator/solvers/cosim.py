@@ -48,7 +48,8 @@ class MachineStepper:
 
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
         self.plant = dataclasses.replace(model, governor=None, load_pieces=())
-        self.state = model.initial_state()[:2]
+        initial = model.initial_state()
+        self.state = np.concatenate([initial[:2], initial[model.coupling_index:]]) if model.coupling else initial[:2]
         self.time = 0.0
         self.overspeed_trip = overspeed_trip
         self.tripped_at: float | None = None
@@ -97,9 +98,9 @@ class GovernorStepper:
         if model.governor is None:
             raise ValueError(f"scene '{model.scene.name}' has no governor")
         self.regulator = dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False,
-                                             effects=(), load_pieces=())
+                                             effects=(), load_pieces=(), coupling=None)
         self.governor = model.governor
-        self.state = model.initial_state()
+        self.state = model.initial_state()[:model.coupling_index]
         self.mode = model.initial_mode(self.state)
         self.time = 0.0
         self.events: list[tuple[float, str, tuple[str, str]]] = []
@@ -148,7 +149,7 @@ def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
 @dataclass
 class CoSimulation:
     """A co-simulated run sampled at its exchange times: times [s], the full state there (machine
-    (phi, omega) then the governor's states, shape n_states x n), the throttle [-] and external load
+    (phi, omega), the governor's states, then a coupling's, as MachineModel.state_names; n_states x n), the throttle [-] and external load
     [N m] held from each time on, the governor's mode changes (time, what, new mode), and how it ended."""
 
     times: np.ndarray
@@ -188,8 +189,8 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
             throttle = governor.answer(now, float(machine.state[1])) if governor is not None else 1.0
             throttle = machine.applied_throttle(throttle)
             load = model.external_load(now)
-            rows.append(np.concatenate([machine.state, governor.state[2:]]) if governor is not None
-                        else machine.state.copy())
+            rows.append(np.concatenate([machine.state[:2], governor.state[2:], machine.state[2:]])
+                        if governor is not None else machine.state.copy())
             inputs.append((now, throttle, load))
             if tick * step >= end or machine.status != "complete" or (governor and governor.status != "complete"):
                 break

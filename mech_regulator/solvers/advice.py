@@ -1,0 +1,66 @@
+"""Advice on the choice of solver: a stiff elastic coupling makes explicit methods crawl.
+
+The coupling's relative motion (twist) is a damped oscillator of the two inertias against each other,
+with reduced inertia J_r = J1 I2 / (J1 + I2) (J1 the crank side's mean inertia):
+
+    J_r twist'' + c twist' + k twist = ...,   lambda = -c / (2 J_r) +- sqrt((c / (2 J_r))^2 - k / J_r).
+
+An explicit Runge-Kutta method stays stable only while h |lambda| stays inside its stability region
+(about 3 to 6 along the negative real axis and the imaginary axis), whatever the tolerance asks for:
+a fast mode that has long decayed still dictates the step. Implicit methods (Radau, BDF) are not
+limited by it.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+from dataclasses import dataclass
+
+from mech_regulator.model import MachineModel
+
+EXPLICIT_METHODS = ("RK45", "RK23", "DOP853", "RK4")
+STABILITY_LIMIT = 3.0  # h |lambda| an explicit method of this family keeps stable (conservatively) [-]
+STIFF_STEPS = 20_000  # steps imposed by stability alone above which the user is advised to switch
+
+
+@dataclass(frozen=True)
+class CouplingModes:
+    """The coupling's relative mode: reduced inertia [kg m^2], natural frequency sqrt(k / J_r) [rad/s],
+    damping ratio c / (2 sqrt(k J_r)) [-] and the eigenvalue of largest magnitude [1/s]."""
+
+    reduced_inertia: float
+    natural_frequency: float
+    damping_ratio: float
+    fastest: complex
+
+
+def coupling_modes(model: MachineModel) -> CouplingModes | None:
+    """The coupling's relative mode (module docstring), or None without a coupling."""
+    coupling = model.coupling
+    if coupling is None:
+        return None
+    crank_inertia = model.cycle_averages(0.0)[0] - coupling.driven_inertia
+    reduced = crank_inertia * coupling.driven_inertia / (crank_inertia + coupling.driven_inertia)
+    natural = math.sqrt(coupling.stiffness / reduced)
+    ratio = coupling.damping / (2.0 * math.sqrt(coupling.stiffness * reduced))
+    half = coupling.damping / (2.0 * reduced)
+    root = cmath.sqrt(half * half - coupling.stiffness / reduced)
+    return CouplingModes(reduced, natural, ratio, max(-half + root, -half - root, key=abs))
+
+
+def stiffness_advice(model: MachineModel) -> str | None:
+    """A note for the user when the scene's explicit method would need more than STIFF_STEPS steps for
+    stability alone over the scenario (None otherwise)."""
+    modes = coupling_modes(model)
+    method = model.scene.solver.method
+    if modes is None or method not in EXPLICIT_METHODS:
+        return None
+    largest_step = STABILITY_LIMIT / abs(modes.fastest)
+    steps = model.scene.scenario.duration / largest_step
+    if steps <= STIFF_STEPS:
+        return None
+    return (f"the coupling is stiff: its fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s (natural frequency "
+            f"{modes.natural_frequency:.3g} rad/s, damping ratio {modes.damping_ratio:.3g}), so {method} needs steps "
+            f"below about {largest_step:.2g} s for stability alone, some {steps:.2g} steps; an implicit method is "
+            "not limited by it: set solver.method: Radau (or BDF)")
