@@ -63,4 +63,5 @@ def stiffness_advice(model: MachineModel) -> str | None:
     return (f"the coupling is stiff: its fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s (natural frequency "
             f"{modes.natural_frequency:.3g} rad/s, damping ratio {modes.damping_ratio:.3g}), so {method} needs steps "
             f"below about {largest_step:.2g} s for stability alone, some {steps:.2g} steps; an implicit method is "
-            "not limited by it: set solver.method: Radau (or BDF)")
+            "not limited by it: set solver.method: Radau (or BDF; with steps longer than the vibration's period "
+            "they damp it out, keeping the mean motion and the mean coupling moment)")
