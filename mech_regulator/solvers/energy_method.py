@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import optimize
 from scipy.interpolate import CubicHermiteSpline
 
 from mech_regulator.model import MachineModel
@@ -30,8 +31,8 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     scenario = model.scene.scenario
     dphi = math.radians(model.scene.solver.phi_step_deg)
     implicit = bool(model.depends_on() & {"omega", "t"})
-    trajectory = Trajectory(method="energy", t_start=0.0)
     t, phi, omega = 0.0, scenario.initial.phi, scenario.initial.omega
+    trajectory = Trajectory(method="energy", t_start=0.0, y_start=np.array([phi, omega]))
     if omega < 0.0:
         trajectory.status = "failed"
         trajectory.message = (f"energy method: initial omega = {omega} rad/s; the method steps forward in phi and "
@@ -55,25 +56,16 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
         while t < scenario.duration:
             phi_next = phi + dphi
             J_next, _ = model.inertia(phi_next)
-            guess = math.sqrt(max(2.0 * (energy + M * dphi), 0.0) / J_next) if omega == 0.0 else omega
-            for _ in range(MAX_ITERATIONS):
-                if omega + guess <= 0.0:
-                    raise _Stopped(t, phi, omega)
-                t_next = t + 2.0 * dphi / (omega + guess)
-                M_next, _, epsilon_next = moment_and_derivative(t_next, phi_next, guess)
-                energy_next = energy + 0.5 * (M + M_next) * dphi
-                if energy_next <= 0.0:
-                    raise _Stopped(t, phi, omega)
-                omega_next = math.sqrt(2.0 * energy_next / J_next)
-                converged = abs(omega_next - guess) <= 1e-14 * omega_next
-                guess = omega_next
-                if not implicit or converged:
-                    break
-            else:
-                trajectory.status = "failed"
-                trajectory.message = (f"energy method: the implicit step did not converge at phi = {phi_next:.6g} rad; "
-                                      "use a smaller solver.phi_step_deg or a time-domain method")
-                break
+
+            def energy_after(speed: float) -> tuple[float, float, float]:
+                """(E_{i+1} [J], M_{i+1} [N m], epsilon_{i+1}) if the step ends at speed [rad/s]."""
+                M_next, _, epsilon_next = moment_and_derivative(t + 2.0 * dphi / (omega + speed), phi_next, speed)
+                return energy + 0.5 * (M + M_next) * dphi, M_next, epsilon_next
+
+            step_end = _step_end(energy_after, J_next, omega, energy + M * dphi, implicit)
+            if step_end is None:
+                raise _Stopped(t, phi, omega)
+            omega_next, energy_next, M_next, epsilon_next = step_end
             t = t + 2.0 * dphi / (omega + omega_next)
             phi, omega, M, energy = phi_next, omega_next, M_next, energy_next
             if implicit:  # the slope at the accepted time and speed
@@ -86,9 +78,18 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
                 progress(min(t, scenario.duration))
     except _Stopped as stop:
         trajectory.status = "failed"
-        trajectory.message = (f"energy method: the machine stops (kinetic energy reaches 0) just after t = {stop.t:.6g} s, "
-                              f"phi = {stop.phi:.6g} rad, omega = {stop.omega:.6g} rad/s; stepping in phi cannot follow "
-                              "a stop or a reversal: use a time-domain method such as DOP853")
+        if stop.omega == 0.0:
+            what = (f"the net moment at rest (M = {M:.6g} N m at t = {stop.t:.6g} s, phi = {stop.phi:.6g} rad) does not "
+                    "start the machine; "
+                    "stepping in phi cannot follow a machine that stays at rest or turns back")
+        else:
+            what = (f"the machine stops (kinetic energy reaches 0) just after t = {stop.t:.6g} s, phi = {stop.phi:.6g} "
+                    f"rad, omega = {stop.omega:.6g} rad/s; stepping in phi cannot follow a stop or a reversal")
+        trajectory.message = f"energy method: {what}: use a time-domain method such as DOP853"
+    except _NoConvergence:
+        trajectory.status = "failed"
+        trajectory.message = (f"energy method: no end speed satisfies the step's energy equation at phi = {phi:.6g} rad "
+                              f"(t = {t:.6g} s); use a smaller solver.phi_step_deg or a time-domain method")
     except KeyboardInterrupt:
         trajectory.status = "interrupted"
         trajectory.message = f"interrupted by the user at t = {t:.6g} s"
@@ -96,6 +97,50 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
         trajectory.add_piece(times[0], min(times[-1], scenario.duration), CubicHermiteSpline(np.array(times), np.array(states).T,
                                                                       np.array(slopes).T, axis=1))
     return trajectory
+
+
+def _step_end(energy_after, J_next: float, omega: float, explicit_energy: float, implicit: bool
+              ) -> tuple[float, float, float, float] | None:
+    """The end of a step, (omega_{i+1} [rad/s], E_{i+1} [J], M_{i+1} [N m], epsilon_{i+1} [rad/s^2]):
+    omega_{i+1} is the positive root of 1/2 J_{i+1} w^2 = E_{i+1}(w), the trapezoidal energy with the moment
+    at the step's end evaluated at w (and at the time the step ends at). None when no positive speed
+    satisfies it: the machine stops.
+
+    Fixed-point iteration from the explicit guess w = sqrt(2 (E_i + M_i dphi) / J_{i+1}) converges in a few
+    iterations for moderate steps; when it does not (a step long against the machine's time constant
+    overshoots), the root is bracketed and found by Brent's method, so a too-long step is never taken for
+    a stop. Raises _NoConvergence if the root cannot be bracketed."""
+    guess = math.sqrt(max(2.0 * explicit_energy, 0.0) / J_next) if omega == 0.0 else omega
+    for _ in range(MAX_ITERATIONS if implicit else 1):
+        if omega + guess <= 0.0:
+            break
+        energy_next, M_next, epsilon_next = energy_after(guess)
+        if energy_next <= 0.0:
+            break
+        omega_next = math.sqrt(2.0 * energy_next / J_next)
+        if not implicit or abs(omega_next - guess) <= 1e-14 * omega_next:
+            return omega_next, energy_next, M_next, epsilon_next
+        guess = omega_next
+    if not implicit:
+        return None
+
+    def surplus(speed: float) -> float:
+        return energy_after(speed)[0] - 0.5 * J_next * speed * speed
+
+    low = 1e-9 * max(omega, abs(guess)) or 1e-12  # [rad/s]; from rest, a speed the step's time stays finite at
+    if not surplus(low) > 0.0:
+        return None
+    high = max(omega, abs(guess), 2.0 * low)
+    for _ in range(200):
+        if surplus(high) < 0.0:
+            omega_next = optimize.brentq(surplus, low, high, xtol=1e-15 * high, rtol=4 * np.finfo(float).eps)
+            return (omega_next, *energy_after(omega_next))
+        high *= 2.0
+    raise _NoConvergence
+
+
+class _NoConvergence(Exception):
+    pass
 
 
 class _Stopped(Exception):

@@ -29,8 +29,8 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None)
     """Integrate the scene's scenario with its solver settings; returns the (possibly partial) trajectory."""
     solver = model.scene.solver
     scenario = model.scene.scenario
-    trajectory = Trajectory(method=solver.method, t_start=0.0)
     y = model.initial_state()
+    trajectory = Trajectory(method=solver.method, t_start=0.0, y_start=y.copy())
     mode = model.initial_mode(y)
     if mode is not None:
         trajectory.modes.append((0.0, mode))

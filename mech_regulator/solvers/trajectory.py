@@ -34,6 +34,7 @@ class Trajectory:
     status is 'complete', 'failed' (message says why and where) or 'interrupted'; a trajectory that
     did not complete still covers [t_start, t_end] and nothing computed is lost. modes: (start time,
     governor mode) of each stretch in one mode; events: (time, what happened) of every mode change.
+    y_start: the state at t_start, what a run refused before its first step still gives at t_start.
     """
 
     method: str
@@ -45,6 +46,7 @@ class Trajectory:
     events: list[tuple[float, str]] = field(default_factory=list)
     status: str = "complete"
     message: str = ""
+    y_start: np.ndarray | None = None
     _solution: OdeSolution | None = field(default=None, repr=False)
 
     def add_piece(self, t_start: float, t_end: float, interpolant: Callable) -> None:
@@ -63,9 +65,20 @@ class Trajectory:
 
     def __call__(self, t: float | np.ndarray) -> np.ndarray:
         """State at t: shape (n_states,) for a scalar, (n_states, n) for an array of times in [t_start, t_end]."""
+        if not self.interpolants:
+            return self._start_only(t)
         if self._solution is None:
             self._solution = OdeSolution(np.asarray(self.piece_edges), self.interpolants)
         return self._solution(t)
+
+    def _start_only(self, t: float | np.ndarray) -> np.ndarray:
+        """The state of a run that made no step: y_start at t_start, nothing elsewhere."""
+        if self.y_start is None or np.any(np.asarray(t) != self.t_start):
+            raise ValueError(f"the run made no step: it covers only t = {self.t_start} s"
+                             + (" and its initial state is unknown" if self.y_start is None else ""))
+        if np.ndim(t) == 0:
+            return np.array(self.y_start, dtype=float)
+        return np.repeat(np.asarray(self.y_start, dtype=float)[:, None], np.size(t), axis=1)
 
     def samples(self, sample_rate: float) -> np.ndarray:
         """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end, both ends included."""
