@@ -1,6 +1,6 @@
 """Hard cases of the machine (J(phi) domega/dt + 1/2 J'(phi) omega^2 = M_d + M_c) that must stay numerically
 stable: a start from rest, dead centres and a near-toggle four-bar run through many times, a 10^4-revolution
-conservative run, and extreme scales of J, omega and duration. docs/hard_cases_parts/machine.md explains each
+conservative run, and extreme scales of J, omega and duration. docs/hard_cases.md explains each
 case and lists the numbers measured when these bounds were set.
 
 Every test names its oracle: a closed form, an independent method (a quadrature, the circle-intersection

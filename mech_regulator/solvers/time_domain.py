@@ -23,6 +23,7 @@ from mech_regulator.solvers.trajectory import Progress, Trajectory
 PROBES_PER_STEP = 4  # interior points of each step checked for a switch crossing
 RESTART_PERIODS = 4  # the solver's wrapped crank angle stays within this many dynamic periods
 MAX_INSTANT_EVENTS = 20  # governor mode changes allowed at one instant before the run is declared stuck
+GUARD_TOLERANCE = 1e-12  # a guard within this of 0 (in its own units: rad, rad/s, N, 1/s) is at its boundary
 
 
 def integrate_time_domain(model: MachineModel, progress: Progress | None = None) -> Trajectory:
@@ -64,6 +65,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     t, first_step = t_start, None
     counts = _switch_counts(y[0], switches)
+    instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
         if trajectory.status != "complete":
@@ -104,6 +106,9 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                     else:
                         mode, y_step = transition(y_step)
                         _log_event(trajectory, t_step, name, mode)
+                        instant_events = instant_events + 1 if t_step == solver.t_old == t else 0
+                        if instant_events > MAX_INSTANT_EVENTS:
+                            _fail_stuck(trajectory, t_step)
                     restart = t_step < t_end or transition is not None
             trajectory.add_piece(solver.t_old, t_step, dense)
             trajectory.stats.steps += 1
@@ -126,15 +131,21 @@ def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory:
     (a sleeve that comes to rest exactly where the forces pull it off, a stop reached as the motion
     reverses). More than MAX_INSTANT_EVENTS in a row means the governor's modes contradict each other."""
     for _ in range(MAX_INSTANT_EVENTS):
-        violated = next((guard for guard in model.guards(mode) if guard.value(y) < 0.0), None)
+        violated = next((guard for guard in model.guards(mode) if guard.value(y) < -GUARD_TOLERANCE), None)
         if violated is None:
             return y, mode
         mode, y = violated.transition(y)
         _log_event(trajectory, t, violated.name, mode)
+    _fail_stuck(trajectory, t)
+    return y, mode
+
+
+def _fail_stuck(trajectory: Trajectory, t: float) -> None:
+    """End a run whose governor changes mode over and over at one instant."""
     trajectory.status = "failed"
     trajectory.message = (f"the governor changed mode {MAX_INSTANT_EVENTS} times at t = {t:.6g} s without moving "
-                          f"(last: {trajectory.events[-1][1]}); its friction, stops or limits contradict each other")
-    return y, mode
+                          f"(last: {trajectory.events[-1][1]}); its friction, stops or limits contradict each other, "
+                          "or the sleeve is released exactly where the forces turn back (a grazing release)")
 
 
 def _log_event(trajectory: Trajectory, t: float, name: str, mode) -> None:
@@ -188,10 +199,14 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
     or None if the step has no event. The step is probed at interior points so an event and its undoing
     within one step is not missed; the event is then located by Brent's method on the dense output.
     Switch counts are carried, not recomputed from phi, so a restart exactly on a switch angle is never
-    taken for a new crossing.
+    taken for a new crossing. A guard that starts the step at its boundary (|value| <= GUARD_TOLERANCE, as
+    a transition leaves it: the sleeve just released, just at rest) is crossed only when it falls below
+    -GUARD_TOLERANCE: a release where the forces turn straight back (grazing) keeps its mode instead of
+    switching back and forth at one instant, and a real release is located after the step's start.
     """
     probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
     states = dense(probe_times)
+    levels = [-GUARD_TOLERANCE if guard.value(states[:, 0]) <= GUARD_TOLERANCE else 0.0 for guard in guards]
     previous = counts_old
     for i in range(1, probe_times.size):
         earliest = None
@@ -203,9 +218,9 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
             t_cross = _root(lambda tau: dense(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
             if earliest is None or t_cross < earliest[0]:
                 earliest = (t_cross, j, boundary)
-        for guard in guards:
-            if guard.value(states[:, i]) < 0.0:
-                t_cross = _root(lambda tau: guard.value(dense(tau)), probe_times[i - 1], probe_times[i])
+        for guard, level in zip(guards, levels):
+            if guard.value(states[:, i]) < level:
+                t_cross = _root(lambda tau: guard.value(dense(tau)) - level, probe_times[i - 1], probe_times[i])
                 if earliest is None or t_cross < earliest[0]:
                     earliest = (t_cross, guard, None)
         if earliest is not None:
