@@ -1,12 +1,16 @@
-"""Helpers shared by the tests: run `mech-regulator` in-process, write scene files, simulate a model to the end."""
+"""Helpers shared by the tests: run `mech-regulator` in-process, write scene files, vary scene data, simulate a
+model to the end."""
 
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import pytest
 
 from mech_regulator.cli.main import main
+from mech_regulator.model import MachineModel, build_model
+from mech_regulator.scene import validate_scene
 from mech_regulator.solvers import Trajectory, simulate
 
 
@@ -32,3 +36,20 @@ def simulate_complete(model) -> Trajectory:
     assert trajectory.status == "complete", trajectory.message
     assert trajectory.t_end == pytest.approx(model.scene.scenario.duration, abs=1e-12)
     return trajectory
+
+
+def scene(base: dict, **changes) -> dict:
+    """A deep copy of base with keys replaced along '__'-separated paths, e.g. governor__damping=10."""
+    result = copy.deepcopy(base)
+    for key, value in changes.items():
+        *path, last = key.split("__")
+        target = result
+        for part in path:
+            target = target[part]
+        target[last] = value
+    return result
+
+
+def model_of(data: dict) -> MachineModel:
+    """The model of scene data (validated)."""
+    return build_model(validate_scene(data))

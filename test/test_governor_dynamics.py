@@ -33,7 +33,6 @@ step far below its integration error) and RK4's dense output on frozen states (i
 
 from __future__ import annotations
 
-import copy
 import math
 
 import numpy as np
@@ -42,9 +41,8 @@ from scipy import integrate
 
 from mech_regulator.analysis import (critical_damping, floquet_stability, is_periodic, linear_stability,
                                      operating_point)
-from mech_regulator.model import LoadPiece, build_model
-from mech_regulator.scene import validate_scene
-from support import simulate_complete
+from mech_regulator.model import LoadPiece
+from support import model_of, scene, simulate_complete
 
 TIGHT = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
 
@@ -70,22 +68,6 @@ INDIRECT = {
     "scenario": {"initial": {"omega": 65.0}, "duration": 30.0, "external_load": 50.0},
     "solver": TIGHT,
 }
-
-
-def scene(base: dict, **changes) -> dict:
-    """A deep copy of base with keys replaced along '__'-separated paths, e.g. governor__damping=10."""
-    result = copy.deepcopy(base)
-    for key, value in changes.items():
-        *path, last = key.split("__")
-        target = result
-        for part in path:
-            target = target[part]
-        target[last] = value
-    return result
-
-
-def model_of(data: dict):
-    return build_model(validate_scene(data))
 
 
 def extrema(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -19,7 +19,6 @@ No test asserts on time. SI units throughout.
 
 from __future__ import annotations
 
-import copy
 import functools
 import math
 
@@ -30,9 +29,9 @@ from scipy import integrate, optimize
 from mech_regulator.analysis import (critical_damping, cycle_mean_speed, floquet_stability, linear_stability,
                                      operating_point)
 from mech_regulator.model import build_model
-from mech_regulator.scene import load_scene, validate_scene
+from mech_regulator.scene import load_scene
 from mech_regulator.solvers import simulate
-from support import simulate_complete
+from support import model_of, scene, simulate_complete
 
 TIGHT = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
 
@@ -47,22 +46,6 @@ DIRECT = {
     "scenario": {"initial": {"omega": 112.86}, "duration": 5.0, "external_load": 0.0},
     "solver": TIGHT,
 }
-
-
-def scene(base: dict, **changes) -> dict:
-    """A deep copy of base with keys replaced along '__'-separated paths, e.g. governor__damping=10."""
-    result = copy.deepcopy(base)
-    for key, value in changes.items():
-        *path, last = key.split("__")
-        target = result
-        for part in path:
-            target = target[part]
-        target[last] = value
-    return result
-
-
-def model_of(data: dict):
-    return build_model(validate_scene(data))
 
 
 def lift_of(model, y: np.ndarray) -> np.ndarray:

@@ -122,3 +122,17 @@ def effect_cost_table(costs: list[EffectCost]) -> str:
                      f"{cost.steps_per_s:,.0f} | {cost.events_per_s:.1f} | {cost.cpu_per_s:.4f} | "
                      f"{cost.cpu_per_s / costs[0].cpu_per_s:,.0f} |")
     return "\n".join(lines) + "\n"
+
+
+def effect_cost_section(costs: list[EffectCost]) -> str:
+    """The section of docs/accuracy/README.md on what each effect costs: how it is measured, the table, and
+    what each link adds."""
+    lines = ["", "## What each effect costs", "",
+             f"The `{BASE_SCENE}` machine built up one effect at a time, every link run through the same scenario "
+             "(6 N m, the load thrown off at 0.5 s, 1.5 s) with DOP853 at rtol 1e-8. *One RHS* is the CPU time of one "
+             "right-hand-side evaluation timed alone at the run's states: the price of computing the effect. The "
+             "evaluations and steps per simulated second show what the effect does to the solver (a table with "
+             "kinks makes it reject steps; a stuck sleeve lets it stride). `mech-regulator describe SCENE` lists "
+             "what a scene computes.", "", effect_cost_table(costs), "| link | adds |", "| --- | --- |"]
+    lines += [f"| {cost.label} | {cost.adds} |" for cost in costs]
+    return "\n".join(lines) + "\n"

@@ -76,6 +76,24 @@ def build_parser() -> argparse.ArgumentParser:
     schema.add_argument("--format", choices=("json", "markdown"), default="json",
                         help="json: the JSON Schema; markdown: the key tables of docs/scenes.md")
     commands.add_parser("scenes", help="list the bundled scenes")
+    bench = commands.add_parser("bench", help="benchmarks of the solvers", description="benchmarks of the solvers")
+    benchmarks = bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK")
+    accuracy = benchmarks.add_parser(
+        "accuracy", help="work-precision benchmark: achieved error against CPU time of every method",
+        description="Run every method (scipy's adaptive methods over a tolerance sweep, RK4 over steps, the energy "
+                    "method over crank-angle steps, the nodes' co-simulation over exchange steps) on reference scenes, "
+                    "measure the error each achieves against a closed form or a checked reference solution and its "
+                    "CPU time, and write runs.csv, a work-precision PNG per scene, tolerance_proportionality.png, "
+                    "README.md and work_precision.rrd. Ctrl-C keeps the runs measured so far in runs.csv.")
+    accuracy.add_argument("--quick", action="store_true", help="few points and tiny durations (a check of the "
+                                                               "command end to end, not a measurement)")
+    accuracy.add_argument("--scenes", metavar="NAME[,NAME...]",
+                          help="reference scenes to run, comma-separated (default: all; a wrong name lists them)")
+    accuracy.add_argument("--out", type=Path, default=Path("docs/accuracy"), metavar="FOLDER",
+                          help="folder for the outputs (default docs/accuracy)")
+    accuracy.add_argument("--jobs", type=int, default=2, metavar="N",
+                          help="worker processes (default 2; CPU time is per process, but more workers than cores "
+                               "disturb it)")
     return parser
 
 
@@ -88,6 +106,8 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "scenes":
             return _list_scenes()
+        if args.command == "bench":
+            return _bench_accuracy(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "describe":
             from mech_regulator.model import build_model
@@ -238,6 +258,51 @@ def _main_job(scene, args) -> int:
     _check_outputs(args, args.out)
     return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
                     args.overspeed_trip, args.out, args.domain_id, args.quiet)
+
+
+def _bench_accuracy(args) -> int:
+    """bench accuracy: measure, then write runs.csv (also when interrupted), the PNGs, the recording and
+    README.md into args.out."""
+    import time
+
+    from mech_regulator.bench.accuracy import run_benchmark, select_scenes
+    from mech_regulator.bench.report import findings, markdown, write_runs_csv
+
+    if args.jobs < 1:
+        raise SceneError(f"--jobs {args.jobs}: expected at least 1 worker process")
+    names = None if args.scenes is None else [name.strip() for name in args.scenes.split(",") if name.strip()]
+    if names == []:
+        raise SceneError("--scenes: expected scene names separated by commas, e.g. startup,compressor")
+    scenes = select_scenes(names)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise SceneError(f"--out '{args.out}': cannot make the folder: {error.strerror or error}") from None
+    start = time.monotonic()
+    benchmark = run_benchmark(scenes, args.quick, args.jobs, report=lambda line: print(line, flush=True))
+    write_runs_csv(benchmark, args.out / "runs.csv")
+    if benchmark.interrupted:
+        print(f"mech-regulator: interrupted; the runs measured so far are in {args.out / 'runs.csv'}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    from mech_regulator.bench.effect_cost import effect_cost_section, effect_cost_table, measure_effect_costs
+    from mech_regulator.viz.work_precision import write_pictures
+
+    try:
+        print("effect costs:", flush=True)
+        costs = measure_effect_costs(1 if args.quick else 3, progress=lambda label: print(f"  {label}", flush=True))
+        write_pictures(benchmark, args.out)
+        (args.out / "README.md").write_text(markdown(benchmark, time.monotonic() - start) + effect_cost_section(costs),
+                                            encoding="utf-8")
+    except KeyboardInterrupt:
+        print(f"mech-regulator: interrupted while writing the pictures; every run is in {args.out / 'runs.csv'}",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    for result in benchmark.scenes:
+        print(f"{result.bench.name}:", *findings(result), sep="\n")
+    print("effect costs (DOP853, rtol 1e-8):", effect_cost_table(costs), sep="\n")
+    print(f"wrote {args.out}: runs.csv, README.md, work_precision_<scene>.png, tolerance_proportionality.png, "
+          f"work_precision.rrd ({time.monotonic() - start:.0f} s)")
+    return 0
 
 
 def _samples(model, trajectory) -> tuple[np.ndarray, np.ndarray]:
