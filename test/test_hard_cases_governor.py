@@ -32,20 +32,7 @@ from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers import simulate
 from support import model_of, scene, simulate_complete
-
-TIGHT = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
-
-# test_governor_dynamics.py's direct example: linear motor + viscous load, Porter governor, constant J.
-DIRECT = {
-    "machine": {"inertia": 0.5,
-                "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-                "loads": [{"type": "viscous", "coefficient": 0.3}]},
-    "governor": {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0,
-                 "damping": 200.0, "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08],
-                 "valve": {"open_at": 0.02, "closed_at": 0.08}},
-    "scenario": {"initial": {"omega": 112.86}, "duration": 5.0, "external_load": 0.0},
-    "solver": TIGHT,
-}
+from test_governor_dynamics import DIRECT, TIGHT  # linear motor + viscous load, Porter governor, constant J
 
 
 def lift_of(model, y: np.ndarray) -> np.ndarray:
