@@ -36,7 +36,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from mech_regulator.model import MachineModel, build_model
-from mech_regulator.scene import SceneError, bundled_scenes, load_scene
+from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import Trajectory, simulate
 from mech_regulator.solvers.cosim import cosimulate
 
@@ -145,24 +145,14 @@ SCENES = (
 )
 
 
-def available_scenes() -> list[BenchScene]:
-    """The reference scenes whose bundled scene file exists (two_mass comes with machine.coupling)."""
-    bundled = bundled_scenes()
-    return [bench for bench in SCENES if bench.scene in bundled]
-
-
 def select_scenes(names: list[str] | None) -> list[BenchScene]:
-    """The reference scenes named (all available ones if names is None); an unknown or missing one is a
-    SceneError naming the choices."""
-    available = available_scenes()
+    """The reference scenes named (all if names is None); an unknown one is a SceneError naming the choices."""
     if names is None:
-        return available
-    by_name = {bench.name: bench for bench in available}
+        return list(SCENES)
+    by_name = {bench.name: bench for bench in SCENES}
     unknown = [name for name in names if name not in by_name]
     if unknown:
-        missing = [name for name in unknown if name in {bench.name for bench in SCENES}]
-        why = f" (its scene file config/scenes/{missing[0]}.yaml is not there)" if missing else ""
-        raise SceneError(f"--scenes: no reference scene '{unknown[0]}'{why}; choose from {', '.join(by_name)}")
+        raise SceneError(f"--scenes: no reference scene '{unknown[0]}'; choose from {', '.join(by_name)}")
     return [by_name[name] for name in dict.fromkeys(names)]
 
 
@@ -282,7 +272,7 @@ def _scene_named(name: str) -> BenchScene:
     return next(bench for bench in SCENES if bench.name == name)
 
 
-def _timed(run: Callable[[], object]) -> tuple[object, float]:
+def timed(run: Callable[[], object]) -> tuple[object, float]:
     """(run's result, its CPU time [s])."""
     start = time.process_time()
     result = run()
@@ -298,13 +288,13 @@ def measure(task: Task) -> Measurement:
     setting = task.setting
     model = build_model(bench.load(task.quick, tuple(setting.overrides(bench.state_scale))))
     run = (lambda: cosimulate(model, setting.value)) if setting.method == COSIM else (lambda: simulate(model))
-    result, cpu = _timed(run)
+    result, cpu = timed(run)
     if result.status == "interrupted":
         raise KeyboardInterrupt
     times = [cpu]
     if task.role == "run" and not task.quick:
         repeats = min(MAX_REPEATS, math.ceil(REPEAT_BUDGET_S / max(cpu, 1e-9)))
-        times += [_timed(run)[1] for _ in range(repeats - 1)]
+        times += [timed(run)[1] for _ in range(repeats - 1)]
     complete = result.status == "complete"
     if setting.method == COSIM:
         sample_times, states = result.times, result.states
@@ -531,5 +521,5 @@ def _expected_cost(task: Task) -> tuple[int, float]:
     return setting.method in IMPLICIT, -math.log10(setting.value)
 
 
-__all__ = ["Benchmark", "BenchScene", "Run", "SCENES", "SceneResult", "Setting", "available_scenes",
-           "run_benchmark", "select_scenes", "startup_closed_form"]
+__all__ = ["Benchmark", "BenchScene", "Run", "SCENES", "SceneResult", "Setting", "run_benchmark", "select_scenes",
+           "startup_closed_form", "timed"]

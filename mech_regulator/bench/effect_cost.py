@@ -18,6 +18,7 @@ from typing import Callable
 
 import numpy as np
 
+from mech_regulator.bench.accuracy import timed
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers import Trajectory, simulate
@@ -102,9 +103,8 @@ def measure_effect_costs(repeats: int = 3, progress: Callable[[str], None] | Non
         model = step_model(step)
         cpu = []
         for _ in range(repeats):
-            start = time.process_time()
-            trajectory = simulate(model)
-            cpu.append(time.process_time() - start)
+            trajectory, seconds = timed(lambda: simulate(model))
+            cpu.append(seconds)
         simulated = trajectory.t_end - trajectory.t_start
         stats = trajectory.stats
         costs.append(EffectCost(step.label, step.adds, len(model.state_names()), rhs_microseconds(model, trajectory),

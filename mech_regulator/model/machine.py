@@ -155,16 +155,16 @@ class MachineModel:
             mode: Mode | None = None, ideal: bool = False) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and governor mode.
 
-        y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is
-        epsilon = (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with
-        throttle = 1 without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c
-        includes -M_m, the external load acts on the driven part, d twist/dt = omega - omega2 and
-        domega2/dt = (M_m + M_c2(omega2) - M_external) / I2 (physics.md section 4). window = (lo, hi): the crank-angle interval between two switch
-        angles the solver is in; effects that jump at switch angles then see phi clamped into it, so
-        they keep their mode across the switch until the solver has located the crossing and restarted
-        (no step straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine
-        co-simulated with an outside governor, by the piece's held throttle. ideal: the governor without friction, limits and stops (the smooth
-        model of the stability analysis).
+        y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
+        (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with throttle = 1
+        without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c includes -M_m, the
+        external load acts on the driven part, d twist/dt = omega - omega2 and domega2/dt = (M_m + M_c2(omega2)
+        - M_external) / I2 (physics.md section 4). window = (lo, hi): the crank-angle interval between two
+        switch angles the solver is in; effects that jump at switch angles then see phi clamped into it, so they
+        keep their mode across the switch until the solver has located the crossing and restarted (no step
+        straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine co-simulated with
+        an outside governor, by the piece's held throttle. ideal: the governor without friction, limits and
+        stops (the smooth model of the stability analysis).
         """
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
@@ -286,6 +286,12 @@ class MachineModel:
             return (inertia + self.coupling.driven_inertia, drive / count,
                     other / count + self.coupling.driven_moment(0.0, omega) + weight - external)
         return inertia, drive / count, other / count + weight - external
+
+    @property
+    def mean_crank_inertia(self) -> float:
+        """Mean of the crank side's reduced inertia J(phi) over one dynamic period [kg m^2] (without a coupled
+        driven part)."""
+        return self._cycle_grid[1]
 
     @functools.cached_property
     def _cycle_grid(self) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:

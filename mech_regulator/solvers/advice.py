@@ -40,7 +40,7 @@ def coupling_modes(model: MachineModel) -> CouplingModes | None:
     coupling = model.coupling
     if coupling is None:
         return None
-    crank_inertia = model.cycle_averages(0.0)[0] - coupling.driven_inertia
+    crank_inertia = model.mean_crank_inertia
     reduced = crank_inertia * coupling.driven_inertia / (crank_inertia + coupling.driven_inertia)
     natural = math.sqrt(coupling.stiffness / reduced)
     ratio = coupling.damping / (2.0 * math.sqrt(coupling.stiffness * reduced))

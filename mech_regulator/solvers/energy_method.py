@@ -79,9 +79,9 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     except _Stopped as stop:
         trajectory.status = "failed"
         if stop.omega == 0.0:
-            what = (f"the net moment at rest (M = {M:.6g} N m at t = {stop.t:.6g} s, phi = {stop.phi:.6g} rad) does not "
-                    "start the machine; "
-                    "stepping in phi cannot follow a machine that stays at rest or turns back")
+            what = (f"the net moment at rest (M = {M:.6g} N m at t = {stop.t:.6g} s, phi = {stop.phi:.6g} rad) "
+                    "does not start the machine; stepping in phi cannot follow a machine that stays at rest or "
+                    "turns back")
         else:
             what = (f"the machine stops (kinetic energy reaches 0) just after t = {stop.t:.6g} s, phi = {stop.phi:.6g} "
                     f"rad, omega = {stop.omega:.6g} rad/s; stepping in phi cannot follow a stop or a reversal")
