@@ -2,7 +2,7 @@
 
 An effect is built once from its scene entry into a plain closure
 `moment(t, phi, omega, q, dq) -> M [N m]` over constants, where q is the mechanism's output
-coordinate (slider position x [m] or rocker angle th4 [rad]) and dq = dq/dphi its velocity ratio.
+coordinate (slider position x [m], rocker angle th4 [rad] or shuttle bar position x_C [m]) and dq = dq/dphi its velocity ratio.
 A force F on the output link becomes the reduced moment `F dq` (same power, physics.md section 1).
 Only the effects a scene names are built; the right-hand side calls exactly these.
 """
@@ -109,7 +109,7 @@ def build_load(load: schema.Load, kinematic_period: float | None) -> Effect:
                       period=math.radians(load.period_deg))
     if isinstance(load, schema.CuttingLoad):
         return _cutting(load)
-    on = "slider" if load.type.startswith("slider") else "rocker"
+    on = {"slider": "slider", "rocker": "rocker", "shuttle": "shuttle bar"}[load.type.split("_")[0]]
     if isinstance(load, (schema.SliderConstant, schema.RockerConstant)):
         value = load.force if isinstance(load, schema.SliderConstant) else load.torque
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: value * dq, frozenset({"phi"}),

@@ -327,8 +327,9 @@ class MachineModel:
         t, phi, omega, epsilon, J, dJ_dphi, M_drive (as applied, throttle included), M_load (sum of
         all resisting moments and the external load), one M_<effect> column per load (and M_weight,
         M_external when present), E_kinetic = 1/2 J omega^2, the output coordinate with its speed
-        (x, v for a slider, theta4, omega4 for a rocker) and, governed: throttle, sleeve z [m],
-        sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and feedback_shift [m] where present.
+        (x, v for a slider, theta4, omega4 for a rocker, x_shuttle [m], v_shuttle [m/s] for a walking beam's
+        shuttle bar) and, governed: throttle, sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], servo [-]
+        and feedback_shift [m] where present.
         With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
         load is not), twist [rad], omega_driven [rad/s], M_driven_<effect> and M_driven_external (moments on
         the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
@@ -390,6 +391,8 @@ class MachineModel:
             out["x_slider"], out["v_slider"] = q, dq * omega
         elif kind == "four_bar":
             out["theta4"], out["omega4"] = q, dq * omega
+        elif kind == "walking_beam":
+            out["x_shuttle"], out["v_shuttle"] = q, dq * omega
         if self.governor is not None:
             arm, arm_rate = y[2], y[3]
             arm_length = self.governor.sensor.arm_length

@@ -99,20 +99,82 @@ class FourBar(SceneModel):
 
     @model_validator(mode="after")
     def _assembles(self) -> FourBar:
-        from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
-
-        ranges = unassemblable_crank_ranges(self.crank, self.coupler, self.rocker, self.frame,
-                                            math.radians(self.frame_angle_deg))
-        if ranges:
-            spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
-            raise ValueError(
-                f"the four-bar (crank {self.crank}, coupler {self.coupler}, rocker {self.rocker}, frame {self.frame} m) "
-                f"cannot be assembled for crank angles {spans}; the crank must turn fully: expected a Grashof "
-                "crank (shortest link = crank, and shortest + longest < sum of the other two)")
+        _check_crank_turns(self)
         return self
 
 
-Mechanism = Annotated[Union[CrankSlider, FourBar], Field(discriminator="type")]
+def _check_crank_turns(linkage: FourBar | WalkingBeam) -> None:
+    """Raise ValueError naming the crank angles where the four-bar loop (crank, coupler, rocker, frame,
+    frame_angle_deg) of a linkage cannot be assembled."""
+    from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
+
+    ranges = unassemblable_crank_ranges(linkage.crank, linkage.coupler, linkage.rocker, linkage.frame,
+                                        math.radians(linkage.frame_angle_deg))
+    if ranges:
+        spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
+        raise ValueError(
+            f"the four-bar (crank {linkage.crank}, coupler {linkage.coupler}, rocker {linkage.rocker}, frame "
+            f"{linkage.frame} m) cannot be assembled for crank angles {spans}; the crank must turn fully: expected a "
+            "Grashof crank (shortest link = crank, and shortest + longest < sum of the other two)")
+
+
+class WalkingBeam(SceneModel):
+    """Eight-bar walking-beam transport mechanism (source 004, docs/linkages.md): a four-bar O1 A B O2 whose
+    coupler point C drives, through two parallelograms, a shuttle bar C D in reciprocating translation.
+
+    Crank O1A about O1 = (0, 0), A = crank e^{i phi}; rocker O2B about O2 = frame e^{i th1}; loop closure
+    `a e^{i th2} + b e^{i th3} = d e^{i th1} + c e^{i th4}` with th2 = phi; C = A + p e^{i (th3 + delta)};
+    O3 = O2 + s, E = B + s, D = C + s with the beam vector s = beam_length e^{i beta}. The output coordinate
+    (for shuttle_* loads and the x_shuttle column) is the shuttle bar's horizontal position x_C."""
+
+    type: Literal["walking_beam"]
+    crank: Positive = Field(description="crank length a = O1A (paper's link 1) [m]")
+    coupler: Positive = Field(description="coupler length b = AB (link 2, from the crank pin A to the rocker pin B) [m]")
+    rocker: Positive = Field(description="rocker length c = O2B (link 3), and of the parallel rocker O3E (link 5) [m]")
+    frame: Positive = Field(description="frame length d = O1O2, crank pivot to rocker pivot [m]")
+    frame_angle_deg: float = Field(0.0, description="direction th1 of the frame line O1->O2 from the +x axis [deg]")
+    branch: Literal["open", "crossed"] = Field("open", description="assembly branch of the four-bar: 'open' puts B to "
+                                                                    "the right of the directed line O2->A, 'crossed' "
+                                                                    "to the left")
+    coupler_point: Positive = Field(description="distance p = AC from the crank pin A to the coupler point C, where "
+                                                "the shuttle bar is pinned [m]")
+    coupler_point_angle_deg: float = Field(0.0, description="angle delta from the line A->B to the line A->C, "
+                                                            "counter-clockwise [deg]")
+    beam_length: Positive = Field(description="length L of the shuttle bar CD, equal to O2O3 and BE (the "
+                                              "parallelograms' long sides) [m]")
+    beam_angle_deg: float = Field(0.0, description="direction beta of O2->O3 (and C->D, B->E) from the +x axis [deg]")
+    crank_mass: NonNegative = Field(0.0, description="crank mass, for its weight only [kg]")
+    crank_cg: float = Field(0.0, description="distance of the crank's centre of mass from O1 towards A [m]")
+    coupler_mass: NonNegative = Field(0.0, description="coupler (triangle ABC) mass [kg]")
+    coupler_cg: NonNegative = Field(0.0, description="distance of the coupler's centre of mass from A [m]")
+    coupler_cg_angle_deg: float = Field(0.0, description="angle from the line A->B to the line from A to the coupler's "
+                                                         "centre of mass, counter-clockwise [deg]")
+    coupler_inertia: NonNegative = Field(0.0, description="coupler moment of inertia about its centre of mass [kg m^2]")
+    rocker_mass: NonNegative = Field(0.0, description="mass of each of the two rockers O2B and O3E [kg]")
+    rocker_cg: float = Field(0.0, description="distance of each rocker's centre of mass from its pivot towards B (E) [m]")
+    rocker_inertia: NonNegative = Field(0.0, description="moment of inertia of each rocker about its centre of mass "
+                                                         "[kg m^2]")
+    tie_mass: NonNegative = Field(0.0, description="mass of the tie BE (link 4, translates with B) [kg]")
+    side_mass: NonNegative = Field(0.0, description="mass of the side link ED (link 6, parallel to BC) [kg]")
+    side_cg: float = Field(0.0, description="distance of the side link's centre of mass from E towards D [m]")
+    side_inertia: NonNegative = Field(0.0, description="side link's moment of inertia about its centre of mass [kg m^2]")
+    shuttle_mass: NonNegative = Field(0.0, description="mass of the shuttle bar CD (link 7, translates with C) with "
+                                                       "what it carries [kg]")
+
+    @model_validator(mode="after")
+    def _assembles(self) -> WalkingBeam:
+        from mech_regulator.mechanisms import walking_beam
+
+        _check_crank_turns(self)
+        flattening = walking_beam.change_point(walking_beam.geometry_from_scene(self))
+        if flattening is not None:
+            raise ValueError(f"{flattening}; expected a beam direction (or its opposite) outside the swing "
+                             "of both links, so that the parallelograms never fold")
+        return self
+
+
+
+Mechanism = Annotated[Union[CrankSlider, FourBar, WalkingBeam], Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -221,8 +283,9 @@ class CuttingLoad(SceneModel):
 
 
 class SliderConstant(SceneModel):
-    type: Literal["slider_constant"]
-    force: float = Field(description="constant force on the slider along +x, signed [N]")
+    type: Literal["slider_constant", "shuttle_constant"]
+    force: float = Field(description="constant force along +x on the slider, or on the shuttle bar of a walking beam, "
+                                     "signed [N]")
 
 
 class RockerConstant(SceneModel):
@@ -231,16 +294,19 @@ class RockerConstant(SceneModel):
 
 
 class OutputViscous(SceneModel):
-    type: Literal["slider_viscous", "rocker_viscous"]
-    coefficient: NonNegative = Field(description="viscous coefficient on the slider, -c v [N s/m], or on the rocker, "
-                                                 "-c omega_rocker [N m s/rad]")
+    type: Literal["slider_viscous", "rocker_viscous", "shuttle_viscous"]
+    coefficient: NonNegative = Field(description="viscous coefficient on the slider, -c v [N s/m], on the rocker, "
+                                                 "-c omega_rocker [N m s/rad], or on the shuttle bar's horizontal "
+                                                 "motion, -c v_x [N s/m]")
 
 
 class OutputSpring(SceneModel):
-    type: Literal["slider_spring", "rocker_spring"]
-    stiffness: NonNegative = Field(description="spring stiffness on the slider, -k (x - x0) [N/m], or on the rocker, "
-                                               "-k (theta4 - theta0) [N m/rad]")
-    free_position: float = Field(0.0, description="free slider position x0 [m], or free rocker angle theta0 [rad]")
+    type: Literal["slider_spring", "rocker_spring", "shuttle_spring"]
+    stiffness: NonNegative = Field(description="spring stiffness on the slider, -k (x - x0) [N/m], on the rocker, "
+                                               "-k (theta4 - theta0) [N m/rad], or on the shuttle bar, horizontal, "
+                                               "-k (x_C - x0) [N/m]")
+    free_position: float = Field(0.0, description="free slider (or shuttle point C) position x0 [m], or free rocker "
+                                                  "angle theta0 [rad]")
 
 
 class SliderTable(SceneModel):
@@ -306,7 +372,7 @@ class Machine(SceneModel):
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
         kind = self.mechanism.type if self.mechanism is not None else None
-        needs = {"slider": "crank_slider", "rocker": "four_bar"}
+        needs = {"slider": "crank_slider", "rocker": "four_bar", "shuttle": "walking_beam"}
         for index, load in enumerate(self.loads):
             prefix = load.type.split("_")[0]
             if prefix in needs and kind != needs[prefix]:
