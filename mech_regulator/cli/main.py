@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import os
 import sys
 from pathlib import Path
@@ -58,6 +59,16 @@ def build_parser() -> argparse.ArgumentParser:
                                          "Vyshnegradsky A and B, Floquet multipliers")
     governor.add_argument("--plot", type=Path, help="write a PNG picture of the statics and stability")
     governor.add_argument("--json", action="store_true", help="print the analysis as JSON")
+    kinematics = scene_command("kinematics", "positions, velocities and accelerations of the mechanism's joints over "
+                                             "one turn at constant crank speed (crank-slider, four-bar, walking beam)")
+    kinematics.add_argument("--omega", type=float, default=10.0, help="constant crank speed [rad/s] (default 10)")
+    kinematics.add_argument("--points", type=int, default=361, metavar="N",
+                            help="crank angles over the turn, both ends included (default 361: every degree)")
+    kinematics.add_argument("--out", type=Path, help="write the table as CSV (phi, t, then per point P: P_x, P_y [m], "
+                                                     "P_vx, P_vy, P_v [m/s], P_ax, P_ay, P_a [m/s^2])")
+    kinematics.add_argument("--plot", type=Path, help="write a PNG picture: paths with the mechanism at a few "
+                                                      "positions, speeds and accelerations")
+    kinematics.add_argument("--json", action="store_true", help="print the summary as JSON")
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
@@ -119,6 +130,8 @@ def main(argv: list[str] | None = None) -> int:
             return _governor(scene, args)
         if args.command == "run":
             return _main_job(scene, args)
+        if args.command == "kinematics":
+            return _kinematics(scene, args)
         return _simulate(scene, args)
     except SceneError as error:
         print(f"mech-regulator: {error}", file=sys.stderr)
@@ -238,6 +251,45 @@ def _governor(scene, args) -> int:
         plot_governor(model, analysis, args.plot)
         analysis["plot"] = str(args.plot)
     print(to_json(analysis) if args.json else format_governor(analysis))
+    return 0
+
+
+def _kinematics(scene, args) -> int:
+    """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
+    from mech_regulator.analysis.kinematics import kinematics_summary, kinematics_table
+
+    mechanism = scene.machine.mechanism
+    if mechanism is None:
+        raise SceneError(f"scene '{scene.name}' has no mechanism: kinematics needs machine.mechanism "
+                         "(crank_slider, four_bar or walking_beam; see docs/scenes.md)")
+    if not (math.isfinite(args.omega) and args.omega > 0.0):
+        raise SceneError(f"--omega {args.omega:g}: expected a crank speed > 0 rad/s")
+    if not 3 <= args.points <= 100_000:
+        raise SceneError(f"--points {args.points}: expected 3 to 100000 crank angles")
+    _check_outputs(args, args.out)
+    columns = kinematics_table(mechanism, args.omega, args.points)
+    summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
+               "joints": kinematics_summary(columns)}
+    if args.out is not None:
+        write_csv(args.out, columns)
+        summary["csv"] = str(args.out)
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_kinematics
+
+        plot_kinematics(mechanism, columns, args.omega, scene.name or mechanism.type, args.plot)
+        summary["plot"] = str(args.plot)
+    if args.json:
+        print(to_json(summary))
+        return 0
+    print(f"scene {scene.name}: {mechanism.type} at omega = {args.omega:g} rad/s, {args.points} crank angles over a turn")
+    print(f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
+          f"{'a_max [m/s^2]':>16}{'at [deg]':>10}")
+    for name, joint in summary["joints"].items():
+        print(f"{name:<6}{joint['x_min']:>11.5g}{joint['x_max']:>11.5g}{joint['y_min']:>11.5g}{joint['y_max']:>11.5g}"
+              f"{joint['v_max']:>14.5g}{joint['v_max_at_deg']:>10.4g}{joint['a_max']:>16.5g}{joint['a_max_at_deg']:>10.4g}")
+    for key in ("csv", "plot"):
+        if key in summary:
+            print(f"wrote {summary[key]}")
     return 0
 
 

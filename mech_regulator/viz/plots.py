@@ -174,3 +174,63 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
     circle.grid(alpha=0.3)
     figure.savefig(path, dpi=100)
     plt.close(figure)
+
+
+KINEMATICS_POSES = 4  # crank positions at which plot_kinematics draws the mechanism
+
+
+def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, title: str, path: Path) -> None:
+    """Kinematics over one turn at constant crank speed omega [rad/s] (analysis.kinematics.kinematics_table):
+    the paths of the moving points with the mechanism drawn at KINEMATICS_POSES crank angles (dark at phi = 0,
+    where the points are named; left), and the
+    points' speeds |v| and accelerations |a| against the crank angle (right). Points moving alike (a walking
+    beam's B and E, C and D) have identical curves: the later one is dashed."""
+    from mech_regulator.analysis.kinematics import point_names
+    from mech_regulator.mechanisms import point_motions
+    from mech_regulator.mechanisms.drawing import mechanism_outline
+
+    names = point_names(columns)
+    figure = plt.figure(figsize=(14, 7), constrained_layout=True)
+    grid = figure.add_gridspec(2, 2, width_ratios=[1.25, 1.0])
+    paths, speed, acceleration = figure.add_subplot(grid[:, 0]), figure.add_subplot(grid[0, 1]), \
+        figure.add_subplot(grid[1, 1])
+    figure.suptitle(f"{title}: kinematics over one turn at omega = {omega:g} rad/s")
+    colours = dict(zip(names, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
+    for index, phi in enumerate(np.linspace(0.0, 2.0 * math.pi, KINEMATICS_POSES, endpoint=False)):
+        outline = mechanism_outline(mechanism, phi)
+        shade, width = ("0.15", 1.8) if index == 0 else ("0.7", 0.9)
+        for part_name, part in outline.items():
+            if part_name == "joints":
+                paths.plot(part[:, 0], part[:, 1], "o", ms=4 if index == 0 else 2.5, color=shade, zorder=3)
+            elif part_name != "crank_path":
+                for strip in (part if part.ndim == 3 else [part]):
+                    paths.plot(strip[:, 0], strip[:, 1], color=shade, lw=width, zorder=2 if index == 0 else 1)
+        paths.annotate(f"{math.degrees(phi):.0f}°", outline["crank"][-1], fontsize=8, color=shade,
+                       xytext=(4, 4), textcoords="offset points")
+    first = point_motions(mechanism)(0.0)
+    for name in names:
+        paths.annotate(name, (first[name][0].real, first[name][0].imag), fontsize=10, fontweight="bold",
+                       color=colours[name], xytext=(-12, 5), textcoords="offset points")
+    dphi = np.degrees(columns["phi"])
+    for index, name in enumerate(names):
+        twin = next((other for other in names[:index] if all(
+            np.allclose(columns[f"{name}_{key}"], columns[f"{other}_{key}"], rtol=1e-9, atol=1e-12)
+            for key in ("vx", "vy"))), None)
+        style = {"color": colours[name], "ls": "--" if twin else "-", "lw": 1.6 if twin else 1.2}
+        label = f"{name} (moves as {twin})" if twin else name
+        paths.plot(columns[f"{name}_x"], columns[f"{name}_y"], label=f"path of {label}", **style)
+        speed.plot(dphi, columns[f"{name}_v"], label=label, **style)
+        acceleration.plot(dphi, columns[f"{name}_a"], label=label, **style)
+    paths.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
+              title=f"paths of the joints; the mechanism at phi = 0 (dark) and {KINEMATICS_POSES - 1} more crank angles")
+    paths.legend(loc="best", fontsize=8)
+    speed.set(ylabel="speed |v| [m/s]", title="speeds of the points")
+    acceleration.set(xlabel="crank angle phi [deg]", ylabel="acceleration |a| [m/s^2]",
+                     title="accelerations of the points")
+    for axes in (speed, acceleration):
+        axes.set_xlim(0.0, 360.0)
+        axes.set_xticks(np.arange(0, 361, 45))
+        axes.grid(alpha=0.3)
+        axes.legend(loc="upper right", fontsize=8, ncol=3)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
