@@ -189,6 +189,7 @@ EFFECT_WORDS = {  # what `describe` calls each effect type
     "fan": "fan", "cutting": "cutting", "slider_viscous": "viscous on the slider",
     "slider_spring": "spring on the slider", "slider_table": "slider force table",
     "rocker_viscous": "viscous on the rocker", "rocker_spring": "spring on the rocker",
+    "shuttle_viscous": "viscous on the shuttle bar",
 }
 
 

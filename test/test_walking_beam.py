@@ -18,6 +18,7 @@ import cmath
 import csv
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,7 +32,8 @@ from support import model_of, run_cli, scene, simulate_complete, write_scene
 
 TWO_PI = 2.0 * math.pi
 OMEGA = 10.0  # the paper's crank speed [rad/s]
-SCENE = read_scene_data(__import__("pathlib").Path(__file__).resolve().parents[1] / "config/scenes/walking_beam.yaml")
+SCENES = Path(__file__).resolve().parents[1] / "config" / "scenes"
+SCENE = read_scene_data(SCENES / "walking_beam.yaml")
 SPEC = model_of(SCENE).scene.machine.mechanism
 GEOMETRY = walking_beam.geometry_from_scene(SPEC)
 ANGLES = np.linspace(0.0, TWO_PI, 37)[:-1] + 0.013
@@ -347,9 +349,38 @@ def test_kinematics_bad_input_is_a_clear_message(capsys, argv, expected):
 def test_kinematics_of_a_scene_without_mechanism_and_shuttle_load_without_walking_beam(tmp_path, capsys):
     code, _, err = run_cli(capsys, "kinematics", "startup")
     assert code == 2 and "has no mechanism" in err and "machine.mechanism" in err
-    data = read_scene_data(__import__("pathlib").Path(__file__).resolve().parents[1]
-                           / "config/scenes/four_bar_rocker.yaml")
+    data = read_scene_data(SCENES / "four_bar_rocker.yaml")
     data["machine"]["loads"] = [{"type": "shuttle_viscous", "coefficient": 1.0}]
     path = write_scene(tmp_path, json.dumps(data))
     code, _, err = run_cli(capsys, "describe", str(path))
     assert code == 2 and "shuttle_viscous" in err and "walking_beam" in err and "four_bar" in err
+
+
+def test_recording_animates_the_eight_links(tmp_path):
+    """The Rerun recording draws every link; each frame's shuttle bar is the beam vector s (y flipped:
+    Rerun's views have y down) and the rockers come as a bundle of two strips."""
+    import pyarrow as pa
+    from rerun.chunk import RrdReader
+
+    from mech_regulator.viz.recording import record_run
+
+    model = model_of(scene(SCENE, scenario__duration=0.1))
+    trajectory = simulate_complete(model)
+    times = trajectory.samples(1000.0)
+    path = tmp_path / "walking_beam.rrd"
+    record_run(model, times, trajectory(times), path)
+    store = RrdReader(path).store()
+    entities = set(store.schema().entity_paths())
+    assert {f"/mechanism/{part}" for part in ("crank", "coupler", "rocker", "tie", "side", "shuttle", "frame",
+                                              "joints")} <= entities
+    frames = {}
+    for part in ("shuttle", "rocker"):
+        frames[part] = [strips for chunk in store.stream() if chunk.entity_path == f"/mechanism/{part}"
+                        and not chunk.is_static for strips in chunk.to_record_batch().column(
+                            "LineStrips2D:strips").cast(pa.list_(pa.list_(pa.list_(pa.float64())))).to_pylist()]
+    assert len(frames["shuttle"]) > 5
+    s = GEOMETRY.beam_length * cmath.exp(1j * GEOMETRY.beam_angle)
+    for (strip,) in frames["shuttle"]:
+        (x0, y0), (x1, y1) = strip
+        assert complex(x1 - x0, -(y1 - y0)) == pytest.approx(s, abs=1e-6)
+    assert all(len(strips) == 2 for strips in frames["rocker"])
