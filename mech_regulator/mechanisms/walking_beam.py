@@ -24,8 +24,6 @@ from mech_regulator.mechanisms.four_bar import BRANCH_SIGN, link_angles
 
 Motion = tuple[complex, complex, complex]  # (P [m], dP/dphi [m/rad], d2P/dphi2 [m/rad^2])
 
-MOVING_POINTS = ("A", "B", "C", "D", "E")
-
 
 class WalkingBeamGeometry(NamedTuple):
     """Lengths [m], angles [rad], branch sign, masses [kg], inertias [kg m^2] (scene.schema.WalkingBeam)."""
