@@ -254,6 +254,7 @@ def format_engine(report: dict) -> str:
              f"-R w^2 (1 - lambda) = {piston['j_bottom_central_formula']:.6g})",
              f"source 002's first-order formulas against the exact kinematics, largest error over the turn: "
              f"x {error['x'] * 1000:.3g} mm, v {error['v']:.3g} m/s, j {error['a']:.4g} m/s^2",
+             f"cylinders: 1 ({strokes})" if cylinders["count"] == 1 else
              f"cylinders: {cylinders['count']} ({strokes}), throws {_degrees(cylinders['throw_deg'])} deg"
              + (f", banks {_degrees(cylinders['bank_deg'])} deg" if any(cylinders["bank_deg"]) else "")
              + f"; firing order {'-'.join(map(str, cylinders['firing_order']))}, at "
