@@ -280,11 +280,17 @@ def indicated_work(data, cylinders=1):
     return cylinders * float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(-area * x)))
 
 
-@pytest.mark.parametrize("data, cylinders", [(ENGINE, 1), (INLINE4, 4)], ids=["single", "inline4"])
+OFFSET_ENGINE = scene(ENGINE)
+OFFSET_ENGINE["machine"]["mechanism"]["offset"] = 0.012
+
+
+@pytest.mark.parametrize("data, cylinders", [(ENGINE, 1), (INLINE4, 4), (OFFSET_ENGINE, 1)],
+                         ids=["single", "inline4", "offset"])
 def test_mean_gas_torque_is_indicated_work_over_cycle_angle(data, cylinders):
     curves = torque_curves(model_of(data), 250.0)
     work = indicated_work(data, cylinders)
-    assert work / (cylinders * math.pi * 0.08 ** 2 / 4 * 0.08) == pytest.approx(6.6e5, rel=0.05)  # "IMEP about 6.6 bar"
+    if data is not OFFSET_ENGINE:  # the scene says "IMEP about 6.6 bar"
+        assert work / (cylinders * math.pi * 0.08 ** 2 / 4 * 0.08) == pytest.approx(6.6e5, rel=0.05)
     # rectangle rule on a periodic curve with kinks at the table's knots: O(dphi^2) ~ 1e-5 relative
     assert np.mean(curves.gas_total) == pytest.approx(work / math.radians(720.0), rel=1e-4)
     assert abs(np.mean(curves.inertia)) < 1e-12 * np.abs(curves.inertia).max()  # J is periodic: no mean

@@ -192,21 +192,20 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
     from mech_regulator.mechanisms.crank_slider import dead_centres
 
     degrees = np.degrees(phis)
-    labels = [("x", 1000.0, "x [mm]", "mm", "piston 1 from the top dead centre"), ("v", 1.0, "v [m/s]", "m/s", None),
-              ("a", 1.0, "j [m/s^2]", "m/s^2", None)]
-    for row, (key, scale, ylabel, unit, title) in enumerate(labels):
+    scales = np.array([1000.0, 1.0, 1.0])  # x in mm
+    errors = np.max(np.abs(exact - approximate), axis=1) * scales
+    for row, (key, ylabel) in enumerate((("x", "x [mm]"), ("v", "v [m/s]"), ("a", "j [m/s^2]"))):
         axis = axes[key]
-        error = np.max(np.abs(exact[row] - approximate[row])) * scale
-        axis.plot(degrees, exact[row] * scale, color="tab:blue", lw=1.5, label="exact")
-        axis.plot(degrees, approximate[row] * scale, color="tab:orange", lw=1.0, ls="--",
-                  label=f"source 002, first order in lambda (largest error {error:.3g} {unit})")
+        axis.plot(degrees, exact[row] * scales[row], color="tab:blue", lw=1.5, label="exact")
+        axis.plot(degrees, approximate[row] * scales[row], color="tab:orange", lw=1.0, ls="--",
+                  label="source 002, first order in lambda\n(largest errors {:.3g} mm, {:.3g} m/s, {:.3g} m/s^2)"
+                  .format(*errors))
         for dead_centre in dead_centres(mechanism.crank, mechanism.rod, mechanism.offset):
             axis.axvline(math.degrees(dead_centre) % 360.0, color="grey", lw=0.6, ls=":")
         axis.set(ylabel=ylabel, xlim=(0.0, 360.0), xticks=np.arange(0, 361, 60))
         axis.grid(alpha=0.3)
-        if title:
-            axis.set_title(title + " (dotted: dead centres)")
-        axis.legend(loc={"x": "lower center", "v": "lower left", "a": "upper center"}[key], fontsize=8)
+    axes["x"].set_title("piston 1 from the top dead centre (dotted: dead centres)")
+    axes["x"].legend(loc="lower center", fontsize=8)
     axes["a"].set_xlabel("crank angle phi [deg]")
 
     torque = axes["torque"]
