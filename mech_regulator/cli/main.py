@@ -1,4 +1,5 @@
-"""The `mech-regulator` command: simulate, describe and list scenes, print the scene schema.
+"""The `mech-regulator` command: simulate, describe and list scenes, analyse governors and engines, print the
+scene schema.
 
 A user's mistake in a scene or an option ends in a message and exit code 2, never a traceback; a run
 that fails or is interrupted still writes what it computed.
