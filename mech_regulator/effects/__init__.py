@@ -93,7 +93,8 @@ def _multi_cylinder_engine(drive: schema.Engine, cylinders: list[schema.Cylinder
 
     order = "-".join(str(i + 1) for i in sorted(range(len(delays)), key=delays.__getitem__))
     return Effect("drive", "drive", moment, frozenset({"phi"}),
-                  f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, {len(cylinders)} cylinders, A = {area:.6g} m^2, "
+                  f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, {len(cylinders)} cylinders, "
+                  f"A = {area:.6g} m^2, "
                   f"{drive.cycle_deg:g} deg cycle, firing {order} at {', '.join(f'{d:g}' for d in sorted(delays))} deg",
                   period=math.radians(drive.cycle_deg))
 
