@@ -1,4 +1,5 @@
-"""The `mech-regulator` command: simulate, describe and list scenes, print the scene schema.
+"""The `mech-regulator` command: simulate, describe and list scenes, analyse governors and engines, print the
+scene schema.
 
 A user's mistake in a scene or an option ends in a message and exit code 2, never a traceback; a run
 that fails or is interrupted still writes what it computed.
@@ -69,6 +70,15 @@ def build_parser() -> argparse.ArgumentParser:
     kinematics.add_argument("--plot", type=Path, help="write a PNG picture: paths with the mechanism at a few "
                                                       "positions, speeds and accelerations")
     kinematics.add_argument("--json", action="store_true", help="print the summary as JSON")
+    engine = scene_command("engine", "an engine scene at constant crank speed: dead centres, stroke, piston "
+                                     "kinematics (exact and source 002's approximation), cylinders and firing, "
+                                     "torque curves per cylinder and total, mean indicated torque and power, harmonics")
+    engine.add_argument("--omega", type=float, metavar="W", help="crank speed [rad/s] (default: the scene's "
+                                                                 "initial speed)")
+    engine.add_argument("--plot", type=Path, help="write a PNG picture: piston x, v, a over the turn; torque "
+                                                  "curves over the cycle; harmonic spectrum")
+    engine.add_argument("--out", type=Path, help="write the curves over the working cycle as CSV")
+    engine.add_argument("--json", action="store_true", help="print the analysis as JSON")
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
@@ -132,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
             return _main_job(scene, args)
         if args.command == "kinematics":
             return _kinematics(scene, args)
+        if args.command == "engine":
+            return _engine(scene, args)
         return _simulate(scene, args)
     except SceneError as error:
         print(f"mech-regulator: {error}", file=sys.stderr)
@@ -290,6 +302,36 @@ def _kinematics(scene, args) -> int:
     for key in ("csv", "plot"):
         if key in summary:
             print(f"wrote {summary[key]}")
+    return 0
+
+
+def _engine(scene, args) -> int:
+    """engine: the analysis of an engine scene at constant speed, printed, and optionally a PNG and a CSV."""
+    from mech_regulator.analysis.engine import engine_curve_columns, engine_report
+    from mech_regulator.cli.report import format_engine
+    from mech_regulator.model import build_model
+
+    machine = scene.machine
+    if machine.mechanism is None or machine.mechanism.type != "crank_slider" or machine.drive is None \
+            or machine.drive.type != "engine":
+        raise SceneError(f"scene '{scene.name}' is not an engine: expected mechanism.type crank_slider and drive.type "
+                         "engine (see docs/engines.md)")
+    omega = scene.scenario.initial.omega if args.omega is None else args.omega
+    if not (math.isfinite(omega) and omega > 0.0):
+        source = "--omega" if args.omega is not None else "the scene's scenario.initial.omega"
+        raise SceneError(f"{source} = {omega:g} rad/s: expected a crank speed > 0 (give --omega W)")
+    _check_outputs(args, args.out)
+    model = build_model(scene)
+    report = engine_report(model, omega)
+    if args.out is not None:
+        write_csv(args.out, engine_curve_columns(model, omega))
+        report["csv"] = str(args.out)
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_engine
+
+        plot_engine(model, omega, args.plot)
+        report["plot"] = str(args.plot)
+    print(to_json(report) if args.json else format_engine(report))
     return 0
 
 

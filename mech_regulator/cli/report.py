@@ -232,3 +232,46 @@ def write_csv(path, columns: dict[str, np.ndarray], digits: int = 12) -> None:
     exactly)."""
     np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="",
                fmt=f"%.{digits}g")
+
+
+def format_engine(report: dict) -> str:
+    """The human-readable analysis of an engine at constant speed (`mech-regulator engine`)."""
+    geometry, piston, cylinders, torque = report["geometry"], report["piston"], report["cylinders"], report["torque"]
+    error = piston["approximation_error"]
+    strokes = "four-stroke" if cylinders["cycle_deg"] == 720.0 else "two-stroke"
+    lines = [f"scene {report['scene']}: engine at omega = {report['omega']:.6g} rad/s ({report['rpm']:.5g} rpm)",
+             f"geometry: R = {geometry['crank']:g} m, l = {geometry['rod']:g} m, e = {geometry['offset']:g} m, "
+             f"lambda = R/l = {geometry['lambda']:.4g}, k = e/R = {geometry['k']:.4g}; stroke S = "
+             f"{geometry['stroke'] * 1000:.5g} mm, bore {geometry['bore'] * 1000:.4g} mm, displacement "
+             f"{geometry['displacement'] * 1e6:.5g} cm^3",
+             f"dead centres: top at phi = {geometry['top_dead_centre_deg']:.4g} deg, bottom at "
+             f"{geometry['bottom_dead_centre_deg']:.5g} deg (source 002: alpha1 = {geometry['source_alpha1_deg']:.4g} "
+             f"deg, alpha2 = {geometry['source_alpha2_deg']:.4g} deg from 180)",
+             f"piston 1 (from the top dead centre): v max {piston['v_max']:.5g} m/s, mean speed S n / 30 = "
+             f"{piston['mean_speed']:.5g} m/s; acceleration j {piston['a_max']:.6g} to {piston['a_min']:.6g} m/s^2, "
+             f"at the top dead centre {piston['j_top']:.6g}, at the bottom {piston['j_bottom']:.6g} "
+             f"(central formulas R w^2 (1 + lambda) = {piston['j_top_central_formula']:.6g}, "
+             f"-R w^2 (1 - lambda) = {piston['j_bottom_central_formula']:.6g})",
+             f"source 002's first-order formulas against the exact kinematics, largest error over the turn: "
+             f"x {error['x'] * 1000:.3g} mm, v {error['v']:.3g} m/s, j {error['a']:.4g} m/s^2",
+             f"cylinders: 1 ({strokes})" if cylinders["count"] == 1 else
+             f"cylinders: {cylinders['count']} ({strokes}), throws {_degrees(cylinders['throw_deg'])} deg"
+             + (f", banks {_degrees(cylinders['bank_deg'])} deg" if any(cylinders["bank_deg"]) else "")
+             + f"; firing order {'-'.join(map(str, cylinders['firing_order']))}, at "
+             f"{_degrees(sorted(cylinders['firing_delay_deg']))} deg",
+             f"mean indicated moment {torque['mean_gas']:.6g} N m, indicated power {torque['indicated_power'] / 1000:.5g} "
+             f"kW, work per cycle {torque['indicated_work_per_cycle']:.6g} J, mean effective pressure "
+             f"{torque['mean_effective_pressure'] / 1e5:.4g} bar; mean inertia moment {torque['mean_inertia']:.2g} N m",
+             f"total moment (gas + inertia) from {torque['total_min']:.5g} to {torque['total_max']:.5g} N m",
+             "largest harmonics, order: amplitude [N m] (phase [deg]), M = mean + sum A cos(order phi + phase):"]
+    for key, label in (("gas_harmonics", "gas"), ("inertia_harmonics", "inertia"), ("total_harmonics", "total")):
+        lines.append(f"  {label:<8} " + ", ".join(f"{h['order']:g}: {h['amplitude']:.4g} ({h['phase_deg']:.0f})"
+                                                  for h in torque[key][:6]))
+    for key in ("csv", "plot"):
+        if key in report:
+            lines.append(f"wrote {report[key]}")
+    return "\n".join(lines)
+
+
+def _degrees(values) -> str:
+    return ", ".join(f"{value:g}" for value in values)

@@ -3,7 +3,8 @@
 Each mechanism module gives a closed-form `make_reduced(geometry, gravity)` returning
 `reduced(phi) -> (J_links [kg m^2], dJ_links/dphi [kg m^2/rad], M_weight [N m], q, dq/dphi)`,
 q being the output coordinate on which output-link loads act (slider x [m], rocker angle [rad],
-shuttle bar x_C [m]). `point_motions` gives the paths of the moving joints for `mech-regulator kinematics`.
+shuttle bar x_C [m]); a crank–slider with several cylinders (engine.py) returns the tuples of every piston's
+x and x'. `point_motions` gives the paths of the moving joints for `mech-regulator kinematics`.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import cmath
 import math
 from typing import Callable
 
-from mech_regulator.mechanisms import crank_slider, four_bar, walking_beam
+from mech_regulator.mechanisms import crank_slider, engine, four_bar, walking_beam
 from mech_regulator.mechanisms.walking_beam import Motion, arm
 from mech_regulator.scene import schema
 
@@ -22,6 +23,9 @@ def build_reduced(mechanism: schema.Mechanism, gravity: tuple[float, float] | No
     if isinstance(mechanism, schema.CrankSlider):
         geometry = crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)
                                                        for k in crank_slider.CrankSliderGeometry._fields})
+        if mechanism.cylinders is not None:
+            return engine.make_multi_reduced(geometry, [c.throw_deg for c in mechanism.cylinders],
+                                             [c.bank_deg for c in mechanism.cylinders], gravity)
         return crank_slider.make_reduced(geometry, gravity)
     if isinstance(mechanism, schema.FourBar):
         fields = {k: getattr(mechanism, k) for k in four_bar.FourBarGeometry._fields

@@ -304,9 +304,8 @@ class MachineModel:
         phis = np.arange(count) * (period / count)
         if self.reduced is None:
             return phis, self.inertia_constant, 0.0, np.zeros(count), np.zeros(count)
-        values = np.array([self.reduced(phi) for phi in phis])
-        return (phis, self.inertia_constant + float(np.mean(values[:, 0])), float(np.mean(values[:, 2])),
-                values[:, 3], values[:, 4])
+        J_links, _, weight, q, dq = (np.array(values, dtype=float) for values in zip(*map(self.reduced, phis)))
+        return phis, self.inertia_constant + float(np.mean(J_links)), float(np.mean(weight)), q, dq
 
     def initial_balance_throttle(self, omega: float) -> float:
         """balance_throttle at speed omega [rad/s] for the scenario's external load at t = 0."""
@@ -328,8 +327,9 @@ class MachineModel:
         all resisting moments and the external load), one M_<effect> column per load (and M_weight,
         M_external when present), E_kinetic = 1/2 J omega^2, the output coordinate with its speed
         (x, v for a slider, theta4, omega4 for a rocker, x_shuttle [m], v_shuttle [m/s] for a walking beam's
-        shuttle bar) and, governed: throttle, sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], servo [-]
-        and feedback_shift [m] where present.
+        shuttle bar; with several cylinders x_slider, v_slider are piston 1's and x_slider_k, v_slider_k piston k's)
+        and, governed: throttle, sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and
+        feedback_shift [m] where present.
         With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
         load is not), twist [rad], omega_driven [rad/s], M_driven_<effect> and M_driven_external (moments on
         the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
@@ -340,8 +340,9 @@ class MachineModel:
         J = np.full(n, self.inertia_constant)
         dJ = np.zeros(n)
         weight = np.zeros(n)
-        q = np.zeros(n)
-        dq = np.zeros(n)
+        cylinders = getattr(self.scene.machine.mechanism, "cylinders", None)
+        q = np.zeros((n, len(cylinders)) if cylinders else n)  # several cylinders: one column per piston
+        dq = np.zeros_like(q)
         given = external is not None
         external = np.array([self.external_load(ti) for ti in t]) if external is None else np.asarray(external)
         outside_throttle = throttle is not None
@@ -387,7 +388,11 @@ class MachineModel:
                 out["M_external"] = -external
             out["E_kinetic"] = 0.5 * J * omega ** 2
         kind = self.scene.machine.mechanism.type if self.scene.machine.mechanism is not None else None
-        if kind == "crank_slider":
+        if kind == "crank_slider" and cylinders:
+            out["x_slider"], out["v_slider"] = q[:, 0], dq[:, 0] * omega  # piston 1
+            for k in range(1, len(cylinders)):
+                out[f"x_slider_{k + 1}"], out[f"v_slider_{k + 1}"] = q[:, k], dq[:, k] * omega
+        elif kind == "crank_slider":
             out["x_slider"], out["v_slider"] = q, dq * omega
         elif kind == "four_bar":
             out["theta4"], out["omega4"] = q, dq * omega
@@ -444,7 +449,7 @@ def build_model(scene: Scene) -> MachineModel:
     kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
     effects = []
     if machine.drive is not None:
-        effects.append(build_drive(machine.drive))
+        effects.append(build_drive(machine.drive, machine.mechanism))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
     coupling = None

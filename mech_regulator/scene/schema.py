@@ -48,6 +48,15 @@ class Flywheel(SceneModel):
                                           "inertia * ratio^2 to the reduced inertia [-]")
 
 
+class Cylinder(SceneModel):
+    """One cylinder of a multi-cylinder engine: its crank throw and its axis (bank) relative to cylinder 1."""
+
+    throw_deg: float = Field(0.0, description="angle of this cylinder's crank throw ahead of cylinder 1's, counter-"
+                                              "clockwise (the pin is at phi + throw) [deg]")
+    bank_deg: float = Field(0.0, description="direction of this cylinder's axis from +x (V engines); the piston "
+                                             "moves on its own line at the same offset [deg]")
+
+
 class CrankSlider(SceneModel):
     """Crank–slider: crank pin B = R(cos phi, sin phi), slider on the line y = offset on the +x side."""
 
@@ -62,9 +71,16 @@ class CrankSlider(SceneModel):
     rod_cg: NonNegative = Field(0.0, description="distance of the rod's centre of mass from the crank pin, along the rod [m]")
     rod_inertia: NonNegative = Field(0.0, description="rod moment of inertia about its centre of mass [kg m^2]")
     slider_mass: NonNegative = Field(0.0, description="slider (piston) mass [kg]")
+    cylinders: list[Cylinder] | None = Field(None, min_length=1, description="identical cylinders on one crankshaft "
+                                             "(multi-cylinder engine), the first at throw_deg 0 and bank_deg 0; every "
+                                             "length and mass above is per cylinder; none = one slider")
 
     @model_validator(mode="after")
     def _assembles(self) -> CrankSlider:
+        if self.cylinders and (self.cylinders[0].throw_deg != 0.0 or self.cylinders[0].bank_deg != 0.0):
+            raise ValueError(f"cylinders[0] has throw_deg {self.cylinders[0].throw_deg:g} and bank_deg "
+                             f"{self.cylinders[0].bank_deg:g}: cylinder 1 is the reference (phi is its crank angle "
+                             "from its axis, +x), expected 0 and 0")
         reach = self.crank + abs(self.offset)
         if self.rod <= reach:
             raise ValueError(f"rod = {self.rod} m is too short: the crank turns fully only if rod > crank + |offset| "
@@ -222,11 +238,19 @@ class Engine(SceneModel):
                                                             "dead centre at the start of intake [deg]")
     pressure: list[float] = Field(min_length=2, description="gauge gas pressure at each cycle angle [Pa]")
     cycle_deg: Literal[360.0, 720.0] = Field(720.0, description="length of the working cycle: 720 four-stroke, 360 two-stroke [deg]")
-    phase_deg: float = Field(0.0, description="cycle angle at crank angle phi = 0 [deg]")
+    phase_deg: float = Field(0.0, description="cycle angle (of cylinder 1) at crank angle phi = 0 [deg]")
+    firing_order: list[int] | None = Field(None, description="multi-cylinder engine: the order in which the cylinders "
+                                                             "fire, e.g. [1, 3, 4, 2]; each fires at its first top "
+                                                             "dead centre after the previous one [-]")
+    firing_deg: list[float] | None = Field(None, description="multi-cylinder engine, instead of firing_order: each "
+                                                             "cylinder's firing delay after cylinder 1, the first 0; "
+                                                             "its cycle angle is cylinder 1's at phi - delay [deg]")
 
     @model_validator(mode="after")
     def _table(self) -> Engine:
         _check_table(self.angle_deg, self.pressure, self.cycle_deg, "engine pressure")
+        if self.firing_order is not None and self.firing_deg is not None:
+            raise ValueError("give either firing_order or firing_deg, not both")
         return self
 
 
@@ -381,10 +405,31 @@ class Machine(SceneModel):
         if isinstance(self.drive, Engine) and kind != "crank_slider":
             raise ValueError(f"drive type 'engine' pushes a piston: it needs mechanism.type: crank_slider "
                              f"(the machine has {kind or 'no mechanism'})")
+        self._cylinders_fit_effects()
         flywheel = self.flywheel.inertia * self.flywheel.ratio ** 2 if self.flywheel else 0.0
         if self.inertia + flywheel <= 0 and self.mechanism is None:
             raise ValueError("the machine has no inertia: give machine.inertia > 0 or a flywheel")
         return self
+
+    def _cylinders_fit_effects(self) -> None:
+        """Several cylinders: forces on "the slider" are ambiguous (refused) and the engine's firing must fit the
+        crankshaft (mechanisms.engine.firing_delays); firing keys need cylinders."""
+        from mech_regulator.mechanisms.engine import firing_delays
+
+        cylinders = self.mechanism.cylinders if isinstance(self.mechanism, CrankSlider) else None
+        engine = self.drive if isinstance(self.drive, Engine) else None
+        if cylinders is None:
+            if engine is not None and (engine.firing_order or engine.firing_deg):
+                raise ValueError("drive.firing_order / firing_deg need several cylinders: add mechanism.cylinders")
+            return
+        for index, load in enumerate(self.loads):
+            if load.type.startswith("slider"):
+                raise ValueError(f"loads[{index}] type '{load.type}' acts on the slider, but the crank–slider has "
+                                 f"{len(cylinders)} cylinders (mechanism.cylinders): expected loads on the crank "
+                                 "(constant, viscous, fan, table, cutting)")
+        if engine is not None:
+            firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], engine.cycle_deg,
+                          engine.firing_order, engine.firing_deg)
 
 
 # --------------------------------------------------------------------------------------------

@@ -234,3 +234,74 @@ def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, tit
         axes.legend(loc="upper right", fontsize=8, ncol=3)
     figure.savefig(path, dpi=100)
     plt.close(figure)
+
+
+def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float = 12.0) -> None:
+    """An engine at constant speed omega [rad/s]: piston 1's displacement, velocity and acceleration over the
+    turn (exact and source 002's approximation, from the top dead centre); gas moment per cylinder, total gas,
+    inertia and total moments over the working cycle; amplitudes of their harmonics up to max_order."""
+    from mech_regulator.analysis.engine import harmonics, piston_table, torque_curves
+
+    mechanism = model.scene.machine.mechanism
+    phis, exact, approximate = piston_table(model, omega)
+    curves = torque_curves(model, omega)
+    figure, axes = plt.subplot_mosaic([["x", "torque"], ["v", "torque"], ["a", "spectrum"]], figsize=(14, 9),
+                                      constrained_layout=True, gridspec_kw={"width_ratios": [1.0, 1.5]})
+    figure.suptitle(f"{model.scene.name}: engine at omega = {omega:.5g} rad/s ({omega * 30 / math.pi:.5g} rpm), "
+                    f"lambda = {mechanism.crank / mechanism.rod:.3g}, k = {mechanism.offset / mechanism.crank:.3g}")
+    from mech_regulator.mechanisms.crank_slider import dead_centres
+
+    degrees = np.degrees(phis)
+    scales = np.array([1000.0, 1.0, 1.0])  # x in mm
+    errors = np.max(np.abs(exact - approximate), axis=1) * scales
+    for row, (key, ylabel) in enumerate((("x", "x [mm]"), ("v", "v [m/s]"), ("a", "j [m/s^2]"))):
+        axis = axes[key]
+        axis.plot(degrees, exact[row] * scales[row], color="tab:blue", lw=1.5, label="exact")
+        axis.plot(degrees, approximate[row] * scales[row], color="tab:orange", lw=1.0, ls="--",
+                  label="source 002, first order in lambda\n(largest errors {:.3g} mm, {:.3g} m/s, {:.3g} m/s^2)"
+                  .format(*errors))
+        for dead_centre in dead_centres(mechanism.crank, mechanism.rod, mechanism.offset):
+            axis.axvline(math.degrees(dead_centre) % 360.0, color="grey", lw=0.6, ls=":")
+        axis.set(ylabel=ylabel, xlim=(0.0, 360.0), xticks=np.arange(0, 361, 60))
+        axis.grid(alpha=0.3)
+    axes["x"].set_title("piston 1 from the top dead centre (dotted: dead centres)")
+    axes["x"].legend(loc="lower center", fontsize=8)
+    axes["a"].set_xlabel("crank angle phi [deg]")
+
+    torque = axes["torque"]
+    cycle_degrees = np.degrees(curves.phi)
+    cylinder_colors = ["C0", "C1", "C4", "C6", "C8", "C9", "C5", "C7"]
+    for i, row in enumerate(curves.gas if len(curves.gas) > 1 else []):
+        torque.plot(cycle_degrees, row, lw=0.7, color=cylinder_colors[i % len(cylinder_colors)],
+                    label=f"gas, cylinder {i + 1}")
+    torque.plot(cycle_degrees, curves.gas_total, color="tab:red", lw=1.6, label="gas, total")
+    torque.plot(cycle_degrees, curves.inertia, color="tab:green", lw=1.2, label="inertia -1/2 J' omega^2")
+    torque.plot(cycle_degrees, curves.total, color="k", lw=1.8, label="total")
+    mean = float(np.mean(curves.gas_total))
+    torque.axhline(mean, color="tab:red", lw=0.8, ls="--", label=f"mean {mean:.4g} N m")
+    torque.set(xlabel="crank angle phi [deg]", ylabel="moment on the crank [N m]", xlim=(0.0, cycle_degrees[-1] + 0.25),
+               xticks=np.arange(0, cycle_degrees[-1] + 1, 90),
+               title=f"moments over the working cycle ({len(curves.gas)} cylinder"
+                     f"{'s' if len(curves.gas) > 1 else ''})")
+    torque.grid(alpha=0.3)
+    low, high = torque.get_ylim()
+    torque.set_ylim(low, high + 0.3 * (high - low))  # room for the legend above the curves
+    torque.legend(loc="upper center", fontsize=8, ncols=4)
+
+    spectrum = axes["spectrum"]
+    series = [("gas", curves.gas_total, "tab:red"), ("inertia", curves.inertia, "tab:green"),
+              ("total", curves.total, "k")]
+    step = 2.0 * math.pi / curves.cycle
+    width = 0.8 * step / len(series)
+    for index, (name, values, color) in enumerate(series):
+        fourier = harmonics(values, curves.cycle)
+        shown = fourier.orders <= max_order + 1e-9
+        spectrum.bar(fourier.orders[shown] + (index - 1) * width, fourier.amplitudes[shown], width=width,
+                     color=color, label=name)
+    spectrum.set(xlabel="order (multiples of the crank speed)", ylabel="amplitude [N m]",
+                 xticks=np.arange(0.0, max_order + 0.5, 1.0), xlim=(0.0, max_order + 0.5),
+                 title="harmonics: M = mean + sum A_k cos(order_k phi + phase_k)")
+    spectrum.grid(alpha=0.3, axis="y")
+    spectrum.legend(loc="upper right", fontsize=8)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
