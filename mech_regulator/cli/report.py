@@ -107,7 +107,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
                  + (f", {solver['njev']} jacobians, {solver['nlu']} LU" if solver["njev"] else "")
                  + (f", {solver['switches']} switches located" if solver["switches"] else "")
                  + (f", {solver['restarts']} restarts" if solver["restarts"] else "")
-                 + (f", {solver['events']} governor events" if solver["events"] else ""))
+                 + (f", {solver['events']} events" if solver["events"] else ""))
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
     for key in ("csv", "plot", "recording"):
