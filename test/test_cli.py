@@ -46,8 +46,8 @@ def bundled_data(name: str) -> dict:
 
 
 def test_bundled_scenes_present():
-    assert BUNDLED == ["compressor", "compressor_friction", "engine", "engine_direct", "engine_indirect_isodromic", "engine_indirect_none",
-                       "engine_indirect_rigid", "four_bar_rocker", "lathe", "startup", "two_mass"]
+    assert BUNDLED == ["compressor", "compressor_friction", "engine", "engine_direct", "engine_indirect_isodromic",
+                       "engine_indirect_none", "engine_indirect_rigid", "four_bar_rocker", "lathe", "startup", "two_mass"]
 
 
 # ----------------------------------------------------------------------------------------------

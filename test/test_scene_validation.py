@@ -456,8 +456,8 @@ def test_missing_scene_suggests_bundled(capsys, name, suggestion):
     assert code == 2
     assert "Traceback" not in out + err
     assert_all_in(err, f"scene '{name}'", "no such file", f"did you mean the bundled scene '{suggestion}'?",
-                  "compressor, engine, engine_direct, engine_indirect_isodromic, engine_indirect_none, "
-                   "engine_indirect_rigid, four_bar_rocker, lathe")
+                  "compressor, compressor_friction, engine, engine_direct, engine_indirect_isodromic, "
+                  "engine_indirect_none, engine_indirect_rigid, four_bar_rocker, lathe")
 
 
 def test_missing_scene_path(tmp_path, capsys):
