@@ -3,6 +3,7 @@
 Each mechanism module gives a closed-form `make_reduced(geometry, gravity)` returning
 `reduced(phi) -> (J_links [kg m^2], dJ_links/dphi [kg m^2/rad], M_weight [N m], q, dq/dphi)`,
 q being the output coordinate on which output-link loads act (slider x [m], rocker angle [rad]).
+`kinetostatics` gives the joint reactions of both mechanisms (for joint friction).
 """
 
 from __future__ import annotations
