@@ -41,6 +41,9 @@ def describe(model: MachineModel) -> str:
         lines.append(f"  - load  external load moment (N m) by time: {changes}   [reads t]")
     if not model.effects and not model.has_weight and not model.load_pieces:
         lines.append("  (none: the machine coasts)")
+    if model.joint_friction is not None:
+        lines.append("joint friction (kinetostatics per right-hand side; epsilon solved from the implicit equation): "
+                     f"{model.joint_friction.formula}")
     if model.coupling is not None:
         coupling = model.coupling
         modes = coupling_modes(model)
@@ -104,7 +107,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
                  + (f", {solver['njev']} jacobians, {solver['nlu']} LU" if solver["njev"] else "")
                  + (f", {solver['switches']} switches located" if solver["switches"] else "")
                  + (f", {solver['restarts']} restarts" if solver["restarts"] else "")
-                 + (f", {solver['events']} governor events" if solver["events"] else ""))
+                 + (f", {solver['events']} events" if solver["events"] else ""))
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
     for key in ("csv", "plot", "recording"):

@@ -31,7 +31,10 @@ class Effect:
     name: column name in outputs; role: 'drive' or 'load'; moment: the closure;
     depends_on: which of 't', 'phi', 'omega' it reads ('phi' includes the output coordinate);
     period: its period in phi [rad] if it depends on phi; switch_angles: angles in [0, period)
-    where it jumps [rad]; formula: what it computes, for `describe`.
+    where it jumps [rad]; formula: what it computes, for `describe`; output_force: for an effect acting
+    on the output link, the generalised force Q(t, phi, omega, q, dq) on it (slider force along +x [N],
+    rocker moment [N m]) whose reduced moment is `moment` = Q dq, else None (read by the kinetostatics of
+    joint friction only).
     """
 
     name: str
@@ -41,6 +44,7 @@ class Effect:
     formula: str
     period: float | None = None
     switch_angles: tuple[float, ...] = ()
+    output_force: MomentFunction | None = None
 
 
 def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:
@@ -69,7 +73,8 @@ def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) 
         # Gas pushes the piston towards the crank axis: F_x = -p A, reduced moment F_x dx/dphi.
         return Effect("drive", "drive", lambda t, phi, omega, q, dq: -pressure(phi + phase) * area * dq,
                       frozenset({"phi"}), f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, "
-                                          f"{drive.cycle_deg:g} deg cycle", period=math.radians(drive.cycle_deg))
+                                          f"{drive.cycle_deg:g} deg cycle", period=math.radians(drive.cycle_deg),
+                      output_force=lambda t, phi, omega, q, dq: -pressure(phi + phase) * area)
     raise TypeError(f"no drive effect for {type(drive).__name__}")
 
 
@@ -144,19 +149,21 @@ def build_load(load: schema.Load, kinematic_period: float | None) -> Effect:
     if isinstance(load, (schema.SliderConstant, schema.RockerConstant)):
         value = load.force if isinstance(load, schema.SliderConstant) else load.torque
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: value * dq, frozenset({"phi"}),
-                      f"constant on the {on}: M = {value:g} dq/dphi", period=kinematic_period)
+                      f"constant on the {on}: M = {value:g} dq/dphi", period=kinematic_period,
+                      output_force=lambda t, phi, omega, q, dq: value)
     if isinstance(load, schema.OutputViscous):
         c = load.coefficient
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: -c * dq * dq * omega,
                       frozenset({"phi", "omega"}), f"viscous on the {on}: M = -{c:g} (dq/dphi)^2 omega",
-                      period=kinematic_period)
+                      period=kinematic_period, output_force=lambda t, phi, omega, q, dq: -c * dq * omega)
     if isinstance(load, schema.OutputSpring):
         k, free = load.stiffness, load.free_position
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: -k * (q - free) * dq, frozenset({"phi"}),
-                      f"spring on the {on}: M = -{k:g} (q - {free:g}) dq/dphi", period=kinematic_period)
+                      f"spring on the {on}: M = -{k:g} (q - {free:g}) dq/dphi", period=kinematic_period,
+                      output_force=lambda t, phi, omega, q, dq: -k * (q - free))
     if isinstance(load, schema.SliderTable):
         force = clamped_linear(load.position, load.force)
         return Effect("slider_table", "load", lambda t, phi, omega, q, dq: force(q) * dq, frozenset({"phi"}),
                       f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi",
-                      period=kinematic_period)
+                      period=kinematic_period, output_force=lambda t, phi, omega, q, dq: force(q))
     raise TypeError(f"no load effect for {type(load).__name__}")

@@ -4,7 +4,8 @@ Each mechanism module gives a closed-form `make_reduced(geometry, gravity)` retu
 `reduced(phi) -> (J_links [kg m^2], dJ_links/dphi [kg m^2/rad], M_weight [N m], q, dq/dphi)`,
 q being the output coordinate on which output-link loads act (slider x [m], rocker angle [rad],
 shuttle bar x_C [m]); a crank–slider with several cylinders (engine.py) returns the tuples of every piston's
-x and x'. `point_motions` gives the paths of the moving joints for `mech-regulator kinematics`.
+x and x'. `point_motions` gives the paths of the moving joints for `mech-regulator kinematics`;
+`kinetostatics` gives the joint reactions of the single crank–slider and the four-bar (for joint friction).
 """
 
 from __future__ import annotations
@@ -13,28 +14,43 @@ import cmath
 import math
 from typing import Callable
 
-from mech_regulator.mechanisms import crank_slider, engine, four_bar, walking_beam
+from mech_regulator.mechanisms import crank_slider, engine, four_bar, kinetostatics, walking_beam
 from mech_regulator.mechanisms.walking_beam import Motion, arm
 from mech_regulator.scene import schema
 
 
 def build_reduced(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
     """The `reduced(phi)` closure of a scene's mechanism (gravity None: no weight moment is computed)."""
+    geometry = mechanism_geometry(mechanism)
+    if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None:
+        return engine.make_multi_reduced(geometry, [c.throw_deg for c in mechanism.cylinders],
+                                         [c.bank_deg for c in mechanism.cylinders], gravity)
+    module = {schema.CrankSlider: crank_slider, schema.FourBar: four_bar, schema.WalkingBeam: walking_beam}
+    return module[type(mechanism)].make_reduced(geometry, gravity)
+
+
+def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
+    """The `loads(phi, omega, Q)` closure of a scene's mechanism (mechanisms.kinetostatics) and its joint
+    names; gravity None: the links are weightless."""
+    geometry = mechanism_geometry(mechanism)
+    gravity = gravity if gravity is not None else (0.0, 0.0)
+    if isinstance(geometry, crank_slider.CrankSliderGeometry):
+        return kinetostatics.crank_slider_kinetostatics(geometry, gravity), kinetostatics.CRANK_SLIDER_JOINTS
+    return kinetostatics.four_bar_kinetostatics(geometry, gravity), kinetostatics.FOUR_BAR_JOINTS
+
+
+def mechanism_geometry(mechanism: schema.Mechanism):
+    """The geometry NamedTuple (lengths [m], angles [rad], masses [kg], inertias [kg m^2]) of a scene's mechanism."""
     if isinstance(mechanism, schema.CrankSlider):
-        geometry = crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)
-                                                       for k in crank_slider.CrankSliderGeometry._fields})
-        if mechanism.cylinders is not None:
-            return engine.make_multi_reduced(geometry, [c.throw_deg for c in mechanism.cylinders],
-                                             [c.bank_deg for c in mechanism.cylinders], gravity)
-        return crank_slider.make_reduced(geometry, gravity)
+        return crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)
+                                                   for k in crank_slider.CrankSliderGeometry._fields})
     if isinstance(mechanism, schema.FourBar):
         fields = {k: getattr(mechanism, k) for k in four_bar.FourBarGeometry._fields
                   if k not in ("frame_angle", "branch_sign")}
-        geometry = four_bar.FourBarGeometry(frame_angle=math.radians(mechanism.frame_angle_deg),
-                                            branch_sign=four_bar.BRANCH_SIGN[mechanism.branch], **fields)
-        return four_bar.make_reduced(geometry, gravity)
+        return four_bar.FourBarGeometry(frame_angle=math.radians(mechanism.frame_angle_deg),
+                                        branch_sign=four_bar.BRANCH_SIGN[mechanism.branch], **fields)
     if isinstance(mechanism, schema.WalkingBeam):
-        return walking_beam.make_reduced(walking_beam.geometry_from_scene(mechanism), gravity)
+        return walking_beam.geometry_from_scene(mechanism)
     raise TypeError(f"no kinematics for {type(mechanism).__name__}")
 
 

@@ -28,8 +28,10 @@ from typing import Callable
 import numpy as np
 
 from mech_regulator.effects import Effect, build_drive, build_load
-from mech_regulator.governors import Governor, Mode, build_governor
+from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
+from mech_regulator.governors import Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
+from mech_regulator.scene import SceneError
 from mech_regulator.scene.schema import Scene
 
 CYCLE_POINTS_PER_TURN = 720  # samples per turn of the cycle averages of the governor's statics
@@ -79,7 +81,8 @@ class MachineModel:
     phi -> (J_links, dJ_links/dphi, M_weight, q, dq/dphi), or None for a constant-J machine;
     effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none;
     governor: the speed governor whose throttle scales the drive, or None; coupling: the elastic coupling
-    to a driven part (which then carries the external load), or None.
+    to a driven part (which then carries the external load), or None; joint_friction: the friction in the
+    joints (effects.joint_friction), or None.
     """
 
     scene: Scene
@@ -90,6 +93,7 @@ class MachineModel:
     load_pieces: tuple[LoadPiece, ...]
     governor: Governor | None = None
     coupling: CouplingModel | None = None
+    joint_friction: JointFrictionModel | None = None
 
     def breakpoints(self) -> list[float]:
         """Times where the external load has a kink or a jump: integration never steps across them."""
@@ -133,6 +137,8 @@ class MachineModel:
             reads.add("phi")
         if self.load_pieces:
             reads.add("t")
+        if self.joint_friction is not None:
+            reads.add("omega")
         return frozenset(reads)
 
     def inertia(self, phi: float) -> tuple[float, float]:
@@ -225,7 +231,78 @@ class MachineModel:
                 rates += [omega - omega2, driven_total / I2]
             return rates
 
+        if self.joint_friction is None:
+            return machine
+        return self._with_joint_friction(machine, scale_drive, held_throttle)
+
+    def _with_joint_friction(self, frictionless: RightHandSide, scale_drive: bool, held_throttle: float
+                             ) -> RightHandSide:
+        """The right-hand side with joint friction: frictionless's rates with epsilon replaced by the root of
+        `J epsilon = J epsilon_0 - sign(omega) F(epsilon)` (effects.joint_friction), epsilon_0 being the
+        frictionless acceleration and F reading the force on the output link (the drive's scaled by the
+        throttle)."""
+        friction = self.joint_friction
+        J0, reduced = self.inertia_constant, self.reduced
+        throttle = self.governor.throttle if self.governor is not None else None
+        output_force = self._output_force(scale_drive)
+
+        def machine(t: float, y: np.ndarray):
+            rates = list(frictionless(t, y))
+            phi, omega = y[0], y[1]
+            if reduced is None:
+                J, q, dq = J0, 0.0, 0.0
+            else:
+                J_links, _, _, q, dq = reduced(phi)
+                J = J0 + J_links
+            share = held_throttle if throttle is None else throttle(y)
+            force = output_force(t, phi, omega, q, dq, share)
+            rates[1] = friction.acceleration(phi, omega, force, J, J * rates[1])
+            return rates
+
         return machine
+
+    def _output_force(self, scale_drive: bool) -> Callable[..., float]:
+        """`force(t, phi, omega, q, dq, share)`: the generalised force on the output link [N or N m], the sum of
+        the effects' output forces, the drive's times share (the throttle [-]) when scale_drive."""
+        scaled = tuple(effect.output_force for effect in self.effects
+                       if effect.output_force is not None and scale_drive and effect.role == "drive")
+        fixed = tuple(effect.output_force for effect in self.effects
+                      if effect.output_force is not None and not (scale_drive and effect.role == "drive"))
+
+        def force(t: float, phi: float, omega: float, q: float, dq: float, share: float) -> float:
+            total = 0.0
+            for function in fixed:
+                total += function(t, phi, omega, q, dq)
+            for function in scaled:
+                total += share * function(t, phi, omega, q, dq)
+            return total
+
+        return force
+
+    def _joint_friction_columns(self, t: np.ndarray, y: np.ndarray, J: np.ndarray, moment: np.ndarray,
+                                q: np.ndarray, dq: np.ndarray, throttle: np.ndarray) -> dict[str, np.ndarray]:
+        """Joint friction at the samples, given J [kg m^2] and every other moment M = M_d + M_c - 1/2 J' omega^2
+        [N m]: M_joint_friction, the friction reduced to the crank (J epsilon - M) [N m], and for each joint
+        friction_<joint> (journal: moment rho |R| [N m]; guide: force f |N| [N]) and reaction_<joint> |R| [N];
+        friction_thrust_collar [N m] with a collar."""
+        friction = self.joint_friction
+        output_force = self._output_force(True)
+        n = t.size
+        reduced = np.zeros(n)
+        frictions = np.zeros((len(friction.names), n))
+        reactions = np.zeros((len(friction.names), n))
+        for i in range(n):
+            phi, omega = y[0, i], y[1, i]
+            force = output_force(t[i], phi, omega, q[i], dq[i], throttle[i])
+            epsilon = friction.acceleration(phi, omega, force, J[i], moment[i])
+            reduced[i] = J[i] * epsilon - moment[i]
+            frictions[:, i], reactions[:, i], _ = friction.joint_values(phi, omega, epsilon, force)
+        out = {"M_joint_friction": reduced}
+        for k, name in enumerate(friction.names):
+            out[f"friction_{name}"], out[f"reaction_{name}"] = frictions[k], reactions[k]
+        if friction.collar > 0.0:
+            out["friction_thrust_collar"] = np.full(n, friction.collar)
+        return out
 
     @property
     def coupling_index(self) -> int:
@@ -258,9 +335,24 @@ class MachineModel:
         """The governor's mode at a state with the governor at rest (None without a governor)."""
         return self.governor.initial_mode(y) if self.governor is not None else None
 
-    def guards(self, mode: Mode | None) -> list:
-        """The governor's guards in a mode (none without a governor)."""
-        return self.governor.guards(mode) if self.governor is not None else []
+    def guards(self, mode: Mode | None, y: np.ndarray | None = None) -> list:
+        """The governor's guards in a mode (none without a governor) and, with joint friction and given the
+        state y the solver starts from, the crank's: 'crank stops' (omega reaches 0 from the sign it has
+        in y: the solver restarts there exactly, omega = 0, where friction may hold the crank at rest) or,
+        starting at rest, 'crank starts' (omega leaves 0: the solver restarts to watch for the next stop)."""
+        guards = self.governor.guards(mode) if self.governor is not None else []
+        if self.joint_friction is None or y is None:
+            return guards
+        if y[1] == 0.0:
+            return guards + [Guard("crank starts", lambda state: -abs(state[1]), lambda state: (mode, state))]
+        direction = 1.0 if y[1] > 0.0 else -1.0
+
+        def stop(state: np.ndarray) -> tuple[Mode | None, np.ndarray]:
+            state = np.array(state, dtype=float)
+            state[1] = 0.0
+            return mode, state
+
+        return guards + [Guard("crank stops", lambda state: direction * state[1], stop)]
 
     def cycle_averages(self, omega: float, external: float = 0.0) -> tuple[float, float, float]:
         """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
@@ -333,6 +425,8 @@ class MachineModel:
         With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
         load is not), twist [rad], omega_driven [rad/s], M_driven_<effect> and M_driven_external (moments on
         the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
+        With joint friction: M_joint_friction (part of M_load), friction_<joint> and reaction_<joint>
+        (_joint_friction_columns); epsilon then solves the implicit equation of effects.joint_friction.
         """
         n = t.size
         names = [effect.name for effect in self.effects]
@@ -367,6 +461,10 @@ class MachineModel:
             passed = coupling.moment(twist, y[1] - omega_driven)
             load = load - passed
         net = drive + load + weight
+        if self.joint_friction is not None:
+            friction_columns = self._joint_friction_columns(t, y, J, net - 0.5 * dJ * omega ** 2, q, dq, throttle)
+            load = load + friction_columns["M_joint_friction"]
+            net = net + friction_columns["M_joint_friction"]
         out = {"t": t, "phi": y[0], "omega": omega, "epsilon": (net - 0.5 * dJ * omega ** 2) / J, "J": J,
                "dJ_dphi": dJ, "M_drive": drive, "M_load": load}
         for k, name in enumerate(names):
@@ -374,6 +472,8 @@ class MachineModel:
                 out[f"M_{name}"] = per_effect[k]
         if self.has_weight:
             out["M_weight"] = weight
+        if self.joint_friction is not None:
+            out.update(friction_columns)
         if coupling is not None:
             out["M_coupling"] = -passed
             for effect in coupling.driven_effects:
@@ -460,10 +560,25 @@ def build_model(scene: Scene) -> MachineModel:
     model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
                          has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene),
                          coupling=coupling)
+    if machine.joint_friction is not None:
+        model = dataclasses.replace(model, joint_friction=_joint_friction(model))
     if scene.governor is None:
         return model
     governor = build_governor(scene.governor, model.initial_balance_throttle)
     return dataclasses.replace(model, governor=governor)
+
+
+def _joint_friction(model: MachineModel) -> JointFrictionModel:
+    """The machine's joint friction; a self-locking machine (friction growing faster with epsilon than the
+    inertia, effects.joint_friction) is refused with a SceneError."""
+    friction = build_joint_friction(model.scene.machine)
+    phi, ratio = worst_locking(friction, lambda angle: model.inertia(angle)[0])
+    if ratio >= 1.0:
+        raise SceneError(f"machine.joint_friction: the machine self-locks at phi = {math.degrees(phi):.1f} deg: there "
+                         f"the joint friction grows with the crank's acceleration {ratio:.3g} times as fast as the "
+                         "inertia resists it (sum rho_j |k_j| |dR_j/d epsilon| >= J), so the equation of motion has "
+                         "no unique acceleration; expected smaller joint radii or coefficient, or more inertia")
+    return friction
 
 
 def _has_mass(mechanism) -> bool:

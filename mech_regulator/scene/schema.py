@@ -378,6 +378,61 @@ class Coupling(SceneModel):
     driven: DrivenPart = Field(description="the driven part")
 
 
+class Journal(SceneModel):
+    """A revolute joint's journal: its friction moment is M_f = lambda_p f' r |R| (physics.md section 7)."""
+
+    radius: Positive = Field(description="journal (pin) radius r [m]")
+    fit: Literal["clearance", "new", "run_in"] = Field("clearance", description="pressure distribution over the "
+                                                                                "journal: 'clearance' (lambda_p = 1), "
+                                                                                "'new' close fit (pi/2), 'run_in' "
+                                                                                "(4/pi) [-]")
+
+
+class Journals(SceneModel):
+    """The revolute joints that have friction, by name; a joint left out turns without friction."""
+
+    crank_bearing: Journal | None = Field(None, description="the crank's bearing A in the frame (both mechanisms)")
+    crank_pin: Journal | None = Field(None, description="the crank pin B between crank and rod / coupler")
+    wrist_pin: Journal | None = Field(None, description="crank_slider: the wrist pin C between rod and slider")
+    rocker_pin: Journal | None = Field(None, description="four_bar: the pin C between coupler and rocker")
+    rocker_bearing: Journal | None = Field(None, description="four_bar: the rocker's bearing D in the frame")
+
+
+class ThrustCollar(SceneModel):
+    """An annular thrust collar on the crank shaft carrying an axial load."""
+
+    inner_radius: NonNegative = Field(description="inner radius r1 of the bearing ring [m]")
+    outer_radius: Positive = Field(description="outer radius r2 of the bearing ring [m]")
+    axial_load: NonNegative = Field(description="axial load Q on the collar [N]")
+    state: Literal["new", "run_in"] = Field("run_in", description="'new' (uniform pressure): M_f = 2/3 f Q (r2^3 - "
+                                                                  "r1^3)/(r2^2 - r1^2); 'run_in' (uniform wear): "
+                                                                  "M_f = f Q (r1 + r2)/2 [-]")
+
+    @model_validator(mode="after")
+    def _ring(self) -> ThrustCollar:
+        if self.inner_radius >= self.outer_radius:
+            raise ValueError(f"thrust_collar: inner_radius = {self.inner_radius} m must be smaller than outer_radius "
+                             f"= {self.outer_radius} m")
+        return self
+
+
+class JointFriction(SceneModel):
+    """Coulomb friction in the joints, from the joint reactions of the kinetostatic analysis at every step
+    (physics.md section 7; docs/joint_friction.md)."""
+
+    coefficient: Positive = Field(description="coefficient of sliding friction f of the joints and the collar [-]")
+    joints: Journals = Field(default_factory=Journals, description="the revolute joints with friction")
+    guide: NonNegative = Field(0.0, description="crank_slider: coefficient of sliding friction of the slider on its "
+                                                "guide, force f |N|; 0 = none [-]")
+    thrust_collar: ThrustCollar | None = Field(None, description="optional thrust collar on the crank shaft")
+
+
+JOINTS_OF = {"crank_slider": ("crank_bearing", "crank_pin", "wrist_pin"),
+             "four_bar": ("crank_bearing", "crank_pin", "rocker_pin", "rocker_bearing"), None: ()}
+# Mechanisms whose kinetostatics is not built: only a thrust_collar can have friction.
+NO_KINETOSTATICS = ("walking_beam", "multi-cylinder crank_slider")
+
+
 class Machine(SceneModel):
     """The machine reduced to its driving link (the crank)."""
 
@@ -392,6 +447,8 @@ class Machine(SceneModel):
     loads: list[Load] = Field(default_factory=list, description="resisting moments and forces M_c")
     coupling: Coupling | None = Field(None, description="optional elastic coupling to a driven part (two-mass "
                                                         "machine); the external load then acts on the driven part")
+    joint_friction: JointFriction | None = Field(None, description="optional friction in the mechanism's joints "
+                                                                  "and a thrust collar (the most expensive effect)")
 
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
@@ -409,6 +466,9 @@ class Machine(SceneModel):
         flywheel = self.flywheel.inertia * self.flywheel.ratio ** 2 if self.flywheel else 0.0
         if self.inertia + flywheel <= 0 and self.mechanism is None:
             raise ValueError("the machine has no inertia: give machine.inertia > 0 or a flywheel")
+        if self.joint_friction is not None:
+            several = kind == "crank_slider" and self.mechanism.cylinders is not None
+            _check_joint_friction(self.joint_friction, "multi-cylinder crank_slider" if several else kind)
         return self
 
     def _cylinders_fit_effects(self) -> None:
@@ -430,6 +490,27 @@ class Machine(SceneModel):
         if engine is not None:
             firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], engine.cycle_deg,
                           engine.firing_order, engine.firing_deg)
+
+
+def _check_joint_friction(friction: JointFriction, kind: str | None) -> None:
+    """The joints named must exist in the mechanism, and something must have friction."""
+    named = [name for name in Journals.model_fields if getattr(friction.joints, name) is not None]
+    foreign = [name for name in named if name not in JOINTS_OF.get(kind, ())]
+    if foreign:
+        if kind in NO_KINETOSTATICS:
+            expected = (f"none: the joint reactions of a {kind} are not computed (kinetostatics exists for a "
+                        "single crank_slider and the four_bar); only a thrust_collar can have friction")
+        elif kind is None:
+            expected = "none (a machine without a mechanism can only have a thrust_collar)"
+        else:
+            expected = f"some of {list(JOINTS_OF[kind])}"
+        raise ValueError(f"joint_friction.joints names {foreign}, which the machine's mechanism ({kind or 'none'}) "
+                         f"does not have; expected {expected}")
+    if friction.guide > 0.0 and kind != "crank_slider":
+        raise ValueError(f"joint_friction.guide = {friction.guide}: only a crank_slider has a guide (the machine has "
+                         f"{kind or 'no mechanism'})")
+    if not named and friction.guide == 0.0 and friction.thrust_collar is None:
+        raise ValueError("joint_friction has no joints, no guide and no thrust_collar: expected at least one of them")
 
 
 # --------------------------------------------------------------------------------------------

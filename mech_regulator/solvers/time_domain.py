@@ -70,7 +70,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         y, mode = _settle_mode(model, t, y, mode, trajectory)
         if trajectory.status != "complete":
             break
-        guards = model.guards(mode)
+        guards = model.guards(mode, y)
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         rhs = model.rhs(piece, window, mode)
@@ -131,7 +131,7 @@ def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory:
     (a sleeve that comes to rest exactly where the forces pull it off, a stop reached as the motion
     reverses). More than MAX_INSTANT_EVENTS in a row means the governor's modes contradict each other."""
     for _ in range(MAX_INSTANT_EVENTS):
-        violated = next((guard for guard in model.guards(mode) if guard.value(y) < -GUARD_TOLERANCE), None)
+        violated = next((guard for guard in model.guards(mode, y) if guard.value(y) < -GUARD_TOLERANCE), None)
         if violated is None:
             return y, mode
         mode, y = violated.transition(y)

@@ -44,7 +44,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
         moments.plot(angle, period_columns["M_load"], lw=1.0, label="M_load (all resisting)")
         if "M_weight" in period_columns:
             moments.plot(angle, period_columns["M_weight"], lw=1.0, label="M_weight")
-        moments.legend(loc="lower right")
+        if "M_joint_friction" in period_columns:
+            moments.plot(angle, period_columns["M_joint_friction"], lw=1.0, label="M_joint_friction (part of M_load)")
+        moments.legend(loc="best", fontsize="small")
     moments.set(xlabel="crank angle within the last dynamic period [deg]", ylabel="reduced moment [N m]",
                 title="moments on the crank")
 
