@@ -214,7 +214,8 @@ def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ra
         run = motion.run(flywheel)
         if run is None:
             notes.append(f"{'without a flywheel' if name == 'none' else name.replace('_', ' ')}: the machine has "
-                         "no periodic steady motion at this speed (it stops or turns back); not simulated")
+                         "no periodic steady motion near omega_m (its kinetic energy cannot carry it through the "
+                         "energy swing: it stalls or turns back); not simulated")
         else:
             runs[name] = run
     refined = motion.refine(delta, construction.flywheel, runs)
@@ -315,10 +316,11 @@ class PeriodicMotion:
         step = guess - low if math.isfinite(guess) and guess != low else max(low, self.diagram.mean_inertia)
         high = low + 1.5 * step
         for _ in range(40):
-            if high > 0.0 and excess(high) * mismatch < 0.0:
+            high = max(high, 0.0)
+            if excess(high) * mismatch < 0.0:
                 break
-            if high <= 0.0:
-                return None if mismatch > 0.0 else 0.0
+            if high == 0.0:  # even without a flywheel the machine stays below [delta]
+                return 0.0
             step *= 2.0
             high = low + step
         else:

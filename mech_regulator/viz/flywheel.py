@@ -93,7 +93,7 @@ def plot_flywheel(design: FlywheelDesign, path: Path) -> None:
     for name in ("none", "scene"):
         _plot_speed(before, design, name)
     before.set(xlabel="crank angle phi [deg]", ylabel="omega [rad/s]",
-               title="simulated steady speed before the design" if set(design.runs) & {"none", "scene"}
+               title="simulated steady speed without a flywheel and with the scene's" if set(design.runs) & {"none", "scene"}
                else "no steady motion without a flywheel (the machine stalls)")
     if set(design.runs) & {"none", "scene"}:
         _room_for_legend(before)
