@@ -63,6 +63,16 @@ def test_lathe_simulated_delta_and_refinement(lathe):
     assert lathe.runs["none"].speeds.delta == pytest.approx(25.0 * math.pi / 450.0, rel=1e-8)
 
 
+def test_a_loose_delta_needs_no_flywheel():
+    """Without a flywheel the lathe runs at delta = 25 pi / 450 = 0.175: for [delta] = 0.5 both formulas give
+    J_fw < 0 and the refinement answers 0."""
+    design = design_flywheel(load_scene("lathe"), 0.5)
+    assert design.energy_swing < 0.0 and design.wittenbauer < 0.0
+    assert design.refined == 0.0
+    assert design.runs["refined"].speeds.delta == pytest.approx(25.0 * math.pi / 450.0, rel=1e-8)
+    assert any("no flywheel needed" in note for note in design.notes)
+
+
 # ---------------------------------------------------------------------------------------------
 # 2: a conservative machine in closed form: no moments, omega^2 J(phi) = const
 

@@ -193,10 +193,10 @@ def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ra
     if scene.scenario.load_events:
         notes.append(f"designed for the external load at t = 0 ({scene.scenario.external_load:g} N m); "
                      "the scenario's load events are left out")
+    if not speed_dependent:
+        _check_balanced(energy_swing(model, 1.0)[1])  # omega is not read: any speed gives the same swing
     omega_m, source = design_speed(scene, model, omega_m)
     diagram = energy_diagram(model, omega_m)
-    if not speed_dependent:
-        _check_balanced(diagram)
     construction = wittenbauer(diagram, delta)
     by_energy_swing = flywheel_for_constant_inertia(diagram.swing, omega_m, delta, diagram.mean_inertia)
     motion = PeriodicMotion(bare, diagram, ratio, speed_dependent, progress)
@@ -222,10 +222,10 @@ def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ra
     if refined is None:
         notes.append("refinement: no flywheel of positive inertia gives the requested delta in simulation")
     elif refined == 0.0:
-        notes.append(f"refinement: the machine without a flywheel already has delta = "
-                     f"{runs['none'].speeds.delta:.4g} <= [delta]: no flywheel needed")
-    if refined is not None:
-        runs["refined"] = motion.run(refined)
+        notes.append("refinement: the machine without a flywheel already has delta <= [delta]: no flywheel needed")
+    refined_run = motion.run(refined) if refined is not None else None
+    if refined_run is not None:
+        runs["refined"] = refined_run
     return FlywheelDesign(scene.name or "scene", delta, omega_m, source, ratio, speed_dependent, diagram,
                           construction, by_energy_swing, refined, scene_flywheel, runs, notes)
 
@@ -443,11 +443,11 @@ def _check_designable(scene: Scene, delta: float, ratio: float | None) -> None:
                          "one-mass machines reduced to the crank")
 
 
-def _check_balanced(diagram: EnergyDiagram) -> None:
+def _check_balanced(energy: np.ndarray) -> None:
     """Moments independent of omega: steady motion needs A_d = A_c over the dynamic period; refuse a machine whose
-    net work is not zero."""
-    net = float(diagram.energy[-1])
-    scale = max(diagram.swing, 1e-300)
+    net work energy[-1] [J] (of the energy swing dE(phi) [J] from phi = 0) is not zero."""
+    net = float(energy[-1])
+    scale = max(float(np.ptp(energy)), 1e-300)
     if abs(net) > 1e-6 * scale:
         raise SceneError(f"the net work of the moments over the dynamic period is {net:.6g} J (A_d != A_c): the machine "
                          f"{'accelerates' if net > 0 else 'slows down'} and has no periodic steady motion; balance "
