@@ -48,7 +48,7 @@ def bundled_data(name: str) -> dict:
 def test_bundled_scenes_present():
     assert BUNDLED == ["compressor", "compressor_friction", "engine", "engine_direct", "engine_indirect_isodromic",
                        "engine_indirect_none", "engine_indirect_rigid", "engine_inline4", "four_bar_rocker", "lathe",
-                       "startup", "two_mass", "walking_beam"]
+                       "press", "startup", "two_mass", "walking_beam"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -187,7 +187,7 @@ def test_set_list_item(capsys):
 
 EFFECT_WORDS = {  # what `describe` calls each effect type
     "constant": "constant", "linear_motor": "linear motor", "engine": "engine", "viscous": "viscous",
-    "fan": "fan", "cutting": "cutting", "slider_viscous": "viscous on the slider",
+    "fan": "fan", "cutting": "cutting", "table": "table", "slider_viscous": "viscous on the slider",
     "slider_spring": "spring on the slider", "slider_table": "slider force table",
     "rocker_viscous": "viscous on the rocker", "rocker_spring": "spring on the rocker",
     "shuttle_viscous": "viscous on the shuttle bar",
