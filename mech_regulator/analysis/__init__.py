@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from mech_regulator.analysis.drivetrain import drive_train_summary
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
 from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
@@ -24,6 +25,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         return {"scene": model.scene.name, "status": trajectory.status, "message": trajectory.message,
                 "t_end": trajectory.t_start, "phi_end": model.scene.scenario.initial.phi,
                 "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None, "governor": None,
+                "drive_train": None,
                 "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)}}
     steady = analyse_steady_state(model, trajectory)
     balance = energy_balance(model, trajectory)
@@ -46,6 +48,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         "energy": dataclasses.asdict(balance),
         "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
         "governor": _governed_run(model, trajectory) if model.governor is not None else None,
+        "drive_train": drive_train_summary(model, trajectory) if model.driven is not None else None,
     }
 
 
@@ -127,6 +130,6 @@ def analyse_governor(model: MachineModel) -> dict:
 
 __all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "LoadResponse", "OperatingPoint",
            "PeriodSpeeds", "StaticCharacteristic", "SteadyState", "analyse_governor", "analyse_steady_state",
-           "critical_damping", "cycle_mean_speed", "droop", "energy_balance", "energy_swing",
+           "critical_damping", "cycle_mean_speed", "drive_train_summary", "droop", "energy_balance", "energy_swing",
            "flywheel_for_constant_inertia", "floquet_stability", "is_periodic", "linear_stability", "load_responses",
            "operating_point", "static_characteristic", "summarise", "summarise_cosimulation"]
