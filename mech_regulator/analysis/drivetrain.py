@@ -26,16 +26,15 @@ def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
     in which the driven part was held at rest, and per branch the largest section torque (value [N m], time
     [s]) with the paper's estimate (module docstring), as plain data."""
     driven = model.driven
-    spans = _spans(model, trajectory)
     result = {
-        "held": [[start, end] for start, end, mode in spans if mode[-1] == HELD],
+        "held": [[start, end] for start, end, mode in _spans(model, trajectory, -1) if mode == HELD],
         "events": [[t, name] for t, name in trajectory.events if "clutch" in name or "driven part" in name],
         "clutch": None,
         "sections": {},
     }
     if model.clutch is not None:
         result["clutch"] = {
-            "slip_phases": [[start, end, mode[0]] for start, end, mode in spans if mode[0] != STUCK],
+            "slip_phases": [[start, end, mode] for start, end, mode in _spans(model, trajectory, 0) if mode != STUCK],
             "lock_times": [t for t, name in trajectory.events if name.startswith("clutch locks")],
         }
     if not driven.branches:
@@ -60,9 +59,10 @@ def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
     return result
 
 
-def _spans(model: MachineModel, trajectory: Trajectory) -> list[tuple[float, float, tuple[str, ...]]]:
-    """(start, end, drive-train mode) of each stretch of the run in one drive-train mode."""
-    changes = [(t, model.train_mode_of(mode)) for t, mode in trajectory.modes]
+def _spans(model: MachineModel, trajectory: Trajectory, part: int) -> list[tuple[float, float, str]]:
+    """(start, end, mode) of each stretch of the run in one mode of a drive-train part (0: the clutch, -1: the
+    driven part)."""
+    changes = [(t, model.train_mode_of(mode)[part]) for t, mode in trajectory.modes]
     spans = []
     for (start, mode), (end, _) in zip(changes, changes[1:] + [(trajectory.t_end, None)]):
         if spans and spans[-1][2] == mode:
