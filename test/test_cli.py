@@ -46,7 +46,7 @@ def bundled_data(name: str) -> dict:
 
 
 def test_bundled_scenes_present():
-    assert BUNDLED == ["compressor", "engine", "engine_direct", "engine_indirect_isodromic", "engine_indirect_none",
+    assert BUNDLED == ["clutch_start", "compressor", "engine", "engine_direct", "engine_indirect_isodromic", "engine_indirect_none",
                        "engine_indirect_rigid", "four_bar_rocker", "lathe", "startup", "two_mass"]
 
 
