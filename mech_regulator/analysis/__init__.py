@@ -84,7 +84,8 @@ def analyse_governor(model: MachineModel) -> dict:
     """Statics and stability of a governed scene, as plain data (JSON-ready): static characteristic,
     statism, insensitivity, operating points for every load level of the scenario, droop, linear
     stability of the averaged model (eigenvalues, dominant mode, Vyshnegradsky A and B, critical sleeve
-    damping) and, for a machine periodic in phi, the Floquet multipliers of the periodic orbit."""
+    damping) and, for a machine periodic in phi without a driven part behind a coupling or clutch, the Floquet
+    multipliers of the periodic orbit."""
     governor = model.governor
     characteristic = static_characteristic(governor)
     load = model.external_load(0.0)
@@ -118,7 +119,7 @@ def analyse_governor(model: MachineModel) -> dict:
         },
         "floquet": None,
     }
-    if is_periodic(model):
+    if is_periodic(model) and model.driven is None:  # the period map carries the crank's and governor's states only
         floquet = floquet_stability(model, point, linear)
         result["floquet"] = {
             "cycle_time": floquet.cycle_time, "mean_speed": floquet.mean_speed, "residual": floquet.residual,
