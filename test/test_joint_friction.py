@@ -416,7 +416,7 @@ def test_scenes_without_joint_friction_run_bit_for_bit_as_before(name, overrides
     and their right-hand side is the frictionless closure itself."""
     model = build_model(load_scene(name, overrides))
     rhs = model.rhs(None, None, model.initial_mode(model.initial_state()))
-    assert model.joint_friction is None and rhs.__qualname__ == "MachineModel.rhs.<locals>.machine"
+    assert model.joint_friction is None and rhs.__qualname__ == "MachineModel._right_hand_side.<locals>.machine"
     trajectory = simulate_complete(model)
     assert [float(value).hex() for value in trajectory(np.array([trajectory.t_end]))[:, 0]] == expected
     assert "M_joint_friction" not in model.columns(np.array([0.0]), model.initial_state()[:, None])

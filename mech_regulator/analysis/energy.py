@@ -3,7 +3,8 @@
 Energy balance (physics.md section 1, energy form): the work of all moments equals the change of
 kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. A two-mass machine adds
 the driven part's works (at omega_driven), the coupling damper's work -c (omega - omega_driven)^2 and the
-coupling's elastic energy 1/2 k twist^2 to the stored energy. The works are integrated
+coupling's elastic energy 1/2 k twist^2 to the stored energy; a friction clutch the work lost in its slip,
+-T (omega - omega_driven) (T the moment it passes: +-kinetic_torque while slipping). The works are integrated
 by Gauss-Legendre quadrature on every solver step of the dense output, so the residual measures
 the integration error of the run, not a sampling error.
 """
@@ -52,15 +53,18 @@ def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance
 def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The power of every moment that exchanges energy with the outside [W], by name: M_k omega for the
     crank's moments, M_driven_k omega_driven for the driven part's, and -c (omega - omega_driven)^2 for the
-    coupling's damper (the coupling's spring only stores energy)."""
+    coupling's damper (the coupling's spring only stores energy) and -T (omega - omega_driven) for a clutch's
+    slip (T = clutch_torque). Section torques (M_section_*) are internal moments and do no work on the machine."""
     result = {}
     for name, moment in columns.items():
-        if not name.startswith("M_") or name in ("M_load", "M_coupling"):
+        if not name.startswith("M_") or name in ("M_load", "M_coupling") or name.startswith("M_section_"):
             continue
         speed = columns["omega_driven"] if name.startswith("M_driven_") else columns["omega"]
         result[name[2:]] = moment * speed
     if model.coupling is not None:
         result["coupling_damping"] = -model.coupling.damping * (columns["omega"] - columns["omega_driven"]) ** 2
+    if model.clutch is not None:
+        result["clutch_slip"] = -columns["clutch_torque"] * columns["slip_speed"]
     return result
 
 
@@ -91,6 +95,8 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
     states = np.vstack([middles, np.full_like(middles, omega)])
     if model.coupling is not None:  # rigid at constant speed: the coupling carries the driven part's loads
         states = np.vstack([states, np.full_like(middles, model.static_twist(omega)), np.full_like(middles, omega)])
+    if model.clutch is not None:  # stuck at constant speed
+        states = np.vstack([states, np.full_like(middles, omega)])
     columns = model.columns(np.zeros_like(middles), states)
     net = columns["M_drive"] + columns["M_load"] + columns.get("M_weight", 0.0)
     return grid, np.concatenate([[0.0], np.cumsum(net * np.diff(grid))])

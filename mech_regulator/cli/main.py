@@ -217,6 +217,10 @@ def _cosimulate(model, args) -> int:
 
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    if model.clutch is not None:
+        raise SceneError(f"--exchange-step {args.exchange_step:g}: scene '{model.scene.name}' has a machine.clutch, "
+                         "whose stick/slip modes the co-simulated machine does not play yet; simulate it without "
+                         "--exchange-step")
     if not args.overspeed_trip >= 0.0:
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
     duration = model.scene.scenario.duration

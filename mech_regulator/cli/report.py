@@ -50,10 +50,13 @@ def describe(model: MachineModel) -> str:
         lines.append(f"coupling: M_m = {coupling.stiffness:g} twist + {coupling.damping:g} (omega - omega_driven) N m to "
                      f"a driven part of I2 = {coupling.driven_inertia:g} kg m^2 (relative mode: natural frequency "
                      f"{modes.natural_frequency:.4g} rad/s, damping ratio {modes.damping_ratio:.3g})")
-        for effect in coupling.driven_effects:
-            lines.append(f"  driven part's load: {effect.formula.replace('omega', 'omega_driven')}")
-        if model.load_pieces:
-            lines.append("  the external load acts on the driven part")
+        lines += _driven_lines(model)
+    if model.clutch is not None:
+        clutch = model.clutch
+        lines.append(f"clutch: Coulomb friction, static {clutch.static_torque:g} N m, kinetic {clutch.kinetic_torque:g} "
+                     f"N m (exact stick/slip modes), to a driven part of I = {clutch.driven.inertia:g} kg m^2 "
+                     "reduced to its shaft")
+        lines += _driven_lines(model)
     if model.governor is not None:
         lines.append("governor (M_d = throttle * drive; hybrid modes with exact stick, break-away and stops):")
         lines += [f"  {line}" for line in model.governor.describe()]
@@ -77,6 +80,24 @@ def describe(model: MachineModel) -> str:
     lines.append(f"scenario: {scene.scenario.duration:g} s from phi = {scene.scenario.initial.phi:g} rad, "
                  f"omega = {scene.scenario.initial.omega:g} rad/s")
     return "\n".join(lines)
+
+
+def _driven_lines(model: MachineModel) -> list[str]:
+    """describe's lines for the driven part behind a coupling or clutch: loads, branches, resistance at rest."""
+    driven = model.driven
+    in_branches = {index for branch in driven.branches for index in branch.effects}
+    lines = [f"  driven part's load: {effect.formula.replace('omega', 'omega_driven')}"
+             for index, effect in enumerate(driven.effects) if index not in in_branches]
+    for branch in driven.branches:
+        lines.append(f"  branch {branch.name}: I_n = {branch.inertia:g} kg m^2, i_1n = {branch.ratio:g} (adds "
+                     f"{branch.inertia / branch.ratio ** 2:.4g} kg m^2); section torque M_section_{branch.name} = "
+                     f"M_n,c + (I_n / i_1n) epsilon_driven")
+        lines += [f"    load {driven.effects[i].formula}" for i in branch.effects]
+    lines.append(f"  at rest it is held by its Coulomb resistances (constant loads{' and the external load' if model.load_pieces else ''}"
+                 f"): {driven.resistance:g} N m{' + external' if model.load_pieces else ''}")
+    if model.load_pieces:
+        lines.append("  the external load acts on the driven part")
+    return lines
 
 
 def format_summary(model: MachineModel, summary: dict) -> str:
@@ -107,13 +128,42 @@ def format_summary(model: MachineModel, summary: dict) -> str:
                  + (f", {solver['njev']} jacobians, {solver['nlu']} LU" if solver["njev"] else "")
                  + (f", {solver['switches']} switches located" if solver["switches"] else "")
                  + (f", {solver['restarts']} restarts" if solver["restarts"] else "")
-                 + (f", {solver['events']} events" if solver["events"] else ""))
+                 + (f", {solver['events']} mode events" if solver["events"] else ""))
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
+    if summary.get("drive_train"):
+        lines += _drive_train_lines(summary["drive_train"], energy["works"].get("clutch_slip"))
     for key in ("csv", "plot", "recording"):
         if key in summary:
             lines.append(f"wrote {summary[key]}")
     return "\n".join(lines)
+
+
+def _drive_train_lines(train: dict, slip_work: float | None) -> list[str]:
+    """The drive train's part of a run summary: slip phases and lock times, held stretches, section torques."""
+    lines = []
+    clutch = train["clutch"]
+    if clutch is not None:
+        phases = ", ".join(f"{start:.6g}-{end:.6g} s ({'motor ahead' if mode == 'slip+' else 'machine ahead'})"
+                           for start, end, mode in clutch["slip_phases"]) or "never"
+        locks = ", ".join(f"{t:.9g}" for t in clutch["lock_times"]) or "never"
+        lines.append(f"clutch: slips {phases}; slip ends (locks) at {locks} s"
+                     + (f"; work lost in slip {-slip_work:.6g} J" if slip_work is not None else ""))
+    if train["held"]:
+        lines.append("driven part held at rest by its resistances: "
+                     + ", ".join(f"{start:.6g}-{end:.6g} s" for start, end in train["held"]))
+    if train["sections"]:
+        if clutch is not None and clutch["beta"] is not None:
+            lines.append(f"section torques (paper: M_kr = M_n,c + (I_n / i_1n) domega/dt; clutch reserve beta = "
+                         f"kinetic torque / nominal load {clutch['nominal_load']:.4g} N m = {clutch['beta']:.4g}):")
+        else:
+            lines.append("section torques (M_kr = M_n,c + (I_n / i_1n) domega/dt):")
+        for name, section in train["sections"].items():
+            estimate = section["paper_estimate"]
+            lines.append(f"  {name}: max {section['max']:.6g} N m at {section['time']:.4g} s (nominal "
+                         f"{section['nominal']:.4g} N m" + (f", paper's estimate {estimate:.6g} N m)" if estimate is not None
+                                                            else ")"))
+    return lines
 
 
 def format_cosimulation_summary(summary: dict) -> str:

@@ -12,7 +12,10 @@ a machine without a mechanism has no J(phi), no J' term and no kinematics call a
 A machine with an elastic coupling is the two-mass machine of physics.md section 4: the crank (the
 driving part above) passes M_m = k (phi - phi2) + c (omega - omega2) to a driven part of constant
 inertia I2, I2 domega2/dt = M_m + M_c2(omega2) - M_external; its states, the twist phi - phi2 and
-omega2, come last in the state vector.
+omega2, come last in the state vector. A machine with a friction clutch has the driven part's speed
+omega2 last. The driven part (possibly a branched drive), its Coulomb resistances and the modes of clutch
+and driven part are in model/drivetrain.py; a mode is the governor's (sleeve, servo) followed by the
+drive train's (clutch, driven part) or (driven part,).
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ from mech_regulator.effects import Effect, build_drive, build_load
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.governors import Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
+from mech_regulator.model.drivetrain import (BACKWARD, CLUTCH_CODE, DIRECTION, FORWARD, HELD, STUCK, ClutchModel,
+                                             DrivenModel, Forces, build_driven, coulomb_factor, train_guards)
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.schema import Scene
 
@@ -55,13 +60,22 @@ class LoadPiece:
 
 @dataclass(frozen=True)
 class CouplingModel:
-    """An elastic coupling and the driven part behind it: stiffness k [N m/rad], damping c [N m s/rad], the
-    driven part's inertia I2 [kg m^2] and its resisting moments (effects of omega_driven)."""
+    """An elastic coupling and the driven part behind it: stiffness k [N m/rad], damping c [N m s/rad] and the
+    driven part (inertia I2 [kg m^2] reduced to its shaft, its resisting moments of omega_driven)."""
 
     stiffness: float
     damping: float
-    driven_inertia: float
-    driven_effects: tuple[Effect, ...]
+    driven: DrivenModel
+
+    @property
+    def driven_inertia(self) -> float:
+        """I2 [kg m^2], branches included."""
+        return self.driven.inertia
+
+    @property
+    def driven_effects(self) -> tuple[Effect, ...]:
+        """The driven part's moments (effects of omega_driven), branches' reduced."""
+        return self.driven.effects
 
     def moment(self, twist: float, relative_speed: float) -> float:
         """The moment the coupling passes to the driven part [N m]: M_m = k twist + c (omega - omega2)
@@ -69,8 +83,9 @@ class CouplingModel:
         return self.stiffness * twist + self.damping * relative_speed
 
     def driven_moment(self, t: float, omega_driven: float) -> float:
-        """Sum of the driven part's own moments at speed omega_driven [rad/s] [N m] (negative: resisting)."""
-        return sum(effect.moment(t, 0.0, omega_driven, 0.0, 0.0) for effect in self.driven_effects)
+        """Sum of the driven part's own moments turning forward at speed omega_driven [rad/s] [N m] (negative:
+        resisting)."""
+        return self.driven.forward_moment(t, omega_driven)
 
 
 @dataclass(frozen=True)
@@ -81,7 +96,8 @@ class MachineModel:
     phi -> (J_links, dJ_links/dphi, M_weight, q, dq/dphi), or None for a constant-J machine;
     effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none;
     governor: the speed governor whose throttle scales the drive, or None; coupling: the elastic coupling
-    to a driven part (which then carries the external load), or None; joint_friction: the friction in the
+    to a driven part (which then carries the external load), or None; clutch: the friction clutch to a
+    driven part (which then carries the external load), or None; joint_friction: the friction in the
     joints (effects.joint_friction), or None.
     """
 
@@ -94,6 +110,14 @@ class MachineModel:
     governor: Governor | None = None
     coupling: CouplingModel | None = None
     joint_friction: JointFrictionModel | None = None
+    clutch: ClutchModel | None = None
+
+    @property
+    def driven(self) -> DrivenModel | None:
+        """The driven part behind the coupling or the clutch (None without one)."""
+        if self.coupling is not None:
+            return self.coupling.driven
+        return self.clutch.driven if self.clutch is not None else None
 
     def breakpoints(self) -> list[float]:
         """Times where the external load has a kink or a jump: integration never steps across them."""
@@ -131,7 +155,7 @@ class MachineModel:
 
     def depends_on(self) -> frozenset[str]:
         """Which of 't', 'phi', 'omega' the net moment reads."""
-        effects = self.effects + (self.coupling.driven_effects if self.coupling is not None else ())
+        effects = self.effects + (self.driven.effects if self.driven is not None else ())
         reads = set().union(*(effect.depends_on for effect in effects)) if effects else set()
         if self.has_weight:
             reads.add("phi")
@@ -159,19 +183,34 @@ class MachineModel:
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
             mode: Mode | None = None, ideal: bool = False) -> RightHandSide:
-        """The right-hand side `f(t, y) = dy/dt` for one external-load piece and governor mode.
+        """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
         (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with throttle = 1
         without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c includes -M_m, the
         external load acts on the driven part, d twist/dt = omega - omega2 and domega2/dt = (M_m + M_c2(omega2)
-        - M_external) / I2 (physics.md section 4). window = (lo, hi): the crank-angle interval between two
-        switch angles the solver is in; effects that jump at switch angles then see phi clamped into it, so they
-        keep their mode across the switch until the solver has located the crossing and restarted (no step
-        straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine co-simulated with
-        an outside governor, by the piece's held throttle. ideal: the governor without friction, limits and
-        stops (the smooth model of the stability analysis).
+        - M_external) / I2 (physics.md section 4), 0 while the driven part is held at rest. With a clutch, y
+        ends with omega2 and the crank and driven part follow the clutch's mode (model/drivetrain.py); while it
+        is stuck the solver's own omega2 is frozen and `constraint` sets it to omega. window = (lo, hi): the
+        crank-angle interval between two switch angles the solver is in; effects that jump at switch angles then
+        see phi clamped into it, so they keep their mode across the switch until the solver has located the
+        crossing and restarted (no step straddles a jump). The drive is scaled by the governor's throttle(y) or,
+        for a machine co-simulated with an outside governor, by the piece's held throttle. ideal: the governor
+        without friction, limits and stops (the smooth model of the stability analysis). mode None: the governor
+        as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
         """
+        return self._right_hand_side(piece, window, mode, ideal, crank_only=False)
+
+    @functools.cached_property
+    def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
+        """(t, y) -> (J(phi) [kg m^2], F1 [N m]): the crank's inertia and its net moment apart from the coupling or
+        clutch and the external load, F1 = throttle M_drive + M_c + M_weight - 1/2 J' omega^2 (throttle from the
+        governor's state in y)."""
+        return self._right_hand_side(None, None, None, False, crank_only=True)
+
+    def _right_hand_side(self, piece: LoadPiece | None, window: tuple[float, float] | None, mode: Mode | None,
+                         ideal: bool, crank_only: bool) -> Callable:
+        """rhs (see there) or, crank_only, crank_side."""
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
         scale_drive = governor is not None or held_throttle != 1.0
@@ -189,13 +228,12 @@ class MachineModel:
         J0 = self.inertia_constant
         reduced = self.reduced
         throttle = governor.throttle if governor is not None else None
-        governor_rates = governor.derivatives(mode, ideal) if governor is not None else None
-        coupling = self.coupling
-        if coupling is not None:
-            k, c, I2 = coupling.stiffness, coupling.damping, coupling.driven_inertia
-            driven = tuple(effect.moment for effect in coupling.driven_effects)
-            index = self.coupling_index
-        plain = governor_rates is None and coupling is None
+        governor_rates = None
+        if governor is not None and not crank_only:
+            governor_rates = governor.derivatives(mode[:2] if mode is not None else mode, ideal)
+        train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode))
+        plain = governor_rates is None and train is None and not crank_only
+        external_on_crank = train is None and not crank_only
 
         def machine(t: float, y: np.ndarray):
             phi, omega = y[0], y[1]
@@ -204,11 +242,8 @@ class MachineModel:
             else:
                 J_links, dJ, total, q, dq = reduced(phi)
                 J = J0 + J_links
-            if coupling is None:
+            if external_on_crank:
                 total -= offset + slope * t
-            else:
-                passed = k * y[index] + c * (omega - y[index + 1])
-                total -= passed
             for moment in smooth:
                 total += moment(t, phi, omega, q, dq)
             for moment in switched:
@@ -217,19 +252,19 @@ class MachineModel:
                 for moment in scaled:
                     total += held_throttle * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            share = held_throttle if governor_rates is None else throttle(y)
+            share = held_throttle if throttle is None else throttle(y)
             for moment in scaled:
                 total += share * moment(t, phi, omega, q, dq)
-            rates = [omega, (total - 0.5 * dJ * omega * omega) / J]
+            net = total - 0.5 * dJ * omega * omega
+            if crank_only:
+                return J, net
+            if train is None:
+                return [omega, net / J] + governor_rates(y)
+            crank_rate, train_rates = train(t, y, J, net, offset + slope * t)
+            rates = [omega, crank_rate]
             if governor_rates is not None:
                 rates += governor_rates(y)
-            if coupling is not None:
-                omega2 = y[index + 1]
-                driven_total = passed - (offset + slope * t)
-                for moment in driven:
-                    driven_total += moment(t, 0.0, omega2, 0.0, 0.0)
-                rates += [omega - omega2, driven_total / I2]
-            return rates
+            return rates + train_rates
 
         if self.joint_friction is None:
             return machine
@@ -304,15 +339,103 @@ class MachineModel:
             out["friction_thrust_collar"] = np.full(n, friction.collar)
         return out
 
+    def _train(self, train_mode: tuple[str, ...]) -> Callable:
+        """The drive train's part of the right-hand side in a train mode: (t, y, J, F1, external) -> (domega/dt,
+        rates of the train's states), F1 the crank's net moment apart from the train (crank_side), external the
+        external load's magnitude [N m], a Coulomb resistance of the driven part."""
+        driven = self.driven
+        index = self.driven_speed_index
+        resistance = driven.resistance
+        if self.coupling is not None:
+            k, c, I2 = self.coupling.stiffness, self.coupling.damping, driven.inertia
+            smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
+            part = train_mode[0]
+            held, direction = part == HELD, DIRECTION[part]
+
+            def coupled(t: float, y: np.ndarray, J: float, net: float, external: float):
+                omega, omega2 = y[1], y[index]
+                passed = k * y[index - 1] + c * (omega - omega2)
+                if held:
+                    return (net - passed) / J, [omega - omega2, 0.0]
+                driven_total = passed - direction * (resistance + external)
+                for moment in smooth:
+                    driven_total += moment(t, 0.0, omega2, 0.0, 0.0)
+                return (net - passed) / J, [omega - omega2, driven_total / I2]
+
+            return coupled
+        clutch = self.clutch
+        stuck = train_mode[0] == STUCK
+
+        def clutched(t: float, y: np.ndarray, J: float, net: float, external: float):
+            omega2 = y[1] if stuck else y[index]
+            forces = clutch.forces(train_mode, net, J, driven.smooth_moment(t, omega2), resistance + external)
+            return forces.crank, [0.0 if stuck else forces.driven]
+
+        return clutched
+
+    def train_mode_of(self, mode: Mode | None) -> tuple[str, ...]:
+        """The drive train's part of a machine's mode (its default when mode is None or carries none)."""
+        train = tuple(mode[2:] if self.governor is not None else mode) if mode is not None else ()
+        if train or self.driven is None:
+            return train
+        return (STUCK, FORWARD) if self.clutch is not None else (FORWARD,)
+
+    def drive_train_at(self, t: float, y: np.ndarray, external: float | None = None,
+                       train_mode: tuple[str, ...] | None = None) -> tuple[tuple[str, ...], Forces, float]:
+        """(train mode, Forces, Coulomb resistance R [N m]) at time t [s] and state y, in `train_mode` or, if None,
+        in the mode the state is in (a clutch or driven part at rest decided by the forces, as
+        ClutchModel.mode_at); external: the external load's magnitude [N m] (default: the scenario's at t)."""
+        driven = self.driven
+        resistance = driven.resistance + (self.external_load(t) if external is None else external)
+        index = self.driven_speed_index
+        omega2 = y[index]
+        J, F1 = self.crank_side(t, y)
+        if self.clutch is not None:
+            if train_mode is None:
+                train_mode = self.clutch.mode_at(y[1] - omega2, omega2, F1, J, driven.smooth_moment(t, omega2),
+                                                 resistance)
+            if train_mode[0] == STUCK:
+                omega2 = y[1]
+            return train_mode, self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2),
+                                                  resistance), resistance
+        passed = self.coupling.moment(y[index - 1], y[1] - omega2)
+        smooth = driven.smooth_moment(t, omega2)
+        push = passed + smooth
+        if train_mode is None:
+            train_mode = (driven.at_rest(push, resistance) if omega2 == 0.0 else FORWARD if omega2 > 0.0
+                          else BACKWARD,)
+        part = train_mode[0]
+        return train_mode, Forces((F1 - passed) / J, driven.acceleration(part, passed, smooth, resistance), 0.0, push,
+                                  coulomb_factor(part, push, resistance)), resistance
+
+    def constraint(self, mode: Mode | None) -> Callable[[np.ndarray], None] | None:
+        """What a mode imposes on the states the solver gives, in place, or None: a stuck clutch sets omega2 =
+        omega bit for bit (the solver holds its own omega2 frozen meanwhile)."""
+        if self.clutch is None or mode is None or self.train_mode_of(mode)[0] != STUCK:
+            return None
+        index = self.driven_speed_index
+
+        def stuck(y: np.ndarray) -> None:
+            y[index] = y[1]
+
+        return stuck
+
     @property
     def coupling_index(self) -> int:
-        """Index of the coupling's twist in the state vector (omega2 follows); the governor's states come before."""
+        """Index of the coupling's twist (omega2 follows) or of the clutch's omega2 in the state vector; the
+        governor's states come before."""
         return 2 + (len(self.governor.state_names) if self.governor is not None else 0)
+
+    @property
+    def driven_speed_index(self) -> int:
+        """Index of the driven part's speed omega2 in the state vector."""
+        return self.coupling_index + (1 if self.coupling is not None else 0)
 
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector y."""
         return (("phi", "omega") + (self.governor.state_names if self.governor is not None else ())
-                + (("twist", "omega_driven") if self.coupling is not None else ()))
+                + (("twist", "omega_driven") if self.coupling is not None else ())
+                + (("omega_driven",) if self.clutch is not None else ()))
 
     def initial_state(self) -> np.ndarray:
         """The state at t = 0 from the scenario (governor at rest in equilibrium unless the scene says)."""
@@ -321,9 +444,12 @@ class MachineModel:
         if self.governor is not None:
             parts.append(self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
                                                      self.initial_balance_throttle))
+        omega_driven = initial.omega if initial.omega_driven is None else initial.omega_driven
         if self.coupling is not None:
             parts.append(np.array([self.static_twist(initial.omega) if initial.twist is None else initial.twist,
-                                   initial.omega]))
+                                   omega_driven]))
+        if self.clutch is not None:
+            parts.append(np.array([omega_driven]))
         return np.concatenate(parts)
 
     def static_twist(self, omega: float) -> float:
@@ -332,15 +458,19 @@ class MachineModel:
         return (self.external_load(0.0) - self.coupling.driven_moment(0.0, omega)) / self.coupling.stiffness
 
     def initial_mode(self, y: np.ndarray) -> Mode | None:
-        """The governor's mode at a state with the governor at rest (None without a governor)."""
-        return self.governor.initial_mode(y) if self.governor is not None else None
+        """The mode at a state with the governor at rest: the governor's (None without a governor), followed by
+        the drive train's mode of the state (drive_train_at)."""
+        governor = self.governor.initial_mode(y) if self.governor is not None else None
+        if self.driven is None:
+            return governor
+        return (governor or ()) + self.drive_train_at(0.0, y)[0]
 
     def guards(self, mode: Mode | None, y: np.ndarray | None = None) -> list:
-        """The governor's guards in a mode (none without a governor) and, with joint friction and given the
-        state y the solver starts from, the crank's: 'crank stops' (omega reaches 0 from the sign it has
-        in y: the solver restarts there exactly, omega = 0, where friction may hold the crank at rest) or,
+        """The governor's guards in a mode, then the drive train's (none without either) and, with joint friction
+        and given the state y the solver starts from, the crank's: 'crank stops' (omega reaches 0 from the sign
+        it has in y: the solver restarts there exactly, omega = 0, where friction may hold the crank at rest) or,
         starting at rest, 'crank starts' (omega leaves 0: the solver restarts to watch for the next stop)."""
-        guards = self.governor.guards(mode) if self.governor is not None else []
+        guards = self._mode_guards(mode)
         if self.joint_friction is None or y is None:
             return guards
         if y[1] == 0.0:
@@ -354,11 +484,25 @@ class MachineModel:
 
         return guards + [Guard("crank stops", lambda state: direction * state[1], stop)]
 
+    def _mode_guards(self, mode: Mode | None) -> list:
+        """The governor's guards in a mode, then the drive train's (none without either)."""
+        if mode is None:
+            return []
+        if self.driven is None:
+            return self.governor.guards(mode) if self.governor is not None else []
+        train_mode = self.train_mode_of(mode)
+        governor_mode = tuple(mode[:2]) if self.governor is not None else ()
+        guards = [_carrying(guard, train_mode) for guard in self.governor.guards(governor_mode)] if governor_mode else []
+        return guards + train_guards(train_mode, self.driven_speed_index,
+                                     lambda t, y: self.drive_train_at(t, y, train_mode=train_mode)[1:],
+                                     lambda t, y: self.drive_train_at(t, y)[0],
+                                     lambda train: governor_mode + tuple(train), self.clutch)
+
     def cycle_averages(self, omega: float, external: float = 0.0) -> tuple[float, float, float]:
         """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
         mean M_drive at full throttle [N m], mean of all other moments with the external load `external`
-        [N m], which opposes motion). A coupled driven part turns with the crank in the mean: its inertia
-        and moments are added (the coupling is taken as rigid).
+        [N m], which opposes motion). A coupled or clutched driven part turns with the crank in the mean: its
+        inertia and moments are added (the coupling is taken as rigid, the clutch as stuck).
 
         The weight moment averages out over a turn; the J' omega^2 / 2 term averages to zero at constant
         speed. These define the cycle-averaged model J_m omega' = throttle M_d(omega) + M_c(omega) used by
@@ -374,9 +518,9 @@ class MachineModel:
                 else:
                     other += value
         count = len(phis)
-        if self.coupling is not None:
-            return (inertia + self.coupling.driven_inertia, drive / count,
-                    other / count + self.coupling.driven_moment(0.0, omega) + weight - external)
+        if self.driven is not None:
+            return (inertia + self.driven.inertia, drive / count,
+                    other / count + self.driven.forward_moment(0.0, omega) + weight - external)
         return inertia, drive / count, other / count + weight - external
 
     @property
@@ -427,6 +571,13 @@ class MachineModel:
         the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
         With joint friction: M_joint_friction (part of M_load), friction_<joint> and reaction_<joint>
         (_joint_friction_columns); epsilon then solves the implicit equation of effects.joint_friction.
+        With a clutch: clutch_torque (the moment it passes to the driven part; M_load includes minus it) [N m],
+        slip_speed = omega - omega_driven [rad/s], clutch_mode (0 stuck, +1 slipping with the motor ahead, -1
+        with the machine ahead), omega_driven, M_driven_<effect>, M_driven_external, E_kinetic as above. Either
+        driven part adds epsilon_driven [rad/s^2], driven_mode (+1 turning forward, -1 backward, 0 held at rest
+        by its resistances), its loads reduced to its shaft as M_driven_<effect> (a branch's as
+        M_driven_<branch>_<effect>; Coulomb ones as mobilised) and the torque in each branch's section
+        M_section_<branch> = M_n,c + (I_n / i_1n) epsilon_driven on the branch's shaft [N m].
         """
         n = t.size
         names = [effect.name for effect in self.effects]
@@ -454,12 +605,20 @@ class MachineModel:
         drive = throttle * sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
         load = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "load"), np.zeros(n))
         coupling = self.coupling
-        if coupling is None:
+        driven = self.driven
+        if driven is not None:
+            train = [self.drive_train_at(ti, y[:, i], external[i]) for i, ti in enumerate(t)]
+            forces = {key: np.array([getattr(state[1], key) for state in train])
+                      for key in ("driven", "clutch", "factor")}
+            omega_driven = y[self.driven_speed_index]
+        if driven is None:
             load = load - external
-        else:
-            twist, omega_driven = y[self.coupling_index], y[self.coupling_index + 1]
+        elif coupling is not None:
+            twist = y[self.coupling_index]
             passed = coupling.moment(twist, y[1] - omega_driven)
             load = load - passed
+        else:
+            load = load - forces["clutch"]
         net = drive + load + weight
         if self.joint_friction is not None:
             friction_columns = self._joint_friction_columns(t, y, J, net - 0.5 * dJ * omega ** 2, q, dq, throttle)
@@ -476,13 +635,26 @@ class MachineModel:
             out.update(friction_columns)
         if coupling is not None:
             out["M_coupling"] = -passed
-            for effect in coupling.driven_effects:
-                out[f"M_driven_{effect.name}"] = np.array([effect.moment(ti, 0.0, w, 0.0, 0.0)
-                                                           for ti, w in zip(t, omega_driven)])
-            out["M_driven_external"] = -external
-            out["twist"], out["omega_driven"] = twist, omega_driven
-            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * coupling.driven_inertia * omega_driven ** 2
-            out["E_elastic"] = 0.5 * coupling.stiffness * twist ** 2
+        if self.clutch is not None:
+            out["clutch_torque"] = forces["clutch"]
+            out["slip_speed"] = omega - omega_driven
+            out["clutch_mode"] = np.array([CLUTCH_CODE[state[0][0]] for state in train])
+        if driven is not None:
+            for effect, dry in zip(driven.effects, driven.coulomb):
+                moment = np.array([effect.moment(ti, 0.0, w, 0.0, 0.0) for ti, w in zip(t, omega_driven)])
+                out[f"M_driven_{effect.name}"] = moment * forces["factor"] if dry else moment
+            out["M_driven_external"] = -external * forces["factor"]
+            if coupling is not None:
+                out["twist"] = twist
+            out["omega_driven"] = omega_driven
+            out["epsilon_driven"] = forces["driven"]
+            out["driven_mode"] = np.array([DIRECTION[state[0][-1]] for state in train])
+            for branch in driven.branches:
+                resisting = -branch.ratio * sum(out[f"M_driven_{driven.effects[i].name}"] for i in branch.effects)
+                out[f"M_section_{branch.name}"] = resisting + branch.inertia / branch.ratio * forces["driven"]
+            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * driven.inertia * omega_driven ** 2
+            if coupling is not None:
+                out["E_elastic"] = 0.5 * coupling.stiffness * twist ** 2
         else:
             if self.load_pieces or given:
                 out["M_external"] = -external
@@ -552,14 +724,16 @@ def build_model(scene: Scene) -> MachineModel:
         effects.append(build_drive(machine.drive, machine.mechanism))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
-    coupling = None
+    coupling = clutch = None
     if machine.coupling is not None:
-        driven = machine.coupling.driven
-        coupling = CouplingModel(machine.coupling.stiffness, machine.coupling.damping, driven.inertia,
-                                 tuple(_unique_names([build_load(load, None) for load in driven.loads])))
+        coupling = CouplingModel(machine.coupling.stiffness, machine.coupling.damping,
+                                 build_driven(machine.coupling.driven, _unique_names))
+    if machine.clutch is not None:
+        clutch = ClutchModel(machine.clutch.static_torque, machine.clutch.kinetic_torque,
+                             build_driven(machine.clutch.driven, _unique_names))
     model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
                          has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene),
-                         coupling=coupling)
+                         coupling=coupling, clutch=clutch)
     if machine.joint_friction is not None:
         model = dataclasses.replace(model, joint_friction=_joint_friction(model))
     if scene.governor is None:
@@ -579,6 +753,15 @@ def _joint_friction(model: MachineModel) -> JointFrictionModel:
                          "inertia resists it (sum rho_j |k_j| |dR_j/d epsilon| >= J), so the equation of motion has "
                          "no unique acceleration; expected smaller joint radii or coefficient, or more inertia")
     return friction
+
+
+def _carrying(guard: Guard, train_mode: tuple[str, ...]) -> Guard:
+    """A governor's guard whose transition keeps the drive train's mode after the governor's new mode."""
+    def transition(y: np.ndarray) -> tuple[Mode, np.ndarray]:
+        governor_mode, state = guard.transition(y)
+        return governor_mode + train_mode, state
+
+    return Guard(guard.name, guard.value, transition)
 
 
 def _has_mass(mechanism) -> bool:

@@ -360,13 +360,40 @@ Load = Annotated[
 DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
 
 
+class Branch(SceneModel):
+    """A branch of a branched drive (physics.md section 4, second paper): a working member driven from the
+    driven part's main shaft through a ratio i_1n, with its own inertia and resisting moments on its shaft."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="name of the branch, used in the output "
+                                                                        "columns M_section_<name> (letters, digits, _)")
+    inertia: Positive = Field(description="moment of inertia I_n of everything beyond the branch's section, reduced "
+                                          "to the branch's shaft [kg m^2]")
+    ratio: Positive = Field(description="ratio i_1n = omega_main / omega_n from the main shaft to the branch's shaft; "
+                                        "the branch adds I_n / i_1n^2 to the main shaft's inertia [-]")
+    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the branch's shaft, of "
+                                                                      "its speed omega_n = omega_driven / i_1n "
+                                                                      "(constant, viscous, fan)")
+
+
 class DrivenPart(SceneModel):
     """The driven part of a two-mass machine (physics.md section 4): a rotor of constant inertia with its own
-    resisting moments, turning at omega_driven; the scenario's external load acts on it."""
+    resisting moments, turning at omega_driven; the scenario's external load acts on it. Its constant loads and
+    the external load are Coulomb resistances: they oppose the motion and, at rest, hold the part up to their
+    sum (it breaks away when the moment passed to it exceeds them)."""
 
     inertia: Positive = Field(description="moment of inertia I2 of the driven part, reduced to the crank shaft [kg m^2]")
     loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the driven part, of "
                                                                       "omega_driven (constant, viscous, fan)")
+    branches: list[Branch] = Field(default_factory=list, description="working members driven from the driven part's "
+                                                                     "shaft (a branched drive), each with its ratio")
+
+    @model_validator(mode="after")
+    def _distinct_branches(self) -> DrivenPart:
+        names = [branch.name for branch in self.branches]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ValueError(f"branches: the name(s) {repeated} appear more than once; expected distinct names")
+        return self
 
 
 class Coupling(SceneModel):
@@ -433,6 +460,24 @@ JOINTS_OF = {"crank_slider": ("crank_bearing", "crank_pin", "wrist_pin"),
 NO_KINETOSTATICS = ("walking_beam", "multi-cylinder crank_slider")
 
 
+class Clutch(SceneModel):
+    """Friction (Coulomb) clutch between the crank side (machine.inertia, the motor of machine.drive) and the
+    driven part: slipping it passes +-kinetic_torque (the sign of the slip); stuck, the two turn together and
+    it passes the moment that keeps them together, as long as that stays within +-static_torque."""
+
+    static_torque: Positive = Field(description="largest moment the stuck clutch can pass (static friction) [N m]")
+    kinetic_torque: Positive = Field(description="moment the slipping clutch passes (kinetic friction); at most "
+                                                 "static_torque [N m]")
+    driven: DrivenPart = Field(description="the driven part (the working machine) behind the clutch")
+
+    @model_validator(mode="after")
+    def _kinetic_below_static(self) -> Clutch:
+        if self.kinetic_torque > self.static_torque:
+            raise ValueError(f"kinetic_torque = {self.kinetic_torque} N m exceeds static_torque = "
+                             f"{self.static_torque} N m; expected kinetic_torque <= static_torque")
+        return self
+
+
 class Machine(SceneModel):
     """The machine reduced to its driving link (the crank)."""
 
@@ -449,6 +494,8 @@ class Machine(SceneModel):
                                                         "machine); the external load then acts on the driven part")
     joint_friction: JointFriction | None = Field(None, description="optional friction in the mechanism's joints "
                                                                   "and a thrust collar (the most expensive effect)")
+    clutch: Clutch | None = Field(None, description="optional friction clutch to a driven part (motor and working "
+                                                    "machine); the external load then acts on the driven part")
 
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
@@ -469,6 +516,12 @@ class Machine(SceneModel):
         if self.joint_friction is not None:
             several = kind == "crank_slider" and self.mechanism.cylinders is not None
             _check_joint_friction(self.joint_friction, "multi-cylinder crank_slider" if several else kind)
+        if self.joint_friction is not None and self.clutch is not None:
+            raise ValueError("machine.joint_friction with machine.clutch: the joint friction solves the crank's own "
+                             "equation, which a stuck clutch joins to the driven part; expected one of them")
+        if self.coupling is not None and self.clutch is not None:
+            raise ValueError("machine.coupling and machine.clutch are both set; the driven part sits behind one of "
+                             "them: expected either an elastic coupling or a friction clutch")
         return self
 
     def _cylinders_fit_effects(self) -> None:
@@ -675,6 +728,8 @@ class InitialState(SceneModel):
     twist: float | None = Field(None, description="initial twist phi - phi_driven of the coupling, driven part turning "
                                                   "at omega; none = the static twist that carries the driven part's "
                                                   "loads at the initial speed [rad]")
+    omega_driven: float | None = Field(None, description="initial speed of the driven part (behind a coupling or a "
+                                                         "clutch); none = omega [rad/s]")
 
 
 class LoadEvent(SceneModel):
@@ -745,6 +800,12 @@ class Scene(SceneModel):
         initial = self.scenario.initial
         if self.machine.coupling is None and initial.twist is not None:
             raise ValueError("scenario.initial.twist is set but the machine has no coupling")
+        if self.machine.coupling is None and self.machine.clutch is None and initial.omega_driven is not None:
+            raise ValueError("scenario.initial.omega_driven is set but the machine has no driven part (no coupling "
+                             "and no clutch)")
+        if self.machine.clutch is not None and self.solver.method == "energy":
+            raise ValueError("solver.method 'energy' steps one crank angle; a machine with a clutch has two masses: "
+                             "use a method in time (DOP853, RK45, RK23, Radau, BDF, LSODA or RK4)")
         if self.machine.coupling is not None and self.solver.method == "energy":
             raise ValueError("solver.method 'energy' steps one crank angle; a machine with a coupling has two "
                              "masses: use a method in time (Radau or BDF for a stiff coupling, else DOP853)")

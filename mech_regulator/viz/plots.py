@@ -19,6 +19,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     """Four panels: omega(t) with the steady band, moments against t, omega over the last dynamic
     period against the crank angle, and J(phi) with dJ/dphi (or the works of the moments)."""
     times = trajectory.samples(max(model.scene.solver.sample_rate, 2000.0 / max(trajectory.t_end, 1e-9)))
+    if model.clutch is not None:
+        plot_clutch_run(model, trajectory, summary, times, path)
+        return
     columns = model.columns(times, trajectory(times))
     last = summary["steady"]["last_period"]
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
@@ -109,6 +112,69 @@ def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dic
         panel.plot(events, np.interp(events, times, columns["sleeve"] * 1000.0), "k|", ms=6,
                    label=f"mode changes ({len(events)})")
     panel.legend(loc="upper left")
+
+
+def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray, path: Path) -> None:
+    """A start-up through a friction clutch: motor and machine speeds, the clutch's torque against its static
+    and kinetic limits with the motor's moment, the torque in each branch's section with the paper's estimate,
+    and the works of the run; slip phases shaded (and stretches with the driven part held at rest hatched)."""
+    times = np.union1d(times, [t for t, _ in trajectory.events])
+    columns = model.columns(times, trajectory(times))
+    train = summary["drive_train"]
+    clutch = model.clutch
+    figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
+    figure.suptitle(f"{model.scene.name}: start-up through a friction clutch ({model.scene.solver.method}, "
+                    f"{summary['status']})")
+
+    def shade(panel) -> None:
+        for index, (start, end, mode) in enumerate(train["clutch"]["slip_phases"]):
+            panel.axvspan(start, end, color="tab:orange", alpha=0.15, lw=0,
+                          label=("clutch slips" if index == 0 else None))
+        for index, (start, end) in enumerate(train["held"]):
+            panel.axvspan(start, end, facecolor="none", edgecolor="tab:gray", hatch="//", lw=0,
+                          label=("machine held at rest" if index == 0 else None))
+
+    speed = axes[0, 0]
+    shade(speed)
+    speed.plot(times, columns["omega"], color="tab:blue", lw=1.2, label="motor omega")
+    speed.plot(times, columns["omega_driven"], color="tab:green", lw=1.2, label="machine omega_driven")
+    for t in train["clutch"]["lock_times"]:
+        speed.axvline(t, color="k", lw=0.8, ls=":")
+        speed.annotate(f"locks at {t:.4g} s", (t, speed.get_ylim()[0]), xytext=(4, 6), textcoords="offset points",
+                       fontsize=8)
+    speed.set(xlabel="t [s]", ylabel="speed [rad/s]", title="motor and machine (main shaft) speeds")
+    speed.legend(loc="lower right", fontsize=8)
+
+    torque = axes[0, 1]
+    shade(torque)
+    torque.plot(times, columns["M_drive"], color="tab:blue", lw=1.0, label="motor moment M_d")
+    torque.plot(times, columns["clutch_torque"], color="tab:red", lw=1.4, label="clutch torque (to the machine)")
+    torque.axhline(clutch.static_torque, color="tab:red", lw=0.8, ls="--", label=f"static limit {clutch.static_torque:g} N m")
+    torque.axhline(clutch.kinetic_torque, color="tab:red", lw=0.8, ls=":", label=f"kinetic {clutch.kinetic_torque:g} N m")
+    torque.set(xlabel="t [s]", ylabel="moment [N m]", title="clutch torque and motor moment")
+    torque.legend(loc="upper right", fontsize=8)
+
+    sections = axes[1, 0]
+    shade(sections)
+    for index, (name, section) in enumerate(train["sections"].items()):
+        color = f"C{index + 4}"
+        sections.plot(times, columns[f"M_section_{name}"], color=color, lw=1.2, label=f"{name} section")
+        sections.plot(section["time"], section["max"], "o", color=color, ms=5,
+                      label=f"max {section['max']:.4g} N m at {section['time']:.3g} s")
+        if section["paper_estimate"] is not None:
+            sections.axhline(section["paper_estimate"], color=color, lw=0.8, ls="--",
+                             label=f"paper's estimate {section['paper_estimate']:.4g} N m")
+    sections.set(xlabel="t [s]", ylabel="torque in the section [N m]",
+                 title="branch sections: M_kr = M_n,c + (I_n / i_1n) domega/dt")
+    sections.legend(loc="upper right", fontsize=8)
+
+    works = summary["energy"]["works"]
+    bars = axes[1, 1]
+    bars.barh(list(works), list(works.values()), color="tab:green")
+    bars.set(xlabel="work over the run [J]", title=f"works (energy residual {summary['energy']['relative_residual']:.1g} "
+                                                   "relative)")
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
 
 
 def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
