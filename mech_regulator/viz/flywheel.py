@@ -142,17 +142,26 @@ def _plot_speed(axes, design: FlywheelDesign, name: str) -> None:
               label=f"{label}: J_fw = {run.flywheel:.5g} kg m^2, delta = {run.speeds.delta:.5g}")
 
 
+def _method_rows(design: FlywheelDesign) -> list[tuple[str, float, float, float | None]]:
+    """(label, J_fw on the crank [kg m^2], J_x on the flywheel's shaft [kg m^2], simulated delta or None) of each
+    flywheel the design has: the three methods and the scene's own."""
+    rows = []
+    for name, flywheel in (("energy_swing", design.energy_swing), ("wittenbauer", design.wittenbauer),
+                           ("refined", design.refined), ("scene", design.scene_flywheel)):
+        if flywheel is not None:
+            run = design.runs.get(name)
+            rows.append((RUN_STYLE[name][0], flywheel, design.on_shaft(flywheel),
+                         run.speeds.delta if run is not None else None))
+    return rows
+
+
 def _numbers(design: FlywheelDesign) -> str:
     """The three methods side by side as monospace text."""
     lines = [f"{'':<26}{'J_fw [kg m^2]':>14}{'J_x [kg m^2]':>14}{'delta sim':>11}",
              f"{'':<26}{'(crank)':>14}{f'(ratio {design.ratio:g})':>14}"]
-    for name, flywheel in (("energy_swing", design.energy_swing), ("wittenbauer", design.wittenbauer),
-                           ("refined", design.refined), ("scene", design.scene_flywheel)):
-        if flywheel is None:
-            continue
-        run = design.runs.get(name)
-        lines.append(f"{RUN_STYLE[name][0]:<26}{flywheel:>14.6g}{design.on_shaft(flywheel):>14.6g}"
-                     + (f"{run.speeds.delta:>11.5g}" if run is not None else f"{'-':>11}"))
+    for label, flywheel, on_shaft, delta in _method_rows(design):
+        lines.append(f"{label:<26}{flywheel:>14.6g}{on_shaft:>14.6g}"
+                     + (f"{delta:>11.5g}" if delta is not None else f"{'-':>11}"))
     construction = design.construction
     lines += ["", f"[delta] = {design.delta:.5g}, omega_m = {design.omega_m:.5g} rad/s",
               f"dE_max = {design.diagram.swing:.5g} J, mean J = {design.diagram.mean_inertia:.5g} kg m^2",
@@ -268,13 +277,9 @@ def _about(design: FlywheelDesign) -> str:
     """Markdown: what the views show and the numbers."""
     rows = ["| method | J_fw [kg m²] | J_x at ratio {:g} [kg m²] | simulated δ |".format(design.ratio),
             "| --- | ---: | ---: | ---: |"]
-    for name, flywheel in (("energy_swing", design.energy_swing), ("wittenbauer", design.wittenbauer),
-                           ("refined", design.refined), ("scene", design.scene_flywheel)):
-        if flywheel is None:
-            continue
-        run = design.runs.get(name)
-        rows.append(f"| {RUN_STYLE[name][0]} | {flywheel:.6g} | {design.on_shaft(flywheel):.6g} | "
-                    + (f"{run.speeds.delta:.6g} |" if run is not None else "not simulated |"))
+    for label, flywheel, on_shaft, delta in _method_rows(design):
+        rows.append(f"| {label} | {flywheel:.6g} | {on_shaft:.6g} | "
+                    + (f"{delta:.6g} |" if delta is not None else "not simulated |"))
     construction = design.construction
     return "\n\n".join([
         f"# {design.scene}: flywheel for [δ] = {design.delta:.4g}",
