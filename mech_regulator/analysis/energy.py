@@ -2,8 +2,10 @@
 
 Energy balance (physics.md section 1, energy form): the work of all moments equals the change of
 kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. A two-mass machine adds
-the driven part's works (at omega_driven), the coupling damper's work -c (omega - omega_driven)^2 and the
-coupling's elastic energy 1/2 k twist^2 to the stored energy. The works are integrated
+the driven part's works (at omega_driven; its links' weight included), the coupling damper's work
+-c (omega - omega_driven)^2 and the coupling's elastic energy integral_0^twist M_elastic dtwist
+(1/2 k twist^2 for a linear coupling) to the stored energy, 1/2 I2(phi_driven) omega_driven^2 to the
+kinetic energy. The works are integrated
 by Gauss-Legendre quadrature on every solver step of the dense output, so the residual measures
 the integration error of the run, not a sampling error.
 """
@@ -77,7 +79,7 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
                  ) -> tuple[np.ndarray, np.ndarray]:
     """dE(phi) = integral_{phi_start}^{phi} (M_d + M_c) dphi over one dynamic period [J] at a fixed speed
     omega [rad/s] and t = 0 (for moments that read omega, the swing at that speed). A coupled driven part
-    turns at omega too, its loads passed through the coupling.
+    turns at omega too, at phi_driven = phi, its moments added to the crank's.
 
     Midpoint rule on a grid that contains every switch angle, so on-off moments integrate exactly.
     Returns (phi [rad], dE [J]).
@@ -89,10 +91,13 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
         grid = np.union1d(grid, np.arange(first, phi_start + period, switch_period))
     middles = 0.5 * (grid[:-1] + grid[1:])
     states = np.vstack([middles, np.full_like(middles, omega)])
-    if model.coupling is not None:  # rigid at constant speed: the coupling carries the driven part's loads
-        states = np.vstack([states, np.full_like(middles, model.static_twist(omega)), np.full_like(middles, omega)])
+    if model.coupling is not None:  # rigid at constant speed: the driven part turns with the crank (twist 0)
+        states = np.vstack([states, np.zeros_like(middles), np.full_like(middles, omega)])
     columns = model.columns(np.zeros_like(middles), states)
     net = columns["M_drive"] + columns["M_load"] + columns.get("M_weight", 0.0)
+    if model.coupling is not None:  # the driven part's moments (loads, weight, external load) in place of M_m
+        driven = sum(values for name, values in columns.items() if name.startswith("M_driven_"))
+        net = net - columns["M_coupling"] + driven
     return grid, np.concatenate([[0.0], np.cumsum(net * np.diff(grid))])
 
 

@@ -44,11 +44,19 @@ def describe(model: MachineModel) -> str:
     if model.coupling is not None:
         coupling = model.coupling
         modes = coupling_modes(model)
-        lines.append(f"coupling: M_m = {coupling.stiffness:g} twist + {coupling.damping:g} (omega - omega_driven) N m to "
-                     f"a driven part of I2 = {coupling.driven_inertia:g} kg m^2 (relative mode: natural frequency "
-                     f"{modes.natural_frequency:.4g} rad/s, damping ratio {modes.damping_ratio:.3g})")
+        elastic = (f"{coupling.stiffness:g} twist" if coupling.table is None else
+                   f"M_elastic(twist) (table of {coupling.table[0].size} points, {coupling.table[0][0]:g} to "
+                   f"{coupling.table[0][-1]:g} rad, end slopes continued)")
+        driven = (f"I2 = {coupling.driven_inertia:g} kg m^2" if coupling.driven_reduced is None else
+                  f"I2(phi_driven) = {coupling.driven_inertia:g} kg m^2 + "
+                  f"{machine.coupling.driven.mechanism.type} links")
+        lines.append(f"coupling: M_m = {elastic} + {coupling.damping:g} (omega - omega_driven) N m to a driven part of "
+                     f"{driven} (relative mode at the operating twist {modes.operating_twist:.4g} rad: stiffness "
+                     f"{modes.stiffness:.4g} N m/rad, natural frequency {modes.natural_frequency:.4g} rad/s, damping "
+                     f"ratio {modes.damping_ratio:.3g})")
         for effect in coupling.driven_effects:
-            lines.append(f"  driven part's load: {effect.formula.replace('omega', 'omega_driven')}")
+            formula = effect.formula.replace("omega", "omega_driven").replace("phi", "phi_driven")
+            lines.append(f"  driven part's load: {formula}")
         if model.load_pieces:
             lines.append("  the external load acts on the driven part")
     if model.governor is not None:

@@ -10,9 +10,10 @@ with J = J0 + J_flywheel ratio^2 + J_links(phi). The right-hand side is speciali
 a machine without a mechanism has no J(phi), no J' term and no kinematics call at all.
 
 A machine with an elastic coupling is the two-mass machine of physics.md section 4: the crank (the
-driving part above) passes M_m = k (phi - phi2) + c (omega - omega2) to a driven part of constant
-inertia I2, I2 domega2/dt = M_m + M_c2(omega2) - M_external; its states, the twist phi - phi2 and
-omega2, come last in the state vector.
+driving part above) passes M_m = M_elastic(phi - phi2) + c (omega - omega2) (M_elastic = k twist or a
+tabulated characteristic) to a driven part with its own mechanism and loads,
+I2(phi2) domega2/dt + 1/2 I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external;
+its states, the twist phi - phi2 and omega2, come last in the state vector.
 """
 
 from __future__ import annotations
@@ -26,8 +27,10 @@ from fractions import Fraction
 from typing import Callable
 
 import numpy as np
+from scipy import optimize
 
 from mech_regulator.effects import Effect, build_drive, build_load
+from mech_regulator.effects.tables import extrapolated_linear
 from mech_regulator.governors import Governor, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
 from mech_regulator.scene.schema import Scene
@@ -53,22 +56,93 @@ class LoadPiece:
 
 @dataclass(frozen=True)
 class CouplingModel:
-    """An elastic coupling and the driven part behind it: stiffness k [N m/rad], damping c [N m s/rad], the
-    driven part's inertia I2 [kg m^2] and its resisting moments (effects of omega_driven)."""
+    """An elastic coupling and the driven part behind it (physics.md section 4).
 
-    stiffness: float
+    stiffness k [N m/rad] of a linear coupling, or table = (twist [rad], moment [N m]) knots of a nonlinear
+    characteristic (linear between them, end segments continued); elastic: twist -> M_elastic [N m] for the
+    hot path; damping c [N m s/rad]; the driven part: constant inertia [kg m^2], driven_reduced: its
+    mechanism's phi2 -> (I_links, dI_links/dphi2, M_weight, q2, dq2/dphi2) or None; driven_effects: its
+    resisting moments, read at (t, phi2, omega2, q2, dq2).
+    """
+
+    stiffness: float | None
     damping: float
     driven_inertia: float
     driven_effects: tuple[Effect, ...]
+    elastic: Callable[[float], float]
+    table: tuple[np.ndarray, np.ndarray] | None = None
+    driven_reduced: Reduced | None = None
+    driven_has_weight: bool = False
 
-    def moment(self, twist: float, relative_speed: float) -> float:
-        """The moment the coupling passes to the driven part [N m]: M_m = k twist + c (omega - omega2)
-        (the crank feels -M_m)."""
-        return self.stiffness * twist + self.damping * relative_speed
+    def moment(self, twist, relative_speed):
+        """The moment the coupling passes to the driven part [N m]: M_m = M_elastic(twist) + c (omega - omega2)
+        (the crank feels -M_m); twist [rad] and relative_speed [rad/s] scalars or arrays."""
+        return self.elastic_moment(twist) + self.damping * relative_speed
 
-    def driven_moment(self, t: float, omega_driven: float) -> float:
-        """Sum of the driven part's own moments at speed omega_driven [rad/s] [N m] (negative: resisting)."""
-        return sum(effect.moment(t, 0.0, omega_driven, 0.0, 0.0) for effect in self.driven_effects)
+    def _segments(self, twist):
+        """Knots, values, index of the table segment of each twist (end segments beyond the table), slopes."""
+        knots, values = self.table
+        index = np.clip(np.searchsorted(knots, twist, side="right") - 1, 0, knots.size - 2)
+        slopes = np.diff(values) / np.diff(knots)
+        return knots, values, index, slopes
+
+    def elastic_moment(self, twist):
+        """M_elastic(twist) [N m]: k twist, or the table linear between knots (end segments continued)."""
+        if self.table is None:
+            return self.stiffness * np.asarray(twist, dtype=float)
+        knots, values, i, slopes = self._segments(twist)
+        return values[i] + slopes[i] * (twist - knots[i])
+
+    def local_stiffness(self, twist):
+        """dM_elastic/dtwist at twist [N m/rad]: k, or the slope of the table's segment there."""
+        if self.table is None:
+            return self.stiffness + 0.0 * np.asarray(twist, dtype=float)
+        _, _, i, slopes = self._segments(twist)
+        return slopes[i]
+
+    def elastic_energy(self, twist):
+        """E_elastic = integral_0^twist M_elastic dtwist [J]: 1/2 k twist^2, or exact for the piecewise-linear
+        table (a quadratic on each segment)."""
+        if self.table is None:
+            return 0.5 * self.stiffness * np.asarray(twist, dtype=float) ** 2
+        knots, values, i, slopes = self._segments(twist)
+        at_knots = np.concatenate([[0.0], np.cumsum(0.5 * (values[1:] + values[:-1]) * np.diff(knots))])
+        at_knots -= at_knots[int(np.flatnonzero(knots == 0.0)[0])]
+        step = twist - knots[i]
+        return at_knots[i] + values[i] * step + 0.5 * slopes[i] * step ** 2
+
+    def twist_for(self, moment: float) -> float:
+        """The twist [rad] at which the elastic moment equals `moment` [N m] (the characteristic is strictly
+        increasing, so this is unique)."""
+        if self.table is None:
+            return moment / self.stiffness
+        knots, values = self.table
+        i = int(np.clip(np.searchsorted(values, moment, side="right") - 1, 0, knots.size - 2))
+        return float(knots[i] + (moment - values[i]) * (knots[i + 1] - knots[i]) / (values[i + 1] - values[i]))
+
+    @property
+    def reads_angle(self) -> bool:
+        """Whether the driven part's inertia or moments depend on its angle phi2."""
+        return self.driven_reduced is not None or any("phi" in e.depends_on for e in self.driven_effects)
+
+    def driven_state(self, phi2: float) -> tuple[float, float, float, float, float]:
+        """(I2 [kg m^2], dI2/dphi2 [kg m^2/rad], M_weight [N m], q2, dq2/dphi2) of the driven part at phi2 [rad]."""
+        if self.driven_reduced is None:
+            return self.driven_inertia, 0.0, 0.0, 0.0, 0.0
+        links, slope, weight, q, dq = self.driven_reduced(phi2)
+        return self.driven_inertia + links, slope, weight, q, dq
+
+    def driven_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
+        """Sum of the driven part's own moments (its loads and its links' weight) at phi_driven [rad] and
+        omega_driven [rad/s] [N m] (negative: resisting)."""
+        _, _, weight, q, dq = self.driven_state(phi_driven)
+        return weight + sum(effect.moment(t, phi_driven, omega_driven, q, dq) for effect in self.driven_effects)
+
+    def required_moment(self, t: float, phi_driven: float, omega: float, external: float) -> float:
+        """The coupling moment [N m] that keeps the driven part at constant speed omega [rad/s] at phi_driven
+        [rad] against its moments and the external load [N m]: M_m = external - M_c2 + 1/2 I2' omega^2."""
+        _, slope, *_ = self.driven_state(phi_driven)
+        return external - self.driven_moment(t, omega, phi_driven) + 0.5 * slope * omega * omega
 
 
 @dataclass(frozen=True)
@@ -117,8 +191,9 @@ class MachineModel:
         Periods are taken as rational multiples of 2 pi; a machine with nothing periodic in phi gets 2 pi.
         """
         turns = [Fraction(1)]
+        driven = self.coupling.driven_effects if self.coupling is not None else ()
         turns += [Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
-                  for effect in self.effects if effect.period is not None]
+                  for effect in self.effects + driven if effect.period is not None]
         lcm = turns[0]
         for turn in turns[1:]:
             numerator = math.lcm(lcm.numerator * turn.denominator, turn.numerator * lcm.denominator)
@@ -129,7 +204,7 @@ class MachineModel:
         """Which of 't', 'phi', 'omega' the net moment reads."""
         effects = self.effects + (self.coupling.driven_effects if self.coupling is not None else ())
         reads = set().union(*(effect.depends_on for effect in effects)) if effects else set()
-        if self.has_weight:
+        if self.has_weight or (self.coupling is not None and self.coupling.driven_reduced is not None):
             reads.add("phi")
         if self.load_pieces:
             reads.add("t")
@@ -158,8 +233,9 @@ class MachineModel:
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
         (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with throttle = 1
         without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c includes -M_m, the
-        external load acts on the driven part, d twist/dt = omega - omega2 and domega2/dt = (M_m + M_c2(omega2)
-        - M_external) / I2 (physics.md section 4). window = (lo, hi): the crank-angle interval between two
+        external load acts on the driven part, d twist/dt = omega - omega2 and I2(phi2) domega2/dt + 1/2
+        I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external, phi2 = phi - twist (physics.md section 4).
+        window = (lo, hi): the crank-angle interval between two
         switch angles the solver is in; effects that jump at switch angles then see phi clamped into it, so they
         keep their mode across the switch until the solver has located the crossing and restarted (no step
         straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine co-simulated with
@@ -186,7 +262,8 @@ class MachineModel:
         governor_rates = governor.derivatives(mode, ideal) if governor is not None else None
         coupling = self.coupling
         if coupling is not None:
-            k, c, I2 = coupling.stiffness, coupling.damping, coupling.driven_inertia
+            elastic, c = coupling.elastic, coupling.damping
+            driven_state = coupling.driven_state
             driven = tuple(effect.moment for effect in coupling.driven_effects)
             index = self.coupling_index
         plain = governor_rates is None and coupling is None
@@ -201,7 +278,7 @@ class MachineModel:
             if coupling is None:
                 total -= offset + slope * t
             else:
-                passed = k * y[index] + c * (omega - y[index + 1])
+                passed = elastic(y[index]) + c * (omega - y[index + 1])
                 total -= passed
             for moment in smooth:
                 total += moment(t, phi, omega, q, dq)
@@ -218,11 +295,12 @@ class MachineModel:
             if governor_rates is not None:
                 rates += governor_rates(y)
             if coupling is not None:
-                omega2 = y[index + 1]
-                driven_total = passed - (offset + slope * t)
+                phi2, omega2 = phi - y[index], y[index + 1]
+                I2, dI2, driven_total, q2, dq2 = driven_state(phi2)
+                driven_total += passed - (offset + slope * t)
                 for moment in driven:
-                    driven_total += moment(t, 0.0, omega2, 0.0, 0.0)
-                rates += [omega - omega2, driven_total / I2]
+                    driven_total += moment(t, phi2, omega2, q2, dq2)
+                rates += [omega - omega2, (driven_total - 0.5 * dI2 * omega2 * omega2) / I2]
             return rates
 
         return machine
@@ -251,8 +329,17 @@ class MachineModel:
 
     def static_twist(self, omega: float) -> float:
         """The twist [rad] at which the coupling carries the driven part's loads and the external load at t = 0
-        at speed omega [rad/s]: k twist = M_external - M_c2(omega)."""
-        return (self.external_load(0.0) - self.coupling.driven_moment(0.0, omega)) / self.coupling.stiffness
+        at speed omega [rad/s] with the driven part at phi_driven = phi0 - twist (phi0 the initial crank angle):
+        M_elastic(twist) = CouplingModel.required_moment, solved by Brent's method when it depends on phi_driven."""
+        coupling, external, phi0 = self.coupling, self.external_load(0.0), self.scene.scenario.initial.phi
+        if not coupling.reads_angle:
+            return coupling.twist_for(coupling.required_moment(0.0, phi0, omega, external))
+        needed = [coupling.required_moment(0.0, angle, omega, external) for angle in np.linspace(0, 2 * math.pi, 361)]
+        low, high = coupling.twist_for(min(needed)), coupling.twist_for(max(needed))
+        if low == high:
+            return low
+        return optimize.brentq(lambda twist: float(coupling.elastic(twist)) - coupling.required_moment(
+            0.0, phi0 - twist, omega, external), low, high, xtol=1e-15)
 
     def initial_mode(self, y: np.ndarray) -> Mode | None:
         """The governor's mode at a state with the governor at rest (None without a governor)."""
@@ -282,9 +369,11 @@ class MachineModel:
                 else:
                     other += value
         count = len(phis)
-        if self.coupling is not None:
-            return (inertia + self.coupling.driven_inertia, drive / count,
-                    other / count + self.coupling.driven_moment(0.0, omega) + weight - external)
+        if self.coupling is not None:  # the driven part at phi_driven = phi
+            coupling = self.coupling
+            driven = [(coupling.driven_state(phi)[0], coupling.driven_moment(0.0, omega, phi)) for phi in phis]
+            mean_inertia, mean_moment = np.mean(driven, axis=0)
+            return inertia + float(mean_inertia), drive / count, other / count + float(mean_moment) + weight - external
         return inertia, drive / count, other / count + weight - external
 
     @property
@@ -330,8 +419,11 @@ class MachineModel:
         (x, v for a slider, theta4, omega4 for a rocker) and, governed: throttle, sleeve z [m],
         sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and feedback_shift [m] where present.
         With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
-        load is not), twist [rad], omega_driven [rad/s], M_driven_<effect> and M_driven_external (moments on
-        the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
+        load is not), twist [rad], phi_driven = phi - twist [rad], omega_driven [rad/s], epsilon_driven
+        [rad/s^2], I2 [kg m^2] and dI2_dphi2 [kg m^2/rad] (the driven part's inertia), M_driven_<effect>,
+        M_driven_weight (with a driven mechanism and gravity) and M_driven_external (moments on the driven part
+        [N m]), its mechanism's output (x_driven, v_driven or theta4_driven, omega4_driven), E_elastic =
+        integral_0^twist M_elastic dtwist [J]; E_kinetic includes 1/2 I2 omega_driven^2.
         """
         n = t.size
         names = [effect.name for effect in self.effects]
@@ -374,13 +466,28 @@ class MachineModel:
             out["M_weight"] = weight
         if coupling is not None:
             out["M_coupling"] = -passed
+            phi_driven = y[0] - twist
+            driven = np.array([coupling.driven_state(p) for p in phi_driven]).T.reshape(5, n)
+            I2, dI2 = driven[0], driven[1]
+            driven_net = passed - external - 0.5 * dI2 * omega_driven ** 2
             for effect in coupling.driven_effects:
-                out[f"M_driven_{effect.name}"] = np.array([effect.moment(ti, 0.0, w, 0.0, 0.0)
-                                                           for ti, w in zip(t, omega_driven)])
+                moment = np.array([effect.moment(ti, p, w, q2, dq2) for ti, p, w, q2, dq2
+                                   in zip(t, phi_driven, omega_driven, driven[3], driven[4])])
+                out[f"M_driven_{effect.name}"] = moment
+                driven_net = driven_net + moment
+            if coupling.driven_has_weight:
+                out["M_driven_weight"] = driven[2]
+                driven_net = driven_net + driven[2]
             out["M_driven_external"] = -external
-            out["twist"], out["omega_driven"] = twist, omega_driven
-            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * coupling.driven_inertia * omega_driven ** 2
-            out["E_elastic"] = 0.5 * coupling.stiffness * twist ** 2
+            out["twist"], out["phi_driven"], out["omega_driven"] = twist, phi_driven, omega_driven
+            out["epsilon_driven"] = driven_net / I2
+            out["I2"], out["dI2_dphi2"] = I2, dI2
+            kind = self.scene.machine.coupling.driven.mechanism
+            if kind is not None:
+                names = ("x_driven", "v_driven") if kind.type == "crank_slider" else ("theta4_driven", "omega4_driven")
+                out[names[0]], out[names[1]] = driven[3], driven[4] * omega_driven
+            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * I2 * omega_driven ** 2
+            out["E_elastic"] = coupling.elastic_energy(twist)
         else:
             if self.load_pieces or given:
                 out["M_external"] = -external
@@ -444,11 +551,7 @@ def build_model(scene: Scene) -> MachineModel:
         effects.append(build_drive(machine.drive))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
-    coupling = None
-    if machine.coupling is not None:
-        driven = machine.coupling.driven
-        coupling = CouplingModel(machine.coupling.stiffness, machine.coupling.damping, driven.inertia,
-                                 tuple(_unique_names([build_load(load, None) for load in driven.loads])))
+    coupling = _coupling_model(machine, gravity)
     model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
                          has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene),
                          coupling=coupling)
@@ -456,6 +559,27 @@ def build_model(scene: Scene) -> MachineModel:
         return model
     governor = build_governor(scene.governor, model.initial_balance_throttle)
     return dataclasses.replace(model, governor=governor)
+
+
+def _coupling_model(machine, gravity: tuple[float, float] | None) -> CouplingModel | None:
+    """The coupling and driven part of a scene's machine (None without machine.coupling); the driven
+    mechanism's links weigh under the machine's gravity."""
+    coupling = machine.coupling
+    if coupling is None:
+        return None
+    driven = coupling.driven
+    weighs = driven.mechanism is not None and gravity is not None and any(gravity) and _has_mass(driven.mechanism)
+    reduced = build_reduced(driven.mechanism, gravity if weighs else None) if driven.mechanism else None
+    effects = tuple(_unique_names([build_load(load, 2.0 * math.pi if driven.mechanism else None)
+                                   for load in driven.loads]))
+    if coupling.characteristic is None:
+        stiffness = coupling.stiffness
+        return CouplingModel(stiffness, coupling.damping, driven.inertia, effects, lambda twist: stiffness * twist,
+                             driven_reduced=reduced, driven_has_weight=weighs)
+    table = coupling.characteristic
+    return CouplingModel(None, coupling.damping, driven.inertia, effects,
+                         extrapolated_linear(table.twist, table.moment), (np.array(table.twist), np.array(table.moment)),
+                         reduced, weighs)
 
 
 def _has_mass(mechanism) -> bool:

@@ -267,25 +267,87 @@ Load = Annotated[
 ]
 
 
-DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
+DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, SliderConstant, RockerConstant,
+                             OutputViscous, OutputSpring, SliderTable], Field(discriminator="type")]
 
 
 class DrivenPart(SceneModel):
-    """The driven part of a two-mass machine (physics.md section 4): a rotor of constant inertia with its own
-    resisting moments, turning at omega_driven; the scenario's external load acts on it."""
+    """The driven part of a two-mass machine (physics.md section 4): a rotor with its own resisting moments,
+    turning at omega_driven, angle phi_driven = phi - twist, optionally with a mechanism on its shaft (then
+    I2(phi_driven) = inertia + the links' reduced inertia); the scenario's external load acts on it."""
 
-    inertia: Positive = Field(description="moment of inertia I2 of the driven part, reduced to the crank shaft [kg m^2]")
-    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the driven part, of "
-                                                                      "omega_driven (constant, viscous, fan)")
+    inertia: Positive = Field(description="constant part of the moment of inertia I2 of the driven part, reduced to "
+                                          "the crank shaft [kg m^2]")
+    mechanism: Mechanism | None = Field(None, description="linkage driven by the driven shaft (its crank angle is "
+                                                          "phi_driven); adds its links' reduced inertia and weight "
+                                                          "(machine.gravity)")
+    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the driven part, read "
+                                                                      "at phi_driven and omega_driven (constant, "
+                                                                      "viscous, fan, table in phi_driven, and "
+                                                                      "slider/rocker loads of its mechanism)")
+
+    @model_validator(mode="after")
+    def _loads_fit_mechanism(self) -> DrivenPart:
+        kind = self.mechanism.type if self.mechanism is not None else None
+        needs = {"slider": "crank_slider", "rocker": "four_bar"}
+        for index, load in enumerate(self.loads):
+            prefix = load.type.split("_")[0]
+            if prefix in needs and kind != needs[prefix]:
+                raise ValueError(f"driven.loads[{index}] type '{load.type}' acts on the {prefix}: it needs "
+                                 f"driven.mechanism.type: {needs[prefix]} (the driven part has "
+                                 f"{kind or 'no mechanism'})")
+        return self
+
+
+class CouplingCharacteristic(SceneModel):
+    """Nonlinear elastic characteristic M_m(twist) of a coupling: a table, linear between points; beyond the
+    table the end segments continue (the coupling keeps its end stiffness)."""
+
+    twist: list[float] = Field(min_length=2, description="twists phi - phi_driven of the table points, strictly "
+                                                         "increasing, with a point at 0 [rad]")
+    moment: list[float] = Field(min_length=2, description="elastic moment the coupling passes at each twist, "
+                                                          "strictly increasing, 0 at twist 0 [N m]")
+
+    @model_validator(mode="after")
+    def _elastic(self) -> CouplingCharacteristic:
+        if len(self.twist) != len(self.moment):
+            raise ValueError(f"characteristic: twist has {len(self.twist)} entries but moment has "
+                             f"{len(self.moment)}; expected one moment per twist")
+        if any(b <= a for a, b in zip(self.twist, self.twist[1:])):
+            raise ValueError(f"characteristic: twist = {self.twist} rad must be strictly increasing")
+        if 0.0 not in self.twist or self.moment[self.twist.index(0.0)] != 0.0:
+            raise ValueError(f"characteristic: twist = {self.twist} rad, moment = {self.moment} N m; expected the "
+                             "point twist 0 -> moment 0 (an untwisted coupling passes no moment)")
+        falls = [i for i, (a, b) in enumerate(zip(self.moment, self.moment[1:])) if b <= a]
+        if falls:
+            i = falls[0]
+            raise ValueError(f"characteristic: moment does not rise from twist {self.twist[i]} to {self.twist[i + 1]} "
+                             f"rad ({self.moment[i]} -> {self.moment[i + 1]} N m); expected a strictly increasing "
+                             "moment (positive stiffness everywhere: a falling characteristic has no stable "
+                             "equilibrium)")
+        return self
 
 
 class Coupling(SceneModel):
     """Elastic coupling between the crank (driving part) and the driven part: it passes the moment
-    M_m = stiffness * twist + damping * (omega - omega_driven), twist = phi - phi_driven."""
+    M_m = M_elastic(twist) + damping * (omega - omega_driven), twist = phi - phi_driven, with M_elastic =
+    stiffness * twist (linear) or the tabulated characteristic."""
 
-    stiffness: Positive = Field(description="torsional stiffness k of the coupling [N m/rad]")
+    stiffness: Positive | None = Field(None, description="torsional stiffness k of a linear coupling; give this or "
+                                                         "characteristic [N m/rad]")
+    characteristic: CouplingCharacteristic | None = Field(None, description="nonlinear elastic characteristic "
+                                                                            "M_elastic(twist); give this or stiffness")
     damping: NonNegative = Field(0.0, description="torsional damping c of the coupling [N m s/rad]")
     driven: DrivenPart = Field(description="the driven part")
+
+    @model_validator(mode="after")
+    def _one_characteristic(self) -> Coupling:
+        if (self.stiffness is None) == (self.characteristic is None):
+            given = "both" if self.stiffness is not None else "neither"
+            raise ValueError(f"coupling: {given} of stiffness and characteristic given; expected exactly one "
+                             "(stiffness [N m/rad] for a linear coupling, characteristic {twist, moment} for a "
+                             "nonlinear one)")
+        return self
 
 
 class Machine(SceneModel):
