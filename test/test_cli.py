@@ -47,7 +47,7 @@ def bundled_data(name: str) -> dict:
 
 def test_bundled_scenes_present():
     assert BUNDLED == ["compressor", "engine", "engine_direct", "engine_indirect_isodromic", "engine_indirect_none",
-                       "engine_indirect_rigid", "four_bar_rocker", "lathe", "startup", "two_mass"]
+                       "engine_indirect_rigid", "four_bar_rocker", "lathe", "press_coupling", "startup", "two_mass"]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -37,7 +37,7 @@ class EnergyBalance:
 
 def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance:
     """Integrate M_k omega over every step of the trajectory and compare with the kinetic energy change."""
-    edges = _step_edges(trajectory)
+    edges = step_edges(trajectory)
     left, width = edges[:-1], np.diff(edges)
     nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
     weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
@@ -66,7 +66,7 @@ def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.
     return result
 
 
-def _step_edges(trajectory: Trajectory) -> np.ndarray:
+def step_edges(trajectory: Trajectory) -> np.ndarray:
     """All step boundaries of the trajectory: the pieces' own knots where a piece spans many steps."""
     edges = [np.asarray(trajectory.piece_edges[:1])]
     for interpolant, end in zip(trajectory.interpolants, trajectory.piece_edges[1:]):
