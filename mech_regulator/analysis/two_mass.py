@@ -93,24 +93,24 @@ def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadySt
 def _start_up_end(model: MachineModel, trajectory: Trajectory, times: np.ndarray, columns: dict) -> float | None:
     """End of period 1 [s]: the first time from which omega_driven > 0, located by bisection between samples on
     the dense output. It is the break-away time when stick holds the driven part at exactly 0, and the upward
-    zero crossing when it first rolls back; 0 when the driven part moves forward at once."""
+    zero crossing when it first rolls back; 0 when the driven part moves forward at once (within 1e-9 of the
+    run: the dense output rounds omega2 ~ t^3 to 0 just after a start from rest)."""
     index = model.coupling_index + 1
     omega2 = columns["omega_driven"]
-    threshold = 1e-12 * max(float(np.max(np.abs(omega2))), 1e-300)
-    if omega2[0] > threshold or (omega2[0] >= 0.0 and columns["epsilon_driven"][0] > 0.0):
+    if omega2[0] > 0.0 or (omega2[0] == 0.0 and columns["epsilon_driven"][0] > 0.0):
         return 0.0
-    moving = omega2 > threshold
+    moving = omega2 > 0.0
     if not moving.any():
         return None
     first = int(np.argmax(moving))
     lo, hi = times[first - 1], times[first]
     for _ in range(BISECTIONS):
         middle = 0.5 * (lo + hi)
-        if trajectory(middle)[index] > threshold:
+        if trajectory(middle)[index] > 0.0:
             hi = middle
         else:
             lo = middle
-    return float(hi)
+    return 0.0 if hi - times[0] <= 1e-9 * (times[-1] - times[0]) else float(hi)
 
 
 def _refine_peak(model: MachineModel, trajectory: Trajectory, times: np.ndarray, index: int) -> tuple[float, float]:
