@@ -168,7 +168,9 @@ class RequiredCoupling:
     of the elastic moment at one twist within the stretch and over the whole run; jump: the step of the
     needed moment at t = T [N m]; realisable: single-valued and rising over the stretch; initial: the state
     (phi, omega, twist) at t_from with the two speeds equal, for a forward run of the characteristic;
-    driving_delta: the driving speed's (max - min) / mean over the last period [-]; notes: what to do.
+    driving_delta: the driving speed's (max - min) / mean over the last period [-]; notes: what to do;
+    periodic_from: index of the first sample of the last period, where the driving part's periodic motion
+    (computed directly) replaces its transient.
     """
 
     law: SpeedLaw
@@ -189,6 +191,7 @@ class RequiredCoupling:
     initial: dict
     driving_delta: float
     notes: tuple[str, ...]
+    periodic_from: int
 
 
 def required_coupling(model: MachineModel, run_up: float, delta: float, frequency: float | None = None,
@@ -277,7 +280,7 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     notes += _advice(width, looped, rising, driving_delta)
     return RequiredCoupling(law, times, omega1, omega2, twist + shift, moment, elastic, stretch, float(times[start]),
                             table_twist, table_moment, width, whole_width, jump, not looped and rising, initial,
-                            driving_delta, notes)
+                            driving_delta, notes, times.size - steady_times.size)
 
 
 def _check_inverse(model: MachineModel) -> None:

@@ -112,31 +112,38 @@ def _plot_two_mass_run(periods: dict, times: np.ndarray, columns: dict, speed, p
 
 def plot_required_coupling(result, name: str, path: Path) -> None:
     """The inverse problem (analysis.two_mass.RequiredCoupling): the prescribed driven speed law with the driving
-    speed it implies, the twist and the coupling moment against time, and the required characteristic."""
+    speed it implies, the twist and the needed coupling moment over the tabulated stretch, and the required
+    characteristic with its table."""
     figure, axes = plt.subplots(1, 3, figsize=(16, 5), constrained_layout=True)
     figure.suptitle(f"{name}: coupling characteristic for the prescribed speed law "
-                    f"({'realisable' if result.realisable else 'not realisable'} by an elastic coupling)")
-    times = result.times
+                    f"({'realisable' if result.realisable else 'NOT realisable'} by an elastic coupling)")
+    times, periodic = result.times, result.periodic_from
     law = axes[0]
     law.plot(times, result.omega_driven, color="tab:purple", lw=1.0, label="omega_driven (prescribed)")
-    law.plot(times, result.omega_driving, color="tab:blue", lw=1.0, label="omega (driving part, computed)")
+    law.plot(times[:periodic], result.omega_driving[:periodic], color="tab:blue", lw=1.0,
+             label="omega, driving part (from rest)")
+    law.plot(times[periodic:], result.omega_driving[periodic:], color="tab:cyan", lw=1.5,
+             label="omega, driving part's periodic motion")
     law.axvline(result.law.run_up, color="k", lw=0.8, ls=":", label=f"end of run-up T = {result.law.run_up:g} s")
     law.set(xlabel="t [s]", ylabel="speed [rad/s]", title="speeds")
     law.legend(loc="lower right", fontsize=8)
+    stretch = slice(periodic, None) if result.stretch == "steady motion" else slice(None)
     twist = axes[1]
-    twist.plot(times, result.twist, color="tab:green", lw=1.0)
-    twist.set(xlabel="t [s]", ylabel="twist phi - phi_driven [rad]", title="twist and coupling moment")
+    twist.plot(times[stretch], result.twist[stretch], color="tab:green", lw=4.0, alpha=0.5)
+    twist.set(xlabel="t [s]", title=f"twist and needed coupling moment ({result.stretch})")
     twist.set_ylabel("twist phi - phi_driven [rad]", color="tab:green")
     moment = twist.twinx()
-    moment.plot(times, result.moment, color="tab:red", lw=0.8)
+    moment.plot(times[stretch], result.moment[stretch], color="tab:red", lw=1.0)
     moment.set_ylabel("needed coupling moment M_m [N m]", color="tab:red")
     characteristic = axes[2]
-    characteristic.plot(result.twist, result.elastic, color="0.7", lw=0.8, label="(twist, M_elastic) over the run")
-    stretch = times >= result.t_from
-    characteristic.plot(result.twist[stretch], result.elastic[stretch], color="tab:blue", lw=1.5,
-                        label=f"{result.stretch} (loop width {result.loop_width:.2g} N m)")
-    characteristic.plot(result.table_twist, result.table_moment, "k.", ms=3, label="table (through 0, 0)")
-    characteristic.set(xlabel="twist [rad]", ylabel="elastic moment [N m]", title="required characteristic")
+    characteristic.plot(result.table_twist, result.table_moment, "k.-", lw=0.6, ms=3,
+                        label="table (continued to 0, 0)")
+    characteristic.plot(result.twist[stretch], result.elastic[stretch], color="tab:blue", lw=1.5, alpha=0.7,
+                        label=f"{result.stretch}: loop width {result.loop_width:.2g} N m")
+    characteristic.axhline(0.0, color="k", lw=0.5)
+    characteristic.axvline(0.0, color="k", lw=0.5)
+    characteristic.set(xlabel="twist [rad]", ylabel="elastic moment M_m - c (omega - omega_driven) [N m]",
+                       title="required characteristic")
     characteristic.grid(alpha=0.3)
     characteristic.legend(loc="upper left", fontsize=8)
     figure.savefig(path, dpi=100)
