@@ -12,20 +12,22 @@ from mech_regulator.bench.effect_cost import EFFECT_CHAIN, effect_cost_table, me
 
 def test_each_link_adds_exactly_its_effect():
     """Model structure along the chain: mechanism, then the engine drive, then the governor, its friction,
-    the shorter stroke, then the coupling; nothing else changes between neighbours."""
+    the shorter stroke, then the coupling, then joint friction; nothing else changes between neighbours."""
     models = [step_model(step) for step in EFFECT_CHAIN]
-    assert [model.reduced is not None for model in models] == [False] + [True] * 6
-    assert [model.effects[0].formula.startswith("engine") for model in models] == [False, False] + [True] * 5
-    assert [model.governor is not None for model in models] == [False] * 3 + [True] * 4
-    assert [model.governor is not None and model.governor.has_friction for model in models] == [False] * 4 + [True] * 3
+    assert [model.reduced is not None for model in models] == [False] + [True] * 7
+    assert [model.effects[0].formula.startswith("engine") for model in models] == [False, False] + [True] * 6
+    assert [model.governor is not None for model in models] == [False] * 3 + [True] * 5
+    assert [model.governor is not None and model.governor.has_friction for model in models] == [False] * 4 + [True] * 4
     strokes = [model.scene.governor.stroke[1] for model in models[3:]]
-    assert strokes[0] == strokes[1] > strokes[2] == strokes[3]
-    assert [model.coupling is not None for model in models] == [False] * 6 + [True]
-    assert [len(model.state_names()) for model in models] == [2, 2, 2, 4, 4, 4, 6]
+    assert strokes[0] == strokes[1] > strokes[2] == strokes[3] == strokes[4]
+    assert [model.coupling is not None for model in models] == [False] * 6 + [True] * 2
+    assert [len(model.state_names()) for model in models] == [2, 2, 2, 4, 4, 4, 6, 6]
+    assert [model.joint_friction is not None for model in models] == [False] * 7 + [True]
+    assert models[-1].joint_friction.names == ("crank_bearing", "crank_pin", "wrist_pin", "guide")
     # the same loads everywhere: the coupling moves the fan to the driven part, it does not drop it
     fans = [sum(effect.name == "fan" for effect in model.effects + (model.coupling.driven_effects if model.coupling
                                                                     else ())) for model in models]
-    assert fans == [1] * 7
+    assert fans == [1] * 8
 
 
 def test_measurement_runs_every_link_to_the_end():

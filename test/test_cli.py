@@ -46,8 +46,9 @@ def bundled_data(name: str) -> dict:
 
 
 def test_bundled_scenes_present():
-    assert BUNDLED == ["compressor", "engine", "engine_direct", "engine_indirect_isodromic", "engine_indirect_none",
-                       "engine_indirect_rigid", "four_bar_rocker", "lathe", "press_coupling", "startup", "two_mass"]
+    assert BUNDLED == ["clutch_start", "compressor", "compressor_friction", "engine", "engine_direct",
+                       "engine_indirect_isodromic", "engine_indirect_none", "engine_indirect_rigid", "engine_inline4",
+                       "four_bar_rocker", "lathe", "press", "press_coupling", "startup", "two_mass", "walking_beam"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -186,9 +187,10 @@ def test_set_list_item(capsys):
 
 EFFECT_WORDS = {  # what `describe` calls each effect type
     "constant": "constant", "linear_motor": "linear motor", "engine": "engine", "viscous": "viscous",
-    "fan": "fan", "cutting": "cutting", "slider_viscous": "viscous on the slider",
+    "fan": "fan", "cutting": "cutting", "table": "table", "slider_viscous": "viscous on the slider",
     "slider_spring": "spring on the slider", "slider_table": "slider force table",
     "rocker_viscous": "viscous on the rocker", "rocker_spring": "spring on the rocker",
+    "shuttle_viscous": "viscous on the shuttle bar",
 }
 
 

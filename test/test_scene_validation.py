@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 import mech_regulator
-from mech_regulator.scene.loading import load_scene
+from mech_regulator.scene.loading import bundled_scenes, load_scene
 from support import run_cli as run, write_scene as write
 
 # A valid scene: a crank-slider with a flywheel, a constant drive and a viscous load.
@@ -456,8 +456,7 @@ def test_missing_scene_suggests_bundled(capsys, name, suggestion):
     assert code == 2
     assert "Traceback" not in out + err
     assert_all_in(err, f"scene '{name}'", "no such file", f"did you mean the bundled scene '{suggestion}'?",
-                  "compressor, engine, engine_direct, engine_indirect_isodromic, engine_indirect_none, "
-                   "engine_indirect_rigid, four_bar_rocker, lathe")
+                  "bundled: " + ", ".join(bundled_scenes()) + ")")
 
 
 def test_missing_scene_path(tmp_path, capsys):

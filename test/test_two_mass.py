@@ -19,7 +19,6 @@ import yaml
 from scipy import integrate, optimize
 
 from mech_regulator.analysis import analyse_steady_state, energy_balance, motion_periods, required_coupling
-from mech_regulator.analysis.two_mass import _start_up_end
 from mech_regulator.scene import load_scene
 from support import model_of, run_cli, scene, simulate_complete, write_scene
 
@@ -143,41 +142,82 @@ def start_from_rest(stiffness: float, driven_loads: list, drive: float = 40.0, d
     return data
 
 
-def test_period_1_ends_when_the_driven_part_moves_forward_closed_form():
-    """Constant drive M on J1, constant resistance Mc on I2, linear coupling, from rest (no stick: the driven part
-    first rolls back). Closed form: twist = tw_s (1 - cos w_n t) with k tw_s = (I2 M + J1 Mc) / (J1 + I2), so
-    omega2 = (k tw_s (t - sin(w_n t) / w_n) - Mc t) / I2 crosses zero upwards where 1 - sin(x) / x = Mc / (k tw_s),
-    x = w_n t. The largest coupling moment is 2 k tw_s at an odd multiple of pi / w_n (undamped)."""
+def test_period_1_ends_at_the_break_away_closed_form():
+    """Constant drive M on J1, constant resistance Mc on I2 (a Coulomb resistance: it holds the driven part at
+    exactly omega2 = 0), undamped linear coupling, from rest. While held, J1 phi'' = M - k phi: the twist is
+    (M / k) (1 - cos(w1 t)), w1 = sqrt(k / J1), and period 1 ends when k twist reaches Mc,
+    t_b = acos(1 - Mc / M) / w1. Then both move: J_r tw'' + k tw = J_r (M / J1 + Mc / I2) = k tw_s from
+    tw(t_b) = Mc / k, tw'(t_b) = omega1(t_b), so the largest coupling moment is k (tw_s + sqrt(A^2 + B^2)),
+    A = Mc / k - tw_s, B = tw'(t_b) / w_n, at t_b + atan2(B, A) / w_n (w_n = sqrt(k / J_r)), in period 2."""
     k, drive, load = 2e4, 40.0, 15.0
     model = model_of(start_from_rest(k, [{"type": "constant", "torque": load}], drive))
     trajectory = simulate_complete(model)
     periods = motion_periods(model, trajectory, analyse_steady_state(model, trajectory))
-    reduced = J1 * I2 / (J1 + I2)
-    natural = math.sqrt(k / reduced)
+    w1 = math.sqrt(k / J1)
+    t_b = math.acos(1.0 - load / drive) / w1
+    assert periods.start_up_end == pytest.approx(t_b, rel=1e-9)
+    assert np.all(trajectory(np.linspace(0.0, 0.99 * t_b, 50))[3] == 0.0)  # held exactly, no roll-back
+    natural = math.sqrt(k * (J1 + I2) / (J1 * I2))
     carried = (I2 * drive + J1 * load) / (J1 + I2)
-    x = optimize.brentq(lambda x: 1.0 - math.sin(x) / x - load / carried, 1e-3, 4.49)
-    assert periods.start_up_end == pytest.approx(x / natural, rel=1e-7)
-    assert periods.peak.moment == pytest.approx(2.0 * carried, rel=1e-7)
-    assert (periods.peak.time * natural / math.pi) % 2.0 == pytest.approx(1.0, abs=1e-5)
+    a, b = load / k - carried / k, drive / k * w1 * math.sin(w1 * t_b) / natural
+    assert periods.peak.moment == pytest.approx(carried + k * math.hypot(a, b), rel=1e-7)
+    phase = (periods.peak.time - t_b - math.atan2(b, a) / natural) * natural / (2.0 * math.pi)
+    assert phase == pytest.approx(round(phase), abs=1e-4)  # undamped: the peak repeats once per relative period
     assert periods.peak.period == 2 and periods.steady_from is None  # the speed keeps growing: never steady
 
 
-def test_period_1_with_stick_is_the_break_away_time():
-    """With stick (the driven part held at exactly omega2 = 0 until k twist reaches its static resistance), period 1
-    ends at the break-away: the twist grows as the driving part's free motion M t^2 / (2 J1), so
-    t_b = sqrt(2 J1 Mc / (k M)). The criterion is checked on that motion written as a dense output."""
-    k, drive, load = 2e4, 40.0, 15.0
-    t_b = math.sqrt(2.0 * J1 * load / (k * drive))
-    model = model_of(start_from_rest(k, [{"type": "constant", "torque": load}], drive))
+def test_held_driven_mechanism_with_a_branch_breaks_away_and_balances_energy():
+    """The two-mass features composed with the drive train's: a driven crank-slider (slider load, no gravity)
+    with a branch, held at rest by its Coulomb resistances R = Mc + M_n / i_1n. While held, the slider load
+    reads omega2 = 0, so the coupling alone pushes and the break-away is the closed form of the rotor case,
+    t_b = acos(1 - R / M) / w1. After it: epsilon_driven = central differences of omega_driven, the branch's
+    section torque M_n + (I_n / i_1n) epsilon_driven, and the energy balance closes with I2(phi2)."""
+    k, drive, load, branch_load, ratio, branch_inertia = 2e4, 40.0, 5.0, 12.0, 2.0, 0.4
+    mechanism = {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 30.0}
+    data = start_from_rest(k, [{"type": "constant", "torque": load}, {"type": "slider_viscous", "coefficient": 50.0}],
+                           drive, duration=0.3)
+    data["machine"]["coupling"]["driven"].update(mechanism=mechanism, branches=[
+        {"name": "feed", "inertia": branch_inertia, "ratio": ratio,
+         "loads": [{"type": "constant", "torque": branch_load}]}])
+    model = model_of(data)
+    trajectory = simulate_complete(model)
+    resistance = load + branch_load / ratio
+    t_b = math.acos(1.0 - resistance / drive) / math.sqrt(k / J1)
+    periods = motion_periods(model, trajectory, analyse_steady_state(model, trajectory))
+    assert periods.start_up_end == pytest.approx(t_b, rel=1e-9)
+    times = np.linspace(t_b + 0.005, 0.295, 100)
+    columns = model.columns(times, trajectory(times))
+    h = 1e-6
+    differences = (trajectory(times + h)[3] - trajectory(times - h)[3]) / (2 * h)
+    assert np.max(np.abs(columns["epsilon_driven"] - differences)) < 1e-5 * np.max(np.abs(differences))
+    assert np.ptp(columns["I2"]) > 0.1  # the mechanism matters: I2 from 0.3 to about 0.6 kg m^2
+    section = branch_load + branch_inertia / ratio * columns["epsilon_driven"]
+    assert np.max(np.abs(columns["M_section_feed"] - section)) < 1e-9 * np.max(np.abs(section))
+    assert abs(energy_balance(model, trajectory).relative_residual) < 1e-8
 
-    def held(t):  # states [phi, omega, twist, omega2]: omega2 = 0 until t_b, then rising
-        t = np.asarray(t, dtype=float)
-        omega2 = np.where(t > t_b, 3.0 * (t - t_b), 0.0)
-        return np.array([drive * t ** 2 / (2 * J1), drive * t / J1, drive * t ** 2 / (2 * J1), omega2])
 
-    times = np.linspace(0.0, 0.05, 51)
-    columns = {"omega_driven": held(times)[3], "epsilon_driven": np.zeros_like(times)}
-    assert _start_up_end(model, held, times, columns) == pytest.approx(t_b, rel=1e-10)
+@pytest.mark.parametrize("driven, message", [
+    ({"mechanism": {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 3.0}},
+     "clutch.driven.mechanism (crank_slider)"),
+    ({"loads": [{"type": "table", "angle_deg": [0.0, 180.0], "torque": [1.0, 2.0]}],},
+     "clutch.driven.loads[0] type 'table' reads the driven part's angle"),
+])
+def test_clutch_refuses_an_angle_dependent_driven_part(tmp_path, capsys, driven, message):
+    """Behind a clutch the driven part has no angle state: its mechanism and angle loads are refused by name."""
+    data = {"name": "clutch_angle", "machine": {"inertia": 0.5, "drive": {"type": "constant", "torque": 40.0},
+                                                "clutch": {"static_torque": 30.0, "kinetic_torque": 25.0,
+                                                           "driven": {"inertia": 1.0, **driven}}},
+            "scenario": {"duration": 0.1}}
+    code, _, err = run_cli(capsys, "simulate", str(write_scene(tmp_path, yaml.safe_dump(data))), "--quiet")
+    assert code == 2 and message in err
+
+
+def test_branch_loads_are_rotor_loads_only(tmp_path, capsys):
+    """A branch is reduced by its ratio alone: a table in the driven angle on a branch is refused by the schema."""
+    data = two_mass({"stiffness": 1e3}, [], branches=[{"name": "b", "inertia": 1.0, "ratio": 2.0, "loads": [
+        {"type": "table", "angle_deg": [0.0, 180.0], "torque": [1.0, 2.0]}]}])
+    code, _, err = run_cli(capsys, "simulate", str(write_scene(tmp_path, yaml.safe_dump(data))), "--quiet")
+    assert code == 2 and "branches" in err and "table" in err
 
 
 def test_no_period_1_when_the_driven_part_moves_at_once():
@@ -326,10 +366,12 @@ def test_coupling_needs_exactly_one_characteristic_and_fitting_driven_loads(tmp_
 
 
 def test_press_scene_summary_reports_the_periods(capsys):
-    """The bundled press (shortened): JSON summary with the periods: the press rolls back first (period 1 of a
-    few ms), the largest coupling moment lies in the start-up transient, above the running moment."""
+    """The bundled press (shortened): JSON summary with the periods: its friction holds the press at rest first
+    (period 1 of a few ms, reported as a held stretch by the drive train), the largest coupling moment lies in
+    the start-up transient, above the running moment."""
     code, out, _ = run_cli(capsys, "simulate", "press_coupling", "--json", "--quiet", "--set", "scenario.duration=0.3")
     assert code == 0
     periods = json.loads(out)["two_mass"]
     assert 0.0 < periods["start_up_end"] < 0.02
+    assert json.loads(out)["drive_train"]["held"] == [[0.0, pytest.approx(periods["start_up_end"], rel=1e-12)]]
     assert periods["peak"]["period"] == 2 and periods["peak"]["moment"] > 500.0

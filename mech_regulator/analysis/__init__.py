@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from mech_regulator.analysis.drivetrain import drive_train_summary
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
 from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
@@ -28,6 +29,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
                 "t_end": trajectory.t_start, "phi_end": model.scene.scenario.initial.phi,
                 "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None, "governor": None,
                 "two_mass": None,
+                "drive_train": None,
                 "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)}}
     steady = analyse_steady_state(model, trajectory)
     balance = energy_balance(model, trajectory)
@@ -52,6 +54,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         "governor": _governed_run(model, trajectory) if model.governor is not None else None,
         "two_mass": (dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None
                      else None),
+        "drive_train": drive_train_summary(model, trajectory) if model.driven is not None else None,
     }
 
 
@@ -87,7 +90,8 @@ def analyse_governor(model: MachineModel) -> dict:
     """Statics and stability of a governed scene, as plain data (JSON-ready): static characteristic,
     statism, insensitivity, operating points for every load level of the scenario, droop, linear
     stability of the averaged model (eigenvalues, dominant mode, Vyshnegradsky A and B, critical sleeve
-    damping) and, for a machine periodic in phi, the Floquet multipliers of the periodic orbit."""
+    damping) and, for a machine periodic in phi without a driven part behind a coupling or clutch, the Floquet
+    multipliers of the periodic orbit."""
     governor = model.governor
     characteristic = static_characteristic(governor)
     load = model.external_load(0.0)
@@ -121,7 +125,7 @@ def analyse_governor(model: MachineModel) -> dict:
         },
         "floquet": None,
     }
-    if is_periodic(model):
+    if is_periodic(model) and model.driven is None:  # the period map carries the crank's and governor's states only
         floquet = floquet_stability(model, point, linear)
         result["floquet"] = {
             "cycle_time": floquet.cycle_time, "mean_speed": floquet.mean_speed, "residual": floquet.residual,
@@ -134,6 +138,6 @@ def analyse_governor(model: MachineModel) -> dict:
 __all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "LoadResponse", "MotionPeriods",
            "OperatingPoint", "RequiredCoupling", "motion_periods", "required_coupling",
            "PeriodSpeeds", "StaticCharacteristic", "SteadyState", "analyse_governor", "analyse_steady_state",
-           "critical_damping", "cycle_mean_speed", "droop", "energy_balance", "energy_swing",
+           "critical_damping", "cycle_mean_speed", "drive_train_summary", "droop", "energy_balance", "energy_swing",
            "flywheel_for_constant_inertia", "floquet_stability", "is_periodic", "linear_stability", "load_responses",
            "operating_point", "static_characteristic", "summarise", "summarise_cosimulation"]

@@ -5,7 +5,8 @@ kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. A two-
 the driven part's works (at omega_driven; its links' weight included), the coupling damper's work
 -c (omega - omega_driven)^2 and the coupling's elastic energy integral_0^twist M_elastic dtwist
 (1/2 k twist^2 for a linear coupling) to the stored energy, 1/2 I2(phi_driven) omega_driven^2 to the
-kinetic energy. The works are integrated
+kinetic energy; a friction clutch the work lost in its slip, -T (omega - omega_driven) (T the moment it
+passes: +-kinetic_torque while slipping). The works are integrated
 by Gauss-Legendre quadrature on every solver step of the dense output, so the residual measures
 the integration error of the run, not a sampling error.
 """
@@ -54,15 +55,18 @@ def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance
 def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The power of every moment that exchanges energy with the outside [W], by name: M_k omega for the
     crank's moments, M_driven_k omega_driven for the driven part's, and -c (omega - omega_driven)^2 for the
-    coupling's damper (the coupling's spring only stores energy)."""
+    coupling's damper (the coupling's spring only stores energy) and -T (omega - omega_driven) for a clutch's
+    slip (T = clutch_torque). Section torques (M_section_*) are internal moments and do no work on the machine."""
     result = {}
     for name, moment in columns.items():
-        if not name.startswith("M_") or name in ("M_load", "M_coupling"):
+        if not name.startswith("M_") or name in ("M_load", "M_coupling") or name.startswith("M_section_"):
             continue
         speed = columns["omega_driven"] if name.startswith("M_driven_") else columns["omega"]
         result[name[2:]] = moment * speed
     if model.coupling is not None:
         result["coupling_damping"] = -model.coupling.damping * (columns["omega"] - columns["omega_driven"]) ** 2
+    if model.clutch is not None:
+        result["clutch_slip"] = -columns["clutch_torque"] * columns["slip_speed"]
     return result
 
 
@@ -93,11 +97,15 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
     states = np.vstack([middles, np.full_like(middles, omega)])
     if model.coupling is not None:  # rigid at constant speed: the driven part turns with the crank (twist 0)
         states = np.vstack([states, np.zeros_like(middles), np.full_like(middles, omega)])
+    if model.clutch is not None:  # stuck at constant speed
+        states = np.vstack([states, np.full_like(middles, omega)])
     columns = model.columns(np.zeros_like(middles), states)
     net = columns["M_drive"] + columns["M_load"] + columns.get("M_weight", 0.0)
-    if model.coupling is not None:  # the driven part's moments (loads, weight, external load) in place of M_m
+    if model.driven is not None:  # the driven part's moments (loads, weight, external load) in place of the
+        #                            coupling's or clutch's moment
         driven = sum(values for name, values in columns.items() if name.startswith("M_driven_"))
-        net = net - columns["M_coupling"] + driven
+        passed = -columns["M_coupling"] if model.coupling is not None else columns["clutch_torque"]
+        net = net + passed + driven
     return grid, np.concatenate([[0.0], np.cumsum(net * np.diff(grid))])
 
 

@@ -29,12 +29,12 @@ from scipy import integrate, optimize
 from mech_regulator.analysis.energy import step_edges
 from mech_regulator.analysis.periodic import SteadyState
 from mech_regulator.model import MachineModel
+from mech_regulator.model.drivetrain import FORWARD
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import Trajectory
 
 LOOP_TOLERANCE = 1e-3  # a characteristic is single-valued when moments at one twist differ by less than this
 #                        fraction of its moment range [-]
-BISECTIONS = 60  # halvings locating the end of period 1 (2^-60 of a sample interval)
 
 
 @dataclass(frozen=True)
@@ -68,7 +68,7 @@ def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadySt
     """The periods of a coupled run and its largest coupling moment, located on the dense output."""
     times = np.union1d(step_edges(trajectory), trajectory.samples(model.scene.solver.sample_rate))
     columns = model.columns(times, trajectory(times))
-    t1 = _start_up_end(model, trajectory, times, columns)
+    t1 = _start_up_end(model, trajectory)
     t3 = steady.t_steady if steady.steady else None
     passed = -columns["M_coupling"]
     i = int(np.argmax(np.abs(passed)))
@@ -90,27 +90,15 @@ def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadySt
                          float(twist.max()), note)
 
 
-def _start_up_end(model: MachineModel, trajectory: Trajectory, times: np.ndarray, columns: dict) -> float | None:
-    """End of period 1 [s]: the first time from which omega_driven > 0, located by bisection between samples on
-    the dense output. It is the break-away time when stick holds the driven part at exactly 0, and the upward
-    zero crossing when it first rolls back; 0 when the driven part moves forward at once (within 1e-9 of the
-    run: the dense output rounds omega2 ~ t^3 to 0 just after a start from rest)."""
-    index = model.coupling_index + 1
-    omega2 = columns["omega_driven"]
-    if omega2[0] > 0.0 or (omega2[0] == 0.0 and columns["epsilon_driven"][0] > 0.0):
-        return 0.0
-    moving = omega2 > 0.0
-    if not moving.any():
-        return None
-    first = int(np.argmax(moving))
-    lo, hi = times[first - 1], times[first]
-    for _ in range(BISECTIONS):
-        middle = 0.5 * (lo + hi)
-        if trajectory(middle)[index] > 0.0:
-            hi = middle
-        else:
-            lo = middle
-    return 0.0 if hi - times[0] <= 1e-9 * (times[-1] - times[0]) else float(hi)
+def _start_up_end(model: MachineModel, trajectory: Trajectory) -> float | None:
+    """End of period 1 [s]: when the driven part's mode first becomes 'forward' (model/drivetrain.py: held at rest
+    by its Coulomb resistances until the coupling moment breaks it away, or rolling back until it comes to rest
+    and moves on), located exactly by the solver's guards; 0 when it turns forward from the start, None when
+    it never does."""
+    for time, mode in trajectory.modes:
+        if model.train_mode_of(mode)[-1] == FORWARD:
+            return 0.0 if time <= trajectory.t_start else float(time)
+    return None
 
 
 def _refine_peak(model: MachineModel, trajectory: Trajectory, times: np.ndarray, index: int) -> tuple[float, float]:
@@ -216,7 +204,7 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     def needed(t: np.ndarray) -> np.ndarray:
         """M_m(t) from the driven part's equation [N m]."""
         angle, omega2, epsilon2 = law(np.atleast_1d(t))
-        return np.array([coupling.driven_state(phi2_start + a)[0] * e
+        return np.array([coupling.driven.state(phi2_start + a)[0] * e
                          + coupling.required_moment(ti, phi2_start + a, w, external)
                          for ti, a, w, e in zip(np.atleast_1d(t), angle, omega2, epsilon2)])
 
@@ -252,7 +240,7 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     twist = phi1 - angle
     moment = needed(times)
     elastic = moment - coupling.damping * (omega1 - omega2)
-    jump = coupling.driven_state(phi2_start + law(np.array([run_up]))[0][0])[0] * (law.amplitude * frequency
+    jump = coupling.driven.state(phi2_start + law(np.array([run_up]))[0][0])[0] * (law.amplitude * frequency
                                                                                    - omega_m / run_up)
     scale = float(np.ptp(elastic)) or 1.0
     whole_grid, whole_curve, whole_width = _characteristic(twist, elastic, points)

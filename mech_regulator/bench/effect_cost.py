@@ -2,7 +2,7 @@
 
 "Simulate only the effects a scene calls for" is a claim about cost, so it is measured: a chain of
 scenes, each the previous one plus one effect (constant J -> mechanism J(phi) -> engine torque ->
-governor -> sleeve friction -> stops reached -> elastic coupling), each run through the same scenario
+governor -> sleeve friction -> stops reached -> elastic coupling -> joint friction), each run through the same scenario
 (the engine_direct machine under 6 N m, the load thrown off at 0.5 s) with the same solver (DOP853,
 rtol 1e-8). For each: the CPU time of one right-hand-side evaluation (timed alone, at the states of
 the run), the evaluations, steps and mode changes per simulated second, and the CPU time per simulated
@@ -33,6 +33,9 @@ STOPS = ("governor.stroke=[0.02, 0.034]", "governor.valve.closed_at=0.034")  # t
 COUPLING = ("machine.loads=[{type: viscous, coefficient: 0.02}]",
             "machine.coupling={stiffness: 5000.0, damping: 2.0, driven: {inertia: 0.1, loads: [{type: fan, "
             "coefficient: 1.5e-4}]}}")
+# lubricated journals of an 80 mm bore engine: main bearing 50 mm, crank pin 40 mm, wrist pin 22 mm; piston on its liner
+JOINT_FRICTION = ("machine.joint_friction={coefficient: 0.02, guide: 0.02, joints: {crank_bearing: {radius: 0.025, "
+                  "fit: run_in}, crank_pin: {radius: 0.02, fit: run_in}, wrist_pin: {radius: 0.011, fit: run_in}}}",)
 
 
 @dataclass(frozen=True)
@@ -54,6 +57,8 @@ EFFECT_CHAIN = (
     EffectStep("+ sleeve friction", "Coulomb friction, static > kinetic: stick/slip modes and their guards", FRICTION),
     EffectStep("+ stops reached", "a shorter stroke: the sleeve lands on its stop after the rejection", FRICTION + STOPS),
     EffectStep("+ elastic coupling", "the generator as a second mass on a coupling: 2 more states", FRICTION + STOPS + COUPLING),
+    EffectStep("+ joint friction", "kinetostatics of the crank-slider per evaluation, friction in 3 journals and the "
+               "guide, epsilon from the implicit equation (Newton)", FRICTION + STOPS + COUPLING + JOINT_FRICTION),
 )
 
 

@@ -1,4 +1,5 @@
-"""The `mech-regulator` command: simulate, describe and list scenes, print the scene schema.
+"""The `mech-regulator` command: simulate, describe and list scenes, analyse governors and engines, print the
+scene schema.
 
 A user's mistake in a scene or an option ends in a message and exit code 2, never a traceback; a run
 that fails or is interrupted still writes what it computed.
@@ -19,6 +20,7 @@ import numpy as np
 from mech_regulator import __version__
 from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
+from mech_regulator.cli.flywheel import add_flywheel_command, run_flywheel
 from mech_regulator.cli.report import progress_bar, to_json, write_csv
 
 EXIT_BAD_INPUT = 2
@@ -78,6 +80,26 @@ def build_parser() -> argparse.ArgumentParser:
                                "it forward with `simulate`")
     coupling.add_argument("--plot", type=Path, help="write a PNG picture: the law, the twist, the characteristic")
     coupling.add_argument("--json", action="store_true", help="print the answer as JSON")
+    kinematics = scene_command("kinematics", "positions, velocities and accelerations of the mechanism's joints over "
+                                             "one turn at constant crank speed (crank-slider, four-bar, walking beam)")
+    kinematics.add_argument("--omega", type=float, default=10.0, help="constant crank speed [rad/s] (default 10)")
+    kinematics.add_argument("--points", type=int, default=361, metavar="N",
+                            help="crank angles over the turn, both ends included (default 361: every degree)")
+    kinematics.add_argument("--out", type=Path, help="write the table as CSV (phi, t, then per point P: P_x, P_y [m], "
+                                                     "P_vx, P_vy, P_v [m/s], P_ax, P_ay, P_a [m/s^2])")
+    kinematics.add_argument("--plot", type=Path, help="write a PNG picture: paths with the mechanism at a few "
+                                                      "positions, speeds and accelerations")
+    kinematics.add_argument("--json", action="store_true", help="print the summary as JSON")
+    engine = scene_command("engine", "an engine scene at constant crank speed: dead centres, stroke, piston "
+                                     "kinematics (exact and source 002's approximation), cylinders and firing, "
+                                     "torque curves per cylinder and total, mean indicated torque and power, harmonics")
+    engine.add_argument("--omega", type=float, metavar="W", help="crank speed [rad/s] (default: the scene's "
+                                                                 "initial speed)")
+    engine.add_argument("--plot", type=Path, help="write a PNG picture: piston x, v, a over the turn; torque "
+                                                  "curves over the cycle; harmonic spectrum")
+    engine.add_argument("--out", type=Path, help="write the curves over the working cycle as CSV")
+    engine.add_argument("--json", action="store_true", help="print the analysis as JSON")
+    add_flywheel_command(commands)
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
@@ -128,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
             return _list_scenes()
         if args.command == "bench":
             return _bench_accuracy(args)
+        if args.command == "flywheel":
+            return run_flywheel(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "describe":
             from mech_regulator.model import build_model
@@ -141,6 +165,10 @@ def main(argv: list[str] | None = None) -> int:
             return _main_job(scene, args)
         if args.command == "coupling":
             return _required_coupling(scene, args)
+        if args.command == "kinematics":
+            return _kinematics(scene, args)
+        if args.command == "engine":
+            return _engine(scene, args)
         return _simulate(scene, args)
     except SceneError as error:
         print(f"mech-regulator: {error}", file=sys.stderr)
@@ -210,6 +238,10 @@ def _cosimulate(model, args) -> int:
 
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    if model.clutch is not None:
+        raise SceneError(f"--exchange-step {args.exchange_step:g}: scene '{model.scene.name}' has a machine.clutch, "
+                         "whose stick/slip modes the co-simulated machine does not play yet; simulate it without "
+                         "--exchange-step")
     if not args.overspeed_trip >= 0.0:
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
     duration = model.scene.scenario.duration
@@ -312,6 +344,75 @@ def _required_coupling(scene, args) -> int:
         for key in ("csv", "scene_out", "plot"):
             if key in answer:
                 print(f"wrote {answer[key]}")
+    return 0
+
+
+def _kinematics(scene, args) -> int:
+    """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
+    from mech_regulator.analysis.kinematics import kinematics_summary, kinematics_table
+
+    mechanism = scene.machine.mechanism
+    if mechanism is None:
+        raise SceneError(f"scene '{scene.name}' has no mechanism: kinematics needs machine.mechanism "
+                         "(crank_slider, four_bar or walking_beam; see docs/scenes.md)")
+    if not (math.isfinite(args.omega) and args.omega > 0.0):
+        raise SceneError(f"--omega {args.omega:g}: expected a crank speed > 0 rad/s")
+    if not 3 <= args.points <= 100_000:
+        raise SceneError(f"--points {args.points}: expected 3 to 100000 crank angles")
+    _check_outputs(args, args.out)
+    columns = kinematics_table(mechanism, args.omega, args.points)
+    summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
+               "joints": kinematics_summary(columns)}
+    if args.out is not None:
+        write_csv(args.out, columns)
+        summary["csv"] = str(args.out)
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_kinematics
+
+        plot_kinematics(mechanism, columns, args.omega, scene.name or mechanism.type, args.plot)
+        summary["plot"] = str(args.plot)
+    if args.json:
+        print(to_json(summary))
+        return 0
+    print(f"scene {scene.name}: {mechanism.type} at omega = {args.omega:g} rad/s, {args.points} crank angles over a turn")
+    print(f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
+          f"{'a_max [m/s^2]':>16}{'at [deg]':>10}")
+    for name, joint in summary["joints"].items():
+        print(f"{name:<6}{joint['x_min']:>11.5g}{joint['x_max']:>11.5g}{joint['y_min']:>11.5g}{joint['y_max']:>11.5g}"
+              f"{joint['v_max']:>14.5g}{joint['v_max_at_deg']:>10.4g}{joint['a_max']:>16.5g}{joint['a_max_at_deg']:>10.4g}")
+    for key in ("csv", "plot"):
+        if key in summary:
+            print(f"wrote {summary[key]}")
+    return 0
+
+
+def _engine(scene, args) -> int:
+    """engine: the analysis of an engine scene at constant speed, printed, and optionally a PNG and a CSV."""
+    from mech_regulator.analysis.engine import engine_curve_columns, engine_report
+    from mech_regulator.cli.report import format_engine
+    from mech_regulator.model import build_model
+
+    machine = scene.machine
+    if machine.mechanism is None or machine.mechanism.type != "crank_slider" or machine.drive is None \
+            or machine.drive.type != "engine":
+        raise SceneError(f"scene '{scene.name}' is not an engine: expected mechanism.type crank_slider and drive.type "
+                         "engine (see docs/engines.md)")
+    omega = scene.scenario.initial.omega if args.omega is None else args.omega
+    if not (math.isfinite(omega) and omega > 0.0):
+        source = "--omega" if args.omega is not None else "the scene's scenario.initial.omega"
+        raise SceneError(f"{source} = {omega:g} rad/s: expected a crank speed > 0 (give --omega W)")
+    _check_outputs(args, args.out)
+    model = build_model(scene)
+    report = engine_report(model, omega)
+    if args.out is not None:
+        write_csv(args.out, engine_curve_columns(model, omega))
+        report["csv"] = str(args.out)
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_engine
+
+        plot_engine(model, omega, args.plot)
+        report["plot"] = str(args.plot)
+    print(to_json(report) if args.json else format_engine(report))
     return 0
 
 

@@ -41,24 +41,29 @@ def describe(model: MachineModel) -> str:
         lines.append(f"  - load  external load moment (N m) by time: {changes}   [reads t]")
     if not model.effects and not model.has_weight and not model.load_pieces:
         lines.append("  (none: the machine coasts)")
+    if model.joint_friction is not None:
+        lines.append("joint friction (kinetostatics per right-hand side; epsilon solved from the implicit equation): "
+                     f"{model.joint_friction.formula}")
     if model.coupling is not None:
         coupling = model.coupling
         modes = coupling_modes(model)
         elastic = (f"{coupling.stiffness:g} twist" if coupling.table is None else
                    f"M_elastic(twist) (table of {coupling.table[0].size} points, {coupling.table[0][0]:g} to "
                    f"{coupling.table[0][-1]:g} rad, end slopes continued)")
-        driven = (f"I2 = {coupling.driven_inertia:g} kg m^2" if coupling.driven_reduced is None else
+        driven = (f"I2 = {coupling.driven_inertia:g} kg m^2" if coupling.driven.reduced is None else
                   f"I2(phi_driven) = {coupling.driven_inertia:g} kg m^2 + "
                   f"{machine.coupling.driven.mechanism.type} links")
         lines.append(f"coupling: M_m = {elastic} + {coupling.damping:g} (omega - omega_driven) N m to a driven part of "
                      f"{driven} (relative mode at the operating twist {modes.operating_twist:.4g} rad: stiffness "
                      f"{modes.stiffness:.4g} N m/rad, natural frequency {modes.natural_frequency:.4g} rad/s, damping "
                      f"ratio {modes.damping_ratio:.3g})")
-        for effect in coupling.driven_effects:
-            formula = effect.formula.replace("omega", "omega_driven").replace("phi", "phi_driven")
-            lines.append(f"  driven part's load: {formula}")
-        if model.load_pieces:
-            lines.append("  the external load acts on the driven part")
+        lines += _driven_lines(model)
+    if model.clutch is not None:
+        clutch = model.clutch
+        lines.append(f"clutch: Coulomb friction, static {clutch.static_torque:g} N m, kinetic {clutch.kinetic_torque:g} "
+                     f"N m (exact stick/slip modes), to a driven part of I = {clutch.driven.inertia:g} kg m^2 "
+                     "reduced to its shaft")
+        lines += _driven_lines(model)
     if model.governor is not None:
         lines.append("governor (M_d = throttle * drive; hybrid modes with exact stick, break-away and stops):")
         lines += [f"  {line}" for line in model.governor.describe()]
@@ -82,6 +87,24 @@ def describe(model: MachineModel) -> str:
     lines.append(f"scenario: {scene.scenario.duration:g} s from phi = {scene.scenario.initial.phi:g} rad, "
                  f"omega = {scene.scenario.initial.omega:g} rad/s")
     return "\n".join(lines)
+
+
+def _driven_lines(model: MachineModel) -> list[str]:
+    """describe's lines for the driven part behind a coupling or clutch: loads, branches, resistance at rest."""
+    driven = model.driven
+    in_branches = {index for branch in driven.branches for index in branch.effects}
+    lines = [f"  driven part's load: {effect.formula.replace('omega', 'omega_driven').replace('phi', 'phi_driven')}"
+             for index, effect in enumerate(driven.effects) if index not in in_branches]
+    for branch in driven.branches:
+        lines.append(f"  branch {branch.name}: I_n = {branch.inertia:g} kg m^2, i_1n = {branch.ratio:g} (adds "
+                     f"{branch.inertia / branch.ratio ** 2:.4g} kg m^2); section torque M_section_{branch.name} = "
+                     f"M_n,c + (I_n / i_1n) epsilon_driven")
+        lines += [f"    load {driven.effects[i].formula}" for i in branch.effects]
+    lines.append(f"  at rest it is held by its Coulomb resistances (constant loads{' and the external load' if model.load_pieces else ''}"
+                 f"): {driven.resistance:g} N m{' + external' if model.load_pieces else ''}")
+    if model.load_pieces:
+        lines.append("  the external load acts on the driven part")
+    return lines
 
 
 def format_summary(model: MachineModel, summary: dict) -> str:
@@ -112,15 +135,44 @@ def format_summary(model: MachineModel, summary: dict) -> str:
                  + (f", {solver['njev']} jacobians, {solver['nlu']} LU" if solver["njev"] else "")
                  + (f", {solver['switches']} switches located" if solver["switches"] else "")
                  + (f", {solver['restarts']} restarts" if solver["restarts"] else "")
-                 + (f", {solver['events']} governor events" if solver["events"] else ""))
+                 + (f", {solver['events']} mode events" if solver["events"] else ""))
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
     if summary.get("two_mass"):
         lines += two_mass_lines(summary["two_mass"])
+    if summary.get("drive_train"):
+        lines += _drive_train_lines(summary["drive_train"], energy["works"].get("clutch_slip"))
     for key in ("csv", "plot", "recording"):
         if key in summary:
             lines.append(f"wrote {summary[key]}")
     return "\n".join(lines)
+
+
+def _drive_train_lines(train: dict, slip_work: float | None) -> list[str]:
+    """The drive train's part of a run summary: slip phases and lock times, held stretches, section torques."""
+    lines = []
+    clutch = train["clutch"]
+    if clutch is not None:
+        phases = ", ".join(f"{start:.6g}-{end:.6g} s ({'motor ahead' if mode == 'slip+' else 'machine ahead'})"
+                           for start, end, mode in clutch["slip_phases"]) or "never"
+        locks = ", ".join(f"{t:.9g}" for t in clutch["lock_times"]) or "never"
+        lines.append(f"clutch: slips {phases}; slip ends (locks) at {locks} s"
+                     + (f"; work lost in slip {-slip_work:.6g} J" if slip_work is not None else ""))
+    if train["held"]:
+        lines.append("driven part held at rest by its resistances: "
+                     + ", ".join(f"{start:.6g}-{end:.6g} s" for start, end in train["held"]))
+    if train["sections"]:
+        if clutch is not None and clutch["beta"] is not None:
+            lines.append(f"section torques (paper: M_kr = M_n,c + (I_n / i_1n) domega/dt; clutch reserve beta = "
+                         f"kinetic torque / nominal load {clutch['nominal_load']:.4g} N m = {clutch['beta']:.4g}):")
+        else:
+            lines.append("section torques (M_kr = M_n,c + (I_n / i_1n) domega/dt):")
+        for name, section in train["sections"].items():
+            estimate = section["paper_estimate"]
+            lines.append(f"  {name}: max {section['max']:.6g} N m at {section['time']:.4g} s (nominal "
+                         f"{section['nominal']:.4g} N m" + (f", paper's estimate {estimate:.6g} N m)" if estimate is not None
+                                                            else ")"))
+    return lines
 
 
 def format_cosimulation_summary(summary: dict) -> str:
@@ -282,3 +334,46 @@ def write_csv(path, columns: dict[str, np.ndarray], digits: int = 12) -> None:
     exactly)."""
     np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="",
                fmt=f"%.{digits}g")
+
+
+def format_engine(report: dict) -> str:
+    """The human-readable analysis of an engine at constant speed (`mech-regulator engine`)."""
+    geometry, piston, cylinders, torque = report["geometry"], report["piston"], report["cylinders"], report["torque"]
+    error = piston["approximation_error"]
+    strokes = "four-stroke" if cylinders["cycle_deg"] == 720.0 else "two-stroke"
+    lines = [f"scene {report['scene']}: engine at omega = {report['omega']:.6g} rad/s ({report['rpm']:.5g} rpm)",
+             f"geometry: R = {geometry['crank']:g} m, l = {geometry['rod']:g} m, e = {geometry['offset']:g} m, "
+             f"lambda = R/l = {geometry['lambda']:.4g}, k = e/R = {geometry['k']:.4g}; stroke S = "
+             f"{geometry['stroke'] * 1000:.5g} mm, bore {geometry['bore'] * 1000:.4g} mm, displacement "
+             f"{geometry['displacement'] * 1e6:.5g} cm^3",
+             f"dead centres: top at phi = {geometry['top_dead_centre_deg']:.4g} deg, bottom at "
+             f"{geometry['bottom_dead_centre_deg']:.5g} deg (source 002: alpha1 = {geometry['source_alpha1_deg']:.4g} "
+             f"deg, alpha2 = {geometry['source_alpha2_deg']:.4g} deg from 180)",
+             f"piston 1 (from the top dead centre): v max {piston['v_max']:.5g} m/s, mean speed S n / 30 = "
+             f"{piston['mean_speed']:.5g} m/s; acceleration j {piston['a_max']:.6g} to {piston['a_min']:.6g} m/s^2, "
+             f"at the top dead centre {piston['j_top']:.6g}, at the bottom {piston['j_bottom']:.6g} "
+             f"(central formulas R w^2 (1 + lambda) = {piston['j_top_central_formula']:.6g}, "
+             f"-R w^2 (1 - lambda) = {piston['j_bottom_central_formula']:.6g})",
+             f"source 002's first-order formulas against the exact kinematics, largest error over the turn: "
+             f"x {error['x'] * 1000:.3g} mm, v {error['v']:.3g} m/s, j {error['a']:.4g} m/s^2",
+             f"cylinders: 1 ({strokes})" if cylinders["count"] == 1 else
+             f"cylinders: {cylinders['count']} ({strokes}), throws {_degrees(cylinders['throw_deg'])} deg"
+             + (f", banks {_degrees(cylinders['bank_deg'])} deg" if any(cylinders["bank_deg"]) else "")
+             + f"; firing order {'-'.join(map(str, cylinders['firing_order']))}, at "
+             f"{_degrees(sorted(cylinders['firing_delay_deg']))} deg",
+             f"mean indicated moment {torque['mean_gas']:.6g} N m, indicated power {torque['indicated_power'] / 1000:.5g} "
+             f"kW, work per cycle {torque['indicated_work_per_cycle']:.6g} J, mean effective pressure "
+             f"{torque['mean_effective_pressure'] / 1e5:.4g} bar; mean inertia moment {torque['mean_inertia']:.2g} N m",
+             f"total moment (gas + inertia) from {torque['total_min']:.5g} to {torque['total_max']:.5g} N m",
+             "largest harmonics, order: amplitude [N m] (phase [deg]), M = mean + sum A cos(order phi + phase):"]
+    for key, label in (("gas_harmonics", "gas"), ("inertia_harmonics", "inertia"), ("total_harmonics", "total")):
+        lines.append(f"  {label:<8} " + ", ".join(f"{h['order']:g}: {h['amplitude']:.4g} ({h['phase_deg']:.0f})"
+                                                  for h in torque[key][:6]))
+    for key in ("csv", "plot"):
+        if key in report:
+            lines.append(f"wrote {report[key]}")
+    return "\n".join(lines)
+
+
+def _degrees(values) -> str:
+    return ", ".join(f"{value:g}" for value in values)

@@ -2,8 +2,10 @@
 
 An effect is built once from its scene entry into a plain closure
 `moment(t, phi, omega, q, dq) -> M [N m]` over constants, where q is the mechanism's output
-coordinate (slider position x [m] or rocker angle th4 [rad]) and dq = dq/dphi its velocity ratio.
+coordinate (slider position x [m], rocker angle th4 [rad] or shuttle bar position x_C [m]) and dq = dq/dphi its velocity ratio.
 A force F on the output link becomes the reduced moment `F dq` (same power, physics.md section 1).
+With several cylinders q and dq are tuples, one entry per piston; only the engine drive reads them then
+(loads on "the slider" are refused by the scene).
 Only the effects a scene names are built; the right-hand side calls exactly these.
 """
 
@@ -29,7 +31,10 @@ class Effect:
     name: column name in outputs; role: 'drive' or 'load'; moment: the closure;
     depends_on: which of 't', 'phi', 'omega' it reads ('phi' includes the output coordinate);
     period: its period in phi [rad] if it depends on phi; switch_angles: angles in [0, period)
-    where it jumps [rad]; formula: what it computes, for `describe`.
+    where it jumps [rad]; formula: what it computes, for `describe`; output_force: for an effect acting
+    on the output link, the generalised force Q(t, phi, omega, q, dq) on it (slider force along +x [N],
+    rocker moment [N m]) whose reduced moment is `moment` = Q dq, else None (read by the kinetostatics of
+    joint friction only).
     """
 
     name: str
@@ -39,10 +44,11 @@ class Effect:
     formula: str
     period: float | None = None
     switch_angles: tuple[float, ...] = ()
+    output_force: MomentFunction | None = None
 
 
-def build_drive(drive: schema.Drive) -> Effect:
-    """The driving moment M_d of a scene's `machine.drive`."""
+def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:
+    """The driving moment M_d of a scene's `machine.drive` (an engine reads the mechanism's cylinders)."""
     if isinstance(drive, schema.ConstantDrive):
         torque = drive.torque
         return Effect("drive", "drive", lambda t, phi, omega, q, dq: torque, frozenset(),
@@ -61,11 +67,41 @@ def build_drive(drive: schema.Drive) -> Effect:
         phase = math.radians(drive.phase_deg)
         pressure = periodic_linear([math.radians(a) for a in drive.angle_deg], drive.pressure,
                                    math.radians(drive.cycle_deg))
+        cylinders = mechanism.cylinders if isinstance(mechanism, schema.CrankSlider) else None
+        if cylinders is not None:
+            return _multi_cylinder_engine(drive, cylinders, area, pressure)
         # Gas pushes the piston towards the crank axis: F_x = -p A, reduced moment F_x dx/dphi.
         return Effect("drive", "drive", lambda t, phi, omega, q, dq: -pressure(phi + phase) * area * dq,
                       frozenset({"phi"}), f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, "
-                                          f"{drive.cycle_deg:g} deg cycle", period=math.radians(drive.cycle_deg))
+                                          f"{drive.cycle_deg:g} deg cycle", period=math.radians(drive.cycle_deg),
+                      output_force=lambda t, phi, omega, q, dq: -pressure(phi + phase) * area)
     raise TypeError(f"no drive effect for {type(drive).__name__}")
+
+
+def _multi_cylinder_engine(drive: schema.Engine, cylinders: list[schema.Cylinder], area: float,
+                           pressure: Callable[[float], float]) -> Effect:
+    """Gas moment of identical cylinders on one crankshaft: `M_d = -A sum_i p(phi + phase - d_i) x_i'`, with
+    cylinder i's firing delay d_i (mechanisms.engine.firing_delays) and its piston's x_i' = dx_i/dphi, which
+    the multi-cylinder mechanism passes as the tuple dq. Linear in each x_i': cylinder i's share is the
+    moment with the other ratios set to zero."""
+    from mech_regulator.mechanisms.engine import firing_delays
+
+    delays = firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], drive.cycle_deg,
+                           drive.firing_order, drive.firing_deg)
+    shifts = tuple(math.radians(drive.phase_deg - delay) for delay in delays)
+
+    def moment(t: float, phi: float, omega: float, q, dq) -> float:
+        total = 0.0
+        for shift, ratio in zip(shifts, dq):
+            total += pressure(phi + shift) * ratio
+        return -area * total
+
+    order = "-".join(str(i + 1) for i in sorted(range(len(delays)), key=delays.__getitem__))
+    return Effect("drive", "drive", moment, frozenset({"phi"}),
+                  f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, {len(cylinders)} cylinders, "
+                  f"A = {area:.6g} m^2, "
+                  f"{drive.cycle_deg:g} deg cycle, firing {order} at {', '.join(f'{d:g}' for d in sorted(delays))} deg",
+                  period=math.radians(drive.cycle_deg))
 
 
 def _cutting(load: schema.CuttingLoad) -> Effect:
@@ -109,23 +145,25 @@ def build_load(load: schema.Load, kinematic_period: float | None) -> Effect:
                       period=math.radians(load.period_deg))
     if isinstance(load, schema.CuttingLoad):
         return _cutting(load)
-    on = "slider" if load.type.startswith("slider") else "rocker"
+    on = {"slider": "slider", "rocker": "rocker", "shuttle": "shuttle bar"}[load.type.split("_")[0]]
     if isinstance(load, (schema.SliderConstant, schema.RockerConstant)):
         value = load.force if isinstance(load, schema.SliderConstant) else load.torque
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: value * dq, frozenset({"phi"}),
-                      f"constant on the {on}: M = {value:g} dq/dphi", period=kinematic_period)
+                      f"constant on the {on}: M = {value:g} dq/dphi", period=kinematic_period,
+                      output_force=lambda t, phi, omega, q, dq: value)
     if isinstance(load, schema.OutputViscous):
         c = load.coefficient
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: -c * dq * dq * omega,
                       frozenset({"phi", "omega"}), f"viscous on the {on}: M = -{c:g} (dq/dphi)^2 omega",
-                      period=kinematic_period)
+                      period=kinematic_period, output_force=lambda t, phi, omega, q, dq: -c * dq * omega)
     if isinstance(load, schema.OutputSpring):
         k, free = load.stiffness, load.free_position
         return Effect(load.type, "load", lambda t, phi, omega, q, dq: -k * (q - free) * dq, frozenset({"phi"}),
-                      f"spring on the {on}: M = -{k:g} (q - {free:g}) dq/dphi", period=kinematic_period)
+                      f"spring on the {on}: M = -{k:g} (q - {free:g}) dq/dphi", period=kinematic_period,
+                      output_force=lambda t, phi, omega, q, dq: -k * (q - free))
     if isinstance(load, schema.SliderTable):
         force = clamped_linear(load.position, load.force)
         return Effect("slider_table", "load", lambda t, phi, omega, q, dq: force(q) * dq, frozenset({"phi"}),
                       f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi",
-                      period=kinematic_period)
+                      period=kinematic_period, output_force=lambda t, phi, omega, q, dq: force(q))
     raise TypeError(f"no load effect for {type(load).__name__}")

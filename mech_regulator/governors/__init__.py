@@ -33,11 +33,22 @@ ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5  # indices of the governor's states in 
 @dataclass(frozen=True)
 class Guard:
     """A condition of a mode: value(y) >= 0 while the mode holds; when it turns negative the solver
-    applies transition(y) -> (new mode, state to restart from)."""
+    applies transition(y) -> (new mode, state to restart from). A timed guard's value and transition
+    also read the time: value(t, y), transition(t, y) (a moment that changes in time, such as the
+    external load, takes part in it)."""
 
     name: str
-    value: Callable[[np.ndarray], float]
-    transition: Callable[[np.ndarray], tuple[Mode, np.ndarray]]
+    value: Callable[..., float]
+    transition: Callable[..., tuple[Mode, np.ndarray]]
+    timed: bool = False
+
+    def level(self, t: float, y: np.ndarray) -> float:
+        """The guard's value at time t [s] and state y."""
+        return self.value(t, y) if self.timed else self.value(y)
+
+    def apply(self, t: float, y: np.ndarray) -> tuple[Mode, np.ndarray]:
+        """The guard's transition at time t [s] from state y: (new mode, state to restart from)."""
+        return self.transition(t, y) if self.timed else self.transition(y)
 
 
 @dataclass(frozen=True)

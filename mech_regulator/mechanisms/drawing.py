@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from mech_regulator.mechanisms import crank_slider, four_bar
+from mech_regulator.mechanisms import crank_slider, four_bar, walking_beam
 from mech_regulator.scene import schema
 
 BLOCK_LENGTH_PER_CRANK = 1.0    # slider block length along the guide, per crank radius [-]
@@ -26,12 +26,13 @@ BOUNDS_SAMPLES = 360            # crank angles sampled over a turn to find the s
 MOVING_PARTS = {
     "crank_slider": ("crank", "rod", "slider", "joints"),
     "four_bar": ("crank", "coupler", "rocker", "joints"),
+    "walking_beam": ("crank", "coupler", "rocker", "tie", "side", "shuttle", "joints"),
     None: ("spoke", "joints"),
 }
 
 
 def mechanism_kind(mechanism_spec: schema.Mechanism | None) -> str | None:
-    """'crank_slider', 'four_bar', or None for a machine without a mechanism."""
+    """'crank_slider', 'four_bar', 'walking_beam', or None for a machine without a mechanism."""
     return None if mechanism_spec is None else mechanism_spec.type
 
 
@@ -60,6 +61,9 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
     Four-bar (a, b, c, d, th1): crank A-B with A = 0, B = a e^{i phi}; coupler B-C; rocker D-C with
     D = d e^{i th1}, C = D + c e^{i th4}, th4 from `four_bar.link_angles` on the scene's branch; the frame
     A-D; the path of the pin B.
+    Walking beam (source 004's names, `walking_beam.solve`): crank O1-A, coupler triangle A-B-C, the two
+    rockers O2-B and O3-E (a bundle), the tie B-E, the side link E-D, the shuttle bar C-D, the frame O1-O2-O3
+    and the path of the pin A.
     No mechanism: a disc of radius DISC_RADIUS (schematic: the machine has no link lengths) and a spoke
     from its centre to DISC_RADIUS (cos phi, sin phi).
     """
@@ -68,6 +72,8 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
         return _crank_slider_outline(mechanism_spec, phi)
     if kind == "four_bar":
         return _four_bar_outline(mechanism_spec, phi)
+    if kind == "walking_beam":
+        return _walking_beam_outline(mechanism_spec, phi)
     tip = (DISC_RADIUS * math.cos(phi), DISC_RADIUS * math.sin(phi))
     return {"disc": circle((0.0, 0.0), DISC_RADIUS), "spoke": np.array([[0.0, 0.0], tip]),
             "joints": np.array([[0.0, 0.0]])}
@@ -105,6 +111,29 @@ def _four_bar_outline(spec: schema.FourBar, phi: float) -> dict[str, np.ndarray]
         "coupler": np.array([B, C]),
         "rocker": np.array([D, C]),
         "joints": np.array([A, B, C, D]),
+    }
+
+
+def _walking_beam_outline(spec: schema.WalkingBeam, phi: float) -> dict[str, np.ndarray]:
+    geometry = walking_beam.geometry_from_scene(spec)
+    points = {name: motion[0] for name, motion in walking_beam.solve(phi, geometry)[1].items()}
+    points["O1"] = 0j
+    points["O2"] = geometry.frame * np.exp(1j * geometry.frame_angle)
+    points["O3"] = points["O2"] + walking_beam.beam(geometry)
+
+    def line(*names: str) -> np.ndarray:
+        return np.array([[points[name].real, points[name].imag] for name in names])
+
+    return {
+        "frame": line("O1", "O2", "O3"),
+        "crank_path": circle((0.0, 0.0), geometry.crank),
+        "crank": line("O1", "A"),
+        "coupler": line("A", "B", "C", "A"),
+        "rocker": np.stack([line("O2", "B"), line("O3", "E")]),
+        "tie": line("B", "E"),
+        "side": line("E", "D"),
+        "shuttle": line("C", "D"),
+        "joints": line("O1", "A", "B", "C", "D", "E", "O2", "O3"),
     }
 
 

@@ -13,7 +13,10 @@ A machine with an elastic coupling is the two-mass machine of physics.md section
 driving part above) passes M_m = M_elastic(phi - phi2) + c (omega - omega2) (M_elastic = k twist or a
 tabulated characteristic) to a driven part with its own mechanism and loads,
 I2(phi2) domega2/dt + 1/2 I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external;
-its states, the twist phi - phi2 and omega2, come last in the state vector.
+its states, the twist phi - phi2 and omega2, come last in the state vector. A machine with a friction clutch has the driven part's speed
+omega2 last. The driven part (possibly a branched drive), its Coulomb resistances and the modes of clutch
+and driven part are in model/drivetrain.py; a mode is the governor's (sleeve, servo) followed by the
+drive train's (clutch, driven part) or (driven part,).
 """
 
 from __future__ import annotations
@@ -27,12 +30,17 @@ from fractions import Fraction
 from typing import Callable
 
 import numpy as np
+
 from scipy import optimize
 
 from mech_regulator.effects import Effect, build_drive, build_load
 from mech_regulator.effects.tables import extrapolated_linear
-from mech_regulator.governors import Governor, Mode, build_governor
+from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
+from mech_regulator.governors import Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
+from mech_regulator.model.drivetrain import (BACKWARD, CLUTCH_CODE, DIRECTION, FORWARD, HELD, STUCK, ClutchModel,
+                                             DrivenModel, Forces, build_driven, coulomb_factor, train_guards)
+from mech_regulator.scene import SceneError
 from mech_regulator.scene.schema import Scene
 
 CYCLE_POINTS_PER_TURN = 720  # samples per turn of the cycle averages of the governor's statics
@@ -59,20 +67,26 @@ class CouplingModel:
     """An elastic coupling and the driven part behind it (physics.md section 4).
 
     stiffness k [N m/rad] of a linear coupling, or table = (twist [rad], moment [N m]) knots of a nonlinear
-    characteristic (linear between them, end segments continued); elastic: twist -> M_elastic [N m] for the
-    hot path; damping c [N m s/rad]; the driven part: constant inertia [kg m^2], driven_reduced: its
-    mechanism's phi2 -> (I_links, dI_links/dphi2, M_weight, q2, dq2/dphi2) or None; driven_effects: its
-    resisting moments, read at (t, phi2, omega2, q2, dq2).
+    characteristic (linear between them, end segments continued); damping c [N m s/rad]; the driven part
+    (model/drivetrain.py: inertia reduced to its shaft, its mechanism, its moments read at (t, phi2, omega2,
+    q2, dq2)); elastic: twist -> M_elastic [N m] for the hot path.
     """
 
     stiffness: float | None
     damping: float
-    driven_inertia: float
-    driven_effects: tuple[Effect, ...]
+    driven: DrivenModel
     elastic: Callable[[float], float]
     table: tuple[np.ndarray, np.ndarray] | None = None
-    driven_reduced: Reduced | None = None
-    driven_has_weight: bool = False
+
+    @property
+    def driven_inertia(self) -> float:
+        """I2 [kg m^2], branches included."""
+        return self.driven.inertia
+
+    @property
+    def driven_effects(self) -> tuple[Effect, ...]:
+        """The driven part's moments (effects of omega_driven), branches' reduced."""
+        return self.driven.effects
 
     def moment(self, twist, relative_speed):
         """The moment the coupling passes to the driven part [N m]: M_m = M_elastic(twist) + c (omega - omega2)
@@ -120,28 +134,15 @@ class CouplingModel:
         i = int(np.clip(np.searchsorted(values, moment, side="right") - 1, 0, knots.size - 2))
         return float(knots[i] + (moment - values[i]) * (knots[i + 1] - knots[i]) / (values[i + 1] - values[i]))
 
-    @property
-    def reads_angle(self) -> bool:
-        """Whether the driven part's inertia or moments depend on its angle phi2."""
-        return self.driven_reduced is not None or any("phi" in e.depends_on for e in self.driven_effects)
-
-    def driven_state(self, phi2: float) -> tuple[float, float, float, float, float]:
-        """(I2 [kg m^2], dI2/dphi2 [kg m^2/rad], M_weight [N m], q2, dq2/dphi2) of the driven part at phi2 [rad]."""
-        if self.driven_reduced is None:
-            return self.driven_inertia, 0.0, 0.0, 0.0, 0.0
-        links, slope, weight, q, dq = self.driven_reduced(phi2)
-        return self.driven_inertia + links, slope, weight, q, dq
-
     def driven_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
-        """Sum of the driven part's own moments (its loads and its links' weight) at phi_driven [rad] and
-        omega_driven [rad/s] [N m] (negative: resisting)."""
-        _, _, weight, q, dq = self.driven_state(phi_driven)
-        return weight + sum(effect.moment(t, phi_driven, omega_driven, q, dq) for effect in self.driven_effects)
+        """Sum of the driven part's own moments (its loads and its links' weight) turning forward at phi_driven
+        [rad] and omega_driven [rad/s] [N m] (negative: resisting)."""
+        return self.driven.forward_moment(t, omega_driven, phi_driven)
 
     def required_moment(self, t: float, phi_driven: float, omega: float, external: float) -> float:
         """The coupling moment [N m] that keeps the driven part at constant speed omega [rad/s] at phi_driven
         [rad] against its moments and the external load [N m]: M_m = external - M_c2 + 1/2 I2' omega^2."""
-        _, slope, *_ = self.driven_state(phi_driven)
+        _, slope, *_ = self.driven.state(phi_driven)
         return external - self.driven_moment(t, omega, phi_driven) + 0.5 * slope * omega * omega
 
 
@@ -153,7 +154,9 @@ class MachineModel:
     phi -> (J_links, dJ_links/dphi, M_weight, q, dq/dphi), or None for a constant-J machine;
     effects: the drive and loads; load_pieces: the external load in time, or () if the scene has none;
     governor: the speed governor whose throttle scales the drive, or None; coupling: the elastic coupling
-    to a driven part (which then carries the external load), or None.
+    to a driven part (which then carries the external load), or None; clutch: the friction clutch to a
+    driven part (which then carries the external load), or None; joint_friction: the friction in the
+    joints (effects.joint_friction), or None.
     """
 
     scene: Scene
@@ -164,6 +167,15 @@ class MachineModel:
     load_pieces: tuple[LoadPiece, ...]
     governor: Governor | None = None
     coupling: CouplingModel | None = None
+    joint_friction: JointFrictionModel | None = None
+    clutch: ClutchModel | None = None
+
+    @property
+    def driven(self) -> DrivenModel | None:
+        """The driven part behind the coupling or the clutch (None without one)."""
+        if self.coupling is not None:
+            return self.coupling.driven
+        return self.clutch.driven if self.clutch is not None else None
 
     def breakpoints(self) -> list[float]:
         """Times where the external load has a kink or a jump: integration never steps across them."""
@@ -191,7 +203,7 @@ class MachineModel:
         Periods are taken as rational multiples of 2 pi; a machine with nothing periodic in phi gets 2 pi.
         """
         turns = [Fraction(1)]
-        driven = self.coupling.driven_effects if self.coupling is not None else ()
+        driven = self.driven.effects if self.driven is not None else ()
         turns += [Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
                   for effect in self.effects + driven if effect.period is not None]
         lcm = turns[0]
@@ -202,12 +214,14 @@ class MachineModel:
 
     def depends_on(self) -> frozenset[str]:
         """Which of 't', 'phi', 'omega' the net moment reads."""
-        effects = self.effects + (self.coupling.driven_effects if self.coupling is not None else ())
+        effects = self.effects + (self.driven.effects if self.driven is not None else ())
         reads = set().union(*(effect.depends_on for effect in effects)) if effects else set()
-        if self.has_weight or (self.coupling is not None and self.coupling.driven_reduced is not None):
+        if self.has_weight or (self.driven is not None and self.driven.reduced is not None):
             reads.add("phi")
         if self.load_pieces:
             reads.add("t")
+        if self.joint_friction is not None:
+            reads.add("omega")
         return frozenset(reads)
 
     def inertia(self, phi: float) -> tuple[float, float]:
@@ -228,20 +242,35 @@ class MachineModel:
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
             mode: Mode | None = None, ideal: bool = False) -> RightHandSide:
-        """The right-hand side `f(t, y) = dy/dt` for one external-load piece and governor mode.
+        """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
         (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with throttle = 1
         without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c includes -M_m, the
         external load acts on the driven part, d twist/dt = omega - omega2 and I2(phi2) domega2/dt + 1/2
-        I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external, phi2 = phi - twist (physics.md section 4).
-        window = (lo, hi): the crank-angle interval between two
-        switch angles the solver is in; effects that jump at switch angles then see phi clamped into it, so they
-        keep their mode across the switch until the solver has located the crossing and restarted (no step
-        straddles a jump). The drive is scaled by the governor's throttle(y) or, for a machine co-simulated with
-        an outside governor, by the piece's held throttle. ideal: the governor without friction, limits and
-        stops (the smooth model of the stability analysis).
+        I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external, phi2 = phi - twist (physics.md section 4),
+        domega2/dt = 0 while the driven part is held at rest. With a clutch, y
+        ends with omega2 and the crank and driven part follow the clutch's mode (model/drivetrain.py); while it
+        is stuck the solver's own omega2 is frozen and `constraint` sets it to omega. window = (lo, hi): the
+        crank-angle interval between two switch angles the solver is in; effects that jump at switch angles then
+        see phi clamped into it, so they keep their mode across the switch until the solver has located the
+        crossing and restarted (no step straddles a jump). The drive is scaled by the governor's throttle(y) or,
+        for a machine co-simulated with an outside governor, by the piece's held throttle. ideal: the governor
+        without friction, limits and stops (the smooth model of the stability analysis). mode None: the governor
+        as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
         """
+        return self._right_hand_side(piece, window, mode, ideal, crank_only=False)
+
+    @functools.cached_property
+    def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
+        """(t, y) -> (J(phi) [kg m^2], F1 [N m]): the crank's inertia and its net moment apart from the coupling or
+        clutch and the external load, F1 = throttle M_drive + M_c + M_weight - 1/2 J' omega^2 (throttle from the
+        governor's state in y)."""
+        return self._right_hand_side(None, None, None, False, crank_only=True)
+
+    def _right_hand_side(self, piece: LoadPiece | None, window: tuple[float, float] | None, mode: Mode | None,
+                         ideal: bool, crank_only: bool) -> Callable:
+        """rhs (see there) or, crank_only, crank_side."""
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
         scale_drive = governor is not None or held_throttle != 1.0
@@ -259,14 +288,12 @@ class MachineModel:
         J0 = self.inertia_constant
         reduced = self.reduced
         throttle = governor.throttle if governor is not None else None
-        governor_rates = governor.derivatives(mode, ideal) if governor is not None else None
-        coupling = self.coupling
-        if coupling is not None:
-            elastic, c = coupling.elastic, coupling.damping
-            driven_state = coupling.driven_state
-            driven = tuple(effect.moment for effect in coupling.driven_effects)
-            index = self.coupling_index
-        plain = governor_rates is None and coupling is None
+        governor_rates = None
+        if governor is not None and not crank_only:
+            governor_rates = governor.derivatives(mode[:2] if mode is not None else mode, ideal)
+        train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode))
+        plain = governor_rates is None and train is None and not crank_only
+        external_on_crank = train is None and not crank_only
 
         def machine(t: float, y: np.ndarray):
             phi, omega = y[0], y[1]
@@ -275,11 +302,8 @@ class MachineModel:
             else:
                 J_links, dJ, total, q, dq = reduced(phi)
                 J = J0 + J_links
-            if coupling is None:
+            if external_on_crank:
                 total -= offset + slope * t
-            else:
-                passed = elastic(y[index]) + c * (omega - y[index + 1])
-                total -= passed
             for moment in smooth:
                 total += moment(t, phi, omega, q, dq)
             for moment in switched:
@@ -288,32 +312,192 @@ class MachineModel:
                 for moment in scaled:
                     total += held_throttle * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            share = held_throttle if governor_rates is None else throttle(y)
+            share = held_throttle if throttle is None else throttle(y)
             for moment in scaled:
                 total += share * moment(t, phi, omega, q, dq)
-            rates = [omega, (total - 0.5 * dJ * omega * omega) / J]
+            net = total - 0.5 * dJ * omega * omega
+            if crank_only:
+                return J, net
+            if train is None:
+                return [omega, net / J] + governor_rates(y)
+            crank_rate, train_rates = train(t, y, J, net, offset + slope * t)
+            rates = [omega, crank_rate]
             if governor_rates is not None:
                 rates += governor_rates(y)
-            if coupling is not None:
-                phi2, omega2 = phi - y[index], y[index + 1]
-                I2, dI2, driven_total, q2, dq2 = driven_state(phi2)
-                driven_total += passed - (offset + slope * t)
-                for moment in driven:
-                    driven_total += moment(t, phi2, omega2, q2, dq2)
-                rates += [omega - omega2, (driven_total - 0.5 * dI2 * omega2 * omega2) / I2]
+            return rates + train_rates
+
+        if self.joint_friction is None:
+            return machine
+        return self._with_joint_friction(machine, scale_drive, held_throttle)
+
+    def _with_joint_friction(self, frictionless: RightHandSide, scale_drive: bool, held_throttle: float
+                             ) -> RightHandSide:
+        """The right-hand side with joint friction: frictionless's rates with epsilon replaced by the root of
+        `J epsilon = J epsilon_0 - sign(omega) F(epsilon)` (effects.joint_friction), epsilon_0 being the
+        frictionless acceleration and F reading the force on the output link (the drive's scaled by the
+        throttle)."""
+        friction = self.joint_friction
+        J0, reduced = self.inertia_constant, self.reduced
+        throttle = self.governor.throttle if self.governor is not None else None
+        output_force = self._output_force(scale_drive)
+
+        def machine(t: float, y: np.ndarray):
+            rates = list(frictionless(t, y))
+            phi, omega = y[0], y[1]
+            if reduced is None:
+                J, q, dq = J0, 0.0, 0.0
+            else:
+                J_links, _, _, q, dq = reduced(phi)
+                J = J0 + J_links
+            share = held_throttle if throttle is None else throttle(y)
+            force = output_force(t, phi, omega, q, dq, share)
+            rates[1] = friction.acceleration(phi, omega, force, J, J * rates[1])
             return rates
 
         return machine
 
+    def _output_force(self, scale_drive: bool) -> Callable[..., float]:
+        """`force(t, phi, omega, q, dq, share)`: the generalised force on the output link [N or N m], the sum of
+        the effects' output forces, the drive's times share (the throttle [-]) when scale_drive."""
+        scaled = tuple(effect.output_force for effect in self.effects
+                       if effect.output_force is not None and scale_drive and effect.role == "drive")
+        fixed = tuple(effect.output_force for effect in self.effects
+                      if effect.output_force is not None and not (scale_drive and effect.role == "drive"))
+
+        def force(t: float, phi: float, omega: float, q: float, dq: float, share: float) -> float:
+            total = 0.0
+            for function in fixed:
+                total += function(t, phi, omega, q, dq)
+            for function in scaled:
+                total += share * function(t, phi, omega, q, dq)
+            return total
+
+        return force
+
+    def _joint_friction_columns(self, t: np.ndarray, y: np.ndarray, J: np.ndarray, moment: np.ndarray,
+                                q: np.ndarray, dq: np.ndarray, throttle: np.ndarray) -> dict[str, np.ndarray]:
+        """Joint friction at the samples, given J [kg m^2] and every other moment M = M_d + M_c - 1/2 J' omega^2
+        [N m]: M_joint_friction, the friction reduced to the crank (J epsilon - M) [N m], and for each joint
+        friction_<joint> (journal: moment rho |R| [N m]; guide: force f |N| [N]) and reaction_<joint> |R| [N];
+        friction_thrust_collar [N m] with a collar."""
+        friction = self.joint_friction
+        output_force = self._output_force(True)
+        n = t.size
+        reduced = np.zeros(n)
+        frictions = np.zeros((len(friction.names), n))
+        reactions = np.zeros((len(friction.names), n))
+        for i in range(n):
+            phi, omega = y[0, i], y[1, i]
+            force = output_force(t[i], phi, omega, q[i], dq[i], throttle[i])
+            epsilon = friction.acceleration(phi, omega, force, J[i], moment[i])
+            reduced[i] = J[i] * epsilon - moment[i]
+            frictions[:, i], reactions[:, i], _ = friction.joint_values(phi, omega, epsilon, force)
+        out = {"M_joint_friction": reduced}
+        for k, name in enumerate(friction.names):
+            out[f"friction_{name}"], out[f"reaction_{name}"] = frictions[k], reactions[k]
+        if friction.collar > 0.0:
+            out["friction_thrust_collar"] = np.full(n, friction.collar)
+        return out
+
+    def _train(self, train_mode: tuple[str, ...]) -> Callable:
+        """The drive train's part of the right-hand side in a train mode: (t, y, J, F1, external) -> (domega/dt,
+        rates of the train's states), F1 the crank's net moment apart from the train (crank_side), external the
+        external load's magnitude [N m], a Coulomb resistance of the driven part."""
+        driven = self.driven
+        index = self.driven_speed_index
+        resistance = driven.resistance
+        if self.coupling is not None:
+            elastic, c, state = self.coupling.elastic, self.coupling.damping, driven.state
+            smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
+            part = train_mode[0]
+            held, direction = part == HELD, DIRECTION[part]
+
+            def coupled(t: float, y: np.ndarray, J: float, net: float, external: float):
+                omega, twist, omega2 = y[1], y[index - 1], y[index]
+                passed = elastic(twist) + c * (omega - omega2)
+                if held:
+                    return (net - passed) / J, [omega - omega2, 0.0]
+                phi2 = y[0] - twist
+                I2, dI2, driven_total, q2, dq2 = state(phi2)
+                driven_total += passed - direction * (resistance + external) - 0.5 * dI2 * omega2 * omega2
+                for moment in smooth:
+                    driven_total += moment(t, phi2, omega2, q2, dq2)
+                return (net - passed) / J, [omega - omega2, driven_total / I2]
+
+            return coupled
+        clutch = self.clutch
+        stuck = train_mode[0] == STUCK
+
+        def clutched(t: float, y: np.ndarray, J: float, net: float, external: float):
+            omega2 = y[1] if stuck else y[index]
+            forces = clutch.forces(train_mode, net, J, driven.smooth_moment(t, omega2), resistance + external)
+            return forces.crank, [0.0 if stuck else forces.driven]
+
+        return clutched
+
+    def train_mode_of(self, mode: Mode | None) -> tuple[str, ...]:
+        """The drive train's part of a machine's mode (its default when mode is None or carries none)."""
+        train = tuple(mode[2:] if self.governor is not None else mode) if mode is not None else ()
+        if train or self.driven is None:
+            return train
+        return (STUCK, FORWARD) if self.clutch is not None else (FORWARD,)
+
+    def drive_train_at(self, t: float, y: np.ndarray, external: float | None = None,
+                       train_mode: tuple[str, ...] | None = None) -> tuple[tuple[str, ...], Forces, float]:
+        """(train mode, Forces, Coulomb resistance R [N m]) at time t [s] and state y, in `train_mode` or, if None,
+        in the mode the state is in (a clutch or driven part at rest decided by the forces, as
+        ClutchModel.mode_at); external: the external load's magnitude [N m] (default: the scenario's at t)."""
+        driven = self.driven
+        resistance = driven.resistance + (self.external_load(t) if external is None else external)
+        index = self.driven_speed_index
+        omega2 = y[index]
+        J, F1 = self.crank_side(t, y)
+        if self.clutch is not None:
+            if train_mode is None:
+                train_mode = self.clutch.mode_at(y[1] - omega2, omega2, F1, J, driven.smooth_moment(t, omega2),
+                                                 resistance)
+            if train_mode[0] == STUCK:
+                omega2 = y[1]
+            return train_mode, self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2),
+                                                  resistance), resistance
+        passed = float(self.coupling.moment(y[index - 1], y[1] - omega2))
+        inertia, smooth = driven.dynamics(t, y[0] - y[index - 1], omega2)
+        push = passed + smooth
+        if train_mode is None:
+            train_mode = (driven.at_rest(push, resistance) if omega2 == 0.0 else FORWARD if omega2 > 0.0
+                          else BACKWARD,)
+        part = train_mode[0]
+        return train_mode, Forces((F1 - passed) / J, driven.acceleration(part, passed, smooth, resistance, inertia),
+                                  0.0, push, coulomb_factor(part, push, resistance)), resistance
+
+    def constraint(self, mode: Mode | None) -> Callable[[np.ndarray], None] | None:
+        """What a mode imposes on the states the solver gives, in place, or None: a stuck clutch sets omega2 =
+        omega bit for bit (the solver holds its own omega2 frozen meanwhile)."""
+        if self.clutch is None or mode is None or self.train_mode_of(mode)[0] != STUCK:
+            return None
+        index = self.driven_speed_index
+
+        def stuck(y: np.ndarray) -> None:
+            y[index] = y[1]
+
+        return stuck
+
     @property
     def coupling_index(self) -> int:
-        """Index of the coupling's twist in the state vector (omega2 follows); the governor's states come before."""
+        """Index of the coupling's twist (omega2 follows) or of the clutch's omega2 in the state vector; the
+        governor's states come before."""
         return 2 + (len(self.governor.state_names) if self.governor is not None else 0)
+
+    @property
+    def driven_speed_index(self) -> int:
+        """Index of the driven part's speed omega2 in the state vector."""
+        return self.coupling_index + (1 if self.coupling is not None else 0)
 
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector y."""
         return (("phi", "omega") + (self.governor.state_names if self.governor is not None else ())
-                + (("twist", "omega_driven") if self.coupling is not None else ()))
+                + (("twist", "omega_driven") if self.coupling is not None else ())
+                + (("omega_driven",) if self.clutch is not None else ()))
 
     def initial_state(self) -> np.ndarray:
         """The state at t = 0 from the scenario (governor at rest in equilibrium unless the scene says)."""
@@ -322,9 +506,12 @@ class MachineModel:
         if self.governor is not None:
             parts.append(self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
                                                      self.initial_balance_throttle))
+        omega_driven = initial.omega if initial.omega_driven is None else initial.omega_driven
         if self.coupling is not None:
             parts.append(np.array([self.static_twist(initial.omega) if initial.twist is None else initial.twist,
-                                   initial.omega]))
+                                   omega_driven]))
+        if self.clutch is not None:
+            parts.append(np.array([omega_driven]))
         return np.concatenate(parts)
 
     def static_twist(self, omega: float) -> float:
@@ -332,7 +519,7 @@ class MachineModel:
         at speed omega [rad/s] with the driven part at phi_driven = phi0 - twist (phi0 the initial crank angle):
         M_elastic(twist) = CouplingModel.required_moment, solved by Brent's method when it depends on phi_driven."""
         coupling, external, phi0 = self.coupling, self.external_load(0.0), self.scene.scenario.initial.phi
-        if not coupling.reads_angle:
+        if not coupling.driven.reads_angle:
             return coupling.twist_for(coupling.required_moment(0.0, phi0, omega, external))
         needed = [coupling.required_moment(0.0, angle, omega, external) for angle in np.linspace(0, 2 * math.pi, 361)]
         low, high = coupling.twist_for(min(needed)), coupling.twist_for(max(needed))
@@ -342,18 +529,51 @@ class MachineModel:
             0.0, phi0 - twist, omega, external), low, high, xtol=1e-15)
 
     def initial_mode(self, y: np.ndarray) -> Mode | None:
-        """The governor's mode at a state with the governor at rest (None without a governor)."""
-        return self.governor.initial_mode(y) if self.governor is not None else None
+        """The mode at a state with the governor at rest: the governor's (None without a governor), followed by
+        the drive train's mode of the state (drive_train_at)."""
+        governor = self.governor.initial_mode(y) if self.governor is not None else None
+        if self.driven is None:
+            return governor
+        return (governor or ()) + self.drive_train_at(0.0, y)[0]
 
-    def guards(self, mode: Mode | None) -> list:
-        """The governor's guards in a mode (none without a governor)."""
-        return self.governor.guards(mode) if self.governor is not None else []
+    def guards(self, mode: Mode | None, y: np.ndarray | None = None) -> list:
+        """The governor's guards in a mode, then the drive train's (none without either) and, with joint friction
+        and given the state y the solver starts from, the crank's: 'crank stops' (omega reaches 0 from the sign
+        it has in y: the solver restarts there exactly, omega = 0, where friction may hold the crank at rest) or,
+        starting at rest, 'crank starts' (omega leaves 0: the solver restarts to watch for the next stop)."""
+        guards = self._mode_guards(mode)
+        if self.joint_friction is None or y is None:
+            return guards
+        if y[1] == 0.0:
+            return guards + [Guard("crank starts", lambda state: -abs(state[1]), lambda state: (mode, state))]
+        direction = 1.0 if y[1] > 0.0 else -1.0
+
+        def stop(state: np.ndarray) -> tuple[Mode | None, np.ndarray]:
+            state = np.array(state, dtype=float)
+            state[1] = 0.0
+            return mode, state
+
+        return guards + [Guard("crank stops", lambda state: direction * state[1], stop)]
+
+    def _mode_guards(self, mode: Mode | None) -> list:
+        """The governor's guards in a mode, then the drive train's (none without either)."""
+        if mode is None:
+            return []
+        if self.driven is None:
+            return self.governor.guards(mode) if self.governor is not None else []
+        train_mode = self.train_mode_of(mode)
+        governor_mode = tuple(mode[:2]) if self.governor is not None else ()
+        guards = [_carrying(guard, train_mode) for guard in self.governor.guards(governor_mode)] if governor_mode else []
+        return guards + train_guards(train_mode, self.driven_speed_index,
+                                     lambda t, y: self.drive_train_at(t, y, train_mode=train_mode)[1:],
+                                     lambda t, y: self.drive_train_at(t, y)[0],
+                                     lambda train: governor_mode + tuple(train), self.clutch)
 
     def cycle_averages(self, omega: float, external: float = 0.0) -> tuple[float, float, float]:
         """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
         mean M_drive at full throttle [N m], mean of all other moments with the external load `external`
-        [N m], which opposes motion). A coupled driven part turns with the crank in the mean: its inertia
-        and moments are added (the coupling is taken as rigid).
+        [N m], which opposes motion). A coupled or clutched driven part turns with the crank in the mean: its
+        inertia and moments are added (the coupling is taken as rigid, the clutch as stuck).
 
         The weight moment averages out over a turn; the J' omega^2 / 2 term averages to zero at constant
         speed. These define the cycle-averaged model J_m omega' = throttle M_d(omega) + M_c(omega) used by
@@ -369,10 +589,10 @@ class MachineModel:
                 else:
                     other += value
         count = len(phis)
-        if self.coupling is not None:  # the driven part at phi_driven = phi
-            coupling = self.coupling
-            driven = [(coupling.driven_state(phi)[0], coupling.driven_moment(0.0, omega, phi)) for phi in phis]
-            mean_inertia, mean_moment = np.mean(driven, axis=0)
+        if self.driven is not None:  # the driven part at phi_driven = phi
+            driven = self.driven
+            pairs = [(driven.state(phi)[0], driven.forward_moment(0.0, omega, phi)) for phi in phis]
+            mean_inertia, mean_moment = np.mean(pairs, axis=0)
             return inertia + float(mean_inertia), drive / count, other / count + float(mean_moment) + weight - external
         return inertia, drive / count, other / count + weight - external
 
@@ -393,9 +613,8 @@ class MachineModel:
         phis = np.arange(count) * (period / count)
         if self.reduced is None:
             return phis, self.inertia_constant, 0.0, np.zeros(count), np.zeros(count)
-        values = np.array([self.reduced(phi) for phi in phis])
-        return (phis, self.inertia_constant + float(np.mean(values[:, 0])), float(np.mean(values[:, 2])),
-                values[:, 3], values[:, 4])
+        J_links, _, weight, q, dq = (np.array(values, dtype=float) for values in zip(*map(self.reduced, phis)))
+        return phis, self.inertia_constant + float(np.mean(J_links)), float(np.mean(weight)), q, dq
 
     def initial_balance_throttle(self, omega: float) -> float:
         """balance_throttle at speed omega [rad/s] for the scenario's external load at t = 0."""
@@ -416,14 +635,25 @@ class MachineModel:
         t, phi, omega, epsilon, J, dJ_dphi, M_drive (as applied, throttle included), M_load (sum of
         all resisting moments and the external load), one M_<effect> column per load (and M_weight,
         M_external when present), E_kinetic = 1/2 J omega^2, the output coordinate with its speed
-        (x, v for a slider, theta4, omega4 for a rocker) and, governed: throttle, sleeve z [m],
-        sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and feedback_shift [m] where present.
+        (x, v for a slider, theta4, omega4 for a rocker, x_shuttle [m], v_shuttle [m/s] for a walking beam's
+        shuttle bar; with several cylinders x_slider, v_slider are piston 1's and x_slider_k, v_slider_k piston k's)
+        and, governed: throttle, sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and
+        feedback_shift [m] where present.
         With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
-        load is not), twist [rad], phi_driven = phi - twist [rad], omega_driven [rad/s], epsilon_driven
-        [rad/s^2], I2 [kg m^2] and dI2_dphi2 [kg m^2/rad] (the driven part's inertia), M_driven_<effect>,
-        M_driven_weight (with a driven mechanism and gravity) and M_driven_external (moments on the driven part
-        [N m]), its mechanism's output (x_driven, v_driven or theta4_driven, omega4_driven), E_elastic =
-        integral_0^twist M_elastic dtwist [J]; E_kinetic includes 1/2 I2 omega_driven^2.
+        load is not), twist [rad], phi_driven = phi - twist [rad], omega_driven [rad/s], I2 [kg m^2] and
+        dI2_dphi2 [kg m^2/rad] (the driven part's inertia), M_driven_<effect>, M_driven_weight (with a driven
+        mechanism and gravity) and M_driven_external (moments on the driven part [N m]), its mechanism's output
+        (x_driven, v_driven or theta4_driven, omega4_driven), E_elastic = integral_0^twist M_elastic dtwist
+        [J]; E_kinetic includes 1/2 I2 omega_driven^2.
+        With joint friction: M_joint_friction (part of M_load), friction_<joint> and reaction_<joint>
+        (_joint_friction_columns); epsilon then solves the implicit equation of effects.joint_friction.
+        With a clutch: clutch_torque (the moment it passes to the driven part; M_load includes minus it) [N m],
+        slip_speed = omega - omega_driven [rad/s], clutch_mode (0 stuck, +1 slipping with the motor ahead, -1
+        with the machine ahead), omega_driven, M_driven_<effect>, M_driven_external, E_kinetic as above. Either
+        driven part adds epsilon_driven [rad/s^2], driven_mode (+1 turning forward, -1 backward, 0 held at rest
+        by its resistances), its loads reduced to its shaft as M_driven_<effect> (a branch's as
+        M_driven_<branch>_<effect>; Coulomb ones as mobilised) and the torque in each branch's section
+        M_section_<branch> = M_n,c + (I_n / i_1n) epsilon_driven on the branch's shaft [N m].
         """
         n = t.size
         names = [effect.name for effect in self.effects]
@@ -431,8 +661,9 @@ class MachineModel:
         J = np.full(n, self.inertia_constant)
         dJ = np.zeros(n)
         weight = np.zeros(n)
-        q = np.zeros(n)
-        dq = np.zeros(n)
+        cylinders = getattr(self.scene.machine.mechanism, "cylinders", None)
+        q = np.zeros((n, len(cylinders)) if cylinders else n)  # several cylinders: one column per piston
+        dq = np.zeros_like(q)
         given = external is not None
         external = np.array([self.external_load(ti) for ti in t]) if external is None else np.asarray(external)
         outside_throttle = throttle is not None
@@ -450,13 +681,25 @@ class MachineModel:
         drive = throttle * sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "drive"), np.zeros(n))
         load = sum((per_effect[k] for k, e in enumerate(self.effects) if e.role == "load"), np.zeros(n))
         coupling = self.coupling
-        if coupling is None:
+        driven = self.driven
+        if driven is not None:
+            train = [self.drive_train_at(ti, y[:, i], external[i]) for i, ti in enumerate(t)]
+            forces = {key: np.array([getattr(state[1], key) for state in train])
+                      for key in ("driven", "clutch", "factor")}
+            omega_driven = y[self.driven_speed_index]
+        if driven is None:
             load = load - external
-        else:
-            twist, omega_driven = y[self.coupling_index], y[self.coupling_index + 1]
+        elif coupling is not None:
+            twist = y[self.coupling_index]
             passed = coupling.moment(twist, y[1] - omega_driven)
             load = load - passed
+        else:
+            load = load - forces["clutch"]
         net = drive + load + weight
+        if self.joint_friction is not None:
+            friction_columns = self._joint_friction_columns(t, y, J, net - 0.5 * dJ * omega ** 2, q, dq, throttle)
+            load = load + friction_columns["M_joint_friction"]
+            net = net + friction_columns["M_joint_friction"]
         out = {"t": t, "phi": y[0], "omega": omega, "epsilon": (net - 0.5 * dJ * omega ** 2) / J, "J": J,
                "dJ_dphi": dJ, "M_drive": drive, "M_load": load}
         for k, name in enumerate(names):
@@ -464,39 +707,56 @@ class MachineModel:
                 out[f"M_{name}"] = per_effect[k]
         if self.has_weight:
             out["M_weight"] = weight
+        if self.joint_friction is not None:
+            out.update(friction_columns)
         if coupling is not None:
             out["M_coupling"] = -passed
-            phi_driven = y[0] - twist
-            driven = np.array([coupling.driven_state(p) for p in phi_driven]).T.reshape(5, n)
-            I2, dI2 = driven[0], driven[1]
-            driven_net = passed - external - 0.5 * dI2 * omega_driven ** 2
-            for effect in coupling.driven_effects:
+        if self.clutch is not None:
+            out["clutch_torque"] = forces["clutch"]
+            out["slip_speed"] = omega - omega_driven
+            out["clutch_mode"] = np.array([CLUTCH_CODE[state[0][0]] for state in train])
+        if driven is not None:
+            phi_driven = y[0] - twist if coupling is not None else np.zeros(n)
+            state = np.array([driven.state(p) for p in phi_driven]).T.reshape(5, n)
+            for effect, dry in zip(driven.effects, driven.coulomb):
                 moment = np.array([effect.moment(ti, p, w, q2, dq2) for ti, p, w, q2, dq2
-                                   in zip(t, phi_driven, omega_driven, driven[3], driven[4])])
-                out[f"M_driven_{effect.name}"] = moment
-                driven_net = driven_net + moment
-            if coupling.driven_has_weight:
-                out["M_driven_weight"] = driven[2]
-                driven_net = driven_net + driven[2]
-            out["M_driven_external"] = -external
-            out["twist"], out["phi_driven"], out["omega_driven"] = twist, phi_driven, omega_driven
-            out["epsilon_driven"] = driven_net / I2
-            out["I2"], out["dI2_dphi2"] = I2, dI2
-            kind = self.scene.machine.coupling.driven.mechanism
-            if kind is not None:
-                names = ("x_driven", "v_driven") if kind.type == "crank_slider" else ("theta4_driven", "omega4_driven")
-                out[names[0]], out[names[1]] = driven[3], driven[4] * omega_driven
-            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * I2 * omega_driven ** 2
-            out["E_elastic"] = coupling.elastic_energy(twist)
+                                   in zip(t, phi_driven, omega_driven, state[3], state[4])])
+                out[f"M_driven_{effect.name}"] = moment * forces["factor"] if dry else moment
+            if driven.has_weight:
+                out["M_driven_weight"] = state[2]
+            out["M_driven_external"] = -external * forces["factor"]
+            if coupling is not None:
+                out["twist"], out["phi_driven"] = twist, phi_driven
+                out["I2"], out["dI2_dphi2"] = state[0], state[1]
+                kind = self.scene.machine.coupling.driven.mechanism
+                if kind is not None:
+                    names = ("x_driven", "v_driven") if kind.type == "crank_slider" else ("theta4_driven",
+                                                                                           "omega4_driven")
+                    out[names[0]], out[names[1]] = state[3], state[4] * omega_driven
+            out["omega_driven"] = omega_driven
+            out["epsilon_driven"] = forces["driven"]
+            out["driven_mode"] = np.array([DIRECTION[state[0][-1]] for state in train])
+            for branch in driven.branches:
+                resisting = -branch.ratio * sum(out[f"M_driven_{driven.effects[i].name}"] for i in branch.effects)
+                out[f"M_section_{branch.name}"] = resisting + branch.inertia / branch.ratio * forces["driven"]
+            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * state[0] * omega_driven ** 2
+            if coupling is not None:
+                out["E_elastic"] = coupling.elastic_energy(twist)
         else:
             if self.load_pieces or given:
                 out["M_external"] = -external
             out["E_kinetic"] = 0.5 * J * omega ** 2
         kind = self.scene.machine.mechanism.type if self.scene.machine.mechanism is not None else None
-        if kind == "crank_slider":
+        if kind == "crank_slider" and cylinders:
+            out["x_slider"], out["v_slider"] = q[:, 0], dq[:, 0] * omega  # piston 1
+            for k in range(1, len(cylinders)):
+                out[f"x_slider_{k + 1}"], out[f"v_slider_{k + 1}"] = q[:, k], dq[:, k] * omega
+        elif kind == "crank_slider":
             out["x_slider"], out["v_slider"] = q, dq * omega
         elif kind == "four_bar":
             out["theta4"], out["omega4"] = q, dq * omega
+        elif kind == "walking_beam":
+            out["x_shuttle"], out["v_shuttle"] = q, dq * omega
         if self.governor is not None:
             arm, arm_rate = y[2], y[3]
             arm_length = self.governor.sensor.arm_length
@@ -548,13 +808,19 @@ def build_model(scene: Scene) -> MachineModel:
     kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
     effects = []
     if machine.drive is not None:
-        effects.append(build_drive(machine.drive))
+        effects.append(build_drive(machine.drive, machine.mechanism))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
     coupling = _coupling_model(machine, gravity)
+    clutch = None
+    if machine.clutch is not None:
+        clutch = ClutchModel(machine.clutch.static_torque, machine.clutch.kinetic_torque,
+                             build_driven(machine.clutch.driven, _unique_names))
     model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
                          has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene),
-                         coupling=coupling)
+                         coupling=coupling, clutch=clutch)
+    if machine.joint_friction is not None:
+        model = dataclasses.replace(model, joint_friction=_joint_friction(model))
     if scene.governor is None:
         return model
     governor = build_governor(scene.governor, model.initial_balance_throttle)
@@ -567,19 +833,38 @@ def _coupling_model(machine, gravity: tuple[float, float] | None) -> CouplingMod
     coupling = machine.coupling
     if coupling is None:
         return None
-    driven = coupling.driven
-    weighs = driven.mechanism is not None and gravity is not None and any(gravity) and _has_mass(driven.mechanism)
-    reduced = build_reduced(driven.mechanism, gravity if weighs else None) if driven.mechanism else None
-    effects = tuple(_unique_names([build_load(load, 2.0 * math.pi if driven.mechanism else None)
-                                   for load in driven.loads]))
+    mechanism = coupling.driven.mechanism
+    weighs = mechanism is not None and gravity is not None and any(gravity) and _has_mass(mechanism)
+    reduced = build_reduced(mechanism, gravity if weighs else None) if mechanism is not None else None
+    driven = build_driven(coupling.driven, _unique_names, reduced, weighs)
     if coupling.characteristic is None:
         stiffness = coupling.stiffness
-        return CouplingModel(stiffness, coupling.damping, driven.inertia, effects, lambda twist: stiffness * twist,
-                             driven_reduced=reduced, driven_has_weight=weighs)
+        return CouplingModel(stiffness, coupling.damping, driven, lambda twist: stiffness * twist)
     table = coupling.characteristic
-    return CouplingModel(None, coupling.damping, driven.inertia, effects,
-                         extrapolated_linear(table.twist, table.moment), (np.array(table.twist), np.array(table.moment)),
-                         reduced, weighs)
+    return CouplingModel(None, coupling.damping, driven, extrapolated_linear(table.twist, table.moment),
+                         (np.array(table.twist), np.array(table.moment)))
+
+
+def _joint_friction(model: MachineModel) -> JointFrictionModel:
+    """The machine's joint friction; a self-locking machine (friction growing faster with epsilon than the
+    inertia, effects.joint_friction) is refused with a SceneError."""
+    friction = build_joint_friction(model.scene.machine)
+    phi, ratio = worst_locking(friction, lambda angle: model.inertia(angle)[0])
+    if ratio >= 1.0:
+        raise SceneError(f"machine.joint_friction: the machine self-locks at phi = {math.degrees(phi):.1f} deg: there "
+                         f"the joint friction grows with the crank's acceleration {ratio:.3g} times as fast as the "
+                         "inertia resists it (sum rho_j |k_j| |dR_j/d epsilon| >= J), so the equation of motion has "
+                         "no unique acceleration; expected smaller joint radii or coefficient, or more inertia")
+    return friction
+
+
+def _carrying(guard: Guard, train_mode: tuple[str, ...]) -> Guard:
+    """A governor's guard whose transition keeps the drive train's mode after the governor's new mode."""
+    def transition(y: np.ndarray) -> tuple[Mode, np.ndarray]:
+        governor_mode, state = guard.transition(y)
+        return governor_mode + train_mode, state
+
+    return Guard(guard.name, guard.value, transition)
 
 
 def _has_mass(mechanism) -> bool:

@@ -112,11 +112,14 @@ def scene_model(node: Node) -> MachineModel:
 
 
 def check_scene_for_nodes(scene: Scene, source: str) -> None:
-    """Raise SceneError for a scene the nodes cannot play: a two-mass machine (machine.coupling), whose driven
-    part's state the nodes' messages do not carry."""
+    """Raise SceneError for a scene the nodes cannot play: a two-mass machine (machine.coupling or
+    machine.clutch), whose driven part's state the nodes' messages do not carry."""
     if scene.machine.coupling is not None:
         raise SceneError(f"{source}: machine.coupling is set, but the nodes exchange the crank's state only and "
                          "cannot play a two-mass machine yet; simulate it with `mech-regulator simulate`")
+    if scene.machine.clutch is not None:
+        raise SceneError(f"{source}: machine.clutch is set, but the nodes exchange the crank's state only and "
+                         "cannot play a clutch and its driven part yet; simulate it with `mech-regulator simulate`")
 
 
 @dataclass

@@ -109,7 +109,8 @@ class MachineNode(Node):
         self.last_diagnostics = -math.inf
         kind = self.model.scene.machine.mechanism.type if self.model.scene.machine.mechanism else None
         self.output_joint = {"crank_slider": ("slider", "x_slider", "v_slider"),
-                             "four_bar": ("rocker", "theta4", "omega4")}.get(kind)
+                             "four_bar": ("rocker", "theta4", "omega4"),
+                             "walking_beam": ("shuttle", "x_shuttle", "v_shuttle")}.get(kind)
 
     # ---------------------------------------------------------------------------------------------
     # Inputs: every message is checked before it touches anything.

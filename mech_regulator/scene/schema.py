@@ -48,6 +48,15 @@ class Flywheel(SceneModel):
                                           "inertia * ratio^2 to the reduced inertia [-]")
 
 
+class Cylinder(SceneModel):
+    """One cylinder of a multi-cylinder engine: its crank throw and its axis (bank) relative to cylinder 1."""
+
+    throw_deg: float = Field(0.0, description="angle of this cylinder's crank throw ahead of cylinder 1's, counter-"
+                                              "clockwise (the pin is at phi + throw) [deg]")
+    bank_deg: float = Field(0.0, description="direction of this cylinder's axis from +x (V engines); the piston "
+                                             "moves on its own line at the same offset [deg]")
+
+
 class CrankSlider(SceneModel):
     """Crank–slider: crank pin B = R(cos phi, sin phi), slider on the line y = offset on the +x side."""
 
@@ -62,9 +71,16 @@ class CrankSlider(SceneModel):
     rod_cg: NonNegative = Field(0.0, description="distance of the rod's centre of mass from the crank pin, along the rod [m]")
     rod_inertia: NonNegative = Field(0.0, description="rod moment of inertia about its centre of mass [kg m^2]")
     slider_mass: NonNegative = Field(0.0, description="slider (piston) mass [kg]")
+    cylinders: list[Cylinder] | None = Field(None, min_length=1, description="identical cylinders on one crankshaft "
+                                             "(multi-cylinder engine), the first at throw_deg 0 and bank_deg 0; every "
+                                             "length and mass above is per cylinder; none = one slider")
 
     @model_validator(mode="after")
     def _assembles(self) -> CrankSlider:
+        if self.cylinders and (self.cylinders[0].throw_deg != 0.0 or self.cylinders[0].bank_deg != 0.0):
+            raise ValueError(f"cylinders[0] has throw_deg {self.cylinders[0].throw_deg:g} and bank_deg "
+                             f"{self.cylinders[0].bank_deg:g}: cylinder 1 is the reference (phi is its crank angle "
+                             "from its axis, +x), expected 0 and 0")
         reach = self.crank + abs(self.offset)
         if self.rod <= reach:
             raise ValueError(f"rod = {self.rod} m is too short: the crank turns fully only if rod > crank + |offset| "
@@ -99,20 +115,82 @@ class FourBar(SceneModel):
 
     @model_validator(mode="after")
     def _assembles(self) -> FourBar:
-        from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
-
-        ranges = unassemblable_crank_ranges(self.crank, self.coupler, self.rocker, self.frame,
-                                            math.radians(self.frame_angle_deg))
-        if ranges:
-            spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
-            raise ValueError(
-                f"the four-bar (crank {self.crank}, coupler {self.coupler}, rocker {self.rocker}, frame {self.frame} m) "
-                f"cannot be assembled for crank angles {spans}; the crank must turn fully: expected a Grashof "
-                "crank (shortest link = crank, and shortest + longest < sum of the other two)")
+        _check_crank_turns(self)
         return self
 
 
-Mechanism = Annotated[Union[CrankSlider, FourBar], Field(discriminator="type")]
+def _check_crank_turns(linkage: FourBar | WalkingBeam) -> None:
+    """Raise ValueError naming the crank angles where the four-bar loop (crank, coupler, rocker, frame,
+    frame_angle_deg) of a linkage cannot be assembled."""
+    from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
+
+    ranges = unassemblable_crank_ranges(linkage.crank, linkage.coupler, linkage.rocker, linkage.frame,
+                                        math.radians(linkage.frame_angle_deg))
+    if ranges:
+        spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
+        raise ValueError(
+            f"the four-bar (crank {linkage.crank}, coupler {linkage.coupler}, rocker {linkage.rocker}, frame "
+            f"{linkage.frame} m) cannot be assembled for crank angles {spans}; the crank must turn fully: expected a "
+            "Grashof crank (shortest link = crank, and shortest + longest < sum of the other two)")
+
+
+class WalkingBeam(SceneModel):
+    """Eight-bar walking-beam transport mechanism (source 004, docs/linkages.md): a four-bar O1 A B O2 whose
+    coupler point C drives, through two parallelograms, a shuttle bar C D in reciprocating translation.
+
+    Crank O1A about O1 = (0, 0), A = crank e^{i phi}; rocker O2B about O2 = frame e^{i th1}; loop closure
+    `a e^{i th2} + b e^{i th3} = d e^{i th1} + c e^{i th4}` with th2 = phi; C = A + p e^{i (th3 + delta)};
+    O3 = O2 + s, E = B + s, D = C + s with the beam vector s = beam_length e^{i beta}. The output coordinate
+    (for shuttle_* loads and the x_shuttle column) is the shuttle bar's horizontal position x_C."""
+
+    type: Literal["walking_beam"]
+    crank: Positive = Field(description="crank length a = O1A (paper's link 1) [m]")
+    coupler: Positive = Field(description="coupler length b = AB (link 2, from the crank pin A to the rocker pin B) [m]")
+    rocker: Positive = Field(description="rocker length c = O2B (link 3), and of the parallel rocker O3E (link 5) [m]")
+    frame: Positive = Field(description="frame length d = O1O2, crank pivot to rocker pivot [m]")
+    frame_angle_deg: float = Field(0.0, description="direction th1 of the frame line O1->O2 from the +x axis [deg]")
+    branch: Literal["open", "crossed"] = Field("open", description="assembly branch of the four-bar: 'open' puts B to "
+                                                                    "the right of the directed line O2->A, 'crossed' "
+                                                                    "to the left")
+    coupler_point: Positive = Field(description="distance p = AC from the crank pin A to the coupler point C, where "
+                                                "the shuttle bar is pinned [m]")
+    coupler_point_angle_deg: float = Field(0.0, description="angle delta from the line A->B to the line A->C, "
+                                                            "counter-clockwise [deg]")
+    beam_length: Positive = Field(description="length L of the shuttle bar CD, equal to O2O3 and BE (the "
+                                              "parallelograms' long sides) [m]")
+    beam_angle_deg: float = Field(0.0, description="direction beta of O2->O3 (and C->D, B->E) from the +x axis [deg]")
+    crank_mass: NonNegative = Field(0.0, description="crank mass, for its weight only [kg]")
+    crank_cg: float = Field(0.0, description="distance of the crank's centre of mass from O1 towards A [m]")
+    coupler_mass: NonNegative = Field(0.0, description="coupler (triangle ABC) mass [kg]")
+    coupler_cg: NonNegative = Field(0.0, description="distance of the coupler's centre of mass from A [m]")
+    coupler_cg_angle_deg: float = Field(0.0, description="angle from the line A->B to the line from A to the coupler's "
+                                                         "centre of mass, counter-clockwise [deg]")
+    coupler_inertia: NonNegative = Field(0.0, description="coupler moment of inertia about its centre of mass [kg m^2]")
+    rocker_mass: NonNegative = Field(0.0, description="mass of each of the two rockers O2B and O3E [kg]")
+    rocker_cg: float = Field(0.0, description="distance of each rocker's centre of mass from its pivot towards B (E) [m]")
+    rocker_inertia: NonNegative = Field(0.0, description="moment of inertia of each rocker about its centre of mass "
+                                                         "[kg m^2]")
+    tie_mass: NonNegative = Field(0.0, description="mass of the tie BE (link 4, translates with B) [kg]")
+    side_mass: NonNegative = Field(0.0, description="mass of the side link ED (link 6, parallel to BC) [kg]")
+    side_cg: float = Field(0.0, description="distance of the side link's centre of mass from E towards D [m]")
+    side_inertia: NonNegative = Field(0.0, description="side link's moment of inertia about its centre of mass [kg m^2]")
+    shuttle_mass: NonNegative = Field(0.0, description="mass of the shuttle bar CD (link 7, translates with C) with "
+                                                       "what it carries [kg]")
+
+    @model_validator(mode="after")
+    def _assembles(self) -> WalkingBeam:
+        from mech_regulator.mechanisms import walking_beam
+
+        _check_crank_turns(self)
+        flattening = walking_beam.change_point(walking_beam.geometry_from_scene(self))
+        if flattening is not None:
+            raise ValueError(f"{flattening}; expected a beam direction (or its opposite) outside the swing "
+                             "of both links, so that the parallelograms never fold")
+        return self
+
+
+
+Mechanism = Annotated[Union[CrankSlider, FourBar, WalkingBeam], Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -160,11 +238,19 @@ class Engine(SceneModel):
                                                             "dead centre at the start of intake [deg]")
     pressure: list[float] = Field(min_length=2, description="gauge gas pressure at each cycle angle [Pa]")
     cycle_deg: Literal[360.0, 720.0] = Field(720.0, description="length of the working cycle: 720 four-stroke, 360 two-stroke [deg]")
-    phase_deg: float = Field(0.0, description="cycle angle at crank angle phi = 0 [deg]")
+    phase_deg: float = Field(0.0, description="cycle angle (of cylinder 1) at crank angle phi = 0 [deg]")
+    firing_order: list[int] | None = Field(None, description="multi-cylinder engine: the order in which the cylinders "
+                                                             "fire, e.g. [1, 3, 4, 2]; each fires at its first top "
+                                                             "dead centre after the previous one [-]")
+    firing_deg: list[float] | None = Field(None, description="multi-cylinder engine, instead of firing_order: each "
+                                                             "cylinder's firing delay after cylinder 1, the first 0; "
+                                                             "its cycle angle is cylinder 1's at phi - delay [deg]")
 
     @model_validator(mode="after")
     def _table(self) -> Engine:
         _check_table(self.angle_deg, self.pressure, self.cycle_deg, "engine pressure")
+        if self.firing_order is not None and self.firing_deg is not None:
+            raise ValueError("give either firing_order or firing_deg, not both")
         return self
 
 
@@ -221,8 +307,9 @@ class CuttingLoad(SceneModel):
 
 
 class SliderConstant(SceneModel):
-    type: Literal["slider_constant"]
-    force: float = Field(description="constant force on the slider along +x, signed [N]")
+    type: Literal["slider_constant", "shuttle_constant"]
+    force: float = Field(description="constant force along +x on the slider, or on the shuttle bar of a walking beam, "
+                                     "signed [N]")
 
 
 class RockerConstant(SceneModel):
@@ -231,16 +318,19 @@ class RockerConstant(SceneModel):
 
 
 class OutputViscous(SceneModel):
-    type: Literal["slider_viscous", "rocker_viscous"]
-    coefficient: NonNegative = Field(description="viscous coefficient on the slider, -c v [N s/m], or on the rocker, "
-                                                 "-c omega_rocker [N m s/rad]")
+    type: Literal["slider_viscous", "rocker_viscous", "shuttle_viscous"]
+    coefficient: NonNegative = Field(description="viscous coefficient on the slider, -c v [N s/m], on the rocker, "
+                                                 "-c omega_rocker [N m s/rad], or on the shuttle bar's horizontal "
+                                                 "motion, -c v_x [N s/m]")
 
 
 class OutputSpring(SceneModel):
-    type: Literal["slider_spring", "rocker_spring"]
-    stiffness: NonNegative = Field(description="spring stiffness on the slider, -k (x - x0) [N/m], or on the rocker, "
-                                               "-k (theta4 - theta0) [N m/rad]")
-    free_position: float = Field(0.0, description="free slider position x0 [m], or free rocker angle theta0 [rad]")
+    type: Literal["slider_spring", "rocker_spring", "shuttle_spring"]
+    stiffness: NonNegative = Field(description="spring stiffness on the slider, -k (x - x0) [N/m], on the rocker, "
+                                               "-k (theta4 - theta0) [N m/rad], or on the shuttle bar, horizontal, "
+                                               "-k (x_C - x0) [N/m]")
+    free_position: float = Field(0.0, description="free slider (or shuttle point C) position x0 [m], or free rocker "
+                                                  "angle theta0 [rad]")
 
 
 class SliderTable(SceneModel):
@@ -269,12 +359,30 @@ Load = Annotated[
 
 DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, SliderConstant, RockerConstant,
                              OutputViscous, OutputSpring, SliderTable], Field(discriminator="type")]
+BranchLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
+
+
+class Branch(SceneModel):
+    """A branch of a branched drive (physics.md section 4, second paper): a working member driven from the
+    driven part's main shaft through a ratio i_1n, with its own inertia and resisting moments on its shaft."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="name of the branch, used in the output "
+                                                                        "columns M_section_<name> (letters, digits, _)")
+    inertia: Positive = Field(description="moment of inertia I_n of everything beyond the branch's section, reduced "
+                                          "to the branch's shaft [kg m^2]")
+    ratio: Positive = Field(description="ratio i_1n = omega_main / omega_n from the main shaft to the branch's shaft; "
+                                        "the branch adds I_n / i_1n^2 to the main shaft's inertia [-]")
+    loads: list[BranchLoad] = Field(default_factory=list, description="resisting moments on the branch's shaft, of "
+                                                                      "its speed omega_n = omega_driven / i_1n "
+                                                                      "(constant, viscous, fan)")
 
 
 class DrivenPart(SceneModel):
     """The driven part of a two-mass machine (physics.md section 4): a rotor with its own resisting moments,
     turning at omega_driven, angle phi_driven = phi - twist, optionally with a mechanism on its shaft (then
-    I2(phi_driven) = inertia + the links' reduced inertia); the scenario's external load acts on it."""
+    I2(phi_driven) = inertia + the links' reduced inertia), and branches; the scenario's external load acts on
+    it. Its constant loads and the external load are Coulomb resistances: they oppose the motion and, at rest,
+    hold the part up to their sum (it breaks away when the moment passed to it exceeds them)."""
 
     inertia: Positive = Field(description="constant part of the moment of inertia I2 of the driven part, reduced to "
                                           "the crank shaft [kg m^2]")
@@ -285,9 +393,15 @@ class DrivenPart(SceneModel):
                                                                       "at phi_driven and omega_driven (constant, "
                                                                       "viscous, fan, table in phi_driven, and "
                                                                       "slider/rocker loads of its mechanism)")
+    branches: list[Branch] = Field(default_factory=list, description="working members driven from the driven part's "
+                                                                     "shaft (a branched drive), each with its ratio")
 
     @model_validator(mode="after")
     def _loads_fit_mechanism(self) -> DrivenPart:
+        names = [branch.name for branch in self.branches]
+        repeated = sorted({name for name in names if names.count(name) > 1})
+        if repeated:
+            raise ValueError(f"branches: the name(s) {repeated} appear more than once; expected distinct names")
         kind = self.mechanism.type if self.mechanism is not None else None
         needs = {"slider": "crank_slider", "rocker": "four_bar"}
         for index, load in enumerate(self.loads):
@@ -350,6 +464,88 @@ class Coupling(SceneModel):
         return self
 
 
+class Journal(SceneModel):
+    """A revolute joint's journal: its friction moment is M_f = lambda_p f' r |R| (physics.md section 7)."""
+
+    radius: Positive = Field(description="journal (pin) radius r [m]")
+    fit: Literal["clearance", "new", "run_in"] = Field("clearance", description="pressure distribution over the "
+                                                                                "journal: 'clearance' (lambda_p = 1), "
+                                                                                "'new' close fit (pi/2), 'run_in' "
+                                                                                "(4/pi) [-]")
+
+
+class Journals(SceneModel):
+    """The revolute joints that have friction, by name; a joint left out turns without friction."""
+
+    crank_bearing: Journal | None = Field(None, description="the crank's bearing A in the frame (both mechanisms)")
+    crank_pin: Journal | None = Field(None, description="the crank pin B between crank and rod / coupler")
+    wrist_pin: Journal | None = Field(None, description="crank_slider: the wrist pin C between rod and slider")
+    rocker_pin: Journal | None = Field(None, description="four_bar: the pin C between coupler and rocker")
+    rocker_bearing: Journal | None = Field(None, description="four_bar: the rocker's bearing D in the frame")
+
+
+class ThrustCollar(SceneModel):
+    """An annular thrust collar on the crank shaft carrying an axial load."""
+
+    inner_radius: NonNegative = Field(description="inner radius r1 of the bearing ring [m]")
+    outer_radius: Positive = Field(description="outer radius r2 of the bearing ring [m]")
+    axial_load: NonNegative = Field(description="axial load Q on the collar [N]")
+    state: Literal["new", "run_in"] = Field("run_in", description="'new' (uniform pressure): M_f = 2/3 f Q (r2^3 - "
+                                                                  "r1^3)/(r2^2 - r1^2); 'run_in' (uniform wear): "
+                                                                  "M_f = f Q (r1 + r2)/2 [-]")
+
+    @model_validator(mode="after")
+    def _ring(self) -> ThrustCollar:
+        if self.inner_radius >= self.outer_radius:
+            raise ValueError(f"thrust_collar: inner_radius = {self.inner_radius} m must be smaller than outer_radius "
+                             f"= {self.outer_radius} m")
+        return self
+
+
+class JointFriction(SceneModel):
+    """Coulomb friction in the joints, from the joint reactions of the kinetostatic analysis at every step
+    (physics.md section 7; docs/joint_friction.md)."""
+
+    coefficient: Positive = Field(description="coefficient of sliding friction f of the joints and the collar [-]")
+    joints: Journals = Field(default_factory=Journals, description="the revolute joints with friction")
+    guide: NonNegative = Field(0.0, description="crank_slider: coefficient of sliding friction of the slider on its "
+                                                "guide, force f |N|; 0 = none [-]")
+    thrust_collar: ThrustCollar | None = Field(None, description="optional thrust collar on the crank shaft")
+
+
+JOINTS_OF = {"crank_slider": ("crank_bearing", "crank_pin", "wrist_pin"),
+             "four_bar": ("crank_bearing", "crank_pin", "rocker_pin", "rocker_bearing"), None: ()}
+# Mechanisms whose kinetostatics is not built: only a thrust_collar can have friction.
+NO_KINETOSTATICS = ("walking_beam", "multi-cylinder crank_slider")
+
+
+class Clutch(SceneModel):
+    """Friction (Coulomb) clutch between the crank side (machine.inertia, the motor of machine.drive) and the
+    driven part: slipping it passes +-kinetic_torque (the sign of the slip); stuck, the two turn together and
+    it passes the moment that keeps them together, as long as that stays within +-static_torque."""
+
+    static_torque: Positive = Field(description="largest moment the stuck clutch can pass (static friction) [N m]")
+    kinetic_torque: Positive = Field(description="moment the slipping clutch passes (kinetic friction); at most "
+                                                 "static_torque [N m]")
+    driven: DrivenPart = Field(description="the driven part (the working machine) behind the clutch")
+
+    @model_validator(mode="after")
+    def _kinetic_below_static(self) -> Clutch:
+        if self.kinetic_torque > self.static_torque:
+            raise ValueError(f"kinetic_torque = {self.kinetic_torque} N m exceeds static_torque = "
+                             f"{self.static_torque} N m; expected kinetic_torque <= static_torque")
+        if self.driven.mechanism is not None:
+            raise ValueError(f"clutch.driven.mechanism ({self.driven.mechanism.type}): a driven part behind a clutch "
+                             "has no angle of its own in the state (only omega_driven), so it cannot carry a "
+                             "mechanism; expected a rotor (drop driven.mechanism, or use machine.coupling)")
+        for index, load in enumerate(self.driven.loads):
+            if load.type not in ("constant", "viscous", "fan"):
+                raise ValueError(f"clutch.driven.loads[{index}] type '{load.type}' reads the driven part's angle, "
+                                 "which a driven part behind a clutch does not have; expected constant, viscous or "
+                                 "fan (angle-dependent driven loads need machine.coupling)")
+        return self
+
+
 class Machine(SceneModel):
     """The machine reduced to its driving link (the crank)."""
 
@@ -364,11 +560,15 @@ class Machine(SceneModel):
     loads: list[Load] = Field(default_factory=list, description="resisting moments and forces M_c")
     coupling: Coupling | None = Field(None, description="optional elastic coupling to a driven part (two-mass "
                                                         "machine); the external load then acts on the driven part")
+    joint_friction: JointFriction | None = Field(None, description="optional friction in the mechanism's joints "
+                                                                  "and a thrust collar (the most expensive effect)")
+    clutch: Clutch | None = Field(None, description="optional friction clutch to a driven part (motor and working "
+                                                    "machine); the external load then acts on the driven part")
 
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
         kind = self.mechanism.type if self.mechanism is not None else None
-        needs = {"slider": "crank_slider", "rocker": "four_bar"}
+        needs = {"slider": "crank_slider", "rocker": "four_bar", "shuttle": "walking_beam"}
         for index, load in enumerate(self.loads):
             prefix = load.type.split("_")[0]
             if prefix in needs and kind != needs[prefix]:
@@ -377,10 +577,61 @@ class Machine(SceneModel):
         if isinstance(self.drive, Engine) and kind != "crank_slider":
             raise ValueError(f"drive type 'engine' pushes a piston: it needs mechanism.type: crank_slider "
                              f"(the machine has {kind or 'no mechanism'})")
+        self._cylinders_fit_effects()
         flywheel = self.flywheel.inertia * self.flywheel.ratio ** 2 if self.flywheel else 0.0
         if self.inertia + flywheel <= 0 and self.mechanism is None:
             raise ValueError("the machine has no inertia: give machine.inertia > 0 or a flywheel")
+        if self.joint_friction is not None:
+            several = kind == "crank_slider" and self.mechanism.cylinders is not None
+            _check_joint_friction(self.joint_friction, "multi-cylinder crank_slider" if several else kind)
+        if self.joint_friction is not None and self.clutch is not None:
+            raise ValueError("machine.joint_friction with machine.clutch: the joint friction solves the crank's own "
+                             "equation, which a stuck clutch joins to the driven part; expected one of them")
+        if self.coupling is not None and self.clutch is not None:
+            raise ValueError("machine.coupling and machine.clutch are both set; the driven part sits behind one of "
+                             "them: expected either an elastic coupling or a friction clutch")
         return self
+
+    def _cylinders_fit_effects(self) -> None:
+        """Several cylinders: forces on "the slider" are ambiguous (refused) and the engine's firing must fit the
+        crankshaft (mechanisms.engine.firing_delays); firing keys need cylinders."""
+        from mech_regulator.mechanisms.engine import firing_delays
+
+        cylinders = self.mechanism.cylinders if isinstance(self.mechanism, CrankSlider) else None
+        engine = self.drive if isinstance(self.drive, Engine) else None
+        if cylinders is None:
+            if engine is not None and (engine.firing_order or engine.firing_deg):
+                raise ValueError("drive.firing_order / firing_deg need several cylinders: add mechanism.cylinders")
+            return
+        for index, load in enumerate(self.loads):
+            if load.type.startswith("slider"):
+                raise ValueError(f"loads[{index}] type '{load.type}' acts on the slider, but the crank–slider has "
+                                 f"{len(cylinders)} cylinders (mechanism.cylinders): expected loads on the crank "
+                                 "(constant, viscous, fan, table, cutting)")
+        if engine is not None:
+            firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], engine.cycle_deg,
+                          engine.firing_order, engine.firing_deg)
+
+
+def _check_joint_friction(friction: JointFriction, kind: str | None) -> None:
+    """The joints named must exist in the mechanism, and something must have friction."""
+    named = [name for name in Journals.model_fields if getattr(friction.joints, name) is not None]
+    foreign = [name for name in named if name not in JOINTS_OF.get(kind, ())]
+    if foreign:
+        if kind in NO_KINETOSTATICS:
+            expected = (f"none: the joint reactions of a {kind} are not computed (kinetostatics exists for a "
+                        "single crank_slider and the four_bar); only a thrust_collar can have friction")
+        elif kind is None:
+            expected = "none (a machine without a mechanism can only have a thrust_collar)"
+        else:
+            expected = f"some of {list(JOINTS_OF[kind])}"
+        raise ValueError(f"joint_friction.joints names {foreign}, which the machine's mechanism ({kind or 'none'}) "
+                         f"does not have; expected {expected}")
+    if friction.guide > 0.0 and kind != "crank_slider":
+        raise ValueError(f"joint_friction.guide = {friction.guide}: only a crank_slider has a guide (the machine has "
+                         f"{kind or 'no mechanism'})")
+    if not named and friction.guide == 0.0 and friction.thrust_collar is None:
+        raise ValueError("joint_friction has no joints, no guide and no thrust_collar: expected at least one of them")
 
 
 # --------------------------------------------------------------------------------------------
@@ -545,6 +796,8 @@ class InitialState(SceneModel):
     twist: float | None = Field(None, description="initial twist phi - phi_driven of the coupling, driven part turning "
                                                   "at omega; none = the static twist that carries the driven part's "
                                                   "loads at the initial speed [rad]")
+    omega_driven: float | None = Field(None, description="initial speed of the driven part (behind a coupling or a "
+                                                         "clutch); none = omega [rad/s]")
 
 
 class LoadEvent(SceneModel):
@@ -615,6 +868,12 @@ class Scene(SceneModel):
         initial = self.scenario.initial
         if self.machine.coupling is None and initial.twist is not None:
             raise ValueError("scenario.initial.twist is set but the machine has no coupling")
+        if self.machine.coupling is None and self.machine.clutch is None and initial.omega_driven is not None:
+            raise ValueError("scenario.initial.omega_driven is set but the machine has no driven part (no coupling "
+                             "and no clutch)")
+        if self.machine.clutch is not None and self.solver.method == "energy":
+            raise ValueError("solver.method 'energy' steps one crank angle; a machine with a clutch has two masses: "
+                             "use a method in time (DOP853, RK45, RK23, Radau, BDF, LSODA or RK4)")
         if self.machine.coupling is not None and self.solver.method == "energy":
             raise ValueError("solver.method 'energy' steps one crank angle; a machine with a coupling has two "
                              "masses: use a method in time (Radau or BDF for a stiff coupling, else DOP853)")

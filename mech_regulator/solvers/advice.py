@@ -48,7 +48,7 @@ def coupling_modes(model: MachineModel) -> CouplingModes | None:
     if coupling is None:
         return None
     crank_inertia = model.mean_crank_inertia
-    driven_inertia = float(np.mean([coupling.driven_state(angle)[0] for angle in np.linspace(0.0, 2.0 * math.pi, 360,
+    driven_inertia = float(np.mean([coupling.driven.state(angle)[0] for angle in np.linspace(0.0, 2.0 * math.pi, 360,
                                                                                                  endpoint=False)]))
     reduced = crank_inertia * driven_inertia / (crank_inertia + driven_inertia)
     twist = model.static_twist(model.scene.scenario.initial.omega)

@@ -70,10 +70,11 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         y, mode = _settle_mode(model, t, y, mode, trajectory)
         if trajectory.status != "complete":
             break
-        guards = model.guards(mode)
+        guards = model.guards(mode, y)
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         rhs = model.rhs(piece, window, mode)
+        constraint = model.constraint(mode)
         y_wrapped = y.copy()
         y_wrapped[0] -= offset
         if settings.method == "RK4":
@@ -95,21 +96,21 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 trajectory.message = (f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s; "
                                       f"{advice}")
                 break
-            dense = _Shifted(solver.dense_output(), offset)
+            dense = _Shifted(solver.dense_output(), offset, constraint)
             t_step, y_step = solver.t, dense(solver.t)
             if switches or guards:
                 crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards)
                 if crossing is not None:
-                    t_step, y_step, counts, transition, name = crossing
-                    if transition is None:
+                    t_step, y_step, counts, guard, name = crossing
+                    if guard is None:
                         trajectory.stats.switches += 1
                     else:
-                        mode, y_step = transition(y_step)
+                        mode, y_step = guard.apply(t_step, y_step)
                         _log_event(trajectory, t_step, name, mode)
                         instant_events = instant_events + 1 if t_step == solver.t_old == t else 0
                         if instant_events > MAX_INSTANT_EVENTS:
                             _fail_stuck(trajectory, t_step)
-                    restart = t_step < t_end or transition is not None
+                    restart = t_step < t_end or guard is not None
             trajectory.add_piece(solver.t_old, t_step, dense)
             trajectory.stats.steps += 1
             t, y = t_step, np.array(y_step, dtype=float)
@@ -131,10 +132,10 @@ def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory:
     (a sleeve that comes to rest exactly where the forces pull it off, a stop reached as the motion
     reverses). More than MAX_INSTANT_EVENTS in a row means the governor's modes contradict each other."""
     for _ in range(MAX_INSTANT_EVENTS):
-        violated = next((guard for guard in model.guards(mode) if guard.value(y) < -GUARD_TOLERANCE), None)
+        violated = next((guard for guard in model.guards(mode, y) if guard.level(t, y) < -GUARD_TOLERANCE), None)
         if violated is None:
             return y, mode
-        mode, y = violated.transition(y)
+        mode, y = violated.apply(t, y)
         _log_event(trajectory, t, violated.name, mode)
     _fail_stuck(trajectory, t)
     return y, mode
@@ -155,14 +156,17 @@ def _log_event(trajectory: Trajectory, t: float, name: str, mode) -> None:
 
 
 class _Shifted:
-    """A solver's dense output with the wrapped-off whole periods added back to the angle."""
+    """A solver's dense output with the wrapped-off whole periods added back to the angle and the mode's
+    constraint (model.constraint: a stuck clutch's equal speeds) imposed, when it has one."""
 
-    def __init__(self, dense, offset: float):
-        self.dense, self.offset = dense, offset
+    def __init__(self, dense, offset: float, constraint=None):
+        self.dense, self.offset, self.constraint = dense, offset, constraint
 
     def __call__(self, t):
         y = self.dense(t)
         y[0] += self.offset
+        if self.constraint is not None:
+            self.constraint(y)
         return y
 
 
@@ -195,7 +199,7 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
                  guards: list) -> tuple | None:
     """The earliest event in (t_old, t_new]: phi reaching a switch angle or a governor guard turning negative.
 
-    Returns (time, state, switch counts after it, guard transition or None for a switch, what happened),
+    Returns (time, state, switch counts after it, the guard or None for a switch, what happened),
     or None if the step has no event. The step is probed at interior points so an event and its undoing
     within one step is not missed; the event is then located by Brent's method on the dense output.
     Switch counts are carried, not recomputed from phi, so a restart exactly on a switch angle is never
@@ -206,7 +210,7 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
     """
     probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
     states = dense(probe_times)
-    levels = [-GUARD_TOLERANCE if guard.value(states[:, 0]) <= GUARD_TOLERANCE else 0.0 for guard in guards]
+    levels = [-GUARD_TOLERANCE if guard.level(t_old, states[:, 0]) <= GUARD_TOLERANCE else 0.0 for guard in guards]
     previous = counts_old
     for i in range(1, probe_times.size):
         earliest = None
@@ -219,15 +223,15 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
             if earliest is None or t_cross < earliest[0]:
                 earliest = (t_cross, j, boundary)
         for guard, level in zip(guards, levels):
-            if guard.value(states[:, i]) < level:
-                t_cross = _root(lambda tau: guard.value(dense(tau)) - level, probe_times[i - 1], probe_times[i])
+            if guard.level(probe_times[i], states[:, i]) < level:
+                t_cross = _root(lambda tau: guard.level(tau, dense(tau)) - level, probe_times[i - 1], probe_times[i])
                 if earliest is None or t_cross < earliest[0]:
                     earliest = (t_cross, guard, None)
         if earliest is not None:
             t_cross, what, boundary = earliest
             y = dense(t_cross)
             if boundary is None:
-                return t_cross, y, _switch_counts(y[0], switches) if switches else previous, what.transition, what.name
+                return t_cross, y, _switch_counts(y[0], switches) if switches else previous, what, what.name
             after = list(previous)
             after[what] += 1 if forward else -1
             y[0] = boundary

@@ -33,7 +33,8 @@ class Trajectory:
 
     status is 'complete', 'failed' (message says why and where) or 'interrupted'; a trajectory that
     did not complete still covers [t_start, t_end] and nothing computed is lost. modes: (start time,
-    governor mode) of each stretch in one mode; events: (time, what happened) of every mode change.
+    mode: the governor's, then the drive train's) of each stretch in one mode; events: (time, what happened)
+    of every mode change.
     y_start: the state at t_start, what a run refused before its first step still gives at t_start.
     """
 
@@ -42,7 +43,7 @@ class Trajectory:
     piece_edges: list[float] = field(default_factory=list)
     interpolants: list[Callable] = field(default_factory=list)
     stats: SolverStats = field(default_factory=SolverStats)
-    modes: list[tuple[float, tuple[str, str]]] = field(default_factory=list)
+    modes: list[tuple[float, tuple[str, ...]]] = field(default_factory=list)
     events: list[tuple[float, str]] = field(default_factory=list)
     status: str = "complete"
     message: str = ""

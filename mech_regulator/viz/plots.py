@@ -19,6 +19,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     """Four panels: omega(t) with the steady band, moments against t, omega over the last dynamic
     period against the crank angle, and J(phi) with dJ/dphi (or the works of the moments)."""
     times = trajectory.samples(max(model.scene.solver.sample_rate, 2000.0 / max(trajectory.t_end, 1e-9)))
+    if model.clutch is not None:
+        plot_clutch_run(model, trajectory, summary, times, path)
+        return
     columns = model.columns(times, trajectory(times))
     last = summary["steady"]["last_period"]
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
@@ -44,7 +47,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
         moments.plot(angle, period_columns["M_load"], lw=1.0, label="M_load (all resisting)")
         if "M_weight" in period_columns:
             moments.plot(angle, period_columns["M_weight"], lw=1.0, label="M_weight")
-        moments.legend(loc="lower right")
+        if "M_joint_friction" in period_columns:
+            moments.plot(angle, period_columns["M_joint_friction"], lw=1.0, label="M_joint_friction (part of M_load)")
+        moments.legend(loc="best", fontsize="small")
     moments.set(xlabel="crank angle within the last dynamic period [deg]", ylabel="reduced moment [N m]",
                 title="moments on the crank")
 
@@ -180,6 +185,69 @@ def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dic
     panel.legend(loc="upper left")
 
 
+def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray, path: Path) -> None:
+    """A start-up through a friction clutch: motor and machine speeds, the clutch's torque against its static
+    and kinetic limits with the motor's moment, the torque in each branch's section with the paper's estimate,
+    and the works of the run; slip phases shaded (and stretches with the driven part held at rest hatched)."""
+    times = np.union1d(times, [t for t, _ in trajectory.events])
+    columns = model.columns(times, trajectory(times))
+    train = summary["drive_train"]
+    clutch = model.clutch
+    figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
+    figure.suptitle(f"{model.scene.name}: start-up through a friction clutch ({model.scene.solver.method}, "
+                    f"{summary['status']})")
+
+    def shade(panel) -> None:
+        for index, (start, end, mode) in enumerate(train["clutch"]["slip_phases"]):
+            panel.axvspan(start, end, color="tab:orange", alpha=0.15, lw=0,
+                          label=("clutch slips" if index == 0 else None))
+        for index, (start, end) in enumerate(train["held"]):
+            panel.axvspan(start, end, facecolor="none", edgecolor="tab:gray", hatch="//", lw=0,
+                          label=("machine held at rest" if index == 0 else None))
+
+    speed = axes[0, 0]
+    shade(speed)
+    speed.plot(times, columns["omega"], color="tab:blue", lw=1.2, label="motor omega")
+    speed.plot(times, columns["omega_driven"], color="tab:green", lw=1.2, label="machine omega_driven")
+    for t in train["clutch"]["lock_times"]:
+        speed.axvline(t, color="k", lw=0.8, ls=":")
+        speed.annotate(f"locks at {t:.4g} s", (t, speed.get_ylim()[0]), xytext=(4, 6), textcoords="offset points",
+                       fontsize=8)
+    speed.set(xlabel="t [s]", ylabel="speed [rad/s]", title="motor and machine (main shaft) speeds")
+    speed.legend(loc="lower right", fontsize=8)
+
+    torque = axes[0, 1]
+    shade(torque)
+    torque.plot(times, columns["M_drive"], color="tab:blue", lw=1.0, label="motor moment M_d")
+    torque.plot(times, columns["clutch_torque"], color="tab:red", lw=1.4, label="clutch torque (to the machine)")
+    torque.axhline(clutch.static_torque, color="tab:red", lw=0.8, ls="--", label=f"static limit {clutch.static_torque:g} N m")
+    torque.axhline(clutch.kinetic_torque, color="tab:red", lw=0.8, ls=":", label=f"kinetic {clutch.kinetic_torque:g} N m")
+    torque.set(xlabel="t [s]", ylabel="moment [N m]", title="clutch torque and motor moment")
+    torque.legend(loc="upper right", fontsize=8)
+
+    sections = axes[1, 0]
+    shade(sections)
+    for index, (name, section) in enumerate(train["sections"].items()):
+        color = f"C{index + 4}"
+        sections.plot(times, columns[f"M_section_{name}"], color=color, lw=1.2, label=f"{name} section")
+        sections.plot(section["time"], section["max"], "o", color=color, ms=5,
+                      label=f"max {section['max']:.4g} N m at {section['time']:.3g} s")
+        if section["paper_estimate"] is not None:
+            sections.axhline(section["paper_estimate"], color=color, lw=0.8, ls="--",
+                             label=f"paper's estimate {section['paper_estimate']:.4g} N m")
+    sections.set(xlabel="t [s]", ylabel="torque in the section [N m]",
+                 title="branch sections: M_kr = M_n,c + (I_n / i_1n) domega/dt")
+    sections.legend(loc="upper right", fontsize=8)
+
+    works = summary["energy"]["works"]
+    bars = axes[1, 1]
+    bars.barh(list(works), list(works.values()), color="tab:green")
+    bars.set(xlabel="work over the run [J]", title=f"works (energy residual {summary['energy']['relative_residual']:.1g} "
+                                                   "relative)")
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
 def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
     """Statics and stability of a governor: static characteristic with the insensitivity band and the
     operating points, throttle against speed at the operating points, eigenvalues of the averaged model
@@ -243,5 +311,136 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
         circle.set_title("Floquet multipliers: the machine is not periodic in phi")
     circle.set(xlabel="Re mu", ylabel="Im mu", aspect="equal")
     circle.grid(alpha=0.3)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+KINEMATICS_POSES = 4  # crank positions at which plot_kinematics draws the mechanism
+
+
+def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, title: str, path: Path) -> None:
+    """Kinematics over one turn at constant crank speed omega [rad/s] (analysis.kinematics.kinematics_table):
+    the paths of the moving points with the mechanism drawn at KINEMATICS_POSES crank angles (dark at phi = 0,
+    where the points are named; left), and the
+    points' speeds |v| and accelerations |a| against the crank angle (right). Points moving alike (a walking
+    beam's B and E, C and D) have identical curves: the later one is dashed."""
+    from mech_regulator.analysis.kinematics import point_names
+    from mech_regulator.mechanisms import point_motions
+    from mech_regulator.mechanisms.drawing import mechanism_outline
+
+    names = point_names(columns)
+    figure = plt.figure(figsize=(14, 7), constrained_layout=True)
+    grid = figure.add_gridspec(2, 2, width_ratios=[1.25, 1.0])
+    paths, speed, acceleration = figure.add_subplot(grid[:, 0]), figure.add_subplot(grid[0, 1]), \
+        figure.add_subplot(grid[1, 1])
+    figure.suptitle(f"{title}: kinematics over one turn at omega = {omega:g} rad/s")
+    colours = dict(zip(names, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
+    for index, phi in enumerate(np.linspace(0.0, 2.0 * math.pi, KINEMATICS_POSES, endpoint=False)):
+        outline = mechanism_outline(mechanism, phi)
+        shade, width = ("0.15", 1.8) if index == 0 else ("0.7", 0.9)
+        for part_name, part in outline.items():
+            if part_name == "joints":
+                paths.plot(part[:, 0], part[:, 1], "o", ms=4 if index == 0 else 2.5, color=shade, zorder=3)
+            elif part_name != "crank_path":
+                for strip in (part if part.ndim == 3 else [part]):
+                    paths.plot(strip[:, 0], strip[:, 1], color=shade, lw=width, zorder=2 if index == 0 else 1)
+        paths.annotate(f"{math.degrees(phi):.0f}°", outline["crank"][-1], fontsize=8, color=shade,
+                       xytext=(4, 4), textcoords="offset points")
+    first = point_motions(mechanism)(0.0)
+    for name in names:
+        paths.annotate(name, (first[name][0].real, first[name][0].imag), fontsize=10, fontweight="bold",
+                       color=colours[name], xytext=(-12, 5), textcoords="offset points")
+    dphi = np.degrees(columns["phi"])
+    for index, name in enumerate(names):
+        twin = next((other for other in names[:index] if all(
+            np.allclose(columns[f"{name}_{key}"], columns[f"{other}_{key}"], rtol=1e-9, atol=1e-12)
+            for key in ("vx", "vy"))), None)
+        style = {"color": colours[name], "ls": "--" if twin else "-", "lw": 1.6 if twin else 1.2}
+        label = f"{name} (moves as {twin})" if twin else name
+        paths.plot(columns[f"{name}_x"], columns[f"{name}_y"], label=f"path of {label}", **style)
+        speed.plot(dphi, columns[f"{name}_v"], label=label, **style)
+        acceleration.plot(dphi, columns[f"{name}_a"], label=label, **style)
+    paths.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
+              title=f"paths of the joints; the mechanism at phi = 0 (dark) and {KINEMATICS_POSES - 1} more crank angles")
+    paths.legend(loc="best", fontsize=8)
+    speed.set(ylabel="speed |v| [m/s]", title="speeds of the points")
+    acceleration.set(xlabel="crank angle phi [deg]", ylabel="acceleration |a| [m/s^2]",
+                     title="accelerations of the points")
+    for axes in (speed, acceleration):
+        axes.set_xlim(0.0, 360.0)
+        axes.set_xticks(np.arange(0, 361, 45))
+        axes.grid(alpha=0.3)
+        axes.legend(loc="upper right", fontsize=8, ncol=3)
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float = 12.0) -> None:
+    """An engine at constant speed omega [rad/s]: piston 1's displacement, velocity and acceleration over the
+    turn (exact and source 002's approximation, from the top dead centre); gas moment per cylinder, total gas,
+    inertia and total moments over the working cycle; amplitudes of their harmonics up to max_order."""
+    from mech_regulator.analysis.engine import harmonics, piston_table, torque_curves
+
+    mechanism = model.scene.machine.mechanism
+    phis, exact, approximate = piston_table(model, omega)
+    curves = torque_curves(model, omega)
+    figure, axes = plt.subplot_mosaic([["x", "torque"], ["v", "torque"], ["a", "spectrum"]], figsize=(14, 9),
+                                      constrained_layout=True, gridspec_kw={"width_ratios": [1.0, 1.5]})
+    figure.suptitle(f"{model.scene.name}: engine at omega = {omega:.5g} rad/s ({omega * 30 / math.pi:.5g} rpm), "
+                    f"lambda = {mechanism.crank / mechanism.rod:.3g}, k = {mechanism.offset / mechanism.crank:.3g}")
+    from mech_regulator.mechanisms.crank_slider import dead_centres
+
+    degrees = np.degrees(phis)
+    scales = np.array([1000.0, 1.0, 1.0])  # x in mm
+    errors = np.max(np.abs(exact - approximate), axis=1) * scales
+    for row, (key, ylabel) in enumerate((("x", "x [mm]"), ("v", "v [m/s]"), ("a", "j [m/s^2]"))):
+        axis = axes[key]
+        axis.plot(degrees, exact[row] * scales[row], color="tab:blue", lw=1.5, label="exact")
+        axis.plot(degrees, approximate[row] * scales[row], color="tab:orange", lw=1.0, ls="--",
+                  label="source 002, first order in lambda\n(largest errors {:.3g} mm, {:.3g} m/s, {:.3g} m/s^2)"
+                  .format(*errors))
+        for dead_centre in dead_centres(mechanism.crank, mechanism.rod, mechanism.offset):
+            axis.axvline(math.degrees(dead_centre) % 360.0, color="grey", lw=0.6, ls=":")
+        axis.set(ylabel=ylabel, xlim=(0.0, 360.0), xticks=np.arange(0, 361, 60))
+        axis.grid(alpha=0.3)
+    axes["x"].set_title("piston 1 from the top dead centre (dotted: dead centres)")
+    axes["x"].legend(loc="lower center", fontsize=8)
+    axes["a"].set_xlabel("crank angle phi [deg]")
+
+    torque = axes["torque"]
+    cycle_degrees = np.degrees(curves.phi)
+    cylinder_colors = ["C0", "C1", "C4", "C6", "C8", "C9", "C5", "C7"]
+    for i, row in enumerate(curves.gas if len(curves.gas) > 1 else []):
+        torque.plot(cycle_degrees, row, lw=0.7, color=cylinder_colors[i % len(cylinder_colors)],
+                    label=f"gas, cylinder {i + 1}")
+    torque.plot(cycle_degrees, curves.gas_total, color="tab:red", lw=1.6, label="gas, total")
+    torque.plot(cycle_degrees, curves.inertia, color="tab:green", lw=1.2, label="inertia -1/2 J' omega^2")
+    torque.plot(cycle_degrees, curves.total, color="k", lw=1.8, label="total")
+    mean = float(np.mean(curves.gas_total))
+    torque.axhline(mean, color="tab:red", lw=0.8, ls="--", label=f"mean {mean:.4g} N m")
+    torque.set(xlabel="crank angle phi [deg]", ylabel="moment on the crank [N m]", xlim=(0.0, cycle_degrees[-1] + 0.25),
+               xticks=np.arange(0, cycle_degrees[-1] + 1, 90),
+               title=f"moments over the working cycle ({len(curves.gas)} cylinder"
+                     f"{'s' if len(curves.gas) > 1 else ''})")
+    torque.grid(alpha=0.3)
+    low, high = torque.get_ylim()
+    torque.set_ylim(low, high + 0.3 * (high - low))  # room for the legend above the curves
+    torque.legend(loc="upper center", fontsize=8, ncols=4)
+
+    spectrum = axes["spectrum"]
+    series = [("gas", curves.gas_total, "tab:red"), ("inertia", curves.inertia, "tab:green"),
+              ("total", curves.total, "k")]
+    step = 2.0 * math.pi / curves.cycle
+    width = 0.8 * step / len(series)
+    for index, (name, values, color) in enumerate(series):
+        fourier = harmonics(values, curves.cycle)
+        shown = fourier.orders <= max_order + 1e-9
+        spectrum.bar(fourier.orders[shown] + (index - 1) * width, fourier.amplitudes[shown], width=width,
+                     color=color, label=name)
+    spectrum.set(xlabel="order (multiples of the crank speed)", ylabel="amplitude [N m]",
+                 xticks=np.arange(0.0, max_order + 0.5, 1.0), xlim=(0.0, max_order + 0.5),
+                 title="harmonics: M = mean + sum A_k cos(order_k phi + phase_k)")
+    spectrum.grid(alpha=0.3, axis="y")
+    spectrum.legend(loc="upper right", fontsize=8)
     figure.savefig(path, dpi=100)
     plt.close(figure)

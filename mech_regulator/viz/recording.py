@@ -67,6 +67,7 @@ MECHANISM_STYLE = {
     "guide": (GREY, 1.5), "frame": (GREY, 2.0), "crank_path": (DARK_GREY, 1.0), "disc": (GREY, 1.5),
     "crank": (ORANGE, 3.0), "spoke": (ORANGE, 3.0), "rod": (BLUE, 3.0), "coupler": (BLUE, 3.0),
     "rocker": (GREEN, 3.0), "slider": (WHITE, 2.0), "joints": (WHITE, 4.0),
+    "tie": (VIOLET, 2.5), "side": (PINK, 2.5), "shuttle": (YELLOW, 4.0),
 }
 GOVERNOR_STYLE = {
     "spindle": (GREY, 2.5), "stops": (RED, 2.5), "upper_arms": (ORANGE, 2.5), "lower_links": (BLUE, 2.0),

@@ -1,0 +1,72 @@
+"""The drive train's part of a run's summary: the clutch's slip phases and lock times, the driven part's
+stretches held at rest, and the largest torque in each branch's section against the paper's estimate.
+
+Paper (physics.md section 4, second paper, eq. 6-7): the torque in the section of branch n is
+`M_kr = M_n,c + (I_n / i_1n) domega/dt`; behind a friction clutch with a constant reduced inertia I the
+machine's main shaft accelerates at most at (beta M_nom - M_nom) / I, beta M_nom = the clutch's torque, so
+
+    M_kr,max ~ M_n,nom + (I_n / i_1n) (beta - 1) M_nom / I,
+
+with M_nom, M_n,nom the nominal resisting moments (here: at the speed the run ends at) and beta = the
+clutch's kinetic torque / M_nom (the clutch's reserve factor). With Coulomb resistances only it is exact
+while the clutch slips.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mech_regulator.model import MachineModel
+from mech_regulator.model.drivetrain import HELD, STUCK
+from mech_regulator.solvers import Trajectory
+
+
+def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
+    """Slip phases [(start, end, 'slip+' | 'slip-')] and lock times [s] of a clutch, stretches [(start, end)]
+    in which the driven part was held at rest, and per branch the largest section torque (value [N m], time
+    [s]) with the paper's estimate (module docstring), as plain data."""
+    driven = model.driven
+    result = {
+        "held": [[start, end] for start, end, mode in _spans(model, trajectory, -1) if mode == HELD],
+        "events": [[t, name] for t, name in trajectory.events if "clutch" in name or "driven part" in name],
+        "clutch": None,
+        "sections": {},
+    }
+    if model.clutch is not None:
+        result["clutch"] = {
+            "slip_phases": [[start, end, mode] for start, end, mode in _spans(model, trajectory, 0) if mode != STUCK],
+            "lock_times": [t for t, name in trajectory.events if name.startswith("clutch locks")],
+        }
+    if not driven.branches:
+        return result
+    times = np.union1d(trajectory.samples(model.scene.solver.sample_rate),
+                       [t for t, _ in trajectory.events if trajectory.t_start <= t <= trajectory.t_end])
+    columns = model.columns(times, trajectory(times))
+    end = {name: values[-1] for name, values in columns.items()}
+    nominal = -(end["M_driven_external"] + sum(end[f"M_driven_{effect.name}"] for effect in driven.effects))
+    beta = model.clutch.kinetic_torque / nominal if model.clutch is not None and nominal > 0.0 else None
+    if model.clutch is not None:
+        result["clutch"].update(nominal_load=nominal, beta=beta)
+    for branch in driven.branches:
+        section = columns[f"M_section_{branch.name}"]
+        peak = int(np.argmax(section))
+        branch_nominal = -branch.ratio * sum(end[f"M_driven_{driven.effects[i].name}"] for i in branch.effects)
+        estimate = None
+        if beta is not None:
+            estimate = branch_nominal + branch.inertia / branch.ratio * (beta - 1.0) * nominal / driven.inertia
+        result["sections"][branch.name] = {"max": float(section[peak]), "time": float(times[peak]),
+                                           "nominal": float(branch_nominal), "paper_estimate": estimate}
+    return result
+
+
+def _spans(model: MachineModel, trajectory: Trajectory, part: int) -> list[tuple[float, float, str]]:
+    """(start, end, mode) of each stretch of the run in one mode of a drive-train part (0: the clutch, -1: the
+    driven part)."""
+    changes = [(t, model.train_mode_of(mode)[part]) for t, mode in trajectory.modes]
+    spans = []
+    for (start, mode), (end, _) in zip(changes, changes[1:] + [(trajectory.t_end, None)]):
+        if spans and spans[-1][2] == mode:
+            spans[-1] = (spans[-1][0], end, mode)
+        elif end > start:
+            spans.append((start, end, mode))
+    return spans
