@@ -1,5 +1,6 @@
 """Analysis of a run: steady state and speed fluctuation over the dynamic period, energy balance,
 the flywheel formulas, a governor's statics and stability and its answer to load changes;
+the two-mass machine's periods and the coupling an inverse problem needs;
 `summarise` and `analyse_governor` gather them for the command line."""
 
 from __future__ import annotations
@@ -12,6 +13,8 @@ from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
 from mech_regulator.analysis.stability import (FloquetStability, LinearStability, critical_damping,
                                                floquet_stability, is_periodic, linear_stability)
+from mech_regulator.analysis.two_mass import (MotionPeriods, RequiredCoupling, motion_periods,
+                                              required_coupling)
 from mech_regulator.analysis.statics import (Droop, OperatingPoint, StaticCharacteristic, droop, operating_point,
                                              static_characteristic)
 from mech_regulator.model import MachineModel
@@ -25,6 +28,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         return {"scene": model.scene.name, "status": trajectory.status, "message": trajectory.message,
                 "t_end": trajectory.t_start, "phi_end": model.scene.scenario.initial.phi,
                 "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None, "governor": None,
+                "two_mass": None,
                 "drive_train": None,
                 "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)}}
     steady = analyse_steady_state(model, trajectory)
@@ -48,6 +52,8 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         "energy": dataclasses.asdict(balance),
         "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
         "governor": _governed_run(model, trajectory) if model.governor is not None else None,
+        "two_mass": (dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None
+                     else None),
         "drive_train": drive_train_summary(model, trajectory) if model.driven is not None else None,
     }
 
@@ -129,7 +135,8 @@ def analyse_governor(model: MachineModel) -> dict:
     return result
 
 
-__all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "LoadResponse", "OperatingPoint",
+__all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "LoadResponse", "MotionPeriods",
+           "OperatingPoint", "RequiredCoupling", "motion_periods", "required_coupling",
            "PeriodSpeeds", "StaticCharacteristic", "SteadyState", "analyse_governor", "analyse_steady_state",
            "critical_damping", "cycle_mean_speed", "drive_train_summary", "droop", "energy_balance", "energy_swing",
            "flywheel_for_constant_inertia", "floquet_stability", "is_periodic", "linear_stability", "load_responses",

@@ -2,9 +2,11 @@
 
 Energy balance (physics.md section 1, energy form): the work of all moments equals the change of
 kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. A two-mass machine adds
-the driven part's works (at omega_driven), the coupling damper's work -c (omega - omega_driven)^2 and the
-coupling's elastic energy 1/2 k twist^2 to the stored energy; a friction clutch the work lost in its slip,
--T (omega - omega_driven) (T the moment it passes: +-kinetic_torque while slipping). The works are integrated
+the driven part's works (at omega_driven; its links' weight included), the coupling damper's work
+-c (omega - omega_driven)^2 and the coupling's elastic energy integral_0^twist M_elastic dtwist
+(1/2 k twist^2 for a linear coupling) to the stored energy, 1/2 I2(phi_driven) omega_driven^2 to the
+kinetic energy; a friction clutch the work lost in its slip, -T (omega - omega_driven) (T the moment it
+passes: +-kinetic_torque while slipping). The works are integrated
 by Gauss-Legendre quadrature on every solver step of the dense output, so the residual measures
 the integration error of the run, not a sampling error.
 """
@@ -36,7 +38,7 @@ class EnergyBalance:
 
 def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance:
     """Integrate M_k omega over every step of the trajectory and compare with the kinetic energy change."""
-    edges = _step_edges(trajectory)
+    edges = step_edges(trajectory)
     left, width = edges[:-1], np.diff(edges)
     nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
     weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
@@ -68,7 +70,7 @@ def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.
     return result
 
 
-def _step_edges(trajectory: Trajectory) -> np.ndarray:
+def step_edges(trajectory: Trajectory) -> np.ndarray:
     """All step boundaries of the trajectory: the pieces' own knots where a piece spans many steps."""
     edges = [np.asarray(trajectory.piece_edges[:1])]
     for interpolant, end in zip(trajectory.interpolants, trajectory.piece_edges[1:]):
@@ -81,7 +83,7 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
                  ) -> tuple[np.ndarray, np.ndarray]:
     """dE(phi) = integral_{phi_start}^{phi} (M_d + M_c) dphi over one dynamic period [J] at a fixed speed
     omega [rad/s] and t = 0 (for moments that read omega, the swing at that speed). A coupled driven part
-    turns at omega too, its loads passed through the coupling.
+    turns at omega too, at phi_driven = phi, its moments added to the crank's.
 
     Midpoint rule on a grid that contains every switch angle, so on-off moments integrate exactly.
     Returns (phi [rad], dE [J]).
@@ -93,12 +95,17 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
         grid = np.union1d(grid, np.arange(first, phi_start + period, switch_period))
     middles = 0.5 * (grid[:-1] + grid[1:])
     states = np.vstack([middles, np.full_like(middles, omega)])
-    if model.coupling is not None:  # rigid at constant speed: the coupling carries the driven part's loads
-        states = np.vstack([states, np.full_like(middles, model.static_twist(omega)), np.full_like(middles, omega)])
+    if model.coupling is not None:  # rigid at constant speed: the driven part turns with the crank (twist 0)
+        states = np.vstack([states, np.zeros_like(middles), np.full_like(middles, omega)])
     if model.clutch is not None:  # stuck at constant speed
         states = np.vstack([states, np.full_like(middles, omega)])
     columns = model.columns(np.zeros_like(middles), states)
     net = columns["M_drive"] + columns["M_load"] + columns.get("M_weight", 0.0)
+    if model.driven is not None:  # the driven part's moments (loads, weight, external load) in place of the
+        #                            coupling's or clutch's moment
+        driven = sum(values for name, values in columns.items() if name.startswith("M_driven_"))
+        passed = -columns["M_coupling"] if model.coupling is not None else columns["clutch_torque"]
+        net = net + passed + driven
     return grid, np.concatenate([[0.0], np.cumsum(net * np.diff(grid))])
 
 

@@ -8,6 +8,7 @@ that fails or is interrupted still writes what it computed.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib.util
 import math
 import os
@@ -61,6 +62,24 @@ def build_parser() -> argparse.ArgumentParser:
                                          "Vyshnegradsky A and B, Floquet multipliers")
     governor.add_argument("--plot", type=Path, help="write a PNG picture of the statics and stability")
     governor.add_argument("--json", action="store_true", help="print the analysis as JSON")
+    coupling = scene_command("coupling", "the inverse problem of the two-mass machine (source 003): the coupling "
+                                         "characteristic M_m(twist) a prescribed driven speed law needs - a linear "
+                                         "run-up from rest to omega_m in T, then omega_m + A sin(k (t - T)), "
+                                         "A = delta omega_m / 2")
+    coupling.add_argument("--run-up", type=float, required=True, metavar="T", help="run-up time T [s]")
+    coupling.add_argument("--delta", type=float, required=True, metavar="D",
+                          help="coefficient of speed fluctuation of the driven part in steady motion, 0 < D < 2 [-]")
+    coupling.add_argument("--frequency", type=float, metavar="K", help="k of the sine [rad/s] (default: once per "
+                                                                       "dynamic period at omega_m)")
+    coupling.add_argument("--speed", type=float, metavar="OMEGA", help="mean speed omega_m [rad/s] (default: the "
+                                                                        "speed at which the drive balances the loads)")
+    coupling.add_argument("--points", type=int, default=201, metavar="N", help="points of the table (default 201)")
+    coupling.add_argument("--out", type=Path, help="write the characteristic as CSV (twist, moment)")
+    coupling.add_argument("--scene-out", type=Path, metavar="FILE.yaml",
+                          help="write the scene with this characteristic, started where the table begins, to run "
+                               "it forward with `simulate`")
+    coupling.add_argument("--plot", type=Path, help="write a PNG picture: the law, the twist, the characteristic")
+    coupling.add_argument("--json", action="store_true", help="print the answer as JSON")
     kinematics = scene_command("kinematics", "positions, velocities and accelerations of the mechanism's joints over "
                                              "one turn at constant crank speed (crank-slider, four-bar, walking beam)")
     kinematics.add_argument("--omega", type=float, default=10.0, help="constant crank speed [rad/s] (default 10)")
@@ -144,6 +163,8 @@ def main(argv: list[str] | None = None) -> int:
             return _governor(scene, args)
         if args.command == "run":
             return _main_job(scene, args)
+        if args.command == "coupling":
+            return _required_coupling(scene, args)
         if args.command == "kinematics":
             return _kinematics(scene, args)
         if args.command == "engine":
@@ -271,6 +292,58 @@ def _governor(scene, args) -> int:
         plot_governor(model, analysis, args.plot)
         analysis["plot"] = str(args.plot)
     print(to_json(analysis) if args.json else format_governor(analysis))
+    return 0
+
+
+def _required_coupling(scene, args) -> int:
+    """coupling: solve the inverse problem and write the table, the scene that uses it and the picture."""
+    import yaml
+
+    from mech_regulator.analysis import required_coupling
+    from mech_regulator.cli.report import format_required_coupling
+    from mech_regulator.model import build_model
+
+    for option, value, low, high in (("--run-up", args.run_up, 0.0, math.inf), ("--delta", args.delta, 0.0, 2.0),
+                                     ("--frequency", args.frequency, 0.0, math.inf),
+                                     ("--speed", args.speed, 0.0, math.inf)):
+        if value is not None and not low < value < high:
+            raise SceneError(f"{option} {value:g}: expected a value between {low:g} and {high:g} (exclusive)")
+    if args.points < 3:
+        raise SceneError(f"--points {args.points}: expected at least 3 table points")
+    _check_outputs(args, args.out, args.scene_out)
+    result = required_coupling(build_model(scene), args.run_up, args.delta, args.frequency, args.speed, args.points)
+    answer = {"scene": scene.name, "law": dataclasses.asdict(result.law), "stretch": result.stretch,
+              "t_from": result.t_from, "realisable": result.realisable, "loop_width": result.loop_width,
+              "whole_loop_width": result.whole_loop_width, "jump": result.jump, "driving_delta": result.driving_delta,
+              "notes": list(result.notes), "initial": result.initial,
+              "characteristic": {"twist": result.table_twist.tolist(), "moment": result.table_moment.tolist()}}
+    if args.out is not None:
+        write_csv(args.out, {"twist": result.table_twist, "moment": result.table_moment}, digits=17)
+        answer["csv"] = str(args.out)
+    if args.scene_out is not None:
+        data = scene.model_dump(exclude_none=True)
+        data["name"] = f"{scene.name or 'scene'}_required_coupling"
+        data["description"] = (f"{scene.name}: the coupling characteristic the inverse problem found for delta = "
+                               f"{args.delta:g} (mech-regulator coupling), started at t = {result.t_from:.6g} s of "
+                               "the prescribed law.")
+        coupling = data["machine"]["coupling"]
+        coupling.pop("stiffness", None)
+        coupling["characteristic"] = answer["characteristic"]
+        data["scenario"]["initial"] = dict(result.initial)
+        args.scene_out.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding="utf-8")
+        answer["scene_out"] = str(args.scene_out)
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_required_coupling
+
+        plot_required_coupling(result, scene.name, args.plot)
+        answer["plot"] = str(args.plot)
+    if args.json:
+        print(to_json(answer))
+    else:
+        print(format_required_coupling(result, scene.name))
+        for key in ("csv", "scene_out", "plot"):
+            if key in answer:
+                print(f"wrote {answer[key]}")
     return 0
 
 

@@ -47,9 +47,16 @@ def describe(model: MachineModel) -> str:
     if model.coupling is not None:
         coupling = model.coupling
         modes = coupling_modes(model)
-        lines.append(f"coupling: M_m = {coupling.stiffness:g} twist + {coupling.damping:g} (omega - omega_driven) N m to "
-                     f"a driven part of I2 = {coupling.driven_inertia:g} kg m^2 (relative mode: natural frequency "
-                     f"{modes.natural_frequency:.4g} rad/s, damping ratio {modes.damping_ratio:.3g})")
+        elastic = (f"{coupling.stiffness:g} twist" if coupling.table is None else
+                   f"M_elastic(twist) (table of {coupling.table[0].size} points, {coupling.table[0][0]:g} to "
+                   f"{coupling.table[0][-1]:g} rad, end slopes continued)")
+        driven = (f"I2 = {coupling.driven_inertia:g} kg m^2" if coupling.driven.reduced is None else
+                  f"I2(phi_driven) = {coupling.driven_inertia:g} kg m^2 + "
+                  f"{machine.coupling.driven.mechanism.type} links")
+        lines.append(f"coupling: M_m = {elastic} + {coupling.damping:g} (omega - omega_driven) N m to a driven part of "
+                     f"{driven} (relative mode at the operating twist {modes.operating_twist:.4g} rad: stiffness "
+                     f"{modes.stiffness:.4g} N m/rad, natural frequency {modes.natural_frequency:.4g} rad/s, damping "
+                     f"ratio {modes.damping_ratio:.3g})")
         lines += _driven_lines(model)
     if model.clutch is not None:
         clutch = model.clutch
@@ -86,7 +93,7 @@ def _driven_lines(model: MachineModel) -> list[str]:
     """describe's lines for the driven part behind a coupling or clutch: loads, branches, resistance at rest."""
     driven = model.driven
     in_branches = {index for branch in driven.branches for index in branch.effects}
-    lines = [f"  driven part's load: {effect.formula.replace('omega', 'omega_driven')}"
+    lines = [f"  driven part's load: {effect.formula.replace('omega', 'omega_driven').replace('phi', 'phi_driven')}"
              for index, effect in enumerate(driven.effects) if index not in in_branches]
     for branch in driven.branches:
         lines.append(f"  branch {branch.name}: I_n = {branch.inertia:g} kg m^2, i_1n = {branch.ratio:g} (adds "
@@ -131,6 +138,8 @@ def format_summary(model: MachineModel, summary: dict) -> str:
                  + (f", {solver['events']} mode events" if solver["events"] else ""))
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
+    if summary.get("two_mass"):
+        lines += two_mass_lines(summary["two_mass"])
     if summary.get("drive_train"):
         lines += _drive_train_lines(summary["drive_train"], energy["works"].get("clutch_slip"))
     for key in ("csv", "plot", "recording"):
@@ -180,6 +189,46 @@ def format_cosimulation_summary(summary: dict) -> str:
     for key in ("csv", "recording"):
         if key in summary:
             lines.append(f"wrote {summary[key]}")
+    return "\n".join(lines)
+
+
+def two_mass_lines(periods: dict) -> list[str]:
+    """The two-mass machine's part of a run summary: its periods (source 003) and largest coupling moment."""
+    start, steady, peak = periods["start_up_end"], periods["steady_from"], periods["peak"]
+    period_1 = ("the driven part never moves forward" if start is None else
+                "none (the driven part moves at once)" if start == 0.0 else f"0-{start:.6g} s (driven part at rest "
+                                                                            "or rolling back)")
+    period_3 = f"from {steady:.6g} s" if steady is not None else "not reached"
+    lines = [f"periods: 1 start-up {period_1}; 2 transient; 3 steady motion {period_3}",
+             f"largest coupling moment M_m = {peak['moment']:.6g} N m at t = {peak['time']:.6g} s (period "
+             f"{peak['period']})" + (f", {peak['ratio']:.4g} x the steady mean {peak['steady_mean']:.6g} N m"
+                                     if peak["ratio"] is not None else ""),
+             f"twist from {periods['twist_min']:.6g} to {periods['twist_max']:.6g} rad"]
+    if periods["note"]:
+        lines.append(f"note: {periods['note']}")
+    return lines
+
+
+def format_required_coupling(result, source: str) -> str:
+    """The human-readable answer of the inverse problem (analysis.two_mass.RequiredCoupling)."""
+    law = result.law
+    lines = [f"scene {source}: coupling characteristic for the prescribed driven speed law",
+             f"law: run-up from rest to omega_m = {law.omega_m:.6g} rad/s in T = {law.run_up:.6g} s, then omega_m + "
+             f"A sin(k (t - T)) with A = {law.amplitude:.6g} rad/s, k = {law.frequency:.6g} rad/s "
+             f"(delta = {2 * law.amplitude / law.omega_m:.4g})",
+             f"tabulated over: {result.stretch} (from t = {result.t_from:.6g} s); "
+             + ("realisable by an elastic coupling" if result.realisable else "NOT realisable by an elastic coupling"),
+             f"one twist, moments apart by at most {result.loop_width:.3g} N m over it "
+             f"({result.whole_loop_width:.3g} N m over the whole run); the driving speed fluctuates by "
+             f"{result.driving_delta:.3g} of its mean"]
+    lines += [f"note: {note}" for note in result.notes]
+    lines.append("characteristic (twist [rad] -> elastic moment [N m]; every point in --out):")
+    step = max(1, result.table_twist.size // 12)
+    picks = sorted(set(range(0, result.table_twist.size, step)) | {result.table_twist.size - 1})
+    lines += [f"  {result.table_twist[i]:12.6g} {result.table_moment[i]:12.6g}" for i in picks]
+    initial = result.initial
+    lines.append(f"a forward run starts at t = {result.t_from:.6g} s of the law with phi = {initial['phi']:.6g} rad, "
+                 f"omega = {initial['omega']:.6g} rad/s, twist = {initial['twist']:.6g} rad (both parts at one speed)")
     return "\n".join(lines)
 
 

@@ -45,3 +45,17 @@ def clamped_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[[float]
         return values[i] + slopes[i] * (x - knots[i])
 
     return table
+
+
+def extrapolated_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[[float], float]:
+    """Return y(x): linear between the points, the first and last segments continued beyond the ends
+    (a characteristic that keeps its end slopes)."""
+    knots, values = list(xs), list(ys)
+    slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(len(knots) - 1)]
+    last = len(slopes) - 1
+
+    def table(x: float) -> float:
+        i = min(max(bisect.bisect_right(knots, x) - 1, 0), last)
+        return values[i] + slopes[i] * (x - knots[i])
+
+    return table

@@ -8,7 +8,11 @@ omega_n. Reduced to the main shaft by equal kinetic energy and equal power,
     I = I_main + sum_n I_n / i_1n^2,        M_reduced = M_n / i_1n  (M_n of omega_n = omega_driven / i_1n),
 
 so I domega_driven/dt = M_passed + M_smooth(omega_driven) - s R with R = the Coulomb resistances (constant
-loads, reduced, and the external load) and s = +1 turning forward, -1 backward. At rest ('held') the
+loads, reduced, and the external load) and s = +1 turning forward, -1 backward. Behind an elastic coupling
+the main shaft may carry a mechanism (a crank-slider or four-bar whose crank angle is phi_driven): then
+I = I(phi_driven) adds its links' reduced inertia, M_smooth its links' weight, its loads read phi_driven
+and the slider's or rocker's q2, dq2/dphi2, and the equation gains 1/2 I'(phi_driven) omega_driven^2 on
+the left (physics.md section 4). At rest ('held') the
 resistances hold the part while |M_passed + M_smooth| <= R; they are then mobilised in proportion,
 s = (M_passed + M_smooth) / R. The moment in the section of branch n (the paper's M_kr, on the branch's
 shaft) is
@@ -69,35 +73,65 @@ class BranchModel:
 
 @dataclass(frozen=True)
 class DrivenModel:
-    """A driven part reduced to its main shaft: inertia I [kg m^2]; effects: its moments and its branches'
-    (reduced, M_n / i_1n, named <branch>_<load>); coulomb: which effects are Coulomb resistances (constant
-    loads: the moment given is the one turning forward); resistance: their sum R0 [N m]; branches."""
+    """A driven part reduced to its main shaft: inertia I [kg m^2] (its constant part with a mechanism);
+    effects: its moments and its branches' (reduced, M_n / i_1n, named <branch>_<load>); coulomb: which effects
+    are Coulomb resistances (constant loads: the moment given is the one turning forward); resistance: their
+    sum R0 [N m]; branches; reduced: its mechanism's phi2 -> (I_links, dI_links/dphi2, M_weight, q2, dq2/dphi2)
+    or None; has_weight: whether its links weigh (a M_driven_weight column)."""
 
     inertia: float
     effects: tuple[Effect, ...]
     coulomb: tuple[bool, ...]
     resistance: float
     branches: tuple[BranchModel, ...]
+    reduced: Callable[[float], tuple[float, float, float, float, float]] | None = None
+    has_weight: bool = False
 
-    def smooth_moment(self, t: float, omega_driven: float) -> float:
-        """Sum of the non-Coulomb moments (viscous, fan) at speed omega_driven [rad/s] [N m]."""
-        return sum(effect.moment(t, 0.0, omega_driven, 0.0, 0.0)
-                   for effect, dry in zip(self.effects, self.coulomb) if not dry)
+    @property
+    def reads_angle(self) -> bool:
+        """Whether the driven part's inertia or moments depend on its angle phi2."""
+        return self.reduced is not None or any("phi" in effect.depends_on for effect in self.effects)
 
-    def forward_moment(self, t: float, omega_driven: float) -> float:
-        """Sum of all its moments turning forward at omega_driven [rad/s] [N m] (Coulomb ones at -R0)."""
-        return self.smooth_moment(t, omega_driven) - self.resistance
+    def state(self, phi_driven: float) -> tuple[float, float, float, float, float]:
+        """(I(phi2) [kg m^2], dI/dphi2 [kg m^2/rad], M_weight [N m], q2, dq2/dphi2) at phi_driven [rad]."""
+        if self.reduced is None:
+            return self.inertia, 0.0, 0.0, 0.0, 0.0
+        links, slope, weight, q, dq = self.reduced(phi_driven)
+        return self.inertia + links, slope, weight, q, dq
 
-    def acceleration(self, mode: str, push: float, smooth: float, resistance: float) -> float:
-        """domega_driven/dt [rad/s^2] = (push + smooth - s R) / I turning, 0 held."""
-        return 0.0 if mode == HELD else (push + smooth - DIRECTION[mode] * resistance) / self.inertia
+    def smooth_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
+        """Sum of the non-Coulomb moments (viscous, fan, tables, its mechanism's loads and links' weight) at
+        phi_driven [rad] and omega_driven [rad/s] [N m]."""
+        _, _, weight, q, dq = self.state(phi_driven)
+        return weight + sum(effect.moment(t, phi_driven, omega_driven, q, dq)
+                            for effect, dry in zip(self.effects, self.coulomb) if not dry)
+
+    def dynamics(self, t: float, phi_driven: float, omega_driven: float) -> tuple[float, float]:
+        """(I(phi2) [kg m^2], M_smooth - 1/2 I'(phi2) omega2^2 [N m]) at phi_driven [rad], omega_driven [rad/s]:
+        the inertia and the non-Coulomb side of the driven part's equation."""
+        inertia, slope, _, _, _ = self.state(phi_driven)
+        return inertia, self.smooth_moment(t, omega_driven, phi_driven) - 0.5 * slope * omega_driven ** 2
+
+    def forward_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
+        """Sum of all its moments turning forward at omega_driven [rad/s] and phi_driven [rad] [N m] (Coulomb
+        ones at -R0)."""
+        return self.smooth_moment(t, omega_driven, phi_driven) - self.resistance
+
+    def acceleration(self, mode: str, push: float, smooth: float, resistance: float,
+                     inertia: float | None = None) -> float:
+        """domega_driven/dt [rad/s^2] = (push + smooth - s R) / I turning, 0 held; inertia: I(phi2) (default:
+        the constant I)."""
+        if mode == HELD:
+            return 0.0
+        return (push + smooth - DIRECTION[mode] * resistance) / (self.inertia if inertia is None else inertia)
 
     def at_rest(self, push: float, resistance: float) -> str:
         """The mode of the part at rest pushed by `push` [N m] against resistances R [N m]: held while
-        |push| <= R, else moving the way it is pushed."""
-        if abs(push) <= resistance:
+        |push| <= R, else moving the way it is pushed; with no resistance (R = 0) nothing holds it, so it is
+        never held (forward when not pushed either way)."""
+        if abs(push) <= resistance and resistance > 0.0:
             return HELD
-        return FORWARD if push > 0.0 else BACKWARD
+        return FORWARD if push >= 0.0 else BACKWARD
 
 
 def coulomb_factor(mode: str, push: float, resistance: float) -> float:
@@ -107,9 +141,11 @@ def coulomb_factor(mode: str, push: float, resistance: float) -> float:
     return push / resistance if resistance > 0.0 else 0.0
 
 
-def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]], list[Effect]]) -> DrivenModel:
-    """Assemble a scene's driven part, its branches reduced to the main shaft (module docstring)."""
-    effects = [build_load(load, None) for load in spec.loads]
+def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]], list[Effect]],
+                 reduced: Callable | None = None, has_weight: bool = False) -> DrivenModel:
+    """Assemble a scene's driven part, its branches reduced to the main shaft (module docstring); reduced and
+    has_weight: its mechanism's reduced inertia and weight (mechanisms.build_reduced), if it has one."""
+    effects = [build_load(load, 2.0 * math.pi if spec.mechanism is not None else None) for load in spec.loads]
     coulomb = [isinstance(load, schema.ConstantLoad) for load in spec.loads]
     effects = unique_names(effects)
     branches = []
@@ -121,7 +157,7 @@ def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]],
         branches.append(BranchModel(branch.name, branch.inertia, branch.ratio, tuple(range(first, len(effects)))))
     inertia = spec.inertia + sum(branch.inertia / branch.ratio ** 2 for branch in spec.branches)
     resistance = -sum(effect.moment(0.0, 0.0, 0.0, 0.0, 0.0) for effect, dry in zip(effects, coulomb) if dry)
-    return DrivenModel(inertia, tuple(effects), tuple(coulomb), resistance, tuple(branches))
+    return DrivenModel(inertia, tuple(effects), tuple(coulomb), resistance, tuple(branches), reduced, has_weight)
 
 
 def _reduced(effect: Effect, branch: str, ratio: float) -> Effect:

@@ -10,9 +10,10 @@ with J = J0 + J_flywheel ratio^2 + J_links(phi). The right-hand side is speciali
 a machine without a mechanism has no J(phi), no J' term and no kinematics call at all.
 
 A machine with an elastic coupling is the two-mass machine of physics.md section 4: the crank (the
-driving part above) passes M_m = k (phi - phi2) + c (omega - omega2) to a driven part of constant
-inertia I2, I2 domega2/dt = M_m + M_c2(omega2) - M_external; its states, the twist phi - phi2 and
-omega2, come last in the state vector. A machine with a friction clutch has the driven part's speed
+driving part above) passes M_m = M_elastic(phi - phi2) + c (omega - omega2) (M_elastic = k twist or a
+tabulated characteristic) to a driven part with its own mechanism and loads,
+I2(phi2) domega2/dt + 1/2 I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external;
+its states, the twist phi - phi2 and omega2, come last in the state vector. A machine with a friction clutch has the driven part's speed
 omega2 last. The driven part (possibly a branched drive), its Coulomb resistances and the modes of clutch
 and driven part are in model/drivetrain.py; a mode is the governor's (sleeve, servo) followed by the
 drive train's (clutch, driven part) or (driven part,).
@@ -30,7 +31,10 @@ from typing import Callable
 
 import numpy as np
 
+from scipy import optimize
+
 from mech_regulator.effects import Effect, build_drive, build_load
+from mech_regulator.effects.tables import extrapolated_linear
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.governors import Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
@@ -60,12 +64,19 @@ class LoadPiece:
 
 @dataclass(frozen=True)
 class CouplingModel:
-    """An elastic coupling and the driven part behind it: stiffness k [N m/rad], damping c [N m s/rad] and the
-    driven part (inertia I2 [kg m^2] reduced to its shaft, its resisting moments of omega_driven)."""
+    """An elastic coupling and the driven part behind it (physics.md section 4).
 
-    stiffness: float
+    stiffness k [N m/rad] of a linear coupling, or table = (twist [rad], moment [N m]) knots of a nonlinear
+    characteristic (linear between them, end segments continued); damping c [N m s/rad]; the driven part
+    (model/drivetrain.py: inertia reduced to its shaft, its mechanism, its moments read at (t, phi2, omega2,
+    q2, dq2)); elastic: twist -> M_elastic [N m] for the hot path.
+    """
+
+    stiffness: float | None
     damping: float
     driven: DrivenModel
+    elastic: Callable[[float], float]
+    table: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def driven_inertia(self) -> float:
@@ -77,15 +88,62 @@ class CouplingModel:
         """The driven part's moments (effects of omega_driven), branches' reduced."""
         return self.driven.effects
 
-    def moment(self, twist: float, relative_speed: float) -> float:
-        """The moment the coupling passes to the driven part [N m]: M_m = k twist + c (omega - omega2)
-        (the crank feels -M_m)."""
-        return self.stiffness * twist + self.damping * relative_speed
+    def moment(self, twist, relative_speed):
+        """The moment the coupling passes to the driven part [N m]: M_m = M_elastic(twist) + c (omega - omega2)
+        (the crank feels -M_m); twist [rad] and relative_speed [rad/s] scalars or arrays."""
+        return self.elastic_moment(twist) + self.damping * relative_speed
 
-    def driven_moment(self, t: float, omega_driven: float) -> float:
-        """Sum of the driven part's own moments turning forward at speed omega_driven [rad/s] [N m] (negative:
-        resisting)."""
-        return self.driven.forward_moment(t, omega_driven)
+    def _segments(self, twist):
+        """Knots, values, index of the table segment of each twist (end segments beyond the table), slopes."""
+        knots, values = self.table
+        index = np.clip(np.searchsorted(knots, twist, side="right") - 1, 0, knots.size - 2)
+        slopes = np.diff(values) / np.diff(knots)
+        return knots, values, index, slopes
+
+    def elastic_moment(self, twist):
+        """M_elastic(twist) [N m]: k twist, or the table linear between knots (end segments continued)."""
+        if self.table is None:
+            return self.stiffness * np.asarray(twist, dtype=float)
+        knots, values, i, slopes = self._segments(twist)
+        return values[i] + slopes[i] * (twist - knots[i])
+
+    def local_stiffness(self, twist):
+        """dM_elastic/dtwist at twist [N m/rad]: k, or the slope of the table's segment there."""
+        if self.table is None:
+            return self.stiffness + 0.0 * np.asarray(twist, dtype=float)
+        _, _, i, slopes = self._segments(twist)
+        return slopes[i]
+
+    def elastic_energy(self, twist):
+        """E_elastic = integral_0^twist M_elastic dtwist [J]: 1/2 k twist^2, or exact for the piecewise-linear
+        table (a quadratic on each segment)."""
+        if self.table is None:
+            return 0.5 * self.stiffness * np.asarray(twist, dtype=float) ** 2
+        knots, values, i, slopes = self._segments(twist)
+        at_knots = np.concatenate([[0.0], np.cumsum(0.5 * (values[1:] + values[:-1]) * np.diff(knots))])
+        at_knots -= at_knots[int(np.flatnonzero(knots == 0.0)[0])]
+        step = twist - knots[i]
+        return at_knots[i] + values[i] * step + 0.5 * slopes[i] * step ** 2
+
+    def twist_for(self, moment: float) -> float:
+        """The twist [rad] at which the elastic moment equals `moment` [N m] (the characteristic is strictly
+        increasing, so this is unique)."""
+        if self.table is None:
+            return moment / self.stiffness
+        knots, values = self.table
+        i = int(np.clip(np.searchsorted(values, moment, side="right") - 1, 0, knots.size - 2))
+        return float(knots[i] + (moment - values[i]) * (knots[i + 1] - knots[i]) / (values[i + 1] - values[i]))
+
+    def driven_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
+        """Sum of the driven part's own moments (its loads and its links' weight) turning forward at phi_driven
+        [rad] and omega_driven [rad/s] [N m] (negative: resisting)."""
+        return self.driven.forward_moment(t, omega_driven, phi_driven)
+
+    def required_moment(self, t: float, phi_driven: float, omega: float, external: float) -> float:
+        """The coupling moment [N m] that keeps the driven part at constant speed omega [rad/s] at phi_driven
+        [rad] against its moments and the external load [N m]: M_m = external - M_c2 + 1/2 I2' omega^2."""
+        _, slope, *_ = self.driven.state(phi_driven)
+        return external - self.driven_moment(t, omega, phi_driven) + 0.5 * slope * omega * omega
 
 
 @dataclass(frozen=True)
@@ -145,8 +203,9 @@ class MachineModel:
         Periods are taken as rational multiples of 2 pi; a machine with nothing periodic in phi gets 2 pi.
         """
         turns = [Fraction(1)]
+        driven = self.driven.effects if self.driven is not None else ()
         turns += [Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
-                  for effect in self.effects if effect.period is not None]
+                  for effect in self.effects + driven if effect.period is not None]
         lcm = turns[0]
         for turn in turns[1:]:
             numerator = math.lcm(lcm.numerator * turn.denominator, turn.numerator * lcm.denominator)
@@ -157,7 +216,7 @@ class MachineModel:
         """Which of 't', 'phi', 'omega' the net moment reads."""
         effects = self.effects + (self.driven.effects if self.driven is not None else ())
         reads = set().union(*(effect.depends_on for effect in effects)) if effects else set()
-        if self.has_weight:
+        if self.has_weight or (self.driven is not None and self.driven.reduced is not None):
             reads.add("phi")
         if self.load_pieces:
             reads.add("t")
@@ -188,8 +247,9 @@ class MachineModel:
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
         (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with throttle = 1
         without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c includes -M_m, the
-        external load acts on the driven part, d twist/dt = omega - omega2 and domega2/dt = (M_m + M_c2(omega2)
-        - M_external) / I2 (physics.md section 4), 0 while the driven part is held at rest. With a clutch, y
+        external load acts on the driven part, d twist/dt = omega - omega2 and I2(phi2) domega2/dt + 1/2
+        I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external, phi2 = phi - twist (physics.md section 4),
+        domega2/dt = 0 while the driven part is held at rest. With a clutch, y
         ends with omega2 and the crank and driven part follow the clutch's mode (model/drivetrain.py); while it
         is stuck the solver's own omega2 is frozen and `constraint` sets it to omega. window = (lo, hi): the
         crank-angle interval between two switch angles the solver is in; effects that jump at switch angles then
@@ -347,19 +407,21 @@ class MachineModel:
         index = self.driven_speed_index
         resistance = driven.resistance
         if self.coupling is not None:
-            k, c, I2 = self.coupling.stiffness, self.coupling.damping, driven.inertia
+            elastic, c, state = self.coupling.elastic, self.coupling.damping, driven.state
             smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
             part = train_mode[0]
             held, direction = part == HELD, DIRECTION[part]
 
             def coupled(t: float, y: np.ndarray, J: float, net: float, external: float):
-                omega, omega2 = y[1], y[index]
-                passed = k * y[index - 1] + c * (omega - omega2)
+                omega, twist, omega2 = y[1], y[index - 1], y[index]
+                passed = elastic(twist) + c * (omega - omega2)
                 if held:
                     return (net - passed) / J, [omega - omega2, 0.0]
-                driven_total = passed - direction * (resistance + external)
+                phi2 = y[0] - twist
+                I2, dI2, driven_total, q2, dq2 = state(phi2)
+                driven_total += passed - direction * (resistance + external) - 0.5 * dI2 * omega2 * omega2
                 for moment in smooth:
-                    driven_total += moment(t, 0.0, omega2, 0.0, 0.0)
+                    driven_total += moment(t, phi2, omega2, q2, dq2)
                 return (net - passed) / J, [omega - omega2, driven_total / I2]
 
             return coupled
@@ -398,15 +460,15 @@ class MachineModel:
                 omega2 = y[1]
             return train_mode, self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2),
                                                   resistance), resistance
-        passed = self.coupling.moment(y[index - 1], y[1] - omega2)
-        smooth = driven.smooth_moment(t, omega2)
+        passed = float(self.coupling.moment(y[index - 1], y[1] - omega2))
+        inertia, smooth = driven.dynamics(t, y[0] - y[index - 1], omega2)
         push = passed + smooth
         if train_mode is None:
             train_mode = (driven.at_rest(push, resistance) if omega2 == 0.0 else FORWARD if omega2 > 0.0
                           else BACKWARD,)
         part = train_mode[0]
-        return train_mode, Forces((F1 - passed) / J, driven.acceleration(part, passed, smooth, resistance), 0.0, push,
-                                  coulomb_factor(part, push, resistance)), resistance
+        return train_mode, Forces((F1 - passed) / J, driven.acceleration(part, passed, smooth, resistance, inertia),
+                                  0.0, push, coulomb_factor(part, push, resistance)), resistance
 
     def constraint(self, mode: Mode | None) -> Callable[[np.ndarray], None] | None:
         """What a mode imposes on the states the solver gives, in place, or None: a stuck clutch sets omega2 =
@@ -454,8 +516,17 @@ class MachineModel:
 
     def static_twist(self, omega: float) -> float:
         """The twist [rad] at which the coupling carries the driven part's loads and the external load at t = 0
-        at speed omega [rad/s]: k twist = M_external - M_c2(omega)."""
-        return (self.external_load(0.0) - self.coupling.driven_moment(0.0, omega)) / self.coupling.stiffness
+        at speed omega [rad/s] with the driven part at phi_driven = phi0 - twist (phi0 the initial crank angle):
+        M_elastic(twist) = CouplingModel.required_moment, solved by Brent's method when it depends on phi_driven."""
+        coupling, external, phi0 = self.coupling, self.external_load(0.0), self.scene.scenario.initial.phi
+        if not coupling.driven.reads_angle:
+            return coupling.twist_for(coupling.required_moment(0.0, phi0, omega, external))
+        needed = [coupling.required_moment(0.0, angle, omega, external) for angle in np.linspace(0, 2 * math.pi, 361)]
+        low, high = coupling.twist_for(min(needed)), coupling.twist_for(max(needed))
+        if low == high:
+            return low
+        return optimize.brentq(lambda twist: float(coupling.elastic(twist)) - coupling.required_moment(
+            0.0, phi0 - twist, omega, external), low, high, xtol=1e-15)
 
     def initial_mode(self, y: np.ndarray) -> Mode | None:
         """The mode at a state with the governor at rest: the governor's (None without a governor), followed by
@@ -518,9 +589,11 @@ class MachineModel:
                 else:
                     other += value
         count = len(phis)
-        if self.driven is not None:
-            return (inertia + self.driven.inertia, drive / count,
-                    other / count + self.driven.forward_moment(0.0, omega) + weight - external)
+        if self.driven is not None:  # the driven part at phi_driven = phi
+            driven = self.driven
+            pairs = [(driven.state(phi)[0], driven.forward_moment(0.0, omega, phi)) for phi in phis]
+            mean_inertia, mean_moment = np.mean(pairs, axis=0)
+            return inertia + float(mean_inertia), drive / count, other / count + float(mean_moment) + weight - external
         return inertia, drive / count, other / count + weight - external
 
     @property
@@ -567,8 +640,11 @@ class MachineModel:
         and, governed: throttle, sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], servo [-] and
         feedback_shift [m] where present.
         With a coupling: M_coupling = -M_m (the coupling's moment on the crank, part of M_load; the external
-        load is not), twist [rad], omega_driven [rad/s], M_driven_<effect> and M_driven_external (moments on
-        the driven part [N m]), E_elastic = 1/2 k twist^2 [J]; E_kinetic includes 1/2 I2 omega_driven^2.
+        load is not), twist [rad], phi_driven = phi - twist [rad], omega_driven [rad/s], I2 [kg m^2] and
+        dI2_dphi2 [kg m^2/rad] (the driven part's inertia), M_driven_<effect>, M_driven_weight (with a driven
+        mechanism and gravity) and M_driven_external (moments on the driven part [N m]), its mechanism's output
+        (x_driven, v_driven or theta4_driven, omega4_driven), E_elastic = integral_0^twist M_elastic dtwist
+        [J]; E_kinetic includes 1/2 I2 omega_driven^2.
         With joint friction: M_joint_friction (part of M_load), friction_<joint> and reaction_<joint>
         (_joint_friction_columns); epsilon then solves the implicit equation of effects.joint_friction.
         With a clutch: clutch_torque (the moment it passes to the driven part; M_load includes minus it) [N m],
@@ -640,21 +716,32 @@ class MachineModel:
             out["slip_speed"] = omega - omega_driven
             out["clutch_mode"] = np.array([CLUTCH_CODE[state[0][0]] for state in train])
         if driven is not None:
+            phi_driven = y[0] - twist if coupling is not None else np.zeros(n)
+            state = np.array([driven.state(p) for p in phi_driven]).T.reshape(5, n)
             for effect, dry in zip(driven.effects, driven.coulomb):
-                moment = np.array([effect.moment(ti, 0.0, w, 0.0, 0.0) for ti, w in zip(t, omega_driven)])
+                moment = np.array([effect.moment(ti, p, w, q2, dq2) for ti, p, w, q2, dq2
+                                   in zip(t, phi_driven, omega_driven, state[3], state[4])])
                 out[f"M_driven_{effect.name}"] = moment * forces["factor"] if dry else moment
+            if driven.has_weight:
+                out["M_driven_weight"] = state[2]
             out["M_driven_external"] = -external * forces["factor"]
             if coupling is not None:
-                out["twist"] = twist
+                out["twist"], out["phi_driven"] = twist, phi_driven
+                out["I2"], out["dI2_dphi2"] = state[0], state[1]
+                kind = self.scene.machine.coupling.driven.mechanism
+                if kind is not None:
+                    names = ("x_driven", "v_driven") if kind.type == "crank_slider" else ("theta4_driven",
+                                                                                           "omega4_driven")
+                    out[names[0]], out[names[1]] = state[3], state[4] * omega_driven
             out["omega_driven"] = omega_driven
             out["epsilon_driven"] = forces["driven"]
             out["driven_mode"] = np.array([DIRECTION[state[0][-1]] for state in train])
             for branch in driven.branches:
                 resisting = -branch.ratio * sum(out[f"M_driven_{driven.effects[i].name}"] for i in branch.effects)
                 out[f"M_section_{branch.name}"] = resisting + branch.inertia / branch.ratio * forces["driven"]
-            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * driven.inertia * omega_driven ** 2
+            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * state[0] * omega_driven ** 2
             if coupling is not None:
-                out["E_elastic"] = 0.5 * coupling.stiffness * twist ** 2
+                out["E_elastic"] = coupling.elastic_energy(twist)
         else:
             if self.load_pieces or given:
                 out["M_external"] = -external
@@ -724,10 +811,8 @@ def build_model(scene: Scene) -> MachineModel:
         effects.append(build_drive(machine.drive, machine.mechanism))
     effects += [build_load(load, kinematic_period) for load in machine.loads]
     effects = _unique_names(effects)
-    coupling = clutch = None
-    if machine.coupling is not None:
-        coupling = CouplingModel(machine.coupling.stiffness, machine.coupling.damping,
-                                 build_driven(machine.coupling.driven, _unique_names))
+    coupling = _coupling_model(machine, gravity)
+    clutch = None
     if machine.clutch is not None:
         clutch = ClutchModel(machine.clutch.static_torque, machine.clutch.kinetic_torque,
                              build_driven(machine.clutch.driven, _unique_names))
@@ -740,6 +825,24 @@ def build_model(scene: Scene) -> MachineModel:
         return model
     governor = build_governor(scene.governor, model.initial_balance_throttle)
     return dataclasses.replace(model, governor=governor)
+
+
+def _coupling_model(machine, gravity: tuple[float, float] | None) -> CouplingModel | None:
+    """The coupling and driven part of a scene's machine (None without machine.coupling); the driven
+    mechanism's links weigh under the machine's gravity."""
+    coupling = machine.coupling
+    if coupling is None:
+        return None
+    mechanism = coupling.driven.mechanism
+    weighs = mechanism is not None and gravity is not None and any(gravity) and _has_mass(mechanism)
+    reduced = build_reduced(mechanism, gravity if weighs else None) if mechanism is not None else None
+    driven = build_driven(coupling.driven, _unique_names, reduced, weighs)
+    if coupling.characteristic is None:
+        stiffness = coupling.stiffness
+        return CouplingModel(stiffness, coupling.damping, driven, lambda twist: stiffness * twist)
+    table = coupling.characteristic
+    return CouplingModel(None, coupling.damping, driven, extrapolated_linear(table.twist, table.moment),
+                         (np.array(table.twist), np.array(table.moment)))
 
 
 def _joint_friction(model: MachineModel) -> JointFrictionModel:

@@ -357,7 +357,9 @@ Load = Annotated[
 ]
 
 
-DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
+DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, SliderConstant, RockerConstant,
+                             OutputViscous, OutputSpring, SliderTable], Field(discriminator="type")]
+BranchLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
 
 
 class Branch(SceneModel):
@@ -370,39 +372,96 @@ class Branch(SceneModel):
                                           "to the branch's shaft [kg m^2]")
     ratio: Positive = Field(description="ratio i_1n = omega_main / omega_n from the main shaft to the branch's shaft; "
                                         "the branch adds I_n / i_1n^2 to the main shaft's inertia [-]")
-    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the branch's shaft, of "
+    loads: list[BranchLoad] = Field(default_factory=list, description="resisting moments on the branch's shaft, of "
                                                                       "its speed omega_n = omega_driven / i_1n "
                                                                       "(constant, viscous, fan)")
 
 
 class DrivenPart(SceneModel):
-    """The driven part of a two-mass machine (physics.md section 4): a rotor of constant inertia with its own
-    resisting moments, turning at omega_driven; the scenario's external load acts on it. Its constant loads and
-    the external load are Coulomb resistances: they oppose the motion and, at rest, hold the part up to their
-    sum (it breaks away when the moment passed to it exceeds them)."""
+    """The driven part of a two-mass machine (physics.md section 4): a rotor with its own resisting moments,
+    turning at omega_driven, angle phi_driven = phi - twist, optionally with a mechanism on its shaft (then
+    I2(phi_driven) = inertia + the links' reduced inertia), and branches; the scenario's external load acts on
+    it. Its constant loads and the external load are Coulomb resistances: they oppose the motion and, at rest,
+    hold the part up to their sum (it breaks away when the moment passed to it exceeds them)."""
 
-    inertia: Positive = Field(description="moment of inertia I2 of the driven part, reduced to the crank shaft [kg m^2]")
-    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the driven part, of "
-                                                                      "omega_driven (constant, viscous, fan)")
+    inertia: Positive = Field(description="constant part of the moment of inertia I2 of the driven part, reduced to "
+                                          "the crank shaft [kg m^2]")
+    mechanism: Mechanism | None = Field(None, description="linkage driven by the driven shaft (its crank angle is "
+                                                          "phi_driven); adds its links' reduced inertia and weight "
+                                                          "(machine.gravity)")
+    loads: list[DrivenLoad] = Field(default_factory=list, description="resisting moments on the driven part, read "
+                                                                      "at phi_driven and omega_driven (constant, "
+                                                                      "viscous, fan, table in phi_driven, and "
+                                                                      "slider/rocker loads of its mechanism)")
     branches: list[Branch] = Field(default_factory=list, description="working members driven from the driven part's "
                                                                      "shaft (a branched drive), each with its ratio")
 
     @model_validator(mode="after")
-    def _distinct_branches(self) -> DrivenPart:
+    def _loads_fit_mechanism(self) -> DrivenPart:
         names = [branch.name for branch in self.branches]
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:
             raise ValueError(f"branches: the name(s) {repeated} appear more than once; expected distinct names")
+        kind = self.mechanism.type if self.mechanism is not None else None
+        needs = {"slider": "crank_slider", "rocker": "four_bar"}
+        for index, load in enumerate(self.loads):
+            prefix = load.type.split("_")[0]
+            if prefix in needs and kind != needs[prefix]:
+                raise ValueError(f"driven.loads[{index}] type '{load.type}' acts on the {prefix}: it needs "
+                                 f"driven.mechanism.type: {needs[prefix]} (the driven part has "
+                                 f"{kind or 'no mechanism'})")
+        return self
+
+
+class CouplingCharacteristic(SceneModel):
+    """Nonlinear elastic characteristic M_m(twist) of a coupling: a table, linear between points; beyond the
+    table the end segments continue (the coupling keeps its end stiffness)."""
+
+    twist: list[float] = Field(min_length=2, description="twists phi - phi_driven of the table points, strictly "
+                                                         "increasing, with a point at 0 [rad]")
+    moment: list[float] = Field(min_length=2, description="elastic moment the coupling passes at each twist, "
+                                                          "strictly increasing, 0 at twist 0 [N m]")
+
+    @model_validator(mode="after")
+    def _elastic(self) -> CouplingCharacteristic:
+        if len(self.twist) != len(self.moment):
+            raise ValueError(f"characteristic: twist has {len(self.twist)} entries but moment has "
+                             f"{len(self.moment)}; expected one moment per twist")
+        if any(b <= a for a, b in zip(self.twist, self.twist[1:])):
+            raise ValueError(f"characteristic: twist = {self.twist} rad must be strictly increasing")
+        if 0.0 not in self.twist or self.moment[self.twist.index(0.0)] != 0.0:
+            raise ValueError(f"characteristic: twist = {self.twist} rad, moment = {self.moment} N m; expected the "
+                             "point twist 0 -> moment 0 (an untwisted coupling passes no moment)")
+        falls = [i for i, (a, b) in enumerate(zip(self.moment, self.moment[1:])) if b <= a]
+        if falls:
+            i = falls[0]
+            raise ValueError(f"characteristic: moment does not rise from twist {self.twist[i]} to {self.twist[i + 1]} "
+                             f"rad ({self.moment[i]} -> {self.moment[i + 1]} N m); expected a strictly increasing "
+                             "moment (positive stiffness everywhere: a falling characteristic has no stable "
+                             "equilibrium)")
         return self
 
 
 class Coupling(SceneModel):
     """Elastic coupling between the crank (driving part) and the driven part: it passes the moment
-    M_m = stiffness * twist + damping * (omega - omega_driven), twist = phi - phi_driven."""
+    M_m = M_elastic(twist) + damping * (omega - omega_driven), twist = phi - phi_driven, with M_elastic =
+    stiffness * twist (linear) or the tabulated characteristic."""
 
-    stiffness: Positive = Field(description="torsional stiffness k of the coupling [N m/rad]")
+    stiffness: Positive | None = Field(None, description="torsional stiffness k of a linear coupling; give this or "
+                                                         "characteristic [N m/rad]")
+    characteristic: CouplingCharacteristic | None = Field(None, description="nonlinear elastic characteristic "
+                                                                            "M_elastic(twist); give this or stiffness")
     damping: NonNegative = Field(0.0, description="torsional damping c of the coupling [N m s/rad]")
     driven: DrivenPart = Field(description="the driven part")
+
+    @model_validator(mode="after")
+    def _one_characteristic(self) -> Coupling:
+        if (self.stiffness is None) == (self.characteristic is None):
+            given = "both" if self.stiffness is not None else "neither"
+            raise ValueError(f"coupling: {given} of stiffness and characteristic given; expected exactly one "
+                             "(stiffness [N m/rad] for a linear coupling, characteristic {twist, moment} for a "
+                             "nonlinear one)")
+        return self
 
 
 class Journal(SceneModel):
@@ -475,6 +534,15 @@ class Clutch(SceneModel):
         if self.kinetic_torque > self.static_torque:
             raise ValueError(f"kinetic_torque = {self.kinetic_torque} N m exceeds static_torque = "
                              f"{self.static_torque} N m; expected kinetic_torque <= static_torque")
+        if self.driven.mechanism is not None:
+            raise ValueError(f"clutch.driven.mechanism ({self.driven.mechanism.type}): a driven part behind a clutch "
+                             "has no angle of its own in the state (only omega_driven), so it cannot carry a "
+                             "mechanism; expected a rotor (drop driven.mechanism, or use machine.coupling)")
+        for index, load in enumerate(self.driven.loads):
+            if load.type not in ("constant", "viscous", "fan"):
+                raise ValueError(f"clutch.driven.loads[{index}] type '{load.type}' reads the driven part's angle, "
+                                 "which a driven part behind a clutch does not have; expected constant, viscous or "
+                                 "fan (angle-dependent driven loads need machine.coupling)")
         return self
 
 

@@ -1,7 +1,9 @@
 """Advice on the choice of solver: a stiff elastic coupling makes explicit methods crawl.
 
 The coupling's relative motion (twist) is a damped oscillator of the two inertias against each other,
-with reduced inertia J_r = J1 I2 / (J1 + I2) (J1 the crank side's mean inertia):
+with reduced inertia J_r = J1 I2 / (J1 + I2) (J1 and I2 the two sides' mean inertias) and, for a nonlinear
+characteristic, the local stiffness k = dM_elastic/dtwist at the operating twist (the static twist at the
+initial speed):
 
     J_r twist'' + c twist' + k twist = ...,   lambda = -c / (2 J_r) +- sqrt((c / (2 J_r))^2 - k / J_r).
 
@@ -17,6 +19,8 @@ import cmath
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 from mech_regulator.model import MachineModel
 
 EXPLICIT_METHODS = ("RK45", "RK23", "DOP853", "RK4")
@@ -26,10 +30,13 @@ STIFF_STEPS = 20_000  # steps imposed by stability alone above which the user is
 
 @dataclass(frozen=True)
 class CouplingModes:
-    """The coupling's relative mode: reduced inertia [kg m^2], natural frequency sqrt(k / J_r) [rad/s],
-    damping ratio c / (2 sqrt(k J_r)) [-] and the eigenvalue of largest magnitude [1/s]."""
+    """The coupling's relative mode: reduced inertia [kg m^2], the (local) stiffness k [N m/rad] at the operating
+    twist [rad], natural frequency sqrt(k / J_r) [rad/s], damping ratio c / (2 sqrt(k J_r)) [-] and the eigenvalue
+    of largest magnitude [1/s]."""
 
     reduced_inertia: float
+    stiffness: float
+    operating_twist: float
     natural_frequency: float
     damping_ratio: float
     fastest: complex
@@ -41,12 +48,16 @@ def coupling_modes(model: MachineModel) -> CouplingModes | None:
     if coupling is None:
         return None
     crank_inertia = model.mean_crank_inertia
-    reduced = crank_inertia * coupling.driven_inertia / (crank_inertia + coupling.driven_inertia)
-    natural = math.sqrt(coupling.stiffness / reduced)
-    ratio = coupling.damping / (2.0 * math.sqrt(coupling.stiffness * reduced))
+    driven_inertia = float(np.mean([coupling.driven.state(angle)[0] for angle in np.linspace(0.0, 2.0 * math.pi, 360,
+                                                                                                 endpoint=False)]))
+    reduced = crank_inertia * driven_inertia / (crank_inertia + driven_inertia)
+    twist = model.static_twist(model.scene.scenario.initial.omega)
+    stiffness = float(coupling.local_stiffness(twist))
+    natural = math.sqrt(stiffness / reduced)
+    ratio = coupling.damping / (2.0 * math.sqrt(stiffness * reduced))
     half = coupling.damping / (2.0 * reduced)
-    root = cmath.sqrt(half * half - coupling.stiffness / reduced)
-    return CouplingModes(reduced, natural, ratio, max(-half + root, -half - root, key=abs))
+    root = cmath.sqrt(half * half - stiffness / reduced)
+    return CouplingModes(reduced, stiffness, twist, natural, ratio, max(-half + root, -half - root, key=abs))
 
 
 def stiffness_advice(model: MachineModel) -> str | None:

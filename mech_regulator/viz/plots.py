@@ -65,7 +65,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
               title="speed over the last dynamic period")
 
     right = axes[1, 1]
-    if model.governor is not None:
+    if summary.get("two_mass"):
+        _plot_two_mass_run(summary["two_mass"], times, columns, speed, right)
+    elif model.governor is not None:
         _plot_governor_run(model, trajectory, summary, times, columns, speed, right)
     elif model.reduced is not None:
         phi = np.linspace(0.0, 2.0 * math.pi, 721)
@@ -80,6 +82,75 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
         right.barh(list(works), list(works.values()), color="tab:green")
         right.set(xlabel="work over the run [J]", title=f"works (energy residual "
                                                          f"{summary['energy']['relative_residual']:.1g} relative)")
+    figure.savefig(path, dpi=100)
+    plt.close(figure)
+
+
+PERIOD_COLOURS = ("tab:red", "tab:olive", "tab:green")  # shading of periods 1, 2, 3 of a two-mass run
+
+
+def _plot_two_mass_run(periods: dict, times: np.ndarray, columns: dict, speed, panel) -> None:
+    """Two-mass run: omega_driven on the speed panel; the coupling moment M_m against time with its largest
+    value marked on `panel`; both with the periods (start-up, transient, steady) shaded."""
+    speed.plot(times, columns["omega_driven"], color="tab:purple", lw=0.8, label="omega_driven")
+    speed.legend(loc="lower right")
+    passed = -columns["M_coupling"]
+    panel.plot(times, passed, color="tab:blue", lw=0.8, label="M_m (coupling to the driven part)")
+    peak = periods["peak"]
+    panel.plot(peak["time"], peak["moment"], "v", color="k", ms=8,
+               label=f"largest {peak['moment']:.4g} N m at {peak['time']:.3g} s (period {peak['period']})")
+    if peak["steady_mean"] is not None:
+        panel.axhline(peak["steady_mean"], color="k", lw=0.8, ls="--",
+                      label=f"steady mean {peak['steady_mean']:.4g} N m (peak x{peak['ratio']:.3g})")
+    start = periods["start_up_end"] if periods["start_up_end"] is not None else times[-1]
+    steady = periods["steady_from"] if periods["steady_from"] is not None else times[-1]
+    for axis in (speed, panel):
+        for number, (lo, hi) in enumerate(((times[0], start), (start, steady), (steady, times[-1])), start=1):
+            if hi > lo:
+                axis.axvspan(lo, hi, color=PERIOD_COLOURS[number - 1], alpha=0.08,
+                             label=f"period {number}" if axis is panel else None)
+    panel.set(xlabel="t [s]", ylabel="coupling moment M_m [N m]", title="coupling moment and periods of motion")
+    low, high = panel.get_ylim()
+    panel.set_ylim(low, high + 0.45 * (high - low))  # room for the legend above the curve
+    panel.legend(loc="upper right", fontsize=8, ncol=2)
+
+
+def plot_required_coupling(result, name: str, path: Path) -> None:
+    """The inverse problem (analysis.two_mass.RequiredCoupling): the prescribed driven speed law with the driving
+    speed it implies, the twist and the needed coupling moment over the tabulated stretch, and the required
+    characteristic with its table."""
+    figure, axes = plt.subplots(1, 3, figsize=(16, 5), constrained_layout=True)
+    figure.suptitle(f"{name}: coupling characteristic for the prescribed speed law "
+                    f"({'realisable' if result.realisable else 'NOT realisable'} by an elastic coupling)")
+    times, periodic = result.times, result.periodic_from
+    law = axes[0]
+    law.plot(times, result.omega_driven, color="tab:purple", lw=1.0, label="omega_driven (prescribed)")
+    law.plot(times[:periodic], result.omega_driving[:periodic], color="tab:blue", lw=1.0,
+             label="omega, driving part (from rest)")
+    law.plot(times[periodic:], result.omega_driving[periodic:], color="tab:cyan", lw=1.5,
+             label="omega, driving part's periodic motion")
+    law.axvline(result.law.run_up, color="k", lw=0.8, ls=":", label=f"end of run-up T = {result.law.run_up:g} s")
+    law.set(xlabel="t [s]", ylabel="speed [rad/s]", title="speeds")
+    law.legend(loc="lower right", fontsize=8)
+    stretch = slice(periodic, None) if result.stretch == "steady motion" else slice(None)
+    twist = axes[1]
+    twist.plot(times[stretch], result.twist[stretch], color="tab:green", lw=4.0, alpha=0.5)
+    twist.set(xlabel="t [s]", title=f"twist and needed coupling moment ({result.stretch})")
+    twist.set_ylabel("twist phi - phi_driven [rad]", color="tab:green")
+    moment = twist.twinx()
+    moment.plot(times[stretch], result.moment[stretch], color="tab:red", lw=1.0)
+    moment.set_ylabel("needed coupling moment M_m [N m]", color="tab:red")
+    characteristic = axes[2]
+    characteristic.plot(result.table_twist, result.table_moment, "k.-", lw=0.6, ms=3,
+                        label="table (continued to 0, 0)")
+    characteristic.plot(result.twist[stretch], result.elastic[stretch], color="tab:blue", lw=1.5, alpha=0.7,
+                        label=f"{result.stretch}: loop width {result.loop_width:.2g} N m")
+    characteristic.axhline(0.0, color="k", lw=0.5)
+    characteristic.axvline(0.0, color="k", lw=0.5)
+    characteristic.set(xlabel="twist [rad]", ylabel="elastic moment M_m - c (omega - omega_driven) [N m]",
+                       title="required characteristic")
+    characteristic.grid(alpha=0.3)
+    characteristic.legend(loc="upper left", fontsize=8)
     figure.savefig(path, dpi=100)
     plt.close(figure)
 
