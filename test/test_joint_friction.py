@@ -18,6 +18,7 @@ from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.mechanisms.four_bar import link_angles
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene, schema
+from mech_regulator.solvers.cosim import GovernorStepper
 from support import model_of, run_cli, simulate_complete
 
 GRAVITY = (0.7, -9.81)
@@ -385,6 +386,8 @@ def test_guide_needs_a_crank_slider(capsys):
     assert code == 2 and "only a crank_slider has a guide" in err, err
 
 
+ENGINE_JOINT_FRICTION = ("machine.joint_friction={coefficient: 0.02, joints: {crank_bearing: {radius: 0.025, fit: "
+                         "run_in}, crank_pin: {radius: 0.02, fit: run_in}}, guide: 0.02}")
 COLLAR_ONLY = ("machine.joint_friction={coefficient: 0.1, thrust_collar: {inner_radius: 0.01, outer_radius: 0.02, "
                "axial_load: 100.0, state: new}}")
 
@@ -400,6 +403,19 @@ def test_mechanisms_without_kinetostatics_take_a_thrust_collar_but_no_journals(c
     trajectory = simulate_complete(model)
     moment = model.columns(np.array([trajectory.t_end]), trajectory(np.array([trajectory.t_end])))["M_joint_friction"]
     assert moment[0] == pytest.approx(-2.0 / 3.0 * 0.1 * 100.0 * (0.02 ** 3 - 0.01 ** 3) / (0.02 ** 2 - 0.01 ** 2), rel=1e-12)
+
+
+def test_governor_stepper_of_a_machine_with_joint_friction_holds_the_crank_speed():
+    """The co-simulation's governor (the ROS governor node's stepper) integrates the governor alone with the
+    crank speed held: a machine's joint friction must not act there, so its governor answers exactly as the
+    frictionless machine's does."""
+    frictionless = build_model(load_scene("engine_direct", ["scenario.load_events=[]"]))
+    with_friction = build_model(load_scene("engine_direct", ["scenario.load_events=[]", ENGINE_JOINT_FRICTION]))
+    answers = []
+    for model in (frictionless, with_friction):
+        stepper = GovernorStepper(model)
+        answers.append([stepper.answer(0.01 * k, 224.17 + 2.0 * k) for k in range(20)] + list(stepper.state))
+    assert answers[0] == answers[1]
 
 
 # ----------------------------------------------------------------------------------------------

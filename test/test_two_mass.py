@@ -363,6 +363,9 @@ def test_coupling_needs_exactly_one_characteristic_and_fitting_driven_loads(tmp_
     slider = two_mass({"stiffness": 1e3}, [{"type": "slider_viscous", "coefficient": 1.0}])
     code, _, err = run_cli(capsys, "simulate", str(write_scene(tmp_path, yaml.safe_dump(slider), "b.yaml")))
     assert code == 2 and "driven.loads[0] type 'slider_viscous'" in err and "driven.mechanism.type" in err
+    shuttle = two_mass({"stiffness": 1e3}, [{"type": "shuttle_constant", "force": 3.0}])
+    code, _, err = run_cli(capsys, "simulate", str(write_scene(tmp_path, yaml.safe_dump(shuttle), "c.yaml")))
+    assert code == 2 and "driven.loads[0] type 'shuttle_constant'" in err and "walking_beam" in err
 
 
 def test_press_scene_summary_reports_the_periods(capsys):

@@ -361,6 +361,21 @@ DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, Slid
                              OutputViscous, OutputSpring, SliderTable], Field(discriminator="type")]
 BranchLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
 
+# The mechanism a load on its output (type slider_*, rocker_*, shuttle_*) needs.
+OUTPUT_MECHANISM = {"slider": "crank_slider", "rocker": "four_bar", "shuttle": "walking_beam"}
+
+
+def _check_loads_fit(loads: list, mechanism: Mechanism | None, key: str, owner: str) -> None:
+    """Raise ValueError for a load on a mechanism's output whose mechanism (OUTPUT_MECHANISM) the owner (the
+    machine or its driven part) does not have; key prefixes the scene keys named ('' or 'driven.')."""
+    kind = mechanism.type if mechanism is not None else None
+    for index, load in enumerate(loads):
+        prefix = load.type.split("_")[0]
+        needed = OUTPUT_MECHANISM.get(prefix)
+        if needed is not None and kind != needed:
+            raise ValueError(f"{key}loads[{index}] type '{load.type}' acts on the {prefix}: it needs "
+                             f"{key}mechanism.type: {needed} ({owner} has {kind or 'no mechanism'})")
+
 
 class Branch(SceneModel):
     """A branch of a branched drive (physics.md section 4, second paper): a working member driven from the
@@ -402,14 +417,7 @@ class DrivenPart(SceneModel):
         repeated = sorted({name for name in names if names.count(name) > 1})
         if repeated:
             raise ValueError(f"branches: the name(s) {repeated} appear more than once; expected distinct names")
-        kind = self.mechanism.type if self.mechanism is not None else None
-        needs = {"slider": "crank_slider", "rocker": "four_bar"}
-        for index, load in enumerate(self.loads):
-            prefix = load.type.split("_")[0]
-            if prefix in needs and kind != needs[prefix]:
-                raise ValueError(f"driven.loads[{index}] type '{load.type}' acts on the {prefix}: it needs "
-                                 f"driven.mechanism.type: {needs[prefix]} (the driven part has "
-                                 f"{kind or 'no mechanism'})")
+        _check_loads_fit(self.loads, self.mechanism, "driven.", "the driven part")
         return self
 
 
@@ -514,7 +522,7 @@ class JointFriction(SceneModel):
 
 
 JOINTS_OF = {"crank_slider": ("crank_bearing", "crank_pin", "wrist_pin"),
-             "four_bar": ("crank_bearing", "crank_pin", "rocker_pin", "rocker_bearing"), None: ()}
+             "four_bar": ("crank_bearing", "crank_pin", "rocker_pin", "rocker_bearing")}
 # Mechanisms whose kinetostatics is not built: only a thrust_collar can have friction.
 NO_KINETOSTATICS = ("walking_beam", "multi-cylinder crank_slider")
 
@@ -568,12 +576,7 @@ class Machine(SceneModel):
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
         kind = self.mechanism.type if self.mechanism is not None else None
-        needs = {"slider": "crank_slider", "rocker": "four_bar", "shuttle": "walking_beam"}
-        for index, load in enumerate(self.loads):
-            prefix = load.type.split("_")[0]
-            if prefix in needs and kind != needs[prefix]:
-                raise ValueError(f"loads[{index}] type '{load.type}' acts on the {prefix}: it needs mechanism.type: "
-                                 f"{needs[prefix]} (the machine has {kind or 'no mechanism'})")
+        _check_loads_fit(self.loads, self.mechanism, "", "the machine")
         if isinstance(self.drive, Engine) and kind != "crank_slider":
             raise ValueError(f"drive type 'engine' pushes a piston: it needs mechanism.type: crank_slider "
                              f"(the machine has {kind or 'no mechanism'})")

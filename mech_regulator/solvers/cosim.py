@@ -98,7 +98,8 @@ class GovernorStepper:
         if model.governor is None:
             raise ValueError(f"scene '{model.scene.name}' has no governor")
         self.regulator = dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False,
-                                             effects=(), load_pieces=(), coupling=None, clutch=None)
+                                             effects=(), load_pieces=(), coupling=None, clutch=None,
+                                             joint_friction=None)
         self.governor = model.governor
         self.state = model.initial_state()[:model.coupling_index]
         self.mode = self.regulator.initial_mode(self.state)
