@@ -24,6 +24,7 @@ The flywheel may sit on a shaft x turning at a fixed ratio N = omega_x / omega: 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Callable
@@ -32,7 +33,7 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.energy import energy_swing, flywheel_for_constant_inertia
-from mech_regulator.analysis.periodic import PeriodSpeeds, analyse_steady_state
+from mech_regulator.analysis.periodic import PeriodSpeeds, analyse_steady_state, balance_speed
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene.loading import SceneError, validate_scene
 from mech_regulator.scene.schema import InitialState, Scenario, Scene
@@ -239,7 +240,7 @@ def design_speed(scene: Scene, model: MachineModel, omega_m: float | None) -> tu
     motion through its initial state with its flywheel, omega^2 = 2 (E0 + dE(phi) - dE(phi0)) / J(phi).
     """
     if "omega" in model.depends_on():
-        balance = _balance_speed(model)
+        balance = balance_speed(model)
         if omega_m is not None:
             raise SceneError(f"--omega-m {omega_m:g}: the moments of scene '{scene.name}' depend on omega, so the "
                              f"machine sets its own mean speed ({balance:.6g} rad/s, where the cycle-mean moments "
@@ -251,15 +252,14 @@ def design_speed(scene: Scene, model: MachineModel, omega_m: float | None) -> tu
         return omega_m, "--omega-m"
     initial = scene.scenario.initial
     with_flywheel = build_model(scene)
-    phi, energy = energy_swing(with_flywheel, 1.0)  # omega is not read: any speed gives the same swing
-    inertia = np.array([with_flywheel.inertia(angle)[0] for angle in phi])
+    diagram = energy_diagram(with_flywheel, 1.0)  # omega is not read: any speed gives the same swing
     J0 = with_flywheel.inertia(initial.phi)[0]
-    start = 0.5 * J0 * initial.omega ** 2 - np.interp(initial.phi % phi[-1], phi, energy)
-    kinetic = start + energy
+    start = 0.5 * J0 * initial.omega ** 2 - np.interp(initial.phi % diagram.phi[-1], diagram.phi, diagram.energy)
+    kinetic = start + diagram.energy
     if initial.omega <= 0.0 or np.min(kinetic) <= 0.0:
         raise SceneError(f"scene '{scene.name}' starts at omega = {initial.omega:g} rad/s and does not turn steadily "
                          "through its initial state: give the design mean speed with --omega-m")
-    omega = np.sqrt(2.0 * kinetic / inertia)
+    omega = np.sqrt(2.0 * kinetic / diagram.inertia)
     return 0.5 * float(omega.max() + omega.min()), "the mean speed of the scene's own steady motion through its " \
                                                    "initial state (moments independent of omega)"
 
@@ -379,6 +379,7 @@ class PeriodicMotion:
         if guess is None:
             return None
 
+        @functools.cache  # brentq starts by re-evaluating the bracket's ends
         def gain(omega_start: float) -> float:
             trajectory = self._one_period(model, flywheel, omega_start)
             if trajectory is None:  # stopped within the period: it loses speed
@@ -452,24 +453,3 @@ def _check_balanced(energy: np.ndarray) -> None:
         raise SceneError(f"the net work of the moments over the dynamic period is {net:.6g} J (A_d != A_c): the machine "
                          f"{'accelerates' if net > 0 else 'slows down'} and has no periodic steady motion; balance "
                          "the drive against the loads")
-
-
-def _balance_speed(model: MachineModel) -> float:
-    """The speed [rad/s] at which the cycle-mean drive balances the cycle-mean resisting moments (bracketed by
-    doubling from 1 rad/s, then brentq)."""
-    external = model.external_load(0.0)
-
-    def mean_moment(omega: float) -> float:
-        _, drive, other = model.cycle_averages(omega, external)
-        return drive + other
-
-    low, high = 1e-9, 1.0
-    while mean_moment(high) > 0.0:
-        low, high = high, 2.0 * high
-        if high > 1e7:
-            raise SceneError("the cycle-mean drive exceeds the resisting moments at every speed up to 1e7 rad/s: "
-                             "the machine has no steady mean speed")
-    if mean_moment(low) <= 0.0:
-        raise SceneError("the cycle-mean drive does not overcome the resisting moments even at rest: the machine "
-                         "has no steady mean speed")
-    return optimize.brentq(mean_moment, low, high, xtol=1e-13, rtol=1e-14)

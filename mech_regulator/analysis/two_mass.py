@@ -27,7 +27,7 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.energy import step_edges
-from mech_regulator.analysis.periodic import SteadyState
+from mech_regulator.analysis.periodic import SteadyState, balance_speed
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import FORWARD
 from mech_regulator.scene import SceneError
@@ -189,7 +189,7 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     which the cycle-averaged drive balances all loads); frequency: k [rad/s] (None: once per dynamic period at
     omega_m); points: table points over the stretch."""
     _check_inverse(model)
-    omega_m = speed if speed is not None else balance_speed(model)
+    omega_m = speed if speed is not None else balance_speed(model, "; give the mean speed with --speed")
     frequency = frequency if frequency is not None else omega_m * 2.0 * math.pi / model.dynamic_period()
     law = SpeedLaw(omega_m, run_up, 0.5 * delta * omega_m, frequency)
     period = 2.0 * math.pi / frequency
@@ -287,22 +287,6 @@ def _check_inverse(model: MachineModel) -> None:
     if scene.scenario.load_events:
         raise SceneError(f"scene '{scene.name}' has scenario.load_events: the inverse problem takes a constant "
                          "external load (scenario.external_load)")
-
-
-def balance_speed(model: MachineModel) -> float:
-    """The speed [rad/s] at which the cycle-averaged drive balances all loads (driven part's and external
-    included): mean M_d(omega) + mean M_c(omega) = 0 (MachineModel.cycle_averages), the steady speed of the
-    rigid machine."""
-    speeds = np.geomspace(1e-3, 1e5, 161)
-    net = [sum(model.cycle_averages(speed, model.external_load(0.0))[1:]) for speed in speeds]
-    falls = [i for i in range(len(speeds) - 1) if net[i] > 0.0 >= net[i + 1]]
-    if not falls:
-        raise SceneError(f"scene '{model.scene.name}': the drive balances the loads at no speed from 1e-3 to 1e5 "
-                         "rad/s (a constant drive against loads that do not grow with speed?); give the mean "
-                         "speed with --speed")
-    i = falls[0]
-    return optimize.brentq(lambda speed: sum(model.cycle_averages(speed, model.external_load(0.0))[1:]),
-                           speeds[i], speeds[i + 1], xtol=1e-12)
 
 
 def _characteristic(twist: np.ndarray, moment: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray, float]:

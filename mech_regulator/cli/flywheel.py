@@ -10,22 +10,21 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
+from mech_regulator.cli.report import check_outputs, to_json, wrote_lines
 from mech_regulator.scene import SceneError, load_scene
 
 
-def add_flywheel_command(commands) -> None:
-    """The `flywheel` subcommand's options."""
+def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
+    """The `flywheel` subcommand and its options; scene_command (cli.main) makes a subcommand with the SCENE and
+    --set arguments of every scene command (SCENE optional here: --classes needs none)."""
     text = ("size a flywheel for a permitted coefficient of speed fluctuation [delta]: the energy-swing formula, "
             "the Wittenbauer construction (exact numerical form) and the flywheel refined by simulation, each "
             "checked by simulating the steady motion")
-    parser = commands.add_parser("flywheel", help=text, description=text)
-    parser.add_argument("scene", nargs="?", metavar="SCENE",
-                        help="scene file, or the name of a bundled scene (see 'scenes')")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                        help="change a scene value, e.g. --set machine.inertia=2; repeatable")
+    parser = scene_command("flywheel", text, scene_required=False)
     parser.add_argument("--delta", metavar="DELTA",
                         help="permitted (omega_max - omega_min) / omega_m, as a fraction (1/80) or a number (0.0125); "
                              "default: the scene's analysis.permitted_delta")
@@ -49,8 +48,6 @@ def add_flywheel_command(commands) -> None:
 def run_flywheel(args: argparse.Namespace) -> int:
     """Run the command; a user's mistake raises SceneError (exit 2 in cli.main)."""
     from mech_regulator.analysis.flywheel import design_flywheel
-    from mech_regulator.cli.main import _check_outputs
-    from mech_regulator.cli.report import to_json
 
     if args.classes:
         print(format_classes())
@@ -60,7 +57,7 @@ def run_flywheel(args: argparse.Namespace) -> int:
                          "machine classes")
     scene = load_scene(args.scene, args.overrides)
     delta, delta_source = requested_delta(args.delta, args.machine_class, scene.analysis.permitted_delta)
-    _check_outputs(args, args.record)
+    check_outputs(args, args.record)
     from tqdm import tqdm
 
     with tqdm(unit=" periods", disable=True if args.quiet else None, file=sys.stderr,
@@ -222,10 +219,7 @@ def format_flywheel(data: dict) -> str:
                  f"(J = {lower['J']:.5g}, dE = {lower['dE']:.5g}); E-axis intercepts a = {construction['a']:.6g} J, "
                  f"b = {construction['b']:.6g} J; J_fw = (a - b) / (k_max - k_min) = {witt:.7g} kg m^2")
     lines += [f"note: {note}" for note in data["notes"]]
-    for key in ("plot", "recording"):
-        if key in data:
-            lines.append(f"wrote {data[key]}")
-    return "\n".join(lines)
+    return "\n".join(lines + wrote_lines(data))
 
 
 def _fraction(value: float) -> str:

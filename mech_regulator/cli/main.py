@@ -21,7 +21,7 @@ from mech_regulator import __version__
 from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
 from mech_regulator.cli.flywheel import add_flywheel_command, run_flywheel
-from mech_regulator.cli.report import progress_bar, to_json, write_csv
+from mech_regulator.cli.report import check_outputs, progress_bar, to_json, write_csv
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -34,9 +34,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    def scene_command(name: str, help_text: str) -> argparse.ArgumentParser:
+    def scene_command(name: str, help_text: str, scene_required: bool = True) -> argparse.ArgumentParser:
         sub = commands.add_parser(name, help=help_text, description=help_text)
-        sub.add_argument("scene", metavar="SCENE", help="scene file, or the name of a bundled scene (see 'scenes')")
+        sub.add_argument("scene", nargs=None if scene_required else "?", metavar="SCENE",
+                         help="scene file, or the name of a bundled scene (see 'scenes')")
         sub.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                          help="change a scene value, e.g. --set machine.flywheel.inertia=0.5 "
                               "(list items by index: machine.loads.0.coefficient=0.02); repeatable")
@@ -99,7 +100,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                   "curves over the cycle; harmonic spectrum")
     engine.add_argument("--out", type=Path, help="write the curves over the working cycle as CSV")
     engine.add_argument("--json", action="store_true", help="print the analysis as JSON")
-    add_flywheel_command(commands)
+    add_flywheel_command(scene_command)
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
@@ -192,7 +193,7 @@ def _simulate(scene, args) -> int:
     from mech_regulator.solvers import simulate
     from mech_regulator.solvers.advice import stiffness_advice
 
-    _check_outputs(args, args.out, args.record)
+    check_outputs(args, args.out, args.record)
     model = build_model(scene)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
@@ -265,17 +266,6 @@ def _cosimulate(model, args) -> int:
     return EXIT_INTERRUPTED if run.status == "interrupted" else 0
 
 
-def _check_outputs(args, *others: Path | None) -> None:
-    """Give the plot a .png suffix and refuse, before any work, output paths that cannot be written."""
-    plot = getattr(args, "plot", None)
-    if plot is not None and not plot.suffix:
-        args.plot = plot = plot.with_suffix(".png")
-    for path in (*others, plot):
-        if path is not None and (path.is_dir() or not path.parent.is_dir()):
-            problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
-            raise SceneError(f"cannot write '{path}': {problem}")
-
-
 def _governor(scene, args) -> int:
     from mech_regulator.analysis import analyse_governor
     from mech_regulator.cli.report import format_governor
@@ -283,7 +273,7 @@ def _governor(scene, args) -> int:
 
     if scene.governor is None:
         raise SceneError(f"scene '{scene.name}' has no governor: add a 'governor:' section (see docs/scenes.md)")
-    _check_outputs(args)
+    check_outputs(args)
     model = build_model(scene)
     analysis = analyse_governor(model)
     if args.plot is not None:
@@ -300,7 +290,7 @@ def _required_coupling(scene, args) -> int:
     import yaml
 
     from mech_regulator.analysis import required_coupling
-    from mech_regulator.cli.report import format_required_coupling
+    from mech_regulator.cli.report import format_required_coupling, wrote_lines
     from mech_regulator.model import build_model
 
     for option, value, low, high in (("--run-up", args.run_up, 0.0, math.inf), ("--delta", args.delta, 0.0, 2.0),
@@ -310,7 +300,7 @@ def _required_coupling(scene, args) -> int:
             raise SceneError(f"{option} {value:g}: expected a value between {low:g} and {high:g} (exclusive)")
     if args.points < 3:
         raise SceneError(f"--points {args.points}: expected at least 3 table points")
-    _check_outputs(args, args.out, args.scene_out)
+    check_outputs(args, args.out, args.scene_out)
     result = required_coupling(build_model(scene), args.run_up, args.delta, args.frequency, args.speed, args.points)
     answer = {"scene": scene.name, "law": dataclasses.asdict(result.law), "stretch": result.stretch,
               "t_from": result.t_from, "realisable": result.realisable, "loop_width": result.loop_width,
@@ -337,19 +327,15 @@ def _required_coupling(scene, args) -> int:
 
         plot_required_coupling(result, scene.name, args.plot)
         answer["plot"] = str(args.plot)
-    if args.json:
-        print(to_json(answer))
-    else:
-        print(format_required_coupling(result, scene.name))
-        for key in ("csv", "scene_out", "plot"):
-            if key in answer:
-                print(f"wrote {answer[key]}")
+    print(to_json(answer) if args.json else "\n".join([format_required_coupling(result, scene.name),
+                                                          *wrote_lines(answer)]))
     return 0
 
 
 def _kinematics(scene, args) -> int:
     """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
     from mech_regulator.analysis.kinematics import kinematics_summary, kinematics_table
+    from mech_regulator.cli.report import format_kinematics
 
     mechanism = scene.machine.mechanism
     if mechanism is None:
@@ -359,7 +345,7 @@ def _kinematics(scene, args) -> int:
         raise SceneError(f"--omega {args.omega:g}: expected a crank speed > 0 rad/s")
     if not 3 <= args.points <= 100_000:
         raise SceneError(f"--points {args.points}: expected 3 to 100000 crank angles")
-    _check_outputs(args, args.out)
+    check_outputs(args, args.out)
     columns = kinematics_table(mechanism, args.omega, args.points)
     summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
                "joints": kinematics_summary(columns)}
@@ -371,18 +357,7 @@ def _kinematics(scene, args) -> int:
 
         plot_kinematics(mechanism, columns, args.omega, scene.name or mechanism.type, args.plot)
         summary["plot"] = str(args.plot)
-    if args.json:
-        print(to_json(summary))
-        return 0
-    print(f"scene {scene.name}: {mechanism.type} at omega = {args.omega:g} rad/s, {args.points} crank angles over a turn")
-    print(f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
-          f"{'a_max [m/s^2]':>16}{'at [deg]':>10}")
-    for name, joint in summary["joints"].items():
-        print(f"{name:<6}{joint['x_min']:>11.5g}{joint['x_max']:>11.5g}{joint['y_min']:>11.5g}{joint['y_max']:>11.5g}"
-              f"{joint['v_max']:>14.5g}{joint['v_max_at_deg']:>10.4g}{joint['a_max']:>16.5g}{joint['a_max_at_deg']:>10.4g}")
-    for key in ("csv", "plot"):
-        if key in summary:
-            print(f"wrote {summary[key]}")
+    print(to_json(summary) if args.json else format_kinematics(summary))
     return 0
 
 
@@ -392,16 +367,14 @@ def _engine(scene, args) -> int:
     from mech_regulator.cli.report import format_engine
     from mech_regulator.model import build_model
 
-    machine = scene.machine
-    if machine.mechanism is None or machine.mechanism.type != "crank_slider" or machine.drive is None \
-            or machine.drive.type != "engine":
+    if scene.machine.drive is None or scene.machine.drive.type != "engine":  # the schema gives it a crank_slider
         raise SceneError(f"scene '{scene.name}' is not an engine: expected mechanism.type crank_slider and drive.type "
                          "engine (see docs/engines.md)")
     omega = scene.scenario.initial.omega if args.omega is None else args.omega
     if not (math.isfinite(omega) and omega > 0.0):
         source = "--omega" if args.omega is not None else "the scene's scenario.initial.omega"
         raise SceneError(f"{source} = {omega:g} rad/s: expected a crank speed > 0 (give --omega W)")
-    _check_outputs(args, args.out)
+    check_outputs(args, args.out)
     model = build_model(scene)
     report = engine_report(model, omega)
     if args.out is not None:
@@ -430,7 +403,7 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
-    _check_outputs(args, args.out)
+    check_outputs(args, args.out)
     return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
                     args.overspeed_trip, args.out, args.domain_id, args.quiet)
 

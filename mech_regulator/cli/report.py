@@ -1,16 +1,18 @@
-"""What the command line shows: what a scene computes (`describe`), the summary of a run (text or strict
-JSON) and the progress bar over simulated time."""
+"""What the command line shows: what a scene computes (`describe`), the summary of a run and the answers of the
+analysis commands (text or strict JSON), the progress bar over simulated time, and the output files (CSV, the
+check of their paths)."""
 
 from __future__ import annotations
 
 import json
 import math
-
 import sys
+from pathlib import Path
 
 import numpy as np
 
 from mech_regulator.model import MachineModel
+from mech_regulator.scene import SceneError
 from mech_regulator.solvers.advice import coupling_modes, stiffness_advice
 
 
@@ -142,10 +144,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
         lines += two_mass_lines(summary["two_mass"])
     if summary.get("drive_train"):
         lines += _drive_train_lines(summary["drive_train"], energy["works"].get("clutch_slip"))
-    for key in ("csv", "plot", "recording"):
-        if key in summary:
-            lines.append(f"wrote {summary[key]}")
-    return "\n".join(lines)
+    return "\n".join(lines + wrote_lines(summary))
 
 
 def _drive_train_lines(train: dict, slip_work: float | None) -> list[str]:
@@ -186,10 +185,7 @@ def format_cosimulation_summary(summary: dict) -> str:
         lines.append(f"overspeed trip at t = {summary['tripped_at']:.6g} s: throttle closed from then on")
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
-    for key in ("csv", "recording"):
-        if key in summary:
-            lines.append(f"wrote {summary[key]}")
-    return "\n".join(lines)
+    return "\n".join(lines + wrote_lines(summary))
 
 
 def two_mass_lines(periods: dict) -> list[str]:
@@ -296,9 +292,7 @@ def format_governor(analysis: dict) -> str:
         lines.append("  multipliers |mu|: " + ", ".join(f"{math.hypot(*m):.5g}" for m in floquet["multipliers"]))
         lines.append("  averaged model exp(lambda T): " + ", ".join(f"{math.hypot(*m):.5g}"
                                                                      for m in floquet["averaged_multipliers"]))
-    if "plot" in analysis:
-        lines.append(f"wrote {analysis['plot']}")
-    return "\n".join(lines)
+    return "\n".join(lines + wrote_lines(analysis))
 
 
 def _complex(re: float, im: float) -> str:
@@ -369,11 +363,42 @@ def format_engine(report: dict) -> str:
     for key, label in (("gas_harmonics", "gas"), ("inertia_harmonics", "inertia"), ("total_harmonics", "total")):
         lines.append(f"  {label:<8} " + ", ".join(f"{h['order']:g}: {h['amplitude']:.4g} ({h['phase_deg']:.0f})"
                                                   for h in torque[key][:6]))
-    for key in ("csv", "plot"):
-        if key in report:
-            lines.append(f"wrote {report[key]}")
-    return "\n".join(lines)
+    return "\n".join(lines + wrote_lines(report))
 
 
 def _degrees(values) -> str:
     return ", ".join(f"{value:g}" for value in values)
+
+
+def format_kinematics(summary: dict) -> str:
+    """The human-readable joint motion over one turn (`mech-regulator kinematics`): per joint its x and y ranges
+    [m], largest speed [m/s] and acceleration [m/s^2] and the crank angles [deg] where they occur."""
+    lines = [f"scene {summary['scene']}: {summary['mechanism']} at omega = {summary['omega']:g} rad/s, "
+             f"{summary['points']} crank angles over a turn",
+             f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
+             f"{'a_max [m/s^2]':>16}{'at [deg]':>10}"]
+    for name, joint in summary["joints"].items():
+        lines.append(f"{name:<6}{joint['x_min']:>11.5g}{joint['x_max']:>11.5g}{joint['y_min']:>11.5g}"
+                     f"{joint['y_max']:>11.5g}{joint['v_max']:>14.5g}{joint['v_max_at_deg']:>10.4g}"
+                     f"{joint['a_max']:>16.5g}{joint['a_max_at_deg']:>10.4g}")
+    return "\n".join(lines + wrote_lines(summary))
+
+
+OUTPUT_KEYS = ("csv", "scene_out", "plot", "recording")
+
+
+def wrote_lines(data: dict) -> list[str]:
+    """'wrote PATH' for each file a command wrote: the OUTPUT_KEYS its answer holds, in that order."""
+    return [f"wrote {data[key]}" for key in OUTPUT_KEYS if key in data]
+
+
+def check_outputs(args, *others: Path | None) -> None:
+    """Give args.plot a .png suffix and refuse, before any work, output paths (the plot and others) that cannot
+    be written (SceneError)."""
+    plot = getattr(args, "plot", None)
+    if plot is not None and not plot.suffix:
+        args.plot = plot = plot.with_suffix(".png")
+    for path in (*others, plot):
+        if path is not None and (path.is_dir() or not path.parent.is_dir()):
+            problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
+            raise SceneError(f"cannot write '{path}': {problem}")

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from mech_regulator.effects.tables import clamped_linear, periodic_linear
+from mech_regulator.mechanisms.engine import firing_delays
 from mech_regulator.scene import schema
 
 MomentFunction = Callable[[float, float, float, float, float], float]
@@ -84,8 +85,6 @@ def _multi_cylinder_engine(drive: schema.Engine, cylinders: list[schema.Cylinder
     cylinder i's firing delay d_i (mechanisms.engine.firing_delays) and its piston's x_i' = dx_i/dphi, which
     the multi-cylinder mechanism passes as the tuple dq. Linear in each x_i': cylinder i's share is the
     moment with the other ratios set to zero."""
-    from mech_regulator.mechanisms.engine import firing_delays
-
     delays = firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], drive.cycle_deg,
                            drive.firing_order, drive.firing_deg)
     shifts = tuple(math.radians(drive.phase_deg - delay) for delay in delays)

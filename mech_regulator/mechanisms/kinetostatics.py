@@ -7,7 +7,7 @@ the crank bearing's reaction and the balancing moment. Forces are complex number
 mechanism plane (y up); `F_ij` is the force of link i on link j, 0 being the frame.
 
 Every acceleration is `a = s' epsilon + s'' omega^2` (kinematic transfer functions of
-crank_slider.slider_kinematics / four_bar.link_angles), so the reactions are affine in epsilon:
+crank_slider.slider_kinematics / four_bar.make_centre_motions), so the reactions are affine in epsilon:
 `R = R0(phi, omega, Q) + R1(phi) epsilon` with Q the generalised force on the output link (slider force
 along +x [N], or moment on the rocker [N m]). `make_kinetostatics` returns both parts.
 
@@ -22,7 +22,7 @@ import cmath
 from typing import Callable, NamedTuple
 
 from mech_regulator.mechanisms.crank_slider import CrankSliderGeometry, slider_kinematics
-from mech_regulator.mechanisms.four_bar import FourBarGeometry, link_angles
+from mech_regulator.mechanisms.four_bar import FourBarGeometry, make_centre_motions
 
 CRANK_SLIDER_JOINTS = ("crank_bearing", "crank_pin", "wrist_pin", "guide")
 FOUR_BAR_JOINTS = ("crank_bearing", "crank_pin", "rocker_pin", "rocker_bearing")
@@ -104,21 +104,17 @@ def four_bar_kinetostatics(geometry: FourBarGeometry, gravity: tuple[float, floa
     Then `F_12 = m3 (a_S3 - g) + F_23`, `F_03 = m4 (a_S4 - g) - F_23`, `F_01 = m1 (a_S1 - g) + F_12`.
     """
     g_ = geometry
-    a, b, c, d, th1, sign = g_.crank, g_.coupler, g_.rocker, g_.frame, g_.frame_angle, g_.branch_sign
+    a, b, c = g_.crank, g_.coupler, g_.rocker
     m1, u1 = g_.crank_mass, g_.crank_cg
     m3, u3, J3 = g_.coupler_mass, g_.coupler_cg, g_.coupler_inertia
     m4, u4, J4 = g_.rocker_mass, g_.rocker_cg, g_.rocker_inertia
     g = complex(*gravity)
+    motions = make_centre_motions(geometry)
 
     def loads(phi: float, omega: float, moment: float) -> JointLoads:
-        th3, dth3, ddth3, th4, dth4, ddth4 = link_angles(phi, a, b, c, d, th1, sign)
-        e2, e3, e4 = cmath.exp(1j * phi), cmath.exp(1j * th3), cmath.exp(1j * th4)
+        (_, dth3, ddth3, _, dth4, ddth4), (e2, e3, e4, dS3, ddS3, dS4, ddS4) = motions(phi)
         B = a * e2
         coupler, rocker = b * e3, c * e4
-        dS3 = 1j * (a * e2 + u3 * dth3 * e3)
-        ddS3 = -a * e2 + u3 * complex(-dth3 * dth3, ddth3) * e3
-        dS4 = 1j * u4 * dth4 * e4
-        ddS4 = u4 * complex(-dth4 * dth4, ddth4) * e4
         det = _cross(rocker, coupler)
         w2 = omega * omega
 
@@ -138,9 +134,4 @@ def four_bar_kinetostatics(geometry: FourBarGeometry, gravity: tuple[float, floa
         return JointLoads(constant, per_epsilon, (balancing0, balancing1), (1.0, 1.0 - dth3, dth3 - dth4, dth4))
 
     return loads
-
-
-def reactions_at(loads: JointLoads, epsilon: float) -> tuple[complex, ...]:
-    """The joint reactions R = R0 + R1 epsilon [N] at crank acceleration epsilon [rad/s^2]."""
-    return tuple(r0 + r1 * epsilon for r0, r1 in zip(loads.constant, loads.per_epsilon))
 

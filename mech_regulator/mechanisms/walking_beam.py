@@ -81,6 +81,19 @@ def beam(geometry: WalkingBeamGeometry) -> complex:
     return geometry.beam_length * cmath.exp(1j * geometry.beam_angle)
 
 
+def _loop_points(phi: float, geometry: WalkingBeamGeometry, O2: complex
+                 ) -> tuple[tuple[float, ...], Motion, Motion, Motion]:
+    """Link angles of `four_bar.link_angles` and the motions of A, B, C at crank angle phi [rad] (see `solve`),
+    the rocker pivot O2 [m] given."""
+    g = geometry
+    angles = link_angles(phi, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign)
+    th3, dth3, ddth3, th4, dth4, ddth4 = angles
+    A = arm((0j, 0j, 0j), g.crank, phi, 1.0, 0.0)
+    B = arm((O2, 0j, 0j), g.rocker, th4, dth4, ddth4)
+    C = arm(A, g.coupler_point, th3 + g.coupler_point_angle, dth3, ddth3)
+    return angles, A, B, C
+
+
 def solve(phi: float, geometry: WalkingBeamGeometry) -> tuple[tuple[float, ...], dict[str, Motion]]:
     """Link angles (th3, th3', th3'', th4, th4', th4'') of `four_bar.link_angles` and the motions of the
     moving points A, B, C, D, E at crank angle phi [rad].
@@ -88,13 +101,8 @@ def solve(phi: float, geometry: WalkingBeamGeometry) -> tuple[tuple[float, ...],
     A = a e^{i phi}; B = O2 + c e^{i th4}; C = A + p e^{i (th3 + delta)}; E = B + s; D = C + s, s constant
     (so E, D have the derivatives of B, C). Raises ValueError where the four-bar cannot close.
     """
-    g = geometry
-    angles = link_angles(phi, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign)
-    th3, dth3, ddth3, th4, dth4, ddth4 = angles
-    A = arm((0j, 0j, 0j), g.crank, phi, 1.0, 0.0)
-    B = arm((g.frame * cmath.exp(1j * g.frame_angle), 0j, 0j), g.rocker, th4, dth4, ddth4)
-    C = arm(A, g.coupler_point, th3 + g.coupler_point_angle, dth3, ddth3)
-    s = beam(g)
+    angles, A, B, C = _loop_points(phi, geometry, geometry.frame * cmath.exp(1j * geometry.frame_angle))
+    s = beam(geometry)
     return angles, {"A": A, "B": B, "C": C, "D": (C[0] + s, C[1], C[2]), "E": (B[0] + s, B[1], B[2])}
 
 
@@ -116,27 +124,28 @@ def make_reduced(geometry: WalkingBeamGeometry, gravity: tuple[float, float] | N
     m2, u2, gamma2, J2 = g.coupler_mass, g.coupler_cg, g.coupler_cg_angle, g.coupler_inertia
     m3, u3, J3 = 2.0 * g.rocker_mass, g.rocker_cg, 2.0 * g.rocker_inertia  # both rockers move alike
     m4, m6, u6, J6, m7 = g.tie_mass, g.side_mass, g.side_cg, g.side_inertia, g.shuttle_mass
+    J_coupler_side = J2 + J6  # both turn with th3
     m1u1 = g.crank_mass * g.crank_cg
     O2 = g.frame * cmath.exp(1j * g.frame_angle)
     gravity_c = complex(*gravity) if gravity is not None else 0j
     with_weight = gravity_c != 0j
 
     def reduced(phi: float) -> tuple[float, float, float, float, float]:
-        (th3, dth3, ddth3, th4, dth4, ddth4), points = solve(phi, g)
-        A, B, C, E = points["A"], points["B"], points["C"], points["E"]
-        S2 = arm(A, u2, th3 + gamma2, dth3, ddth3)
-        S3 = arm((O2, 0j, 0j), u3, th4, dth4, ddth4)
-        S6 = arm(E, u6, th3 + side_angle, dth3, ddth3)
-        translating = ((m2, S2), (m3, S3), (m4, B), (m6, S6), (m7, C))
-        turning = ((J2 + J6, dth3, ddth3), (J3, dth4, ddth4))
-        J = sum(m * abs(S[1]) ** 2 for m, S in translating) + sum(Jk * w * w for Jk, w, _ in turning)
-        dJ = 2.0 * (sum(m * (S[1].conjugate() * S[2]).real for m, S in translating)
-                    + sum(Jk * w * dw for Jk, w, dw in turning))
+        (th3, dth3, ddth3, th4, dth4, ddth4), A, B, C = _loop_points(phi, g, O2)
+        dS2, ddS2 = arm(A, u2, th3 + gamma2, dth3, ddth3)[1:]
+        dS3, ddS3 = arm((O2, 0j, 0j), u3, th4, dth4, ddth4)[1:]
+        dS6, ddS6 = arm(B, u6, th3 + side_angle, dth3, ddth3)[1:]  # about E = B + s: the derivatives of B's arm
+        dB, ddB, dC, ddC = B[1], B[2], C[1], C[2]
+        J = (m2 * abs(dS2) ** 2 + m3 * abs(dS3) ** 2 + m4 * abs(dB) ** 2 + m6 * abs(dS6) ** 2 + m7 * abs(dC) ** 2
+             + J_coupler_side * dth3 * dth3 + J3 * dth4 * dth4)
+        dJ = 2.0 * (m2 * (dS2.conjugate() * ddS2).real + m3 * (dS3.conjugate() * ddS3).real
+                    + m4 * (dB.conjugate() * ddB).real + m6 * (dS6.conjugate() * ddS6).real
+                    + m7 * (dC.conjugate() * ddC).real + J_coupler_side * dth3 * ddth3 + J3 * dth4 * ddth4)
         weight = 0.0
         if with_weight:
-            weight = (gravity_c.conjugate() * (m1u1 * 1j * cmath.exp(1j * phi)
-                                               + sum(m * S[1] for m, S in translating))).real
-        return J, dJ, weight, C[0].real, C[1].real
+            weight = (gravity_c.conjugate() * (m1u1 * 1j * cmath.exp(1j * phi) + m2 * dS2 + m3 * dS3 + m4 * dB
+                                               + m6 * dS6 + m7 * dC)).real
+        return J, dJ, weight, C[0].real, dC.real
 
     return reduced
 

@@ -49,7 +49,8 @@ CLUTCH_CODE = {STUCK: 0.0, SLIP_AHEAD: 1.0, SLIP_BEHIND: -1.0}
 
 @dataclass(frozen=True)
 class Forces:
-    """The drive train's answer in one mode: crank acceleration [rad/s^2], driven part's acceleration
+    """The drive train's answer in one mode: crank acceleration [rad/s^2] (NaN behind a coupling, see
+    MachineModel.drive_train_at), driven part's acceleration
     [rad/s^2], moment the clutch passes to the driven part [N m] (0 for a coupling), the moment pushing the
     driven part apart from its resistances [N m], and the Coulomb factor s of its resistances [-]."""
 
@@ -102,15 +103,20 @@ class DrivenModel:
     def smooth_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
         """Sum of the non-Coulomb moments (viscous, fan, tables, its mechanism's loads and links' weight) at
         phi_driven [rad] and omega_driven [rad/s] [N m]."""
-        _, _, weight, q, dq = self.state(phi_driven)
+        return self._smooth_at(t, phi_driven, omega_driven, self.state(phi_driven))
+
+    def _smooth_at(self, t: float, phi_driven: float, omega_driven: float, state: tuple) -> float:
+        """smooth_moment [N m] given state = self.state(phi_driven) (its kinematics evaluated once)."""
+        _, _, weight, q, dq = state
         return weight + sum(effect.moment(t, phi_driven, omega_driven, q, dq)
                             for effect, dry in zip(self.effects, self.coulomb) if not dry)
 
     def dynamics(self, t: float, phi_driven: float, omega_driven: float) -> tuple[float, float]:
         """(I(phi2) [kg m^2], M_smooth - 1/2 I'(phi2) omega2^2 [N m]) at phi_driven [rad], omega_driven [rad/s]:
         the inertia and the non-Coulomb side of the driven part's equation."""
-        inertia, slope, _, _, _ = self.state(phi_driven)
-        return inertia, self.smooth_moment(t, omega_driven, phi_driven) - 0.5 * slope * omega_driven ** 2
+        state = self.state(phi_driven)
+        inertia, slope = state[0], state[1]
+        return inertia, self._smooth_at(t, phi_driven, omega_driven, state) - 0.5 * slope * omega_driven ** 2
 
     def forward_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
         """Sum of all its moments turning forward at omega_driven [rad/s] and phi_driven [rad] [N m] (Coulomb

@@ -69,14 +69,21 @@ class CouplingModel:
     stiffness k [N m/rad] of a linear coupling, or table = (twist [rad], moment [N m]) knots of a nonlinear
     characteristic (linear between them, end segments continued); damping c [N m s/rad]; the driven part
     (model/drivetrain.py: inertia reduced to its shaft, its mechanism, its moments read at (t, phi2, omega2,
-    q2, dq2)); elastic: twist -> M_elastic [N m] for the hot path.
+    q2, dq2)).
     """
 
     stiffness: float | None
     damping: float
     driven: DrivenModel
-    elastic: Callable[[float], float]
     table: tuple[np.ndarray, np.ndarray] | None = None
+
+    @functools.cached_property
+    def elastic(self) -> Callable[[float], float]:
+        """twist [rad] -> M_elastic [N m] for one twist, for the hot path (elastic_moment takes arrays)."""
+        if self.table is None:
+            stiffness = self.stiffness
+            return lambda twist: stiffness * twist
+        return extrapolated_linear(self.table[0].tolist(), self.table[1].tolist())
 
     @property
     def driven_inertia(self) -> float:
@@ -258,6 +265,9 @@ class MachineModel:
         for a machine co-simulated with an outside governor, by the piece's held throttle. ideal: the governor
         without friction, limits and stops (the smooth model of the stability analysis). mode None: the governor
         as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
+        With joint friction the crank's epsilon is the root of `J epsilon = J epsilon_0 - sign(omega) F(epsilon)`
+        (effects.joint_friction), epsilon_0 the frictionless acceleration and F reading the force on the output
+        link (the drive's scaled by the throttle).
         """
         return self._right_hand_side(piece, window, mode, ideal, crank_only=False)
 
@@ -265,7 +275,7 @@ class MachineModel:
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
         """(t, y) -> (J(phi) [kg m^2], F1 [N m]): the crank's inertia and its net moment apart from the coupling or
         clutch and the external load, F1 = throttle M_drive + M_c + M_weight - 1/2 J' omega^2 (throttle from the
-        governor's state in y)."""
+        governor's state in y; joint friction, which depends on the acceleration, is not in it)."""
         return self._right_hand_side(None, None, None, False, crank_only=True)
 
     def _right_hand_side(self, piece: LoadPiece | None, window: tuple[float, float] | None, mode: Mode | None,
@@ -292,7 +302,9 @@ class MachineModel:
         if governor is not None and not crank_only:
             governor_rates = governor.derivatives(mode[:2] if mode is not None else mode, ideal)
         train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode))
-        plain = governor_rates is None and train is None and not crank_only
+        friction = None if crank_only else self.joint_friction
+        output_force = self._output_force(scale_drive) if friction is not None else None
+        plain = governor_rates is None and train is None and friction is None and not crank_only
         external_on_crank = train is None and not crank_only
 
         def machine(t: float, y: np.ndarray):
@@ -319,39 +331,15 @@ class MachineModel:
             if crank_only:
                 return J, net
             if train is None:
-                return [omega, net / J] + governor_rates(y)
-            crank_rate, train_rates = train(t, y, J, net, offset + slope * t)
-            rates = [omega, crank_rate]
+                epsilon, train_rates = net / J, ()
+            else:
+                epsilon, train_rates = train(t, y, J, net, offset + slope * t)
+            if friction is not None:  # J epsilon = J epsilon_0 - sign(omega) F(epsilon), effects.joint_friction
+                epsilon = friction.acceleration(phi, omega, output_force(t, phi, omega, q, dq, share), J, J * epsilon)
+            rates = [omega, epsilon]
             if governor_rates is not None:
                 rates += governor_rates(y)
-            return rates + train_rates
-
-        if self.joint_friction is None:
-            return machine
-        return self._with_joint_friction(machine, scale_drive, held_throttle)
-
-    def _with_joint_friction(self, frictionless: RightHandSide, scale_drive: bool, held_throttle: float
-                             ) -> RightHandSide:
-        """The right-hand side with joint friction: frictionless's rates with epsilon replaced by the root of
-        `J epsilon = J epsilon_0 - sign(omega) F(epsilon)` (effects.joint_friction), epsilon_0 being the
-        frictionless acceleration and F reading the force on the output link (the drive's scaled by the
-        throttle)."""
-        friction = self.joint_friction
-        J0, reduced = self.inertia_constant, self.reduced
-        throttle = self.governor.throttle if self.governor is not None else None
-        output_force = self._output_force(scale_drive)
-
-        def machine(t: float, y: np.ndarray):
-            rates = list(frictionless(t, y))
-            phi, omega = y[0], y[1]
-            if reduced is None:
-                J, q, dq = J0, 0.0, 0.0
-            else:
-                J_links, _, _, q, dq = reduced(phi)
-                J = J0 + J_links
-            share = held_throttle if throttle is None else throttle(y)
-            force = output_force(t, phi, omega, q, dq, share)
-            rates[1] = friction.acceleration(phi, omega, force, J, J * rates[1])
+            rates += train_rates
             return rates
 
         return machine
@@ -406,9 +394,9 @@ class MachineModel:
         driven = self.driven
         index = self.driven_speed_index
         resistance = driven.resistance
+        smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
         if self.coupling is not None:
             elastic, c, state = self.coupling.elastic, self.coupling.damping, driven.state
-            smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
             part = train_mode[0]
             held, direction = part == HELD, DIRECTION[part]
 
@@ -425,12 +413,15 @@ class MachineModel:
                 return (net - passed) / J, [omega - omega2, driven_total / I2]
 
             return coupled
-        clutch = self.clutch
+        clutch_forces = self.clutch.forces
         stuck = train_mode[0] == STUCK
 
         def clutched(t: float, y: np.ndarray, J: float, net: float, external: float):
             omega2 = y[1] if stuck else y[index]
-            forces = clutch.forces(train_mode, net, J, driven.smooth_moment(t, omega2), resistance + external)
+            driven_total = 0.0  # DrivenModel.smooth_moment: a clutch's driven part has no mechanism (schema)
+            for moment in smooth:
+                driven_total += moment(t, 0.0, omega2, 0.0, 0.0)
+            forces = clutch_forces(train_mode, net, J, driven_total, resistance + external)
             return forces.crank, [0.0 if stuck else forces.driven]
 
         return clutched
@@ -446,13 +437,14 @@ class MachineModel:
                        train_mode: tuple[str, ...] | None = None) -> tuple[tuple[str, ...], Forces, float]:
         """(train mode, Forces, Coulomb resistance R [N m]) at time t [s] and state y, in `train_mode` or, if None,
         in the mode the state is in (a clutch or driven part at rest decided by the forces, as
-        ClutchModel.mode_at); external: the external load's magnitude [N m] (default: the scenario's at t)."""
+        ClutchModel.mode_at); external: the external load's magnitude [N m] (default: the scenario's at t). Behind
+        a coupling Forces.crank is NaN: nothing here needs the crank's acceleration (the right-hand side gives it)."""
         driven = self.driven
         resistance = driven.resistance + (self.external_load(t) if external is None else external)
         index = self.driven_speed_index
         omega2 = y[index]
-        J, F1 = self.crank_side(t, y)
         if self.clutch is not None:
+            J, F1 = self.crank_side(t, y)
             if train_mode is None:
                 train_mode = self.clutch.mode_at(y[1] - omega2, omega2, F1, J, driven.smooth_moment(t, omega2),
                                                  resistance)
@@ -460,14 +452,14 @@ class MachineModel:
                 omega2 = y[1]
             return train_mode, self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2),
                                                   resistance), resistance
-        passed = float(self.coupling.moment(y[index - 1], y[1] - omega2))
+        passed = float(self.coupling.elastic(y[index - 1]) + self.coupling.damping * (y[1] - omega2))
         inertia, smooth = driven.dynamics(t, y[0] - y[index - 1], omega2)
         push = passed + smooth
         if train_mode is None:
             train_mode = (driven.at_rest(push, resistance) if omega2 == 0.0 else FORWARD if omega2 > 0.0
                           else BACKWARD,)
         part = train_mode[0]
-        return train_mode, Forces((F1 - passed) / J, driven.acceleration(part, passed, smooth, resistance, inertia),
+        return train_mode, Forces(math.nan, driven.acceleration(part, passed, smooth, resistance, inertia),
                                   0.0, push, coulomb_factor(part, push, resistance)), resistance
 
     def constraint(self, mode: Mode | None) -> Callable[[np.ndarray], None] | None:
@@ -837,12 +829,10 @@ def _coupling_model(machine, gravity: tuple[float, float] | None) -> CouplingMod
     weighs = mechanism is not None and gravity is not None and any(gravity) and _has_mass(mechanism)
     reduced = build_reduced(mechanism, gravity if weighs else None) if mechanism is not None else None
     driven = build_driven(coupling.driven, _unique_names, reduced, weighs)
-    if coupling.characteristic is None:
-        stiffness = coupling.stiffness
-        return CouplingModel(stiffness, coupling.damping, driven, lambda twist: stiffness * twist)
     table = coupling.characteristic
-    return CouplingModel(None, coupling.damping, driven, extrapolated_linear(table.twist, table.moment),
-                         (np.array(table.twist), np.array(table.moment)))
+    if table is None:
+        return CouplingModel(coupling.stiffness, coupling.damping, driven)
+    return CouplingModel(None, coupling.damping, driven, (np.array(table.twist), np.array(table.moment)))
 
 
 def _joint_friction(model: MachineModel) -> JointFrictionModel:

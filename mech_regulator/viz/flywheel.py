@@ -18,6 +18,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first
 import numpy as np  # noqa: E402
 
 from mech_regulator.analysis.flywheel import FlywheelDesign  # noqa: E402
+from mech_regulator.viz.plots import room_for_legend  # noqa: E402
 
 # run name -> (legend label, matplotlib colour, Rerun colour)
 RUN_STYLE = {
@@ -66,7 +67,7 @@ def plot_flywheel(design: FlywheelDesign, path: Path) -> None:
     curve.set(xlabel="J without flywheel [kg m^2]", ylabel="dE [J]",
               title="Wittenbauer curve E(J) and the tangent rays")
     curve.ticklabel_format(useOffset=False)
-    _room_for_legend(curve)
+    room_for_legend(curve)
     curve.legend(loc="upper center", fontsize=8)
 
     whole = axes[0, 2]
@@ -96,7 +97,7 @@ def plot_flywheel(design: FlywheelDesign, path: Path) -> None:
                title="simulated steady speed without a flywheel and with the scene's" if set(design.runs) & {"none", "scene"}
                else "no steady motion without a flywheel (the machine stalls)")
     if set(design.runs) & {"none", "scene"}:
-        _room_for_legend(before)
+        room_for_legend(before)
         before.legend(loc="upper center", fontsize=8)
 
     after = axes[1, 1]
@@ -108,7 +109,7 @@ def plot_flywheel(design: FlywheelDesign, path: Path) -> None:
                       label=f"{which} (1 +- [delta]/2)" if sign > 0 else None)
     after.set(xlabel="crank angle phi [deg]", ylabel="omega [rad/s]",
               title="simulated steady speed with the proposed flywheels")
-    _room_for_legend(after)
+    room_for_legend(after)
     after.legend(loc="upper center", fontsize=8)
 
     table = axes[1, 2]
@@ -116,12 +117,6 @@ def plot_flywheel(design: FlywheelDesign, path: Path) -> None:
     table.text(0.0, 1.0, _numbers(design), family="monospace", fontsize=8.5, va="top", transform=table.transAxes)
     figure.savefig(path, dpi=100)
     plt.close(figure)
-
-
-def _room_for_legend(axes, share: float = 0.35) -> None:
-    """Raise the top of the y axis so a legend at the top does not cover the curves."""
-    low, high = axes.get_ylim()
-    axes.set_ylim(low, high + share * (high - low))
 
 
 def band_centre(design: FlywheelDesign) -> tuple[float, str]:
@@ -227,16 +222,21 @@ def _scales(J: np.ndarray, E: np.ndarray, aspect: float = 1.6) -> tuple[float, f
     return float(np.min(J)), J_span / aspect, float(np.min(E)), E_span
 
 
+def _scaler(J0: float, mu_J: float, E0: float, mu_E: float):
+    """(J, E) -> drawing coordinates, rows of ((J - J0) / mu_J, (E - E0) / mu_E)."""
+    def scaled(J, E):
+        return np.column_stack([(np.asarray(J) - J0) / mu_J, (np.asarray(E) - E0) / mu_E])
+
+    return scaled
+
+
 def _curve_drawing(design: FlywheelDesign) -> dict:
     """The E(J) curve with the tangent segments and points, in drawing units."""
     diagram, construction = design.diagram, design.construction
     J0, mu_J, E0, mu_E = _scales(diagram.inertia, diagram.energy)
     if np.ptp(diagram.inertia) < 1e-9 * max(abs(J0), 1.0):  # constant J: a vertical segment, draw it narrow
         mu_J = 1.0
-
-    def scaled(J, E):
-        return np.column_stack([(np.asarray(J) - J0) / mu_J, (np.asarray(E) - E0) / mu_E])
-
+    scaled = _scaler(J0, mu_J, E0, mu_E)
     J = np.array([J0 - 0.2 * 1.6 * mu_J, J0 + 1.2 * 1.6 * mu_J])
     return {
         "E_of_J": ("line", scaled(diagram.inertia, diagram.energy), (235, 235, 235), None),
@@ -258,11 +258,7 @@ def _construction_drawing(design: FlywheelDesign) -> dict:
     origin_J, origin_E = construction.origin
     J = np.array([origin_J, diagram.inertia.max()])
     E_all = np.concatenate([diagram.energy, [origin_E, construction.a, construction.b]])
-    J0, mu_J, E0, mu_E = _scales(np.concatenate([diagram.inertia, [origin_J]]), E_all)
-
-    def scaled(J, E):
-        return np.column_stack([(np.asarray(J) - J0) / mu_J, (np.asarray(E) - E0) / mu_E])
-
+    scaled = _scaler(*_scales(np.concatenate([diagram.inertia, [origin_J]]), E_all))
     return {
         "E_axis": ("line", scaled([0.0, 0.0], [E_all.min(), E_all.max()]), (150, 150, 150), ["E axis (J = 0)"]),
         "E_of_J": ("line", scaled(diagram.inertia, diagram.energy), (235, 235, 235), None),

@@ -15,6 +15,12 @@ from mech_regulator.model import MachineModel  # noqa: E402
 from mech_regulator.solvers import Trajectory  # noqa: E402
 
 
+def room_for_legend(axes, share: float = 0.35) -> None:
+    """Raise the top of the y axis by `share` of its range so a legend at the top does not cover the curves."""
+    low, high = axes.get_ylim()
+    axes.set_ylim(low, high + share * (high - low))
+
+
 def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: Path) -> None:
     """Four panels: omega(t) with the steady band, moments against t, omega over the last dynamic
     period against the crank angle, and J(phi) with dJ/dphi (or the works of the moments)."""
@@ -110,8 +116,7 @@ def _plot_two_mass_run(periods: dict, times: np.ndarray, columns: dict, speed, p
                 axis.axvspan(lo, hi, color=PERIOD_COLOURS[number - 1], alpha=0.08,
                              label=f"period {number}" if axis is panel else None)
     panel.set(xlabel="t [s]", ylabel="coupling moment M_m [N m]", title="coupling moment and periods of motion")
-    low, high = panel.get_ylim()
-    panel.set_ylim(low, high + 0.45 * (high - low))  # room for the legend above the curve
+    room_for_legend(panel, 0.45)
     panel.legend(loc="upper right", fontsize=8, ncol=2)
 
 
@@ -423,8 +428,7 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
                title=f"moments over the working cycle ({len(curves.gas)} cylinder"
                      f"{'s' if len(curves.gas) > 1 else ''})")
     torque.grid(alpha=0.3)
-    low, high = torque.get_ylim()
-    torque.set_ylim(low, high + 0.3 * (high - low))  # room for the legend above the curves
+    room_for_legend(torque, 0.3)
     torque.legend(loc="upper center", fontsize=8, ncols=4)
 
     spectrum = axes["spectrum"]
