@@ -25,10 +25,13 @@ setup(
         "rerun-sdk>=0.41,<0.42",
         "matplotlib>=3.8",
         "tqdm>=4.66",
+        "numba>=0.60",
     ],
     extras_require={
         "test": ["pytest>=8", "jsonschema>=4"],
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
+        "distributed": ["dask[distributed]>=2024.1"],
+        "bench": ["mujoco>=3.1"],
         "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-sensor-msgs",
                 "ros-geometry-msgs", "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
     },
