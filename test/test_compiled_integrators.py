@@ -148,7 +148,7 @@ def test_a_warm_start_takes_scipys_first_step():
 
 
 @pytest.mark.parametrize("method, rtol, error", [(compiled.rk45, 1e-9, 1e-7), (compiled.dop853, 1e-9, 1e-8),
-                                                 (compiled.rosenbrock23, 1e-7, 2e-4)])
+                                                 (compiled.rosenbrock23, 1e-7, 5e-4)])
 def test_the_oscillator_against_its_closed_form(method, rtol, error):
     """x'' = -4 x from x = 1: x = cos 2t, v = -2 sin 2t over 3 periods, ends and dense output."""
     run = adaptive(method, oscillator, [1.0, 0.0], 3 * np.pi, [4.0], rtol=rtol, atol=rtol * 1e-2)
@@ -173,8 +173,8 @@ def test_the_stiff_method_is_stable_with_few_steps_and_converges():
         if rtol == 1e-4:
             assert run.n_steps < 200
             assert run.njev == run.n_steps and run.nlu >= run.n_steps
-    assert errors[0] < 1e-3
-    assert 5.0 < errors[0] / errors[1] < 100.0
+    assert errors[0] < 5e-4
+    assert 10.0 < errors[0] / errors[1] < 50.0  # 100^(2/3) = 21.5
 
 
 def test_the_rosenbrock_steps_are_second_order():
