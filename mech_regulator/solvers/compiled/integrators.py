@@ -135,7 +135,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     if method == _RK4:
         count = max(1, np.ceil((t_end - t0) / fixed_step - 1e-9))
         h_abs = (t_end - t0) / count
-    elif first_step > 0.0:
+    elif first_step > 0.0 or status >= 0:
         h_abs = first_step
     else:
         order = 7 if method == _DOP853 else (4 if method == _RK45 else 2)
@@ -149,6 +149,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             break
         if method == _RK4:
             h = t_end - t if t_end - t < 1.5 * h_abs else h_abs
+            t_new = t + h
             nfev += _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new)
         else:
             min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
@@ -193,7 +194,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             capacity *= 2
         nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, coefficients[n_steps])
         y_old[n_steps] = y
-        times[n_steps + 1] = t + h
+        times[n_steps + 1] = t_new
         h_previous = h
         n_steps += 1
         if n_guards > 0:
@@ -209,7 +210,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                     _rescale(coefficients[n_steps - 1], (event_time - t) / h)
                     times[n_steps] = event_time
                 break
-        t = t + h
+        t = t_new
         y[:] = y_new
         f[:] = f_new
         jacobian_current = False
