@@ -10,9 +10,11 @@ rows in the order of the points, whatever order they complete in.
 For a governed scene the row holds the stability verdict by simulation (physics.md section 3): the cycle-mean
 speed omega_bar(t) after the last load change (analysis.cycle_mean_speed) is split into thirds; the
 oscillation ratio r = ptp(omega_bar over the last third) / ptp(omega_bar over the middle third) is about
-exp(sigma T/3) for a mode growing at sigma [1/s] over a window of T seconds. The point is stable when r <= 0.9 (the
-swing shrinks by at least a tenth per third) or when the last third stays within the scene's settling band;
-otherwise unstable (growing, or held at a limit cycle by the sleeve's stops). Next to it: the linear analysis of
+exp(sigma T/3) for a mode growing at sigma [1/s] over a window of T seconds. The point is stable when the last
+third stays within the scene's settling band, or when r <= 0.9 (the swing shrinks by at least a tenth per third)
+and the sleeve (or servo-motor) came onto a stop at most once in the last third; otherwise unstable: the swing
+grows, or a limit cycle holds it, which for a governor with stops means the sleeve keeps striking them (its swing
+varies from third to third, so r alone could pass it as stable). Next to it: the linear analysis of
 the averaged model at the operating point of the final load (analysis.stability.linear_stability) and, for a
 direct governor, Vyshnegradsky's A and B (stable iff A B > 1).
 """
@@ -37,10 +39,10 @@ DECAY_RATIO = 0.9  # stable by simulation: the cycle-mean speed's swing in the l
 VERDICT_SAMPLES = 3000  # samples of the cycle-mean speed over the window after the last load change
 ENGINES = ("local", "dask")
 ROW_COLUMNS = ("status", "message", "t_end", "omega_end", "steady", "omega_m", "omega_average", "delta",
-               "stable_by_simulation", "oscillation_ratio", "stable_linear", "vyshnegradsky_A", "vyshnegradsky_B",
-               "wall_time", "rhs_evaluations")
+               "stable_by_simulation", "oscillation_ratio", "stop_arrivals", "stable_linear", "vyshnegradsky_A",
+               "vyshnegradsky_B", "wall_time", "rhs_evaluations")
 """The columns of a row after the scene's name and its grid values (None where they do not apply)."""
-METRICS = ("delta", "omega_m", "omega_average", "omega_end", "oscillation_ratio", "vyshnegradsky_A",
+METRICS = ("delta", "omega_m", "omega_average", "omega_end", "oscillation_ratio", "stop_arrivals", "vyshnegradsky_A",
            "vyshnegradsky_B", "t_end", "wall_time", "rhs_evaluations")
 """The numeric columns a sweep's picture can draw (--metric)."""
 
@@ -140,9 +142,9 @@ def run_point(scene: dict, values: dict | None = None) -> dict:
     model or analysis refuses, 'error' for anything unexpected) and message; t_end [s], omega_end [rad/s];
     steady (the motion repeats over the last dynamic periods), omega_m = (omega_max + omega_min) / 2 and
     omega_average = Phi / (time of the period) [rad/s] and delta = (omega_max - omega_min) / omega_m of the last
-    dynamic period (analysis.analyse_steady_state); for a governed scene stable_by_simulation and
-    oscillation_ratio (see the module's docstring), stable_linear and, for a direct governor, vyshnegradsky_A
-    and vyshnegradsky_B; wall_time [s] of the simulation and rhs_evaluations. Never raises for a bad point.
+    dynamic period (analysis.analyse_steady_state); for a governed scene stable_by_simulation, oscillation_ratio
+    and stop_arrivals (see the module's docstring), stable_linear and, for a direct governor, vyshnegradsky_A and
+    vyshnegradsky_B; wall_time [s] of the simulation and rhs_evaluations. Never raises for a bad point.
     """
     from mech_regulator.analysis import analyse_steady_state
     from mech_regulator.model import build_model
@@ -184,30 +186,37 @@ def governor_stability(model, trajectory) -> dict:
     answer = {"stable_linear": linear.stable, "vyshnegradsky_A": None, "vyshnegradsky_B": None}
     if linear.vyshnegradsky is not None:
         answer["vyshnegradsky_A"], answer["vyshnegradsky_B"] = (float(value) for value in linear.vyshnegradsky)
-    ratio, settled = oscillation_ratio(model, trajectory, t_from)
-    answer["oscillation_ratio"] = ratio
-    answer["stable_by_simulation"] = None if math.isnan(ratio) else bool(settled or ratio <= DECAY_RATIO)
+    ratio, settled, arrivals = oscillation_measures(model, trajectory, t_from)
+    answer["oscillation_ratio"], answer["stop_arrivals"] = ratio, arrivals
+    answer["stable_by_simulation"] = (None if math.isnan(ratio) else
+                                      bool(settled or (ratio <= DECAY_RATIO and arrivals <= 1)))
     return answer
 
 
-def oscillation_ratio(model, trajectory, t_from: float) -> tuple[float, bool]:
-    """(r, settled): r = ptp(omega_bar) over the last third of [t_from, t_end] / ptp(omega_bar) over the middle
-    third, omega_bar the cycle-mean speed [rad/s]; settled: the last third stays within the scene's settling band
-    (ptp <= settling_band x its mean speed). NaN when the window is shorter than three dynamic periods."""
+def oscillation_measures(model, trajectory, t_from: float) -> tuple[float, bool, int]:
+    """(r, settled, arrivals) over the window [t_from, t_end] split into thirds: r = ptp(omega_bar) over the last
+    third / ptp(omega_bar) over the middle third, omega_bar the cycle-mean speed [rad/s]; settled: the last third
+    stays within the scene's settling band (ptp <= settling_band x its mean speed); arrivals: how often the sleeve
+    or the servo-motor came onto a stop during the last third (trajectory.modes). r is NaN when the window is
+    shorter than three dynamic periods."""
     from mech_regulator.analysis import cycle_mean_speed
 
     t_to = trajectory.t_end
+    third = (t_to - t_from) / 3.0
+    modes = trajectory.modes
+    arrivals = sum(1 for (_, before), (t, mode) in zip(modes, modes[1:]) if t >= t_from + 2.0 * third
+                   for part, previous in zip(mode, before) if part in ("low", "high") and part != previous)
     cycle_time = model.dynamic_period() / max(abs(float(trajectory(t_to)[1])), 1e-12)
     if t_to - t_from < 3.0 * cycle_time:
-        return math.nan, False
+        return math.nan, False, arrivals
     times = np.linspace(t_from, t_to, VERDICT_SAMPLES)
     speed = cycle_mean_speed(model, trajectory, times)
-    third = (t_to - t_from) / 3.0
     middle = speed[(times >= t_from + third) & (times < t_from + 2.0 * third)]
     last = speed[times >= t_from + 2.0 * third]
     swing_middle, swing_last = np.nanmax(middle) - np.nanmin(middle), np.nanmax(last) - np.nanmin(last)
     settled = bool(swing_last <= model.scene.analysis.settling_band * abs(np.nanmean(last)))
-    return float(swing_last / swing_middle) if swing_middle > 0.0 else (0.0 if swing_last == 0.0 else math.inf), settled
+    ratio = swing_last / swing_middle if swing_middle > 0.0 else (0.0 if swing_last == 0.0 else math.inf)
+    return float(ratio), settled, arrivals
 
 
 def check_executor(jobs: int | None, engine: str, scheduler: str | None) -> int:
