@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import time
 from collections.abc import Callable
@@ -20,6 +21,7 @@ from pathlib import Path
 from mech_regulator.analysis.sweep import ENGINES, METRICS, check_executor, parse_grid, run_sweep, sweep_points
 from mech_regulator.cli.report import progress_bar, write_rows_csv
 from mech_regulator.scene import SceneError
+from mech_regulator.scene.loading import key_description
 
 EXIT_INTERRUPTED = 130
 SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
@@ -89,7 +91,10 @@ def run_sweep_command(args: argparse.Namespace) -> int:
 
     permitted = points[0].scene.get("analysis", {}).get("permitted_delta")
     names = ", ".join(dict.fromkeys(str(point.scene["name"]) for point in points))
-    plot_sweep(rows, axes, metric, f"sweep of {names}: {len(rows)} points", out / "sweep.png", permitted)
+    units = {axis.key: re.search(r"(\[[^\]]*\])?$", key_description(axis.key, points[0].scene)).group(0)
+             for axis in axes}
+    plot_sweep(rows, axes, metric, f"sweep of {names}: {len(rows)} points", out / "sweep.png", permitted,
+               {key: f"{key} {unit}".strip() for key, unit in units.items()})
     print(f"wrote {out / 'sweep.png'}")
     failed = [row for row in rows if row["status"] != "complete"]
     for row in failed[:5]:

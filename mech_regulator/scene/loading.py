@@ -349,3 +349,9 @@ def _field_description(loc: list, data: Any) -> str:
     model = _model_at(loc[:-1], data)
     field = model.model_fields.get(loc[-1]) if model is not None else None
     return (field.description or "") if field is not None else ""
+
+
+def key_description(key: str, data: dict) -> str:
+    """The schema's description of a dotted scene key (list items by index, as in --set) for the scene mapping
+    data, with its unit in brackets at the end; '' for a key the schema does not know."""
+    return _field_description([int(part) if part.isdigit() else part for part in key.split(".")], data)

@@ -20,21 +20,22 @@ VERDICT_STYLES = {True: dict(marker="o", color="tab:green", label="stable by sim
 
 
 def plot_sweep(rows: list[dict], axes: list[GridAxis], metric: str, title: str, path: Path,
-               permitted_delta: float | None = None) -> None:
+               permitted_delta: float | None = None, labels: dict[str, str] | None = None) -> None:
     """One grid key: the metric against it (log axes for a geometric grid, the permitted delta as a line);
     two grid keys: a map of the metric over the grid; no grid (a list of scenes) or more keys: the metric per
     point. Points of a governed scene are marked stable / unstable by simulation. When the rows hold
     Vyshnegradsky's A and B (a direct governor), a second panel draws every point in the (A, B) plane with the
-    boundary A B = 1 of the averaged linear model."""
+    boundary A B = 1 of the averaged linear model. labels: axis label per grid key (e.g. with its unit)."""
+    labels = {axis.key: axis.key for axis in axes} | (labels or {})
     diagram = any(row.get("vyshnegradsky_A") is not None for row in rows)
     figure, panels = plt.subplots(1, 2 if diagram else 1, figsize=(14 if diagram else 8, 6), constrained_layout=True,
                                   squeeze=False)
     figure.suptitle(title)
     values = _column(rows, metric)
     if len(axes) == 1:
-        _plot_against_key(panels[0, 0], rows, axes[0], metric, values, permitted_delta)
+        _plot_against_key(panels[0, 0], rows, axes[0], labels[axes[0].key], metric, values, permitted_delta)
     elif len(axes) == 2:
-        _plot_map(figure, panels[0, 0], rows, axes, metric, values)
+        _plot_map(figure, panels[0, 0], rows, axes, [labels[axis.key] for axis in axes], metric, values)
     else:
         _plot_per_point(panels[0, 0], rows, axes, metric, values)
     if diagram:
@@ -65,7 +66,8 @@ def _mark_verdicts(panel, x: np.ndarray, y: np.ndarray, rows: list[dict]) -> Non
             panel.scatter(x[chosen], y[chosen], s=70, zorder=3, edgecolors="k", linewidths=0.6, **style)
 
 
-def _plot_against_key(panel, rows, axis: GridAxis, metric: str, values: np.ndarray, permitted: float | None) -> None:
+def _plot_against_key(panel, rows, axis: GridAxis, label: str, metric: str, values: np.ndarray,
+                      permitted: float | None) -> None:
     x, labels = _positions(axis, rows)
     panel.plot(x, values, color="tab:blue", lw=1.2, marker=".", ms=8, label=metric)
     _mark_verdicts(panel, x, values, rows)
@@ -78,14 +80,14 @@ def _plot_against_key(panel, rows, axis: GridAxis, metric: str, values: np.ndarr
         panel.axhline(permitted, color="tab:orange", lw=1.2, ls="--", label=f"permitted delta = {permitted:.4g}")
     if labels is not None:
         panel.set_xticks(range(len(labels)), labels)
-    panel.set(xlabel=axis.key, ylabel=metric, title=f"{metric} against {axis.key}")
+    panel.set(xlabel=label, ylabel=metric, title=f"{metric} against {axis.key}")
     panel.grid(True, which="both", alpha=0.3)
     if panel.get_yscale() == "linear":
         room_for_legend(panel, 0.2)
     panel.legend(loc="best")
 
 
-def _plot_map(figure, panel, rows, axes: list[GridAxis], metric: str, values: np.ndarray) -> None:
+def _plot_map(figure, panel, rows, axes: list[GridAxis], labels: list[str], metric: str, values: np.ndarray) -> None:
     """pcolormesh of the metric over the two grid keys (rows in product order: the second key varies fastest)."""
     x, x_labels = _positions(axes[0], rows)
     y, y_labels = _positions(axes[1], rows)
@@ -97,15 +99,15 @@ def _plot_map(figure, panel, rows, axes: list[GridAxis], metric: str, values: np
         mesh = panel.scatter(x, y, c=values, s=200, cmap="viridis")
     figure.colorbar(mesh, ax=panel, label=metric)
     _mark_verdicts(panel, x, y, rows)
-    for axis, set_scale, labels, set_ticks in ((axes[0], panel.set_xscale, x_labels, panel.set_xticks),
-                                               (axes[1], panel.set_yscale, y_labels, panel.set_yticks)):
+    for axis, set_scale, ticks, set_ticks in ((axes[0], panel.set_xscale, x_labels, panel.set_xticks),
+                                              (axes[1], panel.set_yscale, y_labels, panel.set_yticks)):
         if axis.geometric:
             set_scale("log")
-        if labels is not None:
-            set_ticks(range(len(labels)), labels)
-    panel.set(xlabel=axes[0].key, ylabel=axes[1].key, title=f"{metric} over the grid")
-    if panel.collections and any(row.get("stable_by_simulation") is not None for row in rows):
-        panel.legend(loc="upper left", framealpha=0.9)
+        if ticks is not None:
+            set_ticks(range(len(ticks)), ticks)
+    panel.set(xlabel=labels[0], ylabel=labels[1], title=f"{metric} over the grid")
+    if any(row.get("stable_by_simulation") is not None for row in rows):
+        panel.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2)
 
 
 def _plot_per_point(panel, rows, axes: list[GridAxis], metric: str, values: np.ndarray) -> None:
