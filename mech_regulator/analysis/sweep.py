@@ -265,16 +265,19 @@ def run_sweep(points: list[SweepPoint], jobs: int | None = None, engine: str = "
 
 
 def _run_on_processes(points: list[SweepPoint], jobs: int, finished: Callable[[int, dict], None]) -> None:
-    """The points on a pool of `jobs` local worker processes, each finished as it completes."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    """The points on a pool of `jobs` local worker processes (multiprocessing.Pool), each finished as it
+    completes; on Ctrl-C the pool's workers are terminated at once (leaving the `with`)."""
+    import multiprocessing
 
-    executor = ProcessPoolExecutor(max_workers=min(jobs, len(points)))
-    try:
-        futures = {executor.submit(run_point, point.scene, point.values): index for index, point in enumerate(points)}
-        for future in as_completed(futures):
-            finished(futures[future], future.result())
-    finally:  # on Ctrl-C: drop the points not started, do not wait for the running ones
-        executor.shutdown(wait=False, cancel_futures=True)
+    with multiprocessing.Pool(min(jobs, len(points))) as pool:
+        for index, row in pool.imap_unordered(_run_indexed, [(index, point) for index, point in enumerate(points)]):
+            finished(index, row)
+
+
+def _run_indexed(item: tuple[int, SweepPoint]) -> tuple[int, dict]:
+    """(index, row) of one point: the task of the process pool, which returns rows in completion order."""
+    index, point = item
+    return index, run_point(point.scene, point.values)
 
 
 def _run_on_dask(points: list[SweepPoint], jobs: int, scheduler: str | None,

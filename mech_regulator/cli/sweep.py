@@ -93,8 +93,13 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     names = ", ".join(dict.fromkeys(str(point.scene["name"]) for point in points))
     units = {axis.key: re.search(r"(\[[^\]]*\])?$", key_description(axis.key, points[0].scene)).group(0)
              for axis in axes}
-    plot_sweep(rows, axes, metric, f"sweep of {names}: {len(rows)} points", out / "sweep.png", permitted,
-               {key: f"{key} {unit}".strip() for key, unit in units.items()})
+    try:
+        plot_sweep(rows, axes, metric, f"sweep of {names}: {len(rows)} points", out / "sweep.png", permitted,
+                   {key: f"{key} {unit}".strip() for key, unit in units.items()})
+    except KeyboardInterrupt:
+        print(f"mech-regulator: interrupted while drawing the picture; every row is in {out / 'sweep.csv'}",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
     print(f"wrote {out / 'sweep.png'}")
     failed = [row for row in rows if row["status"] != "complete"]
     for row in failed[:5]:
