@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -210,6 +211,12 @@ def test_dask_scheduler_that_does_not_answer(capsys, tmp_path):
     code, _, stderr = run_cli(capsys, "sweep", "lathe", "--engine", "dask", "--scheduler", "tcp://127.0.0.1:9",
                               "--out", str(tmp_path / "none"), "--quiet")
     assert code == 2 and "--scheduler tcp://127.0.0.1:9: no Dask scheduler answers there" in stderr
+
+
+def test_without_dask_the_message_gives_the_pip_command(capsys, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)  # import dask.distributed now fails
+    code, _, stderr = run_cli(capsys, "sweep", "lathe", "--engine", "dask", "--out", str(tmp_path / "none"), "--quiet")
+    assert code == 2 and "--engine dask needs Dask distributed: pip install 'mech_regulator[distributed]'" in stderr
 
 
 # ----------------------------------------------------------------------------------------------
