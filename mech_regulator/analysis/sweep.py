@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import copy
 import itertools
+import logging
 import math
 import os
 import time
@@ -292,7 +293,9 @@ def _run_on_dask(points: list[SweepPoint], jobs: int, scheduler: str | None,
     cluster = None
     try:
         if scheduler is None:
-            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None)
+            # its workers' logs stay quiet: a Ctrl-C reaches them too, and their shutdown reports are no news
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.CRITICAL)
             client = Client(cluster)
         else:
             try:
