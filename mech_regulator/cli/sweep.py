@@ -80,7 +80,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     not_run = sum(row["status"] == "not run" for row in rows)
     where = f"a Dask cluster at {args.scheduler}" if args.scheduler else (
         f"a Dask local cluster of {jobs} processes" if args.engine == "dask" else
-        "this process" if jobs == 1 else f"{jobs} local processes")
+        "this process" if jobs == 1 or len(points) == 1 else f"{jobs} local processes")
     print(f"{len(rows) - not_run} of {len(rows)} points in {wall_time:.3g} s on {where}")
     print(f"wrote {out / 'sweep.csv'}")
     if not_run:
