@@ -78,10 +78,10 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     write_rows_csv(out / "sweep.csv", rows)
     print(format_rows(rows, [axis.key for axis in axes]))
     not_run = sum(row["status"] == "not run" for row in rows)
-    where = f"a Dask cluster at {args.scheduler}" if args.scheduler else (
-        f"a Dask local cluster of {jobs} processes" if args.engine == "dask" else
-        "this process" if jobs == 1 or len(points) == 1 else f"{jobs} local processes")
-    print(f"{len(rows) - not_run} of {len(rows)} points in {wall_time:.3g} s on {where}")
+    where = f"on a Dask cluster at {args.scheduler}" if args.scheduler else (
+        f"on a Dask local cluster of {jobs} processes" if args.engine == "dask" else
+        "in this process" if jobs == 1 or len(points) == 1 else f"on {jobs} local processes")
+    print(f"{len(rows) - not_run} of {len(rows)} points in {wall_time:.3g} s {where}")
     print(f"wrote {out / 'sweep.csv'}")
     if not_run:
         print(f"mech-regulator: interrupted; the {len(rows) - not_run} finished points are in {out / 'sweep.csv'}",
