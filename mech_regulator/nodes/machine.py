@@ -193,7 +193,7 @@ class MachineNode(Node):
                 self.count_publishers(topics[name]) > 0 for name in self.lockstep_inputs)
 
         while rclpy.ok() and not ready():
-            rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+            self.executor.spin_once(timeout_sec=SPIN_SLICE)
             if time.monotonic() - waited > self.peer_timeout:
                 self.get_logger().warning(f"waiting for {self.min_subscribers} subscribers of joint_states, "
                                           f"{self.joint_publisher.get_subscription_count()} so far",
@@ -205,7 +205,7 @@ class MachineNode(Node):
         if self.time_mode == "lockstep":
             waited = sent = time.monotonic()
             while rclpy.ok() and self.missing_inputs():
-                rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+                self.executor.spin_once(timeout_sec=SPIN_SLICE)
                 if time.monotonic() - sent > RESEND_PERIOD:  # a peer that matched late missed it: say it again
                     self.joint_publisher.publish(self.state_message)
                     sent = time.monotonic()
@@ -217,7 +217,7 @@ class MachineNode(Node):
                                             "waiting, fail-safe applies; this run is no longer reproducible")
                     self.report(force=True)
         else:
-            rclpy.spin_once(self, timeout_sec=0.0)
+            self.executor.spin_once(timeout_sec=0.0)
         if self.now_ns in self.stamped_load:
             value = self.stamped_load.pop(self.now_ns)
             if value != self.last_stamped_load:  # only the scenario's changes: a load typed in between stays
@@ -270,7 +270,7 @@ class MachineNode(Node):
             remaining = self.wall_start + seconds(target_ns) / self.real_time_factor - time.monotonic()
             if remaining <= 0.0:
                 return
-            rclpy.spin_once(self, timeout_sec=min(remaining, SPIN_SLICE))
+            self.executor.spin_once(timeout_sec=min(remaining, SPIN_SLICE))
 
     # ---------------------------------------------------------------------------------------------
     # Outputs
