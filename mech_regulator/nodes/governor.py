@@ -66,13 +66,13 @@ class GovernorNode(Node):
         when, omega = received
         self.previous_ns, self.time_ns = self.time_ns, when
         throttle = self.throttle = self.stepper.answer(seconds(when), omega)
-        for t, event, mode in self.stepper.events[self.reported_events:]:
-            self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
-        self.reported_events = len(self.stepper.events)
         header_stamp = stamp(when)
         answer = JointState(name=["throttle"], position=[throttle])
         answer.header.stamp = header_stamp
-        self.throttle_publisher.publish(answer)
+        self.throttle_publisher.publish(answer)  # first: the machine waits for it
+        for t, event, mode in self.stepper.events[self.reported_events:]:
+            self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
+        self.reported_events = len(self.stepper.events)
         values = self.stepper.outputs()
         state = JointState(name=["sleeve", "arm", "throttle"],
                            position=[values["sleeve"], values["arm_angle"], values["throttle"]],

@@ -160,22 +160,26 @@ class MachineNode(Node):
         """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time."""
         self.wait_for_subscribers()
         self.wall_start = time.monotonic()
-        tick = 0
+        tick, moments = 0, None
         while rclpy.ok():
             self.now_ns = min(tick * self.step_ns, self.end_ns)
             next_ns = min((tick + 1) * self.step_ns, self.end_ns)
             self.publish_state()
+            if moments is not None:  # the last exchange's, sent while the peers answer this one
+                self.moments_publisher.publish(moments)
             if self.time_mode == "realtime" and next_ns > self.now_ns:
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
             throttle = self.stepper.applied_throttle(self.applied_throttle())
-            self.publish_moments()
+            moments = self.moments_message()
             if self.now_ns >= self.end_ns or self.stepper.status != "complete":
                 break
             tick += 1
             self.stepper.advance(seconds(next_ns), throttle, self.load)
             self.report()
         if rclpy.ok():
+            if moments is not None:
+                self.moments_publisher.publish(moments)
             self.finish()
 
     def wait_for_subscribers(self) -> None:
@@ -294,12 +298,13 @@ class MachineNode(Node):
         self.joint_publisher.publish(message)
         self.state_message = message
 
-    def publish_moments(self) -> None:
-        """machine/moments at the current exchange time, with the inputs that now hold."""
+    def moments_message(self) -> JointState:
+        """machine/moments at the current exchange time, with the inputs that now hold (published after
+        the next exchange's joint_states, off the critical path of the lockstep)."""
         moments = self.stepper.moments(self.throttle, self.load)
         message = JointState(name=list(moments), effort=list(moments.values()))
         message.header.stamp = stamp(self.now_ns)
-        self.moments_publisher.publish(message)
+        return message
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""
