@@ -26,7 +26,7 @@ from mech_regulator.scene.schema import Scene
 from mech_regulator.solvers.cosim import NANOSECONDS, seconds
 
 EXIT_BAD_INPUT = 2
-SPIN_SLICE = 0.1  # [s] of wall time per wait of an idle node's spin loop
+IDLE_SPIN_SLICE = 0.1  # [s] of wall time per wait of a spin loop that only waits for callbacks
 HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
 WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad messages
 
@@ -198,7 +198,7 @@ OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.E
 
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
     """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
-    add it to rclpy's EventsExecutor (`node.executor`: its callbacks cost about a third of the default
+    add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
     executor's), then `work(node)` or spin. A bad scene or parameter ends with a message and exit code 2."""
     rclpy.init(args=sys.argv)
     node = None
@@ -210,7 +210,7 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
             work(node)
         else:
             while rclpy.ok():
-                executor.spin_once(timeout_sec=SPIN_SLICE)
+                executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
         return 0
     except SceneError as error:
         print(f"mech_regulator: {error}", file=sys.stderr)

@@ -25,8 +25,8 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (OK, STATE_QOS, diagnostics, float_parameter, nanoseconds, run, scene_model,
-                                         text_parameter)
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, diagnostics, float_parameter, nanoseconds,
+                                         run, scene_model, text_parameter)
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
@@ -197,7 +197,7 @@ class RecorderNode(Node):
     def record(self) -> None:
         """Spin until the machine has finished and everything is in (or Ctrl-C)."""
         while rclpy.ok() and not self.complete():
-            self.executor.spin_once(timeout_sec=0.1)
+            self.executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
 
 
 def main() -> int:
