@@ -41,7 +41,7 @@ from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cosim import cosimulate, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import GovernorStepper, cosimulate, seconds, to_nanoseconds
 from mech_regulator.solvers.trajectory import SampledTrajectory
 
 # engine_direct shortened to 1 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s): the main job's test scene
@@ -163,6 +163,24 @@ def test_lockstep_error_is_first_order_in_the_exchange_step():
         assert omega_error[step] > 0.0 and fair_mean_error[step] > 0.0
     assert 1.8 <= omega_error[2e-3] / omega_error[1e-3] <= 2.2, omega_error
     assert 1.8 <= fair_mean_error[2e-3] / fair_mean_error[1e-3] <= 2.2, fair_mean_error
+
+
+def test_an_anticipating_governor_answers_as_one_that_does_not():
+    """governor_node advances over the next step before it is asked (GovernorStepper.anticipate); a guess
+    of the next exchange time that turns out wrong is undone: answers, states, mode changes and solver
+    counts stay those of a governor that never anticipates."""
+    model = build_model(load_scene("engine_direct"))
+    plain, anticipating = GovernorStepper(model), GovernorStepper(model)
+    step = to_nanoseconds(1e-3)
+    speeds = np.concatenate([np.full(150, 400.0), np.full(150, 150.0)])  # [rad/s] up to the high stop and off it
+    for k, omega in enumerate(speeds):
+        now = seconds(k * step)
+        assert anticipating.answer(now, omega) == plain.answer(now, omega), f"throttle at t = {now} s"
+        np.testing.assert_array_equal(anticipating.state, plain.state, err_msg=f"state at t = {now} s")
+        assert (anticipating.mode, anticipating.events, anticipating.stats) == (plain.mode, plain.events, plain.stats)
+        anticipating.anticipate(seconds((k + (2 if k % 7 == 0 else 1)) * step))  # every 7th guess too far
+    assert [event for _, event, _ in plain.events] == ["sleeve reaches the high stop", "sleeve leaves the high stop"]
+    assert plain.stats.restarts >= 1
 
 
 def test_columns_after_an_overspeed_trip_show_the_closed_throttle(tmp_path):
@@ -603,7 +621,12 @@ def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe
         return any(float(values["sim_time"]) >= after for _, _, values in listener.statuses()) \
             and job.rrd.exists() and job.rrd.stat().st_size > 0
 
+    def recorded(exchanges: int) -> bool:  # (once flaky: a Ctrl-C before the recorder had a complete exchange)
+        return any(int(values["recorded_exchanges"]) >= exchanges for _, _, values in listener.statuses("/recorder"))
+
     probe.spin_until(lambda: running(0.5), "the main job running past 0.5 s", describe=job.describe)
+    probe.spin_until(lambda: recorded(2), "the recorder's diagnostics counting 2 complete exchanges",
+                     describe=job.describe)
     size = job.rrd.stat().st_size
     probe.spin_until(lambda: job.rrd.stat().st_size > size, "the recording growing", describe=job.describe)
     assert job.process.poll() is None, job.describe()
@@ -655,6 +678,11 @@ def test_ctrl_c_right_after_the_loop_check_is_a_normal_stop(tmp_path, processes)
     output = processes.log(recorder)
     assert "recording to" in output, output  # it got as far as its loop
     assert code == 0 and "Traceback" not in without_rclpy_noise(output), output
+    # no machine ever spoke: the summary says so, and there are no samples to write
+    summary = json.loads((tmp_path / "lathe.json").read_text())
+    assert (summary["status"], summary["samples"], summary["t_end"]) == ("interrupted", 0, 0.0), summary
+    assert summary["message"] == "interrupted before the first complete exchange: nothing recorded yet", summary
+    assert not (tmp_path / "lathe.csv").exists()
 
 
 def without_rclpy_noise(output: str) -> str:

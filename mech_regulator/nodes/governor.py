@@ -7,7 +7,11 @@ For each message it advances its own states to that time with the previous speed
 `governor/state` (sensor_msgs/JointState: "sleeve" z [m] and z' [m/s], "arm" angle [rad] and rate
 [rad/s], "throttle", and for indirect action "servo" [-] (and "feedback_shift" [m])) and each mode
 change (a stop reached, the sleeve sticking or breaking away) on `governor/events` (std_msgs/String,
-JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosimulate.
+JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosimulate. Having
+answered, it anticipates: it advances its states over the next step (as long as the last one), with
+the speed just received held, while the machine integrates that step, so that its next answer is
+immediate (GovernorStepper.anticipate: an exchange time other than the expected one is computed
+afresh, so the numbers never depend on it).
 """
 
 from __future__ import annotations
@@ -42,6 +46,8 @@ class GovernorNode(Node):
                                          0.0, 1e9)
         self.stepper = GovernorStepper(model)
         self.time_ns: int | None = None
+        self.previous_ns: int | None = None  # the exchange time before time_ns [ns]
+        self.throttle = self.stepper.throttle  # [-] the last answer
         self.reported_events = 0
         self.rejections = Rejections(self)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
@@ -58,15 +64,15 @@ class GovernorNode(Node):
         if received is None:
             return
         when, omega = received
-        self.time_ns = when
-        throttle = self.stepper.answer(seconds(when), omega)
-        for t, event, mode in self.stepper.events[self.reported_events:]:
-            self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
-        self.reported_events = len(self.stepper.events)
+        self.previous_ns, self.time_ns = self.time_ns, when
+        throttle = self.throttle = self.stepper.answer(seconds(when), omega)
         header_stamp = stamp(when)
         answer = JointState(name=["throttle"], position=[throttle])
         answer.header.stamp = header_stamp
-        self.throttle_publisher.publish(answer)
+        self.throttle_publisher.publish(answer)  # first: the machine waits for it
+        for t, event, mode in self.stepper.events[self.reported_events:]:
+            self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
+        self.reported_events = len(self.stepper.events)
         values = self.stepper.outputs()
         state = JointState(name=["sleeve", "arm", "throttle"],
                            position=[values["sleeve"], values["arm_angle"], values["throttle"]],
@@ -80,6 +86,8 @@ class GovernorNode(Node):
         self.state_publisher.publish(state)
         if self.stepper.status != "complete":
             self.report()
+        elif self.previous_ns is not None and when > self.previous_ns:  # while the machine does the same step
+            self.stepper.anticipate(seconds(2 * when - self.previous_ns))
 
     def report(self) -> None:
         level, text = OK, "running"
@@ -87,7 +95,7 @@ class GovernorNode(Node):
             level, text = ERROR, self.stepper.message
         elif self.rejections.total:
             level, text = WARN, f"{self.rejections.total} bad messages rejected"
-        values = {"scene": self.scene_name, "sim_time": self.stepper.time, "throttle": self.stepper.throttle,
+        values = {"scene": self.scene_name, "sim_time": seconds(self.time_ns or 0), "throttle": self.throttle,
                   "mode": "/".join(part for part in self.stepper.mode if part), "events": len(self.stepper.events)}
         array = diagnostics(self, level, text, values)
         array.status[0].values += self.rejections.key_values()

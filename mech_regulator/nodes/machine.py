@@ -160,22 +160,26 @@ class MachineNode(Node):
         """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time."""
         self.wait_for_subscribers()
         self.wall_start = time.monotonic()
-        tick = 0
+        tick, moments = 0, None
         while rclpy.ok():
             self.now_ns = min(tick * self.step_ns, self.end_ns)
             next_ns = min((tick + 1) * self.step_ns, self.end_ns)
             self.publish_state()
+            if moments is not None:  # the last exchange's, sent while the peers answer this one
+                self.moments_publisher.publish(moments)
             if self.time_mode == "realtime" and next_ns > self.now_ns:
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
             throttle = self.stepper.applied_throttle(self.applied_throttle())
-            self.publish_moments()
+            moments = self.moments_message()
             if self.now_ns >= self.end_ns or self.stepper.status != "complete":
                 break
             tick += 1
             self.stepper.advance(seconds(next_ns), throttle, self.load)
             self.report()
         if rclpy.ok():
+            if moments is not None:
+                self.moments_publisher.publish(moments)
             self.finish()
 
     def wait_for_subscribers(self) -> None:
@@ -193,7 +197,7 @@ class MachineNode(Node):
                 self.count_publishers(topics[name]) > 0 for name in self.lockstep_inputs)
 
         while rclpy.ok() and not ready():
-            rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+            self.executor.spin_once(timeout_sec=SPIN_SLICE)
             if time.monotonic() - waited > self.peer_timeout:
                 self.get_logger().warning(f"waiting for {self.min_subscribers} subscribers of joint_states, "
                                           f"{self.joint_publisher.get_subscription_count()} so far",
@@ -205,7 +209,7 @@ class MachineNode(Node):
         if self.time_mode == "lockstep":
             waited = sent = time.monotonic()
             while rclpy.ok() and self.missing_inputs():
-                rclpy.spin_once(self, timeout_sec=SPIN_SLICE)
+                self.executor.spin_once(timeout_sec=SPIN_SLICE)
                 if time.monotonic() - sent > RESEND_PERIOD:  # a peer that matched late missed it: say it again
                     self.joint_publisher.publish(self.state_message)
                     sent = time.monotonic()
@@ -217,7 +221,7 @@ class MachineNode(Node):
                                             "waiting, fail-safe applies; this run is no longer reproducible")
                     self.report(force=True)
         else:
-            rclpy.spin_once(self, timeout_sec=0.0)
+            self.executor.spin_once(timeout_sec=0.0)
         if self.now_ns in self.stamped_load:
             value = self.stamped_load.pop(self.now_ns)
             if value != self.last_stamped_load:  # only the scenario's changes: a load typed in between stays
@@ -270,7 +274,7 @@ class MachineNode(Node):
             remaining = self.wall_start + seconds(target_ns) / self.real_time_factor - time.monotonic()
             if remaining <= 0.0:
                 return
-            rclpy.spin_once(self, timeout_sec=min(remaining, SPIN_SLICE))
+            self.executor.spin_once(timeout_sec=min(remaining, SPIN_SLICE))
 
     # ---------------------------------------------------------------------------------------------
     # Outputs
@@ -294,12 +298,13 @@ class MachineNode(Node):
         self.joint_publisher.publish(message)
         self.state_message = message
 
-    def publish_moments(self) -> None:
-        """machine/moments at the current exchange time, with the inputs that now hold."""
+    def moments_message(self) -> JointState:
+        """machine/moments at the current exchange time, with the inputs that now hold (published after
+        the next exchange's joint_states, off the critical path of the lockstep)."""
         moments = self.stepper.moments(self.throttle, self.load)
         message = JointState(name=list(moments), effort=list(moments.values()))
         message.header.stamp = stamp(self.now_ns)
-        self.moments_publisher.publish(message)
+        return message
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""

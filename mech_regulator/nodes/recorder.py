@@ -1,7 +1,9 @@
 """recorder_node: records a run from the topics into a Rerun recording (a .rrd file and/or a live
 viewer) with its blueprint, and at the end writes the run's samples (CSV) and summary (JSON).
 
-Subscribes `joint_states`, `machine/moments`, `governor/state`, `governor/events` and `/diagnostics`.
+Subscribes `joint_states`, `machine/moments`, `governor/state`, `governor/events` and `/diagnostics`;
+publishes its own `/diagnostics` every second: `recorded_exchanges` (complete exchanges so far) and
+`recorded_until` [s].
 The text log gets every change of the applied load, the governor's mode changes and the machine's
 warnings (fail-safe, overspeed trip). When the machine says it finished (diagnostics `finished_at_ns`)
 the recorder waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it
@@ -23,13 +25,15 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import STATE_QOS, float_parameter, nanoseconds, run, scene_model, text_parameter
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, diagnostics, float_parameter, nanoseconds,
+                                         run, scene_model, text_parameter)
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
 from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
+DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 
 
@@ -68,6 +72,8 @@ class RecorderNode(Node):
         self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
+        self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
 
     def on_joint_states(self, message: JointState) -> None:
@@ -128,28 +134,49 @@ class RecorderNode(Node):
         return self.model.governor is None or self.finished_at in self.governor
 
     def close(self) -> None:
-        """Finish the recording, then write the samples (CSV) and the summary (JSON) next to it."""
+        """Finish the recording, then write the samples (CSV) and the summary (JSON) next to it; stopped
+        before a first complete exchange, the summary alone (status interrupted, samples 0)."""
         if self.closed:
             return
         self.closed = True
         self.recording.close()
+        if self.path is None:
+            return
         run_data = self.run_data()
-        if self.path is None or run_data is None:
+        summary_path = self.path.with_suffix(".json")
+        if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
+            summary = {"scene": self.model.scene.name, "status": "interrupted",
+                       "message": "interrupted before the first complete exchange: nothing recorded yet",
+                       "exchange_step": self.exchange_step, "samples": 0, "t_end": 0.0,
+                       "omega_end": self.model.scene.scenario.initial.omega, "tripped_at": None, "governor": None,
+                       "recording": str(self.path)}
+            summary_path.write_text(to_json(summary))
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step)
         if not self.complete():
             summary["status"] = "interrupted"
             summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
-        csv_path, summary_path = self.path.with_suffix(".csv"), self.path.with_suffix(".json")
+        csv_path = self.path.with_suffix(".csv")
         columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
         write_csv(csv_path, columns, digits=17)
         summary.update(recording=str(self.path), csv=str(csv_path))
         summary_path.write_text(to_json(summary))
 
+    def complete_times(self) -> list[int]:
+        """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""
+        return sorted(when for when in self.machine if when in self.moments
+                      and (self.model.governor is None or when in self.governor))
+
+    def report(self) -> None:
+        """Publish /diagnostics: how many complete exchanges are recorded and up to which time."""
+        times = self.complete_times()
+        values = {"scene": self.model.scene.name, "recorded_exchanges": len(times),
+                  "recorded_until": seconds(times[-1]) if times else None}
+        self.diagnostics_publisher.publish(diagnostics(self, OK, "recording", values))
+
     def run_data(self) -> CoSimulation | None:
         """The run as the core's CoSimulation, from the exchange times all parts were received for."""
-        times = sorted(when for when in self.machine if when in self.moments
-                       and (self.model.governor is None or when in self.governor))
+        times = self.complete_times()
         if not times:
             return None
         rows = []
@@ -170,7 +197,7 @@ class RecorderNode(Node):
     def record(self) -> None:
         """Spin until the machine has finished and everything is in (or Ctrl-C)."""
         while rclpy.ok() and not self.complete():
-            rclpy.spin_once(self, timeout_sec=0.1)
+            self.executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
 
 
 def main() -> int:

@@ -107,11 +107,19 @@ class GovernorStepper:
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
+        self._before_anticipation: tuple | None = None
 
     def answer(self, time: float, omega: float) -> float:
         """Take the crank speed omega [rad/s] measured at `time` [s]: first advance from the last exchange
         time to `time` with the previous speed held, then hold omega from here on; returns the
-        throttle [-] at `time`."""
+        throttle [-] at `time`. After `anticipate`, the stretch already done is kept if it ends at `time`,
+        else undone and done again to `time`: the numbers never depend on anticipating."""
+        if self._before_anticipation is not None:
+            if time != self.time:
+                (self.state, self.mode, self.time, events, self.stats, self.status,
+                 self.message) = self._before_anticipation
+                del self.events[events:]
+            self._before_anticipation = None
         if time > self.time:
             stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
             self.state, self.mode = _segment(self.regulator, None, self.time, time, self.state, self.mode,
@@ -122,6 +130,15 @@ class GovernorStepper:
         self.state = self.state.copy()
         self.state[1] = omega
         return self.throttle
+
+    def anticipate(self, time: float) -> None:
+        """Advance now, with the speed held, to `time` [s], the next exchange time as expected, so that the
+        answer there is immediate (a governor node does this while the machine integrates the same
+        step: the two run in parallel). Keeps the state before it for `answer` at another time."""
+        before = (self.state.copy(), self.mode, self.time, len(self.events), dataclasses.replace(self.stats),
+                  self.status, self.message)
+        self.answer(time, float(self.state[1]))
+        self._before_anticipation = before
 
     @property
     def throttle(self) -> float:
