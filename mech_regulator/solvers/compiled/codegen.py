@@ -31,6 +31,7 @@ import importlib.util
 import inspect
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -122,6 +123,7 @@ def compile_scene(model: MachineModel) -> CompiledScene:
             _write(path, source)
         spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", path)
         module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
         spec.loader.exec_module(module)
         _LOADED[digest] = module
     return CompiledScene(model, module.rhs, module.guards, parameters, n_guards, window_slot, source, path)
