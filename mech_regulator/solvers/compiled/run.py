@@ -20,13 +20,14 @@ from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import integrators
 from mech_regulator.solvers.compiled.codegen import CompiledScene, compile_scene
-from mech_regulator.solvers.time_domain import (GUARD_TOLERANCE, MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck,
+from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck,
                                                 _log_event, _settle_mode, _Shifted, _switch_window,
                                                 integrate_time_domain)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 FAST_METHODS = ("RK45", "DOP853", "RK4", "Rosenbrock23")
-MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress, Ctrl-C)
+MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (so progress moves and Ctrl-C is heard; the next call
+# warm-starts with the last step size)
 
 
 def fast_path_refusal(scene_or_model) -> str | None:
@@ -78,7 +79,7 @@ def _compiled_segment(compiled: CompiledScene, model: MachineModel, piece, t_sta
     wraps = model.reduced is not None or "phi" in model.depends_on()
     wrap_limit = RESTART_PERIODS * period if wraps else math.inf
     atol = np.full(y.size, settings.atol)
-    levels = np.empty(compiled.n_guards)
+    thresholds = np.zeros(compiled.n_guards)  # the steppers apply time_domain's GUARD_TOLERANCE semantics
     t, first_step = t_start, 0.0
     instant_events = 0
     while t < t_end and trajectory.status == "complete":
@@ -90,32 +91,32 @@ def _compiled_segment(compiled: CompiledScene, model: MachineModel, piece, t_sta
         p = compiled.parameters_for(piece, mode, window)
         y_wrapped = np.array(y, dtype=float)
         y_wrapped[0] -= offset
-        compiled.guards(t, y_wrapped, p, levels)
-        thresholds = np.where(levels <= GUARD_TOLERANCE, -GUARD_TOLERANCE, 0.0)
         run = _step(settings, compiled, compiled.linear(mode, window), thresholds, t, y_wrapped, t_end, p, atol,
                     first_step, wrap_limit)
-        trajectory.add_piece(t, run.t_end, _Shifted(run.dense(), offset))
-        trajectory.stats.steps += run.n_steps
-        trajectory.stats.nfev += run.nfev
-        trajectory.stats.njev += run.njev
-        trajectory.stats.nlu += run.nlu
-        first_step = min(run.last_step, t_end - run.t_end) if run.last_step > 0.0 else 0.0
+        if run.n_steps:
+            trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset))
+        trajectory.stats.steps += int(run.n_steps)
+        trajectory.stats.nfev += int(run.nfev)
+        trajectory.stats.njev += int(run.njev)
+        trajectory.stats.nlu += int(run.nlu)
+        if run.last_step > 0.0:
+            first_step = min(run.last_step, t_end - run.t_end)
         t_old, t = t, run.t_end
         y = np.array(run.y_end, dtype=float)
         y[0] += offset
-        if run.status == integrators.FAILED:
+        if run.status == integrators.FAILED and run.failure != integrators.TOO_MANY_STEPS:
             trajectory.status = "failed"
-            if np.all(np.isfinite(run.y_end)):
-                trajectory.message = f"{settings.method} failed at t = {t:.6g} s: the step size became too small"
-            else:
+            if run.failure == integrators.NONFINITE:
                 advice = "use a smaller step" if settings.method == "RK4" else "tighten rtol/atol or limit max_step"
-                trajectory.message = (f"{settings.method}: the state became non-finite at t = {t:.6g} s; {advice}")
+                trajectory.message = f"{settings.method}: the state became non-finite at t = {t:.6g} s; {advice}"
+            else:
+                trajectory.message = f"{settings.method} failed: {run.message}"
         elif run.status == integrators.EVENT:
-            g = run.event_guard
+            g = int(run.event_guard)
             if compiled.window_slot is not None and g >= compiled.window_slot:
                 trajectory.stats.switches += 1
                 y[0] = offset + window[g - compiled.window_slot]
-                trajectory.stats.restarts += t < t_end
+                trajectory.stats.restarts += int(t < t_end)
             else:
                 guard = model.guards(mode, y)[g]
                 mode, y = guard.apply(t, y)
