@@ -88,6 +88,8 @@ def _compiled_segment(compiled: CompiledScene, model: MachineModel, piece, t_sta
             break
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
+        if window is not None and y[0] - offset > window[1]:  # a whole period that floor() left by round-off
+            offset += period
         p = compiled.parameters_for(piece, mode, window)
         y_wrapped = np.array(y, dtype=float)
         y_wrapped[0] -= offset
