@@ -1,0 +1,663 @@
+"""The compiled steppers of the fast path: rk45 (scipy's RK45), dop853 (scipy's DOP853), rk4 (the classic
+fixed-step RK4 of solvers/rk4.py) and rosenbrock23 (MATLAB's ode23s, for stiff scenes), compiled once by
+numba with explicit signatures and cached on disk; a scene's rhs and guards come in as first-class functions
+(signatures.RHS_TYPE, GUARDS_TYPE).
+
+Each stepper integrates dy/dt = rhs(t, y, p) from (t0, y0) towards t_end and stops at the first of:
+t_end reached; a guard falling below its threshold inside a step (an event, located, the step cut there);
+|y[0]| > wrap_limit at the end of an accepted step before t_end (the caller re-wraps the crank angle and
+restarts); failure (non-finite state, step size underflow, max_steps accepted steps).
+
+    rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
+         rtol, atol, max_step, first_step, wrap_limit, max_steps) -> result
+    dop853(... same as rk45 ...), rosenbrock23(... same as rk45 ...)
+    rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, max_steps) -> result
+
+t0, t_end, max_step, first_step (0 = choose it as scipy's select_initial_step), step [s]; atol per state
+(units of the state); wrap_limit [rad] (inf = none); rk4's step is the largest step, shortened to divide
+[t0, t_end] evenly as in solvers/rk4.py.
+
+The result tuple, in this order:
+     0 status        int64: 0 reached t_end, 1 event, 2 wrap limit, 3 failed
+     1 n_steps       int64: accepted steps n
+     2 times         float64[n + 1]: step edges [s] (times[n]: the event time after an event)
+     3 y_old         float64[n, n_states]: the state at each step's start
+     4 coefficients  float64[n, n_states, K]: dense output y(t) = y_old[k] + h_k sum_{j=1..K} c[k, :, j-1] theta^j,
+                     theta = (t - times[k]) / h_k, h_k = times[k+1] - times[k]; K = 4 (rk45: scipy's
+                     RkDenseOutput; rk4: the Hermite cubic, column 4 zero; rosenbrock23: ode23s's quadratic,
+                     columns 3-4 zero) or 7 (dop853: scipy's Dop853DenseOutput expanded into powers of theta).
+                     A step cut by an event keeps the full step's polynomial, rescaled to the cut step's theta.
+     5 event_guard   int64: index of the guard that fired, -1 if none
+     6 event_time    float64 [s]: the event time (nan if none)
+     7 y_end         float64[n_states]: the state at times[n] (the dense output at the event time after an
+                     event; else the last accepted step's end state; y0 if no step was taken)
+     8 nfev, 9 njev, 10 nlu  int64: rhs evaluations, Jacobian evaluations, LU factorisations
+    11 last_step     float64 [s]: the last accepted step's full size (scipy's step_size), to warm-start the
+                     next call (0 if none)
+    12 failure       int64: why status 3: 1 non-finite state, 2 step size underflow, 3 max_steps reached
+
+CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coefficients) is the dense output
+of all the steps of one call, for Trajectory.add_piece.
+
+Guards: guards(t, y, p, levels) writes every guard's level (+inf: not active in this mode). A mode holds
+while level >= threshold. linear[g] = [flag, c0, c1..c_n]: flag 1 says the guard is c0 + sum c_i y_i, so
+along a step it is a polynomial in theta, whose first crossing in (0, 1] is found exactly (its derivative's
+roots split the step into monotone pieces). Other guards are probed at NONLINEAR_PROBES interior points of
+each step and located by Brent's method on the dense output, as the reference does: a crossing and its
+undoing between two probes is missed. Thresholds follow solvers/time_domain.py's _first_event: pass
+thresholds[g] = 0 for its semantics; at every step start a guard within GUARD_TOLERANCE above its threshold
+(at its boundary, as a transition leaves it) fires only when it falls GUARD_TOLERANCE below it. A guard
+already more than GUARD_TOLERANCE below its threshold at t0 is an event at t0 with no step. The earliest
+event over all guards wins.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, types
+from scipy.integrate import DOP853, RK45, DenseOutput
+from scipy.integrate._ivp import dop853_coefficients
+
+from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, RHS_TYPE
+from mech_regulator.solvers.time_domain import GUARD_TOLERANCE
+
+REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
+NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS = 1, 2, 3
+FAILURES = {NONFINITE: "the state became non-finite", STEP_TOO_SMALL: "the step size fell below round-off",
+            TOO_MANY_STEPS: "the step limit (max_steps) was reached"}
+NONLINEAR_PROBES = 8  # interior points of each step where a guard that is not linear in the state is checked
+
+_RK4, _RK45, _DOP853, _ROSENBROCK23 = 0, 1, 2, 3
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0  # scipy's step-size controller (scipy.integrate._ivp.rk)
+
+# scipy's tableaux, taken from scipy itself (numba freezes these global arrays into the compiled code)
+RK45_A = np.ascontiguousarray(RK45.A, dtype=np.float64)
+RK45_B = np.ascontiguousarray(RK45.B, dtype=np.float64)
+RK45_C = np.ascontiguousarray(RK45.C, dtype=np.float64)
+RK45_E = np.ascontiguousarray(RK45.E, dtype=np.float64)
+RK45_P = np.ascontiguousarray(RK45.P, dtype=np.float64)
+DOP853_STAGES = dop853_coefficients.N_STAGES  # 12; the step adds f(t + h, y_new), the dense output 3 more
+DOP853_A = np.ascontiguousarray(dop853_coefficients.A, dtype=np.float64)  # (16, 16) with the extra stages
+DOP853_B = np.ascontiguousarray(DOP853.B, dtype=np.float64)
+DOP853_C = np.ascontiguousarray(dop853_coefficients.C, dtype=np.float64)  # (16,)
+DOP853_E3 = np.ascontiguousarray(DOP853.E3, dtype=np.float64)
+DOP853_E5 = np.ascontiguousarray(DOP853.E5, dtype=np.float64)
+DOP853_D = np.ascontiguousarray(DOP853.D, dtype=np.float64)  # (4, 16)
+ROSENBROCK_D = 1.0 / (2.0 + np.sqrt(2.0))  # ode23s's gamma
+ROSENBROCK_E32 = 6.0 + np.sqrt(2.0)
+
+_ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
+                  types.float64, types.float64[::1], types.float64, types.float64[::1],
+                  types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.int64)
+_FIXED_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
+               types.float64, types.float64[::1], types.float64, types.float64[::1],
+               types.float64, types.float64, types.int64)
+
+
+@njit(cache=True)
+def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
+               first_step, fixed_step, wrap_limit, max_steps):
+    """The stepping loop shared by the four methods: accepted steps with their dense output stored in
+    arrays grown by doubling, an event check on every step, the wrap and step limits."""
+    n = y0.size
+    powers = 7 if method == _DOP853 else 4
+    stages = DOP853_A.shape[0] if method == _DOP853 else RK45_A.shape[0] + 1
+    capacity = 16
+    times = np.empty(capacity + 1)
+    y_old = np.empty((capacity, n))
+    coefficients = np.zeros((capacity, n, powers))
+    stage = np.empty((stages, n))
+    jacobian = np.empty((n, n))
+    dfdt = np.empty(n)
+    levels = np.empty(max(n_guards, 1))
+    t = t0
+    y = y0.copy()
+    f = np.empty(n)
+    y_new = np.empty(n)
+    f_new = np.empty(n)
+    y_end = y0.copy()
+    rhs(t, y, p, f)
+    nfev, njev, nlu = 1, 0, 0
+    status, failure, n_steps = -1, 0, 0
+    event_guard, event_time = -1, np.nan
+    h_previous = 0.0
+    times[0] = t0
+    if t_end <= t0:
+        status = REACHED
+    elif n_guards > 0:
+        guards(t, y, p, levels)
+        for g in range(n_guards):
+            if levels[g] < thresholds[g] - GUARD_TOLERANCE:
+                status, event_guard, event_time = EVENT, g, t0
+                break
+    if method == _RK4:
+        count = max(1, np.ceil((t_end - t0) / fixed_step - 1e-9))
+        h_abs = (t_end - t0) / count
+    elif first_step > 0.0:
+        h_abs = first_step
+    else:
+        order = 7 if method == _DOP853 else (4 if method == _RK45 else 2)
+        h_abs = _initial_step(rhs, t0, y, f, t_end, max_step, order, rtol, atol, p, y_new, f_new)
+        nfev += 1
+    exponent = -1.0 / 8.0 if method == _DOP853 else (-1.0 / 5.0 if method == _RK45 else -1.0 / 3.0)
+    jacobian_current = False
+    while status < 0:
+        if n_steps >= max_steps:
+            status, failure = FAILED, TOO_MANY_STEPS
+            break
+        if method == _RK4:
+            h = t_end - t if t_end - t < 1.5 * h_abs else h_abs
+            nfev += _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new)
+        else:
+            min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
+            h_abs = min(max(h_abs, min_step), max_step)
+            rejected = False
+            finite = True
+            while True:
+                if h_abs < min_step:
+                    status, failure = FAILED, (STEP_TOO_SMALL if finite else NONFINITE)
+                    break
+                t_new = min(t + h_abs, t_end)
+                h = t_new - t
+                h_abs = abs(h)
+                if method == _ROSENBROCK23:
+                    if not jacobian_current:
+                        nfev += _derivatives(rhs, t, y, f, h, atol, rtol, p, jacobian, dfdt, y_new, f_new)
+                        njev += 1
+                        jacobian_current = True
+                    error = _rosenbrock_step(rhs, t, y, f, h, jacobian, dfdt, rtol, atol, p, stage, y_new, f_new)
+                    nfev += 2
+                    nlu += 1
+                else:
+                    nfev += _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new)
+                    error = _error_norm(method, stage, h, y, y_new, rtol, atol)
+                finite = np.all(np.isfinite(y_new))
+                if error < 1.0:
+                    factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error ** exponent)
+                    if rejected:
+                        factor = min(1.0, factor)
+                    h_abs *= factor
+                    break
+                factor = SAFETY * error ** exponent
+                h_abs *= factor if factor > MIN_FACTOR else MIN_FACTOR  # a nan error norm shrinks by MIN_FACTOR
+                rejected = True
+            if status >= 0:
+                break
+        if not np.all(np.isfinite(y_new)):
+            status, failure = FAILED, NONFINITE
+            break
+        if n_steps == capacity:
+            times, y_old, coefficients = _grown(times, y_old, coefficients)
+            capacity *= 2
+        nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, coefficients[n_steps])
+        y_old[n_steps] = y
+        times[n_steps + 1] = t + h
+        h_previous = h
+        n_steps += 1
+        if n_guards > 0:
+            event_guard, event_time = _first_event(guards, n_guards, linear, thresholds, t, h, y,
+                                                   coefficients[n_steps - 1], p, levels, y_end)
+            if event_guard >= 0:
+                status = EVENT
+                if event_time <= t:  # at the step's very start: no step taken
+                    n_steps -= 1
+                    y_end[:] = y
+                else:
+                    _dense_at(event_time, t, h, y, coefficients[n_steps - 1], y_end)
+                    _rescale(coefficients[n_steps - 1], (event_time - t) / h)
+                    times[n_steps] = event_time
+                break
+        t = t + h
+        y[:] = y_new
+        f[:] = f_new
+        jacobian_current = False
+        if t >= t_end:
+            status = REACHED
+        elif abs(y[0]) > wrap_limit:
+            status = WRAPPED
+    if status != EVENT:
+        y_end[:] = y
+    return (status, n_steps, times[:n_steps + 1].copy(), y_old[:n_steps].copy(), coefficients[:n_steps].copy(),
+            event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure)
+
+
+@njit(cache=True)
+def _grown(times, y_old, coefficients):
+    """The output arrays with twice the room for steps, the stored steps copied."""
+    capacity = y_old.shape[0]
+    new_times = np.empty(2 * capacity + 1)
+    new_times[:capacity + 1] = times
+    new_y_old = np.empty((2 * capacity, y_old.shape[1]))
+    new_y_old[:capacity] = y_old
+    new_coefficients = np.zeros((2 * capacity, coefficients.shape[1], coefficients.shape[2]))
+    new_coefficients[:capacity] = coefficients
+    return new_times, new_y_old, new_coefficients
+
+
+@njit(cache=True)
+def _rms(x):
+    """Root mean square of x (scipy's norm for step control)."""
+    return np.sqrt(np.sum(x * x) / x.size)
+
+
+@njit(cache=True)
+def _initial_step(rhs, t0, y0, f0, t_bound, max_step, order, rtol, atol, p, y1, f1):
+    """scipy's select_initial_step (Hairer, Nørsett & Wanner, II.4): h0 from |y0| / |f0|, refined by the
+    change of f over h0 so that h^(order+1) times it is about 0.01 (one rhs evaluation)."""
+    interval = abs(t_bound - t0)
+    scale = atol + np.abs(y0) * rtol
+    d0 = _rms(y0 / scale)
+    d1 = _rms(f0 / scale)
+    h0 = 1e-6 if d0 < 1e-5 or d1 < 1e-5 else 0.01 * d0 / d1
+    h0 = min(h0, interval)
+    y1[:] = y0 + h0 * f0
+    rhs(t0 + h0, y1, p, f1)
+    d2 = _rms((f1 - f0) / scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / (order + 1))
+    return min(100.0 * h0, h1, interval, max_step)
+
+
+@njit(cache=True)
+def _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new):
+    """One explicit Runge–Kutta step as scipy's rk_step: stage[s] = f(t + c_s h, y + h sum_j a_sj stage[j]),
+    y_new = y + h sum_s b_s stage[s], f_new = f(t + h, y_new) kept as the last stage (FSAL).
+    Returns the number of rhs evaluations."""
+    if method == _DOP853:
+        a, b, c, count = DOP853_A, DOP853_B, DOP853_C, DOP853_STAGES
+    else:
+        a, b, c, count = RK45_A, RK45_B, RK45_C, RK45_B.size
+    n = y.size
+    stage[0] = f
+    y_stage = np.empty(n)
+    for s in range(1, count):
+        for i in range(n):
+            total = 0.0
+            for j in range(s):
+                total += stage[j, i] * a[s, j]
+            y_stage[i] = y[i] + total * h
+        rhs(t + c[s] * h, y_stage, p, stage[s])
+    for i in range(n):
+        total = 0.0
+        for j in range(count):
+            total += stage[j, i] * b[j]
+        y_new[i] = y[i] + h * total
+    rhs(t + h, y_new, p, f_new)
+    stage[count] = f_new
+    return count
+
+
+@njit(cache=True)
+def _error_norm(method, stage, h, y, y_new, rtol, atol):
+    """scipy's error norm of an explicit step, scaled by atol + rtol max(|y|, |y_new|): RK45's RMS of
+    h sum_s e_s stage[s]; DOP853's |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2))."""
+    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    if method == _RK45:
+        return _rms(stage[:RK45_E.size].T.copy() @ RK45_E * h / scale)
+    rows = stage[:DOP853_E5.size].T.copy()
+    err5 = rows @ DOP853_E5 / scale
+    err3 = rows @ DOP853_E3 / scale
+    err5_2 = np.sum(err5 * err5)
+    err3_2 = np.sum(err3 * err3)
+    if err5_2 == 0.0 and err3_2 == 0.0:
+        return 0.0
+    return abs(h) * err5_2 / np.sqrt((err5_2 + 0.01 * err3_2) * scale.size)
+
+
+@njit(cache=True)
+def _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new):
+    """One classic RK4 step (k1 = f, k2, k3 at t + h/2, k4 at t + h) and f_new = f(t + h, y_new).
+    Returns the number of rhs evaluations."""
+    rhs(t + 0.5 * h, y + 0.5 * h * f, p, stage[1])
+    rhs(t + 0.5 * h, y + 0.5 * h * stage[1], p, stage[2])
+    rhs(t + h, y + h * stage[2], p, stage[3])
+    y_new[:] = y + h / 6.0 * (f + 2.0 * stage[1] + 2.0 * stage[2] + stage[3])
+    rhs(t + h, y_new, p, f_new)
+    return 4
+
+
+@njit(cache=True)
+def _derivatives(rhs, t, y, f, h, atol, rtol, p, jacobian, dfdt, y_work, f_work):
+    """J = df/dy by forward differences (increment sqrt(eps) max(|y_i|, atol_i / rtol), as ode23s's
+    threshold) and T = df/dt by a forward difference over min(sqrt(eps) max(|t|, |t + h|), h), as ode23s.
+    Returns the number of rhs evaluations."""
+    root_eps = np.sqrt(np.finfo(np.float64).eps)
+    n = y.size
+    for i in range(n):
+        y_work[:] = y
+        size = root_eps * max(abs(y[i]), atol[i] / rtol)
+        if size == 0.0:
+            size = root_eps
+        y_work[i] = y[i] + size
+        rhs(t, y_work, p, f_work)
+        jacobian[:, i] = (f_work - f) / (y_work[i] - y[i])
+    t_delta = (t + min(root_eps * max(abs(t), abs(t + h)), h)) - t
+    rhs(t + t_delta, y, p, f_work)
+    dfdt[:] = (f_work - f) / t_delta
+    return n + 1
+
+
+@njit(cache=True)
+def _rosenbrock_step(rhs, t, y, f, h, jacobian, dfdt, rtol, atol, p, stage, y_new, f_new):
+    """One ode23s step (formulas in rosenbrock23's docstring), one factorisation of W; stage[0..2] = k1, k2,
+    k3, stage[3] = F1. Returns the error norm (scipy's RMS scaled by atol + rtol max(|y|, |y_new|))."""
+    d = ROSENBROCK_D
+    w_inverse = np.linalg.inv(np.eye(y.size) - h * d * jacobian)
+    k1 = w_inverse @ (f + h * d * dfdt)
+    rhs(t + 0.5 * h, y + 0.5 * h * k1, p, stage[3])
+    k2 = w_inverse @ (stage[3] - k1) + k1
+    y_new[:] = y + h * k2
+    rhs(t + h, y_new, p, f_new)
+    k3 = w_inverse @ (f_new - ROSENBROCK_E32 * (k2 - stage[3]) - 2.0 * (k1 - f) + h * d * dfdt)
+    stage[0] = k1
+    stage[1] = k2
+    stage[2] = k3
+    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    return _rms(h / 6.0 * (k1 - 2.0 * k2 + k3) / scale)
+
+
+@njit(cache=True)
+def _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, out):
+    """The accepted step's dense output as powers of theta, out[i, j-1] the coefficient of h theta^j:
+    RK45 stage^T P; the Hermite cubic from y, y_new, f, f_new; ode23s's
+    y + h (theta (1 - theta) k1 + theta (theta - 2d) k2) / (1 - 2d); DOP853's nested form after 3 extra
+    stages. Returns the number of rhs evaluations (DOP853's extra stages)."""
+    if method == _RK45:
+        out[:, :] = stage.T.copy() @ RK45_P
+        return 0
+    if method == _RK4:
+        slope = (y_new - y) / h
+        out[:, 0] = f
+        out[:, 1] = 3.0 * slope - 2.0 * f - f_new
+        out[:, 2] = f + f_new - 2.0 * slope
+        out[:, 3] = 0.0
+        return 0
+    if method == _ROSENBROCK23:
+        scale = 1.0 / (1.0 - 2.0 * ROSENBROCK_D)
+        out[:, 0] = (stage[0] - 2.0 * ROSENBROCK_D * stage[1]) * scale
+        out[:, 1] = (stage[1] - stage[0]) * scale
+        out[:, 2:] = 0.0
+        return 0
+    return _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, out)
+
+
+@njit(cache=True)
+def _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, out):
+    """scipy's DOP853 dense output: 3 extra stages, F = [dy, h f - dy, 2 dy - h (f_new + f), h D stage]
+    (dy = y_new - y), y(theta) = y + x (F0 + (1 - x) (F1 + x (F2 + (1 - x) (F3 + ...)))) expanded into powers
+    of theta and divided by h. Returns 3 (rhs evaluations)."""
+    n = y.size
+    y_stage = np.empty(n)
+    for s in range(DOP853_STAGES + 1, DOP853_A.shape[0]):
+        for i in range(n):
+            total = 0.0
+            for j in range(s):
+                total += stage[j, i] * DOP853_A[s, j]
+            y_stage[i] = y[i] + total * h
+        rhs(t + DOP853_C[s] * h, y_stage, p, stage[s])
+    nested = np.empty((7, n))
+    delta = y_new - y
+    nested[0] = delta
+    nested[1] = h * f - delta
+    nested[2] = 2.0 * delta - h * (f_new + f)
+    nested[3:] = h * (DOP853_D @ stage)
+    poly = np.zeros((n, 8))  # poly[:, j]: coefficient of theta^j
+    for i in range(6, -1, -1):
+        poly[:, 0] += nested[i]
+        if (6 - i) % 2 == 0:  # times theta
+            poly[:, 1:] = poly[:, :-1].copy()
+            poly[:, 0] = 0.0
+        else:  # times (1 - theta)
+            poly[:, 1:] -= poly[:, :-1].copy()
+    out[:, :] = poly[:, 1:] / h
+    return 3
+
+
+@njit(cache=True)
+def _dense_at(time, t_old, h, y_old, coefficients, out):
+    """The step's dense output at time: out = y_old + h sum_j c_j theta^j (Horner), theta = (time - t_old) / h."""
+    theta = (time - t_old) / h
+    for i in range(y_old.size):
+        total = 0.0
+        for j in range(coefficients.shape[1] - 1, -1, -1):
+            total = (total + coefficients[i, j]) * theta
+        out[i] = y_old[i] + h * total
+
+
+@njit(cache=True)
+def _rescale(coefficients, ratio):
+    """Re-express a step's polynomial for the step cut to ratio of its length: c_j <- c_j ratio^(j-1), so that
+    h' sum c'_j theta'^j (h' = ratio h, theta' = theta / ratio) is the same function of time."""
+    for j in range(1, coefficients.shape[1]):
+        coefficients[:, j] *= ratio ** j
+
+
+@njit(cache=True)
+def _polynomial(theta, values):
+    """sum_j values[j] theta^j (Horner)."""
+    total = 0.0
+    for j in range(values.size - 1, -1, -1):
+        total = total * theta + values[j]
+    return total
+
+
+@njit(cache=True)
+def _excess(time, g, line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold):
+    """How far guard g is above its threshold at time inside the step: the polynomial line in theta for a
+    linear guard, else the guard evaluated on the dense output."""
+    if line.size > 0:
+        return _polynomial((time - t_old) / h, line)
+    _dense_at(time, t_old, h, y_old, coefficients, state)
+    guards(time, state, p, levels)
+    return levels[g] - threshold
+
+
+@njit(cache=True)
+def _brent(a, b, g, line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold):
+    """Root of _excess in [a, b] by Brent's method, scipy's brentq (xtol 1e-15 s, rtol 4 eps) as the
+    reference's event location; an end already on the root, or a bracket without a sign change
+    (round-off), gives the end nearer to it, as the reference's _root."""
+    xtol, rtol = 1e-15, 4.0 * np.finfo(np.float64).eps
+    x_pre, x_cur = a, b
+    f_pre = _excess(x_pre, g, line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+    f_cur = _excess(x_cur, g, line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+    if f_pre == 0.0 or f_pre * f_cur > 0.0:
+        return a if abs(f_pre) <= abs(f_cur) else b
+    if f_cur == 0.0:
+        return b
+    x_blk, f_blk, s_pre, s_cur = 0.0, 0.0, 0.0, 0.0
+    for _ in range(100):
+        if f_pre != 0.0 and f_cur != 0.0 and (f_pre < 0.0) != (f_cur < 0.0):
+            x_blk, f_blk = x_pre, f_pre
+            s_pre = s_cur = x_cur - x_pre
+        if abs(f_blk) < abs(f_cur):
+            x_pre, x_cur, x_blk = x_cur, x_blk, x_cur
+            f_pre, f_cur, f_blk = f_cur, f_blk, f_cur
+        delta = 0.5 * (xtol + rtol * abs(x_cur))
+        s_bis = 0.5 * (x_blk - x_cur)
+        if f_cur == 0.0 or abs(s_bis) < delta:
+            return x_cur
+        if abs(s_pre) > delta and abs(f_cur) < abs(f_pre):
+            if x_pre == x_blk:  # secant
+                s_try = -f_cur * (x_cur - x_pre) / (f_cur - f_pre)
+            else:  # inverse quadratic interpolation
+                d_pre = (f_pre - f_cur) / (x_pre - x_cur)
+                d_blk = (f_blk - f_cur) / (x_blk - x_cur)
+                s_try = -f_cur * (f_blk * d_blk - f_pre * d_pre) / (d_blk * d_pre * (f_blk - f_pre))
+            if 2.0 * abs(s_try) < min(abs(s_pre), 3.0 * abs(s_bis) - delta):
+                s_pre, s_cur = s_cur, s_try
+            else:
+                s_pre = s_cur = s_bis
+        else:
+            s_pre = s_cur = s_bis
+        x_pre, f_pre = x_cur, f_cur
+        x_cur += s_cur if abs(s_cur) > delta else (delta if s_bis > 0.0 else -delta)
+        f_cur = _excess(x_cur, g, line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+    return x_cur
+
+
+@njit(cache=True)
+def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coefficients, p, levels, state):
+    """The earliest guard crossing in (t_old, t_old + h]: (guard index, time [s]) or (-1, nan).
+
+    Thresholds for this step: thresholds[g], lowered by GUARD_TOLERANCE for a guard that starts the step
+    within GUARD_TOLERANCE above it. A linear guard is the polynomial g0 + sum_j a_j theta^j along the step;
+    the real parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends
+    below the threshold holds the first crossing (exact; a tangency does not fire). The other guards are
+    probed at NONLINEAR_PROBES interior points and the first probe interval that ends below is searched."""
+    n = y_old.size
+    guards(t_old, y_old, p, levels)
+    start = levels[:n_guards].copy()
+    step_thresholds = thresholds[:n_guards].copy()
+    nonlinear = False
+    best_guard, best_time = -1, np.inf
+    no_line = np.zeros(0)
+    for g in range(n_guards):
+        if start[g] == np.inf:
+            continue
+        if start[g] <= thresholds[g] + GUARD_TOLERANCE:
+            step_thresholds[g] = thresholds[g] - GUARD_TOLERANCE
+        if linear[g, 0] != 1.0:
+            nonlinear = True
+            continue
+        weights = linear[g, 2:2 + n].copy()
+        line = np.zeros(coefficients.shape[1] + 1)  # level - threshold as powers of theta
+        line[0] = linear[g, 1] + weights @ y_old - step_thresholds[g]
+        line[1:] = h * (weights @ coefficients)
+        slope = line[1:] * np.arange(1.0, line.size)  # derivative, lowest power first
+        roots = np.roots(slope[::-1].astype(np.complex128)).real  # complex: numba keeps the domain
+        cuts = np.sort(np.concatenate((roots[(roots > 0.0) & (roots < 1.0)], np.ones(1))))
+        lower = 0.0
+        for upper in cuts:
+            if _polynomial(upper, line) < 0.0:
+                time = _brent(t_old + lower * h, t_old + upper * h, g, line, t_old, h, y_old, coefficients, p,
+                              guards, levels, state, 0.0)
+                if time < best_time:
+                    best_guard, best_time = g, time
+                break
+            lower = upper
+    if nonlinear:
+        probes = np.linspace(t_old, t_old + h, NONLINEAR_PROBES + 2)
+        for k in range(1, probes.size):
+            if probes[k - 1] >= best_time:
+                break
+            _dense_at(probes[k], t_old, h, y_old, coefficients, state)
+            guards(probes[k], state, p, levels)
+            below = levels[:n_guards].copy()
+            for g in range(n_guards):
+                if start[g] == np.inf or linear[g, 0] == 1.0 or not below[g] < step_thresholds[g]:
+                    continue
+                time = _brent(probes[k - 1], probes[k], g, no_line, t_old, h, y_old, coefficients, p, guards,
+                              levels, state, step_thresholds[g])
+                if time < best_time:
+                    best_guard, best_time = g, time
+            if best_guard >= 0:
+                break
+    return best_guard, (best_time if best_guard >= 0 else np.nan)
+
+
+# the public steppers are compiled at import (explicit signatures): after the helpers they call
+@njit(_ADAPTIVE_ARGS, cache=True)
+def rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
+         wrap_limit, max_steps):
+    """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
+    the same steps up to round-off. Returns the result tuple of the module docstring."""
+    return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
+                      first_step, 0.0, wrap_limit, max_steps)
+
+
+@njit(_ADAPTIVE_ARGS, cache=True)
+def dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
+           wrap_limit, max_steps):
+    """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
+    the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
+    return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
+                      max_step, first_step, 0.0, wrap_limit, max_steps)
+
+
+@njit(_ADAPTIVE_ARGS, cache=True)
+def rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
+                 wrap_limit, max_steps):
+    """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
+    with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
+        k1 = W^-1 (F0 + h d T),  F1 = f(t + h/2, y + h k1/2),  k2 = W^-1 (F1 - k1) + k1,
+        y_new = y + h k2,  F2 = f(t + h, y_new),  k3 = W^-1 (F2 - e32 (k2 - F1) - 2 (k1 - F0) + h d T),
+        error = h/6 (k1 - 2 k2 + k3),
+    J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
+    with exponent -1/3. Returns the result tuple of the module docstring."""
+    return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
+                      max_step, first_step, 0.0, wrap_limit, max_steps)
+
+
+@njit(_FIXED_ARGS, cache=True)
+def rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, max_steps):
+    """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
+    [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
+    the module docstring."""
+    return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, 0.0, np.zeros(0),
+                      0.0, 0.0, step, wrap_limit, max_steps)
+
+
+class StepsDense(DenseOutput):
+    """The dense output of all the steps of one compiled call: y(t) = y_old[k] + h_k sum_j c[k, :, j-1]
+    theta^j on step k (found by np.searchsorted over times), theta = (t - times[k]) / h_k. Called with a
+    scalar time [s] it gives shape (n_states,), with an array of m times shape (n_states, m)."""
+
+    def __init__(self, times: np.ndarray, y_old: np.ndarray, coefficients: np.ndarray):
+        super().__init__(times[0], times[-1])
+        self.times, self.y_old, self.coefficients = times, y_old, coefficients
+
+    def _call_impl(self, t):
+        times = np.atleast_1d(t)
+        k = np.clip(np.searchsorted(self.times, times, side="right") - 1, 0, self.y_old.shape[0] - 1)
+        h = self.times[k + 1] - self.times[k]
+        theta = ((times - self.times[k]) / h)[:, None]
+        total = np.zeros((times.size, self.y_old.shape[1]))
+        for j in range(self.coefficients.shape[2] - 1, -1, -1):
+            total = (total + self.coefficients[k, :, j]) * theta
+        y = (self.y_old[k] + h[:, None] * total).T
+        return y[:, 0] if np.ndim(t) == 0 else y
+
+
+@dataclass
+class CompiledRun:
+    """One compiled call's result (the tuple of the module docstring, by name)."""
+
+    status: int
+    n_steps: int
+    times: np.ndarray
+    y_old: np.ndarray
+    coefficients: np.ndarray
+    event_guard: int
+    event_time: float
+    y_end: np.ndarray
+    nfev: int
+    njev: int
+    nlu: int
+    last_step: float
+    failure: int
+
+    @classmethod
+    def from_result(cls, result: tuple) -> "CompiledRun":
+        """Name the fields of a stepper's result tuple."""
+        return cls(*result)
+
+    @property
+    def t_end(self) -> float:
+        """Where the call stopped [s]: t_end, the event time, the first step end past the wrap limit or the
+        last good step end of a failed call."""
+        return float(self.times[-1])
+
+    @property
+    def dense(self) -> StepsDense | None:
+        """The dense output over [times[0], times[-1]], None when no step was taken."""
+        return StepsDense(self.times, self.y_old, self.coefficients) if self.n_steps else None
+
+    @property
+    def message(self) -> str:
+        """Why a failed call (status 3) stopped, '' otherwise."""
+        return FAILURES[self.failure] + f" at t = {self.t_end:.6g} s" if self.status == FAILED else ""
