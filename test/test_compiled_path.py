@@ -18,7 +18,8 @@ from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE, compile_scene, generate,
                                                      mode_rows)
-from support import model_of, run_cli, scene
+from mech_regulator.solvers import simulate
+from support import model_of, run_cli, scene, simulate_complete
 
 RNG = np.random.default_rng(7)
 
@@ -257,3 +258,135 @@ def test_cli_refusals_exit_2(capsys, name, overrides, expected):
     sets = [item for override in ["solver.path=fast"] + overrides for item in ("--set", override)]
     code, _, err = run_cli(capsys, "simulate", name, "--quiet", *sets)
     assert code == 2 and expected in err
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Whole runs: fast path against the reference path
+
+def run_pair(data: dict):
+    """(reference run, fast run) of scene data; both must complete."""
+    reference = simulate_complete(model_of(data))
+    fast = simulate_complete(model_of(scene(data, solver__path="fast")))
+    return reference, fast
+
+
+def relative_difference(first, second, samples: int = 1001) -> np.ndarray:
+    """Per state: max |first - second| at the sample times over max |first|."""
+    times = np.linspace(first.t_start, first.t_end, samples)
+    a, b = first(times), second(times)
+    return np.max(np.abs(a - b), axis=1) / np.max(np.abs(a), axis=1)
+
+
+def assert_same_events(reference, fast, within: float = 1e-9):
+    assert [name for _, name in fast.events] == [name for _, name in reference.events]
+    assert np.allclose([t for t, _ in fast.events], [t for t, _ in reference.events], rtol=0.0, atol=within)
+    assert fast.stats.switches == reference.stats.switches
+
+
+def shortened(name: str, duration: float, **changes) -> dict:
+    """A bundled scene run for `duration` [s] (load events after it dropped), with scene() changes."""
+    data = bundled(name)
+    events = [event for event in data["scenario"].get("load_events", []) if event["time"] + event.get("ramp", 0.0)
+              <= duration]
+    return scene(data, **{"scenario__duration": duration, "scenario__load_events": events, **changes})
+
+
+# Where the compiled integrator reproduces scipy's arithmetic step for step, the runs agree to round-off.
+@pytest.mark.parametrize("data", [
+    scene(bundled("startup"), solver__method="DOP853"), scene(bundled("startup"), solver__method="RK45"),
+    scene(bundled("startup"), solver__method="RK4", solver__step=1e-3),
+    shortened("lathe", 3.0), shortened("lathe", 3.0, solver__method="RK45"),
+    shortened("lathe", 2.0, solver__method="RK4", solver__step=1e-3),
+    shortened("four_bar_rocker", 1.0, solver__method="RK45")],
+    ids=["startup-DOP853", "startup-RK45", "startup-RK4", "lathe-DOP853", "lathe-RK45", "lathe-RK4", "four_bar-RK45"])
+def test_runs_equal_reference_step_for_step(data):
+    reference, fast = run_pair(data)
+    assert np.all(relative_difference(reference, fast) < 1e-12)
+    assert fast.stats.steps == reference.stats.steps and fast.stats.restarts == reference.stats.restarts
+    assert abs(fast.stats.nfev - reference.stats.nfev) <= 2 * reference.stats.switches  # RK4: one f per restart
+    assert_same_events(reference, fast)
+
+
+# Elsewhere the step sequences part at round-off of the error estimate (the right-hand sides are equal bit for bit,
+# test above) and the runs differ by the method's own error: the difference stays within 10 times the fast run's
+# error (its distance to a fast run at 1/100 of the tolerances); a wrong moment, sign or mode would exceed it by
+# orders of magnitude.
+@pytest.mark.parametrize("data", [
+    shortened("compressor", 1.0), shortened("four_bar_rocker", 1.0),
+    shortened("engine_direct", 2.2), shortened("engine_indirect_isodromic", 2.2),
+    shortened("engine_indirect_rigid", 2.2, solver__method="RK45"), shortened("two_mass", 1.2),
+    shortened("press_coupling", 1.0), shortened("press_coupling", 1.0, solver__method="RK45")],
+    ids=["compressor", "four_bar", "engine_direct", "isodromic", "rigid-RK45", "two_mass", "press_coupling",
+         "press_coupling-RK45"])
+def test_runs_equal_reference_within_their_accuracy(data):
+    reference, fast = run_pair(data)
+    settings = data.get("solver", {})
+    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings["rtol"] / 100,
+                                             solver__atol=settings["atol"] / 100)))
+    assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
+    assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps
+    assert fast.stats.restarts == reference.stats.restarts
+    assert_same_events(reference, fast)
+
+
+def governed_lathe() -> dict:
+    """The lathe's cutting load (switch angles) under a direct governor with sleeve friction and a short stroke:
+    the sleeve sticks, breaks away, hits both stops and leaves them as the load steps up and is thrown off."""
+    data = bundled("lathe")
+    data["machine"]["drive"] = {"type": "constant", "torque": 150.0}
+    data["governor"] = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 20.0,
+                        "friction": 3.0, "static_friction": 4.0, "ratio": 1.22, "stroke": [0.03, 0.06],
+                        "valve": {"open_at": 0.02, "closed_at": 0.08}}
+    data["scenario"] = {"initial": {"omega": 15.0}, "duration": 3.0,
+                        "load_events": [{"time": 1.0, "torque": 60.0}, {"time": 2.0, "torque": -40.0}]}
+    return data
+
+
+@pytest.mark.parametrize("method", ["DOP853", "RK45"])
+def test_switches_and_governor_events_equal_reference(method):
+    reference, fast = run_pair(scene(governed_lathe(), solver__method=method))
+    assert {name for _, name in reference.events} == {
+        "sleeve breaks away downwards", "sleeve reaches the low stop", "sleeve leaves the low stop",
+        "sleeve reaches the high stop"}
+    assert reference.stats.switches > 20
+    assert_same_events(reference, fast, within=1e-9)
+    assert fast.modes == [(pytest.approx(t, abs=1e-9), mode) for t, mode in reference.modes]
+    assert np.all(relative_difference(reference, fast) < 1e-10)
+
+
+def test_rosenbrock23_on_a_stiff_coupling_equals_radau():
+    """k = 1e7 N m/rad: a coupling vibrating at about 1.9 kHz; Rosenbrock23 at rtol 1e-6 against Radau at 1e-10."""
+    data = shortened("two_mass", 0.15, machine__coupling__stiffness=1e7, machine__coupling__damping=200.0,
+                     scenario__load_events=[{"time": 0.05, "torque": 8.0}])
+    radau = simulate_complete(model_of(scene(data, solver__method="Radau", solver__rtol=1e-10, solver__atol=1e-12)))
+    fast = simulate_complete(model_of(scene(data, solver__path="fast", solver__method="Rosenbrock23",
+                                            solver__rtol=1e-6, solver__atol=1e-12)))
+    times = np.linspace(0.0, 0.15, 501)
+    a, b = radau(times), fast(times)
+    speeds = [0, 1, 3]  # phi, omega, omega_driven to 1e-6 of their range
+    assert np.max(np.abs(a[speeds] - b[speeds]) / np.max(np.abs(a[speeds]), axis=1)[:, None]) < 1e-6
+    # the twist (a few 1e-6 rad: twist = M / k) and so the coupling moment to 1e-3 of its range
+    assert np.max(np.abs(a[2] - b[2])) < 1e-3 * np.max(np.abs(a[2]))
+    assert fast.stats.njev > 0 and fast.stats.nlu >= fast.stats.njev
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning", "ignore:invalid value:RuntimeWarning")
+def test_failure_and_interruption_keep_what_was_computed():
+    # RK4 with a step of 3.1 time constants is unstable (|R(-3.14)| = 1.68 per step): the speed overflows
+    blown = scene(bundled("startup"), scenario__duration=2000.0, solver__method="RK4", solver__step=1.0)
+    reference = simulate(model_of(blown))
+    fast = simulate(model_of(scene(blown, solver__path="fast")))
+    assert reference.status == fast.status == "failed"
+    assert fast.message.startswith("RK4: the state became non-finite at t = ") and "use a smaller step" in fast.message
+    assert fast.t_end == reference.t_end == 1325.0
+    assert fast(1325.0) == pytest.approx(reference(1325.0), rel=1e-12)
+
+    def stop_at_half(t: float) -> None:
+        if t > 0.5:
+            raise KeyboardInterrupt
+
+    model = model_of(shortened("engine", 1.0, solver__path="fast"))
+    interrupted = simulate(model, progress=stop_at_half)
+    assert interrupted.status == "interrupted" and "interrupted by the user" in interrupted.message
+    assert 0.5 < interrupted.t_end < 1.0
+    assert np.all(np.isfinite(interrupted(np.linspace(0.0, interrupted.t_end, 11))))
