@@ -5,7 +5,6 @@ structure, loaded from numba's disk cache by a fresh process; clear refusals of 
 from __future__ import annotations
 
 import json
-import math
 import os
 import subprocess
 import sys
