@@ -135,7 +135,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     if method == _RK4:
         count = max(1, np.ceil((t_end - t0) / fixed_step - 1e-9))
         h_abs = (t_end - t0) / count
-    elif first_step > 0.0:
+    elif first_step > 0.0 or status >= 0:
         h_abs = first_step
     else:
         order = 7 if method == _DOP853 else (4 if method == _RK45 else 2)
@@ -149,6 +149,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             break
         if method == _RK4:
             h = t_end - t if t_end - t < 1.5 * h_abs else h_abs
+            t_new = t + h
             nfev += _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new)
         else:
             min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
@@ -193,7 +194,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             capacity *= 2
         nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, coefficients[n_steps])
         y_old[n_steps] = y
-        times[n_steps + 1] = t + h
+        times[n_steps + 1] = t_new
         h_previous = h
         n_steps += 1
         if n_guards > 0:
@@ -209,7 +210,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                     _rescale(coefficients[n_steps - 1], (event_time - t) / h)
                     times[n_steps] = event_time
                 break
-        t = t + h
+        t = t_new
         y[:] = y_new
         f[:] = f_new
         jacobian_current = False
@@ -271,21 +272,10 @@ def _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new):
         a, b, c, count = DOP853_A, DOP853_B, DOP853_C, DOP853_STAGES
     else:
         a, b, c, count = RK45_A, RK45_B, RK45_C, RK45_B.size
-    n = y.size
     stage[0] = f
-    y_stage = np.empty(n)
-    for s in range(1, count):
-        for i in range(n):
-            total = 0.0
-            for j in range(s):
-                total += stage[j, i] * a[s, j]
-            y_stage[i] = y[i] + total * h
-        rhs(t + c[s] * h, y_stage, p, stage[s])
-    for i in range(n):
-        total = 0.0
-        for j in range(count):
-            total += stage[j, i] * b[j]
-        y_new[i] = y[i] + h * total
+    for s in range(1, count):  # np.dot on the transposed stages, as scipy: the same BLAS sums, the same round-off
+        rhs(t + c[s] * h, y + np.dot(stage[:s].T, a[s, :s].copy()) * h, p, stage[s])
+    y_new[:] = y + h * np.dot(stage[:count].T, b)
     rhs(t + h, y_new, p, f_new)
     stage[count] = f_new
     return count
@@ -297,10 +287,9 @@ def _error_norm(method, stage, h, y, y_new, rtol, atol):
     h sum_s e_s stage[s]; DOP853's |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2))."""
     scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
     if method == _RK45:
-        return _rms(stage[:RK45_E.size].T.copy() @ RK45_E * h / scale)
-    rows = stage[:DOP853_E5.size].T.copy()
-    err5 = rows @ DOP853_E5 / scale
-    err3 = rows @ DOP853_E3 / scale
+        return _rms(np.dot(stage[:RK45_E.size].T, RK45_E) * h / scale)
+    err5 = np.dot(stage[:DOP853_E5.size].T, DOP853_E5) / scale
+    err3 = np.dot(stage[:DOP853_E3.size].T, DOP853_E3) / scale
     err5_2 = np.sum(err5 * err5)
     err3_2 = np.sum(err3 * err3)
     if err5_2 == 0.0 and err3_2 == 0.0:
@@ -367,7 +356,7 @@ def _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, out):
     y + h (theta (1 - theta) k1 + theta (theta - 2d) k2) / (1 - 2d); DOP853's nested form after 3 extra
     stages. Returns the number of rhs evaluations (DOP853's extra stages)."""
     if method == _RK45:
-        out[:, :] = stage.T.copy() @ RK45_P
+        out[:, :] = np.dot(stage.T, RK45_P)
         return 0
     if method == _RK4:
         slope = (y_new - y) / h
@@ -391,20 +380,14 @@ def _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, out):
     (dy = y_new - y), y(theta) = y + x (F0 + (1 - x) (F1 + x (F2 + (1 - x) (F3 + ...)))) expanded into powers
     of theta and divided by h. Returns 3 (rhs evaluations)."""
     n = y.size
-    y_stage = np.empty(n)
     for s in range(DOP853_STAGES + 1, DOP853_A.shape[0]):
-        for i in range(n):
-            total = 0.0
-            for j in range(s):
-                total += stage[j, i] * DOP853_A[s, j]
-            y_stage[i] = y[i] + total * h
-        rhs(t + DOP853_C[s] * h, y_stage, p, stage[s])
+        rhs(t + DOP853_C[s] * h, y + np.dot(stage[:s].T, DOP853_A[s, :s].copy()) * h, p, stage[s])
     nested = np.empty((7, n))
     delta = y_new - y
     nested[0] = delta
     nested[1] = h * f - delta
     nested[2] = 2.0 * delta - h * (f_new + f)
-    nested[3:] = h * (DOP853_D @ stage)
+    nested[3:] = h * np.dot(DOP853_D, stage)
     poly = np.zeros((n, 8))  # poly[:, j]: coefficient of theta^j
     for i in range(6, -1, -1):
         poly[:, 0] += nested[i]

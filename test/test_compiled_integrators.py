@@ -1,0 +1,314 @@
+"""The compiled steppers against scipy's own steppers (same steps up to round-off), the reference RK4, closed
+forms and the reference path's event semantics; the Python wrappers CompiledRun and StepsDense."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit
+from scipy.integrate import DOP853, RK45
+from scipy.linalg import expm
+
+from mech_regulator.solvers.compiled import integrators as compiled
+from mech_regulator.solvers.compiled.integrators import CompiledRun, StepsDense
+from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, RHS_SIGNATURE
+from mech_regulator.solvers.rk4 import RK4
+from mech_regulator.solvers.time_domain import PROBES_PER_STEP
+
+STIFF = np.array([[1.0, 1.0], [1.0, -1.0]]) @ np.diag([-1.0, -1e6]) @ np.linalg.inv([[1.0, 1.0], [1.0, -1.0]])
+
+
+@njit(RHS_SIGNATURE, cache=True)
+def van_der_pol(t, y, p, dydt):
+    """x'' - mu (1 - x^2) x' + x = 0 with mu = p[0]."""
+    dydt[0] = y[1]
+    dydt[1] = p[0] * (1.0 - y[0] * y[0]) * y[1] - y[0]
+
+
+@njit(RHS_SIGNATURE, cache=True)
+def oscillator(t, y, p, dydt):
+    """x'' = -p[0] x (p[0] = omega^2 [1/s^2])."""
+    dydt[0] = y[1]
+    dydt[1] = -p[0] * y[0]
+
+
+@njit(RHS_SIGNATURE, cache=True)
+def constant_acceleration(t, y, p, dydt):
+    """x'' = p[0]: x is a parabola in t, which every method and dense output here reproduces exactly."""
+    dydt[0] = y[1]
+    dydt[1] = p[0]
+
+
+@njit(RHS_SIGNATURE, cache=True)
+def stiff_linear(t, y, p, dydt):
+    """y' = A y, A = p[:4] row by row (eigenvalues -1 and -1e6 for STIFF)."""
+    dydt[0] = p[0] * y[0] + p[1] * y[1]
+    dydt[1] = p[2] * y[0] + p[3] * y[1]
+
+
+@njit(RHS_SIGNATURE, cache=True)
+def blow_up(t, y, p, dydt):
+    """y' = y^2: y = 1 / (1 - t) from y(0) = 1 escapes to infinity at t = 1."""
+    dydt[0] = y[0] * y[0]
+
+
+@njit(GUARDS_SIGNATURE, cache=True)
+def position_and_clock(t, y, p, levels):
+    """levels[0] = x - p[1] (linear in the state), levels[1] = p[2] - t (reads t: probed)."""
+    levels[0] = y[0] - p[1]
+    levels[1] = p[2] - t
+
+
+@njit(GUARDS_SIGNATURE, cache=True)
+def position(t, y, p, levels):
+    """levels[0] = x - p[1]."""
+    levels[0] = y[0] - p[1]
+
+
+@njit(GUARDS_SIGNATURE, cache=True)
+def exponential_position(t, y, p, levels):
+    """levels[0] = exp(x) - 1: the sign of x, but not linear in it (probed)."""
+    levels[0] = np.exp(y[0]) - 1.0
+
+
+NO_LINES = np.zeros((0, 4))
+POSITION_LINE = np.array([[1.0, 0.0, 1.0, 0.0]])  # flag, c0, c_x, c_v: the guard x - p[1] with c0 set per test
+TWO_GUARD_LINES = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
+
+
+def adaptive(method, rhs, y0, t_end, p, rtol=1e-6, atol=1e-9, guards=position, lines=NO_LINES,
+             thresholds=None, max_step=np.inf, first_step=0.0, wrap_limit=np.inf, max_steps=100000):
+    y0 = np.asarray(y0, dtype=float)
+    thresholds = np.zeros(len(lines)) if thresholds is None else np.asarray(thresholds, dtype=float)
+    return CompiledRun.from_result(method(rhs, guards, len(lines), np.ascontiguousarray(lines), thresholds, 0.0,
+                                          y0, t_end, np.asarray(p, dtype=float), rtol, np.full(y0.size, atol),
+                                          max_step, first_step, wrap_limit, max_steps))
+
+
+def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, max_steps=100000):
+    y0 = np.asarray(y0, dtype=float)
+    return CompiledRun.from_result(compiled.rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
+                                                np.zeros(len(lines)), 0.0, y0, t_end, np.asarray(p, dtype=float),
+                                                step, wrap_limit, max_steps))
+
+
+def stepped(solver):
+    """Step a scipy solver to its end: step times, states at each step start, dense outputs."""
+    times, starts, dense = [solver.t], [], []
+    while solver.status == "running":
+        starts.append(solver.y.copy())
+        solver.step()
+        times.append(solver.t)
+        dense.append(solver.dense_output())
+    return np.array(times), np.array(starts), dense
+
+
+def vdp_python(t, y):
+    return np.array([y[1], (1.0 - y[0] ** 2) * y[1] - y[0]])
+
+
+@pytest.mark.parametrize("method, scipy_method, same_times, same_states", [(compiled.rk45, RK45, 1e-12, 1e-11),
+                                                                            (compiled.dop853, DOP853, 1e-10, 1e-8)])
+def test_the_same_steps_as_scipy(method, scipy_method, same_times, same_states):
+    """Van der Pol at mu = 1 over [0, 20]: scipy's solver stepped by hand takes the same steps (times to 1e-12
+    relative; DOP853's error estimate, a 13-term cancellation, carries the round-off of the BLAS sums to
+    3e-11), the same rhs calls (scipy's DOP853 spends its 3 dense-output calls when asked, here every step)
+    and the same states and dense output up to that round-off (RK45: 1e-11 on |x| <= 2 after 176 steps;
+    DOP853: its step edges shifted by 1e-10 s move the states by 1e-9)."""
+    run = adaptive(method, van_der_pol, [2.0, 0.0], 20.0, [1.0], rtol=1e-6, atol=1e-9)
+    solver = scipy_method(vdp_python, 0.0, np.array([2.0, 0.0]), 20.0, rtol=1e-6, atol=1e-9)
+    times, starts, dense = stepped(solver)
+    assert run.status == compiled.REACHED and run.n_steps == len(dense) > 50
+    np.testing.assert_allclose(run.times, times, rtol=same_times, atol=0)
+    np.testing.assert_allclose(run.y_old, starts, rtol=0, atol=same_states)
+    np.testing.assert_allclose(run.y_end, solver.y, rtol=0, atol=same_states)
+    assert run.nfev == solver.nfev
+    inside = times[:-1] + np.array([0.13, 0.5, 0.91])[:, None] * np.diff(times)
+    expected = np.hstack([np.column_stack([dense[k](inside[i, k]) for i in range(3)]) for k in range(len(dense))])
+    np.testing.assert_allclose(run.dense(inside.T.ravel()), expected, rtol=0, atol=same_states)
+    assert run.last_step == pytest.approx(solver.step_size, abs=20.0 * same_times)
+
+
+def test_dop853_dense_output_in_powers_of_theta_is_scipys():
+    """One DOP853 step of 0.8 s on Van der Pol: the 7th-degree power form equals scipy's nested
+    Dop853DenseOutput inside the step to round-off."""
+    run = adaptive(compiled.dop853, van_der_pol, [2.0, 0.0], 0.8, [1.0], rtol=1e-2, atol=1e-2, first_step=0.8)
+    times, _, dense = stepped(DOP853(vdp_python, 0.0, np.array([2.0, 0.0]), 0.8, rtol=1e-2, atol=1e-2,
+                                     first_step=0.8))
+    assert run.n_steps == len(dense) == 1 and run.coefficients.shape == (1, 2, 7)
+    t = np.linspace(0.0, 0.8, 9)
+    np.testing.assert_allclose(run.dense(t), dense[0](t), rtol=0, atol=1e-14)
+
+
+def test_a_warm_start_takes_scipys_first_step():
+    """first_step given: no initial-step selection (one rhs call fewer), scipy's steps with the same first_step."""
+    run = adaptive(compiled.rk45, van_der_pol, [2.0, 0.0], 3.0, [1.0], first_step=0.05)
+    times, _, _ = stepped(RK45(vdp_python, 0.0, np.array([2.0, 0.0]), 3.0, rtol=1e-6, atol=1e-9, first_step=0.05))
+    np.testing.assert_allclose(run.times, times, rtol=1e-12)
+
+
+@pytest.mark.parametrize("method, rtol, error", [(compiled.rk45, 1e-9, 1e-7), (compiled.dop853, 1e-9, 1e-8),
+                                                 (compiled.rosenbrock23, 1e-7, 5e-4)])
+def test_the_oscillator_against_its_closed_form(method, rtol, error):
+    """x'' = -4 x from x = 1: x = cos 2t, v = -2 sin 2t over 3 periods, ends and dense output."""
+    run = adaptive(method, oscillator, [1.0, 0.0], 3 * np.pi, [4.0], rtol=rtol, atol=rtol * 1e-2)
+    assert run.status == compiled.REACHED
+    np.testing.assert_allclose(run.y_end, [1.0, 0.0], atol=error)
+    t = np.linspace(0.0, 3 * np.pi, 37)
+    np.testing.assert_allclose(run.dense(t), [np.cos(2 * t), -2 * np.sin(2 * t)], atol=error)
+
+
+def test_the_stiff_method_is_stable_with_few_steps_and_converges():
+    """Eigenvalues -1 and -1e6: an explicit method would need ~3e6 steps over [0, 10]; ode23s's pair stays
+    stable in under 200 and matches expm; its error falls by ~(rtol ratio)^(2/3) (order 2, error per step
+    h^3) when rtol is tightened 100 times."""
+    y0 = np.array([1.0, 0.0])
+    errors = []
+    for rtol in (1e-4, 1e-6):
+        run = adaptive(compiled.rosenbrock23, stiff_linear, y0, 10.0, STIFF.ravel(), rtol=rtol, atol=rtol * 1e-3)
+        assert run.status == compiled.REACHED
+        t = np.linspace(0.01, 10.0, 50)
+        exact = np.column_stack([expm(STIFF * s) @ y0 for s in t])
+        errors.append(np.max(np.abs(run.dense(t) - exact)))
+        if rtol == 1e-4:
+            assert run.n_steps < 200
+            assert run.njev == run.n_steps and run.nlu >= run.n_steps
+    assert errors[0] < 5e-4
+    assert 10.0 < errors[0] / errors[1] < 50.0  # 100^(2/3) = 21.5
+
+
+def test_the_rosenbrock_steps_are_second_order():
+    """All steps accepted at max_step (a huge rtol): halving the step divides the global error by ~4."""
+    errors = []
+    for step in (0.1, 0.05):
+        run = adaptive(compiled.rosenbrock23, oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10,
+                       max_step=step, first_step=step)
+        errors.append(np.max(np.abs(run.y_end - [np.cos(2.0), -np.sin(2.0)])))
+    assert errors[0] / errors[1] == pytest.approx(4.0, rel=0.1)
+
+
+def test_rk4_is_fourth_order_and_the_reference_rk4():
+    """Halving the step divides the error by ~16; the same steps, states and Hermite dense output as
+    solvers/rk4.py (the step 0.3 shortened to divide [0, 4.1] evenly)."""
+    errors = [np.max(np.abs(fixed(oscillator, [1.0, 0.0], 2.0, [1.0], step).y_end - [np.cos(2.0), -np.sin(2.0)]))
+              for step in (0.1, 0.05)]
+    assert errors[0] / errors[1] == pytest.approx(16.0, rel=0.05)
+    run = fixed(van_der_pol, [2.0, 0.0], 4.1, [1.0], 0.3)
+    times, starts, dense = stepped(RK4(vdp_python, 0.0, np.array([2.0, 0.0]), 4.1, step=0.3))
+    np.testing.assert_allclose(run.times, times, rtol=1e-13)
+    np.testing.assert_allclose(run.y_old, starts, rtol=1e-13, atol=1e-13)
+    inside = times[:-1] + 0.37 * np.diff(times)
+    np.testing.assert_allclose(run.dense(inside), np.column_stack([d(s) for d, s in zip(dense, inside)]),
+                               rtol=1e-13, atol=1e-13)
+    assert run.nfev == 1 + 4 * run.n_steps
+
+
+def test_an_event_is_located_to_round_off():
+    """x = cos t reaches 0.5 at t = pi/3 (to 1e-12, DOP853 at a tight tolerance); the step ends there."""
+    lines = POSITION_LINE.copy()
+    lines[0, 1] = -0.5
+    run = adaptive(compiled.dop853, oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15,
+                   lines=lines)
+    assert run.status == compiled.EVENT and run.event_guard == 0
+    assert run.event_time == pytest.approx(np.pi / 3, abs=1e-12)
+    assert run.t_end == run.event_time
+    np.testing.assert_allclose(run.y_end, [0.5, -np.sqrt(0.75)], atol=1e-12)
+    np.testing.assert_allclose(run.dense(run.event_time), run.y_end, atol=1e-15)
+
+
+def reference_misses(start: float, step: float, x) -> bool:
+    """The reference's probes of the step [start, start + step] all see x >= 0 (it would miss the dip)."""
+    return bool(np.all(x(np.linspace(start, start + step, PROBES_PER_STEP + 2)) >= 0.0))
+
+
+def test_a_dip_inside_one_step_is_caught_for_a_linear_guard():
+    """x = (t - 0.5)^2 - 0.001 dips below 0 on 0.5 -/+ 0.0316 inside the first step [0, 1] of RK45 (exact
+    on a parabola, so the step is accepted) between the reference's probes; the polynomial roots find it."""
+    def x(t):
+        return (t - 0.5) ** 2 - 0.001
+
+    run = adaptive(compiled.rk45, constant_acceleration, [0.249, -1.0], 10.0, [2.0, 0.0, np.inf], rtol=1e-3,
+                   lines=POSITION_LINE, first_step=1.0)
+    assert run.n_steps == 1 and run.last_step == 1.0 and reference_misses(0.0, 1.0, x)
+    assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.5 - np.sqrt(0.001), abs=1e-12)
+
+
+def test_a_tangency_is_no_event():
+    """x = (t - 0.5)^2 touches 0 at t = 0.5 without going below: the mode holds."""
+    run = adaptive(compiled.rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, 0.0, np.inf], lines=POSITION_LINE)
+    assert run.status == compiled.REACHED
+
+
+def test_a_dip_between_the_reference_probes_is_caught_for_a_nonlinear_guard():
+    """exp(x) - 1 with x = (t - 0.5)^2 - 0.0064 (below 0 on (0.42, 0.58)) in the one RK4 step [0, 1]: the
+    reference's 4 probes miss it, the 8 probes see it, Brent's method locates t = 0.42."""
+    def x(t):
+        return (t - 0.5) ** 2 - 0.0064
+
+    run = fixed(constant_acceleration, [x(0.0), -1.0], 1.0, [2.0], 1.0, guards=exponential_position,
+                lines=np.zeros((1, 4)))
+    assert run.n_steps == 1 and reference_misses(0.0, 1.0, x)
+    assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.42, abs=1e-12)
+
+
+def test_a_guard_at_its_boundary_fires_only_past_the_tolerance():
+    """x starts at 0 and falls at 1e-13 per s: the guard (threshold 0, or -1e-12 given by the caller) does
+    not fire at once but when x < -1e-12 (t = 10 s, or 20 s with the lowered threshold); a threshold of
+    0.5 on x = 1 - t fires at t = 0.5."""
+    slow = [0.0, -1e-13]
+    run = adaptive(compiled.rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE)
+    assert run.status == compiled.EVENT and run.n_steps > 0 and run.event_time == pytest.approx(10.0, rel=1e-6)
+    run = adaptive(compiled.rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
+                   thresholds=[-1e-12])
+    assert run.status == compiled.EVENT and run.event_time == pytest.approx(20.0, rel=1e-6)
+    run = adaptive(compiled.rk45, constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
+                   thresholds=[0.5])
+    assert run.event_time == pytest.approx(0.5, abs=1e-12)
+
+
+def test_a_guard_already_violated_is_an_event_without_a_step():
+    run = adaptive(compiled.rk45, oscillator, [-1.0, 0.0], 3.0, [1.0, 0.0, np.inf], lines=POSITION_LINE)
+    assert (run.status, run.n_steps, run.event_guard, run.event_time, run.dense) == (compiled.EVENT, 0, 0, 0.0, None)
+    np.testing.assert_array_equal(run.y_end, [-1.0, 0.0])
+
+
+@pytest.mark.parametrize("clock, guard, time", [(1.0, 1, 1.0), (1.1, 0, np.pi / 3)])
+def test_the_earliest_of_two_guards_wins(clock, guard, time):
+    """x = cos t reaches 0.5 at pi/3 = 1.047 s; the clock guard fires at 1.0 s or 1.1 s."""
+    lines = TWO_GUARD_LINES.copy()
+    lines[0, 1] = -0.5
+    run = adaptive(compiled.rk45, oscillator, [1.0, 0.0], 5.0, [1.0, 0.5, clock], rtol=1e-10, atol=1e-12,
+                   guards=position_and_clock, lines=lines, max_step=0.5)
+    assert run.status == compiled.EVENT and run.event_guard == guard
+    assert run.event_time == pytest.approx(time, abs=1e-9)
+
+
+def test_the_wrap_limit_stops_at_the_first_step_end_past_it():
+    """x = t with RK4 steps of 1 s and wrap limit 2.5 rad: stops at t = 3 s (status 2)."""
+    run = fixed(constant_acceleration, [0.0, 1.0], 10.0, [0.0], 1.0, wrap_limit=2.5)
+    assert run.status == compiled.WRAPPED and run.t_end == 3.0 and run.y_end[0] == pytest.approx(3.0)
+
+
+def test_failures_keep_what_was_computed():
+    """y' = y^2 escapes at t = 1: RK4 (stepping just past it) reports a non-finite state, RK45 a step size
+    underflow just past it, both with the steps taken kept; max_steps is a failure too."""
+    rk4 = fixed(blow_up, [1.0], 2.0, [0.0], 0.01)
+    assert rk4.status == compiled.FAILED and rk4.failure == compiled.NONFINITE and 0.99 < rk4.t_end < 1.1
+    assert "non-finite" in rk4.message and np.all(np.isfinite(rk4.y_old))
+    rk45 = adaptive(compiled.rk45, blow_up, [1.0], 2.0, [0.0])
+    assert rk45.status == compiled.FAILED and rk45.failure == compiled.STEP_TOO_SMALL and 0.99 < rk45.t_end < 1.01
+    assert "step size" in rk45.message
+    limited = adaptive(compiled.rk45, oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
+    assert (limited.status, limited.failure, limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 5)
+
+
+def test_the_dense_output_of_a_call_on_scalars_and_arrays():
+    """StepsDense: shape (n,) for a scalar, (n, m) for m times; the step starts give y_old and the end y_end;
+    the arrays grew past their first capacity."""
+    run = adaptive(compiled.rk45, oscillator, [1.0, 0.0], 6.0, [1.0], rtol=1e-8, atol=1e-10)
+    assert run.n_steps > 16
+    dense = run.dense
+    assert isinstance(dense, StepsDense) and dense(1.0).shape == (2,) and dense(np.array([1.0, 2.0])).shape == (2, 2)
+    np.testing.assert_allclose(dense(run.times[:-1]), run.y_old.T, atol=1e-15)
+    np.testing.assert_allclose(dense(6.0), run.y_end, atol=1e-14)
+    np.testing.assert_allclose(dense(1.0), [np.cos(1.0), -np.sin(1.0)], atol=1e-7)
