@@ -18,6 +18,7 @@ from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE, compile_scene, generate,
                                                      mode_rows)
 from mech_regulator.solvers import simulate
+from mech_regulator.solvers.compiled import fast_path_refusal
 from support import model_of, run_cli, scene, simulate_complete
 
 RNG = np.random.default_rng(7)
@@ -232,8 +233,6 @@ def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
 
 
 def test_refusals_name_the_key():
-    from mech_regulator.solvers.compiled.run import fast_path_refusal
-
     cases = {"clutch_start": "machine.clutch", "compressor_friction": "machine.joint_friction",
              "engine_inline4": "machine.mechanism.cylinders", "walking_beam": "machine.mechanism: walking_beam"}
     for name, key in cases.items():

@@ -26,6 +26,7 @@ the state (stops, sleeve at rest, driven part at rest, switch window) also get t
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import inspect
@@ -114,7 +115,7 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     """The compiled right-hand side and guards of a scene (generated, written to the cache and imported once per
     process; numba compiles only on the first start with an empty cache)."""
     source, parameters, n_guards, window_slot = generate(model)
-    digest = hashlib.sha256("\n".join([source, inspect.getsource(kernels), mech_regulator.__version__,
+    digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
     module = _LOADED.get(digest)
     path = cache_folder() / f"scene_{digest}.py"
@@ -127,6 +128,12 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         spec.loader.exec_module(module)
         _LOADED[digest] = module
     return CompiledScene(model, module.rhs, module.guards, parameters, n_guards, window_slot, source, path)
+
+
+@functools.cache
+def _kernels_source() -> str:
+    """kernels.py's source (part of every module's cache name: numba's cache would not notice a changed kernel)."""
+    return inspect.getsource(kernels)
 
 
 def cache_folder() -> Path:

@@ -18,43 +18,15 @@ import numpy as np
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, schema
-from mech_regulator.solvers.compiled import integrators
+from mech_regulator.solvers.compiled import fast_path_refusal, integrators
 from mech_regulator.solvers.compiled.codegen import CompiledScene, compile_scene
 from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck,
                                                 _log_event, _settle_mode, _Shifted, _switch_window,
                                                 integrate_time_domain)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
-FAST_METHODS = ("RK45", "DOP853", "RK4", "Rosenbrock23")
-MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (so progress moves and Ctrl-C is heard; the next call
-# warm-starts with the last step size)
-
-
-def fast_path_refusal(scene_or_model) -> str | None:
-    """Why a scene (or its model) cannot run on the fast path, naming the key, its value and what the fast path
-    has; None when it can."""
-    scene = getattr(scene_or_model, "scene", scene_or_model)
-    method = scene.solver.method
-    if method not in FAST_METHODS:
-        return (f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "
-                f"{', '.join(FAST_METHODS)}, or solver.path: reference")
-    machine = scene.machine
-    coupling = machine.coupling
-    mechanism = machine.mechanism
-    features = [
-        ("machine.clutch", machine.clutch is not None),
-        ("machine.joint_friction", machine.joint_friction is not None),
-        ("machine.mechanism.cylinders (a multi-cylinder engine)",
-         isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None),
-        ("machine.mechanism: walking_beam", isinstance(mechanism, schema.WalkingBeam)),
-        ("machine.coupling.driven.branches", coupling is not None and bool(coupling.driven.branches)),
-        ("machine.coupling.driven.mechanism: walking_beam",
-         coupling is not None and isinstance(coupling.driven.mechanism, schema.WalkingBeam)),
-    ]
-    for key, present in features:
-        if present:
-            return f"solver.path: 'fast' does not compile {key} yet; expected a scene without it, or solver.path: reference"
-    return None
+MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress moves, Ctrl-C is heard);
+# the next call warm-starts with the last step size
 
 
 def integrate_compiled(model: MachineModel, progress: Progress | None = None) -> Trajectory:
