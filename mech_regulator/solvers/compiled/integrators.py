@@ -531,14 +531,16 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
             _dense_at(probes[k], t_old, h, y_old, coefficients, state)
             guards(probes[k], state, p, levels)
             below = levels[:n_guards].copy()
+            crossed = False  # a nonlinear guard crossed in this probe interval (a linear one found above does not end the probing)
             for g in range(n_guards):
                 if start[g] == np.inf or linear[g, 0] == 1.0 or not below[g] < step_thresholds[g]:
                     continue
+                crossed = True
                 time = _brent(probes[k - 1], probes[k], g, no_line, t_old, h, y_old, coefficients, p, guards,
                               levels, state, step_thresholds[g])
                 if time < best_time:
                     best_guard, best_time = g, time
-            if best_guard >= 0:
+            if crossed:
                 break
     return best_guard, (best_time if best_guard >= 0 else np.nan)
 

@@ -1,0 +1,399 @@
+"""The fast path (solvers/compiled): the generated right-hand side and guards equal the reference model's at random
+states for every kernel and mode; whole runs on the fast path equal the reference path's; one module per scene
+structure, loaded from numba's disk cache by a fresh process; clear refusals of what is not compiled."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mech_regulator.model import LoadPiece
+from mech_regulator.scene import SceneError, load_scene, validate_scene
+from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
+from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE, compile_scene, generate,
+                                                     mode_rows)
+from mech_regulator.solvers import simulate
+from mech_regulator.solvers.compiled import fast_path_refusal
+from support import model_of, run_cli, scene, simulate_complete
+
+RNG = np.random.default_rng(7)
+
+
+def bundled(name: str) -> dict:
+    """A bundled scene's data (its base resolved)."""
+    return read_scene_data(resolve_scene_path(name))
+
+
+# Scenes whose structures, together with the bundled ones, call every kernel.
+PLAIN = {"name": "plain", "machine": {
+    "inertia": 0.4,
+    "drive": {"type": "table", "angle_deg": [0.0, 90.0, 200.0], "torque": [30.0, 50.0, 10.0], "period_deg": 360.0},
+    "loads": [{"type": "constant", "torque": 3.0}, {"type": "viscous", "coefficient": 0.05},
+              {"type": "fan", "coefficient": 1e-3},
+              {"type": "table", "angle_deg": [10.0, 100.0, 150.0], "torque": [5.0, 25.0, 0.0], "period_deg": 180.0},
+              {"type": "cutting", "torque": 12.0, "intervals_deg": [[20.0, 90.0], [200.0, 260.0]]}]},
+    "scenario": {"initial": {"omega": 20.0}, "duration": 1.0, "external_load": 2.0}}
+
+
+def four_bar_governed(feedback: dict) -> dict:
+    """The four-bar rocker with rocker loads of every kind and an indirect governor with dead band, speed limit and
+    sleeve friction."""
+    data = bundled("four_bar_rocker")
+    data["machine"]["loads"].append({"type": "rocker_constant", "torque": -0.4})
+    data["governor"] = {"type": "indirect", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 100.0,
+                        "friction": 2.0, "static_friction": 3.0, "ratio": 0.8, "stroke": [0.02, 0.08],
+                        "pilot_neutral": 0.05, "servo": {"gain": 100.0, "max_speed": 2.0, "dead_band": 0.002,
+                                                         "travel": [0.0, 1.0]}, "feedback": feedback}
+    data["scenario"]["initial"] = {"omega": 70.0}
+    return data
+
+
+def compressor_direct() -> dict:
+    """The compressor with every slider load and a direct governor on a table valve, with sleeve friction."""
+    data = bundled("compressor")
+    data["machine"]["loads"].append({"type": "slider_constant", "force": -40.0})
+    data["governor"] = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
+                        "friction": 2.0, "ratio": 0.8, "stroke": [0.02, 0.08],
+                        "valve": {"type": "table", "sleeve": [0.02, 0.05, 0.08], "throttle": [1.0, 0.6, 0.0]}}
+    data["scenario"]["initial"] = {"omega": 120.0}
+    return data
+
+
+def driven_four_bar() -> dict:
+    """two_mass with a four-bar, weighing links and rocker loads on the driven part and a Coulomb resistance."""
+    data = bundled("two_mass")
+    mechanism = {key: value for key, value in bundled("four_bar_rocker")["machine"]["mechanism"].items()}
+    data["machine"]["gravity"] = [0.0, -9.81]
+    data["machine"]["coupling"]["driven"] = {
+        "inertia": 0.1, "mechanism": mechanism,
+        "loads": [{"type": "fan", "coefficient": 2.56e-4}, {"type": "constant", "torque": 1.5},
+                  {"type": "rocker_viscous", "coefficient": 0.05}, {"type": "rocker_spring", "stiffness": 5.0,
+                                                                    "free_position": 1.6},
+                  {"type": "table", "angle_deg": [0.0, 180.0], "torque": [0.0, 2.0]}]}
+    return data
+
+
+SLEEVE_MODES = list(SLEEVE_CODE)
+
+
+def governor_modes(model) -> list:
+    """Every (sleeve, servo) mode of a governed model (servo '' for a direct governor)."""
+    servo = ["free", "low", "high"] if model.governor.kind == "indirect" else [""]
+    return [(sleeve, s) for sleeve in SLEEVE_MODES for s in servo]
+
+
+def random_state(model) -> np.ndarray:
+    """A state near the scene's initial one: phi anywhere, speeds and governor states perturbed."""
+    y = model.initial_state().astype(float)
+    y[0] = RNG.uniform(-20.0, 20.0)
+    y[1] = y[1] * RNG.uniform(0.8, 1.2) + RNG.uniform(-5.0, 5.0)
+    if model.governor is not None:
+        y[2] += RNG.uniform(-0.1, 0.1)
+        y[3] = RNG.uniform(-2.0, 2.0)
+        for index in range(4, 2 + len(model.governor.state_names)):
+            y[index] = RNG.uniform(0.0, 1.0) if index == 4 else RNG.uniform(-0.01, 0.01)
+    if model.coupling is not None:
+        y[model.coupling_index] = RNG.uniform(-0.15, 0.15)
+        y[model.driven_speed_index] = y[1] * RNG.uniform(0.5, 1.5)
+    return y
+
+
+def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None):
+    """Compiled rhs and guards equal model.rhs / model.guards (1e-12 relative) at random states in every mode."""
+    compiled = compile_scene(model)
+    n = len(model.state_names())
+    for mode in modes:
+        for _ in range(states):
+            y = random_state(model)
+            t = RNG.uniform(0.0, 5.0)
+            chosen = piece or LoadPiece(0.0, 10.0, RNG.uniform(0.0, 8.0), RNG.uniform(-1.0, 1.0))
+            if model.coupling is not None:  # the driven part's guards read the scenario's load at t
+                chosen = model.piece_at(t)
+            if window is not None:
+                y[0] = RNG.uniform(*window)
+            p = compiled.parameters_for(chosen, mode, window)
+            expected = np.array(model.rhs(chosen, window, mode)(t, y), dtype=float)
+            got = np.zeros(n)
+            compiled.rhs(t, y, p, got)
+            np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * np.max(np.abs(expected)))
+            levels = np.zeros(compiled.n_guards)
+            compiled.guards(t, y, p, levels)
+            reference = [guard.level(t, y) for guard in model.guards(mode, y)]
+            count = len(reference)
+            np.testing.assert_allclose(levels[:count], reference, rtol=1e-12, atol=1e-12)
+            window_guards = 2 if compiled.window_slot is not None else 0
+            assert np.all(np.isinf(levels[count:compiled.n_guards - window_guards]))
+            rows = mode_rows(model, mode)  # linear rows reproduce the levels of the guards they claim
+            assert len(rows) == count
+            for row, level in zip(rows, reference):
+                if row is not None:
+                    assert row[1] + row[2:] @ y == pytest.approx(level, rel=1e-12, abs=1e-12)
+
+
+def test_plain_kernels_equal_reference_in_and_out_of_a_switch_window():
+    model = model_of(PLAIN)
+    assert_same_rhs(model, [None], states=20, window=(0.4, 1.5))
+    compiled = compile_scene(model)
+    y, p = np.array([1.0, 20.0]), compiled.parameters_for(None, None, (0.4, 1.5))
+    levels = np.zeros(compiled.n_guards)
+    compiled.guards(0.0, y, p, levels)
+    assert levels.tolist() == pytest.approx([1.0 - 0.4, 1.5 - 1.0])  # phi - lo, hi - phi
+    assert compiled.linear(None, (0.4, 1.5))[:, :4].tolist() == [[1.0, -0.4, 1.0, 0.0], [1.0, 1.5, -1.0, 0.0]]
+    # a held throttle (co-simulation) scales the drive only
+    piece = LoadPiece(0.0, 1.0, 2.0, 0.0, throttle=0.6)
+    assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=piece)
+
+
+@pytest.mark.parametrize("name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine"])
+def test_bundled_machines_equal_reference(name):
+    model = model_of(bundled(name))
+    grid = model.switch_grid()
+    window = (grid[0], grid[1]) if grid else None
+    assert_same_rhs(model, [None], window=window)
+
+
+@pytest.mark.parametrize("gravity", [[0.0, -9.81], None])
+def test_mechanisms_with_and_without_weight_equal_reference(gravity):
+    for data in (compressor_direct(), four_bar_governed({"type": "isodromic", "gain": 0.3, "time_constant": 1.5})):
+        data["machine"]["gravity"] = gravity
+        model = model_of(data)
+        assert model.has_weight == (gravity is not None)
+        assert_same_rhs(model, governor_modes(model), states=3)
+
+
+@pytest.mark.parametrize("feedback", [{"type": "none"}, {"type": "rigid", "gain": 0.12},
+                                      {"type": "isodromic", "gain": 0.3, "time_constant": 1.5}])
+def test_indirect_governor_every_feedback_and_mode(feedback):
+    model = model_of(four_bar_governed(feedback))
+    assert_same_rhs(model, governor_modes(model), states=3)
+
+
+@pytest.mark.parametrize("name", ["engine_direct", "engine_indirect_rigid"])
+def test_engine_governors_every_mode(name):
+    model = model_of(bundled(name))
+    assert_same_rhs(model, governor_modes(model), states=3)
+
+
+@pytest.mark.parametrize("data", [bundled("two_mass"), bundled("press_coupling"), driven_four_bar()],
+                         ids=["linear", "table", "driven_four_bar"])
+def test_coupling_in_every_driven_mode(data):
+    model = model_of(data)
+    assert_same_rhs(model, [("forward",), ("backward",), ("held",)], states=5)
+
+
+def test_source_depends_on_structure_not_numbers():
+    base = bundled("engine_indirect_isodromic")
+    other = scene(base, machine__flywheel__inertia=0.5, governor__damping=50.0, scenario__external_load=0.0)
+    other["machine"]["drive"]["pressure"] = other["machine"]["drive"]["pressure"][:20]
+    other["machine"]["drive"]["angle_deg"] = other["machine"]["drive"]["angle_deg"][:20]
+    first, second = compile_scene(model_of(base)), compile_scene(model_of(other))
+    assert first.source == second.source and first.path == second.path
+    assert first.rhs is second.rhs  # one module, compiled once
+    assert first.parameters.size != second.parameters.size
+    changed = scene(base, governor__feedback={"type": "rigid", "gain": 0.12})
+    assert generate(model_of(changed))[0] != first.source
+
+
+def test_only_the_scene_s_kernels_are_called():
+    startup = generate(model_of(bundled("startup")))[0]
+    assert "reduced" not in startup and "sleeve" not in startup and "clamped" not in startup
+    assert "k.linear_motor" in startup and "k.viscous_load" in startup
+    lathe = generate(model_of(bundled("lathe")))[0]
+    assert "k.cutting_load(clamped" in lathe and "linear_motor" not in lathe
+
+
+def test_cache_folder_that_cannot_be_made(tmp_path, monkeypatch):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    monkeypatch.setenv(CACHE_VARIABLE, str(blocker / "cache"))
+    model = model_of(scene(PLAIN, machine__inertia=0.123))
+    with pytest.raises(SceneError, match=CACHE_VARIABLE):
+        compile_scene(model)
+
+
+def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
+    model = model_of(bundled("startup"))
+    compiled = compile_scene(model)
+    files = set(os.listdir(compiled.path.parent / "__pycache__"))
+    script = ("import json\nfrom mech_regulator.model import build_model\nfrom mech_regulator.scene import load_scene\n"
+              "from mech_regulator.solvers.compiled.codegen import compile_scene\n"
+              "c = compile_scene(build_model(load_scene('startup')))\n"
+              "print(json.dumps([sum(c.rhs.stats.cache_hits.values()), sum(c.rhs.stats.cache_misses.values()), "
+              "sum(c.guards.stats.cache_hits.values())]))\n")
+    environment = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
+    output = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
+                            env=environment).stdout
+    assert json.loads(output.splitlines()[-1]) == [1, 0, 1]
+    assert set(os.listdir(compiled.path.parent / "__pycache__")) == files  # nothing compiled anew
+
+
+def test_refusals_name_the_key():
+    cases = {"clutch_start": "machine.clutch", "compressor_friction": "machine.joint_friction",
+             "engine_inline4": "machine.mechanism.cylinders", "walking_beam": "machine.mechanism: walking_beam"}
+    for name, key in cases.items():
+        reason = fast_path_refusal(load_scene(name, ["solver.path=fast"]))
+        assert reason.startswith(f"solver.path: 'fast' does not compile {key}"), reason
+    branched = bundled("two_mass")
+    branched["machine"]["coupling"]["driven"]["branches"] = [{"name": "pump", "inertia": 0.01, "ratio": 2.0}]
+    assert "machine.coupling.driven.branches" in fast_path_refusal(validate_scene(branched))
+    assert "solver.method: 'Radau'" in fast_path_refusal(load_scene("startup", ["solver.method=Radau"]))
+    assert "solver.method: 'energy'" in fast_path_refusal(load_scene("lathe", ["solver.method=energy"]))
+    assert fast_path_refusal(load_scene("two_mass")) is None
+    with pytest.raises(SceneError, match="Rosenbrock23' runs only on the compiled fast path"):
+        load_scene("startup", ["solver.method=Rosenbrock23"])
+
+
+@pytest.mark.parametrize("name, overrides, expected", [
+    ("clutch_start", [], "does not compile machine.clutch yet"),
+    ("startup", ["solver.method=BDF"], "does not run solver.method: 'BDF'"),
+    ("startup", ["solver.method=Rosenbrock23", "solver.path=reference"], "runs only on the compiled fast path")])
+def test_cli_refusals_exit_2(capsys, name, overrides, expected):
+    sets = [item for override in ["solver.path=fast"] + overrides for item in ("--set", override)]
+    code, _, err = run_cli(capsys, "simulate", name, "--quiet", *sets)
+    assert code == 2 and expected in err
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Whole runs: fast path against the reference path
+
+def run_pair(data: dict):
+    """(reference run, fast run) of scene data; both must complete."""
+    reference = simulate_complete(model_of(data))
+    fast = simulate_complete(model_of(scene(data, solver__path="fast")))
+    return reference, fast
+
+
+def relative_difference(first, second, samples: int = 1001) -> np.ndarray:
+    """Per state: max |first - second| at the sample times over max |first|."""
+    times = np.linspace(first.t_start, first.t_end, samples)
+    a, b = first(times), second(times)
+    return np.max(np.abs(a - b), axis=1) / np.max(np.abs(a), axis=1)
+
+
+def assert_same_events(reference, fast, within: float = 1e-9):
+    assert [name for _, name in fast.events] == [name for _, name in reference.events]
+    assert np.allclose([t for t, _ in fast.events], [t for t, _ in reference.events], rtol=0.0, atol=within)
+    assert fast.stats.switches == reference.stats.switches
+
+
+def shortened(name: str, duration: float, **changes) -> dict:
+    """A bundled scene run for `duration` [s] (load events after it dropped), with scene() changes."""
+    data = bundled(name)
+    events = [event for event in data["scenario"].get("load_events", []) if event["time"] + event.get("ramp", 0.0)
+              <= duration]
+    return scene(data, **{"scenario__duration": duration, "scenario__load_events": events, **changes})
+
+
+# Where the compiled integrator reproduces scipy's arithmetic step for step, the runs agree to round-off.
+@pytest.mark.parametrize("data", [
+    scene(bundled("startup"), solver__method="DOP853"), scene(bundled("startup"), solver__method="RK45"),
+    scene(bundled("startup"), solver__method="RK4", solver__step=1e-3),
+    shortened("lathe", 3.0), shortened("lathe", 3.0, solver__method="RK45"),
+    shortened("lathe", 2.0, solver__method="RK4", solver__step=1e-3),
+    shortened("four_bar_rocker", 1.0, solver__method="RK45")],
+    ids=["startup-DOP853", "startup-RK45", "startup-RK4", "lathe-DOP853", "lathe-RK45", "lathe-RK4", "four_bar-RK45"])
+def test_runs_equal_reference_step_for_step(data):
+    reference, fast = run_pair(data)
+    assert np.all(relative_difference(reference, fast) < 1e-12)
+    assert fast.stats.steps == reference.stats.steps and fast.stats.restarts == reference.stats.restarts
+    assert abs(fast.stats.nfev - reference.stats.nfev) <= 2 * reference.stats.switches  # RK4: one f per restart
+    assert_same_events(reference, fast)
+
+
+# Elsewhere the step sequences part at round-off of the error estimate (the right-hand sides are equal bit for bit,
+# test above) and the runs differ by the method's own error: the difference stays within 10 times the fast run's
+# error (its distance to a fast run at 1/100 of the tolerances); a wrong moment, sign or mode would exceed it by
+# orders of magnitude.
+@pytest.mark.parametrize("data", [
+    shortened("compressor", 1.0), shortened("four_bar_rocker", 1.0),
+    shortened("engine_direct", 2.2), shortened("engine_indirect_isodromic", 2.2),
+    shortened("engine_indirect_rigid", 2.2, solver__method="RK45"), shortened("two_mass", 1.2),
+    shortened("press_coupling", 1.0), shortened("press_coupling", 1.0, solver__method="RK45")],
+    ids=["compressor", "four_bar", "engine_direct", "isodromic", "rigid-RK45", "two_mass", "press_coupling",
+         "press_coupling-RK45"])
+def test_runs_equal_reference_within_their_accuracy(data):
+    reference, fast = run_pair(data)
+    settings = data.get("solver", {})
+    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings["rtol"] / 100,
+                                             solver__atol=settings["atol"] / 100)))
+    assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
+    assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps
+    assert fast.stats.restarts == reference.stats.restarts
+    assert_same_events(reference, fast)
+
+
+def governed_lathe() -> dict:
+    """The lathe's cutting load (switch angles) under a direct governor with sleeve friction and a short stroke:
+    the sleeve sticks, breaks away, hits both stops and leaves them as the load steps up and is thrown off."""
+    data = bundled("lathe")
+    data["machine"]["drive"] = {"type": "constant", "torque": 150.0}
+    data["governor"] = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 20.0,
+                        "friction": 3.0, "static_friction": 4.0, "ratio": 1.22, "stroke": [0.03, 0.06],
+                        "valve": {"open_at": 0.02, "closed_at": 0.08}}
+    data["scenario"] = {"initial": {"omega": 15.0}, "duration": 3.0,
+                        "load_events": [{"time": 1.0, "torque": 60.0}, {"time": 2.0, "torque": -40.0}]}
+    return data
+
+
+@pytest.mark.parametrize("method", ["DOP853", "RK45"])
+def test_switches_and_governor_events_equal_reference(method):
+    reference, fast = run_pair(scene(governed_lathe(), solver__method=method))
+    assert {name for _, name in reference.events} == {
+        "sleeve breaks away downwards", "sleeve reaches the low stop", "sleeve leaves the low stop",
+        "sleeve reaches the high stop"}
+    assert reference.stats.switches > 20
+    assert_same_events(reference, fast, within=1e-9)
+    assert fast.modes == [(pytest.approx(t, abs=1e-9), mode) for t, mode in reference.modes]
+    assert np.all(relative_difference(reference, fast) < 1e-10)
+
+
+def test_rosenbrock23_on_a_stiff_coupling_equals_radau():
+    """k = 1e7 N m/rad: a coupling vibrating at about 1.9 kHz; Rosenbrock23 at rtol 1e-6 against Radau at 1e-10."""
+    data = shortened("two_mass", 0.15, machine__coupling__stiffness=1e7, machine__coupling__damping=200.0,
+                     scenario__load_events=[{"time": 0.05, "torque": 8.0}])
+    radau = simulate_complete(model_of(scene(data, solver__method="Radau", solver__rtol=1e-10, solver__atol=1e-12)))
+    fast = simulate_complete(model_of(scene(data, solver__path="fast", solver__method="Rosenbrock23",
+                                            solver__rtol=1e-6, solver__atol=1e-12)))
+    times = np.linspace(0.0, 0.15, 501)
+    a, b = radau(times), fast(times)
+    speeds = [0, 1, 3]  # phi, omega, omega_driven to 1e-6 of their range
+    assert np.max(np.abs(a[speeds] - b[speeds]) / np.max(np.abs(a[speeds]), axis=1)[:, None]) < 1e-6
+    # the twist (a few 1e-6 rad: twist = M / k) and so the coupling moment to 1e-3 of its range
+    assert np.max(np.abs(a[2] - b[2])) < 1e-3 * np.max(np.abs(a[2]))
+    assert fast.stats.njev > 0 and fast.stats.nlu >= fast.stats.njev
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning", "ignore:invalid value:RuntimeWarning")
+def test_failure_and_interruption_keep_what_was_computed():
+    # RK4 with a step of 3.1 time constants is unstable (|R(-3.14)| = 1.68 per step): the speed overflows
+    blown = scene(bundled("startup"), scenario__duration=2000.0, solver__method="RK4", solver__step=1.0)
+    reference = simulate(model_of(blown))
+    fast = simulate(model_of(scene(blown, solver__path="fast")))
+    assert reference.status == fast.status == "failed"
+    assert fast.message.startswith("RK4: the state became non-finite at t = ") and "use a smaller step" in fast.message
+    assert fast.t_end == reference.t_end == 1325.0
+    assert fast(1325.0) == pytest.approx(reference(1325.0), rel=1e-12)
+
+    def stop_at_half(t: float) -> None:
+        if t > 0.5:
+            raise KeyboardInterrupt
+
+    model = model_of(shortened("engine", 1.0, solver__path="fast"))
+    interrupted = simulate(model, progress=stop_at_half)
+    assert interrupted.status == "interrupted" and "interrupted by the user" in interrupted.message
+    assert 0.5 < interrupted.t_end < 1.0
+    assert np.all(np.isfinite(interrupted(np.linspace(0.0, interrupted.t_end, 11))))
+
+
+def test_cli_fast_path_run_and_cosimulation_refusal(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "simulate", "lathe", "--quiet", "--set", "solver.path=fast", "--set",
+                           "scenario.duration=1.0", "--out", str(tmp_path / "lathe.csv"))
+    assert code == 0 and (tmp_path / "lathe.csv").exists()
+    code, _, err = run_cli(capsys, "simulate", "engine_direct", "--quiet", "--exchange-step", "0.01", "--set",
+                           "solver.path=fast")
+    assert code == 2 and "the co-simulation steps the reference path" in err
