@@ -22,6 +22,7 @@ from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
 from mech_regulator.cli.bench_speed import add_bench_speed_command, run_bench_speed
 from mech_regulator.cli.flywheel import add_flywheel_command, run_flywheel
+from mech_regulator.cli.sweep import add_sweep_command, run_sweep_command
 from mech_regulator.cli.report import check_outputs, progress_bar, to_json, write_csv
 
 EXIT_BAD_INPUT = 2
@@ -102,6 +103,7 @@ def build_parser() -> argparse.ArgumentParser:
     engine.add_argument("--out", type=Path, help="write the curves over the working cycle as CSV")
     engine.add_argument("--json", action="store_true", help="print the analysis as JSON")
     add_flywheel_command(scene_command)
+    add_sweep_command(scene_command)
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
@@ -155,6 +157,8 @@ def main(argv: list[str] | None = None) -> int:
             return run_bench_speed(args) if args.benchmark == "speed" else _bench_accuracy(args)
         if args.command == "flywheel":
             return run_flywheel(args)
+        if args.command == "sweep":
+            return run_sweep_command(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "describe":
             from mech_regulator.model import build_model

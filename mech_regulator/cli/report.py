@@ -402,3 +402,20 @@ def check_outputs(args, *others: Path | None) -> None:
         if path is not None and (path.is_dir() or not path.parent.is_dir()):
             problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
             raise SceneError(f"cannot write '{path}': {problem}")
+
+
+def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:
+    """Write rows of mixed values (numbers, text, booleans) as CSV with a header line, the first row's keys in
+    order: numbers with `digits` significant digits (17 round-trips a double), None as an empty field, text
+    quoted where it needs to be (the csv module)."""
+    import csv
+
+    def field(value):
+        if isinstance(value, float):
+            return f"{value:.{digits}g}"
+        return "" if value is None else value
+
+    with open(path, "w", newline="", encoding="utf-8") as file:
+        writer = csv.writer(file)
+        writer.writerow(list(rows[0]) if rows else [])
+        writer.writerows([field(value) for value in row.values()] for row in rows)

@@ -97,45 +97,46 @@ def resolve_scene_path(name_or_path: str) -> Path:
 # Overrides
 
 
-def apply_override(data: dict, assignment: str) -> None:
+def apply_override(data: dict, assignment: str, option: str = "--set") -> None:
     """Apply one `dotted.key=value` override in place; the value is read as YAML (numbers, lists...).
 
-    List entries are addressed by index: `machine.loads.0.coefficient=0.02`.
+    List entries are addressed by index: `machine.loads.0.coefficient=0.02`. option: the command-line option
+    the messages name (--set, or --grid for a sweep).
     """
     if "=" not in assignment:
-        raise SceneError(f"--set '{assignment}': expected dotted.key=value, e.g. machine.inertia=0.1")
+        raise SceneError(f"{option} '{assignment}': expected dotted.key=value, e.g. machine.inertia=0.1")
     dotted, raw = assignment.split("=", 1)
     keys = dotted.strip().split(".")
     if not all(keys):
-        raise SceneError(f"--set '{assignment}': the key '{dotted}' has an empty part")
-    value = parse_yaml(raw, f"--set {dotted}")
+        raise SceneError(f"{option} '{assignment}': the key '{dotted}' has an empty part")
+    value = parse_yaml(raw, f"{option} {dotted}")
     node: Any = data
     for depth, key in enumerate(keys[:-1]):
-        node = _child(node, key, keys[: depth + 1], assignment, create=True)
+        node = _child(node, key, keys[: depth + 1], assignment, create=True, option=option)
     last = keys[-1]
     if isinstance(node, list):
-        node[_index(node, last, keys, assignment)] = value
+        node[_index(node, last, keys, assignment, option)] = value
     elif isinstance(node, dict):
         node[last] = value
     else:
-        raise SceneError(f"--set '{assignment}': '{'.'.join(keys[:-1])}' holds {node!r}, not a section")
+        raise SceneError(f"{option} '{assignment}': '{'.'.join(keys[:-1])}' holds {node!r}, not a section")
 
 
-def _index(node: list, key: str, path: list[str], assignment: str) -> int:
+def _index(node: list, key: str, path: list[str], assignment: str, option: str) -> int:
     if not key.isdigit() or int(key) >= len(node):
-        raise SceneError(f"--set '{assignment}': '{'.'.join(path)}' must index the list "
+        raise SceneError(f"{option} '{assignment}': '{'.'.join(path)}' must index the list "
                          f"(0 to {len(node) - 1}), got '{key}'")
     return int(key)
 
 
-def _child(node: Any, key: str, path: list[str], assignment: str, create: bool) -> Any:
+def _child(node: Any, key: str, path: list[str], assignment: str, create: bool, option: str) -> Any:
     if isinstance(node, list):
-        return node[_index(node, key, path, assignment)]
+        return node[_index(node, key, path, assignment, option)]
     if isinstance(node, dict):
         if node.get(key) is None and create:
             node[key] = {}
         return node[key]
-    raise SceneError(f"--set '{assignment}': '{'.'.join(path[:-1])}' holds {node!r}, not a section")
+    raise SceneError(f"{option} '{assignment}': '{'.'.join(path[:-1])}' holds {node!r}, not a section")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -144,12 +145,19 @@ def _child(node: Any, key: str, path: list[str], assignment: str, create: bool) 
 
 def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
     """Read, override and validate a scene; any problem raises SceneError with a clear message."""
+    data, path = overridden_scene_data(name_or_path, overrides)
+    return validate_scene(data, str(path))
+
+
+def overridden_scene_data(name_or_path: str, overrides: list[str] = ()) -> tuple[dict, Path]:
+    """The mapping of a scene (a file or a bundled name) with the --set overrides applied and its name defaulting
+    to the file's stem, not yet validated, and the file it came from."""
     path = resolve_scene_path(name_or_path)
     data = read_scene_data(path)
     for assignment in overrides:
         apply_override(data, assignment)
     data.setdefault("name", path.stem)
-    return validate_scene(data, str(path))
+    return data, path
 
 
 def read_scene_data(path: Path, derived_from: tuple[Path, ...] = ()) -> dict:

@@ -1,0 +1,125 @@
+"""`mech-regulator sweep`: run a grid of scene values and/or a list of scenes as independent tasks, in this
+process, on local worker processes or on a Dask cluster, and write one row per scene (sweep.csv) and a picture
+(sweep.png).
+
+A thin layer over analysis.sweep: the grid and the points are validated before anything runs (a bad key or value
+exits 2 with a message naming the option), a progress bar counts the simulated seconds of the finished points,
+and Ctrl-C writes the rows finished so far.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+from mech_regulator.analysis.sweep import ENGINES, METRICS, check_executor, parse_grid, run_sweep, sweep_points
+from mech_regulator.cli.report import progress_bar, write_rows_csv
+from mech_regulator.scene import SceneError
+
+EXIT_INTERRUPTED = 130
+SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
+
+
+def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
+    """The `sweep` subcommand and its options; scene_command (cli.main) makes a subcommand with the SCENE and --set
+    arguments of every scene command (SCENE optional here: --scenes may name them all)."""
+    text = ("run many scenes: a grid of scene values (the Cartesian product of the --grid options) and/or a list of "
+            "scenes, on both cores or a Dask cluster; writes sweep.csv (one row per scene: final and mean speed, "
+            "delta, the governor's stability by simulation and Vyshnegradsky's A and B) and sweep.png")
+    parser = scene_command("sweep", text, scene_required=False)
+    parser.add_argument("--grid", action="append", default=[], metavar="KEY=SPEC",
+                        help="a scene key and its values: KEY=START:STOP:N (linear), KEY=START:STOP:N:log "
+                             "(geometric), KEY=V1,V2,... (a list); the keys of --set, e.g. "
+                             "--grid governor.damping=10:300:5:log; repeatable (the Cartesian product)")
+    parser.add_argument("--scenes", nargs="+", default=[], metavar="SCENE",
+                        help="more scene files or bundled scene names to run (after SCENE), each with the grid")
+    parser.add_argument("--jobs", type=int, metavar="N",
+                        help=f"worker processes (default: the number of cores, {os.cpu_count()}; 1: in this process)")
+    parser.add_argument("--engine", choices=ENGINES, default="local",
+                        help="local: a pool of processes on this machine; dask: the scenes as tasks on a Dask "
+                             "cluster (pip install 'mech_regulator[distributed]')")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="with --engine dask: the scheduler of a running cluster, e.g. tcp://10.0.0.5:8786 "
+                             "(default: a local cluster of --jobs processes)")
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="folder for sweep.csv and sweep.png (default runs/sweep-<scene>)")
+    parser.add_argument("--metric", choices=METRICS, metavar="NAME",
+                        help=f"the column the picture draws: {', '.join(METRICS)} (default: oscillation_ratio for "
+                             "a governed scene, else delta)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run_sweep_command(args: argparse.Namespace) -> int:
+    """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs."""
+    scenes = ([args.scene] if args.scene is not None else []) + args.scenes
+    axes = [parse_grid(spec) for spec in args.grid]
+    points = sweep_points(scenes, args.overrides, axes)
+    jobs = check_executor(args.jobs, args.engine, args.scheduler)
+    governed = any(point.scene.get("governor") for point in points)
+    metric = args.metric or ("oscillation_ratio" if governed else "delta")
+    out = args.out if args.out is not None else Path("runs") / f"sweep-{points[0].scene['name']}"
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise SceneError(f"--out '{out}': cannot make the folder: {error.strerror or error}") from None
+    durations = [float(point.scene["scenario"]["duration"]) for point in points]
+    start = time.perf_counter()
+    with progress_bar(sum(durations), args.quiet) as bar:
+        rows = run_sweep(points, jobs, args.engine, args.scheduler,
+                         progress=lambda point, row: bar.update(float(point.scene["scenario"]["duration"])))
+    wall_time = time.perf_counter() - start
+    write_rows_csv(out / "sweep.csv", rows)
+    print(format_rows(rows, [axis.key for axis in axes]))
+    not_run = sum(row["status"] == "not run" for row in rows)
+    where = f"a Dask cluster at {args.scheduler}" if args.scheduler else (
+        f"a Dask local cluster of {jobs} processes" if args.engine == "dask" else
+        "this process" if jobs == 1 else f"{jobs} local processes")
+    print(f"{len(rows) - not_run} of {len(rows)} points in {wall_time:.3g} s on {where}")
+    print(f"wrote {out / 'sweep.csv'}")
+    if not_run:
+        print(f"mech-regulator: interrupted; the {len(rows) - not_run} finished points are in {out / 'sweep.csv'}",
+              file=sys.stderr)
+        return EXIT_INTERRUPTED
+    from mech_regulator.viz.sweep import plot_sweep
+
+    permitted = points[0].scene.get("analysis", {}).get("permitted_delta")
+    names = ", ".join(dict.fromkeys(str(point.scene["name"]) for point in points))
+    plot_sweep(rows, axes, metric, f"sweep of {names}: {len(rows)} points", out / "sweep.png", permitted)
+    print(f"wrote {out / 'sweep.png'}")
+    failed = [row for row in rows if row["status"] != "complete"]
+    for row in failed[:5]:
+        print(f"mech-regulator: point {_label(row, [axis.key for axis in axes])}: {row['status']}: {row['message']}",
+              file=sys.stderr)
+    return 0
+
+
+def _label(row: dict, keys: list[str]) -> str:
+    return " ".join([str(row["scene"])] + [f"{key}={_text(row[key])}" for key in keys])
+
+
+def _text(value) -> str:
+    if isinstance(value, bool) or value is None:
+        return "-" if value is None else ("yes" if value else "no")
+    if isinstance(value, float):
+        return f"{value:.6g}" if math.isfinite(value) else str(value)
+    return str(value)
+
+
+def format_rows(rows: list[dict], keys: list[str]) -> str:
+    """A short table of the rows: the scene, the grid values, status, omega_end, delta and, for governed scenes,
+    the stability by simulation and by the linear model with A and B; the first and last rows of a long sweep."""
+    columns = ["scene", *keys, "status", "omega_end", "delta"]
+    if any(row.get("stable_by_simulation") is not None for row in rows):
+        columns += ["stable_by_simulation", "oscillation_ratio", "stable_linear", "vyshnegradsky_A",
+                    "vyshnegradsky_B"]
+    shown = rows if len(rows) <= SHOWN_ROWS else rows[:SHOWN_ROWS // 2] + [None] + rows[-SHOWN_ROWS // 2:]
+    table = [[name.split(".")[-1] if name in keys else name.replace("vyshnegradsky_", "") for name in columns]]
+    table += [["..."] + [""] * (len(columns) - 1) if row is None else [_text(row[name]) for name in columns]
+              for row in shown]
+    widths = [max(len(line[i]) for line in table) for i in range(len(columns))]
+    return "\n".join("  ".join(cell.rjust(width) for cell, width in zip(line, widths)) for line in table)
