@@ -832,15 +832,28 @@ class Scenario(SceneModel):
 
 
 class Solver(SceneModel):
-    method: Literal["RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA", "RK4", "energy"] = Field(
-        "DOP853", description="scipy.integrate method (adaptive, in time), RK4 (fixed step in time) or energy (the "
-                              "textbook energy method, fixed step in phi)")
+    method: Literal["RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA", "RK4", "Rosenbrock23", "energy"] = Field(
+        "DOP853", description="scipy.integrate method (adaptive, in time), RK4 (fixed step in time), Rosenbrock23 (the "
+                              "stiff method of the fast path only) or energy (the textbook energy method, fixed step "
+                              "in phi)")
+    path: Literal["reference", "fast"] = Field(
+        "reference", description="reference: the pure-Python right-hand side stepped by scipy; fast: the scene's "
+                                 "right-hand side compiled by numba (cached on disk) and stepped by compiled "
+                                 "RK45, DOP853, RK4 or Rosenbrock23 (docs/speed.md)")
     rtol: Positive = Field(1e-8, description="relative tolerance of the adaptive methods [-]")
     atol: Positive = Field(1e-10, description="absolute tolerance of the adaptive methods, on phi [rad] and omega [rad/s]")
     max_step: Positive | None = Field(None, description="largest step of the adaptive methods; none = unlimited [s]")
     step: Positive = Field(1e-4, description="time step of RK4 [s]")
     phi_step_deg: Positive = Field(1.0, description="crank-angle step of the energy method [deg]")
     sample_rate: Positive = Field(1000.0, description="rate of the output samples (dense output) [Hz]")
+
+    @model_validator(mode="after")
+    def _method_on_path(self) -> Solver:
+        if self.method == "Rosenbrock23" and self.path == "reference":
+            raise ValueError("solver.method 'Rosenbrock23' runs only on the compiled fast path; expected solver.path: "
+                             "fast, or a method of the reference path (RK45, RK23, DOP853, Radau, BDF, LSODA, RK4, "
+                             "energy)")
+        return self
 
 
 class Analysis(SceneModel):

@@ -10,7 +10,12 @@ from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
 
 
 def simulate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
-    """Run the scene's scenario with the scene's solver (solver.method)."""
+    """Run the scene's scenario with the scene's solver (solver.method) on its path (solver.path: the reference
+    path, or the compiled fast path, solvers/compiled/run.py, which refuses what it cannot run with a SceneError)."""
+    if model.scene.solver.path == "fast":
+        from mech_regulator.solvers.compiled.run import integrate_compiled
+
+        return integrate_compiled(model, progress)
     if model.scene.solver.method == "energy":
         return integrate_energy_method(model, progress)
     return integrate_time_domain(model, progress)

@@ -26,8 +26,11 @@ MAX_INSTANT_EVENTS = 20  # governor mode changes allowed at one instant before t
 GUARD_TOLERANCE = 1e-12  # a guard within this of 0 (in its own units: rad, rad/s, N, 1/s) is at its boundary
 
 
-def integrate_time_domain(model: MachineModel, progress: Progress | None = None) -> Trajectory:
-    """Integrate the scene's scenario with its solver settings; returns the (possibly partial) trajectory."""
+def integrate_time_domain(model: MachineModel, progress: Progress | None = None, segment=None) -> Trajectory:
+    """Integrate the scene's scenario with its solver settings; returns the (possibly partial) trajectory.
+    segment: what steps one external-load piece, with _segment's arguments and result (default _segment, the
+    reference path; the fast path passes its compiled twin, solvers/compiled/run.py)."""
+    segment = segment or _segment
     solver = model.scene.solver
     scenario = model.scene.scenario
     y = model.initial_state()
@@ -38,7 +41,7 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None)
     edges = [0.0] + [t for t in model.breakpoints() if 0.0 < t < scenario.duration] + [scenario.duration]
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
-            y, mode = _segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
+            y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2

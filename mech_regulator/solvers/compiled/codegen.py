@@ -1,0 +1,449 @@
+"""The code generator of the fast path: a scene's right-hand side and guards as the source of a small module that
+numba compiles once and caches on disk.
+
+From a MachineModel it writes `rhs(t, y, p, dydt)` and `guards(t, y, p, levels)` (compiled with the explicit
+signatures of solvers/compiled/signatures.py) that call only the kernels (solvers/compiled/kernels.py) of the
+effects the scene has — a machine without a mechanism has no kinematics call, an ungoverned one no governor — and
+the parameter vector p they read, laid out as
+
+    p[0:SEGMENT_SLOTS]   the segment's inputs (set by the outer loop, solvers/compiled/run.py): external load
+                         offset [N m] and slope [N m/s], held throttle [-], sleeve / servo / driven-part mode codes,
+                         the switch window (lo, hi) [rad] the effects see phi clamped into and its edges for the
+                         window's guards [rad];
+    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers).
+
+The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
+share one module (a sweep compiles once). The module is written to the cache folder (env MECH_REGULATOR_CACHE,
+default $XDG_CACHE_HOME/mech_regulator/compiled or ~/.cache/mech_regulator/compiled) under a hash of its source,
+kernels.py's source and the package and numba versions, imported with importlib (numba caches the machine code
+in __pycache__ beside it), and kept in a process-wide dict.
+
+Guards are written in the order of MachineModel.guards(mode) (the governor's, then the driven part's), +inf in
+the slots a mode does not use, then the switch window's two guards phi - lo and hi - phi. The guards linear in
+the state (stops, sleeve at rest, driven part at rest, switch window) also get their rows [1, c0, c1..c_n]
+(level = c0 + sum c_i y_i) for the integrators' exact location.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import inspect
+import math
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numba
+import numpy as np
+
+import mech_regulator
+from mech_regulator.model import MachineModel
+from mech_regulator.model.drivetrain import BACKWARD, FORWARD, HELD
+from mech_regulator.scene import SceneError, schema
+from mech_regulator.solvers.compiled import kernels
+
+CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
+
+# Segment inputs: fixed slots at the start of p
+EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
+CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI = range(6, 10)
+SEGMENT_SLOTS = 10
+
+SLEEVE_CODE = {"free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
+SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
+DRIVEN_CODE = {FORWARD: 0.0, BACKWARD: 1.0, HELD: 2.0}
+ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5
+
+_LOADED: dict[str, object] = {}  # module hash -> imported module, for the whole process
+
+
+@dataclass(frozen=True)
+class CompiledScene:
+    """A scene's compiled right-hand side and guards with its parameters.
+
+    rhs, guards: the numba dispatchers (signatures.RHS_SIGNATURE, GUARDS_SIGNATURE); parameters: p with the
+    segment slots zero; n_guards: slots of `guards` (mode guards, then the window's two if window_slot is not
+    None); source and path of the generated module; mode_rows(mode) -> the linear rows of the mode's guards."""
+
+    model: MachineModel
+    rhs: object
+    guards: object
+    parameters: np.ndarray
+    n_guards: int
+    window_slot: int | None
+    source: str
+    path: Path
+
+    def parameters_for(self, piece, mode, window: tuple[float, float] | None) -> np.ndarray:
+        """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
+        codes and the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
+        width, as MachineModel.rhs)."""
+        p = self.parameters.copy()
+        if piece is not None:
+            p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
+        else:
+            p[HELD_THROTTLE] = 1.0
+        model = self.model
+        if model.governor is not None and mode is not None:
+            p[SLEEVE_MODE], p[SERVO_MODE] = SLEEVE_CODE[mode[0]], SERVO_CODE[mode[1]]
+        if model.coupling is not None:
+            p[DRIVEN_MODE] = DRIVEN_CODE[model.train_mode_of(mode)[0]]
+        if window is not None:
+            margin = 1e-9 * (window[1] - window[0])
+            p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
+            p[WINDOW_LO], p[WINDOW_HI] = window
+        return p
+
+    def linear(self, mode, window: tuple[float, float] | None) -> np.ndarray:
+        """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode and window:
+        flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not linear (or unused)."""
+        n = len(self.model.state_names())
+        matrix = np.zeros((self.n_guards, n + 2))
+        for slot, row in enumerate(mode_rows(self.model, mode)):
+            if row is not None:
+                matrix[slot] = row
+        if self.window_slot is not None and window is not None:
+            matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
+            matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
+        return matrix
+
+
+def compile_scene(model: MachineModel) -> CompiledScene:
+    """The compiled right-hand side and guards of a scene (generated, written to the cache and imported once per
+    process; numba compiles only on the first start with an empty cache)."""
+    source, parameters, n_guards, window_slot = generate(model)
+    digest = hashlib.sha256("\n".join([source, inspect.getsource(kernels), mech_regulator.__version__,
+                                       numba.__version__]).encode()).hexdigest()[:20]
+    module = _LOADED.get(digest)
+    path = cache_folder() / f"scene_{digest}.py"
+    if module is None:
+        if not path.exists() or path.read_text(encoding="utf-8") != source:
+            _write(path, source)
+        spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
+        spec.loader.exec_module(module)
+        _LOADED[digest] = module
+    return CompiledScene(model, module.rhs, module.guards, parameters, n_guards, window_slot, source, path)
+
+
+def cache_folder() -> Path:
+    """Where generated modules live: $MECH_REGULATOR_CACHE, else $XDG_CACHE_HOME/mech_regulator/compiled, else
+    ~/.cache/mech_regulator/compiled (created on first use)."""
+    folder = os.environ.get(CACHE_VARIABLE)
+    if not folder:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        folder = os.path.join(base, "mech_regulator", "compiled")
+    path = Path(folder)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise SceneError(f"{CACHE_VARIABLE}: cannot make the fast path's cache folder '{path}': "
+                         f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})") from None
+    return path
+
+
+def _write(path: Path, source: str) -> None:
+    """Write the module atomically (another process may be importing the same file)."""
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        temporary.write_text(source, encoding="utf-8")
+        os.replace(temporary, path)
+    except OSError as error:
+        raise SceneError(f"{CACHE_VARIABLE}: cannot write the fast path's cache folder '{path.parent}': "
+                         f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})") from None
+
+
+def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.ndarray:
+    """A linear guard's row [1, c0, c1..c_n] with one nonzero coefficient."""
+    row = np.zeros(n_states + 2)
+    row[0], row[1], row[2 + index] = 1.0, constant, coefficient
+    return row
+
+
+def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
+    """For each guard of model.guards(mode), in its order, its linear row [1, c0, c1..c_n] or None (not linear in
+    the state)."""
+    if mode is None:
+        return []
+    n = len(model.state_names())
+    rows: list[np.ndarray | None] = []
+    governor = model.governor
+    if governor is not None:
+        low, high = governor.sensor.stop_angles()
+        hit_low, hit_high = _row(n, ARM, 1.0, -low), _row(n, ARM, -1.0, high)
+        rows += {"free": [hit_low, hit_high], "up": [_row(n, ARM_RATE, 1.0, 0.0), hit_high],
+                 "down": [_row(n, ARM_RATE, -1.0, 0.0), hit_low], "stuck": [None, None], "low": [None],
+                 "high": [None]}[mode[0]]
+        if governor.kind == "indirect":
+            s_low, s_high = governor.travel
+            rows += ([_row(n, SERVO, 1.0, -s_low), _row(n, SERVO, -1.0, s_high)] if mode[1] == "free" else [None])
+    if model.coupling is not None:
+        part = model.train_mode_of(mode)[0]
+        sign = {FORWARD: 1.0, BACKWARD: -1.0}.get(part)
+        rows += [None, None] if sign is None else [_row(n, model.driven_speed_index, sign, 0.0)]
+    return rows
+
+
+class _Parameters:
+    """Builds p: scalars get a slot each; a table gets two slots (its offset and length), its columns appended
+    after all scalars when done."""
+
+    def __init__(self):
+        self.values: list[float] = [0.0] * SEGMENT_SLOTS
+        self.values[HELD_THROTTLE] = 1.0
+        self.tables: list[tuple[int, list[float]]] = []
+
+    def scalar(self, value: float) -> str:
+        self.values.append(float(value))
+        return f"p[{len(self.values) - 1}]"
+
+    def table(self, *columns) -> str:
+        """'p, offset, n' for the kernels: the columns (equal lengths) stored one after the other."""
+        offset_slot = len(self.values)
+        self.values += [0.0, float(len(columns[0]))]
+        self.tables.append((offset_slot, [float(v) for column in columns for v in column]))
+        return f"p, int(p[{offset_slot}]), int(p[{offset_slot + 1}])"
+
+    def array(self) -> np.ndarray:
+        values = list(self.values)
+        for offset_slot, data in self.tables:
+            values[offset_slot] = float(len(values))
+            values += data
+        return np.array(values, dtype=float)
+
+
+def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
+    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source."""
+    if isinstance(spec, schema.ConstantDrive):
+        return p.scalar(spec.torque)
+    if isinstance(spec, schema.LinearMotor):
+        return f"k.linear_motor({omega}, {p.scalar(spec.stall_torque)}, {p.scalar(spec.no_load_speed)})"
+    if isinstance(spec, schema.TableDrive):
+        table = p.table([math.radians(a) for a in spec.angle_deg], spec.torque)
+        return f"k.table_drive({phi}, {table}, {p.scalar(math.radians(spec.period_deg))})"
+    if isinstance(spec, schema.Engine):
+        table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
+        return (f"k.engine_gas({phi}, {dq}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
+                f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
+    if isinstance(spec, schema.ConstantLoad):
+        return f"-{p.scalar(spec.torque)}"
+    if isinstance(spec, schema.ViscousLoad):
+        return f"k.viscous_load({omega}, {p.scalar(spec.coefficient)})"
+    if isinstance(spec, schema.FanLoad):
+        return f"k.fan_load({omega}, {p.scalar(spec.coefficient)})"
+    if isinstance(spec, schema.TableLoad):
+        table = p.table([math.radians(a) for a in spec.angle_deg], spec.torque)
+        return f"k.table_load({phi}, {table}, {p.scalar(math.radians(spec.period_deg))})"
+    if isinstance(spec, schema.CuttingLoad):
+        start = math.radians(spec.intervals_deg[0][0])
+        bounds = p.table([math.radians(edge) - start for interval in spec.intervals_deg for edge in interval])
+        return (f"k.cutting_load({phi}, {bounds}, {p.scalar(math.radians(spec.period_deg))}, {p.scalar(start)}, "
+                f"{p.scalar(spec.torque)})")
+    if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
+        value = spec.force if isinstance(spec, schema.SliderConstant) else spec.torque
+        return f"k.output_constant({dq}, {p.scalar(value)})"
+    if isinstance(spec, schema.OutputViscous):
+        return f"k.output_viscous({omega}, {dq}, {p.scalar(spec.coefficient)})"
+    if isinstance(spec, schema.OutputSpring):
+        return f"k.output_spring({q}, {dq}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
+    if isinstance(spec, schema.SliderTable):
+        return f"k.slider_table({q}, {dq}, {p.table(spec.position, spec.force)})"
+    raise TypeError(f"no compiled kernel for {type(spec).__name__}")
+
+
+def _reduced_call(mechanism, gravity, p: _Parameters, angle: str) -> str:
+    """The kernel call of a mechanism's reduced(phi) (mechanisms.build_reduced), as source; gravity None or
+    massless links: the weight moment is not computed (with_weight 0 in p)."""
+    gx, gy = gravity if gravity is not None else (0.0, 0.0)
+    weighs = float(gravity is not None and (gx != 0.0 or gy != 0.0)
+                   and any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass")))
+    if isinstance(mechanism, schema.CrankSlider):
+        m = mechanism
+        args = [m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod, m.rod_mass, m.rod_inertia,
+                m.slider_mass, gx, gy]
+        return f"k.crank_slider_reduced({angle}, {', '.join(p.scalar(v) for v in args)}, {p.scalar(weighs)} != 0.0)"
+    m = mechanism
+    args = [m.crank, m.coupler, m.rocker, m.frame, math.radians(m.frame_angle_deg),
+            {"open": -1.0, "crossed": 1.0}[m.branch], m.crank_mass * m.crank_cg, m.coupler_mass, m.coupler_cg,
+            m.coupler_inertia, m.rocker_mass, m.rocker_cg, m.rocker_inertia, gx, gy]
+    return f"k.four_bar_reduced({angle}, {', '.join(p.scalar(v) for v in args)}, {p.scalar(weighs)} != 0.0)"
+
+
+def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
+    """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None) of a
+    scene's model (see the module docstring). The model must pass run.fast_path_refusal."""
+    machine = model.scene.machine
+    p = _Parameters()
+    body: list[str] = ["phi = y[0]", "omega = y[1]"]
+    if machine.mechanism is not None:
+        body.append(f"J_links, dJ, total, q, dq = {_reduced_call(machine.mechanism, machine.gravity, p, 'phi')}")
+    else:
+        body.append("J_links, dJ, total, q, dq = 0.0, 0.0, 0.0, 0.0, 0.0")
+    body.append(f"J = {p.scalar(model.inertia_constant)} + J_links")
+    coupled = model.coupling is not None
+    if not coupled:
+        body.append(f"total -= p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t")
+    specs = ([machine.drive] if machine.drive is not None else []) + list(machine.loads)
+    governor = model.governor
+    scaled, switched = [], []
+    for spec, effect in zip(specs, model.effects):
+        if effect.switch_angles:
+            switched.append(spec)
+        elif effect.role == "drive" and governor is not None:
+            scaled.append(spec)
+        elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
+            body.append(f"total += p[{HELD_THROTTLE}] * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
+        else:
+            body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
+    if switched:
+        body.append(f"clamped = min(max(phi, p[{CLAMP_LO}]), p[{CLAMP_HI}])")
+        body += [f"total += {_effect_call(spec, p, 'clamped', 'omega', 'q', 'dq')}" for spec in switched]
+    governor_lines, guard_lines, opening = [], [], []
+    if governor is not None:
+        sensor = governor.sensor
+        constants = [sensor.ball_mass, sensor.arm_length, sensor.sleeve_mass, sensor.stiffness, sensor.free_position]
+        m, l, M, kk, z_free = (p.scalar(v) for v in constants)
+        c, g, ratio = p.scalar(sensor.damping), p.scalar(sensor.gravity), p.scalar(sensor.ratio)
+        kinetic, static = p.scalar(sensor.kinetic_friction), p.scalar(sensor.static_friction)
+        low, high = (p.scalar(v) for v in sensor.stop_angles())
+        if governor.kind == "direct":
+            valve = model.scene.governor.valve
+            z = f"k.sleeve(y[{ARM}], {l})"
+            if isinstance(valve, schema.LinearValve):
+                throttle = f"k.linear_valve({z}, {p.scalar(valve.open_at)}, {p.scalar(valve.closed_at)})"
+            else:
+                throttle = f"k.clamped_linear({z}, {p.table(valve.sleeve, valve.throttle)})"
+        else:
+            throttle = f"y[{SERVO}]"
+            opening = [f"opening = k.sleeve(y[{ARM}], {l}) - {p.scalar(governor.pilot_neutral)}"]
+            rho = p.scalar(governor.feedback_gain)
+            if governor.feedback == "rigid":
+                opening.append(f"opening += k.rigid_feedback({rho}, y[{SERVO}], {p.scalar(governor.feedback_reference)})")
+            elif governor.feedback == "isodromic":
+                opening.append(f"opening += y[{SHIFT}]")
+            command = (f"k.servo_command(opening, {p.scalar(governor.servo_gain)}, "
+                       f"{p.scalar(governor.servo_max_speed)}, {p.scalar(governor.dead_band)})")
+        body.append(f"share = {throttle}")
+        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}" for spec in scaled]
+        sensor_args = f"{m}, {l}, {M}, {kk}, {z_free}, {c}, {g}, {ratio}"
+        lift = f"k.lift(y[{ARM}], omega, {m}, {l}, {M}, {kk}, {z_free}, {g}, {ratio})"
+        governor_lines += [
+            f"sleeve_mode = p[{SLEEVE_MODE}]",
+            "if sleeve_mode <= 2.0:",
+            f"    friction = 0.0 if sleeve_mode == 0.0 else ({kinetic} if sleeve_mode == 1.0 else -{kinetic})",
+            f"    dydt[{ARM}] = y[{ARM_RATE}]",
+            f"    dydt[{ARM_RATE}] = k.arm_acceleration(y[{ARM}], y[{ARM_RATE}], omega, friction, {sensor_args})",
+            "else:",
+            f"    dydt[{ARM}] = 0.0",
+            f"    dydt[{ARM_RATE}] = 0.0"]
+        guard_lines += [
+            f"sleeve_mode = p[{SLEEVE_MODE}]",
+            "if sleeve_mode == 0.0:",
+            f"    levels[0] = y[{ARM}] - {low}", f"    levels[1] = {high} - y[{ARM}]", "    g = 2",
+            "elif sleeve_mode == 1.0:",
+            f"    levels[0] = y[{ARM_RATE}]", f"    levels[1] = {high} - y[{ARM}]", "    g = 2",
+            "elif sleeve_mode == 2.0:",
+            f"    levels[0] = -y[{ARM_RATE}]", f"    levels[1] = y[{ARM}] - {low}", "    g = 2",
+            "elif sleeve_mode == 3.0:",
+            f"    force = {lift}", f"    levels[0] = {static} - force", f"    levels[1] = {static} + force", "    g = 2",
+            "elif sleeve_mode == 4.0:",
+            f"    levels[0] = {static} - {lift}", "    g = 1",
+            "else:",
+            f"    levels[0] = {static} + {lift}", "    g = 1"]
+        if governor.kind == "indirect":
+            s_low, s_high = (p.scalar(v) for v in governor.travel)
+            governor_lines += opening + [
+                f"servo_rate = {command} if p[{SERVO_MODE}] == 0.0 else 0.0", f"dydt[{SERVO}] = servo_rate"]
+            if governor.feedback == "isodromic":
+                governor_lines.append(f"dydt[{SHIFT}] = {rho} * servo_rate - y[{SHIFT}] / "
+                                      f"{p.scalar(governor.feedback_time_constant)}")
+            guard_lines += [
+                f"if p[{SERVO_MODE}] == 0.0:",
+                f"    levels[g] = y[{SERVO}] - {s_low}", f"    levels[g + 1] = {s_high} - y[{SERVO}]", "    g += 2",
+                "else:"] + [f"    {line}" for line in opening] + [
+                f"    command = {command}",
+                f"    levels[g] = -command if p[{SERVO_MODE}] == 1.0 else command", "    g += 1"]
+    body.append("net = total - 0.5 * dJ * omega * omega")
+    body.append("dydt[0] = omega")
+    n_mode_guards = 0
+    if governor is not None:
+        n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
+    if coupled:
+        train_lines, train_guards = _coupling_lines(model, p)
+        body += train_lines
+        guard_lines += train_guards
+        n_mode_guards += 2
+    else:
+        body.append("dydt[1] = net / J")
+    body += governor_lines
+    window_slot = None
+    n_guards = n_mode_guards
+    if switched:
+        window_slot = n_mode_guards
+        n_guards += 2
+        guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
+                        f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
+    source = _module(body, guard_lines, n_guards)
+    return source, p.array(), n_guards, window_slot
+
+
+def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], list[str]]:
+    """Source of the coupling and the driven part behind it (MachineModel._train, drive_train_at): the crank's
+    dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
+    (at rest: the holding margins R -+ push; turning: s omega2)."""
+    coupling = model.coupling
+    spec = model.scene.machine.coupling
+    twist_index, speed_index = model.coupling_index, model.driven_speed_index
+    if coupling.table is None:
+        elastic = f"{p.scalar(coupling.stiffness)} * twist"
+    else:
+        elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])})"
+    driven = spec.driven
+    state = [f"twist = y[{twist_index}]", f"omega2 = y[{speed_index}]",
+             f"passed = {elastic} + {p.scalar(coupling.damping)} * (omega - omega2)"]
+    dynamics = ["phi2 = y[0] - twist"]
+    if driven.mechanism is not None:
+        dynamics.append("I_links, dI, weight2, q2, dq2 = "
+                        + _reduced_call(driven.mechanism, model.scene.machine.gravity, p, "phi2"))
+    else:
+        dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
+    dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
+    dynamics += [f"smooth += {_effect_call(load, p, 'phi2', 'omega2', 'q2', 'dq2')}"
+                 for load in driven.loads if not isinstance(load, schema.ConstantLoad)]
+    resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
+    rhs = state + [
+        "dydt[1] = (net - passed) / J",
+        f"dydt[{twist_index}] = omega - omega2",
+        f"if p[{DRIVEN_MODE}] == 2.0:",
+        f"    dydt[{speed_index}] = 0.0",
+        "else:"] + [f"    {line}" for line in dynamics] + [
+        f"    direction = 1.0 if p[{DRIVEN_MODE}] == 0.0 else -1.0",
+        f"    dydt[{speed_index}] = k.driven_acceleration(direction, passed, weight2, smooth, dI, omega2, I2, "
+        f"{resistance})"]
+    guards = [f"if p[{DRIVEN_MODE}] == 2.0:"] + [f"    {line}" for line in state + dynamics] + [
+        f"    levels[g] = k.driven_margin(passed, weight2, smooth, dI, omega2, {resistance}, -1.0)",
+        f"    levels[g + 1] = k.driven_margin(passed, weight2, smooth, dI, omega2, {resistance}, 1.0)",
+        "    g += 2",
+        f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{speed_index}]", "    g += 1",
+        "else:", f"    levels[g] = -y[{speed_index}]", "    g += 1"]
+    return rhs, guards
+
+
+def _module(rhs_body: list[str], guard_body: list[str], n_guards: int) -> str:
+    """The generated module's source."""
+    indent = "\n    "
+    guards = [f"for i in range({n_guards}):", "    levels[i] = math.inf", "omega = y[1]", "g = 0"] + guard_body
+    return (
+        '"""Generated by mech_regulator.solvers.compiled.codegen: a scene\'s right-hand side and guards (do not edit;\n'
+        'the parameters are in p)."""\n\n'
+        "import math\n\n"
+        "from numba import njit\n\n"
+        "from mech_regulator.solvers.compiled import kernels as k\n"
+        "from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, RHS_SIGNATURE\n\n\n"
+        "@njit(RHS_SIGNATURE, cache=True)\n"
+        f"def rhs(t, y, p, dydt):{indent}{indent.join(rhs_body)}\n\n\n"
+        "@njit(GUARDS_SIGNATURE, cache=True)\n"
+        f"def guards(t, y, p, levels):{indent}{indent.join(guards)}\n")

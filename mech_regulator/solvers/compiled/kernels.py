@@ -1,0 +1,278 @@
+"""Scalar numba kernels of the compiled fast path: one per physics piece, each a transcription of its pure-Python
+original (named in its docstring, with the same equation), called by the right-hand side the code generator writes
+for a scene (solvers/compiled/codegen.py). Tables are read from the parameter vector p at (offset, length), so no
+number of a scene is compiled into the code. All arguments and results are SI, as in the originals.
+
+The generated module's cache name includes this file's source: numba's own cache would not notice a changed kernel.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+
+import numpy as np
+from numba import njit
+
+# ---------------------------------------------------------------------------------------------------------------
+# Tables (effects/tables.py) read from p: xs at p[offset : offset + n], ys at p[offset + n : offset + 2 n]
+
+
+@njit(cache=True)
+def periodic_linear(x, p, offset, n, period):
+    """effects.tables.periodic_linear: y(x) linear between the n points, periodic with `period`, the last point
+    joined to the first plus one period (np.interp(x, xs, ys, period=period))."""
+    x0 = p[offset]
+    u = np.fmod(x - x0, period)
+    if u < 0.0:
+        u += period
+    i = n - 1
+    while i > 0 and p[offset + i] - x0 > u:
+        i -= 1
+    lo = p[offset + i] - x0
+    y_lo = p[offset + n + i]
+    if i + 1 < n:
+        hi, y_hi = p[offset + i + 1] - x0, p[offset + n + i + 1]
+    else:
+        hi, y_hi = period, p[offset + n]
+    return y_lo + (y_hi - y_lo) / (hi - lo) * (u - lo)
+
+
+@njit(cache=True)
+def clamped_linear(x, p, offset, n):
+    """effects.tables.clamped_linear: y(x) linear between the n points, held at the end values beyond them."""
+    if x <= p[offset]:
+        return p[offset + n]
+    if x >= p[offset + n - 1]:
+        return p[offset + 2 * n - 1]
+    i = n - 2
+    while p[offset + i] > x:
+        i -= 1
+    return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
+        x - p[offset + i])
+
+
+@njit(cache=True)
+def extrapolated_linear(x, p, offset, n):
+    """effects.tables.extrapolated_linear: y(x) linear between the n points, the end segments continued."""
+    i = n - 2
+    while i > 0 and p[offset + i] > x:
+        i -= 1
+    return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
+        x - p[offset + i])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Effects (effects/__init__.py): moments on the crank [N m]
+
+
+@njit(cache=True)
+def linear_motor(omega, stall, no_load):
+    """Linear motor: M_d = M_stall (1 - omega / omega_0)."""
+    return stall * (1.0 - omega / no_load)
+
+
+@njit(cache=True)
+def table_drive(phi, p, offset, n, period):
+    """Table drive: M_d = M(phi), periodic linear table."""
+    return periodic_linear(phi, p, offset, n, period)
+
+
+@njit(cache=True)
+def engine_gas(phi, dq, p, offset, n, cycle, phase, area):
+    """Single-cylinder engine: M_d = -p(phi + phase) A dx/dphi (the gas pushes the piston towards the crank)."""
+    return -periodic_linear(phi + phase, p, offset, n, cycle) * area * dq
+
+
+@njit(cache=True)
+def viscous_load(omega, c):
+    """Viscous load: M_c = -c omega."""
+    return -c * omega
+
+
+@njit(cache=True)
+def fan_load(omega, k):
+    """Fan load: M_c = -k omega |omega|."""
+    return -k * omega * abs(omega)
+
+
+@njit(cache=True)
+def table_load(phi, p, offset, n, period):
+    """Table load: M_c = -M(phi), periodic linear table."""
+    return -periodic_linear(phi, p, offset, n, period)
+
+
+@njit(cache=True)
+def cutting_load(phi, p, offset, n, period, start, torque):
+    """Cutting (on-off) load: M_c = -torque while (phi - start) mod period lies in an interval [start_k, end_k);
+    the n interval edges (relative to start, ascending) are at p[offset : offset + n]."""
+    u = np.fmod(phi - start, period)
+    if u < 0.0:
+        u += period
+    count = 0  # bisect_right(bounds, u)
+    while count < n and p[offset + count] <= u:
+        count += 1
+    return -torque if count % 2 == 1 else 0.0
+
+
+@njit(cache=True)
+def output_constant(dq, value):
+    """Constant force (slider) or moment (rocker) on the output link: M = Q dq/dphi."""
+    return value * dq
+
+
+@njit(cache=True)
+def output_viscous(omega, dq, c):
+    """Viscous force on the output link: M = -c (dq/dphi)^2 omega."""
+    return -c * dq * dq * omega
+
+
+@njit(cache=True)
+def output_spring(q, dq, k, free):
+    """Spring on the output link: M = -k (q - q_free) dq/dphi."""
+    return -k * (q - free) * dq
+
+
+@njit(cache=True)
+def slider_table(q, dq, p, offset, n):
+    """Slider force table: M = F(x) dx/dphi, F clamped linear in x."""
+    return clamped_linear(q, p, offset, n) * dq
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Mechanisms: reduced(phi) -> (J_links [kg m^2], dJ/dphi [kg m^2/rad], M_weight [N m], q, dq/dphi)
+
+
+@njit(cache=True)
+def crank_slider_reduced(phi, R, l, e, m_crank_r, rho, m_rod, J_rod, m_slider, gx, gy, with_weight):
+    """mechanisms.crank_slider.make_reduced: with s = e - R sin phi, w = sqrt(l^2 - s^2), x = R cos phi + w,
+    theta' = s'/w; S' = (1 - rho) B' + rho C'; J = m_rod |S'|^2 + J_rod theta'^2 + m_slider x'^2,
+    dJ = 2 m_rod S'.S'' + 2 J_rod theta' theta'' + 2 m_slider x' x'', M_weight = g . sum m_k S_k'
+    (m_crank_r = crank mass times its centre's radius, rho = rod_cg / l)."""
+    sin_phi, cos_phi = math.sin(phi), math.cos(phi)
+    s = e - R * sin_phi
+    ds = -R * cos_phi
+    dds = R * sin_phi
+    w = math.sqrt(l * l - s * s)
+    dw = -s * ds / w
+    ddw = -(ds * ds + s * dds + dw * dw) / w
+    dtheta = ds / w
+    ddtheta = (dds * w - ds * dw) / (w * w)
+    x, dx, ddx = R * cos_phi + w, -R * sin_phi + dw, -R * cos_phi + ddw
+    dSx = -(1.0 - rho) * R * sin_phi + rho * dx
+    dSy = (1.0 - rho) * R * cos_phi
+    ddSx = -(1.0 - rho) * R * cos_phi + rho * ddx
+    ddSy = -(1.0 - rho) * R * sin_phi
+    J = m_rod * (dSx * dSx + dSy * dSy) + J_rod * dtheta * dtheta + m_slider * dx * dx
+    dJ = 2.0 * (m_rod * (dSx * ddSx + dSy * ddSy) + J_rod * dtheta * ddtheta + m_slider * dx * ddx)
+    weight = 0.0
+    if with_weight:
+        weight = gx * (-m_crank_r * sin_phi + m_rod * dSx + m_slider * dx) + gy * (m_crank_r * cos_phi + m_rod * dSy)
+    return J, dJ, weight, x, dx
+
+
+@njit(cache=True)
+def four_bar_reduced(phi, a, b, c, d, th1, sign, m2r, m3, u3, J3, m4, u4, J4, gx, gy, with_weight):
+    """mechanisms.four_bar.make_reduced with link_angles: th4 = arg(B - D) + sign acos((c^2 + f^2 - b^2) / (2 c f)),
+    th3' = a sin(th4 - phi) / (b sin(th3 - th4)), th4' = a sin(phi - th3) / (c sin(th4 - th3)), second derivatives
+    from the twice-differentiated loop; S3' = i (a e^{i phi} + u3 th3' e^{i th3}), S4' = i u4 th4' e^{i th4};
+    J = m3 |S3'|^2 + J3 th3'^2 + m4 |S4'|^2 + J4 th4'^2, dJ = 2 sum (m Re(conj(S') S'') + J th' th''),
+    M_weight = g . (m2 r2 i e^{i phi} + m3 S3' + m4 S4'). NaN where the loop cannot close."""
+    B = a * cmath.exp(1j * phi)
+    D = d * cmath.exp(1j * th1)
+    pv = B - D
+    f = abs(pv)
+    cos_gamma = (c * c + f * f - b * b) / (2.0 * c * f) if f > 0.0 else math.inf
+    if not (-1.0 <= cos_gamma <= 1.0):
+        return math.nan, math.nan, math.nan, math.nan, math.nan
+    towards_A = th1 + math.pi
+    th4 = towards_A + cmath.phase(pv * cmath.exp(-1j * towards_A)) + sign * math.acos(cos_gamma)
+    C = D + c * cmath.exp(1j * th4)
+    th3 = cmath.phase(C - B)
+    sin34 = math.sin(th3 - th4)
+    dth3 = a * math.sin(th4 - phi) / (b * sin34)
+    dth4 = a * math.sin(phi - th3) / (-c * sin34)
+    e2, e3, e4 = cmath.exp(1j * phi), cmath.exp(1j * th3), cmath.exp(1j * th4)
+    r = B + b * dth3 * dth3 * e3 - c * dth4 * dth4 * e4
+    ddth3 = -(r / e4).real / (b * sin34)
+    ddth4 = (r / e3).real / (-c * sin34)
+    dS3 = 1j * (a * e2 + u3 * dth3 * e3)
+    ddS3 = -a * e2 + u3 * complex(-dth3 * dth3, ddth3) * e3
+    dS4 = 1j * u4 * dth4 * e4
+    ddS4 = u4 * complex(-dth4 * dth4, ddth4) * e4
+    J = m3 * abs(dS3) ** 2 + J3 * dth3 * dth3 + m4 * abs(dS4) ** 2 + J4 * dth4 * dth4
+    dJ = 2.0 * (m3 * (dS3.conjugate() * ddS3).real + J3 * dth3 * ddth3
+                + m4 * (dS4.conjugate() * ddS4).real + J4 * dth4 * ddth4)
+    weight = 0.0
+    if with_weight:
+        weight = (complex(gx, -gy) * (m2r * 1j * e2 + m3 * dS3 + m4 * dS4)).real
+    return J, dJ, weight, th4, dth4
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Governor (governors/centrifugal.py, valve.py, governors/__init__.py)
+
+
+@njit(cache=True)
+def sleeve(arm, l):
+    """PorterSensor.sleeve: z = 2 l (1 - cos a) [m]."""
+    return 2.0 * l * (1.0 - math.cos(arm))
+
+
+@njit(cache=True)
+def lift(arm, omega, m, l, M, k, z_free, g, ratio):
+    """PorterSensor.lift: F = m l omega_g^2 cos a - (m + M) g - k (z - z_free), omega_g = ratio omega [N]."""
+    omega_g = ratio * omega
+    spring = k * (sleeve(arm, l) - z_free)
+    return m * l * omega_g * omega_g * math.cos(arm) - (m + M) * g - spring
+
+
+@njit(cache=True)
+def arm_acceleration(arm, arm_rate, omega, friction, m, l, M, k, z_free, c, g, ratio):
+    """PorterSensor.arm_acceleration: (2 m l^2 + 4 M l^2 sin^2 a) a'' + 2 M l^2 sin(2a) a'^2
+    = 2 l sin a [F(a, omega) - c z' - friction], z' = 2 l sin a a' [rad/s^2]."""
+    sin_a = math.sin(arm)
+    lever = 2.0 * l * sin_a
+    sleeve_rate = lever * arm_rate
+    force = lift(arm, omega, m, l, M, k, z_free, g, ratio) - c * sleeve_rate - friction
+    mass = 2.0 * m * l * l + 4.0 * M * l * l * sin_a * sin_a
+    return (lever * force - 2.0 * M * l * l * math.sin(2.0 * arm) * arm_rate * arm_rate) / mass
+
+
+@njit(cache=True)
+def linear_valve(z, open_at, closed_at):
+    """governors.valve linear: throttle = (z_closed - z) / (z_closed - z_open), clipped to [0, 1]."""
+    return min(max((closed_at - z) / (closed_at - open_at), 0.0), 1.0)
+
+
+@njit(cache=True)
+def rigid_feedback(gain, servo, reference):
+    """Rigid feedback's share of the pilot opening: rho (s - s_ref) [m]."""
+    return gain * (servo - reference)
+
+
+@njit(cache=True)
+def servo_command(opening, gain, max_speed, dead_band):
+    """Governor.servo_command: s' = -gain * opening, the opening less the dead band, clipped to +-max_speed [1/s]."""
+    if dead_band > 0.0:
+        opening = math.copysign(max(abs(opening) - dead_band, 0.0), opening)
+    return min(max(-gain * opening, -max_speed), max_speed)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Drive train behind an elastic coupling (model/machine.py _train, model/drivetrain.py)
+
+
+@njit(cache=True)
+def driven_acceleration(direction, passed, weight, smooth, dI, omega2, I2, resistance):
+    """domega2/dt of a turning driven part: (M_weight + M_m - s R - 1/2 I2' omega2^2 + M_smooth) / I2, s = +1
+    forward, -1 backward (R: Coulomb resistances and the external load) [rad/s^2]."""
+    total = weight + (passed - direction * resistance - 0.5 * dI * omega2 * omega2)
+    return (total + smooth) / I2
+
+
+@njit(cache=True)
+def driven_margin(passed, weight, smooth, dI, omega2, resistance, sign):
+    """The holding margin of a driven part at rest, R + sign * push, push = M_m + M_weight + M_smooth
+    - 1/2 I2' omega2^2 (MachineModel.drive_train_at, drivetrain._margin) [N m]."""
+    return resistance + sign * (passed + (weight + smooth - 0.5 * dI * omega2 * omega2))
