@@ -20,7 +20,7 @@ work–precision front (the runs no cheaper run beats in error); the ratios of t
 
 Also measured: the cost against simulated time (fast and reference), against the number of effects
 (effect_cost.EFFECT_CHAIN, fast and reference per link; a link the fast path refuses is shown as such), against
-the number of scenes in a sweep (analysis.sweep.run_sweep on 1 and 2 processes, once it exists), the start-up
+the number of scenes in a sweep (analysis.sweep.run_sweep on 1 and 2 processes), the start-up
 cost (cold: empty compile caches, and warm, each in a fresh Python process; the package's import time) and,
 optionally (ros=True), the lockstep ROS main job at a 1 ms exchange step. Numbers to print, never to assert.
 """
@@ -84,13 +84,18 @@ print(imported - start, time.perf_counter() - start, trajectory.status)
 
 
 def fast_path_exists() -> bool:
-    """Whether the scene format has solver.path (the compiled path of issue 7)."""
+    """Whether the compiled path of issue 7 can run here: the scene key solver.path and its compiled integrators
+    (mech_regulator.solvers.compiled.run imports them)."""
+    try:
+        import mech_regulator.solvers.compiled.run  # noqa: F401
+    except ImportError:
+        return False
     return "path" in Solver.model_fields
 
 
 def fast_refusal(model: MachineModel) -> str | None:
     """Why a model cannot run on the fast path (None if it can): the compiled path's own fast_path_refusal."""
-    from mech_regulator.solvers.compiled import fast_path_refusal
+    from mech_regulator.solvers.compiled.run import fast_path_refusal
 
     return fast_path_refusal(model)
 
@@ -356,26 +361,26 @@ def measure_effects(quick: bool, report: Callable[[Row], None]) -> list[Row]:
 
 
 def measure_sweeps(quick: bool, report: Callable[[Row], None]) -> list[Row]:
-    """Wall time of run_sweep over 1, 2, 4, 8, 16 variants of crank_slider_bench (its flywheel's inertia
-    varied) on 1 and 2 processes; one row saying why when analysis.sweep does not exist yet."""
-    try:
-        from mech_regulator.analysis.sweep import run_sweep
-    except ImportError:
-        row = Row("sweep", BENCH_SCENE, REFERENCE, "DOP853", "points", math.nan, math.nan,
-                  note="not measured: mech_regulator.analysis.sweep.run_sweep does not exist yet")
-        report(row)
-        return [row]
+    """Wall time of analysis.sweep.run_sweep over 1, 2, 4, 8, 16 variants of crank_slider_bench (its flywheel's
+    inertia from 0.2 to 0.4 kg m^2; DOP853 at SCALING_RTOL) on 1 and 2 local processes, reference path and (when
+    it exists) fast path."""
+    from mech_regulator.analysis.sweep import parse_grid, run_sweep, sweep_points
+
     rows = []
     for size in QUICK_SWEEP_SIZES if quick else SWEEP_SIZES:
-        points = [load_scene(BENCH_SCENE, [f"machine.flywheel.inertia={0.2 + 0.2 * k / size!r}",
-                                           *_solver_overrides(REFERENCE, "DOP853", SCALING_RTOL, 1.0)])
-                  for k in range(size)]
-        for jobs in SWEEP_JOBS:
-            start = time.perf_counter()
-            run_sweep(points, jobs=jobs, progress=None)
-            rows.append(Row("sweep", BENCH_SCENE, REFERENCE, "DOP853", f"points, {jobs} process(es)", size,
-                            size * points[0].scenario.duration, time.perf_counter() - start))
-            report(rows[-1])
+        points = sweep_points([BENCH_SCENE], _solver_overrides(REFERENCE, "DOP853", SCALING_RTOL, 1.0),
+                              [parse_grid(f"machine.flywheel.inertia=0.2:0.4:{size}")])
+        for path in (FAST, REFERENCE) if fast_path_exists() else (REFERENCE,):
+            path_points = [dataclasses.replace(point, scene={**point.scene, "solver": {**point.scene["solver"],
+                                                                                        "path": path}})
+                           for point in points] if path == FAST else points
+            for jobs in SWEEP_JOBS:
+                start = time.perf_counter()
+                results = run_sweep(path_points, jobs=jobs)
+                failed = [result["message"] for result in results if result["status"] != "complete"]
+                rows.append(Row("sweep", BENCH_SCENE, path, "DOP853", f"{jobs} process(es)", size, size * 2.0,
+                                time.perf_counter() - start, note=failed[0] if failed else ""))
+                report(rows[-1])
     return rows
 
 
@@ -549,8 +554,8 @@ def tables(benchmark: SpeedBenchmark) -> str:
     lines += [f"| {row.setting} | {row.path} | {_number(row.cpu_s / row.simulated_s)} | {row.note} |"
               for row in benchmark.of("effects")]
     lines += ["", "cost against the number of scenes in a sweep (wall time)", "",
-              "| points | processes | wall [s] | note |", "| ---: | --- | ---: | --- |"]
-    lines += [f"| {_number(row.value)} | {row.setting} | {_number(row.cpu_s)} | {row.note} |"
+              "| path | points | processes | wall [s] | note |", "| --- | ---: | --- | ---: | --- |"]
+    lines += [f"| {row.path} | {_number(row.value)} | {row.setting} | {_number(row.cpu_s)} | {row.note} |"
               for row in benchmark.of("sweep")]
     lines += ["", f"start-up: a fresh Python process to the first result of {BENCH_SCENE} (wall time)", "",
               "| path | caches | import [s] | first result [s] | note |", "| --- | --- | ---: | ---: | --- |"]
