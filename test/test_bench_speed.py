@@ -94,11 +94,12 @@ def _row(error: float, cpu: float) -> Row:
 
 def test_cost_at_the_target_error_is_interpolated_log_log_along_the_front():
     """cpu = 1e-3 error^-1/2 at 1e-5 and 1e-7 gives 1 s at 1e-6; a dearer run that is less accurate is off the
-    front; a front that does not cross the target gives nan."""
+    front; a target looser than every run costs the cheapest run; one tighter than every run gives nan."""
     rows = [_row(1e-5, 1e-3 * 1e-5 ** -0.5), _row(1e-7, 1e-3 * 1e-7 ** -0.5), _row(1e-4, 5.0)]
     assert [row.error for row in work_precision_front(rows)] == [1e-5, 1e-7]
     assert at_error(rows, 1e-6) == pytest.approx(1.0, rel=1e-12)
     assert at_error(rows, 1e-6, "nfev") == pytest.approx(1e4, rel=1e-12)
+    assert at_error(rows, 1e-4) == pytest.approx(1e-3 * 1e-5 ** -0.5, rel=1e-12)
     assert math.isnan(at_error(rows, 1e-9))
 
 

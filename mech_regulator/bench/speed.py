@@ -16,7 +16,8 @@ run's ACHIEVED error is measured against a reference solution as in `bench accur
 the reference path; the closed form for `startup`): RMS of omega - omega_ref relative to max |omega_ref|
 (accuracy.achieved_errors) on a uniform 20 kHz grid (MuJoCo: at its step times). CPU time is time.process_time
 of the run alone, the median of repeats. The CPU time at TARGET_ERROR is interpolated log-log along the path's
-work–precision front (the runs no cheaper run beats in error); the ratios of those times are the speed-ups.
+work–precision front (the runs no cheaper run beats in error), or is the cheapest run's when that one is already
+more accurate; the ratios of those times are the speed-ups.
 
 Also measured: the cost against simulated time (fast and reference), against the number of effects
 (effect_cost.EFFECT_CHAIN, fast and reference per link; a link the fast path refuses is shown as such), against
@@ -221,12 +222,15 @@ def work_precision_front(rows: list[Row]) -> list[Row]:
 
 
 def at_error(rows: list[Row], target: float, quantity: str = "cpu_s") -> float:
-    """A quantity (cpu_s or nfev) at achieved error `target`, interpolated linearly in log-log along the
-    work–precision front; nan when the front does not reach across the target."""
+    """A quantity (cpu_s or nfev) needed to reach achieved error `target`: interpolated linearly in log-log along
+    the work–precision front where it crosses the target; the cheapest run's when even that one is more accurate
+    (then an upper bound: the sweep did not go looser); nan when no run reaches the target."""
     front = work_precision_front(rows)
-    errors = np.log10([row.error for row in front])[::-1]
-    if not front or not errors[0] <= math.log10(target) <= errors[-1]:
+    if not front or front[-1].error > target:
         return math.nan
+    if front[0].error <= target:
+        return float(getattr(front[0], quantity))
+    errors = np.log10([row.error for row in front])[::-1]
     values = np.log10([getattr(row, quantity) for row in front])[::-1]
     return float(10.0 ** np.interp(math.log10(target), errors, values))
 
