@@ -191,7 +191,7 @@ EFFECT_WORDS = {  # what `describe` calls each effect type
     "fan": "fan", "cutting": "cutting", "table": "table", "slider_viscous": "viscous on the slider",
     "slider_spring": "spring on the slider", "slider_table": "slider force table",
     "rocker_viscous": "viscous on the rocker", "rocker_spring": "spring on the rocker",
-    "shuttle_viscous": "viscous on the shuttle bar",
+    "shuttle_viscous": "viscous on the shuttle bar", "slider_constant": "constant on the slider",
 }
 
 
