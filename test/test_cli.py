@@ -46,9 +46,10 @@ def bundled_data(name: str) -> dict:
 
 
 def test_bundled_scenes_present():
-    assert BUNDLED == ["clutch_start", "compressor", "compressor_friction", "engine", "engine_direct",
-                       "engine_indirect_isodromic", "engine_indirect_none", "engine_indirect_rigid", "engine_inline4",
-                       "four_bar_rocker", "lathe", "press", "press_coupling", "startup", "two_mass", "walking_beam"]
+    assert BUNDLED == ["clutch_start", "compressor", "compressor_friction", "crank_slider_bench", "engine",
+                       "engine_direct", "engine_indirect_isodromic", "engine_indirect_none", "engine_indirect_rigid",
+                       "engine_inline4", "four_bar_rocker", "lathe", "press", "press_coupling", "startup", "two_mass",
+                       "walking_beam"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -190,7 +191,7 @@ EFFECT_WORDS = {  # what `describe` calls each effect type
     "fan": "fan", "cutting": "cutting", "table": "table", "slider_viscous": "viscous on the slider",
     "slider_spring": "spring on the slider", "slider_table": "slider force table",
     "rocker_viscous": "viscous on the rocker", "rocker_spring": "spring on the rocker",
-    "shuttle_viscous": "viscous on the shuttle bar",
+    "shuttle_viscous": "viscous on the shuttle bar", "slider_constant": "constant on the slider",
 }
 
 

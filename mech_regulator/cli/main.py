@@ -20,6 +20,7 @@ import numpy as np
 from mech_regulator import __version__
 from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
+from mech_regulator.cli.bench_speed import add_bench_speed_command, run_bench_speed
 from mech_regulator.cli.flywheel import add_flywheel_command, run_flywheel
 from mech_regulator.cli.sweep import add_sweep_command, run_sweep_command
 from mech_regulator.cli.report import check_outputs, progress_bar, to_json, write_csv
@@ -139,6 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
     accuracy.add_argument("--jobs", type=int, default=2, metavar="N",
                           help="worker processes (default 2; CPU time is per process, but more workers than cores "
                                "disturb it)")
+    add_bench_speed_command(benchmarks)
     return parser
 
 
@@ -152,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "scenes":
             return _list_scenes()
         if args.command == "bench":
-            return _bench_accuracy(args)
+            return run_bench_speed(args) if args.benchmark == "speed" else _bench_accuracy(args)
         if args.command == "flywheel":
             return run_flywheel(args)
         if args.command == "sweep":
