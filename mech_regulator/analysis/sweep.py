@@ -35,11 +35,12 @@ import numpy as np
 
 from mech_regulator.scene.loading import (SceneError, apply_override, overridden_scene_data, parse_yaml,
                                           validate_scene)
+from mech_regulator.solvers.compiled import fast_path_refusal
 
 DECAY_RATIO = 0.9  # stable by simulation: the cycle-mean speed's swing in the last third <= this x the middle third's
 VERDICT_SAMPLES = 3000  # samples of the cycle-mean speed over the window after the last load change
 ENGINES = ("local", "dask")
-ROW_COLUMNS = ("status", "message", "t_end", "omega_end", "steady", "omega_m", "omega_average", "delta",
+ROW_COLUMNS = ("status", "message", "path", "t_end", "omega_end", "steady", "omega_m", "omega_average", "delta",
                "stable_by_simulation", "oscillation_ratio", "stop_arrivals", "stable_linear", "vyshnegradsky_A",
                "vyshnegradsky_B", "wall_time", "rhs_evaluations")
 """The columns of a row after the scene's name and its grid values (None where they do not apply)."""
@@ -106,9 +107,12 @@ def parse_grid(spec: str) -> GridAxis:
     return GridAxis(key, values, tuple(repr(value) for value in values), geometric, option)
 
 
-def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis]) -> list[SweepPoint]:
+def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], path: str = "scene"
+                 ) -> list[SweepPoint]:
     """Every scene x every combination of the grid values (the Cartesian product, the last axis varying fastest),
-    each validated by the scene loading: a value the scene refuses raises SceneError naming the --grid option."""
+    each validated by the scene loading: a value the scene refuses raises SceneError naming the --grid option.
+    path 'fast': every point the fast path compiles (solvers.compiled.fast_path_refusal) runs on it, the others on
+    the reference path; 'reference': every point on the reference path; 'scene': as each scene's solver.path says."""
     keys = [axis.key for axis in axes]
     repeated = sorted({key for key in keys if keys.count(key) > 1})
     if repeated:
@@ -129,9 +133,12 @@ def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis]) 
             for axis, index in zip(axes, combination):
                 apply_override(data, f"{axis.key}={axis.texts[index]}", option=axis.option)
             values = {axis.key: axis.values[index] for axis, index in zip(axes, combination)}
-            if axes:
-                where = ", ".join(f"{key} = {axis.texts[index]}" for key, axis, index in zip(keys, axes, combination))
-                validate_scene(data, f"--grid point {where} in scene '{source}'")
+            where = ", ".join(f"{key} = {axis.texts[index]}" for key, axis, index in zip(keys, axes, combination))
+            scene = validate_scene(copy.deepcopy(data), f"--grid point {where} in scene '{source}'") if axes else None
+            if path != "scene":
+                scene = scene or validate_scene(copy.deepcopy(data), str(path))
+                fast = path == "fast" and fast_path_refusal(scene) is None
+                data.setdefault("solver", {})["path"] = "fast" if fast else "reference"
             points.append(SweepPoint(source, values, data))
     return points
 
@@ -140,7 +147,7 @@ def run_point(scene: dict, values: dict | None = None) -> dict:
     """Validate, build and simulate one scene with its own solver settings; its row of plain numbers.
 
     Columns: scene, the grid values, status ('complete', 'failed', 'interrupted', or 'refused' for a scene the
-    model or analysis refuses, 'error' for anything unexpected) and message; t_end [s], omega_end [rad/s];
+    model or analysis refuses, 'error' for anything unexpected) and message; path (the solver.path it ran on); t_end [s], omega_end [rad/s];
     steady (the motion repeats over the last dynamic periods), omega_m = (omega_max + omega_min) / 2 and
     omega_average = Phi / (time of the period) [rad/s] and delta = (omega_max - omega_min) / omega_m of the last
     dynamic period (analysis.analyse_steady_state); for a governed scene stable_by_simulation, oscillation_ratio
@@ -154,6 +161,7 @@ def run_point(scene: dict, values: dict | None = None) -> dict:
     row: dict[str, Any] = {"scene": scene.get("name"), **(values or {}), **dict.fromkeys(ROW_COLUMNS)}
     try:
         model = build_model(validate_scene(copy.deepcopy(scene), f"scene '{scene.get('name')}'"))
+        row["path"] = model.scene.solver.path
         start = time.perf_counter()
         trajectory = simulate(model)
         row["wall_time"] = time.perf_counter() - start

@@ -53,6 +53,10 @@ def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> 
     parser.add_argument("--metric", choices=METRICS, metavar="NAME",
                         help=f"the column the picture draws: {', '.join(METRICS)} (default: oscillation_ratio for "
                              "a governed scene, else delta)")
+    parser.add_argument("--path", choices=("fast", "reference", "scene"), default="fast",
+                        help="fast (default): every scene the compiled fast path runs goes on it, the others on the "
+                             "reference path (the row's path column says which); reference: all on the reference "
+                             "path; scene: as each scene's solver.path says")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -60,7 +64,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs."""
     scenes = ([args.scene] if args.scene is not None else []) + args.scenes
     axes = [parse_grid(spec) for spec in args.grid]
-    points = sweep_points(scenes, args.overrides, axes)
+    points = sweep_points(scenes, args.overrides, axes, args.path)
     jobs = check_executor(args.jobs, args.engine, args.scheduler)
     governed = any(point.scene.get("governor") for point in points)
     metric = args.metric or ("oscillation_ratio" if governed else "delta")
