@@ -198,7 +198,8 @@ def test_dask_scheduler_address_gives_the_local_rows(single_runs, dask_cluster, 
     out = tmp_path / "dask"
     code, stdout, stderr = run_cli(capsys, "sweep", "lathe", "--set", "scenario.duration=1.0", "--grid",
                                    "machine.flywheel.inertia=4,15.453292519943295,40", "--engine", "dask",
-                                   "--scheduler", dask_cluster.scheduler_address, "--out", str(out), "--quiet")
+                                   "--scheduler", dask_cluster.scheduler_address, "--path", "reference", "--out", str(out),
+                                   "--quiet")
     assert code == 0, stderr
     assert f"on a Dask cluster at {dask_cluster.scheduler_address}" in stdout
     with (out / "sweep.csv").open(newline="") as handle:
@@ -275,6 +276,21 @@ def test_a_list_of_scenes(capsys, tmp_path):
         rows = list(csv.DictReader(handle))
     assert [(row["scene"], row["status"]) for row in rows] == [("lathe", "complete"), ("startup", "complete")]
     assert (out / "sweep.png").read_bytes()[:8] == PNG_SIGNATURE
+
+
+def test_fast_path_by_default_where_the_scene_compiles(capsys, tmp_path, single_runs):
+    out = tmp_path / "paths"
+    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", "compressor_friction", "--set",
+                                   "scenario.duration=1.0", "--grid", "machine.flywheel.inertia=15.453292519943295",
+                                   "--jobs", "1", "--out", str(out), "--quiet")
+    assert code == 0, stderr
+    with (out / "sweep.csv").open(newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    # joint friction is not compiled: that scene runs on the reference path, and the row says so
+    assert [(row["scene"], row["status"], row["path"]) for row in rows] == [
+        ("lathe", "complete", "fast"), ("compressor_friction", "complete", "reference")]
+    assert float(rows[0]["omega_end"]) == pytest.approx(single_runs[1]["omega_end"], rel=1e-9)
+    assert single_runs[1]["path"] == "reference"
 
 
 def test_scene_refused_before_running(capsys, tmp_path):

@@ -107,11 +107,11 @@ def parse_grid(spec: str) -> GridAxis:
     return GridAxis(key, values, tuple(repr(value) for value in values), geometric, option)
 
 
-def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], path: str = "scene"
+def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], solver_path: str = "scene"
                  ) -> list[SweepPoint]:
     """Every scene x every combination of the grid values (the Cartesian product, the last axis varying fastest),
     each validated by the scene loading: a value the scene refuses raises SceneError naming the --grid option.
-    path 'fast': every point the fast path compiles (solvers.compiled.fast_path_refusal) runs on it, the others on
+    solver_path 'fast': every point the fast path compiles (solvers.compiled.fast_path_refusal) runs on it, the others on
     the reference path; 'reference': every point on the reference path; 'scene': as each scene's solver.path says."""
     keys = [axis.key for axis in axes]
     repeated = sorted({key for key in keys if keys.count(key) > 1})
@@ -135,9 +135,9 @@ def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], 
             values = {axis.key: axis.values[index] for axis, index in zip(axes, combination)}
             where = ", ".join(f"{key} = {axis.texts[index]}" for key, axis, index in zip(keys, axes, combination))
             scene = validate_scene(copy.deepcopy(data), f"--grid point {where} in scene '{source}'") if axes else None
-            if path != "scene":
+            if solver_path != "scene":
                 scene = scene or validate_scene(copy.deepcopy(data), str(path))
-                fast = path == "fast" and fast_path_refusal(scene) is None
+                fast = solver_path == "fast" and fast_path_refusal(scene) is None
                 data.setdefault("solver", {})["path"] = "fast" if fast else "reference"
             points.append(SweepPoint(source, values, data))
     return points
