@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import functools
 import importlib.util
 import math
 import os
@@ -109,14 +110,23 @@ def _solver_overrides(path: str, method: str, rtol: float, state_scale: float) -
 
 @dataclasses.dataclass
 class Outcome:
-    """One run: omega [rad/s] at `times` [s], right-hand-side evaluations (MuJoCo: 4 forward-dynamics
-    evaluations per RK4 step), steps, and status ('complete' or why not)."""
+    """One run: its speed at `times` [s] (`speed`: omega [rad/s] there, or the dense output's omega(t), read only
+    when `omega` is asked for, after the run's CPU time was taken: sampling 20 kHz of dense output is not
+    simulation), right-hand-side evaluations (MuJoCo: 4 forward-dynamics evaluations per RK4 step), steps, and
+    status ('complete' or why not)."""
 
     times: np.ndarray
-    omega: np.ndarray
+    speed: np.ndarray | Callable[[np.ndarray], np.ndarray]
     nfev: int
     steps: int
     status: str = "complete"
+
+    @functools.cached_property
+    def omega(self) -> np.ndarray:
+        """omega [rad/s] at `times` (empty for a run that did not complete)."""
+        if self.status != "complete":
+            return np.zeros(0)
+        return self.speed(self.times) if callable(self.speed) else self.speed
 
 
 def ode_runner(path: str, method: str, model: MachineModel) -> Callable[[], Outcome]:
@@ -127,7 +137,7 @@ def ode_runner(path: str, method: str, model: MachineModel) -> Callable[[], Outc
         def run() -> Outcome:
             trajectory = simulate(model)
             complete = trajectory.status == "complete"
-            return Outcome(grid, trajectory(grid)[1] if complete else np.zeros(0), trajectory.stats.nfev,
+            return Outcome(grid, lambda times: trajectory(times)[1], trajectory.stats.nfev,
                            trajectory.stats.steps, "complete" if complete else f"{trajectory.status}: "
                                                                                f"{trajectory.message}")
         return run
@@ -138,7 +148,7 @@ def ode_runner(path: str, method: str, model: MachineModel) -> Callable[[], Outc
     def run_ivp() -> Outcome:
         solution = solve_ivp(rhs, (0.0, model.scene.scenario.duration), y0, method=method, rtol=solver.rtol,
                              atol=solver.atol, dense_output=True)
-        return Outcome(grid, solution.sol(grid)[1] if solution.success else np.zeros(0), solution.nfev,
+        return Outcome(grid, lambda times: solution.sol(times)[1], solution.nfev,
                        len(solution.t) - 1, "complete" if solution.success else f"failed: {solution.message}")
     return run_ivp
 
