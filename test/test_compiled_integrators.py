@@ -47,6 +47,13 @@ def stiff_linear(t, y, p, dydt):
 
 
 @njit(RHS_SIGNATURE, cache=True)
+def rotating_pendulum(t, y, p, dydt):
+    """phi'' = -p[0] sin phi + p[1] (1 - phi' / p[2]): a driven pendulum turning over, periodic in phi (2 pi)."""
+    dydt[0] = y[1]
+    dydt[1] = -p[0] * np.sin(y[0]) + p[1] * (1.0 - y[1] / p[2])
+
+
+@njit(RHS_SIGNATURE, cache=True)
 def blow_up(t, y, p, dydt):
     """y' = y^2: y = 1 / (1 - t) from y(0) = 1 escapes to infinity at t = 1."""
     dydt[0] = y[0] * y[0]
@@ -77,19 +84,20 @@ TWO_GUARD_LINES = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
 
 
 def adaptive(method, rhs, y0, t_end, p, rtol=1e-6, atol=1e-9, guards=position, lines=NO_LINES,
-             thresholds=None, max_step=np.inf, first_step=0.0, wrap_limit=np.inf, max_steps=100000):
+             thresholds=None, max_step=np.inf, first_step=0.0, wrap_limit=np.inf, wrap_period=0.0, max_steps=100000):
     y0 = np.asarray(y0, dtype=float)
     thresholds = np.zeros(len(lines)) if thresholds is None else np.asarray(thresholds, dtype=float)
     return CompiledRun.from_result(method(rhs, guards, len(lines), np.ascontiguousarray(lines), thresholds, 0.0,
                                           y0, t_end, np.asarray(p, dtype=float), rtol, np.full(y0.size, atol),
-                                          max_step, first_step, wrap_limit, max_steps))
+                                          max_step, first_step, wrap_limit, wrap_period, max_steps))
 
 
-def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, max_steps=100000):
+def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, wrap_period=0.0,
+          max_steps=100000):
     y0 = np.asarray(y0, dtype=float)
     return CompiledRun.from_result(compiled.rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
                                                 np.zeros(len(lines)), 0.0, y0, t_end, np.asarray(p, dtype=float),
-                                                step, wrap_limit, max_steps))
+                                                step, wrap_limit, wrap_period, max_steps))
 
 
 def stepped(solver):
@@ -287,6 +295,39 @@ def test_the_wrap_limit_stops_at_the_first_step_end_past_it():
     """x = t with RK4 steps of 1 s and wrap limit 2.5 rad: stops at t = 3 s (status 2)."""
     run = fixed(constant_acceleration, [0.0, 1.0], 10.0, [0.0], 1.0, wrap_limit=2.5)
     assert run.status == compiled.WRAPPED and run.t_end == 3.0 and run.y_end[0] == pytest.approx(3.0)
+
+
+@pytest.mark.parametrize("method", ["rk45", "dop853", "rk4"])
+def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
+    """With wrap_period the stepper wraps the angle itself at the wrap limit; the same as stopping there (status
+    2), taking whole periods off the angle and restarting with the last step's size, as the outer loop does:
+    the same steps, the unwrapped angle at every step start, the same end state (1e-12), one wrap per restart."""
+    period, limit, p, y0, t_end = 2.0 * np.pi, 4 * 2.0 * np.pi, [9.81, 30.0, 40.0], np.array([0.0, 5.0]), 3.0
+
+    def call(y, t0, first_step, wrap_period):
+        y = np.asarray(y, dtype=float)
+        arguments = (rotating_pendulum, position, 0, np.zeros((0, 4)), np.zeros(0), t0, y, t_end,
+                     np.asarray(p, dtype=float))
+        if method == "rk4":
+            return CompiledRun.from_result(compiled.rk4(*arguments, 0.01, limit, wrap_period, 100000))
+        return CompiledRun.from_result(getattr(compiled, method)(*arguments, 1e-8, np.full(2, 1e-10), np.inf,
+                                                                 first_step, limit, wrap_period, 100000))
+
+    inside = call(y0, 0.0, 0.0, period)
+    times, starts, t, y, first_step, offset, restarts = [0.0], [], 0.0, y0, 0.0, 0.0, -1
+    while t < t_end:
+        restarts += 1
+        run = call(y - [offset, 0.0], t, first_step, 0.0)
+        assert run.status == (compiled.REACHED if run.t_end == t_end else compiled.WRAPPED)
+        times += list(run.times[1:])
+        starts += list(run.y_old + [offset, 0.0])
+        t, y = run.t_end, run.y_end + [offset, 0.0]
+        first_step = min(run.last_step, t_end - t)
+        offset = period * np.floor(y[0] / period)
+    assert inside.status == compiled.REACHED and inside.wraps == restarts >= 3 and inside.y_end[0] > 3 * limit
+    np.testing.assert_allclose(inside.times, times, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(inside.y_old, starts, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(inside.y_end, y, rtol=1e-12)
 
 
 def test_failures_keep_what_was_computed():

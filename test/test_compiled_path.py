@@ -17,6 +17,7 @@ from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE, compile_scene, generate,
                                                      mode_rows)
+from mech_regulator.solvers.compiled.run import MAX_STEPS_PER_CALL
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal
 from support import model_of, run_cli, scene, simulate_complete
@@ -323,7 +324,9 @@ def test_runs_equal_reference_within_their_accuracy(data):
                                              solver__atol=settings["atol"] / 100)))
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
     assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps
-    assert fast.stats.restarts == reference.stats.restarts
+    # each MAX_STEPS_PER_CALL chunk of the fast path starts with the angle wrapped into one period, which can move
+    # a later wrap of the angle (a restart) past the end: one restart more or less per chunk
+    assert abs(fast.stats.restarts - reference.stats.restarts) <= fast.stats.steps // MAX_STEPS_PER_CALL
     assert_same_events(reference, fast)
 
 

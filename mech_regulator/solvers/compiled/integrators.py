@@ -5,13 +5,16 @@ numba with explicit signatures and cached on disk; a scene's rhs and guards come
 
 Each stepper integrates dy/dt = rhs(t, y, p) from (t0, y0) towards t_end and stops at the first of:
 t_end reached; a guard falling below its threshold inside a step (an event, located, the step cut there);
-|y[0]| > wrap_limit at the end of an accepted step before t_end (the caller re-wraps the crank angle and
-restarts); failure (non-finite state, step size underflow, max_steps accepted steps).
+|y[0]| > wrap_limit at the end of an accepted step before t_end when wrap_period is 0 (the caller re-wraps the
+crank angle and restarts); failure (non-finite state, step size underflow, max_steps accepted steps). With
+wrap_period > 0 [rad] the stepper wraps the angle itself at the wrap limit, doing what the caller's restart would:
+y[0] less whole periods, f evaluated anew, the last step's size kept (RK4: the rest divided evenly again); its
+outputs (y_old, y_end) carry the unwrapped angle. Only for guards that do not read y[0] (no switch window).
 
     rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
-         rtol, atol, max_step, first_step, wrap_limit, max_steps) -> result
+         rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps) -> result
     dop853(... same as rk45 ...), rosenbrock23(... same as rk45 ...)
-    rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, max_steps) -> result
+    rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps)
 
 t0, t_end, max_step, first_step (0 = choose it as scipy's select_initial_step), step [s]; atol per state
 (units of the state); wrap_limit [rad] (inf = none); rk4's step is the largest step, shortened to divide
@@ -35,6 +38,7 @@ The result tuple, in this order:
     11 last_step     float64 [s]: the last accepted step's full size (scipy's step_size), to warm-start the
                      next call (0 if none)
     12 failure       int64: why status 3: 1 non-finite state, 2 step size underflow, 3 max_steps reached
+    13 wraps         int64: wraps of the angle made inside the call (wrap_period > 0)
 
 CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coefficients) is the dense output
 of all the steps of one call, for Trajectory.add_piece.
@@ -90,15 +94,16 @@ ROSENBROCK_E32 = 6.0 + np.sqrt(2.0)
 
 _ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
                   types.float64, types.float64[::1], types.float64, types.float64[::1],
-                  types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.int64)
+                  types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.float64,
+                  types.int64)
 _FIXED_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
                types.float64, types.float64[::1], types.float64, types.float64[::1],
-               types.float64, types.float64, types.int64)
+               types.float64, types.float64, types.float64, types.int64)
 
 
 @njit(cache=True)
 def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
-               first_step, fixed_step, wrap_limit, max_steps):
+               first_step, fixed_step, wrap_limit, wrap_period, max_steps):
     """The stepping loop shared by the four methods: accepted steps with their dense output stored in
     arrays grown by doubling, an event check on every step, the wrap and step limits."""
     n = y0.size
@@ -123,6 +128,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     status, failure, n_steps = -1, 0, 0
     event_guard, event_time = -1, np.nan
     h_previous = 0.0
+    offset, wraps = 0.0, 0  # whole periods [rad] taken off y[0] by wraps inside this call, and how many
     times[0] = t0
     if t_end <= t0:
         status = REACHED
@@ -194,6 +200,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             capacity *= 2
         nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, coefficients[n_steps])
         y_old[n_steps] = y
+        y_old[n_steps, 0] += offset
         times[n_steps + 1] = t_new
         h_previous = h
         n_steps += 1
@@ -209,6 +216,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                     _dense_at(event_time, t, h, y, coefficients[n_steps - 1], y_end)
                     _rescale(coefficients[n_steps - 1], (event_time - t) / h)
                     times[n_steps] = event_time
+                y_end[0] += offset
                 break
         t = t_new
         y[:] = y_new
@@ -216,12 +224,26 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
         jacobian_current = False
         if t >= t_end:
             status = REACHED
+        elif abs(y[0]) > wrap_limit and wrap_period > 0.0:
+            # what the reference path's restart does: the angle less whole periods, f evaluated anew there, the
+            # last step's size (RK4: the remaining interval divided evenly again)
+            unwrapped = y[0] + offset
+            offset = wrap_period * np.floor(unwrapped / wrap_period)
+            y[0] = unwrapped - offset
+            rhs(t, y, p, f)
+            nfev += 1
+            wraps += 1
+            if method == _RK4:
+                h_abs = (t_end - t) / max(1, np.ceil((t_end - t) / fixed_step - 1e-9))
+            else:
+                h_abs = min(abs(h_previous), t_end - t)
         elif abs(y[0]) > wrap_limit:
             status = WRAPPED
     if status != EVENT:
         y_end[:] = y
+        y_end[0] += offset
     return (status, n_steps, times[:n_steps + 1].copy(), y_old[:n_steps].copy(), coefficients[:n_steps].copy(),
-            event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure)
+            event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure, wraps)
 
 
 @njit(cache=True)
@@ -548,25 +570,25 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 # the public steppers are compiled at import (explicit signatures): after the helpers they call
 @njit(_ADAPTIVE_ARGS, cache=True)
 def rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-         wrap_limit, max_steps):
+         wrap_limit, wrap_period, max_steps):
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
     return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
-                      first_step, 0.0, wrap_limit, max_steps)
+                      first_step, 0.0, wrap_limit, wrap_period, max_steps)
 
 
 @njit(_ADAPTIVE_ARGS, cache=True)
 def dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-           wrap_limit, max_steps):
+           wrap_limit, wrap_period, max_steps):
     """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
     the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
     return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
-                      max_step, first_step, 0.0, wrap_limit, max_steps)
+                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps)
 
 
 @njit(_ADAPTIVE_ARGS, cache=True)
 def rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-                 wrap_limit, max_steps):
+                 wrap_limit, wrap_period, max_steps):
     """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
     with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
         k1 = W^-1 (F0 + h d T),  F1 = f(t + h/2, y + h k1/2),  k2 = W^-1 (F1 - k1) + k1,
@@ -575,16 +597,16 @@ def rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rt
     J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
     with exponent -1/3. Returns the result tuple of the module docstring."""
     return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
-                      max_step, first_step, 0.0, wrap_limit, max_steps)
+                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps)
 
 
 @njit(_FIXED_ARGS, cache=True)
-def rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, max_steps):
+def rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps):
     """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
     the module docstring."""
     return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, 0.0, np.zeros(0),
-                      0.0, 0.0, step, wrap_limit, max_steps)
+                      0.0, 0.0, step, wrap_limit, wrap_period, max_steps)
 
 
 class StepsDense(DenseOutput):
@@ -625,6 +647,7 @@ class CompiledRun:
     nlu: int
     last_step: float
     failure: int
+    wraps: int
 
     @classmethod
     def from_result(cls, result: tuple) -> "CompiledRun":

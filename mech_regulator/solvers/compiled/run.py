@@ -4,8 +4,8 @@ compiled right-hand side (codegen.py) and the compiled integrators (integrators.
 Each external-load piece is integrated on its own; within it the mode is settled, p is set for the piece, the mode
 and the switch window, and the scene's compiled stepper runs until the piece ends, a guard fires (a governor or
 driven-part event, located in the stepper; its transition is the model's own Guard, applied here), the crank angle
-passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper restarts with its last step size)
-or MAX_STEPS_PER_CALL steps are done (so that progress moves and Ctrl-C is heard). Every call's steps become one
+passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper restarts with its last step size;
+without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so that progress moves and Ctrl-C is heard). Every call's steps become one
 piece of the Trajectory.
 """
 
@@ -65,14 +65,17 @@ def _compiled_segment(compiled: CompiledScene, model: MachineModel, piece, t_sta
         p = compiled.parameters_for(piece, mode, window)
         y_wrapped = np.array(y, dtype=float)
         y_wrapped[0] -= offset
+        # without a switch window no guard reads phi: the stepper wraps it itself instead of returning to restart
+        wrap_period = period if wraps and window is None else 0.0
         run = _step(settings, compiled, compiled.linear(mode, window), thresholds, t, y_wrapped, t_end, p, atol,
-                    first_step, wrap_limit)
+                    first_step, wrap_limit, wrap_period)
         if run.n_steps:
             trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset))
         trajectory.stats.steps += int(run.n_steps)
         trajectory.stats.nfev += int(run.nfev)
         trajectory.stats.njev += int(run.njev)
         trajectory.stats.nlu += int(run.nlu)
+        trajectory.stats.restarts += int(run.wraps)
         if run.last_step > 0.0:
             first_step = min(run.last_step, t_end - run.t_end)
         t_old, t = t, run.t_end
@@ -108,15 +111,16 @@ def _compiled_segment(compiled: CompiledScene, model: MachineModel, piece, t_sta
 
 
 def _step(settings: schema.Solver, compiled: CompiledScene, linear: np.ndarray, thresholds: np.ndarray, t: float,
-          y: np.ndarray, t_end: float, p: np.ndarray, atol: np.ndarray, first_step: float, wrap_limit: float):
+          y: np.ndarray, t_end: float, p: np.ndarray, atol: np.ndarray, first_step: float, wrap_limit: float,
+          wrap_period: float):
     """One call of the scene's compiled stepper, as an integrators.CompiledRun."""
     common = (compiled.rhs_callback, compiled.guards_callback, compiled.n_guards, linear, thresholds, t, y, t_end, p)
     stepper = _entry_point(settings.method)
     if settings.method == "RK4":
-        result = stepper(*common, settings.step, wrap_limit, MAX_STEPS_PER_CALL)
+        result = stepper(*common, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL)
     else:
         result = stepper(*common, settings.rtol, atol, settings.max_step or math.inf, first_step, wrap_limit,
-                         MAX_STEPS_PER_CALL)
+                         wrap_period, MAX_STEPS_PER_CALL)
     return integrators.CompiledRun.from_result(result)
 
 
