@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from mech_regulator.bench.mujoco_model import MujocoCrankSlider, crank_slider_mjcf, mujoco_refusal
-from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, at_error, fast_path_exists, ode_runner,
+from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, at_error, ode_runner,
                                         work_precision_front)
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
@@ -80,7 +80,6 @@ def test_solve_ivp_baseline_solves_the_reference_paths_problem(method):
     assert np.max(np.abs(omega - omega_ref)) / np.max(omega_ref) < 30 * 1e-8
 
 
-@pytest.mark.skipif(not fast_path_exists(), reason="the fast path (solver.path, branch issue7-codegen) is not here")
 @pytest.mark.parametrize("method", ["RK45", "DOP853"])
 def test_fast_path_rows_equal_the_reference_path(method):
     times, omega = _omega(FAST, method, 1e-9, "solver.path=fast")

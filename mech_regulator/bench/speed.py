@@ -3,8 +3,7 @@ equal achieved accuracy, and how their cost grows.
 
 Paths compared on each speed scene (SPEED_SCENES):
 
-- fast: the compiled path (scene key solver.path: fast, issue 7), RK45 and DOP853; its rows appear once the
-  scene format has solver.path;
+- fast: the compiled path (scene key solver.path: fast), RK45 and DOP853;
 - reference: our reference path, `solvers.simulate` with DOP853 (restarts at breakpoints, guards, events);
 - solve_ivp: scipy's solve_ivp on the model's plain-Python right-hand side `model.rhs(...)`, RK45 and DOP853,
   no events (so only scenes without a governor, drive train, external-load changes or moments that jump in phi);
@@ -50,7 +49,6 @@ from mech_regulator.bench.effect_cost import BASE_SCENE, EFFECT_CHAIN, SCENARIO
 from mech_regulator.bench.mujoco_model import MujocoCrankSlider, mujoco_refusal
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.scene.schema import Solver
 from mech_regulator.solvers import simulate
 
 BENCH_SCENE = "crank_slider_bench"
@@ -85,19 +83,9 @@ print(imported - start, time.perf_counter() - start, trajectory.status)
 """
 
 
-def fast_path_exists() -> bool:
-    """Whether the compiled path of issue 7 can run here: the scene key solver.path and its compiled integrators
-    (mech_regulator.solvers.compiled.run imports them)."""
-    try:
-        import mech_regulator.solvers.compiled.run  # noqa: F401
-    except ImportError:
-        return False
-    return "path" in Solver.model_fields
-
-
 def fast_refusal(model: MachineModel) -> str | None:
     """Why a model cannot run on the fast path (None if it can): the compiled path's own fast_path_refusal."""
-    from mech_regulator.solvers.compiled.run import fast_path_refusal
+    from mech_regulator.solvers.compiled import fast_path_refusal
 
     return fast_path_refusal(model)
 
@@ -321,10 +309,6 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
             if refusal is not None:
                 rows.append(Row("precision", bench.name, path, method, "timestep", math.nan, duration, note=refusal))
             continue
-        if path == FAST and not fast_path_exists():
-            rows.append(Row("precision", bench.name, path, method, "rtol", math.nan, duration,
-                            note="no fast path yet: the scene format has no solver.path"))
-            continue
         for rtol in QUICK_TOLERANCES if quick else TOLERANCES:
             model = build_model(bench.load(quick, tuple(_solver_overrides(path, method, rtol, bench.state_scale))))
             refusal = (solve_ivp_refusal(model) if path == SOLVE_IVP else fast_refusal(model) if path == FAST
@@ -341,7 +325,7 @@ def measure_durations(quick: bool, report: Callable[[Row], None]) -> list[Row]:
     SCALING_RTOL."""
     rows = []
     for duration in QUICK_DURATIONS if quick else DURATIONS:
-        for path in (FAST, REFERENCE) if fast_path_exists() else (REFERENCE,):
+        for path in (FAST, REFERENCE):
             model = build_model(load_scene(BENCH_SCENE, [f"scenario.duration={duration!r}",
                                                          *_solver_overrides(path, "DOP853", SCALING_RTOL, 1.0)]))
             outcome, cpu, _repeats = median_cpu(ode_runner(path, "DOP853", model), quick)
@@ -359,18 +343,15 @@ def measure_effects(quick: bool, report: Callable[[Row], None]) -> list[Row]:
         for path in (FAST, REFERENCE):
             overrides = [*SCENARIO, *step.overrides] + (["solver.path=fast"] if path == FAST else [])
             row = Row("effects", BASE_SCENE, path, "DOP853", step.label, math.nan, math.nan)
-            if path == FAST and not fast_path_exists():
-                row.note = "no fast path yet"
+            model = build_model(load_scene(BASE_SCENE, overrides))
+            row.simulated_s = model.scene.scenario.duration
+            refusal = fast_refusal(model) if path == FAST else None
+            if refusal is not None:
+                row.note = f"refused: {refusal}"
             else:
-                model = build_model(load_scene(BASE_SCENE, overrides))
-                row.simulated_s = model.scene.scenario.duration
-                refusal = fast_refusal(model) if path == FAST else None
-                if refusal is not None:
-                    row.note = f"refused: {refusal}"
-                else:
-                    outcome, row.cpu_s, _repeats = median_cpu(ode_runner(path, "DOP853", model), quick)
-                    row.nfev, row.steps = outcome.nfev, outcome.steps
-                    row.note = "" if outcome.status == "complete" else outcome.status
+                outcome, row.cpu_s, _repeats = median_cpu(ode_runner(path, "DOP853", model), quick)
+                row.nfev, row.steps = outcome.nfev, outcome.steps
+                row.note = "" if outcome.status == "complete" else outcome.status
             rows.append(row)
             report(row)
     return rows
@@ -378,15 +359,14 @@ def measure_effects(quick: bool, report: Callable[[Row], None]) -> list[Row]:
 
 def measure_sweeps(quick: bool, report: Callable[[Row], None]) -> list[Row]:
     """Wall time of analysis.sweep.run_sweep over 1, 2, 4, 8, 16 variants of crank_slider_bench (its flywheel's
-    inertia from 0.2 to 0.4 kg m^2; DOP853 at SCALING_RTOL) on 1 and 2 local processes, reference path and (when
-    it exists) fast path."""
+    inertia from 0.2 to 0.4 kg m^2; DOP853 at SCALING_RTOL) on 1 and 2 local processes, reference and fast path."""
     from mech_regulator.analysis.sweep import parse_grid, run_sweep, sweep_points
 
     rows = []
     for size in QUICK_SWEEP_SIZES if quick else SWEEP_SIZES:
         points = sweep_points([BENCH_SCENE], _solver_overrides(REFERENCE, "DOP853", SCALING_RTOL, 1.0),
                               [parse_grid(f"machine.flywheel.inertia=0.2:0.4:{size}")])
-        for path in (FAST, REFERENCE) if fast_path_exists() else (REFERENCE,):
+        for path in (FAST, REFERENCE):
             path_points = [dataclasses.replace(point, scene={**point.scene, "solver": {**point.scene["solver"],
                                                                                         "path": path}})
                            for point in points] if path == FAST else points
@@ -417,9 +397,7 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="mech-regulator-cache-") as cache:
         env = dict(os.environ, MECH_REGULATOR_CACHE=cache, NUMBA_CACHE_DIR=cache)
-        runs = [(REFERENCE, "warm", [])]
-        if fast_path_exists():
-            runs += [(FAST, "cold", ["solver.path=fast"]), (FAST, "warm", ["solver.path=fast"])]
+        runs = [(REFERENCE, "warm", []), (FAST, "cold", ["solver.path=fast"]), (FAST, "warm", ["solver.path=fast"])]
         for path, phase, overrides in runs:
             (imported, first, status), wall = _python_wall(STARTUP_PROGRAM.format(scene=BENCH_SCENE,
                                                                                   overrides=overrides), env)
@@ -537,7 +515,7 @@ def summary(benchmark: SpeedBenchmark) -> dict:
     startup = {f"{row.path} {row.setting}": {"first_result_s": row.cpu_s, "import_s": row.value}
                for row in benchmark.of("startup")}
     return {"target_error": TARGET_ERROR, "quick": benchmark.quick, "interrupted": benchmark.interrupted,
-            "fast_path": fast_path_exists(), "environment": benchmark.environment, "scenes": scenes,
+            "environment": benchmark.environment, "scenes": scenes,
             "targets": targets(benchmark), "startup": startup, "ros": ros_summary(benchmark)}
 
 

@@ -10,8 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from mech_regulator.cli.report import to_json
-from mech_regulator.scene import SceneError
+from mech_regulator.cli.report import bench_scenes_and_folder, to_json
 
 EXIT_INTERRUPTED = 130
 
@@ -43,14 +42,7 @@ def run_bench_speed(args: argparse.Namespace) -> int:
     from mech_regulator.bench.speed import (row_line, run_speed_benchmark, select_speed_scenes, summary, tables,
                                             write_rows_csv)
 
-    names = None if args.scenes is None else [name.strip() for name in args.scenes.split(",") if name.strip()]
-    if names == []:
-        raise SceneError("--scenes: expected scene names separated by commas, e.g. crank_slider_bench,startup")
-    scenes = select_speed_scenes(names)
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise SceneError(f"--out '{args.out}': cannot make the folder: {error.strerror or error}") from None
+    scenes = select_speed_scenes(bench_scenes_and_folder(args.scenes, args.out, "crank_slider_bench,startup"))
     start = time.monotonic()
     benchmark = run_speed_benchmark(scenes, args.quick, args.ros, report=lambda row: print(row_line(row), flush=True))
     write_rows_csv(benchmark, args.out / "speed.csv")

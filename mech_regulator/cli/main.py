@@ -23,7 +23,7 @@ from mech_regulator.scene.reference import schema_json, schema_markdown
 from mech_regulator.cli.bench_speed import add_bench_speed_command, run_bench_speed
 from mech_regulator.cli.flywheel import add_flywheel_command, run_flywheel
 from mech_regulator.cli.sweep import add_sweep_command, run_sweep_command
-from mech_regulator.cli.report import check_outputs, progress_bar, to_json, write_csv
+from mech_regulator.cli.report import bench_scenes_and_folder, check_outputs, progress_bar, to_json, write_csv
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -427,14 +427,7 @@ def _bench_accuracy(args) -> int:
 
     if args.jobs < 1:
         raise SceneError(f"--jobs {args.jobs}: expected at least 1 worker process")
-    names = None if args.scenes is None else [name.strip() for name in args.scenes.split(",") if name.strip()]
-    if names == []:
-        raise SceneError("--scenes: expected scene names separated by commas, e.g. startup,compressor")
-    scenes = select_scenes(names)
-    try:
-        args.out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise SceneError(f"--out '{args.out}': cannot make the folder: {error.strerror or error}") from None
+    scenes = select_scenes(bench_scenes_and_folder(args.scenes, args.out, "startup,compressor"))
     start = time.monotonic()
     benchmark = run_benchmark(scenes, args.quick, args.jobs, report=lambda line: print(line, flush=True))
     write_runs_csv(benchmark, args.out / "runs.csv")

@@ -419,3 +419,16 @@ def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:
         writer = csv.writer(file)
         writer.writerow(list(rows[0]) if rows else [])
         writer.writerows([field(value) for value in row.values()] for row in rows)
+
+
+def bench_scenes_and_folder(scenes: str | None, out: Path, example: str) -> list[str] | None:
+    """A benchmark's --scenes (comma-separated names; None: its default scenes) and its --out folder, made now:
+    SceneError for an empty list (the message shows `example`) or a folder that cannot be made."""
+    names = None if scenes is None else [name.strip() for name in scenes.split(",") if name.strip()]
+    if names == []:
+        raise SceneError(f"--scenes: expected scene names separated by commas, e.g. {example}")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise SceneError(f"--out '{out}': cannot make the folder: {error.strerror or error}") from None
+    return names

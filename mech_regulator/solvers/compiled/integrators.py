@@ -511,7 +511,7 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
     Thresholds for this step: thresholds[g], lowered by GUARD_TOLERANCE for a guard that starts the step
     within GUARD_TOLERANCE above it. A linear guard is the polynomial g0 + sum_j a_j theta^j along the step;
-    the real parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends
+    when g0 >= sum_j |a_j| it cannot fall below on [0, 1] and is done with at once (most steps); else the real parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends
     below the threshold holds the first crossing (exact; a tangency does not fire). The other guards are
     probed at NONLINEAR_PROBES interior points and the first probe interval that ends below is searched."""
     n = y_old.size
@@ -533,6 +533,8 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
         line = np.zeros(coefficients.shape[1] + 1)  # level - threshold as powers of theta
         line[0] = linear[g, 1] + weights @ y_old - step_thresholds[g]
         line[1:] = h * (weights @ coefficients)
+        if line[0] >= np.sum(np.abs(line[1:])):  # then line(theta) >= 0 on all of [0, 1]: no crossing (exact)
+            continue
         slope = line[1:] * np.arange(1.0, line.size)  # derivative, lowest power first
         roots = np.roots(slope[::-1].astype(np.complex128)).real  # complex: numba keeps the domain
         cuts = np.sort(np.concatenate((roots[(roots > 0.0) & (roots < 1.0)], np.ones(1))))
