@@ -30,6 +30,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
 WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a test measures)
+ANSWER_WAIT = 10.0  # [s] of wall time before a service request that got no answer is sent again
 STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
 
 # Domains where no ports collide with the ephemeral range: 1..101 and 215..232. A test run takes
@@ -281,11 +282,23 @@ class Probe:
         return received
 
     def call(self, service_type, name: str, request, describe=lambda: ""):
-        """Call a service (waiting for it first) and return its response."""
+        """Call a service (waiting for it first) and return its response. A request not answered within
+        ANSWER_WAIT is sent again until WAIT has passed: Fast DDS drops an answer whose client reader the server
+        has not matched yet ("failed to send response (timeout)" in the server's log; seen under load), and the
+        requests the tests send (parameter changes) may be repeated."""
         client = self.node.create_client(service_type, name)
         self.spin_until(client.service_is_ready, f"the service {name}", describe=describe)
-        future = client.call_async(request)
-        self.spin_until(future.done, f"the answer of {name}", describe=describe)
+        deadline = time.monotonic() + WAIT
+        while True:
+            future = client.call_async(request)
+            answer_by = min(time.monotonic() + ANSWER_WAIT, deadline)
+            self.spin_until(lambda: future.done() or time.monotonic() > answer_by, f"the answer of {name}",
+                            describe=describe)
+            if future.done():
+                break
+            client.remove_pending_request(future)
+            if time.monotonic() > deadline:
+                pytest.fail(f"timed out after {WAIT} s waiting for the answer of {name}\n{describe()}")
         self.node.destroy_client(client)
         return future.result()
 
