@@ -50,6 +50,7 @@ from mech_regulator.bench.mujoco_model import MujocoCrankSlider, mujoco_refusal
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import simulate
+from mech_regulator.solvers.compiled import fast_path_refusal
 
 BENCH_SCENE = "crank_slider_bench"
 SPEED_SCENES = (BenchScene(BENCH_SCENE, BENCH_SCENE, (), ("scenario.duration=0.5",),
@@ -81,13 +82,6 @@ imported = time.perf_counter()
 trajectory = simulate(build_model(load_scene({scene!r}, {overrides!r})))
 print(imported - start, time.perf_counter() - start, trajectory.status)
 """
-
-
-def fast_refusal(model: MachineModel) -> str | None:
-    """Why a model cannot run on the fast path (None if it can): the compiled path's own fast_path_refusal."""
-    from mech_regulator.solvers.compiled import fast_path_refusal
-
-    return fast_path_refusal(model)
 
 
 def _solver_overrides(path: str, method: str, rtol: float, state_scale: float) -> list[str]:
@@ -311,7 +305,7 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
             continue
         for rtol in QUICK_TOLERANCES if quick else TOLERANCES:
             model = build_model(bench.load(quick, tuple(_solver_overrides(path, method, rtol, bench.state_scale))))
-            refusal = (solve_ivp_refusal(model) if path == SOLVE_IVP else fast_refusal(model) if path == FAST
+            refusal = (solve_ivp_refusal(model) if path == SOLVE_IVP else fast_path_refusal(model) if path == FAST
                        else None)
             if refusal is not None:
                 rows.append(Row("precision", bench.name, path, method, "rtol", math.nan, duration, note=refusal))
@@ -345,7 +339,7 @@ def measure_effects(quick: bool, report: Callable[[Row], None]) -> list[Row]:
             row = Row("effects", BASE_SCENE, path, "DOP853", step.label, math.nan, math.nan)
             model = build_model(load_scene(BASE_SCENE, overrides))
             row.simulated_s = model.scene.scenario.duration
-            refusal = fast_refusal(model) if path == FAST else None
+            refusal = fast_path_refusal(model) if path == FAST else None
             if refusal is not None:
                 row.note = f"refused: {refusal}"
             else:
