@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from numba import njit
-from scipy.integrate import DOP853, RK45
+from scipy.integrate import DOP853, RK45, OdeSolution
 from scipy.linalg import expm
 
 from mech_regulator.solvers.compiled import integrators as compiled
@@ -115,26 +115,28 @@ def vdp_python(t, y):
     return np.array([y[1], (1.0 - y[0] ** 2) * y[1] - y[0]])
 
 
-@pytest.mark.parametrize("method, scipy_method, same_times, same_states", [(compiled.rk45, RK45, 1e-12, 1e-11),
-                                                                            (compiled.dop853, DOP853, 1e-10, 1e-8)])
-def test_the_same_steps_as_scipy(method, scipy_method, same_times, same_states):
-    """Van der Pol at mu = 1 over [0, 20]: scipy's solver stepped by hand takes the same steps (times to 1e-12
-    relative; DOP853's error estimate, a 13-term cancellation, carries the round-off of the BLAS sums to
-    3e-11), the same rhs calls (scipy's DOP853 spends its 3 dense-output calls when asked, here every step)
-    and the same states and dense output up to that round-off (RK45: 1e-11 on |x| <= 2 after 176 steps;
-    DOP853: its step edges shifted by 1e-10 s move the states by 1e-9)."""
+@pytest.mark.parametrize("method, scipy_method, same_solution", [(compiled.rk45, RK45, 5e-12),
+                                                                 (compiled.dop853, DOP853, 1e-12)])
+def test_the_same_steps_as_scipy(method, scipy_method, same_solution):
+    """Van der Pol at mu = 1 over [0, 20]: scipy's solver stepped by hand takes the same steps and the same rhs
+    calls (scipy's DOP853 spends its 3 dense-output calls when asked, here every step). The step edges agree to
+    1e-7 relative, not to round-off: the error estimate is a sum of stages that cancel, the compiled stepper sums
+    them in plain loops where scipy calls BLAS, and the controller carries that difference (measured 1.4e-8). The
+    solution is the same: the compiled states at its own step edges and its dense output inside the steps lie on
+    scipy's dense output to 5e-12 on |x| <= 2 (measured 1.4e-13 and 5e-13 after 176 RK45 steps; 4e-14 and
+    7e-14 after 69 DOP853 steps), and the end states agree to 1e-12."""
     run = adaptive(method, van_der_pol, [2.0, 0.0], 20.0, [1.0], rtol=1e-6, atol=1e-9)
     solver = scipy_method(vdp_python, 0.0, np.array([2.0, 0.0]), 20.0, rtol=1e-6, atol=1e-9)
-    times, starts, dense = stepped(solver)
+    times, _, dense = stepped(solver)
     assert run.status == compiled.REACHED and run.n_steps == len(dense) > 50
-    np.testing.assert_allclose(run.times, times, rtol=same_times, atol=0)
-    np.testing.assert_allclose(run.y_old, starts, rtol=0, atol=same_states)
-    np.testing.assert_allclose(run.y_end, solver.y, rtol=0, atol=same_states)
     assert run.nfev == solver.nfev
-    inside = times[:-1] + np.array([0.13, 0.5, 0.91])[:, None] * np.diff(times)
-    expected = np.hstack([np.column_stack([dense[k](inside[i, k]) for i in range(3)]) for k in range(len(dense))])
-    np.testing.assert_allclose(run.dense(inside.T.ravel()), expected, rtol=0, atol=same_states)
-    assert run.last_step == pytest.approx(solver.step_size, abs=20.0 * same_times)
+    np.testing.assert_allclose(run.times, times, rtol=1e-7, atol=0)
+    scipy_solution = OdeSolution(times, dense)
+    np.testing.assert_allclose(run.y_old, scipy_solution(run.times[:-1]).T, rtol=0, atol=same_solution)
+    np.testing.assert_allclose(run.y_end, solver.y, rtol=0, atol=1e-12)
+    inside = (run.times[:-1] + np.array([0.13, 0.5, 0.91])[:, None] * np.diff(run.times)).T.ravel()
+    np.testing.assert_allclose(run.dense(inside), scipy_solution(inside), rtol=0, atol=same_solution)
+    assert run.last_step == pytest.approx(solver.step_size, rel=1e-7)
 
 
 def test_dop853_dense_output_in_powers_of_theta_is_scipys():
@@ -152,7 +154,7 @@ def test_a_warm_start_takes_scipys_first_step():
     """first_step given: no initial-step selection (one rhs call fewer), scipy's steps with the same first_step."""
     run = adaptive(compiled.rk45, van_der_pol, [2.0, 0.0], 3.0, [1.0], first_step=0.05)
     times, _, _ = stepped(RK45(vdp_python, 0.0, np.array([2.0, 0.0]), 3.0, rtol=1e-6, atol=1e-9, first_step=0.05))
-    np.testing.assert_allclose(run.times, times, rtol=1e-12)
+    np.testing.assert_allclose(run.times, times, rtol=1e-7)  # round-off carried by the controller, as above
 
 
 @pytest.mark.parametrize("method, rtol, error", [(compiled.rk45, 1e-9, 1e-7), (compiled.dop853, 1e-9, 1e-8),
@@ -241,10 +243,16 @@ def test_a_dip_inside_one_step_is_caught_for_a_linear_guard():
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.5 - np.sqrt(0.001), abs=1e-12)
 
 
-def test_a_tangency_is_no_event():
-    """x = (t - 0.5)^2 touches 0 at t = 0.5 without going below: the mode holds."""
-    run = adaptive(compiled.rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, 0.0, np.inf], lines=POSITION_LINE)
-    assert run.status == compiled.REACHED
+@pytest.mark.parametrize("level, fires", [(-1e-10, False), (1e-10, True)])
+def test_a_near_tangency_fires_only_when_it_dips(level, fires):
+    """x = (t - 0.5)^2 against the guard x - level: a parabola that stays 1e-10 above the level holds the mode
+    (the exact polynomial roots do not take a near-tangency for a crossing), one that dips 1e-10 below it fires
+    where it crosses, t = 0.5 - 1e-5."""
+    run = adaptive(compiled.rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, level, np.inf],
+                   lines=np.array([[1.0, -level, 1.0, 0.0]]))
+    assert run.status == (compiled.EVENT if fires else compiled.REACHED)
+    if fires:
+        assert run.event_time == pytest.approx(0.5 - 1e-5, abs=1e-9)
 
 
 def test_a_dip_between_the_reference_probes_is_caught_for_a_nonlinear_guard():

@@ -209,6 +209,11 @@ class MachineModel:
 
         Periods are taken as rational multiples of 2 pi; a machine with nothing periodic in phi gets 2 pi.
         """
+        return self._dynamic_period
+
+    @functools.cached_property
+    def _dynamic_period(self) -> float:
+        """dynamic_period, worked out once per model (the solvers ask for it at every segment)."""
         turns = [Fraction(1)]
         driven = self.driven.effects if self.driven is not None else ()
         turns += [Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
@@ -240,12 +245,17 @@ class MachineModel:
 
     def switch_grid(self) -> list[float]:
         """All switch angles within one dynamic period, sorted, in [0, Phi_omega) [rad]."""
+        return list(self._switch_grid)
+
+    @functools.cached_property
+    def _switch_grid(self) -> tuple[float, ...]:
+        """switch_grid, worked out once per model (the solvers ask for it at every segment)."""
         period = self.dynamic_period()
         angles = set()
         for angle, switch_period in self.switch_angles():
             for k in range(int(round(period / switch_period))):
                 angles.add(round((angle + k * switch_period) % period, 12))
-        return sorted(angles)
+        return tuple(sorted(angles))
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
             mode: Mode | None = None, ideal: bool = False) -> RightHandSide:

@@ -58,6 +58,8 @@ DRIVEN_CODE = {FORWARD: 0.0, BACKWARD: 1.0, HELD: 2.0}
 ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5
 
 _LOADED: dict[str, object] = {}  # module hash -> imported module, for the whole process
+_RECENT: dict[int, CompiledScene] = {}  # id(model) -> its CompiledScene, the last RECENT_MODELS models compiled
+RECENT_MODELS = 64
 
 
 @dataclass(frozen=True)
@@ -117,7 +119,11 @@ class CompiledScene:
 
 def compile_scene(model: MachineModel) -> CompiledScene:
     """The compiled right-hand side and guards of a scene (generated, written to the cache and imported once per
-    process; numba compiles only on the first start with an empty cache)."""
+    process; numba compiles only on the first start with an empty cache). A model compiled lately is answered
+    from memory (a model is immutable; its entry holds it, so its id is not reused while there)."""
+    recent = _RECENT.get(id(model))
+    if recent is not None and recent.model is model:
+        return recent
     source, parameters, n_guards, window_slot = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
@@ -131,7 +137,12 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
         spec.loader.exec_module(module)
         _LOADED[digest] = module
-    return CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters, n_guards, window_slot, source, path)
+    compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
+                             n_guards, window_slot, source, path)
+    if len(_RECENT) >= RECENT_MODELS:
+        del _RECENT[next(iter(_RECENT))]
+    _RECENT[id(model)] = compiled
+    return compiled
 
 
 @functools.cache

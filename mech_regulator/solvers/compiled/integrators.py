@@ -109,11 +109,12 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     n = y0.size
     powers = 7 if method == _DOP853 else 4
     stages = DOP853_A.shape[0] if method == _DOP853 else RK45_A.shape[0] + 1
-    capacity = 16
+    capacity = 256
     times = np.empty(capacity + 1)
     y_old = np.empty((capacity, n))
     coefficients = np.zeros((capacity, n, powers))
     stage = np.empty((stages, n))
+    work = np.empty(n)
     jacobian = np.empty((n, n))
     dfdt = np.empty(n)
     levels = np.empty(max(n_guards, 1))
@@ -180,7 +181,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                 else:
                     nfev += _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new)
                     error = _error_norm(method, stage, h, y, y_new, rtol, atol)
-                finite = np.all(np.isfinite(y_new))
+                finite = _finite(y_new)
                 if error < 1.0:
                     factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error ** exponent)
                     if rejected:
@@ -192,13 +193,14 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                 rejected = True
             if status >= 0:
                 break
-        if not np.all(np.isfinite(y_new)):
+        if not _finite(y_new):
             status, failure = FAILED, NONFINITE
             break
         if n_steps == capacity:
             times, y_old, coefficients = _grown(times, y_old, coefficients)
             capacity *= 2
-        nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, coefficients[n_steps])
+        nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work,
+                                    coefficients[n_steps])
         y_old[n_steps] = y
         y_old[n_steps, 0] += offset
         times[n_steps + 1] = t_new
@@ -247,6 +249,15 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
 
 
 @njit(cache=True)
+def _finite(x):
+    """Whether every entry of x is finite (no temporary array)."""
+    for value in x:
+        if not np.isfinite(value):
+            return False
+    return True
+
+
+@njit(cache=True)
 def _grown(times, y_old, coefficients):
     """The output arrays with twice the room for steps, the stored steps copied."""
     capacity = y_old.shape[0]
@@ -286,18 +297,30 @@ def _initial_step(rhs, t0, y0, f0, t_bound, max_step, order, rtol, atol, p, y1, 
 
 
 @njit(cache=True)
+def _stage_state(y, h, stage, weights, count, out):
+    """out = y + h sum_{s < count} weights[s] stage[s]: the state a Runge–Kutta stage is evaluated at (plain
+    loops over preallocated arrays: for a machine of a few states this is most of a step's cost)."""
+    for i in range(y.size):
+        total = 0.0
+        for s in range(count):
+            total += weights[s] * stage[s, i]
+        out[i] = y[i] + h * total
+
+
+@njit(cache=True)
 def _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new):
     """One explicit Runge–Kutta step as scipy's rk_step: stage[s] = f(t + c_s h, y + h sum_j a_sj stage[j]),
-    y_new = y + h sum_s b_s stage[s], f_new = f(t + h, y_new) kept as the last stage (FSAL).
-    Returns the number of rhs evaluations."""
+    y_new = y + h sum_s b_s stage[s], f_new = f(t + h, y_new) kept as the last stage (FSAL); the stage states
+    are built in y_new. Returns the number of rhs evaluations."""
     if method == _DOP853:
         a, b, c, count = DOP853_A, DOP853_B, DOP853_C, DOP853_STAGES
     else:
         a, b, c, count = RK45_A, RK45_B, RK45_C, RK45_B.size
     stage[0] = f
-    for s in range(1, count):  # np.dot on the transposed stages, as scipy: the same BLAS sums, the same round-off
-        rhs(t + c[s] * h, y + np.dot(stage[:s].T, a[s, :s].copy()) * h, p, stage[s])
-    y_new[:] = y + h * np.dot(stage[:count].T, b)
+    for s in range(1, count):
+        _stage_state(y, h, stage, a[s], s, y_new)
+        rhs(t + c[s] * h, y_new, p, stage[s])
+    _stage_state(y, h, stage, b, count, y_new)
     rhs(t + h, y_new, p, f_new)
     stage[count] = f_new
     return count
@@ -305,28 +328,49 @@ def _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new):
 
 @njit(cache=True)
 def _error_norm(method, stage, h, y, y_new, rtol, atol):
-    """scipy's error norm of an explicit step, scaled by atol + rtol max(|y|, |y_new|): RK45's RMS of
-    h sum_s e_s stage[s]; DOP853's |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2))."""
-    scale = atol + np.maximum(np.abs(y), np.abs(y_new)) * rtol
+    """scipy's error norm of an explicit step, scaled by scale_i = atol_i + rtol max(|y_i|, |y_new_i|): RK45's RMS
+    of h sum_s e_s stage[s] / scale; DOP853's |h| |err5|^2 / sqrt(n (|err5|^2 + 0.01 |err3|^2)) with
+    err5, err3 = sum_s e5_s stage[s] / scale, sum_s e3_s stage[s] / scale."""
+    n = y.size
     if method == _RK45:
-        return _rms(np.dot(stage[:RK45_E.size].T, RK45_E) * h / scale)
-    err5 = np.dot(stage[:DOP853_E5.size].T, DOP853_E5) / scale
-    err3 = np.dot(stage[:DOP853_E3.size].T, DOP853_E3) / scale
-    err5_2 = np.sum(err5 * err5)
-    err3_2 = np.sum(err3 * err3)
+        total = 0.0
+        for i in range(n):
+            error = 0.0
+            for s in range(RK45_E.size):
+                error += RK45_E[s] * stage[s, i]
+            error *= h / (atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol)
+            total += error * error
+        return np.sqrt(total / n)
+    err5_2, err3_2 = 0.0, 0.0
+    for i in range(n):
+        err5, err3 = 0.0, 0.0
+        for s in range(DOP853_E5.size):
+            err5 += DOP853_E5[s] * stage[s, i]
+            err3 += DOP853_E3[s] * stage[s, i]
+        scale = atol[i] + max(abs(y[i]), abs(y_new[i])) * rtol
+        err5_2 += (err5 / scale) ** 2
+        err3_2 += (err3 / scale) ** 2
     if err5_2 == 0.0 and err3_2 == 0.0:
         return 0.0
-    return abs(h) * err5_2 / np.sqrt((err5_2 + 0.01 * err3_2) * scale.size)
+    return abs(h) * err5_2 / np.sqrt((err5_2 + 0.01 * err3_2) * n)
 
 
 @njit(cache=True)
 def _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new):
-    """One classic RK4 step (k1 = f, k2, k3 at t + h/2, k4 at t + h) and f_new = f(t + h, y_new).
-    Returns the number of rhs evaluations."""
-    rhs(t + 0.5 * h, y + 0.5 * h * f, p, stage[1])
-    rhs(t + 0.5 * h, y + 0.5 * h * stage[1], p, stage[2])
-    rhs(t + h, y + h * stage[2], p, stage[3])
-    y_new[:] = y + h / 6.0 * (f + 2.0 * stage[1] + 2.0 * stage[2] + stage[3])
+    """One classic RK4 step (k1 = f, k2, k3 at t + h/2, k4 at t + h; the stage states built in y_new) and
+    f_new = f(t + h, y_new). Returns the number of rhs evaluations."""
+    n = y.size
+    for i in range(n):
+        y_new[i] = y[i] + 0.5 * h * f[i]
+    rhs(t + 0.5 * h, y_new, p, stage[1])
+    for i in range(n):
+        y_new[i] = y[i] + 0.5 * h * stage[1, i]
+    rhs(t + 0.5 * h, y_new, p, stage[2])
+    for i in range(n):
+        y_new[i] = y[i] + h * stage[2, i]
+    rhs(t + h, y_new, p, stage[3])
+    for i in range(n):
+        y_new[i] = y[i] + h / 6.0 * (f[i] + 2.0 * stage[1, i] + 2.0 * stage[2, i] + stage[3, i])
     rhs(t + h, y_new, p, f_new)
     return 4
 
@@ -372,20 +416,26 @@ def _rosenbrock_step(rhs, t, y, f, h, jacobian, dfdt, rtol, atol, p, stage, y_ne
 
 
 @njit(cache=True)
-def _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, out):
+def _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work, out):
     """The accepted step's dense output as powers of theta, out[i, j-1] the coefficient of h theta^j:
     RK45 stage^T P; the Hermite cubic from y, y_new, f, f_new; ode23s's
     y + h (theta (1 - theta) k1 + theta (theta - 2d) k2) / (1 - 2d); DOP853's nested form after 3 extra
-    stages. Returns the number of rhs evaluations (DOP853's extra stages)."""
+    stages (work: room for a stage's state). Returns the number of rhs evaluations (DOP853's extra stages)."""
     if method == _RK45:
-        out[:, :] = np.dot(stage.T, RK45_P)
+        for i in range(y.size):
+            for j in range(RK45_P.shape[1]):
+                total = 0.0
+                for s in range(RK45_P.shape[0]):
+                    total += stage[s, i] * RK45_P[s, j]
+                out[i, j] = total
         return 0
     if method == _RK4:
-        slope = (y_new - y) / h
-        out[:, 0] = f
-        out[:, 1] = 3.0 * slope - 2.0 * f - f_new
-        out[:, 2] = f + f_new - 2.0 * slope
-        out[:, 3] = 0.0
+        for i in range(y.size):
+            slope = (y_new[i] - y[i]) / h
+            out[i, 0] = f[i]
+            out[i, 1] = 3.0 * slope - 2.0 * f[i] - f_new[i]
+            out[i, 2] = f[i] + f_new[i] - 2.0 * slope
+            out[i, 3] = 0.0
         return 0
     if method == _ROSENBROCK23:
         scale = 1.0 / (1.0 - 2.0 * ROSENBROCK_D)
@@ -393,32 +443,41 @@ def _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, out):
         out[:, 1] = (stage[1] - stage[0]) * scale
         out[:, 2:] = 0.0
         return 0
-    return _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, out)
+    return _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, work, out)
 
 
 @njit(cache=True)
-def _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, out):
+def _dop853_dense(rhs, t, y, f, h, y_new, f_new, p, stage, work, out):
     """scipy's DOP853 dense output: 3 extra stages, F = [dy, h f - dy, 2 dy - h (f_new + f), h D stage]
     (dy = y_new - y), y(theta) = y + x (F0 + (1 - x) (F1 + x (F2 + (1 - x) (F3 + ...)))) expanded into powers
     of theta and divided by h. Returns 3 (rhs evaluations)."""
-    n = y.size
     for s in range(DOP853_STAGES + 1, DOP853_A.shape[0]):
-        rhs(t + DOP853_C[s] * h, y + np.dot(stage[:s].T, DOP853_A[s, :s].copy()) * h, p, stage[s])
-    nested = np.empty((7, n))
-    delta = y_new - y
-    nested[0] = delta
-    nested[1] = h * f - delta
-    nested[2] = 2.0 * delta - h * (f_new + f)
-    nested[3:] = h * np.dot(DOP853_D, stage)
-    poly = np.zeros((n, 8))  # poly[:, j]: coefficient of theta^j
-    for i in range(6, -1, -1):
-        poly[:, 0] += nested[i]
-        if (6 - i) % 2 == 0:  # times theta
-            poly[:, 1:] = poly[:, :-1].copy()
-            poly[:, 0] = 0.0
-        else:  # times (1 - theta)
-            poly[:, 1:] -= poly[:, :-1].copy()
-    out[:, :] = poly[:, 1:] / h
+        _stage_state(y, h, stage, DOP853_A[s], s, work)
+        rhs(t + DOP853_C[s] * h, work, p, stage[s])
+    nested = np.empty(7)
+    poly = np.empty(8)  # poly[j]: coefficient of theta^j
+    for i in range(y.size):
+        delta = y_new[i] - y[i]
+        nested[0] = delta
+        nested[1] = h * f[i] - delta
+        nested[2] = 2.0 * delta - h * (f_new[i] + f[i])
+        for row in range(DOP853_D.shape[0]):
+            total = 0.0
+            for s in range(DOP853_D.shape[1]):
+                total += DOP853_D[row, s] * stage[s, i]
+            nested[3 + row] = h * total
+        poly[:] = 0.0
+        for k in range(6, -1, -1):
+            poly[0] += nested[k]
+            if (6 - k) % 2 == 0:  # times theta
+                for j in range(7, 0, -1):
+                    poly[j] = poly[j - 1]
+                poly[0] = 0.0
+            else:  # times (1 - theta)
+                for j in range(7, 0, -1):
+                    poly[j] -= poly[j - 1]
+        for j in range(7):
+            out[i, j] = poly[j + 1] / h
     return 3
 
 
