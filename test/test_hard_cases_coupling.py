@@ -11,14 +11,19 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 from scipy.linalg import expm
 
 from mech_regulator.analysis import energy_balance
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
-from mech_regulator.solvers.advice import coupling_modes, stiffness_advice
+from mech_regulator.scene import SceneError
+from mech_regulator.solvers import simulate
+from mech_regulator.solvers.advice import (coupling_modes, rk4_amplification, rk4_largest_stable_step,
+                                           rk4_stability_refusal, stiffness_advice)
 from mech_regulator.solvers.cosim import cosimulate
-from support import run_cli, simulate_complete
+from mech_regulator.solvers.time_domain import integrate_time_domain
+from support import run_cli, simulate_complete, write_scene
 
 J1, I2 = 0.5, 0.2  # crank side and driven part [kg m^2]
 DRIVE, VISCOUS_1, VISCOUS_2, LOAD = 40.0, 0.05, 0.1, 10.0  # [N m], [N m s/rad], [N m s/rad], [N m]
@@ -190,3 +195,38 @@ def test_scene_errors_for_the_coupling(tmp_path, capsys):
     assert code == 2 and "machine.coupling" in err
     code, out, _ = run_cli(capsys, "describe", "two_mass")
     assert code == 0 and "coupling: M_m = 5000 twist" in out and "natural frequency 261.6 rad/s" in out
+
+
+def test_rk4_largest_stable_step_closed_forms():
+    """RK4's stability boundary, |R(z)| = 1, R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24: on the imaginary axis at
+    |z| = 2 sqrt 2 (|R(iy)|^2 = 1 - y^6/72 + y^8/576), on the negative real axis at the real root of
+    R(z) - 1 = z (1 + z/2 + z^2/6 + z^3/24), i.e. of z^3 + 4 z^2 + 12 z + 24 (-2.785)."""
+    assert rk4_largest_stable_step(2000j) == pytest.approx(2.0 * math.sqrt(2.0) / 2000.0, rel=1e-9)
+    real_root = min(root.real for root in np.roots([1.0, 4.0, 12.0, 24.0]) if abs(root.imag) < 1e-12)
+    assert rk4_largest_stable_step(-500.0) == pytest.approx(-real_root / 500.0, rel=1e-9)
+    assert rk4_amplification(-1.0) == pytest.approx(math.exp(-1.0), abs=1e-2)  # one step of y' = -y, h = 1
+
+
+def test_rk4_beyond_its_stability_limit_is_refused_and_would_blow_up(capsys, tmp_path):
+    """A lightly damped coupling (k = 1e6 N m/rad, zeta = 0.026): RK4 at 0.9 of the largest stable step for its
+    fastest mode keeps the vibration bounded and the speeds near the matrix exponential's; at 1.1 of it the
+    integration itself (run without the check) grows the twist a thousandfold; simulate and the command refuse
+    that step with a message naming solver.step and the largest step."""
+    stiffness, damping = 1e6, 20.0
+    model = build_model(validate_scene(linear_scene(stiffness, damping)))
+    largest = rk4_largest_stable_step(coupling_modes(model).fastest)
+    times = np.linspace(0.0, 0.3, 31)
+    exact = exact_linear(stiffness, damping, times)
+    stable = build_model(validate_scene(linear_scene(stiffness, damping, "RK4", step=0.9 * largest)))
+    assert rk4_stability_refusal(stable) is None
+    run = simulate_complete(stable)
+    assert np.max(np.abs(run(times)[2])) < 2.0 * np.max(np.abs(exact[2]))
+    assert np.max(np.abs(run(times)[1] - exact[1])) < 1e-2 * np.max(np.abs(exact[1]))
+    unstable = build_model(validate_scene(linear_scene(stiffness, damping, "RK4", step=1.1 * largest)))
+    grown = integrate_time_domain(unstable)
+    assert grown.status == "failed" or np.max(np.abs(grown(times)[2])) > 1e3 * np.max(np.abs(exact[2]))
+    with pytest.raises(SceneError, match=r"solver.step = .*: RK4 is unstable .* expected solver.step <= "):
+        simulate(unstable)
+    path = write_scene(tmp_path, yaml.safe_dump(linear_scene(stiffness, damping, "RK4", step=1.1 * largest)))
+    code, _, err = run_cli(capsys, "simulate", str(path), "--quiet")
+    assert code == 2 and f"{largest:.3g}" in err, err
