@@ -45,8 +45,9 @@ def to_nanoseconds(time: float) -> int:
 
 
 class MachineStepper:
-    """The machine without its governor: (phi, omega) advanced over exchange steps with the throttle and
-    the external load held. overspeed_trip [rad/s] (0: none) closes the throttle for good once the
+    """The machine without its governor: (phi, omega) and a coupling's (twist, omega_driven) advanced over
+    exchange steps with the throttle and the external load held, in the drive train's mode (a driven part
+    held at rest, turning forwards or backwards; None without a coupling). overspeed_trip [rad/s] (0: none) closes the throttle for good once the
     speed at an exchange time exceeds it, as the trip valve of a real engine does."""
 
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
@@ -54,6 +55,7 @@ class MachineStepper:
         self._segment = segment_for(self.plant)
         initial = model.initial_state()
         self.state = np.concatenate([initial[:2], initial[model.coupling_index:]]) if model.coupling else initial[:2]
+        self.mode = self.plant.initial_mode(self.state)
         self.time = 0.0
         self.overspeed_trip = overspeed_trip
         self.tripped_at: float | None = None
@@ -73,7 +75,8 @@ class MachineStepper:
         throttle = self.applied_throttle(throttle)
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
         piece = LoadPiece(self.time, t_end, external_load, 0.0, throttle)
-        self.state, _ = self._segment(self.plant, piece, self.time, t_end, self.state, None, stretch, None)
+        self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch,
+                                              None)
         self.time = stretch.t_end
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
