@@ -47,8 +47,9 @@ def to_nanoseconds(time: float) -> int:
 class MachineStepper:
     """The machine without its governor: (phi, omega) and a coupling's (twist, omega_driven) advanced over
     exchange steps with the throttle and the external load held, in the drive train's mode (a driven part
-    held at rest, turning forwards or backwards; None without a coupling). overspeed_trip [rad/s] (0: none) closes the throttle for good once the
-    speed at an exchange time exceeds it, as the trip valve of a real engine does."""
+    held at rest, turning forwards or backwards; None without a coupling). overspeed_trip [rad/s] (0: none)
+    closes the throttle for good once the speed at an exchange time exceeds it, as the trip valve of a real
+    engine does."""
 
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
         self.plant = dataclasses.replace(model, governor=None, load_pieces=())

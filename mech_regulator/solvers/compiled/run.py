@@ -60,6 +60,7 @@ class _Layout(NamedTuple):
 
     @classmethod
     def of(cls, model: MachineModel, compiled: CompiledScene) -> _Layout:
+        """The layout of a model and its compiled scene."""
         return cls(grid=model.switch_grid(), period=model.dynamic_period(),
                    wraps=model.reduced is not None or "phi" in model.depends_on(),
                    atol=np.full(len(model.state_names()), model.scene.solver.atol),
