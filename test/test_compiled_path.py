@@ -393,10 +393,8 @@ def test_failure_and_interruption_keep_what_was_computed():
     assert np.all(np.isfinite(interrupted(np.linspace(0.0, interrupted.t_end, 11))))
 
 
-def test_cli_fast_path_run_and_cosimulation_refusal(capsys, tmp_path):
+def test_cli_fast_path_run(capsys, tmp_path):
+    # (the co-simulation, --exchange-step, on the fast path: test_cosim_fast.py)
     code, out, _ = run_cli(capsys, "simulate", "lathe", "--quiet", "--set", "solver.path=fast", "--set",
                            "scenario.duration=1.0", "--out", str(tmp_path / "lathe.csv"))
     assert code == 0 and (tmp_path / "lathe.csv").exists()
-    code, _, err = run_cli(capsys, "simulate", "engine_direct", "--quiet", "--exchange-step", "0.01", "--set",
-                           "solver.path=fast")
-    assert code == 2 and "the co-simulation steps the reference path" in err

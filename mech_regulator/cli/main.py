@@ -251,9 +251,6 @@ def _cosimulate(model, args) -> int:
                          "--exchange-step")
     if not args.overspeed_trip >= 0.0:
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
-    if model.scene.solver.path == "fast":
-        raise SceneError(f"--exchange-step {args.exchange_step:g}: the co-simulation steps the reference path; "
-                         "expected solver.path: reference (or simulate without --exchange-step)")
     duration = model.scene.scenario.duration
     with progress_bar(duration, args.quiet) as bar:
         run = cosimulate(model, args.exchange_step, args.overspeed_trip,

@@ -12,7 +12,9 @@ exchange steps h on a grid of whole nanoseconds, t_k = k h (the stamps of ROS me
 
 Each subsystem is the monolithic model with the other part taken out, integrated by the same solver
 loop (modes, guards, switches), so the only difference from the monolithic simulation is the hold:
-the error is first order in h (docs/ros.md gives the measured constant).
+the error is first order in h (docs/ros.md gives the measured constant). The scene's solver.path chooses
+that loop's stepping: the reference path's, or the compiled fast path's (solvers/compiled/run.py), each
+subsystem compiled once when its stepper is made.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from mech_regulator.solvers.time_domain import _segment
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
 NANOSECONDS = 1_000_000_000
+_STATISTICS = tuple(item.name for item in dataclasses.fields(SolverStats))
 
 
 def seconds(nanoseconds: int) -> float:
@@ -42,14 +45,18 @@ def to_nanoseconds(time: float) -> int:
 
 
 class MachineStepper:
-    """The machine without its governor: (phi, omega) advanced over exchange steps with the throttle and
-    the external load held. overspeed_trip [rad/s] (0: none) closes the throttle for good once the
-    speed at an exchange time exceeds it, as the trip valve of a real engine does."""
+    """The machine without its governor: (phi, omega) and a coupling's (twist, omega_driven) advanced over
+    exchange steps with the throttle and the external load held, in the drive train's mode (a driven part
+    held at rest, turning forwards or backwards; None without a coupling). overspeed_trip [rad/s] (0: none)
+    closes the throttle for good once the speed at an exchange time exceeds it, as the trip valve of a real
+    engine does."""
 
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
         self.plant = dataclasses.replace(model, governor=None, load_pieces=())
+        self._segment = segment_for(self.plant)
         initial = model.initial_state()
         self.state = np.concatenate([initial[:2], initial[model.coupling_index:]]) if model.coupling else initial[:2]
+        self.mode = self.plant.initial_mode(self.state)
         self.time = 0.0
         self.overspeed_trip = overspeed_trip
         self.tripped_at: float | None = None
@@ -69,7 +76,8 @@ class MachineStepper:
         throttle = self.applied_throttle(throttle)
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
         piece = LoadPiece(self.time, t_end, external_load, 0.0, throttle)
-        self.state, _ = _segment(self.plant, piece, self.time, t_end, self.state, None, stretch, None)
+        self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch,
+                                              None)
         self.time = stretch.t_end
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
@@ -100,6 +108,7 @@ class GovernorStepper:
         self.regulator = dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False,
                                              effects=(), load_pieces=(), coupling=None, clutch=None,
                                              joint_friction=None)
+        self._segment = segment_for(self.regulator)
         self.governor = model.governor
         self.state = model.initial_state()[:model.coupling_index]
         self.mode = self.regulator.initial_mode(self.state)
@@ -122,8 +131,8 @@ class GovernorStepper:
             self._before_anticipation = None
         if time > self.time:
             stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
-            self.state, self.mode = _segment(self.regulator, None, self.time, time, self.state, self.mode,
-                                             stretch, None)
+            self.state, self.mode = self._segment(self.regulator, None, self.time, time, self.state, self.mode,
+                                                  stretch, None)
             self.time = stretch.t_end
             self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
             self.status, self.message = _accumulate(self.stats, stretch)
@@ -157,10 +166,21 @@ class GovernorStepper:
         return values
 
 
+def segment_for(subsystem: MachineModel):
+    """What steps a subsystem over one exchange step (time_domain._segment's arguments and result): the reference
+    path's _segment, or on solver.path: fast the subsystem's compiled twin (compiled here, once; a scene the fast
+    path cannot run raises SceneError naming the key, solvers/compiled.fast_path_refusal)."""
+    if subsystem.scene.solver.path != "fast":
+        return _segment
+    from mech_regulator.solvers.compiled.run import compiled_segment  # numba is imported only when needed
+
+    return compiled_segment(subsystem)
+
+
 def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
     """Add a stretch's solver statistics to the running totals; returns its status and message."""
-    for item in dataclasses.fields(SolverStats):
-        setattr(stats, item.name, getattr(stats, item.name) + getattr(stretch.stats, item.name))
+    for name in _STATISTICS:
+        setattr(stats, name, getattr(stats, name) + getattr(stretch.stats, name))
     return stretch.status, stretch.message
 
 

@@ -300,8 +300,9 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     machine = model.scene.machine
     p = _Parameters()
     body: list[str] = ["phi = y[0]", "omega = y[1]"]
-    if machine.mechanism is not None:
-        body.append(f"J_links, dJ, total, q, dq = {_reduced_call(machine.mechanism, machine.gravity, p, 'phi')}")
+    if model.reduced is not None:  # the model's, not the scene's: a co-simulated governor has no mechanism
+        gravity = machine.gravity if model.has_weight else None
+        body.append(f"J_links, dJ, total, q, dq = {_reduced_call(machine.mechanism, gravity, p, 'phi')}")
     else:
         body.append("J_links, dJ, total, q, dq = 0.0, 0.0, 0.0, 0.0, 0.0")
     body.append(f"J = {p.scalar(model.inertia_constant)} + J_links")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -33,25 +34,47 @@ def integrate_compiled(model: MachineModel, progress: Progress | None = None) ->
     """Integrate the scene's scenario on the fast path; returns the (possibly partial) trajectory, with the same
     statuses and messages as the reference path (time_domain.integrate_time_domain). A scene the fast path cannot
     run raises SceneError (fast_path_refusal)."""
+    return integrate_time_domain(model, progress, compiled_segment(model))
+
+
+def compiled_segment(model: MachineModel):
+    """time_domain._segment's compiled twin for this model (same arguments and result; the scene compiled once here):
+    what integrate_compiled and the co-simulation's steppers (solvers/cosim.py) step a load piece or an exchange
+    step with. A model the fast path cannot run raises SceneError (fast_path_refusal)."""
     reason = fast_path_refusal(model)
     if reason is not None:
         raise SceneError(reason)
     compiled = compile_scene(model)
-    return integrate_time_domain(model, progress, functools.partial(_compiled_segment, compiled))
+    return functools.partial(_compiled_segment, compiled, _Layout.of(model, compiled))
 
 
-def _compiled_segment(compiled: CompiledScene, model: MachineModel, piece, t_start: float, t_end: float,
-                      y: np.ndarray, mode, trajectory: Trajectory, progress: Progress | None):
+class _Layout(NamedTuple):
+    """What every segment of a model reuses (a co-simulation steps thousands of short ones): its switch grid [rad],
+    dynamic period [rad], whether the crank angle is wrapped, the absolute tolerances and the guards' thresholds."""
+
+    grid: list[float]
+    period: float
+    wraps: bool
+    atol: np.ndarray
+    thresholds: np.ndarray
+
+    @classmethod
+    def of(cls, model: MachineModel, compiled: CompiledScene) -> _Layout:
+        """The layout of a model and its compiled scene."""
+        return cls(grid=model.switch_grid(), period=model.dynamic_period(),
+                   wraps=model.reduced is not None or "phi" in model.depends_on(),
+                   atol=np.full(len(model.state_names()), model.scene.solver.atol),
+                   thresholds=np.zeros(compiled.n_guards))  # the steppers apply time_domain's GUARD_TOLERANCE
+
+
+def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineModel, piece, t_start: float,
+                      t_end: float, y: np.ndarray, mode, trajectory: Trajectory, progress: Progress | None):
     """time_domain._segment on the fast path: step [t_start, t_end] with the compiled stepper, restarting at every
     event (mode transition applied), switch angle and wrap of the crank angle; returns the state and mode at the
     end."""
     settings = model.scene.solver
-    grid = model.switch_grid()
-    period = model.dynamic_period()
-    wraps = model.reduced is not None or "phi" in model.depends_on()
+    grid, period, wraps, atol, thresholds = layout
     wrap_limit = RESTART_PERIODS * period if wraps else math.inf
-    atol = np.full(y.size, settings.atol)
-    thresholds = np.zeros(compiled.n_guards)  # the steppers apply time_domain's GUARD_TOLERANCE semantics
     t, first_step = t_start, 0.0
     instant_events = 0
     while t < t_end and trajectory.status == "complete":
