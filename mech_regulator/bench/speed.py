@@ -22,7 +22,8 @@ Also measured: the cost against simulated time (fast and reference), against the
 (effect_cost.EFFECT_CHAIN, fast and reference per link; a link the fast path refuses is shown as such), against
 the number of scenes in a sweep (analysis.sweep.run_sweep on 1 and 2 processes), the start-up
 cost (cold: empty compile caches, and warm, each in a fresh Python process; the package's import time) and,
-optionally (ros=True), the lockstep ROS main job at a 1 ms exchange step. Numbers to print, never to assert.
+optionally (ros=True), the lockstep ROS main job on both paths at a 1 ms exchange step and on the fast path at
+longer exchange steps, with the exchange's error (measure_ros). Numbers to print, never to assert.
 """
 
 from __future__ import annotations
@@ -71,7 +72,8 @@ SWEEP_SIZES, QUICK_SWEEP_SIZES = (1, 2, 4, 8, 16), (1, 2)
 SWEEP_JOBS = (1, 2)
 REPEAT_BUDGET_S, MAX_REPEATS = 0.3, 7    # a run is repeated to about this much CPU time [s], at most this often
 MAX_ERROR_SAMPLES = 40_001               # MuJoCo's step times are thinned to at most this many for the error
-ROS_SCENE, ROS_DURATIONS, ROS_EXCHANGE = "engine_direct", (1.0, 6.0), 1e-3   # [s]
+ROS_SCENE, ROS_DURATIONS, ROS_EXCHANGE = "engine_direct", (1.0, 6.0), 1e-3   # [s]; the target's exchange step
+ROS_RUNS = ((REFERENCE, 1e-3), (FAST, 1e-3), (FAST, 2e-3), (FAST, 5e-3), (FAST, 1e-2))  # (path, exchange step [s])
 STARTUP_PROGRAM = """
 import time
 start = time.perf_counter()
@@ -402,40 +404,76 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
 
 
 def measure_ros(report: Callable[[Row], None]) -> list[Row]:
-    """Wall time of the lockstep ROS main job (`mech-regulator run`, exchange step ROS_EXCHANGE) on engine_direct
-    shortened to each of ROS_DURATIONS (load step 6 -> 8 N m at 0.5 s): real-time factor = simulated s / wall s;
-    the difference of the two runs gives the wall time per exchange without the nodes' start-up."""
+    """The lockstep ROS main job (`mech-regulator run`, four node processes) on engine_direct shortened to each of
+    ROS_DURATIONS (load step 6 -> 8 N m at 0.5 s), for each (path, exchange step) of ROS_RUNS: wall time (method
+    'nodes'); and the same co-simulation in this process (solvers.cosim.cosimulate, number for number what the
+    nodes compute; method 'in process'), its CPU time and its achieved error: omega's RMS difference from the
+    monolithic run at REFERENCE_RTOL (fast path) at the exchange times, relative to max |omega|. The error is that of
+    the exchange (first order in the step, docs/ros.md), the same for the nodes."""
+    from mech_regulator.solvers.cosim import cosimulate
+
     rows = []
     with tempfile.TemporaryDirectory(prefix="mech-regulator-ros-") as folder:
-        for duration in ROS_DURATIONS:
-            command = [sys.executable, "-m", "mech_regulator", "run", ROS_SCENE, "--quiet", "--exchange-step",
-                       repr(ROS_EXCHANGE), "--out", os.path.join(folder, f"run{duration:g}.rrd"),
-                       "--set", f"scenario.duration={duration!r}",
-                       "--set", "scenario.load_events=[{time: 0.5, torque: 8.0}]"]
-            start = time.perf_counter()
-            done = subprocess.run(command, capture_output=True, text=True, check=False)
-            wall = time.perf_counter() - start
-            row = Row("ros", ROS_SCENE, "ROS lockstep", "nodes", "exchange_step", ROS_EXCHANGE, duration, wall,
-                      steps=round(duration / ROS_EXCHANGE))
-            if done.returncode != 0:
-                row.note = f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1]}"
-            rows.append(row)
-            report(row)
+        for path, exchange in ROS_RUNS:
+            overrides = ["scenario.load_events=[{time: 0.5, torque: 8.0}]"] + (["solver.path=fast"] if path == FAST
+                                                                                else [])
+            for duration in ROS_DURATIONS:
+                settings = overrides + [f"scenario.duration={duration!r}"]
+                command = [sys.executable, "-m", "mech_regulator", "run", ROS_SCENE, "--quiet", "--exchange-step",
+                           repr(exchange), "--out", os.path.join(folder, f"run{duration:g}.rrd")]
+                command += [item for setting in settings for item in ("--set", setting)]
+                start = time.perf_counter()
+                done = subprocess.run(command, capture_output=True, text=True, check=False)
+                row = Row("ros", ROS_SCENE, path, "nodes", "exchange_step", exchange, duration,
+                          time.perf_counter() - start, steps=round(duration / exchange))
+                if done.returncode != 0:
+                    row.note = f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1]}"
+                rows.append(row)
+                report(row)
+            longest = ROS_DURATIONS[-1]
+            settings = overrides + [f"scenario.duration={longest!r}"]
+            model = build_model(load_scene(ROS_SCENE, settings))
+            run, cpu = timed(lambda: cosimulate(model, exchange))
+            exact = simulate(build_model(load_scene(ROS_SCENE, settings + [
+                "solver.path=fast", f"solver.rtol={REFERENCE_RTOL!r}", f"solver.atol={REFERENCE_RTOL * 1e2!r}"])))
+            reference = exact(run.times)[1]
+            error = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / np.max(np.abs(reference)))
+            rows.append(Row("ros", ROS_SCENE, path, "in process", "exchange_step", exchange, longest, cpu,
+                            steps=run.times.size - 1, error=error))
+            report(rows[-1])
     return rows
 
 
-def ros_summary(benchmark: SpeedBenchmark) -> dict[str, float]:
-    """Real-time factor of the longest ROS run (simulated s per wall s, start-up included) and the marginal
-    wall time per exchange [s] between the two runs (start-up excluded); empty without ROS rows."""
-    rows = [row for row in benchmark.of("ros") if not row.note]
-    if len(rows) < 2:
-        return {}
-    short, long = rows[0], rows[-1]
-    per_exchange = (long.cpu_s - short.cpu_s) / (long.steps - short.steps)
-    if per_exchange <= 0.0:  # the nodes' start-up varied by more than the longer run's extra exchanges cost
-        return {"real_time_factor": long.simulated_s / long.cpu_s}
-    return {"real_time_factor": long.simulated_s / long.cpu_s, "marginal_real_time_factor": ROS_EXCHANGE / per_exchange,
-            "wall_per_exchange_s": per_exchange}
+def ros_summary(benchmark: SpeedBenchmark) -> list[dict[str, float | str]]:
+    """Per (path, exchange step) of the ROS rows: the nodes' real-time factor over the longest run (simulated s per
+    wall s, start-up included), the marginal wall time per exchange [s] between the shortest and longest runs and
+    its real-time factor (start-up excluded: what a long run approaches; absent when the start-up varied more than
+    the difference), the in-process co-simulation's real-time factor (CPU) and its achieved error."""
+    found = []
+    for path, exchange in dict.fromkeys((row.path, row.value) for row in benchmark.of("ros")):
+        nodes = [row for row in benchmark.of("ros") if (row.path, row.value, row.method) == (path, exchange, "nodes")
+                 and not row.note]
+        alone = [row for row in benchmark.of("ros") if (row.path, row.value, row.method) == (path, exchange,
+                                                                                            "in process")]
+        item: dict[str, float | str] = {"path": path, "exchange_step_s": exchange}
+        if nodes:
+            item["real_time_factor"] = nodes[-1].simulated_s / nodes[-1].cpu_s
+        if len(nodes) >= 2 and nodes[-1].cpu_s > nodes[0].cpu_s:
+            per_exchange = (nodes[-1].cpu_s - nodes[0].cpu_s) / (nodes[-1].steps - nodes[0].steps)
+            item.update(wall_per_exchange_s=per_exchange, marginal_real_time_factor=exchange / per_exchange)
+        if alone:
+            item.update(in_process_real_time_factor=alone[-1].simulated_s / alone[-1].cpu_s, error=alone[-1].error)
+        found.append(item)
+    return found
+
+
+def ros_target(benchmark: SpeedBenchmark) -> float:
+    """The ROS target's measure: the lockstep nodes at ROS_EXCHANGE on the fast path, start-up excluded (the marginal
+    real-time factor; the start-up-included one when that is not resolved); nan when not measured."""
+    for item in ros_summary(benchmark):
+        if (item["path"], item["exchange_step_s"]) == (FAST, ROS_EXCHANGE):
+            return float(item.get("marginal_real_time_factor", item.get("real_time_factor", math.nan)))
+    return math.nan
 
 
 def run_speed_benchmark(scenes: list[BenchScene], quick: bool = False, ros: bool = False,
@@ -472,7 +510,7 @@ def select_speed_scenes(names: list[str] | None) -> list[BenchScene]:
 
 
 __all__ = ["FAST", "MUJOCO", "PATHS", "REFERENCE", "SOLVE_IVP", "SPEED_SCENES", "TARGETS", "TARGET_ERROR",
-           "PathAtTarget", "Row", "SpeedBenchmark", "at_error", "at_target", "ratios", "ros_summary",
+           "PathAtTarget", "Row", "SpeedBenchmark", "at_error", "at_target", "ratios", "ros_summary", "ros_target",
            "run_speed_benchmark", "select_speed_scenes", "work_precision_front"]
 
 
@@ -490,7 +528,7 @@ def targets(benchmark: SpeedBenchmark) -> list[dict]:
     found = {}
     if benchmark.of("precision", scene=BENCH_SCENE):
         found = ratios(at_target(benchmark, BENCH_SCENE, _scene_duration(benchmark, BENCH_SCENE)))
-    found["ROS real-time factor"] = ros_summary(benchmark).get("real_time_factor", math.nan)
+    found["ROS real-time factor"] = ros_target(benchmark)
     rows = []
     for name, wanted in TARGETS.items():
         measured = found.get(name, math.nan)
@@ -552,16 +590,18 @@ def tables(benchmark: SpeedBenchmark) -> str:
     lines += [f"| {row.path} | {row.setting} | {_number(row.value)} | {_number(row.cpu_s)} | {row.note} |"
               for row in benchmark.of("startup")]
     if benchmark.of("ros"):
-        lines += ["", f"lockstep ROS main job ({ROS_SCENE}, exchange step {ROS_EXCHANGE * 1e3:g} ms, wall time)", "",
-                  "| simulated [s] | wall [s] | real-time factor | note |", "| ---: | ---: | ---: | --- |"]
-        lines += [f"| {row.simulated_s:g} | {_number(row.cpu_s)} | {_number(row.simulated_s / row.cpu_s)} | "
-                  f"{row.note} |" for row in benchmark.of("ros")]
-        ros = ros_summary(benchmark)
-        if ros and "wall_per_exchange_s" not in ros:
-            lines.append("- per exchange: not resolved (the nodes' start-up varied by more than the difference)")
-        elif ros:
-            lines.append(f"- per exchange, start-up excluded: {ros['wall_per_exchange_s'] * 1e6:.4g} us wall, a "
-                         f"real-time factor of {ros['marginal_real_time_factor']:.3g}")
+        lines += ["", f"lockstep ROS main job ({ROS_SCENE}, four node processes, wall time) and the same co-simulation "
+                  "in one process (CPU time)", "",
+                  "| path | exchange step [ms] | simulated [s] | how | time [s] | real-time factor | omega error | note |",
+                  "| --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
+        lines += [f"| {row.path} | {row.value * 1e3:g} | {row.simulated_s:g} | {row.method} | {_number(row.cpu_s)} | "
+                  f"{_number(row.simulated_s / row.cpu_s)} | {_number(row.error)} | {row.note} |"
+                  for row in benchmark.of("ros")]
+        for item in ros_summary(benchmark):
+            if "wall_per_exchange_s" in item:
+                lines.append(f"- {item['path']} path, {item['exchange_step_s'] * 1e3:g} ms: per exchange, start-up "
+                             f"excluded, {item['wall_per_exchange_s'] * 1e6:.4g} us wall, a real-time factor of "
+                             f"{item['marginal_real_time_factor']:.3g}")
     return "\n".join(lines) + "\n"
 
 

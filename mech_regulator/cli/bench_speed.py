@@ -33,8 +33,10 @@ def add_bench_speed_command(benchmarks) -> None:
                             "lists them)")
     speed.add_argument("--out", type=Path, default=Path("docs/speed"), metavar="FOLDER",
                        help="folder for the outputs (default docs/speed)")
-    speed.add_argument("--ros", action="store_true", help="also time the lockstep ROS main job at a 1 ms exchange "
-                                                          "step (needs rclpy; tens of seconds)")
+    speed.add_argument("--ros", action="store_true",
+                       help="also time the lockstep ROS main job, reference and fast path at a 1 ms exchange step and "
+                            "the fast path at 2, 5 and 10 ms, with each exchange step's error (needs rclpy; about "
+                            "3 minutes)")
 
 
 def run_bench_speed(args: argparse.Namespace) -> int:
