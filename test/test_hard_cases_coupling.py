@@ -211,7 +211,7 @@ def test_rk4_beyond_its_stability_limit_is_refused_and_would_blow_up(capsys, tmp
     """A lightly damped coupling (k = 1e6 N m/rad, zeta = 0.026): RK4 at 0.9 of the largest stable step for its
     fastest mode keeps the vibration bounded and the speeds near the matrix exponential's; at 1.1 of it the
     integration itself (run without the check) grows the twist a thousandfold; simulate and the command refuse
-    that step with a message naming solver.step and the largest step."""
+    that step with a message naming solver.step and the largest step, and so does the co-simulation."""
     stiffness, damping = 1e6, 20.0
     model = build_model(validate_scene(linear_scene(stiffness, damping)))
     largest = rk4_largest_stable_step(coupling_modes(model).fastest)
@@ -227,6 +227,8 @@ def test_rk4_beyond_its_stability_limit_is_refused_and_would_blow_up(capsys, tmp
     assert grown.status == "failed" or np.max(np.abs(grown(times)[2])) > 1e3 * np.max(np.abs(exact[2]))
     with pytest.raises(SceneError, match=r"solver.step = .*: RK4 is unstable .* expected solver.step <= "):
         simulate(unstable)
+    with pytest.raises(SceneError, match="RK4 is unstable"):  # the co-simulated machine too (the nodes, --exchange-step)
+        cosimulate(unstable, 1e-3)
     path = write_scene(tmp_path, yaml.safe_dump(linear_scene(stiffness, damping, "RK4", step=1.1 * largest)))
     code, _, err = run_cli(capsys, "simulate", str(path), "--quiet")
     assert code == 2 and f"{largest:.3g}" in err, err

@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from mech_regulator.model import LoadPiece, MachineModel, crank_moments
+from mech_regulator.scene import SceneError
+from mech_regulator.solvers.advice import rk4_stability_refusal
 from mech_regulator.solvers.time_domain import _segment
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -169,7 +171,11 @@ class GovernorStepper:
 def segment_for(subsystem: MachineModel):
     """What steps a subsystem over one exchange step (time_domain._segment's arguments and result): the reference
     path's _segment, or on solver.path: fast the subsystem's compiled twin (compiled here, once; a scene the fast
-    path cannot run raises SceneError naming the key, solvers/compiled.fast_path_refusal)."""
+    path cannot run raises SceneError naming the key, solvers/compiled.fast_path_refusal; so does an RK4 step outside
+    the stability region of the subsystem's coupling, solvers/advice.rk4_stability_refusal)."""
+    reason = rk4_stability_refusal(subsystem)
+    if reason is not None:
+        raise SceneError(reason)
     if subsystem.scene.solver.path != "fast":
         return _segment
     from mech_regulator.solvers.compiled.run import compiled_segment  # numba is imported only when needed
