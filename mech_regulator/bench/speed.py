@@ -32,6 +32,7 @@ import csv
 import dataclasses
 import functools
 import importlib.util
+import json
 import math
 import os
 import statistics
@@ -39,6 +40,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -72,7 +74,7 @@ SWEEP_SIZES, QUICK_SWEEP_SIZES = (1, 2, 4, 8, 16), (1, 2)
 SWEEP_JOBS = (1, 2)
 REPEAT_BUDGET_S, MAX_REPEATS = 0.3, 7    # a run is repeated to about this much CPU time [s], at most this often
 MAX_ERROR_SAMPLES = 40_001               # MuJoCo's step times are thinned to at most this many for the error
-ROS_SCENE, ROS_DURATIONS, ROS_EXCHANGE = "engine_direct", (1.0, 6.0), 1e-3   # [s]; the target's exchange step
+ROS_SCENE, ROS_DURATION, ROS_EXCHANGE = "engine_direct", 6.0, 1e-3   # [s]; the target's exchange step
 ROS_RUNS = ((REFERENCE, 1e-3), (FAST, 1e-3), (FAST, 2e-3), (FAST, 5e-3), (FAST, 1e-2))  # (path, exchange step [s])
 STARTUP_PROGRAM = """
 import time
@@ -404,75 +406,70 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
 
 
 def measure_ros(report: Callable[[Row], None]) -> list[Row]:
-    """The lockstep ROS main job (`mech-regulator run`, four node processes) on engine_direct shortened to each of
-    ROS_DURATIONS (load step 6 -> 8 N m at 0.5 s), for each (path, exchange step) of ROS_RUNS: wall time (method
-    'nodes'); and the same co-simulation in this process (solvers.cosim.cosimulate, number for number what the
-    nodes compute; method 'in process'), its CPU time and its achieved error: omega's RMS difference from the
-    monolithic run at REFERENCE_RTOL (fast path) at the exchange times, relative to max |omega|. The error is that of
-    the exchange (first order in the step, docs/ros.md), the same for the nodes."""
+    """The lockstep ROS main job (`mech-regulator run`, four node processes) on engine_direct over ROS_DURATION s
+    (load step 6 -> 8 N m at 0.5 s), for each (path, exchange step) of ROS_RUNS (method 'nodes'): the wall time of
+    the exchanges as the recorder measured it (from the first machine state to the last; the run's summary), the
+    process's wall time with the nodes' start-up in the note; and the same co-simulation in this process
+    (solvers.cosim.cosimulate, number for number what the nodes compute; method 'in process'): its CPU time and its
+    achieved error, omega's RMS difference from the monolithic run at REFERENCE_RTOL (fast path) at the exchange
+    times, relative to max |omega| (the exchange's error, first order in the step, docs/ros.md; the nodes' too)."""
     from mech_regulator.solvers.cosim import cosimulate
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="mech-regulator-ros-") as folder:
         for path, exchange in ROS_RUNS:
-            overrides = ["scenario.load_events=[{time: 0.5, torque: 8.0}]"] + (["solver.path=fast"] if path == FAST
-                                                                                else [])
-            for duration in ROS_DURATIONS:
-                settings = overrides + [f"scenario.duration={duration!r}"]
-                command = [sys.executable, "-m", "mech_regulator", "run", ROS_SCENE, "--quiet", "--exchange-step",
-                           repr(exchange), "--out", os.path.join(folder, f"run{duration:g}.rrd")]
-                command += [item for setting in settings for item in ("--set", setting)]
-                start = time.perf_counter()
-                done = subprocess.run(command, capture_output=True, text=True, check=False)
-                row = Row("ros", ROS_SCENE, path, "nodes", "exchange_step", exchange, duration,
-                          time.perf_counter() - start, steps=round(duration / exchange))
-                if done.returncode != 0:
-                    row.note = f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1]}"
-                rows.append(row)
-                report(row)
-            longest = ROS_DURATIONS[-1]
-            settings = overrides + [f"scenario.duration={longest!r}"]
+            settings = ["scenario.load_events=[{time: 0.5, torque: 8.0}]", f"scenario.duration={ROS_DURATION!r}"]
+            settings += ["solver.path=fast"] if path == FAST else []
+            output = os.path.join(folder, f"{path}{exchange:g}.rrd")
+            command = [sys.executable, "-m", "mech_regulator", "run", ROS_SCENE, "--quiet", "--exchange-step",
+                       repr(exchange), "--out", output] + [item for setting in settings for item in ("--set", setting)]
+            start = time.perf_counter()
+            done = subprocess.run(command, capture_output=True, text=True, check=False)
+            process_wall = time.perf_counter() - start
+            row = Row("ros", ROS_SCENE, path, "nodes", "exchange_step", exchange, ROS_DURATION,
+                      steps=round(ROS_DURATION / exchange), note=f"process {process_wall:.3g} s with start-up")
+            summary_path = Path(output).with_suffix(".json")
+            pace = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+            if done.returncode != 0 or "wall_time_s" not in pace:
+                row.note = f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1]}"
+            else:
+                row.cpu_s, row.simulated_s = pace["wall_time_s"], pace["t_end"]
+            rows.append(row)
+            report(row)
             model = build_model(load_scene(ROS_SCENE, settings))
             run, cpu = timed(lambda: cosimulate(model, exchange))
             exact = simulate(build_model(load_scene(ROS_SCENE, settings + [
                 "solver.path=fast", f"solver.rtol={REFERENCE_RTOL!r}", f"solver.atol={REFERENCE_RTOL * 1e2!r}"])))
             reference = exact(run.times)[1]
             error = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / np.max(np.abs(reference)))
-            rows.append(Row("ros", ROS_SCENE, path, "in process", "exchange_step", exchange, longest, cpu,
+            rows.append(Row("ros", ROS_SCENE, path, "in process", "exchange_step", exchange, ROS_DURATION, cpu,
                             steps=run.times.size - 1, error=error))
             report(rows[-1])
     return rows
 
 
 def ros_summary(benchmark: SpeedBenchmark) -> list[dict[str, float | str]]:
-    """Per (path, exchange step) of the ROS rows: the nodes' real-time factor over the longest run (simulated s per
-    wall s, start-up included), the marginal wall time per exchange [s] between the shortest and longest runs and
-    its real-time factor (start-up excluded: what a long run approaches; absent when the start-up varied more than
-    the difference), the in-process co-simulation's real-time factor (CPU) and its achieved error."""
+    """Per (path, exchange step) of the ROS rows: the nodes' real-time factor over their exchanges (start-up
+    excluded; missing when the run failed) and the in-process co-simulation's real-time factor (CPU) and achieved
+    error."""
     found = []
     for path, exchange in dict.fromkeys((row.path, row.value) for row in benchmark.of("ros")):
-        nodes = [row for row in benchmark.of("ros") if (row.path, row.value, row.method) == (path, exchange, "nodes")
-                 and not row.note]
-        alone = [row for row in benchmark.of("ros") if (row.path, row.value, row.method) == (path, exchange,
-                                                                                            "in process")]
         item: dict[str, float | str] = {"path": path, "exchange_step_s": exchange}
-        if nodes:
-            item["real_time_factor"] = nodes[-1].simulated_s / nodes[-1].cpu_s
-        if len(nodes) >= 2 and nodes[-1].cpu_s > nodes[0].cpu_s:
-            per_exchange = (nodes[-1].cpu_s - nodes[0].cpu_s) / (nodes[-1].steps - nodes[0].steps)
-            item.update(wall_per_exchange_s=per_exchange, marginal_real_time_factor=exchange / per_exchange)
-        if alone:
-            item.update(in_process_real_time_factor=alone[-1].simulated_s / alone[-1].cpu_s, error=alone[-1].error)
+        for row in benchmark.of("ros", path=path, value=exchange):
+            if row.method == "nodes" and math.isfinite(row.cpu_s):
+                item["real_time_factor"] = row.simulated_s / row.cpu_s
+            elif row.method == "in process":
+                item.update(in_process_real_time_factor=row.simulated_s / row.cpu_s, error=row.error)
         found.append(item)
     return found
 
 
 def ros_target(benchmark: SpeedBenchmark) -> float:
-    """The ROS target's measure: the lockstep nodes at ROS_EXCHANGE on the fast path, start-up excluded (the marginal
-    real-time factor; the start-up-included one when that is not resolved); nan when not measured."""
+    """The ROS target's measure: the lockstep nodes' real-time factor at ROS_EXCHANGE on the fast path (nan when not
+    measured)."""
     for item in ros_summary(benchmark):
         if (item["path"], item["exchange_step_s"]) == (FAST, ROS_EXCHANGE):
-            return float(item.get("marginal_real_time_factor", item.get("real_time_factor", math.nan)))
+            return float(item.get("real_time_factor", math.nan))
     return math.nan
 
 
@@ -590,18 +587,13 @@ def tables(benchmark: SpeedBenchmark) -> str:
     lines += [f"| {row.path} | {row.setting} | {_number(row.value)} | {_number(row.cpu_s)} | {row.note} |"
               for row in benchmark.of("startup")]
     if benchmark.of("ros"):
-        lines += ["", f"lockstep ROS main job ({ROS_SCENE}, four node processes, wall time) and the same co-simulation "
-                  "in one process (CPU time)", "",
+        lines += ["", f"lockstep ROS main job ({ROS_SCENE}, four node processes: wall time of the exchanges, start-up "
+                  "excluded) and the same co-simulation in one process (CPU time)", "",
                   "| path | exchange step [ms] | simulated [s] | how | time [s] | real-time factor | omega error | note |",
                   "| --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
         lines += [f"| {row.path} | {row.value * 1e3:g} | {row.simulated_s:g} | {row.method} | {_number(row.cpu_s)} | "
                   f"{_number(row.simulated_s / row.cpu_s)} | {_number(row.error)} | {row.note} |"
                   for row in benchmark.of("ros")]
-        for item in ros_summary(benchmark):
-            if "wall_per_exchange_s" in item:
-                lines.append(f"- {item['path']} path, {item['exchange_step_s'] * 1e3:g} ms: per exchange, start-up "
-                             f"excluded, {item['wall_per_exchange_s'] * 1e6:.4g} us wall, a real-time factor of "
-                             f"{item['marginal_real_time_factor']:.3g}")
     return "\n".join(lines) + "\n"
 
 

@@ -183,6 +183,9 @@ def format_cosimulation_summary(summary: dict) -> str:
         lines.append(summary["message"])
     if summary["tripped_at"] is not None:
         lines.append(f"overspeed trip at t = {summary['tripped_at']:.6g} s: throttle closed from then on")
+    if "real_time_factor" in summary:  # the ROS nodes' pace, from the recorder
+        lines.append(f"the nodes ran at {summary['real_time_factor']:.3g} x real time over the exchanges "
+                     f"({summary['wall_time_s']:.3g} s of wall time, start-up not included)")
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
     return "\n".join(lines + wrote_lines(summary))

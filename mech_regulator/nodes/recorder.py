@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -66,6 +67,7 @@ class RecorderNode(Node):
         self.finished_at: int | None = None
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
+        self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
         self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
         self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
@@ -84,6 +86,7 @@ class RecorderNode(Node):
         when = nanoseconds(message.header.stamp)
         phi, omega = message.position[index], message.velocity[index]
         self.machine[when] = (phi, omega)
+        self.state_walls[1:] = [time.monotonic()]
         self.recording.add_machine(when, phi, omega)
 
     def on_moments(self, message: JointState) -> None:
@@ -153,6 +156,7 @@ class RecorderNode(Node):
             summary_path.write_text(to_json(summary))
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step)
+        summary.update(self.pace())
         if not self.complete():
             summary["status"] = "interrupted"
             summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
@@ -161,6 +165,15 @@ class RecorderNode(Node):
         write_csv(csv_path, columns, digits=17)
         summary.update(recording=str(self.path), csv=str(csv_path))
         summary_path.write_text(to_json(summary))
+
+    def pace(self) -> dict[str, float]:
+        """How fast the nodes ran, from the wall-clock times the first and the last machine states arrived here (the
+        exchanges only: the nodes' start-up and discovery before the first exchange are not in it): wall_time_s [s]
+        and real_time_factor = simulated time between those states / wall_time_s; empty before two states."""
+        if len(self.state_walls) < 2 or self.state_walls[1] <= self.state_walls[0]:
+            return {}
+        wall = self.state_walls[1] - self.state_walls[0]
+        return {"wall_time_s": wall, "real_time_factor": (seconds(max(self.machine)) - seconds(min(self.machine))) / wall}
 
     def complete_times(self) -> list[int]:
         """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""
