@@ -15,6 +15,7 @@ from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, RHS_SIG
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.time_domain import PROBES_PER_STEP
 
+rk45, dop853, rosenbrock23, rk4 = (compiled.stepper(method) for method in ("RK45", "DOP853", "Rosenbrock23", "RK4"))
 STIFF = np.array([[1.0, 1.0], [1.0, -1.0]]) @ np.diag([-1.0, -1e6]) @ np.linalg.inv([[1.0, 1.0], [1.0, -1.0]])
 
 
@@ -95,7 +96,7 @@ def adaptive(method, rhs, y0, t_end, p, rtol=1e-6, atol=1e-9, guards=position, l
 def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, wrap_period=0.0,
           max_steps=100000):
     y0 = np.asarray(y0, dtype=float)
-    return CompiledRun.from_result(compiled.rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
+    return CompiledRun.from_result(rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
                                                 np.zeros(len(lines)), 0.0, y0, t_end, np.asarray(p, dtype=float),
                                                 step, wrap_limit, wrap_period, max_steps))
 
@@ -115,8 +116,8 @@ def vdp_python(t, y):
     return np.array([y[1], (1.0 - y[0] ** 2) * y[1] - y[0]])
 
 
-@pytest.mark.parametrize("method, scipy_method, same_solution", [(compiled.rk45, RK45, 5e-12),
-                                                                 (compiled.dop853, DOP853, 1e-12)])
+@pytest.mark.parametrize("method, scipy_method, same_solution", [(rk45, RK45, 5e-12),
+                                                                 (dop853, DOP853, 1e-12)])
 def test_the_same_steps_as_scipy(method, scipy_method, same_solution):
     """Van der Pol at mu = 1 over [0, 20]: scipy's solver stepped by hand takes the same steps and the same rhs
     calls (scipy's DOP853 spends its 3 dense-output calls when asked, here every step). The step edges agree to
@@ -142,7 +143,7 @@ def test_the_same_steps_as_scipy(method, scipy_method, same_solution):
 def test_dop853_dense_output_in_powers_of_theta_is_scipys():
     """One DOP853 step of 0.8 s on Van der Pol: the 7th-degree power form equals scipy's nested
     Dop853DenseOutput inside the step to round-off."""
-    run = adaptive(compiled.dop853, van_der_pol, [2.0, 0.0], 0.8, [1.0], rtol=1e-2, atol=1e-2, first_step=0.8)
+    run = adaptive(dop853, van_der_pol, [2.0, 0.0], 0.8, [1.0], rtol=1e-2, atol=1e-2, first_step=0.8)
     times, _, dense = stepped(DOP853(vdp_python, 0.0, np.array([2.0, 0.0]), 0.8, rtol=1e-2, atol=1e-2,
                                      first_step=0.8))
     assert run.n_steps == len(dense) == 1 and run.coefficients.shape == (1, 2, 7)
@@ -152,13 +153,13 @@ def test_dop853_dense_output_in_powers_of_theta_is_scipys():
 
 def test_a_warm_start_takes_scipys_first_step():
     """first_step given: no initial-step selection (one rhs call fewer), scipy's steps with the same first_step."""
-    run = adaptive(compiled.rk45, van_der_pol, [2.0, 0.0], 3.0, [1.0], first_step=0.05)
+    run = adaptive(rk45, van_der_pol, [2.0, 0.0], 3.0, [1.0], first_step=0.05)
     times, _, _ = stepped(RK45(vdp_python, 0.0, np.array([2.0, 0.0]), 3.0, rtol=1e-6, atol=1e-9, first_step=0.05))
     np.testing.assert_allclose(run.times, times, rtol=1e-7)  # round-off carried by the controller, as above
 
 
-@pytest.mark.parametrize("method, rtol, error", [(compiled.rk45, 1e-9, 1e-7), (compiled.dop853, 1e-9, 1e-8),
-                                                 (compiled.rosenbrock23, 1e-7, 5e-4)])
+@pytest.mark.parametrize("method, rtol, error", [(rk45, 1e-9, 1e-7), (dop853, 1e-9, 1e-8),
+                                                 (rosenbrock23, 1e-7, 5e-4)])
 def test_the_oscillator_against_its_closed_form(method, rtol, error):
     """x'' = -4 x from x = 1: x = cos 2t, v = -2 sin 2t over 3 periods, ends and dense output."""
     run = adaptive(method, oscillator, [1.0, 0.0], 3 * np.pi, [4.0], rtol=rtol, atol=rtol * 1e-2)
@@ -175,7 +176,7 @@ def test_the_stiff_method_is_stable_with_few_steps_and_converges():
     y0 = np.array([1.0, 0.0])
     errors = []
     for rtol in (1e-4, 1e-6):
-        run = adaptive(compiled.rosenbrock23, stiff_linear, y0, 10.0, STIFF.ravel(), rtol=rtol, atol=rtol * 1e-3)
+        run = adaptive(rosenbrock23, stiff_linear, y0, 10.0, STIFF.ravel(), rtol=rtol, atol=rtol * 1e-3)
         assert run.status == compiled.REACHED
         t = np.linspace(0.01, 10.0, 50)
         exact = np.column_stack([expm(STIFF * s) @ y0 for s in t])
@@ -191,7 +192,7 @@ def test_the_rosenbrock_steps_are_second_order():
     """All steps accepted at max_step (a huge rtol): halving the step divides the global error by ~4."""
     errors = []
     for step in (0.1, 0.05):
-        run = adaptive(compiled.rosenbrock23, oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10,
+        run = adaptive(rosenbrock23, oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10,
                        max_step=step, first_step=step)
         errors.append(np.max(np.abs(run.y_end - [np.cos(2.0), -np.sin(2.0)])))
     assert errors[0] / errors[1] == pytest.approx(4.0, rel=0.1)
@@ -217,7 +218,7 @@ def test_an_event_is_located_to_round_off():
     """x = cos t reaches 0.5 at t = pi/3 (to 1e-12, DOP853 at a tight tolerance); the step ends there."""
     lines = POSITION_LINE.copy()
     lines[0, 1] = -0.5
-    run = adaptive(compiled.dop853, oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15,
+    run = adaptive(dop853, oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15,
                    lines=lines)
     assert run.status == compiled.EVENT and run.event_guard == 0
     assert run.event_time == pytest.approx(np.pi / 3, abs=1e-12)
@@ -237,7 +238,7 @@ def test_a_dip_inside_one_step_is_caught_for_a_linear_guard():
     def x(t):
         return (t - 0.5) ** 2 - 0.001
 
-    run = adaptive(compiled.rk45, constant_acceleration, [0.249, -1.0], 10.0, [2.0, 0.0, np.inf], rtol=1e-3,
+    run = adaptive(rk45, constant_acceleration, [0.249, -1.0], 10.0, [2.0, 0.0, np.inf], rtol=1e-3,
                    lines=POSITION_LINE, first_step=1.0)
     assert run.n_steps == 1 and run.last_step == 1.0 and reference_misses(0.0, 1.0, x)
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.5 - np.sqrt(0.001), abs=1e-12)
@@ -248,7 +249,7 @@ def test_a_near_tangency_fires_only_when_it_dips(level, fires):
     """x = (t - 0.5)^2 against the guard x - level: a parabola that stays 1e-10 above the level holds the mode
     (the exact polynomial roots do not take a near-tangency for a crossing), one that dips 1e-10 below it fires
     where it crosses, t = 0.5 - 1e-5."""
-    run = adaptive(compiled.rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, level, np.inf],
+    run = adaptive(rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, level, np.inf],
                    lines=np.array([[1.0, -level, 1.0, 0.0]]))
     assert run.status == (compiled.EVENT if fires else compiled.REACHED)
     if fires:
@@ -272,18 +273,18 @@ def test_a_guard_at_its_boundary_fires_only_past_the_tolerance():
     not fire at once but when x < -1e-12 (t = 10 s, or 20 s with the lowered threshold); a threshold of
     0.5 on x = 1 - t fires at t = 0.5."""
     slow = [0.0, -1e-13]
-    run = adaptive(compiled.rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE)
+    run = adaptive(rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE)
     assert run.status == compiled.EVENT and run.n_steps > 0 and run.event_time == pytest.approx(10.0, rel=1e-6)
-    run = adaptive(compiled.rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
+    run = adaptive(rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
                    thresholds=[-1e-12])
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(20.0, rel=1e-6)
-    run = adaptive(compiled.rk45, constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
+    run = adaptive(rk45, constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
                    thresholds=[0.5])
     assert run.event_time == pytest.approx(0.5, abs=1e-12)
 
 
 def test_a_guard_already_violated_is_an_event_without_a_step():
-    run = adaptive(compiled.rk45, oscillator, [-1.0, 0.0], 3.0, [1.0, 0.0, np.inf], lines=POSITION_LINE)
+    run = adaptive(rk45, oscillator, [-1.0, 0.0], 3.0, [1.0, 0.0, np.inf], lines=POSITION_LINE)
     assert (run.status, run.n_steps, run.event_guard, run.event_time, run.dense) == (compiled.EVENT, 0, 0, 0.0, None)
     np.testing.assert_array_equal(run.y_end, [-1.0, 0.0])
 
@@ -293,7 +294,7 @@ def test_the_earliest_of_two_guards_wins(clock, guard, time):
     """x = cos t reaches 0.5 at pi/3 = 1.047 s; the clock guard fires at 1.0 s or 1.1 s."""
     lines = TWO_GUARD_LINES.copy()
     lines[0, 1] = -0.5
-    run = adaptive(compiled.rk45, oscillator, [1.0, 0.0], 5.0, [1.0, 0.5, clock], rtol=1e-10, atol=1e-12,
+    run = adaptive(rk45, oscillator, [1.0, 0.0], 5.0, [1.0, 0.5, clock], rtol=1e-10, atol=1e-12,
                    guards=position_and_clock, lines=lines, max_step=0.5)
     assert run.status == compiled.EVENT and run.event_guard == guard
     assert run.event_time == pytest.approx(time, abs=1e-9)
@@ -305,7 +306,7 @@ def test_the_wrap_limit_stops_at_the_first_step_end_past_it():
     assert run.status == compiled.WRAPPED and run.t_end == 3.0 and run.y_end[0] == pytest.approx(3.0)
 
 
-@pytest.mark.parametrize("method", ["rk45", "dop853", "rk4"])
+@pytest.mark.parametrize("method", ["RK45", "DOP853", "RK4"])
 def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
     """With wrap_period the stepper wraps the angle itself at the wrap limit; the same as stopping there (status
     2), taking whole periods off the angle and restarting with the last step's size, as the outer loop does:
@@ -316,10 +317,10 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
         y = np.asarray(y, dtype=float)
         arguments = (rotating_pendulum, position, 0, np.zeros((0, 4)), np.zeros(0), t0, y, t_end,
                      np.asarray(p, dtype=float))
-        if method == "rk4":
-            return CompiledRun.from_result(compiled.rk4(*arguments, 0.01, limit, wrap_period, 100000))
-        return CompiledRun.from_result(getattr(compiled, method)(*arguments, 1e-8, np.full(2, 1e-10), np.inf,
-                                                                 first_step, limit, wrap_period, 100000))
+        if method == "RK4":
+            return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000))
+        return CompiledRun.from_result(compiled.stepper(method)(*arguments, 1e-8, np.full(2, 1e-10), np.inf,
+                                                                first_step, limit, wrap_period, 100000))
 
     inside = call(y0, 0.0, 0.0, period)
     times, starts, t, y, first_step, offset, restarts = [0.0], [], 0.0, y0, 0.0, 0.0, -1
@@ -341,20 +342,20 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
 def test_failures_keep_what_was_computed():
     """y' = y^2 escapes at t = 1: RK4 (stepping just past it) reports a non-finite state, RK45 a step size
     underflow just past it, both with the steps taken kept; max_steps is a failure too."""
-    rk4 = fixed(blow_up, [1.0], 2.0, [0.0], 0.01)
-    assert rk4.status == compiled.FAILED and rk4.failure == compiled.NONFINITE and 0.99 < rk4.t_end < 1.1
-    assert "non-finite" in rk4.message and np.all(np.isfinite(rk4.y_old))
-    rk45 = adaptive(compiled.rk45, blow_up, [1.0], 2.0, [0.0])
-    assert rk45.status == compiled.FAILED and rk45.failure == compiled.STEP_TOO_SMALL and 0.99 < rk45.t_end < 1.01
-    assert "step size" in rk45.message
-    limited = adaptive(compiled.rk45, oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
+    fixed_run = fixed(blow_up, [1.0], 2.0, [0.0], 0.01)
+    assert fixed_run.status == compiled.FAILED and fixed_run.failure == compiled.NONFINITE
+    assert 0.99 < fixed_run.t_end < 1.1 and "non-finite" in fixed_run.message and np.all(np.isfinite(fixed_run.y_old))
+    adaptive_run = adaptive(rk45, blow_up, [1.0], 2.0, [0.0])
+    assert adaptive_run.status == compiled.FAILED and adaptive_run.failure == compiled.STEP_TOO_SMALL
+    assert 0.99 < adaptive_run.t_end < 1.01 and "step size" in adaptive_run.message
+    limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
     assert (limited.status, limited.failure, limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 5)
 
 
 def test_the_dense_output_of_a_call_on_scalars_and_arrays():
     """StepsDense: shape (n,) for a scalar, (n, m) for m times; the step starts give y_old and the end y_end;
     the arrays grew past their first capacity."""
-    run = adaptive(compiled.rk45, oscillator, [1.0, 0.0], 6.0, [1.0], rtol=1e-8, atol=1e-10)
+    run = adaptive(rk45, oscillator, [1.0, 0.0], 6.0, [1.0], rtol=1e-8, atol=1e-10)
     assert run.n_steps > 16
     dense = run.dense
     assert isinstance(dense, StepsDense) and dense(1.0).shape == (2,) and dense(np.array([1.0, 2.0])).shape == (2, 2)

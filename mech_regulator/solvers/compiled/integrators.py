@@ -1,7 +1,7 @@
-"""The compiled steppers of the fast path: rk45 (scipy's RK45), dop853 (scipy's DOP853), rk4 (the classic
-fixed-step RK4 of solvers/rk4.py) and rosenbrock23 (MATLAB's ode23s, for stiff scenes), compiled once by
-numba with explicit signatures and cached on disk; a scene's rhs and guards come in as first-class functions
-(signatures.RHS_TYPE, GUARDS_TYPE).
+"""The compiled steppers of the fast path: RK45 (scipy's RK45), DOP853 (scipy's DOP853), RK4 (the classic
+fixed-step RK4 of solvers/rk4.py) and Rosenbrock23 (MATLAB's ode23s, for stiff scenes), each compiled by numba
+with its explicit signature when first asked for (stepper(method)) and cached on disk; a scene's rhs and guards
+come in as first-class functions (signatures.RHS_TYPE, GUARDS_TYPE).
 
 Each stepper integrates dy/dt = rhs(t, y, p) from (t0, y0) towards t_end and stops at the first of:
 t_end reached; a guard falling below its threshold inside a step (an event, located, the step cut there);
@@ -11,10 +11,11 @@ wrap_period > 0 [rad] the stepper wraps the angle itself at the wrap limit, doin
 y[0] less whole periods, f evaluated anew, the last step's size kept (RK4: the rest divided evenly again); its
 outputs (y_old, y_end) carry the unwrapped angle. Only for guards that do not read y[0] (no switch window).
 
-    rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
-         rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps) -> result
-    dop853(... same as rk45 ...), rosenbrock23(... same as rk45 ...)
-    rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps)
+    stepper("RK45")(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
+                    rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps) -> result
+    stepper("DOP853")(... as RK45 ...), stepper("Rosenbrock23")(... as RK45 ...)
+    stepper("RK4")(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
+                   step, wrap_limit, wrap_period, max_steps) -> result
 
 t0, t_end, max_step, first_step (0 = choose it as scipy's select_initial_step), step [s]; atol per state
 (units of the state); wrap_limit [rad] (inf = none); rk4's step is the largest step, shortened to divide
@@ -57,6 +58,7 @@ event over all guards wins.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -570,8 +572,9 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
     Thresholds for this step: thresholds[g], lowered by GUARD_TOLERANCE for a guard that starts the step
     within GUARD_TOLERANCE above it. A linear guard is the polynomial g0 + sum_j a_j theta^j along the step;
-    when g0 >= sum_j |a_j| it cannot fall below on [0, 1] and is done with at once (most steps); else the real parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends
-    below the threshold holds the first crossing (exact; a tangency does not fire). The other guards are
+    when g0 >= sum_j |a_j| it cannot fall below on [0, 1] and is done with at once (most steps); else the real
+    parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends below the
+    threshold holds the first crossing (exact; a near-tangency that stays above does not fire). The other guards are
     probed at NONLINEAR_PROBES interior points and the first probe interval that ends below is searched."""
     n = y_old.size
     guards(t_old, y_old, p, levels)
@@ -614,7 +617,8 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
             _dense_at(probes[k], t_old, h, y_old, coefficients, state)
             guards(probes[k], state, p, levels)
             below = levels[:n_guards].copy()
-            crossed = False  # a nonlinear guard crossed in this probe interval (a linear one found above does not end the probing)
+            # a nonlinear guard crossed in this probe interval (a linear one found above does not end the probing)
+            crossed = False
             for g in range(n_guards):
                 if start[g] == np.inf or linear[g, 0] == 1.0 or not below[g] < step_thresholds[g]:
                     continue
@@ -628,9 +632,8 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
     return best_guard, (best_time if best_guard >= 0 else np.nan)
 
 
-# the public steppers are compiled at import (explicit signatures): after the helpers they call
-@njit(_ADAPTIVE_ARGS, cache=True)
-def rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
+# the four steppers; stepper(method) compiles the one a run needs
+def _rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
          wrap_limit, wrap_period, max_steps):
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
@@ -638,8 +641,7 @@ def rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol
                       first_step, 0.0, wrap_limit, wrap_period, max_steps)
 
 
-@njit(_ADAPTIVE_ARGS, cache=True)
-def dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
+def _dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
            wrap_limit, wrap_period, max_steps):
     """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
     the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
@@ -647,8 +649,7 @@ def dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, at
                       max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps)
 
 
-@njit(_ADAPTIVE_ARGS, cache=True)
-def rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
+def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
                  wrap_limit, wrap_period, max_steps):
     """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
     with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
@@ -661,13 +662,25 @@ def rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rt
                       max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps)
 
 
-@njit(_FIXED_ARGS, cache=True)
-def rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps):
+def _rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps):
     """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
     the module docstring."""
     return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, 0.0, np.zeros(0),
                       0.0, 0.0, step, wrap_limit, wrap_period, max_steps)
+
+
+_STEPPERS = {"RK45": (_rk45, _ADAPTIVE_ARGS), "DOP853": (_dop853, _ADAPTIVE_ARGS),
+             "Rosenbrock23": (_rosenbrock23, _ADAPTIVE_ARGS), "RK4": (_rk4, _FIXED_ARGS)}
+
+
+@functools.cache
+def stepper(method: str):
+    """The compiled stepper of a method ('RK45', 'DOP853', 'Rosenbrock23', 'RK4'; call it as the module docstring
+    says): compiled with its one explicit signature when first asked for, or loaded from numba's disk cache, so a
+    process compiles or loads only the methods it runs (each takes some 10 s to compile on a fresh machine)."""
+    function, signature = _STEPPERS[method]
+    return njit(signature, cache=True)(function)
 
 
 class StepsDense(DenseOutput):

@@ -5,8 +5,8 @@ Each external-load piece is integrated on its own; within it the mode is settled
 and the switch window, and the scene's compiled stepper runs until the piece ends, a guard fires (a governor or
 driven-part event, located in the stepper; its transition is the model's own Guard, applied here), the crank angle
 passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper restarts with its last step size;
-without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so that progress moves and Ctrl-C is heard). Every call's steps become one
-piece of the Trajectory.
+without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so
+that progress moves and Ctrl-C is heard). Every call's steps become one piece of the Trajectory.
 """
 
 from __future__ import annotations
@@ -151,7 +151,5 @@ def _step(settings: schema.Solver, compiled: CompiledScene, linear: np.ndarray, 
 def _entry_point(method: str):
     """The machine-code entry of the method's compiled stepper for its one explicit signature: calling it skips
     numba's type dispatch of the arguments (some 15 us per call, as much as a short call's integration)."""
-    dispatcher = {"RK45": integrators.rk45, "DOP853": integrators.dop853, "RK4": integrators.rk4,
-                  "Rosenbrock23": integrators.rosenbrock23}[method]
-    (compiled,) = dispatcher.overloads.values()
+    (compiled,) = integrators.stepper(method).overloads.values()
     return compiled.entry_point
