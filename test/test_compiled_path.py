@@ -150,7 +150,7 @@ def test_plain_kernels_equal_reference_in_and_out_of_a_switch_window():
     assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=piece)
 
 
-@pytest.mark.parametrize("name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine"])
+@pytest.mark.parametrize("name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine", "engine_inline4"])
 def test_bundled_machines_equal_reference(name):
     model = model_of(bundled(name))
     grid = model.switch_grid()
@@ -165,6 +165,38 @@ def test_mechanisms_with_and_without_weight_equal_reference(gravity):
         model = model_of(data)
         assert model.has_weight == (gravity is not None)
         assert_same_rhs(model, governor_modes(model), states=3)
+
+
+def v_twin(name: str) -> dict:
+    """A bundled single-cylinder engine scene made a 90 deg V-twin on one throw (cylinder 2's axis at 90 deg, so its
+    gravity is turned), with offset, every mass, gravity with both components and a firing delay of 450 deg."""
+    data = bundled(name)
+    data["machine"]["gravity"] = [1.5, -9.81]
+    data["machine"]["mechanism"].update(offset=0.006, crank_mass=1.2, crank_cg=0.01,
+                                        cylinders=[{"throw_deg": 0.0}, {"throw_deg": 0.0, "bank_deg": 90.0}])
+    data["machine"]["drive"].update(firing_deg=[0.0, 450.0], phase_deg=30.0)
+    return data
+
+
+def driven_inline4() -> dict:
+    """two_mass with engine_inline4's four-cylinder crankshaft (weighing) as the driven part's mechanism."""
+    data = bundled("two_mass")
+    data["machine"]["gravity"] = [0.0, -9.81]
+    data["machine"]["coupling"]["driven"]["mechanism"] = bundled("engine_inline4")["machine"]["mechanism"]
+    return data
+
+
+def test_multi_cylinder_engines_equal_reference():
+    """Every cylinder's kinematics at its own crank angle, with its gravity turned into its frame, and the gas
+    moments of every cylinder with its firing delay; behind a coupling too."""
+    model = model_of(v_twin("engine_direct"))  # governed
+    assert model.has_weight and len(model.reduced(0.3)[4]) == 2
+    assert_same_rhs(model, governor_modes(model), states=3)
+    source = compile_scene(model).source
+    assert source.count("k.crank_slider_reduced(") == 2 and source.count("k.engine_gas(") == 2
+    driven = model_of(driven_inline4())
+    assert_same_rhs(driven, [("forward",), ("backward",), ("held",)], states=4)
+    assert compile_scene(driven).source.count("k.crank_slider_reduced(phi2 + ") == 8  # in rhs and in guards
 
 
 @pytest.mark.parametrize("feedback", [{"type": "none"}, {"type": "rigid", "gain": 0.12},
@@ -235,7 +267,7 @@ def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
 
 def test_refusals_name_the_key():
     cases = {"clutch_start": "machine.clutch", "compressor_friction": "machine.joint_friction",
-             "engine_inline4": "machine.mechanism.cylinders", "walking_beam": "machine.mechanism: walking_beam"}
+             "walking_beam": "machine.mechanism: walking_beam"}
     for name, key in cases.items():
         reason = fast_path_refusal(load_scene(name, ["solver.path=fast"]))
         assert reason.startswith(f"solver.path: 'fast' does not compile {key}"), reason
@@ -244,7 +276,8 @@ def test_refusals_name_the_key():
     assert "machine.coupling.driven.branches" in fast_path_refusal(validate_scene(branched))
     assert "solver.method: 'Radau'" in fast_path_refusal(load_scene("startup", ["solver.method=Radau"]))
     assert "solver.method: 'energy'" in fast_path_refusal(load_scene("lathe", ["solver.method=energy"]))
-    assert fast_path_refusal(load_scene("two_mass")) is None
+    for name in ("two_mass", "engine_inline4"):
+        assert fast_path_refusal(load_scene(name)) is None
     with pytest.raises(SceneError, match="Rosenbrock23' runs only on the compiled fast path"):
         load_scene("startup", ["solver.method=Rosenbrock23"])
 
@@ -314,9 +347,11 @@ def test_runs_equal_reference_step_for_step(data):
     shortened("compressor", 1.0), shortened("four_bar_rocker", 1.0),
     shortened("engine_direct", 2.2), shortened("engine_indirect_isodromic", 2.2),
     shortened("engine_indirect_rigid", 2.2, solver__method="RK45"), shortened("two_mass", 1.2),
-    shortened("press_coupling", 1.0), shortened("press_coupling", 1.0, solver__method="RK45")],
+    shortened("press_coupling", 1.0), shortened("press_coupling", 1.0, solver__method="RK45"),
+    bundled("engine_inline4"),
+    shortened("engine", 0.6, machine=v_twin("engine")["machine"])],
     ids=["compressor", "four_bar", "engine_direct", "isodromic", "rigid-RK45", "two_mass", "press_coupling",
-         "press_coupling-RK45"])
+         "press_coupling-RK45", "engine_inline4", "v_twin"])
 def test_runs_equal_reference_within_their_accuracy(data):
     reference, fast = run_pair(data)
     settings = data.get("solver", {})

@@ -26,8 +26,6 @@ def fast_path_refusal(scene_or_model) -> str | None:
     features = [
         ("machine.clutch", machine.clutch is not None),
         ("machine.joint_friction", machine.joint_friction is not None),
-        ("machine.mechanism.cylinders (a multi-cylinder engine)",
-         isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None),
         ("machine.mechanism: walking_beam", isinstance(mechanism, schema.WalkingBeam)),
         ("machine.coupling.driven.branches", coupling is not None and bool(coupling.driven.branches)),
         ("machine.coupling.driven.mechanism: walking_beam",

@@ -42,6 +42,7 @@ import numpy as np
 import mech_regulator
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, FORWARD, HELD
+from mech_regulator.mechanisms import engine
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
 
@@ -237,8 +238,11 @@ class _Parameters:
         return np.array(values, dtype=float)
 
 
-def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
-    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source."""
+def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, mechanism=None) -> str:
+    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source; an
+    engine on a crank–slider with several cylinders (mechanism.cylinders) is the sum of every cylinder's gas moment
+    -p(phi + phase - d_i) A dx_i/dphi (d_i its firing delay, effects._multi_cylinder_engine; dx_i/dphi named as
+    _reduced_lines does)."""
     if isinstance(spec, schema.ConstantDrive):
         return p.scalar(spec.torque)
     if isinstance(spec, schema.LinearMotor):
@@ -248,8 +252,18 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) ->
         return f"k.table_drive({phi}, {table}, {p.scalar(math.radians(spec.period_deg))})"
     if isinstance(spec, schema.Engine):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
-        return (f"k.engine_gas({phi}, {dq}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
-                f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
+        cycle, area = p.scalar(math.radians(spec.cycle_deg)), math.pi * spec.bore ** 2 / 4.0
+        cylinders = getattr(mechanism, "cylinders", None)
+        if cylinders is None:
+            return (f"k.engine_gas({phi}, {dq}, {table}, {cycle}, {p.scalar(math.radians(spec.phase_deg))}, "
+                    f"{p.scalar(area)})")
+        area = p.scalar(area)
+        delays = engine.firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders],
+                                      spec.cycle_deg, spec.firing_order, spec.firing_deg)
+        ratios = [dq] + [f"{dq}_{number}" for number in range(2, len(cylinders) + 1)]
+        return "(" + " + ".join(f"k.engine_gas({phi}, {ratio}, {table}, {cycle}, "
+                                f"{p.scalar(math.radians(spec.phase_deg - delay))}, {area})"
+                                for ratio, delay in zip(ratios, delays)) + ")"
     if isinstance(spec, schema.ConstantLoad):
         return f"-{p.scalar(spec.torque)}"
     if isinstance(spec, schema.ViscousLoad):
@@ -276,22 +290,43 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) ->
     raise TypeError(f"no compiled kernel for {type(spec).__name__}")
 
 
-def _reduced_call(mechanism, gravity, p: _Parameters, angle: str) -> str:
-    """The kernel call of a mechanism's reduced(phi) (mechanisms.build_reduced), as source; gravity None or
-    massless links: the weight moment is not computed (with_weight 0 in p)."""
+def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[str, ...]) -> list[str]:
+    """Source assigning a mechanism's reduced(phi) (mechanisms.build_reduced) at `angle` to the five `names` (J_links,
+    dJ, weight, q, dq); gravity None or massless links: the weight moment is not computed (with_weight 0 in p).
+    Several cylinders (mechanisms.engine.make_multi_reduced): cylinder 1's call assigns the names, cylinder k's
+    (k >= 2), at angle + throw_k - bank_k with gravity turned into its frame, is added to the first three and its
+    q, dq are named q_k, dq_k (what the engine's gas moment reads)."""
     gx, gy = gravity if gravity is not None else (0.0, 0.0)
     weighs = float(gravity is not None and (gx != 0.0 or gy != 0.0)
                    and any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass")))
+    target = ", ".join(names)
     if isinstance(mechanism, schema.CrankSlider):
         m = mechanism
-        args = [m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod, m.rod_mass, m.rod_inertia,
-                m.slider_mass, gx, gy]
-        return f"k.crank_slider_reduced({angle}, {', '.join(p.scalar(v) for v in args)}, {p.scalar(weighs)} != 0.0)"
+        geometry = [p.scalar(v) for v in (m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod,
+                                          m.rod_mass, m.rod_inertia, m.slider_mass)]
+        if m.cylinders is None:
+            args = geometry + [p.scalar(gx), p.scalar(gy)]
+            return [f"{target} = k.crank_slider_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
+        with_weight = f"{p.scalar(weighs)} != 0.0"
+        throws, banks = [c.throw_deg for c in m.cylinders], [c.bank_deg for c in m.cylinders]
+        lines = []
+        for number, (shift, bank) in enumerate(zip(engine.cylinder_shifts(throws, banks), banks), start=1):
+            c, s = math.cos(math.radians(bank)), math.sin(math.radians(bank))
+            turned = [p.scalar(gx * c + gy * s), p.scalar(-gx * s + gy * c)]
+            call = f"k.crank_slider_reduced({angle} + {p.scalar(shift)}, {', '.join(geometry + turned)}, {with_weight})"
+            if number == 1:
+                lines.append(f"{target} = {call}")
+            else:
+                J, dJ, weight, q, dq = names
+                lines += [f"J_k, dJ_k, weight_k, {q}_{number}, {dq}_{number} = {call}",
+                          f"{J} += J_k", f"{dJ} += dJ_k", f"{weight} += weight_k"]
+        return lines
     m = mechanism
     args = [m.crank, m.coupler, m.rocker, m.frame, math.radians(m.frame_angle_deg),
             {"open": -1.0, "crossed": 1.0}[m.branch], m.crank_mass * m.crank_cg, m.coupler_mass, m.coupler_cg,
             m.coupler_inertia, m.rocker_mass, m.rocker_cg, m.rocker_inertia, gx, gy]
-    return f"k.four_bar_reduced({angle}, {', '.join(p.scalar(v) for v in args)}, {p.scalar(weighs)} != 0.0)"
+    args = [p.scalar(v) for v in args]
+    return [f"{target} = k.four_bar_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
 
 
 def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
@@ -302,7 +337,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     body: list[str] = ["phi = y[0]", "omega = y[1]"]
     if model.reduced is not None:  # the model's, not the scene's: a co-simulated governor has no mechanism
         gravity = machine.gravity if model.has_weight else None
-        body.append(f"J_links, dJ, total, q, dq = {_reduced_call(machine.mechanism, gravity, p, 'phi')}")
+        body += _reduced_lines(machine.mechanism, gravity, p, "phi", ("J_links", "dJ", "total", "q", "dq"))
     else:
         body.append("J_links, dJ, total, q, dq = 0.0, 0.0, 0.0, 0.0, 0.0")
     body.append(f"J = {p.scalar(model.inertia_constant)} + J_links")
@@ -318,7 +353,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
         elif effect.role == "drive" and governor is not None:
             scaled.append(spec)
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
-            body.append(f"total += p[{HELD_THROTTLE}] * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
+            body.append(f"total += p[{HELD_THROTTLE}] * "
+                        f"{_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}")
         else:
             body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
     if switched:
@@ -350,7 +386,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
             command = (f"k.servo_command(opening, {p.scalar(governor.servo_gain)}, "
                        f"{p.scalar(governor.servo_max_speed)}, {p.scalar(governor.dead_band)})")
         body.append(f"share = {throttle}")
-        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}" for spec in scaled]
+        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}"
+                 for spec in scaled]
         sensor_args = f"{m}, {l}, {M}, {kk}, {z_free}, {c}, {g}, {ratio}"
         lift = f"k.lift(y[{ARM}], omega, {m}, {l}, {M}, {kk}, {z_free}, {g}, {ratio})"
         governor_lines += [
@@ -429,8 +466,8 @@ def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], lis
              f"passed = {elastic} + {p.scalar(coupling.damping)} * (omega - omega2)"]
     dynamics = ["phi2 = y[0] - twist"]
     if driven.mechanism is not None:
-        dynamics.append("I_links, dI, weight2, q2, dq2 = "
-                        + _reduced_call(driven.mechanism, model.scene.machine.gravity, p, "phi2"))
+        dynamics += _reduced_lines(driven.mechanism, model.scene.machine.gravity, p, "phi2",
+                                   ("I_links", "dI", "weight2", "q2", "dq2"))
     else:
         dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
     dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
