@@ -150,7 +150,8 @@ def test_plain_kernels_equal_reference_in_and_out_of_a_switch_window():
     assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=piece)
 
 
-@pytest.mark.parametrize("name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine", "engine_inline4"])
+@pytest.mark.parametrize("name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine", "engine_inline4",
+                                  "walking_beam"])
 def test_bundled_machines_equal_reference(name):
     model = model_of(bundled(name))
     grid = model.switch_grid()
@@ -184,6 +185,31 @@ def driven_inline4() -> dict:
     data["machine"]["gravity"] = [0.0, -9.81]
     data["machine"]["coupling"]["driven"]["mechanism"] = bundled("engine_inline4")["machine"]["mechanism"]
     return data
+
+
+def driven_walking_beam() -> dict:
+    """two_mass with the bundled walking beam (weighing links) on the driven part, with shuttle loads of every kind."""
+    data = bundled("two_mass")
+    data["machine"]["gravity"] = [0.0, -9.81]
+    data["machine"]["coupling"]["driven"]["mechanism"] = bundled("walking_beam")["machine"]["mechanism"]
+    data["machine"]["coupling"]["driven"]["loads"] += [
+        {"type": "shuttle_viscous", "coefficient": 150.0}, {"type": "shuttle_constant", "force": -20.0},
+        {"type": "shuttle_spring", "stiffness": 400.0, "free_position": 0.1}]
+    return data
+
+
+def test_walking_beam_on_the_crank_and_behind_a_coupling_equals_reference():
+    """The eight-bar's reduced inertia, its derivative, the weight of all seven links and the shuttle's x_C, x_C'
+    (shuttle loads); on the crank with gravity along both axes, and as a coupled driven part."""
+    data = bundled("walking_beam")
+    data["machine"]["gravity"] = [2.0, -9.81]
+    data["machine"]["loads"].append({"type": "shuttle_spring", "stiffness": 300.0, "free_position": 0.05})
+    model = model_of(data)
+    assert model.has_weight
+    assert_same_rhs(model, [None], states=12)
+    driven = model_of(driven_walking_beam())
+    assert_same_rhs(driven, [("forward",), ("backward",), ("held",)], states=4)
+    assert "k.walking_beam_reduced(phi2" in compile_scene(driven).source
 
 
 def test_multi_cylinder_engines_equal_reference():
@@ -266,8 +292,7 @@ def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
 
 
 def test_refusals_name_the_key():
-    cases = {"clutch_start": "machine.clutch", "compressor_friction": "machine.joint_friction",
-             "walking_beam": "machine.mechanism: walking_beam"}
+    cases = {"clutch_start": "machine.clutch", "compressor_friction": "machine.joint_friction"}
     for name, key in cases.items():
         reason = fast_path_refusal(load_scene(name, ["solver.path=fast"]))
         assert reason.startswith(f"solver.path: 'fast' does not compile {key}"), reason
@@ -276,7 +301,7 @@ def test_refusals_name_the_key():
     assert "machine.coupling.driven.branches" in fast_path_refusal(validate_scene(branched))
     assert "solver.method: 'Radau'" in fast_path_refusal(load_scene("startup", ["solver.method=Radau"]))
     assert "solver.method: 'energy'" in fast_path_refusal(load_scene("lathe", ["solver.method=energy"]))
-    for name in ("two_mass", "engine_inline4"):
+    for name in ("two_mass", "engine_inline4", "walking_beam"):
         assert fast_path_refusal(load_scene(name)) is None
     with pytest.raises(SceneError, match="Rosenbrock23' runs only on the compiled fast path"):
         load_scene("startup", ["solver.method=Rosenbrock23"])
@@ -349,9 +374,11 @@ def test_runs_equal_reference_step_for_step(data):
     shortened("engine_indirect_rigid", 2.2, solver__method="RK45"), shortened("two_mass", 1.2),
     shortened("press_coupling", 1.0), shortened("press_coupling", 1.0, solver__method="RK45"),
     bundled("engine_inline4"),
-    shortened("engine", 0.6, machine=v_twin("engine")["machine"])],
+    shortened("engine", 0.6, machine=v_twin("engine")["machine"]), shortened("walking_beam", 1.0),
+    shortened("two_mass", 0.6, machine=driven_walking_beam()["machine"])],
     ids=["compressor", "four_bar", "engine_direct", "isodromic", "rigid-RK45", "two_mass", "press_coupling",
-         "press_coupling-RK45", "engine_inline4", "v_twin"])
+         "press_coupling-RK45", "engine_inline4", "v_twin", "walking_beam",
+         "driven_walking_beam"])
 def test_runs_equal_reference_within_their_accuracy(data):
     reference, fast = run_pair(data)
     settings = data.get("solver", {})

@@ -7,8 +7,6 @@ before choosing a path."""
 
 from __future__ import annotations
 
-from mech_regulator.scene import schema
-
 FAST_METHODS = ("RK45", "DOP853", "RK4", "Rosenbrock23")
 
 
@@ -22,14 +20,10 @@ def fast_path_refusal(scene_or_model) -> str | None:
                 f"{', '.join(FAST_METHODS)}, or solver.path: reference")
     machine = scene.machine
     coupling = machine.coupling
-    mechanism = machine.mechanism
     features = [
         ("machine.clutch", machine.clutch is not None),
         ("machine.joint_friction", machine.joint_friction is not None),
-        ("machine.mechanism: walking_beam", isinstance(mechanism, schema.WalkingBeam)),
         ("machine.coupling.driven.branches", coupling is not None and bool(coupling.driven.branches)),
-        ("machine.coupling.driven.mechanism: walking_beam",
-         coupling is not None and isinstance(coupling.driven.mechanism, schema.WalkingBeam)),
     ]
     for key, present in features:
         if present:

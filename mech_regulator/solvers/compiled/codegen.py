@@ -26,6 +26,7 @@ the state (stops, sleeve at rest, driven part at rest, switch window) also get t
 
 from __future__ import annotations
 
+import cmath
 import functools
 import hashlib
 import importlib.util
@@ -42,7 +43,7 @@ import numpy as np
 import mech_regulator
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, FORWARD, HELD
-from mech_regulator.mechanisms import engine
+from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
 
@@ -321,6 +322,15 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
                 lines += [f"J_k, dJ_k, weight_k, {q}_{number}, {dq}_{number} = {call}",
                           f"{J} += J_k", f"{dJ} += dJ_k", f"{weight} += weight_k"]
         return lines
+    if isinstance(mechanism, schema.WalkingBeam):
+        g = walking_beam.geometry_from_scene(mechanism)
+        args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.coupler_point,
+                g.coupler_point_angle, g.coupler_cg, g.coupler_cg_angle, g.coupler_mass,
+                g.coupler_inertia + g.side_inertia, 2.0 * g.rocker_mass, g.rocker_cg, 2.0 * g.rocker_inertia,
+                g.tie_mass, g.side_mass, g.side_cg, cmath.phase(walking_beam.side(g)), g.shuttle_mass,
+                g.crank_mass * g.crank_cg, gx, gy]
+        args = [p.scalar(v) for v in args]
+        return [f"{target} = k.walking_beam_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
     m = mechanism
     args = [m.crank, m.coupler, m.rocker, m.frame, math.radians(m.frame_angle_deg),
             {"open": -1.0, "crossed": 1.0}[m.branch], m.crank_mass * m.crank_cg, m.coupler_mass, m.coupler_cg,

@@ -172,19 +172,17 @@ def crank_slider_reduced(phi, R, l, e, m_crank_r, rho, m_rod, J_rod, m_slider, g
 
 
 @njit(cache=True)
-def four_bar_reduced(phi, a, b, c, d, th1, sign, m2r, m3, u3, J3, m4, u4, J4, gx, gy, with_weight):
-    """mechanisms.four_bar.make_reduced with link_angles: th4 = arg(B - D) + sign acos((c^2 + f^2 - b^2) / (2 c f)),
-    th3' = a sin(th4 - phi) / (b sin(th3 - th4)), th4' = a sin(phi - th3) / (c sin(th4 - th3)), second derivatives
-    from the twice-differentiated loop; S3' = i (a e^{i phi} + u3 th3' e^{i th3}), S4' = i u4 th4' e^{i th4};
-    J = m3 |S3'|^2 + J3 th3'^2 + m4 |S4'|^2 + J4 th4'^2, dJ = 2 sum (m Re(conj(S') S'') + J th' th''),
-    M_weight = g . (m2 r2 i e^{i phi} + m3 S3' + m4 S4'). NaN where the loop cannot close."""
+def link_angles(phi, a, b, c, d, th1, sign):
+    """mechanisms.four_bar.link_angles: (th3, th3', th3'', th4, th4', th4''), th4 = arg(B - D) + sign acos((c^2 + f^2
+    - b^2) / (2 c f)), th3' = a sin(th4 - phi) / (b sin(th3 - th4)), th4' = a sin(phi - th3) / (c sin(th4 - th3)),
+    second derivatives from the twice-differentiated loop; all NaN where the loop cannot close."""
     B = a * cmath.exp(1j * phi)
     D = d * cmath.exp(1j * th1)
     pv = B - D
     f = abs(pv)
     cos_gamma = (c * c + f * f - b * b) / (2.0 * c * f) if f > 0.0 else math.inf
     if not (-1.0 <= cos_gamma <= 1.0):
-        return math.nan, math.nan, math.nan, math.nan, math.nan
+        return math.nan, math.nan, math.nan, math.nan, math.nan, math.nan
     towards_A = th1 + math.pi
     th4 = towards_A + cmath.phase(pv * cmath.exp(-1j * towards_A)) + sign * math.acos(cos_gamma)
     C = D + c * cmath.exp(1j * th4)
@@ -192,10 +190,23 @@ def four_bar_reduced(phi, a, b, c, d, th1, sign, m2r, m3, u3, J3, m4, u4, J4, gx
     sin34 = math.sin(th3 - th4)
     dth3 = a * math.sin(th4 - phi) / (b * sin34)
     dth4 = a * math.sin(phi - th3) / (-c * sin34)
-    e2, e3, e4 = cmath.exp(1j * phi), cmath.exp(1j * th3), cmath.exp(1j * th4)
+    e3, e4 = cmath.exp(1j * th3), cmath.exp(1j * th4)
     r = B + b * dth3 * dth3 * e3 - c * dth4 * dth4 * e4
     ddth3 = -(r / e4).real / (b * sin34)
     ddth4 = (r / e3).real / (-c * sin34)
+    return th3, dth3, ddth3, th4, dth4, ddth4
+
+
+@njit(cache=True)
+def four_bar_reduced(phi, a, b, c, d, th1, sign, m2r, m3, u3, J3, m4, u4, J4, gx, gy, with_weight):
+    """mechanisms.four_bar.make_reduced with link_angles: S3' = i (a e^{i phi} + u3 th3' e^{i th3}),
+    S4' = i u4 th4' e^{i th4}; J = m3 |S3'|^2 + J3 th3'^2 + m4 |S4'|^2 + J4 th4'^2,
+    dJ = 2 sum (m Re(conj(S') S'') + J th' th''), M_weight = g . (m2 r2 i e^{i phi} + m3 S3' + m4 S4').
+    NaN where the loop cannot close."""
+    th3, dth3, ddth3, th4, dth4, ddth4 = link_angles(phi, a, b, c, d, th1, sign)
+    if math.isnan(th4):
+        return math.nan, math.nan, math.nan, math.nan, math.nan
+    e2, e3, e4 = cmath.exp(1j * phi), cmath.exp(1j * th3), cmath.exp(1j * th4)
     dS3 = 1j * (a * e2 + u3 * dth3 * e3)
     ddS3 = -a * e2 + u3 * complex(-dth3 * dth3, ddth3) * e3
     dS4 = 1j * u4 * dth4 * e4
@@ -207,6 +218,42 @@ def four_bar_reduced(phi, a, b, c, d, th1, sign, m2r, m3, u3, J3, m4, u4, J4, gx
     if with_weight:
         weight = (complex(gx, -gy) * (m2r * 1j * e2 + m3 * dS3 + m4 * dS4)).real
     return J, dJ, weight, th4, dth4
+
+
+@njit(cache=True)
+def arm(base, base_rate, base_rate2, length, angle, rate, rate2):
+    """mechanisms.walking_beam.arm: P = base + length e^{i angle}, P' = base' + i length rate e^{i angle},
+    P'' = base'' + length (i rate2 - rate^2) e^{i angle} (derivatives with respect to phi) [m, m/rad, m/rad^2]."""
+    direction = length * cmath.exp(1j * angle)
+    return base + direction, base_rate + 1j * rate * direction, base_rate2 + complex(-rate * rate, rate2) * direction
+
+
+@njit(cache=True)
+def walking_beam_reduced(phi, a, b, c, d, th1, sign, p_len, delta, u2, gamma2, m2, J_coupler_side, m3, u3, J3, m4,
+                         m6, u6, side_angle, m7, m1u1, gx, gy, with_weight):
+    """mechanisms.walking_beam.make_reduced: with link_angles, A = a e^{i phi}, B = O2 + c e^{i th4},
+    C = A + p e^{i (th3 + delta)} and the centres S2 = A + u2 e^{i (th3 + gamma2)}, S3 = O2 + u3 e^{i th4} (both
+    rockers: m3, J3 doubled), S6 = B + u6 e^{i (th3 + arg BC)} (about E = B + s), the tie moving with B, the shuttle
+    with C: J = sum m |S'|^2 + (J2 + J6) th3'^2 + J3 th4'^2, dJ = 2 sum (m Re(conj(S') S'') + J th' th''),
+    M_weight = Re(conj(g) (m1 u1 i e^{i phi} + sum m S')); returns (J, dJ, M_weight, x_C, x_C')."""
+    th3, dth3, ddth3, th4, dth4, ddth4 = link_angles(phi, a, b, c, d, th1, sign)
+    O2 = d * cmath.exp(1j * th1)
+    A, dA, ddA = arm(0j, 0j, 0j, a, phi, 1.0, 0.0)
+    B, dB, ddB = arm(O2, 0j, 0j, c, th4, dth4, ddth4)
+    C, dC, ddC = arm(A, dA, ddA, p_len, th3 + delta, dth3, ddth3)
+    _, dS2, ddS2 = arm(A, dA, ddA, u2, th3 + gamma2, dth3, ddth3)
+    _, dS3, ddS3 = arm(O2, 0j, 0j, u3, th4, dth4, ddth4)
+    _, dS6, ddS6 = arm(B, dB, ddB, u6, th3 + side_angle, dth3, ddth3)
+    J = (m2 * abs(dS2) ** 2 + m3 * abs(dS3) ** 2 + m4 * abs(dB) ** 2 + m6 * abs(dS6) ** 2 + m7 * abs(dC) ** 2
+         + J_coupler_side * dth3 * dth3 + J3 * dth4 * dth4)
+    dJ = 2.0 * (m2 * (dS2.conjugate() * ddS2).real + m3 * (dS3.conjugate() * ddS3).real
+                + m4 * (dB.conjugate() * ddB).real + m6 * (dS6.conjugate() * ddS6).real
+                + m7 * (dC.conjugate() * ddC).real + J_coupler_side * dth3 * ddth3 + J3 * dth4 * ddth4)
+    weight = 0.0
+    if with_weight:
+        weight = (complex(gx, -gy) * (m1u1 * 1j * cmath.exp(1j * phi) + m2 * dS2 + m3 * dS3 + m4 * dB
+                                      + m6 * dS6 + m7 * dC)).real
+    return J, dJ, weight, C.real, dC.real
 
 
 # ---------------------------------------------------------------------------------------------------------------
