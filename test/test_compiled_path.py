@@ -104,8 +104,9 @@ def random_state(model) -> np.ndarray:
     return y
 
 
-def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None):
-    """Compiled rhs and guards equal model.rhs / model.guards (1e-12 relative) at random states in every mode."""
+def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None, speed=None):
+    """Compiled rhs and guards equal model.rhs / model.guards (1e-12 relative) at random states in every mode
+    (speed: the crank's omega in all of them)."""
     compiled = compile_scene(model)
     n = len(model.state_names())
     for mode in modes:
@@ -117,6 +118,8 @@ def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None):
                 chosen = model.piece_at(t)
             if window is not None:
                 y[0] = RNG.uniform(*window)
+            if speed is not None:
+                y[1] = speed
             p = compiled.parameters_for(chosen, mode, window)
             expected = np.array(model.rhs(chosen, window, mode)(t, y), dtype=float)
             got = np.zeros(n)
@@ -225,6 +228,63 @@ def test_multi_cylinder_engines_equal_reference():
     assert compile_scene(driven).source.count("k.crank_slider_reduced(phi2 + ") == 8  # in rhs and in guards
 
 
+JOURNALS = {"crank_bearing": {"radius": 0.02, "fit": "run_in"}, "crank_pin": {"radius": 0.015},
+            "rocker_pin": {"radius": 0.01, "fit": "new"}, "rocker_bearing": {"radius": 0.012}}
+COLLAR = {"inner_radius": 0.02, "outer_radius": 0.035, "axial_load": 200.0, "state": "new"}
+
+
+def with_joint_friction(data: dict, journals: list[str], guide: float = 0.0, collar: bool = True) -> dict:
+    """Scene data with joint friction (f = 0.08) in the named journals, the guide and a thrust collar."""
+    data["machine"]["joint_friction"] = {"coefficient": 0.08, "joints": {name: JOURNALS[name] for name in journals},
+                                         "guide": guide, **({"thrust_collar": COLLAR} if collar else {})}
+    return data
+
+
+def crank_at_rest(torque: float) -> dict:
+    """test_joint_friction's crank–slider at rest in gravity, held by its crank bearing and collar (F(0) = 3 +
+    0.1 / sqrt(1.01) 0.03 30 9.81 = 3.878 N m) or not, under a constant drive [N m]."""
+    return {"machine": {"inertia": 0.2, "gravity": [0.0, -9.81], "drive": {"type": "constant", "torque": torque},
+                        "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": 30.0,
+                                      "slider_mass": 2.0},
+                        "joint_friction": {"coefficient": 0.1, "joints": {"crank_bearing": {"radius": 0.03}},
+                                           "thrust_collar": {"inner_radius": 0.02, "outer_radius": 0.04,
+                                                             "axial_load": 1000.0}}},
+            "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 0.5}, "solver": {}}
+
+
+@pytest.mark.parametrize("speed", [None, 0.0], ids=["turning", "at_rest"])
+def test_joint_friction_equals_reference(speed):
+    """The implicit epsilon of J epsilon = J epsilon_0 - sign(omega) F(epsilon) with the reactions of the
+    kinetostatics at the output force of every load kind (crank–slider with guide, four-bar under an indirect
+    governor that scales the drive's force, behind a coupling) or a collar alone (walking beam: no kinetostatics),
+    turning and at rest (held while |M| <= F(0), else breaking away), and the crank's guard."""
+    slider = with_joint_friction(compressor_direct(), ["crank_bearing", "crank_pin"], guide=0.05)
+    four_bar = with_joint_friction(four_bar_governed({"type": "rigid", "gain": 0.12}), list(JOURNALS))
+    coupled = with_joint_friction(bundled("two_mass"), ["crank_pin"], guide=0.1, collar=False)  # the gas force
+    for data in (bundled("compressor_friction"), slider, four_bar, coupled):
+        model = model_of(data)
+        modes = governor_modes(model) if model.governor is not None else [None]
+        if model.coupling is not None:
+            modes = [("forward",), ("backward",), ("held",)]
+        assert_same_rhs(model, modes, states=3, speed=speed)
+    collar_only = model_of(with_joint_friction(bundled("walking_beam"), [], collar=True))
+    assert "joint_loads" not in compile_scene(collar_only).source
+    assert_same_rhs(collar_only, [None], states=4, speed=speed)
+    at_rest = 3.0 + 0.1 / np.sqrt(1.01) * 0.03 * 30.0 * 9.81
+    held, moving = model_of(crank_at_rest(0.9 * at_rest)), model_of(crank_at_rest(1.1 * at_rest))
+    for model, expected in ((held, 0.0), (moving, 0.1 * at_rest / 0.2)):
+        compiled, y = compile_scene(model), np.zeros(2)
+        rates = np.zeros(2)
+        compiled.rhs(0.0, y, compiled.parameters_for(None, None, None), rates)
+        assert rates[1] == pytest.approx(model.rhs()(0.0, y)[1], rel=1e-12, abs=0.0)
+        assert rates[1] == pytest.approx(expected, rel=1e-9, abs=0.0)
+    levels, p = np.zeros(1), compile_scene(held).parameters_for(None, None, None)
+    # the crank's guard latches the sign of the first nonzero omega it sees (at rest: 0 until the crank moves)
+    for state, level in (([0.0, 0.0], 0.0), ([0.0, 1e-6], 1e-6), ([0.0, 0.0], 0.0), ([0.0, -2.0], -2.0)):
+        compile_scene(held).guards(0.0, np.array(state), p, levels)
+        assert levels[0] == level
+
+
 @pytest.mark.parametrize("feedback", [{"type": "none"}, {"type": "rigid", "gain": 0.12},
                                       {"type": "isodromic", "gain": 0.3, "time_constant": 1.5}])
 def test_indirect_governor_every_feedback_and_mode(feedback):
@@ -292,7 +352,7 @@ def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
 
 
 def test_refusals_name_the_key():
-    cases = {"clutch_start": "machine.clutch", "compressor_friction": "machine.joint_friction"}
+    cases = {"clutch_start": "machine.clutch"}
     for name, key in cases.items():
         reason = fast_path_refusal(load_scene(name, ["solver.path=fast"]))
         assert reason.startswith(f"solver.path: 'fast' does not compile {key}"), reason
@@ -301,7 +361,7 @@ def test_refusals_name_the_key():
     assert "machine.coupling.driven.branches" in fast_path_refusal(validate_scene(branched))
     assert "solver.method: 'Radau'" in fast_path_refusal(load_scene("startup", ["solver.method=Radau"]))
     assert "solver.method: 'energy'" in fast_path_refusal(load_scene("lathe", ["solver.method=energy"]))
-    for name in ("two_mass", "engine_inline4", "walking_beam"):
+    for name in ("two_mass", "engine_inline4", "walking_beam", "compressor_friction"):
         assert fast_path_refusal(load_scene(name)) is None
     with pytest.raises(SceneError, match="Rosenbrock23' runs only on the compiled fast path"):
         load_scene("startup", ["solver.method=Rosenbrock23"])
@@ -390,6 +450,37 @@ def test_runs_equal_reference_within_their_accuracy(data):
     # a later wrap of the angle (a restart) past the end: one restart more or less per chunk
     assert abs(fast.stats.restarts - reference.stats.restarts) <= fast.stats.steps // MAX_STEPS_PER_CALL
     assert_same_events(reference, fast)
+
+
+def test_crank_stops_and_starts_as_on_the_reference_path():
+    """Joint friction's crank guard on the fast path: a collar alone (M = f Q (r1 + r2)/2 = 3 N m) stops J = 0.5,
+    omega0 = 10 at t = J omega0 / M = 5/3 s, where the crank then stays (omega exactly 0); the crank–slider at rest
+    stays under 0.9 F(0) and starts under 1.1 F(0) (on the fast path without the reference's 'crank starts' event,
+    codegen._crank_guard_lines) and then runs as on the reference path."""
+    collar = {"inner_radius": 0.02, "outer_radius": 0.04, "axial_load": 1000.0}
+    run_down = {"machine": {"inertia": 0.5, "joint_friction": {"coefficient": 0.1, "thrust_collar": collar}},
+                "scenario": {"initial": {"omega": 10.0}, "duration": 2.0}, "solver": {}}
+    at_rest = 3.0 + 0.1 / np.sqrt(1.01) * 0.03 * 30.0 * 9.81
+    reference, fast = run_pair(run_down)
+    assert_same_events(reference, fast)
+    assert np.all(relative_difference(reference, fast) < 1e-9)
+    reference, fast = run_pair(crank_at_rest(0.9 * at_rest))  # held: exactly at rest
+    assert fast.events == reference.events == [] and np.all(fast(np.linspace(0.0, 0.5, 11)) == 0.0)
+    stopped = simulate_complete(model_of(scene(run_down, solver__path="fast")))
+    assert stopped.events[0] == (pytest.approx(0.5 * 10.0 / 3.0, abs=1e-9), "crank stops")
+    assert np.all(stopped(np.linspace(1.7, 2.0, 5))[1] == 0.0)
+    # starting from rest, as the bundled compressor_friction does: within the runs' accuracy (10 times the fast
+    # run's distance to one at 1/100 of the tolerances, as test_runs_equal_reference_within_their_accuracy)
+    for data in (crank_at_rest(1.1 * at_rest), shortened("compressor_friction", 0.5)):
+        reference, fast = run_pair(data)
+        assert [name for _, name in reference.events] == ["crank starts"] and fast.events == []
+        settings = model_of(data).scene.solver
+        tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
+                                                 solver__atol=settings.atol / 100)))
+        print(relative_difference(reference, fast), relative_difference(tight, fast))
+        assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
+        # the reference's one step more: to its 'crank starts' event
+        assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps + 1
 
 
 def governed_lathe() -> dict:

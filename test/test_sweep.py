@@ -280,15 +280,15 @@ def test_a_list_of_scenes(capsys, tmp_path):
 
 def test_fast_path_by_default_where_the_scene_compiles(capsys, tmp_path, single_runs):
     out = tmp_path / "paths"
-    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", "compressor_friction", "--set",
+    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", "clutch_start", "--set",
                                    "scenario.duration=1.0", "--grid", "machine.flywheel.inertia=15.453292519943295",
                                    "--jobs", "1", "--out", str(out), "--quiet")
     assert code == 0, stderr
     with (out / "sweep.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
-    # joint friction is not compiled: that scene runs on the reference path, and the row says so
+    # a clutch is not compiled: that scene runs on the reference path, and the row says so
     assert [(row["scene"], row["status"], row["path"]) for row in rows] == [
-        ("lathe", "complete", "fast"), ("compressor_friction", "complete", "reference")]
+        ("lathe", "complete", "fast"), ("clutch_start", "complete", "reference")]
     assert float(rows[0]["omega_end"]) == pytest.approx(single_runs[1]["omega_end"], rel=1e-9)
     assert single_runs[1]["path"] == "reference"
 

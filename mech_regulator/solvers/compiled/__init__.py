@@ -22,7 +22,6 @@ def fast_path_refusal(scene_or_model) -> str | None:
     coupling = machine.coupling
     features = [
         ("machine.clutch", machine.clutch is not None),
-        ("machine.joint_friction", machine.joint_friction is not None),
         ("machine.coupling.driven.branches", coupling is not None and bool(coupling.driven.branches)),
     ]
     for key, present in features:

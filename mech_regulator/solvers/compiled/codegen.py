@@ -43,6 +43,8 @@ import numpy as np
 import mech_regulator
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, FORWARD, HELD
+from mech_regulator import mechanisms
+from mech_regulator.effects import joint_friction
 from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
@@ -189,9 +191,11 @@ def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.n
 
 def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
     """For each guard of model.guards(mode), in its order, its linear row [1, c0, c1..c_n] or None (not linear in
-    the state)."""
+    the state; the joint friction's 'crank stops' is linear only given the crank's direction at the segment's start,
+    which the rows do not know)."""
+    crank = [None] if model.joint_friction is not None else []
     if mode is None:
-        return []
+        return crank
     n = len(model.state_names())
     rows: list[np.ndarray | None] = []
     governor = model.governor
@@ -208,7 +212,7 @@ def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
         part = model.train_mode_of(mode)[0]
         sign = {FORWARD: 1.0, BACKWARD: -1.0}.get(part)
         rows += [None, None] if sign is None else [_row(n, model.driven_speed_index, sign, 0.0)]
-    return rows
+    return rows + crank
 
 
 class _Parameters:
@@ -448,6 +452,11 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
         n_mode_guards += 2
     else:
         body.append("dydt[1] = net / J")
+    if model.joint_friction is not None:
+        share = "share" if governor is not None else f"p[{HELD_THROTTLE}]"
+        body += _joint_friction_lines(model, p, specs, share)
+        guard_lines += _crank_guard_lines(p)
+        n_mode_guards += 1
     body += governor_lines
     window_slot = None
     n_guards = n_mode_guards
@@ -458,6 +467,84 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
     source = _module(body, guard_lines, n_guards)
     return source, p.array(), n_guards, window_slot
+
+
+def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
+    """The generalised force on the output link of a drive or load entry that has one (Effect.output_force: slider
+    force along +x [N] or rocker moment [N m]), as source."""
+    if isinstance(spec, schema.Engine):
+        table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
+        return (f"k.engine_gas_force({phi}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
+                f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
+    if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
+        return p.scalar(spec.force if isinstance(spec, schema.SliderConstant) else spec.torque)
+    if isinstance(spec, schema.OutputViscous):
+        return f"k.output_viscous_force({omega}, {dq}, {p.scalar(spec.coefficient)})"
+    if isinstance(spec, schema.OutputSpring):
+        return f"k.output_spring_force({q}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
+    if isinstance(spec, schema.SliderTable):
+        return f"k.clamped_linear({q}, {p.table(spec.position, spec.force)})"
+    raise TypeError(f"no compiled output force for {type(spec).__name__}")
+
+
+def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, share: str) -> list[str]:
+    """Source that turns the crank's frictionless dydt[1] = epsilon_0 into the root of J epsilon = J epsilon_0 -
+    sign(omega) F(epsilon) (MachineModel.rhs, effects.joint_friction): the force Q on the output link (the effects'
+    output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
+    kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics."""
+    friction = model.joint_friction
+    collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
+    iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
+    if friction.loads is None:
+        return [f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
+                f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations})"]
+    lines = ["force = 0.0"]
+    scaled = []
+    for spec, effect in zip(specs, model.effects):
+        if effect.output_force is None:
+            continue
+        call = _output_force_call(spec, p, "phi", "omega", "q", "dq")
+        if effect.role == "drive":
+            scaled.append(f"force += {share} * {call}")
+        else:
+            lines.append(f"force += {call}")
+    lines += scaled
+    machine = model.scene.machine
+    gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
+    g = mechanisms.mechanism_geometry(machine.mechanism)
+    if isinstance(machine.mechanism, schema.CrankSlider):
+        args = [g.crank, g.rod, g.offset, g.rod_cg / g.rod, g.crank_mass, g.crank_cg, g.rod_mass, g.rod_inertia,
+                g.slider_mass, gx, gy]
+        kernel = "crank_slider_joint_loads"
+    else:
+        args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.crank_mass, g.crank_cg,
+                g.coupler_mass, g.coupler_cg, g.coupler_inertia, g.rocker_mass, g.rocker_cg, g.rocker_inertia, gx, gy]
+        kernel = "four_bar_joint_loads"
+    lines.append(f"R0, R1, ratios = k.{kernel}(phi, omega, force, {', '.join(p.scalar(v) for v in args)})")
+    arms = [0.0] * 4  # a joint without friction: arm 0, its terms exact zeros
+    for index, arm_length in zip(friction.indices, friction.arms):
+        arms[index] = arm_length
+    lines.append(f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, "
+                 f"({', '.join(p.scalar(v) for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations})")
+    return lines
+
+
+def _crank_guard_lines(p: _Parameters) -> list[str]:
+    """Source of the joint friction's crank guard (MachineModel.guards), after the mode's: 'crank stops', s omega,
+    s the sign of the first nonzero omega the segment's guards see: at its start (the integrators call guards
+    first at the segment's start state, with a fresh p per stepper call, solvers/compiled/run.py) or, for a crank
+    starting the segment at rest, as it breaks away (level 0 until then). The sign's slot of p is NaN as
+    parameters_for gives it, 0 while the crank has not moved. Unlike the reference path, a crank starting from rest
+    is not an event ('crank starts' there only restarts the solver to watch for the next stop, which this guard
+    watches for within the segment): run.py takes an event's transition from model.guards at the event's state, where
+    omega is no longer 0 and the model's guard would be 'crank stops'."""
+    slot = p.scalar(math.nan)
+    return [f"direction = {slot}",
+            "if direction != direction or direction == 0.0:",
+            "    direction = 0.0 if omega == 0.0 else (1.0 if omega > 0.0 else -1.0)",
+            f"    {slot} = direction",
+            "levels[g] = direction * omega",
+            "g += 1"]
 
 
 def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], list[str]]:
