@@ -42,7 +42,7 @@ import numpy as np
 
 import mech_regulator
 from mech_regulator.model import MachineModel
-from mech_regulator.model.drivetrain import BACKWARD, FORWARD, HELD
+from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK
 from mech_regulator import mechanisms
 from mech_regulator.effects import joint_friction
 from mech_regulator.mechanisms import engine, walking_beam
@@ -53,8 +53,8 @@ CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
-CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI = range(6, 10)
-SEGMENT_SLOTS = 10
+CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE = range(6, 11)
+SEGMENT_SLOTS = 11
 
 SLEEVE_CODE = {"free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
@@ -99,8 +99,11 @@ class CompiledScene:
         model = self.model
         if model.governor is not None and mode is not None:
             p[SLEEVE_MODE], p[SERVO_MODE] = SLEEVE_CODE[mode[0]], SERVO_CODE[mode[1]]
-        if model.coupling is not None:
-            p[DRIVEN_MODE] = DRIVEN_CODE[model.train_mode_of(mode)[0]]
+        if model.driven is not None:
+            train = model.train_mode_of(mode)
+            p[DRIVEN_MODE] = DRIVEN_CODE[train[-1]]
+            if model.clutch is not None:
+                p[CLUTCH_MODE] = CLUTCH_CODE[train[0]]
         if window is not None:
             margin = 1e-9 * (window[1] - window[0])
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
@@ -208,10 +211,17 @@ def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
         if governor.kind == "indirect":
             s_low, s_high = governor.travel
             rows += ([_row(n, SERVO, 1.0, -s_low), _row(n, SERVO, -1.0, s_high)] if mode[1] == "free" else [None])
-    if model.coupling is not None:
-        part = model.train_mode_of(mode)[0]
-        sign = {FORWARD: 1.0, BACKWARD: -1.0}.get(part)
-        rows += [None, None] if sign is None else [_row(n, model.driven_speed_index, sign, 0.0)]
+    if model.driven is not None:
+        train = model.train_mode_of(mode)
+        index = model.driven_speed_index
+        if model.clutch is not None and train[0] == STUCK:
+            rows += [None, None]
+        elif model.clutch is not None:  # the slip ends: s (omega - omega2)
+            slip = _row(n, 1, CLUTCH_CODE[train[0]], 0.0)
+            slip[2 + index] = -CLUTCH_CODE[train[0]]
+            rows.append(slip)
+        sign = {FORWARD: 1.0, BACKWARD: -1.0}.get(train[-1])
+        rows += [None, None] if sign is None else [_row(n, index, sign, 0.0)]
     return rows + crank
 
 
@@ -355,7 +365,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     else:
         body.append("J_links, dJ, total, q, dq = 0.0, 0.0, 0.0, 0.0, 0.0")
     body.append(f"J = {p.scalar(model.inertia_constant)} + J_links")
-    coupled = model.coupling is not None
+    coupled = model.driven is not None  # the external load on the driven part, not on the crank
     if not coupled:
         body.append(f"total -= p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t")
     specs = ([machine.drive] if machine.drive is not None else []) + list(machine.loads)
@@ -445,11 +455,17 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     n_mode_guards = 0
     if governor is not None:
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
-    if coupled:
+    if model.coupling is not None:
         train_lines, train_guards = _coupling_lines(model, p)
         body += train_lines
         guard_lines += train_guards
         n_mode_guards += 2
+    elif model.clutch is not None:  # the crank's net moment again in guards, phi unclamped (MachineModel.crank_side)
+        crank = ["clamped = phi" if line.startswith("clamped = ") else line for line in body if line != "dydt[0] = omega"]
+        train_lines, train_guards = _clutch_lines(model, p, crank)
+        body += train_lines
+        guard_lines += train_guards
+        n_mode_guards += 4
     else:
         body.append("dydt[1] = net / J")
     if model.joint_friction is not None:
@@ -568,8 +584,7 @@ def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], lis
     else:
         dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
     dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
-    dynamics += [f"smooth += {_effect_call(load, p, 'phi2', 'omega2', 'q2', 'dq2')}"
-                 for load in driven.loads if not isinstance(load, schema.ConstantLoad)]
+    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2")
     resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
     rhs = state + [
         "dydt[1] = (net - passed) / J",
@@ -586,6 +601,49 @@ def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], lis
         "    g += 2",
         f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{speed_index}]", "    g += 1",
         "else:", f"    levels[g] = -y[{speed_index}]", "    g += 1"]
+    return rhs, guards
+
+
+def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, omega: str, q: str, dq: str
+                         ) -> list[str]:
+    """Source adding a driven part's non-Coulomb moments to `smooth` (DrivenModel.smooth_moment): its own loads,
+    then each branch's reduced to the main shaft, M_n(omega / i_1n) / i_1n (drivetrain._reduced); constant loads
+    are Coulomb resistances, in R."""
+    lines = [f"smooth += {_effect_call(load, p, phi, omega, q, dq)}"
+             for load in driven.loads if not isinstance(load, schema.ConstantLoad)]
+    for branch in driven.branches:
+        ratio = p.scalar(branch.ratio)
+        lines += [f"smooth += {_effect_call(load, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
+                  for load in branch.loads if not isinstance(load, schema.ConstantLoad)]
+    return lines
+
+
+def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tuple[list[str], list[str]]:
+    """Source of the friction clutch and the driven part behind it (MachineModel._train, drivetrain.ClutchModel) in
+    the train mode of p (CLUTCH_MODE, DRIVEN_MODE): dydt[1] and domega2/dt of clutch_forces, the driven part read at
+    omega2 = omega while stuck. Stuck, domega2/dt is the crank's (the reference freezes omega2 and sets it to omega
+    in its outputs, MachineModel.constraint; equal starting values and equal rates keep them equal bit for bit here).
+    Guards, in drivetrain.train_guards' order: stuck, static_torque -+ T (crank: the crank's net moment F1, phi
+    unclamped); slipping, s (omega - omega2); then the driven part's margins R -+ push at rest or s omega2 turning."""
+    clutch = model.clutch
+    index = model.driven_speed_index
+    omega2 = f"omega2 = y[1] if p[{CLUTCH_MODE}] == 0.0 else y[{index}]"
+    driven = ["smooth = 0.0"] + _driven_smooth_lines(model.scene.machine.clutch.driven, p, "0.0", "omega2", "0.0",
+                                                      "0.0")
+    resistance = f"resistance = {p.scalar(clutch.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
+    forces = (f"epsilon, epsilon2, torque, push = k.clutch_forces(p[{CLUTCH_MODE}], p[{DRIVEN_MODE}], net, J, smooth, "
+              f"resistance, {p.scalar(clutch.driven.inertia)}, {p.scalar(clutch.kinetic_torque)})")
+    rhs = [omega2] + driven + [resistance, forces, "dydt[1] = epsilon", f"dydt[{index}] = epsilon2"]
+    static = p.scalar(clutch.static_torque)
+    guards = crank + rhs[:-2] + [
+        f"if p[{CLUTCH_MODE}] == 0.0:",
+        f"    levels[g] = {static} - torque", f"    levels[g + 1] = {static} + torque", "    g += 2",
+        "else:",
+        f"    levels[g] = p[{CLUTCH_MODE}] * (omega - y[{index}])", "    g += 1",
+        f"if p[{DRIVEN_MODE}] == 2.0:",
+        "    levels[g] = resistance - push", "    levels[g + 1] = resistance + push", "    g += 2",
+        f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{index}]", "    g += 1",
+        "else:", f"    levels[g] = -y[{index}]", "    g += 1"]
     return rhs, guards
 
 

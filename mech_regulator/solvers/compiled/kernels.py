@@ -470,6 +470,27 @@ def driven_acceleration(direction, passed, weight, smooth, dI, omega2, I2, resis
 
 
 @njit(cache=True)
+def clutch_forces(clutch, part, F1, J, smooth, resistance, inertia, kinetic):
+    """model.drivetrain.ClutchModel.forces in a train mode (clutch: 0 stuck, 1 slipping with the motor ahead, -1
+    with the machine ahead; part: 0 forward, 1 backward, 2 held): stuck and held, everything at rest and the clutch
+    passing F1; stuck and turning, (J + I) epsilon = F1 + M_smooth - s R and T = F1 - J epsilon; slipping,
+    T = +-kinetic_torque, epsilon = (F1 - T) / J and I epsilon2 = T + M_smooth - s R (0 held). Returns (epsilon,
+    epsilon2 [rad/s^2], T, push = T + M_smooth [N m])."""
+    if clutch == 0.0:
+        if part == 2.0:
+            return 0.0, 0.0, F1, F1 + smooth
+        s = 1.0 if part == 0.0 else -1.0
+        acceleration = (F1 + smooth - s * resistance) / (J + inertia)
+        torque = F1 - J * acceleration
+        return acceleration, acceleration, torque, torque + smooth
+    torque = kinetic if clutch == 1.0 else -kinetic
+    driven = 0.0
+    if part != 2.0:
+        driven = (torque + smooth - (1.0 if part == 0.0 else -1.0) * resistance) / inertia
+    return (F1 - torque) / J, driven, torque, torque + smooth
+
+
+@njit(cache=True)
 def driven_margin(passed, weight, smooth, dI, omega2, resistance, sign):
     """The holding margin of a driven part at rest, R + sign * push, push = M_m + M_weight + M_smooth
     - 1/2 I2' omega2^2 (MachineModel.drive_train_at, drivetrain._margin) [N m]."""
