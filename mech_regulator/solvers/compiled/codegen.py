@@ -9,8 +9,9 @@ the parameter vector p they read, laid out as
     p[0:SEGMENT_SLOTS]   the segment's inputs (set by the outer loop, solvers/compiled/run.py): external load
                          offset [N m] and slope [N m/s], held throttle [-], sleeve / servo / driven-part mode codes,
                          the switch window (lo, hi) [rad] the effects see phi clamped into and its edges for the
-                         window's guards [rad];
-    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers).
+                         window's guards [rad], the clutch's mode code;
+    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers); with
+                         joint friction, one slot the crank's guard writes (_crank_guard_lines).
 
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
 share one module (a sweep compiles once). The module is written to the cache folder (env MECH_REGULATOR_CACHE,
@@ -18,10 +19,11 @@ default $XDG_CACHE_HOME/mech_regulator/compiled or ~/.cache/mech_regulator/compi
 kernels.py's source and the package and numba versions, imported with importlib (numba caches the machine code
 in __pycache__ beside it), and kept in a process-wide dict.
 
-Guards are written in the order of MachineModel.guards(mode) (the governor's, then the driven part's), +inf in
-the slots a mode does not use, then the switch window's two guards phi - lo and hi - phi. The guards linear in
-the state (stops, sleeve at rest, driven part at rest, switch window) also get their rows [1, c0, c1..c_n]
-(level = c0 + sum c_i y_i) for the integrators' exact location.
+Guards are written in the order of MachineModel.guards(mode) (the governor's, then the clutch's and the driven
+part's, then the joint friction's crank guard), +inf in the slots a mode does not use, then the switch window's two
+guards phi - lo and hi - phi. The guards linear in the state (stops, sleeve at rest, slip ending, driven part at
+rest, switch window) also get their rows [1, c0, c1..c_n] (level = c0 + sum c_i y_i) for the integrators' exact
+location.
 """
 
 from __future__ import annotations
