@@ -134,6 +134,16 @@ def test_energy_balance_includes_the_clutch_slip_work(engagement):
     assert balance.works["clutch_slip"] == pytest.approx(-KINETIC * slip_angle, rel=1e-6)
 
 
+def test_motor_ahead_of_a_machine_turning_backwards_slips_until_the_machine_stops():
+    """The clutch engages (slip+, motor at W0) on a machine turning backwards at 20 rad/s: the kinetic torque and the
+    resistance both brake it, I omega2' = T_k + L, so it comes to rest at t = 20 I / (T_k + L) with the clutch
+    still slipping (the lock guard is s (omega - omega2), s of the slip, not of the machine's direction)."""
+    model = model_of(scene(ENGAGEMENT, scenario={"initial": {"omega": W0, "omega_driven": -20.0}, "duration": 0.3}))
+    assert model.initial_mode(model.initial_state()) == ("slip+", "backward")
+    trajectory = simulate_complete(model)
+    assert trajectory.events[0] == (pytest.approx(20.0 * I / (KINETIC + L), rel=1e-9), "driven part comes to rest")
+
+
 def test_machine_held_while_the_clutch_slips():
     """Motor and machine at rest, a clutch (static 9 N m) that cannot carry the start: it slips from the start,
     and its kinetic torque (8 N m) cannot overcome the machine's resistance (10 N m) never moves it:

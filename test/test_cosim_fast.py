@@ -154,6 +154,6 @@ def test_cli_co_simulation_on_the_fast_path(capsys):
     assert fast["samples"] == reference["samples"] == 501 and fast["t_end"] == reference["t_end"] == 0.5
     assert fast["status"] == "complete" and fast["governor"]["events"] == reference["governor"]["events"] == 2
     assert fast["omega_end"] == pytest.approx(reference["omega_end"], rel=1e-7)
-    code, _, err = run_cli(capsys, "simulate", "walking_beam", "--quiet", "--exchange-step", "1e-2", "--set",
-                           "solver.path=fast")
-    assert code == 2 and "does not compile machine.mechanism: walking_beam" in err
+    code, _, err = run_cli(capsys, "simulate", "engine_direct", "--quiet", "--exchange-step", "1e-2", "--set",
+                           "solver.path=fast", "--set", "solver.method=Radau")
+    assert code == 2 and "does not run solver.method: 'Radau'" in err

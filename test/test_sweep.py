@@ -20,7 +20,7 @@ from mech_regulator.analysis.sweep import parse_grid, run_point, run_sweep, swee
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, validate_scene
 from mech_regulator.solvers import simulate
-from support import run_cli
+from support import run_cli, write_scene
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 LATHE_SHORT = ["scenario.duration=1.0"]
@@ -280,15 +280,17 @@ def test_a_list_of_scenes(capsys, tmp_path):
 
 def test_fast_path_by_default_where_the_scene_compiles(capsys, tmp_path, single_runs):
     out = tmp_path / "paths"
-    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", "compressor_friction", "--set",
+    # every machine compiles; a solver method without a compiled stepper stays on the reference path
+    lsoda = write_scene(tmp_path, "name: lathe_lsoda\nbase: lathe\nsolver: {method: LSODA}\n", "lathe_lsoda.yaml")
+    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", str(lsoda), "--set",
                                    "scenario.duration=1.0", "--grid", "machine.flywheel.inertia=15.453292519943295",
                                    "--jobs", "1", "--out", str(out), "--quiet")
     assert code == 0, stderr
     with (out / "sweep.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
-    # joint friction is not compiled: that scene runs on the reference path, and the row says so
+    # LSODA is not compiled: that scene runs on the reference path, and the row says so
     assert [(row["scene"], row["status"], row["path"]) for row in rows] == [
-        ("lathe", "complete", "fast"), ("compressor_friction", "complete", "reference")]
+        ("lathe", "complete", "fast"), ("lathe_lsoda", "complete", "reference")]
     assert float(rows[0]["omega_end"]) == pytest.approx(single_runs[1]["omega_end"], rel=1e-9)
     assert single_runs[1]["path"] == "reference"
 

@@ -271,8 +271,8 @@ def train_guards(mode: tuple[str, ...], index: int, forces: Callable, decide: Ca
                    Guard("clutch breaks away, machine ahead", lambda t, y: static + forces(t, y)[0].clutch,
                          switch_to(SLIP_BEHIND, part), timed=True)]
     elif clutch_mode is not None:
-        sign = 1.0 if clutch_mode == SLIP_AHEAD else -1.0
-        guards.append(Guard("clutch locks (slip ends)", lambda t, y: sign * (y[1] - y[index]), settle(lock),
+        slip_sign = 1.0 if clutch_mode == SLIP_AHEAD else -1.0
+        guards.append(Guard("clutch locks (slip ends)", lambda t, y: slip_sign * (y[1] - y[index]), settle(lock),
                             timed=True))
     if part == HELD:
         guards += [Guard("driven part breaks away forwards", lambda t, y: _margin(forces(t, y), -1.0),

@@ -7,34 +7,16 @@ before choosing a path."""
 
 from __future__ import annotations
 
-from mech_regulator.scene import schema
-
 FAST_METHODS = ("RK45", "DOP853", "RK4", "Rosenbrock23")
 
 
 def fast_path_refusal(scene_or_model) -> str | None:
     """Why a scene (or its model) cannot run on the fast path, naming the key, its value and what the fast path
-    has; None when it can."""
+    has; None when it can (the fast path compiles every machine the scene format describes; only the solver
+    methods it has no compiled stepper for stay on the reference path)."""
     scene = getattr(scene_or_model, "scene", scene_or_model)
     method = scene.solver.method
     if method not in FAST_METHODS:
         return (f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "
                 f"{', '.join(FAST_METHODS)}, or solver.path: reference")
-    machine = scene.machine
-    coupling = machine.coupling
-    mechanism = machine.mechanism
-    features = [
-        ("machine.clutch", machine.clutch is not None),
-        ("machine.joint_friction", machine.joint_friction is not None),
-        ("machine.mechanism.cylinders (a multi-cylinder engine)",
-         isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None),
-        ("machine.mechanism: walking_beam", isinstance(mechanism, schema.WalkingBeam)),
-        ("machine.coupling.driven.branches", coupling is not None and bool(coupling.driven.branches)),
-        ("machine.coupling.driven.mechanism: walking_beam",
-         coupling is not None and isinstance(coupling.driven.mechanism, schema.WalkingBeam)),
-    ]
-    for key, present in features:
-        if present:
-            return (f"solver.path: 'fast' does not compile {key} yet; expected a scene without it, or solver.path: "
-                    "reference")
     return None

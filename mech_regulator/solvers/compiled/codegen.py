@@ -9,8 +9,9 @@ the parameter vector p they read, laid out as
     p[0:SEGMENT_SLOTS]   the segment's inputs (set by the outer loop, solvers/compiled/run.py): external load
                          offset [N m] and slope [N m/s], held throttle [-], sleeve / servo / driven-part mode codes,
                          the switch window (lo, hi) [rad] the effects see phi clamped into and its edges for the
-                         window's guards [rad];
-    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers).
+                         window's guards [rad], the clutch's mode code;
+    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers); with
+                         joint friction, one slot the crank's guard writes (_crank_guard_lines).
 
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
 share one module (a sweep compiles once). The module is written to the cache folder (env MECH_REGULATOR_CACHE,
@@ -18,14 +19,16 @@ default $XDG_CACHE_HOME/mech_regulator/compiled or ~/.cache/mech_regulator/compi
 kernels.py's source and the package and numba versions, imported with importlib (numba caches the machine code
 in __pycache__ beside it), and kept in a process-wide dict.
 
-Guards are written in the order of MachineModel.guards(mode) (the governor's, then the driven part's), +inf in
-the slots a mode does not use, then the switch window's two guards phi - lo and hi - phi. The guards linear in
-the state (stops, sleeve at rest, driven part at rest, switch window) also get their rows [1, c0, c1..c_n]
-(level = c0 + sum c_i y_i) for the integrators' exact location.
+Guards are written in the order of MachineModel.guards(mode) (the governor's, then the clutch's and the driven
+part's, then the joint friction's crank guard), +inf in the slots a mode does not use, then the switch window's two
+guards phi - lo and hi - phi. The guards linear in the state (stops, sleeve at rest, slip ending, driven part at
+rest, switch window) also get their rows [1, c0, c1..c_n] (level = c0 + sum c_i y_i) for the integrators' exact
+location.
 """
 
 from __future__ import annotations
 
+import cmath
 import functools
 import hashlib
 import importlib.util
@@ -41,7 +44,10 @@ import numpy as np
 
 import mech_regulator
 from mech_regulator.model import MachineModel
-from mech_regulator.model.drivetrain import BACKWARD, FORWARD, HELD
+from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK
+from mech_regulator import mechanisms
+from mech_regulator.effects import joint_friction
+from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
 
@@ -49,8 +55,8 @@ CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
-CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI = range(6, 10)
-SEGMENT_SLOTS = 10
+CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE = range(6, 11)
+SEGMENT_SLOTS = 11
 
 SLEEVE_CODE = {"free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
@@ -95,8 +101,11 @@ class CompiledScene:
         model = self.model
         if model.governor is not None and mode is not None:
             p[SLEEVE_MODE], p[SERVO_MODE] = SLEEVE_CODE[mode[0]], SERVO_CODE[mode[1]]
-        if model.coupling is not None:
-            p[DRIVEN_MODE] = DRIVEN_CODE[model.train_mode_of(mode)[0]]
+        if model.driven is not None:
+            train = model.train_mode_of(mode)
+            p[DRIVEN_MODE] = DRIVEN_CODE[train[-1]]
+            if model.clutch is not None:
+                p[CLUTCH_MODE] = CLUTCH_CODE[train[0]]
         if window is not None:
             margin = 1e-9 * (window[1] - window[0])
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
@@ -187,9 +196,11 @@ def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.n
 
 def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
     """For each guard of model.guards(mode), in its order, its linear row [1, c0, c1..c_n] or None (not linear in
-    the state)."""
+    the state; the joint friction's 'crank stops' is linear only given the crank's direction at the segment's start,
+    which the rows do not know)."""
+    crank = [None] if model.joint_friction is not None else []
     if mode is None:
-        return []
+        return crank
     n = len(model.state_names())
     rows: list[np.ndarray | None] = []
     governor = model.governor
@@ -202,11 +213,18 @@ def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
         if governor.kind == "indirect":
             s_low, s_high = governor.travel
             rows += ([_row(n, SERVO, 1.0, -s_low), _row(n, SERVO, -1.0, s_high)] if mode[1] == "free" else [None])
-    if model.coupling is not None:
-        part = model.train_mode_of(mode)[0]
-        sign = {FORWARD: 1.0, BACKWARD: -1.0}.get(part)
-        rows += [None, None] if sign is None else [_row(n, model.driven_speed_index, sign, 0.0)]
-    return rows
+    if model.driven is not None:
+        train = model.train_mode_of(mode)
+        index = model.driven_speed_index
+        if model.clutch is not None and train[0] == STUCK:
+            rows += [None, None]
+        elif model.clutch is not None:  # the slip ends: s (omega - omega2)
+            slip = _row(n, 1, CLUTCH_CODE[train[0]], 0.0)
+            slip[2 + index] = -CLUTCH_CODE[train[0]]
+            rows.append(slip)
+        sign = {FORWARD: 1.0, BACKWARD: -1.0}.get(train[-1])
+        rows += [None, None] if sign is None else [_row(n, index, sign, 0.0)]
+    return rows + crank
 
 
 class _Parameters:
@@ -237,8 +255,11 @@ class _Parameters:
         return np.array(values, dtype=float)
 
 
-def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
-    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source."""
+def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, mechanism=None) -> str:
+    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source; an
+    engine on a crank–slider with several cylinders (mechanism.cylinders) is the sum of every cylinder's gas moment
+    -p(phi + phase - d_i) A dx_i/dphi (d_i its firing delay, effects._multi_cylinder_engine; dx_i/dphi named as
+    _reduced_lines does)."""
     if isinstance(spec, schema.ConstantDrive):
         return p.scalar(spec.torque)
     if isinstance(spec, schema.LinearMotor):
@@ -248,8 +269,18 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) ->
         return f"k.table_drive({phi}, {table}, {p.scalar(math.radians(spec.period_deg))})"
     if isinstance(spec, schema.Engine):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
-        return (f"k.engine_gas({phi}, {dq}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
-                f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
+        cycle, area = p.scalar(math.radians(spec.cycle_deg)), math.pi * spec.bore ** 2 / 4.0
+        cylinders = getattr(mechanism, "cylinders", None)
+        if cylinders is None:
+            return (f"k.engine_gas({phi}, {dq}, {table}, {cycle}, {p.scalar(math.radians(spec.phase_deg))}, "
+                    f"{p.scalar(area)})")
+        area = p.scalar(area)
+        delays = engine.firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders],
+                                      spec.cycle_deg, spec.firing_order, spec.firing_deg)
+        ratios = [dq] + [f"{dq}_{number}" for number in range(2, len(cylinders) + 1)]
+        return "(" + " + ".join(f"k.engine_gas({phi}, {ratio}, {table}, {cycle}, "
+                                f"{p.scalar(math.radians(spec.phase_deg - delay))}, {area})"
+                                for ratio, delay in zip(ratios, delays)) + ")"
     if isinstance(spec, schema.ConstantLoad):
         return f"-{p.scalar(spec.torque)}"
     if isinstance(spec, schema.ViscousLoad):
@@ -276,22 +307,52 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) ->
     raise TypeError(f"no compiled kernel for {type(spec).__name__}")
 
 
-def _reduced_call(mechanism, gravity, p: _Parameters, angle: str) -> str:
-    """The kernel call of a mechanism's reduced(phi) (mechanisms.build_reduced), as source; gravity None or
-    massless links: the weight moment is not computed (with_weight 0 in p)."""
+def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[str, ...]) -> list[str]:
+    """Source assigning a mechanism's reduced(phi) (mechanisms.build_reduced) at `angle` to the five `names` (J_links,
+    dJ, weight, q, dq); gravity None or massless links: the weight moment is not computed (with_weight 0 in p).
+    Several cylinders (mechanisms.engine.make_multi_reduced): cylinder 1's call assigns the names, cylinder k's
+    (k >= 2), at angle + throw_k - bank_k with gravity turned into its frame, is added to the first three and its
+    q, dq are named q_k, dq_k (what the engine's gas moment reads)."""
     gx, gy = gravity if gravity is not None else (0.0, 0.0)
     weighs = float(gravity is not None and (gx != 0.0 or gy != 0.0)
                    and any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass")))
+    target = ", ".join(names)
     if isinstance(mechanism, schema.CrankSlider):
         m = mechanism
-        args = [m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod, m.rod_mass, m.rod_inertia,
-                m.slider_mass, gx, gy]
-        return f"k.crank_slider_reduced({angle}, {', '.join(p.scalar(v) for v in args)}, {p.scalar(weighs)} != 0.0)"
+        geometry = [p.scalar(v) for v in (m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod,
+                                          m.rod_mass, m.rod_inertia, m.slider_mass)]
+        if m.cylinders is None:
+            args = geometry + [p.scalar(gx), p.scalar(gy)]
+            return [f"{target} = k.crank_slider_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
+        with_weight = f"{p.scalar(weighs)} != 0.0"
+        throws, banks = [c.throw_deg for c in m.cylinders], [c.bank_deg for c in m.cylinders]
+        lines = []
+        for number, (shift, bank) in enumerate(zip(engine.cylinder_shifts(throws, banks), banks), start=1):
+            c, s = math.cos(math.radians(bank)), math.sin(math.radians(bank))
+            turned = [p.scalar(gx * c + gy * s), p.scalar(-gx * s + gy * c)]
+            call = f"k.crank_slider_reduced({angle} + {p.scalar(shift)}, {', '.join(geometry + turned)}, {with_weight})"
+            if number == 1:
+                lines.append(f"{target} = {call}")
+            else:
+                J, dJ, weight, q, dq = names
+                lines += [f"J_k, dJ_k, weight_k, {q}_{number}, {dq}_{number} = {call}",
+                          f"{J} += J_k", f"{dJ} += dJ_k", f"{weight} += weight_k"]
+        return lines
+    if isinstance(mechanism, schema.WalkingBeam):
+        g = walking_beam.geometry_from_scene(mechanism)
+        args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.coupler_point,
+                g.coupler_point_angle, g.coupler_cg, g.coupler_cg_angle, g.coupler_mass,
+                g.coupler_inertia + g.side_inertia, 2.0 * g.rocker_mass, g.rocker_cg, 2.0 * g.rocker_inertia,
+                g.tie_mass, g.side_mass, g.side_cg, cmath.phase(walking_beam.side(g)), g.shuttle_mass,
+                g.crank_mass * g.crank_cg, gx, gy]
+        args = [p.scalar(v) for v in args]
+        return [f"{target} = k.walking_beam_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
     m = mechanism
     args = [m.crank, m.coupler, m.rocker, m.frame, math.radians(m.frame_angle_deg),
             {"open": -1.0, "crossed": 1.0}[m.branch], m.crank_mass * m.crank_cg, m.coupler_mass, m.coupler_cg,
             m.coupler_inertia, m.rocker_mass, m.rocker_cg, m.rocker_inertia, gx, gy]
-    return f"k.four_bar_reduced({angle}, {', '.join(p.scalar(v) for v in args)}, {p.scalar(weighs)} != 0.0)"
+    args = [p.scalar(v) for v in args]
+    return [f"{target} = k.four_bar_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
 
 
 def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
@@ -302,11 +363,11 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     body: list[str] = ["phi = y[0]", "omega = y[1]"]
     if model.reduced is not None:  # the model's, not the scene's: a co-simulated governor has no mechanism
         gravity = machine.gravity if model.has_weight else None
-        body.append(f"J_links, dJ, total, q, dq = {_reduced_call(machine.mechanism, gravity, p, 'phi')}")
+        body += _reduced_lines(machine.mechanism, gravity, p, "phi", ("J_links", "dJ", "total", "q", "dq"))
     else:
         body.append("J_links, dJ, total, q, dq = 0.0, 0.0, 0.0, 0.0, 0.0")
     body.append(f"J = {p.scalar(model.inertia_constant)} + J_links")
-    coupled = model.coupling is not None
+    coupled = model.driven is not None  # the external load on the driven part, not on the crank
     if not coupled:
         body.append(f"total -= p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t")
     specs = ([machine.drive] if machine.drive is not None else []) + list(machine.loads)
@@ -318,7 +379,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
         elif effect.role == "drive" and governor is not None:
             scaled.append(spec)
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
-            body.append(f"total += p[{HELD_THROTTLE}] * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
+            body.append(f"total += p[{HELD_THROTTLE}] * "
+                        f"{_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}")
         else:
             body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
     if switched:
@@ -350,7 +412,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
             command = (f"k.servo_command(opening, {p.scalar(governor.servo_gain)}, "
                        f"{p.scalar(governor.servo_max_speed)}, {p.scalar(governor.dead_band)})")
         body.append(f"share = {throttle}")
-        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}" for spec in scaled]
+        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}"
+                 for spec in scaled]
         sensor_args = f"{m}, {l}, {M}, {kk}, {z_free}, {c}, {g}, {ratio}"
         lift = f"k.lift(y[{ARM}], omega, {m}, {l}, {M}, {kk}, {z_free}, {g}, {ratio})"
         governor_lines += [
@@ -394,13 +457,24 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     n_mode_guards = 0
     if governor is not None:
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
-    if coupled:
+    if model.coupling is not None:
         train_lines, train_guards = _coupling_lines(model, p)
         body += train_lines
         guard_lines += train_guards
         n_mode_guards += 2
+    elif model.clutch is not None:  # the crank's net moment again in guards, phi unclamped (MachineModel.crank_side)
+        crank = ["clamped = phi" if line.startswith("clamped = ") else line for line in body if line != "dydt[0] = omega"]
+        train_lines, train_guards = _clutch_lines(model, p, crank)
+        body += train_lines
+        guard_lines += train_guards
+        n_mode_guards += 4
     else:
         body.append("dydt[1] = net / J")
+    if model.joint_friction is not None:
+        share = "share" if governor is not None else f"p[{HELD_THROTTLE}]"
+        body += _joint_friction_lines(model, p, specs, share)
+        guard_lines += _crank_guard_lines(p)
+        n_mode_guards += 1
     body += governor_lines
     window_slot = None
     n_guards = n_mode_guards
@@ -411,6 +485,84 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
     source = _module(body, guard_lines, n_guards)
     return source, p.array(), n_guards, window_slot
+
+
+def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
+    """The generalised force on the output link of a drive or load entry that has one (Effect.output_force: slider
+    force along +x [N] or rocker moment [N m]), as source."""
+    if isinstance(spec, schema.Engine):
+        table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
+        return (f"k.engine_gas_force({phi}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
+                f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
+    if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
+        return p.scalar(spec.force if isinstance(spec, schema.SliderConstant) else spec.torque)
+    if isinstance(spec, schema.OutputViscous):
+        return f"k.output_viscous_force({omega}, {dq}, {p.scalar(spec.coefficient)})"
+    if isinstance(spec, schema.OutputSpring):
+        return f"k.output_spring_force({q}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
+    if isinstance(spec, schema.SliderTable):
+        return f"k.clamped_linear({q}, {p.table(spec.position, spec.force)})"
+    raise TypeError(f"no compiled output force for {type(spec).__name__}")
+
+
+def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, share: str) -> list[str]:
+    """Source that turns the crank's frictionless dydt[1] = epsilon_0 into the root of J epsilon = J epsilon_0 -
+    sign(omega) F(epsilon) (MachineModel.rhs, effects.joint_friction): the force Q on the output link (the effects'
+    output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
+    kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics."""
+    friction = model.joint_friction
+    collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
+    iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
+    if friction.loads is None:
+        return [f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
+                f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations})"]
+    lines = ["force = 0.0"]
+    scaled = []
+    for spec, effect in zip(specs, model.effects):
+        if effect.output_force is None:
+            continue
+        call = _output_force_call(spec, p, "phi", "omega", "q", "dq")
+        if effect.role == "drive":
+            scaled.append(f"force += {share} * {call}")
+        else:
+            lines.append(f"force += {call}")
+    lines += scaled
+    machine = model.scene.machine
+    gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
+    g = mechanisms.mechanism_geometry(machine.mechanism)
+    if isinstance(machine.mechanism, schema.CrankSlider):
+        args = [g.crank, g.rod, g.offset, g.rod_cg / g.rod, g.crank_mass, g.crank_cg, g.rod_mass, g.rod_inertia,
+                g.slider_mass, gx, gy]
+        kernel = "crank_slider_joint_loads"
+    else:
+        args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.crank_mass, g.crank_cg,
+                g.coupler_mass, g.coupler_cg, g.coupler_inertia, g.rocker_mass, g.rocker_cg, g.rocker_inertia, gx, gy]
+        kernel = "four_bar_joint_loads"
+    lines.append(f"R0, R1, ratios = k.{kernel}(phi, omega, force, {', '.join(p.scalar(v) for v in args)})")
+    arms = [0.0] * 4  # a joint without friction: arm 0, its terms exact zeros
+    for index, arm_length in zip(friction.indices, friction.arms):
+        arms[index] = arm_length
+    lines.append(f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, "
+                 f"({', '.join(p.scalar(v) for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations})")
+    return lines
+
+
+def _crank_guard_lines(p: _Parameters) -> list[str]:
+    """Source of the joint friction's crank guard (MachineModel.guards), after the mode's: 'crank stops', s omega,
+    s the sign of the first nonzero omega the segment's guards see: at its start (the integrators call guards
+    first at the segment's start state, with a fresh p per stepper call, solvers/compiled/run.py) or, for a crank
+    starting the segment at rest, as it breaks away (level 0 until then). The sign's slot of p is NaN as
+    parameters_for gives it, 0 while the crank has not moved. Unlike the reference path, a crank starting from rest
+    is not an event ('crank starts' there only restarts the solver to watch for the next stop, which this guard
+    watches for within the segment): run.py takes an event's transition from model.guards at the event's state, where
+    omega is no longer 0 and the model's guard would be 'crank stops'."""
+    slot = p.scalar(math.nan)
+    return [f"direction = {slot}",
+            "if direction != direction or direction == 0.0:",
+            "    direction = 0.0 if omega == 0.0 else (1.0 if omega > 0.0 else -1.0)",
+            f"    {slot} = direction",
+            "levels[g] = direction * omega",
+            "g += 1"]
 
 
 def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], list[str]]:
@@ -429,13 +581,12 @@ def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], lis
              f"passed = {elastic} + {p.scalar(coupling.damping)} * (omega - omega2)"]
     dynamics = ["phi2 = y[0] - twist"]
     if driven.mechanism is not None:
-        dynamics.append("I_links, dI, weight2, q2, dq2 = "
-                        + _reduced_call(driven.mechanism, model.scene.machine.gravity, p, "phi2"))
+        dynamics += _reduced_lines(driven.mechanism, model.scene.machine.gravity, p, "phi2",
+                                   ("I_links", "dI", "weight2", "q2", "dq2"))
     else:
         dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
     dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
-    dynamics += [f"smooth += {_effect_call(load, p, 'phi2', 'omega2', 'q2', 'dq2')}"
-                 for load in driven.loads if not isinstance(load, schema.ConstantLoad)]
+    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2")
     resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
     rhs = state + [
         "dydt[1] = (net - passed) / J",
@@ -452,6 +603,49 @@ def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], lis
         "    g += 2",
         f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{speed_index}]", "    g += 1",
         "else:", f"    levels[g] = -y[{speed_index}]", "    g += 1"]
+    return rhs, guards
+
+
+def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, omega: str, q: str, dq: str
+                         ) -> list[str]:
+    """Source adding a driven part's non-Coulomb moments to `smooth` (DrivenModel.smooth_moment): its own loads,
+    then each branch's reduced to the main shaft, M_n(omega / i_1n) / i_1n (drivetrain._reduced); constant loads
+    are Coulomb resistances, in R."""
+    lines = [f"smooth += {_effect_call(load, p, phi, omega, q, dq)}"
+             for load in driven.loads if not isinstance(load, schema.ConstantLoad)]
+    for branch in driven.branches:
+        ratio = p.scalar(branch.ratio)
+        lines += [f"smooth += {_effect_call(load, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
+                  for load in branch.loads if not isinstance(load, schema.ConstantLoad)]
+    return lines
+
+
+def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tuple[list[str], list[str]]:
+    """Source of the friction clutch and the driven part behind it (MachineModel._train, drivetrain.ClutchModel) in
+    the train mode of p (CLUTCH_MODE, DRIVEN_MODE): dydt[1] and domega2/dt of clutch_forces, the driven part read at
+    omega2 = omega while stuck. Stuck, domega2/dt is the crank's (the reference freezes omega2 and sets it to omega
+    in its outputs, MachineModel.constraint; equal starting values and equal rates keep them equal bit for bit here).
+    Guards, in drivetrain.train_guards' order: stuck, static_torque -+ T (crank: the crank's net moment F1, phi
+    unclamped); slipping, s (omega - omega2); then the driven part's margins R -+ push at rest or s omega2 turning."""
+    clutch = model.clutch
+    index = model.driven_speed_index
+    omega2 = f"omega2 = y[1] if p[{CLUTCH_MODE}] == 0.0 else y[{index}]"
+    driven = ["smooth = 0.0"] + _driven_smooth_lines(model.scene.machine.clutch.driven, p, "0.0", "omega2", "0.0",
+                                                      "0.0")
+    resistance = f"resistance = {p.scalar(clutch.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
+    forces = (f"epsilon, epsilon2, torque, push = k.clutch_forces(p[{CLUTCH_MODE}], p[{DRIVEN_MODE}], net, J, smooth, "
+              f"resistance, {p.scalar(clutch.driven.inertia)}, {p.scalar(clutch.kinetic_torque)})")
+    rhs = [omega2] + driven + [resistance, forces, "dydt[1] = epsilon", f"dydt[{index}] = epsilon2"]
+    static = p.scalar(clutch.static_torque)
+    guards = crank + rhs[:-2] + [
+        f"if p[{CLUTCH_MODE}] == 0.0:",
+        f"    levels[g] = {static} - torque", f"    levels[g + 1] = {static} + torque", "    g += 2",
+        "else:",
+        f"    levels[g] = p[{CLUTCH_MODE}] * (omega - y[{index}])", "    g += 1",
+        f"if p[{DRIVEN_MODE}] == 2.0:",
+        "    levels[g] = resistance - push", "    levels[g + 1] = resistance + push", "    g += 2",
+        f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{index}]", "    g += 1",
+        "else:", f"    levels[g] = -y[{index}]", "    g += 1"]
     return rhs, guards
 
 
