@@ -121,7 +121,7 @@ def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None, spee
                 y[0] = RNG.uniform(*window)
             if speed is not None:
                 y[1] = speed
-            p = compiled.parameters_for(chosen, mode, window)
+            p = compiled.parameters_for(chosen, mode, window, y[1])
             expected = np.array(model.rhs(chosen, window, mode)(t, y), dtype=float)
             if model.constraint(mode) is not None:  # a stuck clutch: omega2 follows omega (codegen._clutch_lines)
                 expected[model.driven_speed_index] = expected[1]
@@ -135,7 +135,7 @@ def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None, spee
             np.testing.assert_allclose(levels[:count], reference, rtol=1e-12, atol=1e-12)
             window_guards = 2 if compiled.window_slot is not None else 0
             assert np.all(np.isinf(levels[count:compiled.n_guards - window_guards]))
-            rows = mode_rows(model, mode)  # linear rows reproduce the levels of the guards they claim
+            rows = mode_rows(model, mode, y[1])  # linear rows reproduce the levels of the guards they claim
             assert len(rows) == count
             for row, level in zip(rows, reference):
                 if row is not None:
@@ -316,11 +316,16 @@ def test_joint_friction_equals_reference(speed):
         compiled.rhs(0.0, y, compiled.parameters_for(None, None, None), rates)
         assert rates[1] == pytest.approx(model.rhs()(0.0, y)[1], rel=1e-12, abs=0.0)
         assert rates[1] == pytest.approx(expected, rel=1e-9, abs=0.0)
-    levels, p = np.zeros(1), compile_scene(held).parameters_for(None, None, None)
-    # the crank's guard latches the sign of the first nonzero omega it sees (at rest: 0 until the crank moves)
-    for state, level in (([0.0, 0.0], 0.0), ([0.0, 1e-6], 1e-6), ([0.0, 0.0], 0.0), ([0.0, -2.0], -2.0)):
-        compile_scene(held).guards(0.0, np.array(state), p, levels)
-        assert levels[0] == level
+    # the crank's guard follows the sign of omega at the segment's start: 'crank starts' (-|omega|) from rest,
+    # 'crank stops' (s omega) when turning, as model.guards(mode, y); only the latter is linear in the state
+    levels, compiled = np.zeros(1), compile_scene(held)
+    for start, state, level in ((0.0, 1e-6, -1e-6), (0.0, -2.0, -2.0), (3.0, 2.0, 2.0), (3.0, -1.0, -1.0),
+                                (-3.0, 2.0, -2.0)):
+        compiled.guards(0.0, np.array([0.0, state]), compiled.parameters_for(None, None, None, start), levels)
+        (guard,) = held.guards(None, np.array([0.0, start]))
+        assert levels[0] == level == guard.level(0.0, np.array([0.0, state]))
+        rows = mode_rows(held, None, start)
+        assert (rows[0] is None) == (start == 0.0)
 
 
 @pytest.mark.parametrize("feedback", [{"type": "none"}, {"type": "rigid", "gain": 0.12},
@@ -488,8 +493,8 @@ def test_runs_equal_reference_within_their_accuracy(data):
 def test_crank_stops_and_starts_as_on_the_reference_path():
     """Joint friction's crank guard on the fast path: a collar alone (M = f Q (r1 + r2)/2 = 3 N m) stops J = 0.5,
     omega0 = 10 at t = J omega0 / M = 5/3 s, where the crank then stays (omega exactly 0); the crank–slider at rest
-    stays under 0.9 F(0) and starts under 1.1 F(0) (on the fast path without the reference's 'crank starts' event,
-    codegen._crank_guard_lines) and then runs as on the reference path."""
+    stays under 0.9 F(0) and starts under 1.1 F(0) with the reference's 'crank starts' event, and then runs as on the
+    reference path."""
     collar = {"inner_radius": 0.02, "outer_radius": 0.04, "axial_load": 1000.0}
     run_down = {"machine": {"inertia": 0.5, "joint_friction": {"coefficient": 0.1, "thrust_collar": collar}},
                 "scenario": {"initial": {"omega": 10.0}, "duration": 2.0}, "solver": {}}
@@ -506,13 +511,14 @@ def test_crank_stops_and_starts_as_on_the_reference_path():
     # run's distance to one at 1/100 of the tolerances, as test_runs_equal_reference_within_their_accuracy)
     for data in (crank_at_rest(1.1 * at_rest), shortened("compressor_friction", 0.5)):
         reference, fast = run_pair(data)
-        assert [name for _, name in reference.events] == ["crank starts"] and fast.events == []
+        assert [name for _, name in reference.events] == ["crank starts"]
+        assert_same_events(reference, fast)
         settings = model_of(data).scene.solver
         tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
                                                  solver__atol=settings.atol / 100)))
         assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
-        # the reference's one step more: to its 'crank starts' event
-        assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps + 1
+        # the step sequences after the start part at round-off (measured: 179 against 187 on compressor_friction)
+        assert abs(fast.stats.steps - reference.stats.steps) <= 0.05 * reference.stats.steps
 
 
 @pytest.mark.parametrize("data", [bundled("clutch_start"), shortened("clutch_start", 2.5, solver__method="RK45"),

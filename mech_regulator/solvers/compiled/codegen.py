@@ -9,9 +9,9 @@ the parameter vector p they read, laid out as
     p[0:SEGMENT_SLOTS]   the segment's inputs (set by the outer loop, solvers/compiled/run.py): external load
                          offset [N m] and slope [N m/s], held throttle [-], sleeve / servo / driven-part mode codes,
                          the switch window (lo, hi) [rad] the effects see phi clamped into and its edges for the
-                         window's guards [rad], the clutch's mode code;
-    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers); with
-                         joint friction, one slot the crank's guard writes (_crank_guard_lines).
+                         window's guards [rad], the clutch's mode code, the sign of the crank's speed at the
+                         segment's start (joint friction's crank guard);
+    p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers).
 
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
 share one module (a sweep compiles once). The module is written to the cache folder (env MECH_REGULATOR_CACHE,
@@ -55,8 +55,8 @@ CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
-CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE = range(6, 11)
-SEGMENT_SLOTS = 11
+CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE, CRANK_DIRECTION = range(6, 12)
+SEGMENT_SLOTS = 12
 
 SLEEVE_CODE = {"free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
@@ -89,10 +89,11 @@ class CompiledScene:
     source: str
     path: Path
 
-    def parameters_for(self, piece, mode, window: tuple[float, float] | None) -> np.ndarray:
+    def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0) -> np.ndarray:
         """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
-        codes and the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
-        width, as MachineModel.rhs)."""
+        codes, the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
+        width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
+        joint friction's crank guard watches, as MachineModel.guards(mode, y))."""
         p = self.parameters.copy()
         if piece is not None:
             p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
@@ -110,14 +111,16 @@ class CompiledScene:
             margin = 1e-9 * (window[1] - window[0])
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
             p[WINDOW_LO], p[WINDOW_HI] = window
+        p[CRANK_DIRECTION] = np.sign(omega)
         return p
 
-    def linear(self, mode, window: tuple[float, float] | None) -> np.ndarray:
-        """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode and window:
-        flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not linear (or unused)."""
+    def linear(self, mode, window: tuple[float, float] | None, omega: float = 0.0) -> np.ndarray:
+        """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
+        crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
+        linear (or unused)."""
         n = len(self.model.state_names())
         matrix = np.zeros((self.n_guards, n + 2))
-        for slot, row in enumerate(mode_rows(self.model, mode)):
+        for slot, row in enumerate(mode_rows(self.model, mode, omega)):
             if row is not None:
                 matrix[slot] = row
         if self.window_slot is not None and window is not None:
@@ -194,11 +197,12 @@ def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.n
     return row
 
 
-def mode_rows(model: MachineModel, mode) -> list[np.ndarray | None]:
-    """For each guard of model.guards(mode), in its order, its linear row [1, c0, c1..c_n] or None (not linear in
-    the state; the joint friction's 'crank stops' is linear only given the crank's direction at the segment's start,
-    which the rows do not know)."""
-    crank = [None] if model.joint_friction is not None else []
+def mode_rows(model: MachineModel, mode, omega: float = 0.0) -> list[np.ndarray | None]:
+    """For each guard of model.guards(mode, y) with y's crank speed omega [rad/s], in its order, its linear row
+    [1, c0, c1..c_n] or None (not linear in the state: among others joint friction's 'crank starts', -|omega|)."""
+    crank = []
+    if model.joint_friction is not None:  # 'crank stops': s omega with s the sign of omega at the segment's start
+        crank = [None if omega == 0.0 else _row(len(model.state_names()), 1, float(np.sign(omega)), 0.0)]
     if mode is None:
         return crank
     n = len(model.state_names())
@@ -473,7 +477,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     if model.joint_friction is not None:
         share = "share" if governor is not None else f"p[{HELD_THROTTLE}]"
         body += _joint_friction_lines(model, p, specs, share)
-        guard_lines += _crank_guard_lines(p)
+        guard_lines += _crank_guard_lines()
         n_mode_guards += 1
     body += governor_lines
     window_slot = None
@@ -547,21 +551,12 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     return lines
 
 
-def _crank_guard_lines(p: _Parameters) -> list[str]:
-    """Source of the joint friction's crank guard (MachineModel.guards), after the mode's: 'crank stops', s omega,
-    s the sign of the first nonzero omega the segment's guards see: at its start (the integrators call guards
-    first at the segment's start state, with a fresh p per stepper call, solvers/compiled/run.py) or, for a crank
-    starting the segment at rest, as it breaks away (level 0 until then). The sign's slot of p is NaN as
-    parameters_for gives it, 0 while the crank has not moved. Unlike the reference path, a crank starting from rest
-    is not an event ('crank starts' there only restarts the solver to watch for the next stop, which this guard
-    watches for within the segment): run.py takes an event's transition from model.guards at the event's state, where
-    omega is no longer 0 and the model's guard would be 'crank stops'."""
-    slot = p.scalar(math.nan)
-    return [f"direction = {slot}",
-            "if direction != direction or direction == 0.0:",
-            "    direction = 0.0 if omega == 0.0 else (1.0 if omega > 0.0 else -1.0)",
-            f"    {slot} = direction",
-            "levels[g] = direction * omega",
+def _crank_guard_lines() -> list[str]:
+    """Source of the joint friction's crank guard (MachineModel.guards), after the mode's: with s the sign of the
+    crank's speed at the segment's start (p's CRANK_DIRECTION), 'crank stops', s omega, or, starting at rest (s = 0),
+    'crank starts', -|omega| (omega leaves 0: the solver restarts to watch for the next stop)."""
+    return [f"direction = p[{CRANK_DIRECTION}]",
+            "levels[g] = direction * omega if direction != 0.0 else -abs(omega)",
             "g += 1"]
 
 

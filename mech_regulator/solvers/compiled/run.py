@@ -85,13 +85,14 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         if window is not None and y[0] - offset > window[1]:  # a whole period that floor() left by round-off
             offset += period
-        p = compiled.parameters_for(piece, mode, window)
-        y_wrapped = np.array(y, dtype=float)
+        start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
+        p = compiled.parameters_for(piece, mode, window, start[1])
+        y_wrapped = start.copy()
         y_wrapped[0] -= offset
         # without a switch window no guard reads phi: the stepper wraps it itself instead of returning to restart
         wrap_period = period if wraps and window is None else 0.0
-        run = _step(settings, compiled, compiled.linear(mode, window), thresholds, t, y_wrapped, t_end, p, atol,
-                    first_step, wrap_limit, wrap_period)
+        run = _step(settings, compiled, compiled.linear(mode, window, start[1]), thresholds, t, y_wrapped, t_end, p,
+                    atol, first_step, wrap_limit, wrap_period)
         if run.n_steps:
             trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset))
         trajectory.stats.steps += int(run.n_steps)
@@ -118,7 +119,7 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
                 y[0] = offset + window[g - compiled.window_slot]
                 trajectory.stats.restarts += int(t < t_end)
             else:
-                guard = model.guards(mode, y)[g]
+                guard = model.guards(mode, start)[g]
                 mode, y = guard.apply(t, y)
                 y = np.array(y, dtype=float)
                 _log_event(trajectory, t, guard.name, mode)
