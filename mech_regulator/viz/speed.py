@@ -1,6 +1,6 @@
 """The picture of the speed benchmark (`mech-regulator bench speed`): the work–precision of every path on the
-crank–slider (CPU time against achieved error, log–log, the target error marked) and the cost against simulated
-time."""
+crank–slider (CPU time against achieved error, log–log, the target error marked), the cost against simulated
+time and, with --ros, the lockstep run's real-time factor against the exchange step's error."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 
-from mech_regulator.bench.speed import (BENCH_SCENE, FAST, MUJOCO, PATHS, REFERENCE, SCALING_RTOL,  # noqa: E402
-                                        SOLVE_IVP, TARGET_ERROR, SpeedBenchmark, work_precision_front)
+from mech_regulator.bench.speed import (BENCH_SCENE, FAST, MUJOCO, PATHS, REFERENCE, ROS_DURATION,  # noqa: E402
+                                        ROS_EXCHANGE, ROS_SCENE, SCALING_RTOL, SOLVE_IVP, TARGET_ERROR, TARGETS,
+                                        SpeedBenchmark, ros_summary, work_precision_front)
 from mech_regulator.viz.work_precision import X_LABEL  # noqa: E402
 
 # (path, method) -> (colour, marker, line style): a colour per path, a line style per method
@@ -24,10 +25,15 @@ STYLE = {(FAST, "RK45"): ("tab:green", "o", "--"), (FAST, "DOP853"): ("tab:green
 def plot_speed(benchmark: SpeedBenchmark, path: Path, scene: str = BENCH_SCENE) -> None:
     """Left: CPU time [s] against achieved error [-] of every path and method on `scene`, points labelled with
     their setting (rtol; MuJoCo's timestep), faded where a cheaper run of the same line is more accurate, and
-    TARGET_ERROR as a dotted line. Right: CPU time [s] against simulated time [s], with the line of cost
-    proportional to simulated time through the shortest run."""
-    figure, (precision, growth) = plt.subplots(1, 2, figsize=(15, 6.5), width_ratios=(1.6, 1.0),
-                                               constrained_layout=True)
+    TARGET_ERROR as a dotted line. Middle: CPU time [s] against simulated time [s], with the line of cost
+    proportional to simulated time through the shortest run. Right, when the ROS run was measured: real-time factor
+    against the exchange step's achieved error, the nodes and the same co-simulation in one process (_plot_ros)."""
+    ros = ros_summary(benchmark)
+    figure, axes = plt.subplots(1, 3 if ros else 2, figsize=(21 if ros else 15, 6.5),
+                                width_ratios=(1.6, 1.0, 1.0) if ros else (1.6, 1.0), constrained_layout=True)
+    precision, growth = axes[:2]
+    if ros:
+        _plot_ros(axes[2], ros)
     for key in PATHS:
         rows = [row for row in benchmark.of("precision", scene=scene, path=key[0], method=key[1]) if row.error > 0]
         if not rows:
@@ -56,8 +62,9 @@ def plot_speed(benchmark: SpeedBenchmark, path: Path, scene: str = BENCH_SCENE) 
             colour, marker, style = STYLE[key]
             growth.plot([row.value for row in rows], [row.cpu_s for row in rows], color=colour, ls=style,
                         marker=marker, label=f"{key[0]} DOP853")
-            growth.plot([rows[0].value, rows[-1].value], [rows[0].cpu_s, rows[0].cpu_s * rows[-1].value / rows[0].value],
-                        color=colour, lw=0.8, ls=":", label=f"{key[0]}: proportional to simulated time")
+            proportional = rows[0].cpu_s * rows[-1].value / rows[0].value
+            growth.plot([rows[0].value, rows[-1].value], [rows[0].cpu_s, proportional], color=colour, lw=0.8, ls=":",
+                        label=f"{key[0]}: proportional to simulated time")
     growth.set_xscale("log")
     growth.set_yscale("log")
     growth.grid(which="major", alpha=0.35)
@@ -68,3 +75,35 @@ def plot_speed(benchmark: SpeedBenchmark, path: Path, scene: str = BENCH_SCENE) 
         growth.legend(fontsize=9)
     figure.savefig(path, dpi=110)
     plt.close(figure)
+
+
+def _plot_ros(axis, ros: list[dict]) -> None:
+    """Real-time factor (simulated s per wall s of the nodes' exchanges; per CPU s in one process) against the
+    exchange step's achieved error (omega, relative RMS), each point labelled with its exchange step; the target
+    (TARGETS at ROS_EXCHANGE) and real time as horizontal lines."""
+    for path, colour in ((FAST, "tab:green"), (REFERENCE, "tab:blue")):
+        items = [item for item in ros if item["path"] == path and "error" in item]
+        for key, marker, style, how in (("real_time_factor", "o", "-", "four node processes"),
+                                        ("in_process_real_time_factor", "s", "--", "one process, no ROS")):
+            points = [item for item in items if key in item]
+            if not points:
+                continue
+            axis.plot([item["error"] for item in points], [item[key] for item in points], color=colour, ls=style,
+                      marker=marker, label=f"{path} path, {how}")
+            for item in points:
+                axis.annotate(f"{item['exchange_step_s'] * 1e3:g} ms", (item["error"], item[key]), xytext=(4, 3),
+                              textcoords="offset points", fontsize=7, color=colour)
+    axis.axhline(TARGETS["ROS real-time factor"], color="k", lw=0.9, ls=":",
+                 label=f"target at {ROS_EXCHANGE * 1e3:g} ms: {TARGETS['ROS real-time factor']:g} x real time")
+    axis.axhline(1.0, color="0.5", lw=0.8, ls="-.", label="real time")
+    axis.set_xscale("log")
+    axis.set_yscale("log")
+    axis.invert_xaxis()
+    axis.grid(which="major", alpha=0.35)
+    axis.grid(which="minor", alpha=0.1)
+    axis.set(xlabel="the exchange's error: RMS of omega - omega_monolithic, relative [-]\n"
+                    "(more accurate to the right)",
+             ylabel="real-time factor (simulated s per s)",
+             title=f"{ROS_SCENE}: lockstep co-simulation, {ROS_DURATION:g} s\n"
+                   "real-time factor against the exchange step's error")
+    axis.legend(fontsize=8, loc="lower left")
