@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from mech_regulator.model import LoadPiece
-from mech_regulator.scene import SceneError, load_scene, validate_scene
+from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE, compile_scene, generate,
                                                      mode_rows)
