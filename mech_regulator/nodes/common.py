@@ -7,6 +7,7 @@ The nodes are thin: every number they publish comes from the core (mech_regulato
 from __future__ import annotations
 
 import math
+import signal
 import sys
 from dataclasses import dataclass, field
 from typing import Callable
@@ -196,10 +197,28 @@ def diagnostics(node: Node, level: bytes, message: str, values: dict[str, object
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
 
+def remember_ctrl_c() -> Callable[[], bool]:
+    """Install Python's handler for SIGINT (a KeyboardInterrupt, as by default) that also notes the signal,
+    and return whether it came. Installed before rclpy.init, whose C handler chains to it. rclpy shuts its
+    context down on a thread of its own, so the KeyboardInterrupt can surface while rclpy.ok() still says
+    True — and wrapped by rclpy's C++ layer in another exception when it interrupts the conversion of a
+    message for a callback ("RuntimeError: Unable to convert call argument '0' to Python object")."""
+    received: list[int] = []
+
+    def note_and_interrupt(number, frame) -> None:
+        received.append(number)
+        signal.default_int_handler(number, frame)
+
+    signal.signal(signal.SIGINT, note_and_interrupt)
+    return lambda: bool(received)
+
+
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
     """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
     add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
-    executor's), then `work(node)` or spin. A bad scene or parameter ends with a message and exit code 2."""
+    executor's), then `work(node)` or spin. A bad scene or parameter ends with a message and exit code 2;
+    Ctrl-C ends with exit code 0 whatever call into rclpy it interrupts."""
+    interrupted = remember_ctrl_c()
     rclpy.init(args=sys.argv)
     node = None
     try:
@@ -221,7 +240,7 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
         print(f"mech_regulator: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except Exception:
-        if not rclpy.ok():  # Ctrl-C shut the context down in the middle of a call into rclpy
+        if interrupted() or not rclpy.ok():  # Ctrl-C in the middle of a call into rclpy
             return 0
         raise
     finally:
@@ -230,6 +249,4 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
             if close is not None:
                 close()
             node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-
+        rclpy.try_shutdown()  # rclpy's SIGINT handler may shut the context down at any moment
