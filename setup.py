@@ -15,6 +15,7 @@ setup(
         (f"share/{package_name}", ["package.xml"]),
         (f"share/{package_name}/config/scenes", glob("config/scenes/*.yaml")),
         (f"share/{package_name}/config/params", glob("config/params/*.yaml")),
+        (f"share/{package_name}/launch", glob("launch/*.launch.py")),
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -32,8 +33,8 @@ setup(
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
         "distributed": ["dask[distributed]>=2024.1"],
         "bench": ["mujoco>=3.1"],
-        "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-sensor-msgs",
-                "ros-geometry-msgs", "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
+        "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-kilted-std-srvs",
+                "ros-sensor-msgs", "ros-geometry-msgs", "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
     },
     zip_safe=True,
     maintainer="mech_regulator developers",
@@ -42,7 +43,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "mech-regulator = mech_regulator.cli.main:main",
+            "mech-regulator = mech_regulator.cli:entry",
             "machine_node = mech_regulator.nodes.machine:main",
             "governor_node = mech_regulator.nodes.governor:main",
             "scenario_node = mech_regulator.nodes.scenario:main",

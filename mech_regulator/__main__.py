@@ -2,6 +2,6 @@
 
 import sys
 
-from mech_regulator.cli.main import main
+from mech_regulator.cli import entry
 
-sys.exit(main())
+sys.exit(entry())

@@ -4,6 +4,9 @@ model to the end."""
 from __future__ import annotations
 
 import copy
+import runpy
+import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -12,6 +15,8 @@ from mech_regulator.cli.main import main
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import validate_scene
 from mech_regulator.solvers import Trajectory, simulate
+
+SOURCE_TREE = Path(__file__).resolve().parents[1]
 
 
 def run_cli(capsys, *argv: str) -> tuple[int, str, str]:
@@ -53,3 +58,18 @@ def scene(base: dict, **changes) -> dict:
 def model_of(data: dict) -> MachineModel:
     """The model of scene data (validated)."""
     return build_model(validate_scene(data))
+
+
+def setup_arguments() -> dict:
+    """The keyword arguments setup.py passes to setup(), read by running it with a stand-in of setuptools
+    (it may not be installed: Python 3.12's venv has none)."""
+    captured: dict = {}
+    stand_in = types.ModuleType("setuptools")
+    stand_in.setup = lambda **arguments: captured.update(arguments)
+    stand_in.find_packages = lambda *args, **kwargs: []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setitem(sys.modules, "setuptools", stand_in)
+        patch.chdir(SOURCE_TREE)  # its globs are relative to the source tree
+        runpy.run_path(str(SOURCE_TREE / "setup.py"), run_name="__main__")
+    assert captured, "setup.py did not call setup()"
+    return captured

@@ -36,9 +36,11 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.duration import Duration
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
+from mech_regulator.nodes.launch import viewer_command
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import GovernorStepper, cosimulate, seconds, to_nanoseconds
@@ -202,7 +204,7 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
     scene, _ = constant_inertia_scene(tmp_path, duration=0.6)
     # the test node is the machine's `load` input (the scenario's constant BASE_LOAD, stamped), so the
     # machine waits for it at every exchange time; the step itself goes on load_torque (Float64)
-    processes.node("machine", machine_parameters(scene, min_subscribers=2))
+    processes.node("machine", machine_parameters(scene, peers=["governor", probe.node.get_name()]))
     processes.node("governor", {"scene_file": str(scene)})
     stamped = probe.publisher(WrenchStamped, "load_torque_stamped", describe=processes.logs)
     load = probe.publisher(Float64, "load_torque", describe=processes.logs)
@@ -253,7 +255,8 @@ def bad_messages_run(tmp_path_factory):
     domain = next_domain_id()
     with processes_on(folder, domain) as processes, probe_on(domain) as probe:
         scene, model = constant_inertia_scene(folder, duration=0.3, load_events=[{"time": 0.1, "torque": 8.0}])
-        processes.node("machine", machine_parameters(scene, min_subscribers=3, max_load_torque=1e3))
+        processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", probe.node.get_name()],
+                                                     max_load_torque=1e3))
         processes.node("governor", {"scene_file": str(scene)})
         processes.node("scenario", {"scene_file": str(scene)})
         listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
@@ -348,7 +351,8 @@ def overspeed_run(tmp_path_factory):
         trip = _steady_speed() + 0.3  # the full load rejection reaches it
         run = cosimulate(model, TRIP_STEP, overspeed_trip=trip)
         assert run.tripped_at is not None and 0.1 < run.tripped_at < 0.4
-        processes.node("machine", machine_parameters(scene, min_subscribers=4, overspeed_trip=trip,
+        processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", "recorder",
+                                                            probe.node.get_name()], overspeed_trip=trip,
                                                      exchange_step=TRIP_STEP))
         processes.node("governor", {"scene_file": str(scene)})
         processes.node("scenario", {"scene_file": str(scene)})
@@ -458,8 +462,8 @@ def _get_parameters(probe, names: list[str], describe) -> list:
 
 def test_parameters_set_at_run_time_are_checked(tmp_path, processes, probe):
     scene, _ = constant_inertia_scene(tmp_path)
-    # waiting for 5 subscribers that never come: the node serves its parameters, nothing else happens
-    processes.node("machine", machine_parameters(scene, min_subscribers=5))
+    # waiting for a peer that never comes: the node serves its parameters, nothing else happens
+    processes.node("machine", machine_parameters(scene, peers=["never_started"]))
     describe = processes.logs
     accepted = _set_parameter(probe, "real_time_factor", 2.0, describe)
     assert accepted.successful, accepted.reason
@@ -478,13 +482,16 @@ def test_parameters_set_at_run_time_are_checked(tmp_path, processes, probe):
 def test_a_refused_fail_safe_is_not_applied(tmp_path, processes, probe):
     # (once a bug: the node applied the value in an on-set callback that ran before the choice check)
     scene, _ = constant_inertia_scene(tmp_path, duration=0.05)
-    # no governor: the machine waits peer_timeout for the throttle, then goes on fail-safe
-    processes.node("machine", machine_parameters(scene, lockstep_inputs=["throttle"], min_subscribers=1,
-                                                 peer_timeout=0.05, exchange_step=0.01))
+    # no governor: the machine waits peer_timeout for the throttle, then goes on fail-safe; it starts paused, so
+    # that the parameter is refused before the first step
+    listener = RunListener(probe, governed=False, diagnostics_publishers=0, describe=processes.logs)
+    listener.open_gate()
+    processes.node("machine", machine_parameters(scene, lockstep_inputs=["throttle"], peers=[probe.node.get_name()],
+                                                 peer_timeout=5.0, exchange_step=0.01, start_paused=True))
     refused = _set_parameter(probe, "fail_safe", "open", processes.logs)
     assert not refused.successful, "ROS accepted fail_safe = 'open'"
-    listener = RunListener(probe, governed=False, describe=processes.logs)
-    listener.open_gate()
+    resumed = probe.call(Trigger, "/machine/resume", Trigger.Request(), describe=processes.logs)
+    assert resumed.success, resumed.message
     end = listener.wait_finished()
     level, message, values = listener.final_status()
     assert level == DiagnosticStatus.WARN and values["fail_safe_active"] == "True", (level, message)
@@ -564,7 +571,7 @@ def test_main_job_reproduces_the_in_process_cosimulation(main_jobs, tmp_path, ca
                                                                                                (0.7, 8.0, 0.0)]
     assert responses[0]["static_error"] < 0.0 < responses[1]["static_error"]
     assert summary["status"] == "complete" and summary["samples"] == 1001 and summary["tripped_at"] is None
-    assert f"open the recording with: rerun {first.rrd}" in first.log
+    assert f"open the recording with: {viewer_command(first.rrd)}" in first.log
 
 
 def _rerun() -> str:
@@ -644,7 +651,7 @@ def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe
     _verify(job.rrd)
     summary = json.loads(job.json.read_text())
     assert summary["status"] == "interrupted" and summary["message"].startswith("the recording stops at"), summary
-    assert 0.0 < summary["t_end"] < 16.0 and f"open the recording with: rerun {job.rrd}" in job.log
+    assert 0.0 < summary["t_end"] < 16.0 and f"open the recording with: {viewer_command(job.rrd)}" in job.log
     csv = np.genfromtxt(job.csv, delimiter=",", names=True)
     assert csv.size == summary["samples"] >= 2
     scalars, _, _ = _recorded_scalars(job.rrd)
@@ -658,6 +665,9 @@ def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe
     np.testing.assert_array_equal(prefix["omega"], run.states[1, :prefix.size])
     np.testing.assert_array_equal(prefix["throttle"], run.throttle[:prefix.size])
     assert code == 130 and "Traceback" not in without_rclpy_noise(job.log + job.node_log), job.describe()
+    assert "failed" not in job.log, job.describe()  # every node stopped on the interrupt, none was killed
+    listing = subprocess.run(["ps", "-ww", "-eo", "args"], capture_output=True, text=True, check=True).stdout
+    assert not [line for line in listing.splitlines() if "mech_regulator.nodes" in line and str(tmp_path) in line]
 
 INTERRUPTED_AFTER_THE_CHECK = """
 import sys

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from mech_regulator.cli.report import bench_scenes_and_folder, to_json
 
-EXIT_INTERRUPTED = 130
+from mech_regulator.cli import EXIT_INTERRUPTED
 
 
 def add_bench_speed_command(benchmarks) -> None:

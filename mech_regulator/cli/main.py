@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from mech_regulator import __version__
+from mech_regulator.cli import EXIT_INTERRUPTED
 from mech_regulator.scene import SceneError, bundled_scenes, load_scene
 from mech_regulator.scene.reference import schema_json, schema_markdown
 from mech_regulator.cli.bench_speed import add_bench_speed_command, run_bench_speed
@@ -27,7 +28,6 @@ from mech_regulator.cli.report import bench_scenes_and_folder, check_outputs, pr
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
-EXIT_INTERRUPTED = 130
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -109,6 +109,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
     main_job.add_argument("--exchange-step", type=float, default=1e-3, metavar="H",
                           help="simulation time between exchanges of the nodes [s] (default 0.001)")
+    main_job.add_argument("--duration", type=float, metavar="T",
+                          help="simulated time to play [s] (default: the scene's scenario.duration); a shorter run "
+                               "keeps the scene's load events as they are")
     main_job.add_argument("--time-mode", choices=("lockstep", "realtime"), default="lockstep",
                           help="lockstep: as fast as possible and reproducible; realtime: follow the wall clock")
     main_job.add_argument("--real-time-factor", type=float, default=1.0, metavar="X",
@@ -245,10 +248,6 @@ def _cosimulate(model, args) -> int:
 
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
-    if model.clutch is not None:
-        raise SceneError(f"--exchange-step {args.exchange_step:g}: scene '{model.scene.name}' has a machine.clutch, "
-                         "whose stick/slip modes the co-simulated machine does not play yet; simulate it without "
-                         "--exchange-step")
     if not args.overspeed_trip >= 0.0:
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
     duration = model.scene.scenario.duration
@@ -399,19 +398,24 @@ def _main_job(scene, args) -> int:
     if importlib.util.find_spec("rclpy") is None:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
-    from mech_regulator.nodes.common import check_scene_for_nodes
+    from mech_regulator.model import build_model
     from mech_regulator.nodes.launch import main_job
+    from mech_regulator.solvers.cosim import cosimulation_refusal
 
-    check_scene_for_nodes(scene, args.scene)
+    reason = cosimulation_refusal(build_model(scene))
+    if reason is not None:
+        raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    if args.duration is not None and not 0.0 < args.duration <= 1e7:
+        raise SceneError(f"--duration {args.duration:g}: expected a simulated time in (0, 1e7] s")
     if not 1e-3 <= args.real_time_factor <= 1e3:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
     check_outputs(args, args.out)
     return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
-                    args.overspeed_trip, args.out, args.domain_id, args.quiet)
+                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration)
 
 
 def _bench_accuracy(args) -> int:

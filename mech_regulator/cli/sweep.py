@@ -23,7 +23,7 @@ from mech_regulator.cli.report import progress_bar, write_rows_csv
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.loading import key_description
 
-EXIT_INTERRUPTED = 130
+from mech_regulator.cli import EXIT_INTERRUPTED
 SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
 
 

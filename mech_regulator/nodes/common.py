@@ -6,6 +6,7 @@ The nodes are thin: every number they publish comes from the core (mech_regulato
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import sys
@@ -20,12 +21,13 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.scene.schema import Scene
-from mech_regulator.solvers.cosim import NANOSECONDS, seconds
+from mech_regulator.solvers.cosim import NANOSECONDS, cosimulation_refusal, seconds
 
+EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 IDLE_SPIN_SLICE = 0.1  # [s] of wall time per wait of a spin loop that only waits for callbacks
 HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
@@ -38,6 +40,13 @@ COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability
 # recorder) still receives the last HISTORY_DEPTH messages. Volatile subscribers match them too.
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# The machine's run state (RunState): the latest only, kept for nodes that join late.
+STATUS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+class PeerError(Exception):
+    """A peer node the run needs did not come (the machine then ends with exit code 1 and says which)."""
 
 
 def stamp(nanoseconds: int) -> Time:
@@ -59,10 +68,11 @@ def float_parameter(node: Node, name: str, value: float, description: str, low: 
     return node.declare_parameter(name, float(value), descriptor).value
 
 
-def int_parameter(node: Node, name: str, value: int, description: str, low: int, high: int) -> int:
+def int_parameter(node: Node, name: str, value: int, description: str, low: int, high: int,
+                  read_only: bool = True) -> int:
     """Declare an integer parameter with its range and return its value."""
     descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_INTEGER, description=description,
-                                     read_only=True, integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
+                                     read_only=read_only, integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
     return node.declare_parameter(name, int(value), descriptor).value
 
 
@@ -104,25 +114,36 @@ def _choice_check(name: str, choices: tuple[str, ...]) -> Callable:
 
 def scene_model(node: Node) -> MachineModel:
     """The scene named by the node's `scene_file` parameter (a path or a bundled name) with the
-    `overrides` parameter's KEY=VALUE changes, assembled by the core. Raises SceneError."""
+    `overrides` parameter's KEY=VALUE changes, assembled by the core. Raises SceneError, also for a scene that
+    cannot be co-simulated (solvers.cosim.cosimulation_refusal)."""
     scene_file = text_parameter(node, "scene_file", "engine_direct",
                                 "scene file (YAML path) or the name of a bundled scene")
     overrides = list_parameter(node, "overrides", [""],
                                "scene changes KEY=VALUE, as `mech-regulator --set` (e.g. governor.damping=300)")
-    scene = load_scene(scene_file, [item for item in overrides if item])
-    check_scene_for_nodes(scene, scene_file)
-    return build_model(scene)
+    model = build_model(load_scene(scene_file, [item for item in overrides if item]))
+    reason = cosimulation_refusal(model)
+    if reason is not None:
+        raise SceneError(f"{scene_file}: the nodes cannot play this scene: {reason}")
+    return model
 
 
-def check_scene_for_nodes(scene: Scene, source: str) -> None:
-    """Raise SceneError for a scene the nodes cannot play: a two-mass machine (machine.coupling or
-    machine.clutch), whose driven part's state the nodes' messages do not carry."""
-    if scene.machine.coupling is not None:
-        raise SceneError(f"{source}: machine.coupling is set, but the nodes exchange the crank's state only and "
-                         "cannot play a two-mass machine yet; simulate it with `mech-regulator simulate`")
-    if scene.machine.clutch is not None:
-        raise SceneError(f"{source}: machine.clutch is set, but the nodes exchange the crank's state only and "
-                         "cannot play a clutch and its driven part yet; simulate it with `mech-regulator simulate`")
+class RunState:
+    """What the machine says of the run on `machine/status` (std_msgs/String, JSON, transient-local so that a node
+    joining late reads it): `state` running, paused, holding (at the end, waiting for ~/reset) or finished; the
+    simulation `time` [s]; the `trial` (1, then one more at every ~/reset); `status` of the solver (complete,
+    failed, ...), `tripped_at` [s] (None: no overspeed trip) and, once finished, `finished_at_ns`."""
+
+    RUNNING, PAUSED, HOLDING, FINISHED = "running", "paused", "holding", "finished"
+
+
+def follow_run_state(node: Node, on_state: Callable[[dict], None]) -> None:
+    """Subscribe `node` to the machine's run state (RunState); on_state gets the decoded JSON object. A node that
+    follows the machine sets `node.done = True` when the state is finished, so `run` ends it by itself."""
+
+    def decode(message: String) -> None:
+        on_state(json.loads(message.data))
+
+    node.create_subscription(String, "machine/status", decode, STATUS_QOS)
 
 
 @dataclass
@@ -207,7 +228,8 @@ def remember_ctrl_c() -> Callable[[], bool]:
 
     def note_and_interrupt(number, frame) -> None:
         received.append(number)
-        signal.default_int_handler(number, frame)
+        if len(received) == 1:  # a second interrupt while the node stops would cut its closing short
+            signal.default_int_handler(number, frame)
 
     signal.signal(signal.SIGINT, note_and_interrupt)
     return lambda: bool(received)
@@ -216,8 +238,9 @@ def remember_ctrl_c() -> Callable[[], bool]:
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
     """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
     add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
-    executor's), then `work(node)` or spin. A bad scene or parameter ends with a message and exit code 2;
-    Ctrl-C ends with exit code 0 whatever call into rclpy it interrupts."""
+    executor's), then `work(node)` or spin until the node says it is done (`node.done`, see follow_run_state).
+    A bad scene or parameter ends with a message and exit code 2, a missing peer with exit code 1; Ctrl-C ends
+    with exit code 0 whatever call into rclpy it interrupts."""
     interrupted = remember_ctrl_c()
     rclpy.init(args=sys.argv)
     node = None
@@ -228,12 +251,15 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
         if work is not None:
             work(node)
         else:
-            while rclpy.ok():
+            while rclpy.ok() and not getattr(node, "done", False):
                 executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
         return 0
     except SceneError as error:
         print(f"mech_regulator: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except PeerError as error:
+        print(f"mech_regulator: {error}", file=sys.stderr)
+        return EXIT_FAILED
     except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C: a normal way to stop a node
         return 0
     except rclpy.exceptions.ParameterException as error:  # a parameter override outside its range or type
@@ -244,9 +270,12 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
             return 0
         raise
     finally:
-        if node is not None:
-            close = getattr(node, "close", None)
-            if close is not None:
-                close()
-            node.destroy_node()
-        rclpy.try_shutdown()  # rclpy's SIGINT handler may shut the context down at any moment
+        try:
+            if node is not None:
+                close = getattr(node, "close", None)
+                if close is not None:
+                    close()
+                node.destroy_node()
+            rclpy.try_shutdown()  # rclpy's SIGINT handler may shut the context down at any moment
+        except KeyboardInterrupt:  # the interrupt that stops the node, surfacing late (rclpy defers it)
+            pass

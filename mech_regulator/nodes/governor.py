@@ -11,7 +11,9 @@ JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosi
 answered, it anticipates: it advances its states over the next step (as long as the last one), with
 the speed just received held, while the machine integrates that step, so that its next answer is
 immediate (GovernorStepper.anticipate: an exchange time other than the expected one is computed
-afresh, so the numbers never depend on it).
+afresh, so the numbers never depend on it). A speed stamped 0 after later ones starts a new trial (the
+machine's ~/reset): the governor starts again from its initial state. It ends by itself when the machine
+says the run is finished (`machine/status`).
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, diagnostics,
-                                         float_parameter, joint_value, run, scene_model, stamp)
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, RunState, diagnostics,
+                                         float_parameter, follow_run_state, joint_value, nanoseconds, run, scene_model,
+                                         stamp)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -41,14 +44,11 @@ class GovernorNode(Node):
         if model.governor is None:
             raise SceneError(f"scene '{model.scene.name}' has no governor: governor_node needs a scene with a "
                              "'governor:' section")
-        self.scene_name = model.scene.name
+        self.model = model
         self.max_speed = float_parameter(self, "max_speed", 1e4, "crank speeds beyond +- this [rad/s] are rejected",
                                          0.0, 1e9)
-        self.stepper = GovernorStepper(model)
-        self.time_ns: int | None = None
-        self.previous_ns: int | None = None  # the exchange time before time_ns [ns]
-        self.throttle = self.stepper.throttle  # [-] the last answer
-        self.reported_events = 0
+        self.start_trial()
+        self.done = False
         self.rejections = Rejections(self)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
         self.state_publisher = self.create_publisher(JointState, "governor/state", STATE_QOS)
@@ -56,9 +56,24 @@ class GovernorNode(Node):
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
+        follow_run_state(self, self.on_run_state)
+
+    def start_trial(self) -> None:
+        """The governor's initial state: at the start and when the machine starts a new trial."""
+        self.stepper = GovernorStepper(self.model)
+        self.time_ns: int | None = None
+        self.previous_ns: int | None = None  # the exchange time before time_ns [ns]
+        self.throttle = self.stepper.throttle  # [-] the last answer
+        self.reported_events = 0
+
+    def on_run_state(self, state: dict) -> None:
+        """End by itself when the machine has finished."""
+        self.done = state["state"] == RunState.FINISHED
 
     def on_joint_states(self, message: JointState) -> None:
         """Answer the crank speed at a stamped time with the throttle at that time."""
+        if nanoseconds(message.header.stamp) == 0 and self.time_ns:  # the machine's ~/reset: a new trial
+            self.start_trial()
         received = joint_value(message, "crank", "velocity", -self.max_speed, self.max_speed, "parameter max_speed",
                                self.rejections, self.time_ns)
         if received is None:
@@ -95,7 +110,7 @@ class GovernorNode(Node):
             level, text = ERROR, self.stepper.message
         elif self.rejections.total:
             level, text = WARN, f"{self.rejections.total} bad messages rejected"
-        values = {"scene": self.scene_name, "sim_time": seconds(self.time_ns or 0), "throttle": self.throttle,
+        values = {"scene": self.model.scene.name, "sim_time": seconds(self.time_ns or 0), "throttle": self.throttle,
                   "mode": "/".join(part for part in self.stepper.mode if part), "events": len(self.stepper.events)}
         array = diagnostics(self, level, text, values)
         array.status[0].values += self.rejections.key_values()

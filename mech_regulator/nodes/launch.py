@@ -4,7 +4,9 @@ in lockstep, recorded to runs/<scene>-<time>.rrd, with a progress bar and the su
 ros2 launch is not on the package index, so this is a small launcher of its own: it writes the run's
 parameter file (ros__parameters form, next to the recording), starts recorder_node, governor_node,
 scenario_node and machine_node with it, follows the machine's /diagnostics for progress, and on
-Ctrl-C passes the interrupt on to every node, so the recording is closed properly.
+Ctrl-C passes the interrupt on to every node, so the recording is closed properly. What the machine waits
+for comes from the scene: the nodes this launcher starts are its `peers`. Every node dies with the
+launcher, however it ends (Linux: PR_SET_PDEATHSIG), so none is ever left behind.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from mech_regulator.cli.report import format_cosimulation_summary, progress_bar
 from mech_regulator.scene import config_dir
 
 OVERSPEED_TRIP_FACTOR = 1.25  # default trip speed: this times the scene's initial speed
-STOP_TIMEOUT = 20.0  # [s] of wall time a node gets to stop after an interrupt before it is killed
+STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
+END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
 
 
 def private_environment(domain_id: int) -> dict[str, str]:
@@ -38,17 +41,27 @@ def private_environment(domain_id: int) -> dict[str, str]:
     return environment
 
 
+def node_names(governed: bool) -> list[str]:
+    """The nodes of the main job, in the order they are started (the machine last: it waits for the others)."""
+    return ["recorder"] + (["governor"] if governed else []) + ["scenario", "machine"]
+
+
 def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
-                   overspeed_trip: float, output: Path, real_time_factor: float) -> dict:
-    """The bundled config/params/main_job.yaml with this run's choices filled in."""
+                   overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
+                   duration: float | None = None) -> dict:
+    """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
+    other nodes started (in realtime only the recorder is waited for: the inputs are the newest, not awaited)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
     common = parameters["/**"]["ros__parameters"]
     common.update(scene_file=scene_file, overrides=overrides or [""], exchange_step=exchange_step, time_mode=time_mode)
-    machine = parameters["machine"]["ros__parameters"]
-    machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor)
+    machine = parameters.setdefault("machine", {}).setdefault("ros__parameters", {})
+    peers = [name for name in node_names(governed) if name != "machine"]
+    machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor, peers=peers)
+    if duration is not None:
+        machine.update(duration=duration)
     if time_mode == "realtime":
-        machine.update(lockstep_inputs=[""], min_subscribers=0)
-    parameters["recorder"]["ros__parameters"]["output"] = str(output)
+        machine.update(lockstep_inputs=[""], peers=["recorder"])
+    parameters.setdefault("recorder", {}).setdefault("ros__parameters", {})["output"] = str(output)
     return parameters
 
 
@@ -59,20 +72,22 @@ def default_recording(scene_name: str) -> Path:
 
 def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
-             quiet: bool) -> int:
-    """Run the nodes on the scene; returns the exit code (0, 1 if a node failed, 130 if interrupted)."""
+             quiet: bool, duration: float | None = None) -> int:
+    """Run the nodes on the scene for `duration` [s] of simulated time (None: the scene's); returns the exit code
+    (0, 1 if a node failed, 130 if interrupted)."""
     output = output or default_recording(scene.name)
     output.parent.mkdir(parents=True, exist_ok=True)
     if overspeed_trip is None:
         overspeed_trip = OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega)
+    governed = scene.governor is not None
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
-                                real_time_factor)
+                                real_time_factor, governed, duration)
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
     domain_id = domain_id if domain_id is not None else random.randint(1, 101)
     environment = private_environment(domain_id)
-    names = ["recorder"] + (["governor"] if scene.governor is not None else []) + ["scenario", "machine"]
+    names = node_names(governed)
     print(f"running {', '.join(names)} nodes on ROS domain {domain_id} ({time_mode}, exchange step "
           f"{exchange_step:g} s); node logs in {log_file}", file=sys.stderr)
     processes: dict[str, subprocess.Popen] = {}
@@ -83,10 +98,12 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
                 processes[name] = subprocess.Popen(
                     [sys.executable, "-m", f"mech_regulator.nodes.{name}", "--ros-args", "--params-file",
                      str(parameter_file)], env=environment, stdout=log, stderr=subprocess.STDOUT,
-                    start_new_session=True)  # Ctrl-C reaches this launcher only; it passes it on
+                    start_new_session=True,  # Ctrl-C reaches this launcher only; it passes it on
+                    preexec_fn=_die_with_parent)
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
-            _follow(processes, environment, scene.scenario.duration, quiet)
-            _wait(processes["recorder"], STOP_TIMEOUT)
+            _follow(processes, environment, duration or scene.scenario.duration, quiet)
+            if processes["machine"].returncode == 0:
+                _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
         except KeyboardInterrupt:
             interrupted = True
             print("\ninterrupted: stopping the nodes and closing the recording", file=sys.stderr)
@@ -94,14 +111,18 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
             for process in processes.values():
                 if process.poll() is None:
                     process.send_signal(signal.SIGINT)
-            for process in processes.values():
-                _wait(process, STOP_TIMEOUT)
+            _wait_all(processes, STOP_TIMEOUT)
     summary_path = output.with_suffix(".json")
     failed = [name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT)]
+    if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
+        from mech_regulator.model import build_model
+        from mech_regulator.nodes.recorder import write_empty_run
+
+        write_empty_run(build_model(scene), output, exchange_step)
     if summary_path.exists():
         summary = json.loads(summary_path.read_text())
         print(format_cosimulation_summary(summary))
-        print(f"open the recording with: rerun {output}")
+        print(f"open the recording with: {viewer_command(output)}")
     else:
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)
     if failed:
@@ -109,6 +130,13 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
         print("".join(log_file.read_text().splitlines(keepends=True)[-20:]), file=sys.stderr)
         return 1
     return 130 if interrupted else 0
+
+
+def viewer_command(recording: Path) -> str:
+    """The command that opens a recording in a fresh shell: this Python's `rerun` (the virtual environment's, which
+    a fresh shell does not have on its PATH) on the recording's absolute path."""
+    viewer = Path(sys.executable).parent / "rerun"
+    return f"{viewer if viewer.exists() else 'rerun'} {recording.resolve()}"
 
 
 def _interrupt(signal_number, frame) -> None:
@@ -149,11 +177,22 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
             rclpy.try_shutdown()
 
 
-def _wait(process: subprocess.Popen, timeout: float) -> None:
-    """Wait for a node to end; kill it if it does not within timeout [s]."""
-    try:
-        process.wait(timeout)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
+def _wait_all(processes: dict[str, subprocess.Popen], timeout: float) -> None:
+    """Wait for the nodes to end; kill those still running after timeout [s] of wall time in all."""
+    deadline = time.monotonic() + timeout
+    for process in processes.values():
+        try:
+            process.wait(max(deadline - time.monotonic(), 0.0))
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def _die_with_parent() -> None:
+    """In a node's process before it starts (Linux): receive SIGINT when the launcher dies, however it dies (even
+    SIGKILL), so that the node closes what it has and ends, and no node is left behind."""
+    import ctypes
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGINT)
 

@@ -9,16 +9,31 @@ effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate
 scene has a mechanism), `machine/moments` (sensor_msgs/JointState whose efforts are the moments on
 the crank by source: drive, resistance, external, net [N m]), `/clock` and `/diagnostics`.
 
+A two-mass machine adds the joints "coupling" (position: twist [rad]) and "driven" (position: phi_driven
+[rad], NaN behind a clutch; velocity: omega_driven [rad/s]) to `joint_states`. `machine/status`
+(std_msgs/String, JSON, transient-local: common.RunState) says whether the run is running, paused, holding
+at its end or finished; the other nodes end by themselves when it is finished.
+
 Time modes: `lockstep` advances exchange step by exchange step, waiting at each exchange time for the
 inputs listed in `lockstep_inputs` stamped with that time (reproducible to the last digit, the same
 numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
-`real_time_factor` with the newest inputs. A governor that stays silent longer than `throttle_timeout`
-(realtime) or `peer_timeout` (lockstep) puts the machine on its fail-safe (`fail_safe`: hold the last
-throttle or close it); `overspeed_trip` closes the throttle for good above that speed.
+`real_time_factor` with the newest inputs. What it waits for comes from the scene: the throttle when it
+has a governor, the scenario's load; before the first step, the `peers` (node names) that give them must
+subscribe to `joint_states`, or the machine ends within `peer_timeout` naming the missing ones. A governor
+that stays silent longer than `throttle_timeout` (realtime) or `peer_timeout` (lockstep) puts the machine on
+its fail-safe (`fail_safe`: hold the last throttle or close it); `overspeed_trip` closes the throttle for
+good above that speed.
+
+Services (std_srvs/Trigger), for trials one after another as with a simulator's world: `~/pause` (the run
+stops at the next exchange time), `~/resume`, `~/step` (advance `step_exchanges` exchanges, then stay
+paused), `~/reset` (back to the scene's initial state at t = 0; the governor and the scenario follow when
+they see time start again at 0). At the end of the scenario the machine finishes (`at_end: exit`) or holds,
+paused, for a `~/reset` (`at_end: hold`).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import sys
 import time
@@ -30,15 +45,18 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, String
+from std_srvs.srv import Trigger
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, bool_parameter,
-                                         diagnostics, finite_in_range, float_parameter, int_parameter, joint_value, list_parameter,
-                                         nanoseconds, run, scene_model, stamp, text_parameter)
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, PeerError, Rejections,
+                                         RunState, bool_parameter, diagnostics, finite_in_range, float_parameter,
+                                         int_parameter, joint_value, list_parameter, nanoseconds, run, scene_model,
+                                         stamp, text_parameter)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
 
-LOCKSTEP_INPUTS = ("throttle", "load")
+LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
+# (the node that gives it by default, its topic)
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between diagnostics
 SPIN_SLICE = 0.02  # [s] of wall time per wait for messages
 RESEND_PERIOD = 1.0  # [s] of wall time after which a lockstep exchange time is published again
@@ -71,34 +89,44 @@ class MachineNode(Node):
                                                "are rejected", 0.0, 1e12)
         overspeed = float_parameter(self, "overspeed_trip", 0.0, "trip speed [rad/s]: above it the throttle closes "
                                     "for good; 0: no trip", 0.0, 1e9, read_only=True)
-        inputs = list_parameter(self, "lockstep_inputs", ["throttle"] if governed else [""],
-                                "lockstep: inputs to wait for at every exchange time: throttle, load")
+        inputs = list_parameter(self, "lockstep_inputs", ["throttle", "load"] if governed else ["load"],
+                                "lockstep: inputs to wait for at every exchange time: throttle, load (default: the "
+                                "throttle when the scene has a governor, and the scenario's load)")
         self.lockstep_inputs = [item for item in inputs if item]
         unknown = [item for item in self.lockstep_inputs if item not in LOCKSTEP_INPUTS]
         if unknown:
             raise SceneError(f"parameter lockstep_inputs = {inputs}: unknown {unknown}; expected a list of "
                              f"{', '.join(LOCKSTEP_INPUTS)}")
-        self.min_subscribers = int_parameter(self, "min_subscribers", len(self.lockstep_inputs), "lockstep: "
-                                             "subscribers of joint_states to wait for before the first step", 0, 100)
+        if "throttle" in self.lockstep_inputs and not governed:
+            raise SceneError(f"parameter lockstep_inputs = {inputs}: scene '{self.model.scene.name}' has no governor "
+                             "to give a throttle; leave 'throttle' out")
+        default_peers = [LOCKSTEP_INPUTS[item][0] for item in self.lockstep_inputs] if self.time_mode == "lockstep" \
+            else []
+        peers = list_parameter(self, "peers", default_peers or [""], "node names that must subscribe to joint_states "
+                               "before the first step (default: those giving the lockstep inputs)")
+        self.peers = [item for item in peers if item]
+        self.at_end = text_parameter(self, "at_end", "exit", "at the end of the scenario: exit, or hold (paused) "
+                                     "until ~/reset", ("exit", "hold"))
+        self.step_exchanges = int_parameter(self, "step_exchanges", 1, "exchanges advanced by one ~/step call", 1,
+                                            10**9, read_only=False)
         self.publish_clock = bool_parameter(self, "publish_clock", True, "publish the simulation time on /clock")
 
-        self.stepper = MachineStepper(self.model, overspeed)
-        initial = self.model.initial_state()
-        self.throttle = self.model.governor.throttle(initial) if governed else 1.0
-        self.load = self.model.external_load(0.0)
-        self.throttle_stamp: int | None = None  # stamp [ns] of the newest throttle received
-        self.stamped_throttle: dict[int, float] = {}
-        self.stamped_load: dict[int, float] = {}
-        self.last_stamped_load: float | None = None
-        self.pending_load: float | None = None
-        self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
-        self.failing_safe = False
+        self.overspeed = overspeed
+        self.trial = 0
+        self.start_trial()
+        self.paused = bool_parameter(self, "start_paused", False, "start paused (~/resume or ~/step to go on)")
+        self.steps_left = 0  # exchanges ~/step still allows while paused
+        self.reset_requested = False
         self.rejections = Rejections(self)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.moments_publisher = self.create_publisher(JointState, "machine/moments", STATE_QOS)
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.status_publisher = self.create_publisher(String, "machine/status", STATUS_QOS)
+        for name, callback in (("reset", self.on_reset), ("pause", self.on_pause), ("resume", self.on_resume),
+                               ("step", self.on_step)):
+            self.create_service(Trigger, f"~/{name}", callback)
         self.create_subscription(JointState, "throttle", self.on_throttle, COMMAND_QOS)
         self.create_subscription(Float64, "load_torque", self.on_load, COMMAND_QOS)
         self.create_subscription(WrenchStamped, "load_torque_stamped", self.on_stamped_load, COMMAND_QOS)
@@ -107,10 +135,49 @@ class MachineNode(Node):
         self.state_message = JointState()
         self.wall_start = time.monotonic()
         self.last_diagnostics = -math.inf
-        kind = self.model.scene.machine.mechanism.type if self.model.scene.machine.mechanism else None
-        self.output_joint = {"crank_slider": ("slider", "x_slider", "v_slider"),
-                             "four_bar": ("rocker", "theta4", "omega4"),
-                             "walking_beam": ("shuttle", "x_shuttle", "v_shuttle")}.get(kind)
+
+    def start_trial(self) -> None:
+        """The scene's initial state at t = 0 with its initial inputs: at the start and at every ~/reset."""
+        self.trial += 1
+        self.stepper = MachineStepper(self.model, self.overspeed)
+        self.throttle = self.model.governor.throttle(self.model.initial_state()) if self.model.governor else 1.0
+        self.load = self.model.external_load(0.0)
+        self.throttle_stamp: int | None = None  # stamp [ns] of the newest throttle received
+        self.stamped_throttle: dict[int, float] = {}
+        self.stamped_load: dict[int, float] = {}
+        self.last_stamped_load: float | None = None
+        self.pending_load: float | None = None
+        self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
+        self.failing_safe = False
+        self.now_ns = 0
+
+    # ---------------------------------------------------------------------------------------------
+    # Services: trials one after another.
+
+    def on_reset(self, request, response):
+        self.reset_requested = True
+        response.success, response.message = True, (f"trial {self.trial} stops at t = {seconds(self.now_ns):.9g} s; "
+                                                     f"trial {self.trial + 1} starts from the initial state at t = 0")
+        return response
+
+    def on_pause(self, request, response):
+        self.paused, self.steps_left = True, 0
+        response.success, response.message = True, f"paused at t = {seconds(self.now_ns):.9g} s"
+        self.publish_status()
+        return response
+
+    def on_resume(self, request, response):
+        self.paused, self.steps_left = False, 0
+        response.success, response.message = True, f"running from t = {seconds(self.now_ns):.9g} s"
+        self.publish_status()
+        return response
+
+    def on_step(self, request, response):
+        self.paused = True
+        self.steps_left += self.step_exchanges
+        response.success, response.message = True, (f"advancing {self.steps_left} exchange(s) from "
+                                                     f"t = {seconds(self.now_ns):.9g} s, then paused")
+        return response
 
     # ---------------------------------------------------------------------------------------------
     # Inputs: every message is checked before it touches anything.
@@ -148,7 +215,7 @@ class MachineNode(Node):
         change while running."""
         for parameter in parameters:
             if parameter.name in ("real_time_factor", "throttle_timeout", "peer_timeout", "max_load_torque",
-                                  "fail_safe"):
+                                  "fail_safe", "step_exchanges"):
                 if parameter.name == "real_time_factor":  # keep the simulation time continuous
                     self.wall_start = time.monotonic() - seconds(self.now_ns) / parameter.value
                 setattr(self, parameter.name, parameter.value)
@@ -157,9 +224,11 @@ class MachineNode(Node):
     # The run
 
     def run(self) -> None:
-        """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time."""
-        self.wait_for_subscribers()
+        """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time; between
+        exchanges, pause, step and reset as the services ask."""
+        self.wait_for_peers()
         self.wall_start = time.monotonic()
+        self.publish_status()
         tick, moments = 0, None
         while rclpy.ok():
             self.now_ns = min(tick * self.step_ns, self.end_ns)
@@ -172,8 +241,19 @@ class MachineNode(Node):
             self.collect_inputs()
             throttle = self.stepper.applied_throttle(self.applied_throttle())
             moments = self.moments_message()
-            if self.now_ns >= self.end_ns or self.stepper.status != "complete":
+            at_end = self.now_ns >= self.end_ns or self.stepper.status != "complete"
+            if at_end and (self.at_end == "exit" or self.stepper.status != "complete"):
                 break
+            self.wait_while_paused(holding=at_end)
+            if self.reset_requested:
+                self.moments_publisher.publish(moments)
+                self.reset_requested = False
+                self.start_trial()
+                self.wall_start = time.monotonic()
+                self.publish_status()
+                self.get_logger().info(f"reset: trial {self.trial} starts from the initial state")
+                tick, moments = 0, None
+                continue
             tick += 1
             self.stepper.advance(seconds(next_ns), throttle, self.load)
             self.report()
@@ -182,26 +262,44 @@ class MachineNode(Node):
                 self.moments_publisher.publish(moments)
             self.finish()
 
-    def wait_for_subscribers(self) -> None:
-        """Lockstep: spin until joint_states has min_subscribers matched subscribers (the peers) and, for
-        at most peer_timeout seconds, until each lockstep input has a publisher."""
-        if self.time_mode != "lockstep":
+    def wait_while_paused(self, holding: bool) -> None:
+        """Between exchanges: spin (serving the services) while paused with no ~/step left, or while holding at
+        the end; return when the run may advance or a reset is asked for."""
+        if self.paused and self.steps_left > 0 and not holding:
+            self.steps_left -= 1
             return
-        waited = time.monotonic()
-        topics = {"throttle": "throttle", "load": "load_torque_stamped"}
-
-        def ready() -> bool:
-            if self.joint_publisher.get_subscription_count() < self.min_subscribers:
-                return False
-            return time.monotonic() - waited > self.peer_timeout or all(
-                self.count_publishers(topics[name]) > 0 for name in self.lockstep_inputs)
-
-        while rclpy.ok() and not ready():
+        if not (self.paused or holding):
+            return
+        self.publish_status(RunState.HOLDING if holding else RunState.PAUSED)
+        paused_at = time.monotonic()
+        while rclpy.ok() and not self.reset_requested and (holding or self.paused and self.steps_left == 0):
             self.executor.spin_once(timeout_sec=SPIN_SLICE)
-            if time.monotonic() - waited > self.peer_timeout:
-                self.get_logger().warning(f"waiting for {self.min_subscribers} subscribers of joint_states, "
-                                          f"{self.joint_publisher.get_subscription_count()} so far",
-                                          throttle_duration_sec=5.0)
+            self.report()
+        self.wall_start += time.monotonic() - paused_at  # realtime: the pause does not count
+        if not self.reset_requested:
+            self.steps_left = max(self.steps_left - 1, 0)
+            self.publish_status()
+
+    def wait_for_peers(self) -> None:
+        """Spin until every peer node (parameter peers) subscribes to joint_states, raising PeerError that names the
+        missing ones after peer_timeout seconds, and, for at most peer_timeout, until each lockstep input has a
+        publisher (one still missing then is waited for at the first exchange and, silent, put on its fail-safe)."""
+        waited = time.monotonic()
+        topic = self.joint_publisher.topic_name
+        namespace = self.get_namespace()
+        while rclpy.ok():
+            subscribed = {info.node_name for info in self.get_subscriptions_info_by_topic(topic)
+                          if info.node_namespace == namespace}
+            missing = [name for name in self.peers if name not in subscribed]
+            unpublished = [item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0]
+            timed_out = time.monotonic() - waited > self.peer_timeout
+            if missing and timed_out:
+                raise PeerError(f"machine: no {', '.join(missing)} node subscribed to {topic} within "
+                                f"{self.peer_timeout:g} s (parameter peer_timeout): start it, or leave it out of the "
+                                "parameter peers")
+            if not missing and (not unpublished or timed_out):
+                return
+            self.executor.spin_once(timeout_sec=SPIN_SLICE)
 
     def collect_inputs(self) -> None:
         """Take the inputs for the current exchange time: in lockstep, wait for each listed input stamped
@@ -289,19 +387,20 @@ class MachineNode(Node):
         message = JointState(name=["crank"], position=[float(self.stepper.state[0])],
                              velocity=[float(self.stepper.state[1])], effort=[values["net"]])
         message.header.stamp = header_stamp
-        if self.output_joint is not None:
-            name, position, velocity = self.output_joint
+        for name, position, velocity in output_joints(self.model, values):
             message.name.append(name)
-            message.position.append(values[position])
-            message.velocity.append(values[velocity])
+            message.position.append(position)
+            message.velocity.append(velocity)
             message.effort.append(math.nan)  # not computed
         self.joint_publisher.publish(message)
         self.state_message = message
 
     def moments_message(self) -> JointState:
         """machine/moments at the current exchange time, with the inputs that now hold (published after
-        the next exchange's joint_states, off the critical path of the lockstep)."""
-        moments = self.stepper.moments(self.throttle, self.load)
+        the next exchange's joint_states, off the critical path of the lockstep): the moments on the crank by
+        source and the external load applied [N m] (against the motion, where the scene applies it: on the crank,
+        or on a two-mass machine's driven part, where the crank's `external` is 0)."""
+        moments = self.stepper.moments(self.throttle, self.load) | {"load": self.load}
         message = JointState(name=list(moments), effort=list(moments.values()))
         message.header.stamp = stamp(self.now_ns)
         return message
@@ -337,13 +436,42 @@ class MachineNode(Node):
         array.status[0].values += self.rejections.key_values()
         return array
 
+    def publish_status(self, state: str | None = None) -> None:
+        """machine/status: the run's state (RunState; by default running or paused), time, trial and solver
+        status."""
+        state = state or (RunState.PAUSED if self.paused and self.steps_left == 0 else RunState.RUNNING)
+        status = {"state": state, "time": seconds(self.now_ns), "trial": self.trial, "status": self.stepper.status,
+                  "tripped_at": self.stepper.tripped_at}
+        if state == RunState.FINISHED:
+            status["finished_at_ns"] = self.now_ns
+        self.status_publisher.publish(String(data=json.dumps(status)))
+
     def finish(self) -> None:
-        """Say the run is over (diagnostics with finished_at_ns) once every subscriber has the last state."""
+        """Say the run is over (machine/status finished, diagnostics with finished_at_ns) once every subscriber
+        has the last state."""
         for publisher in (self.joint_publisher, self.moments_publisher):
             publisher.wait_for_all_acked(Duration(seconds=5.0))
+        self.publish_status(RunState.FINISHED)
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))
-        self.diagnostics_publisher.wait_for_all_acked(Duration(seconds=5.0))
+        for publisher in (self.status_publisher, self.diagnostics_publisher):
+            publisher.wait_for_all_acked(Duration(seconds=5.0))
         self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
+
+
+def output_joints(model, values: dict[str, float]) -> list[tuple[str, float, float]]:
+    """The joints joint_states carries besides the crank, as (joint name, position, velocity), from the machine's
+    outputs `values` (MachineStepper.outputs): the mechanism's output link (slider x [m], v [m/s]; rocker or
+    shuttle), and a two-mass machine's coupling (twist [rad], its rate omega - omega_driven [rad/s]) and driven part
+    (phi_driven [rad], NaN behind a clutch, which does not follow the driven part's angle; omega_driven [rad/s])."""
+    kind = model.scene.machine.mechanism.type if model.scene.machine.mechanism else None
+    columns = {"crank_slider": [("slider", "x_slider", "v_slider")], "four_bar": [("rocker", "theta4", "omega4")],
+               "walking_beam": [("shuttle", "x_shuttle", "v_shuttle")]}.get(kind, [])
+    joints = [(name, values[position], values[velocity]) for name, position, velocity in columns]
+    if model.coupling is not None:
+        joints.append(("coupling", values["twist"], values["omega"] - values["omega_driven"]))
+    if model.driven is not None:
+        joints.append(("driven", values.get("phi_driven", math.nan), values["omega_driven"]))
+    return joints
 
 
 def main() -> int:

@@ -5,9 +5,10 @@ Subscribes `joint_states`, `machine/moments`, `governor/state`, `governor/events
 publishes its own `/diagnostics` every second: `recorded_exchanges` (complete exchanges so far) and
 `recorded_until` [s].
 The text log gets every change of the applied load, the governor's mode changes and the machine's
-warnings (fail-safe, overspeed trip). When the machine says it finished (diagnostics `finished_at_ns`)
-the recorder waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it
-has, so the recording stays valid.
+warnings (fail-safe, overspeed trip). When the machine says it finished (`machine/status`) the recorder
+waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it has, so the
+recording stays valid. A machine state stamped 0 after later ones is a new trial (the machine's ~/reset):
+the CSV and the summary are of the last trial, the recording keeps every trial with an event at each reset.
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, diagnostics, float_parameter, nanoseconds,
-                                         run, scene_model, text_parameter)
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, RunState, diagnostics, float_parameter,
+                                         follow_run_state, nanoseconds, run, scene_model, text_parameter)
+from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
@@ -58,7 +60,9 @@ class RecorderNode(Node):
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate)
-        self.machine: dict[int, tuple[float, float]] = {}
+        self.machine: dict[int, list[float]] = {}  # stamp -> the machine's state (phi, omega, then a two-mass
+        # machine's twist and omega_driven or a clutch's omega_driven, as MachineModel.state_names)
+        self.trial = 1
         self.moments: dict[int, tuple[float, float]] = {}  # stamp -> (drive, external load) [N m]
         self.governor: dict[int, dict[str, float]] = {}
         self.events: list[tuple[float, str, tuple[str, str]]] = []
@@ -73,6 +77,7 @@ class RecorderNode(Node):
         self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
         self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
+        follow_run_state(self, self.on_run_state)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
@@ -82,22 +87,41 @@ class RecorderNode(Node):
         names = list(message.name)
         if "crank" not in names:
             return
-        index = names.index("crank")
         when = nanoseconds(message.header.stamp)
-        phi, omega = message.position[index], message.velocity[index]
-        self.machine[when] = (phi, omega)
+        if when == 0 and self.machine and max(self.machine) > 0:
+            self.start_trial()
+        crank = names.index("crank")
+        phi, omega = message.position[crank], message.velocity[crank]
+        state = [phi, omega]
+        if self.model.coupling is not None:
+            state.append(message.position[names.index("coupling")])
+        if self.model.driven is not None:
+            state.append(message.velocity[names.index("driven")])
+        self.machine[when] = state
         self.state_walls[1:] = [time.monotonic()]
         self.recording.add_machine(when, phi, omega)
+
+    def start_trial(self) -> None:
+        """The machine's ~/reset: forget the samples of the trial before (the recording keeps them)."""
+        self.trial += 1
+        for samples in (self.machine, self.moments, self.governor):
+            samples.clear()
+        self.events.clear()
+        self.last_external = None
+        self.state_walls.clear()
+        self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
+
+    def on_run_state(self, state: dict) -> None:
+        if state["state"] == RunState.FINISHED:
+            self.finished_at = int(state["finished_at_ns"])
+            self.tripped_at = state["tripped_at"]
 
     def on_moments(self, message: JointState) -> None:
         when = nanoseconds(message.header.stamp)
         moments = dict(zip(message.name, message.effort))
         self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"], moments["net"])
-        external = moments["external"]
-        if self.last_external is not None and external != self.last_external:
-            self.recording.add_event(when, f"load {-self.last_external:.6g} -> {-external:.6g} N m")
-        self.last_external = external
-        self.moments[when] = (moments["drive"], -external)
+        self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
+        self.moments[when] = (moments["drive"], moments["load"])
 
     def on_governor(self, message: JointState) -> None:
         when = nanoseconds(message.header.stamp)
@@ -114,7 +138,7 @@ class RecorderNode(Node):
     def on_governor_event(self, message: String) -> None:
         event = json.loads(message.data)
         self.events.append((event["time"], event["event"], tuple(event["mode"])))
-        self.recording.add_event(int(round(event["time"] * 1e9)), f"governor: {event['event']}")
+        self.recording.add_mode_change(int(round(event["time"] * 1e9)), event["event"])
 
     def on_diagnostics(self, message: DiagnosticArray) -> None:
         for status in message.status:
@@ -127,8 +151,6 @@ class RecorderNode(Node):
             self.machine_status = (status.level, status.message)
             if values.get("tripped_at", "None") != "None":
                 self.tripped_at = float(values["tripped_at"])
-            if "finished_at_ns" in values:
-                self.finished_at = int(values["finished_at_ns"])
 
     def complete(self) -> bool:
         """Whether the machine finished and its last samples (and the governor's) are in."""
@@ -148,12 +170,7 @@ class RecorderNode(Node):
         run_data = self.run_data()
         summary_path = self.path.with_suffix(".json")
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
-            summary = {"scene": self.model.scene.name, "status": "interrupted",
-                       "message": "interrupted before the first complete exchange: nothing recorded yet",
-                       "exchange_step": self.exchange_step, "samples": 0, "t_end": 0.0,
-                       "omega_end": self.model.scene.scenario.initial.omega, "tripped_at": None, "governor": None,
-                       "recording": str(self.path)}
-            summary_path.write_text(to_json(summary))
+            write_empty_run(self.model, self.path, self.exchange_step)
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step)
         summary.update(self.pace())
@@ -194,12 +211,13 @@ class RecorderNode(Node):
             return None
         rows = []
         for when in times:
-            row = list(self.machine[when])
+            machine = self.machine[when]
+            row = machine[:2]
             if self.model.governor is not None:
                 values = self.governor[when]
                 row += [values["arm_angle"], values["arm_rate"]]
                 row += [values[name] for name in self.model.governor.state_names[2:]]
-            rows.append(row)
+            rows.append(row + machine[2:])
         tripped = self.tripped_at if self.tripped_at is not None else np.inf
         throttle = [0.0 if seconds(when) >= tripped else
                     self.governor[when]["throttle"] if self.model.governor is not None else 1.0 for when in times]
@@ -211,6 +229,19 @@ class RecorderNode(Node):
         """Spin until the machine has finished and everything is in (or Ctrl-C)."""
         while rclpy.ok() and not self.complete():
             self.executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
+
+
+def write_empty_run(model: MachineModel, path: Path, exchange_step: float) -> None:
+    """The files of a run stopped before its first complete exchange: the recording at `path` with its layout and
+    no samples (unless one was written already) and the summary next to it (status interrupted, samples 0)."""
+    if not path.exists():
+        RunRecording(model, path=path).close()
+    summary = {"scene": model.scene.name, "status": "interrupted",
+               "message": "interrupted before the first complete exchange: nothing recorded yet",
+               "exchange_step": exchange_step, "samples": 0, "t_end": 0.0,
+               "omega_end": model.scene.scenario.initial.omega, "tripped_at": None, "governor": None,
+               "recording": str(path)}
+    path.with_suffix(".json").write_text(to_json(summary))
 
 
 def main() -> int:

@@ -4,7 +4,8 @@ Listens to `joint_states` for the machine's exchange times. In `lockstep` it ans
 time t with the scene's external load L(t) on `load_torque_stamped` (geometry_msgs/WrenchStamped,
 torque.z [N m], stamped t) — the machine waits for it, so the run is reproducible. In `realtime` it
 publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other publisher
-would. Either way it logs each load event.
+would. Either way it logs each load event. It ends by itself when the machine says the run is finished
+(`machine/status`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mech_regulator.nodes.common import COMMAND_QOS, nanoseconds, run, scene_model, text_parameter
+from mech_regulator.nodes.common import (COMMAND_QOS, RunState, follow_run_state, nanoseconds, run, scene_model,
+                                         text_parameter)
 from mech_regulator.solvers.cosim import seconds
 
 
@@ -33,10 +35,19 @@ class ScenarioNode(Node):
         self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
         self.last_load: float | None = None
         self.last_ns = -1
+        self.done = False
+        follow_run_state(self, self.on_run_state)
+
+    def on_run_state(self, state: dict) -> None:
+        """End by itself when the machine has finished."""
+        self.done = state["state"] == RunState.FINISHED
 
     def on_joint_states(self, message: JointState) -> None:
-        """Give the load at the machine's exchange time."""
+        """Give the load at the machine's exchange time (a time of 0 after later ones: the machine's ~/reset, the
+        scenario starts again)."""
         when = nanoseconds(message.header.stamp)
+        if when == 0 and self.last_ns > 0:
+            self.last_load, self.last_ns = None, -1
         if when <= self.last_ns and self.time_mode == "realtime":
             return
         self.last_ns = max(when, self.last_ns)

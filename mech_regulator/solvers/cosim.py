@@ -54,10 +54,10 @@ class MachineStepper:
     engine does."""
 
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
-        self.plant = dataclasses.replace(model, governor=None, load_pieces=())
+        self.plant = machine_subsystem(model)
         self._segment = segment_for(self.plant)
         initial = model.initial_state()
-        self.state = np.concatenate([initial[:2], initial[model.coupling_index:]]) if model.coupling else initial[:2]
+        self.state = np.concatenate([initial[:2], initial[model.coupling_index:]]) if model.driven is not None else initial[:2]
         self.mode = self.plant.initial_mode(self.state)
         self.time = 0.0
         self.overspeed_trip = overspeed_trip
@@ -107,9 +107,7 @@ class GovernorStepper:
     def __init__(self, model: MachineModel):
         if model.governor is None:
             raise ValueError(f"scene '{model.scene.name}' has no governor")
-        self.regulator = dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False,
-                                             effects=(), load_pieces=(), coupling=None, clutch=None,
-                                             joint_friction=None)
+        self.regulator = governor_subsystem(model)
         self._segment = segment_for(self.regulator)
         self.governor = model.governor
         self.state = model.initial_state()[:model.coupling_index]
@@ -168,12 +166,43 @@ class GovernorStepper:
         return values
 
 
+def machine_subsystem(model: MachineModel) -> MachineModel:
+    """The machine without its governor and without the scenario's load pieces (the load comes as an input)."""
+    return dataclasses.replace(model, governor=None, load_pieces=())
+
+
+def governor_subsystem(model: MachineModel) -> MachineModel:
+    """The governor without the machine: unit constant inertia and no moments, so that omega' = 0 exactly."""
+    return dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False, effects=(), load_pieces=(),
+                               coupling=None, clutch=None, joint_friction=None)
+
+
+def cosimulation_refusal(model: MachineModel) -> str | None:
+    """Why a scene cannot be co-simulated (the nodes, simulate --exchange-step), naming the key, its value and what
+    would do; None when it can. Checked before anything starts, so that a refusal comes at once: the energy method
+    steps in phi, not in time; an RK4 step outside the stability region of a subsystem's coupling; a solver method
+    the fast path has no stepper for on solver.path: fast."""
+    solver = model.scene.solver
+    if solver.method == "energy":
+        return ("solver.method: 'energy' integrates in the crank angle, but the co-simulation exchanges signals at "
+                "times; choose a method in time, e.g. --set solver.method=DOP853")
+    subsystems = [machine_subsystem(model)] + ([governor_subsystem(model)] if model.governor is not None else [])
+    for subsystem in subsystems:
+        reason = rk4_stability_refusal(subsystem)
+        if reason is not None:
+            return reason
+    if solver.path == "fast":
+        from mech_regulator.solvers.compiled import fast_path_refusal
+
+        return fast_path_refusal(model)
+    return None
+
+
 def segment_for(subsystem: MachineModel):
     """What steps a subsystem over one exchange step (time_domain._segment's arguments and result): the reference
-    path's _segment, or on solver.path: fast the subsystem's compiled twin (compiled here, once; a scene the fast
-    path cannot run raises SceneError naming the key, solvers/compiled.fast_path_refusal; so does an RK4 step outside
-    the stability region of the subsystem's coupling, solvers/advice.rk4_stability_refusal)."""
-    reason = rk4_stability_refusal(subsystem)
+    path's _segment, or on solver.path: fast the subsystem's compiled twin (compiled here, once). A scene that cannot
+    be co-simulated raises SceneError (cosimulation_refusal)."""
+    reason = cosimulation_refusal(subsystem)
     if reason is not None:
         raise SceneError(reason)
     if subsystem.scene.solver.path != "fast":

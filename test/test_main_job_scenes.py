@@ -1,0 +1,227 @@
+"""The main job plays every scene: every bundled scene and a user's scene through the nodes
+(`mech-regulator run`), the nodes ending by themselves and leaving no process behind, a missing peer named,
+a scene the nodes cannot play refused at once, and the machine's services (~/pause, ~/step, ~/resume,
+~/reset) between trials.
+
+Every run's CSV is compared with the in-process co-simulation of the core (solvers.cosim.cosimulate) of
+the same scene over the same simulated time: the nodes only move messages.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from ros_support import (WAIT, Processes, RunListener, domain_id, next_domain_id, probe,  # noqa: F401 (fixtures)
+                         processes, stamp_ns)
+
+# after ros_support, which skips this module when rclpy is missing
+from std_srvs.srv import Trigger
+
+from mech_regulator.cli.report import write_csv
+from mech_regulator.model import build_model
+from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
+from mech_regulator.solvers.cosim import cosimulate, to_nanoseconds
+
+PLAYED = 0.3  # [s] of simulated time each bundled scene is played
+EXCHANGE_STEP = 1e-3  # [s]
+
+
+def in_process_csv(model, duration: float, path: Path) -> bytes:
+    """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write)."""
+    scenario = model.scene.scenario.model_copy(update={"duration": duration})
+    shortened = dataclasses.replace(model, scene=model.scene.model_copy(update={"scenario": scenario}))
+    run = cosimulate(shortened, EXCHANGE_STEP)
+    write_csv(path, shortened.columns(run.times, run.states, run.throttle, run.external_load), digits=17)
+    return path.read_bytes()
+
+
+def node_processes(marker: str) -> list[str]:
+    """The command lines of the running node processes whose arguments mention `marker` (a run's folder)."""
+    listing = subprocess.run(["ps", "-ww", "-eo", "args"], capture_output=True, text=True, check=True).stdout
+    return [line for line in listing.splitlines() if "mech_regulator.nodes" in line and marker in line]
+
+
+def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedProcess, Path]:
+    """`mech-regulator run SCENE --duration PLAYED` on a private domain; returns the finished process and the
+    recording's path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    rrd = folder / "run.rrd"
+    result = subprocess.run([sys.executable, "-m", "mech_regulator", "run", scene, "--duration", str(PLAYED),
+                             "--out", str(rrd), "--domain-id", str(next_domain_id()), "--quiet", *options],
+                            capture_output=True, text=True, timeout=4 * WAIT, cwd=folder,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    return result, rrd
+
+
+def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: Path, tmp_path: Path) -> None:
+    """The run ended by itself with exit 0 and status complete, wrote every exchange to its CSV exactly as the
+    in-process co-simulation does, and left no node running."""
+    log = rrd.with_suffix(".log")
+    described = f"{scene}: exit {result.returncode}\n{result.stdout}\n{result.stderr}\n" \
+                f"{log.read_text() if log.exists() else ''}"
+    assert result.returncode == 0, described
+    summary = json.loads(rrd.with_suffix(".json").read_text())
+    assert summary["status"] == "complete" and summary["t_end"] == PLAYED, described
+    rows = rrd.with_suffix(".csv").read_bytes()
+    assert rows.count(b"\n") == 1 + round(PLAYED / EXCHANGE_STEP) + 1, described  # header and every exchange
+    assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv"), \
+        f"{scene}: the nodes' CSV differs from the in-process co-simulation"
+    assert node_processes(str(rrd.parent)) == [], f"{scene}: nodes left running"
+
+
+def test_every_bundled_scene_plays_to_the_end_through_the_nodes(tmp_path):
+    """Governed or not, direct and indirect governors, two-mass machines, a clutch with branches, engines,
+    linkages: each plays PLAYED s through the nodes, two runs side by side."""
+    scenes = bundled_scenes()
+    assert len(scenes) >= 17
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        results = dict(zip(scenes, pool.map(lambda scene: play(scene, tmp_path / scene), scenes)))
+    for scene, (result, rrd) in results.items():
+        assert_played(scene, build_model(load_scene(scene)), result, rrd, tmp_path)
+
+
+def four_bar_from_rest() -> dict:
+    """A user's scene: an ungoverned four-bar (crank 0.1 m, coupler 0.4 m, rocker 0.3 m, frame 0.35 m) started
+    from rest by an induction motor against a viscous load."""
+    return {
+        "name": "my_four_bar",
+        "machine": {"inertia": 0.2,
+                    "mechanism": {"type": "four_bar", "crank": 0.1, "coupler": 0.4, "rocker": 0.3, "frame": 0.35,
+                                  "branch": "open", "coupler_mass": 2.0, "coupler_cg": 0.2, "rocker_mass": 3.0,
+                                  "rocker_cg": 0.15},
+                    "drive": {"type": "linear_motor", "stall_torque": 60.0, "no_load_speed": 100.0},
+                    "loads": [{"type": "viscous", "coefficient": 0.2}]},
+        "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": PLAYED},
+        "solver": {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11},
+    }
+
+
+def test_a_user_scene_plays_through_the_nodes(tmp_path):
+    path = tmp_path / "my_four_bar.yaml"
+    path.write_text(yaml.safe_dump(four_bar_from_rest(), sort_keys=False))
+    model = build_model(validate_scene(four_bar_from_rest()))
+    result, rrd = play(str(path), tmp_path / "run")
+    assert_played("my_four_bar", model, result, rrd, tmp_path)
+    csv = np.genfromtxt(rrd.with_suffix(".csv"), delimiter=",", names=True)
+    assert csv["omega"][0] == 0.0 and csv["omega"][-1] > 1.0, "the machine did not start from rest"
+    assert "theta4" in csv.dtype.names, "no rocker columns in the CSV of a four-bar"
+
+
+def test_a_scene_the_nodes_cannot_play_is_refused_at_once(tmp_path):
+    data = four_bar_from_rest() | {"solver": {"method": "energy"}}
+    path = tmp_path / "energy.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    result, rrd = play(str(path), tmp_path / "run")
+    assert result.returncode == 2 and "solver.method: 'energy'" in result.stderr, result.stderr
+    assert "cannot be played by the nodes" in result.stderr and "Traceback" not in result.stderr
+    assert not rrd.with_suffix(".log").exists(), "nodes were started for a scene refused at once"
+
+
+def test_a_missing_peer_is_named_and_the_machine_ends(tmp_path, processes):
+    machine = processes.node("machine", {"scene_file": "lathe", "peers": ["scenario", "recorder"],
+                                         "peer_timeout": 3.0})
+    processes.node("scenario", {"scene_file": "lathe"})
+    assert processes.wait(machine) == 1, processes.logs()
+    log = processes.log(machine)
+    assert "no recorder node subscribed to /joint_states within 3 s" in log and "peers" in log, log
+    assert "scenario" not in log.split("no ")[1].split(" node")[0], log
+
+
+def test_hand_started_nodes_end_by_themselves_with_the_run(tmp_path, processes):
+    scene = "engine_direct"
+    overrides = ["scenario.duration=0.2", "scenario.load_events=[]"]
+    parameters = {"scene_file": scene, "overrides": overrides}
+    governor = processes.node("governor", parameters)
+    scenario = processes.node("scenario", parameters)
+    machine = processes.node("machine", parameters | {"peer_timeout": 60.0})
+    for process in (machine, governor, scenario):
+        assert processes.wait(process) == 0, processes.logs()
+    assert "finished at t = 0.2 s: complete" in processes.log(machine), processes.logs()
+    assert node_processes(str(tmp_path)) == []
+
+
+def _call(probe, name: str, describe) -> Trigger.Response:
+    response = probe.call(Trigger, f"/machine/{name}", Trigger.Request(), describe=describe)
+    assert response.success, response.message
+    return response
+
+
+def test_the_services_pause_step_resume_and_reset_between_trials(tmp_path, processes, probe):
+    """Paused from the start, ~/step advances step_exchanges exchanges at a time; ~/resume plays on; ~/reset
+    starts a second trial from the initial state, and the governor follows: the second trial is the in-process
+    co-simulation to the last bit, as the first."""
+    scene = "engine_direct"
+    overrides = ["scenario.duration=0.1", "scenario.load_events=[]"]
+    model = build_model(load_scene(scene, overrides))
+    run = cosimulate(model, 0.002)
+    parameters = {"scene_file": scene, "overrides": overrides, "exchange_step": 0.002}
+    processes.node("governor", parameters)
+    processes.node("scenario", parameters)
+    machine = processes.node("machine", parameters | {"peer_timeout": 60.0, "start_paused": True,
+                                                      "step_exchanges": 5, "at_end": "hold",
+                                                      "peers": ["governor", "scenario", probe.node.get_name()]})
+    listener = RunListener(probe, governed=True, diagnostics_publishers=0, describe=processes.logs)
+    trials: list[dict[int, float]] = [{}]  # per trial: exchange time [ns] -> omega [rad/s] (a state sent again
+    # while the machine waits counts once)
+    listener.open_gate(lambda message: trials[-1].update({stamp_ns(message.header.stamp): message.velocity[0]}))
+
+    def times(trial: int) -> list[int]:
+        return sorted(trials[trial])
+
+    probe.spin_until(lambda: times(0) == [0], "the first state at t = 0", describe=processes.logs)
+    _call(probe, "step", processes.logs)
+    probe.spin_until(lambda: len(times(0)) == 6, "5 exchanges after ~/step", describe=processes.logs)
+    assert times(0) == [to_nanoseconds(0.002 * k) for k in range(6)]
+    later = time.monotonic() + 1.0
+    probe.spin_until(lambda: time.monotonic() > later, "a second of listening")
+    assert len(times(0)) == 6, "the machine went on after its steps while paused"
+    _call(probe, "resume", processes.logs)
+    probe.spin_until(lambda: times(0)[-1] == to_nanoseconds(0.1), "the end of the first trial",
+                     describe=processes.logs)
+    assert machine.poll() is None, "at_end: hold, but the machine ended"
+    trials.append({})
+    _call(probe, "reset", processes.logs)
+    probe.spin_until(lambda: times(1) and times(1)[-1] == to_nanoseconds(0.1), "the end of the second trial",
+                     describe=processes.logs)
+    for trial in trials:
+        assert times(trials.index(trial)) == [to_nanoseconds(t) for t in run.times]
+        np.testing.assert_array_equal([trial[when] for when in sorted(trial)], run.states[1],
+                                      err_msg="a trial differs from the in-process run")
+
+
+def test_a_killed_launcher_leaves_no_node_behind(tmp_path, processes):
+    """However the launcher ends — here SIGKILL, which it cannot catch — its nodes end too (they get SIGINT when
+    their parent dies), closing the recording."""
+    rrd = tmp_path / "killed" / "run.rrd"
+    rrd.parent.mkdir()
+    launcher = processes.start([sys.executable, "-m", "mech_regulator", "run", "engine_direct", "--out", rrd,
+                                "--domain-id", next_domain_id(), "--quiet"], "launcher")
+
+    def nodes_running() -> bool:  # the machine stepping: the scenario gave its first load
+        log = rrd.with_suffix(".log")
+        return len(node_processes(str(rrd.parent))) == 4 and log.exists() and "load 6 N m" in log.read_text()
+
+    wait_for(nodes_running, "the four nodes running", lambda: f"{node_processes(str(rrd.parent))}\n{processes.logs()}")
+    launcher.kill()
+    wait_for(lambda: not node_processes(str(rrd.parent)), "the nodes ending after their launcher", processes.logs)
+    assert rrd.with_suffix(".json").exists(), "the recorder did not close the run"
+
+
+def wait_for(condition, what: str, describe) -> None:
+    """Poll condition() every 0.1 s; a failure (with the logs) after WAIT seconds."""
+    deadline = time.monotonic() + WAIT
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {WAIT} s waiting for {what}\n{describe()}")
+        time.sleep(0.1)
