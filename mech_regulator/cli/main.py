@@ -228,7 +228,8 @@ def _simulate(scene, args) -> int:
     if args.record is not None:
         from mech_regulator.viz.recording import record_run
 
-        record_run(model, *_samples(model, trajectory), args.record)
+        record_run(model, *_samples(model, trajectory), args.record, mode_changes=trajectory.events,
+                   status=trajectory.status, message=trajectory.message)
         summary["recording"] = str(args.record)
     print(to_json(summary) if args.json else format_summary(model, summary))
     if trajectory.status == "failed":
@@ -262,7 +263,8 @@ def _cosimulate(model, args) -> int:
     if args.record is not None:
         from mech_regulator.viz.recording import record_run
 
-        record_run(model, run.times, run.states, args.record)
+        record_run(model, run.times, run.states, args.record,
+                   mode_changes=[(t, what) for t, what, _ in run.events], status=run.status, message=run.message)
         summary["recording"] = str(args.record)
     print(to_json(summary) if args.json else format_cosimulation_summary(summary))
     if run.status == "failed":

@@ -63,10 +63,10 @@ class RecorderNode(Node):
         self.machine: dict[int, list[float]] = {}  # stamp -> the machine's state (phi, omega, then a two-mass
         # machine's twist and omega_driven or a clutch's omega_driven, as MachineModel.state_names)
         self.trial = 1
+        self.machine_result = ("complete", "")  # the machine's solver status and its message
         self.moments: dict[int, tuple[float, float]] = {}  # stamp -> (drive, external load) [N m]
         self.governor: dict[int, dict[str, float]] = {}
         self.events: list[tuple[float, str, tuple[str, str]]] = []
-        self.last_external: float | None = None
         self.machine_status = (DiagnosticStatus.OK, "")
         self.finished_at: int | None = None
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
@@ -92,14 +92,14 @@ class RecorderNode(Node):
             self.start_trial()
         crank = names.index("crank")
         phi, omega = message.position[crank], message.velocity[crank]
-        state = [phi, omega]
+        driven = {}
         if self.model.coupling is not None:
-            state.append(message.position[names.index("coupling")])
+            driven["twist"] = message.position[names.index("coupling")]
         if self.model.driven is not None:
-            state.append(message.velocity[names.index("driven")])
-        self.machine[when] = state
+            driven["omega_driven"] = message.velocity[names.index("driven")]
+        self.machine[when] = [phi, omega, *driven.values()]
         self.state_walls[1:] = [time.monotonic()]
-        self.recording.add_machine(when, phi, omega)
+        self.recording.add_machine(when, phi, omega, driven or None)
 
     def start_trial(self) -> None:
         """The machine's ~/reset: forget the samples of the trial before (the recording keeps them)."""
@@ -107,11 +107,11 @@ class RecorderNode(Node):
         for samples in (self.machine, self.moments, self.governor):
             samples.clear()
         self.events.clear()
-        self.last_external = None
         self.state_walls.clear()
         self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
 
     def on_run_state(self, state: dict) -> None:
+        self.machine_result = (state["status"], self.machine_status[1])
         if state["state"] == RunState.FINISHED:
             self.finished_at = int(state["finished_at_ns"])
             self.tripped_at = state["tripped_at"]
@@ -164,10 +164,17 @@ class RecorderNode(Node):
         if self.closed:
             return
         self.closed = True
-        self.recording.close()
+        run_data = self.run_data()
+        if run_data is None:
+            self.recording.close("interrupted", "before the first complete exchange")
+        else:
+            status, message = ("complete", "") if self.complete() else \
+                ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
+            if self.machine_result[0] not in ("complete", "interrupted"):
+                status, message = self.machine_result
+            self.recording.close(status, message)
         if self.path is None:
             return
-        run_data = self.run_data()
         summary_path = self.path.with_suffix(".json")
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
             write_empty_run(self.model, self.path, self.exchange_step)

@@ -1,11 +1,21 @@
-"""Rerun recordings of a run: time series of the crank speed, throttle, governor and moments, an
+"""Rerun recordings of a run: time series of the speeds, throttle, governor, coupling and moments, an
 animation of the mechanism and the governor, and a text log of events, laid out by a blueprint.
 
-A RunRecording is fed sample by sample (the ROS recorder's callbacks, or `record_run` from a monolithic
-simulation). Times are whole nanoseconds of SIMULATED time on the duration timeline `sim_time`. Scalar
+A RunRecording is fed sample by sample (the ROS recorder's callbacks, or `record_run` from a monolithic or
+co-simulated run). Times are whole nanoseconds of SIMULATED time on the duration timeline `sim_time`. Scalar
 samples are only appended to lists; `flush()` sends them as columns. The animation is decimated to
 `animation_rate` frames per second of simulated time. Rerun's 2-D views have y pointing down, so the
 drawings (y up, mechanisms.drawing and governors.drawing) are flipped on the way in.
+
+Only what the scene has is recorded and shown: a throttle, a governor and a set point only with a governor,
+the driven part's speed omega_driven with a coupling or a clutch, the coupling's twist with a coupling, the
+external load moment on the crank only when the load acts on the crank (behind a coupling or a clutch it acts
+on the driven part). The mechanism drawn is the machine's, else the driven part's at phi_driven = phi - twist
+(a two-mass machine with a mechanism behind its coupling), else a schematic disc. Each plot names its series
+and their colours in its title; the legends are hidden, so they never cover the curves. While the run goes
+on the viewer fits the plots' y axes to the data; `close()` sends the blueprint again with each y axis over
+the values recorded and a margin of Y_MARGIN (the throttle's over 0..1 at least, the sleeve's over its
+stroke), so that no curve runs along a frame and the axes stay put while the run is played back.
 
 Speed set point omega_set (`speed/set_point`): for an indirect governor its set speed
 (`Governor.set_speed`, constant); for a direct governor the speed of the operating point of the
@@ -13,13 +23,21 @@ cycle-averaged machine at the current external load (`analysis.operating_point`)
 governor settles (it has a static error); a machine without a governor has no set point and no band.
 The band `speed/band_high`, `speed/band_low` is omega_set (1 +- delta / 2) with delta the scene's
 `analysis.permitted_delta` or, when the scene gives none, twice its `analysis.settling_band` (then the
-band is the settling band around omega_set); the speed view's title and the `about` document say which.
+band is the settling band around omega_set); the band's name and the `about` document say which.
+
+The text log `events` says what happened: the start (scene, governor, initial speed and load), every change
+of the external load as the samples show it (`add_external_load`: a change that goes on at consecutive
+samples in one direction is ONE ramp event, logged at its start with its end; a change at a single sample
+is a step), the mode changes (`add_mode_change`: the governor's stops and sticking, a clutch's slip) and
+the end (`close(status, message)`).
 """
 
 from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +50,7 @@ from mech_regulator.governors.drawing import ball_radius, governor_bounds, gover
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
 from mech_regulator.model import MachineModel, crank_moments
+from mech_regulator.scene import schema
 from mech_regulator.solvers.trajectory import Progress
 
 APPLICATION_ID = "mech_regulator"
@@ -39,27 +58,40 @@ TIMELINE = "sim_time"
 NANOSECONDS = 1_000_000_000
 SET_POINT_REFRESH_NS = 10_000_000   # a direct governor's set point follows a changing load at most every 10 ms
 RECORD_RUN_FLUSH_SAMPLES = 20_000   # record_run sends the buffered columns every this many samples
-MOMENTS_WINDOW = 0.5                # [s] of simulated time shown by the moments view of a cyclic machine
+MOMENTS_PERIODS = 4                 # dynamic periods at the initial speed shown by a cyclic machine's moments view
+MOMENTS_WINDOW = 0.5                # [s] of simulated time shown instead when the machine starts from rest
+MOMENTS_WINDOW_LIMITS = (0.05, 10.0)    # [s] shortest and longest window of the moments view
 MILLIMETRES = 1000.0                # [mm/m]: the sleeve and the dashpot's shift are plotted in mm
+MILLIRADIANS = 1000.0               # [mrad/rad]: the coupling's twist is plotted in mrad
+Y_MARGIN = 0.08                     # the final blueprint's plots span the data and this fraction of it above and below
 
 WHITE, GREY, DARK_GREY = (235, 235, 235), (150, 150, 150), (95, 95, 95)
 BLUE, ORANGE, GREEN = (80, 160, 255), (255, 165, 50), (110, 215, 110)
 RED, VIOLET, YELLOW, PINK = (255, 95, 95), (195, 125, 255), (250, 210, 60), (255, 120, 190)
+COLOUR_NAMES = {WHITE: "white", BLUE: "blue", ORANGE: "orange", GREEN: "green", RED: "red", VIOLET: "violet",
+                YELLOW: "yellow", PINK: "pink"}
 
-# entity -> (series name in the legend, colour, line width [ui points]); the band's names come from the scene
+# entity -> (label in the plot's title, colour, line width [ui points]); the full names: series_names
 SERIES_STYLE = {
-    "speed/omega": ("ω crank speed", BLUE, 1.0),
+    "speed/omega": ("ω crank", BLUE, 1.0),
+    "speed/driven": ("ω₂ driven part", PINK, 1.0),
     "speed/set_point": ("ω_set", WHITE, 1.5),
-    "speed/band_high": ("", ORANGE, 1.0),
-    "speed/band_low": ("", ORANGE, 1.0),
-    "throttle": ("throttle [-]", GREEN, 2.5),
-    "governor/servo": ("servo s [-]", VIOLET, 1.0),
-    "governor/sleeve": ("sleeve z [mm]", YELLOW, 1.5),
-    "governor/feedback_shift": ("dashpot shift ζ [mm]", PINK, 1.5),
-    "moments/drive": ("drive (throttle × M_d)", GREEN, 1.0),
-    "moments/resistance": ("resistance (loads, weight)", RED, 1.0),
-    "moments/external": ("external load moment", VIOLET, 1.5),
-    "moments/net": ("net = J ε + J' ω² / 2", WHITE, 1.0),
+    "speed/band_high": ("band", ORANGE, 1.0),
+    "speed/band_low": ("band", ORANGE, 1.0),
+    "throttle": ("throttle", GREEN, 2.5),
+    "governor/sleeve": ("sleeve z", YELLOW, 1.5),
+    "governor/feedback_shift": ("shift ζ", PINK, 1.5),
+    "coupling/twist": ("coupling twist φ − φ₂", YELLOW, 1.5),
+    "moments/drive": ("drive", GREEN, 1.0),
+    "moments/resistance": ("resistance", RED, 1.0),
+    "moments/external": ("external", VIOLET, 1.5),
+    "moments/net": ("net", WHITE, 1.0),
+}
+SERIES_NAMES = {   # entity -> name of the series (hover, selection) unless series_names gives the scene's own
+    "speed/omega": "ω crank speed", "speed/driven": "ω₂ driven part's speed", "speed/set_point": "ω_set",
+    "throttle": "throttle", "governor/sleeve": "sleeve z [mm]", "governor/feedback_shift": "dashpot's shift ζ [mm]",
+    "coupling/twist": "twist φ − φ₂ [mrad]", "moments/external": "external load moment",
+    "moments/net": "net = J ε + J' ω² / 2",
 }
 
 # drawing part -> (colour, line width or point radius [ui points]; None: the point radius is in metres)
@@ -75,13 +107,17 @@ GOVERNOR_STYLE = {
 }
 POINT_PARTS = ("joints", "balls", "spindle_mark")
 FLIP_Y = np.array([1.0, -1.0])       # drawings have y up, Rerun's 2-D views y down
+MECHANISM_NAMES = {"crank_slider": "crank–slider", "four_bar": "four-bar linkage", "walking_beam": "walking beam"}
+END_LEVELS = {"complete": "INFO", "interrupted": "WARN", "failed": "ERROR"}
 
 
 class RunRecording:
     """One run written to Rerun: a .rrd file (path) and/or a live viewer (connect: gRPC URL such as
     rerun+http://127.0.0.1:9876/proxy), through a recording stream of its own, with the blueprint of
     `run_blueprint`. Feed it samples in time order per stream (streams may interleave), call `flush()`
-    every so often and `close()` at the end. Thread-safe; samples given after close() are dropped."""
+    every so often and `close()` at the end. Thread-safe; samples given after close() are dropped.
+    A sample time earlier than the one before on the machine's or the load's stream starts a new trial
+    (the machine was reset): the load's changes are then followed from that sample on."""
 
     def __init__(self, model: MachineModel, path: Path | None = None, connect: str | None = None,
                  animation_rate: float = 200.0, recording_name: str | None = None):
@@ -94,14 +130,23 @@ class RunRecording:
         self._closed = False
         self._frame_period_ns = max(1, round(NANOSECONDS / animation_rate))
         self._mechanism_frame = self._governor_frame = -1
+        self._last_machine_ns = 0
+        self._drawing, self._drawn_driven = drawn_mechanism(model)
         self._phi = model.scene.scenario.initial.phi
         self._external_load = model.external_load(0.0)
+        self._load_changes = LoadChanges(self._external_load)
         self._delta, self._delta_source = speed_band_delta(model)
         self._set_points: dict[float, float] = {}    # external load [N m] -> direct governor's set point [rad/s]
         self._set_point_load = math.nan
         self._set_point_time = -SET_POINT_REFRESH_NS
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
         self._series = {entity: ([], []) for entity in recorded_series(model)}
+        # entity -> (lowest, highest) value recorded; the throttle's plot spans 0..1, the sleeve's its stroke
+        self._extents: dict[str, tuple[float, float]] = {}
+        if model.governor is not None:
+            stroke = model.governor.sensor.stroke
+            self._extents = {"throttle": (0.0, 1.0),
+                             "governor/sleeve": (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])}
         self._frames: dict[str, tuple[list[int], list[np.ndarray]]] = {}   # entity -> (times, parts y down)
         self._stream = rr.RecordingStream(APPLICATION_ID)
         self._stream.set_log_time_enabled(False)   # one time line: simulated time, not the wall clock
@@ -110,92 +155,136 @@ class RunRecording:
         self._stream.send_blueprint(run_blueprint(model), make_active=True, make_default=True)
         self._stream.send_recording_name(recording_name or model.scene.name or "run")
         self._log_static()
+        self._log_event(0, start_text(model))
 
     # ---------------------------------------------------------------------------------------------
     # Samples
 
-    def add_machine(self, t_ns: int, phi: float, omega: float) -> None:
-        """A sample of the crank: angle phi [rad] and speed omega [rad/s] at t_ns [ns]; also the set point
-        and band at that time and, when a frame is due, the mechanism's picture."""
+    def add_machine(self, t_ns: int, phi: float, omega: float, driven: dict[str, float] | None = None) -> None:
+        """A sample of the machine at t_ns [ns]: crank angle phi [rad] and speed omega [rad/s] and, behind a
+        coupling or a clutch, the driven part's `omega_driven` [rad/s] and a coupling's `twist` = phi -
+        phi_driven [rad] (driven; other keys are ignored). Also the set point and band at that time and, when
+        a frame is due, the mechanism's picture (a driven part's mechanism only when the twist is given)."""
         with self._lock:
             if self._closed:
                 return
+            driven = driven or {}
+            self._last_machine_ns = t_ns
             self._append("speed/omega", t_ns, omega)
+            if "omega_driven" in driven and self.model.driven is not None:
+                self._append("speed/driven", t_ns, driven["omega_driven"])
+            if "twist" in driven and self.model.coupling is not None:
+                self._append("coupling/twist", t_ns, MILLIRADIANS * driven["twist"])
             set_point = self._current_set_point(t_ns)
             if math.isfinite(set_point):
                 self._append("speed/set_point", t_ns, set_point)
                 self._append("speed/band_high", t_ns, set_point * (1.0 + 0.5 * self._delta))
                 self._append("speed/band_low", t_ns, set_point * (1.0 - 0.5 * self._delta))
             self._phi = phi
+            if self._drawn_driven and "twist" not in driven:
+                return
             frame = t_ns // self._frame_period_ns
-            if frame > self._mechanism_frame:
+            if frame != self._mechanism_frame:
                 self._mechanism_frame = frame
-                mechanism = self.model.scene.machine.mechanism
-                self._add_frame("mechanism", t_ns, mechanism_outline(mechanism, phi),
-                                MECHANISM_MOVING_PARTS[mechanism_kind(mechanism)])
+                angle = phi - driven["twist"] if self._drawn_driven else phi
+                self._add_frame("mechanism", t_ns, mechanism_outline(self._drawing, angle),
+                                MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)])
 
     def add_moments(self, t_ns: int, drive: float, resistance: float, external: float, net: float) -> None:
         """Moments on the crank [N m] at t_ns [ns]: the drive as applied (throttle included), the machine's
-        resisting moments (loads and link weight, not the external load), the external moment (minus the
-        external load) and their sum, the net moment J epsilon + 1/2 J' omega^2."""
+        resisting moments (loads, link weight, what a coupling or clutch takes; not the external load), the
+        external moment (minus the external load; not recorded behind a coupling or a clutch, where the load acts
+        on the driven part) and their sum, the net moment J epsilon + 1/2 J' omega^2."""
         with self._lock:
             if self._closed:
                 return
             for entity, value in (("moments/drive", drive), ("moments/resistance", resistance),
                                   ("moments/external", external), ("moments/net", net)):
-                self._append(entity, t_ns, value)
-            self._external_load = -external
+                if entity in self._series:
+                    self._append(entity, t_ns, value)
+
+    def add_external_load(self, t_ns: int, load: float) -> None:
+        """The external load [N m] (its magnitude, opposing motion) applied from t_ns [ns] on, as a sample:
+        it sets a direct governor's set point, and its changes become events (see LoadChanges: a ramp over
+        consecutive samples is one event with its start and end, a change at one sample a step)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._external_load = load
+            for when, text in self._load_changes.sample(t_ns, load):
+                self._log_event(when, text)
 
     def add_governor(self, t_ns: int, values: dict[str, float]) -> None:
-        """A sample of the governor at t_ns [ns]: sleeve [m], arm_angle [rad], throttle [-], and for an
-        indirect governor servo [-] and, isodromic, feedback_shift [m] (other keys are ignored); also the
-        governor's picture when a frame is due, its spindle at ratio * (the latest crank angle)."""
+        """A sample of the governor at t_ns [ns]: sleeve [m], arm_angle [rad], throttle [-], and with isodromic
+        feedback feedback_shift [m] (other keys, such as an indirect governor's servo, which is its throttle,
+        are ignored); also the governor's picture when a frame is due, its spindle at ratio * (the latest
+        crank angle)."""
         with self._lock:
             if self._closed:
                 return
             self._append("throttle", t_ns, values["throttle"])
             self._append("governor/sleeve", t_ns, MILLIMETRES * values["sleeve"])
-            if "servo" in values:
-                self._append("governor/servo", t_ns, values["servo"])
             if "feedback_shift" in values:
                 self._append("governor/feedback_shift", t_ns, MILLIMETRES * values["feedback_shift"])
             frame = t_ns // self._frame_period_ns
-            if frame > self._governor_frame:
+            if frame != self._governor_frame:
                 self._governor_frame = frame
                 sensor = self.model.governor.sensor
                 self._add_frame("governor/drawing", t_ns,
                                 governor_outline(sensor, values["arm_angle"], sensor.ratio * self._phi),
                                 GOVERNOR_MOVING_PARTS)
 
+    def add_mode_change(self, t_ns: int, what: str) -> None:
+        """A mode change at t_ns [ns] in the text log: the governor's (a stop reached, the sleeve sticking or
+        breaking away) or the drive train's (a clutch locking or slipping), `what` as the solvers name it."""
+        self.add_event(t_ns, what)
+
     def add_event(self, t_ns: int, text: str, level: str = "INFO") -> None:
         """A line of the text log `events` at t_ns [ns] (level: TRACE, DEBUG, INFO, WARN, ERROR, CRITICAL)."""
         with self._lock:
             if self._closed:
                 return
-            self._stream.set_time(TIMELINE, duration=np.timedelta64(t_ns, "ns"))
-            self._stream.log("events", rr.TextLog(text, level=level))
+            self._log_event(t_ns, text, level)
 
     def flush(self) -> None:
         """Send the buffered samples and animation frames, one column per entity, and empty the buffers."""
         with self._lock:
             self._send_buffers()
 
-    def close(self) -> None:
-        """Send everything and finish the sinks (the file gets its footer and is complete); idempotent."""
+    def close(self, status: str | None = None, message: str = "") -> None:
+        """Log a load change still going on and the end of the run at the latest machine sample (how the run
+        ended: status 'complete', 'interrupted' or 'failed' with its message; None: only that the recording ends
+        there), send everything, then the final blueprint, whose plots span the values recorded (run_blueprint's
+        extents), and finish the sinks (the file gets its footer and is complete); idempotent."""
         with self._lock:
             if self._closed:
                 return
+            for when, text in self._load_changes.finish():
+                self._log_event(when, text)
+            self._log_event(self._last_machine_ns, end_text(self._last_machine_ns, status, message),
+                            END_LEVELS.get(status, "INFO"))
             self._closed = True
             self._send_buffers()
+            self._stream.send_blueprint(run_blueprint(self.model, self._extents), make_active=True,
+                                        make_default=True)
             self._stream.flush()
             self._stream.disconnect()
 
     # ---------------------------------------------------------------------------------------------
 
     def _append(self, entity: str, t_ns: int, value: float) -> None:
+        """Buffer a sample of a series and widen the series' extent to it (a NaN or infinite one leaves it)."""
         times, values = self._series[entity]
         times.append(t_ns)
         values.append(value)
+        if math.isfinite(value):
+            low, high = self._extents.get(entity, (value, value))
+            self._extents[entity] = (min(low, value), max(high, value))
+
+    def _log_event(self, t_ns: int, text: str, level: str = "INFO") -> None:
+        """Log a line of the text log at t_ns [ns] (the caller holds the lock)."""
+        self._stream.set_time(TIMELINE, duration=np.timedelta64(t_ns, "ns"))
+        self._stream.log("events", rr.TextLog(text, level=level))
 
     def _add_frame(self, root: str, t_ns: int, outline: dict[str, np.ndarray], parts) -> None:
         """Buffer the moving parts of a drawing (metres, y up) as a frame at t_ns, y flipped."""
@@ -237,7 +326,7 @@ class RunRecording:
         if governor is None or governor.kind != "direct":
             return self._set_point
         load = self._external_load
-        if load != self._set_point_load and t_ns - self._set_point_time >= SET_POINT_REFRESH_NS:
+        if load != self._set_point_load and abs(t_ns - self._set_point_time) >= SET_POINT_REFRESH_NS:
             if load not in self._set_points:
                 self._set_points[load] = operating_point(self.model, load).speed
             self._set_point, self._set_point_load, self._set_point_time = self._set_points[load], load, t_ns
@@ -260,20 +349,126 @@ class RunRecording:
 
     def _log_static(self) -> None:
         """The series' styles, the drawings' fixed parts and styles, and the `about` document."""
-        band_names = band_series_names(self._delta, self._delta_source)
+        names = series_names(self.model)
         for entity in self._series:
-            name, colour, width = SERIES_STYLE[entity]
-            self._stream.log(entity, rr.SeriesLines(colors=[colour], names=[band_names.get(entity, name)],
-                                                    widths=[width]), static=True)
-        mechanism = self.model.scene.machine.mechanism
-        self._log_styles("mechanism", mechanism_outline(mechanism, self._phi), MECHANISM_STYLE,
-                         MECHANISM_MOVING_PARTS[mechanism_kind(mechanism)])
+            _, colour, width = SERIES_STYLE[entity]
+            self._stream.log(entity, rr.SeriesLines(colors=[colour], names=[names[entity]], widths=[width]),
+                             static=True)
+        initial = self.model.initial_state()
+        angle = initial[0] - initial[self.model.coupling_index] if self._drawn_driven else initial[0]
+        self._log_styles("mechanism", mechanism_outline(self._drawing, angle), MECHANISM_STYLE,
+                         MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)])
         if self.model.governor is not None:
             sensor = self.model.governor.sensor
             self._log_styles("governor/drawing", governor_outline(sensor, sensor.stop_angles()[0], 0.0),
                              GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS)
         self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source),
                                                   media_type=rr.MediaType.MARKDOWN), static=True)
+
+
+@dataclass
+class _Change:
+    """A change of the external load in progress: from start_load [N m] at start_ns to end_load at end_ns [ns]
+    over `samples` consecutive samples, rising (direction +1) or falling (-1)."""
+
+    start_ns: int
+    start_load: float
+    end_ns: int
+    end_load: float
+    direction: float
+    samples: int = 1
+
+
+class LoadChanges:
+    """Turns samples of the external load [N m] into events, by what the samples show (the scenario's
+    load, or one published by anybody): a change that goes on at consecutive samples in one direction is one
+    ramp, 'load ramp a -> b N m over t0-t1 s' at its start t0 (the last sample before it changed) with its end
+    t1 (the last sample that changed), logged once the ramp is over; a change at one sample only is a step,
+    'load step a -> b N m', at that sample. A sample earlier than the one before starts afresh (a new trial)."""
+
+    def __init__(self, load: float):
+        self._load = load                   # [N m] at the latest sample (at first: the scene's at t = 0)
+        self._time: int | None = None       # [ns] of the latest sample
+        self._change: _Change | None = None
+
+    def sample(self, t_ns: int, load: float) -> list[tuple[int, str]]:
+        """Take the load [N m] at t_ns [ns]; returns the events (time [ns], text) that it completes."""
+        events: list[tuple[int, str]] = []
+        if self._time is not None and t_ns < self._time:   # time went back: a new trial starts here
+            events, self._time, self._load = self.finish(), t_ns, load
+            return events
+        if load == self._load:
+            events = self.finish()
+        else:
+            direction = math.copysign(1.0, load - self._load)
+            if self._change is not None and direction != self._change.direction:
+                events = self.finish()
+            if self._change is None:
+                start = self._time if self._time is not None else t_ns
+                self._change = _Change(start, self._load, t_ns, load, direction, samples=0)
+            self._change.end_ns, self._change.end_load = t_ns, load
+            self._change.samples += 1
+        self._time, self._load = t_ns, load
+        return events
+
+    def finish(self) -> list[tuple[int, str]]:
+        """End the change in progress, if any: its event (time [ns], text) as a list of none or one."""
+        change, self._change = self._change, None
+        if change is None:
+            return []
+        if change.samples == 1:
+            return [(change.end_ns, f"load step {change.start_load:.6g} -> {change.end_load:.6g} N m")]
+        return [(change.start_ns, f"load ramp {change.start_load:.6g} -> {change.end_load:.6g} N m over "
+                                  f"{change.start_ns / NANOSECONDS:.3f}-{change.end_ns / NANOSECONDS:.3f} s")]
+
+
+def start_text(model: MachineModel) -> str:
+    """The first line of the text log: the initial speed, the external load at t = 0 (with a load in the
+    scene), the scene and its governor (or none)."""
+    scene = model.scene
+    if model.governor is None:
+        governor = "no governor"
+    elif model.governor.kind == "indirect" and scene.governor.feedback.type == "none":
+        governor = "indirect governor without feedback"
+    elif model.governor.kind == "indirect":
+        governor = f"indirect governor, {scene.governor.feedback.type} feedback"
+    else:
+        governor = "direct governor"
+    speed = f"start: ω = {scene.scenario.initial.omega:.6g} rad/s"
+    if model.load_pieces:
+        where = " on the driven part" if model.driven is not None else ""
+        speed += f", load {model.external_load(0.0):.6g} N m{where}"
+    return f"{speed}; {scene.name or 'run'}, {governor}"
+
+
+def end_text(t_ns: int, status: str | None, message: str) -> str:
+    """The last line of the text log: how the run ended at t_ns [ns] (status None: the recording ends)."""
+    when = f"t = {t_ns / NANOSECONDS:.3f} s"
+    if status is None:
+        return f"end of the recording at {when}"
+    return f"end: {status} at {when}" + (f": {message}" if message else "")
+
+
+def drawn_mechanism(model: MachineModel) -> tuple[schema.Mechanism | None, bool]:
+    """The mechanism the recording draws and whether it is the driven part's (turning at phi - twist behind a
+    coupling): the machine's own, else the one behind a coupling, else None (a schematic disc)."""
+    own = model.scene.machine.mechanism
+    if own is None and model.coupling is not None and model.scene.machine.coupling.driven.mechanism is not None:
+        return model.scene.machine.coupling.driven.mechanism, True
+    return own, False
+
+
+def mechanism_title(model: MachineModel) -> str:
+    """Name of the mechanism view: what it draws."""
+    drawing, driven = drawn_mechanism(model)
+    kind = mechanism_kind(drawing)
+    if kind is None:
+        return "crank angle φ (no mechanism: a disc and a spoke)"
+    name = MECHANISM_NAMES[kind]
+    cylinders = getattr(drawing, "cylinders", None)
+    if cylinders:
+        name += f", cylinder 1 of {len(cylinders)}"
+    return f"driven {name} at φ₂ = φ − twist" if driven else name
 
 
 def speed_band_delta(model: MachineModel) -> tuple[float, str]:
@@ -285,32 +480,69 @@ def speed_band_delta(model: MachineModel) -> tuple[float, str]:
     return 2.0 * analysis.settling_band, "settling"
 
 
-def band_series_names(delta: float, source: str) -> dict[str, str]:
-    """Legend names of the band's two series (the speed view's title says where delta comes from)."""
-    half = "δ/2" if source == "permitted" else f"{delta / 2:.3g}"
-    return {"speed/band_high": f"ω_set (1 + {half})", "speed/band_low": f"ω_set (1 − {half})"}
+def band_name(delta: float, source: str) -> str:
+    """Name of the band's two series (one name: they are one band): what delta is and where it comes from."""
+    if source == "permitted":
+        return f"band ω_set (1 ± δ/2), permitted δ = {delta:.4g}"
+    return f"settling band ω_set (1 ± {delta / 2:.3g})"
 
 
 def band_title(delta: float, source: str) -> str:
-    """What the speed band is, for the speed view's title."""
+    """What the band is, after its label in the speed view's title."""
     if source == "permitted":
-        return f"band: permitted δ = {delta:.4g}"
-    return f"band: settling band ± {delta / 2:.3g}"
+        return f"±δ/2, permitted δ = {delta:.4g}"
+    return f"±{delta / 2:.3g}, the settling band"
+
+
+def resistance_name(model: MachineModel) -> str:
+    """Name of the resisting moments on the crank: the machine's loads and whatever else takes moment from it."""
+    parts = ["loads"] + (["link weight"] if model.has_weight else []) + (["coupling"] if model.coupling else [])
+    parts += (["clutch"] if model.clutch else []) + (["joint friction"] if model.joint_friction else [])
+    return "resistance: " + " + ".join(parts)
+
+
+def series_names(model: MachineModel) -> dict[str, str]:
+    """Name of each recorded series: SERIES_NAMES', with the band, the drive, the resistance and an indirect
+    governor's throttle named as the scene has them."""
+    names = dict(SERIES_NAMES)
+    governor = model.governor
+    if governor is not None:
+        band = band_name(*speed_band_delta(model))
+        names.update({"speed/band_high": band, "speed/band_low": band, "moments/drive": "drive = throttle × M_d"})
+        if governor.kind == "indirect":
+            names["throttle"] = "throttle = servo position s"
+    else:
+        names["moments/drive"] = "drive M_d"
+    names["moments/resistance"] = resistance_name(model)
+    return {entity: names[entity] for entity in recorded_series(model)}
 
 
 def recorded_series(model: MachineModel) -> list[str]:
-    """The scalar entities a run of this model records: speed (with set point and band when governed),
-    throttle and governor states when governed (servo for indirect action, the dashpot's shift for
-    isodromic feedback), and the four moments."""
-    series = ["speed/omega"]
+    """The scalar entities a run of this model records: speed (with the driven part's behind a coupling or a
+    clutch, with set point and band when governed), throttle and governor states when governed (the dashpot's
+    shift for isodromic feedback), the coupling's twist, and the moments (the external one only when the load
+    acts on the crank)."""
+    series = ["speed/omega"] + (["speed/driven"] if model.driven is not None else [])
     governor = model.governor
     if governor is not None:
         series += ["speed/set_point", "speed/band_high", "speed/band_low", "throttle", "governor/sleeve"]
-        if governor.kind == "indirect":
-            series.append("governor/servo")
         if "feedback_shift" in governor.state_names:
             series.append("governor/feedback_shift")
-    return series + ["moments/drive", "moments/resistance", "moments/external", "moments/net"]
+    if model.coupling is not None:
+        series.append("coupling/twist")
+    external = ["moments/external"] if model.driven is None else []
+    return series + ["moments/drive", "moments/resistance"] + external + ["moments/net"]
+
+
+def moments_window(model: MachineModel) -> float | None:
+    """Seconds of simulated time the moments view shows before the time cursor: MOMENTS_PERIODS dynamic
+    periods at the initial speed (MOMENTS_WINDOW from rest), within MOMENTS_WINDOW_LIMITS; None (the whole
+    run) for a machine whose moments do not vary within a turn."""
+    if model.reduced is None and "phi" not in model.depends_on():
+        return None
+    omega = abs(model.scene.scenario.initial.omega)
+    window = MOMENTS_PERIODS * model.dynamic_period() / omega if omega > 0.0 else MOMENTS_WINDOW
+    return min(max(window, MOMENTS_WINDOW_LIMITS[0]), MOMENTS_WINDOW_LIMITS[1])
 
 
 def about_text(model: MachineModel, delta: float, source: str) -> str:
@@ -319,15 +551,19 @@ def about_text(model: MachineModel, delta: float, source: str) -> str:
     governor = model.governor
     paragraphs = [f"# {scene.name or 'run'}"] + ([scene.description] if scene.description else [])
     paragraphs.append("Time line `sim_time`: simulated time. Crank speed ω in rad/s; moments on the crank in N m: "
-                      "drive as applied (throttle included), resistance = the machine's loads and link weights, "
-                      "external = minus the external load, net = their sum = J ε + J' ω² / 2.")
+                      "drive as applied (throttle included), resistance = the machine's loads and link weights (and "
+                      "what a coupling or a clutch takes), external = minus the external load (when it acts on the "
+                      "crank), net = their sum = J ε + J' ω² / 2.")
+    if model.driven is not None:
+        where = "coupling" if model.coupling is not None else "clutch"
+        paragraphs.append(f"Behind the {where}: the driven part's speed ω₂ in rad/s; it carries the external load."
+                          + (" The coupling's twist φ − φ₂ in mrad." if model.coupling is not None else ""))
     if governor is None:
-        paragraphs.append("No governor: no set speed and no band are drawn.")
+        paragraphs.append("No governor: no throttle, no set speed and no band are drawn.")
     else:
         if governor.kind == "indirect":
             paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
-                              "(sleeve at the pilot valve's neutral). Throttle and servo s in 0..1 (the servo "
-                              "position is the throttle).")
+                              "(sleeve at the pilot valve's neutral). Throttle in 0..1: the servo position s.")
         else:
             paragraphs.append("Set speed ω_set: where the direct governor settles under the present external load "
                               "(operating point of the cycle-averaged machine; it moves with the load: the static "
@@ -341,51 +577,93 @@ def about_text(model: MachineModel, delta: float, source: str) -> str:
         paragraphs.append("Sleeve rise z (and the dashpot's shift ζ of isodromic feedback) in mm. The governor is "
                           "drawn to scale, its balls as steel spheres of the ball mass, projected on a plane "
                           "through the turning spindle.")
-    paragraphs.append("The mechanism is drawn to scale in metres." if scene.machine.mechanism is not None
-                      else "The machine has no mechanism: a schematic disc with a spoke shows the crank angle.")
+    drawing, driven = drawn_mechanism(model)
+    if drawing is None:
+        paragraphs.append("The machine has no mechanism: a schematic disc with a spoke shows the crank angle.")
+    else:
+        where = ", on the driven shaft at φ₂ = φ − twist." if driven else "."
+        paragraphs.append(f"The mechanism is drawn to scale in metres{where}")
+    paragraphs.append("Events: the start, each change of the external load (a ramp as one line with its start and "
+                      "end), the mode changes of the governor or the clutch, and the end.")
     return "\n\n".join(paragraphs)
 
 
-def run_blueprint(model: MachineModel) -> rrb.Blueprint:
-    """The layout: time series on the left (speed, throttle, sleeve, moments); on the right the mechanism
-    (wide) over the governor (tall) beside the events log (with the `about` document in a tab). Each 2-D view
-    is framed by the drawing's bounds (y flipped). A machine whose moments vary within a turn shows them
-    over a window of MOMENTS_WINDOW before the time cursor, so the cycle stays readable while it plays."""
-    governed = model.governor is not None
-    plots = [rrb.TimeSeriesView(name=_speed_title(model), origin="speed",
-                                plot_legend=rrb.PlotLegend(corner="RightBottom"))]
-    if governed:
-        plots += [rrb.TimeSeriesView(name="throttle [-]", contents=["/throttle", "/governor/servo"],
-                                     plot_legend=rrb.PlotLegend(corner="RightBottom")),
-                  rrb.TimeSeriesView(name="governor sleeve [mm]",
-                                     contents=["/governor/sleeve", "/governor/feedback_shift"],
-                                     plot_legend=rrb.PlotLegend(corner="RightBottom"))]
-    cyclic = model.reduced is not None or "phi" in model.depends_on()
-    window = rrb.VisibleTimeRange(TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-MOMENTS_WINDOW),
-                                  end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0)) if cyclic else None
-    title = f"moments on the crank [N m], last {MOMENTS_WINDOW:g} s" if cyclic else "moments on the crank [N m]"
-    plots.append(rrb.TimeSeriesView(name=title, origin="moments", time_ranges=window,
-                                    plot_legend=rrb.PlotLegend(corner="RightTop")))
+def _caption(entities: Iterable[str]) -> str:
+    """The series of a plot with their colours, e.g. 'ω crank (blue) · ω_set (white)' (a label once)."""
+    shown: dict[str, str] = {}
+    for entity in entities:
+        label, colour, _ = SERIES_STYLE[entity]
+        shown.setdefault(label, COLOUR_NAMES[colour])
+    return " · ".join(f"{label} ({colour})" for label, colour in shown.items())
+
+
+def _plot(title: str, entities: list[str], extents: dict[str, tuple[float, float]],
+          window: rrb.VisibleTimeRange | None = None) -> rrb.TimeSeriesView:
+    """A time series view of these entities with its legend hidden (the title names the series) and, when any
+    of them has an extent (lowest, highest value), its y axis over their extents widened by Y_MARGIN (a
+    constant by 5 % of its size, at least 0.05) on each side; else the viewer fits the y axis to the data."""
+    known = [extents[entity] for entity in entities if entity in extents]
+    axis = None
+    if known:
+        low, high = min(extent[0] for extent in known), max(extent[1] for extent in known)
+        margin = Y_MARGIN * (high - low) if high > low else 0.05 * max(abs(high), 1.0)
+        axis = rrb.ScalarAxis(range=(low - margin, high + margin))
+    return rrb.TimeSeriesView(name=title, contents=[f"/{entity}" for entity in entities], time_ranges=window,
+                              axis_y=axis, plot_legend=rrb.PlotLegend(visible=False))
+
+
+def _single_plot(entity: str, unit: str, extents: dict[str, tuple[float, float]]) -> rrb.TimeSeriesView:
+    """The time series view of one entity, titled with its label and unit."""
+    return _plot(f"{SERIES_STYLE[entity][0]} [{unit}]", [entity], extents)
+
+
+def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
+    """The layout: time series on the left (speeds, throttle, sleeve, the coupling's twist, moments), each titled
+    with its series and their colours; on the right the mechanism over the governor beside the events log (with
+    the `about` document in a tab). Each 2-D view is framed by the drawing's bounds (y flipped). A machine
+    whose moments vary within a turn shows them over a window before the time cursor (moments_window); the
+    viewer fits the window's time axis to the data in it, so from t = 0 until the run passes the window it
+    shows [0, cursor]. extents: entity -> (lowest, highest value) recorded, to frame the plots' y axes (see _plot;
+    none while the run goes on: the viewer fits them to the data)."""
+    extents = extents or {}
+    series = recorded_series(model)
+    speed = [entity for entity in series if entity.startswith("speed/")]
+    band = f" {band_title(*speed_band_delta(model))}" if model.governor is not None else ""
+    plots = [_plot(f"speed [rad/s]: {_caption(speed)}{band}", speed, extents)]
+    shares = [2.0]
+    if model.governor is not None:
+        # side by side, each tall enough for the viewer to label its y axis
+        governor = [_single_plot("throttle", "-", extents), _single_plot("governor/sleeve", "mm", extents)]
+        if "governor/feedback_shift" in series:
+            governor.append(_single_plot("governor/feedback_shift", "mm", extents))
+        plots.append(rrb.Horizontal(*governor))
+        shares.append(1.6)
+    if model.coupling is not None:
+        plots.append(_single_plot("coupling/twist", "mrad", extents))
+        shares.append(1.0)
+    moments = [entity for entity in series if entity.startswith("moments/")]
+    window = moments_window(model)
+    time_range = None if window is None else rrb.VisibleTimeRange(
+        TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-window),
+        end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
+    span = "" if window is None else f", last {window:.2g} s"
+    plots.append(_plot(f"moments [N m]{span}: {_caption(moments)}", moments, extents, time_range))
+    shares.append(1.6)
     logs = rrb.Tabs(rrb.TextLogView(name="events", origin="events",
                                     columns=rrb.TextLogColumns(text_log_columns=["LogLevel", "Body"])),
                     rrb.TextDocumentView(name="about", origin="about"))
-    mechanism = rrb.Spatial2DView(name="mechanism", origin="mechanism",
-                                  visual_bounds=_bounds_y_down(mechanism_bounds(model.scene.machine.mechanism)))
-    below = logs
-    if governed:
+    mechanism = rrb.Spatial2DView(name=mechanism_title(model), origin="mechanism",
+                                  visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])))
+    if model.governor is not None:
         governor = rrb.Spatial2DView(name="governor", origin="governor/drawing",
                                      visual_bounds=_bounds_y_down(governor_bounds(model.governor.sensor)))
-        below = rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3])
-    layout = rrb.Horizontal(rrb.Vertical(*plots, row_shares=[2.0] + [1.0] * (len(plots) - 2) + [1.4]),
-                            rrb.Vertical(mechanism, below, row_shares=[1.0, 1.8]))
+        right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]),
+                             row_shares=[1.0, 1.8])
+    else:
+        right = rrb.Vertical(mechanism, logs, row_shares=[1.6, 1.0])
+    layout = rrb.Horizontal(rrb.Vertical(*plots, row_shares=shares), right)
     return rrb.Blueprint(layout, rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
                          rrb.TimePanel(state="collapsed", timeline=TIMELINE))
-
-
-def _speed_title(model: MachineModel) -> str:
-    if model.governor is None:
-        return "crank speed ω [rad/s]"
-    return f"crank speed ω [rad/s]; {band_title(*speed_band_delta(model))}"
 
 
 def _bounds_y_down(bounds: tuple[float, float, float, float]) -> rrb.VisualBounds2D:
@@ -394,25 +672,14 @@ def _bounds_y_down(bounds: tuple[float, float, float, float]) -> rrb.VisualBound
     return rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin])
 
 
-def load_change_events(model: MachineModel) -> list[tuple[float, str]]:
-    """(time [s], text) of the scenario's external load: its value at t = 0 and each step or ramp (none for a
-    scene without an external load)."""
-    scenario = model.scene.scenario
-    if not model.load_pieces:
-        return []
-    events = [(0.0, f"external load {scenario.external_load:g} N m")]
-    for event in scenario.load_events:
-        if event.ramp > 0.0:
-            events.append((event.time, f"external load ramps to {event.torque:g} N m over {event.ramp:g} s"))
-        else:
-            events.append((event.time, f"external load steps to {event.torque:g} N m"))
-    return events
-
-
 def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path: Path,
-               progress: Progress | None = None) -> None:
-    """Record a monolithic simulation sampled at `times` [s] with its states (n_states x n, as
-    `trajectory(times)` gives) into the .rrd file `path`, with the scenario's load changes as events.
+               progress: Progress | None = None, *, mode_changes: Iterable[tuple[float, str]] = (),
+               status: str | None = None, message: str = "") -> None:
+    """Record a run sampled at `times` [s] with its states (n_states x n, as `trajectory(times)` gives, or a
+    co-simulation's exchange times and states) into the .rrd file `path`, with the same events as the ROS
+    recorder logs: the start, the external load's changes as its samples show them (the scenario's load at
+    `times`), the mode changes (time [s], what: a Trajectory's `events`, or a co-simulation's events without
+    their modes) and the end (status and message of the run; None: the recording just ends).
 
     Moments from `model.columns`: drive = M_drive; external = M_external (0 without an external load);
     resistance = M_load - M_external + M_weight (the machine's own resisting moments); net = J epsilon +
@@ -421,15 +688,18 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
     columns = model.columns(times, states)
     count = times.size
     moments = crank_moments(columns)
-    governor_keys = [key for key in ("sleeve", "sleeve_velocity", "arm_angle", "throttle", "servo", "feedback_shift")
+    governor_keys = [key for key in ("sleeve", "sleeve_velocity", "arm_angle", "throttle", "feedback_shift")
                      if key in columns]
+    driven_keys = [key for key in ("twist", "omega_driven") if key in columns]
     stamps = np.round(np.asarray(times) * NANOSECONDS).astype(np.int64)
     recording = RunRecording(model, path=path)
-    for time, text in load_change_events(model):
-        recording.add_event(int(round(time * NANOSECONDS)), text)
+    for time, what in mode_changes:
+        recording.add_mode_change(int(round(time * NANOSECONDS)), what)
     for i in range(count):
         t_ns = int(stamps[i])
-        recording.add_machine(t_ns, float(columns["phi"][i]), float(columns["omega"][i]))
+        recording.add_external_load(t_ns, model.external_load(float(times[i])))
+        recording.add_machine(t_ns, float(columns["phi"][i]), float(columns["omega"][i]),
+                              {key: float(columns[key][i]) for key in driven_keys})
         recording.add_moments(t_ns, *(float(moments[name][i]) for name in ("drive", "resistance", "external", "net")))
         if governor_keys:
             recording.add_governor(t_ns, {key: float(columns[key][i]) for key in governor_keys})
@@ -437,6 +707,6 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
             recording.flush()
             if progress is not None:
                 progress(float(times[i]))
-    recording.close()
+    recording.close(status, message)
     if progress is not None and count:
         progress(float(times[-1]))
