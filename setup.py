@@ -15,6 +15,7 @@ setup(
         (f"share/{package_name}", ["package.xml"]),
         (f"share/{package_name}/config/scenes", glob("config/scenes/*.yaml")),
         (f"share/{package_name}/config/params", glob("config/params/*.yaml")),
+        (f"share/{package_name}/config/schema", glob("config/schema/*.json")),
         (f"share/{package_name}/launch", glob("launch/*.launch.py")),
     ],
     python_requires=">=3.10",

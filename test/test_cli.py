@@ -251,7 +251,7 @@ def test_schema_is_json_schema(schema_text):
     assert "json-schema.org" in schema["$schema"]
     assert schema["type"] == "object"
     assert {"machine", "scenario", "solver"} <= set(schema["properties"])
-    assert {"machine", "scenario"} <= set(schema["required"])
+    assert {"machine", "scenario"} <= set(schema["else"]["required"])  # required unless the scene has a base
     assert schema.get("additionalProperties") is False
 
 
