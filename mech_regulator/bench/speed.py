@@ -274,8 +274,9 @@ def ratios(results: list[PathAtTarget]) -> dict[str, float]:
 # Measuring
 
 
-def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], None]) -> list[Row]:
-    """Sweep every path's setting on a speed scene and measure each run's CPU time and achieved error."""
+def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], None], mujoco: bool = True) -> list[Row]:
+    """Sweep every path's setting on a speed scene and measure each run's CPU time and achieved error (MuJoCo's
+    path left out, with a note, when not `mujoco`)."""
     scene = bench.load(quick)
     duration = scene.scenario.duration
     if bench.closed_form is not None:
@@ -299,8 +300,9 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
 
     for path, method in PATHS:
         if path == MUJOCO:
-            refusal = mujoco_refusal(scene) or (None if importlib.util.find_spec("mujoco") else
-                                                "mujoco is not installed: pip install 'mech_regulator[bench]'")
+            refusal = ("left out (--no-mujoco)" if not mujoco else mujoco_refusal(scene)
+                       or (None if importlib.util.find_spec("mujoco") else
+                           "mujoco is not installed: pip install 'mech_regulator[bench]'"))
             steps = () if refusal is not None else QUICK_MUJOCO_STEPS if quick else MUJOCO_STEPS
             for timestep in steps:
                 add(path, method, "timestep", timestep, mujoco_runner(build_model(scene), timestep))
@@ -474,16 +476,16 @@ def ros_target(benchmark: SpeedBenchmark) -> float:
 
 
 def run_speed_benchmark(scenes: list[BenchScene], quick: bool = False, ros: bool = False,
-                        report: Callable[[Row], None] = print) -> SpeedBenchmark:
-    """Measure everything (see the module docstring); report(row) is called as each row is measured. Ctrl-C
-    returns what was measured, with `interrupted` set."""
+                        report: Callable[[Row], None] = print, mujoco: bool = True) -> SpeedBenchmark:
+    """Measure everything (see the module docstring; MuJoCo's path only when `mujoco`); report(row) is called as
+    each row is measured. Ctrl-C returns what was measured, with `interrupted` set."""
     benchmark = SpeedBenchmark(quick=quick, environment=environment(1))
 
     def keep(row: Row) -> None:
         benchmark.rows.append(row)
         report(row)
 
-    parts = [lambda bench=bench: measure_precision(bench, quick, keep) for bench in scenes]
+    parts = [lambda bench=bench: measure_precision(bench, quick, keep, mujoco) for bench in scenes]
     parts += [lambda: measure_durations(quick, keep), lambda: measure_effects(quick, keep),
               lambda: measure_sweeps(quick, keep), lambda: measure_startup(keep)]
     if ros:

@@ -1,6 +1,10 @@
 """`mech-regulator bench speed`: the four paths side by side at equal achieved accuracy, how cost grows, the
 start-up cost and (--ros) the lockstep ROS run. A thin layer over bench.speed: it prints each measurement as it
 comes, then the tables with the targets, and writes speed.csv (also when interrupted), speed.json and speed.png.
+
+`mech-regulator bench startup`: the time to a first result as a user meets it, whole processes (bench.startup).
+
+Light to import (the parser is built from it): the benchmarks load inside the run functions.
 """
 
 from __future__ import annotations
@@ -10,9 +14,9 @@ import sys
 import time
 from pathlib import Path
 
-from mech_regulator.cli.report import bench_scenes_and_folder, to_json
-
 from mech_regulator.cli import EXIT_INTERRUPTED
+
+BENCH_EXTRA = "pip install 'mech_regulator[bench]'"
 
 
 def add_bench_speed_command(benchmarks) -> None:
@@ -37,16 +41,54 @@ def add_bench_speed_command(benchmarks) -> None:
                        help="also time the lockstep ROS main job, reference and fast path at a 1 ms exchange step and "
                             "the fast path at 2, 5 and 10 ms, with each exchange step's error (needs rclpy; about "
                             "3 minutes)")
+    speed.add_argument("--no-mujoco", action="store_true",
+                       help="leave MuJoCo's path out (without it, crank_slider_bench needs MuJoCo: "
+                            f"{BENCH_EXTRA})")
+
+
+def add_bench_startup_command(benchmarks) -> None:
+    """The `bench startup` subcommand and its options, under `bench`'s subparsers."""
+    startup = benchmarks.add_parser(
+        "startup", help="start-up benchmark: import, --help, a cold first run and a warm run, whole processes",
+        description="Time whole processes as a user meets them, for the reference path, the fast path and a plain "
+                    "scipy solve_ivp script of the same machine (written to a temporary file): the import of the "
+                    "command line (python -c 'import mech_regulator.cli.main'; the script: numpy and "
+                    "scipy.integrate), `mech-regulator --help`, a cold first run of `mech-regulator simulate SCENE "
+                    "--quiet` (empty compile caches: MECH_REGULATOR_CACHE and NUMBA_CACHE_DIR in a new temporary "
+                    "folder each time) and a warm run (the caches filled). Wall time, median and minimum of the "
+                    "repeats, side by side with the ratios to the script. Numbers to read, never asserted.")
+    startup.add_argument("--scene", default="crank_slider_bench", metavar="SCENE",
+                         help="the machine (default crank_slider_bench; lathe works too: a scene without governor, "
+                              "drive train, joint friction or load events, with no mechanism or a crank-slider)")
+    startup.add_argument("--repeat", type=int, default=3, metavar="N",
+                         help="runs of each measurement (default 3; a cold fast run compiles, tens of seconds)")
+    startup.add_argument("--skip-cold-fast", action="store_true",
+                         help="leave out the fast path's cold runs (the compiling ones); its warm runs then use the "
+                              "compile caches of this machine (MECH_REGULATOR_CACHE or ~/.cache), filled first by "
+                              "one run that is not counted")
+    startup.add_argument("--json", action="store_true", help="print the measurements as JSON")
 
 
 def run_bench_speed(args: argparse.Namespace) -> int:
     """bench speed: measure, print, then write speed.csv (also when interrupted), speed.json and speed.png."""
+    import importlib.util
+
+    from mech_regulator.bench.mujoco_model import mujoco_refusal
     from mech_regulator.bench.speed import (row_line, run_speed_benchmark, select_speed_scenes, summary, tables,
                                             write_rows_csv)
+    from mech_regulator.cli.report import bench_scenes_and_folder, to_json
+    from mech_regulator.scene import SceneError
 
     scenes = select_speed_scenes(bench_scenes_and_folder(args.scenes, args.out, "crank_slider_bench,startup"))
+    mujoco = not args.no_mujoco
+    if mujoco and importlib.util.find_spec("mujoco") is None:
+        needing = [bench.name for bench in scenes if mujoco_refusal(bench.load(args.quick)) is None]
+        if needing:
+            raise SceneError(f"bench speed: {', '.join(needing)} runs on MuJoCo too, and MuJoCo is not installed: "
+                             f"{BENCH_EXTRA} (or give --no-mujoco to leave MuJoCo's path out)")
     start = time.monotonic()
-    benchmark = run_speed_benchmark(scenes, args.quick, args.ros, report=lambda row: print(row_line(row), flush=True))
+    benchmark = run_speed_benchmark(scenes, args.quick, args.ros, report=lambda row: print(row_line(row), flush=True),
+                                    mujoco=mujoco)
     write_rows_csv(benchmark, args.out / "speed.csv")
     (args.out / "speed.json").write_text(to_json(summary(benchmark)) + "\n", encoding="utf-8")
     print(tables(benchmark))
@@ -60,3 +102,28 @@ def run_bench_speed(args: argparse.Namespace) -> int:
     print(f"wrote {args.out}: speed.csv, speed.json, speed.png ({time.monotonic() - start:.0f} s)")
     return 0
 
+
+
+def run_bench_startup(args: argparse.Namespace) -> int:
+    """bench startup: measure, printing each measurement on stderr as it comes, then the table (or JSON)."""
+    from mech_regulator.bench.startup import format_table, measure_startup, script_refusal, startup_summary
+    from mech_regulator.cli.report import to_json
+    from mech_regulator.scene import SceneError, load_scene
+
+    if not 1 <= args.repeat <= 100:
+        raise SceneError(f"--repeat {args.repeat}: expected 1 to 100 runs of each measurement")
+    refusal = script_refusal(load_scene(args.scene))
+    if refusal is not None:
+        raise SceneError(f"bench startup: scene '{args.scene}': the plain solve_ivp script cannot reproduce it: "
+                         f"{refusal}; choose e.g. crank_slider_bench or lathe")
+    try:
+        benchmark = measure_startup(args.scene, args.repeat, cold_fast=not args.skip_cold_fast,
+                                    report=lambda line: print(line, file=sys.stderr, flush=True))
+    except KeyboardInterrupt:
+        print("mech-regulator: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except RuntimeError as error:  # a measured command failed: its own message
+        print(f"mech-regulator: bench startup: {error}", file=sys.stderr)
+        return 1
+    print(to_json(startup_summary(benchmark)) if args.json else format_table(benchmark))
+    return 0

@@ -9,13 +9,11 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
 from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
-from mech_regulator.cli.report import check_outputs, to_json, wrote_lines
-from mech_regulator.scene import SceneError, load_scene
+from mech_regulator.cli.report import check_outputs, progress_bar, to_json, wrote_lines
 
 
 def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
@@ -48,6 +46,7 @@ def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) 
 def run_flywheel(args: argparse.Namespace) -> int:
     """Run the command; a user's mistake raises SceneError (exit 2 in cli.main)."""
     from mech_regulator.analysis.flywheel import design_flywheel
+    from mech_regulator.scene import SceneError, load_scene
 
     if args.classes:
         print(format_classes())
@@ -58,10 +57,8 @@ def run_flywheel(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene, args.overrides)
     delta, delta_source = requested_delta(args.delta, args.machine_class, scene.analysis.permitted_delta)
     check_outputs(args, args.record)
-    from tqdm import tqdm
-
-    with tqdm(unit=" periods", disable=True if args.quiet else None, file=sys.stderr,
-              bar_format="{desc}: {n} dynamic periods simulated [{elapsed}]") as bar:
+    with progress_bar(None, args.quiet, f"flywheel for {scene.name or args.scene}", quantity=None,
+                      unit="dynamic periods simulated") as bar:
         def progress(stage: str) -> None:
             bar.set_description_str(stage, refresh=False)
             bar.update(1)
@@ -84,6 +81,8 @@ def run_flywheel(args: argparse.Namespace) -> int:
 
 def parse_delta(text: str) -> float:
     """[delta] from '1/80' or '0.0125' (fractions.Fraction reads both); SceneError unless 0 < delta < 1."""
+    from mech_regulator.scene import SceneError
+
     try:
         value = Fraction(text.strip())
     except (ValueError, ZeroDivisionError):
@@ -98,6 +97,7 @@ def requested_delta(delta: str | None, machine_class: str | None, permitted: flo
     """[delta] and where it comes from: --delta, else --class (its strictest value), else the scene's
     analysis.permitted_delta."""
     from mech_regulator.analysis.flywheel import MACHINE_CLASSES
+    from mech_regulator.scene import SceneError
 
     if delta is not None and machine_class is not None:
         raise SceneError(f"--delta {delta} and --class {machine_class}: give one of them, not both")

@@ -8,23 +8,24 @@ that fails or is interrupted still writes what it computed.
 from __future__ import annotations
 
 import argparse
-import dataclasses
-import importlib.util
 import math
 import os
 import sys
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
 from mech_regulator.cli import EXIT_INTERRUPTED
-from mech_regulator.scene import SceneError, bundled_scenes, load_scene
-from mech_regulator.scene.reference import schema_json, schema_markdown
-from mech_regulator.cli.bench_speed import add_bench_speed_command, run_bench_speed
-from mech_regulator.cli.flywheel import add_flywheel_command, run_flywheel
-from mech_regulator.cli.sweep import add_sweep_command, run_sweep_command
-from mech_regulator.cli.report import bench_scenes_and_folder, check_outputs, progress_bar, to_json, write_csv
+from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
+from mech_regulator.cli.flywheel import add_flywheel_command
+from mech_regulator.cli.sweep import add_sweep_command
+
+if TYPE_CHECKING:
+    import numpy as np
+
+# The parser is built from light modules only (the standard library and the cli's own parser builders), so that
+# `--help` and a mistyped option answer at once; each command imports what it needs (numpy, scipy, numba,
+# pydantic, matplotlib, rerun) inside its function. test/test_cli_startup.py checks it.
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
@@ -144,24 +145,35 @@ def build_parser() -> argparse.ArgumentParser:
                           help="worker processes (default 2; CPU time is per process, but more workers than cores "
                                "disturb it)")
     add_bench_speed_command(benchmarks)
+    add_bench_startup_command(benchmarks)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of `mech-regulator` and `python -m mech_regulator`; returns the exit code."""
     args = build_parser().parse_args(argv)
+    from mech_regulator.scene import SceneError
+
     try:
         if args.command == "schema":
+            from mech_regulator.scene.reference import schema_json, schema_markdown
+
             print(schema_json() if args.format == "json" else schema_markdown(), end="")
             return 0
         if args.command == "scenes":
             return _list_scenes()
         if args.command == "bench":
-            return run_bench_speed(args) if args.benchmark == "speed" else _bench_accuracy(args)
+            return _bench(args)
         if args.command == "flywheel":
+            from mech_regulator.cli.flywheel import run_flywheel
+
             return run_flywheel(args)
         if args.command == "sweep":
+            from mech_regulator.cli.sweep import run_sweep_command
+
             return run_sweep_command(args)
+        from mech_regulator.scene import load_scene
+
         scene = load_scene(args.scene, args.overrides)
         if args.command == "describe":
             from mech_regulator.model import build_model
@@ -188,7 +200,22 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
 
+def _bench(args) -> int:
+    """bench: the benchmark asked for."""
+    if args.benchmark == "speed":
+        from mech_regulator.cli.bench_speed import run_bench_speed
+
+        return run_bench_speed(args)
+    if args.benchmark == "startup":
+        from mech_regulator.cli.bench_speed import run_bench_startup
+
+        return run_bench_startup(args)
+    return _bench_accuracy(args)
+
+
 def _list_scenes() -> int:
+    from mech_regulator.scene import bundled_scenes, load_scene
+
     for name, path in bundled_scenes().items():
         description = " ".join((load_scene(str(path)).description or "").split())
         print(f"{name:<26} {description.split('. ')[0]}")
@@ -197,7 +224,7 @@ def _list_scenes() -> int:
 
 def _simulate(scene, args) -> int:
     from mech_regulator.analysis import summarise
-    from mech_regulator.cli.report import format_summary
+    from mech_regulator.cli.report import check_outputs, format_summary, progress_bar, to_json, write_csv
     from mech_regulator.model import build_model
     from mech_regulator.solvers import simulate
     from mech_regulator.solvers.advice import stiffness_advice
@@ -210,7 +237,7 @@ def _simulate(scene, args) -> int:
     if advice is not None:
         print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
-    with progress_bar(duration, args.quiet) as bar:
+    with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
         trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory)
@@ -244,7 +271,8 @@ def _simulate(scene, args) -> int:
 def _cosimulate(model, args) -> int:
     """simulate --exchange-step: the lockstep co-simulation of the nodes, in this process."""
     from mech_regulator.analysis import summarise_cosimulation
-    from mech_regulator.cli.report import format_cosimulation_summary
+    from mech_regulator.cli.report import format_cosimulation_summary, progress_bar, to_json, write_csv
+    from mech_regulator.scene import SceneError
     from mech_regulator.solvers.cosim import cosimulate
 
     if not 1e-6 <= args.exchange_step <= 1.0:
@@ -252,7 +280,7 @@ def _cosimulate(model, args) -> int:
     if not args.overspeed_trip >= 0.0:
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
     duration = model.scene.scenario.duration
-    with progress_bar(duration, args.quiet) as bar:
+    with progress_bar(duration, args.quiet, f"co-simulating {model.scene.name or args.scene}") as bar:
         run = cosimulate(model, args.exchange_step, args.overspeed_trip,
                          progress=lambda t: bar.update(min(t, duration) - bar.n))
     summary = summarise_cosimulation(model, run, args.exchange_step)
@@ -275,8 +303,9 @@ def _cosimulate(model, args) -> int:
 
 def _governor(scene, args) -> int:
     from mech_regulator.analysis import analyse_governor
-    from mech_regulator.cli.report import format_governor
+    from mech_regulator.cli.report import check_outputs, format_governor, to_json
     from mech_regulator.model import build_model
+    from mech_regulator.scene import SceneError
 
     if scene.governor is None:
         raise SceneError(f"scene '{scene.name}' has no governor: add a 'governor:' section (see docs/scenes.md)")
@@ -294,11 +323,14 @@ def _governor(scene, args) -> int:
 
 def _required_coupling(scene, args) -> int:
     """coupling: solve the inverse problem and write the table, the scene that uses it and the picture."""
+    import dataclasses
+
     import yaml
 
     from mech_regulator.analysis import required_coupling
-    from mech_regulator.cli.report import format_required_coupling, wrote_lines
+    from mech_regulator.cli.report import check_outputs, format_required_coupling, to_json, write_csv, wrote_lines
     from mech_regulator.model import build_model
+    from mech_regulator.scene import SceneError
 
     for option, value, low, high in (("--run-up", args.run_up, 0.0, math.inf), ("--delta", args.delta, 0.0, 2.0),
                                      ("--frequency", args.frequency, 0.0, math.inf),
@@ -342,7 +374,8 @@ def _required_coupling(scene, args) -> int:
 def _kinematics(scene, args) -> int:
     """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
     from mech_regulator.analysis.kinematics import kinematics_summary, kinematics_table
-    from mech_regulator.cli.report import format_kinematics
+    from mech_regulator.cli.report import check_outputs, format_kinematics, to_json, write_csv
+    from mech_regulator.scene import SceneError
 
     mechanism = scene.machine.mechanism
     if mechanism is None:
@@ -371,8 +404,9 @@ def _kinematics(scene, args) -> int:
 def _engine(scene, args) -> int:
     """engine: the analysis of an engine scene at constant speed, printed, and optionally a PNG and a CSV."""
     from mech_regulator.analysis.engine import engine_curve_columns, engine_report
-    from mech_regulator.cli.report import format_engine
+    from mech_regulator.cli.report import check_outputs, format_engine, to_json, write_csv
     from mech_regulator.model import build_model
+    from mech_regulator.scene import SceneError
 
     if scene.machine.drive is None or scene.machine.drive.type != "engine":  # the schema gives it a crank_slider
         raise SceneError(f"scene '{scene.name}' is not an engine: expected mechanism.type crank_slider and drive.type "
@@ -397,6 +431,11 @@ def _engine(scene, args) -> int:
 
 
 def _main_job(scene, args) -> int:
+    import importlib.util
+
+    from mech_regulator.cli.report import check_outputs
+    from mech_regulator.scene import SceneError
+
     if importlib.util.find_spec("rclpy") is None:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
@@ -427,6 +466,8 @@ def _bench_accuracy(args) -> int:
 
     from mech_regulator.bench.accuracy import run_benchmark, select_scenes
     from mech_regulator.bench.report import findings, markdown, write_runs_csv
+    from mech_regulator.cli.report import bench_scenes_and_folder
+    from mech_regulator.scene import SceneError
 
     if args.jobs < 1:
         raise SceneError(f"--jobs {args.jobs}: expected at least 1 worker process")

@@ -1,23 +1,31 @@
 """What the command line shows: what a scene computes (`describe`), the summary of a run and the answers of the
-analysis commands (text or strict JSON), the progress bar over simulated time, and the output files (CSV, the
-check of their paths)."""
+analysis commands (text or strict JSON), the progress of long work (a tqdm bar on a terminal, plain lines in a
+log), and the output files (CSV, the check of their paths).
+
+Light to import (the standard library only at module level): the ROS launcher and the command line's parser
+import it; numpy, the model and the scene load inside the functions that need them.
+"""
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import sys
+import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+if TYPE_CHECKING:
+    import numpy as np
 
-from mech_regulator.model import MachineModel
-from mech_regulator.scene import SceneError
-from mech_regulator.solvers.advice import coupling_modes, stiffness_advice
+    from mech_regulator.model import MachineModel
 
 
 def describe(model: MachineModel) -> str:
     """The effects, state vector, right-hand side and solver a scene uses."""
+    from mech_regulator.solvers.advice import coupling_modes, stiffness_advice
+
     scene = model.scene
     machine = scene.machine
     lines = [f"scene: {scene.name}"]
@@ -304,6 +312,8 @@ def _complex(re: float, im: float) -> str:
 
 def to_json(data) -> str:
     """Strict JSON (no NaN or Infinity, which jq and JavaScript reject): non-finite numbers become null."""
+    import numpy as np
+
     def finite(value):
         if isinstance(value, dict):
             return {key: finite(item) for key, item in value.items()}
@@ -318,17 +328,130 @@ def to_json(data) -> str:
     return json.dumps(finite(data), indent=2, allow_nan=False)
 
 
-def progress_bar(duration: float, quiet: bool):
-    """A tqdm progress bar over duration [s] of simulated time (on stderr; none when quiet)."""
+PROGRESS_INTERVAL_VARIABLE = "MECH_REGULATOR_PROGRESS_INTERVAL"
+PROGRESS_INTERVAL = 3.0  # [s] of wall time between two progress lines in a log (not a terminal), by default
+
+
+def progress_bar(total: float | None, quiet: bool, label: str = "simulating", quantity: str | None = "t",
+                 unit: str = "s"):
+    """The progress of long work on stderr, as a context manager with tqdm's `update(amount)` and `n`: nothing
+    when quiet; tqdm's bar on a terminal; in a log, a pipe or a notebook (stderr not a terminal, where tqdm would
+    show nothing useful), a plain line every few seconds of wall time (ProgressLines). total: the amount to do,
+    simulated seconds by default (None: unknown, a count); label names the work, quantity the amount
+    ('t = 3.2 / 10 s'; None: '3.2 / 10 s'), unit its unit."""
+    if quiet or not _is_terminal(sys.stderr):
+        return ProgressLines(total, label, quantity, unit, progress_interval(), enabled=not quiet)
     from tqdm import tqdm
 
-    return tqdm(total=duration, unit="s sim", disable=True if quiet else None, file=sys.stderr,
-                bar_format="{l_bar}{bar}| {n:.3g}/{total:.3g} s simulated [{elapsed}<{remaining}]")
+    amount = f"{quantity} = " if quantity else ""
+    if total is None:
+        return tqdm(desc=label, file=sys.stderr, bar_format=f"{{desc}}: {{n:.4g}} {unit} [{{elapsed}}]")
+    return tqdm(total=total, desc=label, file=sys.stderr,
+                bar_format=f"{{l_bar}}{{bar}}| {amount}{{n:.3g}}/{{total:.3g}} {unit} [{{elapsed}}<{{remaining}}]")
+
+
+def progress_interval() -> float:
+    """Wall time [s] between two progress lines in a log: $MECH_REGULATOR_PROGRESS_INTERVAL when it is a number
+    >= 0, else PROGRESS_INTERVAL."""
+    try:
+        interval = float(os.environ.get(PROGRESS_INTERVAL_VARIABLE, ""))
+    except ValueError:
+        return PROGRESS_INTERVAL
+    return interval if math.isfinite(interval) and interval >= 0.0 else PROGRESS_INTERVAL
+
+
+def _is_terminal(stream) -> bool:
+    try:
+        return stream.isatty()
+    except (AttributeError, ValueError):  # no isatty, or closed
+        return False
+
+
+class ProgressLines:
+    """Progress as plain lines on stderr for a log: after `interval` s of wall time since the last line, the next
+    update prints `simulating lathe: t = 3.2 / 10 s (32 %), 4.1 s elapsed, ETA 8.7 s` (ETA: the elapsed time
+    scaled by what is left, which assumes an even pace); at the end `simulating lathe: done: t = 10 / 10 s in
+    12.3 s` (`stopped at` when the work ended short of its total). Work that ends within one interval prints
+    nothing. The same interface as the tqdm bar the command line uses (update, n, set_description_str, close, a
+    context manager); silent unless enabled (--quiet). No thread: a line comes with an update."""
+
+    def __init__(self, total: float | None, label: str, quantity: str | None, unit: str, interval: float,
+                 enabled: bool = True, file=None, clock=time.monotonic):
+        self.total, self.label, self.quantity, self.unit = total, label, quantity, unit
+        self.interval, self.enabled, self.file, self.clock = interval, enabled, file, clock
+        self.n = 0.0
+        self.stage = ""
+        self.start = self.last = clock()
+        self.printed = False
+        self.closed = False
+
+    def __enter__(self) -> ProgressLines:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def update(self, amount: float = 1) -> None:
+        self.n += amount
+        now = self.clock()
+        if self.enabled and now - self.last >= self.interval:
+            self.last = now
+            self._print(f"{self._label()}: {self._amount()}{self._share()}, {_duration(now - self.start)} elapsed"
+                        + self._eta(now - self.start))
+
+    def set_description_str(self, text: str, refresh: bool = False) -> None:
+        """The current stage of the work (flywheel: the flywheel being simulated), shown after the label."""
+        self.stage = text
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        elapsed = self.clock() - self.start
+        if self.enabled and (self.printed or elapsed >= self.interval):
+            short = self.total is not None and self.n < self.total * (1.0 - 1e-9)
+            self._print(f"{self.label}: {'stopped at' if short else 'done:'} {self._amount()} "
+                        f"{'after' if short else 'in'} {_duration(elapsed)}")
+
+    def _label(self) -> str:
+        return f"{self.label} ({self.stage})" if self.stage else self.label
+
+    def _amount(self) -> str:
+        amount = f"{self.quantity} = " if self.quantity else ""
+        if self.total is None:
+            return f"{amount}{self.n:.4g} {self.unit}"
+        return f"{amount}{self.n:.3g} / {self.total:.3g} {self.unit}"
+
+    def _share(self) -> str:
+        return f" ({100.0 * self.n / self.total:.0f} %)" if self.total else ""
+
+    def _eta(self, elapsed: float) -> str:
+        if not self.total:
+            return ""
+        if self.n <= 0.0:
+            return ", ETA unknown"
+        return f", ETA {_duration(max(elapsed * (self.total - self.n) / self.n, 0.0))}"
+
+    def _print(self, line: str) -> None:
+        self.printed = True
+        print(line, file=self.file or sys.stderr, flush=True)
+
+
+def _duration(seconds: float) -> str:
+    """Wall time for a progress line: '4.1 s', '2 min 05 s', '1 h 02 min'."""
+    if seconds < 99.95:
+        return f"{seconds:.1f} s"
+    minutes, rest = divmod(round(seconds), 60)
+    if minutes < 60:
+        return f"{minutes} min {rest:02d} s"
+    return f"{minutes // 60} h {minutes % 60:02d} min"
 
 
 def write_csv(path, columns: dict[str, np.ndarray], digits: int = 12) -> None:
     """Write output columns as CSV with a header line (digits significant digits; 17 round-trips a double
     exactly)."""
+    import numpy as np
+
     np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="",
                fmt=f"%.{digits}g")
 
@@ -398,6 +521,8 @@ def wrote_lines(data: dict) -> list[str]:
 def check_outputs(args, *others: Path | None) -> None:
     """Give args.plot a .png suffix and refuse, before any work, output paths (the plot and others) that cannot
     be written (SceneError)."""
+    from mech_regulator.scene import SceneError
+
     plot = getattr(args, "plot", None)
     if plot is not None and not plot.suffix:
         args.plot = plot = plot.with_suffix(".png")
@@ -427,6 +552,8 @@ def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:
 def bench_scenes_and_folder(scenes: str | None, out: Path, example: str) -> list[str] | None:
     """A benchmark's --scenes (comma-separated names; None: its default scenes) and its --out folder, made now:
     SceneError for an empty list (the message shows `example`) or a folder that cannot be made."""
+    from mech_regulator.scene import SceneError
+
     names = None if scenes is None else [name.strip() for name in scenes.split(",") if name.strip()]
     if names == []:
         raise SceneError(f"--scenes: expected scene names separated by commas, e.g. {example}")

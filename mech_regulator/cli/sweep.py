@@ -18,13 +18,15 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from mech_regulator.analysis.sweep import ENGINES, METRICS, check_executor, parse_grid, run_sweep, sweep_points
-from mech_regulator.cli.report import progress_bar, write_rows_csv
-from mech_regulator.scene import SceneError
-from mech_regulator.scene.loading import key_description
-
 from mech_regulator.cli import EXIT_INTERRUPTED
+
 SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
+# analysis.sweep's ENGINES and METRICS, repeated here so that building the parser does not import the sweep (numpy,
+# the scene schema, the compiled path); test/test_cli_startup.py checks that they stay equal.
+ENGINES = ("local", "dask")
+METRICS = ("delta", "omega_m", "omega_average", "omega_end", "oscillation_ratio", "stop_arrivals", "vyshnegradsky_A",
+           "vyshnegradsky_B", "t_end", "wall_time", "rhs_evaluations")
+DASK_EXTRA = "pip install 'mech_regulator[distributed]'"
 
 
 def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
@@ -61,7 +63,15 @@ def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> 
 
 
 def run_sweep_command(args: argparse.Namespace) -> int:
-    """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs."""
+    """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs, and so does
+    --engine dask without Dask installed (the message names the pip extra)."""
+    from mech_regulator.analysis.sweep import check_executor, parse_grid, run_sweep, sweep_points
+    from mech_regulator.cli.report import progress_bar, write_rows_csv
+    from mech_regulator.scene import SceneError
+    from mech_regulator.scene.loading import key_description
+
+    if args.engine == "dask" and not dask_installed():
+        raise SceneError(f"--engine dask needs Dask distributed: {DASK_EXTRA} (or pip install 'dask[distributed]')")
     scenes = ([args.scene] if args.scene is not None else []) + args.scenes
     axes = [parse_grid(spec) for spec in args.grid]
     points = sweep_points(scenes, args.overrides, axes, args.path)
@@ -75,7 +85,8 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         raise SceneError(f"--out '{out}': cannot make the folder: {error.strerror or error}") from None
     durations = [float(point.scene["scenario"]["duration"]) for point in points]
     start = time.perf_counter()
-    with progress_bar(sum(durations), args.quiet) as bar:
+    label = f"sweep of {len(points)} point{'s' if len(points) != 1 else ''}"
+    with progress_bar(sum(durations), args.quiet, label, quantity=None, unit="s simulated") as bar:
         rows = run_sweep(points, jobs, args.engine, args.scheduler,
                          progress=lambda point, row: bar.update(float(point.scene["scenario"]["duration"])))
     wall_time = time.perf_counter() - start
@@ -110,6 +121,16 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         print(f"mech-regulator: point {_label(row, [axis.key for axis in axes])}: {row['status']}: {row['message']}",
               file=sys.stderr)
     return 0
+
+
+def dask_installed() -> bool:
+    """Whether dask.distributed can be imported (its spec found; only the dask package itself is imported)."""
+    import importlib.util
+
+    try:
+        return importlib.util.find_spec("dask.distributed") is not None
+    except (ImportError, ValueError):  # dask itself missing, or a module without a spec
+        return False
 
 
 def _label(row: dict, keys: list[str]) -> str:
