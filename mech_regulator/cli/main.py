@@ -126,6 +126,11 @@ def build_parser() -> argparse.ArgumentParser:
     schema.add_argument("--format", choices=("json", "markdown"), default="json",
                         help="json: the JSON Schema; markdown: the key tables of docs/scenes.md")
     commands.add_parser("scenes", help="list the bundled scenes")
+    compile_command = commands.add_parser(
+        "compile", help="compile the fast path's steppers once on this machine (a first fast run otherwise uses the "
+                        "reference path while they compile in the background)")
+    compile_command.add_argument("--method", action="append", choices=("RK45", "DOP853", "RK4", "Rosenbrock23"),
+                                 help="a method to compile (repeatable; default: all)")
     bench = commands.add_parser("bench", help="benchmarks of the solvers", description="benchmarks of the solvers")
     benchmarks = bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK")
     accuracy = benchmarks.add_parser(
@@ -162,6 +167,11 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "scenes":
             return _list_scenes()
+        if args.command == "compile":
+            from mech_regulator.solvers.compiled.warm import compile_steppers
+
+            compile_steppers(args.method or ("RK45", "DOP853", "RK4", "Rosenbrock23"), print)
+            return 0
         if args.command == "bench":
             return _bench(args)
         if args.command == "flywheel":
@@ -213,6 +223,11 @@ def _bench(args) -> int:
     return _bench_accuracy(args)
 
 
+def _note(line: str) -> None:
+    """A one-line note of a command on stderr (e.g. which path a run takes and why)."""
+    print(f"mech-regulator: {line}", file=sys.stderr)
+
+
 def _list_scenes() -> int:
     from mech_regulator.scene import bundled_scenes, load_scene
 
@@ -226,11 +241,11 @@ def _simulate(scene, args) -> int:
     from mech_regulator.analysis import summarise
     from mech_regulator.cli.report import check_outputs, format_summary, progress_bar, to_json, write_csv
     from mech_regulator.model import build_model
-    from mech_regulator.solvers import simulate
+    from mech_regulator.solvers import on_path_for_a_command, simulate
     from mech_regulator.solvers.advice import stiffness_advice
 
     check_outputs(args, args.out, args.record)
-    model = build_model(scene)
+    model = on_path_for_a_command(build_model(scene), _note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
     advice = stiffness_advice(model)
@@ -441,11 +456,15 @@ def _main_job(scene, args) -> int:
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
     from mech_regulator.model import build_model
     from mech_regulator.nodes.launch import main_job
+    from mech_regulator.solvers import on_path_for_a_command
     from mech_regulator.solvers.cosim import cosimulation_refusal
 
-    reason = cosimulation_refusal(build_model(scene))
+    model = build_model(scene)
+    reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
+    if on_path_for_a_command(model, _note).scene.solver.path != scene.solver.path:  # decided once for every node
+        args.overrides = [*(args.overrides or []), "solver.path=reference"]
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
     if args.duration is not None and not 0.0 < args.duration <= 1e7:

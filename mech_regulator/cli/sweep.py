@@ -62,6 +62,25 @@ def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> 
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def warm_fast_path(points, engine: str, quiet: bool) -> None:
+    """Compile, here and before any point runs, the fast-path steppers the sweep's points need and this machine has
+    not compiled yet, saying so: the local worker processes then load them from the disk cache instead of each
+    compiling them. Dask workers on other machines compile for themselves, once each (said too)."""
+    methods = sorted({point.scene.get("solver", {}).get("method", "DOP853") for point in points
+                      if point.scene.get("solver", {}).get("path") == "fast"})
+    if not methods:
+        return
+    from mech_regulator.solvers.compiled.warm import compile_steppers, stepper_cached
+
+    cold = [method for method in methods if not stepper_cached(method)]
+    report = (lambda line: None) if quiet else (lambda line: print(f"mech-regulator: {line}", file=sys.stderr))
+    if cold:
+        compile_steppers(cold, report)
+    if engine == "dask":
+        report(f"note: Dask workers on other machines compile the fast path's {', '.join(methods)} stepper(s) once "
+               "each (about 10-30 s) before their first point")
+
+
 def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs, and so does
     --engine dask without Dask installed (the message names the pip extra)."""
@@ -83,6 +102,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:
         raise SceneError(f"--out '{out}': cannot make the folder: {error.strerror or error}") from None
+    warm_fast_path(points, args.engine, args.quiet)
     durations = [float(point.scene["scenario"]["duration"]) for point in points]
     start = time.perf_counter()
     label = f"sweep of {len(points)} point{'s' if len(points) != 1 else ''}"

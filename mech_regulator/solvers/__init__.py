@@ -3,6 +3,8 @@ method in phi. All return a dense Trajectory with the solver's statistics."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.advice import rk4_stability_refusal
@@ -27,4 +29,40 @@ def simulate(model: MachineModel, progress: Progress | None = None) -> Trajector
     return integrate_time_domain(model, progress)
 
 
-__all__ = ["SolverStats", "Trajectory", "simulate"]
+def on_path_for_a_command(model: MachineModel, report: Callable[[str], None]) -> MachineModel:
+    """The model a command (simulate, sweep, flywheel, the nodes) runs: the scene's own, except that a scene asking
+    for the fast path is served by the reference path — with a one-line note to `report` — where the fast path does
+    not cover it (fast_path_refusal), or while its method's stepper is not compiled yet on this machine: that is then
+    compiled by a background process for the next run (compiled/warm.py), so a first run is never a wait of half a
+    minute. Rosenbrock23, which only the fast path has, is compiled in the foreground, announced."""
+    if model.scene.solver.path != "fast":
+        return model
+    from mech_regulator.solvers.compiled import fast_path_refusal
+
+    refusal = fast_path_refusal(model)
+    if refusal is not None:
+        report(f"note: {refusal}; this run uses the reference path")
+        return on_reference_path(model)
+    from mech_regulator.solvers.compiled.warm import compile_in_background, stepper_cached
+
+    method = model.scene.solver.method
+    if stepper_cached(method):
+        return model
+    if method == "Rosenbrock23":
+        report(f"note: compiling the fast path's {method} stepper once (about 10-30 s); later runs start at once")
+        return model
+    started = compile_in_background([method])
+    report(f"note: the fast path's {method} stepper is {'now compiling' if started else 'compiling'} in the "
+           "background (once, about 10-30 s); this run uses the reference path, later runs the fast path")
+    return on_reference_path(model)
+
+
+def on_reference_path(model: MachineModel) -> MachineModel:
+    """The same scene with solver.path: reference."""
+    from mech_regulator.model import build_model
+
+    solver = model.scene.solver.model_copy(update={"path": "reference"})
+    return build_model(model.scene.model_copy(update={"solver": solver}))
+
+
+__all__ = ["SolverStats", "Trajectory", "on_path_for_a_command", "on_reference_path", "simulate"]

@@ -1,0 +1,94 @@
+"""Warming the fast path: its compiled steppers (one per method, solvers/compiled/integrators.py) take some 10 to
+30 s each to compile on a fresh machine — once per machine and numba version, then numba loads them from its disk
+cache in a fraction of a second — while a scene's own module (codegen.py) compiles in about a second. So only the
+steppers are warmed ahead:
+
+- `mech-regulator compile` (which `./dev` runs once at set-up) compiles every method's stepper, a line per method;
+- a command whose scene asks for the fast path while its method's stepper is not compiled yet is served by the
+  reference path, and the stepper is compiled by a background process for the next run (`compile_in_background`;
+  a lock in the cache folder keeps it to one such process at a time).
+
+Run as a module (`python -m mech_regulator.solvers.compiled.warm METHOD ...`) it compiles the methods named (all
+when none) under that lock: what the background process does.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from mech_regulator.solvers.compiled import FAST_METHODS
+
+LOCK_NAME = "compiling.lock"
+LOCK_VARIABLE = "MECH_REGULATOR_COMPILE_LOCK_FD"  # the lock's descriptor handed to the background process
+
+
+def stepper_cached(method: str) -> bool:
+    """Whether numba's disk cache holds the compiled stepper of `method` for the current source of integrators.py
+    (numba's index is empty when the source changed since)."""
+    from numba.core.caching import FunctionCache
+
+    from mech_regulator.solvers.compiled.integrators import _STEPPERS
+
+    function, _ = _STEPPERS[method]
+    return bool(FunctionCache(function)._cache_file._load_index())
+
+
+def compile_steppers(methods: Iterable[str], report: Callable[[str], None] = lambda line: None) -> None:
+    """Compile (or load from the disk cache) the steppers of `methods`, reporting a line before and after each."""
+    from mech_regulator.solvers.compiled.integrators import stepper
+
+    for method in methods:
+        cached = stepper_cached(method)
+        report(f"{'loading' if cached else 'compiling'} the fast path's {method} stepper"
+               f"{'' if cached else ' (once, about 10-30 s)'} ...")
+        started = time.perf_counter()
+        stepper(method)
+        report(f"  {method} ready in {time.perf_counter() - started:.1f} s")
+
+
+def _lock_path() -> Path:
+    from mech_regulator.solvers.compiled.codegen import cache_folder
+
+    return cache_folder() / LOCK_NAME
+
+
+def compile_in_background(methods: Iterable[str]) -> bool:
+    """Start a detached process compiling the steppers of `methods` unless one is compiling already; returns whether
+    one was started. The lock is taken here and handed to the process (an inherited descriptor), so that a second
+    command right after this one sees it held. Its output goes to compiling.log in the cache folder."""
+    lock = _lock_path()
+    with open(lock, "a") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return False  # another process is compiling
+        with open(lock.with_name("compiling.log"), "a") as log:
+            subprocess.Popen([sys.executable, "-m", __name__, *methods], stdin=subprocess.DEVNULL, stdout=log,
+                             stderr=subprocess.STDOUT, start_new_session=True, pass_fds=(handle.fileno(),),
+                             env=dict(os.environ, **{LOCK_VARIABLE: str(handle.fileno())}))
+    return True  # the process holds the lock on its copy of the descriptor until it ends
+
+
+def main(argv: list[str]) -> int:
+    """Compile the steppers of the methods in argv (all fast methods when none), holding the lock meanwhile (handed
+    over by compile_in_background, or taken here)."""
+    methods = argv or list(FAST_METHODS)
+    unknown = [method for method in methods if method not in FAST_METHODS]
+    if unknown:
+        print(f"unknown fast-path method(s) {unknown}; expected some of {', '.join(FAST_METHODS)}", file=sys.stderr)
+        return 2
+    inherited = os.environ.pop(LOCK_VARIABLE, None)
+    with (os.fdopen(int(inherited), "a") if inherited else open(_lock_path(), "a")) as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        compile_steppers(methods, lambda line: print(line, flush=True))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

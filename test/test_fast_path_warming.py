@@ -1,0 +1,72 @@
+"""Warming the fast path (solvers/compiled/warm.py, solvers.on_path_for_a_command): a first run whose method's stepper
+is not compiled yet is served by the reference path with a note, while a background process compiles the stepper;
+the next run is on the fast path. A method the fast path does not have falls back with a note; a scene on the
+reference path is left alone.
+
+numba reads NUMBA_CACHE_DIR when it is imported, so each case runs in a fresh Python with empty caches of its own.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+WAIT = 300.0  # [s] of wall time: the failure limit of the background compile (never what the test measures)
+
+CHOOSE = """
+import json, sys
+from mech_regulator.model import build_model
+from mech_regulator.scene import load_scene
+from mech_regulator.solvers import on_path_for_a_command
+from mech_regulator.solvers.compiled.warm import stepper_cached
+
+notes = []
+model = on_path_for_a_command(build_model(load_scene("lathe", sys.argv[1:])), notes.append)
+print(json.dumps({"path": model.scene.solver.path, "notes": notes, "cached": stepper_cached("RK4")}))
+"""
+
+
+def choose(environment: dict[str, str], *overrides: str) -> dict:
+    """What on_path_for_a_command chose for the lathe with these overrides, in a fresh Python."""
+    result = subprocess.run([sys.executable, "-c", CHOOSE, *overrides], capture_output=True, text=True, timeout=120,
+                            env=environment, check=True)
+    return json.loads(result.stdout)
+
+
+@pytest.fixture
+def empty_caches(tmp_path) -> dict[str, str]:
+    (tmp_path / "numba").mkdir()
+    (tmp_path / "compiled").mkdir()
+    return dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
+
+
+def test_a_cold_first_run_uses_the_reference_path_while_the_stepper_compiles(empty_caches):
+    fast_rk4 = ("solver.path=fast", "solver.method=RK4", "solver.step=0.001")
+    first = choose(empty_caches, *fast_rk4)
+    assert first["path"] == "reference" and not first["cached"], first
+    assert len(first["notes"]) == 1 and "now compiling in the background" in first["notes"][0], first
+    second = choose(empty_caches, *fast_rk4)  # while it compiles: no second compiling process
+    log = os.path.join(empty_caches["MECH_REGULATOR_CACHE"], "compiling.log")
+    deadline = time.monotonic() + WAIT
+    while not (os.path.exists(log) and "RK4 ready" in open(log).read()):
+        assert time.monotonic() < deadline, f"the background compile did not finish: {open(log).read()}"
+        time.sleep(0.5)
+    assert second["path"] == "fast" or "is compiling in the background" in second["notes"][0], second
+    assert open(log).read().count("compiling the fast path's RK4 stepper") == 1, open(log).read()
+    warm = choose(empty_caches, *fast_rk4)
+    assert warm == {"path": "fast", "notes": [], "cached": True}
+
+
+def test_a_method_the_fast_path_lacks_falls_back_with_a_note(empty_caches):
+    chosen = choose(empty_caches, "solver.path=fast", "solver.method=LSODA")
+    assert chosen["path"] == "reference" and "solver.method: 'LSODA'" in chosen["notes"][0], chosen
+    assert not os.path.exists(os.path.join(empty_caches["MECH_REGULATOR_CACHE"], "compiling.log"))
+
+
+def test_the_reference_path_is_left_alone(empty_caches):
+    assert choose(empty_caches, "solver.path=reference") == {"path": "reference", "notes": [], "cached": False}
