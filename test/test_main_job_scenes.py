@@ -37,11 +37,11 @@ PLAYED = 0.3  # [s] of simulated time each bundled scene is played
 EXCHANGE_STEP = 1e-3  # [s]
 
 
-def in_process_csv(model, duration: float, path: Path) -> bytes:
+def in_process_csv(model, duration: float, path: Path, coupling: str = "hold") -> bytes:
     """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write)."""
     scenario = model.scene.scenario.model_copy(update={"duration": duration})
     shortened = dataclasses.replace(model, scene=model.scene.model_copy(update={"scenario": scenario}))
-    run = cosimulate(shortened, EXCHANGE_STEP)
+    run = cosimulate(shortened, EXCHANGE_STEP, coupling=coupling)
     write_csv(path, shortened.columns(run.times, run.states, run.throttle, run.external_load), digits=17)
     return path.read_bytes()
 
@@ -64,7 +64,8 @@ def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedP
     return result, rrd
 
 
-def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: Path, tmp_path: Path) -> None:
+def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: Path, tmp_path: Path,
+                  coupling: str = "hold") -> None:
     """The run ended by itself with exit 0 and status complete, wrote every exchange to its CSV exactly as the
     in-process co-simulation does, and left no node running."""
     log = rrd.with_suffix(".log")
@@ -75,7 +76,7 @@ def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: P
     assert summary["status"] == "complete" and summary["t_end"] == PLAYED, described
     rows = rrd.with_suffix(".csv").read_bytes()
     assert rows.count(b"\n") == 1 + round(PLAYED / EXCHANGE_STEP) + 1, described  # header and every exchange
-    assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv"), \
+    assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv", coupling), \
         f"{scene}: the nodes' CSV differs from the in-process co-simulation"
     assert node_processes(str(rrd.parent)) == [], f"{scene}: nodes left running"
 
@@ -89,6 +90,15 @@ def test_every_bundled_scene_plays_to_the_end_through_the_nodes(tmp_path):
         results = dict(zip(scenes, pool.map(lambda scene: play(scene, tmp_path / scene), scenes)))
     for scene, (result, rrd) in results.items():
         assert_played(scene, build_model(load_scene(scene)), result, rrd, tmp_path)
+
+
+def test_the_waveform_coupling_through_the_nodes_is_the_in_process_one(tmp_path):
+    """The machine sends its speed at the middle of each step, the governor follows it, the machine extrapolates
+    the throttle: the same operations as cosimulate(coupling='waveform'), so the same CSV to the last bit."""
+    scene = "engine_indirect_isodromic"
+    result, rrd = play(scene, tmp_path / "run", "--coupling", "waveform")
+    assert_played(scene, build_model(load_scene(scene)), result, rrd, tmp_path, "waveform")
+    assert json.loads(rrd.with_suffix(".json").read_text())["coupling"] == "waveform"
 
 
 def four_bar_from_rest() -> dict:

@@ -172,8 +172,9 @@ def test_a_section_replaced_by_a_scalar_is_reported(tmp_path, capsys):
 
 
 def test_base_relative_to_the_file_not_the_working_folder(tmp_path, monkeypatch):
-    write(tmp_path, "scenes/parent.yaml", PARENT)
-    child = write(tmp_path, "scenes/variants/child.yaml", "base: ../parent.yaml\nmachine: {inertia: 0.7}\n")
+    # (a base stays inside the scene's own folder, subfolders allowed: test_hostile_input.py refuses '..')
+    write(tmp_path, "scenes/variants/parents/parent.yaml", PARENT)
+    child = write(tmp_path, "scenes/variants/child.yaml", "base: parents/parent.yaml\nmachine: {inertia: 0.7}\n")
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
@@ -234,8 +235,9 @@ def test_loop_to_itself(tmp_path, capsys):
 
 def test_loop_of_three_through_subfolders(tmp_path):
     a = write(tmp_path, "a.yaml", "base: sub/b.yaml\n")
-    write(tmp_path, "sub/b.yaml", "base: c.yaml\n")
-    write(tmp_path, "sub/c.yaml", "base: ../a.yaml\n")
+    write(tmp_path, "sub/b.yaml", "base: deeper/c.yaml\n")
+    write(tmp_path, "sub/deeper/c.yaml", "base: d.yaml\n")
+    write(tmp_path, "sub/deeper/d.yaml", "base: c.yaml\n")
     assert "loop" in scene_error(a)
 
 

@@ -58,16 +58,18 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
     }
 
 
-def summarise_cosimulation(model: MachineModel, run: CoSimulation, exchange_step: float) -> dict:
-    """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended,
-    the final speed, the governor's answer to each load change (from the run sampled at its exchange
-    times) and the overspeed trip."""
+def summarise_cosimulation(model: MachineModel, run: CoSimulation, exchange_step: float, coupling: str = "hold"
+                           ) -> dict:
+    """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended, the exchange
+    step [s] and coupling (solvers.cosim), the final speed, the governor's answer to each load change (from the run
+    sampled at its exchange times) and the overspeed trip."""
     trajectory = run.trajectory(model)
     return {
         "scene": model.scene.name,
         "status": run.status,
         "message": run.message,
         "exchange_step": exchange_step,
+        "coupling": coupling,
         "samples": int(run.times.size),
         "t_end": float(run.times[-1]),
         "omega_end": float(run.states[1, -1]),

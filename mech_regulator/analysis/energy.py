@@ -37,7 +37,10 @@ class EnergyBalance:
 
 
 def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance:
-    """Integrate M_k omega over every step of the trajectory and compare with the kinetic energy change."""
+    """The works [J] of the moments over the run, each the integral of its power (`powers`) by 4-point
+    Gauss-Legendre quadrature on every solver step (step_edges: the dense output is one polynomial per step, so the
+    quadrature's error stays far below the solver's), against the change of the stored energy between the run's
+    ends [J]."""
     edges = step_edges(trajectory)
     left, width = edges[:-1], np.diff(edges)
     nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
@@ -71,12 +74,10 @@ def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.
 
 
 def step_edges(trajectory: Trajectory) -> np.ndarray:
-    """All step boundaries of the trajectory: the pieces' own knots where a piece spans many steps."""
-    edges = [np.asarray(trajectory.piece_edges[:1])]
-    for interpolant, end in zip(trajectory.interpolants, trajectory.piece_edges[1:]):
-        knots = getattr(interpolant, "x", None)
-        edges.append(np.asarray(knots[1:]) if knots is not None else np.array([end]))
-    return np.concatenate(edges)
+    """Every solver step's boundary over the run [s], ascending from t_start to t_end: the start, then the step
+    ends each piece recorded (Trajectory.step_ends; a piece of the fast path spans a whole compiled call's steps).
+    Empty for a run without a step."""
+    return np.concatenate([trajectory.piece_edges[:1], *trajectory.step_ends])
 
 
 def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, points: int = 7200

@@ -19,6 +19,8 @@ from mech_regulator.scene.loading import SceneError
 from mech_regulator.solvers import Trajectory
 
 SAMPLES_PER_PERIOD = 200
+MAX_PERIODS = 10_000  # dynamic periods examined for repetition (the last ones of a longer run): each start is located
+# on the dense output, and a run of millions of periods would take minutes (or not fit in memory)
 
 
 @dataclass(frozen=True)
@@ -53,7 +55,8 @@ class SteadyState:
 
 
 def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance: float | None = None) -> SteadyState:
-    """Split the run after the last load change into dynamic periods and test them for repetition."""
+    """Split the run after the last load change into dynamic periods (at most its last MAX_PERIODS) and test them for
+    repetition."""
     tolerance = tolerance if tolerance is not None else model.scene.analysis.steady_tolerance
     period = model.dynamic_period()
     t_from = max([0.0] + [piece.start for piece in model.load_pieces])
@@ -69,7 +72,8 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
         return SteadyState(False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)")
     # Periods start at whole multiples of Phi_omega, so each one begins at the same phase of the cycle
     # (for an engine: cycle angle 0 at phi = 0).
-    levels = period * np.arange(math.ceil(phi[0] / period), math.floor(phi[-1] / period) + 1)
+    last_level = math.floor(phi[-1] / period)
+    levels = period * np.arange(max(math.ceil(phi[0] / period), last_level - MAX_PERIODS), last_level + 1)
     starts = np.array([_time_at_angle(trajectory, times, phi, level) for level in levels])
     periods = max(starts.size - 1, 0)
     if periods < 1:

@@ -119,7 +119,9 @@ def crank_slider_mjcf(scene: Scene, timestep: float) -> str:
     half_angle = 0.5 * theta_ref
     spring_attributes = (f' stiffness="{spring.stiffness!r}" springref="{spring.free_position!r}"'
                          if spring is not None else "")
-    return f"""<mujoco model="{scene.name or 'crank_slider'}">
+    from mech_regulator.scene.limits import output_stem  # (a name with '"' or '<' would break the XML)
+
+    return f"""<mujoco model="{output_stem(scene.name, 'crank_slider')}">
   <compiler angle="radian"/>
   <option timestep="{timestep!r}" integrator="RK4" gravity="{gx!r} {gy!r} 0" solver="Newton"
           tolerance="{SOLVER_TOLERANCE!r}" iterations="100" ls_tolerance="1e-6">

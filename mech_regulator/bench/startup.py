@@ -239,7 +239,10 @@ def script_text(scene) -> str:
     machine, solver, scenario = scene.machine, scene.solver, scene.scenario
     model = build_model(scene)
     switches = [(float(angle), float(period)) for angle, period in model.switch_angles()]
-    text = SCRIPT_HEAD.format(scene=scene.name, J0=model.inertia_constant, switches=switches)
+    from mech_regulator.scene.limits import output_stem
+
+    # the name only as a safe stem: a scene's name must not write code into the script (a '"""' in it would)
+    text = SCRIPT_HEAD.format(scene=output_stem(scene.name), J0=model.inertia_constant, switches=switches)
     mechanism = machine.mechanism
     if mechanism is None:
         text += CONSTANT_INERTIA
@@ -293,6 +296,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
                     report: Callable[[str], None] = print) -> StartupBenchmark:
     """Measure (see the module docstring); report(line) is called after every run."""
     from mech_regulator.scene import load_scene
+    from mech_regulator.scene.limits import output_stem
 
     scene = load_scene(scene_name)
     cli = cli_command()
@@ -320,7 +324,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
             omega_end[path] = float(found.group(1))
 
     with tempfile.TemporaryDirectory(prefix="mech-regulator-startup-") as folder:
-        script = Path(folder) / f"{scene_name}_solve_ivp.py"
+        script = Path(folder) / f"{output_stem(scene.name)}_solve_ivp.py"
         script.write_text(script_text(scene), encoding="utf-8")
         base = dict(os.environ)
         base.pop("MECH_REGULATOR_PROGRESS_INTERVAL", None)

@@ -57,6 +57,8 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--exchange-step", type=float, metavar="H",
                           help="co-simulate machine and governor as the ROS nodes do in lockstep, exchanging "
                                "speed, throttle and load every H seconds (the same numbers as `run`)")
+    simulate.add_argument("--coupling", choices=("hold", "waveform"), default="hold",
+                          help="with --exchange-step: " + "how machine and governor see each other over an exchange step: hold (each holds the other's last value, first order in H) or waveform (the governor follows the machine's speed over the step, the machine the throttle extrapolated from the governor's last answers; third order on a smooth scene; docs/ros.md)")
     simulate.add_argument("--overspeed-trip", type=float, default=0.0, metavar="OMEGA",
                           help="with --exchange-step: trip speed [rad/s] closing the throttle for good, as `run` "
                                "has (default 0: none; `run` uses 1.25 x the initial speed)")
@@ -110,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
     main_job.add_argument("--exchange-step", type=float, default=1e-3, metavar="H",
                           help="simulation time between exchanges of the nodes [s] (default 0.001)")
+    main_job.add_argument("--coupling", choices=("hold", "waveform"), default="hold",
+                          help="how machine and governor see each other over an exchange step: hold (each holds the other's last value, first order in H) or waveform (the governor follows the machine's speed over the step, the machine the throttle extrapolated from the governor's last answers; third order on a smooth scene; docs/ros.md)")
     main_job.add_argument("--duration", type=float, metavar="T",
                           help="simulated time to play [s] (default: the scene's scenario.duration); a shorter run "
                                "keeps the scene's load events as they are")
@@ -297,8 +301,8 @@ def _cosimulate(model, args) -> int:
     duration = model.scene.scenario.duration
     with progress_bar(duration, args.quiet, f"co-simulating {model.scene.name or args.scene}") as bar:
         run = cosimulate(model, args.exchange_step, args.overspeed_trip,
-                         progress=lambda t: bar.update(min(t, duration) - bar.n))
-    summary = summarise_cosimulation(model, run, args.exchange_step)
+                         progress=lambda t: bar.update(min(t, duration) - bar.n), coupling=args.coupling)
+    summary = summarise_cosimulation(model, run, args.exchange_step, args.coupling)
     if args.out is not None:
         columns = model.columns(run.times, run.states, run.throttle, run.external_load)
         write_csv(args.out, columns, digits=17)
@@ -475,7 +479,7 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
     check_outputs(args, args.out)
     return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
-                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration)
+                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling)
 
 
 def _bench_accuracy(args) -> int:

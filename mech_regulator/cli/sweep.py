@@ -87,6 +87,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     from mech_regulator.analysis.sweep import check_executor, parse_grid, run_sweep, sweep_points
     from mech_regulator.cli.report import progress_bar, write_rows_csv
     from mech_regulator.scene import SceneError
+    from mech_regulator.scene.limits import output_stem
     from mech_regulator.scene.loading import key_description
 
     if args.engine == "dask" and not dask_installed():
@@ -97,7 +98,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     jobs = check_executor(args.jobs, args.engine, args.scheduler)
     governed = any(point.scene.get("governor") for point in points)
     metric = args.metric or ("oscillation_ratio" if governed else "delta")
-    out = args.out if args.out is not None else Path("runs") / f"sweep-{points[0].scene['name']}"
+    out = args.out if args.out is not None else Path("runs") / f"sweep-{output_stem(points[0].scene['name'])}"
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as error:

@@ -51,15 +51,23 @@ RightHandSide = Callable[[float, np.ndarray], tuple[float, float] | list[float]]
 
 @dataclass(frozen=True)
 class LoadPiece:
-    """The inputs held on [start, end): the external load moment value(t) = offset + slope * t [N m],
-    opposing motion, and, for a machine whose governor runs outside the model (co-simulation), the
-    throttle [-] that scales its drive (1 otherwise)."""
+    """The inputs on [start, end): the external load moment value(t) = offset + slope * t [N m], opposing motion,
+    and, for a machine whose governor runs outside the model (co-simulation), the throttle [-] that scales its
+    drive (1 otherwise): u(t) = throttle + throttle_slope s + throttle_curvature s^2, s = t - start, clamped to
+    [0, 1] (held when both are 0; a polynomial extrapolated from the governor's last answers otherwise)."""
 
     start: float
     end: float
     offset: float
     slope: float
     throttle: float = 1.0
+    throttle_slope: float = 0.0  # [1/s]
+    throttle_curvature: float = 0.0  # [1/s^2]
+
+    def throttle_at(self, t: float) -> float:
+        """u(t) [-] (see the class)."""
+        s = t - self.start
+        return min(max(self.throttle + s * (self.throttle_slope + s * self.throttle_curvature), 0.0), 1.0)
 
 
 @dataclass(frozen=True)
@@ -293,7 +301,9 @@ class MachineModel:
         """rhs (see there) or, crank_only, crank_side."""
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
-        scale_drive = governor is not None or held_throttle != 1.0
+        ramped = piece is not None and (piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0)
+        held = piece.throttle_at if ramped else (lambda t: held_throttle)
+        scale_drive = governor is not None or held_throttle != 1.0 or ramped
         scaled = tuple(effect.moment for effect in self.effects if scale_drive and effect.role == "drive")
         rest = [effect for effect in self.effects if not (scale_drive and effect.role == "drive")]
         switched = tuple(effect.moment for effect in rest if effect.switch_angles)
@@ -331,10 +341,11 @@ class MachineModel:
             for moment in switched:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
             if plain:
+                share = held(t)
                 for moment in scaled:
-                    total += held_throttle * moment(t, phi, omega, q, dq)
+                    total += share * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            share = held_throttle if throttle is None else throttle(y)
+            share = held(t) if throttle is None else throttle(y)
             for moment in scaled:
                 total += share * moment(t, phi, omega, q, dq)
             net = total - 0.5 * dJ * omega * omega
@@ -807,6 +818,7 @@ def build_model(scene: Scene) -> MachineModel:
     gravity = tuple(machine.gravity) if machine.gravity is not None else None
     has_weight = machine.mechanism is not None and gravity is not None and any(gravity) and _has_mass(machine.mechanism)
     reduced = build_reduced(machine.mechanism, gravity if has_weight else None) if machine.mechanism else None
+    _check_inertia(machine, machine.inertia + flywheel, reduced)
     kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
     effects = []
     if machine.drive is not None:
@@ -865,6 +877,59 @@ def _carrying(guard: Guard, train_mode: tuple[str, ...]) -> Guard:
         return governor_mode + train_mode, state
 
     return Guard(guard.name, guard.value, transition)
+
+
+INERTIA_SCAN_POINTS = 720  # crank angles over a turn at which J(phi) is checked before its smallest value is refined
+
+
+def _check_inertia(machine, J0: float, reduced: Reduced | None) -> None:
+    """Refuse with a SceneError a machine whose reduced inertia J(phi) = J0 + J_links(phi) is not finite, or falls below
+    MIN_INERTIA or below MIN_INERTIA_FRACTION of its largest value (limits.py) somewhere in a turn (a crank-slider
+    with only a slider mass and no machine.inertia has J = 0 at the dead centres), or whose driven part's inertia is
+    below MIN_INERTIA: there the acceleration M / J has no bound (or overflows) and the solvers grind to a halt. J is
+    scanned at INERTIA_SCAN_POINTS angles and its smallest value refined by a bounded Brent search; the message
+    names the keys and the mechanism's values."""
+    from mech_regulator.scene.limits import MIN_INERTIA, MIN_INERTIA_FRACTION
+
+    for key in ("coupling", "clutch"):
+        part = getattr(machine, key)
+        if part is not None and part.driven.inertia < MIN_INERTIA:
+            raise SceneError(f"machine.{key}.driven.inertia = {part.driven.inertia:g} kg m^2: below the limit of "
+                             f"{MIN_INERTIA:g} kg m^2 for an inertia (moments divided by it would overflow)")
+    advice = "give machine.inertia > 0 (the rotor's, the crank's) or a flywheel"
+    if reduced is None:
+        if J0 < MIN_INERTIA:
+            raise SceneError(f"machine.inertia = {machine.inertia:g} kg m^2 (with the flywheel's, J = {J0:g} kg m^2): "
+                             f"below the limit of {MIN_INERTIA:g} kg m^2 for an inertia (moments divided by it "
+                             "would overflow)")
+        return
+
+    def inertia(phi: float) -> float:
+        return J0 + reduced(phi)[0]
+
+    phis = np.linspace(0.0, 2.0 * math.pi, INERTIA_SCAN_POINTS, endpoint=False)
+    with np.errstate(all="ignore"):
+        J = np.array([inertia(phi) for phi in phis], dtype=float)
+    mechanism = machine.mechanism
+    values = ", ".join(f"{key} {value:g}" for key, value in mechanism.model_dump().items() if isinstance(value, float))
+    keys = (f"(J0 = machine.inertia + flywheel = {J0:g} kg m^2; machine.mechanism, type {mechanism.type}: {values}; "
+            "lengths in m, masses in kg, inertias in kg m^2)")
+    if not np.all(np.isfinite(J)):
+        where = math.degrees(phis[int(np.argmax(~np.isfinite(J)))])
+        raise SceneError(f"machine: the reduced inertia J(phi) is not finite at phi = {where:.1f} deg {keys}; "
+                         "expected the lengths and masses of a real mechanism")
+    index, step = int(np.argmin(J)), phis[1] - phis[0]
+    found = optimize.minimize_scalar(inertia, bounds=(phis[index] - step, phis[index] + step), method="bounded",
+                                     options={"xatol": 1e-12})
+    J_min, phi_min = min((float(found.fun), float(found.x)), (float(J[index]), float(phis[index])))
+    J_max = float(np.max(J))
+    if J_min > MIN_INERTIA_FRACTION * J_max and J_min >= MIN_INERTIA:
+        return
+    limit = (f"above {MIN_INERTIA_FRACTION:g} of its largest value" if J_min <= MIN_INERTIA_FRACTION * J_max else
+             f"at least {MIN_INERTIA:g} kg m^2 (the limit for an inertia)")
+    raise SceneError(f"machine: the reduced inertia J(phi) falls to {J_min:.3g} kg m^2 at phi = "
+                     f"{math.degrees(phi_min) % 360.0:.2f} deg (its largest: {J_max:.3g} kg m^2) {keys}; there the "
+                     f"crank's acceleration M / J has no bound: expected J(phi) {limit} over the whole turn: {advice}")
 
 
 def _has_mass(mechanism) -> bool:

@@ -25,7 +25,7 @@ from std_msgs.msg import String
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.solvers.cosim import NANOSECONDS, cosimulation_refusal, seconds
+from mech_regulator.solvers.cosim import COUPLINGS, NANOSECONDS, cosimulation_refusal, seconds
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
@@ -110,6 +110,14 @@ def _choice_check(name: str, choices: tuple[str, ...]) -> Callable:
                                                                     f"{', '.join(choices)}")
         return SetParametersResult(successful=True)
     return check
+
+
+def coupling_parameter(node: Node) -> str:
+    """Declare the `coupling` parameter (solvers.cosim.COUPLINGS: how machine and governor see each other over an
+    exchange step; machine, governor and recorder must have the same) and return it."""
+    return text_parameter(node, "coupling", "hold", "how machine and governor see each other over an exchange step: "
+                          "hold, or waveform (the governor follows the machine's speed over the step, the machine the "
+                          "throttle extrapolated from the governor's last answers)", COUPLINGS)
 
 
 def scene_model(node: Node) -> MachineModel:
@@ -235,15 +243,23 @@ def remember_ctrl_c() -> Callable[[], bool]:
     return lambda: bool(received)
 
 
+def node_label(node_factory: Callable[[], Node]) -> str:
+    """The name a node's messages start with: machine_node for MachineNode (the launcher finds them by it)."""
+    label = getattr(node_factory, "__name__", "node")
+    return label[:-len("Node")].lower() + "_node" if label.endswith("Node") else label
+
+
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
     """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
     add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
     executor's), then `work(node)` or spin until the node says it is done (`node.done`, see follow_run_state).
-    A bad scene or parameter ends with a message and exit code 2, a missing peer with exit code 1; Ctrl-C ends
+    A bad scene or parameter ends with a message 'mech_regulator: <name>_node: <why>' (node_label; the launcher
+    quotes it) and exit code 2, a missing peer with exit code 1; Ctrl-C ends
     with exit code 0 whatever call into rclpy it interrupts."""
     interrupted = remember_ctrl_c()
     rclpy.init(args=sys.argv)
     node = None
+    name = node_label(node_factory)
     try:
         node = node_factory()
         executor = EventsExecutor()
@@ -255,19 +271,23 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
                 executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
         return 0
     except SceneError as error:
-        print(f"mech_regulator: {error}", file=sys.stderr)
+        print(f"mech_regulator: {name}: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except PeerError as error:
-        print(f"mech_regulator: {error}", file=sys.stderr)
+        print(f"mech_regulator: {name}: {error}", file=sys.stderr)
         return EXIT_FAILED
     except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C: a normal way to stop a node
         return 0
     except rclpy.exceptions.ParameterException as error:  # a parameter override outside its range or type
-        print(f"mech_regulator: {error}", file=sys.stderr)
+        print(f"mech_regulator: {name}: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except Exception:
+    except Exception as error:
         if interrupted() or not rclpy.ok():  # Ctrl-C in the middle of a call into rclpy
             return 0
+        if node is None and isinstance(error, (ArithmeticError, RecursionError, MemoryError)):
+            print(f"mech_regulator: {name}: the scene cannot be computed with ({type(error).__name__}: {error}); "
+                  "expected the values of a real machine", file=sys.stderr)  # a scene beyond the limits' reach
+            return EXIT_BAD_INPUT
         raise
     finally:
         try:

@@ -26,9 +26,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, RunState, diagnostics,
-                                         float_parameter, follow_run_state, joint_value, nanoseconds, run, scene_model,
-                                         stamp)
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, RunState,
+                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
+                                         joint_value, nanoseconds, run, scene_model, stamp)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -45,6 +45,7 @@ class GovernorNode(Node):
             raise SceneError(f"scene '{model.scene.name}' has no governor: governor_node needs a scene with a "
                              "'governor:' section")
         self.model = model
+        self.waveform = coupling_parameter(self) == "waveform"
         self.max_speed = float_parameter(self, "max_speed", 1e4, "crank speeds beyond +- this [rad/s] are rejected",
                                          0.0, 1e9)
         self.start_trial()
@@ -80,7 +81,9 @@ class GovernorNode(Node):
             return
         when, omega = received
         self.previous_ns, self.time_ns = self.time_ns, when
-        throttle = self.throttle = self.stepper.answer(seconds(when), omega)
+        names = list(message.name)
+        omega_middle = message.velocity[names.index("crank_midstep")] if "crank_midstep" in names else None
+        throttle = self.throttle = self.stepper.answer(seconds(when), omega, omega_middle)
         header_stamp = stamp(when)
         answer = JointState(name=["throttle"], position=[throttle])
         answer.header.stamp = header_stamp
@@ -101,7 +104,8 @@ class GovernorNode(Node):
         self.state_publisher.publish(state)
         if self.stepper.status != "complete":
             self.report()
-        elif self.previous_ns is not None and when > self.previous_ns:  # while the machine does the same step
+        elif not self.waveform and self.previous_ns is not None and when > self.previous_ns:  # while the machine
+            # does the same step (with the waveform coupling the governor's step needs the machine's speed over it)
             self.stepper.anticipate(seconds(2 * when - self.previous_ns))
 
     def report(self) -> None:

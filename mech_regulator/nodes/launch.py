@@ -23,7 +23,8 @@ from pathlib import Path
 import yaml
 
 from mech_regulator.cli.report import format_cosimulation_summary, progress_bar
-from mech_regulator.scene import config_dir
+from mech_regulator.scene import SceneError, config_dir
+from mech_regulator.scene.limits import exchange_refusal, output_stem
 
 OVERSPEED_TRIP_FACTOR = 1.25  # default trip speed: this times the scene's initial speed
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
@@ -48,12 +49,13 @@ def node_names(governed: bool) -> list[str]:
 
 def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
                    overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
-                   duration: float | None = None) -> dict:
+                   duration: float | None = None, coupling: str = "hold") -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
     other nodes started (in realtime only the recorder is waited for: the inputs are the newest, not awaited)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
     common = parameters["/**"]["ros__parameters"]
-    common.update(scene_file=scene_file, overrides=overrides or [""], exchange_step=exchange_step, time_mode=time_mode)
+    common.update(scene_file=scene_file, overrides=overrides or [""], exchange_step=exchange_step, time_mode=time_mode,
+                  coupling=coupling)
     machine = parameters.setdefault("machine", {}).setdefault("ros__parameters", {})
     peers = [name for name in node_names(governed) if name != "machine"]
     machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor, peers=peers)
@@ -65,23 +67,28 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     return parameters
 
 
-def default_recording(scene_name: str) -> Path:
-    """runs/<scene>-<local time>.rrd"""
-    return Path("runs") / f"{scene_name}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
+def default_recording(scene_name: str | None) -> Path:
+    """runs/<scene>-<local time>.rrd, <scene> the scene's name made safe for a file name (limits.output_stem: no
+    separator, no '..', no control character), so that the run's files stay in runs/ whatever the name says."""
+    return Path("runs") / f"{output_stem(scene_name)}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
 
 
 def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
-             quiet: bool, duration: float | None = None) -> int:
+             quiet: bool, duration: float | None = None, coupling: str = "hold") -> int:
     """Run the nodes on the scene for `duration` [s] of simulated time (None: the scene's); returns the exit code
-    (0, 1 if a node failed, 130 if interrupted)."""
+    (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
+    named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
+    if too_many is not None:
+        raise SceneError(too_many)
     output = output or default_recording(scene.name)
     output.parent.mkdir(parents=True, exist_ok=True)
     if overspeed_trip is None:
         overspeed_trip = OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega)
     governed = scene.governor is not None
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
-                                real_time_factor, governed, duration)
+                                real_time_factor, governed, duration, coupling)
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
@@ -126,10 +133,35 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
     else:
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)
     if failed:
+        log_text = log_file.read_text(errors="replace")
+        endings: dict[tuple[int, str], list[str]] = {}  # (exit code, why) -> the nodes that ended so
+        for name in failed:
+            endings.setdefault((processes[name].returncode, node_reason(log_text, name)), []).append(name)
+        for (code, reason), names in endings.items():
+            print(f"mech-regulator: the {', '.join(names)} node{'s' if len(names) > 1 else ''} ended with exit code "
+                  f"{code}{reason}", file=sys.stderr)
         print(f"mech-regulator: node(s) {', '.join(failed)} failed; the end of {log_file}:", file=sys.stderr)
-        print("".join(log_file.read_text().splitlines(keepends=True)[-20:]), file=sys.stderr)
-        return 1
+        print("".join(log_text.splitlines(keepends=True)[-20:]), file=sys.stderr)
+        bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
+        return 2 if bad_input else 1
     return 130 if interrupted else 0
+
+
+def node_reason(log_text: str, name: str) -> str:
+    """': <why>' from the last line a node's `run` wrote about its end ('mech_regulator: <name>_node: <why>', see
+    nodes.common.run, with the indented lines that follow it: the problems of a scene) in the nodes' log, '' when
+    there is none."""
+    prefix = f"mech_regulator: {name}_node: "
+    lines = log_text.splitlines()
+    starts = [index for index, line in enumerate(lines) if line.startswith(prefix)]
+    if not starts:
+        return ""
+    reason = [lines[starts[-1]][len(prefix):]]
+    for line in lines[starts[-1] + 1:]:
+        if not line.startswith("  "):
+            break
+        reason.append(line)
+    return ": " + "\n".join(reason)
 
 
 def viewer_command(recording: Path) -> str:

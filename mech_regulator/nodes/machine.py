@@ -49,11 +49,11 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, PeerError, Rejections,
-                                         RunState, bool_parameter, diagnostics, finite_in_range, float_parameter,
-                                         int_parameter, joint_value, list_parameter, nanoseconds, run, scene_model,
-                                         stamp, text_parameter)
+                                         RunState, bool_parameter, coupling_parameter, diagnostics, finite_in_range,
+                                         float_parameter, int_parameter, joint_value, list_parameter, nanoseconds,
+                                         run, scene_model, stamp, text_parameter)
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import MachineStepper, seconds, throttle_extrapolation, to_nanoseconds
 
 LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
 # (the node that gives it by default, its topic)
@@ -112,6 +112,7 @@ class MachineNode(Node):
         self.publish_clock = bool_parameter(self, "publish_clock", True, "publish the simulation time on /clock")
 
         self.overspeed = overspeed
+        self.waveform = coupling_parameter(self) == "waveform" and governed
         self.trial = 0
         self.start_trial()
         self.paused = bool_parameter(self, "start_paused", False, "start paused (~/resume or ~/step to go on)")
@@ -150,6 +151,8 @@ class MachineNode(Node):
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
         self.failing_safe = False
         self.now_ns = 0
+        self.answers: list[tuple[float, float]] = []  # (time [s], throttle applied) at the last exchanges
+        self.omega_middle: float | None = None  # [rad/s] at the middle of the last step (waveform coupling)
 
     # ---------------------------------------------------------------------------------------------
     # Services: trials one after another.
@@ -255,12 +258,24 @@ class MachineNode(Node):
                 tick, moments = 0, None
                 continue
             tick += 1
-            self.stepper.advance(seconds(next_ns), throttle, self.load)
+            self.advance(next_ns, throttle)
             self.report()
         if rclpy.ok():
             if moments is not None:
                 self.moments_publisher.publish(moments)
             self.finish()
+
+    def advance(self, next_ns: int, throttle: float) -> None:
+        """Integrate to the next exchange time with the load held and the throttle held (hold coupling) or
+        extrapolated from the governor's last answers, noting the speed at the step's middle (waveform coupling;
+        the same operations as solvers.cosim.cosimulate)."""
+        if not self.waveform:
+            self.stepper.advance(seconds(next_ns), throttle, self.load)
+            return
+        self.answers = self.answers[-2:] + [(seconds(self.now_ns), throttle)]
+        _, slope, curvature = throttle_extrapolation(self.answers)
+        stretch = self.stepper.advance(seconds(next_ns), throttle, self.load, slope, curvature)
+        self.omega_middle = float(stretch(0.5 * (seconds(self.now_ns) + seconds(next_ns)))[1])
 
     def wait_while_paused(self, holding: bool) -> None:
         """Between exchanges: spin (serving the services) while paused with no ~/step left, or while holding at
@@ -387,7 +402,10 @@ class MachineNode(Node):
         message = JointState(name=["crank"], position=[float(self.stepper.state[0])],
                              velocity=[float(self.stepper.state[1])], effort=[values["net"]])
         message.header.stamp = header_stamp
-        for name, position, velocity in output_joints(self.model, values):
+        joints = output_joints(self.model, values)
+        if self.omega_middle is not None:  # waveform coupling: the speed at the middle of the step that ended here
+            joints.append(("crank_midstep", math.nan, self.omega_middle))
+        for name, position, velocity in joints:
             message.name.append(name)
             message.position.append(position)
             message.velocity.append(velocity)

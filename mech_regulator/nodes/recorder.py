@@ -27,8 +27,9 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, RunState, diagnostics, float_parameter,
-                                         follow_run_state, nanoseconds, run, scene_model, text_parameter)
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, RunState, coupling_parameter, diagnostics,
+                                         float_parameter, follow_run_state, nanoseconds, run, scene_model,
+                                         text_parameter)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
@@ -54,6 +55,7 @@ class RecorderNode(Node):
                                                               "time [Hz]", 1.0, 1e5, read_only=True)
         self.exchange_step = float_parameter(self, "exchange_step", 1e-3, "the machine's exchange step [s], for the "
                                                                           "summary", 1e-6, 1.0, read_only=True)
+        self.coupling = coupling_parameter(self)
         self.path = None if output == "none" else Path(output) if output else default_recording(self.model.scene.name)
         if self.path is None and not connect:
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
@@ -179,7 +181,7 @@ class RecorderNode(Node):
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
             write_empty_run(self.model, self.path, self.exchange_step)
             return
-        summary = summarise_cosimulation(self.model, run_data, self.exchange_step)
+        summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
         summary.update(self.pace())
         if not self.complete():
             summary["status"] = "interrupted"

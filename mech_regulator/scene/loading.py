@@ -17,6 +17,8 @@ from typing import Any
 import pydantic
 import yaml
 
+from mech_regulator.scene.limits import (MAX_BASE_CHAIN, MAX_SCENE_BYTES, MAX_YAML_CHARACTERS, MAX_YAML_DEPTH,
+                                         MAX_YAML_NODES, number_refusals, run_refusals, shown)
 from mech_regulator.scene.schema import Scene
 
 
@@ -24,8 +26,64 @@ class SceneError(Exception):
     """A scene that cannot be used; str(error) is the message for the user (one or more lines)."""
 
 
+SCENE_KEYS = frozenset(Scene.model_fields) | {"base"}  # the top-level keys a scene file may have
+
+
+class _Refused(yaml.YAMLError):
+    """A YAML document beyond a limit of limits.py (problem: which, and the limit; problem_mark: where)."""
+
+    def __init__(self, problem: str, problem_mark):
+        super().__init__(problem)
+        self.problem, self.problem_mark = problem, problem_mark
+
+
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads YAML 1.2 floats such as 1e-3 (PyYAML alone reads them as strings)."""
+    """SafeLoader that also reads YAML 1.2 floats such as 1e-3 (PyYAML alone reads them as strings), and refuses a
+    document nested deeper than MAX_YAML_DEPTH or larger, with its aliases expanded, than MAX_YAML_NODES values or
+    MAX_YAML_CHARACTERS characters of scalars (an alias bomb, "billion laughs"): each node's expanded size (values,
+    characters, depth; an alias counts as the whole node it repeats) is worked out from its children's as it is
+    composed, so a bomb is refused at the first node beyond the limit, before anything is expanded."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+        self._sizes: dict[int, tuple[int, int, int]] = {}  # id(node) -> (values, characters, depth) expanded
+
+    def compose_node(self, parent, index):
+        event = self.peek_event()
+        if isinstance(event, yaml.AliasEvent):
+            node = self.anchors.get(event.anchor)
+            if node is not None and id(node) not in self._sizes:
+                raise _Refused(f"the alias *{event.anchor[:40]} repeats a node that contains it: a recursive "
+                               "structure, which a scene never needs", event.start_mark)
+            return super().compose_node(parent, index)
+        if self._depth >= MAX_YAML_DEPTH:
+            raise _Refused(f"mappings and lists nested deeper than {MAX_YAML_DEPTH} levels (the limit; a scene needs "
+                           "fewer than 10)", event.start_mark)
+        self._depth += 1
+        try:
+            node = super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+        if isinstance(node, yaml.ScalarNode):
+            size = (1, len(node.value), 1)
+        else:
+            children = [part for pair in node.value for part in pair] if isinstance(node, yaml.MappingNode) \
+                else node.value
+            sizes = [self._sizes[id(child)] for child in children]
+            size = (1 + sum(s[0] for s in sizes), sum(s[1] for s in sizes), 1 + max((s[2] for s in sizes), default=0))
+        self._sizes[id(node)] = size
+        values, characters, depth = size
+        if values > MAX_YAML_NODES:
+            raise _Refused(f"with its aliases expanded the document holds more than {MAX_YAML_NODES} values (the "
+                           f"limit; this node alone {values:.3g}): an alias bomb?", event.start_mark)
+        if characters > MAX_YAML_CHARACTERS:
+            raise _Refused(f"with its aliases expanded the document's values hold more than {MAX_YAML_CHARACTERS} "
+                           f"characters (the limit; this node alone {characters:.3g})", event.start_mark)
+        if depth > MAX_YAML_DEPTH:
+            raise _Refused(f"with its aliases expanded, mappings and lists nest deeper than {MAX_YAML_DEPTH} levels "
+                           "(the limit)", event.start_mark)
+        return node
 
 
 _Loader.add_implicit_resolver(
@@ -42,6 +100,10 @@ def parse_yaml(text: str, source: str) -> Any:
     """Parse YAML text; a syntax error becomes a SceneError naming the line and column."""
     try:
         return yaml.load(text, Loader=_Loader)
+    except _Refused as error:
+        mark = error.problem_mark
+        raise SceneError(f"{source}: refused at line {mark.line + 1}, column {mark.column + 1}: {error.problem}") \
+            from None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -119,7 +181,7 @@ def apply_override(data: dict, assignment: str, option: str = "--set") -> None:
     elif isinstance(node, dict):
         node[last] = value
     else:
-        raise SceneError(f"{option} '{assignment}': '{'.'.join(keys[:-1])}' holds {node!r}, not a section")
+        raise SceneError(f"{option} '{assignment}': '{'.'.join(keys[:-1])}' holds {shown(node)}, not a section")
 
 
 def _index(node: list, key: str, path: list[str], assignment: str, option: str) -> int:
@@ -136,7 +198,7 @@ def _child(node: Any, key: str, path: list[str], assignment: str, create: bool, 
         if node.get(key) is None and create:
             node[key] = {}
         return node[key]
-    raise SceneError(f"{option} '{assignment}': '{'.'.join(path[:-1])}' holds {node!r}, not a section")
+    raise SceneError(f"{option} '{assignment}': '{'.'.join(path[:-1])}' holds {shown(node)}, not a section")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -160,43 +222,93 @@ def overridden_scene_data(name_or_path: str, overrides: list[str] = ()) -> tuple
     return data, path
 
 
-def read_scene_data(path: Path, derived_from: tuple[Path, ...] = ()) -> dict:
-    """The mapping of a scene file; a file with `base: SCENE` starts from that scene (a bundled name or a
-    path relative to the file) and changes it: mappings merge key by key, null removes a key, anything else
-    is replaced."""
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as error:
-        raise SceneError(f"scene '{path}': cannot be read: {error.strerror}") from None
-    except UnicodeDecodeError as error:
-        raise SceneError(f"scene '{path}': not UTF-8 text (byte {error.start}: {error.reason}); "
-                         "save the file as UTF-8") from None
-    data = parse_yaml(text, str(path))
+def read_scene_data(path: Path, derived_from: tuple[Path, ...] = (), referrer: str = "") -> dict:
+    """The mapping of a scene file; a file with `base: SCENE` starts from that scene (a bundled name, or a .yaml
+    file inside the file's own folder, see base_path) and changes it: mappings merge key by key, null removes a key,
+    anything else is replaced. referrer: for a base, "<the file naming it>: base = '<base>'", which its messages
+    start with; a base is taken only for a scene (its top-level keys a scene's) and, not being one, its content is
+    never shown."""
+    text = _scene_text(path, referrer)
+    if referrer:
+        try:
+            data = parse_yaml(text, str(path))
+        except SceneError:
+            raise SceneError(f"{referrer}: {path} is not a valid YAML scene file; check it with `mech-regulator "
+                             f"describe {path}`") from None
+    else:
+        data = parse_yaml(text, str(path))
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise SceneError(f"{path}: expected a mapping of sections (machine, scenario, solver), got {type(data).__name__}")
+        what = f"{referrer}: {path}" if referrer else str(path)
+        raise SceneError(f"{what}: expected a mapping of sections (machine, scenario, solver), got "
+                         f"{type(data).__name__}")
+    if referrer and not set(data) <= SCENE_KEYS:
+        raise SceneError(f"{referrer}: {path} is not a scene file: its top level has keys that a scene does not have "
+                         f"(a scene's: {', '.join(sorted(SCENE_KEYS))})")
     base = data.pop("base", None)
     if base is None:
         return data
     if not isinstance(base, str):
-        raise SceneError(f"{path}: base = {base!r}; expected the name of a bundled scene or a path to a scene file")
-    relative = path.parent / base
-    bundled = bundled_scenes()
-    if relative.is_file():
-        base_path = relative
-    elif base.removesuffix(".yaml") in bundled and len(Path(base).parts) == 1:
-        base_path = bundled[base.removesuffix(".yaml")]
-    else:
-        raise SceneError(f"{path}: base = '{base}': no such file next to this scene ({relative}), nor a bundled "
-                         f"scene (bundled: {', '.join(bundled)})")
-    if base_path.resolve() in derived_from + (path.resolve(),):
+        raise SceneError(f"{path}: base = {shown(base)}; expected the name of a bundled scene or a path to a scene "
+                         "file")
+    if len(derived_from) >= MAX_BASE_CHAIN:
+        raise SceneError(f"{path}: base = '{base}': a chain of more than {MAX_BASE_CHAIN} bases (the "
+                         "limit); expected a short chain of scenes that ends in a scene without base")
+    base_file = base_path(path, base)
+    if base_file.resolve() in derived_from + (path.resolve(),):
         raise SceneError(f"{path}: base = '{base}' closes a loop of bases; expected a chain of scenes that ends "
                          "in a scene without base")
-    merged = read_scene_data(base_path, derived_from + (path.resolve(),))
+    merged = read_scene_data(base_file, derived_from + (path.resolve(),), f"{path}: base = '{base}'")
     merged.pop("name", None)
     merged.pop("description", None)
     return _merge(merged, data)
+
+
+def _scene_text(path: Path, referrer: str = "") -> str:
+    """The text of a scene file, at most MAX_SCENE_BYTES long (read no further, whatever the file is)."""
+    what = f"{referrer}: {path}" if referrer else f"scene '{path}'"
+    try:
+        with open(path, "rb") as file:
+            raw = file.read(MAX_SCENE_BYTES + 1)
+    except OSError as error:
+        raise SceneError(f"{what}: cannot be read: {error.strerror}") from None
+    if len(raw) > MAX_SCENE_BYTES:
+        raise SceneError(f"{what}: larger than {MAX_SCENE_BYTES} bytes, the limit for a scene file (a scene is a few "
+                         "kB; long tables belong in fewer points)")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise SceneError(f"{what}: not UTF-8 text (byte {error.start}: {error.reason}); save the file as UTF-8") \
+            from None
+
+
+def base_path(path: Path, base: str) -> Path:
+    """The file a scene at `path` names with `base: BASE`: a .yaml file inside the scene's own folder (a relative
+    path, subfolders allowed, no '..', not through a link that leads out of the folder), else a bundled scene's
+    name. Anything else is refused with a SceneError that names the rule: a scene shared with you cannot make this
+    program read a file elsewhere."""
+    bundled = bundled_scenes()
+    folder = path.parent
+    relative = Path(base)
+    expected = (f"expected the name of a bundled scene ({', '.join(bundled)}) or the relative path of a .yaml scene "
+                f"file inside this scene's folder ({folder})")
+    if relative.is_absolute():
+        raise SceneError(f"{path}: base = '{base}': not a relative path; {expected}")
+    if ".." in relative.parts:
+        raise SceneError(f"{path}: base = '{base}': '..' leaves this scene's folder; {expected}")
+    candidate = folder / relative
+    if candidate.suffix == ".yaml" and candidate.is_file():
+        if not candidate.resolve().is_relative_to(folder.resolve()):
+            raise SceneError(f"{path}: base = '{base}': a link that leads outside this scene's folder; {expected}")
+        return candidate
+    if base.removesuffix(".yaml") in bundled and len(relative.parts) == 1:
+        return bundled[base.removesuffix(".yaml")]
+    if relative.suffix != ".yaml":
+        raise SceneError(f"{path}: base = '{base}': no such file: not a bundled scene's name, and a base file is a "
+                         f".yaml file; {expected}")
+    raise SceneError(f"{path}: base = '{base}': no such file next to this scene ({candidate}), nor a bundled "
+                     f"scene (bundled: {', '.join(bundled)})")
 
 
 def _merge(base: dict, changes: dict) -> dict:
@@ -213,13 +325,35 @@ def _merge(base: dict, changes: dict) -> dict:
 
 
 def validate_scene(data: dict, source: str = "scene") -> Scene:
-    """Validate a scene mapping; SceneError lists every problem, one per line."""
+    """Validate a scene mapping; SceneError lists every problem, one per line (at most MAX_PROBLEMS_SHOWN). Numbers
+    beyond the limits of limits.py are refused first (before the schema's checks multiply them), then settings that
+    would make the run impossible (limits.run_refusals)."""
+    problems = number_refusals(data)
+    if problems:
+        raise SceneError(_problems(source, problems))
     try:
-        return Scene.model_validate(data)
+        scene = Scene.model_validate(data)
     except pydantic.ValidationError as error:
         lines = [describe_error(item, data) for item in error.errors(include_url=False)]
-        raise SceneError(f"{source}: {len(lines)} problem{'s' if len(lines) > 1 else ''}:\n  "
-                         + "\n  ".join(dict.fromkeys(lines))) from None
+        raise SceneError(_problems(source, list(dict.fromkeys(lines)))) from None
+    except (ArithmeticError, RecursionError) as error:  # a check of the schema computing with extreme numbers
+        raise SceneError(f"{source}: its numbers cannot be computed with ({type(error).__name__}: {error}); expected "
+                         "values of a real machine") from None
+    problems = run_refusals(scene)
+    if problems:
+        raise SceneError(_problems(source, problems))
+    return scene
+
+
+MAX_PROBLEMS_SHOWN = 40  # lines of a validation message; the rest are counted
+
+
+def _problems(source: str, lines: list[str]) -> str:
+    """The message listing a scene's problems, one per line."""
+    shown_lines = lines[:MAX_PROBLEMS_SHOWN]
+    if len(lines) > MAX_PROBLEMS_SHOWN:
+        shown_lines.append(f"... and {len(lines) - MAX_PROBLEMS_SHOWN} more")
+    return f"{source}: {len(lines)} problem{'s' if len(lines) > 1 else ''}:\n  " + "\n  ".join(shown_lines)
 
 
 def describe_error(item: dict, data: Any) -> str:
@@ -238,14 +372,14 @@ def describe_error(item: dict, data: Any) -> str:
         expected = ", ".join(f"'{tag}'" for tag in _type_tags(loc, data))
         if kind == "union_tag_not_found":
             return f"{key}: missing 'type'; expected one of {expected}"
-        return f"{key}.type = {item['input'].get('type')!r}: unknown type; expected one of {expected}"
+        return f"{key}.type = {shown(item['input'].get('type'))}: unknown type; expected one of {expected}"
     if message.startswith("Value error, "):
         return f"{key}: {message[len('Value error, '):]}"
     if kind == "finite_number":
         message = "expected a finite number (not NaN or infinity)"
     description = _field_description(loc, data)
     unit = f" ({description})" if description else ""
-    return f"{key} = {item['input']!r}: {message[0].lower() + message[1:]}{unit}"
+    return f"{key} = {shown(item['input'])}: {message[0].lower() + message[1:]}{unit}"
 
 
 def _data_path(loc: tuple, data: Any) -> list:

@@ -38,7 +38,8 @@ def scene_json_schema() -> dict:
                     for key, value in full["properties"].items()}
     descriptions = {key: _annotations(value) for key, value in full["properties"].items()}
     base = {"type": "string", "title": "Base",
-            "description": "the scene this one changes (a bundled scene's name, or a path relative to this file); "
+            "description": "the scene this one changes (a bundled scene's name, or the relative path of a .yaml scene "
+                           "file inside this file's folder, no '..'); "
                            "with base, every key is optional: mappings merge key by key, lists and plain values "
                            "replace, and null removes a key of the base"}
     return {

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.advice import rk4_stability_refusal
+from mech_regulator.solvers.advice import energy_step_refusal, rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.energy_method import integrate_energy_method
 from mech_regulator.solvers.time_domain import integrate_time_domain
 from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
@@ -16,8 +16,10 @@ from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
 def simulate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
     """Run the scene's scenario with the scene's solver (solver.method) on its path (solver.path: the reference
     path, or the compiled fast path, solvers/compiled/run.py, which refuses what it cannot run with a SceneError). An
-    RK4 step outside the stability region of the scene's coupling is refused with a SceneError (advice.py)."""
-    reason = rk4_stability_refusal(model)
+    RK4 step outside the stability region of the scene's coupling, an explicit adaptive method that stability alone
+    would hold to more steps than limits.MAX_STEPS, and an energy method's step that would take more, are refused
+    with a SceneError (advice.py)."""
+    reason = rk4_stability_refusal(model) or stiffness_refusal(model) or energy_step_refusal(model)
     if reason is not None:
         raise SceneError(reason)
     if model.scene.solver.path == "fast":

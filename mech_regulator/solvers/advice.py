@@ -80,6 +80,140 @@ def stiffness_advice(model: MachineModel) -> str | None:
             "they damp it out, keeping the mean motion and the mean coupling moment)")
 
 
+def speed_relaxation_rate(model: MachineModel) -> float:
+    """-d epsilon / d omega of the crank alone at the initial state [1/s] (the rate its speed settles at when
+    positive: J against d M / d omega), by a difference on the side of the initial speed away from 0 (a Coulomb
+    moment's jump at rest is not a slope); 0 when it cannot be worked out."""
+    y = np.array(model.initial_state(), dtype=float)
+    omega = float(y[1])
+    delta = 1e-3 * max(1.0, abs(omega)) * (1.0 if omega >= 0.0 else -1.0)
+
+    def acceleration(speed: float) -> float:
+        state = y.copy()
+        state[1] = speed
+        J, moment = model.crank_side(0.0, state)
+        return moment / J
+
+    try:
+        with np.errstate(all="ignore"):
+            rate = -(acceleration(omega + 2.0 * delta) - acceleration(omega + delta)) / delta
+    except (ArithmeticError, ValueError):
+        return 0.0
+    return rate if math.isfinite(rate) else 0.0
+
+
+def stiffness_refusal(model: MachineModel) -> str | None:
+    """Why the scene's explicit adaptive method (RK45, RK23, DOP853) cannot run it within MAX_STEPS steps (limits.py):
+    its fastest decaying mode — the coupling's, or the crank speed's own settling (J against d M / d omega; a
+    machine.inertia of 1e-300 kg m^2 settles in 1e-298 s) — needs more steps than that for stability alone, however
+    loose the tolerances. None otherwise (an implicit method is not limited by it; RK4 with an unstable step blows up
+    within a few steps and is stopped there)."""
+    from mech_regulator.scene.limits import MAX_STEPS
+
+    method, duration = model.scene.solver.method, model.scene.scenario.duration
+    if method not in ("RK45", "RK23", "DOP853"):
+        return None
+    expected = ("expected solver.method: Radau or BDF (implicit, not limited by it)" +
+                (", or Rosenbrock23 with solver.path: fast" if model.scene.solver.path == "fast" else ""))
+    rate = speed_relaxation_rate(model)
+    steps = duration * rate / STABILITY_LIMIT
+    if steps > MAX_STEPS:
+        J = model.crank_side(0.0, np.array(model.initial_state(), dtype=float))[0]
+        return (f"solver.method = {method}: the crank's speed settles in {1.0 / rate:.3g} s (J = {J:.3g} kg m^2 "
+                f"against d M / d omega = {-rate * J:.3g} N m s/rad at the start), so over {duration:g} s an explicit method "
+                f"needs some {steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}, "
+                "or an inertia that fits the moments (machine.inertia)")
+    modes = coupling_modes(model)
+    if modes is not None and duration * abs(modes.fastest) / STABILITY_LIMIT > MAX_STEPS:
+        steps = duration * abs(modes.fastest) / STABILITY_LIMIT
+        return (f"solver.method = {method}: the coupling's fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s "
+                f"(machine.coupling stiffness {modes.stiffness:.3g} N m/rad on a reduced inertia of "
+                f"{modes.reduced_inertia:.3g} kg m^2), so over {duration:g} s an explicit method needs some "
+                f"{steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}")
+    fastest = fastest_mode(model)
+    if fastest is not None and duration * abs(fastest[0]) / STABILITY_LIMIT > MAX_STEPS:
+        steps = duration * abs(fastest[0]) / STABILITY_LIMIT
+        name = fastest[1]
+        keys = STATE_KEYS.get(name, "the scene's values")
+        return (f"solver.method = {method}: the scene's fastest mode at the start has |lambda| = {abs(fastest[0]):.3g} "
+                f"1/s, mostly in the state {name} ({keys}), so over {duration:g} s an explicit method needs some "
+                f"{steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}")
+    return None
+
+
+def energy_step_refusal(model: MachineModel) -> str | None:
+    """Why the energy method's crank-angle step cannot cover the scene within MAX_STEPS steps (limits.py), or None:
+    the angle it turns is estimated as the larger of omega_0 T and the smaller of 1/2 |epsilon_0| T^2 and
+    omega_balance T, epsilon_0 the cycle-mean acceleration at the initial speed (MachineModel.cycle_averages: the
+    J' omega^2 / 2 term and the weights average out) and omega_balance the speed at which the mean moments balance
+    (a start from rest: limits.run_refusals, which sees only the scene, cannot tell)."""
+    from mech_regulator.scene.limits import MAX_STEPS
+
+    scene = model.scene
+    if scene.solver.method != "energy":
+        return None
+    duration, omega = scene.scenario.duration, abs(scene.scenario.initial.omega)
+    try:
+        J_mean, drive, other = model.cycle_averages(omega, model.external_load(0.0))
+        epsilon = abs(drive + other) / J_mean
+        from mech_regulator.analysis.periodic import balance_speed
+
+        try:
+            balance = balance_speed(model)
+        except Exception:  # no speed at which the moments balance (SceneError), or they cannot be averaged
+            balance = math.inf
+        turned = max(omega * duration, min(0.5 * epsilon * duration * duration, balance * duration))
+    except (ArithmeticError, ValueError, IndexError, TypeError):
+        return None
+    steps = turned / math.radians(scene.solver.phi_step_deg)
+    if not steps > MAX_STEPS:
+        return None
+    return (f"solver.phi_step_deg = {scene.solver.phi_step_deg:g} deg would take about {steps:.2g} steps: over "
+            f"{duration:g} s the crank turns some {turned:.3g} rad (from omega = {omega:g} rad/s, mean epsilon = "
+            f"{epsilon:.3g} rad/s^2 at the start); expected at most {MAX_STEPS:g} steps: solver.phi_step_deg >= "
+            f"{math.degrees(turned / MAX_STEPS):.3g} deg")
+
+
+# The keys that set how fast each state moves (for stiffness_refusal's message).
+STATE_KEYS = {"phi": "machine.inertia, machine.loads", "omega": "machine.inertia, machine.drive, machine.loads",
+              "arm_angle": "governor.ball_mass, governor.arm_length, governor.spring, governor.damping",
+              "arm_rate": "governor.ball_mass, governor.sleeve_mass, governor.damping, governor.spring",
+              "servo": "governor.servo.gain, governor.feedback", "feedback": "governor.feedback",
+              "twist": "machine.coupling", "omega_driven": "machine.coupling, machine.clutch, the driven part's loads"}
+
+
+def fastest_mode(model: MachineModel) -> tuple[float, str] | None:
+    """(|lambda| [1/s], the state it moves most) of the fastest non-growing eigenvalue of the right-hand side's
+    Jacobian at the initial state, in its initial mode (by differences on one side of each state, the crank angle in
+    the direction of motion, so that a moment jumping exactly at the start is not taken for a slope); None when it
+    cannot be worked out."""
+    y0 = np.array(model.initial_state(), dtype=float)
+    names = model.state_names()
+    try:
+        rhs = model.rhs(model.piece_at(0.0), None, model.initial_mode(y0), ideal=True)
+        columns = []
+        with np.errstate(all="ignore"):
+            for index in range(y0.size):
+                sign = -1.0 if index == 0 and y0[1] < 0.0 else 1.0
+                delta = sign * 1e-7 * max(1.0, abs(y0[index]))
+                near, far = y0.copy(), y0.copy()
+                near[index] += delta
+                far[index] += 2.0 * delta
+                columns.append((np.asarray(rhs(0.0, far), dtype=float) - np.asarray(rhs(0.0, near), dtype=float))
+                               / delta)
+            jacobian = np.array(columns).T
+            if not np.all(np.isfinite(jacobian)):
+                return None
+            values, vectors = np.linalg.eig(jacobian)
+    except (ArithmeticError, ValueError, IndexError, TypeError, np.linalg.LinAlgError):
+        return None
+    candidates = [index for index in range(values.size) if values[index].real <= 0.0]
+    if not candidates:
+        return None
+    index = max(candidates, key=lambda i: abs(values[i]))
+    return float(abs(values[index])), names[int(np.argmax(np.abs(vectors[:, index])))]
+
+
 def rk4_amplification(z: complex) -> float:
     """|R(z)|, R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24: how much one classic RK4 step of y' = lambda y multiplies y
     by, z = h lambda (the step is stable for the mode while it is <= 1)."""

@@ -18,6 +18,8 @@ from scipy import optimize
 from scipy.interpolate import CubicHermiteSpline
 
 from mech_regulator.model import MachineModel
+from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS
+from mech_regulator.solvers.time_domain import fail_blown_up, fail_too_many_steps
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_ITERATIONS = 100
@@ -74,6 +76,12 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
             states.append((phi, omega))
             slopes.append((omega, epsilon_next))
             trajectory.stats.steps += 1
+            if not abs(omega) <= MAX_SPEED:  # a blow-up (limits.py): stop here, keeping the run
+                fail_blown_up(model, trajectory, t, (phi, omega), "omega", omega)
+                break
+            if trajectory.stats.steps >= MAX_STEPS:
+                fail_too_many_steps(model, trajectory, t, (phi, omega))
+                break
             if progress is not None and trajectory.stats.steps % 1000 == 0:
                 progress(min(t, scenario.duration))
     except _Stopped as stop:

@@ -17,6 +17,7 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.model import MachineModel
+from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS, speed_beyond_limit
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
@@ -30,6 +31,7 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     """Integrate the scene's scenario with its solver settings; returns the (possibly partial) trajectory.
     segment: what steps one external-load piece, with _segment's arguments and result (default _segment, the
     reference path; the fast path passes its compiled twin, solvers/compiled/run.py)."""
+    watched = segment is not None and segment is not _segment
     segment = segment or _segment
     solver = model.scene.solver
     scenario = model.scene.scenario
@@ -39,9 +41,13 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     if mode is not None:
         trajectory.modes.append((0.0, mode))
     edges = [0.0] + [t for t in model.breakpoints() if 0.0 < t < scenario.duration] + [scenario.duration]
+    if watched:  # a segment that takes many steps per call (the fast path): its pieces are checked after each call
+        progress = _Watch(model, trajectory, progress)
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
             y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
+            if watched:
+                progress.check()
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2
@@ -66,6 +72,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     grid = model.switch_grid()
     period = model.dynamic_period()
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
+    names = model.state_names()
     t, first_step = t_start, None
     counts = _switch_counts(y[0], switches)
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
@@ -88,7 +95,13 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                                                          first_step=first_step)
         restart = False
         while solver.status == "running" and not restart:
-            message = solver.step()
+            try:
+                message = solver.step()
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:  # e.g. an implicit method's
+                trajectory.status = "failed"  # Jacobian overflowing: a numerical breakdown, reported as a failure
+                trajectory.message = (f"{settings.method} failed at t = {solver.t:.6g} s: {error} (the state: "
+                                      f"{state_text(names, y)}); the numbers of the machine overflow the method")
+                break
             if solver.status == "failed":
                 trajectory.status = "failed"
                 trajectory.message = f"{settings.method} failed at t = {solver.t:.6g} s: {message}"
@@ -97,10 +110,16 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 trajectory.status = "failed"
                 advice = "use a smaller step" if settings.method == "RK4" else "tighten rtol/atol or limit max_step"
                 trajectory.message = (f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s; "
-                                      f"{advice}")
+                                      f"{advice} (the last finite state, at t = {t:.6g} s: {state_text(names, y)})")
                 break
             dense = _Shifted(solver.dense_output(), offset, constraint)
             t_step, y_step = solver.t, dense(solver.t)
+            beyond = speed_beyond_limit(names, y_step)
+            if beyond is not None:  # the step that carried it there is kept, to show the blow-up
+                trajectory.add_piece(solver.t_old, t_step, dense)
+                trajectory.stats.steps += 1
+                fail_blown_up(model, trajectory, t_step, y_step, *beyond)
+                break
             if switches or guards:
                 crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards)
                 if crossing is not None:
@@ -117,6 +136,9 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
             trajectory.add_piece(solver.t_old, t_step, dense)
             trajectory.stats.steps += 1
             t, y = t_step, np.array(y_step, dtype=float)
+            if trajectory.stats.steps >= MAX_STEPS:
+                fail_too_many_steps(model, trajectory, t, y)
+                break
             restart = restart or (wraps and abs(solver.y[0]) > RESTART_PERIODS * period and t < t_end)
             if progress is not None:
                 progress(t)
@@ -156,6 +178,105 @@ def _log_event(trajectory: Trajectory, t: float, name: str, mode) -> None:
     trajectory.events.append((t, name))
     trajectory.modes.append((t, mode))
     trajectory.stats.events += 1
+
+
+def state_text(names: tuple[str, ...], y) -> str:
+    """A state for a message: 'phi = 1.2, omega = 3.4, ...'."""
+    return ", ".join(f"{name} = {float(value):.6g}" for name, value in zip(names, y))
+
+
+def fail_blown_up(model: MachineModel, trajectory: Trajectory, t: float, y, name: str, value: float) -> None:
+    """End a run whose speed `name` (omega or omega_driven) is beyond MAX_SPEED, or not finite, at t [s] in the state
+    y: status failed, with the time, the state and the likely cause; what was computed up to t stays."""
+    trajectory.status = "failed"
+    trajectory.message = blown_up_message(model, t, y, name, value)
+
+
+def blown_up_message(model: MachineModel, t: float, y, name: str, value: float) -> str:
+    """Why a run stopped at a speed beyond MAX_SPEED (limits.py): the time, the speed, the state and the likely
+    cause, from the crank's net moment and inertia there."""
+    solver = model.scene.solver
+    cause = "a drive or load far too large for the machine's inertia (machine.inertia, machine.drive, machine.loads)"
+    if name == "omega_driven":
+        cause = ("moments far too large for the driven part's inertia, or a coupling too stiff for the method (its "
+                 "stiffness, damping; try Radau or BDF)")
+    else:
+        try:
+            state = np.array(y, dtype=float)
+            J, moment = model.crank_side(t, state)
+            cause = (f"the crank's net moment {moment:.3g} N m on J = {J:.3g} kg m^2 (an acceleration of "
+                     f"{moment / J:.3g} rad/s^2): {cause}")
+            state[1] *= 1.0 + 1e-6
+            rate = -(model.crank_side(t, state)[1] - moment) / (J * 1e-6 * float(y[1]))  # -d epsilon/d omega [1/s]
+            if solver.method == "RK4" and solver.step * rate > 2.785:  # outside RK4's region on the real axis
+                cause = (f"an RK4 step too long to be stable: solver.step = {solver.step:g} s against the crank "
+                         f"speed's time constant J / |dM/domega| = {1.0 / rate:.3g} s (RK4 is stable below 2.79 of them); "
+                         "expected a smaller solver.step")
+        except (ArithmeticError, ValueError, IndexError, TypeError):
+            pass
+    if solver.method == "RK4" and "RK4 step" not in cause:
+        cause += f", or an RK4 step too long to be stable (solver.step = {solver.step:g} s)"
+    return (f"{solver.method}: the run blew up at t = {t:.6g} s: {name} = {value:.6g} rad/s is beyond "
+            f"{MAX_SPEED:g} rad/s, the limit on any machine's speed (the state: {state_text(model.state_names(), y)}); "
+            f"likely cause: {cause}")
+
+
+def fail_too_many_steps(model: MachineModel, trajectory: Trajectory, t: float, y) -> None:
+    """End a run that has taken MAX_STEPS steps (limits.py) at t [s] in the state y: status failed, with why."""
+    trajectory.status = "failed"
+    trajectory.message = (f"{model.scene.solver.method}: stopped at t = {t:.6g} s of {model.scene.scenario.duration:g} "
+                          f"s after {trajectory.stats.steps} steps, the limit of {MAX_STEPS:g} steps for one run (the "
+                          f"state: {state_text(model.state_names(), y)}); likely cause: a stiff machine for an "
+                          "explicit method (try Radau or BDF), tolerances tighter than needed (solver.rtol, "
+                          "solver.atol) or a motion that runs away")
+
+
+class _Watch:
+    """The progress callback handed to a segment that takes many steps per call (the fast path, whose compiled
+    steppers return every few thousand steps): after each call it checks the step ends of the pieces added since, and
+    ends the run as _segment does — cut at the first step end with a speed beyond MAX_SPEED or not finite (the step
+    that carried it there kept), or at MAX_STEPS steps — then passes the time on to `progress`."""
+
+    def __init__(self, model: MachineModel, trajectory: Trajectory, progress: Progress | None):
+        self.model, self.trajectory, self.progress = model, trajectory, progress
+        self.names = model.state_names()
+        self.speeds = [index for index, name in enumerate(self.names) if name in ("omega", "omega_driven")]
+        self.checked = 0  # pieces checked
+
+    def __call__(self, t: float) -> None:
+        self.check()
+        if self.progress is not None:
+            self.progress(t)
+
+    def check(self) -> None:
+        trajectory = self.trajectory
+        while self.checked < len(trajectory.interpolants):
+            index = self.checked
+            self.checked += 1
+            ends = np.asarray(trajectory.step_ends[index], dtype=float)
+            states = np.asarray(trajectory.interpolants[index](ends), dtype=float).reshape(len(self.names), -1)
+            beyond = ~(np.abs(states[self.speeds]) <= MAX_SPEED)
+            if beyond.any():
+                step = int(np.argmax(beyond.any(axis=0)))
+                row = self.speeds[int(np.argmax(beyond[:, step]))]
+                self._cut(index, ends[:step + 1])
+                fail_blown_up(self.model, trajectory, float(ends[step]), states[:, step], self.names[row],
+                              float(states[row, step]))
+                return
+        if trajectory.status == "complete" and trajectory.stats.steps >= MAX_STEPS and trajectory.interpolants:
+            fail_too_many_steps(self.model, trajectory, trajectory.t_end, trajectory.interpolants[-1](trajectory.t_end))
+
+    def _cut(self, index: int, ends: np.ndarray) -> None:
+        """Keep the trajectory up to ends[-1], the last of `ends` (the step ends of piece `index` kept)."""
+        trajectory, t_cut = self.trajectory, float(ends[-1])
+        del trajectory.interpolants[index + 1:]
+        del trajectory.step_ends[index + 1:]
+        trajectory.piece_edges[index + 1:] = [t_cut]
+        trajectory.step_ends[index] = ends
+        trajectory.events[:] = [event for event in trajectory.events if event[0] <= t_cut]
+        trajectory.modes[:] = [mode for mode in trajectory.modes if mode[0] <= t_cut]
+        trajectory._solution = None
+        self.checked = len(trajectory.interpolants)
 
 
 class _Shifted:

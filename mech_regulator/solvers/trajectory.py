@@ -36,6 +36,9 @@ class Trajectory:
     mode: the governor's, then the drive train's) of each stretch in one mode; events: (time, what happened)
     of every mode change.
     y_start: the state at t_start, what a run refused before its first step still gives at t_start.
+    step_ends: for each piece, the ends [s] of the solver steps it spans, ascending, its last the piece's end (one
+    for a piece of a single step; a compiled call's steps; the energy method's knots): the dense output is smooth
+    within a step, which is what a quadrature over the run needs to know (analysis/energy.py).
     """
 
     method: str
@@ -48,16 +51,23 @@ class Trajectory:
     status: str = "complete"
     message: str = ""
     y_start: np.ndarray | None = None
+    step_ends: list[np.ndarray] = field(default_factory=list)
     _solution: OdeSolution | None = field(default=None, repr=False)
 
-    def add_piece(self, t_start: float, t_end: float, interpolant: Callable) -> None:
-        """Append the interpolant valid on [t_start, t_end] (pieces are contiguous in time)."""
+    def add_piece(self, t_start: float, t_end: float, interpolant: Callable,
+                  step_ends: np.ndarray | None = None) -> None:
+        """Append the interpolant valid on [t_start, t_end] [s] (pieces are contiguous in time) and record the ends of
+        the solver steps it spans: step_ends [s] ascending when it spans several; by default the knots `x` of a scipy
+        piecewise polynomial (the energy method's spline), else one step. Ends at or beyond t_end are cut to t_end."""
         if t_end <= t_start:
             return
         if not self.piece_edges:
             self.piece_edges.append(t_start)
         self.piece_edges.append(t_end)
         self.interpolants.append(interpolant)
+        knots = getattr(interpolant, "x", None) if step_ends is None else np.asarray(step_ends, dtype=float)
+        inner = knots[(knots > t_start) & (knots < t_end)] if knots is not None else ()
+        self.step_ends.append(np.append(inner, t_end))
         self._solution = None
 
     @property
@@ -99,6 +109,7 @@ class SampledTrajectory(Trajectory):
         if self.times.size:
             self.piece_edges = [float(self.times[0]), float(self.times[-1])]
             self.interpolants = [self]
+            self.step_ends = [np.asarray(self.times[1:], dtype=float)]
 
     def __call__(self, t: float | np.ndarray) -> np.ndarray:
         """State at t by linear interpolation between samples."""

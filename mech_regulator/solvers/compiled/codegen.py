@@ -10,7 +10,8 @@ the parameter vector p they read, laid out as
                          offset [N m] and slope [N m/s], held throttle [-], sleeve / servo / driven-part mode codes,
                          the switch window (lo, hi) [rad] the effects see phi clamped into and its edges for the
                          window's guards [rad], the clutch's mode code, the sign of the crank's speed at the
-                         segment's start (joint friction's crank guard);
+                         segment's start (joint friction's crank guard), the co-simulated throttle's slope [1/s],
+                         curvature [1/s^2] and start time [s] (LoadPiece.throttle_at);
     p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers).
 
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
@@ -56,7 +57,11 @@ CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
 CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE, CRANK_DIRECTION = range(6, 12)
-SEGMENT_SLOTS = 12
+THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START = range(12, 15)
+SEGMENT_SLOTS = 15
+# the throttle of a co-simulated machine: held, or the polynomial of LoadPiece.throttle_at
+HELD_THROTTLE_EXPRESSION = (f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
+                            f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)")
 
 SLEEVE_CODE = {"free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
@@ -97,6 +102,8 @@ class CompiledScene:
         p = self.parameters.copy()
         if piece is not None:
             p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
+            p[THROTTLE_SLOPE], p[THROTTLE_CURVATURE] = piece.throttle_slope, piece.throttle_curvature
+            p[THROTTLE_START] = piece.start
         else:
             p[HELD_THROTTLE] = 1.0
         model = self.model
@@ -383,7 +390,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
         elif effect.role == "drive" and governor is not None:
             scaled.append(spec)
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
-            body.append(f"total += p[{HELD_THROTTLE}] * "
+            body.append(f"total += {HELD_THROTTLE_EXPRESSION} * "
                         f"{_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}")
         else:
             body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
@@ -475,7 +482,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     else:
         body.append("dydt[1] = net / J")
     if model.joint_friction is not None:
-        share = "share" if governor is not None else f"p[{HELD_THROTTLE}]"
+        share = "share" if governor is not None else HELD_THROTTLE_EXPRESSION
         body += _joint_friction_lines(model, p, specs, share)
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1

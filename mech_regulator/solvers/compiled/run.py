@@ -6,7 +6,8 @@ and the switch window, and the scene's compiled stepper runs until the piece end
 driven-part event, located in the stepper; its transition is the model's own Guard, applied here), the crank angle
 passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper restarts with its last step size;
 without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so
-that progress moves and Ctrl-C is heard). Every call's steps become one piece of the Trajectory.
+that progress moves and Ctrl-C is heard). Every call's steps become one piece of the Trajectory, with the ends of
+those steps (Trajectory.step_ends: the works of the energy balance are integrated step by step).
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         run = _step(settings, compiled, compiled.linear(mode, window, start[1]), thresholds, t, y_wrapped, t_end, p,
                     atol, first_step, wrap_limit, wrap_period)
         if run.n_steps:
-            trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset))
+            trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset), step_ends=run.times[1:])
         trajectory.stats.steps += int(run.n_steps)
         trajectory.stats.nfev += int(run.nfev)
         trajectory.stats.njev += int(run.njev)

@@ -1,0 +1,94 @@
+"""The co-simulation's coupling (solvers.cosim): `hold`, each side holding the other's last value, is first order in
+the exchange step h; `waveform`, the governor following the machine's speed over the step and the machine the
+throttle extrapolated from the governor's last answers, is third order on a smooth scene. Both are measured against
+the monolithic run, which has no exchange at all."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mech_regulator.model import build_model
+from mech_regulator.scene import load_scene, validate_scene
+from mech_regulator.solvers import simulate
+from mech_regulator.solvers.cosim import cosimulate, speed_waveform, throttle_extrapolation
+
+SMOOTH_GOVERNED = {  # constant inertia, a direct governor without friction or stops reached, a load step at 0.2 s
+    "name": "smooth_governed",
+    "machine": {"inertia": 0.5, "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+                "loads": [{"type": "viscous", "coefficient": 0.3}]},
+    "governor": {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
+                 "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08], "valve": {"open_at": 0.02, "closed_at": 0.08}},
+    "scenario": {"initial": {"omega": 100.0}, "duration": 1.0, "external_load": 6.0,
+                 "load_events": [{"time": 0.2, "torque": 8.0}]},
+    "solver": {"method": "DOP853", "rtol": 1e-11, "atol": 1e-12},
+}
+
+
+def omega_errors(model, coupling: str, steps: tuple[float, ...]) -> dict[float, float]:
+    """Largest |omega - omega_monolithic| [rad/s] at the exchange times, per exchange step [s]."""
+    monolithic = simulate(model)
+    errors = {}
+    for step in steps:
+        run = cosimulate(model, step, coupling=coupling)
+        assert run.status == "complete", run.message
+        errors[step] = float(np.max(np.abs(run.states[1] - monolithic(run.times)[1])))
+    return errors
+
+
+@pytest.fixture(scope="module")
+def smooth_model():
+    return build_model(validate_scene(SMOOTH_GOVERNED))
+
+
+def test_hold_is_first_order(smooth_model):
+    errors = omega_errors(smooth_model, "hold", (0.004, 0.002, 0.001))
+    for coarse, fine in ((0.004, 0.002), (0.002, 0.001)):
+        assert 1.8 <= errors[coarse] / errors[fine] <= 2.2, errors
+
+
+def test_waveform_is_third_order_and_far_closer(smooth_model):
+    errors = omega_errors(smooth_model, "waveform", (0.008, 0.004, 0.002))
+    for coarse, fine in ((0.008, 0.004), (0.004, 0.002)):
+        assert 7.0 <= errors[coarse] / errors[fine] <= 9.0, errors
+    held = omega_errors(smooth_model, "hold", (0.001,))[0.001]
+    assert errors[0.008] < held / 100.0, (errors, held)  # eight times the step, a hundred times closer
+
+
+def test_waveform_on_the_engine_is_closer_at_twice_the_step():
+    """engine_direct shortened (a load step and a full load rejection; its sleeve meets a stop, which no polynomial
+    follows): the waveform coupling at 2 ms is still several times closer to the monolithic run than hold at 1 ms."""
+    model = build_model(load_scene("engine_direct", ["scenario.duration=1", "scenario.load_events.0.time=0.4",
+                                                     "scenario.load_events.1.time=0.7"]))
+    waveform = omega_errors(model, "waveform", (0.002,))[0.002]
+    held = omega_errors(model, "hold", (0.001,))[0.001]
+    assert waveform < held / 5.0, (waveform, held)
+
+
+def test_throttle_extrapolation_is_exact_on_a_quadratic():
+    def throttle(t: float) -> float:
+        return 0.3 + 0.5 * t - 2.0 * t * t
+
+    answers = [(t, throttle(t)) for t in (0.1, 0.12, 0.15)]
+    value, slope, curvature = throttle_extrapolation(answers)
+    for s in (0.0, 0.01, 0.03):
+        assert value + slope * s + curvature * s * s == pytest.approx(throttle(0.15 + s), abs=1e-13)
+    assert throttle_extrapolation(answers[-1:]) == (throttle(0.15), 0.0, 0.0)
+    value, slope, curvature = throttle_extrapolation(answers[-2:])
+    assert (value, curvature) == (throttle(0.15), 0.0) and slope == pytest.approx(
+        (throttle(0.15) - throttle(0.12)) / 0.03, abs=1e-12)
+
+
+def test_speed_waveform_is_the_quadratic_through_three_speeds():
+    t_start, t_end, speeds = 2.0, 2.01, (100.0, 100.7, 101.1)
+    piece = speed_waveform(t_start, t_end, *speeds)
+
+    def rate(t: float) -> float:  # omega' = -L(t) on the governor's unit free inertia
+        return -(piece.offset + piece.slope * t)
+
+    # integrate omega' exactly (it is linear in t): omega(t) = omega_start + integral of rate
+    def omega(t: float) -> float:
+        return speeds[0] + (rate(t_start) + rate(t)) / 2.0 * (t - t_start)
+
+    assert omega(0.5 * (t_start + t_end)) == pytest.approx(speeds[1], abs=1e-9)
+    assert omega(t_end) == pytest.approx(speeds[2], abs=1e-9)
