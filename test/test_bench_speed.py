@@ -107,7 +107,7 @@ def test_ros_real_time_factors():
     target's measure on the fast path at 1 ms; the in-process run's factor and error are passed on; a failed run
     (no time) gives none; the reference path is not the target's."""
     def row(path, method, wall, error=math.nan):
-        return Row("ros", "engine_direct", path, method, "exchange_step", 1e-3, 6.0, wall, steps=6000, error=error)
+        return Row("ros", "engine_direct", path, method, "hold", 1e-3, 6.0, wall, steps=6000, error=error)
 
     rows = [row(REFERENCE, "nodes", 30.0), row(REFERENCE, "in process", 6.0, 6e-5), row(FAST, "nodes", 12.0),
             row(FAST, "in process", 1.5, 2e-4)]
@@ -119,6 +119,11 @@ def test_ros_real_time_factors():
     assert ros_target(benchmark) == pytest.approx(0.5, rel=1e-12)
     assert math.isnan(ros_target(SpeedBenchmark(rows=rows[:2])))
     assert math.isnan(ros_target(SpeedBenchmark(rows=[row(FAST, "nodes", math.nan)])))
+    waveform = Row("ros", "engine_direct", FAST, "nodes", "waveform", 1e-3, 6.0, 3.0, steps=6000)
+    summary = ros_summary(SpeedBenchmark(rows=rows + [waveform]))
+    assert [item["coupling"] for item in summary] == ["hold", "hold", "waveform"]
+    assert summary[2]["real_time_factor"] == pytest.approx(2.0, rel=1e-12)
+    assert math.isnan(ros_target(SpeedBenchmark(rows=[waveform]))), "the target's measure is the hold coupling's"
 
 
 def test_quick_command_writes_its_files(capsys, tmp_path):

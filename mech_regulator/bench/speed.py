@@ -75,7 +75,9 @@ SWEEP_JOBS = (1, 2)
 REPEAT_BUDGET_S, MAX_REPEATS = 0.3, 7    # a run is repeated to about this much CPU time [s], at most this often
 MAX_ERROR_SAMPLES = 40_001               # MuJoCo's step times are thinned to at most this many for the error
 ROS_SCENE, ROS_DURATION, ROS_EXCHANGE = "engine_direct", 6.0, 1e-3   # [s]; the target's exchange step
-ROS_RUNS = ((REFERENCE, 1e-3), (FAST, 1e-3), (FAST, 2e-3), (FAST, 5e-3), (FAST, 1e-2))  # (path, exchange step [s])
+ROS_RUNS = ((REFERENCE, 1e-3, "hold"), (FAST, 1e-3, "hold"), (FAST, 2e-3, "hold"), (FAST, 5e-3, "hold"),
+            (FAST, 1e-2, "hold"), (FAST, 2e-3, "waveform"), (FAST, 5e-3, "waveform"),
+            (FAST, 1e-2, "waveform"))  # (path, exchange step [s], coupling: solvers.cosim)
 STARTUP_PROGRAM = """
 import time
 start = time.perf_counter()
@@ -409,26 +411,29 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
 
 def measure_ros(report: Callable[[Row], None]) -> list[Row]:
     """The lockstep ROS main job (`mech-regulator run`, four node processes) on engine_direct over ROS_DURATION s
-    (load step 6 -> 8 N m at 0.5 s), for each (path, exchange step) of ROS_RUNS (method 'nodes'): the wall time of
+    (load step 6 -> 8 N m at 0.5 s), for each (path, exchange step, coupling) of ROS_RUNS (method 'nodes', setting
+    the coupling): the wall time of
     the exchanges as the recorder measured it (from the first machine state to the last; the run's summary), the
     process's wall time with the nodes' start-up in the note; and the same co-simulation in this process
     (solvers.cosim.cosimulate, number for number what the nodes compute; method 'in process'): its CPU time and its
     achieved error, omega's RMS difference from the monolithic run at REFERENCE_RTOL (fast path) at the exchange
-    times, relative to max |omega| (the exchange's error, first order in the step, docs/ros.md; the nodes' too)."""
+    times, relative to max |omega| (the exchange's error: first order in the step with the hold, higher with the
+    waveform coupling, docs/ros.md; the nodes' too), and its maximum in the note."""
     from mech_regulator.solvers.cosim import cosimulate
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="mech-regulator-ros-") as folder:
-        for path, exchange in ROS_RUNS:
+        for path, exchange, coupling in ROS_RUNS:
             settings = ["scenario.load_events=[{time: 0.5, torque: 8.0}]", f"scenario.duration={ROS_DURATION!r}"]
             settings += ["solver.path=fast"] if path == FAST else []
-            output = os.path.join(folder, f"{path}{exchange:g}.rrd")
+            output = os.path.join(folder, f"{path}{exchange:g}{coupling}.rrd")
             command = [sys.executable, "-m", "mech_regulator", "run", ROS_SCENE, "--quiet", "--exchange-step",
-                       repr(exchange), "--out", output] + [item for setting in settings for item in ("--set", setting)]
+                       repr(exchange), "--coupling", coupling, "--out", output] + [
+                item for setting in settings for item in ("--set", setting)]
             start = time.perf_counter()
             done = subprocess.run(command, capture_output=True, text=True, check=False)
             process_wall = time.perf_counter() - start
-            row = Row("ros", ROS_SCENE, path, "nodes", "exchange_step", exchange, ROS_DURATION,
+            row = Row("ros", ROS_SCENE, path, "nodes", coupling, exchange, ROS_DURATION,
                       steps=round(ROS_DURATION / exchange), note=f"process {process_wall:.3g} s with start-up")
             summary_path = Path(output).with_suffix(".json")
             pace = json.loads(summary_path.read_text()) if summary_path.exists() else {}
@@ -439,13 +444,15 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
             rows.append(row)
             report(row)
             model = build_model(load_scene(ROS_SCENE, settings))
-            run, cpu = timed(lambda: cosimulate(model, exchange))
+            run, cpu = timed(lambda: cosimulate(model, exchange, coupling=coupling))
             exact = simulate(build_model(load_scene(ROS_SCENE, settings + [
                 "solver.path=fast", f"solver.rtol={REFERENCE_RTOL!r}", f"solver.atol={REFERENCE_RTOL * 1e2!r}"])))
             reference = exact(run.times)[1]
-            error = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / np.max(np.abs(reference)))
-            rows.append(Row("ros", ROS_SCENE, path, "in process", "exchange_step", exchange, ROS_DURATION, cpu,
-                            steps=run.times.size - 1, error=error))
+            scale = np.max(np.abs(reference))
+            error = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / scale)
+            largest = float(np.max(np.abs(run.states[1] - reference)) / scale)
+            rows.append(Row("ros", ROS_SCENE, path, "in process", coupling, exchange, ROS_DURATION, cpu,
+                            steps=run.times.size - 1, error=error, note=f"max error {largest:.2g}"))
             report(rows[-1])
     return rows
 
@@ -455,9 +462,9 @@ def ros_summary(benchmark: SpeedBenchmark) -> list[dict[str, float | str]]:
     excluded; missing when the run failed) and the in-process co-simulation's real-time factor (CPU) and achieved
     error."""
     found = []
-    for path, exchange in dict.fromkeys((row.path, row.value) for row in benchmark.of("ros")):
-        item: dict[str, float | str] = {"path": path, "exchange_step_s": exchange}
-        for row in benchmark.of("ros", path=path, value=exchange):
+    for path, exchange, coupling in dict.fromkeys((row.path, row.value, row.setting) for row in benchmark.of("ros")):
+        item: dict[str, float | str] = {"path": path, "exchange_step_s": exchange, "coupling": coupling}
+        for row in benchmark.of("ros", path=path, value=exchange, setting=coupling):
             if row.method == "nodes" and math.isfinite(row.cpu_s):
                 item["real_time_factor"] = row.simulated_s / row.cpu_s
             elif row.method == "in process":
@@ -470,7 +477,7 @@ def ros_target(benchmark: SpeedBenchmark) -> float:
     """The ROS target's measure: the lockstep nodes' real-time factor at ROS_EXCHANGE on the fast path (nan when not
     measured)."""
     for item in ros_summary(benchmark):
-        if (item["path"], item["exchange_step_s"]) == (FAST, ROS_EXCHANGE):
+        if (item["path"], item["exchange_step_s"], item["coupling"]) == (FAST, ROS_EXCHANGE, "hold"):
             return float(item.get("real_time_factor", math.nan))
     return math.nan
 
@@ -591,9 +598,11 @@ def tables(benchmark: SpeedBenchmark) -> str:
     if benchmark.of("ros"):
         lines += ["", f"lockstep ROS main job ({ROS_SCENE}, four node processes: wall time of the exchanges, start-up "
                   "excluded) and the same co-simulation in one process (CPU time)", "",
-                  "| path | exchange step [ms] | simulated [s] | how | time [s] | real-time factor | omega error | note |",
-                  "| --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
-        lines += [f"| {row.path} | {row.value * 1e3:g} | {row.simulated_s:g} | {row.method} | {_number(row.cpu_s)} | "
+                  "| path | coupling | exchange step [ms] | simulated [s] | how | time [s] | real-time factor | "
+                  "omega error (RMS) | note |",
+                  "| --- | --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
+        lines += [f"| {row.path} | {row.setting} | {row.value * 1e3:g} | {row.simulated_s:g} | {row.method} | "
+                  f"{_number(row.cpu_s)} | "
                   f"{_number(row.simulated_s / row.cpu_s)} | {_number(row.error)} | {row.note} |"
                   for row in benchmark.of("ros")]
     return "\n".join(lines) + "\n"

@@ -81,15 +81,16 @@ def _plot_ros(axis, ros: list[dict]) -> None:
     """Real-time factor (simulated s per wall s of the nodes' exchanges; per CPU s in one process) against the
     exchange step's achieved error (omega, relative RMS), each point labelled with its exchange step; the target
     (TARGETS at ROS_EXCHANGE) and real time as horizontal lines."""
-    for path, colour in ((FAST, "tab:green"), (REFERENCE, "tab:blue")):
-        items = [item for item in ros if item["path"] == path and "error" in item]
+    for path, coupling, colour in ((FAST, "hold", "tab:green"), (REFERENCE, "hold", "tab:blue"),
+                                   (FAST, "waveform", "tab:orange")):
+        items = [item for item in ros if item["path"] == path and item["coupling"] == coupling and "error" in item]
         for key, marker, style, how in (("real_time_factor", "o", "-", "four node processes"),
                                         ("in_process_real_time_factor", "s", "--", "one process, no ROS")):
             points = [item for item in items if key in item]
             if not points:
                 continue
             axis.plot([item["error"] for item in points], [item[key] for item in points], color=colour, ls=style,
-                      marker=marker, label=f"{path} path, {how}")
+                      marker=marker, label=f"{path} path, {coupling}, {how}")
             for item in points:
                 axis.annotate(f"{item['exchange_step_s'] * 1e3:g} ms", (item["error"], item[key]), xytext=(4, 3),
                               textcoords="offset points", fontsize=7, color=colour)
