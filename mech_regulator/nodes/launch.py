@@ -108,7 +108,8 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
                     start_new_session=True,  # Ctrl-C reaches this launcher only; it passes it on
                     preexec_fn=_die_with_parent)
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
-            _follow(processes, environment, duration or scene.scenario.duration, quiet)
+            _follow(processes, environment, duration or scene.scenario.duration, quiet,
+                    f"{scene.name} on the nodes")
             if processes["machine"].returncode == 0:
                 _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
         except KeyboardInterrupt:
@@ -176,9 +177,9 @@ def _interrupt(signal_number, frame) -> None:
 
 
 def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
-            quiet: bool) -> None:
-    """Show the machine's progress (its /diagnostics sim_time) until its process ends, or until another
-    node fails first (the launcher then stops the others)."""
+            quiet: bool, label: str) -> None:
+    """Show the machine's progress (its /diagnostics sim_time; `label` names the work) until its process ends, or
+    until another node fails first (the launcher then stops the others)."""
     machine = processes["machine"]
     os.environ.update({key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                           "AMENT_PREFIX_PATH")})
@@ -188,7 +189,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
 
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
-    with progress_bar(duration, quiet) as bar:
+    with progress_bar(duration, quiet, label) as bar:
         def on_diagnostics(message: DiagnosticArray) -> None:
             for status in message.status:
                 if status.name.endswith("/machine"):
