@@ -14,9 +14,11 @@ cycle angle is the indicated work of all cylinders per cycle, `n * loop integral
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import optimize
 
 from mech_regulator.mechanisms import crank_slider
 from mech_regulator.mechanisms.engine import (PistonMotion, firing_delays, mean_piston_speed, piston_motion,
@@ -124,6 +126,55 @@ def piston_table(model: MachineModel, omega: float) -> tuple[np.ndarray, np.ndar
     return phis, exact, approximate
 
 
+def indicated_work(model: MachineModel) -> float:
+    """The indicated work of all cylinders per working cycle [J], W = integral over the cycle of M_gas(phi) dphi
+    (= n * loop integral p dV, M_gas the drive at full throttle), by 8-point Gauss–Legendre quadrature between the
+    knots of the pressure table as each cylinder sees it (table angle - phase + firing delay, mod the cycle): there
+    the integrand is a straight piece of the table times the smooth dx_i/dphi, so the quadrature is exact to
+    round-off (a sum over a uniform grid is not: the table's kinks cost it some 1e-6)."""
+    drive, mechanism = model.scene.machine.drive, model.scene.machine.mechanism
+    cycle = math.radians(drive.cycle_deg)
+    if mechanism.cylinders:
+        delays = firing_delays([c.throw_deg for c in mechanism.cylinders], [c.bank_deg for c in mechanism.cylinders],
+                               drive.cycle_deg, drive.firing_order, drive.firing_deg)
+        shifts = [math.radians(drive.phase_deg - delay) for delay in delays]
+    else:
+        shifts = [math.radians(drive.phase_deg)]
+    knots = sorted({(math.radians(angle) - shift) % cycle for angle in drive.angle_deg for shift in shifts}
+                   | {0.0, cycle})
+    effect = next(effect for effect in model.effects if effect.role == "drive")
+    nodes, weights = np.polynomial.legendre.leggauss(8)
+    work = 0.0
+    for low, high in zip(knots[:-1], knots[1:]):
+        half = 0.5 * (high - low)
+        for node, weight in zip(nodes, weights):
+            phi = low + half * (node + 1.0)
+            _, _, _, q, dq = model.reduced(phi)
+            work += weight * half * effect.moment(0.0, phi, 0.0, q, dq)
+    return work
+
+
+def piston_extremes(omega: float, crank: float, rod: float, offset: float, phis: np.ndarray,
+                    exact: np.ndarray) -> dict[str, float]:
+    """The piston's largest |v| [m/s], largest and smallest a [m/s^2] at constant omega [rad/s] (source 002's
+    convention), each located exactly: bounded Brent's method on the closed-form motion within one grid step of
+    the grid's extremum (phis [rad], exact: piston_table's (x, v, a) rows on that grid)."""
+    step = float(phis[1] - phis[0])
+
+    def motion(phi: float) -> PistonMotion:
+        return source_from_exact(piston_motion(phi, omega, crank, rod, offset), crank, rod, offset)
+
+    def refined(values: np.ndarray, value: Callable[[float], float]) -> float:
+        centre = float(phis[int(np.argmax(values))])
+        found = optimize.minimize_scalar(lambda phi: -value(phi), bounds=(centre - step, centre + step),
+                                         method="bounded", options={"xatol": 1e-13})
+        return max(-float(found.fun), float(values.max()))
+
+    return {"v_max": refined(np.abs(exact[1]), lambda phi: abs(motion(phi).v)),
+            "a_max": refined(exact[2], lambda phi: motion(phi).a),
+            "a_min": -refined(-exact[2], lambda phi: -motion(phi).a)}
+
+
 def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
     """Everything `mech-regulator engine` prints at crank speed omega [rad/s]: geometry (lambda, k, stroke, dead
     centres ours and the source's), piston kinematics (extremes, acceleration at the dead centres, mean piston
@@ -146,7 +197,8 @@ def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
     area = math.pi * drive.bore ** 2 / 4.0
     gas, inertia, total = (harmonics(values, curves.cycle) for values in
                            (curves.gas_total, curves.inertia, curves.total))
-    work = gas.mean * curves.cycle
+    work = indicated_work(model)
+    extremes = piston_extremes(omega, R, l, e, phis, exact)
     return {
         "scene": scene.name, "omega": omega, "rpm": omega * 30.0 / math.pi,
         "geometry": {"crank": R, "rod": l, "offset": e, "lambda": R / l, "k": e / R, "stroke": stroke,
@@ -154,8 +206,7 @@ def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
                      "top_dead_centre_deg": math.degrees(top), "bottom_dead_centre_deg": math.degrees(bottom),
                      "source_alpha1_deg": math.degrees(alpha1), "source_alpha2_deg": math.degrees(alpha2)},
         "piston": {"x_min": float(exact[0].min()), "x_max": float(exact[0].max()),
-                   "v_max": float(np.abs(exact[1]).max()), "a_max": float(exact[2].max()),
-                   "a_min": float(exact[2].min()),
+                   **extremes,
                    "j_top": -at_top.a, "j_bottom": -at_bottom.a,
                    "j_top_central_formula": R * omega ** 2 * (1.0 + R / l),
                    "j_bottom_central_formula": -R * omega ** 2 * (1.0 - R / l),
@@ -164,8 +215,8 @@ def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
         "cylinders": {"count": len(throws), "throw_deg": throws, "bank_deg": banks, "cycle_deg": drive.cycle_deg,
                       "firing_delay_deg": delays,
                       "firing_order": [i + 1 for i in sorted(range(len(delays)), key=delays.__getitem__)]},
-        "torque": {"mean_gas": gas.mean, "mean_inertia": inertia.mean, "mean_total": total.mean,
-                   "indicated_power": gas.mean * omega, "indicated_work_per_cycle": work,
+        "torque": {"mean_gas": work / curves.cycle, "mean_inertia": inertia.mean, "mean_total": total.mean,
+                   "indicated_power": work / curves.cycle * omega, "indicated_work_per_cycle": work,
                    "mean_effective_pressure": work / (area * stroke * len(throws)),
                    "total_max": float(curves.total.max()), "total_min": float(curves.total.min()),
                    "gas_harmonics": gas.largest(largest), "inertia_harmonics": inertia.largest(largest),
