@@ -29,6 +29,7 @@ if TYPE_CHECKING:
 
 EXIT_BAD_INPUT = 2
 EXIT_RUN_FAILED = 1
+EXIT_INACCURATE = 3  # simulate --strict: the run failed a self-check (analysis/self_check.py)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
                                "and governor animated, events); open it with `rerun RUN.rrd`")
     simulate.add_argument("--json", action="store_true", help="print the summary as JSON")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
+    simulate.add_argument("--strict", action="store_true",
+                          help="exit 3 when the run fails a self-check (status inaccurate: its energy residual "
+                               "exceeds what its tolerance allows)")
     simulate.add_argument("--exchange-step", type=float, metavar="H",
                           help="co-simulate machine and governor as the ROS nodes do in lockstep, exchanging "
                                "speed, throttle and load every H seconds (the same numbers as `run`)")
@@ -243,6 +247,7 @@ def _list_scenes() -> int:
 
 def _simulate(scene, args) -> int:
     from mech_regulator.analysis import summarise
+    from mech_regulator.analysis.self_check import self_checks
     from mech_regulator.cli.report import check_outputs, format_summary, progress_bar, to_json, write_csv
     from mech_regulator.model import build_model
     from mech_regulator.solvers import on_path_for_a_command, simulate
@@ -260,6 +265,9 @@ def _simulate(scene, args) -> int:
         trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory)
+    checks = summary["self_checks"] = self_checks(model, summary)
+    if checks and summary["status"] == "complete":
+        summary["status"] = "inaccurate"
     if not trajectory.interpolants:
         args.out = args.plot = args.record = None  # nothing to write
     if args.out is not None:
@@ -278,13 +286,16 @@ def _simulate(scene, args) -> int:
                    status=trajectory.status, message=trajectory.message)
         summary["recording"] = str(args.record)
     print(to_json(summary) if args.json else format_summary(model, summary))
+    for check in checks:
+        print(f"mech-regulator: warning: inaccurate run: {check['check']} {check['value']:.2g} exceeds the "
+              f"{check['allowed']:.2g} its tolerance allows; {check['fix']}", file=sys.stderr)
     if trajectory.status == "failed":
         print(f"mech-regulator: {trajectory.message}", file=sys.stderr)
         return EXIT_RUN_FAILED
     if trajectory.status == "interrupted":
         print(f"mech-regulator: {trajectory.message}; the outputs hold the run up to there", file=sys.stderr)
         return EXIT_INTERRUPTED
-    return 0
+    return EXIT_INACCURATE if checks and args.strict else 0
 
 
 def _cosimulate(model, args) -> int:
