@@ -468,16 +468,22 @@ class _Collector:
             result.runs.sort(key=lambda run: (METHODS.index(run.setting.method), -run.setting.value))
 
 
-def environment(jobs: int) -> dict[str, str]:
-    """Where the benchmark ran: processor, Python, numpy and scipy versions, worker processes, date."""
-    import scipy
-
+def processor_name() -> str:
+    """The processor's model name (Linux's /proc/cpuinfo), else what the platform module says."""
     processor = platform.processor() or platform.machine()
     cpuinfo = Path("/proc/cpuinfo")
     if cpuinfo.is_file():
         names = [line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines()
                  if line.startswith("model name")]
         processor = names[0] if names else processor
+    return processor
+
+
+def environment(jobs: int) -> dict[str, str]:
+    """Where the benchmark ran: processor, Python, numpy and scipy versions, worker processes, date."""
+    import scipy
+
+    processor = processor_name()
     return {"processor": processor, "python": platform.python_version(), "numpy": np.__version__,
             "scipy": scipy.__version__, "jobs": str(jobs), "date": time.strftime("%Y-%m-%d")}
 

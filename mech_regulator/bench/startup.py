@@ -367,13 +367,9 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
 
 def environment() -> dict[str, str]:
     """Where it ran: processor, cores, Python, date."""
-    processor = platform.processor() or platform.machine()
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.is_file():
-        names = [line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines()
-                 if line.startswith("model name")]
-        processor = names[0] if names else processor
-    return {"processor": processor, "cores": str(os.cpu_count()), "python": platform.python_version(),
+    from mech_regulator.bench.accuracy import processor_name
+
+    return {"processor": processor_name(), "cores": str(os.cpu_count()), "python": platform.python_version(),
             "date": time.strftime("%Y-%m-%d")}
 
 
