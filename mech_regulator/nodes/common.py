@@ -17,6 +17,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType, SetParametersResult
+from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
@@ -32,6 +33,7 @@ EXIT_BAD_INPUT = 2
 IDLE_SPIN_SLICE = 0.1  # [s] of wall time per wait of a spin loop that only waits for callbacks
 HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
 WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad messages
+ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -249,6 +251,13 @@ def node_label(node_factory: Callable[[], Node]) -> str:
     return label[:-len("Node")].lower() + "_node" if label.endswith("Node") else label
 
 
+def deliver_all(node: Node) -> None:
+    """Wait (at most ACK_WAIT s each) until every subscriber has acknowledged what the node's publishers sent: a node
+    that ends by itself right after its last message (the governor's last state) must not take it with it."""
+    for publisher in node.publishers:
+        publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+
+
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
     """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
     add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
@@ -269,6 +278,8 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
         else:
             while rclpy.ok() and not getattr(node, "done", False):
                 executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
+            if rclpy.ok():
+                deliver_all(node)
         return 0
     except SceneError as error:
         print(f"mech_regulator: {name}: {error}", file=sys.stderr)

@@ -37,6 +37,7 @@ from mech_regulator.solvers.cosim import CoSimulation, seconds
 from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
+FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 
@@ -235,9 +236,18 @@ class RecorderNode(Node):
                             events=self.events, status="complete", message="", tripped_at=self.tripped_at)
 
     def record(self) -> None:
-        """Spin until the machine has finished and everything is in (or Ctrl-C)."""
+        """Spin until the machine has finished and everything is in (or Ctrl-C); should the last samples not come
+        within FINISH_GRACE s of the machine's end, close with what there is (the summary says where it stops)."""
+        finished_seen = None
         while rclpy.ok() and not self.complete():
             self.executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
+            if self.finished_at is not None:
+                finished_seen = finished_seen or time.monotonic()
+                if time.monotonic() - finished_seen > FINISH_GRACE:
+                    self.get_logger().warning(f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
+                                              f"its last samples did not come within {FINISH_GRACE:g} s: closing "
+                                              "with what was received")
+                    return
 
 
 def write_empty_run(model: MachineModel, path: Path, exchange_step: float) -> None:
