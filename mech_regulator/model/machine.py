@@ -302,7 +302,7 @@ class MachineModel:
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
         ramped = piece is not None and (piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0)
-        held = piece.throttle_at if ramped else (lambda t: held_throttle)
+        ramp = piece.throttle_at if ramped else None  # a co-simulated throttle's polynomial; None: held_throttle
         scale_drive = governor is not None or held_throttle != 1.0 or ramped
         scaled = tuple(effect.moment for effect in self.effects if scale_drive and effect.role == "drive")
         rest = [effect for effect in self.effects if not (scale_drive and effect.role == "drive")]
@@ -341,11 +341,11 @@ class MachineModel:
             for moment in switched:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
             if plain:
-                share = held(t)
+                share = held_throttle if ramp is None else ramp(t)
                 for moment in scaled:
                     total += share * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            share = held(t) if throttle is None else throttle(y)
+            share = throttle(y) if throttle is not None else held_throttle if ramp is None else ramp(t)
             for moment in scaled:
                 total += share * moment(t, phi, omega, q, dq)
             net = total - 0.5 * dJ * omega * omega

@@ -53,7 +53,7 @@ from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STAT
                                          float_parameter, int_parameter, joint_value, list_parameter, nanoseconds,
                                          run, scene_model, stamp, text_parameter)
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import MachineStepper, seconds, throttle_extrapolation, to_nanoseconds
+from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
 
 LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
 # (the node that gives it by default, its topic)
@@ -151,7 +151,6 @@ class MachineNode(Node):
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
         self.failing_safe = False
         self.now_ns = 0
-        self.answers: list[tuple[float, float]] = []  # (time [s], throttle applied) at the last exchanges
         self.omega_middle: float | None = None  # [rad/s] at the middle of the last step (waveform coupling)
 
     # ---------------------------------------------------------------------------------------------
@@ -267,15 +266,12 @@ class MachineNode(Node):
 
     def advance(self, next_ns: int, throttle: float) -> None:
         """Integrate to the next exchange time with the load held and the throttle held (hold coupling) or
-        extrapolated from the governor's last answers, noting the speed at the step's middle (waveform coupling;
-        the same operations as solvers.cosim.cosimulate)."""
-        if not self.waveform:
+        extrapolated, noting the speed at the step's middle (waveform coupling; MachineStepper.advance_following, as
+        solvers.cosim.cosimulate)."""
+        if self.waveform:
+            self.omega_middle = self.stepper.advance_following(seconds(next_ns), throttle, self.load)
+        else:
             self.stepper.advance(seconds(next_ns), throttle, self.load)
-            return
-        self.answers = self.answers[-2:] + [(seconds(self.now_ns), throttle)]
-        _, slope, curvature = throttle_extrapolation(self.answers)
-        stretch = self.stepper.advance(seconds(next_ns), throttle, self.load, slope, curvature)
-        self.omega_middle = float(stretch(0.5 * (seconds(self.now_ns) + seconds(next_ns)))[1])
 
     def wait_while_paused(self, holding: bool) -> None:
         """Between exchanges: spin (serving the services) while paused with no ~/step left, or while holding at

@@ -77,6 +77,7 @@ class MachineStepper:
         self.tripped_at: float | None = None
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
+        self._answers: list[tuple[float, float]] = []  # (time [s], throttle applied) of the last exchanges
 
     def applied_throttle(self, throttle: float) -> float:
         """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
@@ -103,6 +104,16 @@ class MachineStepper:
             fail_blown_up(self.plant, stretch, self.time, self.state, *beyond)
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
+
+    def advance_following(self, t_end: float, throttle: float, external_load: float) -> float:
+        """The waveform coupling's step: integrate to t_end [s] with the load [N m] held and the throttle [-] (this
+        exchange's answer, as applied_throttle gives it) extrapolated through the last three answers
+        (throttle_extrapolation); returns the speed omega [rad/s] at the step's middle, which the governor follows."""
+        t_start = self.time
+        self._answers = self._answers[-2:] + [(t_start, self.applied_throttle(throttle))]
+        _, slope, curvature = throttle_extrapolation(self._answers)
+        stretch = self.advance(t_end, throttle, external_load, slope, curvature)
+        return float(stretch(0.5 * (t_start + t_end))[1])
 
     def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
         """The machine's outputs at its current state with these inputs held: the columns of
@@ -316,7 +327,7 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
     end = to_nanoseconds(model.scene.scenario.duration)
     machine = MachineStepper(model, overspeed_trip)
     governor = GovernorStepper(model) if model.governor is not None else None
-    rows, inputs, answers = [], [], []
+    rows, inputs = [], []
     omega_middle = None  # the machine's speed at the middle of the last step (waveform coupling)
     tick = 0
     try:
@@ -324,7 +335,6 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
             now = seconds(min(tick * step, end))
             throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None else 1.0
             throttle = machine.applied_throttle(throttle)
-            answers.append((now, throttle))
             load = model.external_load(now)
             rows.append(np.concatenate([machine.state[:2], governor.state[2:], machine.state[2:]])
                         if governor is not None else machine.state.copy())
@@ -334,9 +344,7 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
             tick += 1
             following = seconds(min(tick * step, end))
             if coupling == "waveform" and governor is not None:
-                _, slope, curvature = throttle_extrapolation(answers[-3:])
-                stretch = machine.advance(following, throttle, load, slope, curvature)
-                omega_middle = float(stretch(0.5 * (now + following))[1])
+                omega_middle = machine.advance_following(following, throttle, load)
             else:
                 machine.advance(following, throttle, load)
             if progress is not None:
