@@ -1,7 +1,8 @@
 """Warming the fast path (solvers/compiled/warm.py, solvers.on_path_for_a_command): a first run whose method's stepper
 is not compiled yet is served by the reference path with a note, while a background process compiles the stepper;
-the next run is on the fast path. A method the fast path does not have falls back with a note; a scene on the
-reference path is left alone.
+the next run is on the fast path. That is what the scene default solver.path auto does (test/conftest.py fixes auto to
+the reference path for the rest of the suite; these cases take that away). A method the fast path does not have
+falls back with a note; a scene on the reference path is left alone; MECH_REGULATOR_AUTO_PATH fixes what auto means.
 
 numba reads NUMBA_CACHE_DIR when it is imported, so each case runs in a fresh Python with empty caches of its own.
 """
@@ -42,11 +43,14 @@ def choose(environment: dict[str, str], *overrides: str) -> dict:
 def empty_caches(tmp_path) -> dict[str, str]:
     (tmp_path / "numba").mkdir()
     (tmp_path / "compiled").mkdir()
-    return dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"),
+                       MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
+    environment.pop("MECH_REGULATOR_AUTO_PATH", None)  # the product's default, not the suite's (conftest.py)
+    return environment
 
 
 def test_a_cold_first_run_uses_the_reference_path_while_the_stepper_compiles(empty_caches):
-    fast_rk4 = ("solver.path=fast", "solver.method=RK4", "solver.step=0.001")
+    fast_rk4 = ("solver.method=RK4", "solver.step=0.001")  # solver.path: auto, the default
     first = choose(empty_caches, *fast_rk4)
     assert first["path"] == "reference" and not first["cached"], first
     assert len(first["notes"]) == 1 and "now compiling in the background" in first["notes"][0], first
@@ -70,3 +74,20 @@ def test_a_method_the_fast_path_lacks_falls_back_with_a_note(empty_caches):
 
 def test_the_reference_path_is_left_alone(empty_caches):
     assert choose(empty_caches, "solver.path=reference") == {"path": "reference", "notes": [], "cached": False}
+
+
+def test_auto_and_fast_fall_back_alike_for_a_method_the_fast_path_lacks(empty_caches):
+    chosen = choose(empty_caches, "solver.method=LSODA")
+    assert chosen["path"] == "reference" and "solver.method: 'LSODA'" in chosen["notes"][0], chosen
+
+
+def test_the_auto_path_variable_fixes_what_auto_means(empty_caches):
+    pinned = dict(empty_caches, MECH_REGULATOR_AUTO_PATH="reference")
+    assert choose(pinned, "solver.method=RK4", "solver.step=0.001") == {"path": "reference", "notes": [],
+                                                                          "cached": False}
+    assert not os.path.exists(os.path.join(empty_caches["MECH_REGULATOR_CACHE"], "compiling.log"))
+    wrong = subprocess.run([sys.executable, "-m", "mech_regulator", "simulate", "lathe", "--quiet"], text=True,
+                           capture_output=True, timeout=120, env=dict(empty_caches, MECH_REGULATOR_AUTO_PATH="quick"))
+    assert wrong.returncode == 2, wrong.stderr
+    assert "MECH_REGULATOR_AUTO_PATH='quick': expected reference or fast" in wrong.stderr
+    assert "Traceback" not in wrong.stderr

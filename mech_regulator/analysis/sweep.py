@@ -35,6 +35,7 @@ import numpy as np
 
 from mech_regulator.scene.loading import (SceneError, apply_override, overridden_scene_data, parse_yaml,
                                           validate_scene)
+from mech_regulator.solvers import auto_path
 from mech_regulator.solvers.compiled import fast_path_refusal
 
 DECAY_RATIO = 0.9  # stable by simulation: the cycle-mean speed's swing in the last third <= this x the middle third's
@@ -112,7 +113,8 @@ def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], 
     """Every scene x every combination of the grid values (the Cartesian product, the last axis varying fastest),
     each validated by the scene loading: a value the scene refuses raises SceneError naming the --grid option.
     solver_path 'fast': every point the fast path compiles (solvers.compiled.fast_path_refusal) runs on it, the others on
-    the reference path; 'reference': every point on the reference path; 'scene': as each scene's solver.path says."""
+    the reference path; 'reference': every point on the reference path; 'scene': as each scene's solver.path says
+    (auto: solvers.auto_path(), fast unless MECH_REGULATOR_AUTO_PATH says otherwise)."""
     keys = [axis.key for axis in axes]
     repeated = sorted({key for key in keys if keys.count(key) > 1})
     if repeated:
@@ -135,9 +137,13 @@ def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], 
             values = {axis.key: axis.values[index] for axis, index in zip(axes, combination)}
             where = ", ".join(f"{key} = {axis.texts[index]}" for key, axis, index in zip(keys, axes, combination))
             scene = validate_scene(copy.deepcopy(data), f"--grid point {where} in scene '{source}'") if axes else None
-            if solver_path != "scene":
+            chosen = solver_path
+            if chosen == "scene":  # the scene's own path; auto as a command takes it (solvers.auto_path)
                 scene = scene or validate_scene(copy.deepcopy(data), str(path))
-                fast = solver_path == "fast" and fast_path_refusal(scene) is None
+                chosen = auto_path() if scene.solver.path == "auto" else "scene"
+            if chosen != "scene":
+                scene = scene or validate_scene(copy.deepcopy(data), str(path))
+                fast = chosen == "fast" and fast_path_refusal(scene) is None
                 data.setdefault("solver", {})["path"] = "fast" if fast else "reference"
             points.append(SweepPoint(source, values, data))
     return points

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
-from mech_regulator.cli.report import check_outputs, progress_bar, to_json, wrote_lines
+from mech_regulator.cli.report import check_outputs, note, progress_bar, to_json, wrote_lines
 
 
 def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
@@ -54,7 +54,10 @@ def run_flywheel(args: argparse.Namespace) -> int:
     if args.scene is None:
         raise SceneError("flywheel: give a SCENE (a file or a bundled scene's name), or --classes to list the "
                          "machine classes")
-    scene = load_scene(args.scene, args.overrides)
+    from mech_regulator.model import build_model
+    from mech_regulator.solvers import on_path_for_a_command
+
+    scene = on_path_for_a_command(build_model(load_scene(args.scene, args.overrides)), note).scene
     delta, delta_source = requested_delta(args.delta, args.machine_class, scene.analysis.permitted_delta)
     check_outputs(args, args.record)
     with progress_bar(None, args.quiet, f"flywheel for {scene.name or args.scene}", quantity=None,

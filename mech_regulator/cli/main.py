@@ -18,6 +18,7 @@ from mech_regulator import __version__
 from mech_regulator.cli import EXIT_INTERRUPTED
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
+from mech_regulator.cli.report import note
 from mech_regulator.cli.sweep import add_sweep_command
 
 if TYPE_CHECKING:
@@ -231,11 +232,6 @@ def _bench(args) -> int:
     return _bench_accuracy(args)
 
 
-def _note(line: str) -> None:
-    """A one-line note of a command on stderr (e.g. which path a run takes and why)."""
-    print(f"mech-regulator: {line}", file=sys.stderr)
-
-
 def _list_scenes() -> int:
     from mech_regulator.scene import bundled_scenes, load_scene
 
@@ -254,7 +250,7 @@ def _simulate(scene, args) -> int:
     from mech_regulator.solvers.advice import stiffness_advice
 
     check_outputs(args, args.out, args.record)
-    model = on_path_for_a_command(build_model(scene), _note)
+    model = on_path_for_a_command(build_model(scene), note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
     advice = stiffness_advice(model)
@@ -478,8 +474,9 @@ def _main_job(scene, args) -> int:
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
-    if on_path_for_a_command(model, _note).scene.solver.path != scene.solver.path:  # decided once for every node
-        args.overrides = [*(args.overrides or []), "solver.path=reference"]
+    path = on_path_for_a_command(model, note).scene.solver.path  # decided once, for every node
+    if path != scene.solver.path:
+        args.overrides = [*(args.overrides or []), f"solver.path={path}"]
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
     if args.duration is not None and not 0.0 < args.duration <= 1e7:

@@ -22,6 +22,11 @@ if TYPE_CHECKING:
     from mech_regulator.model import MachineModel
 
 
+def note(line: str) -> None:
+    """A one-line note of a command on stderr (e.g. which path a run takes and why)."""
+    print(f"mech-regulator: {line}", file=sys.stderr)
+
+
 def describe(model: MachineModel) -> str:
     """The effects, state vector, right-hand side and solver a scene uses."""
     from mech_regulator.solvers.advice import coupling_modes, stiffness_advice

@@ -26,6 +26,7 @@ from std_msgs.msg import String
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
+from mech_regulator.solvers import on_path_for_a_command
 from mech_regulator.solvers.cosim import COUPLINGS, NANOSECONDS, cosimulation_refusal, seconds
 
 EXIT_FAILED = 1
@@ -124,13 +125,15 @@ def coupling_parameter(node: Node) -> str:
 
 def scene_model(node: Node) -> MachineModel:
     """The scene named by the node's `scene_file` parameter (a path or a bundled name) with the
-    `overrides` parameter's KEY=VALUE changes, assembled by the core. Raises SceneError, also for a scene that
-    cannot be co-simulated (solvers.cosim.cosimulation_refusal)."""
+    `overrides` parameter's KEY=VALUE changes, assembled by the core, its solver.path decided as a command decides
+    it (solvers.on_path_for_a_command; `run` passes its decision to every node). Raises SceneError, also for a
+    scene that cannot be co-simulated (solvers.cosim.cosimulation_refusal)."""
     scene_file = text_parameter(node, "scene_file", "engine_direct",
                                 "scene file (YAML path) or the name of a bundled scene")
     overrides = list_parameter(node, "overrides", [""],
                                "scene changes KEY=VALUE, as `mech-regulator --set` (e.g. governor.damping=300)")
-    model = build_model(load_scene(scene_file, [item for item in overrides if item]))
+    model = on_path_for_a_command(build_model(load_scene(scene_file, [item for item in overrides if item])),
+                                  node.get_logger().info)  # solver.path auto: fast once compiled (`run` decides it)
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"{scene_file}: the nodes cannot play this scene: {reason}")

@@ -836,10 +836,13 @@ class Solver(SceneModel):
         "DOP853", description="scipy.integrate method (adaptive, in time), RK4 (fixed step in time), Rosenbrock23 (the "
                               "stiff method of the fast path only) or energy (the textbook energy method, fixed step "
                               "in phi)")
-    path: Literal["reference", "fast"] = Field(
-        "reference", description="reference: the pure-Python right-hand side stepped by scipy; fast: the scene's "
-                                 "right-hand side compiled by numba (cached on disk) and stepped by compiled "
-                                 "RK45, DOP853, RK4 or Rosenbrock23 (docs/speed.md)")
+    path: Literal["auto", "reference", "fast"] = Field(
+        "auto", description="auto: a command (simulate, sweep, flywheel, run, the nodes) runs the fast path where it "
+                            "covers the scene and is compiled on this machine, else the reference path with a "
+                            "one-line note (a first run starts compiling it in the background); the library's "
+                            "simulate() runs auto on the reference path. reference: the pure-Python right-hand side "
+                            "stepped by scipy; fast: the scene's right-hand side compiled by numba (cached on disk) "
+                            "and stepped by compiled RK45, DOP853, RK4 or Rosenbrock23 (docs/speed.md)")
     rtol: Positive = Field(1e-8, description="relative tolerance of the adaptive methods [-]")
     atol: Positive = Field(1e-10, description="absolute tolerance of the adaptive methods, on phi [rad] and omega [rad/s]")
     max_step: Positive | None = Field(None, description="largest step of the adaptive methods; none = unlimited [s]")

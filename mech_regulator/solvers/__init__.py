@@ -3,11 +3,13 @@ method in phi. All return a dense Trajectory with the solver's statistics."""
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.advice import energy_step_refusal, rk4_stability_refusal, stiffness_refusal
+from mech_regulator.solvers.compiled import AUTO_PATH_VARIABLE, fast_path_refusal, runs_compiled
 from mech_regulator.solvers.energy_method import integrate_energy_method
 from mech_regulator.solvers.time_domain import integrate_time_domain
 from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
@@ -15,14 +17,15 @@ from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
 
 def simulate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
     """Run the scene's scenario with the scene's solver (solver.method) on its path (solver.path: the reference
-    path, or the compiled fast path, solvers/compiled/run.py, which refuses what it cannot run with a SceneError). An
+    path, or the compiled fast path, solvers/compiled/run.py, which refuses what it cannot run with a SceneError;
+    auto runs on the reference path here, compiled.runs_compiled, a command resolves it first). An
     RK4 step outside the stability region of the scene's coupling, an explicit adaptive method that stability alone
     would hold to more steps than limits.MAX_STEPS, and an energy method's step that would take more, are refused
     with a SceneError (advice.py)."""
     reason = rk4_stability_refusal(model) or stiffness_refusal(model) or energy_step_refusal(model)
     if reason is not None:
         raise SceneError(reason)
-    if model.scene.solver.path == "fast":
+    if runs_compiled(model.scene.solver):
         from mech_regulator.solvers.compiled.run import integrate_compiled
 
         return integrate_compiled(model, progress)
@@ -32,39 +35,59 @@ def simulate(model: MachineModel, progress: Progress | None = None) -> Trajector
 
 
 def on_path_for_a_command(model: MachineModel, report: Callable[[str], None]) -> MachineModel:
-    """The model a command (simulate, sweep, flywheel, the nodes) runs: the scene's own, except that a scene asking
-    for the fast path is served by the reference path — with a one-line note to `report` — where the fast path does
-    not cover it (fast_path_refusal), or while its method's stepper is not compiled yet on this machine: that is then
-    compiled by a background process for the next run (compiled/warm.py), so a first run is never a wait of half a
-    minute. Rosenbrock23, which only the fast path has, is compiled in the foreground, announced."""
-    if model.scene.solver.path != "fast":
-        return model
-    from mech_regulator.solvers.compiled import fast_path_refusal
+    """The model a command (simulate, sweep, flywheel, run and the nodes) runs, its solver.path decided: fast or
+    reference, never auto.
 
+    solver.path reference stays; fast and auto (the default) run the fast path where it covers the scene
+    (fast_path_refusal) and its method's stepper is compiled on this machine. Otherwise the reference path, with a
+    one-line note to `report`: where the fast path does not cover the scene, or while the stepper is not compiled
+    yet — it is then compiled by a background process for the next run (compiled/warm.py), so a first run is never a
+    wait of half a minute. Rosenbrock23, which only the fast path has, is compiled in the foreground, announced.
+    The environment variable MECH_REGULATOR_AUTO_PATH (reference or fast) fixes what auto means on a machine that
+    must not depend on what is compiled (a reproducible CI, the test suite)."""
+    path = model.scene.solver.path
+    if path == "auto":
+        path = auto_path()
+        if path == "reference" and model.scene.solver.method != "Rosenbrock23":
+            return on_path(model, "reference")
+    if path == "reference":
+        return model
     refusal = fast_path_refusal(model)
     if refusal is not None:
         report(f"note: {refusal}; this run uses the reference path")
-        return on_reference_path(model)
+        return on_path(model, "reference")
     from mech_regulator.solvers.compiled.warm import compile_in_background, stepper_cached
 
     method = model.scene.solver.method
     if stepper_cached(method):
-        return model
+        return on_path(model, "fast")
     if method == "Rosenbrock23":
         report(f"note: compiling the fast path's {method} stepper once (about 10-30 s); later runs start at once")
-        return model
+        return on_path(model, "fast")
     started = compile_in_background([method])
     report(f"note: the fast path's {method} stepper is {'now compiling' if started else 'compiling'} in the "
            "background (once, about 10-30 s); this run uses the reference path, later runs the fast path")
-    return on_reference_path(model)
+    return on_path(model, "reference")
 
 
-def on_reference_path(model: MachineModel) -> MachineModel:
-    """The same scene with solver.path: reference."""
+def auto_path() -> str:
+    """What solver.path auto means for a command on this machine: the environment variable MECH_REGULATOR_AUTO_PATH
+    (reference or fast) when set, else fast (where it covers the scene and is compiled: on_path_for_a_command)."""
+    chosen = os.environ.get(AUTO_PATH_VARIABLE, "")
+    if chosen not in ("", "reference", "fast"):
+        raise SceneError(f"{AUTO_PATH_VARIABLE}={chosen!r}: expected reference or fast (what solver.path auto "
+                         "means), or leave it unset")
+    return chosen or "fast"
+
+
+def on_path(model: MachineModel, path: str) -> MachineModel:
+    """The same scene with solver.path set to `path` (the model itself when it already has it)."""
+    if model.scene.solver.path == path:
+        return model
     from mech_regulator.model import build_model
 
-    solver = model.scene.solver.model_copy(update={"path": "reference"})
+    solver = model.scene.solver.model_copy(update={"path": path})
     return build_model(model.scene.model_copy(update={"solver": solver}))
 
 
-__all__ = ["SolverStats", "Trajectory", "on_path_for_a_command", "on_reference_path", "simulate"]
+__all__ = ["SolverStats", "Trajectory", "auto_path", "on_path", "on_path_for_a_command", "simulate"]

@@ -21,6 +21,15 @@ sees the other over a step, the coupling:
   machine — and the machine integrates [t_k, t_k+1] with the throttle extrapolated from the governor's last
   three answers (the quadratic through them, clamped to [0, 1]). The error is then of second order or better
   in h (docs/ros.md gives the measured orders), so a ten times longer exchange is as accurate as the hold's.
+- `corrected` (predictor-corrector, one Gauss–Seidel iteration per step): the machine predicts [t_k, t_k+1] with the
+  throttle extrapolated (as `waveform`); the governor integrates that step tentatively following the machine's speed
+  sampled every h / (2 m) (m = speed_pieces(h): pieces of at most MAX_SPEED_PIECE, the quadratic through three
+  samples on each, so that an engine's speed ripple is followed) and answers its own throttle over the step, piecewise
+  quadratic with a break at every governor event inside it (a stop reached or left, stick/slip: a kink no polynomial
+  follows); the machine does the step again from its saved state with that throttle (the corrector), and the governor
+  does it again, for good, with the corrected speed. Pipelined, this is still one message each way per step: the
+  machine sends at t_k the corrected samples of [t_k-1, t_k] with the predicted ones of [t_k, t_k+1], the governor
+  answers its throttle at t_k with its tentative throttle over [t_k, t_k+1].
 
 The time of the governor's step enters the governor subsystem as an "external load" on its (unit, free)
 inertia: omega' = -L(t) with L(t) = -(a + 2 b (t - t_k-1)) makes its omega state follow the quadratic
@@ -41,6 +50,7 @@ from mech_regulator.model import LoadPiece, MachineModel, crank_moments
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
+from mech_regulator.solvers.compiled import runs_compiled
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -78,6 +88,8 @@ class MachineStepper:
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
         self._answers: list[tuple[float, float]] = []  # (time [s], throttle applied) of the last exchanges
+        self._predicted: tuple | None = None  # corrected coupling: (state, mode, time, status, message) before the
+        # predicted step, and the step's end time [s]
 
     def applied_throttle(self, throttle: float) -> float:
         """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
@@ -114,6 +126,36 @@ class MachineStepper:
         _, slope, curvature = throttle_extrapolation(self._answers)
         stretch = self.advance(t_end, throttle, external_load, slope, curvature)
         return float(stretch(0.5 * (t_start + t_end))[1])
+
+    def predict(self, t_end: float, external_load: float, throttle_end: float) -> Samples:
+        """The corrected coupling's predictor: keep the state now, then integrate to t_end [s] with the load [N m]
+        held and the throttle [-] extrapolated through the last two answers and throttle_end, the governor's tentative
+        throttle for now (throttle_extrapolation); returns the step's speed samples (speed_samples)."""
+        t_start = self.time
+        self._predicted = (self.state.copy(), self.mode, t_start, self.status, self.message), t_end
+        throttle, slope, curvature = throttle_extrapolation(self._answers[-2:] + [(t_start, throttle_end)])
+        return speed_samples([self.advance(t_end, throttle, external_load, slope, curvature)], t_start, t_end)
+
+    def correct(self, throttle: float, waveform: Samples | None, external_load: float) -> Samples:
+        """The corrected coupling's corrector: from the state `predict` kept, integrate the same step again with the
+        load [N m] held and the throttle the governor answered: `throttle` [-] at the step's start (as applied_throttle
+        gives it), then its tentative throttle over the step, samples (times [s], throttle [-]) at the middle and the
+        end of each piece (GovernorStepper.answer_corrected), the quadratic through a piece's start, middle and end;
+        held without them (a silent governor: the fail-safe). Returns the step's speed samples (speed_samples)."""
+        (self.state, self.mode, self.time, self.status, self.message), t_end = self._predicted
+        t_start = self.time
+        self._answers = self._answers[-2:] + [(t_start, self.applied_throttle(throttle))]
+        if waveform is None or self.tripped_at is not None:
+            return speed_samples([self.advance(t_end, throttle, external_load)], t_start, t_end)
+        stretches, value = [], throttle
+        for index in range(0, len(waveform[0]) - 1, 2):
+            end, middle_value, end_value = waveform[0][index + 1], waveform[1][index], waveform[1][index + 1]
+            slope, curvature = quadratic_through(end - self.time, value, middle_value, end_value)
+            stretches.append(self.advance(end, value, external_load, slope, curvature))
+            value = end_value
+            if self.status != "complete":
+                break
+        return speed_samples(stretches, t_start, t_end)
 
     def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
         """The machine's outputs at its current state with these inputs held: the columns of
@@ -163,17 +205,66 @@ class GovernorStepper:
                 del self.events[events:]
             self._before_anticipation = None
         if time > self.time:
-            stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
-            piece = None if omega_middle is None else speed_waveform(self.time, time, float(self.state[1]),
-                                                                       omega_middle, omega)
-            self.state, self.mode = self._segment(self.regulator, piece, self.time, time, self.state, self.mode,
-                                                  stretch, None)
-            self.time = stretch.t_end
-            self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
-            self.status, self.message = _accumulate(self.stats, stretch)
+            self.follow(time, None if omega_middle is None else
+                        ([self.time, 0.5 * (self.time + time), time], [float(self.state[1]), omega_middle, omega]))
         self.state = self.state.copy()
         self.state[1] = omega
         return self.throttle
+
+    def follow(self, t_end: float, samples: Samples | None) -> Trajectory:
+        """Integrate from now to t_end [s] with the speed held (samples None) or following the machine's speed
+        samples (times [s] from now to t_end, omega [rad/s]; an odd number: the quadratic through three on each piece,
+        speed_waveform); the mode changes go to `events`. Returns the stretch's dense trajectory."""
+        stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
+        if samples is None:
+            self.state, self.mode = self._segment(self.regulator, None, self.time, t_end, self.state, self.mode,
+                                                  stretch, None)
+        else:
+            times, speeds = samples
+            for index in range(0, len(times) - 2, 2):
+                self.state = self.state.copy()
+                self.state[1] = speeds[index]
+                piece = speed_waveform(times[index], times[index + 2], *speeds[index:index + 3])
+                self.state, self.mode = self._segment(self.regulator, piece, times[index], times[index + 2],
+                                                      self.state, self.mode, stretch, None)
+                if stretch.status != "complete":
+                    break
+        self.time = stretch.t_end
+        self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
+        self.status, self.message = _accumulate(self.stats, stretch)
+        return stretch
+
+    def answer_corrected(self, time: float, corrected: Samples | None, predicted: Samples | None
+                         ) -> tuple[float, Samples | None]:
+        """The corrected coupling's answer at `time` [s]: integrate the step that ends there for good following the
+        machine's corrected speed samples over it (times [s], omega [rad/s]; with the speed held when they do not
+        start at this governor's time: a missed exchange, realtime), then integrate the next step tentatively
+        following the machine's predicted samples, and go back. Returns the throttle [-] at `time` and the tentative
+        throttle over the next step: samples (times [s], throttle [-]) at the middle and the end of each piece, the
+        step split at every mode change inside it (a kink: a stop reached or left, the sleeve sticking or slipping);
+        None without predicted samples (the run's end)."""
+        if time > self.time:
+            following = corrected is not None and len(corrected[0]) >= 3 and corrected[0][0] == self.time \
+                and corrected[0][-1] == time
+            self.follow(time, corrected if following else None)
+            self.state = self.state.copy()
+            self.state[1] = corrected[1][-1] if following else self.state[1]
+        throttle = self.throttle
+        if predicted is None or len(predicted[0]) < 3 or predicted[0][0] != self.time:
+            return throttle, None
+        before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
+        stretch = self.follow(predicted[0][-1], predicted)
+        edges = [self.time]
+        if stretch.status == "complete":
+            edges = [time] + sorted({t for t, _ in stretch.events if time + MIN_PIECE < t < stretch.t_end - MIN_PIECE})
+            edges.append(stretch.t_end)
+        (self.state, self.mode, self.time, events, self.status, self.message) = before
+        del self.events[events:]
+        if len(edges) < 2:
+            return throttle, None
+        times = [t for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
+        states = stretch(np.array(times))
+        return throttle, (times, [self.governor.throttle(states[:, index]) for index in range(len(times))])
 
     def anticipate(self, time: float) -> None:
         """Advance now, with the speed held, to `time` [s], the next exchange time as expected, so that the
@@ -201,7 +292,40 @@ class GovernorStepper:
         return values
 
 
-COUPLINGS = ("hold", "waveform")
+COUPLINGS = ("hold", "waveform", "corrected")
+MAX_SPEED_PIECE = 2.5e-3  # [s]: the corrected coupling samples the machine's speed at least every half of this, the
+# quadratic through three samples on each piece (an engine's speed ripple is followed; docs/ros.md gives the numbers)
+MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
+
+Samples = tuple  # (times [s], values) of a signal over one exchange step, two sequences of floats
+
+
+def quadratic_through(duration: float, start: float, middle: float, end: float) -> tuple[float, float]:
+    """(a, b) of the quadratic q(s) = start + a s + b s^2 with q(duration / 2) = middle and q(duration) = end
+    (duration [s] > 0)."""
+    b = 2.0 * (end - 2.0 * middle + start) / (duration * duration)
+    return (end - start) / duration - b * duration, b
+
+
+def speed_sample_times(t_start: float, t_end: float) -> np.ndarray:
+    """The times [s] at which the corrected coupling samples the machine's speed over [t_start, t_end]: 2 m + 1
+    evenly spaced, both ends included, m the fewest pieces no longer than MAX_SPEED_PIECE."""
+    pieces = max(1, math.ceil((t_end - t_start) / MAX_SPEED_PIECE - 1e-9))
+    return np.linspace(t_start, t_end, 2 * pieces + 1)
+
+
+def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float) -> Samples:
+    """The machine's speed omega [rad/s] at speed_sample_times(t_start, t_end), from the dense trajectories of the
+    step's stretches (consecutive; the last ends at t_end unless the run failed in it)."""
+    times = speed_sample_times(t_start, t_end)
+    speeds = np.empty(times.size)
+    for index, stretch in enumerate(stretches):
+        inside = (times >= stretch.t_start) & ((times <= stretch.t_end) if index == len(stretches) - 1
+                                               else (times < stretch.t_end))
+        inside &= times <= stretch.t_end
+        if inside.any():
+            speeds[inside] = stretch(times[inside])[1]
+    return times.tolist(), speeds.tolist()
 
 
 def speed_waveform(t_start: float, t_end: float, omega_start: float, omega_middle: float, omega_end: float
@@ -210,9 +334,7 @@ def speed_waveform(t_start: float, t_end: float, omega_start: float, omega_middl
     q(s) = omega_start + a s + b s^2, s = t - t_start, through the machine's speeds [rad/s] at the start, the middle
     and the end: on its unit free inertia omega' = -L(t), so L(t) = -(a + 2 b s), an external load with
     offset a' and slope [N m/s] as LoadPiece's value(t) = offset + slope t."""
-    h = t_end - t_start
-    b = 2.0 * (omega_end - 2.0 * omega_middle + omega_start) / (h * h)
-    a = (omega_end - omega_start) / h - b * h
+    a, b = quadratic_through(t_end - t_start, omega_start, omega_middle, omega_end)
     return LoadPiece(t_start, t_end, -a + 2.0 * b * t_start, -2.0 * b)
 
 
@@ -258,7 +380,7 @@ def cosimulation_refusal(model: MachineModel) -> str | None:
         reason = rk4_stability_refusal(subsystem) or stiffness_refusal(subsystem)
         if reason is not None:
             return reason
-    if solver.path == "fast":
+    if runs_compiled(solver):
         from mech_regulator.solvers.compiled import fast_path_refusal
 
         return fast_path_refusal(model)
@@ -272,7 +394,7 @@ def segment_for(subsystem: MachineModel):
     reason = cosimulation_refusal(subsystem)
     if reason is not None:
         raise SceneError(reason)
-    if subsystem.scene.solver.path != "fast":
+    if not runs_compiled(subsystem.scene.solver):
         return _segment
     from mech_regulator.solvers.compiled.run import compiled_segment  # numba is imported only when needed
 

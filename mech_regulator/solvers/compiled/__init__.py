@@ -8,6 +8,15 @@ before choosing a path."""
 from __future__ import annotations
 
 FAST_METHODS = ("RK45", "DOP853", "RK4", "Rosenbrock23")
+AUTO_PATH_VARIABLE = "MECH_REGULATOR_AUTO_PATH"  # 'reference' or 'fast': what solver.path auto means on this machine
+
+
+def runs_compiled(solver) -> bool:
+    """Whether the core (solvers.simulate, the co-simulation's steppers) steps a scene's solver settings on the fast
+    path: solver.path fast, or auto with Rosenbrock23 (which only the fast path has). Auto is otherwise the reference
+    path here: the core never chooses by what happens to be compiled; commands resolve auto first
+    (solvers.on_path_for_a_command)."""
+    return solver.path == "fast" or (solver.path == "auto" and solver.method == "Rosenbrock23")
 
 
 def fast_path_refusal(scene_or_model) -> str | None:

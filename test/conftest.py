@@ -1,0 +1,8 @@
+"""Suite-wide settings. solver.path auto (the scene default) means, for a command, the fast path once its stepper is
+compiled on the machine: which path a command took would then depend on what earlier tests happened to compile.
+The suite fixes auto to the reference path (MECH_REGULATOR_AUTO_PATH, also in every subprocess and node it starts);
+test/test_auto_path.py takes it away to test auto itself."""
+
+import os
+
+os.environ["MECH_REGULATOR_AUTO_PATH"] = "reference"
