@@ -1,19 +1,24 @@
-"""Every run checks itself (analysis/self_check.py): a run whose energy residual exceeds what its tolerance allows is
+"""Every run checks itself (analysis/self_check.py): a run whose energy residual exceeds what its tolerance allows, or
+whose mode log misses an event, is
 reported `inaccurate` with the check, its value, the allowed value and the fix, in the summary and the JSON;
 `--strict` makes it exit 3. The deliberately loose run: a load switched on and off within 0.5 deg, which DOP853's
 steps stride over (the speed runs up to the motor's no-load speed as if the load were not there)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 import yaml
 
-from mech_regulator.analysis.self_check import ENERGY_PER_RTOL, FIXED_STEP_RESIDUAL, self_checks
+from mech_regulator.analysis import summarise
+from mech_regulator.analysis.self_check import (ENERGY_PER_RTOL, FIXED_STEP_RESIDUAL, MODE_PER_RTOL, mode_log_check,
+                                                self_checks)
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from support import run_cli
+from support import model_of, run_cli, scene, simulate_complete
+from test_governor_dynamics import DIRECT
 
 PULSED_LOAD = {
     "name": "pulsed_load",
@@ -66,3 +71,32 @@ def test_the_fixed_step_methods_have_their_own_bound():
     assert check["allowed"] == FIXED_STEP_RESIDUAL and "solver.step" in check["fix"]
     assert self_checks(model, {"energy": {"relative_residual": FIXED_STEP_RESIDUAL / 2}}) == []
     assert self_checks(model, {"energy": None}) == []
+
+
+# The mode-log check: a sleeve with static > kinetic friction under a ramped load sticks and breaks away many times
+# (test_hard_cases_governor.py's stick-slip base). A run's own mode log passes; the same run with one logged mode
+# change taken out (its stretch merged into the one before) claims the sleeve kept a mode whose guard went below 0
+# — what a missed event looks like — and is caught, naming the guard.
+STICK_SLIP = scene(DIRECT, governor__friction=1.0, governor__static_friction=3.0, governor__damping=100.0,
+                   scenario={"duration": 3.0, "external_load": 0.0,
+                             "load_events": [{"time": 0.5, "torque": 30.0, "ramp": 2.0}]},
+                   solver={"method": "DOP853", "rtol": 1e-8, "atol": 1e-10})
+
+
+def test_a_run_passes_its_own_mode_log_and_a_missed_event_is_caught():
+    model = model_of(STICK_SLIP)
+    trajectory = simulate_complete(model)
+    assert len(trajectory.modes) >= 4, trajectory.modes
+    assert mode_log_check(model, trajectory) is None
+    assert self_checks(model, summarise(model, trajectory), trajectory) == []
+    # the longest stretch after the first: its start taken out of the log, as if the solver had not seen it
+    lengths = [(end - start, index) for index, ((start, _), (end, _)) in
+               enumerate(zip(trajectory.modes[1:], trajectory.modes[2:]), start=1)]
+    _, missed = max(lengths)
+    doctored = dataclasses.replace(trajectory, modes=trajectory.modes[:missed] + trajectory.modes[missed + 1:])
+    check = mode_log_check(model, doctored)
+    assert check is not None and check["value"] > check["allowed"] == MODE_PER_RTOL * 1e-8
+    left_mode = trajectory.modes[missed - 1][1]
+    assert any(guard.name in check["check"] for guard in model.guards(left_mode)), (check, left_mode)
+    (reported,) = self_checks(model, summarise(model, doctored), doctored)
+    assert reported["check"].startswith("missed event") and "solver.rtol" in reported["fix"]

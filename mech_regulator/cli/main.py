@@ -19,6 +19,7 @@ from mech_regulator.cli import EXIT_INTERRUPTED
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note
+from mech_regulator.cli.structure import add_structure_command
 from mech_regulator.cli.sweep import add_sweep_command
 
 if TYPE_CHECKING:
@@ -58,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
     simulate.add_argument("--strict", action="store_true",
                           help="exit 3 when the run fails a self-check (status inaccurate: its energy residual "
-                               "exceeds what its tolerance allows)")
+                               "exceeds what its tolerance allows, or its mode log missed an event)")
     simulate.add_argument("--exchange-step", type=float, metavar="H",
                           help="co-simulate machine and governor as the ROS nodes do in lockstep, exchanging "
                                "speed, throttle and load every H seconds (the same numbers as `run`)")
@@ -111,6 +112,7 @@ def build_parser() -> argparse.ArgumentParser:
     engine.add_argument("--out", type=Path, help="write the curves over the working cycle as CSV")
     engine.add_argument("--json", action="store_true", help="print the analysis as JSON")
     add_flywheel_command(scene_command)
+    add_structure_command(scene_command)
     add_sweep_command(scene_command)
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
@@ -208,6 +210,10 @@ def main(argv: list[str] | None = None) -> int:
             return _required_coupling(scene, args)
         if args.command == "kinematics":
             return _kinematics(scene, args)
+        if args.command == "structure":
+            from mech_regulator.cli.structure import run_structure
+
+            return run_structure(scene, args)
         if args.command == "engine":
             return _engine(scene, args)
         return _simulate(scene, args)
@@ -261,7 +267,7 @@ def _simulate(scene, args) -> int:
         trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory)
-    checks = summary["self_checks"] = self_checks(model, summary)
+    checks = summary["self_checks"] = self_checks(model, summary, trajectory)
     if checks and summary["status"] == "complete":
         summary["status"] = "inaccurate"
     if not trajectory.interpolants:
