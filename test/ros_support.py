@@ -376,14 +376,21 @@ class RunListener:
     def joints(self) -> dict[int, object]:
         return self.by_stamp([message for message in self.joint_messages if "crank" in message.name])
 
-    @property
-    def moments(self) -> dict[int, dict[str, float]]:
-        return {when: dict(zip(message.name, message.effort)) for when, message in
-                self.by_stamp(self.moment_messages).items()}
+    @staticmethod
+    def by_group(messages: list) -> dict[int, dict[str, tuple[float, float, float]]]:
+        """Batched messages (nodes.common.Batch) by exchange time: {joint: (position, velocity, effort)}."""
+        from mech_regulator.nodes.common import batch_groups
+
+        return {when: joints for message in messages for when, joints in batch_groups(message)}
 
     @property
-    def governor(self) -> dict[int, object]:
-        return self.by_stamp(self.governor_messages)
+    def moments(self) -> dict[int, dict[str, float]]:
+        return {when: {name: effort for name, (_, _, effort) in joints.items()}
+                for when, joints in self.by_group(self.moment_messages).items()}
+
+    @property
+    def governor(self) -> dict[int, dict[str, tuple[float, float, float]]]:
+        return self.by_group(self.governor_messages)
 
     def wait_finished(self) -> int:
         """Spin until the machine said it finished and its (and the governor's) last samples are in;

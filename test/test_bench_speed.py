@@ -17,6 +17,7 @@ from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, SpeedBe
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP
 from support import run_cli, simulate_complete
 
 SHORT = "scenario.duration=0.5"
@@ -103,27 +104,39 @@ def test_cost_at_the_target_error_is_interpolated_log_log_along_the_front():
 
 
 def test_ros_real_time_factors():
-    """The nodes' real-time factor is the simulated time over the exchanges' wall time (6 s in 12 s: 0.5), the
-    target's measure on the fast path at 1 ms; the in-process run's factor and error are passed on; a failed run
-    (no time) gives none; the reference path is not the target's."""
-    def row(path, method, wall, error=math.nan):
-        return Row("ros", "engine_direct", path, method, "hold", 1e-3, 6.0, wall, steps=6000, error=error)
+    """The nodes' real-time factor is the simulated time over the exchanges' wall time (16 s in 32 s: 0.5), the
+    target's measure at run's default (the fast path, DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING); the in-process run's
+    factor and largest error are passed on; a failed run (no time) gives none; another design is not the target's."""
+    def row(path, method, wall, error=math.nan, coupling=DEFAULT_COUPLING, step=DEFAULT_EXCHANGE_STEP):
+        return Row("ros", "engine_direct", path, method, coupling, step, 16.0, wall, steps=800, error=error)
 
-    rows = [row(REFERENCE, "nodes", 30.0), row(REFERENCE, "in process", 6.0, 6e-5), row(FAST, "nodes", 12.0),
-            row(FAST, "in process", 1.5, 2e-4)]
+    rows = [row(REFERENCE, "nodes", 80.0), row(REFERENCE, "in process", 16.0, 6e-5), row(FAST, "nodes", 32.0),
+            row(FAST, "in process", 4.0, 2e-5)]
     benchmark = SpeedBenchmark(rows=rows)
     reference, fast = ros_summary(benchmark)
-    assert reference["real_time_factor"] == pytest.approx(0.2, rel=1e-12)
-    assert fast["real_time_factor"] == pytest.approx(0.5, rel=1e-12)
-    assert fast["in_process_real_time_factor"] == pytest.approx(4.0, rel=1e-12) and fast["error"] == 2e-4
+    assert reference["real_time_factor"] == pytest.approx(0.2, rel=1e-12) and not reference["default"]
+    assert fast["real_time_factor"] == pytest.approx(0.5, rel=1e-12) and fast["default"]
+    assert fast["in_process_real_time_factor"] == pytest.approx(4.0, rel=1e-12) and fast["max_error"] == 2e-5
     assert ros_target(benchmark) == pytest.approx(0.5, rel=1e-12)
     assert math.isnan(ros_target(SpeedBenchmark(rows=rows[:2])))
     assert math.isnan(ros_target(SpeedBenchmark(rows=[row(FAST, "nodes", math.nan)])))
-    waveform = Row("ros", "engine_direct", FAST, "nodes", "waveform", 1e-3, 6.0, 3.0, steps=6000)
-    summary = ros_summary(SpeedBenchmark(rows=rows + [waveform]))
-    assert [item["coupling"] for item in summary] == ["hold", "hold", "waveform"]
-    assert summary[2]["real_time_factor"] == pytest.approx(2.0, rel=1e-12)
-    assert math.isnan(ros_target(SpeedBenchmark(rows=[waveform]))), "the target's measure is the hold coupling's"
+    held = row(FAST, "nodes", 8.0, coupling="hold", step=1e-3)
+    summary = ros_summary(SpeedBenchmark(rows=rows + [held]))
+    assert [item["coupling"] for item in summary] == [DEFAULT_COUPLING, DEFAULT_COUPLING, "hold"]
+    assert summary[2]["real_time_factor"] == pytest.approx(2.0, rel=1e-12) and not summary[2]["default"]
+    assert math.isnan(ros_target(SpeedBenchmark(rows=[held]))), "the target's measure is run's default"
+
+
+def test_the_ros_picture_is_drawn_only_when_the_main_job_was_measured(tmp_path):
+    from mech_regulator.viz.speed import plot_ros_speed
+
+    rows = [Row("ros", "engine_direct", path, how, DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, 16.0, wall, steps=800,
+                error=error) for path, how, wall, error in ((FAST, "nodes", 4.0, math.nan),
+                                                             (FAST, "in process", 2.0, 2e-5))]
+    assert plot_ros_speed(SpeedBenchmark(rows=rows), tmp_path / "ros.png")
+    assert (tmp_path / "ros.png").read_bytes().startswith(b"\x89PNG")
+    assert not plot_ros_speed(SpeedBenchmark(rows=[]), tmp_path / "none.png")
+    assert not (tmp_path / "none.png").exists()
 
 
 def test_quick_command_writes_its_files(capsys, tmp_path):

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy import optimize
 
 from mech_regulator.analysis import energy_balance, summarise
 from mech_regulator.scene import SceneError, load_scene, validate_scene
@@ -329,3 +330,56 @@ def test_the_co_simulated_clutch_slips_and_locks_as_the_monolithic_run():
     columns = model.columns(run.times, run.states, run.throttle, run.external_load)
     slipping = columns["slip_speed"] != 0.0
     assert slipping[1] and not slipping[-1], "the clutch should slip at the start and be locked at 2 s"
+
+
+# A clutch slip shorter than a solver step (issue 19): a crank-slider on the motor side makes the moment the stuck
+# clutch passes swing over each turn (its reduced inertia and the 1/2 J' omega^2 term), and its highest swing tops
+# the static torque for 1.65 ms, inside a 40 ms step the loose run takes when the clutch never slips.
+def short_slip(static: float, rtol: float) -> dict:
+    """Constant 5 N m drive on 0.05 kg m^2 and a crank-slider (0.1 m crank, 0.4 m rod, 3 kg slider), a clutch of
+    `static` N m (kinetic 0.1 N m below) to a 0.5 kg m^2 shaft with a viscous load, both at 30 rad/s, for 0.5 s."""
+    return {"name": "short_slip",
+            "machine": {"inertia": 0.05, "drive": {"type": "constant", "torque": 5.0},
+                        "mechanism": {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 3.0},
+                        "clutch": {"static_torque": static, "kinetic_torque": static - 0.1,
+                                   "driven": {"inertia": 0.5, "loads": [{"type": "viscous", "coefficient": 0.05}]}}},
+            "scenario": {"initial": {"omega": 30.0, "omega_driven": 30.0}, "duration": 0.5},
+            "solver": {"method": "DOP853", "rtol": rtol, "atol": rtol * 1e-2}}
+
+
+def test_a_slip_shorter_than_a_step_is_seen():
+    """Oracles: the never-slipping clutch (static torque 1000 N m) at rtol 1e-12 gives the stuck torque T(t), whose
+    crossings of 21.7 N m bound the episode (t1, t2); a tight run (rtol 1e-12) gives the lock time. The loose run
+    (rtol 1e-5, steps of ~30 ms) logs exactly a break-away at t1 and a lock near the tight run's (within 1e-5 s;
+    measured 1e-6 s), and its mode log agrees with the torque bound: on 2000 samples of its stuck stretches |T| <=
+    21.7 N m. Without the event the loose never-slipping run would stride over it: one of its steps spans the whole
+    slip (measured 0.359-0.399 s)."""
+    static = 21.7
+    never = model_of(short_slip(1000.0, 1e-12))
+    stuck_run = simulate_complete(never)
+
+    def over_static(t: float) -> float:
+        return never.columns(np.array([t]), stuck_run(np.array([t])))["clutch_torque"][0] - static
+
+    samples = np.linspace(0.0, 0.5, 5001)
+    over = np.array([over_static(t) for t in samples])
+    (first, second), = [np.flatnonzero(np.diff(np.sign(over)))]  # exactly one episode above the static torque
+    t1 = optimize.brentq(over_static, samples[first], samples[first + 1], xtol=1e-14)
+    t2 = optimize.brentq(over_static, samples[second], samples[second + 1], xtol=1e-14)
+    tight = simulate_complete(model_of(short_slip(static, 1e-12)))
+    (_, _), (t_lock, locks) = tight.events
+    assert locks == "clutch locks (slip ends)" and t_lock > t2
+
+    model = model_of(short_slip(static, 1e-5))
+    loose = simulate_complete(model)
+    assert [name for _, name in loose.events] == ["clutch breaks away, motor ahead", "clutch locks (slip ends)"]
+    assert loose.events[0][0] == pytest.approx(t1, abs=1e-5)
+    assert loose.events[1][0] == pytest.approx(t_lock, abs=1e-5)
+    starts = [start for start, _ in loose.modes] + [0.5]
+    for (start, mode), end in zip(loose.modes, starts[1:]):
+        if "stuck" in mode:
+            times = np.linspace(start, end, 2000)
+            assert np.max(np.abs(model.columns(times, loose(times))["clutch_torque"])) <= static * (1.0 + 1e-9)
+    coarse = simulate_complete(model_of(short_slip(1000.0, 1e-5)))
+    ends = np.concatenate(coarse.step_ends)
+    assert any(a < t1 and t_lock < b for a, b in zip(ends, ends[1:]))

@@ -3,6 +3,8 @@ forms and the reference path's event semantics; the Python wrappers CompiledRun 
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from numba import njit
@@ -256,16 +258,19 @@ def test_a_near_tangency_fires_only_when_it_dips(level, fires):
         assert run.event_time == pytest.approx(0.5 - 1e-5, abs=1e-9)
 
 
-def test_a_dip_between_the_reference_probes_is_caught_for_a_nonlinear_guard():
-    """exp(x) - 1 with x = (t - 0.5)^2 - 0.0064 (below 0 on (0.42, 0.58)) in the one RK4 step [0, 1]: the
-    reference's 4 probes miss it, the 8 probes see it, Brent's method locates t = 0.42."""
+@pytest.mark.parametrize("depth", [0.0064, 1e-4, 1e-8])
+def test_a_dip_between_the_reference_probes_is_caught_for_a_nonlinear_guard(depth):
+    """exp(x) - 1 with x = (t - 0.5)^2 - depth (below 0 on 0.5 -/+ sqrt(depth): 0.16 s, 0.02 s, 2e-4 s wide) in the
+    one RK4 step [0, 1]: all of them between the switch probes (PROBES_PER_STEP) and the two narrower ones between
+    any 9 evenly spaced points; the guard's polynomial over the step finds each, Brent's method locates
+    t = 0.5 - sqrt(depth)."""
     def x(t):
-        return (t - 0.5) ** 2 - 0.0064
+        return (t - 0.5) ** 2 - depth
 
     run = fixed(constant_acceleration, [x(0.0), -1.0], 1.0, [2.0], 1.0, guards=exponential_position,
                 lines=np.zeros((1, 4)))
     assert run.n_steps == 1 and reference_misses(0.0, 1.0, x)
-    assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.42, abs=1e-12)
+    assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.5 - math.sqrt(depth), abs=1e-12)
 
 
 def test_a_guard_at_its_boundary_fires_only_past_the_tolerance():

@@ -19,7 +19,7 @@ from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE
                                                      mode_rows)
 from mech_regulator.solvers.compiled.run import MAX_STEPS_PER_CALL
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.compiled import fast_path_refusal
+from mech_regulator.solvers.compiled import fast_path_refusal, runs_compiled
 from support import model_of, run_cli, scene, simulate_complete
 
 RNG = np.random.default_rng(7)
@@ -150,7 +150,8 @@ def test_plain_kernels_equal_reference_in_and_out_of_a_switch_window():
     levels = np.zeros(compiled.n_guards)
     compiled.guards(0.0, y, p, levels)
     assert levels.tolist() == pytest.approx([1.0 - 0.4, 1.5 - 1.0])  # phi - lo, hi - phi
-    assert compiled.linear(None, (0.4, 1.5))[:, :4].tolist() == [[1.0, -0.4, 1.0, 0.0], [1.0, 1.5, -1.0, 0.0]]
+    # linear rows, flagged STEP_ONTO (2): a switch's state comes from a step onto it
+    assert compiled.linear(None, (0.4, 1.5))[:, :4].tolist() == [[2.0, -0.4, 1.0, 0.0], [2.0, 1.5, -1.0, 0.0]]
     # a held throttle (co-simulation) scales the drive only
     piece = LoadPiece(0.0, 1.0, 2.0, 0.0, throttle=0.6)
     assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=piece)
@@ -402,7 +403,9 @@ def test_refusals_name_the_key():
     for name in ("two_mass", "engine_inline4", "walking_beam", "compressor_friction", "clutch_start"):
         assert fast_path_refusal(load_scene(name)) is None
     with pytest.raises(SceneError, match="Rosenbrock23' runs only on the compiled fast path"):
-        load_scene("startup", ["solver.method=Rosenbrock23"])
+        load_scene("startup", ["solver.method=Rosenbrock23", "solver.path=reference"])
+    assert runs_compiled(load_scene("startup", ["solver.method=Rosenbrock23"]).solver)  # solver.path auto
+    assert not runs_compiled(load_scene("startup").solver)  # auto is the reference path in the core
 
 
 @pytest.mark.parametrize("name, overrides, expected", [

@@ -31,13 +31,13 @@ from std_srvs.srv import Trigger
 from mech_regulator.cli.report import write_csv
 from mech_regulator.model import build_model
 from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
-from mech_regulator.solvers.cosim import cosimulate, to_nanoseconds
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, cosimulate, to_nanoseconds
 
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
-EXCHANGE_STEP = 1e-3  # [s]
+EXCHANGE_STEP = DEFAULT_EXCHANGE_STEP  # [s]: run's default, as its coupling
 
 
-def in_process_csv(model, duration: float, path: Path, coupling: str = "hold") -> bytes:
+def in_process_csv(model, duration: float, path: Path, coupling: str = DEFAULT_COUPLING) -> bytes:
     """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write)."""
     scenario = model.scene.scenario.model_copy(update={"duration": duration})
     shortened = dataclasses.replace(model, scene=model.scene.model_copy(update={"scenario": scenario}))
@@ -65,7 +65,7 @@ def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedP
 
 
 def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: Path, tmp_path: Path,
-                  coupling: str = "hold") -> None:
+                  coupling: str = DEFAULT_COUPLING) -> None:
     """The run ended by itself with exit 0 and status complete, wrote every exchange to its CSV exactly as the
     in-process co-simulation does, and left no node running."""
     log = rrd.with_suffix(".log")
@@ -74,6 +74,8 @@ def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: P
     assert result.returncode == 0, described
     summary = json.loads(rrd.with_suffix(".json").read_text())
     assert summary["status"] == "complete" and summary["t_end"] == PLAYED, described
+    assert summary["start_up_s"] > 0.0 and "max_lag_s" not in summary, described  # the command came first; lockstep
+    assert "s from the command to the first exchange" in result.stdout, described
     rows = rrd.with_suffix(".csv").read_bytes()
     assert rows.count(b"\n") == 1 + round(PLAYED / EXCHANGE_STEP) + 1, described  # header and every exchange
     assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv", coupling), \
@@ -99,6 +101,19 @@ def test_the_waveform_coupling_through_the_nodes_is_the_in_process_one(tmp_path)
     result, rrd = play(scene, tmp_path / "run", "--coupling", "waveform")
     assert_played(scene, build_model(load_scene(scene)), result, rrd, tmp_path, "waveform")
     assert json.loads(rrd.with_suffix(".json").read_text())["coupling"] == "waveform"
+
+
+def test_realtime_says_how_far_it_fell_behind_the_wall_clock(tmp_path):
+    """--time-mode realtime: the machine integrates a step only once the wall clock has reached its end, so the
+    simulation time it publishes is never ahead of the wall clock: the largest lag in the summary is >= 0 (and
+    finite), printed with the summary; the run completes its simulated time."""
+    result, rrd = play("engine_direct", tmp_path / "realtime", "--time-mode", "realtime")
+    described = f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    assert result.returncode == 0, described
+    summary = json.loads(rrd.with_suffix(".json").read_text())
+    assert summary["status"] == "complete" and summary["t_end"] == PLAYED, described
+    assert 0.0 <= summary["max_lag_s"] < np.inf, described
+    assert f"behind the wall clock by {summary['max_lag_s']:.3g} s at most" in result.stdout, described
 
 
 def four_bar_from_rest() -> dict:
@@ -174,7 +189,7 @@ def test_the_services_pause_step_resume_and_reset_between_trials(tmp_path, proce
     scene = "engine_direct"
     overrides = ["scenario.duration=0.1", "scenario.load_events=[]"]
     model = build_model(load_scene(scene, overrides))
-    run = cosimulate(model, 0.002)
+    run = cosimulate(model, 0.002, coupling=DEFAULT_COUPLING)  # the nodes' default coupling
     parameters = {"scene_file": scene, "overrides": overrides, "exchange_step": 0.002}
     processes.node("governor", parameters)
     processes.node("scenario", parameters)

@@ -43,7 +43,8 @@ from mech_regulator.model import build_model
 from mech_regulator.nodes.launch import viewer_command
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cosim import GovernorStepper, cosimulate, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import (DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, GovernorStepper, cosimulate, seconds,
+                                         to_nanoseconds)
 from mech_regulator.solvers.trajectory import SampledTrajectory
 
 # engine_direct shortened to 1 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s): the main job's test scene
@@ -88,8 +89,43 @@ def constant_inertia_scene(folder: Path, name: str = "scene.yaml", **scenario):
 
 def machine_parameters(scene: Path, **changes) -> dict:
     """machine_node's parameters for a lockstep run of scene with the test node as one subscriber."""
-    return {"scene_file": str(scene), "time_mode": "lockstep", "exchange_step": 0.002,
+    return {"scene_file": str(scene), "time_mode": "lockstep", "exchange_step": 0.002, "coupling": "hold",
             "lockstep_inputs": ["throttle", "load"], "peer_timeout": 60.0, **changes}
+
+
+# -------------------------------------------------------------------------------------------------
+# What only the recorder reads travels in batches (nodes.common.Batch)
+
+
+class _Published(list):
+    """A stand-in publisher: keeps what is published."""
+
+    def publish(self, message) -> None:
+        self.append(message)
+
+
+def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
+    from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
+
+    published = _Published()
+    batch = Batch(published)
+    largest = 2**53  # [ns]: about 104 days, still exact in a double
+    batch.add(0, ["drive", "load"], [], [], [1.5, -2.0])
+    batch.add(20_000_000, ["sleeve", "arm"], [0.03, 0.1], [0.0, -0.2], [])
+    batch.add(largest, ["drive"], [], [], [7.0])
+    batch.send()
+    batch.send()  # nothing left: nothing sent
+    assert len(published) == 1 and stamp_ns(published[0].header.stamp) == largest
+    groups = batch_groups(published[0])
+    assert [when for when, _ in groups] == [0, 20_000_000, largest]
+    assert {name: effort for name, (_, _, effort) in groups[0][1].items()} == {"drive": 1.5, "load": -2.0}
+    assert groups[1][1]["arm"][:2] == (0.1, -0.2) and math.isnan(groups[1][1]["arm"][2])
+    assert groups[2][1]["drive"][2] == 7.0 and math.isnan(groups[2][1]["drive"][0])
+    for when in range(BATCH_SIZE):  # a full batch goes out when due, however little wall time has passed (and an
+        batch.add(when, ["drive"], [], [], [float(when)])  # older group waiting 0.1 s sends it earlier)
+        batch.send_when_due()
+    assert batch.groups == 0 and [when for message in published[1:] for when, _ in batch_groups(message)] == \
+        list(range(BATCH_SIZE))
 
 
 # -------------------------------------------------------------------------------------------------
@@ -103,10 +139,8 @@ def received_run(listener: RunListener, end: int):
     times = sorted(joints)
     assert times[-1] == end and sorted(moments) == times and sorted(governor) == times, \
         "joint_states, machine/moments and governor/state have different exchange times"
-    rows = np.array([[joints[t].position[0], joints[t].velocity[0],
-                      governor[t].position[list(governor[t].name).index("arm")],
-                      governor[t].velocity[list(governor[t].name).index("arm")]] for t in times]).T
-    throttle = np.array([governor[t].position[list(governor[t].name).index("throttle")] for t in times])
+    rows = np.array([[joints[t].position[0], joints[t].velocity[0], *governor[t]["arm"][:2]] for t in times]).T
+    throttle = np.array([governor[t]["throttle"][0] for t in times])
     return times, rows, throttle, {name: np.array([moments[t][name] for t in times])
                                    for name in ("drive", "resistance", "external", "net")}
 
@@ -205,7 +239,7 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
     # the test node is the machine's `load` input (the scenario's constant BASE_LOAD, stamped), so the
     # machine waits for it at every exchange time; the step itself goes on load_torque (Float64)
     processes.node("machine", machine_parameters(scene, peers=["governor", probe.node.get_name()]))
-    processes.node("governor", {"scene_file": str(scene)})
+    processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
     stamped = probe.publisher(WrenchStamped, "load_torque_stamped", describe=processes.logs)
     load = probe.publisher(Float64, "load_torque", describe=processes.logs)
     listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
@@ -257,7 +291,7 @@ def bad_messages_run(tmp_path_factory):
         scene, model = constant_inertia_scene(folder, duration=0.3, load_events=[{"time": 0.1, "torque": 8.0}])
         processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", probe.node.get_name()],
                                                      max_load_torque=1e3))
-        processes.node("governor", {"scene_file": str(scene)})
+        processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
         processes.node("scenario", {"scene_file": str(scene)})
         listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
         load = probe.publisher(Float64, "load_torque", describe=processes.logs)
@@ -354,11 +388,11 @@ def overspeed_run(tmp_path_factory):
         processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", "recorder",
                                                             probe.node.get_name()], overspeed_trip=trip,
                                                      exchange_step=TRIP_STEP))
-        processes.node("governor", {"scene_file": str(scene)})
+        processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
         processes.node("scenario", {"scene_file": str(scene)})
         output = folder / "trip.rrd"
         recorder = processes.node("recorder", {"scene_file": str(scene), "output": str(output),
-                                               "exchange_step": TRIP_STEP})
+                                               "exchange_step": TRIP_STEP, "coupling": "hold"})
         listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
         listener.open_gate()
         end = listener.wait_finished()
@@ -391,9 +425,12 @@ def _in_process_summary(model, run) -> dict:
 
 def _without_pace(summary: dict) -> dict:
     """The recorder's summary less the nodes' pace (wall time of the exchanges and real-time factor, which only a
-    ROS run has), after checking that the two agree with the simulated time (arithmetic, not a speed test)."""
+    ROS run has, and `run`'s start-up), after checking that the two agree with the simulated time (arithmetic, not a
+    speed test)."""
     wall, pace = summary.pop("wall_time_s"), summary.pop("real_time_factor")
     assert wall > 0.0 and pace * wall == pytest.approx(summary["t_end"], rel=1e-12)  # exchanges from t = 0 to t_end
+    start_up = summary.pop("start_up_s", None)  # `run`'s (the command's start came before the first exchange)
+    assert start_up is None or start_up > 0.0
     return summary
 
 
@@ -531,7 +568,8 @@ class MainJob:
 
 
 def _short_engine_arguments() -> list[str]:
-    return ["engine_direct", *[part for change in SHORT_ENGINE for part in ("--set", change)]]
+    """The short engine_direct, exchanged every 1 ms with the hold coupling (not run's defaults: many exchanges)."""
+    return ["engine_direct", *[part for change in SHORT_ENGINE for part in ("--set", change)], "--coupling", "hold"]
 
 
 @pytest.fixture(scope="module")
@@ -540,7 +578,8 @@ def main_jobs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("main_job")
     started = Processes(folder, dict(os.environ, PYTHONUNBUFFERED="1"))  # each run sets its domain
     try:
-        jobs = [MainJob(started, folder, _short_engine_arguments(), name) for name in ("first", "second")]
+        jobs = [MainJob(started, folder, [*_short_engine_arguments(), "--exchange-step", "1e-3"], name)
+                for name in ("first", "second")]
         for job in jobs:
             started.wait(job.process, 4 * WAIT)
     finally:
@@ -661,7 +700,7 @@ def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe
     # what was run is the co-simulation of the scene: its start, in process
     prefix = csv[csv["t"] <= 0.3]
     model = build_model(load_scene("engine_direct", ["scenario.duration=0.3", "scenario.load_events=[]"]))
-    run = cosimulate(model, 1e-3)
+    run = cosimulate(model, DEFAULT_EXCHANGE_STEP, coupling=DEFAULT_COUPLING)  # run's defaults
     np.testing.assert_array_equal(prefix["omega"], run.states[1, :prefix.size])
     np.testing.assert_array_equal(prefix["throttle"], run.throttle[:prefix.size])
     assert code == 130 and "Traceback" not in without_rclpy_noise(job.log + job.node_log), job.describe()

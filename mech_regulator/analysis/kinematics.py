@@ -1,8 +1,11 @@
-"""Kinematic analysis of a scene's mechanism over one turn of the crank at constant speed (source 004).
+"""Kinematic analysis of a scene's mechanism over one turn of the crank at constant speed (source 004), and its
+kinetostatics there (source 001).
 
 With the crank turning at constant omega (epsilon = 0, phi = omega t), a point P(phi) of the mechanism has
 velocity v = P'(phi) omega and acceleration a = P''(phi) omega^2, P' and P'' being the kinematic transfer
-functions of `mechanisms.point_motions` (closed forms, no differentiation in time).
+functions of `mechanisms.point_motions` (closed forms, no differentiation in time). The joint reactions and the
+balancing moment on the crank at that motion (inertia forces and weights, nothing on the output) come from the
+mechanism's kinetostatics (`mechanisms.build_kinetostatics`: group by group from the farthest inward for a linkage).
 """
 
 from __future__ import annotations
@@ -31,6 +34,37 @@ def kinematics_table(mechanism: schema.Mechanism, omega: float, count: int) -> d
                         f"{name}_ax": acceleration.real, f"{name}_ay": acceleration.imag,
                         f"{name}_a": np.abs(acceleration)})
     return columns
+
+
+def reactions_table(mechanism: schema.Mechanism, gravity: tuple[float, float] | None, omega: float,
+                    phis: np.ndarray) -> dict[str, np.ndarray]:
+    """Kinetostatics at constant crank speed omega [rad/s] (epsilon = 0) with the links' weights (gravity [m/s^2],
+    None: weightless) and no load on the output, at the crank angles phis [rad]: R_<joint> = |R| [N], the magnitude of
+    every joint's reaction (a guide's: its normal force), and M_balancing [N m], the moment on the crank that keeps
+    its speed constant, M_b = 1/2 J'(phi) omega^2 - M_weight(phi). Empty for a mechanism whose kinetostatics is not
+    built (the walking beam preset and a multi-cylinder crank-slider; scene.schema.NO_KINETOSTATICS)."""
+    from mech_regulator.mechanisms import build_kinetostatics
+
+    if mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
+        return {}
+    loads, joints = build_kinetostatics(mechanism, gravity)
+    samples = [loads(float(phi), omega, 0.0) for phi in phis]
+    columns = {f"R_{joint}": np.array([abs(sample.constant[index]) for sample in samples])
+               for index, joint in enumerate(joints)}
+    columns["M_balancing"] = np.array([sample.balancing[0] for sample in samples])
+    return columns
+
+
+def reactions_summary(columns: dict[str, np.ndarray]) -> dict[str, dict[str, float]]:
+    """Per joint of a reactions_table: the largest reaction R_max [N] over the turn and the crank angle where it
+    occurs [deg]; and for the balancing moment its least and largest values [N m] with their crank angles."""
+    phi_deg = np.degrees(columns["phi"])
+    summary = {key[2:]: {"R_max": float(columns[key].max()), "R_max_at_deg": float(phi_deg[columns[key].argmax()])}
+               for key in columns if key.startswith("R_")}
+    moment = columns["M_balancing"]
+    summary["balancing_moment"] = {"min": float(moment.min()), "min_at_deg": float(phi_deg[moment.argmin()]),
+                                   "max": float(moment.max()), "max_at_deg": float(phi_deg[moment.argmax()])}
+    return summary
 
 
 def point_names(columns: dict[str, np.ndarray]) -> list[str]:

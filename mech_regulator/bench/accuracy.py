@@ -127,7 +127,8 @@ SCENES = (
     # 150.2347 rad/s: the speed at phi = 2 pi k on the periodic orbit, from a 40 s run from rest (rtol 1e-12)
     BenchScene("compressor", "compressor", ("scenario.initial.omega=150.2347", "scenario.duration=1.0"),
                ("scenario.duration=0.1",), "steady motion (started on its periodic orbit) for 1 s; the gas force is "
-               "a table, linear between points, so the moment has kinks in phi that the solvers step over", 1.0, 1e-3),
+               "a table in the slider position, linear between points, so the moment has kinks in phi that the solvers "
+               "step over (breakpoints in x are not located; those of tables in phi are)", 1.0, 1e-3),
     BenchScene("engine_direct", "engine_direct", ("scenario.duration=2.0", _load_step(0.5, 8.0)),
                ("scenario.duration=0.2", _load_step(0.1, 8.0)), "direct governor, load step 6 -> 8 N m at 0.5 s, "
                "2 s; the indicator diagram is a table in phi (kinks every 15 deg)", 1e-2, 1e-3),

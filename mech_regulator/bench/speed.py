@@ -22,8 +22,9 @@ Also measured: the cost against simulated time (fast and reference), against the
 (effect_cost.EFFECT_CHAIN, fast and reference per link; a link the fast path refuses is shown as such), against
 the number of scenes in a sweep (analysis.sweep.run_sweep on 1 and 2 processes), the start-up
 cost (cold: empty compile caches, and warm, each in a fresh Python process; the package's import time) and,
-optionally (ros=True), the lockstep ROS main job on both paths at a 1 ms exchange step and on the fast path at
-longer exchange steps, with the exchange's error (measure_ros). Numbers to print, never to assert.
+optionally (ros=True), the lockstep ROS main job on the whole engine_direct for each exchange design (coupling,
+step, path) and on the other governed scenes at run's default, with the exchange's error (measure_ros). Numbers
+to print, never to assert.
 """
 
 from __future__ import annotations
@@ -54,12 +55,18 @@ from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, cosimulate
 
 BENCH_SCENE = "crank_slider_bench"
 SPEED_SCENES = (BenchScene(BENCH_SCENE, BENCH_SCENE, (), ("scenario.duration=0.5",),
                            "motor-driven crank-slider from rest, 2 s: the machine MuJoCo also simulates", 1.0, 1e-3),
                 ) + tuple(bench for bench in SCENES if bench.name in ("startup", "compressor"))
-DEFAULT_SCENES = (BENCH_SCENE, "startup")
+# a general linkage (issue 21): nine links in four groups solved per right-hand side; the fast path refuses it
+LINKAGE_SCENE = BenchScene("walking_beam_linkage", "walking_beam_linkage", ("scenario.duration=0.5",),
+                           ("scenario.duration=0.1",), "source 004's walking beam as a general linkage, 0.5 s: the "
+                           "reference path only (the fast path does not compile a linkage)", 1.0, 1e-3)
+SPEED_SCENES += (LINKAGE_SCENE,)
+DEFAULT_SCENES = (BENCH_SCENE, "startup", LINKAGE_SCENE.name)
 TARGET_ERROR = 1e-6                      # common achieved error of the comparison (omega RMS, relative) [-]
 TARGETS = {"fast : solve_ivp": 30.0, "fast : MuJoCo": 100.0, "ROS real-time factor": 10.0}
 FAST, REFERENCE, SOLVE_IVP, MUJOCO = "fast", "reference", "solve_ivp", "MuJoCo"
@@ -74,10 +81,12 @@ SWEEP_SIZES, QUICK_SWEEP_SIZES = (1, 2, 4, 8, 16), (1, 2)
 SWEEP_JOBS = (1, 2)
 REPEAT_BUDGET_S, MAX_REPEATS = 0.3, 7    # a run is repeated to about this much CPU time [s], at most this often
 MAX_ERROR_SAMPLES = 40_001               # MuJoCo's step times are thinned to at most this many for the error
-ROS_SCENE, ROS_DURATION, ROS_EXCHANGE = "engine_direct", 6.0, 1e-3   # [s]; the target's exchange step
-ROS_RUNS = ((REFERENCE, 1e-3, "hold"), (FAST, 1e-3, "hold"), (FAST, 2e-3, "hold"), (FAST, 5e-3, "hold"),
-            (FAST, 1e-2, "hold"), (FAST, 2e-3, "waveform"), (FAST, 5e-3, "waveform"),
-            (FAST, 1e-2, "waveform"))  # (path, exchange step [s], coupling: solvers.cosim)
+ROS_SCENE = "engine_direct"  # the whole scene (16 s), as `run` plays it
+ROS_RUNS = ((REFERENCE, 1e-3, "hold"), (FAST, 1e-3, "hold"), (FAST, 2e-3, "waveform"), (FAST, 1e-2, "waveform"),
+            (FAST, 1e-2, "corrected"), (FAST, 2e-2, "corrected"), (FAST, 4e-2, "corrected"))  # (path, exchange
+# step [s], coupling: solvers.cosim); run's default (solvers.cosim.DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING) among them
+ROS_OTHER_SCENES = ("engine_indirect_rigid", "engine_indirect_isodromic", "engine_indirect_none")  # the other
+# governed bundled scenes, at run's default only
 STARTUP_PROGRAM = """
 import time
 start = time.perf_counter()
@@ -300,6 +309,11 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
         rows.append(row)
         report(row)
 
+    def refused(path: str, method: str, setting: str, refusal: str) -> None:
+        """A path that does not run the scene: a row with the reason as its note (the tables list it)."""
+        rows.append(Row("precision", bench.name, path, method, setting, math.nan, duration, note=refusal))
+        report(rows[-1])
+
     for path, method in PATHS:
         if path == MUJOCO:
             refusal = ("left out (--no-mujoco)" if not mujoco else mujoco_refusal(scene)
@@ -309,14 +323,14 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
             for timestep in steps:
                 add(path, method, "timestep", timestep, mujoco_runner(build_model(scene), timestep))
             if refusal is not None:
-                rows.append(Row("precision", bench.name, path, method, "timestep", math.nan, duration, note=refusal))
+                refused(path, method, "timestep", refusal)
             continue
         for rtol in QUICK_TOLERANCES if quick else TOLERANCES:
             model = build_model(bench.load(quick, tuple(_solver_overrides(path, method, rtol, bench.state_scale))))
             refusal = (solve_ivp_refusal(model) if path == SOLVE_IVP else fast_path_refusal(model) if path == FAST
                        else None)
             if refusal is not None:
-                rows.append(Row("precision", bench.name, path, method, "rtol", math.nan, duration, note=refusal))
+                refused(path, method, "rtol", refusal)
                 break
             add(path, method, "rtol", rtol, ode_runner(path, method, model))
     return rows
@@ -410,31 +424,33 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
 
 
 def measure_ros(report: Callable[[Row], None]) -> list[Row]:
-    """The lockstep ROS main job (`mech-regulator run`, four node processes) on engine_direct over ROS_DURATION s
-    (load step 6 -> 8 N m at 0.5 s), for each (path, exchange step, coupling) of ROS_RUNS (method 'nodes', setting
-    the coupling): the wall time of
-    the exchanges as the recorder measured it (from the first machine state to the last; the run's summary), the
-    process's wall time with the nodes' start-up in the note; and the same co-simulation in this process
-    (solvers.cosim.cosimulate, number for number what the nodes compute; method 'in process'): its CPU time and its
-    achieved error, omega's RMS difference from the monolithic run at REFERENCE_RTOL (fast path) at the exchange
-    times, relative to max |omega| (the exchange's error: first order in the step with the hold, higher with the
-    waveform coupling, docs/ros.md; the nodes' too), and its maximum in the note."""
-    from mech_regulator.solvers.cosim import cosimulate
-
-    rows = []
+    """The lockstep ROS main job (`mech-regulator run`, four node processes) on the whole engine_direct, for each
+    (path, exchange step, coupling) of ROS_RUNS, and on each of ROS_OTHER_SCENES at run's default (method 'nodes',
+    setting the coupling): the wall time of the exchanges as the recorder measured it (from the first machine state
+    to the last; the run's summary), the process's wall time with the nodes' start-up in the note; and the same
+    co-simulation in this process (solvers.cosim.cosimulate, number for number what the nodes compute; method 'in
+    process'): its CPU time and its achieved error, omega's largest difference from the monolithic run at
+    REFERENCE_RTOL (fast path) at the exchange times, relative to max |omega| (the issue's bound is on it; the nodes'
+    is the same), with the RMS difference in the note."""
+    runs = [(ROS_SCENE, *run) for run in ROS_RUNS]
+    runs += [(scene, FAST, DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING) for scene in ROS_OTHER_SCENES]
+    rows, exact = [], {}
     with tempfile.TemporaryDirectory(prefix="mech-regulator-ros-") as folder:
-        for path, exchange, coupling in ROS_RUNS:
-            settings = ["scenario.load_events=[{time: 0.5, torque: 8.0}]", f"scenario.duration={ROS_DURATION!r}"]
-            settings += ["solver.path=fast"] if path == FAST else []
-            output = os.path.join(folder, f"{path}{exchange:g}{coupling}.rrd")
-            command = [sys.executable, "-m", "mech_regulator", "run", ROS_SCENE, "--quiet", "--exchange-step",
+        for scene, path, exchange, coupling in runs:
+            settings = ["solver.path=fast"] if path == FAST else ["solver.path=reference"]
+            output = os.path.join(folder, f"{scene}{path}{exchange:g}{coupling}.rrd")
+            command = [sys.executable, "-m", "mech_regulator", "run", scene, "--quiet", "--exchange-step",
                        repr(exchange), "--coupling", coupling, "--out", output] + [
                 item for setting in settings for item in ("--set", setting)]
             start = time.perf_counter()
             done = subprocess.run(command, capture_output=True, text=True, check=False)
             process_wall = time.perf_counter() - start
-            row = Row("ros", ROS_SCENE, path, "nodes", coupling, exchange, ROS_DURATION,
-                      steps=round(ROS_DURATION / exchange), note=f"process {process_wall:.3g} s with start-up")
+            model = build_model(load_scene(scene, settings))
+            duration = model.scene.scenario.duration
+            default = " (run's default)" if (path, exchange, coupling) == (FAST, DEFAULT_EXCHANGE_STEP,
+                                                                          DEFAULT_COUPLING) else ""
+            row = Row("ros", scene, path, "nodes", coupling, exchange, duration, steps=round(duration / exchange),
+                      note=f"process {process_wall:.3g} s with start-up{default}")
             summary_path = Path(output).with_suffix(".json")
             pace = json.loads(summary_path.read_text()) if summary_path.exists() else {}
             if done.returncode != 0 or "wall_time_s" not in pace:
@@ -443,16 +459,16 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
                 row.cpu_s, row.simulated_s = pace["wall_time_s"], pace["t_end"]
             rows.append(row)
             report(row)
-            model = build_model(load_scene(ROS_SCENE, settings))
             run, cpu = timed(lambda: cosimulate(model, exchange, coupling=coupling))
-            exact = simulate(build_model(load_scene(ROS_SCENE, settings + [
-                "solver.path=fast", f"solver.rtol={REFERENCE_RTOL!r}", f"solver.atol={REFERENCE_RTOL * 1e2!r}"])))
-            reference = exact(run.times)[1]
+            if scene not in exact:
+                exact[scene] = simulate(build_model(load_scene(scene, [
+                    "solver.path=fast", f"solver.rtol={REFERENCE_RTOL!r}", f"solver.atol={REFERENCE_RTOL * 1e2!r}"])))
+            reference = exact[scene](run.times)[1]
             scale = np.max(np.abs(reference))
-            error = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / scale)
             largest = float(np.max(np.abs(run.states[1] - reference)) / scale)
-            rows.append(Row("ros", ROS_SCENE, path, "in process", coupling, exchange, ROS_DURATION, cpu,
-                            steps=run.times.size - 1, error=error, note=f"max error {largest:.2g}"))
+            rms = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / scale)
+            rows.append(Row("ros", scene, path, "in process", coupling, exchange, duration, cpu,
+                            steps=run.times.size - 1, error=largest, note=f"RMS error {rms:.2g}{default}"))
             report(rows[-1])
     return rows
 
@@ -462,22 +478,25 @@ def ros_summary(benchmark: SpeedBenchmark) -> list[dict[str, float | str]]:
     excluded; missing when the run failed) and the in-process co-simulation's real-time factor (CPU) and achieved
     error."""
     found = []
-    for path, exchange, coupling in dict.fromkeys((row.path, row.value, row.setting) for row in benchmark.of("ros")):
-        item: dict[str, float | str] = {"path": path, "exchange_step_s": exchange, "coupling": coupling}
-        for row in benchmark.of("ros", path=path, value=exchange, setting=coupling):
+    for scene, path, exchange, coupling in dict.fromkeys((row.scene, row.path, row.value, row.setting)
+                                                         for row in benchmark.of("ros")):
+        item: dict[str, float | str] = {"scene": scene, "path": path, "exchange_step_s": exchange,
+                                        "coupling": coupling}
+        for row in benchmark.of("ros", scene=scene, path=path, value=exchange, setting=coupling):
             if row.method == "nodes" and math.isfinite(row.cpu_s):
                 item["real_time_factor"] = row.simulated_s / row.cpu_s
             elif row.method == "in process":
-                item.update(in_process_real_time_factor=row.simulated_s / row.cpu_s, error=row.error)
+                item.update(in_process_real_time_factor=row.simulated_s / row.cpu_s, max_error=row.error)
+        item["default"] = (path, exchange, coupling) == (FAST, DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING)
         found.append(item)
     return found
 
 
 def ros_target(benchmark: SpeedBenchmark) -> float:
-    """The ROS target's measure: the lockstep nodes' real-time factor at ROS_EXCHANGE on the fast path (nan when not
-    measured)."""
+    """The ROS target's measure: the lockstep nodes' real-time factor on the whole engine_direct at run's defaults
+    (nan when not measured)."""
     for item in ros_summary(benchmark):
-        if (item["path"], item["exchange_step_s"], item["coupling"]) == (FAST, ROS_EXCHANGE, "hold"):
+        if item["scene"] == ROS_SCENE and item.get("default"):
             return float(item.get("real_time_factor", math.nan))
     return math.nan
 
@@ -596,15 +615,15 @@ def tables(benchmark: SpeedBenchmark) -> str:
     lines += [f"| {row.path} | {row.setting} | {_number(row.value)} | {_number(row.cpu_s)} | {row.note} |"
               for row in benchmark.of("startup")]
     if benchmark.of("ros"):
-        lines += ["", f"lockstep ROS main job ({ROS_SCENE}, four node processes: wall time of the exchanges, start-up "
-                  "excluded) and the same co-simulation in one process (CPU time)", "",
-                  "| path | coupling | exchange step [ms] | simulated [s] | how | time [s] | real-time factor | "
-                  "omega error (RMS) | note |",
-                  "| --- | --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
-        lines += [f"| {row.path} | {row.setting} | {row.value * 1e3:g} | {row.simulated_s:g} | {row.method} | "
-                  f"{_number(row.cpu_s)} | "
-                  f"{_number(row.simulated_s / row.cpu_s)} | {_number(row.error)} | {row.note} |"
-                  for row in benchmark.of("ros")]
+        lines += ["", "lockstep ROS main job (four node processes: wall time of the exchanges, start-up excluded) "
+                  "and the same co-simulation in one process (CPU time); omega's error against the monolithic run "
+                  "(max, relative to max |omega|; the nodes' numbers are the in-process ones)", "",
+                  "| scene | path | coupling | exchange step [ms] | simulated [s] | how | time [s] | real-time factor "
+                  "| omega error (max) | note |",
+                  "| --- | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
+        lines += [f"| {row.scene} | {row.path} | {row.setting} | {row.value * 1e3:g} | {row.simulated_s:g} | "
+                  f"{row.method} | {_number(row.cpu_s)} | {_number(row.simulated_s / row.cpu_s)} | "
+                  f"{_number(row.error)} | {row.note} |" for row in benchmark.of("ros")]
     return "\n".join(lines) + "\n"
 
 

@@ -1,6 +1,7 @@
 """`mech-regulator bench speed`: the four paths side by side at equal achieved accuracy, how cost grows, the
 start-up cost and (--ros) the lockstep ROS run. A thin layer over bench.speed: it prints each measurement as it
-comes, then the tables with the targets, and writes speed.csv (also when interrupted), speed.json and speed.png.
+comes, then the tables with the targets, and writes speed.csv (also when interrupted), speed.json and speed.png
+(and ros.png with --ros).
 
 `mech-regulator bench startup`: the time to a first result as a user meets it, whole processes (bench.startup).
 
@@ -28,19 +29,21 @@ def add_bench_speed_command(benchmarks) -> None:
                     "MuJoCo simulating the crank-slider as a multibody model with a closed loop: CPU time, ratios, "
                     "RHS evaluations per second, real-time factor; then the cost against simulated time, the number "
                     "of effects and the number of scenes in a sweep, and the start-up cost. Writes speed.csv, "
-                    "speed.json and speed.png; Ctrl-C keeps what was measured in speed.csv. Speeds are reported, "
+                    "speed.json and speed.png (with --ros also ros.png, the real-time factor against the exchange "
+                    "error); Ctrl-C keeps what was measured in speed.csv. Speeds are reported, "
                     "never asserted.")
     speed.add_argument("--quick", action="store_true", help="few points and short runs (a check of the command end "
                                                             "to end, well under a minute; not a measurement)")
     speed.add_argument("--scenes", metavar="NAME[,NAME...]",
-                       help="speed scenes to run, comma-separated (default: crank_slider_bench,startup; a wrong name "
-                            "lists them)")
+                       help="speed scenes to run, comma-separated (default: crank_slider_bench,startup,"
+                            "walking_beam_linkage; a wrong name lists them)")
     speed.add_argument("--out", type=Path, default=Path("docs/speed"), metavar="FOLDER",
                        help="folder for the outputs (default docs/speed)")
     speed.add_argument("--ros", action="store_true",
-                       help="also time the lockstep ROS main job, reference and fast path at a 1 ms exchange step and "
-                            "the fast path at 2, 5 and 10 ms, with each exchange step's error (needs rclpy; about "
-                            "3 minutes)")
+                       help="also time the lockstep ROS main job on the whole engine_direct for each exchange design "
+                            "(hold at 1 ms on both paths, waveform at 2 and 10 ms, corrected at 10, 20 and 40 ms) and "
+                            "on the other governed scenes at run's default, with each run's error against the monolithic "
+                            "run (needs rclpy; about 5 minutes)")
     speed.add_argument("--no-mujoco", action="store_true",
                        help="leave MuJoCo's path out (without it, crank_slider_bench needs MuJoCo: "
                             f"{BENCH_EXTRA})")
@@ -96,10 +99,13 @@ def run_bench_speed(args: argparse.Namespace) -> int:
         print(f"mech-regulator: interrupted; what was measured is in {args.out / 'speed.csv'} and speed.json",
               file=sys.stderr)
         return EXIT_INTERRUPTED
-    from mech_regulator.viz.speed import plot_speed
+    from mech_regulator.viz.speed import plot_ros_speed, plot_speed
 
     plot_speed(benchmark, args.out / "speed.png")
-    print(f"wrote {args.out}: speed.csv, speed.json, speed.png ({time.monotonic() - start:.0f} s)")
+    written = ["speed.csv", "speed.json", "speed.png"]
+    if plot_ros_speed(benchmark, args.out / "ros.png"):
+        written.append("ros.png")
+    print(f"wrote {args.out}: {', '.join(written)} ({time.monotonic() - start:.0f} s)")
     return 0
 
 

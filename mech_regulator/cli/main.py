@@ -22,6 +22,13 @@ from mech_regulator.cli.report import note
 from mech_regulator.cli.structure import add_structure_command
 from mech_regulator.cli.sweep import add_sweep_command
 
+COUPLING_HELP = ("how machine and governor see each other over an exchange step: hold (each holds the other's last "
+                 "value, first order in H), waveform (the governor follows the machine's speed over the step, the "
+                 "machine the throttle extrapolated from the governor's last answers) or corrected (waveform's "
+                 "prediction, then the step done again with the governor's own throttle over it, the governor "
+                 "following the machine's speed sampled every 1.25 ms, a ramp of the load followed; the default; "
+                 "docs/ros.md)")
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -63,8 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--exchange-step", type=float, metavar="H",
                           help="co-simulate machine and governor as the ROS nodes do in lockstep, exchanging "
                                "speed, throttle and load every H seconds (the same numbers as `run`)")
-    simulate.add_argument("--coupling", choices=("hold", "waveform"), default="hold",
-                          help="with --exchange-step: " + "how machine and governor see each other over an exchange step: hold (each holds the other's last value, first order in H) or waveform (the governor follows the machine's speed over the step, the machine the throttle extrapolated from the governor's last answers; third order on a smooth scene; docs/ros.md)")
+    simulate.add_argument("--coupling", choices=("hold", "waveform", "corrected"), default="corrected",
+                          help="with --exchange-step: " + COUPLING_HELP)
     simulate.add_argument("--overspeed-trip", type=float, default=0.0, metavar="OMEGA",
                           help="with --exchange-step: trip speed [rad/s] closing the throttle for good, as `run` "
                                "has (default 0: none; `run` uses 1.25 x the initial speed)")
@@ -117,10 +124,10 @@ def build_parser() -> argparse.ArgumentParser:
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
-    main_job.add_argument("--exchange-step", type=float, default=1e-3, metavar="H",
-                          help="simulation time between exchanges of the nodes [s] (default 0.001)")
-    main_job.add_argument("--coupling", choices=("hold", "waveform"), default="hold",
-                          help="how machine and governor see each other over an exchange step: hold (each holds the other's last value, first order in H) or waveform (the governor follows the machine's speed over the step, the machine the throttle extrapolated from the governor's last answers; third order on a smooth scene; docs/ros.md)")
+    main_job.add_argument("--exchange-step", type=float, default=0.02, metavar="H",  # solvers.cosim's defaults
+                          help="simulation time between exchanges of the nodes [s] (default 0.02)")
+    main_job.add_argument("--coupling", choices=("hold", "waveform", "corrected"), default="corrected",
+                          help=COUPLING_HELP)
     main_job.add_argument("--duration", type=float, metavar="T",
                           help="simulated time to play [s] (default: the scene's scenario.duration); a shorter run "
                                "keeps the scene's load events as they are")
@@ -405,7 +412,8 @@ def _required_coupling(scene, args) -> int:
 
 def _kinematics(scene, args) -> int:
     """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
-    from mech_regulator.analysis.kinematics import kinematics_summary, kinematics_table
+    from mech_regulator.analysis.kinematics import (kinematics_summary, kinematics_table, reactions_summary,
+                                                    reactions_table)
     from mech_regulator.cli.report import check_outputs, format_kinematics, to_json, write_csv
     from mech_regulator.scene import SceneError
 
@@ -421,6 +429,11 @@ def _kinematics(scene, args) -> int:
     columns = kinematics_table(mechanism, args.omega, args.points)
     summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
                "joints": kinematics_summary(columns)}
+    gravity = tuple(scene.machine.gravity) if scene.machine.gravity is not None else None
+    reactions = reactions_table(mechanism, gravity, args.omega, columns["phi"])
+    if reactions:
+        columns.update(reactions)
+        summary["reactions"] = reactions_summary(columns)
     if args.out is not None:
         write_csv(args.out, columns)
         summary["csv"] = str(args.out)

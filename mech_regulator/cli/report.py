@@ -503,7 +503,8 @@ def _degrees(values) -> str:
 
 def format_kinematics(summary: dict) -> str:
     """The human-readable joint motion over one turn (`mech-regulator kinematics`): per joint its x and y ranges
-    [m], largest speed [m/s] and acceleration [m/s^2] and the crank angles [deg] where they occur."""
+    [m], largest speed [m/s] and acceleration [m/s^2] and the crank angles [deg] where they occur; then, where the
+    mechanism's kinetostatics is built, the balancing moment's range and each joint's largest reaction."""
     lines = [f"scene {summary['scene']}: {summary['mechanism']} at omega = {summary['omega']:g} rad/s, "
              f"{summary['points']} crank angles over a turn",
              f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
@@ -512,6 +513,14 @@ def format_kinematics(summary: dict) -> str:
         lines.append(f"{name:<6}{joint['x_min']:>11.5g}{joint['x_max']:>11.5g}{joint['y_min']:>11.5g}"
                      f"{joint['y_max']:>11.5g}{joint['v_max']:>14.5g}{joint['v_max_at_deg']:>10.4g}"
                      f"{joint['a_max']:>16.5g}{joint['a_max_at_deg']:>10.4g}")
+    reactions = summary.get("reactions")
+    if reactions is not None:
+        moment = reactions["balancing_moment"]
+        lines.append(f"joint reactions (inertia forces and weights at constant speed, nothing on the output): "
+                     f"balancing moment on the crank {moment['min']:.5g} N m at {moment['min_at_deg']:.4g} deg to "
+                     f"{moment['max']:.5g} N m at {moment['max_at_deg']:.4g} deg")
+        lines += [f"  {name:<16} |R| max {joint['R_max']:12.5g} N at {joint['R_max_at_deg']:.4g} deg"
+                  for name, joint in reactions.items() if name != "balancing_moment"]
     return "\n".join(lines + wrote_lines(summary))
 
 

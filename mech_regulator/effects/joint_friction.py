@@ -3,13 +3,15 @@ reactions of the kinetostatic analysis, sliding friction of the slider on its gu
 
 - Journal of radius r with reaction R: `M_f = lambda_p f' r |R|`, `f' = f / sqrt(1 + f^2)`, lambda_p = 1
   (clearance), pi/2 (new close fit), 4/pi (run-in); `rho = lambda_p f' r` is the friction-circle radius.
-- Guide: friction force `f_guide |N|` against the slider's velocity.
+- Guide: friction force `f_guide |N|` against the slider's velocity (a linkage: in each of its prismatic joints,
+  N its normal force, the sliding speed relative to the guide; the couple a slider's block carries is not read).
 - Thrust collar (r1, r2, axial load Q): new `2/3 f Q (r2^3 - r1^3)/(r2^2 - r1^2)`, run-in `f Q (r1 + r2)/2`.
 
 Each friction opposes the relative motion in its joint; reduced to the crank by power,
 `M_joint_friction = -sign(omega) F`, `F = M_collar + sum_j rho_j |k_j| |R_j| + f_guide |x'| |N|` with
 `k_j = omega_rel,j / omega` (for the guide, x' = dx/dphi). The reactions are affine in epsilon,
-`R_j = R0_j + R1_j epsilon` (mechanisms.kinetostatics), so the equation of motion is implicit in epsilon:
+`R_j = R0_j + R1_j epsilon` (mechanisms.kinetostatics; a linkage's from its kinetostatics by groups,
+mechanisms.linkage.make_joint_loads), so the equation of motion is implicit in epsilon:
 
     J epsilon = M - sign(omega) F(epsilon),   M = M_d + M_c - 1/2 J' omega^2 (every other moment).
 
@@ -147,15 +149,21 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
         return JointFrictionModel((), (), (), collar_moment, None, f"f = {f:g}: " + ", ".join(parts))
     gravity = tuple(machine.gravity) if machine.gravity is not None else None
     loads, joints = build_kinetostatics(machine.mechanism, gravity)
+    if mechanism.type == "linkage":  # its journals by joint name; every prismatic joint slides with f_guide
+        journals = dict(spec.journals)
+        slides = {name for name, joint in mechanism.joints.items() if joint.type == "prismatic"}
+    else:
+        journals = {name: getattr(spec.joints, name) for name in type(spec.joints).model_fields}
+        slides = {"guide"}
     names, indices, arms = [], [], []
     for index, joint in enumerate(joints):
-        journal = getattr(spec.joints, joint, None)
+        journal = journals.get(joint)
         if journal is not None:
             arm = friction_circle_radius(f, journal.radius, journal.fit)
             parts.append(f"{joint} rho = {arm * 1000:.4g} mm ({journal.fit})")
-        elif joint == "guide" and spec.guide > 0.0:
+        elif joint in slides and spec.guide > 0.0:
             arm = spec.guide
-            parts.append(f"guide f = {arm:g}")
+            parts.append(f"{joint} f = {arm:g}")
         else:
             continue
         names.append(joint)

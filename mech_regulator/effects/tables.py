@@ -11,37 +11,55 @@ import math
 from typing import Callable, Sequence
 
 
-def periodic_linear(xs: Sequence[float], ys: Sequence[float], period: float) -> Callable[[float], float]:
-    """Return y(x): linear between the points, periodic with `period`, wrapping from the last point to
-    the first plus one period (equals np.interp(x, xs, ys, period=period))."""
+def periodic_linear(xs: Sequence[float], ys: Sequence[float], period: float) -> Callable[..., float]:
+    """Return y(x, anchor=None): linear between the points, periodic with `period`, wrapping from the last point to
+    the first plus one period (equals np.interp(x, xs, ys, period=period)); with an anchor, the line of the segment
+    that holds the anchor, continued to x: y(anchor) + slope (x - anchor) (a solver between two knots sees a smooth
+    function, its kink only once it restarts on the knot)."""
     x0 = xs[0]
     knots = [x - x0 for x in xs] + [period]
     values = list(ys) + [ys[0]]
     slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(len(xs))]
 
-    def table(x: float) -> float:
-        u = math.fmod(x - x0, period)
+    def table(x: float, anchor: float | None = None) -> float:
+        at = x if anchor is None else anchor
+        u = math.fmod(at - x0, period)
         if u < 0.0:
             u += period
         i = bisect.bisect_right(knots, u) - 1
         if i >= len(slopes):  # u rounded up to exactly one period
             i = len(slopes) - 1
-        return values[i] + slopes[i] * (u - knots[i])
+        return values[i] + slopes[i] * (u - knots[i] + (x - at))
 
     return table
 
 
-def clamped_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[[float], float]:
-    """Return y(x): linear between the points, constant beyond the first and last (as np.interp)."""
+def periodic_kinks(xs: Sequence[float], ys: Sequence[float], period: float) -> tuple[float, ...]:
+    """The knots of periodic_linear(xs, ys, period) where its slope changes (by more than round-off, 1e-12 of the
+    slopes), in [0, period) [units of x]."""
+    n = len(xs)
+    knots = list(xs) + [xs[0] + period]
+    values = list(ys) + [ys[0]]
+    slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(n)]
+    return tuple(sorted({xs[i] % period for i in range(n)
+                         if abs(slopes[i] - slopes[i - 1]) > 1e-12 * max(abs(slopes[i]), abs(slopes[i - 1]))}))
+
+
+def clamped_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[..., float]:
+    """Return y(x, anchor=None): linear between the points, constant beyond the first and last (as np.interp); with an
+    anchor, the piece (a segment, or a constant end) that holds the anchor, continued to x (as periodic_linear's); an
+    anchor on an end point holds the end segment (a slider at a dead centre that touches the table's end)."""
     knots, values = list(xs), list(ys)
     slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(len(knots) - 1)]
+    last = len(slopes) - 1
 
-    def table(x: float) -> float:
-        if x <= knots[0]:
+    def table(x: float, anchor: float | None = None) -> float:
+        at = x if anchor is None else anchor
+        if at < knots[0]:
             return values[0]
-        if x >= knots[-1]:
+        if at > knots[-1]:
             return values[-1]
-        i = bisect.bisect_right(knots, x) - 1
+        i = min(bisect.bisect_right(knots, at) - 1, last)
         return values[i] + slopes[i] * (x - knots[i])
 
     return table

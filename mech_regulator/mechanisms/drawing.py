@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from mech_regulator.mechanisms import crank_slider, four_bar, walking_beam
+from mech_regulator.mechanisms.linkage import drawing as linkage_drawing
 from mech_regulator.scene import schema
 
 BLOCK_LENGTH_PER_CRANK = 1.0    # slider block length along the guide, per crank radius [-]
@@ -27,12 +28,13 @@ MOVING_PARTS = {
     "crank_slider": ("crank", "rod", "slider", "joints"),
     "four_bar": ("crank", "coupler", "rocker", "joints"),
     "walking_beam": ("crank", "coupler", "rocker", "tie", "side", "shuttle", "joints"),
+    "linkage": linkage_drawing.MOVING_PARTS,
     None: ("spoke", "joints"),
 }
 
 
 def mechanism_kind(mechanism_spec: schema.Mechanism | None) -> str | None:
-    """'crank_slider', 'four_bar', 'walking_beam', or None for a machine without a mechanism."""
+    """'crank_slider', 'four_bar', 'walking_beam', 'linkage', or None for a machine without a mechanism."""
     return None if mechanism_spec is None else mechanism_spec.type
 
 
@@ -64,6 +66,7 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
     Walking beam (source 004's names, `walking_beam.solve`): crank O1-A, coupler triangle A-B-C, the two
     rockers O2-B and O3-E (a bundle), the tie B-E, the side link E-D, the shuttle bar C-D, the frame O1-O2-O3
     and the path of the pin A.
+    Linkage: the parts of `linkage.drawing.linkage_outline` (frame, crank, links, sliders, joints).
     No mechanism: a disc of radius DISC_RADIUS (schematic: the machine has no link lengths) and a spoke
     from its centre to DISC_RADIUS (cos phi, sin phi).
     """
@@ -74,6 +77,10 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
         return _four_bar_outline(mechanism_spec, phi)
     if kind == "walking_beam":
         return _walking_beam_outline(mechanism_spec, phi)
+    if kind == "linkage":
+        from mech_regulator.mechanisms import mechanism_geometry
+
+        return linkage_drawing.linkage_outline(*mechanism_geometry(mechanism_spec), phi)
     tip = (DISC_RADIUS * math.cos(phi), DISC_RADIUS * math.sin(phi))
     return {"disc": circle((0.0, 0.0), DISC_RADIUS), "spoke": np.array([[0.0, 0.0], tip]),
             "joints": np.array([[0.0, 0.0]])}

@@ -212,6 +212,12 @@ class MachineModel:
         """(angle, period) pairs [rad] where some moment jumps with phi."""
         return [(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
 
+    def kink_angles(self) -> list[tuple[float, float]]:
+        """(angle, period) pairs [rad] where the slope of some moment in phi jumps (the knots of its tables in phi):
+        the solvers restart on them as on switch angles, and between two of them see each table continued along
+        one segment (rhs's window)."""
+        return [(angle, effect.period) for effect in self.effects for angle in effect.kink_angles]
+
     def dynamic_period(self) -> float:
         """Phi_omega = lcm of the kinematic period and the effects' periods [rad] (physics.md section 1).
 
@@ -251,22 +257,31 @@ class MachineModel:
         J_links, dJ, *_ = self.reduced(phi)
         return self.inertia_constant + J_links, dJ
 
-    def switch_grid(self) -> list[float]:
-        """All switch angles within one dynamic period, sorted, in [0, Phi_omega) [rad]."""
-        return list(self._switch_grid)
+    def switch_grid(self, kinks: bool = True) -> list[float]:
+        """All switch angles and, with kinks, kink angles within one dynamic period, sorted, in [0, Phi_omega) [rad]."""
+        return list(self._switch_grid if kinks else self._jump_grid)
 
     @functools.cached_property
     def _switch_grid(self) -> tuple[float, ...]:
-        """switch_grid, worked out once per model (the solvers ask for it at every segment)."""
+        """switch_grid(), worked out once per model (the solvers ask for it at every segment)."""
+        return self._grid(self.switch_angles() + self.kink_angles())
+
+    @functools.cached_property
+    def _jump_grid(self) -> tuple[float, ...]:
+        """switch_grid(kinks=False), worked out once per model."""
+        return self._grid(self.switch_angles())
+
+    def _grid(self, angles: list[tuple[float, float]]) -> tuple[float, ...]:
+        """The (angle, period) pairs [rad] repeated over one dynamic period, sorted, in [0, Phi_omega) [rad]."""
         period = self.dynamic_period()
-        angles = set()
-        for angle, switch_period in self.switch_angles():
+        grid = set()
+        for angle, switch_period in angles:
             for k in range(int(round(period / switch_period))):
-                angles.add(round((angle + k * switch_period) % period, 12))
-        return tuple(sorted(angles))
+                grid.add(round((angle + k * switch_period) % period, 12))
+        return tuple(sorted(grid))
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-            mode: Mode | None = None, ideal: bool = False) -> RightHandSide:
+            mode: Mode | None = None, ideal: bool = False, kinks: bool = True) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
@@ -279,35 +294,46 @@ class MachineModel:
         is stuck the solver's own omega2 is frozen and `constraint` sets it to omega. window = (lo, hi): the
         crank-angle interval between two switch angles the solver is in; effects that jump at switch angles then
         see phi clamped into it, so they keep their mode across the switch until the solver has located the
-        crossing and restarted (no step straddles a jump). The drive is scaled by the governor's throttle(y) or,
-        for a machine co-simulated with an outside governor, by the piece's held throttle. ideal: the governor
-        without friction, limits and stops (the smooth model of the stability analysis). mode None: the governor
-        as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
+        crossing and restarted (no step straddles a jump), and effects with kinks (tables in phi) see each table
+        continued along the segment that holds the window's middle, so no step straddles a kink either (kinks
+        False: the tables as they are, for a window between switch angles only, switch_grid(kinks=False)). The
+        drive is scaled by the governor's throttle(y) or, for a machine co-simulated with an outside governor, by the
+        piece's held throttle. ideal: the governor without friction, limits and stops (the smooth model of the
+        stability analysis). mode None: the governor as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
         With joint friction the crank's epsilon is the root of `J epsilon = J epsilon_0 - sign(omega) F(epsilon)`
         (effects.joint_friction), epsilon_0 the frictionless acceleration and F reading the force on the output
         link (the drive's scaled by the throttle).
         """
-        return self._right_hand_side(piece, window, mode, ideal, crank_only=False)
+        return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False)
 
     @functools.cached_property
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
         """(t, y) -> (J(phi) [kg m^2], F1 [N m]): the crank's inertia and its net moment apart from the coupling or
         clutch and the external load, F1 = throttle M_drive + M_c + M_weight - 1/2 J' omega^2 (throttle from the
         governor's state in y; joint friction, which depends on the acceleration, is not in it)."""
-        return self._right_hand_side(None, None, None, False, crank_only=True)
+        return self._right_hand_side(None, None, None, None, False, crank_only=True)
 
-    def _right_hand_side(self, piece: LoadPiece | None, window: tuple[float, float] | None, mode: Mode | None,
+    def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
+                         window: tuple[float, float] | None, mode: Mode | None,
                          ideal: bool, crank_only: bool) -> Callable:
-        """rhs (see there) or, crank_only, crank_side."""
+        """rhs (see there) or, crank_only, crank_side; segment: the window when its tables continue along one segment
+        (rhs's kinks), else None."""
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
         ramped = piece is not None and (piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0)
         ramp = piece.throttle_at if ramped else None  # a co-simulated throttle's polynomial; None: held_throttle
         scale_drive = governor is not None or held_throttle != 1.0 or ramped
-        scaled = tuple(effect.moment for effect in self.effects if scale_drive and effect.role == "drive")
+
+        def moment_of(effect) -> Callable:
+            """The effect's moment; between two kinks (segment, a window), its tables continued along one segment."""
+            if segment is None or not effect.kink_angles:
+                return effect.moment
+            return functools.partial(effect.segment_moment, 0.5 * (segment[0] + segment[1]))
+
+        scaled = tuple(moment_of(effect) for effect in self.effects if scale_drive and effect.role == "drive")
         rest = [effect for effect in self.effects if not (scale_drive and effect.role == "drive")]
         switched = tuple(effect.moment for effect in rest if effect.switch_angles)
-        smooth = tuple(effect.moment for effect in rest if not effect.switch_angles)
+        smooth = tuple(moment_of(effect) for effect in rest if not effect.switch_angles)
         if window is None:
             smooth, switched = smooth + switched, ()
             lo = hi = 0.0
@@ -743,8 +769,8 @@ class MachineModel:
                 out["I2"], out["dI2_dphi2"] = state[0], state[1]
                 kind = self.scene.machine.coupling.driven.mechanism
                 if kind is not None:
-                    names = ("x_driven", "v_driven") if kind.type == "crank_slider" else ("theta4_driven",
-                                                                                           "omega4_driven")
+                    slider = kind.type == "crank_slider" or getattr(kind, "output_kind", None) == "slider"
+                    names = ("x_driven", "v_driven") if slider else ("theta4_driven", "omega4_driven")
                     out[names[0]], out[names[1]] = state[3], state[4] * omega_driven
             out["omega_driven"] = omega_driven
             out["epsilon_driven"] = forces["driven"]
@@ -770,6 +796,10 @@ class MachineModel:
             out["theta4"], out["omega4"] = q, dq * omega
         elif kind == "walking_beam":
             out["x_shuttle"], out["v_shuttle"] = q, dq * omega
+        elif kind == "linkage" and self.scene.machine.mechanism.output is not None:  # its output: a travel or an angle
+            names = ("x_output", "v_output") if self.scene.machine.mechanism.output.joint else ("theta_output",
+                                                                                              "omega_output")
+            out[names[0]], out[names[1]] = q, dq * omega
         if self.governor is not None:
             arm, arm_rate = y[2], y[3]
             arm_length = self.governor.sensor.arm_length
@@ -823,7 +853,8 @@ def build_model(scene: Scene) -> MachineModel:
     effects = []
     if machine.drive is not None:
         effects.append(build_drive(machine.drive, machine.mechanism))
-    effects += [build_load(load, kinematic_period) for load in machine.loads]
+    output_position = (lambda phi: reduced(phi)[3:5]) if reduced is not None else None  # (q, dq/dphi)
+    effects += [build_load(load, kinematic_period, output_position) for load in machine.loads]
     effects = _unique_names(effects)
     coupling = _coupling_model(machine, gravity)
     clutch = None
@@ -933,6 +964,8 @@ def _check_inertia(machine, J0: float, reduced: Reduced | None) -> None:
 
 
 def _has_mass(mechanism) -> bool:
+    if mechanism.type == "linkage":  # a general linkage's masses are its links'
+        return any(link.mass > 0 for link in mechanism.links.values())
     return any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass"))
 
 

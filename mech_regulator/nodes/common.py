@@ -10,6 +10,7 @@ import json
 import math
 import signal
 import sys
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -22,18 +23,21 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import on_path_for_a_command
-from mech_regulator.solvers.cosim import COUPLINGS, NANOSECONDS, cosimulation_refusal, seconds
+from mech_regulator.solvers.cosim import COUPLINGS, DEFAULT_COUPLING, NANOSECONDS, cosimulation_refusal, seconds
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 IDLE_SPIN_SLICE = 0.1  # [s] of wall time per wait of a spin loop that only waits for callbacks
 HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
 WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad messages
+BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
+BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
@@ -118,9 +122,89 @@ def _choice_check(name: str, choices: tuple[str, ...]) -> Callable:
 def coupling_parameter(node: Node) -> str:
     """Declare the `coupling` parameter (solvers.cosim.COUPLINGS: how machine and governor see each other over an
     exchange step; machine, governor and recorder must have the same) and return it."""
-    return text_parameter(node, "coupling", "hold", "how machine and governor see each other over an exchange step: "
-                          "hold, or waveform (the governor follows the machine's speed over the step, the machine the "
-                          "throttle extrapolated from the governor's last answers)", COUPLINGS)
+    return text_parameter(node, "coupling", DEFAULT_COUPLING, "how machine and governor see each other over an "
+                          "exchange step: hold, waveform (the governor follows the machine's speed over the step, the machine the "
+                          "throttle extrapolated from the governor's last answers) or corrected (each step predicted, "
+                          "then done again with the governor's own throttle over it)", COUPLINGS)
+
+
+def add_samples(message, joint: str, field: str, samples: tuple | None) -> None:
+    """Append a signal's samples over an exchange step (times [s], values; solvers.cosim.Samples) to a
+    sensor_msgs/JointState as entries of `joint`, one per sample: the value in `field` ('position' or 'velocity'),
+    the sample's time in effort, NaN in the other field. Nothing when samples is None."""
+    if samples is None:
+        return
+    other = "velocity" if field == "position" else "position"
+    for sample_time, value in zip(*samples):
+        message.name.append(joint)
+        getattr(message, field).append(value)
+        getattr(message, other).append(math.nan)
+        message.effort.append(sample_time)
+
+
+def samples(message, joint: str, field: str) -> tuple[list[float], list[float]] | None:
+    """The samples (times [s], values) that add_samples put in a sensor_msgs/JointState under `joint`; None when
+    there are fewer than two, they are not finite or their times do not increase."""
+    rows = [(effort, value) for name, value, effort in zip(message.name, getattr(message, field), message.effort)
+            if name == joint]
+    if len(rows) < 2 or not all(math.isfinite(sample_time) and math.isfinite(value) for sample_time, value in rows) \
+            or any(later <= earlier for (earlier, _), (later, _) in zip(rows, rows[1:])):
+        return None
+    times, values = zip(*rows)
+    return list(times), list(values)
+
+
+class Batch:
+    """What only the recorder reads (the machine's moments, the governor's state), gathered over exchanges and sent
+    as one sensor_msgs/JointState, off the lockstep's critical path: one group per exchange time, each opened by a
+    joint "stamp" whose position is the exchange time in whole nanoseconds (exact as a double up to 2^53 ns, about
+    104 days), then that time's joints. The node sends it when due (send_when_due: BATCH_SIZE groups in, or the
+    oldest BATCH_PERIOD s of wall time old, so the recorder still shows a live picture) at a moment it would
+    otherwise wait, and at once (send) when the run ends, pauses or resets."""
+
+    def __init__(self, publisher):
+        self.publisher = publisher
+        self.fields: tuple[list, list, list, list] = ([], [], [], [])  # names, positions, velocities, efforts
+        self.groups = 0
+        self.last = 0  # [ns] the newest exchange time waiting
+        self.oldest_wall = 0.0  # [s] of wall time (time.monotonic) the oldest waiting group was added
+
+    def add(self, when: int, names: list[str], positions: list[float], velocities: list[float],
+            efforts: list[float]) -> None:
+        """Add the joints of exchange time `when` [ns] (a field left empty: NaN for each joint)."""
+        if not self.groups:
+            self.oldest_wall = time.monotonic()
+        missing = [math.nan] * len(names)
+        for gathered, values, first in zip(self.fields, (names, positions, velocities, efforts),
+                                           ("stamp", float(when), math.nan, math.nan)):
+            gathered.append(first)
+            gathered.extend(values or missing)
+        self.groups, self.last = self.groups + 1, when
+
+    def send_when_due(self) -> None:
+        """Send the waiting groups if BATCH_SIZE are in or the oldest waited BATCH_PERIOD s of wall time."""
+        if self.groups >= BATCH_SIZE or self.groups and time.monotonic() - self.oldest_wall >= BATCH_PERIOD:
+            self.send()
+
+    def send(self) -> None:
+        """Publish the waiting groups (nothing when there are none), stamped with the newest exchange time."""
+        if self.groups:
+            names, positions, velocities, efforts = self.fields
+            message = JointState(name=names, position=positions, velocity=velocities, effort=efforts)
+            message.header.stamp = stamp(self.last)
+            self.publisher.publish(message)
+            self.fields, self.groups = ([], [], [], []), 0
+
+
+def batch_groups(message) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
+    """The groups of a Batch message: (exchange time [ns], {joint: (position, velocity, effort)}), in order."""
+    groups: list[tuple[int, dict[str, tuple[float, float, float]]]] = []
+    for name, position, velocity, effort in zip(message.name, message.position, message.velocity, message.effort):
+        if name == "stamp":
+            groups.append((int(position), {}))
+        elif groups:
+            groups[-1][1][name] = (position, velocity, effort)
+    return groups
 
 
 def scene_model(node: Node) -> MachineModel:
@@ -144,7 +228,8 @@ class RunState:
     """What the machine says of the run on `machine/status` (std_msgs/String, JSON, transient-local so that a node
     joining late reads it): `state` running, paused, holding (at the end, waiting for ~/reset) or finished; the
     simulation `time` [s]; the `trial` (1, then one more at every ~/reset); `status` of the solver (complete,
-    failed, ...), `tripped_at` [s] (None: no overspeed trip) and, once finished, `finished_at_ns`."""
+    failed, ...), `tripped_at` [s] (None: no overspeed trip), in realtime `max_lag_s` (the largest lag [s] of the
+    published simulation time behind the wall clock) and, once finished, `finished_at_ns`."""
 
     RUNNING, PAUSED, HOLDING, FINISHED = "running", "paused", "holding", "finished"
 

@@ -5,9 +5,16 @@ Subscribes `joint_states` (joint "crank", velocity omega [rad/s], stamped with t
 For each message it advances its own states to that time with the previous speed held, then publishes
 `throttle` (sensor_msgs/JointState, joint "throttle", position 0..1) stamped with the same time,
 `governor/state` (sensor_msgs/JointState: "sleeve" z [m] and z' [m/s], "arm" angle [rad] and rate
-[rad/s], "throttle", and for indirect action "servo" [-] (and "feedback_shift" [m])) and each mode
+[rad/s], "throttle", and for indirect action "servo" [-] (and "feedback_shift" [m]); several exchange times in one
+message, each group opened by a joint "stamp": common.Batch, sent at least every common.BATCH_PERIOD s of wall
+time and whenever the machine's run state changes) and each mode
 change (a stop reached, the sleeve sticking or breaking away) on `governor/events` (std_msgs/String,
-JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosimulate. Having
+JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosimulate. With the
+`coupling` waveform it follows the speed at the step's middle ("crank_midstep"); with corrected it integrates
+the step that ended for good following the machine's corrected speed samples ("crank_corrected" entries: the
+speed in velocity, the sample's time in effort), then the next step tentatively following the predicted ones
+("crank_predicted"), and sends its tentative throttle over that step with its answer ("throttle_tentative"
+entries: the throttle in position, the time in effort; GovernorStepper.answer_corrected). With hold, having
 answered, it anticipates: it advances its states over the next step (as long as the last one), with
 the speed just received held, while the machine integrates that step, so that its next answer is
 immediate (GovernorStepper.anticipate: an exchange time other than the expected one is computed
@@ -19,6 +26,7 @@ says the run is finished (`machine/status`).
 from __future__ import annotations
 
 import json
+import math
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -26,9 +34,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Rejections, RunState,
-                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
-                                         joint_value, nanoseconds, run, scene_model, stamp)
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Batch, Rejections, RunState,
+                                         add_samples, coupling_parameter, diagnostics, float_parameter,
+                                         follow_run_state, joint_value, nanoseconds, run, samples, scene_model, stamp)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -45,14 +53,14 @@ class GovernorNode(Node):
             raise SceneError(f"scene '{model.scene.name}' has no governor: governor_node needs a scene with a "
                              "'governor:' section")
         self.model = model
-        self.waveform = coupling_parameter(self) == "waveform"
+        self.coupling = coupling_parameter(self)
         self.max_speed = float_parameter(self, "max_speed", 1e4, "crank speeds beyond +- this [rad/s] are rejected",
                                          0.0, 1e9)
         self.start_trial()
         self.done = False
         self.rejections = Rejections(self)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
-        self.state_publisher = self.create_publisher(JointState, "governor/state", STATE_QOS)
+        self.states = Batch(self.create_publisher(JointState, "governor/state", STATE_QOS))
         self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
@@ -68,12 +76,15 @@ class GovernorNode(Node):
         self.reported_events = 0
 
     def on_run_state(self, state: dict) -> None:
-        """End by itself when the machine has finished."""
+        """Send the states gathered so far (the machine stops, pauses or starts again), and end by itself when the
+        machine has finished."""
+        self.states.send()
         self.done = state["state"] == RunState.FINISHED
 
     def on_joint_states(self, message: JointState) -> None:
         """Answer the crank speed at a stamped time with the throttle at that time."""
         if nanoseconds(message.header.stamp) == 0 and self.time_ns:  # the machine's ~/reset: a new trial
+            self.states.send()
             self.start_trial()
         received = joint_value(message, "crank", "velocity", -self.max_speed, self.max_speed, "parameter max_speed",
                                self.rejections, self.time_ns)
@@ -82,30 +93,32 @@ class GovernorNode(Node):
         when, omega = received
         self.previous_ns, self.time_ns = self.time_ns, when
         names = list(message.name)
-        omega_middle = message.velocity[names.index("crank_midstep")] if "crank_midstep" in names else None
-        throttle = self.throttle = self.stepper.answer(seconds(when), omega, omega_middle)
-        header_stamp = stamp(when)
-        answer = JointState(name=["throttle"], position=[throttle])
-        answer.header.stamp = header_stamp
+        waveform = None  # corrected coupling: the tentative throttle over the next step
+        if self.coupling == "corrected":
+            throttle, waveform = self.stepper.answer_corrected(seconds(when), omega,
+                                                               samples(message, "crank_corrected", "velocity"),
+                                                               samples(message, "crank_predicted", "velocity"))
+        else:
+            omega_middle = message.velocity[names.index("crank_midstep")] if "crank_midstep" in names else None
+            throttle = self.stepper.answer(seconds(when), omega, omega_middle)
+        self.throttle = throttle
+        answer = JointState(name=["throttle"], position=[throttle], velocity=[math.nan], effort=[math.nan])
+        add_samples(answer, "throttle_tentative", "position", waveform)
+        answer.header.stamp = stamp(when)
         self.throttle_publisher.publish(answer)  # first: the machine waits for it
         for t, event, mode in self.stepper.events[self.reported_events:]:
             self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
         self.reported_events = len(self.stepper.events)
         values = self.stepper.outputs()
-        state = JointState(name=["sleeve", "arm", "throttle"],
-                           position=[values["sleeve"], values["arm_angle"], values["throttle"]],
-                           velocity=[values["sleeve_velocity"], values["arm_rate"], 0.0])
-        for name in ("servo", "feedback_shift"):
-            if name in values:
-                state.name.append(name)
-                state.position.append(values[name])
-                state.velocity.append(0.0)
-        state.header.stamp = header_stamp
-        self.state_publisher.publish(state)
+        extra = [name for name in ("servo", "feedback_shift") if name in values]
+        self.states.add(when, ["sleeve", "arm", "throttle", *extra],
+                        [values["sleeve"], values["arm_angle"], values["throttle"], *(values[name] for name in extra)],
+                        [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)], [])
+        self.states.send_when_due()  # after the answer, while the machine integrates
         if self.stepper.status != "complete":
             self.report()
-        elif not self.waveform and self.previous_ns is not None and when > self.previous_ns:  # while the machine
-            # does the same step (with the waveform coupling the governor's step needs the machine's speed over it)
+        elif self.coupling == "hold" and self.previous_ns is not None and when > self.previous_ns:  # while the machine
+            # does the same step (with the other couplings the governor's step needs the machine's speed over it)
             self.stepper.anticipate(seconds(2 * when - self.previous_ns))
 
     def report(self) -> None:

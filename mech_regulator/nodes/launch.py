@@ -49,7 +49,7 @@ def node_names(governed: bool) -> list[str]:
 
 def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
                    overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
-                   duration: float | None = None, coupling: str = "hold") -> dict:
+                   duration: float | None, coupling: str) -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
     other nodes started (in realtime only the recorder is waited for: the inputs are the newest, not awaited)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
@@ -63,8 +63,20 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
         machine.update(duration=duration)
     if time_mode == "realtime":
         machine.update(lockstep_inputs=[""], peers=["recorder"])
-    parameters.setdefault("recorder", {}).setdefault("ros__parameters", {})["output"] = str(output)
+    parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(output=str(output),
+                                                                                   launched_at=command_started())
     return parameters
+
+
+def command_started() -> float:
+    """When this process started, on the clock of time.monotonic() [s] (Linux: its start time in /proc, which counts
+    from the same origin, 10 ms resolution; elsewhere: now), so that the recorder can say how long the run took from
+    the command to its first exchange (start_up_s in the summary)."""
+    try:
+        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
+        return int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22 of proc(5): starttime [clock ticks]
+    except (OSError, IndexError, ValueError):
+        return time.monotonic()
 
 
 def default_recording(scene_name: str | None) -> Path:
@@ -75,7 +87,7 @@ def default_recording(scene_name: str | None) -> Path:
 
 def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
-             quiet: bool, duration: float | None = None, coupling: str = "hold") -> int:
+             quiet: bool, duration: float | None, coupling: str) -> int:
     """Run the nodes on the scene for `duration` [s] of simulated time (None: the scene's); returns the exit code
     (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
     named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
@@ -130,6 +142,10 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
     if summary_path.exists():
         summary = json.loads(summary_path.read_text())
         print(format_cosimulation_summary(summary))
+        if "start_up_s" in summary:
+            print(f"start-up: {summary['start_up_s']:.3g} s from the command to the first exchange")
+        if "max_lag_s" in summary:
+            print(f"realtime: the simulation time fell behind the wall clock by {summary['max_lag_s']:.3g} s at most")
         print(f"open the recording with: {viewer_command(output)}")
     else:
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)

@@ -4,10 +4,13 @@ Subscribes `throttle` (sensor_msgs/JointState, joint "throttle", position 0..1, 
 simulation time it applies from), `load_torque` (std_msgs/Float64 [N m], the external load moment
 opposing motion, from any publisher; applied from the next exchange time on) and
 `load_torque_stamped` (geometry_msgs/WrenchStamped, torque.z [N m] applying from its stamp: the
-scenario's load in lockstep). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
+scenario's load in lockstep; force.z: its rate [N m/s] over the step, a ramp's, which the corrected coupling
+follows). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
 effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
 scene has a mechanism), `machine/moments` (sensor_msgs/JointState whose efforts are the moments on
-the crank by source: drive, resistance, external, net [N m]), `/clock` and `/diagnostics`.
+the crank by source: drive, resistance, external, net, and the applied load [N m]; several exchange times in one
+message, each group opened by a joint "stamp": common.Batch), `/clock` (at most every `clock_period` s of
+wall time: the other nodes' timers need no more) and `/diagnostics`.
 
 A two-mass machine adds the joints "coupling" (position: twist [rad]) and "driven" (position: phi_driven
 [rad], NaN behind a clutch; velocity: omega_driven [rad/s]) to `joint_states`. `machine/status`
@@ -17,9 +20,11 @@ at its end or finished; the other nodes end by themselves when it is finished.
 Time modes: `lockstep` advances exchange step by exchange step, waiting at each exchange time for the
 inputs listed in `lockstep_inputs` stamped with that time (reproducible to the last digit, the same
 numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
-`real_time_factor` with the newest inputs. What it waits for comes from the scene: the throttle when it
-has a governor, the scenario's load; before the first step, the `peers` (node names) that give them must
-subscribe to `joint_states`, or the machine ends within `peer_timeout` naming the missing ones. A governor
+`real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
+(`max_lag_s` [s of simulation time] in /diagnostics and machine/status; the recorder's summary has it). What it
+waits for comes from the scene: the throttle when it has a governor, the scenario's load; before the first
+step, the `peers` (node names) that give them must subscribe to `joint_states`, or the machine ends within
+`peer_timeout` naming the missing ones. A governor
 that stays silent longer than `throttle_timeout` (realtime) or `peer_timeout` (lockstep) puts the machine on
 its fail-safe (`fail_safe`: hold the last throttle or close it); `overspeed_trip` closes the throttle for
 good above that speed.
@@ -48,12 +53,12 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, PeerError, Rejections,
-                                         RunState, bool_parameter, coupling_parameter, diagnostics, finite_in_range,
-                                         float_parameter, int_parameter, joint_value, list_parameter, nanoseconds,
-                                         run, scene_model, stamp, text_parameter)
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, Batch, PeerError,
+                                         Rejections, RunState, add_samples, bool_parameter, coupling_parameter, diagnostics,
+                                         finite_in_range, float_parameter, int_parameter, joint_value, list_parameter,
+                                         nanoseconds, run, samples, scene_model, stamp, text_parameter)
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import DEFAULT_EXCHANGE_STEP, MachineStepper, Samples, seconds, to_nanoseconds
 
 LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
 # (the node that gives it by default, its topic)
@@ -71,8 +76,9 @@ class MachineNode(Node):
         governed = self.model.governor is not None
         self.time_mode = text_parameter(self, "time_mode", "lockstep", "how simulation time advances",
                                         ("lockstep", "realtime"))
-        self.step_ns = to_nanoseconds(float_parameter(self, "exchange_step", 1e-3, "exchange step h [s]: inputs are "
-                                                      "held and outputs published every h of simulation time",
+        self.step_ns = to_nanoseconds(float_parameter(self, "exchange_step", DEFAULT_EXCHANGE_STEP, "exchange step h "
+                                                      "[s]: inputs are held and outputs published every h of "
+                                                      "simulation time",
                                                       1e-6, 1.0, read_only=True))
         duration = float_parameter(self, "duration", 0.0, "simulated time [s] to run; 0: the scene's duration",
                                    0.0, 1e7, read_only=True)
@@ -110,18 +116,27 @@ class MachineNode(Node):
         self.step_exchanges = int_parameter(self, "step_exchanges", 1, "exchanges advanced by one ~/step call", 1,
                                             10**9, read_only=False)
         self.publish_clock = bool_parameter(self, "publish_clock", True, "publish the simulation time on /clock")
+        self.clock_period = float_parameter(self, "clock_period", 0.02, "wall-clock seconds between /clock messages "
+                                            "(at most; the first and last exchange times are always published); 0: "
+                                            "every exchange time", 0.0, 3600.0)
+        self.last_clock = -math.inf  # wall-clock time [s] of the last /clock message
 
         self.overspeed = overspeed
-        self.waveform = coupling_parameter(self) == "waveform" and governed
+        coupling = coupling_parameter(self)
+        self.waveform = coupling == "waveform" and governed
+        self.corrects = coupling == "corrected" and governed
+        self.follows_ramps = coupling == "corrected"  # the load's rate over a step (force.z of the stamped load)
         self.trial = 0
         self.start_trial()
+        MachineStepper(self.model, self.overspeed).advance(seconds(min(self.step_ns, self.end_ns)), self.throttle,
+                                                           self.load)  # thrown away: see run()
         self.paused = bool_parameter(self, "start_paused", False, "start paused (~/resume or ~/step to go on)")
         self.steps_left = 0  # exchanges ~/step still allows while paused
         self.reset_requested = False
         self.rejections = Rejections(self)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
-        self.moments_publisher = self.create_publisher(JointState, "machine/moments", STATE_QOS)
+        self.moments = Batch(self.create_publisher(JointState, "machine/moments", STATE_QOS))
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.status_publisher = self.create_publisher(String, "machine/status", STATUS_QOS)
@@ -143,15 +158,21 @@ class MachineNode(Node):
         self.stepper = MachineStepper(self.model, self.overspeed)
         self.throttle = self.model.governor.throttle(self.model.initial_state()) if self.model.governor else 1.0
         self.load = self.model.external_load(0.0)
+        self.load_rate = 0.0  # [N m/s] the scenario's ramp over the next step (corrected coupling)
         self.throttle_stamp: int | None = None  # stamp [ns] of the newest throttle received
         self.stamped_throttle: dict[int, float] = {}
-        self.stamped_load: dict[int, float] = {}
+        self.stamped_load: dict[int, tuple[float, float]] = {}  # [ns] -> (load [N m], its rate [N m/s])
         self.last_stamped_load: float | None = None
         self.pending_load: float | None = None
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
         self.failing_safe = False
         self.now_ns = 0
+        self.max_lag = 0.0  # realtime: [s] of simulation time the published state fell behind the wall clock, at most
         self.omega_middle: float | None = None  # [rad/s] at the middle of the last step (waveform coupling)
+        self.corrected: Samples | None = None  # corrected coupling: the speed over the last step, as done for good,
+        self.predicted: Samples | None = None  # and as predicted over the next one
+        self.stamped_waveform: dict[int, Samples] = {}  # [ns] -> the governor's tentative throttle over that step
+        self.tentative = self.throttle  # [-] the governor's tentative throttle at the end of the last step
 
     # ---------------------------------------------------------------------------------------------
     # Services: trials one after another.
@@ -192,6 +213,10 @@ class MachineNode(Node):
         when, value = received
         self.throttle_stamp = when
         self.stamped_throttle[when] = value
+        if self.corrects:
+            waveform = samples(message, "throttle_tentative", "position")
+            if waveform is not None:
+                self.stamped_waveform[when] = waveform
         self.silent.discard("throttle")
 
     def on_load(self, message: Float64) -> None:
@@ -203,13 +228,14 @@ class MachineNode(Node):
         self.pending_load = message.data
 
     def on_stamped_load(self, message: WrenchStamped) -> None:
-        value = message.wrench.torque.z
+        value, rate = message.wrench.torque.z, message.wrench.force.z
         problem = finite_in_range(value, self.max_load_torque)
-        if problem:
-            self.rejections.reject(problem, f"load_torque_stamped torque.z = {value!r} N m, expected a finite "
-                                            f"number within +-{self.max_load_torque:g}")
+        if problem or not math.isfinite(rate):
+            self.rejections.reject(problem or "not finite", f"load_torque_stamped torque.z = {value!r} N m, force.z "
+                                   f"(its rate) = {rate!r} N m/s, expected finite numbers, the load within "
+                                   f"+-{self.max_load_torque:g}")
             return
-        self.stamped_load[nanoseconds(message.header.stamp)] = value
+        self.stamped_load[nanoseconds(message.header.stamp)] = (value, rate)
         self.silent.discard("load")
 
     def on_parameters(self, parameters) -> None:
@@ -217,7 +243,7 @@ class MachineNode(Node):
         change while running."""
         for parameter in parameters:
             if parameter.name in ("real_time_factor", "throttle_timeout", "peer_timeout", "max_load_torque",
-                                  "fail_safe", "step_exchanges"):
+                                  "fail_safe", "step_exchanges", "clock_period"):
                 if parameter.name == "real_time_factor":  # keep the simulation time continuous
                     self.wall_start = time.monotonic() - seconds(self.now_ns) / parameter.value
                 setattr(self, parameter.name, parameter.value)
@@ -228,50 +254,64 @@ class MachineNode(Node):
     def run(self) -> None:
         """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time; between
         exchanges, pause, step and reset as the services ask."""
+        waited = time.monotonic()
         self.wait_for_peers()
+        # The first log line and the first diagnostics take up to a tenth of a second each (so does the first
+        # integration: done in __init__ on a stepper thrown away): before the clock starts, so that a realtime run does
+        # not start behind it.
+        self.get_logger().info(f"{self.time_mode} run starts: peers ({', '.join(self.peers) or 'none'}) there after "
+                               f"{time.monotonic() - waited:.3g} s")
+        self.report(force=True)
         self.wall_start = time.monotonic()
         self.publish_status()
-        tick, moments = 0, None
+        tick = 0
         while rclpy.ok():
             self.now_ns = min(tick * self.step_ns, self.end_ns)
             next_ns = min((tick + 1) * self.step_ns, self.end_ns)
+            if self.corrects:  # the step predicted with the last step's load: the new one comes with the throttle
+                self.predicted = self.stepper.predict(seconds(next_ns), self.tentative) if next_ns > self.now_ns \
+                    else None
             self.publish_state()
-            if moments is not None:  # the last exchange's, sent while the peers answer this one
-                self.moments_publisher.publish(moments)
+            self.moments.send_when_due()  # the last exchanges', sent while the peers answer this one
             if self.time_mode == "realtime" and next_ns > self.now_ns:
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
             throttle = self.stepper.applied_throttle(self.applied_throttle())
-            moments = self.moments_message()
+            self.add_moments()
             at_end = self.now_ns >= self.end_ns or self.stepper.status != "complete"
             if at_end and (self.at_end == "exit" or self.stepper.status != "complete"):
                 break
             self.wait_while_paused(holding=at_end)
             if self.reset_requested:
-                self.moments_publisher.publish(moments)
+                self.moments.send()
                 self.reset_requested = False
                 self.start_trial()
                 self.wall_start = time.monotonic()
                 self.publish_status()
                 self.get_logger().info(f"reset: trial {self.trial} starts from the initial state")
-                tick, moments = 0, None
+                tick = 0
                 continue
             tick += 1
             self.advance(next_ns, throttle)
             self.report()
         if rclpy.ok():
-            if moments is not None:
-                self.moments_publisher.publish(moments)
+            self.moments.send()
             self.finish()
 
     def advance(self, next_ns: int, throttle: float) -> None:
         """Integrate to the next exchange time with the load held and the throttle held (hold coupling) or
-        extrapolated, noting the speed at the step's middle (waveform coupling; MachineStepper.advance_following, as
-        solvers.cosim.cosimulate)."""
-        if self.waveform:
+        extrapolated, noting the speed at the step's middle (waveform coupling; MachineStepper.advance_following), or
+        following the governor's tentative throttle over the step (corrected coupling: MachineStepper.correct), as
+        solvers.cosim.cosimulate."""
+        if self.corrects:
+            waveform = self.stamped_waveform.get(self.now_ns) if not self.failing_safe else None
+            self.corrected = self.stepper.correct(throttle, waveform, self.load, self.load_rate)
+            self.tentative = waveform[1][-1] if waveform is not None else throttle
+        elif self.waveform:
             self.omega_middle = self.stepper.advance_following(seconds(next_ns), throttle, self.load)
-        else:
-            self.stepper.advance(seconds(next_ns), throttle, self.load)
+        else:  # corrected without a governor: only the load's ramp is followed
+            self.stepper.advance(seconds(next_ns), throttle, self.load,
+                                 load_rate=self.load_rate if self.follows_ramps else 0.0)
 
     def wait_while_paused(self, holding: bool) -> None:
         """Between exchanges: spin (serving the services) while paused with no ~/step left, or while holding at
@@ -281,6 +321,7 @@ class MachineNode(Node):
             return
         if not (self.paused or holding):
             return
+        self.moments.send()
         self.publish_status(RunState.HOLDING if holding else RunState.PAUSED)
         paused_at = time.monotonic()
         while rclpy.ok() and not self.reset_requested and (holding or self.paused and self.steps_left == 0):
@@ -332,13 +373,13 @@ class MachineNode(Node):
         else:
             self.executor.spin_once(timeout_sec=0.0)
         if self.now_ns in self.stamped_load:
-            value = self.stamped_load.pop(self.now_ns)
+            value, self.load_rate = self.stamped_load.pop(self.now_ns)
             if value != self.last_stamped_load:  # only the scenario's changes: a load typed in between stays
                 self.load = self.last_stamped_load = value
         for when in [when for when in self.stamped_load if when < self.now_ns]:  # too late to apply
             self.stamped_load.pop(when)
         if self.pending_load is not None:
-            self.load, self.pending_load = self.pending_load, None
+            self.load, self.load_rate, self.pending_load = self.pending_load, 0.0, None
 
     def missing_inputs(self) -> list[str]:
         """The lockstep inputs not yet received for the current exchange time (and not given up on)."""
@@ -361,6 +402,7 @@ class MachineNode(Node):
                 fresh = None
         for when in [when for when in self.stamped_throttle if when < self.now_ns]:
             self.stamped_throttle.pop(when)
+            self.stamped_waveform.pop(when, None)
         expects_governor = "throttle" in self.lockstep_inputs or self.time_mode == "realtime" and \
             self.model.governor is not None
         if fresh is not None:
@@ -392,8 +434,13 @@ class MachineNode(Node):
         """/clock and joint_states at the current exchange time (effort: the net moment with the inputs
         held over the step that ended here)."""
         header_stamp = stamp(self.now_ns)
-        if self.clock_publisher is not None:
-            self.clock_publisher.publish(Clock(clock=header_stamp))
+        wall = time.monotonic()
+        if self.time_mode == "realtime":  # the wall clock's simulation time less the state's, at its publication
+            self.max_lag = max(self.max_lag, (wall - self.wall_start) * self.real_time_factor - seconds(self.now_ns))
+        if self.clock_publisher is not None and (wall - self.last_clock >= self.clock_period or self.now_ns == 0
+                                                 or self.now_ns >= self.end_ns):
+            self.clock_publisher.publish(Clock(clock=header_stamp))  # the others' timers need not every exchange
+            self.last_clock = wall
         values = self.stepper.outputs(self.throttle, self.load)
         message = JointState(name=["crank"], position=[float(self.stepper.state[0])],
                              velocity=[float(self.stepper.state[1])], effort=[values["net"]])
@@ -406,18 +453,18 @@ class MachineNode(Node):
             message.position.append(position)
             message.velocity.append(velocity)
             message.effort.append(math.nan)  # not computed
+        for name, waveform in (("crank_corrected", self.corrected), ("crank_predicted", self.predicted)):
+            add_samples(message, name, "velocity", waveform)  # corrected coupling
         self.joint_publisher.publish(message)
         self.state_message = message
 
-    def moments_message(self) -> JointState:
-        """machine/moments at the current exchange time, with the inputs that now hold (published after
-        the next exchange's joint_states, off the critical path of the lockstep): the moments on the crank by
-        source and the external load applied [N m] (against the motion, where the scene applies it: on the crank,
+    def add_moments(self) -> None:
+        """machine/moments at the current exchange time, with the inputs that now hold, to the batch (common.Batch:
+        sent after a later exchange's joint_states, off the critical path of the lockstep): the moments on the crank
+        by source and the external load applied [N m] (against the motion, where the scene applies it: on the crank,
         or on a two-mass machine's driven part, where the crank's `external` is 0)."""
         moments = self.stepper.moments(self.throttle, self.load) | {"load": self.load}
-        message = JointState(name=list(moments), effort=list(moments.values()))
-        message.header.stamp = stamp(self.now_ns)
-        return message
+        self.moments.add(self.now_ns, list(moments), [], [], list(moments.values()))
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""
@@ -444,6 +491,8 @@ class MachineNode(Node):
                   "end_time": seconds(self.end_ns), "real_time_factor": f"{seconds(self.now_ns) / elapsed:.4g}",
                   "throttle": self.throttle, "external_load": self.load, "rhs_evaluations": self.stepper.stats.nfev,
                   "fail_safe_active": self.failing_safe, "tripped_at": self.stepper.tripped_at}
+        if self.time_mode == "realtime":
+            values["max_lag_s"] = self.max_lag
         if finished:
             values["finished_at_ns"] = self.now_ns
         array = diagnostics(self, level, message, values)
@@ -456,6 +505,8 @@ class MachineNode(Node):
         state = state or (RunState.PAUSED if self.paused and self.steps_left == 0 else RunState.RUNNING)
         status = {"state": state, "time": seconds(self.now_ns), "trial": self.trial, "status": self.stepper.status,
                   "tripped_at": self.stepper.tripped_at}
+        if self.time_mode == "realtime":
+            status["max_lag_s"] = self.max_lag
         if state == RunState.FINISHED:
             status["finished_at_ns"] = self.now_ns
         self.status_publisher.publish(String(data=json.dumps(status)))
@@ -463,7 +514,7 @@ class MachineNode(Node):
     def finish(self) -> None:
         """Say the run is over (machine/status finished, diagnostics with finished_at_ns) once every subscriber
         has the last state."""
-        for publisher in (self.joint_publisher, self.moments_publisher):
+        for publisher in (self.joint_publisher, self.moments.publisher):
             publisher.wait_for_all_acked(Duration(seconds=5.0))
         self.publish_status(RunState.FINISHED)
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))

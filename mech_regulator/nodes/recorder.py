@@ -27,13 +27,13 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, RunState, coupling_parameter, diagnostics,
-                                         float_parameter, follow_run_state, nanoseconds, run, scene_model,
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, RunState, batch_groups, coupling_parameter,
+                                         diagnostics, float_parameter, follow_run_state, nanoseconds, run, scene_model,
                                          text_parameter)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import CoSimulation, seconds
+from mech_regulator.solvers.cosim import DEFAULT_EXCHANGE_STEP, CoSimulation, seconds
 from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
@@ -54,9 +54,13 @@ class RecorderNode(Node):
                                                       "rerun+http://127.0.0.1:9876/proxy ('' : none)")
         rate = float_parameter(self, "animation_rate", 200.0, "frames of the animation per second of simulation "
                                                               "time [Hz]", 1.0, 1e5, read_only=True)
-        self.exchange_step = float_parameter(self, "exchange_step", 1e-3, "the machine's exchange step [s], for the "
-                                                                          "summary", 1e-6, 1.0, read_only=True)
+        self.exchange_step = float_parameter(self, "exchange_step", DEFAULT_EXCHANGE_STEP, "the machine's exchange "
+                                                                          "step [s], for the summary", 1e-6, 1.0, read_only=True)
         self.coupling = coupling_parameter(self)
+        self.launched_at = float_parameter(self, "launched_at", 0.0, "time.monotonic() [s] at which the command that "
+                                           "started the run started (`run` sets it), for the start-up time in the "
+                                           "summary; 0: not known", 0.0, 1e12, read_only=True)
+        self.max_lag: float | None = None  # realtime: the machine's largest lag [s] behind the wall clock
         self.path = None if output == "none" else Path(output) if output else default_recording(self.model.scene.name)
         if self.path is None and not connect:
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
@@ -115,28 +119,30 @@ class RecorderNode(Node):
 
     def on_run_state(self, state: dict) -> None:
         self.machine_result = (state["status"], self.machine_status[1])
+        self.max_lag = state.get("max_lag_s", self.max_lag)
         if state["state"] == RunState.FINISHED:
             self.finished_at = int(state["finished_at_ns"])
             self.tripped_at = state["tripped_at"]
 
     def on_moments(self, message: JointState) -> None:
-        when = nanoseconds(message.header.stamp)
-        moments = dict(zip(message.name, message.effort))
-        self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"], moments["net"])
-        self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
-        self.moments[when] = (moments["drive"], moments["load"])
+        """The machine's moments of one or more exchange times (common.Batch), in order."""
+        for when, joints in batch_groups(message):
+            moments = {name: effort for name, (_, _, effort) in joints.items()}
+            self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"],
+                                       moments["net"])
+            self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
+            self.moments[when] = (moments["drive"], moments["load"])
 
     def on_governor(self, message: JointState) -> None:
-        when = nanoseconds(message.header.stamp)
-        positions = dict(zip(message.name, message.position))
-        velocities = dict(zip(message.name, message.velocity))
-        values = {"sleeve": positions["sleeve"], "sleeve_velocity": velocities["sleeve"],
-                  "arm_angle": positions["arm"], "arm_rate": velocities["arm"], "throttle": positions["throttle"]}
-        for name in ("servo", "feedback_shift"):
-            if name in positions:
-                values[name] = positions[name]
-        self.governor[when] = values
-        self.recording.add_governor(when, values)
+        """The governor's state at one or more exchange times (common.Batch), in order."""
+        for when, joints in batch_groups(message):
+            values = {"sleeve": joints["sleeve"][0], "sleeve_velocity": joints["sleeve"][1],
+                      "arm_angle": joints["arm"][0], "arm_rate": joints["arm"][1], "throttle": joints["throttle"][0]}
+            for name in ("servo", "feedback_shift"):
+                if name in joints:
+                    values[name] = joints[name][0]
+            self.governor[when] = values
+            self.recording.add_governor(when, values)
 
     def on_governor_event(self, message: String) -> None:
         event = json.loads(message.data)
@@ -196,11 +202,19 @@ class RecorderNode(Node):
     def pace(self) -> dict[str, float]:
         """How fast the nodes ran, from the wall-clock times the first and the last machine states arrived here (the
         exchanges only: the nodes' start-up and discovery before the first exchange are not in it): wall_time_s [s]
-        and real_time_factor = simulated time between those states / wall_time_s; empty before two states."""
+        and real_time_factor = simulated time between those states / wall_time_s; empty before two states. Also
+        start_up_s, the wall time [s] from the command's start (parameter launched_at) to the first machine state,
+        and in realtime max_lag_s, the machine's largest lag [s] of simulation time behind the wall clock."""
         if len(self.state_walls) < 2 or self.state_walls[1] <= self.state_walls[0]:
             return {}
         wall = self.state_walls[1] - self.state_walls[0]
-        return {"wall_time_s": wall, "real_time_factor": (seconds(max(self.machine)) - seconds(min(self.machine))) / wall}
+        pace = {"wall_time_s": wall,
+                "real_time_factor": (seconds(max(self.machine)) - seconds(min(self.machine))) / wall}
+        if self.launched_at > 0.0 and self.trial == 1:
+            pace["start_up_s"] = self.state_walls[0] - self.launched_at
+        if self.max_lag is not None:
+            pace["max_lag_s"] = self.max_lag
+        return pace
 
     def complete_times(self) -> list[int]:
         """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""

@@ -2,7 +2,8 @@
 
 Listens to `joint_states` for the machine's exchange times. In `lockstep` it answers every exchange
 time t with the scene's external load L(t) on `load_torque_stamped` (geometry_msgs/WrenchStamped,
-torque.z [N m], stamped t) — the machine waits for it, so the run is reproducible. In `realtime` it
+torque.z [N m], stamped t, and in force.z the rate [N m/s] at which it changes then, a ramp's) — the machine
+waits for it, so the run is reproducible. In `realtime` it
 publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other publisher
 would. Either way it logs each load event. It ends by itself when the machine says the run is finished
 (`machine/status`).
@@ -19,7 +20,7 @@ from std_msgs.msg import Float64
 
 from mech_regulator.nodes.common import (COMMAND_QOS, RunState, follow_run_state, nanoseconds, run, scene_model,
                                          text_parameter)
-from mech_regulator.solvers.cosim import seconds
+from mech_regulator.solvers.cosim import load_rate, seconds
 
 
 class ScenarioNode(Node):
@@ -37,6 +38,8 @@ class ScenarioNode(Node):
         self.last_ns = -1
         self.done = False
         follow_run_state(self, self.on_run_state)
+        self.get_logger().info(f"playing the load of scene '{self.model.scene.name}' ({self.time_mode})")  # (the first
+        # log line takes up to a tenth of a second: not at t = 0)
 
     def on_run_state(self, state: dict) -> None:
         """End by itself when the machine has finished."""
@@ -59,6 +62,7 @@ class ScenarioNode(Node):
             answer.header.stamp = message.header.stamp
             answer.header.frame_id = "crank"
             answer.wrench.torque.z = load
+            answer.wrench.force.z = load_rate(self.model, seconds(when))  # [N m/s]: a ramp, followed over the step
             self.stamped_publisher.publish(answer)
         elif load != self.last_load:
             self.load_publisher.publish(Float64(data=load))

@@ -148,7 +148,7 @@ def schema_markdown() -> str:
             rows.append(f"| `{name}` | {_type_name(field.annotation)} | {default} | "
                         f"{(field.description or '').replace('|', chr(92) + '|')} |")
             for child in _models_in(field.annotation):
-                suffix = "[]" if typing.get_origin(_strip(field.annotation)) is list else ""
+                suffix = {list: "[]", dict: ".<name>"}.get(typing.get_origin(_strip(field.annotation)), "")
                 nested.append((child, f"{path}.{name}{suffix}" if path else name + suffix))
         title = f"`{path}`" if path else "top level"
         kind = model.model_fields.get("type")
@@ -189,6 +189,8 @@ def _type_name(annotation) -> str:
         return " / ".join(f"`{value}`" for value in typing.get_args(annotation))
     if origin is list:
         return f"list of {_type_name(typing.get_args(annotation)[0])}"
+    if origin is dict:
+        return f"mapping of names to {_type_name(typing.get_args(annotation)[1])}"
     if origin in (typing.Union, types.UnionType):
         members = [a for a in typing.get_args(annotation) if a is not type(None)]
         optional = " (optional)" if type(None) in typing.get_args(annotation) else ""
@@ -203,5 +205,5 @@ def _type_name(annotation) -> str:
 def _format_default(field) -> str:
     if field.default_factory is not None:
         value = field.default_factory()
-        return "[]" if value == [] else "(section defaults)"
+        return "[]" if value == [] else "{}" if value == {} else "(section defaults)"
     return "none" if field.default is None else f"`{field.default}`"

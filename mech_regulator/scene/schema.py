@@ -190,7 +190,117 @@ class WalkingBeam(SceneModel):
 
 
 
-Mechanism = Annotated[Union[CrankSlider, FourBar, WalkingBeam], Field(discriminator="type")]
+Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+MAX_LINKS = 60         # moving links of a linkage (a press or a loom has under 20): its analysis stays well under 1 s
+MAX_LINK_POINTS = 50   # points of one link
+
+
+class LinkageLink(SceneModel):
+    """A moving link of a linkage: its points in its own coordinates, its mass and inertia."""
+
+    points: dict[str, Point] = Field(min_length=1, max_length=MAX_LINK_POINTS, description="the link's points by name, [x, y] in its own "
+                                                               "coordinates: every joint of the link has its point "
+                                                               "of the joint's name; points of interest may be added [m]")
+    mass: NonNegative = Field(0.0, description="link mass [kg]")
+    centre: Point = Field([0.0, 0.0], description="centre of mass [x, y] in the link's coordinates [m]")
+    inertia: NonNegative = Field(0.0, description="moment of inertia about the centre of mass [kg m^2]")
+
+
+class LinkageJoint(SceneModel):
+    """A lower pair between two links; both have a point of the joint's name."""
+
+    type: Literal["revolute", "prismatic"] = Field(description="revolute: the two links' points coincide; prismatic: "
+                                                              "the second link's point slides on a line of the first")
+    links: list[str] = Field(min_length=2, max_length=2, description="the two links ('frame' for the frame); "
+                                                                     "prismatic: [guide, slider]")
+    direction_deg: float = Field(0.0, description="prismatic: direction of the guide line through the guide's point, "
+                                                  "in the guide's coordinates [deg]")
+    slider_angle_deg: float = Field(0.0, description="prismatic: the slider's angle minus the guide's (constant) [deg]")
+
+
+class LinkageOutput(SceneModel):
+    """The output coordinate q on which output-link loads act: a prismatic joint's travel (slider_* loads) or a
+    link's angle (rocker_* loads)."""
+
+    joint: str | None = Field(None, description="a prismatic joint: q = its slider's travel along the guide "
+                                                "direction from the guide's point [m]")
+    link: str | None = Field(None, description="a moving link: q = its angle [rad]")
+
+    @model_validator(mode="after")
+    def _one(self) -> LinkageOutput:
+        if (self.joint is None) == (self.link is None):
+            raise ValueError("output: give exactly one of joint (a prismatic joint's travel) and link (a link's angle)")
+        return self
+
+
+class Linkage(SceneModel):
+    """A general planar linkage (docs/linkages.md): links with their points, joints, the driving crank. It must
+    have one degree of freedom and decompose into the crank and class-II Assur groups (RRR, RRP, RPR, PRP, RPP),
+    which are solved in closed form from the crank outward; a link with point p has it at r + p e^{i theta}."""
+
+    type: Literal["linkage"]
+    frame: dict[str, Point] = Field(min_length=1, max_length=MAX_LINK_POINTS, description="the frame's points by name, [x, y] in the global "
+                                                              "coordinates (the crank axis need not be at the origin) [m]")
+    links: dict[str, LinkageLink] = Field(min_length=1, max_length=MAX_LINKS, description="the moving links by name")
+    joints: dict[str, LinkageJoint] = Field(min_length=1, max_length=2 * MAX_LINKS, description="the joints by name")
+    crank: str = Field(description="the driving link: it turns with the crank angle phi about its revolute joint "
+                                   "with the frame, theta_crank = phi; its mass and inertia count in J(phi)")
+    branches: dict[str, Literal[1, -1]] = Field(default_factory=dict, description="assembly branch of a group, by its "
+                                                "internal joint: RRR +1 puts that joint left of the line from the outer "
+                                                "joint of the group's link listed first in links to the other's; RRP +1 further along the guide; "
+                                                "RPR +1 with the slider's pivot ahead of the guide's along the guide; "
+                                                "default +1")
+    points: list[str] = Field(default_factory=list, description="points of interest (names of link points) whose "
+                                                                "motion `kinematics` reports besides the joints")
+    output: LinkageOutput | None = Field(None, description="output coordinate for slider_* (a prismatic joint) or "
+                                                           "rocker_* (a link) loads; none = no output loads")
+
+    def core(self):
+        """The mechanisms.linkage.Linkage of this scene entry (the frame is the link named 'frame')."""
+        from mech_regulator.mechanisms.linkage import Joint, Link
+        from mech_regulator.mechanisms.linkage import Linkage as Core
+
+        def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
+            return {name: complex(*xy) for name, xy in points.items()}
+
+        links = (Link("frame", complex_points(self.frame)),) + tuple(
+            Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
+            for name, link in self.links.items())
+        joints = tuple(Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
+                             math.radians(joint.slider_angle_deg)) for name, joint in self.joints.items())
+        output = self.output or LinkageOutput.model_construct(joint=None, link=None)
+        return Core(links, joints, "frame", self.crank, dict(self.branches), tuple(self.points), output.joint,
+                    output.link)
+
+    @property
+    def output_kind(self) -> str | None:
+        """'slider' (output joint), 'rocker' (output link) or None: the loads the output takes."""
+        return None if self.output is None else ("slider" if self.output.joint is not None else "rocker")
+
+    @model_validator(mode="after")
+    def _drivable(self) -> Linkage:
+        from mech_regulator.mechanisms.linkage import LinkageError, assembly_failures, checked
+
+        if "frame" in self.links:
+            raise ValueError("links has a link named 'frame'; that name is the frame's (give its points under frame:)")
+        try:
+            core = self.core()
+            structure = checked(core)
+        except LinkageError as error:
+            raise ValueError(str(error)) from None
+        internal = {group.internal.name for group in structure.groups if hasattr(group, "internal")}
+        foreign = sorted(set(self.branches) - internal)
+        if foreign:
+            raise ValueError(f"branches names {foreign}, which are not the internal joint of a group; expected some of "
+                             f"{sorted(internal)}")
+        failures = assembly_failures(core, structure)
+        if failures:
+            raise ValueError("; ".join(failures) + "; expected a linkage whose crank turns fully (check the lengths "
+                                                   "and the branches)")
+        return self
+
+
+Mechanism = Annotated[Union[CrankSlider, FourBar, WalkingBeam, Linkage], Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -372,9 +482,15 @@ def _check_loads_fit(loads: list, mechanism: Mechanism | None, key: str, owner: 
     for index, load in enumerate(loads):
         prefix = load.type.split("_")[0]
         needed = OUTPUT_MECHANISM.get(prefix)
-        if needed is not None and kind != needed:
-            raise ValueError(f"{key}loads[{index}] type '{load.type}' acts on the {prefix}: it needs "
-                             f"{key}mechanism.type: {needed} ({owner} has {kind or 'no mechanism'})")
+        if needed is None or kind == needed or (kind == "linkage" and mechanism.output_kind == prefix):
+            continue
+        if kind == "linkage":
+            has = {None: "no output", "slider": "output.joint", "rocker": "output.link"}[mechanism.output_kind]
+            wanted = {"slider": "output.joint (a prismatic joint)", "rocker": "output.link"}.get(prefix)
+            raise ValueError(f"{key}loads[{index}] type '{load.type}' acts on the {prefix}: the linkage needs "
+                             f"{key}mechanism.{wanted or f'type: {needed}'} (it has {has})")
+        raise ValueError(f"{key}loads[{index}] type '{load.type}' acts on the {prefix}: it needs "
+                         f"{key}mechanism.type: {needed} ({owner} has {kind or 'no mechanism'})")
 
 
 class Branch(SceneModel):
@@ -516,8 +632,10 @@ class JointFriction(SceneModel):
 
     coefficient: Positive = Field(description="coefficient of sliding friction f of the joints and the collar [-]")
     joints: Journals = Field(default_factory=Journals, description="the revolute joints with friction")
+    journals: dict[str, Journal] = Field(default_factory=dict, description="linkage: its revolute joints with "
+                                                                           "friction, by the joint's name")
     guide: NonNegative = Field(0.0, description="crank_slider: coefficient of sliding friction of the slider on its "
-                                                "guide, force f |N|; 0 = none [-]")
+                                                "guide, force f |N|; linkage: of every prismatic joint; 0 = none [-]")
     thrust_collar: ThrustCollar | None = Field(None, description="optional thrust collar on the crank shaft")
 
 
@@ -587,6 +705,8 @@ class Machine(SceneModel):
         if self.joint_friction is not None:
             several = kind == "crank_slider" and self.mechanism.cylinders is not None
             _check_joint_friction(self.joint_friction, "multi-cylinder crank_slider" if several else kind)
+            if kind == "linkage":
+                _check_linkage_journals(self.joint_friction, self.mechanism)
         if self.joint_friction is not None and self.clutch is not None:
             raise ValueError("machine.joint_friction with machine.clutch: the joint friction solves the crank's own "
                              "equation, which a stuck clutch joins to the driven part; expected one of them")
@@ -616,24 +736,40 @@ class Machine(SceneModel):
                           engine.firing_order, engine.firing_deg)
 
 
+def _check_linkage_journals(friction: JointFriction, linkage: Linkage) -> None:
+    """A linkage's journals must name its revolute joints, and its guide friction needs a prismatic joint."""
+    revolute = [name for name, joint in linkage.joints.items() if joint.type == "revolute"]
+    foreign = [name for name in friction.journals if name not in revolute]
+    if foreign:
+        raise ValueError(f"joint_friction.journals names {foreign}, which are not revolute joints of the linkage; "
+                         f"expected some of {revolute}")
+    if friction.guide > 0.0 and len(revolute) == len(linkage.joints):
+        raise ValueError(f"joint_friction.guide = {friction.guide}: the linkage has no prismatic joint to slide in")
+
+
 def _check_joint_friction(friction: JointFriction, kind: str | None) -> None:
     """The joints named must exist in the mechanism, and something must have friction."""
+    if friction.journals and kind != "linkage":
+        raise ValueError(f"joint_friction.journals names {sorted(friction.journals)}: journals by joint name are a "
+                         f"linkage's (the machine has {kind or 'no mechanism'}); expected joint_friction.joints")
     named = [name for name in Journals.model_fields if getattr(friction.joints, name) is not None]
     foreign = [name for name in named if name not in JOINTS_OF.get(kind, ())]
     if foreign:
         if kind in NO_KINETOSTATICS:
             expected = (f"none: the joint reactions of a {kind} are not computed (kinetostatics exists for a "
-                        "single crank_slider and the four_bar); only a thrust_collar can have friction")
+                        "single crank_slider, the four_bar and a linkage); only a thrust_collar can have friction")
         elif kind is None:
             expected = "none (a machine without a mechanism can only have a thrust_collar)"
+        elif kind == "linkage":
+            expected = "none: a linkage's journals are joint_friction.journals, by the names of its joints"
         else:
             expected = f"some of {list(JOINTS_OF[kind])}"
         raise ValueError(f"joint_friction.joints names {foreign}, which the machine's mechanism ({kind or 'none'}) "
                          f"does not have; expected {expected}")
-    if friction.guide > 0.0 and kind != "crank_slider":
-        raise ValueError(f"joint_friction.guide = {friction.guide}: only a crank_slider has a guide (the machine has "
-                         f"{kind or 'no mechanism'})")
-    if not named and friction.guide == 0.0 and friction.thrust_collar is None:
+    if friction.guide > 0.0 and kind not in ("crank_slider", "linkage"):
+        raise ValueError(f"joint_friction.guide = {friction.guide}: only a crank_slider has a guide, or a linkage "
+                         f"its prismatic joints (the machine has {kind or 'no mechanism'})")
+    if not named and not friction.journals and friction.guide == 0.0 and friction.thrust_collar is None:
         raise ValueError("joint_friction has no joints, no guide and no thrust_collar: expected at least one of them")
 
 

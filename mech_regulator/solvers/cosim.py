@@ -88,8 +88,9 @@ class MachineStepper:
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
         self._answers: list[tuple[float, float]] = []  # (time [s], throttle applied) of the last exchanges
-        self._predicted: tuple | None = None  # corrected coupling: (state, mode, time, status, message) before the
-        # predicted step, and the step's end time [s]
+        self._step_end = 0.0  # [s] the end of the step `predict` did (corrected coupling)
+        self._load_line = (model.external_load(0.0), 0.0)  # the last step's load [N m] at its start and rate [N m/s]
+        self._load_line_time = 0.0  # [s] that step's start
 
     def applied_throttle(self, throttle: float) -> float:
         """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
@@ -99,15 +100,17 @@ class MachineStepper:
         return 0.0 if self.tripped_at is not None else throttle
 
     def advance(self, t_end: float, throttle: float, external_load: float, throttle_slope: float = 0.0,
-                throttle_curvature: float = 0.0) -> Trajectory:
-        """Integrate from the current time to t_end [s] with the external load [N m] held and the throttle [-] (as
-        applied_throttle gives it) held or, with a slope [1/s] and curvature [1/s^2], following that polynomial in
-        the time since now (LoadPiece.throttle_at; none once tripped); returns that stretch's dense trajectory."""
+                throttle_curvature: float = 0.0, load_rate: float = 0.0) -> Trajectory:
+        """Integrate from the current time to t_end [s] with the external load [N m] held or, with a rate [N m/s],
+        changing at that rate from now, and the throttle [-] (as applied_throttle gives it) held or, with a slope
+        [1/s] and curvature [1/s^2], following that polynomial in the time since now (LoadPiece.throttle_at; none once
+        tripped); returns that stretch's dense trajectory."""
         throttle = self.applied_throttle(throttle)
         if self.tripped_at is not None:
             throttle_slope = throttle_curvature = 0.0
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
-        piece = LoadPiece(self.time, t_end, external_load, 0.0, throttle, throttle_slope, throttle_curvature)
+        piece = LoadPiece(self.time, t_end, external_load - load_rate * self.time if load_rate else external_load,
+                          load_rate, throttle, throttle_slope, throttle_curvature)
         self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch,
                                               None)
         self.time = stretch.t_end
@@ -127,31 +130,41 @@ class MachineStepper:
         stretch = self.advance(t_end, throttle, external_load, slope, curvature)
         return float(stretch(0.5 * (t_start + t_end))[1])
 
-    def predict(self, t_end: float, external_load: float, throttle_end: float) -> Samples:
-        """The corrected coupling's predictor: keep the state now, then integrate to t_end [s] with the load [N m]
-        held and the throttle [-] extrapolated through the last two answers and throttle_end, the governor's tentative
-        throttle for now (throttle_extrapolation); returns the step's speed samples (speed_samples)."""
-        t_start = self.time
-        self._predicted = (self.state.copy(), self.mode, t_start, self.status, self.message), t_end
+    def predict(self, t_end: float, throttle_end: float) -> Samples:
+        """The corrected coupling's predictor: integrate from now to t_end [s] with the last step's load continued
+        (its value and rate: the new one comes with the governor's answer) and the throttle [-] extrapolated through
+        the last two answers and throttle_end, the governor's tentative throttle for now (throttle_extrapolation),
+        then go back to now; returns the step's speed at its start, middle and end (speed_samples with one piece: the
+        governor's tentative step follows the quadratic through them)."""
+        t_start, before = self.time, (self.state.copy(), self.mode, self.time, self.status, self.message)
         throttle, slope, curvature = throttle_extrapolation(self._answers[-2:] + [(t_start, throttle_end)])
-        return speed_samples([self.advance(t_end, throttle, external_load, slope, curvature)], t_start, t_end)
+        load, load_rate = self._load_line
+        stretch = self.advance(t_end, throttle, load + load_rate * (t_start - self._load_line_time), slope, curvature,
+                               load_rate)
+        samples = speed_samples([stretch], t_start, t_end, math.inf)
+        (self.state, self.mode, self.time, self.status, self.message), self._step_end = before, t_end
+        return samples
 
-    def correct(self, throttle: float, waveform: Samples | None, external_load: float) -> Samples:
-        """The corrected coupling's corrector: from the state `predict` kept, integrate the same step again with the
-        load [N m] held and the throttle the governor answered: `throttle` [-] at the step's start (as applied_throttle
-        gives it), then its tentative throttle over the step, samples (times [s], throttle [-]) at the middle and the
-        end of each piece (GovernorStepper.answer_corrected), the quadratic through a piece's start, middle and end;
-        held without them (a silent governor: the fail-safe). Returns the step's speed samples (speed_samples)."""
-        (self.state, self.mode, self.time, self.status, self.message), t_end = self._predicted
-        t_start = self.time
+    def correct(self, throttle: float, waveform: Samples | None, external_load: float, load_rate: float = 0.0
+                ) -> Samples:
+        """The corrected coupling's corrector: integrate the step `predict` did again, from the same state, with the
+        load [N m] changing at load_rate [N m/s] from now (a ramp of the scenario; held at 0) and the throttle the
+        governor answered: `throttle` [-] at the step's start (as applied_throttle gives it), then its tentative
+        throttle over the step, samples (times [s], throttle [-]) at the middle and the end of each piece
+        (GovernorStepper.answer_corrected), the quadratic through a piece's start, middle and end; held without them
+        or when they do not end at the step's end (a silent governor: the fail-safe). Returns the step's speed
+        samples (speed_samples)."""
+        t_start, t_end = self.time, self._step_end
         self._answers = self._answers[-2:] + [(t_start, self.applied_throttle(throttle))]
-        if waveform is None or self.tripped_at is not None:
-            return speed_samples([self.advance(t_end, throttle, external_load)], t_start, t_end)
+        self._load_line, self._load_line_time = (external_load, load_rate), t_start
+        if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
+            return speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
         stretches, value = [], throttle
         for index in range(0, len(waveform[0]) - 1, 2):
             end, middle_value, end_value = waveform[0][index + 1], waveform[1][index], waveform[1][index + 1]
             slope, curvature = quadratic_through(end - self.time, value, middle_value, end_value)
-            stretches.append(self.advance(end, value, external_load, slope, curvature))
+            load = external_load + load_rate * (self.time - t_start)
+            stretches.append(self.advance(end, value, load, slope, curvature, load_rate))
             value = end_value
             if self.status != "complete":
                 break
@@ -234,35 +247,33 @@ class GovernorStepper:
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
 
-    def answer_corrected(self, time: float, corrected: Samples | None, predicted: Samples | None
+    def answer_corrected(self, time: float, omega: float, corrected: Samples | None, predicted: Samples | None
                          ) -> tuple[float, Samples | None]:
-        """The corrected coupling's answer at `time` [s]: integrate the step that ends there for good following the
-        machine's corrected speed samples over it (times [s], omega [rad/s]; with the speed held when they do not
-        start at this governor's time: a missed exchange, realtime), then integrate the next step tentatively
-        following the machine's predicted samples, and go back. Returns the throttle [-] at `time` and the tentative
-        throttle over the next step: samples (times [s], throttle [-]) at the middle and the end of each piece, the
-        step split at every mode change inside it (a kink: a stop reached or left, the sleeve sticking or slipping);
-        None without predicted samples (the run's end)."""
+        """The corrected coupling's answer to the crank speed omega [rad/s] at `time` [s]: integrate the step that
+        ends there for good following the machine's corrected speed samples over it (times [s], omega [rad/s]; with the
+        previous speed held when they do not span it: a missed exchange, realtime), hold omega from here on, then
+        integrate the next step tentatively following the machine's predicted samples, and go back. Returns the
+        throttle [-] at `time` and the tentative throttle over the next step: samples (times [s], throttle [-]) at
+        the middle and the end of each piece, the step split at every mode change inside it (a kink: a stop reached
+        or left, the sleeve sticking or slipping); None without predicted samples (the run's end)."""
         if time > self.time:
             following = corrected is not None and len(corrected[0]) >= 3 and corrected[0][0] == self.time \
                 and corrected[0][-1] == time
             self.follow(time, corrected if following else None)
-            self.state = self.state.copy()
-            self.state[1] = corrected[1][-1] if following else self.state[1]
+        self.state = self.state.copy()
+        self.state[1] = omega
         throttle = self.throttle
         if predicted is None or len(predicted[0]) < 3 or predicted[0][0] != self.time:
             return throttle, None
         before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
         stretch = self.follow(predicted[0][-1], predicted)
-        edges = [self.time]
-        if stretch.status == "complete":
-            edges = [time] + sorted({t for t, _ in stretch.events if time + MIN_PIECE < t < stretch.t_end - MIN_PIECE})
-            edges.append(stretch.t_end)
         (self.state, self.mode, self.time, events, self.status, self.message) = before
         del self.events[events:]
-        if len(edges) < 2:
+        if stretch.status != "complete":
             return throttle, None
-        times = [t for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
+        start, end = stretch.t_start, stretch.t_end
+        edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
+        times = [float(t) for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
         states = stretch(np.array(times))
         return throttle, (times, [self.governor.throttle(states[:, index]) for index in range(len(times))])
 
@@ -293,6 +304,8 @@ class GovernorStepper:
 
 
 COUPLINGS = ("hold", "waveform", "corrected")
+DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP = "corrected", 0.02  # [s]: the nodes' defaults (docs/ros.md, "Speed": within
+# 1e-4 of the monolithic run on the governed engines, and the fastest of the designs that are)
 MAX_SPEED_PIECE = 2.5e-3  # [s]: the corrected coupling samples the machine's speed at least every half of this, the
 # quadratic through three samples on each piece (an engine's speed ripple is followed; docs/ros.md gives the numbers)
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
@@ -307,22 +320,15 @@ def quadratic_through(duration: float, start: float, middle: float, end: float) 
     return (end - start) / duration - b * duration, b
 
 
-def speed_sample_times(t_start: float, t_end: float) -> np.ndarray:
-    """The times [s] at which the corrected coupling samples the machine's speed over [t_start, t_end]: 2 m + 1
-    evenly spaced, both ends included, m the fewest pieces no longer than MAX_SPEED_PIECE."""
-    pieces = max(1, math.ceil((t_end - t_start) / MAX_SPEED_PIECE - 1e-9))
-    return np.linspace(t_start, t_end, 2 * pieces + 1)
-
-
-def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float) -> Samples:
-    """The machine's speed omega [rad/s] at speed_sample_times(t_start, t_end), from the dense trajectories of the
-    step's stretches (consecutive; the last ends at t_end unless the run failed in it)."""
-    times = speed_sample_times(t_start, t_end)
-    speeds = np.empty(times.size)
-    for index, stretch in enumerate(stretches):
-        inside = (times >= stretch.t_start) & ((times <= stretch.t_end) if index == len(stretches) - 1
-                                               else (times < stretch.t_end))
-        inside &= times <= stretch.t_end
+def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE
+                  ) -> Samples:
+    """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
+    (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
+    ends included, m the fewest pieces no longer than `longest` [s]."""
+    times = np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
+    speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
+    for stretch in stretches:
+        inside = (times >= stretch.t_start) & (times <= stretch.t_end)
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
     return times.tolist(), speeds.tolist()
@@ -353,6 +359,12 @@ def throttle_extrapolation(answers: list[tuple[float, float]]) -> tuple[float, f
     curvature = (rate - (u1 - u0) / (t1 - t0)) / (t2 - t0)
     # u(t) = u2 + rate (t - t2) + curvature (t - t2)(t - t1) = u2 + (rate + curvature (t2 - t1)) s + curvature s^2
     return u2, rate + curvature * (t2 - t1), curvature
+
+
+def load_rate(model: MachineModel, time: float) -> float:
+    """The rate [N m/s] at which the scenario's external load changes at `time` [s] (a ramp's; 0 when held)."""
+    piece = model.piece_at(time)
+    return 0.0 if piece is None else piece.slope
 
 
 def machine_subsystem(model: MachineModel) -> MachineModel:
@@ -437,7 +449,7 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
                progress: Progress | None = None, coupling: str = "hold") -> CoSimulation:
     """Run the scene's scenario as the nodes do in lockstep: machine and governor exchange omega and the
     throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns), with the
-    coupling `hold` or `waveform` (module docstring)."""
+    coupling `hold`, `waveform` or `corrected` (module docstring)."""
     step = to_nanoseconds(exchange_step)
     if step <= 0:
         raise ValueError(f"exchange_step = {exchange_step!r} s: expected at least 1 ns")
@@ -451,11 +463,20 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
     governor = GovernorStepper(model) if model.governor is not None else None
     rows, inputs = [], []
     omega_middle = None  # the machine's speed at the middle of the last step (waveform coupling)
+    corrected = waveform = None  # the corrected coupling's speed samples of the last step, throttle samples of the next
+    corrects = coupling == "corrected" and governor is not None
+    tentative = governor.throttle if governor is not None else 1.0
     tick = 0
     try:
         while True:
             now = seconds(min(tick * step, end))
-            throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None else 1.0
+            if corrects:
+                predicted = machine.predict(seconds(min((tick + 1) * step, end)), tentative) if tick * step < end \
+                    else None
+                throttle, waveform = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
+            else:
+                throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None \
+                    else 1.0
             throttle = machine.applied_throttle(throttle)
             load = model.external_load(now)
             rows.append(np.concatenate([machine.state[:2], governor.state[2:], machine.state[2:]])
@@ -465,10 +486,14 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
                 break
             tick += 1
             following = seconds(min(tick * step, end))
-            if coupling == "waveform" and governor is not None:
+            if corrects:
+                corrected = machine.correct(throttle, waveform, load, load_rate(model, now))
+                tentative = waveform[1][-1] if waveform is not None else throttle
+            elif coupling == "waveform" and governor is not None:
                 omega_middle = machine.advance_following(following, throttle, load)
-            else:
-                machine.advance(following, throttle, load)
+            else:  # corrected without a governor: only the load's ramp is followed
+                machine.advance(following, throttle, load, load_rate=load_rate(model, now) if coupling == "corrected"
+                                else 0.0)
             if progress is not None:
                 progress(machine.time)
         status, message = "complete", ""

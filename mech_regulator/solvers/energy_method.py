@@ -4,7 +4,10 @@
     t_{i+1} = t_i + 2 (phi_{i+1} - phi_i) / (omega_i + omega_{i+1}),
 
 with E = 1/2 J omega^2 and M the net moment without the J' term (the energy form accounts for it).
-Moments that read omega or t make the step implicit; it is solved by fixed-point iteration. A start
+Moments that read omega or t make the step implicit; it is solved by fixed-point iteration. A step that would pass
+a switch or kink angle (model.switch_grid: a jump of the cutting load, a knot of a table in phi) ends on it, and the
+step's moments are those of the interval between two such angles (model.rhs's window: jumps held, tables continued
+along one segment), so the trapezoid rule never straddles a corner and integrates a table's segment exactly. A start
 from rest (omega_0 = 0) is exact for a constant net moment; a machine that stops or turns back
 (E reaching 0) cannot be followed in phi, and the method stops there with a clear message.
 """
@@ -19,7 +22,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS
-from mech_regulator.solvers.time_domain import fail_blown_up, fail_too_many_steps
+from mech_regulator.solvers.time_domain import _switch_window, fail_blown_up, fail_too_many_steps
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_ITERATIONS = 100
@@ -41,12 +44,18 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
                               "needs omega >= 0 (use a time-domain method such as DOP853)")
         return trajectory
 
-    rhs_of_piece = {piece: model.rhs(piece) for piece in model.load_pieces or (None,)}
+    grid, period = model.switch_grid(), model.dynamic_period()
+    right_hand_sides: dict = {}
 
-    def moment_and_derivative(t: float, phi: float, omega: float) -> tuple[float, float, float]:
+    def moment_and_derivative(t: float, phi: float, omega: float, window: tuple | None = None, offset: float = 0.0
+                              ) -> tuple[float, float, float]:
         """(net moment M [N m], J [kg m^2], epsilon [rad/s^2]) from the model's right-hand side:
-        M = J epsilon + 1/2 J' omega^2."""
-        _, epsilon = rhs_of_piece[model.piece_at(t)](t, (phi, omega))
+        M = J epsilon + 1/2 J' omega^2; within a window (lo, hi) [rad] between two switch or kink angles, at
+        phi - offset (whole dynamic periods [rad] taken off, the window's coordinates)."""
+        key = (model.piece_at(t), window)
+        if key not in right_hand_sides:
+            right_hand_sides[key] = model.rhs(*key)
+        _, epsilon = right_hand_sides[key](t, (phi - offset, omega))
         J, dJ = model.inertia(phi)
         trajectory.stats.nfev += 1
         return J * epsilon + 0.5 * dJ * omega * omega, J, epsilon
@@ -54,24 +63,33 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     M, J, epsilon = moment_and_derivative(t, phi, omega)
     energy = 0.5 * J * omega * omega
     times, states, slopes = [t], [(phi, omega)], [(omega, epsilon)]
+    window = None
     try:
         while t < scenario.duration:
-            phi_next = phi + dphi
+            offset, phi_next = 0.0, phi + dphi
+            if grid:  # end the step on the next switch or kink angle; the moments of the interval it is in
+                offset = period * math.floor(phi / period)
+                window_before, window = window, _switch_window(grid, period, phi - offset, forward=True)
+                phi_next = min(phi_next, offset + window[1])
+                if window != window_before:  # the moment on the far side of the angle just reached
+                    M, _, _ = moment_and_derivative(t, phi, omega, window, offset)
+            step = phi_next - phi
             J_next, _ = model.inertia(phi_next)
 
             def energy_after(speed: float) -> tuple[float, float, float]:
                 """(E_{i+1} [J], M_{i+1} [N m], epsilon_{i+1}) if the step ends at speed [rad/s]."""
-                M_next, _, epsilon_next = moment_and_derivative(t + 2.0 * dphi / (omega + speed), phi_next, speed)
-                return energy + 0.5 * (M + M_next) * dphi, M_next, epsilon_next
+                M_next, _, epsilon_next = moment_and_derivative(t + 2.0 * step / (omega + speed), phi_next, speed,
+                                                                window, offset)
+                return energy + 0.5 * (M + M_next) * step, M_next, epsilon_next
 
-            step_end = _step_end(energy_after, J_next, omega, energy + M * dphi, implicit)
+            step_end = _step_end(energy_after, J_next, omega, energy + M * step, implicit)
             if step_end is None:
                 raise _Stopped(t, phi, omega)
             omega_next, energy_next, M_next, epsilon_next = step_end
-            t = t + 2.0 * dphi / (omega + omega_next)
+            t = t + 2.0 * step / (omega + omega_next)
             phi, omega, M, energy = phi_next, omega_next, M_next, energy_next
             if implicit:  # the slope at the accepted time and speed
-                M, _, epsilon_next = moment_and_derivative(t, phi, omega)
+                M, _, epsilon_next = moment_and_derivative(t, phi, omega, window, offset)
             times.append(t)
             states.append((phi, omega))
             slopes.append((omega, epsilon_next))

@@ -25,6 +25,16 @@ PROBES_PER_STEP = 4  # interior points of each step checked for a switch crossin
 RESTART_PERIODS = 4  # the solver's wrapped crank angle stays within this many dynamic periods
 MAX_INSTANT_EVENTS = 20  # governor mode changes allowed at one instant before the run is declared stuck
 GUARD_TOLERANCE = 1e-12  # a guard within this of 0 (in its own units: rad, rad/s, N, 1/s) is at its boundary
+# one-step methods: on a switch or kink they restart from a step onto it, not from the dense output (_step_onto)
+STEPS_ONTO_SWITCHES = ("RK23", "RK45", "DOP853", "Radau", "RK4")
+# multistep methods restart at order 1: a restart on every kink of a table (24 a turn on an engine) costs them more
+# accuracy than stepping over the kinks, so they restart on switch angles (jumps) only
+STEPS_OVER_KINKS = ("BDF", "LSODA")
+GUARD_NODES = 9  # a guard along a step is interpolated at this many Chebyshev points (time_domain.guard_polynomial)
+GUARD_NODE_FRACTIONS = 0.5 - 0.5 * np.cos(np.pi * np.arange(GUARD_NODES) / (GUARD_NODES - 1))  # theta_k in [0, 1]
+SAMPLES_TO_POWERS = np.linalg.inv(np.vander(GUARD_NODE_FRACTIONS, increasing=True))  # samples -> powers of theta
+# samples -> the interpolant's last Chebyshev coefficient, (1 / (n - 1)) sum'' (-1)^k g_k (ends halved), up to sign
+LAST_CHEBYSHEV = (-1.0) ** np.arange(GUARD_NODES) * np.r_[0.5, np.ones(GUARD_NODES - 2), 0.5] / (GUARD_NODES - 1)
 
 
 def integrate_time_domain(model: MachineModel, progress: Progress | None = None, segment=None) -> Trajectory:
@@ -68,8 +78,9 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     wrapped angle passes RESTART_PERIODS periods; outputs carry the unwrapped angle.
     """
     settings = model.scene.solver
-    switches = _unique_switches(model.switch_angles())
-    grid = model.switch_grid()
+    kinks = settings.method not in STEPS_OVER_KINKS
+    switches = _unique_switches(model.switch_angles() + (model.kink_angles() if kinks else []))
+    grid = model.switch_grid(kinks)
     period = model.dynamic_period()
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     names = model.state_names()
@@ -83,16 +94,12 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         guards = model.guards(mode, y)
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
-        rhs = model.rhs(piece, window, mode)
+        rhs = model.rhs(piece, window, mode, kinks=kinks)
         constraint = model.constraint(mode)
+        interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
         y_wrapped = y.copy()
         y_wrapped[0] -= offset
-        if settings.method == "RK4":
-            solver = RK4(rhs, t, y_wrapped, t_end, step=settings.step)
-        else:
-            solver = getattr(integrate, settings.method)(rhs, t, y_wrapped, t_end, rtol=settings.rtol,
-                                                         atol=settings.atol, max_step=settings.max_step or np.inf,
-                                                         first_step=first_step)
+        solver = _solver(settings, rhs, t, y_wrapped, t_end, first_step)
         restart = False
         while solver.status == "running" and not restart:
             try:
@@ -121,11 +128,14 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 fail_blown_up(model, trajectory, t_step, y_step, *beyond)
                 break
             if switches or guards:
-                crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards)
+                crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise)
                 if crossing is not None:
                     t_step, y_step, counts, guard, name = crossing
                     if guard is None:
                         trajectory.stats.switches += 1
+                        if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
+                            dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint,
+                                                       y_step[0], trajectory)
                     else:
                         mode, y_step = guard.apply(t_step, y_step)
                         _log_event(trajectory, t_step, name, mode)
@@ -149,6 +159,51 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         if restart:
             trajectory.stats.restarts += 1
     return y, mode
+
+
+def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: float | None):
+    """The scene's solver (scipy's OdeSolver class of settings.method, or RK4) started at (t [s], y) towards t_bound."""
+    if settings.method == "RK4":
+        return RK4(rhs, t, y, t_bound, step=settings.step)
+    return getattr(integrate, settings.method)(rhs, t, y, t_bound, rtol=settings.rtol, atol=settings.atol,
+                                              max_step=settings.max_step or np.inf, first_step=first_step)
+
+
+def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, t_switch: float, offset: float, constraint,
+               phi_switch: float, trajectory: Trajectory) -> tuple:
+    """Step from the accepted step's start (t_old [s], y_old, unwrapped) exactly onto the switch crossing located at
+    t_switch [s] (a step of t_switch - t_old, with the same rhs: RK4 one step, an adaptive method its own steps,
+    normally one): the state there then has the method's step accuracy, where the dense output's (the crossing's
+    location) is not controlled at all; restarting on knots from the dense output loses about a digit over a run (an
+    engine at rtol 1e-10: 2-10 rtol instead of 0.3-0.8). Returns (the dense output over (t_old, t_switch], the state
+    at t_switch with phi set to the switch angle phi_switch [rad]); the function evaluations count in trajectory."""
+    start = np.array(y_old, dtype=float)
+    start[0] -= offset
+    onto = _solver(settings, rhs, t_old, start, t_switch, t_switch - t_old)
+    pieces = []
+    while onto.status == "running":
+        onto.step()
+        pieces.append(_Shifted(onto.dense_output(), offset, constraint))
+    trajectory.stats.nfev += int(onto.nfev)
+    trajectory.stats.njev += int(onto.njev)
+    trajectory.stats.nlu += int(onto.nlu)
+    y_switch = pieces[-1](t_switch)
+    y_switch[0] = phi_switch
+    return (pieces[0] if len(pieces) == 1 else _Joined(pieces)), y_switch
+
+
+class _Joined:
+    """Dense outputs of consecutive steps as one function of time (each called on its own interval)."""
+
+    def __init__(self, pieces: list):
+        self.pieces = pieces
+        self.ends = [piece.dense.t for piece in pieces]
+
+    def __call__(self, t):
+        times = np.atleast_1d(np.asarray(t, dtype=float))
+        indices = np.minimum(np.searchsorted(self.ends, times), len(self.pieces) - 1)
+        columns = np.column_stack([self.pieces[i](tau) for i, tau in zip(indices, times)])
+        return columns[:, 0] if np.ndim(t) == 0 else columns
 
 
 def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory: Trajectory
@@ -295,15 +350,16 @@ class _Shifted:
 
 
 def _switch_window(grid: list[float], period: float, phi: float, forward: bool) -> tuple[float, float]:
-    """The interval between consecutive switch angles that the motion from phi (in [0, period)) is in:
-    on a switch angle, the one ahead in the direction of motion."""
+    """The interval between consecutive switch angles that the motion from phi (in [0, period)) is in, in phi's
+    coordinates: on a switch angle, the one ahead in the direction of motion."""
     tolerance = 1e-9 * period
-    if phi > period - tolerance:  # a whole period that floor() left unwrapped by round-off
-        phi -= period
+    shift = 0.0
+    if phi > period - tolerance:  # a whole period that floor() left unwrapped by round-off: the window beyond it
+        phi, shift = phi - period, period
     i = bisect.bisect_right(grid, phi + tolerance) - 1 if forward else bisect.bisect_left(grid, phi - tolerance) - 1
     lo = grid[i] if i >= 0 else grid[-1] - period
     hi = grid[i + 1] if i + 1 < len(grid) else grid[0] + period
-    return lo, hi
+    return lo + shift, hi + shift
 
 
 def _unique_switches(switches: list[tuple[float, float]]) -> list[tuple[float, float]]:
@@ -320,47 +376,127 @@ def _switch_counts(phi: float, switches: list[tuple[float, float]]) -> list[int]
 
 
 def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switches: list[tuple[float, float]],
-                 guards: list) -> tuple | None:
+                 guards: list, interpolant_noise: np.ndarray | None = None) -> tuple | None:
     """The earliest event in (t_old, t_new]: phi reaching a switch angle or a governor guard turning negative.
 
     Returns (time, state, switch counts after it, the guard or None for a switch, what happened),
-    or None if the step has no event. The step is probed at interior points so an event and its undoing
-    within one step is not missed; the event is then located by Brent's method on the dense output.
-    Switch counts are carried, not recomputed from phi, so a restart exactly on a switch angle is never
-    taken for a new crossing. A guard that starts the step at its boundary (|value| <= GUARD_TOLERANCE, as
-    a transition leaves it: the sleeve just released, just at rest) is crossed only when it falls below
-    -GUARD_TOLERANCE: a release where the forces turn straight back (grazing) keeps its mode instead of
-    switching back and forth at one instant, and a real release is located after the step's start.
+    or None if the step has no event. Switch angles: the step is probed at interior points so a crossing and its
+    undoing within one step is not missed, and a crossing is located by Brent's method on the dense output. Switch
+    counts are carried, not recomputed from phi, so a restart exactly on a switch angle is never taken for a new
+    crossing. Guards: _guard_crossing, from the guard's polynomial along the whole step, finds a dip below the level
+    and back however short. A guard that starts the step at its boundary (|value| <= GUARD_TOLERANCE, as a
+    transition leaves it: the sleeve just released, just at rest) is crossed only when it falls below
+    -GUARD_TOLERANCE: a release where the forces turn straight back (grazing) keeps its mode instead of switching
+    back and forth at one instant, and a real release is located after the step's start. interpolant_noise (Radau
+    only: atol + rtol |y| per state): Radau's dense output is its collocation polynomial, of order 3 inside the step
+    (5 at the step's end) and not tangent to the motion at the step's start, so a sleeve released at a stop with
+    almost no force dips back into it by up to about atol at the start of every step; a guard that starts the step at
+    its boundary is then crossed only below minus its change over that noise (_release_level), or every restart
+    would log another touch (thousands per contact).
     """
-    probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
-    states = dense(probe_times)
-    levels = [-GUARD_TOLERANCE if guard.level(t_old, states[:, 0]) <= GUARD_TOLERANCE else 0.0 for guard in guards]
-    previous = counts_old
-    for i in range(1, probe_times.size):
-        earliest = None
-        current = _switch_counts(states[0, i], switches)
-        forward = states[0, i] > states[0, i - 1]
-        for j in [j for j in range(len(switches)) if current[j] != previous[j]]:
-            angle, period = switches[j]
-            boundary = angle + period * (previous[j] + 1 if forward else previous[j])
-            t_cross = _root(lambda tau: dense(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
-            if earliest is None or t_cross < earliest[0]:
-                earliest = (t_cross, j, boundary)
-        for guard, level in zip(guards, levels):
-            if guard.level(probe_times[i], states[:, i]) < level:
-                t_cross = _root(lambda tau: guard.level(tau, dense(tau)) - level, probe_times[i - 1], probe_times[i])
+    first_guard = None
+    if guards:
+        node_times = t_old + GUARD_NODE_FRACTIONS * (t_new - t_old)
+        node_states = dense(node_times)
+        for guard in guards:
+            samples = np.array([guard.level(tau, node_states[:, k]) for k, tau in enumerate(node_times)])
+            level = 0.0
+            if samples[0] <= GUARD_TOLERANCE:
+                level = -_release_level(guard, t_old, node_states[:, 0], interpolant_noise)
+            t_cross = _guard_crossing(lambda tau: guard.level(tau, dense(tau)) - level, t_old, t_new, samples - level)
+            if t_cross is not None and (first_guard is None or t_cross < first_guard[0]):
+                first_guard = (t_cross, guard)
+    if switches:
+        probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
+        phis = dense(probe_times)[0]
+        previous = counts_old
+        for i in range(1, probe_times.size):
+            if first_guard is not None and probe_times[i - 1] >= first_guard[0]:
+                break
+            current = _switch_counts(phis[i], switches)
+            forward = phis[i] > phis[i - 1]
+            earliest = None
+            for j in [j for j in range(len(switches)) if current[j] != previous[j]]:
+                angle, period = switches[j]
+                boundary = angle + period * (previous[j] + 1 if forward else previous[j])
+                t_cross = _root(lambda tau: dense(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
                 if earliest is None or t_cross < earliest[0]:
-                    earliest = (t_cross, guard, None)
-        if earliest is not None:
-            t_cross, what, boundary = earliest
-            y = dense(t_cross)
-            if boundary is None:
-                return t_cross, y, _switch_counts(y[0], switches) if switches else previous, what, what.name
-            after = list(previous)
-            after[what] += 1 if forward else -1
-            y[0] = boundary
-            return t_cross, y, after, None, "switch"
-        previous = current
+                    earliest = (t_cross, j, boundary)
+            if earliest is not None and (first_guard is None or earliest[0] < first_guard[0]):
+                t_cross, j, boundary = earliest
+                y = dense(t_cross)
+                after = list(previous)
+                after[j] += 1 if forward else -1
+                y[0] = boundary
+                return t_cross, y, after, None, "switch"
+            previous = current
+    if first_guard is None:
+        return None
+    t_cross, guard = first_guard
+    y = dense(t_cross)
+    return t_cross, y, _switch_counts(y[0], switches) if switches else counts_old, guard, guard.name
+
+
+def _release_level(guard, t: float, y: np.ndarray, noise: np.ndarray | None) -> float:
+    """How far below 0 a guard that starts a step at its boundary must fall to be crossed [guard units]:
+    GUARD_TOLERANCE, or with noise (per state) the larger sum_i |g(y + noise_i e_i) - g(y)|."""
+    if noise is None:
+        return GUARD_TOLERANCE
+    value = guard.level(t, y)
+    change = 0.0
+    for i, delta in enumerate(noise):
+        shifted = np.array(y, dtype=float)
+        shifted[i] += delta
+        change += abs(guard.level(t, shifted) - value)
+    return max(GUARD_TOLERANCE, change)
+
+
+def guard_polynomial(samples: np.ndarray) -> tuple[np.ndarray, float]:
+    """A guard along one step as a polynomial in theta = (t - t_old) / h: from its values at the GUARD_NODES
+    Chebyshev points theta_k = GUARD_NODE_FRACTIONS (both ends included) the coefficients c_0..c_8 of the
+    interpolant, lowest power first, and a bound on how far the guard may be from it on [0, 1] [guard units]:
+    twice the interpolant's last Chebyshev coefficient (zero when the guard is a polynomial of degree <= 7 in theta,
+    as a guard linear in the state is along a dense output of DOP853, RK45, Radau, RK4) plus the round-off of the
+    power basis, 1e-10 of the samples' spread."""
+    spread = np.max(np.abs(samples - samples[0]))
+    line = SAMPLES_TO_POWERS @ (samples - samples[0])
+    line[0] += samples[0]
+    return line, 2.0 * abs(LAST_CHEBYSHEV @ samples) + 1e-10 * spread
+
+
+def monotone_ends(line: np.ndarray) -> np.ndarray:
+    """The polynomial sum_j line[j] theta^j cut into pieces monotone on (0, 1]: the pieces' upper ends, sorted, 1
+    last (the real parts of its derivative's roots inside (0, 1); complex roots only add harmless cuts)."""
+    slope = line[1:] * np.arange(1.0, line.size)  # derivative, lowest power first
+    roots = np.roots(slope[::-1].astype(np.complex128)).real  # complex: numba keeps the domain
+    return np.sort(np.concatenate((roots[(roots > 0.0) & (roots < 1.0)], np.ones(1))))
+
+
+def _guard_crossing(excess, t_old: float, t_new: float, samples: np.ndarray) -> float | None:
+    """The time in (t_old, t_new] [s] where excess (a guard less its level, along the step's dense output) first
+    falls below 0, or None. samples: excess at t_old + GUARD_NODE_FRACTIONS (t_new - t_old). The guard's polynomial
+    (guard_polynomial: interpolant and error bound) is cut into monotone pieces; the first piece that ends within the
+    bound of 0 is checked on the guard itself at that end and, when it is above 0 there, by minimising the guard on
+    the pieces on both sides of it (Brent's bounded minimisation): a dip below 0 and back is found however short,
+    and located by Brent's method between the last point known above 0 and the dip's bottom."""
+    line, margin = guard_polynomial(samples)
+    if line[0] - margin >= np.sum(np.abs(line[1:])):  # then the polynomial stays above the margin on [0, 1]
+        return None
+    h = t_new - t_old
+    cuts = monotone_ends(line)
+    lower = 0.0
+    for i, upper in enumerate(cuts):
+        if np.polynomial.polynomial.polyval(upper, line) < margin:
+            t_low = t_old + upper * h
+            low = excess(t_low)
+            if low >= 0.0 and upper < 1.0:
+                found = optimize.minimize_scalar(excess, bounds=(t_old + lower * h, t_old + cuts[i + 1] * h),
+                                                 method="bounded", options={"xatol": 1e-12 * h})
+                if found.fun < low:
+                    t_low, low = float(found.x), float(found.fun)
+            if low < 0.0:
+                return _root(excess, t_old + lower * h, t_low)
+        lower = upper
     return None
 
 

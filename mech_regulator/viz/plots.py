@@ -327,15 +327,17 @@ def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, tit
     """Kinematics over one turn at constant crank speed omega [rad/s] (analysis.kinematics.kinematics_table):
     the paths of the moving points with the mechanism drawn at KINEMATICS_POSES crank angles (dark at phi = 0,
     where the points are named; left), and the
-    points' speeds |v| and accelerations |a| against the crank angle (right). Points moving alike (a walking
-    beam's B and E, C and D) have identical curves: the later one is dashed."""
+    points' speeds |v| and accelerations |a| against the crank angle (right); with the columns of
+    analysis.kinematics.reactions_table, the joint reactions |R| and the balancing moment below them. Points moving
+    alike (a walking beam's B and E, C and D) have identical curves: the later one is dashed."""
     from mech_regulator.analysis.kinematics import point_names
     from mech_regulator.mechanisms import point_motions
     from mech_regulator.mechanisms.drawing import mechanism_outline
 
     names = point_names(columns)
-    figure = plt.figure(figsize=(14, 7), constrained_layout=True)
-    grid = figure.add_gridspec(2, 2, width_ratios=[1.25, 1.0])
+    joints = [key for key in columns if key.startswith("R_")]
+    figure = plt.figure(figsize=(14, 10 if joints else 7), constrained_layout=True)
+    grid = figure.add_gridspec(3 if joints else 2, 2, width_ratios=[1.25, 1.0])
     paths, speed, acceleration = figure.add_subplot(grid[:, 0]), figure.add_subplot(grid[0, 1]), \
         figure.add_subplot(grid[1, 1])
     figure.suptitle(f"{title}: kinematics over one turn at omega = {omega:g} rad/s")
@@ -371,11 +373,26 @@ def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, tit
     speed.set(ylabel="speed |v| [m/s]", title="speeds of the points")
     acceleration.set(xlabel="crank angle phi [deg]", ylabel="acceleration |a| [m/s^2]",
                      title="accelerations of the points")
-    for axes in (speed, acceleration):
+    panels = [speed, acceleration]
+    if joints:
+        reactions = figure.add_subplot(grid[2, 1])
+        for key in joints:
+            reactions.plot(dphi, columns[key], lw=1.2, label=key[2:])
+        balancing = reactions.twinx()
+        balancing.plot(dphi, columns["M_balancing"], color="k", lw=1.0, ls=":", label="balancing moment (right axis)")
+        balancing.set_ylabel("balancing moment M_b [N m]")
+        reactions.set(xlabel="crank angle phi [deg]", ylabel="reaction |R| [N]",
+                      title="joint reactions and the balancing moment\n(kinetostatics at constant speed, with weights)")
+        handles, labels = (sum(pair, []) for pair in zip(reactions.get_legend_handles_labels(),
+                                                         balancing.get_legend_handles_labels()))
+        reactions.legend(handles, labels, loc="upper right", fontsize=8, ncol=3)
+        panels.append(reactions)
+    for axes in panels:
         axes.set_xlim(0.0, 360.0)
         axes.set_xticks(np.arange(0, 361, 45))
         axes.grid(alpha=0.3)
-        axes.legend(loc="upper right", fontsize=8, ncol=3)
+        if axes is not panels[-1] or not joints:
+            axes.legend(loc="upper right", fontsize=8, ncol=3)
     figure.savefig(path, dpi=100)
     plt.close(figure)
 

@@ -99,7 +99,7 @@ MECHANISM_STYLE = {
     "guide": (GREY, 1.5), "frame": (GREY, 2.0), "crank_path": (DARK_GREY, 1.0), "disc": (GREY, 1.5),
     "crank": (ORANGE, 3.0), "spoke": (ORANGE, 3.0), "rod": (BLUE, 3.0), "coupler": (BLUE, 3.0),
     "rocker": (GREEN, 3.0), "slider": (WHITE, 2.0), "joints": (WHITE, 4.0),
-    "tie": (VIOLET, 2.5), "side": (PINK, 2.5), "shuttle": (YELLOW, 4.0),
+    "tie": (VIOLET, 2.5), "side": (PINK, 2.5), "shuttle": (YELLOW, 4.0), "links": (BLUE, 3.0), "sliders": (WHITE, 2.0),
 }
 GOVERNOR_STYLE = {
     "spindle": (GREY, 2.5), "stops": (RED, 2.5), "upper_arms": (ORANGE, 2.5), "lower_links": (BLUE, 2.0),
@@ -107,7 +107,8 @@ GOVERNOR_STYLE = {
 }
 POINT_PARTS = ("joints", "balls", "spindle_mark")
 FLIP_Y = np.array([1.0, -1.0])       # drawings have y up, Rerun's 2-D views y down
-MECHANISM_NAMES = {"crank_slider": "crank–slider", "four_bar": "four-bar linkage", "walking_beam": "walking beam"}
+MECHANISM_NAMES = {"crank_slider": "crank–slider", "four_bar": "four-bar linkage", "walking_beam": "walking beam",
+                   "linkage": "linkage"}
 END_LEVELS = {"complete": "INFO", "interrupted": "WARN", "failed": "ERROR"}
 
 

@@ -47,10 +47,11 @@ import mech_regulator
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK
 from mech_regulator import mechanisms
-from mech_regulator.effects import joint_friction
+from mech_regulator.effects import held_positions, joint_friction
 from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
+from mech_regulator.solvers.compiled.integrators import STEP_ONTO
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
@@ -133,6 +134,7 @@ class CompiledScene:
         if self.window_slot is not None and window is not None:
             matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
             matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
+            matrix[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
         return matrix
 
 
@@ -266,8 +268,10 @@ class _Parameters:
         return np.array(values, dtype=float)
 
 
-def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, mechanism=None) -> str:
-    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source; an
+def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, mechanism=None,
+                 anchor: str | None = None) -> str:
+    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source, its
+    tables in phi on the segment that holds `anchor` (default phi: the tables themselves); an
     engine on a crank–slider with several cylinders (mechanism.cylinders) is the sum of every cylinder's gas moment
     -p(phi + phase - d_i) A dx_i/dphi (d_i its firing delay, effects._multi_cylinder_engine; dx_i/dphi named as
     _reduced_lines does)."""
@@ -275,21 +279,22 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, me
         return p.scalar(spec.torque)
     if isinstance(spec, schema.LinearMotor):
         return f"k.linear_motor({omega}, {p.scalar(spec.stall_torque)}, {p.scalar(spec.no_load_speed)})"
+    anchor = anchor or phi
     if isinstance(spec, schema.TableDrive):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.torque)
-        return f"k.table_drive({phi}, {table}, {p.scalar(math.radians(spec.period_deg))})"
+        return f"k.table_drive({phi}, {anchor}, {table}, {p.scalar(math.radians(spec.period_deg))})"
     if isinstance(spec, schema.Engine):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
         cycle, area = p.scalar(math.radians(spec.cycle_deg)), math.pi * spec.bore ** 2 / 4.0
         cylinders = getattr(mechanism, "cylinders", None)
         if cylinders is None:
-            return (f"k.engine_gas({phi}, {dq}, {table}, {cycle}, {p.scalar(math.radians(spec.phase_deg))}, "
+            return (f"k.engine_gas({phi}, {anchor}, {dq}, {table}, {cycle}, {p.scalar(math.radians(spec.phase_deg))}, "
                     f"{p.scalar(area)})")
         area = p.scalar(area)
         delays = engine.firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders],
                                       spec.cycle_deg, spec.firing_order, spec.firing_deg)
         ratios = [dq] + [f"{dq}_{number}" for number in range(2, len(cylinders) + 1)]
-        return "(" + " + ".join(f"k.engine_gas({phi}, {ratio}, {table}, {cycle}, "
+        return "(" + " + ".join(f"k.engine_gas({phi}, {anchor}, {ratio}, {table}, {cycle}, "
                                 f"{p.scalar(math.radians(spec.phase_deg - delay))}, {area})"
                                 for ratio, delay in zip(ratios, delays)) + ")"
     if isinstance(spec, schema.ConstantLoad):
@@ -300,7 +305,7 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, me
         return f"k.fan_load({omega}, {p.scalar(spec.coefficient)})"
     if isinstance(spec, schema.TableLoad):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.torque)
-        return f"k.table_load({phi}, {table}, {p.scalar(math.radians(spec.period_deg))})"
+        return f"k.table_load({phi}, {anchor}, {table}, {p.scalar(math.radians(spec.period_deg))})"
     if isinstance(spec, schema.CuttingLoad):
         start = math.radians(spec.intervals_deg[0][0])
         bounds = p.table([math.radians(edge) - start for interval in spec.intervals_deg for edge in interval])
@@ -314,7 +319,8 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, me
     if isinstance(spec, schema.OutputSpring):
         return f"k.output_spring({q}, {dq}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
     if isinstance(spec, schema.SliderTable):
-        return f"k.slider_table({q}, {dq}, {p.table(spec.position, spec.force)})"
+        held = q if anchor == phi else f"{q}_anchor"  # x on the anchor's interval (generate's q_anchor)
+        return f"k.slider_table({q}, {held}, {dq}, {p.table(spec.position, spec.force)})"
     raise TypeError(f"no compiled kernel for {type(spec).__name__}")
 
 
@@ -384,6 +390,18 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     specs = ([machine.drive] if machine.drive is not None else []) + list(machine.loads)
     governor = model.governor
     scaled, switched = [], []
+    kinked = any(effect.kink_angles for effect in model.effects)
+    anchor = "anchor" if kinked else "phi"
+    if kinked:  # between two kinks the tables continue along the segment that holds the window's middle (rhs);
+        #         without a window (p's edges both 0) they are the tables themselves
+        body.append(f"anchor = 0.5 * (p[{WINDOW_LO}] + p[{WINDOW_HI}]) if p[{WINDOW_HI}] > p[{WINDOW_LO}] else phi")
+        kinks = sorted({angle for spec, effect in zip(specs, model.effects)
+                        if isinstance(spec, schema.SliderTable) for angle in effect.kink_angles})
+        if kinks:  # a slider table's piece: that of x on the anchor's interval between its breakpoint crossings
+            held = held_positions(tuple(kinks), lambda phi: model.reduced(phi)[3:5])
+            body.append(f"q_anchor = k.held_position(anchor, {p.table(kinks + [2.0 * math.pi], held)})")
+        elif any(isinstance(spec, schema.SliderTable) for spec in specs):  # x never crosses its breakpoints
+            body.append("q_anchor = q")
     for spec, effect in zip(specs, model.effects):
         if effect.switch_angles:
             switched.append(spec)
@@ -391,9 +409,9 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
             scaled.append(spec)
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
             body.append(f"total += {HELD_THROTTLE_EXPRESSION} * "
-                        f"{_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}")
+                        f"{_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism, anchor)}")
         else:
-            body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq')}")
+            body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', anchor=anchor)}")
     if switched:
         body.append(f"clamped = min(max(phi, p[{CLAMP_LO}]), p[{CLAMP_HI}])")
         body += [f"total += {_effect_call(spec, p, 'clamped', 'omega', 'q', 'dq')}" for spec in switched]
@@ -423,7 +441,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
             command = (f"k.servo_command(opening, {p.scalar(governor.servo_gain)}, "
                        f"{p.scalar(governor.servo_max_speed)}, {p.scalar(governor.dead_band)})")
         body.append(f"share = {throttle}")
-        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism)}"
+        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism, anchor)}"
                  for spec in scaled]
         sensor_args = f"{m}, {l}, {M}, {kk}, {z_free}, {c}, {g}, {ratio}"
         lift = f"k.lift(y[{ARM}], omega, {m}, {l}, {M}, {kk}, {z_free}, {g}, {ratio})"
@@ -474,7 +492,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
         guard_lines += train_guards
         n_mode_guards += 2
     elif model.clutch is not None:  # the crank's net moment again in guards, phi unclamped (MachineModel.crank_side)
-        crank = ["clamped = phi" if line.startswith("clamped = ") else line for line in body if line != "dydt[0] = omega"]
+        crank = [line.split(" = ")[0] + " = phi" if line.startswith(("clamped = ", "anchor = ")) else line
+                 for line in body if line != "dydt[0] = omega"]
         train_lines, train_guards = _clutch_lines(model, p, crank)
         body += train_lines
         guard_lines += train_guards
@@ -489,7 +508,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     body += governor_lines
     window_slot = None
     n_guards = n_mode_guards
-    if switched:
+    if switched or kinked:
         window_slot = n_mode_guards
         n_guards += 2
         guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
@@ -503,7 +522,7 @@ def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: s
     force along +x [N] or rocker moment [N m]), as source."""
     if isinstance(spec, schema.Engine):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
-        return (f"k.engine_gas_force({phi}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
+        return (f"k.engine_gas_force({phi}, {phi}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
                 f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
     if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
         return p.scalar(spec.force if isinstance(spec, schema.SliderConstant) else spec.torque)

@@ -45,11 +45,16 @@ CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coeffi
 of all the steps of one call, for Trajectory.add_piece.
 
 Guards: guards(t, y, p, levels) writes every guard's level (+inf: not active in this mode). A mode holds
-while level >= threshold. linear[g] = [flag, c0, c1..c_n]: flag 1 says the guard is c0 + sum c_i y_i, so
+while level >= threshold. linear[g] = [flag, c0, c1..c_n]: flag LINEAR (1) says the guard is c0 + sum c_i y_i, flag
+STEP_ONTO (2) the same for a switch (a switch window's edge, solvers/time_domain.py's _step_onto): the event's state
+is then not read off the dense output but computed by the method's own step from the step's start to the event
+time, so a restart on a switch or kink keeps the method's accuracy; linear ones
 along a step it is a polynomial in theta, whose first crossing in (0, 1] is found exactly (its derivative's
-roots split the step into monotone pieces). Other guards are probed at NONLINEAR_PROBES interior points of
-each step and located by Brent's method on the dense output, as the reference does: a crossing and its
-undoing between two probes is missed. Thresholds follow solvers/time_domain.py's _first_event: pass
+roots split the step into monotone pieces). Other guards are interpolated along the step at GUARD_NODES
+Chebyshev points by a polynomial with an error bound, cut into monotone pieces in the same way, checked on the
+guard itself where a piece ends near the threshold and located by Brent's method on the dense output, as the
+reference does (time_domain._guard_crossing): a dip below the threshold and back is found however short.
+Thresholds follow solvers/time_domain.py's _first_event: pass
 thresholds[g] = 0 for its semantics; at every step start a guard within GUARD_TOLERANCE above its threshold
 (at its boundary, as a transition leaves it) fires only when it falls GUARD_TOLERANCE below it. A guard
 already more than GUARD_TOLERANCE below its threshold at t0 is an event at t0 with no step. The earliest
@@ -67,13 +72,14 @@ from scipy.integrate import DOP853, RK45, DenseOutput
 from scipy.integrate._ivp import dop853_coefficients
 
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, RHS_TYPE
-from mech_regulator.solvers.time_domain import GUARD_TOLERANCE
+from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODES, GUARD_TOLERANCE, guard_polynomial,
+                                                monotone_ends)
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
+LINEAR, STEP_ONTO = 1.0, 2.0  # flags of linear guards (module docstring)
 NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS = 1, 2, 3
 FAILURES = {NONFINITE: "the state became non-finite", STEP_TOO_SMALL: "the step size fell below round-off",
             TOO_MANY_STEPS: "the step limit (max_steps) was reached"}
-NONLINEAR_PROBES = 8  # interior points of each step where a guard that is not linear in the state is checked
 
 _RK4, _RK45, _DOP853, _ROSENBROCK23 = 0, 1, 2, 3
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0  # scipy's step-size controller (scipy.integrate._ivp.rk)
@@ -216,6 +222,21 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                 if event_time <= t:  # at the step's very start: no step taken
                     n_steps -= 1
                     y_end[:] = y
+                elif linear[event_guard, 0] == STEP_ONTO:  # the method's step from t onto the switch
+                    h = event_time - t
+                    if method == _RK4:
+                        nfev += _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new)
+                    elif method == _ROSENBROCK23:
+                        _rosenbrock_step(rhs, t, y, f, h, jacobian, dfdt, rtol, atol, p, stage, y_new, f_new)
+                        nfev += 2
+                        nlu += 1
+                    else:
+                        nfev += _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new)
+                    coefficients[n_steps - 1] = 0.0
+                    nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work,
+                                                coefficients[n_steps - 1])
+                    y_end[:] = y_new
+                    times[n_steps] = event_time
                 else:
                     _dense_at(event_time, t, h, y, coefficients[n_steps - 1], y_end)
                     _rescale(coefficients[n_steps - 1], (event_time - t) / h)
@@ -566,6 +587,33 @@ def _brent(a, b, g, line, t_old, h, y_old, coefficients, p, guards, levels, stat
     return x_cur
 
 
+_guard_polynomial = njit(cache=True)(guard_polynomial)
+_monotone_ends = njit(cache=True)(monotone_ends)
+
+
+@njit(cache=True)
+def _golden_minimum(a, b, g, t_old, h, y_old, coefficients, p, guards, levels, state, threshold):
+    """The minimum of guard g less threshold on [a, b] (a time interval inside the step) by golden-section search,
+    to 1e-12 of the step: (time [s], value)."""
+    ratio = 0.5 * (3.0 - np.sqrt(5.0))
+    no_line = np.zeros(0)
+    x1, x2 = a + ratio * (b - a), b - ratio * (b - a)
+    f1 = _excess(x1, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+    f2 = _excess(x2, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+    for _ in range(100):
+        if b - a <= 1e-12 * h:
+            break
+        if f1 < f2:
+            b, x2, f2 = x2, x1, f1
+            x1 = a + ratio * (b - a)
+            f1 = _excess(x1, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+        else:
+            a, x1, f1 = x1, x2, f2
+            x2 = b - ratio * (b - a)
+            f2 = _excess(x2, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold)
+    return (x1, f1) if f1 < f2 else (x2, f2)
+
+
 @njit(cache=True)
 def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coefficients, p, levels, state):
     """The earliest guard crossing in (t_old, t_old + h]: (guard index, time [s]) or (-1, nan).
@@ -575,7 +623,10 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
     when g0 >= sum_j |a_j| it cannot fall below on [0, 1] and is done with at once (most steps); else the real
     parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends below the
     threshold holds the first crossing (exact; a near-tangency that stays above does not fire). The other guards are
-    probed at NONLINEAR_PROBES interior points and the first probe interval that ends below is searched."""
+    sampled at GUARD_NODES Chebyshev points and checked as the reference's time_domain._guard_crossing does: their
+    interpolating polynomial (with its error bound) cut into monotone pieces, the first piece that ends within the
+    bound of the threshold checked on the guard itself at its end and, if above there, by a golden-section minimum
+    over the pieces on both sides; a crossing is located by Brent's method from the last point known above."""
     n = y_old.size
     guards(t_old, y_old, p, levels)
     start = levels[:n_guards].copy()
@@ -588,7 +639,7 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
             continue
         if start[g] <= thresholds[g] + GUARD_TOLERANCE:
             step_thresholds[g] = thresholds[g] - GUARD_TOLERANCE
-        if linear[g, 0] != 1.0:
+        if linear[g, 0] == 0.0:
             nonlinear = True
             continue
         weights = linear[g, 2:2 + n].copy()
@@ -597,11 +648,8 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
         line[1:] = h * (weights @ coefficients)
         if line[0] >= np.sum(np.abs(line[1:])):  # then line(theta) >= 0 on all of [0, 1]: no crossing (exact)
             continue
-        slope = line[1:] * np.arange(1.0, line.size)  # derivative, lowest power first
-        roots = np.roots(slope[::-1].astype(np.complex128)).real  # complex: numba keeps the domain
-        cuts = np.sort(np.concatenate((roots[(roots > 0.0) & (roots < 1.0)], np.ones(1))))
         lower = 0.0
-        for upper in cuts:
+        for upper in _monotone_ends(line):
             if _polynomial(upper, line) < 0.0:
                 time = _brent(t_old + lower * h, t_old + upper * h, g, line, t_old, h, y_old, coefficients, p,
                               guards, levels, state, 0.0)
@@ -610,25 +658,41 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
                 break
             lower = upper
     if nonlinear:
-        probes = np.linspace(t_old, t_old + h, NONLINEAR_PROBES + 2)
-        for k in range(1, probes.size):
-            if probes[k - 1] >= best_time:
-                break
-            _dense_at(probes[k], t_old, h, y_old, coefficients, state)
-            guards(probes[k], state, p, levels)
-            below = levels[:n_guards].copy()
-            # a nonlinear guard crossed in this probe interval (a linear one found above does not end the probing)
-            crossed = False
-            for g in range(n_guards):
-                if start[g] == np.inf or linear[g, 0] == 1.0 or not below[g] < step_thresholds[g]:
-                    continue
-                crossed = True
-                time = _brent(probes[k - 1], probes[k], g, no_line, t_old, h, y_old, coefficients, p, guards,
-                              levels, state, step_thresholds[g])
-                if time < best_time:
-                    best_guard, best_time = g, time
-            if crossed:
-                break
+        samples = np.empty((GUARD_NODES, n_guards))
+        for k in range(GUARD_NODES):
+            time = t_old + GUARD_NODE_FRACTIONS[k] * h
+            _dense_at(time, t_old, h, y_old, coefficients, state)
+            guards(time, state, p, levels)
+            samples[k] = levels[:n_guards]
+        for g in range(n_guards):
+            if start[g] == np.inf or linear[g, 0] != 0.0:
+                continue
+            line, margin = _guard_polynomial(samples[:, g] - step_thresholds[g])
+            if line[0] - margin >= np.sum(np.abs(line[1:])):  # the polynomial stays above the margin on [0, 1]
+                continue
+            cuts = _monotone_ends(line)
+            lower = 0.0
+            for i in range(cuts.size):
+                upper = cuts[i]
+                if t_old + lower * h >= best_time:
+                    break
+                if _polynomial(upper, line) < margin:
+                    t_low = t_old + upper * h
+                    low = _excess(t_low, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state,
+                                  step_thresholds[g])
+                    if low >= 0.0 and upper < 1.0:
+                        t_min, v_min = _golden_minimum(t_old + lower * h, t_old + cuts[i + 1] * h, g, t_old, h,
+                                                       y_old, coefficients, p, guards, levels, state,
+                                                       step_thresholds[g])
+                        if v_min < low:
+                            t_low, low = t_min, v_min
+                    if low < 0.0:
+                        time = _brent(t_old + lower * h, t_low, g, no_line, t_old, h, y_old, coefficients, p, guards,
+                                      levels, state, step_thresholds[g])
+                        if time < best_time:
+                            best_guard, best_time = g, time
+                        break
+                lower = upper
     return best_guard, (best_time if best_guard >= 0 else np.nan)
 
 

@@ -19,11 +19,12 @@ from numba import njit
 
 
 @njit(cache=True)
-def periodic_linear(x, p, offset, n, period):
+def periodic_linear(x, anchor, p, offset, n, period):
     """effects.tables.periodic_linear: y(x) linear between the n points, periodic with `period`, the last point
-    joined to the first plus one period (np.interp(x, xs, ys, period=period))."""
+    joined to the first plus one period (np.interp(x, xs, ys, period=period)), here the line of the segment that holds
+    `anchor` continued to x (anchor = x: the table itself)."""
     x0 = p[offset]
-    u = np.fmod(x - x0, period)
+    u = np.fmod(anchor - x0, period)
     if u < 0.0:
         u += period
     i = n - 1
@@ -35,18 +36,20 @@ def periodic_linear(x, p, offset, n, period):
         hi, y_hi = p[offset + i + 1] - x0, p[offset + n + i + 1]
     else:
         hi, y_hi = period, p[offset + n]
-    return y_lo + (y_hi - y_lo) / (hi - lo) * (u - lo)
+    return y_lo + (y_hi - y_lo) / (hi - lo) * (u - lo + (x - anchor))
 
 
 @njit(cache=True)
-def clamped_linear(x, p, offset, n):
-    """effects.tables.clamped_linear: y(x) linear between the n points, held at the end values beyond them."""
-    if x <= p[offset]:
+def clamped_linear(x, p, offset, n, anchor=np.nan):
+    """effects.tables.clamped_linear: y(x) linear between the n points, held at the end values beyond them; with an
+    anchor (not NaN), the piece that holds the anchor continued to x (an anchor on an end point: the end segment)."""
+    at = x if np.isnan(anchor) else anchor
+    if at < p[offset]:
         return p[offset + n]
-    if x >= p[offset + n - 1]:
+    if at > p[offset + n - 1]:
         return p[offset + 2 * n - 1]
     i = n - 2
-    while p[offset + i] > x:
+    while p[offset + i] > at:
         i -= 1
     return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
         x - p[offset + i])
@@ -73,21 +76,22 @@ def linear_motor(omega, stall, no_load):
 
 
 @njit(cache=True)
-def table_drive(phi, p, offset, n, period):
-    """Table drive: M_d = M(phi), periodic linear table."""
-    return periodic_linear(phi, p, offset, n, period)
+def table_drive(phi, anchor, p, offset, n, period):
+    """Table drive: M_d = M(phi), periodic linear table (on the segment that holds anchor)."""
+    return periodic_linear(phi, anchor, p, offset, n, period)
 
 
 @njit(cache=True)
-def engine_gas_force(phi, p, offset, n, cycle, phase, area):
-    """The gas force on the piston along +x: F = -p(phi + phase) A (it pushes the piston towards the crank) [N]."""
-    return -periodic_linear(phi + phase, p, offset, n, cycle) * area
+def engine_gas_force(phi, anchor, p, offset, n, cycle, phase, area):
+    """The gas force on the piston along +x: F = -p(phi + phase) A (it pushes the piston towards the crank) [N]
+    (p on the segment that holds anchor + phase)."""
+    return -periodic_linear(phi + phase, anchor + phase, p, offset, n, cycle) * area
 
 
 @njit(cache=True)
-def engine_gas(phi, dq, p, offset, n, cycle, phase, area):
+def engine_gas(phi, anchor, dq, p, offset, n, cycle, phase, area):
     """Single-cylinder engine: M_d = -p(phi + phase) A dx/dphi (engine_gas_force reduced to the crank)."""
-    return engine_gas_force(phi, p, offset, n, cycle, phase, area) * dq
+    return engine_gas_force(phi, anchor, p, offset, n, cycle, phase, area) * dq
 
 
 @njit(cache=True)
@@ -103,9 +107,9 @@ def fan_load(omega, k):
 
 
 @njit(cache=True)
-def table_load(phi, p, offset, n, period):
-    """Table load: M_c = -M(phi), periodic linear table."""
-    return -periodic_linear(phi, p, offset, n, period)
+def table_load(phi, anchor, p, offset, n, period):
+    """Table load: M_c = -M(phi), periodic linear table (on the segment that holds anchor)."""
+    return -periodic_linear(phi, anchor, p, offset, n, period)
 
 
 @njit(cache=True)
@@ -152,9 +156,22 @@ def output_spring(q, dq, k, free):
 
 
 @njit(cache=True)
-def slider_table(q, dq, p, offset, n):
-    """Slider force table: M = F(x) dx/dphi, F clamped linear in x."""
-    return clamped_linear(q, p, offset, n) * dq
+def held_position(anchor, p, offset, n):
+    """effects.held_positions looked up: the n - 1 kink angles [rad] in [0, 2 pi) at p[offset:], then 2 pi, and the n
+    held slider positions [m] after them; the one of the interval that holds anchor mod 2 pi."""
+    u = np.fmod(anchor, p[offset + n - 1])
+    if u < 0.0:
+        u += p[offset + n - 1]
+    j = 0  # bisect_right(kinks, u)
+    while j < n - 1 and p[offset + j] <= u:
+        j += 1
+    return p[offset + n + j]
+
+
+@njit(cache=True)
+def slider_table(q, q_anchor, dq, p, offset, n):
+    """Slider force table: M = F(x) dx/dphi, F clamped linear in x (on the piece that holds x = q_anchor [m])."""
+    return clamped_linear(q, p, offset, n, q_anchor) * dq
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -84,8 +84,6 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
             break
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
-        if window is not None and y[0] - offset > window[1]:  # a whole period that floor() left by round-off
-            offset += period
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
         p = compiled.parameters_for(piece, mode, window, start[1])
         y_wrapped = start.copy()

@@ -1,0 +1,79 @@
+"""Drawing geometry of a linkage at a crank angle (pure numpy), in the outline format of mechanisms/drawing.py:
+metres, y up, a dict of parts, each a polyline (n, 2) or a bundle of polylines (k, n, 2); `joints` is a set of
+points.
+
+Parts: `frame` (the polyline through the frame's points, fixed), `crank_path` (the circle of the crank's farthest
+point, fixed), `crank` (its pivot to its farthest point: the last point is the crank pin), `links` (every other
+moving link as the closed polygon through its points in the order given, padded by repeating its last point to the
+longest), `sliders` (a block on each prismatic joint's slider point, along the guide, BLOCK_PER_CRANK crank
+lengths by half that; an empty bundle without prismatic joints) and `joints` (every joint's point).
+"""
+
+from __future__ import annotations
+
+import cmath
+
+import numpy as np
+
+from mech_regulator.mechanisms.linkage.kinematics import crank_pose, solve
+from mech_regulator.mechanisms.linkage.model import PRISMATIC, Linkage
+from mech_regulator.mechanisms.linkage.structure import Structure
+
+MOVING_PARTS = ("crank", "links", "sliders", "joints")
+BLOCK_PER_CRANK = 0.6   # slider block length along the guide, per crank length [-]
+
+
+def crank_length(linkage: Linkage) -> float:
+    """Distance from the crank's pivot to its farthest point [m]."""
+    points = linkage.link(linkage.crank).points
+    pivot = points[linkage.crank_pivot().name]
+    return max(abs(p - pivot) for p in points.values())
+
+
+def _xy(points: list[complex]) -> np.ndarray:
+    return np.array([[p.real, p.imag] for p in points])
+
+
+def link_polygon(linkage: Linkage, poses: dict, name: str) -> list[complex]:
+    """The global points of a link in the order given, closed when it has three or more."""
+    r, theta = poses[name][0], poses[name][1]
+    points = [r + p * cmath.exp(1j * theta) for p in linkage.link(name).points.values()]
+    return points + points[:1] if len(points) > 2 else points
+
+
+def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[str, np.ndarray]:
+    """The linkage's parts at crank angle phi [rad] (module docstring)."""
+    poses = solve(linkage, structure, phi, derivatives=False)
+    frame_points = list(linkage.link(linkage.frame).points.values())
+    crank = linkage.link(linkage.crank)
+    pivot_name = linkage.crank_pivot().name
+    pose = crank_pose(linkage, phi)
+    tip = max(crank.points.values(), key=lambda p: abs(p - crank.points[pivot_name]))
+    pivot = linkage.link(linkage.frame).points[pivot_name]
+    radius = crank_length(linkage)
+    others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != linkage.crank]
+    longest = max(len(points) for points in others)  # a linkage with W = 1 has at least one group
+    half = 0.5 * BLOCK_PER_CRANK * radius
+    blocks = []
+    for joint in linkage.joints:
+        if joint.kind == PRISMATIC:
+            guide, slider = joint.links
+            centre = poses[slider][0] + linkage.link(slider).points[joint.name] * cmath.exp(1j * poses[slider][1])
+            along = cmath.exp(1j * (joint.direction + poses[guide][1]))
+            corners = [centre + half * along * complex(x, 0.5 * y) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+            blocks.append(_xy(corners + corners[:1]))
+    joint_points = []
+    for joint in linkage.joints:
+        link = joint.links[1]
+        joint_points.append(poses[link][0] + linkage.link(link).points[joint.name] * cmath.exp(1j * poses[link][1]))
+    from mech_regulator.mechanisms.drawing import circle  # mechanisms.drawing imports this module
+
+    outline = {
+        "frame": _xy(frame_points),
+        "crank_path": circle((pivot.real, pivot.imag), radius),
+        "crank": _xy([pivot, pose[0] + tip * cmath.exp(1j * phi)]),
+        "links": np.stack([_xy(points + points[-1:] * (longest - len(points))) for points in others]),
+        "sliders": np.stack(blocks) if blocks else np.zeros((0, 5, 2)),
+        "joints": _xy(joint_points),
+    }
+    return outline
