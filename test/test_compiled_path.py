@@ -526,8 +526,11 @@ def test_crank_stops_and_starts_as_on_the_reference_path():
         tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
                                                  solver__atol=settings.atol / 100)))
         assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
-        # the step sequences after the start part at round-off (measured: 179 against 187 on compressor_friction)
-        assert abs(fast.stats.steps - reference.stats.steps) <= 0.05 * reference.stats.steps
+        # the same restarts (the start, and on compressor_friction the crossings of its slider table's breakpoints);
+        # the step sequences after each restart part at round-off (measured: 137 against 151 steps on
+        # compressor_friction, 20 switches each; 179 against 187 before the breakpoints were located)
+        assert fast.stats.switches == reference.stats.switches and fast.stats.restarts == reference.stats.restarts
+        assert abs(fast.stats.steps - reference.stats.steps) <= 0.15 * reference.stats.steps
 
 
 @pytest.mark.parametrize("data", [bundled("clutch_start"), shortened("clutch_start", 2.5, solver__method="RK45"),
