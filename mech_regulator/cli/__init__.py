@@ -1,8 +1,10 @@
 """The command line: a thin layer over the physics core."""
 
 import sys
+import time
 
 EXIT_INTERRUPTED = 130
+STARTED = time.monotonic()  # [s] when the command line began (its first import): `run`'s start-up counts from it
 
 
 def entry() -> int:

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
-from mech_regulator.cli import EXIT_INTERRUPTED
+from mech_regulator.cli import EXIT_INTERRUPTED, STARTED
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note
@@ -506,7 +506,7 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
     check_outputs(args, args.out)
     return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
-                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling)
+                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED)
 
 
 def _bench_accuracy(args) -> int:

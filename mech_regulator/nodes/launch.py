@@ -49,9 +49,11 @@ def node_names(governed: bool) -> list[str]:
 
 def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
                    overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
-                   duration: float | None, coupling: str) -> dict:
+                   duration: float | None, coupling: str, started: float) -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
-    other nodes started (in realtime only the recorder is waited for: the inputs are the newest, not awaited)."""
+    other nodes started (in realtime only the recorder is waited for: the inputs are the newest, not awaited);
+    started: when the command began, on the clock of time.monotonic() [s] (the recorder's start_up_s counts from
+    it)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
     common = parameters["/**"]["ros__parameters"]
     common.update(scene_file=scene_file, overrides=overrides or [""], exchange_step=exchange_step, time_mode=time_mode,
@@ -64,19 +66,8 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     if time_mode == "realtime":
         machine.update(lockstep_inputs=[""], peers=["recorder"])
     parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(output=str(output),
-                                                                                   launched_at=command_started())
+                                                                                   launched_at=started)
     return parameters
-
-
-def command_started() -> float:
-    """When this process started, on the clock of time.monotonic() [s] (Linux: its start time in /proc, which counts
-    from the same origin, 10 ms resolution; elsewhere: now), so that the recorder can say how long the run took from
-    the command to its first exchange (start_up_s in the summary)."""
-    try:
-        fields = Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()
-        return int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22 of proc(5): starttime [clock ticks]
-    except (OSError, IndexError, ValueError):
-        return time.monotonic()
 
 
 def default_recording(scene_name: str | None) -> Path:
@@ -87,9 +78,10 @@ def default_recording(scene_name: str | None) -> Path:
 
 def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
-             quiet: bool, duration: float | None, coupling: str) -> int:
-    """Run the nodes on the scene for `duration` [s] of simulated time (None: the scene's); returns the exit code
-    (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
+             quiet: bool, duration: float | None, coupling: str, started: float | None = None) -> int:
+    """Run the nodes on the scene for `duration` [s] of simulated time (None: the scene's), `started` the command's
+    start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
+    code (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
     named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
@@ -100,7 +92,8 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
         overspeed_trip = OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega)
     governed = scene.governor is not None
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
-                                real_time_factor, governed, duration, coupling)
+                                real_time_factor, governed, duration, coupling,
+                                started if started is not None else time.monotonic())
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
