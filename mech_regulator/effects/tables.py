@@ -65,15 +65,25 @@ def clamped_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[..., fl
     return table
 
 
-def extrapolated_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[[float], float]:
-    """Return y(x): linear between the points, the first and last segments continued beyond the ends
-    (a characteristic that keeps its end slopes)."""
+def extrapolated_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[..., float]:
+    """Return y(x, anchor=None): linear between the points, the first and last segments continued beyond the ends
+    (a characteristic that keeps its end slopes); with an anchor, the segment that holds the anchor, continued to x
+    (as periodic_linear's)."""
     knots, values = list(xs), list(ys)
     slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(len(knots) - 1)]
     last = len(slopes) - 1
 
-    def table(x: float) -> float:
-        i = min(max(bisect.bisect_right(knots, x) - 1, 0), last)
+    def table(x: float, anchor: float | None = None) -> float:
+        i = min(max(bisect.bisect_right(knots, x if anchor is None else anchor) - 1, 0), last)
         return values[i] + slopes[i] * (x - knots[i])
 
     return table
+
+
+def slope_breaks(xs: Sequence[float], ys: Sequence[float], ends: bool) -> tuple[float, ...]:
+    """The points of a piecewise-linear table (xs increasing) where its slope changes (by more than round-off, 1e-12
+    of the slopes): the interior points, and with `ends` (a table held constant beyond its ends, clamped_linear) also
+    the end points next to a sloped segment [units of x]."""
+    slopes = [0.0] + [(ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]) for i in range(len(xs) - 1)] + [0.0]
+    return tuple(x for i, x in enumerate(xs) if (ends or 0 < i < len(xs) - 1)
+                 and abs(slopes[i + 1] - slopes[i]) > 1e-12 * max(abs(slopes[i + 1]), abs(slopes[i])))

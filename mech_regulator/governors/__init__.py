@@ -58,7 +58,8 @@ class Governor:
     sensor: the Porter sensor; valve: throttle(z) for direct action (None for indirect);
     pilot_neutral [m], servo_gain [1/(m s)], servo_max_speed [1/s] (inf = unlimited), dead_band [m],
     travel (low, high) [-], feedback ('none' | 'rigid' | 'isodromic'), feedback_gain rho [m],
-    feedback_time_constant T_i [s], feedback_reference: servo position of rigid feedback's neutral [-].
+    feedback_time_constant T_i [s], feedback_reference: servo position of rigid feedback's neutral [-];
+    valve_breaks: the sleeve positions [m] where a valve table's slope jumps (build_valve).
     """
 
     kind: str
@@ -73,6 +74,7 @@ class Governor:
     feedback: str = "none"
     feedback_gain: float = 0.0
     feedback_time_constant: float = math.inf
+    valve_breaks: tuple[float, ...] = ()
     feedback_reference: float = 0.0
 
     @property
@@ -94,6 +96,12 @@ class Governor:
         if self.valve is not None:
             return self.valve(self.sensor.sleeve(y[ARM]))
         return y[SERVO]
+
+    def held_throttle(self, anchor: float) -> Callable[[np.ndarray], float]:
+        """y -> throttle 0..1 of a valve table continued along the piece that holds the sleeve position anchor [m]
+        (between two of its breakpoints valve_breaks: smooth in y, the breakpoint met only by restarting on it)."""
+        valve, sleeve = self.valve, self.sensor.sleeve
+        return lambda y: valve(sleeve(y[ARM]), anchor)
 
     def set_speed(self) -> float:
         """Indirect action: the crank speed [rad/s] at which the sleeve sits at pilot_neutral (no feedback
@@ -293,8 +301,8 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
         static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
         ratio=spec.ratio, gravity=spec.gravity, stroke=(spec.stroke[0], spec.stroke[1]))
     if isinstance(spec, schema.DirectGovernor):
-        valve, formula = build_valve(spec.valve)
-        return Governor(kind="direct", sensor=sensor, valve=valve, valve_formula=formula)
+        valve, formula, breaks = build_valve(spec.valve)
+        return Governor(kind="direct", sensor=sensor, valve=valve, valve_formula=formula, valve_breaks=breaks)
     servo, feedback = spec.servo, spec.feedback
     reference = feedback.reference
     if feedback.type == "rigid" and reference is None:

@@ -4,14 +4,16 @@ from __future__ import annotations
 
 from typing import Callable
 
-from mech_regulator.effects.tables import clamped_linear
+from mech_regulator.effects.tables import clamped_linear, slope_breaks
 from mech_regulator.scene import schema
 
 ValveCharacteristic = Callable[[float], float]
 
 
-def build_valve(valve: schema.Valve) -> tuple[ValveCharacteristic, str]:
-    """The throttle as a function of the sleeve position z, and a formula for `describe`.
+def build_valve(valve: schema.Valve) -> tuple[ValveCharacteristic, str, tuple[float, ...]]:
+    """The throttle as a function of the sleeve position z (a table's also of an anchor: throttle(z, anchor) continues
+    the piece that holds z = anchor [m] to z), a formula for `describe`, and the sleeve positions [m] where a table's
+    slope jumps (its breakpoints; () for the linear valve).
 
     linear: throttle = (closed_at - z) / (closed_at - open_at), clipped to [0, 1];
     table: linear between the points, held at the end values beyond them.
@@ -23,6 +25,7 @@ def build_valve(valve: schema.Valve) -> tuple[ValveCharacteristic, str]:
         def linear(z: float) -> float:
             return min(max((closed_at - z) / span, 0.0), 1.0)
 
-        return linear, f"throttle = ({closed_at:g} - z) / ({closed_at:g} - {open_at:g}), clipped to 0..1"
+        return linear, f"throttle = ({closed_at:g} - z) / ({closed_at:g} - {open_at:g}), clipped to 0..1", ()
     table = clamped_linear(valve.sleeve, valve.throttle)
-    return table, f"throttle table over z, {len(valve.sleeve)} points from {valve.sleeve[0]:g} to {valve.sleeve[-1]:g} m"
+    formula = f"throttle table over z, {len(valve.sleeve)} points from {valve.sleeve[0]:g} to {valve.sleeve[-1]:g} m"
+    return table, formula, slope_breaks(valve.sleeve, valve.throttle, ends=True)

@@ -34,9 +34,9 @@ import numpy as np
 from scipy import optimize
 
 from mech_regulator.effects import Effect, build_drive, build_load
-from mech_regulator.effects.tables import extrapolated_linear
+from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
-from mech_regulator.governors import Governor, Guard, Mode, build_governor
+from mech_regulator.governors import ARM, Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
 from mech_regulator.model.drivetrain import (BACKWARD, CLUTCH_CODE, DIRECTION, FORWARD, HELD, STUCK, ClutchModel,
                                              DrivenModel, Forces, build_driven, coulomb_factor, train_guards)
@@ -162,6 +162,18 @@ class CouplingModel:
 
 
 @dataclass(frozen=True)
+class StateTable:
+    """A piecewise-linear table read at a function of the state (the valve table at the sleeve position z [m], the
+    coupling characteristic at the twist [rad]): value(y) is where it is read, breaks the values where its slope
+    jumps (sorted). Each break is a guard value(y) - break that changes no mode: the solvers restart on its
+    crossings and between two of them see the table continued along one piece (rhs's anchors)."""
+
+    name: str
+    value: Callable[[np.ndarray], float]
+    breaks: tuple[float, ...]
+
+
+@dataclass(frozen=True)
 class MachineModel:
     """A scene assembled for simulation.
 
@@ -211,6 +223,23 @@ class MachineModel:
     def switch_angles(self) -> list[tuple[float, float]]:
         """(angle, period) pairs [rad] where some moment jumps with phi."""
         return [(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+
+    @functools.cached_property
+    def state_tables(self) -> tuple[StateTable, ...]:
+        """The tables read at a function of the state that have breakpoints (StateTable): a direct governor's valve
+        table (at the sleeve position), a nonlinear coupling's characteristic (at the twist); the order of rhs's
+        anchors."""
+        tables = []
+        governor = self.governor
+        if governor is not None and governor.valve_breaks:
+            sleeve, arm = governor.sensor.sleeve, ARM
+            tables.append(StateTable("valve table", lambda y: sleeve(y[arm]), governor.valve_breaks))
+        if self.coupling is not None and self.coupling.table is not None:
+            breaks = slope_breaks(self.coupling.table[0].tolist(), self.coupling.table[1].tolist(), ends=False)
+            if breaks:
+                twist = self.driven_speed_index - 1
+                tables.append(StateTable("coupling table", lambda y: y[twist], breaks))
+        return tuple(tables)
 
     def kink_angles(self) -> list[tuple[float, float]]:
         """(angle, period) pairs [rad] where the slope of some moment in phi jumps (the knots of its tables in phi):
@@ -281,7 +310,8 @@ class MachineModel:
         return tuple(sorted(grid))
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-            mode: Mode | None = None, ideal: bool = False, kinks: bool = True) -> RightHandSide:
+            mode: Mode | None = None, ideal: bool = False, kinks: bool = True,
+            anchors: tuple[float, ...] | None = None) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
@@ -302,9 +332,12 @@ class MachineModel:
         stability analysis). mode None: the governor as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
         With joint friction the crank's epsilon is the root of `J epsilon = J epsilon_0 - sign(omega) F(epsilon)`
         (effects.joint_friction), epsilon_0 the frictionless acceleration and F reading the force on the output
-        link (the drive's scaled by the throttle).
+        link (the drive's scaled by the throttle). anchors (one per state_tables entry, in their units): each table read
+        at a function of the state continued along the piece that holds that value (no step straddles its breakpoint
+        either); None: the tables as they are.
         """
-        return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False)
+        return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False,
+                                     anchors=anchors)
 
     @functools.cached_property
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
@@ -315,9 +348,10 @@ class MachineModel:
 
     def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
                          window: tuple[float, float] | None, mode: Mode | None,
-                         ideal: bool, crank_only: bool) -> Callable:
+                         ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None) -> Callable:
         """rhs (see there) or, crank_only, crank_side; segment: the window when its tables continue along one segment
-        (rhs's kinks), else None."""
+        (rhs's kinks), else None; anchors: rhs's."""
+        held = dict(zip((table.name for table in self.state_tables), anchors)) if anchors is not None else {}
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
         ramped = piece is not None and (piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0)
@@ -344,10 +378,13 @@ class MachineModel:
         J0 = self.inertia_constant
         reduced = self.reduced
         throttle = governor.throttle if governor is not None else None
+        if "valve table" in held:
+            throttle = governor.held_throttle(held["valve table"])
         governor_rates = None
         if governor is not None and not crank_only:
             governor_rates = governor.derivatives(mode[:2] if mode is not None else mode, ideal)
-        train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode))
+        train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode),
+                                                                                   held.get("coupling table"))
         friction = None if crank_only else self.joint_friction
         output_force = self._output_force(scale_drive) if friction is not None else None
         plain = governor_rates is None and train is None and friction is None and not crank_only
@@ -434,16 +471,19 @@ class MachineModel:
             out["friction_thrust_collar"] = np.full(n, friction.collar)
         return out
 
-    def _train(self, train_mode: tuple[str, ...]) -> Callable:
+    def _train(self, train_mode: tuple[str, ...], twist_anchor: float | None = None) -> Callable:
         """The drive train's part of the right-hand side in a train mode: (t, y, J, F1, external) -> (domega/dt,
         rates of the train's states), F1 the crank's net moment apart from the train (crank_side), external the
-        external load's magnitude [N m], a Coulomb resistance of the driven part."""
+        external load's magnitude [N m], a Coulomb resistance of the driven part; twist_anchor [rad]: a coupling
+        table continued along the segment that holds it (None: the table as it is)."""
         driven = self.driven
         index = self.driven_speed_index
         resistance = driven.resistance
         smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
         if self.coupling is not None:
             elastic, c, state = self.coupling.elastic, self.coupling.damping, driven.state
+            if twist_anchor is not None:
+                elastic = functools.partial(self.coupling.elastic, anchor=twist_anchor)
             part = train_mode[0]
             held, direction = part == HELD, DIRECTION[part]
 

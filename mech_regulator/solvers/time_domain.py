@@ -16,6 +16,7 @@ import math
 import numpy as np
 from scipy import integrate, optimize
 
+from mech_regulator.governors import Guard
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS, speed_beyond_limit
 from mech_regulator.solvers.rk4 import RK4
@@ -86,15 +87,19 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     names = model.state_names()
     t, first_step = t_start, None
     counts = _switch_counts(y[0], switches)
+    tables = model.state_tables if kinks else ()
+    held = _held_pieces(tables, y)
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
         if trajectory.status != "complete":
             break
-        guards = model.guards(mode, y)
+        held = _held_pieces(tables, y, held)
+        breakpoints = _breakpoint_guards(tables, held, mode, y)
+        guards = model.guards(mode, y) + list(breakpoints)
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
-        rhs = model.rhs(piece, window, mode, kinks=kinks)
+        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=_anchors(tables, held) if tables else None)
         constraint = model.constraint(mode)
         interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
         y_wrapped = y.copy()
@@ -136,6 +141,14 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
                             dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint,
                                                        y_step[0], trajectory)
+                    elif guard in breakpoints:  # a table's breakpoint: the next piece, mode and state kept
+                        trajectory.stats.switches += 1
+                        table, step = breakpoints[guard]
+                        held[table] += step
+                        if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
+                            dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint, None,
+                                                       trajectory)
+                        mode, y_step = guard.apply(t_step, y_step)
                     else:
                         mode, y_step = guard.apply(t_step, y_step)
                         _log_event(trajectory, t_step, name, mode)
@@ -161,6 +174,61 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     return y, mode
 
 
+def _held_pieces(tables, y: np.ndarray, held: list[int] | None = None) -> list[int]:
+    """For each StateTable, the piece its value(y) is in: i such that breaks[i - 1] <= value < breaks[i] (bisect_right,
+    0 and len(breaks) the ends). A carried piece (held) is kept while the value stays in it to within 1e-9 of the
+    breaks' size: a restart just on a breakpoint then stays on the side the crossing went to."""
+    pieces = []
+    for k, table in enumerate(tables):
+        value, breaks = table.value(y), table.breaks
+        if held is not None:
+            slack = 1e-9 * max(max(abs(b) for b in breaks), breaks[-1] - breaks[0]) or 1e-15
+            lo = breaks[held[k] - 1] - slack if held[k] > 0 else -math.inf
+            hi = breaks[held[k]] + slack if held[k] < len(breaks) else math.inf
+            if lo <= value <= hi:
+                pieces.append(held[k])
+                continue
+        pieces.append(bisect.bisect_right(breaks, value))
+    return pieces
+
+
+def _anchors(tables, held: list[int]) -> tuple[float, ...]:
+    """A value strictly inside each table's held piece (its middle, 1 unit beyond an end break for an end piece): the
+    rhs's anchors."""
+    anchors = []
+    for table, i in zip(tables, held):
+        breaks = table.breaks
+        if i == 0:
+            anchors.append(breaks[0] - 1.0)
+        elif i == len(breaks):
+            anchors.append(breaks[-1] + 1.0)
+        else:
+            anchors.append(0.5 * (breaks[i - 1] + breaks[i]))
+    return tuple(anchors)
+
+
+def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
+    """The guards of the breakpoints around each table's held piece, from the state y the solver starts at:
+    value - breaks[i - 1] >= 0 and breaks[i] - value >= 0 (those that exist), each mapped to (table index, the piece
+    step its crossing makes: -1 or +1). They change no mode; their crossing restarts the solver on the next piece. A
+    start just across the breakpoint it was stepped onto (within _held_pieces' slack, the method's error) moves that
+    level to the start value: the guard starts at its boundary, instead of firing again at once."""
+    guards = {}
+    for k, (table, i) in enumerate(zip(tables, held)):
+        start = table.value(y)
+        if i > 0:
+            low = min(table.breaks[i - 1], start)
+            guards[Guard(f"{table.name} breakpoint {table.breaks[i - 1]:g}",
+                         lambda state, value=table.value, low=low: value(state) - low,
+                         lambda state: (mode, state))] = (k, -1)
+        if i < len(table.breaks):
+            high = max(table.breaks[i], start)
+            guards[Guard(f"{table.name} breakpoint {table.breaks[i]:g}",
+                         lambda state, value=table.value, high=high: high - value(state),
+                         lambda state: (mode, state))] = (k, +1)
+    return guards
+
+
 def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: float | None):
     """The scene's solver (scipy's OdeSolver class of settings.method, or RK4) started at (t [s], y) towards t_bound."""
     if settings.method == "RK4":
@@ -170,13 +238,14 @@ def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: 
 
 
 def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, t_switch: float, offset: float, constraint,
-               phi_switch: float, trajectory: Trajectory) -> tuple:
+               phi_switch: float | None, trajectory: Trajectory) -> tuple:
     """Step from the accepted step's start (t_old [s], y_old, unwrapped) exactly onto the switch crossing located at
     t_switch [s] (a step of t_switch - t_old, with the same rhs: RK4 one step, an adaptive method its own steps,
     normally one): the state there then has the method's step accuracy, where the dense output's (the crossing's
     location) is not controlled at all; restarting on knots from the dense output loses about a digit over a run (an
     engine at rtol 1e-10: 2-10 rtol instead of 0.3-0.8). Returns (the dense output over (t_old, t_switch], the state
-    at t_switch with phi set to the switch angle phi_switch [rad]); the function evaluations count in trajectory."""
+    at t_switch with phi set to the switch angle phi_switch [rad], or as the step ends for None: a table's breakpoint
+    crossed by a function of the state); the function evaluations count in trajectory."""
     start = np.array(y_old, dtype=float)
     start[0] -= offset
     onto = _solver(settings, rhs, t_old, start, t_switch, t_switch - t_old)
@@ -188,7 +257,8 @@ def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, t_switch: float, 
     trajectory.stats.njev += int(onto.njev)
     trajectory.stats.nlu += int(onto.nlu)
     y_switch = pieces[-1](t_switch)
-    y_switch[0] = phi_switch
+    if phi_switch is not None:
+        y_switch[0] = phi_switch
     return (pieces[0] if len(pieces) == 1 else _Joined(pieces)), y_switch
 
 

@@ -52,6 +52,7 @@ from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
 from mech_regulator.solvers.compiled.integrators import STEP_ONTO
+from mech_regulator.solvers.time_domain import _anchors
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
@@ -81,8 +82,11 @@ class CompiledScene:
     rhs, guards: the numba dispatchers (signatures.RHS_SIGNATURE, GUARDS_SIGNATURE), callable from Python;
     rhs_callback, guards_callback: the same functions compiled as C callbacks, what the integrators are given (a
     dispatcher argument costs numba some 50 us per call to turn into a function pointer); parameters: p with the
-    segment slots zero; n_guards: slots of `guards` (mode guards, then the window's two if window_slot is not
-    None); source and path of the generated module; mode_rows(mode) -> the linear rows of the mode's guards."""
+    segment slots zero; n_guards: slots of `guards` (mode guards, then two per model.state_tables entry from
+    breakpoint_slot on: its value above the held piece's lower breakpoint and below its upper one, then the window's
+    two if window_slot is not None); source and path of the generated module; table_slots: per state table the
+    slot in p of its anchor (NaN: the table as it is), then its piece's lower and upper breakpoints in the guard's
+    state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards."""
 
     model: MachineModel
     rhs: object
@@ -94,12 +98,16 @@ class CompiledScene:
     window_slot: int | None
     source: str
     path: Path
+    breakpoint_slot: int | None = None
+    table_slots: tuple[int, ...] = ()
 
-    def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0) -> np.ndarray:
+    def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
+                       held: list[int] | None = None, y: np.ndarray | None = None) -> np.ndarray:
         """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
         codes, the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
-        joint friction's crank guard watches, as MachineModel.guards(mode, y))."""
+        joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
+        time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds."""
         p = self.parameters.copy()
         if piece is not None:
             p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
@@ -120,12 +128,27 @@ class CompiledScene:
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
             p[WINDOW_LO], p[WINDOW_HI] = window
         p[CRANK_DIRECTION] = np.sign(omega)
+        if held is not None:
+            anchors = _anchors(self.model.state_tables, held)
+            for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):
+                p[slot], p[slot + 1], p[slot + 2] = anchor, low, high
         return p
 
-    def linear(self, mode, window: tuple[float, float] | None, omega: float = 0.0) -> np.ndarray:
+    def _held_bounds(self, held: list[int], y: np.ndarray) -> list[tuple[float, float]]:
+        """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
+        valve table's sleeve positions, the twist [rad]), moved to the start state y where it is just across one (as
+        time_domain._breakpoint_guards); -inf, inf where the piece has none."""
+        bounds = []
+        for (index, breaks), i in zip(breakpoint_states(self.model), held):
+            bounds.append((min(breaks[i - 1], y[index]) if i > 0 else -math.inf,
+                           max(breaks[i], y[index]) if i < len(breaks) else math.inf))
+        return bounds
+
+    def linear(self, mode, window: tuple[float, float] | None, omega: float = 0.0,
+               held: list[int] | None = None, y: np.ndarray | None = None) -> np.ndarray:
         """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
-        linear (or unused)."""
+        linear (or unused); with held and the start state y, the breakpoint guards of the held pieces (STEP_ONTO)."""
         n = len(self.model.state_names())
         matrix = np.zeros((self.n_guards, n + 2))
         for slot, row in enumerate(mode_rows(self.model, mode, omega)):
@@ -135,7 +158,30 @@ class CompiledScene:
             matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
             matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
             matrix[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
+        if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
+            slot = self.breakpoint_slot
+            for (index, _), (low, high) in zip(breakpoint_states(self.model), self._held_bounds(held, y)):
+                if low > -math.inf:
+                    matrix[slot] = _row(n, index, 1.0, -low)
+                    matrix[slot, 0] = STEP_ONTO
+                if high < math.inf:
+                    matrix[slot + 1] = _row(n, index, -1.0, high)
+                    matrix[slot + 1, 0] = STEP_ONTO
+                slot += 2
         return matrix
+
+
+def breakpoint_states(model: MachineModel) -> list[tuple[int, tuple[float, ...]]]:
+    """Per model.state_tables entry, the state its guards are linear in and its breakpoints there: the arm angle
+    a_k = arccos(1 - z_k / (2 l)) [rad] of a valve table's sleeve breakpoints z_k (z rises with a), the twist
+    [rad] of a coupling table's."""
+    states = []
+    for table in model.state_tables:
+        if table.name == "valve table":
+            states.append((ARM, tuple(model.governor.sensor.arm_angle(z) for z in table.breaks)))
+        else:
+            states.append((model.coupling_index, table.breaks))
+    return states
 
 
 def compile_scene(model: MachineModel) -> CompiledScene:
@@ -145,7 +191,7 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     recent = _RECENT.get(id(model))
     if recent is not None and recent.model is model:
         return recent
-    source, parameters, n_guards, window_slot = generate(model)
+    source, parameters, n_guards, window_slot, breakpoint_slot, table_slots = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
     module = _LOADED.get(digest)
@@ -159,7 +205,7 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         spec.loader.exec_module(module)
         _LOADED[digest] = module
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
-                             n_guards, window_slot, source, path)
+                             n_guards, window_slot, source, path, breakpoint_slot, table_slots)
     if len(_RECENT) >= RECENT_MODELS:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
@@ -250,8 +296,18 @@ class _Parameters:
         self.tables: list[tuple[int, list[float]]] = []
 
     def scalar(self, value: float) -> str:
+        return f"p[{self.slot(value)}]"
+
+    def slot(self, value: float) -> int:
+        """A new scalar slot holding value; its index in p."""
         self.values.append(float(value))
-        return f"p[{len(self.values) - 1}]"
+        return len(self.values) - 1
+
+    def slots(self, *values: float) -> int:
+        """Consecutive new scalar slots holding values; the index in p of the first."""
+        first = len(self.values)
+        self.values += [float(value) for value in values]
+        return first
 
     def table(self, *columns) -> str:
         """'p, offset, n' for the kernels: the columns (equal lengths) stored one after the other."""
@@ -372,11 +428,14 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
     return [f"{target} = k.four_bar_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
 
 
-def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
-    """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None) of a
-    scene's model (see the module docstring). The model must pass run.fast_path_refusal."""
+def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...]]:
+    """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None, slot of
+    the first breakpoint guard or None, CompiledScene.table_slots) of a scene's model (see the module docstring). The
+    model must pass run.fast_path_refusal."""
     machine = model.scene.machine
     p = _Parameters()
+    table_slots = tuple(p.slots(math.nan, -math.inf, math.inf) for _ in model.state_tables)  # anchor, low, high
+    anchor_of = {table.name: f", p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}  # kernels' anchor
     body: list[str] = ["phi = y[0]", "omega = y[1]"]
     if model.reduced is not None:  # the model's, not the scene's: a co-simulated governor has no mechanism
         gravity = machine.gravity if model.has_weight else None
@@ -429,7 +488,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
             if isinstance(valve, schema.LinearValve):
                 throttle = f"k.linear_valve({z}, {p.scalar(valve.open_at)}, {p.scalar(valve.closed_at)})"
             else:
-                throttle = f"k.clamped_linear({z}, {p.table(valve.sleeve, valve.throttle)})"
+                throttle = (f"k.clamped_linear({z}, {p.table(valve.sleeve, valve.throttle)}"
+                            f"{anchor_of.get('valve table', '')})")
         else:
             throttle = f"y[{SERVO}]"
             opening = [f"opening = k.sleeve(y[{ARM}], {l}) - {p.scalar(governor.pilot_neutral)}"]
@@ -487,7 +547,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
     if governor is not None:
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
     if model.coupling is not None:
-        train_lines, train_guards = _coupling_lines(model, p)
+        train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", ""))
         body += train_lines
         guard_lines += train_guards
         n_mode_guards += 2
@@ -506,15 +566,20 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None]:
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
     body += governor_lines
-    window_slot = None
     n_guards = n_mode_guards
+    breakpoint_slot = n_guards if table_slots else None
+    for slot, (index, _) in zip(table_slots, breakpoint_states(model)):  # -inf, inf bounds: levels +inf, inactive
+        guard_lines += [f"levels[{n_guards}] = y[{index}] - p[{slot + 1}]",
+                        f"levels[{n_guards + 1}] = p[{slot + 2}] - y[{index}]"]
+        n_guards += 2
+    window_slot = None
     if switched or kinked:
-        window_slot = n_mode_guards
+        window_slot = n_guards
         n_guards += 2
         guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
     source = _module(body, guard_lines, n_guards)
-    return source, p.array(), n_guards, window_slot
+    return source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots
 
 
 def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
@@ -586,17 +651,18 @@ def _crank_guard_lines() -> list[str]:
             "g += 1"]
 
 
-def _coupling_lines(model: MachineModel, p: _Parameters) -> tuple[list[str], list[str]]:
+def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str) -> tuple[list[str], list[str]]:
     """Source of the coupling and the driven part behind it (MachineModel._train, drive_train_at): the crank's
     dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
-    (at rest: the holding margins R -+ push; turning: s omega2)."""
+    (at rest: the holding margins R -+ push; turning: s omega2); anchor: ', p[slot]' of a coupling table's anchor
+    (the kernel's last argument), or ''."""
     coupling = model.coupling
     spec = model.scene.machine.coupling
     twist_index, speed_index = model.coupling_index, model.driven_speed_index
     if coupling.table is None:
         elastic = f"{p.scalar(coupling.stiffness)} * twist"
     else:
-        elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])})"
+        elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])}{anchor})"
     driven = spec.driven
     state = [f"twist = y[{twist_index}]", f"omega2 = y[{speed_index}]",
              f"passed = {elastic} + {p.scalar(coupling.damping)} * (omega - omega2)"]

@@ -56,10 +56,12 @@ def clamped_linear(x, p, offset, n, anchor=np.nan):
 
 
 @njit(cache=True)
-def extrapolated_linear(x, p, offset, n):
-    """effects.tables.extrapolated_linear: y(x) linear between the n points, the end segments continued."""
+def extrapolated_linear(x, p, offset, n, anchor=np.nan):
+    """effects.tables.extrapolated_linear: y(x) linear between the n points, the end segments continued; with an
+    anchor (not NaN), the segment that holds the anchor continued to x."""
+    at = x if np.isnan(anchor) else anchor
     i = n - 2
-    while i > 0 and p[offset + i] > x:
+    while i > 0 and p[offset + i] > at:
         i -= 1
     return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
         x - p[offset + i])

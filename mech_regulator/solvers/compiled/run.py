@@ -22,7 +22,7 @@ from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators
 from mech_regulator.solvers.compiled.codegen import CompiledScene, compile_scene
-from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck,
+from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck, _held_pieces,
                                                 _log_event, _settle_mode, _Shifted, _switch_window,
                                                 integrate_time_domain)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
@@ -77,6 +77,8 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
     grid, period, wraps, atol, thresholds = layout
     wrap_limit = RESTART_PERIODS * period if wraps else math.inf
     t, first_step = t_start, 0.0
+    tables = model.state_tables
+    held = _held_pieces(tables, y)
     instant_events = 0
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
@@ -85,12 +87,14 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
-        p = compiled.parameters_for(piece, mode, window, start[1])
+        held = _held_pieces(tables, y, held)
+        p = compiled.parameters_for(piece, mode, window, start[1], held, start)
         y_wrapped = start.copy()
         y_wrapped[0] -= offset
         # without a switch window no guard reads phi: the stepper wraps it itself instead of returning to restart
         wrap_period = period if wraps and window is None else 0.0
-        run = _step(settings, compiled, compiled.linear(mode, window, start[1]), thresholds, t, y_wrapped, t_end, p,
+        linear = compiled.linear(mode, window, start[1], held, start)
+        run = _step(settings, compiled, linear, thresholds, t, y_wrapped, t_end, p,
                     atol, first_step, wrap_limit, wrap_period)
         if run.n_steps:
             trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset), step_ends=run.times[1:])
@@ -116,6 +120,11 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
             if compiled.window_slot is not None and g >= compiled.window_slot:
                 trajectory.stats.switches += 1
                 y[0] = offset + window[g - compiled.window_slot]
+                trajectory.stats.restarts += int(t < t_end)
+            elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
+                table, side = divmod(g - compiled.breakpoint_slot, 2)
+                held[table] += 1 if side else -1
+                trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
             else:
                 guard = model.guards(mode, start)[g]
