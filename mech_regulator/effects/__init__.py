@@ -41,7 +41,8 @@ class Effect:
     met only by restarting on it); None without kinks; formula: what it computes, for `describe`; output_force: for
     an effect acting on the output link, the generalised force Q(t, phi, omega, q, dq) on it (slider force along +x [N],
     rocker moment [N m]) whose reduced moment is `moment` = Q dq, else None (read by the kinetostatics of
-    joint friction only).
+    joint friction only); segment_output_force(anchor, t, phi, omega, q, dq): output_force read on the same piece as
+    segment_moment (None: output_force has no breakpoints).
     """
 
     name: str
@@ -54,6 +55,7 @@ class Effect:
     output_force: MomentFunction | None = None
     kink_angles: tuple[float, ...] = ()
     segment_moment: Callable[..., float] | None = None
+    segment_output_force: Callable[..., float] | None = None
 
 
 def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:
@@ -89,7 +91,9 @@ def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) 
                       output_force=lambda t, phi, omega, q, dq: -pressure(phi + phase) * area,
                       kink_angles=_shifted_kinks(knots, (phase,), cycle),
                       segment_moment=lambda anchor, t, phi, omega, q, dq: -pressure(phi + phase, anchor + phase)
-                      * area * dq)
+                      * area * dq,
+                      segment_output_force=lambda anchor, t, phi, omega, q, dq: -pressure(phi + phase, anchor + phase)
+                      * area)
     raise TypeError(f"no drive effect for {type(drive).__name__}")
 
 
@@ -202,16 +206,22 @@ def _slider_table(load: schema.SliderTable, kinematic_period: float | None,
     (position_kinks), and between two of them segment_moment holds F on the piece of x there (held_positions)."""
     force = clamped_linear(load.position, load.force)
     kinks = position_kinks(load.position, output_position) if output_position and kinematic_period else ()
-    segment_moment = None
+    segment_moment = segment_force = None
     if kinks:
         positions = held_positions(kinks, output_position)
 
+        def segment_force(anchor: float, t: float, phi: float, omega: float, q: float, dq: float) -> float:
+            """F [N] on the piece of x held between the two kinks around the crank angle anchor [rad]."""
+            return force(q, positions[bisect.bisect_right(kinks, anchor % kinematic_period)])
+
         def segment_moment(anchor: float, t: float, phi: float, omega: float, q: float, dq: float) -> float:
-            return force(q, positions[bisect.bisect_right(kinks, anchor % kinematic_period)]) * dq
+            """M = F dx/dphi [N m], F on segment_force's piece."""
+            return segment_force(anchor, t, phi, omega, q, dq) * dq
 
     return Effect("slider_table", "load", lambda t, phi, omega, q, dq: force(q) * dq, frozenset({"phi"}),
                   f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi", period=kinematic_period,
-                  output_force=lambda t, phi, omega, q, dq: force(q), kink_angles=kinks, segment_moment=segment_moment)
+                  output_force=lambda t, phi, omega, q, dq: force(q), kink_angles=kinks, segment_moment=segment_moment,
+                  segment_output_force=segment_force)
 
 
 def held_positions(kinks: tuple[float, ...], output_position: Callable[[float], tuple[float, float]]) -> list[float]:

@@ -164,13 +164,18 @@ class CouplingModel:
 @dataclass(frozen=True)
 class StateTable:
     """A piecewise-linear table read at a function of the state (the valve table at the sleeve position z [m], the
-    coupling characteristic at the twist [rad]): value(y) is where it is read, breaks the values where its slope
-    jumps (sorted). Each break is a guard value(y) - break that changes no mode: the solvers restart on its
-    crossings and between two of them see the table continued along one piece (rhs's anchors)."""
+    coupling characteristic at the twist [rad], a table load of a coupled driven part at its angle phi2 = phi - twist
+    [rad]): value(y) is where it is read, breaks the values where its slope jumps (sorted; with a period, those in
+    [0, period), repeated every period). Each break is a guard value(y) - break that changes no mode: the solvers
+    restart on its crossings and between two of them see the table continued along one piece (rhs's anchors).
+    angular: whether value turns with the crank angle phi (value(y) - phi independent of phi): the solvers give its
+    anchor in their wrapped phi."""
 
     name: str
     value: Callable[[np.ndarray], float]
     breaks: tuple[float, ...]
+    period: float | None = None
+    angular: bool = False
 
 
 @dataclass(frozen=True)
@@ -227,18 +232,23 @@ class MachineModel:
     @functools.cached_property
     def state_tables(self) -> tuple[StateTable, ...]:
         """The tables read at a function of the state that have breakpoints (StateTable): a direct governor's valve
-        table (at the sleeve position), a nonlinear coupling's characteristic (at the twist); the order of rhs's
-        anchors."""
+        table (at the sleeve position), a nonlinear coupling's characteristic (at the twist), each table load with
+        knots of a coupled driven part (periodic, at its angle phi2 = phi - twist [rad], named "driven part's <load>";
+        angular: its rhs anchor is in the solver's wrapped phi); the order of rhs's anchors."""
         tables = []
         governor = self.governor
         if governor is not None and governor.valve_breaks:
             sleeve, arm = governor.sensor.sleeve, ARM
             tables.append(StateTable("valve table", lambda y: sleeve(y[arm]), governor.valve_breaks))
-        if self.coupling is not None and self.coupling.table is not None:
-            breaks = slope_breaks(self.coupling.table[0].tolist(), self.coupling.table[1].tolist(), ends=False)
-            if breaks:
-                twist = self.driven_speed_index - 1
-                tables.append(StateTable("coupling table", lambda y: y[twist], breaks))
+        if self.coupling is not None:
+            twist = self.driven_speed_index - 1
+            if self.coupling.table is not None:
+                breaks = slope_breaks(self.coupling.table[0].tolist(), self.coupling.table[1].tolist(), ends=False)
+                if breaks:
+                    tables.append(StateTable("coupling table", lambda y: y[twist], breaks))
+            tables += [StateTable(f"driven part's {effect.name}", lambda y: y[0] - y[twist], effect.kink_angles,
+                                  effect.period, angular=True)
+                       for effect in self.driven.effects if effect.kink_angles and effect.segment_moment is not None]
         return tuple(tables)
 
     def kink_angles(self) -> list[tuple[float, float]]:
@@ -332,9 +342,9 @@ class MachineModel:
         stability analysis). mode None: the governor as `ideal` says and the drive train in its default mode (driven part turning forward, clutch stuck).
         With joint friction the crank's epsilon is the root of `J epsilon = J epsilon_0 - sign(omega) F(epsilon)`
         (effects.joint_friction), epsilon_0 the frictionless acceleration and F reading the force on the output
-        link (the drive's scaled by the throttle). anchors (one per state_tables entry, in their units): each table read
-        at a function of the state continued along the piece that holds that value (no step straddles its breakpoint
-        either); None: the tables as they are.
+        link (the drive's scaled by the throttle). anchors (one per state_tables entry, in their units, an angular
+        one's in the wrapped phi the solver integrates): each table read at a function of the state continued along the
+        piece that holds that value (no step straddles its breakpoint either); None: the tables as they are.
         """
         return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False,
                                      anchors=anchors)
@@ -384,9 +394,9 @@ class MachineModel:
         if governor is not None and not crank_only:
             governor_rates = governor.derivatives(mode[:2] if mode is not None else mode, ideal)
         train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode),
-                                                                                   held.get("coupling table"))
+                                                                                   held.get("coupling table"), held)
         friction = None if crank_only else self.joint_friction
-        output_force = self._output_force(scale_drive) if friction is not None else None
+        output_force = self._output_force(scale_drive, segment) if friction is not None else None
         plain = governor_rates is None and train is None and friction is None and not crank_only
         external_on_crank = train is None and not crank_only
 
@@ -428,12 +438,21 @@ class MachineModel:
 
         return machine
 
-    def _output_force(self, scale_drive: bool) -> Callable[..., float]:
+    def _output_force(self, scale_drive: bool, segment: tuple[float, float] | None = None) -> Callable[..., float]:
         """`force(t, phi, omega, q, dq, share)`: the generalised force on the output link [N or N m], the sum of
-        the effects' output forces, the drive's times share (the throttle [-]) when scale_drive."""
-        scaled = tuple(effect.output_force for effect in self.effects
+        the effects' output forces, the drive's times share (the throttle [-]) when scale_drive; segment (a window
+        between two kinks [rad], as _right_hand_side's): the tables in the output forces (a slider table's, an engine's
+        pressure) read on the segment their moments are read on."""
+
+        def force_of(effect) -> Callable:
+            """The effect's output force; inside a segment, on the piece of its table held there."""
+            if segment is None or effect.segment_output_force is None:
+                return effect.output_force
+            return functools.partial(effect.segment_output_force, 0.5 * (segment[0] + segment[1]))
+
+        scaled = tuple(force_of(effect) for effect in self.effects
                        if effect.output_force is not None and scale_drive and effect.role == "drive")
-        fixed = tuple(effect.output_force for effect in self.effects
+        fixed = tuple(force_of(effect) for effect in self.effects
                       if effect.output_force is not None and not (scale_drive and effect.role == "drive"))
 
         def force(t: float, phi: float, omega: float, q: float, dq: float, share: float) -> float:
@@ -471,15 +490,25 @@ class MachineModel:
             out["friction_thrust_collar"] = np.full(n, friction.collar)
         return out
 
-    def _train(self, train_mode: tuple[str, ...], twist_anchor: float | None = None) -> Callable:
+    def _train(self, train_mode: tuple[str, ...], twist_anchor: float | None = None,
+               driven_anchors: dict[str, float] | None = None) -> Callable:
         """The drive train's part of the right-hand side in a train mode: (t, y, J, F1, external) -> (domega/dt,
         rates of the train's states), F1 the crank's net moment apart from the train (crank_side), external the
         external load's magnitude [N m], a Coulomb resistance of the driven part; twist_anchor [rad]: a coupling
-        table continued along the segment that holds it (None: the table as it is)."""
+        table continued along the segment that holds it (None: the table as it is); driven_anchors: a driven part's
+        table load named in state_tables read along the segment that holds its anchor phi2 [rad] (in the solver's
+        wrapped phi; absent: as it is)."""
         driven = self.driven
         index = self.driven_speed_index
         resistance = driven.resistance
-        smooth = tuple(effect.moment for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
+        anchored = driven_anchors or {}
+
+        def moment_of(effect) -> Callable:
+            """The driven effect's moment; with an anchor, its table continued along the segment that holds it."""
+            anchor = anchored.get(f"driven part's {effect.name}")
+            return effect.moment if anchor is None else functools.partial(effect.segment_moment, anchor)
+
+        smooth = tuple(moment_of(effect) for effect, dry in zip(driven.effects, driven.coulomb) if not dry)
         if self.coupling is not None:
             elastic, c, state = self.coupling.elastic, self.coupling.damping, driven.state
             if twist_anchor is not None:

@@ -99,7 +99,9 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         guards = model.guards(mode, y) + list(breakpoints)
         offset = period * math.floor(y[0] / period) if wraps else 0.0
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
-        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=_anchors(tables, held) if tables else None)
+        anchors = tuple(anchor - offset if table.angular else anchor  # in the solver's wrapped phi
+                        for table, anchor in zip(tables, _anchors(tables, held)))
+        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors if tables else None)
         constraint = model.constraint(mode)
         interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
         y_wrapped = y.copy()
@@ -174,21 +176,33 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     return y, mode
 
 
+def _break(table, i: int) -> float:
+    """The table's i-th breakpoint on the line of its value: breaks[i] (-inf below the first, inf above the last);
+    periodic, breaks[i mod n] + period (i div n) (n breaks a period)."""
+    n = len(table.breaks)
+    if table.period is not None:
+        return table.breaks[i % n] + table.period * (i // n)
+    return table.breaks[i] if 0 <= i < n else -math.inf if i < 0 else math.inf
+
+
 def _held_pieces(tables, y: np.ndarray, held: list[int] | None = None) -> list[int]:
-    """For each StateTable, the piece its value(y) is in: i such that breaks[i - 1] <= value < breaks[i] (bisect_right,
-    0 and len(breaks) the ends). A carried piece (held) is kept while the value stays in it to within 1e-9 of the
-    breaks' size: a restart just on a breakpoint then stays on the side the crossing went to."""
+    """For each StateTable, the piece its value(y) is in: i such that _break(i - 1) <= value < _break(i) (0 and
+    len(breaks) the ends of a table without period). A carried piece (held) is kept while the value stays in it to
+    within 1e-9 of the breaks' size: a restart just on a breakpoint then stays on the side the crossing went to."""
     pieces = []
     for k, table in enumerate(tables):
         value, breaks = table.value(y), table.breaks
         if held is not None:
-            slack = 1e-9 * max(max(abs(b) for b in breaks), breaks[-1] - breaks[0]) or 1e-15
-            lo = breaks[held[k] - 1] - slack if held[k] > 0 else -math.inf
-            hi = breaks[held[k]] + slack if held[k] < len(breaks) else math.inf
-            if lo <= value <= hi:
+            size = max(max(abs(b) for b in breaks), breaks[-1] - breaks[0], table.period or 0.0)
+            slack = 1e-9 * size or 1e-15
+            if _break(table, held[k] - 1) - slack <= value <= _break(table, held[k]) + slack:
                 pieces.append(held[k])
                 continue
-        pieces.append(bisect.bisect_right(breaks, value))
+        if table.period is None:
+            pieces.append(bisect.bisect_right(breaks, value))
+        else:
+            turns = math.floor(value / table.period)
+            pieces.append(turns * len(breaks) + bisect.bisect_right(breaks, value - turns * table.period))
     return pieces
 
 
@@ -197,13 +211,8 @@ def _anchors(tables, held: list[int]) -> tuple[float, ...]:
     rhs's anchors."""
     anchors = []
     for table, i in zip(tables, held):
-        breaks = table.breaks
-        if i == 0:
-            anchors.append(breaks[0] - 1.0)
-        elif i == len(breaks):
-            anchors.append(breaks[-1] + 1.0)
-        else:
-            anchors.append(0.5 * (breaks[i - 1] + breaks[i]))
+        low, high = _break(table, i - 1), _break(table, i)
+        anchors.append(high - 1.0 if low == -math.inf else low + 1.0 if high == math.inf else 0.5 * (low + high))
     return tuple(anchors)
 
 
@@ -215,15 +224,15 @@ def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
     level to the start value: the guard starts at its boundary, instead of firing again at once."""
     guards = {}
     for k, (table, i) in enumerate(zip(tables, held)):
-        start = table.value(y)
-        if i > 0:
-            low = min(table.breaks[i - 1], start)
-            guards[Guard(f"{table.name} breakpoint {table.breaks[i - 1]:g}",
+        start, below, above = table.value(y), _break(table, i - 1), _break(table, i)
+        if below > -math.inf:
+            low = min(below, start)
+            guards[Guard(f"{table.name} breakpoint {below:g}",
                          lambda state, value=table.value, low=low: value(state) - low,
                          lambda state: (mode, state))] = (k, -1)
-        if i < len(table.breaks):
-            high = max(table.breaks[i], start)
-            guards[Guard(f"{table.name} breakpoint {table.breaks[i]:g}",
+        if above < math.inf:
+            high = max(above, start)
+            guards[Guard(f"{table.name} breakpoint {above:g}",
                          lambda state, value=table.value, high=high: high - value(state),
                          lambda state: (mode, state))] = (k, +1)
     return guards

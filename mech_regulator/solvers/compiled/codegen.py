@@ -37,7 +37,7 @@ import inspect
 import math
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numba
@@ -45,6 +45,7 @@ import numpy as np
 
 import mech_regulator
 from mech_regulator.model import MachineModel
+from mech_regulator.model.machine import StateTable
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK
 from mech_regulator import mechanisms
 from mech_regulator.effects import held_positions, joint_friction
@@ -52,7 +53,7 @@ from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
 from mech_regulator.solvers.compiled.integrators import STEP_ONTO
-from mech_regulator.solvers.time_domain import _anchors
+from mech_regulator.solvers.time_domain import _anchors, _break
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
@@ -102,12 +103,13 @@ class CompiledScene:
     table_slots: tuple[int, ...] = ()
 
     def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
-                       held: list[int] | None = None, y: np.ndarray | None = None) -> np.ndarray:
+                       held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
         """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
         codes, the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
         joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
-        time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds."""
+        time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds (those
+        of a table that turns with phi in the stepper's phi, wrapped by offset [rad])."""
         p = self.parameters.copy()
         if piece is not None:
             p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
@@ -129,23 +131,27 @@ class CompiledScene:
             p[WINDOW_LO], p[WINDOW_HI] = window
         p[CRANK_DIRECTION] = np.sign(omega)
         if held is not None:
-            anchors = _anchors(self.model.state_tables, held)
-            for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):
-                p[slot], p[slot + 1], p[slot + 2] = anchor, low, high
+            tables = self.model.state_tables
+            anchors = _anchors(tables, held)
+            for table, slot, anchor, (low, high) in zip(tables, self.table_slots, anchors,
+                                                        self._held_bounds(held, y, offset)):
+                p[slot], p[slot + 1], p[slot + 2] = anchor - offset if table.angular else anchor, low, high
         return p
 
-    def _held_bounds(self, held: list[int], y: np.ndarray) -> list[tuple[float, float]]:
+    def _held_bounds(self, held: list[int], y: np.ndarray, offset: float = 0.0) -> list[tuple[float, float]]:
         """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
-        valve table's sleeve positions, the twist [rad]), moved to the start state y where it is just across one (as
-        time_domain._breakpoint_guards); -inf, inf where the piece has none."""
+        valve table's sleeve positions, the twist [rad], phi - twist [rad] less offset for a driven part's table),
+        moved to the start state y where it is just across one (as time_domain._breakpoint_guards); -inf, inf where
+        the piece has none."""
         bounds = []
-        for (index, breaks), i in zip(breakpoint_states(self.model), held):
-            bounds.append((min(breaks[i - 1], y[index]) if i > 0 else -math.inf,
-                           max(breaks[i], y[index]) if i < len(breaks) else math.inf))
+        for (coefficients, table), i in zip(breakpoint_states(self.model), held):
+            start = sum(c * y[index] for index, c in coefficients)
+            shift = offset if table.angular else 0.0
+            bounds.append((min(_break(table, i - 1), start) - shift, max(_break(table, i), start) - shift))
         return bounds
 
     def linear(self, mode, window: tuple[float, float] | None, omega: float = 0.0,
-               held: list[int] | None = None, y: np.ndarray | None = None) -> np.ndarray:
+               held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
         """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
         linear (or unused); with held and the start state y, the breakpoint guards of the held pieces (STEP_ONTO)."""
@@ -160,27 +166,36 @@ class CompiledScene:
             matrix[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
             slot = self.breakpoint_slot
-            for (index, _), (low, high) in zip(breakpoint_states(self.model), self._held_bounds(held, y)):
+            bounds = self._held_bounds(held, y, offset)
+            for (coefficients, _), (low, high) in zip(breakpoint_states(self.model), bounds):
                 if low > -math.inf:
-                    matrix[slot] = _row(n, index, 1.0, -low)
+                    matrix[slot] = _row(n, 0, 0.0, -low)
+                    for index, c in coefficients:
+                        matrix[slot, 2 + index] = c
                     matrix[slot, 0] = STEP_ONTO
                 if high < math.inf:
-                    matrix[slot + 1] = _row(n, index, -1.0, high)
+                    matrix[slot + 1] = _row(n, 0, 0.0, high)
+                    for index, c in coefficients:
+                        matrix[slot + 1, 2 + index] = -c
                     matrix[slot + 1, 0] = STEP_ONTO
                 slot += 2
         return matrix
 
 
-def breakpoint_states(model: MachineModel) -> list[tuple[int, tuple[float, ...]]]:
-    """Per model.state_tables entry, the state its guards are linear in and its breakpoints there: the arm angle
-    a_k = arccos(1 - z_k / (2 l)) [rad] of a valve table's sleeve breakpoints z_k (z rises with a), the twist
-    [rad] of a coupling table's."""
+def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float], ...], StateTable]]:
+    """Per model.state_tables entry, the (state index, coefficient) pairs of the combination of states its guards
+    are linear in, and the table with its breakpoints there: the arm angle a_k = arccos(1 - z_k / (2 l)) [rad] of a
+    valve table's sleeve breakpoints z_k (z rises with a), the twist [rad] of a coupling table's, phi - twist [rad]
+    for a driven part's table (its knots)."""
     states = []
     for table in model.state_tables:
         if table.name == "valve table":
-            states.append((ARM, tuple(model.governor.sensor.arm_angle(z) for z in table.breaks)))
+            states.append((((ARM, 1.0),), replace(table, breaks=tuple(model.governor.sensor.arm_angle(z)
+                                                                       for z in table.breaks))))
+        elif table.angular:
+            states.append((((0, 1.0), (model.coupling_index, -1.0)), table))
         else:
-            states.append((model.coupling_index, table.breaks))
+            states.append((((model.coupling_index, 1.0),), table))
     return states
 
 
@@ -547,7 +562,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     if governor is not None:
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
     if model.coupling is not None:
-        train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", ""))
+        train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", ""), table_slots)
         body += train_lines
         guard_lines += train_guards
         n_mode_guards += 2
@@ -562,15 +577,16 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         body.append("dydt[1] = net / J")
     if model.joint_friction is not None:
         share = "share" if governor is not None else HELD_THROTTLE_EXPRESSION
-        body += _joint_friction_lines(model, p, specs, share)
+        body += _joint_friction_lines(model, p, specs, share, anchor, "q_anchor" if kinked else "q")
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
     body += governor_lines
     n_guards = n_mode_guards
     breakpoint_slot = n_guards if table_slots else None
-    for slot, (index, _) in zip(table_slots, breakpoint_states(model)):  # -inf, inf bounds: levels +inf, inactive
-        guard_lines += [f"levels[{n_guards}] = y[{index}] - p[{slot + 1}]",
-                        f"levels[{n_guards + 1}] = p[{slot + 2}] - y[{index}]"]
+    for slot, (coefficients, _) in zip(table_slots, breakpoint_states(model)):  # -inf, inf bounds: +inf, inactive
+        value = " + ".join(f"{c!r} * y[{index}]" for index, c in coefficients)
+        guard_lines += [f"levels[{n_guards}] = {value} - p[{slot + 1}]",
+                        f"levels[{n_guards + 1}] = p[{slot + 2}] - ({value})"]
         n_guards += 2
     window_slot = None
     if switched or kinked:
@@ -582,12 +598,14 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     return source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots
 
 
-def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str) -> str:
+def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, anchor: str, held: str) -> str:
     """The generalised force on the output link of a drive or load entry that has one (Effect.output_force: slider
-    force along +x [N] or rocker moment [N m]), as source."""
+    force along +x [N] or rocker moment [N m]), as source; anchor, held: the crank angle whose segment an engine's
+    pressure table is read on and the slider position whose piece a slider table is read on (generate's anchor and
+    q_anchor between two kinks, as their moments; else phi and q)."""
     if isinstance(spec, schema.Engine):
         table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
-        return (f"k.engine_gas_force({phi}, {phi}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
+        return (f"k.engine_gas_force({phi}, {anchor}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
                 f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
     if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
         return p.scalar(spec.force if isinstance(spec, schema.SliderConstant) else spec.torque)
@@ -596,15 +614,17 @@ def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: s
     if isinstance(spec, schema.OutputSpring):
         return f"k.output_spring_force({q}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
     if isinstance(spec, schema.SliderTable):
-        return f"k.clamped_linear({q}, {p.table(spec.position, spec.force)})"
+        return f"k.clamped_linear({q}, {p.table(spec.position, spec.force)}, {held})"
     raise TypeError(f"no compiled output force for {type(spec).__name__}")
 
 
-def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, share: str) -> list[str]:
+def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, share: str, anchor: str,
+                          held: str) -> list[str]:
     """Source that turns the crank's frictionless dydt[1] = epsilon_0 into the root of J epsilon = J epsilon_0 -
     sign(omega) F(epsilon) (MachineModel.rhs, effects.joint_friction): the force Q on the output link (the effects'
     output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
-    kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics."""
+    kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics. anchor,
+    held: the crank angle and slider position the tables in the output forces are read on (_output_force_call)."""
     friction = model.joint_friction
     collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
     iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
@@ -616,7 +636,7 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     for spec, effect in zip(specs, model.effects):
         if effect.output_force is None:
             continue
-        call = _output_force_call(spec, p, "phi", "omega", "q", "dq")
+        call = _output_force_call(spec, p, "phi", "omega", "q", "dq", anchor, held)
         if effect.role == "drive":
             scaled.append(f"force += {share} * {call}")
         else:
@@ -651,11 +671,12 @@ def _crank_guard_lines() -> list[str]:
             "g += 1"]
 
 
-def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str) -> tuple[list[str], list[str]]:
+def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str, table_slots: tuple[int, ...]
+                    ) -> tuple[list[str], list[str]]:
     """Source of the coupling and the driven part behind it (MachineModel._train, drive_train_at): the crank's
     dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
     (at rest: the holding margins R -+ push; turning: s omega2); anchor: ', p[slot]' of a coupling table's anchor
-    (the kernel's last argument), or ''."""
+    (the kernel's last argument), or ''; table_slots: generate's (a driven part's table loads' anchors)."""
     coupling = model.coupling
     spec = model.scene.machine.coupling
     twist_index, speed_index = model.coupling_index, model.driven_speed_index
@@ -673,7 +694,10 @@ def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str) -> tuple[l
     else:
         dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
     dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
-    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2")
+    located = {table.name: f"p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}
+    names = [f"driven part's {effect.name}" for effect in model.driven.effects[:len(driven.loads)]]
+    anchors = {index: located[name] for index, name in enumerate(names) if name in located}
+    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2", anchors)
     resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
     rhs = state + [
         "dydt[1] = (net - passed) / J",
@@ -693,13 +717,21 @@ def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str) -> tuple[l
     return rhs, guards
 
 
-def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, omega: str, q: str, dq: str
-                         ) -> list[str]:
+def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, omega: str, q: str, dq: str,
+                         anchors: dict[int, str] | None = None) -> list[str]:
     """Source adding a driven part's non-Coulomb moments to `smooth` (DrivenModel.smooth_moment): its own loads,
     then each branch's reduced to the main shaft, M_n(omega / i_1n) / i_1n (drivetrain._reduced); constant loads
-    are Coulomb resistances, in R."""
-    lines = [f"smooth += {_effect_call(load, p, phi, omega, q, dq)}"
-             for load in driven.loads if not isinstance(load, schema.ConstantLoad)]
+    are Coulomb resistances, in R. anchors: per index of an own load that is a located table, the slot p[k] of its
+    anchor (NaN: the table as it is)."""
+    anchors = anchors or {}
+
+    def anchor_of(index: int) -> str | None:
+        """The kernel's anchor of own load `index`: its slot's value, phi where it is NaN (or it has none)."""
+        slot = anchors.get(index)
+        return None if slot is None else f"({slot} if {slot} == {slot} else {phi})"
+
+    lines = [f"smooth += {_effect_call(load, p, phi, omega, q, dq, anchor=anchor_of(index))}"
+             for index, load in enumerate(driven.loads) if not isinstance(load, schema.ConstantLoad)]
     for branch in driven.branches:
         ratio = p.scalar(branch.ratio)
         lines += [f"smooth += {_effect_call(load, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"

@@ -78,6 +78,7 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
     wrap_limit = RESTART_PERIODS * period if wraps else math.inf
     t, first_step = t_start, 0.0
     tables = model.state_tables
+    turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held = _held_pieces(tables, y)
     instant_events = 0
     while t < t_end and trajectory.status == "complete":
@@ -88,12 +89,13 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
         held = _held_pieces(tables, y, held)
-        p = compiled.parameters_for(piece, mode, window, start[1], held, start)
+        p = compiled.parameters_for(piece, mode, window, start[1], held, start, offset)
         y_wrapped = start.copy()
         y_wrapped[0] -= offset
-        # without a switch window no guard reads phi: the stepper wraps it itself instead of returning to restart
-        wrap_period = period if wraps and window is None else 0.0
-        linear = compiled.linear(mode, window, start[1], held, start)
+        # without a switch window or a driven part's table no guard reads phi: the stepper wraps it itself instead
+        # of returning to restart
+        wrap_period = period if wraps and window is None and not turning else 0.0
+        linear = compiled.linear(mode, window, start[1], held, start, offset)
         run = _step(settings, compiled, linear, thresholds, t, y_wrapped, t_end, p,
                     atol, first_step, wrap_limit, wrap_period)
         if run.n_steps:
