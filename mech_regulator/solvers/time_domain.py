@@ -150,7 +150,6 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
                             dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint, None,
                                                        trajectory)
-                        mode, y_step = guard.apply(t_step, y_step)
                     else:
                         mode, y_step = guard.apply(t_step, y_step)
                         _log_event(trajectory, t_step, name, mode)
