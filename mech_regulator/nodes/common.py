@@ -39,6 +39,7 @@ WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad mes
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
+MATCH_POLL = 0.01  # [s] between two looks at whether a publisher has matched the subscriptions the graph knows
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
@@ -339,11 +340,18 @@ def node_label(node_factory: Callable[[], Node]) -> str:
     return label[:-len("Node")].lower() + "_node" if label.endswith("Node") else label
 
 
-def deliver_all(node: Node) -> None:
-    """Wait (at most ACK_WAIT s each) until every subscriber has acknowledged what the node's publishers sent: a node
-    that ends by itself right after its last message (the governor's last state) must not take it with it."""
-    for publisher in node.publishers:
-        publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+def deliver_all(node: Node, publishers: list | None = None) -> None:
+    """Wait (at most ACK_WAIT s each) until every subscriber has acknowledged what the publishers (default: all the
+    node's) sent: a node that ends by itself right after its last message (the governor's last state) must not take
+    it with it. Acknowledgements count only the subscriptions a publisher has matched, and discovery tells a process
+    of a subscription (the graph) and matches its publisher to it (the middleware) separately: so each publisher
+    first waits until it has matched as many subscriptions as the graph knows on its topic."""
+    for publisher in node.publishers if publishers is None else publishers:
+        deadline = time.monotonic() + ACK_WAIT
+        while publisher.get_subscription_count() < node.count_subscribers(publisher.topic_name) \
+                and time.monotonic() < deadline:
+            time.sleep(MATCH_POLL)
+        publisher.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
 
 
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:

@@ -46,7 +46,6 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.duration import Duration
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -54,9 +53,10 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, Batch, PeerError,
-                                         Rejections, RunState, add_samples, bool_parameter, coupling_parameter, diagnostics,
-                                         finite_in_range, float_parameter, int_parameter, joint_value, list_parameter,
-                                         nanoseconds, run, samples, scene_model, stamp, text_parameter)
+                                         Rejections, RunState, add_samples, bool_parameter, coupling_parameter,
+                                         deliver_all, diagnostics, finite_in_range, float_parameter, int_parameter,
+                                         joint_value, list_parameter, nanoseconds, run, samples, scene_model, stamp,
+                                         text_parameter)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import DEFAULT_EXCHANGE_STEP, MachineStepper, Samples, seconds, to_nanoseconds
 
@@ -335,7 +335,9 @@ class MachineNode(Node):
     def wait_for_peers(self) -> None:
         """Spin until every peer node (parameter peers) subscribes to joint_states, raising PeerError that names the
         missing ones after peer_timeout seconds, and, for at most peer_timeout, until each lockstep input has a
-        publisher (one still missing then is waited for at the first exchange and, silent, put on its fail-safe)."""
+        publisher (one still missing then is waited for at the first exchange and, silent, put on its fail-safe) and
+        the state streams have matched every subscription the graph knows (matched_every_subscription): a short run
+        could otherwise end before a stream matched the recorder, and its samples be lost with the machine."""
         waited = time.monotonic()
         topic = self.joint_publisher.topic_name
         namespace = self.get_namespace()
@@ -349,9 +351,16 @@ class MachineNode(Node):
                 raise PeerError(f"machine: no {', '.join(missing)} node subscribed to {topic} within "
                                 f"{self.peer_timeout:g} s (parameter peer_timeout): start it, or leave it out of the "
                                 "parameter peers")
-            if not missing and (not unpublished or timed_out):
+            if not missing and (timed_out or not unpublished and self.matched_every_subscription()):
                 return
             self.executor.spin_once(timeout_sec=SPIN_SLICE)
+
+    def matched_every_subscription(self) -> bool:
+        """Whether the state streams the recorder reads (joint_states, machine/moments, machine/status) have matched
+        every subscription the graph knows on their topics: a stream a peer subscribes to but that has not matched it
+        yet would not deliver to it (common.deliver_all)."""
+        return all(publisher.get_subscription_count() >= self.count_subscribers(publisher.topic_name)
+                   for publisher in (self.joint_publisher, self.moments.publisher, self.status_publisher))
 
     def collect_inputs(self) -> None:
         """Take the inputs for the current exchange time: in lockstep, wait for each listed input stamped
@@ -514,12 +523,10 @@ class MachineNode(Node):
     def finish(self) -> None:
         """Say the run is over (machine/status finished, diagnostics with finished_at_ns) once every subscriber
         has the last state."""
-        for publisher in (self.joint_publisher, self.moments.publisher):
-            publisher.wait_for_all_acked(Duration(seconds=5.0))
+        deliver_all(self, [self.joint_publisher, self.moments.publisher])
         self.publish_status(RunState.FINISHED)
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))
-        for publisher in (self.status_publisher, self.diagnostics_publisher):
-            publisher.wait_for_all_acked(Duration(seconds=5.0))
+        deliver_all(self, [self.status_publisher, self.diagnostics_publisher])
         self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
 
 

@@ -79,12 +79,14 @@ class RecorderNode(Node):
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
-        self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
         self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
         self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
         self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
         follow_run_state(self, self.on_run_state)
+        # Last: the machine starts once the recorder subscribes to joint_states, and a node's graph entry lists the
+        # subscriptions made before, so the machine then knows every stream the recorder reads (wait_for_peers).
+        self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
@@ -216,6 +218,15 @@ class RecorderNode(Node):
             pace["max_lag_s"] = self.max_lag
         return pace
 
+    def received(self) -> str:
+        """What came of each stream: how many exchange times and the last one [s], e.g. 'machine states: 301 up to
+        0.3 s; machine moments: 0; governor states: 301 up to 0.3 s'."""
+        streams = {"machine states": self.machine, "machine moments": self.moments}
+        if self.model.governor is not None:
+            streams["governor states"] = self.governor
+        return "; ".join(f"{name}: {len(samples)}" + (f" up to {seconds(max(samples)):.6g} s" if samples else "")
+                         for name, samples in streams.items())
+
     def complete_times(self) -> list[int]:
         """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""
         return sorted(when for when in self.machine if when in self.moments
@@ -260,7 +271,7 @@ class RecorderNode(Node):
                 if time.monotonic() - finished_seen > FINISH_GRACE:
                     self.get_logger().warning(f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
                                               f"its last samples did not come within {FINISH_GRACE:g} s: closing "
-                                              "with what was received")
+                                              f"with what was received ({self.received()})")
                     return
 
 
