@@ -50,8 +50,8 @@ MARGIN = 10.0  # allowed: MARGIN times the runs' measured errors, plus MARGIN rt
 RESIDUAL_LIMIT = 1e-4  # largest |energy residual| / largest |work|
 LOAD_RESPONSE_GRID = 1.0 / 2000.0  # [s] the grid analysis.load_response reads a response's times off
 NUMBER = re.compile(r"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?")
-# The bundled scenes the fast path compiles: a general linkage (type: linkage, issue 21) runs on the reference path
-# only for now (solvers/compiled/__init__.py fast_path_refusal).
+# The bundled scenes the fast path compiles (solvers/compiled/__init__.py fast_path_refusal: all of them, the general
+# linkages included since issue 21).
 SCENES = [name for name in bundled_scenes() if fast_path_refusal(load_scene(name)) is None]
 
 

@@ -61,12 +61,16 @@ BENCH_SCENE = "crank_slider_bench"
 SPEED_SCENES = (BenchScene(BENCH_SCENE, BENCH_SCENE, (), ("scenario.duration=0.5",),
                            "motor-driven crank-slider from rest, 2 s: the machine MuJoCo also simulates", 1.0, 1e-3),
                 ) + tuple(bench for bench in SCENES if bench.name in ("startup", "compressor"))
-# a general linkage (issue 21): nine links in four groups solved per right-hand side; the fast path refuses it
+# general linkages (issue 21), solved group by group per right-hand side by mechanisms/linkage/flat.py, the same
+# functions on both paths: nine links in four groups, and the shaper's four links in two (RPR, RRP)
 LINKAGE_SCENE = BenchScene("walking_beam_linkage", "walking_beam_linkage", ("scenario.duration=0.5",),
-                           ("scenario.duration=0.1",), "source 004's walking beam as a general linkage, 0.5 s: the "
-                           "reference path only (the fast path does not compile a linkage)", 1.0, 1e-3)
-SPEED_SCENES += (LINKAGE_SCENE,)
-DEFAULT_SCENES = (BENCH_SCENE, "startup", LINKAGE_SCENE.name)
+                           ("scenario.duration=0.1",), "source 004's walking beam as a general linkage, 0.5 s",
+                           1.0, 1e-3)
+SHAPER_SCENE = BenchScene("shaper", "shaper", ("scenario.duration=0.5",), ("scenario.duration=0.1",),
+                          "the shaper, a general linkage (slotted lever, RPR + RRP) with a cutting table, 0.5 s",
+                          1.0, 1e-3)
+SPEED_SCENES += (LINKAGE_SCENE, SHAPER_SCENE)
+DEFAULT_SCENES = (BENCH_SCENE, "startup", LINKAGE_SCENE.name)   # the shaper by --scenes shaper
 TARGET_ERROR = 1e-6                      # common achieved error of the comparison (omega RMS, relative) [-]
 TARGETS = {"fast : solve_ivp": 30.0, "fast : MuJoCo": 100.0, "ROS real-time factor": 10.0}
 FAST, REFERENCE, SOLVE_IVP, MUJOCO = "fast", "reference", "solve_ivp", "MuJoCo"

@@ -145,8 +145,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="json: the JSON Schema; markdown: the key tables of docs/scenes.md")
     commands.add_parser("scenes", help="list the bundled scenes")
     compile_command = commands.add_parser(
-        "compile", help="compile the fast path's steppers once on this machine (a first fast run otherwise uses the "
-                        "reference path while they compile in the background)")
+        "compile", help="compile the fast path's steppers and the linkage solver once on this machine (a first fast "
+                        "run otherwise uses the reference path while they compile in the background; a first linkage "
+                        "compiles its solver, announced)")
     compile_command.add_argument("--method", action="append", choices=("RK45", "DOP853", "RK4", "Rosenbrock23"),
                                  help="a method to compile (repeatable; default: all)")
     bench = commands.add_parser("bench", help="benchmarks of the solvers", description="benchmarks of the solvers")
@@ -189,6 +190,10 @@ def main(argv: list[str] | None = None) -> int:
             from mech_regulator.solvers.compiled.warm import compile_steppers
 
             compile_steppers(args.method or ("RK45", "DOP853", "RK4", "Rosenbrock23"), print)
+            if not args.method:
+                from mech_regulator.mechanisms.linkage.flat import compile_all
+
+                compile_all(print)
             return 0
         if args.command == "bench":
             return _bench(args)

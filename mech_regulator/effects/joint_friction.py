@@ -23,13 +23,24 @@ inertia, and the equation can have no or several solutions; build_model refuses 
 At rest (omega = 0) friction opposes the motion the other moments would start and cannot exceed them:
 if |M| <= F(0) (the friction with the reactions of the state at rest), epsilon = 0 and the machine stays
 at rest; otherwise it breaks away in the direction of M with the friction at its kinetic value.
+
+Corners (issue 19). F has a kink wherever a joint's relative rate k_j changes sign (|k_j|: the wrist pin's
+rate, the rod's, at 90 and 270 deg; the guide's x' at the dead centres) and where a guide's normal force N
+changes sign (|N|). The first are fixed crank angles (`corner_angles`, periodic in one turn), the solvers restart
+on them as on a table's knots; the second depends on the state (phi, omega and epsilon), a guard N = 0 of its own.
+Between two corners the solvers read F continued along its piece, s_j k_j for |k_j| and s_N N for the guide's |N|
+with the signs s held (`acceleration`'s ratio_signs and normal_sign), so the right-hand side is smooth there.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 from typing import Callable
+
+import numpy as np
+from scipy import optimize
 
 from mech_regulator.mechanisms import build_kinetostatics
 from mech_regulator.mechanisms.kinetostatics import Kinetostatics
@@ -39,6 +50,7 @@ FIT_FACTOR = {"clearance": 1.0, "new": math.pi / 2.0, "run_in": 4.0 / math.pi}  
 NEWTON_TOLERANCE = 1e-14   # relative size of the last Newton step on epsilon [-]
 NEWTON_ITERATIONS = 50     # more means the equation in epsilon has no root (self-locking)
 LOCKING_SAMPLES = 720      # crank angles per turn at which build_model checks for self-locking
+CORNER_SAMPLES = 720       # crank angles per turn at which a joint's relative rate is checked for a sign change
 
 
 def reduced_friction_coefficient(f: float) -> float:
@@ -67,7 +79,11 @@ class JointFrictionModel:
     names: the joints with friction, in the kinetostatics' order ('guide' for the slider's guide);
     indices: their positions in the kinetostatics' joints; arms: friction-circle radius rho_j [m] of each
     journal, f_guide [-] for the guide; collar: the thrust collar's moment [N m] (0 without one);
-    loads: the mechanism's kinetostatics, or None without a mechanism; formula: what it computes.
+    loads: the mechanism's kinetostatics, or None without a mechanism; formula: what it computes;
+    guide: the position in names of a crank–slider's guide (its reaction i N, N the normal force [N]), whose |N|
+    has a corner where N changes sign, or None; corner_angles: the crank angles in [0, 2 pi) [rad] where the
+    relative rate k_j of a joint with friction changes sign (a corner of |k_j|; the kinematics repeat every turn);
+    corner_signs: the signs of the k_j (in names' order) from each corner angle to the next (the last to the first).
     """
 
     names: tuple[str, ...]
@@ -76,21 +92,45 @@ class JointFrictionModel:
     collar: float
     loads: Kinetostatics | None
     formula: str
+    guide: int | None = None
+    corner_angles: tuple[float, ...] = ()
+    corner_signs: tuple[tuple[float, ...], ...] = ()
 
-    def _terms(self, phi: float, omega: float, force: float) -> list[tuple[float, complex, complex]]:
-        """(rho_j |k_j|, R0_j, R1_j) of every joint with friction at (phi, omega, output force)."""
+    def ratio_signs(self, phi: float) -> tuple[float, ...]:
+        """The sign (+1 or -1) of each joint's relative rate k_j at crank angle phi [rad] that is not a corner angle
+        (in names' order; corner_signs; the model must have corner angles): between two corner angles the solvers
+        read rho_j s_j k_j for rho_j |k_j|."""
+        return self.corner_signs[bisect.bisect_right(self.corner_angles, phi % (2.0 * math.pi)) - 1]
+
+    def _terms(self, phi: float, omega: float, force: float, ratio_signs: tuple[float, ...] | None = None
+               ) -> list[tuple[float, complex, complex]]:
+        """(rho_j |k_j|, R0_j, R1_j) of every joint with friction at (phi, omega, output force); with ratio_signs
+        (one per joint, +1 or -1) rho_j s_j k_j instead of rho_j |k_j| (|k_j| continued across its corner)."""
         if self.loads is None:
             return []
         loads = self.loads(phi, omega, force)
-        return [(arm * abs(loads.ratios[i]), loads.constant[i], loads.per_epsilon[i])
-                for i, arm in zip(self.indices, self.arms)]
+        if ratio_signs is None:
+            return [(arm * abs(loads.ratios[i]), loads.constant[i], loads.per_epsilon[i])
+                    for i, arm in zip(self.indices, self.arms)]
+        return [(arm * sign * loads.ratios[i], loads.constant[i], loads.per_epsilon[i])
+                for i, arm, sign in zip(self.indices, self.arms, ratio_signs)]
 
-    def acceleration(self, phi: float, omega: float, force: float, inertia: float, moment: float) -> float:
+    def _size(self, joint: int, reaction: complex, normal_sign: float) -> float:
+        """|R_j| [N] of joint position `joint` (in names); a guide's |N| continued across N = 0 as s_N N with
+        normal_sign s_N (+1 or -1; 0: |N| itself)."""
+        if joint == self.guide and normal_sign != 0.0:
+            return normal_sign * reaction.imag
+        return abs(reaction)
+
+    def acceleration(self, phi: float, omega: float, force: float, inertia: float, moment: float,
+                     ratio_signs: tuple[float, ...] | None = None, normal_sign: float = 0.0) -> float:
         """epsilon [rad/s^2] solving `J epsilon = M - sign(omega) F(epsilon)` (module docstring) at crank angle
         phi [rad], speed omega [rad/s], output-link force Q [N or N m], reduced inertia J [kg m^2] and every
-        other moment M [N m]; at rest, 0 while |M| <= F(0). NaN if Newton's method does not converge."""
-        terms = self._terms(phi, omega, force)
-        at_rest = self.collar + sum(weight * abs(r0) for weight, r0, _ in terms)
+        other moment M [N m]; at rest, 0 while |M| <= F(0). NaN if Newton's method does not converge.
+        ratio_signs, normal_sign: F continued along its piece between two corners (module docstring; _terms,
+        _size); None and 0: F itself."""
+        terms = self._terms(phi, omega, force, ratio_signs)
+        at_rest = self.collar + sum(weight * self._size(j, r0, normal_sign) for j, (weight, r0, _) in enumerate(terms))
         if omega > 0.0:
             sign = 1.0
         elif omega < 0.0:
@@ -104,17 +144,26 @@ class JointFrictionModel:
             return epsilon
         for _ in range(NEWTON_ITERATIONS):
             friction, slope = self.collar, 0.0
-            for weight, r0, r1 in terms:
+            for j, (weight, r0, r1) in enumerate(terms):
                 reaction = r0 + r1 * epsilon
-                size = abs(reaction)
+                size = self._size(j, reaction, normal_sign)
                 friction += weight * size
-                if size > 0.0:
+                if j == self.guide and normal_sign != 0.0:
+                    slope += weight * normal_sign * r1.imag
+                elif size > 0.0:
                     slope += weight * (r1.real * reaction.real + r1.imag * reaction.imag) / size
             step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
             epsilon -= step
             if abs(step) <= NEWTON_TOLERANCE * (abs(epsilon) + (abs(moment) + friction) / inertia):
                 return epsilon
         return math.nan
+
+    def guide_normal(self, phi: float, omega: float, epsilon: float, force: float) -> float:
+        """The guide's normal force N [N] (signed; the guard of its corner) at crank angle phi [rad], speed omega
+        [rad/s], acceleration epsilon [rad/s^2] and output force Q [N]; the machine must have a guide with friction."""
+        loads = self.loads(phi, omega, force)
+        index = self.indices[self.guide]
+        return (loads.constant[index] + loads.per_epsilon[index] * epsilon).imag
 
     def joint_values(self, phi: float, omega: float, epsilon: float, force: float
                      ) -> tuple[list[float], list[float], float]:
@@ -169,8 +218,29 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
         names.append(joint)
         indices.append(index)
         arms.append(arm)
+    guide = names.index("guide") if mechanism.type == "crank_slider" and "guide" in names else None
+    corners = _corner_angles(loads, indices)
+    middles = [0.5 * (a + b) for a, b in zip(corners, corners[1:] + (corners[0] + 2.0 * math.pi,))] if corners else []
+    signs = tuple(tuple(1.0 if loads(phi, 0.0, 0.0).ratios[i] >= 0.0 else -1.0 for i in indices) for phi in middles)
     return JointFrictionModel(tuple(names), tuple(indices), tuple(arms), collar_moment, loads,
-                              f"f = {f:g}: " + ", ".join(parts))
+                              f"f = {f:g}: " + ", ".join(parts), guide, corners, signs)
+
+
+def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...]:
+    """The crank angles in [0, 2 pi) [rad] where the relative rate k_j(phi) of one of the joints at `indices` of
+    the kinetostatics changes sign: sampled at CORNER_SAMPLES + 1 angles over a turn (a zero counting as
+    positive), each change located by Brent's method."""
+    angles = np.linspace(0.0, 2.0 * math.pi, CORNER_SAMPLES + 1)
+    corners = set()
+    for index in indices:
+        def rate(phi: float, index: int = index) -> float:
+            return loads(phi, 0.0, 0.0).ratios[index]
+        ahead = [rate(phi) >= 0.0 for phi in angles]
+        for k in np.flatnonzero(np.array(ahead[:-1]) != np.array(ahead[1:])):
+            root = optimize.brentq(rate, angles[k], angles[k + 1], xtol=1e-15, rtol=4.0 * np.finfo(float).eps)
+            angle = root % (2.0 * math.pi)
+            corners.add(0.0 if 2.0 * math.pi - angle < 1e-12 else angle)  # a root at the turn's end is its start
+    return tuple(sorted(corners))
 
 
 def worst_locking(friction: JointFrictionModel, inertia: Callable[[float], float]) -> tuple[float, float]:

@@ -252,10 +252,13 @@ class MachineModel:
         return tuple(tables)
 
     def kink_angles(self) -> list[tuple[float, float]]:
-        """(angle, period) pairs [rad] where the slope of some moment in phi jumps (the knots of its tables in phi):
-        the solvers restart on them as on switch angles, and between two of them see each table continued along
-        one segment (rhs's window)."""
-        return [(angle, effect.period) for effect in self.effects for angle in effect.kink_angles]
+        """(angle, period) pairs [rad] where the slope of some moment in phi jumps (the knots of its tables in phi,
+        joint friction's corner angles, where a joint's relative rate changes sign, every turn): the solvers restart
+        on them as on switch angles, and between two of them see each table continued along one segment and the
+        friction's |k_j| as s_j k_j with the signs of the window's middle (rhs's window)."""
+        corners = self.joint_friction.corner_angles if self.joint_friction is not None else ()
+        return ([(angle, effect.period) for effect in self.effects for angle in effect.kink_angles]
+                + [(angle, 2.0 * math.pi) for angle in corners])
 
     def dynamic_period(self) -> float:
         """Phi_omega = lcm of the kinematic period and the effects' periods [rad] (physics.md section 1).
@@ -321,7 +324,7 @@ class MachineModel:
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
             mode: Mode | None = None, ideal: bool = False, kinks: bool = True,
-            anchors: tuple[float, ...] | None = None) -> RightHandSide:
+            anchors: tuple[float, ...] | None = None, normal_sign: float = 0.0) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
@@ -345,9 +348,22 @@ class MachineModel:
         link (the drive's scaled by the throttle). anchors (one per state_tables entry, in their units, an angular
         one's in the wrapped phi the solver integrates): each table read at a function of the state continued along the
         piece that holds that value (no step straddles its breakpoint either); None: the tables as they are.
+        normal_sign (+1 or -1; 0: |N|): joint friction's guide force f |x'| |N| read as f |x'| s_N N, continued across
+        N = 0 between two crossings of the guard guide_normal locates (effects.joint_friction).
         """
         return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False,
-                                     anchors=anchors)
+                                     anchors=anchors, normal_sign=normal_sign)
+
+    def guide_normal(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
+                     mode: Mode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
+                     normal_sign: float = 0.0) -> Callable[[float, np.ndarray], float] | None:
+        """(t, y) -> the crank–slider guide's normal force N [N] with the acceleration of rhs(piece, window, mode,
+        kinks=kinks, anchors=anchors, normal_sign=normal_sign) (the guard of the corner of its friction f |x'| |N|),
+        or None for a machine without a guide with friction."""
+        if self.joint_friction is None or self.joint_friction.guide is None:
+            return None
+        return self._right_hand_side(piece, window if kinks else None, window, mode, False, crank_only=False,
+                                     anchors=anchors, normal_sign=normal_sign, normal=True)
 
     @functools.cached_property
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
@@ -358,9 +374,10 @@ class MachineModel:
 
     def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
                          window: tuple[float, float] | None, mode: Mode | None,
-                         ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None) -> Callable:
-        """rhs (see there) or, crank_only, crank_side; segment: the window when its tables continue along one segment
-        (rhs's kinks), else None; anchors: rhs's."""
+                         ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None,
+                         normal_sign: float = 0.0, normal: bool = False) -> Callable:
+        """rhs (see there) or, crank_only, crank_side, or, normal, guide_normal; segment: the window when its tables
+        continue along one segment (rhs's kinks), else None; anchors, normal_sign: rhs's."""
         held = dict(zip((table.name for table in self.state_tables), anchors)) if anchors is not None else {}
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
@@ -397,6 +414,9 @@ class MachineModel:
                                                                                    held.get("coupling table"), held)
         friction = None if crank_only else self.joint_friction
         output_force = self._output_force(scale_drive, segment) if friction is not None else None
+        ratio_signs = None  # between two corners of the friction (segment), |k_j| continued as s_j k_j
+        if friction is not None and segment is not None and friction.corner_angles:
+            ratio_signs = friction.ratio_signs(0.5 * (segment[0] + segment[1]))
         plain = governor_rates is None and train is None and friction is None and not crank_only
         external_on_crank = train is None and not crank_only
 
@@ -429,7 +449,10 @@ class MachineModel:
             else:
                 epsilon, train_rates = train(t, y, J, net, offset + slope * t)
             if friction is not None:  # J epsilon = J epsilon_0 - sign(omega) F(epsilon), effects.joint_friction
-                epsilon = friction.acceleration(phi, omega, output_force(t, phi, omega, q, dq, share), J, J * epsilon)
+                force = output_force(t, phi, omega, q, dq, share)
+                epsilon = friction.acceleration(phi, omega, force, J, J * epsilon, ratio_signs, normal_sign)
+                if normal:
+                    return friction.guide_normal(phi, omega, epsilon, force)
             rates = [omega, epsilon]
             if governor_rates is not None:
                 rates += governor_rates(y)

@@ -89,6 +89,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     counts = _switch_counts(y[0], switches)
     tables = model.state_tables if kinks else ()
     held = _held_pieces(tables, y)
+    normal_side, crossed_normal = 0.0, False  # joint friction's guide: the held sign of N, and just crossed it
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
@@ -101,11 +102,17 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
         anchors = tuple(anchor - offset if table.angular else anchor  # in the solver's wrapped phi
                         for table, anchor in zip(tables, _anchors(tables, held)))
-        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors if tables else None)
-        constraint = model.constraint(mode)
-        interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
+        anchors = anchors if tables else None
         y_wrapped = y.copy()
         y_wrapped[0] -= offset
+        normal_side, normal_guard = _normal_guard(model, piece, window, mode, kinks, anchors, t, y_wrapped, offset,
+                                                  normal_side, crossed_normal)
+        crossed_normal = False
+        if normal_guard is not None:
+            guards.append(normal_guard)
+        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_sign=normal_side)
+        constraint = model.constraint(mode)
+        interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
         solver = _solver(settings, rhs, t, y_wrapped, t_end, first_step)
         restart = False
         while solver.status == "running" and not restart:
@@ -143,10 +150,13 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
                             dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint,
                                                        y_step[0], trajectory)
-                    elif guard in breakpoints:  # a table's breakpoint: the next piece, mode and state kept
-                        trajectory.stats.switches += 1
-                        table, step = breakpoints[guard]
-                        held[table] += step
+                    elif guard in breakpoints or guard is normal_guard:  # a table's breakpoint or the guide's N = 0:
+                        trajectory.stats.switches += 1               # the next piece, mode and state kept
+                        if guard is normal_guard:
+                            normal_side, crossed_normal = -normal_side, True
+                        else:
+                            table, step = breakpoints[guard]
+                            held[table] += step
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
                             dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint, None,
                                                        trajectory)
@@ -235,6 +245,29 @@ def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
                          lambda state, value=table.value, high=high: high - value(state),
                          lambda state: (mode, state))] = (k, +1)
     return guards
+
+
+def _normal_guard(model: MachineModel, piece, window, mode, kinks: bool, anchors, t: float, y: np.ndarray,
+                  offset: float, side: float, crossed: bool) -> tuple[float, Guard | None]:
+    """Joint friction's guide at a restart (t [s], y with phi wrapped by offset [rad]): (the sign s of its normal
+    force N that the rhs holds, normal_sign, and the guard s N >= 0 whose crossing flips it), or (0, None) for a
+    machine without a guide with friction or a multistep method (kinks False: it steps over kinks, N's too). The sign
+    is N's at the start, or, just after the guard crossed (crossed), the side it crossed to (side, already flipped);
+    its level then starts at the start's value when that is within the method's error across 0 (as
+    _breakpoint_guards), instead of firing again at once."""
+    if not kinks or model.guide_normal(piece, window, mode, kinks, anchors) is None:
+        return 0.0, None
+    if not crossed:
+        side = 1.0 if model.guide_normal(piece, window, mode, kinks, anchors)(t, y) >= 0.0 else -1.0
+    normal = model.guide_normal(piece, window, mode, kinks, anchors, normal_sign=side)
+    low = min(0.0, side * normal(t, y))
+
+    def level(tau: float, state: np.ndarray) -> float:
+        shifted = np.array(state, dtype=float)
+        shifted[0] -= offset
+        return side * normal(tau, shifted) - low
+
+    return side, Guard("guide's normal force changes sign", level, lambda tau, state: (mode, state), timed=True)
 
 
 def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: float | None):

@@ -15,7 +15,7 @@ import cmath
 
 import numpy as np
 
-from mech_regulator.mechanisms.linkage.kinematics import crank_pose, solve
+from mech_regulator.mechanisms.linkage.kinematics import solve
 from mech_regulator.mechanisms.linkage.model import PRISMATIC, Linkage
 from mech_regulator.mechanisms.linkage.structure import Structure
 
@@ -47,7 +47,7 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
     frame_points = list(linkage.link(linkage.frame).points.values())
     crank = linkage.link(linkage.crank)
     pivot_name = linkage.crank_pivot().name
-    pose = crank_pose(linkage, phi)
+    pose = poses[linkage.crank]
     tip = max(crank.points.values(), key=lambda p: abs(p - crank.points[pivot_name]))
     pivot = linkage.link(linkage.frame).points[pivot_name]
     radius = crank_length(linkage)

@@ -1,19 +1,23 @@
 """Kinematics of a planar linkage group by group, and its reduction to the crank (physics.md section 1).
 
 At crank angle phi the crank's pose is theta = phi with its pivot point on the frame's; the groups are then
-placed and differentiated from the crank outward (groups.place, groups.differentiate). Every link's pose carries
-[r, theta, r', theta', r'', theta''] (derivatives with respect to phi), so that a point p of a link moves as
-`P = r + q`, `P' = r' + i theta' q`, `P'' = r'' + (i theta'' - theta'^2) q`, q = p e^{i theta}; at crank speed
-omega and acceleration epsilon its velocity is P' omega and its acceleration P'' omega^2 + P' epsilon.
+placed and differentiated from the crank outward. The equations are written once, in flat.py, and run compiled
+(flat.compiled: the same functions the fast path compiles into a scene's right-hand side); this module is their
+dict form. Every link's pose carries [r, theta, r', theta', r'', theta''] (derivatives with respect to phi), so
+that a point p of a link moves as `P = r + q`, `P' = r' + i theta' q`, `P'' = r'' + (i theta'' - theta'^2) q`,
+q = p e^{i theta}; at crank speed omega and acceleration epsilon its velocity is P' omega and its acceleration
+P'' omega^2 + P' epsilon.
 """
 
 from __future__ import annotations
 
-import cmath
 import math
-from typing import Callable
+from typing import Callable, Sequence
 
-from mech_regulator.mechanisms.linkage.groups import Pose, differentiate, place
+import numpy as np
+
+from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage.groups import Dyad, Pose, RedundantLink, failure_message, packed
 from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
 from mech_regulator.mechanisms.linkage.structure import Structure
 
@@ -21,70 +25,52 @@ Motion = tuple[complex, complex, complex]  # (P [m], dP/dphi [m/rad], d2P/dphi2 
 ASSEMBLY_SAMPLES = 720  # crank angles over a turn at which a linkage is checked to assemble (every 0.5 deg)
 
 
-def crank_pose(linkage: Linkage, phi: float) -> Pose:
-    """The crank's pose at phi: theta = phi, r = A - p_A e^{i phi} (A: its pivot on the frame, p_A the pivot in
-    the crank's coordinates), r' = -i p_A e^{i phi}, r'' = p_A e^{i phi}, theta' = 1, theta'' = 0."""
-    pivot = linkage.crank_pivot().name
-    pivot_on_crank = linkage.link(linkage.crank).points[pivot] * cmath.exp(1j * phi)
-    return [linkage.link(linkage.frame).points[pivot] - pivot_on_crank, phi, -1j * pivot_on_crank, 1.0,
-            pivot_on_crank, 0.0]
+def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]
+                ) -> Callable[[float, bool], dict[str, Pose]]:
+    """Build `solve_at(phi, derivatives=True) -> {link: pose}` placing the crank and these groups (a structure's,
+    or the ones found so far) at crank angle phi [rad] (flat.solve_poses); raises LinkageError naming the group
+    that cannot assemble, or is at a dead point, and the angle (groups.failure_message)."""
+    program = flat.encode(linkage, groups, None)
+    names = list(flat.link_indices(linkage))
+    solve_poses = flat.compiled("solve_poses")
+
+    def solve_at(phi: float, derivatives: bool = True) -> dict[str, Pose]:
+        poses = np.empty(flat.POSE_SIZE * len(names))
+        status, group, *numbers = solve_poses(phi, program, 0, poses, derivatives)
+        if status != flat.SOLVED:
+            raise LinkageError(failure_message(groups[group], status, tuple(numbers), phi))
+        values = poses.tolist()
+        return {name: [complex(values[k], values[k + 1]), values[k + 2], complex(values[k + 3], values[k + 4]),
+                       values[k + 5], complex(values[k + 6], values[k + 7]), values[k + 8]]
+                for name, k in zip(names, range(0, len(values), flat.POSE_SIZE))}
+
+    return solve_at
 
 
 def solve(linkage: Linkage, structure: Structure, phi: float, derivatives: bool = True) -> dict[str, Pose]:
-    """The poses of every link at crank angle phi [rad] (with derivatives unless `derivatives` is False); raises
-    LinkageError naming the group that cannot assemble, or is at a dead point, and the angle."""
-    poses = {linkage.frame: [0j, 0.0, 0j, 0.0, 0j, 0.0], linkage.crank: crank_pose(linkage, phi)}
-    for group in structure.groups:
-        place(linkage, group, poses, phi)
-        if derivatives:
-            differentiate(linkage, group, poses, phi)
-    return poses
+    """The poses of every link at crank angle phi [rad] (with derivatives unless `derivatives` is False, then
+    zero); raises LinkageError naming the group that cannot assemble, or is at a dead point, and the angle."""
+    return make_solver(linkage, structure.groups)(phi, derivatives)
 
 
 def motion(pose: Pose, point: complex) -> Motion:
-    """(P, P', P'') of the point `point` (link coordinates [m]) of a link with this pose (module docstring)."""
-    r, theta, dr, dtheta, ddr, ddtheta = pose
-    q = point * cmath.exp(1j * theta)
-    return r + q, dr + 1j * dtheta * q, ddr + complex(-dtheta * dtheta, ddtheta) * q
-
-
-def output_coordinate(linkage: Linkage, poses: dict[str, Pose]) -> tuple[float, float]:
-    """(q, dq/dphi) of the linkage's output: a prismatic joint's travel `q = Re((P_s - P_g) conj w)` [m] (its
-    slider's point from the guide's point along the guide direction w), `q' = Re(d' conj w) + theta_g' Im(d conj w)`
-    (the second term vanishes on the line); a link's angle theta [rad] and theta'; (0, 0) without an output."""
-    if linkage.output_link is not None:
-        pose = poses[linkage.output_link]
-        return pose[1], pose[3]
-    if linkage.output_joint is None:
-        return 0.0, 0.0
-    joint = linkage.joint(linkage.output_joint)
-    guide, slider = joint.links
-    P_g, dP_g, _ = motion(poses[guide], linkage.link(guide).points[joint.name])
-    P_s, dP_s, _ = motion(poses[slider], linkage.link(slider).points[joint.name])
-    w = cmath.exp(1j * (joint.direction + poses[guide][1]))
-    d, dd = P_s - P_g, dP_s - dP_g
-    return (d * w.conjugate()).real, (dd * w.conjugate()).real + poses[guide][3] * (d * w.conjugate()).imag
+    """(P, P', P'') of the point `point` (link coordinates [m]) of a link with this pose (flat.motion)."""
+    return flat.motion(packed(pose), 0, point)
 
 
 def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
                  ) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, q, q')` for this linkage (the contract of
-    mechanisms/__init__.py): over the moving links k (the crank included) with centres S_k and angles theta_k,
-    `J_links = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k Re(conj(S_k') S_k'') + I_k theta_k'
-    theta_k'')`, `M_weight = sum m_k g . S_k'` (zero and not computed without gravity)."""
-    links = [linkage.link(name) for name in linkage.moving_links()]
-    gravity_c = complex(*gravity) if gravity is not None else 0j
+    mechanisms/__init__.py; flat.reduced_from_poses gives the sums): the compiled flat.reduced on the linkage's
+    program; where it gives NaN (a group fails), the LinkageError of make_solver."""
+    program = flat.encode(linkage, structure.groups, gravity)
+    compiled = flat.compiled("reduced")
 
     def reduced(phi: float) -> tuple[float, float, float, float, float]:
-        poses = solve(linkage, structure, phi)
-        J = dJ = weight = 0.0
-        for link in links:
-            pose = poses[link.name]
-            _, dS, ddS = motion(pose, link.centre)
-            J += link.mass * abs(dS) ** 2 + link.inertia * pose[3] * pose[3]
-            dJ += 2.0 * (link.mass * (dS.conjugate() * ddS).real + link.inertia * pose[3] * pose[5])
-            weight += link.mass * (gravity_c.conjugate() * dS).real
-        return (J, dJ, weight) + output_coordinate(linkage, poses)
+        values = compiled(phi, program, 0)
+        if math.isnan(values[0]):
+            make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
+        return values
 
     return reduced
 
@@ -111,9 +97,10 @@ def moving_points(linkage: Linkage) -> list[tuple[str, str]]:
 def make_point_motions(linkage: Linkage, structure: Structure) -> Callable[[float], dict[str, Motion]]:
     """`motions(phi) -> {point: (P, P', P'')}` of the moving_points (complex numbers x + i y)."""
     points = [(name, link, linkage.link(link).points[name]) for name, link in moving_points(linkage)]
+    solve_at = make_solver(linkage, structure.groups)
 
     def motions(phi: float) -> dict[str, Motion]:
-        poses = solve(linkage, structure, phi)
+        poses = solve_at(phi)
         return {name: motion(poses[link], local) for name, link, local in points}
 
     return motions
@@ -126,10 +113,11 @@ def assembly_failures(linkage: Linkage, structure: Structure, samples: int = ASS
     spans: dict[str, list[list[float]]] = {}
     first_reason: dict[str, str] = {}
     step = 360.0 / samples
+    solve_at = make_solver(linkage, structure.groups)
     for k in range(samples):
         phi_deg = k * step
         try:
-            solve(linkage, structure, math.radians(phi_deg))
+            solve_at(math.radians(phi_deg))
         except LinkageError as error:
             what, reason = str(error).split(" at crank angle ", 1)
             first_reason.setdefault(what, reason)

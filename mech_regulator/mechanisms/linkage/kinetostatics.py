@@ -8,9 +8,9 @@ theta) its equations are
     m a_S = F,    I alpha + (S - r) x m a_S = M_r,
 
 F the forces on it and M_r their moment about r (gravity m g at S, an output load, the joints' reactions). The
-reactions of a joint are the multipliers lambda of its constraint equations (groups._rows): a joint contributes
+reactions of a joint are the multipliers lambda of its constraint equations (flat.joint_rows): a joint contributes
 `(dC/dx_link)^T lambda` to each of its links, so a group's links give `A^T lambda = (inertia - applied - reactions of
-the groups farther out)`, A the matrix of its kinematics (groups.differentiate). A revolute joint's lambda is the
+the groups farther out)`, A the matrix of its kinematics (flat.group_matrix). A revolute joint's lambda is the
 force on its first link from its second [N] (its second link gets -lambda); a prismatic joint's are the normal
 force N on the slider along i w (w the guide's direction) [N] and the couple on the slider [N m] (the guide gets
 the opposite). Solving the groups from the last one to the first, each passes its outer joints' reactions inward;
@@ -30,7 +30,7 @@ import numpy as np
 
 from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
 from mech_regulator.mechanisms.linkage.groups import RedundantLink, _rows
-from mech_regulator.mechanisms.linkage.kinematics import motion, solve
+from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 from mech_regulator.mechanisms.linkage.model import PRISMATIC, Linkage, LinkageError
 from mech_regulator.mechanisms.linkage.structure import Structure
 
@@ -53,7 +53,7 @@ def _solver(linkage: Linkage, structure: Structure, gravity: tuple[float, float]
             ) -> Callable[[float, list[tuple[float, float, float, bool]]], tuple[dict, dict[str, np.ndarray],
                                                                                  np.ndarray]]:
     """Build `reactions(phi, cases) -> (poses, multipliers, balancing)` for several load cases at one crank angle,
-    each case (omega, epsilon, Q, weighs): the poses of kinematics.solve, each joint's multipliers (module
+    each case (omega, epsilon, Q, weighs): the poses of kinematics.make_solver, each joint's multipliers (module
     docstring) as an array [2, cases] and the balancing moments M_b [N m] of the cases; `weighs` False leaves out
     gravity (the reactions are linear in (omega^2, epsilon, g, Q): a case (0, 1, 0, False) gives their rate with
     epsilon)."""
@@ -63,9 +63,10 @@ def _solver(linkage: Linkage, structure: Structure, gravity: tuple[float, float]
     gravity_c = complex(*gravity) if gravity is not None else 0j
     moving = [linkage.link(name) for name in linkage.moving_links()]
     pivot = linkage.crank_pivot()
+    solve_at = make_solver(linkage, structure.groups)
 
     def reactions(phi: float, cases: list[tuple[float, float, float, bool]]):
-        poses = solve(linkage, structure, phi)
+        poses = solve_at(phi)
         count = len(cases)
         # residual[k][:, case] = inertia - applied, generalised over (x, y, theta about the origin r)
         residual = {}

@@ -20,7 +20,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
-from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad, place, point_of
+from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
 REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
@@ -171,8 +171,9 @@ def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str]
                          ) -> RedundantLink | None:
     """An unknown link with exactly two revolute joints, both to known links, whose two points stay at the link's
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
-    from mech_regulator.mechanisms.linkage.kinematics import crank_pose
+    from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 
+    solve_at = make_solver(linkage, groups)
     for name in remaining:
         joints = linkage.joints_of(name)
         if len(joints) != 2 or any(j.kind != REVOLUTE or j.other(name) not in known for j in joints):
@@ -180,13 +181,9 @@ def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str]
         points = linkage.link(name).points
         own = abs(points[joints[1].name] - points[joints[0].name])
         for k in range(REDUNDANCY_SAMPLES):
-            phi = 2.0 * math.pi * k / REDUNDANCY_SAMPLES
-            poses = {linkage.frame: [0j, 0.0], linkage.crank: crank_pose(linkage, phi)}
-            for group in groups:
-                place(linkage, group, poses, phi)
-            span = abs(point_of(linkage, poses, joints[1].other(name), joints[1].name)
-                       - point_of(linkage, poses, joints[0].other(name), joints[0].name))
-            if abs(span - own) > REDUNDANCY_TOLERANCE * max(own, 1e-300):
+            poses = solve_at(2.0 * math.pi * k / REDUNDANCY_SAMPLES, False)
+            ends = [motion(poses[j.other(name)], linkage.link(j.other(name)).points[j.name])[0] for j in joints]
+            if abs(abs(ends[1] - ends[0]) - own) > REDUNDANCY_TOLERANCE * max(own, 1e-300):
                 break
         else:
             return RedundantLink(name, (joints[0], joints[1]))

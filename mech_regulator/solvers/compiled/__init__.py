@@ -21,15 +21,15 @@ def runs_compiled(solver) -> bool:
 
 def fast_path_refusal(scene_or_model) -> str | None:
     """Why a scene (or its model) cannot run on the fast path, naming the key, its value and what the fast path
-    has; None when it can (the fast path compiles every machine the scene format describes but a general linkage;
-    that and the solver methods it has no compiled stepper for stay on the reference path)."""
+    has; None when it can (the fast path compiles every machine the scene format describes but joint friction on a
+    general linkage, whose kinetostatics by groups is not compiled; that and the solver methods it has no compiled
+    stepper for stay on the reference path)."""
     scene = getattr(scene_or_model, "scene", scene_or_model)
-    coupling = scene.machine.coupling
-    for key, mechanism in (("machine.mechanism", scene.machine.mechanism),
-                           ("machine.coupling.driven.mechanism", coupling.driven.mechanism if coupling else None)):
-        if mechanism is not None and mechanism.type == "linkage":
-            return (f"solver.path: 'fast' does not compile {key}.type: 'linkage' yet; expected crank_slider, "
-                    "four_bar or walking_beam, or solver.path: reference")
+    machine = scene.machine
+    if machine.joint_friction is not None and machine.mechanism is not None and machine.mechanism.type == "linkage":
+        return ("solver.path: 'fast' does not compile machine.joint_friction on machine.mechanism.type: 'linkage' "
+                "yet (its kinetostatics by groups); expected no joint_friction on a linkage, or solver.path: "
+                "reference")
     method = scene.solver.method
     if method not in FAST_METHODS:
         return (f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "

@@ -21,7 +21,8 @@ kernels.py's source and the package and numba versions, imported with importlib 
 in __pycache__ beside it), and kept in a process-wide dict.
 
 Guards are written in the order of MachineModel.guards(mode) (the governor's, then the clutch's and the driven
-part's, then the joint friction's crank guard), +inf in the slots a mode does not use, then the switch window's two
+part's, then the joint friction's crank guard; then the guide's N guard, time_domain._normal_guard), +inf in the
+slots a mode does not use, then the switch window's two
 guards phi - lo and hi - phi. The guards linear in the state (stops, sleeve at rest, slip ending, driven part at
 rest, switch window) also get their rows [1, c0, c1..c_n] (level = c0 + sum c_i y_i) for the integrators' exact
 location.
@@ -50,9 +51,10 @@ from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD
 from mech_regulator import mechanisms
 from mech_regulator.effects import held_positions, joint_friction
 from mech_regulator.mechanisms import engine, walking_beam
+from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
-from mech_regulator.solvers.compiled.integrators import STEP_ONTO
+from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
 from mech_regulator.solvers.time_domain import _anchors, _break
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
@@ -87,7 +89,10 @@ class CompiledScene:
     breakpoint_slot on: its value above the held piece's lower breakpoint and below its upper one, then the window's
     two if window_slot is not None); source and path of the generated module; table_slots: per state table the
     slot in p of its anchor (NaN: the table as it is), then its piece's lower and upper breakpoints in the guard's
-    state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards."""
+    state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards. Joint friction with a
+    mechanism (issue 19): friction_slot, the first of its six slots in p (the signs s_j of the four joints' relative
+    rates, 0: |k_j|; the guide's normal sign s_N, 0: |N|; its guard's start level), and normal_slot, the guard slot of
+    s_N N (a crank–slider's guide with friction, after the mode's guards; +inf while s_N is 0), or None."""
 
     model: MachineModel
     rhs: object
@@ -101,6 +106,8 @@ class CompiledScene:
     path: Path
     breakpoint_slot: int | None = None
     table_slots: tuple[int, ...] = ()
+    friction_slot: int | None = None
+    normal_slot: int | None = None
 
     def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
                        held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
@@ -109,7 +116,8 @@ class CompiledScene:
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
         joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
         time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds (those
-        of a table that turns with phi in the stepper's phi, wrapped by offset [rad])."""
+        of a table that turns with phi in the stepper's phi, wrapped by offset [rad]); with joint friction's corner
+        angles and a window, the signs of the joints' relative rates at its middle (the guide's N sign: hold_normal)."""
         p = self.parameters.copy()
         if piece is not None:
             p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
@@ -130,6 +138,10 @@ class CompiledScene:
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
             p[WINDOW_LO], p[WINDOW_HI] = window
         p[CRANK_DIRECTION] = np.sign(omega)
+        friction = model.joint_friction
+        if self.friction_slot is not None and window is not None and friction.corner_angles:  # |k_j| as s_j k_j
+            for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
+                p[self.friction_slot + index] = sign
         if held is not None:
             tables = self.model.state_tables
             anchors = _anchors(tables, held)
@@ -137,6 +149,21 @@ class CompiledScene:
                                                         self._held_bounds(held, y, offset)):
                 p[slot], p[slot + 1], p[slot + 2] = anchor - offset if table.angular else anchor, low, high
         return p
+
+    def hold_normal(self, p: np.ndarray, t: float, y: np.ndarray, side: float) -> float:
+        """Set in p (parameters_for's) the guide's normal sign s_N that the segment from (t [s], y, phi wrapped as
+        the stepper's) holds and its guard's start level, as time_domain._normal_guard: side (+-1) just after its
+        guard crossed, else (side 0) the sign of N at the start; returns s_N."""
+        levels = np.zeros(self.n_guards)
+        sign_slot, low_slot = self.friction_slot + 4, self.friction_slot + 5
+        if side == 0.0:  # N with |N| read as +N: >= 0 where N is
+            p[sign_slot] = 1.0
+            self.guards(t, y, p, levels)
+            side = 1.0 if levels[self.normal_slot] >= 0.0 else -1.0
+        p[sign_slot] = side
+        self.guards(t, y, p, levels)
+        p[low_slot] = min(0.0, levels[self.normal_slot])
+        return side
 
     def _held_bounds(self, held: list[int], y: np.ndarray, offset: float = 0.0) -> list[tuple[float, float]]:
         """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
@@ -164,6 +191,8 @@ class CompiledScene:
             matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
             matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
             matrix[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
+        if self.normal_slot is not None:  # the guide's N = 0: a nonlinear guard, also a step onto it
+            matrix[self.normal_slot, 0] = NONLINEAR_ONTO
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
             slot = self.breakpoint_slot
             bounds = self._held_bounds(held, y, offset)
@@ -206,7 +235,8 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     recent = _RECENT.get(id(model))
     if recent is not None and recent.model is model:
         return recent
-    source, parameters, n_guards, window_slot, breakpoint_slot, table_slots = generate(model)
+    (source, parameters, n_guards, window_slot, breakpoint_slot, table_slots, friction_slot,
+     normal_slot) = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
     module = _LOADED.get(digest)
@@ -220,7 +250,8 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         spec.loader.exec_module(module)
         _LOADED[digest] = module
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
-                             n_guards, window_slot, source, path, breakpoint_slot, table_slots)
+                             n_guards, window_slot, source, path, breakpoint_slot, table_slots, friction_slot,
+                             normal_slot)
     if len(_RECENT) >= RECENT_MODELS:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
@@ -229,8 +260,9 @@ def compile_scene(model: MachineModel) -> CompiledScene:
 
 @functools.cache
 def _kernels_source() -> str:
-    """kernels.py's source (part of every module's cache name: numba's cache would not notice a changed kernel)."""
-    return inspect.getsource(kernels)
+    """kernels.py's source and that of the linkage solver it compiles (mechanisms/linkage/flat.py), part of every
+    module's cache name: numba's cache would not notice a changed kernel."""
+    return inspect.getsource(kernels) + inspect.getsource(flat)
 
 
 def cache_folder() -> Path:
@@ -400,11 +432,17 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
     dJ, weight, q, dq); gravity None or massless links: the weight moment is not computed (with_weight 0 in p).
     Several cylinders (mechanisms.engine.make_multi_reduced): cylinder 1's call assigns the names, cylinder k's
     (k >= 2), at angle + throw_k - bank_k with gravity turned into its frame, is added to the first three and its
-    q, dq are named q_k, dq_k (what the engine's gas moment reads)."""
+    q, dq are named q_k, dq_k (what the engine's gas moment reads). A general linkage: its program
+    (mechanisms/linkage/flat.py's encode, gravity None: zero) stored as a table in p and flat.reduced compiled
+    (kernels.linkage_reduced), the very function the reference path calls."""
+    target = ", ".join(names)
+    if isinstance(mechanism, schema.Linkage):  # the program of mechanisms/linkage/flat.py, run by flat.reduced
+        core, structure = mechanisms.mechanism_geometry(mechanism)
+        program = p.table(flat.encode(core, structure.groups, gravity)).rsplit(", ", 1)[0]   # 'p, offset'
+        return [f"{target} = k.linkage_reduced({angle}, {program})"]
     gx, gy = gravity if gravity is not None else (0.0, 0.0)
     weighs = float(gravity is not None and (gx != 0.0 or gy != 0.0)
                    and any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass")))
-    target = ", ".join(names)
     if isinstance(mechanism, schema.CrankSlider):
         m = mechanism
         geometry = [p.scalar(v) for v in (m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod,
@@ -443,10 +481,11 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
     return [f"{target} = k.four_bar_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
 
 
-def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...]]:
+def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None,
+                                          int | None]:
     """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None, slot of
-    the first breakpoint guard or None, CompiledScene.table_slots) of a scene's model (see the module docstring). The
-    model must pass run.fast_path_refusal."""
+    the first breakpoint guard or None, CompiledScene.table_slots, friction_slot, normal_slot) of a scene's model (see
+    the module docstring). The model must pass run.fast_path_refusal."""
     machine = model.scene.machine
     p = _Parameters()
     table_slots = tuple(p.slots(math.nan, -math.inf, math.inf) for _ in model.state_tables)  # anchor, low, high
@@ -466,6 +505,10 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     scaled, switched = [], []
     kinked = any(effect.kink_angles for effect in model.effects)
     anchor = "anchor" if kinked else "phi"
+    friction = model.joint_friction
+    friction_slot = normal_slot = None
+    if friction is not None and friction.loads is not None:  # the joints' rate signs, the guide's N sign and level
+        friction_slot = p.slots(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     if kinked:  # between two kinks the tables continue along the segment that holds the window's middle (rhs);
         #         without a window (p's edges both 0) they are the tables themselves
         body.append(f"anchor = 0.5 * (p[{WINDOW_LO}] + p[{WINDOW_HI}]) if p[{WINDOW_HI}] > p[{WINDOW_LO}] else phi")
@@ -577,9 +620,17 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         body.append("dydt[1] = net / J")
     if model.joint_friction is not None:
         share = "share" if governor is not None else HELD_THROTTLE_EXPRESSION
-        body += _joint_friction_lines(model, p, specs, share, anchor, "q_anchor" if kinked else "q")
+        body += _joint_friction_lines(model, p, specs, share, anchor, "q_anchor" if kinked else "q", friction_slot)
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
+        if friction.guide is not None:  # s_N N - its start level, with the rhs's epsilon (the body up to here)
+            side, low = f"p[{friction_slot + 4}]", f"p[{friction_slot + 5}]"
+            copy = [line.replace("dydt[", "rates[") for line in body]
+            guard_lines += [f"if {side} != 0.0:", f"    rates = k.np.empty({len(model.state_names())})"]
+            guard_lines += [f"    {line}" for line in copy]
+            guard_lines += [f"    levels[g] = {side} * (R0[3] + R1[3] * rates[1]).imag - {low}", "g += 1"]
+            normal_slot = n_mode_guards
+            n_mode_guards += 1
     body += governor_lines
     n_guards = n_mode_guards
     breakpoint_slot = n_guards if table_slots else None
@@ -589,13 +640,13 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
                         f"levels[{n_guards + 1}] = p[{slot + 2}] - ({value})"]
         n_guards += 2
     window_slot = None
-    if switched or kinked:
+    if switched or kinked or (friction is not None and friction.corner_angles):
         window_slot = n_guards
         n_guards += 2
         guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
     source = _module(body, guard_lines, n_guards)
-    return source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots
+    return source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot
 
 
 def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, anchor: str, held: str) -> str:
@@ -619,18 +670,20 @@ def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: s
 
 
 def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, share: str, anchor: str,
-                          held: str) -> list[str]:
+                          held: str, friction_slot: int | None) -> list[str]:
     """Source that turns the crank's frictionless dydt[1] = epsilon_0 into the root of J epsilon = J epsilon_0 -
     sign(omega) F(epsilon) (MachineModel.rhs, effects.joint_friction): the force Q on the output link (the effects'
     output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
     kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics. anchor,
-    held: the crank angle and slider position the tables in the output forces are read on (_output_force_call)."""
+    held: the crank angle and slider position the tables in the output forces are read on (_output_force_call);
+    friction_slot: CompiledScene's (the joints' rate signs and the guide's normal sign between two corners)."""
     friction = model.joint_friction
     collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
     iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
     if friction.loads is None:
         return [f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
-                f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations})"]
+                f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations}, "
+                "(0.0, 0.0, 0.0, 0.0), 0.0)"]
     lines = ["force = 0.0"]
     scaled = []
     for spec, effect in zip(specs, model.effects):
@@ -657,8 +710,10 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     arms = [0.0] * 4  # a joint without friction: arm 0, its terms exact zeros
     for index, arm_length in zip(friction.indices, friction.arms):
         arms[index] = arm_length
+    signs = ", ".join(f"p[{friction_slot + j}]" for j in range(4))
     lines.append(f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, "
-                 f"({', '.join(p.scalar(v) for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations})")
+                 f"({', '.join(p.scalar(v) for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
+                 f"({signs}), p[{friction_slot + 4}])")
     return lines
 
 

@@ -48,7 +48,8 @@ Guards: guards(t, y, p, levels) writes every guard's level (+inf: not active in 
 while level >= threshold. linear[g] = [flag, c0, c1..c_n]: flag LINEAR (1) says the guard is c0 + sum c_i y_i, flag
 STEP_ONTO (2) the same for a switch (a switch window's edge, solvers/time_domain.py's _step_onto): the event's state
 is then not read off the dense output but computed by the method's own step from the step's start to the event
-time, so a restart on a switch or kink keeps the method's accuracy; linear ones
+time, so a restart on a switch or kink keeps the method's accuracy; flag NONLINEAR_ONTO (3) a guard that is not
+linear (its row otherwise unused) whose event is reached by such a step too (joint friction's guide N = 0); linear ones
 along a step it is a polynomial in theta, whose first crossing in (0, 1] is found exactly (its derivative's
 roots split the step into monotone pieces). Other guards are interpolated along the step at GUARD_NODES
 Chebyshev points by a polynomial with an error bound, cut into monotone pieces in the same way, checked on the
@@ -76,7 +77,7 @@ from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODE
                                                 monotone_ends)
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
-LINEAR, STEP_ONTO = 1.0, 2.0  # flags of linear guards (module docstring)
+LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
 NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS = 1, 2, 3
 FAILURES = {NONFINITE: "the state became non-finite", STEP_TOO_SMALL: "the step size fell below round-off",
             TOO_MANY_STEPS: "the step limit (max_steps) was reached"}
@@ -222,7 +223,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                 if event_time <= t:  # at the step's very start: no step taken
                     n_steps -= 1
                     y_end[:] = y
-                elif linear[event_guard, 0] == STEP_ONTO:  # the method's step from t onto the switch
+                elif linear[event_guard, 0] >= STEP_ONTO:  # the method's step from t onto the switch
                     h = event_time - t
                     if method == _RK4:
                         nfev += _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new)
@@ -639,7 +640,7 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
             continue
         if start[g] <= thresholds[g] + GUARD_TOLERANCE:
             step_thresholds[g] = thresholds[g] - GUARD_TOLERANCE
-        if linear[g, 0] == 0.0:
+        if linear[g, 0] == 0.0 or linear[g, 0] == NONLINEAR_ONTO:
             nonlinear = True
             continue
         weights = linear[g, 2:2 + n].copy()
@@ -665,7 +666,7 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
             guards(time, state, p, levels)
             samples[k] = levels[:n_guards]
         for g in range(n_guards):
-            if start[g] == np.inf or linear[g, 0] != 0.0:
+            if start[g] == np.inf or linear[g, 0] == LINEAR or linear[g, 0] == STEP_ONTO:
                 continue
             line, margin = _guard_polynomial(samples[:, g] - step_thresholds[g])
             if line[0] - margin >= np.sum(np.abs(line[1:])):  # the polynomial stays above the margin on [0, 1]

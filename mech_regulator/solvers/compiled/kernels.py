@@ -388,16 +388,19 @@ def four_bar_joint_loads(phi, omega, moment, a, b, c, d, th1, sign, m1, u1, m3, 
 
 @njit(cache=True)
 def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, constant, per_epsilon, with_joints,
-                                tolerance, iterations):
+                                tolerance, iterations, ratio_signs, normal_sign):
     """JointFrictionModel.acceleration: epsilon [rad/s^2] solving J epsilon = M - sign(omega) F(epsilon),
     F = M_collar + sum_j rho_j |k_j| |R0_j + R1_j epsilon| by Newton's method from the friction at rest; at rest
     (omega = 0) 0 while |M| <= F(0), else breaking away in the direction of M; NaN without convergence.
     arms: rho_j [m] (f_guide for the guide) of the four joints, 0 for a joint without friction (its terms add
-    exact zeros); with_joints False: the collar alone (no kinetostatics)."""
+    exact zeros); with_joints False: the collar alone (no kinetostatics). Between two corners (issue 19):
+    ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_sign s_N (0: |R_3|) the guide's |N| (joint 3, i N) as
+    s_N N."""
     at_rest = 0.0
     if with_joints:
         for j in range(4):
-            at_rest += arms[j] * abs(ratios[j]) * abs(constant[j])
+            at_rest += arms[j] * _friction_weight(ratios[j], ratio_signs[j]) * _reaction_size(constant[j], j,
+                                                                                              normal_sign)
     at_rest = collar + at_rest
     if omega > 0.0:
         sign = 1.0
@@ -413,17 +416,32 @@ def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, co
     for _ in range(iterations):
         friction, slope = collar, 0.0
         for j in range(4):
-            weight = arms[j] * abs(ratios[j])
+            weight = arms[j] * _friction_weight(ratios[j], ratio_signs[j])
             reaction = constant[j] + per_epsilon[j] * epsilon
-            size = abs(reaction)
+            size = _reaction_size(reaction, j, normal_sign)
             friction += weight * size
-            if size > 0.0:
+            if j == 3 and normal_sign != 0.0:
+                slope += weight * normal_sign * per_epsilon[j].imag
+            elif size > 0.0:
                 slope += weight * (per_epsilon[j].real * reaction.real + per_epsilon[j].imag * reaction.imag) / size
         step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
         epsilon -= step
         if abs(step) <= tolerance * (abs(epsilon) + (abs(moment) + friction) / inertia):
             return epsilon
     return math.nan
+
+
+@njit(cache=True)
+def _friction_weight(ratio, sign):
+    """|k_j| [-], or s_j k_j continued across its sign change when sign s_j is +-1 (JointFrictionModel._terms)."""
+    return abs(ratio) if sign == 0.0 else sign * ratio
+
+
+@njit(cache=True)
+def _reaction_size(reaction, joint, normal_sign):
+    """|R_j| [N], or for the guide (joint 3, reaction i N) s_N N continued across N = 0 when normal_sign s_N is +-1
+    (JointFrictionModel._size)."""
+    return normal_sign * reaction.imag if joint == 3 and normal_sign != 0.0 else abs(reaction)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -514,3 +532,12 @@ def driven_margin(passed, weight, smooth, dI, omega2, resistance, sign):
     """The holding margin of a driven part at rest, R + sign * push, push = M_m + M_weight + M_smooth
     - 1/2 I2' omega2^2 (MachineModel.drive_train_at, drivetrain._margin) [N m]."""
     return resistance + sign * (passed + (weight + smooth - 0.5 * dI * omega2 * omega2))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A general linkage: not a transcription but the reference path's own functions (mechanisms/linkage/flat.py),
+# compiled once; its program is read from p at an offset, flat.reduced(phi, p, offset) -> (J_links, dJ, weight, q, dq)
+
+from mech_regulator.mechanisms.linkage import flat  # noqa: E402  (appended: the kernels above stay as they were)
+
+linkage_reduced = flat.compiled("reduced")

@@ -80,6 +80,7 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
     tables = model.state_tables
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held = _held_pieces(tables, y)
+    normal_side, crossed_normal = 0.0, False  # joint friction's guide: the held sign of N, just crossed (issue 19)
     instant_events = 0
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
@@ -92,6 +93,9 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         p = compiled.parameters_for(piece, mode, window, start[1], held, start, offset)
         y_wrapped = start.copy()
         y_wrapped[0] -= offset
+        if compiled.normal_slot is not None:
+            normal_side = compiled.hold_normal(p, t, y_wrapped, normal_side if crossed_normal else 0.0)
+            crossed_normal = False
         # without a switch window or a driven part's table no guard reads phi: the stepper wraps it itself instead
         # of returning to restart
         wrap_period = period if wraps and window is None and not turning else 0.0
@@ -122,6 +126,10 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
             if compiled.window_slot is not None and g >= compiled.window_slot:
                 trajectory.stats.switches += 1
                 y[0] = offset + window[g - compiled.window_slot]
+                trajectory.stats.restarts += int(t < t_end)
+            elif g == compiled.normal_slot:  # the guide's N = 0: the other sign held, mode and state kept
+                normal_side, crossed_normal = -normal_side, True
+                trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
             elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
                 table, side = divmod(g - compiled.breakpoint_slot, 2)

@@ -3,7 +3,8 @@
 cache in a fraction of a second — while a scene's own module (codegen.py) compiles in about a second. So only the
 steppers are warmed ahead:
 
-- `mech-regulator compile` (which `./dev` runs once at set-up) compiles every method's stepper, a line per method;
+- `mech-regulator compile` compiles every method's stepper, a line per method (and the linkage solver, which the
+  reference path runs compiled too: mechanisms/linkage/flat.py);
 - a command whose scene asks for the fast path while its method's stepper is not compiled yet is served by the
   reference path, and the stepper is compiled by a background process for the next run (`compile_in_background`;
   a lock in the cache folder keeps it to one such process at a time).

@@ -1,0 +1,510 @@
+"""The linkage solver written once, flat: a float64 program vector (`encode`) and plain functions over it in the
+subset numba compiles (scalars, complex numbers, float arrays; no dicts or objects), so that the reference path
+and the compiled fast path run the same code and give the same numbers (issue 21, "one implementation").
+
+`reduced(phi, program, base)` gives the linkage's reduced quantities (J_links, dJ/dphi, M_weight, q, dq/dphi) of
+mechanisms/__init__.py; `solve_poses` the links' poses and their phi-derivatives group by group, returning a status
+(and the group and numbers that explain it) instead of raising, so the callers write the message (kinematics.py).
+Each function is plain Python; `compiled(name)` gives its numba-compiled form (on first use: numba is imported only
+then, so the package loads without it; the functions are registered with numba.extending.register_jitable so that
+compiled code calls them compiled; numba's disk cache keeps them, compiled once per machine).
+
+The equations (module docstring of groups.py, physics.md section 1): a link's pose is (r, theta), its point p at
+`P = r + p e^{i theta}`; every pose carries [x, y, theta, x', y', theta', x'', y'', theta''] (derivatives with
+respect to the crank angle phi). Per group: position in closed form (RRR, RRP, RPR, PRP, RPP, a redundant link),
+then `A u' = -K k'` and `A u'' = -K k'' - gamma` from the joints' constraint rows (`joint_rows`, `joint_quadratic`),
+A inverted by np.linalg.inv (a redundant link's consistent 4 x 3 system by its
+pseudo-inverse (A^T A)^-1 A^T), refused as a dead point when |A|_max |A^-1|_max > DEAD_POINT_CONDITION.
+
+Program layout (indices into the vector from `base`; link 0 is the frame, the moving links follow in the linkage's
+order; a joint record is JOINT_SIZE floats [kind (0 revolute, 1 prismatic), link a, link b, p_a (x, y), p_b (x, y),
+direction, slider_angle], a and b as in model.Joint.links, p_a, p_b the joint's point in each link [m]):
+  header: number of links, number of groups, crank link, output kind (0 none, 1 link angle, 2 prismatic joint
+  travel), output link, output joint record, gravity (gx, gy) [m/s^2], the crank pivot on the frame (x, y) [m] and
+  on the crank (x, y) [m];
+  per link LINK_SIZE floats: mass [kg], centre of mass (x, y) [m, own coordinates], inertia about it [kg m^2];
+  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT), branch (+1 or -1), link L1, link L2 (-1 for a
+  redundant link), then three joint records: E1, internal, E2 (a redundant link: its two joints, then zeros).
+"""
+
+from __future__ import annotations
+
+import cmath
+import functools
+import math
+import sys
+import time
+
+import numpy as np
+
+KIND_CODES = {"RRR": 0, "RRP": 1, "RPR": 2, "PRP": 3, "RPP": 4}
+REDUNDANT = 5
+JOINT_SIZE = 9
+LINK_SIZE = 4
+GROUP_SIZE = 4 + 3 * JOINT_SIZE
+POSE_SIZE = 9
+HEADER_SIZE = 5 + JOINT_SIZE + 6
+DEAD_POINT_CONDITION = 1e10   # condition of a group's equations beyond which its ratios count as infinite [-]
+TWO_PI = 2.0 * math.pi
+
+# solve_poses' status: what stopped the solution at a group (the numbers returned with it in brackets)
+SOLVED = 0
+RRR_APART = 1          # [distance of the external joints, |l1 - l2|, l1 + l2] [m]
+RRP_GUIDE_FAR = 2      # [distance of the guide from E1, l1] [m]
+RPR_PIVOTS_CLOSE = 3   # [the guide's offset |h|, the pivots' distance rho] [m]
+GUIDES_PARALLEL = 4    # []
+DEAD_POINT = 5         # []
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Encoding (plain Python: builds the program once per linkage)
+
+def joint_record(linkage, joint, index: dict[str, int]) -> list[float]:
+    """A joint's JOINT_SIZE floats (module docstring)."""
+    a, b = joint.links
+    pa, pb = linkage.link(a).points[joint.name], linkage.link(b).points[joint.name]
+    return [0.0 if joint.kind == "revolute" else 1.0, float(index[a]), float(index[b]), pa.real, pa.imag, pb.real,
+            pb.imag, joint.direction, joint.slider_angle]
+
+
+def link_indices(linkage) -> dict[str, int]:
+    """Each link's index in the program: the frame 0, the moving links 1, 2, ... in the linkage's order."""
+    return {name: index for index, name in enumerate([linkage.frame] + linkage.moving_links())}
+
+
+def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
+    """The program vector of a linkage (model.Linkage) solved by these groups (structure.Structure.groups, or the
+    groups found so far), gravity (gx, gy) [m/s^2] or None (no weight moment); layout in the module docstring."""
+    index = link_indices(linkage)
+    pivot = linkage.crank_pivot()
+    output_kind, output_link, output_joint = 0.0, 0.0, [0.0] * JOINT_SIZE
+    if linkage.output_link is not None:
+        output_kind, output_link = 1.0, float(index[linkage.output_link])
+    elif linkage.output_joint is not None:
+        output_kind, output_joint = 2.0, joint_record(linkage, linkage.joint(linkage.output_joint), index)
+    gx, gy = gravity if gravity is not None else (0.0, 0.0)
+    on_frame = linkage.link(linkage.frame).points[pivot.name]
+    on_crank = linkage.link(linkage.crank).points[pivot.name]
+    program = [float(len(index)), float(len(groups)), float(index[linkage.crank]), output_kind, output_link,
+               *output_joint, gx, gy, on_frame.real, on_frame.imag, on_crank.real, on_crank.imag]
+    for name in index:
+        link = linkage.link(name)
+        program += [link.mass, link.centre.real, link.centre.imag, link.inertia]
+    for group in groups:
+        if group.kind == "redundant link":
+            joints = [joint_record(linkage, joint, index) for joint in group.joints] + [[0.0] * JOINT_SIZE]
+            program += [float(REDUNDANT), 0.0, float(index[group.link]), -1.0]
+        else:
+            joints = [joint_record(linkage, joint, index) for joint in group.joints]
+            program += [float(KIND_CODES[group.kind]), float(group.branch), float(index[group.links[0]]),
+                        float(index[group.links[1]])]
+        program += [value for record in joints for value in record]
+    return np.array(program, dtype=np.float64)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Points and poses
+
+def _local(program, j, link):
+    """The point of the joint record at j in the coordinates of `link` (one of its two links) [m]."""
+    if int(program[j + 1]) == link:
+        return complex(program[j + 3], program[j + 4])
+    return complex(program[j + 5], program[j + 6])
+
+
+def _other(program, j, link):
+    """The link the joint record at j joins to `link`."""
+    a = int(program[j + 1])
+    return int(program[j + 2]) if a == link else a
+
+
+def _origin(poses, link):
+    """The position r [m] of a link's coordinate origin."""
+    return complex(poses[POSE_SIZE * link], poses[POSE_SIZE * link + 1])
+
+
+def _point(program, j, poses, link):
+    """Global position [m] of the joint j's point on `link`: r + p e^{i theta}."""
+    return _origin(poses, link) + _local(program, j, link) * cmath.exp(1j * poses[POSE_SIZE * link + 2])
+
+
+def _set_pose(poses, link, r, theta):
+    """Store a link's position: origin r [m], angle theta [rad]."""
+    k = POSE_SIZE * link
+    poses[k], poses[k + 1], poses[k + 2] = r.real, r.imag, theta
+
+
+def _pin(program, j, poses, link, at, theta):
+    """Set the pose of `link` with angle theta (taken in [-pi, pi]) and its point of joint j at `at`:
+    r = at - p e^{i theta}."""
+    theta = theta - TWO_PI * math.floor(theta / TWO_PI + 0.5)
+    _set_pose(poses, link, at - _local(program, j, link) * cmath.exp(1j * theta), theta)
+
+
+def _swing(program, pivot, tip, poses, link, P, T):
+    """Set the pose of `link` whose point of joint `pivot` is at P and of joint `tip` at T (|T - P| its own)."""
+    theta = cmath.phase(T - P) - cmath.phase(_local(program, tip, link) - _local(program, pivot, link))
+    _pin(program, pivot, poses, link, P, theta)
+
+
+def _angle_across(program, j, known, theta_known):
+    """The angle [rad] of the link the prismatic joint j joins to `known`: theta_slider = theta_guide + alpha."""
+    if int(program[j + 1]) == known:
+        return theta_known + program[j + 8]
+    return theta_known - program[j + 8]
+
+
+def _origin_line(program, j, poses, unknown, theta_unknown):
+    """(c, w): the line c + s w (w unit) on which the origin r of `unknown` lies, that link having the angle
+    theta_unknown and being joined by the prismatic joint j to a known link.
+    Slider unknown: its point must lie on the guide line G + t w -> r = G - p_s e^{i theta} + t w.
+    Guide unknown: the slider's point S = r + (p_g + t u) e^{i theta} -> r = S - p_g e^{i theta} - t w."""
+    guide, slider = int(program[j + 1]), int(program[j + 2])
+    u = cmath.exp(1j * program[j + 7])
+    turn = cmath.exp(1j * theta_unknown)
+    if unknown == slider:
+        w = u * cmath.exp(1j * poses[POSE_SIZE * guide + 2])
+        return _point(program, j, poses, guide) - _local(program, j, slider) * turn, w
+    return _point(program, j, poses, slider) - _local(program, j, guide) * turn, u * turn
+
+
+def _lines_cross(w1, w2):
+    """Im(w1 conj w2): zero for parallel lines."""
+    return (w1 * w2.conjugate()).imag
+
+
+def _lines_meet(c1, w1, c2, w2):
+    """Intersection of the lines c1 + s w1 and c2 + t w2: `s = Im((c2 - c1) conj w2) / Im(w1 conj w2)`."""
+    return c1 + w1 * ((c2 - c1) * w2.conjugate()).imag / _lines_cross(w1, w2)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Position of a group in closed form (groups.py's module docstring)
+
+def place_group(program, g, poses):
+    """Set the positions of the links of the group at g, the links it joins being known; returns (status, three
+    numbers explaining it) (module docstring: SOLVED, RRR_APART, ...)."""
+    kind, sigma = int(program[g]), program[g + 1]
+    L1, L2 = int(program[g + 2]), int(program[g + 3])
+    E1, Ji, E2 = g + 4, g + 4 + JOINT_SIZE, g + 4 + 2 * JOINT_SIZE
+    if kind == REDUNDANT:
+        _swing(program, E1, Ji, poses, L1, _point(program, E1, poses, _other(program, E1, L1)),
+               _point(program, Ji, poses, _other(program, Ji, L1)))
+        return SOLVED, 0.0, 0.0, 0.0
+    K1, K2 = _other(program, E1, L1), _other(program, E2, L2)
+    if kind == 0 or kind == 1:   # RRR, RRP
+        B = _point(program, E1, poses, K1)
+        l1 = abs(_local(program, Ji, L1) - _local(program, E1, L1))
+        if kind == 0:
+            D = _point(program, E2, poses, K2)
+            l2 = abs(_local(program, Ji, L2) - _local(program, E2, L2))
+            v = D - B
+            f = abs(v)
+            cos_B = (l1 * l1 + f * f - l2 * l2) / (2.0 * l1 * f) if f > 0.0 else math.inf
+            if not -1.0 <= cos_B <= 1.0:
+                return RRR_APART, f, abs(l1 - l2), l1 + l2
+            C = B + l1 * cmath.exp(1j * (cmath.phase(v) + sigma * math.acos(cos_B)))
+            _swing(program, E2, Ji, poses, L2, D, C)
+        else:
+            theta2 = _angle_across(program, E2, K2, poses[POSE_SIZE * K2 + 2])
+            c, w = _origin_line(program, E2, poses, L2, theta2)
+            m = c + _local(program, Ji, L2) * cmath.exp(1j * theta2) - B
+            along = (m * w.conjugate()).real
+            discriminant = along * along - abs(m) ** 2 + l1 * l1
+            if discriminant < 0.0:
+                return RRP_GUIDE_FAR, math.sqrt(abs(m) ** 2 - along * along), l1, 0.0
+            C = m + B + w * (-along + sigma * math.sqrt(discriminant))
+            _pin(program, Ji, poses, L2, C, theta2)
+        _swing(program, E1, Ji, poses, L1, B, C)
+        return SOLVED, 0.0, 0.0, 0.0
+    if kind == 2:   # RPR
+        guide, slider = int(program[Ji + 1]), int(program[Ji + 2])
+        pivot_g, pivot_s = (E1, E2) if guide == L1 else (E2, E1)
+        Pg = _point(program, pivot_g, poses, _other(program, pivot_g, guide))
+        Ps = _point(program, pivot_s, poses, _other(program, pivot_s, slider))
+        u = cmath.exp(1j * program[Ji + 7])
+        alpha = program[Ji + 8]
+        # The line's offset from the pivots, in the guide's coordinates: h = Im((p_g[pivot] - p_g[J]
+        # + (p_s[J] - p_s[pivot]) e^{i alpha}) conj u).
+        h = ((_local(program, pivot_g, guide) - _local(program, Ji, guide)
+              + (_local(program, Ji, slider) - _local(program, pivot_s, slider)) * cmath.exp(1j * alpha))
+             * u.conjugate()).imag
+        rho = abs(Ps - Pg)
+        if rho < abs(h) or rho == 0.0:
+            return RPR_PIVOTS_CLOSE, abs(h), rho, 0.0
+        a = math.asin(-h / rho)
+        theta_g = cmath.phase(Ps - Pg) - cmath.phase(u) - (a if sigma > 0 else math.pi - a)
+        _pin(program, pivot_g, poses, guide, Pg, theta_g)
+        _pin(program, pivot_s, poses, slider, Ps, theta_g + alpha)
+        return SOLVED, 0.0, 0.0, 0.0
+    theta2 = _angle_across(program, E2, K2, poses[POSE_SIZE * K2 + 2])
+    if kind == 3:   # PRP
+        theta1 = _angle_across(program, E1, K1, poses[POSE_SIZE * K1 + 2])
+        c1, w1 = _origin_line(program, E1, poses, L1, theta1)
+        c2, w2 = _origin_line(program, E2, poses, L2, theta2)
+        if abs(_lines_cross(w1, w2)) < 1e-12:
+            return GUIDES_PARALLEL, 0.0, 0.0, 0.0
+        C = _lines_meet(c1 + _local(program, Ji, L1) * cmath.exp(1j * theta1), w1,
+                        c2 + _local(program, Ji, L2) * cmath.exp(1j * theta2), w2)
+        _pin(program, Ji, poses, L1, C, theta1)
+        _pin(program, Ji, poses, L2, C, theta2)
+        return SOLVED, 0.0, 0.0, 0.0
+    # RPP: L1 pinned at B with the angle its prismatic internal joint gives it from L2's.
+    theta1 = _angle_across(program, Ji, L2, theta2)
+    _pin(program, E1, poses, L1, _point(program, E1, poses, K1), theta1)
+    c1, w1 = _origin_line(program, Ji, poses, L2, theta2)
+    c2, w2 = _origin_line(program, E2, poses, L2, theta2)
+    if abs(_lines_cross(w1, w2)) < 1e-12:
+        return GUIDES_PARALLEL, 0.0, 0.0, 0.0
+    _set_pose(poses, L2, _lines_meet(c1, w1, c2, w2), theta2)
+    return SOLVED, 0.0, 0.0, 0.0
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Velocity and acceleration ratios
+
+def joint_rows(program, j, poses, rows):
+    """Fill rows[0:12] with the partial derivatives of the joint j's two constraint equations by its links' (x, y,
+    theta): row r at rows[6 r : 6 r + 6] = (by link a's x, y, theta, by link b's x, y, theta).
+    Revolute, `r_a + q_a - r_b - q_b = 0` (q = p e^{i theta}): its real and imaginary parts.
+    Prismatic (guide a, slider b): the line `Im(d conj w) = 0`, d = P_s - P_g, w = u e^{i theta_g}, and the angle
+    `theta_s - theta_g - alpha = 0`."""
+    a, b = int(program[j + 1]), int(program[j + 2])
+    qa = _local(program, j, a) * cmath.exp(1j * poses[POSE_SIZE * a + 2])
+    qb = _local(program, j, b) * cmath.exp(1j * poses[POSE_SIZE * b + 2])
+    if program[j] == 0.0:
+        rows[0], rows[1], rows[2], rows[3], rows[4], rows[5] = 1.0, 0.0, -qa.imag, -1.0, 0.0, qb.imag
+        rows[6], rows[7], rows[8], rows[9], rows[10], rows[11] = 0.0, 1.0, qa.real, 0.0, -1.0, -qb.real
+        return
+    w = cmath.exp(1j * (program[j + 7] + poses[POSE_SIZE * a + 2]))
+    d = _origin(poses, b) + qb - _origin(poses, a) - qa
+    rows[0], rows[1], rows[2] = w.imag, -w.real, -((qa + d) * w.conjugate()).real
+    rows[3], rows[4], rows[5] = -w.imag, w.real, (qb * w.conjugate()).real
+    rows[6], rows[7], rows[8], rows[9], rows[10], rows[11] = 0.0, 0.0, -1.0, 0.0, 0.0, 1.0
+
+
+def joint_quadratic(program, j, poses):
+    """The terms of the joint j's twice-differentiated constraints quadratic in the first derivatives (gamma).
+    Revolute: `-theta_a'^2 q_a + theta_b'^2 q_b`. Prismatic line: `Im((theta_g'^2 q_g - theta_s'^2 q_s) conj w)
+    - 2 theta_g' Re(d' conj w)`, d' = r_s' + i theta_s' q_s - r_g' - i theta_g' q_g (the term -theta_g'^2 Im(d conj w)
+    vanishes on the line); the angle: 0."""
+    a, b = int(program[j + 1]), int(program[j + 2])
+    ka, kb = POSE_SIZE * a, POSE_SIZE * b
+    dta, dtb = poses[ka + 5], poses[kb + 5]
+    qa = _local(program, j, a) * cmath.exp(1j * poses[ka + 2])
+    qb = _local(program, j, b) * cmath.exp(1j * poses[kb + 2])
+    if program[j] == 0.0:
+        gamma = -dta * dta * qa + dtb * dtb * qb
+        return gamma.real, gamma.imag
+    w = cmath.exp(1j * (program[j + 7] + poses[ka + 2]))
+    dd = complex(poses[kb + 3], poses[kb + 4]) + 1j * dtb * qb - complex(poses[ka + 3], poses[ka + 4]) - 1j * dta * qa
+    line = ((dta * dta * qa - dtb * dtb * qb) * w.conjugate()).imag - 2.0 * dta * (dd * w.conjugate()).real
+    return line, 0.0
+
+
+def invert(A, inverse):
+    """Fill `inverse` with A^-1 (A square: np.linalg.inv, LAPACK's LU in both forms); False for an exactly singular
+    A."""
+    try:
+        inverse[:, :] = np.linalg.inv(A)
+    except Exception:  # numpy's and numba's LinAlgError: an exactly singular A
+        return False
+    return True
+
+
+def group_matrix(program, g, poses, A, known_first, known_second):
+    """Fill the group's A (its rows by its unknown links' (x, y, theta): 6 x 6, a redundant link's 4 x 3) and the
+    known links' terms K k' and K k'' of each row; returns the number of rows."""
+    L1, L2 = int(program[g + 2]), int(program[g + 3])
+    n_joints = 2 if int(program[g]) == REDUNDANT else 3
+    rows = np.empty(12)
+    for joint in range(n_joints):
+        j = g + 4 + JOINT_SIZE * joint
+        joint_rows(program, j, poses, rows)
+        for r in range(2):
+            row = 2 * joint + r
+            first = second = 0.0
+            for c in range(A.shape[1]):
+                A[row, c] = 0.0
+            for side in range(2):
+                link = int(program[j + 1 + side])
+                px, py, pt = rows[6 * r + 3 * side], rows[6 * r + 3 * side + 1], rows[6 * r + 3 * side + 2]
+                column = 0 if link == L1 else (3 if link == L2 else -1)
+                if column >= 0:
+                    A[row, column], A[row, column + 1], A[row, column + 2] = px, py, pt
+                else:
+                    k = POSE_SIZE * link
+                    first += px * poses[k + 3] + py * poses[k + 4] + pt * poses[k + 5]
+                    second += px * poses[k + 6] + py * poses[k + 7] + pt * poses[k + 8]
+            known_first[row], known_second[row] = first, second
+    return 2 * n_joints
+
+
+def differentiate_group(program, g, poses):
+    """Set the first and second derivatives of the group's links' poses from `A u' = -K k'` and
+    `A u'' = -K k'' - gamma` (module docstring); False at a dead point (A singular or its condition beyond
+    DEAD_POINT_CONDITION)."""
+    redundant = int(program[g]) == REDUNDANT
+    n_unknown = 3 if redundant else 6
+    n_rows = 4 if redundant else 6
+    A = np.empty((n_rows, n_unknown))
+    known_first, known_second = np.empty(n_rows), np.empty(n_rows)
+    group_matrix(program, g, poses, A, known_first, known_second)
+    inverse = np.empty((n_unknown, n_rows))
+    if redundant:   # the pseudo-inverse (A^T A)^-1 A^T, exact on the consistent equations
+        normal, normal_inverse = np.zeros((3, 3)), np.empty((3, 3))
+        for r in range(3):
+            for c in range(3):
+                for row in range(n_rows):
+                    normal[r, c] += A[row, r] * A[row, c]
+        if not invert(normal, normal_inverse):
+            return False
+        for r in range(3):
+            for row in range(n_rows):
+                value = 0.0
+                for c in range(3):
+                    value += normal_inverse[r, c] * A[row, c]
+                inverse[r, row] = value
+    elif not invert(A, inverse):
+        return False
+    if np.abs(inverse).max() * np.abs(A).max() > DEAD_POINT_CONDITION:
+        return False
+    links = (int(program[g + 2]), int(program[g + 3]))
+    for order in range(1, 3):
+        right = -(known_first if order == 1 else known_second)
+        if order == 2:   # the first derivatives are known now
+            for joint in range(n_rows // 2):
+                line, other = joint_quadratic(program, g + 4 + JOINT_SIZE * joint, poses)
+                right[2 * joint] -= line
+                right[2 * joint + 1] -= other
+        for unknown in range(n_unknown):
+            value = 0.0
+            for row in range(n_rows):
+                value += inverse[unknown, row] * right[row]
+            poses[POSE_SIZE * links[unknown // 3] + 3 * order + unknown % 3] = value
+    return True
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The whole linkage
+
+def solve_poses(phi, program, base, poses, derivatives):
+    """Fill poses (POSE_SIZE per link, zeros for the frame) at crank angle phi [rad]: the crank's, theta = phi,
+    r = A - p_A e^{i phi}, r' = -i p_A e^{i phi}, r'' = p_A e^{i phi}, theta' = 1, then each group's (with the
+    derivatives if `derivatives`); returns (status, group number, three numbers) of the first group that fails
+    (module docstring), (SOLVED, -1, 0, 0, 0) when all are solved."""
+    for k in range(POSE_SIZE * int(program[base])):
+        poses[k] = 0.0
+    crank = int(program[base + 2])
+    pivot_frame = complex(program[base + HEADER_SIZE - 4], program[base + HEADER_SIZE - 3])
+    pivot_crank = complex(program[base + HEADER_SIZE - 2], program[base + HEADER_SIZE - 1]) * cmath.exp(1j * phi)
+    k = POSE_SIZE * crank
+    r, dr = pivot_frame - pivot_crank, -1j * pivot_crank
+    poses[k], poses[k + 1], poses[k + 2], poses[k + 3], poses[k + 4], poses[k + 5] = r.real, r.imag, phi, dr.real, \
+        dr.imag, 1.0
+    poses[k + 6], poses[k + 7], poses[k + 8] = pivot_crank.real, pivot_crank.imag, 0.0
+    g = base + HEADER_SIZE + LINK_SIZE * int(program[base])
+    for group in range(int(program[base + 1])):
+        status, first, second, third = place_group(program, g, poses)
+        if status != SOLVED:
+            return status, group, first, second, third
+        if derivatives and not differentiate_group(program, g, poses):
+            return DEAD_POINT, group, 0.0, 0.0, 0.0
+        g += GROUP_SIZE
+    return SOLVED, -1, 0.0, 0.0, 0.0
+
+
+def motion(poses, link, point):
+    """(P, P', P'') of the point `point` (link coordinates [m]) of a link: P = r + q, P' = r' + i theta' q,
+    P'' = r'' + (i theta'' - theta'^2) q, q = point e^{i theta}."""
+    k = POSE_SIZE * link
+    q = point * cmath.exp(1j * poses[k + 2])
+    return (complex(poses[k], poses[k + 1]) + q, complex(poses[k + 3], poses[k + 4]) + 1j * poses[k + 5] * q,
+            complex(poses[k + 6], poses[k + 7]) + complex(-poses[k + 5] * poses[k + 5], poses[k + 8]) * q)
+
+
+def reduced_from_poses(program, base, poses):
+    """(J_links, dJ_links/dphi, M_weight, q, q') from solved poses: over the moving links k (the crank included)
+    with centres S_k and angles theta_k, `J_links = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k
+    Re(conj(S_k') S_k'') + I_k theta_k' theta_k'')`, `M_weight = sum m_k g . S_k'`; the output q: a link's angle
+    theta [rad] and theta', or a prismatic joint's travel `q = Re((P_s - P_g) conj w)` [m] (w the guide's direction),
+    `q' = Re(d' conj w) + theta_g' Im(d conj w)`; (0, 0) without an output."""
+    n_links = int(program[base])
+    gravity = complex(program[base + 5 + JOINT_SIZE], program[base + 6 + JOINT_SIZE])
+    J = dJ = weight = 0.0
+    for link in range(1, n_links):
+        record = base + HEADER_SIZE + LINK_SIZE * link
+        mass, inertia = program[record], program[record + 3]
+        _, dS, ddS = motion(poses, link, complex(program[record + 1], program[record + 2]))
+        dtheta, ddtheta = poses[POSE_SIZE * link + 5], poses[POSE_SIZE * link + 8]
+        J += mass * abs(dS) ** 2 + inertia * dtheta * dtheta
+        dJ += 2.0 * (mass * (dS.conjugate() * ddS).real + inertia * dtheta * ddtheta)
+        weight += mass * (gravity.conjugate() * dS).real
+    output = program[base + 3]
+    if output == 1.0:
+        link = int(program[base + 4])
+        return J, dJ, weight, poses[POSE_SIZE * link + 2], poses[POSE_SIZE * link + 5]
+    if output == 0.0:
+        return J, dJ, weight, 0.0, 0.0
+    j = base + 5
+    guide, slider = int(program[j + 1]), int(program[j + 2])
+    P_g, dP_g, _ = motion(poses, guide, _local(program, j, guide))
+    P_s, dP_s, _ = motion(poses, slider, _local(program, j, slider))
+    w = cmath.exp(1j * (program[j + 7] + poses[POSE_SIZE * guide + 2]))
+    d, dd = P_s - P_g, dP_s - dP_g
+    return (J, dJ, weight, (d * w.conjugate()).real,
+            (dd * w.conjugate()).real + poses[POSE_SIZE * guide + 5] * (d * w.conjugate()).imag)
+
+
+def reduced(phi, program, base):
+    """The linkage's (J_links [kg m^2], dJ_links/dphi [kg m^2/rad], M_weight [N m], q, dq/dphi) at crank angle phi
+    [rad] (reduced_from_poses), its program at `base` in `program`; NaNs where a group cannot assemble or is at a
+    dead point (solve_poses tells which)."""
+    poses = np.empty(POSE_SIZE * int(program[base]))
+    if solve_poses(phi, program, base, poses, True)[0] != SOLVED:
+        return math.nan, math.nan, math.nan, math.nan, math.nan
+    return reduced_from_poses(program, base, poses)
+
+
+
+@functools.cache
+def _registered() -> None:
+    """Register every function of the solver with numba (once), so that compiled code calls them compiled."""
+    from numba.extending import register_jitable
+
+    for function in (_local, _other, _origin, _point, _set_pose, _pin, _swing, _angle_across, _origin_line,
+                     _lines_cross, _lines_meet, place_group, joint_rows, joint_quadratic, invert, group_matrix,
+                     differentiate_group, solve_poses, motion, reduced_from_poses, reduced):
+        register_jitable(function)
+
+
+# What the reference path calls compiled, with the argument types of its calls (kinematics.py)
+COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1], boolean)",
+                      "reduced": "(float64, float64[::1], int64)"}
+
+
+@functools.cache
+def compiled(name: str):
+    """The numba-compiled form of this module's function `name` (COMPILED_FUNCTIONS), the same source the
+    reference path and the fast path's generated right-hand sides run (numba imported here, on first use). Its first
+    compilation on a machine (5-15 s) is announced on stderr; numba's disk cache keeps it for later runs."""
+    from numba import njit
+    from numba.core.caching import FunctionCache
+
+    _registered()
+    function = njit(cache=True)(globals()[name])
+    if not FunctionCache(function.py_func)._cache_file._load_index():  # nothing on disk for this source yet
+        print(f"note: compiling the linkage solver's {name} once (about 5-15 s; later runs load it at once)",
+              file=sys.stderr, flush=True)  # numba compiles it at its first call
+    return function
+
+
+def compile_all(report) -> None:
+    """Compile (or load from numba's disk cache) every function of COMPILED_FUNCTIONS for the argument types of
+    the reference path's calls, reporting a line after each (`mech-regulator compile`)."""
+    import time
+
+    for name, signature in COMPILED_FUNCTIONS.items():
+        started = time.perf_counter()
+        compiled(name).compile(signature)
+        report(f"  the linkage solver's {name} ready in {time.perf_counter() - started:.1f} s")
