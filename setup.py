@@ -14,7 +14,7 @@ setup(
         ("share/ament_index/resource_index/packages", [f"resource/{package_name}"]),
         (f"share/{package_name}", ["package.xml"]),
         (f"share/{package_name}/config/scenes", glob("config/scenes/*.yaml")),
-        (f"share/{package_name}/config/params", glob("config/params/*.yaml")),
+        (f"share/{package_name}/config/params", glob("config/params/*.yaml") + glob("config/params/*.xml")),
         (f"share/{package_name}/config/schema", glob("config/schema/*.json")),
         (f"share/{package_name}/launch", glob("launch/*.launch.py")),
     ],

@@ -15,11 +15,12 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from mech_regulator.nodes.launch import OVERSPEED_TRIP_FACTOR, node_names
+from mech_regulator.nodes.launch import FASTDDS_PROFILE_VARIABLE, OVERSPEED_TRIP_FACTOR, node_names
 from mech_regulator.scene import load_scene
 
 PACKAGE = "mech_regulator"
 PARAMS_FILE = "config/params/main_job.yaml"  # what `mech-regulator run` starts from
+FASTDDS_PROFILE = "config/params/fastdds.xml"  # acknowledgements asked every 20 ms (nodes.launch.fastdds_profile)
 # node name (its section in the params file) -> executable
 EXECUTABLES = {
     "recorder": "recorder_node",
@@ -31,7 +32,8 @@ EXECUTABLES = {
 
 def _nodes(context, *args, **kwargs):
     """The nodes `mech-regulator run` starts for the chosen scene (the governor only when it has one), with
-    the choices it adds to the params file: the scene, the machine's peers and its overspeed trip."""
+    the choices it adds to the params file: the scene, the machine's peers and its overspeed trip; and, unless one is
+    set, the bundled Fast DDS profile."""
     scene_file = LaunchConfiguration("scene").perform(context)
     params_file = LaunchConfiguration("params_file").perform(context)
     scene = load_scene(scene_file)
@@ -39,8 +41,10 @@ def _nodes(context, *args, **kwargs):
     run_choices = {name: {"scene_file": scene_file} for name in names}
     run_choices["machine"].update(peers=[name for name in names if name != "machine"],
                                   overspeed_trip=OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega))
+    profile = {} if FASTDDS_PROFILE_VARIABLE in os.environ else {
+        FASTDDS_PROFILE_VARIABLE: os.path.join(get_package_share_directory(PACKAGE), FASTDDS_PROFILE)}
     return [Node(package=PACKAGE, executable=EXECUTABLES[name], name=name, output="screen",
-                 parameters=[params_file, run_choices[name]])
+                 parameters=[params_file, run_choices[name]], additional_env=profile)
             for name in names]
 
 

@@ -29,6 +29,8 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
+from mech_regulator.nodes.launch import private_environment  # noqa: E402
+
 WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a test measures)
 ANSWER_WAIT = 10.0  # [s] of wall time before a service request that got no answer is sent again
 STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
@@ -72,13 +74,9 @@ def next_domain_id() -> int:
 
 
 def ros_environment(domain_id: int) -> dict[str, str]:
-    """The environment of processes on a private domain: discovery on this machine only, the message
-    packages of this Python's prefix when no ROS is sourced, unbuffered output for the logs."""
-    environment = dict(os.environ)
-    environment.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", PYTHONUNBUFFERED="1")
-    environment.setdefault("AMENT_PREFIX_PATH", sys.prefix)
-    environment.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    return environment
+    """The environment of processes on a private domain, as the main job's (nodes.launch.private_environment), with
+    unbuffered output for the logs."""
+    return dict(private_environment(domain_id), PYTHONUNBUFFERED="1")
 
 
 def stamp_ns(stamp) -> int:

@@ -47,9 +47,12 @@ def in_process_csv(model, duration: float, path: Path, coupling: str = DEFAULT_C
 
 
 def node_processes(marker: str) -> list[str]:
-    """The command lines of the running node processes whose arguments mention `marker` (a run's folder)."""
-    listing = subprocess.run(["ps", "-ww", "-eo", "args"], capture_output=True, text=True, check=True).stdout
-    return [line for line in listing.splitlines() if "mech_regulator.nodes" in line and marker in line]
+    """The names and command lines of the running node processes whose arguments mention `marker` (a run's
+    folder): started by hand (python -m mech_regulator.nodes.<name>), or forked by `run` (named <name>_node, with
+    the launcher's command line)."""
+    listing = subprocess.run(["ps", "-ww", "-eo", "comm=,args="], capture_output=True, text=True, check=True).stdout
+    return [line for line in listing.splitlines()
+            if marker in line and ("mech_regulator.nodes" in line or line.split(maxsplit=1)[0].endswith("_node"))]
 
 
 def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedProcess, Path]:

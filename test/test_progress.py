@@ -17,9 +17,10 @@ import pytest
 from mech_regulator.cli.report import PROGRESS_INTERVAL, ProgressLines, progress_bar, progress_interval
 from support import run_cli
 
-LINE = re.compile(r"^simulating lathe: t = ([0-9.e+-]+) / 20 s \((\d+) %\), ([0-9.]+) s elapsed, "
-                  r"ETA ([0-9.]+ s|unknown)$")
-FINAL = re.compile(r"^simulating lathe: done: t = 20 / 20 s in ([0-9.]+ s|\d+ min \d+ s)$")
+DURATION = r"(?:[0-9.]+ s|\d+ min \d+ s|\d+ h \d+ min)"  # report._duration: '4.1 s', '2 min 05 s', '1 h 02 min'
+LINE = re.compile(rf"^simulating lathe: t = ([0-9.e+-]+) / 20 s \((\d+) %\), ({DURATION}) elapsed, "
+                  rf"ETA ({DURATION}|unknown)$")
+FINAL = re.compile(rf"^simulating lathe: done: t = 20 / 20 s in ({DURATION})$")
 
 
 def simulate(*options: str, interval: str | None = "0") -> subprocess.CompletedProcess:

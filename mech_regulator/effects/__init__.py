@@ -224,6 +224,12 @@ def _slider_table(load: schema.SliderTable, kinematic_period: float | None,
                   segment_output_force=segment_force)
 
 
+def output_position_of(reduced: Callable[[float], tuple] | None) -> Callable[[float], tuple[float, float]] | None:
+    """The output position build_load reads, phi -> (q, dq/dphi) (q [m] or [rad]), taken from a mechanism's
+    reduced(phi) = (J_links, dJ/dphi, M_weight, q, dq/dphi) (mechanisms.build_reduced); None without one."""
+    return (lambda phi: reduced(phi)[3:5]) if reduced is not None else None
+
+
 def held_positions(kinks: tuple[float, ...], output_position: Callable[[float], tuple[float, float]]) -> list[float]:
     """A slider position [m] inside the table piece of each interval between consecutive kinks [rad] (sorted, in
     [0, 2 pi)), indexed by bisect_right(kinks, phi mod 2 pi): the interval across 0 first and last. x stays in one

@@ -37,7 +37,7 @@ from typing import Callable
 
 import numpy as np
 
-from mech_regulator.effects import Effect, build_load
+from mech_regulator.effects import Effect, build_load, output_position_of
 from mech_regulator.governors import Guard
 from mech_regulator.scene import schema
 
@@ -150,8 +150,10 @@ def coulomb_factor(mode: str, push: float, resistance: float) -> float:
 def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]], list[Effect]],
                  reduced: Callable | None = None, has_weight: bool = False) -> DrivenModel:
     """Assemble a scene's driven part, its branches reduced to the main shaft (module docstring); reduced and
-    has_weight: its mechanism's reduced inertia and weight (mechanisms.build_reduced), if it has one."""
-    effects = [build_load(load, 2.0 * math.pi if spec.mechanism is not None else None) for load in spec.loads]
+    has_weight: its mechanism's reduced inertia and weight (mechanisms.build_reduced), if it has one (its output
+    position places the kinks in phi_driven of a slider table, effects.build_load)."""
+    effects = [build_load(load, 2.0 * math.pi if spec.mechanism is not None else None, output_position_of(reduced))
+               for load in spec.loads]  # a slider table's kinks: where its mechanism's x crosses a breakpoint
     coulomb = [isinstance(load, schema.ConstantLoad) for load in spec.loads]
     effects = unique_names(effects)
     branches = []

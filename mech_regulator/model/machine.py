@@ -33,7 +33,7 @@ import numpy as np
 
 from scipy import optimize
 
-from mech_regulator.effects import Effect, build_drive, build_load
+from mech_regulator.effects import Effect, build_drive, build_load, output_position_of
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.governors import ARM, Governor, Guard, Mode, build_governor
@@ -233,8 +233,10 @@ class MachineModel:
     def state_tables(self) -> tuple[StateTable, ...]:
         """The tables read at a function of the state that have breakpoints (StateTable): a direct governor's valve
         table (at the sleeve position), a nonlinear coupling's characteristic (at the twist), each table load with
-        knots of a coupled driven part (periodic, at its angle phi2 = phi - twist [rad], named "driven part's <load>";
-        angular: its rhs anchor is in the solver's wrapped phi); the order of rhs's anchors."""
+        kinks of a coupled driven part (periodic, at its angle phi2 = phi - twist [rad], named "driven part's <load>":
+        a table in phi2 at its knots, a slider table of its mechanism where x(phi2) crosses a breakpoint; angular: its
+        rhs anchor is in the solver's wrapped phi); the order of rhs's anchors. A driven part's branches have no
+        tables (schema.BranchLoad), nor has a driven part behind a clutch (no angle)."""
         tables = []
         governor = self.governor
         if governor is not None and governor.valve_breaks:
@@ -945,8 +947,7 @@ def build_model(scene: Scene) -> MachineModel:
     effects = []
     if machine.drive is not None:
         effects.append(build_drive(machine.drive, machine.mechanism))
-    output_position = (lambda phi: reduced(phi)[3:5]) if reduced is not None else None  # (q, dq/dphi)
-    effects += [build_load(load, kinematic_period, output_position) for load in machine.loads]
+    effects += [build_load(load, kinematic_period, output_position_of(reduced)) for load in machine.loads]
     effects = _unique_names(effects)
     coupling = _coupling_model(machine, gravity)
     clutch = None

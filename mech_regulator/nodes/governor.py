@@ -77,9 +77,12 @@ class GovernorNode(Node):
 
     def on_run_state(self, state: dict) -> None:
         """Send the states gathered so far (the machine stops, pauses or starts again), and end by itself when the
-        machine has finished."""
+        machine has finished, with its last diagnostics (what it rejected, even in a run shorter than their
+        period)."""
         self.states.send()
         self.done = state["state"] == RunState.FINISHED
+        if self.done:
+            self.report()
 
     def on_joint_states(self, message: JointState) -> None:
         """Answer the crank speed at a stamped time with the throttle at that time."""

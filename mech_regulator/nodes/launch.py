@@ -32,17 +32,27 @@ from mech_regulator.scene.limits import exchange_refusal, output_stem
 OVERSPEED_TRIP_FACTOR = 1.25  # default trip speed: this times the scene's initial speed
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
+FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
 
 
 def private_environment(domain_id: int) -> dict[str, str]:
-    """The environment of a run: its own ROS domain, discovery on this machine only, and the message
-    packages found in this Python's prefix when no ROS installation is sourced."""
+    """The environment of a run: its own ROS domain, discovery on this machine only, the message packages found
+    in this Python's prefix when no ROS installation is sourced, and the bundled Fast DDS profile unless one is set
+    (fastdds_profile)."""
     environment = dict(os.environ)
     environment["ROS_DOMAIN_ID"] = str(domain_id)
     environment["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     environment.setdefault("AMENT_PREFIX_PATH", sys.prefix)
     environment.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    environment.setdefault(FASTDDS_PROFILE_VARIABLE, str(fastdds_profile()))
     return environment
+
+
+def fastdds_profile() -> Path:
+    """The bundled Fast DDS profile (config/params/fastdds.xml): reliable writers ask for acknowledgements every
+    20 ms instead of every 3 s, so that a node waiting for its last samples to be acknowledged before it ends
+    (nodes.common.deliver_all) waits that long, not seconds."""
+    return config_dir() / "params" / "fastdds.xml"
 
 
 def node_names(governed: bool) -> list[str]:
@@ -54,7 +64,8 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
                    overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
                    duration: float | None, coupling: str, started: float) -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
-    other nodes started (in realtime only the recorder is waited for: the inputs are the newest, not awaited);
+    other nodes started (in realtime too, before the clock starts: a governor still starting would miss the run; the
+    inputs are then the newest, not awaited);
     started: when the command began, on the clock of time.monotonic() [s] (the recorder's start_up_s counts from
     it)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
@@ -67,7 +78,7 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     if duration is not None:
         machine.update(duration=duration)
     if time_mode == "realtime":
-        machine.update(lockstep_inputs=[""], peers=["recorder"])
+        machine.update(lockstep_inputs=[""])  # the newest inputs, not awaited; the peers still are, before the clock
     parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(output=str(output),
                                                                                    launched_at=started)
     return parameters
@@ -267,16 +278,27 @@ class NodeProcess:
 
 
 def _node_main(name: str, parameter_file: Path, environment: dict[str, str], log_descriptor: int) -> None:
-    """In a node's forked process: its own session, the launcher's death passed on (_die_with_parent), output to the
-    log, the run's environment and command line, then the node's main; its return value is the exit code."""
+    """In a node's forked process: its own session, the launcher's death passed on (_die_with_parent), its name
+    (<name>_node, _name_process), output to the log, the run's environment and command line, then the node's main;
+    its return value is the exit code."""
     os.setsid()
     _die_with_parent()
+    _name_process(f"{name}_node")
     os.dup2(log_descriptor, sys.stdout.fileno())
     os.dup2(log_descriptor, sys.stderr.fileno())
     os.environ.clear()
     os.environ.update(environment)
     sys.argv = [f"{name}_node", "--ros-args", "--params-file", str(parameter_file)]
     sys.exit(importlib.import_module(f"mech_regulator.nodes.{name}").main())
+
+
+def _name_process(name: str) -> None:
+    """Give the process the name `name` (at most 15 bytes; Linux: PR_SET_NAME), which ps -o comm, top and pgrep
+    show: a forked node's command line is its launcher's."""
+    import ctypes
+
+    PR_SET_NAME = 15
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_NAME, name.encode()[:15])
 
 
 def _die_with_parent() -> None:

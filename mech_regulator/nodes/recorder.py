@@ -27,9 +27,9 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, OK, STATE_QOS, RunState, batch_groups, coupling_parameter,
-                                         diagnostics, float_parameter, follow_run_state, nanoseconds, run, scene_model,
-                                         text_parameter)
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
+                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
+                                         nanoseconds, run, scene_model, text_parameter)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
@@ -38,6 +38,7 @@ from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
 FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished
+MATCH_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers before it subscribes to the machine
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 
@@ -79,14 +80,13 @@ class RecorderNode(Node):
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
-        self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
-        self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
+        self.streams = [self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)]
+        governor_states = self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
+        if self.model.governor is not None:
+            self.streams.append(governor_states)
         self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
         follow_run_state(self, self.on_run_state)
-        # Last: the machine starts once the recorder subscribes to joint_states, and a node's graph entry lists the
-        # subscriptions made before, so the machine then knows every stream the recorder reads (wait_for_peers).
-        self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
@@ -260,9 +260,22 @@ class RecorderNode(Node):
                             throttle=np.array(throttle), external_load=np.array([self.moments[w][1] for w in times]),
                             events=self.events, status="complete", message="", tripped_at=self.tripped_at)
 
+    def subscribe_to_the_machine(self) -> None:
+        """Subscribe to joint_states once the streams the run needs (the machine's moments, a governor's state) have
+        matched their publishers, or after MATCH_WAIT s: the machine starts as soon as its peers subscribe to
+        joint_states, and a short run could otherwise end before a stream has matched the recorder, its samples
+        lost with the node that sent them."""
+        waited = time.monotonic()
+        while rclpy.ok() and any(stream.get_publisher_count() == 0 for stream in self.streams) \
+                and time.monotonic() - waited < MATCH_WAIT:
+            self.executor.spin_once(timeout_sec=MATCH_POLL)
+        self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
+
     def record(self) -> None:
-        """Spin until the machine has finished and everything is in (or Ctrl-C); should the last samples not come
-        within FINISH_GRACE s of the machine's end, close with what there is (the summary says where it stops)."""
+        """Subscribe to the machine (subscribe_to_the_machine), then spin until the machine has finished and
+        everything is in (or Ctrl-C); should the last samples not come within FINISH_GRACE s of the machine's end,
+        close with what there is (the summary says where it stops)."""
+        self.subscribe_to_the_machine()
         finished_seen = None
         while rclpy.ok() and not self.complete():
             self.executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)

@@ -47,9 +47,9 @@ import numpy as np
 import mech_regulator
 from mech_regulator.model import MachineModel
 from mech_regulator.model.machine import StateTable
-from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK
+from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator import mechanisms
-from mech_regulator.effects import held_positions, joint_friction
+from mech_regulator.effects import held_positions, joint_friction, output_position_of
 from mech_regulator.mechanisms import engine, walking_beam
 from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.scene import SceneError, schema
@@ -372,9 +372,10 @@ class _Parameters:
 
 
 def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, mechanism=None,
-                 anchor: str | None = None) -> str:
+                 anchor: str | None = None, held: str | None = None) -> str:
     """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source, its
-    tables in phi on the segment that holds `anchor` (default phi: the tables themselves); an
+    tables in phi on the segment that holds `anchor` (default phi: the tables themselves), a slider table on the
+    piece that holds the slider position `held` [m] (default: q at the anchor phi, else generate's q_anchor); an
     engine on a crank–slider with several cylinders (mechanism.cylinders) is the sum of every cylinder's gas moment
     -p(phi + phase - d_i) A dx_i/dphi (d_i its firing delay, effects._multi_cylinder_engine; dx_i/dphi named as
     _reduced_lines does)."""
@@ -422,9 +423,17 @@ def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, me
     if isinstance(spec, schema.OutputSpring):
         return f"k.output_spring({q}, {dq}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
     if isinstance(spec, schema.SliderTable):
-        held = q if anchor == phi else f"{q}_anchor"  # x on the anchor's interval (generate's q_anchor)
+        held = held or (q if anchor == phi else f"{q}_anchor")  # x on the anchor's interval (generate's q_anchor)
         return f"k.slider_table({q}, {held}, {dq}, {p.table(spec.position, spec.force)})"
     raise TypeError(f"no compiled kernel for {type(spec).__name__}")
+
+
+def _held_position_call(kinks, output_position, p: _Parameters, anchor: str) -> str:
+    """The kernel call (as source) of the slider position [m] that holds a slider table's piece on the interval
+    between its kinks [rad] (sorted, in [0, 2 pi)) around the crank angle `anchor` (effects.held_positions of the
+    mechanism's output_position, looked up by kernels.held_position)."""
+    held = held_positions(tuple(kinks), output_position)
+    return f"k.held_position({anchor}, {p.table(list(kinks) + [2.0 * math.pi], held)})"
 
 
 def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[str, ...]) -> list[str]:
@@ -515,8 +524,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         kinks = sorted({angle for spec, effect in zip(specs, model.effects)
                         if isinstance(spec, schema.SliderTable) for angle in effect.kink_angles})
         if kinks:  # a slider table's piece: that of x on the anchor's interval between its breakpoint crossings
-            held = held_positions(tuple(kinks), lambda phi: model.reduced(phi)[3:5])
-            body.append(f"q_anchor = k.held_position(anchor, {p.table(kinks + [2.0 * math.pi], held)})")
+            body.append(f"q_anchor = {_held_position_call(kinks, output_position_of(model.reduced), p, 'anchor')}")
         elif any(isinstance(spec, schema.SliderTable) for spec in specs):  # x never crosses its breakpoints
             body.append("q_anchor = q")
     for spec, effect in zip(specs, model.effects):
@@ -752,7 +760,7 @@ def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str, table_slot
     located = {table.name: f"p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}
     names = [f"driven part's {effect.name}" for effect in model.driven.effects[:len(driven.loads)]]
     anchors = {index: located[name] for index, name in enumerate(names) if name in located}
-    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2", anchors)
+    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2", anchors, model.driven)
     resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
     rhs = state + [
         "dydt[1] = (net - passed) / J",
@@ -773,20 +781,29 @@ def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str, table_slot
 
 
 def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, omega: str, q: str, dq: str,
-                         anchors: dict[int, str] | None = None) -> list[str]:
+                         anchors: dict[int, str] | None = None, model: DrivenModel | None = None) -> list[str]:
     """Source adding a driven part's non-Coulomb moments to `smooth` (DrivenModel.smooth_moment): its own loads,
     then each branch's reduced to the main shaft, M_n(omega / i_1n) / i_1n (drivetrain._reduced); constant loads
     are Coulomb resistances, in R. anchors: per index of an own load that is a located table, the slot p[k] of its
-    anchor (NaN: the table as it is)."""
+    anchor phi2 [rad] (NaN: the table as it is); a slider table's is read on the piece of x held on the interval
+    between its kinks around the anchor (`{q}_anchor<index>`, from model's effect and mechanism)."""
     anchors = anchors or {}
-
-    def anchor_of(index: int) -> str | None:
-        """The kernel's anchor of own load `index`: its slot's value, phi where it is NaN (or it has none)."""
+    lines = []
+    for index, load in enumerate(driven.loads):
         slot = anchors.get(index)
-        return None if slot is None else f"({slot} if {slot} == {slot} else {phi})"
-
-    lines = [f"smooth += {_effect_call(load, p, phi, omega, q, dq, anchor=anchor_of(index))}"
-             for index, load in enumerate(driven.loads) if not isinstance(load, schema.ConstantLoad)]
+        if isinstance(load, schema.ConstantLoad):
+            continue
+        if slot is None:
+            lines.append(f"smooth += {_effect_call(load, p, phi, omega, q, dq)}")
+        elif isinstance(load, schema.SliderTable):
+            held = f"{q}_anchor{index}"
+            position = _held_position_call(model.effects[index].kink_angles, output_position_of(model.reduced), p,
+                                           slot)
+            lines += [f"{held} = {position} if {slot} == {slot} else {q}",
+                      f"smooth += {_effect_call(load, p, phi, omega, q, dq, held=held)}"]
+        else:
+            anchor = f"({slot} if {slot} == {slot} else {phi})"  # NaN: the table as it is
+            lines.append(f"smooth += {_effect_call(load, p, phi, omega, q, dq, anchor=anchor)}")
     for branch in driven.branches:
         ratio = p.scalar(branch.ratio)
         lines += [f"smooth += {_effect_call(load, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
