@@ -498,7 +498,8 @@ def _main_job(scene, args) -> int:
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
-    path = on_path_for_a_command(model, note).scene.solver.path  # decided once, for every node
+    model = on_path_for_a_command(model, note)
+    path = model.scene.solver.path  # decided once, for every node
     if path != scene.solver.path:
         args.overrides = [*(args.overrides or []), f"solver.path={path}"]
     if not 1e-6 <= args.exchange_step <= 1.0:
@@ -510,7 +511,7 @@ def _main_job(scene, args) -> int:
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
     check_outputs(args, args.out)
-    return main_job(scene, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
+    return main_job(model, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
                     args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED)
 
 

@@ -90,13 +90,15 @@ def default_recording(scene_name: str | None) -> Path:
     return Path("runs") / f"{output_stem(scene_name)}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
 
 
-def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
+def main_job(model, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
              quiet: bool, duration: float | None, coupling: str, started: float | None = None) -> int:
-    """Run the nodes on the scene for `duration` [s] of simulated time (None: the scene's), `started` the command's
+    """Run the nodes on the model's scene (its solver.path decided: fast or reference) for `duration` [s] of
+    simulated time (None: the scene's), `started` the command's
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
     code (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
     named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
         raise SceneError(too_many)
@@ -121,7 +123,10 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
     with open(log_file, "w") as log:
         try:
             importlib.import_module("mech_regulator.nodes.common")  # what every node imports (rclpy, the message
-            # types, the core with scipy), imported once here for the node processes forked below
+            # types, the core with scipy) and what the steppers load on first use, once here for the nodes forked below
+            from mech_regulator.solvers.cosim import load_steppers
+
+            load_steppers(model, exchange_step)
             for name in names:
                 processes[name] = NodeProcess(name, parameter_file, environment, log)
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
@@ -140,10 +145,9 @@ def main_job(scene, scene_file: str, overrides: list[str], exchange_step: float,
     summary_path = output.with_suffix(".json")
     failed = [name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT)]
     if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
-        from mech_regulator.model import build_model
         from mech_regulator.nodes.recorder import write_empty_run
 
-        write_empty_run(build_model(scene), output, exchange_step)
+        write_empty_run(model, output, exchange_step)
     if summary_path.exists():
         summary = json.loads(summary_path.read_text())
         print(format_cosimulation_summary(summary))

@@ -186,6 +186,17 @@ class MachineStepper:
         return {name: outputs[name] for name in ("drive", "resistance", "external", "net")}
 
 
+def load_steppers(model: MachineModel, exchange_step: float) -> None:
+    """Do one exchange step of the machine's stepper (and one answer of the governor's) on `model` and throw them
+    away: what they load on first use (the scene's compiled modules and the compiled steppers of the fast path, the
+    first call's set-up of the reference path) is then in this process, and in processes forked from it (the
+    launcher's nodes, nodes.launch), so that their first exchange does not wait for it."""
+    duration = model.scene.scenario.duration
+    MachineStepper(model).advance(min(exchange_step, duration), 1.0, model.external_load(0.0))
+    if model.governor is not None:
+        GovernorStepper(model).answer(min(exchange_step, duration), model.initial_state()[1])
+
+
 class GovernorStepper:
     """The governor without the machine: its states advanced over exchange steps with the crank speed
     held at the last value it was given (the machine's terms are absent, so omega' = 0 exactly)."""
