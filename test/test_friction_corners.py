@@ -35,7 +35,7 @@ def test_corner_angles_are_where_the_relative_rates_change_sign():
         inner = math.pi + math.asin(offset / (ROD - CRANK))
         expected = sorted([outer % (2.0 * math.pi), 0.5 * math.pi, inner, 1.5 * math.pi])
         assert np.allclose(friction.corner_angles, expected, rtol=0.0, atol=1e-12)
-        assert friction.names[friction.guide] == "guide"
+        assert [friction.names[k] for k in friction.guides] == ["guide"]
 
 
 def test_the_rhs_between_corners_is_the_friction_continued():
@@ -50,12 +50,12 @@ def test_the_rhs_between_corners_is_the_friction_continued():
         y = np.array([phi, 40.0])
         window = _switch_window(grid, period, phi, forward=True)
         side = 1.0 if model.guide_normal(None, window)(0.0, y) >= 0.0 else -1.0
-        epsilon = model.rhs(None, window, normal_sign=side)(0.0, y)[1]
+        epsilon = model.rhs(None, window, normal_signs=(side,))(0.0, y)[1]
         assert abs(epsilon - true_rhs(0.0, y)[1]) <= 1e-12 * abs(true_rhs(0.0, y)[1])
         beyond = np.array([window[1] + 0.1, 40.0])
         if any(abs(window[1] - corner) < 1e-9 for corner in (0.5 * math.pi, math.pi, 1.5 * math.pi, 2.0 * math.pi)):
             side = 1.0 if model.guide_normal()(0.0, beyond) >= 0.0 else -1.0  # N's own sign there: only k_j continued
-            before_corners.append(model.rhs(None, window, normal_sign=side)(0.0, beyond)[1] != true_rhs(0.0, beyond)[1])
+            before_corners.append(model.rhs(None, window, normal_signs=(side,))(0.0, beyond)[1] != true_rhs(0.0, beyond)[1])
     assert len(before_corners) >= 20 and all(before_corners)
 
 

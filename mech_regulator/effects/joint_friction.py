@@ -25,11 +25,12 @@ if |M| <= F(0) (the friction with the reactions of the state at rest), epsilon =
 at rest; otherwise it breaks away in the direction of M with the friction at its kinetic value.
 
 Corners (issue 19). F has a kink wherever a joint's relative rate k_j changes sign (|k_j|: the wrist pin's
-rate, the rod's, at 90 and 270 deg; the guide's x' at the dead centres) and where a guide's normal force N
-changes sign (|N|). The first are fixed crank angles (`corner_angles`, periodic in one turn), the solvers restart
-on them as on a table's knots; the second depends on the state (phi, omega and epsilon), a guard N = 0 of its own.
-Between two corners the solvers read F continued along its piece, s_j k_j for |k_j| and s_N N for the guide's |N|
-with the signs s held (`acceleration`'s ratio_signs and normal_sign), so the right-hand side is smooth there.
+rate, the rod's, at 90 and 270 deg; the guide's x' at the dead centres; a linkage's joints likewise) and where a
+guide's normal force N changes sign (|N|: a crank–slider's guide, each prismatic joint of a linkage). The first are
+fixed crank angles (`corner_angles`, periodic in one turn), the solvers restart on them as on a table's knots; the
+second depends on the state (phi, omega and epsilon), a guard N = 0 of its own per guide. Between two corners the
+solvers read F continued along its piece, s_j k_j for |k_j| and s_N N for each guide's |N| with the signs s held
+(`acceleration`'s ratio_signs and normal_signs), so the right-hand side is smooth there.
 """
 
 from __future__ import annotations
@@ -51,6 +52,7 @@ NEWTON_TOLERANCE = 1e-14   # relative size of the last Newton step on epsilon [-
 NEWTON_ITERATIONS = 50     # more means the equation in epsilon has no root (self-locking)
 LOCKING_SAMPLES = 720      # crank angles per turn at which build_model checks for self-locking
 CORNER_SAMPLES = 720       # crank angles per turn at which a joint's relative rate is checked for a sign change
+SAME_CORNER = 1e-9         # corner angles of several joints closer than this [rad] are one corner
 
 
 def reduced_friction_coefficient(f: float) -> float:
@@ -80,8 +82,9 @@ class JointFrictionModel:
     indices: their positions in the kinetostatics' joints; arms: friction-circle radius rho_j [m] of each
     journal, f_guide [-] for the guide; collar: the thrust collar's moment [N m] (0 without one);
     loads: the mechanism's kinetostatics, or None without a mechanism; formula: what it computes;
-    guide: the position in names of a crank–slider's guide (its reaction i N, N the normal force [N]), whose |N|
-    has a corner where N changes sign, or None; corner_angles: the crank angles in [0, 2 pi) [rad] where the
+    guides: the positions in names of the guides with friction (a crank–slider's guide, a linkage's prismatic
+    joints; the reaction i N in the guide's own frame, N the normal force [N]), whose |N| has a corner where N
+    changes sign; corner_angles: the crank angles in [0, 2 pi) [rad] where the
     relative rate k_j of a joint with friction changes sign (a corner of |k_j|; the kinematics repeat every turn);
     corner_signs: the signs of the k_j (in names' order) from each corner angle to the next (the last to the first).
     """
@@ -92,7 +95,7 @@ class JointFrictionModel:
     collar: float
     loads: Kinetostatics | None
     formula: str
-    guide: int | None = None
+    guides: tuple[int, ...] = ()
     corner_angles: tuple[float, ...] = ()
     corner_signs: tuple[tuple[float, ...], ...] = ()
 
@@ -115,22 +118,23 @@ class JointFrictionModel:
         return [(arm * sign * loads.ratios[i], loads.constant[i], loads.per_epsilon[i])
                 for i, arm, sign in zip(self.indices, self.arms, ratio_signs)]
 
-    def _size(self, joint: int, reaction: complex, normal_sign: float) -> float:
-        """|R_j| [N] of joint position `joint` (in names); a guide's |N| continued across N = 0 as s_N N with
-        normal_sign s_N (+1 or -1; 0: |N| itself)."""
-        if joint == self.guide and normal_sign != 0.0:
-            return normal_sign * reaction.imag
-        return abs(reaction)
+    def _normal_sign(self, joint: int, normal_signs: tuple[float, ...]) -> float:
+        """The sign s_N (+1 or -1) held for joint position `joint` (in names) when it is a guide whose |N| is read as
+        s_N N (normal_signs: one per guide, in guides' order; () or 0: |N| itself), else 0."""
+        if joint in self.guides and normal_signs:
+            return normal_signs[self.guides.index(joint)]
+        return 0.0
 
     def acceleration(self, phi: float, omega: float, force: float, inertia: float, moment: float,
-                     ratio_signs: tuple[float, ...] | None = None, normal_sign: float = 0.0) -> float:
+                     ratio_signs: tuple[float, ...] | None = None, normal_signs: tuple[float, ...] = ()) -> float:
         """epsilon [rad/s^2] solving `J epsilon = M - sign(omega) F(epsilon)` (module docstring) at crank angle
         phi [rad], speed omega [rad/s], output-link force Q [N or N m], reduced inertia J [kg m^2] and every
         other moment M [N m]; at rest, 0 while |M| <= F(0). NaN if Newton's method does not converge.
-        ratio_signs, normal_sign: F continued along its piece between two corners (module docstring; _terms,
-        _size); None and 0: F itself."""
+        ratio_signs, normal_signs: F continued along its piece between two corners (module docstring; _terms,
+        _normal_sign: |R_j| of a guide read as s_N N = s_N Im R_j); None and (): F itself."""
         terms = self._terms(phi, omega, force, ratio_signs)
-        at_rest = self.collar + sum(weight * self._size(j, r0, normal_sign) for j, (weight, r0, _) in enumerate(terms))
+        held = [self._normal_sign(j, normal_signs) for j in range(len(terms))]
+        at_rest = self.collar + sum(weight * (s * r0.imag if s else abs(r0)) for (weight, r0, _), s in zip(terms, held))
         if omega > 0.0:
             sign = 1.0
         elif omega < 0.0:
@@ -144,12 +148,12 @@ class JointFrictionModel:
             return epsilon
         for _ in range(NEWTON_ITERATIONS):
             friction, slope = self.collar, 0.0
-            for j, (weight, r0, r1) in enumerate(terms):
+            for (weight, r0, r1), s in zip(terms, held):
                 reaction = r0 + r1 * epsilon
-                size = self._size(j, reaction, normal_sign)
+                size = s * reaction.imag if s else abs(reaction)
                 friction += weight * size
-                if j == self.guide and normal_sign != 0.0:
-                    slope += weight * normal_sign * r1.imag
+                if s:
+                    slope += weight * s * r1.imag
                 elif size > 0.0:
                     slope += weight * (r1.real * reaction.real + r1.imag * reaction.imag) / size
             step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
@@ -158,11 +162,12 @@ class JointFrictionModel:
                 return epsilon
         return math.nan
 
-    def guide_normal(self, phi: float, omega: float, epsilon: float, force: float) -> float:
-        """The guide's normal force N [N] (signed; the guard of its corner) at crank angle phi [rad], speed omega
-        [rad/s], acceleration epsilon [rad/s^2] and output force Q [N]; the machine must have a guide with friction."""
+    def guide_normal(self, phi: float, omega: float, epsilon: float, force: float, guide: int = 0) -> float:
+        """The normal force N [N] of guide number `guide` (in guides' order; signed, the guard of its corner) at crank
+        angle phi [rad], speed omega [rad/s], acceleration epsilon [rad/s^2] and output force Q [N or N m]; the
+        machine must have that guide with friction."""
         loads = self.loads(phi, omega, force)
-        index = self.indices[self.guide]
+        index = self.indices[self.guides[guide]]
         return (loads.constant[index] + loads.per_epsilon[index] * epsilon).imag
 
     def joint_values(self, phi: float, omega: float, epsilon: float, force: float
@@ -204,7 +209,7 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
     else:
         journals = {name: getattr(spec.joints, name) for name in type(spec.joints).model_fields}
         slides = {"guide"}
-    names, indices, arms = [], [], []
+    names, indices, arms, guides = [], [], [], []
     for index, joint in enumerate(joints):
         journal = journals.get(joint)
         if journal is not None:
@@ -213,23 +218,23 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
         elif joint in slides and spec.guide > 0.0:
             arm = spec.guide
             parts.append(f"{joint} f = {arm:g}")
+            guides.append(len(names))
         else:
             continue
         names.append(joint)
         indices.append(index)
         arms.append(arm)
-    guide = names.index("guide") if mechanism.type == "crank_slider" and "guide" in names else None
     corners = _corner_angles(loads, indices)
     middles = [0.5 * (a + b) for a, b in zip(corners, corners[1:] + (corners[0] + 2.0 * math.pi,))] if corners else []
     signs = tuple(tuple(1.0 if loads(phi, 0.0, 0.0).ratios[i] >= 0.0 else -1.0 for i in indices) for phi in middles)
     return JointFrictionModel(tuple(names), tuple(indices), tuple(arms), collar_moment, loads,
-                              f"f = {f:g}: " + ", ".join(parts), guide, corners, signs)
+                              f"f = {f:g}: " + ", ".join(parts), tuple(guides), corners, signs)
 
 
 def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...]:
     """The crank angles in [0, 2 pi) [rad] where the relative rate k_j(phi) of one of the joints at `indices` of
     the kinetostatics changes sign: sampled at CORNER_SAMPLES + 1 angles over a turn (a zero counting as
-    positive), each change located by Brent's method."""
+    positive), each change located by Brent's method; roots of several joints within SAME_CORNER are one corner."""
     angles = np.linspace(0.0, 2.0 * math.pi, CORNER_SAMPLES + 1)
     corners = set()
     for index in indices:
@@ -240,7 +245,13 @@ def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...
             root = optimize.brentq(rate, angles[k], angles[k + 1], xtol=1e-15, rtol=4.0 * np.finfo(float).eps)
             angle = root % (2.0 * math.pi)
             corners.add(0.0 if 2.0 * math.pi - angle < 1e-12 else angle)  # a root at the turn's end is its start
-    return tuple(sorted(corners))
+    merged: list[float] = []
+    for angle in sorted(corners):
+        if not merged or angle - merged[-1] > SAME_CORNER:
+            merged.append(angle)
+    if len(merged) > 1 and merged[0] + 2.0 * math.pi - merged[-1] <= SAME_CORNER:
+        merged.pop()  # the same corner on both sides of the turn's start
+    return tuple(merged)
 
 
 def worst_locking(friction: JointFrictionModel, inertia: Callable[[float], float]) -> tuple[float, float]:

@@ -33,7 +33,8 @@ class JointLoads(NamedTuple):
 
     constant, per_epsilon: reactions R = constant + per_epsilon * epsilon as complex Fx + i Fy [N] and
     [N s^2/rad]: the crank bearing F_01, the crank pin F_12, then F_23 (wrist pin / rocker pin) and the
-    guide's normal force i N (crank–slider) or the rocker bearing F_03 (four-bar);
+    guide's normal force i N (crank–slider) or the rocker bearing F_03 (four-bar); a linkage's in its joints'
+    order (linkage.make_joint_loads), a prismatic joint's as i N in the guide's own frame, as the crank–slider's;
     balancing: (M_b0 [N m], M_b1 [kg m^2]), the balancing moment M_b = M_b0 + M_b1 epsilon on the crank;
     ratios: the relative angular speed of the two links of each joint over omega [-] (for the guide, the
     slider's velocity over omega, dx/dphi [m/rad]).

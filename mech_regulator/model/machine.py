@@ -326,7 +326,7 @@ class MachineModel:
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
             mode: Mode | None = None, ideal: bool = False, kinks: bool = True,
-            anchors: tuple[float, ...] | None = None, normal_sign: float = 0.0) -> RightHandSide:
+            anchors: tuple[float, ...] | None = None, normal_signs: tuple[float, ...] = ()) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
@@ -350,22 +350,25 @@ class MachineModel:
         link (the drive's scaled by the throttle). anchors (one per state_tables entry, in their units, an angular
         one's in the wrapped phi the solver integrates): each table read at a function of the state continued along the
         piece that holds that value (no step straddles its breakpoint either); None: the tables as they are.
-        normal_sign (+1 or -1; 0: |N|): joint friction's guide force f |x'| |N| read as f |x'| s_N N, continued across
-        N = 0 between two crossings of the guard guide_normal locates (effects.joint_friction).
+        normal_signs (one per guide with friction, +1 or -1, in joint_friction.guides' order; (): |N|): each guide's
+        friction f |x'| |N| (a crank–slider's guide, a linkage's prismatic joints) read as f |x'| s_N N, continued
+        across N = 0 between two crossings of the guard guide_normal locates (effects.joint_friction).
         """
         return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False,
-                                     anchors=anchors, normal_sign=normal_sign)
+                                     anchors=anchors, normal_signs=normal_signs)
 
     def guide_normal(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
                      mode: Mode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
-                     normal_sign: float = 0.0) -> Callable[[float, np.ndarray], float] | None:
-        """(t, y) -> the crank–slider guide's normal force N [N] with the acceleration of rhs(piece, window, mode,
-        kinks=kinks, anchors=anchors, normal_sign=normal_sign) (the guard of the corner of its friction f |x'| |N|),
-        or None for a machine without a guide with friction."""
-        if self.joint_friction is None or self.joint_friction.guide is None:
+                     normal_signs: tuple[float, ...] = (), guide: int = 0
+                     ) -> Callable[[float, np.ndarray], float] | None:
+        """(t, y) -> the normal force N [N] of guide number `guide` with friction (joint_friction.guides' order: a
+        crank–slider's guide, a linkage's prismatic joints) with the acceleration of rhs(piece, window, mode,
+        kinks=kinks, anchors=anchors, normal_signs=normal_signs) (the guard of the corner of its friction f |x'| |N|),
+        or None for a machine without that guide with friction."""
+        if self.joint_friction is None or guide >= len(self.joint_friction.guides):
             return None
         return self._right_hand_side(piece, window if kinks else None, window, mode, False, crank_only=False,
-                                     anchors=anchors, normal_sign=normal_sign, normal=True)
+                                     anchors=anchors, normal_signs=normal_signs, normal=guide)
 
     @functools.cached_property
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
@@ -377,9 +380,9 @@ class MachineModel:
     def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
                          window: tuple[float, float] | None, mode: Mode | None,
                          ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None,
-                         normal_sign: float = 0.0, normal: bool = False) -> Callable:
-        """rhs (see there) or, crank_only, crank_side, or, normal, guide_normal; segment: the window when its tables
-        continue along one segment (rhs's kinks), else None; anchors, normal_sign: rhs's."""
+                         normal_signs: tuple[float, ...] = (), normal: int | None = None) -> Callable:
+        """rhs (see there) or, crank_only, crank_side, or, normal (a guide's number), guide_normal; segment: the window
+        when its tables continue along one segment (rhs's kinks), else None; anchors, normal_signs: rhs's."""
         held = dict(zip((table.name for table in self.state_tables), anchors)) if anchors is not None else {}
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
@@ -452,9 +455,9 @@ class MachineModel:
                 epsilon, train_rates = train(t, y, J, net, offset + slope * t)
             if friction is not None:  # J epsilon = J epsilon_0 - sign(omega) F(epsilon), effects.joint_friction
                 force = output_force(t, phi, omega, q, dq, share)
-                epsilon = friction.acceleration(phi, omega, force, J, J * epsilon, ratio_signs, normal_sign)
-                if normal:
-                    return friction.guide_normal(phi, omega, epsilon, force)
+                epsilon = friction.acceleration(phi, omega, force, J, J * epsilon, ratio_signs, normal_signs)
+                if normal is not None:
+                    return friction.guide_normal(phi, omega, epsilon, force, normal)
             rates = [omega, epsilon]
             if governor_rates is not None:
                 rates += governor_rates(y)

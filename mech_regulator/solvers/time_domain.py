@@ -89,7 +89,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     counts = _switch_counts(y[0], switches)
     tables = model.state_tables if kinks else ()
     held = _held_pieces(tables, y)
-    normal_side, crossed_normal = 0.0, False  # joint friction's guide: the held sign of N, and just crossed it
+    normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, and the one just crossed
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
@@ -105,12 +105,11 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         anchors = anchors if tables else None
         y_wrapped = y.copy()
         y_wrapped[0] -= offset
-        normal_side, normal_guard = _normal_guard(model, piece, window, mode, kinks, anchors, t, y_wrapped, offset,
-                                                  normal_side, crossed_normal)
-        crossed_normal = False
-        if normal_guard is not None:
-            guards.append(normal_guard)
-        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_sign=normal_side)
+        normal_sides, normal_guards = _normal_guards(model, piece, window, mode, kinks, anchors, t, y_wrapped, offset,
+                                                     normal_sides, crossed_normal)
+        crossed_normal = None
+        guards += list(normal_guards)
+        rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_sides)
         constraint = model.constraint(mode)
         interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
         solver = _solver(settings, rhs, t, y_wrapped, t_end, first_step)
@@ -150,10 +149,12 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
                             dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint,
                                                        y_step[0], trajectory)
-                    elif guard in breakpoints or guard is normal_guard:  # a table's breakpoint or the guide's N = 0:
-                        trajectory.stats.switches += 1               # the next piece, mode and state kept
-                        if guard is normal_guard:
-                            normal_side, crossed_normal = -normal_side, True
+                    elif guard in breakpoints or guard in normal_guards:  # a table's breakpoint or a guide's N = 0:
+                        trajectory.stats.switches += 1                  # the next piece, mode and state kept
+                        if guard in normal_guards:
+                            crossed_normal = normal_guards[guard]
+                            normal_sides = tuple(-side if k == crossed_normal else side
+                                                 for k, side in enumerate(normal_sides))
                         else:
                             table, step = breakpoints[guard]
                             held[table] += step
@@ -247,27 +248,34 @@ def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
     return guards
 
 
-def _normal_guard(model: MachineModel, piece, window, mode, kinks: bool, anchors, t: float, y: np.ndarray,
-                  offset: float, side: float, crossed: bool) -> tuple[float, Guard | None]:
-    """Joint friction's guide at a restart (t [s], y with phi wrapped by offset [rad]): (the sign s of its normal
-    force N that the rhs holds, normal_sign, and the guard s N >= 0 whose crossing flips it), or (0, None) for a
-    machine without a guide with friction or a multistep method (kinks False: it steps over kinks, N's too). The sign
-    is N's at the start, or, just after the guard crossed (crossed), the side it crossed to (side, already flipped);
-    its level then starts at the start's value when that is within the method's error across 0 (as
-    _breakpoint_guards), instead of firing again at once."""
-    if not kinks or model.guide_normal(piece, window, mode, kinks, anchors) is None:
-        return 0.0, None
-    if not crossed:
-        side = 1.0 if model.guide_normal(piece, window, mode, kinks, anchors)(t, y) >= 0.0 else -1.0
-    normal = model.guide_normal(piece, window, mode, kinks, anchors, normal_sign=side)
-    low = min(0.0, side * normal(t, y))
+def _normal_guards(model: MachineModel, piece, window, mode, kinks: bool, anchors, t: float, y: np.ndarray,
+                   offset: float, sides: tuple[float, ...], crossed: int | None
+                   ) -> tuple[tuple[float, ...], dict[Guard, int]]:
+    """Joint friction's guides at a restart (t [s], y with phi wrapped by offset [rad]): (the signs s of their normal
+    forces N that the rhs holds, normal_signs, and the guards s N >= 0 whose crossing flips one, each with its
+    guide's number), or ((), {}) for a machine without a guide with friction or a multistep method (kinks False: it
+    steps over kinks, N's too). A sign is N's at the start, or, for the guide whose guard just crossed (crossed, its
+    number), the side it crossed to (sides, already flipped); that guard's level then starts at the start's value
+    when that is within the method's error across 0 (as _breakpoint_guards), instead of firing again at once."""
+    count = len(model.joint_friction.guides) if kinks and model.joint_friction is not None else 0
+    if count == 0:
+        return (), {}
+    sides = tuple(side if k == crossed else
+                  1.0 if model.guide_normal(piece, window, mode, kinks, anchors, guide=k)(t, y) >= 0.0 else -1.0
+                  for k, side in enumerate(sides or (0.0,) * count))
+    guards = {}
+    for k, side in enumerate(sides):
+        normal = model.guide_normal(piece, window, mode, kinks, anchors, normal_signs=sides, guide=k)
+        low = min(0.0, side * normal(t, y))
 
-    def level(tau: float, state: np.ndarray) -> float:
-        shifted = np.array(state, dtype=float)
-        shifted[0] -= offset
-        return side * normal(tau, shifted) - low
+        def level(tau: float, state: np.ndarray, side: float = side, normal=normal, low: float = low) -> float:
+            shifted = np.array(state, dtype=float)
+            shifted[0] -= offset
+            return side * normal(tau, shifted) - low
 
-    return side, Guard("guide's normal force changes sign", level, lambda tau, state: (mode, state), timed=True)
+        name = f"{model.joint_friction.names[model.joint_friction.guides[k]]}'s normal force changes sign"
+        guards[Guard(name, level, lambda tau, state: (mode, state), timed=True)] = k
+    return sides, guards
 
 
 def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: float | None):

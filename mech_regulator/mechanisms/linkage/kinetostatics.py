@@ -126,11 +126,13 @@ def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[floa
     """The linkage's kinetostatics in the form joint friction reads (mechanisms.kinetostatics.JointLoads) and its
     joint names (the linkage's order): `loads(phi, omega, Q)` gives every joint's reaction affine in epsilon,
     `R = R0 + R1 epsilon` (R0 at (omega, epsilon = 0, Q) with gravity, R1 at (0, 1, 0) without: the reactions are
-    linear in (omega^2, epsilon, g, Q)), as a force Fx + i Fy [N]: a revolute joint's on its first link from its
-    second, a prismatic joint's normal force on the slider N i w (w the guide's direction; its couple, which
-    joint friction does not read, is left out); the balancing moment (M_b0 [N m], M_b1 [kg m^2]); and the ratios
-    (module kinetostatics.JointLoads): a revolute joint's relative angular speed theta_a' - theta_b' [-], a prismatic
-    joint's sliding speed over omega, `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]."""
+    linear in (omega^2, epsilon, g, Q)): a revolute joint's, the force on its first link from its second, Fx + i Fy
+    [N]; a prismatic joint's, the normal force on the slider in the guide's own frame, i N [N] (as a crank–slider's
+    guide: N along i w, w the guide's direction; its couple, which joint friction does not read, is left out), so
+    |R| = |N| and Im R = N, whose sign changes joint friction locates; the balancing moment (M_b0 [N m], M_b1
+    [kg m^2]); and the ratios (module kinetostatics.JointLoads): a revolute joint's relative angular speed
+    theta_a' - theta_b' [-], a prismatic joint's sliding speed over omega,
+    `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]."""
     reactions = _solver(linkage, structure, gravity)
     joints = linkage.joints
 
@@ -144,7 +146,7 @@ def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[floa
                 P_s, dP_s, _ = motion(poses[b], linkage.link(b).points[joint.name])
                 r_g, theta_g, dr_g, dtheta_g = poses[a][:4]
                 w = cmath.exp(1j * (joint.direction + theta_g))
-                forces.append((first[0] * 1j * w, first[1] * 1j * w))
+                forces.append((first[0] * 1j, first[1] * 1j))
                 ratios.append(((dP_s - dr_g - 1j * dtheta_g * (P_s - r_g)) * w.conjugate()).real)
             else:
                 forces.append((complex(first[0], second[0]), complex(first[1], second[1])))

@@ -631,7 +631,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         body += _joint_friction_lines(model, p, specs, share, anchor, "q_anchor" if kinked else "q", friction_slot)
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
-        if friction.guide is not None:  # s_N N - its start level, with the rhs's epsilon (the body up to here)
+        if friction.guides:  # s_N N - its start level, with the rhs's epsilon (the body up to here)
             side, low = f"p[{friction_slot + 4}]", f"p[{friction_slot + 5}]"
             copy = [line.replace("dydt[", "rates[") for line in body]
             guard_lines += [f"if {side} != 0.0:", f"    rates = k.np.empty({len(model.state_names())})"]
