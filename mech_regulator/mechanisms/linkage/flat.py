@@ -486,16 +486,23 @@ COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1
 @functools.cache
 def compiled(name: str):
     """The numba-compiled form of this module's function `name` (COMPILED_FUNCTIONS), the same source the
-    reference path and the fast path's generated right-hand sides run (numba imported here, on first use). Its first
-    compilation on a machine (5-15 s) is announced on stderr; numba's disk cache keeps it for later runs."""
+    reference path and the fast path's generated right-hand sides run (numba imported here, on first use; numba
+    compiles it at its first call, or loads it from its disk cache)."""
     from numba import njit
-    from numba.core.caching import FunctionCache
 
     _registered()
-    function = njit(cache=True)(globals()[name])
-    if not FunctionCache(function.py_func)._cache_file._load_index():  # nothing on disk for this source yet
+    return njit(cache=True)(globals()[name])
+
+
+def compiled_announced(name: str):
+    """compiled(name), saying on stderr when its first call will compile it (5-15 s, once per machine: nothing in
+    numba's disk cache for this source yet), for the callers that call it next (kinematics.py)."""
+    from numba.core.caching import FunctionCache
+
+    function = compiled(name)
+    if not function.signatures and not FunctionCache(function.py_func)._cache_file._load_index():
         print(f"note: compiling the linkage solver's {name} once (about 5-15 s; later runs load it at once)",
-              file=sys.stderr, flush=True)  # numba compiles it at its first call
+              file=sys.stderr, flush=True)
     return function
 
 
@@ -506,5 +513,5 @@ def compile_all(report) -> None:
 
     for name, signature in COMPILED_FUNCTIONS.items():
         started = time.perf_counter()
-        compiled(name).compile(signature)
+        compiled_announced(name).compile(signature)
         report(f"  the linkage solver's {name} ready in {time.perf_counter() - started:.1f} s")

@@ -32,7 +32,7 @@ def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]
     that cannot assemble, or is at a dead point, and the angle (groups.failure_message)."""
     program = flat.encode(linkage, groups, None)
     names = list(flat.link_indices(linkage))
-    solve_poses = flat.compiled("solve_poses")
+    solve_poses = flat.compiled_announced("solve_poses")
 
     def solve_at(phi: float, derivatives: bool = True) -> dict[str, Pose]:
         poses = np.empty(flat.POSE_SIZE * len(names))
@@ -64,7 +64,7 @@ def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, f
     mechanisms/__init__.py; flat.reduced_from_poses gives the sums): the compiled flat.reduced on the linkage's
     program; where it gives NaN (a group fails), the LinkageError of make_solver."""
     program = flat.encode(linkage, structure.groups, gravity)
-    compiled = flat.compiled("reduced")
+    compiled = flat.compiled_announced("reduced")
 
     def reduced(phi: float) -> tuple[float, float, float, float, float]:
         values = compiled(phi, program, 0)
