@@ -29,7 +29,7 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
-from mech_regulator.nodes.launch import private_environment  # noqa: E402
+from mech_regulator.nodes.launch import private_environment, wait_for_a_quiet_graph  # noqa: E402
 
 WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a test measures)
 ANSWER_WAIT = 10.0  # [s] of wall time before a service request that got no answer is sent again
@@ -308,6 +308,8 @@ class Probe:
         return publisher
 
     def close(self) -> None:
+        """Destroy the node once the graph is quiet (nodes.launch.wait_for_a_quiet_graph: a Fast DDS deadlock)."""
+        wait_for_a_quiet_graph(self.node, lambda timeout: self.executor.spin_once(timeout_sec=timeout))
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)

@@ -22,6 +22,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 import yaml
 
@@ -32,6 +33,8 @@ from mech_regulator.scene.limits import exchange_refusal, output_stem
 OVERSPEED_TRIP_FACTOR = 1.25  # default trip speed: this times the scene's initial speed
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
+GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
+GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
 
 
@@ -231,8 +234,24 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
                           file=sys.stderr)
                     return
         finally:
+            wait_for_a_quiet_graph(node, lambda timeout: rclpy.spin_once(node, timeout_sec=timeout))
             node.destroy_node()
             rclpy.try_shutdown()
+
+
+def wait_for_a_quiet_graph(node, spin: Callable[[float], None], quiet: float = GRAPH_QUIET,
+                           limit: float = GRAPH_QUIET_LIMIT) -> None:
+    """Spin (`spin(timeout [s])`) until the nodes `node` sees on its domain have not changed for `quiet` s of wall
+    time, at most `limit` s. Fast DDS can deadlock when a participant is destroyed while it handles another's leaving
+    (eProsima/Fast-DDS#6193 and kin; seen here once as a hang), so a node is destroyed once the nodes that were ending
+    as it closes (the machine's peers at the end of a run) have left."""
+    deadline = time.monotonic() + limit
+    seen, since = node.get_node_names_and_namespaces(), time.monotonic()
+    while time.monotonic() < deadline and time.monotonic() - since < quiet:
+        spin(0.05)
+        now = node.get_node_names_and_namespaces()
+        if now != seen:
+            seen, since = now, time.monotonic()
 
 
 def _wait_all(processes: dict[str, subprocess.Popen], timeout: float) -> None:
