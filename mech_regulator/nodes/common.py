@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Callable
@@ -39,6 +41,8 @@ WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad mes
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
+DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the process ends anyway (end_if_stuck)
+MATCH_WAIT = 1.0  # [s] of wall time a publisher waits at most to match what the graph lists (deliver_all)
 MATCH_POLL = 0.01  # [s] between two looks at whether a publisher has matched the subscriptions the graph knows
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
@@ -345,13 +349,14 @@ def deliver_all(node: Node, publishers: list | None = None) -> None:
     node's) sent: a node that ends by itself right after its last message (the governor's last state) must not take
     it with it. Acknowledgements count only the subscriptions a publisher has matched, and discovery tells a process
     of a subscription (the graph) and matches its publisher to it (the middleware) separately: so each publisher
-    first waits until it has matched as many subscriptions as the graph knows on its topic."""
+    first waits (at most MATCH_WAIT s) until it has matched as many subscriptions as the graph knows on its topic."""
     for publisher in node.publishers if publishers is None else publishers:
-        deadline = time.monotonic() + ACK_WAIT
+        deadline = time.monotonic() + MATCH_WAIT  # a subscription the graph still lists may never match (its node
+        # was killed and its lease has not run out yet, or its QoS does not fit)
         while publisher.get_subscription_count() < node.count_subscribers(publisher.topic_name) \
                 and time.monotonic() < deadline:
             time.sleep(MATCH_POLL)
-        publisher.wait_for_all_acked(Duration(seconds=max(deadline - time.monotonic(), 0.0)))
+        publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
 
 
 def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
@@ -365,6 +370,7 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
     rclpy.init(args=sys.argv)
     node = None
     name = node_label(node_factory)
+    code = EXIT_FAILED  # an unexpected error: it propagates, the process ends with 1
     try:
         node = node_factory()
         executor = EventsExecutor()
@@ -376,33 +382,52 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
                 executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
             if rclpy.ok():
                 deliver_all(node)
-        return 0
+        code = 0
     except SceneError as error:
         print(f"mech_regulator: {name}: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        code = EXIT_BAD_INPUT
     except PeerError as error:
         print(f"mech_regulator: {name}: {error}", file=sys.stderr)
-        return EXIT_FAILED
+        code = EXIT_FAILED
     except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C: a normal way to stop a node
-        return 0
+        code = 0
     except rclpy.exceptions.ParameterException as error:  # a parameter override outside its range or type
         print(f"mech_regulator: {name}: {error}", file=sys.stderr)
-        return EXIT_BAD_INPUT
+        code = EXIT_BAD_INPUT
     except Exception as error:
         if interrupted() or not rclpy.ok():  # Ctrl-C in the middle of a call into rclpy
-            return 0
-        if node is None and isinstance(error, (ArithmeticError, RecursionError, MemoryError)):
+            code = 0
+        elif node is None and isinstance(error, (ArithmeticError, RecursionError, MemoryError)):
             print(f"mech_regulator: {name}: the scene cannot be computed with ({type(error).__name__}: {error}); "
                   "expected the values of a real machine", file=sys.stderr)  # a scene beyond the limits' reach
-            return EXIT_BAD_INPUT
-        raise
+            code = EXIT_BAD_INPUT
+        else:
+            raise
     finally:
         try:
             if node is not None:
                 close = getattr(node, "close", None)
                 if close is not None:
                     close()
+            end_if_stuck(code)
+            if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()  # rclpy's SIGINT handler may shut the context down at any moment
         except KeyboardInterrupt:  # the interrupt that stops the node, surfacing late (rclpy defers it)
             pass
+    return code
+
+
+def end_if_stuck(code: int) -> None:
+    """End the process with `code` (os._exit) should destroying its node and rclpy's context take longer than
+    DESTROY_WAIT s: Fast DDS can deadlock when a participant is destroyed while it handles another's leaving
+    (eProsima/Fast-DDS#6193 and kin; seen as a node that never ended after its run), and by then everything the node
+    owes is sent and acknowledged, and its files closed."""
+    def end() -> None:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+
+    watchdog = threading.Timer(DESTROY_WAIT, end)
+    watchdog.daemon = True
+    watchdog.start()

@@ -38,7 +38,7 @@ from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
 FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished
-MATCH_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers before it subscribes to the machine
+STREAMS_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers (subscribe_to_the_machine)
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 
@@ -262,12 +262,12 @@ class RecorderNode(Node):
 
     def subscribe_to_the_machine(self) -> None:
         """Subscribe to joint_states once the streams the run needs (the machine's moments, a governor's state) have
-        matched their publishers, or after MATCH_WAIT s: the machine starts as soon as its peers subscribe to
+        matched their publishers, or after STREAMS_WAIT s: the machine starts as soon as its peers subscribe to
         joint_states, and a short run could otherwise end before a stream has matched the recorder, its samples
         lost with the node that sent them."""
         waited = time.monotonic()
         while rclpy.ok() and any(stream.get_publisher_count() == 0 for stream in self.streams) \
-                and time.monotonic() - waited < MATCH_WAIT:
+                and time.monotonic() - waited < STREAMS_WAIT:
             self.executor.spin_once(timeout_sec=MATCH_POLL)
         self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
 
