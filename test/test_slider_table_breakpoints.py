@@ -17,12 +17,11 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from support import simulate_complete
-from test_table_knots import assert_meets_rtol
+from test_table_knots import assert_meets_rtol, restarted_reference
 
 RUN_TIME = 0.3  # [s]: about 5 turns at 104 rad/s, 6 breakpoint crossings a turn
 
@@ -56,10 +55,7 @@ def crossing_reference() -> tuple[np.ndarray, np.ndarray]:
             return [omega, epsilon + (line - np.interp(x, positions, forces)) * dx / model.inertia(y[0])[0]]
         return rhs
 
-    options = {"method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
-    t, y = 0.0, np.array([model.scene.scenario.initial.phi, model.scene.scenario.initial.omega])
-    times, omegas = [t], [y[1]]
-    while t < RUN_TIME:
+    def piece(y):
         ahead = slider(y[0] + 1e-6)[0]  # x just after the restart: which segment the piece is on
         k = int(np.clip(np.searchsorted(positions, ahead, side="right") - 1, 0, len(slopes) - 1))
         events = []
@@ -69,15 +65,10 @@ def crossing_reference() -> tuple[np.ndarray, np.ndarray]:
                     return slider(y[0])[0] - x_k
                 event.terminal, event.direction = True, direction
                 events.append(event)
-        rhs = piece_rhs(k)
-        found = solve_ivp(rhs, (t, RUN_TIME), y, events=events, **options)
-        hits = [float(event_times[0]) for event_times in found.t_events if event_times.size]
-        t_next = min(hits) if found.status == 1 else RUN_TIME
-        y = solve_ivp(rhs, (t, t_next), y, **options).y[:, -1].copy()
-        t = t_next
-        times.append(t)
-        omegas.append(y[1])
-    return np.array(times), np.array(omegas)
+        return piece_rhs(k), events, None
+
+    initial = model.scene.scenario.initial
+    return restarted_reference(piece, np.array([initial.phi, initial.omega]), RUN_TIME)
 
 
 @pytest.mark.parametrize("method, rtol, path", [("DOP853", 1e-8, "reference"), ("DOP853", 1e-10, "reference"),

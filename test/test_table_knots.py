@@ -60,23 +60,41 @@ def knot_reference() -> tuple[np.ndarray, np.ndarray]:
             return [omega, epsilon - area * dq * (line - table) / J]
         return rhs
 
-    t, y = 0.0, np.array([0.0, model.scene.scenario.initial.omega])
-    times, omegas = [t], [y[1]]
-    while t < ENGINE_TIME:
+    def piece(y):
         base = cycle * math.floor(y[0] / cycle)
         k = int(np.searchsorted(ends, y[0] - base + 1e-12, side="right")) - 1
-        rhs, phi_next = piece_rhs(base, k), base + ends[k + 1]
+        phi_next = base + ends[k + 1]
 
         def knot(t, y):
             return y[0] - phi_next
         knot.terminal, knot.direction = True, 1.0
-        options = {"method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
-        found = solve_ivp(rhs, (t, ENGINE_TIME), y, events=knot, **options)
-        t_next = float(found.t_events[0][0]) if found.status == 1 else ENGINE_TIME
-        onto = solve_ivp(rhs, (t, t_next), y, **options)
-        t, y = t_next, onto.y[:, -1].copy()
-        if found.status == 1:
+
+        def land(y):
             y[0] = phi_next
+            return y
+        return piece_rhs(base, k), [knot], land
+
+    return restarted_reference(piece, np.array([0.0, model.scene.scenario.initial.omega]), ENGINE_TIME)
+
+
+def restarted_reference(piece, y0: np.ndarray, t_end: float) -> tuple[np.ndarray, np.ndarray]:
+    """(times [s], omega [rad/s]) at every restart of a run by solve_ivp (DOP853, rtol = atol = 1e-12) restarted
+    piece by piece: `piece(y) -> (rhs, events, land)` gives the right-hand side of the piece the state y starts on,
+    the terminal events that end it and `land(y) -> y` (or None) setting the state onto the crossing. The crossing
+    is located by the first event and the state there taken from a second solve_ivp that ends exactly on it (not
+    from the dense output)."""
+    options = {"method": "DOP853", "rtol": 1e-12, "atol": 1e-12}
+    t, y = 0.0, y0
+    times, omegas = [t], [y[1]]
+    while t < t_end:
+        rhs, events, land = piece(y)
+        found = solve_ivp(rhs, (t, t_end), y, events=events, **options)
+        hits = [float(event_times[0]) for event_times in found.t_events if event_times.size]
+        t_next = min(hits) if found.status == 1 else t_end
+        y = solve_ivp(rhs, (t, t_next), y, **options).y[:, -1].copy()
+        if found.status == 1 and land is not None:
+            y = land(y)
+        t = t_next
         times.append(t)
         omegas.append(y[1])
     return np.array(times), np.array(omegas)
