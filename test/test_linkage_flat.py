@@ -18,7 +18,7 @@ from mech_regulator.solvers.compiled import fast_path_refusal
 from mech_regulator.solvers.compiled.codegen import generate
 from support import model_of, simulate_complete
 from test_compiled_path import assert_same_rhs, driven_four_bar
-from test_linkage import four_bar_linkage
+from test_linkage import DYADS, four_bar_linkage
 from test_linkage_scene import FOUR_BAR_LINKAGE
 
 LINKAGE_SCENES = ["shaper", "sieve_shaker", "six_bar_press", "walking_beam_linkage"]
@@ -150,3 +150,45 @@ def test_a_slider_table_on_a_linkage_output_runs_the_same_on_both_paths():
     omega_fast = np.array([fast(t)[1] for t in times])
     np.testing.assert_allclose(omega_fast, omega_reference, rtol=0.0, atol=1e-12 * np.max(np.abs(omega_reference)))
     assert_same_rhs(model, [None], window=(kinks[0] + 1e-3, kinks[1] - 1e-3))
+
+
+@pytest.mark.parametrize("kind", sorted(DYADS))
+def test_a_dyads_inverse_by_elimination_is_numpys_inverse(kind):
+    """flat.invert_dyad (the external joints' 2 x 3 rows, then a 2 x 2 system for the internal joint) against
+    np.linalg.inv of the same group matrix, plain Python, at six crank angles: equal to 1e-12 of the largest entry
+    and A A^-1 = I."""
+    linkage = DYADS[kind]()
+    structure = analyse(linkage)
+    program = flat.encode(linkage, structure.groups, None)
+    g = flat.HEADER_SIZE + flat.LINK_SIZE * int(program[0])
+    poses, scratch = np.empty(flat.POSE_SIZE * int(program[0])), np.empty(flat.SCRATCH_SHAPE)
+    for phi in np.linspace(0.3, 2.0 * math.pi, 6):
+        assert flat.solve_poses(phi, program, 0, poses, scratch, False)[0] == flat.SOLVED
+        A, inverse, known = np.empty((6, 6)), np.empty((6, 6)), np.empty((2, 6))
+        flat.group_matrix(program, g, poses, A, known)
+        assert flat.invert_dyad(A, inverse)
+        expected = np.linalg.inv(A)
+        np.testing.assert_allclose(inverse, expected, rtol=0.0, atol=1e-12 * np.abs(expected).max())
+        np.testing.assert_allclose(A @ inverse, np.eye(6), rtol=0.0, atol=1e-12)
+
+
+def test_a_group_at_a_dead_point_is_named_with_its_angle():
+    """A change-point four-bar (crank 1, coupler 3, rocker 1, frame 3): at phi = 180 deg its coupler and rocker lie
+    stretched along one line (|B - D| = b + c), at 0 deg folded (|B - D| = b - c), where A is singular: solve and
+    reduced name the group's dead point, plain Python flat.solve_poses gives the same status; a degree away the
+    group solves."""
+    linkage = four_bar_linkage(a=1.0, b=3.0, c=1.0, d=3.0, th1=0.0)
+    structure = analyse(linkage)
+    reduced = make_reduced(linkage, structure, None)
+    program = flat.encode(linkage, structure.groups, None)
+    for phi, degrees in ((math.pi, "180.000"), (0.0, "0.000")):
+        expected = (f"RRR group C (links coupler, rocker) is at a dead point at crank angle {degrees} deg: its "
+                    "links are aligned and its velocity ratios infinite")
+        with pytest.raises(LinkageError) as from_solve:
+            solve(linkage, structure, phi)
+        with pytest.raises(LinkageError) as from_reduced:
+            reduced(phi)
+        assert str(from_solve.value) == str(from_reduced.value) == expected
+        plain = flat.solve_poses(phi, program, 0, np.empty(flat.POSE_SIZE * 4), np.empty(flat.SCRATCH_SHAPE), True)
+        assert plain[:2] == (flat.DEAD_POINT, 0)
+        assert all(math.isfinite(value) for value in reduced(phi + math.radians(1.0)))

@@ -7,18 +7,23 @@ mechanisms/__init__.py; `solve_poses` the links' poses and their phi-derivatives
 (and the group and numbers that explain it) instead of raising, so the callers write the message (kinematics.py).
 Each function is plain Python; `compiled(name)` gives its numba-compiled form (on first use: numba is imported only
 then, so the package loads without it; the functions are registered with numba.extending.register_jitable so that
-compiled code calls them compiled; numba's disk cache keeps them, compiled once per machine).
+compiled code calls them compiled; numba's disk cache keeps them, compiled once per machine). Nothing below
+`reduced` allocates: `solve_poses` works in the poses and the scratch array it is given, and `reduced` allocates
+one workspace per call for both.
 
 The equations (module docstring of groups.py, physics.md section 1): a link's pose is (r, theta), its point p at
-`P = r + p e^{i theta}`; every pose carries [x, y, theta, x', y', theta', x'', y'', theta''] (derivatives with
-respect to the crank angle phi). Per group: position in closed form (RRR, RRP, RPR, PRP, RPP, a redundant link),
-then `A u' = -K k'` and `A u'' = -K k'' - gamma` from the joints' constraint rows (`joint_rows`, `joint_quadratic`),
-A inverted by np.linalg.inv (a redundant link's consistent 4 x 3 system by its
-pseudo-inverse (A^T A)^-1 A^T), refused as a dead point when |A|_max |A^-1|_max > DEAD_POINT_CONDITION.
+`P = r + p e^{i theta}`; every pose carries POSE_SIZE floats [x, y, theta, x', y', theta', x'', y'', theta'',
+cos theta, sin theta] (derivatives with respect to the crank angle phi; e^{i theta} kept so that it is computed once
+per link). Per group: position in closed form (RRR, RRP, RPR, PRP, RPP, a redundant link), then `A u' = -K k'` and
+`A u'' = -K k'' - gamma` from the joints' constraint rows (`joint_rows`, `joint_quadratic`), A inverted by
+elimination in closed form (`invert_dyad`: each external joint's 2 x 3 rows, then a 2 x 2 system for the internal
+joint; a redundant link's consistent 4 x 3 system by its pseudo-inverse (A^T A)^-1 A^T, the 3 x 3 by its
+cofactors), refused as a dead point when A is exactly singular or |A|_max |A^-1|_max > DEAD_POINT_CONDITION.
 
 Program layout (indices into the vector from `base`; link 0 is the frame, the moving links follow in the linkage's
 order; a joint record is JOINT_SIZE floats [kind (0 revolute, 1 prismatic), link a, link b, p_a (x, y), p_b (x, y),
-direction, slider_angle], a and b as in model.Joint.links, p_a, p_b the joint's point in each link [m]):
+the guide's direction u (cos, sin), slider_angle], a and b as in model.Joint.links, p_a, p_b the joint's point in
+each link [m]):
   header: number of links, number of groups, crank link, output kind (0 none, 1 link angle, 2 prismatic joint
   travel), output link, output joint record, gravity (gx, gy) [m/s^2], the crank pivot on the frame (x, y) [m] and
   on the crank (x, y) [m];
@@ -39,11 +44,12 @@ import numpy as np
 
 KIND_CODES = {"RRR": 0, "RRP": 1, "RPR": 2, "PRP": 3, "RPP": 4}
 REDUNDANT = 5
-JOINT_SIZE = 9
+JOINT_SIZE = 10
 LINK_SIZE = 4
 GROUP_SIZE = 4 + 3 * JOINT_SIZE
-POSE_SIZE = 9
+POSE_SIZE = 11
 HEADER_SIZE = 5 + JOINT_SIZE + 6
+SCRATCH_SHAPE = (14, 6)   # differentiate_group's A, A^-1, K k' and K k''
 DEAD_POINT_CONDITION = 1e10   # condition of a group's equations beyond which its ratios count as infinite [-]
 TWO_PI = 2.0 * math.pi
 
@@ -64,7 +70,7 @@ def joint_record(linkage, joint, index: dict[str, int]) -> list[float]:
     a, b = joint.links
     pa, pb = linkage.link(a).points[joint.name], linkage.link(b).points[joint.name]
     return [0.0 if joint.kind == "revolute" else 1.0, float(index[a]), float(index[b]), pa.real, pa.imag, pb.real,
-            pb.imag, joint.direction, joint.slider_angle]
+            pb.imag, math.cos(joint.direction), math.sin(joint.direction), joint.slider_angle]
 
 
 def link_indices(linkage) -> dict[str, int]:
@@ -118,27 +124,43 @@ def _other(program, j, link):
     return int(program[j + 2]) if a == link else a
 
 
+def _unit(angle):
+    """e^{i angle} = cos(angle) + i sin(angle)."""
+    return complex(math.cos(angle), math.sin(angle))
+
+
+def _direction(program, j):
+    """The unit direction u of the prismatic joint j's guide line, in the guide's coordinates."""
+    return complex(program[j + 7], program[j + 8])
+
+
 def _origin(poses, link):
     """The position r [m] of a link's coordinate origin."""
     return complex(poses[POSE_SIZE * link], poses[POSE_SIZE * link + 1])
 
 
+def _turn(poses, link):
+    """e^{i theta} of a link, kept with its pose."""
+    return complex(poses[POSE_SIZE * link + 9], poses[POSE_SIZE * link + 10])
+
+
 def _point(program, j, poses, link):
     """Global position [m] of the joint j's point on `link`: r + p e^{i theta}."""
-    return _origin(poses, link) + _local(program, j, link) * cmath.exp(1j * poses[POSE_SIZE * link + 2])
+    return _origin(poses, link) + _local(program, j, link) * _turn(poses, link)
 
 
-def _set_pose(poses, link, r, theta):
-    """Store a link's position: origin r [m], angle theta [rad]."""
+def _set_pose(poses, link, r, theta, turn):
+    """Store a link's position: origin r [m], angle theta [rad] and turn = e^{i theta}."""
     k = POSE_SIZE * link
-    poses[k], poses[k + 1], poses[k + 2] = r.real, r.imag, theta
+    poses[k], poses[k + 1], poses[k + 2], poses[k + 9], poses[k + 10] = r.real, r.imag, theta, turn.real, turn.imag
 
 
 def _pin(program, j, poses, link, at, theta):
     """Set the pose of `link` with angle theta (taken in [-pi, pi]) and its point of joint j at `at`:
     r = at - p e^{i theta}."""
     theta = theta - TWO_PI * math.floor(theta / TWO_PI + 0.5)
-    _set_pose(poses, link, at - _local(program, j, link) * cmath.exp(1j * theta), theta)
+    turn = _unit(theta)
+    _set_pose(poses, link, at - _local(program, j, link) * turn, theta, turn)
 
 
 def _swing(program, pivot, tip, poses, link, P, T):
@@ -150,20 +172,19 @@ def _swing(program, pivot, tip, poses, link, P, T):
 def _angle_across(program, j, known, theta_known):
     """The angle [rad] of the link the prismatic joint j joins to `known`: theta_slider = theta_guide + alpha."""
     if int(program[j + 1]) == known:
-        return theta_known + program[j + 8]
-    return theta_known - program[j + 8]
+        return theta_known + program[j + 9]
+    return theta_known - program[j + 9]
 
 
-def _origin_line(program, j, poses, unknown, theta_unknown):
+def _origin_line(program, j, poses, unknown, turn):
     """(c, w): the line c + s w (w unit) on which the origin r of `unknown` lies, that link having the angle
-    theta_unknown and being joined by the prismatic joint j to a known link.
+    theta (turn = e^{i theta}) and being joined by the prismatic joint j to a known link.
     Slider unknown: its point must lie on the guide line G + t w -> r = G - p_s e^{i theta} + t w.
     Guide unknown: the slider's point S = r + (p_g + t u) e^{i theta} -> r = S - p_g e^{i theta} - t w."""
     guide, slider = int(program[j + 1]), int(program[j + 2])
-    u = cmath.exp(1j * program[j + 7])
-    turn = cmath.exp(1j * theta_unknown)
+    u = _direction(program, j)
     if unknown == slider:
-        w = u * cmath.exp(1j * poses[POSE_SIZE * guide + 2])
+        w = u * _turn(poses, guide)
         return _point(program, j, poses, guide) - _local(program, j, slider) * turn, w
     return _point(program, j, poses, slider) - _local(program, j, guide) * turn, u * turn
 
@@ -203,12 +224,13 @@ def place_group(program, g, poses):
             cos_B = (l1 * l1 + f * f - l2 * l2) / (2.0 * l1 * f) if f > 0.0 else math.inf
             if not -1.0 <= cos_B <= 1.0:
                 return RRR_APART, f, abs(l1 - l2), l1 + l2
-            C = B + l1 * cmath.exp(1j * (cmath.phase(v) + sigma * math.acos(cos_B)))
+            C = B + l1 * _unit(cmath.phase(v) + sigma * math.acos(cos_B))
             _swing(program, E2, Ji, poses, L2, D, C)
         else:
             theta2 = _angle_across(program, E2, K2, poses[POSE_SIZE * K2 + 2])
-            c, w = _origin_line(program, E2, poses, L2, theta2)
-            m = c + _local(program, Ji, L2) * cmath.exp(1j * theta2) - B
+            turn2 = _unit(theta2)
+            c, w = _origin_line(program, E2, poses, L2, turn2)
+            m = c + _local(program, Ji, L2) * turn2 - B
             along = (m * w.conjugate()).real
             discriminant = along * along - abs(m) ** 2 + l1 * l1
             if discriminant < 0.0:
@@ -222,12 +244,12 @@ def place_group(program, g, poses):
         pivot_g, pivot_s = (E1, E2) if guide == L1 else (E2, E1)
         Pg = _point(program, pivot_g, poses, _other(program, pivot_g, guide))
         Ps = _point(program, pivot_s, poses, _other(program, pivot_s, slider))
-        u = cmath.exp(1j * program[Ji + 7])
-        alpha = program[Ji + 8]
+        u = _direction(program, Ji)
+        alpha = program[Ji + 9]
         # The line's offset from the pivots, in the guide's coordinates: h = Im((p_g[pivot] - p_g[J]
         # + (p_s[J] - p_s[pivot]) e^{i alpha}) conj u).
         h = ((_local(program, pivot_g, guide) - _local(program, Ji, guide)
-              + (_local(program, Ji, slider) - _local(program, pivot_s, slider)) * cmath.exp(1j * alpha))
+              + (_local(program, Ji, slider) - _local(program, pivot_s, slider)) * _unit(alpha))
              * u.conjugate()).imag
         rho = abs(Ps - Pg)
         if rho < abs(h) or rho == 0.0:
@@ -238,49 +260,48 @@ def place_group(program, g, poses):
         _pin(program, pivot_s, poses, slider, Ps, theta_g + alpha)
         return SOLVED, 0.0, 0.0, 0.0
     theta2 = _angle_across(program, E2, K2, poses[POSE_SIZE * K2 + 2])
+    turn2 = _unit(theta2)
     if kind == 3:   # PRP
         theta1 = _angle_across(program, E1, K1, poses[POSE_SIZE * K1 + 2])
-        c1, w1 = _origin_line(program, E1, poses, L1, theta1)
-        c2, w2 = _origin_line(program, E2, poses, L2, theta2)
+        turn1 = _unit(theta1)
+        c1, w1 = _origin_line(program, E1, poses, L1, turn1)
+        c2, w2 = _origin_line(program, E2, poses, L2, turn2)
         if abs(_lines_cross(w1, w2)) < 1e-12:
             return GUIDES_PARALLEL, 0.0, 0.0, 0.0
-        C = _lines_meet(c1 + _local(program, Ji, L1) * cmath.exp(1j * theta1), w1,
-                        c2 + _local(program, Ji, L2) * cmath.exp(1j * theta2), w2)
+        C = _lines_meet(c1 + _local(program, Ji, L1) * turn1, w1, c2 + _local(program, Ji, L2) * turn2, w2)
         _pin(program, Ji, poses, L1, C, theta1)
         _pin(program, Ji, poses, L2, C, theta2)
         return SOLVED, 0.0, 0.0, 0.0
     # RPP: L1 pinned at B with the angle its prismatic internal joint gives it from L2's.
     theta1 = _angle_across(program, Ji, L2, theta2)
     _pin(program, E1, poses, L1, _point(program, E1, poses, K1), theta1)
-    c1, w1 = _origin_line(program, Ji, poses, L2, theta2)
-    c2, w2 = _origin_line(program, E2, poses, L2, theta2)
+    c1, w1 = _origin_line(program, Ji, poses, L2, turn2)
+    c2, w2 = _origin_line(program, E2, poses, L2, turn2)
     if abs(_lines_cross(w1, w2)) < 1e-12:
         return GUIDES_PARALLEL, 0.0, 0.0, 0.0
-    _set_pose(poses, L2, _lines_meet(c1, w1, c2, w2), theta2)
+    _set_pose(poses, L2, _lines_meet(c1, w1, c2, w2), theta2, turn2)
     return SOLVED, 0.0, 0.0, 0.0
 
 
 # ---------------------------------------------------------------------------------------------------------------
 # Velocity and acceleration ratios
 
-def joint_rows(program, j, poses, rows):
-    """Fill rows[0:12] with the partial derivatives of the joint j's two constraint equations by its links' (x, y,
-    theta): row r at rows[6 r : 6 r + 6] = (by link a's x, y, theta, by link b's x, y, theta).
+def joint_rows(program, j, poses):
+    """The partial derivatives of the joint j's two constraint equations by its links' (x, y, theta), 12 floats:
+    row r at [6 r : 6 r + 6] = (by link a's x, y, theta, by link b's x, y, theta).
     Revolute, `r_a + q_a - r_b - q_b = 0` (q = p e^{i theta}): its real and imaginary parts.
     Prismatic (guide a, slider b): the line `Im(d conj w) = 0`, d = P_s - P_g, w = u e^{i theta_g}, and the angle
     `theta_s - theta_g - alpha = 0`."""
     a, b = int(program[j + 1]), int(program[j + 2])
-    qa = _local(program, j, a) * cmath.exp(1j * poses[POSE_SIZE * a + 2])
-    qb = _local(program, j, b) * cmath.exp(1j * poses[POSE_SIZE * b + 2])
+    qa = _local(program, j, a) * _turn(poses, a)
+    qb = _local(program, j, b) * _turn(poses, b)
     if program[j] == 0.0:
-        rows[0], rows[1], rows[2], rows[3], rows[4], rows[5] = 1.0, 0.0, -qa.imag, -1.0, 0.0, qb.imag
-        rows[6], rows[7], rows[8], rows[9], rows[10], rows[11] = 0.0, 1.0, qa.real, 0.0, -1.0, -qb.real
-        return
-    w = cmath.exp(1j * (program[j + 7] + poses[POSE_SIZE * a + 2]))
+        return (1.0, 0.0, -qa.imag, -1.0, 0.0, qb.imag,
+                0.0, 1.0, qa.real, 0.0, -1.0, -qb.real)
+    w = _direction(program, j) * _turn(poses, a)
     d = _origin(poses, b) + qb - _origin(poses, a) - qa
-    rows[0], rows[1], rows[2] = w.imag, -w.real, -((qa + d) * w.conjugate()).real
-    rows[3], rows[4], rows[5] = -w.imag, w.real, (qb * w.conjugate()).real
-    rows[6], rows[7], rows[8], rows[9], rows[10], rows[11] = 0.0, 0.0, -1.0, 0.0, 0.0, 1.0
+    return (w.imag, -w.real, -((qa + d) * w.conjugate()).real, -w.imag, w.real, (qb * w.conjugate()).real,
+            0.0, 0.0, -1.0, 0.0, 0.0, 1.0)
 
 
 def joint_quadratic(program, j, poses):
@@ -291,96 +312,168 @@ def joint_quadratic(program, j, poses):
     a, b = int(program[j + 1]), int(program[j + 2])
     ka, kb = POSE_SIZE * a, POSE_SIZE * b
     dta, dtb = poses[ka + 5], poses[kb + 5]
-    qa = _local(program, j, a) * cmath.exp(1j * poses[ka + 2])
-    qb = _local(program, j, b) * cmath.exp(1j * poses[kb + 2])
+    qa = _local(program, j, a) * _turn(poses, a)
+    qb = _local(program, j, b) * _turn(poses, b)
     if program[j] == 0.0:
         gamma = -dta * dta * qa + dtb * dtb * qb
         return gamma.real, gamma.imag
-    w = cmath.exp(1j * (program[j + 7] + poses[ka + 2]))
+    w = _direction(program, j) * _turn(poses, a)
     dd = complex(poses[kb + 3], poses[kb + 4]) + 1j * dtb * qb - complex(poses[ka + 3], poses[ka + 4]) - 1j * dta * qa
     line = ((dta * dta * qa - dtb * dtb * qb) * w.conjugate()).imag - 2.0 * dta * (dd * w.conjugate()).real
     return line, 0.0
 
 
-def invert(A, inverse):
-    """Fill `inverse` with A^-1 (A square: np.linalg.inv, LAPACK's LU in both forms); False for an exactly singular
-    A."""
-    try:
-        inverse[:, :] = np.linalg.inv(A)
-    except Exception:  # numpy's and numba's LinAlgError: an exactly singular A
-        return False
-    return True
+def _enter(A, known, row, link, by_x, by_y, by_theta, L1, L2, poses):
+    """Enter a constraint row's partial derivatives by `link`'s (x, y, theta) into the group's A (columns 0-2 for
+    L1, 3-5 for L2) or, `link` being known, its terms into known[0, row] (K k') and known[1, row] (K k'')."""
+    column = 0 if link == L1 else (3 if link == L2 else -1)
+    if column >= 0:
+        A[row, column], A[row, column + 1], A[row, column + 2] = by_x, by_y, by_theta
+    else:
+        k = POSE_SIZE * link
+        known[0, row] += by_x * poses[k + 3] + by_y * poses[k + 4] + by_theta * poses[k + 5]
+        known[1, row] += by_x * poses[k + 6] + by_y * poses[k + 7] + by_theta * poses[k + 8]
 
 
-def group_matrix(program, g, poses, A, known_first, known_second):
-    """Fill the group's A (its rows by its unknown links' (x, y, theta): 6 x 6, a redundant link's 4 x 3) and the
-    known links' terms K k' and K k'' of each row; returns the number of rows."""
+def group_matrix(program, g, poses, A, known):
+    """Fill the group's A (its rows by its unknown links' (x, y, theta): 6 x 6, a redundant link's 4 x 3 in the top
+    left of A) and the known links' terms of each row, K k' in known[0] and K k'' in known[1]; returns the number
+    of rows. A dyad's rows: its external joint E1 (rows 0, 1, only L1's columns 0-2), its internal joint (rows 2,
+    3), its external joint E2 (rows 4, 5, only L2's columns 3-5)."""
     L1, L2 = int(program[g + 2]), int(program[g + 3])
     n_joints = 2 if int(program[g]) == REDUNDANT else 3
-    rows = np.empty(12)
+    for row in range(2 * n_joints):
+        for column in range(A.shape[1]):
+            A[row, column] = 0.0
+        known[0, row] = known[1, row] = 0.0
     for joint in range(n_joints):
         j = g + 4 + JOINT_SIZE * joint
-        joint_rows(program, j, poses, rows)
-        for r in range(2):
-            row = 2 * joint + r
-            first = second = 0.0
-            for c in range(A.shape[1]):
-                A[row, c] = 0.0
-            for side in range(2):
-                link = int(program[j + 1 + side])
-                px, py, pt = rows[6 * r + 3 * side], rows[6 * r + 3 * side + 1], rows[6 * r + 3 * side + 2]
-                column = 0 if link == L1 else (3 if link == L2 else -1)
-                if column >= 0:
-                    A[row, column], A[row, column + 1], A[row, column + 2] = px, py, pt
-                else:
-                    k = POSE_SIZE * link
-                    first += px * poses[k + 3] + py * poses[k + 4] + pt * poses[k + 5]
-                    second += px * poses[k + 6] + py * poses[k + 7] + pt * poses[k + 8]
-            known_first[row], known_second[row] = first, second
+        a, b = int(program[j + 1]), int(program[j + 2])
+        rows = joint_rows(program, j, poses)
+        _enter(A, known, 2 * joint, a, rows[0], rows[1], rows[2], L1, L2, poses)
+        _enter(A, known, 2 * joint, b, rows[3], rows[4], rows[5], L1, L2, poses)
+        _enter(A, known, 2 * joint + 1, a, rows[6], rows[7], rows[8], L1, L2, poses)
+        _enter(A, known, 2 * joint + 1, b, rows[9], rows[10], rows[11], L1, L2, poses)
     return 2 * n_joints
 
 
-def differentiate_group(program, g, poses):
+def _row3(A, row, column):
+    """The three entries A[row, column : column + 3] as a tuple."""
+    return A[row, column], A[row, column + 1], A[row, column + 2]
+
+
+def _dot3(u, v):
+    """u . v of two 3-vectors."""
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+def _cross3(u, v):
+    """u x v of two 3-vectors."""
+    return u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]
+
+
+def _scaled3(u, factor):
+    """factor u of a 3-vector."""
+    return u[0] * factor, u[1] * factor, u[2] * factor
+
+
+def _null_and_right_inverse(first, second):
+    """For the 2 x 3 rows (first, second) of an external joint on its link (rank 2: a revolute joint's rows
+    (1, 0, .), (0, 1, .), a prismatic's (w_y, -w_x, .), (0, 0, -+1)): their null vector n = first x second and the
+    two columns of a right inverse, c1 = (second x n) / |n|^2, c2 = (n x first) / |n|^2 (first . c1 = second . c2 =
+    1, first . c2 = second . c1 = 0)."""
+    n = _cross3(first, second)
+    scale = 1.0 / _dot3(n, n)
+    return n, _scaled3(_cross3(second, n), scale), _scaled3(_cross3(n, first), scale)
+
+
+def invert_dyad(A, inverse):
+    """Fill `inverse` with the 6 x 6 A^-1 of a dyad (group_matrix's row blocks) by elimination: the external rows
+    give each link's unknowns as u1 = P1 b_E1 + s1 n1, u2 = P2 b_E2 + s2 n2 (_null_and_right_inverse), the internal
+    rows (a1 | a2) then the 2 x 2 system M (s1, s2) = b_I - a1 P1 b_E1 - a2 P2 b_E2, M = (a1 n1 | a2 n2), solved by
+    Cramer's rule for each unit right-hand side b = e_column; False for an exactly singular M (then A is)."""
+    n1, c1, c2 = _null_and_right_inverse(_row3(A, 0, 0), _row3(A, 1, 0))
+    n2, d1, d2 = _null_and_right_inverse(_row3(A, 4, 3), _row3(A, 5, 3))
+    a1_first, a1_second, a2_first, a2_second = _row3(A, 2, 0), _row3(A, 3, 0), _row3(A, 2, 3), _row3(A, 3, 3)
+    m11, m12, m21, m22 = _dot3(a1_first, n1), _dot3(a2_first, n2), _dot3(a1_second, n1), _dot3(a2_second, n2)
+    determinant = m11 * m22 - m12 * m21
+    if determinant == 0.0:
+        return False
+    zero = (0.0, 0.0, 0.0)
+    for column in range(6):
+        p1 = c1 if column == 0 else (c2 if column == 1 else zero)
+        p2 = d1 if column == 4 else (d2 if column == 5 else zero)
+        t1 = (1.0 if column == 2 else 0.0) - _dot3(a1_first, p1) - _dot3(a2_first, p2)
+        t2 = (1.0 if column == 3 else 0.0) - _dot3(a1_second, p1) - _dot3(a2_second, p2)
+        s1 = (m22 * t1 - m12 * t2) / determinant
+        s2 = (m11 * t2 - m21 * t1) / determinant
+        for k in range(3):
+            inverse[k, column] = p1[k] + s1 * n1[k]
+            inverse[3 + k, column] = p2[k] + s2 * n2[k]
+    return True
+
+
+def _column_dot(A, first, second):
+    """The sum over a redundant link's four rows of A[row, first] A[row, second]: an entry of A^T A."""
+    return A[0, first] * A[0, second] + A[1, first] * A[1, second] + A[2, first] * A[2, second] \
+        + A[3, first] * A[3, second]
+
+
+def pseudo_invert_redundant(A, inverse):
+    """Fill inverse[0:3, 0:4] with the pseudo-inverse (A^T A)^-1 A^T of a redundant link's 4 x 3 A (exact on its
+    consistent equations), the 3 x 3 N = A^T A inverted by its cofactors: the columns of N^-1 are (n2 x n3, n3 x n1,
+    n1 x n2) / (n1 . (n2 x n3)), n_k the rows of N; False for an exactly singular N."""
+    n1 = (_column_dot(A, 0, 0), _column_dot(A, 0, 1), _column_dot(A, 0, 2))
+    n2 = (n1[1], _column_dot(A, 1, 1), _column_dot(A, 1, 2))
+    n3 = (n1[2], n2[2], _column_dot(A, 2, 2))
+    determinant = _dot3(n1, _cross3(n2, n3))
+    if determinant == 0.0:
+        return False
+    columns = (_cross3(n2, n3), _cross3(n3, n1), _cross3(n1, n2))
+    for r in range(3):
+        for row in range(4):
+            value = 0.0
+            for c in range(3):
+                value += columns[c][r] * A[row, c]
+            inverse[r, row] = value / determinant
+    return True
+
+
+def _largest_magnitude(M, n_rows, n_columns):
+    """max |M[row, column]| over the top left n_rows x n_columns of M."""
+    largest = 0.0
+    for row in range(n_rows):
+        for column in range(n_columns):
+            largest = max(largest, abs(M[row, column]))
+    return largest
+
+
+def differentiate_group(program, g, poses, scratch):
     """Set the first and second derivatives of the group's links' poses from `A u' = -K k'` and
-    `A u'' = -K k'' - gamma` (module docstring); False at a dead point (A singular or its condition beyond
-    DEAD_POINT_CONDITION)."""
+    `A u'' = -K k'' - gamma` (module docstring), A and its inverse held in scratch (SCRATCH_SHAPE: A in rows 0-5,
+    A^-1 in rows 6-11, K k' and K k'' in rows 12, 13); False at a dead point (A singular or its condition
+    |A|_max |A^-1|_max beyond DEAD_POINT_CONDITION)."""
     redundant = int(program[g]) == REDUNDANT
     n_unknown = 3 if redundant else 6
     n_rows = 4 if redundant else 6
-    A = np.empty((n_rows, n_unknown))
-    known_first, known_second = np.empty(n_rows), np.empty(n_rows)
-    group_matrix(program, g, poses, A, known_first, known_second)
-    inverse = np.empty((n_unknown, n_rows))
-    if redundant:   # the pseudo-inverse (A^T A)^-1 A^T, exact on the consistent equations
-        normal, normal_inverse = np.zeros((3, 3)), np.empty((3, 3))
-        for r in range(3):
-            for c in range(3):
-                for row in range(n_rows):
-                    normal[r, c] += A[row, r] * A[row, c]
-        if not invert(normal, normal_inverse):
-            return False
-        for r in range(3):
-            for row in range(n_rows):
-                value = 0.0
-                for c in range(3):
-                    value += normal_inverse[r, c] * A[row, c]
-                inverse[r, row] = value
-    elif not invert(A, inverse):
+    A, inverse, known = scratch[0:6], scratch[6:12], scratch[12:14]
+    group_matrix(program, g, poses, A, known)
+    if not (pseudo_invert_redundant(A, inverse) if redundant else invert_dyad(A, inverse)):
         return False
-    if np.abs(inverse).max() * np.abs(A).max() > DEAD_POINT_CONDITION:
+    if _largest_magnitude(inverse, n_unknown, n_rows) * _largest_magnitude(A, n_rows, n_unknown) \
+            > DEAD_POINT_CONDITION:
         return False
     links = (int(program[g + 2]), int(program[g + 3]))
     for order in range(1, 3):
-        right = -(known_first if order == 1 else known_second)
-        if order == 2:   # the first derivatives are known now
+        if order == 2:   # the first derivatives are known now: the right-hand side -(K k'' + gamma)
             for joint in range(n_rows // 2):
                 line, other = joint_quadratic(program, g + 4 + JOINT_SIZE * joint, poses)
-                right[2 * joint] -= line
-                right[2 * joint + 1] -= other
+                known[1, 2 * joint] += line
+                known[1, 2 * joint + 1] += other
         for unknown in range(n_unknown):
             value = 0.0
             for row in range(n_rows):
-                value += inverse[unknown, row] * right[row]
+                value -= inverse[unknown, row] * known[order - 1, row]
             poses[POSE_SIZE * links[unknown // 3] + 3 * order + unknown % 3] = value
     return True
 
@@ -388,27 +481,29 @@ def differentiate_group(program, g, poses):
 # ---------------------------------------------------------------------------------------------------------------
 # The whole linkage
 
-def solve_poses(phi, program, base, poses, derivatives):
+def solve_poses(phi, program, base, poses, scratch, derivatives):
     """Fill poses (POSE_SIZE per link, zeros for the frame) at crank angle phi [rad]: the crank's, theta = phi,
     r = A - p_A e^{i phi}, r' = -i p_A e^{i phi}, r'' = p_A e^{i phi}, theta' = 1, then each group's (with the
-    derivatives if `derivatives`); returns (status, group number, three numbers) of the first group that fails
-    (module docstring), (SOLVED, -1, 0, 0, 0) when all are solved."""
+    derivatives if `derivatives`, worked out in `scratch`, an array of SCRATCH_SHAPE); returns (status, group number,
+    three numbers) of the first group that fails (module docstring), (SOLVED, -1, 0, 0, 0) when all are solved."""
     for k in range(POSE_SIZE * int(program[base])):
         poses[k] = 0.0
+    poses[9] = 1.0   # the frame's e^{i 0}
     crank = int(program[base + 2])
     pivot_frame = complex(program[base + HEADER_SIZE - 4], program[base + HEADER_SIZE - 3])
-    pivot_crank = complex(program[base + HEADER_SIZE - 2], program[base + HEADER_SIZE - 1]) * cmath.exp(1j * phi)
+    turn = _unit(phi)
+    pivot_crank = complex(program[base + HEADER_SIZE - 2], program[base + HEADER_SIZE - 1]) * turn
     k = POSE_SIZE * crank
     r, dr = pivot_frame - pivot_crank, -1j * pivot_crank
-    poses[k], poses[k + 1], poses[k + 2], poses[k + 3], poses[k + 4], poses[k + 5] = r.real, r.imag, phi, dr.real, \
-        dr.imag, 1.0
+    _set_pose(poses, crank, r, phi, turn)
+    poses[k + 3], poses[k + 4], poses[k + 5] = dr.real, dr.imag, 1.0
     poses[k + 6], poses[k + 7], poses[k + 8] = pivot_crank.real, pivot_crank.imag, 0.0
     g = base + HEADER_SIZE + LINK_SIZE * int(program[base])
     for group in range(int(program[base + 1])):
         status, first, second, third = place_group(program, g, poses)
         if status != SOLVED:
             return status, group, first, second, third
-        if derivatives and not differentiate_group(program, g, poses):
+        if derivatives and not differentiate_group(program, g, poses, scratch):
             return DEAD_POINT, group, 0.0, 0.0, 0.0
         g += GROUP_SIZE
     return SOLVED, -1, 0.0, 0.0, 0.0
@@ -418,7 +513,7 @@ def motion(poses, link, point):
     """(P, P', P'') of the point `point` (link coordinates [m]) of a link: P = r + q, P' = r' + i theta' q,
     P'' = r'' + (i theta'' - theta'^2) q, q = point e^{i theta}."""
     k = POSE_SIZE * link
-    q = point * cmath.exp(1j * poses[k + 2])
+    q = point * _turn(poses, link)
     return (complex(poses[k], poses[k + 1]) + q, complex(poses[k + 3], poses[k + 4]) + 1j * poses[k + 5] * q,
             complex(poses[k + 6], poses[k + 7]) + complex(-poses[k + 5] * poses[k + 5], poses[k + 8]) * q)
 
@@ -450,7 +545,7 @@ def reduced_from_poses(program, base, poses):
     guide, slider = int(program[j + 1]), int(program[j + 2])
     P_g, dP_g, _ = motion(poses, guide, _local(program, j, guide))
     P_s, dP_s, _ = motion(poses, slider, _local(program, j, slider))
-    w = cmath.exp(1j * (program[j + 7] + poses[POSE_SIZE * guide + 2]))
+    w = _direction(program, j) * _turn(poses, guide)
     d, dd = P_s - P_g, dP_s - dP_g
     return (J, dJ, weight, (d * w.conjugate()).real,
             (dd * w.conjugate()).real + poses[POSE_SIZE * guide + 5] * (d * w.conjugate()).imag)
@@ -459,9 +554,11 @@ def reduced_from_poses(program, base, poses):
 def reduced(phi, program, base):
     """The linkage's (J_links [kg m^2], dJ_links/dphi [kg m^2/rad], M_weight [N m], q, dq/dphi) at crank angle phi
     [rad] (reduced_from_poses), its program at `base` in `program`; NaNs where a group cannot assemble or is at a
-    dead point (solve_poses tells which)."""
-    poses = np.empty(POSE_SIZE * int(program[base]))
-    if solve_poses(phi, program, base, poses, True)[0] != SOLVED:
+    dead point (solve_poses tells which). Its one allocation per call holds the poses and the scratch."""
+    n_poses = POSE_SIZE * int(program[base])
+    workspace = np.empty(n_poses + SCRATCH_SHAPE[0] * SCRATCH_SHAPE[1])
+    poses = workspace[:n_poses]
+    if solve_poses(phi, program, base, poses, workspace[n_poses:].reshape(SCRATCH_SHAPE), True)[0] != SOLVED:
         return math.nan, math.nan, math.nan, math.nan, math.nan
     return reduced_from_poses(program, base, poses)
 
@@ -469,17 +566,22 @@ def reduced(phi, program, base):
 
 @functools.cache
 def _registered() -> None:
-    """Register every function of the solver with numba (once), so that compiled code calls them compiled."""
+    """Register every function of the solver with numba (once), so that compiled code calls them compiled: all but
+    `reduced` (which allocates its workspace) without numba's runtime (`_nrt=False`: they allocate nothing, and so
+    spend no time counting references to the arrays they are passed)."""
     from numba.extending import register_jitable
 
-    for function in (_local, _other, _origin, _point, _set_pose, _pin, _swing, _angle_across, _origin_line,
-                     _lines_cross, _lines_meet, place_group, joint_rows, joint_quadratic, invert, group_matrix,
-                     differentiate_group, solve_poses, motion, reduced_from_poses, reduced):
-        register_jitable(function)
+    register_jitable(reduced)
+    for function in (_local, _other, _unit, _direction, _origin, _turn, _point, _set_pose, _pin, _swing,
+                     _angle_across, _origin_line, _lines_cross, _lines_meet, place_group, joint_rows, joint_quadratic,
+                     _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
+                     _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
+                     motion, reduced_from_poses):
+        register_jitable(_nrt=False)(function)
 
 
 # What the reference path calls compiled, with the argument types of its calls (kinematics.py)
-COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1], boolean)",
+COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1], float64[:, ::1], boolean)",
                       "reduced": "(float64, float64[::1], int64)"}
 
 

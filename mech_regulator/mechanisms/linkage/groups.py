@@ -127,15 +127,17 @@ def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[flo
 
 
 def packed(pose: Pose) -> list[float]:
-    """A pose [r, theta, (r', theta', r'', theta'')] as flat.py's POSE_SIZE floats (missing derivatives: 0)."""
+    """A pose [r, theta, (r', theta', r'', theta'')] as flat.py's POSE_SIZE floats (missing derivatives: 0; then
+    cos theta, sin theta)."""
     r, theta, dr, dtheta, ddr, ddtheta = list(pose) + [0j, 0.0, 0j, 0.0][:6 - len(pose)]
-    return [r.real, r.imag, theta, dr.real, dr.imag, dtheta, ddr.real, ddr.imag, ddtheta]
+    return [r.real, r.imag, theta, dr.real, dr.imag, dtheta, ddr.real, ddr.imag, ddtheta, math.cos(theta),
+            math.sin(theta)]
 
 
 def _rows(linkage: Linkage, poses: dict[str, Pose], joint: Joint) -> list[dict[str, tuple[float, float, float]]]:
     """The partial derivatives of a joint's two constraint equations by each of its links' (x, y, theta)
     (flat.joint_rows), as {link: (d/dx, d/dy, d/dtheta)} per equation."""
     a, b = joint.links
-    rows = [0.0] * 12   # plain lists: flat.joint_rows run as plain Python (a few µs)
-    flat.joint_rows(flat.joint_record(linkage, joint, {a: 0, b: 1}), 0, packed(poses[a]) + packed(poses[b]), rows)
+    # plain lists: flat.joint_rows run as plain Python (a few µs)
+    rows = flat.joint_rows(flat.joint_record(linkage, joint, {a: 0, b: 1}), 0, packed(poses[a]) + packed(poses[b]))
     return [{a: tuple(rows[6 * r:6 * r + 3]), b: tuple(rows[6 * r + 3:6 * r + 6])} for r in range(2)]

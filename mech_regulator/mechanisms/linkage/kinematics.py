@@ -33,10 +33,11 @@ def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]
     program = flat.encode(linkage, groups, None)
     names = list(flat.link_indices(linkage))
     solve_poses = flat.compiled_announced("solve_poses")
+    scratch = np.empty(flat.SCRATCH_SHAPE)
 
     def solve_at(phi: float, derivatives: bool = True) -> dict[str, Pose]:
         poses = np.empty(flat.POSE_SIZE * len(names))
-        status, group, *numbers = solve_poses(phi, program, 0, poses, derivatives)
+        status, group, *numbers = solve_poses(phi, program, 0, poses, scratch, derivatives)
         if status != flat.SOLVED:
             raise LinkageError(failure_message(groups[group], status, tuple(numbers), phi))
         values = poses.tolist()
