@@ -6,6 +6,9 @@ straddles a jump or a kink. Moments that jump with the crank angle (an on-off cu
 switches: every accepted step is checked for a crossing of a switch angle, also inside the step
 (the dense output is probed at interior points, so a step that crosses and comes back is caught),
 the crossing is located on the dense output, and the solver restarts exactly on the switch.
+With joint friction, every step of an adaptive one-step method also stays at least its own length away from
+the branch points of the journals' friction |R_j| in complex time (_reaction_branches), where a reaction passes
+close to zero and the method's error estimate would not see it.
 """
 
 from __future__ import annotations
@@ -31,6 +34,10 @@ STEPS_ONTO_SWITCHES = ("RK23", "RK45", "DOP853", "Radau", "RK4")
 # multistep methods restart at order 1: a restart on every kink of a table (24 a turn on an engine) costs them more
 # accuracy than stepping over the kinks, so they restart on switch angles (jumps) only
 STEPS_OVER_KINKS = ("BDF", "LSODA")
+# adaptive one-step methods: every step stays at least its own length away from the branch points of the journals'
+# friction |R_j(t)| in complex time (_reaction_branches, _reach); the multistep methods step over corners, RK4 keeps
+# its step
+STEPS_WITHIN_REACTIONS = ("RK23", "RK45", "DOP853", "Radau")
 GUARD_NODES = 9  # a guard along a step is interpolated at this many Chebyshev points (time_domain.guard_polynomial)
 GUARD_NODE_FRACTIONS = 0.5 - 0.5 * np.cos(np.pi * np.arange(GUARD_NODES) / (GUARD_NODES - 1))  # theta_k in [0, 1]
 SAMPLES_TO_POWERS = np.linalg.inv(np.vander(GUARD_NODE_FRACTIONS, increasing=True))  # samples -> powers of theta
@@ -81,7 +88,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     settings = model.scene.solver
     kinks = settings.method not in STEPS_OVER_KINKS
     switches = _unique_switches(model.switch_angles() + (model.kink_angles() if kinks else []))
-    grid = model.switch_grid(kinks)
+    grid = np.array(model.switch_grid(kinks), dtype=float)
     period = model.dynamic_period()
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     names = model.state_names()
@@ -90,6 +97,8 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     tables = model.state_tables if kinks else ()
     held = _held_pieces(tables, y)
     normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, and the one just crossed
+    journals = _journals(model) if settings.method in STEPS_WITHIN_REACTIONS else ()
+    branches = np.empty(0, dtype=complex)  # the branch points of the journals' |R_j| the last step saw [s]
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
@@ -99,7 +108,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         breakpoints = _breakpoint_guards(tables, held, mode, y)
         guards = model.guards(mode, y) + list(breakpoints)
         offset = period * math.floor(y[0] / period) if wraps else 0.0
-        window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
+        window = switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid.size else None
         anchors = tuple(anchor - offset if table.angular else anchor  # in the solver's wrapped phi
                         for table, anchor in zip(tables, _anchors(tables, held)))
         anchors = anchors if tables else None
@@ -112,8 +121,10 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_sides)
         constraint = model.constraint(mode)
         interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
+        if branches.size and first_step is not None:  # a restart's first step stays within the reach too
+            first_step = min(first_step, max(_reach(branches, t), _smallest_limit(t)))
         solver = _solver(settings, rhs, t, y_wrapped, t_end, first_step)
-        restart = False
+        restart, redone = False, False
         while solver.status == "running" and not restart:
             try:
                 message = solver.step()
@@ -140,6 +151,19 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 trajectory.stats.steps += 1
                 fail_blown_up(model, trajectory, t_step, y_step, *beyond)
                 break
+            if journals:
+                branches = _reaction_branches(model, journals, dense, solver.t_old, solver.t)
+                reach = _reach(branches, solver.t_old)
+                if solver.t - solver.t_old > reach and not redone:  # the step again, within the reach
+                    _count_evaluations(trajectory, solver)
+                    y_start = np.array(y, dtype=float)
+                    y_start[0] -= offset
+                    solver = _solver(settings, rhs, t, y_start, t_end, max(reach, _smallest_limit(t)))
+                    redone = True
+                    continue
+                redone = False
+                solver.max_step = min(settings.max_step or np.inf,
+                                      max(_reach(branches, solver.t), _smallest_limit(solver.t)))
             if switches or guards:
                 crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise)
                 if crossing is not None:
@@ -178,9 +202,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
             if progress is not None:
                 progress(t)
         first_step = min(solver.step_size, t_end - t) if solver.step_size else None
-        trajectory.stats.nfev += int(solver.nfev)
-        trajectory.stats.njev += int(solver.njev)
-        trajectory.stats.nlu += int(solver.nlu)
+        _count_evaluations(trajectory, solver)
         if restart:
             trajectory.stats.restarts += 1
     return y, mode
@@ -286,6 +308,64 @@ def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: 
                                               max_step=settings.max_step or np.inf, first_step=first_step)
 
 
+def _count_evaluations(trajectory: Trajectory, solver) -> None:
+    """Add a solver's function evaluations, Jacobians and LU decompositions to the trajectory's statistics."""
+    trajectory.stats.nfev += int(solver.nfev)
+    trajectory.stats.njev += int(solver.njev)
+    trajectory.stats.nlu += int(solver.nlu)
+
+
+def _journals(model: MachineModel) -> tuple[str, ...]:
+    """The joints with friction whose |R_j| the right-hand side reads as it is (journals; not the guides, whose |N| it
+    reads as s_N N between located crossings): their names, or () without joint friction."""
+    friction = model.joint_friction
+    if friction is None:
+        return ()
+    return tuple(name for k, name in enumerate(friction.names) if k not in friction.guides)
+
+
+def _reaction_branches(model: MachineModel, journals: tuple[str, ...], dense, t_old: float, t_new: float
+                       ) -> np.ndarray:
+    """The branch points [s, complex] of the journals' friction rho_j |R_j| seen along the step (t_old, t_new] [s]: the
+    complex zeros of |R_j(t)|^2, where |R_j| = sqrt(|R_j|^2) stops being analytic. Where a reaction passes close to 0
+    without a sign change to locate (R = R_m + R' (t - t_m), R_m perpendicular to R'), |R_j|^2 = |R_m|^2 +
+    |R'|^2 (t - t_m)^2 has its zeros at t_m +- i |R_m| / |R'|: the motion's Taylor series about a point converges
+    only within its distance to them, and a one-step method's error estimate, an expansion in the step, fails on
+    steps that reach that far (DOP853 accepted a 23 ms step across the wrist pin's 1.4 N of 145 N with 14 times its
+    tolerance); _reach gives the steps that do not. |R_j|^2 along the step: the model's reaction columns on the
+    dense output at the GUARD_NODES Chebyshev points, interpolated in theta = (t - t_old) / h; its zeros are np.roots
+    of that polynomial. Real zeros (a reaction through 0 exactly: a corner of |R_j|, nothing to step around) are
+    left out."""
+    h = t_new - t_old
+    times = t_old + GUARD_NODE_FRACTIONS * h
+    columns = model.columns(times, dense(times))
+    roots = np.concatenate([np.roots((SAMPLES_TO_POWERS @ columns[f"reaction_{name}"] ** 2)[::-1])
+                            for name in journals])
+    return t_old + h * roots[roots.imag != 0.0]
+
+
+def _reach(branches: np.ndarray, t: float) -> float:
+    """The longest step [s] forward from t [s] that stays at least its own length away from every branch point
+    (_reaction_branches, _admissible_step); inf without any."""
+    return min((_admissible_step(complex(branch) - t) for branch in branches), default=math.inf)
+
+
+def _admissible_step(branch: complex) -> float:
+    """The longest step h >= 0 forward from 0 whose every point lies at least h away from the branch point x + i rho
+    [s] (relative to the step's start): |branch| when it is behind (x <= 0); |branch|^2 / (2 x) when rho <= x (the
+    step's end then h from it); else rho (it lies beside the step)."""
+    x, rho = branch.real, abs(branch.imag)
+    if x <= 0.0:
+        return abs(branch)
+    return abs(branch) ** 2 / (2.0 * x) if rho <= x else rho
+
+
+def _smallest_limit(t: float) -> float:
+    """The shortest step limit [s] given to scipy's solvers at time t [s]: 100 times the spacing of floating-point
+    numbers at |t| + 1 (scipy's own smallest step is 10 times the spacing at t; a limit below it fails the run)."""
+    return 100.0 * float(np.spacing(abs(t) + 1.0))
+
+
 def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, t_switch: float, offset: float, constraint,
                phi_switch: float | None, trajectory: Trajectory) -> tuple:
     """Step from the accepted step's start (t_old [s], y_old, unwrapped) exactly onto the switch crossing located at
@@ -302,9 +382,7 @@ def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, t_switch: float, 
     while onto.status == "running":
         onto.step()
         pieces.append(_Shifted(onto.dense_output(), offset, constraint))
-    trajectory.stats.nfev += int(onto.nfev)
-    trajectory.stats.njev += int(onto.njev)
-    trajectory.stats.nlu += int(onto.nlu)
+    _count_evaluations(trajectory, onto)
     y_switch = pieces[-1](t_switch)
     if phi_switch is not None:
         y_switch[0] = phi_switch
@@ -468,17 +546,21 @@ class _Shifted:
         return y
 
 
-def _switch_window(grid: list[float], period: float, phi: float, forward: bool) -> tuple[float, float]:
-    """The interval between consecutive switch angles that the motion from phi (in [0, period)) is in, in phi's
-    coordinates: on a switch angle, the one ahead in the direction of motion."""
+def switch_window(grid: np.ndarray, period: float, phi: float, forward: bool) -> tuple[float, float]:
+    """The interval (lo, hi) [rad] between consecutive switch angles of the grid (one period, sorted array) that the
+    motion from phi (in [0, period)) is in, in phi's coordinates: on a switch angle, the one ahead in the direction of
+    motion. Plain Python that numba compiles as it is (the compiled stepper's own restarts: integrators.py)."""
     tolerance = 1e-9 * period
     shift = 0.0
     if phi > period - tolerance:  # a whole period that floor() left unwrapped by round-off: the window beyond it
         phi, shift = phi - period, period
-    i = bisect.bisect_right(grid, phi + tolerance) - 1 if forward else bisect.bisect_left(grid, phi - tolerance) - 1
+    if forward:
+        i = np.searchsorted(grid, phi + tolerance, side="right") - 1
+    else:
+        i = np.searchsorted(grid, phi - tolerance, side="left") - 1
     lo = grid[i] if i >= 0 else grid[-1] - period
-    hi = grid[i + 1] if i + 1 < len(grid) else grid[0] + period
-    return lo + shift, hi + shift
+    hi = grid[i + 1] if i + 1 < grid.size else grid[0] + period
+    return float(lo + shift), float(hi + shift)
 
 
 def _unique_switches(switches: list[tuple[float, float]]) -> list[tuple[float, float]]:
