@@ -12,7 +12,7 @@ from scipy.integrate import DOP853, RK45, OdeSolution
 from scipy.linalg import expm
 
 from mech_regulator.solvers.compiled import integrators as compiled
-from mech_regulator.solvers.compiled.integrators import CompiledRun, StepsDense
+from mech_regulator.solvers.compiled.integrators import NO_RESTARTS, CompiledRun, StepsDense
 from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, RHS_SIGNATURE
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.time_domain import PROBES_PER_STEP
@@ -92,7 +92,7 @@ def adaptive(method, rhs, y0, t_end, p, rtol=1e-6, atol=1e-9, guards=position, l
     thresholds = np.zeros(len(lines)) if thresholds is None else np.asarray(thresholds, dtype=float)
     return CompiledRun.from_result(method(rhs, guards, len(lines), np.ascontiguousarray(lines), thresholds, 0.0,
                                           y0, t_end, np.asarray(p, dtype=float), rtol, np.full(y0.size, atol),
-                                          max_step, first_step, wrap_limit, wrap_period, max_steps))
+                                          max_step, first_step, wrap_limit, wrap_period, max_steps, *NO_RESTARTS))
 
 
 def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, wrap_period=0.0,
@@ -100,7 +100,7 @@ def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=n
     y0 = np.asarray(y0, dtype=float)
     return CompiledRun.from_result(rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
                                                 np.zeros(len(lines)), 0.0, y0, t_end, np.asarray(p, dtype=float),
-                                                step, wrap_limit, wrap_period, max_steps))
+                                                step, wrap_limit, wrap_period, max_steps, *NO_RESTARTS))
 
 
 def stepped(solver):
@@ -323,9 +323,9 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
         arguments = (rotating_pendulum, position, 0, np.zeros((0, 4)), np.zeros(0), t0, y, t_end,
                      np.asarray(p, dtype=float))
         if method == "RK4":
-            return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000))
+            return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000, *NO_RESTARTS))
         return CompiledRun.from_result(compiled.stepper(method)(*arguments, 1e-8, np.full(2, 1e-10), np.inf,
-                                                                first_step, limit, wrap_period, 100000))
+                                                                first_step, limit, wrap_period, 100000, *NO_RESTARTS))
 
     inside = call(y0, 0.0, 0.0, period)
     times, starts, t, y, first_step, offset, restarts = [0.0], [], 0.0, y0, 0.0, 0.0, -1

@@ -41,6 +41,7 @@ subsystem compiled once when its stepper is made.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -206,6 +207,7 @@ class GovernorStepper:
             raise ValueError(f"scene '{model.scene.name}' has no governor")
         self.regulator = governor_subsystem(model)
         self._segment = segment_for(self.regulator)
+        self._follow_pieces = pieces_for(self.regulator)
         self.governor = model.governor
         self.state = model.initial_state()[:model.coupling_index]
         self.mode = self.regulator.initial_mode(self.state)
@@ -245,14 +247,9 @@ class GovernorStepper:
                                                   stretch, None)
         else:
             times, speeds = samples
-            for index in range(0, len(times) - 2, 2):
-                self.state = self.state.copy()
-                self.state[1] = speeds[index]
-                piece = speed_waveform(times[index], times[index + 2], *speeds[index:index + 3])
-                self.state, self.mode = self._segment(self.regulator, piece, times[index], times[index + 2],
-                                                      self.state, self.mode, stretch, None)
-                if stretch.status != "complete":
-                    break
+            pieces = [(speed_waveform(times[index], times[index + 2], *speeds[index:index + 3]), times[index],
+                       times[index + 2], speeds[index]) for index in range(0, len(times) - 2, 2)]
+            self.state, self.mode = self._follow_pieces(self.regulator, pieces, self.state, self.mode, stretch)
         self.time = stretch.t_end
         self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
         self.status, self.message = _accumulate(self.stats, stretch)
@@ -422,6 +419,30 @@ def segment_for(subsystem: MachineModel):
     from mech_regulator.solvers.compiled.run import compiled_segment  # numba is imported only when needed
 
     return compiled_segment(subsystem)
+
+
+def pieces_for(subsystem: MachineModel):
+    """What steps a subsystem over a sequence of load pieces, each started with the crank's speed set (follow_pieces'
+    arguments and result): follow_pieces with the reference path's _segment, or on solver.path: fast its compiled
+    twin, which goes on from piece to piece inside its compiled calls (solvers/compiled/run.compiled_pieces)."""
+    if not runs_compiled(subsystem.scene.solver):
+        return functools.partial(follow_pieces, _segment)
+    from mech_regulator.solvers.compiled.run import compiled_pieces  # numba is imported only when needed
+
+    return compiled_pieces(subsystem)
+
+
+def follow_pieces(segment, subsystem: MachineModel, pieces: list, y: np.ndarray, mode, trajectory: Trajectory):
+    """Step a subsystem over pieces (LoadPiece, t_start [s], t_end [s], the crank's speed at its start [rad/s]) one
+    after the other with segment (time_domain._segment's arguments and result), each from the state so far with
+    y[1] set to its start speed, until one fails; returns the state and mode at the end."""
+    for piece, t_start, t_end, omega in pieces:
+        y = y.copy()
+        y[1] = omega
+        y, mode = segment(subsystem, piece, t_start, t_end, y, mode, trajectory, None)
+        if trajectory.status != "complete":
+            break
+    return y, mode
 
 
 def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:

@@ -22,7 +22,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS
-from mech_regulator.solvers.time_domain import _switch_window, fail_blown_up, fail_too_many_steps
+from mech_regulator.solvers.time_domain import fail_blown_up, fail_too_many_steps, switch_window
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_ITERATIONS = 100
@@ -44,7 +44,7 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
                               "needs omega >= 0 (use a time-domain method such as DOP853)")
         return trajectory
 
-    grid, period = model.switch_grid(), model.dynamic_period()
+    grid, period = np.array(model.switch_grid(), dtype=float), model.dynamic_period()
     right_hand_sides: dict = {}
 
     def moment_and_derivative(t: float, phi: float, omega: float, window: tuple | None = None, offset: float = 0.0
@@ -67,9 +67,9 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     try:
         while t < scenario.duration:
             offset, phi_next = 0.0, phi + dphi
-            if grid:  # end the step on the next switch or kink angle; the moments of the interval it is in
+            if grid.size:  # end the step on the next switch or kink angle; the moments of the interval it is in
                 offset = period * math.floor(phi / period)
-                window_before, window = window, _switch_window(grid, period, phi - offset, forward=True)
+                window_before, window = window, switch_window(grid, period, phi - offset, forward=True)
                 phi_next = min(phi_next, offset + window[1])
                 if window != window_before:  # the moment on the far side of the angle just reached
                     M, _, _ = moment_and_derivative(t, phi, omega, window, offset)

@@ -78,6 +78,8 @@ class Trajectory:
         """State at t: shape (n_states,) for a scalar, (n_states, n) for an array of times in [t_start, t_end]."""
         if not self.interpolants:
             return self._start_only(t)
+        if len(self.interpolants) == 1:  # what scipy's OdeSolution would call, without its sorting and grouping
+            return self.interpolants[0](np.asarray(t))
         if self._solution is None:
             self._solution = OdeSolution(np.asarray(self.piece_edges), self.interpolants)
         return self._solution(t)

@@ -38,7 +38,7 @@ import inspect
 import math
 import os
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numba
@@ -64,6 +64,10 @@ EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_
 CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE, CRANK_DIRECTION = range(6, 12)
 THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START = range(12, 15)
 SEGMENT_SLOTS = 15
+# the slots a load piece and the crank's speed at its start set (CompiledScene.piece_values)
+PIECE_SLOTS = (EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START,
+               CRANK_DIRECTION)
+PIECE_INDEX = np.array(PIECE_SLOTS, dtype=np.int64)
 # the throttle of a co-simulated machine: held, or the polynomial of LoadPiece.throttle_at
 HELD_THROTTLE_EXPRESSION = (f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
                             f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)")
@@ -108,6 +112,7 @@ class CompiledScene:
     table_slots: tuple[int, ...] = ()
     friction_slot: int | None = None
     normal_slot: int | None = None
+    _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega) -> rows
 
     def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
                        held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
@@ -119,12 +124,7 @@ class CompiledScene:
         of a table that turns with phi in the stepper's phi, wrapped by offset [rad]); with joint friction's corner
         angles and a window, the signs of the joints' relative rates at its middle (the guide's N sign: hold_normal)."""
         p = self.parameters.copy()
-        if piece is not None:
-            p[EXTERNAL_OFFSET], p[EXTERNAL_SLOPE], p[HELD_THROTTLE] = piece.offset, piece.slope, piece.throttle
-            p[THROTTLE_SLOPE], p[THROTTLE_CURVATURE] = piece.throttle_slope, piece.throttle_curvature
-            p[THROTTLE_START] = piece.start
-        else:
-            p[HELD_THROTTLE] = 1.0
+        p[PIECE_INDEX] = self.piece_values(piece, omega)
         model = self.model
         if model.governor is not None and mode is not None:
             p[SLEEVE_MODE], p[SERVO_MODE] = SLEEVE_CODE[mode[0]], SERVO_CODE[mode[1]]
@@ -137,7 +137,6 @@ class CompiledScene:
             margin = 1e-9 * (window[1] - window[0])
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
             p[WINDOW_LO], p[WINDOW_HI] = window
-        p[CRANK_DIRECTION] = np.sign(omega)
         friction = model.joint_friction
         if self.friction_slot is not None and window is not None and friction.corner_angles:  # |k_j| as s_j k_j
             for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
@@ -149,6 +148,16 @@ class CompiledScene:
                                                         self._held_bounds(held, y, offset)):
                 p[slot], p[slot + 1], p[slot + 2] = anchor - offset if table.angular else anchor, low, high
         return p
+
+    @staticmethod
+    def piece_values(piece, omega: float) -> tuple[float, ...]:
+        """The values of p[PIECE_SLOTS] for an external-load piece (offset [N m], slope [N m/s], held throttle [-],
+        the throttle's slope [1/s], curvature [1/s^2] and start time [s]; None: no load, full throttle) and the sign
+        of the crank's speed omega [rad/s] at the segment's start."""
+        if piece is None:
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, float(np.sign(omega))
+        return (piece.offset, piece.slope, piece.throttle, piece.throttle_slope, piece.throttle_curvature, piece.start,
+                float(np.sign(omega)))
 
     def hold_normal(self, p: np.ndarray, t: float, y: np.ndarray, side: float) -> float:
         """Set in p (parameters_for's) the guide's normal sign s_N that the segment from (t [s], y, phi wrapped as
@@ -183,10 +192,15 @@ class CompiledScene:
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
         linear (or unused); with held and the start state y, the breakpoint guards of the held pieces (STEP_ONTO)."""
         n = len(self.model.state_names())
-        matrix = np.zeros((self.n_guards, n + 2))
-        for slot, row in enumerate(mode_rows(self.model, mode, omega)):
-            if row is not None:
-                matrix[slot] = row
+        key = (mode, float(np.sign(omega)))  # mode_rows reads omega's sign only
+        rows = self._mode_matrices.get(key)
+        if rows is None:
+            rows = np.zeros((self.n_guards, n + 2))
+            for slot, row in enumerate(mode_rows(self.model, mode, omega)):
+                if row is not None:
+                    rows[slot] = row
+            self._mode_matrices[key] = rows
+        matrix = rows.copy()
         if self.window_slot is not None and window is not None:
             matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
             matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])

@@ -11,15 +11,33 @@ wrap_period > 0 [rad] the stepper wraps the angle itself at the wrap limit, doin
 y[0] less whole periods, f evaluated anew, the last step's size kept (RK4: the rest divided evenly again); its
 outputs (y_old, y_end) carry the unwrapped angle. Only for guards that do not read y[0] (no switch window).
 
+With a kink grid (the switch window's restarts inside the call), a switch window's edge reached (its guard, from
+kink_slots[0] on) is restarted on inside the loop as the caller (solvers/compiled/run.py) would, when that restart
+changes nothing but the window (_kink_restart): phi set onto the edge and wrapped anew into [0, kink_period), the
+next window's slots written into p and its guards' rows into linear, f evaluated anew, the last step's size kept
+(RK4: the rest divided evenly again), max_steps counted from there; it returns the event instead when a mode guard
+is within RESTART_MARGIN of its threshold there, a speed (speed_indices) went beyond MAX_SPEED, or max_steps steps
+or max_restarts restarts were done in the call. The numbers are those of the caller's restarts, bit for bit.
+
     stepper("RK45")(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
-                    rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps) -> result
+                    rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps,
+                    kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots,
+                    max_restarts) -> result
     stepper("DOP853")(... as RK45 ...), stepper("Rosenbrock23")(... as RK45 ...)
     stepper("RK4")(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
-                   step, wrap_limit, wrap_period, max_steps) -> result
+                   step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots,
+                   speed_indices, pieces, piece_slots, max_restarts) -> result
 
 t0, t_end, max_step, first_step (0 = choose it as scipy's select_initial_step), step [s]; atol per state
 (units of the state); wrap_limit [rad] (inf = none); rk4's step is the largest step, shortened to divide
-[t0, t_end] evenly as in solvers/rk4.py.
+[t0, t_end] evenly as in solvers/rk4.py. kink_grid: the switch grid [rad] in one period kink_period [rad], sorted
+(empty: every edge returns; NO_RESTARTS are the arguments of such a call); kink_offset [rad]: the whole periods taken
+off phi in y0 (added back in the dense output); kink_slots: the window's first guard slot, then the slots in p of the
+clamp (lo, hi), the window's edges (lo, hi) and the sign of omega (codegen's layout); speed_indices: the states
+kept within MAX_SPEED. pieces: per row a piece that follows t_end, [its end [s], its start speed y[1] [rad/s], the
+values of p[piece_slots]]: at t_end the call goes on into the next (_piece_restart: y[1] and those slots set, f anew,
+a fresh first step, as the caller's next call would), on the same conditions as a kink, then to its end, and so on.
+max_restarts: the most restarts (kinks and pieces) made inside one call (so that the caller hears of progress).
 
 The result tuple, in this order:
      0 status        int64: 0 reached t_end, 1 event, 2 wrap limit, 3 failed
@@ -40,9 +58,16 @@ The result tuple, in this order:
                      next call (0 if none)
     12 failure       int64: why status 3: 1 non-finite state, 2 step size underflow, 3 max_steps reached
     13 wraps         int64: wraps of the angle made inside the call (wrap_period > 0)
+    14 kinks         int64: restarts on a switch window's edge made inside the call (each also a switch)
+    15 step_offsets  float64[n]: the whole periods [rad] wrapped off phi on each step (kink_offset, then each
+                     restart's), added back by the dense output
+    16 restarted     bool[n]: whether the step begins a restart inside the call
+    17 offset        float64 [rad]: the whole periods wrapped off phi at the end (y_end is less them)
+    18 window_lo, 19 window_hi  float64 [rad]: the switch window at the end (nan without a kink grid)
+    20 pieces_done   int64: rows of pieces the call went on into (y_end is in the last of them)
 
-CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coefficients) is the dense output
-of all the steps of one call, for Trajectory.add_piece.
+CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coefficients, step_offsets, restarted)
+is the dense output of all the steps of one call, for Trajectory.add_piece.
 
 Guards: guards(t, y, p, levels) writes every guard's level (+inf: not active in this mode). A mode holds
 while level >= threshold. linear[g] = [flag, c0, c1..c_n]: flag LINEAR (1) says the guard is c0 + sum c_i y_i, flag
@@ -72,9 +97,10 @@ from numba import njit, types
 from scipy.integrate import DOP853, RK45, DenseOutput
 from scipy.integrate._ivp import dop853_coefficients
 
+from mech_regulator.scene.limits import MAX_SPEED
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, RHS_TYPE
 from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODES, GUARD_TOLERANCE, guard_polynomial,
-                                                monotone_ends)
+                                                monotone_ends, switch_window)
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
@@ -101,20 +127,31 @@ DOP853_D = np.ascontiguousarray(DOP853.D, dtype=np.float64)  # (4, 16)
 ROSENBROCK_D = 1.0 / (2.0 + np.sqrt(2.0))  # ode23s's gamma
 ROSENBROCK_E32 = 6.0 + np.sqrt(2.0)
 
+_RESTART_ARGS = (types.float64[::1], types.float64, types.float64, types.int64[::1], types.int64[::1],
+                 types.float64[:, ::1], types.int64[::1], types.int64)
 _ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
                   types.float64, types.float64[::1], types.float64, types.float64[::1],
                   types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.float64,
-                  types.int64)
+                  types.int64) + _RESTART_ARGS
 _FIXED_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
                types.float64, types.float64[::1], types.float64, types.float64[::1],
-               types.float64, types.float64, types.float64, types.int64)
+               types.float64, types.float64, types.float64, types.int64) + _RESTART_ARGS
+# the restart arguments of a call that returns at every switch window's edge and at t_end (no restart inside)
+NO_RESTARTS = (np.zeros(0), 0.0, 0.0, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2)),
+               np.zeros(0, dtype=np.int64), 0)
+# kink_slots: the window's first guard slot, then the slots in p of the clamp (lo, hi), the window (lo, hi) and the
+# sign of the crank's speed at the segment's start (codegen's CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CRANK_DIRECTION)
+KINK_WINDOW_GUARD, KINK_CLAMP_LO, KINK_CLAMP_HI, KINK_WINDOW_LO, KINK_WINDOW_HI, KINK_DIRECTION = range(6)
+RESTART_MARGIN = 1e-9  # a kink or piece is restarted inside only when every mode guard is this above its threshold
 
 
 @njit(cache=True)
 def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
-               first_step, fixed_step, wrap_limit, wrap_period, max_steps):
+               first_step, fixed_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
+               kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """The stepping loop shared by the four methods: accepted steps with their dense output stored in
-    arrays grown by doubling, an event check on every step, the wrap and step limits."""
+    arrays grown by doubling, an event check on every step, the wrap and step limits, and the restarts inside the
+    loop on a switch window's edges (_kink_restart) and into the following pieces (_piece_restart)."""
     n = y0.size
     powers = 7 if method == _DOP853 else 4
     stages = DOP853_A.shape[0] if method == _DOP853 else RK45_A.shape[0] + 1
@@ -122,6 +159,8 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     times = np.empty(capacity + 1)
     y_old = np.empty((capacity, n))
     coefficients = np.zeros((capacity, n, powers))
+    step_offsets = np.empty(capacity)
+    restarted = np.zeros(capacity, dtype=np.bool_)
     stage = np.empty((stages, n))
     work = np.empty(n)
     jacobian = np.empty((n, n))
@@ -139,6 +178,12 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     event_guard, event_time = -1, np.nan
     h_previous = 0.0
     offset, wraps = 0.0, 0  # whole periods [rad] taken off y[0] by wraps inside this call, and how many
+    # kink restarts made, the first step after the last one (and whether it is yet to be stored), speeds within limit
+    kinks, first_of_segment, restart_pending, within_limit = 0, 0, False, True
+    pieces_done = 0  # the pieces after the first that the call went on into
+    window_lo, window_hi = np.nan, np.nan
+    if kink_grid.size > 0:
+        window_lo, window_hi = p[kink_slots[KINK_WINDOW_LO]], p[kink_slots[KINK_WINDOW_HI]]
     times[0] = t0
     if t_end <= t0:
         status = REACHED
@@ -148,19 +193,19 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             if levels[g] < thresholds[g] - GUARD_TOLERANCE:
                 status, event_guard, event_time = EVENT, g, t0
                 break
+    order = 7 if method == _DOP853 else (4 if method == _RK45 else 2)
     if method == _RK4:
         count = max(1, np.ceil((t_end - t0) / fixed_step - 1e-9))
         h_abs = (t_end - t0) / count
     elif first_step > 0.0 or status >= 0:
         h_abs = first_step
     else:
-        order = 7 if method == _DOP853 else (4 if method == _RK45 else 2)
         h_abs = _initial_step(rhs, t0, y, f, t_end, max_step, order, rtol, atol, p, y_new, f_new)
         nfev += 1
     exponent = -1.0 / 8.0 if method == _DOP853 else (-1.0 / 5.0 if method == _RK45 else -1.0 / 3.0)
     jacobian_current = False
     while status < 0:
-        if n_steps >= max_steps:
+        if n_steps - first_of_segment >= max_steps:
             status, failure = FAILED, TOO_MANY_STEPS
             break
         if method == _RK4:
@@ -206,13 +251,19 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             status, failure = FAILED, NONFINITE
             break
         if n_steps == capacity:
-            times, y_old, coefficients = _grown(times, y_old, coefficients)
+            times, y_old, coefficients, step_offsets, restarted = _grown(times, y_old, coefficients, step_offsets,
+                                                                         restarted)
             capacity *= 2
         nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work,
                                     coefficients[n_steps])
         y_old[n_steps] = y
         y_old[n_steps, 0] += offset
+        step_offsets[n_steps] = kink_offset
+        restarted[n_steps] = restart_pending
+        restart_pending = False
         times[n_steps + 1] = t_new
+        for i in speed_indices:
+            within_limit = within_limit and abs(y_new[i]) <= MAX_SPEED
         h_previous = h
         n_steps += 1
         if n_guards > 0:
@@ -243,13 +294,55 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                     _rescale(coefficients[n_steps - 1], (event_time - t) / h)
                     times[n_steps] = event_time
                 y_end[0] += offset
+                if (kink_grid.size > 0 and event_guard >= kink_slots[KINK_WINDOW_GUARD] and t < event_time < t_end
+                        and within_limit and n_steps < max_steps and kinks + pieces_done < max_restarts):
+                    restart_offset = _kink_restart(guards, n_guards, linear, thresholds, event_time, y_end, p, levels,
+                                                   kink_grid, kink_period, kink_offset, kink_slots, event_guard,
+                                                   window_lo, window_hi, work)
+                    if restart_offset == restart_offset:  # not nan: restarted on the next window, y its start
+                        t = event_time
+                        y[:] = work
+                        kink_offset = restart_offset
+                        window_lo, window_hi = p[kink_slots[KINK_WINDOW_LO]], p[kink_slots[KINK_WINDOW_HI]]
+                        rhs(t, y, p, f)
+                        nfev += 1
+                        kinks += 1
+                        first_of_segment = n_steps
+                        restart_pending = True
+                        status, event_guard, event_time = -1, -1, np.nan
+                        if method == _RK4:
+                            h_abs = (t_end - t) / max(1, np.ceil((t_end - t) / fixed_step - 1e-9))
+                        else:
+                            h_abs = min(abs(h_previous), t_end - t)
+                        h_previous = 0.0
+                        jacobian_current = False
+                        continue
                 break
         t = t_new
         y[:] = y_new
         f[:] = f_new
         jacobian_current = False
         if t >= t_end:
-            status = REACHED
+            if (pieces_done < pieces.shape[0] and pieces[pieces_done, 0] > t and within_limit and n_steps < max_steps
+                    and kinks + pieces_done < max_restarts
+                    and _piece_restart(guards, n_guards, thresholds, t, y, p, levels, pieces[pieces_done], piece_slots,
+                                       work)):
+                # the caller's next piece, started here as it would: y[1] and p set, f anew, a fresh first step
+                y[:] = work
+                t_end = pieces[pieces_done, 0]
+                pieces_done += 1
+                rhs(t, y, p, f)
+                nfev += 1
+                first_of_segment = n_steps
+                restart_pending = True
+                h_previous = 0.0
+                if method == _RK4:
+                    h_abs = (t_end - t) / max(1, np.ceil((t_end - t) / fixed_step - 1e-9))
+                else:
+                    h_abs = _initial_step(rhs, t, y, f, t_end, max_step, order, rtol, atol, p, y_new, f_new)
+                    nfev += 1
+            else:
+                status = REACHED
         elif abs(y[0]) > wrap_limit and wrap_period > 0.0:
             # what the reference path's restart does: the angle less whole periods, f evaluated anew there, the
             # last step's size (RK4: the remaining interval divided evenly again)
@@ -269,7 +362,65 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
         y_end[:] = y
         y_end[0] += offset
     return (status, n_steps, times[:n_steps + 1].copy(), y_old[:n_steps].copy(), coefficients[:n_steps].copy(),
-            event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure, wraps)
+            event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure, wraps, kinks,
+            step_offsets[:n_steps].copy(), restarted[:n_steps].copy(), kink_offset, window_lo, window_hi, pieces_done)
+
+
+@njit(cache=True)
+def _kink_restart(guards, n_guards, linear, thresholds, t, y_end, p, levels, grid, period, offset, slots, edge_guard,
+                  window_lo, window_hi, start):
+    """The outer loop's restart (run._compiled_pieces) on the edge of the switch window (window_lo, window_hi) [rad]
+    that guard edge_guard reached at t [s] in the state y_end (phi less offset [rad]), when it changes nothing but the
+    window: phi set onto the edge, wrapped anew into one period (the new offset period floor(phi / period)), the
+    window ahead (_switch_window) written into p (the clamp, 1e-9 of its width inside, the window's edges, the sign of
+    omega) and into the window guards' linear rows. Done only when every other guard is at least RESTART_MARGIN above
+    its threshold there (no mode change the outer loop's time_domain._settle_mode would apply) and the window's own do
+    not fire at once: then start holds the restart state (phi wrapped) and the new offset [rad] is returned; else p
+    is left as it was and nan is returned (the caller returns the event)."""
+    window_guard = slots[KINK_WINDOW_GUARD]
+    phi = offset + (window_lo if edge_guard == window_guard else window_hi)
+    new_offset = period * np.floor(phi / period)
+    lo, hi = _switch_window(grid, period, phi - new_offset, y_end[1] >= 0.0)
+    start[:] = y_end
+    start[0] = phi - new_offset
+    saved = np.empty(slots.size)
+    for k in range(1, slots.size):
+        saved[k] = p[slots[k]]
+    margin = 1e-9 * (hi - lo)
+    p[slots[KINK_CLAMP_LO]], p[slots[KINK_CLAMP_HI]] = lo + margin, hi - margin
+    p[slots[KINK_WINDOW_LO]], p[slots[KINK_WINDOW_HI]] = lo, hi
+    p[slots[KINK_DIRECTION]] = np.sign(start[1])
+    guards(t, start, p, levels)
+    for g in range(n_guards):
+        own = g == window_guard or g == window_guard + 1
+        if levels[g] < thresholds[g] + (-GUARD_TOLERANCE if own else RESTART_MARGIN):
+            for k in range(1, slots.size):
+                p[slots[k]] = saved[k]
+            return np.nan
+    linear[window_guard, 1], linear[window_guard + 1, 1] = -lo, hi
+    return new_offset
+
+
+@njit(cache=True)
+def _piece_restart(guards, n_guards, thresholds, t, y, p, levels, row, slots, start):
+    """The caller's start of its next piece at t [s] (cosim's governor following the machine's speed piece by piece),
+    when that changes nothing but the crank speed y[1] and the piece's slots of p: row = [the piece's end [s], its
+    start speed [rad/s], the values of p[slots]]. Done only when every guard is at least RESTART_MARGIN above its
+    threshold there (no mode change the caller's time_domain._settle_mode would apply): then start holds the
+    piece's start state and p its slots, and True is returned; else p is left as it was and False is returned."""
+    start[:] = y
+    start[1] = row[1]
+    saved = np.empty(slots.size)
+    for k in range(slots.size):
+        saved[k] = p[slots[k]]
+        p[slots[k]] = row[2 + k]
+    guards(t, start, p, levels)
+    for g in range(n_guards):
+        if levels[g] < thresholds[g] + RESTART_MARGIN:
+            for k in range(slots.size):
+                p[slots[k]] = saved[k]
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -282,7 +433,7 @@ def _finite(x):
 
 
 @njit(cache=True)
-def _grown(times, y_old, coefficients):
+def _grown(times, y_old, coefficients, step_offsets, restarted):
     """The output arrays with twice the room for steps, the stored steps copied."""
     capacity = y_old.shape[0]
     new_times = np.empty(2 * capacity + 1)
@@ -291,7 +442,11 @@ def _grown(times, y_old, coefficients):
     new_y_old[:capacity] = y_old
     new_coefficients = np.zeros((2 * capacity, coefficients.shape[1], coefficients.shape[2]))
     new_coefficients[:capacity] = coefficients
-    return new_times, new_y_old, new_coefficients
+    new_offsets = np.empty(2 * capacity)
+    new_offsets[:capacity] = step_offsets
+    new_restarted = np.zeros(2 * capacity, dtype=np.bool_)
+    new_restarted[:capacity] = restarted
+    return new_times, new_y_old, new_coefficients, new_offsets, new_restarted
 
 
 @njit(cache=True)
@@ -589,6 +744,7 @@ def _brent(a, b, g, line, t_old, h, y_old, coefficients, p, guards, levels, stat
 
 
 _guard_polynomial = njit(cache=True)(guard_polynomial)
+_switch_window = njit(cache=True)(switch_window)
 _monotone_ends = njit(cache=True)(monotone_ends)
 
 
@@ -699,23 +855,28 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
 # the four steppers; stepper(method) compiles the one a run needs
 def _rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-         wrap_limit, wrap_period, max_steps):
+         wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices,
+         pieces, piece_slots, max_restarts):
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
     return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
-                      first_step, 0.0, wrap_limit, wrap_period, max_steps)
+                      first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
+                      kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 def _dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-           wrap_limit, wrap_period, max_steps):
+           wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices,
+           pieces, piece_slots, max_restarts):
     """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
     the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
     return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
-                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps)
+                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-                 wrap_limit, wrap_period, max_steps):
+                 wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices,
+                 pieces, piece_slots, max_restarts):
     """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
     with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
         k1 = W^-1 (F0 + h d T),  F1 = f(t + h/2, y + h k1/2),  k2 = W^-1 (F1 - k1) + k1,
@@ -724,15 +885,18 @@ def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, r
     J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
     with exponent -1/3. Returns the result tuple of the module docstring."""
     return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
-                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps)
+                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
-def _rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps):
+def _rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps,
+         kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
     the module docstring."""
     return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, 0.0, np.zeros(0),
-                      0.0, 0.0, step, wrap_limit, wrap_period, max_steps)
+                      0.0, 0.0, step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
+                      kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 _STEPPERS = {"RK45": (_rk45, _ADAPTIVE_ARGS), "DOP853": (_dop853, _ADAPTIVE_ARGS),
@@ -750,22 +914,32 @@ def stepper(method: str):
 
 class StepsDense(DenseOutput):
     """The dense output of all the steps of one compiled call: y(t) = y_old[k] + h_k sum_j c[k, :, j-1]
-    theta^j on step k (found by np.searchsorted over times), theta = (t - times[k]) / h_k. Called with a
-    scalar time [s] it gives shape (n_states,), with an array of m times shape (n_states, m)."""
+    theta^j on step k (found by np.searchsorted over times), theta = (t - times[k]) / h_k, then phi plus the whole
+    periods step_offsets[k] [rad] wrapped off it on that step (none by default). At the start of a step that begins a
+    restart inside the call (restarted[k], a switch window's edge) the step before it answers, as between two pieces
+    of a Trajectory (scipy's OdeSolution). Called with a scalar time [s] it gives shape (n_states,), with an array of
+    m times shape (n_states, m)."""
 
-    def __init__(self, times: np.ndarray, y_old: np.ndarray, coefficients: np.ndarray):
+    def __init__(self, times: np.ndarray, y_old: np.ndarray, coefficients: np.ndarray,
+                 step_offsets: np.ndarray | None = None, restarted: np.ndarray | None = None):
         super().__init__(times[0], times[-1])
         self.times, self.y_old, self.coefficients = times, y_old, coefficients
+        self.step_offsets = step_offsets
+        self.restarted = restarted if restarted is not None and restarted.any() else None
 
     def _call_impl(self, t):
         times = np.atleast_1d(t)
-        k = np.clip(np.searchsorted(self.times, times, side="right") - 1, 0, self.y_old.shape[0] - 1)
+        k = np.minimum(np.maximum(np.searchsorted(self.times, times, side="right") - 1, 0), self.y_old.shape[0] - 1)
+        if self.restarted is not None:
+            k -= self.restarted[k] & (self.times[k] == times)
         h = self.times[k + 1] - self.times[k]
         theta = ((times - self.times[k]) / h)[:, None]
         total = np.zeros((times.size, self.y_old.shape[1]))
         for j in range(self.coefficients.shape[2] - 1, -1, -1):
             total = (total + self.coefficients[k, :, j]) * theta
         y = (self.y_old[k] + h[:, None] * total).T
+        if self.step_offsets is not None:
+            y[0] += self.step_offsets[k]
         return y[:, 0] if np.ndim(t) == 0 else y
 
 
@@ -787,6 +961,13 @@ class CompiledRun:
     last_step: float
     failure: int
     wraps: int
+    kinks: int
+    step_offsets: np.ndarray
+    restarted: np.ndarray
+    offset: float
+    window_lo: float
+    window_hi: float
+    pieces_done: int
 
     @classmethod
     def from_result(cls, result: tuple) -> "CompiledRun":
@@ -801,8 +982,10 @@ class CompiledRun:
 
     @property
     def dense(self) -> StepsDense | None:
-        """The dense output over [times[0], times[-1]], None when no step was taken."""
-        return StepsDense(self.times, self.y_old, self.coefficients) if self.n_steps else None
+        """The dense output over [times[0], times[-1]], phi with the whole periods wrapped off it added back (the
+        kink offsets), None when no step was taken."""
+        return (StepsDense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted)
+                if self.n_steps else None)
 
     @property
     def message(self) -> str:

@@ -6,8 +6,13 @@ and the switch window, and the scene's compiled stepper runs until the piece end
 driven-part event, located in the stepper; its transition is the model's own Guard, applied here), the crank angle
 passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper restarts with its last step size;
 without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so
-that progress moves and Ctrl-C is heard). Every call's steps become one piece of the Trajectory, with the ends of
-those steps (Trajectory.step_ends: the works of the energy balance are integrated step by step).
+that progress moves and Ctrl-C is heard). A switch window's edge (a switch or a kink of a table) is a restart that
+changes only the window: for a scene whose p depends on nothing else there (no state tables, no joint friction:
+_Layout.kink_grid) the stepper makes it itself, exactly as this loop would (integrators._kink_restart), and returns
+only when a mode guard is near its threshold there, a speed went beyond its limit, or MAX_STEPS_PER_CALL steps or
+MAX_RESTARTS_PER_CALL such restarts are done. A co-simulated governor's speed pieces (compiled_pieces) are gone on
+into in the same way (integrators._piece_restart). Every call's steps become one piece of the Trajectory, with the
+ends of those steps (Trajectory.step_ends: the works of the energy balance are integrated step by step).
 """
 
 from __future__ import annotations
@@ -21,14 +26,15 @@ import numpy as np
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators
-from mech_regulator.solvers.compiled.codegen import CompiledScene, compile_scene
+from mech_regulator.solvers.compiled.codegen import (CLAMP_HI, CLAMP_LO, CRANK_DIRECTION, PIECE_INDEX, PIECE_SLOTS,
+                                                     WINDOW_HI, WINDOW_LO, CompiledScene, compile_scene)
 from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck, _held_pieces,
-                                                _log_event, _settle_mode, _Shifted, _switch_window,
-                                                integrate_time_domain)
+                                                _log_event, _settle_mode, integrate_time_domain, switch_window)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress moves, Ctrl-C is heard);
 # the next call warm-starts with the last step size
+MAX_RESTARTS_PER_CALL = 32  # and after this many restarts it made itself (kinks, pieces), for the same reasons
 
 
 def integrate_compiled(model: MachineModel, progress: Progress | None = None) -> Trajectory:
@@ -42,30 +48,61 @@ def compiled_segment(model: MachineModel):
     """time_domain._segment's compiled twin for this model (same arguments and result; the scene compiled once here):
     what integrate_compiled and the co-simulation's steppers (solvers/cosim.py) step a load piece or an exchange
     step with. A model the fast path cannot run raises SceneError (fast_path_refusal)."""
+    return functools.partial(_compiled_segment, *_compiled(model))
+
+
+def compiled_pieces(model: MachineModel):
+    """cosim.follow_pieces' compiled twin for this model (same arguments and result): a sequence of load pieces, each
+    started with the crank's speed set, stepped in as few compiled calls as the pieces allow (_compiled_pieces)."""
+    return functools.partial(_follow_compiled, *_compiled(model))
+
+
+def _compiled(model: MachineModel) -> tuple[CompiledScene, _Layout]:
+    """The model's compiled scene and layout; a model the fast path cannot run raises SceneError."""
     reason = fast_path_refusal(model)
     if reason is not None:
         raise SceneError(reason)
     compiled = compile_scene(model)
-    return functools.partial(_compiled_segment, compiled, _Layout.of(model, compiled))
+    return compiled, _Layout.of(model, compiled)
 
 
 class _Layout(NamedTuple):
     """What every segment of a model reuses (a co-simulation steps thousands of short ones): its switch grid [rad],
-    dynamic period [rad], whether the crank angle is wrapped, the absolute tolerances and the guards' thresholds."""
+    dynamic period [rad], whether the crank angle is wrapped, the absolute tolerances and the guards' thresholds;
+    for the stepper's own restarts on the window's edges (integrators._kink_restart) the grid as an array (empty:
+    the scene's p depends on more than the window there, every edge returns here), the slots it writes and the
+    indices of the speeds it keeps within MAX_SPEED; whether the stepper may go on into the next of a sequence of
+    load pieces itself (integrators._piece_restart: a scene whose p there depends on the piece and the crank's
+    speed only, without switch angles or a wrapped angle)."""
 
-    grid: list[float]
+    grid: np.ndarray
     period: float
     wraps: bool
     atol: np.ndarray
     thresholds: np.ndarray
+    kink_grid: np.ndarray
+    kink_slots: np.ndarray
+    speed_indices: np.ndarray
+    pieces_inside: bool
 
     @classmethod
     def of(cls, model: MachineModel, compiled: CompiledScene) -> _Layout:
         """The layout of a model and its compiled scene."""
-        return cls(grid=model.switch_grid(), period=model.dynamic_period(),
-                   wraps=model.reduced is not None or "phi" in model.depends_on(),
-                   atol=np.full(len(model.state_names()), model.scene.solver.atol),
-                   thresholds=np.zeros(compiled.n_guards))  # the steppers apply time_domain's GUARD_TOLERANCE
+        grid = np.array(model.switch_grid(), dtype=float)
+        wraps = model.reduced is not None or "phi" in model.depends_on()
+        window_only = (compiled.window_slot is not None and wraps and not model.state_tables
+                       and model.joint_friction is None and compiled.normal_slot is None)
+        names = model.state_names()
+        return cls(grid=grid, period=model.dynamic_period(), wraps=wraps,
+                   atol=np.full(len(names), model.scene.solver.atol),
+                   thresholds=np.zeros(compiled.n_guards),  # the steppers apply time_domain's GUARD_TOLERANCE
+                   kink_grid=grid if window_only else np.empty(0),
+                   kink_slots=np.array([compiled.window_slot or 0, CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI,
+                                        CRANK_DIRECTION], dtype=np.int64),
+                   speed_indices=np.array([index for index, name in enumerate(names)
+                                           if name in ("omega", "omega_driven")], dtype=np.int64),
+                   pieces_inside=(not grid.size and not wraps and not model.state_tables and model.joint_friction is None
+                                  and compiled.normal_slot is None))
 
 
 def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineModel, piece, t_start: float,
@@ -73,10 +110,37 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
     """time_domain._segment on the fast path: step [t_start, t_end] with the compiled stepper, restarting at every
     event (mode transition applied), switch angle and wrap of the crank angle; returns the state and mode at the
     end."""
+    return _compiled_pieces(compiled, layout, model, [(piece, t_start, t_end, y[1])], 0, y, mode, trajectory,
+                            progress)[:2]
+
+
+def _follow_compiled(compiled: CompiledScene, layout: _Layout, model: MachineModel, pieces: list, y: np.ndarray, mode,
+                     trajectory: Trajectory):
+    """cosim.follow_pieces on the fast path: each piece (LoadPiece, t_start [s], t_end [s], the crank's speed at its
+    start [rad/s]) stepped from the state so far with y[1] set to that speed, until one fails; returns the state and
+    mode at the end."""
+    index = 0
+    while index < len(pieces) and trajectory.status == "complete":
+        y = np.array(y, dtype=float)
+        y[1] = pieces[index][3]
+        y, mode, index = _compiled_pieces(compiled, layout, model, pieces, index, y, mode, trajectory, None)
+    return y, mode
+
+
+def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineModel, pieces: list, index: int,
+                     y: np.ndarray, mode, trajectory: Trajectory, progress: Progress | None):
+    """Step pieces[index] (as _follow_compiled's) from y with the compiled stepper, restarting at every event (mode
+    transition applied), switch angle and wrap of the crank angle, and, where the layout allows it (pieces_inside),
+    go on into the pieces after it inside the compiled calls (as _follow_compiled would start them); returns the
+    state and mode at the end and the index of the next piece to start."""
     settings = model.scene.solver
-    grid, period, wraps, atol, thresholds = layout
+    grid, period, wraps, atol, thresholds = layout[:5]
     wrap_limit = RESTART_PERIODS * period if wraps else math.inf
-    t, first_step = t_start, 0.0
+    piece, t, t_end, _ = pieces[index]
+    following = np.array([(end, omega, *compiled.piece_values(later, omega))
+                          for later, _, end, omega in pieces[index + 1:]] if layout.pieces_inside else [],
+                         dtype=float).reshape(-1, 2 + len(PIECE_SLOTS))
+    first_step = 0.0
     tables = model.state_tables
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held = _held_pieces(tables, y)
@@ -87,7 +151,7 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         if trajectory.status != "complete":
             break
         offset = period * math.floor(y[0] / period) if wraps else 0.0
-        window = _switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid else None
+        window = switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid.size else None
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
         held = _held_pieces(tables, y, held)
         p = compiled.parameters_for(piece, mode, window, start[1], held, start, offset)
@@ -100,15 +164,24 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
         # of returning to restart
         wrap_period = period if wraps and window is None and not turning else 0.0
         linear = compiled.linear(mode, window, start[1], held, start, offset)
+        restarts = (layout.kink_grid, period, offset, layout.kink_slots, layout.speed_indices, following, PIECE_INDEX,
+                    MAX_RESTARTS_PER_CALL)
         run = _step(settings, compiled, linear, thresholds, t, y_wrapped, t_end, p,
-                    atol, first_step, wrap_limit, wrap_period)
+                    atol, first_step, wrap_limit, wrap_period, restarts)
         if run.n_steps:
-            trajectory.add_piece(t, run.t_end, _Shifted(run.dense, offset), step_ends=run.times[1:])
+            trajectory.add_piece(t, run.t_end, run.dense, step_ends=run.times[1:])
         trajectory.stats.steps += int(run.n_steps)
         trajectory.stats.nfev += int(run.nfev)
         trajectory.stats.njev += int(run.njev)
         trajectory.stats.nlu += int(run.nlu)
-        trajectory.stats.restarts += int(run.wraps)
+        trajectory.stats.restarts += int(run.wraps) + int(run.kinks)
+        trajectory.stats.switches += int(run.kinks)
+        if run.kinks:  # the stepper went on into later windows: phi's offset and the window are those of the last
+            offset, window = run.offset, (run.window_lo, run.window_hi)
+        if run.pieces_done:  # and into later pieces: the last is the one stepped now
+            index += int(run.pieces_done)
+            piece, _, t_end, _ = pieces[index]
+            following = following[run.pieces_done:]
         if run.last_step > 0.0:
             first_step = min(run.last_step, t_end - run.t_end)
         t_old, t = t, run.t_end
@@ -149,20 +222,22 @@ def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineMo
             trajectory.stats.restarts += 1
         if progress is not None:
             progress(t)
-    return y, mode
+    return y, mode, index + 1
 
 
 def _step(settings: schema.Solver, compiled: CompiledScene, linear: np.ndarray, thresholds: np.ndarray, t: float,
           y: np.ndarray, t_end: float, p: np.ndarray, atol: np.ndarray, first_step: float, wrap_limit: float,
-          wrap_period: float):
-    """One call of the scene's compiled stepper, as an integrators.CompiledRun."""
+          wrap_period: float, restarts: tuple):
+    """One call of the scene's compiled stepper, as an integrators.CompiledRun; restarts: its restart arguments (the
+    kink grid, period, offset, slots, speed indices, following pieces and their slots, the most restarts; integrators'
+    module docstring)."""
     common = (compiled.rhs_callback, compiled.guards_callback, compiled.n_guards, linear, thresholds, t, y, t_end, p)
     stepper = _entry_point(settings.method)
     if settings.method == "RK4":
-        result = stepper(*common, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL)
+        result = stepper(*common, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, *restarts)
     else:
         result = stepper(*common, settings.rtol, atol, settings.max_step or math.inf, first_step, wrap_limit,
-                         wrap_period, MAX_STEPS_PER_CALL)
+                         wrap_period, MAX_STEPS_PER_CALL, *restarts)
     return integrators.CompiledRun.from_result(result)
 
 
