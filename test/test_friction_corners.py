@@ -17,7 +17,7 @@ import pytest
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from mech_regulator.solvers.time_domain import _admissible_step, _reaction_branches, _reach, switch_window
+from mech_regulator.solvers.time_domain import _reaction_branches, _reach, switch_window
 from support import simulate_complete
 
 CRANK, ROD = 0.05, 0.20  # compressor.yaml's crank-slider [m]
@@ -85,17 +85,6 @@ def test_compressor_friction_meets_its_rtol_on_both_paths():
     assert [run.stats.switches for run in runs] == [tight.stats.switches] * 2 == [expected] * 2
 
 
-class _LinearReaction:
-    """A stand-in for a model whose journal 'pin' carries R(t) = R_m + R' (t - t_m) [N] (complex, R_m perpendicular
-    to R'): its reaction column |R| at any times."""
-
-    def __init__(self, minimum: complex, rate: complex, at: float):
-        self.minimum, self.rate, self.at = minimum, rate, at
-
-    def columns(self, times, states):
-        return {"reaction_pin": np.abs(self.minimum + self.rate * (np.asarray(times) - self.at))}
-
-
 def test_branch_points_of_a_reaction_passing_near_zero_are_the_closed_form():
     """|R|^2 = |R_m|^2 + |R'|^2 (t - t_m)^2 vanishes at t_m +- i |R_m| / |R'|: found on a step (0.1, 0.12] s for a
     reaction of 1.4 N at its minimum at 0.113 s falling by 2e4 N/s (the compressor's wrist pin), to 1e-12 s (the
@@ -103,8 +92,11 @@ def test_branch_points_of_a_reaction_passing_near_zero_are_the_closed_form():
     reach is the longest step whose every point stays its own length away from them: (x^2 + rho^2) / (2 x) from
     0.1 s (x = 0.013 s ahead), rho from 0.113 s (beside), the distance to them from 0.2 s (behind)."""
     minimum, rate, at = 1.4j, -2.0e4, 0.113
-    model = _LinearReaction(minimum, rate, at)
-    branches = _reaction_branches(model, ("pin",), lambda times: np.zeros((2, np.size(times))), 0.1, 0.12)
+
+    def reactions(t, y):  # a journal with R(t) = R_m + R' (t - t_m) [N] (complex, R_m perpendicular to R')
+        return [abs(minimum + rate * (t - at))]
+
+    branches = _reaction_branches(reactions, (0,), lambda times: np.zeros((2, np.size(times))), 0.1, 0.12, 0.0)
     rho = abs(minimum) / abs(rate)
     near = np.sort_complex(branches[np.abs(branches - 0.11) < 1.0])  # the interpolant's other zeros: round-off, > 1 s
     assert near == pytest.approx(np.array([at - 1j * rho, at + 1j * rho]), abs=1e-12)
@@ -113,7 +105,7 @@ def test_branch_points_of_a_reaction_passing_near_zero_are_the_closed_form():
     assert _reach(branches, at) == pytest.approx(rho, rel=1e-6)
     assert _reach(branches, 0.2) == pytest.approx(math.hypot(0.2 - at, rho), rel=1e-9)
     for branch in (3.0 + 1.0j, 0.5 + 2.0j, -1.0 + 0.5j):  # from the step's every point at least the step's length
-        h = _admissible_step(branch)
+        h = _reach(np.array([branch]), 0.0)
         nearest = min(abs(branch - s) for s in np.linspace(0.0, h, 100001))
         assert nearest == pytest.approx(h, rel=1e-6)
 

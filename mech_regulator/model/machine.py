@@ -370,6 +370,19 @@ class MachineModel:
         return self._right_hand_side(piece, window if kinks else None, window, mode, False, crank_only=False,
                                      anchors=anchors, normal_signs=normal_signs, normal=guide)
 
+    def joint_reactions(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
+                        mode: Mode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
+                        normal_signs: tuple[float, ...] = ()) -> Callable[[float, np.ndarray], list[float]] | None:
+        """(t, y) -> the reaction magnitudes |R_j| [N] of the joints with friction (joint_friction.names' order) with
+        the acceleration of rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_signs): the
+        reactions the rhs reads, continued along its segment as it is (the solvers keep their steps away from the
+        journals' branch points, time_domain._reaction_branches), or None for a machine without joint friction on a
+        mechanism."""
+        if self.joint_friction is None or self.joint_friction.loads is None:
+            return None
+        return self._right_hand_side(piece, window if kinks else None, window, mode, False, crank_only=False,
+                                     anchors=anchors, normal_signs=normal_signs, reactions=True)
+
     @functools.cached_property
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
         """(t, y) -> (J(phi) [kg m^2], F1 [N m]): the crank's inertia and its net moment apart from the coupling or
@@ -380,9 +393,11 @@ class MachineModel:
     def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
                          window: tuple[float, float] | None, mode: Mode | None,
                          ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None,
-                         normal_signs: tuple[float, ...] = (), normal: int | None = None) -> Callable:
-        """rhs (see there) or, crank_only, crank_side, or, normal (a guide's number), guide_normal; segment: the window
-        when its tables continue along one segment (rhs's kinks), else None; anchors, normal_signs: rhs's."""
+                         normal_signs: tuple[float, ...] = (), normal: int | None = None,
+                         reactions: bool = False) -> Callable:
+        """rhs (see there) or, crank_only, crank_side, or, normal (a guide's number), guide_normal, or, reactions,
+        joint_reactions; segment: the window when its tables continue along one segment (rhs's kinks), else None;
+        anchors, normal_signs: rhs's."""
         held = dict(zip((table.name for table in self.state_tables), anchors)) if anchors is not None else {}
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
@@ -458,6 +473,8 @@ class MachineModel:
                 epsilon = friction.acceleration(phi, omega, force, J, J * epsilon, ratio_signs, normal_signs)
                 if normal is not None:
                     return friction.guide_normal(phi, omega, epsilon, force, normal)
+                if reactions:
+                    return friction.joint_values(phi, omega, epsilon, force)[1]
             rates = [omega, epsilon]
             if governor_rates is not None:
                 rates += governor_rates(y)

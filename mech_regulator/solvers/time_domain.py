@@ -41,6 +41,9 @@ STEPS_WITHIN_REACTIONS = ("RK23", "RK45", "DOP853", "Radau")
 GUARD_NODES = 9  # a guard along a step is interpolated at this many Chebyshev points (time_domain.guard_polynomial)
 GUARD_NODE_FRACTIONS = 0.5 - 0.5 * np.cos(np.pi * np.arange(GUARD_NODES) / (GUARD_NODES - 1))  # theta_k in [0, 1]
 SAMPLES_TO_POWERS = np.linalg.inv(np.vander(GUARD_NODE_FRACTIONS, increasing=True))  # samples -> powers of theta
+# a zero of a journal's |R_j|^2 along a step within this much of the real axis (in theta, units of the step) is real:
+# a reaction through 0 (a corner of |R_j|; its double zero splits by some sqrt(eps) in round-off), not a branch point
+REAL_ZERO = 1e-7
 # samples -> the interpolant's last Chebyshev coefficient, (1 / (n - 1)) sum'' (-1)^k g_k (ends halved), up to sign
 LAST_CHEBYSHEV = (-1.0) ** np.arange(GUARD_NODES) * np.r_[0.5, np.ones(GUARD_NODES - 2), 0.5] / (GUARD_NODES - 1)
 
@@ -119,6 +122,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         crossed_normal = None
         guards += list(normal_guards)
         rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_sides)
+        reactions = model.joint_reactions(piece, window, mode, kinks, anchors, normal_sides) if journals else None
         constraint = model.constraint(mode)
         interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
         if branches.size and first_step is not None:  # a restart's first step stays within the reach too
@@ -152,13 +156,13 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 fail_blown_up(model, trajectory, t_step, y_step, *beyond)
                 break
             if journals:
-                branches = _reaction_branches(model, journals, dense, solver.t_old, solver.t)
-                reach = _reach(branches, solver.t_old)
-                if solver.t - solver.t_old > reach and not redone:  # the step again, within the reach
+                branches = _reaction_branches(reactions, journals, dense, solver.t_old, solver.t, offset)
+                longest = _reach(branches, solver.t_old)
+                if solver.t - solver.t_old > longest and not redone:  # the step again, within the reach
                     _count_evaluations(trajectory, solver)
                     y_start = np.array(y, dtype=float)
                     y_start[0] -= offset
-                    solver = _solver(settings, rhs, t, y_start, t_end, max(reach, _smallest_limit(t)))
+                    solver = _solver(settings, rhs, t, y_start, t_end, max(longest, _smallest_limit(t)))
                     redone = True
                     continue
                 redone = False
@@ -315,16 +319,17 @@ def _count_evaluations(trajectory: Trajectory, solver) -> None:
     trajectory.stats.nlu += int(solver.nlu)
 
 
-def _journals(model: MachineModel) -> tuple[str, ...]:
+def _journals(model: MachineModel) -> tuple[int, ...]:
     """The joints with friction whose |R_j| the right-hand side reads as it is (journals; not the guides, whose |N| it
-    reads as s_N N between located crossings): their names, or () without joint friction."""
+    reads as s_N N between located crossings): their positions in joint_friction.names, or () without joint friction
+    on a mechanism."""
     friction = model.joint_friction
-    if friction is None:
+    if friction is None or friction.loads is None:
         return ()
-    return tuple(name for k, name in enumerate(friction.names) if k not in friction.guides)
+    return tuple(k for k in range(len(friction.names)) if k not in friction.guides)
 
 
-def _reaction_branches(model: MachineModel, journals: tuple[str, ...], dense, t_old: float, t_new: float
+def _reaction_branches(reactions, journals: tuple[int, ...], dense, t_old: float, t_new: float, offset: float
                        ) -> np.ndarray:
     """The branch points [s, complex] of the journals' friction rho_j |R_j| seen along the step (t_old, t_new] [s]: the
     complex zeros of |R_j(t)|^2, where |R_j| = sqrt(|R_j|^2) stops being analytic. Where a reaction passes close to 0
@@ -332,32 +337,53 @@ def _reaction_branches(model: MachineModel, journals: tuple[str, ...], dense, t_
     |R'|^2 (t - t_m)^2 has its zeros at t_m +- i |R_m| / |R'|: the motion's Taylor series about a point converges
     only within its distance to them, and a one-step method's error estimate, an expansion in the step, fails on
     steps that reach that far (DOP853 accepted a 23 ms step across the wrist pin's 1.4 N of 145 N with 14 times its
-    tolerance); _reach gives the steps that do not. |R_j|^2 along the step: the model's reaction columns on the
-    dense output at the GUARD_NODES Chebyshev points, interpolated in theta = (t - t_old) / h; its zeros are np.roots
-    of that polynomial. Real zeros (a reaction through 0 exactly: a corner of |R_j|, nothing to step around) are
-    left out."""
+    tolerance); _reach gives the steps that do not. |R_j|^2 along the step: reactions(t, y) (the segment's
+    MachineModel.joint_reactions, in the solver's phi, offset [rad] less than the dense output's) at the journals'
+    positions, on the dense output at the GUARD_NODES Chebyshev points (_branch_points). They are the reactions the
+    step integrates, continued along the segment: beyond a corner inside the step (which the step is then cut at) the
+    reactions themselves have a kink, whose interpolant's complex zeros would limit the step for nothing."""
     h = t_new - t_old
     times = t_old + GUARD_NODE_FRACTIONS * h
-    columns = model.columns(times, dense(times))
-    roots = np.concatenate([np.roots((SAMPLES_TO_POWERS @ columns[f"reaction_{name}"] ** 2)[::-1])
-                            for name in journals])
-    return t_old + h * roots[roots.imag != 0.0]
+    states = dense(times)
+    states[0] -= offset
+    sizes = np.array([reactions(time, states[:, k]) for k, time in enumerate(times)])
+    return _branch_points(sizes[:, list(journals)] ** 2, t_old, h)
+
+
+def _branch_points(squares: np.ndarray, t_old: float, h: float) -> np.ndarray:
+    """The branch points [s, complex] of the journals' |R_j| along the step (t_old, t_old + h] [s] from squares[k, j],
+    |R_j|^2 [N^2] at the GUARD_NODES Chebyshev points t_old + GUARD_NODE_FRACTIONS[k] h: the complex zeros of each
+    journal's interpolating polynomial in theta = (t - t_old) / h (np.roots), as times t_old + h theta. Zeros within
+    REAL_ZERO of the real axis (a reaction through 0: a corner of |R_j|, nothing to step around) are left out, and so
+    is a journal with a non-finite sample (the step fails on its own). Plain loops: the fast path compiles it
+    (solvers/compiled/integrators.py)."""
+    found = np.empty(squares.shape[1] * (GUARD_NODES - 1), dtype=np.complex128)
+    count = 0
+    for j in range(squares.shape[1]):
+        samples = np.ascontiguousarray(squares[:, j])
+        if not np.all(np.isfinite(samples)):
+            continue
+        powers = SAMPLES_TO_POWERS @ samples
+        for root in np.roots(powers[::-1].astype(np.complex128)):  # complex: numba keeps the domain
+            if abs(root.imag) > REAL_ZERO:
+                found[count] = t_old + h * root
+                count += 1
+    return found[:count]
 
 
 def _reach(branches: np.ndarray, t: float) -> float:
-    """The longest step [s] forward from t [s] that stays at least its own length away from every branch point
-    (_reaction_branches, _admissible_step); inf without any."""
-    return min((_admissible_step(complex(branch) - t) for branch in branches), default=math.inf)
-
-
-def _admissible_step(branch: complex) -> float:
-    """The longest step h >= 0 forward from 0 whose every point lies at least h away from the branch point x + i rho
-    [s] (relative to the step's start): |branch| when it is behind (x <= 0); |branch|^2 / (2 x) when rho <= x (the
-    step's end then h from it); else rho (it lies beside the step)."""
-    x, rho = branch.real, abs(branch.imag)
-    if x <= 0.0:
-        return abs(branch)
-    return abs(branch) ** 2 / (2.0 * x) if rho <= x else rho
+    """The longest step h [s] forward from t [s] whose every point lies at least h away from every branch point
+    (_branch_points) x + i rho [s] (x relative to t): |x + i rho| for one behind (x <= 0); |x + i rho|^2 / (2 x) when
+    rho <= x (the step's end then h from it); else rho (it lies beside the step); inf without any. Plain loops: the
+    fast path compiles it."""
+    longest = math.inf
+    for branch in branches:
+        x, rho = branch.real - t, abs(branch.imag)
+        if x <= 0.0:
+            longest = min(longest, math.hypot(x, rho))
+        else:
+            longest = min(longest, (x * x + rho * rho) / (2.0 * x) if rho <= x else rho)
+    return longest
 
 
 def _smallest_limit(t: float) -> float:

@@ -20,6 +20,10 @@ default $XDG_CACHE_HOME/mech_regulator/compiled or ~/.cache/mech_regulator/compi
 kernels.py's source and the package and numba versions, imported with importlib (numba caches the machine code
 in __pycache__ beside it), and kept in a process-wide dict.
 
+With joint friction on a mechanism it also writes `reactions(t, y, p, squares)` (signatures.REACTIONS_SIGNATURE): the
+|R_j|^2 = |R0_j + R1_j epsilon|^2 [N^2] of the journals with friction (time_domain._journals: not the guides), at the
+rhs's own epsilon, which the integrators keep their steps' reach from (their branch points, issue 19).
+
 Guards are written in the order of MachineModel.guards(mode) (the governor's, then the clutch's and the driven
 part's, then the joint friction's crank guard; then the guide's N guard, time_domain._normal_guard), +inf in the
 slots a mode does not use, then the switch window's two
@@ -55,7 +59,7 @@ from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
 from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
-from mech_regulator.solvers.time_domain import _anchors, _break
+from mech_regulator.solvers.time_domain import _anchors, _break, _journals
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
@@ -96,7 +100,9 @@ class CompiledScene:
     state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards. Joint friction with a
     mechanism (issue 19): friction_slot, the first of its six slots in p (the signs s_j of the four joints' relative
     rates, 0: |k_j|; the guide's normal sign s_N, 0: |N|; its guard's start level), and normal_slot, the guard slot of
-    s_N N (a crank–slider's guide with friction, after the mode's guards; +inf while s_N is 0), or None."""
+    s_N N (a crank–slider's guide with friction, after the mode's guards; +inf while s_N is 0), or None;
+    reactions_callback (a C callback, as rhs_callback) writes the |R_j|^2 of the n_journals journals with friction
+    (guards_callback, never called, when n_journals is 0)."""
 
     model: MachineModel
     rhs: object
@@ -112,6 +118,8 @@ class CompiledScene:
     table_slots: tuple[int, ...] = ()
     friction_slot: int | None = None
     normal_slot: int | None = None
+    reactions_callback: object = None
+    n_journals: int = 0
     _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega) -> rows
 
     def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
@@ -249,8 +257,8 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     recent = _RECENT.get(id(model))
     if recent is not None and recent.model is model:
         return recent
-    (source, parameters, n_guards, window_slot, breakpoint_slot, table_slots, friction_slot,
-     normal_slot) = generate(model)
+    (source, parameters, n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
+     n_journals) = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
     module = _LOADED.get(digest)
@@ -265,7 +273,8 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         _LOADED[digest] = module
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
                              n_guards, window_slot, source, path, breakpoint_slot, table_slots, friction_slot,
-                             normal_slot)
+                             normal_slot, module.reactions_callback if n_journals else module.guards_callback,
+                             n_journals)
     if len(_RECENT) >= RECENT_MODELS:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
@@ -505,10 +514,11 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
 
 
 def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None,
-                                          int | None]:
+                                          int | None, int]:
     """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None, slot of
-    the first breakpoint guard or None, CompiledScene.table_slots, friction_slot, normal_slot) of a scene's model (see
-    the module docstring). The model must pass run.fast_path_refusal."""
+    the first breakpoint guard or None, CompiledScene.table_slots, friction_slot, normal_slot, number of journals
+    with friction that `reactions` writes) of a scene's model (see the module docstring). The model must pass
+    run.fast_path_refusal."""
     machine = model.scene.machine
     p = _Parameters()
     table_slots = tuple(p.slots(math.nan, -math.inf, math.inf) for _ in model.state_tables)  # anchor, low, high
@@ -624,6 +634,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     body.append("net = total - 0.5 * dJ * omega * omega")
     body.append("dydt[0] = omega")
     n_mode_guards = 0
+    journals, reaction_lines = [], []  # the journals' positions in the kinetostatics; `reactions`' body
     if governor is not None:
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
     if model.coupling is not None:
@@ -645,9 +656,14 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         body += _joint_friction_lines(model, p, specs, share, anchor, "q_anchor" if kinked else "q", friction_slot)
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
-        if friction.guides:  # s_N N - its start level, with the rhs's epsilon (the body up to here)
+        copy = [line.replace("dydt[", "rates[") for line in body]  # the body up to here: R0, R1 and the rhs's epsilon
+        if friction_slot is not None:
+            journals = [friction.indices[k] for k in _journals(model)]
+        if journals:  # |R0_j + R1_j epsilon|^2 of each journal
+            reaction_lines = [f"rates = k.np.empty({len(model.state_names())})"] + copy + [
+                f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
+        if friction.guides:  # s_N N - its start level, with the rhs's epsilon
             side, low = f"p[{friction_slot + 4}]", f"p[{friction_slot + 5}]"
-            copy = [line.replace("dydt[", "rates[") for line in body]
             guard_lines += [f"if {side} != 0.0:", f"    rates = k.np.empty({len(model.state_names())})"]
             guard_lines += [f"    {line}" for line in copy]
             guard_lines += [f"    levels[g] = {side} * (R0[3] + R1[3] * rates[1]).imag - {low}", "g += 1"]
@@ -667,8 +683,9 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         n_guards += 2
         guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
-    source = _module(body, guard_lines, n_guards)
-    return source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot
+    source = _module(body, guard_lines, n_guards, reaction_lines)
+    return (source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
+            len(journals))
 
 
 def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, anchor: str, held: str) -> str:
@@ -854,20 +871,25 @@ def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tupl
     return rhs, guards
 
 
-def _module(rhs_body: list[str], guard_body: list[str], n_guards: int) -> str:
-    """The generated module's source."""
+def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_body: list[str]) -> str:
+    """The generated module's source (`reactions` only with a reaction_body)."""
     indent = "\n    "
     guards = [f"for i in range({n_guards}):", "    levels[i] = math.inf", "omega = y[1]", "g = 0"] + guard_body
+    signatures = f"GUARDS_SIGNATURE, {'REACTIONS_SIGNATURE, ' if reaction_body else ''}RHS_SIGNATURE"
+    reactions = ("\n\n@njit(REACTIONS_SIGNATURE, cache=True)\n"
+                 f"def reactions(t, y, p, squares):{indent}{indent.join(reaction_body)}\n\n\n"
+                 "reactions_callback = cfunc(REACTIONS_SIGNATURE, cache=True)(reactions.py_func)\n"
+                 if reaction_body else "")
     return (
         '"""Generated by mech_regulator.solvers.compiled.codegen: a scene\'s right-hand side and guards (do not edit;\n'
         'the parameters are in p)."""\n\n'
         "import math\n\n"
         "from numba import cfunc, njit\n\n"
         "from mech_regulator.solvers.compiled import kernels as k\n"
-        "from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, RHS_SIGNATURE\n\n\n"
+        f"from mech_regulator.solvers.compiled.signatures import {signatures}\n\n\n"
         "@njit(RHS_SIGNATURE, cache=True)\n"
         f"def rhs(t, y, p, dydt):{indent}{indent.join(rhs_body)}\n\n\n"
         "@njit(GUARDS_SIGNATURE, cache=True)\n"
         f"def guards(t, y, p, levels):{indent}{indent.join(guards)}\n\n\n"
         "rhs_callback = cfunc(RHS_SIGNATURE, cache=True)(rhs.py_func)\n"
-        "guards_callback = cfunc(GUARDS_SIGNATURE, cache=True)(guards.py_func)\n")
+        "guards_callback = cfunc(GUARDS_SIGNATURE, cache=True)(guards.py_func)\n" + reactions)

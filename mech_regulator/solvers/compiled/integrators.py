@@ -19,7 +19,7 @@ next window's slots written into p and its guards' rows into linear, f evaluated
 is within RESTART_MARGIN of its threshold there, a speed (speed_indices) went beyond MAX_SPEED, or max_steps steps
 or max_restarts restarts were done in the call. The numbers are those of the caller's restarts, bit for bit.
 
-    stepper("RK45")(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
+    stepper("RK45")(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p,
                     rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps,
                     kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots,
                     max_restarts) -> result
@@ -38,6 +38,16 @@ kept within MAX_SPEED. pieces: per row a piece that follows t_end, [its end [s],
 values of p[piece_slots]]: at t_end the call goes on into the next (_piece_restart: y[1] and those slots set, f anew,
 a fresh first step, as the caller's next call would), on the same conditions as a kink, then to its end, and so on.
 max_restarts: the most restarts (kinks and pieces) made inside one call (so that the caller hears of progress).
+
+Joint friction's journals (issue 19, as the reference path's adaptive one-step methods, time_domain._segment):
+reactions(t, y, p, squares) writes the |R_j|^2 [N^2] of the n_journals journals with friction (a scene's generated
+function; any function of that type when n_journals is 0: no limit, the steps exactly as without it). After every
+accepted step of RK45, DOP853 or Rosenbrock23 they are sampled along the step's dense output at the GUARD_NODES
+Chebyshev points and the complex zeros of their interpolants are the branch points of |R_j|
+(time_domain._branch_points); every step stays at least its own length away from them (time_domain._reach): a
+step that reaches closer is taken again from its start with the longest admissible step (once), and the next
+steps, the first after a kink restart too, are limited to the reach from where they start (never below
+time_domain._smallest_limit); a piece restart starts afresh, as the caller's next piece would.
 
 The result tuple, in this order:
      0 status        int64: 0 reached t_end, 1 event, 2 wrap limit, 3 failed
@@ -65,6 +75,8 @@ The result tuple, in this order:
     17 offset        float64 [rad]: the whole periods wrapped off phi at the end (y_end is less them)
     18 window_lo, 19 window_hi  float64 [rad]: the switch window at the end (nan without a kink grid)
     20 pieces_done   int64: rows of pieces the call went on into (y_end is in the last of them)
+    21 step_limit    float64 [s]: the longest first step of the next call that the last step's branch points of the
+                     journals' |R_j| allow from times[n] (inf: none; the caller's restart takes min(last_step, it))
 
 CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coefficients, step_offsets, restarted)
 is the dense output of all the steps of one call, for Trajectory.add_piece.
@@ -98,9 +110,10 @@ from scipy.integrate import DOP853, RK45, DenseOutput
 from scipy.integrate._ivp import dop853_coefficients
 
 from mech_regulator.scene.limits import MAX_SPEED
-from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, RHS_TYPE
-from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODES, GUARD_TOLERANCE, guard_polynomial,
-                                                monotone_ends, switch_window)
+from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, REACTIONS_TYPE, RHS_TYPE
+from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODES, GUARD_TOLERANCE, _branch_points,
+                                                _reach, _smallest_limit, guard_polynomial, monotone_ends,
+                                                switch_window)
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
@@ -129,8 +142,8 @@ ROSENBROCK_E32 = 6.0 + np.sqrt(2.0)
 
 _RESTART_ARGS = (types.float64[::1], types.float64, types.float64, types.int64[::1], types.int64[::1],
                  types.float64[:, ::1], types.int64[::1], types.int64)
-_ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
-                  types.float64, types.float64[::1], types.float64, types.float64[::1],
+_ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1], REACTIONS_TYPE,
+                  types.int64, types.float64, types.float64[::1], types.float64, types.float64[::1],
                   types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.float64,
                   types.int64) + _RESTART_ARGS
 _FIXED_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
@@ -146,12 +159,13 @@ RESTART_MARGIN = 1e-9  # a kink or piece is restarted inside only when every mod
 
 
 @njit(cache=True)
-def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
-               first_step, fixed_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
-               kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
+               max_step, first_step, fixed_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+               kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """The stepping loop shared by the four methods: accepted steps with their dense output stored in
-    arrays grown by doubling, an event check on every step, the wrap and step limits, and the restarts inside the
-    loop on a switch window's edges (_kink_restart) and into the following pieces (_piece_restart)."""
+    arrays grown by doubling, an event check on every step, the wrap and step limits, the journals' reach, and the
+    restarts inside the loop on a switch window's edges (_kink_restart) and into the following pieces
+    (_piece_restart)."""
     n = y0.size
     powers = 7 if method == _DOP853 else 4
     stages = DOP853_A.shape[0] if method == _DOP853 else RK45_A.shape[0] + 1
@@ -166,6 +180,11 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
     jacobian = np.empty((n, n))
     dfdt = np.empty(n)
     levels = np.empty(max(n_guards, 1))
+    squares = np.empty((GUARD_NODES, max(n_journals, 1)))  # the journals' |R_j|^2 at the step's nodes [N^2]
+    node_state = np.empty(n)
+    branches = np.zeros(0, dtype=np.complex128)  # the branch points of the journals' |R_j| the last step saw [s]
+    limit = np.inf  # the longest step they allow from where the next step starts [s] (inf: none)
+    redone = False  # the last step was taken again within their reach
     t = t0
     y = y0.copy()
     f = np.empty(n)
@@ -214,7 +233,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             nfev += _rk4_step(rhs, t, y, f, h, p, stage, y_new, f_new)
         else:
             min_step = 10.0 * abs(np.nextafter(t, np.inf) - t)
-            h_abs = min(max(h_abs, min_step), max_step)
+            h_abs = min(max(h_abs, min_step), min(max_step, limit))
             rejected = False
             finite = True
             while True:
@@ -256,6 +275,16 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
             capacity *= 2
         nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work,
                                     coefficients[n_steps])
+        if n_journals > 0:
+            branches = _journal_branches(reactions, n_journals, t, h, y, coefficients[n_steps], p, squares,
+                                         node_state)
+            longest = _reach_from(branches, t)
+            if h > longest and not redone:  # the step again from its start, within the reach
+                h_abs = max(longest, _smallest_step_limit(t))
+                redone = True
+                continue
+            redone = False
+            limit = _step_limit(branches, t_new)
         y_old[n_steps] = y
         y_old[n_steps, 0] += offset
         step_offsets[n_steps] = kink_offset
@@ -316,6 +345,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                             h_abs = min(abs(h_previous), t_end - t)
                         h_previous = 0.0
                         jacobian_current = False
+                        limit = _step_limit(branches, t)  # as the caller's restart: within the reach from there
                         continue
                 break
         t = t_new
@@ -331,6 +361,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
                 y[:] = work
                 t_end = pieces[pieces_done, 0]
                 pieces_done += 1
+                branches, limit = branches[:0], np.inf  # a fresh start, as the caller's next piece (a new segment)
                 rhs(t, y, p, f)
                 nfev += 1
                 first_of_segment = n_steps
@@ -363,7 +394,8 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end,
         y_end[0] += offset
     return (status, n_steps, times[:n_steps + 1].copy(), y_old[:n_steps].copy(), coefficients[:n_steps].copy(),
             event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure, wraps, kinks,
-            step_offsets[:n_steps].copy(), restarted[:n_steps].copy(), kink_offset, window_lo, window_hi, pieces_done)
+            step_offsets[:n_steps].copy(), restarted[:n_steps].copy(), kink_offset, window_lo, window_hi, pieces_done,
+            _step_limit(branches, times[n_steps]))
 
 
 @njit(cache=True)
@@ -744,6 +776,28 @@ def _brent(a, b, g, line, t_old, h, y_old, coefficients, p, guards, levels, stat
 
 
 _guard_polynomial = njit(cache=True)(guard_polynomial)
+_branch_points_of = njit(cache=True)(_branch_points)
+_reach_from = njit(cache=True)(_reach)
+_smallest_step_limit = njit(cache=True)(_smallest_limit)
+
+
+@njit(cache=True)
+def _journal_branches(reactions, n_journals, t_old, h, y_old, coefficients, p, squares, state):
+    """The branch points [s, complex] of the journals' |R_j| along the step (t_old, t_old + h] [s]
+    (time_domain._branch_points): reactions' |R_j|^2 on the step's dense output at the GUARD_NODES Chebyshev
+    points (squares, state: room for them and for a state)."""
+    for k in range(GUARD_NODES):
+        time = t_old + GUARD_NODE_FRACTIONS[k] * h
+        _dense_at(time, t_old, h, y_old, coefficients, state)
+        reactions(time, state, p, squares[k])
+    return _branch_points_of(squares[:, :n_journals], t_old, h)
+
+
+@njit(cache=True)
+def _step_limit(branches, t):
+    """The longest step [s] from t [s] that the branch points allow (time_domain._reach), never below
+    time_domain._smallest_limit; inf without any, as the reference's solver.max_step and first step."""
+    return max(_reach_from(branches, t), _smallest_step_limit(t))
 _switch_window = njit(cache=True)(switch_window)
 _monotone_ends = njit(cache=True)(monotone_ends)
 
@@ -854,29 +908,29 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
 
 # the four steppers; stepper(method) compiles the one a run needs
-def _rk45(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-         wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices,
-         pieces, piece_slots, max_restarts):
+def _rk45(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol, max_step,
+          first_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots,
+          speed_indices, pieces, piece_slots, max_restarts):
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
-    return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step,
-                      first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
-                      kink_slots, speed_indices, pieces, piece_slots, max_restarts)
-
-
-def _dop853(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-           wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices,
-           pieces, piece_slots, max_restarts):
-    """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
-    the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
-    return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
-                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+    return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol,
+                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
                       kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
-def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol, max_step, first_step,
-                 wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices,
-                 pieces, piece_slots, max_restarts):
+def _dop853(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
+            max_step, first_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots,
+            speed_indices, pieces, piece_slots, max_restarts):
+    """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
+    the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
+    return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol,
+                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+
+
+def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
+                  max_step, first_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
+                  kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
     with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
         k1 = W^-1 (F0 + h d T),  F1 = f(t + h/2, y + h k1/2),  k2 = W^-1 (F1 - k1) + k1,
@@ -884,8 +938,8 @@ def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, r
         error = h/6 (k1 - 2 k2 + k3),
     J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
     with exponent -1/3. Returns the result tuple of the module docstring."""
-    return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, rtol, atol,
-                      max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+    return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p,
+                      rtol, atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
                       kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
@@ -893,10 +947,10 @@ def _rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap
          kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
-    the module docstring."""
-    return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, 0.0, np.zeros(0),
-                      0.0, 0.0, step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
-                      kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+    the module docstring. Its step is kept: no journals' reach (guards stands in for reactions)."""
+    return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, guards, 0, t0, y0, t_end, p, 0.0,
+                      np.zeros(0), 0.0, 0.0, step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 _STEPPERS = {"RK45": (_rk45, _ADAPTIVE_ARGS), "DOP853": (_dop853, _ADAPTIVE_ARGS),
@@ -968,6 +1022,7 @@ class CompiledRun:
     window_lo: float
     window_hi: float
     pieces_done: int
+    step_limit: float
 
     @classmethod
     def from_result(cls, result: tuple) -> "CompiledRun":

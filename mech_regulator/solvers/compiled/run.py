@@ -182,8 +182,8 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
             index += int(run.pieces_done)
             piece, _, t_end, _ = pieces[index]
             following = following[run.pieces_done:]
-        if run.last_step > 0.0:
-            first_step = min(run.last_step, t_end - run.t_end)
+        if run.last_step > 0.0:  # within the reach of the journals' branch points the last step saw (integrators)
+            first_step = min(run.last_step, t_end - run.t_end, run.step_limit)
         t_old, t = t, run.t_end
         y = np.array(run.y_end, dtype=float)
         y[0] += offset
@@ -231,13 +231,15 @@ def _step(settings: schema.Solver, compiled: CompiledScene, linear: np.ndarray, 
     """One call of the scene's compiled stepper, as an integrators.CompiledRun; restarts: its restart arguments (the
     kink grid, period, offset, slots, speed indices, following pieces and their slots, the most restarts; integrators'
     module docstring)."""
-    common = (compiled.rhs_callback, compiled.guards_callback, compiled.n_guards, linear, thresholds, t, y, t_end, p)
+    scene = (compiled.rhs_callback, compiled.guards_callback, compiled.n_guards, linear, thresholds)
+    start = (t, y, t_end, p)
     stepper = _entry_point(settings.method)
     if settings.method == "RK4":
-        result = stepper(*common, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, *restarts)
-    else:
-        result = stepper(*common, settings.rtol, atol, settings.max_step or math.inf, first_step, wrap_limit,
-                         wrap_period, MAX_STEPS_PER_CALL, *restarts)
+        result = stepper(*scene, *start, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, *restarts)
+    else:  # the adaptive ones keep their steps within the reach of the journals' branch points
+        result = stepper(*scene, compiled.reactions_callback, compiled.n_journals, *start, settings.rtol, atol,
+                         settings.max_step or math.inf, first_step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL,
+                         *restarts)
     return integrators.CompiledRun.from_result(result)
 
 

@@ -13,5 +13,10 @@ GUARDS_SIGNATURE = types.void(types.float64, types.float64[::1], types.float64[:
 """guards(t [s], y, p, levels): writes the level of every guard into levels (>= 0 while its mode holds;
 +inf for a guard the mode in p does not have)."""
 
+REACTIONS_SIGNATURE = types.void(types.float64, types.float64[::1], types.float64[::1], types.float64[::1])
+"""reactions(t [s], y, p, squares): writes |R_j|^2 [N^2] of each journal with friction into squares (joint friction's
+reactions R0_j + R1_j epsilon at the rhs's epsilon; integrators' step limit near their branch points)."""
+
 RHS_TYPE = types.FunctionType(RHS_SIGNATURE)
 GUARDS_TYPE = types.FunctionType(GUARDS_SIGNATURE)
+REACTIONS_TYPE = types.FunctionType(REACTIONS_SIGNATURE)
