@@ -657,8 +657,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
         copy = [line.replace("dydt[", "rates[") for line in body]  # the body up to here: R0, R1 and the rhs's epsilon
-        if friction_slot is not None:
-            journals = [friction.indices[k] for k in _journals(model)]
+        journals = [friction.indices[k] for k in _journals(model)]
         if journals:  # |R0_j + R1_j epsilon|^2 of each journal
             reaction_lines = [f"rates = k.np.empty({len(model.state_names())})"] + copy + [
                 f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
