@@ -12,7 +12,8 @@ import sys
 import numpy as np
 import pytest
 
-from mech_regulator.model import LoadPiece
+from mech_regulator.bench.effect_cost import BASE_SCENE, EFFECT_CHAIN, SCENARIO
+from mech_regulator.model import LoadPiece, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers.compiled.codegen import (CACHE_VARIABLE, SLEEVE_CODE, compile_scene, generate,
@@ -532,6 +533,26 @@ def test_crank_stops_and_starts_as_on_the_reference_path():
         # both keep their steps away from the branch points of the journals' |R| (issue 19)
         assert fast.stats.switches == reference.stats.switches and fast.stats.restarts == reference.stats.restarts
         assert abs(fast.stats.steps - reference.stats.steps) <= 0.15 * reference.stats.steps
+
+
+def test_governed_engine_with_coupling_and_joint_friction_as_on_the_reference_path():
+    """The last link of `bench speed`'s effect chain (bench/effect_cost.py: the governed engine with sleeve friction,
+    stops, an elastic coupling and joint friction), 0.6 s with the load rejection at 0.5 s. Its guide's N guard has a
+    slot of its own after the mode guards, which are fewer in some modes (the driven part at rest has two, turning
+    one): the fast path once read an N crossing as a mode guard there and failed (IndexError). A friction corner that
+    falls on a table knot (the corners every 90 deg of the crank, the indicator diagram's knots every 720 deg) is one
+    switch on both paths (the reference path counted it twice, a second restart at the same point). Same events,
+    switches, restarts and steps; states within 10 times the fast run's own error."""
+    def run(*changes):
+        return simulate_complete(build_model(load_scene(BASE_SCENE, [*SCENARIO, *EFFECT_CHAIN[-1].overrides,
+                                                                     "scenario.duration=0.6", *changes])))
+
+    reference, fast = run(), run("solver.path=fast")
+    tight = run("solver.path=fast", "solver.rtol=1e-10", "solver.atol=1e-12")
+    assert [name for _, name in reference.events] == ["sleeve breaks away downwards", "sleeve reaches the low stop"]
+    assert_same_events(reference, fast)
+    assert (fast.stats.restarts, fast.stats.steps) == (reference.stats.restarts, reference.stats.steps)
+    assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
 
 
 @pytest.mark.parametrize("data", [bundled("clutch_start"), shortened("clutch_start", 2.5, solver__method="RK45"),

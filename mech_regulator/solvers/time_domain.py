@@ -90,9 +90,11 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     """
     settings = model.scene.solver
     kinks = settings.method not in STEPS_OVER_KINKS
-    switches = _unique_switches(model.switch_angles() + (model.kink_angles() if kinks else []))
     grid = np.array(model.switch_grid(kinks), dtype=float)
     period = model.dynamic_period()
+    # each angle of the grid once per dynamic period: a friction corner on a table's knot (their own periods differ)
+    # is one switch, as on the fast path, not two crossings at the same point
+    switches = [(angle, period) for angle in grid]
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     names = model.state_names()
     t, first_step = t_start, None
@@ -587,14 +589,6 @@ def switch_window(grid: np.ndarray, period: float, phi: float, forward: bool) ->
     lo = grid[i] if i >= 0 else grid[-1] - period
     hi = grid[i + 1] if i + 1 < grid.size else grid[0] + period
     return float(lo + shift), float(hi + shift)
-
-
-def _unique_switches(switches: list[tuple[float, float]]) -> list[tuple[float, float]]:
-    """Switch (angle, period) pairs [rad] with duplicates (same angle and period) removed."""
-    unique: dict[tuple[float, float], tuple[float, float]] = {}
-    for angle, period in switches:
-        unique.setdefault((round(angle % period, 12), round(period, 12)), (angle % period, period))
-    return list(unique.values())
 
 
 def _switch_counts(phi: float, switches: list[tuple[float, float]]) -> list[int]:

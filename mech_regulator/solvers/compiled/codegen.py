@@ -665,8 +665,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
             side, low = f"p[{friction_slot + 4}]", f"p[{friction_slot + 5}]"
             guard_lines += [f"if {side} != 0.0:", f"    rates = k.np.empty({len(model.state_names())})"]
             guard_lines += [f"    {line}" for line in copy]
-            guard_lines += [f"    levels[g] = {side} * (R0[3] + R1[3] * rates[1]).imag - {low}", "g += 1"]
-            normal_slot = n_mode_guards
+            normal_slot = n_mode_guards  # its own slot: the mode guards before it are fewer in some modes
+            guard_lines += [f"    levels[{normal_slot}] = {side} * (R0[3] + R1[3] * rates[1]).imag - {low}"]
             n_mode_guards += 1
     body += governor_lines
     n_guards = n_mode_guards
