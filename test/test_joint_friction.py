@@ -18,7 +18,7 @@ from mech_regulator.mechanisms import build_kinetostatics, build_reduced
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.mechanisms.four_bar import link_angles
 from mech_regulator.model import build_model
-from mech_regulator.scene import SceneError, load_scene, schema
+from mech_regulator.scene import load_scene, schema
 from mech_regulator.solvers.cosim import GovernorStepper
 from support import model_of, run_cli, simulate_complete
 

@@ -611,8 +611,6 @@ def compiled_announced(name: str):
 def compile_all(report) -> None:
     """Compile (or load from numba's disk cache) every function of COMPILED_FUNCTIONS for the argument types of
     the reference path's calls, reporting a line after each (`mech-regulator compile`)."""
-    import time
-
     for name, signature in COMPILED_FUNCTIONS.items():
         started = time.perf_counter()
         compiled_announced(name).compile(signature)

@@ -776,6 +776,7 @@ def _brent(a, b, g, line, t_old, h, y_old, coefficients, p, guards, levels, stat
 
 
 _guard_polynomial = njit(cache=True)(guard_polynomial)
+_switch_window = njit(cache=True)(switch_window)
 _branch_points_of = njit(cache=True)(_branch_points)
 _reach_from = njit(cache=True)(_reach)
 _smallest_step_limit = njit(cache=True)(_smallest_limit)
@@ -798,7 +799,8 @@ def _step_limit(branches, t):
     """The longest step [s] from t [s] that the branch points allow (time_domain._reach), never below
     time_domain._smallest_limit; inf without any, as the reference's solver.max_step and first step."""
     return max(_reach_from(branches, t), _smallest_step_limit(t))
-_switch_window = njit(cache=True)(switch_window)
+
+
 _monotone_ends = njit(cache=True)(monotone_ends)
 
 
