@@ -31,9 +31,9 @@ def fast_path_refusal(scene_or_model) -> str | None:
         sliding = [name for name, joint in mechanism.joints.items() if joint.type == "prismatic"]
         if len(sliding) > 1:
             return (f"solver.path: 'fast' does not compile machine.joint_friction.guide: {friction.guide:g} on a "
-                    f"linkage with {len(sliding)} prismatic joints ({', '.join(sliding)}: one guard of the sign of "
-                    "their normal forces each, the fast path has one); expected one prismatic joint, guide: 0, or "
-                    "solver.path: reference")
+                    f"linkage with {len(sliding)} prismatic joints ({', '.join(sliding)}): it locates where the "
+                    "normal force of one guide changes sign, not of several; expected a linkage with one prismatic "
+                    "joint, guide: 0, or solver.path: reference")
     method = scene.solver.method
     if method not in FAST_METHODS:
         return (f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "
