@@ -15,6 +15,7 @@ import sys
 import numpy as np
 import pytest
 
+from mech_regulator.analysis.energy import energy_balance
 from mech_regulator.mechanisms import build_kinetostatics, mechanism_geometry
 from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.scene import load_scene
@@ -113,6 +114,23 @@ def test_press_with_joint_friction_runs_the_same_on_both_paths():
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
     frictionless = simulate_complete(model_of(scene(data, machine__joint_friction=None)))
     assert fast(fast.t_end)[1] < frictionless(frictionless.t_end)[1]   # friction takes energy
+    for run in (reference, fast):   # 3.7e-5 (0.225 J, at any rtol) while the corner of |k_C| at 0 was missed
+        balance = energy_balance(model_of(data), run)
+        assert balance.works["joint_friction"] < 0.0 and abs(balance.relative_residual) < 1e-8
+
+
+def test_held_rate_signs_are_those_of_the_rates_everywhere():
+    """Between two corners the rhs reads rho_j s_j k_j for rho_j |k_j| (JointFrictionModel.ratio_signs): at 2000
+    crank angles s_j k_j >= 0 for every joint with friction of the press. Its coupler-lever joint C has
+    k_C = theta_coupler' - theta_lever' = 0 exactly at phi = 0 and 180 deg (the linkage is symmetric about the frame
+    line there); its k(0) and k(2 pi) fell on both sides of 0 by round-off and the corner at 0 was missed, so k_C was
+    read with the wrong sign from 0 to 24 deg."""
+    friction = model_of(press()).joint_friction
+    assert friction.corner_angles[0] == 0.0 and math.pi in friction.corner_angles
+    for phi in np.linspace(0.0, 2.0 * math.pi, 2001)[:-1] + 1e-4:
+        ratios = friction.loads(phi, 0.0, 0.0).ratios
+        for index, sign in zip(friction.indices, friction.ratio_signs(phi)):
+            assert sign * ratios[index] >= -1e-12, (math.degrees(phi), friction.names[friction.indices.index(index)])
 
 
 def at_rest(torque: float) -> dict:

@@ -245,6 +245,8 @@ def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...
             root = optimize.brentq(rate, angles[k], angles[k + 1], xtol=1e-15, rtol=4.0 * np.finfo(float).eps)
             angle = root % (2.0 * math.pi)
             corners.add(0.0 if 2.0 * math.pi - angle < 1e-12 else angle)  # a root at the turn's end is its start
+        if ahead[0] != ahead[-1]:  # k(0) = k(2 pi) but for round-off, which put them on both sides of a root at 0
+            corners.add(0.0)
     merged: list[float] = []
     for angle in sorted(corners):
         if not merged or angle - merged[-1] > SAME_CORNER:
