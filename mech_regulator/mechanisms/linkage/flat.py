@@ -8,8 +8,8 @@ mechanisms/__init__.py; `solve_poses` the links' poses and their phi-derivatives
 Each function is plain Python; `compiled(name)` gives its numba-compiled form (on first use: numba is imported only
 then, so the package loads without it; the functions are registered with numba.extending.register_jitable so that
 compiled code calls them compiled; numba's disk cache keeps them, compiled once per machine). Nothing below
-`reduced` allocates: `solve_poses` works in the poses and the scratch array it is given, and `reduced` allocates
-one workspace per call for both.
+`reduced` and `joint_loads` allocates: `solve_poses` and `kinetostatics` work in the arrays they are given, and
+`reduced` and `joint_loads` allocate one workspace per call for them (`joint_loads` also its three results).
 
 The equations (module docstring of groups.py, physics.md section 1): a link's pose is (r, theta), its point p at
 `P = r + p e^{i theta}`; every pose carries POSE_SIZE floats [x, y, theta, x', y', theta', x'', y'', theta'',
