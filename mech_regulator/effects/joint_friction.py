@@ -234,7 +234,8 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
 def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...]:
     """The crank angles in [0, 2 pi) [rad] where the relative rate k_j(phi) of one of the joints at `indices` of
     the kinetostatics changes sign: sampled at CORNER_SAMPLES + 1 angles over a turn (a zero counting as
-    positive), each change located by Brent's method; roots of several joints within SAME_CORNER are one corner."""
+    positive), each change located by Brent's method, and a root at 0 itself where round-off puts k(0) and k(2 pi) on
+    both sides of it; roots of several joints within SAME_CORNER are one corner."""
     angles = np.linspace(0.0, 2.0 * math.pi, CORNER_SAMPLES + 1)
     corners = set()
     for index in indices:
