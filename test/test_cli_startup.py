@@ -48,6 +48,12 @@ def test_importing_the_command_line_loads_no_heavy_library():
     assert modules_after("import mech_regulator.cli.main; mech_regulator.cli.main.build_parser()") == []
 
 
+def test_the_entry_points_client_loads_no_heavy_library():
+    """The entry point asks the command server first (cli/server.py's client): the standard library only."""
+    assert modules_after("from mech_regulator.cli import server\nserver.server_key()\n"
+                         "server.through_server(['simulate', '--help'])") == []
+
+
 def test_the_check_sees_a_heavy_import():
     """The checks above can fail: a command that reads a scene does load pydantic and the scene."""
     found = modules_after(after_main("scenes"))

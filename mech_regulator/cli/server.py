@@ -25,9 +25,9 @@ command (default 600), when the source of its package changes (it could serve no
 The key (`server_key`) is everything that must match for the server's code to be the command's: the package's
 version, folder and a fingerprint of its source (path, size and modification time of every .py file), the Python
 (sys.executable, its flags, sys.path less its first entry, the modification times of the site-packages folders,
-which an install changes) and the environment variables that change behaviour: MECH_REGULATOR_* (but the
-server's own MECH_REGULATOR_SERVER*), NUMBA_*, PYTHON*, the BLAS and OpenMP ones, the locale's, HOME and
-XDG_CACHE_HOME (the compile caches' default folder). The socket is named by a hash of the key, and the server
+which an install changes) and the environment variables that change behaviour: MECH_REGULATOR_* (but UNKEYED:
+the server's own and those a command reads afresh where it uses them), NUMBA_*, PYTHON*, the BLAS and OpenMP ones,
+the locale's, HOME and XDG_CACHE_HOME (the compile caches' default folder). The socket is named by a hash of the key, and the server
 compares the whole key of every command: a server whose key does not match is never used. The folder:
 $XDG_RUNTIME_DIR/mech_regulator, else ~/.cache/mech_regulator/server ($XDG_CACHE_HOME), private to the user
 (mode 0700).
@@ -56,6 +56,9 @@ SERVED_COMMANDS = frozenset({"simulate", "describe", "governor", "coupling", "ki
 processes of its own; compile: numba compiling for tens of seconds; server)."""
 KEYED_PREFIXES = ("MECH_REGULATOR_", "NUMBA_", "PYTHON", "OPENBLAS_", "OMP_", "MKL_", "LC_")
 KEYED_NAMES = ("LANG", "HOME", "XDG_CACHE_HOME")
+UNKEYED = ("MECH_REGULATOR_SERVER", "MECH_REGULATOR_PROGRESS_INTERVAL", "MECH_REGULATOR_AUTO_PATH")
+"""Variables left out of the key: the server's own, and those a command reads afresh where it uses them (from the
+client's environment in the child)."""
 PRELOADED = ("numpy", "scipy.integrate", "numba", "yaml", "tqdm", "mech_regulator.cli.main",
              "mech_regulator.cli.report", "mech_regulator.scene", "mech_regulator.model", "mech_regulator.solvers",
              "mech_regulator.solvers.advice", "mech_regulator.solvers.cosim", "mech_regulator.solvers.compiled.run",
@@ -102,7 +105,7 @@ def server_key() -> str:
                  if entry.endswith(("site-packages", "dist-packages")) and os.path.isdir(entry)}
     environment = {name: value for name, value in os.environ.items()
                    if (name.startswith(KEYED_PREFIXES) or name in KEYED_NAMES)
-                   and not name.startswith(SERVER_VARIABLE)}
+                   and not name.startswith(UNKEYED)}
     return json.dumps({"version": mech_regulator.__version__, "package": package,
                        "source": source_fingerprint(package), "executable": sys.executable,
                        "flags": [list(sys.flags), sys.warnoptions, sorted(map(str, sys._xoptions.items()))],
@@ -303,7 +306,7 @@ def server_command(action: str) -> int:
             return 1
         start_server(key)
         deadline = time.monotonic() + READY_WAIT
-        while (status := _ask(path, {"op": "status"})) is None:
+        while (status := ask_server(path, {"op": "status"})) is None:
             if time.monotonic() > deadline:
                 print(f"mech-regulator: the command server did not answer within {READY_WAIT:g} s; see "
                       f"{path.with_suffix('.log')}", file=sys.stderr)
@@ -311,7 +314,7 @@ def server_command(action: str) -> int:
             time.sleep(0.05)
         print(_status_line(status, key))
         return 0
-    servers = [(path, _ask(path, {"op": "status"})) for path in sorted(server_folder().glob("*.sock"))]
+    servers = [(path, ask_server(path, {"op": "status"})) for path in sorted(server_folder().glob("*.sock"))]
     servers = [(path, status) for path, status in servers if status is not None]
     if action == "status":
         key = server_key()
@@ -322,11 +325,11 @@ def server_command(action: str) -> int:
                   f"({', '.join(sorted(SERVED_COMMANDS))}), unless {SERVER_VARIABLE}=off")
         return 0
     for path, status in servers:
-        _ask(path, {"op": "stop"})
+        ask_server(path, {"op": "stop"})
         deadline = time.monotonic() + STOP_WAIT
-        while _alive(status["pid"]) and time.monotonic() < deadline:
+        while process_alive(status["pid"]) and time.monotonic() < deadline:
             time.sleep(0.02)
-        if _alive(status["pid"]):
+        if process_alive(status["pid"]):
             os.kill(status["pid"], signal.SIGKILL)
         print(f"stopped the command server pid {status['pid']} (key {status['digest']})")
     if not servers:
@@ -334,7 +337,7 @@ def server_command(action: str) -> int:
     return 0
 
 
-def _ask(path: Path, message: dict) -> dict | None:
+def ask_server(path: Path, message: dict) -> dict | None:
     """The server's answer to message, None when none answers at path."""
     try:
         with _connect(path) as connection:
@@ -344,7 +347,7 @@ def _ask(path: Path, message: dict) -> dict | None:
         return None
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
     """Whether the process runs (a zombie waiting for its parent's reaping counts as ended)."""
     try:
         with open(f"/proc/{pid}/stat") as stat:
