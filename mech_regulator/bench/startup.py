@@ -11,7 +11,9 @@ the machine's speed touches all alike:
 - cold: a first run, `mech-regulator simulate SCENE --quiet --set solver.path=PATH` with empty compile caches
   (MECH_REGULATOR_CACHE and NUMBA_CACHE_DIR pointed at a new empty temporary folder for every run); the script:
   `python script.py`. Python's bytecode caches and the operating system's file cache stay warm: "cold" is about
-  the fast path's compile caches, which is where the cost is;
+  the fast path's compile caches, which is where the cost is. A cold fast run is served by the reference path
+  while its stepper compiles in the background (solvers/compiled/warm.py): that compile is waited for, not
+  counted, before the next run;
 - warm: the same run again with the caches filled (the last cold run's; without cold fast runs, the compile caches
   of this machine, filled first by one run that is not counted), each in a process of its own: no command server;
 - served: the warm run through the command server (cli/server.py), one server for both paths started with the
@@ -30,6 +32,7 @@ machine. Numbers to read, never to assert.
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import os
 import platform
 import re
@@ -361,6 +364,8 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
                 final_speed(path, record(timings["cold"][path], f"cold {PATH_TITLES[path]}", command, env))
                 warm_caches[path] = env
+                if path == FAST:
+                    _wait_for_background_compile(cache, report)
         if not cold_fast:
             env = dict(base)
             report("bench startup: filling this machine's compile caches for the warm fast runs (not counted)")
@@ -385,6 +390,20 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
         finally:
             _stop_servers(cli, served, int(server[1]) if server else None)
     return StartupBenchmark(scene_name, repeat, cold_fast, timings, python, omega_end, environment())
+
+
+def _wait_for_background_compile(cache: str, report: Callable[[str], None]) -> None:
+    """Wait until the background process compiling the stepper that a cold fast run started (it ran on the
+    reference path meanwhile: solvers/compiled/warm.py) has ended — it holds the lock in the cache folder — so that
+    it neither slows the runs measured next nor leaves the warm fast runs on the reference path."""
+    from mech_regulator.solvers.compiled.warm import LOCK_NAME
+
+    lock = Path(cache) / LOCK_NAME
+    if lock.exists():
+        report("bench startup: waiting for the stepper's compile in the background that the cold fast run started "
+               "(not counted)")
+        with open(lock, "a") as handle:
+            fcntl.flock(handle, fcntl.LOCK_EX)
 
 
 def _stop_servers(cli: list[str], env: dict[str, str], pid: int | None) -> None:
@@ -452,7 +471,8 @@ def format_table(benchmark: StartupBenchmark) -> str:
                       for path, value in benchmark.omega_end.items())
     lines += ["", f"Python itself (python -c pass): {_cell(benchmark.python)} s. The import and --help rows are one "
               "process for both paths of the command line; the script's import row is numpy and scipy.integrate. "
-              "The server row's ratios are to the script's warm run (a script has no server).",
+              "The server row's ratios are to the script's warm run (a script has no server); its CPU time (--json) "
+              "is the client's alone, the server's child is not the benchmark's.",
               f"final speed omega [rad/s] (the same machine on each): {omega}"]
     if not benchmark.cold_fast:
         lines.append("cold fast runs left out (--skip-cold-fast): the warm fast runs used this machine's caches")
