@@ -7,9 +7,10 @@ The client (`through_server`, called by the entry point cli.entry before any hea
 standard library only): a served command (SERVED_COMMANDS: the physics core only, no threads, ROS, Dask or worker
 processes) connects to the Unix socket of the server whose key matches, sends its argv, working folder, whole
 environment, sys.path and umask with its stdin, stdout and stderr descriptors (SCM_RIGHTS), forwards SIGINT, SIGTERM
-and SIGHUP to the child the server names, and ends as the child ended (its exit code, or the signal that killed it).
-When no server answers, the command runs in its own process as without a server and starts one, detached, for the
-next commands, saying so in one line on stderr. MECH_REGULATOR_SERVER=off: never a server.
+and SIGHUP to the child the server names (and stops it with itself on Ctrl-Z), and ends as the child ended (its exit
+code, or the signal that killed it). When no server answers, the command runs in its own process as without a
+server and starts one, detached, for the next commands, saying so in one line on stderr. MECH_REGULATOR_SERVER=off:
+never a server.
 
 The server (`serve`) forks a child per command; the child puts the client's descriptors on 0, 1 and 2 (so that
 isatty, the progress bar, colours and output files are those of the client's terminal or pipe), takes the client's
@@ -27,9 +28,9 @@ version, folder and a fingerprint of its source (path, size and modification tim
 (sys.executable, its flags, sys.path less its first entry, the modification times of the site-packages folders,
 which an install changes) and the environment variables that change behaviour: MECH_REGULATOR_* (but UNKEYED:
 the server's own and those a command reads afresh where it uses them), NUMBA_*, PYTHON*, the BLAS and OpenMP ones,
-the locale's, HOME and XDG_CACHE_HOME (the compile caches' default folder). The socket is named by a hash of the key, and the server
-compares the whole key of every command: a server whose key does not match is never used. The folder:
-$XDG_RUNTIME_DIR/mech_regulator, else ~/.cache/mech_regulator/server ($XDG_CACHE_HOME), private to the user
+the locale's, HOME and XDG_CACHE_HOME (the compile caches' default folder). The socket is named by a hash of the
+key, and the server compares the whole key of every command: a server whose key does not match is never used. The
+folder: $XDG_RUNTIME_DIR/mech_regulator, else ~/.cache/mech_regulator/server ($XDG_CACHE_HOME), private to the user
 (mode 0700).
 """
 
@@ -172,8 +173,8 @@ def through_server(argv: list[str]) -> int | None:
         pid = start_server(key)
         if pid is not None:
             print(f"mech-regulator: started a command server (pid {pid}) that answers the next commands without "
-                  f"their imports; it stops after {idle_limit() / 60.0:g} min idle (`mech-regulator server stop`; "
-                  f"{SERVER_VARIABLE}=off never starts one)", file=sys.stderr)
+                  f"their imports; it stops after {idle_limit() / 60.0:g} min idle (stop it: `mech-regulator server "
+                  f"stop`; never use one: {SERVER_VARIABLE}=off)", file=sys.stderr)
         return None
     except OSError:
         return None
@@ -193,7 +194,8 @@ def _connect(path: Path) -> socket.socket:
 
 def run_request(connection: socket.socket, key: str, argv: list[str]) -> int | None:
     """Send the command argv over the connection and wait for its end, forwarding SIGINT, SIGTERM and SIGHUP to its
-    child: its exit code; None when the server refused it (another key) or could not take it."""
+    child and stopping it with this process on Ctrl-Z (SIGTSTP): its exit code; None when the server refused it
+    (another key) or could not take it."""
     umask = os.umask(0)
     os.umask(umask)
     try:
@@ -210,30 +212,42 @@ def run_request(connection: socket.socket, key: str, argv: list[str]) -> int | N
         else:
             pending.append(number)
 
-    forwarded = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    before = {number: signal.signal(number, forward) for number in forwarded}
+    def suspend(number, frame) -> None:  # the child stops with this process and goes on with it
+        if child:
+            _signal(child[0], signal.SIGSTOP)
+        signal.signal(signal.SIGTSTP, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTSTP)  # stopped here until continued
+        signal.signal(signal.SIGTSTP, suspend)
+        if child:
+            _signal(child[0], signal.SIGCONT)
+
+    handlers = {signal.SIGINT: forward, signal.SIGTERM: forward, signal.SIGHUP: forward, signal.SIGTSTP: suspend}
+    before = {number: signal.signal(number, handler) for number, handler in handlers.items()}
+    answer = None
     try:
-        try:
-            _send(connection, request, (0, 1, 2))
-            replies = connection.makefile("rb")
-            answer = _reply(replies)
-        except (OSError, ServerGone):
-            return None  # not taken: this process runs the command
+        _send(connection, request, (0, 1, 2))
+        replies = connection.makefile("rb")
+        answer = _reply(replies)
         if "refused" in answer:
-            return None
-        child.append(answer["pid"])
-        for number in pending:
-            _signal(child[0], number)
-        try:
+            answer = None
+        else:
+            child.append(answer["pid"])
+            for number in pending:
+                _signal(child[0], number)
             answer = _reply(replies)
-        except (OSError, ServerGone):
+    except (OSError, ServerGone):
+        if child:
             _signal(child[0], signal.SIGTERM)
             print(f"mech-regulator: the command server ended during the command (its child {child[0]} was stopped); "
                   f"run it again, or without the server: {SERVER_VARIABLE}=off", file=sys.stderr)
-            return 1
+            answer = {"exit": 1}
     finally:
         for number, handler in before.items():
             signal.signal(number, handler)
+    if answer is None:  # not taken: this process runs the command, unless a signal came meanwhile
+        for number in pending:
+            os.kill(os.getpid(), number)
+        return None
     if "signal" in answer:  # end as the child ended: by the same signal
         signal.signal(answer["signal"], signal.SIG_DFL)
         os.kill(os.getpid(), answer["signal"])
