@@ -4,8 +4,8 @@ child per command, so that a warm `simulate` pays a fork instead of the imports 
 The remedy of Android's zygote, Julia's DaemonMode, dmypy and the Gradle daemon for the start-up of a JIT.
 
 The client (`through_server`, called by the entry point cli.entry before any heavy import: this module imports the
-standard library only): a served command (SERVED_COMMANDS: the physics core only, no threads, ROS, Dask or worker
-processes) connects to the Unix socket of the server whose key matches, sends its argv, working folder, whole
+standard library only): a served command (cli.SERVED_COMMANDS: the physics core only, no threads, ROS, Dask or
+worker processes) connects to the Unix socket of the server whose key matches, sends its argv, working folder, whole
 environment, sys.path and umask with its stdin, stdout and stderr descriptors (SCM_RIGHTS), forwards SIGINT, SIGTERM
 and SIGHUP to the child the server names (and stops it with itself on Ctrl-Z), and ends as the child ended (its exit
 code, or the signal that killed it). When no server answers, the command runs in its own process as without a
@@ -48,13 +48,11 @@ import sys
 import time
 from pathlib import Path
 
+from mech_regulator.cli import SERVED_COMMANDS
+
 SERVER_VARIABLE = "MECH_REGULATOR_SERVER"  # off: never use or start a server
 IDLE_VARIABLE = "MECH_REGULATOR_SERVER_IDLE"  # [s] without a command after which the server stops
 IDLE_DEFAULT = 600.0  # [s]
-SERVED_COMMANDS = frozenset({"simulate", "describe", "governor", "coupling", "kinematics", "engine", "structure",
-                             "flywheel", "scenes", "schema"})
-"""Commands the server runs: the physics core in one thread (not run: ROS; sweep: worker processes or Dask; bench:
-processes of its own; compile: numba compiling for tens of seconds; server)."""
 KEYED_PREFIXES = ("MECH_REGULATOR_", "NUMBA_", "PYTHON", "OPENBLAS_", "OMP_", "MKL_", "LC_")
 KEYED_NAMES = ("LANG", "HOME", "XDG_CACHE_HOME")
 UNKEYED = ("MECH_REGULATOR_SERVER", "MECH_REGULATOR_PROGRESS_INTERVAL", "MECH_REGULATOR_AUTO_PATH")
@@ -318,12 +316,13 @@ def server_command(action: str) -> int:
             print(f"mech-regulator: the server's folder {server_folder()} is too deep for a Unix socket (at most "
                   f"{SOCKET_PATH_MAX} bytes); set XDG_RUNTIME_DIR to a shorter folder", file=sys.stderr)
             return 1
-        start_server(key)
+        started = start_server(key)
         deadline = time.monotonic() + READY_WAIT
         while (status := ask_server(path, {"op": "status"})) is None:
-            if time.monotonic() > deadline:
-                print(f"mech-regulator: the command server did not answer within {READY_WAIT:g} s; see "
-                      f"{path.with_suffix('.log')}", file=sys.stderr)
+            ended = started is not None and not process_alive(started)
+            if ended or time.monotonic() > deadline:
+                print(f"mech-regulator: the command server {'ended' if ended else 'did not answer'} within "
+                      f"{READY_WAIT:g} s; see {path.with_suffix('.log')}", file=sys.stderr)
                 return 1
             time.sleep(0.05)
         print(_status_line(status, key))
@@ -368,11 +367,13 @@ def process_alive(pid: int) -> bool:
             return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
     except FileNotFoundError:
         return False
-    except OSError:
+    except OSError:  # no /proc: ask the kernel
         try:
             os.kill(pid, 0)
         except ProcessLookupError:
             return False
+        except PermissionError:  # another user's
+            return True
         return True
 
 
