@@ -62,8 +62,9 @@ PRELOADED = ("numpy", "scipy.integrate", "numba", "yaml", "tqdm", "mech_regulato
              "mech_regulator.cli.report", "mech_regulator.scene", "mech_regulator.model", "mech_regulator.solvers",
              "mech_regulator.solvers.advice", "mech_regulator.solvers.cosim", "mech_regulator.solvers.compiled.run",
              "mech_regulator.solvers.compiled.warm", "mech_regulator.analysis", "mech_regulator.analysis.self_check",
-             "mech_regulator.analysis.kinematics", "mech_regulator.analysis.engine")
-"""What the server imports before its first command: what simulate and the analysis commands import."""
+             "mech_regulator.analysis.kinematics", "mech_regulator.analysis.engine", "mech_regulator.viz.plots")
+"""What the server imports before its first command: what simulate and the analysis commands import, and their
+pictures (matplotlib with its Agg backend: --plot)."""
 READY_WAIT = 120.0  # [s] `server start` waits at most this for the server to answer
 STOP_WAIT = 30.0  # [s] `server stop` waits at most this for a server to end (it finishes its running commands)
 SOURCE_CHECK = 10.0  # [s] between two checks of the package's source by the server
