@@ -264,16 +264,10 @@ def compile_scene(model: MachineModel) -> CompiledScene:
      n_journals) = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
-    module = _LOADED.get(digest)
-    path = cache_folder() / f"scene_{digest}.py"
-    if module is None:
-        if not path.exists() or path.read_text(encoding="utf-8") != source:
-            _write(path, source)
-        spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
-        spec.loader.exec_module(module)
-        _LOADED[digest] = module
+    path = _module_path(digest)
+    if digest not in _LOADED and (not path.exists() or path.read_text(encoding="utf-8") != source):
+        _write(path, source)
+    module = load_scene_module(digest)
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
                              n_guards, window_slot, source, path, breakpoint_slot, table_slots, friction_slot,
                              normal_slot, module.reactions_callback if n_journals else module.guards_callback,
@@ -282,6 +276,29 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
     return compiled
+
+
+def load_scene_module(digest: str):
+    """The generated module scene_<digest>.py of the cache folder, imported once per process (numba loads its
+    functions from its disk cache as it imports them, or compiles them) and kept in _LOADED. The command server
+    (cli/server.py) also calls it, for the modules its last command loaded (loaded_scene_modules)."""
+    module = _LOADED.get(digest)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", _module_path(digest))
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
+        spec.loader.exec_module(module)
+        _LOADED[digest] = module
+    return module
+
+
+def loaded_scene_modules() -> list[str]:
+    """The digests of the generated modules this process has imported (load_scene_module)."""
+    return list(_LOADED)
+
+
+def _module_path(digest: str) -> Path:
+    return cache_folder() / f"scene_{digest}.py"
 
 
 @functools.cache
