@@ -210,9 +210,10 @@ def fastest_mode(model: MachineModel, at_least: float = 0.0) -> tuple[float, str
                 columns.append((np.asarray(rhs(0.0, far), dtype=float) - np.asarray(rhs(0.0, near), dtype=float))
                                / delta)
             jacobian = np.array(columns).T
-            if not np.all(np.isfinite(jacobian)):
+            rows = jacobian.tolist()  # a few states: plain Python is quicker than numpy's reductions here
+            if not all(math.isfinite(value) for row in rows for value in row):
                 return None
-            if np.max(np.sum(np.abs(jacobian), axis=1)) * (1.0 + NORM_MARGIN) <= at_least:
+            if max(sum(abs(value) for value in row) for row in rows) * (1.0 + NORM_MARGIN) <= at_least:
                 return None
             values, vectors = np.linalg.eig(jacobian)
     except (ArithmeticError, ValueError, IndexError, TypeError, np.linalg.LinAlgError):
