@@ -135,7 +135,12 @@ def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None, spee
             count = len(reference)
             np.testing.assert_allclose(levels[:count], reference, rtol=1e-12, atol=1e-12)
             window_guards = 2 if compiled.window_slot is not None else 0
-            assert np.all(np.isinf(levels[count:compiled.n_guards - window_guards]))
+            normals = range(compiled.normal_slot or 0, (compiled.normal_slot or 0) + compiled.n_normals)
+            for k, slot in enumerate(normals):  # a guide's guard reads its N while its held sign is 0 (hold_normal)
+                normal = model.guide_normal(chosen, window, mode, guide=k)(t, y)
+                assert levels[slot] == pytest.approx(normal, rel=1e-12, abs=1e-12 * (1.0 + abs(normal)))
+            unused = [slot for slot in range(count, compiled.n_guards - window_guards) if slot not in normals]
+            assert np.all(np.isinf(levels[unused]))
             rows = mode_rows(model, mode, y[1])  # linear rows reproduce the levels of the guards they claim
             assert len(rows) == count
             for row, level in zip(rows, reference):

@@ -86,7 +86,7 @@ def test_compiled_right_hand_side_and_reactions_equal_the_model():
         p = compiled.parameters_for(None, None, window if held else None, y[1])
         normal_signs = ()
         if held:
-            normal_signs = (compiled.hold_normal(p, 0.0, y, 0.0),)
+            normal_signs = compiled.hold_normal(p, 0.0, y, (), None)
         rates, squares = np.zeros(2), np.zeros(compiled.n_journals)
         compiled.rhs(0.0, y, p, rates)
         expected = model.rhs(None, window if held else None, normal_signs=normal_signs)(0.0, y)
@@ -117,6 +117,42 @@ def test_press_with_joint_friction_runs_the_same_on_both_paths():
     for run in (reference, fast):   # 3.7e-5 (0.225 J, at any rtol) while the corner of |k_C| at 0 was missed
         balance = energy_balance(model_of(data), run)
         assert balance.works["joint_friction"] < 0.0 and abs(balance.relative_residual) < 1e-8
+
+
+def test_shaper_with_guide_friction_in_both_prismatic_joints_runs_the_same_on_both_paths():
+    """The bundled shaper without gravity (so that the ram's guide G's N changes sign too) with f = 0.05 in every
+    joint, its slot S and the ram's guide G both sliding with friction, over 1.2 s (more than a turn): each slider's N
+    changes sign in the run, and the fast path (one held sign and one N guard per prismatic joint) has the same events,
+    switches and restarts as the reference path, the switches the crank angles of the grid that phi passes plus every
+    sign change of both N (counted on 4000 samples of the tight run), and its states within 10 times the fast run's
+    own distance to one at 1/100 of the tolerances."""
+    journals = "{" + ", ".join(f"{joint}: {{radius: 0.03, fit: run_in}}" for joint in ("O2", "A", "O4", "B", "C")) + "}"
+    data = load_scene("shaper", ["scenario.duration=1.2", "machine.gravity=[0.0, 0.0]",
+                                 "machine.joint_friction.coefficient=0.05", "machine.joint_friction.guide=0.05",
+                                 f"machine.joint_friction.journals={journals}"]).model_dump(exclude_none=True)
+    model = model_of(data)
+    assert [model.joint_friction.names[k] for k in model.joint_friction.guides] == ["S", "G"]
+    assert fast_path_refusal(model) is None
+    reference = simulate_complete(model)
+    fast = simulate_complete(model_of(scene(data, solver__path="fast")))
+    settings = model.scene.solver
+    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
+                                             solver__atol=settings.atol / 100)))
+    assert_same_events(reference, fast)
+    assert fast.stats.restarts == reference.stats.restarts
+    times = np.linspace(0.0, 1.2, 4001)
+    states = tight(times)
+    crossings = []
+    for guide in range(2):
+        normal = model.guide_normal(guide=guide)
+        signs = np.sign([normal(t, states[:, k]) for k, t in enumerate(times)])
+        crossings.append(int(np.count_nonzero(signs[1:] != signs[:-1])))
+    assert min(crossings) >= 1
+    grid, period = model.switch_grid(), model.dynamic_period()
+    passed = sum(math.floor((states[0, -1] - angle) / period) - math.floor((states[0, 0] - angle) / period)
+                 for angle in grid)
+    assert fast.stats.switches == tight.stats.switches == passed + sum(crossings)
+    assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
 
 
 def test_held_rate_signs_are_those_of_the_rates_everywhere():

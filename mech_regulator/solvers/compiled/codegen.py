@@ -25,8 +25,8 @@ With joint friction on a mechanism it also writes `reactions(t, y, p, squares)` 
 rhs's own epsilon, which the integrators keep their steps' reach from (their branch points, issue 19).
 
 Guards are written in the order of MachineModel.guards(mode) (the governor's, then the clutch's and the driven
-part's, then the joint friction's crank guard; then the guide's N guard, time_domain._normal_guard), +inf in the
-slots a mode does not use, then the switch window's two
+part's, then the joint friction's crank guard; then one N guard per guide with friction, time_domain._normal_guards),
++inf in the slots a mode does not use, then the switch window's two
 guards phi - lo and hi - phi. The guards linear in the state (stops, sleeve at rest, slip ending, driven part at
 rest, switch window) also get their rows [1, c0, c1..c_n] (level = c0 + sum c_i y_i) for the integrators' exact
 location.
@@ -73,8 +73,8 @@ PIECE_SLOTS = (EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, THROTTLE_SLOPE, T
                CRANK_DIRECTION)
 PIECE_INDEX = np.array(PIECE_SLOTS, dtype=np.int64)
 # the throttle of a co-simulated machine: held, or the polynomial of LoadPiece.throttle_at
-RATE_SIGNS = 2  # joint friction's slots in p from friction_slot: the guide's normal sign s_N and its guard's start
-#                level, then (from friction_slot + RATE_SIGNS) the signs s_j of the joints' relative rates
+NORMAL_SLOTS = 2  # joint friction's slots in p from friction_slot, per guide with friction: its normal sign s_N and
+#                  its guard's start level; then the signs s_j of the joints' relative rates
 HELD_THROTTLE_EXPRESSION = (f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
                             f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)")
 
@@ -100,10 +100,11 @@ class CompiledScene:
     two if window_slot is not None); source and path of the generated module; table_slots: per state table the
     slot in p of its anchor (NaN: the table as it is), then its piece's lower and upper breakpoints in the guard's
     state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards. Joint friction with a
-    mechanism (issue 19): friction_slot, the first of its slots in p (the guide's normal sign s_N, 0: |N|; its
-    guard's start level; then the signs s_j of the kinetostatics' joints' relative rates, the presets' four or a
-    linkage's all, 0: |k_j|), and normal_slot, the guard slot of s_N N (a crank–slider's guide or a linkage's one
-    prismatic joint with friction, after the mode's guards; +inf while s_N is 0), or None;
+    mechanism (issue 19): friction_slot, the first of its slots in p (per guide with friction its normal sign s_N,
+    0: |N|, and its guard's start level; then the signs s_j of the kinetostatics' joints' relative rates, the
+    presets' four or a linkage's all, 0: |k_j|), and normal_slot, the guard slot of the first guide's s_N N (a
+    crank–slider's guide or a linkage's prismatic joints with friction, n_normals of them in joint_friction.guides'
+    order, after the mode's guards; N itself while its s_N is 0, what hold_normal reads its sign from), or None;
     reactions_callback (a C callback, as rhs_callback) writes the |R_j|^2 of the n_journals journals with friction
     (guards_callback, never called, when n_journals is 0)."""
 
@@ -123,6 +124,7 @@ class CompiledScene:
     normal_slot: int | None = None
     reactions_callback: object = None
     n_journals: int = 0
+    n_normals: int = 0
     _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega) -> rows
 
     def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
@@ -133,7 +135,8 @@ class CompiledScene:
         joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
         time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds (those
         of a table that turns with phi in the stepper's phi, wrapped by offset [rad]); with joint friction's corner
-        angles and a window, the signs of the joints' relative rates at its middle (the guide's N sign: hold_normal)."""
+        angles and a window, the signs of the joints' relative rates at its middle (the guides' N signs:
+        hold_normal)."""
         p = self.parameters.copy()
         p[PIECE_INDEX] = self.piece_values(piece, omega)
         model = self.model
@@ -150,8 +153,9 @@ class CompiledScene:
             p[WINDOW_LO], p[WINDOW_HI] = window
         friction = model.joint_friction
         if self.friction_slot is not None and window is not None and friction.corner_angles:  # |k_j| as s_j k_j
+            first_rate = self.friction_slot + NORMAL_SLOTS * self.n_normals
             for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
-                p[self.friction_slot + RATE_SIGNS + index] = sign
+                p[first_rate + index] = sign
         if held is not None:
             tables = self.model.state_tables
             anchors = _anchors(tables, held)
@@ -170,20 +174,25 @@ class CompiledScene:
         return (piece.offset, piece.slope, piece.throttle, piece.throttle_slope, piece.throttle_curvature, piece.start,
                 float(np.sign(omega)))
 
-    def hold_normal(self, p: np.ndarray, t: float, y: np.ndarray, side: float) -> float:
-        """Set in p (parameters_for's) the guide's normal sign s_N that the segment from (t [s], y, phi wrapped as
-        the stepper's) holds and its guard's start level, as time_domain._normal_guard: side (+-1) just after its
-        guard crossed, else (side 0) the sign of N at the start; returns s_N."""
+    def hold_normal(self, p: np.ndarray, t: float, y: np.ndarray, sides: tuple[float, ...],
+                    crossed: int | None) -> tuple[float, ...]:
+        """Set in p (parameters_for's, every s_N 0) the guides' normal signs s_N that the segment from (t [s], y, phi
+        wrapped as the stepper's) holds and their guards' start levels, as time_domain._normal_guards: the sign of
+        each guide's N at the start (read with every |N| as it is), but for guide number `crossed`, whose guard just
+        crossed, its side in sides (already flipped); a guard's level starts at min(0, s_N N) there. Returns the
+        signs, one per guide."""
         levels = np.zeros(self.n_guards)
-        sign_slot, low_slot = self.friction_slot, self.friction_slot + 1
-        if side == 0.0:  # N with |N| read as +N: >= 0 where N is
-            p[sign_slot] = 1.0
+        normals = slice(self.normal_slot, self.normal_slot + self.n_normals)
+        signs = slice(self.friction_slot, self.friction_slot + NORMAL_SLOTS * self.n_normals, NORMAL_SLOTS)
+        if crossed is None or self.n_normals > 1:  # a guide's guard reads N itself while its s_N is 0
             self.guards(t, y, p, levels)
-            side = 1.0 if levels[self.normal_slot] >= 0.0 else -1.0
-        p[sign_slot] = side
+        sides = tuple(sides[k] if k == crossed else 1.0 if level >= 0.0 else -1.0
+                      for k, level in enumerate(levels[normals]))
+        p[signs] = sides
         self.guards(t, y, p, levels)
-        p[low_slot] = min(0.0, levels[self.normal_slot])
-        return side
+        p[self.friction_slot + 1:self.friction_slot + NORMAL_SLOTS * self.n_normals:NORMAL_SLOTS] = np.minimum(
+            0.0, levels[normals])
+        return sides
 
     def _held_bounds(self, held: list[int], y: np.ndarray, offset: float = 0.0) -> list[tuple[float, float]]:
         """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
@@ -216,8 +225,8 @@ class CompiledScene:
             matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
             matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
             matrix[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
-        if self.normal_slot is not None:  # the guide's N = 0: a nonlinear guard, also a step onto it
-            matrix[self.normal_slot, 0] = NONLINEAR_ONTO
+        if self.normal_slot is not None:  # a guide's N = 0: a nonlinear guard, also a step onto it
+            matrix[self.normal_slot:self.normal_slot + self.n_normals, 0] = NONLINEAR_ONTO
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
             slot = self.breakpoint_slot
             bounds = self._held_bounds(held, y, offset)
@@ -261,7 +270,7 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     if recent is not None and recent.model is model:
         return recent
     (source, parameters, n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
-     n_journals) = generate(model)
+     n_journals, n_normals) = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
     path = _module_path(digest)
@@ -271,7 +280,7 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
                              n_guards, window_slot, source, path, breakpoint_slot, table_slots, friction_slot,
                              normal_slot, module.reactions_callback if n_journals else module.guards_callback,
-                             n_journals)
+                             n_journals, n_normals)
     if len(_RECENT) >= RECENT_MODELS:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
@@ -534,11 +543,11 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
 
 
 def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None,
-                                          int | None, int]:
+                                          int | None, int, int]:
     """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None, slot of
     the first breakpoint guard or None, CompiledScene.table_slots, friction_slot, normal_slot, number of journals
-    with friction that `reactions` writes) of a scene's model (see the module docstring). The model must pass
-    run.fast_path_refusal."""
+    with friction that `reactions` writes, number of guides with friction) of a scene's model (see the
+    module docstring). The model must pass run.fast_path_refusal."""
     machine = model.scene.machine
     p = _Parameters()
     table_slots = tuple(p.slots(math.nan, -math.inf, math.inf) for _ in model.state_tables)  # anchor, low, high
@@ -560,8 +569,9 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     anchor = "anchor" if kinked else "phi"
     friction = model.joint_friction
     friction_slot = normal_slot = None
-    if friction is not None and friction.loads is not None:  # the guide's N sign and level, the joints' rate signs
-        friction_slot = p.slots(*[0.0] * (RATE_SIGNS + len(_kinetostatics_joints(machine.mechanism))))
+    n_normals = len(friction.guides) if friction is not None else 0
+    if friction is not None and friction.loads is not None:  # the guides' N signs and levels, the joints' rate signs
+        friction_slot = p.slots(*[0.0] * (NORMAL_SLOTS * n_normals + len(_kinetostatics_joints(machine.mechanism))))
     if kinked:  # between two kinks the tables continue along the segment that holds the window's middle (rhs);
         #         without a window (p's edges both 0) they are the tables themselves
         body.append(f"anchor = 0.5 * (p[{WINDOW_LO}] + p[{WINDOW_HI}]) if p[{WINDOW_HI}] > p[{WINDOW_LO}] else phi")
@@ -681,14 +691,15 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         if journals:  # |R0_j + R1_j epsilon|^2 of each journal
             reaction_lines = [f"rates = k.np.empty({len(model.state_names())})"] + copy + [
                 f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
-        if friction.guides:  # s_N N - its start level, with the rhs's epsilon
-            side, low = f"p[{friction_slot}]", f"p[{friction_slot + 1}]"
-            guard_lines += [f"if {side} != 0.0:", f"    rates = k.np.empty({len(model.state_names())})"]
-            guard_lines += [f"    {line}" for line in copy]
-            normal_slot = n_mode_guards  # its own slot: the mode guards before it are fewer in some modes
-            guide = friction.indices[friction.guides[0]]
-            guard_lines += [f"    levels[{normal_slot}] = {side} * (R0[{guide}] + R1[{guide}] * rates[1]).imag - {low}"]
-            n_mode_guards += 1
+        if friction.guides:  # per guide s_N N - its start level (N while s_N is 0), with the rhs's epsilon
+            guard_lines += [f"rates = k.np.empty({len(model.state_names())})"] + copy
+            normal_slot = n_mode_guards  # their own slots: the mode guards before them are fewer in some modes
+            for k, position in enumerate(friction.guides):
+                side, low = f"p[{friction_slot + NORMAL_SLOTS * k}]", f"p[{friction_slot + NORMAL_SLOTS * k + 1}]"
+                normal = f"(R0[{friction.indices[position]}] + R1[{friction.indices[position]}] * rates[1]).imag"
+                guard_lines.append(f"levels[{normal_slot + k}] = {side} * {normal} - {low} if {side} != 0.0 "
+                                   f"else {normal}")
+            n_mode_guards += n_normals
     body += governor_lines
     n_guards = n_mode_guards
     breakpoint_slot = n_guards if table_slots else None
@@ -705,7 +716,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
     source = _module(body, guard_lines, n_guards, reaction_lines)
     return (source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
-            len(journals))
+            len(journals), n_normals)
 
 
 def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, anchor: str, held: str) -> str:
@@ -735,14 +746,14 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
     kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics. anchor,
     held: the crank angle and slider position the tables in the output forces are read on (_output_force_call);
-    friction_slot: CompiledScene's (the joints' rate signs and the guide's normal sign between two corners)."""
+    friction_slot: CompiledScene's (the guides' normal signs and the joints' rate signs between two corners)."""
     friction = model.joint_friction
     collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
     iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
     if friction.loads is None:
         return [f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
                 f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations}, "
-                "(0.0, 0.0, 0.0, 0.0), 0.0, -1)"]
+                "(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))"]
     lines = ["force = 0.0"]
     scaled = []
     for spec, effect in zip(specs, model.effects):
@@ -756,20 +767,17 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     lines += scaled
     machine = model.scene.machine
     joints = _kinetostatics_joints(machine.mechanism)
-    guide = -1  # the joint whose |N| the guide's sign reads as s_N N
     if isinstance(machine.mechanism, schema.Linkage):  # flat.joint_loads on the program in p, with its gravity
         core, structure = mechanisms.mechanism_geometry(machine.mechanism)
         program = p.table(flat.encode(core, structure.groups, machine.gravity)).rsplit(", ", 1)[0]  # 'p, offset'
         lines.append(f"R0, R1, ratios, _, _ = k.linkage_joint_loads(phi, omega, force, {program})")
-        if friction.guides:
-            guide = friction.indices[friction.guides[0]]
     else:
         gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
         g = mechanisms.mechanism_geometry(machine.mechanism)
         if isinstance(machine.mechanism, schema.CrankSlider):
             args = [g.crank, g.rod, g.offset, g.rod_cg / g.rod, g.crank_mass, g.crank_cg, g.rod_mass, g.rod_inertia,
                     g.slider_mass, gx, gy]
-            kernel, guide = "crank_slider_joint_loads", joints.index("guide")
+            kernel = "crank_slider_joint_loads"
         else:
             args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.crank_mass, g.crank_cg,
                     g.coupler_mass, g.coupler_cg, g.coupler_inertia, g.rocker_mass, g.rocker_cg, g.rocker_inertia, gx,
@@ -779,10 +787,14 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     arms = [0.0] * len(joints)  # a joint without friction: arm 0, its terms exact zeros
     for index, arm_length in zip(friction.indices, friction.arms):
         arms[index] = arm_length
-    signs = "".join(f"p[{friction_slot + RATE_SIGNS + j}], " for j in range(len(joints)))
+    normals = ["0.0"] * len(joints)  # a guide's |N| read as s_N N (its p slot), every other joint's |R|
+    for k, position in enumerate(friction.guides):
+        normals[friction.indices[position]] = f"p[{friction_slot + NORMAL_SLOTS * k}]"
+    first_rate = friction_slot + NORMAL_SLOTS * len(friction.guides)
+    signs = "".join(f"p[{first_rate + j}], " for j in range(len(joints)))
     lines.append(f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, "
                  f"({''.join(p.scalar(v) + ', ' for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
-                 f"({signs}), p[{friction_slot}], {guide})")
+                 f"({signs}), ({''.join(sign + ', ' for sign in normals)}))")
     return lines
 
 

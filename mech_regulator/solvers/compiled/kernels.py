@@ -388,19 +388,19 @@ def four_bar_joint_loads(phi, omega, moment, a, b, c, d, th1, sign, m1, u1, m3, 
 
 @njit(cache=True)
 def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, constant, per_epsilon, with_joints,
-                                tolerance, iterations, ratio_signs, normal_sign, guide):
+                                tolerance, iterations, ratio_signs, normal_signs):
     """JointFrictionModel.acceleration: epsilon [rad/s^2] solving J epsilon = M - sign(omega) F(epsilon),
     F = M_collar + sum_j rho_j |k_j| |R0_j + R1_j epsilon| by Newton's method from the friction at rest; at rest
     (omega = 0) 0 while |M| <= F(0), else breaking away in the direction of M; NaN without convergence.
     arms: rho_j [m] (f_guide for a guide) of the mechanism's joints (the presets' four, a linkage's all), 0 for a
     joint without friction (its terms add exact zeros); with_joints False: the collar alone (no kinetostatics).
-    Between two corners (issue 19): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_sign s_N (0: |R|) the
-    guide's |N| (joint number `guide`, reaction i N; -1: none) as s_N N."""
+    Between two corners (issue 19): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_signs s_N (0: |R|) a
+    guide's |N| (its reaction i N) as s_N N, per joint (0 for every joint but the guides)."""
     at_rest = 0.0
     if with_joints:
         for j in range(len(arms)):
-            at_rest += arms[j] * _friction_weight(ratios[j], ratio_signs[j]) * _reaction_size(constant[j], j == guide,
-                                                                                              normal_sign)
+            at_rest += arms[j] * _friction_weight(ratios[j], ratio_signs[j]) * _reaction_size(constant[j],
+                                                                                              normal_signs[j])
     at_rest = collar + at_rest
     if omega > 0.0:
         sign = 1.0
@@ -418,10 +418,10 @@ def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, co
         for j in range(len(arms)):
             weight = arms[j] * _friction_weight(ratios[j], ratio_signs[j])
             reaction = constant[j] + per_epsilon[j] * epsilon
-            size = _reaction_size(reaction, j == guide, normal_sign)
+            size = _reaction_size(reaction, normal_signs[j])
             friction += weight * size
-            if j == guide and normal_sign != 0.0:
-                slope += weight * normal_sign * per_epsilon[j].imag
+            if normal_signs[j] != 0.0:
+                slope += weight * normal_signs[j] * per_epsilon[j].imag
             elif size > 0.0:
                 slope += weight * (per_epsilon[j].real * reaction.real + per_epsilon[j].imag * reaction.imag) / size
         step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
@@ -438,10 +438,10 @@ def _friction_weight(ratio, sign):
 
 
 @njit(cache=True)
-def _reaction_size(reaction, is_guide, normal_sign):
-    """|R_j| [N], or for the guide (is_guide, reaction i N) s_N N continued across N = 0 when normal_sign s_N is +-1
+def _reaction_size(reaction, normal_sign):
+    """|R_j| [N], or for a guide (reaction i N) s_N N continued across N = 0 when normal_sign s_N is +-1
     (JointFrictionModel.acceleration)."""
-    return normal_sign * reaction.imag if is_guide and normal_sign != 0.0 else abs(reaction)
+    return normal_sign * reaction.imag if normal_sign != 0.0 else abs(reaction)
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -176,7 +176,7 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
     tables = model.state_tables
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held = _held_pieces(tables, y)
-    normal_side, crossed_normal = 0.0, False  # joint friction's guide: the held sign of N, just crossed (issue 19)
+    normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, the one just crossed
     instant_events = 0
     while t < t_end and trajectory.status == "complete":
         y, mode = _settle_mode(model, t, y, mode, trajectory)
@@ -190,8 +190,8 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         y_wrapped = start.copy()
         y_wrapped[0] -= offset
         if compiled.normal_slot is not None:
-            normal_side = compiled.hold_normal(p, t, y_wrapped, normal_side if crossed_normal else 0.0)
-            crossed_normal = False
+            normal_sides = compiled.hold_normal(p, t, y_wrapped, normal_sides, crossed_normal)
+            crossed_normal = None
         # without a switch window or a driven part's table no guard reads phi: the stepper wraps it itself instead
         # of returning to restart
         wrap_period = period if wraps and window is None and not turning else 0.0
@@ -233,8 +233,9 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
                 trajectory.stats.switches += 1
                 y[0] = offset + window[g - compiled.window_slot]
                 trajectory.stats.restarts += int(t < t_end)
-            elif g == compiled.normal_slot:  # the guide's N = 0: the other sign held, mode and state kept
-                normal_side, crossed_normal = -normal_side, True
+            elif compiled.normal_slot is not None and 0 <= g - compiled.normal_slot < compiled.n_normals:
+                crossed_normal = g - compiled.normal_slot  # a guide's N = 0: its other sign held, mode and state kept
+                normal_sides = tuple(-side if k == crossed_normal else side for k, side in enumerate(normal_sides))
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
             elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
