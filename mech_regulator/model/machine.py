@@ -693,20 +693,37 @@ class MachineModel:
         """The governor's guards in a mode, then the drive train's (none without either) and, with joint friction
         and given the state y the solver starts from, the crank's: 'crank stops' (omega reaches 0 from the sign
         it has in y: the solver restarts there exactly, omega = 0, where friction may hold the crank at rest) or,
-        starting at rest, 'crank starts' (omega leaves 0: the solver restarts to watch for the next stop)."""
-        guards = self._mode_guards(mode)
-        if self.joint_friction is None or y is None:
-            return guards
-        if y[1] == 0.0:
-            return guards + [Guard("crank starts", lambda state: -abs(state[1]), lambda state: (mode, state))]
-        direction = 1.0 if y[1] > 0.0 else -1.0
+        starting at rest, 'crank starts' (omega leaves 0: the solver restarts to watch for the next stop). Built once
+        per mode and sign of y's omega (all they depend on; the solvers ask at every segment)."""
+        direction = None
+        if self.joint_friction is not None and y is not None:
+            direction = 0.0 if y[1] == 0.0 else 1.0 if y[1] > 0.0 else -1.0
+        built = self._built_guards.get((mode, direction))
+        if built is None:
+            built = self._built_guards[mode, direction] = tuple(self._mode_guards(mode)
+                                                                + self._crank_guards(mode, direction))
+        return list(built)
+
+    @functools.cached_property
+    def _built_guards(self) -> dict:
+        """guards' answers so far, by (mode, sign of omega or None)."""
+        return {}
+
+    @staticmethod
+    def _crank_guards(mode: Mode | None, direction: float | None) -> list:
+        """The crank's guard of guards with joint friction: 'crank starts' from rest (direction 0), 'crank stops'
+        turning in the direction +-1; none for direction None."""
+        if direction is None:
+            return []
+        if direction == 0.0:
+            return [Guard("crank starts", lambda state: -abs(state[1]), lambda state: (mode, state))]
 
         def stop(state: np.ndarray) -> tuple[Mode | None, np.ndarray]:
             state = np.array(state, dtype=float)
             state[1] = 0.0
             return mode, state
 
-        return guards + [Guard("crank stops", lambda state: direction * state[1], stop)]
+        return [Guard("crank stops", lambda state: direction * state[1], stop)]
 
     def _mode_guards(self, mode: Mode | None) -> list:
         """The governor's guards in a mode, then the drive train's (none without either)."""

@@ -125,7 +125,8 @@ class CompiledScene:
     reactions_callback: object = None
     n_journals: int = 0
     n_normals: int = 0
-    _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega) -> rows
+    _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega, window)
+    # -> linear's rows before the breakpoints
 
     def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
                        held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
@@ -170,9 +171,9 @@ class CompiledScene:
         the throttle's slope [1/s], curvature [1/s^2] and start time [s]; None: no load, full throttle) and the sign
         of the crank's speed omega [rad/s] at the segment's start."""
         if piece is None:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, float(np.sign(omega))
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, sign_of(omega)
         return (piece.offset, piece.slope, piece.throttle, piece.throttle_slope, piece.throttle_curvature, piece.start,
-                float(np.sign(omega)))
+                sign_of(omega))
 
     def hold_normal(self, p: np.ndarray, t: float, y: np.ndarray, sides: tuple[float, ...],
                     crossed: int | None) -> tuple[float, ...]:
@@ -212,21 +213,21 @@ class CompiledScene:
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
         linear (or unused); with held and the start state y, the breakpoint guards of the held pieces (STEP_ONTO)."""
         n = len(self.model.state_names())
-        key = (mode, float(np.sign(omega)))  # mode_rows reads omega's sign only
+        key = (mode, sign_of(omega), window)  # mode_rows reads omega's sign only
         rows = self._mode_matrices.get(key)
         if rows is None:
             rows = np.zeros((self.n_guards, n + 2))
             for slot, row in enumerate(mode_rows(self.model, mode, omega)):
                 if row is not None:
                     rows[slot] = row
+            if self.window_slot is not None and window is not None:
+                rows[self.window_slot] = _row(n, 0, 1.0, -window[0])
+                rows[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
+                rows[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
+            if self.normal_slot is not None:  # a guide's N = 0: a nonlinear guard, also a step onto it
+                rows[self.normal_slot:self.normal_slot + self.n_normals, 0] = NONLINEAR_ONTO
             self._mode_matrices[key] = rows
-        matrix = rows.copy()
-        if self.window_slot is not None and window is not None:
-            matrix[self.window_slot] = _row(n, 0, 1.0, -window[0])
-            matrix[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
-            matrix[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
-        if self.normal_slot is not None:  # a guide's N = 0: a nonlinear guard, also a step onto it
-            matrix[self.normal_slot:self.normal_slot + self.n_normals, 0] = NONLINEAR_ONTO
+        matrix = rows.copy()  # the stepper writes the window's rows of its copy (integrators._kink_restart)
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
             slot = self.breakpoint_slot
             bounds = self._held_bounds(held, y, offset)
@@ -243,6 +244,11 @@ class CompiledScene:
                     matrix[slot + 1, 0] = STEP_ONTO
                 slot += 2
         return matrix
+
+
+def sign_of(value: float) -> float:
+    """float(np.sign(value)) for a Python float (-1.0, 0.0, 1.0 or NaN), without numpy's call on a scalar."""
+    return 1.0 if value > 0.0 else -1.0 if value < 0.0 else 0.0 if value == 0.0 else math.nan
 
 
 def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float], ...], StateTable]]:
@@ -356,7 +362,7 @@ def mode_rows(model: MachineModel, mode, omega: float = 0.0) -> list[np.ndarray 
     [1, c0, c1..c_n] or None (not linear in the state: among others joint friction's 'crank starts', -|omega|)."""
     crank = []
     if model.joint_friction is not None:  # 'crank stops': s omega with s the sign of omega at the segment's start
-        crank = [None if omega == 0.0 else _row(len(model.state_names()), 1, float(np.sign(omega)), 0.0)]
+        crank = [None if omega == 0.0 else _row(len(model.state_names()), 1, sign_of(omega), 0.0)]
     if mode is None:
         return crank
     n = len(model.state_names())

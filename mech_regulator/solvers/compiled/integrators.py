@@ -1013,8 +1013,10 @@ class StepsDense(DenseOutput):
         h = self.times[k + 1] - self.times[k]
         theta = ((times - self.times[k]) / h)[:, None]
         total = np.zeros((times.size, self.y_old.shape[1]))
-        for j in range(self.coefficients.shape[2] - 1, -1, -1):
-            total = (total + self.coefficients[k, :, j]) * theta
+        coefficients = self.coefficients[k]  # the steps' (one gather; the loop then reads views, in place)
+        for j in range(coefficients.shape[2] - 1, -1, -1):
+            total += coefficients[:, :, j]
+            total *= theta
         y = (self.y_old[k] + h[:, None] * total).T
         if self.step_offsets is not None:
             y[0] += self.step_offsets[k]
