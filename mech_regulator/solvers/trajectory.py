@@ -66,8 +66,12 @@ class Trajectory:
         self.piece_edges.append(t_end)
         self.interpolants.append(interpolant)
         knots = getattr(interpolant, "x", None) if step_ends is None else np.asarray(step_ends, dtype=float)
-        inner = knots[(knots > t_start) & (knots < t_end)] if knots is not None else ()
-        self.step_ends.append(np.append(inner, t_end))
+        if knots is None:
+            self.step_ends.append(np.array([t_end]))
+        elif knots.size and knots[0] > t_start and knots[-1] == t_end and (knots.size == 1 or knots[-2] < t_end):
+            self.step_ends.append(knots)  # already so (a compiled call's steps)
+        else:
+            self.step_ends.append(np.append(knots[(knots > t_start) & (knots < t_end)], t_end))
         self._solution = None
 
     @property
