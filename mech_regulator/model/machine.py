@@ -711,8 +711,8 @@ class MachineModel:
 
     @staticmethod
     def _crank_guards(mode: Mode | None, direction: float | None) -> list:
-        """The crank's guard of guards with joint friction: 'crank starts' from rest (direction 0), 'crank stops'
-        turning in the direction +-1; none for direction None."""
+        """The crank's guard that guards ends with under joint friction: 'crank starts' from rest (direction 0),
+        'crank stops' turning in the direction +-1; none for direction None (no joint friction, or no state given)."""
         if direction is None:
             return []
         if direction == 0.0:
