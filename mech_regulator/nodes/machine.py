@@ -273,6 +273,8 @@ class MachineNode(Node):
                     else None
             self.publish_state()
             self.moments.send_when_due()  # the last exchanges', sent while the peers answer this one
+            if self.corrects and next_ns < self.end_ns:  # the next step's predictor, while the governor answers
+                self.stepper.predict_ahead(seconds(min((tick + 2) * self.step_ns, self.end_ns)), self.tentative)
             if self.time_mode == "realtime" and next_ns > self.now_ns:
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
