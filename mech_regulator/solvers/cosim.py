@@ -247,18 +247,24 @@ class MachineStepper:
         return speed_samples(stretches, t_start, t_end)
 
     def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
-        """The machine's outputs at its current state with these inputs held: the columns of
-        MachineModel.columns (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the
-        moments on the crank by source (drive, resistance, external, net; see crank_moments)."""
-        throttle = self.applied_throttle(throttle)
-        columns = self.plant.columns(np.array([self.time]), self.state[:, None], np.array([throttle]),
+        """The machine's outputs at its current state with these inputs held (the throttle [-] as applied_throttle
+        gives it, the external load [N m]): outputs_at."""
+        return self.outputs_at(self.time, self.state, self.applied_throttle(throttle), external_load)
+
+    def outputs_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
+        """The machine's outputs at `time` [s] in `state` with the throttle [-] as applied (no trip checked here) and
+        the external load [N m] held: the columns of MachineModel.columns (omega, epsilon, J, M_drive as applied,
+        M_load, x_slider, ...) and the moments on the crank by source (drive, resistance, external, net; see
+        crank_moments)."""
+        columns = self.plant.columns(np.array([time]), state[:, None], np.array([throttle]),
                                      np.array([external_load]))
         columns.update(crank_moments(columns))
         return {name: float(values[0]) for name, values in columns.items()}
 
-    def moments(self, throttle: float, external_load: float) -> dict[str, float]:
-        """The moments on the crank by source [N m] now, with these inputs held (see crank_moments)."""
-        outputs = self.outputs(throttle, external_load)
+    def moments_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
+        """The moments on the crank by source [N m] at `time` [s] in `state` with these inputs held (outputs_at; see
+        crank_moments)."""
+        outputs = self.outputs_at(time, state, throttle, external_load)
         return {name: outputs[name] for name in ("drive", "resistance", "external", "net")}
 
 
