@@ -48,6 +48,12 @@ def test_importing_the_command_line_loads_no_heavy_library():
     assert modules_after("import mech_regulator.cli.main; mech_regulator.cli.main.build_parser()") == []
 
 
+def test_the_entry_points_client_loads_no_heavy_library():
+    """The entry point asks the command server first (cli/server.py's client): the standard library only."""
+    assert modules_after("from mech_regulator.cli import server\nserver.server_key()\n"
+                         "server.through_server(['simulate', '--help'])") == []
+
+
 def test_the_check_sees_a_heavy_import():
     """The checks above can fail: a command that reads a scene does load pydantic and the scene."""
     found = modules_after(after_main("scenes"))
@@ -118,16 +124,16 @@ def test_bench_startup_json(capsys):
     for measure, paths in found["measures"].items():
         assert set(paths) == set(PATHS)
         for path, timing in paths.items():
-            if (measure, path) in (("help", "solve_ivp"), ("cold", "fast")):
+            if (measure, path) in (("help", "solve_ivp"), ("cold", "fast"), ("served", "solve_ivp")):
                 assert timing is None
                 continue
             assert timing["median_s"] > 0 and timing["min_s"] > 0 and len(timing["runs_s"]) == 1, (measure, path)
     assert found["python_startup"]["median_s"] > 0
-    assert found["ratios"]["warm"]["fast / solve_ivp"] > 0
+    assert found["ratios"]["warm"]["fast / solve_ivp"] > 0 and found["ratios"]["served"]["fast / solve_ivp"] > 0
     omega = found["omega_end"]
     assert omega["reference"] == pytest.approx(omega["solve_ivp"], rel=1e-5)
     assert omega["fast"] == pytest.approx(omega["solve_ivp"], rel=1e-5)
-    assert "bench startup: warm fast run 1/1" in err
+    assert "bench startup: warm fast run 1/1" in err and "bench startup: warm fast through the server run 1/1" in err
 
 
 def test_bench_startup_refuses_a_scene_the_script_cannot_write(capsys):

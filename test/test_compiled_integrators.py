@@ -100,21 +100,21 @@ TWO_GUARD_LINES = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
 
 def adaptive(method, rhs, y0, t_end, p, rtol=1e-6, atol=1e-9, guards=position, lines=NO_LINES,
              thresholds=None, max_step=np.inf, first_step=0.0, wrap_limit=np.inf, wrap_period=0.0, max_steps=100000,
-             reactions=position, n_journals=0):
+             reactions=position, n_journals=0, run_steps=100000, restarts=NO_RESTARTS):
     y0 = np.asarray(y0, dtype=float)
     thresholds = np.zeros(len(lines)) if thresholds is None else np.asarray(thresholds, dtype=float)
     return CompiledRun.from_result(method(rhs, guards, len(lines), np.ascontiguousarray(lines), thresholds, reactions,
                                           n_journals, 0.0, y0, t_end, np.asarray(p, dtype=float), rtol,
                                           np.full(y0.size, atol), max_step, first_step, wrap_limit, wrap_period,
-                                          max_steps, *NO_RESTARTS))
+                                          max_steps, run_steps, *restarts))
 
 
 def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, wrap_period=0.0,
-          max_steps=100000):
+          max_steps=100000, run_steps=100000, restarts=NO_RESTARTS):
     y0 = np.asarray(y0, dtype=float)
     return CompiledRun.from_result(rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
                                                 np.zeros(len(lines)), 0.0, y0, t_end, np.asarray(p, dtype=float),
-                                                step, wrap_limit, wrap_period, max_steps, *NO_RESTARTS))
+                                                step, wrap_limit, wrap_period, max_steps, run_steps, *restarts))
 
 
 def stepped(solver):
@@ -337,10 +337,10 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
         arguments = (rotating_pendulum, position, 0, np.zeros((0, 4)), np.zeros(0), t0, y, t_end,
                      np.asarray(p, dtype=float))
         if method == "RK4":
-            return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000, *NO_RESTARTS))
+            return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000, 100000, *NO_RESTARTS))
         return CompiledRun.from_result(compiled.stepper(method)(*arguments[:5], position, 0, *arguments[5:], 1e-8,
                                                                 np.full(2, 1e-10), np.inf, first_step, limit,
-                                                                wrap_period, 100000, *NO_RESTARTS))
+                                                                wrap_period, 100000, 100000, *NO_RESTARTS))
 
     inside = call(y0, 0.0, 0.0, period)
     times, starts, t, y, first_step, offset, restarts = [0.0], [], 0.0, y0, 0.0, 0.0, -1
@@ -370,6 +370,28 @@ def test_failures_keep_what_was_computed():
     assert 0.99 < adaptive_run.t_end < 1.01 and "step size" in adaptive_run.message
     limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
     assert (limited.status, limited.failure, limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 5)
+    run_limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], run_steps=7)
+    assert (run_limited.status, run_limited.failure, run_limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 7)
+
+
+@pytest.mark.parametrize("method", ["RK45", "DOP853", "RK4"])
+def test_a_speed_beyond_the_limit_stops_the_call_at_that_step(method):
+    """y' = y^2 (y a speed: speed_indices [0]) passes MAX_SPEED = 1e6 just before t = 1: the call stops at the first
+    step end beyond it, that step kept: the same steps as the call without the check, up to that one."""
+    watched = list(NO_RESTARTS)
+    watched[4] = np.zeros(1, dtype=np.int64)  # speed_indices
+    if method == "RK4":
+        free, stopped = (fixed(blow_up, [1.0], 2.0, [0.0], 1e-4, restarts=restarts)
+                         for restarts in (NO_RESTARTS, tuple(watched)))
+    else:
+        free, stopped = (adaptive(compiled.stepper(method), blow_up, [1.0], 2.0, [0.0], restarts=restarts)
+                         for restarts in (NO_RESTARTS, tuple(watched)))
+    ends = np.append(free.y_old[1:, 0], free.y_end[0])
+    first = int(np.argmax(ends > 1e6))  # the first step end beyond the limit
+    assert 0 < first < free.n_steps - 1 and free.beyond == -1
+    assert (stopped.status, stopped.failure, stopped.beyond) == (compiled.FAILED, compiled.BLOWN_UP, 0)
+    assert stopped.n_steps == first + 1 and np.array_equal(stopped.times, free.times[:first + 2])
+    assert stopped.y_end[0] == ends[first] > 1e6 >= stopped.y_old[-1, 0]
 
 
 def test_the_dense_output_of_a_call_on_scalars_and_arrays():

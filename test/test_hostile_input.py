@@ -256,17 +256,33 @@ def test_the_energy_method_stops_at_a_blow_up_too(tmp_path):
     assert trajectory.stats.steps <= 5 and abs(trajectory(trajectory.t_end)[1]) > MAX_SPEED
 
 
-def test_an_unstable_rk4_step_is_named_as_the_cause():
-    scene = load_scene("startup", ["scenario.duration=2000", "solver.method=RK4", "solver.step=1.0"])
+@pytest.mark.parametrize("method", ["RK45", "DOP853", "RK4"])
+def test_a_blow_up_stops_the_fast_path_at_the_reference_path_s_step(tmp_path, method):
+    # the compiled stepper watches the speed at every step end itself: the same cut, message and step count
+    overrides = ["machine.drive.torque=1e14", f"solver.method={method}"]
+    reference = simulate(build_model(load_scene(plain(tmp_path), overrides)))
+    fast = simulate(build_model(load_scene(plain(tmp_path), overrides + ["solver.path=fast"])))
+    assert reference.status == fast.status == "failed" and fast.message == reference.message
+    assert fast.stats.steps == reference.stats.steps <= 50
+    assert fast.t_end == pytest.approx(reference.t_end, rel=1e-12)
+    assert abs(fast(fast.t_end)[1]) > MAX_SPEED >= abs(fast(fast.step_ends[-1][-2] if fast.step_ends[-1].size > 1
+                                                               else fast.piece_edges[-2])[1])
+
+
+@pytest.mark.parametrize("path", ["reference", "fast"])
+def test_an_unstable_rk4_step_is_named_as_the_cause(path):
+    scene = load_scene("startup", ["scenario.duration=2000", "solver.method=RK4", "solver.step=1.0",
+                                   f"solver.path={path}"])
     trajectory = simulate(build_model(scene))
     assert trajectory.status == "failed" and trajectory.t_end == 17.0, trajectory.message
     assert "an RK4 step too long to be stable: solver.step = 1 s" in trajectory.message
     assert trajectory.stats.steps == 17
 
 
-def test_a_run_stops_at_the_step_limit(monkeypatch):
+@pytest.mark.parametrize("path", ["reference", "fast"])
+def test_a_run_stops_at_the_step_limit(monkeypatch, path):
     monkeypatch.setattr(time_domain, "MAX_STEPS", 40)
-    trajectory = simulate(build_model(load_scene("lathe")))          # 99 steps to its end at 10 s
+    trajectory = simulate(build_model(load_scene("lathe", [f"solver.path={path}"])))  # 99 steps to its end at 10 s
     assert trajectory.status == "failed" and trajectory.stats.steps == 40
     assert "after 40 steps, the limit of 40 steps for one run" in trajectory.message
     assert 0.0 < trajectory.t_end < 10.0 and np.all(np.isfinite(trajectory(trajectory.t_end)))

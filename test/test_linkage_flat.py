@@ -117,14 +117,17 @@ def test_a_group_that_cannot_assemble_gives_the_same_clear_message_from_reduced_
                                             "be assembled: the distance ")
 
 
-def test_joint_friction_on_a_linkage_stays_on_the_reference_path_with_a_clear_note():
-    """The fast path compiles a linkage but not its kinetostatics by groups: joint friction on a linkage is
-    refused, naming the keys; the same linkage without it is accepted."""
+def test_guide_friction_in_two_prismatic_joints_stays_on_the_reference_path_with_a_clear_note():
+    """The fast path compiles joint friction on a linkage (flat.joint_loads) but locates where the normal force of
+    one guide changes sign, not of several: the shaper with journals is accepted, with guide friction in its two
+    prismatic joints (its slot S and the ram's guide G) refused, naming the key, its value and the joints."""
     data = load_scene("shaper").model_dump(exclude_none=True)
     assert fast_path_refusal(model_of(data)) is None
     data["machine"]["joint_friction"] = {"coefficient": 0.1, "journals": {"O2": {"radius": 0.02}}}
+    assert fast_path_refusal(model_of(data)) is None
+    data["machine"]["joint_friction"]["guide"] = 0.1
     refusal = fast_path_refusal(model_of(data))
-    assert refusal is not None and "machine.joint_friction" in refusal and "'linkage'" in refusal
+    assert refusal is not None and "machine.joint_friction.guide: 0.1" in refusal and "(S, G)" in refusal
 
 
 def test_a_slider_table_on_a_linkage_output_runs_the_same_on_both_paths():

@@ -11,9 +11,17 @@ the machine's speed touches all alike:
 - cold: a first run, `mech-regulator simulate SCENE --quiet --set solver.path=PATH` with empty compile caches
   (MECH_REGULATOR_CACHE and NUMBA_CACHE_DIR pointed at a new empty temporary folder for every run); the script:
   `python script.py`. Python's bytecode caches and the operating system's file cache stay warm: "cold" is about
-  the fast path's compile caches, which is where the cost is;
+  the fast path's compile caches, which is where the cost is. A cold fast run is served by the reference path
+  while its stepper compiles in the background (solvers/compiled/warm.py): that compile is waited for, not
+  counted, before the next run;
 - warm: the same run again with the caches filled (the last cold run's; without cold fast runs, the compile caches
-  of this machine, filled first by one run that is not counted).
+  of this machine, filled first by one run that is not counted), each in a process of its own: no command server;
+- served: the warm run through the command server (cli/server.py), one server for both paths started with the
+  fast path's warm caches (the reference path uses none on the scenes the script can write) in a temporary
+  folder of its own, after one uncounted run of each path through it (so that it holds the scene's compiled
+  module), stopped at the end. The script has no server: its row is compared with the script's warm run.
+
+Every row but the served one runs with MECH_REGULATOR_SERVER=off: no command starts a server.
 
 The script is written from the scene (script_text): its constants, the crank-slider's closed-form kinematics and
 the moments as plain Python, solve_ivp with the scene's method and tolerances, sampled at its sample rate; it
@@ -24,10 +32,12 @@ machine. Numbers to read, never to assert.
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import os
 import platform
 import re
 import resource
+import signal
 import statistics
 import subprocess
 import sys
@@ -39,9 +49,11 @@ from typing import Callable
 REFERENCE, FAST, SCRIPT = "reference", "fast", "solve_ivp"
 PATHS = (REFERENCE, FAST, SCRIPT)
 PATH_TITLES = {REFERENCE: "reference", FAST: "fast", SCRIPT: "solve_ivp script"}
-MEASURES = ("import", "help", "cold", "warm")
+MEASURES = ("import", "help", "cold", "warm", "served")
 MEASURE_TITLES = {"import": "import of the command line", "help": "mech-regulator --help",
-                  "cold": "cold first run (empty caches)", "warm": "warm run"}
+                  "cold": "cold first run (empty caches)", "warm": "warm run, no server",
+                  "served": "warm run through the command server"}
+SCRIPT_MEASURE = {"served": "warm"}  # the script's row a measure is compared with, when not its own
 CACHE_VARIABLES = ("MECH_REGULATOR_CACHE", "NUMBA_CACHE_DIR")
 SCRIPT_IMPORT = "import numpy, scipy.integrate"
 OMEGA_PATTERN = re.compile(r"omega = (\S+) rad/s")
@@ -302,7 +314,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
     cli = cli_command()
     timings: dict[str, dict[str, Timing | None]] = {measure: {path: Timing() for path in PATHS}
                                                    for measure in MEASURES}
-    timings["help"][SCRIPT] = None
+    timings["help"][SCRIPT] = timings["served"][SCRIPT] = None
     if not cold_fast:
         timings["cold"][FAST] = None
     python = Timing()
@@ -326,7 +338,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
     with tempfile.TemporaryDirectory(prefix="mech-regulator-startup-") as folder:
         script = Path(folder) / f"{output_stem(scene.name)}_solve_ivp.py"
         script.write_text(script_text(scene), encoding="utf-8")
-        base = dict(os.environ)
+        base = dict(os.environ, MECH_REGULATOR_SERVER="off")
         base.pop("MECH_REGULATOR_PROGRESS_INTERVAL", None)
         commands = {"import": {REFERENCE: [sys.executable, "-c", "import mech_regulator.cli.main"],
                                SCRIPT: [sys.executable, "-c", SCRIPT_IMPORT]},
@@ -352,6 +364,8 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
                 final_speed(path, record(timings["cold"][path], f"cold {PATH_TITLES[path]}", command, env))
                 warm_caches[path] = env
+                if path == FAST:
+                    _wait_for_background_compile(cache, report)
         if not cold_fast:
             env = dict(base)
             report("bench startup: filling this machine's compile caches for the warm fast runs (not counted)")
@@ -362,7 +376,45 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
                 final_speed(path, record(timings["warm"][path], f"warm {PATH_TITLES[path]}", command,
                                          warm_caches[path]))
+        served = dict(warm_caches[FAST], XDG_RUNTIME_DIR=os.path.join(folder, "servers"))
+        served.pop("MECH_REGULATOR_SERVER")
+        report("bench startup: starting a command server, one run of each path through it (not counted)")
+        server = re.search(r"pid (\d+)", run_process([*cli, "server", "start"], served)[2])
+        try:
+            for path in (REFERENCE, FAST):
+                run_process(simulate_command(path), served)
+            for index in range(repeat):
+                for path in (REFERENCE, FAST):
+                    final_speed(path, record(timings["served"][path], f"warm {PATH_TITLES[path]} through the "
+                                             "server", simulate_command(path), served))
+        finally:
+            _stop_servers(cli, served, int(server[1]) if server else None)
     return StartupBenchmark(scene_name, repeat, cold_fast, timings, python, omega_end, environment())
+
+
+def _wait_for_background_compile(cache: str, report: Callable[[str], None]) -> None:
+    """Wait until the background process compiling the stepper that a cold fast run started (it ran on the
+    reference path meanwhile: solvers/compiled/warm.py) has ended — it holds the lock in the cache folder — so that
+    it neither slows the runs measured next nor leaves the warm fast runs on the reference path."""
+    from mech_regulator.solvers.compiled.warm import LOCK_NAME
+
+    lock = Path(cache) / LOCK_NAME
+    if lock.exists():
+        report("bench startup: waiting for the stepper's compile in the background that the cold fast run started "
+               "(not counted)")
+        with open(lock, "a") as handle:
+            fcntl.flock(handle, fcntl.LOCK_EX)
+
+
+def _stop_servers(cli: list[str], env: dict[str, str], pid: int | None) -> None:
+    """`server stop` in the benchmark's folder; the server killed by its pid if it is still there."""
+    from mech_regulator.cli.server import process_alive
+
+    try:
+        run_process([*cli, "server", "stop"], env)
+    finally:
+        if pid is not None and process_alive(pid):
+            os.kill(pid, signal.SIGKILL)
 
 
 def environment() -> dict[str, str]:
@@ -378,10 +430,11 @@ def environment() -> dict[str, str]:
 
 
 def ratios(benchmark: StartupBenchmark) -> dict[str, dict[str, float | None]]:
-    """Per measure, each path's median over the script's (None where either is missing)."""
+    """Per measure, each path's median over the script's (its warm run's for the served one; None where either is
+    missing)."""
     found = {}
     for measure, timings in benchmark.timings.items():
-        script = timings[SCRIPT]
+        script = benchmark.timings[SCRIPT_MEASURE.get(measure, measure)][SCRIPT]
         found[measure] = {f"{path} / {SCRIPT}": (timings[path].median / script.median
                                                  if timings[path] is not None and script is not None else None)
                           for path in (REFERENCE, FAST)}
@@ -417,7 +470,9 @@ def format_table(benchmark: StartupBenchmark) -> str:
     omega = ", ".join(f"{PATH_TITLES[path]} {value:.10g}" if value is not None else f"{PATH_TITLES[path]} -"
                       for path, value in benchmark.omega_end.items())
     lines += ["", f"Python itself (python -c pass): {_cell(benchmark.python)} s. The import and --help rows are one "
-              "process for both paths of the command line; the script's import row is numpy and scipy.integrate.",
+              "process for both paths of the command line; the script's import row is numpy and scipy.integrate. "
+              "The server row's ratios are to the script's warm run (a script has no server); its CPU time (--json) "
+              "is the client's alone, the server's child is not the benchmark's.",
               f"final speed omega [rad/s] (the same machine on each): {omega}"]
     if not benchmark.cold_fast:
         lines.append("cold fast runs left out (--skip-cold-fast): the warm fast runs used this machine's caches")

@@ -5,15 +5,35 @@ import time
 
 EXIT_INTERRUPTED = 130
 STARTED = time.monotonic()  # [s] when the command line began (its first import): `run`'s start-up counts from it
+SERVED_COMMANDS = frozenset({"simulate", "describe", "governor", "coupling", "kinematics", "engine", "structure",
+                             "flywheel", "scenes", "schema"})
+"""Commands the command server (cli/server.py) runs: the physics core in one thread (not run: ROS; sweep: worker
+processes or Dask; bench: processes of its own; compile: numba compiling for tens of seconds; server)."""
 
 
 def entry() -> int:
-    """Entry point of `mech-regulator`: the command line (cli.main.main), imported here so that a Ctrl-C while its
+    """Entry point of `mech-regulator`: a served command through the command server when one serves it
+    (cli/server.py: no heavy import there), else the command in this process (run_command)."""
+    argv = sys.argv[1:]
+    code = None
+    if argv and argv[0] in SERVED_COMMANDS:
+        try:
+            from mech_regulator.cli.server import through_server
+
+            code = through_server(argv)
+        except KeyboardInterrupt:
+            print("mech-regulator: interrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+    return run_command(argv) if code is None else code
+
+
+def run_command(argv: list[str]) -> int:
+    """The command line (cli.main.main) run on argv in this process, imported here so that a Ctrl-C while its
     modules load ends quietly with exit code 130, as a Ctrl-C later does."""
     try:
         from mech_regulator.cli.main import main
 
-        return main()
+        return main(argv)
     except KeyboardInterrupt:
         print("mech-regulator: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED

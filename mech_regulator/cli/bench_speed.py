@@ -58,8 +58,10 @@ def add_bench_startup_command(benchmarks) -> None:
                     "command line (python -c 'import mech_regulator.cli.main'; the script: numpy and "
                     "scipy.integrate), `mech-regulator --help`, a cold first run of `mech-regulator simulate SCENE "
                     "--quiet` (empty compile caches: MECH_REGULATOR_CACHE and NUMBA_CACHE_DIR in a new temporary "
-                    "folder each time) and a warm run (the caches filled). Wall time, median and minimum of the "
-                    "repeats, side by side with the ratios to the script. Numbers to read, never asserted.")
+                    "folder each time), a warm run (the caches filled) in a process of its own and a warm run "
+                    "through the command server (one started in a temporary folder, stopped at the end). Wall time, "
+                    "median and minimum of the repeats, side by side with the ratios to the script. Numbers to "
+                    "read, never asserted.")
     startup.add_argument("--scene", default="crank_slider_bench", metavar="SCENE",
                          help="the machine (default crank_slider_bench; lathe works too: a scene without governor, "
                               "drive train, joint friction or load events, with no mechanism or a crank-slider)")

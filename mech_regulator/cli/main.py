@@ -150,6 +150,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "compiles its solver, announced)")
     compile_command.add_argument("--method", action="append", choices=("RK45", "DOP853", "RK4", "Rosenbrock23"),
                                  help="a method to compile (repeatable; default: all)")
+    server = commands.add_parser(
+        "server", help="the command server: a resident process with the command line and the physics core loaded "
+                       "that answers simulate, describe, kinematics, structure, governor, engine, coupling, flywheel, "
+                       "scenes and schema in a forked child, without their imports (started by the first such "
+                       "command; stops after 10 min idle, MECH_REGULATOR_SERVER_IDLE seconds; "
+                       "MECH_REGULATOR_SERVER=off: never one)")
+    server.add_argument("action", choices=("start", "status", "stop"),
+                        help="start: start this environment's server (unless running) and wait until it answers; "
+                             "status: pid, key, idle time and what each server has loaded; stop: stop every server")
     bench = commands.add_parser("bench", help="benchmarks of the solvers", description="benchmarks of the solvers")
     benchmarks = bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK")
     accuracy = benchmarks.add_parser(
@@ -186,6 +195,10 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         if args.command == "scenes":
             return _list_scenes()
+        if args.command == "server":
+            from mech_regulator.cli.server import server_command
+
+            return server_command(args.action)
         if args.command == "compile":
             from mech_regulator.solvers.compiled.warm import compile_steppers
 

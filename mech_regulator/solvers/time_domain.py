@@ -52,7 +52,6 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     """Integrate the scene's scenario with its solver settings; returns the (possibly partial) trajectory.
     segment: what steps one external-load piece, with _segment's arguments and result (default _segment, the
     reference path; the fast path passes its compiled twin, solvers/compiled/run.py)."""
-    watched = segment is not None and segment is not _segment
     segment = segment or _segment
     solver = model.scene.solver
     scenario = model.scene.scenario
@@ -62,13 +61,9 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     if mode is not None:
         trajectory.modes.append((0.0, mode))
     edges = [0.0] + [t for t in model.breakpoints() if 0.0 < t < scenario.duration] + [scenario.duration]
-    if watched:  # a segment that takes many steps per call (the fast path): its pieces are checked after each call
-        progress = _Watch(model, trajectory, progress)
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
             y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
-            if watched:
-                progress.check()
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2
@@ -509,54 +504,6 @@ def fail_too_many_steps(model: MachineModel, trajectory: Trajectory, t: float, y
                           f"state: {state_text(model.state_names(), y)}); likely cause: a stiff machine for an "
                           "explicit method (try Radau or BDF), tolerances tighter than needed (solver.rtol, "
                           "solver.atol) or a motion that runs away")
-
-
-class _Watch:
-    """The progress callback handed to a segment that takes many steps per call (the fast path, whose compiled
-    steppers return every few thousand steps): after each call it checks the step ends of the pieces added since, and
-    ends the run as _segment does — cut at the first step end with a speed beyond MAX_SPEED or not finite (the step
-    that carried it there kept), or at MAX_STEPS steps — then passes the time on to `progress`."""
-
-    def __init__(self, model: MachineModel, trajectory: Trajectory, progress: Progress | None):
-        self.model, self.trajectory, self.progress = model, trajectory, progress
-        self.names = model.state_names()
-        self.speeds = [index for index, name in enumerate(self.names) if name in ("omega", "omega_driven")]
-        self.checked = 0  # pieces checked
-
-    def __call__(self, t: float) -> None:
-        self.check()
-        if self.progress is not None:
-            self.progress(t)
-
-    def check(self) -> None:
-        trajectory = self.trajectory
-        while self.checked < len(trajectory.interpolants):
-            index = self.checked
-            self.checked += 1
-            ends = np.asarray(trajectory.step_ends[index], dtype=float)
-            states = np.asarray(trajectory.interpolants[index](ends), dtype=float).reshape(len(self.names), -1)
-            beyond = ~(np.abs(states[self.speeds]) <= MAX_SPEED)
-            if beyond.any():
-                step = int(np.argmax(beyond.any(axis=0)))
-                row = self.speeds[int(np.argmax(beyond[:, step]))]
-                self._cut(index, ends[:step + 1])
-                fail_blown_up(self.model, trajectory, float(ends[step]), states[:, step], self.names[row],
-                              float(states[row, step]))
-                return
-        if trajectory.status == "complete" and trajectory.stats.steps >= MAX_STEPS and trajectory.interpolants:
-            fail_too_many_steps(self.model, trajectory, trajectory.t_end, trajectory.interpolants[-1](trajectory.t_end))
-
-    def _cut(self, index: int, ends: np.ndarray) -> None:
-        """Keep the trajectory up to ends[-1], the last of `ends` (the step ends of piece `index` kept)."""
-        trajectory, t_cut = self.trajectory, float(ends[-1])
-        del trajectory.interpolants[index + 1:]
-        del trajectory.step_ends[index + 1:]
-        trajectory.piece_edges[index + 1:] = [t_cut]
-        trajectory.step_ends[index] = ends
-        trajectory.events[:] = [event for event in trajectory.events if event[0] <= t_cut]
-        trajectory.modes[:] = [mode for mode in trajectory.modes if mode[0] <= t_cut]
-        trajectory._solution = None
-        self.checked = len(trajectory.interpolants)
 
 
 class _Shifted:

@@ -8,8 +8,8 @@ mechanisms/__init__.py; `solve_poses` the links' poses and their phi-derivatives
 Each function is plain Python; `compiled(name)` gives its numba-compiled form (on first use: numba is imported only
 then, so the package loads without it; the functions are registered with numba.extending.register_jitable so that
 compiled code calls them compiled; numba's disk cache keeps them, compiled once per machine). Nothing below
-`reduced` allocates: `solve_poses` works in the poses and the scratch array it is given, and `reduced` allocates
-one workspace per call for both.
+`reduced` and `joint_loads` allocates: `solve_poses` and `kinetostatics` work in the arrays they are given, and
+`reduced` and `joint_loads` allocate one workspace per call for them (`joint_loads` also its three results).
 
 The equations (module docstring of groups.py, physics.md section 1): a link's pose is (r, theta), its point p at
 `P = r + p e^{i theta}`; every pose carries POSE_SIZE floats [x, y, theta, x', y', theta', x'', y'', theta'',
@@ -29,7 +29,18 @@ each link [m]):
   on the crank (x, y) [m];
   per link LINK_SIZE floats: mass [kg], centre of mass (x, y) [m, own coordinates], inertia about it [kg m^2];
   per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT), branch (+1 or -1), link L1, link L2 (-1 for a
-  redundant link), then three joint records: E1, internal, E2 (a redundant link: its two joints, then zeros).
+  redundant link), then three joint records: E1, internal, E2 (a redundant link: its two joints, then zeros);
+  the joint map (what the kinetostatics reports per joint): the number of the linkage's joints, the crank pivot's
+  joint record, then per joint in the linkage's order (model.Linkage.joints) the position of its record from
+  `base` and its multiplier slot (joint k of group number n: 3 n + k; the crank pivot: 3 n_groups; -1, -1 for a
+  joint of none of the groups given, as while the structure is still being found).
+
+The kinetostatics by groups (source 001, chapter 3; linkage/kinetostatics.py describes it) is written here too:
+`kinetostatics` gives the multipliers of every joint (a revolute joint's: the force on its first link from its
+second, Fx, Fy [N]; a prismatic joint's: the normal force N on the slider along i w [N] and the couple on it [N m])
+and the balancing moment for two load cases at once, (omega, epsilon = 0, Q, with gravity) and (0, 1, 0, without),
+whose sum weighted (1, epsilon) is any state's (the reactions are linear in (omega^2, epsilon, g, Q));
+`joint_loads` turns them into what joint friction reads (mechanisms.kinetostatics.JointLoads).
 """
 
 from __future__ import annotations
@@ -105,6 +116,12 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
             program += [float(KIND_CODES[group.kind]), float(group.branch), float(index[group.links[0]]),
                         float(index[group.links[1]])]
         program += [value for record in joints for value in record]
+    found = {joint.name: (len(program) - GROUP_SIZE * (len(groups) - number) + 4 + JOINT_SIZE * k, 3 * number + k)
+             for number, group in enumerate(groups) for k, joint in enumerate(group.joints)}
+    program += [float(len(linkage.joints)), *joint_record(linkage, pivot, index)]
+    found[pivot.name] = (len(program) - JOINT_SIZE, 3 * len(groups))
+    for joint in linkage.joints:
+        program += [float(value) for value in found.get(joint.name, (-1, -1))]
     return np.array(program, dtype=np.float64)
 
 
@@ -563,26 +580,223 @@ def reduced(phi, program, base):
     return reduced_from_poses(program, base, poses)
 
 
+# ---------------------------------------------------------------------------------------------------------------
+# Kinetostatics by groups (linkage/kinetostatics.py's module docstring)
+
+def _planar_cross(u, v):
+    """z component of the planar cross product u x v = Im(conj(u) v)."""
+    return (u.conjugate() * v).imag
+
+
+def joint_map(program, base):
+    """The position in the program of the joint map (module docstring): its count of joints."""
+    return base + HEADER_SIZE + LINK_SIZE * int(program[base]) + GROUP_SIZE * int(program[base + 1])
+
+
+def _inertia_residuals(program, base, poses, omega, residual):
+    """Fill residual[3 k : 3 k + 3, case] (k a link, zeros for the frame) with the d'Alembert terms of each moving
+    link's equilibrium in its coordinates (x, y of its origin r, theta) for the two load cases: `m (a_S - g)`
+    (x, y) and `I alpha + (S - r) x m (a_S - g)` (theta), with a_S = S'' omega^2, alpha = theta'' omega^2 and g
+    (case 0, (omega, epsilon = 0)), a_S = S', alpha = theta' and no g (case 1, the rate with epsilon)."""
+    n_links = int(program[base])
+    gravity = complex(program[base + 5 + JOINT_SIZE], program[base + 6 + JOINT_SIZE])
+    square = omega * omega
+    for row in range(3):
+        residual[row, 0] = residual[row, 1] = 0.0
+    for link in range(1, n_links):
+        record = base + HEADER_SIZE + LINK_SIZE * link
+        mass, inertia = program[record], program[record + 3]
+        centre = complex(program[record + 1], program[record + 2])
+        _, dS, ddS = motion(poses, link, centre)
+        to_centre = centre * _turn(poses, link)
+        k = POSE_SIZE * link
+        net = mass * (ddS * square - gravity)
+        residual[3 * link, 0], residual[3 * link + 1, 0] = net.real, net.imag
+        residual[3 * link + 2, 0] = inertia * poses[k + 8] * square + _planar_cross(to_centre, net)
+        net = mass * dS
+        residual[3 * link, 1], residual[3 * link + 1, 1] = net.real, net.imag
+        residual[3 * link + 2, 1] = inertia * poses[k + 5] + _planar_cross(to_centre, net)
+
+
+def _output_load(program, base, poses, force, residual):
+    """Subtract load case 0's output load from the residuals: a moment Q [N m] on the output link, or a force
+    Q w [N] on the output joint's slider at its point P_s and -Q w on the guide there (w the guide's direction; its
+    power is Q q' omega); nothing without an output."""
+    kind = program[base + 3]
+    if force == 0.0 or kind == 0.0:
+        return
+    if kind == 1.0:
+        residual[3 * int(program[base + 4]) + 2, 0] -= force
+        return
+    j = base + 5
+    guide, slider = int(program[j + 1]), int(program[j + 2])
+    at = _point(program, j, poses, slider)
+    pull = force * _direction(program, j) * _turn(poses, guide)
+    for side in range(2):
+        link, sign = (slider, 1.0) if side == 0 else (guide, -1.0)
+        if link != 0:
+            residual[3 * link, 0] -= sign * pull.real
+            residual[3 * link + 1, 0] -= sign * pull.imag
+            residual[3 * link + 2, 0] -= sign * _planar_cross(at - _origin(poses, link), pull)
+
+
+def _solve_group_reactions(program, g, group, poses, scratch, residual, multipliers):
+    """The multipliers of the group at g (number `group`) for both load cases from `A^T lambda = residual` of its
+    links (A the matrix of its kinematics, group_matrix; lambda = (A^-1)^T residual with invert_dyad's inverse),
+    stored at multipliers[2 (3 group + k) + row, case] for its joint k's rows; then their reactions on the links
+    it hangs on, `residual[link] -= (dC/dx_link)^T lambda` (joint_rows), passed inward. False where A is
+    singular, or for a redundant link (statically indeterminate)."""
+    if int(program[g]) == REDUNDANT:
+        return False
+    A, inverse, known = scratch[0:6], scratch[6:12], scratch[12:14]
+    L1, L2 = int(program[g + 2]), int(program[g + 3])
+    group_matrix(program, g, poses, A, known)
+    if not invert_dyad(A, inverse):
+        return False
+    for case in range(2):
+        for row in range(6):
+            value = 0.0
+            for unknown in range(6):
+                link = L1 if unknown < 3 else L2
+                value += inverse[unknown, row] * residual[3 * link + unknown % 3, case]
+            multipliers[6 * group + row, case] = value
+    for joint in range(3):
+        j = g + 4 + JOINT_SIZE * joint
+        rows = joint_rows(program, j, poses)
+        for side in range(2):
+            link = int(program[j + 1 + side])
+            if link == 0 or link == L1 or link == L2:
+                continue
+            for row in range(2):
+                for coordinate in range(3):
+                    partial = rows[6 * row + 3 * side + coordinate]
+                    for case in range(2):
+                        residual[3 * link + coordinate, case] -= partial * multipliers[6 * group + 2 * joint + row,
+                                                                                        case]
+    return True
+
+
+def kinetostatics(phi, omega, force, program, base, poses, scratch, residual, multipliers):
+    """The kinetostatics by groups at crank angle phi [rad], crank speed omega [rad/s] and output force Q [N or
+    N m] (linkage/kinetostatics.py): solves the poses (solve_poses, in poses and scratch), the links' d'Alembert
+    residuals (residual, 3 n_links x 2) with the output load, each group's multipliers from the farthest inward
+    (_solve_group_reactions), then the crank's: its pivot's reaction from the crank's force equations and the
+    balancing moment M_b from its moment equation, `M_b = residual_theta - (dC/dtheta_crank)^T lambda_pivot`.
+    Fills multipliers (2 (3 n_groups + 1) x 2: joint slot s at rows 2 s, 2 s + 1, the pivot's slot 3 n_groups;
+    columns the load cases (omega, epsilon = 0, Q, with gravity) and (0, 1, 0, without)); returns (solved,
+    M_b of case 0 [N m], of case 1 [kg m^2]), (False, NaN, NaN) where a group cannot assemble, is at a dead point
+    or is a redundant link."""
+    if solve_poses(phi, program, base, poses, scratch, True)[0] != SOLVED:
+        return False, math.nan, math.nan
+    _inertia_residuals(program, base, poses, omega, residual)
+    _output_load(program, base, poses, force, residual)
+    n_groups = int(program[base + 1])
+    groups_at = base + HEADER_SIZE + LINK_SIZE * int(program[base])
+    for group in range(n_groups - 1, -1, -1):
+        if not _solve_group_reactions(program, groups_at + GROUP_SIZE * group, group, poses, scratch, residual,
+                                      multipliers):
+            return False, math.nan, math.nan
+    crank = int(program[base + 2])
+    pivot = joint_map(program, base) + 1
+    rows = joint_rows(program, pivot, poses)
+    side = 0 if int(program[pivot + 1]) == crank else 3
+    x1, y1, t1 = rows[side], rows[side + 1], rows[side + 2]        # the pivot's first row by the crank's (x, y, theta)
+    x2, y2, t2 = rows[6 + side], rows[7 + side], rows[8 + side]    # its second
+    determinant = x1 * y2 - x2 * y1
+    slot = 6 * n_groups
+    balancing = 0.0
+    for case in range(2):
+        fx, fy = residual[3 * crank, case], residual[3 * crank + 1, case]
+        first = (fx * y2 - x2 * fy) / determinant
+        second = (x1 * fy - fx * y1) / determinant
+        multipliers[slot, case], multipliers[slot + 1, case] = first, second
+        if case == 0:
+            balancing = residual[3 * crank + 2, 0] - t1 * first - t2 * second
+    return True, balancing, residual[3 * crank + 2, 1] - t1 * multipliers[slot, 1] - t2 * multipliers[slot + 1, 1]
+
+
+def joint_reactions(program, base, poses, multipliers, reactions, ratios):
+    """From kinetostatics' poses and multipliers, per joint in the linkage's order (the joint map): reactions[0, j]
+    = R0 and reactions[1, j] = R1 (R = R0 + R1 epsilon, complex Fx + i Fy [N] and [N s^2/rad]: a revolute joint's
+    force on its first link from its second; a prismatic joint's normal force on the slider as i N, in the guide's
+    own frame) and ratios[j], a revolute joint's relative angular speed over omega theta_a' - theta_b' [-], a
+    prismatic joint's sliding speed over omega `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]
+    (w the guide's direction e^{i theta_g} u)."""
+    at = joint_map(program, base)
+    for joint in range(int(program[at])):
+        entry = at + 1 + JOINT_SIZE + 2 * joint
+        j, slot = base + int(program[entry]), 2 * int(program[entry + 1])
+        a, b = int(program[j + 1]), int(program[j + 2])
+        ka = POSE_SIZE * a
+        if program[j] == 0.0:
+            reactions[0, joint] = complex(multipliers[slot, 0], multipliers[slot + 1, 0])
+            reactions[1, joint] = complex(multipliers[slot, 1], multipliers[slot + 1, 1])
+            ratios[joint] = poses[ka + 5] - poses[POSE_SIZE * b + 5]
+        else:
+            reactions[0, joint] = complex(0.0, multipliers[slot, 0])
+            reactions[1, joint] = complex(0.0, multipliers[slot, 1])
+            P_s, dP_s, _ = motion(poses, b, _local(program, j, b))
+            sliding = dP_s - complex(poses[ka + 3], poses[ka + 4]) - 1j * poses[ka + 5] * (P_s - _origin(poses, a))
+            ratios[joint] = (sliding * (_direction(program, j) * _turn(poses, a)).conjugate()).real
+
+
+def workspace_sizes(program, base):
+    """(poses, residual rows, multiplier rows) of kinetostatics' arrays for the program at base: POSE_SIZE
+    n_links, 3 n_links, 2 (3 n_groups + 1)."""
+    n_links = int(program[base])
+    return POSE_SIZE * n_links, 3 * n_links, 2 * (3 * int(program[base + 1]) + 1)
+
+
+def joint_loads(phi, omega, force, program, base):
+    """What joint friction reads of the linkage at crank angle phi [rad], speed omega [rad/s] and output force Q
+    (mechanisms.kinetostatics.JointLoads): (R0, R1, ratios, M_b0 [N m], M_b1 [kg m^2]), R0 and R1 complex arrays
+    and ratios per joint in the linkage's order (joint_reactions), the balancing moment M_b = M_b0 + M_b1 epsilon;
+    NaNs where a group fails (kinetostatics). Its allocations per call: one workspace and the three results."""
+    n_poses, n_residual, n_multipliers = workspace_sizes(program, base)
+    scratch_size = SCRATCH_SHAPE[0] * SCRATCH_SHAPE[1]
+    workspace = np.empty(n_poses + scratch_size + 2 * (n_residual + n_multipliers))
+    poses = workspace[:n_poses]
+    scratch = workspace[n_poses:n_poses + scratch_size].reshape(SCRATCH_SHAPE)
+    start = n_poses + scratch_size
+    residual = workspace[start:start + 2 * n_residual].reshape((n_residual, 2))
+    multipliers = workspace[start + 2 * n_residual:].reshape((n_multipliers, 2))
+    n_joints = int(program[joint_map(program, base)])
+    reactions = np.empty((2, n_joints), dtype=np.complex128)
+    ratios = np.empty(n_joints)
+    solved, constant, per_epsilon = kinetostatics(phi, omega, force, program, base, poses, scratch, residual,
+                                                  multipliers)
+    if solved:
+        joint_reactions(program, base, poses, multipliers, reactions, ratios)
+    else:
+        reactions[:, :] = math.nan
+        ratios[:] = math.nan
+    return reactions[0], reactions[1], ratios, constant, per_epsilon
+
 
 @functools.cache
 def _registered() -> None:
     """Register every function of the solver with numba (once), so that compiled code calls them compiled: all but
-    `reduced` (which allocates its workspace) without numba's runtime (`_nrt=False`: they allocate nothing, and so
-    spend no time counting references to the arrays they are passed)."""
+    `reduced` and `joint_loads` (which allocate their workspace) without numba's runtime (`_nrt=False`: they
+    allocate nothing, and so spend no time counting references to the arrays they are passed)."""
     from numba.extending import register_jitable
 
     register_jitable(reduced)
+    register_jitable(joint_loads)
     for function in (_local, _other, _unit, _direction, _origin, _turn, _point, _set_pose, _pin, _swing,
                      _angle_across, _origin_line, _lines_cross, _lines_meet, place_group, joint_rows, joint_quadratic,
                      _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
                      _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
-                     motion, reduced_from_poses):
+                     motion, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,
+                     _solve_group_reactions, kinetostatics, joint_reactions, workspace_sizes):
         register_jitable(_nrt=False)(function)
 
 
-# What the reference path calls compiled, with the argument types of its calls (kinematics.py)
+# What the reference path calls compiled, with the argument types of its calls (kinematics.py, kinetostatics.py)
 COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1], float64[:, ::1], boolean)",
-                      "reduced": "(float64, float64[::1], int64)"}
+                      "reduced": "(float64, float64[::1], int64)",
+                      "kinetostatics": "(float64, float64, float64, float64[::1], int64, float64[::1], float64[:, ::1], "
+                                       "float64[:, ::1], float64[:, ::1])",
+                      "joint_loads": "(float64, float64, float64, float64[::1], int64)"}
 
 
 @functools.cache

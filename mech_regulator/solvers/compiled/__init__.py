@@ -21,15 +21,19 @@ def runs_compiled(solver) -> bool:
 
 def fast_path_refusal(scene_or_model) -> str | None:
     """Why a scene (or its model) cannot run on the fast path, naming the key, its value and what the fast path
-    has; None when it can (the fast path compiles every machine the scene format describes but joint friction on a
-    general linkage, whose kinetostatics by groups is not compiled; that and the solver methods it has no compiled
-    stepper for stay on the reference path)."""
+    has; None when it can (the fast path compiles every machine the scene format describes but joint friction in
+    more than one prismatic joint of a general linkage, whose normal forces' sign changes it has one guard for;
+    that and the solver methods it has no compiled stepper for stay on the reference path)."""
     scene = getattr(scene_or_model, "scene", scene_or_model)
     machine = scene.machine
-    if machine.joint_friction is not None and machine.mechanism is not None and machine.mechanism.type == "linkage":
-        return ("solver.path: 'fast' does not compile machine.joint_friction on machine.mechanism.type: 'linkage' "
-                "yet (its kinetostatics by groups); expected no joint_friction on a linkage, or solver.path: "
-                "reference")
+    mechanism, friction = machine.mechanism, machine.joint_friction
+    if friction is not None and friction.guide > 0.0 and mechanism is not None and mechanism.type == "linkage":
+        sliding = [name for name, joint in mechanism.joints.items() if joint.type == "prismatic"]
+        if len(sliding) > 1:
+            return (f"solver.path: 'fast' does not compile machine.joint_friction.guide: {friction.guide:g} on a "
+                    f"linkage with {len(sliding)} prismatic joints ({', '.join(sliding)}): it locates where the "
+                    "normal force of one guide changes sign, not of several; expected a linkage with one prismatic "
+                    "joint, guide: 0, or solver.path: reference")
     method = scene.solver.method
     if method not in FAST_METHODS:
         return (f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "

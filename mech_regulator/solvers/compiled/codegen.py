@@ -54,7 +54,7 @@ from mech_regulator.model.machine import StateTable
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator import mechanisms
 from mech_regulator.effects import held_positions, joint_friction, output_position_of
-from mech_regulator.mechanisms import engine, walking_beam
+from mech_regulator.mechanisms import engine, kinetostatics, walking_beam
 from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import kernels
@@ -73,6 +73,8 @@ PIECE_SLOTS = (EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, THROTTLE_SLOPE, T
                CRANK_DIRECTION)
 PIECE_INDEX = np.array(PIECE_SLOTS, dtype=np.int64)
 # the throttle of a co-simulated machine: held, or the polynomial of LoadPiece.throttle_at
+RATE_SIGNS = 2  # joint friction's slots in p from friction_slot: the guide's normal sign s_N and its guard's start
+#                level, then (from friction_slot + RATE_SIGNS) the signs s_j of the joints' relative rates
 HELD_THROTTLE_EXPRESSION = (f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
                             f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)")
 
@@ -98,9 +100,10 @@ class CompiledScene:
     two if window_slot is not None); source and path of the generated module; table_slots: per state table the
     slot in p of its anchor (NaN: the table as it is), then its piece's lower and upper breakpoints in the guard's
     state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards. Joint friction with a
-    mechanism (issue 19): friction_slot, the first of its six slots in p (the signs s_j of the four joints' relative
-    rates, 0: |k_j|; the guide's normal sign s_N, 0: |N|; its guard's start level), and normal_slot, the guard slot of
-    s_N N (a crank–slider's guide with friction, after the mode's guards; +inf while s_N is 0), or None;
+    mechanism (issue 19): friction_slot, the first of its slots in p (the guide's normal sign s_N, 0: |N|; its
+    guard's start level; then the signs s_j of the kinetostatics' joints' relative rates, the presets' four or a
+    linkage's all, 0: |k_j|), and normal_slot, the guard slot of s_N N (a crank–slider's guide or a linkage's one
+    prismatic joint with friction, after the mode's guards; +inf while s_N is 0), or None;
     reactions_callback (a C callback, as rhs_callback) writes the |R_j|^2 of the n_journals journals with friction
     (guards_callback, never called, when n_journals is 0)."""
 
@@ -148,7 +151,7 @@ class CompiledScene:
         friction = model.joint_friction
         if self.friction_slot is not None and window is not None and friction.corner_angles:  # |k_j| as s_j k_j
             for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
-                p[self.friction_slot + index] = sign
+                p[self.friction_slot + RATE_SIGNS + index] = sign
         if held is not None:
             tables = self.model.state_tables
             anchors = _anchors(tables, held)
@@ -172,7 +175,7 @@ class CompiledScene:
         the stepper's) holds and its guard's start level, as time_domain._normal_guard: side (+-1) just after its
         guard crossed, else (side 0) the sign of N at the start; returns s_N."""
         levels = np.zeros(self.n_guards)
-        sign_slot, low_slot = self.friction_slot + 4, self.friction_slot + 5
+        sign_slot, low_slot = self.friction_slot, self.friction_slot + 1
         if side == 0.0:  # N with |N| read as +N: >= 0 where N is
             p[sign_slot] = 1.0
             self.guards(t, y, p, levels)
@@ -261,16 +264,10 @@ def compile_scene(model: MachineModel) -> CompiledScene:
      n_journals) = generate(model)
     digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
                                        numba.__version__]).encode()).hexdigest()[:20]
-    module = _LOADED.get(digest)
-    path = cache_folder() / f"scene_{digest}.py"
-    if module is None:
-        if not path.exists() or path.read_text(encoding="utf-8") != source:
-            _write(path, source)
-        spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
-        spec.loader.exec_module(module)
-        _LOADED[digest] = module
+    path = _module_path(digest)
+    if digest not in _LOADED and (not path.exists() or path.read_text(encoding="utf-8") != source):
+        _write(path, source)
+    module = load_scene_module(digest)
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
                              n_guards, window_slot, source, path, breakpoint_slot, table_slots, friction_slot,
                              normal_slot, module.reactions_callback if n_journals else module.guards_callback,
@@ -279,6 +276,29 @@ def compile_scene(model: MachineModel) -> CompiledScene:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
     return compiled
+
+
+def load_scene_module(digest: str):
+    """The generated module scene_<digest>.py of the cache folder, imported once per process (numba loads its
+    functions from its disk cache as it imports them, or compiles them) and kept in _LOADED. The command server
+    (cli/server.py) also calls it, for the modules its last command loaded (loaded_scene_modules)."""
+    module = _LOADED.get(digest)
+    if module is None:
+        spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", _module_path(digest))
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
+        spec.loader.exec_module(module)
+        _LOADED[digest] = module
+    return module
+
+
+def loaded_scene_modules() -> list[str]:
+    """The digests of the generated modules this process has imported (load_scene_module)."""
+    return list(_LOADED)
+
+
+def _module_path(digest: str) -> Path:
+    return cache_folder() / f"scene_{digest}.py"
 
 
 @functools.cache
@@ -540,8 +560,8 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     anchor = "anchor" if kinked else "phi"
     friction = model.joint_friction
     friction_slot = normal_slot = None
-    if friction is not None and friction.loads is not None:  # the joints' rate signs, the guide's N sign and level
-        friction_slot = p.slots(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if friction is not None and friction.loads is not None:  # the guide's N sign and level, the joints' rate signs
+        friction_slot = p.slots(*[0.0] * (RATE_SIGNS + len(_kinetostatics_joints(machine.mechanism))))
     if kinked:  # between two kinks the tables continue along the segment that holds the window's middle (rhs);
         #         without a window (p's edges both 0) they are the tables themselves
         body.append(f"anchor = 0.5 * (p[{WINDOW_LO}] + p[{WINDOW_HI}]) if p[{WINDOW_HI}] > p[{WINDOW_LO}] else phi")
@@ -662,11 +682,12 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
             reaction_lines = [f"rates = k.np.empty({len(model.state_names())})"] + copy + [
                 f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
         if friction.guides:  # s_N N - its start level, with the rhs's epsilon
-            side, low = f"p[{friction_slot + 4}]", f"p[{friction_slot + 5}]"
+            side, low = f"p[{friction_slot}]", f"p[{friction_slot + 1}]"
             guard_lines += [f"if {side} != 0.0:", f"    rates = k.np.empty({len(model.state_names())})"]
             guard_lines += [f"    {line}" for line in copy]
             normal_slot = n_mode_guards  # its own slot: the mode guards before it are fewer in some modes
-            guard_lines += [f"    levels[{normal_slot}] = {side} * (R0[3] + R1[3] * rates[1]).imag - {low}"]
+            guide = friction.indices[friction.guides[0]]
+            guard_lines += [f"    levels[{normal_slot}] = {side} * (R0[{guide}] + R1[{guide}] * rates[1]).imag - {low}"]
             n_mode_guards += 1
     body += governor_lines
     n_guards = n_mode_guards
@@ -721,7 +742,7 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     if friction.loads is None:
         return [f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
                 f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations}, "
-                "(0.0, 0.0, 0.0, 0.0), 0.0)"]
+                "(0.0, 0.0, 0.0, 0.0), 0.0, -1)"]
     lines = ["force = 0.0"]
     scaled = []
     for spec, effect in zip(specs, model.effects):
@@ -734,25 +755,45 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
             lines.append(f"force += {call}")
     lines += scaled
     machine = model.scene.machine
-    gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
-    g = mechanisms.mechanism_geometry(machine.mechanism)
-    if isinstance(machine.mechanism, schema.CrankSlider):
-        args = [g.crank, g.rod, g.offset, g.rod_cg / g.rod, g.crank_mass, g.crank_cg, g.rod_mass, g.rod_inertia,
-                g.slider_mass, gx, gy]
-        kernel = "crank_slider_joint_loads"
+    joints = _kinetostatics_joints(machine.mechanism)
+    guide = -1  # the joint whose |N| the guide's sign reads as s_N N
+    if isinstance(machine.mechanism, schema.Linkage):  # flat.joint_loads on the program in p, with its gravity
+        core, structure = mechanisms.mechanism_geometry(machine.mechanism)
+        program = p.table(flat.encode(core, structure.groups, machine.gravity)).rsplit(", ", 1)[0]  # 'p, offset'
+        lines.append(f"R0, R1, ratios, _, _ = k.linkage_joint_loads(phi, omega, force, {program})")
+        if friction.guides:
+            guide = friction.indices[friction.guides[0]]
     else:
-        args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.crank_mass, g.crank_cg,
-                g.coupler_mass, g.coupler_cg, g.coupler_inertia, g.rocker_mass, g.rocker_cg, g.rocker_inertia, gx, gy]
-        kernel = "four_bar_joint_loads"
-    lines.append(f"R0, R1, ratios = k.{kernel}(phi, omega, force, {', '.join(p.scalar(v) for v in args)})")
-    arms = [0.0] * 4  # a joint without friction: arm 0, its terms exact zeros
+        gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
+        g = mechanisms.mechanism_geometry(machine.mechanism)
+        if isinstance(machine.mechanism, schema.CrankSlider):
+            args = [g.crank, g.rod, g.offset, g.rod_cg / g.rod, g.crank_mass, g.crank_cg, g.rod_mass, g.rod_inertia,
+                    g.slider_mass, gx, gy]
+            kernel, guide = "crank_slider_joint_loads", joints.index("guide")
+        else:
+            args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.crank_mass, g.crank_cg,
+                    g.coupler_mass, g.coupler_cg, g.coupler_inertia, g.rocker_mass, g.rocker_cg, g.rocker_inertia, gx,
+                    gy]
+            kernel = "four_bar_joint_loads"
+        lines.append(f"R0, R1, ratios = k.{kernel}(phi, omega, force, {', '.join(p.scalar(v) for v in args)})")
+    arms = [0.0] * len(joints)  # a joint without friction: arm 0, its terms exact zeros
     for index, arm_length in zip(friction.indices, friction.arms):
         arms[index] = arm_length
-    signs = ", ".join(f"p[{friction_slot + j}]" for j in range(4))
+    signs = "".join(f"p[{friction_slot + RATE_SIGNS + j}], " for j in range(len(joints)))
     lines.append(f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, "
-                 f"({', '.join(p.scalar(v) for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
-                 f"({signs}), p[{friction_slot + 4}])")
+                 f"({''.join(p.scalar(v) + ', ' for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
+                 f"({signs}), p[{friction_slot}], {guide})")
     return lines
+
+
+def _kinetostatics_joints(mechanism) -> tuple[str, ...]:
+    """The joints a mechanism's kinetostatics reports, in its order (mechanisms.build_kinetostatics): the crank–slider's
+    and the four-bar's four, a linkage's all."""
+    if isinstance(mechanism, schema.Linkage):
+        return tuple(joint.name for joint in mechanisms.mechanism_geometry(mechanism)[0].joints)
+    if isinstance(mechanism, schema.CrankSlider):
+        return kinetostatics.CRANK_SLIDER_JOINTS
+    return kinetostatics.FOUR_BAR_JOINTS
 
 
 def _crank_guard_lines() -> list[str]:

@@ -6,7 +6,9 @@ come in as first-class functions (signatures.RHS_TYPE, GUARDS_TYPE).
 Each stepper integrates dy/dt = rhs(t, y, p) from (t0, y0) towards t_end and stops at the first of:
 t_end reached; a guard falling below its threshold inside a step (an event, located, the step cut there);
 |y[0]| > wrap_limit at the end of an accepted step before t_end when wrap_period is 0 (the caller re-wraps the
-crank angle and restarts); failure (non-finite state, step size underflow, max_steps accepted steps). With
+crank angle and restarts); a speed beyond MAX_SPEED (limits.py) or not finite at the end of an accepted step (the
+states speed_indices; the step kept, the call stops there: 'beyond'); failure (non-finite state, step size underflow,
+max_steps accepted steps since the last restart, run_steps accepted steps in the call). With
 wrap_period > 0 [rad] the stepper wraps the angle itself at the wrap limit, doing what the caller's restart would:
 y[0] less whole periods, f evaluated anew, the last step's size kept (RK4: the rest divided evenly again); its
 outputs (y_old, y_end) carry the unwrapped angle. Only for guards that do not read y[0] (no switch window).
@@ -16,27 +18,29 @@ kink_slots[0] on) is restarted on inside the loop as the caller (solvers/compile
 changes nothing but the window (_kink_restart): phi set onto the edge and wrapped anew into [0, kink_period), the
 next window's slots written into p and its guards' rows into linear, f evaluated anew, the last step's size kept
 (RK4: the rest divided evenly again), max_steps counted from there; it returns the event instead when a mode guard
-is within RESTART_MARGIN of its threshold there, a speed (speed_indices) went beyond MAX_SPEED, or max_steps steps
-or max_restarts restarts were done in the call. The numbers are those of the caller's restarts, bit for bit.
+is within RESTART_MARGIN of its threshold there, or max_steps (run_steps) steps or max_restarts restarts were done in
+the call. The numbers are those of the caller's restarts, bit for bit.
 
     stepper("RK45")(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p,
-                    rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps,
+                    rtol, atol, max_step, first_step, wrap_limit, wrap_period, max_steps, run_steps,
                     kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots,
                     max_restarts) -> result
     stepper("DOP853")(... as RK45 ...), stepper("Rosenbrock23")(... as RK45 ...)
     stepper("RK4")(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p,
-                   step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots,
-                   speed_indices, pieces, piece_slots, max_restarts) -> result
+                   step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period, kink_offset,
+                   kink_slots, speed_indices, pieces, piece_slots, max_restarts) -> result
 
 t0, t_end, max_step, first_step (0 = choose it as scipy's select_initial_step), step [s]; atol per state
 (units of the state); wrap_limit [rad] (inf = none); rk4's step is the largest step, shortened to divide
-[t0, t_end] evenly as in solvers/rk4.py. kink_grid: the switch grid [rad] in one period kink_period [rad], sorted
-(empty: every edge returns; NO_RESTARTS are the arguments of such a call); kink_offset [rad]: the whole periods taken
-off phi in y0 (added back in the dense output); kink_slots: the window's first guard slot, then the slots in p of the
-clamp (lo, hi), the window's edges (lo, hi) and the sign of omega (codegen's layout); speed_indices: the states
-kept within MAX_SPEED. pieces: per row a piece that follows t_end, [its end [s], its start speed y[1] [rad/s], the
-values of p[piece_slots]]: at t_end the call goes on into the next (_piece_restart: y[1] and those slots set, f anew,
-a fresh first step, as the caller's next call would), on the same conditions as a kink, then to its end, and so on.
+[t0, t_end] evenly as in solvers/rk4.py; run_steps: the most accepted steps of the call (the run's steps left below
+limits.MAX_STEPS; failure 3 when reached before anything else stops the call). kink_grid: the switch grid [rad] in one
+period kink_period [rad], sorted (empty: every edge returns; NO_RESTARTS are the arguments of such a call);
+kink_offset [rad]: the whole periods taken off phi in y0 (added back in the dense output); kink_slots: the window's
+first guard slot, then the slots in p of the clamp (lo, hi), the window's edges (lo, hi) and the sign of omega
+(codegen's layout); speed_indices: the states kept within MAX_SPEED (the call stops at the first step end beyond it).
+pieces: per row a piece that follows t_end, [its end [s], its start speed y[1] [rad/s], the values of p[piece_slots]]:
+at t_end the call goes on into the next (_piece_restart: y[1] and those slots set, f anew, a fresh first step, as the
+caller's next call would), on the same conditions as a kink, then to its end, and so on.
 max_restarts: the most restarts (kinks and pieces) made inside one call (so that the caller hears of progress).
 
 Joint friction's journals (issue 19, as the reference path's adaptive one-step methods, time_domain._segment):
@@ -66,7 +70,8 @@ The result tuple, in this order:
      8 nfev, 9 njev, 10 nlu  int64: rhs evaluations, Jacobian evaluations, LU factorisations
     11 last_step     float64 [s]: the last accepted step's full size (scipy's step_size), to warm-start the
                      next call (0 if none)
-    12 failure       int64: why status 3: 1 non-finite state, 2 step size underflow, 3 max_steps reached
+    12 failure       int64: why status 3: 1 non-finite state, 2 step size underflow, 3 max_steps or run_steps
+                     reached, 4 a speed beyond MAX_SPEED (beyond)
     13 wraps         int64: wraps of the angle made inside the call (wrap_period > 0)
     14 kinks         int64: restarts on a switch window's edge made inside the call (each also a switch)
     15 step_offsets  float64[n]: the whole periods [rad] wrapped off phi on each step (kink_offset, then each
@@ -77,6 +82,9 @@ The result tuple, in this order:
     20 pieces_done   int64: rows of pieces the call went on into (y_end is in the last of them)
     21 step_limit    float64 [s]: the longest first step of the next call that the last step's branch points of the
                      journals' |R_j| allow from times[n] (inf: none; the caller's restart takes min(last_step, it))
+    22 beyond        int64: the index of the first of speed_indices whose value at times[n] (y_end) is beyond
+                     MAX_SPEED or not finite, -1 if none: the call stopped at the first such step end, that step kept
+                     (status 1 when an event ended that step, else 3 with failure 4)
 
 CompiledRun.from_result(result) wraps the tuple; StepsDense(times, y_old, coefficients, step_offsets, restarted)
 is the dense output of all the steps of one call, for Trajectory.add_piece.
@@ -117,9 +125,9 @@ from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODE
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
-NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS = 1, 2, 3
+NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS, BLOWN_UP = 1, 2, 3, 4
 FAILURES = {NONFINITE: "the state became non-finite", STEP_TOO_SMALL: "the step size fell below round-off",
-            TOO_MANY_STEPS: "the step limit (max_steps) was reached"}
+            TOO_MANY_STEPS: "the step limit (max_steps) was reached", BLOWN_UP: "a speed went beyond MAX_SPEED"}
 
 _RK4, _RK45, _DOP853, _ROSENBROCK23 = 0, 1, 2, 3
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0  # scipy's step-size controller (scipy.integrate._ivp.rk)
@@ -145,10 +153,10 @@ _RESTART_ARGS = (types.float64[::1], types.float64, types.float64, types.int64[:
 _ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1], REACTIONS_TYPE,
                   types.int64, types.float64, types.float64[::1], types.float64, types.float64[::1],
                   types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.float64,
-                  types.int64) + _RESTART_ARGS
+                  types.int64, types.int64) + _RESTART_ARGS
 _FIXED_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
                types.float64, types.float64[::1], types.float64, types.float64[::1],
-               types.float64, types.float64, types.float64, types.int64) + _RESTART_ARGS
+               types.float64, types.float64, types.float64, types.int64, types.int64) + _RESTART_ARGS
 # the restart arguments of a call that returns at every switch window's edge and at t_end (no restart inside)
 NO_RESTARTS = (np.zeros(0), 0.0, 0.0, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2)),
                np.zeros(0, dtype=np.int64), 0)
@@ -160,11 +168,11 @@ RESTART_MARGIN = 1e-9  # a kink or piece is restarted inside only when every mod
 
 @njit(cache=True)
 def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
-               max_step, first_step, fixed_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
+               max_step, first_step, fixed_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period,
                kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """The stepping loop shared by the four methods: accepted steps with their dense output stored in
-    arrays grown by doubling, an event check on every step, the wrap and step limits, the journals' reach, and the
-    restarts inside the loop on a switch window's edges (_kink_restart) and into the following pieces
+    arrays grown by doubling, an event check on every step, the speed, wrap and step limits, the journals' reach, and
+    the restarts inside the loop on a switch window's edges (_kink_restart) and into the following pieces
     (_piece_restart)."""
     n = y0.size
     powers = 7 if method == _DOP853 else 4
@@ -197,8 +205,9 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
     event_guard, event_time = -1, np.nan
     h_previous = 0.0
     offset, wraps = 0.0, 0  # whole periods [rad] taken off y[0] by wraps inside this call, and how many
-    # kink restarts made, the first step after the last one (and whether it is yet to be stored), speeds within limit
-    kinks, first_of_segment, restart_pending, within_limit = 0, 0, False, True
+    # kink restarts made, the first step after the last one (and whether it is yet to be stored)
+    kinks, first_of_segment, restart_pending = 0, 0, False
+    beyond = -1  # the speed state beyond MAX_SPEED at the last step's end (-1: none)
     pieces_done = 0  # the pieces after the first that the call went on into
     window_lo, window_hi = np.nan, np.nan
     if kink_grid.size > 0:
@@ -224,7 +233,7 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
     exponent = -1.0 / 8.0 if method == _DOP853 else (-1.0 / 5.0 if method == _RK45 else -1.0 / 3.0)
     jacobian_current = False
     while status < 0:
-        if n_steps - first_of_segment >= max_steps:
+        if n_steps - first_of_segment >= max_steps or n_steps >= run_steps:
             status, failure = FAILED, TOO_MANY_STEPS
             break
         if method == _RK4:
@@ -291,8 +300,6 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
         restarted[n_steps] = restart_pending
         restart_pending = False
         times[n_steps + 1] = t_new
-        for i in speed_indices:
-            within_limit = within_limit and abs(y_new[i]) <= MAX_SPEED
         h_previous = h
         n_steps += 1
         if n_guards > 0:
@@ -323,8 +330,11 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
                     _rescale(coefficients[n_steps - 1], (event_time - t) / h)
                     times[n_steps] = event_time
                 y_end[0] += offset
+                if event_time > t:
+                    beyond = _speed_beyond(y_end, speed_indices)
                 if (kink_grid.size > 0 and event_guard >= kink_slots[KINK_WINDOW_GUARD] and t < event_time < t_end
-                        and within_limit and n_steps < max_steps and kinks + pieces_done < max_restarts):
+                        and beyond < 0 and n_steps < max_steps and n_steps < run_steps
+                        and kinks + pieces_done < max_restarts):
                     restart_offset = _kink_restart(guards, n_guards, linear, thresholds, event_time, y_end, p, levels,
                                                    kink_grid, kink_period, kink_offset, kink_slots, event_guard,
                                                    window_lo, window_hi, work)
@@ -352,9 +362,12 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
         y[:] = y_new
         f[:] = f_new
         jacobian_current = False
-        if t >= t_end:
-            if (pieces_done < pieces.shape[0] and pieces[pieces_done, 0] > t and within_limit and n_steps < max_steps
-                    and kinks + pieces_done < max_restarts
+        beyond = _speed_beyond(y, speed_indices)
+        if beyond >= 0:  # the step that carried it there is kept, the call stops
+            status, failure = FAILED, BLOWN_UP
+        elif t >= t_end:
+            if (pieces_done < pieces.shape[0] and pieces[pieces_done, 0] > t and n_steps < max_steps
+                    and n_steps < run_steps and kinks + pieces_done < max_restarts
                     and _piece_restart(guards, n_guards, thresholds, t, y, p, levels, pieces[pieces_done], piece_slots,
                                        work)):
                 # the caller's next piece, started here as it would: y[1] and p set, f anew, a fresh first step
@@ -395,7 +408,16 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
     return (status, n_steps, times[:n_steps + 1].copy(), y_old[:n_steps].copy(), coefficients[:n_steps].copy(),
             event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure, wraps, kinks,
             step_offsets[:n_steps].copy(), restarted[:n_steps].copy(), kink_offset, window_lo, window_hi, pieces_done,
-            _step_limit(branches, times[n_steps]))
+            _step_limit(branches, times[n_steps]), beyond)
+
+
+@njit(cache=True)
+def _speed_beyond(y, speed_indices):
+    """The first index of speed_indices whose speed in y is beyond MAX_SPEED [rad/s] or not finite, -1 if none."""
+    for i in speed_indices:
+        if not abs(y[i]) <= MAX_SPEED:
+            return i
+    return -1
 
 
 @njit(cache=True)
@@ -911,28 +933,28 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
 # the four steppers; stepper(method) compiles the one a run needs
 def _rk45(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol, max_step,
-          first_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots,
+          first_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period, kink_offset, kink_slots,
           speed_indices, pieces, piece_slots, max_restarts):
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
     return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol,
-                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
-                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
+                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 def _dop853(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
-            max_step, first_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset, kink_slots,
-            speed_indices, pieces, piece_slots, max_restarts):
+            max_step, first_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period, kink_offset,
+            kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
     the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
     return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol,
-                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
-                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
+                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
-                  max_step, first_step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period, kink_offset,
-                  kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+                  max_step, first_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period,
+                  kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
     with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
         k1 = W^-1 (F0 + h d T),  F1 = f(t + h/2, y + h k1/2),  k2 = W^-1 (F1 - k1) + k1,
@@ -941,18 +963,18 @@ def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, reactions, n_journa
     J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
     with exponent -1/3. Returns the result tuple of the module docstring."""
     return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p,
-                      rtol, atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
-                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+                      rtol, atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
+                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 def _rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps,
-         kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+         run_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
     """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
     the module docstring. Its step is kept: no journals' reach (guards stands in for reactions)."""
     return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, guards, 0, t0, y0, t_end, p, 0.0,
-                      np.zeros(0), 0.0, 0.0, step, wrap_limit, wrap_period, max_steps, kink_grid, kink_period,
-                      kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+                      np.zeros(0), 0.0, 0.0, step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
+                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
 
 
 _STEPPERS = {"RK45": (_rk45, _ADAPTIVE_ARGS), "DOP853": (_dop853, _ADAPTIVE_ARGS),
@@ -1025,6 +1047,7 @@ class CompiledRun:
     window_hi: float
     pieces_done: int
     step_limit: float
+    beyond: int
 
     @classmethod
     def from_result(cls, result: tuple) -> "CompiledRun":

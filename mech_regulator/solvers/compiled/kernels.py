@@ -388,18 +388,18 @@ def four_bar_joint_loads(phi, omega, moment, a, b, c, d, th1, sign, m1, u1, m3, 
 
 @njit(cache=True)
 def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, constant, per_epsilon, with_joints,
-                                tolerance, iterations, ratio_signs, normal_sign):
+                                tolerance, iterations, ratio_signs, normal_sign, guide):
     """JointFrictionModel.acceleration: epsilon [rad/s^2] solving J epsilon = M - sign(omega) F(epsilon),
     F = M_collar + sum_j rho_j |k_j| |R0_j + R1_j epsilon| by Newton's method from the friction at rest; at rest
     (omega = 0) 0 while |M| <= F(0), else breaking away in the direction of M; NaN without convergence.
-    arms: rho_j [m] (f_guide for the guide) of the four joints, 0 for a joint without friction (its terms add
-    exact zeros); with_joints False: the collar alone (no kinetostatics). Between two corners (issue 19):
-    ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_sign s_N (0: |R_3|) the guide's |N| (joint 3, i N) as
-    s_N N."""
+    arms: rho_j [m] (f_guide for a guide) of the mechanism's joints (the presets' four, a linkage's all), 0 for a
+    joint without friction (its terms add exact zeros); with_joints False: the collar alone (no kinetostatics).
+    Between two corners (issue 19): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_sign s_N (0: |R|) the
+    guide's |N| (joint number `guide`, reaction i N; -1: none) as s_N N."""
     at_rest = 0.0
     if with_joints:
-        for j in range(4):
-            at_rest += arms[j] * _friction_weight(ratios[j], ratio_signs[j]) * _reaction_size(constant[j], j,
+        for j in range(len(arms)):
+            at_rest += arms[j] * _friction_weight(ratios[j], ratio_signs[j]) * _reaction_size(constant[j], j == guide,
                                                                                               normal_sign)
     at_rest = collar + at_rest
     if omega > 0.0:
@@ -415,12 +415,12 @@ def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, co
         return epsilon
     for _ in range(iterations):
         friction, slope = collar, 0.0
-        for j in range(4):
+        for j in range(len(arms)):
             weight = arms[j] * _friction_weight(ratios[j], ratio_signs[j])
             reaction = constant[j] + per_epsilon[j] * epsilon
-            size = _reaction_size(reaction, j, normal_sign)
+            size = _reaction_size(reaction, j == guide, normal_sign)
             friction += weight * size
-            if j == 3 and normal_sign != 0.0:
+            if j == guide and normal_sign != 0.0:
                 slope += weight * normal_sign * per_epsilon[j].imag
             elif size > 0.0:
                 slope += weight * (per_epsilon[j].real * reaction.real + per_epsilon[j].imag * reaction.imag) / size
@@ -438,10 +438,10 @@ def _friction_weight(ratio, sign):
 
 
 @njit(cache=True)
-def _reaction_size(reaction, joint, normal_sign):
-    """|R_j| [N], or for the guide (joint 3, reaction i N) s_N N continued across N = 0 when normal_sign s_N is +-1
-    (JointFrictionModel._size)."""
-    return normal_sign * reaction.imag if joint == 3 and normal_sign != 0.0 else abs(reaction)
+def _reaction_size(reaction, is_guide, normal_sign):
+    """|R_j| [N], or for the guide (is_guide, reaction i N) s_N N continued across N = 0 when normal_sign s_N is +-1
+    (JointFrictionModel.acceleration)."""
+    return normal_sign * reaction.imag if is_guide and normal_sign != 0.0 else abs(reaction)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -537,7 +537,9 @@ def driven_margin(passed, weight, smooth, dI, omega2, resistance, sign):
 # ---------------------------------------------------------------------------------------------------------------
 # A general linkage: not a transcription but the reference path's own functions (mechanisms/linkage/flat.py),
 # compiled once; its program is read from p at an offset, flat.reduced(phi, p, offset) -> (J_links, dJ, weight, q, dq)
+# and flat.joint_loads(phi, omega, Q, p, offset) -> (R0, R1, ratios, M_b0, M_b1) of its joints (joint friction)
 
 from mech_regulator.mechanisms.linkage import flat  # noqa: E402  (appended: the kernels above stay as they were)
 
 linkage_reduced = flat.compiled("reduced")
+linkage_joint_loads = flat.compiled("joint_loads")

@@ -12,7 +12,10 @@ _Layout.kink_grid) the stepper makes it itself, exactly as this loop would (inte
 only when a mode guard is near its threshold there, a speed went beyond its limit, or MAX_STEPS_PER_CALL steps or
 MAX_RESTARTS_PER_CALL such restarts are done. A co-simulated governor's speed pieces (compiled_pieces) are gone on
 into in the same way (integrators._piece_restart). Every call's steps become one piece of the Trajectory, with the
-ends of those steps (Trajectory.step_ends: the works of the energy balance are integrated step by step).
+ends of those steps (Trajectory.step_ends: the works of the energy balance are integrated step by step). The run's
+limits (limits.py) are kept by the stepper as the reference path keeps them step by step: it stops at the first step
+end with a speed beyond MAX_SPEED or not finite (that step kept; the run fails there with time_domain.fail_blown_up's
+message) and once the run has taken MAX_STEPS steps (fail_too_many_steps).
 """
 
 from __future__ import annotations
@@ -27,9 +30,12 @@ from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, schema
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators
 from mech_regulator.solvers.compiled.codegen import (CLAMP_HI, CLAMP_LO, CRANK_DIRECTION, PIECE_INDEX, PIECE_SLOTS,
-                                                     WINDOW_HI, WINDOW_LO, CompiledScene, compile_scene)
+                                                     RECENT_MODELS, WINDOW_HI, WINDOW_LO, CompiledScene,
+                                                     compile_scene)
+from mech_regulator.solvers import time_domain
 from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck, _held_pieces,
-                                                _log_event, _settle_mode, integrate_time_domain, switch_window)
+                                                _log_event, _settle_mode, fail_blown_up, fail_too_many_steps,
+                                                integrate_time_domain, switch_window)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress moves, Ctrl-C is heard);
@@ -57,13 +63,35 @@ def compiled_pieces(model: MachineModel):
     return functools.partial(_follow_compiled, *_compiled(model))
 
 
+_LAYOUTS: dict[int, tuple[CompiledScene, _Layout]] = {}  # id(compiled scene) -> it and its layout, the last few
+
+
 def _compiled(model: MachineModel) -> tuple[CompiledScene, _Layout]:
-    """The model's compiled scene and layout; a model the fast path cannot run raises SceneError."""
+    """The model's compiled scene and layout (worked out once per compiled scene: a model is immutable, and
+    compile_scene answers a recent one from memory); a model the fast path cannot run raises SceneError."""
     reason = fast_path_refusal(model)
     if reason is not None:
         raise SceneError(reason)
     compiled = compile_scene(model)
-    return compiled, _Layout.of(model, compiled)
+    known = _LAYOUTS.get(id(compiled))
+    if known is None or known[0] is not compiled:
+        if len(_LAYOUTS) >= RECENT_MODELS:
+            del _LAYOUTS[next(iter(_LAYOUTS))]
+        known = _LAYOUTS[id(compiled)] = (compiled, _Layout.of(model, compiled))
+    return known
+
+
+class _Address:
+    """A compiled callback (numba CFunc) by its machine address: numba's wrapper address protocol
+    (numba.experimental.function_type), which the stepper's entry takes without checking the callback's signature
+    again on every call (some 2 us of 3.5 for each of the three callbacks). The callback is held, so the address
+    stays valid."""
+
+    def __init__(self, callback):
+        self.callback, self.address = callback, callback.address
+
+    def __wrapper_address__(self) -> int:
+        return self.address
 
 
 class _Layout(NamedTuple):
@@ -71,9 +99,10 @@ class _Layout(NamedTuple):
     dynamic period [rad], whether the crank angle is wrapped, the absolute tolerances and the guards' thresholds;
     for the stepper's own restarts on the window's edges (integrators._kink_restart) the grid as an array (empty:
     the scene's p depends on more than the window there, every edge returns here), the slots it writes and the
-    indices of the speeds it keeps within MAX_SPEED; whether the stepper may go on into the next of a sequence of
-    load pieces itself (integrators._piece_restart: a scene whose p there depends on the piece and the crank's
-    speed only, without switch angles or a wrapped angle)."""
+    indices of the speeds the stepper keeps within MAX_SPEED (the run stops beyond it); whether the stepper may go on
+    into the next of a sequence of load pieces itself (integrators._piece_restart: a scene whose p there depends on
+    the piece and the crank's speed only, without switch angles or a wrapped angle); the scene's compiled rhs, guards
+    and reactions as the stepper takes them (_Address)."""
 
     grid: np.ndarray
     period: float
@@ -84,6 +113,7 @@ class _Layout(NamedTuple):
     kink_slots: np.ndarray
     speed_indices: np.ndarray
     pieces_inside: bool
+    callbacks: tuple[_Address, _Address, _Address]
 
     @classmethod
     def of(cls, model: MachineModel, compiled: CompiledScene) -> _Layout:
@@ -102,7 +132,9 @@ class _Layout(NamedTuple):
                    speed_indices=np.array([index for index, name in enumerate(names)
                                            if name in ("omega", "omega_driven")], dtype=np.int64),
                    pieces_inside=(not grid.size and not wraps and not model.state_tables and model.joint_friction is None
-                                  and compiled.normal_slot is None))
+                                  and compiled.normal_slot is None),
+                   callbacks=tuple(_Address(callback) for callback in (compiled.rhs_callback, compiled.guards_callback,
+                                                                       compiled.reactions_callback)))
 
 
 def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineModel, piece, t_start: float,
@@ -166,8 +198,8 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         linear = compiled.linear(mode, window, start[1], held, start, offset)
         restarts = (layout.kink_grid, period, offset, layout.kink_slots, layout.speed_indices, following, PIECE_INDEX,
                     MAX_RESTARTS_PER_CALL)
-        run = _step(settings, compiled, linear, thresholds, t, y_wrapped, t_end, p,
-                    atol, first_step, wrap_limit, wrap_period, restarts)
+        run = _step(settings, compiled, layout.callbacks, linear, thresholds, t, y_wrapped, t_end, p, atol, first_step,
+                    wrap_limit, wrap_period, time_domain.MAX_STEPS - trajectory.stats.steps, restarts)
         if run.n_steps:
             trajectory.add_piece(t, run.t_end, run.dense, step_ends=run.times[1:])
         trajectory.stats.steps += int(run.n_steps)
@@ -187,7 +219,8 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         t_old, t = t, run.t_end
         y = np.array(run.y_end, dtype=float)
         y[0] += offset
-        if run.status == integrators.FAILED and run.failure != integrators.TOO_MANY_STEPS:
+        y_stop = y.copy()  # the state where the call stopped, before an event's transition
+        if run.status == integrators.FAILED and run.failure in (integrators.NONFINITE, integrators.STEP_TOO_SMALL):
             trajectory.status = "failed"
             if run.failure == integrators.NONFINITE:
                 advice = "use a smaller step" if settings.method == "RK4" else "tighten rtol/atol or limit max_step"
@@ -220,26 +253,33 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
                 trajectory.stats.restarts += 1
         elif run.status == integrators.WRAPPED and t < t_end:
             trajectory.stats.restarts += 1
+        if run.beyond >= 0:  # a speed beyond MAX_SPEED at the last step's end: the run stops there (time_domain)
+            fail_blown_up(model, trajectory, t, y_stop, model.state_names()[run.beyond], float(y_stop[run.beyond]))
+        elif trajectory.status == "complete" and trajectory.stats.steps >= time_domain.MAX_STEPS:
+            fail_too_many_steps(model, trajectory, t, y_stop)
         if progress is not None:
             progress(t)
     return y, mode, index + 1
 
 
-def _step(settings: schema.Solver, compiled: CompiledScene, linear: np.ndarray, thresholds: np.ndarray, t: float,
-          y: np.ndarray, t_end: float, p: np.ndarray, atol: np.ndarray, first_step: float, wrap_limit: float,
-          wrap_period: float, restarts: tuple):
-    """One call of the scene's compiled stepper, as an integrators.CompiledRun; restarts: its restart arguments (the
-    kink grid, period, offset, slots, speed indices, following pieces and their slots, the most restarts; integrators'
-    module docstring)."""
-    scene = (compiled.rhs_callback, compiled.guards_callback, compiled.n_guards, linear, thresholds)
+def _step(settings: schema.Solver, compiled: CompiledScene, callbacks: tuple, linear: np.ndarray,
+          thresholds: np.ndarray, t: float, y: np.ndarray, t_end: float, p: np.ndarray, atol: np.ndarray,
+          first_step: float, wrap_limit: float, wrap_period: float, run_steps: int, restarts: tuple):
+    """One call of the scene's compiled stepper, as an integrators.CompiledRun; callbacks: the scene's rhs, guards
+    and reactions (_Layout.callbacks); run_steps: the most steps it may take (the run's left); restarts: its restart
+    arguments (the kink grid, period, offset, slots, speed indices, following pieces and their slots, the most
+    restarts; integrators' module docstring)."""
+    rhs, guards, reactions = callbacks
+    scene = (rhs, guards, compiled.n_guards, linear, thresholds)
     start = (t, y, t_end, p)
     stepper = _entry_point(settings.method)
     if settings.method == "RK4":
-        result = stepper(*scene, *start, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, *restarts)
-    else:  # the adaptive ones keep their steps within the reach of the journals' branch points
-        result = stepper(*scene, compiled.reactions_callback, compiled.n_journals, *start, settings.rtol, atol,
-                         settings.max_step or math.inf, first_step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL,
+        result = stepper(*scene, *start, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, run_steps,
                          *restarts)
+    else:  # the adaptive ones keep their steps within the reach of the journals' branch points
+        result = stepper(*scene, reactions, compiled.n_journals, *start, settings.rtol, atol,
+                         settings.max_step or math.inf, first_step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL,
+                         run_steps, *restarts)
     return integrators.CompiledRun.from_result(result)
 
 

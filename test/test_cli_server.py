@@ -1,0 +1,211 @@
+"""The command server (cli/server.py): a command it serves gives the same stdout, output file, stderr and exit code
+as in a process of its own, a bad scene the same message and exit 2; Ctrl-C at the client reaches the child (exit
+130, the partial output written); a server of another key is never used; a server that vanishes mid-command ends
+the command with a message and exit 1; `server stop` leaves no process; MECH_REGULATOR_SERVER=off starts none.
+
+The suite runs with MECH_REGULATOR_SERVER=off (conftest.py); this module's server runs in a folder of its own
+(XDG_RUNTIME_DIR), with an idle limit of 2 minutes in case all else fails, and is stopped at the end, by its pid if
+it does not answer. No timing is asserted."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+from mech_regulator.cli import EXIT_INTERRUPTED
+from mech_regulator.cli import server as command_server
+
+COMMAND = [sys.executable, "-m", "mech_regulator"]
+TIMEOUT = 120.0  # [s] for any one command: a hung test fails instead of hanging the suite
+
+
+@dataclasses.dataclass
+class Served:
+    """A server of this module: its client environment, folder, pid, socket and the first command's output."""
+
+    env: dict[str, str]
+    folder: str
+    pid: int
+    socket: Path
+    first: subprocess.CompletedProcess
+
+    def served(self) -> int:
+        """How many commands the server has run."""
+        return command_server.ask_server(self.socket, {"op": "status"})["served"]
+
+
+def server_environment(folder: str) -> dict[str, str]:
+    env = dict(os.environ, XDG_RUNTIME_DIR=folder, MECH_REGULATOR_SERVER_IDLE="120",
+               MECH_REGULATOR_PROGRESS_INTERVAL="0")
+    env.pop("MECH_REGULATOR_SERVER", None)  # conftest's off
+    return env
+
+
+def run(argv: list[str], env: dict[str, str], cwd: Path | str | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([*COMMAND, *argv], env=env, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT)
+
+
+def start(env: dict[str, str]) -> tuple[int, Path]:
+    """`server start` (this environment's server, waited for): its pid and socket."""
+    started = run(["server", "start"], env)
+    assert started.returncode == 0, started.stderr
+    return int(re.search(r"pid (\d+)", started.stdout).group(1)), Path(re.search(r"socket (\S+)", started.stdout)[1])
+
+
+def stop(env: dict[str, str], pid: int, folder: str) -> None:
+    """Stop the server (kill it by its pid if it lingers) and remove its folder."""
+    try:
+        run(["server", "stop"], env)
+    finally:
+        if command_server.process_alive(pid):
+            os.kill(pid, signal.SIGKILL)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def served():
+    folder = tempfile.mkdtemp(prefix="mr-server-")  # short: a socket's path holds at most 108 bytes
+    env = server_environment(folder)
+    first = run(["describe", "lathe"], env)  # finds no server: runs here and starts one
+    pid = None
+    try:
+        pid, path = start(env)
+        yield Served(env, folder, pid, path, first)
+    finally:
+        match = re.search(r"\(pid (\d+)\)", first.stderr)
+        for known in {pid, int(match[1]) if match else None} - {None}:
+            stop(env, known, folder)
+
+
+def test_the_first_served_command_runs_itself_and_starts_a_server(served):
+    assert served.first.returncode == 0 and served.first.stdout.startswith("scene: lathe\n"), served.first.stdout
+    [line] = served.first.stderr.splitlines()
+    assert line.startswith(f"mech-regulator: started a command server (pid {served.pid})"), line
+    assert "10 min idle" not in line and "2 min idle" in line and "server stop" in line
+    assert "MECH_REGULATOR_SERVER=off" in line
+
+
+def test_simulate_through_the_server_equals_simulate_in_process(served, tmp_path):
+    """The same command in two folders (the CSV's name is printed): through the server, then in its own process
+    with MECH_REGULATOR_SERVER=off and an empty server folder, which stays empty."""
+    argv = ["simulate", "crank_slider_bench", "--quiet", "--out", "run.csv"]
+    through, alone, empty = tmp_path / "through", tmp_path / "alone", tmp_path / "servers"
+    for folder in (through, alone, empty):
+        folder.mkdir()
+    before = served.served()
+    by_server = run(argv, served.env, through)
+    assert served.served() == before + 1
+    in_process = run(argv, dict(served.env, MECH_REGULATOR_SERVER="off", XDG_RUNTIME_DIR=str(empty)), alone)
+    assert served.served() == before + 1 and list(empty.iterdir()) == []
+    assert by_server.returncode == in_process.returncode == 0, by_server.stderr + in_process.stderr
+    assert by_server.stdout == in_process.stdout and "csv" in by_server.stdout
+    assert by_server.stderr == in_process.stderr
+    assert (through / "run.csv").read_bytes() == (alone / "run.csv").read_bytes()
+
+
+def test_a_bad_scene_key_through_the_server_gives_the_message_and_exit_2(served):
+    argv = ["simulate", "lathe", "--set", "machine.nonsense=1"]
+    before = served.served()
+    by_server = run(argv, served.env)
+    assert served.served() == before + 1
+    in_process = run(argv, dict(served.env, MECH_REGULATOR_SERVER="off"))
+    assert by_server.returncode == in_process.returncode == 2 and by_server.stdout == in_process.stdout == ""
+    assert by_server.stderr == in_process.stderr and "machine.nonsense: unknown key" in by_server.stderr
+
+
+def test_ctrl_c_at_the_client_interrupts_the_child(served, tmp_path):
+    """SIGINT to the client once the child simulates (its first progress line): the run stops as in-process, exit
+    130, its summary says where, the CSV holds the run up to there."""
+    before = served.served()
+    client = subprocess.Popen([*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000", "--out", "run.csv"],
+                              env=served.env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        first = client.stderr.readline()
+        assert first.startswith("simulating lathe: t = "), first
+        client.send_signal(signal.SIGINT)
+        out, err = client.communicate(timeout=TIMEOUT)
+    finally:
+        client.kill()
+    assert client.returncode == EXIT_INTERRUPTED, err
+    assert served.served() == before + 1
+    stopped = float(re.match(r"scene lathe: interrupted at t = (\S+) s", out)[1])
+    assert 0.0 < stopped < 5000.0 and "the outputs hold the run up to there" in err
+    rows = (tmp_path / "run.csv").read_text().splitlines()
+    assert rows[0].startswith("t,") and len(rows) > 1
+    assert 0.0 <= float(rows[-1].split(",")[0]) <= stopped
+
+
+def test_a_server_of_another_key_is_not_used(served):
+    """A stale source fingerprint: another socket name, and the server refuses the command (it runs nothing)."""
+    key = command_server.ask_server(served.socket, {"op": "status"})["key"]
+    stale = json.loads(key)
+    stale["source"] = "0" * 16
+    stale = json.dumps(stale, sort_keys=True)
+    assert command_server.key_digest(stale) != served.socket.stem == command_server.key_digest(key)
+    before = served.served()
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as connection:
+        connection.connect(str(served.socket))
+        assert command_server.run_request(connection, stale, ["describe", "lathe"]) is None
+    assert served.served() == before
+
+
+def test_the_key_follows_the_source_and_the_environment(tmp_path, monkeypatch):
+    (tmp_path / "a.py").write_text("x = 1\n")
+    first = command_server.source_fingerprint(str(tmp_path))
+    os.utime(tmp_path / "a.py", ns=(0, 10**9))
+    assert command_server.source_fingerprint(str(tmp_path)) != first
+    key = command_server.server_key()
+    monkeypatch.setenv("MECH_REGULATOR_PROGRESS_INTERVAL", "7")  # read where it is used: not keyed
+    monkeypatch.setenv("MECH_REGULATOR_SERVER_IDLE", "7")
+    assert command_server.server_key() == key
+    monkeypatch.setenv("NUMBA_OPT", "1")
+    assert command_server.server_key() != key
+
+
+def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
+    folder = tempfile.mkdtemp(prefix="mr-vanish-")
+    env = server_environment(folder)
+    pid, _ = start(env)
+    try:
+        client = subprocess.Popen([*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000"], env=env,
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            first = client.stderr.readline()
+            assert first.startswith("simulating lathe: t = "), first
+            os.kill(pid, signal.SIGKILL)
+            out, err = client.communicate(timeout=TIMEOUT)
+        finally:
+            client.kill()
+        assert client.returncode == 1
+        # the last line (after the child's last progress line, which SIGTERM may have cut short)
+        found = re.search(r"mech-regulator: the command server ended during the command \(its child (\d+) was "
+                          r"stopped\); run it again, or without the server: MECH_REGULATOR_SERVER=off\n$", err)
+        assert found and out == "", err
+        child = int(found[1])
+        deadline = time.monotonic() + TIMEOUT
+        while command_server.process_alive(child) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not command_server.process_alive(child)
+    finally:
+        stop(env, pid, folder)
+
+
+def test_server_stop_leaves_no_process(served):
+    """Last of the module: it stops the module's server."""
+    stopped = run(["server", "stop"], served.env)
+    assert stopped.returncode == 0 and f"stopped the command server pid {served.pid}" in stopped.stdout
+    assert not command_server.process_alive(served.pid) and not served.socket.exists()
+    status = run(["server", "status"], served.env)
+    assert status.stdout.startswith("no command server in ")
