@@ -165,8 +165,8 @@ class MachineStepper:
         (speed_samples with one piece: the governor's tentative step follows the quadratic through them). The step
         predicted ahead for it (predict_ahead, while the governor answered the exchange before), its speeds shifted by
         the difference between the speed now and the speed that prediction started from; without one (the first step,
-        a step other than the one expected, or a load other than the one it assumed: a load event came with the last
-        answer), the step integrated now from the state now (_predicted_step, with the governor's tentative throttle
+        a step other than the one expected, or a load other than the one it assumed: a load event came with the
+        scenario's last answer), the step integrated now from the state now (_predicted_step, with the governor's tentative throttle
         for now, throttle_end [-])."""
         self._step_end = t_end
         prediction = self._prediction
@@ -206,7 +206,7 @@ class MachineStepper:
         """Integrate from `state` in `mode` at t_start to t_end [s] with the throttle [-] extrapolated (the quadratic
         through the last two answers and throttle_end now: throttle_extrapolation, taken from t_start on; closed once
         tripped) and the last step's load continued (its value [N m] and rate [N m/s]: the new one comes with the
-        governor's answer), then go back to the machine's own state; returns the prediction."""
+        scenario's answer), then go back to the machine's own state; returns the prediction."""
         before = (self.state, self.mode, self.time, self.status, self.message)
         throttle, slope, curvature = throttle_extrapolation(self._answers[-2:] + [(self.time, throttle_end)])
         ahead = t_start - self.time  # [s] from now to the predicted step's start
