@@ -172,6 +172,8 @@ class MachineNode(Node):
         self.corrected: Samples | None = None  # corrected coupling: the speed over the last step, as done for good,
         self.predicted: Samples | None = None  # and as predicted over the next one
         self.stamped_waveform: dict[int, Samples] = {}  # [ns] -> the governor's tentative throttle over that step
+        self.held: tuple | None = None  # the last exchange's (time [ns], time [s], state, throttle applied [-], load
+        # [N m]) for its machine/moments, computed later (add_moments)
         self.tentative = self.throttle  # [-] the governor's tentative throttle at the end of the last step
 
     # ---------------------------------------------------------------------------------------------
@@ -273,17 +275,20 @@ class MachineNode(Node):
                     else None
             self.publish_state()
             self.moments.send_when_due()  # the last exchanges', sent while the peers answer this one
+            if self.corrects and next_ns < self.end_ns:  # the next step's predictor, while the governor answers
+                self.stepper.predict_ahead(seconds(min((tick + 2) * self.step_ns, self.end_ns)), self.tentative)
+            self.add_moments()  # the last exchange's, while the peers answer this one
             if self.time_mode == "realtime" and next_ns > self.now_ns:
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
             throttle = self.stepper.applied_throttle(self.applied_throttle())
-            self.add_moments()
+            self.held = (self.now_ns, self.stepper.time, self.stepper.state, throttle, self.load)
             at_end = self.now_ns >= self.end_ns or self.stepper.status != "complete"
             if at_end and (self.at_end == "exit" or self.stepper.status != "complete"):
                 break
             self.wait_while_paused(holding=at_end)
             if self.reset_requested:
-                self.moments.send()
+                self.send_moments()
                 self.reset_requested = False
                 self.start_trial()
                 self.wall_start = time.monotonic()
@@ -295,7 +300,7 @@ class MachineNode(Node):
             self.advance(next_ns, throttle)
             self.report()
         if rclpy.ok():
-            self.moments.send()
+            self.send_moments()
             self.finish()
 
     def advance(self, next_ns: int, throttle: float) -> None:
@@ -321,7 +326,7 @@ class MachineNode(Node):
             return
         if not (self.paused or holding):
             return
-        self.moments.send()
+        self.send_moments()
         self.publish_status(RunState.HOLDING if holding else RunState.PAUSED)
         paused_at = time.monotonic()
         while rclpy.ok() and not self.reset_requested and (holding or self.paused and self.steps_left == 0):
@@ -468,12 +473,23 @@ class MachineNode(Node):
         self.state_message = message
 
     def add_moments(self) -> None:
-        """machine/moments at the current exchange time, with the inputs that now hold, to the batch (common.Batch:
-        sent after a later exchange's joint_states, off the critical path of the lockstep): the moments on the crank
-        by source and the external load applied [N m] (against the motion, where the scene applies it: on the crank,
-        or on a two-mass machine's driven part, where the crank's `external` is 0)."""
-        moments = self.stepper.moments(self.throttle, self.load) | {"load": self.load}
-        self.moments.add(self.now_ns, list(moments), [], [], list(moments.values()))
+        """machine/moments at the last exchange time, with the inputs that held from there (`held`: noted then,
+        computed now, while the peers answer the next exchange: off the critical path of the lockstep), to the batch
+        (common.Batch: sent after a later exchange's joint_states): the moments on the crank by source and the
+        external load applied [N m] (against the motion, where the scene applies it: on the crank, or on a two-mass
+        machine's driven part, where the crank's `external` is 0). Nothing when they are in already."""
+        if self.held is None:
+            return
+        when, held_time, state, throttle, load = self.held
+        moments = self.stepper.moments_at(held_time, state, throttle, load) | {"load": load}
+        self.moments.add(when, list(moments), [], [], list(moments.values()))
+        self.held = None
+
+    def send_moments(self) -> None:
+        """Send machine/moments now (common.Batch.send), the last exchange's with them (add_moments): the run ends,
+        pauses, holds or resets."""
+        self.add_moments()
+        self.moments.send()
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""

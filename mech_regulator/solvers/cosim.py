@@ -29,7 +29,11 @@ sees the other over a step, the coupling:
   follows); the machine does the step again from its saved state with that throttle (the corrector), and the governor
   does it again, for good, with the corrected speed. Pipelined, this is still one message each way per step: the
   machine sends at t_k the corrected samples of [t_k-1, t_k] with the predicted ones of [t_k, t_k+1], the governor
-  answers its throttle at t_k with its tentative throttle over [t_k, t_k+1].
+  answers its throttle at t_k with its tentative throttle over [t_k, t_k+1]. The machine predicts one step ahead
+  (MachineStepper.predict_ahead): while the governor answers at t_k, it predicts [t_k+1, t_k+2] from the end of its
+  prediction of [t_k, t_k+1] moved by how far the state at t_k now differs from where that prediction started, so
+  that between its corrector and its next message there is no predictor to wait for (in the nodes the two run in
+  parallel; a step whose load changed is predicted again from its start).
 
 The time of the governor's step enters the governor subsystem as an "external load" on its (unit, free)
 inertia: omega' = -L(t) with L(t) = -(a + 2 b (t - t_k-1)) makes its omega state follow the quadratic
@@ -70,6 +74,25 @@ def to_nanoseconds(time: float) -> int:
     return int(round(time * NANOSECONDS))
 
 
+Samples = tuple  # (times [s], values) of a signal over one exchange step, two sequences of floats
+
+
+@dataclass
+class Prediction:
+    """The machine's predictor over one exchange step (corrected coupling): its start time [s] and state, its end time
+    [s], state and mode, the load it assumed (its value at the start [N m] and its rate [N m/s]), the integration's
+    status, and the speed samples over the step (speed_samples)."""
+
+    t_start: float
+    start: np.ndarray
+    t_end: float
+    end: np.ndarray
+    end_mode: object
+    load_line: tuple[float, float]
+    status: str
+    samples: Samples
+
+
 class MachineStepper:
     """The machine without its governor: (phi, omega) and a coupling's (twist, omega_driven) advanced over
     exchange steps with the throttle and the external load held, in the drive train's mode (a driven part
@@ -90,6 +113,7 @@ class MachineStepper:
         self.status, self.message = "complete", ""
         self._answers: list[tuple[float, float]] = []  # (time [s], throttle applied) of the last exchanges
         self._step_end = 0.0  # [s] the end of the step `predict` did (corrected coupling)
+        self._prediction: Prediction | None = None  # the predictor's latest step (corrected coupling)
         self._load_line = (model.external_load(0.0), 0.0)  # the last step's load [N m] at its start and rate [N m/s]
         self._load_line_time = 0.0  # [s] that step's start
 
@@ -109,6 +133,11 @@ class MachineStepper:
         throttle = self.applied_throttle(throttle)
         if self.tripped_at is not None:
             throttle_slope = throttle_curvature = 0.0
+        return self._integrate(t_end, throttle, external_load, throttle_slope, throttle_curvature, load_rate)
+
+    def _integrate(self, t_end: float, throttle: float, external_load: float, throttle_slope: float,
+                   throttle_curvature: float, load_rate: float) -> Trajectory:
+        """advance's integration, with the throttle [-] as given (no trip checked)."""
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
         piece = LoadPiece(self.time, t_end, external_load - load_rate * self.time if load_rate else external_load,
                           load_rate, throttle, throttle_slope, throttle_curvature)
@@ -132,19 +161,65 @@ class MachineStepper:
         return float(stretch(0.5 * (t_start + t_end))[1])
 
     def predict(self, t_end: float, throttle_end: float) -> Samples:
-        """The corrected coupling's predictor: integrate from now to t_end [s] with the last step's load continued
-        (its value and rate: the new one comes with the governor's answer) and the throttle [-] extrapolated through
-        the last two answers and throttle_end, the governor's tentative throttle for now (throttle_extrapolation),
-        then go back to now; returns the step's speed at its start, middle and end (speed_samples with one piece: the
-        governor's tentative step follows the quadratic through them)."""
-        t_start, before = self.time, (self.state.copy(), self.mode, self.time, self.status, self.message)
-        throttle, slope, curvature = throttle_extrapolation(self._answers[-2:] + [(t_start, throttle_end)])
+        """The corrected coupling's predictor of the step from now to t_end [s]: the speed at its start, middle and end
+        (speed_samples with one piece: the governor's tentative step follows the quadratic through them). The step
+        predicted ahead for it (predict_ahead, while the governor answered the exchange before), its speeds shifted by
+        the difference between the speed now and the speed that prediction started from; without one (the first step,
+        a step other than the one expected, or a load other than the one it assumed: a load event came with the
+        scenario's last answer), the step integrated now from the state now (_predicted_step, with the governor's tentative throttle
+        for now, throttle_end [-])."""
+        self._step_end = t_end
+        prediction = self._prediction
+        load, load_rate = self._continued_load(self.time)
+        if prediction is None or prediction.t_start != self.time or prediction.t_end != t_end \
+                or prediction.load_line[1] != load_rate or not math.isclose(prediction.load_line[0], load,
+                                                                            rel_tol=LOAD_LINE_TOLERANCE):
+            prediction = self._prediction = self._predicted_step(self.state, self.mode, self.time, t_end, throttle_end)
+        shift = float(self.state[1]) - float(prediction.start[1])
+        times, speeds = prediction.samples
+        return times, [speed + shift for speed in speeds]
+
+    def predict_ahead(self, t_end: float, throttle_end: float) -> None:
+        """The corrected coupling's predictor of the step after the current one (from the end of the step `predict`
+        did to t_end [s]), made while the governor answers the current exchange (in the nodes: in parallel), so that
+        no predictor stands between the machine's corrector and its next state: integrated from the end of the
+        current step's prediction moved by the difference between the state now and the state that prediction
+        started from (both steps are predicted from the same state, so this is the prediction re-synced with the
+        corrected run to first order), with the throttle extrapolated through the last two answers and the
+        governor's tentative throttle for now, throttle_end [-], on over both steps, and the last step's load
+        continued. `predict` takes it at the next exchange; a failed prediction is dropped (predict then integrates
+        that step itself)."""
+        current = self._prediction
+        if current is None or current.t_start != self.time:
+            return
+        prediction = self._predicted_step(current.end + (self.state - current.start), current.end_mode, current.t_end,
+                                          t_end, throttle_end)
+        self._prediction = prediction if prediction.status == "complete" else None
+
+    def _continued_load(self, time: float) -> tuple[float, float]:
+        """The last step's load continued to `time` [s]: (its value then [N m], its rate [N m/s])."""
         load, load_rate = self._load_line
-        stretch = self.advance(t_end, throttle, load + load_rate * (t_start - self._load_line_time), slope, curvature,
-                               load_rate)
-        samples = speed_samples([stretch], t_start, t_end, math.inf)
-        (self.state, self.mode, self.time, self.status, self.message), self._step_end = before, t_end
-        return samples
+        return load + load_rate * (time - self._load_line_time), load_rate
+
+    def _predicted_step(self, state: np.ndarray, mode, t_start: float, t_end: float, throttle_end: float
+                        ) -> Prediction:
+        """Integrate from `state` in `mode` at t_start to t_end [s] with the throttle [-] extrapolated (the quadratic
+        through the last two answers and throttle_end now: throttle_extrapolation, taken from t_start on; closed once
+        tripped) and the last step's load continued (its value [N m] and rate [N m/s]: the new one comes with the
+        scenario's answer), then go back to the machine's own state; returns the prediction."""
+        before = (self.state, self.mode, self.time, self.status, self.message)
+        throttle, slope, curvature = throttle_extrapolation(self._answers[-2:] + [(self.time, throttle_end)])
+        ahead = t_start - self.time  # [s] from now to the predicted step's start
+        throttle, slope = throttle + (slope + curvature * ahead) * ahead, slope + 2.0 * curvature * ahead
+        if self.tripped_at is not None:
+            throttle = slope = curvature = 0.0
+        load_line = self._continued_load(t_start)
+        self.state, self.mode, self.time = state.copy(), mode, t_start
+        stretch = self._integrate(t_end, throttle, load_line[0], slope, curvature, load_line[1])
+        prediction = Prediction(t_start, np.array(state), t_end, self.state, self.mode, load_line, stretch.status,
+                                speed_samples([stretch], t_start, t_end, math.inf))
+        self.state, self.mode, self.time, self.status, self.message = before
+        return prediction
 
     def correct(self, throttle: float, waveform: Samples | None, external_load: float, load_rate: float = 0.0
                 ) -> Samples:
@@ -172,18 +247,24 @@ class MachineStepper:
         return speed_samples(stretches, t_start, t_end)
 
     def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
-        """The machine's outputs at its current state with these inputs held: the columns of
-        MachineModel.columns (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the
-        moments on the crank by source (drive, resistance, external, net; see crank_moments)."""
-        throttle = self.applied_throttle(throttle)
-        columns = self.plant.columns(np.array([self.time]), self.state[:, None], np.array([throttle]),
+        """The machine's outputs at its current state with these inputs held (the throttle [-] as applied_throttle
+        gives it, the external load [N m]): outputs_at."""
+        return self.outputs_at(self.time, self.state, self.applied_throttle(throttle), external_load)
+
+    def outputs_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
+        """The machine's outputs at `time` [s] in `state` with the throttle [-] as applied (no trip checked here) and
+        the external load [N m] held: the columns of MachineModel.columns (omega, epsilon, J, M_drive as applied,
+        M_load, x_slider, ...) and the moments on the crank by source (drive, resistance, external, net; see
+        crank_moments)."""
+        columns = self.plant.columns(np.array([time]), state[:, None], np.array([throttle]),
                                      np.array([external_load]))
         columns.update(crank_moments(columns))
         return {name: float(values[0]) for name, values in columns.items()}
 
-    def moments(self, throttle: float, external_load: float) -> dict[str, float]:
-        """The moments on the crank by source [N m] now, with these inputs held (see crank_moments)."""
-        outputs = self.outputs(throttle, external_load)
+    def moments_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
+        """The moments on the crank by source [N m] at `time` [s] in `state` with these inputs held (outputs_at; see
+        crank_moments)."""
+        outputs = self.outputs_at(time, state, throttle, external_load)
         return {name: outputs[name] for name in ("drive", "resistance", "external", "net")}
 
 
@@ -316,9 +397,10 @@ DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP = "corrected", 0.02  # [s]: the nodes' d
 # 1e-4 of the monolithic run on the governed engines, and the fastest of the designs that are)
 MAX_SPEED_PIECE = 2.5e-3  # [s]: the corrected coupling samples the machine's speed at least every half of this, the
 # quadratic through three samples on each piece (an engine's speed ripple is followed; docs/ros.md gives the numbers)
+LOAD_LINE_TOLERANCE = 1e-9  # [-] a prediction made ahead is kept while the load it assumed is the last step's load
+# continued within this (rounding along a ramp); a load event in between (a change) drops it
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
 
-Samples = tuple  # (times [s], values) of a signal over one exchange step, two sequences of floats
 
 
 def quadratic_through(duration: float, start: float, middle: float, end: float) -> tuple[float, float]:
@@ -505,6 +587,8 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
             if corrects:
                 predicted = machine.predict(seconds(min((tick + 1) * step, end)), tentative) if tick * step < end \
                     else None
+                if (tick + 1) * step < end:  # the nodes' machine does this while the governor answers
+                    machine.predict_ahead(seconds(min((tick + 2) * step, end)), tentative)
                 throttle, waveform = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
             else:
                 throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None \
