@@ -50,6 +50,7 @@ def server_environment(folder: str) -> dict[str, str]:
     env = dict(os.environ, XDG_RUNTIME_DIR=folder, MECH_REGULATOR_SERVER_IDLE="120",
                MECH_REGULATOR_PROGRESS_INTERVAL="0")
     env.pop("MECH_REGULATOR_SERVER", None)  # conftest's off
+    env.pop("CI", None)  # a CI job starts no server by itself (tested below)
     return env
 
 
@@ -209,3 +210,22 @@ def test_server_stop_leaves_no_process(served):
     assert not command_server.process_alive(served.pid) and not served.socket.exists()
     status = run(["server", "status"], served.env)
     assert status.stdout.startswith("no command server in ")
+
+
+def test_a_ci_job_starts_no_server_unless_asked(tmp_path):
+    """With CI set (as CI services do), a served command finding no server runs in its own process and starts
+    none; MECH_REGULATOR_SERVER=on starts one even there."""
+    folder = tempfile.mkdtemp(prefix="mr-ci-")
+    try:
+        for value in ("true", "1", "yes"):
+            env = dict(server_environment(folder), CI=value)
+            alone = run(["describe", "lathe"], env)
+            assert alone.returncode == 0 and alone.stdout.startswith("scene: lathe\n"), alone.stdout
+            assert alone.stderr == "", alone.stderr
+            assert not any(Path(folder).rglob("*.sock")), list(Path(folder).rglob("*"))
+        asked = run(["describe", "lathe"], dict(server_environment(folder), CI="true", MECH_REGULATOR_SERVER="on"))
+        match = re.search(r"started a command server \(pid (\d+)\)", asked.stderr)
+        assert asked.returncode == 0 and match, asked.stderr
+        stop(dict(server_environment(folder), CI="true", MECH_REGULATOR_SERVER="on"), int(match[1]), folder)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)

@@ -9,8 +9,9 @@ worker processes) connects to the Unix socket of the server whose key matches, s
 environment, sys.path and umask with its stdin, stdout and stderr descriptors (SCM_RIGHTS), forwards SIGINT, SIGTERM
 and SIGHUP to the child the server names (and stops it with itself on Ctrl-Z), and ends as the child ended (its exit
 code, or the signal that killed it). When no server answers, the command runs in its own process as without a
-server and starts one, detached, for the next commands, saying so in one line on stderr. MECH_REGULATOR_SERVER=off:
-never a server.
+server and starts one, detached, for the next commands, saying so in one line on stderr — except in a CI job (the
+variable CI set: `in_ci`), where it starts none unless MECH_REGULATOR_SERVER=on. MECH_REGULATOR_SERVER=off: never a
+server.
 
 The server (`serve`) forks a child per command; the child puts the client's descriptors on 0, 1 and 2 (so that
 isatty, the progress bar, colours and output files are those of the client's terminal or pipe), takes the client's
@@ -169,6 +170,8 @@ def through_server(argv: list[str]) -> int | None:
     try:
         connection = _connect(path)
     except (FileNotFoundError, ConnectionRefusedError):  # none, or a dead one's socket
+        if setting != "on" and in_ci():
+            return None  # a CI job's commands leave no resident process behind unless asked to
         pid = start_server(key)
         if pid is not None:
             print(f"mech-regulator: started a command server (pid {pid}) that answers the next commands without "
@@ -179,6 +182,13 @@ def through_server(argv: list[str]) -> int | None:
         return None
     with connection:
         return run_request(connection, key, argv)
+
+
+def in_ci() -> bool:
+    """Whether this command runs in a continuous-integration job: the variable CI that GitHub Actions, GitLab CI,
+    Travis, CircleCI, Buildkite and others set, with any value but empty, 0, false or no. There a command starts no
+    server by itself (MECH_REGULATOR_SERVER=on still does), so that a job leaves no resident process behind."""
+    return os.environ.get("CI", "").strip().lower() not in ("", "0", "false", "no")
 
 
 def _connect(path: Path) -> socket.socket:
