@@ -5,7 +5,8 @@ simulation time it applies from), `load_torque` (std_msgs/Float64 [N m], the ext
 opposing motion, from any publisher; applied from the next exchange time on) and
 `load_torque_stamped` (geometry_msgs/WrenchStamped, torque.z [N m] applying from its stamp: the
 scenario's load in lockstep; force.z: its rate [N m/s] over the step, a ramp's, which the corrected coupling
-follows). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
+follows; force.x: the time [s] up to which, not including it, the load holds, rate and all, at the exchange times
+after the stamp too, which then wait for no other answer; 0 or not above the stamp: that exchange time only). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
 effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
 scene has a mechanism), `machine/moments` (sensor_msgs/JointState whose efforts are the moments on
 the crank by source: drive, resistance, external, net, and the applied load [N m]; several exchange times in one
@@ -162,6 +163,8 @@ class MachineNode(Node):
         self.throttle_stamp: int | None = None  # stamp [ns] of the newest throttle received
         self.stamped_throttle: dict[int, float] = {}
         self.stamped_load: dict[int, tuple[float, float]] = {}  # [ns] -> (load [N m], its rate [N m/s])
+        self.load_holds: tuple[int, int | float, float, float] | None = None  # the newest stamped load that holds
+        # over later exchange times: (from, until [ns], load [N m], rate [N m/s])
         self.last_stamped_load: float | None = None
         self.pending_load: float | None = None
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
@@ -230,14 +233,17 @@ class MachineNode(Node):
         self.pending_load = message.data
 
     def on_stamped_load(self, message: WrenchStamped) -> None:
-        value, rate = message.wrench.torque.z, message.wrench.force.z
+        value, rate, until = message.wrench.torque.z, message.wrench.force.z, message.wrench.force.x
         problem = finite_in_range(value, self.max_load_torque)
-        if problem or not math.isfinite(rate):
+        if problem or not math.isfinite(rate) or math.isnan(until):
             self.rejections.reject(problem or "not finite", f"load_torque_stamped torque.z = {value!r} N m, force.z "
-                                   f"(its rate) = {rate!r} N m/s, expected finite numbers, the load within "
-                                   f"+-{self.max_load_torque:g}")
+                                   f"(its rate) = {rate!r} N m/s, force.x (held until) = {until!r} s, expected "
+                                   f"finite numbers (force.x may be +inf), the load within +-{self.max_load_torque:g}")
             return
-        self.stamped_load[nanoseconds(message.header.stamp)] = (value, rate)
+        when = nanoseconds(message.header.stamp)
+        self.stamped_load[when] = (value, rate)
+        if until > seconds(when):  # beyond the run's end: to the end
+            self.load_holds = (when, to_nanoseconds(until) if until <= seconds(self.end_ns) else math.inf, value, rate)
         self.silent.discard("load")
 
     def on_parameters(self, parameters) -> None:
@@ -386,8 +392,9 @@ class MachineNode(Node):
                     self.report(force=True)
         else:
             self.executor.spin_once(timeout_sec=0.0)
-        if self.now_ns in self.stamped_load:
-            value, self.load_rate = self.stamped_load.pop(self.now_ns)
+        stamped = self.stamped_load.pop(self.now_ns, None) or self.held_load()
+        if stamped is not None:
+            value, self.load_rate = stamped
             if value != self.last_stamped_load:  # only the scenario's changes: a load typed in between stays
                 self.load = self.last_stamped_load = value
         for when in [when for when in self.stamped_load if when < self.now_ns]:  # too late to apply
@@ -401,9 +408,17 @@ class MachineNode(Node):
         if "throttle" in self.lockstep_inputs and "throttle" not in self.silent \
                 and self.now_ns not in self.stamped_throttle:
             missing.append("throttle")
-        if "load" in self.lockstep_inputs and "load" not in self.silent and self.now_ns not in self.stamped_load:
+        if "load" in self.lockstep_inputs and "load" not in self.silent and self.now_ns not in self.stamped_load \
+                and self.held_load() is None:
             missing.append("load")
         return missing
+
+    def held_load(self) -> tuple[float, float] | None:
+        """(load [N m], rate [N m/s]) of the newest stamped load that holds at the current exchange time (force.x of
+        load_torque_stamped), None when none does."""
+        if self.load_holds is not None and self.load_holds[0] <= self.now_ns < self.load_holds[1]:
+            return self.load_holds[2:]
+        return None
 
     def applied_throttle(self) -> float:
         """The throttle held over the next step: the governor's for this exchange time (lockstep) or its

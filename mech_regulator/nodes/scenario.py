@@ -1,9 +1,12 @@
 """scenario_node: plays the load events of a scene in simulation time.
 
-Listens to `joint_states` for the machine's exchange times. In `lockstep` it answers every exchange
+Listens to `joint_states` for the machine's exchange times. In `lockstep` it answers an exchange
 time t with the scene's external load L(t) on `load_torque_stamped` (geometry_msgs/WrenchStamped,
-torque.z [N m], stamped t, and in force.z the rate [N m/s] at which it changes then, a ramp's) — the machine
-waits for it, so the run is reproducible. In `realtime` it
+torque.z [N m], stamped t, in force.z the rate [N m/s] at which it changes then, a ramp's, and in force.x the
+time [s] up to which L stays that number, the next load event's, +inf: to the end; 0 on a ramp) — the machine
+waits for it, so the run is reproducible. An answer whose load is held covers the exchange times after it up to that
+time (solvers.cosim.held_load_until): those the scenario leaves unanswered, one message per load event instead of
+one per exchange. In `realtime` it
 publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other publisher
 would. Either way it logs each load event. It ends by itself when the machine says the run is finished
 (`machine/status`).
@@ -20,7 +23,7 @@ from std_msgs.msg import Float64
 
 from mech_regulator.nodes.common import (COMMAND_QOS, RunState, follow_run_state, nanoseconds, run, scene_model,
                                          text_parameter)
-from mech_regulator.solvers.cosim import load_rate, seconds
+from mech_regulator.solvers.cosim import held_load_until, load_rate, seconds
 
 
 class ScenarioNode(Node):
@@ -36,6 +39,8 @@ class ScenarioNode(Node):
         self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
         self.last_load: float | None = None
         self.last_ns = -1
+        self.answered: tuple[int, int | float] = (0, 0)  # [ns] the exchange time of the last answer and the time up
+        # to which its load holds (held_load_until): the exchange times between are covered by it
         self.done = False
         follow_run_state(self, self.on_run_state)
         self.get_logger().info(f"playing the load of scene '{self.model.scene.name}' ({self.time_mode})")  # (the first
@@ -50,10 +55,14 @@ class ScenarioNode(Node):
         scenario starts again)."""
         when = nanoseconds(message.header.stamp)
         if when == 0 and self.last_ns > 0:
-            self.last_load, self.last_ns = None, -1
+            self.last_load, self.last_ns, self.answered = None, -1, (0, 0)
         if when <= self.last_ns and self.time_mode == "realtime":
             return
         self.last_ns = max(when, self.last_ns)
+        if self.answered[0] < when < self.answered[1]:  # the last answer's load holds (a repeat of its own exchange
+            return  # time, a peer that matched late, is answered again)
+        until = held_load_until(self.model, seconds(when))
+        self.answered = (when, until)
         load = self.model.external_load(seconds(when))
         if load != self.last_load:
             self.get_logger().info(f"t = {seconds(when):.6g} s: load {load:g} N m")
@@ -63,6 +72,7 @@ class ScenarioNode(Node):
             answer.header.frame_id = "crank"
             answer.wrench.torque.z = load
             answer.wrench.force.z = load_rate(self.model, seconds(when))  # [N m/s]: a ramp, followed over the step
+            answer.wrench.force.x = seconds(until) if until > when else 0.0  # [s] the load holds up to then
             self.stamped_publisher.publish(answer)
         elif load != self.last_load:
             self.load_publisher.publish(Float64(data=load))
