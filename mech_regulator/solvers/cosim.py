@@ -261,12 +261,6 @@ class MachineStepper:
         columns.update(crank_moments(columns))
         return {name: float(values[0]) for name, values in columns.items()}
 
-    def moments_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
-        """The moments on the crank by source [N m] at `time` [s] in `state` with these inputs held (outputs_at; see
-        crank_moments)."""
-        outputs = self.outputs_at(time, state, throttle, external_load)
-        return {name: outputs[name] for name in ("drive", "resistance", "external", "net")}
-
 
 def load_steppers(model: MachineModel, exchange_step: float) -> None:
     """Do one exchange step of the machine's stepper (and one answer of the governor's) on `model` and throw them
