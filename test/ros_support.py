@@ -338,7 +338,8 @@ def probe(domain_id):
 
 class RunListener:
     """What the machine (and governor) publish, as the test node receives it. `open_gate` subscribes
-    to joint_states last: a lockstep machine waiting for that subscriber starts only then."""
+    to the machine's streams (joint_states, machine/moments) last: a lockstep machine waiting for the test node as a
+    peer (subscribed to either) starts only then."""
 
     def __init__(self, probe: Probe, governed: bool, diagnostics_publishers: int = 1, describe=lambda: ""):
         from diagnostic_msgs.msg import DiagnosticArray
@@ -348,12 +349,13 @@ class RunListener:
         self.JointState = JointState
         self.diagnostics = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS,
                                         publishers=diagnostics_publishers, describe=describe)
-        self.moment_messages = probe.listen(JointState, "machine/moments", STATE_LISTEN_QOS)
+        self.moment_messages: list = []
         self.governor_messages = probe.listen(JointState, "governor/state", STATE_LISTEN_QOS) if governed else None
         self.joint_messages: list = []
 
     def open_gate(self, callback: Callable | None = None) -> None:
         self.joint_messages = self.probe.listen(self.JointState, "joint_states", STATE_LISTEN_QOS, callback=callback)
+        self.moment_messages = self.probe.listen(self.JointState, "machine/moments", STATE_LISTEN_QOS)
 
     def statuses(self, suffix: str = "/machine") -> list[tuple[bytes, str, dict[str, str]]]:
         """(level, message, values) of every status received from the node whose name ends with suffix."""

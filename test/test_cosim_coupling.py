@@ -16,8 +16,8 @@ import pytest
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cosim import (GovernorStepper, MachineStepper, cosimulate, load_rate, seconds,
-                                          speed_waveform, throttle_extrapolation)
+from mech_regulator.solvers.cosim import (GovernorStepper, MachineStepper, cosimulate, held_load_until, load_rate,
+                                          seconds, speed_waveform, throttle_extrapolation, to_nanoseconds)
 
 SMOOTH_GOVERNED = {  # constant inertia, a direct governor without friction or stops reached, a load step at 0.2 s
     "name": "smooth_governed",
@@ -143,6 +143,26 @@ def test_the_tentative_throttle_breaks_where_the_sleeve_reaches_its_stop():
     assert times == pytest.approx([event_time / 2, event_time, (event_time + 0.02) / 2, 0.02], abs=1e-15)
     assert values[1] == pytest.approx(final.governor.valve(0.08), abs=1e-9) == values[3]  # closed from the stop on
     assert values[0] > values[1]
+
+
+def test_a_held_load_is_the_same_number_up_to_the_next_event_and_no_further():
+    """held_load_until, which lets one answer of the scenario cover the exchange times after it: on a held piece the
+    load at every whole nanosecond from the asked time up to (not including) the returned one is the load asked for,
+    and at the returned one the next piece's (events at times whose nanoseconds are not whole in binary: 0.1 + 0.2,
+    0.7); on a ramp the asked time itself; on the last piece, held, to the end."""
+    data = copy.deepcopy(SMOOTH_GOVERNED)
+    data["scenario"]["load_events"] = [{"time": 0.1 + 0.2, "torque": 8.0}, {"time": 0.7, "torque": 4.0, "ramp": 0.1},
+                                       {"time": 0.9, "torque": 5.0}]
+    model = build_model(validate_scene(data))
+    for asked, next_event in ((0.0, 0.1 + 0.2), (0.5, 0.7)):
+        until = held_load_until(model, asked)
+        load = model.external_load(asked)
+        assert seconds(until - 1) < next_event <= seconds(until)
+        assert [model.external_load(seconds(n)) for n in (to_nanoseconds(asked), until - 2, until - 1)] == [load] * 3
+        assert model.piece_at(seconds(until - 1)).start < next_event == model.piece_at(seconds(until)).start
+    assert model.external_load(seconds(held_load_until(model, 0.0))) == 8.0  # the step (the ramp starts from 8)
+    assert held_load_until(model, 0.75) == to_nanoseconds(0.75)  # the ramp from 8 to 4 N m over 0.7-0.8 s
+    assert held_load_until(model, 0.95) == np.inf
 
 
 def test_throttle_extrapolation_is_exact_on_a_quadratic():

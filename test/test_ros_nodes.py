@@ -110,7 +110,7 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
     published = _Published()
     batch = Batch(published)
     largest = 2**53  # [ns]: about 104 days, still exact in a double
-    batch.add(0, ["drive", "load"], [], [], [1.5, -2.0])
+    batch.add(0, ["drive", "load"], [], [], [1.5, -2.0], wall=12.5)  # wall: when the machine published t = 0 [s]
     batch.add(20_000_000, ["sleeve", "arm"], [0.03, 0.1], [0.0, -0.2], [])
     batch.add(largest, ["drive"], [], [], [7.0])
     batch.send()
@@ -118,6 +118,7 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
     assert len(published) == 1 and stamp_ns(published[0].header.stamp) == largest
     groups = batch_groups(published[0])
     assert [when for when, _ in groups] == [0, 20_000_000, largest]
+    assert groups[0][1].pop("stamp")[:2] == (0.0, 12.5) and math.isnan(groups[1][1].pop("stamp")[1])
     assert {name: effort for name, (_, _, effort) in groups[0][1].items()} == {"drive": 1.5, "load": -2.0}
     assert groups[1][1]["arm"][:2] == (0.1, -0.2) and math.isnan(groups[1][1]["arm"][2])
     assert groups[2][1]["drive"][2] == 7.0 and math.isnan(groups[2][1]["drive"][0])
@@ -167,6 +168,17 @@ def assert_equals_cosimulation(listener: RunListener, end: int, model, run) -> N
 
 # -------------------------------------------------------------------------------------------------
 # 2. Lockstep against the monolithic simulation (in process: the error of the exchange step itself)
+
+
+def test_the_scenario_filters_out_the_exchange_times_its_answer_covers():
+    """The content filter's parameters (scenario.filter_bounds): the stamps up to the answer's and from the time its
+    load holds until on come through, as whole seconds and nanoseconds; held to the end: the largest stamp; an answer
+    that covers nothing lets every stamp through."""
+    from mech_regulator.nodes.scenario import LATEST_STAMP_SECONDS, filter_bounds
+
+    assert filter_bounds((2_020_000_000, 9_000_000_001)) == ["2", "20000000", "9", "1"]
+    assert filter_bounds((9_000_000_001, math.inf)) == ["9", "1", str(LATEST_STAMP_SECONDS), "0"]
+    assert filter_bounds((0, 0)) == ["0", "0", "0", "0"]
 
 
 def test_lockstep_error_is_first_order_in_the_exchange_step():
@@ -336,6 +348,7 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
     probe.spin_until(lambda: probe.node.count_subscribers("joint_states") >= 1
                      and probe.node.count_publishers("throttle") >= 1, "the governor node", describe=processes.logs)
     listener = RunListener(probe, governed=False, diagnostics_publishers=1, describe=processes.logs)
+    listener.open_gate()  # (a realtime machine waits for no one)
     processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 1.0,
                                "exchange_step": 0.005, "throttle_timeout": 0.05, "fail_safe": "close"})
 

@@ -160,10 +160,12 @@ def samples(message, joint: str, field: str) -> tuple[list[float], list[float]] 
 
 
 class Batch:
-    """What only the recorder reads (the machine's moments, the governor's state), gathered over exchanges and sent
-    as one sensor_msgs/JointState, off the lockstep's critical path: one group per exchange time, each opened by a
-    joint "stamp" whose position is the exchange time in whole nanoseconds (exact as a double up to 2^53 ns, about
-    104 days), then that time's joints. The node sends it when due (send_when_due: BATCH_SIZE groups in, or the
+    """What only the recorder reads (the machine's states and moments, the governor's state), gathered over exchanges
+    and sent as one sensor_msgs/JointState, off the lockstep's critical path: one group per exchange time, each opened
+    by a joint "stamp" whose position is the exchange time in whole nanoseconds (exact as a double up to 2^53 ns,
+    about 104 days) and whose velocity a wall-clock time [s] the sender gives (the machine: when it published that
+    exchange's joint_states, time.monotonic, the host's clock its processes share; NaN when none), then that time's
+    joints. The node sends it when due (send_when_due: BATCH_SIZE groups in, or the
     oldest BATCH_PERIOD s of wall time old, so the recorder still shows a live picture) at a moment it would
     otherwise wait, and at once (send) when the run ends, pauses or resets."""
 
@@ -175,13 +177,14 @@ class Batch:
         self.oldest_wall = 0.0  # [s] of wall time (time.monotonic) the oldest waiting group was added
 
     def add(self, when: int, names: list[str], positions: list[float], velocities: list[float],
-            efforts: list[float]) -> None:
-        """Add the joints of exchange time `when` [ns] (a field left empty: NaN for each joint)."""
+            efforts: list[float], wall: float = math.nan) -> None:
+        """Add the joints of exchange time `when` [ns] (a field left empty: NaN for each joint), with a wall-clock
+        time [s] in the "stamp" joint's velocity."""
         if not self.groups:
             self.oldest_wall = time.monotonic()
         missing = [math.nan] * len(names)
         for gathered, values, first in zip(self.fields, (names, positions, velocities, efforts),
-                                           ("stamp", float(when), math.nan, math.nan)):
+                                           ("stamp", float(when), wall, math.nan)):
             gathered.append(first)
             gathered.extend(values or missing)
         self.groups, self.last = self.groups + 1, when
@@ -202,11 +205,12 @@ class Batch:
 
 
 def batch_groups(message) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
-    """The groups of a Batch message: (exchange time [ns], {joint: (position, velocity, effort)}), in order."""
+    """The groups of a Batch message: (exchange time [ns], {joint: (position, velocity, effort)}), in order; the
+    group's "stamp" joint among them (its velocity: the wall-clock time the sender gave)."""
     groups: list[tuple[int, dict[str, tuple[float, float, float]]]] = []
     for name, position, velocity, effort in zip(message.name, message.position, message.velocity, message.effort):
         if name == "stamp":
-            groups.append((int(position), {}))
+            groups.append((int(position), {"stamp": (position, velocity, effort)}))
         elif groups:
             groups[-1][1][name] = (position, velocity, effort)
     return groups

@@ -5,11 +5,15 @@ simulation time it applies from), `load_torque` (std_msgs/Float64 [N m], the ext
 opposing motion, from any publisher; applied from the next exchange time on) and
 `load_torque_stamped` (geometry_msgs/WrenchStamped, torque.z [N m] applying from its stamp: the
 scenario's load in lockstep; force.z: its rate [N m/s] over the step, a ramp's, which the corrected coupling
-follows). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
+follows; force.x: the time [s] up to which, not including it, the load holds, rate and all, at the exchange times
+after the stamp too, which then wait for no other answer; 0 or not above the stamp: that exchange time only). Publishes `joint_states` (joint "crank": phi [rad], omega [rad/s],
 effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
-scene has a mechanism), `machine/moments` (sensor_msgs/JointState whose efforts are the moments on
-the crank by source: drive, resistance, external, net, and the applied load [N m]; several exchange times in one
-message, each group opened by a joint "stamp": common.Batch), `/clock` (at most every `clock_period` s of
+scene has a mechanism), `machine/moments` (what the recorder reads, sensor_msgs/JointState: the joints "drive",
+"resistance", "external", "net" whose efforts are the moments on the crank by source, "load" the applied load
+[N m], and the state as in joint_states: "crank" phi [rad], omega [rad/s], a two-mass machine's "coupling" twist
+[rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
+whose velocity is the wall-clock time [s, time.monotonic] at which that exchange's joint_states went out:
+common.Batch), `/clock` (at most every `clock_period` s of
 wall time: the other nodes' timers need no more) and `/diagnostics`.
 
 A two-mass machine adds the joints "coupling" (position: twist [rad]) and "driven" (position: phi_driven
@@ -23,7 +27,8 @@ numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall
 `real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
 (`max_lag_s` [s of simulation time] in /diagnostics and machine/status; the recorder's summary has it). What it
 waits for comes from the scene: the throttle when it has a governor, the scenario's load; before the first
-step, the `peers` (node names) that give them must subscribe to `joint_states`, or the machine ends within
+step, the `peers` (node names) that give them must subscribe to `joint_states` (or, as the recorder, to
+`machine/moments`), or the machine ends within
 `peer_timeout` naming the missing ones. A governor
 that stays silent longer than `throttle_timeout` (realtime) or `peer_timeout` (lockstep) puts the machine on
 its fail-safe (`fail_safe`: hold the last throttle or close it); `overspeed_trip` closes the throttle for
@@ -162,6 +167,8 @@ class MachineNode(Node):
         self.throttle_stamp: int | None = None  # stamp [ns] of the newest throttle received
         self.stamped_throttle: dict[int, float] = {}
         self.stamped_load: dict[int, tuple[float, float]] = {}  # [ns] -> (load [N m], its rate [N m/s])
+        self.load_holds: tuple[int, int | float, float, float] | None = None  # the newest stamped load that holds
+        # over later exchange times: (from, until [ns], load [N m], rate [N m/s])
         self.last_stamped_load: float | None = None
         self.pending_load: float | None = None
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
@@ -173,7 +180,8 @@ class MachineNode(Node):
         self.predicted: Samples | None = None  # and as predicted over the next one
         self.stamped_waveform: dict[int, Samples] = {}  # [ns] -> the governor's tentative throttle over that step
         self.held: tuple | None = None  # the last exchange's (time [ns], time [s], state, throttle applied [-], load
-        # [N m]) for its machine/moments, computed later (add_moments)
+        # [N m], wall-clock time [s] its joint_states went out) for its machine/moments, computed later (add_moments)
+        self.published_at = 0.0  # [s] time.monotonic() when the last joint_states went out
         self.tentative = self.throttle  # [-] the governor's tentative throttle at the end of the last step
 
     # ---------------------------------------------------------------------------------------------
@@ -230,14 +238,17 @@ class MachineNode(Node):
         self.pending_load = message.data
 
     def on_stamped_load(self, message: WrenchStamped) -> None:
-        value, rate = message.wrench.torque.z, message.wrench.force.z
+        value, rate, until = message.wrench.torque.z, message.wrench.force.z, message.wrench.force.x
         problem = finite_in_range(value, self.max_load_torque)
-        if problem or not math.isfinite(rate):
+        if problem or not math.isfinite(rate) or math.isnan(until):
             self.rejections.reject(problem or "not finite", f"load_torque_stamped torque.z = {value!r} N m, force.z "
-                                   f"(its rate) = {rate!r} N m/s, expected finite numbers, the load within "
-                                   f"+-{self.max_load_torque:g}")
+                                   f"(its rate) = {rate!r} N m/s, force.x (held until) = {until!r} s, expected "
+                                   f"finite numbers (force.x may be +inf), the load within +-{self.max_load_torque:g}")
             return
-        self.stamped_load[nanoseconds(message.header.stamp)] = (value, rate)
+        when = nanoseconds(message.header.stamp)
+        self.stamped_load[when] = (value, rate)
+        if until > seconds(when):  # beyond the run's end: to the end
+            self.load_holds = (when, to_nanoseconds(until) if until <= seconds(self.end_ns) else math.inf, value, rate)
         self.silent.discard("load")
 
     def on_parameters(self, parameters) -> None:
@@ -282,7 +293,7 @@ class MachineNode(Node):
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
             self.collect_inputs()
             throttle = self.stepper.applied_throttle(self.applied_throttle())
-            self.held = (self.now_ns, self.stepper.time, self.stepper.state, throttle, self.load)
+            self.held = (self.now_ns, self.stepper.time, self.stepper.state, throttle, self.load, self.published_at)
             at_end = self.now_ns >= self.end_ns or self.stepper.status != "complete"
             if at_end and (self.at_end == "exit" or self.stepper.status != "complete"):
                 break
@@ -338,7 +349,8 @@ class MachineNode(Node):
             self.publish_status()
 
     def wait_for_peers(self) -> None:
-        """Spin until every peer node (parameter peers) subscribes to joint_states, raising PeerError that names the
+        """Spin until every peer node (parameter peers) subscribes to joint_states or (the recorder) machine/moments,
+        raising PeerError that names the
         missing ones after peer_timeout seconds, and, for at most peer_timeout, until each lockstep input has a
         publisher (one still missing then is waited for at the first exchange and, silent, put on its fail-safe) and
         the state streams have matched every subscription the graph knows (matched_every_subscription): a short run
@@ -347,13 +359,14 @@ class MachineNode(Node):
         topic = self.joint_publisher.topic_name
         namespace = self.get_namespace()
         while rclpy.ok():
-            subscribed = {info.node_name for info in self.get_subscriptions_info_by_topic(topic)
-                          if info.node_namespace == namespace}
+            subscribed = {info.node_name for name in (topic, self.moments.publisher.topic_name)
+                          for info in self.get_subscriptions_info_by_topic(name) if info.node_namespace == namespace}
             missing = [name for name in self.peers if name not in subscribed]
             unpublished = [item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0]
             timed_out = time.monotonic() - waited > self.peer_timeout
             if missing and timed_out:
-                raise PeerError(f"machine: no {', '.join(missing)} node subscribed to {topic} within "
+                raise PeerError(f"machine: no {', '.join(missing)} node subscribed to {topic} (or "
+                                f"{self.moments.publisher.topic_name}) within "
                                 f"{self.peer_timeout:g} s (parameter peer_timeout): start it, or leave it out of the "
                                 "parameter peers")
             if not missing and (timed_out or not unpublished and self.matched_every_subscription()):
@@ -386,8 +399,9 @@ class MachineNode(Node):
                     self.report(force=True)
         else:
             self.executor.spin_once(timeout_sec=0.0)
-        if self.now_ns in self.stamped_load:
-            value, self.load_rate = self.stamped_load.pop(self.now_ns)
+        stamped = self.stamped_load.pop(self.now_ns, None) or self.held_load()
+        if stamped is not None:
+            value, self.load_rate = stamped
             if value != self.last_stamped_load:  # only the scenario's changes: a load typed in between stays
                 self.load = self.last_stamped_load = value
         for when in [when for when in self.stamped_load if when < self.now_ns]:  # too late to apply
@@ -401,9 +415,17 @@ class MachineNode(Node):
         if "throttle" in self.lockstep_inputs and "throttle" not in self.silent \
                 and self.now_ns not in self.stamped_throttle:
             missing.append("throttle")
-        if "load" in self.lockstep_inputs and "load" not in self.silent and self.now_ns not in self.stamped_load:
+        if "load" in self.lockstep_inputs and "load" not in self.silent and self.now_ns not in self.stamped_load \
+                and self.held_load() is None:
             missing.append("load")
         return missing
+
+    def held_load(self) -> tuple[float, float] | None:
+        """(load [N m], rate [N m/s]) of the newest stamped load that holds at the current exchange time (force.x of
+        load_torque_stamped), None when none does."""
+        if self.load_holds is not None and self.load_holds[0] <= self.now_ns < self.load_holds[1]:
+            return self.load_holds[2:]
+        return None
 
     def applied_throttle(self) -> float:
         """The throttle held over the next step: the governor's for this exchange time (lockstep) or its
@@ -470,19 +492,35 @@ class MachineNode(Node):
         for name, waveform in (("crank_corrected", self.corrected), ("crank_predicted", self.predicted)):
             add_samples(message, name, "velocity", waveform)  # corrected coupling
         self.joint_publisher.publish(message)
+        self.published_at = time.monotonic()
         self.state_message = message
 
     def add_moments(self) -> None:
         """machine/moments at the last exchange time, with the inputs that held from there (`held`: noted then,
         computed now, while the peers answer the next exchange: off the critical path of the lockstep), to the batch
-        (common.Batch: sent after a later exchange's joint_states): the moments on the crank by source and the
-        external load applied [N m] (against the motion, where the scene applies it: on the crank, or on a two-mass
-        machine's driven part, where the crank's `external` is 0). Nothing when they are in already."""
+        (common.Batch: sent after a later exchange's joint_states, with the wall-clock time that exchange's
+        joint_states went out): the moments on the crank by source and the external load applied [N m] (against the
+        motion, where the scene applies it: on the crank, or on a two-mass machine's driven part, where the crank's
+        `external` is 0), and the state as joint_states had it (crank phi, omega; a two-mass machine's twist and
+        omega_driven). Nothing when they are in already."""
         if self.held is None:
             return
-        when, held_time, state, throttle, load = self.held
-        moments = self.stepper.moments_at(held_time, state, throttle, load) | {"load": load}
-        self.moments.add(when, list(moments), [], [], list(moments.values()))
+        when, held_time, state, throttle, load, published_at = self.held
+        outputs = self.stepper.outputs_at(held_time, state, throttle, load)
+        names = ["drive", "resistance", "external", "net", "load", "crank"]
+        efforts = [outputs[name] for name in names[:4]] + [load, math.nan]
+        positions, velocities = [math.nan] * 5 + [float(state[0])], [math.nan] * 5 + [float(state[1])]
+        if self.model.coupling is not None:
+            names.append("coupling")
+            positions.append(outputs["twist"])
+            velocities.append(math.nan)
+            efforts.append(math.nan)
+        if self.model.driven is not None:
+            names.append("driven")
+            positions.append(math.nan)
+            velocities.append(outputs["omega_driven"])
+            efforts.append(math.nan)
+        self.moments.add(when, names, positions, velocities, efforts, wall=published_at)
         self.held = None
 
     def send_moments(self) -> None:

@@ -1,13 +1,15 @@
 """recorder_node: records a run from the topics into a Rerun recording (a .rrd file and/or a live
 viewer) with its blueprint, and at the end writes the run's samples (CSV) and summary (JSON).
 
-Subscribes `joint_states`, `machine/moments`, `governor/state`, `governor/events` and `/diagnostics`;
+Subscribes `machine/moments` (the machine's states and moments, several exchanges a message: only the governor and
+outside clients need `joint_states` at every exchange), `governor/state`, `governor/events`, `machine/status` and
+`/diagnostics`;
 publishes its own `/diagnostics` every second: `recorded_exchanges` (complete exchanges so far) and
 `recorded_until` [s].
 The text log gets every change of the applied load, the governor's mode changes and the machine's
 warnings (fail-safe, overspeed trip). When the machine says it finished (`machine/status`) the recorder
 waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it has, so the
-recording stays valid. A machine state stamped 0 after later ones is a new trial (the machine's ~/reset):
+recording stays valid. A new trial number in `machine/status` is a new trial (the machine's ~/reset):
 the CSV and the summary are of the last trial, the recording keeps every trial with an event at each reset.
 """
 
@@ -29,7 +31,7 @@ from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
 from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
-                                         nanoseconds, run, scene_model, text_parameter)
+                                         run, scene_model, text_parameter)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
@@ -80,10 +82,8 @@ class RecorderNode(Node):
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
-        self.streams = [self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)]
         governor_states = self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
-        if self.model.governor is not None:
-            self.streams.append(governor_states)
+        self.streams = [governor_states] if self.model.governor is not None else []
         self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
         self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
         follow_run_state(self, self.on_run_state)
@@ -92,27 +92,10 @@ class RecorderNode(Node):
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
 
-    def on_joint_states(self, message: JointState) -> None:
-        names = list(message.name)
-        if "crank" not in names:
-            return
-        when = nanoseconds(message.header.stamp)
-        if when == 0 and self.machine and max(self.machine) > 0:
-            self.start_trial()
-        crank = names.index("crank")
-        phi, omega = message.position[crank], message.velocity[crank]
-        driven = {}
-        if self.model.coupling is not None:
-            driven["twist"] = message.position[names.index("coupling")]
-        if self.model.driven is not None:
-            driven["omega_driven"] = message.velocity[names.index("driven")]
-        self.machine[when] = [phi, omega, *driven.values()]
-        self.state_walls[1:] = [time.monotonic()]
-        self.recording.add_machine(when, phi, omega, driven or None)
-
-    def start_trial(self) -> None:
-        """The machine's ~/reset: forget the samples of the trial before (the recording keeps them)."""
-        self.trial += 1
+    def start_trial(self, trial: int) -> None:
+        """The machine's ~/reset (trial: the new trial's number): forget the samples of the trial before (the
+        recording keeps them)."""
+        self.trial = trial
         for samples in (self.machine, self.moments, self.governor):
             samples.clear()
         self.events.clear()
@@ -120,6 +103,8 @@ class RecorderNode(Node):
         self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
 
     def on_run_state(self, state: dict) -> None:
+        if state["trial"] > self.trial:
+            self.start_trial(state["trial"])
         self.machine_result = (state["status"], self.machine_status[1])
         self.max_lag = state.get("max_lag_s", self.max_lag)
         if state["state"] == RunState.FINISHED:
@@ -127,8 +112,17 @@ class RecorderNode(Node):
             self.tripped_at = state["tripped_at"]
 
     def on_moments(self, message: JointState) -> None:
-        """The machine's moments of one or more exchange times (common.Batch), in order."""
+        """The machine's states and moments of one or more exchange times (common.Batch), in order."""
         for when, joints in batch_groups(message):
+            phi, omega = joints["crank"][:2]
+            driven = {}
+            if self.model.coupling is not None:
+                driven["twist"] = joints["coupling"][0]
+            if self.model.driven is not None:
+                driven["omega_driven"] = joints["driven"][1]
+            self.machine[when] = [phi, omega, *driven.values()]
+            self.state_walls[1:] = [joints["stamp"][1]]  # when the machine published that state
+            self.recording.add_machine(when, phi, omega, driven or None)
             moments = {name: effort for name, (_, _, effort) in joints.items()}
             self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"],
                                        moments["net"])
@@ -202,10 +196,11 @@ class RecorderNode(Node):
         summary_path.write_text(to_json(summary))
 
     def pace(self) -> dict[str, float]:
-        """How fast the nodes ran, from the wall-clock times the first and the last machine states arrived here (the
-        exchanges only: the nodes' start-up and discovery before the first exchange are not in it): wall_time_s [s]
-        and real_time_factor = simulated time between those states / wall_time_s; empty before two states. Also
-        start_up_s, the wall time [s] from the command's start (parameter launched_at) to the first machine state,
+        """How fast the nodes ran, from the wall-clock times the machine published its first and its last state
+        (the "stamp" joints' velocity in machine/moments, time.monotonic of this host; the exchanges only: the nodes'
+        start-up and discovery before the first exchange are not in it): wall_time_s [s] and real_time_factor =
+        simulated time between those states / wall_time_s; empty before two states. Also start_up_s, the wall time
+        [s] from the command's start (parameter launched_at) to the first machine state,
         and in realtime max_lag_s, the machine's largest lag [s] of simulation time behind the wall clock."""
         if len(self.state_walls) < 2 or self.state_walls[1] <= self.state_walls[0]:
             return {}
@@ -261,15 +256,15 @@ class RecorderNode(Node):
                             events=self.events, status="complete", message="", tripped_at=self.tripped_at)
 
     def subscribe_to_the_machine(self) -> None:
-        """Subscribe to joint_states once the streams the run needs (the machine's moments, a governor's state) have
-        matched their publishers, or after STREAMS_WAIT s: the machine starts as soon as its peers subscribe to
-        joint_states, and a short run could otherwise end before a stream has matched the recorder, its samples
-        lost with the node that sent them."""
+        """Subscribe to the machine's states and moments (machine/moments) once the other stream the run needs (a
+        governor's state) has matched its publisher, or after STREAMS_WAIT s: the machine starts as soon as its peers
+        subscribe (the recorder: to machine/moments), and a short run could otherwise end before a stream has matched
+        the recorder, its samples lost with the node that sent them."""
         waited = time.monotonic()
         while rclpy.ok() and any(stream.get_publisher_count() == 0 for stream in self.streams) \
                 and time.monotonic() - waited < STREAMS_WAIT:
             self.executor.spin_once(timeout_sec=MATCH_POLL)
-        self.create_subscription(JointState, "joint_states", self.on_joint_states, STATE_QOS)
+        self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
 
     def record(self) -> None:
         """Subscribe to the machine (subscribe_to_the_machine), then spin until the machine has finished and

@@ -261,12 +261,6 @@ class MachineStepper:
         columns.update(crank_moments(columns))
         return {name: float(values[0]) for name, values in columns.items()}
 
-    def moments_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
-        """The moments on the crank by source [N m] at `time` [s] in `state` with these inputs held (outputs_at; see
-        crank_moments)."""
-        outputs = self.outputs_at(time, state, throttle, external_load)
-        return {name: outputs[name] for name in ("drive", "resistance", "external", "net")}
-
 
 def load_steppers(model: MachineModel, exchange_step: float) -> None:
     """Do one exchange step of the machine's stepper (and one answer of the governor's) on `model` and throw them
@@ -455,6 +449,26 @@ def load_rate(model: MachineModel, time: float) -> float:
     """The rate [N m/s] at which the scenario's external load changes at `time` [s] (a ramp's; 0 when held)."""
     piece = model.piece_at(time)
     return 0.0 if piece is None else piece.slope
+
+
+def held_load_until(model: MachineModel, time: float) -> int | float:
+    """How long the scenario's external load at `time` [s] stays the same number: while it is held (a piece of slope
+    0), the first whole nanosecond [ns] at which it may change, the next piece's start (for every whole nanosecond n
+    from `time` below it, model.external_load(seconds(n)) is the same number), or math.inf when it is held to the end;
+    on a ramp, `time` in nanoseconds (it holds for that instant only)."""
+    piece = model.piece_at(time)
+    if piece is not None and piece.slope != 0.0:
+        return to_nanoseconds(time)
+    later = [candidate.start for candidate in model.load_pieces if candidate.start > time]
+    if not later:
+        return math.inf
+    start = later[0]
+    until = to_nanoseconds(start)  # then the smallest whole nanosecond whose time in seconds reaches the start
+    while seconds(until - 1) >= start:
+        until -= 1
+    while seconds(until) < start:
+        until += 1
+    return until
 
 
 def machine_subsystem(model: MachineModel) -> MachineModel:
