@@ -389,8 +389,10 @@ class GovernorStepper:
 COUPLINGS = ("hold", "waveform", "corrected")
 DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP = "corrected", 0.02  # [s]: the nodes' defaults (docs/ros.md, "Speed": within
 # 1e-4 of the monolithic run on the governed engines, and the fastest of the designs that are)
-MAX_SPEED_PIECE = 2.5e-3  # [s]: the corrected coupling samples the machine's speed at least every half of this, the
-# quadratic through three samples on each piece (an engine's speed ripple is followed; docs/ros.md gives the numbers)
+MAX_SPEED_PIECE = 1.25e-3  # [s]: the corrected coupling samples the machine's speed at least every half of this, the
+# quadratic through three samples on each piece (an engine's speed ripple is followed; docs/ros.md gives the numbers).
+# Its error does not fall with the exchange step: at 2.5e-3 it kept engine_indirect_none 1.4e-5 off within 1 s, which
+# the hunting grew to 4.8e-3 over 16 s whatever the step; at 6.25e-4, 1.2e-5 at 10 ms, but the nodes ~9 % slower
 LOAD_LINE_TOLERANCE = 1e-9  # [-] a prediction made ahead is kept while the load it assumed is the last step's load
 # continued within this (rounding along a ramp); a load event in between (a change) drops it
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
