@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from mech_regulator.bench.mujoco_model import MujocoCrankSlider, crank_slider_mjcf, mujoco_refusal
-from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, SpeedBenchmark, at_error, ode_runner,
-                                        ros_summary, ros_target, work_precision_front)
+from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, SpeedBenchmark, at_error, failure_text,
+                                        ode_runner, ros_summary, ros_target, work_precision_front)
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene
@@ -168,3 +168,16 @@ def test_bad_option_exits_2_with_a_message(capsys, tmp_path, argv, message):
     assert code == 2
     assert message in err
     assert not (tmp_path / "speed.csv").exists()
+
+
+def test_a_failed_ros_run_is_named_by_its_nodes_not_by_a_crash_dumps_last_line():
+    """A node's crash ends the launcher's stderr with the log tail it prints, whose last line is the interpreter's list
+    of extension modules: the row's note names the node, its exit code and the fatal error instead."""
+    stderr = ("mech-regulator: the machine node ended with exit code -11\n"
+              "mech-regulator: node(s) machine failed; the end of /tmp/x.log:\n"
+              "Fatal Python error: Segmentation fault\n\nCurrent thread 0x1 (most recent call first):\n"
+              "  File \"x.py\", line 1 in f\n\nExtension modules: yaml._yaml, numpy (total: 2)\n")
+    assert failure_text(stderr) == ("mech-regulator: the machine node ended with exit code -11; "
+                                    "Fatal Python error: Segmentation fault")
+    assert failure_text("usage: mech-regulator run\nmech-regulator run: error: bad option\n") == \
+        "mech-regulator run: error: bad option"

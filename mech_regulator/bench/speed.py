@@ -427,6 +427,16 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
     return rows
 
 
+def failure_text(stderr: str) -> str:
+    """What a failed `mech-regulator run` says of its failure, in one line: the launcher's lines naming the nodes that
+    ended and how, and a fatal error's first line from the nodes' log it prints (a crash's traceback ends in the list
+    of extension modules, which says nothing); else its last line."""
+    lines = stderr.strip().splitlines()
+    telling = [line.strip() for line in lines
+               if line.startswith("mech-regulator: the ") or line.startswith("Fatal Python error")]
+    return "; ".join(telling) or (lines or [""])[-1]
+
+
 def measure_ros(report: Callable[[Row], None]) -> list[Row]:
     """The lockstep ROS main job (`mech-regulator run`, four node processes) on the whole engine_direct, for each
     (path, exchange step, coupling) of ROS_RUNS, and on each of ROS_OTHER_SCENES at run's default (method 'nodes',
@@ -458,7 +468,7 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
             summary_path = Path(output).with_suffix(".json")
             pace = json.loads(summary_path.read_text()) if summary_path.exists() else {}
             if done.returncode != 0 or "wall_time_s" not in pace:
-                row.note = f"exit {done.returncode}: {(done.stderr.strip().splitlines() or [''])[-1]}"
+                row.note = f"exit {done.returncode}: {failure_text(done.stderr)}"
             else:
                 row.cpu_s, row.simulated_s = pace["wall_time_s"], pace["t_end"]
             rows.append(row)
