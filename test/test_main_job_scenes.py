@@ -34,14 +34,13 @@ from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, cosimulate, to_nanoseconds
 
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
-EXCHANGE_STEP = DEFAULT_EXCHANGE_STEP  # [s]: run's default, as its coupling
 
 
 def in_process_csv(model, duration: float, path: Path, coupling: str = DEFAULT_COUPLING) -> bytes:
     """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write)."""
     scenario = model.scene.scenario.model_copy(update={"duration": duration})
     shortened = dataclasses.replace(model, scene=model.scene.model_copy(update={"scenario": scenario}))
-    run = cosimulate(shortened, EXCHANGE_STEP, coupling=coupling)
+    run = cosimulate(shortened, model.scene.solver.exchange_step, coupling=coupling)
     write_csv(path, shortened.columns(run.times, run.states, run.throttle, run.external_load), digits=17)
     return path.read_bytes()
 
@@ -80,10 +79,18 @@ def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: P
     assert summary["start_up_s"] > 0.0 and "max_lag_s" not in summary, described  # the command came first; lockstep
     assert "s from the command to the first exchange" in result.stdout, described
     rows = rrd.with_suffix(".csv").read_bytes()
-    assert rows.count(b"\n") == 1 + round(PLAYED / EXCHANGE_STEP) + 1, described  # header and every exchange
+    assert rows.count(b"\n") == 1 + round(PLAYED / model.scene.solver.exchange_step) + 1, described  # header, exchanges
     assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv", coupling), \
         f"{scene}: the nodes' CSV differs from the in-process co-simulation"
     assert node_processes(str(rrd.parent)) == [], f"{scene}: nodes left running"
+
+
+def test_a_scene_without_its_own_exchange_step_runs_the_nodes_default():
+    """solver.exchange_step defaults to the nodes' own default (solvers.cosim), and the hunting engine sets 10 ms
+    (docs/ros.md); that `run` plays each scene at its own step is checked by the next test (the CSV's rows)."""
+    assert load_scene("engine_direct").solver.exchange_step == DEFAULT_EXCHANGE_STEP
+    assert load_scene("engine_indirect_rigid").solver.exchange_step == DEFAULT_EXCHANGE_STEP
+    assert load_scene("engine_indirect_none").solver.exchange_step == 0.01
 
 
 def test_every_bundled_scene_plays_to_the_end_through_the_nodes(tmp_path):

@@ -320,7 +320,10 @@ def test_bundled_governed_scenes(name, kind, feedback):
 
 
 def test_indirect_scenes_differ_only_in_feedback():
+    """... and in run's exchange step: the hunting engine without feedback exchanges every 10 ms (docs/ros.md)."""
     none, rigid, isodromic = (load_scene(f"engine_indirect_{kind}") for kind in ("none", "rigid", "isodromic"))
+    differing = ("name", "description", "governor.feedback", "solver.exchange_step")
     for scene in (rigid, isodromic):
-        assert without(scene.model_dump(), "name", "description", "governor.feedback") == \
-            without(none.model_dump(), "name", "description", "governor.feedback")
+        assert without(scene.model_dump(), *differing) == without(none.model_dump(), *differing)
+        assert scene.solver.exchange_step == 0.02
+    assert none.solver.exchange_step == 0.01

@@ -55,7 +55,7 @@ from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal
-from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, cosimulate
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate
 
 BENCH_SCENE = "crank_slider_bench"
 SPEED_SCENES = (BenchScene(BENCH_SCENE, BENCH_SCENE, (), ("scenario.duration=0.5",),
@@ -427,6 +427,12 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
     return rows
 
 
+def default_exchange_step(scene: str) -> float:
+    """run's exchange step for a bundled scene [s]: its solver.exchange_step (solvers.cosim.DEFAULT_EXCHANGE_STEP
+    unless the scene sets another)."""
+    return load_scene(scene).solver.exchange_step
+
+
 def failure_text(stderr: str) -> str:
     """What a failed `mech-regulator run` says of its failure, in one line: the launcher's lines naming the nodes that
     ended and how, and a fatal error's first line from the nodes' log it prints (a crash's traceback ends in the list
@@ -447,7 +453,7 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
     REFERENCE_RTOL (fast path) at the exchange times, relative to max |omega| (the issue's bound is on it; the nodes'
     is the same), with the RMS difference in the note."""
     runs = [(ROS_SCENE, *run) for run in ROS_RUNS]
-    runs += [(scene, FAST, DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING) for scene in ROS_OTHER_SCENES]
+    runs += [(scene, FAST, default_exchange_step(scene), DEFAULT_COUPLING) for scene in ROS_OTHER_SCENES]
     rows, exact = [], {}
     with tempfile.TemporaryDirectory(prefix="mech-regulator-ros-") as folder:
         for scene, path, exchange, coupling in runs:
@@ -461,7 +467,7 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
             process_wall = time.perf_counter() - start
             model = build_model(load_scene(scene, settings))
             duration = model.scene.scenario.duration
-            default = " (run's default)" if (path, exchange, coupling) == (FAST, DEFAULT_EXCHANGE_STEP,
+            default = " (run's default)" if (path, exchange, coupling) == (FAST, default_exchange_step(scene),
                                                                           DEFAULT_COUPLING) else ""
             row = Row("ros", scene, path, "nodes", coupling, exchange, duration, steps=round(duration / exchange),
                       note=f"process {process_wall:.3g} s with start-up{default}")
@@ -501,7 +507,7 @@ def ros_summary(benchmark: SpeedBenchmark) -> list[dict[str, float | str]]:
                 item["real_time_factor"] = row.simulated_s / row.cpu_s
             elif row.method == "in process":
                 item.update(in_process_real_time_factor=row.simulated_s / row.cpu_s, max_error=row.error)
-        item["default"] = (path, exchange, coupling) == (FAST, DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING)
+        item["default"] = (path, exchange, coupling) == (FAST, default_exchange_step(scene), DEFAULT_COUPLING)
         found.append(item)
     return found
 

@@ -124,8 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     main_job = scene_command("run", "the main job: run the ROS nodes (machine, governor, scenario, recorder) as "
                                     "separate processes on a private ROS domain, record the run to a Rerun file "
                                     "and print its summary (needs rclpy: pip install 'mech_regulator[ros]')")
-    main_job.add_argument("--exchange-step", type=float, default=0.02, metavar="H",  # solvers.cosim's defaults
-                          help="simulation time between exchanges of the nodes [s] (default 0.02)")
+    main_job.add_argument("--exchange-step", type=float, metavar="H",
+                          help="simulation time between exchanges of the nodes [s] (default: the scene's "
+                               "solver.exchange_step, 0.02 unless the scene sets it)")
     main_job.add_argument("--coupling", choices=("hold", "waveform", "corrected"), default="corrected",
                           help=COUPLING_HELP)
     main_job.add_argument("--duration", type=float, metavar="T",
@@ -515,6 +516,8 @@ def _main_job(scene, args) -> int:
     path = model.scene.solver.path  # decided once, for every node
     if path != scene.solver.path:
         args.overrides = [*(args.overrides or []), f"solver.path={path}"]
+    if args.exchange_step is None:
+        args.exchange_step = model.scene.solver.exchange_step
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
     if args.duration is not None and not 0.0 < args.duration <= 1e7:

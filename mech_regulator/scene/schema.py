@@ -985,6 +985,9 @@ class Solver(SceneModel):
     step: Positive = Field(1e-4, description="time step of RK4 [s]")
     phi_step_deg: Positive = Field(1.0, description="crank-angle step of the energy method [deg]")
     sample_rate: Positive = Field(1000.0, description="rate of the output samples (dense output) [Hz]")
+    exchange_step: float = Field(0.02, ge=1e-6, le=1.0, description=(
+        "simulation time between the exchanges of the lockstep co-simulation (`run`, the ROS nodes), unless "
+        "--exchange-step says otherwise: its error falls with it, its speed grows with it (docs/ros.md) [s]"))
 
     @model_validator(mode="after")
     def _method_on_path(self) -> Solver:
