@@ -145,7 +145,7 @@ def test_ctrl_c_at_the_client_interrupts_the_child(served, tmp_path):
     assert 0.0 < stopped < 5000.0 and "the outputs hold the run up to there" in err
     rows = (tmp_path / "run.csv").read_text().splitlines()
     assert rows[0].startswith("t,") and len(rows) > 1
-    assert 0.0 <= float(rows[-1].split(",")[0]) <= stopped
+    assert 0.0 <= float(rows[-1].split(",")[0]) <= stopped * (1.0 + 1e-5)  # the summary prints 6 digits
 
 
 def test_a_server_of_another_key_is_not_used(served):
