@@ -31,7 +31,7 @@ from std_srvs.srv import Trigger
 from mech_regulator.cli.report import write_csv
 from mech_regulator.model import build_model
 from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
-from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, cosimulate, to_nanoseconds
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, to_nanoseconds
 
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
 
@@ -83,14 +83,6 @@ def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: P
     assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv", coupling), \
         f"{scene}: the nodes' CSV differs from the in-process co-simulation"
     assert node_processes(str(rrd.parent)) == [], f"{scene}: nodes left running"
-
-
-def test_a_scene_without_its_own_exchange_step_runs_the_nodes_default():
-    """solver.exchange_step defaults to the nodes' own default (solvers.cosim), and the hunting engine sets 10 ms
-    (docs/ros.md); that `run` plays each scene at its own step is checked by the next test (the CSV's rows)."""
-    assert load_scene("engine_direct").solver.exchange_step == DEFAULT_EXCHANGE_STEP
-    assert load_scene("engine_indirect_rigid").solver.exchange_step == DEFAULT_EXCHANGE_STEP
-    assert load_scene("engine_indirect_none").solver.exchange_step == 0.01
 
 
 def test_every_bundled_scene_plays_to_the_end_through_the_nodes(tmp_path):

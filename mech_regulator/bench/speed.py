@@ -427,6 +427,7 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
     return rows
 
 
+@functools.cache
 def default_exchange_step(scene: str) -> float:
     """run's exchange step for a bundled scene [s]: its solver.exchange_step (solvers.cosim.DEFAULT_EXCHANGE_STEP
     unless the scene sets another)."""

@@ -474,8 +474,8 @@ class _Server:
 
     def __init__(self, lock, key: str):
         self.lock, self.key, self.digest = lock, key, key_digest(key)
-        self.package = os.path.dirname(os.path.abspath(sys.modules["mech_regulator"].__file__))
-        self.source = source_fingerprint(self.package)
+        keyed = json.loads(key)  # serve() has checked it is this process's own
+        self.package, self.source = keyed["package"], keyed["source"]
         self.path = _socket_path(self.digest)
         self.pid = os.getpid()
         self.idle_limit = idle_limit()
@@ -616,7 +616,6 @@ class _Server:
             with os.fdopen(report) as pipe:
                 text = pipe.read()
             self.served += 1
-            self.last = time.monotonic()
             self._load_after(text)
 
     def _load_after(self, report: str) -> None:

@@ -63,7 +63,7 @@ from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STAT
                                          joint_value, list_parameter, nanoseconds, run, samples, scene_model, stamp,
                                          text_parameter)
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import DEFAULT_EXCHANGE_STEP, MachineStepper, Samples, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import MachineStepper, Samples, seconds, to_nanoseconds
 
 LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
 # (the node that gives it by default, its topic)
@@ -81,9 +81,10 @@ class MachineNode(Node):
         governed = self.model.governor is not None
         self.time_mode = text_parameter(self, "time_mode", "lockstep", "how simulation time advances",
                                         ("lockstep", "realtime"))
-        self.step_ns = to_nanoseconds(float_parameter(self, "exchange_step", DEFAULT_EXCHANGE_STEP, "exchange step h "
-                                                      "[s]: inputs are held and outputs published every h of "
-                                                      "simulation time",
+        self.step_ns = to_nanoseconds(float_parameter(self, "exchange_step", self.model.scene.solver.exchange_step,
+                                                      "exchange step h [s]: inputs are held and outputs published "
+                                                      "every h of simulation time (default: the scene's "
+                                                      "solver.exchange_step)",
                                                       1e-6, 1.0, read_only=True))
         duration = float_parameter(self, "duration", 0.0, "simulated time [s] to run; 0: the scene's duration",
                                    0.0, 1e7, read_only=True)

@@ -35,7 +35,7 @@ from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import DEFAULT_EXCHANGE_STEP, CoSimulation, seconds
+from mech_regulator.solvers.cosim import CoSimulation, seconds
 from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
@@ -57,8 +57,9 @@ class RecorderNode(Node):
                                                       "rerun+http://127.0.0.1:9876/proxy ('' : none)")
         rate = float_parameter(self, "animation_rate", 200.0, "frames of the animation per second of simulation "
                                                               "time [Hz]", 1.0, 1e5, read_only=True)
-        self.exchange_step = float_parameter(self, "exchange_step", DEFAULT_EXCHANGE_STEP, "the machine's exchange "
-                                                                          "step [s], for the summary", 1e-6, 1.0, read_only=True)
+        self.exchange_step = float_parameter(self, "exchange_step", self.model.scene.solver.exchange_step,
+                                             "the machine's exchange step [s], for the summary (default: the scene's "
+                                             "solver.exchange_step)", 1e-6, 1.0, read_only=True)
         self.coupling = coupling_parameter(self)
         self.launched_at = float_parameter(self, "launched_at", 0.0, "time.monotonic() [s] at which the command that "
                                            "started the run started (`run` sets it), for the start-up time in the "

@@ -967,6 +967,9 @@ class Scenario(SceneModel):
         return self
 
 
+DEFAULT_EXCHANGE_STEP = 0.02  # [s] run's exchange step unless a scene sets solver.exchange_step (docs/ros.md, "Speed")
+
+
 class Solver(SceneModel):
     method: Literal["RK45", "RK23", "DOP853", "Radau", "BDF", "LSODA", "RK4", "Rosenbrock23", "energy"] = Field(
         "DOP853", description="scipy.integrate method (adaptive, in time), RK4 (fixed step in time), Rosenbrock23 (the "
@@ -985,7 +988,7 @@ class Solver(SceneModel):
     step: Positive = Field(1e-4, description="time step of RK4 [s]")
     phi_step_deg: Positive = Field(1.0, description="crank-angle step of the energy method [deg]")
     sample_rate: Positive = Field(1000.0, description="rate of the output samples (dense output) [Hz]")
-    exchange_step: float = Field(0.02, ge=1e-6, le=1.0, description=(
+    exchange_step: float = Field(DEFAULT_EXCHANGE_STEP, ge=1e-6, le=1.0, description=(
         "simulation time between the exchanges of the lockstep co-simulation (`run`, the ROS nodes), unless "
         "--exchange-step says otherwise: its error falls with it, its speed grows with it (docs/ros.md) [s]"))
 

@@ -54,6 +54,7 @@ import numpy as np
 from mech_regulator.model import LoadPiece, MachineModel, crank_moments
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
+from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.compiled import runs_compiled
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up
@@ -387,8 +388,8 @@ class GovernorStepper:
 
 
 COUPLINGS = ("hold", "waveform", "corrected")
-DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP = "corrected", 0.02  # [s]: the nodes' defaults (docs/ros.md, "Speed": within
-# 1e-4 of the monolithic run on the governed engines, and the fastest of the designs that are)
+DEFAULT_COUPLING = "corrected"  # the nodes' default coupling, with the scene's exchange step (DEFAULT_EXCHANGE_STEP
+# unless it sets solver.exchange_step; docs/ros.md, "Speed": within 1e-4 of the monolithic runs, the fastest that is)
 MAX_SPEED_PIECE = 1.25e-3  # [s]: the corrected coupling samples the machine's speed at least every half of this, the
 # quadratic through three samples on each piece (an engine's speed ripple is followed; docs/ros.md gives the numbers).
 # Its error does not fall with the exchange step: at 2.5e-3 it kept engine_indirect_none 1.4e-5 off within 1 s, which
