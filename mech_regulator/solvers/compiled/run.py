@@ -32,7 +32,7 @@ from mech_regulator.solvers.compiled import fast_path_refusal, integrators
 from mech_regulator.solvers.compiled.codegen import (CLAMP_HI, CLAMP_LO, CRANK_DIRECTION, PIECE_INDEX, PIECE_SLOTS,
                                                      RECENT_MODELS, WINDOW_HI, WINDOW_LO, CompiledScene,
                                                      compile_scene)
-from mech_regulator.scene.limits import MAX_STEPS
+from mech_regulator.solvers import time_domain
 from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck, _held_pieces,
                                                 _log_event, _settle_mode, fail_blown_up, fail_too_many_steps,
                                                 integrate_time_domain, switch_window)
@@ -199,7 +199,7 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         restarts = (layout.kink_grid, period, offset, layout.kink_slots, layout.speed_indices, following, PIECE_INDEX,
                     MAX_RESTARTS_PER_CALL)
         run = _step(settings, compiled, layout.callbacks, linear, thresholds, t, y_wrapped, t_end, p, atol, first_step,
-                    wrap_limit, wrap_period, MAX_STEPS - trajectory.stats.steps, restarts)
+                    wrap_limit, wrap_period, time_domain.MAX_STEPS - trajectory.stats.steps, restarts)
         if run.n_steps:
             trajectory.add_piece(t, run.t_end, run.dense, step_ends=run.times[1:])
         trajectory.stats.steps += int(run.n_steps)
@@ -256,7 +256,7 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
             trajectory.stats.restarts += 1
         if run.beyond >= 0:  # a speed beyond MAX_SPEED at the last step's end: the run stops there (time_domain)
             fail_blown_up(model, trajectory, t, y_stop, model.state_names()[run.beyond], float(y_stop[run.beyond]))
-        elif trajectory.status == "complete" and trajectory.stats.steps >= MAX_STEPS:
+        elif trajectory.status == "complete" and trajectory.stats.steps >= time_domain.MAX_STEPS:
             fail_too_many_steps(model, trajectory, t, y_stop)
         if progress is not None:
             progress(t)
