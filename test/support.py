@@ -4,6 +4,7 @@ model to the end."""
 from __future__ import annotations
 
 import copy
+import math
 import runpy
 import sys
 import types
@@ -73,3 +74,25 @@ def setup_arguments() -> dict:
         runpy.run_path(str(SOURCE_TREE / "setup.py"), run_name="__main__")
     assert captured, "setup.py did not call setup()"
     return captured
+
+
+def linkage_scene_entry(linkage) -> dict:
+    """The scene's `type: linkage` mechanism entry (scene.schema.Linkage) of a mechanisms.linkage.Linkage whose frame
+    is named 'frame': the inverse of schema.Linkage.core() (angles in degrees)."""
+    def xy(point: complex) -> list[float]:
+        return [point.real, point.imag]
+
+    entry = {"type": "linkage", "frame": {name: xy(p) for name, p in linkage.link("frame").points.items()},
+             "crank": linkage.crank,
+             "links": {link.name: {"points": {name: xy(p) for name, p in link.points.items()}, "mass": link.mass,
+                                   "centre": xy(link.centre), "inertia": link.inertia}
+                       for link in linkage.links if link.name != linkage.frame},
+             "joints": {joint.name: {"type": joint.kind, "links": list(joint.links),
+                                     "direction_deg": math.degrees(joint.direction),
+                                     "slider_angle_deg": math.degrees(joint.slider_angle)} for joint in linkage.joints},
+             "branches": dict(linkage.branches), "points": list(linkage.points)}
+    if linkage.output_joint is not None:
+        entry["output"] = {"joint": linkage.output_joint}
+    elif linkage.output_link is not None:
+        entry["output"] = {"link": linkage.output_link}
+    return entry
