@@ -8,23 +8,24 @@ module, RPR: the slotted lever's angle, PRP: two lines' intersection, RPP: the S
 velocity and acceleration ratios against finite differences of its positions (five-point stencil, step 1e-3:
 truncation h^4/30 |f^(5)| ~ 1e-13 and rounding ~ eps / h ~ 1e-13 for these O(1) linkages, so 1e-9 leaves a
 margin of ~1e3 while a wrong term is O(0.1..1)); a six-bar's J(phi) against an independent loop closure solved
-by Newton (scipy's fsolve) and differentiated numerically; linkages built like the four_bar and crank_slider
-reproduce their make_reduced (J, dJ/dphi, weight moment, output) to 1e-12.
+by Newton (scipy's fsolve) and differentiated numerically. The RRR and RRP linkages are the presets' (mechanisms/
+presets.py), which test_presets.py checks against the preset mechanisms.
+Kinetostatics: the balancing moment from the reactions by groups equals the reduced moment.
 """
 
 from __future__ import annotations
 
 import cmath
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from scipy.optimize import fsolve
 
-from mech_regulator.mechanisms import crank_slider, four_bar
-from mech_regulator.mechanisms import kinetostatics as preset_kinetostatics
+from mech_regulator.mechanisms import crank_slider, four_bar, presets
 from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageError, analyse, assembly_failures,
-                                               checked, make_point_motions, make_reduced, solve)
+                                               checked, make_reduced, solve)
 from mech_regulator.mechanisms.linkage.groups import _rows
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
 
@@ -42,27 +43,19 @@ def prismatic(name, guide, slider, direction=0.0, slider_angle=0.0):
 
 
 def four_bar_linkage(a=1.0, b=3.0, c=2.5, d=3.5, th1=0.3, branch=1):
-    """The four-bar of four_bar.py (crank A-B, coupler B-C, rocker D-C), with masses on every link."""
-    return Linkage(
-        links=(Link("frame", {"A": 0j, "D": d * cmath.exp(1j * th1)}),
-               Link("crank", {"A": 0j, "B": a + 0j}, mass=2.0, centre=0.4 + 0j),
-               Link("coupler", {"B": 0j, "C": b + 0j, "P": 1.0 + 0.8j}, mass=3.0, centre=1.2 + 0j, inertia=0.7),
-               Link("rocker", {"D": 0j, "C": c + 0j}, mass=1.5, centre=1.0 + 0j, inertia=0.3)),
-        joints=(revolute("A", "frame", "crank"), revolute("B", "crank", "coupler"),
-                revolute("C", "coupler", "rocker"), revolute("D", "frame", "rocker")),
-        frame="frame", crank="crank", branches={"C": branch}, points=("P",), output_link="rocker")
+    """The preset four-bar (presets.four_bar_linkage: crank, coupler, rocker; joints crank_bearing A, crank_pin B,
+    rocker_pin C, rocker_bearing D) with masses on every link and a coupler point P; branch +1 is 'open'."""
+    linkage = presets.four_bar_linkage(four_bar.FourBarGeometry(a, b, c, d, th1, -float(branch), 2.0, 0.4, 3.0, 1.2,
+                                                                0.7, 1.5, 1.0, 0.3))
+    return replace(linkage, links=tuple(replace(link, points={**link.points, "P": 1.0 + 0.8j})
+                                        if link.name == "coupler" else link for link in linkage.links),
+                   points=linkage.points + ("P",))
 
 
 def crank_slider_linkage(R=0.1, rod=0.35, e=0.03):
-    """The crank-slider of crank_slider.py: slider C on the frame's line y = e along +x (RRP group)."""
-    return Linkage(
-        links=(Link("frame", {"A": 0j, "G": complex(0.0, e)}),
-               Link("crank", {"A": 0j, "B": R + 0j}, mass=1.2, centre=0.03 + 0j),
-               Link("rod", {"B": 0j, "C": rod + 0j}, mass=2.5, centre=0.12 + 0j, inertia=0.04),
-               Link("slider", {"C": 0j, "G": 0j}, mass=1.7)),
-        joints=(revolute("A", "frame", "crank"), revolute("B", "crank", "rod"), revolute("C", "rod", "slider"),
-                prismatic("G", "frame", "slider")),
-        frame="frame", crank="crank", output_joint="G")
+    """The preset crank-slider (presets.crank_slider_linkage): the piston on the frame's line y = e along +x (RRP
+    group)."""
+    return presets.crank_slider_linkage(crank_slider.CrankSliderGeometry(R, rod, e, 1.2, 0.03, 2.5, 0.12, 0.04, 1.7))
 
 
 def slotted_lever_linkage(r=0.3, d=0.8, offset=0.05, branch=1):
@@ -222,23 +215,23 @@ def test_a_class_three_group_is_named_and_refused():
 
 def test_a_joint_naming_an_unknown_link_is_refused():
     linkage = four_bar_linkage()
-    broken = Linkage(links=linkage.links, joints=linkage.joints[:-1] + (revolute("D", "frame", "rocket"),),
+    broken = Linkage(links=linkage.links, joints=linkage.joints[:-1] + (revolute("rocker_bearing", "frame", "rocket"),),
                      frame="frame", crank="crank")
-    with pytest.raises(LinkageError, match="joint 'D' names the link 'rocket'"):
+    with pytest.raises(LinkageError, match="joint 'rocker_bearing' names the link 'rocket'"):
         analyse(broken)
 
 
 def test_a_group_that_cannot_assemble_is_located_on_the_crank_angle():
-    """A non-Grashof four-bar (a + d > b + c): the RRR group C fails where |B - D| > b + c, i.e. around phi = 180
-    deg (th1 = 0): cos(psi) <= (a^2 + d^2 - (b + c)^2) / (2 a d)."""
+    """A non-Grashof four-bar (a + d > b + c): the RRR group rocker_pin fails where |B - D| > b + c, i.e. around
+    phi = 180 deg (th1 = 0): cos(psi) <= (a^2 + d^2 - (b + c)^2) / (2 a d)."""
     linkage = four_bar_linkage(a=1.5, b=2.0, c=2.0, d=3.0, th1=0.0)
     half = math.degrees(math.acos((1.5 ** 2 + 3.0 ** 2 - 4.0 ** 2) / (2 * 1.5 * 3.0)))
     [failure] = assembly_failures(linkage, checked(linkage))
-    assert "RRR group C" in failure
+    assert "RRR group rocker_pin" in failure
     span = failure.split("crank angles ")[1].split(" deg")[0]
     low, high = (float(value) for value in span.split(" to "))
     assert half < low < half + 0.5 and 360.0 - half - 0.5 < high < 360.0 - half
-    with pytest.raises(LinkageError, match="RRR group C .* at crank angle 180.000 deg cannot be assembled"):
+    with pytest.raises(LinkageError, match="RRR group rocker_pin .* at crank angle 180.000 deg cannot be assembled"):
         solve(linkage, checked(linkage), math.pi)
 
 
@@ -277,7 +270,7 @@ def test_dyad_positions_satisfy_every_joint_and_their_closed_form(kind):
             assert math.remainder(poses["rocker"][1] - th4, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
         elif kind == "RRP":
             x = crank_slider.slider_kinematics(phi, 0.1, 0.35, 0.03)[0]
-            assert poses["slider"][0] == pytest.approx(complex(x, 0.03), abs=1e-14)
+            assert poses["piston"][0] == pytest.approx(complex(x, 0.03), abs=1e-14)
         elif kind == "RPR":
             B, O = 0.3 * cmath.exp(1j * phi), -0.8j
             # the crank pin is `offset` beside the lever's axis, on the side the slot is: angle = arg(B - O) - asin
@@ -336,36 +329,6 @@ def test_dyad_velocity_and_acceleration_ratios_match_finite_differences(kind):
 
 # ----------------------------------------------------------------------------------------------
 # Reduction to the crank
-
-
-def test_four_bar_linkage_reproduces_four_bar_make_reduced():
-    """J differs by the crank's constant m_crank cg^2 (four_bar.py leaves the crank's inertia to machine.inertia);
-    dJ, the weight moment and the rocker angle agree to 1e-12."""
-    linkage = four_bar_linkage()
-    reduced = make_reduced(linkage, checked(linkage), GRAVITY)
-    geometry = four_bar.FourBarGeometry(1.0, 3.0, 2.5, 3.5, 0.3, four_bar.BRANCH_SIGN["open"], 2.0, 0.4, 3.0, 1.2,
-                                        0.7, 1.5, 1.0, 0.3)
-    reference = four_bar.make_reduced(geometry, GRAVITY)
-    for phi in ANGLES:
-        (J, dJ, weight, q, dq), (J0, dJ0, weight0, q0, dq0) = reduced(phi), reference(phi)
-        assert J - 2.0 * 0.4 ** 2 == pytest.approx(J0, rel=1e-12)
-        assert dJ == pytest.approx(dJ0, rel=1e-12, abs=1e-12 * abs(J0))
-        assert weight == pytest.approx(weight0, rel=1e-12, abs=1e-12 * 30.0)
-        assert math.remainder(q - q0, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
-        assert dq == pytest.approx(dq0, rel=1e-12, abs=1e-14)
-
-
-def test_crank_slider_linkage_reproduces_crank_slider_make_reduced():
-    linkage = crank_slider_linkage()
-    reduced = make_reduced(linkage, checked(linkage), GRAVITY)
-    geometry = crank_slider.CrankSliderGeometry(0.1, 0.35, 0.03, 1.2, 0.03, 2.5, 0.12, 0.04, 1.7)
-    reference = crank_slider.make_reduced(geometry, GRAVITY)
-    for phi in ANGLES:
-        (J, dJ, weight, q, dq), (J0, dJ0, weight0, q0, dq0) = reduced(phi), reference(phi)
-        assert J - 1.2 * 0.03 ** 2 == pytest.approx(J0, rel=1e-12)
-        assert dJ == pytest.approx(dJ0, rel=1e-12, abs=1e-12 * J0)
-        assert weight == pytest.approx(weight0, rel=1e-12, abs=1e-12 * 5.0)
-        assert (q, dq) == pytest.approx((q0, dq0), rel=1e-12, abs=1e-14)
 
 
 def six_bar_linkage():
@@ -460,103 +423,3 @@ def test_balancing_moment_equals_the_reduced_moment(build):
         expected = J * epsilon + 0.5 * dJ * omega ** 2 - weight - force * dq
         scale = abs(J * epsilon) + abs(0.5 * dJ * omega ** 2) + abs(weight) + abs(force * dq)
         assert loads(phi, omega, epsilon, force).balancing == pytest.approx(expected, abs=1e-11 * scale)
-
-
-def test_four_bar_reactions_equal_the_four_bar_kinetostatics():
-    """The preset's kinetostatics (mechanisms/kinetostatics.py) gives F_ij, the force of link i on link j: the
-    linkage's revolute reactions are the forces on the joint's first link, F_10 (A), F_21 (B), F_32 (C), F_30 (D)
-    = -F_01, -F_12, -F_23, -F_03; the balancing moments differ by the crank's m cg^2 epsilon, which the preset
-    leaves to machine.inertia."""
-    linkage = four_bar_linkage()
-    loads = make_kinetostatics(linkage, checked(linkage), GRAVITY)
-    geometry = four_bar.FourBarGeometry(1.0, 3.0, 2.5, 3.5, 0.3, four_bar.BRANCH_SIGN["open"], 2.0, 0.4, 3.0, 1.2,
-                                        0.7, 1.5, 1.0, 0.3)
-    preset = preset_kinetostatics.four_bar_kinetostatics(geometry, GRAVITY)
-    for phi, omega, epsilon, moment in ((0.3, 6.0, 20.0, 40.0), (3.5, 9.0, -8.0, -15.0)):
-        ours = loads(phi, omega, epsilon, moment)
-        theirs = preset(phi, omega, moment)
-        forces = [c + p * epsilon for c, p in zip(theirs.constant, theirs.per_epsilon)]
-        scale = max(abs(force) for force in forces)
-        for name, force in zip("ABCD", forces):
-            assert ours.reactions[name] == pytest.approx(-force, abs=1e-12 * scale), name
-        balancing = theirs.balancing[0] + theirs.balancing[1] * epsilon
-        assert ours.balancing - 2.0 * 0.4 ** 2 * epsilon == pytest.approx(balancing, abs=1e-12 * scale)
-
-
-def test_crank_slider_reactions_equal_the_crank_slider_kinetostatics():
-    """As the four-bar's: A, B, C carry -F_01, -F_12, -F_23; the guide's normal force on the slider i N is the
-    prismatic joint G's N along i w = i (its couple is zero: the slider is a point mass pinned where the guide
-    pushes)."""
-    linkage = crank_slider_linkage()
-    loads = make_kinetostatics(linkage, checked(linkage), GRAVITY)
-    geometry = crank_slider.CrankSliderGeometry(0.1, 0.35, 0.03, 1.2, 0.03, 2.5, 0.12, 0.04, 1.7)
-    preset = preset_kinetostatics.crank_slider_kinetostatics(geometry, GRAVITY)
-    for phi, omega, epsilon, force in ((0.7, 30.0, 100.0, -800.0), (4.0, 12.0, -50.0, 300.0)):
-        ours = loads(phi, omega, epsilon, force)
-        theirs = preset(phi, omega, force)
-        F01, F12, F23, guide = (c + p * epsilon for c, p in zip(theirs.constant, theirs.per_epsilon))
-        scale = max(abs(F01), abs(F12), abs(F23))
-        for name, value in zip("ABC", (F01, F12, F23)):
-            assert ours.reactions[name] == pytest.approx(-value, abs=1e-12 * scale), name
-        normal, couple = ours.reactions["G"]
-        assert complex(0.0, normal) == pytest.approx(guide, abs=1e-12 * scale) and abs(couple) < 1e-12 * scale
-        balancing = theirs.balancing[0] + theirs.balancing[1] * epsilon
-        assert ours.balancing - 1.2 * 0.03 ** 2 * epsilon == pytest.approx(balancing, abs=1e-12 * scale * 0.1)
-
-
-def test_walking_beam_as_a_linkage_reproduces_the_walking_beam():
-    """Source 004's eight-bar built from links and joints (the bundled walking_beam's dimensions and masses): the
-    four-bar O1 A B O2 (an RRR group), the parallelogram O2 B E O3 (tie and second rocker: RRR) and B C D E (side
-    link and shuttle bar: RRR); n = 7, p5 = 10, W = 1. Its J (less the crank's m cg^2), dJ/dphi, weight moment and
-    the motions of C and D equal walking_beam.py's to 1e-12. The parallelograms' branches are those that close them
-    (E = B + s, D = C + s) at phi = 0: the sign of the turn from the outer joints' line to the internal joint."""
-    from mech_regulator.mechanisms import walking_beam
-    from mech_regulator.scene import load_scene
-
-    g = walking_beam.geometry_from_scene(load_scene("walking_beam").machine.mechanism)
-    s, bc = walking_beam.beam(g), walking_beam.side(g)
-    O2 = g.frame * cmath.exp(1j * g.frame_angle)
-    th3, _, _, th4, _, _ = four_bar.link_angles(0.0, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle,
-                                                g.branch_sign)
-    B = O2 + g.rocker * cmath.exp(1j * th4)
-    C = g.crank + g.coupler_point * cmath.exp(1j * (th3 + g.coupler_point_angle))
-
-    def side_of(start, end, point):
-        return 1 if ((end - start).conjugate() * (point - start)).imag > 0 else -1
-
-    linkage = Linkage(
-        links=(Link("frame", {"O1": 0j, "O2": O2, "O3": O2 + s}),
-               Link("crank", {"O1": 0j, "A": g.crank + 0j}, mass=g.crank_mass, centre=g.crank_cg + 0j),
-               Link("coupler", {"A": 0j, "B": g.coupler + 0j,
-                                "C": g.coupler_point * cmath.exp(1j * g.coupler_point_angle)},
-                    mass=g.coupler_mass, centre=g.coupler_cg * cmath.exp(1j * g.coupler_cg_angle),
-                    inertia=g.coupler_inertia),
-               Link("rocker", {"O2": 0j, "B": g.rocker + 0j, "Bt": g.rocker + 0j}, mass=g.rocker_mass,
-                    centre=g.rocker_cg + 0j, inertia=g.rocker_inertia),
-               Link("tie", {"Bt": 0j, "E": s, "Es": s}, mass=g.tie_mass),
-               Link("rocker5", {"O3": 0j, "E": g.rocker + 0j}, mass=g.rocker_mass, centre=g.rocker_cg + 0j,
-                    inertia=g.rocker_inertia),
-               Link("side", {"Es": 0j, "D": bc}, mass=g.side_mass, centre=g.side_cg * bc / abs(bc),
-                    inertia=g.side_inertia),
-               Link("shuttle", {"C": 0j, "D": s}, mass=g.shuttle_mass)),
-        joints=(revolute("O1", "frame", "crank"), revolute("A", "crank", "coupler"), revolute("B", "coupler", "rocker"),
-                revolute("O2", "frame", "rocker"), revolute("Bt", "rocker", "tie"), revolute("E", "tie", "rocker5"),
-                revolute("O3", "frame", "rocker5"), revolute("Es", "tie", "side"), revolute("D", "side", "shuttle"),
-                revolute("C", "coupler", "shuttle")),
-        frame="frame", crank="crank",
-        branches={"B": -int(g.branch_sign), "E": side_of(B, O2 + s, B + s), "D": side_of(B + s, C, C + s)})
-    structure = checked(linkage)
-    assert (structure.moving_links, structure.lower_pairs, structure.freedom) == (7, 10, 1)
-    assert [group.kind for group in structure.groups] == ["RRR", "RRR", "RRR"]
-    reduced = make_reduced(linkage, structure, GRAVITY)
-    motions = make_point_motions(linkage, structure)
-    preset = walking_beam.make_reduced(g, GRAVITY)
-    for phi in ANGLES:
-        (J, dJ, weight, _, _), (J0, dJ0, weight0, x_C, dx_C) = reduced(phi), preset(phi)
-        assert J - g.crank_mass * g.crank_cg ** 2 == pytest.approx(J0, rel=1e-12)
-        assert dJ == pytest.approx(dJ0, abs=1e-12 * J0)
-        assert weight == pytest.approx(weight0, abs=1e-12 * 10.0 * abs(J0) + 1e-12)
-        ours, theirs = motions(phi), walking_beam.solve(phi, g)[1]
-        for point in ("C", "D", "E"):
-            assert ours[point] == pytest.approx(theirs[point], abs=1e-12)
-        assert (ours["C"][0].real, ours["C"][1].real) == pytest.approx((x_C, dx_C), abs=1e-12)

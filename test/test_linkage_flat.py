@@ -113,7 +113,7 @@ def test_a_group_that_cannot_assemble_gives_the_same_clear_message_from_reduced_
     with pytest.raises(LinkageError) as from_reduced:
         reduced(math.pi)
     assert str(from_reduced.value) == str(from_solve.value)
-    assert str(from_solve.value).startswith("RRR group C (links coupler, rocker) at crank angle 180.000 deg cannot "
+    assert str(from_solve.value).startswith("RRR group rocker_pin (links coupler, rocker) at crank angle 180.000 deg cannot "
                                             "be assembled: the distance ")
 
 
@@ -172,7 +172,7 @@ def test_a_group_at_a_dead_point_is_named_with_its_angle():
     reduced = make_reduced(linkage, structure, None)
     program = flat.encode(linkage, structure.groups, None)
     for phi, degrees in ((math.pi, "180.000"), (0.0, "0.000")):
-        expected = (f"RRR group C (links coupler, rocker) is at a dead point at crank angle {degrees} deg: its "
+        expected = (f"RRR group rocker_pin (links coupler, rocker) is at a dead point at crank angle {degrees} deg: its "
                     "links are aligned and its velocity ratios infinite")
         with pytest.raises(LinkageError) as from_solve:
             solve(linkage, structure, phi)
