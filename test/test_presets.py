@@ -153,7 +153,7 @@ def test_preset_points_move_as_the_presets(name, mechanism):
     for phi in ANGLES[::3]:
         reference, found = theirs(phi), ours(phi)
         size = max(abs(value) for motion in reference.values() for value in motion)
-        assert set(reference) <= set(found)
+        assert set(reference) == set(linkage.points) and set(reference) <= set(found)
         for point, motion in reference.items():
             assert found[point] == pytest.approx(motion, abs=TOLERANCE * size), point
 
