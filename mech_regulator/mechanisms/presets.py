@@ -14,11 +14,10 @@ motions (linkage.make_point_motions) and joint reactions (linkage.make_joint_loa
 - The frame is the link named 'frame' (as a scene's linkage), the crank 'crank'; the crank turns about the origin.
 - Joint names: the preset's (kinetostatics.CRANK_SLIDER_JOINTS, FOUR_BAR_JOINTS), so that a scene's
   `joint_friction.joints:` names the same joints. Each of their revolute joints lists the link farther from the
-  frame first,
-so that its reaction (the force on its first link from its second) is the preset's F_ij, the force of the
-  inner link i on the outer link j; its ratio (theta_first' - theta_second') is then the preset's relative speed for
-  the bearings and its negative for the pins (joint friction reads |R| and |ratio| only). The walking beam (no
-  kinetostatics as a preset) keeps the paper's joint names.
+  frame first, so that its reaction (the force on its first link from its second) is the preset's F_ij, the force
+  of the inner link i on the outer link j; its ratio (theta_first' - theta_second') is then the preset's relative
+  speed for the bearings and its negative for the pins (joint friction reads |R| and |ratio| only). The walking
+  beam (no kinetostatics as a preset) keeps the paper's joint names.
 - The preset's point names (mechanisms.point_motions) are the linkage's points of interest (`Linkage.points`):
   crank–slider B (crank pin) and C (wrist pin), four-bar B and C, walking beam A..E (its joints' names).
 - The output q: the crank–slider's slider x (the guide's point on the frame at x = 0, its direction the cylinder
