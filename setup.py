@@ -28,6 +28,7 @@ setup(
         "matplotlib>=3.8",
         "tqdm>=4.66",
         "numba>=0.60",
+        "sympy>=1.12",
     ],
     extras_require={
         "test": ["pytest>=8", "jsonschema>=4"],

@@ -96,3 +96,17 @@ def linkage_scene_entry(linkage) -> dict:
     elif linkage.output_link is not None:
         entry["output"] = {"link": linkage.output_link}
     return entry
+
+
+def preset_reduced(geometry, gravity):
+    """The product's reduced(phi) of a preset's geometry (crank_slider.CrankSliderGeometry, four_bar.FourBarGeometry
+    or walking_beam.WalkingBeamGeometry): its linkage (mechanisms/presets.py) through the code generated from its
+    groups (mechanisms/linkage/symbolic.py), what mechanisms.build_reduced runs for the scene."""
+    from mech_regulator.mechanisms import crank_slider, four_bar, presets, walking_beam
+    from mech_regulator.mechanisms.linkage import checked, symbolic
+
+    build = {crank_slider.CrankSliderGeometry: presets.crank_slider_linkage,
+             four_bar.FourBarGeometry: presets.four_bar_linkage,
+             walking_beam.WalkingBeamGeometry: presets.walking_beam_linkage}[type(geometry)]
+    linkage = build(geometry)
+    return symbolic.make_reduced(linkage, checked(linkage), gravity)

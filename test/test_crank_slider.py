@@ -21,10 +21,10 @@ import math
 import numpy as np
 import pytest
 
+from support import preset_reduced
 from mech_regulator.mechanisms.crank_slider import (
     CrankSliderGeometry,
     dead_centres,
-    make_reduced,
     slider_kinematics,
     stroke,
 )
@@ -337,7 +337,7 @@ def _potential(phi, g, gravity):
 @pytest.mark.parametrize("gravity", [(0.0, -9.81), (3.0, -8.5)], ids=["vertical", "tilted"])
 def test_make_reduced_inertia_and_weight(R, l, e, gravity):
     g = _geometry(R, l, e)
-    reduced = make_reduced(g, gravity)
+    reduced = preset_reduced(g, gravity)
     J_scale = g.rod_mass * (l + R) ** 2 + g.rod_inertia + g.slider_mass * R ** 2  # dominant size of J
     M_scale = (g.crank_mass + g.rod_mass + g.slider_mass) * math.hypot(*gravity) * (l + R)
     for phi in ANGLES:
@@ -359,7 +359,7 @@ def test_make_reduced_weight_integrates_to_zero_over_a_turn():
     smooth integrand is spectrally accurate), while the work over half a turn equals -(V(pi) - V(0))."""
     g = _geometry(0.1, 0.35, 0.04)
     gravity = (1.0, -9.81)
-    reduced = make_reduced(g, gravity)
+    reduced = preset_reduced(g, gravity)
     phis = np.linspace(0.0, 2 * math.pi, 721)
     M = np.array([reduced(p)[2] for p in phis])
     work = np.trapezoid(M, phis)
@@ -374,8 +374,8 @@ def test_make_reduced_weight_integrates_to_zero_over_a_turn():
 @pytest.mark.parametrize("gravity", [None, (0.0, 0.0)])
 def test_make_reduced_without_gravity(gravity):
     g = _geometry(0.1, 0.45, -0.02)
-    with_g = make_reduced(g, (0.0, -9.81))
-    without = make_reduced(g, gravity)
+    with_g = preset_reduced(g, (0.0, -9.81))
+    without = preset_reduced(g, gravity)
     for phi in ANGLES:
         J, dJ, Mw, x, dx = without(phi)
         assert Mw == 0.0
@@ -389,8 +389,8 @@ def test_make_reduced_massless_links():
     """Only the slider has mass: J = m x'^2 exactly, and only the crank has mass: no inertia, weight
     moment of a point mass on a circle (M = m g . r' = m r_cg (-gx sin phi + gy cos phi))."""
     R, l, e = 0.08, 0.3, 0.01
-    slider_only = make_reduced(_geometry(R, l, e, crank_mass=0.0, rod_mass=0.0, rod_inertia=0.0), None)
-    crank_only = make_reduced(_geometry(R, l, e, rod_mass=0.0, rod_inertia=0.0, slider_mass=0.0,
+    slider_only = preset_reduced(_geometry(R, l, e, crank_mass=0.0, rod_mass=0.0, rod_inertia=0.0), None)
+    crank_only = preset_reduced(_geometry(R, l, e, rod_mass=0.0, rod_inertia=0.0, slider_mass=0.0,
                                         crank_mass=3.0, crank_cg=0.05), (0.5, -9.81))
     for phi in ANGLES:
         dx = slider_kinematics(phi, R, l, e)[1]

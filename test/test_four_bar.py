@@ -19,11 +19,11 @@ import math
 import numpy as np
 import pytest
 
+from support import preset_reduced
 from mech_regulator.mechanisms.four_bar import (
     BRANCH_SIGN,
     FourBarGeometry,
     link_angles,
-    make_reduced,
     unassemblable_crank_ranges,
 )
 
@@ -386,7 +386,7 @@ def _potential(phi, g, branch, gravity):
 @pytest.mark.parametrize("a, b, c, d, th1", CRANK_ROCKERS)
 def test_make_reduced_inertia_and_weight(a, b, c, d, th1, branch, gravity):
     g = _geometry(a, b, c, d, th1, branch)
-    reduced = make_reduced(g, gravity)
+    reduced = preset_reduced(g, gravity)
     L = a + b + c + d
     J_scale = (g.coupler_mass + g.rocker_mass) * L ** 2 + g.coupler_inertia + g.rocker_inertia
     M_scale = (g.crank_mass + g.coupler_mass + g.rocker_mass) * math.hypot(*gravity) * L
@@ -407,8 +407,8 @@ def test_make_reduced_inertia_and_weight(a, b, c, d, th1, branch, gravity):
 @pytest.mark.parametrize("gravity", [None, (0.0, 0.0)])
 def test_make_reduced_without_gravity(gravity):
     g = _geometry(1.0, 2.6, 2.2, 3.0, 0.7, "crossed")
-    with_g = make_reduced(g, (0.0, -9.81))
-    without = make_reduced(g, gravity)
+    with_g = preset_reduced(g, (0.0, -9.81))
+    without = preset_reduced(g, gravity)
     for phi in ANGLES:
         J, dJ, Mw, th4, dth4 = without(phi)
         assert Mw == 0.0
@@ -419,7 +419,7 @@ def test_make_reduced_without_gravity(gravity):
 def test_make_reduced_weight_is_conservative_over_a_turn():
     """The weights' work over a full crank turn is zero (periodic trapezoid rule: spectrally accurate)."""
     g = _geometry(0.8, 3.2, 2.0, 3.0, -2.5, "open")
-    reduced = make_reduced(g, (1.5, -9.81))
+    reduced = preset_reduced(g, (1.5, -9.81))
     phis = np.linspace(0.0, TWO_PI, 721)
     M = np.array([reduced(p)[2] for p in phis])
     assert abs(np.trapezoid(M, phis)) <= 1e-10 * np.abs(M).max() * TWO_PI

@@ -1,12 +1,14 @@
-"""The preset mechanisms built as linkages (mechanisms/presets.py, issue 21) against the presets' closed forms.
+"""The preset mechanisms built as linkages (mechanisms/presets.py, issue 21) against the presets' closed forms
+(test/closed_forms.py: the hand-written reductions and kinetostatics the product ran before).
 
 For every bundled scene's mechanism and for random geometries (an offset, a crank mass and centre, V engines,
-four-bars open and crossed at any frame angle, walking beams with other masses and angles): the linkage's reduction
-(flat.reduced, compiled) equals mechanisms.build_reduced (J_links, dJ/dphi, M_weight, q, dq/dphi) to 1e-12 of each
-quantity's largest size over the turn, with and without gravity; a multi-cylinder engine's every piston (its guide's
-travel) equals engine.make_multi_reduced's; the preset's named point motions equal the linkage's; the joint loads
-joint friction reads (linkage.make_joint_loads) equal kinetostatics.py's; and a whole machine with joint friction
-(compressor_friction, four_bar_rocker) built on the linkage equals the preset machine to 1e-12.
+four-bars open and crossed at any frame angle, walking beams with other masses and angles): the product's reduction
+(mechanisms.build_reduced: the code generated from the linkage's groups) and the general solver's (flat.reduced,
+compiled) equal the closed forms (J_links, dJ/dphi, M_weight, q, dq/dphi) to 1e-12 of each quantity's largest size
+over the turn, with and without gravity; a multi-cylinder engine's every piston (its guide's travel) too; the
+preset's named point motions equal the closed forms'; the joint loads joint friction reads
+(mechanisms.build_kinetostatics, the linkage's by groups) equal the hand-written d'Alembert's; and a whole machine
+with joint friction (compressor_friction, four_bar_rocker) written as a scene's linkage equals the preset machine.
 """
 
 from __future__ import annotations
@@ -17,8 +19,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from mech_regulator.mechanisms import build_kinetostatics, build_reduced, point_motions, presets
-from mech_regulator.mechanisms.linkage import checked, make_joint_loads, make_point_motions, make_reduced
+import closed_forms
+from mech_regulator.mechanisms import (build_kinetostatics, build_reduced, kinetostatics, mechanism_geometry,
+                                       point_motions, presets)
+from mech_regulator.mechanisms.linkage import checked, make_reduced
 from mech_regulator.scene import load_scene, schema
 from support import linkage_scene_entry, model_of
 
@@ -104,32 +108,46 @@ def _pistons(linkage, structure, guides):
     return lambda phi: [reduced(phi)[3:] for reduced in reductions]
 
 
+def closed_form_reduced(mechanism, gravity):
+    """The preset's hand-written reduced(phi) (closed_forms.py); a multi-cylinder engine's with the pistons' tuples."""
+    geometry = mechanism_geometry(mechanism)
+    if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None:
+        return closed_forms.multi_cylinder_reduced(geometry, [c.throw_deg for c in mechanism.cylinders],
+                                                   [c.bank_deg for c in mechanism.cylinders], gravity)
+    build = {schema.CrankSlider: closed_forms.crank_slider_reduced, schema.FourBar: closed_forms.four_bar_reduced,
+             schema.WalkingBeam: closed_forms.walking_beam_reduced}[type(mechanism)]
+    return build(geometry, gravity)
+
+
 @pytest.mark.parametrize("name, mechanism", CASES, ids=[name for name, _ in CASES])
 @pytest.mark.parametrize("gravity", [None, GRAVITY], ids=["weightless", "gravity"])
 def test_preset_linkage_reduces_as_the_preset(name, mechanism, gravity):
-    """J_links, dJ/dphi, M_weight, q, q' of the linkage against the preset's, each to 1e-12 of its largest size
-    over the turn (a four-bar's rocker angle modulo 2 pi: test_four_bar_output_angle_...). A multi-cylinder
-    engine: the sums, and each piston's x_i, x_i' (its guide's travel) against make_multi_reduced's."""
+    """J_links, dJ/dphi, M_weight, q, q' of the product (the generated code) and of the general solver against the
+    closed form's, each to 1e-12 of its largest size over the turn (a four-bar's rocker angle too: the linkage reports
+    it within pi of its angle at phi = 0, as link_angles does). A multi-cylinder engine: the sums, and each piston's
+    x_i, x_i' (its guide's travel)."""
     linkage = presets.preset_linkage(mechanism)
     structure = checked(linkage)
-    ours, theirs = make_reduced(linkage, structure, gravity), build_reduced(mechanism, gravity)
+    theirs = closed_form_reduced(mechanism, gravity)
     several = isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
+    general = make_reduced(linkage, structure, gravity)
     pistons = _pistons(linkage, structure, presets.guide_joints(mechanism)) if several else None
-    rows, differences = [], []
-    for phi in ANGLES:
-        first, second = np.array(ours(phi)), theirs(phi)
-        if several:
-            first = np.concatenate([first[:3], np.ravel(pistons(phi))])
-            second = [*second[:3], *(value for pair in zip(second[3], second[4]) for value in pair)]
-        difference = first - np.array(second)
-        if isinstance(mechanism, schema.FourBar):
-            difference[3] = math.remainder(difference[3], 2.0 * math.pi)
-        rows.append(second)
-        differences.append(difference)
-    scales = _scales(np.array(rows))
-    assert np.all(np.abs(np.array(differences)) <= TOLERANCE * scales), (np.max(np.abs(differences), axis=0), scales)
-    weights = np.array(rows)[:, 2]
-    assert np.all(weights == 0.0) if gravity is None else np.any(weights != 0.0)   # weights compared, not zeros
+    products = [build_reduced(mechanism, gravity),
+                (lambda phi: (*general(phi)[:3], tuple(x for x, _ in pistons(phi)), tuple(dx for _, dx in pistons(phi))))
+                if several else general]
+    rows = np.array([np.array(_flat(theirs(phi))) for phi in ANGLES])
+    scales = _scales(rows)
+    for ours in products:
+        differences = np.array([_flat(ours(phi)) for phi in ANGLES]) - rows
+        assert np.all(np.abs(differences) <= TOLERANCE * scales), (np.max(np.abs(differences), axis=0), scales)
+    assert np.all(rows[:, 2] == 0.0) if gravity is None else np.any(rows[:, 2] != 0.0)   # weights compared, not zeros
+
+
+def _flat(values) -> list[float]:
+    """(J, dJ, weight, q, dq) with a multi-cylinder engine's tuples (x_1.., x_1'..) as x_1, x_1', x_2, ..."""
+    if isinstance(values[3], tuple):
+        return [*values[:3], *(value for pair in zip(values[3], values[4]) for value in pair)]
+    return list(values)
 
 
 def test_multi_cylinder_engine_has_a_crank_pin_rod_and_piston_per_cylinder():
@@ -149,7 +167,7 @@ def test_preset_points_move_as_the_presets(name, mechanism):
     """mechanisms.point_motions' points (crank-slider and four-bar B, C; walking beam A..E) under the same names
     from the linkage: position, P', P'' to 1e-12 of the mechanism's size."""
     linkage = presets.preset_linkage(mechanism)
-    ours, theirs = make_point_motions(linkage, checked(linkage)), point_motions(mechanism)
+    ours, theirs = point_motions(mechanism), closed_forms.preset_point_motions(mechanism)
     for phi in ANGLES[::3]:
         reference, found = theirs(phi), ours(phi)
         size = max(abs(value) for motion in reference.values() for value in motion)
@@ -171,9 +189,12 @@ def test_preset_linkage_joint_loads_are_the_presets(mechanism, gravity):
     every reaction's R0 and R1 (each joint lists its outer link first: the preset's F_ij) and the balancing moment
     to 1e-12 of the largest; the ratios equal for the bearings and the guide, opposite for the pins (the linkage's
     theta_first' - theta_second' is the outer link's, the preset's the inner link's)."""
-    linkage = presets.preset_linkage(mechanism)
-    ours, names = make_joint_loads(linkage, checked(linkage), gravity)
-    theirs, preset_names = build_kinetostatics(mechanism, gravity)
+    ours, names = build_kinetostatics(mechanism, gravity)
+    geometry, weight = mechanism_geometry(mechanism), gravity if gravity is not None else (0.0, 0.0)
+    if isinstance(mechanism, schema.CrankSlider):
+        theirs, preset_names = closed_forms.crank_slider_kinetostatics(geometry, weight), kinetostatics.CRANK_SLIDER_JOINTS
+    else:
+        theirs, preset_names = closed_forms.four_bar_kinetostatics(geometry, weight), kinetostatics.FOUR_BAR_JOINTS
     assert names == preset_names
     signs = np.array([1.0, -1.0, -1.0, 1.0])
     rng = np.random.default_rng(3)
@@ -189,22 +210,21 @@ def test_preset_linkage_joint_loads_are_the_presets(mechanism, gravity):
         assert np.abs(np.array(first.ratios) - signs * second.ratios).max() <= TOLERANCE * max(map(abs, second.ratios))
 
 
-def test_four_bar_output_angle_is_the_presets_within_pi_and_wrapped_outside():
-    """four_bar.link_angles' th4 is continuous around the direction D->A (it may leave [-pi, pi]); the linkage's
-    output link angle is the rocker's pose angle, taken in [-pi, pi] (flat._pin). They are equal where th4 lies in
-    [-pi, pi] (the bundled four_bar_rocker over its whole turn) and differ by a whole 2 pi elsewhere: with the frame
-    at 150 deg the rocker hangs around th1 + pi = 330 deg, so th4 > pi over the whole turn and q = th4 - 2 pi."""
-    def outputs(mechanism):
-        linkage = presets.preset_linkage(mechanism)
-        ours, theirs = make_reduced(linkage, checked(linkage), None), build_reduced(mechanism, None)
-        return np.array([(ours(phi)[3], theirs(phi)[3]) for phi in ANGLES])
-
-    bundled = outputs(bundled_mechanism("four_bar_rocker"))
-    assert np.all(np.abs(bundled[:, 1]) <= math.pi)
-    assert np.abs(bundled[:, 0] - bundled[:, 1]).max() <= TOLERANCE * math.pi
-    turned = outputs(bundled_mechanism("four_bar_rocker").model_copy(update={"frame_angle_deg": 150.0}))
-    assert np.all(turned[:, 1] > math.pi)
-    assert np.abs(turned[:, 0] - (turned[:, 1] - 2.0 * math.pi)).max() <= TOLERANCE * math.pi
+def test_four_bar_output_angle_follows_the_rocker_beyond_pi():
+    """four_bar.link_angles' th4 is continuous around the direction D->A (it may leave [-pi, pi]); the linkage reports
+    its output link's angle within pi of its angle at phi = 0 (Linkage.output_reference), so the two agree where th4
+    lies beyond pi too: with the frame at 150 deg the rocker hangs around th1 + pi = 330 deg over the whole turn. A
+    reference 2 pi away gives the angle 2 pi away (the reference is what is read)."""
+    mechanism = bundled_mechanism("four_bar_rocker").model_copy(update={"frame_angle_deg": 150.0})
+    theirs = closed_form_reduced(mechanism, None)
+    expected = np.array([theirs(phi)[3] for phi in ANGLES])
+    assert np.all(expected > math.pi)
+    linkage = presets.preset_linkage(mechanism)
+    for ours in (build_reduced(mechanism, None), make_reduced(linkage, checked(linkage), None)):
+        assert np.abs(np.array([ours(phi)[3] for phi in ANGLES]) - expected).max() <= TOLERANCE * math.pi
+    shifted = replace(linkage, output_reference=linkage.output_reference - 2.0 * math.pi)
+    moved = make_reduced(shifted, checked(shifted), None)
+    assert np.abs(np.array([moved(phi)[3] for phi in ANGLES]) - (expected - 2.0 * math.pi)).max() <= 1e-12 * math.pi
 
 
 # ----------------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ from mech_regulator.analysis.kinematics import kinematics_table
 from mech_regulator.mechanisms import walking_beam
 from mech_regulator.mechanisms.drawing import mechanism_outline
 from mech_regulator.scene.loading import read_scene_data
-from support import model_of, run_cli, scene, simulate_complete, write_scene
+from support import model_of, preset_reduced, run_cli, scene, simulate_complete, write_scene
 
 TWO_PI = 2.0 * math.pi
 OMEGA = 10.0  # the paper's crank speed [rad/s]
@@ -144,10 +144,12 @@ def test_coupler_curve_fills_the_axes_of_figure_5c(paper_table):
 
 
 def test_point_pairs_have_the_same_velocity_and_acceleration(paper_table):
-    """Figures 6b,c and 7b,c plot B with E and C with D: one curve each."""
+    """Figures 6b,c and 7b,c plot B with E and C with D: one curve each (to rounding: E and D are placed on their own
+    links, the parallelograms' groups)."""
     for first, second in (("B", "E"), ("C", "D")):
         for key in ("vx", "vy", "ax", "ay"):
-            assert np.array_equal(paper_table[f"{first}_{key}"], paper_table[f"{second}_{key}"])
+            scale = np.abs(paper_table[f"{first}_{key}"]).max()
+            assert np.abs(paper_table[f"{first}_{key}"] - paper_table[f"{second}_{key}"]).max() <= 1e-12 * scale
     assert not np.allclose(paper_table["B_v"], paper_table["C_v"])
 
 
@@ -171,7 +173,7 @@ def test_reduced_inertia_is_the_definition_with_numerical_velocities(numerical):
     """J = sum m |v_S / omega|^2 + J_S (omega_k / omega)^2 with every centre of mass and link angle from the
     fsolve positions (central differences): coupler, two rockers, tie, side link, shuttle."""
     g = GEOMETRY._replace(**MASSES)
-    reduced = walking_beam.make_reduced(g, None)
+    reduced = preset_reduced(g, None)
     O2 = g.frame * cmath.exp(1j * g.frame_angle)
     s = g.beam_length * cmath.exp(1j * g.beam_angle)
     bc_angle = cmath.phase(walking_beam.side(g))
@@ -196,7 +198,7 @@ def test_inertia_derivative_and_weight_moment_match_differences():
     """dJ/dphi against a central difference of J; M_weight = -dV/dphi with the potential
     V = -g . sum m S (centres of mass from the closed-form points)."""
     g = GEOMETRY._replace(**MASSES)
-    reduced = walking_beam.make_reduced(g, GRAVITY)
+    reduced = preset_reduced(g, GRAVITY)
     gravity = complex(*GRAVITY)
     O2 = g.frame * cmath.exp(1j * g.frame_angle)
     bc_angle = cmath.phase(walking_beam.side(g))

@@ -21,7 +21,7 @@ working cycle lags cylinder 1's by its firing delay d_i: cycle angle `theta_i(ph
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple, Sequence
+from typing import NamedTuple, Sequence
 
 from mech_regulator.mechanisms import crank_slider
 
@@ -83,38 +83,6 @@ def mean_piston_speed(stroke: float, omega: float) -> float:
 def cylinder_shifts(throws_deg: Sequence[float], banks_deg: Sequence[float]) -> tuple[float, ...]:
     """Each cylinder's own crank angle minus phi [rad]: `phi_i - phi = throw_i - bank_i`."""
     return tuple(math.radians(throw - bank) for throw, bank in zip(throws_deg, banks_deg))
-
-
-def make_multi_reduced(geometry: crank_slider.CrankSliderGeometry, throws_deg: Sequence[float],
-                       banks_deg: Sequence[float], gravity: tuple[float, float] | None
-                       ) -> Callable[[float], tuple[float, float, float, tuple[float, ...], tuple[float, ...]]]:
-    """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, (x_1..x_n), (x_1'..x_n'))` of n identical
-    cylinders on one crankshaft: each term is the single cylinder's at its own crank angle phi_i = phi +
-    throw_i - bank_i (d phi_i / d phi = 1), its gravity turned into the cylinder's frame
-    `g_i = (gx cos b + gy sin b, -gx sin b + gy cos b)`, b = bank_i. Kinetic energy and power do not depend on
-    the frame, so `J = sum_i J_1(phi_i)`, `J' = sum_i J_1'(phi_i)`, `M_weight = sum_i M_weight,i`. The crank
-    mass counts once per cylinder (each throw's share of the crankshaft)."""
-    parts = []
-    for shift, bank in zip(cylinder_shifts(throws_deg, banks_deg), banks_deg):
-        turned = None
-        if gravity is not None:
-            c, s = math.cos(math.radians(bank)), math.sin(math.radians(bank))
-            turned = (gravity[0] * c + gravity[1] * s, -gravity[0] * s + gravity[1] * c)
-        parts.append((shift, crank_slider.make_reduced(geometry, turned)))
-
-    def reduced(phi: float) -> tuple[float, float, float, tuple[float, ...], tuple[float, ...]]:
-        J = dJ = weight = 0.0
-        xs, dxs = [], []
-        for shift, single in parts:
-            J_i, dJ_i, weight_i, x_i, dx_i = single(phi + shift)
-            J += J_i
-            dJ += dJ_i
-            weight += weight_i
-            xs.append(x_i)
-            dxs.append(dx_i)
-        return J, dJ, weight, tuple(xs), tuple(dxs)
-
-    return reduced
 
 
 def firing_delays(throws_deg: Sequence[float], banks_deg: Sequence[float], cycle_deg: float,

@@ -113,7 +113,9 @@ def four_bar_linkage(g: four_bar.FourBarGeometry) -> Linkage:
         joints=(_revolute(CRANK_BEARING, CRANK, FRAME), _revolute(CRANK_PIN, "coupler", CRANK),
                 _revolute(ROCKER_PIN, "rocker", "coupler"), _revolute(ROCKER_BEARING, "rocker", FRAME)),
         frame=FRAME, crank=CRANK, branches={ROCKER_PIN: -int(g.branch_sign)}, points=("B", "C"),
-        output_link="rocker")
+        output_link="rocker",
+        output_reference=four_bar.rocker_angle(0.0, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle,
+                                               g.branch_sign))
 
 
 def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import cmath
 import math
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 from mech_regulator.mechanisms.four_bar import BRANCH_SIGN, link_angles
 
@@ -104,50 +104,6 @@ def solve(phi: float, geometry: WalkingBeamGeometry) -> tuple[tuple[float, ...],
     angles, A, B, C = _loop_points(phi, geometry, geometry.frame * cmath.exp(1j * geometry.frame_angle))
     s = beam(geometry)
     return angles, {"A": A, "B": B, "C": C, "D": (C[0] + s, C[1], C[2]), "E": (B[0] + s, B[1], B[2])}
-
-
-def make_reduced(geometry: WalkingBeamGeometry, gravity: tuple[float, float] | None
-                 ) -> Callable[[float], tuple[float, float, float, float, float]]:
-    """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, x_C, x_C')` for this walking beam.
-
-    By the definition of the reduced inertia (physics.md section 1), J_links = sum_k m_k |S_k'|^2 + J_k th_k'^2:
-    coupler S2 = A + u2 e^{i (th3 + gamma2)} turning with th3; the two rockers (identical) S3 = O2 + u3 e^{i th4}
-    and its copy, turning with th4; the tie B E translating with B; the side link S6 = E + u6 e^{i th6},
-    th6 = th3 + arg(BC) turning with th3; the shuttle bar translating with C. dJ/dphi = 2 sum_k
-    (m_k Re(conj(S_k') S_k'') + J_k th_k' th_k''); M_weight = Re(conj(g) sum_k m_k S_k') with the crank's
-    m1 u1 i e^{i phi}. The output coordinate is the shuttle bar's horizontal position x_C = Re C.
-    The crank's own inertia belongs to the machine's constant inertia.
-    """
-    g = geometry
-    bc = side(g)
-    side_angle = cmath.phase(bc)
-    m2, u2, gamma2, J2 = g.coupler_mass, g.coupler_cg, g.coupler_cg_angle, g.coupler_inertia
-    m3, u3, J3 = 2.0 * g.rocker_mass, g.rocker_cg, 2.0 * g.rocker_inertia  # both rockers move alike
-    m4, m6, u6, J6, m7 = g.tie_mass, g.side_mass, g.side_cg, g.side_inertia, g.shuttle_mass
-    J_coupler_side = J2 + J6  # both turn with th3
-    m1u1 = g.crank_mass * g.crank_cg
-    O2 = g.frame * cmath.exp(1j * g.frame_angle)
-    gravity_c = complex(*gravity) if gravity is not None else 0j
-    with_weight = gravity_c != 0j
-
-    def reduced(phi: float) -> tuple[float, float, float, float, float]:
-        (th3, dth3, ddth3, th4, dth4, ddth4), A, B, C = _loop_points(phi, g, O2)
-        dS2, ddS2 = arm(A, u2, th3 + gamma2, dth3, ddth3)[1:]
-        dS3, ddS3 = arm((O2, 0j, 0j), u3, th4, dth4, ddth4)[1:]
-        dS6, ddS6 = arm(B, u6, th3 + side_angle, dth3, ddth3)[1:]  # about E = B + s: the derivatives of B's arm
-        dB, ddB, dC, ddC = B[1], B[2], C[1], C[2]
-        J = (m2 * abs(dS2) ** 2 + m3 * abs(dS3) ** 2 + m4 * abs(dB) ** 2 + m6 * abs(dS6) ** 2 + m7 * abs(dC) ** 2
-             + J_coupler_side * dth3 * dth3 + J3 * dth4 * dth4)
-        dJ = 2.0 * (m2 * (dS2.conjugate() * ddS2).real + m3 * (dS3.conjugate() * ddS3).real
-                    + m4 * (dB.conjugate() * ddB).real + m6 * (dS6.conjugate() * ddS6).real
-                    + m7 * (dC.conjugate() * ddC).real + J_coupler_side * dth3 * ddth3 + J3 * dth4 * ddth4)
-        weight = 0.0
-        if with_weight:
-            weight = (gravity_c.conjugate() * (m1u1 * 1j * cmath.exp(1j * phi) + m2 * dS2 + m3 * dS3 + m4 * dB
-                                               + m6 * dS6 + m7 * dC)).real
-        return J, dJ, weight, C[0].real, dC.real
-
-    return reduced
 
 
 def change_point(geometry: WalkingBeamGeometry, samples: int = 720) -> str | None:

@@ -25,8 +25,9 @@ order; a joint record is JOINT_SIZE floats [kind (0 revolute, 1 prismatic), link
 the guide's direction u (cos, sin), slider_angle], a and b as in model.Joint.links, p_a, p_b the joint's point in
 each link [m]):
   header: number of links, number of groups, crank link, output kind (0 none, 1 link angle, 2 prismatic joint
-  travel), output link, output joint record, gravity (gx, gy) [m/s^2], the crank pivot on the frame (x, y) [m] and
-  on the crank (x, y) [m];
+  travel), output link, output joint record, gravity (gx, gy) [m/s^2], the output reference angle [rad] (a link
+  output's angle is reported within pi of it, model.Linkage.output_reference), the crank pivot on the frame (x, y)
+  [m] and on the crank (x, y) [m];
   per link LINK_SIZE floats: mass [kg], centre of mass (x, y) [m, own coordinates], inertia about it [kg m^2];
   per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT), branch (+1 or -1), link L1, link L2 (-1 for a
   redundant link), then three joint records: E1, internal, E2 (a redundant link: its two joints, then zeros);
@@ -59,7 +60,8 @@ JOINT_SIZE = 10
 LINK_SIZE = 4
 GROUP_SIZE = 4 + 3 * JOINT_SIZE
 POSE_SIZE = 11
-HEADER_SIZE = 5 + JOINT_SIZE + 6
+HEADER_SIZE = 5 + JOINT_SIZE + 7
+OUTPUT_REFERENCE = 7 + JOINT_SIZE   # the header's output reference angle (module docstring)
 SCRATCH_SHAPE = (14, 6)   # differentiate_group's A, A^-1, K k' and K k''
 DEAD_POINT_CONDITION = 1e10   # condition of a group's equations beyond which its ratios count as infinite [-]
 TWO_PI = 2.0 * math.pi
@@ -103,7 +105,8 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
     on_frame = linkage.link(linkage.frame).points[pivot.name]
     on_crank = linkage.link(linkage.crank).points[pivot.name]
     program = [float(len(index)), float(len(groups)), float(index[linkage.crank]), output_kind, output_link,
-               *output_joint, gx, gy, on_frame.real, on_frame.imag, on_crank.real, on_crank.imag]
+               *output_joint, gx, gy, linkage.output_reference, on_frame.real, on_frame.imag, on_crank.real,
+               on_crank.imag]
     for name in index:
         link = linkage.link(name)
         program += [link.mass, link.centre.real, link.centre.imag, link.inertia]
@@ -535,11 +538,17 @@ def motion(poses, link, point):
             complex(poses[k + 6], poses[k + 7]) + complex(-poses[k + 5] * poses[k + 5], poses[k + 8]) * q)
 
 
+def near(angle, reference):
+    """The angle [rad] plus the multiple of 2 pi that puts it within pi of `reference`:
+    `angle - 2 pi floor((angle - reference) / (2 pi) + 1/2)`."""
+    return angle - TWO_PI * math.floor((angle - reference) / TWO_PI + 0.5)
+
+
 def reduced_from_poses(program, base, poses):
     """(J_links, dJ_links/dphi, M_weight, q, q') from solved poses: over the moving links k (the crank included)
     with centres S_k and angles theta_k, `J_links = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k
     Re(conj(S_k') S_k'') + I_k theta_k' theta_k'')`, `M_weight = sum m_k g . S_k'`; the output q: a link's angle
-    theta [rad] and theta', or a prismatic joint's travel `q = Re((P_s - P_g) conj w)` [m] (w the guide's direction),
+    theta [rad] (within pi of the output reference angle, `near`) and theta', or a prismatic joint's travel `q = Re((P_s - P_g) conj w)` [m] (w the guide's direction),
     `q' = Re(d' conj w) + theta_g' Im(d conj w)`; (0, 0) without an output."""
     n_links = int(program[base])
     gravity = complex(program[base + 5 + JOINT_SIZE], program[base + 6 + JOINT_SIZE])
@@ -555,7 +564,8 @@ def reduced_from_poses(program, base, poses):
     output = program[base + 3]
     if output == 1.0:
         link = int(program[base + 4])
-        return J, dJ, weight, poses[POSE_SIZE * link + 2], poses[POSE_SIZE * link + 5]
+        return J, dJ, weight, near(poses[POSE_SIZE * link + 2], program[base + OUTPUT_REFERENCE]), \
+            poses[POSE_SIZE * link + 5]
     if output == 0.0:
         return J, dJ, weight, 0.0, 0.0
     j = base + 5
@@ -786,7 +796,7 @@ def _registered() -> None:
                      _angle_across, _origin_line, _lines_cross, _lines_meet, place_group, joint_rows, joint_quadratic,
                      _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
                      _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
-                     motion, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,
+                     motion, near, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,
                      _solve_group_reactions, kinetostatics, joint_reactions, workspace_sizes):
         register_jitable(_nrt=False)(function)
 

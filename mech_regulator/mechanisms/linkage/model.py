@@ -68,7 +68,8 @@ class Linkage:
     driving link, for the structural count only), the assembly branch (+1 or -1) of each group named by its
     internal joint (a group not named takes +1), the points of interest (names of link points whose motion is
     reported) and the output: a prismatic joint (q = the slider's travel along the guide [m]) or a link (q = its
-    angle [rad]), or None."""
+    angle [rad], reported within pi of output_reference [rad], so that a rocker swinging across +-pi stays
+    continuous), or None."""
 
     links: tuple[Link, ...]
     joints: tuple[Joint, ...]
@@ -78,6 +79,7 @@ class Linkage:
     points: tuple[str, ...] = ()
     output_joint: str | None = None
     output_link: str | None = None
+    output_reference: float = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, "_by_name", {link.name: link for link in self.links})

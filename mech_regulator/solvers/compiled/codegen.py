@@ -34,13 +34,11 @@ location.
 
 from __future__ import annotations
 
-import cmath
 import functools
 import hashlib
 import importlib.util
 import inspect
 import math
-import os
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -49,19 +47,19 @@ import numba
 import numpy as np
 
 import mech_regulator
+from mech_regulator.cache import folder as cache_folder, write as _write
 from mech_regulator.model import MachineModel
 from mech_regulator.model.machine import StateTable
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator import mechanisms
 from mech_regulator.effects import held_positions, joint_friction, output_position_of
-from mech_regulator.mechanisms import engine, kinetostatics, walking_beam
-from mech_regulator.mechanisms.linkage import flat
-from mech_regulator.scene import SceneError, schema
+from mech_regulator.mechanisms import engine
+from mech_regulator.mechanisms.linkage import flat, symbolic
+from mech_regulator.scene import schema
 from mech_regulator.solvers.compiled import kernels
 from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
 from mech_regulator.solvers.time_domain import _anchors, _break, _journals
 
-CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
@@ -323,33 +321,6 @@ def _kernels_source() -> str:
     return inspect.getsource(kernels) + inspect.getsource(flat)
 
 
-def cache_folder() -> Path:
-    """Where generated modules live: $MECH_REGULATOR_CACHE, else $XDG_CACHE_HOME/mech_regulator/compiled, else
-    ~/.cache/mech_regulator/compiled (created on first use)."""
-    folder = os.environ.get(CACHE_VARIABLE)
-    if not folder:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        folder = os.path.join(base, "mech_regulator", "compiled")
-    path = Path(folder)
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise SceneError(f"{CACHE_VARIABLE}: cannot make the fast path's cache folder '{path}': "
-                         f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})") from None
-    return path
-
-
-def _write(path: Path, source: str) -> None:
-    """Write the module atomically (another process may be importing the same file)."""
-    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        temporary.write_text(source, encoding="utf-8")
-        os.replace(temporary, path)
-    except OSError as error:
-        raise SceneError(f"{CACHE_VARIABLE}: cannot write the fast path's cache folder '{path.parent}': "
-                         f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})") from None
-
-
 def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.ndarray:
     """A linear guard's row [1, c0, c1..c_n] with one nonzero coefficient."""
     row = np.zeros(n_states + 2)
@@ -399,6 +370,7 @@ class _Parameters:
         self.values: list[float] = [0.0] * SEGMENT_SLOTS
         self.values[HELD_THROTTLE] = 1.0
         self.tables: list[tuple[int, list[float]]] = []
+        self.functions: dict[str, str] = {}   # name -> source of the generated functions the module calls
 
     def scalar(self, value: float) -> str:
         return f"p[{self.slot(value)}]"
@@ -496,56 +468,21 @@ def _held_position_call(kinks, output_position, p: _Parameters, anchor: str) -> 
 
 def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[str, ...]) -> list[str]:
     """Source assigning a mechanism's reduced(phi) (mechanisms.build_reduced) at `angle` to the five `names` (J_links,
-    dJ, weight, q, dq); gravity None or massless links: the weight moment is not computed (with_weight 0 in p).
-    Several cylinders (mechanisms.engine.make_multi_reduced): cylinder 1's call assigns the names, cylinder k's
-    (k >= 2), at angle + throw_k - bank_k with gravity turned into its frame, is added to the first three and its
-    q, dq are named q_k, dq_k (what the engine's gas moment reads). A general linkage: its program
-    (mechanisms/linkage/flat.py's encode, gravity None: zero) stored as a table in p and flat.reduced compiled
-    (kernels.linkage_reduced), the very function the reference path calls."""
-    target = ", ".join(names)
-    if isinstance(mechanism, schema.Linkage):  # the program of mechanisms/linkage/flat.py, run by flat.reduced
-        core, structure = mechanisms.mechanism_geometry(mechanism)
-        program = p.table(flat.encode(core, structure.groups, gravity)).rsplit(", ", 1)[0]   # 'p, offset'
-        return [f"{target} = k.linkage_reduced({angle}, {program})"]
-    gx, gy = gravity if gravity is not None else (0.0, 0.0)
-    weighs = float(gravity is not None and (gx != 0.0 or gy != 0.0)
-                   and any(getattr(mechanism, key) > 0 for key in type(mechanism).model_fields if key.endswith("_mass")))
-    if isinstance(mechanism, schema.CrankSlider):
-        m = mechanism
-        geometry = [p.scalar(v) for v in (m.crank, m.rod, m.offset, m.crank_mass * m.crank_cg, m.rod_cg / m.rod,
-                                          m.rod_mass, m.rod_inertia, m.slider_mass)]
-        if m.cylinders is None:
-            args = geometry + [p.scalar(gx), p.scalar(gy)]
-            return [f"{target} = k.crank_slider_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
-        with_weight = f"{p.scalar(weighs)} != 0.0"
-        throws, banks = [c.throw_deg for c in m.cylinders], [c.bank_deg for c in m.cylinders]
-        lines = []
-        for number, (shift, bank) in enumerate(zip(engine.cylinder_shifts(throws, banks), banks), start=1):
-            c, s = math.cos(math.radians(bank)), math.sin(math.radians(bank))
-            turned = [p.scalar(gx * c + gy * s), p.scalar(-gx * s + gy * c)]
-            call = f"k.crank_slider_reduced({angle} + {p.scalar(shift)}, {', '.join(geometry + turned)}, {with_weight})"
-            if number == 1:
-                lines.append(f"{target} = {call}")
-            else:
-                J, dJ, weight, q, dq = names
-                lines += [f"J_k, dJ_k, weight_k, {q}_{number}, {dq}_{number} = {call}",
-                          f"{J} += J_k", f"{dJ} += dJ_k", f"{weight} += weight_k"]
-        return lines
-    if isinstance(mechanism, schema.WalkingBeam):
-        g = walking_beam.geometry_from_scene(mechanism)
-        args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.coupler_point,
-                g.coupler_point_angle, g.coupler_cg, g.coupler_cg_angle, g.coupler_mass,
-                g.coupler_inertia + g.side_inertia, 2.0 * g.rocker_mass, g.rocker_cg, 2.0 * g.rocker_inertia,
-                g.tie_mass, g.side_mass, g.side_cg, cmath.phase(walking_beam.side(g)), g.shuttle_mass,
-                g.crank_mass * g.crank_cg, gx, gy]
-        args = [p.scalar(v) for v in args]
-        return [f"{target} = k.walking_beam_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
-    m = mechanism
-    args = [m.crank, m.coupler, m.rocker, m.frame, math.radians(m.frame_angle_deg),
-            {"open": -1.0, "crossed": 1.0}[m.branch], m.crank_mass * m.crank_cg, m.coupler_mass, m.coupler_cg,
-            m.coupler_inertia, m.rocker_mass, m.rocker_cg, m.rocker_inertia, gx, gy]
-    args = [p.scalar(v) for v in args]
-    return [f"{target} = k.four_bar_reduced({angle}, {', '.join(args)}, {p.scalar(weighs)} != 0.0)"]
+    dJ, weight, q, dq): the generated function of its linkage (mechanisms.linkage_of: a preset's or the scene's own;
+    mechanisms/linkage/symbolic.py), the very source the reference path runs, added to the module (p.functions), on
+    the linkage's program (flat.encode; gravity None: zero, no weight moment) stored as a table in p. Several outputs
+    (a multi-cylinder engine's pistons): the first assigns q, dq, output k (k >= 2) q_k, dq_k (what the engine's gas
+    moment reads)."""
+    core, structure, outputs = mechanisms.linkage_of(mechanism)
+    program = flat.encode(core, structure.groups, gravity)
+    name, source = symbolic.reduced_source(program, symbolic.output_records(program, core, outputs))
+    p.functions[name] = source
+    call = f"{name}({angle}, {p.table(program).rsplit(', ', 1)[0]})"   # 'p, int(p[slot])': the program's offset
+    if len(outputs) <= 1:
+        return [f"{', '.join(names)} = {call}"]
+    J, dJ, weight, q, dq = names
+    rest = "".join(f", {q}_{k}, {dq}_{k}" for k in range(2, len(outputs) + 1))
+    return [f"{J}, {dJ}, {weight}, {q}, {dq}{rest} = {call}"]
 
 
 def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None,
@@ -720,7 +657,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         n_guards += 2
         guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
-    source = _module(body, guard_lines, n_guards, reaction_lines)
+    source = _module(body, guard_lines, n_guards, reaction_lines, p.functions)
     return (source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
             len(journals), n_normals)
 
@@ -773,23 +710,9 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     lines += scaled
     machine = model.scene.machine
     joints = _kinetostatics_joints(machine.mechanism)
-    if isinstance(machine.mechanism, schema.Linkage):  # flat.joint_loads on the program in p, with its gravity
-        core, structure = mechanisms.mechanism_geometry(machine.mechanism)
-        program = p.table(flat.encode(core, structure.groups, machine.gravity)).rsplit(", ", 1)[0]  # 'p, offset'
-        lines.append(f"R0, R1, ratios, _, _ = k.linkage_joint_loads(phi, omega, force, {program})")
-    else:
-        gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
-        g = mechanisms.mechanism_geometry(machine.mechanism)
-        if isinstance(machine.mechanism, schema.CrankSlider):
-            args = [g.crank, g.rod, g.offset, g.rod_cg / g.rod, g.crank_mass, g.crank_cg, g.rod_mass, g.rod_inertia,
-                    g.slider_mass, gx, gy]
-            kernel = "crank_slider_joint_loads"
-        else:
-            args = [g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign, g.crank_mass, g.crank_cg,
-                    g.coupler_mass, g.coupler_cg, g.coupler_inertia, g.rocker_mass, g.rocker_cg, g.rocker_inertia, gx,
-                    gy]
-            kernel = "four_bar_joint_loads"
-        lines.append(f"R0, R1, ratios = k.{kernel}(phi, omega, force, {', '.join(p.scalar(v) for v in args)})")
+    core, structure, _ = mechanisms.linkage_of(machine.mechanism)   # flat.joint_loads on its program, with gravity
+    program = p.table(flat.encode(core, structure.groups, machine.gravity)).rsplit(", ", 1)[0]  # 'p, offset'
+    lines.append(f"R0, R1, ratios, _, _ = k.linkage_joint_loads(phi, omega, force, {program})")
     arms = [0.0] * len(joints)  # a joint without friction: arm 0, its terms exact zeros
     for index, arm_length in zip(friction.indices, friction.arms):
         arms[index] = arm_length
@@ -805,13 +728,8 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
 
 
 def _kinetostatics_joints(mechanism) -> tuple[str, ...]:
-    """The joints a mechanism's kinetostatics reports, in its order (mechanisms.build_kinetostatics): the crank–slider's
-    and the four-bar's four, a linkage's all."""
-    if isinstance(mechanism, schema.Linkage):
-        return tuple(joint.name for joint in mechanisms.mechanism_geometry(mechanism)[0].joints)
-    if isinstance(mechanism, schema.CrankSlider):
-        return kinetostatics.CRANK_SLIDER_JOINTS
-    return kinetostatics.FOUR_BAR_JOINTS
+    """The joints a mechanism's kinetostatics reports, in its order (mechanisms.build_kinetostatics): its linkage's."""
+    return tuple(joint.name for joint in mechanisms.linkage_of(mechanism)[0].joints)
 
 
 def _crank_guard_lines() -> list[str]:
@@ -929,8 +847,10 @@ def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tupl
     return rhs, guards
 
 
-def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_body: list[str]) -> str:
-    """The generated module's source (`reactions` only with a reaction_body)."""
+def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_body: list[str],
+            functions: dict[str, str]) -> str:
+    """The generated module's source (`reactions` only with a reaction_body), the generated `functions` (name ->
+    source) compiled before the right-hand side that calls them."""
     indent = "\n    "
     guards = [f"for i in range({n_guards}):", "    levels[i] = math.inf", "omega = y[1]", "g = 0"] + guard_body
     signatures = f"GUARDS_SIGNATURE, {'REACTIONS_SIGNATURE, ' if reaction_body else ''}RHS_SIGNATURE"
@@ -945,6 +865,7 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
         "from numba import cfunc, njit\n\n"
         "from mech_regulator.solvers.compiled import kernels as k\n"
         f"from mech_regulator.solvers.compiled.signatures import {signatures}\n\n\n"
+        + "".join(f"@njit(cache=True)\n{source}\n\n" for source in functions.values()) +
         "@njit(RHS_SIGNATURE, cache=True)\n"
         f"def rhs(t, y, p, dydt):{indent}{indent.join(rhs_body)}\n\n\n"
         "@njit(GUARDS_SIGNATURE, cache=True)\n"

@@ -1,0 +1,485 @@
+"""A linkage's reduced(phi) as straight-line code, generated per linkage from its groups' closed forms (issue 21).
+
+The general solver (flat.py) places each group by its closed form and differentiates it through the group's 6 x 6
+constraint system; that costs some 0.45 us per call on a crank–slider whose hand-written formula costs 0.025 us.
+This module writes, once per kind of linkage, the function a designer would write by hand: each group's position
+in closed form without angles (a link's pose is its origin r and its turn e^{i theta} = (cos theta, sin theta),
+both algebraic in the known poses: no sine, cosine or arctangent but the crank's), and its first and second
+derivatives with respect to phi by the chain rule, symbolically (sympy), common subexpressions shared (sympy.cse).
+The fast path compiles the source into a scene's module and the reference path runs the very same source as plain
+Python, so both give the same numbers; flat.py stays the solver of everything else (structure, kinematics,
+kinetostatics, the messages of a group that cannot assemble) and the tests hold the two to 1e-12.
+
+The closed forms per group (groups.py's module docstring; sigma the group's branch):
+- RRR: with v = D - B, f^2 = |v|^2, `C = B + a v + sigma h i v`, a = (l1^2 - l2^2 + f^2) / (2 f^2),
+  h = sqrt(l1^2 / f^2 - a^2) (the acos form's C = B + l1 e^{i (arg v + sigma acos ...)} without its angles);
+- RRP: C on the line c + s w of L2's known angle, `C = m + B + w (-Re(m conj w) + sigma sqrt(Re(m conj w)^2 - |m|^2
+  + l1^2))`, m = c + p_C e^{i theta2} - B;
+- RPR: the guide's turn `e^{i theta_g} = (Ps - Pg) conj(u) (sigma sqrt(rho^2 - h^2) + i h) / rho^2` (rho = |Ps - Pg|,
+  h the line's offset from the pivots), the slider's e^{i theta_g} e^{i alpha};
+- PRP, RPP: intersections of two known lines, `c1 + w1 Im((c2 - c1) conj w2) / Im(w1 conj w2)`;
+- a link through two known points P, T (a dyad's links, a redundant link): `e^{i theta} = (T - P) conj(d) / |d|^2`,
+  d its own vector between the two points, r = P - p e^{i theta}.
+Then, over the moving links k with centres S_k = r_k + c_k e^{i theta_k} and theta' = Re(e) Im(e)' - Im(e) Re(e)'
+(e = e^{i theta}): `J = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k S_k'.S_k'' + I_k theta_k'
+theta_k'')` (the crank's term the constant m |c - p_A|^2 + I, p_A its pivot, written so: it is exactly zero for a
+preset's crank, whose inertia is in machine.inertia), `M_weight = sum m_k g.S_k'` and the outputs: a prismatic joint's travel `q = Re((P_s - P_g) conj w)` or
+a link's angle atan2(Im e, Re e) (within pi of the output reference, flat.near), with q' (flat.reduced_from_poses).
+
+The numbers are read from the linkage's program (flat.encode) in p at `offset`, so the source depends only on the
+linkage's structure and on which of its numbers are exactly 0, 1 or -1 (written as literals, so that a joint at a
+link's origin or a guide along x costs nothing): two linkages of one kind share one source, kept in the cache folder
+(mech_regulator.cache) under a hash of that key, so sympy runs once per kind of linkage and machine.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+
+from mech_regulator import cache
+from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
+from mech_regulator.mechanisms.linkage.structure import Structure
+
+GENERATOR_VERSION = 2   # part of the cache key: raise it when the generated code changes
+FUNCTION_NAME = "linkage_reduced"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The key: the program's structural entries exactly, its numbers as 0, 1, -1 or 'x'
+
+def _structural_positions(program: np.ndarray) -> set[int]:
+    """The positions in a program (flat.encode's layout, base 0) of its counts, codes, link indices, branches and
+    joint-map entries (everything that is not a length, angle, mass or gravity)."""
+    n_links, n_groups = int(program[0]), int(program[1])
+    positions = {0, 1, 2, 3, 4}
+
+    def joint(j):
+        positions.update((j, j + 1, j + 2))
+
+    joint(5)
+    g = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
+    for _ in range(n_groups):
+        positions.update(range(g, g + 4))
+        for k in range(3):
+            joint(g + 4 + flat.JOINT_SIZE * k)
+        g += flat.GROUP_SIZE
+    positions.add(g)
+    joint(g + 1)
+    positions.update(range(g + 1 + flat.JOINT_SIZE, len(program)))
+    return positions
+
+
+def _literal(value: float):
+    """The literal a number is written as (0, 1 or -1), or None: read from p."""
+    return int(value) if value in (0.0, 1.0, -1.0) else None
+
+
+def program_key(program: np.ndarray, outputs: Sequence[int]) -> str:
+    """The hash of what the generated source depends on: the structural entries of the program, the literal
+    pattern of its numbers, the output joints' record positions and the generator's version."""
+    structural = _structural_positions(program)
+    pattern = [repr(float(v)) if i in structural else repr(_literal(v)) for i, v in enumerate(program)]
+    text = f"{GENERATOR_VERSION}|{'|'.join(pattern)}|{tuple(outputs)}"
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Generation (sympy is imported only here: a cached source needs none)
+
+class _Writer:
+    """Builds the expressions group by group and writes them as assignments. Complex quantities are (re, im) pairs
+    of sympy expressions. Every symbol that stands for a function of phi has its derivative with respect to phi in
+    `rate` (a symbol, an expression or zero); `rate_of(expr)` is the chain rule `sum d expr/d s rate(s)`."""
+
+    def __init__(self, program: np.ndarray):
+        import sympy
+
+        self.sp = sympy
+        self.program = program
+        self.read: dict[int, object] = {}
+        self.rate: dict[object, object] = {}
+        self.lines: list[str] = []
+        self.count = 0
+        cos_phi, sin_phi = sympy.symbols("cos_phi sin_phi")
+        self.rate[cos_phi], self.rate[sin_phi] = -sin_phi, cos_phi
+        self.crank_turn = (cos_phi, sin_phi)
+
+    # numbers and points of the program
+    def number(self, i: int):
+        """The program's number at i: a literal, or the symbol of p[offset + i]."""
+        literal = _literal(self.program[i])
+        if literal is not None:
+            return self.sp.Integer(literal)
+        if i not in self.read:
+            self.read[i] = self.sp.Symbol(f"n{i}")
+        return self.read[i]
+
+    def local(self, j: int, link: int):
+        """The point of the joint record at j in the coordinates of `link` (flat._local)."""
+        k = 3 if int(self.program[j + 1]) == link else 5
+        return self.number(j + k), self.number(j + k + 1)
+
+    def other(self, j: int, link: int) -> int:
+        a = int(self.program[j + 1])
+        return int(self.program[j + 2]) if a == link else a
+
+    # the chain rule and assignments
+    def rate_of(self, expr):
+        """d expr / d phi by the chain rule over the symbols with a known rate."""
+        total = self.sp.Integer(0)
+        for symbol in expr.free_symbols:
+            rate = self.rate.get(symbol)
+            if rate is None:
+                continue
+            if rate == "unknown":
+                raise RuntimeError(f"the third derivative of {symbol} was asked for")
+            total += expr.diff(symbol) * rate
+        return total
+
+    def assign(self, exprs: list) -> list:
+        """Write `exprs` as assignments (common subexpressions shared) and return the symbols that stand for them
+        (numbers and plain symbols stay themselves)."""
+        sp = self.sp
+        targets, wanted = [], []
+        for expr in exprs:
+            if expr.is_number or expr.is_Symbol:
+                targets.append(expr)
+            else:
+                self.count += 1
+                symbol = sp.Symbol(f"v{self.count}")
+                targets.append(symbol)
+                wanted.append((symbol, expr))
+        if wanted:
+            common, reduced = sp.cse([expr for _, expr in wanted],
+                                     symbols=sp.numbered_symbols(f"t{self.count}_"), order="none")
+            self.lines += [f"{name} = {sp.pycode(value)}" for name, value in common]
+            self.lines += [f"{symbol} = {sp.pycode(value)}" for (symbol, _), value in zip(wanted, reduced)]
+        return targets
+
+    def jets(self, exprs: list) -> list:
+        """Assign `exprs` with their first and second derivatives (one batch, so they share subexpressions); each
+        symbol's rate is its derivative's symbol (the second derivatives' rates are never needed: no third
+        derivative is asked for)."""
+        firsts = [self.rate_of(expr) for expr in exprs]
+        seconds = [self.rate_of(expr) for expr in firsts]
+        symbols = self.assign(list(exprs) + firsts + seconds)
+        n = len(exprs)
+        self._chain(symbols[:n], symbols[n:2 * n], symbols[2 * n:])
+        return symbols[:n]
+
+    def _chain(self, values, firsts, seconds) -> None:
+        """Record rate(value) = first and rate(first) = second for the symbols just assigned."""
+        for value, first, second in zip(values, firsts, seconds):
+            if value.is_Symbol and value not in self.rate:
+                self.rate[value] = first
+            if first.is_Symbol and first not in self.rate:
+                self.rate[first] = second
+            if second.is_Symbol and second not in self.rate:
+                self.rate[second] = "unknown"
+
+    def root(self, expr):
+        """sqrt(expr) with its derivatives written through the root itself, s' = a' / (2 s), s'' = (a'' - 2 s'^2)
+        / (2 s) (a = expr), so that the code has one square root and no fractional power."""
+        sp = self.sp
+        argument, = self.jets([expr])
+        rate = self.rate_of(argument)
+        curvature = self.rate_of(rate)
+        value, = self.assign([sp.sqrt(argument)])
+        half_inverse, = self.assign([1 / (2 * value)])
+        first, = self.assign([rate * half_inverse])
+        second, = self.assign([(curvature - 2 * first * first) * half_inverse])
+        self._chain([value], [first], [second])
+        return value
+
+
+def _add(u, v):
+    return u[0] + v[0], u[1] + v[1]
+
+
+def _sub(u, v):
+    return u[0] - v[0], u[1] - v[1]
+
+
+def _mul(u, v):
+    return u[0] * v[0] - u[1] * v[1], u[0] * v[1] + u[1] * v[0]
+
+
+def _conj(u):
+    return u[0], -u[1]
+
+
+def _scale(u, factor):
+    return u[0] * factor, u[1] * factor
+
+
+def _square(u):
+    return u[0] * u[0] + u[1] * u[1]
+
+
+def _cross(u, v):
+    """Im(u conj v)."""
+    return u[1] * v[0] - u[0] * v[1]
+
+
+def _dot(u, v):
+    """Re(u conj v)."""
+    return u[0] * v[0] + u[1] * v[1]
+
+
+class _Poses:
+    """The links' poses as expressions: origin r and turn e = e^{i theta} per link index."""
+
+    def __init__(self, writer: _Writer):
+        self.w = writer
+        zero, one = writer.sp.Integer(0), writer.sp.Integer(1)
+        self.origin = {0: (zero, zero)}
+        self.turn = {0: (one, zero)}
+
+    def point(self, j: int, link: int):
+        """Global position of the joint j's point on `link`: r + p e."""
+        return _add(self.origin[link], _mul(self.w.local(j, link), self.turn[link]))
+
+    def set(self, link: int, origin, turn) -> None:
+        """Store a link's pose, assigned with its derivatives."""
+        values = self.w.jets([origin[0], origin[1], turn[0], turn[1]])
+        self.origin[link], self.turn[link] = (values[0], values[1]), (values[2], values[3])
+
+    def pin(self, j: int, link: int, at, turn) -> None:
+        """The pose of `link` with turn e and its point of joint j at `at`: r = at - p e."""
+        self.set(link, _sub(at, _mul(self.w.local(j, link), turn)), turn)
+
+    def swing(self, pivot: int, tip: int, link: int, P, T) -> None:
+        """The pose of `link` whose point of joint `pivot` is at P and of joint `tip` at T:
+        e = (T - P) conj(d) / |d|^2, d = p_tip - p_pivot."""
+        d = _sub(self.w.local(tip, link), self.w.local(pivot, link))
+        turn = _scale(_mul(_sub(T, P), _conj(d)), 1 / _square(d))
+        self.pin(pivot, link, P, turn)
+
+    def across_turn(self, j: int, known: int, known_turn):
+        """e^{i theta} of the link the prismatic joint j joins to the link `known` of turn known_turn:
+        theta_slider = theta_guide + alpha."""
+        value = float(self.w.program[j + 9])
+        if value == 0.0:
+            return known_turn
+        sp = self.w.sp
+        alpha = self.w.number(j + 9)
+        rotation = (sp.cos(alpha), sp.sin(alpha) if int(self.w.program[j + 1]) == known else -sp.sin(alpha))
+        return _mul(known_turn, rotation)
+
+    def line(self, j: int, unknown: int, turn):
+        """(c, w): the line c + s w on which the origin of `unknown` lies, its turn being `turn`, joined by the
+        prismatic joint j to a known link (flat._origin_line)."""
+        guide, slider = int(self.w.program[j + 1]), int(self.w.program[j + 2])
+        u = (self.w.number(j + 7), self.w.number(j + 8))
+        if unknown == slider:
+            return _sub(self.point(j, guide), _mul(self.w.local(j, slider), turn)), _mul(u, self.turn[guide])
+        return _sub(self.point(j, slider), _mul(self.w.local(j, guide), turn)), _mul(u, turn)
+
+
+def _meet(c1, w1, c2, w2):
+    """The intersection of the lines c1 + s w1 and c2 + t w2."""
+    return _add(c1, _scale(w1, _cross(_sub(c2, c1), w2) / _cross(w1, w2)))
+
+
+def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
+    """Place the group at g (flat.place_group's closed forms, written without angles)."""
+    w, sp = poses.w, poses.w.sp
+    kind, sigma = int(program[g]), int(program[g + 1])
+    L1, L2 = int(program[g + 2]), int(program[g + 3])
+    E1, Ji, E2 = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
+    if kind == flat.REDUNDANT:
+        poses.swing(E1, Ji, L1, poses.point(E1, w.other(E1, L1)), poses.point(Ji, w.other(Ji, L1)))
+        return
+    K1, K2 = w.other(E1, L1), w.other(E2, L2)
+    if kind in (0, 1):   # RRR, RRP
+        B = poses.point(E1, K1)
+        l1_square = _square(_sub(w.local(Ji, L1), w.local(E1, L1)))
+        if kind == 0:
+            D = poses.point(E2, K2)
+            l2_square = _square(_sub(w.local(Ji, L2), w.local(E2, L2)))
+            v = tuple(w.jets(list(_sub(D, B))))
+            f_square, = w.jets([_square(v)])
+            along, = w.jets([(l1_square - l2_square + f_square) / (2 * f_square)])
+            height, = w.jets([sigma * w.root(l1_square / f_square - along * along)])
+            C = _add(B, (along * v[0] - height * v[1], along * v[1] + height * v[0]))
+            C = tuple(w.jets(list(C)))
+            poses.swing(E2, Ji, L2, D, C)
+        else:
+            turn2 = poses.across_turn(E2, K2, poses.turn[K2])
+            c, direction = poses.line(E2, L2, turn2)
+            m = tuple(w.jets(list(_sub(_add(c, _mul(w.local(Ji, L2), turn2)), B))))
+            along, = w.jets([_dot(m, direction)])
+            root, = w.jets([sigma * w.root(along * along - _square(m) + l1_square)])
+            C = _add(_add(m, B), _scale(direction, root - along))
+            C = tuple(w.jets(list(C)))
+            poses.pin(Ji, L2, C, turn2)
+        poses.swing(E1, Ji, L1, B, C)
+        return
+    if kind == 2:   # RPR
+        guide, slider = int(program[Ji + 1]), int(program[Ji + 2])
+        pivot_g, pivot_s = (E1, E2) if guide == L1 else (E2, E1)
+        Pg = poses.point(pivot_g, w.other(pivot_g, guide))
+        Ps = poses.point(pivot_s, w.other(pivot_s, slider))
+        u = (w.number(Ji + 7), w.number(Ji + 8))
+        alpha = float(program[Ji + 9])
+        rotation = (sp.Integer(1), sp.Integer(0)) if alpha == 0.0 else (sp.cos(w.number(Ji + 9)),
+                                                                       sp.sin(w.number(Ji + 9)))
+        offset = _cross(_add(_sub(w.local(pivot_g, guide), w.local(Ji, guide)),
+                             _mul(_sub(w.local(Ji, slider), w.local(pivot_s, slider)), rotation)), u)
+        span = tuple(w.jets(list(_sub(Ps, Pg))))
+        rho_square, = w.jets([_square(span)])
+        root, = w.jets([sigma * w.root(rho_square - offset * offset)])
+        turn_g = _scale(_mul(_mul(span, _conj(u)), (root, offset)), 1 / rho_square)
+        poses.pin(pivot_g, guide, Pg, turn_g)
+        poses.pin(pivot_s, slider, Ps, _mul(poses.turn[guide], rotation))
+        return
+    turn2 = poses.across_turn(E2, K2, poses.turn[K2])
+    if kind == 3:   # PRP
+        turn1 = poses.across_turn(E1, K1, poses.turn[K1])
+        c1, w1 = poses.line(E1, L1, turn1)
+        c2, w2 = poses.line(E2, L2, turn2)
+        C = _meet(_add(c1, _mul(w.local(Ji, L1), turn1)), w1, _add(c2, _mul(w.local(Ji, L2), turn2)), w2)
+        C = tuple(w.jets(list(C)))
+        poses.pin(Ji, L1, C, turn1)
+        poses.pin(Ji, L2, C, turn2)
+        return
+    # RPP: L1 pinned at B with the angle its prismatic internal joint gives it from L2's
+    turn1 = poses.across_turn(Ji, L2, turn2)
+    poses.pin(E1, L1, poses.point(E1, K1), turn1)
+    c1, w1 = poses.line(Ji, L2, turn2)
+    c2, w2 = poses.line(E2, L2, turn2)
+    poses.set(L2, _meet(c1, w1, c2, w2), turn2)
+
+
+def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
+    """The source of `def name(phi, p, offset)` returning (J_links, dJ/dphi, M_weight, q_1, q_1', ...) of the
+    linkage whose program (flat.encode, base 0) is read from p at offset; `outputs`: the record positions of the
+    prismatic joints whose travels are the q's (none: the program's own output, flat.reduced_from_poses)."""
+    writer = _Writer(program)
+    sp = writer.sp
+    poses = _Poses(writer)
+    n_links, n_groups, crank = int(program[0]), int(program[1]), int(program[2])
+    pivot_frame = writer.number(flat.HEADER_SIZE - 4), writer.number(flat.HEADER_SIZE - 3)
+    pivot_crank = writer.number(flat.HEADER_SIZE - 2), writer.number(flat.HEADER_SIZE - 1)
+    poses.origin[crank] = _sub(pivot_frame, _mul(pivot_crank, writer.crank_turn))
+    poses.turn[crank] = writer.crank_turn
+    g = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
+    for _ in range(n_groups):
+        _place(poses, program, g)
+        g += flat.GROUP_SIZE
+    gravity = writer.number(5 + flat.JOINT_SIZE), writer.number(6 + flat.JOINT_SIZE)
+    J = dJ = weight = sp.Integer(0)
+    rate = writer.rate_of
+    for link in range(1, n_links):
+        record = flat.HEADER_SIZE + flat.LINK_SIZE * link
+        mass, inertia = writer.number(record), writer.number(record + 3)
+        turn = poses.turn[link]
+        local_centre = (writer.number(record + 1), writer.number(record + 2))
+        centre = _add(poses.origin[link], _mul(local_centre, turn))
+        dS = (rate(centre[0]), rate(centre[1]))
+        weight += mass * _dot(dS, gravity)
+        if link == crank:   # turning about its pivot at theta' = 1: a constant m |c - p_A|^2 + I, no dJ
+            J += mass * _square(_sub(local_centre, pivot_crank)) + inertia
+            continue
+        ddS = (rate(dS[0]), rate(dS[1]))
+        dtheta = turn[0] * rate(turn[1]) - turn[1] * rate(turn[0])
+        ddtheta = turn[0] * rate(rate(turn[1])) - turn[1] * rate(rate(turn[0]))
+        J += mass * _square(dS) + inertia * dtheta * dtheta
+        dJ += 2 * (mass * _dot(dS, ddS) + inertia * dtheta * ddtheta)
+    results = [J, dJ, weight]
+    kind = int(program[3])
+    if outputs:
+        records = list(outputs)
+    elif kind == 2:
+        records = [5]
+    else:
+        records = []
+    for j in records:
+        guide, slider = int(program[j + 1]), int(program[j + 2])
+        direction = _mul((writer.number(j + 7), writer.number(j + 8)), poses.turn[guide])
+        q = _dot(_sub(poses.point(j, slider), poses.point(j, guide)), direction)
+        results += [q, rate(q)]
+    if not records and kind == 1:
+        turn = poses.turn[int(program[4])]
+        angle, = writer.assign([sp.atan2(turn[1], turn[0])])
+        reference = writer.number(flat.OUTPUT_REFERENCE)
+        results += [angle - 2 * sp.pi * sp.floor((angle - reference) / (2 * sp.pi) + sp.Rational(1, 2)),
+                    turn[0] * rate(turn[1]) - turn[1] * rate(turn[0])]
+    elif not records:
+        results += [sp.Integer(0), sp.Integer(0)]
+    final = writer.assign(results)
+    reads = [f"{symbol} = p[offset + {i}]" for i, symbol in sorted(writer.read.items())]
+    body = ["cos_phi = math.cos(phi)", "sin_phi = math.sin(phi)"] + reads + writer.lines
+    body.append("return " + ", ".join(sp.pycode(value) if not value.is_Symbol else str(value) for value in final))
+    doc = ('"""Generated by mechanisms.linkage.symbolic: (J_links [kg m^2], dJ/dphi [kg m^2/rad], M_weight [N m], '
+           'then q, dq/dphi per output) at crank angle phi [rad], the program at p[offset:]."""')
+    return f"def {name}(phi, p, offset):\n    {doc}\n    " + "\n    ".join(body) + "\n"
+
+
+@functools.cache
+def _source_by_key(key: str) -> str | None:
+    """The cached source of a key, from the cache folder (None: not generated yet on this machine)."""
+    path = cache.folder() / f"linkage_{key}.py"
+    return path.read_text(encoding="utf-8") if path.exists() else None
+
+
+def reduced_source(program: np.ndarray, outputs: Sequence[int] = ()) -> tuple[str, str]:
+    """(function name, source) of the generated reduced function of a linkage program (flat.encode, base 0) with
+    these output joint records (prismatic joints' record positions; empty: the program's output), from the cache
+    folder if generated before, else generated now (sympy) and cached."""
+    key = program_key(program, outputs)
+    name = f"{FUNCTION_NAME}_{key}"
+    source = _source_by_key(key)
+    if source is None:
+        source = _generate(program, outputs, name)
+        cache.write(cache.folder() / f"linkage_{key}.py", source)
+        _source_by_key.cache_clear()
+    return name, source
+
+
+@functools.cache
+def _python_function(name: str, source: str) -> Callable:
+    """The generated source run as plain Python (the reference path)."""
+    namespace = {"math": math}
+    exec(compile(source, f"<{name}>", "exec"), namespace)
+    return namespace[name]
+
+
+def output_records(program: np.ndarray, linkage: Linkage, joints: Sequence[str]) -> list[int]:
+    """The record positions (in the program's joint map) of the named joints, for `reduced_source`'s outputs."""
+    first = flat.joint_map(program, 0) + 1 + flat.JOINT_SIZE
+    index = {joint.name: k for k, joint in enumerate(linkage.joints)}
+    return [int(program[first + 2 * index[name]]) for name in joints]
+
+
+def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None,
+                 outputs: Sequence[str] = ()) -> Callable[[float], tuple[float, ...]]:
+    """`reduced(phi) -> (J_links, dJ/dphi, M_weight, q, dq/dphi)` of a linkage by its generated code run as plain
+    Python (with `outputs`, prismatic joints' names: q, dq/dphi of each in turn); where a group cannot assemble or is
+    at a dead point (the code meets a square root of a negative number, a division by zero, or gives NaN), the
+    LinkageError of the general solver (kinematics.make_solver) naming the group and why."""
+    from mech_regulator.mechanisms.linkage.kinematics import make_solver
+
+    program = flat.encode(linkage, structure.groups, gravity)
+    name, source = reduced_source(program, output_records(program, linkage, outputs))
+    function = _python_function(name, source)
+    numbers = program.tolist()
+
+    def reduced(phi: float) -> tuple[float, ...]:
+        try:
+            values = function(phi, numbers, 0)
+        except (ValueError, ZeroDivisionError):
+            values = (math.nan,)
+        if not all(math.isfinite(value) for value in values):
+            make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
+            raise LinkageError(f"the linkage's reduced quantities are not finite at crank angle "
+                               f"{math.degrees(phi):.3f} deg")
+        return values
+
+    return reduced
