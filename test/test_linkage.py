@@ -157,27 +157,16 @@ def test_parallelogram_with_an_extra_link_has_one_redundant_constraint():
     moves: EF is one redundant constraint. Link 1 rocks here, driven by a crank-rocker (crank O K, rod K B1), so the
     parallelogram never reaches its change points (at AB along AD it could fold into an antiparallelogram):
     n = 6, p5 = 9, R_redundant = 1, W = 3*6 - (2*9 - 1) = 1. With EF longer it is a structure (W = 0)."""
-    def parallelogram(ef_length):
-        return Linkage(
-            links=(Link("0", {"O": 0.9 + 0j, "A": 0j, "D": 2 + 0j, "F": 1 + 0j}),
-                   Link("crank", {"O": 0j, "K": 0.2 + 0j}),
-                   Link("rod", {"K": 0j, "B1": 0.9 + 0j}), Link("1", {"A": 0j, "B": 1 + 0j, "B1": 0.5 + 0j}),
-                   Link("2", {"B": 0j, "C": 2 + 0j, "E": 1 + 0j}), Link("3", {"D": 0j, "C": 1 + 0j}),
-                   Link("5", {"F": 0j, "E": ef_length + 0j})),
-            joints=(revolute("O", "0", "crank"), revolute("K", "crank", "rod"), revolute("B1", "rod", "1"),
-                    revolute("A", "0", "1"), revolute("B", "1", "2"), revolute("C", "2", "3"), revolute("D", "0", "3"),
-                    revolute("E", "2", "5"), revolute("F", "0", "5")),
-            frame="0", crank="crank", branches={"B1": -1, "C": 1})
-    structure = analyse(parallelogram(1.0))
+    structure = analyse(parallelogram_linkage(1.0))
     assert (structure.moving_links, structure.lower_pairs, len(structure.redundant)) == (6, 9, 1)
     assert structure.freedom == 1 and structure.refusal() is None
     assert [group.kind for group in structure.groups] == ["RRR", "RRR", "redundant link"]
     for phi in ANGLES:
-        poses = solve(parallelogram(1.0), structure, phi)
+        poses = solve(parallelogram_linkage(1.0), structure, phi)
         assert 0.0 < poses["1"][1] < math.pi
         assert (poses["5"][1], poses["5"][3], poses["5"][5]) == pytest.approx(
             (poses["1"][1], poses["1"][3], poses["1"][5]), abs=1e-12)   # EF stays parallel to AB
-    wrong = analyse(parallelogram(1.1))
+    wrong = analyse(parallelogram_linkage(1.1))
     assert wrong.freedom == 0 and "W = 3*6 - (2*9 + 0 - 0 - 0) - 0 = 0" in wrong.refusal()
 
 
@@ -329,6 +318,21 @@ def test_dyad_velocity_and_acceleration_ratios_match_finite_differences(kind):
 
 # ----------------------------------------------------------------------------------------------
 # Reduction to the crank
+
+
+def parallelogram_linkage(ef_length: float = 1.0):
+    """Source 001, fig. 1.26: the parallelogram A B C D (link 1 = AB, 2 = BCE, 3 = DC) with the link 5 = EF (a
+    redundant link at ef_length 1), link 1 rocked by a crank-rocker (crank O K, rod K B1)."""
+    return Linkage(
+        links=(Link("0", {"O": 0.9 + 0j, "A": 0j, "D": 2 + 0j, "F": 1 + 0j}),
+               Link("crank", {"O": 0j, "K": 0.2 + 0j}),
+               Link("rod", {"K": 0j, "B1": 0.9 + 0j}), Link("1", {"A": 0j, "B": 1 + 0j, "B1": 0.5 + 0j}),
+               Link("2", {"B": 0j, "C": 2 + 0j, "E": 1 + 0j}), Link("3", {"D": 0j, "C": 1 + 0j}),
+               Link("5", {"F": 0j, "E": ef_length + 0j})),
+        joints=(revolute("O", "0", "crank"), revolute("K", "crank", "rod"), revolute("B1", "rod", "1"),
+                revolute("A", "0", "1"), revolute("B", "1", "2"), revolute("C", "2", "3"), revolute("D", "0", "3"),
+                revolute("E", "2", "5"), revolute("F", "0", "5")),
+        frame="0", crank="crank", branches={"B1": -1, "C": 1})
 
 
 def six_bar_linkage():

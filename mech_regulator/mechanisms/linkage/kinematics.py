@@ -61,9 +61,11 @@ def motion(pose: Pose, point: complex) -> Motion:
 
 def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
                  ) -> Callable[[float], tuple[float, float, float, float, float]]:
-    """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, q, q')` for this linkage (the contract of
-    mechanisms/__init__.py; flat.reduced_from_poses gives the sums): the compiled flat.reduced on the linkage's
-    program; where it gives NaN (a group fails), the LinkageError of make_solver."""
+    """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, q, q')` for this linkage by the general solver (the
+    contract of mechanisms/__init__.py; flat.reduced_from_poses gives the sums): the compiled flat.reduced on the
+    linkage's program; where it gives NaN (a group fails), the LinkageError of make_solver. A machine runs the code
+    generated from the groups instead (symbolic.make_reduced, mechanisms.build_reduced); this is its independent
+    check (each group differentiated through its constraint system, not by the chain rule)."""
     program = flat.encode(linkage, structure.groups, gravity)
     compiled = flat.compiled_announced("reduced")
 
