@@ -191,7 +191,9 @@ def test_four_bar_reactions_match_newton_euler_system():
 
 
 def test_relative_speed_ratios_by_finite_differences():
-    """The ratios omega_rel / omega of the joints (and dx/dphi of the guide) against differences of the angles."""
+    """The ratios omega_rel / omega of the joints (and dx/dphi of the guide) against differences of the angles: a
+    revolute joint's is theta_first' - theta_second', its first link the outer one (mechanisms/presets.py), so the
+    pins' are the rod's (coupler's) turn less the crank's and the piston's (rocker's) less the rod's (coupler's)."""
     h = 1e-6
     for spec in (CRANK_SLIDER, FOUR_BAR):
         loads, _ = build_kinetostatics(spec, None)
@@ -200,11 +202,11 @@ def test_relative_speed_ratios_by_finite_differences():
             if spec is CRANK_SLIDER:
                 def angle(p):
                     x, _, _, theta, _, _ = slider_kinematics(p, spec.crank, spec.rod, spec.offset)
-                    return np.array([p, p - theta, theta, x])
+                    return np.array([p, theta - p, -theta, x])
             else:
                 def angle(p):
                     th3, _, _, th4, _, _ = link_angles(p, 0.04, 0.12, 0.08, 0.10, math.radians(12.0), -1.0)
-                    return np.array([p, p - th3, th3 - th4, th4])
+                    return np.array([p, th3 - p, th4 - th3, th4])
             difference = (angle(phi + h) - angle(phi - h)) / (2 * h)
             assert np.allclose(ratios, difference, rtol=1e-6, atol=1e-7)
 
@@ -424,9 +426,9 @@ def test_governor_stepper_of_a_machine_with_joint_friction_holds_the_crank_speed
 
 
 @pytest.mark.parametrize("name, overrides, expected", [
-    ("compressor", ["scenario.duration=0.3"], ["0x1.1e97e20db19b5p+3", "0x1.9fed43e1f9d81p+5"]),
+    ("compressor", ["scenario.duration=0.3"], ["0x1.1e97e20db19b6p+3", "0x1.9fed43e1f9d84p+5"]),
     ("engine_direct", ["scenario.duration=0.1", "scenario.load_events=[]"],
-     ["0x1.643cad47dec88p+4", "0x1.c3df427415441p+7", "0x1.8cd15065eee4cp-2", "-0x1.ae450b2b7a154p-11"]),
+     ["0x1.643cad47dec8ap+4", "0x1.c3df42741543fp+7", "0x1.8cd15065eee4ap-2", "-0x1.ae450b2b7c854p-11"]),
 ])
 def test_scenes_without_joint_friction_run_bit_for_bit_as_before(name, overrides, expected):
     """The final state of short runs, bit for bit as main (9c13bc8) computed it before joint friction existed,
@@ -435,7 +437,9 @@ def test_scenes_without_joint_friction_run_bit_for_bit_as_before(name, overrides
     compressor's slider table by 2.4e-8 at rtol 1e-9, the kinks' old errors — test_table_knots.py and
     test_slider_table_breakpoints.py check the new runs against references restarted at every knot; and in their last
     bits when the reference path took its switch angles from the model's switch grid, rounded to 1e-12 rad, as the
-    fast path does.)"""
+    fast path does; and when every mechanism became a linkage run by generated code, issue 21: the crank–slider's J
+    and its derivatives from the linkage's closed forms differ in their last bits, the final states by 2e-16 to 4e-16
+    relative, the governor's servo, crossing zero, by 1.3e-12 of its size.)"""
     model = build_model(load_scene(name, overrides))
     rhs = model.rhs(None, None, model.initial_mode(model.initial_state()))
     assert model.joint_friction is None and rhs.__qualname__ == "MachineModel._right_hand_side.<locals>.machine"

@@ -183,6 +183,7 @@ PYTHON_DEPENDENCIES = {
     "matplotlib": ("matplotlib", "python3-matplotlib"),
     "tqdm": ("tqdm", "python3-tqdm"),
     "numba": ("numba", "python3-numba"),
+    "sympy": ("sympy", "python3-sympy"),
     "rerun": ("rerun-sdk", "python3-rerun-sdk-pip"),  # no rosdep key: rosdep's convention for pip packages
 }
 # imported only by optional features, installed with an extra of setup.py, not by a ROS user's rosdep
