@@ -397,11 +397,12 @@ def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
               "from mech_regulator.solvers.compiled.codegen import compile_scene\n"
               "c = compile_scene(build_model(load_scene('startup')))\n"
               "print(json.dumps([sum(c.rhs.stats.cache_hits.values()), sum(c.rhs.stats.cache_misses.values()), "
-              "sum(c.guards.stats.cache_hits.values())]))\n")
+              "sum(c.guards.stats.cache_hits.values())]))\nprint(c.path)\n")
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
     output = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
                             env=environment).stdout
-    assert json.loads(output.splitlines()[-1]) == [1, 0, 1]
+    counts, path = output.splitlines()[-2:]
+    assert (json.loads(counts), path) == ([1, 0, 1], str(compiled.path)), sorted(os.listdir(compiled.path.parent))
     assert set(os.listdir(compiled.path.parent / "__pycache__")) == files  # nothing compiled anew
 
 
