@@ -89,7 +89,8 @@ def make_kinetostatics(linkage: Linkage, structure: Structure, gravity: tuple[fl
 
 def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
                      ) -> tuple[Kinetostatics, tuple[str, ...]]:
-    """The linkage's kinetostatics in the form joint friction reads (mechanisms.kinetostatics.JointLoads) and its joint names (the linkage's order): `loads(phi, omega, Q)` gives every joint's reaction
+    """The linkage's kinetostatics in the form joint friction reads (mechanisms.kinetostatics.JointLoads) and its
+    joint names (the linkage's order): `loads(phi, omega, Q)` gives every joint's reaction
     affine in epsilon, `R = R0 + R1 epsilon`: a revolute joint's, the force on its first link from its second, Fx + i
     Fy [N]; a prismatic joint's, the normal force on the slider in the guide's own frame, i N [N] (as a
     crank–slider's guide: N along i w, w the guide's direction; its couple, which joint friction does not read, is

@@ -495,7 +495,7 @@ def _residuals(poses: _Poses, program: np.ndarray, omega, force) -> dict:
     d'Alembert terms (x, y of r, theta): case 0 `m (S'' omega^2 - g)` and `I theta'' omega^2 + (S - r) x m (S''
     omega^2 - g)`, less the output load Q (a moment on the output link; a force Q w on the output joint's slider at
     its point, -Q w on the guide); case 1 `m S'`, `I theta' + (S - r) x m S'`."""
-    w, sp = poses.w, poses.w.sp
+    w = poses.w
     rate, crank = w.rate_of, int(program[2])
     gravity = w.number(5 + flat.JOINT_SIZE), w.number(6 + flat.JOINT_SIZE)
     square = omega * omega
