@@ -1,6 +1,7 @@
 """Issue 21: joint friction on a general linkage on both paths, its kinetostatics by groups written once, flat
-(mechanisms/linkage/flat.py: kinetostatics, joint_loads), run compiled by the reference path and compiled into the
-fast path's right-hand side.
+(mechanisms/linkage/flat.py: kinetostatics, joint_loads), and generated per kind of linkage as straight-line code
+(mechanisms/linkage/symbolic.py, joint_loads_source; test_linkage_symbolic_kinetostatics.py holds it to flat's), run
+as plain Python by the reference path and compiled into the fast path's right-hand side.
 
 The flat reactions were compared with the object implementation they replaced before it was deleted (the bundled
 linkages, 50 random states each: the reactions to 7e-16 of the largest, the ratios exactly); what stays is
@@ -30,7 +31,7 @@ GRAVITY = (1.5, -9.81)   # with a component along x, so that the weights' terms 
 
 @pytest.mark.parametrize("name", LINKAGES)
 def test_balancing_moment_equals_the_reduced_moment_at_many_angles(name):
-    """From the flat reactions (mechanisms.build_kinetostatics: flat.joint_loads compiled) at 97 crank angles and
+    """From the reactions (mechanisms.build_kinetostatics: the generated joint loads) at 97 crank angles and
     random (omega, epsilon, Q): M_b0 + M_b1 epsilon = J epsilon + 1/2 J' omega^2 - M_weight - Q q' (J, J', M_weight,
     q' of flat.reduced, the crank's own inertia included) to 1e-9 of the terms' size: a check of every reaction the
     crank's equilibrium sums, group by group inward."""

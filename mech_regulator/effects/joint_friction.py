@@ -234,8 +234,9 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
 def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...]:
     """The crank angles in [0, 2 pi) [rad] where the relative rate k_j(phi) of one of the joints at `indices` of
     the kinetostatics changes sign: sampled at CORNER_SAMPLES + 1 angles over a turn (a zero counting as
-    positive), each change located by Brent's method, and a root at 0 itself where round-off puts k(0) and k(2 pi) on
-    both sides of it; roots of several joints within SAME_CORNER are one corner."""
+    positive), each change located by Brent's method (a root within 1e-12 rad of 0 or 2 pi taken as 0), and a root
+    at 0 itself where round-off puts k(0) and k(2 pi) on both sides of it; roots of several joints within
+    SAME_CORNER are one corner."""
     angles = np.linspace(0.0, 2.0 * math.pi, CORNER_SAMPLES + 1)
     corners = set()
     for index in indices:
@@ -245,7 +246,7 @@ def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...
         for k in np.flatnonzero(np.array(ahead[:-1]) != np.array(ahead[1:])):
             root = optimize.brentq(rate, angles[k], angles[k + 1], xtol=1e-15, rtol=4.0 * np.finfo(float).eps)
             angle = root % (2.0 * math.pi)
-            corners.add(0.0 if 2.0 * math.pi - angle < 1e-12 else angle)  # a root at the turn's end is its start
+            corners.add(0.0 if min(angle, 2.0 * math.pi - angle) < 1e-12 else angle)  # a root at the turn's ends: 0
         if ahead[0] != ahead[-1]:  # k(0) = k(2 pi) but for round-off, which put them on both sides of a root at 0
             corners.add(0.0)
     merged: list[float] = []

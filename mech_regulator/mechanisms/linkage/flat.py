@@ -802,12 +802,12 @@ def _registered() -> None:
 
 
 # What the reference path calls compiled, with the argument types of its calls (kinematics.py, kinetostatics.py);
-# `reduced` is not among them: a machine runs the code generated from its groups (symbolic.py), and the general
-# solver's reduction is kept as the independent check of that code (kinematics.make_reduced, the tests)
+# `reduced` and `joint_loads` are not among them: a machine runs the code generated from its groups (symbolic.py),
+# and the general solver's reduction and joint loads are kept as the independent check of that code
+# (kinematics.make_reduced, the tests)
 COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1], float64[:, ::1], boolean)",
                       "kinetostatics": "(float64, float64, float64, float64[::1], int64, float64[::1], float64[:, ::1], "
-                                       "float64[:, ::1], float64[:, ::1])",
-                      "joint_loads": "(float64, float64, float64, float64[::1], int64)"}
+                                       "float64[:, ::1], float64[:, ::1])"}
 
 
 @functools.cache

@@ -20,8 +20,10 @@ built-in check of both. The right-hand sides are linear in (omega^2, epsilon, g,
 position solution and one inverse per group: (omega, epsilon = 0, Q, with gravity) and (0, 1, 0, without), the
 reactions at epsilon = 0 and their rate with epsilon, whose sum weighted (1, epsilon) is any state's.
 
-The equations are written once, in flat.py (`flat.kinetostatics`, `flat.joint_loads`), and run compiled, the same
-functions the fast path compiles into a scene's right-hand side; this module wraps them for the callers in Python.
+The equations are written once, in flat.py (`flat.kinetostatics`, `flat.joint_loads`), which make_kinetostatics runs
+compiled; what joint friction reads (make_joint_loads) is the same solution written out per kind of linkage as
+straight-line code (symbolic.joint_loads_source), run here as plain Python and compiled by the fast path into a
+scene's right-hand side, with flat.joint_loads its independent check (the tests).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
-from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage import flat, symbolic
 from mech_regulator.mechanisms.linkage.groups import RedundantLink
 from mech_regulator.mechanisms.linkage.kinematics import make_solver
 from mech_regulator.mechanisms.linkage.model import PRISMATIC, Linkage, LinkageError
@@ -87,23 +89,31 @@ def make_kinetostatics(linkage: Linkage, structure: Structure, gravity: tuple[fl
 
 def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
                      ) -> tuple[Kinetostatics, tuple[str, ...]]:
-    """The linkage's kinetostatics in the form joint friction reads (mechanisms.kinetostatics.JointLoads; the compiled
-    flat.joint_loads) and its joint names (the linkage's order): `loads(phi, omega, Q)` gives every joint's reaction
+    """The linkage's kinetostatics in the form joint friction reads (mechanisms.kinetostatics.JointLoads) and its
+    joint names (the linkage's order): `loads(phi, omega, Q)` gives every joint's reaction
     affine in epsilon, `R = R0 + R1 epsilon`: a revolute joint's, the force on its first link from its second, Fx + i
     Fy [N]; a prismatic joint's, the normal force on the slider in the guide's own frame, i N [N] (as a
     crank–slider's guide: N along i w, w the guide's direction; its couple, which joint friction does not read, is
     left out), so |R| = |N| and Im R = N, whose sign changes joint friction locates; the balancing moment (M_b0
     [N m], M_b1 [kg m^2]); and the ratios: a revolute joint's relative angular speed theta_a' - theta_b' [-], a
-    prismatic joint's sliding speed over omega, `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]. Raises
-    the LinkageError of the group that fails at phi."""
+    prismatic joint's sliding speed over omega, `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]. It runs
+    the code generated from the linkage's groups (symbolic.joint_loads_source: flat.joint_loads written out per
+    kind of linkage) as plain Python, the very source the fast path compiles. Raises the LinkageError of the group
+    that fails at phi."""
     program = _program(linkage, structure, gravity)
-    joint_loads = flat.compiled_announced("joint_loads")
+    name, source = symbolic.joint_loads_source(program)
+    joint_loads = symbolic.python_function(name, source)
+    numbers = program.tolist()
 
     def loads(phi: float, omega: float, output_force: float) -> JointLoads:
-        constant, per_epsilon, ratios, balancing, balancing_rate = joint_loads(phi, omega, output_force, program, 0)
-        if math.isnan(balancing):
+        try:
+            constant, per_epsilon, ratios, balancing, balancing_rate = joint_loads(phi, omega, output_force, numbers, 0)
+        except (ValueError, ZeroDivisionError):   # a square root of a negative number or a division by zero
+            balancing = math.nan
+        if not math.isfinite(balancing):
             make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
-        return JointLoads(tuple(constant.tolist()), tuple(per_epsilon.tolist()), (balancing, balancing_rate),
-                          tuple(ratios.tolist()))
+            raise LinkageError(f"the linkage's joint reactions are not finite at crank angle {math.degrees(phi):.3f} "
+                               "deg")
+        return JointLoads(constant, per_epsilon, (balancing, balancing_rate), ratios)
 
     return loads, tuple(joint.name for joint in linkage.joints)

@@ -710,9 +710,11 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
     lines += scaled
     machine = model.scene.machine
     joints = _kinetostatics_joints(machine.mechanism)
-    core, structure, _ = mechanisms.linkage_of(machine.mechanism)   # flat.joint_loads on its program, with gravity
-    program = p.table(flat.encode(core, structure.groups, machine.gravity)).rsplit(", ", 1)[0]  # 'p, offset'
-    lines.append(f"R0, R1, ratios, _, _ = k.linkage_joint_loads(phi, omega, force, {program})")
+    core, structure, _ = mechanisms.linkage_of(machine.mechanism)   # its generated kinetostatics, with gravity
+    program = flat.encode(core, structure.groups, machine.gravity)
+    name, source = symbolic.joint_loads_source(program)
+    p.functions[name] = source
+    lines.append(f"R0, R1, ratios, _, _ = {name}(phi, omega, force, {p.table(program).rsplit(', ', 1)[0]})")
     arms = [0.0] * len(joints)  # a joint without friction: arm 0, its terms exact zeros
     for index, arm_length in zip(friction.indices, friction.arms):
         arms[index] = arm_length

@@ -325,14 +325,3 @@ def driven_margin(passed, weight, smooth, dI, omega2, resistance, sign):
     """The holding margin of a driven part at rest, R + sign * push, push = M_m + M_weight + M_smooth
     - 1/2 I2' omega2^2 (MachineModel.drive_train_at, drivetrain._margin) [N m]."""
     return resistance + sign * (passed + (weight + smooth - 0.5 * dI * omega2 * omega2))
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# The linkage kinetostatics (every mechanism is a linkage): not a transcription but the reference path's own
-# function (mechanisms/linkage/flat.py) compiled once; its program is read from p at an offset,
-# flat.joint_loads(phi, omega, Q, p, offset) -> (R0, R1, ratios, M_b0, M_b1) of its joints (joint friction). A
-# mechanism's reduced(phi) is generated per linkage (mechanisms/linkage/symbolic.py) into the scene's module.
-
-from mech_regulator.mechanisms.linkage import flat  # noqa: E402  (appended: the kernels above stay as they were)
-
-linkage_joint_loads = flat.compiled("joint_loads")
