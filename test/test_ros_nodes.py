@@ -170,17 +170,6 @@ def assert_equals_cosimulation(listener: RunListener, end: int, model, run) -> N
 # 2. Lockstep against the monolithic simulation (in process: the error of the exchange step itself)
 
 
-def test_the_scenario_filters_out_the_exchange_times_its_answer_covers():
-    """The content filter's parameters (scenario.filter_bounds): the stamps up to the answer's and from the time its
-    load holds until on come through, as whole seconds and nanoseconds; held to the end: the largest stamp; an answer
-    that covers nothing lets every stamp through."""
-    from mech_regulator.nodes.scenario import LATEST_STAMP_SECONDS, filter_bounds
-
-    assert filter_bounds((2_020_000_000, 9_000_000_001)) == ["2", "20000000", "9", "1"]
-    assert filter_bounds((9_000_000_001, math.inf)) == ["9", "1", str(LATEST_STAMP_SECONDS), "0"]
-    assert filter_bounds((0, 0)) == ["0", "0", "0", "0"]
-
-
 def test_lockstep_error_is_first_order_in_the_exchange_step():
     """docs/ros.md: errors about 120 h on omega, 45 h on the cycle-mean speed, 30 h on the peak deviation
     after a load change (measured on the whole engine_direct; checked here on its short version)."""

@@ -6,8 +6,9 @@ torque.z [N m], stamped t, in force.z the rate [N m/s] at which it changes then,
 time [s] up to which L stays that number, the next load event's, +inf: to the end; 0 on a ramp) — the machine
 waits for it, so the run is reproducible. An answer whose load is held covers the exchange times after it up to that
 time (solvers.cosim.held_load_until): those the scenario leaves unanswered, one message per load event instead of
-one per exchange; a content filter on its `joint_states` subscription (DDS's, set by `covered`) keeps those
-exchange times from reaching it at all. In `realtime` it
+one per exchange. It reads every `joint_states` and passes over the covered ones in Python: a DDS content filter
+that kept them from reaching it (parameters changed after each answer) crashed the machine now and then, Fast DDS
+evaluating it inside the machine's publish (docs/ros.md, "Speed"). In `realtime` it
 publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other publisher
 would. Either way it logs each load event. It ends by itself when the machine says the run is finished
 (`machine/status`).
@@ -15,23 +16,16 @@ would. Either way it logs each load event. It ends by itself when the machine sa
 
 from __future__ import annotations
 
-import math
 import sys
 
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from rclpy.subscription_content_filter_options import ContentFilterOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
 from mech_regulator.nodes.common import (COMMAND_QOS, RunState, follow_run_state, nanoseconds, run, scene_model,
                                          text_parameter)
-from mech_regulator.solvers.cosim import NANOSECONDS, held_load_until, load_rate, seconds
-
-# joint_states stamped up to the last answer's (%0 s %1 ns) or from the time its load holds until (%2 s %3 ns) on
-UNCOVERED = ("header.stamp.sec < %0 OR (header.stamp.sec = %0 AND header.stamp.nanosec <= %1) OR "
-             "header.stamp.sec > %2 OR (header.stamp.sec = %2 AND header.stamp.nanosec >= %3)")
-LATEST_STAMP_SECONDS = 2**31 - 1  # builtin_interfaces/Time's sec is an int32: "held to the end"
+from mech_regulator.solvers.cosim import held_load_until, load_rate, seconds
 
 
 class ScenarioNode(Node):
@@ -44,13 +38,11 @@ class ScenarioNode(Node):
                                         "realtime: publish load changes", ("lockstep", "realtime"))
         self.stamped_publisher = self.create_publisher(WrenchStamped, "load_torque_stamped", COMMAND_QOS)
         self.load_publisher = self.create_publisher(Float64, "load_torque", COMMAND_QOS)
-        self.answered: tuple[int, int | float] = (0, 0)  # [ns] the exchange time of the last answer and the time up
-        # to which its load holds (held_load_until): the exchange times between are covered by it
-        self.bounds = filter_bounds((0, 0))  # the filter's parameters as set
-        self.speeds = self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS,
-                                               content_filter_options=ContentFilterOptions(UNCOVERED, self.bounds))
+        self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
         self.last_load: float | None = None
         self.last_ns = -1
+        self.answered: tuple[int, int | float] = (0, 0)  # [ns] the exchange time of the last answer and the time up
+        # to which its load holds (held_load_until): the exchange times between are covered by it
         self.done = False
         follow_run_state(self, self.on_run_state)
         self.get_logger().info(f"playing the load of scene '{self.model.scene.name}' ({self.time_mode})")  # (the first
@@ -60,30 +52,19 @@ class ScenarioNode(Node):
         """End by itself when the machine has finished."""
         self.done = state["state"] == RunState.FINISHED
 
-    def covered(self, answered: tuple[int, int | float]) -> None:
-        """Note the last answer's exchange time and the time up to which its load holds [ns], and ask DDS to keep the
-        joint_states in between from reaching this node (a filter the middleware applies to what it delivers;
-        joint_states it lets through while the change travels are left unanswered by on_joint_states). A ramp's
-        answer covers nothing: every exchange time comes through then."""
-        self.answered = answered
-        bounds = filter_bounds(answered if answered[1] > answered[0] else (0, 0))
-        if self.speeds.is_cft_enabled and bounds != self.bounds:
-            self.speeds.set_content_filter(UNCOVERED, bounds)
-        self.bounds = bounds
-
     def on_joint_states(self, message: JointState) -> None:
         """Give the load at the machine's exchange time (a time of 0 after later ones: the machine's ~/reset, the
         scenario starts again)."""
         when = nanoseconds(message.header.stamp)
         if when == 0 and self.last_ns > 0:
-            self.last_load, self.last_ns = None, -1
-            self.covered((0, 0))
+            self.last_load, self.last_ns, self.answered = None, -1, (0, 0)
         if when <= self.last_ns and self.time_mode == "realtime":
             return
         self.last_ns = max(when, self.last_ns)
         if self.answered[0] < when < self.answered[1]:  # the last answer's load holds (a repeat of its own exchange
             return  # time, a peer that matched late, is answered again)
         until = held_load_until(self.model, seconds(when))
+        self.answered = (when, until)
         load = self.model.external_load(seconds(when))
         if load != self.last_load:
             self.get_logger().info(f"t = {seconds(when):.6g} s: load {load:g} N m")
@@ -97,16 +78,7 @@ class ScenarioNode(Node):
             self.stamped_publisher.publish(answer)
         elif load != self.last_load:
             self.load_publisher.publish(Float64(data=load))
-        self.covered((when, until))  # after the answer, which the machine waits for
         self.last_load = load
-
-
-def filter_bounds(answered: tuple[int, int | float]) -> list[str]:
-    """The parameters of UNCOVERED for an answer at answered[0] whose load holds up to answered[1] [ns] (math.inf:
-    to the end): whole seconds and nanoseconds of each, as text; (0, 0): every exchange time comes through."""
-    when, until = answered
-    until_bounds = (LATEST_STAMP_SECONDS, 0) if until == math.inf else divmod(until, NANOSECONDS)
-    return [str(value) for value in (*divmod(when, NANOSECONDS), *until_bounds)]
 
 
 def main() -> int:
