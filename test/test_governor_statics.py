@@ -581,3 +581,18 @@ def test_rigid_feedback_run_settles_at_the_predicted_droop():
     assert trajectory(t_step)[1] == pytest.approx(speed_0, abs=1e-6)
     assert trajectory(duration)[1] == pytest.approx(speed_1, abs=tol)
     assert trajectory(duration)[4] == pytest.approx(servo_1, abs=tol_servo)
+
+
+def test_a_load_event_within_the_first_cycle_is_not_analysed():
+    """engine_direct with load changes at 0.05 s (inside its first dynamic cycle of 4 pi rad, some 56 ms: no
+    cycle-mean speed before it), 0.09 s and 0.13 s: the first has no response (it used to end the summary in a
+    traceback, an all-NaN argmax), the two others have theirs, at their times."""
+    from mech_regulator.scene import load_scene
+
+    model = build_model(load_scene("engine_direct", [
+        "scenario.duration=0.5", "scenario.load_events=[{time: 0.05, torque: 8.0}, {time: 0.09, torque: 6.0}, "
+        "{time: 0.13, torque: 8.0}]"]))
+    assert model.dynamic_period() / 224.0 > 0.05
+    responses = load_responses(model, simulate_complete(model))
+    assert [response.time for response in responses] == [0.09, 0.13]
+    assert all(math.isfinite(response.peak_deviation) for response in responses)

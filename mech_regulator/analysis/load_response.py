@@ -68,7 +68,8 @@ class LoadResponse:
 
 
 def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: float = 2000.0) -> list[LoadResponse]:
-    """Analyse every load event of the scenario that the trajectory reached."""
+    """Analyse every load event of the scenario that the trajectory reached, but one within the run's first dynamic
+    cycle: there is no cycle-mean speed before it (cycle_mean_speed is NaN there), so it has no response to measure."""
     scenario = model.scene.scenario
     band = model.scene.analysis.settling_band
     responses = []
@@ -81,6 +82,8 @@ def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: flo
             break
         times = np.linspace(start, end, max(int((end - start) * sample_rate), 50) + 1)
         speed = cycle_mean_speed(model, trajectory, times)
+        if math.isnan(speed[0]):   # within the first cycle: no speed before the change to measure from
+            continue
         before = speed[0]
         after = speed[-1]
         deviation = speed - before
