@@ -95,14 +95,14 @@ def test_the_source_depends_on_structure_and_exact_zeros_only():
 
 
 def test_a_cached_source_is_read_back_without_generating(monkeypatch, tmp_path):
-    """The first call generates and writes linkage_<key>.py in the cache folder; with generation made to fail, a
-    fresh lookup reads that file and gives the same function."""
+    """The first call generates and writes the module <name>.py in the cache folder (its header, then the function);
+    with generation made to fail, a fresh lookup reads that file and gives the same function."""
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
     symbolic._source_by_key.cache_clear()
     linkage = four_bar_linkage(a=0.8, b=2.9, c=2.4, d=3.3)
     program = flat.encode(linkage, checked(linkage).groups, None)
     name, source = symbolic.reduced_source(program)
-    assert (tmp_path / f"linkage_{symbolic.program_key(program, ())}.py").read_text() == source
+    assert (tmp_path / f"{name}.py").read_text() == symbolic.MODULE_HEADER + source
 
     def no_sympy(*_):
         raise AssertionError("generated again")

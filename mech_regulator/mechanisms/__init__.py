@@ -24,7 +24,7 @@ from mech_regulator.scene import schema
 
 def build_reduced(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
     """The `reduced(phi)` closure of a scene's mechanism (gravity None: no weight moment is computed): the generated
-    code of its linkage (linkage_of, linkage.symbolic) run as plain Python; several outputs (a multi-cylinder
+    code of its linkage (linkage_of, linkage.symbolic), compiled as on the fast path; several outputs (a multi-cylinder
     engine's pistons): q and dq/dphi are the tuples of every piston's x and x' (engine.py)."""
     core, structure, outputs = linkage_of(mechanism)
     reduced = symbolic.make_reduced(core, structure, gravity, outputs)

@@ -22,8 +22,8 @@ reactions at epsilon = 0 and their rate with epsilon, whose sum weighted (1, eps
 
 The equations are written once, in flat.py (`flat.kinetostatics`, `flat.joint_loads`), which make_kinetostatics runs
 compiled; what joint friction reads (make_joint_loads) is the same solution written out per kind of linkage as
-straight-line code (symbolic.joint_loads_source), run here as plain Python and compiled by the fast path into a
-scene's right-hand side, with flat.joint_loads its independent check (the tests).
+straight-line code (symbolic.joint_loads_source), run here compiled (symbolic.reference_function) as the fast path
+runs it in a scene's right-hand side, with flat.joint_loads its independent check (the tests).
 """
 
 from __future__ import annotations
@@ -98,19 +98,15 @@ def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[floa
     [N m], M_b1 [kg m^2]); and the ratios: a revolute joint's relative angular speed theta_a' - theta_b' [-], a
     prismatic joint's sliding speed over omega, `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]. It runs
     the code generated from the linkage's groups (symbolic.joint_loads_source: flat.joint_loads written out per
-    kind of linkage) as plain Python, the very source the fast path compiles. Raises the LinkageError of the group
+    kind of linkage) compiled (symbolic.reference_function), the very source the fast path compiles. Raises the LinkageError of the group
     that fails at phi."""
     program = _program(linkage, structure, gravity)
-    name, source = symbolic.joint_loads_source(program)
-    joint_loads = symbolic.python_function(name, source)
-    numbers = program.tolist()
+    name, _ = symbolic.joint_loads_source(program)
+    joint_loads = symbolic.reference_function(name)
 
     def loads(phi: float, omega: float, output_force: float) -> JointLoads:
-        try:
-            constant, per_epsilon, ratios, balancing, balancing_rate = joint_loads(phi, omega, output_force, numbers, 0)
-        except (ValueError, ZeroDivisionError):   # a square root of a negative number or a division by zero
-            balancing = math.nan
-        if not math.isfinite(balancing):
+        constant, per_epsilon, ratios, balancing, balancing_rate = joint_loads(phi, omega, output_force, program, 0)
+        if not math.isfinite(balancing):   # a square root of a negative number or a division by zero
             make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
             raise LinkageError(f"the linkage's joint reactions are not finite at crank angle {math.degrees(phi):.3f} "
                                "deg")
