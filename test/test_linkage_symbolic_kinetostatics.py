@@ -75,7 +75,7 @@ def test_generated_joint_loads_equal_the_general_solver(name, build, gravity):
     generated = _generated(program)
     ours, theirs = [], []
     for phi, omega, force in _states(len(name)):
-        ours.append(_table(generated(phi, omega, force, program.tolist(), 0)))
+        ours.append(_table(generated(phi, omega, force, program, 0)))
         theirs.append(_table(flat.joint_loads(phi, omega, force, program, 0)))
     ours, theirs = np.array(ours), np.array(theirs)
     n = len(flat.joint_loads(0.0, 0.0, 0.0, program, 0)[0])
