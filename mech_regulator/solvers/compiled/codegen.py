@@ -849,11 +849,16 @@ def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tupl
     return rhs, guards
 
 
+_INLINED = ", inline='always'"
+
+
 def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_body: list[str],
             functions: dict[str, str]) -> str:
     """The generated module's source (`reactions` only with a reaction_body), the generated `functions` (name ->
     source) compiled before the right-hand side that calls them, with numpy's error model (a division by zero gives
-    an infinity or NaN, which the callers read, instead of an exception and a test per division)."""
+    an infinity or NaN, which the callers read, instead of an exception and a test per division); the reduction
+    inlined into its callers (numba's IR inlining: `crank_slider_bench` 13 % slower as a call than with the hand kernel
+    it replaced, 4-5 % inlined), the kinetostatics not (inlined it doubled the friction scenes' compile time)."""
     indent = "\n    "
     guards = [f"for i in range({n_guards}):", "    levels[i] = math.inf", "omega = y[1]", "g = 0"] + guard_body
     signatures = f"GUARDS_SIGNATURE, {'REACTIONS_SIGNATURE, ' if reaction_body else ''}RHS_SIGNATURE"
@@ -869,7 +874,8 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
         "from numba import cfunc, njit\n\n"
         "from mech_regulator.solvers.compiled import kernels as k\n"
         f"from mech_regulator.solvers.compiled.signatures import {signatures}\n\n\n"
-        + "".join(f"@njit(cache=True, error_model='numpy')\n{source}\n\n" for source in functions.values()) +
+        + "".join(f"@njit(cache=True, error_model='numpy'{_INLINED if name.startswith(symbolic.FUNCTION_NAME) else ''})"
+                  f"\n{source}\n\n" for name, source in functions.items()) +
         "@njit(RHS_SIGNATURE, cache=True)\n"
         f"def rhs(t, y, p, dydt):{indent}{indent.join(rhs_body)}\n\n\n"
         "@njit(GUARDS_SIGNATURE, cache=True)\n"
