@@ -13,7 +13,6 @@ from typing import Callable, Sequence
 
 from mech_regulator.mechanisms import crank_slider
 from mech_regulator.mechanisms.crank_slider import CrankSliderGeometry, slider_kinematics
-from mech_regulator.mechanisms.engine import cylinder_shifts
 from mech_regulator.mechanisms.four_bar import FourBarGeometry, link_angles
 from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
 from mech_regulator.mechanisms.walking_beam import WalkingBeamGeometry, _loop_points, arm, side
@@ -144,6 +143,11 @@ def walking_beam_reduced(geometry: WalkingBeamGeometry, gravity: tuple[float, fl
         return J, dJ, weight, C[0].real, dC.real
 
     return reduced
+
+
+def cylinder_shifts(throws_deg: Sequence[float], banks_deg: Sequence[float]) -> tuple[float, ...]:
+    """Each cylinder's own crank angle minus phi [rad]: `phi_i - phi = throw_i - bank_i`."""
+    return tuple(math.radians(throw - bank) for throw, bank in zip(throws_deg, banks_deg))
 
 
 def multi_cylinder_reduced(geometry: crank_slider.CrankSliderGeometry, throws_deg: Sequence[float],

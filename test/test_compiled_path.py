@@ -5,9 +5,8 @@ structure, loaded from numba's disk cache by a fresh process; clear refusals of 
 from __future__ import annotations
 
 import json
-import math
-import re
 import os
+import re
 import subprocess
 import sys
 

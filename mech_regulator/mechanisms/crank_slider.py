@@ -1,4 +1,4 @@
-"""Crank–slider kinematics in closed form and its reduced inertia and weight moment.
+"""Crank–slider kinematics in closed form (the preset builds a linkage: presets.py).
 
 Geometry (docs/scenes.md, "Conventions"): crank of radius R about the origin, crank pin
 `B = R (cos phi, sin phi)`, slider C on the line y = e at

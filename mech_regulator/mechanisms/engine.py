@@ -80,11 +80,6 @@ def mean_piston_speed(stroke: float, omega: float) -> float:
     return stroke * (30.0 * omega / math.pi) / 30.0
 
 
-def cylinder_shifts(throws_deg: Sequence[float], banks_deg: Sequence[float]) -> tuple[float, ...]:
-    """Each cylinder's own crank angle minus phi [rad]: `phi_i - phi = throw_i - bank_i`."""
-    return tuple(math.radians(throw - bank) for throw, bank in zip(throws_deg, banks_deg))
-
-
 def firing_delays(throws_deg: Sequence[float], banks_deg: Sequence[float], cycle_deg: float,
                   firing_order: Sequence[int] | None = None, firing_deg: Sequence[float] | None = None
                   ) -> list[float]:

@@ -2,9 +2,9 @@
 (issue 21: "the three existing mechanisms become presets that build a linkage; their scene syntax stays").
 
 `preset_linkage(mechanism)` turns a scene's `crank_slider`, `four_bar` or `walking_beam` (the geometry of
-mechanisms.mechanism_geometry) into a mechanisms.linkage.Linkage whose reduction (linkage.make_reduced), point
-motions (linkage.make_point_motions) and joint reactions (linkage.make_joint_loads) equal the preset's closed forms
-(crank_slider.py, engine.py, four_bar.py, walking_beam.py, kinetostatics.py) to rounding. Its conventions:
+mechanisms.mechanism_geometry) into a mechanisms.linkage.Linkage whose reduction, point motions and joint reactions
+(mechanisms.build_reduced, point_motions, build_kinetostatics) equal the presets' hand-written closed forms, kept as
+the tests' reference (test/closed_forms.py), to rounding. Its conventions:
 
 - The crank's own inertia belongs to machine.inertia (scene.schema.CrankSlider.crank_mass: "for its weight only"):
   the crank link has the crank's mass m at its centre cg (so its weight moment m g . S' and the crank bearing's
@@ -17,7 +17,7 @@ motions (linkage.make_point_motions) and joint reactions (linkage.make_joint_loa
   frame first, so that its reaction (the force on its first link from its second) is the preset's F_ij, the force
   of the inner link i on the outer link j; its ratio (theta_first' - theta_second') is then the preset's relative
   speed for the bearings and its negative for the pins (joint friction reads |R| and |ratio| only). The walking
-  beam (no kinetostatics as a preset) keeps the paper's joint names.
+  beam keeps the paper's joint names.
 - The preset's point names (mechanisms.point_motions) are the linkage's points of interest (`Linkage.points`):
   crank–slider B (crank pin) and C (wrist pin), four-bar B and C, walking beam A..E (its joints' names).
 - The output q: the crank–slider's slider x (the guide's point on the frame at x = 0, its direction the cylinder
@@ -46,7 +46,8 @@ _, _, ROCKER_PIN, ROCKER_BEARING = kinetostatics.FOUR_BAR_JOINTS
 def _crank(points: dict[str, complex], mass: float, centre: complex) -> Link:
     """The crank link (its pivot at its origin, among `points`) with mass [kg] at `centre` [m] and no moment of
     inertia about its pivot: I_S = -m |centre|^2 (module docstring)."""
-    return Link(CRANK, points, mass=mass, centre=centre, inertia=0.0 - mass * abs(centre) ** 2)
+    return Link(CRANK, points, mass=mass, centre=centre,
+                inertia=0.0 - mass * (centre.real * centre.real + centre.imag * centre.imag))  # as the code writes it
 
 
 def _revolute(name: str, outer: str, inner: str) -> Joint:

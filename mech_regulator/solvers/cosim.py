@@ -54,7 +54,6 @@ import numpy as np
 from mech_regulator.model import LoadPiece, MachineModel, crank_moments
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
-from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.compiled import runs_compiled
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up

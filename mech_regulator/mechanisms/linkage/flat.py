@@ -1,6 +1,8 @@
-"""The linkage solver written once, flat: a float64 program vector (`encode`) and plain functions over it in the
-subset numba compiles (scalars, complex numbers, float arrays; no dicts or objects), so that the reference path
-and the compiled fast path run the same code and give the same numbers (issue 21, "one implementation").
+"""The general linkage solver, flat: a float64 program vector (`encode`) and plain functions over it in the subset
+numba compiles (scalars, complex numbers, float arrays; no dicts or objects). It places the groups for the structure
+checks, the kinematics tables, the point motions and the messages of a group that fails; what a machine integrates
+(the reduction, the kinetostatics joint friction reads) runs as code generated per kind of linkage (symbolic.py),
+which this solver's `reduced` and `joint_loads` check independently (the tests).
 
 `reduced(phi, program, base)` gives the linkage's reduced quantities (J_links, dJ/dphi, M_weight, q, dq/dphi) of
 mechanisms/__init__.py; `solve_poses` the links' poses and their phi-derivatives group by group, returning a status

@@ -6,8 +6,8 @@ This module writes, once per kind of linkage, the function a designer would writ
 in closed form without angles (a link's pose is its origin r and its turn e^{i theta} = (cos theta, sin theta),
 both algebraic in the known poses: no sine, cosine or arctangent but the crank's), and its first and second
 derivatives with respect to phi by the chain rule, symbolically (sympy), common subexpressions shared (sympy.cse).
-The fast path compiles the source into a scene's module and the reference path runs the very same source as plain
-Python, so both give the same numbers; flat.py stays the solver of everything else (structure, kinematics, the
+The fast path compiles the source into a scene's module and the reference path compiles the very same source
+(reference_function), so both give the same numbers; flat.py stays the solver of everything else (structure, kinematics, the
 messages of a group that cannot assemble) and the tests hold the two to 1e-12.
 
 The kinetostatics joint friction reads (flat.joint_loads: joint reactions R0 + R1 epsilon, the joints' relative
@@ -57,7 +57,6 @@ from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
 from mech_regulator.mechanisms.linkage.structure import Structure
 
-GENERATOR_VERSION = 5   # part of the cache key: raise it when the generated code changes
 FUNCTION_NAME = "linkage_reduced"
 JOINT_LOADS_NAME = "linkage_joint_loads"
 
@@ -92,12 +91,21 @@ def _literal(value: float):
     return int(value) if value in (0.0, 1.0, -1.0) else None
 
 
+@functools.cache
+def _generator_source_hash() -> str:
+    """The hash of this module's and flat.py's source (program_key)."""
+    import inspect
+
+    return hashlib.sha256((inspect.getsource(sys.modules[__name__]) + inspect.getsource(flat)).encode()).hexdigest()
+
+
 def program_key(program: np.ndarray, outputs: Sequence[int]) -> str:
     """The hash of what the generated source depends on: the structural entries of the program, the literal
-    pattern of its numbers, the output joints' record positions and the generator's version."""
+    pattern of its numbers, the output joints' record positions and the generator's own source (this module's and
+    flat.py's, whose layout it reads: a changed generator never meets an old cached source)."""
     structural = _structural_positions(program)
     pattern = [repr(float(v)) if i in structural else repr(_literal(v)) for i, v in enumerate(program)]
-    text = f"{GENERATOR_VERSION}|{'|'.join(pattern)}|{tuple(outputs)}"
+    text = f"{_generator_source_hash()}|{'|'.join(pattern)}|{tuple(outputs)}"
     return hashlib.sha256(text.encode()).hexdigest()[:20]
 
 
@@ -764,7 +772,7 @@ def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, f
 
     def reduced(phi: float) -> tuple[float, ...]:
         values = function(phi, program, 0)
-        if not all(math.isfinite(value) for value in values):
+        if not math.isfinite(sum(values)):   # a NaN or an infinity among them (one test, not one per value)
             make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
             raise LinkageError(f"the linkage's reduced quantities are not finite at crank angle "
                                f"{math.degrees(phi):.3f} deg")

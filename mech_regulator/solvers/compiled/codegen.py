@@ -316,9 +316,9 @@ def _module_path(digest: str) -> Path:
 
 @functools.cache
 def _kernels_source() -> str:
-    """kernels.py's source and that of the linkage solver it compiles (mechanisms/linkage/flat.py), part of every
-    module's cache name: numba's cache would not notice a changed kernel."""
-    return inspect.getsource(kernels) + inspect.getsource(flat)
+    """kernels.py's source, part of every module's cache name: numba's cache would not notice a changed kernel (a
+    mechanism's generated functions are in the module's text itself)."""
+    return inspect.getsource(kernels)
 
 
 def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.ndarray:
