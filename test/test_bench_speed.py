@@ -17,7 +17,8 @@ from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, SpeedBe
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.solvers.cosim import DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP
+from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING
 from support import run_cli, simulate_complete
 
 SHORT = "scenario.duration=0.5"

@@ -43,8 +43,8 @@ from mech_regulator.model import build_model
 from mech_regulator.nodes.launch import viewer_command
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cosim import (DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, GovernorStepper, cosimulate, seconds,
-                                         to_nanoseconds)
+from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, GovernorStepper, cosimulate, seconds, to_nanoseconds
 from mech_regulator.solvers.trajectory import SampledTrajectory
 
 # engine_direct shortened to 1 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s): the main job's test scene
