@@ -41,7 +41,7 @@ def test_a_dip_between_the_probes_is_found_and_located(depth, nonlinear):
     value = (lambda y: math.expm1(y[0])) if nonlinear else (lambda y: y[0])
     event = _first_event(dense, 0.0, 1.0, [], [], [Guard("dips", value, no_transition)])
     assert event is not None
-    time, state, _, guard, name = event
+    time, state, _, guard, name, _ = event
     assert name == "dips" and time == pytest.approx(0.5 - math.sqrt(depth), abs=1e-12)
 
 

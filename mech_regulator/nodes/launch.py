@@ -34,6 +34,7 @@ from mech_regulator.scene.limits import exchange_refusal, output_stem
 OVERSPEED_TRIP_FACTOR = 1.25  # default trip speed: this times the scene's initial speed
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
+STALL_REPORT = 30.0  # [s] of wall time without the machine's simulated time advancing before the launcher says so
 GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
@@ -211,7 +212,9 @@ def _interrupt(signal_number, frame) -> None:
 def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
             quiet: bool, label: str) -> None:
     """Show the machine's progress (its /diagnostics sim_time; `label` names the work) until its process ends, or
-    until another node fails first (the launcher then stops the others)."""
+    until another node fails first (the launcher then stops the others). A machine whose simulated time has not
+    advanced for STALL_REPORT s of wall time (paused from outside, or stuck) is reported once on stderr, with the time
+    it stands at, and again when it goes on."""
     machine = processes["machine"]
     os.environ.update({key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                           "AMENT_PREFIX_PATH")})
@@ -221,17 +224,28 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
 
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
+    advanced = {"sim_time": -1.0, "at": time.monotonic(), "reported": False}  # the machine's time and when it moved
     with progress_bar(duration, quiet, label) as bar:
         def on_diagnostics(message: DiagnosticArray) -> None:
             for status in message.status:
                 if status.name.endswith("/machine"):
                     values = {item.key: item.value for item in status.values}
-                    bar.update(min(float(values.get("sim_time", 0.0)), duration) - bar.n)
+                    sim_time = float(values.get("sim_time", 0.0))
+                    bar.update(min(sim_time, duration) - bar.n)
+                    if sim_time > advanced["sim_time"]:
+                        if advanced["reported"]:
+                            print(f"\nmech-regulator: the machine goes on at t = {sim_time:.6g} s", file=sys.stderr)
+                        advanced.update(sim_time=sim_time, at=time.monotonic(), reported=False)
 
         node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 50)
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)
+                if not advanced["reported"] and time.monotonic() - advanced["at"] > STALL_REPORT:
+                    advanced["reported"] = True
+                    print(f"\nmech-regulator: the machine has not advanced from t = {max(advanced['sim_time'], 0.0):.6g} "
+                          f"s for {STALL_REPORT:g} s of wall time (paused through its ~/pause service, or stuck); "
+                          "Ctrl-C ends the run with its summary", file=sys.stderr)
                 ended = [name for name, process in processes.items() if process.poll() not in (None, 0)]
                 if ended and machine.poll() is None:
                     print(f"\nmech-regulator: the {', '.join(ended)} node ended early; stopping the others",

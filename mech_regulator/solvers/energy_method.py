@@ -22,7 +22,7 @@ from scipy.interpolate import CubicHermiteSpline
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS
-from mech_regulator.solvers.time_domain import fail_blown_up, fail_too_many_steps, switch_window
+from mech_regulator.solvers.time_domain import fail_blown_up, fail_too_many_steps, switch_window, turns_and_phase
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_ITERATIONS = 100
@@ -47,39 +47,44 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     grid, period = np.array(model.switch_grid(), dtype=float), model.dynamic_period()
     right_hand_sides: dict = {}
 
-    def moment_and_derivative(t: float, phi: float, omega: float, window: tuple | None = None, offset: float = 0.0
+    def moment_and_derivative(t: float, phase: float, omega: float, window: tuple | None = None
                               ) -> tuple[float, float, float]:
         """(net moment M [N m], J [kg m^2], epsilon [rad/s^2]) from the model's right-hand side:
-        M = J epsilon + 1/2 J' omega^2; within a window (lo, hi) [rad] between two switch or kink angles, at
-        phi - offset (whole dynamic periods [rad] taken off, the window's coordinates)."""
+        M = J epsilon + 1/2 J' omega^2; within a window (lo, hi) [rad] between two switch or kink angles, at the
+        crank's phase (phi less whole dynamic periods [rad], the window's coordinates: the machine is periodic in
+        them)."""
         key = (model.piece_at(t), window)
         if key not in right_hand_sides:
             right_hand_sides[key] = model.rhs(*key)
-        _, epsilon = right_hand_sides[key](t, (phi - offset, omega))
-        J, dJ = model.inertia(phi)
+        _, epsilon = right_hand_sides[key](t, (phase, omega))
+        J, dJ = model.inertia(phase)
         trajectory.stats.nfev += 1
         return J * epsilon + 0.5 * dJ * omega * omega, J, epsilon
 
-    M, J, epsilon = moment_and_derivative(t, phi, omega)
+    # the crank angle as whole periods and the phase within them (time_domain.turns_and_phase), carried exactly: the
+    # steps end on switch angles of the phase, and phi = turns period + phase is only written out
+    turns, phase = turns_and_phase(phi, period)
+    M, J, epsilon = moment_and_derivative(t, phase, omega)
     energy = 0.5 * J * omega * omega
     times, states, slopes = [t], [(phi, omega)], [(omega, epsilon)]
     window = None
     try:
         while t < scenario.duration:
-            offset, phi_next = 0.0, phi + dphi
+            whole = math.floor(phase / period)
+            turns, phase = turns + whole, phase - whole * period
+            phase_next = phase + dphi
             if grid.size:  # end the step on the next switch or kink angle; the moments of the interval it is in
-                offset = period * math.floor(phi / period)
-                window_before, window = window, switch_window(grid, period, phi - offset, forward=True)
-                phi_next = min(phi_next, offset + window[1])
+                window_before, window = window, switch_window(grid, period, phase, forward=True)
+                phase_next = min(phase_next, window[1])
                 if window != window_before:  # the moment on the far side of the angle just reached
-                    M, _, _ = moment_and_derivative(t, phi, omega, window, offset)
-            step = phi_next - phi
-            J_next, _ = model.inertia(phi_next)
+                    M, _, _ = moment_and_derivative(t, phase, omega, window)
+            step = phase_next - phase
+            J_next, _ = model.inertia(phase_next)
 
             def energy_after(speed: float) -> tuple[float, float, float]:
                 """(E_{i+1} [J], M_{i+1} [N m], epsilon_{i+1}) if the step ends at speed [rad/s]."""
-                M_next, _, epsilon_next = moment_and_derivative(t + 2.0 * step / (omega + speed), phi_next, speed,
-                                                                window, offset)
+                M_next, _, epsilon_next = moment_and_derivative(t + 2.0 * step / (omega + speed), phase_next, speed,
+                                                                window)
                 return energy + 0.5 * (M + M_next) * step, M_next, epsilon_next
 
             step_end = _step_end(energy_after, J_next, omega, energy + M * step, implicit)
@@ -87,9 +92,10 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
                 raise _Stopped(t, phi, omega)
             omega_next, energy_next, M_next, epsilon_next = step_end
             t = t + 2.0 * step / (omega + omega_next)
-            phi, omega, M, energy = phi_next, omega_next, M_next, energy_next
+            phase, omega, M, energy = phase_next, omega_next, M_next, energy_next
+            phi = turns * period + phase
             if implicit:  # the slope at the accepted time and speed
-                M, _, epsilon_next = moment_and_derivative(t, phi, omega, window, offset)
+                M, _, epsilon_next = moment_and_derivative(t, phase, omega, window)
             times.append(t)
             states.append((phi, omega))
             slopes.append((omega, epsilon_next))

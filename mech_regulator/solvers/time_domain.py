@@ -28,6 +28,8 @@ from mech_regulator.solvers.trajectory import Progress, Trajectory
 PROBES_PER_STEP = 4  # interior points of each step checked for a switch crossing
 RESTART_PERIODS = 4  # the solver's wrapped crank angle stays within this many dynamic periods
 MAX_INSTANT_EVENTS = 20  # governor mode changes allowed at one instant before the run is declared stuck
+MAX_RESTARTS_WITHOUT_PROGRESS = 100  # restarts in a row of any kind (switch, table piece, guide, mode, wrap) at one
+# instant before the run is declared stuck (fail_no_progress): a loop that makes no progress in time never spins
 GUARD_TOLERANCE = 1e-12  # a guard within this of 0 (in its own units: rad, rad/s, N, 1/s) is at its boundary
 # one-step methods: on a switch or kink they restart from a step onto it, not from the dense output (_step_onto)
 STEPS_ONTO_SWITCHES = ("RK23", "RK45", "DOP853", "Radau", "RK4")
@@ -93,35 +95,44 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     names = model.state_names()
     t, first_step = t_start, None
-    counts = _switch_counts(y[0], switches)
+    # the crank angle as whole periods and the phase within them (turns_and_phase), carried exactly across the
+    # restarts; the switch counts are the phase's (relative to turns)
+    turns, phase = turns_and_phase(y[0], period) if wraps else (0, float(y[0]))  # (phi only an output)
+    counts = _switch_counts(phase, switches)
     tables = model.state_tables if kinks else ()
     held = _held_pieces(tables, y)
     normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, and the one just crossed
     journals = _journals(model) if settings.method in STEPS_WITHIN_REACTIONS else ()
     branches = np.empty(0, dtype=complex)  # the branch points of the journals' |R_j| the last step saw [s]
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
+    stalled = 0  # restarts in a row of any kind that left the time where it was
+    y = np.array(y, dtype=float)
     while t < t_end and trajectory.status == "complete":
-        y, mode = _settle_mode(model, t, y, mode, trajectory)
+        if wraps:
+            whole = math.floor(phase / period)
+            turns, phase = turns + whole, phase - whole * period
+            counts = [count - whole for count in counts]
+        offset = turns * period if wraps else 0.0
+        y, mode, phase = settle_mode_in_phase(model, t, y, phase, offset, mode, trajectory)
         if trajectory.status != "complete":
             break
         held = _held_pieces(tables, y, held)
-        breakpoints = _breakpoint_guards(tables, held, mode, y)
+        breakpoints = _breakpoint_guards(tables, held, mode, y, offset)
         guards = model.guards(mode, y) + list(breakpoints)
-        offset = period * math.floor(y[0] / period) if wraps else 0.0
-        window = switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid.size else None
+        window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
         anchors = tuple(anchor - offset if table.angular else anchor  # in the solver's wrapped phi
                         for table, anchor in zip(tables, _anchors(tables, held)))
         anchors = anchors if tables else None
         y_wrapped = y.copy()
-        y_wrapped[0] -= offset
-        normal_sides, normal_guards = _normal_guards(model, piece, window, mode, kinks, anchors, t, y_wrapped, offset,
+        y_wrapped[0] = phase
+        normal_sides, normal_guards = _normal_guards(model, piece, window, mode, kinks, anchors, t, y_wrapped,
                                                      normal_sides, crossed_normal)
         crossed_normal = None
         guards += list(normal_guards)
         rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_sides)
         reactions = model.joint_reactions(piece, window, mode, kinks, anchors, normal_sides) if journals else None
         constraint = model.constraint(mode)
-        interpolant_noise = (settings.atol + settings.rtol * np.abs(y)) if settings.method == "Radau" else None
+        interpolant_noise = (settings.atol + settings.rtol * np.abs(y_wrapped)) if settings.method == "Radau" else None
         if branches.size and first_step is not None:  # a restart's first step stays within the reach too
             first_step = min(first_step, max(_reach(branches, t), _smallest_limit(t)))
         solver = _solver(settings, rhs, t, y_wrapped, t_end, first_step)
@@ -144,8 +155,9 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 trajectory.message = (f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s; "
                                       f"{advice} (the last finite state, at t = {t:.6g} s: {state_text(names, y)})")
                 break
-            dense = _Shifted(solver.dense_output(), offset, constraint)
-            t_step, y_step = solver.t, dense(solver.t)
+            wrapped = _Shifted(solver.dense_output(), 0.0, constraint)
+            dense = _Shifted(wrapped.dense, offset, constraint)
+            t_step, y_step, phase_step = solver.t, dense(solver.t), solver.y[0]
             beyond = speed_beyond_limit(names, y_step)
             if beyond is not None:  # the step that carried it there is kept, to show the blow-up
                 trajectory.add_piece(solver.t_old, t_step, dense)
@@ -153,12 +165,12 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 fail_blown_up(model, trajectory, t_step, y_step, *beyond)
                 break
             if journals:
-                branches = _reaction_branches(reactions, journals, dense, solver.t_old, solver.t, offset)
+                branches = _reaction_branches(reactions, journals, wrapped, solver.t_old, solver.t)
                 longest = _reach(branches, solver.t_old)
                 if solver.t - solver.t_old > longest and not redone:  # the step again, within the reach
                     _count_evaluations(trajectory, solver)
                     y_start = np.array(y, dtype=float)
-                    y_start[0] -= offset
+                    y_start[0] = phase
                     solver = _solver(settings, rhs, t, y_start, t_end, max(longest, _smallest_limit(t)))
                     redone = True
                     continue
@@ -166,14 +178,15 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 solver.max_step = min(settings.max_step or np.inf,
                                       max(_reach(branches, solver.t), _smallest_limit(solver.t)))
             if switches or guards:
-                crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise)
+                crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise,
+                                        wrapped=wrapped)
                 if crossing is not None:
-                    t_step, y_step, counts, guard, name = crossing
+                    t_step, y_step, counts, guard, name, phase_step = crossing
                     if guard is None:
                         trajectory.stats.switches += 1
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
-                            dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint,
-                                                       y_step[0], trajectory)
+                            dense, y_step, phase_step = _step_onto(settings, rhs, solver.t_old, y, phase, t_step,
+                                                                   offset, constraint, phase_step, trajectory)
                     elif guard in breakpoints or guard in normal_guards:  # a table's breakpoint or a guide's N = 0:
                         trajectory.stats.switches += 1                  # the next piece, mode and state kept
                         if guard in normal_guards:
@@ -184,10 +197,12 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                             table, step = breakpoints[guard]
                             held[table] += step
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
-                            dense, y_step = _step_onto(settings, rhs, solver.t_old, y, t_step, offset, constraint, None,
-                                                       trajectory)
+                            dense, y_step, phase_step = _step_onto(settings, rhs, solver.t_old, y, phase, t_step,
+                                                                   offset, constraint, None, trajectory)
                     else:
                         mode, y_step = guard.apply(t_step, y_step)
+                        y_step = np.array(y_step, dtype=float)
+                        y_step[0] = offset + phase_step  # (a transition never moves the crank)
                         _log_event(trajectory, t_step, name, mode)
                         instant_events = instant_events + 1 if t_step == solver.t_old == t else 0
                         if instant_events > MAX_INSTANT_EVENTS:
@@ -195,9 +210,13 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                     restart = t_step < t_end or guard is not None
             trajectory.add_piece(solver.t_old, t_step, dense)
             trajectory.stats.steps += 1
-            t, y = t_step, np.array(y_step, dtype=float)
+            stalled = stalled + 1 if t_step == t else 0
+            t, y, phase = t_step, np.array(y_step, dtype=float), phase_step
             if trajectory.stats.steps >= MAX_STEPS:
                 fail_too_many_steps(model, trajectory, t, y)
+                break
+            if stalled >= MAX_RESTARTS_WITHOUT_PROGRESS:
+                fail_no_progress(model, trajectory, t, y, f"the event '{name}'" if crossing else "a step")
                 break
             restart = restart or (wraps and abs(solver.y[0]) > RESTART_PERIODS * period and t < t_end)
             if progress is not None:
@@ -249,22 +268,24 @@ def _anchors(tables, held: list[int]) -> tuple[float, ...]:
     return tuple(anchors)
 
 
-def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
+def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray, offset: float = 0.0) -> dict:
     """The guards of the breakpoints around each table's held piece, from the state y the solver starts at:
     value - breaks[i - 1] >= 0 and breaks[i] - value >= 0 (those that exist), each mapped to (table index, the piece
     step its crossing makes: -1 or +1). They change no mode; their crossing restarts the solver on the next piece. A
     start just across the breakpoint it was stepped onto (within _held_pieces' slack, the method's error) moves that
-    level to the start value: the guard starts at its boundary, instead of firing again at once."""
+    level to the start value: the guard starts at its boundary, instead of firing again at once. The guards read the
+    state as the solver steps it, phi less offset [rad]: the levels of a table that turns with phi less it too."""
     guards = {}
     for k, (table, i) in enumerate(zip(tables, held)):
         start, below, above = table.value(y), _break(table, i - 1), _break(table, i)
+        shift = offset if table.angular else 0.0
         if below > -math.inf:
-            low = min(below, start)
+            low = min(below, start) - shift
             guards[Guard(f"{table.name} breakpoint {below:g}",
                          lambda state, value=table.value, low=low: value(state) - low,
                          lambda state: (mode, state))] = (k, -1)
         if above < math.inf:
-            high = max(above, start)
+            high = max(above, start) - shift
             guards[Guard(f"{table.name} breakpoint {above:g}",
                          lambda state, value=table.value, high=high: high - value(state),
                          lambda state: (mode, state))] = (k, +1)
@@ -272,9 +293,9 @@ def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
 
 
 def _normal_guards(model: MachineModel, piece, window, mode, kinks: bool, anchors, t: float, y: np.ndarray,
-                   offset: float, sides: tuple[float, ...], crossed: int | None
-                   ) -> tuple[tuple[float, ...], dict[Guard, int]]:
-    """Joint friction's guides at a restart (t [s], y with phi wrapped by offset [rad]): (the signs s of their normal
+                   sides: tuple[float, ...], crossed: int | None) -> tuple[tuple[float, ...], dict[Guard, int]]:
+    """Joint friction's guides at a restart (t [s], y with phi in the phase, as the solver steps it and the guards read
+    it): (the signs s of their normal
     forces N that the rhs holds, normal_signs, and the guards s N >= 0 whose crossing flips one, each with its
     guide's number), or ((), {}) for a machine without a guide with friction or a multistep method (kinks False: it
     steps over kinks, N's too). A sign is N's at the start, or, for the guide whose guard just crossed (crossed, its
@@ -292,9 +313,7 @@ def _normal_guards(model: MachineModel, piece, window, mode, kinks: bool, anchor
         low = min(0.0, side * normal(t, y))
 
         def level(tau: float, state: np.ndarray, side: float = side, normal=normal, low: float = low) -> float:
-            shifted = np.array(state, dtype=float)
-            shifted[0] -= offset
-            return side * normal(tau, shifted) - low
+            return side * normal(tau, state) - low
 
         name = f"{model.joint_friction.names[model.joint_friction.guides[k]]}'s normal force changes sign"
         guards[Guard(name, level, lambda tau, state: (mode, state), timed=True)] = k
@@ -326,8 +345,7 @@ def _journals(model: MachineModel) -> tuple[int, ...]:
     return tuple(k for k in range(len(friction.names)) if k not in friction.guides)
 
 
-def _reaction_branches(reactions, journals: tuple[int, ...], dense, t_old: float, t_new: float, offset: float
-                       ) -> np.ndarray:
+def _reaction_branches(reactions, journals: tuple[int, ...], wrapped, t_old: float, t_new: float) -> np.ndarray:
     """The branch points [s, complex] of the journals' friction rho_j |R_j| seen along the step (t_old, t_new] [s]: the
     complex zeros of |R_j(t)|^2, where |R_j| = sqrt(|R_j|^2) stops being analytic. Where a reaction passes close to 0
     without a sign change to locate (R = R_m + R' (t - t_m), R_m perpendicular to R'), |R_j|^2 = |R_m|^2 +
@@ -335,14 +353,13 @@ def _reaction_branches(reactions, journals: tuple[int, ...], dense, t_old: float
     only within its distance to them, and a one-step method's error estimate, an expansion in the step, fails on
     steps that reach that far (DOP853 accepted a 23 ms step across the wrist pin's 1.4 N of 145 N with 14 times its
     tolerance); _reach gives the steps that do not. |R_j|^2 along the step: reactions(t, y) (the segment's
-    MachineModel.joint_reactions, in the solver's phi, offset [rad] less than the dense output's) at the journals'
-    positions, on the dense output at the GUARD_NODES Chebyshev points (_branch_points). They are the reactions the
+    MachineModel.joint_reactions, in the solver's phi) at the journals' positions, on the solver's own dense output
+    (wrapped: phi in the phase, as the solver steps it) at the GUARD_NODES Chebyshev points (_branch_points). They are the reactions the
     step integrates, continued along the segment: beyond a corner inside the step (which the step is then cut at) the
     reactions themselves have a kink, whose interpolant's complex zeros would limit the step for nothing."""
     h = t_new - t_old
     times = t_old + GUARD_NODE_FRACTIONS * h
-    states = dense(times)
-    states[0] -= offset
+    states = wrapped(times)
     sizes = np.array([reactions(time, states[:, k]) for k, time in enumerate(times)])
     return _branch_points(sizes[:, list(journals)] ** 2, t_old, h)
 
@@ -389,27 +406,29 @@ def _smallest_limit(t: float) -> float:
     return 100.0 * float(np.spacing(abs(t) + 1.0))
 
 
-def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, t_switch: float, offset: float, constraint,
-               phi_switch: float | None, trajectory: Trajectory) -> tuple:
-    """Step from the accepted step's start (t_old [s], y_old, unwrapped) exactly onto the switch crossing located at
+def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, phase_old: float, t_switch: float, offset: float,
+               constraint, phase_switch: float | None, trajectory: Trajectory) -> tuple:
+    """Step from the accepted step's start (t_old [s], y_old unwrapped, its crank phase phase_old = phi less offset
+    [rad]) exactly onto the switch crossing located at
     t_switch [s] (a step of t_switch - t_old, with the same rhs: RK4 one step, an adaptive method its own steps,
     normally one): the state there then has the method's step accuracy, where the dense output's (the crossing's
     location) is not controlled at all; restarting on knots from the dense output loses about a digit over a run (an
     engine at rtol 1e-10: 2-10 rtol instead of 0.3-0.8). Returns (the dense output over (t_old, t_switch], the state
-    at t_switch with phi set to the switch angle phi_switch [rad], or as the step ends for None: a table's breakpoint
-    crossed by a function of the state); the function evaluations count in trajectory."""
+    at t_switch with the phase set to the switch angle phase_switch [rad, less offset], or as the step ends for None: a
+    table's breakpoint crossed by a function of the state; the phase there); the function evaluations count in
+    trajectory."""
     start = np.array(y_old, dtype=float)
-    start[0] -= offset
+    start[0] = phase_old
     onto = _solver(settings, rhs, t_old, start, t_switch, t_switch - t_old)
     pieces = []
     while onto.status == "running":
         onto.step()
         pieces.append(_Shifted(onto.dense_output(), offset, constraint))
     _count_evaluations(trajectory, onto)
+    phase = onto.y[0] if phase_switch is None else phase_switch
     y_switch = pieces[-1](t_switch)
-    if phi_switch is not None:
-        y_switch[0] = phi_switch
-    return (pieces[0] if len(pieces) == 1 else _Joined(pieces)), y_switch
+    y_switch[0] = offset + phase
+    return (pieces[0] if len(pieces) == 1 else _Joined(pieces)), y_switch, phase
 
 
 class _Joined:
@@ -424,6 +443,19 @@ class _Joined:
         indices = np.minimum(np.searchsorted(self.ends, times), len(self.pieces) - 1)
         columns = np.column_stack([self.pieces[i](tau) for i, tau in zip(indices, times)])
         return columns[:, 0] if np.ndim(t) == 0 else columns
+
+
+def settle_mode_in_phase(model: MachineModel, t: float, y: np.ndarray, phase: float, offset: float, mode,
+                         trajectory: Trajectory) -> tuple[np.ndarray, tuple | None, float]:
+    """_settle_mode on the state y at t [s] with its crank angle as the phase (phi less offset [rad]: the guards read
+    the angle as the solver steps it, turns_and_phase); returns the settled state (phi = offset + phase), mode and
+    phase."""
+    in_phase = np.array(y, dtype=float)
+    in_phase[0] = phase
+    in_phase, mode = _settle_mode(model, t, in_phase, mode, trajectory)
+    settled = np.array(in_phase, dtype=float)
+    settled[0] = offset + in_phase[0]
+    return settled, mode, float(in_phase[0])
 
 
 def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory: Trajectory
@@ -453,6 +485,25 @@ def _log_event(trajectory: Trajectory, t: float, name: str, mode) -> None:
     trajectory.events.append((t, name))
     trajectory.modes.append((t, mode))
     trajectory.stats.events += 1
+
+
+def turns_and_phase(phi: float, period: float) -> tuple[int, float]:
+    """The crank angle phi [rad] as whole dynamic periods and the angle within one: (k, phi - k period) with
+    k = floor(phi / period). The solvers carry the phase across their restarts and compare switch angles, table
+    knots and windows with it, never with the growing phi, whose last place is 2e-9 rad at phi = 1e7 rad
+    (docs/hard_cases.md, "Long runs"); only a segment's start reads the phase off phi."""
+    turns = math.floor(phi / period)
+    return turns, phi - turns * period
+
+
+def fail_no_progress(model: MachineModel, trajectory: Trajectory, t: float, y, what: str) -> None:
+    """End a run whose solver restarted MAX_RESTARTS_WITHOUT_PROGRESS times in a row at t [s] without the time
+    advancing: status failed, with the time, the restart that repeats (what) and the state y; what was computed up to
+    t stays."""
+    trajectory.status = "failed"
+    trajectory.message = (f"{model.scene.solver.method}: no progress at t = {t:.9g} s: {MAX_RESTARTS_WITHOUT_PROGRESS} "
+                          f"restarts in a row without the time advancing (the last at {what}; the state: "
+                          f"{state_text(model.state_names(), y)}); please report this scene")
 
 
 def state_text(names: tuple[str, ...], y) -> str:
@@ -544,11 +595,14 @@ def _switch_counts(phi: float, switches: list[tuple[float, float]]) -> list[int]
 
 
 def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switches: list[tuple[float, float]],
-                 guards: list, interpolant_noise: np.ndarray | None = None) -> tuple | None:
+                 guards: list, interpolant_noise: np.ndarray | None = None, wrapped=None) -> tuple | None:
     """The earliest event in (t_old, t_new]: phi reaching a switch angle or a governor guard turning negative.
 
-    Returns (time, state, switch counts after it, the guard or None for a switch, what happened),
-    or None if the step has no event. Switch angles: the step is probed at interior points so a crossing and its
+    Returns (time, state, switch counts after it, the guard or None for a switch, what happened, the crank's phase
+    there), or None if the step has no event. wrapped: the same dense output in the phase, phi less whole periods
+    (dense by default); the guards read it and the switches are crossings of the phase, their counts the phase's, so
+    that a switch angle is compared with a number that keeps its precision however far the crank has turned
+    (turns_and_phase). Switch angles: the step is probed at interior points so a crossing and its
     undoing within one step is not missed, and a crossing is located by Brent's method on the dense output. Switch
     counts are carried, not recomputed from phi, so a restart exactly on a switch angle is never taken for a new
     crossing. Guards: _guard_crossing, from the guard's polynomial along the whole step, finds a dip below the level
@@ -563,20 +617,22 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
     would log another touch (thousands per contact).
     """
     first_guard = None
+    wrapped = dense if wrapped is None else wrapped
     if guards:
         node_times = t_old + GUARD_NODE_FRACTIONS * (t_new - t_old)
-        node_states = dense(node_times)
+        node_states = wrapped(node_times)
         for guard in guards:
             samples = np.array([guard.level(tau, node_states[:, k]) for k, tau in enumerate(node_times)])
             level = 0.0
             if samples[0] <= GUARD_TOLERANCE:
                 level = -_release_level(guard, t_old, node_states[:, 0], interpolant_noise)
-            t_cross = _guard_crossing(lambda tau: guard.level(tau, dense(tau)) - level, t_old, t_new, samples - level)
+            t_cross = _guard_crossing(lambda tau: guard.level(tau, wrapped(tau)) - level, t_old, t_new,
+                                      samples - level)
             if t_cross is not None and (first_guard is None or t_cross < first_guard[0]):
                 first_guard = (t_cross, guard)
     if switches:
         probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
-        phis = dense(probe_times)[0]
+        phis = wrapped(probe_times)[0]
         previous = counts_old
         for i in range(1, probe_times.size):
             if first_guard is not None and probe_times[i - 1] >= first_guard[0]:
@@ -587,7 +643,7 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
             for j in [j for j in range(len(switches)) if current[j] != previous[j]]:
                 angle, period = switches[j]
                 boundary = angle + period * (previous[j] + 1 if forward else previous[j])
-                t_cross = _root(lambda tau: dense(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
+                t_cross = _root(lambda tau: wrapped(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
                 if earliest is None or t_cross < earliest[0]:
                     earliest = (t_cross, j, boundary)
             if earliest is not None and (first_guard is None or earliest[0] < first_guard[0]):
@@ -595,14 +651,14 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
                 y = dense(t_cross)
                 after = list(previous)
                 after[j] += 1 if forward else -1
-                y[0] = boundary
-                return t_cross, y, after, None, "switch"
+                y[0] += boundary - wrapped(t_cross)[0]  # the whole periods (dense's) on the switch angle
+                return t_cross, y, after, None, "switch", boundary
             previous = current
     if first_guard is None:
         return None
     t_cross, guard = first_guard
-    y = dense(t_cross)
-    return t_cross, y, _switch_counts(y[0], switches) if switches else counts_old, guard, guard.name
+    y, phase = dense(t_cross), wrapped(t_cross)[0]
+    return t_cross, y, _switch_counts(phase, switches) if switches else counts_old, guard, guard.name, phase
 
 
 def _release_level(guard, t: float, y: np.ndarray, noise: np.ndarray | None) -> float:

@@ -425,18 +425,20 @@ def _kink_restart(guards, n_guards, linear, thresholds, t, y_end, p, levels, gri
                   window_lo, window_hi, start):
     """The outer loop's restart (run._compiled_pieces) on the edge of the switch window (window_lo, window_hi) [rad]
     that guard edge_guard reached at t [s] in the state y_end (phi less offset [rad]), when it changes nothing but the
-    window: phi set onto the edge, wrapped anew into one period (the new offset period floor(phi / period)), the
+    window: phi set onto the edge, wrapped anew into one period (the edge less whole periods: the phase is carried, never
+    read back off the growing phi; the new offset is those periods added to offset's), the
     window ahead (_switch_window) written into p (the clamp, 1e-9 of its width inside, the window's edges, the sign of
     omega) and into the window guards' linear rows. Done only when every other guard is at least RESTART_MARGIN above
     its threshold there (no mode change the outer loop's time_domain._settle_mode would apply) and the window's own do
     not fire at once: then start holds the restart state (phi wrapped) and the new offset [rad] is returned; else p
     is left as it was and nan is returned (the caller returns the event)."""
     window_guard = slots[KINK_WINDOW_GUARD]
-    phi = offset + (window_lo if edge_guard == window_guard else window_hi)
-    new_offset = period * np.floor(phi / period)
-    lo, hi = _switch_window(grid, period, phi - new_offset, y_end[1] >= 0.0)
+    edge = window_lo if edge_guard == window_guard else window_hi  # less offset, as the window
+    whole = np.floor(edge / period)  # the phase on the edge wrapped into one period, never read off phi
+    new_offset = period * (np.round(offset / period) + whole)  # (time_domain.turns_and_phase)
     start[:] = y_end
-    start[0] = phi - new_offset
+    start[0] = edge - whole * period
+    lo, hi = _switch_window(grid, period, start[0], y_end[1] >= 0.0)
     saved = np.empty(slots.size)
     for k in range(1, slots.size):
         saved[k] = p[slots[k]]

@@ -33,9 +33,10 @@ from mech_regulator.solvers.compiled.codegen import (CLAMP_HI, CLAMP_LO, CRANK_D
                                                      RECENT_MODELS, WINDOW_HI, WINDOW_LO, CompiledScene,
                                                      compile_scene)
 from mech_regulator.solvers import time_domain
-from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, RESTART_PERIODS, _fail_stuck, _held_pieces,
-                                                _log_event, _settle_mode, fail_blown_up, fail_too_many_steps,
-                                                integrate_time_domain, switch_window)
+from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, MAX_RESTARTS_WITHOUT_PROGRESS, RESTART_PERIODS,
+                                                _fail_stuck, _held_pieces, _log_event, fail_blown_up, fail_no_progress,
+                                                fail_too_many_steps, integrate_time_domain, settle_mode_in_phase,
+                                                switch_window, turns_and_phase)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress moves, Ctrl-C is heard);
@@ -177,18 +178,26 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held = _held_pieces(tables, y)
     normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, the one just crossed
-    instant_events = 0
+    instant_events = stalled = 0  # mode changes, and restarts of any kind, in a row that left the time where it was
+    # the crank angle as whole periods and the phase within them (time_domain.turns_and_phase), carried exactly across
+    # the restarts: phi = turns period + phase is only written out, never read back
+    turns, phase = turns_and_phase(y[0], period) if wraps else (0, float(y[0]))  # (phi only an output)
+    y = np.array(y, dtype=float)
     while t < t_end and trajectory.status == "complete":
-        y, mode = _settle_mode(model, t, y, mode, trajectory)
+        if wraps:
+            whole = math.floor(phase / period)
+            turns, phase = turns + whole, phase - whole * period
+        offset = turns * period if wraps else 0.0
+        y, mode, phase = settle_mode_in_phase(model, t, y, phase, offset, mode, trajectory)
         if trajectory.status != "complete":
             break
-        offset = period * math.floor(y[0] / period) if wraps else 0.0
-        window = switch_window(grid, period, y[0] - offset, forward=y[1] >= 0.0) if grid.size else None
+        window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
-        held = _held_pieces(tables, y, held)
+        start[0] = offset + phase
+        held = _held_pieces(tables, start, held)
         p = compiled.parameters_for(piece, mode, window, start[1], held, start, offset)
         y_wrapped = start.copy()
-        y_wrapped[0] -= offset
+        y_wrapped[0] = phase
         if compiled.normal_slot is not None:
             normal_sides = compiled.hold_normal(p, t, y_wrapped, normal_sides, crossed_normal)
             crossed_normal = None
@@ -209,7 +218,8 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         trajectory.stats.restarts += int(run.wraps) + int(run.kinks)
         trajectory.stats.switches += int(run.kinks)
         if run.kinks:  # the stepper went on into later windows: phi's offset and the window are those of the last
-            offset, window = run.offset, (run.window_lo, run.window_hi)
+            turns, window = round(run.offset / period), (run.window_lo, run.window_hi)
+            offset = turns * period
         if run.pieces_done:  # and into later pieces: the last is the one stepped now
             index += int(run.pieces_done)
             piece, _, t_end, _ = pieces[index]
@@ -218,8 +228,10 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
             first_step = min(run.last_step, t_end - run.t_end, run.step_limit)
         t_old, t = t, run.t_end
         y = np.array(run.y_end, dtype=float)
+        phase = y[0]  # less offset (the stepper's own wraps added back)
         y[0] += offset
         y_stop = y.copy()  # the state where the call stopped, before an event's transition
+        what = "the end of a call"
         if run.status == integrators.FAILED and run.failure in (integrators.NONFINITE, integrators.STEP_TOO_SMALL):
             trajectory.status = "failed"
             if run.failure == integrators.NONFINITE:
@@ -231,18 +243,22 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
             g = int(run.event_guard)
             if compiled.window_slot is not None and g >= compiled.window_slot:
                 trajectory.stats.switches += 1
-                y[0] = offset + window[g - compiled.window_slot]
+                phase = window[g - compiled.window_slot]
+                y[0] = offset + phase
                 trajectory.stats.restarts += int(t < t_end)
+                what = f"the switch angle phi = {y[0]:.12g} rad ({phase:.12g} rad in its period)"
             elif compiled.normal_slot is not None and 0 <= g - compiled.normal_slot < compiled.n_normals:
                 crossed_normal = g - compiled.normal_slot  # a guide's N = 0: its other sign held, mode and state kept
                 normal_sides = tuple(-side if k == crossed_normal else side for k, side in enumerate(normal_sides))
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
+                what = f"a guide's normal force N = 0 (guide {crossed_normal})"
             elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
                 table, side = divmod(g - compiled.breakpoint_slot, 2)
                 held[table] += 1 if side else -1
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
+                what = f"a breakpoint of the table {tables[table].name}"
             else:
                 guard = model.guards(mode, start)[g]
                 mode, y = guard.apply(t, y)
@@ -252,12 +268,17 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
                 if instant_events > MAX_INSTANT_EVENTS:
                     _fail_stuck(trajectory, t)
                 trajectory.stats.restarts += 1
+                what = f"the guard '{guard.name}'"
         elif run.status == integrators.WRAPPED and t < t_end:
             trajectory.stats.restarts += 1
+            what = "a wrap of the crank angle"
+        stalled = stalled + 1 if t == t_old and not run.n_steps and not run.pieces_done else 0
         if run.beyond >= 0:  # a speed beyond MAX_SPEED at the last step's end: the run stops there (time_domain)
             fail_blown_up(model, trajectory, t, y_stop, model.state_names()[run.beyond], float(y_stop[run.beyond]))
         elif trajectory.status == "complete" and trajectory.stats.steps >= time_domain.MAX_STEPS:
             fail_too_many_steps(model, trajectory, t, y_stop)
+        elif trajectory.status == "complete" and stalled >= MAX_RESTARTS_WITHOUT_PROGRESS:
+            fail_no_progress(model, trajectory, t, y_stop, what)
         if progress is not None:
             progress(t)
     return y, mode, index + 1
