@@ -23,7 +23,7 @@ from ros_support import WAIT, domain_id, next_domain_id, processes  # noqa: F401
 psutil = pytest.importorskip("psutil", reason="bench soak reads memory with psutil: pip install "
                                                "'mech_regulator[bench]'")
 
-from mech_regulator.bench.soak import (PROCESS_NAMES, Progress, Row, Soak, between_samples,  # noqa: E402
+from mech_regulator.bench.soak import (PROCESS_NAMES, Progress, Row, Soak, _Watch, between_samples,  # noqa: E402
                                        format_row, parse_launch_banner, parse_progress, verdict)
 from mech_regulator.cli.report import ProgressLines  # noqa: E402
 from mech_regulator.model import build_model  # noqa: E402
@@ -120,6 +120,39 @@ def test_the_rows_and_the_verdict_carry_their_numbers():
                 rows=[Row(30.0, {}, 300.0, 10.0, 500.0), Row(60.0, {}, 540.0, 8.0, 400.0)])
     assert verdict(soak) == ("memory machine 100.0 -> 101.0 MB (+1.0 MB, +1.0 %), recorder 200.0 -> 250.0 MB "
                              "(+50.0 MB, +25.0 %); real-time factor 10 in the first interval, 8 in the last (-20.0 %)")
+
+
+def test_the_rate_rows_follow_the_progress_lines_and_show_a_stall():
+    """Rows from progress lines come at known wall times: no time before the first line and no pace from it alone,
+    then the pace between the lines at the rows' edges, 0 over an interval without a line (a run that stopped
+    exchanging), and no row due once the progress up to the run's last line (repeating the time) is reported."""
+    reported = []
+    watch = _Watch(Soak("engine_direct", 3600.0, exchange_step=0.02), psutil.Process(), 30.0, reported.append)
+
+    def line(wall: float, t: float, end: str = "") -> None:
+        watch.take(f"engine_direct on the nodes: {end}t = {t:g} / 3600 s (1 %), 1.0 s elapsed", wall, reported.append)
+
+    watch.row(5.0)
+    assert not watch.unreported()
+    line(10.0, 0.0)
+    assert watch.unreported()
+    watch.row(10.5)
+    line(11.0, 10.0)
+    line(12.0, 20.0)
+    watch.row(12.5)
+    line(14.0, 40.0)
+    watch.row(14.5)
+    watch.row(20.0)
+    line(21.0, 50.0)
+    assert watch.running() and watch.unreported()
+    line(23.0, 50.0, "done: ")
+    assert watch.running() and watch.unreported()  # the progress up to the last line still to report
+    watch.row(24.0)
+    assert not watch.running() and not watch.unreported()
+    rows = [(row.sim_time, row.real_time_factor, row.exchange_rate) for row in watch.soak.rows]
+    assert rows == [(None, None, None), (0.0, None, None), (20.0, 10.0, 500.0), (40.0, 10.0, 500.0),
+                    (40.0, 0.0, 0.0), (50.0, pytest.approx(10.0 / 7.0), pytest.approx(500.0 / 7.0))]
+    assert all("launcher" in row.memory and row.memory["launcher"] > 0.0 for row in watch.soak.rows)
 
 
 def test_the_motion_between_samples_is_exact_for_a_cubic():

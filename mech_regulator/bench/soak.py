@@ -74,9 +74,9 @@ class Progress:
 @dataclasses.dataclass(frozen=True)
 class Row:
     """One row of the soak: wall time since the soak began [s], each process's RSS [MB] then, the machine's simulated
-    time at the last progress line [s] (None before the first), and over the interval before the row (None before an
-    interval that starts with a progress line): the real-time factor [simulated s per wall s] and the exchanges per
-    second of wall time (None if the launcher did not announce its exchange step)."""
+    time at the last progress line [s] (None before the first), and over the interval before the row (from the first
+    progress line for the first; None before a second line): the real-time factor [simulated s per wall s] and the
+    exchanges per second of wall time (None if the launcher did not announce its exchange step)."""
 
     wall: float
     memory: dict[str, float]
@@ -207,12 +207,14 @@ class _Watch:
         self.start = time.monotonic()
         self.next_row = self.start + interval
         self.latest: Progress | None = None  # the last progress line with the machine's time
-        self.anchor: Progress | None = None  # the last progress line at the row before (its interval's start)
+        self.anchor: Progress | None = None  # where the next row's interval starts: the first progress line, then the
+        # last one at each row
+        self.anchored_by_a_row = False  # whether the anchor is a row's (a row without a new line then shows a stall)
         self.ended = False  # the run's last progress line has come
 
     def follow(self, rows: bool = True) -> None:
         """Read the launcher's lines until both its streams end, with a row every interval while the run goes
-        (rows), and one more for the part of the run after the last row."""
+        (rows), and one more for the progress after the last row, if any."""
         while self.open_streams:
             try:
                 line, wall, destination = self.lines.get(timeout=max(self.next_row - time.monotonic(), 0.0))
@@ -228,12 +230,16 @@ class _Watch:
                 self.next_row += self.interval * math.ceil((now - self.next_row) / self.interval + 1e-9)
                 if rows and self.running():
                     self.row(now)
-        if rows and self.running():
+        if rows and self.unreported():
             self.row(time.monotonic())
 
     def running(self) -> bool:
-        """Whether a row has something to say: the run has not ended, or it progressed since the last row."""
-        return not self.ended or self.latest is not self.anchor
+        """Whether a row has something to say: the run has not ended, or it has unreported progress."""
+        return not self.ended or self.unreported()
+
+    def unreported(self) -> bool:
+        """Whether a progress line came that no row has reported."""
+        return self.latest is not None and (self.latest is not self.anchor or not self.anchored_by_a_row)
 
     def take(self, line: str, wall: float, destination: Callable[[str], None]) -> None:
         """One line of the launcher, come at `wall` (time.monotonic() [s]): a progress line (the memory read with it),
@@ -248,6 +254,7 @@ class _Watch:
         self.ended = progress.final
         if self.latest is None or progress.sim_time != self.latest.sim_time:  # the last line repeats the time
             self.latest = progress
+        self.anchor = self.anchor or progress
         memory = process_memory(self.launcher)
         if not self.soak.memory_start and "machine" in memory:
             self.soak.memory_start = memory
@@ -256,14 +263,14 @@ class _Watch:
 
     def row(self, now: float) -> None:
         """Report the memory row and the rate row of the interval ending now (time.monotonic() [s]): the pace between
-        the last progress line before the interval and the last one in it (0 without a new one); none before a
-        second line."""
+        the last progress line before the interval (or the first line) and the last one in it, 0 without a new one;
+        none before a second line."""
         rate = exchanges = None
-        if self.anchor is not None:
+        if self.latest is not None and (self.latest is not self.anchor or self.anchored_by_a_row):
             span = (self.latest.wall if self.latest is not self.anchor else now) - self.anchor.wall
             rate = (self.latest.sim_time - self.anchor.sim_time) / span if span > 0.0 else 0.0
             exchanges = rate / self.soak.exchange_step if self.soak.exchange_step else None
-        self.anchor = self.latest
+        self.anchor, self.anchored_by_a_row = self.latest, self.latest is not None
         row = Row(now - self.start, process_memory(self.launcher),
                   self.latest.sim_time if self.latest is not None else None, rate, exchanges)
         self.soak.rows.append(row)
@@ -375,7 +382,7 @@ def format_row(row: Row) -> list[str]:
     312.4 s, 520.6 exchanges/s, real-time factor 10.41 over the interval`."""
     when = f"[{row.wall:7.1f} s]"
     names = [name for name in PROCESS_NAMES if name in row.memory]
-    memory = "  ".join(f"{name} {row.memory[name]:.1f}" for name in names) or "no process"
+    memory = "  ".join(f"{name} {row.memory[name]:.1f}" for name in names) or "no process running"
     if row.sim_time is None:
         rate = "no progress yet (the nodes are starting)"
     elif row.real_time_factor is None:
