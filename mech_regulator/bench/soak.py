@@ -379,7 +379,7 @@ def run_energy(soak: Soak, model) -> list[EnergySpan]:
 
 def format_row(row: Row) -> list[str]:
     """A row's two lines: `[   30.0 s] memory [MB]: machine 212.4  governor 180.1  ...` and `[   30.0 s] rate: t =
-    312.4 s, 520.6 exchanges/s, real-time factor 10.41 over the interval`."""
+    312.4 s, 520.6 exchanges/s, real-time factor 10.4 over the interval`."""
     when = f"[{row.wall:7.1f} s]"
     names = [name for name in PROCESS_NAMES if name in row.memory]
     memory = "  ".join(f"{name} {row.memory[name]:.1f}" for name in names) or "no process running"
@@ -420,7 +420,7 @@ def format_soak(soak: Soak) -> str:
 
 def verdict(soak: Soak) -> str:
     """Memory at the run's start and end per process (growth in MB and %) and the real-time factor of the first and
-    the last interval with progress, in one line."""
+    the last row with a pace (0 for an interval without progress), in one line."""
     growth = []
     for name in PROCESS_NAMES:
         if name in soak.memory_start and name in soak.memory_end:
@@ -430,7 +430,7 @@ def verdict(soak: Soak) -> str:
     memory = "memory " + ", ".join(growth) if growth else "memory: no reading while the nodes ran"
     rates = [row.real_time_factor for row in soak.rows if row.real_time_factor is not None]
     if not rates:
-        pace = "real-time factor: no interval with progress"
+        pace = "real-time factor: no interval with a pace"
     elif len(rates) == 1:
         pace = f"real-time factor {rates[0]:.3g} (one interval)"
     else:
