@@ -34,7 +34,7 @@ setup(
         "test": ["pytest>=8", "jsonschema>=4"],
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
         "distributed": ["dask[distributed]>=2024.1"],
-        "bench": ["mujoco>=3.1"],
+        "bench": ["mujoco>=3.1", "psutil>=5.9"],
         "ros": ["ros-kilted-rclpy", "ros-kilted-rmw-fastrtps-cpp", "ros-kilted-std-msgs", "ros-kilted-std-srvs",
                 "ros-sensor-msgs", "ros-geometry-msgs", "ros-rosgraph-msgs", "ros-diagnostic-msgs"],
     },

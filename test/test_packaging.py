@@ -189,6 +189,7 @@ PYTHON_DEPENDENCIES = {
 # imported only by optional features, installed with an extra of setup.py, not by a ROS user's rosdep
 OPTIONAL_IMPORTS = {
     "mujoco": "extra 'bench': `bench speed` compares against MuJoCo (mech_regulator/bench/)",
+    "psutil": "extra 'bench': `bench soak` reads each node's memory (mech_regulator/bench/soak.py)",
     "dask": "extra 'distributed': `sweep --engine dask` only (mech_regulator/analysis/sweep.py)",
 }
 # declared but never imported: the `ros2 launch` command, for launch/main_job.launch.py

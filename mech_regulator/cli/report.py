@@ -425,7 +425,7 @@ class ProgressLines:
         amount = f"{self.quantity} = " if self.quantity else ""
         if self.total is None:
             return f"{amount}{self.n:.4g} {self.unit}"
-        return f"{amount}{self.n:.3g} / {self.total:.3g} {self.unit}"
+        return f"{amount}{_progress_number(self.n)} / {_progress_number(self.total)} {self.unit}"
 
     def _share(self) -> str:
         return f" ({100.0 * self.n / self.total:.0f} %)" if self.total else ""
@@ -440,6 +440,12 @@ class ProgressLines:
     def _print(self, line: str) -> None:
         self.printed = True
         print(line, file=self.file or sys.stderr, flush=True)
+
+
+def _progress_number(value: float) -> str:
+    """An amount for a progress line: 3 significant digits, and every digit of its integer part ('42.7', '3600',
+    '12346' rather than '3.6e+03' and '1.23e+04'), so that a long run's lines tell its pace to the second."""
+    return f"{value:.{max(3, len(f'{abs(value):.0f}'))}g}"
 
 
 def _duration(seconds: float) -> str:

@@ -319,11 +319,11 @@ class NodeProcess:
 
 
 def _node_main(name: str, parameter_file: Path, environment: dict[str, str], log_descriptor: int) -> None:
-    """In a node's forked process: its own session, the launcher's death passed on (_die_with_parent), its name
+    """In a node's forked process: its own session, the launcher's death passed on (die_with_parent), its name
     (<name>_node, _name_process), output to the log, the run's environment and command line, then the node's main;
     its return value is the exit code."""
     os.setsid()
-    _die_with_parent()
+    die_with_parent()
     _name_process(f"{name}_node")
     os.dup2(log_descriptor, sys.stdout.fileno())
     os.dup2(log_descriptor, sys.stderr.fileno())
@@ -342,9 +342,9 @@ def _name_process(name: str) -> None:
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_NAME, name.encode()[:15])
 
 
-def _die_with_parent() -> None:
-    """In a node's process before it starts (Linux): receive SIGINT when the launcher dies, however it dies (even
-    SIGKILL), so that the node closes what it has and ends, and no node is left behind."""
+def die_with_parent() -> None:
+    """In a child process before it starts (Linux): receive SIGINT when its parent dies, however it dies (even
+    SIGKILL), so that the child (a node; `bench soak`'s run) closes what it has and ends, and none is left behind."""
     import ctypes
 
     PR_SET_PDEATHSIG = 1
