@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
-from mech_regulator.cli import EXIT_INTERRUPTED, STARTED
+from mech_regulator.cli import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED, STARTED
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note, terminal_text
@@ -37,8 +37,6 @@ if TYPE_CHECKING:
 # pydantic, matplotlib, rerun) inside its function. test/test_cli_startup.py checks it.
 
 EXIT_BAD_INPUT = 2
-EXIT_RUN_FAILED = 1
-EXIT_INACCURATE = 3  # simulate --strict: the run failed a self-check (analysis/self_check.py)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -18,6 +18,8 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from mech_regulator.cli import EXIT_INACCURATE, EXIT_RUN_FAILED
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -574,15 +576,20 @@ def check_output_paths(*paths: Path | None) -> None:
         seen.add(os.path.realpath(path))
 
 
+KERNEL_FOLDERS = (Path("/dev"), Path("/proc"), Path("/sys"))
+"""The kernel's file systems (devices, processes, settings): no output is ever written there."""
+
+
 def output_refusal(path: Path) -> str | None:
-    """Why the output file `path` cannot be written, or None: it is in /dev (nothing is ever written there) or is
-    not a regular file (a device, a pipe, a socket, a folder); its folder does not exist; or a first byte cannot be
-    written (a read-only file system, no permission, a full disk), tried by writing one: a new file is made with it
-    and removed, an existing one has its first byte written over with itself (an empty one gets one, taken away
-    again)."""
+    """Why the output file `path` cannot be written, or None: it is in KERNEL_FOLDERS or is not a regular file (a
+    device, a pipe, a socket, a folder); its folder does not exist; or a first byte cannot be written (a read-only
+    file system, no permission, a full disk), tried by writing one: a new file is made with it and removed, an
+    existing one has its first byte written over with itself (an empty one gets one, taken away again)."""
     real = Path(os.path.realpath(path))  # where a symbolic link leads
-    if real == Path("/dev") or Path("/dev") in real.parents:
-        return "it is in /dev, where devices live: expected a regular file in a folder of yours"
+    for kernel in KERNEL_FOLDERS:
+        if real == kernel or kernel in real.parents:
+            return f"it is in {kernel}, the kernel's (devices, processes, settings): expected a regular file in a " \
+                   "folder of yours"
     try:
         mode = os.stat(real).st_mode
     except FileNotFoundError:
@@ -643,8 +650,8 @@ class OutputWriter:
         self.answer = answer
         self.failures: list[str] = []
 
-    def write(self, key: str | None, path: Path | None, write) -> None:
-        """write(path), unless path is None; on success answer[key] = path (key None: not in the answer)."""
+    def write(self, key: str, path: Path | None, write) -> None:
+        """write(path), unless path is None; on success answer[key] = path."""
         if path is None:
             return
         try:
@@ -652,15 +659,14 @@ class OutputWriter:
         except OSError as error:
             self.failures.append(f"writing '{path}' failed: {error.strerror or error}; that file is incomplete")
             return
-        if key is not None:
-            self.answer[key] = str(path)
+        self.answer[key] = str(path)
 
     def exit_code(self, code: int) -> int:
-        """Print each failure as a line on stderr; the command's exit code: 1 when a write failed and the command
-        would otherwise have succeeded (0, or 3 of simulate --strict), else `code`."""
+        """Print each failure as a line on stderr; the command's exit code: EXIT_RUN_FAILED when a write failed and
+        the command would otherwise have succeeded (0, or EXIT_INACCURATE of simulate --strict), else `code`."""
         for line in self.failures:
             print(f"mech-regulator: {terminal_text(line)}", file=sys.stderr)
-        return 1 if self.failures and code in (0, 3) else code
+        return EXIT_RUN_FAILED if self.failures and code in (0, EXIT_INACCURATE) else code
 
 
 def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:

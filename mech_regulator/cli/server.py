@@ -139,11 +139,13 @@ def server_folder() -> Path:
 
 
 def folder_refusal(folder: Path) -> str | None:
-    """Why the servers' folder must not be used, or None: it must be a folder (not a symbolic link to one) owned by
-    this process's user with no permission for its group or others (mode 0700), so that no one else can place a
-    socket there or reach this user's server."""
+    """Why the servers' folder must not be used, or None (also while it does not exist: start_server makes it): it
+    must be a folder (not a symbolic link to one) owned by this process's user with no permission for its group or
+    others (mode 0700), so that no one else can place a socket there or reach this user's server."""
     try:
         status = os.lstat(folder)
+    except FileNotFoundError:
+        return None
     except OSError as error:
         return error.strerror or str(error)
     if not stat.S_ISDIR(status.st_mode):
@@ -221,7 +223,7 @@ def through_server(argv: list[str]) -> int | None:
               "the command server", file=sys.stderr)
         return None
     folder = server_folder()
-    problem = folder_refusal(folder) if os.path.lexists(folder) else None  # (missing: start_server makes it)
+    problem = folder_refusal(folder)
     if problem is not None:
         print(f"mech-regulator: note: the command server's folder {folder} is not private: {problem}; this command "
               f"runs without the server (chmod 700 it if it is yours, or set {SERVER_VARIABLE}=off)", file=sys.stderr)
@@ -390,7 +392,7 @@ def server_command(action: str) -> int:
     """server start: start this environment's server unless running and wait until it answers; status: each
     server of the folder (pid, key, idle time, what it loaded); stop: stop every server of the folder and wait
     until each has ended."""
-    problem = folder_refusal(server_folder()) if os.path.lexists(server_folder()) else None
+    problem = folder_refusal(server_folder())
     if problem is not None:
         print(f"mech-regulator: the command server's folder {server_folder()} is not private: {problem}; no server "
               "is started, asked or stopped there (chmod 700 it if it is yours)", file=sys.stderr)

@@ -93,19 +93,14 @@ def run_sweep_command(args: argparse.Namespace) -> int:
 
     if args.engine == "dask" and not dask_installed():
         raise SceneError(f"--engine dask needs Dask distributed: {DASK_EXTRA} (or pip install 'dask[distributed]')")
-    def checked(folder: Path) -> Path:  # the folder made, it and the files to write in it checked
-        check_output_paths(output_folder(folder) / "sweep.csv", folder / "sweep.png")
-        return folder
-
-    if args.out is not None:  # before the scenes are read
-        checked(args.out)
     scenes = ([args.scene] if args.scene is not None else []) + args.scenes
     axes = [parse_grid(spec) for spec in args.grid]
     points = sweep_points(scenes, args.overrides, axes, args.path)
     jobs = check_executor(args.jobs, args.engine, args.scheduler)
     governed = any(point.scene.get("governor") for point in points)
     metric = args.metric or ("oscillation_ratio" if governed else "delta")
-    out = args.out if args.out is not None else checked(Path("runs") / f"sweep-{output_stem(points[0].scene['name'])}")
+    out = args.out if args.out is not None else Path("runs") / f"sweep-{output_stem(points[0].scene['name'])}"
+    check_output_paths(output_folder(out) / "sweep.csv", out / "sweep.png")  # once the points are valid
     warm_fast_path(points, args.engine, args.quiet)
     durations = [float(point.scene["scenario"]["duration"]) for point in points]
     start = time.perf_counter()
