@@ -162,6 +162,94 @@ def test_a_server_of_another_key_is_not_used(served):
     assert served.served() == before
 
 
+ROOT_AND_UNSHARE = pytest.mark.skipif(os.geteuid() != 0 or shutil.which("unshare") is None,
+                                      reason="another mount namespace (unshare -m) and other users need root")
+
+
+@ROOT_AND_UNSHARE
+def test_a_client_in_another_mount_namespace_runs_the_command_itself(served, tmp_path):
+    """The client mounts a tmpfs on view/ in a mount namespace of its own and writes view/run.csv: the server, which
+    would write the folder's file of its own namespace, does not serve it; the client writes into its tmpfs, as a
+    command without server would, silently."""
+    (tmp_path / "view").mkdir()
+    before = served.served()
+    shell = 'mount -t tmpfs none view && "$0" -m mech_regulator simulate lathe --quiet --out view/run.csv && test -s ' \
+            'view/run.csv'
+    done = subprocess.run(["unshare", "-m", "sh", "-c", shell, sys.executable], cwd=tmp_path, env=served.env,
+                          capture_output=True, text=True, timeout=TIMEOUT)
+    assert done.returncode == 0 and "wrote view/run.csv" in done.stdout, done.stdout + done.stderr
+    assert done.stderr == ""
+    assert served.served() == before and list((tmp_path / "view").iterdir()) == []
+    here = run(["simulate", "lathe", "--quiet", "--out", "view/run.csv"], served.env, tmp_path)  # this namespace
+    assert here.returncode == 0 and served.served() == before + 1 and (tmp_path / "view" / "run.csv").exists()
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="a client of another user or other groups needs root to start it")
+@pytest.mark.parametrize("user, groups, refusal", [(65534, [], "another user"), (0, [4242], "other groups")])
+def test_the_server_refuses_a_client_of_another_user_or_other_groups(tmp_path, user, groups, refusal):
+    """peer_refusal on a connection from a process started as another user, or with other supplementary groups."""
+    folder = Path(tempfile.mkdtemp(prefix="mr-peer-"))
+    try:
+        folder.chmod(0o755)
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as listener:
+            listener.bind(str(folder / "s"))
+            (folder / "s").chmod(0o777)
+            listener.listen(1)
+            child = os.fork()
+            if child == 0:  # the client: another user, or other groups; it connects and waits for the end
+                try:
+                    os.setgroups(groups)
+                    os.setgid(user)
+                    os.setuid(user)
+                    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as connection:
+                        connection.settimeout(TIMEOUT)  # a failing test does not leave it waiting
+                        connection.connect(str(folder / "s"))
+                        connection.recv(1)
+                finally:
+                    os._exit(0)
+            try:
+                connection, _ = listener.accept()
+                with connection:
+                    assert command_server.peer_refusal(connection) == refusal
+            finally:
+                os.waitpid(child, 0)
+        mine, theirs = socket.socketpair()
+        with mine, theirs:
+            assert command_server.peer_refusal(mine) is None  # this very process
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@pytest.mark.parametrize("kind", ["open", "not mine", "a link"])
+def test_a_server_folder_that_is_not_private_is_not_used(tmp_path, kind):
+    """The command runs in its own process with a note saying why, and no server is started or asked there."""
+    if kind == "not mine" and os.geteuid() != 0:
+        pytest.skip("giving a folder to another user needs root")
+    runtime = Path(tempfile.mkdtemp(prefix="mr-open-"))
+    try:
+        folder = runtime / "mech_regulator"
+        if kind == "a link":
+            (runtime / "elsewhere").mkdir(mode=0o700)
+            folder.symlink_to(runtime / "elsewhere")
+        else:
+            folder.mkdir(mode=0o700)
+            folder.chmod(0o755 if kind == "open" else 0o700)
+            if kind == "not mine":
+                os.chown(folder, 65534, 65534)
+        alone = run(["describe", "lathe"], server_environment(str(runtime)))
+        assert alone.returncode == 0 and alone.stdout.startswith("scene: lathe\n"), alone.stderr
+        why = {"open": "its mode 0755 lets others in (expected 0700)", "a link": "it is not a folder",
+               "not mine": "it belongs to user id 65534, not to this user (0)"}[kind]
+        assert alone.stderr.startswith(f"mech-regulator: note: the command server's folder {folder} is not private: "
+                                       f"{why}"), alone.stderr
+        assert len(alone.stderr.splitlines()) == 1 and "this command runs without the server" in alone.stderr
+        assert list(folder.iterdir()) == []  # no lock, log or socket: no server started
+        status = run(["server", "status"], server_environment(str(runtime)))
+        assert status.returncode == 1 and "is not private" in status.stderr
+    finally:
+        shutil.rmtree(runtime, ignore_errors=True)
+
+
 def test_the_key_follows_the_source_and_the_environment(tmp_path, monkeypatch):
     (tmp_path / "a.py").write_text("x = 1\n")
     first = command_server.source_fingerprint(str(tmp_path))

@@ -4,6 +4,8 @@ import sys
 import time
 
 EXIT_INTERRUPTED = 130
+EXIT_RUN_FAILED = 1  # a run that failed, or an output that could not be written after the work
+EXIT_INACCURATE = 3  # simulate --strict: the run failed a self-check (analysis/self_check.py)
 STARTED = time.monotonic()  # [s] when the command line began (its first import): `run`'s start-up counts from it
 SERVED_COMMANDS = frozenset({"simulate", "describe", "governor", "coupling", "kinematics", "engine", "structure",
                              "flywheel", "scenes", "schema"})

@@ -81,10 +81,11 @@ def run_bench_speed(args: argparse.Namespace) -> int:
     from mech_regulator.bench.mujoco_model import mujoco_refusal
     from mech_regulator.bench.speed import (row_line, run_speed_benchmark, select_speed_scenes, summary, tables,
                                             write_rows_csv)
-    from mech_regulator.cli.report import bench_scenes_and_folder, to_json
+    from mech_regulator.cli.report import bench_scenes_and_folder, check_output_paths, to_json
     from mech_regulator.scene import SceneError
 
     scenes = select_speed_scenes(bench_scenes_and_folder(args.scenes, args.out, "crank_slider_bench,startup"))
+    check_output_paths(*(args.out / name for name in ("speed.csv", "speed.json", "speed.png", "ros.png")))
     mujoco = not args.no_mujoco
     if mujoco and importlib.util.find_spec("mujoco") is None:
         needing = [bench.name for bench in scenes if mujoco_refusal(bench.load(args.quick)) is None]

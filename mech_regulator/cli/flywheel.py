@@ -13,7 +13,8 @@ from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
-from mech_regulator.cli.report import check_outputs, note, progress_bar, to_json, wrote_lines
+from mech_regulator.cli.report import (OutputWriter, check_outputs, note, progress_bar, terminal_text, to_json,
+                                       wrote_lines)
 
 
 def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
@@ -54,12 +55,12 @@ def run_flywheel(args: argparse.Namespace) -> int:
     if args.scene is None:
         raise SceneError("flywheel: give a SCENE (a file or a bundled scene's name), or --classes to list the "
                          "machine classes")
+    check_outputs(args, args.record)
     from mech_regulator.model import build_model
     from mech_regulator.solvers import on_path_for_a_command
 
     scene = on_path_for_a_command(build_model(load_scene(args.scene, args.overrides)), note).scene
     delta, delta_source = requested_delta(args.delta, args.machine_class, scene.analysis.permitted_delta)
-    check_outputs(args, args.record)
     with progress_bar(None, args.quiet, f"flywheel for {scene.name or args.scene}", quantity=None,
                       unit="dynamic periods simulated") as bar:
         def progress(stage: str) -> None:
@@ -68,18 +69,14 @@ def run_flywheel(args: argparse.Namespace) -> int:
 
         design = design_flywheel(scene, delta, args.omega_m, args.ratio, progress)
     data = design_data(design, delta_source)
-    if args.plot is not None:
-        from mech_regulator.viz.flywheel import plot_flywheel
+    outputs = OutputWriter(data)
+    if args.plot is not None or args.record is not None:
+        from mech_regulator.viz.flywheel import plot_flywheel, record_flywheel
 
-        plot_flywheel(design, args.plot)
-        data["plot"] = str(args.plot)
-    if args.record is not None:
-        from mech_regulator.viz.flywheel import record_flywheel
-
-        record_flywheel(design, args.record)
-        data["recording"] = str(args.record)
+        outputs.write("plot", args.plot, lambda path: plot_flywheel(design, path))
+        outputs.write("recording", args.record, lambda path: record_flywheel(design, path))
     print(to_json(data) if args.json else format_flywheel(data))
-    return 0
+    return outputs.exit_code(0)
 
 
 def parse_delta(text: str) -> float:
@@ -222,7 +219,7 @@ def format_flywheel(data: dict) -> str:
                  f"(J = {lower['J']:.5g}, dE = {lower['dE']:.5g}); E-axis intercepts a = {construction['a']:.6g} J, "
                  f"b = {construction['b']:.6g} J; J_fw = (a - b) / (k_max - k_min) = {witt:.7g} kg m^2")
     lines += [f"note: {note}" for note in data["notes"]]
-    return "\n".join(lines + wrote_lines(data))
+    return terminal_text("\n".join(lines + wrote_lines(data)))
 
 
 def _fraction(value: float) -> str:

@@ -15,11 +15,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
-from mech_regulator.cli import EXIT_INTERRUPTED, STARTED
+from mech_regulator.cli import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED, STARTED
 from mech_regulator.cli.bench_soak import add_bench_soak_command
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
-from mech_regulator.cli.report import note
+from mech_regulator.cli.report import note, terminal_text
 from mech_regulator.cli.structure import add_structure_command
 from mech_regulator.cli.sweep import add_sweep_command
 
@@ -38,8 +38,6 @@ if TYPE_CHECKING:
 # pydantic, matplotlib, rerun) inside its function. test/test_cli_startup.py checks it.
 
 EXIT_BAD_INPUT = 2
-EXIT_RUN_FAILED = 1
-EXIT_INACCURATE = 3  # simulate --strict: the run failed a self-check (analysis/self_check.py)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -221,8 +219,13 @@ def main(argv: list[str] | None = None) -> int:
             from mech_regulator.cli.sweep import run_sweep_command
 
             return run_sweep_command(args)
+        from mech_regulator.cli.report import check_outputs
         from mech_regulator.scene import load_scene
 
+        if args.command != "run":  # every output checked before the scene is read (it may compile a linkage)
+            check_outputs(args, *(getattr(args, name, None) for name in ("out", "record", "scene_out")))
+        elif args.out is not None:
+            _check_run_files(args.out)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "describe":
             from mech_regulator.model import build_model
@@ -246,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
             return _engine(scene, args)
         return _simulate(scene, args)
     except SceneError as error:
-        print(f"mech-regulator: {error}", file=sys.stderr)
+        print(f"mech-regulator: {terminal_text(str(error))}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except BrokenPipeError:  # the reader went away (`... | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -282,12 +285,11 @@ def _list_scenes() -> int:
 def _simulate(scene, args) -> int:
     from mech_regulator.analysis import summarise
     from mech_regulator.analysis.self_check import self_checks
-    from mech_regulator.cli.report import check_outputs, format_summary, progress_bar, to_json, write_csv
+    from mech_regulator.cli.report import OutputWriter, format_summary, progress_bar, to_json, write_csv
     from mech_regulator.model import build_model
     from mech_regulator.solvers import on_path_for_a_command, simulate
     from mech_regulator.solvers.advice import stiffness_advice
 
-    check_outputs(args, args.out, args.record)
     model = on_path_for_a_command(build_model(scene), note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
@@ -304,38 +306,36 @@ def _simulate(scene, args) -> int:
         summary["status"] = "inaccurate"
     if not trajectory.interpolants:
         args.out = args.plot = args.record = None  # nothing to write
-    if args.out is not None:
-        columns = model.columns(*_samples(model, trajectory))
-        write_csv(args.out, columns)
-        summary["csv"] = str(args.out)
+    outputs = OutputWriter(summary)
+    outputs.write("csv", args.out, lambda path: write_csv(path, model.columns(*_samples(model, trajectory))))
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_run
 
-        plot_run(model, trajectory, summary, args.plot)
-        summary["plot"] = str(args.plot)
+        outputs.write("plot", args.plot, lambda path: plot_run(model, trajectory, summary, path))
     if args.record is not None:
         from mech_regulator.viz.recording import record_run
 
-        record_run(model, *_samples(model, trajectory), args.record, mode_changes=trajectory.events,
-                   status=trajectory.status, message=trajectory.message)
-        summary["recording"] = str(args.record)
+        outputs.write("recording", args.record, lambda path: record_run(
+            model, *_samples(model, trajectory), path, mode_changes=trajectory.events, status=trajectory.status,
+            message=trajectory.message))
     print(to_json(summary) if args.json else format_summary(model, summary))
     for check in checks:
         print(f"mech-regulator: warning: inaccurate run: {check['check']} {check['value']:.2g} exceeds the "
               f"{check['allowed']:.2g} its tolerance allows; {check['fix']}", file=sys.stderr)
     if trajectory.status == "failed":
-        print(f"mech-regulator: {trajectory.message}", file=sys.stderr)
-        return EXIT_RUN_FAILED
+        print(f"mech-regulator: {terminal_text(trajectory.message)}", file=sys.stderr)
+        return outputs.exit_code(EXIT_RUN_FAILED)
     if trajectory.status == "interrupted":
-        print(f"mech-regulator: {trajectory.message}; the outputs hold the run up to there", file=sys.stderr)
-        return EXIT_INTERRUPTED
-    return EXIT_INACCURATE if checks and args.strict else 0
+        print(f"mech-regulator: {terminal_text(trajectory.message)}; the outputs hold the run up to there",
+              file=sys.stderr)
+        return outputs.exit_code(EXIT_INTERRUPTED)
+    return outputs.exit_code(EXIT_INACCURATE if checks and args.strict else 0)
 
 
 def _cosimulate(model, args) -> int:
     """simulate --exchange-step: the lockstep co-simulation of the nodes, in this process."""
     from mech_regulator.analysis import summarise_cosimulation
-    from mech_regulator.cli.report import format_cosimulation_summary, progress_bar, to_json, write_csv
+    from mech_regulator.cli.report import OutputWriter, format_cosimulation_summary, progress_bar, to_json, write_csv
     from mech_regulator.scene import SceneError
     from mech_regulator.solvers.cosim import cosimulate
 
@@ -348,41 +348,39 @@ def _cosimulate(model, args) -> int:
         run = cosimulate(model, args.exchange_step, args.overspeed_trip,
                          progress=lambda t: bar.update(min(t, duration) - bar.n), coupling=args.coupling)
     summary = summarise_cosimulation(model, run, args.exchange_step, args.coupling)
-    if args.out is not None:
-        columns = model.columns(run.times, run.states, run.throttle, run.external_load)
-        write_csv(args.out, columns, digits=17)
-        summary["csv"] = str(args.out)
+    outputs = OutputWriter(summary)
+    outputs.write("csv", args.out, lambda path: write_csv(
+        path, model.columns(run.times, run.states, run.throttle, run.external_load), digits=17))
     if args.record is not None:
         from mech_regulator.viz.recording import record_run
 
-        record_run(model, run.times, run.states, args.record,
-                   mode_changes=[(t, what) for t, what, _ in run.events], status=run.status, message=run.message)
-        summary["recording"] = str(args.record)
+        outputs.write("recording", args.record, lambda path: record_run(
+            model, run.times, run.states, path, mode_changes=[(t, what) for t, what, _ in run.events],
+            status=run.status, message=run.message))
     print(to_json(summary) if args.json else format_cosimulation_summary(summary))
     if run.status == "failed":
-        print(f"mech-regulator: {run.message}", file=sys.stderr)
-        return EXIT_RUN_FAILED
-    return EXIT_INTERRUPTED if run.status == "interrupted" else 0
+        print(f"mech-regulator: {terminal_text(run.message)}", file=sys.stderr)
+        return outputs.exit_code(EXIT_RUN_FAILED)
+    return outputs.exit_code(EXIT_INTERRUPTED if run.status == "interrupted" else 0)
 
 
 def _governor(scene, args) -> int:
     from mech_regulator.analysis import analyse_governor
-    from mech_regulator.cli.report import check_outputs, format_governor, to_json
+    from mech_regulator.cli.report import OutputWriter, format_governor, to_json
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 
     if scene.governor is None:
         raise SceneError(f"scene '{scene.name}' has no governor: add a 'governor:' section (see docs/scenes.md)")
-    check_outputs(args)
     model = build_model(scene)
     analysis = analyse_governor(model)
+    outputs = OutputWriter(analysis)
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_governor
 
-        plot_governor(model, analysis, args.plot)
-        analysis["plot"] = str(args.plot)
+        outputs.write("plot", args.plot, lambda path: plot_governor(model, analysis, path))
     print(to_json(analysis) if args.json else format_governor(analysis))
-    return 0
+    return outputs.exit_code(0)
 
 
 def _required_coupling(scene, args) -> int:
@@ -392,7 +390,7 @@ def _required_coupling(scene, args) -> int:
     import yaml
 
     from mech_regulator.analysis import required_coupling
-    from mech_regulator.cli.report import check_outputs, format_required_coupling, to_json, write_csv, wrote_lines
+    from mech_regulator.cli.report import OutputWriter, format_required_coupling, to_json, write_csv, wrote_lines
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 
@@ -403,16 +401,15 @@ def _required_coupling(scene, args) -> int:
             raise SceneError(f"{option} {value:g}: expected a value between {low:g} and {high:g} (exclusive)")
     if args.points < 3:
         raise SceneError(f"--points {args.points}: expected at least 3 table points")
-    check_outputs(args, args.out, args.scene_out)
     result = required_coupling(build_model(scene), args.run_up, args.delta, args.frequency, args.speed, args.points)
     answer = {"scene": scene.name, "law": dataclasses.asdict(result.law), "stretch": result.stretch,
               "t_from": result.t_from, "realisable": result.realisable, "loop_width": result.loop_width,
               "whole_loop_width": result.whole_loop_width, "jump": result.jump, "driving_delta": result.driving_delta,
               "notes": list(result.notes), "initial": result.initial,
               "characteristic": {"twist": result.table_twist.tolist(), "moment": result.table_moment.tolist()}}
-    if args.out is not None:
-        write_csv(args.out, {"twist": result.table_twist, "moment": result.table_moment}, digits=17)
-        answer["csv"] = str(args.out)
+    outputs = OutputWriter(answer)
+    outputs.write("csv", args.out, lambda path: write_csv(
+        path, {"twist": result.table_twist, "moment": result.table_moment}, digits=17))
     if args.scene_out is not None:
         data = scene.model_dump(exclude_none=True)
         data["name"] = f"{scene.name or 'scene'}_required_coupling"
@@ -423,23 +420,22 @@ def _required_coupling(scene, args) -> int:
         coupling.pop("stiffness", None)
         coupling["characteristic"] = answer["characteristic"]
         data["scenario"]["initial"] = dict(result.initial)
-        args.scene_out.write_text(yaml.safe_dump(data, sort_keys=False, default_flow_style=None), encoding="utf-8")
-        answer["scene_out"] = str(args.scene_out)
+        text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
+        outputs.write("scene_out", args.scene_out, lambda path: path.write_text(text, encoding="utf-8"))
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_required_coupling
 
-        plot_required_coupling(result, scene.name, args.plot)
-        answer["plot"] = str(args.plot)
+        outputs.write("plot", args.plot, lambda path: plot_required_coupling(result, scene.name, path))
     print(to_json(answer) if args.json else "\n".join([format_required_coupling(result, scene.name),
-                                                          *wrote_lines(answer)]))
-    return 0
+                                                          *map(terminal_text, wrote_lines(answer))]))
+    return outputs.exit_code(0)
 
 
 def _kinematics(scene, args) -> int:
     """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
     from mech_regulator.analysis.kinematics import (kinematics_summary, kinematics_table, reactions_summary,
                                                     reactions_table)
-    from mech_regulator.cli.report import check_outputs, format_kinematics, to_json, write_csv
+    from mech_regulator.cli.report import OutputWriter, format_kinematics, to_json, write_csv
     from mech_regulator.scene import SceneError
 
     mechanism = scene.machine.mechanism
@@ -450,7 +446,6 @@ def _kinematics(scene, args) -> int:
         raise SceneError(f"--omega {args.omega:g}: expected a crank speed > 0 rad/s")
     if not 3 <= args.points <= 100_000:
         raise SceneError(f"--points {args.points}: expected 3 to 100000 crank angles")
-    check_outputs(args, args.out)
     columns = kinematics_table(mechanism, args.omega, args.points)
     summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
                "joints": kinematics_summary(columns)}
@@ -459,22 +454,21 @@ def _kinematics(scene, args) -> int:
     if reactions:
         columns.update(reactions)
         summary["reactions"] = reactions_summary(columns)
-    if args.out is not None:
-        write_csv(args.out, columns)
-        summary["csv"] = str(args.out)
+    outputs = OutputWriter(summary)
+    outputs.write("csv", args.out, lambda path: write_csv(path, columns))
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_kinematics
 
-        plot_kinematics(mechanism, columns, args.omega, scene.name or mechanism.type, args.plot)
-        summary["plot"] = str(args.plot)
+        outputs.write("plot", args.plot, lambda path: plot_kinematics(mechanism, columns, args.omega,
+                                                                      scene.name or mechanism.type, path))
     print(to_json(summary) if args.json else format_kinematics(summary))
-    return 0
+    return outputs.exit_code(0)
 
 
 def _engine(scene, args) -> int:
     """engine: the analysis of an engine scene at constant speed, printed, and optionally a PNG and a CSV."""
     from mech_regulator.analysis.engine import engine_curve_columns, engine_report
-    from mech_regulator.cli.report import check_outputs, format_engine, to_json, write_csv
+    from mech_regulator.cli.report import OutputWriter, format_engine, to_json, write_csv
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 
@@ -485,32 +479,34 @@ def _engine(scene, args) -> int:
     if not (math.isfinite(omega) and omega > 0.0):
         source = "--omega" if args.omega is not None else "the scene's scenario.initial.omega"
         raise SceneError(f"{source} = {omega:g} rad/s: expected a crank speed > 0 (give --omega W)")
-    check_outputs(args, args.out)
     model = build_model(scene)
     report = engine_report(model, omega)
-    if args.out is not None:
-        write_csv(args.out, engine_curve_columns(model, omega))
-        report["csv"] = str(args.out)
+    outputs = OutputWriter(report)
+    outputs.write("csv", args.out, lambda path: write_csv(path, engine_curve_columns(model, omega)))
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_engine
 
-        plot_engine(model, omega, args.plot)
-        report["plot"] = str(args.plot)
+        outputs.write("plot", args.plot, lambda path: plot_engine(model, omega, path))
     print(to_json(report) if args.json else format_engine(report))
-    return 0
+    return outputs.exit_code(0)
 
 
 def _main_job(scene, args) -> int:
     import importlib.util
 
-    from mech_regulator.cli.report import check_outputs
+    from mech_regulator.cli.report import output_folder
     from mech_regulator.scene import SceneError
 
     if importlib.util.find_spec("rclpy") is None:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
     from mech_regulator.model import build_model
-    from mech_regulator.nodes.launch import main_job
+    from mech_regulator.nodes.launch import default_recording, main_job
+
+    if args.out is None:  # runs/<scene>-<time>.rrd, its folder made now (a given --out is checked by main)
+        args.out = default_recording(scene.name)
+        output_folder(args.out.parent, "the default output folder")
+        _check_run_files(args.out)
     from mech_regulator.solvers import on_path_for_a_command
     from mech_regulator.solvers.cosim import cosimulation_refusal
 
@@ -532,9 +528,22 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
-    check_outputs(args, args.out)
     return main_job(model, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
                     args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED)
+
+
+def _check_run_files(recording: Path) -> None:
+    """Refuse (SceneError) a recording for `run` whose files (nodes.launch.run_files: it and the parameter file, log,
+    summary and CSV next to it) cannot all be written, or one that is itself one of those files."""
+    from mech_regulator.cli.report import check_output_paths
+    from mech_regulator.nodes.launch import run_files
+    from mech_regulator.scene import SceneError
+
+    files = run_files(recording)
+    if recording in files[1:]:
+        raise SceneError(f"--out '{recording}': expected the recording's file (.rrd): the run writes its own "
+                         f"{recording.suffix} file next to the recording, under that name")
+    check_output_paths(*files)
 
 
 def _bench_accuracy(args) -> int:
@@ -544,12 +553,14 @@ def _bench_accuracy(args) -> int:
 
     from mech_regulator.bench.accuracy import run_benchmark, select_scenes
     from mech_regulator.bench.report import findings, markdown, write_runs_csv
-    from mech_regulator.cli.report import bench_scenes_and_folder
+    from mech_regulator.cli.report import bench_scenes_and_folder, check_output_paths
     from mech_regulator.scene import SceneError
 
     if args.jobs < 1:
         raise SceneError(f"--jobs {args.jobs}: expected at least 1 worker process")
     scenes = select_scenes(bench_scenes_and_folder(args.scenes, args.out, "startup,compressor"))
+    check_output_paths(*(args.out / name for name in ("runs.csv", "README.md", "work_precision.rrd",
+                                                      "tolerance_proportionality.png")))
     start = time.monotonic()
     benchmark = run_benchmark(scenes, args.quick, args.jobs, report=lambda line: print(line, flush=True))
     write_runs_csv(benchmark, args.out / "runs.csv")

@@ -11,10 +11,14 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
+import stat
 import sys
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from mech_regulator.cli import EXIT_INACCURATE, EXIT_RUN_FAILED
 
 if TYPE_CHECKING:
     import numpy as np
@@ -22,9 +26,22 @@ if TYPE_CHECKING:
     from mech_regulator.model import MachineModel
 
 
+_UNSHOWABLE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+"""Characters a terminal would act on instead of showing: control characters but newline and tab (ESC starts an
+escape sequence, BEL rings, CR returns to the line's start) and the bidirectional marks, embeddings, overrides and
+isolates (U+200E, U+200F, U+061C, U+202A-U+202E, U+2066-U+2069: they reorder what follows them), and the line and
+paragraph separators."""
+
+
+def terminal_text(text: str) -> str:
+    """Text from a scene (its name, a message quoting it) as the terminal may show it: each character of _UNSHOWABLE
+    written as Python writes it in a string literal (ESC as \\x1b, U+202E as \\u202e), newlines and tabs kept."""
+    return _UNSHOWABLE.sub(lambda match: repr(match.group())[1:-1], text)
+
+
 def note(line: str) -> None:
     """A one-line note of a command on stderr (e.g. which path a run takes and why)."""
-    print(f"mech-regulator: {line}", file=sys.stderr)
+    print(f"mech-regulator: {terminal_text(line)}", file=sys.stderr)
 
 
 def describe(model: MachineModel) -> str:
@@ -101,7 +118,7 @@ def describe(model: MachineModel) -> str:
         lines.append(f"note: {advice}")
     lines.append(f"scenario: {scene.scenario.duration:g} s from phi = {scene.scenario.initial.phi:g} rad, "
                  f"omega = {scene.scenario.initial.omega:g} rad/s")
-    return "\n".join(lines)
+    return terminal_text("\n".join(lines))
 
 
 def _driven_lines(model: MachineModel) -> list[str]:
@@ -128,7 +145,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
              f"phi = {summary['phi_end']:.6g} rad, omega = {summary['omega_end']:.6g} rad/s"]
     steady = summary["steady"]
     if steady is None:
-        return lines[0] + "\nnothing was computed: " + summary["message"]
+        return terminal_text(lines[0] + "\nnothing was computed: " + summary["message"])
     last = steady["last_period"]
     if steady["steady"]:
         lines.append(f"steady motion from t = {steady['t_steady']:.4g} s "
@@ -157,7 +174,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
         lines += two_mass_lines(summary["two_mass"])
     if summary.get("drive_train"):
         lines += _drive_train_lines(summary["drive_train"], energy["works"].get("clutch_slip"))
-    return "\n".join(lines + wrote_lines(summary))
+    return terminal_text("\n".join(lines + wrote_lines(summary)))
 
 
 def _drive_train_lines(train: dict, slip_work: float | None) -> list[str]:
@@ -201,7 +218,7 @@ def format_cosimulation_summary(summary: dict) -> str:
                      f"({summary['wall_time_s']:.3g} s of wall time, start-up not included)")
     if summary.get("governor"):
         lines += _governed_lines(summary["governor"])
-    return "\n".join(lines + wrote_lines(summary))
+    return terminal_text("\n".join(lines + wrote_lines(summary)))
 
 
 def two_mass_lines(periods: dict) -> list[str]:
@@ -241,7 +258,7 @@ def format_required_coupling(result, source: str) -> str:
     initial = result.initial
     lines.append(f"a forward run starts at t = {result.t_from:.6g} s of the law with phi = {initial['phi']:.6g} rad, "
                  f"omega = {initial['omega']:.6g} rad/s, twist = {initial['twist']:.6g} rad (both parts at one speed)")
-    return "\n".join(lines)
+    return terminal_text("\n".join(lines))
 
 
 def _governed_lines(governed: dict) -> list[str]:
@@ -308,7 +325,7 @@ def format_governor(analysis: dict) -> str:
         lines.append("  multipliers |mu|: " + ", ".join(f"{math.hypot(*m):.5g}" for m in floquet["multipliers"]))
         lines.append("  averaged model exp(lambda T): " + ", ".join(f"{math.hypot(*m):.5g}"
                                                                      for m in floquet["averaged_multipliers"]))
-    return "\n".join(lines + wrote_lines(analysis))
+    return terminal_text("\n".join(lines + wrote_lines(analysis)))
 
 
 def _complex(re: float, im: float) -> str:
@@ -344,6 +361,7 @@ def progress_bar(total: float | None, quiet: bool, label: str = "simulating", qu
     show nothing useful), a plain line every few seconds of wall time (ProgressLines). total: the amount to do,
     simulated seconds by default (None: unknown, a count); label names the work, quantity the amount
     ('t = 3.2 / 10 s'; None: '3.2 / 10 s'), unit its unit."""
+    label = terminal_text(label)
     if quiet or not _is_terminal(sys.stderr):
         return ProgressLines(total, label, quantity, unit, progress_interval(), enabled=not quiet)
     from tqdm import tqdm
@@ -500,7 +518,7 @@ def format_engine(report: dict) -> str:
     for key, label in (("gas_harmonics", "gas"), ("inertia_harmonics", "inertia"), ("total_harmonics", "total")):
         lines.append(f"  {label:<8} " + ", ".join(f"{h['order']:g}: {h['amplitude']:.4g} ({h['phase_deg']:.0f})"
                                                   for h in torque[key][:6]))
-    return "\n".join(lines + wrote_lines(report))
+    return terminal_text("\n".join(lines + wrote_lines(report)))
 
 
 def _degrees(values) -> str:
@@ -527,7 +545,7 @@ def format_kinematics(summary: dict) -> str:
                      f"{moment['max']:.5g} N m at {moment['max_at_deg']:.4g} deg")
         lines += [f"  {name:<16} |R| max {joint['R_max']:12.5g} N at {joint['R_max_at_deg']:.4g} deg"
                   for name, joint in reactions.items() if name != "balancing_moment"]
-    return "\n".join(lines + wrote_lines(summary))
+    return terminal_text("\n".join(lines + wrote_lines(summary)))
 
 
 OUTPUT_KEYS = ("csv", "scene_out", "plot", "recording")
@@ -540,16 +558,121 @@ def wrote_lines(data: dict) -> list[str]:
 
 def check_outputs(args, *others: Path | None) -> None:
     """Give args.plot a .png suffix and refuse, before any work, output paths (the plot and others) that cannot
-    be written (SceneError)."""
-    from mech_regulator.scene import SceneError
-
+    be written (check_output_paths)."""
     plot = getattr(args, "plot", None)
     if plot is not None and not plot.suffix:
         args.plot = plot = plot.with_suffix(".png")
-    for path in (*others, plot):
-        if path is not None and (path.is_dir() or not path.parent.is_dir()):
-            problem = "it is a folder" if path.is_dir() else f"the folder '{path.parent}' does not exist"
+    check_output_paths(*others, plot)
+
+
+def check_output_paths(*paths: Path | None) -> None:
+    """Refuse, before any work, output files that cannot be written: SceneError naming the first such path and why
+    (output_refusal), or two outputs that are one file. None stands for an output not asked for."""
+    from mech_regulator.scene import SceneError
+
+    seen: set[str] = set()
+    for path in paths:
+        if path is None:
+            continue
+        problem = output_refusal(path)
+        if problem is None and os.path.realpath(path) in seen:
+            problem = "two of the command's outputs would be this one file"
+        if problem is not None:
             raise SceneError(f"cannot write '{path}': {problem}")
+        seen.add(os.path.realpath(path))
+
+
+KERNEL_FOLDERS = (Path("/dev"), Path("/proc"), Path("/sys"))
+"""The kernel's file systems (devices, processes, settings): no output is ever written there."""
+
+
+def output_refusal(path: Path) -> str | None:
+    """Why the output file `path` cannot be written, or None: it is in KERNEL_FOLDERS or is not a regular file (a
+    device, a pipe, a socket, a folder); its folder does not exist; or a first byte cannot be written (a read-only
+    file system, no permission, a full disk), tried by writing one: a new file is made with it and removed, an
+    existing one has its first byte written over with itself (an empty one gets one, taken away again)."""
+    real = Path(os.path.realpath(path))  # where a symbolic link leads
+    for kernel in KERNEL_FOLDERS:
+        if real == kernel or kernel in real.parents:
+            return f"it is in {kernel}, the kernel's (devices, processes, settings): expected a regular file in a " \
+                   "folder of yours"
+    try:
+        mode = os.stat(real).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as error:
+        return error.strerror or str(error)
+    if mode is not None and stat.S_ISDIR(mode):
+        return "it is a folder"
+    if mode is not None and not stat.S_ISREG(mode):
+        return "it is a device, a pipe or a socket, not a regular file"
+    if not real.parent.is_dir():
+        return f"the folder '{path.parent}' does not exist"
+    made = False
+    try:
+        if mode is None:
+            with open(real, "xb") as probe:
+                made = True
+                probe.write(b"\0")
+            real.unlink()
+        else:
+            with open(real, "r+b") as probe:
+                first = probe.read(1)
+                probe.seek(0)
+                probe.write(first or b"\0")
+                probe.flush()
+                if not first:
+                    probe.truncate(0)
+    except OSError as error:
+        if made:
+            real.unlink(missing_ok=True)
+        return error.strerror or str(error)
+    return None
+
+
+def output_folder(folder: Path, option: str = "--out") -> Path:
+    """A command's output folder, made now if missing (with its parents), and checked to take files
+    (output_refusal of a probe file in it): SceneError naming the option and the folder otherwise."""
+    from mech_regulator.scene import SceneError
+
+    if folder.exists() and not folder.is_dir():
+        raise SceneError(f"{option} '{folder}': expected a folder, and it is a file or a device")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise SceneError(f"{option} '{folder}': cannot make the folder: {error.strerror or error}") from None
+    problem = output_refusal(folder / f".mech-regulator-probe-{os.getpid()}")
+    if problem is not None:
+        raise SceneError(f"{option} '{folder}': cannot write in the folder: {problem}")
+    return folder
+
+
+class OutputWriter:
+    """Writes a command's output files after its work, one by one: a write that fails then (a disk that fills up,
+    an I/O error) is kept as one line and the other outputs are still written; the answer gets the key of each file
+    written (wrote_lines)."""
+
+    def __init__(self, answer: dict):
+        self.answer = answer
+        self.failures: list[str] = []
+
+    def write(self, key: str, path: Path | None, write) -> None:
+        """write(path), unless path is None; on success answer[key] = path."""
+        if path is None:
+            return
+        try:
+            write(path)
+        except OSError as error:
+            self.failures.append(f"writing '{path}' failed: {error.strerror or error}; that file is incomplete")
+            return
+        self.answer[key] = str(path)
+
+    def exit_code(self, code: int) -> int:
+        """Print each failure as a line on stderr; the command's exit code: EXIT_RUN_FAILED when a write failed and
+        the command would otherwise have succeeded (0, or EXIT_INACCURATE of simulate --strict), else `code`."""
+        for line in self.failures:
+            print(f"mech-regulator: {terminal_text(line)}", file=sys.stderr)
+        return EXIT_RUN_FAILED if self.failures and code in (0, EXIT_INACCURATE) else code
 
 
 def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:
@@ -570,15 +693,13 @@ def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:
 
 
 def bench_scenes_and_folder(scenes: str | None, out: Path, example: str) -> list[str] | None:
-    """A benchmark's --scenes (comma-separated names; None: its default scenes) and its --out folder, made now:
-    SceneError for an empty list (the message shows `example`) or a folder that cannot be made."""
+    """A benchmark's --scenes (comma-separated names; None: its default scenes) and its --out folder, made now and
+    checked (output_folder): SceneError for an empty list (the message shows `example`) or a folder that cannot be
+    made or written in."""
     from mech_regulator.scene import SceneError
 
     names = None if scenes is None else [name.strip() for name in scenes.split(",") if name.strip()]
     if names == []:
         raise SceneError(f"--scenes: expected scene names separated by commas, e.g. {example}")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise SceneError(f"--out '{out}': cannot make the folder: {error.strerror or error}") from None
+    output_folder(out)
     return names

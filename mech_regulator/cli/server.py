@@ -32,7 +32,16 @@ the server's own and those a command reads afresh where it uses them), NUMBA_*, 
 the locale's, HOME and XDG_CACHE_HOME (the compile caches' default folder). The socket is named by a hash of the
 key, and the server compares the whole key of every command: a server whose key does not match is never used. The
 folder: $XDG_RUNTIME_DIR/mech_regulator, else ~/.cache/mech_regulator/server ($XDG_CACHE_HOME), private to the user
-(mode 0700).
+(mode 0700): made so, and checked to be so before every use (folder_refusal: a folder, not a link, the user's own,
+no permission for anyone else); a folder that fails the check is not used (the command runs in its own process,
+with a note saying why).
+
+A command is served only where its result is the one it would have in its own process (peer_refusal, by the
+server for every connection): the client is the same user with the same groups (the socket's peer credentials,
+SO_PEERCRED, and /proc/PID/status), in the same mount namespace with the same root folder as the server (the
+inodes of /proc/PID/ns/mnt and /proc/PID/root): else the files it names could be other files, or the permissions to
+write them others. A client the server refuses runs the command in its own process, silently; the client in turn
+uses only a server of its own user.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ import os
 import select
 import signal
 import socket
+import stat
 import struct
 import sys
 import time
@@ -128,6 +138,55 @@ def server_folder() -> Path:
     return Path(cache) / "mech_regulator" / "server"
 
 
+def folder_refusal(folder: Path) -> str | None:
+    """Why the servers' folder must not be used, or None (also while it does not exist: start_server makes it): it
+    must be a folder (not a symbolic link to one) owned by this process's user with no permission for its group or
+    others (mode 0700), so that no one else can place a socket there or reach this user's server."""
+    try:
+        status = os.lstat(folder)
+    except FileNotFoundError:
+        return None
+    except OSError as error:
+        return error.strerror or str(error)
+    if not stat.S_ISDIR(status.st_mode):
+        return "it is not a folder (a symbolic link or a file)"
+    if status.st_uid != os.getuid():
+        return f"it belongs to user id {status.st_uid}, not to this user ({os.getuid()})"
+    if status.st_mode & 0o077:
+        return f"its mode {stat.S_IMODE(status.st_mode):04o} lets others in (expected 0700)"
+    return None
+
+
+def peer_credentials(connection: socket.socket) -> tuple[int, int, int]:
+    """(pid, uid, gid) of the process at the other end of a Unix socket (SO_PEERCRED), as the kernel recorded them at
+    connect or listen."""
+    layout = struct.Struct("3i")
+    return layout.unpack(connection.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, layout.size))
+
+
+def peer_refusal(connection: socket.socket) -> str | None:
+    """Why the client at the other end of the connection would get another result from this process than from its
+    own, or None: another user or other groups (peer credentials, the Groups line of /proc/PID/status), another
+    mount namespace or another root folder (the device and inode of /proc/PID/ns/mnt and /proc/PID/root against
+    this process's); a client whose process cannot be looked at (another PID namespace) is refused too."""
+    pid, uid, gid = peer_credentials(connection)
+    if uid != os.getuid() or gid != os.getgid():
+        return "another user"
+    try:
+        with open(f"/proc/{pid}/status") as status:
+            groups = next(line.split()[1:] for line in status if line.startswith("Groups:"))
+        if sorted(map(int, groups)) != sorted(os.getgroups()):
+            return "other groups"
+        for theirs, mine, what in ((f"/proc/{pid}/ns/mnt", "/proc/self/ns/mnt", "another mount namespace"),
+                                   (f"/proc/{pid}/root", "/", "another root folder")):
+            their, my = os.stat(theirs), os.stat(mine)
+            if (their.st_dev, their.st_ino) != (my.st_dev, my.st_ino):
+                return what
+    except (OSError, StopIteration, ValueError):
+        return "a process whose view of the files cannot be compared"
+    return None
+
+
 def _socket_path(digest: str) -> Path:
     return server_folder() / f"{digest}.sock"
 
@@ -163,6 +222,12 @@ def through_server(argv: list[str]) -> int | None:
         print(f"mech-regulator: note: {SERVER_VARIABLE}={setting!r}: expected on or off; this command runs without "
               "the command server", file=sys.stderr)
         return None
+    folder = server_folder()
+    problem = folder_refusal(folder)
+    if problem is not None:
+        print(f"mech-regulator: note: the command server's folder {folder} is not private: {problem}; this command "
+              f"runs without the server (chmod 700 it if it is yours, or set {SERVER_VARIABLE}=off)", file=sys.stderr)
+        return None
     key = server_key()
     path = _socket_path(key_digest(key))
     if len(os.fsencode(path)) > SOCKET_PATH_MAX:
@@ -181,6 +246,8 @@ def through_server(argv: list[str]) -> int | None:
     except OSError:
         return None
     with connection:
+        if peer_credentials(connection)[1] != os.getuid():  # only a server of this user
+            return None
         return run_request(connection, key, argv)
 
 
@@ -295,6 +362,11 @@ def start_server(key: str) -> int | None:
     digest = key_digest(key)
     try:
         folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    except OSError:
+        return None
+    if folder_refusal(folder) is not None:  # made so, and still so
+        return None
+    try:
         lock = open(folder / f"{digest}.lock", "a")
     except OSError:
         return None
@@ -320,6 +392,11 @@ def server_command(action: str) -> int:
     """server start: start this environment's server unless running and wait until it answers; status: each
     server of the folder (pid, key, idle time, what it loaded); stop: stop every server of the folder and wait
     until each has ended."""
+    problem = folder_refusal(server_folder())
+    if problem is not None:
+        print(f"mech-regulator: the command server's folder {server_folder()} is not private: {problem}; no server "
+              "is started, asked or stopped there (chmod 700 it if it is yours)", file=sys.stderr)
+        return 1
     if action == "start":
         key = server_key()
         path = _socket_path(key_digest(key))
@@ -362,13 +439,14 @@ def server_command(action: str) -> int:
 
 
 def ask_server(path: Path, message: dict) -> dict | None:
-    """The server's answer to message, None when none answers at path."""
+    """The server's answer to message, None when none answers at path or it refuses this client (peer_refusal)."""
     try:
         with _connect(path) as connection:
             _send(connection, message)
-            return _reply(connection.makefile("rb"))
+            answer = _reply(connection.makefile("rb"))
     except (OSError, ServerGone, ValueError):
         return None
+    return None if "refused" in answer else answer
 
 
 def process_alive(pid: int) -> bool:
@@ -561,7 +639,10 @@ class _Server:
             connection.close()
             return None
         try:
-            if message.get("op") == "status":
+            refusal = peer_refusal(connection)
+            if refusal is not None:  # the client runs the command itself
+                _answer(connection, {"refused": refusal})
+            elif message.get("op") == "status":
                 _answer(connection, self.status())
             elif message.get("op") == "stop":
                 self.stopping = True

@@ -20,7 +20,7 @@ def add_structure_command(scene_command) -> None:
 def run_structure(scene, args: argparse.Namespace) -> int:
     """structure: the analysis of the scene's linkage (the machine's, else the driven part's behind a coupling);
     a scene whose linkage has W != 1 or an unsupported group has already been refused by its validation."""
-    from mech_regulator.cli.report import check_outputs, to_json
+    from mech_regulator.cli.report import OutputWriter, terminal_text, to_json
     from mech_regulator.mechanisms import mechanism_geometry
     from mech_regulator.mechanisms.linkage import Dyad
     from mech_regulator.scene import SceneError
@@ -30,7 +30,6 @@ def run_structure(scene, args: argparse.Namespace) -> int:
     if mechanism is None or mechanism.type != "linkage":
         raise SceneError(f"scene '{scene.name}' has mechanism {mechanism.type if mechanism else 'none'}: structure "
                          "analyses machine.mechanism.type: linkage (links, joints, crank; docs/linkages.md)")
-    check_outputs(args)
     linkage, structure = mechanism_geometry(mechanism)
     groups = [{"number": number, "class": "II" if isinstance(group, Dyad) else "redundant", "type": group.kind,
                "links": list(group.links), "joints": [joint.name for joint in group.joints],
@@ -39,17 +38,18 @@ def run_structure(scene, args: argparse.Namespace) -> int:
                "p4": structure.higher_pairs, "W": structure.freedom, "formula": structure.formula(),
                "repeated": list(structure.repeated), "redundant": list(structure.redundant),
                "passive": list(structure.passive), "driving_link": linkage.crank, "groups": groups}
+    outputs = OutputWriter(summary)
     if args.plot is not None:
         from mech_regulator.viz.structure_plot import plot_structure
 
-        plot_structure(linkage, structure, scene.scenario.initial.phi, scene.name or "linkage", args.plot)
-        summary["plot"] = str(args.plot)
+        outputs.write("plot", args.plot, lambda path: plot_structure(linkage, structure, scene.scenario.initial.phi,
+                                                                     scene.name or "linkage", path))
     if args.json:
         print(to_json(summary))
     else:
-        print(f"scene {scene.name}: linkage, driving link {linkage.crank} (turns about "
-              f"{linkage.crank_pivot().name} with the frame)")
-        print("\n".join(structure.report()))
-        if args.plot is not None:
-            print(f"wrote {args.plot}")
-    return 0
+        print(terminal_text(f"scene {scene.name}: linkage, driving link {linkage.crank} (turns about "
+                            f"{linkage.crank_pivot().name} with the frame)"))
+        print(terminal_text("\n".join(structure.report())))
+        if "plot" in summary:
+            print(terminal_text(f"wrote {args.plot}"))
+    return outputs.exit_code(0)

@@ -19,6 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mech_regulator.cli import EXIT_INTERRUPTED
+from mech_regulator.cli.report import terminal_text
 
 SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
 # analysis.sweep's ENGINES and METRICS, repeated here so that building the parser does not import the sweep (numpy,
@@ -85,7 +86,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs, and so does
     --engine dask without Dask installed (the message names the pip extra)."""
     from mech_regulator.analysis.sweep import check_executor, parse_grid, run_sweep, sweep_points
-    from mech_regulator.cli.report import progress_bar, write_rows_csv
+    from mech_regulator.cli.report import OutputWriter, check_output_paths, output_folder, progress_bar, write_rows_csv
     from mech_regulator.scene import SceneError
     from mech_regulator.scene.limits import output_stem
     from mech_regulator.scene.loading import key_description
@@ -99,10 +100,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     governed = any(point.scene.get("governor") for point in points)
     metric = args.metric or ("oscillation_ratio" if governed else "delta")
     out = args.out if args.out is not None else Path("runs") / f"sweep-{output_stem(points[0].scene['name'])}"
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as error:
-        raise SceneError(f"--out '{out}': cannot make the folder: {error.strerror or error}") from None
+    check_output_paths(output_folder(out) / "sweep.csv", out / "sweep.png")  # once the points are valid
     warm_fast_path(points, args.engine, args.quiet)
     durations = [float(point.scene["scenario"]["duration"]) for point in points]
     start = time.perf_counter()
@@ -111,18 +109,21 @@ def run_sweep_command(args: argparse.Namespace) -> int:
         rows = run_sweep(points, jobs, args.engine, args.scheduler,
                          progress=lambda point, row: bar.update(float(point.scene["scenario"]["duration"])))
     wall_time = time.perf_counter() - start
-    write_rows_csv(out / "sweep.csv", rows)
+    written: dict[str, str] = {}
+    outputs = OutputWriter(written)
+    outputs.write("csv", out / "sweep.csv", lambda path: write_rows_csv(path, rows))
     print(format_rows(rows, [axis.key for axis in axes]))
     not_run = sum(row["status"] == "not run" for row in rows)
     where = f"on a Dask cluster at {args.scheduler}" if args.scheduler else (
         f"on a Dask local cluster of {jobs} processes" if args.engine == "dask" else
         "in this process" if jobs == 1 or len(points) == 1 else f"on {jobs} local processes")
     print(f"{len(rows) - not_run} of {len(rows)} points in {wall_time:.3g} s {where}")
-    print(f"wrote {out / 'sweep.csv'}")
+    if "csv" in written:
+        print(terminal_text(f"wrote {written['csv']}"))
     if not_run:
-        print(f"mech-regulator: interrupted; the {len(rows) - not_run} finished points are in {out / 'sweep.csv'}",
-              file=sys.stderr)
-        return EXIT_INTERRUPTED
+        print(terminal_text(f"mech-regulator: interrupted; the {len(rows) - not_run} finished points are in "
+                            f"{out / 'sweep.csv'}"), file=sys.stderr)
+        return outputs.exit_code(EXIT_INTERRUPTED)
     from mech_regulator.viz.sweep import plot_sweep
 
     permitted = points[0].scene.get("analysis", {}).get("permitted_delta")
@@ -130,18 +131,20 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     units = {axis.key: re.search(r"(\[[^\]]*\])?$", key_description(axis.key, points[0].scene)).group(0)
              for axis in axes}
     try:
-        plot_sweep(rows, axes, metric, f"sweep of {names}: {len(rows)} points", out / "sweep.png", permitted,
-                   {key: f"{key} {unit}".strip() for key, unit in units.items()})
+        outputs.write("plot", out / "sweep.png", lambda path: plot_sweep(
+            rows, axes, metric, f"sweep of {names}: {len(rows)} points", path, permitted,
+            {key: f"{key} {unit}".strip() for key, unit in units.items()}))
     except KeyboardInterrupt:
-        print(f"mech-regulator: interrupted while drawing the picture; every row is in {out / 'sweep.csv'}",
-              file=sys.stderr)
-        return EXIT_INTERRUPTED
-    print(f"wrote {out / 'sweep.png'}")
+        print(terminal_text(f"mech-regulator: interrupted while drawing the picture; every row is in "
+                            f"{out / 'sweep.csv'}"), file=sys.stderr)
+        return outputs.exit_code(EXIT_INTERRUPTED)
+    if "plot" in written:
+        print(terminal_text(f"wrote {written['plot']}"))
     failed = [row for row in rows if row["status"] != "complete"]
     for row in failed[:5]:
-        print(f"mech-regulator: point {_label(row, [axis.key for axis in axes])}: {row['status']}: {row['message']}",
-              file=sys.stderr)
-    return 0
+        print(terminal_text(f"mech-regulator: point {_label(row, [axis.key for axis in axes])}: {row['status']}: "
+                            f"{row['message']}"), file=sys.stderr)
+    return outputs.exit_code(0)
 
 
 def dask_installed() -> bool:
@@ -175,7 +178,7 @@ def format_rows(rows: list[dict], keys: list[str]) -> str:
                     "vyshnegradsky_B"]
     shown = rows if len(rows) <= SHOWN_ROWS else rows[:SHOWN_ROWS // 2] + [None] + rows[-SHOWN_ROWS // 2:]
     table = [[name.split(".")[-1] if name in keys else name.replace("vyshnegradsky_", "") for name in columns]]
-    table += [["..."] + [""] * (len(columns) - 1) if row is None else [_text(row[name]) for name in columns]
-              for row in shown]
+    table += [["..."] + [""] * (len(columns) - 1) if row is None
+              else [terminal_text(_text(row[name])) for name in columns] for row in shown]
     widths = [max(len(line[i]) for line in table) for i in range(len(columns))]
     return "\n".join("  ".join(cell.rjust(width) for cell, width in zip(line, widths)) for line in table)

@@ -95,6 +95,12 @@ def default_recording(scene_name: str | None) -> Path:
     return Path("runs") / f"{output_stem(scene_name)}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
 
 
+def run_files(recording: Path) -> list[Path]:
+    """The files of a run: its recording, then next to it the parameter file and the nodes' log (main_job writes
+    them) and the summary and the CSV (the recorder writes them); `run` checks them all before the nodes start."""
+    return [recording] + [recording.with_suffix(suffix) for suffix in (".params.yaml", ".log", ".json", ".csv")]
+
+
 def main_job(model, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
              quiet: bool, duration: float | None, coupling: str, started: float | None = None) -> int:

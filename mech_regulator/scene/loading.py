@@ -37,12 +37,39 @@ class _Refused(yaml.YAMLError):
         self.problem, self.problem_mark = problem, problem_mark
 
 
+class _Duplicate(yaml.YAMLError):
+    """A key given twice in one mapping of a YAML document (problem: which key, at which lines)."""
+
+    def __init__(self, problem: str):
+        super().__init__(problem)
+        self.problem = problem
+
+
 class _Loader(yaml.SafeLoader):
-    """SafeLoader that also reads YAML 1.2 floats such as 1e-3 (PyYAML alone reads them as strings), and refuses a
+    """SafeLoader that also reads YAML 1.2 floats such as 1e-3 (PyYAML alone reads them as strings), refuses a key
+    given twice in one mapping (PyYAML alone keeps the last value silently; a merge `<<:` may still bring keys that
+    the mapping then sets itself), and refuses a
     document nested deeper than MAX_YAML_DEPTH or larger, with its aliases expanded, than MAX_YAML_NODES values or
     MAX_YAML_CHARACTERS characters of scalars (an alias bomb, "billion laughs"): each node's expanded size (values,
     characters, depth; an alias counts as the whole node it repeats) is worked out from its children's as it is
     composed, so a bomb is refused at the first node beyond the limit, before anything is expanded."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            first: dict[Any, Any] = {}  # key -> the mark where it was first given
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    earlier = first.setdefault(key, key_node.start_mark)
+                except TypeError:  # an unhashable key: SafeLoader's own message follows
+                    continue
+                if earlier is not key_node.start_mark:
+                    raise _Duplicate(f"the key {shown(key)} is given twice in one mapping, at {_place(earlier)} and "
+                                     f"at {_place(key_node.start_mark)}; expected it once (YAML would keep only the "
+                                     "last)")
+        return super().construct_mapping(node, deep)
 
     def __init__(self, stream):
         super().__init__(stream)
@@ -86,6 +113,11 @@ class _Loader(yaml.SafeLoader):
         return node
 
 
+def _place(mark) -> str:
+    """'line L, column C' of a YAML mark (both from 1)."""
+    return f"line {mark.line + 1}, column {mark.column + 1}"
+
+
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
     re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
@@ -104,6 +136,8 @@ def parse_yaml(text: str, source: str) -> Any:
         mark = error.problem_mark
         raise SceneError(f"{source}: refused at line {mark.line + 1}, column {mark.column + 1}: {error.problem}") \
             from None
+    except _Duplicate as error:
+        raise SceneError(f"{source}: {error.problem}") from None
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

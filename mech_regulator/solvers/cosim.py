@@ -56,7 +56,7 @@ from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.compiled import runs_compiled
-from mech_regulator.solvers.time_domain import _segment, fail_blown_up
+from mech_regulator.solvers.time_domain import _segment, fail_blown_up, state_text
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
 NANOSECONDS = 1_000_000_000
@@ -97,8 +97,9 @@ class MachineStepper:
     """The machine without its governor: (phi, omega) and a coupling's (twist, omega_driven) advanced over
     exchange steps with the throttle and the external load held, in the drive train's mode (a driven part
     held at rest, turning forwards or backwards; None without a coupling). overspeed_trip [rad/s] (0: none)
-    closes the throttle for good once the speed at an exchange time exceeds it, as the trip valve of a real
-    engine does."""
+    bounds the speed both ways at the exchange times: beyond it forwards, it closes the throttle for good, as the
+    trip valve of a real engine does; beyond it backwards (omega < -overspeed_trip), the run fails there, since a
+    load that drives the machine backwards is one no closing of the throttle can stop."""
 
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
         self.plant = machine_subsystem(model)
@@ -147,6 +148,12 @@ class MachineStepper:
         beyond = speed_beyond_limit(self.plant.state_names(), self.state) if stretch.status == "complete" else None
         if beyond is not None:  # a blow-up (limits.py; the fast path's segment does not look at every step)
             fail_blown_up(self.plant, stretch, self.time, self.state, *beyond)
+        elif stretch.status == "complete" and self.overspeed_trip > 0.0 and self.state[1] < -self.overspeed_trip:
+            stretch.status = "failed"
+            stretch.message = (f"driven backwards at t = {self.time:.6g} s: omega = {self.state[1]:.6g} rad/s, beyond "
+                               f"the trip speed {self.overspeed_trip:g} rad/s in reverse (the state: "
+                               f"{state_text(self.plant.state_names(), self.state)}); likely cause: a load larger than "
+                               "the machine can carry, which no closing of the throttle stops")
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
 

@@ -179,6 +179,8 @@ def record_flywheel(design: FlywheelDesign, path: Path) -> None:
     the scales), and a document with the numbers."""
     import rerun as rr
 
+    from mech_regulator.viz.recording import finish_stream
+
     stream = rr.RecordingStream("mech_regulator")
     stream.set_log_time_enabled(False)
     stream.set_sinks(rr.FileSink(str(path)))
@@ -211,8 +213,7 @@ def record_flywheel(design: FlywheelDesign, path: Path) -> None:
                 stream.log(f"{root}/{name}", rr.LineStrips2D([geometry], colors=colour, labels=labels,
                                                              radii=rr.Radius.ui_points(1.0)), static=True)
     stream.log("about", rr.TextDocument(_about(design), media_type=rr.MediaType.MARKDOWN), static=True)
-    stream.flush()
-    stream.disconnect()
+    finish_stream(stream)
 
 
 def _scales(J: np.ndarray, E: np.ndarray, aspect: float = 1.6) -> tuple[float, float, float, float]:

@@ -34,6 +34,7 @@ the end (`close(status, message)`).
 
 from __future__ import annotations
 
+import errno
 import math
 import threading
 from collections.abc import Iterable
@@ -268,8 +269,7 @@ class RunRecording:
             self._send_buffers()
             self._stream.send_blueprint(run_blueprint(self.model, self._extents), make_active=True,
                                         make_default=True)
-            self._stream.flush()
-            self._stream.disconnect()
+            finish_stream(self._stream)
 
     # ---------------------------------------------------------------------------------------------
 
@@ -671,6 +671,18 @@ def _bounds_y_down(bounds: tuple[float, float, float, float]) -> rrb.VisualBound
     """VisualBounds2D of drawing bounds (xmin, xmax, ymin, ymax) [m, y up] in Rerun's y-down plane."""
     xmin, xmax, ymin, ymax = bounds
     return rrb.VisualBounds2D(x_range=[xmin, xmax], y_range=[-ymax, -ymin])
+
+
+def finish_stream(stream: rr.RecordingStream) -> None:
+    """Send what a Rerun stream holds and end its sinks. A file sink that could not write (a full disk; Rerun logs
+    why) raises OSError, not Rerun's RuntimeError, as any other failed write of a file does."""
+    try:
+        stream.flush()
+    except RuntimeError as error:
+        raise OSError(errno.EIO, f"the recording's writer stopped ({error}; Rerun's message above says why)") \
+            from None
+    finally:
+        stream.disconnect()
 
 
 def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path: Path,
