@@ -737,7 +737,15 @@ class Machine(SceneModel):
 
 
 def _check_linkage_journals(friction: JointFriction, linkage: Linkage) -> None:
-    """A linkage's journals must name its revolute joints, and its guide friction needs a prismatic joint."""
+    """A linkage's journals must name its revolute joints, its guide friction needs a prismatic joint, and its
+    joint reactions must be determinate (no redundant link)."""
+    from mech_regulator.mechanisms.linkage import checked
+    from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
+
+    reason = indeterminate(checked(linkage.core()))
+    if reason is not None:
+        raise ValueError(f"joint_friction needs the joint reactions, but {reason}; expected no joint_friction on this "
+                         "linkage (only a thrust_collar)")
     revolute = [name for name, joint in linkage.joints.items() if joint.type == "revolute"]
     foreign = [name for name in friction.journals if name not in revolute]
     if foreign:
