@@ -180,3 +180,10 @@ def test_joint_friction_on_a_redundant_link_is_refused_at_once(scenes, tmp_path,
     changed.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     code, _, err = run_cli(capsys, "simulate", str(changed), "--quiet")
     assert code == 2 and "joint_friction needs the joint reactions" in err and "statically indeterminate" in err, err
+
+
+def test_kinematics_help_says_it_takes_any_linkage(capsys):
+    with pytest.raises(SystemExit):
+        run_cli(capsys, "kinematics", "--help")
+    out = capsys.readouterr().out
+    assert "any linkage (type: linkage" in " ".join(out.split())
