@@ -187,3 +187,15 @@ def test_kinematics_help_says_it_takes_any_linkage(capsys):
         run_cli(capsys, "kinematics", "--help")
     out = capsys.readouterr().out
     assert "any linkage (type: linkage" in " ".join(out.split())
+
+
+def test_a_branch_on_a_group_with_one_assembly_is_refused(scenes, tmp_path, capsys):
+    """PRP and RPP groups have one assembly: a branch given for them would be ignored, so it is refused."""
+    path, _ = scenes["yoke_and_wedge"]
+    data = yaml.safe_load(path.read_text())
+    data["machine"]["mechanism"]["branches"] = {"C": -1}
+    changed = tmp_path / "branch.yaml"
+    changed.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    code, _, err = run_cli(capsys, "structure", str(changed))
+    assert code == 2 and "branches names ['C'], which are not the internal joint of a group with two assemblies" \
+        in err, err

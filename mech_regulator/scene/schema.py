@@ -191,6 +191,7 @@ class WalkingBeam(SceneModel):
 
 
 Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+BRANCHED_GROUPS = ("RRR", "RRP", "RPR")   # the group types with two assemblies, chosen by a branch
 MAX_LINKS = 60         # moving links of a linkage (a press or a loom has under 20): its analysis stays well under 1 s
 MAX_LINK_POINTS = 50   # points of one link
 
@@ -288,10 +289,11 @@ class Linkage(SceneModel):
             structure = checked(core)
         except LinkageError as error:
             raise ValueError(str(error)) from None
-        internal = {group.internal.name for group in structure.groups if hasattr(group, "internal")}
+        internal = {group.internal.name for group in structure.groups if group.kind in BRANCHED_GROUPS}
         foreign = sorted(set(self.branches) - internal)
         if foreign:
-            raise ValueError(f"branches names {foreign}, which are not the internal joint of a group; expected some of "
+            raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "
+                             f"assemblies ({', '.join(BRANCHED_GROUPS)}; PRP and RPP have one); expected some of "
                              f"{sorted(internal)}")
         failures = assembly_failures(core, structure)
         if failures:
