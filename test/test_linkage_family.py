@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,7 +22,7 @@ from rerun.chunk import RrdReader
 from linkage_family import MEMBERS, member
 from mech_regulator.analysis.kinematics import reactions_table
 from mech_regulator.mechanisms import build_reduced
-from mech_regulator.scene import load_scene
+from mech_regulator.scene import load_scene, schema
 from support import run_cli
 from test_recording import scalars
 
@@ -199,3 +200,42 @@ def test_a_branch_on_a_group_with_one_assembly_is_refused(scenes, tmp_path, caps
     code, _, err = run_cli(capsys, "structure", str(changed))
     assert code == 2 and "branches names ['C'], which are not the internal joint of a group with two assemblies" \
         in err, err
+
+
+def documented_six_bar() -> str:
+    """The YAML of the complete scene file in docs/linkages.md ("Your own linkage: a complete scene file")."""
+    text = (Path(__file__).resolve().parents[1] / "docs" / "linkages.md").read_text(encoding="utf-8")
+    section = text.split("### Your own linkage: a complete scene file", 1)[1]
+    return section.split("```yaml\n", 1)[1].split("```", 1)[0]
+
+
+def test_the_documented_six_bar_shows_every_key_and_its_csv_j_holds_the_constant_part(tmp_path, capsys):
+    """The scene file of docs/linkages.md validates, gives the key of every linkage setting (output: one of its
+    two, which exclude each other) and runs; its CSV's J is machine.inertia + flywheel.inertia ratio^2 + J_links(phi),
+    J_links counting the crank's constant m |c - p|^2 + I, as the page says (its number at phi = 0 too)."""
+    data = yaml.safe_load(documented_six_bar())
+    mechanism = data["machine"]["mechanism"]
+    assert set(schema.Linkage.model_fields) <= set(mechanism)
+    assert set(schema.LinkageLink.model_fields) <= {key for link in mechanism["links"].values() for key in link}
+    assert set(schema.LinkageJoint.model_fields) <= {key for joint in mechanism["joints"].values() for key in joint}
+    assert len(mechanism["output"]) == 1 and set(mechanism["output"]) <= set(schema.LinkageOutput.model_fields)
+    path, out = tmp_path / "my_six_bar.yaml", tmp_path / "run.csv"
+    path.write_text(documented_six_bar(), encoding="utf-8")
+    code, _, err = run_cli(capsys, "simulate", str(path), "--quiet", "--set", "scenario.duration=0.1", "--out", str(out))
+    assert code == 0, err
+    columns = read_csv(out)
+    scene = load_scene(str(path))
+    machine = scene.machine
+    constant = machine.inertia + machine.flywheel.inertia * machine.flywheel.ratio ** 2
+    reduced = build_reduced(machine.mechanism, tuple(machine.gravity))
+    links = np.array([reduced(phi)[0] for phi in columns["phi"]])
+    np.testing.assert_allclose(columns["J"], constant + links, rtol=1e-9)
+    assert round(float(columns["J"][0]), 4) == 21.0892   # docs/linkages.md, "J in the run's CSV"
+    crank = data["machine"]["mechanism"]["links"]["crank"]
+    without = load_scene(str(path), ["machine.mechanism.links.crank.mass=0", "machine.mechanism.links.crank.inertia=0"])
+    bare = build_reduced(without.machine.mechanism, tuple(machine.gravity))
+    pivot = np.array(crank["points"]["A"])
+    own = crank["mass"] * float(np.sum((np.array(crank["centre"]) - pivot) ** 2)) + crank["inertia"]
+    assert own > 0.0
+    for phi in columns["phi"][::10]:
+        assert reduced(phi)[0] - bare(phi)[0] == pytest.approx(own, rel=1e-9)
