@@ -513,6 +513,7 @@ def _main_job(scene, args) -> int:
     from mech_regulator.cli.report import check_outputs
     from mech_regulator.scene import SceneError
 
+    _check_overspeed_trip(args)
     if importlib.util.find_spec("rclpy") is None:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
@@ -535,7 +536,6 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
     if args.duration is not None and not 0.0 < args.duration <= 1e7:
         raise SceneError(f"--duration {args.duration:g}: expected a simulated time in (0, 1e7] s")
-    _check_overspeed_trip(args)
     if not 1e-3 <= args.real_time_factor <= 1e3:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
