@@ -203,6 +203,13 @@ def test_an_overspeed_trip_that_is_not_a_speed(capsys, tmp_path, command, trip):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_an_overspeed_trip_without_the_exchanges_it_acts_at(capsys):
+    """simulate without --exchange-step has no trip: one asked for is refused rather than ignored."""
+    err = refused(capsys, "lathe", "--quiet", "--overspeed-trip", "20")
+    assert "--overspeed-trip 20: the trip acts at the exchanges of the co-simulation; expected --exchange-step H" \
+        in err, err
+
+
 # ----------------------------------------------------------------------------------------------
 # J(phi) reaching zero: refused when the model is built, with the mechanism's key values
 
