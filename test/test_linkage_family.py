@@ -22,7 +22,7 @@ from rerun.chunk import RrdReader
 from linkage_family import MEMBERS, member
 from mech_regulator.analysis.kinematics import reactions_table
 from mech_regulator.mechanisms import build_reduced
-from mech_regulator.scene import load_scene, schema
+from mech_regulator.scene import config_dir, load_scene, schema
 from support import run_cli
 from test_recording import scalars
 
@@ -239,3 +239,27 @@ def test_the_documented_six_bar_shows_every_key_and_its_csv_j_holds_the_constant
     assert own > 0.0
     for phi in columns["phi"][::10]:
         assert reduced(phi)[0] - bare(phi)[0] == pytest.approx(own, rel=1e-9)
+
+
+def test_every_linkage_command_takes_a_linkage_behind_a_coupling(scenes, tmp_path, capsys):
+    """A member driven through an elastic coupling (the bundled press_coupling with its crank-slider replaced):
+    `structure` and `kinematics` analyse the driven part's linkage (kinematics once said the scene had no
+    mechanism), simulate records it."""
+    path, expected = scenes["watt_six_bar"]
+    member_data = yaml.safe_load(path.read_text())
+    data = yaml.safe_load((config_dir() / "scenes" / "press_coupling.yaml").read_text())
+    data["machine"]["coupling"]["driven"]["mechanism"] = member_data["machine"]["mechanism"]
+    data["machine"]["coupling"]["driven"]["loads"] = [{"type": "rocker_viscous", "coefficient": 1.0}]
+    data["scenario"]["duration"] = 0.2
+    coupled = tmp_path / "coupled.yaml"
+    coupled.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    code, out, err = run_cli(capsys, "structure", str(coupled), "--json")
+    assert code == 0 and [group["type"] for group in json.loads(out)["groups"]] == expected["groups"], err
+    code, out, err = run_cli(capsys, "kinematics", str(coupled), "--points", "13", "--json")
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["mechanism"] == "linkage" and summary["driven_part"] is True and "F" in summary["joints"]
+    rrd = tmp_path / "coupled.rrd"
+    code, _, err = run_cli(capsys, "simulate", str(coupled), "--quiet", "--record", str(rrd))
+    assert code == 0, err
+    assert strip_counts(rrd, "/mechanism/links") == {len(member_data["machine"]["mechanism"]["links"]) - 1}

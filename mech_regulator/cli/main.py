@@ -443,18 +443,19 @@ def _kinematics(scene, args) -> int:
     from mech_regulator.cli.report import check_outputs, format_kinematics, to_json, write_csv
     from mech_regulator.scene import SceneError
 
-    mechanism = scene.machine.mechanism
+    mechanism, driven = scene.machine.analysed_mechanism()
     if mechanism is None:
-        raise SceneError(f"scene '{scene.name}' has no mechanism: kinematics needs machine.mechanism "
-                         "(a linkage, docs/linkages.md, or crank_slider, four_bar or walking_beam, docs/scenes.md)")
+        raise SceneError(f"scene '{scene.name}' has no mechanism: kinematics needs machine.mechanism or a coupling's "
+                         "driven.mechanism (a linkage, docs/linkages.md, or crank_slider, four_bar or walking_beam, "
+                         "docs/scenes.md)")
     if not (math.isfinite(args.omega) and args.omega > 0.0):
         raise SceneError(f"--omega {args.omega:g}: expected a crank speed > 0 rad/s")
     if not 3 <= args.points <= 100_000:
         raise SceneError(f"--points {args.points}: expected 3 to 100000 crank angles")
     check_outputs(args, args.out)
     columns = kinematics_table(mechanism, args.omega, args.points)
-    summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
-               "joints": kinematics_summary(columns)}
+    summary = {"scene": scene.name, "mechanism": mechanism.type, "driven_part": driven, "omega": args.omega,
+               "points": args.points, "joints": kinematics_summary(columns)}
     gravity = tuple(scene.machine.gravity) if scene.machine.gravity is not None else None
     reactions = reactions_table(mechanism, gravity, args.omega, columns["phi"])
     if reactions:

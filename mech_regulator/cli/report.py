@@ -506,7 +506,8 @@ def format_kinematics(summary: dict) -> str:
     [m], largest speed [m/s] and acceleration [m/s^2] and the crank angles [deg] where they occur; then, where the
     mechanism's kinetostatics is built, the balancing moment's range and each joint's largest reaction, else why
     there are none."""
-    lines = [f"scene {summary['scene']}: {summary['mechanism']} at omega = {summary['omega']:g} rad/s, "
+    driven = " (the driven part's, behind the coupling; omega its speed)" if summary.get("driven_part") else ""
+    lines = [f"scene {summary['scene']}: {summary['mechanism']}{driven} at omega = {summary['omega']:g} rad/s, "
              f"{summary['points']} crank angles over a turn",
              f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
              f"{'a_max [m/s^2]':>16}{'at [deg]':>10}"]

@@ -678,7 +678,7 @@ class Machine(SceneModel):
     """The machine reduced to its driving link (the crank)."""
 
     inertia: NonNegative = Field(description="constant part J0 of the reduced inertia about the crank axis (rotor, "
-                                             "crank, gears) [kg m^2]")
+                                             "gears, a preset's crank; a linkage's crank counts in its link) [kg m^2]")
     flywheel: Flywheel | None = Field(None, description="optional flywheel; adds inertia * ratio^2")
     gravity: list[float] | None = Field(None, min_length=2, max_length=2,
                                         description="gravity vector [gx, gy] in the mechanism plane; weights of the "
@@ -692,6 +692,13 @@ class Machine(SceneModel):
                                                                   "and a thrust collar (the most expensive effect)")
     clutch: Clutch | None = Field(None, description="optional friction clutch to a driven part (motor and working "
                                                     "machine); the external load then acts on the driven part")
+
+    def analysed_mechanism(self) -> tuple[Mechanism | None, bool]:
+        """The mechanism whose kinematics and structure the commands analyse and the recording draws, and whether
+        it is the driven part's: the machine's own, else the one behind a coupling, else None."""
+        if self.mechanism is None and self.coupling is not None and self.coupling.driven.mechanism is not None:
+            return self.coupling.driven.mechanism, True
+        return self.mechanism, False
 
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:

@@ -454,10 +454,7 @@ def end_text(t_ns: int, status: str | None, message: str) -> str:
 def drawn_mechanism(model: MachineModel) -> tuple[schema.Mechanism | None, bool]:
     """The mechanism the recording draws and whether it is the driven part's (turning at phi - twist behind a
     coupling): the machine's own, else the one behind a coupling, else None (a schematic disc)."""
-    own = model.scene.machine.mechanism
-    if own is None and model.coupling is not None and model.scene.machine.coupling.driven.mechanism is not None:
-        return model.scene.machine.coupling.driven.mechanism, True
-    return own, False
+    return model.scene.machine.analysed_mechanism()
 
 
 def mechanism_title(model: MachineModel) -> str:
