@@ -221,7 +221,8 @@ def test_the_documented_six_bar_shows_every_key_and_its_csv_j_holds_the_constant
     assert len(mechanism["output"]) == 1 and set(mechanism["output"]) <= set(schema.LinkageOutput.model_fields)
     path, out = tmp_path / "my_six_bar.yaml", tmp_path / "run.csv"
     path.write_text(documented_six_bar(), encoding="utf-8")
-    code, _, err = run_cli(capsys, "simulate", str(path), "--quiet", "--set", "scenario.duration=0.1", "--out", str(out))
+    code, _, err = run_cli(capsys, "simulate", str(path), "--quiet", "--set", "scenario.duration=0.1",
+                           "--out", str(out))
     assert code == 0, err
     columns = read_csv(out)
     scene = load_scene(str(path))

@@ -281,13 +281,13 @@ def _simulate(scene, args) -> int:
     from mech_regulator.analysis.self_check import self_checks
     from mech_regulator.cli.report import check_outputs, format_summary, progress_bar, to_json, write_csv
     from mech_regulator.model import build_model
-    from mech_regulator.solvers import on_path_for_a_command, simulate
     from mech_regulator.scene import SceneError
+    from mech_regulator.solvers import on_path_for_a_command, simulate
     from mech_regulator.solvers.advice import stiffness_advice
 
     if args.overspeed_trip and args.exchange_step is None:
-        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: the trip acts at the exchanges of the co-simulation; "
-                         "expected --exchange-step H with it (the monolithic run has no trip)")
+        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: the trip acts at the exchanges of the "
+                         "co-simulation; expected --exchange-step H with it (the monolithic run has no trip)")
     check_outputs(args, args.out, args.record)
     model = on_path_for_a_command(build_model(scene), note)
     if args.exchange_step is not None:

@@ -101,7 +101,8 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     nothing else sets one), `started` the command's
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
     code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed, 2 if every
-    node that failed refused its input, 130 if interrupted; each failed node is named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    node that failed refused its input, 130 if interrupted; each failed node is named with its reason). An exchange
+    step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
     scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
