@@ -15,7 +15,7 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from mech_regulator.nodes.launch import FASTDDS_PROFILE_VARIABLE, OVERSPEED_TRIP_FACTOR, node_names
+from mech_regulator.nodes.launch import FASTDDS_PROFILE_VARIABLE, node_names
 from mech_regulator.scene import load_scene
 
 PACKAGE = "mech_regulator"
@@ -32,15 +32,14 @@ EXECUTABLES = {
 
 def _nodes(context, *args, **kwargs):
     """The nodes `mech-regulator run` starts for the chosen scene (the governor only when it has one), with
-    the choices it adds to the params file: the scene, the machine's peers and its overspeed trip; and, unless one is
-    set, the bundled Fast DDS profile."""
+    the choices it adds to the params file: the scene and the machine's peers (its overspeed trip is the params file's
+    machine.overspeed_trip, none unless set there); and, unless one is set, the bundled Fast DDS profile."""
     scene_file = LaunchConfiguration("scene").perform(context)
     params_file = LaunchConfiguration("params_file").perform(context)
     scene = load_scene(scene_file)
     names = node_names(governed=scene.governor is not None)
     run_choices = {name: {"scene_file": scene_file} for name in names}
-    run_choices["machine"].update(peers=[name for name in names if name != "machine"],
-                                  overspeed_trip=OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega))
+    run_choices["machine"].update(peers=[name for name in names if name != "machine"])
     profile = {} if FASTDDS_PROFILE_VARIABLE in os.environ else {
         FASTDDS_PROFILE_VARIABLE: os.path.join(get_package_share_directory(PACKAGE), FASTDDS_PROFILE)}
     return [Node(package=PACKAGE, executable=EXECUTABLES[name], name=name, output="screen",

@@ -193,6 +193,23 @@ def test_an_exchange_step_that_would_take_too_many_exchanges(capsys, evaluations
     assert evaluations[0] <= 200
 
 
+@pytest.mark.parametrize("command", ["simulate", "run"])
+@pytest.mark.parametrize("trip", ["-1", "nan", "inf"])
+def test_an_overspeed_trip_that_is_not_a_speed(capsys, tmp_path, command, trip):
+    """Refused before anything runs (no node started: run's output folder stays empty)."""
+    extra = ["--exchange-step", "0.01"] if command == "simulate" else ["--out", str(tmp_path / "run.rrd")]
+    err = refused(capsys, "lathe", "--quiet", *extra, "--overspeed-trip", trip, command=command)
+    assert f"--overspeed-trip {float(trip):g}: expected a speed >= 0 rad/s (0: none)" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_overspeed_trip_without_the_exchanges_it_acts_at(capsys):
+    """simulate without --exchange-step has no trip: one asked for is refused rather than ignored."""
+    err = refused(capsys, "lathe", "--quiet", "--overspeed-trip", "20")
+    assert "--overspeed-trip 20: the trip acts at the exchanges of the co-simulation; expected --exchange-step H" \
+        in err, err
+
+
 # ----------------------------------------------------------------------------------------------
 # J(phi) reaching zero: refused when the model is built, with the mechanism's key values
 

@@ -85,7 +85,8 @@ def test_four_bar_as_a_linkage_has_the_four_bars_kinematics():
      r"0.000 deg cannot be assembled: the distance 0.03 m between B and D is outside \[0.04, 0.2\] m\)"),
     (lambda m: m["links"]["coupler"]["points"].update(C=[0.0, 0.0]),
      r"the link coupler of the RRR group C has its joints B and C at one point \[0, 0\] m"),
-    (lambda m: m.update(branches={"B": -1}), r"branches names \['B'\], which are not the internal joint of a group; "
+    (lambda m: m.update(branches={"B": -1}), r"branches names \['B'\], which are not the internal joint of a group "
+                                             r"with two assemblies \(RRR, RRP, RPR; PRP and RPP have one\); "
                                              r"expected some of \['C'\]"),
     (lambda m: m.update(crank="rocker"), r"RRR group B \(links crank, coupler\) fails for crank angles 129 to 231 deg, "
                                           r"305.5 to 414.5 deg"),

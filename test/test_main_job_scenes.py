@@ -1,4 +1,4 @@
-"""The main job plays every scene: every bundled scene and a user's scene through the nodes
+"""The main job plays every scene: every bundled scene, a user's scene and two generated linkages through the nodes
 (`mech-regulator run`), the nodes ending by themselves and leaving no process behind, a missing peer named,
 a scene the nodes cannot play refused at once, and the machine's services (~/pause, ~/step, ~/resume,
 ~/reset) between trials.
@@ -28,10 +28,12 @@ from ros_support import (WAIT, Processes, RunListener, domain_id, next_domain_id
 # after ros_support, which skips this module when rclpy is missing
 from std_srvs.srv import Trigger
 
+from linkage_family import member
 from mech_regulator.cli.report import write_csv
 from mech_regulator.model import build_model
 from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, to_nanoseconds
+from test_linkage_family import strip_counts
 
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
 
@@ -143,6 +145,34 @@ def test_a_user_scene_plays_through_the_nodes(tmp_path):
     csv = np.genfromtxt(rrd.with_suffix(".csv"), delimiter=",", names=True)
     assert csv["omega"][0] == 0.0 and csv["omega"][-1] > 1.0, "the machine did not start from rest"
     assert "theta4" in csv.dtype.names, "no rocker columns in the CSV of a four-bar"
+
+
+def test_generated_linkages_play_through_the_nodes_without_a_trip_nobody_asked_for(tmp_path):
+    """Two members of the generated family (test/linkage_family.py) side by side: the all-revolute Watt six-bar with
+    its governor (a linkage without sliders could not be recorded, so `run` failed) and the six-bar with a ram,
+    ungoverned, started at 10 rad/s well below its running speed (the trip once defaulted to 1.25 x the initial
+    speed and closed its throttle at 12.5 rad/s while the run still said complete). Each plays as the in-process
+    co-simulation without a trip, and its recording draws every link but the crank and each slider block."""
+    scenes = {}
+    for name, changes in (("watt_six_bar", {}), ("six_bar_ram", {"omega": 10.0})):
+        data = member(name, 7)
+        data.pop("expected")
+        data["scenario"]["initial"].update(changes)
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(data, sort_keys=False))
+        scenes[name] = (path, data)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        results = dict(zip(scenes, pool.map(lambda name: play(str(scenes[name][0]), tmp_path / name), scenes)))
+    for name, (result, rrd) in results.items():
+        path, data = scenes[name]
+        assert_played(name, build_model(validate_scene(data)), result, rrd, tmp_path)
+        mechanism = data["machine"]["mechanism"]
+        prismatic = sum(joint["type"] == "prismatic" for joint in mechanism["joints"].values())
+        assert strip_counts(rrd, "/mechanism/links") == {len(mechanism["links"]) - 1}
+        assert strip_counts(rrd, "/mechanism/sliders") == {prismatic}
+        assert "overspeed trip" not in result.stdout + result.stderr
+    omega = np.genfromtxt(results["six_bar_ram"][1].with_suffix(".csv"), delimiter=",", names=True)["omega"]
+    assert omega[0] == 10.0 and omega[-1] > 1.25 * 10.0, "the ram's machine did not pass the former default trip"
 
 
 def test_a_scene_the_nodes_cannot_play_is_refused_at_once(tmp_path):

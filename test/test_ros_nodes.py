@@ -27,6 +27,7 @@ import yaml
 from ros_support import (WAIT, Processes, RunListener, domain_id, next_domain_id, probe,  # noqa: F401 (fixtures)
                          probe_on, processes, processes_on, stamp_ns)
 from support import run_cli
+from test_recording import events
 
 # after ros_support, which skips this module when rclpy is missing
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -437,12 +438,16 @@ def _without_pace(summary: dict) -> dict:
 
 
 def test_recorder_summary_of_a_tripped_run(overspeed_run):
-    # (once a bug: the recorder's summary said tripped_at null)
+    # (once a bug: the recorder's summary said tripped_at null; and then status complete)
     _, _, model, run, output = overspeed_run
     summary = json.loads(output.with_suffix(".json").read_text())
     assert summary.pop("recording") == str(output) and summary.pop("csv") == str(output.with_suffix(".csv"))
     assert _without_pace(summary) == _in_process_summary(model, run)
     assert summary["tripped_at"] == run.tripped_at
+    assert summary["status"] == "tripped" and summary["message"] == \
+        f"overspeed trip at t = {run.tripped_at:.6g} s: throttle closed from then on"
+    last_event = events(output)[-1]
+    assert last_event[:2] == (to_nanoseconds(0.4), "WARN") and last_event[2].startswith("end: tripped at t = 0.400 s")
 
 
 # -------------------------------------------------------------------------------------------------

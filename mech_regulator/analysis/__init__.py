@@ -58,16 +58,26 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
     }
 
 
+def cosimulation_ending(run: CoSimulation) -> tuple[str, str]:
+    """How a co-simulated run ended, (status, message): its solver's status and message, except that a run which
+    played to its end after an overspeed trip is `tripped` (the machine's throttle closed from tripped_at on), never
+    `complete`."""
+    if run.status == "complete" and run.tripped_at is not None:
+        return "tripped", f"overspeed trip at t = {run.tripped_at:.6g} s: throttle closed from then on"
+    return run.status, run.message
+
+
 def summarise_cosimulation(model: MachineModel, run: CoSimulation, exchange_step: float, coupling: str = "hold"
                            ) -> dict:
-    """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended, the exchange
-    step [s] and coupling (solvers.cosim), the final speed, the governor's answer to each load change (from the run
-    sampled at its exchange times) and the overspeed trip."""
+    """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended
+    (cosimulation_ending), the exchange step [s] and coupling (solvers.cosim), the final speed, the governor's answer
+    to each load change (from the run sampled at its exchange times) and the overspeed trip."""
     trajectory = run.trajectory(model)
+    status, message = cosimulation_ending(run)
     return {
         "scene": model.scene.name,
-        "status": run.status,
-        "message": run.message,
+        "status": status,
+        "message": message,
         "exchange_step": exchange_step,
         "coupling": coupling,
         "samples": int(run.times.size),

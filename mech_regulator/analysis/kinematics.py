@@ -36,16 +36,29 @@ def kinematics_table(mechanism: schema.Mechanism, omega: float, count: int) -> d
     return columns
 
 
+def reactions_unavailable(mechanism: schema.Mechanism) -> str | None:
+    """Why the joint reactions of a mechanism are not computed, or None when they are: the walking beam preset and
+    a multi-cylinder crank-slider have no kinetostatics (scene.schema.NO_KINETOSTATICS), and a linkage with a
+    redundant link is statically indeterminate (its reactions do not follow from equilibrium alone)."""
+    if mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
+        return f"the kinetostatics of a {mechanism.type} is not built here"
+    if isinstance(mechanism, schema.Linkage):
+        from mech_regulator.mechanisms import mechanism_geometry
+        from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
+
+        return indeterminate(mechanism_geometry(mechanism)[1])
+    return None
+
+
 def reactions_table(mechanism: schema.Mechanism, gravity: tuple[float, float] | None, omega: float,
                     phis: np.ndarray) -> dict[str, np.ndarray]:
     """Kinetostatics at constant crank speed omega [rad/s] (epsilon = 0) with the links' weights (gravity [m/s^2],
     None: weightless) and no load on the output, at the crank angles phis [rad]: R_<joint> = |R| [N], the magnitude of
     every joint's reaction (a guide's: its normal force), and M_balancing [N m], the moment on the crank that keeps
-    its speed constant, M_b = 1/2 J'(phi) omega^2 - M_weight(phi). Empty for a mechanism whose kinetostatics is not
-    built (the walking beam preset and a multi-cylinder crank-slider; scene.schema.NO_KINETOSTATICS)."""
+    its speed constant, M_b = 1/2 J'(phi) omega^2 - M_weight(phi). Empty where reactions_unavailable says why."""
     from mech_regulator.mechanisms import build_kinetostatics
 
-    if mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
+    if reactions_unavailable(mechanism) is not None:
         return {}
     loads, joints = build_kinetostatics(mechanism, gravity)
     samples = [loads(float(phi), omega, 0.0) for phi in phis]

@@ -73,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
                           help="with --exchange-step: " + COUPLING_HELP)
     simulate.add_argument("--overspeed-trip", type=float, default=0.0, metavar="OMEGA",
                           help="with --exchange-step: trip speed [rad/s] closing the throttle for good, as `run` "
-                               "has (default 0: none; `run` uses 1.25 x the initial speed)")
+                               "has; the run then ends `tripped` (default 0: none)")
     scene_command("describe", "print the effects, state vector and solver a scene uses, without running it")
     governor = scene_command("governor", "statics and stability of a governed scene: static characteristic, "
                                          "statism, insensitivity, operating points, droop, eigenvalues, "
@@ -99,7 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
     coupling.add_argument("--plot", type=Path, help="write a PNG picture: the law, the twist, the characteristic")
     coupling.add_argument("--json", action="store_true", help="print the answer as JSON")
     kinematics = scene_command("kinematics", "positions, velocities and accelerations of the mechanism's joints over "
-                                             "one turn at constant crank speed (crank-slider, four-bar, walking beam)")
+                                             "one turn at constant crank speed, and the joint reactions where they "
+                                             "are determinate: any linkage (type: linkage, docs/linkages.md) or a "
+                                             "preset (crank_slider, four_bar, walking_beam)")
     kinematics.add_argument("--omega", type=float, default=10.0, help="constant crank speed [rad/s] (default 10)")
     kinematics.add_argument("--points", type=int, default=361, metavar="N",
                             help="crank angles over the turn, both ends included (default 361: every degree)")
@@ -135,8 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
                           help="lockstep: as fast as possible and reproducible; realtime: follow the wall clock")
     main_job.add_argument("--real-time-factor", type=float, default=1.0, metavar="X",
                           help="realtime: simulated seconds per wall-clock second")
-    main_job.add_argument("--overspeed-trip", type=float, metavar="OMEGA",
-                          help="trip speed [rad/s] (default 1.25 x the initial speed; 0: none)")
+    main_job.add_argument("--overspeed-trip", type=float, default=0.0, metavar="OMEGA",
+                          help="trip speed [rad/s]: above it the machine's throttle closes for good and the run "
+                               "ends `tripped` (default 0: no trip)")
     main_job.add_argument("--out", type=Path, help="the recording to write (default runs/<scene>-<time>.rrd)")
     main_job.add_argument("--domain-id", type=int, help="ROS domain of the run (default: a random one in 1..101)")
     main_job.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -287,9 +290,13 @@ def _simulate(scene, args) -> int:
     from mech_regulator.analysis.self_check import self_checks
     from mech_regulator.cli.report import OutputWriter, format_summary, progress_bar, to_json, write_csv
     from mech_regulator.model import build_model
+    from mech_regulator.scene import SceneError
     from mech_regulator.solvers import on_path_for_a_command, simulate
     from mech_regulator.solvers.advice import stiffness_advice
 
+    if args.overspeed_trip and args.exchange_step is None:
+        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: the trip acts at the exchanges of the "
+                         "co-simulation; expected --exchange-step H with it (the monolithic run has no trip)")
     model = on_path_for_a_command(build_model(scene), note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
@@ -341,8 +348,7 @@ def _cosimulate(model, args) -> int:
 
     if not 1e-6 <= args.exchange_step <= 1.0:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
-    if not args.overspeed_trip >= 0.0:
-        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
+    _check_overspeed_trip(args)
     duration = model.scene.scenario.duration
     with progress_bar(duration, args.quiet, f"co-simulating {model.scene.name or args.scene}") as bar:
         run = cosimulate(model, args.exchange_step, args.overspeed_trip,
@@ -356,7 +362,7 @@ def _cosimulate(model, args) -> int:
 
         outputs.write("recording", args.record, lambda path: record_run(
             model, run.times, run.states, path, mode_changes=[(t, what) for t, what, _ in run.events],
-            status=run.status, message=run.message))
+            status=summary["status"], message=summary["message"]))
     print(to_json(summary) if args.json else format_cosimulation_summary(summary))
     if run.status == "failed":
         print(f"mech-regulator: {terminal_text(run.message)}", file=sys.stderr)
@@ -434,26 +440,29 @@ def _required_coupling(scene, args) -> int:
 def _kinematics(scene, args) -> int:
     """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
     from mech_regulator.analysis.kinematics import (kinematics_summary, kinematics_table, reactions_summary,
-                                                    reactions_table)
+                                                    reactions_table, reactions_unavailable)
     from mech_regulator.cli.report import OutputWriter, format_kinematics, to_json, write_csv
     from mech_regulator.scene import SceneError
 
-    mechanism = scene.machine.mechanism
+    mechanism, driven = scene.machine.analysed_mechanism()
     if mechanism is None:
-        raise SceneError(f"scene '{scene.name}' has no mechanism: kinematics needs machine.mechanism "
-                         "(crank_slider, four_bar or walking_beam; see docs/scenes.md)")
+        raise SceneError(f"scene '{scene.name}' has no mechanism: kinematics needs machine.mechanism or a coupling's "
+                         "driven.mechanism (a linkage, docs/linkages.md, or crank_slider, four_bar or walking_beam, "
+                         "docs/scenes.md)")
     if not (math.isfinite(args.omega) and args.omega > 0.0):
         raise SceneError(f"--omega {args.omega:g}: expected a crank speed > 0 rad/s")
     if not 3 <= args.points <= 100_000:
         raise SceneError(f"--points {args.points}: expected 3 to 100000 crank angles")
     columns = kinematics_table(mechanism, args.omega, args.points)
-    summary = {"scene": scene.name, "mechanism": mechanism.type, "omega": args.omega, "points": args.points,
-               "joints": kinematics_summary(columns)}
+    summary = {"scene": scene.name, "mechanism": mechanism.type, "driven_part": driven, "omega": args.omega,
+               "points": args.points, "joints": kinematics_summary(columns)}
     gravity = tuple(scene.machine.gravity) if scene.machine.gravity is not None else None
     reactions = reactions_table(mechanism, gravity, args.omega, columns["phi"])
     if reactions:
         columns.update(reactions)
         summary["reactions"] = reactions_summary(columns)
+    else:
+        summary["no_reactions"] = reactions_unavailable(mechanism)
     outputs = OutputWriter(summary)
     outputs.write("csv", args.out, lambda path: write_csv(path, columns))
     if args.plot is not None:
@@ -491,12 +500,21 @@ def _engine(scene, args) -> int:
     return outputs.exit_code(0)
 
 
+def _check_overspeed_trip(args) -> None:
+    """Refuse a --overspeed-trip that is not a speed >= 0 rad/s (SceneError)."""
+    from mech_regulator.scene import SceneError
+
+    if not (math.isfinite(args.overspeed_trip) and args.overspeed_trip >= 0.0):
+        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
+
+
 def _main_job(scene, args) -> int:
     import importlib.util
 
     from mech_regulator.cli.report import output_folder
     from mech_regulator.scene import SceneError
 
+    _check_overspeed_trip(args)
     if importlib.util.find_spec("rclpy") is None:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")

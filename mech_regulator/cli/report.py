@@ -211,7 +211,7 @@ def format_cosimulation_summary(summary: dict) -> str:
              f"({summary['samples']} exchanges)"]
     if summary["message"]:
         lines.append(summary["message"])
-    if summary["tripped_at"] is not None:
+    if summary["tripped_at"] is not None and summary["status"] != "tripped":   # a run that failed after its trip
         lines.append(f"overspeed trip at t = {summary['tripped_at']:.6g} s: throttle closed from then on")
     if "real_time_factor" in summary:  # the ROS nodes' pace, from the recorder
         lines.append(f"the nodes ran at {summary['real_time_factor']:.3g} x real time over the exchanges "
@@ -528,8 +528,10 @@ def _degrees(values) -> str:
 def format_kinematics(summary: dict) -> str:
     """The human-readable joint motion over one turn (`mech-regulator kinematics`): per joint its x and y ranges
     [m], largest speed [m/s] and acceleration [m/s^2] and the crank angles [deg] where they occur; then, where the
-    mechanism's kinetostatics is built, the balancing moment's range and each joint's largest reaction."""
-    lines = [f"scene {summary['scene']}: {summary['mechanism']} at omega = {summary['omega']:g} rad/s, "
+    mechanism's kinetostatics is built, the balancing moment's range and each joint's largest reaction, else why
+    there are none."""
+    driven = " (the driven part's, behind the coupling; omega its speed)" if summary.get("driven_part") else ""
+    lines = [f"scene {summary['scene']}: {summary['mechanism']}{driven} at omega = {summary['omega']:g} rad/s, "
              f"{summary['points']} crank angles over a turn",
              f"{'joint':<6}{'x range [m]':>22}{'y range [m]':>22}{'v_max [m/s]':>14}{'at [deg]':>10}"
              f"{'a_max [m/s^2]':>16}{'at [deg]':>10}"]
@@ -545,6 +547,8 @@ def format_kinematics(summary: dict) -> str:
                      f"{moment['max']:.5g} N m at {moment['max_at_deg']:.4g} deg")
         lines += [f"  {name:<16} |R| max {joint['R_max']:12.5g} N at {joint['R_max_at_deg']:.4g} deg"
                   for name, joint in reactions.items() if name != "balancing_moment"]
+    if "no_reactions" in summary:
+        lines.append(f"no joint reactions: {summary['no_reactions']}")
     return terminal_text("\n".join(lines + wrote_lines(summary)))
 
 

@@ -25,8 +25,7 @@ def run_structure(scene, args: argparse.Namespace) -> int:
     from mech_regulator.mechanisms.linkage import Dyad
     from mech_regulator.scene import SceneError
 
-    coupling = scene.machine.coupling
-    mechanism = scene.machine.mechanism or (coupling.driven.mechanism if coupling else None)
+    mechanism = scene.machine.analysed_mechanism()[0]
     if mechanism is None or mechanism.type != "linkage":
         raise SceneError(f"scene '{scene.name}' has mechanism {mechanism.type if mechanism else 'none'}: structure "
                          "analyses machine.mechanism.type: linkage (links, joints, crank; docs/linkages.md)")

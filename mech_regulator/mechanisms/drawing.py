@@ -147,11 +147,14 @@ def _walking_beam_outline(spec: schema.WalkingBeam, phi: float) -> dict[str, np.
 def outline_extent(outlines: list[dict[str, np.ndarray]], point_radius: float = 0.0
                    ) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) [m] of every part of every outline; points (parts of shape (n, 2) whose
-    name says `joints` or `balls`) are grown by point_radius."""
+    name says `joints` or `balls`) are grown by point_radius; an empty part (a linkage without sliders has no
+    slider blocks) adds nothing."""
     lows, highs = [], []
     for outline in outlines:
         for name, part in outline.items():
             points = part.reshape(-1, 2)
+            if not len(points):
+                continue
             grow = point_radius if name in ("joints", "balls") else 0.0
             lows.append(points.min(axis=0) - grow)
             highs.append(points.max(axis=0) + grow)

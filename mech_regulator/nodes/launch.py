@@ -31,7 +31,6 @@ from mech_regulator.cli.report import format_cosimulation_summary, progress_bar
 from mech_regulator.scene import SceneError, config_dir
 from mech_regulator.scene.limits import exchange_refusal, output_stem
 
-OVERSPEED_TRIP_FACTOR = 1.25  # default trip speed: this times the scene's initial speed
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
 STALL_REPORT = 30.0  # [s] of wall time without the machine's simulated time advancing before the launcher says so
@@ -102,21 +101,21 @@ def run_files(recording: Path) -> list[Path]:
 
 
 def main_job(model, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
-             real_time_factor: float, overspeed_trip: float | None, output: Path | None, domain_id: int | None,
+             real_time_factor: float, overspeed_trip: float, output: Path | None, domain_id: int | None,
              quiet: bool, duration: float | None, coupling: str, started: float | None = None) -> int:
     """Run the nodes on the model's scene (its solver.path decided: fast or reference) for `duration` [s] of
-    simulated time (None: the scene's), `started` the command's
+    simulated time (None: the scene's), the machine tripping above overspeed_trip [rad/s] (0: no trip, the default:
+    nothing else sets one), `started` the command's
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
-    code (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
-    named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed, 2 if every
+    node that failed refused its input, 130 if interrupted; each failed node is named with its reason). An exchange
+    step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
     scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
         raise SceneError(too_many)
     output = output or default_recording(scene.name)
     output.parent.mkdir(parents=True, exist_ok=True)
-    if overspeed_trip is None:
-        overspeed_trip = OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega)
     governed = scene.governor is not None
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
                                 real_time_factor, governed, duration, coupling,
@@ -127,8 +126,9 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     domain_id = domain_id if domain_id is not None else random.randint(1, 101)
     environment = private_environment(domain_id)
     names = node_names(governed)
+    trip = f", overspeed trip at {overspeed_trip:g} rad/s" if overspeed_trip > 0.0 else ""
     print(f"running {', '.join(names)} nodes on ROS domain {domain_id} ({time_mode}, exchange step "
-          f"{exchange_step:g} s); node logs in {log_file}", file=sys.stderr)
+          f"{exchange_step:g} s{trip}); node logs in {log_file}", file=sys.stderr)
     processes: dict[str, subprocess.Popen] = {}
     interrupted = False
     with open(log_file, "w") as log:

@@ -27,7 +27,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from mech_regulator.analysis import summarise_cosimulation
+from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
 from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
@@ -174,7 +174,7 @@ class RecorderNode(Node):
         if run_data is None:
             self.recording.close("interrupted", "before the first complete exchange")
         else:
-            status, message = ("complete", "") if self.complete() else \
+            status, message = cosimulation_ending(run_data) if self.complete() else \
                 ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
             if self.machine_result[0] not in ("complete", "interrupted"):
                 status, message = self.machine_result

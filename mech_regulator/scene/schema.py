@@ -191,6 +191,7 @@ class WalkingBeam(SceneModel):
 
 
 Point = Annotated[list[float], Field(min_length=2, max_length=2)]
+BRANCHED_GROUPS = ("RRR", "RRP", "RPR")   # the group types with two assemblies, chosen by a branch
 MAX_LINKS = 60         # moving links of a linkage (a press or a loom has under 20): its analysis stays well under 1 s
 MAX_LINK_POINTS = 50   # points of one link
 
@@ -288,10 +289,11 @@ class Linkage(SceneModel):
             structure = checked(core)
         except LinkageError as error:
             raise ValueError(str(error)) from None
-        internal = {group.internal.name for group in structure.groups if hasattr(group, "internal")}
+        internal = {group.internal.name for group in structure.groups if group.kind in BRANCHED_GROUPS}
         foreign = sorted(set(self.branches) - internal)
         if foreign:
-            raise ValueError(f"branches names {foreign}, which are not the internal joint of a group; expected some of "
+            raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "
+                             f"assemblies ({', '.join(BRANCHED_GROUPS)}; PRP and RPP have one); expected some of "
                              f"{sorted(internal)}")
         failures = assembly_failures(core, structure)
         if failures:
@@ -676,7 +678,7 @@ class Machine(SceneModel):
     """The machine reduced to its driving link (the crank)."""
 
     inertia: NonNegative = Field(description="constant part J0 of the reduced inertia about the crank axis (rotor, "
-                                             "crank, gears) [kg m^2]")
+                                             "gears, a preset's crank; a linkage's crank counts in its link) [kg m^2]")
     flywheel: Flywheel | None = Field(None, description="optional flywheel; adds inertia * ratio^2")
     gravity: list[float] | None = Field(None, min_length=2, max_length=2,
                                         description="gravity vector [gx, gy] in the mechanism plane; weights of the "
@@ -690,6 +692,13 @@ class Machine(SceneModel):
                                                                   "and a thrust collar (the most expensive effect)")
     clutch: Clutch | None = Field(None, description="optional friction clutch to a driven part (motor and working "
                                                     "machine); the external load then acts on the driven part")
+
+    def analysed_mechanism(self) -> tuple[Mechanism | None, bool]:
+        """The mechanism whose kinematics and structure the commands analyse and the recording draws, and whether
+        it is the driven part's: the machine's own, else the one behind a coupling, else None."""
+        if self.mechanism is None and self.coupling is not None and self.coupling.driven.mechanism is not None:
+            return self.coupling.driven.mechanism, True
+        return self.mechanism, False
 
     @model_validator(mode="after")
     def _effects_fit_mechanism(self) -> Machine:
@@ -737,7 +746,15 @@ class Machine(SceneModel):
 
 
 def _check_linkage_journals(friction: JointFriction, linkage: Linkage) -> None:
-    """A linkage's journals must name its revolute joints, and its guide friction needs a prismatic joint."""
+    """A linkage's journals must name its revolute joints, its guide friction needs a prismatic joint, and its
+    joint reactions must be determinate (no redundant link)."""
+    from mech_regulator.mechanisms.linkage import checked
+    from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
+
+    reason = indeterminate(checked(linkage.core()))
+    if reason is not None:
+        raise ValueError(f"joint_friction needs the joint reactions, but {reason}; expected no joint_friction on this "
+                         "linkage (only a thrust_collar)")
     revolute = [name for name, joint in linkage.joints.items() if joint.type == "revolute"]
     foreign = [name for name in friction.journals if name not in revolute]
     if foreign:

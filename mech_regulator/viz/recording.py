@@ -110,7 +110,7 @@ POINT_PARTS = ("joints", "balls", "spindle_mark")
 FLIP_Y = np.array([1.0, -1.0])       # drawings have y up, Rerun's 2-D views y down
 MECHANISM_NAMES = {"crank_slider": "crank–slider", "four_bar": "four-bar linkage", "walking_beam": "walking beam",
                    "linkage": "linkage"}
-END_LEVELS = {"complete": "INFO", "interrupted": "WARN", "failed": "ERROR"}
+END_LEVELS = {"complete": "INFO", "tripped": "WARN", "interrupted": "WARN", "failed": "ERROR"}
 
 
 class RunRecording:
@@ -255,7 +255,8 @@ class RunRecording:
 
     def close(self, status: str | None = None, message: str = "") -> None:
         """Log a load change still going on and the end of the run at the latest machine sample (how the run
-        ended: status 'complete', 'interrupted' or 'failed' with its message; None: only that the recording ends
+        ended: status 'complete', 'tripped' (an overspeed trip closed the throttle), 'interrupted' or 'failed' with
+        its message; None: only that the recording ends
         there), send everything, then the final blueprint, whose plots span the values recorded (run_blueprint's
         extents), and finish the sinks (the file gets its footer and is complete); idempotent."""
         with self._lock:
@@ -453,10 +454,7 @@ def end_text(t_ns: int, status: str | None, message: str) -> str:
 def drawn_mechanism(model: MachineModel) -> tuple[schema.Mechanism | None, bool]:
     """The mechanism the recording draws and whether it is the driven part's (turning at phi - twist behind a
     coupling): the machine's own, else the one behind a coupling, else None (a schematic disc)."""
-    own = model.scene.machine.mechanism
-    if own is None and model.coupling is not None and model.scene.machine.coupling.driven.mechanism is not None:
-        return model.scene.machine.coupling.driven.mechanism, True
-    return own, False
+    return model.scene.machine.analysed_mechanism()
 
 
 def mechanism_title(model: MachineModel) -> str:

@@ -50,11 +50,20 @@ class LinkageLoads(NamedTuple):
     balancing: float
 
 
+def indeterminate(structure: Structure) -> str | None:
+    """Why the linkage's joint reactions cannot be computed, or None: a redundant link makes it statically
+    indeterminate (its reactions do not follow from equilibrium alone)."""
+    if not any(isinstance(group, RedundantLink) for group in structure.groups):
+        return None
+    return (f"a redundant constraint ({'; '.join(structure.redundant)}) makes the linkage statically indeterminate: "
+            "its joint reactions do not follow from equilibrium alone")
+
+
 def _program(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None) -> np.ndarray:
-    """The linkage's flat program (flat.encode); a redundant link is refused (statically indeterminate)."""
-    if any(isinstance(group, RedundantLink) for group in structure.groups):
-        raise LinkageError("a linkage with a redundant link is statically indeterminate: its joint reactions do not "
-                           "follow from equilibrium alone")
+    """The linkage's flat program (flat.encode); a redundant link is refused (indeterminate)."""
+    reason = indeterminate(structure)
+    if reason is not None:
+        raise LinkageError(reason)
     return flat.encode(linkage, structure.groups, gravity)
 
 
