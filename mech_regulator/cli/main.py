@@ -20,6 +20,7 @@ from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_st
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note
 from mech_regulator.cli.structure import add_structure_command
+from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.cli.sweep import add_sweep_command
 
 COUPLING_HELP = ("how machine and governor see each other over an exchange step: hold (each holds the other's last "
@@ -62,6 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--record", type=Path, metavar="RUN.rrd",
                           help="write a Rerun recording of the run (speed, throttle, sleeve, moments, the mechanism "
                                "and governor animated, events); open it with `rerun RUN.rrd`")
+    simulate.add_argument("--bag", type=Path, metavar="FOLDER",
+                          help="write the run as a rosbag2 recording (MCAP; a new folder) of the topics the ROS nodes "
+                               "publish, for ros2 bag, Foxglove or PlotJuggler (docs/ros.md, Bags)")
     simulate.add_argument("--json", action="store_true", help="print the summary as JSON")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
     simulate.add_argument("--strict", action="store_true",
@@ -139,6 +143,16 @@ def build_parser() -> argparse.ArgumentParser:
     main_job.add_argument("--overspeed-trip", type=float, metavar="OMEGA",
                           help="trip speed [rad/s] (default 1.25 x the initial speed; 0: none)")
     main_job.add_argument("--out", type=Path, help="the recording to write (default runs/<scene>-<time>.rrd)")
+    main_job.add_argument("--bag", type=Path, metavar="FOLDER",
+                          help="also write the run as a rosbag2 recording (MCAP; a new folder; docs/ros.md, Bags)")
+    main_job.add_argument("--controller", choices=CONTROLLERS, default="governor",
+                          help="what gives the throttle: the scene's governor (governor_node, default) or your own "
+                               "node, started by you, that answers joint_states with throttle (docs/ros.md, Your own "
+                               "controller); --set governor=null runs the bare machine")
+    main_job.add_argument("--peer-timeout", type=float, metavar="S",
+                          help="lockstep: wall-clock seconds the machine waits for a node and for each answer "
+                               "(default 10); a governor silent that long puts it on its fail-safe, an external "
+                               "controller ends the run")
     main_job.add_argument("--domain-id", type=int, help="ROS domain of the run (default: a random one in 1..101)")
     main_job.add_argument("--quiet", action="store_true", help="no progress bar")
     schema = commands.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
@@ -282,6 +296,7 @@ def _simulate(scene, args) -> int:
     from mech_regulator.solvers.advice import stiffness_advice
 
     check_outputs(args, args.out, args.record)
+    _check_bag(args.bag)
     model = on_path_for_a_command(build_model(scene), note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
@@ -313,6 +328,11 @@ def _simulate(scene, args) -> int:
         record_run(model, *_samples(model, trajectory), args.record, mode_changes=trajectory.events,
                    status=trajectory.status, message=trajectory.message)
         summary["recording"] = str(args.record)
+    if args.bag is not None and trajectory.interpolants:
+        from mech_regulator.viz.bag import write_bag
+
+        summary["bag"] = str(write_bag(args.bag, model, *_samples(model, trajectory), status=trajectory.status,
+                                       message=trajectory.message))
     print(to_json(summary) if args.json else format_summary(model, summary))
     for check in checks:
         print(f"mech-regulator: warning: inaccurate run: {check['check']} {check['value']:.2g} exceeds the "
@@ -352,6 +372,11 @@ def _cosimulate(model, args) -> int:
         record_run(model, run.times, run.states, args.record,
                    mode_changes=[(t, what) for t, what, _ in run.events], status=run.status, message=run.message)
         summary["recording"] = str(args.record)
+    if args.bag is not None:
+        from mech_regulator.viz.bag import write_bag
+
+        summary["bag"] = str(write_bag(args.bag, model, run.times, run.states, run.throttle, run.external_load,
+                                       run.status, run.message))
     print(to_json(summary) if args.json else format_cosimulation_summary(summary))
     if run.status == "failed":
         print(f"mech-regulator: {run.message}", file=sys.stderr)
@@ -508,6 +533,8 @@ def _main_job(scene, args) -> int:
     from mech_regulator.solvers import on_path_for_a_command
     from mech_regulator.solvers.cosim import cosimulation_refusal
 
+    if args.controller == "external" and scene.governor is not None:
+        scene = _without_governor(args)
     model = build_model(scene)
     reason = cosimulation_refusal(model)
     if reason is not None:
@@ -524,11 +551,42 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--duration {args.duration:g}: expected a simulated time in (0, 1e7] s")
     if not 1e-3 <= args.real_time_factor <= 1e3:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
+    if args.peer_timeout is not None and not 0.01 <= args.peer_timeout <= 3600.0:
+        raise SceneError(f"--peer-timeout {args.peer_timeout:g}: expected 0.01 to 3600 s")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
     check_outputs(args, args.out)
+    _check_bag(args.bag)
+    if args.controller == "external" and args.time_mode != "lockstep":
+        raise SceneError("--controller external: only with --time-mode lockstep (in realtime any node may publish "
+                         "throttle to a governed scene's machine: docs/ros.md, Your own controller)")
     return main_job(model, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
-                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED)
+                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED,
+                    bag=args.bag, controller=args.controller, peer_timeout=args.peer_timeout)
+
+
+def _without_governor(args):
+    """The scene of `run --controller external`: the user's controller drives the bare machine, so the scene's
+    governor and the initial governor states it sets are left out (added to args.overrides, which the nodes read)."""
+    from mech_regulator.scene import load_scene
+
+    scene = load_scene(args.scene, args.overrides)
+    initial = [f"scenario.initial.{key}=null" for key in ("sleeve", "servo")
+               if getattr(scene.scenario.initial, key) is not None]
+    args.overrides = [*args.overrides, "governor=null", *initial]
+    note(f"--controller external: the scene's governor is left out ({', '.join(['governor=null', *initial])}); "
+         "your controller drives the bare machine")
+    return load_scene(args.scene, args.overrides)
+
+
+def _check_bag(folder: Path | None) -> None:
+    """Refuse, before any work, a --bag folder that cannot be written (SceneError)."""
+    from mech_regulator.scene import SceneError
+    from mech_regulator.viz.bag import bag_refusal
+
+    reason = bag_refusal(folder) if folder is not None else None
+    if reason is not None:
+        raise SceneError(reason)
 
 
 def _bench_accuracy(args) -> int:
