@@ -568,14 +568,13 @@ def _main_job(scene, args) -> int:
 def _without_governor(args):
     """The scene of `run --controller external`: the user's controller drives the bare machine, so the scene's
     governor and the initial governor states it sets are left out (added to args.overrides, which the nodes read)."""
+    from mech_regulator.nodes.controller import governor_left_out
     from mech_regulator.scene import load_scene
 
-    scene = load_scene(args.scene, args.overrides)
-    initial = [f"scenario.initial.{key}=null" for key in ("sleeve", "servo")
-               if getattr(scene.scenario.initial, key) is not None]
-    args.overrides = [*args.overrides, "governor=null", *initial]
-    note(f"--controller external: the scene's governor is left out ({', '.join(['governor=null', *initial])}); "
-         "your controller drives the bare machine")
+    left_out = governor_left_out(load_scene(args.scene, args.overrides))
+    args.overrides = [*args.overrides, *left_out]
+    note(f"--controller external: the scene's governor is left out ({', '.join(left_out)}); your controller drives "
+         "the bare machine")
     return load_scene(args.scene, args.overrides)
 
 

@@ -10,6 +10,15 @@ THROTTLE_TOPIC = "throttle"
 GUIDE = "docs/ros.md, 'Your own controller'"
 
 
+def governor_left_out(scene) -> list[str]:
+    """The scene changes (KEY=VALUE, as --set) that leave a scene's governor out for an external controller: the
+    governor, and the initial governor states the scenario sets (none when the scene has no governor)."""
+    if scene.governor is None:
+        return []
+    return ["governor=null", *(f"scenario.initial.{key}=null" for key in ("sleeve", "servo")
+                               if getattr(scene.scenario.initial, key) is not None)]
+
+
 def contract(peer_timeout: float) -> str:
     """The one line that says what the machine waits for from an external controller."""
     return (f"waiting for your controller: a node that subscribes joint_states (sensor_msgs/JointState, joint 'crank': "

@@ -10,7 +10,7 @@ after the stamp too, which then wait for no other answer; 0 or not above the sta
 effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
 scene has a mechanism), `machine/moments` (what the recorder reads, sensor_msgs/JointState: the joints "drive",
 "resistance", "external", "net" whose efforts are the moments on the crank by source, "load" the applied load
-[N m], and the state as in joint_states: "crank" phi [rad], omega [rad/s], a two-mass machine's "coupling" twist
+[N m], "throttle" (position: the throttle applied over the step [-]), and the state as in joint_states: "crank" phi [rad], omega [rad/s], a two-mass machine's "coupling" twist
 [rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
 whose velocity is the wall-clock time [s, time.monotonic] at which that exchange's joint_states went out:
 common.Batch), `/clock` (at most every `clock_period` s of
@@ -26,7 +26,9 @@ inputs listed in `lockstep_inputs` stamped with that time (reproducible to the l
 numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
 `real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
 (`max_lag_s` [s of simulation time] in /diagnostics and machine/status; the recorder's summary has it). What it
-waits for comes from the scene: the throttle when it has a governor, the scenario's load; before the first
+waits for comes from the scene: the throttle when it has a governor (or `controller` is external: a node the user
+starts, waited for by topic, not by name, and the run ends naming it when it does not answer within `peer_timeout`:
+nodes.controller), the scenario's load; before the first
 step, the `peers` (node names) that give them must subscribe to `joint_states` (or, as the recorder, to
 `machine/moments`), or the machine ends within
 `peer_timeout` naming the missing ones. A governor
