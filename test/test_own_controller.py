@@ -141,6 +141,21 @@ def test_the_example_controller_in_lockstep_follows_the_continuous_loop(tmp_path
     assert [message.clock.sec * 10**9 + message.clock.nanosec for _, message in topics["/clock"]] == times
     assert topics["/diagnostics"][-1][1].status[0].message == "complete"
     assert "/governor/state" not in topics  # no governor in the loop
+    np.testing.assert_array_equal(recorded_throttle(run.rrd), csv["throttle"])  # the recording shows it too
+
+
+def recorded_throttle(rrd: Path) -> np.ndarray:
+    """The scalars at /throttle of a Rerun recording, in time order."""
+    from rerun.chunk import RrdReader
+
+    samples = []
+    for chunk in RrdReader(str(rrd)).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        if chunk.entity_path == "/throttle" and "Scalars:scalars" in batch.schema.names:
+            samples += [(when, value[0]) for when, value in zip(batch.column("sim_time").cast("int64").to_pylist(),
+                                                                batch.column("Scalars:scalars").to_pylist())
+                        if value is not None]
+    return np.array([value for _, value in sorted(samples)])
 
 
 def test_a_controller_that_never_comes_ends_the_run_naming_what_is_missing(tmp_path, processes, domain_id):

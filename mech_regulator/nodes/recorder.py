@@ -77,7 +77,8 @@ class RecorderNode(Node):
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate)
+        self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate,
+                                      outside_throttle=self.controller == "external")
         self.machine: dict[int, list[float]] = {}  # stamp -> the machine's state (phi, omega, then a two-mass
         # machine's twist and omega_driven or a clutch's omega_driven, as MachineModel.state_names)
         self.trial = 1
@@ -136,6 +137,8 @@ class RecorderNode(Node):
                                        moments["net"])
             self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
             self.moments[when] = (moments["drive"], moments["load"], joints["throttle"][0])
+            if self.controller == "external":
+                self.recording.add_throttle(when, joints["throttle"][0])
 
     def on_governor(self, message: JointState) -> None:
         """The governor's state at one or more exchange times (common.Batch), in order."""
