@@ -146,9 +146,9 @@ def build_parser() -> argparse.ArgumentParser:
     main_job.add_argument("--bag", type=Path, metavar="FOLDER",
                           help="also write the run as a rosbag2 recording (MCAP; a new folder; docs/ros.md, Bags)")
     main_job.add_argument("--controller", choices=CONTROLLERS, default="governor",
-                          help="what gives the throttle: the scene's governor (governor_node, default) or your own "
-                               "node, started by you, that answers joint_states with throttle (docs/ros.md, Your own "
-                               "controller); --set governor=null runs the bare machine")
+                          help="what gives the throttle: the scene's governor (governor_node, default) or external: "
+                               "your own node, started by you, that answers joint_states with throttle; the scene's "
+                               "governor is then left out (docs/ros.md, Your own controller)")
     main_job.add_argument("--peer-timeout", type=float, metavar="S",
                           help="lockstep: wall-clock seconds the machine waits for a node and for each answer "
                                "(default 10); a governor silent that long puts it on its fail-safe, an external "
