@@ -1,5 +1,5 @@
-"""The example controller (examples/pid_governor.py) with one fault from t = FAULT_TIME ns (0.1 s) of simulation time on, for
-the tests of an external controller: `python test/faulty_controller.py slow|die|wrong_stamp [--ros-args ...]`.
+"""The example controller (examples/pid_governor.py) with one fault from t = FAULT_TIME ns (0.1 s) of simulation time
+on, for the tests of an external controller: `python test/faulty_controller.py slow|die|wrong_stamp [--ros-args ...]`.
 slow: answers once after SLOW_ANSWER s of wall time (longer than the tests' peer_timeout); die: the process is killed
 (SIGKILL: no goodbye to the ROS graph); wrong_stamp: answers stamped with the node's clock (wall time), a common
 mistake."""
@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 FAULT_TIME = 100_000_000  # [ns] of simulation time
-SLOW_ANSWER = 8.0  # [s] of wall time
+SLOW_ANSWER = 20.0  # [s] of wall time
 
 spec = importlib.util.spec_from_file_location("pid_governor",
                                               Path(__file__).resolve().parents[1] / "examples" / "pid_governor.py")

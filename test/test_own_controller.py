@@ -34,14 +34,15 @@ EXCHANGE_STEP = 0.002  # [s]
 SET_SPEED, KP, KI, BIAS = 100.0, 0.05, 0.2, 0.54
 # docs/ros.md, "Your own controller": the speed of this loop at h = 2 ms within this of the continuous one [rad/s]
 DOCUMENTED_ERROR = 0.01
-PEER_TIMEOUT = 2.0  # [s] of wall time, for the faulty controllers (faulty_controller.SLOW_ANSWER is longer)
+PEER_TIMEOUT = 5.0  # [s] of wall time, for the faulty controllers (faulty_controller.SLOW_ANSWER is longer)
 
 
 def write_scene(folder: Path) -> Path:
     """The machine above as a scene file (no governor: the controller drives the bare machine)."""
     scene = {"name": "constant_inertia",
              "machine": {"inertia": INERTIA,
-                         "drive": {"type": "linear_motor", "stall_torque": STALL_TORQUE, "no_load_speed": NO_LOAD_SPEED},
+                         "drive": {"type": "linear_motor", "stall_torque": STALL_TORQUE,
+                                   "no_load_speed": NO_LOAD_SPEED},
                          "loads": [{"type": "viscous", "coefficient": VISCOUS}]},
              "scenario": {"initial": {"omega": SET_SPEED}, "duration": DURATION, "external_load": LOAD_BEFORE,
                           "load_events": [{"time": LOAD_STEP_TIME, "torque": LOAD_AFTER}]},
@@ -108,7 +109,8 @@ def bag_messages(folder: Path) -> dict[str, list]:
         for schema, channel, message, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]) \
                 .iter_decoded_messages():
             topics.setdefault(channel.topic, []).append((message.log_time, decoded))
-    counts = {item["topic_metadata"]["name"]: item["message_count"] for item in information["topics_with_message_count"]}
+    counts = {item["topic_metadata"]["name"]: item["message_count"]
+              for item in information["topics_with_message_count"]}
     assert counts == {topic: len(messages) for topic, messages in topics.items()}, "metadata.yaml's counts"
     return topics
 

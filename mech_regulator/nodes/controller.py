@@ -34,8 +34,9 @@ def absent(peer_timeout: float) -> str:
 
 
 def silent(names: list[str], time: float, peer_timeout: float, wrong_stamp: float | None) -> str:
-    """Why the run ends when the controller (node names `names`: those that publish or published throttle) gave no throttle for the exchange time `time` [s] within peer_timeout [s]; `wrong_stamp` [s]: the stamp of the
-    last throttle that answered no exchange time (None: none did)."""
+    """Why the run ends when the controller (node names `names`: those that publish or published throttle) gave no
+    throttle for the exchange time `time` [s] within peer_timeout [s]; `wrong_stamp` [s]: the stamp of the last
+    throttle that answered no exchange time (None: none did)."""
     who = f"controller {', '.join(names)}" if names else "the controller"
     why = f"; its last throttle was stamped {wrong_stamp:.9g} s: answer each joint_states with its own header.stamp" \
         if wrong_stamp is not None else ""

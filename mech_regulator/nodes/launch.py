@@ -109,7 +109,8 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
     code (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
     named with its reason). controller external: no governor_node, the machine waits for a node the user starts
-    (nodes.controller); bag: also a rosbag2 recording there (viz.bag). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    (nodes.controller); bag: also a rosbag2 recording there (viz.bag); peer_timeout: the machine's [s] (None: the
+    parameter file's). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
     scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:

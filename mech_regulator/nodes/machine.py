@@ -10,8 +10,8 @@ after the stamp too, which then wait for no other answer; 0 or not above the sta
 effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
 scene has a mechanism), `machine/moments` (what the recorder reads, sensor_msgs/JointState: the joints "drive",
 "resistance", "external", "net" whose efforts are the moments on the crank by source, "load" the applied load
-[N m], "throttle" (position: the throttle applied over the step [-]), and the state as in joint_states: "crank" phi [rad], omega [rad/s], a two-mass machine's "coupling" twist
-[rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
+[N m], "throttle" (position: the throttle applied over the step [-]), and the state as in joint_states: "crank"
+phi [rad], omega [rad/s], a two-mass machine's "coupling" twist [rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
 whose velocity is the wall-clock time [s, time.monotonic] at which that exchange's joint_states went out:
 common.Batch), `/clock` (at most every `clock_period` s of
 wall time: the other nodes' timers need no more) and `/diagnostics`.
@@ -114,7 +114,8 @@ class MachineNode(Node):
         self.controllers: list[str] = []  # the nodes that publish throttle at the start (external controller)
         inputs = list_parameter(self, "lockstep_inputs", ["throttle", "load"] if governed or external else ["load"],
                                 "lockstep: inputs to wait for at every exchange time: throttle, load (default: the "
-                                "throttle when the scene has a governor, and the scenario's load)")
+                                "throttle when the scene has a governor or controller is external, and the "
+                                "scenario's load)")
         self.lockstep_inputs = [item for item in inputs if item]
         unknown = [item for item in self.lockstep_inputs if item not in LOCKSTEP_INPUTS]
         if unknown:
@@ -184,7 +185,8 @@ class MachineNode(Node):
         self.last_stamped_load: float | None = None
         self.pending_load: float | None = None
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
-        self.wrong_stamp: int | None = None  # [ns] the last throttle stamped with no exchange time (external controller)
+        self.wrong_stamp: int | None = None  # [ns] the last throttle stamped with no exchange time (external
+        # controller)
         self.failing_safe = False
         self.now_ns = 0
         self.max_lag = 0.0  # realtime: [s] of simulation time the published state fell behind the wall clock, at most

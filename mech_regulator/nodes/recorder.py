@@ -33,10 +33,10 @@ from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
                                          run, scene_model, text_parameter)
 from mech_regulator.model import MachineModel
+from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
-from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.viz.bag import write_bag
 from mech_regulator.viz.recording import RunRecording
 

@@ -64,7 +64,8 @@ DIAGNOSTIC_LEVELS = {"complete": 0, "interrupted": 1}  # other statuses (failed,
 def message_definition(datatype: str) -> str:
     """The ros2msg text of `datatype` ('sensor_msgs/JointState'): its definition, then each one it uses after a line
     of '=' and 'MSG: <type>', as rosbag2 writes them."""
-    parts = [DEFINITIONS[datatype]] + [f"{SEPARATOR}\nMSG: {used}\n{DEFINITIONS[used]}" for used in USES.get(datatype, [])]
+    parts = [DEFINITIONS[datatype]] + [f"{SEPARATOR}\nMSG: {used}\n{DEFINITIONS[used]}"
+                                       for used in USES.get(datatype, [])]
     return "\n".join(parts) + "\n"
 
 
@@ -135,7 +136,8 @@ def run_messages(model: MachineModel, times: np.ndarray, states: np.ndarray, thr
 def bag_refusal(folder: Path) -> str | None:
     """Why a bag cannot be written to `folder` (None: it can): it exists already, or its parent folder does not."""
     if folder.exists():
-        return f"cannot write the bag '{folder}': it exists; a rosbag2 recording is a new folder (as ros2 bag record -o)"
+        return (f"cannot write the bag '{folder}': it exists; a rosbag2 recording is a new folder (as ros2 bag record "
+                "-o)")
     if not folder.parent.is_dir():
         return f"cannot write the bag '{folder}': the folder '{folder.parent}' does not exist"
     return None

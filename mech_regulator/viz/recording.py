@@ -375,7 +375,8 @@ class RunRecording:
             sensor = self.model.governor.sensor
             self._log_styles("governor/drawing", governor_outline(sensor, sensor.stop_angles()[0], 0.0),
                              GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS)
-        self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source, self.outside_throttle),
+        self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source,
+                                                             self.outside_throttle),
                                                   media_type=rr.MediaType.MARKDOWN), static=True)
 
 
