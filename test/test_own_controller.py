@@ -16,6 +16,7 @@ import yaml
 from scipy.integrate import solve_ivp
 
 from ros_support import WAIT, domain_id, processes  # noqa: F401 (fixtures)
+from support import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "pid_governor.py"
@@ -180,3 +181,14 @@ def test_a_controller_that_stops_answering_ends_the_run_loudly(tmp_path, process
     assert summary["status"] == "interrupted" and summary["t_end"] == pytest.approx(0.1 - EXCHANGE_STEP), summary
     csv = np.genfromtxt(run.csv, delimiter=",", names=True)
     assert csv["t"][-1] == summary["t_end"]  # what was computed up to the silence is kept
+
+
+@pytest.mark.parametrize("options, expected", [
+    (["--time-mode", "realtime"], "--controller external: only with --time-mode lockstep"),
+    (["--peer-timeout", "0"], "--peer-timeout 0: expected 0.01 to 3600 s"),
+])
+def test_run_refuses_what_an_external_controller_cannot_have(tmp_path, capsys, options, expected):
+    code, _, err = run_cli(capsys, "run", str(write_scene(tmp_path)), "--controller", "external", *options,
+                           "--out", str(tmp_path / "run.rrd"), "--quiet")
+    assert code == 2 and expected in err, err
+    assert not (tmp_path / "run.log").exists()  # refused before any node started
