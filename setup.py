@@ -30,8 +30,7 @@ setup(
         "tqdm>=4.66",
         "numba>=0.60",
         "sympy>=1.12",
-        "mcap>=1.2",
-        "mcap-ros2-support>=0.5",
+        "mcap-ros2-support>=0.5",  # and with it mcap, the MCAP library
     ],
     extras_require={
         "test": ["pytest>=8", "jsonschema>=4"],

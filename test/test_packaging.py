@@ -185,6 +185,7 @@ PYTHON_DEPENDENCIES = {
     "numba": ("numba", "python3-numba"),
     "sympy": ("sympy", "python3-sympy"),
     "rerun": ("rerun-sdk", "python3-rerun-sdk-pip"),  # no rosdep key: rosdep's convention for pip packages
+    "mcap_ros2": ("mcap-ros2-support", "python3-mcap-ros2-support-pip"),  # (as rerun-sdk's; mcap comes with it)
 }
 # imported only by optional features, installed with an extra of setup.py, not by a ROS user's rosdep
 OPTIONAL_IMPORTS = {
