@@ -17,6 +17,7 @@ setup(
         (f"share/{package_name}/config/params", glob("config/params/*.yaml") + glob("config/params/*.xml")),
         (f"share/{package_name}/config/schema", glob("config/schema/*.json")),
         (f"share/{package_name}/launch", glob("launch/*.launch.py")),
+        (f"lib/{package_name}", ["examples/pid_governor.py"]),  # `ros2 run mech_regulator pid_governor.py`
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -29,6 +30,7 @@ setup(
         "tqdm>=4.66",
         "numba>=0.60",
         "sympy>=1.12",
+        "mcap-ros2-support>=0.5",  # and with it mcap, the MCAP library
     ],
     extras_require={
         "test": ["pytest>=8", "jsonschema>=4"],

@@ -1,9 +1,11 @@
 """The main job as a ROS 2 launch file, for a colcon workspace on a ROS 2 distribution:
 
-    ros2 launch mech_regulator main_job.launch.py scene:=lathe
+    ros2 launch mech_regulator main_job.launch.py scene:=lathe [controller:=external]
 
 starts recorder_node, governor_node (only when the scene has a governor), scenario_node and
-machine_node with config/params/main_job.yaml, the parameter file `mech-regulator run` starts from.
+machine_node with config/params/main_job.yaml, the parameter file `mech-regulator run` starts from. With
+controller:=external the scene's governor is left out and the machine waits for a controller the user starts
+(docs/ros.md, "Your own controller").
 Where ROS comes from the package index (no ros2 launch), `mech-regulator run SCENE` does the same.
 """
 
@@ -15,6 +17,7 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
+from mech_regulator.nodes.controller import CONTROLLERS, governor_left_out
 from mech_regulator.nodes.launch import FASTDDS_PROFILE_VARIABLE, node_names
 from mech_regulator.scene import load_scene
 
@@ -36,9 +39,14 @@ def _nodes(context, *args, **kwargs):
     machine.overspeed_trip, none unless set there); and, unless one is set, the bundled Fast DDS profile."""
     scene_file = LaunchConfiguration("scene").perform(context)
     params_file = LaunchConfiguration("params_file").perform(context)
+    controller = LaunchConfiguration("controller").perform(context)
     scene = load_scene(scene_file)
-    names = node_names(governed=scene.governor is not None)
-    run_choices = {name: {"scene_file": scene_file} for name in names}
+    overrides = governor_left_out(scene) if controller == "external" else []
+    names = node_names(governed=scene.governor is not None and not overrides)
+    run_choices = {name: {"scene_file": scene_file, **({"overrides": overrides} if overrides else {})}
+                   for name in names}
+    for name in ("machine", "recorder"):
+        run_choices[name].update(controller=controller)
     run_choices["machine"].update(peers=[name for name in names if name != "machine"])
     profile = {} if FASTDDS_PROFILE_VARIABLE in os.environ else {
         FASTDDS_PROFILE_VARIABLE: os.path.join(get_package_share_directory(PACKAGE), FASTDDS_PROFILE)}
@@ -54,5 +62,8 @@ def generate_launch_description():
                               description="a bundled scene name or the path of a scene file"),
         DeclareLaunchArgument("params_file", default_value=default_params_file,
                               description="node parameters in ros__parameters form"),
+        DeclareLaunchArgument("controller", default_value="governor", choices=list(CONTROLLERS),
+                              description="what gives the throttle: the scene's governor, or external: a node you "
+                                          "start (the scene's governor is then left out)"),
         OpaqueFunction(function=_nodes),
     ])

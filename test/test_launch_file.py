@@ -166,7 +166,8 @@ def launched_nodes(arguments: dict[str, str]) -> tuple[dict[str, object], list]:
 
 def test_launch_file_arguments_default_to_engine_direct_and_the_installed_params_file():
     declared, _ = launched_nodes({})
-    assert set(declared) == {"scene", "params_file"}
+    assert set(declared) == {"scene", "params_file", "controller"}
+    assert declared["controller"].default_value == "governor"
     assert declared["scene"].default_value == "engine_direct"
     assert declared["params_file"].default_value == f"{SHARE}/{PARAMS_FILE}"
 
@@ -193,6 +194,19 @@ def test_launch_file_starts_the_governor_only_for_a_governed_scene(scene, expect
     peers = next(extra["peers"] for extra in machine.parameters[1:] if "peers" in extra)
     assert sorted(peers) == sorted(node.name for node in nodes if node is not machine), \
         "the machine must wait for every other node started (the recorder too, so that it records from t = 0)"
+
+
+def test_launch_file_with_an_external_controller_leaves_the_governor_out():
+    _, nodes = launched_nodes({"scene": "engine_direct", "params_file": str(ROOT / PARAMS_FILE),
+                               "controller": "external"})
+    assert [node.executable for node in nodes] == ["recorder_node", "scenario_node", "machine_node"]
+    for node in nodes:
+        overrides = {key: value for extra in node.parameters[1:] for key, value in extra.items()}
+        assert overrides["overrides"] == ["governor=null", "scenario.initial.sleeve=null"], node.parameters
+        assert overrides.get("controller", "external") == "external", node.parameters
+    machine = nodes[-1]
+    assert {"controller": "external"}.items() <= {key: value for extra in machine.parameters[1:]
+                                                  for key, value in extra.items()}.items()
 
 
 # -------------------------------------------------------------------------------------------------

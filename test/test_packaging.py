@@ -153,6 +153,8 @@ def test_colcon_install_runs_the_nodes(colcon_install, tmp_path):
     for node in NODES:
         assert (lib / node).is_file() and os.access(lib / node, os.X_OK), \
             f"no executable {lib / node}; {lib} holds {sorted(path.name for path in lib.iterdir())}"
+    example = lib / "pid_governor.py"  # `ros2 run mech_regulator pid_governor.py` (docs/ros.md, Your own controller)
+    assert os.access(example, os.X_OK) and example.read_text().startswith("#!/usr/bin/env python3"), example
     env = dict(ros_environment(next_domain_id()), PYTHONPATH=_install_python_path(colcon_install))
     machine = str(lib / "machine_node")
     missing = tmp_path / "missing.yaml"
@@ -185,6 +187,7 @@ PYTHON_DEPENDENCIES = {
     "numba": ("numba", "python3-numba"),
     "sympy": ("sympy", "python3-sympy"),
     "rerun": ("rerun-sdk", "python3-rerun-sdk-pip"),  # no rosdep key: rosdep's convention for pip packages
+    "mcap_ros2": ("mcap-ros2-support", "python3-mcap-ros2-support-pip"),  # (as rerun-sdk's; mcap comes with it)
 }
 # imported only by optional features, installed with an extra of setup.py, not by a ROS user's rosdep
 OPTIONAL_IMPORTS = {

@@ -585,7 +585,8 @@ def main_jobs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("main_job")
     started = Processes(folder, dict(os.environ, PYTHONUNBUFFERED="1"))  # each run sets its domain
     try:
-        jobs = [MainJob(started, folder, [*_short_engine_arguments(), "--exchange-step", "1e-3"], name)
+        jobs = [MainJob(started, folder, [*_short_engine_arguments(), "--exchange-step", "1e-3",
+                                          *(["--bag", folder / "first_bag"] if name == "first" else [])], name)
                 for name in ("first", "second")]
         for job in jobs:
             started.wait(job.process, 4 * WAIT)
@@ -609,6 +610,7 @@ def test_main_job_reproduces_the_in_process_cosimulation(main_jobs, tmp_path, ca
     assert second.csv.read_bytes() == expected, "a second ROS run gave another CSV"
     summary, in_process = json.loads(first.json.read_text()), json.loads(out)
     assert summary.pop("recording") == str(first.rrd) and summary.pop("csv") == str(first.csv)
+    assert summary.pop("bag") == str(first.rrd.parent.parent / "first_bag")  # (test_main_job_bag_...)
     in_process.pop("csv")
     assert "x real time over the exchanges" in first.log
     assert _without_pace(summary) == in_process
@@ -673,6 +675,33 @@ def test_main_job_recording_holds_every_exchange(main_jobs):
     np.testing.assert_array_equal(scalars["/throttle"][1], csv["throttle"])
     np.testing.assert_array_equal(scalars["/governor/sleeve"][1], 1e3 * csv["sleeve"])  # in mm
     np.testing.assert_array_equal(scalars["/moments/external"][1], csv["M_external"])
+
+
+def _bag_messages(folder: Path) -> dict[str, list[tuple[int, bytes]]]:
+    """A rosbag2 folder's messages by topic: (log time [ns], CDR bytes), read with the mcap library."""
+    from mcap.reader import make_reader
+
+    information = yaml.safe_load((folder / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    topics: dict[str, list[tuple[int, bytes]]] = {}
+    for relative in information["relative_file_paths"]:
+        with open(folder / relative, "rb") as stream:
+            for _, channel, message in make_reader(stream).iter_messages():
+                topics.setdefault(channel.topic, []).append((message.log_time, bytes(message.data)))
+    return topics
+
+
+def test_main_job_bag_holds_what_simulate_writes(main_jobs, tmp_path, capsys):
+    first = main_jobs[0]
+    assert first.process.returncode == 0, first.describe()
+    bag = tmp_path / "in_process_bag"
+    code, _, _ = run_cli(capsys, "simulate", *_short_engine_arguments(), "--exchange-step", "1e-3", "--bag", str(bag),
+                         "--quiet")
+    assert code == 0
+    recorded, expected = _bag_messages(first.rrd.parent.parent / "first_bag"), _bag_messages(bag)
+    assert set(recorded) == {"/joint_states", "/throttle", "/load_torque_stamped", "/governor/state",
+                             "/machine/moments", "/clock", "/diagnostics"}
+    assert len(recorded["/joint_states"]) == 1001
+    assert recorded == expected, "the ROS run's bag differs from simulate --bag"
 
 
 def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe, domain_id):

@@ -22,6 +22,7 @@ from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note, terminal_text
 from mech_regulator.cli.structure import add_structure_command
 from mech_regulator.cli.sweep import add_sweep_command
+from mech_regulator.nodes.controller import CONTROLLERS
 
 COUPLING_HELP = ("how machine and governor see each other over an exchange step: hold (each holds the other's last "
                  "value, first order in H), waveform (the governor follows the machine's speed over the step, the "
@@ -61,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--record", type=Path, metavar="RUN.rrd",
                           help="write a Rerun recording of the run (speed, throttle, sleeve, moments, the mechanism "
                                "and governor animated, events); open it with `rerun RUN.rrd`")
+    simulate.add_argument("--bag", type=Path, metavar="FOLDER",
+                          help="write the run as a rosbag2 recording (MCAP; a new folder) of the topics the ROS nodes "
+                               "publish, for ros2 bag, Foxglove or PlotJuggler (docs/ros.md, Bags)")
     simulate.add_argument("--json", action="store_true", help="print the summary as JSON")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
     simulate.add_argument("--strict", action="store_true",
@@ -141,6 +145,16 @@ def build_parser() -> argparse.ArgumentParser:
                           help="trip speed [rad/s]: above it the machine's throttle closes for good and the run "
                                "ends `tripped` (default 0: no trip)")
     main_job.add_argument("--out", type=Path, help="the recording to write (default runs/<scene>-<time>.rrd)")
+    main_job.add_argument("--bag", type=Path, metavar="FOLDER",
+                          help="also write the run as a rosbag2 recording (MCAP; a new folder; docs/ros.md, Bags)")
+    main_job.add_argument("--controller", choices=CONTROLLERS, default="governor",
+                          help="what gives the throttle: the scene's governor (governor_node, default) or external: "
+                               "your own node, started by you, that answers joint_states with throttle; the scene's "
+                               "governor is then left out (docs/ros.md, Your own controller)")
+    main_job.add_argument("--peer-timeout", type=float, metavar="S",
+                          help="lockstep: wall-clock seconds the machine waits for a node and for each answer "
+                               "(default 10); a governor silent that long puts it on its fail-safe, an external "
+                               "controller ends the run")
     main_job.add_argument("--domain-id", type=int, help="ROS domain of the run (default: a random one in 1..101)")
     main_job.add_argument("--quiet", action="store_true", help="no progress bar")
     schema = commands.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
@@ -297,6 +311,7 @@ def _simulate(scene, args) -> int:
     if args.overspeed_trip and args.exchange_step is None:
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: the trip acts at the exchanges of the "
                          "co-simulation; expected --exchange-step H with it (the monolithic run has no trip)")
+    _check_bag(args.bag)
     model = on_path_for_a_command(build_model(scene), note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
@@ -325,6 +340,11 @@ def _simulate(scene, args) -> int:
         outputs.write("recording", args.record, lambda path: record_run(
             model, *_samples(model, trajectory), path, mode_changes=trajectory.events, status=trajectory.status,
             message=trajectory.message))
+    if args.bag is not None and trajectory.interpolants:
+        from mech_regulator.viz.bag import write_bag
+
+        outputs.write("bag", args.bag, lambda path: write_bag(path, model, *_samples(model, trajectory),
+                                                             status=trajectory.status, message=trajectory.message))
     print(to_json(summary) if args.json else format_summary(model, summary))
     for check in checks:
         print(f"mech-regulator: warning: inaccurate run: {check['check']} {check['value']:.2g} exceeds the "
@@ -363,6 +383,11 @@ def _cosimulate(model, args) -> int:
         outputs.write("recording", args.record, lambda path: record_run(
             model, run.times, run.states, path, mode_changes=[(t, what) for t, what, _ in run.events],
             status=summary["status"], message=summary["message"]))
+    if args.bag is not None:
+        from mech_regulator.viz.bag import write_bag
+
+        outputs.write("bag", args.bag, lambda path: write_bag(path, model, run.times, run.states, run.throttle,
+                                                             run.external_load, run.status, run.message))
     print(to_json(summary) if args.json else format_cosimulation_summary(summary))
     if run.status == "failed":
         print(f"mech-regulator: {terminal_text(run.message)}", file=sys.stderr)
@@ -528,6 +553,8 @@ def _main_job(scene, args) -> int:
     from mech_regulator.solvers import on_path_for_a_command
     from mech_regulator.solvers.cosim import cosimulation_refusal
 
+    if args.controller == "external" and scene.governor is not None:
+        scene = _without_governor(args)
     model = build_model(scene)
     reason = cosimulation_refusal(model)
     if reason is not None:
@@ -544,10 +571,40 @@ def _main_job(scene, args) -> int:
         raise SceneError(f"--duration {args.duration:g}: expected a simulated time in (0, 1e7] s")
     if not 1e-3 <= args.real_time_factor <= 1e3:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
+    if args.peer_timeout is not None and not 0.01 <= args.peer_timeout <= 3600.0:
+        raise SceneError(f"--peer-timeout {args.peer_timeout:g}: expected 0.01 to 3600 s")
     if args.domain_id is not None and not 0 <= args.domain_id <= 232:
         raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
+    _check_bag(args.bag)
+    if args.controller == "external" and args.time_mode != "lockstep":
+        raise SceneError("--controller external: only with --time-mode lockstep (in realtime any node may publish "
+                         "throttle to a governed scene's machine: docs/ros.md, Your own controller)")
     return main_job(model, args.scene, args.overrides, args.exchange_step, args.time_mode, args.real_time_factor,
-                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED)
+                    args.overspeed_trip, args.out, args.domain_id, args.quiet, args.duration, args.coupling, STARTED,
+                    bag=args.bag, controller=args.controller, peer_timeout=args.peer_timeout)
+
+
+def _without_governor(args):
+    """The scene of `run --controller external`: the user's controller drives the bare machine, so the scene's
+    governor and the initial governor states it sets are left out (added to args.overrides, which the nodes read)."""
+    from mech_regulator.nodes.controller import governor_left_out
+    from mech_regulator.scene import load_scene
+
+    left_out = governor_left_out(load_scene(args.scene, args.overrides))
+    args.overrides = [*args.overrides, *left_out]
+    note(f"--controller external: the scene's governor is left out ({', '.join(left_out)}); your controller drives "
+         "the bare machine")
+    return load_scene(args.scene, args.overrides)
+
+
+def _check_bag(folder: Path | None) -> None:
+    """Refuse, before any work, a --bag folder that cannot be written (SceneError)."""
+    from mech_regulator.scene import SceneError
+    from mech_regulator.viz.bag import bag_refusal
+
+    reason = bag_refusal(folder) if folder is not None else None
+    if reason is not None:
+        raise SceneError(reason)
 
 
 def _check_run_files(recording: Path) -> None:

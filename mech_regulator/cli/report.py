@@ -552,7 +552,7 @@ def format_kinematics(summary: dict) -> str:
     return terminal_text("\n".join(lines + wrote_lines(summary)))
 
 
-OUTPUT_KEYS = ("csv", "scene_out", "plot", "recording")
+OUTPUT_KEYS = ("csv", "scene_out", "plot", "recording", "bag")
 
 
 def wrote_lines(data: dict) -> list[str]:

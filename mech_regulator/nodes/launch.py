@@ -66,25 +66,31 @@ def node_names(governed: bool) -> list[str]:
 
 def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
                    overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
-                   duration: float | None, coupling: str, started: float) -> dict:
+                   duration: float | None, coupling: str, started: float, controller: str = "governor",
+                   bag: Path | None = None, peer_timeout: float | None = None) -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
     other nodes started (in realtime too, before the clock starts: a governor still starting would miss the run; the
     inputs are then the newest, not awaited);
     started: when the command began, on the clock of time.monotonic() [s] (the recorder's start_up_s counts from
-    it)."""
+    it); controller: what gives the throttle (nodes.controller.CONTROLLERS; external: a node the user starts, not a
+    peer by name); bag: the rosbag2 folder the recorder also writes (None: none); peer_timeout: the machine's [s]
+    (None: the file's)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
     common = parameters["/**"]["ros__parameters"]
     common.update(scene_file=scene_file, overrides=overrides or [""], exchange_step=exchange_step, time_mode=time_mode,
                   coupling=coupling)
     machine = parameters.setdefault("machine", {}).setdefault("ros__parameters", {})
     peers = [name for name in node_names(governed) if name != "machine"]
-    machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor, peers=peers)
+    machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor, peers=peers,
+                   controller=controller)
+    if peer_timeout is not None:
+        machine.update(peer_timeout=peer_timeout)
     if duration is not None:
         machine.update(duration=duration)
     if time_mode == "realtime":
         machine.update(lockstep_inputs=[""])  # the newest inputs, not awaited; the peers still are, before the clock
-    parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(output=str(output),
-                                                                                   launched_at=started)
+    parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(
+        output=str(output), launched_at=started, controller=controller, bag=str(bag) if bag is not None else "")
     return parameters
 
 
@@ -102,14 +108,17 @@ def run_files(recording: Path) -> list[Path]:
 
 def main_job(model, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
              real_time_factor: float, overspeed_trip: float, output: Path | None, domain_id: int | None,
-             quiet: bool, duration: float | None, coupling: str, started: float | None = None) -> int:
+             quiet: bool, duration: float | None, coupling: str, started: float | None = None,
+             controller: str = "governor", bag: Path | None = None, peer_timeout: float | None = None) -> int:
     """Run the nodes on the model's scene (its solver.path decided: fast or reference) for `duration` [s] of
     simulated time (None: the scene's), the machine tripping above overspeed_trip [rad/s] (0: no trip, the default:
     nothing else sets one), `started` the command's
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
     code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed, 2 if every
-    node that failed refused its input, 130 if interrupted; each failed node is named with its reason). An exchange
-    step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    node that failed refused its input, 130 if interrupted; each failed node is named with its reason). controller
+    external: no governor_node, the machine waits for a node the user starts (nodes.controller); bag: also a rosbag2
+    recording there (viz.bag); peer_timeout: the machine's [s] (None: the parameter file's). An exchange step that
+    would take more than limits.MAX_STEPS exchanges raises SceneError."""
     scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
@@ -119,7 +128,8 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     governed = scene.governor is not None
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
                                 real_time_factor, governed, duration, coupling,
-                                started if started is not None else time.monotonic())
+                                started if started is not None else time.monotonic(), controller, bag,
+                                peer_timeout)
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
@@ -129,6 +139,12 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     trip = f", overspeed trip at {overspeed_trip:g} rad/s" if overspeed_trip > 0.0 else ""
     print(f"running {', '.join(names)} nodes on ROS domain {domain_id} ({time_mode}, exchange step "
           f"{exchange_step:g} s{trip}); node logs in {log_file}", file=sys.stderr)
+    if controller == "external":
+        from mech_regulator.nodes.controller import contract
+
+        print(f"{contract(machine_peer_timeout(parameters))}\nstart it with ROS_DOMAIN_ID={domain_id} "
+              f"ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, e.g. ROS_DOMAIN_ID={domain_id} "
+              "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python examples/pid_governor.py", file=sys.stderr)
     processes: dict[str, subprocess.Popen] = {}
     interrupted = False
     with open(log_file, "w") as log:
@@ -185,6 +201,11 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
         return 2 if bad_input else 1
     return 130 if interrupted else 0
+
+
+def machine_peer_timeout(parameters: dict) -> float:
+    """The machine's peer_timeout [s] in a run's parameters (run_parameters; 10 s, the node's default, when unset)."""
+    return float(parameters.get("machine", {}).get("ros__parameters", {}).get("peer_timeout", 10.0))
 
 
 def node_reason(log_text: str, name: str) -> str:

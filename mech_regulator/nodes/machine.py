@@ -10,8 +10,8 @@ after the stamp too, which then wait for no other answer; 0 or not above the sta
 effort = net moment [N m]; "slider" x [m], v [m/s] or "rocker" angle [rad], rate [rad/s] when the
 scene has a mechanism), `machine/moments` (what the recorder reads, sensor_msgs/JointState: the joints "drive",
 "resistance", "external", "net" whose efforts are the moments on the crank by source, "load" the applied load
-[N m], and the state as in joint_states: "crank" phi [rad], omega [rad/s], a two-mass machine's "coupling" twist
-[rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
+[N m], "throttle" (position: the throttle applied over the step [-]), and the state as in joint_states: "crank"
+phi [rad], omega [rad/s], a two-mass machine's "coupling" twist [rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
 whose velocity is the wall-clock time [s, time.monotonic] at which that exchange's joint_states went out:
 common.Batch), `/clock` (at most every `clock_period` s of
 wall time: the other nodes' timers need no more) and `/diagnostics`.
@@ -26,7 +26,9 @@ inputs listed in `lockstep_inputs` stamped with that time (reproducible to the l
 numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
 `real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
 (`max_lag_s` [s of simulation time] in /diagnostics and machine/status; the recorder's summary has it). What it
-waits for comes from the scene: the throttle when it has a governor, the scenario's load; before the first
+waits for comes from the scene: the throttle when it has a governor (or `controller` is external: a node the user
+starts, waited for by topic, not by name, and the run ends naming it when it does not answer within `peer_timeout`:
+nodes.controller), the scenario's load; before the first
 step, the `peers` (node names) that give them must subscribe to `joint_states` (or, as the recorder, to
 `machine/moments`), or the machine ends within
 `peer_timeout` naming the missing ones. A governor
@@ -62,6 +64,9 @@ from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STAT
                                          deliver_all, diagnostics, finite_in_range, float_parameter, int_parameter,
                                          joint_value, list_parameter, nanoseconds, run, samples, scene_model, stamp,
                                          text_parameter)
+from mech_regulator.nodes import controller
+from mech_regulator.nodes.controller import CONTROLLERS
+from mech_regulator.nodes.joints import output_joints
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import MachineStepper, Samples, seconds, to_nanoseconds
 
@@ -101,19 +106,26 @@ class MachineNode(Node):
                                                "are rejected", 0.0, 1e12)
         overspeed = float_parameter(self, "overspeed_trip", 0.0, "trip speed [rad/s]: above it the throttle closes "
                                     "for good; 0: no trip", 0.0, 1e9, read_only=True)
-        inputs = list_parameter(self, "lockstep_inputs", ["throttle", "load"] if governed else ["load"],
+        self.controller = text_parameter(self, "controller", "governor", "what gives the throttle: the scene's "
+                                         "governor (governor_node) or external, a node the user starts (the machine "
+                                         "waits for it by topic, not by name; docs/ros.md, Your own controller)",
+                                         CONTROLLERS)
+        external = self.controller == "external"
+        self.controllers: list[str] = []  # the nodes that publish throttle at the start (external controller)
+        inputs = list_parameter(self, "lockstep_inputs", ["throttle", "load"] if governed or external else ["load"],
                                 "lockstep: inputs to wait for at every exchange time: throttle, load (default: the "
-                                "throttle when the scene has a governor, and the scenario's load)")
+                                "throttle when the scene has a governor or controller is external, and the "
+                                "scenario's load)")
         self.lockstep_inputs = [item for item in inputs if item]
         unknown = [item for item in self.lockstep_inputs if item not in LOCKSTEP_INPUTS]
         if unknown:
             raise SceneError(f"parameter lockstep_inputs = {inputs}: unknown {unknown}; expected a list of "
                              f"{', '.join(LOCKSTEP_INPUTS)}")
-        if "throttle" in self.lockstep_inputs and not governed:
+        if "throttle" in self.lockstep_inputs and not governed and not external:
             raise SceneError(f"parameter lockstep_inputs = {inputs}: scene '{self.model.scene.name}' has no governor "
-                             "to give a throttle; leave 'throttle' out")
-        default_peers = [LOCKSTEP_INPUTS[item][0] for item in self.lockstep_inputs] if self.time_mode == "lockstep" \
-            else []
+                             "to give a throttle; leave 'throttle' out, or set controller to external")
+        default_peers = [LOCKSTEP_INPUTS[item][0] for item in self.lockstep_inputs
+                         if not (external and item == "throttle")] if self.time_mode == "lockstep" else []
         peers = list_parameter(self, "peers", default_peers or [""], "node names that must subscribe to joint_states "
                                "before the first step (default: those giving the lockstep inputs)")
         self.peers = [item for item in peers if item]
@@ -173,6 +185,8 @@ class MachineNode(Node):
         self.last_stamped_load: float | None = None
         self.pending_load: float | None = None
         self.silent: set[str] = set()  # lockstep inputs that timed out and are no longer waited for
+        self.wrong_stamp: int | None = None  # [ns] the last throttle stamped with no exchange time (external
+        # controller)
         self.failing_safe = False
         self.now_ns = 0
         self.max_lag = 0.0  # realtime: [s] of simulation time the published state fell behind the wall clock, at most
@@ -222,6 +236,8 @@ class MachineNode(Node):
         if received is None:
             return
         when, value = received
+        if self.controller == "external" and self.time_mode == "lockstep" and when != self.now_ns:
+            self.wrong_stamp = when  # said when the controller times out (controller.silent)
         self.throttle_stamp = when
         self.stamped_throttle[when] = value
         if self.corrects:
@@ -269,7 +285,10 @@ class MachineNode(Node):
         """Wait for the peers, then step until the end (or Ctrl-C), publishing every exchange time; between
         exchanges, pause, step and reset as the services ask."""
         waited = time.monotonic()
+        if self.controller == "external":
+            self.get_logger().info(controller.contract(self.peer_timeout))
         self.wait_for_peers()
+        self.controllers = controller.publisher_names(self)  # named should the controller die
         # The first log line and the first diagnostics take up to a tenth of a second each (so does the first
         # integration: done in __init__ on a stepper thrown away): before the clock starts, so that a realtime run does
         # not start behind it.
@@ -365,6 +384,8 @@ class MachineNode(Node):
             missing = [name for name in self.peers if name not in subscribed]
             unpublished = [item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0]
             timed_out = time.monotonic() - waited > self.peer_timeout
+            if self.controller == "external" and "throttle" in unpublished and timed_out:
+                raise PeerError(controller.absent(self.peer_timeout))
             if missing and timed_out:
                 raise PeerError(f"machine: no {', '.join(missing)} node subscribed to {topic} (or "
                                 f"{self.moments.publisher.topic_name}) within "
@@ -393,6 +414,8 @@ class MachineNode(Node):
                     sent = time.monotonic()
                 if time.monotonic() - waited > self.peer_timeout:
                     missing = self.missing_inputs()
+                    if self.controller == "external" and "throttle" in missing:
+                        self.end_without_controller()
                     self.silent.update(missing)
                     self.get_logger().error(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
                                             f"{self.peer_timeout:g} s (parameter peer_timeout); going on without "
@@ -409,6 +432,15 @@ class MachineNode(Node):
             self.stamped_load.pop(when)
         if self.pending_load is not None:
             self.load, self.load_rate, self.pending_load = self.pending_load, 0.0, None
+
+    def end_without_controller(self) -> None:
+        """An external controller gave no throttle within peer_timeout: send what was computed (the recorder keeps
+        it), then end naming the controller (PeerError: exit code 1)."""
+        self.send_moments()
+        deliver_all(self, [self.joint_publisher, self.moments.publisher])
+        names = controller.publisher_names(self) or self.controllers
+        raise PeerError(controller.silent(names, seconds(self.now_ns), self.peer_timeout,
+                                          None if self.wrong_stamp is None else seconds(self.wrong_stamp)))
 
     def missing_inputs(self) -> list[str]:
         """The lockstep inputs not yet received for the current exchange time (and not given up on)."""
@@ -508,9 +540,10 @@ class MachineNode(Node):
             return
         when, held_time, state, throttle, load, published_at = self.held
         outputs = self.stepper.outputs_at(held_time, state, throttle, load)
-        names = ["drive", "resistance", "external", "net", "load", "crank"]
-        efforts = [outputs[name] for name in names[:4]] + [load, math.nan]
-        positions, velocities = [math.nan] * 5 + [float(state[0])], [math.nan] * 5 + [float(state[1])]
+        names = ["drive", "resistance", "external", "net", "load", "crank", "throttle"]
+        efforts = [outputs[name] for name in names[:4]] + [load, math.nan, math.nan]
+        positions = [math.nan] * 5 + [float(state[0]), throttle]
+        velocities = [math.nan] * 5 + [float(state[1]), math.nan]
         if self.model.coupling is not None:
             names.append("coupling")
             positions.append(outputs["twist"])
@@ -583,22 +616,6 @@ class MachineNode(Node):
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))
         deliver_all(self, [self.status_publisher, self.diagnostics_publisher])
         self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
-
-
-def output_joints(model, values: dict[str, float]) -> list[tuple[str, float, float]]:
-    """The joints joint_states carries besides the crank, as (joint name, position, velocity), from the machine's
-    outputs `values` (MachineStepper.outputs): the mechanism's output link (slider x [m], v [m/s]; rocker or
-    shuttle), and a two-mass machine's coupling (twist [rad], its rate omega - omega_driven [rad/s]) and driven part
-    (phi_driven [rad], NaN behind a clutch, which does not follow the driven part's angle; omega_driven [rad/s])."""
-    kind = model.scene.machine.mechanism.type if model.scene.machine.mechanism else None
-    columns = {"crank_slider": [("slider", "x_slider", "v_slider")], "four_bar": [("rocker", "theta4", "omega4")],
-               "walking_beam": [("shuttle", "x_shuttle", "v_shuttle")]}.get(kind, [])
-    joints = [(name, values[position], values[velocity]) for name, position, velocity in columns]
-    if model.coupling is not None:
-        joints.append(("coupling", values["twist"], values["omega"] - values["omega_driven"]))
-    if model.driven is not None:
-        joints.append(("driven", values.get("phi_driven", math.nan), values["omega_driven"]))
-    return joints
 
 
 def main() -> int:

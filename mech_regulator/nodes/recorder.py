@@ -33,9 +33,11 @@ from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
                                          run, scene_model, text_parameter)
 from mech_regulator.model import MachineModel
+from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
+from mech_regulator.viz.bag import write_bag
 from mech_regulator.viz.recording import RunRecording
 
 FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
@@ -64,18 +66,24 @@ class RecorderNode(Node):
         self.launched_at = float_parameter(self, "launched_at", 0.0, "time.monotonic() [s] at which the command that "
                                            "started the run started (`run` sets it), for the start-up time in the "
                                            "summary; 0: not known", 0.0, 1e12, read_only=True)
+        self.controller = text_parameter(self, "controller", "governor", "what gives the throttle: the scene's "
+                                         "governor, or external (its throttle is read from machine/moments and "
+                                         "written to the CSV)", CONTROLLERS)
+        bag = text_parameter(self, "bag", "", "a rosbag2 folder to write the run to at the end (viz/bag.py; '': none)")
+        self.bag = Path(bag) if bag else None
         self.max_lag: float | None = None  # realtime: the machine's largest lag [s] behind the wall clock
         self.path = None if output == "none" else Path(output) if output else default_recording(self.model.scene.name)
         if self.path is None and not connect:
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate)
+        self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate,
+                                      outside_throttle=self.controller == "external")
         self.machine: dict[int, list[float]] = {}  # stamp -> the machine's state (phi, omega, then a two-mass
         # machine's twist and omega_driven or a clutch's omega_driven, as MachineModel.state_names)
         self.trial = 1
         self.machine_result = ("complete", "")  # the machine's solver status and its message
-        self.moments: dict[int, tuple[float, float]] = {}  # stamp -> (drive, external load) [N m]
+        self.moments: dict[int, tuple[float, float, float]] = {}  # stamp -> (drive, external load) [N m], throttle [-]
         self.governor: dict[int, dict[str, float]] = {}
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.machine_status = (DiagnosticStatus.OK, "")
@@ -128,7 +136,9 @@ class RecorderNode(Node):
             self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"],
                                        moments["net"])
             self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
-            self.moments[when] = (moments["drive"], moments["load"])
+            self.moments[when] = (moments["drive"], moments["load"], joints["throttle"][0])
+            if self.controller == "external":
+                self.recording.add_throttle(when, joints["throttle"][0])
 
     def on_governor(self, message: JointState) -> None:
         """The governor's state at one or more exchange times (common.Batch), in order."""
@@ -192,8 +202,13 @@ class RecorderNode(Node):
             summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
         csv_path = self.path.with_suffix(".csv")
         columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
+        if self.controller == "external":
+            columns["throttle"] = run_data.throttle
         write_csv(csv_path, columns, digits=17)
         summary.update(recording=str(self.path), csv=str(csv_path))
+        if self.bag is not None:
+            summary["bag"] = str(write_bag(self.bag, self.model, run_data.times, run_data.states, run_data.throttle,
+                                           run_data.external_load, summary["status"], summary.get("message", "")))
         summary_path.write_text(to_json(summary))
 
     def pace(self) -> dict[str, float]:
@@ -250,7 +265,7 @@ class RecorderNode(Node):
                 row += [values[name] for name in self.model.governor.state_names[2:]]
             rows.append(row + machine[2:])
         tripped = self.tripped_at if self.tripped_at is not None else np.inf
-        throttle = [0.0 if seconds(when) >= tripped else
+        throttle = [self.moments[when][2] if self.controller == "external" else 0.0 if seconds(when) >= tripped else
                     self.governor[when]["throttle"] if self.model.governor is not None else 1.0 for when in times]
         return CoSimulation(times=np.array([seconds(when) for when in times]), states=np.array(rows).T,
                             throttle=np.array(throttle), external_load=np.array([self.moments[w][1] for w in times]),

@@ -122,12 +122,14 @@ class RunRecording:
     (the machine was reset): the load's changes are then followed from that sample on."""
 
     def __init__(self, model: MachineModel, path: Path | None = None, connect: str | None = None,
-                 animation_rate: float = 200.0, recording_name: str | None = None):
+                 animation_rate: float = 200.0, recording_name: str | None = None, outside_throttle: bool = False):
         if path is None and connect is None:
             raise ValueError("RunRecording needs a file (path) or a viewer to connect to (connect), or both")
         if not animation_rate > 0.0:
             raise ValueError(f"animation_rate = {animation_rate} Hz; expected a positive rate")
         self.model = model
+        self.outside_throttle = outside_throttle and model.governor is None  # a throttle without a governor: a
+        # controller's outside the model (add_throttle), recorded and shown
         self._lock = threading.Lock()
         self._closed = False
         self._frame_period_ns = max(1, round(NANOSECONDS / animation_rate))
@@ -142,19 +144,22 @@ class RunRecording:
         self._set_point_load = math.nan
         self._set_point_time = -SET_POINT_REFRESH_NS
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
-        self._series = {entity: ([], []) for entity in recorded_series(model)}
+        self._series = {entity: ([], []) for entity in recorded_series(model, self.outside_throttle)}
         # entity -> (lowest, highest) value recorded; the throttle's plot spans 0..1, the sleeve's its stroke
         self._extents: dict[str, tuple[float, float]] = {}
         if model.governor is not None:
             stroke = model.governor.sensor.stroke
             self._extents = {"throttle": (0.0, 1.0),
                              "governor/sleeve": (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])}
+        if self.outside_throttle:
+            self._extents = {"throttle": (0.0, 1.0)}
         self._frames: dict[str, tuple[list[int], list[np.ndarray]]] = {}   # entity -> (times, parts y down)
         self._stream = rr.RecordingStream(APPLICATION_ID)
         self._stream.set_log_time_enabled(False)   # one time line: simulated time, not the wall clock
         sinks = ([rr.FileSink(str(path))] if path is not None else []) + ([rr.GrpcSink(connect)] if connect else [])
         self._stream.set_sinks(*sinks)
-        self._stream.send_blueprint(run_blueprint(model), make_active=True, make_default=True)
+        self._stream.send_blueprint(run_blueprint(model, outside_throttle=self.outside_throttle), make_active=True,
+                                    make_default=True)
         self._stream.send_recording_name(recording_name or model.scene.name or "run")
         self._log_static()
         self._log_event(0, start_text(model))
@@ -236,6 +241,13 @@ class RunRecording:
                                 governor_outline(sensor, values["arm_angle"], sensor.ratio * self._phi),
                                 GOVERNOR_MOVING_PARTS)
 
+    def add_throttle(self, t_ns: int, throttle: float) -> None:
+        """The throttle [-] a controller outside the model applied from t_ns [ns] (outside_throttle; a governor's
+        comes with add_governor)."""
+        with self._lock:
+            if not self._closed:
+                self._append("throttle", t_ns, throttle)
+
     def add_mode_change(self, t_ns: int, what: str) -> None:
         """A mode change at t_ns [ns] in the text log: the governor's (a stop reached, the sleeve sticking or
         breaking away) or the drive train's (a clutch locking or slipping), `what` as the solvers name it."""
@@ -268,8 +280,8 @@ class RunRecording:
                             END_LEVELS.get(status, "INFO"))
             self._closed = True
             self._send_buffers()
-            self._stream.send_blueprint(run_blueprint(self.model, self._extents), make_active=True,
-                                        make_default=True)
+            self._stream.send_blueprint(run_blueprint(self.model, self._extents, self.outside_throttle),
+                                        make_active=True, make_default=True)
             finish_stream(self._stream)
 
     # ---------------------------------------------------------------------------------------------
@@ -351,7 +363,7 @@ class RunRecording:
 
     def _log_static(self) -> None:
         """The series' styles, the drawings' fixed parts and styles, and the `about` document."""
-        names = series_names(self.model)
+        names = series_names(self.model, self.outside_throttle)
         for entity in self._series:
             _, colour, width = SERIES_STYLE[entity]
             self._stream.log(entity, rr.SeriesLines(colors=[colour], names=[names[entity]], widths=[width]),
@@ -364,7 +376,8 @@ class RunRecording:
             sensor = self.model.governor.sensor
             self._log_styles("governor/drawing", governor_outline(sensor, sensor.stop_angles()[0], 0.0),
                              GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS)
-        self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source),
+        self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source,
+                                                             self.outside_throttle),
                                                   media_type=rr.MediaType.MARKDOWN), static=True)
 
 
@@ -500,9 +513,9 @@ def resistance_name(model: MachineModel) -> str:
     return "resistance: " + " + ".join(parts)
 
 
-def series_names(model: MachineModel) -> dict[str, str]:
-    """Name of each recorded series: SERIES_NAMES', with the band, the drive, the resistance and an indirect
-    governor's throttle named as the scene has them."""
+def series_names(model: MachineModel, outside_throttle: bool = False) -> dict[str, str]:
+    """Name of each recorded series (recorded_series): SERIES_NAMES', with the band, the drive, the resistance and an
+    indirect governor's throttle named as the scene has them."""
     names = dict(SERIES_NAMES)
     governor = model.governor
     if governor is not None:
@@ -510,16 +523,19 @@ def series_names(model: MachineModel) -> dict[str, str]:
         names.update({"speed/band_high": band, "speed/band_low": band, "moments/drive": "drive = throttle × M_d"})
         if governor.kind == "indirect":
             names["throttle"] = "throttle = servo position s"
+    elif outside_throttle:
+        names["moments/drive"] = "drive = throttle × M_d"
     else:
         names["moments/drive"] = "drive M_d"
     names["moments/resistance"] = resistance_name(model)
-    return {entity: names[entity] for entity in recorded_series(model)}
+    return {entity: names[entity] for entity in recorded_series(model, outside_throttle)}
 
 
-def recorded_series(model: MachineModel) -> list[str]:
+def recorded_series(model: MachineModel, outside_throttle: bool = False) -> list[str]:
     """The scalar entities a run of this model records: speed (with the driven part's behind a coupling or a
     clutch, with set point and band when governed), throttle and governor states when governed (the dashpot's
-    shift for isodromic feedback), the coupling's twist, and the moments (the external one only when the load
+    shift for isodromic feedback), the throttle alone of a controller outside the model (outside_throttle, no
+    governor), the coupling's twist, and the moments (the external one only when the load
     acts on the crank)."""
     series = ["speed/omega"] + (["speed/driven"] if model.driven is not None else [])
     governor = model.governor
@@ -527,6 +543,8 @@ def recorded_series(model: MachineModel) -> list[str]:
         series += ["speed/set_point", "speed/band_high", "speed/band_low", "throttle", "governor/sleeve"]
         if "feedback_shift" in governor.state_names:
             series.append("governor/feedback_shift")
+    elif outside_throttle:
+        series.append("throttle")
     if model.coupling is not None:
         series.append("coupling/twist")
     external = ["moments/external"] if model.driven is None else []
@@ -544,7 +562,7 @@ def moments_window(model: MachineModel) -> float | None:
     return min(max(window, MOMENTS_WINDOW_LIMITS[0]), MOMENTS_WINDOW_LIMITS[1])
 
 
-def about_text(model: MachineModel, delta: float, source: str) -> str:
+def about_text(model: MachineModel, delta: float, source: str, outside_throttle: bool = False) -> str:
     """Markdown describing the scene and what the series mean (units, set point, band, moments, drawings)."""
     scene = model.scene
     governor = model.governor
@@ -558,7 +576,9 @@ def about_text(model: MachineModel, delta: float, source: str) -> str:
         paragraphs.append(f"Behind the {where}: the driven part's speed ω₂ in rad/s; it carries the external load."
                           + (" The coupling's twist φ − φ₂ in mrad." if model.coupling is not None else ""))
     if governor is None:
-        paragraphs.append("No governor: no throttle, no set speed and no band are drawn.")
+        paragraphs.append("No governor: the throttle (0..1) comes from a controller outside the model; no set speed "
+                          "and no band are drawn." if outside_throttle else
+                          "No governor: no throttle, no set speed and no band are drawn.")
     else:
         if governor.kind == "indirect":
             paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
@@ -616,16 +636,18 @@ def _single_plot(entity: str, unit: str, extents: dict[str, tuple[float, float]]
     return _plot(f"{SERIES_STYLE[entity][0]} [{unit}]", [entity], extents)
 
 
-def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] | None = None) -> rrb.Blueprint:
+def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] | None = None,
+                  outside_throttle: bool = False) -> rrb.Blueprint:
     """The layout: time series on the left (speeds, throttle, sleeve, the coupling's twist, moments), each titled
     with its series and their colours; on the right the mechanism over the governor beside the events log (with
     the `about` document in a tab). Each 2-D view is framed by the drawing's bounds (y flipped). A machine
     whose moments vary within a turn shows them over a window before the time cursor (moments_window); the
     viewer fits the window's time axis to the data in it, so from t = 0 until the run passes the window it
     shows [0, cursor]. extents: entity -> (lowest, highest value) recorded, to frame the plots' y axes (see _plot;
-    none while the run goes on: the viewer fits them to the data)."""
+    none while the run goes on: the viewer fits them to the data); outside_throttle: a throttle plot for a controller
+    outside the model (no governor)."""
     extents = extents or {}
-    series = recorded_series(model)
+    series = recorded_series(model, outside_throttle)
     speed = [entity for entity in series if entity.startswith("speed/")]
     band = f" {band_title(*speed_band_delta(model))}" if model.governor is not None else ""
     plots = [_plot(f"speed [rad/s]: {_caption(speed)}{band}", speed, extents)]
@@ -637,6 +659,9 @@ def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] |
             governor.append(_single_plot("governor/feedback_shift", "mm", extents))
         plots.append(rrb.Horizontal(*governor))
         shares.append(1.6)
+    elif "throttle" in series:
+        plots.append(_single_plot("throttle", "-", extents))
+        shares.append(1.2)
     if model.coupling is not None:
         plots.append(_single_plot("coupling/twist", "mrad", extents))
         shares.append(1.0)
