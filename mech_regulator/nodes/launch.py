@@ -111,9 +111,9 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     if overspeed_trip is None:
         overspeed_trip = OVERSPEED_TRIP_FACTOR * abs(scene.scenario.initial.omega)
     governed = scene.governor is not None
+    started = started if started is not None else time.monotonic()
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
-                                real_time_factor, governed, duration, coupling,
-                                started if started is not None else time.monotonic())
+                                real_time_factor, governed, duration, coupling, started)
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
@@ -138,7 +138,7 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
                 processes[name] = NodeProcess(name, parameter_file, environment, log)
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
             _follow(processes, environment, duration or scene.scenario.duration, quiet,
-                    f"{scene.name} on the nodes")
+                    f"{scene.name} on the nodes", started)
             if processes["machine"].returncode == 0:
                 _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
         except KeyboardInterrupt:
@@ -209,9 +209,10 @@ def _interrupt(signal_number, frame) -> None:
 
 
 def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
-            quiet: bool, label: str) -> None:
-    """Show the machine's progress (its /diagnostics sim_time; `label` names the work) until its process ends, or
-    until another node fails first (the launcher then stops the others)."""
+            quiet: bool, label: str, started: float) -> None:
+    """Show the machine's progress (its /diagnostics sim_time; `label` names the work; `started`: the command's start,
+    time.monotonic() [s], from which its start-up counts) until its process ends, or until another node fails first
+    (the launcher then stops the others)."""
     machine = processes["machine"]
     os.environ.update({key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                           "AMENT_PREFIX_PATH")})
@@ -221,7 +222,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
 
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
-    with progress_bar(duration, quiet, label) as bar:
+    with progress_bar(duration, quiet, label, started=started) as bar:
         def on_diagnostics(message: DiagnosticArray) -> None:
             for status in message.status:
                 if status.name.endswith("/machine"):
