@@ -91,3 +91,51 @@ def test_the_auto_path_variable_fixes_what_auto_means(empty_caches):
     assert wrong.returncode == 2, wrong.stderr
     assert "MECH_REGULATOR_AUTO_PATH='quick': expected reference or fast" in wrong.stderr
     assert "Traceback" not in wrong.stderr
+
+
+def test_the_main_job_compiles_its_stepper_before_its_nodes_start(monkeypatch):
+    """compile_now (the main job): a stepper not compiled yet is compiled here, announced, and the run takes the fast
+    path; no background compile is started (it would compete with the nodes)."""
+    from mech_regulator.model import build_model
+    from mech_regulator.scene import load_scene
+    from mech_regulator.solvers import compiled, on_path_for_a_command
+    from mech_regulator.solvers.compiled import warm
+
+    monkeypatch.delenv("MECH_REGULATOR_AUTO_PATH", raising=False)
+    compiled_here = []
+    monkeypatch.setattr(warm, "stepper_cached", lambda method: False)
+    monkeypatch.setattr(warm, "compile_before_the_run", lambda method, report: compiled_here.append(method))
+    monkeypatch.setattr(warm, "compile_in_background", lambda methods: pytest.fail("a background compile"))
+    model = build_model(load_scene("lathe", ["solver.method=DOP853"]))
+    assert compiled.fast_path_refusal(model) is None
+    notes = []
+    chosen = on_path_for_a_command(model, notes.append, compile_now=True)
+    assert chosen.scene.solver.path == "fast" and compiled_here == ["DOP853"], notes
+
+
+def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
+    """compile_before_the_run while another holds the compile lock: it says it waits, and compiles (here: loads)
+    only once the lock is free."""
+    import fcntl
+    import threading
+
+    from mech_regulator.solvers.compiled import warm
+
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
+    compiled_after = []
+    monkeypatch.setattr(warm, "compile_steppers", lambda methods, report: compiled_after.extend(methods))
+    waiting = threading.Event()
+    lines = []
+
+    def report(line: str) -> None:
+        lines.append(line)
+        waiting.set()
+
+    with open(tmp_path / warm.LOCK_NAME, "a") as other:   # another process's background compile
+        fcntl.flock(other, fcntl.LOCK_EX)
+        runner = threading.Thread(target=warm.compile_before_the_run, args=("RK4", report))
+        runner.start()
+        assert waiting.wait(WAIT), "no line said it waits"
+        assert compiled_after == [] and "waiting for the fast path's RK4 stepper" in lines[0], lines
+    runner.join(WAIT)
+    assert not runner.is_alive() and compiled_after == ["RK4"]

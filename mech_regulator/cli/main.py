@@ -517,7 +517,7 @@ def _main_job(scene, args) -> int:
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
-    model = on_path_for_a_command(model, note)
+    model = on_path_for_a_command(model, note, compile_now=True)   # compiled before the nodes start (warm.py)
     path = model.scene.solver.path  # decided once, for every node
     if path != scene.solver.path:
         args.overrides = [*(args.overrides or []), f"solver.path={path}"]
