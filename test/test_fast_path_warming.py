@@ -139,3 +139,18 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
         assert compiled_after == [] and "waiting for the fast path's RK4 stepper" in lines[0], lines
     runner.join(WAIT)
     assert not runner.is_alive() and compiled_after == ["RK4"]
+
+
+def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):
+    """A scene's generated module new to the cache folder: a note before numba compiles it; none once it is there.
+    In a fresh Python with empty caches (numba reads NUMBA_CACHE_DIR as it is imported)."""
+    script = ("from mech_regulator.model import build_model; from mech_regulator.scene import load_scene; "
+              "from mech_regulator.solvers.compiled.codegen import compile_scene; "
+              "compile_scene(build_model(load_scene('lathe')))")
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"),
+                       MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
+    notes = [subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                            env=environment, check=True).stderr for _ in range(2)]
+    assert notes[0] == ("note: compiling the fast path's module of scene 'lathe' once (a few seconds; later runs load "
+                        "it at once)\n"), notes[0]
+    assert notes[1] == "", notes[1]

@@ -279,6 +279,8 @@ def compile_scene(model: MachineModel) -> CompiledScene:
                                        numba.__version__]).encode()).hexdigest()[:20]
     path = _module_path(digest)
     if digest not in _LOADED and (not path.exists() or path.read_text(encoding="utf-8") != source):
+        print(f"note: compiling the fast path's module of scene '{model.scene.name}' once (a few seconds; later runs "
+              "load it at once)", file=sys.stderr, flush=True)
         _write(path, source)
     module = load_scene_module(digest)
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
