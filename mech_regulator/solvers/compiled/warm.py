@@ -1,9 +1,9 @@
 """Warming the fast path: its compiled steppers (one per method, solvers/compiled/integrators.py) take some 40 to
-50 s of CPU each to compile on a fresh machine (COMPILE_ESTIMATE; DOP853's: 49.6 s on the idle 2-core machine; 41 s
-of CPU and 147 s of wall time there under a load of about 10, 305 s with a pip install beside it: `NUMBA_CACHE_DIR=
-$(mktemp -d) MECH_REGULATOR_CACHE=$(mktemp -d) mech-regulator compile --method DOP853`) — once per machine and numba
-version, then numba loads them from its disk cache in a fraction of a second — while a scene's own module
-(codegen.py) compiles in about a second. So only the steppers are warmed ahead:
+50 s of CPU each to compile on a fresh machine (COMPILE_ESTIMATE; DOP853's on the 2-core machine: 44 s at a load of
+about 2.5, 49.6 s idle in an earlier measurement; 147 s of wall time under a load of about 10, 305 s with a pip
+install beside it: `NUMBA_CACHE_DIR=$(mktemp -d) MECH_REGULATOR_CACHE=$(mktemp -d) mech-regulator compile --method
+DOP853`) — once per machine and numba version, then numba loads them from its disk cache in a fraction of a second
+— while a scene's own module (codegen.py) compiles in a few seconds. So only the steppers are warmed ahead:
 
 - `mech-regulator compile` compiles every method's stepper, a line per method (and the linkage solver, which the
   reference path runs compiled too: mechanisms/linkage/flat.py);
