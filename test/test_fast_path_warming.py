@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -114,31 +115,29 @@ def test_the_main_job_compiles_its_stepper_before_its_nodes_start(monkeypatch):
 
 
 def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
-    """compile_before_the_run while another holds the compile lock: it says it waits, and compiles (here: loads)
-    only once the lock is free."""
+    """compile_before_the_run while another process holds the compile lock: it says it waits; the compile runs in a
+    child process (this module's main, which takes the lock, waiting for the other's compile, then loads it)."""
     import fcntl
-    import threading
 
     from mech_regulator.solvers.compiled import warm
 
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
-    compiled_after = []
-    monkeypatch.setattr(warm, "compile_steppers", lambda methods, report: compiled_after.extend(methods))
-    waiting = threading.Event()
+    children = []
+
+    def child(argv, **options):
+        children.append(argv)
+        return subprocess.CompletedProcess(argv, 0, "", "")
+
+    monkeypatch.setattr(warm.subprocess, "run", child)
     lines = []
-
-    def report(line: str) -> None:
-        lines.append(line)
-        waiting.set()
-
+    warm.compile_before_the_run("RK4", lines.append)
+    assert lines[0].startswith("compiling the fast path's RK4 stepper (once, about 50 s"), lines
     with open(tmp_path / warm.LOCK_NAME, "a") as other:   # another process's background compile
         fcntl.flock(other, fcntl.LOCK_EX)
-        runner = threading.Thread(target=warm.compile_before_the_run, args=("RK4", report))
-        runner.start()
-        assert waiting.wait(WAIT), "no line said it waits"
-        assert compiled_after == [] and "waiting for the fast path's RK4 stepper" in lines[0], lines
-    runner.join(WAIT)
-    assert not runner.is_alive() and compiled_after == ["RK4"]
+        warm.compile_before_the_run("RK4", lines.append)
+    assert lines[2].startswith("waiting for the fast path's RK4 stepper that another process is compiling"), lines
+    assert children == [[sys.executable, "-m", warm.__name__, "RK4"]] * 2
+    assert re.fullmatch(r"RK4 ready in [0-9.]+ s", lines[3]), lines
 
 
 def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):

@@ -67,17 +67,25 @@ def _lock_path() -> Path:
 
 
 def compile_before_the_run(method: str, report: Callable[[str], None]) -> None:
-    """Compile the stepper of `method` in this process under the lock, saying so with its estimate and then how long
-    it took (compile_steppers); when another process holds the lock (a background compile), wait for it first, said
-    too: the stepper is then loaded from numba's disk cache."""
+    """Compile the stepper of `method` before a run, saying so with its estimate and then how long it took: in a
+    child process (this module's main, under the lock: a compile another process has under way is waited for, said
+    too, and then loaded), so that the compile's memory stays out of this process — the main job's nodes are forked
+    from it — and the run that follows is a warm run. Raises RuntimeError with the child's output if it fails."""
     with open(_lock_path(), "a") as handle:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            busy = False
         except BlockingIOError:
-            report(f"waiting for the fast path's {method} stepper that another process is compiling (once, "
-                   f"{COMPILE_ESTIMATE} in all) ...")
-            fcntl.flock(handle, fcntl.LOCK_EX)
-        compile_steppers([method], report)
+            busy = True
+    report(f"waiting for the fast path's {method} stepper that another process is compiling (once, "
+           f"{COMPILE_ESTIMATE} in all) ..." if busy else
+           f"compiling the fast path's {method} stepper (once, {COMPILE_ESTIMATE}) ...")
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", __name__, method], stdin=subprocess.DEVNULL, capture_output=True,
+                          text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"compiling the fast path's {method} stepper failed:\n{done.stdout}{done.stderr}")
+    report(f"{method} ready in {time.perf_counter() - started:.1f} s")
 
 
 def compile_in_background(methods: Iterable[str]) -> bool:
