@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from mech_regulator.bench.accuracy import ADAPTIVE, COSIM, SCENES, startup_closed_form
+from mech_regulator.bench.accuracy import ADAPTIVE, COSIM, SCENES, Setting, Task, _measured, startup_closed_form
 from mech_regulator.bench.report import CSV_COLUMNS
 from mech_regulator.cli.main import main
 from mech_regulator.model import build_model
@@ -177,6 +177,19 @@ def test_ctrl_c_keeps_the_runs_measured(tmp_path):
         rows = list(csv.DictReader(stream))
     assert 1 <= len(rows) < 42, lines   # 42 runs in all: it stopped early
     assert not (tmp_path / "README.md").exists()
+
+
+def test_ctrl_c_while_the_parent_works_stops_the_workers_at_the_next_measurement():
+    """Ctrl-C only marks the interrupt while the workers measure (never a KeyboardInterrupt inside the pool's own
+    locks, which could leave terminate() waiting for ever); it is raised when the next measurement is asked for,
+    and Ctrl-C is Python's again afterwards."""
+    tasks = [Task("startup", True, Setting("RK45", rtol)) for rtol in (1e-3, 1e-4, 1e-5, 1e-6)]
+    measurements = _measured(tasks, 2)
+    assert next(measurements).task in tasks
+    os.kill(os.getpid(), signal.SIGINT)   # as if pressed while the parent adds the measurement
+    with pytest.raises(KeyboardInterrupt):
+        next(measurements)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_the_measurement_imports_neither_rerun_nor_matplotlib_nor_rclpy():

@@ -10,6 +10,7 @@ it does not answer. No timing is asserted."""
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import json
 import os
 import re
@@ -58,11 +59,12 @@ def run(argv: list[str], env: dict[str, str], cwd: Path | str | None = None) -> 
     return subprocess.run([*COMMAND, *argv], env=env, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT)
 
 
-def start(env: dict[str, str]) -> tuple[int, Path]:
-    """`server start` (this environment's server, waited for): its pid and socket."""
+def start(env: dict[str, str]) -> tuple[int, Path, str]:
+    """`server start` (this environment's server, waited for): its pid, socket and the line saying how long it took."""
     started = run(["server", "start"], env)
     assert started.returncode == 0, started.stderr
-    return int(re.search(r"pid (\d+)", started.stdout).group(1)), Path(re.search(r"socket (\S+)", started.stdout)[1])
+    status, took = started.stdout.splitlines()
+    return int(re.search(r"pid (\d+)", status).group(1)), Path(re.search(r"socket (\S+)", status)[1]), took
 
 
 def stop(env: dict[str, str], pid: int, folder: str) -> None:
@@ -82,7 +84,8 @@ def served():
     first = run(["describe", "lathe"], env)  # finds no server: runs here and starts one
     pid = None
     try:
-        pid, path = start(env)
+        pid, path, took = start(env)   # the server the first command started: running, or still starting
+        assert re.fullmatch(r"was running already( \(it answered after [0-9.]+ s: it was starting\))?", took), took
         yield Served(env, folder, pid, path, first)
     finally:
         match = re.search(r"\(pid (\d+)\)", first.stderr)
@@ -266,8 +269,9 @@ def test_the_key_follows_the_source_and_the_environment(tmp_path, monkeypatch):
 def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
     folder = tempfile.mkdtemp(prefix="mr-vanish-")
     env = server_environment(folder)
-    pid, _ = start(env)
+    pid, _, took = start(env)
     try:
+        assert re.fullmatch(r"started in [0-9.]+ s", took), took
         client = subprocess.Popen([*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000"], env=env,
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
@@ -289,6 +293,28 @@ def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
         assert not command_server.process_alive(child)
     finally:
         stop(env, pid, folder)
+
+
+def test_a_command_while_the_server_starts_says_it_runs_on_its_own(tmp_path):
+    """A server that holds its lock but does not answer yet (still starting: here the test holds the lock): a served
+    command runs in its own process, starts no second server and says so in one line."""
+    folder = tempfile.mkdtemp(prefix="mr-start-")
+    env = server_environment(folder)
+    digest = subprocess.run([sys.executable, "-c", "from mech_regulator.cli.server import key_digest, server_key; "
+                             "print(key_digest(server_key()))"], env=env, capture_output=True, text=True,
+                            check=True).stdout.strip()
+    servers = Path(folder) / "mech_regulator"
+    servers.mkdir(mode=0o700)
+    try:
+        with open(servers / f"{digest}.lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            alone = run(["describe", "lathe"], env)
+        assert alone.returncode == 0 and alone.stdout.startswith("scene: lathe\n"), alone.stdout
+        assert alone.stderr == ("mech-regulator: the command server is still starting (it answers once its imports "
+                                "are loaded); this command runs on its own\n"), alone.stderr
+        assert not any(servers.glob("*.sock")) and not any(servers.glob("*.log"))
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 def test_server_stop_leaves_no_process(served):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -91,3 +92,64 @@ def test_the_auto_path_variable_fixes_what_auto_means(empty_caches):
     assert wrong.returncode == 2, wrong.stderr
     assert "MECH_REGULATOR_AUTO_PATH='quick': expected reference or fast" in wrong.stderr
     assert "Traceback" not in wrong.stderr
+
+
+def test_the_main_job_compiles_its_stepper_before_its_nodes_start(monkeypatch):
+    """compile_now (the main job): a stepper not compiled yet is compiled here, announced, and the run takes the fast
+    path; no background compile is started (it would compete with the nodes)."""
+    from mech_regulator.model import build_model
+    from mech_regulator.scene import load_scene
+    from mech_regulator.solvers import compiled, on_path_for_a_command
+    from mech_regulator.solvers.compiled import warm
+
+    monkeypatch.delenv("MECH_REGULATOR_AUTO_PATH", raising=False)
+    compiled_here = []
+    monkeypatch.setattr(warm, "stepper_cached", lambda method: False)
+    monkeypatch.setattr(warm, "compile_before_the_run", lambda method, report: compiled_here.append(method))
+    monkeypatch.setattr(warm, "compile_in_background", lambda methods: pytest.fail("a background compile"))
+    model = build_model(load_scene("lathe", ["solver.method=DOP853"]))
+    assert compiled.fast_path_refusal(model) is None
+    notes = []
+    chosen = on_path_for_a_command(model, notes.append, compile_now=True)
+    assert chosen.scene.solver.path == "fast" and compiled_here == ["DOP853"], notes
+
+
+def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
+    """compile_before_the_run while another process holds the compile lock: it says it waits; the compile runs in a
+    child process (this module's main, which takes the lock, waiting for the other's compile, then loads it)."""
+    import fcntl
+
+    from mech_regulator.solvers.compiled import warm
+
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
+    children = []
+
+    def child(argv, **options):
+        children.append(argv)
+        return subprocess.CompletedProcess(argv, 0, "", "")
+
+    monkeypatch.setattr(warm.subprocess, "run", child)
+    lines = []
+    warm.compile_before_the_run("RK4", lines.append)
+    assert lines[0].startswith("compiling the fast path's RK4 stepper (once, about 50 s"), lines
+    with open(tmp_path / warm.LOCK_NAME, "a") as other:   # another process's background compile
+        fcntl.flock(other, fcntl.LOCK_EX)
+        warm.compile_before_the_run("RK4", lines.append)
+    assert lines[2].startswith("waiting for the fast path's RK4 stepper that another process is compiling"), lines
+    assert children == [[sys.executable, "-m", warm.__name__, "RK4"]] * 2
+    assert re.fullmatch(r"RK4 ready in [0-9.]+ s", lines[3]), lines
+
+
+def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):
+    """A scene's generated module new to the cache folder: a note before numba compiles it; none once it is there.
+    In a fresh Python with empty caches (numba reads NUMBA_CACHE_DIR as it is imported)."""
+    script = ("from mech_regulator.model import build_model; from mech_regulator.scene import load_scene; "
+              "from mech_regulator.solvers.compiled.codegen import compile_scene; "
+              "compile_scene(build_model(load_scene('lathe')))")
+    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"),
+                       MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
+    notes = [subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
+                            env=environment, check=True).stderr for _ in range(2)]
+    assert notes[0] == ("note: compiling the fast path's module of scene 'lathe' once (a few seconds; later runs load "
+                        "it at once)\n"), notes[0]
+    assert notes[1] == "", notes[1]

@@ -65,7 +65,7 @@ def test_a_line_names_time_share_elapsed_and_eta():
     bar.update(6.7)
     bar.close()
     assert out.getvalue().splitlines() == ["simulating lathe: t = 3.2 / 10 s (32 %), 4.1 s elapsed, ETA 8.7 s",
-                                           "simulating lathe: done: t = 10 / 10 s in 12.3 s"]
+                                           "simulating lathe: done: t = 10 / 10 s in 5.0 s"]   # the last update
 
 
 def test_work_ended_short_says_where_it_stopped():
@@ -74,9 +74,9 @@ def test_work_ended_short_says_where_it_stopped():
     with ProgressLines(10.0, "simulating lathe", "t", "s", 3.0, file=out, clock=clock) as bar:
         bar.update(0.0)
         bar.update(4.0)
-    assert out.getvalue().splitlines() == ["simulating lathe: t = 0 / 10 s (0 %), 5.0 s elapsed, ETA unknown",
-                                           "simulating lathe: t = 4 / 10 s (40 %), 10.0 s elapsed, ETA 15.0 s",
-                                           "simulating lathe: stopped at t = 4 / 10 s after 15.0 s"]
+    assert out.getvalue().splitlines() == ["simulating lathe: t = 0 / 10 s (0 %), 0.0 s elapsed, ETA unknown",
+                                           "simulating lathe: t = 4 / 10 s (40 %), 5.0 s elapsed, ETA 7.5 s",
+                                           "simulating lathe: stopped at t = 4 / 10 s after 5.0 s; start-up 5.0 s"]
 
 
 def test_a_count_without_total_and_its_stage():
@@ -88,7 +88,27 @@ def test_a_count_without_total_and_its_stage():
         bar.update(1)
     assert out.getvalue().splitlines() == [
         "flywheel for lathe (J_fw = 18.9 kg m^2): 1 dynamic periods simulated, 2 min 10 s elapsed",
-        "flywheel for lathe: done: 1 dynamic periods simulated in 4 min 20 s"]
+        "flywheel for lathe: done: 1 dynamic periods simulated in 2 min 10 s"]
+
+
+def test_a_start_up_is_neither_in_the_eta_nor_in_the_duration():
+    """The nodes: 4 s from the command to the first diagnostics (t = 0), then 16 s simulated at an even 3 s of wall
+    time per simulated second; after 10 % of the run the ETA is the time left, and the final line gives the run's
+    wall time over the exchanges and the start-up from the command, as the summary does."""
+    wall = {"now": 1.0}   # the bar is made 1 s after the command
+    out = io.StringIO()
+    bar = ProgressLines(16.0, "engine_direct on the nodes", "t", "s", 0.0, file=out, clock=lambda: wall["now"],
+                        started=0.0)
+    wall["now"] = 4.0
+    bar.update(0.0)   # the machine's first diagnostics, as its exchanges start
+    for step in range(1, 17):
+        wall["now"] = 4.0 + 3.0 * step
+        bar.update(1.0)
+    wall["now"] = 60.0   # the nodes' graph settling before the bar closes
+    bar.close()
+    lines = out.getvalue().splitlines()
+    assert lines[2] == "engine_direct on the nodes: t = 2 / 16 s (12 %), 6.0 s elapsed, ETA 42.0 s"
+    assert lines[-1] == "engine_direct on the nodes: done: t = 16 / 16 s in 48.0 s; start-up 4.0 s"
 
 
 def test_silent_when_quiet():

@@ -28,6 +28,7 @@ import multiprocessing
 import platform
 import signal
 import statistics
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -314,15 +315,41 @@ def _ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+INTERRUPT_POLL_S = 0.1  # [s] how often the parent looks for a Ctrl-C while it waits for the workers
+
+
+@contextlib.contextmanager
+def _ctrl_c_as_flag() -> Iterator[threading.Event]:
+    """Within the block, Ctrl-C sets the event instead of raising KeyboardInterrupt wherever the main thread is:
+    raised inside the pool's own code (between taking and releasing a lock its result thread also takes) it could
+    leave that lock held, and the pool's terminate() would then wait for that thread for ever."""
+    pressed = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda number, frame: pressed.set())
+    try:
+        yield pressed
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _measured(tasks: list[Task], jobs: int) -> Iterator[Measurement]:
     """Measurements of the tasks as they finish, in `jobs` worker processes (in this process if 1); the
-    workers are stopped when the iteration ends or is abandoned."""
+    workers are stopped when the iteration ends or is abandoned, and a Ctrl-C raises KeyboardInterrupt here,
+    between two measurements (_ctrl_c_as_flag)."""
     if jobs == 1:
         yield from map(measure, tasks)
         return
     pool = multiprocessing.Pool(jobs, initializer=_ignore_interrupts)
     try:
-        yield from pool.imap_unordered(measure, tasks)
+        with _ctrl_c_as_flag() as pressed:
+            results = pool.imap_unordered(measure, tasks)
+            for _ in tasks:
+                measurement = None
+                while measurement is None:
+                    if pressed.is_set():
+                        raise KeyboardInterrupt
+                    with contextlib.suppress(multiprocessing.TimeoutError):
+                        measurement = results.next(timeout=INTERRUPT_POLL_S)
+                yield measurement
         pool.close()
     finally:
         pool.terminate()

@@ -243,13 +243,15 @@ def main(argv: list[str] | None = None) -> int:
             check_outputs(args, *(getattr(args, name, None) for name in ("out", "record", "scene_out")))
         elif args.out is not None:
             _check_run_files(args.out)
-        scene = load_scene(args.scene, args.overrides)
         if args.command == "describe":
+            from mech_regulator import cache
             from mech_regulator.model import build_model
             from mech_regulator.cli.report import describe
 
-            print(describe(build_model(scene)))
+            with cache.run_uncompiled():   # describing needs no compiled code (cache.py)
+                print(describe(build_model(load_scene(args.scene, args.overrides))))
             return 0
+        scene = load_scene(args.scene, args.overrides)
         if args.command == "governor":
             return _governor(scene, args)
         if args.command == "run":
@@ -291,10 +293,13 @@ def _bench(args) -> int:
 
 
 def _list_scenes() -> int:
-    from mech_regulator.scene import bundled_scenes, load_scene
+    """scenes: each bundled scene's name and the first sentence of its description, read from its file (and the
+    files it derives from) without validating it: listing checks and compiles nothing."""
+    from mech_regulator.scene import bundled_scenes
+    from mech_regulator.scene.loading import read_scene_data
 
     for name, path in bundled_scenes().items():
-        description = " ".join((load_scene(str(path)).description or "").split())
+        description = " ".join(str(read_scene_data(path).get("description") or "").split())
         print(f"{name:<26} {description.split('. ')[0]}")
     return 0
 
@@ -559,7 +564,7 @@ def _main_job(scene, args) -> int:
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
-    model = on_path_for_a_command(model, note)
+    model = on_path_for_a_command(model, note, compile_now=True)   # compiled before the nodes start (warm.py)
     path = model.scene.solver.path  # decided once, for every node
     if path != scene.solver.path:
         args.overrides = [*(args.overrides or []), f"solver.path={path}"]

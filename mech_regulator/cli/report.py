@@ -352,18 +352,20 @@ def to_json(data) -> str:
 
 PROGRESS_INTERVAL_VARIABLE = "MECH_REGULATOR_PROGRESS_INTERVAL"
 PROGRESS_INTERVAL = 3.0  # [s] of wall time between two progress lines in a log (not a terminal), by default
+START_UP_SHOWN = 0.05  # [s] of wall time before the first update from which the final line names the start-up
 
 
 def progress_bar(total: float | None, quiet: bool, label: str = "simulating", quantity: str | None = "t",
-                 unit: str = "s"):
+                 unit: str = "s", started: float | None = None):
     """The progress of long work on stderr, as a context manager with tqdm's `update(amount)` and `n`: nothing
     when quiet; tqdm's bar on a terminal; in a log, a pipe or a notebook (stderr not a terminal, where tqdm would
     show nothing useful), a plain line every few seconds of wall time (ProgressLines). total: the amount to do,
     simulated seconds by default (None: unknown, a count); label names the work, quantity the amount
-    ('t = 3.2 / 10 s'; None: '3.2 / 10 s'), unit its unit."""
+    ('t = 3.2 / 10 s'; None: '3.2 / 10 s'), unit its unit, started when the work was asked for (time.monotonic()
+    [s]; None: now)."""
     label = terminal_text(label)
     if quiet or not _is_terminal(sys.stderr):
-        return ProgressLines(total, label, quantity, unit, progress_interval(), enabled=not quiet)
+        return ProgressLines(total, label, quantity, unit, progress_interval(), enabled=not quiet, started=started)
     from tqdm import tqdm
 
     amount = f"{quantity} = " if quantity else ""
@@ -392,19 +394,24 @@ def _is_terminal(stream) -> bool:
 
 class ProgressLines:
     """Progress as plain lines on stderr for a log: after `interval` s of wall time since the last line, the next
-    update prints `simulating lathe: t = 3.2 / 10 s (32 %), 4.1 s elapsed, ETA 8.7 s` (ETA: the elapsed time
-    scaled by what is left, which assumes an even pace); at the end `simulating lathe: done: t = 10 / 10 s in
-    12.3 s` (`stopped at` when the work ended short of its total). Work that ends within one interval prints
-    nothing. The same interface as the tqdm bar the command line uses (update, n, set_description_str, close, a
-    context manager); silent unless enabled (--quiet). No thread: a line comes with an update."""
+    update prints `simulating lathe: t = 3.2 / 10 s (32 %), 4.1 s elapsed, ETA 8.7 s`; at the end `simulating
+    lathe: done: t = 10 / 10 s in 12.3 s` (`stopped at` when the work ended short of its total), with `; start-up
+    3.1 s` when the work began that long after `started`. The times are the work's own: from its start (the
+    last update that still reported nothing done: the nodes' first diagnostics come as their exchanges start; else
+    the bar's creation) to the latest update, so that a start-up (the nodes' discovery) is neither in the ETA (the
+    time so far scaled by what is left) nor in the duration, which is then the summary's (the nodes' wall time over
+    the exchanges; the start-up from the command). Work that ends within one interval prints nothing. The same
+    interface as the tqdm bar the command line uses (update, n, set_description_str, close, a context manager);
+    silent unless enabled (--quiet). No thread: a line comes with an update."""
 
     def __init__(self, total: float | None, label: str, quantity: str | None, unit: str, interval: float,
-                 enabled: bool = True, file=None, clock=time.monotonic):
+                 enabled: bool = True, file=None, clock=time.monotonic, started: float | None = None):
         self.total, self.label, self.quantity, self.unit = total, label, quantity, unit
         self.interval, self.enabled, self.file, self.clock = interval, enabled, file, clock
         self.n = 0.0
         self.stage = ""
-        self.start = self.last = clock()
+        self.start = self.last = self.began = self.latest = clock()   # began: the work's start; latest: its update
+        self.started = self.start if started is None else started   # when the work was asked for
         self.printed = False
         self.closed = False
 
@@ -415,12 +422,15 @@ class ProgressLines:
         self.close()
 
     def update(self, amount: float = 1) -> None:
+        now = self.latest = self.clock()
         self.n += amount
-        now = self.clock()
+        if self.n == 0.0:
+            self.began = now   # nothing done yet: the work has not begun
         if self.enabled and now - self.last >= self.interval:
             self.last = now
-            self._print(f"{self._label()}: {self._amount()}{self._share()}, {_duration(now - self.start)} elapsed"
-                        + self._eta(now - self.start))
+            elapsed = now - self.began
+            self._print(f"{self._label()}: {self._amount()}{self._share()}, {_duration(elapsed)} elapsed"
+                        + self._eta(elapsed))
 
     def set_description_str(self, text: str, refresh: bool = False) -> None:
         """The current stage of the work (flywheel: the flywheel being simulated), shown after the label."""
@@ -430,11 +440,12 @@ class ProgressLines:
         if self.closed:
             return
         self.closed = True
-        elapsed = self.clock() - self.start
-        if self.enabled and (self.printed or elapsed >= self.interval):
+        if self.enabled and (self.printed or self.clock() - self.start >= self.interval):
             short = self.total is not None and self.n < self.total * (1.0 - 1e-9)
+            start_up = self.began - self.started
             self._print(f"{self.label}: {'stopped at' if short else 'done:'} {self._amount()} "
-                        f"{'after' if short else 'in'} {_duration(elapsed)}")
+                        f"{'after' if short else 'in'} {_duration(self.latest - self.began)}"
+                        + (f"; start-up {_duration(start_up)}" if start_up >= START_UP_SHOWN else ""))
 
     def _label(self) -> str:
         return f"{self.label} ({self.stage})" if self.stage else self.label
@@ -449,6 +460,7 @@ class ProgressLines:
         return f" ({100.0 * self.n / self.total:.0f} %)" if self.total else ""
 
     def _eta(self, elapsed: float) -> str:
+        """', ETA ...' at the pace of the work so far ('' without a total)."""
         if not self.total:
             return ""
         if self.n <= 0.0:

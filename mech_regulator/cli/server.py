@@ -242,6 +242,9 @@ def through_server(argv: list[str]) -> int | None:
             print(f"mech-regulator: started a command server (pid {pid}) that answers the next commands without "
                   f"their imports; it stops after {idle_limit() / 60.0:g} min idle (stop it: `mech-regulator server "
                   f"stop`; never use one: {SERVER_VARIABLE}=off)", file=sys.stderr)
+        elif server_starting(key):
+            print("mech-regulator: the command server is still starting (it answers once its imports are loaded); "
+                  "this command runs on its own", file=sys.stderr)
         return None
     except OSError:
         return None
@@ -352,6 +355,18 @@ def _reply(replies) -> dict:
     return json.loads(line)
 
 
+def server_starting(key: str) -> bool:
+    """Whether the server of `key` holds its lock (it is starting: it has not answered yet)."""
+    try:
+        with open(server_folder() / f"{key_digest(key)}.lock", "a") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)   # released as the file closes
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+    return False
+
+
 def start_server(key: str) -> int | None:
     """Start the server of `key`, detached (a new session; stdin from /dev/null, output to KEY.log), unless one holds
     KEY.lock already (running, or loading): its pid, or None. The lock is taken here and handed to the server,
@@ -389,7 +404,8 @@ def start_server(key: str) -> int | None:
 
 
 def server_command(action: str) -> int:
-    """server start: start this environment's server unless running and wait until it answers; status: each
+    """server start: start this environment's server unless running and wait until it answers, saying how long that
+    took; status: each
     server of the folder (pid, key, idle time, what it loaded); stop: stop every server of the folder and wait
     until each has ended."""
     problem = folder_refusal(server_folder())
@@ -404,8 +420,9 @@ def server_command(action: str) -> int:
             print(f"mech-regulator: the server's folder {server_folder()} is too deep for a Unix socket (at most "
                   f"{SOCKET_PATH_MAX} bytes); set XDG_RUNTIME_DIR to a shorter folder", file=sys.stderr)
             return 1
+        began = time.monotonic()
         started = start_server(key)
-        deadline = time.monotonic() + READY_WAIT
+        deadline = began + READY_WAIT
         while (status := ask_server(path, {"op": "status"})) is None:
             ended = started is not None and not process_alive(started)
             if ended or time.monotonic() > deadline:
@@ -414,6 +431,9 @@ def server_command(action: str) -> int:
                 return 1
             time.sleep(0.05)
         print(_status_line(status, key))
+        waited = time.monotonic() - began
+        print(f"started in {waited:.1f} s" if started is not None else
+              f"was running already{'' if waited < 0.1 else f' (it answered after {waited:.1f} s: it was starting)'}")
         return 0
     servers = [(path, ask_server(path, {"op": "status"})) for path in sorted(server_folder().glob("*.sock"))]
     servers = [(path, status) for path, status in servers if status is not None]

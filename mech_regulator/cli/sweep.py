@@ -71,7 +71,7 @@ def warm_fast_path(points, engine: str, quiet: bool) -> None:
                       if point.scene.get("solver", {}).get("path") == "fast"})
     if not methods:
         return
-    from mech_regulator.solvers.compiled.warm import compile_steppers, stepper_cached
+    from mech_regulator.solvers.compiled.warm import COMPILE_ESTIMATE, compile_steppers, stepper_cached
 
     cold = [method for method in methods if not stepper_cached(method)]
     report = (lambda line: None) if quiet else (lambda line: print(f"mech-regulator: {line}", file=sys.stderr))
@@ -79,7 +79,7 @@ def warm_fast_path(points, engine: str, quiet: bool) -> None:
         compile_steppers(cold, report)
     if engine == "dask":
         report(f"note: Dask workers on other machines compile the fast path's {', '.join(methods)} stepper(s) once "
-               "each (about 10-30 s) before their first point")
+               f"each ({COMPILE_ESTIMATE}) before their first point")
 
 
 def run_sweep_command(args: argparse.Namespace) -> int:

@@ -126,9 +126,9 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     output = output or default_recording(scene.name)
     output.parent.mkdir(parents=True, exist_ok=True)
     governed = scene.governor is not None
+    started = started if started is not None else time.monotonic()
     parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
-                                real_time_factor, governed, duration, coupling,
-                                started if started is not None else time.monotonic(), controller, bag,
+                                real_time_factor, governed, duration, coupling, started, controller, bag,
                                 peer_timeout)
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
@@ -161,7 +161,7 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
                 processes[name] = NodeProcess(name, parameter_file, environment, log)
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
             _follow(processes, environment, duration or scene.scenario.duration, quiet,
-                    f"{scene.name} on the nodes")
+                    f"{scene.name} on the nodes", started)
             if processes["machine"].returncode == 0:
                 _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
         except KeyboardInterrupt:
@@ -237,11 +237,12 @@ def _interrupt(signal_number, frame) -> None:
 
 
 def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
-            quiet: bool, label: str) -> None:
-    """Show the machine's progress (its /diagnostics sim_time; `label` names the work) until its process ends, or
-    until another node fails first (the launcher then stops the others). A machine whose simulated time has not
-    advanced for STALL_REPORT s of wall time (paused from outside, or stuck) is reported once on stderr, with the time
-    it stands at, and again when it goes on."""
+            quiet: bool, label: str, started: float) -> None:
+    """Show the machine's progress (its /diagnostics sim_time; `label` names the work; `started`: the command's start,
+    time.monotonic() [s], from which its start-up counts) until its process ends, or until another node fails first
+    (the launcher then stops the others). A machine whose simulated time has not advanced for STALL_REPORT s of wall
+    time (paused from outside, or stuck) is reported once on stderr, with the time it stands at, and again when it
+    goes on."""
     machine = processes["machine"]
     os.environ.update({key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
                                                           "AMENT_PREFIX_PATH")})
@@ -252,7 +253,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
     advanced = {"sim_time": -1.0, "at": time.monotonic(), "reported": False}  # the machine's time and when it moved
-    with progress_bar(duration, quiet, label) as bar:
+    with progress_bar(duration, quiet, label, started=started) as bar:
         def on_diagnostics(message: DiagnosticArray) -> None:
             for status in message.status:
                 if status.name.endswith("/machine"):

@@ -995,7 +995,8 @@ class Solver(SceneModel):
     path: Literal["auto", "reference", "fast"] = Field(
         "auto", description="auto: a command (simulate, sweep, flywheel, run, the nodes) runs the fast path where it "
                             "covers the scene and is compiled on this machine, else the reference path with a "
-                            "one-line note (a first run starts compiling it in the background); the library's "
+                            "one-line note (a first run starts compiling it in the background; run compiles it "
+                            "first); the library's "
                             "simulate() runs auto on the reference path. reference: the pure-Python right-hand side "
                             "stepped by scipy; fast: the scene's right-hand side compiled by numba (cached on disk) "
                             "and stepped by compiled RK45, DOP853, RK4 or Rosenbrock23 (docs/speed.md)")

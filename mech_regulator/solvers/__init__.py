@@ -34,7 +34,8 @@ def simulate(model: MachineModel, progress: Progress | None = None) -> Trajector
     return integrate_time_domain(model, progress)
 
 
-def on_path_for_a_command(model: MachineModel, report: Callable[[str], None]) -> MachineModel:
+def on_path_for_a_command(model: MachineModel, report: Callable[[str], None],
+                          compile_now: bool = False) -> MachineModel:
     """The model a command (simulate, sweep, flywheel, run and the nodes) runs, its solver.path decided: fast or
     reference, never auto.
 
@@ -42,7 +43,9 @@ def on_path_for_a_command(model: MachineModel, report: Callable[[str], None]) ->
     (fast_path_refusal) and its method's stepper is compiled on this machine. Otherwise the reference path, with a
     one-line note to `report`: where the fast path does not cover the scene, or while the stepper is not compiled
     yet — it is then compiled by a background process for the next run (compiled/warm.py), so a first run is never a
-    wait of half a minute. Rosenbrock23, which only the fast path has, is compiled in the foreground, announced.
+    wait of most of a minute. With `compile_now` (the main job, whose nodes the reference path slows to a tenth of
+    their pace) the stepper is compiled here first, announced with its estimate (warm.compile_before_the_run);
+    Rosenbrock23, which only the fast path has, is compiled in the foreground, announced.
     The environment variable MECH_REGULATOR_AUTO_PATH (reference or fast) fixes what auto means on a machine that
     must not depend on what is compiled (a reproducible CI, the test suite)."""
     path = model.scene.solver.path
@@ -56,17 +59,22 @@ def on_path_for_a_command(model: MachineModel, report: Callable[[str], None]) ->
     if refusal is not None:
         report(f"note: {refusal}; this run uses the reference path")
         return on_path(model, "reference")
-    from mech_regulator.solvers.compiled.warm import compile_in_background, stepper_cached
+    from mech_regulator.solvers.compiled.warm import (COMPILE_ESTIMATE, compile_before_the_run,
+                                                      compile_in_background, stepper_cached)
 
     method = model.scene.solver.method
     if stepper_cached(method):
         return on_path(model, "fast")
+    if compile_now:
+        compile_before_the_run(method, lambda line: report(f"note: {line.strip()}"))
+        return on_path(model, "fast")
     if method == "Rosenbrock23":
-        report(f"note: compiling the fast path's {method} stepper once (about 10-30 s); later runs start at once")
+        report(f"note: compiling the fast path's {method} stepper once ({COMPILE_ESTIMATE}); later runs start at "
+               "once")
         return on_path(model, "fast")
     started = compile_in_background([method])
     report(f"note: the fast path's {method} stepper is {'now compiling' if started else 'compiling'} in the "
-           "background (once, about 10-30 s); this run uses the reference path, later runs the fast path")
+           f"background (once, {COMPILE_ESTIMATE}); this run uses the reference path, later runs the fast path")
     return on_path(model, "reference")
 
 

@@ -56,6 +56,8 @@ import time
 
 import numpy as np
 
+from mech_regulator import cache
+
 KIND_CODES = {"RRR": 0, "RRP": 1, "RPR": 2, "PRP": 3, "RPP": 4}
 REDUNDANT = 5
 JOINT_SIZE = 10
@@ -825,7 +827,10 @@ def compiled(name: str):
 
 def compiled_announced(name: str):
     """compiled(name), saying on stderr when its first call will compile it (5-15 s, once per machine: nothing in
-    numba's disk cache for this source yet), for the callers that call it next (kinematics.py)."""
+    numba's disk cache for this source yet), for the callers that call it next (kinematics.py); the plain function
+    within cache.run_uncompiled."""
+    if cache.uncompiled():
+        return globals()[name]
     from numba.core.caching import FunctionCache
 
     function = compiled(name)

@@ -33,6 +33,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
+from mech_regulator import cache
 from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
 from mech_regulator.mechanisms.linkage import flat, symbolic
 from mech_regulator.mechanisms.linkage.groups import RedundantLink
@@ -107,11 +108,14 @@ def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[floa
     [N m], M_b1 [kg m^2]); and the ratios: a revolute joint's relative angular speed theta_a' - theta_b' [-], a
     prismatic joint's sliding speed over omega, `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]. It runs
     the code generated from the linkage's groups (symbolic.joint_loads_source: flat.joint_loads written out per
-    kind of linkage) compiled (symbolic.reference_function), the very source the fast path compiles. Raises the LinkageError of the group
-    that fails at phi."""
+    kind of linkage) compiled (symbolic.reference_function), the very source the fast path compiles; within
+    cache.run_uncompiled, the general solver's plain flat.joint_loads (the same numbers). Raises the LinkageError of
+    the group that fails at phi."""
     program = _program(linkage, structure, gravity)
-    name, _ = symbolic.joint_loads_source(program)
-    joint_loads = symbolic.reference_function(name)
+    if cache.uncompiled():
+        joint_loads = flat.joint_loads
+    else:
+        joint_loads = symbolic.reference_function(symbolic.joint_loads_source(program)[0])
 
     def loads(phi: float, omega: float, output_force: float) -> JointLoads:
         constant, per_epsilon, ratios, balancing, balancing_rate = joint_loads(phi, omega, output_force, program, 0)

@@ -725,23 +725,30 @@ def _file_name(name: str) -> str:
     return f"{name}.py"
 
 
-@functools.cache
 def reference_function(name: str) -> Callable:
+    """_reference_function(name) on the process's path: compiled, or plain within cache.run_uncompiled."""
+    return _reference_function(name, cache.uncompiled())
+
+
+@functools.cache
+def _reference_function(name: str, plain: bool) -> Callable:
     """The generated function `name` (reduced_source or joint_loads_source made it: its module is in the cache
     folder) compiled by numba for the reference path, as the fast path compiles the same source into a scene's
     module: numba's disk cache beside the module keeps it, so it compiles once per kind of linkage and machine (said
-    on stderr before it does, a second or a few). Plain Python ran it 3 to 8 times slower than the general solver
-    compiled, which the reference path called before."""
+    on stderr before it does, a second or a few; `plain`: the function as plain Python, not compiled). Plain Python
+    ran it 3 to 8 times slower than the general solver compiled, which the reference path called before."""
     import importlib.util
-
-    from numba import njit
-    from numba.core.caching import FunctionCache
 
     path = cache.folder() / _file_name(name)
     spec = importlib.util.spec_from_file_location(f"mech_regulator_generated_{name}", path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module   # numba's cache finds the module's globals by its name
     spec.loader.exec_module(module)
+    if plain:
+        return getattr(module, name)
+    from numba import njit
+    from numba.core.caching import FunctionCache
+
     function = njit(cache=True, error_model="numpy")(getattr(module, name))   # as codegen compiles it
     if not FunctionCache(function.py_func)._cache_file._load_index():
         what = "joint reactions" if name.startswith(JOINT_LOADS_NAME) else "reduced inertia"
@@ -763,9 +770,15 @@ def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, f
     (reference_function: compiled, the source the fast path compiles; with `outputs`, prismatic joints' names: q,
     dq/dphi of each in turn); where a group cannot assemble or is at a dead point (the code gives NaN or an infinity:
     a square root of a negative number, a division by zero), the LinkageError of the general solver
-    (kinematics.make_solver) naming the group and why."""
+    (kinematics.make_solver) naming the group and why. Within cache.run_uncompiled it is the general solver's
+    plain flat.reduced instead when there are no `outputs` (no sympy: the same numbers to rounding, the tests
+    compare them), else the generated code as plain Python."""
     from mech_regulator.mechanisms.linkage.kinematics import make_solver
 
+    if cache.uncompiled() and not outputs:
+        from mech_regulator.mechanisms.linkage.kinematics import make_reduced as general_reduced
+
+        return general_reduced(linkage, structure, gravity)
     program = flat.encode(linkage, structure.groups, gravity)
     name, _ = reduced_source(program, output_records(program, linkage, outputs))
     function = reference_function(name)

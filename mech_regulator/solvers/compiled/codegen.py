@@ -266,6 +266,9 @@ def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float]
     return states
 
 
+_ANNOUNCED: set[str] = set()   # the scenes whose new module compile_scene has announced in this process
+
+
 def compile_scene(model: MachineModel) -> CompiledScene:
     """The compiled right-hand side and guards of a scene (generated, written to the cache and imported once per
     process; numba compiles only on the first start with an empty cache). A model compiled lately is answered
@@ -279,6 +282,10 @@ def compile_scene(model: MachineModel) -> CompiledScene:
                                        numba.__version__]).encode()).hexdigest()[:20]
     path = _module_path(digest)
     if digest not in _LOADED and (not path.exists() or path.read_text(encoding="utf-8") != source):
+        if model.scene.name not in _ANNOUNCED:   # once per scene (its machine and its governor have a module each)
+            _ANNOUNCED.add(model.scene.name)
+            print(f"note: compiling the fast path's module of scene '{model.scene.name}' once (a few seconds; later "
+                  "runs load it at once)", file=sys.stderr, flush=True)
         _write(path, source)
     module = load_scene_module(digest)
     compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,

@@ -1,13 +1,19 @@
-"""Warming the fast path: its compiled steppers (one per method, solvers/compiled/integrators.py) take some 10 to
-30 s each to compile on a fresh machine — once per machine and numba version, then numba loads them from its disk
-cache in a fraction of a second — while a scene's own module (codegen.py) compiles in about a second. So only the
-steppers are warmed ahead:
+"""Warming the fast path: its compiled steppers (one per method, solvers/compiled/integrators.py) take some 40 to
+50 s of CPU each to compile on a fresh machine (COMPILE_ESTIMATE; DOP853's on the 2-core machine: 44 s at a load of
+about 2.5, 49.6 s idle in an earlier measurement; 147 s of wall time under a load of about 10, 305 s with a pip
+install beside it: `NUMBA_CACHE_DIR=$(mktemp -d) MECH_REGULATOR_CACHE=$(mktemp -d) mech-regulator compile --method
+DOP853`) — once per machine and numba version, then numba loads them from its disk cache in a fraction of a second
+— while a scene's own module (codegen.py) compiles in a few seconds. So only the steppers are warmed ahead:
 
 - `mech-regulator compile` compiles every method's stepper, a line per method (and the linkage solver, which the
   reference path runs compiled too: mechanisms/linkage/flat.py);
-- a command whose scene asks for the fast path while its method's stepper is not compiled yet is served by the
-  reference path, and the stepper is compiled by a background process for the next run (`compile_in_background`;
-  a lock in the cache folder keeps it to one such process at a time).
+- the main job (`run`) compiles the stepper of its scene's method before its nodes start (`compile_before_the_run`):
+  its nodes exchange some hundreds of times a second, which the reference path's per-exchange work holds to a tenth
+  of the fast path's pace or less, and a compile beside them would take one of a small machine's cores; a compile that
+  another process has under way is waited for, not run twice;
+- any other command whose scene asks for the fast path while its method's stepper is not compiled yet is served by
+  the reference path, and the stepper is compiled by a background process for the next run
+  (`compile_in_background`; a lock in the cache folder keeps it to one such process at a time).
 
 Run as a module (`python -m mech_regulator.solvers.compiled.warm METHOD ...`) it compiles the methods named (all
 when none) under that lock: what the background process does.
@@ -27,6 +33,7 @@ from mech_regulator.solvers.compiled import FAST_METHODS
 
 LOCK_NAME = "compiling.lock"
 LOCK_VARIABLE = "MECH_REGULATOR_COMPILE_LOCK_FD"  # the lock's descriptor handed to the background process
+COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on a busy one"   # (docstring)
 
 
 def stepper_cached(method: str) -> bool:
@@ -47,7 +54,7 @@ def compile_steppers(methods: Iterable[str], report: Callable[[str], None] = lam
     for method in methods:
         cached = stepper_cached(method)
         report(f"{'loading' if cached else 'compiling'} the fast path's {method} stepper"
-               f"{'' if cached else ' (once, about 10-30 s)'} ...")
+               f"{'' if cached else f' (once, {COMPILE_ESTIMATE})'} ...")
         started = time.perf_counter()
         stepper(method)
         report(f"  {method} ready in {time.perf_counter() - started:.1f} s")
@@ -57,6 +64,28 @@ def _lock_path() -> Path:
     from mech_regulator.solvers.compiled.codegen import cache_folder
 
     return cache_folder() / LOCK_NAME
+
+
+def compile_before_the_run(method: str, report: Callable[[str], None]) -> None:
+    """Compile the stepper of `method` before a run, saying so with its estimate and then how long it took: in a
+    child process (this module's main, under the lock: a compile another process has under way is waited for, said
+    too, and then loaded), so that the compile's memory stays out of this process — the main job's nodes are forked
+    from it — and the run that follows is a warm run. Raises RuntimeError with the child's output if it fails."""
+    with open(_lock_path(), "a") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            busy = False
+        except BlockingIOError:
+            busy = True
+    report(f"waiting for the fast path's {method} stepper that another process is compiling (once, "
+           f"{COMPILE_ESTIMATE} in all) ..." if busy else
+           f"compiling the fast path's {method} stepper (once, {COMPILE_ESTIMATE}) ...")
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", __name__, method], stdin=subprocess.DEVNULL, capture_output=True,
+                          text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"compiling the fast path's {method} stepper failed:\n{done.stdout}{done.stderr}")
+    report(f"{method} ready in {time.perf_counter() - started:.1f} s")
 
 
 def compile_in_background(methods: Iterable[str]) -> bool:
