@@ -37,6 +37,7 @@ END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after 
 GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
+NOTHING_SIMULATED = "interrupted before the nodes were up: nothing was simulated"
 
 
 def private_environment(domain_id: int) -> dict[str, str]:
@@ -154,10 +155,14 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
         from mech_regulator.nodes.recorder import write_empty_run
 
-        write_empty_run(model, output, exchange_step)
+        write_empty_run(model, output, exchange_step, NOTHING_SIMULATED)
     if summary_path.exists():
         summary = json.loads(summary_path.read_text())
         print(format_cosimulation_summary(summary))
+        for topic, reasons in summary.get("refused", {}).items():
+            print(f"refused on {topic}: " + ", ".join(f"{count} {reason}" for reason, count in reasons.items()))
+        for disturbance in summary.get("disturbances", []):
+            print(f"disturbance: {disturbance}")
         if "start_up_s" in summary:
             print(f"start-up: {summary['start_up_s']:.3g} s from the command to the first exchange")
         if "max_lag_s" in summary:
@@ -178,6 +183,26 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
         return 2 if bad_input else 1
     return 130 if interrupted else 0
+
+
+def summary_before_start(argv: list[str]) -> Path | None:
+    """`run`'s summary when Ctrl-C came before main_job could start the nodes (while the command's modules or the
+    scene loaded; argv: the command line, 'run' first): status interrupted, nothing simulated, written next to the
+    recording `--out` names (default: runs/<scene argument>-<time>.rrd), and its path; None when argv does not parse
+    or the file cannot be written (the interrupt is then all there is to say)."""
+    from mech_regulator.cli.main import build_parser
+    from mech_regulator.cli.report import to_json
+
+    try:
+        args = build_parser().parse_args(argv)
+        output = args.out or default_recording(Path(args.scene).stem)
+        summary_path = output.with_suffix(".json")
+        output.parent.mkdir(parents=True, exist_ok=True)
+        summary_path.write_text(to_json({"scene": args.scene, "status": "interrupted", "message": NOTHING_SIMULATED,
+                                         "samples": 0, "t_end": 0.0, "recording": None}))
+    except (SystemExit, OSError):
+        return None
+    return summary_path
 
 
 def node_reason(log_text: str, name: str) -> str:
@@ -316,7 +341,11 @@ def _node_main(name: str, parameter_file: Path, environment: dict[str, str], log
     os.environ.clear()
     os.environ.update(environment)
     sys.argv = [f"{name}_node", "--ros-args", "--params-file", str(parameter_file)]
-    sys.exit(importlib.import_module(f"mech_regulator.nodes.{name}").main())
+    try:
+        node = importlib.import_module(f"mech_regulator.nodes.{name}")  # (the recorder's Rerun is imported here)
+    except KeyboardInterrupt:  # the launcher's Ctrl-C before the node was up: a normal stop, nothing to close
+        sys.exit(0)
+    sys.exit(node.main())
 
 
 def _name_process(name: str) -> None:
