@@ -244,16 +244,21 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.signals import SignalHandlerOptions
 
+    from mech_regulator.nodes.trust import Refusals, Speakers, real_number, receive
+
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
     with progress_bar(duration, quiet, label) as bar:
-        def on_diagnostics(message: DiagnosticArray) -> None:
+        def on_diagnostics(message: DiagnosticArray, speaker: str) -> None:
             for status in message.status:
-                if status.name.endswith("/machine"):
+                if speaker == "machine" and status.name.endswith("/machine"):
                     values = {item.key: item.value for item in status.values}
-                    bar.update(min(float(values.get("sim_time", 0.0)), duration) - bar.n)
+                    bar.update(min(real_number(values.get("sim_time", "0"), "sim_time"), duration) - bar.n)
 
-        node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 50)
+        speakers = Speakers(node)  # the progress is the machine's; the recorder counts what others say
+        speakers.allow("/diagnostics", *node_names(True))
+        receive(node, DiagnosticArray, "/diagnostics", on_diagnostics, 50, Refusals(node), speakers,
+                pass_speaker=True)
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)

@@ -243,7 +243,7 @@ class RecorderNode(Node):
             return
         summary_path = self.path.with_suffix(".json")
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
-            write_empty_run(self.model, self.path, self.exchange_step)
+            write_empty_run(self.model, self.path, self.exchange_step, extra=self.trust_summary("interrupted"))
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
         summary.update(self.pace())
@@ -371,16 +371,17 @@ class RecorderNode(Node):
 
 
 def write_empty_run(model: MachineModel, path: Path, exchange_step: float,
-                    message: str = "interrupted before the first complete exchange: nothing recorded yet") -> None:
+                    message: str = "interrupted before the first complete exchange: nothing recorded yet",
+                    extra: dict | None = None) -> None:
     """The files of a run stopped before its first complete exchange: the recording at `path` with its layout and
     no samples (unless one was written already) and the summary next to it (status interrupted, samples 0, `message`
-    saying when it stopped)."""
+    saying when it stopped, and `extra`: what was refused, what disturbed it)."""
     if not path.exists():
         RunRecording(model, path=path).close()
     summary = {"scene": model.scene.name, "status": "interrupted", "message": message,
                "exchange_step": exchange_step, "samples": 0, "t_end": 0.0,
                "omega_end": model.scene.scenario.initial.omega, "tripped_at": None, "governor": None,
-               "recording": str(path)}
+               "recording": str(path), **(extra or {})}
     path.with_suffix(".json").write_text(to_json(summary))
 
 
