@@ -394,9 +394,10 @@ class MachineNode(Node):
             missing = [name for name in self.peers if name not in subscribed]
             twice = namesakes(self, [self.get_name(), *self.peers])
             if twice:
-                raise SceneError(f"another node named {' and '.join(repr(name) for name in twice)} is on this ROS "
-                                 f"domain already (another run on the same --domain-id?): this run would take its "
-                                 "messages; use another domain, or end the other run")
+                named = ", ".join(repr(name) for name in twice)
+                raise SceneError(f"another node named {named} is on this ROS domain already (another run on the same "
+                                 "--domain-id?): this run would take its messages and it this run's; use another "
+                                 "domain, or end the other run")
             unpublished = [item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0]
             timed_out = time.monotonic() - waited > self.peer_timeout
             if missing and timed_out:
