@@ -1,4 +1,4 @@
-"""What the nodes share: parameters with descriptors, QoS, stamps, the scene, bad-message accounting,
+"""What the nodes share: parameters with descriptors, QoS, stamps, the scene, the run state, batches,
 diagnostics, and the `main` wrapper that turns a user's mistake into a message instead of a traceback.
 
 The nodes are thin: every number they publish comes from the core (mech_regulator.solvers.cosim).
@@ -104,6 +104,13 @@ def list_parameter(node: Node, name: str, value: list[str], description: str) ->
     descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_STRING_ARRAY, description=description,
                                      read_only=True)
     return list(node.declare_parameter(name, value, descriptor).value)
+
+
+def peer_parameter(node: Node, role: str) -> str:
+    """Declare the read-only parameter `<role>_node` (default: `role`): the name of the node, in this node's
+    namespace, whose messages this node takes as the `role`'s (trust.Speakers; docs/ros.md, "Who may speak"), and
+    return it."""
+    return text_parameter(node, f"{role}_node", role, f"the node whose messages this node takes as the {role}'s")
 
 
 def bool_parameter(node: Node, name: str, value: bool, description: str) -> bool:

@@ -35,10 +35,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, Batch, RunState, add_samples,
-                                         coupling_parameter, diagnostics, float_parameter, follow_run_state, run,
-                                         scene_model, sent_samples, stamp)
+                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
+                                         peer_parameter, run, scene_model, sent_samples, stamp)
 from mech_regulator.nodes.trust import (BadMessage, Refusals, RunStateMessage, Speakers, bounded, in_order,
-                                        joint_fields, peer_parameter, receive, stamp_of)
+                                        joint_fields, receive, stamp_of)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -62,7 +62,7 @@ class GovernorNode(Node):
         self.done = False
         self.refusals = Refusals(self, self.report)
         self.speakers = Speakers(self)
-        machine = peer_parameter(self, "machine", "machine")
+        machine = peer_parameter(self, "machine")
         for topic in ("joint_states", "machine/status"):
             self.speakers.allow(topic, machine)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)

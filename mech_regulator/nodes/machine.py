@@ -59,10 +59,10 @@ from std_srvs.srv import Trigger
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, Batch, PeerError,
                                          RunState, add_samples, bool_parameter, coupling_parameter, deliver_all,
-                                         diagnostics, float_parameter, int_parameter, list_parameter, run,
-                                         scene_model, sent_samples, stamp, text_parameter)
+                                         diagnostics, float_parameter, int_parameter, list_parameter,
+                                         peer_parameter, run, scene_model, sent_samples, stamp, text_parameter)
 from mech_regulator.nodes.trust import (BadMessage, Refusals, Speakers, bounded, in_order, joint_fields, namesakes,
-                                        not_ahead, peer_parameter, receive, stamp_of)
+                                        not_ahead, receive, stamp_of)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import MachineStepper, Samples, seconds, to_nanoseconds
 
@@ -142,8 +142,8 @@ class MachineNode(Node):
         self.reset_requested = False
         self.refusals = Refusals(self, lambda: self.report(force=True))
         self.speakers = Speakers(self)
-        self.speakers.allow("throttle", peer_parameter(self, "governor", LOCKSTEP_INPUTS["throttle"][0]))
-        self.speakers.allow("load_torque_stamped", peer_parameter(self, "scenario", LOCKSTEP_INPUTS["load"][0]))
+        self.speakers.allow("throttle", peer_parameter(self, LOCKSTEP_INPUTS["throttle"][0]))
+        self.speakers.allow("load_torque_stamped", peer_parameter(self, LOCKSTEP_INPUTS["load"][0]))
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
@@ -206,7 +206,6 @@ class MachineNode(Node):
             callers = []
         self.refusals.disturb(f"{name} called at t = {seconds(self.now_ns):.9g} s (trial {self.trial}) by "
                               f"{' or '.join(callers) or 'a node that has left'}", alters_results=False)
-        self.report(force=True)
 
     def on_reset(self, request, response):
         self.called_from_outside("reset")
@@ -430,11 +429,8 @@ class MachineNode(Node):
                     missing = self.missing_inputs()
                     self.silent.update(missing)
                     self.refusals.disturb(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
-                                          f"{self.peer_timeout:g} s (a lost or stalled peer): fail-safe",
-                                          alters_results=True)
-                    self.get_logger().error(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
-                                            f"{self.peer_timeout:g} s (parameter peer_timeout); going on without "
-                                            "waiting, fail-safe applies; this run is no longer reproducible")
+                                          f"{self.peer_timeout:g} s (parameter peer_timeout: a lost or stalled peer); "
+                                          "going on without waiting, fail-safe applies", alters_results=True)
                     self.report(force=True)
         else:
             self.executor.spin_once(timeout_sec=0.0)

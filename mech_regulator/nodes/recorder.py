@@ -35,9 +35,9 @@ from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
 from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
-                                         run, scene_model, text_parameter)
+                                         peer_parameter, run, scene_model, text_parameter)
 from mech_regulator.nodes.trust import (BadMessage, GovernorEvent, Refusals, RunStateMessage, Speakers, bounded,
-                                        json_message, merge_counts, peer_parameter, real_number, receive, report_of)
+                                        json_message, merge_counts, real_number, receive, report_of)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
@@ -92,7 +92,7 @@ class RecorderNode(Node):
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.refusals = Refusals(self, self.report)
         self.speakers = Speakers(self)
-        self.peer_names = {role: peer_parameter(self, role, role) for role in ("machine", "governor", "scenario")}
+        self.peer_names = {role: peer_parameter(self, role) for role in ("machine", "governor", "scenario")}
         for topic in ("machine/moments", "machine/status"):
             self.speakers.allow(topic, self.peer_names["machine"])
         for topic in ("governor/state", "governor/events"):

@@ -25,9 +25,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mech_regulator.nodes.common import (COMMAND_QOS, OK, RunState, diagnostics, follow_run_state, run,
-                                         scene_model, text_parameter)
-from mech_regulator.nodes.trust import (Refusals, RunStateMessage, Speakers, in_order, joint_fields, peer_parameter,
+from mech_regulator.nodes.common import (COMMAND_QOS, OK, RunState, diagnostics, follow_run_state, peer_parameter,
+                                         run, scene_model, text_parameter)
+from mech_regulator.nodes.trust import (Refusals, RunStateMessage, Speakers, in_order, joint_fields,
                                         receive, stamp_of)
 from mech_regulator.solvers.cosim import held_load_until, load_rate, seconds
 
@@ -47,7 +47,7 @@ class ScenarioNode(Node):
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.refusals = Refusals(self, self.report)
         self.speakers = Speakers(self)
-        machine = peer_parameter(self, "machine", "machine")
+        machine = peer_parameter(self, "machine")
         for topic in ("joint_states", "machine/status"):
             self.speakers.allow(topic, machine)
         receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)

@@ -162,15 +162,6 @@ def merge_counts(into: dict[str, dict[str, int]], counts: dict[str, dict[str, in
 # Who may speak
 
 
-def peer_parameter(node: Node, role: str, default: str) -> str:
-    """Declare the read-only parameter `<role>_node`: the name of the node this node takes `role`'s topics from
-    (in its own namespace), and return it."""
-    from mech_regulator.nodes.common import text_parameter
-
-    return text_parameter(node, f"{role}_node", default, f"the node whose messages this node takes as the {role}'s "
-                          "(docs/ros.md, \"Who may speak\")")
-
-
 class Speakers:
     """Which nodes a node takes each topic from (`allow`), and the publisher of each it pinned on it: the first
     accepted message's GID. A publisher is known by its GID through the graph (Node.get_publishers_info_by_topic: node
