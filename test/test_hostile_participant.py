@@ -367,3 +367,33 @@ def test_ctrl_c_while_the_nodes_start_leaves_a_summary(tmp_path, processes):
     assert_no_traceback(job.log, job.node_log)
     summary = json.loads(job.json.read_text())
     assert summary["status"] == "interrupted", summary
+
+
+# -------------------------------------------------------------------------------------------------
+# What a run cannot refuse: a lost peer
+
+
+def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domain_id):
+    scene, _ = constant_inertia_scene(tmp_path, duration=2.0)
+    output = tmp_path / "lost.rrd"
+    recorder = processes.node("recorder", {"scene_file": str(scene), "output": str(output), "coupling": "hold",
+                                           "exchange_step": 0.002})
+    governor = processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
+    scenario = processes.node("scenario", {"scene_file": str(scene)})
+    with probe_on(domain_id) as probe:
+        probe.spin_until(lambda: probe.node.count_subscribers("joint_states") >= 2
+                         and probe.node.count_subscribers("machine/moments") >= 1, "the peers listening",
+                         describe=processes.logs)  # (then the machine's short peer_timeout is for the run only)
+        statuses = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS, describe=processes.logs)
+        machine = processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", "recorder"],
+                                                               peer_timeout=2.0))
+        probe.spin_until(lambda: max(sim_times(statuses), default=0.0) > 0.0, "the run under way",
+                         describe=processes.logs)
+        scenario.kill()  # lost: no load for the next exchange time
+        for process in (machine, governor, recorder):
+            assert processes.wait(process) == 0, processes.logs()
+    assert_no_traceback(processes.log(machine), processes.log(recorder))
+    summary = json.loads(output.with_suffix(".json").read_text())
+    assert summary["status"] == "disturbed" and summary["t_end"] == 2.0, summary
+    assert any(text.startswith("machine: no load for t = ") for text in summary["disturbances"]), summary
+    assert "no load for t = " in summary["message"], summary

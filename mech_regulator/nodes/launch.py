@@ -101,8 +101,9 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     """Run the nodes on the model's scene (its solver.path decided: fast or reference) for `duration` [s] of
     simulated time (None: the scene's), `started` the command's
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
-    code (0, 1 if a node failed, 2 if every node that failed refused its input, 130 if interrupted; each failed node is
-    named with its reason). An exchange step that would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    code (0, 1 if a node failed or the summary's status is disturbed (docs/ros.md, "Who may speak"), 2 if every node
+    that failed refused its input, 130 if interrupted; each failed node is named with its reason). An exchange step
+    that would take more than limits.MAX_STEPS exchanges raises SceneError."""
     scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
@@ -151,6 +152,7 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
                     process.send_signal(signal.SIGINT)
             _wait_all(processes, STOP_TIMEOUT)
     summary_path = output.with_suffix(".json")
+    disturbed = False  # the summary says something the run could not refuse may have changed its numbers
     failed = [name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT)]
     if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
         from mech_regulator.nodes.recorder import write_empty_run
@@ -163,6 +165,7 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
             print(f"refused on {topic}: " + ", ".join(f"{count} {reason}" for reason, count in reasons.items()))
         for disturbance in summary.get("disturbances", []):
             print(f"disturbance: {disturbance}")
+        disturbed = summary["status"] == "disturbed"
         if "start_up_s" in summary:
             print(f"start-up: {summary['start_up_s']:.3g} s from the command to the first exchange")
         if "max_lag_s" in summary:
@@ -182,7 +185,7 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         print("".join(log_text.splitlines(keepends=True)[-20:]), file=sys.stderr)
         bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
         return 2 if bad_input else 1
-    return 130 if interrupted else 0
+    return 130 if interrupted else 1 if disturbed else 0
 
 
 def summary_before_start(argv: list[str]) -> Path | None:
