@@ -206,12 +206,13 @@ class RecorderNode(Node):
         for status in statuses:
             values = {item.key: item.value for item in status.values}
             report = report_of(values)
-            if speaker != self.peer_names["machine"]:
-                self.reports[speaker] = report
-                continue
-            when = real_number(values.get("sim_time", "0"), "sim_time")
-            tripped_at = real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True)
+            machine = speaker == self.peer_names["machine"]
+            when = real_number(values.get("sim_time", "0"), "sim_time") if machine else None
+            tripped_at = real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True) if machine \
+                else None
             self.reports[speaker] = report
+            if not machine:
+                continue
             if (status.level, status.message) != self.machine_status and status.level in LEVELS:
                 self.recording.add_event(int(round(when * 1e9)), f"machine: {status.message}", LEVELS[status.level])
             self.machine_status = (status.level, status.message)
