@@ -374,7 +374,8 @@ def test_ctrl_c_while_the_nodes_start_leaves_a_summary(tmp_path, processes):
 
 
 def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domain_id):
-    scene, _ = constant_inertia_scene(tmp_path, duration=2.0)
+    # the scenario's first answer holds the load up to the load event at 1.5 s: killed then, it is missed there
+    scene, _ = constant_inertia_scene(tmp_path, duration=2.0, load_events=[{"time": 1.5, "torque": 8.0}])
     output = tmp_path / "lost.rrd"
     recorder = processes.node("recorder", {"scene_file": str(scene), "output": str(output), "coupling": "hold",
                                            "exchange_step": 0.002})
@@ -384,16 +385,17 @@ def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domai
         probe.spin_until(lambda: probe.node.count_subscribers("joint_states") >= 2
                          and probe.node.count_subscribers("machine/moments") >= 1, "the peers listening",
                          describe=processes.logs)  # (then the machine's short peer_timeout is for the run only)
-        statuses = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS, describe=processes.logs)
+        answers = probe.listen(WrenchStamped, "load_torque_stamped", LISTEN_QOS, publishers=1,
+                               describe=processes.logs)
         machine = processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", "recorder"],
                                                                peer_timeout=2.0))
-        probe.spin_until(lambda: max(sim_times(statuses), default=0.0) > 0.0, "the run under way",
-                         describe=processes.logs)
-        scenario.kill()  # lost: no load for the next exchange time
+        probe.spin_until(lambda: answers, "the scenario's first answer", describe=processes.logs)
+        scenario.kill()  # lost: no load at the event
+        assert answers[0].wrench.force.x == 1.5 and stamp_ns(answers[0].header.stamp) == 0, answers
         for process in (machine, governor, recorder):
             assert processes.wait(process) == 0, processes.logs()
     assert_no_traceback(processes.log(machine), processes.log(recorder))
     summary = json.loads(output.with_suffix(".json").read_text())
     assert summary["status"] == "disturbed" and summary["t_end"] == 2.0, summary
-    assert any(text.startswith("machine: no load for t = ") for text in summary["disturbances"]), summary
-    assert "no load for t = " in summary["message"], summary
+    assert any(text.startswith("machine: no load for t = 1.5 s") for text in summary["disturbances"]), summary
+    assert "no load for t = 1.5 s" in summary["message"], summary

@@ -97,7 +97,8 @@ class RecorderNode(Node):
             self.speakers.allow(topic, self.peer_names["machine"])
         for topic in ("governor/state", "governor/events"):
             self.speakers.allow(topic, self.peer_names["governor"])
-        self.speakers.allow("/diagnostics", self.get_name(), *self.peer_names.values())
+        self.own_name = self.get_name()  # (for the summary, written after Ctrl-C may have shut rclpy down)
+        self.speakers.allow("/diagnostics", self.own_name, *self.peer_names.values())
         self.reports: dict[str, tuple[dict, list[str], bool]] = {}  # peer node -> its refusals, disturbances and
         # whether they alter the results (trust.report_of), from its latest diagnostics
         governor_states = receive(self, JointState, "governor/state", self.on_governor, STATE_QOS, self.refusals,
@@ -201,7 +202,7 @@ class RecorderNode(Node):
         strangers = [status.name for status in statuses if status.name != own]
         if strangers:
             raise BadMessage("names another node", f"diagnostics from '{speaker}' with statuses {strangers}")
-        if speaker == self.get_name():
+        if speaker == self.own_name:
             return
         for status in statuses:
             values = {item.key: item.value for item in status.values}
@@ -262,8 +263,8 @@ class RecorderNode(Node):
         """The summary's `refused` (topic -> reason -> count, summed over the nodes that refused) and `disturbances`
         ('<node>: <what>') when there are any; status `disturbed` (and the first such disturbance as its message) when
         one may have changed the numbers of a run that was otherwise complete."""
-        reports = {**self.reports, self.get_name(): (self.refusals.counts, self.refusals.disturbances,
-                                                     self.refusals.alters_results)}
+        reports = {**self.reports, self.own_name: (self.refusals.counts, self.refusals.disturbances,
+                                                   self.refusals.alters_results)}
         refused: dict[str, dict[str, int]] = {}
         disturbances: list[str] = []
         alters = False
