@@ -247,7 +247,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.signals import SignalHandlerOptions
 
-    from mech_regulator.nodes.trust import Refusals, Speakers, real_number, receive
+    from mech_regulator.nodes.trust import Refusals, Speakers, about_the_nodes, real_number, receive
 
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
@@ -261,7 +261,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
         speakers = Speakers(node)  # the progress is the machine's; the recorder counts what others say
         speakers.allow("/diagnostics", *node_names(True))
         receive(node, DiagnosticArray, "/diagnostics", on_diagnostics, 50, Refusals(node), speakers,
-                pass_speaker=True)
+                pass_speaker=True, concerns=about_the_nodes)
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)

@@ -36,8 +36,9 @@ from mech_regulator.cli.report import to_json, write_csv
 from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
                                          peer_parameter, run, scene_model, text_parameter)
-from mech_regulator.nodes.trust import (BadMessage, GovernorEvent, Refusals, RunStateMessage, Speakers, bounded,
-                                        json_message, merge_counts, real_number, receive, report_of)
+from mech_regulator.nodes.trust import (BadMessage, GovernorEvent, Refusals, RunStateMessage, Speakers,
+                                        about_the_nodes, bounded, json_message, merge_counts, real_number, receive,
+                                        report_of)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.launch import default_recording
 from mech_regulator.scene import SceneError
@@ -106,7 +107,7 @@ class RecorderNode(Node):
         self.streams = [governor_states] if self.model.governor is not None else []
         receive(self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers)
         receive(self, DiagnosticArray, "/diagnostics", self.on_diagnostics, 50, self.refusals, self.speakers,
-                pass_speaker=True)
+                pass_speaker=True, concerns=about_the_nodes)
         follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)

@@ -205,6 +205,12 @@ class Speakers:
         return name
 
 
+def about_the_nodes(message) -> bool:
+    """Whether a diagnostic_msgs/DiagnosticArray has a status of this package's nodes (named 'mech_regulator: ...',
+    common.diagnostics): a diagnostics aggregator's or another program's own statuses are none of their business."""
+    return any(status.name.startswith("mech_regulator: ") for status in message.status)
+
+
 def namesakes(node: Node, names: list[str]) -> list[str]:
     """Those of `names` that more than one node in this node's namespace has on the domain (the graph as this node
     sees it), in order."""
@@ -214,9 +220,11 @@ def namesakes(node: Node, names: list[str]) -> list[str]:
 
 
 def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusals: Refusals,
-            speakers: Speakers | None = None, pass_speaker: bool = False):
-    """Subscribe `node` to `topic`: each message is checked for its speaker (speakers.check) and handed to `handle`
-    (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a refusal is counted (refusals.refuse), any other error logged with its
+            speakers: Speakers | None = None, pass_speaker: bool = False,
+            concerns: Callable[[object], bool] | None = None):
+    """Subscribe `node` to `topic`: each message that `concerns` the node (default: all; a shared topic such as
+    /diagnostics also carries others' messages, passed over) is checked for its speaker (speakers.check) and handed
+    to `handle` (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a refusal is counted (refusals.refuse), any other error logged with its
     traceback and reported as a disturbance that may alter the results. Nothing raises out of the callback.
 
     rclpy 9.1's EventsExecutor calls a callback that takes message info with one argument, the (message, info)
@@ -224,6 +232,8 @@ def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusal
     that rclpy hands it the info)."""
     def on_message(*received) -> None:
         message, info = received if len(received) == 2 else received[0]
+        if concerns is not None and not concerns(message):
+            return
         try:
             speaker = speakers.check(topic, info) if speakers is not None else ""
             if pass_speaker:
