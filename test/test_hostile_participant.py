@@ -18,8 +18,8 @@ import time
 
 import pytest
 
-from ros_support import (LISTEN_QOS, WAIT, Processes, RunListener, diagnostic_values, domain_id,  # noqa: F401 (fixtures)
-                         probe_on, processes, stamp_ns)
+from ros_support import (LISTEN_QOS, WAIT, Processes, RunListener, diagnostic_values,  # noqa: F401 (fixtures)
+                         domain_id, probe_on, processes, stamp_ns)
 
 # after ros_support, which skips this module when rclpy is missing
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue

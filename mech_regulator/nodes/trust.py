@@ -224,8 +224,9 @@ def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusal
             concerns: Callable[[object], bool] | None = None):
     """Subscribe `node` to `topic`: each message that `concerns` the node (default: all; a shared topic such as
     /diagnostics also carries others' messages, passed over) is checked for its speaker (speakers.check) and handed
-    to `handle` (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a refusal is counted (refusals.refuse), any other error logged with its
-    traceback and reported as a disturbance that may alter the results. Nothing raises out of the callback.
+    to `handle` (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a
+    refusal is counted (refusals.refuse), any other error logged with its traceback and reported as a disturbance
+    that may alter the results. Nothing raises out of the callback.
 
     rclpy 9.1's EventsExecutor calls a callback that takes message info with one argument, the (message, info)
     tuple, where the other executors pass them as two: the callback takes both forms (its signature says two, so
