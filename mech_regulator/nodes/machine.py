@@ -487,9 +487,9 @@ class MachineNode(Node):
         failing_safe = fresh is None and expects_governor
         if failing_safe != self.failing_safe:
             self.failing_safe = failing_safe
-            if failing_safe and self.throttle_stamp is not None:  # a governor that had answered fell silent
-                self.refusals.disturb(f"no throttle for t = {seconds(self.now_ns):.9g} s: fail-safe "
-                                      f"'{self.fail_safe}'", alters_results=True)
+            if failing_safe and self.throttle_stamp is not None:  # a governor that had answered fell silent (when:
+                # in the log; reported once)
+                self.refusals.disturb(f"the governor fell silent: fail-safe '{self.fail_safe}'", alters_results=True)
             self.report(force=True)
         return self.throttle
 

@@ -87,6 +87,7 @@ class RecorderNode(Node):
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.machine_status = (DiagnosticStatus.OK, "")
         self.finished_at: int | None = None
+        self.machine_reported_end = False  # its last diagnostics (with its refusals and disturbances) are in
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
@@ -220,10 +221,11 @@ class RecorderNode(Node):
             self.machine_status = (status.level, status.message)
             if tripped_at is not None:
                 self.tripped_at = tripped_at
+            self.machine_reported_end = self.machine_reported_end or "finished_at_ns" in values
 
     def complete(self) -> bool:
-        """Whether the machine finished and its last samples (and the governor's) are in."""
-        if self.finished_at is None or self.finished_at not in self.machine:
+        """Whether the machine finished and its last samples (and the governor's) and its last diagnostics are in."""
+        if self.finished_at is None or self.finished_at not in self.machine or not self.machine_reported_end:
             return False
         return self.model.governor is None or self.finished_at in self.governor
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import inspect
 import json
 import math
-import time
 import traceback
 from typing import Callable, Literal
 
@@ -26,7 +25,7 @@ from rclpy.node import Node
 from mech_regulator.solvers.cosim import NANOSECONDS
 
 WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about refused messages
-REPORT_PERIOD = 0.1  # [s] of wall time between two diagnostics a new refusal or disturbance sends at once
+MAX_DISTURBANCES = 20  # disturbances a node keeps the text of (the others: counted, and in its log)
 LARGEST_STAMP = 2**53  # [ns] the largest exchange time a Batch carries exactly (about 104 days)
 UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"  # the graph's node name of an endpoint whose node it has not heard of yet
 
@@ -43,50 +42,42 @@ class Refusals:
     """What a node refused (counts per topic and reason) and what disturbed its run that it could not refuse (a lost
     peer, a stall, a service called from outside, a namesake on the domain, an error in a callback): each logged,
     both in the node's /diagnostics (key_values) and so in the recorder's summary. `alters_results`: whether a
-    disturbance may have changed the run's numbers (its summary is then not `complete`). `due` says when a new
-    refusal or disturbance should be reported at once (the recorder must have it before the run ends): `report`,
-    when given, is called then."""
+    disturbance may have changed the run's numbers (its summary is then not `complete`). `report`, when given, is
+    called at once for news: a topic and reason refused for the first time, or a disturbance (the recorder must have
+    them before the run ends; there are only so many of either, whatever a flood of bad messages does)."""
 
     def __init__(self, node: Node, report: Callable[[], None] | None = None):
         self.node, self.report = node, report
         self.counts: dict[str, dict[str, int]] = {}
         self.disturbances: list[str] = []
         self.alters_results = False
-        self.news = False  # a topic/reason or disturbance not reported yet
-        self.reported = -math.inf  # [s] time.monotonic() of the last report sent because of news
 
     def refuse(self, topic: str, reason: str, detail: str) -> None:
         """Count a refused message on `topic` under `reason` and warn (at most every WARNING_PERIOD s per call site)
         with what was wrong."""
         reasons = self.counts.setdefault(topic, {})
-        self.news = self.news or reason not in reasons
+        news = reason not in reasons
         reasons[reason] = reasons.get(reason, 0) + 1
         self.node.get_logger().warning(f"refused a message on {topic} ({reason}): {detail}; the state is unchanged "
                                        f"({reasons[reason]} so far)", throttle_duration_sec=WARNING_PERIOD)
-        self.report_news()
-
-    def disturb(self, text: str, alters_results: bool) -> None:
-        """Note a disturbance (once per text), logged as an error."""
-        if text in self.disturbances:
-            return
-        self.disturbances.append(text)
-        self.alters_results = self.alters_results or alters_results
-        self.news = True
-        self.node.get_logger().error(f"disturbance: {text}" + ("; this run's numbers are no longer the scene's"
-                                                               if alters_results else ""))
-        self.report_news()
-
-    def report_news(self) -> None:
-        """Call `report` when there is news due (due)."""
-        if self.report is not None and self.due():
+        if news and self.report is not None:
             self.report()
 
-    def due(self) -> bool:
-        """Whether there is news to report now (at most every REPORT_PERIOD s of wall time); resets the news."""
-        if self.news and time.monotonic() - self.reported >= REPORT_PERIOD:
-            self.news, self.reported = False, time.monotonic()
-            return True
-        return False
+    def disturb(self, text: str, alters_results: bool) -> None:
+        """Note a disturbance (once per text; the first MAX_DISTURBANCES texts, then that there were more), logged as
+        an error."""
+        if text in self.disturbances:
+            return
+        self.node.get_logger().error(f"disturbance: {text}" + ("; this run's numbers may no longer be the scene's"
+                                                               if alters_results else ""))
+        news = len(self.disturbances) <= MAX_DISTURBANCES or alters_results and not self.alters_results
+        if len(self.disturbances) < MAX_DISTURBANCES:
+            self.disturbances.append(text)
+        elif len(self.disturbances) == MAX_DISTURBANCES:
+            self.disturbances.append("more disturbances: see the node's log")
+        self.alters_results = self.alters_results or alters_results
+        if news and self.report is not None:
+            self.report()
 
     def status(self, level: bytes, text: str) -> tuple[bytes, str]:
         """A node's diagnostics level and message with its refusals and disturbances in them (WARN), unless it has a
