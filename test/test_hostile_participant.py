@@ -146,9 +146,21 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
     with probe_on(domain_id) as probe:
         job = MainJob(processes, tmp_path, SCENE, "attacked", domain_id)
         statuses = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS, describe=job.describe)
-        # (matched to each node that subscribes: the attacks below reach every one; /diagnostics: the recorder, the
-        # launcher and this test node)
-        subscribers = {"throttle": 1, "joint_states": 2, "machine/status": 3, "governor/events": 1,
+        # the run paused from outside at 0.2 s (so that it is still there, whatever the attacks take)
+        pause = probe.node.create_client(Trigger, "/machine/pause")
+        probe.spin_until(pause.service_is_ready, "the machine's ~/pause", describe=job.describe)
+        paused = []
+
+        def pause_at(message: JointState) -> None:
+            if not paused and stamp_ns(message.header.stamp) >= 200_000_000:
+                paused.append(pause.call_async(Trigger.Request()))
+
+        probe.listen(JointState, "joint_states", LISTEN_QOS, callback=pause_at)
+        probe.spin_until(lambda: paused and paused[0].done(), "the run paused at 0.2 s", describe=job.describe)
+        assert paused[0].result().success
+        # (matched to each node that subscribes: the attacks below reach every one; joint_states: this test node
+        # too; /diagnostics: this test node and the launcher too)
+        subscribers = {"throttle": 1, "joint_states": 3, "machine/status": 3, "governor/events": 1,
                        "/diagnostics": 3, "machine/moments": 1, "governor/state": 1, "load_torque_stamped": 1}
         types = {"throttle": JointState, "joint_states": JointState, "machine/status": String,
                  "governor/events": String, "/diagnostics": DiagnosticArray, "machine/moments": JointState,
@@ -157,11 +169,6 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         publishers = {topic: probe.publisher(types[topic], topic, count, **({"qos": STATE_QOS} if topic in durable
                                                                            else {}), describe=job.describe)
                       for topic, count in subscribers.items()}
-
-        def machine_at() -> float:
-            return max(sim_times(statuses), default=0.0)
-
-        probe.spin_until(lambda: machine_at() > 0.0, "the run under way", describe=job.describe)
         at = 1_000_000_000 * 1000  # [ns] 1000 s: far beyond the run
         attacks = [
             ("throttle", JointState(name=["throttle"], position=[0.0], velocity=[math.nan], effort=[math.nan],
@@ -183,10 +190,8 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
             publishers[topic].publish(message)
         for publisher in publishers.values():
             assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
-        callers = [probe.call(Trigger, f"/machine/{name}", Trigger.Request(), describe=job.describe)
-                   for name in ("pause", "resume")]
-        assert all(answer.success for answer in callers)
-        assert machine_at() < 1.5, "the run ended before the attacks; make SCENE longer"
+        assert job.process.poll() is None and max(sim_times(statuses), default=0.0) < 1.5, job.describe()
+        assert probe.call(Trigger, "/machine/resume", Trigger.Request(), describe=job.describe).success
         processes.wait(job.process, 4 * WAIT)
     assert job.process.returncode == 0, job.describe()
     assert_no_traceback(job.log, job.node_log)
