@@ -34,9 +34,9 @@ from mech_regulator.solvers.cosim import cosimulate
 from test_ros_nodes import (BASE_LOAD, MainJob, assert_equals_cosimulation, constant_inertia_scene,
                             machine_parameters, without_rclpy_noise)
 
-# engine_direct shortened to 1.5 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s), exchanged every 1 ms: long enough
-# (some seconds of wall time) for the attacker to strike while it runs
 RESEND = 0.3  # [s] of wall time between two sendings of a message whose refusal a test waits for
+# engine_direct shortened to 1.5 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s), exchanged every 1 ms (some seconds of
+# wall time: a second run has time to start while the first runs)
 SCENE = ["engine_direct", "--set", "scenario.duration=1.5", "--set", "scenario.load_events.0.time=0.4", "--set",
          "scenario.load_events.1.time=0.7", "--coupling", "hold", "--exchange-step", "1e-3"]
 
