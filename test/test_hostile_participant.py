@@ -402,5 +402,7 @@ def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domai
     assert_no_traceback(processes.log(machine), processes.log(recorder))
     summary = json.loads(output.with_suffix(".json").read_text())
     assert summary["status"] == "disturbed" and summary["t_end"] == 2.0, summary
-    assert any(text.startswith("machine: no load for t = 1.5 s") for text in summary["disturbances"]), summary
-    assert "no load for t = 1.5 s" in summary["message"], summary
+    # (at the load event, or at once should the machine not have had the answer the test node saw before the kill)
+    assert any(text.startswith("machine: no load for t = ") for text in summary["disturbances"]), \
+        summary["disturbances"]
+    assert "no load for t = " in summary["message"], summary
