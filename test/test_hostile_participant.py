@@ -146,9 +146,11 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
     with probe_on(domain_id) as probe:
         job = MainJob(processes, tmp_path, SCENE, "attacked", domain_id)
         statuses = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS, describe=job.describe)
-        # the run paused from outside at 0.2 s (so that it is still there, whatever the attacks take)
-        pause = probe.node.create_client(Trigger, "/machine/pause")
-        probe.spin_until(pause.service_is_ready, "the machine's ~/pause", describe=job.describe)
+        # the run paused from outside at 0.2 s (so that it is still there, whatever the attacks take); the clients
+        # made early: the machine names a caller from the graph, which learns of a new client a moment after it
+        pause, resume = (probe.node.create_client(Trigger, f"/machine/{name}") for name in ("pause", "resume"))
+        probe.spin_until(lambda: pause.service_is_ready() and resume.service_is_ready(), "the machine's services",
+                         describe=job.describe)
         paused = []
 
         def pause_at(message: JointState) -> None:
@@ -191,7 +193,9 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         for publisher in publishers.values():
             assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
         assert job.process.poll() is None and max(sim_times(statuses), default=0.0) < 1.5, job.describe()
-        assert probe.call(Trigger, "/machine/resume", Trigger.Request(), describe=job.describe).success
+        resumed = resume.call_async(Trigger.Request())
+        probe.spin_until(resumed.done, "the run resumed", describe=job.describe)
+        assert resumed.result().success
         processes.wait(job.process, 4 * WAIT)
     assert job.process.returncode == 0, job.describe()
     assert_no_traceback(job.log, job.node_log)

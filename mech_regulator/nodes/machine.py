@@ -205,7 +205,8 @@ class MachineNode(Node):
         except Exception:  # a node that left while the graph was read
             callers = []
         self.refusals.disturb(f"{name} called at t = {seconds(self.now_ns):.9g} s (trial {self.trial}) by "
-                              f"{' or '.join(callers) or 'a node that has left'}", alters_results=False)
+                              f"{' or '.join(callers) or 'a node the graph does not name (yet, or any more)'}",
+                              alters_results=False)
 
     def on_reset(self, request, response):
         self.called_from_outside("reset")
