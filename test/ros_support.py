@@ -316,13 +316,14 @@ class Probe:
 
 
 @contextlib.contextmanager
-def probe_on(domain: int):
-    """A test node on a domain (discovery on this machine only, as the nodes), closed at the end."""
+def probe_on(domain: int, name: str | None = None):
+    """A test node on a domain (discovery on this machine only, as the nodes), named `name` (default probe_<domain>),
+    closed at the end."""
     with pytest.MonkeyPatch.context() as patch:
         for key, value in ros_environment(domain).items():
             if key.startswith(("ROS_", "RMW_", "AMENT_")):
                 patch.setenv(key, value)
-        node = Probe(domain, f"probe_{domain}")
+        node = Probe(domain, name or f"probe_{domain}")
         try:
             yield node
         finally:

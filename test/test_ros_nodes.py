@@ -238,9 +238,11 @@ def test_columns_after_an_overspeed_trip_show_the_closed_throttle(tmp_path):
 
 def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, processes, probe):
     scene, _ = constant_inertia_scene(tmp_path, duration=0.6)
-    # the test node is the machine's `load` input (the scenario's constant BASE_LOAD, stamped), so the
-    # machine waits for it at every exchange time; the step itself goes on load_torque (Float64)
-    processes.node("machine", machine_parameters(scene, peers=["governor", probe.node.get_name()]))
+    # the test node is the machine's `load` input (the scenario's constant BASE_LOAD, stamped: the machine takes it
+    # as its scenario's), so the machine waits for it at every exchange time; the step itself goes on load_torque
+    # (Float64, from anyone)
+    processes.node("machine", machine_parameters(scene, peers=["governor", probe.node.get_name()],
+                                                 scenario_node=probe.node.get_name()))
     processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
     stamped = probe.publisher(WrenchStamped, "load_torque_stamped", describe=processes.logs)
     load = probe.publisher(Float64, "load_torque", describe=processes.logs)
@@ -280,13 +282,14 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
 
 
 # -------------------------------------------------------------------------------------------------
-# 4. Bad messages are counted and change nothing
+# 4. Bad messages are counted and change nothing (more in test_hostile_participant.py)
 
 
 @pytest.fixture(scope="module")
 def bad_messages_run(tmp_path_factory):
     """A lockstep run (machine, governor, scenario) that got bad messages on every input before it
-    started: (listener, end [ns], model, the governor's last diagnostics values)."""
+    started (the load out of range, a throttle and a speed from the test node, which is neither the governor nor
+    the machine): (listener, end [ns], model, the governor's last diagnostics values)."""
     folder = tmp_path_factory.mktemp("bad_messages")
     domain = next_domain_id()
     with processes_on(folder, domain) as processes, probe_on(domain) as probe:
@@ -310,7 +313,7 @@ def bad_messages_run(tmp_path_factory):
         listener.open_gate()  # the machine's third subscriber: the run starts
         end = listener.wait_finished()
         governor = probe.spin_until(lambda: [values for _, _, values in listener.statuses("/governor")
-                                             if values.get("rejected_messages", "0") != "0"],
+                                             if values.get("refused_messages", "0") != "0"],
                                     "the governor's diagnostics counting the bad message", describe=processes.logs)
     yield listener, end, model, governor[-1]  # (the nodes are stopped: the listener keeps what it received)
 
@@ -318,11 +321,12 @@ def bad_messages_run(tmp_path_factory):
 def test_bad_messages_are_rejected_and_counted(bad_messages_run):
     listener, end, model, governor = bad_messages_run
     level, message, values = listener.final_status()
-    assert level == DiagnosticStatus.WARN and message == "5 bad messages rejected", (level, message)
-    assert {key: value for key, value in values.items() if key.startswith("rejected")} == {
-        "rejected_messages": "5", "rejected: not finite": "2", "rejected: out of range": "2",
-        "rejected: wrong joint name": "1"}
-    assert governor["rejected_messages"] == "1" and governor["rejected: wrong joint name"] == "1", governor
+    assert level == DiagnosticStatus.WARN and message == "5 messages refused", (level, message)
+    assert {key: value for key, value in values.items() if key.startswith("refused")} == {
+        "refused_messages": "5", "refused: load_torque: not finite": "2", "refused: load_torque: out of range": "1",
+        "refused: throttle: not from governor": "2"}
+    assert governor["refused_messages"] == "1" and governor["refused: joint_states: not from machine"] == "1", \
+        governor
     # the state never saw them: the run is the in-process co-simulation to the last bit
     assert_equals_cosimulation(listener, end, model, cosimulate(model, 0.002))
 

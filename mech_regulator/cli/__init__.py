@@ -31,11 +31,18 @@ def entry() -> int:
 
 def run_command(argv: list[str]) -> int:
     """The command line (cli.main.main) run on argv in this process, imported here so that a Ctrl-C while its
-    modules load ends quietly with exit code 130, as a Ctrl-C later does."""
+    modules load ends quietly with exit code 130, as a Ctrl-C later does; `run` then still leaves its summary
+    (nodes.launch.summary_before_start: nothing simulated)."""
     try:
         from mech_regulator.cli.main import main
 
         return main(argv)
     except KeyboardInterrupt:
         print("mech-regulator: interrupted", file=sys.stderr)
+        if argv[:1] == ["run"]:
+            from mech_regulator.nodes.launch import summary_before_start
+
+            written = summary_before_start(argv)
+            if written is not None:
+                print(f"mech-regulator: nothing was simulated; wrote {written}", file=sys.stderr)
         return EXIT_INTERRUPTED

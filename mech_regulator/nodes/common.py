@@ -1,4 +1,4 @@
-"""What the nodes share: parameters with descriptors, QoS, stamps, the scene, bad-message accounting,
+"""What the nodes share: parameters with descriptors, QoS, stamps, the scene, the run state, batches,
 diagnostics, and the `main` wrapper that turns a user's mistake into a message instead of a traceback.
 
 The nodes are thin: every number they publish comes from the core (mech_regulator.solvers.cosim).
@@ -6,14 +6,12 @@ The nodes are thin: every number they publish comes from the core (mech_regulato
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import signal
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
 from typing import Callable
 
 import rclpy
@@ -32,12 +30,13 @@ from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import on_path_for_a_command
 from mech_regulator.solvers.cosim import COUPLINGS, DEFAULT_COUPLING, NANOSECONDS, cosimulation_refusal, seconds
+from mech_regulator.nodes.trust import (LARGEST_STAMP, BadMessage, Refusals, RunStateMessage, Speakers, joint_fields,
+                                        json_message, receive)
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 IDLE_SPIN_SLICE = 0.1  # [s] of wall time per wait of a spin loop that only waits for callbacks
 HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
-WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about bad messages
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
@@ -107,6 +106,13 @@ def list_parameter(node: Node, name: str, value: list[str], description: str) ->
     return list(node.declare_parameter(name, value, descriptor).value)
 
 
+def peer_parameter(node: Node, role: str) -> str:
+    """Declare the read-only parameter `<role>_node` (default: `role`): the name of the node, in this node's
+    namespace, whose messages this node takes as the `role`'s (trust.Speakers; docs/ros.md, "Who may speak"), and
+    return it."""
+    return text_parameter(node, f"{role}_node", role, f"the node whose messages this node takes as the {role}'s")
+
+
 def bool_parameter(node: Node, name: str, value: bool, description: str) -> bool:
     """Declare a read-only boolean parameter and return its value."""
     descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_BOOL, description=description,
@@ -159,6 +165,19 @@ def samples(message, joint: str, field: str) -> tuple[list[float], list[float]] 
     return list(times), list(values)
 
 
+def sent_samples(message, joint: str, field: str, low: float, high: float) -> tuple[list[float], list[float]] | None:
+    """The samples of `joint` in a sensor_msgs/JointState (samples), None when it has none; trust.BadMessage when it
+    has some that samples() cannot read (fewer than two, not finite, times not increasing) or values outside
+    [low, high]."""
+    if joint not in message.name:
+        return None
+    found = samples(message, joint, field)
+    if found is None or not all(low <= value <= high for value in found[1]):
+        raise BadMessage("bad samples", f"the {joint} samples are not at least two finite values within "
+                         f"[{low:g}, {high:g}] at increasing times")
+    return found
+
+
 class Batch:
     """What only the recorder reads (the machine's states and moments, the governor's state), gathered over exchanges
     and sent as one sensor_msgs/JointState, off the lockstep's critical path: one group per exchange time, each opened
@@ -204,15 +223,31 @@ class Batch:
             self.fields, self.groups = ([], [], [], []), 0
 
 
-def batch_groups(message) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
+def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
     """The groups of a Batch message: (exchange time [ns], {joint: (position, velocity, effort)}), in order; the
-    group's "stamp" joint among them (its velocity: the wall-clock time the sender gave)."""
+    group's "stamp" joint among them (its velocity: the wall-clock time the sender gave). Checked (trust.BadMessage
+    otherwise): the arrays as long as the names, a "stamp" first, exchange times whole, within 0..2^53 ns and
+    not decreasing, and every group with the joints `required`."""
+    names = joint_fields(message)
+    if names and names[0] != "stamp":
+        raise BadMessage("no stamp", f"a batch starting with joint {names[0]!r}, expected 'stamp'")
     groups: list[tuple[int, dict[str, tuple[float, float, float]]]] = []
-    for name, position, velocity, effort in zip(message.name, message.position, message.velocity, message.effort):
+    for name, position, velocity, effort in zip(names, message.position, message.velocity, message.effort):
         if name == "stamp":
+            if not (math.isfinite(position) and 0.0 <= position <= LARGEST_STAMP and position == int(position)):
+                raise BadMessage("bad stamp", f"a batch's exchange time {position!r} ns, expected a whole number in "
+                                 f"0..{LARGEST_STAMP}")
+            if groups and int(position) < groups[-1][0]:  # (a repeat: a peer answered an exchange time twice)
+                raise BadMessage("out of order", f"a batch's exchange time {position:.0f} ns after "
+                                 f"{groups[-1][0]} ns")
             groups.append((int(position), {"stamp": (position, velocity, effort)}))
-        elif groups:
+        else:
             groups[-1][1][name] = (position, velocity, effort)
+    for when, joints in groups:
+        missing = [joint for joint in required if joint not in joints]
+        if missing:
+            raise BadMessage("missing joint", f"the group at {seconds(when):.9g} s has no {', '.join(missing)} "
+                             f"(it has {', '.join(joints)})")
     return groups
 
 
@@ -243,73 +278,13 @@ class RunState:
     RUNNING, PAUSED, HOLDING, FINISHED = "running", "paused", "holding", "finished"
 
 
-def follow_run_state(node: Node, on_state: Callable[[dict], None]) -> None:
-    """Subscribe `node` to the machine's run state (RunState); on_state gets the decoded JSON object. A node that
-    follows the machine sets `node.done = True` when the state is finished, so `run` ends it by itself."""
-
-    def decode(message: String) -> None:
-        on_state(json.loads(message.data))
-
-    node.create_subscription(String, "machine/status", decode, STATUS_QOS)
-
-
-@dataclass
-class Rejections:
-    """Bad messages refused by a node, counted by reason; each reason warns at most every WARNING_PERIOD s."""
-
-    node: Node
-    counts: dict[str, int] = field(default_factory=dict)
-
-    def reject(self, reason: str, detail: str) -> None:
-        """Count a refused message under `reason` and warn (throttled) with what was wrong."""
-        self.counts[reason] = self.counts.get(reason, 0) + 1
-        self.node.get_logger().warning(f"rejected a message ({reason}): {detail}; the state is unchanged "
-                                       f"({self.counts[reason]} so far)", throttle_duration_sec=WARNING_PERIOD)
-
-    @property
-    def total(self) -> int:
-        return sum(self.counts.values())
-
-    def key_values(self) -> list[KeyValue]:
-        return [KeyValue(key="rejected_messages", value=str(self.total))] + [
-            KeyValue(key=f"rejected: {reason}", value=str(count)) for reason, count in sorted(self.counts.items())]
-
-
-def joint_value(message, joint: str, field: str, low: float, high: float, what: str,
-                rejections: Rejections, last_stamp: int | None) -> tuple[int, float] | None:
-    """(stamp [ns], value) of `field` ('position' or 'velocity') of `joint` in a sensor_msgs/JointState;
-    None, with the message rejected and counted, when the joint is missing, the value is not finite or
-    outside [low, high] (`what` names the bound, e.g. 'parameter max_speed'), or the stamp is older
-    than last_stamp."""
-    names = list(message.name)
-    if joint not in names:
-        rejections.reject("wrong joint name", f"JointState names {names}, expected a joint '{joint}'")
-        return None
-    values = getattr(message, field)
-    index = names.index(joint)
-    if index >= len(values):
-        rejections.reject(f"no {field}", f"no {field} for joint '{joint}'")
-        return None
-    value = values[index]
-    if not math.isfinite(value) or not low <= value <= high:
-        rejections.reject("out of range" if math.isfinite(value) else "not finite",
-                          f"{joint} {field} = {value!r}, expected a finite number in [{low:g}, {high:g}] ({what})")
-        return None
-    when = nanoseconds(message.header.stamp)
-    if last_stamp is not None and when < last_stamp:
-        rejections.reject("out of order", f"{joint} stamped {seconds(when):.9g} s after one stamped "
-                                          f"{seconds(last_stamp):.9g} s")
-        return None
-    return when, value
-
-
-def finite_in_range(value: float, limit: float) -> str | None:
-    """Why a received number is unacceptable (None if it is finite and |value| <= limit)."""
-    if not math.isfinite(value):
-        return "not finite"
-    if abs(value) > limit:
-        return "out of range"
-    return None
+def follow_run_state(node: Node, on_state: Callable[[RunStateMessage], None], refusals: Refusals,
+                     speakers: Speakers) -> None:
+    """Subscribe `node` to the machine's run state (RunState), taken from the node speakers allow on machine/status
+    only; on_state gets it checked (trust.RunStateMessage). A node that follows the machine sets `node.done = True`
+    when the state is finished, so `run` ends it by itself."""
+    receive(node, String, "machine/status", lambda message: on_state(json_message(message.data, RunStateMessage)),
+            STATUS_QOS, refusals, speakers)
 
 
 def diagnostics(node: Node, level: bytes, message: str, values: dict[str, object]) -> DiagnosticArray:

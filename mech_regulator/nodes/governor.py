@@ -34,9 +34,11 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, WARN, Batch, Rejections, RunState,
-                                         add_samples, coupling_parameter, diagnostics, float_parameter,
-                                         follow_run_state, joint_value, nanoseconds, run, samples, scene_model, stamp)
+from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, Batch, RunState, add_samples,
+                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
+                                         peer_parameter, run, scene_model, sent_samples, stamp)
+from mech_regulator.nodes.trust import (BadMessage, Refusals, RunStateMessage, Speakers, bounded, in_order,
+                                        joint_fields, receive, stamp_of)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -58,14 +60,18 @@ class GovernorNode(Node):
                                          0.0, 1e9)
         self.start_trial()
         self.done = False
-        self.rejections = Rejections(self)
+        self.refusals = Refusals(self, self.report)
+        self.speakers = Speakers(self)
+        machine = peer_parameter(self, "machine")
+        for topic in ("joint_states", "machine/status"):
+            self.speakers.allow(topic, machine)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
         self.states = Batch(self.create_publisher(JointState, "governor/state", STATE_QOS))
         self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
+        receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
-        follow_run_state(self, self.on_run_state)
+        follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
 
     def start_trial(self) -> None:
         """The governor's initial state: at the start and when the machine starts a new trial."""
@@ -75,34 +81,37 @@ class GovernorNode(Node):
         self.throttle = self.stepper.throttle  # [-] the last answer
         self.reported_events = 0
 
-    def on_run_state(self, state: dict) -> None:
+    def on_run_state(self, state: RunStateMessage) -> None:
         """Send the states gathered so far (the machine stops, pauses or starts again), and end by itself when the
         machine has finished, with its last diagnostics (what it rejected, even in a run shorter than their
         period)."""
         self.states.send()
-        self.done = state["state"] == RunState.FINISHED
+        self.done = state.state == RunState.FINISHED
         if self.done:
             self.report()
 
     def on_joint_states(self, message: JointState) -> None:
-        """Answer the crank speed at a stamped time with the throttle at that time."""
-        if nanoseconds(message.header.stamp) == 0 and self.time_ns:  # the machine's ~/reset: a new trial
+        """Answer the crank speed at a stamped time with the throttle at that time (speakers: from the machine only;
+        every field read is checked first: trust.BadMessage)."""
+        names = joint_fields(message)
+        if "crank" not in names:
+            raise BadMessage("wrong joint name", f"JointState names {names}, expected a joint 'crank'")
+        speed = (-self.max_speed, self.max_speed, "crank velocity [rad/s] (parameter max_speed)")
+        omega = bounded(message.velocity[names.index("crank")], *speed)
+        omega_middle = bounded(message.velocity[names.index("crank_midstep")], *speed) \
+            if "crank_midstep" in names else None
+        corrected, predicted = (sent_samples(message, name, "velocity", -self.max_speed, self.max_speed)
+                                for name in ("crank_corrected", "crank_predicted"))
+        when = stamp_of(message.header.stamp)
+        if when == 0 and self.time_ns:  # the machine's ~/reset (only the machine speaks here): a new trial
             self.states.send()
             self.start_trial()
-        received = joint_value(message, "crank", "velocity", -self.max_speed, self.max_speed, "parameter max_speed",
-                               self.rejections, self.time_ns)
-        if received is None:
-            return
-        when, omega = received
+        when = in_order(when, self.time_ns, "joint_states")
         self.previous_ns, self.time_ns = self.time_ns, when
-        names = list(message.name)
         waveform = None  # corrected coupling: the tentative throttle over the next step
         if self.coupling == "corrected":
-            throttle, waveform = self.stepper.answer_corrected(seconds(when), omega,
-                                                               samples(message, "crank_corrected", "velocity"),
-                                                               samples(message, "crank_predicted", "velocity"))
+            throttle, waveform = self.stepper.answer_corrected(seconds(when), omega, corrected, predicted)
         else:
-            omega_middle = message.velocity[names.index("crank_midstep")] if "crank_midstep" in names else None
             throttle = self.stepper.answer(seconds(when), omega, omega_middle)
         self.throttle = throttle
         answer = JointState(name=["throttle"], position=[throttle], velocity=[math.nan], effort=[math.nan])
@@ -128,12 +137,11 @@ class GovernorNode(Node):
         level, text = OK, "running"
         if self.stepper.status != "complete":
             level, text = ERROR, self.stepper.message
-        elif self.rejections.total:
-            level, text = WARN, f"{self.rejections.total} bad messages rejected"
+        level, text = self.refusals.status(level, text)
         values = {"scene": self.model.scene.name, "sim_time": seconds(self.time_ns or 0), "throttle": self.throttle,
                   "mode": "/".join(part for part in self.stepper.mode if part), "events": len(self.stepper.events)}
         array = diagnostics(self, level, text, values)
-        array.status[0].values += self.rejections.key_values()
+        array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
 
 

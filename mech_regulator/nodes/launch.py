@@ -37,6 +37,7 @@ STALL_REPORT = 30.0  # [s] of wall time without the machine's simulated time adv
 GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
+NOTHING_SIMULATED = "interrupted before the nodes were up: nothing was simulated"
 
 
 def private_environment(domain_id: int) -> dict[str, str]:
@@ -114,11 +115,12 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     simulated time (None: the scene's), the machine tripping above overspeed_trip [rad/s] (0: no trip, the default:
     nothing else sets one), `started` the command's
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
-    code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed, 2 if every
-    node that failed refused its input, 130 if interrupted; each failed node is named with its reason). controller
-    external: no governor_node, the machine waits for a node the user starts (nodes.controller); bag: also a rosbag2
-    recording there (viz.bag); peer_timeout: the machine's [s] (None: the parameter file's). An exchange step that
-    would take more than limits.MAX_STEPS exchanges raises SceneError."""
+    code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed or the
+    summary's status is disturbed (docs/ros.md, "Who may speak"), 2 if every node that failed refused its input, 130
+    if interrupted; each failed node is named with its reason). controller external: no governor_node, the machine
+    waits for a node the user starts (nodes.controller); bag: also a rosbag2 recording there (viz.bag);
+    peer_timeout: the machine's [s] (None: the parameter file's). An exchange step that would take more than
+    limits.MAX_STEPS exchanges raises SceneError."""
     scene = model.scene
     too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
     if too_many is not None:
@@ -173,14 +175,20 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
                     process.send_signal(signal.SIGINT)
             _wait_all(processes, STOP_TIMEOUT)
     summary_path = output.with_suffix(".json")
+    disturbed = False  # the summary says something the run could not refuse may have changed its numbers
     failed = [name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT)]
     if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
         from mech_regulator.nodes.recorder import write_empty_run
 
-        write_empty_run(model, output, exchange_step)
+        write_empty_run(model, output, exchange_step, NOTHING_SIMULATED)
     if summary_path.exists():
         summary = json.loads(summary_path.read_text())
         print(format_cosimulation_summary(summary))
+        for topic, reasons in summary.get("refused", {}).items():
+            print(f"refused on {topic}: " + ", ".join(f"{count} {reason}" for reason, count in reasons.items()))
+        for disturbance in summary.get("disturbances", []):
+            print(f"disturbance: {disturbance}")
+        disturbed = summary["status"] == "disturbed"
         if "start_up_s" in summary:
             print(f"start-up: {summary['start_up_s']:.3g} s from the command to the first exchange")
         if "max_lag_s" in summary:
@@ -200,7 +208,27 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         print("".join(log_text.splitlines(keepends=True)[-20:]), file=sys.stderr)
         bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
         return 2 if bad_input else 1
-    return 130 if interrupted else 0
+    return 130 if interrupted else 1 if disturbed else 0
+
+
+def summary_before_start(argv: list[str]) -> Path | None:
+    """`run`'s summary when Ctrl-C came before main_job could start the nodes (while the command's modules or the
+    scene loaded; argv: the command line, 'run' first): status interrupted, nothing simulated, written next to the
+    recording `--out` names (default: runs/<scene argument>-<time>.rrd), and its path; None when argv does not parse
+    or the file cannot be written (the interrupt is then all there is to say)."""
+    from mech_regulator.cli.main import build_parser
+    from mech_regulator.cli.report import to_json
+
+    try:
+        args = build_parser().parse_args(argv)
+        output = args.out or default_recording(Path(args.scene).stem)
+        summary_path = output.with_suffix(".json")
+        output.parent.mkdir(parents=True, exist_ok=True)
+        summary_path.write_text(to_json({"scene": args.scene, "status": "interrupted", "message": NOTHING_SIMULATED,
+                                         "samples": 0, "t_end": 0.0, "recording": None}))
+    except (SystemExit, OSError):
+        return None
+    return summary_path
 
 
 def machine_peer_timeout(parameters: dict) -> float:
@@ -250,22 +278,27 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.signals import SignalHandlerOptions
 
+    from mech_regulator.nodes.trust import Refusals, Speakers, about_the_nodes, real_number, receive
+
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)  # Ctrl-C stays a KeyboardInterrupt
     node = rclpy.create_node("main_job")
     advanced = {"sim_time": -1.0, "at": time.monotonic(), "reported": False}  # the machine's time and when it moved
     with progress_bar(duration, quiet, label, started=started) as bar:
-        def on_diagnostics(message: DiagnosticArray) -> None:
+        def on_diagnostics(message: DiagnosticArray, speaker: str) -> None:
             for status in message.status:
-                if status.name.endswith("/machine"):
+                if speaker == "machine" and status.name.endswith("/machine"):
                     values = {item.key: item.value for item in status.values}
-                    sim_time = float(values.get("sim_time", 0.0))
+                    sim_time = real_number(values.get("sim_time", "0"), "sim_time")
                     bar.update(min(sim_time, duration) - bar.n)
                     if sim_time > advanced["sim_time"]:
                         if advanced["reported"]:
                             print(f"\nmech-regulator: the machine goes on at t = {sim_time:.6g} s", file=sys.stderr)
                         advanced.update(sim_time=sim_time, at=time.monotonic(), reported=False)
 
-        node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 50)
+        speakers = Speakers(node)  # the progress is the machine's; the recorder counts what others say
+        speakers.allow("/diagnostics", *node_names(True))
+        receive(node, DiagnosticArray, "/diagnostics", on_diagnostics, 50, Refusals(node), speakers,
+                pass_speaker=True, concerns=about_the_nodes)
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)
@@ -358,7 +391,11 @@ def _node_main(name: str, parameter_file: Path, environment: dict[str, str], log
     os.environ.clear()
     os.environ.update(environment)
     sys.argv = [f"{name}_node", "--ros-args", "--params-file", str(parameter_file)]
-    sys.exit(importlib.import_module(f"mech_regulator.nodes.{name}").main())
+    try:
+        node = importlib.import_module(f"mech_regulator.nodes.{name}")  # (the recorder's Rerun is imported here)
+    except KeyboardInterrupt:  # the launcher's Ctrl-C before the node was up: a normal stop, nothing to close
+        sys.exit(0)
+    sys.exit(node.main())
 
 
 def _name_process(name: str) -> None:

@@ -60,10 +60,11 @@ from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
 from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, Batch, PeerError,
-                                         Rejections, RunState, add_samples, bool_parameter, coupling_parameter,
-                                         deliver_all, diagnostics, finite_in_range, float_parameter, int_parameter,
-                                         joint_value, list_parameter, nanoseconds, run, samples, scene_model, stamp,
-                                         text_parameter)
+                                         RunState, add_samples, bool_parameter, coupling_parameter, deliver_all,
+                                         diagnostics, float_parameter, int_parameter, list_parameter,
+                                         peer_parameter, run, scene_model, sent_samples, stamp, text_parameter)
+from mech_regulator.nodes.trust import (BadMessage, Refusals, Speakers, bounded, in_order, joint_fields, namesakes,
+                                        not_ahead, receive, stamp_of)
 from mech_regulator.nodes import controller
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.joints import output_joints
@@ -151,7 +152,12 @@ class MachineNode(Node):
         self.paused = bool_parameter(self, "start_paused", False, "start paused (~/resume or ~/step to go on)")
         self.steps_left = 0  # exchanges ~/step still allows while paused
         self.reset_requested = False
-        self.rejections = Rejections(self)
+        self.refusals = Refusals(self, lambda: self.report(force=True))
+        self.speakers = Speakers(self)
+        governor_name = peer_parameter(self, LOCKSTEP_INPUTS["throttle"][0])
+        self.speakers.allow("throttle", *(() if self.controller == "external" else (governor_name,)))
+        self.speakers.allow("load_torque_stamped", peer_parameter(self, LOCKSTEP_INPUTS["load"][0]))
+        self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.moments = Batch(self.create_publisher(JointState, "machine/moments", STATE_QOS))
@@ -161,9 +167,10 @@ class MachineNode(Node):
         for name, callback in (("reset", self.on_reset), ("pause", self.on_pause), ("resume", self.on_resume),
                                ("step", self.on_step)):
             self.create_service(Trigger, f"~/{name}", callback)
-        self.create_subscription(JointState, "throttle", self.on_throttle, COMMAND_QOS)
-        self.create_subscription(Float64, "load_torque", self.on_load, COMMAND_QOS)
-        self.create_subscription(WrenchStamped, "load_torque_stamped", self.on_stamped_load, COMMAND_QOS)
+        for message_type, topic, handle in ((JointState, "throttle", self.on_throttle),
+                                            (Float64, "load_torque", self.on_load),  # from anyone
+                                            (WrenchStamped, "load_torque_stamped", self.on_stamped_load)):
+            receive(self, message_type, topic, handle, COMMAND_QOS, self.refusals, self.speakers)
         self.add_post_set_parameters_callback(self.on_parameters)
         self.now_ns = 0
         self.state_message = JointState()
@@ -202,25 +209,43 @@ class MachineNode(Node):
     # ---------------------------------------------------------------------------------------------
     # Services: trials one after another.
 
+    def called_from_outside(self, service: str) -> None:
+        """Note a call of ~/<service> as a disturbance (the run's own nodes call none), with the nodes that have a
+        client of it: who may have called (a service request does not name its sender in rclpy)."""
+        name = f"{self.get_fully_qualified_name()}/{service}"
+        try:
+            callers = [node for node, namespace in self.get_node_names_and_namespaces() if node != self.get_name()
+                       and any(client == name for client, _ in
+                               self.get_client_names_and_types_by_node(node, namespace))]
+        except Exception:  # a node that left while the graph was read
+            callers = []
+        self.refusals.disturb(f"{name} called at t = {seconds(self.now_ns):.9g} s (trial {self.trial}) by "
+                              f"{' or '.join(callers) or 'a node the graph does not name (yet, or any more)'}",
+                              alters_results=False)
+
     def on_reset(self, request, response):
+        self.called_from_outside("reset")
         self.reset_requested = True
         response.success, response.message = True, (f"trial {self.trial} stops at t = {seconds(self.now_ns):.9g} s; "
                                                      f"trial {self.trial + 1} starts from the initial state at t = 0")
         return response
 
     def on_pause(self, request, response):
+        self.called_from_outside("pause")
         self.paused, self.steps_left = True, 0
         response.success, response.message = True, f"paused at t = {seconds(self.now_ns):.9g} s"
         self.publish_status()
         return response
 
     def on_resume(self, request, response):
+        self.called_from_outside("resume")
         self.paused, self.steps_left = False, 0
         response.success, response.message = True, f"running from t = {seconds(self.now_ns):.9g} s"
         self.publish_status()
         return response
 
     def on_step(self, request, response):
+        self.called_from_outside("step")
         self.paused = True
         self.steps_left += self.step_exchanges
         response.success, response.message = True, (f"advancing {self.steps_left} exchange(s) from "
@@ -231,38 +256,44 @@ class MachineNode(Node):
     # Inputs: every message is checked before it touches anything.
 
     def on_throttle(self, message: JointState) -> None:
-        received = joint_value(message, "throttle", "position", 0.0, 1.0, "a throttle opening", self.rejections,
-                               self.throttle_stamp)
-        if received is None:
-            return
-        when, value = received
-        if self.controller == "external" and self.time_mode == "lockstep" and when != self.now_ns:
-            self.wrong_stamp = when  # said when the controller times out (controller.silent)
+        """The throttle's answer (speakers: the governor node; with controller external, whichever node publishes it
+        first): the throttle in 0..1 for an exchange time the machine has published, not behind the newest taken;
+        with the corrected coupling, its tentative throttle over the step when it sends one. An external
+        controller's answer stamped other than the exchange it answers is kept to be named when it times out."""
+        names = joint_fields(message)
+        if "throttle" not in names:
+            raise BadMessage("wrong joint name", f"JointState names {names}, expected a joint 'throttle'")
+        value = bounded(message.position[names.index("throttle")], 0.0, 1.0, "throttle position (an opening)")
+        stamped = stamp_of(message.header.stamp)
+        if self.controller == "external" and self.time_mode == "lockstep" and stamped != self.now_ns:
+            self.wrong_stamp = stamped  # said when the controller times out (controller.silent)
+        when = in_order(not_ahead(stamped, self.now_ns, "throttle"), self.throttle_stamp, "throttle")
+        waveform = sent_samples(message, "throttle_tentative", "position", 0.0, 1.0)
         self.throttle_stamp = when
         self.stamped_throttle[when] = value
-        if self.corrects:
-            waveform = samples(message, "throttle_tentative", "position")
-            if waveform is not None:
-                self.stamped_waveform[when] = waveform
+        if self.corrects and waveform is not None:
+            self.stamped_waveform[when] = waveform
         self.silent.discard("throttle")
 
     def on_load(self, message: Float64) -> None:
-        problem = finite_in_range(message.data, self.max_load_torque)
-        if problem:
-            self.rejections.reject(problem, f"load_torque = {message.data!r} N m, expected a finite number within "
-                                            f"+-{self.max_load_torque:g} (parameter max_load_torque)")
-            return
-        self.pending_load = message.data
+        """A load from anyone (load_torque: the documented way to poke a run), within +-max_load_torque."""
+        self.pending_load = bounded(message.data, -self.max_load_torque, self.max_load_torque,
+                                    "load_torque [N m] (parameter max_load_torque)")
 
     def on_stamped_load(self, message: WrenchStamped) -> None:
+        """The scenario's load (speakers: from the scenario node only) for an exchange time the machine has published,
+        not behind the newest taken: within +-max_load_torque, and so at the end of the step its rate ramps over;
+        held up to force.x (NaN refused, +inf or beyond the run's end: to the end)."""
         value, rate, until = message.wrench.torque.z, message.wrench.force.z, message.wrench.force.x
-        problem = finite_in_range(value, self.max_load_torque)
-        if problem or not math.isfinite(rate) or math.isnan(until):
-            self.rejections.reject(problem or "not finite", f"load_torque_stamped torque.z = {value!r} N m, force.z "
-                                   f"(its rate) = {rate!r} N m/s, force.x (held until) = {until!r} s, expected "
-                                   f"finite numbers (force.x may be +inf), the load within +-{self.max_load_torque:g}")
-            return
-        when = nanoseconds(message.header.stamp)
+        bounds = (-self.max_load_torque, self.max_load_torque)
+        bounded(value, *bounds, "load_torque_stamped torque.z [N m] (parameter max_load_torque)")
+        bounded(value + rate * seconds(self.step_ns), *bounds, "load_torque_stamped torque.z + force.z (its rate) * "
+                "the exchange step [N m] (parameter max_load_torque)")
+        if math.isnan(until):
+            raise BadMessage("not finite", "load_torque_stamped force.x (held until) = nan, expected a time [s] or inf")
+        newest = max(self.stamped_load, default=None)
+        when = in_order(not_ahead(stamp_of(message.header.stamp), self.now_ns, "load_torque_stamped"), newest,
+                        "load_torque_stamped")
         self.stamped_load[when] = (value, rate)
         if until > seconds(when):  # beyond the run's end: to the end
             self.load_holds = (when, to_nanoseconds(until) if until <= seconds(self.end_ns) else math.inf, value, rate)
@@ -382,6 +413,12 @@ class MachineNode(Node):
             subscribed = {info.node_name for name in (topic, self.moments.publisher.topic_name)
                           for info in self.get_subscriptions_info_by_topic(name) if info.node_namespace == namespace}
             missing = [name for name in self.peers if name not in subscribed]
+            twice = namesakes(self, [self.get_name(), *self.peers])
+            if twice:
+                named = ", ".join(repr(name) for name in twice)
+                raise SceneError(f"another node named {named} is on this ROS domain already (another run on the same "
+                                 "--domain-id?): this run would take its messages and it this run's; use another "
+                                 "domain, or end the other run")
             unpublished = [item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0]
             timed_out = time.monotonic() - waited > self.peer_timeout
             if self.controller == "external" and "throttle" in unpublished and timed_out:
@@ -417,9 +454,9 @@ class MachineNode(Node):
                     if self.controller == "external" and "throttle" in missing:
                         self.end_without_controller()
                     self.silent.update(missing)
-                    self.get_logger().error(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
-                                            f"{self.peer_timeout:g} s (parameter peer_timeout); going on without "
-                                            "waiting, fail-safe applies; this run is no longer reproducible")
+                    self.refusals.disturb(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
+                                          f"{self.peer_timeout:g} s (parameter peer_timeout: a lost or stalled peer); "
+                                          "going on without waiting, fail-safe applies", alters_results=True)
                     self.report(force=True)
         else:
             self.executor.spin_once(timeout_sec=0.0)
@@ -485,6 +522,10 @@ class MachineNode(Node):
         failing_safe = fresh is None and expects_governor
         if failing_safe != self.failing_safe:
             self.failing_safe = failing_safe
+            if failing_safe and self.throttle_stamp is not None:  # a governor that had answered fell silent (when:
+                # in the log; listed once): in lockstep only once given up on (collect_inputs: that one alters the
+                # results); in realtime the numbers follow the wall clock anyway, and a late answer under load is one
+                self.refusals.disturb(f"the governor fell silent: fail-safe '{self.fail_safe}'", alters_results=False)
             self.report(force=True)
         return self.throttle
 
@@ -569,6 +610,10 @@ class MachineNode(Node):
         if not force and wall - self.last_diagnostics < DIAGNOSTICS_PERIOD:
             return
         self.last_diagnostics = wall
+        for name in set(namesakes(self, [self.get_name(), *self.peers])) - self.namesakes:
+            self.namesakes.add(name)
+            self.refusals.disturb(f"a second node named '{name}' appeared on the domain at t = "
+                                  f"{seconds(self.now_ns):.9g} s; its messages are refused", alters_results=False)
         self.diagnostics_publisher.publish(self.diagnostics())
 
     def diagnostics(self, finished: bool = False) -> DiagnosticArray:
@@ -580,8 +625,7 @@ class MachineNode(Node):
             level, message = ERROR, f"overspeed trip at t = {self.stepper.tripped_at:.6g} s: throttle closed"
         elif self.failing_safe or self.silent:
             level, message = WARN, f"fail-safe ({self.fail_safe}): no input from {', '.join(sorted(self.silent)) or 'the governor'}"
-        elif self.rejections.total:
-            level, message = WARN, f"{self.rejections.total} bad messages rejected"
+        level, message = self.refusals.status(level, message)
         if finished and level == OK:
             message = "finished"
         values = {"scene": self.model.scene.name, "time_mode": self.time_mode, "sim_time": seconds(self.now_ns),
@@ -593,7 +637,7 @@ class MachineNode(Node):
         if finished:
             values["finished_at_ns"] = self.now_ns
         array = diagnostics(self, level, message, values)
-        array.status[0].values += self.rejections.key_values()
+        array.status[0].values += self.refusals.key_values()
         return array
 
     def publish_status(self, state: str | None = None) -> None:

@@ -11,11 +11,15 @@ warnings (fail-safe, overspeed trip). When the machine says it finished (`machin
 waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it has, so the
 recording stays valid. A new trial number in `machine/status` is a new trial (the machine's ~/reset):
 the CSV and the summary are of the last trial, the recording keeps every trial with an event at each reset.
+It takes the machine's topics from its machine only, the governor's from its governor, and reads on `/diagnostics`
+the statuses of the machine, governor and scenario from those nodes only (docs/ros.md, "Who may speak"); the summary
+adds what they and it refused (`refused`: topic -> reason -> count) and what disturbed the run (`disturbances`; status
+`disturbed` when one may have changed its numbers).
 """
 
 from __future__ import annotations
 
-import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -31,7 +35,10 @@ from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
 from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
                                          coupling_parameter, diagnostics, float_parameter, follow_run_state,
-                                         run, scene_model, text_parameter)
+                                         peer_parameter, run, scene_model, text_parameter)
+from mech_regulator.nodes.trust import (BadMessage, GovernorEvent, Refusals, RunStateMessage, Speakers,
+                                        about_the_nodes, bounded, json_message, merge_counts, real_number, receive,
+                                        report_of)
 from mech_regulator.model import MachineModel
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.launch import default_recording
@@ -88,16 +95,30 @@ class RecorderNode(Node):
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.machine_status = (DiagnosticStatus.OK, "")
         self.finished_at: int | None = None
+        self.machine_reported_end = False  # its last diagnostics (with its refusals and disturbances) are in
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
-        governor_states = self.create_subscription(JointState, "governor/state", self.on_governor, STATE_QOS)
-        self.streams = [governor_states] if self.model.governor is not None else []
-        self.create_subscription(String, "governor/events", self.on_governor_event, STATE_QOS)
-        self.create_subscription(DiagnosticArray, "/diagnostics", self.on_diagnostics, 50)
-        follow_run_state(self, self.on_run_state)
-        self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.refusals = Refusals(self, self.report)
+        self.speakers = Speakers(self)
+        self.peer_names = {role: peer_parameter(self, role) for role in ("machine", "governor", "scenario")}
+        for topic in ("machine/moments", "machine/status"):
+            self.speakers.allow(topic, self.peer_names["machine"])
+        for topic in ("governor/state", "governor/events"):
+            self.speakers.allow(topic, self.peer_names["governor"])
+        self.own_name = self.get_name()  # (for the summary, written after Ctrl-C may have shut rclpy down)
+        self.speakers.allow("/diagnostics", self.own_name, *self.peer_names.values())
+        self.reports: dict[str, tuple[dict, list[str], bool]] = {}  # peer node -> its refusals, disturbances and
+        # whether they alter the results (trust.report_of), from its latest diagnostics
+        governor_states = receive(self, JointState, "governor/state", self.on_governor, STATE_QOS, self.refusals,
+                                  self.speakers)
+        self.streams = [governor_states] if self.model.governor is not None else []
+        receive(self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers)
+        receive(self, DiagnosticArray, "/diagnostics", self.on_diagnostics, 50, self.refusals, self.speakers,
+                pass_speaker=True, concerns=about_the_nodes)
+        follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
+        self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
 
@@ -111,18 +132,33 @@ class RecorderNode(Node):
         self.state_walls.clear()
         self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
 
-    def on_run_state(self, state: dict) -> None:
-        if state["trial"] > self.trial:
-            self.start_trial(state["trial"])
-        self.machine_result = (state["status"], self.machine_status[1])
-        self.max_lag = state.get("max_lag_s", self.max_lag)
-        if state["state"] == RunState.FINISHED:
-            self.finished_at = int(state["finished_at_ns"])
-            self.tripped_at = state["tripped_at"]
+    def on_run_state(self, state: RunStateMessage) -> None:
+        if state.trial > self.trial:
+            self.start_trial(state.trial)
+        self.machine_result = (state.status, self.machine_status[1])
+        self.max_lag = state.max_lag_s if state.max_lag_s is not None else self.max_lag
+        if state.state == RunState.FINISHED:
+            self.finished_at = state.finished_at_ns
+            self.tripped_at = state.tripped_at
 
     def on_moments(self, message: JointState) -> None:
-        """The machine's states and moments of one or more exchange times (common.Batch), in order."""
-        for when, joints in batch_groups(message):
+        """The machine's states and moments of one or more exchange times (common.Batch), in order, after the last
+        one recorded; every value read checked first (trust.BadMessage)."""
+        needed = ["crank", "drive", "resistance", "external", "net", "load"]
+        needed += ["coupling"] if self.model.coupling is not None else []
+        needed += ["driven"] if self.model.driven is not None else []
+        groups = batch_groups(message, tuple(needed))
+        if groups and self.machine and groups[0][0] < max(self.machine):
+            raise BadMessage("out of order", f"machine/moments from {seconds(groups[0][0]):.9g} s after "
+                             f"{seconds(max(self.machine)):.9g} s")
+        for when, joints in groups:
+            checks = [(joints["crank"][0], "crank position [rad]"), (joints["crank"][1], "crank velocity [rad/s]")]
+            checks += [(joints[name][2], f"{name} effort [N m]") for name in needed[1:6]]
+            checks += [(joints["coupling"][0], "coupling position [rad]")] if "coupling" in needed else []
+            checks += [(joints["driven"][1], "driven velocity [rad/s]")] if "driven" in needed else []
+            for value, what in checks:
+                bounded(value, -math.inf, math.inf, f"machine/moments at {seconds(when):.9g} s: {what}")
+        for when, joints in groups:
             phi, omega = joints["crank"][:2]
             driven = {}
             if self.model.coupling is not None:
@@ -141,8 +177,21 @@ class RecorderNode(Node):
                 self.recording.add_throttle(when, joints["throttle"][0])
 
     def on_governor(self, message: JointState) -> None:
-        """The governor's state at one or more exchange times (common.Batch), in order."""
-        for when, joints in batch_groups(message):
+        """The governor's state at one or more exchange times (common.Batch), in order, after the last one recorded;
+        every value read checked first (trust.BadMessage)."""
+        if self.model.governor is None:
+            raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
+        extra = tuple(name for name in ("servo", "feedback_shift") if name in self.model.governor.state_names)
+        groups = batch_groups(message, ("sleeve", "arm", "throttle", *extra))
+        if groups and self.governor and groups[0][0] < max(self.governor):
+            raise BadMessage("out of order", f"governor/state from {seconds(groups[0][0]):.9g} s after "
+                             f"{seconds(max(self.governor)):.9g} s")
+        for when, joints in groups:
+            values = [*joints["sleeve"][:2], *joints["arm"][:2], *(joints[name][0] for name in extra)]
+            for value in values:
+                bounded(value, -math.inf, math.inf, f"governor/state at {seconds(when):.9g} s")
+            bounded(joints["throttle"][0], 0.0, 1.0, f"governor/state at {seconds(when):.9g} s: throttle")
+        for when, joints in groups:
             values = {"sleeve": joints["sleeve"][0], "sleeve_velocity": joints["sleeve"][1],
                       "arm_angle": joints["arm"][0], "arm_rate": joints["arm"][1], "throttle": joints["throttle"][0]}
             for name in ("servo", "feedback_shift"):
@@ -152,25 +201,41 @@ class RecorderNode(Node):
             self.recording.add_governor(when, values)
 
     def on_governor_event(self, message: String) -> None:
-        event = json.loads(message.data)
-        self.events.append((event["time"], event["event"], tuple(event["mode"])))
-        self.recording.add_mode_change(int(round(event["time"] * 1e9)), event["event"])
+        event = json_message(message.data, GovernorEvent)
+        self.events.append((event.time, event.event, tuple(event.mode)))
+        self.recording.add_mode_change(int(round(event.time * 1e9)), event.event)
 
-    def on_diagnostics(self, message: DiagnosticArray) -> None:
-        for status in message.status:
-            if not status.name.endswith("/machine"):
-                continue
+    def on_diagnostics(self, message: DiagnosticArray, speaker: str) -> None:
+        """The statuses of the machine, governor and scenario (each from that node: `speaker`; one that names another
+        node is refused): their refusals and disturbances for the summary, and the machine's warnings and trip time.
+        Every value read is checked before any is used (trust.BadMessage)."""
+        own = f"mech_regulator: {self.get_namespace().rstrip('/')}/{speaker}"
+        statuses = [status for status in message.status if status.name.startswith("mech_regulator: ")]
+        strangers = [status.name for status in statuses if status.name != own]
+        if strangers:
+            raise BadMessage("names another node", f"diagnostics from '{speaker}' with statuses {strangers}")
+        if speaker == self.own_name:
+            return
+        for status in statuses:
             values = {item.key: item.value for item in status.values}
-            when = int(round(float(values.get("sim_time", 0.0)) * 1e9))
+            report = report_of(values)
+            machine = speaker == self.peer_names["machine"]
+            when = real_number(values.get("sim_time", "0"), "sim_time") if machine else None
+            tripped_at = real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True) if machine \
+                else None
+            self.reports[speaker] = report
+            if not machine:
+                continue
             if (status.level, status.message) != self.machine_status and status.level in LEVELS:
-                self.recording.add_event(when, f"machine: {status.message}", LEVELS[status.level])
+                self.recording.add_event(int(round(when * 1e9)), f"machine: {status.message}", LEVELS[status.level])
             self.machine_status = (status.level, status.message)
-            if values.get("tripped_at", "None") != "None":
-                self.tripped_at = float(values["tripped_at"])
+            if tripped_at is not None:
+                self.tripped_at = tripped_at
+            self.machine_reported_end = self.machine_reported_end or "finished_at_ns" in values
 
     def complete(self) -> bool:
-        """Whether the machine finished and its last samples (and the governor's) are in."""
-        if self.finished_at is None or self.finished_at not in self.machine:
+        """Whether the machine finished and its last samples (and the governor's) and its last diagnostics are in."""
+        if self.finished_at is None or self.finished_at not in self.machine or not self.machine_reported_end:
             return False
         return self.model.governor is None or self.finished_at in self.governor
 
@@ -193,13 +258,14 @@ class RecorderNode(Node):
             return
         summary_path = self.path.with_suffix(".json")
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
-            write_empty_run(self.model, self.path, self.exchange_step)
+            write_empty_run(self.model, self.path, self.exchange_step, extra=self.trust_summary("interrupted"))
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
         summary.update(self.pace())
         if not self.complete():
             summary["status"] = "interrupted"
             summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
+        summary.update(self.trust_summary(summary["status"]))
         csv_path = self.path.with_suffix(".csv")
         columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
         if self.controller == "external":
@@ -210,6 +276,29 @@ class RecorderNode(Node):
             summary["bag"] = str(write_bag(self.bag, self.model, run_data.times, run_data.states, run_data.throttle,
                                            run_data.external_load, summary["status"], summary.get("message", "")))
         summary_path.write_text(to_json(summary))
+
+    def trust_summary(self, status: str) -> dict:
+        """The summary's `refused` (topic -> reason -> count, summed over the nodes that refused) and `disturbances`
+        ('<node>: <what>') when there are any; status `disturbed` (and the first such disturbance as its message) when
+        one may have changed the numbers of a run that was otherwise complete."""
+        reports = {**self.reports, self.own_name: (self.refusals.counts, self.refusals.disturbances,
+                                                   self.refusals.alters_results)}
+        refused: dict[str, dict[str, int]] = {}
+        disturbances: list[str] = []
+        alters = False
+        for node, (counts, texts, alters_results) in sorted(reports.items()):
+            merge_counts(refused, counts)
+            disturbances += [f"{node}: {text}" for text in texts]
+            alters = alters or alters_results
+        summary: dict = {}
+        if refused:
+            summary["refused"] = refused
+        if disturbances:
+            summary["disturbances"] = disturbances
+        if alters and status == "complete":
+            summary.update(status="disturbed", message="the run was disturbed, its numbers may not be the scene's: "
+                           + "; ".join(disturbances))
+        return summary
 
     def pace(self) -> dict[str, float]:
         """How fast the nodes ran, from the wall-clock times the machine published its first and its last state
@@ -248,7 +337,9 @@ class RecorderNode(Node):
         times = self.complete_times()
         values = {"scene": self.model.scene.name, "recorded_exchanges": len(times),
                   "recorded_until": seconds(times[-1]) if times else None}
-        self.diagnostics_publisher.publish(diagnostics(self, OK, "recording", values))
+        array = diagnostics(self, *self.refusals.status(OK, "recording"), values)
+        array.status[0].values += self.refusals.key_values()
+        self.diagnostics_publisher.publish(array)
 
     def run_data(self) -> CoSimulation | None:
         """The run as the core's CoSimulation, from the exchange times all parts were received for."""
@@ -280,7 +371,7 @@ class RecorderNode(Node):
         while rclpy.ok() and any(stream.get_publisher_count() == 0 for stream in self.streams) \
                 and time.monotonic() - waited < STREAMS_WAIT:
             self.executor.spin_once(timeout_sec=MATCH_POLL)
-        self.create_subscription(JointState, "machine/moments", self.on_moments, STATE_QOS)
+        receive(self, JointState, "machine/moments", self.on_moments, STATE_QOS, self.refusals, self.speakers)
 
     def record(self) -> None:
         """Subscribe to the machine (subscribe_to_the_machine), then spin until the machine has finished and
@@ -299,16 +390,18 @@ class RecorderNode(Node):
                     return
 
 
-def write_empty_run(model: MachineModel, path: Path, exchange_step: float) -> None:
+def write_empty_run(model: MachineModel, path: Path, exchange_step: float,
+                    message: str = "interrupted before the first complete exchange: nothing recorded yet",
+                    extra: dict | None = None) -> None:
     """The files of a run stopped before its first complete exchange: the recording at `path` with its layout and
-    no samples (unless one was written already) and the summary next to it (status interrupted, samples 0)."""
+    no samples (unless one was written already) and the summary next to it (status interrupted, samples 0, `message`
+    saying when it stopped, and `extra`: what was refused, what disturbed it)."""
     if not path.exists():
         RunRecording(model, path=path).close()
-    summary = {"scene": model.scene.name, "status": "interrupted",
-               "message": "interrupted before the first complete exchange: nothing recorded yet",
+    summary = {"scene": model.scene.name, "status": "interrupted", "message": message,
                "exchange_step": exchange_step, "samples": 0, "t_end": 0.0,
                "omega_end": model.scene.scenario.initial.omega, "tripped_at": None, "governor": None,
-               "recording": str(path)}
+               "recording": str(path), **(extra or {})}
     path.with_suffix(".json").write_text(to_json(summary))
 
 

@@ -10,22 +10,28 @@ one per exchange. It reads every `joint_states` and passes over the covered ones
 that kept them from reaching it (parameters changed after each answer) crashed the machine now and then, Fast DDS
 evaluating it inside the machine's publish (docs/ros.md, "Speed"). In `realtime` it
 publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other publisher
-would. Either way it logs each load event. It ends by itself when the machine says the run is finished
-(`machine/status`).
+would. Either way it logs each load event. It takes `joint_states` and `machine/status` from its machine only
+(parameter machine_node; docs/ros.md, "Who may speak") and says what it refused on `/diagnostics`. It ends by itself
+when the machine says the run is finished (`machine/status`).
 """
 
 from __future__ import annotations
 
 import sys
 
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mech_regulator.nodes.common import (COMMAND_QOS, RunState, follow_run_state, nanoseconds, run, scene_model,
-                                         text_parameter)
+from mech_regulator.nodes.common import (COMMAND_QOS, OK, RunState, diagnostics, follow_run_state, peer_parameter,
+                                         run, scene_model, text_parameter)
+from mech_regulator.nodes.trust import (Refusals, RunStateMessage, Speakers, in_order, joint_fields,
+                                        receive, stamp_of)
 from mech_regulator.solvers.cosim import held_load_until, load_rate, seconds
+
+DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between diagnostics
 
 
 class ScenarioNode(Node):
@@ -38,27 +44,46 @@ class ScenarioNode(Node):
                                         "realtime: publish load changes", ("lockstep", "realtime"))
         self.stamped_publisher = self.create_publisher(WrenchStamped, "load_torque_stamped", COMMAND_QOS)
         self.load_publisher = self.create_publisher(Float64, "load_torque", COMMAND_QOS)
-        self.create_subscription(JointState, "joint_states", self.on_joint_states, COMMAND_QOS)
+        self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.refusals = Refusals(self, self.report)
+        self.speakers = Speakers(self)
+        machine = peer_parameter(self, "machine")
+        for topic in ("joint_states", "machine/status"):
+            self.speakers.allow(topic, machine)
+        receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)
+        self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.last_load: float | None = None
         self.last_ns = -1
         self.answered: tuple[int, int | float] = (0, 0)  # [ns] the exchange time of the last answer and the time up
         # to which its load holds (held_load_until): the exchange times between are covered by it
         self.done = False
-        follow_run_state(self, self.on_run_state)
+        follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
         self.get_logger().info(f"playing the load of scene '{self.model.scene.name}' ({self.time_mode})")  # (the first
         # log line takes up to a tenth of a second: not at t = 0)
 
-    def on_run_state(self, state: dict) -> None:
-        """End by itself when the machine has finished."""
-        self.done = state["state"] == RunState.FINISHED
+    def on_run_state(self, state: RunStateMessage) -> None:
+        """End by itself when the machine has finished, with its last diagnostics."""
+        self.done = state.state == RunState.FINISHED
+        if self.done:
+            self.report()
+
+    def report(self) -> None:
+        """Publish /diagnostics: the load last given, what was refused and what disturbed the run."""
+        level, text = self.refusals.status(OK, "playing")
+        values = {"scene": self.model.scene.name, "sim_time": seconds(max(self.last_ns, 0)), "load": self.last_load}
+        array = diagnostics(self, level, text, values)
+        array.status[0].values += self.refusals.key_values()
+        self.diagnostics_publisher.publish(array)
 
     def on_joint_states(self, message: JointState) -> None:
         """Give the load at the machine's exchange time (a time of 0 after later ones: the machine's ~/reset, the
-        scenario starts again)."""
-        when = nanoseconds(message.header.stamp)
+        scenario starts again; only the machine speaks here). Checked first: trust.BadMessage."""
+        joint_fields(message)
+        when = stamp_of(message.header.stamp)
         if when == 0 and self.last_ns > 0:
             self.last_load, self.last_ns, self.answered = None, -1, (0, 0)
-        if when <= self.last_ns and self.time_mode == "realtime":
+        in_order(when, self.last_ns if self.last_ns >= 0 else None, "joint_states")
+        if when == self.last_ns and self.time_mode == "realtime":
             return
         self.last_ns = max(when, self.last_ns)
         if self.answered[0] < when < self.answered[1]:  # the last answer's load holds (a repeat of its own exchange

@@ -1,0 +1,345 @@
+"""Who may speak to a node, what a message may say, and what a run could not refuse: the nodes' own defence on a
+shared ROS domain (docs/ros.md, "Who may speak").
+
+Every subscription of the nodes goes through `receive`: the publisher is identified by its GID (the message info rclpy
+gives a two-argument callback) and the graph's endpoint info (node name and namespace of that GID); a topic a node
+takes from named peers only is refused from anyone else, and from a second publisher of a peer's name (the first one
+accepted is pinned). Then the message's own checks run (they raise BadMessage); a refused message is counted per
+topic and reason (Refusals, in /diagnostics and the recorder's summary) and never reaches the state. An error a check
+did not foresee is caught at the callback's boundary, logged with its traceback and reported as a disturbance that
+may have changed the run's numbers: no node raises out of a callback, and no such run ends `complete` unmarked.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import math
+import traceback
+from typing import Callable, Literal
+
+import pydantic
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from rclpy.node import Node
+
+from mech_regulator.solvers.cosim import NANOSECONDS
+
+WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about refused messages
+MAX_DISTURBANCES = 20  # disturbances a node keeps the text of (the others: counted, and in its log)
+LARGEST_STAMP = 2**53  # [ns] the largest exchange time a Batch carries exactly (about 104 days)
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"  # the graph's node name of an endpoint whose node it has not heard of yet
+
+
+class BadMessage(Exception):
+    """A message refused: `reason` (short: the counter's key, e.g. 'not finite') and `detail` (what was wrong)."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason, self.detail = reason, detail
+
+
+class Refusals:
+    """What a node refused (counts per topic and reason) and what disturbed its run that it could not refuse (a lost
+    peer, a stall, a service called from outside, a namesake on the domain, an error in a callback): each logged,
+    both in the node's /diagnostics (key_values) and so in the recorder's summary. `alters_results`: whether a
+    disturbance may have changed the run's numbers (its summary is then not `complete`). `report`, when given, is
+    called at once for news: a topic and reason refused for the first time, or a disturbance (the recorder must have
+    them before the run ends; there are only so many of either, whatever a flood of bad messages does)."""
+
+    def __init__(self, node: Node, report: Callable[[], None] | None = None):
+        self.node, self.report = node, report
+        self.counts: dict[str, dict[str, int]] = {}
+        self.disturbances: list[str] = []
+        self.alters_results = False
+
+    def refuse(self, topic: str, reason: str, detail: str) -> None:
+        """Count a refused message on `topic` under `reason` and warn (at most every WARNING_PERIOD s per call site)
+        with what was wrong."""
+        reasons = self.counts.setdefault(topic, {})
+        news = reason not in reasons
+        reasons[reason] = reasons.get(reason, 0) + 1
+        self.node.get_logger().warning(f"refused a message on {topic} ({reason}): {detail}; the state is unchanged "
+                                       f"({reasons[reason]} so far)", throttle_duration_sec=WARNING_PERIOD)
+        if news and self.report is not None:
+            self.report()
+
+    def disturb(self, text: str, alters_results: bool) -> None:
+        """Note a disturbance (once per text; the first MAX_DISTURBANCES texts, then that there were more), logged as
+        an error."""
+        if text in self.disturbances:
+            return
+        self.node.get_logger().error(f"disturbance: {text}" + ("; this run's numbers may no longer be the scene's"
+                                                               if alters_results else ""))
+        news = len(self.disturbances) <= MAX_DISTURBANCES or alters_results and not self.alters_results
+        if len(self.disturbances) < MAX_DISTURBANCES:
+            self.disturbances.append(text)
+        elif len(self.disturbances) == MAX_DISTURBANCES:
+            self.disturbances.append("more disturbances: see the node's log")
+        self.alters_results = self.alters_results or alters_results
+        if news and self.report is not None:
+            self.report()
+
+    def status(self, level: bytes, text: str) -> tuple[bytes, str]:
+        """A node's diagnostics level and message with its refusals and disturbances in them (WARN), unless it has a
+        worse one already."""
+        if level != DiagnosticStatus.OK:
+            return level, text
+        if self.disturbances:
+            return DiagnosticStatus.WARN, f"disturbed: {self.disturbances[-1]}"
+        if self.total:
+            return DiagnosticStatus.WARN, f"{self.total} messages refused"
+        return level, text
+
+    @property
+    def total(self) -> int:
+        return sum(count for reasons in self.counts.values() for count in reasons.values())
+
+    def key_values(self) -> list[KeyValue]:
+        """The diagnostics' entries: refused_messages (the total), 'refused: <topic>: <reason>' (each count),
+        'disturbance: <n>' (each text) and alters_results."""
+        values = [KeyValue(key="refused_messages", value=str(self.total))]
+        values += [KeyValue(key=f"refused: {topic}: {reason}", value=str(count))
+                   for topic, reasons in sorted(self.counts.items()) for reason, count in sorted(reasons.items())]
+        values += [KeyValue(key=f"disturbance: {index}", value=text) for index, text in enumerate(self.disturbances)]
+        return values + [KeyValue(key="alters_results", value=str(self.alters_results))]
+
+
+def report_of(values: dict[str, str]) -> tuple[dict[str, dict[str, int]], list[str], bool]:
+    """(refused counts per topic and reason, disturbances, alters_results) from a node's diagnostics values
+    (Refusals.key_values), checked; raises BadMessage when they do not read so."""
+    counts: dict[str, dict[str, int]] = {}
+    disturbances = []
+    for key, value in values.items():
+        if key.startswith("refused: "):
+            topic, _, reason = key[len("refused: "):].partition(": ")
+            counts.setdefault(topic, {})[reason] = whole_number(value, key)
+        elif key.startswith("disturbance: "):
+            disturbances.append(value)
+    alters = values.get("alters_results", "False")
+    if alters not in ("True", "False"):
+        raise BadMessage("bad value", f"alters_results = {alters!r}, expected True or False")
+    return counts, disturbances, alters == "True"
+
+
+def whole_number(text: str, what: str) -> int:
+    """A count >= 0 written in a diagnostics value; BadMessage otherwise."""
+    if not text.isdigit():
+        raise BadMessage("bad value", f"{what} = {text!r}, expected a whole number >= 0")
+    return int(text)
+
+
+def real_number(text: str, what: str, allow_none: bool = False) -> float | None:
+    """A finite number written in a diagnostics value ('None' too when allow_none); BadMessage otherwise."""
+    if allow_none and text == "None":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise BadMessage("bad value", f"{what} = {text!r}, expected a finite number" + (" or None" if allow_none
+                                                                                        else ""))
+    return value
+
+
+def merge_counts(into: dict[str, dict[str, int]], counts: dict[str, dict[str, int]]) -> None:
+    """Add refusal counts (topic -> reason -> count) to `into`."""
+    for topic, reasons in counts.items():
+        for reason, count in reasons.items():
+            into.setdefault(topic, {})[reason] = into.get(topic, {}).get(reason, 0) + count
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# Who may speak
+
+
+class Speakers:
+    """Which nodes a node takes each topic from (`allow`), and the publisher of each it pinned on it: the first
+    accepted message's GID. A publisher is known by its GID through the graph (Node.get_publishers_info_by_topic: node
+    name and namespace of each endpoint GID), looked up again whenever a GID is new."""
+
+    def __init__(self, node: Node):
+        self.node = node
+        self.allowed: dict[str, tuple[str, ...]] = {}  # topic -> node names
+        self.pinned: dict[tuple[str, str], bytes] = {}  # (topic, node name) -> GID of its accepted publisher
+        self.names: dict[bytes, str] = {}  # GID -> node name (in this node's namespace; '' elsewhere)
+
+    def allow(self, topic: str, *node_names: str) -> None:
+        """Take `topic` from these nodes only; with no names, from whichever publisher sends first (pinned: an
+        external controller, whose name the run does not know)."""
+        self.allowed[topic] = node_names
+
+    def publisher_name(self, topic: str, gid: bytes) -> str:
+        """The name of the node that has the publisher `gid` on `topic` ('' when the graph does not list it with a
+        node name in this node's namespace yet)."""
+        if gid not in self.names:
+            namespace = self.node.get_namespace()
+            for info in self.node.get_publishers_info_by_topic(topic):
+                if info.node_name != UNKNOWN_NODE:
+                    self.names[bytes(info.endpoint_gid)] = info.node_name if info.node_namespace == namespace else ""
+        return self.names.get(gid, "")
+
+    def check(self, topic: str, info: dict | None) -> str:
+        """The name of the node that sent a message on `topic` (info: its rclpy MessageInfo), '' for a topic open to
+        all; BadMessage unless it is an allowed node's pinned publisher, or an allowed node's first publisher on the
+        topic (then pinned)."""
+        expected = self.allowed.get(topic)
+        if expected is None:
+            return ""
+        gid = bytes(((info or {}).get("publisher_gid") or {}).get("data") or b"")
+        name = self.publisher_name(topic, gid) if gid else ""
+        if expected and name not in expected:
+            sender = name or "a publisher the graph does not name"
+            raise BadMessage("not from " + " or ".join(expected),
+                             f"sent by {sender}; this node takes {topic} from {' or '.join(expected)} only")
+        if self.pinned.setdefault((topic, name if expected else ""), gid) != gid:
+            first = f"node '{name}'" if expected else "the first publisher"
+            raise BadMessage("second publisher", f"a second publisher of {first} on {topic} (another node of "
+                             "that name on the domain?); the first one is kept")
+        return name
+
+
+def about_the_nodes(message) -> bool:
+    """Whether a diagnostic_msgs/DiagnosticArray has a status of this package's nodes (named 'mech_regulator: ...',
+    common.diagnostics): a diagnostics aggregator's or another program's own statuses are none of their business."""
+    return any(status.name.startswith("mech_regulator: ") for status in message.status)
+
+
+def namesakes(node: Node, names: list[str]) -> list[str]:
+    """Those of `names` that more than one node in this node's namespace has on the domain (the graph as this node
+    sees it), in order."""
+    namespace = node.get_namespace()
+    seen = [name for name, space in node.get_node_names_and_namespaces() if space == namespace]
+    return [name for name in dict.fromkeys(names) if seen.count(name) > 1]
+
+
+def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusals: Refusals,
+            speakers: Speakers | None = None, pass_speaker: bool = False,
+            concerns: Callable[[object], bool] | None = None):
+    """Subscribe `node` to `topic`: each message that `concerns` the node (default: all; a shared topic such as
+    /diagnostics also carries others' messages, passed over) is checked for its speaker (speakers.check) and handed
+    to `handle` (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a
+    refusal is counted (refusals.refuse), any other error logged with its traceback and reported as a disturbance
+    that may alter the results. Nothing raises out of the callback.
+
+    rclpy 9.1's EventsExecutor calls a callback that takes message info with one argument, the (message, info)
+    tuple, where the other executors pass them as two: the callback takes both forms (its signature says two, so
+    that rclpy hands it the info)."""
+    def on_message(*received) -> None:
+        message, info = received if len(received) == 2 else received[0]
+        if concerns is not None and not concerns(message):
+            return
+        try:
+            speaker = speakers.check(topic, info) if speakers is not None else ""
+            if pass_speaker:
+                handle(message, speaker)
+            else:
+                handle(message)
+        except BadMessage as refused:
+            refusals.refuse(topic, refused.reason, refused.detail)
+        except Exception as error:  # what no check foresaw: the message may have changed the state half way
+            node.get_logger().error(f"a message on {topic} raised {type(error).__name__}: {error}\n"
+                                    f"{traceback.format_exc()}")
+            refusals.disturb(f"a message on {topic} raised {type(error).__name__}: {error}", alters_results=True)
+
+    on_message.__signature__ = inspect.Signature([
+        inspect.Parameter("message", inspect.Parameter.POSITIONAL_ONLY),
+        inspect.Parameter("info", inspect.Parameter.POSITIONAL_ONLY)])
+    return node.create_subscription(message_type, topic, on_message, qos)
+
+
+# ---------------------------------------------------------------------------------------------------------------------
+# What a message may say
+
+
+def stamp_of(stamp) -> int:
+    """Whole nanoseconds of a builtin_interfaces/Time, checked: seconds >= 0, nanoseconds < 1e9, at most
+    LARGEST_STAMP; BadMessage otherwise."""
+    if stamp.sec < 0 or stamp.nanosec >= NANOSECONDS or stamp.sec * NANOSECONDS + stamp.nanosec > LARGEST_STAMP:
+        raise BadMessage("bad stamp", f"stamp {stamp.sec} s {stamp.nanosec} ns, expected a time >= 0 with nanoseconds "
+                         f"below 1e9, at most {LARGEST_STAMP} ns")
+    return stamp.sec * NANOSECONDS + stamp.nanosec
+
+
+def joint_fields(message) -> list[str]:
+    """The names of a sensor_msgs/JointState, checked against its arrays: each of position, velocity and effort as
+    long as the names; BadMessage otherwise."""
+    names = list(message.name)
+    lengths = {field: len(getattr(message, field)) for field in ("position", "velocity", "effort")}
+    if any(length != len(names) for length in lengths.values()):
+        raise BadMessage("array lengths", f"{len(names)} names but " + ", ".join(
+            f"{length} {field}s" for field, length in lengths.items()) + "; expected one of each per name")
+    return names
+
+
+def bounded(value: float, low: float, high: float, what: str) -> float:
+    """`value` if it is finite and within [low, high]; BadMessage ('not finite' or 'out of range') naming `what`."""
+    if not math.isfinite(value):
+        raise BadMessage("not finite", f"{what} = {value!r}, expected a finite number in [{low:g}, {high:g}]")
+    if not low <= value <= high:
+        raise BadMessage("out of range", f"{what} = {value!r}, expected a finite number in [{low:g}, {high:g}]")
+    return value
+
+
+def in_order(when: int, newest: int | None, what: str) -> int:
+    """`when` [ns] unless it is behind `newest` [ns] (what was taken already): BadMessage 'out of order'."""
+    if newest is not None and when < newest:
+        raise BadMessage("out of order", f"{what} stamped {when / NANOSECONDS:.9g} s after one stamped "
+                         f"{newest / NANOSECONDS:.9g} s")
+    return when
+
+
+def not_ahead(when: int, latest: int, what: str) -> int:
+    """`when` [ns] unless it is ahead of `latest` [ns] (the newest exchange time the machine has published: nothing
+    can answer a time not asked yet): BadMessage 'ahead of the machine'."""
+    if when > latest:
+        raise BadMessage("ahead of the machine", f"{what} stamped {when / NANOSECONDS:.9g} s, the machine is at "
+                         f"{latest / NANOSECONDS:.9g} s")
+    return when
+
+
+FiniteTime = pydantic.confloat(allow_inf_nan=False, ge=0.0)  # [s]
+
+
+class RunStateMessage(pydantic.BaseModel):
+    """machine/status as the nodes read it (common.RunState)."""
+
+    model_config = pydantic.ConfigDict(extra="ignore", strict=True)
+
+    state: Literal["running", "paused", "holding", "finished"]
+    time: FiniteTime
+    trial: pydantic.conint(ge=1)
+    status: str
+    tripped_at: FiniteTime | None = None
+    max_lag_s: pydantic.confloat(allow_inf_nan=False) | None = None
+    finished_at_ns: pydantic.conint(ge=0, le=LARGEST_STAMP) | None = None
+
+    @pydantic.model_validator(mode="after")
+    def finished_says_when(self):
+        if self.state == "finished" and self.finished_at_ns is None:
+            raise ValueError("a finished state needs finished_at_ns")
+        return self
+
+
+class GovernorEvent(pydantic.BaseModel):
+    """An entry of governor/events: a mode change at `time` [s]."""
+
+    model_config = pydantic.ConfigDict(extra="forbid", strict=True)
+
+    time: FiniteTime
+    event: str
+    mode: pydantic.conlist(str | None, min_length=1, max_length=4)
+
+
+def json_message(text: str, model: type[pydantic.BaseModel]):
+    """The JSON object `text` read as `model`; BadMessage ('bad JSON' or 'bad fields') naming what is wrong."""
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, RecursionError) as error:
+        raise BadMessage("bad JSON", f"{text[:80]!r}: {error}") from None
+    try:
+        return model.model_validate(data)
+    except pydantic.ValidationError as error:
+        problems = "; ".join(f"{'.'.join(map(str, item['loc'])) or 'the message'}: {item['msg']}"
+                             for item in error.errors()[:3])
+        raise BadMessage("bad fields", f"{text[:80]!r}: {problems}") from None
