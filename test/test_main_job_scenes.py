@@ -282,3 +282,18 @@ def wait_for(condition, what: str, describe) -> None:
         if time.monotonic() > deadline:
             pytest.fail(f"timed out after {WAIT} s waiting for {what}\n{describe()}")
         time.sleep(0.1)
+
+
+def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
+    """A load that drives the engine backwards past its trip (9.9e4 N m from 0.1 s, trip 300 rad/s both ways): the
+    machine's run fails there, and the summary says `failed` with why (not `interrupted`, as the recorder once wrote
+    over it); `run` exits 1, and the CSV keeps the exchanges up to there."""
+    result, rrd = play("engine_direct", tmp_path / "run", "--overspeed-trip", "300",
+                       "--set", "scenario.load_events=[{time: 0.1, torque: 99000.0}]")
+    described = f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    assert result.returncode == 1 and "Traceback" not in result.stderr, described
+    summary = json.loads(rrd.with_suffix(".json").read_text())
+    assert summary["status"] == "failed" and "driven backwards at t = " in summary["message"], summary
+    assert 0.1 <= summary["t_end"] < PLAYED, summary
+    assert rrd.with_suffix(".csv").read_bytes().count(b"\n") > 5
+    assert node_processes(str(rrd.parent)) == []

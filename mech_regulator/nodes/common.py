@@ -228,7 +228,7 @@ def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dic
     group's "stamp" joint among them (its velocity: the wall-clock time the sender gave). Checked (trust.BadMessage
     otherwise): the arrays as long as the names, a "stamp" first, exchange times whole, within 0..2^53 ns and
     not decreasing, and every group with the joints `required`."""
-    names = joint_fields(message)
+    names = joint_fields(message, "position", "velocity", "effort")
     if names and names[0] != "stamp":
         raise BadMessage("no stamp", f"a batch starting with joint {names[0]!r}, expected 'stamp'")
     groups: list[tuple[int, dict[str, tuple[float, float, float]]]] = []

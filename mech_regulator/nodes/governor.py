@@ -93,7 +93,7 @@ class GovernorNode(Node):
     def on_joint_states(self, message: JointState) -> None:
         """Answer the crank speed at a stamped time with the throttle at that time (speakers: from the machine only;
         every field read is checked first: trust.BadMessage)."""
-        names = joint_fields(message)
+        names = joint_fields(message, "velocity")
         if "crank" not in names:
             raise BadMessage("wrong joint name", f"JointState names {names}, expected a joint 'crank'")
         speed = (-self.max_speed, self.max_speed, "crank velocity [rad/s] (parameter max_speed)")

@@ -69,7 +69,7 @@ from mech_regulator.nodes import controller
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.joints import output_joints
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import MachineStepper, Samples, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import NANOSECONDS, MachineStepper, Samples, seconds, to_nanoseconds
 
 LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
 # (the node that gives it by default, its topic)
@@ -260,14 +260,16 @@ class MachineNode(Node):
         first): the throttle in 0..1 for an exchange time the machine has published, not behind the newest taken;
         with the corrected coupling, its tentative throttle over the step when it sends one. An external
         controller's answer stamped other than the exchange it answers is kept to be named when it times out."""
-        names = joint_fields(message)
+        names = joint_fields(message, "position")
         if "throttle" not in names:
             raise BadMessage("wrong joint name", f"JointState names {names}, expected a joint 'throttle'")
         value = bounded(message.position[names.index("throttle")], 0.0, 1.0, "throttle position (an opening)")
-        stamped = stamp_of(message.header.stamp)
-        if self.controller == "external" and self.time_mode == "lockstep" and stamped != self.now_ns:
-            self.wrong_stamp = stamped  # said when the controller times out (controller.silent)
-        when = in_order(not_ahead(stamped, self.now_ns, "throttle"), self.throttle_stamp, "throttle")
+        if self.controller == "external" and self.time_mode == "lockstep":
+            sent = message.header.stamp.sec * NANOSECONDS + message.header.stamp.nanosec
+            if sent != self.now_ns:  # said when the controller times out (controller.silent), even a wall-clock one
+                self.wrong_stamp = sent
+        when = in_order(not_ahead(stamp_of(message.header.stamp), self.now_ns, "throttle"), self.throttle_stamp,
+                        "throttle")
         waveform = sent_samples(message, "throttle_tentative", "position", 0.0, 1.0)
         self.throttle_stamp = when
         self.stamped_throttle[when] = value

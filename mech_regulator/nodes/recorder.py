@@ -251,7 +251,7 @@ class RecorderNode(Node):
         else:
             status, message = cosimulation_ending(run_data) if self.complete() else \
                 ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
-            if self.machine_result[0] not in ("complete", "interrupted"):
+            if self.machine_result[0] not in ("complete", "interrupted"):  # the machine's own end (failed, ...)
                 status, message = self.machine_result
             self.recording.close(status, message)
         if self.path is None:
@@ -262,9 +262,8 @@ class RecorderNode(Node):
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
         summary.update(self.pace())
-        if not self.complete():
-            summary["status"] = "interrupted"
-            summary["message"] = f"the recording stops at t = {summary['t_end']:.6g} s"
+        if not self.complete() or self.machine_result[0] not in ("complete", "interrupted"):
+            summary["status"], summary["message"] = status, message  # the recording's end, said the same way
         summary.update(self.trust_summary(summary["status"]))
         csv_path = self.path.with_suffix(".csv")
         columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)

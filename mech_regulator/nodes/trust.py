@@ -261,14 +261,16 @@ def stamp_of(stamp) -> int:
     return stamp.sec * NANOSECONDS + stamp.nanosec
 
 
-def joint_fields(message) -> list[str]:
+def joint_fields(message, *needed: str) -> list[str]:
     """The names of a sensor_msgs/JointState, checked against its arrays: each of position, velocity and effort as
-    long as the names; BadMessage otherwise."""
+    long as the names, or empty (as the message's definition allows: a field its sender does not give) unless it is
+    one of the fields `needed` here; BadMessage otherwise."""
     names = list(message.name)
     lengths = {field: len(getattr(message, field)) for field in ("position", "velocity", "effort")}
-    if any(length != len(names) for length in lengths.values()):
+    if any(length != len(names) and (length or field in needed) for field, length in lengths.items()):
         raise BadMessage("array lengths", f"{len(names)} names but " + ", ".join(
-            f"{length} {field}s" for field, length in lengths.items()) + "; expected one of each per name")
+            f"{length} {field}s" for field, length in lengths.items()) + "; expected one of each per name" +
+            (f" ({', '.join(needed)} needed here, the others may be empty)" if needed else " (or none)"))
     return names
 
 
