@@ -1,8 +1,8 @@
-"""The presets' hand-written closed forms (issue 21: the product runs every preset as a linkage, mechanisms/presets.py,
+"""The presets' hand-written closed forms (the product runs every preset as a linkage, mechanisms/presets.py,
 through the code generated from its groups, mechanisms/linkage/symbolic.py): kept here as the independent reference
 the tests hold the product to (test_presets.py and the mechanism tests) — the crank–slider's, four-bar's, walking
 beam's and multi-cylinder engine's reduced inertia, dJ/dphi, weight moment and output, and the crank–slider's and
-four-bar's joint reactions by d'Alembert (physics.md sections 1 and 7), each written from its own equations.
+four-bar's joint reactions by d'Alembert (docs/theory.md §2.1-§2.2 and §6.1), each written from its own equations.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ def crank_slider_reduced(geometry: CrankSliderGeometry, gravity: tuple[float, fl
                  ) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, x, x')` for this crank–slider.
 
-    J_links = m_rod |S'|^2 + J_rod theta'^2 + m_slider x'^2 (physics.md section 1), with the rod's
+    J_links = m_rod |S'|^2 + J_rod theta'^2 + m_slider x'^2 (docs/theory.md §2.1), with the rod's
     centre S = B + rho (C - B), rho = rod_cg / l; dJ/dphi = 2 m_rod S'.S'' + 2 J_rod theta' theta''
     + 2 m_slider x' x''. M_weight = g . sum_k m_k S_k' (zero and not computed without gravity).
     The crank's own inertia belongs to the machine's constant inertia.
@@ -79,7 +79,7 @@ def four_bar_reduced(geometry: FourBarGeometry, gravity: tuple[float, float] | N
 
     With the centres' derivatives S3', S3'', S4', S4'' of `make_centre_motions`:
     `J_links = m3 |S3'|^2 + J3 th3'^2 + m4 |S4'|^2 + J4 th4'^2`, `dJ = 2 sum (m Re(conj(S') S'') + J th' th'')`,
-    `M_weight = g . sum_k m_k S_k'` (physics.md section 1). The output coordinate is the rocker angle.
+    `M_weight = g . sum_k m_k S_k'` (docs/theory.md §2.2). The output coordinate is the rocker angle.
     """
     g = geometry
     m3, J3, m4, J4 = g.coupler_mass, g.coupler_inertia, g.rocker_mass, g.rocker_inertia
@@ -105,7 +105,7 @@ def walking_beam_reduced(geometry: WalkingBeamGeometry, gravity: tuple[float, fl
                  ) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, x_C, x_C')` for this walking beam.
 
-    By the definition of the reduced inertia (physics.md section 1), J_links = sum_k m_k |S_k'|^2 + J_k th_k'^2:
+    By the definition of the reduced inertia (docs/theory.md §2.1), J_links = sum_k m_k |S_k'|^2 + J_k th_k'^2:
     coupler S2 = A + u2 e^{i (th3 + gamma2)} turning with th3; the two rockers (identical) S3 = O2 + u3 e^{i th4}
     and its copy, turning with th4; the tie B E translating with B; the side link S6 = E + u6 e^{i th6},
     th6 = th3 + arg(BC) turning with th3; the shuttle bar translating with C. dJ/dphi = 2 sum_k

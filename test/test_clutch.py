@@ -1,4 +1,4 @@
-"""Friction clutch start-up, Coulomb-held driven parts and branched drives (physics.md section 4, second paper).
+"""Friction clutch start-up, Coulomb-held driven parts and branched drives (docs/theory.md §7.4-§7.5).
 
 Oracles: closed forms of the constant-moment clutch (two constant accelerations while slipping, a common one
 while stuck, break-away where the stuck moment reaches the static torque under a ramping load); the elastic
@@ -332,9 +332,10 @@ def test_the_co_simulated_clutch_slips_and_locks_as_the_monolithic_run():
     assert slipping[1] and not slipping[-1], "the clutch should slip at the start and be locked at 2 s"
 
 
-# A clutch slip shorter than a solver step (issue 19): a crank-slider on the motor side makes the moment the stuck
-# clutch passes swing over each turn (its reduced inertia and the 1/2 J' omega^2 term), and its highest swing tops
-# the static torque for 1.65 ms, inside a 40 ms step the loose run takes when the clutch never slips.
+# A clutch slip shorter than a solver step (a switch the solver must not step over): a crank-slider on the motor side
+# makes the moment the stuck clutch passes swing over each turn (its reduced inertia and the 1/2 J' omega^2 term), and
+# its highest swing tops the static torque for 1.65 ms, inside a 40 ms step the loose run takes when the clutch never
+# slips.
 def short_slip(static: float, rtol: float) -> dict:
     """Constant 5 N m drive on 0.05 kg m^2 and a crank-slider (0.1 m crank, 0.4 m rod, 3 kg slider), a clutch of
     `static` N m (kinetic 0.1 N m below) to a 0.5 kg m^2 shaft with a viscous load, both at 30 rad/s, for 0.5 s."""

@@ -539,7 +539,7 @@ def test_crank_stops_and_starts_as_on_the_reference_path():
         # the same restarts (the start, and on compressor_friction the crossings of its slider table's breakpoints);
         # the step sequences after each restart part at round-off (measured: 137 against 151 steps on
         # compressor_friction, 20 switches each; 179 against 187 before the breakpoints were located)
-        # both keep their steps away from the branch points of the journals' |R| (issue 19)
+        # both keep their steps away from the branch points of the journals' |R| (docs/theory.md §6.5)
         assert fast.stats.switches == reference.stats.switches and fast.stats.restarts == reference.stats.restarts
         assert abs(fast.stats.steps - reference.stats.steps) <= 0.15 * reference.stats.steps
 

@@ -1,4 +1,4 @@
-"""Breakpoints of a slider table on a coupled driven part's mechanism are switches (issue 19): a force table F(x) in
+"""Breakpoints of a slider table on a coupled driven part's mechanism are switches: a force table F(x) in
 the position x of the driven mechanism's slider has a kink in the driven part's angle phi2 = phi - twist wherever
 x(phi2) crosses one of its breakpoints. These angles are found as for the main mechanism's slider tables
 (effects.position_kinks, now given the driven mechanism's output position); the reference path locates each crossing

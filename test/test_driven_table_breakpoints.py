@@ -1,4 +1,4 @@
-"""Knots of a table load on the driven part of a two-mass machine are switches (issue 19): a table in the driven
+"""Knots of a table load on the driven part of a two-mass machine are switches: a table in the driven
 part's own angle phi2 = phi - twist has kinks wherever phi2 crosses a knot. The reference path locates each crossing
 as a guard phi2 - knot that changes no mode (periodic entries of model.MachineModel.state_tables), restarts there,
 and between two crossings sees the table continued along one segment (rhs's anchors); the fast path the same with

@@ -1,4 +1,4 @@
-"""Issue 19: the energy method on a scene with corners in phi that are not a table's knots in phi.
+"""The energy method (docs/theory.md §2.6) on a scene with corners in phi that are not a table's knots in phi.
 
 compressor_friction has a slider table in x (the gas force; its breakpoints are crossed at fixed crank angles) and
 joint friction, whose |k_j| have corners at fixed crank angles (the dead centres, the rod's turning points). Both are

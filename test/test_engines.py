@@ -1,4 +1,4 @@
-"""Engines (physics.md section 5, source 002): piston kinematics, multi-cylinder crankshafts, torque curves and their
+"""Engines (docs/theory.md §4, source 002): piston kinematics, multi-cylinder crankshafts, torque curves and their
 harmonics, and the `mech-regulator engine` command.
 
 References are written here independently of the package: the slider position from the loop closure, time

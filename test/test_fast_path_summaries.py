@@ -1,4 +1,4 @@
-"""The fast path prints and writes what the reference path does (issue 17): on every bundled scene the summary of
+"""The fast path prints and writes what the reference path does: on every bundled scene the summary of
 `mech-regulator simulate --json` (analysis.summarise: energy works and residual, steady-motion figures, the governor's
 load responses, the two-mass and drive-train figures) and the sampled columns `--out` writes agree field by field,
 and the runs change mode at the same events.
@@ -14,12 +14,11 @@ agrees when
 
 scale(x) the largest work [J] for the energy figures, the duration for event times, |x| otherwise (for a sampled
 column its largest |value|); a figure read off a sampling grid (a load response's peak and settling times, a
-section's peak time) may differ by one grid step more. Measured, the differences stay below 0.3 of this bound. A
-fault of one path that does not shrink with the tolerance breaks it: before issue 17 the fast path integrated the
-works over whole compiled calls of up to 2000 steps (startup's residual 8.1 J against 2.4e-9 J). Text (numbers in a
-note aside), flags and counts are equal. The energy residual, zero for the exact motion, stays below RESIDUAL_LIMIT
-of the largest work on both paths (measured: at most 5e-6; the fault above made it 5e-3 to 3 on the 16 scenes it
-touched).
+section's peak time) may differ by one grid step more. Measured, the differences stay below 0.3 of this bound. A fault
+of one path that does not shrink with the tolerance breaks it: before the paths were held equal the fast path integrated
+the works over whole compiled calls of up to 2000 steps (startup's residual 8.1 J against 2.4e-9 J). Text (numbers in a
+note aside), flags and counts are equal. The energy residual, zero for the exact motion, stays below RESIDUAL_LIMIT of
+the largest work on both paths (measured: at most 5e-6; the fault above made it 5e-3 to 3 on the 16 scenes it touched).
 
 The slow reference runs are shortened (SHORTENED; the load changes that end within the shortened run are kept): the
 68 runs and their summaries take some 45 s of CPU, the fast path's compilation on a cold cache some 25 s more. The
@@ -51,7 +50,7 @@ RESIDUAL_LIMIT = 1e-4  # largest |energy residual| / largest |work|
 LOAD_RESPONSE_GRID = 1.0 / 2000.0  # [s] the grid analysis.load_response reads a response's times off
 NUMBER = re.compile(r"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?")
 # The bundled scenes the fast path compiles (solvers/compiled/__init__.py fast_path_refusal: all of them, the general
-# linkages included since issue 21).
+# linkages included).
 SCENES = [name for name in bundled_scenes() if fast_path_refusal(load_scene(name)) is None]
 
 

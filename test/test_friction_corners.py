@@ -1,4 +1,4 @@
-"""Issue 19: the corners of joint friction located on both paths.
+"""The corners of joint friction (docs/theory.md §6.5) located on both paths.
 
 F = M_collar + sum_j rho_j |k_j| |R_j| + f_guide |x'| |N| has a kink where a joint's relative rate k_j changes sign
 (fixed crank angles: the guide's x' at the dead centres, the wrist pin's theta' where the rod turns back) and where

@@ -1,4 +1,4 @@
-"""Governed machines in time against the governor's linear theory (physics.md section 3) and the
+"""Governed machines in time against the governor's linear theory (docs/theory.md §8.7) and the
 hybrid (friction / hard-stop) mode logic of mech_regulator.governors.
 
 All machines have a constant J (a linear motor or a constant torque with a viscous load), so each run
@@ -205,7 +205,7 @@ def test_vyshnegradsky_product_is_one_at_critical_damping():
 
 def test_indirect_without_feedback_hunts_with_the_predicted_period():
     """Machine: J omega' = s M - L with a constant drive M and a constant external load L (no
-    self-regulation, k_c = 0). Mapping to physics.md's normalised form: phi = (omega - omega_0) / omega_0,
+    self-regulation, k_c = 0). Mapping to the normalised form of docs/theory.md §8.7: phi = (omega - omega_0) / omega_0,
     mu = s - s_0, eta = (z - z_0) / Z for any length Z; then T_a = J omega_0 / M, T_s = 1 / (gain Z) and
     delta = Z (d omega / dz) / omega_0 on the static characteristic, so
         T_a T_s delta = J (d omega / dz) / (M gain)   (Z cancels),

@@ -1,4 +1,4 @@
-"""The centrifugal governor (physics.md section 3) against closed forms and independent derivations:
+"""The centrifugal governor (docs/theory.md §8.2-§8.3) against closed forms and independent derivations:
 the Porter sensor's static characteristic, its equation of motion (Jacobi integral and dissipation),
 the insensitivity band and statism, the valve, the operating points of direct and indirect action,
 and short simulations that settle on the operating points the statics predict.

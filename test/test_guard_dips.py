@@ -1,4 +1,4 @@
-"""Guards that cannot be missed (issue 19), on the reference path: time_domain._first_event checks each guard on its
+"""Guards that cannot be missed, on the reference path: time_domain._first_event checks each guard on its
 polynomial over the whole step (interpolant at 9 Chebyshev points with an error bound, cut into monotone pieces,
 checked on the guard itself where a piece ends near the level), so a dip below the level and back inside one step
 is found however short. The compiled twin has the same check (test_compiled_integrators.py).

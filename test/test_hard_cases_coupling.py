@@ -1,4 +1,4 @@
-"""Hard cases of the two-mass machine (physics.md section 4): a stiff elastic coupling.
+"""Hard cases of the two-mass machine (docs/theory.md §7.1): a stiff elastic coupling.
 
 Oracles: the linear two-mass machine (constant inertias, constant drive, viscous loads) solved exactly by
 the matrix exponential; the rigid one-mass machine as the stiff limit; the relative mode's frequency

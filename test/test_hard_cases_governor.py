@@ -534,8 +534,8 @@ def rejection_run(name: str, extra: list[str], duration: float, load: float = 8.
 
 
 def averaged_direct_rejection(model, before) -> tuple[float, float | None]:
-    """Independent oracle: the cycle-averaged machine with the direct governor, hand-written from physics.md
-    (sections 1 and 3) and integrated by scipy's DOP853 at rtol 1e-11 from the operating point `before` with the
+    """Independent oracle: the cycle-averaged machine with the direct governor, hand-written from docs/theory.md
+    (§3.2 and §8.2) and integrated by scipy's DOP853 at rtol 1e-11 from the operating point `before` with the
     load 0 from t = 0.5 s:  J_m omega' = valve(z) M_d - c omega - k omega |omega|,  Lagrange's equation for the
     arm. Returns (peak speed [rad/s], time the sleeve reaches its high stop [s] or None). After that landing the
     valve is shut (the valve closes at the stop), so the speed only falls: the peak is reached before."""

@@ -1,5 +1,5 @@
-"""Hostile and extreme input (issue 20): every scene ends at once with a result or a clear message -- exit code 2 for
-bad input, 1 for a run that failed, never a traceback -- and nothing is written outside the run's folder.
+"""Hostile and extreme input (docs/scenes.md, Limits): every scene ends at once with a result or a clear message -- exit
+code 2 for bad input, 1 for a run that failed, never a traceback -- and nothing is written outside the run's folder.
 
 Each case is written here. Besides the exit code and the message (it names the key), each asserts a bound on the work
 done -- the YAML nodes composed, the right-hand-side evaluations, the steps -- never a wall-clock time. The limits are

@@ -1,4 +1,4 @@
-"""Joint friction (physics.md section 7): kinetostatics against the reduced moment and an independent
+"""Joint friction (docs/theory.md §6): kinetostatics against the reduced moment and an independent
 Newton–Euler system, the friction formulas against closed forms and quadrature, the energy the friction
 dissipates, closed-form run-downs, break-away and self-locking, and scenes without joint friction unchanged."""
 
@@ -433,11 +433,11 @@ def test_governor_stepper_of_a_machine_with_joint_friction_holds_the_crank_speed
 def test_scenes_without_joint_friction_run_bit_for_bit_as_before(name, overrides, expected):
     """The final state of short runs, bit for bit as main (9c13bc8) computed it before joint friction existed,
     and their right-hand side is the frictionless closure itself. (Both pinned again when the knots of tables became
-    switches, issue 19: engine_direct's indicator diagram moved its state by 1e-7 relative at rtol 1e-8, the
+    switches: engine_direct's indicator diagram moved its state by 1e-7 relative at rtol 1e-8, the
     compressor's slider table by 2.4e-8 at rtol 1e-9, the kinks' old errors — test_table_knots.py and
     test_slider_table_breakpoints.py check the new runs against references restarted at every knot; and in their last
     bits when the reference path took its switch angles from the model's switch grid, rounded to 1e-12 rad, as the
-    fast path does; and when every mechanism became a linkage run by generated code, issue 21: the crank–slider's J
+    fast path does; and when every mechanism became a linkage run by generated code: the crank–slider's J
     and its derivatives from the linkage's closed forms differ in their last bits, the final states by 2e-16 to 4e-16
     relative, the governor's servo, crossing zero, by 1.3e-12 of its size; and when the solvers began to carry the
     crank's phase across their restarts instead of reading it back off phi, docs/hard_cases.md "Long runs": a

@@ -1,4 +1,4 @@
-"""Tests of the general planar linkage (mech_regulator.mechanisms.linkage, issue 21).
+"""Tests of the general planar linkage (mech_regulator.mechanisms.linkage, docs/linkages.md).
 
 Structure: source 001's worked degree-of-freedom examples (the four-bar, the triangle of three sliders with one
 repeated constraint, the parallelogram with a redundant link, the cam follower's roller with a passive freedom),

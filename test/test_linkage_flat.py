@@ -1,4 +1,4 @@
-"""The linkage solver written once (mechanisms/linkage/flat.py, issue 21): the reference path and the compiled fast
+"""The linkage solver written once (mechanisms/linkage/flat.py): the reference path and the compiled fast
 path run the same functions, so a linkage scene gives the same omega trace on both; the flat reduced quantities
 against independent checks (their derivatives against central differences, plain Python against compiled)."""
 

@@ -1,4 +1,4 @@
-"""Issue 19: the corners of a linkage's joint friction located on the reference path.
+"""The corners of a linkage's joint friction located on the reference path.
 
 A linkage's friction F = M_collar + sum_j rho_j |k_j| |R_j| + sum_g f_guide |v_g| |N_g| has a kink where a joint's
 relative rate changes sign (fixed crank angles, `JointFrictionModel.corner_angles`) and where the normal force N_g of

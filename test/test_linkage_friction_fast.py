@@ -1,7 +1,7 @@
-"""Issue 21: joint friction on a general linkage on both paths, its kinetostatics by groups written once, flat
+"""Joint friction on a general linkage (docs/theory.md §6) on both paths, its kinetostatics by groups written once, flat
 (mechanisms/linkage/flat.py: kinetostatics, joint_loads), and generated per kind of linkage as straight-line code
-(mechanisms/linkage/symbolic.py, joint_loads_source; test_linkage_symbolic_kinetostatics.py holds it to flat's), run
-as plain Python by the reference path and compiled into the fast path's right-hand side.
+(mechanisms/linkage/symbolic.py, joint_loads_source; test_linkage_symbolic_kinetostatics.py holds it to flat's), run as
+plain Python by the reference path and compiled into the fast path's right-hand side.
 
 The flat reactions were compared with the object implementation they replaced before it was deleted (the bundled
 linkages, 50 random states each: the reactions to 7e-16 of the largest, the ratios exactly); what stays is

@@ -1,4 +1,4 @@
-"""A general linkage in a scene (`machine.mechanism: {type: linkage, ...}`, issue 21): validation messages, the
+"""A general linkage in a scene (`machine.mechanism: {type: linkage, ...}`, docs/linkages.md): validation messages, the
 `structure` command, `kinematics` and `simulate` on the reference path, and the bundled shaper.
 
 The four-bar of the bundled four_bar_rocker scene written as a linkage runs as the four_bar does: the same reduced
@@ -137,7 +137,7 @@ def test_structure_command_refuses_what_it_cannot_analyse(tmp_path, capsys):
 
 
 def test_the_shaper_runs_on_the_reference_path_and_the_fast_path_takes_it():
-    assert fast_path_refusal(load_scene("shaper")) is None   # issue 21: compiled too (test/test_linkage_flat.py)
+    assert fast_path_refusal(load_scene("shaper")) is None   # compiled too (test/test_linkage_flat.py)
     model = build_model(load_scene("shaper", ["scenario.duration=0.3", "solver.path=reference"]))
     trajectory = simulate(model)
     times = np.linspace(0.0, 0.3, 31)

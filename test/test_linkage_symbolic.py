@@ -1,4 +1,4 @@
-"""A linkage's reduced(phi) as generated straight-line code (mechanisms/linkage/symbolic.py, issue 21) against the
+"""A linkage's reduced(phi) as generated straight-line code (mechanisms/linkage/symbolic.py) against the
 general solver (flat.py: each group placed by its closed form with angles and differentiated through its 6 x 6
 constraint system, an independent way to the same numbers).
 

@@ -1,4 +1,4 @@
-"""The preset mechanisms built as linkages (mechanisms/presets.py, issue 21) against the presets' closed forms
+"""The preset mechanisms built as linkages (mechanisms/presets.py) against the presets' closed forms
 (test/closed_forms.py: the hand-written reductions and kinetostatics the product ran before).
 
 For every bundled scene's mechanism and for random geometries (an offset, a crank mass and centre, V engines,

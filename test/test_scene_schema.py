@@ -1,4 +1,4 @@
-"""The published scene schema (issue 17): `mech-regulator schema`, its committed copy
+"""The published scene schema: `mech-regulator schema`, its committed copy
 config/schema/scene.schema.json and the yaml-language-server line of every bundled scene.
 
 The schema accepts every bundled scene file as written, including those with `base:` (a partial scene whose

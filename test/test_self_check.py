@@ -4,8 +4,8 @@ reported `inaccurate` with the check, its value, the allowed value and the fix, 
 `--strict` makes it exit 3. The deliberately loose run: a load switched on for 3 deg of each turn by a table in phi,
 integrated by LSODA, a multistep method that steps over the knots of tables (time_domain.STEPS_OVER_KINKS: it does not
 restart on them), whose steps stride over the pulse (the speed runs up as if the load were not there: residual 17 %);
-the advised solver.max_step = 1e-4 s resolves it (residual 3e-9). (Before issue 19 it was a slider force table over
-5 mm of the stroke under DOP853; its breakpoints are now located like a table in phi's knots.)"""
+the advised solver.max_step = 1e-4 s resolves it (residual 3e-9). (Before kinks became switches it was a slider force
+table over 5 mm of the stroke under DOP853; its breakpoints are now located like a table in phi's knots.)"""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Breakpoints of a slider force table are switches (issue 19): a table F(x) in the slider position x has a kink in
+"""Breakpoints of a slider force table are switches: a table F(x) in the slider position x has a kink in
 the crank angle wherever x(phi) crosses one of its breakpoints; effects.position_kinks finds these angles once per
 model (x split into monotone pieces at its dead centres), and the solvers restart on them as on the knots of a table
 in phi (test_table_knots.py), between two of them seeing F continued along one segment.

@@ -1,4 +1,4 @@
-"""Breakpoints of tables read at the state are switches (issue 19): a direct governor's valve table throttle(z), z the
+"""Breakpoints of tables read at the state are switches: a direct governor's valve table throttle(z), z the
 sleeve position z = 2 l (1 - cos a) of the arm-angle state, and a nonlinear coupling's characteristic M_m(twist), twist
 a state, have kinks wherever z or the twist crosses a breakpoint. The solvers locate each crossing as a guard
 value(y) - breakpoint that changes no mode (model.StateTable, time_domain._breakpoint_guards), restart there, and

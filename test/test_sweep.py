@@ -1,4 +1,4 @@
-"""Sweeps (issue 7): the grid syntax and its messages, rows equal to single runs on every executor (in process,
+"""Sweeps (docs/sweep.md): the grid syntax and its messages, rows equal to single runs on every executor (in process,
 local processes, a Dask local cluster, a Dask scheduler address), a failing point as a row, Ctrl-C, the stability
 verdict by simulation against Vyshnegradsky's A B = 1, and the flywheel's delta against the energy-swing formula.
 

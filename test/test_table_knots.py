@@ -1,6 +1,6 @@
-"""Knots of tables in phi are switches (issue 19): every knot where a table's slope changes (table drive and load,
-the engine's indicator diagram) is located, the solver restarts on it by a step of its own method (not from the dense
-output), and between two knots it sees each table continued along one segment, so no step straddles a kink.
+"""Knots of tables in phi are switches (docs/theory.md §2.7): every knot where a table's slope changes (table drive and
+load, the engine's indicator diagram) is located, the solver restarts on it by a step of its own method (not from the
+dense output), and between two knots it sees each table continued along one segment, so no step straddles a kink.
 
 Oracles: an engine integrated by scipy's solve_ivp piece by piece between the knots, written here (the pressure
 table's line for each piece added to the package's plain right-hand side, the knot found by solve_ivp's event and

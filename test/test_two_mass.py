@@ -1,4 +1,4 @@
-"""The full two-mass machine of source 003 (physics.md section 4): nonlinear coupling characteristic,
+"""The full two-mass machine of source 003 (docs/theory.md §7): nonlinear coupling characteristic,
 position-dependent driven part, periods of motion with the largest coupling moment, and the inverse problem.
 
 Oracles: the `stiffness` coupling (a linear table must give the same numbers); scipy's solve_ivp on the two-mass

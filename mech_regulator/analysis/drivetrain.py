@@ -1,7 +1,7 @@
 """The drive train's part of a run's summary: the clutch's slip phases and lock times, the driven part's
 stretches held at rest, and the largest torque in each branch's section against the paper's estimate.
 
-Paper (physics.md section 4, second paper, eq. 6-7): the torque in the section of branch n is
+Paper (source 003, second paper, eq. 6-7; docs/theory.md §7.4-§7.5): the torque in the section of branch n is
 `M_kr = M_n,c + (I_n / i_1n) domega/dt`; behind a friction clutch with a constant reduced inertia I the
 machine's main shaft accelerates at most at (beta M_nom - M_nom) / I, beta M_nom = the clutch's torque, so
 

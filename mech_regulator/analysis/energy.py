@@ -1,6 +1,6 @@
 """Energy bookkeeping of a run, and the energy swing that sizes a flywheel.
 
-Energy balance (physics.md section 1, energy form): the work of all moments equals the change of
+Energy balance (docs/theory.md §2.4, energy form): the work of all moments equals the change of
 kinetic energy, `sum_k integral M_k omega dt = 1/2 J(phi) omega^2 |_0^T`. A two-mass machine adds
 the driven part's works (at omega_driven; its links' weight included), the coupling damper's work
 -c (omega - omega_driven)^2 and the coupling's elastic energy integral_0^twist M_elastic dtwist
@@ -112,6 +112,6 @@ def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, poin
 
 def flywheel_for_constant_inertia(energy_swing_max: float, omega_m: float, delta: float, inertia: float) -> float:
     """Flywheel inertia [kg m^2] for a constant-J machine: `J_fw = dE_max / (omega_m^2 [delta]) - J0`
-    (physics.md section 2); exact when the moments do not depend on omega, since
+    (docs/theory.md §3.3); exact when the moments do not depend on omega, since
     omega_max^2 - omega_min^2 = 2 delta omega_m^2 with omega_m = (omega_max + omega_min) / 2."""
     return energy_swing_max / (omega_m ** 2 * delta) - inertia

@@ -3,8 +3,8 @@
 At constant omega (epsilon = 0) the moments on the crank of an engine scene are
 - the gas moment of each cylinder, `M_gas,i = -p(theta_i) A dx_i/dphi` (the scene's engine drive at full
   throttle), and their sum;
-- the inertia moment of the links (rods and pistons), `M_inertia = -1/2 J'(phi) omega^2` (physics.md
-  section 1: the part of J omega' + 1/2 J' omega^2 that remains at constant speed, moved to the right);
+- the inertia moment of the links (rods and pistons), `M_inertia = -1/2 J'(phi) omega^2` (docs/theory.md
+  §4.4, §2.3: the part of J omega' + 1/2 J' omega^2 that remains at constant speed, moved to the right);
 - the total `M_gas + M_inertia` (the weight of the links is left out).
 Harmonics are in orders of the crank speed: `M(phi) = M_mean + sum_k A_k cos(order_k phi + phase_k)`, with
 orders 0.5, 1, 1.5, ... over a 720 deg cycle and 1, 2, ... over 360 deg. The mean gas moment times the

@@ -1,4 +1,4 @@
-"""Flywheel design for a permitted coefficient of speed fluctuation [delta] (physics.md sections 1-2, source 000).
+"""Flywheel design for a permitted coefficient of speed fluctuation [delta] (docs/theory.md §3, source 000).
 
 Three answers, side by side:
 
@@ -50,7 +50,7 @@ class MachineClass:
     strictest: float
 
 
-# physics.md section 2: the list in source 000 is garbled in the OCR; these are the common textbook ranges
+# docs/theory.md §3.1: the list in source 000 is garbled in the OCR; these are the common textbook ranges
 # quoted there (Artobolevsky's table and its Vietnamese copies).
 MACHINE_CLASSES = {machine.name: machine for machine in (
     MachineClass("pump", "pumps", 1 / 5, 1 / 30),
@@ -161,7 +161,7 @@ def energy_diagram(model: MachineModel, omega_m: float) -> EnergyDiagram:
 
 
 def wittenbauer(diagram: EnergyDiagram, delta: float) -> WittenbauerConstruction:
-    """The exact numerical form of the Wittenbauer construction (physics.md section 2):
+    """The exact numerical form of the Wittenbauer construction (docs/theory.md §3.4):
     a = max_phi[dE - k_max J], b = min_phi[dE - k_min J], J_fw = (a - b) / (k_max - k_min)."""
     k_max = diagram.omega_m ** 2 * (1.0 + delta) / 2.0
     k_min = diagram.omega_m ** 2 * (1.0 - delta) / 2.0

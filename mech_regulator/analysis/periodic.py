@@ -1,6 +1,6 @@
 """Speed over the dynamic period: steady-state detection and the coefficient of speed fluctuation.
 
-physics.md sections 1-2: the dynamic period Phi_omega = lcm(kinematic period, work period) in phi;
+docs/theory.md §2.5 and §3.1: the dynamic period Phi_omega = lcm(kinematic period, work period) in phi;
 over one period `delta = (omega_max - omega_min) / omega_m` with `omega_m = (omega_max + omega_min) / 2`.
 Steady (periodic) motion: omega at the start of successive dynamic periods repeats. Its mean speed, when the
 moments read omega, is where the cycle-mean moments balance (balance_speed).

@@ -1,4 +1,4 @@
-"""Stability of a governed machine at its operating point (physics.md section 3).
+"""Stability of a governed machine at its operating point (docs/theory.md §8.7).
 
 Linear: the cycle-averaged machine J_m omega' = throttle M_d(omega) + M_c(omega) with the governor
 (without Coulomb friction, dead band, speed limit and stops: they have no linearisation; dry friction

@@ -1,4 +1,4 @@
-"""Statics of a governed machine (physics.md section 3): the governor's static characteristic, its
+"""Statics of a governed machine (docs/theory.md §8.3, §8.6): the governor's static characteristic, its
 degree of non-uniformity and insensitivity, and the operating point of the cycle-averaged machine
 for a given load, with the static error (droop) a load change leaves.
 

@@ -7,7 +7,7 @@ returns its row (a point that fails, or whose scene is refused, is a row with th
 `run_sweep` runs the points in this process, on local worker processes or on a Dask cluster, and returns the
 rows in the order of the points, whatever order they complete in.
 
-For a governed scene the row holds the stability verdict by simulation (physics.md section 3): the cycle-mean
+For a governed scene the row holds the stability verdict by simulation (docs/theory.md §8.7): the cycle-mean
 speed omega_bar(t) after the last load change (analysis.cycle_mean_speed) is split into thirds; the
 oscillation ratio r = ptp(omega_bar over the last third) / ptp(omega_bar over the middle third) is about
 exp(sigma T/3) for a mode growing at sigma [1/s] over a window of T seconds. The point is stable when the last

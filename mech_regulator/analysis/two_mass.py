@@ -1,4 +1,4 @@
-"""The two-mass machine of source 003 (physics.md section 4): the periods of a run and its largest coupling
+"""The two-mass machine of source 003 (docs/theory.md §7.2-§7.3): the periods of a run and its largest coupling
 moment, and the paper's inverse problem, the coupling characteristic a prescribed driven speed law needs.
 
 Periods of motion: 1, start-up, until the driven part starts to move forward (the coupling moment first

@@ -1,7 +1,7 @@
 """The crank–slider machine of a scene as a MuJoCo multibody model with a closed kinematic loop.
 
 Our model reduces the machine to its crank, `J(phi) omega' + 1/2 J'(phi) omega^2 = M_d + M_c`
-(physics.md section 1); MuJoCo instead integrates the three bodies in their own coordinates and holds
+(docs/theory.md §2.3); MuJoCo instead integrates the three bodies in their own coordinates and holds
 the loop closed by a constraint force. It is the independent simulator of the speed benchmark:
 
 - crank: a body on a hinge (z axis) at the origin, inertia J0 + J_flywheel ratio^2 about the axis (the

@@ -61,7 +61,7 @@ BENCH_SCENE = "crank_slider_bench"
 SPEED_SCENES = (BenchScene(BENCH_SCENE, BENCH_SCENE, (), ("scenario.duration=0.5",),
                            "motor-driven crank-slider from rest, 2 s: the machine MuJoCo also simulates", 1.0, 1e-3),
                 ) + tuple(bench for bench in SCENES if bench.name in ("startup", "compressor"))
-# general linkages (issue 21), solved group by group per right-hand side by mechanisms/linkage/flat.py, the same
+# general linkages (docs/linkages.md), solved group by group per right-hand side by mechanisms/linkage/flat.py, the same
 # functions on both paths: nine links in four groups, and the shaper's four links in two (RPR, RRP)
 LINKAGE_SCENE = BenchScene("walking_beam_linkage", "walking_beam_linkage", ("scenario.duration=0.5",),
                            ("scenario.duration=0.1",), "source 004's walking beam as a general linkage, 0.5 s",

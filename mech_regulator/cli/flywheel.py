@@ -122,7 +122,7 @@ def format_classes() -> str:
     """The table of machine classes and their permitted [delta]."""
     from mech_regulator.analysis.flywheel import MACHINE_CLASSES
 
-    lines = ["permitted coefficient of speed fluctuation [delta] by machine class (physics.md section 2: the "
+    lines = ["permitted coefficient of speed fluctuation [delta] by machine class (docs/theory.md §3.1: the "
              "common textbook ranges; source 000's list is garbled); --class NAME takes the strictest value:"]
     for machine in MACHINE_CLASSES.values():
         lines.append(f"  {machine.name:<14} {machine.description:<30} {_fraction(machine.loosest)} to "

@@ -3,7 +3,7 @@
 An effect is built once from its scene entry into a plain closure
 `moment(t, phi, omega, q, dq) -> M [N m]` over constants, where q is the mechanism's output
 coordinate (slider position x [m], rocker angle th4 [rad] or shuttle bar position x_C [m]) and dq = dq/dphi its velocity ratio.
-A force F on the output link becomes the reduced moment `F dq` (same power, physics.md section 1).
+A force F on the output link becomes the reduced moment `F dq` (same power, docs/theory.md §2.2).
 With several cylinders q and dq are tuples, one entry per piston; only the engine drive reads them then
 (loads on "the slider" are refused by the scene).
 Only the effects a scene names are built; the right-hand side calls exactly these.

@@ -1,4 +1,4 @@
-"""Joint friction (physics.md section 7, source 001): friction moments in the revolute joints from the joint
+"""Joint friction (docs/theory.md §6, source 001): friction moments in the revolute joints from the joint
 reactions of the kinetostatic analysis, sliding friction of the slider on its guide, and a thrust collar.
 
 - Journal of radius r with reaction R: `M_f = lambda_p f' r |R|`, `f' = f / sqrt(1 + f^2)`, lambda_p = 1
@@ -24,7 +24,7 @@ At rest (omega = 0) friction opposes the motion the other moments would start an
 if |M| <= F(0) (the friction with the reactions of the state at rest), epsilon = 0 and the machine stays
 at rest; otherwise it breaks away in the direction of M with the friction at its kinetic value.
 
-Corners (issue 19). F has a kink wherever a joint's relative rate k_j changes sign (|k_j|: the wrist pin's
+Corners (docs/theory.md §6.5). F has a kink wherever a joint's relative rate k_j changes sign (|k_j|: the wrist pin's
 rate, the rod's, at 90 and 270 deg; the guide's x' at the dead centres; a linkage's joints likewise) and where a
 guide's normal force N changes sign (|N|: a crank–slider's guide, each prismatic joint of a linkage). The first are
 fixed crank angles (`corner_angles`, periodic in one turn), the solvers restart on them as on a table's knots; the

@@ -1,4 +1,4 @@
-"""The Porter-type centrifugal sensor (physics.md section 3): statics and the sleeve's equation of motion.
+"""The Porter-type centrifugal sensor (docs/theory.md §8.2-§8.3): statics and the sleeve's equation of motion.
 
 Two balls of mass m on arms of length l, hinged on the spindle, with links of the same length down to
 a sleeve of mass M; a is the arm angle from the spindle axis, the sleeve rises z = 2 l (1 - cos a).

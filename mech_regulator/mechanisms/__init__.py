@@ -1,4 +1,4 @@
-"""Mechanisms: every mechanism is a planar linkage driven by its crank (issue 21).
+"""Mechanisms: every mechanism is a planar linkage driven by its crank (docs/linkages.md).
 
 A scene's `type: linkage` is its own linkage (the package linkage/: structural analysis, groups, kinematics and
 kinetostatics); the three presets (`crank_slider` with its cylinders, `four_bar`, `walking_beam`; their modules hold

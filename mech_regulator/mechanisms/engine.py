@@ -2,7 +2,7 @@
 
 Our crank–slider (crank_slider.py): crank pin `B = R (cos phi, sin phi)`, piston (slider) on the line
 y = e at `x = R cos phi + sqrt(l^2 - (e - R sin phi)^2)`, phi counter-clockwise from +x, the cylinder
-axis along +x. Source 002 (physics.md section 5) measures the crank angle alpha from the cylinder axis
+axis along +x. Source 002 (docs/theory.md §4.2) measures the crank angle alpha from the cylinder axis
 and the piston displacement from the outer (top) dead centre towards the crank axis, with the offset
 a = e. In our geometry this is
 
@@ -51,7 +51,7 @@ def source_approximation(alpha: float, omega: float, crank: float, rod: float, o
         j_src ~ R omega^2 (cos a + lambda cos 2a + lambda k sin a)
 
     with k = e / R. The source prints `- lambda k sin a` in j; the derivative of its own v gives `+`
-    (physics.md section 5): this is the corrected form. alpha = phi (module docstring)."""
+    (docs/theory.md §4.2): this is the corrected form. alpha = phi (module docstring)."""
     lam, k = crank / rod, offset / crank
     sin_a, cos_a = math.sin(alpha), math.cos(alpha)
     sin_2a, cos_2a = math.sin(2.0 * alpha), math.cos(2.0 * alpha)

@@ -1,4 +1,4 @@
-"""Four-bar linkage by complex algebra (physics.md section 6, source 004).
+"""Four-bar linkage by complex algebra (docs/theory.md §5.4, source 004).
 
 Loop closure `a e^{i th2} + b e^{i th3} = d e^{i th1} + c e^{i th4}` with the crank angle th2 = phi,
 crank pivot A at the origin and rocker pivot D = d e^{i th1}. The position is solved in closed form

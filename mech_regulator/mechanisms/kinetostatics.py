@@ -1,4 +1,4 @@
-"""What joint friction reads of a mechanism's kinetostatics (physics.md section 7, source 001): the joint reactions
+"""What joint friction reads of a mechanism's kinetostatics (docs/theory.md §6.1, source 001): the joint reactions
 at a state, affine in the crank's acceleration epsilon, `R = R0(phi, omega, Q) + R1(phi) epsilon`, as complex numbers
 F = Fx + i Fy [N] in the mechanism plane (y up), and the balancing moment. Every mechanism is a linkage (a preset's,
 mechanisms/presets.py, or a scene's own), solved by groups from the farthest inward (linkage/kinetostatics.py,

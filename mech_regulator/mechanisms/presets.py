@@ -1,5 +1,5 @@
 """The three preset mechanisms (crank–slider with its cylinders, four-bar, walking beam) built as general linkages
-(issue 21: "the three existing mechanisms become presets that build a linkage; their scene syntax stays").
+(their scene syntax stays as it was; docs/linkages.md).
 
 `preset_linkage(mechanism)` turns a scene's `crank_slider`, `four_bar` or `walking_beam` (the geometry of
 mechanisms.mechanism_geometry) into a mechanisms.linkage.Linkage whose reduction, point motions and joint reactions

@@ -1,4 +1,4 @@
-"""Eight-bar walking-beam transport mechanism of source 004 (physics.md section 6), in closed form.
+"""Eight-bar walking-beam transport mechanism of source 004 (docs/theory.md §5.4), in closed form.
 
 Names follow the paper (its figure 3): crank O1A (link 1, length a) about O1 at the origin, coupler
 A B C (link 2: AB = b, coupler point C at AC = p, angle delta from AB to AC), rocker O2B (link 3,

@@ -1,7 +1,7 @@
 """The drive train behind the crank: a driven part (possibly a branched drive) reached through an elastic
 coupling or a friction clutch, its Coulomb resistances, and the hybrid modes of clutch and driven part.
 
-Driven part (physics.md section 4): a main shaft turning at omega_driven with inertia I_main and branches n,
+Driven part (docs/theory.md §7.4): a main shaft turning at omega_driven with inertia I_main and branches n,
 each with the inertia I_n beyond its section (on the branch's shaft) and the ratio i_1n = omega_driven /
 omega_n. Reduced to the main shaft by equal kinetic energy and equal power,
 
@@ -12,7 +12,7 @@ loads, reduced, and the external load) and s = +1 turning forward, -1 backward. 
 the main shaft may carry a mechanism (a crank-slider or four-bar whose crank angle is phi_driven): then
 I = I(phi_driven) adds its links' reduced inertia, M_smooth its links' weight, its loads read phi_driven
 and the slider's or rocker's q2, dq2/dphi2, and the equation gains 1/2 I'(phi_driven) omega_driven^2 on
-the left (physics.md section 4). At rest ('held') the
+the left (docs/theory.md §7.1). At rest ('held') the
 resistances hold the part while |M_passed + M_smooth| <= R; they are then mobilised in proportion,
 s = (M_passed + M_smooth) / R. The moment in the section of branch n (the paper's M_kr, on the branch's
 shaft) is

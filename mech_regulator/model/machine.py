@@ -2,14 +2,14 @@
 
 The model (like MuJoCo's mjModel) holds everything that does not change during a run; the state
 (phi [rad], omega [rad/s]) lives in the solvers. The equation of motion is the moment form of
-physics.md section 1,
+docs/theory.md §2.3,
 
     J(phi) domega/dt + 1/2 J'(phi) omega^2 = M_d + M_c,
 
 with J = J0 + J_flywheel ratio^2 + J_links(phi). The right-hand side is specialised to the scene:
 a machine without a mechanism has no J(phi), no J' term and no kinematics call at all.
 
-A machine with an elastic coupling is the two-mass machine of physics.md section 4: the crank (the
+A machine with an elastic coupling is the two-mass machine of docs/theory.md §7.1: the crank (the
 driving part above) passes M_m = M_elastic(phi - phi2) + c (omega - omega2) (M_elastic = k twist or a
 tabulated characteristic) to a driven part with its own mechanism and loads,
 I2(phi2) domega2/dt + 1/2 I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external;
@@ -72,7 +72,7 @@ class LoadPiece:
 
 @dataclass(frozen=True)
 class CouplingModel:
-    """An elastic coupling and the driven part behind it (physics.md section 4).
+    """An elastic coupling and the driven part behind it (docs/theory.md §7.1).
 
     stiffness k [N m/rad] of a linear coupling, or table = (twist [rad], moment [N m]) knots of a nonlinear
     characteristic (linear between them, end segments continued); damping c [N m s/rad]; the driven part
@@ -263,7 +263,7 @@ class MachineModel:
                 + [(angle, 2.0 * math.pi) for angle in corners])
 
     def dynamic_period(self) -> float:
-        """Phi_omega = lcm of the kinematic period and the effects' periods [rad] (physics.md section 1).
+        """Phi_omega = lcm of the kinematic period and the effects' periods [rad] (docs/theory.md §2.5).
 
         Periods are taken as rational multiples of 2 pi; a machine with nothing periodic in phi gets 2 pi.
         """
@@ -330,10 +330,10 @@ class MachineModel:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
-        (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (physics.md section 1), with throttle = 1
+        (throttle M_drive + M_c - 1/2 dJ/dphi omega^2) / J(phi) (docs/theory.md §2.3), with throttle = 1
         without a governor. With a coupling, y ends with [twist, omega2]: the crank's M_c includes -M_m, the
         external load acts on the driven part, d twist/dt = omega - omega2 and I2(phi2) domega2/dt + 1/2
-        I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external, phi2 = phi - twist (physics.md section 4),
+        I2'(phi2) omega2^2 = M_m + M_c2(t, phi2, omega2) - M_external, phi2 = phi - twist (docs/theory.md §7.1),
         domega2/dt = 0 while the driven part is held at rest. With a clutch, y
         ends with omega2 and the crank and driven part follow the clutch's mode (model/drivetrain.py); while it
         is stuck the solver's own omega2 is frozen and `constraint` sets it to omega. window = (lo, hi): the
@@ -946,7 +946,7 @@ class MachineModel:
 def crank_moments(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """The moments on the crank by source from MachineModel.columns [N m]: drive (throttle included),
     resistance (the machine's own loads and the links' weight), external (minus the external load) and
-    net = M_d + M_c = J epsilon + 1/2 J' omega^2 (physics.md section 1)."""
+    net = M_d + M_c = J epsilon + 1/2 J' omega^2 (docs/theory.md §2.3)."""
     external = columns.get("M_external", np.zeros_like(columns["omega"]))
     return {"drive": columns["M_drive"], "resistance": columns["M_load"] - external + columns.get("M_weight", 0.0),
             "external": external,

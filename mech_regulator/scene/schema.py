@@ -397,7 +397,7 @@ class TableLoad(_TorqueTable):
 
 
 class CuttingLoad(SceneModel):
-    """On-off technological load (the lathe of physics.md section 2): -torque inside the intervals, 0 outside."""
+    """On-off technological load (the lathe of docs/theory.md §3.6): -torque inside the intervals, 0 outside."""
 
     type: Literal["cutting"]
     torque: NonNegative = Field(description="resisting moment while cutting, F r [N m]")
@@ -496,7 +496,7 @@ def _check_loads_fit(loads: list, mechanism: Mechanism | None, key: str, owner: 
 
 
 class Branch(SceneModel):
-    """A branch of a branched drive (physics.md section 4, second paper): a working member driven from the
+    """A branch of a branched drive (docs/theory.md §7.4): a working member driven from the
     driven part's main shaft through a ratio i_1n, with its own inertia and resisting moments on its shaft."""
 
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="name of the branch, used in the output "
@@ -511,7 +511,7 @@ class Branch(SceneModel):
 
 
 class DrivenPart(SceneModel):
-    """The driven part of a two-mass machine (physics.md section 4): a rotor with its own resisting moments,
+    """The driven part of a two-mass machine (docs/theory.md §7.1): a rotor with its own resisting moments,
     turning at omega_driven, angle phi_driven = phi - twist, optionally with a mechanism on its shaft (then
     I2(phi_driven) = inertia + the links' reduced inertia), and branches; the scenario's external load acts on
     it. Its constant loads and the external load are Coulomb resistances: they oppose the motion and, at rest,
@@ -591,7 +591,7 @@ class Coupling(SceneModel):
 
 
 class Journal(SceneModel):
-    """A revolute joint's journal: its friction moment is M_f = lambda_p f' r |R| (physics.md section 7)."""
+    """A revolute joint's journal: its friction moment is M_f = lambda_p f' r |R| (docs/theory.md §6.2)."""
 
     radius: Positive = Field(description="journal (pin) radius r [m]")
     fit: Literal["clearance", "new", "run_in"] = Field("clearance", description="pressure distribution over the "
@@ -630,7 +630,7 @@ class ThrustCollar(SceneModel):
 
 class JointFriction(SceneModel):
     """Coulomb friction in the joints, from the joint reactions of the kinetostatic analysis at every step
-    (physics.md section 7; docs/joint_friction.md)."""
+    (docs/theory.md §6.5; docs/joint_friction.md)."""
 
     coefficient: Positive = Field(description="coefficient of sliding friction f of the joints and the collar [-]")
     joints: Journals = Field(default_factory=Journals, description="the revolute joints with friction")
@@ -791,7 +791,7 @@ def _check_joint_friction(friction: JointFriction, kind: str | None) -> None:
 
 
 # --------------------------------------------------------------------------------------------
-# Governor (physics.md section 3): a centrifugal sensor whose sleeve sets the throttle, directly
+# Governor (docs/theory.md §8): a centrifugal sensor whose sleeve sets the throttle, directly
 # through a valve or indirectly through a pilot valve and a servo-motor. M_d = throttle * M_drive.
 
 

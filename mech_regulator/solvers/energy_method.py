@@ -1,4 +1,4 @@
-"""The textbook energy (table) method: fixed steps in the crank angle (physics.md section 1).
+"""The textbook energy (table) method: fixed steps in the crank angle (docs/theory.md §2.6).
 
     E_{i+1} = E_i + 1/2 (M_i + M_{i+1}) (phi_{i+1} - phi_i),    omega_{i+1} = sqrt(2 E_{i+1} / J_{i+1}),
     t_{i+1} = t_i + 2 (phi_{i+1} - phi_i) / (omega_i + omega_{i+1}),

@@ -1,4 +1,4 @@
-"""A general planar linkage (issue 21): its data model, structural analysis (source 001: degrees of freedom,
+"""A general planar linkage (docs/linkages.md): its data model, structural analysis (source 001: degrees of freedom,
 repeated and redundant constraints, passive freedoms, the driving link and class-II Assur groups), the closed-form
 position of each dyad type with its analytic velocity and acceleration ratios, and its reduction to the crank
 (J(phi), dJ/dphi, the links' weight moment, the output coordinate) in the `reduced(phi)` contract of

@@ -13,7 +13,7 @@ compiled code calls them compiled; numba's disk cache keeps them, compiled once 
 `reduced` and `joint_loads` allocates: `solve_poses` and `kinetostatics` work in the arrays they are given, and
 `reduced` and `joint_loads` allocate one workspace per call for them (`joint_loads` also its three results).
 
-The equations (module docstring of groups.py, physics.md section 1): a link's pose is (r, theta), its point p at
+The equations (module docstring of groups.py, docs/theory.md §5.3): a link's pose is (r, theta), its point p at
 `P = r + p e^{i theta}`; every pose carries POSE_SIZE floats [x, y, theta, x', y', theta', x'', y'', theta'',
 cos theta, sin theta] (derivatives with respect to the crank angle phi; e^{i theta} kept so that it is computed once
 per link). Per group: position in closed form (RRR, RRP, RPR, PRP, RPP, a redundant link), then `A u' = -K k'` and

@@ -1,4 +1,4 @@
-"""Kinematics of a planar linkage group by group, and its reduction to the crank (physics.md section 1).
+"""Kinematics of a planar linkage group by group, and its reduction to the crank (docs/theory.md §5.3, §2.1).
 
 At crank angle phi the crank's pose is theta = phi with its pivot point on the frame's; the groups are then
 placed and differentiated from the crank outward. The equations are written once, in flat.py, and run compiled

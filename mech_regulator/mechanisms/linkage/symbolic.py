@@ -1,4 +1,4 @@
-"""A linkage's reduced(phi) as straight-line code, generated per linkage from its groups' closed forms (issue 21).
+"""A linkage's reduced(phi) as straight-line code, generated from its groups' closed forms (docs/theory.md §5.3).
 
 The general solver (flat.py) places each group by its closed form and differentiates it through the group's 6 x 6
 constraint system; that costs some 0.45 us per call on a crank–slider whose hand-written formula costs 0.025 us.

@@ -22,7 +22,7 @@ in __pycache__ beside it), and kept in a process-wide dict.
 
 With joint friction on a mechanism it also writes `reactions(t, y, p, squares)` (signatures.REACTIONS_SIGNATURE): the
 |R_j|^2 = |R0_j + R1_j epsilon|^2 [N^2] of the journals with friction (time_domain._journals: not the guides), at the
-rhs's own epsilon, which the integrators keep their steps' reach from (their branch points, issue 19).
+rhs's own epsilon, which the integrators keep their steps' reach from (their branch points, docs/theory.md §6.5).
 
 Guards are written in the order of MachineModel.guards(mode) (the governor's, then the clutch's and the driven
 part's, then the joint friction's crank guard; then one N guard per guide with friction, time_domain._normal_guards),
@@ -97,14 +97,14 @@ class CompiledScene:
     breakpoint_slot on: its value above the held piece's lower breakpoint and below its upper one, then the window's
     two if window_slot is not None); source and path of the generated module; table_slots: per state table the
     slot in p of its anchor (NaN: the table as it is), then its piece's lower and upper breakpoints in the guard's
-    state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards. Joint friction with a
-    mechanism (issue 19): friction_slot, the first of its slots in p (per guide with friction its normal sign s_N,
-    0: |N|, and its guard's start level; then the signs s_j of the kinetostatics' joints' relative rates, the
-    presets' four or a linkage's all, 0: |k_j|), and normal_slot, the guard slot of the first guide's s_N N (a
-    crank–slider's guide or a linkage's prismatic joints with friction, n_normals of them in joint_friction.guides'
-    order, after the mode's guards; N itself while its s_N is 0, what hold_normal reads its sign from), or None;
-    reactions_callback (a C callback, as rhs_callback) writes the |R_j|^2 of the n_journals journals with friction
-    (guards_callback, never called, when n_journals is 0)."""
+    state (-inf, inf: none); mode_rows(mode) -> the linear rows of the mode's guards. Joint friction with a mechanism
+    (docs/theory.md §6.5): friction_slot, the first of its slots in p (per guide with friction its normal sign s_N, 0:
+    |N|, and its guard's start level; then the signs s_j of the kinetostatics' joints' relative rates, the presets' four
+    or a linkage's all, 0: |k_j|), and normal_slot, the guard slot of the first guide's s_N N (a crank–slider's guide or
+    a linkage's prismatic joints with friction, n_normals of them in joint_friction.guides' order, after the mode's
+    guards; N itself while its s_N is 0, what hold_normal reads its sign from), or None; reactions_callback (a C
+    callback, as rhs_callback) writes the |R_j|^2 of the n_journals journals with friction (guards_callback, never
+    called, when n_journals is 0)."""
 
     model: MachineModel
     rhs: object

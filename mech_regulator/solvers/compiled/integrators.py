@@ -43,7 +43,7 @@ at t_end the call goes on into the next (_piece_restart: y[1] and those slots se
 caller's next call would), on the same conditions as a kink, then to its end, and so on.
 max_restarts: the most restarts (kinks and pieces) made inside one call (so that the caller hears of progress).
 
-Joint friction's journals (issue 19, as the reference path's adaptive one-step methods, time_domain._segment):
+Joint friction's journals (docs/theory.md §6.5; as the reference path's one-step methods, time_domain._segment):
 reactions(t, y, p, squares) writes the |R_j|^2 [N^2] of the n_journals journals with friction (a scene's generated
 function; any function of that type when n_journals is 0: no limit, the steps exactly as without it). After every
 accepted step of RK45, DOP853 or Rosenbrock23 they are sampled along the step's dense output at the GUARD_NODES

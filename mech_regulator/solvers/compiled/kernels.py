@@ -187,8 +187,8 @@ def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, co
     (omega = 0) 0 while |M| <= F(0), else breaking away in the direction of M; NaN without convergence.
     arms: rho_j [m] (f_guide for a guide) of the mechanism's linkage's joints, 0 for a
     joint without friction (its terms add exact zeros); with_joints False: the collar alone (no kinetostatics).
-    Between two corners (issue 19): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_signs s_N (0: |R|) a
-    guide's |N| (its reaction i N) as s_N N, per joint (0 for every joint but the guides)."""
+    Between two corners (docs/theory.md §6.5): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_signs s_N
+    (0: |R|) a guide's |N| (its reaction i N) as s_N N, per joint (0 for every joint but the guides)."""
     at_rest = 0.0
     if with_joints:
         for j in range(len(arms)):
