@@ -188,6 +188,28 @@ def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_k
         assert ours[0].startswith(f"mech-regulator: writing '{failed}' failed: ") and "incomplete" in ours[0], err
 
 
+def test_a_run_of_the_nodes_whose_disk_fills_up_ends_with_exit_1_and_says_which_outputs(tmp_path):
+    """The ROS nodes' run on a tmpfs of 64 kB: the recording fills it during the run, then the recorder cannot write
+    the CSV or the summary either. Each failure is one line (the recorder's, quoted by the launcher), the run ends with
+    exit code 1, and nothing ends in a traceback."""
+    pytest.importorskip("rclpy")
+    from ros_support import next_domain_id
+
+    if os.geteuid() != 0 or shutil.which("unshare") is None:
+        pytest.skip("a private tmpfs needs root and unshare (util-linux)")
+    shell = 'mkdir -p small && mount -t tmpfs -o size=64k none small && exec "$0" "$@"'
+    done = subprocess.run(["unshare", "-m", "sh", "-c", shell, sys.executable, "-m", "mech_regulator", "run",
+                           "engine_direct", "--duration", "0.3", "--quiet", "--domain-id", str(next_domain_id()),
+                           "--out", "small/run.rrd"], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, PYTHONPATH=os.pathsep.join(
+                              filter(None, [str(SOURCE_TREE), os.environ.get("PYTHONPATH")]))))
+    code, out, err = done.returncode, done.stdout, done.stderr
+    assert code == 1, err
+    assert "Traceback" not in out + err, err
+    assert "the recorder node ended with exit code 1: " in err and "output(s) could not be written" in err, err
+    assert "No space left on device" in err and "cannot be read (written only in part" in err, err
+
+
 def test_a_failed_write_after_the_run_keeps_the_summary_and_the_other_outputs(capsys, monkeypatch, tmp_path):
     def full_disk(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))

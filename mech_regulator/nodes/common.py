@@ -60,6 +60,10 @@ class PeerError(Exception):
     """A peer node the run needs did not come (the machine then ends with exit code 1 and says which)."""
 
 
+class OutputError(Exception):
+    """An output a node writes could not be written (a full disk); the node said which and ends with exit code 1."""
+
+
 def stamp(nanoseconds: int) -> Time:
     """A builtin_interfaces/Time from whole nanoseconds of simulation time."""
     return Time(sec=nanoseconds // NANOSECONDS, nanosec=nanoseconds % NANOSECONDS)
@@ -343,7 +347,7 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
     add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
     executor's), then `work(node)` or spin until the node says it is done (`node.done`, see follow_run_state).
     A bad scene or parameter ends with a message 'mech_regulator: <name>_node: <why>' (node_label; the launcher
-    quotes it) and exit code 2, a missing peer with exit code 1; Ctrl-C ends
+    quotes it) and exit code 2, a missing peer or an output it could not write with exit code 1; Ctrl-C ends
     with exit code 0 whatever call into rclpy it interrupts."""
     interrupted = remember_ctrl_c()
     rclpy.init(args=sys.argv)
@@ -365,7 +369,7 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
     except SceneError as error:
         print(f"mech_regulator: {name}: {error}", file=sys.stderr)
         code = EXIT_BAD_INPUT
-    except PeerError as error:
+    except (PeerError, OutputError) as error:
         print(f"mech_regulator: {name}: {error}", file=sys.stderr)
         code = EXIT_FAILED
     except (KeyboardInterrupt, ExternalShutdownException):  # Ctrl-C: a normal way to stop a node

@@ -182,8 +182,8 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         from mech_regulator.nodes.recorder import write_empty_run
 
         write_empty_run(model, output, exchange_step, NOTHING_SIMULATED)
-    if summary_path.exists():
-        summary = json.loads(summary_path.read_text())
+    summary = _read_summary(summary_path)
+    if summary is not None:
         print(format_cosimulation_summary(summary))
         for topic, reasons in summary.get("refused", {}).items():
             print(f"refused on {topic}: " + ", ".join(f"{count} {reason}" for reason, count in reasons.items()))
@@ -195,6 +195,9 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         if "max_lag_s" in summary:
             print(f"realtime: the simulation time fell behind the wall clock by {summary['max_lag_s']:.3g} s at most")
         print(f"open the recording with: {viewer_command(output)}")
+    elif summary_path.exists():
+        print(f"mech-regulator: the summary {summary_path} cannot be read (written only in part: a full disk?)",
+              file=sys.stderr)
     else:
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)
     if failed:
@@ -210,6 +213,16 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
         return 2 if bad_input else 1
     return 130 if interrupted else 1 if disturbed else 0
+
+
+def _read_summary(path: Path) -> dict | None:
+    """The run's summary (the recorder's JSON), or None when there is none or it cannot be read whole (the recorder
+    could not write it all: a full disk)."""
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return summary if isinstance(summary, dict) and "status" in summary else None
 
 
 def summary_before_start(argv: list[str]) -> Path | None:

@@ -33,9 +33,9 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, RunState, batch_groups,
-                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
-                                         peer_parameter, run, scene_model, text_parameter)
+from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, OutputError, RunState,
+                                         batch_groups, coupling_parameter, diagnostics, float_parameter,
+                                         follow_run_state, peer_parameter, run, scene_model, text_parameter)
 from mech_regulator.nodes.trust import (BadMessage, GovernorEvent, Refusals, RunStateMessage, Speakers,
                                         about_the_nodes, bounded, json_message, merge_counts, real_number, receive,
                                         report_of)
@@ -98,6 +98,7 @@ class RecorderNode(Node):
         self.machine_reported_end = False  # its last diagnostics (with its refusals and disturbances) are in
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
+        self.write_failures: list[str] = []  # one line per output that could not be written (close)
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.refusals = Refusals(self, self.report)
@@ -240,25 +241,27 @@ class RecorderNode(Node):
         return self.model.governor is None or self.finished_at in self.governor
 
     def close(self) -> None:
-        """Finish the recording, then write the samples (CSV) and the summary (JSON) next to it; stopped
-        before a first complete exchange, the summary alone (status interrupted, samples 0)."""
+        """Finish the recording, then write the samples (CSV), the bag and the summary (JSON) next to it; stopped
+        before a first complete exchange, the summary alone (status interrupted, samples 0). Each output is written
+        on its own: one that cannot be written (a disk that filled up) is said in one line on stderr and kept in
+        write_failures, and the others are still written; nothing here raises."""
         if self.closed:
             return
         self.closed = True
         run_data = self.run_data()
-        if run_data is None:
-            self.recording.close("interrupted", "before the first complete exchange")
-        else:
+        status, message = "interrupted", "before the first complete exchange"
+        if run_data is not None:
             status, message = cosimulation_ending(run_data) if self.complete() else \
                 ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
             if self.machine_result[0] not in ("complete", "interrupted"):  # the machine's own end (failed, ...)
                 status, message = self.machine_result
-            self.recording.close(status, message)
+        self._write("recording", self.path, lambda: self.recording.close(status, message))
         if self.path is None:
             return
         summary_path = self.path.with_suffix(".json")
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
-            write_empty_run(self.model, self.path, self.exchange_step, extra=self.trust_summary("interrupted"))
+            self._write("summary", summary_path, lambda: write_empty_run(
+                self.model, self.path, self.exchange_step, extra=self.trust_summary("interrupted")))
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
         summary.update(self.pace())
@@ -269,12 +272,29 @@ class RecorderNode(Node):
         columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
         if self.controller == "external":
             columns["throttle"] = run_data.throttle
-        write_csv(csv_path, columns, digits=17)
-        summary.update(recording=str(self.path), csv=str(csv_path))
-        if self.bag is not None:
-            summary["bag"] = str(write_bag(self.bag, self.model, run_data.times, run_data.states, run_data.throttle,
-                                           run_data.external_load, summary["status"], summary.get("message", "")))
-        summary_path.write_text(to_json(summary))
+        summary["recording"] = str(self.path)
+        if self._write("CSV", csv_path, lambda: write_csv(csv_path, columns, digits=17)):
+            summary["csv"] = str(csv_path)
+        if self.bag is not None and self._write("bag", self.bag, lambda: write_bag(
+                self.bag, self.model, run_data.times, run_data.states, run_data.throttle, run_data.external_load,
+                summary["status"], summary.get("message", ""))):
+            summary["bag"] = str(self.bag)
+        if self.write_failures:
+            summary["not_written"] = list(self.write_failures)
+        self._write("summary", summary_path, lambda: summary_path.write_text(to_json(summary)))
+
+    def _write(self, what: str, path: Path | None, write) -> bool:
+        """write(); True when it wrote, else (an OSError: a full disk, a folder gone) one line on stderr and in
+        write_failures, False."""
+        try:
+            write()
+            return True
+        except OSError as error:
+            line = (f"writing the {what} '{path}' failed: {error.strerror or error}; what was computed is in the "
+                    "outputs that were written")
+            self.write_failures.append(line)
+            print(f"mech_regulator: recorder_node: {line}", file=sys.stderr)
+            return False
 
     def trust_summary(self, status: str) -> dict:
         """The summary's `refused` (topic -> reason -> count, summed over the nodes that refused) and `disturbances`
@@ -386,7 +406,10 @@ class RecorderNode(Node):
                     self.get_logger().warning(f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
                                               f"its last samples did not come within {FINISH_GRACE:g} s: closing "
                                               f"with what was received ({self.received()})")
-                    return
+                    break
+        self.close()
+        if self.write_failures:  # said one by one already; the node ends with exit code 1
+            raise OutputError(f"{len(self.write_failures)} output(s) could not be written: {self.write_failures[-1]}")
 
 
 def write_empty_run(model: MachineModel, path: Path, exchange_step: float,
