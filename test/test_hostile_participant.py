@@ -210,7 +210,10 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
     assert "/diagnostics" in summary["refused"], summary["refused"]
     calls = [text for text in summary["disturbances"] if "/machine/pause called" in text
              or "/machine/resume called" in text]
-    assert len(calls) == 2 and all(f"probe_{domain_id}" in text for text in calls), summary["disturbances"]
+    # each call recorded, by the probe's name, or (when the machine's graph did not list the probe's client yet:
+    # rclpy does not tell a service who called) as a caller the graph does not name
+    assert len(calls) == 2 and all(f"probe_{domain_id}" in text or "by a node the graph does not name" in text
+                                   for text in calls), summary["disturbances"]
     assert "refused on throttle: " in job.log and "disturbance: machine: /machine/pause called" in job.log
 
 
