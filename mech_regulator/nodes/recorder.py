@@ -92,6 +92,10 @@ class RecorderNode(Node):
         self.machine_result = ("complete", "")  # the machine's solver status and its message
         self.moments: dict[int, tuple[float, float, float]] = {}  # stamp -> (drive, external load) [N m], throttle [-]
         self.governor: dict[int, dict[str, float]] = {}
+        # the exchange times all parts are in for, and the newest: kept as the parts come (the streams' dicts are in
+        # the order of their times), so that the report each second costs nothing however long the run
+        self.completed: set[int] = set()
+        self.completed_until: int | None = None
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.machine_status = (DiagnosticStatus.OK, "")
         self.finished_at: int | None = None
@@ -127,8 +131,9 @@ class RecorderNode(Node):
         """The machine's ~/reset (trial: the new trial's number): forget the samples of the trial before (the
         recording keeps them)."""
         self.trial = trial
-        for samples in (self.machine, self.moments, self.governor):
+        for samples in (self.machine, self.moments, self.governor, self.completed):
             samples.clear()
+        self.completed_until = None
         self.events.clear()
         self.state_walls.clear()
         self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
@@ -149,9 +154,10 @@ class RecorderNode(Node):
         needed += ["coupling"] if self.model.coupling is not None else []
         needed += ["driven"] if self.model.driven is not None else []
         groups = batch_groups(message, tuple(needed))
-        if groups and self.machine and groups[0][0] < max(self.machine):
+        newest = next(reversed(self.machine), None)  # (the dict's order is its times')
+        if groups and newest is not None and groups[0][0] < newest:
             raise BadMessage("out of order", f"machine/moments from {seconds(groups[0][0]):.9g} s after "
-                             f"{seconds(max(self.machine)):.9g} s")
+                             f"{seconds(newest):.9g} s")
         for when, joints in groups:
             checks = [(joints["crank"][0], "crank position [rad]"), (joints["crank"][1], "crank velocity [rad/s]")]
             checks += [(joints[name][2], f"{name} effort [N m]") for name in needed[1:6]]
@@ -174,6 +180,7 @@ class RecorderNode(Node):
                                        moments["net"])
             self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
             self.moments[when] = (moments["drive"], moments["load"], joints["throttle"][0])
+            self.part_arrived(when)
             if self.controller == "external":
                 self.recording.add_throttle(when, joints["throttle"][0])
 
@@ -184,9 +191,10 @@ class RecorderNode(Node):
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
         extra = tuple(name for name in ("servo", "feedback_shift") if name in self.model.governor.state_names)
         groups = batch_groups(message, ("sleeve", "arm", "throttle", *extra))
-        if groups and self.governor and groups[0][0] < max(self.governor):
+        newest = next(reversed(self.governor), None)  # (the dict's order is its times')
+        if groups and newest is not None and groups[0][0] < newest:
             raise BadMessage("out of order", f"governor/state from {seconds(groups[0][0]):.9g} s after "
-                             f"{seconds(max(self.governor)):.9g} s")
+                             f"{seconds(newest):.9g} s")
         for when, joints in groups:
             values = [*joints["sleeve"][:2], *joints["arm"][:2], *(joints[name][0] for name in extra)]
             for value in values:
@@ -200,6 +208,7 @@ class RecorderNode(Node):
                     values[name] = joints[name][0]
             self.governor[when] = values
             self.recording.add_governor(when, values)
+            self.part_arrived(when)
 
     def on_governor_event(self, message: String) -> None:
         event = json_message(message.data, GovernorEvent)
@@ -346,6 +355,13 @@ class RecorderNode(Node):
         return "; ".join(f"{name}: {len(samples)}" + (f" up to {seconds(max(samples)):.6g} s" if samples else "")
                          for name, samples in streams.items())
 
+    def part_arrived(self, when: int) -> None:
+        """A part of the exchange at `when` [ns] came: the exchange is complete once the machine's state and
+        moments and (with a governor) the governor's state are in."""
+        if when in self.machine and when in self.moments and (self.model.governor is None or when in self.governor):
+            self.completed.add(when)
+            self.completed_until = when if self.completed_until is None else max(self.completed_until, when)
+
     def complete_times(self) -> list[int]:
         """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""
         return sorted(when for when in self.machine if when in self.moments
@@ -353,9 +369,8 @@ class RecorderNode(Node):
 
     def report(self) -> None:
         """Publish /diagnostics: how many complete exchanges are recorded and up to which time."""
-        times = self.complete_times()
-        values = {"scene": self.model.scene.name, "recorded_exchanges": len(times),
-                  "recorded_until": seconds(times[-1]) if times else None}
+        values = {"scene": self.model.scene.name, "recorded_exchanges": len(self.completed),
+                  "recorded_until": seconds(self.completed_until) if self.completed_until is not None else None}
         array = diagnostics(self, *self.refusals.status(OK, "recording"), values)
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
