@@ -106,7 +106,6 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
     branches = np.empty(0, dtype=complex)  # the branch points of the journals' |R_j| the last step saw [s]
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
     stalled = 0  # restarts in a row of any kind that left the time where it was
-    y = np.array(y, dtype=float)
     while t < t_end and trajectory.status == "complete":
         if wraps:
             whole = math.floor(phase / period)
@@ -136,7 +135,7 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         if branches.size and first_step is not None:  # a restart's first step stays within the reach too
             first_step = min(first_step, max(_reach(branches, t), _smallest_limit(t)))
         solver = _solver(settings, rhs, t, y_wrapped, t_end, first_step)
-        restart, redone = False, False
+        restart, redone, crossing = False, False, None
         while solver.status == "running" and not restart:
             try:
                 message = solver.step()
@@ -354,9 +353,10 @@ def _reaction_branches(reactions, journals: tuple[int, ...], wrapped, t_old: flo
     steps that reach that far (DOP853 accepted a 23 ms step across the wrist pin's 1.4 N of 145 N with 14 times its
     tolerance); _reach gives the steps that do not. |R_j|^2 along the step: reactions(t, y) (the segment's
     MachineModel.joint_reactions, in the solver's phi) at the journals' positions, on the solver's own dense output
-    (wrapped: phi in the phase, as the solver steps it) at the GUARD_NODES Chebyshev points (_branch_points). They are the reactions the
-    step integrates, continued along the segment: beyond a corner inside the step (which the step is then cut at) the
-    reactions themselves have a kink, whose interpolant's complex zeros would limit the step for nothing."""
+    (wrapped: phi in the phase, as the solver steps it) at the GUARD_NODES Chebyshev points (_branch_points). They are
+    the reactions the step integrates, continued along the segment: beyond a corner inside the step (which the step is
+    then cut at) the reactions themselves have a kink, whose interpolant's complex zeros would limit the step for
+    nothing."""
     h = t_new - t_old
     times = t_old + GUARD_NODE_FRACTIONS * h
     states = wrapped(times)

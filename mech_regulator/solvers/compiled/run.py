@@ -182,7 +182,6 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
     # the crank angle as whole periods and the phase within them (time_domain.turns_and_phase), carried exactly across
     # the restarts: phi = turns period + phase is only written out, never read back
     turns, phase = turns_and_phase(y[0], period) if wraps else (0, float(y[0]))  # (phi only an output)
-    y = np.array(y, dtype=float)
     while t < t_end and trajectory.status == "complete":
         if wraps:
             whole = math.floor(phase / period)
@@ -193,7 +192,6 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
             break
         window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
-        start[0] = offset + phase
         held = _held_pieces(tables, start, held)
         p = compiled.parameters_for(piece, mode, window, start[1], held, start, offset)
         y_wrapped = start.copy()
@@ -231,7 +229,7 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         phase = y[0]  # less offset (the stepper's own wraps added back)
         y[0] += offset
         y_stop = y.copy()  # the state where the call stopped, before an event's transition
-        what = "the end of a call"
+        what = ("the end of a call",)  # the restart this call ended in, put in words only should the run stall
         if run.status == integrators.FAILED and run.failure in (integrators.NONFINITE, integrators.STEP_TOO_SMALL):
             trajectory.status = "failed"
             if run.failure == integrators.NONFINITE:
@@ -246,19 +244,19 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
                 phase = window[g - compiled.window_slot]
                 y[0] = offset + phase
                 trajectory.stats.restarts += int(t < t_end)
-                what = f"the switch angle phi = {y[0]:.12g} rad ({phase:.12g} rad in its period)"
+                what = ("the switch angle phi = {:.12g} rad ({:.12g} rad in its period)", y[0], phase)
             elif compiled.normal_slot is not None and 0 <= g - compiled.normal_slot < compiled.n_normals:
                 crossed_normal = g - compiled.normal_slot  # a guide's N = 0: its other sign held, mode and state kept
                 normal_sides = tuple(-side if k == crossed_normal else side for k, side in enumerate(normal_sides))
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
-                what = f"a guide's normal force N = 0 (guide {crossed_normal})"
+                what = ("a guide's normal force N = 0 (guide {})", crossed_normal)
             elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
                 table, side = divmod(g - compiled.breakpoint_slot, 2)
                 held[table] += 1 if side else -1
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
-                what = f"a breakpoint of the table {tables[table].name}"
+                what = ("a breakpoint of the table {}", tables[table].name)
             else:
                 guard = model.guards(mode, start)[g]
                 mode, y = guard.apply(t, y)
@@ -268,17 +266,17 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
                 if instant_events > MAX_INSTANT_EVENTS:
                     _fail_stuck(trajectory, t)
                 trajectory.stats.restarts += 1
-                what = f"the guard '{guard.name}'"
+                what = ("the guard '{}'", guard.name)
         elif run.status == integrators.WRAPPED and t < t_end:
             trajectory.stats.restarts += 1
-            what = "a wrap of the crank angle"
+            what = ("a wrap of the crank angle",)
         stalled = stalled + 1 if t == t_old and not run.n_steps and not run.pieces_done else 0
         if run.beyond >= 0:  # a speed beyond MAX_SPEED at the last step's end: the run stops there (time_domain)
             fail_blown_up(model, trajectory, t, y_stop, model.state_names()[run.beyond], float(y_stop[run.beyond]))
         elif trajectory.status == "complete" and trajectory.stats.steps >= time_domain.MAX_STEPS:
             fail_too_many_steps(model, trajectory, t, y_stop)
         elif trajectory.status == "complete" and stalled >= MAX_RESTARTS_WITHOUT_PROGRESS:
-            fail_no_progress(model, trajectory, t, y_stop, what)
+            fail_no_progress(model, trajectory, t, y_stop, what[0].format(*what[1:]))
         if progress is not None:
             progress(t)
     return y, mode, index + 1
