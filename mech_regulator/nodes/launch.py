@@ -12,6 +12,7 @@ from the launcher after it has imported what they all import (NodeProcess), so t
 
 from __future__ import annotations
 
+import functools
 import gc
 import importlib
 import json
@@ -150,6 +151,8 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
               "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python examples/pid_governor.py", file=sys.stderr)
     processes: dict[str, subprocess.Popen] = {}
     interrupted = False
+    ctrl_c: list[int] = []  # a Ctrl-C that came (an import of a C extension it interrupts fails with ImportError)
+    signal.signal(signal.SIGINT, functools.partial(_remember_interrupt, ctrl_c))
     with open(log_file, "w") as log:
         try:
             importlib.import_module("mech_regulator.nodes.common")  # what every node imports (rclpy, the message
@@ -167,7 +170,9 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
                     f"{scene.name} on the nodes", started)
             if processes["machine"].returncode == 0:
                 _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
-        except KeyboardInterrupt:
+        except (KeyboardInterrupt, ImportError) as error:
+            if isinstance(error, ImportError) and not ctrl_c:
+                raise
             interrupted = True
             print("\ninterrupted: stopping the nodes and closing the recording", file=sys.stderr)
         finally:
@@ -275,6 +280,12 @@ def viewer_command(recording: Path) -> str:
 
 
 def _interrupt(signal_number, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def _remember_interrupt(received: list[int], signal_number, frame) -> None:
+    """Ctrl-C: remember it in `received`, then raise KeyboardInterrupt as Python's own handler does."""
+    received.append(signal_number)
     raise KeyboardInterrupt
 
 
