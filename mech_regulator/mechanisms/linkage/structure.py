@@ -1,7 +1,7 @@
 """Structural analysis of a planar linkage (source 001, chapter 1): degrees of freedom and Assur groups.
 
 Degrees of freedom: `W = 3 n - (2 p5 + p4 - R_repeated - R_redundant) - W_passive`, n the moving links, p5 the
-lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts), found where they occur:
+lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts, gear meshes), found where they occur:
 - a repeated constraint: three links joined in a triangle by three prismatic joints (their relative rotation is
   forbidden twice), one each;
 - a redundant constraint: a link joined by two revolute joints to links whose motion is already fixed, the
@@ -10,8 +10,9 @@ lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts), found whe
 
 Decomposition: the frame and the driving crank are known; repeatedly, two unknown links joined to each other by
 a lower pair and each by exactly one lower pair to known links form a class-II group (a dyad, groups.Dyad), taken
-in order from the crank outward. What remains undecomposed is reported (a group of class III or higher, or one
-with a higher pair: not supported).
+in order from the crank outward; a gear link on one revolute pivot meshing with a known gear is a group of its own
+(gears.GearGroup, 3 - 2 - 1 = 0). What remains undecomposed is reported (a group of class III or higher, or one
+with a cam: not supported).
 """
 
 from __future__ import annotations
@@ -20,8 +21,9 @@ import itertools
 import math
 from dataclasses import dataclass
 
+from mech_regulator.mechanisms.linkage import gears
 from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad
-from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Linkage, LinkageError
+from mech_regulator.mechanisms.linkage.model import CAM, GEAR, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
 REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
 REDUNDANCY_TOLERANCE = 1e-9      # relative change of that distance still called constant [-]
@@ -38,7 +40,7 @@ class Structure:
     repeated: tuple[str, ...]
     redundant: tuple[str, ...]
     passive: tuple[str, ...]
-    groups: tuple[Dyad | RedundantLink, ...]
+    groups: tuple[Dyad | RedundantLink | gears.GearGroup, ...]
     undecomposed: str | None
 
     @property
@@ -74,6 +76,11 @@ class Structure:
                 joints = ", ".join(f"{j.name} ({j.kind})" for j in group.joints)
                 lines.append(f"group {number}: class II, type {group.kind}, links {group.links[0]} + {group.links[1]}, "
                              f"joints {joints}, branch {group.branch:+d}")
+            elif isinstance(group, gears.GearGroup):
+                lines.append(f"group {number}: gear {group.link} about {group.pivot.name}, mesh {group.mesh.name} with "
+                             f"{group.driver} on {group.carrier}: ratio {group.ratio:+.6g}, pitch radii "
+                             f"{abs(group.pitch[0]):.6g} and {abs(group.pitch[1]):.6g} m, {group.rate:+.6g} turns per "
+                             "crank turn")
             else:
                 lines.append(f"group {number}: {group.name} (joints {group.joints[0].name}, {group.joints[1].name})")
         if self.undecomposed is not None:
@@ -86,7 +93,7 @@ def analyse(linkage: Linkage) -> Structure:
     linkage.check()
     moving = linkage.moving_links()
     lower = sum(1 for joint in linkage.joints if joint.kind in (REVOLUTE, PRISMATIC))
-    higher = sum(1 for joint in linkage.joints if joint.kind == CAM)
+    higher = sum(1 for joint in linkage.joints if joint.kind in (CAM, GEAR))
     groups: list = []
     redundant: list[str] = []
     undecomposed = None
@@ -128,16 +135,27 @@ def _passive(linkage: Linkage) -> tuple[str, ...]:
 def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | None:
     """Fill `groups` from the crank outward and `redundant` with the redundant links found; return a description
     of the links that remain undecomposed, or None."""
+    from mech_regulator.mechanisms.linkage.kinematics import make_solver
+
     known = {linkage.frame, linkage.crank}
+    rates = {linkage.frame: 0.0, linkage.crank: 1.0}   # turns per crank turn of the links whose angle is phi's
     while True:
         remaining = [name for name in linkage.moving_links() if name not in known]
         if not remaining:
+            fractional = gears.hanging_on_fractional_gears(linkage, groups)
+            if fractional:
+                raise LinkageError("; ".join(fractional) + "; expected gears that turn a whole number of times per "
+                                                           "crank turn wherever a mechanism hangs on them")
             return None
-        group = _next_dyad(linkage, known, remaining) or _next_redundant_link(linkage, known, remaining, groups)
+        group = (_next_dyad(linkage, known, remaining)
+                 or gears.next_gear(linkage, known, rates, make_solver(linkage, groups))
+                 or _next_redundant_link(linkage, known, remaining, groups))
+        if isinstance(group, gears.GearGroup):
+            rates[group.link] = group.rate
         if group is None:
             joints = [j for j in linkage.joints if any(link in remaining for link in j.links)]
             letters = "".join(sorted(j.letter for j in joints))
-            lower = sum(1 for j in joints if j.kind != CAM)
+            lower = sum(1 for j in joints if j.kind in (REVOLUTE, PRISMATIC))
             return (f"the links {remaining} with their joints {[f'{j.name} ({j.kind})' for j in joints]} form no "
                     f"class-II group (n = {len(remaining)}, p5 = {lower}, p4 = {len(joints) - lower}, joints "
                     f"{letters}): a group of class III or higher, or one with a higher pair, which is not supported")
@@ -160,7 +178,7 @@ def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad 
         outside = [[j for j in linkage.joints_of(link) if j.other(link) in known] for link in (first, second)]
         if len(between) == 1 and all(len(joints) == 1 for joints in outside):
             joints = [between[0], outside[0][0], outside[1][0]]
-            if any(joint.kind == CAM for joint in joints):
+            if any(joint.kind in (CAM, GEAR) for joint in joints):
                 continue
             return make_dyad(linkage, (first, second), between[0], (outside[0][0], outside[1][0]),
                              linkage.branches.get(between[0].name, 1))

@@ -29,7 +29,10 @@ The closed forms per group (groups.py's module docstring; sigma the group's bran
   h the line's offset from the pivots), the slider's e^{i theta_g} e^{i alpha};
 - PRP, RPP: intersections of two known lines, `c1 + w1 Im((c2 - c1) conj w2) / Im(w1 conj w2)`;
 - a link through two known points P, T (a dyad's links, a redundant link): `e^{i theta} = (T - P) conj(d) / |d|^2`,
-  d its own vector between the two points, r = P - p e^{i theta}.
+  d its own vector between the two points, r = P - p e^{i theta};
+- a gear (gears.py): its angle `theta_L = theta_c + k (theta_G - theta_c) + phase_L` from the angles of its driver
+  and carrier, which are phi's (linear in phi: the frame, the crank, gears), `e^{i theta_L} = (cos theta_L, sin
+  theta_L)` and r = P - p e^{i theta_L} from its pivot P.
 Then, over the moving links k with centres S_k = r_k + c_k e^{i theta_k} and theta' = Re(e) Im(e)' - Im(e) Re(e)'
 (e = e^{i theta}): `J = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k S_k'.S_k'' + I_k theta_k'
 theta_k'')` (the crank's term the constant m |c - p_A|^2 + I, p_A its pivot, written so: it is exactly zero for a
@@ -72,6 +75,8 @@ def _structural_positions(program: np.ndarray) -> set[int]:
 
     def joint(j):
         positions.update((j, j + 1, j + 2))
+        if program[j] == flat.GEAR_MESH:
+            positions.add(j + 9)   # the carrier link
 
     joint(5)
     g = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
@@ -126,9 +131,10 @@ class _Writer:
         self.rate: dict[object, object] = {}
         self.lines: list[str] = []
         self.count = 0
-        cos_phi, sin_phi = sympy.symbols("cos_phi sin_phi")
-        self.rate[cos_phi], self.rate[sin_phi] = -sin_phi, cos_phi
+        cos_phi, sin_phi, phi = sympy.symbols("cos_phi sin_phi phi")
+        self.rate[cos_phi], self.rate[sin_phi], self.rate[phi] = -sin_phi, cos_phi, sympy.Integer(1)
         self.crank_turn = (cos_phi, sin_phi)
+        self.phi = phi
 
     # numbers and points of the program
     def number(self, i: int):
@@ -253,13 +259,15 @@ def _dot(u, v):
 
 
 class _Poses:
-    """The links' poses as expressions: origin r and turn e = e^{i theta} per link index."""
+    """The links' poses as expressions: origin r and turn e = e^{i theta} per link index; `angle` the angle theta of
+    the links whose angle is phi's (the frame, the crank, gears)."""
 
     def __init__(self, writer: _Writer):
         self.w = writer
         zero, one = writer.sp.Integer(0), writer.sp.Integer(1)
         self.origin = {0: (zero, zero)}
         self.turn = {0: (one, zero)}
+        self.angle = {0: zero}
 
     def point(self, j: int, link: int):
         """Global position of the joint j's point on `link`: r + p e."""
@@ -315,6 +323,14 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     E1, Ji, E2 = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
     if kind == flat.REDUNDANT:
         poses.swing(E1, Ji, L1, poses.point(E1, w.other(E1, L1)), poses.point(Ji, w.other(Ji, L1)))
+        return
+    if kind == flat.GEAR:   # flat.place_group's gear: theta_L = theta_c + k (theta_G - theta_c) + phase_L
+        rho_a, rho_b = w.number(Ji + 7), w.number(Ji + 8)
+        ratio = rho_a / rho_b if int(program[Ji + 2]) == L1 else rho_b / rho_a
+        carrier = poses.angle[int(program[Ji + 9])]
+        angle, = w.jets([carrier + ratio * (poses.angle[w.other(Ji, L1)] - carrier) + w.number(g + 1)])
+        poses.angle[L1] = angle
+        poses.pin(E1, L1, poses.point(E1, w.other(E1, L1)), (sp.cos(angle), sp.sin(angle)))
         return
     K1, K2 = w.other(E1, L1), w.other(E2, L2)
     if kind in (0, 1):   # RRR, RRP
@@ -386,6 +402,7 @@ def _placed(program: np.ndarray) -> _Poses:
     pivot_crank = writer.number(flat.HEADER_SIZE - 2), writer.number(flat.HEADER_SIZE - 1)
     poses.origin[crank] = _sub(pivot_frame, _mul(pivot_crank, writer.crank_turn))
     poses.turn[crank] = writer.crank_turn
+    poses.angle[crank] = writer.phi
     g = flat.HEADER_SIZE + flat.LINK_SIZE * int(program[0])
     for _ in range(int(program[1])):
         _place(poses, program, g)
@@ -625,6 +642,8 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         g = groups_at + flat.GROUP_SIZE * group
         if int(program[g]) == flat.REDUNDANT:
             raise ValueError("a linkage with a redundant link is statically indeterminate: no generated kinetostatics")
+        if int(program[g]) == flat.GEAR:
+            raise ValueError("no generated kinetostatics for a linkage with gears yet (flat.kinetostatics solves it)")
         found = _group_reactions(poses, program, g, residual)
         for case in range(2):
             for row in range(6):
