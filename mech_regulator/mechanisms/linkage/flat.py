@@ -32,7 +32,8 @@ the signed pitch radii rho_a, rho_b [m], the carrier link] (gears.py's module do
   output's angle is reported within pi of it, model.Linkage.output_reference), the crank pivot on the frame (x, y)
   [m] and on the crank (x, y) [m];
   per link LINK_SIZE floats: mass [kg], centre of mass (x, y) [m, own coordinates], inertia about it [kg m^2];
-  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT; GEAR), branch (+1 or -1; a gear's phase_L
+  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT; GEAR), branch (+1 or -1; 0 an RRR group kept a
+  parallelogram, groups.Dyad, its E1 record's u slots then holding B - P in B's known link [m]; a gear's phase_L
   [rad]), link L1, link L2 (-1 for a redundant link or a gear), then three joint records: E1, internal, E2 (a
   redundant link: its two joints, then zeros; a gear: its pivot, its mesh, then zeros);
   the joint map (what the kinetostatics reports per joint): the number of the linkage's joints, the crank pivot's
@@ -136,7 +137,12 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
             program += [float(GEAR), group.phase, float(index[group.link]), -1.0]
         else:
             joints = [joint_record(linkage, joint, index) for joint in group.joints]
-            program += [float(KIND_CODES[group.kind]), float(group.branch), float(index[group.links[0]]),
+            branch = float(group.branch)
+            if group.parallelogram is not None:   # B - P on B's known link, in the E1 record's unused u slots
+                known = linkage.link(group.externals[0].other(group.links[0])).points
+                side = known[group.externals[0].name] - known[group.parallelogram.name]
+                joints[0][7:9], branch = [side.real, side.imag], 0.0
+            program += [float(KIND_CODES[group.kind]), branch, float(index[group.links[0]]),
                         float(index[group.links[1]])]
         program += [value for record in joints for value in record]
     found = {joint.name: (len(program) - GROUP_SIZE * (len(groups) - number) + 4 + JOINT_SIZE * k, 3 * number + k)
@@ -262,7 +268,11 @@ def place_group(program, g, poses):
     if kind == 0 or kind == 1:   # RRR, RRP
         B = _point(program, E1, poses, K1)
         l1 = abs(_local(program, Ji, L1) - _local(program, E1, L1))
-        if kind == 0:
+        if kind == 0 and sigma == 0.0:   # the parallelogram P B C D: C = D + (B - P)
+            D = _point(program, E2, poses, K2)
+            C = D + complex(program[E1 + 7], program[E1 + 8]) * _turn(poses, K1)
+            _swing(program, E2, Ji, poses, L2, D, C)
+        elif kind == 0:
             D = _point(program, E2, poses, K2)
             l2 = abs(_local(program, Ji, L2) - _local(program, E2, L2))
             v = D - B
@@ -520,21 +530,36 @@ def _largest_magnitude(M, n_rows, n_columns):
     return largest
 
 
+def _follow(program, j, poses, link, dtheta, ddtheta):
+    """Set a link's theta' = dtheta and theta'' = ddtheta and its origin's derivatives from its point P of the
+    revolute joint j on a known link: r' = P' - i theta' q, r'' = P'' - (i theta'' - theta'^2) q (q = p e^{i theta},
+    p the joint's point in the link)."""
+    k = POSE_SIZE * link
+    known = _other(program, j, link)
+    _, dP, ddP = motion(poses, known, _local(program, j, known))
+    q = _local(program, j, link) * _turn(poses, link)
+    dr, ddr = dP - 1j * dtheta * q, ddP - complex(-dtheta * dtheta, ddtheta) * q
+    poses[k + 3], poses[k + 4], poses[k + 5] = dr.real, dr.imag, dtheta
+    poses[k + 6], poses[k + 7], poses[k + 8] = ddr.real, ddr.imag, ddtheta
+
+
 def differentiate_group(program, g, poses, scratch):
     """Set the first and second derivatives of the group's links' poses from `A u' = -K k'` and
     `A u'' = -K k'' - gamma` (module docstring), A and its inverse held in scratch (SCRATCH_SHAPE: A in rows 0-5,
     A^-1 in rows 6-11, K k' and K k'' in rows 12, 13); False at a dead point (A singular or its condition
     |A|_max |A^-1|_max beyond DEAD_POINT_CONDITION). A gear group's link: theta' and theta'' from its driver's and
     carrier's (_gear_angle), its origin from its pivot P's motion, r' = P' - i theta' q, r'' = P'' - (i theta'' -
-    theta'^2) q (q = p e^{i theta}, p the pivot in the link)."""
+    theta'^2) q (q = p e^{i theta}, p the pivot in the link); a parallelogram P B C D (an RRR group's branch 0):
+    L1 turns with D's link and L2 with B's (C - B = D - P, C - D = B - P), each following its outer joint."""
     if int(program[g]) == GEAR:
-        link, pivot = int(program[g + 2]), g + 4
-        k = POSE_SIZE * link
-        poses[k + 5], poses[k + 8] = _gear_angle(program, g, poses, 5), _gear_angle(program, g, poses, 8)
-        _, dP, ddP = motion(poses, _other(program, pivot, link), _local(program, pivot, _other(program, pivot, link)))
-        q = _local(program, pivot, link) * _turn(poses, link)
-        dr, ddr = dP - 1j * poses[k + 5] * q, ddP - complex(-poses[k + 5] * poses[k + 5], poses[k + 8]) * q
-        poses[k + 3], poses[k + 4], poses[k + 6], poses[k + 7] = dr.real, dr.imag, ddr.real, ddr.imag
+        _follow(program, g + 4, poses, int(program[g + 2]), _gear_angle(program, g, poses, 5),
+                _gear_angle(program, g, poses, 8))
+        return True
+    if int(program[g]) == 0 and program[g + 1] == 0.0:   # a parallelogram: L1 turns with K2, L2 with K1
+        L1, L2 = int(program[g + 2]), int(program[g + 3])
+        K1, K2 = POSE_SIZE * _other(program, g + 4, L1), POSE_SIZE * _other(program, g + 4 + 2 * JOINT_SIZE, L2)
+        _follow(program, g + 4, poses, L1, poses[K2 + 5], poses[K2 + 8])
+        _follow(program, g + 4 + 2 * JOINT_SIZE, poses, L2, poses[K1 + 5], poses[K1 + 8])
         return True
     redundant = int(program[g]) == REDUNDANT
     n_unknown = 3 if redundant else 6
@@ -896,7 +921,7 @@ def _registered() -> None:
     register_jitable(joint_loads)
     for function in (_local, _other, _unit, _direction, _origin, _turn, _point, _set_pose, _pin, _swing,
                      _angle_across, _origin_line, _lines_cross, _lines_meet, gear_ratio, _gear_angle, place_group,
-                     joint_rows, joint_quadratic, _solve_gear_reactions,
+                     joint_rows, joint_quadratic, _solve_gear_reactions, _follow,
                      _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
                      _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
                      motion, near, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,

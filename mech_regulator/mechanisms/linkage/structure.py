@@ -5,7 +5,10 @@ lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts, gear meshe
 - a repeated constraint: three links joined in a triangle by three prismatic joints (their relative rotation is
   forbidden twice), one each;
 - a redundant constraint: a link joined by two revolute joints to links whose motion is already fixed, the
-  distance of its two joints staying its own over the whole turn (the parallelogram's extra link), one each;
+  distance of its two joints staying its own over the whole turn (the parallelogram's extra link), one each; an
+  RRR group that is a parallelogram with the links it hangs on (groups.parallelogram_joint) is tried as the
+  parallelogram (C = D + B - P), and stays one when a redundant link hangs on it: the redundant link keeps it a
+  parallelogram through its change points (source 001), so it is solved as one there, not by a branch;
 - a passive freedom: a roller that touches cams and turns about its one revolute joint, one each.
 
 Decomposition: the frame and the driving crank are known; repeatedly, two unknown links joined to each other by
@@ -17,12 +20,13 @@ with a cam: not supported).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass
 
 from mech_regulator.mechanisms.linkage import gears
-from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad
+from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad, parallelogram_joint
 from mech_regulator.mechanisms.linkage.model import CAM, GEAR, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
 REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
@@ -74,8 +78,11 @@ class Structure:
         for number, group in enumerate(self.groups, start=1):
             if isinstance(group, Dyad):
                 joints = ", ".join(f"{j.name} ({j.kind})" for j in group.joints)
+                branch = (f"the parallelogram {group.parallelogram.name} {group.externals[0].name} "
+                          f"{group.internal.name} {group.externals[1].name} through its change points"
+                          if group.parallelogram is not None else f"branch {group.branch:+d}")
                 lines.append(f"group {number}: class II, type {group.kind}, links {group.links[0]} + {group.links[1]}, "
-                             f"joints {joints}, branch {group.branch:+d}")
+                             f"joints {joints}, {branch}")
             elif isinstance(group, gears.GearGroup):
                 lines.append(f"group {number}: gear {group.link} about {group.pivot.name}, mesh {group.mesh.name} with "
                              f"{group.driver} on {group.carrier}: ratio {group.ratio:+.6g}, pitch radii "
@@ -142,6 +149,7 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
     while True:
         remaining = [name for name in linkage.moving_links() if name not in known]
         if not remaining:
+            _keep_held_parallelograms(groups)
             fractional = gears.hanging_on_fractional_gears(linkage, groups)
             if fractional:
                 raise LinkageError("; ".join(fractional) + "; expected gears that turn a whole number of times per "
@@ -152,6 +160,8 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
                  or _next_redundant_link(linkage, known, remaining, groups))
         if isinstance(group, gears.GearGroup):
             rates[group.link] = group.rate
+        if isinstance(group, Dyad) and parallelogram_joint(linkage, group) is not None:
+            group = dataclasses.replace(group, parallelogram=parallelogram_joint(linkage, group))
         if group is None:
             joints = [j for j in linkage.joints if any(link in remaining for link in j.links)]
             letters = "".join(sorted(j.letter for j in joints))
@@ -164,6 +174,16 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
             redundant.append(f"the link {group.link} joins {group.joints[0].name} and {group.joints[1].name}, whose "
                              "distance the rest of the linkage already keeps")
         known.update(group.links)
+
+
+def _keep_held_parallelograms(groups: list) -> None:
+    """Turn back into a branch every parallelogram group on which no redundant link hangs (nothing holds it through
+    its change points: there it could fold, so the assembly check refuses it if its crank reaches them)."""
+    held = {link for group in groups if isinstance(group, RedundantLink)
+            for joint in group.joints for link in joint.links}
+    for k, group in enumerate(groups):
+        if isinstance(group, Dyad) and group.parallelogram is not None and not held & set(group.links):
+            groups[k] = dataclasses.replace(group, parallelogram=None)
 
 
 def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad | None:

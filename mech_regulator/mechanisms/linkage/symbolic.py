@@ -336,7 +336,11 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     if kind in (0, 1):   # RRR, RRP
         B = poses.point(E1, K1)
         l1_square = _square(_sub(w.local(Ji, L1), w.local(E1, L1)))
-        if kind == 0:
+        if kind == 0 and sigma == 0:   # the parallelogram P B C D: C = D + (B - P), B - P on K1 (flat.place_group)
+            D = poses.point(E2, K2)
+            C = tuple(w.jets(list(_add(D, _mul((w.number(E1 + 7), w.number(E1 + 8)), poses.turn[K1])))))
+            poses.swing(E2, Ji, L2, D, C)
+        elif kind == 0:
             D = poses.point(E2, K2)
             l2_square = _square(_sub(w.local(Ji, L2), w.local(E2, L2)))
             v = tuple(w.jets(list(_sub(D, B))))
