@@ -16,8 +16,8 @@ import math
 import numpy as np
 import pytest
 
-from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageError, checked, make_reduced, solve,
-                                               symbolic)
+from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageError, checked, flat, make_reduced,
+                                               solve, symbolic)
 from mech_regulator.mechanisms.linkage.gears import GearMesh
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
 
@@ -149,3 +149,17 @@ def test_refusals_name_the_mesh():
     joints = tuple(fractional if joint.name == "M" else joint for joint in press.joints)
     with pytest.raises(LinkageError, match="the gear pinion turns -1.5 times per crank turn and carries C"):
         checked(Linkage(press.links, joints, "frame", "crank", output_joint="G"))
+
+
+def test_generated_joint_loads_equal_the_general_solvers():
+    """flat.joint_loads written out per linkage (symbolic.joint_loads_source, what `kinematics` and both paths run)
+    gives the general solver's reactions, tooth force included, rates and balancing moment (1e-10 of each size)."""
+    linkage = geared_press()
+    program = flat.encode(linkage, checked(linkage).groups, GRAVITY)
+    generated = symbolic.reference_function(symbolic.joint_loads_source(program)[0])
+    for phi in ANGLES:
+        expected = flat.joint_loads(phi, 7.0, 150.0, program, 0)
+        found = generated(phi, 7.0, 150.0, program, 0)
+        for wanted, got in zip(expected, found):
+            wanted, got = np.atleast_1d(wanted), np.atleast_1d(np.array(got))
+            assert got == pytest.approx(wanted, abs=1e-10 * (1.0 + np.abs(wanted).max()))
