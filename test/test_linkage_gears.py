@@ -11,6 +11,7 @@ the scene's validation; what is refused is named.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -20,6 +21,7 @@ from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageErro
                                                solve, symbolic)
 from mech_regulator.mechanisms.linkage.gears import GearMesh
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
+from support import run_cli
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 13)[:-1] + 0.137
 GRAVITY = (0.3, -9.81)
@@ -163,3 +165,24 @@ def test_generated_joint_loads_equal_the_general_solvers():
         for wanted, got in zip(expected, found):
             wanted, got = np.atleast_1d(wanted), np.atleast_1d(np.array(got))
             assert got == pytest.approx(wanted, abs=1e-10 * (1.0 + np.abs(wanted).max()))
+
+
+def test_the_geared_scene_through_structure_and_simulate(tmp_path, capsys):
+    """The bundled geared_shaker: `structure` prints the mesh as p4 and the gear group (text and JSON) and draws the
+    pitch circles; `simulate` on the reference path runs it with its recording; radii that do not fit its centres
+    are refused at once (exit 2) with the mesh named."""
+    plot = tmp_path / "structure.png"
+    code, out, _ = run_cli(capsys, "structure", "geared_shaker", "--plot", str(plot))
+    assert code == 0 and "W = 3*4 - (2*5 + 1 - 0 - 0) - 0 = 1" in out
+    assert "group 1: gear pinion about B, mesh M with bull_gear on frame: ratio -2, pitch radii 0.2 and 0.1 m" in out
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    code, out, _ = run_cli(capsys, "structure", "geared_shaker", "--json")
+    summary = json.loads(out)
+    assert (summary["p4"], [group["class"] for group in summary["groups"]]) == (1, ["gear", "II"])
+    record = tmp_path / "run.rrd"
+    code, out, _ = run_cli(capsys, "simulate", "geared_shaker", "--set", "solver.path=reference", "--set",
+                           "scenario.duration=0.3", "--record", str(record))
+    assert code == 0 and "complete at t = 0.3 s" in out and record.stat().st_size > 0
+    code, _, err = run_cli(capsys, "structure", "geared_shaker", "--set", "machine.mechanism.joints.M.teeth=null",
+                           "--set", "machine.mechanism.joints.M.radii=[0.2,0.2]")
+    assert code == 2 and "the gear mesh M: pitch radii 0.2 and 0.2 m (external) need the centres 0.4 m apart" in err

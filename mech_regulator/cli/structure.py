@@ -30,7 +30,8 @@ def run_structure(scene, args: argparse.Namespace) -> int:
         raise SceneError(f"scene '{scene.name}' has mechanism {mechanism.type if mechanism else 'none'}: structure "
                          "analyses machine.mechanism.type: linkage (links, joints, crank; docs/linkages.md)")
     linkage, structure = mechanism_geometry(mechanism)
-    groups = [{"number": number, "class": "II" if isinstance(group, Dyad) else "redundant", "type": group.kind,
+    groups = [{"number": number, "type": group.kind,
+               "class": "II" if isinstance(group, Dyad) else ("gear" if group.kind == "gear" else "redundant"),
                "links": list(group.links), "joints": [joint.name for joint in group.joints],
                "branch": getattr(group, "branch", None)} for number, group in enumerate(structure.groups, start=1)]
     summary = {"scene": scene.name, "n": structure.moving_links, "p5": structure.lower_pairs,
