@@ -1,4 +1,4 @@
-"""Gear pairs in a planar linkage (docs/theory.md §5.4, docs/linkages.md "Gears"): the mesh's data, its group (one
+"""Gear pairs in a planar linkage (docs/theory.md §5.5, docs/linkages.md "Gears"): the mesh's data, its group (one
 gear link on one revolute pivot, turned by a mesh with a known link: 3 - 2 - 1 = 0) and the checks that make it one.
 
 A gear pair between links a and b meshes at the pitch point P = O_a + rho_a u = O_b + rho_b u, O the gears' centres,

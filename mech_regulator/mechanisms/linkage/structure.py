@@ -8,7 +8,7 @@ lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts, gear meshe
   distance of its two joints staying its own over the whole turn (the parallelogram's extra link), one each; an
   RRR group that is a parallelogram with the links it hangs on (groups.parallelogram_joint) is tried as the
   parallelogram (C = D + B - P), and stays one when a redundant link hangs on it: the redundant link keeps it a
-  parallelogram through its change points (source 001), so it is solved as one there, not by a branch;
+  parallelogram through its change points (source 001, docs/theory.md §5.6), so it is solved as one there;
 - a passive freedom: a roller that touches cams and turns about its one revolute joint, one each.
 
 Decomposition: the frame and the driving crank are known; repeatedly, two unknown links joined to each other by
