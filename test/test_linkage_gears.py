@@ -21,6 +21,7 @@ from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageErro
                                                solve, symbolic)
 from mech_regulator.mechanisms.linkage.gears import GearMesh
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
+from mech_regulator.scene import SceneError, load_scene, validate_scene
 from support import run_cli
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 13)[:-1] + 0.137
@@ -186,3 +187,13 @@ def test_the_geared_scene_through_structure_and_simulate(tmp_path, capsys):
     code, _, err = run_cli(capsys, "structure", "geared_shaker", "--set", "machine.mechanism.joints.M.teeth=null",
                            "--set", "machine.mechanism.joints.M.radii=[0.2,0.2]")
     assert code == 2 and "the gear mesh M: pitch radii 0.2 and 0.2 m (external) need the centres 0.4 m apart" in err
+
+
+def test_a_gear_scene_survives_its_own_dump_and_gear_keys_on_a_lower_pair_are_refused():
+    """Commands that re-validate a scene (flywheel, sweep) read its full dump, defaults included: accepted; a gear
+    key on a revolute joint is named."""
+    data = load_scene("geared_shaker").model_dump()
+    assert validate_scene(data).machine.mechanism.joints["M"].teeth == [60, 30]
+    data["machine"]["mechanism"]["joints"]["B"]["teeth"] = [10, 20]
+    with pytest.raises(SceneError, match=r"\['teeth'\] belong to a gear; this joint is revolute"):
+        validate_scene(data)

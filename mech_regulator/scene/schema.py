@@ -234,7 +234,7 @@ class LinkageJoint(SceneModel):
     @model_validator(mode="after")
     def _gear_keys(self) -> LinkageJoint:
         gear_keys = sorted(key for key in ("teeth", "radii", "centres", "internal", "carrier", "phase_deg")
-                           if key in self.model_fields_set)
+                           if getattr(self, key) != LinkageJoint.model_fields[key].default)
         if self.type != "gear" and gear_keys:
             raise ValueError(f"{gear_keys} belong to a gear; this joint is {self.type}")
         if self.type == "gear" and (self.centres is None or (self.teeth is None) == (self.radii is None)):
