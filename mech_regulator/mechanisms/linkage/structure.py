@@ -160,7 +160,7 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
                  or _next_redundant_link(linkage, known, remaining, groups))
         if isinstance(group, gears.GearGroup):
             rates[group.link] = group.rate
-        if isinstance(group, Dyad) and parallelogram_joint(linkage, group) is not None:
+        if isinstance(group, Dyad):   # tried as the parallelogram it may be (module docstring)
             group = dataclasses.replace(group, parallelogram=parallelogram_joint(linkage, group))
         if group is None:
             joints = [j for j in linkage.joints if any(link in remaining for link in j.links)]
