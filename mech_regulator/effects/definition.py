@@ -2,16 +2,17 @@
 
 A kind's formula is a plain Python function of floats, written once in the kind's module (effects/drives.py,
 effects/loads.py, governors/valve.py), that numba compiles unchanged: no closures, no Python objects, no calls but
-`math`'s, `abs`, `min` and `max`: arithmetic and conditional expressions. Its arguments are named: the inputs the caller
-provides (an effect's t [s], phi [rad], omega [rad/s], q and dq (the mechanism's output coordinate and dq/dphi) and
-`table`, the value of the kind's table; a valve's sleeve position z [m] and `table`), then the kind's numbers (SI,
-read from the scene entry). The reference path binds the numbers into a closure (`reference_moment`), the fast path's
-code generator (solvers/compiled/codegen.py) writes a call of the compiled function with the numbers read from its
-parameter vector; both write the call with `call_source`, so the arithmetic is the same and the outputs agree bit
-for bit.
+`math`'s, `abs`, `min` and `max`; arithmetic and conditional expressions. Its arguments are named: the inputs the
+caller provides (an effect's t [s], phi [rad], omega [rad/s], q and dq (the mechanism's output coordinate and
+dq/dphi) and `table`, the value of the kind's table; a valve's sleeve position z [m] and `table`), then the kind's
+numbers (SI, read from the scene entry). The reference path binds the numbers into a closure (reference_closure),
+the fast path's code generator (solvers/compiled/codegen.py) writes a call of the compiled function with the
+numbers read from its parameter vector; both write the call with `call_source`, so the arithmetic is the same and
+the outputs agree bit for bit.
 
 A kind is registered for its scene classes with `define`; `definition_of(spec)` finds it, and `check_covered` fails
-at import when a member of a scene union has none (the kinds' modules call it last).
+at import when a member of a scene union has none (effects/__init__.py and governors/valve.py call it once their
+kinds are registered).
 """
 
 from __future__ import annotations
@@ -22,7 +23,6 @@ import typing
 from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
-EFFECT_INPUTS = ("t", "phi", "omega", "q", "dq", "table")  # what a drive's or load's formula may read
 PERIODIC, CLAMPED, INTERVALS = "periodic", "clamped", "intervals"
 
 
