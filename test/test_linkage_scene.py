@@ -15,6 +15,7 @@ import re
 
 import numpy as np
 import pytest
+from support import run_cli
 
 from mech_regulator.analysis.kinematics import kinematics_table, reactions_table
 from mech_regulator.cli.main import main
@@ -23,7 +24,6 @@ from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal
-from support import run_cli
 
 FOUR_BAR_LINKAGE = {
     "type": "linkage",

@@ -15,8 +15,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from support import setup_arguments
 from packaging.requirements import Requirement
+from support import setup_arguments
 
 import mech_regulator
 

@@ -33,8 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from mech_regulator.scene.loading import (SceneError, apply_override, overridden_scene_data, parse_yaml,
-                                          validate_scene)
+from mech_regulator.scene.loading import SceneError, apply_override, overridden_scene_data, parse_yaml, validate_scene
 from mech_regulator.solvers import auto_path
 from mech_regulator.solvers.compiled import fast_path_refusal
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from mech_regulator.effects.tables import clamped_linear, slope_breaks
 from mech_regulator.scene import schema

@@ -17,14 +17,18 @@ from typing import Any
 import pydantic
 import yaml
 
-from mech_regulator.scene.limits import (MAX_BASE_CHAIN, MAX_SCENE_BYTES, MAX_YAML_CHARACTERS, MAX_YAML_DEPTH,
-                                         MAX_YAML_NODES, number_refusals, run_refusals, shown)
+from mech_regulator.errors import SceneError
+from mech_regulator.scene.limits import (
+    MAX_BASE_CHAIN,
+    MAX_SCENE_BYTES,
+    MAX_YAML_CHARACTERS,
+    MAX_YAML_DEPTH,
+    MAX_YAML_NODES,
+    number_refusals,
+    run_refusals,
+    shown,
+)
 from mech_regulator.scene.schema import Scene
-
-
-class SceneError(Exception):
-    """A scene that cannot be used; str(error) is the message for the user (one or more lines)."""
-
 
 SCENE_KEYS = frozenset(Scene.model_fields) | {"base"}  # the top-level keys a scene file may have
 

@@ -12,7 +12,7 @@ direction); load values are resisting magnitudes unless a description says "sign
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
@@ -302,7 +302,7 @@ class Linkage(SceneModel):
         return self
 
 
-Mechanism = Annotated[Union[CrankSlider, FourBar, WalkingBeam, Linkage], Field(discriminator="type")]
+Mechanism = Annotated[CrankSlider | FourBar | WalkingBeam | Linkage, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -366,7 +366,7 @@ class Engine(SceneModel):
         return self
 
 
-Drive = Annotated[Union[ConstantDrive, LinearMotor, TableDrive, Engine], Field(discriminator="type")]
+Drive = Annotated[ConstantDrive | LinearMotor | TableDrive | Engine, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -463,15 +463,13 @@ class SliderTable(SceneModel):
 
 
 Load = Annotated[
-    Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, CuttingLoad, SliderConstant, RockerConstant, OutputViscous,
-          OutputSpring, SliderTable],
+    ConstantLoad | ViscousLoad | FanLoad | TableLoad | CuttingLoad | SliderConstant | RockerConstant | OutputViscous | OutputSpring | SliderTable,
     Field(discriminator="type"),
 ]
 
 
-DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, SliderConstant, RockerConstant,
-                             OutputViscous, OutputSpring, SliderTable], Field(discriminator="type")]
-BranchLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
+DrivenLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad | TableLoad | SliderConstant | RockerConstant | OutputViscous | OutputSpring | SliderTable, Field(discriminator="type")]
+BranchLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad, Field(discriminator="type")]
 
 # The mechanism a load on its output (type slider_*, rocker_*, shuttle_*) needs.
 OUTPUT_MECHANISM = {"slider": "crank_slider", "rocker": "four_bar", "shuttle": "walking_beam"}
@@ -838,7 +836,7 @@ def _valve_type(value) -> str | None:
     return value.get("type", "linear") if isinstance(value, dict) else getattr(value, "type", None)
 
 
-Valve = Annotated[Union[Annotated[LinearValve, Tag("linear")], Annotated[TableValve, Tag("table")]],
+Valve = Annotated[Annotated[LinearValve, Tag("linear")] | Annotated[TableValve, Tag("table")],
                   Discriminator(_valve_type)]
 
 
@@ -935,7 +933,7 @@ class IndirectGovernor(_CentrifugalGovernor):
         return self
 
 
-Governor = Annotated[Union[DirectGovernor, IndirectGovernor], Field(discriminator="type")]
+Governor = Annotated[DirectGovernor | IndirectGovernor, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------

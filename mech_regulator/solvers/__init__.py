@@ -59,8 +59,12 @@ def on_path_for_a_command(model: MachineModel, report: Callable[[str], None],
     if refusal is not None:
         report(f"note: {refusal}; this run uses the reference path")
         return on_path(model, "reference")
-    from mech_regulator.solvers.compiled.warm import (COMPILE_ESTIMATE, compile_before_the_run,
-                                                      compile_in_background, stepper_cached)
+    from mech_regulator.solvers.compiled.warm import (
+        COMPILE_ESTIMATE,
+        compile_before_the_run,
+        compile_in_background,
+        stepper_cached,
+    )
 
     method = model.scene.solver.method
     if stepper_cached(method):

@@ -12,6 +12,7 @@ lengths by half that; an empty bundle without prismatic joints) and `joints` (ev
 from __future__ import annotations
 
 import cmath
+import math
 
 import numpy as np
 
@@ -21,6 +22,13 @@ from mech_regulator.mechanisms.linkage.structure import Structure
 
 MOVING_PARTS = ("crank", "links", "sliders", "joints")
 BLOCK_PER_CRANK = 0.6   # slider block length along the guide, per crank length [-]
+CIRCLE_POINTS = 73      # points of a drawn circle (72 segments)
+
+
+def circle(centre: tuple[float, float], radius: float) -> np.ndarray:
+    """Closed polyline of a circle [m], shape (CIRCLE_POINTS, 2)."""
+    angles = np.linspace(0.0, 2.0 * math.pi, CIRCLE_POINTS)
+    return np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
 
 
 def crank_length(linkage: Linkage) -> float:
@@ -66,8 +74,6 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
     for joint in linkage.joints:
         link = joint.links[1]
         joint_points.append(poses[link][0] + linkage.link(link).points[joint.name] * cmath.exp(1j * poses[link][1]))
-    from mech_regulator.mechanisms.drawing import circle  # mechanisms.drawing imports this module
-
     outline = {
         "frame": _xy(frame_points),
         "crank_path": circle((pivot.real, pivot.imag), radius),

@@ -21,6 +21,7 @@ import math
 from dataclasses import dataclass
 
 from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad
+from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
 REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
@@ -171,8 +172,6 @@ def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str]
                          ) -> RedundantLink | None:
     """An unknown link with exactly two revolute joints, both to known links, whose two points stay at the link's
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
-    from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
-
     solve_at = make_solver(linkage, groups)
     for name in remaining:
         joints = linkage.joints_of(name)
