@@ -59,6 +59,7 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 from mech_regulator.cli.start import SERVED_COMMANDS
 from mech_regulator.processes import process_alive
@@ -397,7 +398,8 @@ def start_server(key: str) -> int | None:
             return None
         with open(folder / f"{digest}.log", "w") as log:
             # the interpreter's flags (-O, -X ...) as this one's, as multiprocessing starts its processes
-            process = subprocess.Popen([sys.executable, *subprocess._args_from_interpreter_flags(), "-c", BOOTSTRAP,
+            process = subprocess.Popen([sys.executable, *subprocess._args_from_interpreter_flags(),  # type: ignore[attr-defined]
+                                        "-c", BOOTSTRAP,
                                         json.dumps(sys.path), str(lock.fileno()), key],
                                        stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd="/",
                                        start_new_session=True, pass_fds=(lock.fileno(),))
@@ -440,8 +442,8 @@ def server_command(action: str) -> int:
         print(f"started in {waited:.1f} s" if started is not None else
               f"was running already{'' if waited < 0.1 else f' (it answered after {waited:.1f} s: it was starting)'}")
         return 0
-    servers = [(path, ask_server(path, {"op": "status"})) for path in sorted(server_folder().glob("*.sock"))]
-    servers = [(path, status) for path, status in servers if status is not None]
+    servers = [(path, status) for path in sorted(server_folder().glob("*.sock"))
+               if (status := ask_server(path, {"op": "status"})) is not None]
     if action == "status":
         key = server_key()
         for _, status in servers:
@@ -768,14 +770,14 @@ def serve(lock_descriptor: int, key: str, run_command: Callable[[list[str]], int
     _exit(request.run(run_command))
 
 
-def _exit(code: int) -> None:
+def _exit(code: int) -> NoReturn:
     """End a child as the interpreter ends a process — its non-daemon threads joined, the atexit functions run,
     stdout and stderr flushed (exit code 120 when that fails) — without tearing down the server's 1200 modules one
     by one (0.15 s)."""
     import atexit
     import threading
 
-    threading._shutdown()
+    threading._shutdown()  # type: ignore[attr-defined]  # the interpreter's own end of a process
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:

@@ -11,11 +11,13 @@ import re
 import sys
 import types
 import typing
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import pydantic
 import yaml
+from pydantic_core import ErrorDetails
 
 from mech_regulator.errors import SceneError
 from mech_regulator.scene.limits import (
@@ -243,13 +245,13 @@ def _child(node: Any, key: str, path: list[str], assignment: str, create: bool, 
 # Validation and messages
 
 
-def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
+def load_scene(name_or_path: str, overrides: Sequence[str] = ()) -> Scene:
     """Read, override and validate a scene; any problem raises SceneError with a clear message."""
     data, path = overridden_scene_data(name_or_path, overrides)
     return validate_scene(data, str(path))
 
 
-def overridden_scene_data(name_or_path: str, overrides: list[str] = ()) -> tuple[dict, Path]:
+def overridden_scene_data(name_or_path: str, overrides: Sequence[str] = ()) -> tuple[dict, Path]:
     """The mapping of a scene (a file or a bundled name) with the --set overrides applied and its name defaulting
     to the file's stem, not yet validated, and the file it came from."""
     path = resolve_scene_path(name_or_path)
@@ -394,7 +396,7 @@ def _problems(source: str, lines: list[str]) -> str:
     return f"{source}: {len(lines)} problem{'s' if len(lines) > 1 else ''}:\n  " + "\n  ".join(shown_lines)
 
 
-def describe_error(item: dict, data: Any) -> str:
+def describe_error(item: ErrorDetails, data: Any) -> str:
     """One line for one pydantic error: dotted key, the value given, and what is expected."""
     loc = _data_path(item["loc"], data)
     key = ".".join(str(part) for part in loc) or "(top level)"
