@@ -18,17 +18,6 @@ these names it starts with. The bottom floor is the package's own modules (error
 cache, processes); cli/report.py (what a run shows and writes: summaries, progress, JSON and CSV) serves the nodes
 as well as the commands; the other commands stand above the nodes, since `run` starts them; `launch` is the ROS 2
 launch files (launch/*.launch.py). README.md, Layout, describes each floor."""
-KNOWN_UPWARD = frozenset({
-    "mech_regulator.scene.schema -> mech_regulator.mechanisms.engine",
-    "mech_regulator.scene.schema -> mech_regulator.mechanisms.four_bar",
-    "mech_regulator.scene.schema -> mech_regulator.mechanisms.linkage",
-    "mech_regulator.scene.schema -> mech_regulator.mechanisms.linkage.kinetostatics",
-    "mech_regulator.scene.schema -> mech_regulator.mechanisms.walking_beam",
-})
-"""The one exception left, inside functions only: the scene schema's validators still run the mechanisms' checks
-(a crank that turns fully, a linkage driven by its crank, an engine's firing, determinate joint reactions), so
-that a scene is refused with every problem at once when it is read. The test fails when one of these goes, so
-that the list only shrinks."""
 CORE = FLOORS[:FLOORS.index("mech_regulator.analysis") + 1]
 """The physics core: the floors up to the analysis, free of rclpy and rerun."""
 
@@ -105,9 +94,7 @@ def package_graph() -> dict[str, set[str]]:
 
 def test_each_floor_imports_only_from_the_floors_below_it():
     upward = upward_imports(package_graph(), FLOORS)
-    new = [line for line in upward if line not in KNOWN_UPWARD]
-    assert not new, "imports of a higher floor (test_architecture.FLOORS):\n" + "\n".join(new)
-    assert set(upward) == KNOWN_UPWARD, f"gone, to be taken out of KNOWN_UPWARD: {sorted(KNOWN_UPWARD - set(upward))}"
+    assert not upward, "imports of a higher floor (test_architecture.FLOORS):\n" + "\n".join(upward)
 
 
 def test_no_module_imports_itself_round_a_circle():

@@ -259,6 +259,10 @@ def main(argv: list[str] | None = None) -> int:
             return _main_job(scene, args)
         if args.command == "coupling":
             return _required_coupling(scene, args)
+        if args.command in ("kinematics", "structure"):  # they build no machine: the mechanisms' checks here
+            from mech_regulator.mechanisms.checks import refuse_unbuildable
+
+            refuse_unbuildable(scene)
         if args.command == "kinematics":
             return _kinematics(scene, args)
         if args.command == "structure":

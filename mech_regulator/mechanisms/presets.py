@@ -166,11 +166,27 @@ def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:
         points=tuple("ABCDE"), output_joint="X")
 
 
+def linkage_core(mechanism: schema.Linkage) -> Linkage:
+    """The mechanisms.linkage.Linkage of a scene's linkage entry (the frame is the link named 'frame')."""
+
+    def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
+        return {name: complex(*xy) for name, xy in points.items()}
+
+    links = (Link("frame", complex_points(mechanism.frame)),) + tuple(
+        Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
+        for name, link in mechanism.links.items())
+    joints = tuple(Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
+                         math.radians(joint.slider_angle_deg)) for name, joint in mechanism.joints.items())
+    output = mechanism.output or schema.LinkageOutput.model_construct(joint=None, link=None)
+    return Linkage(links, joints, "frame", mechanism.crank, dict(mechanism.branches), tuple(mechanism.points),
+                   output.joint, output.link)
+
+
 def mechanism_geometry(mechanism: schema.Mechanism):
     """The geometry NamedTuple (lengths [m], angles [rad], masses [kg], inertias [kg m^2]) of a scene's mechanism;
     a linkage's: its mechanisms.linkage.Linkage and Structure (validated by the scene: W = 1, class-II groups)."""
     if isinstance(mechanism, schema.Linkage):
-        core = mechanism.core()
+        core = linkage_core(mechanism)
         return core, checked(core)
     if isinstance(mechanism, schema.CrankSlider):
         return crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)

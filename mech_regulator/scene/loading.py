@@ -370,26 +370,26 @@ def validate_scene(data: dict, source: str = "scene") -> Scene:
     would make the run impossible (limits.run_refusals)."""
     problems = number_refusals(data)
     if problems:
-        raise SceneError(_problems(source, problems))
+        raise SceneError(problems_message(source, problems))
     try:
         scene = Scene.model_validate(data)
     except pydantic.ValidationError as error:
         lines = [describe_error(item, data) for item in error.errors(include_url=False)]
-        raise SceneError(_problems(source, list(dict.fromkeys(lines)))) from None
+        raise SceneError(problems_message(source, list(dict.fromkeys(lines)))) from None
     except (ArithmeticError, RecursionError) as error:  # a check of the schema computing with extreme numbers
         raise SceneError(f"{source}: its numbers cannot be computed with ({type(error).__name__}: {error}); expected "
                          "values of a real machine") from None
     problems = run_refusals(scene)
     if problems:
-        raise SceneError(_problems(source, problems))
+        raise SceneError(problems_message(source, problems))
     return scene
 
 
 MAX_PROBLEMS_SHOWN = 40  # lines of a validation message; the rest are counted
 
 
-def _problems(source: str, lines: list[str]) -> str:
-    """The message listing a scene's problems, one per line."""
+def problems_message(source: str, lines: list[str]) -> str:
+    """The message listing a scene's problems, one per line (also the mechanisms' checks', mechanisms/checks.py)."""
     shown_lines = lines[:MAX_PROBLEMS_SHOWN]
     if len(lines) > MAX_PROBLEMS_SHOWN:
         shown_lines.append(f"... and {len(lines) - MAX_PROBLEMS_SHOWN} more")
