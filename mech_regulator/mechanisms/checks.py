@@ -12,7 +12,7 @@ from mech_regulator.errors import SceneError
 from mech_regulator.mechanisms import walking_beam
 from mech_regulator.mechanisms.engine import firing_delays
 from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
-from mech_regulator.mechanisms.linkage import assembly_failures, checked
+from mech_regulator.mechanisms.linkage import Dyad, assembly_failures, checked
 from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
 from mech_regulator.mechanisms.presets import linkage_core
 from mech_regulator.scene import schema
@@ -91,7 +91,8 @@ def _check_drivable(mechanism: schema.Linkage) -> None:
     branches name no such group, or it does not assemble over the whole turn."""
     core = linkage_core(mechanism)
     structure = checked(core)
-    internal = {group.internal.name for group in structure.groups if group.kind in BRANCHED_GROUPS}
+    internal = {group.internal.name for group in structure.groups
+                if isinstance(group, Dyad) and group.kind in BRANCHED_GROUPS}
     foreign = sorted(set(mechanism.branches) - internal)
     if foreign:
         raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "

@@ -175,7 +175,7 @@ def linkage_core(mechanism: schema.Linkage) -> Linkage:
     links = (Link("frame", complex_points(mechanism.frame)),) + tuple(
         Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
         for name, link in mechanism.links.items())
-    joints = tuple(Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
+    joints = tuple(Joint(name, joint.type, (joint.links[0], joint.links[1]), math.radians(joint.direction_deg),
                          math.radians(joint.slider_angle_deg)) for name, joint in mechanism.joints.items())
     output = mechanism.output or schema.LinkageOutput.model_construct(joint=None, link=None)
     return Linkage(links, joints, "frame", mechanism.crank, dict(mechanism.branches), tuple(mechanism.points),
