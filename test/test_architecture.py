@@ -89,6 +89,7 @@ def import_circle(graph: dict[str, set[str]]) -> list[str]:
 
 
 def package_graph() -> dict[str, set[str]]:
+    """The import graph of mech_regulator and of the ROS 2 launch files."""
     return import_graph(module_files(ROOT / "mech_regulator", ROOT / "launch"), "mech_regulator")
 
 
@@ -102,7 +103,8 @@ def test_no_module_imports_itself_round_a_circle():
     assert not circle, "an import circle: " + " -> ".join(circle)
 
 
-def test_every_module_stands_on_a_floor():
+def test_every_floor_holds_modules():
+    """A floor named in FLOORS that no module stands on (misspelt, or its package gone) would check nothing."""
     assert {floor(module, FLOORS) for module in package_graph()} == set(range(len(FLOORS)))
 
 
