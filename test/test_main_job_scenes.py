@@ -22,7 +22,16 @@ import numpy as np
 import pytest
 import yaml
 from linkage_family import member
-from ros_support import WAIT, Processes, RunListener, domain_id, next_domain_id, probe, processes, stamp_ns  # noqa: F401 (fixtures)
+from ros_support import (  # noqa: F401 (fixtures)
+    WAIT,
+    Processes,
+    RunListener,
+    domain_id,
+    next_domain_id,
+    probe,
+    processes,
+    stamp_ns,
+)
 
 # after ros_support, which skips this module when rclpy is missing
 from std_srvs.srv import Trigger

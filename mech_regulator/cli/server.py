@@ -398,8 +398,8 @@ def start_server(key: str) -> int | None:
             return None
         with open(folder / f"{digest}.log", "w") as log:
             # the interpreter's flags (-O, -X ...) as this one's, as multiprocessing starts its processes
-            process = subprocess.Popen([sys.executable, *subprocess._args_from_interpreter_flags(),  # type: ignore[attr-defined]
-                                        "-c", BOOTSTRAP,
+            flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
+            process = subprocess.Popen([sys.executable, *flags, "-c", BOOTSTRAP,
                                         json.dumps(sys.path), str(lock.fileno()), key],
                                        stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd="/",
                                        start_new_session=True, pass_fds=(lock.fileno(),))

@@ -157,8 +157,6 @@ class WalkingBeam(SceneModel):
                                                        "what it carries [kg]")
 
 
-
-
 Point = Annotated[list[float], Field(min_length=2, max_length=2)]
 MAX_LINKS = 60         # moving links of a linkage (a press or a loom has under 20): its analysis stays well under 1 s
 MAX_LINK_POINTS = 50   # points of one link
@@ -397,12 +395,14 @@ class SliderTable(SceneModel):
 
 
 Load = Annotated[
-    ConstantLoad | ViscousLoad | FanLoad | TableLoad | CuttingLoad | SliderConstant | RockerConstant | OutputViscous | OutputSpring | SliderTable,
+    ConstantLoad | ViscousLoad | FanLoad | TableLoad | CuttingLoad | SliderConstant | RockerConstant | OutputViscous
+    | OutputSpring | SliderTable,
     Field(discriminator="type"),
 ]
 
 
-DrivenLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad | TableLoad | SliderConstant | RockerConstant | OutputViscous | OutputSpring | SliderTable, Field(discriminator="type")]
+DrivenLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad | TableLoad | SliderConstant | RockerConstant
+                       | OutputViscous | OutputSpring | SliderTable, Field(discriminator="type")]
 BranchLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad, Field(discriminator="type")]
 
 # The mechanism a load on its output (type slider_*, rocker_*, shuttle_*) needs.
