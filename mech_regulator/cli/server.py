@@ -537,7 +537,7 @@ def _fresh_standard_streams() -> None:
     written through when unbuffered (PYTHONUNBUFFERED, which the server's own stdout shows)."""
     import io
 
-    buffered = not sys.stdout.write_through
+    buffered = not (isinstance(sys.stdout, io.TextIOWrapper) and sys.stdout.write_through)
     for descriptor, name in enumerate(("stdin", "stdout", "stderr")):
         old = getattr(sys, name)
         writing = descriptor > 0
@@ -621,7 +621,7 @@ class _Server:
                     os.read(wake_read, 512)
                 self._reap()
                 if self.listener is not None and self.listener in ready:
-                    request = self._accept()
+                    request = self._accept(self.listener)
                     if request is not None:  # in the child
                         signal.set_wakeup_fd(-1)
                         for descriptor in (wake_read, wake_write):
@@ -637,9 +637,10 @@ class _Server:
             self.listener = None
             self.path.unlink(missing_ok=True)
 
-    def _accept(self) -> _Request | None:
-        """Take one connection: answer status or stop, or fork the command's child (returned in the child)."""
-        connection, _ = self.listener.accept()
+    def _accept(self, listener: socket.socket) -> _Request | None:
+        """Take one connection from `listener`: answer status or stop, or fork the command's child (returned in the
+        child)."""
+        connection, _ = listener.accept()
         connection.settimeout(5.0)  # a client that sends nothing does not hold the server
         try:
             message, descriptors = _receive(connection)
@@ -676,7 +677,8 @@ class _Server:
         pid = os.fork()
         if pid == 0:  # the child: nothing of the server's stays open in it
             os.close(report_read)
-            self.listener.close()
+            if self.listener is not None:
+                self.listener.close()
             self.lock.close()
             connection.close()
             for kept, report in self.children.values():

@@ -46,8 +46,9 @@ def linkage_of(mechanism: schema.Mechanism) -> tuple[linkage.Linkage, linkage.St
         core, structure = mechanism_geometry(mechanism)
         return core, structure, ()
     core = presets.preset_linkage(mechanism)
-    several = isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
-    return core, linkage.checked(core), tuple(presets.guide_joints(mechanism)) if several else ()
+    guides = (tuple(presets.guide_joints(mechanism))
+              if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None else ())
+    return core, linkage.checked(core), guides
 
 
 def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
