@@ -104,8 +104,7 @@ def parse_grid(spec: str) -> GridAxis:
     geometric = len(parts) == 4
     if geometric and not (start > 0.0 and stop > 0.0):
         raise SceneError(f"{option}: a geometric (log) grid needs START > 0 and STOP > 0, got {start:g} and {stop:g}")
-    values = (np.geomspace if geometric else np.linspace)(start, stop, int(count_text))
-    values = tuple(float(value) for value in values)
+    values = tuple(float(value) for value in (np.geomspace if geometric else np.linspace)(start, stop, int(count_text)))
     return GridAxis(key, values, tuple(repr(value) for value in values), geometric, option)
 
 
@@ -204,7 +203,8 @@ def governor_stability(model, trajectory) -> dict:
 
     t_from = max([0.0] + [piece.start for piece in model.load_pieces])
     linear = linear_stability(model, operating_point(model, model.external_load(t_from)))
-    answer = {"stable_linear": linear.stable, "vyshnegradsky_A": None, "vyshnegradsky_B": None}
+    answer: dict[str, float | bool | int | None] = {"stable_linear": linear.stable, "vyshnegradsky_A": None,
+                                                    "vyshnegradsky_B": None}
     if linear.vyshnegradsky is not None:
         answer["vyshnegradsky_A"], answer["vyshnegradsky_B"] = (float(value) for value in linear.vyshnegradsky)
     ratio, settled, arrivals = oscillation_measures(model, trajectory, t_from)
