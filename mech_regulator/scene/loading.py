@@ -11,13 +11,12 @@ import re
 import sys
 import types
 import typing
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import pydantic
 import yaml
-from pydantic_core import ErrorDetails
 
 from mech_regulator.errors import SceneError
 from mech_regulator.scene.limits import (
@@ -396,7 +395,7 @@ def problems_message(source: str, lines: list[str]) -> str:
     return f"{source}: {len(lines)} problem{'s' if len(lines) > 1 else ''}:\n  " + "\n  ".join(shown_lines)
 
 
-def describe_error(item: ErrorDetails, data: Any) -> str:
+def describe_error(item: Mapping[str, Any], data: Any) -> str:
     """One line for one pydantic error: dotted key, the value given, and what is expected."""
     loc = _data_path(item["loc"], data)
     key = ".".join(str(part) for part in loc) or "(top level)"
