@@ -16,7 +16,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
-from mech_regulator.scene import SceneError
+from mech_regulator.errors import SceneError
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
 _UNCOMPILED = {"depth": 0}   # how many run_uncompiled blocks the process is in

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import cmath
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 from mech_regulator.mechanisms import crank_slider
 from mech_regulator.mechanisms.crank_slider import CrankSliderGeometry, slider_kinematics

@@ -78,7 +78,7 @@ def setup_arguments() -> dict:
 
 def linkage_scene_entry(linkage) -> dict:
     """The scene's `type: linkage` mechanism entry (scene.schema.Linkage) of a mechanisms.linkage.Linkage whose frame
-    is named 'frame': the inverse of schema.Linkage.core() (angles in degrees)."""
+    is named 'frame': the inverse of mechanisms.presets.linkage_core (angles in degrees)."""
     def xy(point: complex) -> list[float]:
         return [point.real, point.imag]
 

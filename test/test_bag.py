@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
 from support import run_cli
 
 SHORT_ENGINE = ["engine_direct", "--set", "scenario.duration=0.3", "--set", "scenario.load_events.0.time=0.1",

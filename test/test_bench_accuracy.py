@@ -17,13 +17,13 @@ import matplotlib.image
 import numpy as np
 import pytest
 from rerun.chunk import RrdReader
+from support import run_cli, write_scene
 
 from mech_regulator.bench.accuracy import ADAPTIVE, COSIM, SCENES, Setting, Task, _measured, startup_closed_form
 from mech_regulator.bench.report import CSV_COLUMNS
 from mech_regulator.cli.main import main
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from support import run_cli, write_scene
 
 QUICK_SCENES = ("startup", "engine_direct")
 TOLERANCE_FACTOR = 30.0      # DOP853's achieved error stays below this many times the requested rtol ...

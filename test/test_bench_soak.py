@@ -17,14 +17,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from ros_support import WAIT, domain_id, next_domain_id, processes  # noqa: F401 (fixtures)
 
 psutil = pytest.importorskip("psutil", reason="bench soak reads memory with psutil: pip install "
                                                "'mech_regulator[bench]'")
 
-from mech_regulator.bench.soak import (PROCESS_NAMES, Progress, Row, Soak, _Watch, between_samples,  # noqa: E402
-                                       format_row, parse_launch_banner, parse_progress, verdict)
+from mech_regulator.bench.soak import (  # noqa: E402
+    PROCESS_NAMES,
+    Progress,
+    Row,
+    Soak,
+    _Watch,
+    between_samples,
+    format_row,
+    parse_launch_banner,
+    parse_progress,
+    verdict,
+)
 from mech_regulator.cli.report import ProgressLines  # noqa: E402
 from mech_regulator.model import build_model  # noqa: E402
 from mech_regulator.scene import load_scene  # noqa: E402

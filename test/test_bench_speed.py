@@ -10,16 +10,27 @@ import math
 
 import numpy as np
 import pytest
+from support import run_cli, simulate_complete
 
 from mech_regulator.bench.mujoco_model import MujocoCrankSlider, crank_slider_mjcf, mujoco_refusal
-from mech_regulator.bench.speed import (FAST, REFERENCE, SOLVE_IVP, Row, SpeedBenchmark, at_error, failure_text,
-                                        ode_runner, ros_summary, ros_target, work_precision_front)
+from mech_regulator.bench.speed import (
+    FAST,
+    REFERENCE,
+    SOLVE_IVP,
+    Row,
+    SpeedBenchmark,
+    at_error,
+    failure_text,
+    ode_runner,
+    ros_summary,
+    ros_target,
+    work_precision_front,
+)
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING
-from support import run_cli, simulate_complete
 
 SHORT = "scenario.duration=0.5"
 # every MuJoCo-native form at once: constant drive, constant and viscous crank loads, a spring on the slider, a

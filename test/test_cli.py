@@ -11,10 +11,10 @@ import math
 from pathlib import Path
 
 import pytest
+from support import run_cli as run
 
 from mech_regulator.cli.main import main
 from mech_regulator.scene.loading import read_scene_data
-from support import run_cli as run
 
 SCENES_DIR = Path(__file__).resolve().parents[1] / "config" / "scenes"
 BUNDLED = sorted(path.stem for path in SCENES_DIR.glob("*.yaml"))

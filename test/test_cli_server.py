@@ -25,8 +25,9 @@ from pathlib import Path
 
 import pytest
 
-from mech_regulator.cli import EXIT_INTERRUPTED
 from mech_regulator.cli import server as command_server
+from mech_regulator.errors import EXIT_INTERRUPTED
+from mech_regulator.processes import process_alive
 
 COMMAND = [sys.executable, "-m", "mech_regulator"]
 TIMEOUT = 120.0  # [s] for any one command: a hung test fails instead of hanging the suite
@@ -72,7 +73,7 @@ def stop(env: dict[str, str], pid: int, folder: str) -> None:
     try:
         run(["server", "stop"], env)
     finally:
-        if command_server.process_alive(pid):
+        if process_alive(pid):
             os.kill(pid, signal.SIGKILL)
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -288,9 +289,9 @@ def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
         assert found and out == "", err
         child = int(found[1])
         deadline = time.monotonic() + TIMEOUT
-        while command_server.process_alive(child) and time.monotonic() < deadline:
+        while process_alive(child) and time.monotonic() < deadline:
             time.sleep(0.05)
-        assert not command_server.process_alive(child)
+        assert not process_alive(child)
     finally:
         stop(env, pid, folder)
 
@@ -321,7 +322,7 @@ def test_server_stop_leaves_no_process(served):
     """Last of the module: it stops the module's server."""
     stopped = run(["server", "stop"], served.env)
     assert stopped.returncode == 0 and f"stopped the command server pid {served.pid}" in stopped.stdout
-    assert not command_server.process_alive(served.pid) and not served.socket.exists()
+    assert not process_alive(served.pid) and not served.socket.exists()
     status = run(["server", "status"], served.env)
     assert status.stdout.startswith("no command server in ")
 

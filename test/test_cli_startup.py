@@ -10,11 +10,11 @@ import sys
 
 import numpy as np
 import pytest
+from support import run_cli
 
 from mech_regulator.bench.startup import MEASURES, PATHS, script_refusal, script_text
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from support import run_cli
 
 HEAVY = ("numpy", "scipy", "numba", "llvmlite", "pydantic", "pydantic_core", "matplotlib", "rerun", "tqdm", "yaml",
          "rclpy", "mujoco", "dask")

@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 from scipy import optimize
+from support import model_of, run_cli, scene, simulate_complete
 
 from mech_regulator.analysis import energy_balance, summarise
-from mech_regulator.scene import SceneError, load_scene, validate_scene
-from support import model_of, run_cli, scene, simulate_complete
+from mech_regulator.scene import load_scene
 
 J, I = 0.1, 0.4          # motor side and machine [kg m^2]
 M, L = 20.0, 10.0        # motor moment, machine's constant resistance [N m]

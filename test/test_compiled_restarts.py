@@ -10,14 +10,14 @@ import functools
 
 import numpy as np
 import pytest
+from support import model_of, scene
+from test_compiled_path import shortened
 
 from mech_regulator.analysis.energy import step_edges
 from mech_regulator.solvers.compiled import run
 from mech_regulator.solvers.compiled.codegen import compile_scene
 from mech_regulator.solvers.cosim import GovernorStepper, follow_pieces
 from mech_regulator.solvers.time_domain import integrate_time_domain
-from support import model_of, scene
-from test_compiled_path import shortened
 
 # started fast (300 rad/s against about 224 on the orbit): the sleeve flies to its high stop and leaves it again, so
 # mode events fall between the engine's kinks (27 a cycle)

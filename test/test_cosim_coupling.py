@@ -16,8 +16,17 @@ import pytest
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cosim import (GovernorStepper, MachineStepper, cosimulate, held_load_until, load_rate,
-                                          seconds, speed_waveform, throttle_extrapolation, to_nanoseconds)
+from mech_regulator.solvers.cosim import (
+    GovernorStepper,
+    MachineStepper,
+    cosimulate,
+    held_load_until,
+    load_rate,
+    seconds,
+    speed_waveform,
+    throttle_extrapolation,
+    to_nanoseconds,
+)
 
 SMOOTH_GOVERNED = {  # constant inertia, a direct governor without friction or stops reached, a load step at 0.2 s
     "name": "smooth_governed",

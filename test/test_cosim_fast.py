@@ -9,13 +9,13 @@ import json
 
 import numpy as np
 import pytest
+from support import model_of, run_cli, scene
+from test_compiled_path import shortened
 
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled.codegen import SLEEVE_CODE, compile_scene
 from mech_regulator.solvers.cosim import GovernorStepper, MachineStepper, cosimulate, seconds, to_nanoseconds
-from support import model_of, run_cli, scene
-from test_compiled_path import shortened
 
 EXCHANGE = 1e-3  # [s]
 # Short runs that pass through the governor's modes: started fast (300 rad/s against about 224 on the orbit), the

@@ -20,8 +20,8 @@ import math
 
 import numpy as np
 import pytest
-
 from support import preset_reduced
+
 from mech_regulator.mechanisms.crank_slider import (
     CrankSliderGeometry,
     dead_centres,

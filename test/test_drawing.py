@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from mech_regulator.governors.centrifugal import PorterSensor
-from mech_regulator.governors.drawing import (COLLAR_RADIUS, 
+from mech_regulator.governors.drawing import (
+    COLLAR_RADIUS,
     SLEEVE_HALF_HEIGHT,
     ball_radius,
     governor_bounds,

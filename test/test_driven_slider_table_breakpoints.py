@@ -24,15 +24,15 @@ import math
 
 import numpy as np
 import pytest
+from support import simulate_complete
+from test_state_table_breakpoints import line, restarted_reference
+from test_table_knots import assert_meets_rtol
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers.compiled.codegen import compile_scene
 from mech_regulator.solvers.compiled.run import integrate_compiled
 from mech_regulator.solvers.time_domain import _anchors
-from support import simulate_complete
-from test_state_table_breakpoints import line, restarted_reference
-from test_table_knots import assert_meets_rtol
 
 CRANK, ROD = 0.05, 0.2  # the driven crank-slider [m]: x runs over [ROD - CRANK, ROD + CRANK] = [0.15, 0.25]
 MECHANISM = {"type": "crank_slider", "crank": CRANK, "rod": ROD, "offset": 0.0, "rod_mass": 0.3, "rod_cg": 0.08,
@@ -53,7 +53,7 @@ def driven_slider_model(*overrides: str):
                                                f"machine.coupling.driven.loads=[{json.dumps(TABLE)}]", *overrides]))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def driven_slider_reference() -> tuple[np.ndarray, np.ndarray]:
     """The crossings of x(phi2) through the table's positions (restarted_reference, value x): piece k lies between
     POSITIONS[k - 1] and POSITIONS[k] (the ends are never reached), on it F is the line of segment k - 1, whose

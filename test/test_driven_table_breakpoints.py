@@ -18,11 +18,11 @@ import math
 
 import numpy as np
 import pytest
+from test_state_table_breakpoints import restarted_reference
+from test_table_knots import assert_meets_rtol
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from test_state_table_breakpoints import restarted_reference
-from test_table_knots import assert_meets_rtol
 
 KNOTS_DEG, TORQUES = [0.0, 60.0, 150.0, 250.0], [2.0, 9.0, 4.0, 6.0]  # the driven part's load M(phi2) [deg], [N m]
 TABLE = {"type": "table", "angle_deg": KNOTS_DEG, "torque": TORQUES, "period_deg": 360.0}
@@ -50,7 +50,7 @@ def table_line(segment_at: float, phi2: float) -> float:
     return values[j] + (values[j + 1] - values[j]) / (knots[j + 1] - knots[j]) * (phi2 - start)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def driven_table_reference() -> tuple[np.ndarray, np.ndarray]:
     """The crossings of phi2 through the knots (restarted_reference): piece k lies between breaks[k - 1] and
     breaks[k], the knots of TURNS turns unrolled; on it the table is the line of the segment holding the piece's

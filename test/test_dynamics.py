@@ -19,12 +19,12 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate, optimize
+from support import simulate_complete
 
 from mech_regulator.analysis import analyse_steady_state, energy_balance, energy_swing, flywheel_for_constant_inertia
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from support import simulate_complete
 
 ADAPTIVE = ["DOP853", "RK45", "Radau", "LSODA"]
 METHODS = ADAPTIVE + ["RK4"]

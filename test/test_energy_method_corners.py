@@ -11,10 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from support import simulate_complete
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from support import simulate_complete
 
 SETTINGS = ["scenario.duration=0.3", "scenario.initial.omega=100.0"]
 

@@ -15,13 +15,20 @@ import math
 
 import numpy as np
 import pytest
-
-from mech_regulator.analysis.engine import engine_report, harmonics, torque_curves
-from mech_regulator.mechanisms.crank_slider import CrankSliderGeometry, dead_centres, stroke
-from mech_regulator.mechanisms.engine import (firing_delays, mean_piston_speed, piston_motion,
-                                              source_approximation, source_dead_centre_angles, source_from_exact)
-from mech_regulator.scene import SceneError, load_scene, validate_scene
 from support import model_of, preset_reduced, run_cli, scene, simulate_complete
+
+from mech_regulator.analysis.engine import harmonics, torque_curves
+from mech_regulator.mechanisms.checks import refuse_unbuildable
+from mech_regulator.mechanisms.crank_slider import CrankSliderGeometry, dead_centres, stroke
+from mech_regulator.mechanisms.engine import (
+    firing_delays,
+    mean_piston_speed,
+    piston_motion,
+    source_approximation,
+    source_dead_centre_angles,
+    source_from_exact,
+)
+from mech_regulator.scene import SceneError, load_scene, validate_scene
 
 TURN = np.arange(720) * (2.0 * math.pi / 720)  # 0.5 deg over one turn
 
@@ -48,7 +55,9 @@ def test_exact_velocity_and_acceleration_are_time_derivatives_of_x(R, l, e):
     phi(t) = phi0 + omega t + epsilon t^2 / 2 (so the x' epsilon term of a is checked too)."""
     omega, epsilon, h = 200.0, 3.0e4, 1e-6
     for phi0 in (0.3, 1.9, 4.0):
-        x = lambda t: slider_x(phi0 + omega * t + 0.5 * epsilon * t * t, R, l, e)
+        def x(t, phi0=phi0):
+            return slider_x(phi0 + omega * t + 0.5 * epsilon * t * t, R, l, e)
+
         motion = piston_motion(phi0, omega, R, l, e, epsilon)
         assert motion.x == pytest.approx(x(0.0), abs=1e-15)
         # truncation h^2/6 |x'''| ~ 1e-12 R w^3 h^2 ~ 1e-7 m/s; rounding EPS l / h ~ 3e-11 m/s
@@ -244,9 +253,9 @@ def test_scene_errors_name_the_key_and_what_is_expected():
     bad_first = scene(INLINE4)
     bad_first["machine"]["mechanism"]["cylinders"][0] = {"throw_deg": 90.0}
     bad.append((bad_first, "cylinder 1 is the reference"))
-    for data, message in bad:
+    for data, message in bad:  # read, then built: the firing is the mechanisms' check (mechanisms/checks.py)
         with pytest.raises(SceneError, match=message):
-            validate_scene(data)
+            refuse_unbuildable(validate_scene(data))
 
 
 def test_inline4_simulates_with_one_column_per_piston():

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 from scipy import integrate
+from support import run_cli, simulate_complete
 
 from mech_regulator.analysis.flywheel import MACHINE_CLASSES, PeriodicMotion, design_flywheel, energy_diagram
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
-from support import run_cli, simulate_complete
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -18,8 +18,8 @@ import math
 
 import numpy as np
 import pytest
-
 from support import preset_reduced
+
 from mech_regulator.mechanisms.four_bar import (
     BRANCH_SIGN,
     FourBarGeometry,

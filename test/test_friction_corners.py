@@ -14,11 +14,11 @@ import math
 
 import numpy as np
 import pytest
+from support import simulate_complete
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from mech_regulator.solvers.time_domain import _reaction_branches, _reach, switch_window
-from support import simulate_complete
+from mech_regulator.solvers.time_domain import _reach, _reaction_branches, switch_window
 
 CRANK, ROD = 0.05, 0.20  # compressor.yaml's crank-slider [m]
 

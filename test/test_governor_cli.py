@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import run_cli as run
+from support import write_scene as write
 
 from mech_regulator.cli.main import main
 from mech_regulator.scene import load_scene
-from support import run_cli as run, write_scene as write
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -38,11 +38,10 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate
-
-from mech_regulator.analysis import (critical_damping, floquet_stability, is_periodic, linear_stability,
-                                     operating_point)
-from mech_regulator.model import LoadPiece
 from support import model_of, scene, simulate_complete
+
+from mech_regulator.analysis import critical_damping, floquet_stability, is_periodic, linear_stability, operating_point
+from mech_regulator.model import LoadPiece
 
 TIGHT = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
 

@@ -33,11 +33,11 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate, optimize
+from support import simulate_complete
 
 from mech_regulator.analysis import droop, linear_stability, load_responses, operating_point, static_characteristic
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, validate_scene
-from support import simulate_complete
 
 G = 9.81  # [m/s^2]
 

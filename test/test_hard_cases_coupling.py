@@ -13,17 +13,21 @@ import numpy as np
 import pytest
 import yaml
 from scipy.linalg import expm
+from support import run_cli, simulate_complete, write_scene
 
 from mech_regulator.analysis import energy_balance
 from mech_regulator.model import build_model
-from mech_regulator.scene import load_scene, validate_scene
-from mech_regulator.scene import SceneError
+from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.advice import (coupling_modes, rk4_amplification, rk4_largest_stable_step,
-                                           rk4_stability_refusal, stiffness_advice)
+from mech_regulator.solvers.advice import (
+    coupling_modes,
+    rk4_amplification,
+    rk4_largest_stable_step,
+    rk4_stability_refusal,
+    stiffness_advice,
+)
 from mech_regulator.solvers.cosim import cosimulate
 from mech_regulator.solvers.time_domain import integrate_time_domain
-from support import run_cli, simulate_complete, write_scene
 
 J1, I2 = 0.5, 0.2  # crank side and driven part [kg m^2]
 DRIVE, VISCOUS_1, VISCOUS_2, LOAD = 40.0, 0.05, 0.1, 10.0  # [N m], [N m s/rad], [N m s/rad], [N m]

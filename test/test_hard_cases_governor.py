@@ -26,15 +26,20 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate, optimize
+from support import model_of, scene, simulate_complete
+from test_governor_dynamics import DIRECT, TIGHT  # linear motor + viscous load, Porter governor, constant J
 
-from mech_regulator.analysis import (critical_damping, cycle_mean_speed, floquet_stability, linear_stability,
-                                     operating_point)
+from mech_regulator.analysis import (
+    critical_damping,
+    cycle_mean_speed,
+    floquet_stability,
+    linear_stability,
+    operating_point,
+)
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.time_domain import GUARD_TOLERANCE
-from support import model_of, scene, simulate_complete
-from test_governor_dynamics import DIRECT, TIGHT  # linear motor + viscous load, Porter governor, constant J
 
 
 def lift_of(model, y: np.ndarray) -> np.ndarray:
@@ -77,7 +82,7 @@ RAMP_START, RAMP_TIME, RAMP_LOAD = 0.5, 7.0, 30.0
 STICK_REFERENCE = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12, "max_step": 5e-3}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def stick_point():
     return operating_point(model_of(STICK_BASE), 0.0)
 
@@ -90,7 +95,7 @@ def stick_scene(solver: dict) -> dict:
                         {"time": 8.5, "torque": 0.0, "ramp": 7.0}]})
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def stick_run(solver_items: tuple):
     model = model_of(stick_scene(dict(solver_items)))
     return model, simulate_complete(model)
@@ -299,7 +304,7 @@ INDIRECT = {
 }
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def bang_bang_reference():
     point = operating_point(model_of(INDIRECT), 30.0)
     data = scene(INDIRECT, scenario__initial={"omega": 1.1 * point.speed, "sleeve": point.sleeve,
@@ -442,7 +447,7 @@ def envelope(t: np.ndarray, x: np.ndarray) -> tuple[float, float]:
     return float(np.polyfit(times, np.log(peaks), 1)[0]), float(2.0 * np.polyfit(np.arange(times.size), times, 1)[0])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def boundary_base():
     base = model_of(DIRECT)
     point = operating_point(base, 0.0)

@@ -20,12 +20,12 @@ import math
 import numpy as np
 import pytest
 from scipy import integrate, optimize
+from support import simulate_complete
 
 from mech_regulator.analysis import energy_balance
 from mech_regulator.model import build_model
 from mech_regulator.scene import validate_scene
 from mech_regulator.solvers import simulate
-from support import simulate_complete
 
 TWO_PI = 2.0 * math.pi
 

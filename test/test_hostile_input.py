@@ -16,16 +16,23 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import run_cli, write_scene
 
 import mech_regulator.scene.loading as loading
 import mech_regulator.solvers.time_domain as time_domain
 from mech_regulator.model import MachineModel, build_model
-from mech_regulator.nodes.launch import default_recording, node_reason
+from mech_regulator.nodes.launch import node_reason
+from mech_regulator.nodes.outputs import default_recording
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.scene.limits import (MAX_BASE_CHAIN, MAX_SCENE_BYTES, MAX_SPEED, MAX_YAML_DEPTH, MAX_YAML_NODES,
-                                         output_stem)
+from mech_regulator.scene.limits import (
+    MAX_BASE_CHAIN,
+    MAX_SCENE_BYTES,
+    MAX_SPEED,
+    MAX_YAML_DEPTH,
+    MAX_YAML_NODES,
+    output_stem,
+)
 from mech_regulator.solvers import simulate
-from support import run_cli, write_scene
 
 # A small complete scene: constant J, a constant drive against a viscous load (balance at 300 rad/s), RK45.
 PLAIN = """\
@@ -256,7 +263,7 @@ def test_a_blow_up_stops_the_run_at_once_and_keeps_it(tmp_path, capsys, method):
     summary = json.loads(out)
     assert summary["status"] == "failed"
     message = summary["message"]
-    for fragment in (f"{method}: the run blew up at t = ", f"omega = ", f"is beyond {MAX_SPEED:g} rad/s",
+    for fragment in (f"{method}: the run blew up at t = ", "omega = ", f"is beyond {MAX_SPEED:g} rad/s",
                      "the state: phi = ", "likely cause: the crank's net moment 1e+14 N m on J = 0.5 kg m^2"):
         assert fragment in message, (fragment, message)
     assert message in err

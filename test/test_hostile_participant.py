@@ -18,21 +18,35 @@ import time
 
 import pytest
 
-from ros_support import (LISTEN_QOS, WAIT, Processes, RunListener, diagnostic_values,  # noqa: F401 (fixtures)
-                         domain_id, probe_on, processes, stamp_ns)
-
 # after ros_support, which skips this module when rclpy is missing
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rclpy.duration import Duration
+from ros_support import (  # noqa: F401 (fixtures)
+    LISTEN_QOS,
+    WAIT,
+    Processes,
+    RunListener,
+    diagnostic_values,
+    domain_id,
+    probe_on,
+    processes,
+    stamp_ns,
+)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from test_ros_nodes import (
+    BASE_LOAD,
+    MainJob,
+    assert_equals_cosimulation,
+    constant_inertia_scene,
+    machine_parameters,
+    without_rclpy_noise,
+)
 
 from mech_regulator.nodes.common import STATE_QOS, stamp
 from mech_regulator.solvers.cosim import cosimulate
-from test_ros_nodes import (BASE_LOAD, MainJob, assert_equals_cosimulation, constant_inertia_scene,
-                            machine_parameters, without_rclpy_noise)
 
 RESEND = 0.3  # [s] of wall time between two sendings of a message whose refusal a test waits for
 # engine_direct shortened to 1.5 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s), exchanged every 1 ms (some seconds of
@@ -338,7 +352,7 @@ def test_a_second_run_on_the_same_domain_is_refused_at_start(clean_run, tmp_path
         code = processes.wait(second.process, 4 * WAIT)
         assert code == 2, second.describe()
         assert "another node named 'machine'" in second.log or "another node named" in second.log, second.describe()
-        assert f"domain" in second.log and first.process.poll() is None, second.describe()
+        assert "domain" in second.log and first.process.poll() is None, second.describe()
         probe.spin_until(lambda: any(float(values["sim_time"]) > 1.5 for _, _, values in listener.statuses()),
                          "the first run past the clean run's end", describe=first.describe)
     first.process.send_signal(signal.SIGINT)

@@ -242,9 +242,8 @@ def test_nodes_started_with_the_params_file_follow_a_published_clock(ros_domain)
     from rclpy.context import Context
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
-    from rosgraph_msgs.msg import Clock
-
     from ros_support import WAIT, ros_environment
+    from rosgraph_msgs.msg import Clock
 
     published = Time(sec=123, nanosec=456_000_789)
     published_ns = published.sec * 1_000_000_000 + published.nanosec

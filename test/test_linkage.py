@@ -24,8 +24,17 @@ import pytest
 from scipy.optimize import fsolve
 
 from mech_regulator.mechanisms import crank_slider, four_bar, presets
-from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageError, analyse, assembly_failures,
-                                               checked, make_reduced, solve)
+from mech_regulator.mechanisms.linkage import (
+    Joint,
+    Link,
+    Linkage,
+    LinkageError,
+    analyse,
+    assembly_failures,
+    checked,
+    make_reduced,
+    solve,
+)
 from mech_regulator.mechanisms.linkage.groups import _rows
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
 

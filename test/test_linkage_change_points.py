@@ -12,8 +12,16 @@ import math
 import numpy as np
 import pytest
 
-from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, assembly_failures, checked, make_reduced, solve,
-                                               symbolic)
+from mech_regulator.mechanisms.linkage import (
+    Joint,
+    Link,
+    Linkage,
+    assembly_failures,
+    checked,
+    make_reduced,
+    solve,
+    symbolic,
+)
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, validate_scene
 from mech_regulator.solvers import simulate
@@ -110,4 +118,4 @@ def test_a_scene_without_the_redundant_link_is_refused_at_its_change_point():
     mechanism = data["machine"]["mechanism"]
     del mechanism["links"]["EF"], mechanism["joints"]["E"], mechanism["joints"]["F"]
     with pytest.raises(SceneError, match="RRR group C .* is at a dead point"):
-        validate_scene(data)
+        build_model(validate_scene(data))   # the mechanisms' checks run when a scene becomes a machine

@@ -17,14 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from rerun.chunk import RrdReader
-
 from linkage_family import MEMBERS, member
+from rerun.chunk import RrdReader
+from support import run_cli
+from test_recording import scalars
+
 from mech_regulator.analysis.kinematics import reactions_table
 from mech_regulator.mechanisms import build_reduced
 from mech_regulator.scene import config_dir, load_scene, schema
-from support import run_cli
-from test_recording import scalars
 
 SEED = 7
 NAMES = list(MEMBERS)

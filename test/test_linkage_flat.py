@@ -9,6 +9,10 @@ import re
 
 import numpy as np
 import pytest
+from support import model_of, simulate_complete
+from test_compiled_path import assert_same_rhs, driven_four_bar
+from test_linkage import DYADS, four_bar_linkage
+from test_linkage_scene import FOUR_BAR_LINKAGE
 
 from mech_regulator import mechanisms
 from mech_regulator.mechanisms.linkage import LinkageError, analyse, flat, make_reduced, solve
@@ -17,10 +21,6 @@ from mech_regulator.scene import load_scene
 from mech_regulator.solvers import on_path
 from mech_regulator.solvers.compiled import fast_path_refusal
 from mech_regulator.solvers.compiled.codegen import generate
-from support import model_of, simulate_complete
-from test_compiled_path import assert_same_rhs, driven_four_bar
-from test_linkage import DYADS, four_bar_linkage
-from test_linkage_scene import FOUR_BAR_LINKAGE
 
 LINKAGE_SCENES = ["shaper", "sieve_shaker", "six_bar_press", "walking_beam_linkage"]
 ANGLES = np.linspace(0.1, 2.0 * math.pi, 7)

@@ -12,12 +12,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from support import simulate_complete
 
 from mech_regulator.mechanisms import mechanism_geometry
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from support import simulate_complete
 
 FRICTION = ["machine.joint_friction.coefficient=0.05", "machine.joint_friction.guide=0.05",
             "machine.joint_friction.journals={" + ", ".join(f"{joint}: {{radius: 0.03, fit: run_in}}"

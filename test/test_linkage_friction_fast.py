@@ -15,6 +15,8 @@ import sys
 
 import numpy as np
 import pytest
+from support import model_of, scene, simulate_complete
+from test_compiled_path import assert_same_events, bundled, relative_difference
 
 from mech_regulator.analysis.energy import energy_balance
 from mech_regulator.mechanisms import build_kinetostatics, mechanism_geometry
@@ -22,8 +24,6 @@ from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers.compiled import fast_path_refusal
 from mech_regulator.solvers.compiled.codegen import compile_scene
-from support import model_of, scene, simulate_complete
-from test_compiled_path import assert_same_events, bundled, relative_difference
 
 LINKAGES = ["shaper", "sieve_shaker", "six_bar_press", "walking_beam_linkage"]
 GRAVITY = (1.5, -9.81)   # with a component along x, so that the weights' terms of both axes count

@@ -16,13 +16,22 @@ import math
 
 import numpy as np
 import pytest
+from support import run_cli
 
-from mech_regulator.mechanisms.linkage import (Joint, Link, Linkage, LinkageError, checked, flat, make_reduced,
-                                               solve, symbolic)
+from mech_regulator.mechanisms.linkage import (
+    Joint,
+    Link,
+    Linkage,
+    LinkageError,
+    checked,
+    flat,
+    make_reduced,
+    solve,
+    symbolic,
+)
 from mech_regulator.mechanisms.linkage.gears import GearMesh
 from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
 from mech_regulator.scene import SceneError, load_scene, validate_scene
-from support import run_cli
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 13)[:-1] + 0.137
 GRAVITY = (0.3, -9.81)

@@ -15,15 +15,16 @@ import re
 
 import numpy as np
 import pytest
+from support import run_cli
 
 from mech_regulator.analysis.kinematics import kinematics_table, reactions_table
 from mech_regulator.cli.main import main
 from mech_regulator.mechanisms import build_reduced
+from mech_regulator.mechanisms.checks import refuse_unbuildable
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal
-from support import run_cli
 
 FOUR_BAR_LINKAGE = {
     "type": "linkage",
@@ -52,8 +53,9 @@ def as_linkage(scene_name: str = "four_bar_rocker", mechanism: dict | None = Non
 
 
 def refusal(data: dict) -> str:
+    """The message refusing a scene: its format when read, or its mechanism's checks (mechanisms/checks.py)."""
     with pytest.raises(SceneError) as error:
-        validate_scene(data)
+        refuse_unbuildable(validate_scene(data))
     return str(error.value)
 
 

@@ -16,11 +16,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_linkage import DYADS, four_bar_linkage, parallelogram_linkage, six_bar_linkage
 
 from mech_regulator.mechanisms import linkage_of
 from mech_regulator.mechanisms.linkage import LinkageError, analyse, checked, flat, make_reduced, solve, symbolic
 from mech_regulator.scene import load_scene
-from test_linkage import DYADS, four_bar_linkage, parallelogram_linkage, six_bar_linkage
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 73)[:-1] + 0.0071
 GRAVITY = (0.4, -9.81)

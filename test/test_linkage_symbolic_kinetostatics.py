@@ -15,13 +15,13 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_linkage import DYADS, parallelogram_linkage, six_bar_linkage
+from test_linkage_symbolic import GRAVITY, _weighted
 
 from mech_regulator.mechanisms import build_kinetostatics, linkage_of
 from mech_regulator.mechanisms.linkage import checked, flat, symbolic
 from mech_regulator.mechanisms.linkage.model import Linkage
 from mech_regulator.scene import load_scene
-from test_linkage import DYADS, parallelogram_linkage, six_bar_linkage
-from test_linkage_symbolic import GRAVITY, _weighted
 
 SCENES = ["compressor_friction", "press", "four_bar_rocker", "six_bar_press_friction", "shaper", "sieve_shaker",
           "walking_beam_linkage", "walking_beam", "engine_inline4"]

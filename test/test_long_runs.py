@@ -15,13 +15,13 @@ import math
 
 import numpy as np
 import pytest
+from support import model_of
+from test_compiled_path import shortened
 
 from mech_regulator.analysis.energy import step_edges
 from mech_regulator.solvers import simulate, time_domain
 from mech_regulator.solvers.compiled import run
 from mech_regulator.solvers.time_domain import MAX_RESTARTS_WITHOUT_PROGRESS, turns_and_phase
-from support import model_of
-from test_compiled_path import shortened
 
 FAR = 1e7  # [rad]: about 10 000 s of the engines at 230 rad/s
 

@@ -21,19 +21,26 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-
-from ros_support import (WAIT, Processes, RunListener, domain_id, next_domain_id, probe,  # noqa: F401 (fixtures)
-                         processes, stamp_ns)
+from linkage_family import member
+from ros_support import (  # noqa: F401 (fixtures)
+    WAIT,
+    Processes,
+    RunListener,
+    domain_id,
+    next_domain_id,
+    probe,
+    processes,
+    stamp_ns,
+)
 
 # after ros_support, which skips this module when rclpy is missing
 from std_srvs.srv import Trigger
+from test_linkage_family import strip_counts
 
-from linkage_family import member
 from mech_regulator.cli.report import write_csv
 from mech_regulator.model import build_model
 from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, to_nanoseconds
-from test_linkage_family import strip_counts
 
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
 

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import SOURCE_TREE, run_cli, write_scene
 
 from mech_regulator.cli import report
 from mech_regulator.model import build_model
@@ -31,7 +32,6 @@ from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.limits import MAX_SPEED
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import cosimulate
-from support import SOURCE_TREE, run_cli, write_scene
 
 # Each command that writes files, with the option naming one: (argv before the option, option, a folder option?)
 OUTPUTS = [

@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from scipy.integrate import solve_ivp
-
 from ros_support import WAIT, domain_id, processes  # noqa: F401 (fixtures)
+from scipy.integrate import solve_ivp
 from support import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -107,7 +106,7 @@ def bag_messages(folder: Path) -> dict[str, list]:
     (relative,) = information["relative_file_paths"]
     topics: dict[str, list] = {}
     with open(folder / relative, "rb") as stream:
-        for schema, channel, message, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]) \
+        for _, channel, message, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]) \
                 .iter_decoded_messages():
             topics.setdefault(channel.topic, []).append((message.log_time, decoded))
     counts = {item["topic_metadata"]["name"]: item["message_count"]

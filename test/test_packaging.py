@@ -15,8 +15,8 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import pytest
-from support import setup_arguments
 from packaging.requirements import Requirement
+from support import setup_arguments
 
 import mech_regulator
 
@@ -275,11 +275,11 @@ def test_package_xml_is_valid_for_catkin_pkg():
 # ./dev: each command installs what it needs, once
 
 
-def test_dev_is_valid_bash_and_ci_runs_dev_test():
+def test_dev_is_valid_bash_and_ci_runs_the_checks_then_dev_test():
     _run(["bash", "-n", str(ROOT / "dev")])
     commands = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
                 if line.strip() and not line.lstrip().startswith(("#", "set ", "cd "))]
-    assert commands == ["./dev test"], f".ci/run runs {commands}"
+    assert commands == ["./dev check", "./dev test"], f".ci/run runs {commands}"
 
 
 def test_dev_unknown_command_prints_usage_and_exits_2_without_setting_up(tmp_path):
@@ -326,6 +326,8 @@ def test_dev_installs_each_commands_extras_once_and_again_when_packaging_changes
     assert told.startswith("completing .venv for ./dev test: installing the extras test colcon bench distributed"), told
     calls, _ = dev("test")
     assert calls == ["python -m pytest -q"]
+    calls, _ = dev("check")  # the same extras as test: nothing to install
+    assert calls == ["python -m ruff check .", "python -m mypy"]
     calls, _ = dev("run")
     assert calls == ["mech-regulator run engine_direct"]
 

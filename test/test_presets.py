@@ -16,15 +16,21 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import closed_forms
 import numpy as np
 import pytest
+from support import linkage_scene_entry, model_of
 
-import closed_forms
-from mech_regulator.mechanisms import (build_kinetostatics, build_reduced, kinetostatics, mechanism_geometry,
-                                       point_motions, presets)
+from mech_regulator.mechanisms import (
+    build_kinetostatics,
+    build_reduced,
+    kinetostatics,
+    mechanism_geometry,
+    point_motions,
+    presets,
+)
 from mech_regulator.mechanisms.linkage import checked, make_reduced
 from mech_regulator.scene import load_scene, schema
-from support import linkage_scene_entry, model_of
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 37)[:-1] + 0.0123
 GRAVITY = (0.7, -9.81)

@@ -24,27 +24,37 @@ import numpy as np
 import pytest
 import yaml
 
-from ros_support import (WAIT, Processes, RunListener, domain_id, next_domain_id, probe,  # noqa: F401 (fixtures)
-                         probe_on, processes, processes_on, stamp_ns)
-from support import run_cli
-from test_recording import events
-
 # after ros_support, which skips this module when rclpy is missing
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
-from rcl_interfaces.msg import Parameter as ParameterMessage, ParameterType, ParameterValue
+from rcl_interfaces.msg import Parameter as ParameterMessage
+from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.duration import Duration
+from ros_support import (  # noqa: F401 (fixtures)
+    WAIT,
+    Processes,
+    RunListener,
+    domain_id,
+    next_domain_id,
+    probe,
+    probe_on,
+    processes,
+    processes_on,
+    stamp_ns,
+)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
+from support import run_cli
+from test_recording import events
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
 from mech_regulator.nodes.launch import viewer_command
 from mech_regulator.scene import load_scene, validate_scene
-from mech_regulator.solvers import simulate
 from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
+from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, GovernorStepper, cosimulate, seconds, to_nanoseconds
 from mech_regulator.solvers.trajectory import SampledTrajectory
 

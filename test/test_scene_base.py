@@ -9,9 +9,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from support import run_cli as run
+from support import write_scene
 
 from mech_regulator.scene import SceneError, load_scene
-from support import run_cli as run, write_scene
 
 LATHE_FLYWHEEL = 15.453292519943295
 

@@ -14,10 +14,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from support import run_cli as run
+from support import write_scene as write
 
 import mech_regulator
 from mech_regulator.scene.loading import bundled_scenes, load_scene
-from support import run_cli as run, write_scene as write
 
 # A valid scene: a crank-slider with a flywheel, a constant drive and a viscous load.
 BASE = """\

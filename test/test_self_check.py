@@ -14,14 +14,19 @@ import json
 
 import pytest
 import yaml
-
-from mech_regulator.analysis import summarise
-from mech_regulator.analysis.self_check import (ENERGY_PER_RTOL, FIXED_STEP_RESIDUAL, MODE_PER_RTOL, mode_log_check,
-                                                self_checks)
-from mech_regulator.model import build_model
-from mech_regulator.scene import load_scene
 from support import model_of, run_cli, scene, simulate_complete
 from test_governor_dynamics import DIRECT
+
+from mech_regulator.analysis import summarise
+from mech_regulator.analysis.self_check import (
+    ENERGY_PER_RTOL,
+    FIXED_STEP_RESIDUAL,
+    MODE_PER_RTOL,
+    mode_log_check,
+    self_checks,
+)
+from mech_regulator.model import build_model
+from mech_regulator.scene import load_scene
 
 PULSED_LOAD = {
     "name": "pulsed_load",

@@ -17,11 +17,11 @@ import math
 
 import numpy as np
 import pytest
+from support import simulate_complete
+from test_table_knots import assert_meets_rtol, restarted_reference
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from support import simulate_complete
-from test_table_knots import assert_meets_rtol, restarted_reference
 
 RUN_TIME = 0.3  # [s]: about 5 turns at 104 rad/s, 6 breakpoint crossings a turn
 
@@ -32,7 +32,7 @@ def compressor_model(*overrides: str):
                                                  *overrides]))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def crossing_reference() -> tuple[np.ndarray, np.ndarray]:
     """(times [s], omega [rad/s]) of the compressor at every crossing of a breakpoint of its slider table, by
     solve_ivp (DOP853, rtol 1e-12) between consecutive crossings. The table spans exactly the stroke, so its end

@@ -21,10 +21,10 @@ import math
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from test_table_knots import assert_meets_rtol
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
-from test_table_knots import assert_meets_rtol
 
 VALVE = {"type": "table", "sleeve": [0.02, 0.027, 0.028, 0.03, 0.032, 0.08],
          "throttle": [1.0, 0.8, 0.75, 0.62, 0.55, 0.0]}  # [m] -> [-]: kinks at every point (ends held beyond)
@@ -88,7 +88,7 @@ def line(xs: list[float], ys: list[float], segment: int, x: float) -> float:
     return ys[segment] + slope * (x - xs[segment])
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def valve_reference() -> tuple[np.ndarray, np.ndarray]:
     """The governed machine's crossings (restarted_reference): the valve read at z = 2 l (1 - cos a), piece k is the
     table's segment k - 1 (piece 0 and the last: the held end values), the motor's moment M = stall (1 - omega /
@@ -112,7 +112,7 @@ def valve_reference() -> tuple[np.ndarray, np.ndarray]:
     return restarted_reference(model, sleeve, z, correction, GOVERNED_TIME)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def coupling_reference() -> tuple[np.ndarray, np.ndarray]:
     """The coupled press's crossings (restarted_reference): the breaks are COUPLING_KINKS, piece k follows the line
     of the table's segment that holds a twist inside it (end segments continued); the line's difference d in the

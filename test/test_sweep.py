@@ -13,6 +13,7 @@ import sys
 
 import numpy as np
 import pytest
+from support import run_cli, write_scene
 
 import mech_regulator.analysis.sweep as sweep_module
 from mech_regulator.analysis import energy_swing
@@ -20,7 +21,6 @@ from mech_regulator.analysis.sweep import parse_grid, run_point, run_sweep, swee
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, validate_scene
 from mech_regulator.solvers import simulate
-from support import run_cli, write_scene
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 LATHE_SHORT = ["scenario.duration=1.0"]

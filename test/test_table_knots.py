@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from scipy import optimize
 from scipy.integrate import solve_ivp
+from support import model_of, simulate_complete
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers.compiled.run import integrate_compiled
-from support import model_of, simulate_complete
 
 ENGINE_TIME = 0.25  # [s]: 9 turns of the engine at 230 rad/s, 120 knots of its indicator diagram
 
@@ -32,7 +32,7 @@ def engine_model(*overrides: str):
                                              *overrides]))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def knot_reference() -> tuple[np.ndarray, np.ndarray]:
     """(times [s], omega [rad/s]) of the engine scene at every knot its crank angle passes, by solve_ivp (DOP853,
     rtol 1e-12) between consecutive knots: on the piece from knot k the pressure is the line of segment k,

@@ -16,11 +16,11 @@ import math
 import numpy as np
 import pytest
 import yaml
-from scipy import integrate, optimize
+from scipy import integrate
+from support import model_of, run_cli, scene, simulate_complete, write_scene
 
 from mech_regulator.analysis import analyse_steady_state, energy_balance, motion_periods, required_coupling
 from mech_regulator.scene import load_scene
-from support import model_of, run_cli, scene, simulate_complete, write_scene
 
 J1, I2 = 0.5, 0.2  # [kg m^2]
 

@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.optimize import fsolve
+from support import model_of, preset_reduced, run_cli, scene, simulate_complete, write_scene
 
 from mech_regulator.analysis.kinematics import kinematics_table
 from mech_regulator.mechanisms import walking_beam
 from mech_regulator.mechanisms.drawing import mechanism_outline
 from mech_regulator.scene.loading import read_scene_data
-from support import model_of, preset_reduced, run_cli, scene, simulate_complete, write_scene
 
 TWO_PI = 2.0 * math.pi
 OMEGA = 10.0  # the paper's crank speed [rad/s]

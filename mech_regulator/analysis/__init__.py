@@ -11,12 +11,23 @@ from mech_regulator.analysis.drivetrain import drive_train_summary
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
 from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
-from mech_regulator.analysis.stability import (FloquetStability, LinearStability, critical_damping,
-                                               floquet_stability, is_periodic, linear_stability)
-from mech_regulator.analysis.two_mass import (MotionPeriods, RequiredCoupling, motion_periods,
-                                              required_coupling)
-from mech_regulator.analysis.statics import (Droop, OperatingPoint, StaticCharacteristic, droop, operating_point,
-                                             static_characteristic)
+from mech_regulator.analysis.stability import (
+    FloquetStability,
+    LinearStability,
+    critical_damping,
+    floquet_stability,
+    is_periodic,
+    linear_stability,
+)
+from mech_regulator.analysis.statics import (
+    Droop,
+    OperatingPoint,
+    StaticCharacteristic,
+    droop,
+    operating_point,
+    static_characteristic,
+)
+from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 from mech_regulator.solvers.cosim import CoSimulation

@@ -21,8 +21,15 @@ import numpy as np
 from scipy import optimize
 
 from mech_regulator.mechanisms import crank_slider
-from mech_regulator.mechanisms.engine import (PistonMotion, firing_delays, mean_piston_speed, piston_motion,
-                                              source_approximation, source_dead_centre_angles, source_from_exact)
+from mech_regulator.mechanisms.engine import (
+    PistonMotion,
+    firing_delays,
+    mean_piston_speed,
+    piston_motion,
+    source_approximation,
+    source_dead_centre_angles,
+    source_from_exact,
+)
 from mech_regulator.model import MachineModel
 
 POINTS_PER_DEGREE = 4  # samples of the curves per degree of crank angle (table knots every 0.25 deg fall on it)

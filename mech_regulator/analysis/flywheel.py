@@ -26,15 +26,16 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.energy import energy_swing, flywheel_for_constant_inertia
-from mech_regulator.analysis.periodic import PeriodSpeeds, analyse_steady_state, balance_speed
+from mech_regulator.analysis.periodic import PeriodSpeeds, analyse_steady_state
 from mech_regulator.model import MachineModel, build_model
+from mech_regulator.model.steady import balance_speed
 from mech_regulator.scene.loading import SceneError, validate_scene
 from mech_regulator.scene.schema import InitialState, Scenario, Scene
 from mech_regulator.solvers import Trajectory, simulate

@@ -113,7 +113,7 @@ def _limits(model: MachineModel, trajectory: Trajectory, start: float, end: floa
     found: list[str] = []
     names = {"low": "on its low stop", "high": "on its high stop"}
     spans = [(t, mode) for t, mode in trajectory.modes if t < end]
-    for position, (t, mode) in enumerate(spans):
+    for position, (_, mode) in enumerate(spans):
         t_next = spans[position + 1][0] if position + 1 < len(spans) else end
         if t_next <= start:
             continue

@@ -3,7 +3,7 @@
 docs/theory.md §2.5 and §3.1: the dynamic period Phi_omega = lcm(kinematic period, work period) in phi;
 over one period `delta = (omega_max - omega_min) / omega_m` with `omega_m = (omega_max + omega_min) / 2`.
 Steady (periodic) motion: omega at the start of successive dynamic periods repeats. Its mean speed, when the
-moments read omega, is where the cycle-mean moments balance (balance_speed).
+moments read omega, is where the cycle-mean moments balance (model/steady.py, balance_speed).
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ import numpy as np
 from scipy import optimize
 
 from mech_regulator.model import MachineModel
-from mech_regulator.scene.loading import SceneError
 from mech_regulator.solvers import Trajectory
 
 SAMPLES_PER_PERIOD = 200
@@ -91,29 +90,6 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     while first > 0 and repeats[first - 1]:
         first -= 1
     return SteadyState(True, float(starts[first]), period, periods, last, "")
-
-
-def balance_speed(model: MachineModel, hint: str = "") -> float:
-    """The speed [rad/s] at which the cycle-mean drive balances all resisting moments (a driven part's and the
-    external load at t = 0 included): mean M_d(omega) + mean M_c(omega) = 0 (MachineModel.cycle_averages), the
-    steady mean speed of the rigid machine. Bracketed by doubling from 1 rad/s, then brentq; SceneError (with
-    `hint` appended) when the moments balance at no speed."""
-    external = model.external_load(0.0)
-
-    def mean_moment(omega: float) -> float:
-        _, drive, other = model.cycle_averages(omega, external)
-        return drive + other
-
-    low, high = 1e-9, 1.0
-    while mean_moment(high) > 0.0:
-        low, high = high, 2.0 * high
-        if high > 1e7:
-            raise SceneError(f"scene '{model.scene.name}': the cycle-mean drive exceeds the resisting moments at every "
-                             f"speed up to 1e7 rad/s: the machine has no steady mean speed{hint}")
-    if mean_moment(low) <= 0.0:
-        raise SceneError(f"scene '{model.scene.name}': the cycle-mean drive does not overcome the resisting moments "
-                         f"even at rest: the machine has no steady mean speed{hint}")
-    return optimize.brentq(mean_moment, low, high, xtol=1e-13, rtol=1e-14)
 
 
 def _time_at_angle(trajectory: Trajectory, times: np.ndarray, phi: np.ndarray, level: float) -> float:

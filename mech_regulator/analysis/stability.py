@@ -24,7 +24,6 @@ from scipy import integrate, optimize
 from mech_regulator.analysis.statics import OperatingPoint
 from mech_regulator.model import LoadPiece, MachineModel
 
-
 SHOOTING_TOLERANCE = 1e-8  # the periodic orbit is found when |P(x) - x| is below this, relative to x's scale
 
 

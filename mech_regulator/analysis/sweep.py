@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from mech_regulator.scene.loading import (SceneError, apply_override, overridden_scene_data, parse_yaml,
-                                          validate_scene)
+from mech_regulator.mechanisms.checks import refuse_unbuildable
+from mech_regulator.scene.loading import SceneError, apply_override, overridden_scene_data, parse_yaml, validate_scene
+from mech_regulator.scene.schema import Scene
 from mech_regulator.solvers import auto_path
 from mech_regulator.solvers.compiled import fast_path_refusal
 
@@ -103,8 +104,7 @@ def parse_grid(spec: str) -> GridAxis:
     geometric = len(parts) == 4
     if geometric and not (start > 0.0 and stop > 0.0):
         raise SceneError(f"{option}: a geometric (log) grid needs START > 0 and STOP > 0, got {start:g} and {stop:g}")
-    values = (np.geomspace if geometric else np.linspace)(start, stop, int(count_text))
-    values = tuple(float(value) for value in values)
+    values = tuple(float(value) for value in (np.geomspace if geometric else np.linspace)(start, stop, int(count_text)))
     return GridAxis(key, values, tuple(repr(value) for value in values), geometric, option)
 
 
@@ -124,29 +124,34 @@ def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], 
     points = []
     for source in scenes:
         base, path = overridden_scene_data(source, overrides)
-        validate_scene(copy.deepcopy(base), str(path))
+        _checked_scene(copy.deepcopy(base), str(path))
         for axis in axes:  # each value alone first, so a refusal names the one option that caused it
             for text in axis.texts:
                 data = copy.deepcopy(base)
                 apply_override(data, f"{axis.key}={text}", option=axis.option)
-                validate_scene(data, f"{axis.option}: {axis.key} = {text} in scene '{source}'")
+                _checked_scene(data, f"{axis.option}: {axis.key} = {text} in scene '{source}'")
         for combination in itertools.product(*(range(len(axis.values)) for axis in axes)):
             data = copy.deepcopy(base)
             for axis, index in zip(axes, combination):
                 apply_override(data, f"{axis.key}={axis.texts[index]}", option=axis.option)
             values = {axis.key: axis.values[index] for axis, index in zip(axes, combination)}
             where = ", ".join(f"{key} = {axis.texts[index]}" for key, axis, index in zip(keys, axes, combination))
-            scene = validate_scene(copy.deepcopy(data), f"--grid point {where} in scene '{source}'") if axes else None
+            scene = _checked_scene(copy.deepcopy(data), f"--grid point {where} in scene '{source}'") if axes else None
             chosen = solver_path
             if chosen == "scene":  # the scene's own path; auto as a command takes it (solvers.auto_path)
-                scene = scene or validate_scene(copy.deepcopy(data), str(path))
+                scene = scene or _checked_scene(copy.deepcopy(data), str(path))
                 chosen = auto_path() if scene.solver.path == "auto" else "scene"
             if chosen != "scene":
-                scene = scene or validate_scene(copy.deepcopy(data), str(path))
+                scene = scene or _checked_scene(copy.deepcopy(data), str(path))
                 fast = chosen == "fast" and fast_path_refusal(scene) is None
                 data.setdefault("solver", {})["path"] = "fast" if fast else "reference"
             points.append(SweepPoint(source, values, data))
     return points
+
+
+def _checked_scene(data: dict, source: str) -> Scene:
+    """The scene of `data` validated and its mechanisms checked (mechanisms/checks.py), refused as from `source`."""
+    return refuse_unbuildable(validate_scene(data, source), source)
 
 
 def run_point(scene: dict, values: dict | None = None) -> dict:
@@ -198,7 +203,8 @@ def governor_stability(model, trajectory) -> dict:
 
     t_from = max([0.0] + [piece.start for piece in model.load_pieces])
     linear = linear_stability(model, operating_point(model, model.external_load(t_from)))
-    answer = {"stable_linear": linear.stable, "vyshnegradsky_A": None, "vyshnegradsky_B": None}
+    answer: dict[str, float | bool | int | None] = {"stable_linear": linear.stable, "vyshnegradsky_A": None,
+                                                    "vyshnegradsky_B": None}
     if linear.vyshnegradsky is not None:
         answer["vyshnegradsky_A"], answer["vyshnegradsky_B"] = (float(value) for value in linear.vyshnegradsky)
     ratio, settled, arrivals = oscillation_measures(model, trajectory, t_from)

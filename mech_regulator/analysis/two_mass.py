@@ -27,9 +27,10 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.energy import step_edges
-from mech_regulator.analysis.periodic import SteadyState, balance_speed
+from mech_regulator.analysis.periodic import SteadyState
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import FORWARD
+from mech_regulator.model.steady import balance_speed
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import Trajectory
 

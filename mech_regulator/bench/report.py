@@ -10,9 +10,24 @@ from pathlib import Path
 
 import numpy as np
 
-from mech_regulator.bench.accuracy import (ADAPTIVE, CHECK_METHOD, COSIM, COSIM_RTOL, GRID_RATE, IMPLICIT_TIGHTEST,
-                                           MAX_REPEATS, METHODS, REFERENCE_METHOD, REFERENCE_RTOL, REPEAT_BUDGET_S,
-                                           Benchmark, Run, SceneResult, error_kind, power_of_ten)
+from mech_regulator.bench.accuracy import (
+    ADAPTIVE,
+    CHECK_METHOD,
+    COSIM,
+    COSIM_RTOL,
+    GRID_RATE,
+    IMPLICIT_TIGHTEST,
+    MAX_REPEATS,
+    METHODS,
+    REFERENCE_METHOD,
+    REFERENCE_RTOL,
+    REPEAT_BUDGET_S,
+    Benchmark,
+    Run,
+    SceneResult,
+    error_kind,
+    power_of_ten,
+)
 
 TARGETS = (1e-4, 1e-7, 1e-10)   # headline errors at which the cheapest method is named
 FINEST_POINTS = 4               # the cost of one more digit is fitted over a method's finest resolved runs

@@ -39,14 +39,14 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import psutil
 
 from mech_regulator.analysis.energy import GAUSS_NODES, GAUSS_WEIGHTS, powers
-from mech_regulator.nodes.launch import die_with_parent
+from mech_regulator.processes import die_with_parent
 
 PROCESS_NAMES = ("machine", "governor", "scenario", "recorder", "launcher")  # the order of the memory rows
 NODE_SUFFIX = "_node"  # a forked node's process name is <name>_node (nodes/launch.py _name_process)

@@ -41,14 +41,23 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from mech_regulator.bench.accuracy import (REFERENCE_METHOD, REFERENCE_RTOL, SCENES, BenchScene, achieved_errors,
-                                           error_scale, environment, time_grid, timed)
+from mech_regulator.bench.accuracy import (
+    REFERENCE_METHOD,
+    REFERENCE_RTOL,
+    SCENES,
+    BenchScene,
+    achieved_errors,
+    environment,
+    error_scale,
+    time_grid,
+    timed,
+)
 from mech_regulator.bench.effect_cost import BASE_SCENE, EFFECT_CHAIN, SCENARIO
 from mech_regulator.bench.mujoco_model import MujocoCrankSlider, mujoco_refusal
 from mech_regulator.model import MachineModel, build_model

@@ -46,8 +46,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 REFERENCE, FAST, SCRIPT = "reference", "fast", "solve_ivp"
 PATHS = (REFERENCE, FAST, SCRIPT)
@@ -351,7 +351,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
         for command in (*(command for measure in commands.values() for command in measure.values()),
                         [sys.executable, str(script)]):
             run_process(command, base)
-        for index in range(repeat):
+        for _ in range(repeat):
             record(python, "python -c pass", [sys.executable, "-c", "pass"], base)
             for measure in ("import", "help"):
                 for path, command in commands[measure].items():
@@ -375,7 +375,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
             report("bench startup: filling this machine's compile caches for the warm fast runs (not counted)")
             final_speed(FAST, run_process(simulate_command(FAST), env)[2])
             warm_caches[FAST] = env
-        for index in range(repeat):
+        for _ in range(repeat):
             for path in PATHS:
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
                 final_speed(path, record(timings["warm"][path], f"warm {PATH_TITLES[path]}", command,
@@ -387,7 +387,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
         try:
             for path in (REFERENCE, FAST):
                 run_process(simulate_command(path), served)
-            for index in range(repeat):
+            for _ in range(repeat):
                 for path in (REFERENCE, FAST):
                     final_speed(path, record(timings["served"][path], f"warm {PATH_TITLES[path]} through the "
                                              "server", simulate_command(path), served))
@@ -412,7 +412,7 @@ def _wait_for_background_compile(cache: str, report: Callable[[str], None]) -> N
 
 def _stop_servers(cli: list[str], env: dict[str, str], pid: int | None) -> None:
     """`server stop` in the benchmark's folder; the server killed by its pid if it is still there."""
-    from mech_regulator.cli.server import process_alive
+    from mech_regulator.processes import process_alive
 
     try:
         run_process([*cli, "server", "stop"], env)

@@ -11,7 +11,7 @@ import signal
 import sys
 from pathlib import Path
 
-from mech_regulator.cli import EXIT_INTERRUPTED
+from mech_regulator.errors import EXIT_INTERRUPTED
 
 SOAK_DURATION = 3600.0  # [s] of simulated time a soak plays by default
 SOAK_INTERVAL = 30.0  # [s] of wall time between two rows by default

@@ -15,7 +15,7 @@ import sys
 import time
 from pathlib import Path
 
-from mech_regulator.cli import EXIT_INTERRUPTED
+from mech_regulator.errors import EXIT_INTERRUPTED
 
 BENCH_EXTRA = "pip install 'mech_regulator[bench]'"
 
@@ -79,8 +79,14 @@ def run_bench_speed(args: argparse.Namespace) -> int:
     import importlib.util
 
     from mech_regulator.bench.mujoco_model import mujoco_refusal
-    from mech_regulator.bench.speed import (row_line, run_speed_benchmark, select_speed_scenes, summary, tables,
-                                            write_rows_csv)
+    from mech_regulator.bench.speed import (
+        row_line,
+        run_speed_benchmark,
+        select_speed_scenes,
+        summary,
+        tables,
+        write_rows_csv,
+    )
     from mech_regulator.cli.report import bench_scenes_and_folder, check_output_paths, to_json
     from mech_regulator.scene import SceneError
 

@@ -15,13 +15,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
-from mech_regulator.cli import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED, STARTED
 from mech_regulator.cli.bench_soak import add_bench_soak_command
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note, terminal_text
+from mech_regulator.cli.start import STARTED
 from mech_regulator.cli.structure import add_structure_command
 from mech_regulator.cli.sweep import add_sweep_command
+from mech_regulator.errors import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED
 from mech_regulator.nodes.controller import CONTROLLERS
 
 COUPLING_HELP = ("how machine and governor see each other over an exchange step: hold (each holds the other's last "
@@ -245,8 +246,8 @@ def main(argv: list[str] | None = None) -> int:
             _check_run_files(args.out)
         if args.command == "describe":
             from mech_regulator import cache
-            from mech_regulator.model import build_model
             from mech_regulator.cli.report import describe
+            from mech_regulator.model import build_model
 
             with cache.run_uncompiled():   # describing needs no compiled code (cache.py)
                 print(describe(build_model(load_scene(args.scene, args.overrides))))
@@ -258,6 +259,10 @@ def main(argv: list[str] | None = None) -> int:
             return _main_job(scene, args)
         if args.command == "coupling":
             return _required_coupling(scene, args)
+        if args.command in ("kinematics", "structure"):  # they build no machine: the mechanisms' checks here
+            from mech_regulator.mechanisms.checks import refuse_unbuildable
+
+            refuse_unbuildable(scene)
         if args.command == "kinematics":
             return _kinematics(scene, args)
         if args.command == "structure":
@@ -469,8 +474,13 @@ def _required_coupling(scene, args) -> int:
 
 def _kinematics(scene, args) -> int:
     """kinematics: the joints' motion over one turn at constant crank speed; summary, CSV and PNG."""
-    from mech_regulator.analysis.kinematics import (kinematics_summary, kinematics_table, reactions_summary,
-                                                    reactions_table, reactions_unavailable)
+    from mech_regulator.analysis.kinematics import (
+        kinematics_summary,
+        kinematics_table,
+        reactions_summary,
+        reactions_table,
+        reactions_unavailable,
+    )
     from mech_regulator.cli.report import OutputWriter, format_kinematics, to_json, write_csv
     from mech_regulator.scene import SceneError
 
@@ -549,7 +559,8 @@ def _main_job(scene, args) -> int:
         raise SceneError("the main job needs ROS 2's rclpy: source a ROS 2 installation, or "
                          "pip install 'mech_regulator[ros]' for the wheels from the package index")
     from mech_regulator.model import build_model
-    from mech_regulator.nodes.launch import default_recording, main_job
+    from mech_regulator.nodes.launch import main_job
+    from mech_regulator.nodes.outputs import default_recording
 
     if args.out is None:  # runs/<scene>-<time>.rrd, its folder made now (a given --out is checked by main)
         args.out = default_recording(scene.name)
@@ -613,10 +624,10 @@ def _check_bag(folder: Path | None) -> None:
 
 
 def _check_run_files(recording: Path) -> None:
-    """Refuse (SceneError) a recording for `run` whose files (nodes.launch.run_files: it and the parameter file, log,
+    """Refuse (SceneError) a recording for `run` whose files (nodes.outputs.run_files: it and the parameter file, log,
     summary and CSV next to it) cannot all be written, or one that is itself one of those files."""
     from mech_regulator.cli.report import check_output_paths
-    from mech_regulator.nodes.launch import run_files
+    from mech_regulator.nodes.outputs import run_files
     from mech_regulator.scene import SceneError
 
     files = run_files(recording)

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mech_regulator.cli import EXIT_INACCURATE, EXIT_RUN_FAILED
+from mech_regulator.errors import EXIT_INACCURATE, EXIT_RUN_FAILED
 
 if TYPE_CHECKING:
     import numpy as np

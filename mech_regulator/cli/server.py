@@ -16,7 +16,7 @@ server.
 The server (`serve`) forks a child per command; the child puts the client's descriptors on 0, 1 and 2 (so that
 isatty, the progress bar, colours and output files are those of the client's terminal or pipe), takes the client's
 working folder, environment, sys.path, sys.argv and umask, Python's default signal handlers and new sys.stdin,
-stdout and stderr buffered as Python buffers them for these descriptors, runs the command line (cli.run_command)
+stdout and stderr buffered as Python buffers them for these descriptors, runs the command line (cli.command.run_command)
 and exits through the interpreter's normal exit; the server reaps it and sends the client its exit code. After a
 command it loads what its child needed and it lacks: the generated module of the child's scene
 (codegen.load_scene_module) and the steppers numba's disk cache holds by now (the server never compiles a stepper:
@@ -57,9 +57,12 @@ import stat
 import struct
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
-from mech_regulator.cli import SERVED_COMMANDS
+from mech_regulator.cli.start import SERVED_COMMANDS
+from mech_regulator.processes import process_alive
 
 SERVER_VARIABLE = "MECH_REGULATOR_SERVER"  # off: never use or start a server
 IDLE_VARIABLE = "MECH_REGULATOR_SERVER_IDLE"  # [s] without a command after which the server stops
@@ -81,8 +84,11 @@ STOP_WAIT = 30.0  # [s] `server stop` waits at most this for a server to end (it
 SOURCE_CHECK = 10.0  # [s] between two checks of the package's source by the server
 SOCKET_PATH_MAX = 100  # bytes: a Unix socket's path must fit in sun_path (108 on Linux)
 BOOTSTRAP = ("import sys, json; sys.path[:] = json.loads(sys.argv[1]); from mech_regulator.cli.server import serve; "
-             "sys.exit(serve(int(sys.argv[2]), sys.argv[3]))")
-"""The server's program (python -c): the client's sys.path first, so that it imports what the client imports."""
+             "from mech_regulator.cli.command import run_command; sys.exit(serve(int(sys.argv[2]), sys.argv[3], "
+             "run_command))")
+"""The server's program (python -c): the client's sys.path first, so that it imports what the client imports; its
+children run the command line with cli.command.run_command, which this module does not import (the command line
+imports this module for its `server` command)."""
 
 
 class ServerGone(Exception):
@@ -392,7 +398,8 @@ def start_server(key: str) -> int | None:
             return None
         with open(folder / f"{digest}.log", "w") as log:
             # the interpreter's flags (-O, -X ...) as this one's, as multiprocessing starts its processes
-            process = subprocess.Popen([sys.executable, *subprocess._args_from_interpreter_flags(), "-c", BOOTSTRAP,
+            flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
+            process = subprocess.Popen([sys.executable, *flags, "-c", BOOTSTRAP,
                                         json.dumps(sys.path), str(lock.fileno()), key],
                                        stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd="/",
                                        start_new_session=True, pass_fds=(lock.fileno(),))
@@ -435,11 +442,11 @@ def server_command(action: str) -> int:
         print(f"started in {waited:.1f} s" if started is not None else
               f"was running already{'' if waited < 0.1 else f' (it answered after {waited:.1f} s: it was starting)'}")
         return 0
-    servers = [(path, ask_server(path, {"op": "status"})) for path in sorted(server_folder().glob("*.sock"))]
-    servers = [(path, status) for path, status in servers if status is not None]
+    servers = [(path, status) for path in sorted(server_folder().glob("*.sock"))
+               if (status := ask_server(path, {"op": "status"})) is not None]
     if action == "status":
         key = server_key()
-        for path, status in servers:
+        for _, status in servers:
             print(_status_line(status, key))
         if not servers:
             print(f"no command server in {server_folder()}; the next served command starts one "
@@ -469,23 +476,6 @@ def ask_server(path: Path, message: dict) -> dict | None:
     return None if "refused" in answer else answer
 
 
-def process_alive(pid: int) -> bool:
-    """Whether the process runs (a zombie waiting for its parent's reaping counts as ended)."""
-    try:
-        with open(f"/proc/{pid}/stat") as stat:
-            return stat.read().rsplit(")", 1)[1].split()[0] != "Z"
-    except FileNotFoundError:
-        return False
-    except OSError:  # no /proc: ask the kernel
-        try:
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            return False
-        except PermissionError:  # another user's
-            return True
-        return True
-
-
 def _status_line(status: dict, key: str) -> str:
     mine = "this environment's" if status["key"] == key else "another environment's (not used here)"
     return (f"command server pid {status['pid']}, key {status['digest']} ({mine}): idle {status['idle_s']:.0f} s "
@@ -505,9 +495,9 @@ class _Request:
     def __init__(self, message: dict, descriptors: list[int], report: int):
         self.message, self.descriptors, self.report = message, descriptors, report
 
-    def run(self) -> int:
-        """The command run in this child process as in the client's: its exit code (SystemExit's as the interpreter
-        makes it). Then it writes what it loaded to the report pipe."""
+    def run(self, run_command: Callable[[list[str]], int]) -> int:
+        """The command run in this child process as in the client's by `run_command` (argv -> exit code): its exit
+        code (SystemExit's as the interpreter makes it). Then it writes what it loaded to the report pipe."""
         message = self.message
         for target, descriptor in enumerate(self.descriptors):
             os.dup2(descriptor, target)
@@ -529,8 +519,6 @@ class _Request:
             print(f"mech-regulator: cannot enter the working folder {message['cwd']}: {error.strerror}",
                   file=sys.stderr)
             return 1
-        from mech_regulator.cli import run_command
-
         try:
             return run_command(message["argv"])
         except SystemExit as exit:  # argparse's exit 2, as the interpreter turns it into an exit code
@@ -549,7 +537,7 @@ def _fresh_standard_streams() -> None:
     written through when unbuffered (PYTHONUNBUFFERED, which the server's own stdout shows)."""
     import io
 
-    buffered = not sys.stdout.write_through
+    buffered = not (isinstance(sys.stdout, io.TextIOWrapper) and sys.stdout.write_through)
     for descriptor, name in enumerate(("stdin", "stdout", "stderr")):
         old = getattr(sys, name)
         writing = descriptor > 0
@@ -633,7 +621,7 @@ class _Server:
                     os.read(wake_read, 512)
                 self._reap()
                 if self.listener is not None and self.listener in ready:
-                    request = self._accept()
+                    request = self._accept(self.listener)
                     if request is not None:  # in the child
                         signal.set_wakeup_fd(-1)
                         for descriptor in (wake_read, wake_write):
@@ -649,9 +637,10 @@ class _Server:
             self.listener = None
             self.path.unlink(missing_ok=True)
 
-    def _accept(self) -> _Request | None:
-        """Take one connection: answer status or stop, or fork the command's child (returned in the child)."""
-        connection, _ = self.listener.accept()
+    def _accept(self, listener: socket.socket) -> _Request | None:
+        """Take one connection from `listener`: answer status or stop, or fork the command's child (returned in the
+        child)."""
+        connection, _ = listener.accept()
         connection.settimeout(5.0)  # a client that sends nothing does not hold the server
         try:
             message, descriptors = _receive(connection)
@@ -688,7 +677,8 @@ class _Server:
         pid = os.fork()
         if pid == 0:  # the child: nothing of the server's stays open in it
             os.close(report_read)
-            self.listener.close()
+            if self.listener is not None:
+                self.listener.close()
             self.lock.close()
             connection.close()
             for kept, report in self.children.values():
@@ -764,8 +754,9 @@ def _answer(connection: socket.socket, message: dict) -> None:
     connection.sendall(json.dumps(message).encode() + b"\n")
 
 
-def serve(lock_descriptor: int, key: str) -> int:
-    """The server's program (BOOTSTRAP): check the key, preload, serve; in a forked child, run its command."""
+def serve(lock_descriptor: int, key: str, run_command: Callable[[list[str]], int]) -> int:
+    """The server's program (BOOTSTRAP): check the key, preload, serve; in a forked child, run its command with
+    `run_command` (argv -> exit code)."""
     lock = os.fdopen(lock_descriptor, "a")  # held since start_server took it
     if server_key() != key:
         print(f"this process's key differs from its client's; not serving\n{server_key()}\n{key}", flush=True)
@@ -778,17 +769,17 @@ def serve(lock_descriptor: int, key: str) -> int:
     request = server.run()
     if request is None:
         return 0
-    _exit(request.run())
+    _exit(request.run(run_command))
 
 
-def _exit(code: int) -> None:
+def _exit(code: int) -> NoReturn:
     """End a child as the interpreter ends a process — its non-daemon threads joined, the atexit functions run,
     stdout and stderr flushed (exit code 120 when that fails) — without tearing down the server's 1200 modules one
     by one (0.15 s)."""
     import atexit
     import threading
 
-    threading._shutdown()
+    threading._shutdown()  # type: ignore[attr-defined]  # the interpreter's own end of a process
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:

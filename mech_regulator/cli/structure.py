@@ -19,7 +19,7 @@ def add_structure_command(scene_command) -> None:
 
 def run_structure(scene, args: argparse.Namespace) -> int:
     """structure: the analysis of the scene's linkage (the machine's, else the driven part's behind a coupling);
-    a scene whose linkage has W != 1 or an unsupported group has already been refused by its validation."""
+    a scene whose linkage has W != 1 or an unsupported group has already been refused (mechanisms/checks.py)."""
     from mech_regulator.cli.report import OutputWriter, terminal_text, to_json
     from mech_regulator.mechanisms import mechanism_geometry
     from mech_regulator.mechanisms.linkage import Dyad

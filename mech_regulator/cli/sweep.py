@@ -18,8 +18,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from mech_regulator.cli import EXIT_INTERRUPTED
 from mech_regulator.cli.report import terminal_text
+from mech_regulator.errors import EXIT_INTERRUPTED
 
 SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
 # analysis.sweep's ENGINES and METRICS, repeated here so that building the parser does not import the sweep (numpy,

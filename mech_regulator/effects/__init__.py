@@ -14,14 +14,21 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 from scipy.optimize import brentq
 
 from mech_regulator.effects import drives, loads  # noqa: F401  (they register their definitions)
-from mech_regulator.effects.definition import (CLAMPED, INTERVALS, PERIODIC, Definition, check_covered, definition_of,
-                                               reference_function)
+from mech_regulator.effects.definition import (
+    CLAMPED,
+    INTERVALS,
+    PERIODIC,
+    Definition,
+    check_covered,
+    definition_of,
+    reference_function,
+)
 from mech_regulator.effects.tables import clamped_linear, interval_indicator, periodic_kinks, periodic_linear
 from mech_regulator.scene import schema
 

@@ -20,8 +20,8 @@ from __future__ import annotations
 import inspect
 import math
 import typing
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
 
 PERIODIC, CLAMPED, INTERVALS = "periodic", "clamped", "intervals"
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import bisect
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 
 def periodic_linear(xs: Sequence[float], ys: Sequence[float], period: float) -> Callable[..., float]:

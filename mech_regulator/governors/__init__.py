@@ -17,8 +17,8 @@ creep, a sleeve on a stop stays there until the forces pull it off, and stops ar
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -4,10 +4,17 @@ position z and its table."""
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
-from mech_regulator.effects.definition import (CLAMPED, Definition, Table, check_covered, define, definition_of,
-                                               reference_closure)
+from mech_regulator.effects.definition import (
+    CLAMPED,
+    Definition,
+    Table,
+    check_covered,
+    define,
+    definition_of,
+    reference_closure,
+)
 from mech_regulator.effects.tables import clamped_linear, slope_breaks
 from mech_regulator.scene import schema
 

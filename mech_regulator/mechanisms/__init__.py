@@ -13,11 +13,11 @@ path compiles. `point_motions` gives the paths of the moving points for `mech-re
 
 from __future__ import annotations
 
-import math
-from typing import Callable
+from collections.abc import Callable
 
-from mech_regulator.mechanisms import crank_slider, four_bar, linkage, presets, walking_beam
+from mech_regulator.mechanisms import linkage, presets
 from mech_regulator.mechanisms.linkage import symbolic
+from mech_regulator.mechanisms.presets import mechanism_geometry
 from mech_regulator.mechanisms.walking_beam import Motion
 from mech_regulator.scene import schema
 
@@ -46,8 +46,9 @@ def linkage_of(mechanism: schema.Mechanism) -> tuple[linkage.Linkage, linkage.St
         core, structure = mechanism_geometry(mechanism)
         return core, structure, ()
     core = presets.preset_linkage(mechanism)
-    several = isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
-    return core, linkage.checked(core), tuple(presets.guide_joints(mechanism)) if several else ()
+    guides = (tuple(presets.guide_joints(mechanism))
+              if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None else ())
+    return core, linkage.checked(core), guides
 
 
 def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
@@ -55,25 +56,6 @@ def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float
     its linkage (linkage_of, linkage.make_joint_loads); gravity None: the links are weightless."""
     core, structure, _ = linkage_of(mechanism)
     return linkage.make_joint_loads(core, structure, gravity)
-
-
-def mechanism_geometry(mechanism: schema.Mechanism):
-    """The geometry NamedTuple (lengths [m], angles [rad], masses [kg], inertias [kg m^2]) of a scene's mechanism;
-    a linkage's: its mechanisms.linkage.Linkage and Structure (validated by the scene: W = 1, class-II groups)."""
-    if isinstance(mechanism, schema.Linkage):
-        core = mechanism.core()
-        return core, linkage.checked(core)
-    if isinstance(mechanism, schema.CrankSlider):
-        return crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)
-                                                   for k in crank_slider.CrankSliderGeometry._fields})
-    if isinstance(mechanism, schema.FourBar):
-        fields = {k: getattr(mechanism, k) for k in four_bar.FourBarGeometry._fields
-                  if k not in ("frame_angle", "branch_sign")}
-        return four_bar.FourBarGeometry(frame_angle=math.radians(mechanism.frame_angle_deg),
-                                        branch_sign=four_bar.BRANCH_SIGN[mechanism.branch], **fields)
-    if isinstance(mechanism, schema.WalkingBeam):
-        return walking_beam.geometry_from_scene(mechanism)
-    raise TypeError(f"no kinematics for {type(mechanism).__name__}")
 
 
 def point_motions(mechanism: schema.Mechanism) -> Callable[[float], dict[str, Motion]]:

@@ -15,12 +15,12 @@ import numpy as np
 
 from mech_regulator.mechanisms import crank_slider, four_bar, walking_beam
 from mech_regulator.mechanisms.linkage import drawing as linkage_drawing
+from mech_regulator.mechanisms.linkage.drawing import circle
 from mech_regulator.scene import schema
 
 BLOCK_LENGTH_PER_CRANK = 1.0    # slider block length along the guide, per crank radius [-]
 BLOCK_HEIGHT_PER_CRANK = 0.6    # slider block height across the guide, per crank radius [-]
 DISC_RADIUS = 1.0               # radius of the schematic disc of a machine without mechanism [m]
-CIRCLE_POINTS = 73              # points of a drawn circle (72 segments)
 BOUNDS_MARGIN = 0.08            # margin around the swept outline, per its larger span [-]
 BOUNDS_SAMPLES = 360            # crank angles sampled over a turn to find the swept outline [-]
 
@@ -36,12 +36,6 @@ MOVING_PARTS = {
 def mechanism_kind(mechanism_spec: schema.Mechanism | None) -> str | None:
     """'crank_slider', 'four_bar', 'walking_beam', 'linkage', or None for a machine without a mechanism."""
     return None if mechanism_spec is None else mechanism_spec.type
-
-
-def circle(centre: tuple[float, float], radius: float) -> np.ndarray:
-    """Closed polyline of a circle [m], shape (CIRCLE_POINTS, 2)."""
-    angles = np.linspace(0.0, 2.0 * math.pi, CIRCLE_POINTS)
-    return np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
 
 
 def rectangle(centre: tuple[float, float], half_width: float, half_height: float) -> np.ndarray:

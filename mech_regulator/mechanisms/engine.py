@@ -21,7 +21,8 @@ working cycle lags cylinder 1's by its firing delay d_i: cycle angle `theta_i(ph
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence
+from collections.abc import Sequence
+from typing import NamedTuple
 
 from mech_regulator.mechanisms import crank_slider
 

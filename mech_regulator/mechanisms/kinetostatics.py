@@ -7,7 +7,8 @@ mechanisms/presets.py, or a scene's own), solved by groups from the farthest inw
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 CRANK_SLIDER_JOINTS = ("crank_bearing", "crank_pin", "wrist_pin", "guide")
 FOUR_BAR_JOINTS = ("crank_bearing", "crank_pin", "rocker_pin", "rocker_bearing")

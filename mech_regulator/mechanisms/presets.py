@@ -2,7 +2,7 @@
 (their scene syntax stays as it was; docs/linkages.md).
 
 `preset_linkage(mechanism)` turns a scene's `crank_slider`, `four_bar` or `walking_beam` (the geometry of
-mechanisms.mechanism_geometry) into a mechanisms.linkage.Linkage whose reduction, point motions and joint reactions
+mechanism_geometry) into a mechanisms.linkage.Linkage whose reduction, point motions and joint reactions
 (mechanisms.build_reduced, point_motions, build_kinetostatics) equal the presets' hand-written closed forms, kept as
 the tests' reference (test/closed_forms.py), to rounding. Its conventions:
 
@@ -35,7 +35,8 @@ import math
 from dataclasses import replace
 
 from mech_regulator.mechanisms import crank_slider, four_bar, kinetostatics, walking_beam
-from mech_regulator.mechanisms.linkage import Joint, Link, Linkage
+from mech_regulator.mechanisms.linkage import Joint, Link, Linkage, checked
+from mech_regulator.mechanisms.linkage.gears import GearMesh
 from mech_regulator.scene import schema
 
 FRAME, CRANK = "frame", "crank"
@@ -166,11 +167,54 @@ def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:
         points=tuple("ABCDE"), output_joint="X")
 
 
+def linkage_core(mechanism: schema.Linkage) -> Linkage:
+    """The mechanisms.linkage.Linkage of a scene's linkage entry (the frame is the link named 'frame')."""
+
+    def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
+        return {name: complex(*xy) for name, xy in points.items()}
+
+    links = (Link("frame", complex_points(mechanism.frame)),) + tuple(
+        Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
+        for name, link in mechanism.links.items())
+    joints = tuple(Joint(name, joint.type, (joint.links[0], joint.links[1]), math.radians(joint.direction_deg),
+                         math.radians(joint.slider_angle_deg), _gear_mesh(joint))
+                   for name, joint in mechanism.joints.items())
+    output = mechanism.output or schema.LinkageOutput.model_construct(joint=None, link=None)
+    return Linkage(links, joints, "frame", mechanism.crank, dict(mechanism.branches), tuple(mechanism.points),
+                   output.joint, output.link)
+
+
+def _gear_mesh(joint: schema.LinkageJoint) -> GearMesh | None:
+    """The gear pair of a scene's linkage joint (None for a lower pair)."""
+    if joint.type != "gear":
+        return None
+    return GearMesh(tuple(joint.centres), tuple(joint.teeth) if joint.teeth else None,
+                    tuple(joint.radii) if joint.radii else None, joint.internal, joint.carrier,
+                    math.radians(joint.phase_deg))
+
+
+def mechanism_geometry(mechanism: schema.Mechanism):
+    """The geometry NamedTuple (lengths [m], angles [rad], masses [kg], inertias [kg m^2]) of a scene's mechanism;
+    a linkage's: its mechanisms.linkage.Linkage and Structure (validated by the scene: W = 1, class-II groups)."""
+    if isinstance(mechanism, schema.Linkage):
+        core = linkage_core(mechanism)
+        return core, checked(core)
+    if isinstance(mechanism, schema.CrankSlider):
+        return crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)
+                                                   for k in crank_slider.CrankSliderGeometry._fields})
+    if isinstance(mechanism, schema.FourBar):
+        fields = {k: getattr(mechanism, k) for k in four_bar.FourBarGeometry._fields
+                  if k not in ("frame_angle", "branch_sign")}
+        return four_bar.FourBarGeometry(frame_angle=math.radians(mechanism.frame_angle_deg),
+                                        branch_sign=four_bar.BRANCH_SIGN[mechanism.branch], **fields)
+    if isinstance(mechanism, schema.WalkingBeam):
+        return walking_beam.geometry_from_scene(mechanism)
+    raise TypeError(f"no kinematics for {type(mechanism).__name__}")
+
+
 def preset_linkage(mechanism: schema.CrankSlider | schema.FourBar | schema.WalkingBeam) -> Linkage:
     """The linkage of a scene's preset mechanism (module docstring): its reduction, point motions and joint
     reactions equal the preset's."""
-    from mech_regulator.mechanisms import mechanism_geometry   # the package imports this module
-
     if isinstance(mechanism, schema.CrankSlider):
         return crank_slider_linkage(mechanism_geometry(mechanism), mechanism.cylinders)
     if isinstance(mechanism, schema.FourBar):

@@ -32,8 +32,8 @@ A train mode is (clutch mode, driven mode) with a clutch, (driven mode,) with a 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

@@ -25,21 +25,33 @@ import bisect
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from fractions import Fraction
-from typing import Callable
 
 import numpy as np
-
 from scipy import optimize
 
 from mech_regulator.effects import Effect, build_drive, build_load, output_position_of
-from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
+from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.governors import ARM, Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
-from mech_regulator.model.drivetrain import (BACKWARD, CLUTCH_CODE, DIRECTION, FORWARD, HELD, STUCK, ClutchModel,
-                                             DrivenModel, Forces, build_driven, coulomb_factor, train_guards)
+from mech_regulator.mechanisms.checks import refuse_unbuildable
+from mech_regulator.model.drivetrain import (
+    BACKWARD,
+    CLUTCH_CODE,
+    DIRECTION,
+    FORWARD,
+    HELD,
+    STUCK,
+    ClutchModel,
+    DrivenModel,
+    Forces,
+    build_driven,
+    coulomb_factor,
+    train_guards,
+)
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.schema import Scene
 
@@ -973,8 +985,9 @@ def _load_pieces(scene: Scene) -> tuple[LoadPiece, ...]:
 
 
 def build_model(scene: Scene) -> MachineModel:
-    """Assemble a validated scene into a MachineModel: only the effects the scene names are built."""
-    machine = scene.machine
+    """Assemble a validated scene into a MachineModel: only the effects the scene names are built; a scene whose
+    mechanisms cannot be built is refused (SceneError, mechanisms/checks.py)."""
+    machine = refuse_unbuildable(scene).machine
     flywheel = machine.flywheel.inertia * machine.flywheel.ratio ** 2 if machine.flywheel else 0.0
     gravity = tuple(machine.gravity) if machine.gravity is not None else None
     has_weight = machine.mechanism is not None and gravity is not None and any(gravity) and _has_mass(machine.mechanism)

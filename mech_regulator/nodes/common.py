@@ -12,7 +12,7 @@ import signal
 import sys
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -27,11 +27,19 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.model import MachineModel, build_model
+from mech_regulator.nodes.trust import (
+    LARGEST_STAMP,
+    BadMessage,
+    Refusals,
+    RunStateMessage,
+    Speakers,
+    joint_fields,
+    json_message,
+    receive,
+)
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import on_path_for_a_command
 from mech_regulator.solvers.cosim import COUPLINGS, DEFAULT_COUPLING, NANOSECONDS, cosimulation_refusal, seconds
-from mech_regulator.nodes.trust import (LARGEST_STAMP, BadMessage, Refusals, RunStateMessage, Speakers, joint_fields,
-                                        json_message, receive)
 
 EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2

@@ -34,11 +34,35 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, Batch, RunState, add_samples,
-                                         coupling_parameter, diagnostics, float_parameter, follow_run_state,
-                                         peer_parameter, run, scene_model, sent_samples, stamp)
-from mech_regulator.nodes.trust import (BadMessage, Refusals, RunStateMessage, Speakers, bounded, in_order,
-                                        joint_fields, receive, stamp_of)
+from mech_regulator.nodes.common import (
+    COMMAND_QOS,
+    ERROR,
+    OK,
+    STATE_QOS,
+    Batch,
+    RunState,
+    add_samples,
+    coupling_parameter,
+    diagnostics,
+    float_parameter,
+    follow_run_state,
+    peer_parameter,
+    run,
+    scene_model,
+    sent_samples,
+    stamp,
+)
+from mech_regulator.nodes.trust import (
+    BadMessage,
+    Refusals,
+    RunStateMessage,
+    Speakers,
+    bounded,
+    in_order,
+    joint_fields,
+    receive,
+    stamp_of,
+)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 

@@ -23,14 +23,16 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import yaml
 
 from mech_regulator.cli.report import format_cosimulation_summary, progress_bar
+from mech_regulator.nodes.outputs import default_recording
+from mech_regulator.processes import die_with_parent
 from mech_regulator.scene import SceneError, config_dir
-from mech_regulator.scene.limits import exchange_refusal, output_stem
+from mech_regulator.scene.limits import exchange_refusal
 
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
@@ -94,18 +96,6 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(
         output=str(output), launched_at=started, controller=controller, bag=str(bag) if bag is not None else "")
     return parameters
-
-
-def default_recording(scene_name: str | None) -> Path:
-    """runs/<scene>-<local time>.rrd, <scene> the scene's name made safe for a file name (limits.output_stem: no
-    separator, no '..', no control character), so that the run's files stay in runs/ whatever the name says."""
-    return Path("runs") / f"{output_stem(scene_name)}-{time.strftime('%Y%m%d-%H%M%S')}.rrd"
-
-
-def run_files(recording: Path) -> list[Path]:
-    """The files of a run: its recording, then next to it the parameter file and the nodes' log (main_job writes
-    them) and the summary and the CSV (the recorder writes them); `run` checks them all before the nodes start."""
-    return [recording] + [recording.with_suffix(suffix) for suffix in (".params.yaml", ".log", ".json", ".csv")]
 
 
 def main_job(model, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
@@ -228,26 +218,6 @@ def _read_summary(path: Path) -> dict | None:
     except (OSError, ValueError):
         return None
     return summary if isinstance(summary, dict) and "status" in summary else None
-
-
-def summary_before_start(argv: list[str]) -> Path | None:
-    """`run`'s summary when Ctrl-C came before main_job could start the nodes (while the command's modules or the
-    scene loaded; argv: the command line, 'run' first): status interrupted, nothing simulated, written next to the
-    recording `--out` names (default: runs/<scene argument>-<time>.rrd), and its path; None when argv does not parse
-    or the file cannot be written (the interrupt is then all there is to say)."""
-    from mech_regulator.cli.main import build_parser
-    from mech_regulator.cli.report import to_json
-
-    try:
-        args = build_parser().parse_args(argv)
-        output = args.out or default_recording(Path(args.scene).stem)
-        summary_path = output.with_suffix(".json")
-        output.parent.mkdir(parents=True, exist_ok=True)
-        summary_path.write_text(to_json({"scene": args.scene, "status": "interrupted", "message": NOTHING_SIMULATED,
-                                         "samples": 0, "t_end": 0.0, "recording": None}))
-    except (SystemExit, OSError):
-        return None
-    return summary_path
 
 
 def machine_peer_timeout(parameters: dict) -> float:
@@ -430,13 +400,3 @@ def _name_process(name: str) -> None:
 
     PR_SET_NAME = 15
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_NAME, name.encode()[:15])
-
-
-def die_with_parent() -> None:
-    """In a child process before it starts (Linux): receive SIGINT when its parent dies, however it dies (even
-    SIGKILL), so that the child (a node; `bench soak`'s run) closes what it has and ends, and none is left behind."""
-    import ctypes
-
-    PR_SET_PDEATHSIG = 1
-    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGINT)
-

@@ -59,15 +59,46 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
-from mech_regulator.nodes.common import (COMMAND_QOS, ERROR, OK, STATE_QOS, STATUS_QOS, WARN, Batch, PeerError,
-                                         RunState, add_samples, bool_parameter, coupling_parameter, deliver_all,
-                                         diagnostics, float_parameter, int_parameter, list_parameter,
-                                         peer_parameter, run, scene_model, sent_samples, stamp, text_parameter)
-from mech_regulator.nodes.trust import (BadMessage, Refusals, Speakers, bounded, in_order, joint_fields, namesakes,
-                                        not_ahead, receive, stamp_of)
+from mech_regulator.model.joints import output_joints
 from mech_regulator.nodes import controller
+from mech_regulator.nodes.common import (
+    COMMAND_QOS,
+    ERROR,
+    OK,
+    STATE_QOS,
+    STATUS_QOS,
+    WARN,
+    Batch,
+    PeerError,
+    RunState,
+    add_samples,
+    bool_parameter,
+    coupling_parameter,
+    deliver_all,
+    diagnostics,
+    float_parameter,
+    int_parameter,
+    list_parameter,
+    peer_parameter,
+    run,
+    scene_model,
+    sent_samples,
+    stamp,
+    text_parameter,
+)
 from mech_regulator.nodes.controller import CONTROLLERS
-from mech_regulator.nodes.joints import output_joints
+from mech_regulator.nodes.trust import (
+    BadMessage,
+    Refusals,
+    Speakers,
+    bounded,
+    in_order,
+    joint_fields,
+    namesakes,
+    not_ahead,
+    receive,
+    stamp_of,
+)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import NANOSECONDS, MachineStepper, Samples, seconds, to_nanoseconds
 

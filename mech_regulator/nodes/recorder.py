@@ -33,15 +33,40 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.nodes.common import (IDLE_SPIN_SLICE, MATCH_POLL, OK, STATE_QOS, OutputError, RunState,
-                                         batch_groups, coupling_parameter, diagnostics, float_parameter,
-                                         follow_run_state, peer_parameter, run, scene_model, text_parameter)
-from mech_regulator.nodes.trust import (BadMessage, GovernorEvent, Refusals, RunStateMessage, Speakers,
-                                        about_the_nodes, bounded, json_message, merge_counts, real_number, receive,
-                                        report_of)
 from mech_regulator.model import MachineModel
+from mech_regulator.nodes.common import (
+    IDLE_SPIN_SLICE,
+    MATCH_POLL,
+    OK,
+    STATE_QOS,
+    OutputError,
+    RunState,
+    batch_groups,
+    coupling_parameter,
+    diagnostics,
+    float_parameter,
+    follow_run_state,
+    peer_parameter,
+    run,
+    scene_model,
+    text_parameter,
+)
 from mech_regulator.nodes.controller import CONTROLLERS
-from mech_regulator.nodes.launch import default_recording
+from mech_regulator.nodes.outputs import default_recording
+from mech_regulator.nodes.trust import (
+    BadMessage,
+    GovernorEvent,
+    Refusals,
+    RunStateMessage,
+    Speakers,
+    about_the_nodes,
+    bounded,
+    json_message,
+    merge_counts,
+    real_number,
+    receive,
+    report_of,
+)
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import CoSimulation, seconds
 from mech_regulator.viz.bag import write_bag

@@ -25,10 +25,18 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
-from mech_regulator.nodes.common import (COMMAND_QOS, OK, RunState, diagnostics, follow_run_state, peer_parameter,
-                                         run, scene_model, text_parameter)
-from mech_regulator.nodes.trust import (Refusals, RunStateMessage, Speakers, in_order, joint_fields,
-                                        receive, stamp_of)
+from mech_regulator.nodes.common import (
+    COMMAND_QOS,
+    OK,
+    RunState,
+    diagnostics,
+    follow_run_state,
+    peer_parameter,
+    run,
+    scene_model,
+    text_parameter,
+)
+from mech_regulator.nodes.trust import Refusals, RunStateMessage, Speakers, in_order, joint_fields, receive, stamp_of
 from mech_regulator.solvers.cosim import held_load_until, load_rate, seconds
 
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between diagnostics

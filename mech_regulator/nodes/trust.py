@@ -16,7 +16,8 @@ import inspect
 import json
 import math
 import traceback
-from typing import Callable, Literal
+from collections.abc import Callable
+from typing import Literal
 
 import pydantic
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue

@@ -11,20 +11,25 @@ import re
 import sys
 import types
 import typing
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import pydantic
 import yaml
 
-from mech_regulator.scene.limits import (MAX_BASE_CHAIN, MAX_SCENE_BYTES, MAX_YAML_CHARACTERS, MAX_YAML_DEPTH,
-                                         MAX_YAML_NODES, number_refusals, run_refusals, shown)
+from mech_regulator.errors import SceneError
+from mech_regulator.scene.limits import (
+    MAX_BASE_CHAIN,
+    MAX_SCENE_BYTES,
+    MAX_YAML_CHARACTERS,
+    MAX_YAML_DEPTH,
+    MAX_YAML_NODES,
+    number_refusals,
+    run_refusals,
+    shown,
+)
 from mech_regulator.scene.schema import Scene
-
-
-class SceneError(Exception):
-    """A scene that cannot be used; str(error) is the message for the user (one or more lines)."""
-
 
 SCENE_KEYS = frozenset(Scene.model_fields) | {"base"}  # the top-level keys a scene file may have
 
@@ -239,13 +244,13 @@ def _child(node: Any, key: str, path: list[str], assignment: str, create: bool, 
 # Validation and messages
 
 
-def load_scene(name_or_path: str, overrides: list[str] = ()) -> Scene:
+def load_scene(name_or_path: str, overrides: Sequence[str] = ()) -> Scene:
     """Read, override and validate a scene; any problem raises SceneError with a clear message."""
     data, path = overridden_scene_data(name_or_path, overrides)
     return validate_scene(data, str(path))
 
 
-def overridden_scene_data(name_or_path: str, overrides: list[str] = ()) -> tuple[dict, Path]:
+def overridden_scene_data(name_or_path: str, overrides: Sequence[str] = ()) -> tuple[dict, Path]:
     """The mapping of a scene (a file or a bundled name) with the --set overrides applied and its name defaulting
     to the file's stem, not yet validated, and the file it came from."""
     path = resolve_scene_path(name_or_path)
@@ -364,33 +369,33 @@ def validate_scene(data: dict, source: str = "scene") -> Scene:
     would make the run impossible (limits.run_refusals)."""
     problems = number_refusals(data)
     if problems:
-        raise SceneError(_problems(source, problems))
+        raise SceneError(problems_message(source, problems))
     try:
         scene = Scene.model_validate(data)
     except pydantic.ValidationError as error:
         lines = [describe_error(item, data) for item in error.errors(include_url=False)]
-        raise SceneError(_problems(source, list(dict.fromkeys(lines)))) from None
+        raise SceneError(problems_message(source, list(dict.fromkeys(lines)))) from None
     except (ArithmeticError, RecursionError) as error:  # a check of the schema computing with extreme numbers
         raise SceneError(f"{source}: its numbers cannot be computed with ({type(error).__name__}: {error}); expected "
                          "values of a real machine") from None
     problems = run_refusals(scene)
     if problems:
-        raise SceneError(_problems(source, problems))
+        raise SceneError(problems_message(source, problems))
     return scene
 
 
 MAX_PROBLEMS_SHOWN = 40  # lines of a validation message; the rest are counted
 
 
-def _problems(source: str, lines: list[str]) -> str:
-    """The message listing a scene's problems, one per line."""
+def problems_message(source: str, lines: list[str]) -> str:
+    """The message listing a scene's problems, one per line (also the mechanisms' checks', mechanisms/checks.py)."""
     shown_lines = lines[:MAX_PROBLEMS_SHOWN]
     if len(lines) > MAX_PROBLEMS_SHOWN:
         shown_lines.append(f"... and {len(lines) - MAX_PROBLEMS_SHOWN} more")
     return f"{source}: {len(lines)} problem{'s' if len(lines) > 1 else ''}:\n  " + "\n  ".join(shown_lines)
 
 
-def describe_error(item: dict, data: Any) -> str:
+def describe_error(item: Mapping[str, Any], data: Any) -> str:
     """One line for one pydantic error: dotted key, the value given, and what is expected."""
     loc = _data_path(item["loc"], data)
     key = ".".join(str(part) for part in loc) or "(top level)"

@@ -86,7 +86,7 @@ class _PartialSchemas:
             return {**schema, "$ref": f"#/$defs/{self.define(name)}"} if name else dict(schema)
         for union in ("anyOf", "oneOf"):
             if union in schema:
-                members = []
+                members: list[dict] = []
                 for member in schema[union]:
                     member = self.partial(member)
                     members += member["anyOf"] if set(member) == {"anyOf"} else [member]

@@ -11,8 +11,7 @@ direction); load values are resisting magnitudes unless a description says "sign
 
 from __future__ import annotations
 
-import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
 
@@ -113,26 +112,6 @@ class FourBar(SceneModel):
     rocker_cg: float = Field(0.0, description="distance of the rocker's centre of mass from D towards C [m]")
     rocker_inertia: NonNegative = Field(0.0, description="rocker moment of inertia about its centre of mass [kg m^2]")
 
-    @model_validator(mode="after")
-    def _assembles(self) -> FourBar:
-        _check_crank_turns(self)
-        return self
-
-
-def _check_crank_turns(linkage: FourBar | WalkingBeam) -> None:
-    """Raise ValueError naming the crank angles where the four-bar loop (crank, coupler, rocker, frame,
-    frame_angle_deg) of a linkage cannot be assembled."""
-    from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
-
-    ranges = unassemblable_crank_ranges(linkage.crank, linkage.coupler, linkage.rocker, linkage.frame,
-                                        math.radians(linkage.frame_angle_deg))
-    if ranges:
-        spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
-        raise ValueError(
-            f"the four-bar (crank {linkage.crank}, coupler {linkage.coupler}, rocker {linkage.rocker}, frame "
-            f"{linkage.frame} m) cannot be assembled for crank angles {spans}; the crank must turn fully: expected a "
-            "Grashof crank (shortest link = crank, and shortest + longest < sum of the other two)")
-
 
 class WalkingBeam(SceneModel):
     """Eight-bar walking-beam transport mechanism (source 004, docs/linkages.md): a four-bar O1 A B O2 whose
@@ -177,21 +156,8 @@ class WalkingBeam(SceneModel):
     shuttle_mass: NonNegative = Field(0.0, description="mass of the shuttle bar CD (link 7, translates with C) with "
                                                        "what it carries [kg]")
 
-    @model_validator(mode="after")
-    def _assembles(self) -> WalkingBeam:
-        from mech_regulator.mechanisms import walking_beam
-
-        _check_crank_turns(self)
-        flattening = walking_beam.change_point(walking_beam.geometry_from_scene(self))
-        if flattening is not None:
-            raise ValueError(f"{flattening}; expected a beam direction (or its opposite) outside the swing "
-                             "of both links, so that the parallelograms never fold")
-        return self
-
-
 
 Point = Annotated[list[float], Field(min_length=2, max_length=2)]
-BRANCHED_GROUPS = ("RRR", "RRP", "RPR")   # the group types with two assemblies, chosen by a branch
 MAX_LINKS = 60         # moving links of a linkage (a press or a loom has under 20): its analysis stays well under 1 s
 MAX_LINK_POINTS = 50   # points of one link
 
@@ -244,15 +210,6 @@ class LinkageJoint(SceneModel):
                              "than its pinion")
         return self
 
-    def core_gear(self):
-        """The gear pair's mechanisms.linkage.gears.GearMesh (None for a lower pair)."""
-        from mech_regulator.mechanisms.linkage.gears import GearMesh
-
-        if self.type != "gear":
-            return None
-        return GearMesh(tuple(self.centres), tuple(self.teeth) if self.teeth else None,
-                        tuple(self.radii) if self.radii else None, self.internal, self.carrier,
-                        math.radians(self.phase_deg))
 
 
 class LinkageOutput(SceneModel):
@@ -292,54 +249,19 @@ class Linkage(SceneModel):
     output: LinkageOutput | None = Field(None, description="output coordinate for slider_* (a prismatic joint) or "
                                                            "rocker_* (a link) loads; none = no output loads")
 
-    def core(self):
-        """The mechanisms.linkage.Linkage of this scene entry (the frame is the link named 'frame')."""
-        from mech_regulator.mechanisms.linkage import Joint, Link
-        from mech_regulator.mechanisms.linkage import Linkage as Core
-
-        def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
-            return {name: complex(*xy) for name, xy in points.items()}
-
-        links = (Link("frame", complex_points(self.frame)),) + tuple(
-            Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
-            for name, link in self.links.items())
-        joints = tuple(Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
-                             math.radians(joint.slider_angle_deg), joint.core_gear())
-                       for name, joint in self.joints.items())
-        output = self.output or LinkageOutput.model_construct(joint=None, link=None)
-        return Core(links, joints, "frame", self.crank, dict(self.branches), tuple(self.points), output.joint,
-                    output.link)
-
     @property
     def output_kind(self) -> str | None:
         """'slider' (output joint), 'rocker' (output link) or None: the loads the output takes."""
         return None if self.output is None else ("slider" if self.output.joint is not None else "rocker")
 
     @model_validator(mode="after")
-    def _drivable(self) -> Linkage:
-        from mech_regulator.mechanisms.linkage import LinkageError, assembly_failures, checked
-
+    def _no_moving_frame(self) -> Linkage:
         if "frame" in self.links:
             raise ValueError("links has a link named 'frame'; that name is the frame's (give its points under frame:)")
-        try:
-            core = self.core()
-            structure = checked(core)
-        except LinkageError as error:
-            raise ValueError(str(error)) from None
-        internal = {group.internal.name for group in structure.groups if group.kind in BRANCHED_GROUPS}
-        foreign = sorted(set(self.branches) - internal)
-        if foreign:
-            raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "
-                             f"assemblies ({', '.join(BRANCHED_GROUPS)}; PRP and RPP have one); expected some of "
-                             f"{sorted(internal)}")
-        failures = assembly_failures(core, structure)
-        if failures:
-            raise ValueError("; ".join(failures) + "; expected a linkage whose crank turns fully (check the lengths "
-                                                   "and the branches)")
         return self
 
 
-Mechanism = Annotated[Union[CrankSlider, FourBar, WalkingBeam, Linkage], Field(discriminator="type")]
+Mechanism = Annotated[CrankSlider | FourBar | WalkingBeam | Linkage, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -403,7 +325,7 @@ class Engine(SceneModel):
         return self
 
 
-Drive = Annotated[Union[ConstantDrive, LinearMotor, TableDrive, Engine], Field(discriminator="type")]
+Drive = Annotated[ConstantDrive | LinearMotor | TableDrive | Engine, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -500,15 +422,15 @@ class SliderTable(SceneModel):
 
 
 Load = Annotated[
-    Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, CuttingLoad, SliderConstant, RockerConstant, OutputViscous,
-          OutputSpring, SliderTable],
+    ConstantLoad | ViscousLoad | FanLoad | TableLoad | CuttingLoad | SliderConstant | RockerConstant | OutputViscous
+    | OutputSpring | SliderTable,
     Field(discriminator="type"),
 ]
 
 
-DrivenLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad, TableLoad, SliderConstant, RockerConstant,
-                             OutputViscous, OutputSpring, SliderTable], Field(discriminator="type")]
-BranchLoad = Annotated[Union[ConstantLoad, ViscousLoad, FanLoad], Field(discriminator="type")]
+DrivenLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad | TableLoad | SliderConstant | RockerConstant
+                       | OutputViscous | OutputSpring | SliderTable, Field(discriminator="type")]
+BranchLoad = Annotated[ConstantLoad | ViscousLoad | FanLoad, Field(discriminator="type")]
 
 # The mechanism a load on its output (type slider_*, rocker_*, shuttle_*) needs.
 OUTPUT_MECHANISM = {"slider": "crank_slider", "rocker": "four_bar", "shuttle": "walking_beam"}
@@ -762,10 +684,8 @@ class Machine(SceneModel):
         return self
 
     def _cylinders_fit_effects(self) -> None:
-        """Several cylinders: forces on "the slider" are ambiguous (refused) and the engine's firing must fit the
-        crankshaft (mechanisms.engine.firing_delays); firing keys need cylinders."""
-        from mech_regulator.mechanisms.engine import firing_delays
-
+        """Several cylinders: forces on "the slider" are ambiguous (refused); firing keys need cylinders (that the
+        firing fits the crankshaft is the mechanisms' check, mechanisms/checks.py)."""
         cylinders = self.mechanism.cylinders if isinstance(self.mechanism, CrankSlider) else None
         engine = self.drive if isinstance(self.drive, Engine) else None
         if cylinders is None:
@@ -777,24 +697,11 @@ class Machine(SceneModel):
                 raise ValueError(f"loads[{index}] type '{load.type}' acts on the slider, but the crank–slider has "
                                  f"{len(cylinders)} cylinders (mechanism.cylinders): expected loads on the crank "
                                  "(constant, viscous, fan, table, cutting)")
-        if engine is not None:
-            firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], engine.cycle_deg,
-                          engine.firing_order, engine.firing_deg)
 
 
 def _check_linkage_journals(friction: JointFriction, linkage: Linkage) -> None:
-    """A linkage's journals must name its revolute joints, its guide friction needs a prismatic joint, and its
-    joint reactions must be determinate (no redundant link)."""
-    from mech_regulator.mechanisms.linkage import checked
-    from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
-
-    reason = indeterminate(checked(linkage.core()))
-    gear_joints = [name for name, joint in linkage.joints.items() if joint.type == "gear"]
-    if gear_joints:
-        reason = f"the gear pairs {gear_joints} have no joint friction yet"
-    if reason is not None:
-        raise ValueError(f"joint_friction needs the joint reactions, but {reason}; expected no joint_friction on this "
-                         "linkage (only a thrust_collar)")
+    """A linkage's journals must name its revolute joints and its guide friction needs a prismatic joint (that its
+    joint reactions are determinate is the mechanisms' check, mechanisms/checks.py)."""
     revolute = [name for name, joint in linkage.joints.items() if joint.type == "revolute"]
     foreign = [name for name in friction.journals if name not in revolute]
     if foreign:
@@ -878,7 +785,7 @@ def _valve_type(value) -> str | None:
     return value.get("type", "linear") if isinstance(value, dict) else getattr(value, "type", None)
 
 
-Valve = Annotated[Union[Annotated[LinearValve, Tag("linear")], Annotated[TableValve, Tag("table")]],
+Valve = Annotated[Annotated[LinearValve, Tag("linear")] | Annotated[TableValve, Tag("table")],
                   Discriminator(_valve_type)]
 
 
@@ -975,7 +882,7 @@ class IndirectGovernor(_CentrifugalGovernor):
         return self
 
 
-Governor = Annotated[Union[DirectGovernor, IndirectGovernor], Field(discriminator="type")]
+Governor = Annotated[DirectGovernor | IndirectGovernor, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------

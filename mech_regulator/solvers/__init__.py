@@ -48,7 +48,7 @@ def on_path_for_a_command(model: MachineModel, report: Callable[[str], None],
     Rosenbrock23, which only the fast path has, is compiled in the foreground, announced.
     The environment variable MECH_REGULATOR_AUTO_PATH (reference or fast) fixes what auto means on a machine that
     must not depend on what is compiled (a reproducible CI, the test suite)."""
-    path = model.scene.solver.path
+    path: str = model.scene.solver.path
     if path == "auto":
         path = auto_path()
         if path == "reference" and model.scene.solver.method != "Rosenbrock23":
@@ -59,8 +59,12 @@ def on_path_for_a_command(model: MachineModel, report: Callable[[str], None],
     if refusal is not None:
         report(f"note: {refusal}; this run uses the reference path")
         return on_path(model, "reference")
-    from mech_regulator.solvers.compiled.warm import (COMPILE_ESTIMATE, compile_before_the_run,
-                                                      compile_in_background, stepper_cached)
+    from mech_regulator.solvers.compiled.warm import (
+        COMPILE_ESTIMATE,
+        compile_before_the_run,
+        compile_in_background,
+        stepper_cached,
+    )
 
     method = model.scene.solver.method
     if stepper_cached(method):

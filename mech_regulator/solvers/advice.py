@@ -156,7 +156,7 @@ def energy_step_refusal(model: MachineModel) -> str | None:
     try:
         J_mean, drive, other = model.cycle_averages(omega, model.external_load(0.0))
         epsilon = abs(drive + other) / J_mean
-        from mech_regulator.analysis.periodic import balance_speed
+        from mech_regulator.model.steady import balance_speed
 
         try:
             balance = balance_speed(model)

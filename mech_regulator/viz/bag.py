@@ -23,8 +23,8 @@ import numpy as np
 import yaml
 
 from mech_regulator.model import MachineModel
+from mech_regulator.model.joints import output_joints
 from mech_regulator.model.machine import crank_moments
-from mech_regulator.nodes.joints import output_joints
 
 NANOSECONDS = 1_000_000_000
 SEPARATOR = "=" * 80

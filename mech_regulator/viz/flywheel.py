@@ -272,7 +272,7 @@ def _construction_drawing(design: FlywheelDesign) -> dict:
 
 def _about(design: FlywheelDesign) -> str:
     """Markdown: what the views show and the numbers."""
-    rows = ["| method | J_fw [kg m²] | J_x at ratio {:g} [kg m²] | simulated δ |".format(design.ratio),
+    rows = [f"| method | J_fw [kg m²] | J_x at ratio {design.ratio:g} [kg m²] | simulated δ |",
             "| --- | ---: | ---: | ---: |"]
     for label, flywheel, on_shaft, delta in _method_rows(design):
         rows.append(f"| {label} | {flywheel:.6g} | {on_shaft:.6g} | "

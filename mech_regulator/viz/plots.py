@@ -203,7 +203,7 @@ def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, 
                     f"{summary['status']})")
 
     def shade(panel) -> None:
-        for index, (start, end, mode) in enumerate(train["clutch"]["slip_phases"]):
+        for index, (start, end, _) in enumerate(train["clutch"]["slip_phases"]):
             panel.axvspan(start, end, color="tab:orange", alpha=0.15, lw=0,
                           label=("clutch slips" if index == 0 else None))
         for index, (start, end) in enumerate(train["held"]):

@@ -11,9 +11,21 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 
-from mech_regulator.bench.speed import (BENCH_SCENE, FAST, MUJOCO, PATHS, REFERENCE,  # noqa: E402
-                                        ROS_SCENE, SCALING_RTOL, SOLVE_IVP, TARGET_ERROR, TARGETS,
-                                        SpeedBenchmark, ros_summary, work_precision_front)
+from mech_regulator.bench.speed import (  # noqa: E402
+    BENCH_SCENE,
+    FAST,
+    MUJOCO,
+    PATHS,
+    REFERENCE,
+    ROS_SCENE,
+    SCALING_RTOL,
+    SOLVE_IVP,
+    TARGET_ERROR,
+    TARGETS,
+    SpeedBenchmark,
+    ros_summary,
+    work_precision_front,
+)
 from mech_regulator.viz.work_precision import X_LABEL  # noqa: E402
 
 # (path, method) -> (colour, marker, line style): a colour per path, a line style per method

@@ -13,8 +13,7 @@ import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first
 import numpy as np  # noqa: E402
 
 from mech_regulator.mechanisms.linkage import Linkage, Structure, solve  # noqa: E402
-from mech_regulator.mechanisms.linkage.drawing import (BLOCK_PER_CRANK, crank_length, link_polygon,  # noqa: E402
-                                                       pitch_circles)
+from mech_regulator.mechanisms.linkage.drawing import BLOCK_PER_CRANK, crank_length, link_polygon, pitch_circles  # noqa: E402
 
 FRAME_COLOUR, CRANK_COLOUR = "0.45", "black"
 GROUP_COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]

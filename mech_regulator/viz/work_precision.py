@@ -35,7 +35,8 @@ CPU_STRETCH = 2.5      # recording: units per decade of CPU time (errors: 1 per 
 
 def _rgb(colour: str) -> tuple[int, int, int]:
     """A matplotlib colour as 0-255 RGB, so the recording uses the PNGs' colours."""
-    return tuple(int(round(255 * channel)) for channel in matplotlib.colors.to_rgb(colour))
+    red, green, blue = matplotlib.colors.to_rgb(colour)
+    return round(255 * red), round(255 * green), round(255 * blue)
 
 
 def _curve(result: SceneResult, method: str) -> tuple[np.ndarray, np.ndarray, list[str], list[bool]]:
@@ -162,14 +163,14 @@ def _log_scene(stream: rr.RecordingStream, result: SceneResult) -> tuple[float, 
                    static=True)
         _labels(stream, f"{root}/reference_error/label", [[x, top - 0.7]],
                 [f"reference's own error {result.reference_error:.1g}"], REFERENCE_RED)
-    for method, (errors, cpu, labels, below) in curves.items():
-        points = np.column_stack([-np.log10(errors), -CPU_STRETCH * np.log10(cpu)])
+    for method, (method_errors, method_cpu, point_labels, below) in curves.items():
+        points = np.column_stack([-np.log10(method_errors), -CPU_STRETCH * np.log10(method_cpu)])
         colour = _rgb(STYLE[method][0])
         stream.log(f"{root}/methods/{method}", rr.LineStrips2D([points], colors=colour, labels=[method],
                                                              show_labels=False, radii=rr.Radius.ui_points(1.5),
                                                              draw_order=10.0), static=True)
         stream.log(f"{root}/methods/{method}/points", rr.Points2D(
-            points, labels=labels, colors=[(255, 255, 255) if hollow else colour for hollow in below],
+            points, labels=point_labels, colors=[(255, 255, 255) if hollow else colour for hollow in below],
             radii=rr.Radius.ui_points(3.0), show_labels=True, draw_order=20.0), static=True)
     legend = [[right + 0.6, top + 0.9 * i] for i in range(len(curves))]
     stream.log(f"{root}/legend", rr.Points2D(legend, labels=list(curves), colors=[_rgb(STYLE[m][0]) for m in curves],
@@ -189,7 +190,7 @@ def record_work_precision(benchmark: Benchmark, path: Path) -> None:
     stream = rr.RecordingStream(APPLICATION_ID)
     stream.set_log_time_enabled(False)
     stream.set_sinks(rr.FileSink(str(path)))
-    views = []
+    views: list[rrb.View] = []
     for result in benchmark.scenes:
         bounds = _log_scene(stream, result)
         if bounds is None:

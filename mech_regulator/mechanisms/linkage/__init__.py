@@ -7,8 +7,7 @@ balancing moment). Pure math and numpy: no ROS, no Rerun. docs/linkages.md descr
 """
 
 from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink
-from mech_regulator.mechanisms.linkage.kinematics import (assembly_failures, make_point_motions, make_reduced,
-                                                         solve)
+from mech_regulator.mechanisms.linkage.kinematics import assembly_failures, make_point_motions, make_reduced, solve
 from mech_regulator.mechanisms.linkage.kinetostatics import LinkageLoads, make_joint_loads, make_kinetostatics
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Joint, Link, Linkage, LinkageError
 from mech_regulator.mechanisms.linkage.structure import Structure, analyse, checked

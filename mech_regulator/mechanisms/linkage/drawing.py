@@ -14,6 +14,7 @@ pair's point).
 from __future__ import annotations
 
 import cmath
+import math
 
 import numpy as np
 
@@ -25,6 +26,13 @@ from mech_regulator.mechanisms.linkage.structure import Structure
 MOVING_PARTS = ("crank", "links", "sliders", "gears", "joints")
 GEAR_CIRCLE_POINTS = 73   # points of a pitch circle's polyline (after its radius)
 BLOCK_PER_CRANK = 0.6   # slider block length along the guide, per crank length [-]
+CIRCLE_POINTS = 73      # points of a drawn circle (72 segments)
+
+
+def circle(centre: tuple[float, float], radius: float) -> np.ndarray:
+    """Closed polyline of a circle [m], shape (CIRCLE_POINTS, 2)."""
+    angles = np.linspace(0.0, 2.0 * math.pi, CIRCLE_POINTS)
+    return np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
 
 
 def crank_length(linkage: Linkage) -> float:
@@ -90,8 +98,6 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
             continue
         link = joint.links[1]
         joint_points.append(poses[link][0] + linkage.link(link).points[joint.name] * cmath.exp(1j * poses[link][1]))
-    from mech_regulator.mechanisms.drawing import circle  # mechanisms.drawing imports this module
-
     outline = {
         "frame": _xy(frame_points),
         "crank_path": circle((pivot.real, pivot.imag), radius),

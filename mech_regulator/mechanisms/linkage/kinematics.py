@@ -12,14 +12,17 @@ P'' omega^2 + P' epsilon.
 from __future__ import annotations
 
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.mechanisms.linkage.groups import Dyad, Pose, RedundantLink, failure_message, packed
 from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
-from mech_regulator.mechanisms.linkage.structure import Structure
+
+if TYPE_CHECKING:  # structure.py finds redundant links with this module's solver
+    from mech_regulator.mechanisms.linkage.structure import Structure
 
 Motion = tuple[complex, complex, complex]  # (P [m], dP/dphi [m/rad], d2P/dphi2 [m/rad^2])
 ASSEMBLY_SAMPLES = 720  # crank angles over a turn at which a linkage is checked to assemble (every 0.5 deg)

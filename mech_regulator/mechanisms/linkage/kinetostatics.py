@@ -29,7 +29,8 @@ runs it in a scene's right-hand side, with flat.joint_loads its independent chec
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 from mech_regulator.mechanisms.linkage import gears
 from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad, parallelogram_joint
+from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 from mech_regulator.mechanisms.linkage.model import CAM, GEAR, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
 REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
@@ -142,8 +143,6 @@ def _passive(linkage: Linkage) -> tuple[str, ...]:
 def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | None:
     """Fill `groups` from the crank outward and `redundant` with the redundant links found; return a description
     of the links that remain undecomposed, or None."""
-    from mech_regulator.mechanisms.linkage.kinematics import make_solver
-
     known = {linkage.frame, linkage.crank}
     rates = {linkage.frame: 0.0, linkage.crank: 1.0}   # turns per crank turn of the links whose angle is phi's
     while True:
@@ -209,8 +208,6 @@ def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str]
                          ) -> RedundantLink | None:
     """An unknown link with exactly two revolute joints, both to known links, whose two points stay at the link's
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
-    from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
-
     solve_at = make_solver(linkage, groups)
     for name in remaining:
         joints = linkage.joints_of(name)

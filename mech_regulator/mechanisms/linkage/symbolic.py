@@ -52,7 +52,7 @@ import functools
 import hashlib
 import math
 import sys
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

@@ -41,29 +41,36 @@ import importlib.util
 import inspect
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
 
 import numba
 import numpy as np
 
 import mech_regulator
-from mech_regulator.cache import folder as cache_folder, write as _write
-from mech_regulator.model import MachineModel
-from mech_regulator.model.machine import StateTable
-from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator import mechanisms
+from mech_regulator.cache import folder as cache_folder
+from mech_regulator.cache import write as _write
 from mech_regulator.effects import held_positions, joint_friction, output_position_of
-from mech_regulator.effects.definition import (CLAMPED, INTERVALS, PERIODIC, Definition, call_source, definition_of,
-                                               summed_source)
+from mech_regulator.effects.definition import (
+    CLAMPED,
+    INTERVALS,
+    PERIODIC,
+    Definition,
+    call_source,
+    definition_of,
+    summed_source,
+)
 from mech_regulator.governors import servo as servo_motor
 from mech_regulator.mechanisms.linkage import flat, symbolic
+from mech_regulator.model import MachineModel
+from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
+from mech_regulator.model.machine import StateTable
 from mech_regulator.scene import schema
 from mech_regulator.solvers.compiled import kernels
 from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
 from mech_regulator.solvers.time_domain import _anchors, _break, _journals
-
 
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)

@@ -119,9 +119,17 @@ from scipy.integrate._ivp import dop853_coefficients
 
 from mech_regulator.scene.limits import MAX_SPEED
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, REACTIONS_TYPE, RHS_TYPE
-from mech_regulator.solvers.time_domain import (GUARD_NODE_FRACTIONS, GUARD_NODES, GUARD_TOLERANCE, _branch_points,
-                                                _reach, _smallest_limit, guard_polynomial, monotone_ends,
-                                                switch_window)
+from mech_regulator.solvers.time_domain import (
+    GUARD_NODE_FRACTIONS,
+    GUARD_NODES,
+    GUARD_TOLERANCE,
+    _branch_points,
+    _reach,
+    _smallest_limit,
+    guard_polynomial,
+    monotone_ends,
+    switch_window,
+)
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
@@ -1054,7 +1062,7 @@ class CompiledRun:
     beyond: int
 
     @classmethod
-    def from_result(cls, result: tuple) -> "CompiledRun":
+    def from_result(cls, result: tuple) -> CompiledRun:
         """Name the fields of a stepper's result tuple."""
         return cls(*result)
 

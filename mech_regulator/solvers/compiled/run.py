@@ -28,15 +28,35 @@ import numpy as np
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, schema
-from mech_regulator.solvers.compiled import fast_path_refusal, integrators
-from mech_regulator.solvers.compiled.codegen import (CLAMP_HI, CLAMP_LO, CRANK_DIRECTION, PIECE_INDEX, PIECE_SLOTS,
-                                                     RECENT_MODELS, WINDOW_HI, WINDOW_LO, CompiledScene,
-                                                     compile_scene)
 from mech_regulator.solvers import time_domain
-from mech_regulator.solvers.time_domain import (MAX_INSTANT_EVENTS, MAX_RESTARTS_WITHOUT_PROGRESS, RESTART_PERIODS,
-                                                _fail_stuck, _held_pieces, _log_event, fail_blown_up, fail_no_progress,
-                                                fail_too_many_steps, integrate_time_domain, settle_mode_in_phase,
-                                                switch_window, turns_and_phase)
+from mech_regulator.solvers.compiled import fast_path_refusal, integrators
+from mech_regulator.solvers.compiled.codegen import (
+    CLAMP_HI,
+    CLAMP_LO,
+    CRANK_DIRECTION,
+    PIECE_INDEX,
+    PIECE_SLOTS,
+    RECENT_MODELS,
+    WINDOW_HI,
+    WINDOW_LO,
+    CompiledScene,
+    compile_scene,
+)
+from mech_regulator.solvers.time_domain import (
+    MAX_INSTANT_EVENTS,
+    MAX_RESTARTS_WITHOUT_PROGRESS,
+    RESTART_PERIODS,
+    _fail_stuck,
+    _held_pieces,
+    _log_event,
+    fail_blown_up,
+    fail_no_progress,
+    fail_too_many_steps,
+    integrate_time_domain,
+    settle_mode_in_phase,
+    switch_window,
+    turns_and_phase,
+)
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
 MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress moves, Ctrl-C is heard);
