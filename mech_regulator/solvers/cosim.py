@@ -419,6 +419,8 @@ def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float, lon
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
     ends included, m the fewest pieces no longer than `longest` [s]."""
     times = np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
+    if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
+        return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
     for stretch in stretches:
         inside = (times >= stretch.t_start) & (times <= stretch.t_end)
