@@ -260,13 +260,19 @@ class MachineStepper:
 
     def outputs_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
         """The machine's outputs at `time` [s] in `state` with the throttle [-] as applied (no trip checked here) and
-        the external load [N m] held: the columns of MachineModel.columns (omega, epsilon, J, M_drive as applied,
-        M_load, x_slider, ...) and the moments on the crank by source (drive, resistance, external, net; see
-        crank_moments)."""
-        columns = self.plant.columns(np.array([time]), state[:, None], np.array([throttle]),
-                                     np.array([external_load]))
-        columns.update(crank_moments(columns))
+        the external load [N m] held (outputs_over at one time)."""
+        columns = self.outputs_over(np.array([time]), state[:, None], np.array([throttle]), np.array([external_load]))
         return {name: float(values[0]) for name, values in columns.items()}
+
+    def outputs_over(self, times: np.ndarray, states: np.ndarray, throttles: np.ndarray, external_loads: np.ndarray
+                     ) -> dict[str, np.ndarray]:
+        """The machine's outputs at n times [s] in states (n_states x n), with the throttles [-] as applied (no trip
+        checked here) and the external loads [N m] held, in one vectorised call: the columns of MachineModel.columns
+        (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the moments on the crank by source (drive,
+        resistance, external, net; see crank_moments), arrays of n."""
+        columns = self.plant.columns(times, states, throttles, external_loads)
+        columns.update(crank_moments(columns))
+        return columns
 
 
 def load_steppers(model: MachineModel, exchange_step: float) -> None:
