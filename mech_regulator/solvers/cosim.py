@@ -370,8 +370,9 @@ class GovernorStepper:
         start, end = stretch.t_start, stretch.t_end
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
         times = [float(t) for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
-        states = stretch(np.array(times))
-        return throttle, (times, [self.governor.throttle(states[:, index]) for index in range(len(times))])
+        states = stretch(np.array(times))  # at a stop the dense output may round past it (servo -3e-16): an opening
+        return throttle, (times, [min(max(self.governor.throttle(states[:, index]), 0.0), 1.0)  # is 0..1, and the
+                                  for index in range(len(times))])  # machine node refuses other samples
 
     def anticipate(self, time: float) -> None:
         """Advance now, with the speed held, to `time` [s], the next exchange time as expected, so that the
