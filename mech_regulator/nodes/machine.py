@@ -203,7 +203,7 @@ class MachineNode(Node):
         self.predicted: Samples | None = None  # and as predicted over the next one
         self.stamped_waveform: dict[int, Samples] = {}  # [ns] -> the governor's tentative throttle over that step
         self.held: tuple | None = None  # the last exchange's (time [ns], time [s], state, throttle applied [-], load
-        # [N m], wall-clock time [s] its joint_states went out) for its machine/moments, computed later (add_moments)
+        # [N m], wall-clock time [s] its joint_states went out) for its machine/moments (add_moments, complete_moments)
         self.published_at = 0.0  # [s] time.monotonic() when the last joint_states went out
         self.tentative = self.throttle  # [-] the governor's tentative throttle at the end of the last step
 
