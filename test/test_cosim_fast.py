@@ -62,6 +62,26 @@ def test_fast_co_simulation_equals_the_reference(name):
     np.testing.assert_allclose(fast.throttle, reference.throttle, rtol=0, atol=20.0 * rtol)
 
 
+def test_the_tentative_throttle_stays_an_opening_when_the_servo_reaches_its_stop(monkeypatch):
+    """The corrected coupling's tentative throttle over a step in which the servo reaches its low stop: the dense
+    output there rounded past the stop (-7e-18), which the machine node refuses as a throttle (a bundled scene's run
+    then waited peer_timeout and closed the throttle); every sample is within 0..1."""
+    answers = []
+    answer_corrected = GovernorStepper.answer_corrected
+
+    def kept(self, *arguments):
+        throttle, waveform = answer_corrected(self, *arguments)
+        answers.append(waveform)
+        return throttle, waveform
+
+    monkeypatch.setattr(GovernorStepper, "answer_corrected", kept)
+    run = cosimulate(model_of(scene(CASES["engine_indirect_none"], solver__path="reference")), 0.01,
+                     coupling="corrected")
+    assert run.status == "complete" and "servo reaches its low stop" in [what for _, what, _ in run.events]
+    samples = [value for waveform in answers if waveform is not None for value in waveform[1]]
+    assert len(samples) >= 2 * 49 and min(samples) == 0.0 and max(samples) <= 1.0, min(samples)
+
+
 def test_the_machine_subsystem_keeps_its_drive_train_mode():
     """press_coupling's driven part is held at rest until the coupling's moment overcomes its resistance (3.1 ms
     in): the co-simulated machine plays that mode, as the monolithic run does (oracle: the monolithic run; the

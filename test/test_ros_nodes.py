@@ -140,6 +140,31 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
         list(range(BATCH_SIZE))
 
 
+def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
+    from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
+
+    published, completions = _Published(), []
+
+    def complete(items):  # as the machine's moments: one call for all the deferred exchanges
+        completions.append(list(items))
+        for when, load in items:
+            batch.add(when, ["load"], [], [], [load])
+
+    batch = Batch(published, complete)
+    for when in range(BATCH_SIZE - 1):
+        batch.defer((when, 2.0 * when))
+        batch.send_when_due()
+    assert not published and not completions  # one short of a batch, and not yet BATCH_PERIOD old
+    batch.defer((BATCH_SIZE - 1, 1.0))
+    batch.send_when_due()
+    assert len(completions) == 1 and len(completions[0]) == BATCH_SIZE and len(published) == 1
+    groups = batch_groups(published[0])
+    assert [when for when, _ in groups] == list(range(BATCH_SIZE)) and groups[3][1]["load"][2] == 6.0
+    batch.defer((BATCH_SIZE, 5.0))
+    batch.send()  # the run ends: what was deferred goes out at once
+    assert len(completions) == 2 and [when for when, _ in batch_groups(published[1])] == [BATCH_SIZE]
+
+
 # -------------------------------------------------------------------------------------------------
 # Comparisons with the core
 

@@ -198,20 +198,24 @@ class Batch:
     exchange's joint_states, time.monotonic, the host's clock its processes share; NaN when none), then that time's
     joints. The node sends it when due (send_when_due: BATCH_SIZE groups in, or the
     oldest BATCH_PERIOD s of wall time old, so the recorder still shows a live picture) at a moment it would
-    otherwise wait, and at once (send) when the run ends, pauses or resets."""
+    otherwise wait, and at once (send) when the run ends, pauses or resets. A sender whose groups cost less computed
+    together (the machine's moments: one vectorised call for the batch instead of one per exchange) defers them
+    (defer) and gives `complete`, which adds them (add) when the batch goes out; a batch holds either kind only."""
 
-    def __init__(self, publisher):
+    def __init__(self, publisher, complete: Callable[[list], None] | None = None):
         self.publisher = publisher
         self.fields: tuple[list, list, list, list] = ([], [], [], [])  # names, positions, velocities, efforts
         self.groups = 0
         self.last = 0  # [ns] the newest exchange time waiting
         self.oldest_wall = 0.0  # [s] of wall time (time.monotonic) the oldest waiting group was added
+        self.complete = complete
+        self.deferred: list = []  # what `complete` turns into groups when the batch goes out
 
     def add(self, when: int, names: list[str], positions: list[float], velocities: list[float],
             efforts: list[float], wall: float = math.nan) -> None:
         """Add the joints of exchange time `when` [ns] (a field left empty: NaN for each joint), with a wall-clock
         time [s] in the "stamp" joint's velocity."""
-        if not self.groups:
+        if not self.groups and not self.deferred:
             self.oldest_wall = time.monotonic()
         missing = [math.nan] * len(names)
         for gathered, values, first in zip(self.fields, (names, positions, velocities, efforts),
@@ -220,13 +224,24 @@ class Batch:
             gathered.extend(values or missing)
         self.groups, self.last = self.groups + 1, when
 
+    def defer(self, item) -> None:
+        """Note what `complete` makes one group of when the batch goes out (counted as a waiting group)."""
+        if not self.groups and not self.deferred:
+            self.oldest_wall = time.monotonic()
+        self.deferred.append(item)
+
     def send_when_due(self) -> None:
         """Send the waiting groups if BATCH_SIZE are in or the oldest waited BATCH_PERIOD s of wall time."""
-        if self.groups >= BATCH_SIZE or self.groups and time.monotonic() - self.oldest_wall >= BATCH_PERIOD:
+        waiting = self.groups + len(self.deferred)
+        if waiting >= BATCH_SIZE or waiting and time.monotonic() - self.oldest_wall >= BATCH_PERIOD:
             self.send()
 
     def send(self) -> None:
-        """Publish the waiting groups (nothing when there are none), stamped with the newest exchange time."""
+        """Publish the waiting groups (nothing when there are none; the deferred ones completed first), stamped with
+        the newest exchange time."""
+        if self.deferred:
+            deferred, self.deferred = self.deferred, []
+            self.complete(deferred)
         if self.groups:
             names, positions, velocities, efforts = self.fields
             message = JointState(name=names, position=positions, velocity=velocities, effort=efforts)

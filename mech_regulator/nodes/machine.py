@@ -50,6 +50,7 @@ import math
 import sys
 import time
 
+import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
@@ -191,7 +192,7 @@ class MachineNode(Node):
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
-        self.moments = Batch(self.create_publisher(JointState, "machine/moments", STATE_QOS))
+        self.moments = Batch(self.create_publisher(JointState, "machine/moments", STATE_QOS), self.complete_moments)
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.status_publisher = self.create_publisher(String, "machine/status", STATUS_QOS)
@@ -233,7 +234,7 @@ class MachineNode(Node):
         self.predicted: Samples | None = None  # and as predicted over the next one
         self.stamped_waveform: dict[int, Samples] = {}  # [ns] -> the governor's tentative throttle over that step
         self.held: tuple | None = None  # the last exchange's (time [ns], time [s], state, throttle applied [-], load
-        # [N m], wall-clock time [s] its joint_states went out) for its machine/moments, computed later (add_moments)
+        # [N m], wall-clock time [s] its joint_states went out) for its machine/moments (add_moments, complete_moments)
         self.published_at = 0.0  # [s] time.monotonic() when the last joint_states went out
         self.tentative = self.throttle  # [-] the governor's tentative throttle at the end of the last step
 
@@ -603,33 +604,42 @@ class MachineNode(Node):
         self.state_message = message
 
     def add_moments(self) -> None:
-        """machine/moments at the last exchange time, with the inputs that held from there (`held`: noted then,
-        computed now, while the peers answer the next exchange: off the critical path of the lockstep), to the batch
-        (common.Batch: sent after a later exchange's joint_states, with the wall-clock time that exchange's
-        joint_states went out): the moments on the crank by source and the external load applied [N m] (against the
-        motion, where the scene applies it: on the crank, or on a two-mass machine's driven part, where the crank's
-        `external` is 0), and the state as joint_states had it (crank phi, omega; a two-mass machine's twist and
-        omega_driven). Nothing when they are in already."""
-        if self.held is None:
-            return
-        when, held_time, state, throttle, load, published_at = self.held
-        outputs = self.stepper.outputs_at(held_time, state, throttle, load)
+        """machine/moments at the last exchange time, with the inputs that held from there (`held`: noted then), to the
+        batch (common.Batch: sent after a later exchange's joint_states, with the wall-clock time that exchange's
+        joint_states went out), deferred: complete_moments computes the batch's moments together when it goes out,
+        while the peers answer an exchange (off the critical path of the lockstep). Nothing when they are in
+        already."""
+        if self.held is not None:
+            self.moments.defer(self.held)
+            self.held = None
+
+    def complete_moments(self, held: list[tuple]) -> None:
+        """Add the deferred exchanges (add_moments' `held`) to machine/moments, their outputs computed in one call
+        (MachineStepper.outputs_over): the moments on the crank by source and the external load applied [N m]
+        (against the motion, where the scene applies it: on the crank, or on a two-mass machine's driven part, where
+        the crank's `external` is 0), and the state as joint_states had it (crank phi, omega; a two-mass machine's
+        twist and omega_driven)."""
+        whens, held_times, states, throttles, loads, published = zip(*held)
+        outputs = self.stepper.outputs_over(np.array(held_times), np.column_stack(states), np.array(throttles),
+                                            np.array(loads))
         names = ["drive", "resistance", "external", "net", "load", "crank", "throttle"]
-        efforts = [outputs[name] for name in names[:4]] + [load, math.nan, math.nan]
-        positions = [math.nan] * 5 + [float(state[0]), throttle]
-        velocities = [math.nan] * 5 + [float(state[1]), math.nan]
-        if self.model.coupling is not None:
-            names.append("coupling")
-            positions.append(outputs["twist"])
-            velocities.append(math.nan)
-            efforts.append(math.nan)
-        if self.model.driven is not None:
-            names.append("driven")
-            positions.append(math.nan)
-            velocities.append(outputs["omega_driven"])
-            efforts.append(math.nan)
-        self.moments.add(when, names, positions, velocities, efforts, wall=published_at)
-        self.held = None
+        for index, (when, state, throttle, load, published_at) in enumerate(zip(whens, states, throttles, loads,
+                                                                                published)):
+            efforts = [float(outputs[name][index]) for name in names[:4]] + [load, math.nan, math.nan]
+            positions = [math.nan] * 5 + [float(state[0]), throttle]
+            velocities = [math.nan] * 5 + [float(state[1]), math.nan]
+            extra = []
+            if self.model.coupling is not None:
+                extra.append("coupling")
+                positions.append(float(outputs["twist"][index]))
+                velocities.append(math.nan)
+                efforts.append(math.nan)
+            if self.model.driven is not None:
+                extra.append("driven")
+                positions.append(math.nan)
+                velocities.append(float(outputs["omega_driven"][index]))
+                efforts.append(math.nan)
+            self.moments.add(when, names + extra, positions, velocities, efforts, wall=published_at)
 
     def send_moments(self) -> None:
         """Send machine/moments now (common.Batch.send), the last exchange's with them (add_moments): the run ends,

@@ -260,13 +260,19 @@ class MachineStepper:
 
     def outputs_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
         """The machine's outputs at `time` [s] in `state` with the throttle [-] as applied (no trip checked here) and
-        the external load [N m] held: the columns of MachineModel.columns (omega, epsilon, J, M_drive as applied,
-        M_load, x_slider, ...) and the moments on the crank by source (drive, resistance, external, net; see
-        crank_moments)."""
-        columns = self.plant.columns(np.array([time]), state[:, None], np.array([throttle]),
-                                     np.array([external_load]))
-        columns.update(crank_moments(columns))
+        the external load [N m] held (outputs_over at one time)."""
+        columns = self.outputs_over(np.array([time]), state[:, None], np.array([throttle]), np.array([external_load]))
         return {name: float(values[0]) for name, values in columns.items()}
+
+    def outputs_over(self, times: np.ndarray, states: np.ndarray, throttles: np.ndarray, external_loads: np.ndarray
+                     ) -> dict[str, np.ndarray]:
+        """The machine's outputs at n times [s] in states (n_states x n), with the throttles [-] as applied (no trip
+        checked here) and the external loads [N m] held, in one vectorised call: the columns of MachineModel.columns
+        (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the moments on the crank by source (drive,
+        resistance, external, net; see crank_moments), arrays of n."""
+        columns = self.plant.columns(times, states, throttles, external_loads)
+        columns.update(crank_moments(columns))
+        return columns
 
 
 def load_steppers(model: MachineModel, exchange_step: float) -> None:
@@ -364,8 +370,9 @@ class GovernorStepper:
         start, end = stretch.t_start, stretch.t_end
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
         times = [float(t) for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
-        states = stretch(np.array(times))
-        return throttle, (times, [self.governor.throttle(states[:, index]) for index in range(len(times))])
+        states = stretch(np.array(times))  # at a stop the dense output may round past it (servo -3e-16): an opening
+        return throttle, (times, [min(max(self.governor.throttle(states[:, index]), 0.0), 1.0)  # is 0..1, and the
+                                  for index in range(len(times))])  # machine node refuses other samples
 
     def anticipate(self, time: float) -> None:
         """Advance now, with the speed held, to `time` [s], the next exchange time as expected, so that the
@@ -419,6 +426,8 @@ def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float, lon
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
     ends included, m the fewest pieces no longer than `longest` [s]."""
     times = np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
+    if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
+        return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
     for stretch in stretches:
         inside = (times >= stretch.t_start) & (times <= stretch.t_end)
