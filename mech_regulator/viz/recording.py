@@ -47,7 +47,6 @@ import rerun.blueprint as rrb
 
 from mech_regulator.analysis import operating_point
 from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PARTS
-from mech_regulator.governors.drawing import ball_radius, governor_bounds, governor_outline
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
 from mech_regulator.model import MachineModel, crank_moments
@@ -238,7 +237,7 @@ class RunRecording:
                 self._governor_frame = frame
                 sensor = self.model.governor.sensor
                 self._add_frame("governor/drawing", t_ns,
-                                governor_outline(sensor, values["arm_angle"], sensor.ratio * self._phi),
+                                sensor.outline(values["arm_angle"], sensor.ratio * self._phi),
                                 GOVERNOR_MOVING_PARTS)
 
     def add_throttle(self, t_ns: int, throttle: float) -> None:
@@ -353,7 +352,7 @@ class RunRecording:
             colour, size = styles[name]
             geometry = part * FLIP_Y if name not in moving else None
             if name in POINT_PARTS:
-                radius = ball_radius(self.model.governor.sensor) if size is None else rr.Radius.ui_points(size)
+                radius = self.model.governor.sensor.ball_radius() if size is None else rr.Radius.ui_points(size)
                 archetype = rr.Points2D.from_fields(positions=geometry, radii=radius, colors=colour, draw_order=40.0)
             else:
                 strips = None if geometry is None else list(geometry) if geometry.ndim == 3 else [geometry]
@@ -374,7 +373,7 @@ class RunRecording:
                          MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)])
         if self.model.governor is not None:
             sensor = self.model.governor.sensor
-            self._log_styles("governor/drawing", governor_outline(sensor, sensor.stop_angles()[0], 0.0),
+            self._log_styles("governor/drawing", sensor.outline(sensor.stop_angles()[0], 0.0),
                              GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS)
         self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source,
                                                              self.outside_throttle),
@@ -680,7 +679,7 @@ def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] |
                                   visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])))
     if model.governor is not None:
         governor = rrb.Spatial2DView(name="governor", origin="governor/drawing",
-                                     visual_bounds=_bounds_y_down(governor_bounds(model.governor.sensor)))
+                                     visual_bounds=_bounds_y_down(model.governor.sensor.bounds()))
         right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]),
                              row_shares=[1.0, 1.8])
     else:

@@ -238,33 +238,7 @@ def _reaction_size(reaction, normal_sign):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Governor (governors/centrifugal.py, valve.py, governors/__init__.py)
-
-
-@njit(cache=True)
-def sleeve(arm, l):
-    """PorterSensor.sleeve: z = 2 l (1 - cos a) [m]."""
-    return 2.0 * l * (1.0 - math.cos(arm))
-
-
-@njit(cache=True)
-def lift(arm, omega, m, l, M, k, z_free, g, ratio):
-    """PorterSensor.lift: F = m l omega_g^2 cos a - (m + M) g - k (z - z_free), omega_g = ratio omega [N]."""
-    omega_g = ratio * omega
-    spring = k * (sleeve(arm, l) - z_free)
-    return m * l * omega_g * omega_g * math.cos(arm) - (m + M) * g - spring
-
-
-@njit(cache=True)
-def arm_acceleration(arm, arm_rate, omega, friction, m, l, M, k, z_free, c, g, ratio):
-    """PorterSensor.arm_acceleration: (2 m l^2 + 4 M l^2 sin^2 a) a'' + 2 M l^2 sin(2a) a'^2
-    = 2 l sin a [F(a, omega) - c z' - friction], z' = 2 l sin a a' [rad/s^2]."""
-    sin_a = math.sin(arm)
-    lever = 2.0 * l * sin_a
-    sleeve_rate = lever * arm_rate
-    force = lift(arm, omega, m, l, M, k, z_free, g, ratio) - c * sleeve_rate - friction
-    mass = 2.0 * m * l * l + 4.0 * M * l * l * sin_a * sin_a
-    return (lever * force - 2.0 * M * l * l * math.sin(2.0 * arm) * arm_rate * arm_rate) / mass
+# Governor (valve.py, governors/__init__.py; the sensors' formulas are their own modules' functions, codegen)
 
 
 @njit(cache=True)
