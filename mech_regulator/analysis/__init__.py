@@ -119,6 +119,7 @@ def analyse_governor(model: MachineModel) -> dict:
     result = {
         "scene": model.scene.name,
         "kind": governor.kind,
+        "sensor": None if characteristic is None else governor.sensor.name,
         "feedback": governor.feedback if governor.kind == "indirect" else None,
         "set_speed": governor.set_speed(),
         "characteristic": None if characteristic is None else {

@@ -263,8 +263,10 @@ def format_required_coupling(result, source: str) -> str:
 
 
 def _sleeve_text(point: dict) -> str:
-    """'sleeve z mm, ' of an operating point, or nothing for a governor without a sleeve (PI: NaN)."""
-    return f"sleeve {point['sleeve'] * 1000:.4g} mm, " if point["sleeve"] == point["sleeve"] else ""
+    """'sleeve z mm, ' of an operating point, or nothing for a governor without a sleeve (PI: NaN, or None once the
+    summary went through JSON)."""
+    sleeve = point["sleeve"]
+    return f"sleeve {sleeve * 1000:.4g} mm, " if sleeve is not None and sleeve == sleeve else ""
 
 
 def _governed_lines(governed: dict) -> list[str]:
@@ -289,7 +291,8 @@ def format_governor(analysis: dict) -> str:
     """The human-readable statics and stability of a governed scene."""
     kind = analysis["kind"] + (f", {analysis['feedback']} feedback" if analysis["feedback"] else "")
     characteristic = analysis["characteristic"]
-    lines = [f"scene {analysis['scene']}: {kind} governor"]
+    lines = [f"scene {analysis['scene']}: {kind} governor" + (f", {analysis['sensor']} sensor" if analysis["sensor"]
+                                                              else "")]
     if characteristic is None:  # PI
         lines.append(f"isochronous: omega = {analysis['set_speed']:.6g} rad/s (the set speed) at every load the valve's "
                      f"travel can balance; statism (degree of non-uniformity) {analysis['statism']:.4g}")
