@@ -1,21 +1,18 @@
-#!/usr/bin/env python3
 """The picture of docs/governors.md, "Three governors on one engine": the bundled scenes engine_direct (Porter),
 engine_hartnell and engine_pi run through the same load steps (6 -> 8 N m at 2 s, full load rejection at 9 s); their
-cycle-mean speeds and throttles against time. Run: `python examples/compare_governors.py docs/images/governors_compared.png`.
+cycle-mean speeds and throttles against time.
+Run: `python examples/compare_governors.py docs/images/governors_compared.png`.
 """
 
 import sys
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from mech_regulator.analysis import cycle_mean_speed  # noqa: E402
-from mech_regulator.model import build_model  # noqa: E402
-from mech_regulator.scene import load_scene  # noqa: E402
-from mech_regulator.solvers import simulate  # noqa: E402
+from mech_regulator.analysis import cycle_mean_speed
+from mech_regulator.model import build_model
+from mech_regulator.scene import load_scene
+from mech_regulator.solvers import simulate
 
 SCENES = {"engine_direct": "Porter, direct", "engine_hartnell": "Hartnell, direct", "engine_pi": "electronic PI"}
 

@@ -15,7 +15,6 @@ import pytest
 
 from mech_regulator.governors.centrifugal import PorterSensor
 from mech_regulator.governors.drawing import COLLAR_RADIUS, SLEEVE_HALF_HEIGHT, porter_sleeve_height
-from mech_regulator.governors.hartnell import HartnellSensor
 from mech_regulator.mechanisms.crank_slider import dead_centres
 from mech_regulator.mechanisms.drawing import (
     BLOCK_HEIGHT_PER_CRANK,

@@ -52,7 +52,8 @@ def hartnell_speed(governor: dict, z: float) -> float:
     theta = math.asin(z / b)
     radius = r0 + a * math.sin(theta)
     sleeve_load = M * G + k * (z - z_free)
-    omega_g2 = (0.5 * sleeve_load * b * math.cos(theta) - m * G * a * math.sin(theta)) / (m * radius * a * math.cos(theta))
+    moment = 0.5 * sleeve_load * b * math.cos(theta) - m * G * a * math.sin(theta)  # [N m]
+    omega_g2 = moment / (m * radius * a * math.cos(theta))
     return math.sqrt(omega_g2) / governor["ratio"]
 
 

@@ -294,8 +294,8 @@ def format_governor(analysis: dict) -> str:
     lines = [f"scene {analysis['scene']}: {kind} governor" + (f", {analysis['sensor']} sensor" if analysis["sensor"]
                                                               else "")]
     if characteristic is None:  # PI
-        lines.append(f"isochronous: omega = {analysis['set_speed']:.6g} rad/s (the set speed) at every load the valve's "
-                     f"travel can balance; statism (degree of non-uniformity) {analysis['statism']:.4g}")
+        lines.append(f"isochronous: omega = {analysis['set_speed']:.6g} rad/s (the set speed) at every load the "
+                     f"valve's travel can balance; statism (degree of non-uniformity) {analysis['statism']:.4g}")
     else:
         speeds, sleeve = characteristic["speed"], characteristic["sleeve"]
         lines += [f"static characteristic: omega = {speeds[0]:.5g} rad/s at z = {sleeve[0] * 1000:.4g} mm to "

@@ -5,8 +5,8 @@ the linkage is drawn as in the textbooks, in the plane that turns with it, so th
 each other. The spindle's turning is shown by a mark on a collar above the hinge, which goes round a
 flat ellipse (the collar seen slightly from above) at the spindle angle psi. Parts are polylines of
 shape (n, 2) or bundles of polylines of shape (k, n, 2); `balls` and `spindle_mark` are points, the
-balls drawn with radius `sensor.ball_radius()` (governors/sensor.py). MOVING_PARTS move with the arm or spindle angle; the
-others stay put.
+balls drawn with radius `sensor.ball_radius()` (governors/sensor.py). MOVING_PARTS move with the arm or spindle
+angle; the others stay put.
 """
 
 from __future__ import annotations
@@ -32,7 +32,8 @@ MOVING_PARTS = ("upper_arms", "lower_links", "sleeve", "balls", "spindle_mark")
 
 
 def sensor_parts(scale: float, stop_heights: tuple[float, float], balls: np.ndarray, upper_arms: np.ndarray,
-                 lower_links: np.ndarray, sleeve_y: float, spindle_angle: float, bottom: float) -> dict[str, np.ndarray]:
+                 lower_links: np.ndarray, sleeve_y: float, spindle_angle: float,
+                 bottom: float) -> dict[str, np.ndarray]:
     """The drawing's parts (MOVING_PARTS and the fixed spindle and stops) from a sensor's own geometry, metres, y up:
     scale [m] (the arm length the relative sizes above are per), the heights [m] of the sleeve's centre at its two
     stops, the two balls (2, 2), the upper arms and lower links (2, 2, 2), the sleeve's centre height [m], the spindle
@@ -52,7 +53,8 @@ def sensor_parts(scale: float, stop_heights: tuple[float, float], balls: np.ndar
         "sleeve": rectangle((0.0, sleeve_y), SLEEVE_HALF_WIDTH * scale, half_height),
         "balls": balls,
         "spindle_mark": np.array([[collar * math.cos(spindle_angle),
-                                   0.5 * SPINDLE_ABOVE_HINGE * scale + COLLAR_TILT * collar * math.sin(spindle_angle)]]),
+                                   (0.5 * SPINDLE_ABOVE_HINGE * scale
+                                    + COLLAR_TILT * collar * math.sin(spindle_angle))]]),
     }
 
 

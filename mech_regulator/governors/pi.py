@@ -15,8 +15,8 @@ and pi_integral_rate, which both paths run (solvers/compiled/codegen.py compiles
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -25,7 +25,8 @@ INTEGRAL = 2  # index of the integral part x in the full state vector
 
 
 def pi_throttle(integral, omega, set_speed, gain, integral_time, low, high):
-    """Throttle [-]: u = x + K_p (omega_s - omega) / omega_s clipped to [low, high]."""
+    """Throttle [-]: u = x + K_p (omega_s - omega) / omega_s clipped to [low, high] (integral_time unread: the two
+    functions take the same numbers, ElectronicGovernor.law)."""
     command = integral + gain * (set_speed - omega) / set_speed
     return min(max(command, low), high)
 
@@ -58,7 +59,7 @@ class ElectronicGovernor:
     kind = "pi"
     state_names = ("integral",)
     has_friction = False
-    valve_breaks: tuple[float, ...] = ()
+    valve_breaks = ()  # no valve table: the throttle is the law's output itself
 
     def law(self, ideal: bool = False) -> tuple[float, ...]:
         """The numbers pi_throttle and pi_integral_rate read after x and omega: (omega_s, K_p, T_i, low, high);
@@ -100,6 +101,6 @@ class ElectronicGovernor:
 
     def describe(self) -> list[str]:
         """Lines for `describe`: the PI law."""
-        return [f"electronic PI governor: throttle = x + {self.gain:g} (omega_s - omega) / omega_s within "
-                f"{self.travel[0]:g}..{self.travel[1]:g}, omega_s = {self.set_point:g} rad/s, x' = {self.gain:g} e / "
-                f"{self.integral_time:g} s (tracking the travel's stops)"]
+        return [(f"electronic PI governor: throttle = x + {self.gain:g} (omega_s - omega) / omega_s within "
+                 f"{self.travel[0]:g}..{self.travel[1]:g}, omega_s = {self.set_point:g} rad/s, x' = {self.gain:g} e / "
+                 f"{self.integral_time:g} s (tracking the travel's stops)")]

@@ -128,7 +128,8 @@ class GovernorNode(Node):
         else:
             extra = [name for name in ("servo", "feedback_shift") if name in values]
             self.states.add(when, ["sleeve", "arm", "throttle", *extra],
-                            [values["sleeve"], values["arm_angle"], values["throttle"], *(values[name] for name in extra)],
+                            [values["sleeve"], values["arm_angle"], values["throttle"],
+                             *(values[name] for name in extra)],
                             [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)], [])
         self.states.send_when_due()  # after the answer, while the machine integrates
         if self.stepper.status != "complete":

@@ -979,8 +979,8 @@ class HartnellGovernor(_CentrifugalSensor):
         pull = (self.sleeve_arm * (self.sleeve_mass * self.gravity + spring)
                 - 2.0 * self.ball_mass * self.gravity * self.ball_arm * math.tan(theta))
         if pull <= 0.0:
-            raise ValueError(f"spring = {self.spring.stiffness} N/m free at {self.spring.free_position} m does not hold "
-                             f"the sleeve down at its low stop z = {low} m against the balls' weights; expected "
+            raise ValueError(f"spring = {self.spring.stiffness} N/m free at {self.spring.free_position} m does not "
+                             f"hold the sleeve down at its low stop z = {low} m against the balls' weights; expected "
                              "sleeve_arm (sleeve_mass g + k (z_low - free_position)) > 2 ball_mass g ball_arm "
                              "tan(theta_low)")
         return self
