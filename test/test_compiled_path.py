@@ -81,11 +81,13 @@ def driven_four_bar() -> dict:
     return data
 
 
-SLEEVE_MODES = list(SLEEVE_CODE)
+SLEEVE_MODES = [mode for mode in SLEEVE_CODE if mode]  # '' is a PI governor's, which has no sleeve
 
 
 def governor_modes(model) -> list:
-    """Every (sleeve, servo) mode of a governed model (servo '' for a direct governor)."""
+    """Every (sleeve, servo) mode of a governed model (servo '' for a direct governor; a PI governor's one mode)."""
+    if model.governor.kind == "pi":
+        return [("", "")]
     servo = ["free", "low", "high"] if model.governor.kind == "indirect" else [""]
     return [(sleeve, s) for sleeve in SLEEVE_MODES for s in servo]
 
@@ -95,7 +97,9 @@ def random_state(model) -> np.ndarray:
     y = model.initial_state().astype(float)
     y[0] = RNG.uniform(-20.0, 20.0)
     y[1] = y[1] * RNG.uniform(0.8, 1.2) + RNG.uniform(-5.0, 5.0)
-    if model.governor is not None:
+    if model.governor is not None and model.governor.kind == "pi":  # its integral part, on and off the valve's stops
+        y[2] = RNG.uniform(-0.5, 1.5)
+    elif model.governor is not None:
         y[2] += RNG.uniform(-0.1, 0.1)
         y[3] = RNG.uniform(-2.0, 2.0)
         for index in range(4, 2 + len(model.governor.state_names)):
@@ -344,7 +348,7 @@ def test_indirect_governor_every_feedback_and_mode(feedback):
     assert_same_rhs(model, governor_modes(model), states=3)
 
 
-@pytest.mark.parametrize("name", ["engine_direct", "engine_indirect_rigid"])
+@pytest.mark.parametrize("name", ["engine_direct", "engine_indirect_rigid", "engine_hartnell", "engine_pi"])
 def test_engine_governors_every_mode(name):
     model = model_of(bundled(name))
     assert_same_rhs(model, governor_modes(model), states=3)

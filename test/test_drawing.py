@@ -14,14 +14,7 @@ import numpy as np
 import pytest
 
 from mech_regulator.governors.centrifugal import PorterSensor
-from mech_regulator.governors.drawing import (
-    COLLAR_RADIUS,
-    SLEEVE_HALF_HEIGHT,
-    ball_radius,
-    governor_bounds,
-    governor_outline,
-    sleeve_height,
-)
+from mech_regulator.governors.drawing import COLLAR_RADIUS, SLEEVE_HALF_HEIGHT, porter_sleeve_height
 from mech_regulator.mechanisms.crank_slider import dead_centres
 from mech_regulator.mechanisms.drawing import (
     BLOCK_HEIGHT_PER_CRANK,
@@ -188,7 +181,7 @@ def test_governor_linkage_lengths_and_sleeve_lift(sensor):
     l = sensor.arm_length
     for a in stroke_angles(sensor):
         for psi in SPINDLE_ANGLES:
-            outline = governor_outline(sensor, a, psi)
+            outline = sensor.outline(a, psi)
             balls = outline["balls"]
             sleeve_centre = outline["sleeve"][:4].mean(axis=0)
             for side in range(2):
@@ -207,14 +200,14 @@ def test_governor_linkage_lengths_and_sleeve_lift(sensor):
             assert sleeve_centre[0] == pytest.approx(0.0, abs=TOL)
             # the sleeve's lift above its lowest possible position (arms along the spindle, centre at -2 l)
             assert sleeve_centre[1] + 2.0 * l == pytest.approx(sensor.sleeve(a), abs=TOL)
-            assert sleeve_centre[1] == pytest.approx(sleeve_height(sensor, a), abs=TOL)
+            assert sleeve_centre[1] == pytest.approx(porter_sleeve_height(sensor.arm_length, a), abs=TOL)
 
 
 @pytest.mark.parametrize("sensor", SENSORS)
 def test_governor_spindle_mark_goes_round_with_the_spindle(sensor):
     """The mark's horizontal position is r cos psi: it turns once per turn of the spindle."""
     a = sensor.stop_angles()[0]
-    marks = np.array([governor_outline(sensor, a, psi)["spindle_mark"][0] for psi in SPINDLE_ANGLES])
+    marks = np.array([sensor.outline(a, psi)["spindle_mark"][0] for psi in SPINDLE_ANGLES])
     radius = COLLAR_RADIUS * sensor.arm_length
     assert np.allclose(marks[:, 0], radius * np.cos(SPINDLE_ANGLES), atol=TOL)
     assert np.ptp(marks[:, 1]) > 0.0   # it goes round an ellipse, not along a line
@@ -225,13 +218,13 @@ def test_governor_sleeve_moves_between_its_stops_and_touches_them_at_the_ends(se
     low_angle, high_angle = sensor.stop_angles()
     half_height = SLEEVE_HALF_HEIGHT * sensor.arm_length
     for a in stroke_angles(sensor):
-        outline = governor_outline(sensor, a, 0.0)
+        outline = sensor.outline(a, 0.0)
         (low_stop, high_stop) = outline["stops"][:, 0, 1]
         assert np.all(outline["stops"][:, 0, 1] == outline["stops"][:, 1, 1])   # the stops are horizontal
         assert outline["sleeve"][:, 1].min() >= low_stop - TOL
         assert outline["sleeve"][:, 1].max() <= high_stop + TOL
-    bottom_at_low = governor_outline(sensor, low_angle, 0.0)["sleeve"][:, 1].min()
-    top_at_high = governor_outline(sensor, high_angle, 0.0)["sleeve"][:, 1].max()
+    bottom_at_low = sensor.outline(low_angle, 0.0)["sleeve"][:, 1].min()
+    top_at_high = sensor.outline(high_angle, 0.0)["sleeve"][:, 1].max()
     assert bottom_at_low == pytest.approx(low_stop, abs=TOL)
     assert top_at_high == pytest.approx(high_stop, abs=TOL)
     assert high_stop - low_stop == pytest.approx(sensor.stroke[1] - sensor.stroke[0] + 2 * half_height, abs=TOL)
@@ -239,17 +232,17 @@ def test_governor_sleeve_moves_between_its_stops_and_touches_them_at_the_ends(se
 
 def test_ball_radius_is_a_steel_sphere_of_the_ball_mass():
     for mass in (0.5, 1.0, 4.0):
-        r = ball_radius(porter(ball_mass=mass))
+        r = porter(ball_mass=mass).ball_radius()
         assert 4.0 / 3.0 * math.pi * r ** 3 * 7850.0 == pytest.approx(mass, rel=1e-12)
 
 
 @pytest.mark.parametrize("sensor", SENSORS)
 def test_governor_bounds_contain_every_outline_over_the_stroke(sensor):
-    bounds = governor_bounds(sensor)
-    radius = ball_radius(sensor)
+    bounds = sensor.bounds()
+    radius = sensor.ball_radius()
     for a in stroke_angles(sensor, 53):
         for psi in SPINDLE_ANGLES:
-            outline = governor_outline(sensor, a, psi)
+            outline = sensor.outline(a, psi)
             for name, part in outline.items():
                 assert inside(part, bounds, radius if name == "balls" else 0.0), (name, a, psi)
     # the widest ball at the high stop sets the width: no more than the margin beyond it

@@ -116,23 +116,28 @@ def analyse_governor(model: MachineModel) -> dict:
     damping) and, for a machine periodic in phi without a driven part behind a coupling or clutch, the Floquet
     multipliers of the periodic orbit."""
     governor = model.governor
-    characteristic = static_characteristic(governor)
     load = model.external_load(0.0)
     point = operating_point(model, load)
     levels = [load] + [event.torque for event in model.scene.scenario.load_events]
     linear = linear_stability(model, point)
-    z = point.sleeve
-    sensor = governor.sensor
+    if governor.kind == "pi":  # isochronous within the valve's travel, no sleeve (docs/theory.md §8.10)
+        characteristic, statism, insensitivity = None, 0.0, 0.0
+    else:
+        characteristic = static_characteristic(governor)
+        statism, sensor = characteristic.statism, governor.sensor
+        insensitivity = (sensor.equilibrium_speed(point.sleeve, sensor.static_friction)
+                         - sensor.equilibrium_speed(point.sleeve, -sensor.static_friction)) / point.speed
     result = {
         "scene": model.scene.name,
         "kind": governor.kind,
+        "sensor": None if characteristic is None else governor.sensor.name,
         "feedback": governor.feedback if governor.kind == "indirect" else None,
         "set_speed": governor.set_speed(),
-        "characteristic": {key: value.tolist() if hasattr(value, "tolist") else value
-                           for key, value in dataclasses.asdict(characteristic).items()},
-        "statism": characteristic.statism,
-        "insensitivity_at_operating_point": (sensor.equilibrium_speed(z, sensor.static_friction)
-                                             - sensor.equilibrium_speed(z, -sensor.static_friction)) / point.speed,
+        "characteristic": None if characteristic is None else {
+            key: value.tolist() if hasattr(value, "tolist") else value
+            for key, value in dataclasses.asdict(characteristic).items()},
+        "statism": statism,
+        "insensitivity_at_operating_point": insensitivity,
         "operating_points": [dataclasses.asdict(operating_point(model, level)) for level in levels],
         "droop": dataclasses.asdict(droop(model)),
         "linear": {
@@ -144,6 +149,7 @@ def analyse_governor(model: MachineModel) -> dict:
             "stable": linear.stable,
             "polynomial": linear.polynomial.tolist(),
             "vyshnegradsky": list(linear.vyshnegradsky) if linear.vyshnegradsky else None,
+            "pi_loop": list(linear.pi_loop) if linear.pi_loop else None,
             "critical_damping": critical_damping(model, point),
         },
         "floquet": None,

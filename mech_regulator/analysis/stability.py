@@ -22,6 +22,7 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.statics import OperatingPoint
+from mech_regulator.governors.pi import pi_loop_coefficients
 from mech_regulator.model import LoadPiece, MachineModel
 
 SHOOTING_TOLERANCE = 1e-8  # the periodic orbit is found when |P(x) - x| is below this, relative to x's scale
@@ -35,7 +36,9 @@ class LinearStability:
     dominant: the eigenvalue with the largest real part; damping_ratio = -Re/|lambda| of the dominant
     mode; period [s] of the dominant mode (inf if it does not oscillate); stable: all Re < 0;
     polynomial: characteristic polynomial coefficients, highest power first (leading 1);
-    vyshnegradsky: (A, B) for the direct governor's cubic when all its coefficients are positive, else None.
+    vyshnegradsky: (A, B) for the direct governor's cubic when all its coefficients are positive, else None;
+    pi_loop: for a PI governor the closed forms (a1, a0) of its quadratic p^2 + a1 p + a0 (pi_loop_coefficients),
+    else None.
     """
 
     state_names: tuple[str, ...]
@@ -47,6 +50,7 @@ class LinearStability:
     stable: bool
     polynomial: np.ndarray
     vyshnegradsky: tuple[float, float] | None
+    pi_loop: tuple[float, float] | None = None
 
 
 def averaged_rhs(model: MachineModel, external_load: float):
@@ -65,7 +69,12 @@ def averaged_rhs(model: MachineModel, external_load: float):
 
 
 def equilibrium_state(model: MachineModel, point: OperatingPoint) -> np.ndarray:
-    """The averaged model's state at an operating point: [omega, a, 0, (s, (0))]."""
+    """The averaged model's state at an operating point: [omega, a, 0, (s, (0))], or for a PI governor [omega, x] with
+    the integral part x = throttle - K_p e (governors/pi.py)."""
+    governor = model.governor
+    if governor.kind == "pi":
+        error = (governor.set_point - point.speed) / governor.set_point
+        return np.array([point.speed, point.throttle - governor.gain * error])
     x = [point.speed, model.governor.sensor.arm_angle(point.sleeve), 0.0]
     if model.governor.kind == "indirect":
         x.append(point.servo)
@@ -93,16 +102,37 @@ def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStabil
         a2, a1, a0 = polynomial[1:]
         vyshnegradsky = (a2 / a0 ** (1.0 / 3.0), a1 / a0 ** (2.0 / 3.0))
     magnitude = abs(dominant)
+    loop = _pi_loop(model, point) if model.governor.kind == "pi" else None
     return LinearStability(
         state_names=("omega",) + model.governor.state_names, jacobian=jacobian, eigenvalues=eigenvalues,
         dominant=complex(dominant), damping_ratio=-dominant.real / magnitude if magnitude > 0 else math.nan,
         period=2.0 * math.pi / abs(dominant.imag) if dominant.imag != 0.0 else math.inf,
-        stable=bool(np.all(eigenvalues.real < 0.0)), polynomial=polynomial, vyshnegradsky=vyshnegradsky)
+        stable=bool(np.all(eigenvalues.real < 0.0)), polynomial=polynomial, vyshnegradsky=vyshnegradsky,
+        pi_loop=loop)
+
+
+def _pi_loop(model: MachineModel, point: OperatingPoint) -> tuple[float, float]:
+    """(a1, a0) of the PI loop at an operating point (governors/pi.py pi_loop_coefficients, docs/theory.md §8.10): the
+    averaged machine's drive M_d and inertia J_m at the point's speed, its self-regulation D = d(throttle M_d +
+    M_c)/d omega at the point's throttle by central differences."""
+    governor, load = model.governor, point.external_load
+    inertia, drive, _ = model.cycle_averages(point.speed, load)
+
+    def net(omega: float) -> float:
+        _, drive_at, other = model.cycle_averages(omega, load)
+        return point.throttle * drive_at + other
+
+    step = 1e-6 * max(abs(point.speed), 1.0)
+    regulation = (net(point.speed + step) - net(point.speed - step)) / (2.0 * step)
+    return pi_loop_coefficients(governor.gain, governor.integral_time, governor.set_point, drive, regulation, inertia)
 
 
 def critical_damping(model: MachineModel, point: OperatingPoint, upper: float = 1e7) -> float | None:
     """Sleeve damping [N s/m] at which the averaged model's dominant eigenvalue crosses the imaginary
-    axis (stable above it), or None if the stability does not change between 0 and `upper`."""
+    axis (stable above it), or None if the stability does not change between 0 and `upper` or the governor has no
+    sleeve (PI)."""
+    if model.governor.kind == "pi":
+        return None
     def growth(damping: float) -> float:
         sensor = dataclasses.replace(model.governor.sensor, damping=damping)
         varied = dataclasses.replace(model, governor=dataclasses.replace(model.governor, sensor=sensor))
@@ -172,7 +202,10 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
 
 
 def _state_scale(model: MachineModel, point: OperatingPoint, size: int) -> np.ndarray:
-    """Typical size of each averaged-model state (omega, a, a', s, zeta) for difference steps and tolerances."""
+    """Typical size of each averaged-model state (omega, a, a', s, zeta; a PI governor's omega, x) for difference
+    steps and tolerances."""
+    if model.governor.kind == "pi":
+        return np.array([max(abs(point.speed), 1.0), 1.0])
     return np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[:size]
 
 

@@ -21,7 +21,7 @@ from mech_regulator.model import MachineModel
 @dataclass(frozen=True)
 class StaticCharacteristic:
     """Equilibrium crank speed against sleeve position over the stroke (the part of it where a speed can
-    hold the sleeve: PorterSensor.characteristic_range).
+    hold the sleeve: CentrifugalSensor.characteristic_range).
 
     sleeve [m]; speed [rad/s] (no friction); speed_low / speed_high [rad/s]: the band within which
     static friction holds the sleeve; statism = (omega(z_high) - omega(z_low)) / omega_mean over the
@@ -37,7 +37,8 @@ class StaticCharacteristic:
 
 
 def static_characteristic(governor: Governor, points: int = 101) -> StaticCharacteristic:
-    """The sensor's static characteristic omega_g^2 = ((m + M) g + F_spring(z) +- F_s) / (m l cos a)."""
+    """The sensor's static characteristic: the speed at which the lift vanishes at each sleeve position z (Porter:
+    omega_g^2 = ((m + M) g + F_spring(z) +- F_s) / (m l cos a); CentrifugalSensor.equilibrium_speed)."""
     sensor = governor.sensor
     sleeve = np.linspace(*sensor.characteristic_range(), points)
     static = sensor.static_friction
@@ -76,6 +77,8 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
     follows from the machine's own balance at that throttle.
     """
     governor = model.governor
+    if governor.kind == "pi":
+        return _pi_operating_point(model, external_load)
     sensor = governor.sensor
     z_low, z_high = sensor.characteristic_range()
     mean_inertia = model.cycle_averages(sensor.equilibrium_speed(z_low), external_load)[0]
@@ -131,6 +134,31 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
     if servo < s_low:
         return point(z, s_low, s_low, "servo on its low stop")
     return point(z, servo, servo)
+
+
+def _pi_operating_point(model: MachineModel, external_load: float) -> OperatingPoint:
+    """The PI governor's steady state (docs/theory.md §8.10): the integral part removes any speed error, so the speed
+    is the set speed and the throttle the one that balances the load there, unless that throttle lies beyond the
+    valve's travel: then the valve sits on its stop and the speed follows from the machine's own balance. No sleeve,
+    no servo (NaN)."""
+    governor = model.governor
+    omega = governor.set_speed()
+    mean_inertia = model.cycle_averages(omega, external_load)[0]
+    throttle = model.balance_throttle(omega, external_load)
+    low, high = governor.travel
+    if low <= throttle <= high:
+        return OperatingPoint(external_load, omega, math.nan, throttle, math.nan, "", mean_inertia)
+    stop, name = (high, "high") if throttle > high else (low, "low")
+
+    def surplus(w: float) -> float:
+        _, drive, other = model.cycle_averages(w, external_load)
+        return stop * drive + other
+
+    limited = f"valve on its {name} stop"
+    speed = _machine_speed(surplus, omega)
+    if math.isnan(speed):
+        limited += "; no steady speed at that throttle"
+    return OperatingPoint(external_load, speed, math.nan, stop, math.nan, limited, mean_inertia)
 
 
 def _machine_speed(surplus, guess: float) -> float:

@@ -54,7 +54,7 @@ def describe(model: MachineModel) -> str:
     if scene.description:
         lines.append(f"  {scene.description.strip()}")
     units = {"phi": "rad", "omega": "rad/s", "arm_angle": "rad", "arm_rate": "rad/s", "servo": "-",
-             "feedback_shift": "m", "twist": "rad", "omega_driven": "rad/s"}
+             "feedback_shift": "m", "integral": "-", "twist": "rad", "omega_driven": "rad/s"}
     lines.append("state vector: " + ", ".join(f"{name} [{units[name]}]" for name in model.state_names()))
     if model.reduced is None:
         lines.append(f"inertia: constant J = {model.inertia_constant:g} kg m^2 (no mechanism: no dJ/dphi term)")
@@ -97,7 +97,8 @@ def describe(model: MachineModel) -> str:
                      "reduced to its shaft")
         lines += _driven_lines(model)
     if model.governor is not None:
-        lines.append("governor (M_d = throttle * drive; hybrid modes with exact stick, break-away and stops):")
+        lines.append("governor (M_d = throttle * drive" + ("):" if model.governor.kind == "pi" else
+                                                          "; hybrid modes with exact stick, break-away and stops):"))
         lines += [f"  {line}" for line in model.governor.describe()]
     lines.append(f"dynamic period: {math.degrees(model.dynamic_period()):g} deg of crank angle")
     if model.switch_angles():
@@ -261,11 +262,18 @@ def format_required_coupling(result, source: str) -> str:
     return terminal_text("\n".join(lines))
 
 
+def _sleeve_text(point: dict) -> str:
+    """'sleeve z mm, ' of an operating point, or nothing for a governor without a sleeve (PI: NaN, or None once the
+    summary went through JSON)."""
+    sleeve = point["sleeve"]
+    return f"sleeve {sleeve * 1000:.4g} mm, " if sleeve is not None and sleeve == sleeve else ""
+
+
 def _governed_lines(governed: dict) -> list[str]:
     """The governor's part of a run summary: operating point and one line per load change."""
     point = governed["operating_point"]
     lines = [f"governor: predicted operating point at the initial load {point['external_load']:.4g} N m: "
-             f"omega {point['speed']:.6g} rad/s, sleeve {point['sleeve'] * 1000:.4g} mm, throttle "
+             f"omega {point['speed']:.6g} rad/s, {_sleeve_text(point)}throttle "
              f"{point['throttle']:.4g}" + (f" ({point['limited']})" if point["limited"] else "")]
     for response in governed["load_responses"]:
         settling = (f"settles in {response['settling_time']:.3g} s" if response["settling_time"] is not None
@@ -283,19 +291,25 @@ def format_governor(analysis: dict) -> str:
     """The human-readable statics and stability of a governed scene."""
     kind = analysis["kind"] + (f", {analysis['feedback']} feedback" if analysis["feedback"] else "")
     characteristic = analysis["characteristic"]
-    speeds = characteristic["speed"]
-    lines = [f"scene {analysis['scene']}: {kind} governor",
-             f"static characteristic: omega = {speeds[0]:.5g} rad/s at z = {characteristic['sleeve'][0] * 1000:.4g} mm "
-             f"to {speeds[-1]:.5g} rad/s at z = {characteristic['sleeve'][-1] * 1000:.4g} mm; "
-             f"statism (degree of non-uniformity) {analysis['statism']:.4g}",
-             f"insensitivity (sleeve friction) at the operating point: {analysis['insensitivity_at_operating_point']:.4g}"]
+    lines = [f"scene {analysis['scene']}: {kind} governor" + (f", {analysis['sensor']} sensor" if analysis["sensor"]
+                                                              else "")]
+    if characteristic is None:  # PI
+        lines.append(f"isochronous: omega = {analysis['set_speed']:.6g} rad/s (the set speed) at every load the "
+                     f"valve's travel can balance; statism (degree of non-uniformity) {analysis['statism']:.4g}")
+    else:
+        speeds, sleeve = characteristic["speed"], characteristic["sleeve"]
+        lines += [f"static characteristic: omega = {speeds[0]:.5g} rad/s at z = {sleeve[0] * 1000:.4g} mm to "
+                  f"{speeds[-1]:.5g} rad/s at z = {sleeve[-1] * 1000:.4g} mm; statism (degree of non-uniformity) "
+                  f"{analysis['statism']:.4g}",
+                  "insensitivity (sleeve friction) at the operating point: "
+                  f"{analysis['insensitivity_at_operating_point']:.4g}"]
     if analysis["kind"] == "indirect":
         lines.append(f"set speed (sleeve at the pilot's neutral): {analysis['set_speed']:.6g} rad/s")
     lines.append("operating points (cycle-averaged machine):")
     for point in analysis["operating_points"]:
         servo = f", servo {point['servo']:.4g}" if point["servo"] == point["servo"] else ""
         lines.append(f"  load {point['external_load']:8.4g} N m: omega {point['speed']:.6g} rad/s "
-                     f"({point['speed'] * 30 / math.pi:.5g} rpm), sleeve {point['sleeve'] * 1000:.4g} mm, "
+                     f"({point['speed'] * 30 / math.pi:.5g} rpm), {_sleeve_text(point)}"
                      f"throttle {point['throttle']:.4g}{servo}" + (f"  [{point['limited']}]" if point["limited"] else ""))
     droop = analysis["droop"]
     lines.append(f"droop: {droop['per_unit_load']:+.4g} rad/s per N m of load"
@@ -314,6 +328,10 @@ def format_governor(analysis: dict) -> str:
         A, B = linear["vyshnegradsky"]
         lines.append(f"  Vyshnegradsky: A = {A:.4g}, B = {B:.4g}, A B = {A * B:.4g} "
                      f"({'> 1: stable' if A * B > 1 else '<= 1: unstable'})")
+    if linear["pi_loop"]:
+        a1, a0 = linear["pi_loop"]
+        lines.append(f"  PI loop p^2 + a1 p + a0: a1 = {a1:.4g} 1/s, a0 = {a0:.4g} 1/s^2 "
+                     f"({'both > 0: stable' if a1 > 0 and a0 > 0 else 'not both > 0: unstable'})")
     if linear["critical_damping"] is not None:
         lines.append(f"  sleeve damping at the stability boundary: {linear['critical_damping']:.5g} N s/m")
     floquet = analysis["floquet"]

@@ -24,6 +24,9 @@ import numpy as np
 
 from mech_regulator.governors import servo as servo_motor
 from mech_regulator.governors.centrifugal import PorterSensor
+from mech_regulator.governors.hartnell import HartnellSensor
+from mech_regulator.governors.pi import ElectronicGovernor
+from mech_regulator.governors.sensor import CentrifugalSensor
 from mech_regulator.governors.valve import ValveCharacteristic, build_valve
 from mech_regulator.scene import schema
 
@@ -56,7 +59,7 @@ class Guard:
 class Governor:
     """A governor assembled from its scene entry.
 
-    sensor: the Porter sensor; valve: throttle(z) for direct action (None for indirect);
+    sensor: the centrifugal sensor (governors/sensor.py); valve: throttle(z) for direct action (None for indirect);
     pilot_neutral [m], servo_gain [1/(m s)], servo_max_speed [1/s] (inf = unlimited), dead_band [m],
     travel (low, high) [-], feedback ('none' | 'rigid' | 'isodromic'), feedback_gain rho [m],
     feedback_time_constant T_i [s], feedback_reference: servo position of rigid feedback's neutral [-];
@@ -64,7 +67,7 @@ class Governor:
     """
 
     kind: str
-    sensor: PorterSensor
+    sensor: CentrifugalSensor
     valve: ValveCharacteristic | None
     valve_formula: str
     pilot_neutral: float = math.nan
@@ -175,7 +178,7 @@ class Governor:
     def derivatives(self, mode: Mode, ideal: bool = False) -> Callable[[np.ndarray], list[float]]:
         """Time derivatives of the governor's states in a mode, as a function of the full state y.
 
-        Sleeve: a' = arm_rate, a'' from PorterSensor.arm_acceleration with friction +F_k ('up'),
+        Sleeve: a' = arm_rate, a'' from the sensor's arm_acceleration with friction +F_k ('up'),
         -F_k ('down') or none ('free'); frozen when stuck or on a stop. Servo: s' = servo_command, 0 on a
         stop; isodromic dashpot: T_i zeta' + zeta = rho T_i s'. ideal: frictionless, no dead band, no
         speed limit, no stops (the smooth model that is linearised).
@@ -265,11 +268,23 @@ class Governor:
         }[mode[1]]
         return sleeve_guards + servo_guards
 
+    def signals(self, y: np.ndarray) -> dict[str, np.ndarray | float]:
+        """The governor's outputs at state(s) y (one state, or states along the last axis) besides the throttle:
+        sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], arm_rate [rad/s] and its further states by name
+        (servo [-], feedback_shift [m])."""
+        sensor = self.sensor
+        arm, arm_rate = y[ARM], y[ARM_RATE]
+        values = {"sleeve": np.vectorize(sensor.sleeve, otypes=[float])(arm),
+                  "sleeve_velocity": np.vectorize(sensor.sleeve_rate, otypes=[float])(arm, arm_rate),
+                  "arm_angle": arm, "arm_rate": arm_rate}
+        for index, name in enumerate(self.state_names[2:], start=SERVO):
+            values[name] = y[index]
+        return values
+
     def describe(self) -> list[str]:
         """Lines for `describe`: the governor's parts and equations."""
         sensor = self.sensor
-        lines = [f"{self.kind} governor, Porter sensor: m = {sensor.ball_mass:g} kg, l = {sensor.arm_length:g} m, "
-                 f"M = {sensor.sleeve_mass:g} kg, spindle ratio {sensor.ratio:g}",
+        lines = [f"{self.kind} governor, {sensor.describe()}",
                  f"  sleeve: stroke {sensor.stroke[0]:g} to {sensor.stroke[1]:g} m (inelastic stops), damping "
                  f"{sensor.damping:g} N s/m, friction {sensor.kinetic_friction:g} N (static {sensor.static_friction:g} N)"]
         if self.kind == "direct":
@@ -288,18 +303,15 @@ class Governor:
         return lines
 
 
-def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], float]) -> Governor:
+def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], float]) -> Governor | ElectronicGovernor:
     """Assemble a scene's governor. balance_throttle(omega) is the throttle at which the cycle-averaged
     drive balances the initial load at crank speed omega; rigid feedback's default reference is its
     value at the set speed."""
-    spring = spec.spring or schema.SleeveSpring(stiffness=0.0)
-    sensor = PorterSensor(
-        ball_mass=spec.ball_mass, arm_length=spec.arm_length, sleeve_mass=spec.sleeve_mass,
-        stiffness=spring.stiffness, free_position=spring.free_position, damping=spec.damping,
-        kinetic_friction=spec.friction,
-        static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
-        ratio=spec.ratio, gravity=spec.gravity, stroke=(spec.stroke[0], spec.stroke[1]))
-    if isinstance(spec, schema.DirectGovernor):
+    if isinstance(spec, schema.PIGovernor):
+        return ElectronicGovernor(set_point=spec.set_speed, gain=spec.gain, integral_time=spec.integral_time,
+                                  travel=(spec.travel[0], spec.travel[1]))
+    sensor = build_sensor(spec)
+    if not isinstance(spec, schema.IndirectGovernor):
         valve, formula, breaks = build_valve(spec.valve)
         return Governor(kind="direct", sensor=sensor, valve=valve, valve_formula=formula, valve_breaks=breaks)
     servo, feedback = spec.servo, spec.feedback
@@ -311,3 +323,16 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
         servo_gain=servo.gain, servo_max_speed=servo.max_speed or math.inf, dead_band=servo.dead_band,
         travel=(servo.travel[0], servo.travel[1]), feedback=feedback.type, feedback_gain=feedback.gain,
         feedback_time_constant=feedback.time_constant or math.inf, feedback_reference=reference or 0.0)
+
+
+def build_sensor(spec: schema.DirectGovernor | schema.IndirectGovernor | schema.HartnellGovernor) -> CentrifugalSensor:
+    """The centrifugal sensor of a scene's governor: Hartnell's for type 'hartnell', Porter's otherwise."""
+    spring = spec.spring or schema.SleeveSpring(stiffness=0.0)
+    common = dict(ball_mass=spec.ball_mass, sleeve_mass=spec.sleeve_mass, stiffness=spring.stiffness,
+                  free_position=spring.free_position, damping=spec.damping, kinetic_friction=spec.friction,
+                  static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
+                  ratio=spec.ratio, gravity=spec.gravity, stroke=(spec.stroke[0], spec.stroke[1]))
+    if isinstance(spec, schema.HartnellGovernor):
+        return HartnellSensor(ball_arm=spec.ball_arm, sleeve_arm=spec.sleeve_arm, pivot_radius=spec.pivot_radius,
+                              **common)
+    return PorterSensor(arm_length=spec.arm_length, **common)

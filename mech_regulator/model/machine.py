@@ -35,7 +35,7 @@ from scipy import optimize
 from mech_regulator.effects import Effect, build_drive, build_load, output_position_of
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
-from mech_regulator.governors import ARM, Governor, Guard, Mode, build_governor
+from mech_regulator.governors import ARM, ElectronicGovernor, Governor, Guard, Mode, build_governor
 from mech_regulator.mechanisms import build_reduced
 from mech_regulator.mechanisms.checks import refuse_unbuildable
 from mech_regulator.model.drivetrain import (
@@ -209,7 +209,7 @@ class MachineModel:
     has_weight: bool
     effects: tuple[Effect, ...]
     load_pieces: tuple[LoadPiece, ...]
-    governor: Governor | None = None
+    governor: Governor | ElectronicGovernor | None = None
     coupling: CouplingModel | None = None
     joint_friction: JointFrictionModel | None = None
     clutch: ClutchModel | None = None
@@ -944,14 +944,8 @@ class MachineModel:
                                                                                               "omega_output")
             out[names[0]], out[names[1]] = q, dq * omega
         if self.governor is not None:
-            arm, arm_rate = y[2], y[3]
-            arm_length = self.governor.sensor.arm_length
             out["throttle"] = throttle
-            out["sleeve"] = 2.0 * arm_length * (1.0 - np.cos(arm))
-            out["sleeve_velocity"] = 2.0 * arm_length * np.sin(arm) * arm_rate
-            out["arm_angle"] = arm
-            for index, name in enumerate(self.governor.state_names[2:], start=4):
-                out[name] = y[index]
+            out.update(self.governor.signals(y))
         return out
 
 

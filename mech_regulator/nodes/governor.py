@@ -5,7 +5,8 @@ Subscribes `joint_states` (joint "crank", velocity omega [rad/s], stamped with t
 For each message it advances its own states to that time with the previous speed held, then publishes
 `throttle` (sensor_msgs/JointState, joint "throttle", position 0..1) stamped with the same time,
 `governor/state` (sensor_msgs/JointState: "sleeve" z [m] and z' [m/s], "arm" angle [rad] and rate
-[rad/s], "throttle", and for indirect action "servo" [-] (and "feedback_shift" [m]); several exchange times in one
+[rad/s], "throttle", and for indirect action "servo" [-] (and "feedback_shift" [m]); a PI governor's "throttle" and
+"integral", its integral part [-]; several exchange times in one
 message, each group opened by a joint "stamp": common.Batch, sent at least every common.BATCH_PERIOD s of wall
 time and whenever the machine's run state changes) and each mode
 change (a stop reached, the sleeve sticking or breaking away) on `governor/events` (std_msgs/String,
@@ -146,10 +147,14 @@ class GovernorNode(Node):
             self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
         self.reported_events = len(self.stepper.events)
         values = self.stepper.outputs()
-        extra = [name for name in ("servo", "feedback_shift") if name in values]
-        self.states.add(when, ["sleeve", "arm", "throttle", *extra],
-                        [values["sleeve"], values["arm_angle"], values["throttle"], *(values[name] for name in extra)],
-                        [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)], [])
+        if self.model.governor.kind == "pi":
+            self.states.add(when, ["throttle", "integral"], [values["throttle"], values["integral"]], [0.0, 0.0], [])
+        else:
+            extra = [name for name in ("servo", "feedback_shift") if name in values]
+            self.states.add(when, ["sleeve", "arm", "throttle", *extra],
+                            [values["sleeve"], values["arm_angle"], values["throttle"],
+                             *(values[name] for name in extra)],
+                            [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)], [])
         self.states.send_when_due()  # after the answer, while the machine integrates
         if self.stepper.status != "complete":
             self.report()

@@ -214,23 +214,25 @@ class RecorderNode(Node):
         every value read checked first (trust.BadMessage)."""
         if self.model.governor is None:
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
+        pi = self.model.governor.kind == "pi"  # its joints: throttle and integral
         extra = tuple(name for name in ("servo", "feedback_shift") if name in self.model.governor.state_names)
-        groups = batch_groups(message, ("sleeve", "arm", "throttle", *extra))
+        groups = batch_groups(message, ("throttle", "integral") if pi else ("sleeve", "arm", "throttle", *extra))
         newest = next(reversed(self.governor), None)  # (the dict's order is its times')
         if groups and newest is not None and groups[0][0] < newest:
             raise BadMessage("out of order", f"governor/state from {seconds(groups[0][0]):.9g} s after "
                              f"{seconds(newest):.9g} s")
         for when, joints in groups:
-            values = [*joints["sleeve"][:2], *joints["arm"][:2], *(joints[name][0] for name in extra)]
+            values = [joints["integral"][0]] if pi else [*joints["sleeve"][:2], *joints["arm"][:2],
+                                                          *(joints[name][0] for name in extra)]
             for value in values:
                 bounded(value, -math.inf, math.inf, f"governor/state at {seconds(when):.9g} s")
             bounded(joints["throttle"][0], 0.0, 1.0, f"governor/state at {seconds(when):.9g} s: throttle")
         for when, joints in groups:
-            values = {"sleeve": joints["sleeve"][0], "sleeve_velocity": joints["sleeve"][1],
-                      "arm_angle": joints["arm"][0], "arm_rate": joints["arm"][1], "throttle": joints["throttle"][0]}
-            for name in ("servo", "feedback_shift"):
-                if name in joints:
-                    values[name] = joints[name][0]
+            values = {name: joints[name][0] for name in ("throttle", "integral", "servo", "feedback_shift")
+                      if name in joints}
+            if not pi:
+                values.update({"sleeve": joints["sleeve"][0], "sleeve_velocity": joints["sleeve"][1],
+                               "arm_angle": joints["arm"][0], "arm_rate": joints["arm"][1]})
             self.governor[when] = values
             self.recording.add_governor(when, values)
             self.part_arrived(when)
@@ -410,9 +412,8 @@ class RecorderNode(Node):
             machine = self.machine[when]
             row = machine[:2]
             if self.model.governor is not None:
-                values = self.governor[when]
-                row += [values["arm_angle"], values["arm_rate"]]
-                row += [values[name] for name in self.model.governor.state_names[2:]]
+                values = self.governor[when]  # its values are named as its states
+                row += [values[name] for name in self.model.governor.state_names]
             rows.append(row + machine[2:])
         tripped = self.tripped_at if self.tripped_at is not None else np.inf
         throttle = [self.moments[when][2] if self.controller == "external" else 0.0 if seconds(when) >= tripped else

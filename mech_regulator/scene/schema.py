@@ -11,6 +11,7 @@ direction); load values are resisting magnitudes unless a description says "sign
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, model_validator
@@ -789,12 +790,11 @@ Valve = Annotated[Annotated[LinearValve, Tag("linear")] | Annotated[TableValve, 
                   Discriminator(_valve_type)]
 
 
-class _CentrifugalGovernor(SceneModel):
-    """Porter-type centrifugal sensor: two balls on arms of length l (links equal to the arms), sleeve rise
-    z = 2 l (1 - cos a); Watt's governor is sleeve_mass 0, a spring-loaded one adds a spring."""
+class _CentrifugalSensor(SceneModel):
+    """What every centrifugal sensor has (governors/sensor.py): two balls, a sleeve with its spring, damping and
+    friction, a spindle ratio and the sleeve's stroke between hard stops."""
 
     ball_mass: Positive = Field(description="mass m of each of the two balls [kg]")
-    arm_length: Positive = Field(description="arm (and link) length l [m]")
     sleeve_mass: NonNegative = Field(0.0, description="sleeve mass M; 0 = Watt's governor [kg]")
     spring: SleeveSpring | None = Field(None, description="optional spring on the sleeve")
     damping: NonNegative = Field(0.0, description="viscous damping on the sleeve, force c z' [N s/m]")
@@ -807,6 +807,20 @@ class _CentrifugalGovernor(SceneModel):
     gravity: Positive = Field(9.81, description="gravity along the spindle [m/s^2]")
 
     @model_validator(mode="after")
+    def _friction(self) -> _CentrifugalSensor:
+        if self.static_friction is not None and self.static_friction < self.friction:
+            raise ValueError(f"static_friction = {self.static_friction} N is below friction = {self.friction} N; "
+                             "expected static_friction >= friction")
+        return self
+
+
+class _CentrifugalGovernor(_CentrifugalSensor):
+    """Porter-type centrifugal sensor: two balls on arms of length l (links equal to the arms), sleeve rise
+    z = 2 l (1 - cos a); Watt's governor is sleeve_mass 0, a spring-loaded one adds a spring."""
+
+    arm_length: Positive = Field(description="arm (and link) length l [m]")
+
+    @model_validator(mode="after")
     def _sensor(self) -> _CentrifugalGovernor:
         low, high = self.stroke
         if not 0.0 < low < high < 2.0 * self.arm_length:
@@ -814,9 +828,6 @@ class _CentrifugalGovernor(SceneModel):
                 f"stroke = {self.stroke} m; expected 0 < z_low < z_high < 2 arm_length = {2 * self.arm_length:g} m "
                 "(at z = 0 the arms hang along the spindle and the balls have no lever to lift the sleeve; at "
                 "z = 2 arm_length the arms are horizontal)")
-        if self.static_friction is not None and self.static_friction < self.friction:
-            raise ValueError(f"static_friction = {self.static_friction} N is below friction = {self.friction} N; "
-                             "expected static_friction >= friction")
         return self
 
 
@@ -825,6 +836,13 @@ class DirectGovernor(_CentrifugalGovernor):
 
     type: Literal["direct"]
     valve: Valve = Field(description="throttle as a function of the sleeve position")
+
+
+def _check_throttle_travel(travel: list[float]) -> None:
+    """A travel [low, high] in throttle must lie within 0..1 with low < high."""
+    low, high = travel
+    if not 0.0 <= low < high <= 1.0:
+        raise ValueError(f"travel = {travel}; expected 0 <= low < high <= 1 (throttle)")
 
 
 class Servo(SceneModel):
@@ -838,9 +856,7 @@ class Servo(SceneModel):
 
     @model_validator(mode="after")
     def _travel(self) -> Servo:
-        low, high = self.travel
-        if not 0.0 <= low < high <= 1.0:
-            raise ValueError(f"travel = {self.travel}; expected 0 <= low < high <= 1 (throttle)")
+        _check_throttle_travel(self.travel)
         return self
 
 
@@ -882,7 +898,62 @@ class IndirectGovernor(_CentrifugalGovernor):
         return self
 
 
-Governor = Annotated[DirectGovernor | IndirectGovernor, Field(discriminator="type")]
+class HartnellGovernor(_CentrifugalSensor):
+    """Direct action of a spring-loaded Hartnell sensor (governors/hartnell.py): two bell cranks pivoted at
+    pivot_radius on the turning frame, each with a ball on its ball arm (upright at z = 0) and its sleeve arm
+    (horizontal at z = 0) under the sleeve, which rises z = sleeve_arm sin theta; the spring pushes it down."""
+
+    type: Literal["hartnell"]
+    ball_arm: Positive = Field(description="length a of the bell crank's arm to the ball's centre [m]")
+    sleeve_arm: Positive = Field(description="length b of the bell crank's arm to the sleeve [m]")
+    pivot_radius: Positive = Field(description="radius r0 of the bell cranks' pivots from the spindle's axis [m]")
+    spring: SleeveSpring = Field(description="the spring that pushes the sleeve down")
+    stroke: list[float] = Field(min_length=2, max_length=2,
+                                description="sleeve travel [z_low, z_high] between inelastic hard stops, from the "
+                                            "position with both arms square to the spindle [m]")
+    valve: Valve = Field(description="throttle as a function of the sleeve position")
+
+    @model_validator(mode="after")
+    def _sensor(self) -> HartnellGovernor:
+        low, high = self.stroke
+        if not -self.sleeve_arm < low < high < self.sleeve_arm:
+            raise ValueError(f"stroke = {self.stroke} m; expected -sleeve_arm < z_low < z_high < sleeve_arm = "
+                             f"{self.sleeve_arm:g} m (at +-sleeve_arm the sleeve arms stand along the spindle)")
+        if self.pivot_radius <= self.ball_arm:
+            raise ValueError(f"pivot_radius = {self.pivot_radius} m; expected more than ball_arm = {self.ball_arm} m "
+                             "(the balls would reach the spindle's axis)")
+        theta = math.asin(low / self.sleeve_arm)
+        spring = self.spring.stiffness * (low - self.spring.free_position)
+        pull = (self.sleeve_arm * (self.sleeve_mass * self.gravity + spring)
+                - 2.0 * self.ball_mass * self.gravity * self.ball_arm * math.tan(theta))
+        if pull <= 0.0:
+            raise ValueError(f"spring = {self.spring.stiffness} N/m free at {self.spring.free_position} m does not "
+                             f"hold the sleeve down at its low stop z = {low} m against the balls' weights; expected "
+                             "sleeve_arm (sleeve_mass g + k (z_low - free_position)) > 2 ball_mass g ball_arm "
+                             "tan(theta_low)")
+        return self
+
+
+class PIGovernor(SceneModel):
+    """Electronic PI speed governor (governors/pi.py): it measures the crank speed and sets the throttle valve with
+    throttle = x + gain (set_speed - omega) / set_speed within the travel, x' = gain e / integral_time."""
+
+    type: Literal["pi"]
+    set_speed: Positive = Field(description="crank speed the governor holds [rad/s]")
+    gain: Positive = Field(description="proportional gain K_p: throttle per relative speed error (omega_s - omega) / "
+                                       "omega_s [-]")
+    integral_time: Positive = Field(description="integral time T_i: x' = K_p e / T_i; also the anti-windup's tracking "
+                                                "time on the valve's stops [s]")
+    travel: list[float] = Field([0.0, 1.0], min_length=2, max_length=2,
+                                description="valve travel [low, high] in throttle, within 0..1 [-]")
+
+    @model_validator(mode="after")
+    def _travel(self) -> PIGovernor:
+        _check_throttle_travel(self.travel)
+        return self
+
+
+Governor = Annotated[DirectGovernor | IndirectGovernor | HartnellGovernor | PIGovernor, Field(discriminator="type")]
 
 
 # --------------------------------------------------------------------------------------------
@@ -1013,13 +1084,20 @@ class Scene(SceneModel):
         if self.solver.method == "energy":
             raise ValueError("solver.method 'energy' integrates the machine alone in phi; a governed scene needs a "
                              "method in time (DOP853, RK45, RK23, Radau, BDF, LSODA or RK4)")
+        if self.governor.type == "pi":
+            for key in ("sleeve", "servo"):
+                if getattr(initial, key) is not None:
+                    raise ValueError(f"scenario.initial.{key} is set but the governor is 'pi' (it has no sleeve and "
+                                     "no servo-motor: the integral part starts where the throttle balances the load)")
+            return self
         low, high = self.governor.stroke
         if initial.sleeve is not None and not low <= initial.sleeve <= high:
             raise ValueError(f"scenario.initial.sleeve = {initial.sleeve} m lies outside the governor's stroke "
                              f"{self.governor.stroke} m")
         if initial.servo is not None:
             if self.governor.type != "indirect":
-                raise ValueError("scenario.initial.servo is set but the governor is 'direct' (it has no servo-motor)")
+                raise ValueError(f"scenario.initial.servo is set but the governor is '{self.governor.type}' (it has no "
+                                 "servo-motor)")
             low, high = self.governor.servo.travel
             if not low <= initial.servo <= high:
                 raise ValueError(f"scenario.initial.servo = {initial.servo} lies outside the servo travel "

@@ -176,9 +176,11 @@ def energy_step_refusal(model: MachineModel) -> str | None:
 
 # The keys that set how fast each state moves (for stiffness_refusal's message).
 STATE_KEYS = {"phi": "machine.inertia, machine.loads", "omega": "machine.inertia, machine.drive, machine.loads",
-              "arm_angle": "governor.ball_mass, governor.arm_length, governor.spring, governor.damping",
+              "arm_angle": "governor.ball_mass, governor.arm_length (Hartnell: ball_arm, sleeve_arm), governor.spring, "
+                           "governor.damping",
               "arm_rate": "governor.ball_mass, governor.sleeve_mass, governor.damping, governor.spring",
               "servo": "governor.servo.gain, governor.feedback", "feedback": "governor.feedback",
+              "integral": "governor.gain, governor.integral_time",
               "twist": "machine.coupling", "omega_driven": "machine.coupling, machine.clutch, the driven part's loads"}
 
 

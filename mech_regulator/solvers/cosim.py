@@ -389,14 +389,11 @@ class GovernorStepper:
         return self.governor.throttle(self.state)
 
     def outputs(self) -> dict[str, float]:
-        """The governor's state now: sleeve z [m], sleeve_velocity z' [m/s], arm_angle [rad], arm_rate
-        [rad/s], throttle [-] and, indirect, servo [-] (and feedback_shift [m])."""
-        sensor = self.governor.sensor
-        arm, arm_rate = self.state[2], self.state[3]
-        values = {"sleeve": sensor.sleeve(arm), "sleeve_velocity": 2.0 * sensor.arm_length * math.sin(arm) * arm_rate,
-                  "arm_angle": arm, "arm_rate": arm_rate, "throttle": self.throttle}
-        for index, name in enumerate(self.governor.state_names[2:], start=4):
-            values[name] = float(self.state[index])
+        """The governor's state now: its signals (a centrifugal governor's sleeve z [m], sleeve_velocity z' [m/s],
+        arm_angle [rad], arm_rate [rad/s] and, indirect, servo [-] (and feedback_shift [m]); a PI governor's integral
+        part [-]) and the throttle [-]."""
+        values = {name: float(value) for name, value in self.governor.signals(self.state).items()}
+        values["throttle"] = self.throttle
         return values
 
 

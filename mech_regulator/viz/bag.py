@@ -8,7 +8,8 @@ One message per topic and exchange time, stamped (header and log time) with the 
 or a shuttle's as the machine publishes them), `/throttle` (joint "throttle", position 0..1: the throttle applied over
 the step from that time), `/load_torque_stamped` (torque.z: the external load [N m] from that time), `/governor/state`
 with a governor (joints "sleeve" z [m], z' [m/s]; "arm" angle [rad], rate [rad/s]; "throttle"; "servo",
-"feedback_shift" for indirect action), `/machine/moments` (efforts "drive", "resistance", "external", "net" [N m] on
+"feedback_shift" for indirect action; a PI governor's "throttle" and "integral", its integral part [-]),
+`/machine/moments` (efforts "drive", "resistance", "external", "net" [N m] on
 the crank and "load", the external load applied [N m]), `/clock`; `/diagnostics` once at the start and once at the end
 (the run's status). The nodes' batches (nodes.common.Batch) are a transport detail: here each exchange time is its own
 message. docs/ros.md, "Bags", says how to open one.
@@ -124,10 +125,13 @@ def run_messages(model: MachineModel, times: np.ndarray, states: np.ndarray, thr
         yield "/machine/moments", when, _joints(when, [*((name, nan, nan, float(moments[name][i])) for name in
                                                          ("drive", "resistance", "external", "net")),
                                                        ("load", nan, nan, float(load[i])), ("crank", phi, omega, nan)])
-        if model.governor is not None:
+        if model.governor is not None and model.governor.kind == "pi":
+            governor = [("throttle", applied[i], 0.0), ("integral", columns["integral"][i], 0.0)]
+        elif model.governor is not None:
             governor = [("sleeve", columns["sleeve"][i], columns["sleeve_velocity"][i]),
                         ("arm", columns["arm_angle"][i], states[3][i]), ("throttle", applied[i], 0.0)]
             governor += [(name, columns[name][i], 0.0) for name in ("servo", "feedback_shift") if name in columns]
+        if model.governor is not None:
             yield "/governor/state", when, _joints(when, [(name, float(p), float(v), nan) for name, p, v in governor])
     yield "/diagnostics", stamps[-1], _diagnostics(stamps[-1], model, status, message,
                                                    {"sim_time": float(times[-1]), "finished_at_ns": stamps[-1]})

@@ -174,18 +174,23 @@ def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dic
         speed.annotate(f"statics, load {level:g} N m", (times[-1], predicted), fontsize=7, color="tab:green",
                        va="bottom", ha="right")
     speed.legend(loc="lower right")
-    stroke = model.governor.sensor.stroke
-    panel.plot(times, columns["sleeve"] * 1000.0, color="tab:purple", lw=1.0, label="sleeve z")
-    for stop in stroke:
-        panel.axhline(stop * 1000.0, color="tab:purple", lw=0.6, ls=":")
-    panel.set(xlabel="t [s]", ylabel="sleeve z [mm] (dotted: stops)", title="governor")
+    if model.governor.kind == "pi":  # no sleeve: the integral part of the throttle
+        signal = columns["integral"]
+        panel.plot(times, signal, color="tab:purple", lw=1.0, label="integral part x")
+        panel.set(xlabel="t [s]", ylabel="integral part x [-]", title="governor")
+    else:
+        signal = columns["sleeve"] * 1000.0
+        panel.plot(times, signal, color="tab:purple", lw=1.0, label="sleeve z")
+        for stop in model.governor.sensor.stroke:
+            panel.axhline(stop * 1000.0, color="tab:purple", lw=0.6, ls=":")
+        panel.set(xlabel="t [s]", ylabel="sleeve z [mm] (dotted: stops)", title="governor")
     throttle = panel.twinx()
     throttle.plot(times, columns["throttle"], color="tab:red", lw=1.0, label="throttle")
     throttle.set_ylim(-0.05, 1.05)
     throttle.set_ylabel("throttle [-]", color="tab:red")
     events = [t for t, _ in trajectory.events]
     if events:
-        panel.plot(events, np.interp(events, times, columns["sleeve"] * 1000.0), "k|", ms=6,
+        panel.plot(events, np.interp(events, times, signal), "k|", ms=6,
                    label=f"mode changes ({len(events)})")
     panel.legend(loc="upper left")
 
@@ -258,19 +263,29 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
     operating points, throttle against speed at the operating points, eigenvalues of the averaged model
     and (periodic machines) the Floquet multipliers against exp(lambda T)."""
     characteristic = analysis["characteristic"]
-    sleeve = np.array(characteristic["sleeve"]) * 1000.0
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
     figure.suptitle(f"{model.scene.name}: {analysis['kind']} governor"
                     + (f", {analysis['feedback']} feedback" if analysis["feedback"] else ""))
 
     static = axes[0, 0]
-    static.fill_betweenx(sleeve, characteristic["speed_low"], characteristic["speed_high"], color="tab:orange",
-                         alpha=0.3, label="insensitivity band (static friction)")
-    static.plot(characteristic["speed"], sleeve, color="tab:blue", label=f"equilibrium, statism {analysis['statism']:.3g}")
-    for point in analysis["operating_points"]:
-        static.plot(point["speed"], point["sleeve"] * 1000.0, "o", ms=6,
+    if characteristic is None:  # PI: isochronous, no sleeve; the throttle at each operating point
+        set_speed = analysis["set_speed"]
+        characteristic = {"speed_low": [0.95 * set_speed], "speed_high": [1.05 * set_speed]}
+        static.axvline(set_speed, color="tab:blue", label=f"set speed, statism {analysis['statism']:.3g}")
+        values, axis_label, title = [point["throttle"] for point in analysis["operating_points"]], "throttle [-]", \
+            "isochronous (PI): the set speed at every load"
+    else:
+        sleeve = np.array(characteristic["sleeve"]) * 1000.0
+        static.fill_betweenx(sleeve, characteristic["speed_low"], characteristic["speed_high"], color="tab:orange",
+                             alpha=0.3, label="insensitivity band (static friction)")
+        static.plot(characteristic["speed"], sleeve, color="tab:blue",
+                    label=f"equilibrium, statism {analysis['statism']:.3g}")
+        values, axis_label, title = [point["sleeve"] * 1000.0 for point in analysis["operating_points"]], \
+            "sleeve z [mm]", "static characteristic"
+    for point, value in zip(analysis["operating_points"], values):
+        static.plot(point["speed"], value, "o", ms=6,
                     label=f"load {point['external_load']:g} N m: {point['speed']:.4g} rad/s")
-    static.set(xlabel="crank speed omega [rad/s]", ylabel="sleeve z [mm]", title="static characteristic")
+    static.set(xlabel="crank speed omega [rad/s]", ylabel=axis_label, title=title)
     static.legend(loc="upper left", fontsize=8)
 
     balance = axes[0, 1]

@@ -47,7 +47,6 @@ import rerun.blueprint as rrb
 
 from mech_regulator.analysis import operating_point
 from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PARTS
-from mech_regulator.governors.drawing import ball_radius, governor_bounds, governor_outline
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
 from mech_regulator.model import MachineModel, crank_moments
@@ -81,6 +80,7 @@ SERIES_STYLE = {
     "speed/band_low": ("band", ORANGE, 1.0),
     "throttle": ("throttle", GREEN, 2.5),
     "governor/sleeve": ("sleeve z", YELLOW, 1.5),
+    "governor/integral": ("integral part x", YELLOW, 1.5),
     "governor/feedback_shift": ("shift ζ", PINK, 1.5),
     "coupling/twist": ("coupling twist φ − φ₂", YELLOW, 1.5),
     "moments/drive": ("drive", GREEN, 1.0),
@@ -90,7 +90,8 @@ SERIES_STYLE = {
 }
 SERIES_NAMES = {   # entity -> name of the series (hover, selection) unless series_names gives the scene's own
     "speed/omega": "ω crank speed", "speed/driven": "ω₂ driven part's speed", "speed/set_point": "ω_set",
-    "throttle": "throttle", "governor/sleeve": "sleeve z [mm]", "governor/feedback_shift": "dashpot's shift ζ [mm]",
+    "throttle": "throttle", "governor/sleeve": "sleeve z [mm]", "governor/integral": "PI's integral part x [-]",
+    "governor/feedback_shift": "dashpot's shift ζ [mm]",
     "coupling/twist": "twist φ − φ₂ [mrad]", "moments/external": "external load moment",
     "moments/net": "net = J ε + J' ω² / 2",
 }
@@ -149,9 +150,10 @@ class RunRecording:
         # entity -> (lowest, highest) value recorded; the throttle's plot spans 0..1, the sleeve's its stroke
         self._extents: dict[str, tuple[float, float]] = {}
         if model.governor is not None:
-            stroke = model.governor.sensor.stroke
-            self._extents = {"throttle": (0.0, 1.0),
-                             "governor/sleeve": (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])}
+            self._extents = {"throttle": (0.0, 1.0)}
+            if model.governor.kind != "pi":  # the sleeve's plot spans its stroke
+                stroke = model.governor.sensor.stroke
+                self._extents["governor/sleeve"] = (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])
         if self.outside_throttle:
             self._extents = {"throttle": (0.0, 1.0)}
         self._frames: dict[str, tuple[list[int], list[np.ndarray]]] = {}   # entity -> (times, parts y down)
@@ -223,23 +225,25 @@ class RunRecording:
                 self._log_event(when, text)
 
     def add_governor(self, t_ns: int, values: dict[str, float]) -> None:
-        """A sample of the governor at t_ns [ns]: sleeve [m], arm_angle [rad], throttle [-], and with isodromic
-        feedback feedback_shift [m] (other keys, such as an indirect governor's servo, which is its throttle,
-        are ignored); also the governor's picture when a frame is due, its spindle at ratio * (the latest
-        crank angle)."""
+        """A sample of the governor at t_ns [ns]: throttle [-] and its signal (governor_signal: a centrifugal
+        governor's sleeve [m], with arm_angle [rad], and with isodromic feedback feedback_shift [m]; a PI governor's
+        integral part [-]; other keys, such as an indirect governor's servo, which is its throttle, are ignored);
+        also a centrifugal governor's picture when a frame is due, its spindle at ratio * (the latest crank
+        angle)."""
         with self._lock:
             if self._closed:
                 return
             self._append("throttle", t_ns, values["throttle"])
-            self._append("governor/sleeve", t_ns, MILLIMETRES * values["sleeve"])
+            entity, key, factor, _ = governor_signal(self.model.governor)
+            self._append(entity, t_ns, factor * values[key])
             if "feedback_shift" in values:
                 self._append("governor/feedback_shift", t_ns, MILLIMETRES * values["feedback_shift"])
             frame = t_ns // self._frame_period_ns
-            if frame != self._governor_frame:
+            if self.model.governor.kind != "pi" and frame != self._governor_frame:
                 self._governor_frame = frame
                 sensor = self.model.governor.sensor
                 self._add_frame("governor/drawing", t_ns,
-                                governor_outline(sensor, values["arm_angle"], sensor.ratio * self._phi),
+                                sensor.outline(values["arm_angle"], sensor.ratio * self._phi),
                                 GOVERNOR_MOVING_PARTS)
 
     def add_throttle(self, t_ns: int, throttle: float) -> None:
@@ -354,7 +358,7 @@ class RunRecording:
             colour, size = styles[name]
             geometry = part * FLIP_Y if name not in moving else None
             if name in POINT_PARTS:
-                radius = ball_radius(self.model.governor.sensor) if size is None else rr.Radius.ui_points(size)
+                radius = self.model.governor.sensor.ball_radius() if size is None else rr.Radius.ui_points(size)
                 archetype = rr.Points2D.from_fields(positions=geometry, radii=radius, colors=colour, draw_order=40.0)
             else:
                 strips = None if geometry is None else list(geometry) if geometry.ndim == 3 else [geometry]
@@ -373,9 +377,9 @@ class RunRecording:
         angle = initial[0] - initial[self.model.coupling_index] if self._drawn_driven else initial[0]
         self._log_styles("mechanism", mechanism_outline(self._drawing, angle), MECHANISM_STYLE,
                          MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)])
-        if self.model.governor is not None:
+        if self.model.governor is not None and self.model.governor.kind != "pi":  # a PI governor is not drawn
             sensor = self.model.governor.sensor
-            self._log_styles("governor/drawing", governor_outline(sensor, sensor.stop_angles()[0], 0.0),
+            self._log_styles("governor/drawing", sensor.outline(sensor.stop_angles()[0], 0.0),
                              GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS)
         self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source,
                                                              self.outside_throttle),
@@ -448,6 +452,8 @@ def start_text(model: MachineModel) -> str:
         governor = "indirect governor without feedback"
     elif model.governor.kind == "indirect":
         governor = f"indirect governor, {scene.governor.feedback.type} feedback"
+    elif model.governor.kind == "pi":
+        governor = "electronic PI governor"
     else:
         governor = "direct governor"
     speed = f"start: ω = {scene.scenario.initial.omega:.6g} rad/s"
@@ -514,6 +520,14 @@ def resistance_name(model: MachineModel) -> str:
     return "resistance: " + " + ".join(parts)
 
 
+def governor_signal(governor) -> tuple[str, str, float, str]:
+    """The governor's own plotted signal beside the throttle: (entity, its key in the governor's values, factor to
+    the plotted unit, unit): a centrifugal governor's sleeve z in mm, a PI governor's integral part x [-]."""
+    if governor.kind == "pi":
+        return "governor/integral", "integral", 1.0, "-"
+    return "governor/sleeve", "sleeve", MILLIMETRES, "mm"
+
+
 def series_names(model: MachineModel, outside_throttle: bool = False) -> dict[str, str]:
     """Name of each recorded series (recorded_series): SERIES_NAMES', with the band, the drive, the resistance and an
     indirect governor's throttle named as the scene has them."""
@@ -541,7 +555,7 @@ def recorded_series(model: MachineModel, outside_throttle: bool = False) -> list
     series = ["speed/omega"] + (["speed/driven"] if model.driven is not None else [])
     governor = model.governor
     if governor is not None:
-        series += ["speed/set_point", "speed/band_high", "speed/band_low", "throttle", "governor/sleeve"]
+        series += ["speed/set_point", "speed/band_high", "speed/band_low", "throttle", governor_signal(governor)[0]]
         if "feedback_shift" in governor.state_names:
             series.append("governor/feedback_shift")
     elif outside_throttle:
@@ -584,6 +598,10 @@ def about_text(model: MachineModel, delta: float, source: str, outside_throttle:
         if governor.kind == "indirect":
             paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
                               "(sleeve at the pilot valve's neutral). Throttle in 0..1: the servo position s.")
+        elif governor.kind == "pi":
+            paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the electronic PI governor's, "
+                              "held at every load the valve can balance. Throttle in 0..1; below it the integral "
+                              "part x of the PI law.")
         else:
             paragraphs.append("Set speed ω_set: where the direct governor settles under the present external load "
                               "(operating point of the cycle-averaged machine; it moves with the load: the static "
@@ -655,7 +673,8 @@ def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] |
     shares = [2.0]
     if model.governor is not None:
         # side by side, each tall enough for the viewer to label its y axis
-        governor = [_single_plot("throttle", "-", extents), _single_plot("governor/sleeve", "mm", extents)]
+        entity, _, _, unit = governor_signal(model.governor)
+        governor = [_single_plot("throttle", "-", extents), _single_plot(entity, unit, extents)]
         if "governor/feedback_shift" in series:
             governor.append(_single_plot("governor/feedback_shift", "mm", extents))
         plots.append(rrb.Horizontal(*governor))
@@ -679,9 +698,9 @@ def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] |
                     rrb.TextDocumentView(name="about", origin="about"))
     mechanism = rrb.Spatial2DView(name=mechanism_title(model), origin="mechanism",
                                   visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])))
-    if model.governor is not None:
+    if model.governor is not None and model.governor.kind != "pi":  # a centrifugal governor's drawing
         governor = rrb.Spatial2DView(name="governor", origin="governor/drawing",
-                                     visual_bounds=_bounds_y_down(governor_bounds(model.governor.sensor)))
+                                     visual_bounds=_bounds_y_down(model.governor.sensor.bounds()))
         right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]),
                              row_shares=[1.0, 1.8])
     else:
@@ -725,7 +744,7 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
     columns = model.columns(times, states)
     count = times.size
     moments = crank_moments(columns)
-    governor_keys = [key for key in ("sleeve", "sleeve_velocity", "arm_angle", "throttle", "feedback_shift")
+    governor_keys = [key for key in ("sleeve", "sleeve_velocity", "arm_angle", "integral", "throttle", "feedback_shift")
                      if key in columns]
     driven_keys = [key for key in ("twist", "omega_driven") if key in columns]
     stamps = np.round(np.asarray(times) * NANOSECONDS).astype(np.int64)

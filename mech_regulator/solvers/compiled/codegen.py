@@ -62,6 +62,7 @@ from mech_regulator.effects.definition import (
     definition_of,
     summed_source,
 )
+from mech_regulator.governors import pi
 from mech_regulator.governors import servo as servo_motor
 from mech_regulator.mechanisms.linkage import flat, symbolic
 from mech_regulator.model import MachineModel
@@ -87,7 +88,7 @@ NORMAL_SLOTS = 2  # joint friction's slots in p from friction_slot, per guide wi
 HELD_THROTTLE_EXPRESSION = (f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
                             f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)")
 
-SLEEVE_CODE = {"free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
+SLEEVE_CODE = {"": 0.0, "free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
 DRIVEN_CODE = {FORWARD: 0.0, BACKWARD: 1.0, HELD: 2.0}
 ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5
@@ -357,7 +358,7 @@ def mode_rows(model: MachineModel, mode, omega: float = 0.0) -> list[np.ndarray 
     n = len(model.state_names())
     rows: list[np.ndarray | None] = []
     governor = model.governor
-    if governor is not None:
+    if governor is not None and governor.kind != "pi":
         low, high = governor.sensor.stop_angles()
         hit_low, hit_high = _row(n, ARM, 1.0, -low), _row(n, ARM, -1.0, high)
         rows += {"free": [hit_low, hit_high], "up": [_row(n, ARM_RATE, 1.0, 0.0), hit_high],
@@ -540,6 +541,14 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
     return [f"{J}, {dJ}, {weight}, {q}, {dq}{rest} = {call}"]
 
 
+def _shared_functions(functions, p: _Parameters) -> tuple[str, ...]:
+    """The names of functions the reference path runs (a sensor's formulas, CentrifugalSensor.kernels; the PI law,
+    governors/pi.py), their very source added to the module (p.functions) to be compiled."""
+    for function in functions:
+        p.functions[function.__name__] = inspect.getsource(function)
+    return tuple(function.__name__ for function in functions)
+
+
 def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None,
                                           int | None, int, int]:
     """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None, slot of
@@ -592,19 +601,23 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         body.append(f"clamped = min(max(phi, p[{CLAMP_LO}]), p[{CLAMP_HI}])")
         body += [f"total += {_effect_call(definition, p, 'clamped', 'omega', 'q', 'dq')}" for definition in switched]
     governor_lines, guard_lines, opening = [], [], []
-    if governor is not None:
+    if governor is not None and governor.kind == "pi":
+        throttle_name, rate_name = _shared_functions((pi.pi_throttle, pi.pi_integral_rate), p)
+        law = f"y[{pi.INTEGRAL}], omega, " + ", ".join(p.scalar(value) for value in governor.law())
+        throttle = f"{throttle_name}({law})"
+        governor_lines.append(f"dydt[{pi.INTEGRAL}] = {rate_name}({law})")
+    elif governor is not None:
         sensor = governor.sensor
-        constants = [sensor.ball_mass, sensor.arm_length, sensor.sleeve_mass, sensor.stiffness, sensor.free_position]
-        m, l, M, kk, z_free = (p.scalar(v) for v in constants)
-        c, g, ratio = p.scalar(sensor.damping), p.scalar(sensor.gravity), p.scalar(sensor.ratio)
+        sleeve_kernel, lift_kernel, acceleration_kernel = _shared_functions(sensor.kernels(), p)
+        sensor_args = ", ".join(p.scalar(value) for value in sensor.kernel_parameters())
         kinetic, static = p.scalar(sensor.kinetic_friction), p.scalar(sensor.static_friction)
         low, high = (p.scalar(v) for v in sensor.stop_angles())
+        z = f"{sleeve_kernel}(y[{ARM}], {sensor_args})"
         if governor.kind == "direct":
-            throttle = _valve_call(definition_of(model.scene.governor.valve), p, f"k.sleeve(y[{ARM}], {l})",
-                                   anchor_of.get("valve table", ""))
+            throttle = _valve_call(definition_of(model.scene.governor.valve), p, z, anchor_of.get("valve table", ""))
         else:
             throttle = f"y[{SERVO}]"
-            opening = [f"opening = k.sleeve(y[{ARM}], {l}) - {p.scalar(governor.pilot_neutral)}"]
+            opening = [f"opening = {z} - {p.scalar(governor.pilot_neutral)}"]
             if governor.feedback == "rigid":
                 feedback = _formula_call(p, servo_motor.rigid_feedback, {"servo": f"y[{SERVO}]"},
                                          {"gain": governor.feedback_gain, "reference": governor.feedback_reference})
@@ -614,17 +627,13 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
             command = _formula_call(p, servo_motor.servo_command, {"opening": "opening"},
                                     {"gain": governor.servo_gain, "max_speed": governor.servo_max_speed,
                                      "dead_band": governor.dead_band})
-        body.append(f"share = {throttle}")
-        body += [f"total += share * {_effect_call(definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
-                 for definition in scaled]
-        sensor_args = f"{m}, {l}, {M}, {kk}, {z_free}, {c}, {g}, {ratio}"
-        lift = f"k.lift(y[{ARM}], omega, {m}, {l}, {M}, {kk}, {z_free}, {g}, {ratio})"
+        lift = f"{lift_kernel}(y[{ARM}], omega, {sensor_args})"
         governor_lines += [
             f"sleeve_mode = p[{SLEEVE_MODE}]",
             "if sleeve_mode <= 2.0:",
             f"    friction = 0.0 if sleeve_mode == 0.0 else ({kinetic} if sleeve_mode == 1.0 else -{kinetic})",
             f"    dydt[{ARM}] = y[{ARM_RATE}]",
-            f"    dydt[{ARM_RATE}] = k.arm_acceleration(y[{ARM}], y[{ARM_RATE}], omega, friction, {sensor_args})",
+            f"    dydt[{ARM_RATE}] = {acceleration_kernel}(y[{ARM}], y[{ARM_RATE}], omega, friction, {sensor_args})",
             "else:",
             f"    dydt[{ARM}] = 0.0",
             f"    dydt[{ARM_RATE}] = 0.0"]
@@ -657,11 +666,15 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
                 "else:"] + [f"    {line}" for line in opening] + [
                 f"    command = {command}",
                 f"    levels[g] = -command if p[{SERVO_MODE}] == 1.0 else command", "    g += 1"]
+    if governor is not None:
+        body.append(f"share = {throttle}")
+        body += [f"total += share * {_effect_call(definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
+                 for definition in scaled]
     body.append("net = total - 0.5 * dJ * omega * omega")
     body.append("dydt[0] = omega")
     n_mode_guards = 0
     journals, reaction_lines = [], []  # the journals' positions in the kinetostatics; `reactions`' body
-    if governor is not None:
+    if governor is not None and governor.kind != "pi":
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
     if model.coupling is not None:
         train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", ""), table_slots)

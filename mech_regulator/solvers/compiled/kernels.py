@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import functools
 import importlib
-import math
 
 import numpy as np
 from numba import njit
@@ -105,36 +104,6 @@ def held_position(anchor, p, offset, n):
     while j < n - 1 and p[offset + j] <= u:
         j += 1
     return p[offset + n + j]
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Governor's sensor (governors/centrifugal.py)
-
-
-@njit(cache=True)
-def sleeve(arm, l):
-    """PorterSensor.sleeve: z = 2 l (1 - cos a) [m]."""
-    return 2.0 * l * (1.0 - math.cos(arm))
-
-
-@njit(cache=True)
-def lift(arm, omega, m, l, M, k, z_free, g, ratio):
-    """PorterSensor.lift: F = m l omega_g^2 cos a - (m + M) g - k (z - z_free), omega_g = ratio omega [N]."""
-    omega_g = ratio * omega
-    spring = k * (sleeve(arm, l) - z_free)
-    return m * l * omega_g * omega_g * math.cos(arm) - (m + M) * g - spring
-
-
-@njit(cache=True)
-def arm_acceleration(arm, arm_rate, omega, friction, m, l, M, k, z_free, c, g, ratio):
-    """PorterSensor.arm_acceleration: (2 m l^2 + 4 M l^2 sin^2 a) a'' + 2 M l^2 sin(2a) a'^2
-    = 2 l sin a [F(a, omega) - c z' - friction], z' = 2 l sin a a' [rad/s^2]."""
-    sin_a = math.sin(arm)
-    lever = 2.0 * l * sin_a
-    sleeve_rate = lever * arm_rate
-    force = lift(arm, omega, m, l, M, k, z_free, g, ratio) - c * sleeve_rate - friction
-    mass = 2.0 * m * l * l + 4.0 * M * l * l * sin_a * sin_a
-    return (lever * force - 2.0 * M * l * l * math.sin(2.0 * arm) * arm_rate * arm_rate) / mass
 
 
 # ---------------------------------------------------------------------------------------------------------------
