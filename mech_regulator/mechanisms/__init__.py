@@ -50,6 +50,14 @@ def linkage_of(mechanism: schema.Mechanism) -> tuple[linkage.Linkage, linkage.St
     return core, linkage.checked(core), tuple(presets.guide_joints(mechanism)) if several else ()
 
 
+def cam_law_angles(mechanism: schema.Mechanism) -> list[float]:
+    """The crank angles [rad] in [0, 2 pi) where a cam follower's law changes piece (its s'' may jump there)."""
+    if not isinstance(mechanism, schema.Linkage):
+        return []
+    return [float(angle) % (2.0 * math.pi) for joint in mechanism.core().joints if joint.kind == linkage.CAM
+            for angle in joint.cam.law.kinks() + joint.cam.start]
+
+
 def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
     """The `loads(phi, omega, Q)` closure of a scene's mechanism and its joint names: the kinetostatics by groups of
     its linkage (linkage_of, linkage.make_joint_loads); gravity None: the links are weightless."""

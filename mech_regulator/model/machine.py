@@ -37,7 +37,7 @@ from mech_regulator.effects import Effect, build_drive, build_load, output_posit
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.governors import ARM, Governor, Guard, Mode, build_governor
-from mech_regulator.mechanisms import build_reduced
+from mech_regulator.mechanisms import build_reduced, cam_law_angles
 from mech_regulator.model.drivetrain import (BACKWARD, CLUTCH_CODE, DIRECTION, FORWARD, HELD, STUCK, ClutchModel,
                                              DrivenModel, Forces, build_driven, coulomb_factor, train_guards)
 from mech_regulator.scene import SceneError
@@ -226,8 +226,11 @@ class MachineModel:
         return 0.0 if piece is None else piece.offset + piece.slope * t
 
     def switch_angles(self) -> list[tuple[float, float]]:
-        """(angle, period) pairs [rad] where some moment jumps with phi."""
-        return [(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+        """(angle, period) pairs [rad] where some moment jumps with phi (a cam follower's law changes segment: its
+        s'' jumps, and dJ/dphi with it)."""
+        cams = cam_law_angles(self.scene.machine.mechanism) if self.scene.machine.mechanism is not None else []
+        return ([(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+                + [(angle, 2.0 * math.pi) for angle in cams])
 
     @functools.cached_property
     def state_tables(self) -> tuple[StateTable, ...]:

@@ -219,6 +219,83 @@ class LinkageJoint(SceneModel):
     slider_angle_deg: float = Field(0.0, description="prismatic: the slider's angle minus the guide's (constant) [deg]")
 
 
+class CamSegment(SceneModel):
+    """One part of a cam's turn (docs/theory.md §5.5): the follower rises, dwells or returns by a law."""
+
+    motion: Literal["rise", "dwell", "return"] = Field(description="rise (away from the cam), dwell or return")
+    angle_deg: Positive = Field(description="the cam angle the segment takes [deg]; the segments fill 360 deg")
+    law: Literal["uniform", "harmonic", "cycloidal", "polynomial_345"] | None = Field(
+        None, description="rise and return: the normalised law (none for a dwell)")
+    lift: NonNegative = Field(0.0, description="rise and return: the follower's travel over the segment [m; rad for "
+                                               "an oscillating follower]")
+
+    @model_validator(mode="after")
+    def _complete(self) -> CamSegment:
+        if self.motion == "dwell" and (self.law is not None or self.lift != 0.0):
+            raise ValueError("a dwell segment takes no law and no lift")
+        if self.motion != "dwell" and (self.law is None or self.lift <= 0.0):
+            raise ValueError(f"a {self.motion} segment needs a law (uniform, harmonic, cycloidal, polynomial_345) "
+                             "and a lift > 0")
+        return self
+
+
+class CamTable(SceneModel):
+    """A follower's displacement over the cam's turn as a table (a periodic cubic spline through its points)."""
+
+    angle_deg: list[float] = Field(min_length=4, max_length=3600, description="cam angles, strictly increasing "
+                                                                            "within one turn [deg]")
+    lift: list[float] = Field(min_length=4, max_length=3600, description="the follower's displacement s >= 0 at "
+                                                                       "each angle [m; rad oscillating]")
+
+
+class FollowerSpring(SceneModel):
+    """The spring that holds a follower on its cam, along the follower's travel."""
+
+    stiffness: NonNegative = Field(description="[N/m; N m/rad for an oscillating follower]")
+    preload: NonNegative = Field(description="its force at s = 0, on the base circle [N; N m oscillating]")
+
+
+class CamJoint(SceneModel):
+    """A cam pair (higher pair, docs/linkages.md "Cams"): the cam (the crank) and the link that touches it, the
+    follower itself or its roller; the follower's motion law gives the profile."""
+
+    type: Literal["cam"]
+    links: list[str] = Field(min_length=2, max_length=2, description="[cam, follower or roller]; the follower is "
+                                                                     "joined to the frame by one prismatic "
+                                                                     "(translating) or revolute (oscillating) joint")
+    contact: Literal["knife_edge", "roller", "flat_face"] = Field(description="what touches the cam: the "
+                                                                  "follower's point of the joint's name (knife edge; "
+                                                                  "flat face: a face across its guide through it) or "
+                                                                  "the roller")
+    roller_radius: Positive | None = Field(None, description="contact roller: the roller's radius [m] (the roller "
+                                                             "is links[1], on a revolute joint with its follower)")
+    base_radius: Positive = Field(description="the cam profile's least distance from its pivot [m]")
+    law: list[CamSegment] | CamTable = Field(description="the follower's displacement s over the turn: segments "
+                                                         "from start_deg, or a table")
+    start_deg: float = Field(0.0, description="the crank angle at which the law's first segment starts [deg]")
+    spring: FollowerSpring | None = Field(None, description="the follower's spring (none: no spring)")
+
+    @model_validator(mode="after")
+    def _roller(self) -> CamJoint:
+        if (self.contact == "roller") != (self.roller_radius is not None):
+            raise ValueError("roller_radius is given exactly when contact is roller")
+        return self
+
+    def spec(self):
+        """The mechanisms.linkage.cam.CamSpec of this pair."""
+        from mech_regulator.mechanisms.cam_laws import Segment, SegmentLaw, TableLaw
+        from mech_regulator.mechanisms.linkage.cam import CamSpec
+
+        if isinstance(self.law, CamTable):
+            law = TableLaw([math.radians(a) for a in self.law.angle_deg], self.law.lift)
+        else:
+            law = SegmentLaw(tuple(Segment(part.motion, math.radians(part.angle_deg), part.law or "uniform",
+                                           part.lift) for part in self.law))
+        spring = self.spring or FollowerSpring(stiffness=0.0, preload=0.0)
+        return CamSpec(law, self.contact, self.base_radius, math.radians(self.start_deg), spring.stiffness,
+                       spring.preload)
+
+
 class LinkageOutput(SceneModel):
     """The output coordinate q on which output-link loads act: a prismatic joint's travel (slider_* loads) or a
     link's angle (rocker_* loads)."""
@@ -243,14 +320,16 @@ class Linkage(SceneModel):
     frame: dict[str, Point] = Field(min_length=1, max_length=MAX_LINK_POINTS, description="the frame's points by name, [x, y] in the global "
                                                               "coordinates (the crank axis need not be at the origin) [m]")
     links: dict[str, LinkageLink] = Field(min_length=1, max_length=MAX_LINKS, description="the moving links by name")
-    joints: dict[str, LinkageJoint] = Field(min_length=1, max_length=2 * MAX_LINKS, description="the joints by name")
+    joints: dict[str, Annotated[Union[LinkageJoint, CamJoint], Field(discriminator="type")]] = Field(
+        min_length=1, max_length=2 * MAX_LINKS, description="the joints by name")
     crank: str = Field(description="the driving link: it turns with the crank angle phi about its revolute joint "
                                    "with the frame, theta_crank = phi; its mass and inertia count in J(phi)")
     branches: dict[str, Literal[1, -1]] = Field(default_factory=dict, description="assembly branch of a group, by its "
                                                 "internal joint: RRR +1 puts that joint left of the line from the outer "
                                                 "joint of the group's link listed first in links to the other's; RRP +1 further along the guide; "
                                                 "RPR +1 with the slider's pivot ahead of the guide's along the guide; "
-                                                "default +1")
+                                                "an oscillating cam follower, by its cam pair: +1 with its contact "
+                                                "point left of the line from its pivot to the cam's; default +1")
     points: list[str] = Field(default_factory=list, description="points of interest (names of link points) whose "
                                                                 "motion `kinematics` reports besides the joints")
     output: LinkageOutput | None = Field(None, description="output coordinate for slider_* (a prismatic joint) or "
@@ -264,10 +343,12 @@ class Linkage(SceneModel):
         def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
             return {name: complex(*xy) for name, xy in points.items()}
 
+        rollers = {joint.links[1]: joint.roller_radius for joint in self.joints.values() if joint.type == "cam"}
         links = (Link("frame", complex_points(self.frame)),) + tuple(
-            Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
+            Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia, rollers.get(name))
             for name, link in self.links.items())
-        joints = tuple(Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
+        joints = tuple(Joint(name, joint.type, tuple(joint.links), cam=joint.spec()) if joint.type == "cam" else
+                       Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
                              math.radians(joint.slider_angle_deg)) for name, joint in self.joints.items())
         output = self.output or LinkageOutput.model_construct(joint=None, link=None)
         return Core(links, joints, "frame", self.crank, dict(self.branches), tuple(self.points), output.joint,
@@ -281,15 +362,19 @@ class Linkage(SceneModel):
     @model_validator(mode="after")
     def _drivable(self) -> Linkage:
         from mech_regulator.mechanisms.linkage import LinkageError, assembly_failures, checked
+        from mech_regulator.mechanisms.linkage.cam import check_cams
 
         if "frame" in self.links:
             raise ValueError("links has a link named 'frame'; that name is the frame's (give its points under frame:)")
         try:
             core = self.core()
             structure = checked(core)
+            check_cams(core, structure)
         except LinkageError as error:
             raise ValueError(str(error)) from None
         internal = {group.internal.name for group in structure.groups if group.kind in BRANCHED_GROUPS}
+        internal |= {group.pair.name for group in structure.groups if group.kind == "cam follower"
+                     and group.guide.kind == "revolute"}   # an oscillating follower's side of the cam
         foreign = sorted(set(self.branches) - internal)
         if foreign:
             raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "

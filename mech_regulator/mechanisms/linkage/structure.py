@@ -10,8 +10,9 @@ lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts), found whe
 
 Decomposition: the frame and the driving crank are known; repeatedly, two unknown links joined to each other by
 a lower pair and each by exactly one lower pair to known links form a class-II group (a dyad, groups.Dyad), taken
-in order from the crank outward. What remains undecomposed is reported (a group of class III or higher, or one
-with a higher pair: not supported).
+in order from the crank outward; a follower on the frame touching a known cam (directly or by its roller) is a cam
+follower group (cam.CamFollower: zero freedom with its pair and its roller's passive spin). What remains
+undecomposed is reported (a group of class III or higher, or another with a higher pair: not supported).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import itertools
 import math
 from dataclasses import dataclass
 
+from mech_regulator.mechanisms.linkage.cam import CamFollower, next_cam_follower
 from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
@@ -38,7 +40,7 @@ class Structure:
     repeated: tuple[str, ...]
     redundant: tuple[str, ...]
     passive: tuple[str, ...]
-    groups: tuple[Dyad | RedundantLink, ...]
+    groups: tuple[Dyad | RedundantLink | CamFollower, ...]
     undecomposed: str | None
 
     @property
@@ -75,7 +77,8 @@ class Structure:
                 lines.append(f"group {number}: class II, type {group.kind}, links {group.links[0]} + {group.links[1]}, "
                              f"joints {joints}, branch {group.branch:+d}")
             else:
-                lines.append(f"group {number}: {group.name} (joints {group.joints[0].name}, {group.joints[1].name})")
+                lines.append(f"group {number}: {group.name} (links {' + '.join(group.links)}, joints "
+                             f"{', '.join(f'{j.name} ({j.kind})' for j in group.joints)})")
         if self.undecomposed is not None:
             lines.append(f"not decomposed: {self.undecomposed}")
         return lines
@@ -133,7 +136,8 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
         remaining = [name for name in linkage.moving_links() if name not in known]
         if not remaining:
             return None
-        group = _next_dyad(linkage, known, remaining) or _next_redundant_link(linkage, known, remaining, groups)
+        group = (_next_dyad(linkage, known, remaining) or next_cam_follower(linkage, known)
+                 or _next_redundant_link(linkage, known, remaining, groups))
         if group is None:
             joints = [j for j in linkage.joints if any(link in remaining for link in j.links)]
             letters = "".join(sorted(j.letter for j in joints))
@@ -173,10 +177,12 @@ def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str]
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
     from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 
-    solve_at = make_solver(linkage, groups)
+    lower_groups = [group for group in groups if not isinstance(group, CamFollower)]   # placed by flat.py
+    solved = {linkage.frame, linkage.crank}.union(*(group.links for group in lower_groups))
+    solve_at = make_solver(linkage, lower_groups)
     for name in remaining:
         joints = linkage.joints_of(name)
-        if len(joints) != 2 or any(j.kind != REVOLUTE or j.other(name) not in known for j in joints):
+        if len(joints) != 2 or any(j.kind != REVOLUTE or j.other(name) not in solved for j in joints):
             continue
         points = linkage.link(name).points
         own = abs(points[joints[1].name] - points[joints[0].name])
