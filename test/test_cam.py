@@ -315,3 +315,35 @@ def test_bad_cam_pairs_are_refused_naming_what_is_wrong(change, expected):
     with pytest.raises(SceneError) as error:
         validate_scene(cam_scene(change))
     assert expected in str(error.value)
+
+
+def test_an_oscillating_followers_generated_reduction_is_the_general_solvers_and_the_cams(tmp_path):
+    """Source 001's rocking roller follower with weights and a roller inertia: the generated reduction (both paths'
+    code) equals flat.py's to 1e-12 and the cam's own J_f = (I_O2 + m_roller l^2 + I_roller) s'^2, weight and spring
+    moments (the cam link weighs nothing)."""
+    from mech_regulator.mechanisms import build_reduced, cam_pairs_of, mechanism_geometry
+    from mech_regulator.mechanisms.linkage import make_reduced
+
+    scene = tmp_path / "rocking.yaml"
+    scene.write_text(SOURCE_001_CAM.replace("mass: 0.05}", "mass: 0.05, inertia: 1.0e-5}")
+                     .replace("  inertia: 0.01\n", "  inertia: 0.01\n  gravity: [0.0, -9.81]\n"), encoding="utf-8")
+    machine = load_scene(str(scene)).machine
+    generated = build_reduced(machine.mechanism, machine.gravity)
+    general = make_reduced(*mechanism_geometry(machine.mechanism), machine.gravity)
+    pair, = cam_pairs_of(machine.mechanism, machine.gravity)
+    assert pair.generalised_mass == pytest.approx(2.5e-4 + 0.3 * 0.05 ** 2 + 0.05 * 0.1 ** 2 + 1e-5, rel=1e-12)
+    for phi in np.linspace(0.1, 2 * math.pi - 0.1, 23):
+        values = generated(phi)
+        assert general(phi) == pytest.approx(values, rel=1e-12, abs=1e-15)
+        J, dJ, weight, spring = (float(part[0]) for part in pair.reduced(phi))
+        assert values[:3] == pytest.approx((J, dJ, weight + spring), rel=1e-12, abs=1e-15)
+
+
+def test_the_valve_gear_is_recorded_and_its_kinematics_print_the_cam(tmp_path, capsys):
+    code, out, _ = run_cli(capsys, "kinematics", "valve_gear")
+    assert code == 0 and "no joint reactions: the cam pair K's contact is not in the kinetostatics" in out
+    assert "the follower jumps above 587.822 rad/s" in out
+    record = tmp_path / "valve.rrd"
+    code, _, err = run_cli(capsys, "simulate", "valve_gear", "--set", "solver.path=reference", "--set",
+                           "scenario.duration=0.005", "--record", str(record))
+    assert code == 0 and record.stat().st_size > 0, err

@@ -472,6 +472,7 @@ def _kinematics(scene, args) -> int:
     from mech_regulator.analysis.kinematics import (kinematics_summary, kinematics_table, reactions_summary,
                                                     reactions_table, reactions_unavailable)
     from mech_regulator.cli.report import OutputWriter, format_kinematics, to_json, write_csv
+    from mech_regulator.mechanisms import cam_pairs_of
     from mech_regulator.scene import SceneError
 
     mechanism, driven = scene.machine.analysed_mechanism()
@@ -493,6 +494,9 @@ def _kinematics(scene, args) -> int:
         summary["reactions"] = reactions_summary(columns)
     else:
         summary["no_reactions"] = reactions_unavailable(mechanism)
+    cams = cam_pairs_of(mechanism, gravity)   # a cam pair's pressure angle, curvature and jump speed
+    if cams:
+        summary["cams"] = [pair.numbers() for pair in cams]
     outputs = OutputWriter(summary)
     outputs.write("csv", args.out, lambda path: write_csv(path, columns))
     if args.plot is not None:
@@ -500,7 +504,8 @@ def _kinematics(scene, args) -> int:
 
         outputs.write("plot", args.plot, lambda path: plot_kinematics(mechanism, columns, args.omega,
                                                                       scene.name or mechanism.type, path))
-    print(to_json(summary) if args.json else format_kinematics(summary))
+    print(to_json(summary) if args.json else "\n".join([format_kinematics(summary)]
+                                                      + [line for pair in cams for line in pair.report()]))
     return outputs.exit_code(0)
 
 

@@ -21,9 +21,8 @@ def run_structure(scene, args: argparse.Namespace) -> int:
     """structure: the analysis of the scene's linkage (the machine's, else the driven part's behind a coupling);
     a scene whose linkage has W != 1 or an unsupported group has already been refused by its validation."""
     from mech_regulator.cli.report import OutputWriter, terminal_text, to_json
-    from mech_regulator.mechanisms import mechanism_geometry
+    from mech_regulator.mechanisms import cam_pairs_of, mechanism_geometry
     from mech_regulator.mechanisms.linkage import Dyad
-    from mech_regulator.mechanisms.linkage.cam import cam_pairs
     from mech_regulator.scene import SceneError
 
     mechanism = scene.machine.analysed_mechanism()[0]
@@ -31,7 +30,7 @@ def run_structure(scene, args: argparse.Namespace) -> int:
         raise SceneError(f"scene '{scene.name}' has mechanism {mechanism.type if mechanism else 'none'}: structure "
                          "analyses machine.mechanism.type: linkage (links, joints, crank; docs/linkages.md)")
     linkage, structure = mechanism_geometry(mechanism)
-    cams = cam_pairs(linkage, structure.groups, scene.machine.gravity)
+    cams = cam_pairs_of(mechanism, scene.machine.gravity)
     groups = [{"number": number, "class": "II" if isinstance(group, Dyad) else group.kind, "type": group.kind,
                "links": list(group.links), "joints": [joint.name for joint in group.joints],
                "branch": getattr(group, "branch", None)} for number, group in enumerate(structure.groups, start=1)]

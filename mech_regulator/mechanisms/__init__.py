@@ -58,6 +58,16 @@ def cam_law_angles(mechanism: schema.Mechanism) -> list[float]:
             for angle in joint.cam.law.kinks() + joint.cam.start]
 
 
+def cam_pairs_of(mechanism: schema.Mechanism, gravity) -> list:
+    """The linkage/cam.py CamPairs of a scene's mechanism (gravity (gx, gy) [m/s^2] or None); [] without cams."""
+    if not isinstance(mechanism, schema.Linkage):
+        return []
+    from mech_regulator.mechanisms.linkage.cam import cam_pairs
+
+    core, structure = mechanism_geometry(mechanism)
+    return cam_pairs(core, structure.groups, gravity)
+
+
 def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
     """The `loads(phi, omega, Q)` closure of a scene's mechanism and its joint names: the kinetostatics by groups of
     its linkage (linkage_of, linkage.make_joint_loads); gravity None: the links are weightless."""
