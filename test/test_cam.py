@@ -13,10 +13,10 @@ import math
 import numpy as np
 import pytest
 
+from mech_regulator.analysis.energy import energy_balance
 from mech_regulator.mechanisms.cam_laws import Segment, SegmentLaw, TableLaw
 from mech_regulator.mechanisms.linkage import Joint, Link, Linkage, LinkageError, analyse
 from mech_regulator.mechanisms.linkage.cam import CamPair, CamSpec
-from mech_regulator.analysis.energy import energy_balance
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
@@ -260,18 +260,20 @@ def test_the_valve_gear_runs_below_its_jump_speed_and_stops_where_contact_is_los
     assert omega > pair.jump()[0]
 
 
-def test_a_cam_run_keeps_its_energy_balance_and_the_spring_stores_what_it_takes():
+@pytest.mark.parametrize("gravity", [9.81, 0.0])
+def test_a_cam_run_keeps_its_energy_balance_and_the_spring_stores_what_it_takes(gravity):
     """Over a valve-gear run the works equal the change of kinetic energy (relative 1e-8), and the work of the
-    position moments (weight and spring, the reduction's M_weight) is minus the change of the spring's and the
-    weight's energy, F0 s + k s^2 / 2 + m g s, between the run's ends."""
-    model = build_model(load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.0368"]))
+    position moments (weight and spring, the reduction's M_weight; the spring's also without gravity) is minus the
+    change of the spring's and the weight's energy, F0 s + k s^2 / 2 + m g s, between the run's ends."""
+    model = build_model(load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.0368"]
+                                   + ([] if gravity else ["machine.gravity=null"])))
     trajectory = simulate(model)
     assert trajectory.status == "complete"
     balance = energy_balance(model, trajectory)
     assert abs(balance.relative_residual) < 1e-8
     pair = _pairs(model.scene)[0]
     s = pair.motion(trajectory(np.array([0.0, trajectory.t_end]))[0]).s
-    stored = pair.spec.preload * s + 0.5 * pair.spec.stiffness * s ** 2 + 0.1 * 9.81 * s
+    stored = pair.spec.preload * s + 0.5 * pair.spec.stiffness * s ** 2 + 0.1 * gravity * s
     assert s[1] > 0.5 * LIFT   # the run ends with the valve open: the spring holds energy
     assert balance.works["weight"] == pytest.approx(-(stored[1] - stored[0]), rel=1e-7)
 
@@ -347,3 +349,20 @@ def test_the_valve_gear_is_recorded_and_its_kinematics_print_the_cam(tmp_path, c
     code, _, err = run_cli(capsys, "simulate", "valve_gear", "--set", "solver.path=reference", "--set",
                            "scenario.duration=0.005", "--record", str(record))
     assert code == 0 and record.stat().st_size > 0, err
+
+
+def test_a_flat_faced_follower_has_no_pressure_angle_and_its_profile_radius_is_R_plus_s_plus_s_second():
+    """A flat face across the guide: alpha = 0, the profile's radius of curvature h + h'' = R + s + s'' (theory
+    §5.5), the contact at the face's distance R + s from the pivot along the guide, s' across it; a knife edge's
+    profile is its pitch curve, at R + s from the pivot on a centred follower."""
+    law = rise_dwell_return("cycloidal")
+    flat = translating_pair(law, contact="flat_face", base=0.03)
+    phi = np.linspace(0.0, 2 * math.pi, 73)
+    s, ds, dds = law.evaluate(phi)
+    assert list(flat.pressure_angle(phi)) == [0.0] * len(phi)
+    assert flat.profile_radius(phi) == pytest.approx(0.03 + s + dds, rel=1e-12)
+    contact = flat.contact_point(phi)
+    assert (contact.imag, contact.real) == (pytest.approx(0.03 + s, rel=1e-12), pytest.approx(ds, abs=1e-15))
+    knife = translating_pair(law, contact="knife_edge", base=0.03)
+    assert np.abs(knife.profile(73)) == pytest.approx(0.03 + law.evaluate(np.linspace(0, 2 * math.pi, 73,
+                                                                                      endpoint=False))[0], rel=1e-12)

@@ -41,14 +41,13 @@ import numpy as np
 from mech_regulator.mechanisms.cam_laws import TWO_PI, MotionLaw
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Joint, Linkage, LinkageError
 
-CONTACTS = ("knife_edge", "roller", "flat_face")
 SAMPLES = 3600             # cam angles over a turn at which the profile is checked (every 0.1 deg)
 KINK_APPROACH = 1e-9       # a law's segment ends are also checked this close before them [rad]
 
 
 @dataclass(frozen=True)
 class CamSpec:
-    """What a cam pair says besides its links: the follower's motion law, the contact (CONTACTS), the cam's base
+    """What a cam pair says besides its links: the follower's motion law, the contact (knife_edge, roller or flat_face), the cam's base
     circle radius [m] (its profile's least distance from its pivot), the crank angle [rad] at which the law's
     theta = 0, and the follower's spring along s: stiffness [N/m or N m/rad] and preload [N or N m] at s = 0."""
 
@@ -289,8 +288,8 @@ class CamPair:
         bad = np.flatnonzero(radius <= 0.0 if self.spec.contact == "flat_face" else convex_pitch & (radius <= 0.0))
         if bad.size:
             k = bad[np.argmin(radius[bad])]
-            what = ("the roller's radius {:.6g} m exceeds the pitch curve's radius of curvature {:.6g} m: the profile "
-                    "would be undercut".format(self.roller_radius, radius[k] + self.roller_radius)
+            what = (f"the roller's radius {self.roller_radius:.6g} m exceeds the pitch curve's radius of curvature "
+                    f"{radius[k] + self.roller_radius:.6g} m: the profile would be undercut"
                     if self.spec.contact == "roller" else
                     f"the profile's radius of curvature R + s + s'' is {radius[k]:.6g} m: it would have a cusp")
             raise LinkageError(f"the cam pair {self.group.pair.name} at crank angle {math.degrees(phi[k]) % 360:.2f} "
@@ -376,11 +375,11 @@ class CamPair:
         kind = (f"translating, offset {self.offset:.6g} m" if self.translating else
                 f"oscillating about {self.group.guide.name}, arm {self.arm:.6g} m")
         unit = "m" if self.translating else "rad"
-        lines = [f"cam pair {found['pair']}: cam {self.group.pair.links[0]}, {self.spec.contact.replace('_', ' ')} "
-                 f"follower {self.group.follower} ({kind}), base circle {self.spec.base_radius:.6g} m, lift "
-                 f"{found['lift']:.6g} {unit}",
-                 f"  pressure angle up to {found['pressure_angle_max_deg']:.3f} deg at crank angle "
-                 f"{found['pressure_angle_max_at_deg']:.2f} deg"]
+        lines = [(f"cam pair {found['pair']}: cam {self.group.pair.links[0]}, {self.spec.contact.replace('_', ' ')} "
+                  f"follower {self.group.follower} ({kind}), base circle {self.spec.base_radius:.6g} m, lift "
+                  f"{found['lift']:.6g} {unit}"),
+                 (f"  pressure angle up to {found['pressure_angle_max_deg']:.3f} deg at crank angle "
+                  f"{found['pressure_angle_max_at_deg']:.2f} deg")]
         if found["least_radius"] is not None:
             lines.append(f"  least radius of curvature of the profile {found['least_radius']:.6g} m at crank angle "
                          f"{found['least_radius_at_deg']:.2f} deg")
