@@ -366,3 +366,24 @@ def test_a_flat_faced_follower_has_no_pressure_angle_and_its_profile_radius_is_R
     knife = translating_pair(law, contact="knife_edge", base=0.03)
     assert np.abs(knife.profile(73)) == pytest.approx(0.03 + law.evaluate(np.linspace(0, 2 * math.pi, 73,
                                                                                       endpoint=False))[0], rel=1e-12)
+
+
+def test_the_fast_path_stops_at_the_same_jump_as_the_reference_path():
+    """Both paths run the same generated reduction and the same contact check: the jump above the spring's speed
+    is found at the same time (to the solvers' tolerance) and reported the same way."""
+    times = {}
+    for path in ("reference", "fast"):
+        model = build_model(load_scene("valve_gear", [f"solver.path={path}", "scenario.duration=0.01",
+                                                      "scenario.initial.omega=700"]))
+        trajectory = simulate(model)
+        assert trajectory.status == "failed" and trajectory.events[-1][1] == "contact lost at cam pair K"
+        times[path] = trajectory.t_end
+    assert times["fast"] == pytest.approx(times["reference"], rel=1e-6)
+
+
+def test_a_cam_behind_a_coupling_is_refused():
+    data = load_scene("two_mass").model_dump(exclude_none=True)
+    data["machine"]["coupling"]["driven"]["mechanism"] = load_scene("valve_gear").model_dump(
+        exclude_none=True)["machine"]["mechanism"]
+    with pytest.raises(SceneError, match="a cam behind a coupling is not supported yet"):
+        build_model(validate_scene(data))

@@ -679,7 +679,8 @@ def near(angle, reference):
 def reduced_from_poses(program, base, poses):
     """(J_links, dJ_links/dphi, M_weight, q, q') from solved poses: over the moving links k (the crank included)
     with centres S_k and angles theta_k, `J_links = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k
-    Re(conj(S_k') S_k'') + I_k theta_k' theta_k'')`, `M_weight = sum m_k g . S_k'`; the output q: a link's angle
+    Re(conj(S_k') S_k'') + I_k theta_k' theta_k'')`, `M_weight = sum m_k g . S_k'` plus the cam followers' springs
+    (cam_springs); the output q: a link's angle
     theta [rad] (within pi of the output reference angle, `near`) and theta', or a prismatic joint's travel `q = Re((P_s - P_g) conj w)` [m] (w the guide's direction),
     `q' = Re(d' conj w) + theta_g' Im(d conj w)`; (0, 0) without an output."""
     n_links = int(program[base])

@@ -29,7 +29,10 @@ The closed forms per group (groups.py's module docstring; sigma the group's bran
   h the line's offset from the pivots), the slider's e^{i theta_g} e^{i alpha};
 - PRP, RPP: intersections of two known lines, `c1 + w1 Im((c2 - c1) conj w2) / Im(w1 conj w2)`;
 - a link through two known points P, T (a dyad's links, a redundant link): `e^{i theta} = (T - P) conj(d) / |d|^2`,
-  d its own vector between the two points, r = P - p e^{i theta}.
+  d its own vector between the two points, r = P - p e^{i theta};
+- a cam follower (linkage/cam.py): its law's s, s', s'' from flat.law_at, whose source the function nests (the
+  law's pieces are read from p at run time), then its pose in s (flat._place_cam_follower's formulas); its
+  spring's -(F0 + k s) s' joins M_weight.
 Then, over the moving links k with centres S_k = r_k + c_k e^{i theta_k} and theta' = Re(e) Im(e)' - Im(e) Re(e)'
 (e = e^{i theta}): `J = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k S_k'.S_k'' + I_k theta_k'
 theta_k'')` (the crank's term the constant m |c - p_A|^2 + I, p_A its pivot, written so: it is exactly zero for a
