@@ -22,23 +22,26 @@ SAMPLES_PER_STEP = 8            # points on each solver step at which the contac
 DIFFERENCE_FRACTION = 1e-6      # the central difference's half-width, as a fraction of the stretch [-]
 
 
-_PAIRS: dict[int, tuple] = {}   # id(scene) -> (scene, its CamPairs): built once per scene, not per stretch
+KEPT_SCENES = 8   # the scenes with cams whose CamPairs are kept (built once per scene, not per stretch)
+_PAIRS: dict[int, tuple] = {}   # id(scene) -> (scene, its CamPairs), the newest KEPT_SCENES
 
 
 def _pairs(scene) -> tuple:
     """The CamPairs of a scene's machine mechanism (with its gravity; the scene checked their profiles), () without
     cam pairs."""
+    mechanism = scene.machine.mechanism
+    if getattr(mechanism, "type", None) != "linkage" or not any(joint.type == "cam"
+                                                                for joint in mechanism.joints.values()):
+        return ()
     if id(scene) not in _PAIRS:
         from mech_regulator.mechanisms import mechanism_geometry
         from mech_regulator.mechanisms.linkage.cam import CamFollower, CamPair
-        from mech_regulator.scene.schema import Linkage
 
-        mechanism, pairs = scene.machine.mechanism, ()
-        if isinstance(mechanism, Linkage) and any(joint.type == "cam" for joint in mechanism.joints.values()):
-            core, structure = mechanism_geometry(mechanism)
-            pairs = tuple(CamPair(core, group, scene.machine.gravity, check=False) for group in structure.groups
-                          if isinstance(group, CamFollower))
-        _PAIRS[id(scene)] = (scene, pairs)
+        core, structure = mechanism_geometry(mechanism)
+        _PAIRS[id(scene)] = (scene, tuple(CamPair(core, group, scene.machine.gravity, check=False)
+                                          for group in structure.groups if isinstance(group, CamFollower)))
+        while len(_PAIRS) > KEPT_SCENES:
+            del _PAIRS[next(iter(_PAIRS))]
     return _PAIRS[id(scene)][1]
 
 
