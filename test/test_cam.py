@@ -312,6 +312,12 @@ def cam_scene(change) -> dict:
                                               "lift": 0.03}], roller_radius=0.012), "would be undercut"),
     (lambda m: m["frame"].update(guide=[0.05, 0.0]), "the follower's line passes 0.05 m from the cam's pivot"),
     (lambda m: m.update(crank="tappet"), "the crank 'tappet' must turn about one revolute joint"),
+    (lambda m: m["joints"]["K"].update(law={"angle_deg": [0.0, 90.0, 180.0, 270.0, 300.0],
+                                             "lift": [0.0, 0.004, 0.008, 0.004]}),
+     "law: angle_deg has 5 entries but the values have 4"),
+    (lambda m: m["joints"]["K"].update(law={"angle_deg": [0.0, 90.0, 180.0, 270.0], "lift": [0.0, 0.004, -0.001,
+                                                                                              0.004]}),
+     "the follower table's lift has -0.001 < 0"),
 ])
 def test_bad_cam_pairs_are_refused_naming_what_is_wrong(change, expected):
     with pytest.raises(SceneError) as error:
@@ -387,3 +393,25 @@ def test_a_cam_behind_a_coupling_is_refused():
         exclude_none=True)["machine"]["mechanism"]
     with pytest.raises(SceneError, match="a cam behind a coupling is not supported yet"):
         build_model(validate_scene(data))
+
+
+def test_a_table_law_in_a_scene_is_analysed_like_its_segments(capsys, tmp_path):
+    """The valve gear with cycloidal segments (s'' continuous), and the same law as a table of 360 points (every
+    degree): the table's spline gives the same lift and jump speed to 1e-3. (Through a law whose s'' jumps, as the
+    harmonic's, a cubic spline overshoots s'' near the jump, and the table's jump speed is lower.)"""
+    cycloidal = cam_scene(lambda m: [part.update(law="cycloidal") for part in m["joints"]["K"]["law"]
+                                     if part["motion"] != "dwell"])
+    law = validate_scene(cycloidal).machine.mechanism.core().joint("K").cam.law
+    angles = np.linspace(0.0, 360.0, 361)[:-1]
+    table = copy.deepcopy(cycloidal)
+    table["machine"]["mechanism"]["joints"]["K"]["law"] = {"angle_deg": list(angles),
+                                                           "lift": list(law.evaluate(np.radians(angles))[0])}
+    found = []
+    for data in (cycloidal, table):
+        path = tmp_path / "scene.yaml"
+        path.write_text(json.dumps(data), encoding="utf-8")
+        code, out, _ = run_cli(capsys, "structure", str(path), "--json")
+        assert code == 0
+        found.append(json.loads(out)["cams"][0])
+    assert found[1]["lift"] == pytest.approx(found[0]["lift"], rel=1e-3)
+    assert found[1]["jump_speed"] == pytest.approx(found[0]["jump_speed"], rel=1e-3)

@@ -247,6 +247,20 @@ class CamTable(SceneModel):
     lift: list[float] = Field(min_length=4, max_length=3600, description="the follower's displacement s >= 0 at "
                                                                        "each angle [m; rad oscillating]")
 
+    @model_validator(mode="after")
+    def _table(self) -> CamTable:
+        _check_table(self.angle_deg, self.lift, 360.0, "law")
+        return self
+
+
+def _law_form(value) -> str:
+    """'segments' (a list) or 'table' (anything else): which form a cam's law is written in."""
+    return "segments" if isinstance(value, (list, tuple)) else "table"
+
+
+CamLaw = Annotated[Union[Annotated[list[CamSegment], Tag("segments")], Annotated[CamTable, Tag("table")]],
+                   Discriminator(_law_form)]
+
 
 class FollowerSpring(SceneModel):
     """The spring that holds a follower on its cam, along the follower's travel."""
@@ -270,8 +284,8 @@ class CamJoint(SceneModel):
     roller_radius: Positive | None = Field(None, description="contact roller: the roller's radius [m] (the roller "
                                                              "is links[1], on a revolute joint with its follower)")
     base_radius: Positive = Field(description="the cam profile's least distance from its pivot [m]")
-    law: list[CamSegment] | CamTable = Field(description="the follower's displacement s over the turn: segments "
-                                                         "from start_deg, or a table")
+    law: CamLaw = Field(description="the follower's displacement s over the turn: a list of segments from "
+                                    "start_deg, or a table {angle_deg, lift}")
     start_deg: float = Field(0.0, description="the crank angle at which the law's first segment starts [deg]")
     spring: FollowerSpring | None = Field(None, description="the follower's spring (none: no spring)")
 
