@@ -54,8 +54,8 @@ def cam_law_angles(mechanism: schema.Mechanism) -> list[float]:
     """The crank angles [rad] in [0, 2 pi) where a cam follower's law changes piece (its s'' may jump there)."""
     if not isinstance(mechanism, schema.Linkage):
         return []
-    return [float(angle) % (2.0 * math.pi) for joint in mechanism.core().joints if joint.kind == linkage.CAM
-            for angle in joint.cam.law.kinks() + joint.cam.start]
+    specs = [joint.spec() for joint in mechanism.joints.values() if joint.type == "cam"]
+    return [float(angle) % (2.0 * math.pi) for spec in specs for angle in spec.law.kinks() + spec.start]
 
 
 def cam_pairs_of(mechanism: schema.Mechanism, gravity) -> list:
