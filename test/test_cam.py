@@ -1,4 +1,4 @@
-"""Cam pairs (mechanisms/cam_laws.py, mechanisms/linkage/cam.py; docs/theory.md §5.5, docs/linkages.md "Cams"): the
+"""Cam pairs (mechanisms/cam_laws.py, mechanisms/linkage/cam.py; docs/theory.md §5.7, docs/linkages.md "Cams"): the
 follower laws against their closed forms written here, the eccentric (circular-arc) cam's pressure angle and radius
 of curvature, a translating follower's J = m s'^2, the harmonic follower's jump speed, source 001's rocking roller
 follower (W = 1 with its passive freedom) as a scene through `structure`, the generated reduction, the jump ending
@@ -359,7 +359,7 @@ def test_the_valve_gear_is_recorded_and_its_kinematics_print_the_cam(tmp_path, c
 
 def test_a_flat_faced_follower_has_no_pressure_angle_and_its_profile_radius_is_R_plus_s_plus_s_second():
     """A flat face across the guide: alpha = 0, the profile's radius of curvature h + h'' = R + s + s'' (theory
-    §5.5), the contact at the face's distance R + s from the pivot along the guide, s' across it; a knife edge's
+    §5.7), the contact at the face's distance R + s from the pivot along the guide, s' across it; a knife edge's
     profile is its pitch curve, at R + s from the pivot on a centred follower."""
     law = rise_dwell_return("cycloidal")
     flat = translating_pair(law, contact="flat_face", base=0.03)
@@ -415,3 +415,42 @@ def test_a_table_law_in_a_scene_is_analysed_like_its_segments(capsys, tmp_path):
         found.append(json.loads(out)["cams"][0])
     assert found[1]["lift"] == pytest.approx(found[0]["lift"], rel=1e-3)
     assert found[1]["jump_speed"] == pytest.approx(found[0]["jump_speed"], rel=1e-3)
+
+
+def test_a_cam_on_a_bull_gear_adds_its_followers_share_to_the_geared_linkages_reduction():
+    """Cams and gears in one linkage: geared_shaker's bull gear (the crank) also lifts a roller tappet. Its
+    generated reduction (both paths' code) equals flat.py's to 1e-12, and is the geared shaker's own plus the cam
+    follower's J_f, dJ_f/dphi and weight and spring moments (docs/theory.md §5.5, §5.7)."""
+    from mech_regulator.mechanisms import build_reduced, cam_pairs_of, mechanism_geometry
+    from mech_regulator.mechanisms.linkage import make_reduced
+
+    data = copy.deepcopy(load_scene("geared_shaker").model_dump(exclude_none=True))
+    data["machine"]["gravity"] = [0.0, -9.81]
+    mechanism = data["machine"]["mechanism"]
+    mechanism["frame"]["T"] = [0.0, 0.0]
+    mechanism["links"].update(tappet={"points": {"T": [0.0, 0.0], "R": [0.0, 0.0]}, "mass": 0.5,
+                                      "centre": [0.0, 0.05]},
+                              roller={"points": {"R": [0.0, 0.0]}, "mass": 0.05})
+    mechanism["joints"].update(
+        T={"type": "prismatic", "links": ["frame", "tappet"], "direction_deg": 90.0},
+        R={"type": "revolute", "links": ["tappet", "roller"]},
+        K={"type": "cam", "links": ["bull_gear", "roller"], "contact": "roller", "roller_radius": 0.01,
+           "base_radius": 0.05, "spring": {"stiffness": 2000.0, "preload": 50.0},
+           "law": [{"motion": "rise", "law": "cycloidal", "angle_deg": 120.0, "lift": 0.02},
+                   {"motion": "dwell", "angle_deg": 60.0},
+                   {"motion": "return", "law": "cycloidal", "angle_deg": 120.0, "lift": 0.02},
+                   {"motion": "dwell", "angle_deg": 60.0}]})
+    machine = validate_scene(data).machine
+    assert [group.kind for group in mechanism_geometry(machine.mechanism)[1].groups] == ["cam follower", "gear",
+                                                                                         "RRP"]
+    generated = build_reduced(machine.mechanism, machine.gravity)
+    general = make_reduced(*mechanism_geometry(machine.mechanism), machine.gravity)
+    shaker = load_scene("geared_shaker").machine.mechanism
+    geared = build_reduced(shaker, (0.0, -9.81))
+    pair, = cam_pairs_of(machine.mechanism, machine.gravity)
+    for phi in np.linspace(0.1, 2 * math.pi - 0.1, 17):
+        values = generated(phi)
+        assert general(phi) == pytest.approx(values, rel=1e-12, abs=1e-12)
+        J, dJ, weight, spring = (float(part[0]) for part in pair.reduced(phi))
+        J0, dJ0, weight0, q, dq = geared(phi)
+        assert values == pytest.approx((J0 + J, dJ0 + dJ, weight0 + weight + spring, q, dq), rel=1e-12, abs=1e-12)

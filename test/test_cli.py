@@ -48,7 +48,7 @@ def bundled_data(name: str) -> dict:
 def test_bundled_scenes_present():
     assert BUNDLED == ["clutch_start", "compressor", "compressor_friction", "crank_slider_bench", "engine",
                        "engine_direct", "engine_indirect_isodromic", "engine_indirect_none", "engine_indirect_rigid",
-                       "engine_inline4", "four_bar_rocker", "lathe", "press", "press_coupling", "shaper",
+                       "engine_inline4", "four_bar_rocker", "geared_shaker", "lathe", "press", "press_coupling", "shaper",
                        "sieve_shaker", "six_bar_press", "six_bar_press_friction", "startup", "two_mass", "valve_gear",
                        "walking_beam", "walking_beam_linkage"]
 

@@ -270,7 +270,7 @@ def test_multi_cylinder_engines_equal_reference():
     assert_same_rhs(model, governor_modes(model), states=3)
     source = compile_scene(model).source
     assert re.search(r"total, q, dq, q_2, dq_2 = linkage_reduced_\w+\(phi, ", source)   # one call, both pistons
-    assert source.count("k.engine_gas(") == 2
+    assert source.count("drives_engine_gas(") == 2
     driven = model_of(driven_inline4())
     assert_same_rhs(driven, [("forward",), ("backward",), ("held",)], states=4)
     assert len(re.findall(r"q2_4, dq2_4 = linkage_reduced_\w+\(phi2, ", compile_scene(driven).source)) == 2
@@ -374,9 +374,9 @@ def test_source_depends_on_structure_not_numbers():
 def test_only_the_scene_s_kernels_are_called():
     startup = generate(model_of(bundled("startup")))[0]
     assert "reduced" not in startup and "sleeve" not in startup and "clamped" not in startup
-    assert "k.linear_motor" in startup and "k.viscous_load" in startup
+    assert "drives_linear_motor(" in startup and "loads_viscous_load(" in startup
     lathe = generate(model_of(bundled("lathe")))[0]
-    assert "k.cutting_load(clamped" in lathe and "linear_motor" not in lathe
+    assert "loads_cutting_load(k.inside_intervals(clamped" in lathe and "linear_motor" not in lathe
 
 
 def test_cache_folder_that_cannot_be_made(tmp_path, monkeypatch):

@@ -91,7 +91,7 @@ def test_generated_joint_loads_equal_the_general_solver(name, build, gravity):
 
 def test_compiled_code_gives_the_plain_python_numbers():
     """The source the fast path compiles (numba) and the reference path runs (Python): the same numbers to 1e-13 of
-    the largest reaction, tuples of complex numbers and floats (what kernels.joint_friction_acceleration reads)."""
+    the largest reaction, tuples of complex numbers and floats (what joint_friction.friction_acceleration reads)."""
     from numba import njit
 
     for name in ("six_bar_press_friction", "shaper"):

@@ -26,7 +26,10 @@ Every row but the served one runs with MECH_REGULATOR_SERVER=off: no command sta
 The script is written from the scene (script_text): its constants, the crank-slider's closed-form kinematics and
 the moments as plain Python, solve_ivp with the scene's method and tolerances, sampled at its sample rate; it
 prints the final speed, which is shown next to the command line's as a check that the three compute the same
-machine. Numbers to read, never to assert.
+machine. Its moments are written independently of the package's definitions of the drives and loads
+(effects/drives.py, effects/loads.py) on purpose: a script a user would write by hand, standing alone, and a second
+spelling that the final speeds check the definitions against; it knows the kinds in LOAD_TYPES and the constant and
+linear-motor drives, and script_refusal names any other. Numbers to read, never to assert.
 """
 
 from __future__ import annotations
@@ -124,7 +127,8 @@ LOAD_TYPES = ("constant", "viscous", "fan", "cutting", "slider_constant", "slide
 
 
 def _load_term(load) -> str | None:
-    """The load's moment [N m] as a Python expression of phi, omega, x (slider position) and dx (dx/dphi)."""
+    """The load's moment [N m] as a Python expression of phi, omega, x (slider position) and dx (dx/dphi), written
+    independently of effects/loads.py (module docstring); None for a kind not in LOAD_TYPES."""
     kind = load.type
     if kind == "constant":
         return f"-{load.torque!r}"

@@ -22,7 +22,7 @@ def run_structure(scene, args: argparse.Namespace) -> int:
     a scene whose linkage has W != 1 or an unsupported group has already been refused by its validation."""
     from mech_regulator.cli.report import OutputWriter, terminal_text, to_json
     from mech_regulator.mechanisms import cam_pairs_of, mechanism_geometry
-    from mech_regulator.mechanisms.linkage import Dyad
+    from mech_regulator.mechanisms.linkage import Dyad, RedundantLink
     from mech_regulator.scene import SceneError
 
     mechanism = scene.machine.analysed_mechanism()[0]
@@ -31,7 +31,9 @@ def run_structure(scene, args: argparse.Namespace) -> int:
                          "analyses machine.mechanism.type: linkage (links, joints, crank; docs/linkages.md)")
     linkage, structure = mechanism_geometry(mechanism)
     cams = cam_pairs_of(mechanism, scene.machine.gravity)
-    groups = [{"number": number, "class": "II" if isinstance(group, Dyad) else group.kind, "type": group.kind,
+    groups = [{"number": number, "type": group.kind,
+               "class": "II" if isinstance(group, Dyad) else "redundant" if isinstance(group, RedundantLink)
+               else group.kind,   # "gear" or "cam follower"
                "links": list(group.links), "joints": [joint.name for joint in group.joints],
                "branch": getattr(group, "branch", None)} for number, group in enumerate(structure.groups, start=1)]
     summary = {"scene": scene.name, "n": structure.moving_links, "p5": structure.lower_pairs,

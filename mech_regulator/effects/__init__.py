@@ -1,7 +1,8 @@
 """Effects: the moments that act on the machine, each reduced to the crank.
 
-An effect is built once from its scene entry into a plain closure
-`moment(t, phi, omega, q, dq) -> M [N m]` over constants, where q is the mechanism's output
+Each kind of drive and load is defined once, for both paths, in effects/drives.py or effects/loads.py
+(effects/definition.py, docs/effects.md). For the reference path an effect is built once from its scene entry into a
+plain closure `moment(t, phi, omega, q, dq) -> M [N m]` over constants, where q is the mechanism's output
 coordinate (slider position x [m], rocker angle th4 [rad] or shuttle bar position x_C [m]) and dq = dq/dphi its velocity ratio.
 A force F on the output link becomes the reduced moment `F dq` (same power, docs/theory.md §2.2).
 With several cylinders q and dq are tuples, one entry per piston; only the engine drive reads them then
@@ -18,9 +19,13 @@ from typing import Callable
 
 from scipy.optimize import brentq
 
-from mech_regulator.effects.tables import clamped_linear, periodic_kinks, periodic_linear
-from mech_regulator.mechanisms.engine import firing_delays
+from mech_regulator.effects import drives, loads  # noqa: F401  (they register their definitions)
+from mech_regulator.effects.definition import (CLAMPED, INTERVALS, PERIODIC, Definition, check_covered, definition_of,
+                                               reference_function)
+from mech_regulator.effects.tables import clamped_linear, interval_indicator, periodic_kinks, periodic_linear
 from mech_regulator.scene import schema
+
+check_covered(schema.Drive, schema.Load, schema.DrivenLoad, schema.BranchLoad)
 
 MomentFunction = Callable[[float, float, float, float, float], float]
 
@@ -42,7 +47,8 @@ class Effect:
     an effect acting on the output link, the generalised force Q(t, phi, omega, q, dq) on it (slider force along +x [N],
     rocker moment [N m]) whose reduced moment is `moment` = Q dq, else None (read by the kinetostatics of
     joint friction only); segment_output_force(anchor, t, phi, omega, q, dq): output_force read on the same piece as
-    segment_moment (None: output_force has no breakpoints).
+    segment_moment (None: output_force has no breakpoints); definition: what it was built from, the formulas the fast
+    path compiles (effects/definition.py; None for an effect derived from others, such as a branch's reduced load).
     """
 
     name: str
@@ -56,100 +62,12 @@ class Effect:
     kink_angles: tuple[float, ...] = ()
     segment_moment: Callable[..., float] | None = None
     segment_output_force: Callable[..., float] | None = None
+    definition: Definition | None = None
 
 
 def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:
     """The driving moment M_d of a scene's `machine.drive` (an engine reads the mechanism's cylinders)."""
-    if isinstance(drive, schema.ConstantDrive):
-        torque = drive.torque
-        return Effect("drive", "drive", lambda t, phi, omega, q, dq: torque, frozenset(),
-                      f"constant: M_d = {torque:g} N m")
-    if isinstance(drive, schema.LinearMotor):
-        stall, no_load = drive.stall_torque, drive.no_load_speed
-        return Effect("drive", "drive", lambda t, phi, omega, q, dq: stall * (1.0 - omega / no_load),
-                      frozenset({"omega"}), f"linear motor: M_d = {stall:g} (1 - omega / {no_load:g}) N m")
-    if isinstance(drive, schema.TableDrive):
-        angles, period = [math.radians(a) for a in drive.angle_deg], math.radians(drive.period_deg)
-        table = periodic_linear(angles, drive.torque, period)
-        return Effect("drive", "drive", lambda t, phi, omega, q, dq: table(phi), frozenset({"phi"}),
-                      f"table M_d(phi), {len(drive.torque)} points over {drive.period_deg:g} deg",
-                      period=period, kink_angles=periodic_kinks(angles, drive.torque, period),
-                      segment_moment=lambda anchor, t, phi, omega, q, dq: table(phi, anchor))
-    if isinstance(drive, schema.Engine):
-        area = math.pi * drive.bore ** 2 / 4.0
-        phase = math.radians(drive.phase_deg)
-        angles, cycle = [math.radians(a) for a in drive.angle_deg], math.radians(drive.cycle_deg)
-        pressure = periodic_linear(angles, drive.pressure, cycle)
-        knots = periodic_kinks(angles, drive.pressure, cycle)
-        cylinders = mechanism.cylinders if isinstance(mechanism, schema.CrankSlider) else None
-        if cylinders is not None:
-            return _multi_cylinder_engine(drive, cylinders, area, pressure, knots)
-        # Gas pushes the piston towards the crank axis: F_x = -p A, reduced moment F_x dx/dphi.
-        return Effect("drive", "drive", lambda t, phi, omega, q, dq: -pressure(phi + phase) * area * dq,
-                      frozenset({"phi"}), f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, "
-                                          f"{drive.cycle_deg:g} deg cycle", period=cycle,
-                      output_force=lambda t, phi, omega, q, dq: -pressure(phi + phase) * area,
-                      kink_angles=_shifted_kinks(knots, (phase,), cycle),
-                      segment_moment=lambda anchor, t, phi, omega, q, dq: -pressure(phi + phase, anchor + phase)
-                      * area * dq,
-                      segment_output_force=lambda anchor, t, phi, omega, q, dq: -pressure(phi + phase, anchor + phase)
-                      * area)
-    raise TypeError(f"no drive effect for {type(drive).__name__}")
-
-
-def _shifted_kinks(knots: tuple[float, ...], shifts: tuple[float, ...], period: float) -> tuple[float, ...]:
-    """The crank angles [rad] in [0, period) where p(phi + shift) has a knot, for every shift: knot - shift."""
-    return tuple(sorted({(knot - shift) % period for knot in knots for shift in shifts}))
-
-
-def _multi_cylinder_engine(drive: schema.Engine, cylinders: list[schema.Cylinder], area: float,
-                           pressure: Callable[..., float], knots: tuple[float, ...]) -> Effect:
-    """Gas moment of identical cylinders on one crankshaft: `M_d = -A sum_i p(phi + phase - d_i) x_i'`, with
-    cylinder i's firing delay d_i (mechanisms.engine.firing_delays) and its piston's x_i' = dx_i/dphi, which
-    the multi-cylinder mechanism passes as the tuple dq. Linear in each x_i': cylinder i's share is the
-    moment with the other ratios set to zero."""
-    delays = firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], drive.cycle_deg,
-                           drive.firing_order, drive.firing_deg)
-    shifts = tuple(math.radians(drive.phase_deg - delay) for delay in delays)
-
-    def moment(t: float, phi: float, omega: float, q, dq) -> float:
-        total = 0.0
-        for shift, ratio in zip(shifts, dq):
-            total += pressure(phi + shift) * ratio
-        return -area * total
-
-    def segment_moment(anchor: float, t: float, phi: float, omega: float, q, dq) -> float:
-        total = 0.0
-        for shift, ratio in zip(shifts, dq):
-            total += pressure(phi + shift, anchor + shift) * ratio
-        return -area * total
-
-    order = "-".join(str(i + 1) for i in sorted(range(len(delays)), key=delays.__getitem__))
-    return Effect("drive", "drive", moment, frozenset({"phi"}),
-                  f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, {len(cylinders)} cylinders, "
-                  f"A = {area:.6g} m^2, "
-                  f"{drive.cycle_deg:g} deg cycle, firing {order} at {', '.join(f'{d:g}' for d in sorted(delays))} deg",
-                  period=math.radians(drive.cycle_deg), kink_angles=_shifted_kinks(knots, shifts, math.radians(
-                      drive.cycle_deg)), segment_moment=segment_moment)
-
-
-def _cutting(load: schema.CuttingLoad) -> Effect:
-    """On-off load: -torque while (phi mod period) lies in one of the intervals [start, end)."""
-    period = math.radians(load.period_deg)
-    start = math.radians(load.intervals_deg[0][0])
-    bounds = [math.radians(edge) - start for interval in load.intervals_deg for edge in interval]
-    torque = load.torque
-
-    def moment(t: float, phi: float, omega: float, q: float, dq: float) -> float:
-        u = math.fmod(phi - start, period)
-        if u < 0.0:
-            u += period
-        return -torque if bisect.bisect_right(bounds, u) % 2 == 1 else 0.0
-
-    switches = tuple(sorted({(edge + start) % period for edge in bounds}))
-    return Effect("cutting", "load", moment, frozenset({"phi"}),
-                  f"cutting: M_c = -{torque:g} N m over {load.intervals_deg} deg", period=period,
-                  switch_angles=switches)
+    return build_effect(definition_of(drive, mechanism), None)
 
 
 def build_load(load: schema.Load, kinematic_period: float | None,
@@ -157,71 +75,53 @@ def build_load(load: schema.Load, kinematic_period: float | None,
     """A resisting moment or force of a scene's `machine.loads` entry; loads on the output link are
     periodic with the mechanism (kinematic_period [rad]); output_position(phi) -> (q, dq/dphi) of the mechanism
     places the kinks of a slider force table (None: the table has none, a solver steps over its breakpoints)."""
-    if isinstance(load, schema.ConstantLoad):
-        torque = load.torque
-        return Effect("constant", "load", lambda t, phi, omega, q, dq: -torque, frozenset(),
-                      f"constant: M_c = -{torque:g} N m")
-    if isinstance(load, schema.ViscousLoad):
-        c = load.coefficient
-        return Effect("viscous", "load", lambda t, phi, omega, q, dq: -c * omega, frozenset({"omega"}),
-                      f"viscous: M_c = -{c:g} omega")
-    if isinstance(load, schema.FanLoad):
-        k = load.coefficient
-        return Effect("fan", "load", lambda t, phi, omega, q, dq: -k * omega * abs(omega), frozenset({"omega"}),
-                      f"fan: M_c = -{k:g} omega |omega|")
-    if isinstance(load, schema.TableLoad):
-        angles, period = [math.radians(a) for a in load.angle_deg], math.radians(load.period_deg)
-        table = periodic_linear(angles, load.torque, period)
-        return Effect("table", "load", lambda t, phi, omega, q, dq: -table(phi), frozenset({"phi"}),
-                      f"table: M_c = -M(phi), {len(load.torque)} points over {load.period_deg:g} deg",
-                      period=period, kink_angles=periodic_kinks(angles, load.torque, period),
-                      segment_moment=lambda anchor, t, phi, omega, q, dq: -table(phi, anchor))
-    if isinstance(load, schema.CuttingLoad):
-        return _cutting(load)
-    on = {"slider": "slider", "rocker": "rocker", "shuttle": "shuttle bar"}[load.type.split("_")[0]]
-    if isinstance(load, (schema.SliderConstant, schema.RockerConstant)):
-        value = load.force if isinstance(load, schema.SliderConstant) else load.torque
-        return Effect(load.type, "load", lambda t, phi, omega, q, dq: value * dq, frozenset({"phi"}),
-                      f"constant on the {on}: M = {value:g} dq/dphi", period=kinematic_period,
-                      output_force=lambda t, phi, omega, q, dq: value)
-    if isinstance(load, schema.OutputViscous):
-        c = load.coefficient
-        return Effect(load.type, "load", lambda t, phi, omega, q, dq: -c * dq * dq * omega,
-                      frozenset({"phi", "omega"}), f"viscous on the {on}: M = -{c:g} (dq/dphi)^2 omega",
-                      period=kinematic_period, output_force=lambda t, phi, omega, q, dq: -c * dq * omega)
-    if isinstance(load, schema.OutputSpring):
-        k, free = load.stiffness, load.free_position
-        return Effect(load.type, "load", lambda t, phi, omega, q, dq: -k * (q - free) * dq, frozenset({"phi"}),
-                      f"spring on the {on}: M = -{k:g} (q - {free:g}) dq/dphi", period=kinematic_period,
-                      output_force=lambda t, phi, omega, q, dq: -k * (q - free))
-    if isinstance(load, schema.SliderTable):
-        return _slider_table(load, kinematic_period, output_position)
-    raise TypeError(f"no load effect for {type(load).__name__}")
+    return build_effect(definition_of(load), kinematic_period, output_position)
 
 
-def _slider_table(load: schema.SliderTable, kinematic_period: float | None,
-                  output_position: Callable[[float], tuple[float, float]] | None) -> Effect:
-    """Slider force table: M = F(x) dx/dphi, F clamped linear in the slider position x [m]. With the mechanism's
-    output_position(phi) -> (x [m], dx/dphi [m/rad]), the crank angles where x crosses a breakpoint are its kinks
-    (position_kinks), and between two of them segment_moment holds F on the piece of x there (held_positions)."""
-    force = clamped_linear(load.position, load.force)
-    kinks = position_kinks(load.position, output_position) if output_position and kinematic_period else ()
-    segment_moment = segment_force = None
-    if kinks:
-        positions = held_positions(kinks, output_position)
+def build_effect(definition: Definition, kinematic_period: float | None,
+                 output_position: Callable[[float], tuple[float, float]] | None = None) -> Effect:
+    """The reference path's Effect of a drive's or load's definition (its formulas bound to its numbers,
+    definition.reference_function): a periodic table in phi has its knots as kinks (shifted per output), an interval
+    table its edges as switches, a clamped table in the output position q the crank angles where q crosses one of its
+    breakpoints (position_kinks, with output_position and kinematic_period [rad]; between two of them it is read on
+    the piece of q held there, held_positions)."""
+    spec = definition.table
+    period = spec.period if spec is not None and spec.kind != CLAMPED else (
+        kinematic_period if definition.on_output else None)
+    table = held = None
+    kinks: tuple[float, ...] = ()
+    switches: tuple[float, ...] = ()
+    if spec is not None and spec.kind == PERIODIC:
+        table = periodic_linear(spec.xs, spec.ys, spec.period)
+        knots = periodic_kinks(spec.xs, spec.ys, spec.period)
+        kinks = knots if spec.shifts is None else _shifted_kinks(knots, spec.shifts, spec.period)
+    elif spec is not None and spec.kind == INTERVALS:
+        table = interval_indicator(spec.xs, spec.period)
+        switches = tuple(sorted({(edge - shift) % spec.period for edge in spec.xs for shift in spec.shifts}))
+    elif spec is not None:
+        table = clamped_linear(spec.xs, spec.ys)
+        if output_position and kinematic_period:
+            kinks = position_kinks(spec.xs, output_position)
+        if kinks:
+            positions = held_positions(kinks, output_position)
 
-        def segment_force(anchor: float, t: float, phi: float, omega: float, q: float, dq: float) -> float:
-            """F [N] on the piece of x held between the two kinks around the crank angle anchor [rad]."""
-            return force(q, positions[bisect.bisect_right(kinks, anchor % kinematic_period)])
+            def held(anchor: float) -> float:
+                """The slider position [m] held on the interval between the two kinks around anchor [rad]."""
+                return positions[bisect.bisect_right(kinks, anchor % kinematic_period)]
 
-        def segment_moment(anchor: float, t: float, phi: float, omega: float, q: float, dq: float) -> float:
-            """M = F dx/dphi [N m], F on segment_force's piece."""
-            return segment_force(anchor, t, phi, omega, q, dq) * dq
+    def bound(function: Callable[..., float] | None, anchored: bool) -> Callable[..., float] | None:
+        if function is None or (anchored and not kinks):
+            return None
+        return reference_function(definition, function, table, anchored, held)
 
-    return Effect("slider_table", "load", lambda t, phi, omega, q, dq: force(q) * dq, frozenset({"phi"}),
-                  f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi", period=kinematic_period,
-                  output_force=lambda t, phi, omega, q, dq: force(q), kink_angles=kinks, segment_moment=segment_moment,
-                  segment_output_force=segment_force)
+    return Effect(definition.name, definition.role, bound(definition.moment, False), definition.depends_on,
+                  definition.formula, period, switches, bound(definition.output_force, False), kinks,
+                  bound(definition.moment, True), bound(definition.output_force, True), definition)
+
+
+def _shifted_kinks(knots: tuple[float, ...], shifts: tuple[float, ...], period: float) -> tuple[float, ...]:
+    """The crank angles [rad] in [0, period) where p(phi + shift) has a knot, for every shift: knot - shift."""
+    return tuple(sorted({(knot - shift) % period for knot in knots for shift in shifts}))
 
 
 def output_position_of(reduced: Callable[[float], tuple] | None) -> Callable[[float], tuple[float, float]] | None:

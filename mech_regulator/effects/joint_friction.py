@@ -74,6 +74,53 @@ def thrust_collar_moment(f: float, axial_load: float, inner: float, outer: float
     return f * axial_load * (inner + outer) / 2.0
 
 
+def friction_acceleration(omega, moment, inertia, collar, arms, ratios, constant, per_epsilon, with_joints, tolerance,
+                          iterations, ratio_signs, normal_signs):
+    """epsilon [rad/s^2] solving J epsilon = M - sign(omega) F(epsilon), F = M_collar + sum_j rho_j |k_j| |R0_j +
+    R1_j epsilon| (module docstring), by Newton's method from the friction at rest; at rest (omega = 0) 0 while
+    |M| <= F(0), else breaking away in the direction of M; NaN without convergence. Both paths run this one function
+    (JointFrictionModel.acceleration in Python; the fast path compiles it with numba as it stands: plain loops over
+    sequences indexed by joint). moment M [N m], inertia J [kg m^2], collar M_collar [N m]; per joint: arms rho_j [m]
+    (f_guide for a guide; 0 for a joint without friction, whose terms add exact zeros), ratios k_j [-], the
+    reactions' constant R0_j and per_epsilon R1_j (complex Fx + i Fy [N], [N s^2]); with_joints False: the collar
+    alone (no kinetostatics); tolerance: the relative size of the last step [-]; iterations: at most. Between two
+    corners (docs/theory.md §6.5): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_signs s_N (0: |R|) a guide's
+    |N| (its reaction i N) as s_N N, per joint (0 for every joint but the guides)."""
+    at_rest = 0.0
+    if with_joints:
+        for j in range(len(arms)):
+            weight = arms[j] * (abs(ratios[j]) if ratio_signs[j] == 0.0 else ratio_signs[j] * ratios[j])
+            at_rest += weight * (normal_signs[j] * constant[j].imag if normal_signs[j] != 0.0 else abs(constant[j]))
+    at_rest = collar + at_rest
+    if omega > 0.0:
+        sign = 1.0
+    elif omega < 0.0:
+        sign = -1.0
+    elif abs(moment) <= at_rest:
+        return 0.0
+    else:
+        sign = 1.0 if moment > 0.0 else -1.0
+    epsilon = (moment - sign * at_rest) / inertia
+    if not with_joints:
+        return epsilon
+    for _ in range(iterations):
+        friction, slope = collar, 0.0
+        for j in range(len(arms)):
+            weight = arms[j] * (abs(ratios[j]) if ratio_signs[j] == 0.0 else ratio_signs[j] * ratios[j])
+            reaction = constant[j] + per_epsilon[j] * epsilon
+            size = normal_signs[j] * reaction.imag if normal_signs[j] != 0.0 else abs(reaction)
+            friction += weight * size
+            if normal_signs[j] != 0.0:
+                slope += weight * normal_signs[j] * per_epsilon[j].imag
+            elif size > 0.0:
+                slope += weight * (per_epsilon[j].real * reaction.real + per_epsilon[j].imag * reaction.imag) / size
+        step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
+        epsilon -= step
+        if abs(step) <= tolerance * (abs(epsilon) + (abs(moment) + friction) / inertia):
+            return epsilon
+    return math.nan
+
+
 @dataclass(frozen=True)
 class JointFrictionModel:
     """Joint friction assembled for the hot path.
@@ -105,62 +152,25 @@ class JointFrictionModel:
         read rho_j s_j k_j for rho_j |k_j|."""
         return self.corner_signs[bisect.bisect_right(self.corner_angles, phi % (2.0 * math.pi)) - 1]
 
-    def _terms(self, phi: float, omega: float, force: float, ratio_signs: tuple[float, ...] | None = None
-               ) -> list[tuple[float, complex, complex]]:
-        """(rho_j |k_j|, R0_j, R1_j) of every joint with friction at (phi, omega, output force); with ratio_signs
-        (one per joint, +1 or -1) rho_j s_j k_j instead of rho_j |k_j| (|k_j| continued across its corner)."""
-        if self.loads is None:
-            return []
-        loads = self.loads(phi, omega, force)
-        if ratio_signs is None:
-            return [(arm * abs(loads.ratios[i]), loads.constant[i], loads.per_epsilon[i])
-                    for i, arm in zip(self.indices, self.arms)]
-        return [(arm * sign * loads.ratios[i], loads.constant[i], loads.per_epsilon[i])
-                for i, arm, sign in zip(self.indices, self.arms, ratio_signs)]
-
-    def _normal_sign(self, joint: int, normal_signs: tuple[float, ...]) -> float:
-        """The sign s_N (+1 or -1) held for joint position `joint` (in names) when it is a guide whose |N| is read as
-        s_N N (normal_signs: one per guide, in guides' order; () or 0: |N| itself), else 0."""
-        if joint in self.guides and normal_signs:
-            return normal_signs[self.guides.index(joint)]
-        return 0.0
-
     def acceleration(self, phi: float, omega: float, force: float, inertia: float, moment: float,
                      ratio_signs: tuple[float, ...] | None = None, normal_signs: tuple[float, ...] = ()) -> float:
         """epsilon [rad/s^2] solving `J epsilon = M - sign(omega) F(epsilon)` (module docstring) at crank angle
         phi [rad], speed omega [rad/s], output-link force Q [N or N m], reduced inertia J [kg m^2] and every
         other moment M [N m]; at rest, 0 while |M| <= F(0). NaN if Newton's method does not converge.
-        ratio_signs, normal_signs: F continued along its piece between two corners (module docstring; _terms,
-        _normal_sign: |R_j| of a guide read as s_N N = s_N Im R_j); None and (): F itself."""
-        terms = self._terms(phi, omega, force, ratio_signs)
-        held = [self._normal_sign(j, normal_signs) for j in range(len(terms))]
-        at_rest = self.collar + sum(weight * (s * r0.imag if s else abs(r0)) for (weight, r0, _), s in zip(terms, held))
-        if omega > 0.0:
-            sign = 1.0
-        elif omega < 0.0:
-            sign = -1.0
-        elif abs(moment) <= at_rest:
-            return 0.0
-        else:
-            sign = 1.0 if moment > 0.0 else -1.0
-        epsilon = (moment - sign * at_rest) / inertia
-        if not terms:
-            return epsilon
-        for _ in range(NEWTON_ITERATIONS):
-            friction, slope = self.collar, 0.0
-            for (weight, r0, r1), s in zip(terms, held):
-                reaction = r0 + r1 * epsilon
-                size = s * reaction.imag if s else abs(reaction)
-                friction += weight * size
-                if s:
-                    slope += weight * s * r1.imag
-                elif size > 0.0:
-                    slope += weight * (r1.real * reaction.real + r1.imag * reaction.imag) / size
-            step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
-            epsilon -= step
-            if abs(step) <= NEWTON_TOLERANCE * (abs(epsilon) + (abs(moment) + friction) / inertia):
-                return epsilon
-        return math.nan
+        ratio_signs, normal_signs: F continued along its piece between two corners (module docstring: s_j k_j for
+        |k_j|, one per joint in names' order; a guide's |R_j| read as s_N N = s_N Im R_j, one per guide in guides'
+        order); None and (): F itself. Solved by friction_acceleration, the function the fast path compiles."""
+        if self.loads is None:
+            return friction_acceleration(omega, moment, inertia, self.collar, (), (), (), (), False, NEWTON_TOLERANCE,
+                                         NEWTON_ITERATIONS, (), ())
+        normals = [0.0] * len(self.names)
+        for k, position in enumerate(self.guides if normal_signs else ()):
+            normals[position] = normal_signs[k]
+        loads = self.loads(phi, omega, force)
+        return friction_acceleration(omega, moment, inertia, self.collar, self.arms,
+                                     [loads.ratios[i] for i in self.indices], [loads.constant[i] for i in self.indices],
+                                     [loads.per_epsilon[i] for i in self.indices], True, NEWTON_TOLERANCE,
+                                     NEWTON_ITERATIONS, ratio_signs or (0.0,) * len(self.names), normals)
 
     def guide_normal(self, phi: float, omega: float, epsilon: float, force: float, guide: int = 0) -> float:
         """The normal force N [N] of guide number `guide` (in guides' order; signed, the guard of its corner) at crank
@@ -186,7 +196,11 @@ class JointFrictionModel:
     def locking_ratio(self, phi: float, inertia: float) -> float:
         """K / J at crank angle phi [rad] for reduced inertia J [kg m^2]: K = sum_j rho_j |k_j| |R1_j|, the
         largest slope of the friction with epsilon [kg m^2]; >= 1 is self-locking."""
-        return sum(weight * abs(r1) for weight, _, r1 in self._terms(phi, 0.0, 0.0)) / inertia
+        if self.loads is None:
+            return 0.0
+        loads = self.loads(phi, 0.0, 0.0)
+        return sum(arm * abs(loads.ratios[i]) * abs(loads.per_epsilon[i])
+                   for i, arm in zip(self.indices, self.arms)) / inertia
 
 
 def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:

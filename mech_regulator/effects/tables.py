@@ -87,3 +87,17 @@ def slope_breaks(xs: Sequence[float], ys: Sequence[float], ends: bool) -> tuple[
     slopes = [0.0] + [(ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]) for i in range(len(xs) - 1)] + [0.0]
     return tuple(x for i, x in enumerate(xs) if (ends or 0 < i < len(xs) - 1)
                  and abs(slopes[i + 1] - slopes[i]) > 1e-12 * max(abs(slopes[i + 1]), abs(slopes[i])))
+
+
+def interval_indicator(edges: Sequence[float], period: float) -> Callable[[float], float]:
+    """Return inside(x): 1.0 while x mod period lies in one of the intervals [edges[2k], edges[2k+1]), else 0.0 (the
+    edges from 0, ascending, within one period)."""
+    bounds = list(edges)
+
+    def inside(x: float) -> float:
+        u = math.fmod(x, period)
+        if u < 0.0:
+            u += period
+        return 1.0 if bisect.bisect_right(bounds, u) % 2 == 1 else 0.0
+
+    return inside

@@ -22,6 +22,7 @@ from typing import Callable
 
 import numpy as np
 
+from mech_regulator.governors import servo as servo_motor
 from mech_regulator.governors.centrifugal import PorterSensor
 from mech_regulator.governors.valve import ValveCharacteristic, build_valve
 from mech_regulator.scene import schema
@@ -113,7 +114,7 @@ class Governor:
         dashpot's shift zeta for isodromic feedback. Positive opening closes the throttle."""
         opening = self.sensor.sleeve(y[ARM]) - self.pilot_neutral
         if self.feedback == "rigid":
-            opening += self.feedback_gain * (y[SERVO] - self.feedback_reference)
+            opening += servo_motor.rigid_feedback(self.feedback_gain, y[SERVO], self.feedback_reference)
         elif self.feedback == "isodromic":
             opening += y[SHIFT]
         return opening
@@ -124,9 +125,7 @@ class Governor:
         opening = self.pilot_opening(y)
         if ideal:
             return -self.servo_gain * opening
-        if self.dead_band > 0.0:
-            opening = math.copysign(max(abs(opening) - self.dead_band, 0.0), opening)
-        return min(max(-self.servo_gain * opening, -self.servo_max_speed), self.servo_max_speed)
+        return servo_motor.servo_command(opening, self.servo_gain, self.servo_max_speed, self.dead_band)
 
     def initial_state(self, omega: float, sleeve: float | None, servo: float | None,
                       balance_throttle: Callable[[float], float]) -> np.ndarray:
@@ -200,7 +199,7 @@ class Governor:
             servo_rate = self.servo_command(y, ideal) if moving_servo else 0.0
             rates.append(servo_rate)
             if self.feedback == "isodromic":
-                rates.append(rho * servo_rate - y[SHIFT] / time_constant)
+                rates.append(servo_motor.isodromic_rate(rho, servo_rate, y[SHIFT], time_constant))
             return rates
 
         return indirect

@@ -1,4 +1,4 @@
-"""A cam follower's motion law over the cam's turn (docs/theory.md §5.5): its displacement s(theta) and the first
+"""A cam follower's motion law over the cam's turn (docs/theory.md §5.7): its displacement s(theta) and the first
 and second derivatives s', s'' with respect to the cam angle theta, from segments (rise, dwell, return) or a table.
 
 A segment of angle beta [rad] with lift h moves the follower by h f(x), x = (theta - theta_start) / beta in [0, 1],

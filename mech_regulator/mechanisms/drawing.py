@@ -66,7 +66,7 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
     Walking beam (source 004's names, `walking_beam.solve`): crank O1-A, coupler triangle A-B-C, the two
     rockers O2-B and O3-E (a bundle), the tie B-E, the side link E-D, the shuttle bar C-D, the frame O1-O2-O3
     and the path of the pin A.
-    Linkage: the parts of `linkage.drawing.linkage_outline` (frame, crank, links, sliders, joints).
+    Linkage: the parts of `linkage.drawing.linkage_outline` (frame, crank, links, sliders, gears, joints).
     No mechanism: a disc of radius DISC_RADIUS (schematic: the machine has no link lengths) and a spoke
     from its centre to DISC_RADIUS (cos phi, sin phi).
     """

@@ -154,14 +154,14 @@ def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]],
     position places the kinks in phi_driven of a slider table, effects.build_load)."""
     effects = [build_load(load, 2.0 * math.pi if spec.mechanism is not None else None, output_position_of(reduced))
                for load in spec.loads]  # a slider table's kinks: where its mechanism's x crosses a breakpoint
-    coulomb = [isinstance(load, schema.ConstantLoad) for load in spec.loads]
+    coulomb = [effect.definition.dry for effect in effects]  # constant loads: Coulomb resistances
     effects = unique_names(effects)
     branches = []
     for branch in spec.branches:
         own = unique_names([build_load(load, None) for load in branch.loads])
         first = len(effects)
         effects += [_reduced(effect, branch.name, branch.ratio) for effect in own]
-        coulomb += [isinstance(load, schema.ConstantLoad) for load in branch.loads]
+        coulomb += [effect.definition.dry for effect in own]
         branches.append(BranchModel(branch.name, branch.inertia, branch.ratio, tuple(range(first, len(effects)))))
     inertia = spec.inertia + sum(branch.inertia / branch.ratio ** 2 for branch in spec.branches)
     resistance = -sum(effect.moment(0.0, 0.0, 0.0, 0.0, 0.0) for effect, dry in zip(effects, coulomb) if dry)

@@ -208,19 +208,55 @@ class LinkageLink(SceneModel):
 
 
 class LinkageJoint(SceneModel):
-    """A lower pair between two links; both have a point of the joint's name."""
+    """A lower pair between two links (both have a point of the joint's name), or a gear pair (docs/linkages.md
+    "Gears")."""
 
-    type: Literal["revolute", "prismatic"] = Field(description="revolute: the two links' points coincide; prismatic: "
-                                                              "the second link's point slides on a line of the first")
+    type: Literal["revolute", "prismatic", "gear"] = Field(
+        description="revolute: the two links' points coincide; prismatic: the second link's point slides on a line of "
+                    "the first; gear: the two links' gears mesh")
     links: list[str] = Field(min_length=2, max_length=2, description="the two links ('frame' for the frame); "
                                                                      "prismatic: [guide, slider]")
     direction_deg: float = Field(0.0, description="prismatic: direction of the guide line through the guide's point, "
                                                   "in the guide's coordinates [deg]")
     slider_angle_deg: float = Field(0.0, description="prismatic: the slider's angle minus the guide's (constant) [deg]")
+    teeth: list[Annotated[int, Field(gt=0)]] | None = Field(None, min_length=2, max_length=2, description="gear: the "
+                                                            "tooth numbers of the two links' gears (or radii)")
+    radii: list[Annotated[float, Field(gt=0.0)]] | None = Field(None, min_length=2, max_length=2, description="gear: "
+                                                                "the pitch radii of the two links' gears [m]")
+    internal: bool = Field(False, description="gear: the larger gear is a ring with internal teeth")
+    centres: list[str] | None = Field(None, min_length=2, max_length=2, description="gear: the names of the gears' "
+                                                                                    "centre points on the two links")
+    carrier: str = Field("frame", description="gear: the link on which both centres stay (the arm of an epicyclic "
+                                              "train; the frame for fixed axes)")
+    phase_deg: float = Field(0.0, description="gear: theta_b - theta_c - k (theta_a - theta_c) [deg]: the second "
+                                              "link's angle when the first and the carrier are at 0")
+
+    @model_validator(mode="after")
+    def _gear_keys(self) -> LinkageJoint:
+        gear_keys = sorted(key for key in ("teeth", "radii", "centres", "internal", "carrier", "phase_deg")
+                           if getattr(self, key) != LinkageJoint.model_fields[key].default)
+        if self.type != "gear" and gear_keys:
+            raise ValueError(f"{gear_keys} belong to a gear; this joint is {self.type}")
+        if self.type == "gear" and (self.centres is None or (self.teeth is None) == (self.radii is None)):
+            raise ValueError("a gear needs centres (its two centre points) and exactly one of teeth and radii")
+        if self.type == "gear" and self.internal and (self.teeth or self.radii)[0] == (self.teeth or self.radii)[1]:
+            raise ValueError(f"an internal gear pair of equal gears {self.teeth or self.radii}; expected a ring larger "
+                             "than its pinion")
+        return self
+
+    def core_gear(self):
+        """The gear pair's mechanisms.linkage.gears.GearMesh (None for a lower pair)."""
+        from mech_regulator.mechanisms.linkage.gears import GearMesh
+
+        if self.type != "gear":
+            return None
+        return GearMesh(tuple(self.centres), tuple(self.teeth) if self.teeth else None,
+                        tuple(self.radii) if self.radii else None, self.internal, self.carrier,
+                        math.radians(self.phase_deg))
 
 
 class CamSegment(SceneModel):
-    """One part of a cam's turn (docs/theory.md §5.5): the follower rises, dwells or returns by a law."""
+    """One part of a cam's turn (docs/theory.md §5.7): the follower rises, dwells or returns by a law."""
 
     motion: Literal["rise", "dwell", "return"] = Field(description="rise (away from the cam), dwell or return")
     angle_deg: Positive = Field(description="the cam angle the segment takes [deg]; the segments fill 360 deg")
@@ -363,7 +399,8 @@ class Linkage(SceneModel):
             for name, link in self.links.items())
         joints = tuple(Joint(name, joint.type, tuple(joint.links), cam=joint.spec()) if joint.type == "cam" else
                        Joint(name, joint.type, tuple(joint.links), math.radians(joint.direction_deg),
-                             math.radians(joint.slider_angle_deg)) for name, joint in self.joints.items())
+                             math.radians(joint.slider_angle_deg), gear=joint.core_gear())
+                       for name, joint in self.joints.items())
         output = self.output or LinkageOutput.model_construct(joint=None, link=None)
         return Core(links, joints, "frame", self.crank, dict(self.branches), tuple(self.points), output.joint,
                     output.link)
@@ -851,6 +888,9 @@ def _check_linkage_journals(friction: JointFriction, linkage: Linkage) -> None:
     from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
 
     reason = indeterminate(checked(linkage.core()))
+    gear_joints = [name for name, joint in linkage.joints.items() if joint.type == "gear"]
+    if gear_joints:
+        reason = f"the gear pairs {gear_joints} have no joint friction yet"
     if reason is not None:
         raise ValueError(f"joint_friction needs the joint reactions, but {reason}; expected no joint_friction on this "
                          "linkage (only a thrust_collar)")

@@ -1,4 +1,4 @@
-"""The follower jump (docs/theory.md §5.5, docs/linkages.md "Cams"): a cam pair holds only while the contact pushes.
+"""The follower jump (docs/theory.md §5.7, docs/linkages.md "Cams"): a cam pair holds only while the contact pushes.
 
 After each stretch a solver integrated (a segment of the reference or the fast path, an exchange step of the nodes'
 co-simulation) the contact each cam must give along its follower's travel, Q_c(phi, omega, epsilon)

@@ -101,6 +101,7 @@ MECHANISM_STYLE = {
     "crank": (ORANGE, 3.0), "spoke": (ORANGE, 3.0), "rod": (BLUE, 3.0), "coupler": (BLUE, 3.0),
     "rocker": (GREEN, 3.0), "slider": (WHITE, 2.0), "joints": (WHITE, 4.0),
     "tie": (VIOLET, 2.5), "side": (PINK, 2.5), "shuttle": (YELLOW, 4.0), "links": (BLUE, 3.0), "sliders": (WHITE, 2.0),
+    "gears": (GREEN, 1.5),
 }
 GOVERNOR_STYLE = {
     "spindle": (GREY, 2.5), "stops": (RED, 2.5), "upper_arms": (ORANGE, 2.5), "lower_links": (BLUE, 2.0),

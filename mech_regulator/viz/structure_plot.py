@@ -14,7 +14,8 @@ import numpy as np  # noqa: E402
 
 from mech_regulator.mechanisms.linkage import Dyad, Linkage, Structure, solve  # noqa: E402
 from mech_regulator.mechanisms.linkage.cam import cam_pairs  # noqa: E402
-from mech_regulator.mechanisms.linkage.drawing import BLOCK_PER_CRANK, crank_length, link_polygon  # noqa: E402
+from mech_regulator.mechanisms.linkage.drawing import (BLOCK_PER_CRANK, crank_length, link_polygon,  # noqa: E402
+                                                       pitch_circles)
 
 FRAME_COLOUR, CRANK_COLOUR = "0.45", "black"
 GROUP_COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -23,15 +24,18 @@ GROUP_COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: str, path: Path) -> None:
     """The scheme at crank angle phi [rad]: links as thick polylines (a link of three or more joints shaded),
     sliders as blocks on their guides (dashed, in the guide's colour), revolute joints as rings, the frame's as
-    rings on a hatched base, coloured by role: frame grey, driving link black, group k the k-th colour; a cam as its
-    profile (turned to phi, in the driving link's colour) with its roller's circle and the contact marked."""
+    rings on a hatched base, gears as their pitch circles (dash-dotted, with the radius to the link's x axis) and
+    each mesh named at its pitch point, coloured by role: frame grey, driving link black, group k the k-th colour;
+    a cam as its profile (turned to phi, in the driving link's colour) with its roller's circle and the contact
+    marked."""
     poses = solve(linkage, structure, phi, derivatives=False)
     colour = {linkage.frame: FRAME_COLOUR, linkage.crank: CRANK_COLOUR}
     labels = {linkage.crank: f"driving link: {linkage.crank}"}
     for number, group in enumerate(structure.groups, start=1):
         for link in group.links:
             colour[link] = GROUP_COLOURS[(number - 1) % len(GROUP_COLOURS)]
-        kind = f"class II {group.kind}" if isinstance(group, Dyad) else group.kind
+        kind = (f"class II {group.kind}" if isinstance(group, Dyad) else
+                f"gear about {group.pivot.name}" if group.kind == "gear" else group.kind)
         labels[group.links[0]] = f"group {number}: {kind} ({' + '.join(group.links)})"
     figure, axes = plt.subplots(figsize=(9, 7), constrained_layout=True)
     cams = cam_pairs(linkage, structure.groups, None)
@@ -50,8 +54,20 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
         where, offset = (0.5 * (start + end), (0, -14)) if length > 1e-9 * size else (points[0], (10, -24))
         axes.annotate(name, where, color=colour[name], fontsize=9, fontstyle="italic", xytext=offset,
                       textcoords="offset points", ha="center")
+    for link, centre, radius, theta in pitch_circles(linkage, structure, poses):
+        ring = centre + radius * np.exp(1j * (theta + np.linspace(0.0, 2.0 * np.pi, 145)))
+        axes.plot(ring.real, ring.imag, "-.", color=colour[link], lw=1.5, zorder=2)
+        tick = [centre, centre + radius * cmath.exp(1j * theta)]
+        axes.plot([p.real for p in tick], [p.imag for p in tick], color=colour[link], lw=1.0, zorder=2)
     names_at: dict[tuple[float, float], list[str]] = {}
-    for joint in (joint for joint in linkage.joints if joint.kind != "cam"):
+    for group in structure.groups:   # a mesh is named at its pitch point, O_a + rho_a u
+        if group.kind == "gear":
+            a, b = (poses[link][0] + linkage.link(link).points[centre] * cmath.exp(1j * poses[link][1])
+                    for link, centre in zip(group.mesh.links, group.mesh.gear.centres))
+            pitch = a + group.pitch[0] * (b - a) / abs(b - a)
+            axes.plot(pitch.real, pitch.imag, "D", ms=5, color="black", zorder=4)
+            names_at.setdefault((round(pitch.real, 9), round(pitch.imag, 9)), []).append(group.mesh.name)
+    for joint in (joint for joint in linkage.joints if joint.kind not in ("cam", "gear")):
         guide, slider = joint.links
         where = poses[slider][0] + linkage.link(slider).points[joint.name] * cmath.exp(1j * poses[slider][1])
         if joint.kind == "prismatic":

@@ -1,4 +1,4 @@
-"""Cam pairs of a linkage (docs/theory.md §5.5, docs/linkages.md "Cams"): the follower group, its motion by the law,
+"""Cam pairs of a linkage (docs/theory.md §5.7, docs/linkages.md "Cams"): the follower group, its motion by the law,
 the synthesised profile, pressure angle, radius of curvature, the follower's share of J(phi), its spring, the
 contact force and the speed at which the follower jumps. Pure numpy: no ROS, no Rerun.
 

@@ -7,7 +7,9 @@ point, fixed), `crank` (its pivot to its farthest point: the last point is the c
 moving link as the closed polygon through its points in the order given, padded by repeating its last point to the
 longest; a cam's profile, turned with the crank, among them), `sliders` (a block on each prismatic joint's slider
 point, along the guide, BLOCK_PER_CRANK crank lengths (a cam's largest radius, if longer) by half that; an empty
-bundle without prismatic joints) and `joints` (every joint's point; a cam pair's: where the cam touches).
+bundle without prismatic joints), `gears` (each gear's pitch circle with its radius to the link's x axis, so that
+it shows the gear's turn; an empty bundle without gears) and `joints` (every lower pair's point; a cam pair's:
+where the cam touches).
 """
 
 from __future__ import annotations
@@ -17,11 +19,13 @@ import cmath
 import numpy as np
 
 from mech_regulator.mechanisms.linkage.cam import CamFollower, CamPair
+from mech_regulator.mechanisms.linkage.gears import GearGroup
 from mech_regulator.mechanisms.linkage.kinematics import solve
-from mech_regulator.mechanisms.linkage.model import PRISMATIC, Linkage
+from mech_regulator.mechanisms.linkage.model import GEAR, PRISMATIC, Linkage
 from mech_regulator.mechanisms.linkage.structure import Structure
 
-MOVING_PARTS = ("crank", "links", "sliders", "joints")
+MOVING_PARTS = ("crank", "links", "sliders", "gears", "joints")
+GEAR_CIRCLE_POINTS = 73   # points of a pitch circle's polyline (after its radius)
 BLOCK_PER_CRANK = 0.6   # slider block length along the guide, per crank length [-]
 PROFILE_POINTS = 180    # points of a cam's profile as drawn
 
@@ -42,6 +46,24 @@ def link_polygon(linkage: Linkage, poses: dict, name: str) -> list[complex]:
     r, theta = poses[name][0], poses[name][1]
     points = [r + p * cmath.exp(1j * theta) for p in linkage.link(name).points.values()]
     return points + points[:1] if len(points) > 2 else points
+
+
+def pitch_circles(linkage: Linkage, structure: Structure, poses: dict) -> list[tuple[str, complex, float, float]]:
+    """(link, centre [m], pitch radius [m], the link's angle [rad]) of both gears of every gear mesh, at these
+    poses (kinematics.solve)."""
+    circles = []
+    for group in structure.groups:
+        if isinstance(group, GearGroup):
+            for link, centre, rho in zip(group.mesh.links, group.mesh.gear.centres, group.pitch):
+                r, theta = poses[link][0], poses[link][1]
+                circles.append((link, r + linkage.link(link).points[centre] * cmath.exp(1j * theta), abs(rho), theta))
+    return circles
+
+
+def _gear_polyline(centre: complex, radius: float, theta: float) -> list[complex]:
+    """The centre, then the pitch circle from the link's x axis round (its radius drawn, so the turn shows)."""
+    angles = theta + np.linspace(0.0, 2.0 * np.pi, GEAR_CIRCLE_POINTS)
+    return [centre] + list(centre + radius * np.exp(1j * angles))
 
 
 def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[str, np.ndarray]:
@@ -75,6 +97,8 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
         if joint.name in cams:   # a cam pair's point: where the cam touches
             joint_points.append(complex(cams[joint.name].contact_point(phi)[0]))
             continue
+        if joint.kind == GEAR:
+            continue
         link = joint.links[1]
         joint_points.append(poses[link][0] + linkage.link(link).points[joint.name] * cmath.exp(1j * poses[link][1]))
     from mech_regulator.mechanisms.drawing import circle  # mechanisms.drawing imports this module
@@ -85,6 +109,9 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
         "crank": _xy([pivot, pose[0] + tip * cmath.exp(1j * phi)]),
         "links": np.stack([_xy(points + points[-1:] * (longest - len(points))) for points in others]),
         "sliders": np.stack(blocks) if blocks else np.zeros((0, 5, 2)),
+        "gears": np.array([_xy(_gear_polyline(centre, radius, theta))
+                           for _, centre, radius, theta in pitch_circles(linkage, structure, poses)]).reshape(
+            (-1, GEAR_CIRCLE_POINTS + 1, 2)),
         "joints": _xy(joint_points),
     }
     return outline

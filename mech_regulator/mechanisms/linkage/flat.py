@@ -25,18 +25,21 @@ cofactors), refused as a dead point when A is exactly singular or |A|_max |A^-1|
 Program layout (indices into the vector from `base`; link 0 is the frame, the moving links follow in the linkage's
 order; a joint record is JOINT_SIZE floats [kind (0 revolute, 1 prismatic), link a, link b, p_a (x, y), p_b (x, y),
 the guide's direction u (cos, sin), slider_angle], a and b as in model.Joint.links, p_a, p_b the joint's point in
-each link [m]):
+each link [m]; a gear mesh's record (kind GEAR_MESH) [kind, a, b, the centres O_a, O_b in their links (x, y) [m],
+the signed pitch radii rho_a, rho_b [m], the carrier link] (gears.py's module docstring)):
   header: number of links, number of groups, crank link, output kind (0 none, 1 link angle, 2 prismatic joint
   travel), output link, output joint record, gravity (gx, gy) [m/s^2], the output reference angle [rad] (a link
   output's angle is reported within pi of it, model.Linkage.output_reference), the crank pivot on the frame (x, y)
   [m] and on the crank (x, y) [m];
   per link LINK_SIZE floats: mass [kg], centre of mass (x, y) [m, own coordinates], inertia about it [kg m^2];
-  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT), branch (+1 or -1), link L1, link L2 (-1 for a
-  redundant link), then three joint records: E1, internal, E2 (a redundant link: its two joints, then zeros; a cam
+  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT; GEAR; CAM_FOLLOWER), branch (+1 or -1; 0 an RRR
+  group kept a parallelogram, groups.Dyad, its E1 record's u slots then holding B - P in B's known link [m]; a
+  gear's phase_L [rad]), link L1, link L2 (-1 for a redundant link or a gear), then three joint records: E1,
+  internal, E2 (a redundant link: its two joints, then zeros; a gear: its pivot, its mesh, then zeros; a cam
   follower (CAM_FOLLOWER, branch sigma, follower, roller or -1): its guide's record, its roller joint's (or zeros),
-  then the cam record [2, cam, the touching link, the law's position relative to this record, the crank angle at
-  the law's start [rad], the follower's travel d0 [m] (translating) or angle theta0 [rad] (oscillating) at s = 0, the
-  spring's stiffness and preload, 0, 0]);
+  then the cam record [CAM_CONTACT, cam, the touching link, the law's position relative to this record, the crank
+  angle at the law's start [rad], the follower's travel d0 [m] (translating) or angle theta0 [rad] (oscillating) at
+  s = 0, the spring's stiffness and preload, 0, 0]);
   the joint map (what the kinetostatics reports per joint): the number of the linkage's joints, the crank pivot's
   joint record, then per joint in the linkage's order (model.Linkage.joints) the position of its record from
   `base` and its multiplier slot (joint k of group number n: 3 n + k; the crank pivot: 3 n_groups; -1, -1 for a
@@ -65,8 +68,11 @@ from mech_regulator import cache
 
 KIND_CODES = {"RRR": 0, "RRP": 1, "RPR": 2, "PRP": 3, "RPP": 4}
 REDUNDANT = 5
-CAM_FOLLOWER = 6   # a cam follower group (linkage/cam.py), placed by its law (law_at)
-PIECE_SIZE = 7     # a law piece: [start, length, code, a, b, c, d] (law_at)
+GEAR = 6                # a gear group (gears.GearGroup): one link on its pivot, turned by its mesh
+CAM_FOLLOWER = 7        # a cam follower group (linkage/cam.py), placed by its law (law_at)
+GEAR_MESH = 2.0         # a gear mesh's joint record kind
+CAM_CONTACT = 3.0       # a cam pair's joint record kind
+PIECE_SIZE = 7          # a law piece: [start, length, code, a, b, c, d] (law_at)
 JOINT_SIZE = 10
 LINK_SIZE = 4
 GROUP_SIZE = 4 + 3 * JOINT_SIZE
@@ -95,6 +101,15 @@ def joint_record(linkage, joint, index: dict[str, int]) -> list[float]:
     pa, pb = linkage.link(a).points[joint.name], linkage.link(b).points[joint.name]
     return [0.0 if joint.kind == "revolute" else 1.0, float(index[a]), float(index[b]), pa.real, pa.imag, pb.real,
             pb.imag, math.cos(joint.direction), math.sin(joint.direction), joint.slider_angle]
+
+
+def gear_record(linkage, group, index: dict[str, int]) -> list[float]:
+    """A gear group's mesh record (module docstring)."""
+    mesh = group.mesh
+    a, b = mesh.links
+    O_a, O_b = (linkage.link(link).points[centre] for link, centre in zip(mesh.links, mesh.gear.centres))
+    return [GEAR_MESH, float(index[a]), float(index[b]), O_a.real, O_a.imag, O_b.real, O_b.imag, *group.pitch,
+            float(index[group.carrier])]
 
 
 def link_indices(linkage) -> dict[str, int]:
@@ -128,9 +143,17 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
         if group.kind == "redundant link":
             joints = [joint_record(linkage, joint, index) for joint in group.joints] + [[0.0] * JOINT_SIZE]
             program += [float(REDUNDANT), 0.0, float(index[group.link]), -1.0]
+        elif group.kind == "gear":
+            joints = [joint_record(linkage, group.pivot, index), gear_record(linkage, group, index), [0.0] * JOINT_SIZE]
+            program += [float(GEAR), group.phase, float(index[group.link]), -1.0]
         else:
             joints = [joint_record(linkage, joint, index) for joint in group.joints]
-            program += [float(KIND_CODES[group.kind]), float(group.branch), float(index[group.links[0]]),
+            branch = float(group.branch)
+            if group.parallelogram is not None:   # B - P on B's known link, in the E1 record's unused u slots
+                known = linkage.link(group.externals[0].other(group.links[0])).points
+                side = known[group.externals[0].name] - known[group.parallelogram.name]
+                joints[0][7:9], branch = [side.real, side.imag], 0.0
+            program += [float(KIND_CODES[group.kind]), branch, float(index[group.links[0]]),
                         float(index[group.links[1]])]
         program += [value for record in joints for value in record]
     found = {joint.name: (len(program) - GROUP_SIZE * (len(groups) - number) + 4 + JOINT_SIZE * k, 3 * number + k)
@@ -155,7 +178,7 @@ def _cam_follower_records(linkage, group, index: dict[str, int]) -> list[float]:
     spec = group.pair.cam
     sigma, zero = follower_zero(linkage, group)
     roller = [0.0] * JOINT_SIZE if group.roller_joint is None else joint_record(linkage, group.roller_joint, index)
-    cam = [2.0, float(index[group.pair.links[0]]), float(index[group.pair.links[1]]), 0.0, spec.start, zero,
+    cam = [CAM_CONTACT, float(index[group.pair.links[0]]), float(index[group.pair.links[1]]), 0.0, spec.start, zero,
            spec.stiffness, spec.preload, 0.0, 0.0]
     return ([float(CAM_FOLLOWER), sigma, float(index[group.follower]),
              float(index[group.roller]) if group.roller is not None else -1.0]
@@ -362,11 +385,21 @@ def place_group(program, g, poses):
         _swing(program, E1, Ji, poses, L1, _point(program, E1, poses, _other(program, E1, L1)),
                _point(program, Ji, poses, _other(program, Ji, L1)))
         return SOLVED, 0.0, 0.0, 0.0
+    if kind == GEAR:   # theta_L = theta_c + k (theta_G - theta_c) + phase_L, L's pivot on its known link
+        theta = _gear_angle(program, g, poses, 2)
+        turn = _unit(theta)
+        _set_pose(poses, L1, _point(program, E1, poses, _other(program, E1, L1)) - _local(program, E1, L1) * turn,
+                  theta, turn)
+        return SOLVED, 0.0, 0.0, 0.0
     K1, K2 = _other(program, E1, L1), _other(program, E2, L2)
     if kind == 0 or kind == 1:   # RRR, RRP
         B = _point(program, E1, poses, K1)
         l1 = abs(_local(program, Ji, L1) - _local(program, E1, L1))
-        if kind == 0:
+        if kind == 0 and sigma == 0.0:   # the parallelogram P B C D: C = D + (B - P)
+            D = _point(program, E2, poses, K2)
+            C = D + complex(program[E1 + 7], program[E1 + 8]) * _turn(poses, K1)
+            _swing(program, E2, Ji, poses, L2, D, C)
+        elif kind == 0:
             D = _point(program, E2, poses, K2)
             l2 = abs(_local(program, Ji, L2) - _local(program, E2, L2))
             v = D - B
@@ -433,6 +466,24 @@ def place_group(program, g, poses):
     return SOLVED, 0.0, 0.0, 0.0
 
 
+def gear_ratio(program, g):
+    """k = rho_G / rho_L of the gear group at g: (theta_L - theta_c)' over (theta_G - theta_c)'."""
+    mesh = g + 4 + JOINT_SIZE
+    if int(program[mesh + 2]) == int(program[g + 2]):
+        return program[mesh + 7] / program[mesh + 8]
+    return program[mesh + 8] / program[mesh + 7]
+
+
+def _gear_angle(program, g, poses, slot):
+    """The gear group's link angle (slot 2), or its first or second phi-derivative (slots 5, 8), from its driver's
+    and carrier's: `theta_L = theta_c + k (theta_G - theta_c) + phase_L` (the phase in the angle only)."""
+    mesh = g + 4 + JOINT_SIZE
+    carrier = POSE_SIZE * int(program[mesh + 9]) + slot
+    driver = POSE_SIZE * _other(program, mesh, int(program[g + 2])) + slot
+    value = poses[carrier] + gear_ratio(program, g) * (poses[driver] - poses[carrier])
+    return value + program[g + 1] if slot == 2 else value
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # Velocity and acceleration ratios
 
@@ -441,13 +492,21 @@ def joint_rows(program, j, poses):
     row r at [6 r : 6 r + 6] = (by link a's x, y, theta, by link b's x, y, theta).
     Revolute, `r_a + q_a - r_b - q_b = 0` (q = p e^{i theta}): its real and imaginary parts.
     Prismatic (guide a, slider b): the line `Im(d conj w) = 0`, d = P_s - P_g, w = u e^{i theta_g}, and the angle
-    `theta_s - theta_g - alpha = 0`."""
+    `theta_s - theta_g - alpha = 0`. Gear mesh (gears.py): rolling at the pitch point, `t . O_a' + rho_a theta_a' -
+    t . O_b' - rho_b theta_b' = 0`, u = (O_b - O_a) / |O_b - O_a|, t = i u, O = r + q: by a (t_x, t_y, rho_a + u . q_a),
+    by b (-t_x, -t_y, -rho_b - u . q_b); its second row zero (its multiplier: the tooth force along t on a [N])."""
     a, b = int(program[j + 1]), int(program[j + 2])
     qa = _local(program, j, a) * _turn(poses, a)
     qb = _local(program, j, b) * _turn(poses, b)
     if program[j] == 0.0:
         return (1.0, 0.0, -qa.imag, -1.0, 0.0, qb.imag,
                 0.0, 1.0, qa.real, 0.0, -1.0, -qb.real)
+    if program[j] == GEAR_MESH:
+        line = _origin(poses, b) + qb - _origin(poses, a) - qa
+        u = line / abs(line)
+        return (-u.imag, u.real, program[j + 7] + (qa * u.conjugate()).real,
+                u.imag, -u.real, -program[j + 8] - (qb * u.conjugate()).real,
+                0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     w = _direction(program, j) * _turn(poses, a)
     d = _origin(poses, b) + qb - _origin(poses, a) - qa
     return (w.imag, -w.real, -((qa + d) * w.conjugate()).real, -w.imag, w.real, (qb * w.conjugate()).real,
@@ -598,12 +657,38 @@ def _largest_magnitude(M, n_rows, n_columns):
     return largest
 
 
+def _follow(program, j, poses, link, dtheta, ddtheta):
+    """Set a link's theta' = dtheta and theta'' = ddtheta and its origin's derivatives from its point P of the
+    revolute joint j on a known link: r' = P' - i theta' q, r'' = P'' - (i theta'' - theta'^2) q (q = p e^{i theta},
+    p the joint's point in the link)."""
+    k = POSE_SIZE * link
+    known = _other(program, j, link)
+    _, dP, ddP = motion(poses, known, _local(program, j, known))
+    q = _local(program, j, link) * _turn(poses, link)
+    dr, ddr = dP - 1j * dtheta * q, ddP - complex(-dtheta * dtheta, ddtheta) * q
+    poses[k + 3], poses[k + 4], poses[k + 5] = dr.real, dr.imag, dtheta
+    poses[k + 6], poses[k + 7], poses[k + 8] = ddr.real, ddr.imag, ddtheta
+
+
 def differentiate_group(program, g, poses, scratch):
     """Set the first and second derivatives of the group's links' poses from `A u' = -K k'` and
     `A u'' = -K k'' - gamma` (module docstring), A and its inverse held in scratch (SCRATCH_SHAPE: A in rows 0-5,
     A^-1 in rows 6-11, K k' and K k'' in rows 12, 13); False at a dead point (A singular or its condition
-    |A|_max |A^-1|_max beyond DEAD_POINT_CONDITION)."""
+    |A|_max |A^-1|_max beyond DEAD_POINT_CONDITION). A gear group's link: theta' and theta'' from its driver's and
+    carrier's (_gear_angle), its origin from its pivot P's motion, r' = P' - i theta' q, r'' = P'' - (i theta'' -
+    theta'^2) q (q = p e^{i theta}, p the pivot in the link); a parallelogram P B C D (an RRR group's branch 0):
+    L1 turns with D's link and L2 with B's (C - B = D - P, C - D = B - P), each following its outer joint."""
     if int(program[g]) == CAM_FOLLOWER:   # its derivatives are its law's (_place_cam_follower)
+        return True
+    if int(program[g]) == GEAR:
+        _follow(program, g + 4, poses, int(program[g + 2]), _gear_angle(program, g, poses, 5),
+                _gear_angle(program, g, poses, 8))
+        return True
+    if int(program[g]) == 0 and program[g + 1] == 0.0:   # a parallelogram: L1 turns with K2, L2 with K1
+        L1, L2 = int(program[g + 2]), int(program[g + 3])
+        K1, K2 = POSE_SIZE * _other(program, g + 4, L1), POSE_SIZE * _other(program, g + 4 + 2 * JOINT_SIZE, L2)
+        _follow(program, g + 4, poses, L1, poses[K2 + 5], poses[K2 + 8])
+        _follow(program, g + 4 + 2 * JOINT_SIZE, poses, L2, poses[K1 + 5], poses[K1 + 8])
         return True
     redundant = int(program[g]) == REDUNDANT
     n_unknown = 3 if redundant else 6
@@ -789,9 +874,12 @@ def _solve_group_reactions(program, g, group, poses, scratch, residual, multipli
     links (A the matrix of its kinematics, group_matrix; lambda = (A^-1)^T residual with invert_dyad's inverse),
     stored at multipliers[2 (3 group + k) + row, case] for its joint k's rows; then their reactions on the links
     it hangs on, `residual[link] -= (dC/dx_link)^T lambda` (joint_rows), passed inward. False where A is
-    singular, or for a redundant link (statically indeterminate)."""
+    singular, or for a redundant link or a cam follower (statically indeterminate; the cam's contact force is
+    linkage/cam.py's). A gear group: _solve_gear_reactions."""
     if int(program[g]) == REDUNDANT or int(program[g]) == CAM_FOLLOWER:
         return False
+    if int(program[g]) == GEAR:
+        return _solve_gear_reactions(program, g, group, poses, residual, multipliers)
     A, inverse, known = scratch[0:6], scratch[6:12], scratch[12:14]
     L1, L2 = int(program[g + 2]), int(program[g + 3])
     group_matrix(program, g, poses, A, known)
@@ -817,6 +905,42 @@ def _solve_group_reactions(program, g, group, poses, scratch, residual, multipli
                     for case in range(2):
                         residual[3 * link + coordinate, case] -= partial * multipliers[6 * group + 2 * joint + row,
                                                                                         case]
+    return True
+
+
+def _solve_gear_reactions(program, g, group, poses, residual, multipliers):
+    """The multipliers of the gear group at g (number `group`): its link's three equations `A^T lambda = residual`,
+    A's rows its pivot's two and its mesh's one by the link's (x, y, theta), A^T inverted by its cofactors (the
+    columns of A^-T are (a2 x a3, a3 x a1, a1 x a2) / (a1 . (a2 x a3)), a_k A's rows); stored at the pivot's slot
+    3 group and the mesh's 3 group + 1 (its second row 0), then passed inward to the pivot's known link and to the
+    driver (joint_rows). False where A is singular."""
+    link = int(program[g + 2])
+    records = (g + 4, g + 4 + JOINT_SIZE)
+    rows = (joint_rows(program, records[0], poses), joint_rows(program, records[1], poses))
+    sides = (0 if int(program[records[0] + 1]) == link else 3, 0 if int(program[records[1] + 1]) == link else 3)
+    a1 = (rows[0][sides[0]], rows[0][sides[0] + 1], rows[0][sides[0] + 2])
+    a2 = (rows[0][6 + sides[0]], rows[0][7 + sides[0]], rows[0][8 + sides[0]])
+    a3 = (rows[1][sides[1]], rows[1][sides[1] + 1], rows[1][sides[1] + 2])
+    determinant = _dot3(a1, _cross3(a2, a3))
+    if determinant == 0.0:
+        return False
+    columns = (_cross3(a2, a3), _cross3(a3, a1), _cross3(a1, a2))
+    for case in range(2):
+        b = (residual[3 * link, case], residual[3 * link + 1, case], residual[3 * link + 2, case])
+        multipliers[6 * group, case] = _dot3(columns[0], b) / determinant
+        multipliers[6 * group + 1, case] = _dot3(columns[1], b) / determinant
+        multipliers[6 * group + 2, case] = _dot3(columns[2], b) / determinant
+        multipliers[6 * group + 3, case] = 0.0
+    for joint in range(2):
+        other = 3 - sides[joint]
+        on = int(program[records[joint] + 1 + other // 3])
+        if on == 0:
+            continue
+        for row in range(2):
+            for coordinate in range(3):
+                partial = rows[joint][6 * row + other + coordinate]
+                for case in range(2):
+                    residual[3 * on + coordinate, case] -= partial * multipliers[6 * group + 2 * joint + row, case]
     return True
 
 
@@ -865,14 +989,15 @@ def joint_reactions(program, base, poses, multipliers, reactions, ratios):
     force on its first link from its second; a prismatic joint's normal force on the slider as i N, in the guide's
     own frame) and ratios[j], a revolute joint's relative angular speed over omega theta_a' - theta_b' [-], a
     prismatic joint's sliding speed over omega `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]
-    (w the guide's direction e^{i theta_g} u)."""
+    (w the guide's direction e^{i theta_g} u); a gear mesh's tooth force along t on its link a as a real R [N]
+    (joint_rows) and ratio theta_a' - theta_b' [-]."""
     at = joint_map(program, base)
     for joint in range(int(program[at])):
         entry = at + 1 + JOINT_SIZE + 2 * joint
         j, slot = base + int(program[entry]), 2 * int(program[entry + 1])
         a, b = int(program[j + 1]), int(program[j + 2])
         ka = POSE_SIZE * a
-        if program[j] == 0.0:
+        if program[j] == 0.0 or program[j] == GEAR_MESH:   # a mesh's second multiplier is 0
             reactions[0, joint] = complex(multipliers[slot, 0], multipliers[slot + 1, 0])
             reactions[1, joint] = complex(multipliers[slot, 1], multipliers[slot + 1, 1])
             ratios[joint] = poses[ka + 5] - poses[POSE_SIZE * b + 5]
@@ -926,8 +1051,9 @@ def _registered() -> None:
 
     register_jitable(reduced)
     register_jitable(joint_loads)
-    for function in (law_at, _place_cam_follower, cam_springs, _local, _other, _unit, _direction, _origin, _turn, _point, _set_pose, _pin, _swing,
-                     _angle_across, _origin_line, _lines_cross, _lines_meet, place_group, joint_rows, joint_quadratic,
+    for function in (law_at, _place_cam_follower, cam_springs, _local, _other, _unit, _direction, _origin, _turn,
+                     _point, _set_pose, _pin, _swing, _angle_across, _origin_line, _lines_cross, _lines_meet,
+                     gear_ratio, _gear_angle, place_group, joint_rows, joint_quadratic, _solve_gear_reactions, _follow,
                      _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
                      _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
                      motion, near, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,

@@ -41,18 +41,24 @@ from mech_regulator.mechanisms.linkage.model import Joint, Linkage, LinkageError
 Pose = list
 
 SUPPORTED_TYPES = ("RRR", "RRP", "RPR", "PRP", "RPP")
+PARALLELOGRAM_TOLERANCE = 1e-12   # relative difference of opposite sides still called equal (parallelogram_joint)
 
 
 @dataclass(frozen=True)
 class Dyad:
     """A class-II group: links (L1, L2), the internal joint between them, the external joints (of L1, of L2),
-    its type (one of SUPPORTED_TYPES) and its branch (+1 or -1)."""
+    its type (one of SUPPORTED_TYPES) and its branch (+1 or -1); `parallelogram`: for an RRR group whose outer
+    joints B, D sit on links joined by a revolute joint P with P B C D a parallelogram (|B - P| = |C - D|, |D - P| =
+    |C - B|) kept so through its change points by a redundant link, that joint P: the group then follows
+    `C = D + (B - P)` (the parallelogram, smooth through the change points where the branches meet) instead of
+    a branch (parallelogram_joint, structure._decompose)."""
 
     links: tuple[str, str]
     internal: Joint
     externals: tuple[Joint, Joint]
     kind: str
     branch: int
+    parallelogram: Joint | None = None
 
     @property
     def name(self) -> str:
@@ -101,6 +107,25 @@ def make_dyad(linkage: Linkage, links: tuple[str, str], internal: Joint, externa
                                f"{internal.name} at one point [{points[outer.name].real:g}, "
                                f"{points[outer.name].imag:g}] m; expected two distinct points")
     return Dyad(links, internal, externals, letters, branch)
+
+
+def parallelogram_joint(linkage: Linkage, dyad: Dyad) -> Joint | None:
+    """The revolute joint P between the links an RRR group hangs on that makes P B C D a parallelogram (Dyad), to
+    a relative PARALLELOGRAM_TOLERANCE of its sides; None if there is none."""
+    if dyad.kind != "RRR":
+        return None
+    (L1, L2), (E1, E2), internal = dyad.links, dyad.externals, dyad.internal
+    K1, K2 = E1.other(L1), E2.other(L2)
+    side1, side2 = (abs(linkage.link(link).points[internal.name] - linkage.link(link).points[outer.name])
+                    for link, outer in ((L1, E1), (L2, E2)))
+    for joint in linkage.joints:
+        if joint.kind == "revolute" and set(joint.links) == {K1, K2}:
+            on_K1 = abs(linkage.link(K1).points[E1.name] - linkage.link(K1).points[joint.name])
+            on_K2 = abs(linkage.link(K2).points[E2.name] - linkage.link(K2).points[joint.name])
+            if abs(on_K1 - side2) <= PARALLELOGRAM_TOLERANCE * side2 and \
+                    abs(on_K2 - side1) <= PARALLELOGRAM_TOLERANCE * side1:
+                return joint
+    return None
 
 
 def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[float, float, float], phi: float

@@ -84,6 +84,8 @@ def moving_points(linkage: Linkage) -> list[tuple[str, str]]:
     joints' slider points that no revolute joint of the slider already marks, then the points of interest."""
     found: dict[str, str] = {}
     for joint in sorted(linkage.joints, key=lambda j: j.kind != "revolute"):
+        if joint.kind == "gear":   # a mesh has no point of its own (its gears' centres are pivots)
+            continue
         link = joint.links[1]
         if (linkage.frame in joint.links and joint.kind == "revolute") or joint.kind == "cam":   # a contact: no point
             continue

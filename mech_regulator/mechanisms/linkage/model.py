@@ -13,14 +13,21 @@ Joints (source 001's kinematic pairs):
   the angle `slider_angle` to the guide: theta_slider = theta_guide + slider_angle;
 - cam (higher pair, class 4): the contact of a cam (links[0], the crank) with its follower or the follower's roller
   (links[1]); its `cam` (linkage/cam.py's CamSpec) gives the follower's motion law and the contact; the follower is
-  a group of its own (cam.CamFollower).
+  a group of its own (cam.CamFollower);
+- gear (higher pair, class 4): a gear pair, its data in `gear` (gears.GearMesh: pitch radii or tooth numbers, the
+  centres' points, the carrier).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from mech_regulator.mechanisms.linkage.gears import GearMesh
 
 REVOLUTE, PRISMATIC, CAM = "revolute", "prismatic", "cam"
+GEAR = "gear"
 
 
 class LinkageError(ValueError):
@@ -45,7 +52,7 @@ class Link:
 class Joint:
     """A joint named `name` between links[0] and links[1] (prismatic: links[0] is the guide, links[1] the slider);
     direction [rad]: the guide line's direction in the guide's coordinates; slider_angle [rad]: theta_slider -
-    theta_guide; cam: a cam pair's linkage/cam.py CamSpec (None for a lower pair)."""
+    theta_guide; cam: a cam pair's linkage/cam.py CamSpec; gear: a gear pair's data (None for a lower pair)."""
 
     name: str
     kind: str
@@ -53,11 +60,12 @@ class Joint:
     direction: float = 0.0
     slider_angle: float = 0.0
     cam: object = None
+    gear: GearMesh | None = None
 
     @property
     def letter(self) -> str:
-        """R (revolute), P (prismatic) or C (cam), the letters of a group's type (source 001)."""
-        return {REVOLUTE: "R", PRISMATIC: "P", CAM: "C"}[self.kind]
+        """R (revolute), P (prismatic), C (cam) or G (gear), the letters of a group's type (source 001)."""
+        return {REVOLUTE: "R", PRISMATIC: "P", CAM: "C", GEAR: "G"}[self.kind]
 
     def other(self, link: str) -> str:
         """The link this joint joins to `link`."""
@@ -122,7 +130,15 @@ class Linkage:
             if joint.links[0] == joint.links[1]:
                 raise LinkageError(f"joint '{joint.name}' joins the link '{joint.links[0]}' to itself; expected two "
                                    "different links")
-            if joint.kind != CAM:
+            if joint.kind == GEAR:
+                if joint.gear.carrier is not None and joint.gear.carrier not in names:
+                    raise LinkageError(f"gear '{joint.name}' names the carrier '{joint.gear.carrier}', which does not "
+                                       f"exist; expected one of {names}")
+                for link, centre in zip(joint.links, joint.gear.centres):
+                    if centre not in self.link(link).points:
+                        raise LinkageError(f"gear '{joint.name}' names the centre '{centre}' on the link '{link}', "
+                                           f"which has only {sorted(self.link(link).points)}")
+            elif joint.kind != CAM:
                 for link in joint.links:
                     if joint.name not in self.link(link).points:
                         raise LinkageError(f"joint '{joint.name}' ({joint.kind}) needs the point '{joint.name}' on the "

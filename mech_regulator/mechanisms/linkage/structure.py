@@ -1,29 +1,35 @@
 """Structural analysis of a planar linkage (source 001, chapter 1): degrees of freedom and Assur groups.
 
 Degrees of freedom: `W = 3 n - (2 p5 + p4 - R_repeated - R_redundant) - W_passive`, n the moving links, p5 the
-lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts), found where they occur:
+lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts, gear meshes), found where they occur:
 - a repeated constraint: three links joined in a triangle by three prismatic joints (their relative rotation is
   forbidden twice), one each;
 - a redundant constraint: a link joined by two revolute joints to links whose motion is already fixed, the
-  distance of its two joints staying its own over the whole turn (the parallelogram's extra link), one each;
+  distance of its two joints staying its own over the whole turn (the parallelogram's extra link), one each; an
+  RRR group that is a parallelogram with the links it hangs on (groups.parallelogram_joint) is tried as the
+  parallelogram (C = D + B - P), and stays one when a redundant link hangs on it: the redundant link keeps it a
+  parallelogram through its change points (source 001, docs/theory.md §5.6), so it is solved as one there;
 - a passive freedom: a roller that touches cams and turns about its one revolute joint, one each.
 
 Decomposition: the frame and the driving crank are known; repeatedly, two unknown links joined to each other by
 a lower pair and each by exactly one lower pair to known links form a class-II group (a dyad, groups.Dyad), taken
 in order from the crank outward; a follower on the frame touching a known cam (directly or by its roller) is a cam
-follower group (cam.CamFollower: zero freedom with its pair and its roller's passive spin). What remains
+follower group (cam.CamFollower: zero freedom with its pair and its roller's passive spin); a gear link on one
+revolute pivot meshing with a known gear is a group of its own (gears.GearGroup, 3 - 2 - 1 = 0). What remains
 undecomposed is reported (a group of class III or higher, or another with a higher pair: not supported).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass
 
+from mech_regulator.mechanisms.linkage import gears
 from mech_regulator.mechanisms.linkage.cam import CamFollower, next_cam_follower
-from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad
-from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Linkage, LinkageError
+from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad, parallelogram_joint
+from mech_regulator.mechanisms.linkage.model import CAM, GEAR, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
 REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
 REDUNDANCY_TOLERANCE = 1e-9      # relative change of that distance still called constant [-]
@@ -40,7 +46,7 @@ class Structure:
     repeated: tuple[str, ...]
     redundant: tuple[str, ...]
     passive: tuple[str, ...]
-    groups: tuple[Dyad | RedundantLink | CamFollower, ...]
+    groups: tuple[Dyad | RedundantLink | CamFollower | gears.GearGroup, ...]
     undecomposed: str | None
 
     @property
@@ -74,8 +80,16 @@ class Structure:
         for number, group in enumerate(self.groups, start=1):
             if isinstance(group, Dyad):
                 joints = ", ".join(f"{j.name} ({j.kind})" for j in group.joints)
+                branch = (f"the parallelogram {group.parallelogram.name} {group.externals[0].name} "
+                          f"{group.internal.name} {group.externals[1].name} through its change points"
+                          if group.parallelogram is not None else f"branch {group.branch:+d}")
                 lines.append(f"group {number}: class II, type {group.kind}, links {group.links[0]} + {group.links[1]}, "
-                             f"joints {joints}, branch {group.branch:+d}")
+                             f"joints {joints}, {branch}")
+            elif isinstance(group, gears.GearGroup):
+                lines.append(f"group {number}: gear {group.link} about {group.pivot.name}, mesh {group.mesh.name} with "
+                             f"{group.driver} on {group.carrier}: ratio {group.ratio:+.6g}, pitch radii "
+                             f"{abs(group.pitch[0]):.6g} and {abs(group.pitch[1]):.6g} m, {group.rate:+.6g} turns per "
+                             "crank turn")
             else:
                 lines.append(f"group {number}: {group.name} (links {' + '.join(group.links)}, joints "
                              f"{', '.join(f'{j.name} ({j.kind})' for j in group.joints)})")
@@ -89,7 +103,7 @@ def analyse(linkage: Linkage) -> Structure:
     linkage.check()
     moving = linkage.moving_links()
     lower = sum(1 for joint in linkage.joints if joint.kind in (REVOLUTE, PRISMATIC))
-    higher = sum(1 for joint in linkage.joints if joint.kind == CAM)
+    higher = sum(1 for joint in linkage.joints if joint.kind in (CAM, GEAR))
     groups: list = []
     redundant: list[str] = []
     undecomposed = None
@@ -131,17 +145,30 @@ def _passive(linkage: Linkage) -> tuple[str, ...]:
 def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | None:
     """Fill `groups` from the crank outward and `redundant` with the redundant links found; return a description
     of the links that remain undecomposed, or None."""
+    from mech_regulator.mechanisms.linkage.kinematics import make_solver
+
     known = {linkage.frame, linkage.crank}
+    rates = {linkage.frame: 0.0, linkage.crank: 1.0}   # turns per crank turn of the links whose angle is phi's
     while True:
         remaining = [name for name in linkage.moving_links() if name not in known]
         if not remaining:
+            _keep_held_parallelograms(groups)
+            fractional = gears.hanging_on_fractional_gears(linkage, groups)
+            if fractional:
+                raise LinkageError("; ".join(fractional) + "; expected gears that turn a whole number of times per "
+                                                           "crank turn wherever a mechanism hangs on them")
             return None
         group = (_next_dyad(linkage, known, remaining) or next_cam_follower(linkage, known)
+                 or gears.next_gear(linkage, known, rates, make_solver(linkage, groups))
                  or _next_redundant_link(linkage, known, remaining, groups))
+        if isinstance(group, gears.GearGroup):
+            rates[group.link] = group.rate
+        if isinstance(group, Dyad):   # tried as the parallelogram it may be (module docstring)
+            group = dataclasses.replace(group, parallelogram=parallelogram_joint(linkage, group))
         if group is None:
             joints = [j for j in linkage.joints if any(link in remaining for link in j.links)]
             letters = "".join(sorted(j.letter for j in joints))
-            lower = sum(1 for j in joints if j.kind != CAM)
+            lower = sum(1 for j in joints if j.kind in (REVOLUTE, PRISMATIC))
             return (f"the links {remaining} with their joints {[f'{j.name} ({j.kind})' for j in joints]} form no "
                     f"class-II group (n = {len(remaining)}, p5 = {lower}, p4 = {len(joints) - lower}, joints "
                     f"{letters}): a group of class III or higher, or one with a higher pair, which is not supported")
@@ -150,6 +177,16 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
             redundant.append(f"the link {group.link} joins {group.joints[0].name} and {group.joints[1].name}, whose "
                              "distance the rest of the linkage already keeps")
         known.update(group.links)
+
+
+def _keep_held_parallelograms(groups: list) -> None:
+    """Turn back into a branch every parallelogram group on which no redundant link hangs (nothing holds it through
+    its change points: there it could fold, so the assembly check refuses it if its crank reaches them)."""
+    held = {link for group in groups if isinstance(group, RedundantLink)
+            for joint in group.joints for link in joint.links}
+    for k, group in enumerate(groups):
+        if isinstance(group, Dyad) and group.parallelogram is not None and not held & set(group.links):
+            groups[k] = dataclasses.replace(group, parallelogram=None)
 
 
 def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad | None:
@@ -164,7 +201,7 @@ def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad 
         outside = [[j for j in linkage.joints_of(link) if j.other(link) in known] for link in (first, second)]
         if len(between) == 1 and all(len(joints) == 1 for joints in outside):
             joints = [between[0], outside[0][0], outside[1][0]]
-            if any(joint.kind == CAM for joint in joints):
+            if any(joint.kind in (CAM, GEAR) for joint in joints):
                 continue
             return make_dyad(linkage, (first, second), between[0], (outside[0][0], outside[1][0]),
                              linkage.branches.get(between[0].name, 1))

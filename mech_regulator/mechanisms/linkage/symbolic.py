@@ -17,7 +17,8 @@ g); per dyad from the last inward its six multipliers from `A^T lambda = b` (A f
 joints) by flat.invert_dyad's block elimination written on A's entries, so that a joint's structural zeros and ones
 drop out (the external joints' null vectors n_k and right inverses, the internal joint's 2 x 2 system
 `(a_1 n_1 | a_2 n_2)^T lambda_I = (n_1 . b_1, n_2 . b_2)`, then `lambda_Ek = c_k . (b_k - a_k^T lambda_I)`), the
-outer joints' reactions passed inward; the crank's bearing and balancing moment last. A redundant link (statically
+outer joints' reactions passed inward (a gear group: its link's 3 x 3 system by cofactors, _gear_reactions); the
+crank's bearing and balancing moment last. A redundant link (statically
 indeterminate) has none.
 
 The closed forms per group (groups.py's module docstring; sigma the group's branch):
@@ -30,6 +31,9 @@ The closed forms per group (groups.py's module docstring; sigma the group's bran
 - PRP, RPP: intersections of two known lines, `c1 + w1 Im((c2 - c1) conj w2) / Im(w1 conj w2)`;
 - a link through two known points P, T (a dyad's links, a redundant link): `e^{i theta} = (T - P) conj(d) / |d|^2`,
   d its own vector between the two points, r = P - p e^{i theta};
+- a gear (gears.py): its angle `theta_L = theta_c + k (theta_G - theta_c) + phase_L` from the angles of its driver
+  and carrier, which are phi's (linear in phi: the frame, the crank, gears), `e^{i theta_L} = (cos theta_L, sin
+  theta_L)` and r = P - p e^{i theta_L} from its pivot P;
 - a cam follower (linkage/cam.py): its law's s, s', s'' from flat.law_at, whose source the function nests (the
   law's pieces are read from p at run time), then its pose in s (flat._place_cam_follower's formulas); its
   spring's -(F0 + k s) s' joins M_weight.
@@ -75,6 +79,8 @@ def _structural_positions(program: np.ndarray) -> set[int]:
 
     def joint(j):
         positions.update((j, j + 1, j + 2))
+        if program[j] == flat.GEAR_MESH:
+            positions.add(j + 9)   # the carrier link
 
     joint(5)
     g = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
@@ -132,9 +138,10 @@ class _Writer:
         self.lines: list[str] = []
         self.count = 0
         self.laws = False   # a cam follower's law is evaluated: the function nests flat.law_at
-        cos_phi, sin_phi = sympy.symbols("cos_phi sin_phi")
-        self.rate[cos_phi], self.rate[sin_phi] = -sin_phi, cos_phi
+        cos_phi, sin_phi, phi = sympy.symbols("cos_phi sin_phi phi")
+        self.rate[cos_phi], self.rate[sin_phi], self.rate[phi] = -sin_phi, cos_phi, sympy.Integer(1)
         self.crank_turn = (cos_phi, sin_phi)
+        self.phi = phi
 
     # numbers and points of the program
     def number(self, i: int):
@@ -259,7 +266,8 @@ def _dot(u, v):
 
 
 class _Poses:
-    """The links' poses as expressions: origin r and turn e = e^{i theta} per link index."""
+    """The links' poses as expressions: origin r and turn e = e^{i theta} per link index; `angle` the angle theta of
+    the links whose angle is phi's (the frame, the crank, gears)."""
 
     def __init__(self, writer: _Writer):
         self.w = writer
@@ -267,6 +275,7 @@ class _Poses:
         self.origin = {0: (zero, zero)}
         self.turn = {0: (one, zero)}
         self.cams: list = []   # (s, s', cam record) of each cam follower group (_place_cam_follower)
+        self.angle = {0: zero}
 
     def point(self, j: int, link: int):
         """Global position of the joint j's point on `link`: r + p e."""
@@ -326,11 +335,23 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     if kind == flat.REDUNDANT:
         poses.swing(E1, Ji, L1, poses.point(E1, w.other(E1, L1)), poses.point(Ji, w.other(Ji, L1)))
         return
+    if kind == flat.GEAR:   # flat.place_group's gear: theta_L = theta_c + k (theta_G - theta_c) + phase_L
+        rho_a, rho_b = w.number(Ji + 7), w.number(Ji + 8)
+        ratio = rho_a / rho_b if int(program[Ji + 2]) == L1 else rho_b / rho_a
+        carrier = poses.angle[int(program[Ji + 9])]
+        angle, = w.jets([carrier + ratio * (poses.angle[w.other(Ji, L1)] - carrier) + w.number(g + 1)])
+        poses.angle[L1] = angle
+        poses.pin(E1, L1, poses.point(E1, w.other(E1, L1)), (sp.cos(angle), sp.sin(angle)))
+        return
     K1, K2 = w.other(E1, L1), w.other(E2, L2)
     if kind in (0, 1):   # RRR, RRP
         B = poses.point(E1, K1)
         l1_square = _square(_sub(w.local(Ji, L1), w.local(E1, L1)))
-        if kind == 0:
+        if kind == 0 and sigma == 0:   # the parallelogram P B C D: C = D + (B - P), B - P on K1 (flat.place_group)
+            D = poses.point(E2, K2)
+            C = tuple(w.jets(list(_add(D, _mul((w.number(E1 + 7), w.number(E1 + 8)), poses.turn[K1])))))
+            poses.swing(E2, Ji, L2, D, C)
+        elif kind == 0:
             D = poses.point(E2, K2)
             l2_square = _square(_sub(w.local(Ji, L2), w.local(E2, L2)))
             v = tuple(w.jets(list(_sub(D, B))))
@@ -424,6 +445,7 @@ def _placed(program: np.ndarray) -> _Poses:
     pivot_crank = writer.number(flat.HEADER_SIZE - 2), writer.number(flat.HEADER_SIZE - 1)
     poses.origin[crank] = _sub(pivot_frame, _mul(pivot_crank, writer.crank_turn))
     poses.turn[crank] = writer.crank_turn
+    poses.angle[crank] = writer.phi
     g = flat.HEADER_SIZE + flat.LINK_SIZE * int(program[0])
     for _ in range(int(program[1])):
         _place(poses, program, g)
@@ -511,13 +533,19 @@ def _joint_rows(poses: _Poses, j: int):
     link a, then of its link b. Revolute, `r_a + q_a - r_b - q_b = 0` (q = p e): ((1, 0, -Im q_a), (-1, 0, Im q_b)),
     ((0, 1, Re q_a), (0, -1, -Re q_b)); prismatic (guide a, slider b), `Im(d conj w) = 0` (d = P_s - P_g, w = u e_a)
     and `theta_b - theta_a - alpha = 0`: ((Im w, -Re w, -Re((q_a + d) conj w)), (-Im w, Re w, Re(q_b conj w))),
-    ((0, 0, -1), (0, 0, 1))."""
+    ((0, 0, -1), (0, 0, 1)); a gear mesh, rolling at the pitch point (u the unit vector from O_a to O_b, t = i u):
+    ((t_x, t_y, rho_a + u . q_a), (-t_x, -t_y, -rho_b - u . q_b)), then a zero row."""
     w, sp = poses.w, poses.w.sp
     a, b = int(w.program[j + 1]), int(w.program[j + 2])
     qa, qb = _mul(w.local(j, a), poses.turn[a]), _mul(w.local(j, b), poses.turn[b])
     zero, one = sp.Integer(0), sp.Integer(1)
     if float(w.program[j]) == 0.0:
         return ((one, zero, -qa[1]), (-one, zero, qb[1])), ((zero, one, qa[0]), (zero, -one, -qb[0]))
+    if float(w.program[j]) == flat.GEAR_MESH:
+        line = _sub(_add(poses.origin[b], qb), _add(poses.origin[a], qa))
+        u = _scale(line, 1 / sp.sqrt(_square(line)))
+        return (((-u[1], u[0], w.number(j + 7) + _dot(qa, u)), (u[1], -u[0], -w.number(j + 8) - _dot(qb, u))),
+                ((zero, zero, zero), (zero, zero, zero)))
     direction = _mul((w.number(j + 7), w.number(j + 8)), poses.turn[a])
     d = _sub(_add(poses.origin[b], qb), _add(poses.origin[a], qa))
     return (((direction[1], -direction[0], -_dot(_add(qa, d), direction)),
@@ -645,6 +673,38 @@ def _group_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict)
     return multipliers
 
 
+def _gear_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict) -> list:
+    """The multipliers of the gear group at g for both load cases, [case][row] (its pivot's rows 0, 1, its mesh's
+    2 and a zero 3, then zeros to the dyads' six), from its link's `A^T lambda = b` by flat._solve_gear_reactions'
+    cofactors; then the pivot's and the mesh's reactions on the links they join passed inward."""
+    w, sp = poses.w, poses.w.sp
+    link = int(program[g + 2])
+    records = (g + 4, g + 4 + flat.JOINT_SIZE)
+    rows = [_joint_rows(poses, j) for j in records]
+    sides = [0 if int(program[j + 1]) == link else 1 for j in records]
+    values = iter(w.assign([value for row in (rows[0][0][sides[0]], rows[0][1][sides[0]], rows[1][0][sides[1]])
+                            for value in row]))
+    a1, a2, a3 = [tuple(next(values) for _ in range(3)) for _ in range(3)]
+    columns = (_cross3(a2, a3), _cross3(a3, a1), _cross3(a1, a2))
+    inverse_determinant, = w.assign([1 / _dot3(a1, columns[0])])
+    zero = sp.Integer(0)
+    multipliers = [w.assign([_dot3(column, residual[link][case]) * inverse_determinant for column in columns])
+                   + [zero, zero, zero] for case in range(2)]
+    passed = set()
+    for joint, j in enumerate(records):
+        side = 1 - sides[joint]
+        on = int(program[j + 1 + side])
+        if on == 0:
+            continue
+        passed.add(on)
+        for case in range(2):
+            for coordinate in range(3):
+                residual[on][case][coordinate] -= sum(rows[joint][row][side][coordinate]
+                                                      * multipliers[case][2 * joint + row] for row in range(2))
+    _assign_residual(w, residual, sorted(passed))
+    return multipliers
+
+
 def _float_code(sp, value) -> str:
     """An expression's code, a number written as a float literal (so that compiled tuples hold one type)."""
     return repr(float(value)) if value.is_number else sp.pycode(value)
@@ -671,7 +731,7 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
             raise ValueError("a linkage with a redundant link is statically indeterminate: no generated kinetostatics")
         if int(program[g]) == flat.CAM_FOLLOWER:
             raise ValueError("a cam pair's contact is not in the kinetostatics by groups yet: no generated kinetostatics")
-        found = _group_reactions(poses, program, g, residual)
+        found = (_gear_reactions if int(program[g]) == flat.GEAR else _group_reactions)(poses, program, g, residual)
         for case in range(2):
             for row in range(6):
                 multipliers[6 * group + row, case] = found[case][row]
@@ -694,7 +754,7 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         entry = at + 1 + flat.JOINT_SIZE + 2 * joint
         j, slot = int(program[entry]), 2 * int(program[entry + 1])
         a, b = int(program[j + 1]), int(program[j + 2])
-        if float(program[j]) == 0.0:
+        if float(program[j]) in (0.0, flat.GEAR_MESH):   # a mesh's second multiplier is 0
             reactions.append([(multipliers[slot, case], multipliers[slot + 1, case]) for case in range(2)])
             ratios.append(_angular_rate(poses, a, crank) - _angular_rate(poses, b, crank))
         else:

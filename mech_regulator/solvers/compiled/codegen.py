@@ -2,9 +2,10 @@
 numba compiles once and caches on disk.
 
 From a MachineModel it writes `rhs(t, y, p, dydt)` and `guards(t, y, p, levels)` (compiled with the explicit
-signatures of solvers/compiled/signatures.py) that call only the kernels (solvers/compiled/kernels.py) of the
-effects the scene has — a machine without a mechanism has no kinematics call, an ungoverned one no governor — and
-the parameter vector p they read, laid out as
+signatures of solvers/compiled/signatures.py) that call only the effects the scene has (each drive's, load's,
+valve's and the servo's one definition compiled, effects/definition.py, the call written by its call_source as the
+reference path's; the kernels of solvers/compiled/kernels.py for the rest) — a machine without a mechanism has no
+kinematics call, an ungoverned one no governor — and the parameter vector p they read, laid out as
 
     p[0:SEGMENT_SLOTS]   the segment's inputs (set by the outer loop, solvers/compiled/run.py): external load
                          offset [N m] and slope [N m/s], held throttle [-], sleeve / servo / driven-part mode codes,
@@ -42,6 +43,7 @@ import math
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Callable
 
 import numba
 import numpy as np
@@ -53,7 +55,9 @@ from mech_regulator.model.machine import StateTable
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator import mechanisms
 from mech_regulator.effects import held_positions, joint_friction, output_position_of
-from mech_regulator.mechanisms import engine
+from mech_regulator.effects.definition import (CLAMPED, INTERVALS, PERIODIC, Definition, call_source, definition_of,
+                                               summed_source)
+from mech_regulator.governors import servo as servo_motor
 from mech_regulator.mechanisms.linkage import flat, symbolic
 from mech_regulator.scene import schema
 from mech_regulator.solvers.compiled import kernels
@@ -378,9 +382,16 @@ class _Parameters:
         self.values[HELD_THROTTLE] = 1.0
         self.tables: list[tuple[int, list[float]]] = []
         self.functions: dict[str, str] = {}   # name -> source of the generated functions the module calls
+        self.formulas: dict[str, Callable] = {}   # name in the module -> a definition's formula the module calls
 
     def scalar(self, value: float) -> str:
         return f"p[{self.slot(value)}]"
+
+    def formula(self, function: Callable) -> str:
+        """The name the module calls a definition's formula function by (kernels.compiled), noted in formulas."""
+        name = f"{function.__module__.rsplit('.', 1)[-1]}_{function.__name__}"
+        self.formulas[name] = function
+        return name
 
     def slot(self, value: float) -> int:
         """A new scalar slot holding value; its index in p."""
@@ -408,61 +419,91 @@ class _Parameters:
         return np.array(values, dtype=float)
 
 
-def _effect_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, mechanism=None,
-                 anchor: str | None = None, held: str | None = None) -> str:
-    """The kernel call of one drive or load entry of a scene (effects.build_drive / build_load), as source, its
-    tables in phi on the segment that holds `anchor` (default phi: the tables themselves), a slider table on the
-    piece that holds the slider position `held` [m] (default: q at the anchor phi, else generate's q_anchor); an
-    engine on a crank–slider with several cylinders (mechanism.cylinders) is the sum of every cylinder's gas moment
-    -p(phi + phase - d_i) A dx_i/dphi (d_i its firing delay, effects._multi_cylinder_engine; dx_i/dphi named as
-    _reduced_lines does)."""
-    if isinstance(spec, schema.ConstantDrive):
-        return p.scalar(spec.torque)
-    if isinstance(spec, schema.LinearMotor):
-        return f"k.linear_motor({omega}, {p.scalar(spec.stall_torque)}, {p.scalar(spec.no_load_speed)})"
+def _effect_call(definition: Definition, p: _Parameters, phi: str, omega: str, q: str, dq: str,
+                 anchor: str | None = None, held: str | None = None, function: Callable | None = None) -> str:
+    """The call of a drive's or load's formula (definition.moment, or `function`: its output_force) as source, its
+    numbers and table stored in p: a periodic table in phi read on the segment that holds `anchor` (default phi: the
+    table itself), a clamped table in the output position on the piece that holds the slider position `held` [m]
+    (default: q at the anchor phi, else generate's q_anchor), an interval table at phi; summed over the mechanism's
+    outputs (an engine's cylinders: output k >= 2's q and dq named as _reduced_lines does). The call is written by
+    definition.summed_source, as the reference path's."""
+    function = function or definition.moment
+    numbers = {name: p.scalar(value) for name, value in definition.numbers.items()}
+    spec = definition.table
     anchor = anchor or phi
-    if isinstance(spec, schema.TableDrive):
-        table = p.table([math.radians(a) for a in spec.angle_deg], spec.torque)
-        return f"k.table_drive({phi}, {anchor}, {table}, {p.scalar(math.radians(spec.period_deg))})"
-    if isinstance(spec, schema.Engine):
-        table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
-        cycle, area = p.scalar(math.radians(spec.cycle_deg)), math.pi * spec.bore ** 2 / 4.0
-        cylinders = getattr(mechanism, "cylinders", None)
-        if cylinders is None:
-            return (f"k.engine_gas({phi}, {anchor}, {dq}, {table}, {cycle}, {p.scalar(math.radians(spec.phase_deg))}, "
-                    f"{p.scalar(area)})")
-        area = p.scalar(area)
-        delays = engine.firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders],
-                                      spec.cycle_deg, spec.firing_order, spec.firing_deg)
-        ratios = [dq] + [f"{dq}_{number}" for number in range(2, len(cylinders) + 1)]
-        return "(" + " + ".join(f"k.engine_gas({phi}, {anchor}, {ratio}, {table}, {cycle}, "
-                                f"{p.scalar(math.radians(spec.phase_deg - delay))}, {area})"
-                                for ratio, delay in zip(ratios, delays)) + ")"
-    if isinstance(spec, schema.ConstantLoad):
-        return f"-{p.scalar(spec.torque)}"
-    if isinstance(spec, schema.ViscousLoad):
-        return f"k.viscous_load({omega}, {p.scalar(spec.coefficient)})"
-    if isinstance(spec, schema.FanLoad):
-        return f"k.fan_load({omega}, {p.scalar(spec.coefficient)})"
-    if isinstance(spec, schema.TableLoad):
-        table = p.table([math.radians(a) for a in spec.angle_deg], spec.torque)
-        return f"k.table_load({phi}, {anchor}, {table}, {p.scalar(math.radians(spec.period_deg))})"
-    if isinstance(spec, schema.CuttingLoad):
-        start = math.radians(spec.intervals_deg[0][0])
-        bounds = p.table([math.radians(edge) - start for interval in spec.intervals_deg for edge in interval])
-        return (f"k.cutting_load({phi}, {bounds}, {p.scalar(math.radians(spec.period_deg))}, {p.scalar(start)}, "
-                f"{p.scalar(spec.torque)})")
-    if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
-        value = spec.force if isinstance(spec, schema.SliderConstant) else spec.torque
-        return f"k.output_constant({dq}, {p.scalar(value)})"
-    if isinstance(spec, schema.OutputViscous):
-        return f"k.output_viscous({omega}, {dq}, {p.scalar(spec.coefficient)})"
-    if isinstance(spec, schema.OutputSpring):
-        return f"k.output_spring({q}, {dq}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
-    if isinstance(spec, schema.SliderTable):
+    read = None
+    if spec is not None:
+        columns = p.table(spec.xs, spec.ys) if spec.ys else p.table(spec.xs)
+        period = p.scalar(spec.period) if spec.kind != CLAMPED else ""
+        shifts = [f" + {p.scalar(shift)}" for shift in spec.shifts] if spec.shifts is not None else None
         held = held or (q if anchor == phi else f"{q}_anchor")  # x on the anchor's interval (generate's q_anchor)
-        return f"k.slider_table({q}, {held}, {dq}, {p.table(spec.position, spec.force)})"
-    raise TypeError(f"no compiled kernel for {type(spec).__name__}")
+
+        def read(i: int, position: str) -> str:
+            shift = shifts[i] if shifts is not None else ""
+            if spec.kind == PERIODIC:
+                return f"k.periodic_linear({phi}{shift}, {anchor}{shift}, {columns}, {period})"
+            if spec.kind == INTERVALS:
+                return f"k.inside_intervals({phi}{shift}, {columns}, {period})"
+            return f"k.clamped_linear({position}, {columns}, {held})"
+
+    def inputs(i: int) -> dict[str, str]:
+        position, ratio = (q, dq) if i == 0 else (f"{q}_{i + 1}", f"{dq}_{i + 1}")
+        given = {"t": "t", "phi": phi, "omega": omega, "q": position, "dq": ratio}
+        if read is not None:
+            given["table"] = read(i, position)
+        return given
+
+    return summed_source(definition, function, p.formula(function), inputs, numbers)
+
+
+def _formula_call(p: _Parameters, function: Callable, inputs: dict[str, str], numbers: dict[str, float]) -> str:
+    """The call of a formula function (a valve's, the servo's) as source, its numbers stored in p."""
+    stored = {name: p.scalar(value) for name, value in numbers.items()}
+    return call_source(function, p.formula(function), inputs, stored)
+
+
+def _valve_call(definition: Definition, p: _Parameters, z: str, anchor: str = "") -> str:
+    """The call of a valve's formula at the sleeve position z [m] as source, its table read on the piece that holds
+    the anchor (anchor: ', p[slot]' of the valve table's anchor, the kernel's last argument; '': z itself)."""
+    inputs = {"z": z}
+    if definition.table is not None:
+        inputs["table"] = f"k.clamped_linear({z}, {p.table(definition.table.xs, definition.table.ys)}{anchor})"
+    return _formula_call(p, definition.moment, inputs, definition.numbers)
+
+
+def effect_kernel(definition: Definition, function: Callable | None = None, anchored: bool = False):
+    """The fast path's code of one drive's or load's formula (definition.moment, or `function`: its output_force)
+    alone, as generate writes it into a scene's rhs (_effect_call), compiled: (f(t, phi, omega, anchor, q_anchor, p,
+    q, dq[, q_2, dq_2, ...]) -> value, p), one q and dq per output of the mechanism; anchored: its table read on the
+    piece that holds anchor [rad] (a periodic one) or the slider position q_anchor [m] (one in q). What the check
+    that both paths agree compiles (test/test_effect_definitions.py)."""
+    p = _Parameters()
+    call = _effect_call(definition, p, "phi", "omega", "q", "dq", "anchor" if anchored else None,
+                        "q_anchor" if anchored else None, function)
+    outputs = "".join(f", q_{k}, dq_{k}" for k in range(2, definition.outputs + 1))
+    return _kernel(f"t, phi, omega, anchor, q_anchor, p, q, dq{outputs}", call, p)
+
+
+def valve_kernel(definition: Definition, anchored: bool = False):
+    """The fast path's code of a valve's formula alone, as generate writes it (_valve_call), compiled: (f(z, anchor,
+    p) -> throttle [-], p); anchored: its table read on the piece that holds the sleeve position anchor [m]."""
+    p = _Parameters()
+    return _kernel("z, anchor, p", _valve_call(definition, p, "z", ", anchor" if anchored else ""), p)
+
+
+def _kernel(arguments: str, call: str, p: _Parameters):
+    """(The function `kernel(arguments): return call` compiled by numba over the kernels and p's formulas, p's
+    array); compiled once per process for each source (the source depends only on the entry's structure)."""
+    formulas = tuple((name, function.__module__, function.__name__) for name, function in p.formulas.items())
+    return _compiled_kernel(f"def kernel({arguments}):\n    return {call}\n", formulas), p.array()
+
+
+@functools.cache
+def _compiled_kernel(source: str, formulas: tuple[tuple[str, str, str], ...]):
+    """The function `kernel` of source compiled by numba, the formulas (name, module, function name) in its globals."""
+    namespace = {"k": kernels} | {name: kernels.compiled(module, function) for name, module, function in formulas}
+    exec(source, namespace)
+    return numba.njit(namespace["kernel"])
 
 
 def _held_position_call(kinks, output_position, p: _Parameters, anchor: str) -> str:
@@ -512,7 +553,6 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     coupled = model.driven is not None  # the external load on the driven part, not on the crank
     if not coupled:
         body.append(f"total -= p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t")
-    specs = ([machine.drive] if machine.drive is not None else []) + list(machine.loads)
     governor = model.governor
     scaled, switched = [], []
     kinked = any(effect.kink_angles for effect in model.effects)
@@ -525,25 +565,25 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
     if kinked:  # between two kinks the tables continue along the segment that holds the window's middle (rhs);
         #         without a window (p's edges both 0) they are the tables themselves
         body.append(f"anchor = 0.5 * (p[{WINDOW_LO}] + p[{WINDOW_HI}]) if p[{WINDOW_HI}] > p[{WINDOW_LO}] else phi")
-        kinks = sorted({angle for spec, effect in zip(specs, model.effects)
-                        if isinstance(spec, schema.SliderTable) for angle in effect.kink_angles})
+        in_position = [effect for effect in model.effects if _reads_position(effect.definition)]
+        kinks = sorted({angle for effect in in_position for angle in effect.kink_angles})
         if kinks:  # a slider table's piece: that of x on the anchor's interval between its breakpoint crossings
             body.append(f"q_anchor = {_held_position_call(kinks, output_position_of(model.reduced), p, 'anchor')}")
-        elif any(isinstance(spec, schema.SliderTable) for spec in specs):  # x never crosses its breakpoints
+        elif in_position:  # x never crosses its breakpoints
             body.append("q_anchor = q")
-    for spec, effect in zip(specs, model.effects):
+    for effect in model.effects:
         if effect.switch_angles:
-            switched.append(spec)
+            switched.append(effect.definition)
         elif effect.role == "drive" and governor is not None:
-            scaled.append(spec)
+            scaled.append(effect.definition)
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
             body.append(f"total += {HELD_THROTTLE_EXPRESSION} * "
-                        f"{_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism, anchor)}")
+                        f"{_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}")
         else:
-            body.append(f"total += {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', anchor=anchor)}")
+            body.append(f"total += {_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}")
     if switched:
         body.append(f"clamped = min(max(phi, p[{CLAMP_LO}]), p[{CLAMP_HI}])")
-        body += [f"total += {_effect_call(spec, p, 'clamped', 'omega', 'q', 'dq')}" for spec in switched]
+        body += [f"total += {_effect_call(definition, p, 'clamped', 'omega', 'q', 'dq')}" for definition in switched]
     governor_lines, guard_lines, opening = [], [], []
     if governor is not None:
         sensor = governor.sensor
@@ -553,26 +593,23 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         kinetic, static = p.scalar(sensor.kinetic_friction), p.scalar(sensor.static_friction)
         low, high = (p.scalar(v) for v in sensor.stop_angles())
         if governor.kind == "direct":
-            valve = model.scene.governor.valve
-            z = f"k.sleeve(y[{ARM}], {l})"
-            if isinstance(valve, schema.LinearValve):
-                throttle = f"k.linear_valve({z}, {p.scalar(valve.open_at)}, {p.scalar(valve.closed_at)})"
-            else:
-                throttle = (f"k.clamped_linear({z}, {p.table(valve.sleeve, valve.throttle)}"
-                            f"{anchor_of.get('valve table', '')})")
+            throttle = _valve_call(definition_of(model.scene.governor.valve), p, f"k.sleeve(y[{ARM}], {l})",
+                                   anchor_of.get("valve table", ""))
         else:
             throttle = f"y[{SERVO}]"
             opening = [f"opening = k.sleeve(y[{ARM}], {l}) - {p.scalar(governor.pilot_neutral)}"]
-            rho = p.scalar(governor.feedback_gain)
             if governor.feedback == "rigid":
-                opening.append(f"opening += k.rigid_feedback({rho}, y[{SERVO}], {p.scalar(governor.feedback_reference)})")
+                feedback = _formula_call(p, servo_motor.rigid_feedback, {"servo": f"y[{SERVO}]"},
+                                         {"gain": governor.feedback_gain, "reference": governor.feedback_reference})
+                opening.append(f"opening += {feedback}")
             elif governor.feedback == "isodromic":
                 opening.append(f"opening += y[{SHIFT}]")
-            command = (f"k.servo_command(opening, {p.scalar(governor.servo_gain)}, "
-                       f"{p.scalar(governor.servo_max_speed)}, {p.scalar(governor.dead_band)})")
+            command = _formula_call(p, servo_motor.servo_command, {"opening": "opening"},
+                                    {"gain": governor.servo_gain, "max_speed": governor.servo_max_speed,
+                                     "dead_band": governor.dead_band})
         body.append(f"share = {throttle}")
-        body += [f"total += share * {_effect_call(spec, p, 'phi', 'omega', 'q', 'dq', machine.mechanism, anchor)}"
-                 for spec in scaled]
+        body += [f"total += share * {_effect_call(definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
+                 for definition in scaled]
         sensor_args = f"{m}, {l}, {M}, {kk}, {z_free}, {c}, {g}, {ratio}"
         lift = f"k.lift(y[{ARM}], omega, {m}, {l}, {M}, {kk}, {z_free}, {g}, {ratio})"
         governor_lines += [
@@ -603,8 +640,10 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
             governor_lines += opening + [
                 f"servo_rate = {command} if p[{SERVO_MODE}] == 0.0 else 0.0", f"dydt[{SERVO}] = servo_rate"]
             if governor.feedback == "isodromic":
-                governor_lines.append(f"dydt[{SHIFT}] = {rho} * servo_rate - y[{SHIFT}] / "
-                                      f"{p.scalar(governor.feedback_time_constant)}")
+                rate = _formula_call(p, servo_motor.isodromic_rate,
+                                     {"servo_rate": "servo_rate", "shift": f"y[{SHIFT}]"},
+                                     {"gain": governor.feedback_gain, "time_constant": governor.feedback_time_constant})
+                governor_lines.append(f"dydt[{SHIFT}] = {rate}")
             guard_lines += [
                 f"if p[{SERVO_MODE}] == 0.0:",
                 f"    levels[g] = y[{SERVO}] - {s_low}", f"    levels[g + 1] = {s_high} - y[{SERVO}]", "    g += 2",
@@ -633,7 +672,7 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         body.append("dydt[1] = net / J")
     if model.joint_friction is not None:
         share = "share" if governor is not None else HELD_THROTTLE_EXPRESSION
-        body += _joint_friction_lines(model, p, specs, share, anchor, "q_anchor" if kinked else "q", friction_slot)
+        body += _joint_friction_lines(model, p, share, anchor, "q_anchor" if kinked else "q", friction_slot)
         guard_lines += _crank_guard_lines()
         n_mode_guards += 1
         copy = [line.replace("dydt[", "rates[") for line in body]  # the body up to here: R0, R1 and the rhs's epsilon
@@ -664,52 +703,34 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         n_guards += 2
         guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
                         f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
-    source = _module(body, guard_lines, n_guards, reaction_lines, p.functions)
+    source = _module(body, guard_lines, n_guards, reaction_lines, p.functions, p.formulas)
     return (source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
             len(journals), n_normals)
 
 
-def _output_force_call(spec, p: _Parameters, phi: str, omega: str, q: str, dq: str, anchor: str, held: str) -> str:
-    """The generalised force on the output link of a drive or load entry that has one (Effect.output_force: slider
-    force along +x [N] or rocker moment [N m]), as source; anchor, held: the crank angle whose segment an engine's
-    pressure table is read on and the slider position whose piece a slider table is read on (generate's anchor and
-    q_anchor between two kinks, as their moments; else phi and q)."""
-    if isinstance(spec, schema.Engine):
-        table = p.table([math.radians(a) for a in spec.angle_deg], spec.pressure)
-        return (f"k.engine_gas_force({phi}, {anchor}, {table}, {p.scalar(math.radians(spec.cycle_deg))}, "
-                f"{p.scalar(math.radians(spec.phase_deg))}, {p.scalar(math.pi * spec.bore ** 2 / 4.0)})")
-    if isinstance(spec, (schema.SliderConstant, schema.RockerConstant)):
-        return p.scalar(spec.force if isinstance(spec, schema.SliderConstant) else spec.torque)
-    if isinstance(spec, schema.OutputViscous):
-        return f"k.output_viscous_force({omega}, {dq}, {p.scalar(spec.coefficient)})"
-    if isinstance(spec, schema.OutputSpring):
-        return f"k.output_spring_force({q}, {p.scalar(spec.stiffness)}, {p.scalar(spec.free_position)})"
-    if isinstance(spec, schema.SliderTable):
-        return f"k.clamped_linear({q}, {p.table(spec.position, spec.force)}, {held})"
-    raise TypeError(f"no compiled output force for {type(spec).__name__}")
-
-
-def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, share: str, anchor: str,
-                          held: str, friction_slot: int | None) -> list[str]:
+def _joint_friction_lines(model: MachineModel, p: _Parameters, share: str, anchor: str, held: str,
+                          friction_slot: int | None) -> list[str]:
     """Source that turns the crank's frictionless dydt[1] = epsilon_0 into the root of J epsilon = J epsilon_0 -
     sign(omega) F(epsilon) (MachineModel.rhs, effects.joint_friction): the force Q on the output link (the effects'
     output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
     kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics. anchor,
-    held: the crank angle and slider position the tables in the output forces are read on (_output_force_call);
+    held: the crank angle and slider position the tables in the output forces are read on (_effect_call);
     friction_slot: CompiledScene's (the guides' normal signs and the joints' rate signs between two corners)."""
     friction = model.joint_friction
     collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
     iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
+    solve = p.formula(joint_friction.friction_acceleration)   # the reference path's own Newton solve, compiled
     if friction.loads is None:
-        return [f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
+        return [f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
                 f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations}, "
                 "(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))"]
     lines = ["force = 0.0"]
     scaled = []
-    for spec, effect in zip(specs, model.effects):
+    for effect in model.effects:
         if effect.output_force is None:
             continue
-        call = _output_force_call(spec, p, "phi", "omega", "q", "dq", anchor, held)
+        definition = effect.definition
+        call = _effect_call(definition, p, "phi", "omega", "q", "dq", anchor, held, definition.output_force)
         if effect.role == "drive":
             scaled.append(f"force += {share} * {call}")
         else:
@@ -730,7 +751,7 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, specs: list, shar
         normals[friction.indices[position]] = f"p[{friction_slot + NORMAL_SLOTS * k}]"
     first_rate = friction_slot + NORMAL_SLOTS * len(friction.guides)
     signs = "".join(f"p[{first_rate + j}], " for j in range(len(joints)))
-    lines.append(f"dydt[1] = k.joint_friction_acceleration(omega, J * dydt[1], J, {collar}, "
+    lines.append(f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, "
                  f"({''.join(p.scalar(v) + ', ' for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
                  f"({signs}), ({''.join(sign + ', ' for sign in normals)}))")
     return lines
@@ -807,24 +828,31 @@ def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, om
     lines = []
     for index, load in enumerate(driven.loads):
         slot = anchors.get(index)
-        if isinstance(load, schema.ConstantLoad):
+        definition = definition_of(load)
+        if definition.dry:
             continue
         if slot is None:
-            lines.append(f"smooth += {_effect_call(load, p, phi, omega, q, dq)}")
-        elif isinstance(load, schema.SliderTable):
+            lines.append(f"smooth += {_effect_call(definition, p, phi, omega, q, dq)}")
+        elif _reads_position(definition):
             held = f"{q}_anchor{index}"
             position = _held_position_call(model.effects[index].kink_angles, output_position_of(model.reduced), p,
                                            slot)
             lines += [f"{held} = {position} if {slot} == {slot} else {q}",
-                      f"smooth += {_effect_call(load, p, phi, omega, q, dq, held=held)}"]
+                      f"smooth += {_effect_call(definition, p, phi, omega, q, dq, held=held)}"]
         else:
             anchor = f"({slot} if {slot} == {slot} else {phi})"  # NaN: the table as it is
-            lines.append(f"smooth += {_effect_call(load, p, phi, omega, q, dq, anchor=anchor)}")
+            lines.append(f"smooth += {_effect_call(definition, p, phi, omega, q, dq, anchor=anchor)}")
     for branch in driven.branches:
         ratio = p.scalar(branch.ratio)
-        lines += [f"smooth += {_effect_call(load, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
-                  for load in branch.loads if not isinstance(load, schema.ConstantLoad)]
+        definitions = [definition_of(load) for load in branch.loads]
+        lines += [f"smooth += {_effect_call(definition, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
+                  for definition in definitions if not definition.dry]
     return lines
+
+
+def _reads_position(definition: Definition | None) -> bool:
+    """Whether a drive's or load's formula reads a table in the output position (a slider force table)."""
+    return definition is not None and definition.table is not None and definition.table.kind == CLAMPED
 
 
 def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tuple[list[str], list[str]]:
@@ -860,9 +888,11 @@ _INLINED = ", inline='always'"
 
 
 def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_body: list[str],
-            functions: dict[str, str]) -> str:
-    """The generated module's source (`reactions` only with a reaction_body), the generated `functions` (name ->
-    source) compiled before the right-hand side that calls them, with numpy's error model (a division by zero gives
+            functions: dict[str, str], formulas: dict[str, Callable]) -> str:
+    """The generated module's source (`reactions` only with a reaction_body), the definitions' `formulas` (name in
+    the module -> function, compiled by kernels.compiled; with a hash of each one's module source, so that a changed
+    formula makes a new module) and the generated `functions` (name -> source) compiled before the right-hand side
+    that calls them, with numpy's error model (a division by zero gives
     an infinity or NaN, which the callers read, instead of an exception and a test per division); the reduction
     inlined into its callers (numba's IR inlining: `crank_slider_bench` 13 % slower as a call than with the hand kernel
     it replaced, 4-5 % inlined), the kinetostatics not (inlined it doubled the friction scenes' compile time)."""
@@ -873,6 +903,8 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
                  f"def reactions(t, y, p, squares):{indent}{indent.join(reaction_body)}\n\n\n"
                  "reactions_callback = cfunc(REACTIONS_SIGNATURE, cache=True)(reactions.py_func)\n"
                  if reaction_body else "")
+    compiled = "".join(f"{name} = k.compiled({function.__module__!r}, {function.__name__!r})  # source "
+                       f"{_module_source_hash(function.__module__)}\n" for name, function in sorted(formulas.items()))
     return (
         '"""Generated by mech_regulator.solvers.compiled.codegen: a scene\'s right-hand side and guards (do not edit;\n'
         'the parameters are in p)."""\n\n'
@@ -880,7 +912,8 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
         "import numpy as np\n"
         "from numba import cfunc, njit\n\n"
         "from mech_regulator.solvers.compiled import kernels as k\n"
-        f"from mech_regulator.solvers.compiled.signatures import {signatures}\n\n\n"
+        f"from mech_regulator.solvers.compiled.signatures import {signatures}\n\n"
+        + (f"{compiled}\n" if compiled else "") + "\n"
         + "".join(f"@njit(cache=True, error_model='numpy'{_INLINED if name.startswith(symbolic.FUNCTION_NAME) else ''})"
                   f"\n{source}\n\n" for name, source in functions.items()) +
         "@njit(RHS_SIGNATURE, cache=True)\n"
@@ -889,3 +922,9 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
         f"def guards(t, y, p, levels):{indent}{indent.join(guards)}\n\n\n"
         "rhs_callback = cfunc(RHS_SIGNATURE, cache=True)(rhs.py_func)\n"
         "guards_callback = cfunc(GUARDS_SIGNATURE, cache=True)(guards.py_func)\n" + reactions)
+
+
+@functools.cache
+def _module_source_hash(module: str) -> str:
+    """A short hash of a module's source (a definitions' module, written into the generated module)."""
+    return hashlib.sha256(inspect.getsource(sys.modules[module]).encode()).hexdigest()[:16]

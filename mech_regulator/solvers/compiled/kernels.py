@@ -1,17 +1,32 @@
-"""Scalar numba kernels of the compiled fast path: one per physics piece, each a transcription of its pure-Python
-original (named in its docstring, with the same equation), called by the right-hand side the code generator writes
-for a scene (solvers/compiled/codegen.py). Tables are read from the parameter vector p at (offset, length), so no
+"""Scalar numba kernels of the compiled fast path, called by the right-hand side the code generator writes for a
+scene (solvers/compiled/codegen.py): the drives', loads', valves' and servo's formulas themselves, compiled from
+their one definition (`compiled`, effects/definition.py) as is joint friction's Newton solve
+(effects.joint_friction.friction_acceleration), and, for the pieces not yet defined once, a transcription of the
+pure-Python original (named in its docstring, with the same equation): the tables' lookups, the sensor, the drive
+train. Tables are read from the parameter vector p at (offset, length), so no
 number of a scene is compiled into the code. All arguments and results are SI, as in the originals.
 
-The generated module's cache name includes this file's source: numba's own cache would not notice a changed kernel.
+The generated module's cache name includes this file's source and the formulas' modules' (codegen writes their hash
+into the module): numba's own cache would not notice a changed kernel.
 """
 
 from __future__ import annotations
 
+import functools
+import importlib
 import math
 
 import numpy as np
 from numba import njit
+
+
+@functools.cache
+def compiled(module: str, name: str):
+    """The function `name` of `module` (a definition's formula, effects/definition.py, or joint friction's Newton solve:
+    a plain function) compiled by numba, once per process (numba's disk cache beside the module keeps the machine
+    code)."""
+    return njit(cache=True)(getattr(importlib.import_module(module), name))
+
 
 # ---------------------------------------------------------------------------------------------------------------
 # Tables (effects/tables.py) read from p: xs at p[offset : offset + n], ys at p[offset + n : offset + 2 n]
@@ -66,94 +81,17 @@ def extrapolated_linear(x, p, offset, n, anchor=np.nan):
         x - p[offset + i])
 
 
-# ---------------------------------------------------------------------------------------------------------------
-# Effects (effects/__init__.py): moments on the crank [N m]
-
-
 @njit(cache=True)
-def linear_motor(omega, stall, no_load):
-    """Linear motor: M_d = M_stall (1 - omega / omega_0)."""
-    return stall * (1.0 - omega / no_load)
-
-
-@njit(cache=True)
-def table_drive(phi, anchor, p, offset, n, period):
-    """Table drive: M_d = M(phi), periodic linear table (on the segment that holds anchor)."""
-    return periodic_linear(phi, anchor, p, offset, n, period)
-
-
-@njit(cache=True)
-def engine_gas_force(phi, anchor, p, offset, n, cycle, phase, area):
-    """The gas force on the piston along +x: F = -p(phi + phase) A (it pushes the piston towards the crank) [N]
-    (p on the segment that holds anchor + phase)."""
-    return -periodic_linear(phi + phase, anchor + phase, p, offset, n, cycle) * area
-
-
-@njit(cache=True)
-def engine_gas(phi, anchor, dq, p, offset, n, cycle, phase, area):
-    """Single-cylinder engine: M_d = -p(phi + phase) A dx/dphi (engine_gas_force reduced to the crank)."""
-    return engine_gas_force(phi, anchor, p, offset, n, cycle, phase, area) * dq
-
-
-@njit(cache=True)
-def viscous_load(omega, c):
-    """Viscous load: M_c = -c omega."""
-    return -c * omega
-
-
-@njit(cache=True)
-def fan_load(omega, k):
-    """Fan load: M_c = -k omega |omega|."""
-    return -k * omega * abs(omega)
-
-
-@njit(cache=True)
-def table_load(phi, anchor, p, offset, n, period):
-    """Table load: M_c = -M(phi), periodic linear table (on the segment that holds anchor)."""
-    return -periodic_linear(phi, anchor, p, offset, n, period)
-
-
-@njit(cache=True)
-def cutting_load(phi, p, offset, n, period, start, torque):
-    """Cutting (on-off) load: M_c = -torque while (phi - start) mod period lies in an interval [start_k, end_k);
-    the n interval edges (relative to start, ascending) are at p[offset : offset + n]."""
-    u = np.fmod(phi - start, period)
+def inside_intervals(x, p, offset, n, period):
+    """effects.tables.interval_indicator: 1.0 while x mod period lies in one of the intervals [e_2k, e_2k+1) of the n
+    edges at p[offset : offset + n] (from 0, ascending), else 0.0."""
+    u = np.fmod(x, period)
     if u < 0.0:
         u += period
-    count = 0  # bisect_right(bounds, u)
+    count = 0  # bisect_right(edges, u)
     while count < n and p[offset + count] <= u:
         count += 1
-    return -torque if count % 2 == 1 else 0.0
-
-
-@njit(cache=True)
-def output_constant(dq, value):
-    """Constant force (slider) or moment (rocker) on the output link: M = Q dq/dphi."""
-    return value * dq
-
-
-@njit(cache=True)
-def output_viscous(omega, dq, c):
-    """Viscous force on the output link: M = -c (dq/dphi)^2 omega."""
-    return -c * dq * dq * omega
-
-
-@njit(cache=True)
-def output_viscous_force(omega, dq, c):
-    """The viscous force itself, Q = -c dq/dphi omega (what the joint friction's kinetostatics reads) [N or N m]."""
-    return -c * dq * omega
-
-
-@njit(cache=True)
-def output_spring_force(q, k, free):
-    """The spring's force on the output link: Q = -k (q - q_free) [N or N m]."""
-    return -k * (q - free)
-
-
-@njit(cache=True)
-def output_spring(q, dq, k, free):
-    """Spring on the output link: M = -k (q - q_free) dq/dphi (output_spring_force reduced to the crank)."""
-    return output_spring_force(q, k, free) * dq
+    return 1.0 if count % 2 == 1 else 0.0
 
 
 @njit(cache=True)
@@ -169,76 +107,8 @@ def held_position(anchor, p, offset, n):
     return p[offset + n + j]
 
 
-@njit(cache=True)
-def slider_table(q, q_anchor, dq, p, offset, n):
-    """Slider force table: M = F(x) dx/dphi, F clamped linear in x (on the piece that holds x = q_anchor [m])."""
-    return clamped_linear(q, p, offset, n, q_anchor) * dq
-
-
 # ---------------------------------------------------------------------------------------------------------------
-# Joint friction (effects/joint_friction.py): reactions as complex Fx + i Fy [N] from the linkage kinetostatics
-
-
-@njit(cache=True)
-def joint_friction_acceleration(omega, moment, inertia, collar, arms, ratios, constant, per_epsilon, with_joints,
-                                tolerance, iterations, ratio_signs, normal_signs):
-    """JointFrictionModel.acceleration: epsilon [rad/s^2] solving J epsilon = M - sign(omega) F(epsilon),
-    F = M_collar + sum_j rho_j |k_j| |R0_j + R1_j epsilon| by Newton's method from the friction at rest; at rest
-    (omega = 0) 0 while |M| <= F(0), else breaking away in the direction of M; NaN without convergence.
-    arms: rho_j [m] (f_guide for a guide) of the mechanism's linkage's joints, 0 for a
-    joint without friction (its terms add exact zeros); with_joints False: the collar alone (no kinetostatics).
-    Between two corners (docs/theory.md §6.5): ratio_signs s_j (0: |k_j|) read rho_j s_j k_j, normal_signs s_N
-    (0: |R|) a guide's |N| (its reaction i N) as s_N N, per joint (0 for every joint but the guides)."""
-    at_rest = 0.0
-    if with_joints:
-        for j in range(len(arms)):
-            at_rest += arms[j] * _friction_weight(ratios[j], ratio_signs[j]) * _reaction_size(constant[j],
-                                                                                              normal_signs[j])
-    at_rest = collar + at_rest
-    if omega > 0.0:
-        sign = 1.0
-    elif omega < 0.0:
-        sign = -1.0
-    elif abs(moment) <= at_rest:
-        return 0.0
-    else:
-        sign = 1.0 if moment > 0.0 else -1.0
-    epsilon = (moment - sign * at_rest) / inertia
-    if not with_joints:
-        return epsilon
-    for _ in range(iterations):
-        friction, slope = collar, 0.0
-        for j in range(len(arms)):
-            weight = arms[j] * _friction_weight(ratios[j], ratio_signs[j])
-            reaction = constant[j] + per_epsilon[j] * epsilon
-            size = _reaction_size(reaction, normal_signs[j])
-            friction += weight * size
-            if normal_signs[j] != 0.0:
-                slope += weight * normal_signs[j] * per_epsilon[j].imag
-            elif size > 0.0:
-                slope += weight * (per_epsilon[j].real * reaction.real + per_epsilon[j].imag * reaction.imag) / size
-        step = (inertia * epsilon - moment + sign * friction) / (inertia + sign * slope)
-        epsilon -= step
-        if abs(step) <= tolerance * (abs(epsilon) + (abs(moment) + friction) / inertia):
-            return epsilon
-    return math.nan
-
-
-@njit(cache=True)
-def _friction_weight(ratio, sign):
-    """|k_j| [-], or s_j k_j continued across its sign change when sign s_j is +-1 (JointFrictionModel._terms)."""
-    return abs(ratio) if sign == 0.0 else sign * ratio
-
-
-@njit(cache=True)
-def _reaction_size(reaction, normal_sign):
-    """|R_j| [N], or for a guide (reaction i N) s_N N continued across N = 0 when normal_sign s_N is +-1
-    (JointFrictionModel.acceleration)."""
-    return normal_sign * reaction.imag if normal_sign != 0.0 else abs(reaction)
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Governor (governors/centrifugal.py, valve.py, governors/__init__.py)
+# Governor's sensor (governors/centrifugal.py)
 
 
 @njit(cache=True)
@@ -265,26 +135,6 @@ def arm_acceleration(arm, arm_rate, omega, friction, m, l, M, k, z_free, c, g, r
     force = lift(arm, omega, m, l, M, k, z_free, g, ratio) - c * sleeve_rate - friction
     mass = 2.0 * m * l * l + 4.0 * M * l * l * sin_a * sin_a
     return (lever * force - 2.0 * M * l * l * math.sin(2.0 * arm) * arm_rate * arm_rate) / mass
-
-
-@njit(cache=True)
-def linear_valve(z, open_at, closed_at):
-    """governors.valve linear: throttle = (z_closed - z) / (z_closed - z_open), clipped to [0, 1]."""
-    return min(max((closed_at - z) / (closed_at - open_at), 0.0), 1.0)
-
-
-@njit(cache=True)
-def rigid_feedback(gain, servo, reference):
-    """Rigid feedback's share of the pilot opening: rho (s - s_ref) [m]."""
-    return gain * (servo - reference)
-
-
-@njit(cache=True)
-def servo_command(opening, gain, max_speed, dead_band):
-    """Governor.servo_command: s' = -gain * opening, the opening less the dead band, clipped to +-max_speed [1/s]."""
-    if dead_band > 0.0:
-        opening = math.copysign(max(abs(opening) - dead_band, 0.0), opening)
-    return min(max(-gain * opening, -max_speed), max_speed)
 
 
 # ---------------------------------------------------------------------------------------------------------------
