@@ -48,9 +48,9 @@ def bundled_data(name: str) -> dict:
 def test_bundled_scenes_present():
     assert BUNDLED == ["clutch_start", "compressor", "compressor_friction", "crank_slider_bench", "engine",
                        "engine_direct", "engine_hartnell", "engine_indirect_isodromic", "engine_indirect_none",
-                       "engine_indirect_rigid", "engine_inline4", "engine_pi", "four_bar_rocker", "lathe", "press",
-                       "press_coupling", "shaper", "sieve_shaker", "six_bar_press", "six_bar_press_friction", "startup",
-                       "two_mass", "walking_beam", "walking_beam_linkage"]
+                       "engine_indirect_rigid", "engine_inline4", "engine_pi", "four_bar_rocker", "geared_shaker", "lathe",
+                       "press", "press_coupling", "shaper", "sieve_shaker", "six_bar_press", "six_bar_press_friction",
+                       "startup", "two_mass", "valve_gear", "walking_beam", "walking_beam_linkage"]
 
 
 # ----------------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """Tests of the general planar linkage (mech_regulator.mechanisms.linkage, docs/linkages.md).
 
 Structure: source 001's worked degree-of-freedom examples (the four-bar, the triangle of three sliders with one
-repeated constraint, the parallelogram with a redundant link, the cam follower's roller with a passive freedom),
+repeated constraint, the parallelogram with a redundant link, the cam follower's roller with a passive freedom and its group),
 the decomposition into class-II groups and its refusals.
 Kinematics: each dyad type's position against a closed form (RRR: the four-bar module, RRP: the crank-slider
 module, RPR: the slotted lever's angle, PRP: two lines' intersection, RPP: the Scotch yoke x = r cos phi), its
@@ -181,7 +181,7 @@ def test_parallelogram_with_an_extra_link_has_one_redundant_constraint():
 
 def test_cam_follower_roller_has_one_passive_freedom():
     """Source 001, fig. 1.27: cam 1, roller 2, rocking follower 3: n = 3, p5 = 3, p4 = 1, W_passive = 1,
-    W = 3*3 - (2*3 + 1) - 1 = 1; the roller's group (a higher pair) is reported as not decomposed."""
+    W = 3*3 - (2*3 + 1) - 1 = 1; the follower 3 with its roller 2 is one cam follower group (3*2 - 2*2 - 1 - 1 = 0)."""
     linkage = Linkage(links=(Link("0", {"O1": 0j, "O2": 2 + 0j}), Link("1", {"O1": 0j}),
                              Link("2", {"R": 0j}, roller_radius=0.1), Link("3", {"O2": 0j, "R": -1 + 0.5j})),
                       joints=(revolute("O1", "0", "1"), Joint("K", "cam", ("1", "2")), revolute("R", "2", "3"),
@@ -191,7 +191,12 @@ def test_cam_follower_roller_has_one_passive_freedom():
     assert (structure.moving_links, structure.lower_pairs, structure.higher_pairs) == (3, 3, 1)
     assert len(structure.passive) == 1 and "roller 2" in structure.passive[0]
     assert structure.freedom == 1
-    assert "higher pair" in structure.refusal() and "'2'" in structure.refusal()
+    assert structure.refusal() is None
+    (group,) = structure.groups
+    assert (group.kind, group.follower, group.roller, group.guide.name, group.roller_joint.name) == (
+        "cam follower", "3", "2", "O2", "R")
+    assert "group 1: cam follower 3 (cam pair K) (links 3 + 2, joints O2 (revolute), K (cam), R (revolute))" in \
+        structure.report()
 
 
 def test_a_class_three_group_is_named_and_refused():

@@ -482,6 +482,7 @@ def _kinematics(scene, args) -> int:
         reactions_unavailable,
     )
     from mech_regulator.cli.report import OutputWriter, format_kinematics, to_json, write_csv
+    from mech_regulator.mechanisms import cam_pairs_of
     from mech_regulator.scene import SceneError
 
     mechanism, driven = scene.machine.analysed_mechanism()
@@ -503,6 +504,9 @@ def _kinematics(scene, args) -> int:
         summary["reactions"] = reactions_summary(columns)
     else:
         summary["no_reactions"] = reactions_unavailable(mechanism)
+    cams = cam_pairs_of(mechanism, gravity)   # a cam pair's pressure angle, curvature and jump speed
+    if cams:
+        summary["cams"] = [pair.numbers() for pair in cams]
     outputs = OutputWriter(summary)
     outputs.write("csv", args.out, lambda path: write_csv(path, columns))
     if args.plot is not None:
@@ -510,7 +514,8 @@ def _kinematics(scene, args) -> int:
 
         outputs.write("plot", args.plot, lambda path: plot_kinematics(mechanism, columns, args.omega,
                                                                       scene.name or mechanism.type, path))
-    print(to_json(summary) if args.json else format_kinematics(summary))
+    print(to_json(summary) if args.json else "\n".join([format_kinematics(summary)]
+                                                      + [line for pair in cams for line in pair.report()]))
     return outputs.exit_code(0)
 
 

@@ -66,7 +66,11 @@ def describe(model: MachineModel) -> str:
         reads = ", ".join(sorted(effect.depends_on)) or "nothing"
         lines.append(f"  - {effect.role:<5} {effect.formula}   [reads {reads}]")
     if model.has_weight:
-        lines.append(f"  - load  weight of the links, g = {machine.gravity} m/s^2   [reads phi]")
+        from mech_regulator.model.machine import has_cam_springs
+
+        parts = [f"weight of the links, g = {machine.gravity} m/s^2"] if machine.gravity and any(machine.gravity) else []
+        parts += ["the cam followers' springs"] if has_cam_springs(machine.mechanism) else []
+        lines.append(f"  - load  {' and '.join(parts)}   [reads phi]")
     if model.load_pieces:
         changes = ", ".join(f"{p.start:g}-{p.end:g} s: {p.offset + p.slope * p.start:g}"
                             + (f"->{p.offset + p.slope * p.end:g}" if p.slope else "") for p in model.load_pieces)

@@ -21,8 +21,8 @@ def run_structure(scene, args: argparse.Namespace) -> int:
     """structure: the analysis of the scene's linkage (the machine's, else the driven part's behind a coupling);
     a scene whose linkage has W != 1 or an unsupported group has already been refused (mechanisms/checks.py)."""
     from mech_regulator.cli.report import OutputWriter, terminal_text, to_json
-    from mech_regulator.mechanisms import mechanism_geometry
-    from mech_regulator.mechanisms.linkage import Dyad
+    from mech_regulator.mechanisms import cam_pairs_of, mechanism_geometry
+    from mech_regulator.mechanisms.linkage import Dyad, RedundantLink
     from mech_regulator.scene import SceneError
 
     mechanism = scene.machine.analysed_mechanism()[0]
@@ -30,14 +30,17 @@ def run_structure(scene, args: argparse.Namespace) -> int:
         raise SceneError(f"scene '{scene.name}' has mechanism {mechanism.type if mechanism else 'none'}: structure "
                          "analyses machine.mechanism.type: linkage (links, joints, crank; docs/linkages.md)")
     linkage, structure = mechanism_geometry(mechanism)
+    cams = cam_pairs_of(mechanism, scene.machine.gravity)
     groups = [{"number": number, "type": group.kind,
-               "class": "II" if isinstance(group, Dyad) else ("gear" if group.kind == "gear" else "redundant"),
+               "class": "II" if isinstance(group, Dyad) else "redundant" if isinstance(group, RedundantLink)
+               else group.kind,   # "gear" or "cam follower"
                "links": list(group.links), "joints": [joint.name for joint in group.joints],
                "branch": getattr(group, "branch", None)} for number, group in enumerate(structure.groups, start=1)]
     summary = {"scene": scene.name, "n": structure.moving_links, "p5": structure.lower_pairs,
                "p4": structure.higher_pairs, "W": structure.freedom, "formula": structure.formula(),
                "repeated": list(structure.repeated), "redundant": list(structure.redundant),
-               "passive": list(structure.passive), "driving_link": linkage.crank, "groups": groups}
+               "passive": list(structure.passive), "driving_link": linkage.crank, "groups": groups,
+               "cams": [pair.numbers() for pair in cams]}
     outputs = OutputWriter(summary)
     if args.plot is not None:
         from mech_regulator.viz.structure_plot import plot_structure
@@ -49,7 +52,7 @@ def run_structure(scene, args: argparse.Namespace) -> int:
     else:
         print(terminal_text(f"scene {scene.name}: linkage, driving link {linkage.crank} (turns about "
                             f"{linkage.crank_pivot().name} with the frame)"))
-        print(terminal_text("\n".join(structure.report())))
+        print(terminal_text("\n".join(structure.report() + [line for pair in cams for line in pair.report()])))
         if "plot" in summary:
             print(terminal_text(f"wrote {args.plot}"))
     return outputs.exit_code(0)

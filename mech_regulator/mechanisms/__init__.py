@@ -13,6 +13,7 @@ path compiles. `point_motions` gives the paths of the moving points for `mech-re
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 from mech_regulator.mechanisms import linkage, presets
@@ -49,6 +50,24 @@ def linkage_of(mechanism: schema.Mechanism) -> tuple[linkage.Linkage, linkage.St
     guides = (tuple(presets.guide_joints(mechanism))
               if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None else ())
     return core, linkage.checked(core), guides
+
+
+def cam_law_angles(mechanism: schema.Mechanism) -> list[float]:
+    """The crank angles [rad] in [0, 2 pi) where a cam follower's law changes piece (its s'' may jump there)."""
+    if not isinstance(mechanism, schema.Linkage):
+        return []
+    specs = [presets.cam_spec(joint) for joint in mechanism.joints.values() if isinstance(joint, schema.CamJoint)]
+    return [float(angle) % (2.0 * math.pi) for spec in specs for angle in spec.law.kinks() + spec.start]
+
+
+def cam_pairs_of(mechanism: schema.Mechanism, gravity) -> list:
+    """The linkage/cam.py CamPairs of a scene's mechanism (gravity (gx, gy) [m/s^2] or None); [] without cams."""
+    if not isinstance(mechanism, schema.Linkage):
+        return []
+    from mech_regulator.mechanisms.linkage.cam import cam_pairs
+
+    core, structure = mechanism_geometry(mechanism)
+    return cam_pairs(core, structure.groups, gravity)
 
 
 def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):

@@ -13,6 +13,7 @@ from mech_regulator.mechanisms import walking_beam
 from mech_regulator.mechanisms.engine import firing_delays
 from mech_regulator.mechanisms.four_bar import unassemblable_crank_ranges
 from mech_regulator.mechanisms.linkage import Dyad, assembly_failures, checked
+from mech_regulator.mechanisms.linkage.cam import CamFollower, check_cams
 from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
 from mech_regulator.mechanisms.presets import linkage_core
 from mech_regulator.scene import schema
@@ -88,11 +89,15 @@ def _check_crank_turns(linkage: schema.FourBar | schema.WalkingBeam) -> None:
 
 def _check_drivable(mechanism: schema.Linkage) -> None:
     """Raise ValueError when the linkage is not driven by its crank through class-II groups (linkage.checked), its
-    branches name no such group, or it does not assemble over the whole turn."""
+    cams cannot be cut (linkage/cam.py check_cams: undercut, cam not the crank, ...), its branches name no group
+    with two assemblies, or it does not assemble over the whole turn."""
     core = linkage_core(mechanism)
     structure = checked(core)
+    check_cams(core, structure)
     internal = {group.internal.name for group in structure.groups
                 if isinstance(group, Dyad) and group.kind in BRANCHED_GROUPS}
+    internal |= {group.pair.name for group in structure.groups if isinstance(group, CamFollower)
+                 and group.guide.kind == "revolute"}   # an oscillating follower's side of the cam
     foreign = sorted(set(mechanism.branches) - internal)
     if foreign:
         raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "

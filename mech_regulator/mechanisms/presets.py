@@ -35,7 +35,9 @@ import math
 from dataclasses import replace
 
 from mech_regulator.mechanisms import crank_slider, four_bar, kinetostatics, walking_beam
+from mech_regulator.mechanisms.cam_laws import Segment, SegmentLaw, TableLaw
 from mech_regulator.mechanisms.linkage import Joint, Link, Linkage, checked
+from mech_regulator.mechanisms.linkage.cam import CamSpec
 from mech_regulator.mechanisms.linkage.gears import GearMesh
 from mech_regulator.scene import schema
 
@@ -173,15 +175,31 @@ def linkage_core(mechanism: schema.Linkage) -> Linkage:
     def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
         return {name: complex(*xy) for name, xy in points.items()}
 
+    rollers = {joint.links[1]: joint.roller_radius for joint in mechanism.joints.values() if joint.type == "cam"}
     links = (Link("frame", complex_points(mechanism.frame)),) + tuple(
-        Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia)
+        Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia, rollers.get(name))
         for name, link in mechanism.links.items())
-    joints = tuple(Joint(name, joint.type, (joint.links[0], joint.links[1]), math.radians(joint.direction_deg),
-                         math.radians(joint.slider_angle_deg), _gear_mesh(joint))
+    joints = tuple(Joint(name, joint.type, (joint.links[0], joint.links[1]), cam=cam_spec(joint))
+                   if isinstance(joint, schema.CamJoint) else
+                   Joint(name, joint.type, (joint.links[0], joint.links[1]), math.radians(joint.direction_deg),
+                         math.radians(joint.slider_angle_deg), gear=_gear_mesh(joint))
                    for name, joint in mechanism.joints.items())
     output = mechanism.output or schema.LinkageOutput.model_construct(joint=None, link=None)
     return Linkage(links, joints, "frame", mechanism.crank, dict(mechanism.branches), tuple(mechanism.points),
                    output.joint, output.link)
+
+
+def cam_spec(joint: schema.CamJoint) -> CamSpec:
+    """The linkage/cam.py CamSpec of a scene's cam pair: its law (segments or a table, angles in rad), contact, base
+    radius [m], start angle [rad] and spring (stiffness, preload; 0 without one)."""
+    if isinstance(joint.law, schema.CamTable):
+        law: TableLaw | SegmentLaw = TableLaw([math.radians(a) for a in joint.law.angle_deg], joint.law.lift)
+    else:
+        law = SegmentLaw(tuple(Segment(part.motion, math.radians(part.angle_deg), part.law or "uniform", part.lift)
+                               for part in joint.law))
+    spring = joint.spring or schema.FollowerSpring(stiffness=0.0, preload=0.0)
+    return CamSpec(law, joint.contact, joint.base_radius, math.radians(joint.start_deg), spring.stiffness,
+                   spring.preload)
 
 
 def _gear_mesh(joint: schema.LinkageJoint) -> GearMesh | None:

@@ -36,7 +36,7 @@ from mech_regulator.effects import Effect, build_drive, build_load, output_posit
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.governors import ARM, ElectronicGovernor, Governor, Guard, Mode, build_governor
-from mech_regulator.mechanisms import build_reduced
+from mech_regulator.mechanisms import build_reduced, cam_law_angles
 from mech_regulator.mechanisms.checks import refuse_unbuildable
 from mech_regulator.model.drivetrain import (
     BACKWARD,
@@ -238,8 +238,11 @@ class MachineModel:
         return 0.0 if piece is None else piece.offset + piece.slope * t
 
     def switch_angles(self) -> list[tuple[float, float]]:
-        """(angle, period) pairs [rad] where some moment jumps with phi."""
-        return [(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+        """(angle, period) pairs [rad] where some moment jumps with phi (a cam follower's law changes segment: its
+        s'' jumps, and dJ/dphi with it)."""
+        cams = cam_law_angles(self.scene.machine.mechanism) if self.scene.machine.mechanism is not None else []
+        return ([(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+                + [(angle, 2.0 * math.pi) for angle in cams])
 
     @functools.cached_property
     def state_tables(self) -> tuple[StateTable, ...]:
@@ -984,7 +987,8 @@ def build_model(scene: Scene) -> MachineModel:
     machine = refuse_unbuildable(scene).machine
     flywheel = machine.flywheel.inertia * machine.flywheel.ratio ** 2 if machine.flywheel else 0.0
     gravity = tuple(machine.gravity) if machine.gravity is not None else None
-    has_weight = machine.mechanism is not None and gravity is not None and any(gravity) and _has_mass(machine.mechanism)
+    has_weight = machine.mechanism is not None and ((gravity is not None and any(gravity) and _has_mass(machine.mechanism))
+                                                    or has_cam_springs(machine.mechanism))   # in M_weight too
     reduced = build_reduced(machine.mechanism, gravity if has_weight else None) if machine.mechanism else None
     _check_inertia(machine, machine.inertia + flywheel, reduced)
     kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
@@ -1016,6 +1020,11 @@ def _coupling_model(machine, gravity: tuple[float, float] | None) -> CouplingMod
     if coupling is None:
         return None
     mechanism = coupling.driven.mechanism
+    if mechanism is not None and mechanism.type == "linkage" and any(joint.type == "cam"
+                                                                     for joint in mechanism.joints.values()):
+        raise SceneError("machine.coupling.driven.mechanism has a cam pair: a cam behind a coupling is not supported "
+                         "yet (its contact is checked on the machine's own mechanism only); expected the cam on "
+                         "machine.mechanism")
     weighs = mechanism is not None and gravity is not None and any(gravity) and _has_mass(mechanism)
     reduced = build_reduced(mechanism, gravity if weighs else None) if mechanism is not None else None
     driven = build_driven(coupling.driven, _unique_names, reduced, weighs)
@@ -1098,6 +1107,12 @@ def _check_inertia(machine, J0: float, reduced: Reduced | None) -> None:
     raise SceneError(f"machine: the reduced inertia J(phi) falls to {J_min:.3g} kg m^2 at phi = "
                      f"{math.degrees(phi_min) % 360.0:.2f} deg (its largest: {J_max:.3g} kg m^2) {keys}; there the "
                      f"crank's acceleration M / J has no bound: expected J(phi) {limit} over the whole turn: {advice}")
+
+
+def has_cam_springs(mechanism) -> bool:
+    """Whether a linkage has a cam follower's spring (its moment is carried in the reduction's M_weight)."""
+    return mechanism.type == "linkage" and any(joint.type == "cam" and joint.spring is not None
+                                               for joint in mechanism.joints.values())
 
 
 def _has_mass(mechanism) -> bool:

@@ -213,6 +213,84 @@ class LinkageJoint(SceneModel):
 
 
 
+class CamSegment(SceneModel):
+    """One part of a cam's turn (docs/theory.md §5.7): the follower rises, dwells or returns by a law."""
+
+    motion: Literal["rise", "dwell", "return"] = Field(description="rise (away from the cam), dwell or return")
+    angle_deg: Positive = Field(description="the cam angle the segment takes [deg]; the segments fill 360 deg")
+    law: Literal["uniform", "harmonic", "cycloidal", "polynomial_345"] | None = Field(
+        None, description="rise and return: the normalised law (none for a dwell)")
+    lift: NonNegative = Field(0.0, description="rise and return: the follower's travel over the segment [m; rad for "
+                                               "an oscillating follower]")
+
+    @model_validator(mode="after")
+    def _complete(self) -> CamSegment:
+        if self.motion == "dwell" and (self.law is not None or self.lift != 0.0):
+            raise ValueError("a dwell segment takes no law and no lift")
+        if self.motion != "dwell" and (self.law is None or self.lift <= 0.0):
+            raise ValueError(f"a {self.motion} segment needs a law (uniform, harmonic, cycloidal, polynomial_345) "
+                             "and a lift > 0")
+        return self
+
+
+class CamTable(SceneModel):
+    """A follower's displacement over the cam's turn as a table (a periodic cubic spline through its points)."""
+
+    angle_deg: list[float] = Field(min_length=4, max_length=3600, description="cam angles, strictly increasing "
+                                                                            "within one turn [deg]")
+    lift: list[float] = Field(min_length=4, max_length=3600, description="the follower's displacement s >= 0 at "
+                                                                       "each angle [m; rad oscillating]")
+
+    @model_validator(mode="after")
+    def _table(self) -> CamTable:
+        _check_table(self.angle_deg, self.lift, 360.0, "law")
+        return self
+
+
+def _law_form(value) -> str:
+    """'segments' (a list) or 'table' (anything else): which form a cam's law is written in."""
+    return "segments" if isinstance(value, (list, tuple)) else "table"
+
+
+CamLaw = Annotated[Annotated[list[CamSegment], Tag("segments")] | Annotated[CamTable, Tag("table")],
+                   Discriminator(_law_form)]
+
+
+class FollowerSpring(SceneModel):
+    """The spring that holds a follower on its cam, along the follower's travel."""
+
+    stiffness: NonNegative = Field(description="[N/m; N m/rad for an oscillating follower]")
+    preload: NonNegative = Field(description="its force at s = 0, on the base circle [N; N m oscillating]")
+
+
+class CamJoint(SceneModel):
+    """A cam pair (higher pair, docs/linkages.md "Cams"): the cam (the crank) and the link that touches it, the
+    follower itself or its roller; the follower's motion law gives the profile."""
+
+    type: Literal["cam"]
+    links: list[str] = Field(min_length=2, max_length=2, description="[cam, follower or roller]; the follower is "
+                                                                     "joined to the frame by one prismatic "
+                                                                     "(translating) or revolute (oscillating) joint")
+    contact: Literal["knife_edge", "roller", "flat_face"] = Field(description="what touches the cam: the "
+                                                                  "follower's point of the joint's name (knife edge; "
+                                                                  "flat face: a face across its guide through it) or "
+                                                                  "the roller")
+    roller_radius: Positive | None = Field(None, description="contact roller: the roller's radius [m] (the roller "
+                                                             "is links[1], on a revolute joint with its follower)")
+    base_radius: Positive = Field(description="the cam profile's least distance from its pivot [m]")
+    law: CamLaw = Field(description="the follower's displacement s over the turn: a list of segments from "
+                                    "start_deg, or a table {angle_deg, lift}")
+    start_deg: float = Field(0.0, description="the crank angle at which the law's first segment starts [deg]")
+    spring: FollowerSpring | None = Field(None, description="the follower's spring (none: no spring)")
+
+    @model_validator(mode="after")
+    def _roller(self) -> CamJoint:
+        if (self.contact == "roller") != (self.roller_radius is not None):
+            raise ValueError("roller_radius is given exactly when contact is roller")
+        return self
+
+
+
 class LinkageOutput(SceneModel):
     """The output coordinate q on which output-link loads act: a prismatic joint's travel (slider_* loads) or a
     link's angle (rocker_* loads)."""
@@ -237,14 +315,16 @@ class Linkage(SceneModel):
     frame: dict[str, Point] = Field(min_length=1, max_length=MAX_LINK_POINTS, description="the frame's points by name, [x, y] in the global "
                                                               "coordinates (the crank axis need not be at the origin) [m]")
     links: dict[str, LinkageLink] = Field(min_length=1, max_length=MAX_LINKS, description="the moving links by name")
-    joints: dict[str, LinkageJoint] = Field(min_length=1, max_length=2 * MAX_LINKS, description="the joints by name")
+    joints: dict[str, Annotated[LinkageJoint | CamJoint, Field(discriminator="type")]] = Field(
+        min_length=1, max_length=2 * MAX_LINKS, description="the joints by name")
     crank: str = Field(description="the driving link: it turns with the crank angle phi about its revolute joint "
                                    "with the frame, theta_crank = phi; its mass and inertia count in J(phi)")
     branches: dict[str, Literal[1, -1]] = Field(default_factory=dict, description="assembly branch of a group, by its "
                                                 "internal joint: RRR +1 puts that joint left of the line from the outer "
                                                 "joint of the group's link listed first in links to the other's; RRP +1 further along the guide; "
                                                 "RPR +1 with the slider's pivot ahead of the guide's along the guide; "
-                                                "default +1")
+                                                "an oscillating cam follower, by its cam pair: +1 with its contact "
+                                                "point left of the line from its pivot to the cam's; default +1")
     points: list[str] = Field(default_factory=list, description="points of interest (names of link points) whose "
                                                                 "motion `kinematics` reports besides the joints")
     output: LinkageOutput | None = Field(None, description="output coordinate for slider_* (a prismatic joint) or "

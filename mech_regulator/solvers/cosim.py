@@ -55,6 +55,7 @@ from mech_regulator.model import LoadPiece, MachineModel, crank_moments
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
+from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.compiled import runs_compiled
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up, state_text
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
@@ -144,6 +145,7 @@ class MachineStepper:
                           load_rate, throttle, throttle_slope, throttle_curvature)
         self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch,
                                               None)
+        self.state = check_contact(self.plant, stretch, self.time, self.state)   # a cam follower's jump ends it
         self.time = stretch.t_end
         beyond = speed_beyond_limit(self.plant.state_names(), self.state) if stretch.status == "complete" else None
         if beyond is not None:  # a blow-up (limits.py; the fast path's segment does not look at every step)

@@ -22,6 +22,7 @@ from scipy import integrate, optimize
 from mech_regulator.governors import Guard
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS, speed_beyond_limit
+from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.trajectory import Progress, Trajectory
 
@@ -66,6 +67,7 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
             y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
+            y = check_contact(model, trajectory, t_start, y)   # a cam follower that jumps ends the run there
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2

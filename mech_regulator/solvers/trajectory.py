@@ -74,6 +74,16 @@ class Trajectory:
             self.step_ends.append(np.append(knots[(knots > t_start) & (knots < t_end)], t_end))
         self._solution = None
 
+    def cut(self, t: float) -> None:
+        """End the trajectory at t [s] (t_start < t <= t_end): the pieces after it dropped, the last one ending at t
+        (what a run found no longer valid beyond t is not reported)."""
+        keep = max(1, int(np.searchsorted(self.piece_edges, t, side="left")))
+        del self.interpolants[keep:], self.step_ends[keep:], self.piece_edges[keep + 1:]
+        self.piece_edges[-1] = t
+        ends = self.step_ends[-1]
+        self.step_ends[-1] = np.append(ends[ends < t], t)
+        self._solution = None
+
     @property
     def t_end(self) -> float:
         return self.piece_edges[-1] if self.piece_edges else self.t_start

@@ -12,7 +12,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 
-from mech_regulator.mechanisms.linkage import Linkage, Structure, solve  # noqa: E402
+from mech_regulator.mechanisms.linkage import Dyad, Linkage, Structure, solve  # noqa: E402
+from mech_regulator.mechanisms.linkage.cam import cam_pairs  # noqa: E402
 from mech_regulator.mechanisms.linkage.drawing import BLOCK_PER_CRANK, crank_length, link_polygon, pitch_circles  # noqa: E402
 
 FRAME_COLOUR, CRANK_COLOUR = "0.45", "black"
@@ -23,19 +24,23 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
     """The scheme at crank angle phi [rad]: links as thick polylines (a link of three or more joints shaded),
     sliders as blocks on their guides (dashed, in the guide's colour), revolute joints as rings, the frame's as
     rings on a hatched base, gears as their pitch circles (dash-dotted, with the radius to the link's x axis) and
-    each mesh named at its pitch point, coloured by role: frame grey, driving link black, group k the k-th
-    colour."""
+    each mesh named at its pitch point, coloured by role: frame grey, driving link black, group k the k-th colour;
+    a cam as its profile (turned to phi, in the driving link's colour) with its roller's circle and the contact
+    marked."""
     poses = solve(linkage, structure, phi, derivatives=False)
     colour = {linkage.frame: FRAME_COLOUR, linkage.crank: CRANK_COLOUR}
     labels = {linkage.crank: f"driving link: {linkage.crank}"}
     for number, group in enumerate(structure.groups, start=1):
         for link in group.links:
             colour[link] = GROUP_COLOURS[(number - 1) % len(GROUP_COLOURS)]
-        kind = (f"gear about {group.pivot.name}" if group.kind == "gear" else
-                 "redundant link" if group.kind == "redundant link" else f"class II {group.kind}")
+        kind = (f"class II {group.kind}" if isinstance(group, Dyad) else
+                f"gear about {group.pivot.name}" if group.kind == "gear" else group.kind)
         labels[group.links[0]] = f"group {number}: {kind} ({' + '.join(group.links)})"
     figure, axes = plt.subplots(figsize=(9, 7), constrained_layout=True)
-    size = crank_length(linkage)
+    cams = cam_pairs(linkage, structure.groups, None)
+    size = max([crank_length(linkage)] + [pair.pitch_radius for pair in cams])
+    for pair in cams:
+        _draw_cam(axes, pair, phi, poses, colour)
     for name in linkage.moving_links():
         points = np.array([[p.real, p.imag] for p in link_polygon(linkage, poses, name)])
         axes.plot(points[:, 0], points[:, 1], color=colour[name], lw=3.5, solid_capstyle="round",
@@ -61,9 +66,7 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
             pitch = a + group.pitch[0] * (b - a) / abs(b - a)
             axes.plot(pitch.real, pitch.imag, "D", ms=5, color="black", zorder=4)
             names_at.setdefault((round(pitch.real, 9), round(pitch.imag, 9)), []).append(group.mesh.name)
-    for joint in linkage.joints:
-        if joint.kind == "gear":
-            continue
+    for joint in (joint for joint in linkage.joints if joint.kind not in ("cam", "gear")):
         guide, slider = joint.links
         where = poses[slider][0] + linkage.link(slider).points[joint.name] * cmath.exp(1j * poses[slider][1])
         if joint.kind == "prismatic":
@@ -89,3 +92,22 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
     axes.legend(loc="best", fontsize=8)
     figure.savefig(path, dpi=100)
     plt.close(figure)
+
+
+def _draw_cam(axes, pair, phi: float, poses: dict, colour: dict) -> None:
+    """A cam's profile turned to crank angle phi [rad], filled in its link's colour, the roller's circle (if any)
+    and the contact point with the cam pair's name."""
+    cam = pair.group.pair.links[0]
+    outline = pair.centre + pair.profile() * cmath.exp(1j * phi)
+    outline = np.append(outline, outline[:1])
+    axes.fill(outline.real, outline.imag, color=colour[cam], alpha=0.12, zorder=1)
+    axes.plot(outline.real, outline.imag, color=colour[cam], lw=2.0, zorder=2)
+    motion = pair.motion(phi)
+    centre = complex(motion.P[0])
+    if pair.roller_radius > 0.0:
+        circle = centre + pair.roller_radius * np.exp(1j * np.linspace(0.0, 2.0 * np.pi, 73))
+        axes.plot(circle.real, circle.imag, color=colour[pair.group.roller], lw=2.0, zorder=3)
+    contact = complex(pair.contact_point(phi)[0])
+    axes.plot(contact.real, contact.imag, "o", ms=5, color="black", zorder=4)
+    axes.annotate(pair.group.pair.name, (contact.real, contact.imag), fontsize=10, fontweight="bold",
+                  xytext=(6, -14), textcoords="offset points", zorder=5)

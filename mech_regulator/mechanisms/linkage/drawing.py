@@ -5,10 +5,11 @@ points.
 Parts: `frame` (the polyline through the frame's points, fixed), `crank_path` (the circle of the crank's farthest
 point, fixed), `crank` (its pivot to its farthest point: the last point is the crank pin), `links` (every other
 moving link as the closed polygon through its points in the order given, padded by repeating its last point to the
-longest), `sliders` (a block on each prismatic joint's slider point, along the guide, BLOCK_PER_CRANK crank
-lengths by half that; an empty bundle without prismatic joints), `gears` (each gear's pitch circle with its radius
-to the link's x axis, so that it shows the gear's turn; an empty bundle without gears) and `joints` (every lower
-pair's point).
+longest; a cam's profile, turned with the crank, among them), `sliders` (a block on each prismatic joint's slider
+point, along the guide, BLOCK_PER_CRANK crank lengths (a cam's largest radius, if longer) by half that; an empty
+bundle without prismatic joints), `gears` (each gear's pitch circle with its radius to the link's x axis, so that
+it shows the gear's turn; an empty bundle without gears) and `joints` (every lower pair's point; a cam pair's:
+where the cam touches).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import math
 
 import numpy as np
 
+from mech_regulator.mechanisms.linkage.cam import CamFollower, CamPair
 from mech_regulator.mechanisms.linkage.gears import GearGroup
 from mech_regulator.mechanisms.linkage.kinematics import solve
 from mech_regulator.mechanisms.linkage.model import GEAR, PRISMATIC, Linkage
@@ -26,6 +28,7 @@ from mech_regulator.mechanisms.linkage.structure import Structure
 MOVING_PARTS = ("crank", "links", "sliders", "gears", "joints")
 GEAR_CIRCLE_POINTS = 73   # points of a pitch circle's polyline (after its radius)
 BLOCK_PER_CRANK = 0.6   # slider block length along the guide, per crank length [-]
+PROFILE_POINTS = 180    # points of a cam's profile as drawn
 CIRCLE_POINTS = 73      # points of a drawn circle (72 segments)
 
 
@@ -74,14 +77,19 @@ def _gear_polyline(centre: complex, radius: float, theta: float) -> list[complex
 def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[str, np.ndarray]:
     """The linkage's parts at crank angle phi [rad] (module docstring)."""
     poses = solve(linkage, structure, phi, derivatives=False)
+    cams = {group.pair.name: CamPair(linkage, group, None, check=False) for group in structure.groups
+            if isinstance(group, CamFollower)}
+    profiles = {name: pair.profile(PROFILE_POINTS) for name, pair in cams.items()}
     frame_points = list(linkage.link(linkage.frame).points.values())
     crank = linkage.link(linkage.crank)
     pivot_name = linkage.crank_pivot().name
     pose = poses[linkage.crank]
     tip = max(crank.points.values(), key=lambda p: abs(p - crank.points[pivot_name]))
     pivot = linkage.link(linkage.frame).points[pivot_name]
-    radius = crank_length(linkage)
+    radius = max([crank_length(linkage)] + [float(np.max(np.abs(profile))) for profile in profiles.values()])
     others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != linkage.crank]
+    others += [list(cams[name].centre + np.append(profile, profile[:1]) * cmath.exp(1j * phi))
+               for name, profile in profiles.items()]
     longest = max(len(points) for points in others)  # a linkage with W = 1 has at least one group
     half = 0.5 * BLOCK_PER_CRANK * radius
     blocks = []
@@ -94,6 +102,9 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
             blocks.append(_xy(corners + corners[:1]))
     joint_points = []
     for joint in linkage.joints:
+        if joint.name in cams:   # a cam pair's point: where the cam touches
+            joint_points.append(complex(cams[joint.name].contact_point(phi)[0]))
+            continue
         if joint.kind == GEAR:
             continue
         link = joint.links[1]

@@ -32,14 +32,19 @@ the signed pitch radii rho_a, rho_b [m], the carrier link] (gears.py's module do
   output's angle is reported within pi of it, model.Linkage.output_reference), the crank pivot on the frame (x, y)
   [m] and on the crank (x, y) [m];
   per link LINK_SIZE floats: mass [kg], centre of mass (x, y) [m, own coordinates], inertia about it [kg m^2];
-  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT; GEAR), branch (+1 or -1; 0 an RRR group kept a
-  parallelogram, groups.Dyad, its E1 record's u slots then holding B - P in B's known link [m]; a gear's phase_L
-  [rad]), link L1, link L2 (-1 for a redundant link or a gear), then three joint records: E1, internal, E2 (a
-  redundant link: its two joints, then zeros; a gear: its pivot, its mesh, then zeros);
+  per group GROUP_SIZE floats: kind code (KIND_CODES; REDUNDANT; GEAR; CAM_FOLLOWER), branch (+1 or -1; 0 an RRR
+  group kept a parallelogram, groups.Dyad, its E1 record's u slots then holding B - P in B's known link [m]; a
+  gear's phase_L [rad]), link L1, link L2 (-1 for a redundant link or a gear), then three joint records: E1,
+  internal, E2 (a redundant link: its two joints, then zeros; a gear: its pivot, its mesh, then zeros; a cam
+  follower (CAM_FOLLOWER, branch sigma, follower, roller or -1): its guide's record, its roller joint's (or zeros),
+  then the cam record [CAM_CONTACT, cam, the touching link, the law's position relative to this record, the crank
+  angle at the law's start [rad], the follower's travel d0 [m] (translating) or angle theta0 [rad] (oscillating) at
+  s = 0, the spring's stiffness and preload, 0, 0]);
   the joint map (what the kinetostatics reports per joint): the number of the linkage's joints, the crank pivot's
   joint record, then per joint in the linkage's order (model.Linkage.joints) the position of its record from
   `base` and its multiplier slot (joint k of group number n: 3 n + k; the crank pivot: 3 n_groups; -1, -1 for a
-  joint of none of the groups given, as while the structure is still being found).
+  joint of none of the groups given, as while the structure is still being found);
+  then each cam follower's law: its number of pieces and PIECE_SIZE floats per piece (law_at).
 
 The kinetostatics by groups (source 001, chapter 3; linkage/kinetostatics.py describes it) is written here too:
 `kinetostatics` gives the multipliers of every joint (a revolute joint's: the force on its first link from its
@@ -64,7 +69,10 @@ from mech_regulator import cache
 KIND_CODES = {"RRR": 0, "RRP": 1, "RPR": 2, "PRP": 3, "RPP": 4}
 REDUNDANT = 5
 GEAR = 6                # a gear group (gears.GearGroup): one link on its pivot, turned by its mesh
+CAM_FOLLOWER = 7        # a cam follower group (linkage/cam.py), placed by its law (law_at)
 GEAR_MESH = 2.0         # a gear mesh's joint record kind
+CAM_CONTACT = 3.0       # a cam pair's joint record kind
+PIECE_SIZE = 7          # a law piece: [start, length, code, a, b, c, d] (law_at)
 JOINT_SIZE = 10
 LINK_SIZE = 4
 GROUP_SIZE = 4 + 3 * JOINT_SIZE
@@ -129,6 +137,9 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
         link = linkage.link(name)
         program += [link.mass, link.centre.real, link.centre.imag, link.inertia]
     for group in groups:
+        if group.kind == "cam follower":
+            program += _cam_follower_records(linkage, group, index)
+            continue
         if group.kind == "redundant link":
             joints = [joint_record(linkage, joint, index) for joint in group.joints] + [[0.0] * JOINT_SIZE]
             program += [float(REDUNDANT), 0.0, float(index[group.link]), -1.0]
@@ -151,7 +162,118 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
     found[pivot.name] = (len(program) - JOINT_SIZE, 3 * len(groups))
     for joint in linkage.joints:
         program += [float(value) for value in found.get(joint.name, (-1, -1))]
+    for number, group in enumerate(groups):   # each cam follower's law, pointed to from its cam record
+        if group.kind == "cam follower":
+            record = HEADER_SIZE + LINK_SIZE * len(index) + GROUP_SIZE * number + 4 + 2 * JOINT_SIZE
+            program[record + 3] = float(len(program) - record)
+            pieces = group.pair.cam.law.pieces()
+            program += [float(len(pieces))] + [value for piece in pieces for value in piece]
     return np.array(program, dtype=np.float64)
+
+
+def _cam_follower_records(linkage, group, index: dict[str, int]) -> list[float]:
+    """A cam follower group's GROUP_SIZE floats (module docstring); the law's position is filled in by encode."""
+    spec = group.pair.cam
+    sigma, zero = group.at_base
+    roller = [0.0] * JOINT_SIZE if group.roller_joint is None else joint_record(linkage, group.roller_joint, index)
+    cam = [CAM_CONTACT, float(index[group.pair.links[0]]), float(index[group.pair.links[1]]), 0.0, spec.start, zero,
+           spec.stiffness, spec.preload, 0.0, 0.0]
+    return ([float(CAM_FOLLOWER), sigma, float(index[group.follower]),
+             float(index[group.roller]) if group.roller is not None else -1.0]
+            + joint_record(linkage, group.guide, index) + roller + cam)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A cam follower's law (mechanisms/cam_laws.py describes the laws; this is their one implementation)
+
+def law_at(theta, program, at):
+    """(s, s', s'') of the law at `at` in the program [n, then n pieces of 7 floats: start [rad], length [rad], code,
+    a, b, c, d] at cam angle theta [rad] (taken within [0, 2 pi)): in the piece that holds theta, t = theta - start,
+    x = t / length in [0, 1], code 0 a dwell s = a; 1 uniform, 2 harmonic, 3 cycloidal, 4 polynomial_345:
+    s = a + b f(x), s' = b f'(x) / length, s'' = b f''(x) / length^2 (cam_laws.py's f); 5 a cubic (a table's
+    spline) s = a + b t + c t^2 + d t^3. Self-contained (math only): the generated code nests this very source."""
+    two_pi = 2.0 * math.pi
+    x = theta - two_pi * math.floor(theta / two_pi)
+    low, high = 0, int(program[at]) - 1
+    while low < high:   # the last piece starting at or before x
+        middle = (low + high + 1) // 2
+        if program[at + 1 + 7 * middle] <= x:
+            low = middle
+        else:
+            high = middle - 1
+    k = at + 1 + 7 * low
+    t, length, code, a, b = x - program[k], program[k + 1], program[k + 2], program[k + 3], program[k + 4]
+    if code == 0.0:
+        return a, 0.0, 0.0
+    if code == 5.0:
+        c, d = program[k + 5], program[k + 6]
+        return a + t * (b + t * (c + t * d)), b + t * (2.0 * c + 3.0 * d * t), 2.0 * c + 6.0 * d * t
+    u = min(max(t / length, 0.0), 1.0)
+    if code == 1.0:
+        f, df, ddf = u, 1.0, 0.0
+    elif code == 2.0:
+        f = 0.5 * (1.0 - math.cos(math.pi * u))
+        df, ddf = 0.5 * math.pi * math.sin(math.pi * u), 0.5 * math.pi * math.pi * math.cos(math.pi * u)
+    elif code == 3.0:
+        f = u - math.sin(two_pi * u) / two_pi
+        df, ddf = 1.0 - math.cos(two_pi * u), two_pi * math.sin(two_pi * u)
+    else:
+        f = u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
+        df, ddf = 30.0 * u * u * (1.0 - u) * (1.0 - u), 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u)
+    return a + b * f, b * df / length, b * ddf / (length * length)
+
+
+def _place_cam_follower(program, g, poses):
+    """Set the poses, with their phi-derivatives, of the cam follower group at g (and its roller's, turning with
+    it) from its law at the cam's angle: translating, theta = alpha, r = G + (d0 + s) u - p e^{i alpha}
+    (r' = s' u, r'' = s'' u); oscillating, theta = theta0 + sigma s, r = Q - p e^{i theta} (Q, p its pivot on the
+    frame and on itself); the roller pinned at the follower's point of their joint (linkage/cam.py)."""
+    sigma, follower, roller = program[g + 1], int(program[g + 2]), int(program[g + 3])
+    guide, pin, cam = g + 4, g + 4 + JOINT_SIZE, g + 4 + 2 * JOINT_SIZE
+    phi = poses[POSE_SIZE * int(program[cam + 1]) + 2]
+    s, ds, dds = law_at(phi - program[cam + 4], program, cam + int(program[cam + 3]))
+    k = POSE_SIZE * follower
+    if program[guide] != 0.0:   # translating
+        theta = program[guide + 9]
+        turn = _unit(theta)
+        u = _direction(program, guide)
+        r = _point(program, guide, poses, 0) + (program[cam + 5] + s) * u - _local(program, guide, follower) * turn
+        _set_pose(poses, follower, r, theta, turn)
+        poses[k + 3], poses[k + 4], poses[k + 5] = (ds * u).real, (ds * u).imag, 0.0
+        poses[k + 6], poses[k + 7], poses[k + 8] = (dds * u).real, (dds * u).imag, 0.0
+    else:
+        theta = program[cam + 5] + sigma * s
+        turn = _unit(theta)
+        q = _local(program, guide, follower) * turn
+        dtheta, ddtheta = sigma * ds, sigma * dds
+        _set_pose(poses, follower, _point(program, guide, poses, 0) - q, theta, turn)
+        dr, ddr = -1j * dtheta * q, -complex(-dtheta * dtheta, ddtheta) * q
+        poses[k + 3], poses[k + 4], poses[k + 5] = dr.real, dr.imag, dtheta
+        poses[k + 6], poses[k + 7], poses[k + 8] = ddr.real, ddr.imag, ddtheta
+    if roller >= 0:
+        P, dP, ddP = motion(poses, follower, _local(program, pin, follower))
+        q = _local(program, pin, roller) * turn
+        dtheta, ddtheta = poses[k + 5], poses[k + 8]
+        _set_pose(poses, roller, P - q, theta, turn)
+        dr, ddr = dP - 1j * dtheta * q, ddP - complex(-dtheta * dtheta, ddtheta) * q
+        m = POSE_SIZE * roller
+        poses[m + 3], poses[m + 4], poses[m + 5] = dr.real, dr.imag, dtheta
+        poses[m + 6], poses[m + 7], poses[m + 8] = ddr.real, ddr.imag, ddtheta
+
+
+def cam_springs(program, base, poses):
+    """The reduced moment [N m] of the cam followers' springs at the crank angle of the poses: the sum of
+    -(F0 + k s) s' over the cam follower groups (linkage/cam.py)."""
+    moment = 0.0
+    g = base + HEADER_SIZE + LINK_SIZE * int(program[base])
+    for _ in range(int(program[base + 1])):
+        if int(program[g]) == CAM_FOLLOWER:
+            cam = g + 4 + 2 * JOINT_SIZE
+            phi = poses[POSE_SIZE * int(program[cam + 1]) + 2]
+            s, ds, _ = law_at(phi - program[cam + 4], program, cam + int(program[cam + 3]))
+            moment -= (program[cam + 7] + program[cam + 6] * s) * ds
+        g += GROUP_SIZE
+    return moment
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -254,6 +376,9 @@ def place_group(program, g, poses):
     kind, sigma = int(program[g]), program[g + 1]
     L1, L2 = int(program[g + 2]), int(program[g + 3])
     E1, Ji, E2 = g + 4, g + 4 + JOINT_SIZE, g + 4 + 2 * JOINT_SIZE
+    if kind == CAM_FOLLOWER:   # placed with its derivatives (differentiate_group leaves it)
+        _place_cam_follower(program, g, poses)
+        return SOLVED, 0.0, 0.0, 0.0
     if kind == REDUNDANT:
         _swing(program, E1, Ji, poses, L1, _point(program, E1, poses, _other(program, E1, L1)),
                _point(program, Ji, poses, _other(program, Ji, L1)))
@@ -551,6 +676,8 @@ def differentiate_group(program, g, poses, scratch):
     carrier's (_gear_angle), its origin from its pivot P's motion, r' = P' - i theta' q, r'' = P'' - (i theta'' -
     theta'^2) q (q = p e^{i theta}, p the pivot in the link); a parallelogram P B C D (an RRR group's branch 0):
     L1 turns with D's link and L2 with B's (C - B = D - P, C - D = B - P), each following its outer joint."""
+    if int(program[g]) == CAM_FOLLOWER:   # its derivatives are its law's (_place_cam_follower)
+        return True
     if int(program[g]) == GEAR:
         _follow(program, g + 4, poses, int(program[g + 2]), _gear_angle(program, g, poses, 5),
                 _gear_angle(program, g, poses, 8))
@@ -635,7 +762,8 @@ def near(angle, reference):
 def reduced_from_poses(program, base, poses):
     """(J_links, dJ_links/dphi, M_weight, q, q') from solved poses: over the moving links k (the crank included)
     with centres S_k and angles theta_k, `J_links = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k
-    Re(conj(S_k') S_k'') + I_k theta_k' theta_k'')`, `M_weight = sum m_k g . S_k'`; the output q: a link's angle
+    Re(conj(S_k') S_k'') + I_k theta_k' theta_k'')`, `M_weight = sum m_k g . S_k'` plus the cam followers' springs
+    (cam_springs); the output q: a link's angle
     theta [rad] (within pi of the output reference angle, `near`) and theta', or a prismatic joint's travel `q = Re((P_s - P_g) conj w)` [m] (w the guide's direction),
     `q' = Re(d' conj w) + theta_g' Im(d conj w)`; (0, 0) without an output."""
     n_links = int(program[base])
@@ -649,6 +777,7 @@ def reduced_from_poses(program, base, poses):
         J += mass * abs(dS) ** 2 + inertia * dtheta * dtheta
         dJ += 2.0 * (mass * (dS.conjugate() * ddS).real + inertia * dtheta * ddtheta)
         weight += mass * (gravity.conjugate() * dS).real
+    weight += cam_springs(program, base, poses)
     output = program[base + 3]
     if output == 1.0:
         link = int(program[base + 4])
@@ -743,8 +872,9 @@ def _solve_group_reactions(program, g, group, poses, scratch, residual, multipli
     links (A the matrix of its kinematics, group_matrix; lambda = (A^-1)^T residual with invert_dyad's inverse),
     stored at multipliers[2 (3 group + k) + row, case] for its joint k's rows; then their reactions on the links
     it hangs on, `residual[link] -= (dC/dx_link)^T lambda` (joint_rows), passed inward. False where A is
-    singular, or for a redundant link (statically indeterminate). A gear group: _solve_gear_reactions."""
-    if int(program[g]) == REDUNDANT:
+    singular, or for a redundant link or a cam follower (statically indeterminate; the cam's contact force is
+    linkage/cam.py's). A gear group: _solve_gear_reactions."""
+    if int(program[g]) == REDUNDANT or int(program[g]) == CAM_FOLLOWER:
         return False
     if int(program[g]) == GEAR:
         return _solve_gear_reactions(program, g, group, poses, residual, multipliers)
@@ -919,9 +1049,9 @@ def _registered() -> None:
 
     register_jitable(reduced)
     register_jitable(joint_loads)
-    for function in (_local, _other, _unit, _direction, _origin, _turn, _point, _set_pose, _pin, _swing,
-                     _angle_across, _origin_line, _lines_cross, _lines_meet, gear_ratio, _gear_angle, place_group,
-                     joint_rows, joint_quadratic, _solve_gear_reactions, _follow,
+    for function in (law_at, _place_cam_follower, cam_springs, _local, _other, _unit, _direction, _origin, _turn,
+                     _point, _set_pose, _pin, _swing, _angle_across, _origin_line, _lines_cross, _lines_meet,
+                     gear_ratio, _gear_angle, place_group, joint_rows, joint_quadratic, _solve_gear_reactions, _follow,
                      _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
                      _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
                      motion, near, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,

@@ -82,14 +82,15 @@ def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, f
 
 
 def moving_points(linkage: Linkage) -> list[tuple[str, str]]:
-    """(point, link) of the points whose motion is reported: the revolute joints off the frame, the prismatic
+    """(point, link) of the points whose motion is reported: the revolute joints off the frame (not a cam pair's
+    contact, which is no link's point), the prismatic
     joints' slider points that no revolute joint of the slider already marks, then the points of interest."""
     found: dict[str, str] = {}
     for joint in sorted(linkage.joints, key=lambda j: j.kind != "revolute"):
         if joint.kind == "gear":   # a mesh has no point of its own (its gears' centres are pivots)
             continue
         link = joint.links[1]
-        if linkage.frame in joint.links and joint.kind == "revolute":
+        if (linkage.frame in joint.links and joint.kind == "revolute") or joint.kind == "cam":   # a contact: no point
             continue
         local = linkage.link(link).points[joint.name]
         if joint.kind == "prismatic" and any(on == link and linkage.link(link).points[name] == local

@@ -37,6 +37,7 @@ import numpy as np
 from mech_regulator import cache
 from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
 from mech_regulator.mechanisms.linkage import flat, symbolic
+from mech_regulator.mechanisms.linkage.cam import CamFollower
 from mech_regulator.mechanisms.linkage.groups import RedundantLink
 from mech_regulator.mechanisms.linkage.kinematics import make_solver
 from mech_regulator.mechanisms.linkage.model import PRISMATIC, Linkage, LinkageError
@@ -54,7 +55,12 @@ class LinkageLoads(NamedTuple):
 
 def indeterminate(structure: Structure) -> str | None:
     """Why the linkage's joint reactions cannot be computed, or None: a redundant link makes it statically
-    indeterminate (its reactions do not follow from equilibrium alone)."""
+    indeterminate (its reactions do not follow from equilibrium alone); a cam pair's contact is not among the
+    groups' reactions yet (linkage/cam.py gives its contact force)."""
+    cams = [group.pair.name for group in structure.groups if isinstance(group, CamFollower)]
+    if cams:
+        return (f"the cam pair {cams[0]}'s contact is not in the kinetostatics by groups yet (its contact force is the "
+                "cam's own: `structure` prints the speed at which the follower jumps)")
     if not any(isinstance(group, RedundantLink) for group in structure.groups):
         return None
     return (f"a redundant constraint ({'; '.join(structure.redundant)}) makes the linkage statically indeterminate: "

@@ -11,8 +11,9 @@ Joints (source 001's kinematic pairs):
 - prismatic (lower pair, class 5): the slider link's point of the joint's name stays on the guide link's line
   through its own point of that name, of direction `direction` in the guide's coordinates, and the slider keeps
   the angle `slider_angle` to the guide: theta_slider = theta_guide + slider_angle;
-- cam (higher pair, class 4): a contact of two profiles; counted by the structural analysis only (a linkage with
-  one is not decomposed into class-II groups);
+- cam (higher pair, class 4): the contact of a cam (links[0], the crank) with its follower or the follower's roller
+  (links[1]); its `cam` (linkage/cam.py's CamSpec) gives the follower's motion law and the contact; the follower is
+  a group of its own (cam.CamFollower);
 - gear (higher pair, class 4): a gear pair, its data in `gear` (gears.GearMesh: pitch radii or tooth numbers, the
   centres' points, the carrier).
 """
@@ -51,13 +52,14 @@ class Link:
 class Joint:
     """A joint named `name` between links[0] and links[1] (prismatic: links[0] is the guide, links[1] the slider);
     direction [rad]: the guide line's direction in the guide's coordinates; slider_angle [rad]: theta_slider -
-    theta_guide; gear: a gear pair's data (kind gear)."""
+    theta_guide; cam: a cam pair's linkage/cam.py CamSpec; gear: a gear pair's data (None for a lower pair)."""
 
     name: str
     kind: str
     links: tuple[str, str]
     direction: float = 0.0
     slider_angle: float = 0.0
+    cam: object = None
     gear: GearMesh | None = None
 
     @property

@@ -13,9 +13,10 @@ lower pairs (revolute, prismatic), p4 the higher pairs (cam contacts, gear meshe
 
 Decomposition: the frame and the driving crank are known; repeatedly, two unknown links joined to each other by
 a lower pair and each by exactly one lower pair to known links form a class-II group (a dyad, groups.Dyad), taken
-in order from the crank outward; a gear link on one revolute pivot meshing with a known gear is a group of its own
-(gears.GearGroup, 3 - 2 - 1 = 0). What remains undecomposed is reported (a group of class III or higher, or one
-with a cam: not supported).
+in order from the crank outward; a follower on the frame touching a known cam (directly or by its roller) is a cam
+follower group (cam.CamFollower: zero freedom with its pair and its roller's passive spin); a gear link on one
+revolute pivot meshing with a known gear is a group of its own (gears.GearGroup, 3 - 2 - 1 = 0). What remains
+undecomposed is reported (a group of class III or higher, or another with a higher pair: not supported).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 from mech_regulator.mechanisms.linkage import gears
+from mech_regulator.mechanisms.linkage.cam import CamFollower, next_cam_follower
 from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_dyad, parallelogram_joint
 from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 from mech_regulator.mechanisms.linkage.model import CAM, GEAR, PRISMATIC, REVOLUTE, Linkage, LinkageError
@@ -45,7 +47,7 @@ class Structure:
     repeated: tuple[str, ...]
     redundant: tuple[str, ...]
     passive: tuple[str, ...]
-    groups: tuple[Dyad | RedundantLink | gears.GearGroup, ...]
+    groups: tuple[Dyad | RedundantLink | CamFollower | gears.GearGroup, ...]
     undecomposed: str | None
 
     @property
@@ -90,7 +92,8 @@ class Structure:
                              f"{abs(group.pitch[0]):.6g} and {abs(group.pitch[1]):.6g} m, {group.rate:+.6g} turns per "
                              "crank turn")
             else:
-                lines.append(f"group {number}: {group.name} (joints {group.joints[0].name}, {group.joints[1].name})")
+                lines.append(f"group {number}: {group.name} (links {' + '.join(group.links)}, joints "
+                             f"{', '.join(f'{j.name} ({j.kind})' for j in group.joints)})")
         if self.undecomposed is not None:
             lines.append(f"not decomposed: {self.undecomposed}")
         return lines
@@ -154,7 +157,7 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
                 raise LinkageError("; ".join(fractional) + "; expected gears that turn a whole number of times per "
                                                            "crank turn wherever a mechanism hangs on them")
             return None
-        group = (_next_dyad(linkage, known, remaining)
+        group = (_next_dyad(linkage, known, remaining) or next_cam_follower(linkage, known)
                  or gears.next_gear(linkage, known, rates, make_solver(linkage, groups))
                  or _next_redundant_link(linkage, known, remaining, groups))
         if isinstance(group, gears.GearGroup):
@@ -208,10 +211,12 @@ def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str]
                          ) -> RedundantLink | None:
     """An unknown link with exactly two revolute joints, both to known links, whose two points stay at the link's
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
-    solve_at = make_solver(linkage, groups)
+    lower_groups = [group for group in groups if not isinstance(group, CamFollower)]   # placed by flat.py
+    solved = {linkage.frame, linkage.crank}.union(*(group.links for group in lower_groups))
+    solve_at = make_solver(linkage, lower_groups)
     for name in remaining:
         joints = linkage.joints_of(name)
-        if len(joints) != 2 or any(j.kind != REVOLUTE or j.other(name) not in known for j in joints):
+        if len(joints) != 2 or any(j.kind != REVOLUTE or j.other(name) not in solved for j in joints):
             continue
         points = linkage.link(name).points
         own = abs(points[joints[1].name] - points[joints[0].name])

@@ -33,7 +33,10 @@ The closed forms per group (groups.py's module docstring; sigma the group's bran
   d its own vector between the two points, r = P - p e^{i theta};
 - a gear (gears.py): its angle `theta_L = theta_c + k (theta_G - theta_c) + phase_L` from the angles of its driver
   and carrier, which are phi's (linear in phi: the frame, the crank, gears), `e^{i theta_L} = (cos theta_L, sin
-  theta_L)` and r = P - p e^{i theta_L} from its pivot P.
+  theta_L)` and r = P - p e^{i theta_L} from its pivot P;
+- a cam follower (linkage/cam.py): its law's s, s', s'' from flat.law_at, whose source the function nests (the
+  law's pieces are read from p at run time), then its pose in s (flat._place_cam_follower's formulas); its
+  spring's -(F0 + k s) s' joins M_weight.
 Then, over the moving links k with centres S_k = r_k + c_k e^{i theta_k} and theta' = Re(e) Im(e)' - Im(e) Re(e)'
 (e = e^{i theta}): `J = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k S_k'.S_k'' + I_k theta_k'
 theta_k'')` (the crank's term the constant m |c - p_A|^2 + I, p_A its pivot, written so: it is exactly zero for a
@@ -85,10 +88,12 @@ def _structural_positions(program: np.ndarray) -> set[int]:
         positions.update(range(g, g + 4))
         for k in range(3):
             joint(g + 4 + flat.JOINT_SIZE * k)
+        if int(program[g]) == flat.CAM_FOLLOWER:   # where its law is (a cam law's pieces are read at run time)
+            positions.add(g + 4 + 2 * flat.JOINT_SIZE + 3)
         g += flat.GROUP_SIZE
     positions.add(g)
     joint(g + 1)
-    positions.update(range(g + 1 + flat.JOINT_SIZE, len(program)))
+    positions.update(range(g + 1 + flat.JOINT_SIZE, g + 1 + flat.JOINT_SIZE + 2 * int(program[g])))
     return positions
 
 
@@ -132,6 +137,7 @@ class _Writer:
         self.rate: dict[object, object] = {}
         self.lines: list[str] = []
         self.count = 0
+        self.laws = False   # a cam follower's law is evaluated: the function nests flat.law_at
         cos_phi, sin_phi, phi = sympy.symbols("cos_phi sin_phi phi")
         self.rate[cos_phi], self.rate[sin_phi], self.rate[phi] = -sin_phi, cos_phi, sympy.Integer(1)
         self.crank_turn = (cos_phi, sin_phi)
@@ -268,6 +274,7 @@ class _Poses:
         zero, one = writer.sp.Integer(0), writer.sp.Integer(1)
         self.origin = {0: (zero, zero)}
         self.turn = {0: (one, zero)}
+        self.cams: list = []   # (s, s', cam record) of each cam follower group (_place_cam_follower)
         self.angle = {0: zero}
 
     def point(self, j: int, link: int):
@@ -322,6 +329,9 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     kind, sigma = int(program[g]), int(program[g + 1])
     L1, L2 = int(program[g + 2]), int(program[g + 3])
     E1, Ji, E2 = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
+    if kind == flat.CAM_FOLLOWER:
+        _place_cam_follower(poses, program, g)
+        return
     if kind == flat.REDUNDANT:
         poses.swing(E1, Ji, L1, poses.point(E1, w.other(E1, L1)), poses.point(Ji, w.other(Ji, L1)))
         return
@@ -398,6 +408,34 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     poses.set(L2, _meet(c1, w1, c2, w2), turn2)
 
 
+def _place_cam_follower(poses: _Poses, program: np.ndarray, g: int) -> None:
+    """Place the cam follower group at g (flat._place_cam_follower's formulas): its law's s, s', s'' assigned by
+    flat.law_at (nested in the generated function, _function_source) as symbols whose rates are one another, then the
+    follower's pose (translating: turn e^{i alpha}, r = G + (d0 + s) u - p e^{i alpha}; oscillating: turn
+    e^{i (theta0 + sigma s)}, pinned at its pivot) and its roller's, pinned at their joint with the follower's turn;
+    (s, s', the cam record's position) kept in poses.cams for the springs."""
+    w, sp = poses.w, poses.w.sp
+    sigma, follower, roller = int(program[g + 1]), int(program[g + 2]), int(program[g + 3])
+    guide, pin, cam = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
+    w.count += 1
+    s, ds, dds = sp.symbols(f"s{w.count} ds{w.count} dds{w.count}")
+    w.lines.append(f"{s}, {ds}, {dds} = law_at(phi - {sp.pycode(w.number(cam + 4))}, p, int(at) + "
+                   f"{cam + int(program[cam + 3])})")
+    w.rate[s], w.rate[ds], w.rate[dds] = ds, dds, "unknown"
+    w.laws = True
+    if float(program[guide]) != 0.0:   # translating
+        turn = poses.across_turn(guide, 0, poses.turn[0])
+        u = (w.number(guide + 7), w.number(guide + 8))
+        origin = _sub(_add(poses.point(guide, 0), _scale(u, w.number(cam + 5) + s)), _mul(w.local(guide, follower), turn))
+        poses.set(follower, origin, turn)
+    else:
+        theta = w.number(cam + 5) + sigma * s
+        poses.pin(guide, follower, poses.point(guide, 0), (sp.cos(theta), sp.sin(theta)))
+    if roller >= 0:
+        poses.pin(pin, roller, poses.point(pin, follower), poses.turn[follower])
+    poses.cams.append((s, ds, cam))
+
+
 def _placed(program: np.ndarray) -> _Poses:
     """Every link's pose of the program (base 0) as expressions with their phi-derivatives: the crank's
     `r = A - p_A e^{i phi}`, e = (cos phi, sin phi), then each group's closed form (_place) in turn."""
@@ -443,6 +481,8 @@ def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
         ddtheta = turn[0] * rate(rate(turn[1])) - turn[1] * rate(rate(turn[0]))
         J += mass * _square(dS) + inertia * dtheta * dtheta
         dJ += 2 * (mass * _dot(dS, ddS) + inertia * dtheta * ddtheta)
+    for s, ds, cam in poses.cams:   # the cam followers' springs, -(F0 + k s) s' (flat.cam_springs)
+        weight -= (writer.number(cam + 7) + writer.number(cam + 6) * s) * ds
     results = [J, dJ, weight]
     kind = int(program[3])
     if outputs:
@@ -477,6 +517,10 @@ def _function_source(writer: _Writer, name: str, arguments: str, doc: str, retur
     # an unsigned offset: compiled, p[at + i] then needs no check for a negative index (some 2 ns a read)
     reads = [f"{symbol} = p[at + {i}]" for i, symbol in sorted(writer.read.items())]
     body = ["at = np.uint64(offset)", "cos_phi = math.cos(phi)", "sin_phi = math.sin(phi)"] + reads + writer.lines
+    if writer.laws:   # flat.law_at's own source, nested (numba compiles an inner function called in place)
+        import inspect
+
+        body = inspect.getsource(flat.law_at).rstrip().split("\n") + body
     body.append(f"return {returned}")
     return f"def {name}({arguments}):\n    {doc}\n    " + "\n    ".join(body) + "\n"
 
@@ -685,6 +729,8 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         g = groups_at + flat.GROUP_SIZE * group
         if int(program[g]) == flat.REDUNDANT:
             raise ValueError("a linkage with a redundant link is statically indeterminate: no generated kinetostatics")
+        if int(program[g]) == flat.CAM_FOLLOWER:
+            raise ValueError("a cam pair's contact is not in the kinetostatics by groups yet: no generated kinetostatics")
         found = (_gear_reactions if int(program[g]) == flat.GEAR else _group_reactions)(poses, program, g, residual)
         for case in range(2):
             for row in range(6):
