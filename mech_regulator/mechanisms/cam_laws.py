@@ -42,6 +42,8 @@ class MotionLaw:
     """s(theta), s'(theta), s''(theta) of a follower (module docstring), theta the cam angle from the law's start
     [rad] (any value: taken modulo the turn), from its pieces."""
 
+    _pieces: list[list[float]]   # set by each kind of law (pieces())
+
     def pieces(self) -> list[list[float]]:
         """The law as flat.law_at's pieces [start, length, code, a, b, c, d], in order of start from 0 to the turn."""
         return self._pieces
@@ -85,7 +87,7 @@ class TableLaw(MotionLaw):
     """A periodic cubic spline through (theta_k, s_k) [rad, m or rad] (scipy's CubicSpline, periodic over the
     turn), s >= 0; its pieces are the spline's cubics, the one across theta = 0 split there."""
 
-    def __init__(self, angles: list[float], lifts: list[float]):
+    def __init__(self, angles: list[float] | np.ndarray, lifts: list[float]):
         from scipy.interpolate import CubicSpline
 
         angles = np.asarray(angles, dtype=float)

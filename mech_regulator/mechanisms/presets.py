@@ -206,8 +206,9 @@ def _gear_mesh(joint: schema.LinkageJoint) -> GearMesh | None:
     """The gear pair of a scene's linkage joint (None for a lower pair)."""
     if joint.type != "gear":
         return None
-    return GearMesh(tuple(joint.centres), tuple(joint.teeth) if joint.teeth else None,
-                    tuple(joint.radii) if joint.radii else None, joint.internal, joint.carrier,
+    assert joint.centres is not None   # schema.LinkageJoint: a gear has its two centres
+    return GearMesh((joint.centres[0], joint.centres[1]), (joint.teeth[0], joint.teeth[1]) if joint.teeth else None,
+                    (joint.radii[0], joint.radii[1]) if joint.radii else None, joint.internal, joint.carrier,
                     math.radians(joint.phase_deg))
 
 

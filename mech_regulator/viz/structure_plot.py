@@ -15,6 +15,7 @@ import numpy as np  # noqa: E402
 from mech_regulator.mechanisms.linkage import Dyad, Linkage, Structure, solve  # noqa: E402
 from mech_regulator.mechanisms.linkage.cam import cam_pairs  # noqa: E402
 from mech_regulator.mechanisms.linkage.drawing import BLOCK_PER_CRANK, crank_length, link_polygon, pitch_circles  # noqa: E402
+from mech_regulator.mechanisms.linkage.gears import GearGroup, gear_of  # noqa: E402
 
 FRAME_COLOUR, CRANK_COLOUR = "0.45", "black"
 GROUP_COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -34,7 +35,7 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
         for link in group.links:
             colour[link] = GROUP_COLOURS[(number - 1) % len(GROUP_COLOURS)]
         kind = (f"class II {group.kind}" if isinstance(group, Dyad) else
-                f"gear about {group.pivot.name}" if group.kind == "gear" else group.kind)
+                f"gear about {group.pivot.name}" if isinstance(group, GearGroup) else group.kind)
         labels[group.links[0]] = f"group {number}: {kind} ({' + '.join(group.links)})"
     figure, axes = plt.subplots(figsize=(9, 7), constrained_layout=True)
     cams = cam_pairs(linkage, structure.groups, None)
@@ -60,9 +61,9 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
         axes.plot([p.real for p in tick], [p.imag for p in tick], color=colour[link], lw=1.0, zorder=2)
     names_at: dict[tuple[float, float], list[str]] = {}
     for group in structure.groups:   # a mesh is named at its pitch point, O_a + rho_a u
-        if group.kind == "gear":
+        if isinstance(group, GearGroup):
             a, b = (poses[link][0] + linkage.link(link).points[centre] * cmath.exp(1j * poses[link][1])
-                    for link, centre in zip(group.mesh.links, group.mesh.gear.centres))
+                    for link, centre in zip(group.mesh.links, gear_of(group.mesh).centres))
             pitch = a + group.pitch[0] * (b - a) / abs(b - a)
             axes.plot(pitch.real, pitch.imag, "D", ms=5, color="black", zorder=4)
             names_at.setdefault((round(pitch.real, 9), round(pitch.imag, 9)), []).append(group.mesh.name)

@@ -36,6 +36,7 @@ import cmath
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -137,6 +138,23 @@ class FollowerMotion:
     dtheta: np.ndarray
 
 
+class CamNumbers(TypedDict):
+    """A cam pair's checks over the turn (CamPair.numbers): names, lift [m or rad], angles [deg], the profile's least
+    radius of curvature [m] and the jump speed [rad/s] (None: none found)."""
+
+    pair: str
+    follower: str
+    contact: str
+    motion: str
+    lift: float
+    pressure_angle_max_deg: float
+    pressure_angle_max_at_deg: float
+    least_radius: float | None
+    least_radius_at_deg: float | None
+    jump_speed: float | None
+    jump_at_deg: float | None
+
+
 class CamPair:
     """The geometry and dynamics of one cam follower group (module docstring) in a linkage; raises LinkageError
     for a follower that cannot touch the base circle, an oscillating flat face, a profile that would be undercut or
@@ -146,11 +164,15 @@ class CamPair:
     def __init__(self, linkage: Linkage, group: CamFollower, gravity: tuple[float, float] | None,
                  check: bool = True):
         self.group = group
+        assert group.pair.cam is not None   # a cam pair carries its CamSpec (presets.cam_spec)
         self.spec: CamSpec = group.pair.cam
         spec = self.spec
         self.translating = group.guide.kind == PRISMATIC
         roller_link = linkage.link(group.roller) if group.roller is not None else None
-        self.roller_radius = roller_link.roller_radius if roller_link is not None else 0.0
+        self.roller_radius = 0.0
+        if roller_link is not None:
+            assert roller_link.roller_radius is not None   # next_cam_follower takes a link with a roller_radius
+            self.roller_radius = roller_link.roller_radius
         if (spec.contact == "roller") != (roller_link is not None):
             raise LinkageError(f"the cam pair {group.pair.name} has contact {spec.contact} but touches the link "
                                f"'{group.pair.links[1]}', which is {'a' if roller_link else 'not a'} roller; expected "
@@ -354,7 +376,7 @@ class CamPair:
         k = int(np.argmin(speeds))
         return float(speeds[k]), float(phi[k])
 
-    def numbers(self) -> dict[str, float | str | None]:
+    def numbers(self) -> CamNumbers:
         """The cam pair's checks over the turn: the largest pressure angle [deg] and its crank angle [deg], the
         profile's least radius of curvature where convex [m] and its crank angle, the lift [m or rad], the jump speed
         [rad/s] (jump(): 0 contact lost at rest, None never) and its crank angle [deg]."""

@@ -52,6 +52,7 @@ class GearMesh:
         if self.radii is not None:
             r_a, r_b = self.radii
         else:
+            assert self.teeth is not None   # exactly one of teeth and radii
             z_a, z_b = self.teeth
             r_a, r_b = (distance * z / (abs(z_a - z_b) if self.internal else z_a + z_b) for z in (z_a, z_b))
         if not self.internal:
@@ -95,9 +96,15 @@ class GearGroup:
         return rho_a / rho_b if self.mesh.links[1] == self.link else rho_b / rho_a
 
 
+def gear_of(mesh: Joint) -> GearMesh:
+    """The GearMesh of a gear pair (model.Joint of kind GEAR, whose `gear` is always given)."""
+    assert mesh.gear is not None, f"the gear pair {mesh.name} has no GearMesh"
+    return mesh.gear
+
+
 def carrier_of(linkage: Linkage, mesh: Joint) -> str:
     """The carrier of a gear mesh: the link named, else the frame."""
-    return mesh.gear.carrier or linkage.frame
+    return gear_of(mesh).carrier or linkage.frame
 
 
 def next_gear(linkage: Linkage, known: set[str], rates: dict[str, float], solve_at) -> GearGroup | None:
@@ -122,13 +129,14 @@ def next_gear(linkage: Linkage, known: set[str], rates: dict[str, float], solve_
                 raise LinkageError(f"the gear {name} (mesh {mesh.name}) is {role} {link}, whose angle is not the "
                                    "frame's, the crank's or another gear's; expected a gear meshing with the frame, "
                                    "the crank or a gear, on such a carrier")
-        own_centre = linkage.link(name).points[mesh.gear.centres[mesh.links.index(name)]]
+        gear = gear_of(mesh)
+        own_centre = linkage.link(name).points[gear.centres[mesh.links.index(name)]]
         if own_centre != linkage.link(name).points[pivot.name]:
             raise LinkageError(f"the gear {name} turns about {pivot.name} but its centre for the mesh {mesh.name} is "
                                f"elsewhere; expected its centre point at its pivot {pivot.name}")
         pitch = _pitch(linkage, mesh, pivot, name, solve_at)
         k = pitch[0] / pitch[1] if mesh.links[1] == name else pitch[1] / pitch[0]
-        phase = mesh.gear.phase if mesh.links[1] == name else -mesh.gear.phase * k
+        phase = gear.phase if mesh.links[1] == name else -gear.phase * k
         rate = rates[carrier] + k * (rates[driver] - rates[carrier])
         return GearGroup(name, pivot, mesh, driver, carrier, pitch, phase, rate)
     return None
@@ -139,12 +147,12 @@ def _pitch(linkage: Linkage, mesh: Joint, pivot: Joint, name: str, solve_at) -> 
     CHECK_SAMPLES crank angles (the gear `name`'s centre is its pivot's point on the link it turns about)."""
     from mech_regulator.mechanisms.linkage.kinematics import motion
 
-    carrier = carrier_of(linkage, mesh)
+    carrier, gear = carrier_of(linkage, mesh), gear_of(mesh)
     distances, turns = [], []
     for k in range(CHECK_SAMPLES):
         poses = solve_at(2.0 * math.pi * k / CHECK_SAMPLES, False)
         centres = []
-        for link, centre in zip(mesh.links, mesh.gear.centres):
+        for link, centre in zip(mesh.links, gear.centres):
             on, point = ((pivot.other(name), linkage.link(pivot.other(name)).points[pivot.name]) if link == name
                          else (link, linkage.link(link).points[centre]))
             centres.append(motion(poses[on], point)[0])
@@ -156,13 +164,13 @@ def _pitch(linkage: Linkage, mesh: Joint, pivot: Joint, name: str, solve_at) -> 
     if distance == 0.0 or max(abs(d - distance) for d in distances) > STEADY_TOLERANCE * distance \
             or drift > STEADY_TOLERANCE:
         raise LinkageError(f"the gear mesh {mesh.name} ({mesh.links[0]}, {mesh.links[1]}): its centres "
-                           f"{', '.join(mesh.gear.centres)} are {min(distances):.6g} to {max(distances):.6g} m apart "
+                           f"{', '.join(gear.centres)} are {min(distances):.6g} to {max(distances):.6g} m apart "
                            f"and their line turns {drift:.3g} rad against the carrier {carrier} over the turn; "
                            "expected centres a steady distance apart on the carrier (name it: carrier)")
-    rho_a, rho_b = mesh.gear.signed_radii(distance)
+    rho_a, rho_b = gear.signed_radii(distance)
     if abs(rho_a - rho_b - distance) > CENTRE_TOLERANCE * distance:
         raise LinkageError(f"the gear mesh {mesh.name}: pitch radii {abs(rho_a):g} and {abs(rho_b):g} m "
-                           f"({'internal' if mesh.gear.internal else 'external'}) need the centres "
+                           f"({'internal' if gear.internal else 'external'}) need the centres "
                            f"{abs(rho_a - rho_b):g} m apart, but they are {distance:.6g} m apart")
     return rho_a, rho_b
 

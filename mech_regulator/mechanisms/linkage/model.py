@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from mech_regulator.mechanisms.linkage.cam import CamSpec
     from mech_regulator.mechanisms.linkage.gears import GearMesh
 
 REVOLUTE, PRISMATIC, CAM = "revolute", "prismatic", "cam"
@@ -59,7 +60,7 @@ class Joint:
     links: tuple[str, str]
     direction: float = 0.0
     slider_angle: float = 0.0
-    cam: object = None
+    cam: CamSpec | None = None
     gear: GearMesh | None = None
 
     @property
