@@ -118,6 +118,8 @@ def next_cam_follower(linkage: Linkage, known: set[str]) -> CamFollower | None:
             raise LinkageError(f"the follower '{follower}''s guide {guide.name} lists it first; expected links: "
                                f"[{linkage.frame}, {follower}] (guide, slider)")
         group = CamFollower(follower, roller, guide, pair, roller_joint)
+        if pair.cam is None:   # a structure alone (no law): nothing to place
+            return group
         return dataclasses.replace(group, at_base=follower_zero(linkage, group))
     return None
 
