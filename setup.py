@@ -33,7 +33,7 @@ setup(
         "mcap-ros2-support>=0.5",  # and with it mcap, the MCAP library
     ],
     extras_require={
-        "test": ["pytest>=8", "jsonschema>=4"],
+        "test": ["pytest>=8", "pytest-xdist>=3.5", "jsonschema>=4"],
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
         "distributed": ["dask[distributed]>=2024.1"],
         "bench": ["mujoco>=3.1", "psutil>=5.9"],
