@@ -139,6 +139,9 @@ def measure_first_run(folder: Path, scene: str, pip_cache: Path | None,
     result = FirstRun(folder, steps, machine())
     for index, step in enumerate(steps):
         log = folder / f"step{index}.log"
+        recording = Path(step.command[step.command.index("--out") + 1]) if "--out" in step.command else None
+        if recording is not None:
+            recording.parent.mkdir(parents=True)  # run refuses a recording whose folder is missing
         report(f"bench first-run: {step.title}: `{' '.join(step.command)}` (output in {log}) ...")
         started = time.perf_counter()
         with open(log, "w") as output:
@@ -152,8 +155,8 @@ def measure_first_run(folder: Path, scene: str, pip_cache: Path | None,
                 result.interrupted = True
                 return result
         step.wall_s = time.perf_counter() - started
-        if "--out" in step.command:
-            step.summary = main_job_summary(Path(step.command[step.command.index("--out") + 1]))
+        if recording is not None:
+            step.summary = main_job_summary(recording)
             step.found = describe_run(step.summary)
         report(f"bench first-run: {step.title}: {step.wall_s:.1f} s, exit {step.exit_code}"
                f"{f'; {step.found}' if step.found else ''}")
