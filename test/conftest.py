@@ -7,14 +7,15 @@ No command of the suite starts or uses a command server (MECH_REGULATOR_SERVER=o
 subprocess): a test never depends on one nor leaves one behind. test/test_cli_server.py runs its own, in a folder of
 its own, and stops it.
 
-`./dev test` runs the suite on pytest-xdist's workers (`-n auto --dist loadgroup`): each worker is a process of its
-own, so that its ROS domains (ros_support.next_domain_id: a lock file per domain), tmp_path and command-server
-folders are its own; numba's cache and the fast path's cache folder are shared, written atomically (cache.write).
-The tests of a module that share a module-scoped fixture (a node run, a sweep) are kept on one worker
-(group_by_shared_fixtures), so that the fixture runs once, not once per worker.
+`./dev test` runs the suite on pytest-xdist's workers (`-n auto --dist loadfile`): each worker is a process of its
+own, so that its ROS domains (ros_support.next_domain_id: a lock file per domain), tmp_path and command-server folders
+are its own; numba's cache and the fast path's cache folder are shared, written atomically (cache.write), a stepper
+compiled under its method's lock (solvers/compiled/warm.py). A module's tests all run on one worker, so that a
+module-scoped fixture (a node run, a sweep) runs once. (Not `--dist loadgroup`: pytest-xdist 3.8 marks a group by
+rewriting a test's nodeid, which pytest 9 no longer reads, so no test is grouped.)
 
 Markers (registered in setup.cfg): `physics`, the physics core's own tests (PHYSICS_MODULES): `pytest -m physics`
-runs them alone, in-process on the reference path, in under a minute on the idle 2-core machine."""
+runs them alone, in-process on the reference path (its time: docs/speed.md, The test suite)."""
 
 import os
 
@@ -23,7 +24,6 @@ import pytest
 os.environ["MECH_REGULATOR_AUTO_PATH"] = "reference"
 os.environ["MECH_REGULATOR_SERVER"] = "off"
 
-SHARED_SCOPES = ("module", "package", "session")  # the scopes whose fixture value serves several tests
 # The modules of the physics core's own tests: no ROS node, no subprocess, no fast path (test_suite_markers.py
 # checks it); the machine's kinematics, dynamics, energy method, governor statics and dynamics, linkages
 PHYSICS_MODULES = frozenset({
@@ -31,19 +31,6 @@ PHYSICS_MODULES = frozenset({
     "test_engine_quadrature", "test_four_bar", "test_governor_dynamics", "test_governor_statics", "test_linkage",
     "test_linkage_friction_corners", "test_output_link_loads",
 })
-
-
-def group_by_shared_fixtures(items: list[pytest.Item]) -> None:
-    """Mark each test that uses a fixture of the suite's own (not a plugin's, such as tmp_path_factory) of a
-    SHARED_SCOPES scope with xdist_group(its module): under `--dist loadgroup` the module's tests that share it run
-    on one worker, the others go to any worker."""
-    for item in items:
-        definitions = getattr(item, "_fixtureinfo", None)
-        if definitions is None:  # not a Python function (a doctest): no fixtures of its own
-            continue
-        if any(definition.scope in SHARED_SCOPES and definition.baseid  # a plugin's fixture has no base id
-               for stack in definitions.name2fixturedefs.values() for definition in stack):
-            item.add_marker(pytest.mark.xdist_group(item.module.__name__))
 
 
 def mark_physics(items: list[pytest.Item]) -> None:
@@ -55,6 +42,5 @@ def mark_physics(items: list[pytest.Item]) -> None:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark the physics tests (mark_physics) and group the tests that share a fixture (group_by_shared_fixtures)."""
+    """Mark the physics tests (mark_physics)."""
     mark_physics(items)
-    group_by_shared_fixtures(items)

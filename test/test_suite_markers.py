@@ -1,6 +1,5 @@
 """The suite's own organisation (test/conftest.py): the `physics` marker names existing modules that start no ROS
-node, no subprocess and no fast path, and the tests that share a module-scoped fixture are kept on one
-pytest-xdist worker."""
+node, no subprocess and no fast path, and marks their tests only."""
 
 from __future__ import annotations
 
@@ -51,19 +50,3 @@ def test_the_physics_marker_is_on_the_physics_modules_tests_only():
     physics, other = _Item("test_dynamics"), _Item("test_ros_nodes")
     mark_physics([physics, other])
     assert (physics.markers, other.markers) == (["physics"], [])
-
-
-@pytest.fixture(scope="module")
-def shared_value():
-    """A module-scoped fixture of this module (what group_by_shared_fixtures looks for)."""
-    return object()
-
-
-def test_a_test_using_a_module_fixture_is_grouped_by_its_module(request, shared_value, tmp_path):
-    assert request.node.get_closest_marker("xdist_group").args == (__name__,)
-
-
-def test_a_test_using_only_function_and_plugin_fixtures_is_not_grouped(request, tmp_path):
-    """tmp_path rests on pytest's session-scoped tmp_path_factory: a plugin's, shared by every test, no reason to
-    group."""
-    assert request.node.get_closest_marker("xdist_group") is None
