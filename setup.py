@@ -34,7 +34,7 @@ setup(
     ],
     extras_require={
         # ruff and mypy: the checks of .ci/run, pinned to a minor version (a newer one may find more)
-        "test": ["pytest>=8", "jsonschema>=4", "ruff>=0.17,<0.18", "mypy>=2.4,<2.5"],
+        "test": ["pytest>=8", "pytest-xdist>=3.5", "jsonschema>=4", "ruff>=0.17,<0.18", "mypy>=2.4,<2.5"],
         "colcon": ["colcon-common-extensions", "catkin-pkg", "ros-ament-package", "setuptools<80"],
         "distributed": ["dask[distributed]>=2024.1"],
         "bench": ["mujoco>=3.1", "psutil>=5.9"],

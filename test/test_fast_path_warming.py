@@ -140,6 +140,38 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
     assert re.fullmatch(r"RK4 ready in [0-9.]+ s", lines[3]), lines
 
 
+def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch, tmp_path):
+    """integrators.stepper holds compiling-METHOD.lock while numba compiles or loads the stepper (so that a second
+    process, a test worker beside this one, waits and loads it instead of compiling it again), and no other method's
+    lock nor the background compile's."""
+    import fcntl
+
+    from mech_regulator.solvers.compiled import integrators, warm
+
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
+
+    def held(name: str) -> bool:
+        with open(tmp_path / name, "a") as other:
+            try:
+                fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                return True
+            return False
+
+    seen = []
+
+    def compiling(signature, cache):   # numba's njit, looking at the locks instead of compiling
+        def compile_(function):
+            seen.append([held(name) for name in ("compiling-RK4.lock", "compiling-DOP853.lock", warm.LOCK_NAME)])
+            return function
+        return compile_
+
+    monkeypatch.setattr(integrators, "njit", compiling)
+    integrators.stepper.__wrapped__("RK4")   # not functools.cache's: this process's compiled stepper is left alone
+    assert seen == [[True, False, False]]
+    assert not held("compiling-RK4.lock")   # released once loaded
+
+
 def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):
     """A scene's generated module new to the cache folder: a note before numba compiles it; none once it is there.
     In a fresh Python with empty caches (numba reads NUMBA_CACHE_DIR as it is imported)."""

@@ -322,10 +322,11 @@ def test_dev_installs_each_commands_extras_once_and_again_when_packaging_changes
     calls, told = dev("rerun", "runs/lathe.rrd")  # core is in already
     assert calls == ["rerun runs/lathe.rrd"]
     calls, told = dev("test", "-k", "packaging")  # completes the venv of ./dev run
-    assert calls == ["python -m pip install -e .[ros,test,colcon,bench,distributed]", "python -m pytest -q -k packaging"]
+    assert calls == ["python -m pip install -e .[ros,test,colcon,bench,distributed]",
+                     "python -m pytest -q -n auto --dist loadfile -k packaging"]
     assert told.startswith("completing .venv for ./dev test: installing the extras test colcon bench distributed"), told
     calls, _ = dev("test")
-    assert calls == ["python -m pytest -q"]
+    assert calls == ["python -m pytest -q -n auto --dist loadfile"]
     calls, _ = dev("check")  # the same extras as test: nothing to install
     assert calls == ["python -m ruff check .", "python -m mypy"]
     calls, _ = dev("run")

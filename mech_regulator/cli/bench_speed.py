@@ -5,6 +5,9 @@ comes, then the tables with the targets, and writes speed.csv (also when interru
 
 `mech-regulator bench startup`: the time to a first result as a user meets it, whole processes (bench.startup).
 
+`mech-regulator bench first-run`: a fresh clone with an empty HOME, set-up, first command and first main job timed
+(bench.first_run).
+
 Light to import (the parser is built from it): the benchmarks load inside the run functions.
 """
 
@@ -72,6 +75,28 @@ def add_bench_startup_command(benchmarks) -> None:
                               "compile caches of this machine (MECH_REGULATOR_CACHE or ~/.cache), filled first by "
                               "one run that is not counted")
     startup.add_argument("--json", action="store_true", help="print the measurements as JSON")
+
+
+def add_bench_first_run_command(benchmarks) -> None:
+    """The `bench first-run` subcommand and its options, under `bench`'s subparsers."""
+    first_run = benchmarks.add_parser(
+        "first-run", help="first-run benchmark: a fresh clone with an empty HOME, its set-up, first command and "
+                          "first main job timed",
+        description="Clone this checkout's repository into a new folder and time, as a newcomer meets them, with an "
+                    "empty HOME and no pip cache (unless --pip-cache): the set-up (`./dev run --help`: the venv and "
+                    "the main job's packages), the first command (`mech-regulator scenes`), the first main job "
+                    "(`./dev run SCENE`, its stepper compiled first) with its real-time factor and path, and the "
+                    "same run again warm; prints a table and the first run's pace as a share of the warm one's. Takes "
+                    "minutes and about 1.5 GB of disk, removed at the end unless --keep. Numbers to read, never "
+                    "asserted.")
+    first_run.add_argument("--scene", default="engine_direct", metavar="SCENE",
+                           help="the main job's scene (default engine_direct, `./dev run`'s)")
+    first_run.add_argument("--pip-cache", type=Path, metavar="FOLDER",
+                           help="pip's cache folder for the set-up (default: none, PIP_NO_CACHE_DIR)")
+    first_run.add_argument("--folder", type=Path, metavar="FOLDER",
+                           help="where to clone and run (a new folder; default: a new temporary folder)")
+    first_run.add_argument("--keep", action="store_true", help="keep the folder (the clone, its venv, the runs)")
+    first_run.add_argument("--dry-run", action="store_true", help="print the steps and their commands, run nothing")
 
 
 def run_bench_speed(args: argparse.Namespace) -> int:
@@ -142,3 +167,37 @@ def run_bench_startup(args: argparse.Namespace) -> int:
         return 1
     print(to_json(startup_summary(benchmark)) if args.json else format_table(benchmark))
     return 0
+
+
+def run_bench_first_run(args: argparse.Namespace) -> int:
+    """bench first-run: the steps (or with --dry-run their commands), a line before and after each on stderr, then
+    the table; exit 1 if a step failed, 130 if interrupted (the table of what was measured printed first)."""
+    import tempfile
+
+    from mech_regulator.bench.first_run import format_table, measure_first_run, plan, remove, repository_root
+    from mech_regulator.scene import SceneError, load_scene
+
+    load_scene(args.scene)  # a wrong name lists the scenes before anything is cloned
+    try:
+        repository_root()
+    except ValueError as error:
+        raise SceneError(f"bench first-run: {error}") from None
+    if args.pip_cache is not None and not args.pip_cache.is_dir():
+        raise SceneError(f"--pip-cache '{args.pip_cache}': expected an existing folder (pip's cache)")
+    if args.folder is not None and args.folder.exists():
+        raise SceneError(f"--folder '{args.folder}': expected a new folder (it exists)")
+    if args.dry_run:
+        for step in plan(args.folder or Path("FOLDER"), args.scene):
+            print(f"{step.title}: (in {step.cwd}) {' '.join(step.command)}")
+        return 0
+    folder = args.folder or Path(tempfile.mkdtemp(prefix="mech-regulator-first-run-")) / "work"
+    try:
+        result = measure_first_run(folder, args.scene, args.pip_cache,
+                                   report=lambda line: print(line, file=sys.stderr, flush=True))
+    finally:
+        if not args.keep:
+            remove(folder.parent if args.folder is None else folder)
+    print(format_table(result, args.pip_cache))
+    if result.interrupted:
+        return EXIT_INTERRUPTED
+    return 0 if all(step.exit_code == 0 for step in result.steps) else 1

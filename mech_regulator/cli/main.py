@@ -16,7 +16,8 @@ from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
 from mech_regulator.cli.bench_soak import add_bench_soak_command
-from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
+from mech_regulator.cli.bench_speed import (add_bench_first_run_command, add_bench_speed_command,
+                                             add_bench_startup_command)
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note, terminal_text
 from mech_regulator.cli.start import STARTED
@@ -197,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
                                "disturb it)")
     add_bench_speed_command(benchmarks)
     add_bench_startup_command(benchmarks)
+    add_bench_first_run_command(benchmarks)
     add_bench_soak_command(benchmarks)
     return parser
 
@@ -290,6 +292,10 @@ def _bench(args) -> int:
         from mech_regulator.cli.bench_speed import run_bench_startup
 
         return run_bench_startup(args)
+    if args.benchmark == "first-run":
+        from mech_regulator.cli.bench_speed import run_bench_first_run
+
+        return run_bench_first_run(args)
     if args.benchmark == "soak":
         from mech_regulator.cli.bench_soak import run_bench_soak
 

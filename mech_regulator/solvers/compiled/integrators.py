@@ -995,9 +995,14 @@ _STEPPERS = {"RK45": (_rk45, _ADAPTIVE_ARGS), "DOP853": (_dop853, _ADAPTIVE_ARGS
 def stepper(method: str):
     """The compiled stepper of a method ('RK45', 'DOP853', 'Rosenbrock23', 'RK4'; call it as the module docstring
     says): compiled with its one explicit signature when first asked for, or loaded from numba's disk cache, so a
-    process compiles or loads only the methods it runs (each takes some 10 s to compile on a fresh machine)."""
+    process compiles or loads only the methods it runs (some 50 s of CPU each to compile on a fresh machine: warm.py).
+    Under the method's lock (warm.method_lock): a process that finds another compiling the same stepper waits and then
+    loads it, rather than compiling it a second time beside it."""
+    from mech_regulator.solvers.compiled.warm import method_lock
+
     function, signature = _STEPPERS[method]
-    return njit(signature, cache=True)(function)
+    with method_lock(method):
+        return njit(signature, cache=True)(function)
 
 
 class StepsDense(DenseOutput):

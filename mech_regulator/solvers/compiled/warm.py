@@ -21,12 +21,13 @@ when none) under that lock: what the background process does.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 from mech_regulator.solvers.compiled import FAST_METHODS
@@ -64,6 +65,17 @@ def _lock_path() -> Path:
     from mech_regulator.solvers.compiled.codegen import cache_folder
 
     return cache_folder() / LOCK_NAME
+
+
+@contextlib.contextmanager
+def method_lock(method: str) -> Iterator[None]:
+    """Hold the lock of `method`'s stepper (compiling-METHOD.lock in the cache folder) while compiling or loading it
+    (integrators.stepper): one process at a time, so that two (two commands, two test workers) never compile the
+    same stepper side by side; the other one waits and loads it from numba's disk cache. Another method's compile does
+    not hold it up."""
+    with open(_lock_path().with_name(f"compiling-{method}.lock"), "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        yield
 
 
 def compile_before_the_run(method: str, report: Callable[[str], None]) -> None:
