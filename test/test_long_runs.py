@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 
 from mech_regulator.analysis.energy import step_edges
-from mech_regulator.solvers import simulate, time_domain
+from mech_regulator.scene.limits import MAX_STEPS
+from mech_regulator.solvers import simulate, step_limit_refusal, time_domain
 from mech_regulator.solvers.compiled import run
 from mech_regulator.solvers.time_domain import MAX_RESTARTS_WITHOUT_PROGRESS, turns_and_phase
-from support import model_of
+from support import model_of, run_cli
 from test_compiled_path import shortened
 
 FAR = 1e7  # [rad]: about 10 000 s of the engines at 230 rad/s
@@ -172,3 +173,22 @@ def test_turns_and_phase_split_the_angle_into_whole_periods_and_the_rest(phi, pe
     assert isinstance(turns, int)
     assert 0.0 <= phase < period
     assert turns * period + phase == pytest.approx(phi, rel=0.0, abs=2 * math.ulp(phi or 1.0))
+
+
+def test_a_run_the_step_limit_cannot_finish_is_refused_before_it_starts(capsys):
+    """RK45 on engine_direct takes some 1 500 steps a second: 10 000 s would stop at MAX_STEPS after some 6 400 s.
+    Its first second, probed, says so at once: exit code 2, the key, the value, the estimate and the limit."""
+    code, out, err = run_cli(capsys, "simulate", "engine_direct", "--set", "scenario.duration=10000", "--set",
+                             "solver.method=RK45", "--set", "solver.path=reference", "--quiet")
+    assert code == 2 and out == "", (out, err)
+    assert "scenario.duration = 10000 s: solver.method = RK45 took " in err and "steps over the run's first 1 s" in err
+    assert f"beyond the limit of {MAX_STEPS:g} steps of one run; expected scenario.duration <= " in err, err
+    estimate = float(err.split("so some ")[1].split(" steps")[0])
+    assert MAX_STEPS < estimate < 3 * MAX_STEPS, err
+
+
+def test_a_long_run_within_the_step_limit_is_not_refused():
+    """DOP853 on engine_direct takes some 700 steps a second: its first second, probed, finds 10 000 s within the
+    limit (the run of docs/scenes.md, Limits, 6.9 million steps)."""
+    model = model_of(shortened("engine_direct", 10_000.0, solver__path="fast"))
+    assert step_limit_refusal(model) is None
