@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
 from mech_regulator.cli import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED, STARTED
+from mech_regulator.cli.bench_long import add_bench_long_command
 from mech_regulator.cli.bench_soak import add_bench_soak_command
 from mech_regulator.cli.bench_speed import add_bench_speed_command, add_bench_startup_command
 from mech_regulator.cli.flywheel import add_flywheel_command
@@ -197,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_speed_command(benchmarks)
     add_bench_startup_command(benchmarks)
     add_bench_soak_command(benchmarks)
+    add_bench_long_command(benchmarks)
     return parser
 
 
@@ -289,6 +291,10 @@ def _bench(args) -> int:
         from mech_regulator.cli.bench_soak import run_bench_soak
 
         return run_bench_soak(args)
+    if args.benchmark == "long":
+        from mech_regulator.cli.bench_long import run_bench_long
+
+        return run_bench_long(args)
     return _bench_accuracy(args)
 
 
