@@ -11,9 +11,8 @@ import threading
 import time
 from pathlib import Path
 
-import pytest
-
 from ros_support import next_domain_id  # skips this module when rclpy is missing
+
 from mech_regulator.nodes import launch
 
 WAIT = 60.0  # [s] of wall time at most for each thing awaited (a deadline that turns a hang into a failure)

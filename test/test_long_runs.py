@@ -16,9 +16,13 @@ import math
 import numpy as np
 import pytest
 
+from mech_regulator.analysis import load_response
 from mech_regulator.analysis.energy import step_edges
+from mech_regulator.analysis.load_response import cycle_mean_speed
+from mech_regulator.cli import main as cli_main
 from mech_regulator.scene.limits import MAX_STEPS
 from mech_regulator.solvers import simulate, step_limit_refusal, time_domain
+from mech_regulator.solvers import trajectory as trajectory_module
 from mech_regulator.solvers.compiled import run
 from mech_regulator.solvers.time_domain import MAX_RESTARTS_WITHOUT_PROGRESS, turns_and_phase
 from support import model_of, run_cli
@@ -192,3 +196,30 @@ def test_a_long_run_within_the_step_limit_is_not_refused():
     limit (the run of docs/scenes.md, Limits, 6.9 million steps)."""
     model = model_of(shortened("engine_direct", 10_000.0, solver__path="fast"))
     assert step_limit_refusal(model) is None
+
+
+def test_a_long_runs_outputs_are_worked_out_in_chunks_with_the_same_numbers(tmp_path, capsys, monkeypatch):
+    """Memory bounded however long the run (docs/scenes.md, Limits): the CSV is written SAMPLE_CHUNK samples at a
+    time, a Trajectory evaluates EVALUATION_CHUNK times at a time and the cycle-mean speed CYCLE_CHUNK times at a
+    time. Made tiny here, they give the rows and states they give whole, and the cycle-mean speed to the grid's
+    interpolation error."""
+    arguments = ["simulate", "lathe", "--set", "solver.path=reference", "--set", "scenario.duration=1.0", "--quiet"]
+    whole, chunked = tmp_path / "whole.csv", tmp_path / "chunked.csv"
+    assert run_cli(capsys, *arguments, "--out", str(whole))[0] == 0
+    monkeypatch.setattr(cli_main, "SAMPLE_CHUNK", 7)
+    assert run_cli(capsys, *arguments, "--out", str(chunked))[0] == 0
+    rows = whole.read_text().splitlines()
+    assert len(rows) > 100 and rows[0].startswith("t,phi,omega")
+    assert chunked.read_text().splitlines() == rows
+
+    model = model_of(shortened("lathe", 1.0, solver__path="reference"))
+    trajectory = simulate(model)
+    times = np.linspace(0.0, 1.0, 1001)
+    states, means = trajectory(times), cycle_mean_speed(model, trajectory, times)
+    monkeypatch.setattr(trajectory_module, "EVALUATION_CHUNK", 13)
+    monkeypatch.setattr(load_response, "CYCLE_CHUNK", 17)
+    np.testing.assert_array_equal(trajectory(times), states)
+    chunked_means = cycle_mean_speed(model, trajectory, times)
+    assert np.isnan(means[0]) and np.array_equal(np.isnan(chunked_means), np.isnan(means))
+    assert np.count_nonzero(np.isfinite(means)) > 500
+    np.testing.assert_allclose(chunked_means, means, rtol=1e-7)
