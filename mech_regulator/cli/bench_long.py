@@ -17,8 +17,6 @@ ROW_BUDGET = 3600.0  # [s] of wall time a row may take by default before it is s
 
 def add_bench_long_command(benchmarks) -> None:
     """The `bench long` subcommand and its options, under `bench`'s subparsers."""
-    from mech_regulator.bench.long import METHODS, MODES, PATHS
-
     long = benchmarks.add_parser(
         "long", help="long-run matrix: bundled scenes x paths x methods, through simulate and the co-simulation, "
                      "for a long simulated time",
@@ -31,10 +29,10 @@ def add_bench_long_command(benchmarks) -> None:
     long.add_argument("--duration", type=float, default=LONG_DURATION, metavar="T",
                       help=f"simulated time of each row [s] (default {LONG_DURATION:g})")
     long.add_argument("--scenes", help="comma-separated bundled scenes (default: every one)")
-    long.add_argument("--paths", default=",".join(PATHS), help=f"comma-separated paths (default {','.join(PATHS)})")
-    long.add_argument("--methods", default=",".join(METHODS),
-                      help=f"comma-separated methods (default {','.join(METHODS)})")
-    long.add_argument("--modes", default=",".join(MODES), help="comma-separated: simulate, cosim (default both)")
+    long.add_argument("--paths", help="comma-separated paths: fast, reference (default both)")
+    long.add_argument("--methods", help="comma-separated methods (default DOP853,RK45,RK4,Radau,energy; the fast path "
+                                        "runs no Radau nor energy method)")
+    long.add_argument("--modes", help="comma-separated: simulate, cosim (default both)")
     long.add_argument("--budget", type=float, default=ROW_BUDGET, metavar="S",
                       help=f"wall time a row may take before it is stopped [s] (default {ROW_BUDGET:g})")
 
