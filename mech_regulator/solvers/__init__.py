@@ -130,10 +130,11 @@ def step_limit_refusal(model: MachineModel) -> str | Trajectory | None:
     if probe.status != "complete" or steps <= MAX_STEPS:
         return None  # (a probe that failed: the run fails the same way, and says why)
     longest = MAX_STEPS * PROBE_DURATION / probe.stats.steps
+    other = "" if method == "DOP853" else ", or a method that takes longer steps (DOP853)"
     return (f"scenario.duration = {duration:g} s: solver.method = {method} took {probe.stats.steps} steps over the "
             f"run's first {PROBE_DURATION:g} s, so some {steps:.2g} steps over {duration:g} s, beyond the limit of "
-            f"{MAX_STEPS:g} steps of one run; expected scenario.duration <= {longest:.3g} s, or a method that takes "
-            "longer steps (DOP853), or a looser solver.rtol (docs/scenes.md, Limits)")
+            f"{MAX_STEPS:g} steps of one run; expected scenario.duration <= {longest:.3g} s{other}, or a looser "
+            "solver.rtol (docs/scenes.md, Limits)")
 
 
 __all__ = ["SolverStats", "Trajectory", "auto_path", "on_path", "on_path_for_a_command", "simulate",
