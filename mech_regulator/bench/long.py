@@ -4,12 +4,11 @@ long simulated time (docs/hard_cases.md, "Long runs").
 
 Each row runs the scene as it is (its load events kept) made to last `duration` s with solver.path and solver.method
 set, and prints how it ended (complete, failed, refused before the start with the refusal's message, or stopped when
-its wall-time budget ran out), its wall time (the run, its probe and its analysis), its steps (the co-simulation: its exchanges), the energy balance's
-relative residual (the monolithic run; the co-simulation keeps no dense output) and the steady-state figures of its
-last dynamic period (cycle-mean speed omega_m and coefficient of fluctuation delta) against the same row run for the
-scene's own duration (16 s for most). A row that a path does not run (Radau and the energy method on the fast path) is
-left out. Numbers to read, never asserted. Light to import (the command's parser reads its names): the solvers load
-when a row runs.
+its wall-time budget ran out), its wall time (the run, its probe and its analysis), its steps (the co-simulation: its
+exchanges), the energy balance's relative residual (the monolithic run; the co-simulation keeps no dense output) and
+the steady-state figures of its last dynamic period (cycle-mean speed omega_m and coefficient of fluctuation delta)
+against the same row run for the scene's own duration (16 s for most). A row that a path does not run (Radau and the
+energy method on the fast path) is left out. Numbers to read, never asserted. The solvers load when a row runs.
 """
 
 from __future__ import annotations
@@ -29,9 +28,8 @@ EXCHANGE_STEP = 0.02  # [s] of the co-simulated rows: the nodes' default (schema
 class Row:
     """One run of the matrix: its scene, path, method and mode (simulate or cosim); how it ended (status, message),
     the wall time [s] (the run with its probe and analysis; the budget stops the run itself), steps (the co-simulation:
-    exchanges), the relative energy residual [-] (None: not worked out)
-    and the last dynamic period's omega_m [rad/s] and delta [-] of this run and of the scene's own duration (None:
-    not steady or not run)."""
+    exchanges), the relative energy residual [-] (None: not worked out) and the last dynamic period's omega_m [rad/s]
+    and delta [-] of this run and of the scene's own duration (None: not steady or not run)."""
 
     scene: str
     path: str
