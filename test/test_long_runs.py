@@ -191,6 +191,16 @@ def test_a_run_the_step_limit_cannot_finish_is_refused_before_it_starts(capsys):
     assert MAX_STEPS < estimate < 3 * MAX_STEPS, err
 
 
+def test_an_rk4_run_whose_restarts_pass_the_step_limit_is_refused_before_it_starts():
+    """The lathe with RK4's step of 1e-4 s for 1000 s: duration / step is the limit itself, but every switch of its
+    cutting adds a step (it stopped at t = 999.47 s after 1e7 steps). Its first second, probed, says so at once."""
+    reason = step_limit_refusal(model_of(shortened("lathe", 1000.0, solver__path="fast", solver__method="RK4",
+                                                   solver__step=1e-4)))
+    assert reason.startswith("scenario.duration = 1000 s: solver.method = RK4 took 100"), reason
+    assert "beyond the limit of 1e+07 steps of one run; expected scenario.duration <= 99" in reason, reason
+    assert "s, or a longer solver.step (docs/scenes.md, Limits)" in reason, reason
+
+
 def test_a_long_run_within_the_step_limit_is_not_refused():
     """DOP853 on engine_direct takes some 700 steps a second: its first second, probed, finds 10 000 s within the
     limit (the run of docs/scenes.md, Limits, 6.9 million steps)."""

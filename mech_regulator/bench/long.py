@@ -85,15 +85,17 @@ def run_row(scene: str, path: str, method: str, mode: str, duration: float, budg
     except SceneError as refusal:
         return Row(scene, path, method, mode, "refused", str(refusal), time.monotonic() - started)
     wall = time.monotonic() - started
-    status = "stopped (wall-time budget)" if stopper.spent else run["status"]
+    status, message = run["status"], run["message"]
+    if stopper.spent:
+        status, message = "stopped (wall-time budget)", f"at t = {run['t_end']:.6g} s"
     figures = _run(short, mode, _Budget(budget)) if run["steady"] is not None else {"steady": None}
-    return Row(scene, path, method, mode, status, run["message"], wall, run["steps"], run["residual"],
+    return Row(scene, path, method, mode, status, message, wall, run["steps"], run["residual"],
                *(run["steady"] or (None, None)), *(figures["steady"] or (None, None)))
 
 
 def _run(model, mode: str, progress: Callable[[float], None]) -> dict:
-    """Run the model by simulate or by the co-simulation; its status, message, steps (exchanges), relative energy
-    residual and last period's (omega_m, delta) when steady. Refusals raise SceneError."""
+    """Run the model by simulate or by the co-simulation; its status, message, end [s], steps (exchanges), relative
+    energy residual and last period's (omega_m, delta) when steady. Refusals raise SceneError."""
     from mech_regulator.analysis import analyse_steady_state, energy_balance
     from mech_regulator.scene import SceneError
 
@@ -116,7 +118,7 @@ def _run(model, mode: str, progress: Callable[[float], None]) -> dict:
         status, message = cosimulation_ending(run)
     steady = analyse_steady_state(model, trajectory) if trajectory.t_end > trajectory.t_start else None
     last = steady.last if steady is not None and steady.steady else None
-    return {"status": status, "message": message, "steps": steps, "residual": residual,
+    return {"status": status, "message": message, "t_end": trajectory.t_end, "steps": steps, "residual": residual,
             "steady": (last.omega_m, last.delta) if last is not None else None}
 
 
