@@ -8,10 +8,17 @@ import sys
 from pathlib import Path
 
 import yaml
-
-from mech_regulator.bench.first_run import FirstRun, Step, clean_environment, describe_run, main_job_summary, \
-    repository_root, warm_ratio
 from support import SOURCE_TREE, run_cli
+
+from mech_regulator.bench.first_run import (
+    FirstRun,
+    Step,
+    clean_environment,
+    describe_run,
+    main_job_summary,
+    repository_root,
+    warm_ratio,
+)
 
 
 def test_dry_run_prints_each_step_and_its_command_and_makes_nothing(capsys, tmp_path):

@@ -38,7 +38,8 @@ def after_main(*argv: str) -> str:
 
 @pytest.mark.parametrize("argv", [("--help",), ("simulate", "--help"), ("sweep", "--help"), ("flywheel", "--help"),
                                   ("bench", "speed", "--help"), ("bench", "startup", "--help"), ("bench", "soak", "--help"),
-                                  ("bench", "first-run", "--help"), ("run", "--help"), ("simulate", "lathe", "--no-such-option")],
+                                  ("bench", "first-run", "--help"), ("bench", "long", "--help"),
+                                  ("run", "--help"), ("simulate", "lathe", "--no-such-option")],
                          ids=lambda argv: " ".join(argv))
 def test_the_parser_loads_no_heavy_library(argv):
     assert modules_after(after_main(*argv)) == []

@@ -119,7 +119,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
     child process (this module's main, which takes the lock, waiting for the other's compile, then loads it)."""
     import fcntl
 
-    from mech_regulator.solvers.compiled import warm
+    from mech_regulator.solvers.compiled import locks, warm
 
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
     children = []
@@ -132,7 +132,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
     lines = []
     warm.compile_before_the_run("RK4", lines.append)
     assert lines[0].startswith("compiling the fast path's RK4 stepper (once, about 50 s"), lines
-    with open(tmp_path / warm.LOCK_NAME, "a") as other:   # another process's background compile
+    with open(tmp_path / locks.LOCK_NAME, "a") as other:   # another process's background compile
         fcntl.flock(other, fcntl.LOCK_EX)
         warm.compile_before_the_run("RK4", lines.append)
     assert lines[2].startswith("waiting for the fast path's RK4 stepper that another process is compiling"), lines
@@ -146,7 +146,7 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
     lock nor the background compile's."""
     import fcntl
 
-    from mech_regulator.solvers.compiled import integrators, warm
+    from mech_regulator.solvers.compiled import integrators, locks
 
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
 
@@ -162,7 +162,7 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
 
     def compiling(signature, cache):   # numba's njit, looking at the locks instead of compiling
         def compile_(function):
-            seen.append([held(name) for name in ("compiling-RK4.lock", "compiling-DOP853.lock", warm.LOCK_NAME)])
+            seen.append([held(name) for name in ("compiling-RK4.lock", "compiling-DOP853.lock", locks.LOCK_NAME)])
             return function
         return compile_
 

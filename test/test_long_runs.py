@@ -15,11 +15,16 @@ import math
 
 import numpy as np
 import pytest
-from support import model_of
+from support import model_of, run_cli
 from test_compiled_path import shortened
 
+from mech_regulator.analysis import load_response
 from mech_regulator.analysis.energy import step_edges
-from mech_regulator.solvers import simulate, time_domain
+from mech_regulator.analysis.load_response import cycle_mean_speed
+from mech_regulator.cli import main as cli_main
+from mech_regulator.scene.limits import MAX_STEPS
+from mech_regulator.solvers import simulate, step_limit_refusal, time_domain
+from mech_regulator.solvers import trajectory as trajectory_module
 from mech_regulator.solvers.compiled import run
 from mech_regulator.solvers.time_domain import MAX_RESTARTS_WITHOUT_PROGRESS, turns_and_phase
 
@@ -172,3 +177,59 @@ def test_turns_and_phase_split_the_angle_into_whole_periods_and_the_rest(phi, pe
     assert isinstance(turns, int)
     assert 0.0 <= phase < period
     assert turns * period + phase == pytest.approx(phi, rel=0.0, abs=2 * math.ulp(phi or 1.0))
+
+
+def test_a_run_the_step_limit_cannot_finish_is_refused_before_it_starts(capsys):
+    """RK45 on engine_direct takes some 1 500 steps a second: 10 000 s would stop at MAX_STEPS after some 6 400 s.
+    Its first second, probed, says so at once: exit code 2, the key, the value, the estimate and the limit."""
+    code, out, err = run_cli(capsys, "simulate", "engine_direct", "--set", "scenario.duration=10000", "--set",
+                             "solver.method=RK45", "--set", "solver.path=reference", "--quiet")
+    assert code == 2 and out == "", (out, err)
+    assert "scenario.duration = 10000 s: solver.method = RK45 took " in err and "steps over the run's first 1 s" in err
+    assert f"beyond the limit of {MAX_STEPS:g} steps of one run; expected scenario.duration <= " in err, err
+    estimate = float(err.split("so some ")[1].split(" steps")[0])
+    assert MAX_STEPS < estimate < 3 * MAX_STEPS, err
+
+
+def test_an_rk4_run_whose_restarts_pass_the_step_limit_is_refused_before_it_starts():
+    """The lathe with RK4's step of 1e-4 s for 1000 s: duration / step is the limit itself, but every switch of its
+    cutting adds a step (it stopped at t = 999.47 s after 1e7 steps). Its first second, probed, says so at once."""
+    reason = step_limit_refusal(model_of(shortened("lathe", 1000.0, solver__path="fast", solver__method="RK4",
+                                                   solver__step=1e-4)))
+    assert reason.startswith("scenario.duration = 1000 s: solver.method = RK4 took 100"), reason
+    assert "beyond the limit of 1e+07 steps of one run; expected scenario.duration <= 99" in reason, reason
+    assert "s, or a longer solver.step (docs/scenes.md, Limits)" in reason, reason
+
+
+def test_a_long_run_within_the_step_limit_is_not_refused():
+    """DOP853 on engine_direct takes some 700 steps a second: its first second, probed, finds 10 000 s within the
+    limit (the run of docs/scenes.md, Limits, 6.9 million steps)."""
+    model = model_of(shortened("engine_direct", 10_000.0, solver__path="fast"))
+    assert step_limit_refusal(model) is None
+
+
+def test_a_long_runs_outputs_are_worked_out_in_chunks_with_the_same_numbers(tmp_path, capsys, monkeypatch):
+    """Memory bounded however long the run (docs/scenes.md, Limits): the CSV is written SAMPLE_CHUNK samples at a
+    time, a Trajectory evaluates EVALUATION_CHUNK times at a time and the cycle-mean speed CYCLE_CHUNK times at a
+    time. Made tiny here, they give the rows and states they give whole, and the cycle-mean speed to the grid's
+    interpolation error."""
+    arguments = ["simulate", "lathe", "--set", "solver.path=reference", "--set", "scenario.duration=1.0", "--quiet"]
+    whole, chunked = tmp_path / "whole.csv", tmp_path / "chunked.csv"
+    assert run_cli(capsys, *arguments, "--out", str(whole))[0] == 0
+    monkeypatch.setattr(cli_main, "SAMPLE_CHUNK", 7)
+    assert run_cli(capsys, *arguments, "--out", str(chunked))[0] == 0
+    rows = whole.read_text().splitlines()
+    assert len(rows) > 100 and rows[0].startswith("t,phi,omega")
+    assert chunked.read_text().splitlines() == rows
+
+    model = model_of(shortened("lathe", 1.0, solver__path="reference"))
+    trajectory = simulate(model)
+    times = np.linspace(0.0, 1.0, 1001)
+    states, means = trajectory(times), cycle_mean_speed(model, trajectory, times)
+    monkeypatch.setattr(trajectory_module, "EVALUATION_CHUNK", 13)
+    monkeypatch.setattr(load_response, "CYCLE_CHUNK", 17)
+    np.testing.assert_array_equal(trajectory(times), states)
+    chunked_means = cycle_mean_speed(model, trajectory, times)
+    assert np.isnan(means[0]) and np.array_equal(np.isnan(chunked_means), np.isnan(means))
+    assert np.count_nonzero(np.isfinite(means)) > 500
+    np.testing.assert_allclose(chunked_means, means, rtol=1e-7)

@@ -8,7 +8,6 @@ import types
 from pathlib import Path
 
 import pytest
-
 from conftest import PHYSICS_MODULES, mark_physics
 
 TESTS = Path(__file__).resolve().parent

@@ -22,6 +22,7 @@ from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 
 GAUSS_NODES, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(4)
+BALANCE_CHUNK_STEPS = 50_000  # solver steps whose works energy_balance evaluates at once (some 100 MB of columns)
 
 
 @dataclass(frozen=True)
@@ -40,13 +41,18 @@ def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance
     """The works [J] of the moments over the run, each the integral of its power (`powers`) by 4-point
     Gauss-Legendre quadrature on every solver step (step_edges: the dense output is one polynomial per step, so the
     quadrature's error stays far below the solver's), against the change of the stored energy between the run's
-    ends [J]."""
+    ends [J]. The steps are taken BALANCE_CHUNK_STEPS at a time, so that its memory does not grow with the run's
+    steps (a 10 000-s run of an engine takes millions)."""
     edges = step_edges(trajectory)
-    left, width = edges[:-1], np.diff(edges)
-    nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
-    weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
-    columns = model.columns(nodes, trajectory(nodes))
-    works = {name: float(np.sum(weights * power)) for name, power in powers(model, columns).items()}
+    works: dict[str, float] = {}
+    for first in range(0, max(edges.size - 1, 1), BALANCE_CHUNK_STEPS):
+        chunk = edges[first:first + BALANCE_CHUNK_STEPS + 1]
+        left, width = chunk[:-1], np.diff(chunk)
+        nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
+        weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
+        columns = model.columns(nodes, trajectory(nodes))
+        for name, power in powers(model, columns).items():
+            works[name] = works.get(name, 0.0) + float(np.sum(weights * power))
     ends = model.columns(np.array([edges[0], edges[-1]]), trajectory(np.array([edges[0], edges[-1]])))
     stored = ends["E_kinetic"] + ends.get("E_elastic", 0.0)
     delta_kinetic = float(stored[1] - stored[0])

@@ -20,23 +20,43 @@ from mech_regulator.solvers import Trajectory
 
 THROTTLE_LIMIT = 1e-9  # a throttle this close to 0 or 1 counts as saturated
 GRID_PER_CYCLE = 400  # samples per dynamic period for reading the time a cycle took
+CYCLE_CHUNK = 100_000  # times whose cycle-mean speed is worked out at once (its grid covers their span only)
+MAX_RESPONSE_SAMPLES = 1_000_000  # samples of a load change's window at most: its sample rate, fewer for a window
+# longer than 500 s at 2000 Hz (the cycle-mean speed is smooth within a cycle), so memory stays bounded
 
 
 def cycle_mean_speed(model: MachineModel, trajectory: Trajectory, times: np.ndarray) -> np.ndarray:
     """Cycle-mean crank speed [rad/s] at each time: Phi / (t - t(phi(t) - Phi)), where t(phi) is read
     from the run sampled at GRID_PER_CYCLE points per dynamic period; NaN during the first cycle. For
-    a machine with nothing periodic in phi, omega(t)."""
-    states = trajectory(times)
+    a machine with nothing periodic in phi, omega(t). The times are taken CYCLE_CHUNK at a time, each chunk's grid
+    from a dynamic period before its first time (_period_before) to its last, so that memory does not grow with the
+    run."""
     if not is_periodic(model):
-        return states[1]
+        return trajectory(times)[1]
     period = model.dynamic_period()
-    start, end = trajectory.t_start, float(times[-1])
-    turns = abs(trajectory(end)[0] - trajectory(start)[0]) / period
-    grid = np.linspace(start, end, max(2000, int(GRID_PER_CYCLE * turns)))
-    phi = np.maximum.accumulate(trajectory(grid)[0])  # the angle of a turning crank; flat where it stops
-    earlier = np.interp(states[0] - period, phi, grid, left=math.nan)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return period / (times - earlier)
+    speed = np.empty(np.size(times))
+    for first in range(0, speed.size, CYCLE_CHUNK):
+        chunk = np.asarray(times[first:first + CYCLE_CHUNK])
+        start, end = _period_before(trajectory, float(chunk.min()), period), float(chunk.max())
+        turns = abs(trajectory(end)[0] - trajectory(start)[0]) / period
+        grid = np.linspace(start, end, max(2000, int(GRID_PER_CYCLE * turns)))
+        phi = np.maximum.accumulate(trajectory(grid)[0])  # the angle of a turning crank; flat where it stops
+        earlier = np.interp(trajectory(chunk)[0] - period, phi, grid, left=math.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            speed[first:first + CYCLE_CHUNK] = period / (chunk - earlier)
+    return speed
+
+
+def _period_before(trajectory: Trajectory, t: float, period: float) -> float:
+    """A time [s] at which the crank was at least `period` [rad] behind its angle at t [s] (spans back from t
+    doubled from the time a period takes at t's speed), or the run's start when it never was."""
+    phi, omega = trajectory(t)[:2]
+    span = period / max(abs(omega), 1e-12)
+    while t - span > trajectory.t_start:
+        if trajectory(t - span)[0] <= phi - period:
+            return t - span
+        span *= 2.0
+    return trajectory.t_start
 
 
 @dataclass(frozen=True)
@@ -80,7 +100,7 @@ def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: flo
         end = min(events[index + 1].time if index + 1 < len(events) else scenario.duration, trajectory.t_end)
         if end <= start:
             break
-        times = np.linspace(start, end, max(int((end - start) * sample_rate), 50) + 1)
+        times = np.linspace(start, end, min(max(int((end - start) * sample_rate), 50), MAX_RESPONSE_SAMPLES) + 1)
         speed = cycle_mean_speed(model, trajectory, times)
         if math.isnan(speed[0]):   # within the first cycle: no speed before the change to measure from
             continue

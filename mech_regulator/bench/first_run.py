@@ -26,8 +26,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 DROPPED_PREFIXES = ("MECH_REGULATOR_", "NUMBA_", "PIP_", "XDG_")
 DROPPED_VARIABLES = ("VIRTUAL_ENV", "PYTHONPATH", "PYTHONHOME", "CONDA_PREFIX")

@@ -400,7 +400,7 @@ def _wait_for_background_compile(cache: str, report: Callable[[str], None]) -> N
     """Wait until the background process compiling the stepper that a cold fast run started (it ran on the
     reference path meanwhile: solvers/compiled/warm.py) has ended — it holds the lock in the cache folder — so that
     it neither slows the runs measured next nor leaves the warm fast runs on the reference path."""
-    from mech_regulator.solvers.compiled.warm import LOCK_NAME
+    from mech_regulator.solvers.compiled.locks import LOCK_NAME
 
     lock = Path(cache) / LOCK_NAME
     if lock.exists():

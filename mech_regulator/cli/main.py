@@ -15,9 +15,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from mech_regulator import __version__
+from mech_regulator.cli.bench_long import add_bench_long_command
 from mech_regulator.cli.bench_soak import add_bench_soak_command
-from mech_regulator.cli.bench_speed import (add_bench_first_run_command, add_bench_speed_command,
-                                             add_bench_startup_command)
+from mech_regulator.cli.bench_speed import (
+    add_bench_first_run_command,
+    add_bench_speed_command,
+    add_bench_startup_command,
+)
 from mech_regulator.cli.flywheel import add_flywheel_command
 from mech_regulator.cli.report import note, terminal_text
 from mech_regulator.cli.start import STARTED
@@ -41,6 +45,7 @@ if TYPE_CHECKING:
 # pydantic, matplotlib, rerun) inside its function. test/test_cli_startup.py checks it.
 
 EXIT_BAD_INPUT = 2
+SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and writes at once (_sample_columns)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -200,6 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_bench_startup_command(benchmarks)
     add_bench_first_run_command(benchmarks)
     add_bench_soak_command(benchmarks)
+    add_bench_long_command(benchmarks)
     return parser
 
 
@@ -300,6 +306,10 @@ def _bench(args) -> int:
         from mech_regulator.cli.bench_soak import run_bench_soak
 
         return run_bench_soak(args)
+    if args.benchmark == "long":
+        from mech_regulator.cli.bench_long import run_bench_long
+
+        return run_bench_long(args)
     return _bench_accuracy(args)
 
 
@@ -345,7 +355,7 @@ def _simulate(scene, args) -> int:
     if not trajectory.interpolants:
         args.out = args.plot = args.record = None  # nothing to write
     outputs = OutputWriter(summary)
-    outputs.write("csv", args.out, lambda path: write_csv(path, model.columns(*_samples(model, trajectory))))
+    outputs.write("csv", args.out, lambda path: write_csv(path, _sample_columns(model, trajectory)))
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_run
 
@@ -688,6 +698,15 @@ def _bench_accuracy(args) -> int:
     print(f"wrote {args.out}: runs.csv, README.md, work_precision_<scene>.png, tolerance_proportionality.png, "
           f"work_precision.rrd ({time.monotonic() - start:.0f} s)")
     return 0
+
+
+def _sample_columns(model, trajectory):
+    """The output columns at the scene's sample rate, SAMPLE_CHUNK samples at a time (a generator: a long run's CSV
+    is written without all its rows in memory)."""
+    times = trajectory.samples(model.scene.solver.sample_rate)
+    for first in range(0, times.size, SAMPLE_CHUNK):
+        chunk = times[first:first + SAMPLE_CHUNK]
+        yield model.columns(chunk, trajectory(chunk))
 
 
 def _samples(model, trajectory) -> tuple[np.ndarray, np.ndarray]:

@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 from mech_regulator.errors import EXIT_INACCURATE, EXIT_RUN_FAILED
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     import numpy as np
 
     from mech_regulator.model import MachineModel
@@ -510,13 +512,16 @@ def _duration(seconds: float) -> str:
     return f"{minutes // 60} h {minutes % 60:02d} min"
 
 
-def write_csv(path, columns: dict[str, np.ndarray], digits: int = 12) -> None:
+def write_csv(path, columns: dict[str, np.ndarray] | Iterable[dict[str, np.ndarray]], digits: int = 12) -> None:
     """Write output columns as CSV with a header line (digits significant digits; 17 round-trips a double
-    exactly)."""
+    exactly). columns: a dict of equal-length columns, or an iterable of such dicts whose rows follow one another
+    (the header from the first; memory then holds one at a time)."""
     import numpy as np
 
-    np.savetxt(path, np.column_stack(list(columns.values())), delimiter=",", header=",".join(columns), comments="",
-               fmt=f"%.{digits}g")
+    with open(path, "w") as file:
+        for index, chunk in enumerate([columns] if isinstance(columns, dict) else columns):
+            np.savetxt(file, np.column_stack(list(chunk.values())), delimiter=",",
+                       header=",".join(chunk) if index == 0 else "", comments="", fmt=f"%.{digits}g")
 
 
 def format_engine(report: dict) -> str:

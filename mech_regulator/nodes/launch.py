@@ -260,10 +260,10 @@ def _remember_interrupt(received: list[int], signal_number, frame) -> None:
 
 
 def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
-            quiet: bool, label: str, started: float) -> None:
+            quiet: bool, label: str, started: float, stall_report: float = STALL_REPORT) -> None:
     """Show the machine's progress (its /diagnostics sim_time; `label` names the work; `started`: the command's start,
     time.monotonic() [s], from which its start-up counts) until its process ends, or until another node fails first
-    (the launcher then stops the others). A machine whose simulated time has not advanced for STALL_REPORT s of wall
+    (the launcher then stops the others). A machine whose simulated time has not advanced for stall_report s of wall
     time (paused from outside, or stuck) is reported once on stderr, with the time it stands at, and again when it
     goes on."""
     machine = processes["machine"]
@@ -297,10 +297,10 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)
-                if not advanced["reported"] and time.monotonic() - advanced["at"] > STALL_REPORT:
+                if not advanced["reported"] and time.monotonic() - advanced["at"] > stall_report:
                     advanced["reported"] = True
                     print(f"\nmech-regulator: the machine has not advanced from t = {max(advanced['sim_time'], 0.0):.6g} "
-                          f"s for {STALL_REPORT:g} s of wall time (paused through its ~/pause service, or stuck); "
+                          f"s for {stall_report:g} s of wall time (paused through its ~/pause service, or stuck); "
                           "Ctrl-C ends the run with its summary", file=sys.stderr)
                 ended = [name for name, process in processes.items() if process.poll() not in (None, 0)]
                 if ended and machine.poll() is None:

@@ -35,6 +35,9 @@ MAX_MAGNITUDE = 1e15  # any number's magnitude, in its key's unit (SI): beyond e
 MAX_DURATION = 1e7  # scenario.duration [s] (115 days), as `mech-regulator run --duration`
 MAX_STEPS = 10_000_000  # steps of one run (RK4 or the energy method worked out before the run; any method, and the
 # exchanges of a co-simulation, counted while it runs): ~10 s on the fast path, minutes on the reference path
+LONG_RUN = 100.0  # [s]: an adaptive method's run longer than this is probed before it starts (solvers.simulate)
+PROBE_DURATION = 1.0  # [s] of the run's start the probe steps; its steps, at its rate, over the duration are the
+# estimate of the run's steps (the probe costs at most a hundredth of the run)
 MAX_SAMPLES = 20_000_000  # output samples of a run, duration x solver.sample_rate: rows of the CSV (~4 GB), a few GB
 # of memory while they are written
 MAX_SPEED = 1e6  # [rad/s] (about 10 million rpm): a crank or driven speed beyond it is a blow-up; the run stops there

@@ -3,6 +3,7 @@ method in phi. All return a dense Trajectory with the solver's statistics."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Callable
 
@@ -21,10 +22,21 @@ def simulate(model: MachineModel, progress: Progress | None = None) -> Trajector
     auto runs on the reference path here, compiled.runs_compiled, a command resolves it first). An
     RK4 step outside the stability region of the scene's coupling, an explicit adaptive method that stability alone
     would hold to more steps than limits.MAX_STEPS, and an energy method's step that would take more, are refused
-    with a SceneError (advice.py)."""
+    with a SceneError (advice.py); so is a long run whose start, probed, takes steps at a rate that would pass
+    MAX_STEPS (step_limit_refusal; a probe the user interrupted is returned: the run's start)."""
     reason = rk4_stability_refusal(model) or stiffness_refusal(model) or energy_step_refusal(model)
     if reason is not None:
         raise SceneError(reason)
+    probed = step_limit_refusal(model)
+    if isinstance(probed, Trajectory):
+        return probed
+    if probed is not None:
+        raise SceneError(probed)
+    return _integrate(model, progress)
+
+
+def _integrate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
+    """The run of the scene's scenario on its path with its method (simulate, without the refusals)."""
     if runs_compiled(model.scene.solver):
         from mech_regulator.solvers.compiled.run import integrate_compiled
 
@@ -102,4 +114,35 @@ def on_path(model: MachineModel, path: str) -> MachineModel:
     return build_model(model.scene.model_copy(update={"solver": solver}))
 
 
-__all__ = ["SolverStats", "Trajectory", "auto_path", "on_path", "on_path_for_a_command", "simulate"]
+def step_limit_refusal(model: MachineModel) -> str | Trajectory | None:
+    """Why a run longer than limits.LONG_RUN [s] would pass limits.MAX_STEPS, worked out before it starts: its first
+    limits.PROBE_DURATION s are stepped as the run steps them (same path, method and settings), and the probe's steps
+    at its rate over the whole duration are the estimate (a machine at work repeats its cycle, so its steps come at a
+    steady rate; a run that speeds up later may still stop at the limit, failed). Every method: an adaptive one's
+    steps are known only so, and RK4's and the energy method's (limits.run_refusals, advice.energy_step_refusal)
+    grow by a step at each restart on a switch. None when the run fits or is short; the probe's trajectory when the
+    user interrupted it."""
+    from mech_regulator.scene.limits import LONG_RUN, MAX_STEPS, PROBE_DURATION
+
+    scene = model.scene
+    duration, method = scene.scenario.duration, scene.solver.method
+    if duration <= LONG_RUN:
+        return None
+    scenario = scene.scenario.model_copy(update={"duration": PROBE_DURATION})
+    probe = _integrate(dataclasses.replace(model, scene=scene.model_copy(update={"scenario": scenario})))
+    if probe.status == "interrupted":
+        return probe
+    steps = probe.stats.steps * duration / PROBE_DURATION
+    if probe.status != "complete" or steps <= MAX_STEPS:
+        return None  # (a probe that failed: the run fails the same way, and says why)
+    longest = MAX_STEPS * PROBE_DURATION / probe.stats.steps
+    fixes = {"RK4": "a longer solver.step", "energy": "a longer solver.phi_step_deg"}.get(method, (
+        "" if method == "DOP853" else "a method that takes longer steps (DOP853), or ") + "a looser solver.rtol")
+    return (f"scenario.duration = {duration:g} s: solver.method = {method} took {probe.stats.steps} steps over the "
+            f"run's first {PROBE_DURATION:g} s, so some {steps:.4g} steps over {duration:g} s, beyond the limit of "
+            f"{MAX_STEPS:g} steps of one run; expected scenario.duration <= {longest:.3g} s, or {fixes} (docs/scenes.md, "
+            "Limits)")
+
+
+__all__ = ["SolverStats", "Trajectory", "auto_path", "on_path", "on_path_for_a_command", "simulate",
+           "step_limit_refusal"]

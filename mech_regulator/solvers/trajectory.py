@@ -9,6 +9,8 @@ import numpy as np
 from scipy.integrate import OdeSolution
 
 Progress = Callable[[float], None]
+EVALUATION_CHUNK = 100_000  # times a Trajectory evaluates at once: its temporaries (each time's step coefficients,
+# some 0.2 kB) stay bounded however many times it is asked for
 
 
 @dataclass
@@ -89,9 +91,18 @@ class Trajectory:
         return self.piece_edges[-1] if self.piece_edges else self.t_start
 
     def __call__(self, t: float | np.ndarray) -> np.ndarray:
-        """State at t: shape (n_states,) for a scalar, (n_states, n) for an array of times in [t_start, t_end]."""
+        """State at t: shape (n_states,) for a scalar, (n_states, n) for an array of times in [t_start, t_end]
+        (EVALUATION_CHUNK of them at a time)."""
         if not self.interpolants:
             return self._start_only(t)
+        if np.ndim(t) == 1 and np.size(t) > EVALUATION_CHUNK:
+            t = np.asarray(t)
+            first = self(t[:EVALUATION_CHUNK])
+            states = np.empty((first.shape[0], t.size))
+            states[:, :EVALUATION_CHUNK] = first
+            for start in range(EVALUATION_CHUNK, t.size, EVALUATION_CHUNK):
+                states[:, start:start + EVALUATION_CHUNK] = self(t[start:start + EVALUATION_CHUNK])
+            return states
         if len(self.interpolants) == 1:  # what scipy's OdeSolution would call, without its sorting and grouping
             return self.interpolants[0](np.asarray(t))
         if self._solution is None:

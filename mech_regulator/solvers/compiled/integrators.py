@@ -118,6 +118,7 @@ from scipy.integrate import DOP853, RK45, DenseOutput
 from scipy.integrate._ivp import dop853_coefficients
 
 from mech_regulator.scene.limits import MAX_SPEED
+from mech_regulator.solvers.compiled.locks import method_lock
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, REACTIONS_TYPE, RHS_TYPE
 from mech_regulator.solvers.time_domain import (
     GUARD_NODE_FRACTIONS,
@@ -996,10 +997,8 @@ def stepper(method: str):
     """The compiled stepper of a method ('RK45', 'DOP853', 'Rosenbrock23', 'RK4'; call it as the module docstring
     says): compiled with its one explicit signature when first asked for, or loaded from numba's disk cache, so a
     process compiles or loads only the methods it runs (some 50 s of CPU each to compile on a fresh machine: warm.py).
-    Under the method's lock (warm.method_lock): a process that finds another compiling the same stepper waits and then
+    Under the method's lock (locks.method_lock): a process that finds another compiling the same stepper waits and then
     loads it, rather than compiling it a second time beside it."""
-    from mech_regulator.solvers.compiled.warm import method_lock
-
     function, signature = _STEPPERS[method]
     with method_lock(method):
         return njit(signature, cache=True)(function)

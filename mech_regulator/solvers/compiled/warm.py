@@ -21,18 +21,16 @@ when none) under that lock: what the background process does.
 
 from __future__ import annotations
 
-import contextlib
 import fcntl
 import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator
-from pathlib import Path
+from collections.abc import Callable, Iterable
 
 from mech_regulator.solvers.compiled import FAST_METHODS
+from mech_regulator.solvers.compiled.locks import lock_path
 
-LOCK_NAME = "compiling.lock"
 LOCK_VARIABLE = "MECH_REGULATOR_COMPILE_LOCK_FD"  # the lock's descriptor handed to the background process
 COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on a busy one"   # (docstring)
 
@@ -61,29 +59,12 @@ def compile_steppers(methods: Iterable[str], report: Callable[[str], None] = lam
         report(f"  {method} ready in {time.perf_counter() - started:.1f} s")
 
 
-def _lock_path() -> Path:
-    from mech_regulator.solvers.compiled.codegen import cache_folder
-
-    return cache_folder() / LOCK_NAME
-
-
-@contextlib.contextmanager
-def method_lock(method: str) -> Iterator[None]:
-    """Hold the lock of `method`'s stepper (compiling-METHOD.lock in the cache folder) while compiling or loading it
-    (integrators.stepper): one process at a time, so that two (two commands, two test workers) never compile the
-    same stepper side by side; the other one waits and loads it from numba's disk cache. Another method's compile does
-    not hold it up."""
-    with open(_lock_path().with_name(f"compiling-{method}.lock"), "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        yield
-
-
 def compile_before_the_run(method: str, report: Callable[[str], None]) -> None:
     """Compile the stepper of `method` before a run, saying so with its estimate and then how long it took: in a
     child process (this module's main, under the lock: a compile another process has under way is waited for, said
     too, and then loaded), so that the compile's memory stays out of this process — the main job's nodes are forked
     from it — and the run that follows is a warm run. Raises RuntimeError with the child's output if it fails."""
-    with open(_lock_path(), "a") as handle:
+    with open(lock_path(), "a") as handle:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             busy = False
@@ -104,7 +85,7 @@ def compile_in_background(methods: Iterable[str]) -> bool:
     """Start a detached process compiling the steppers of `methods` unless one is compiling already; returns whether
     one was started. The lock is taken here and handed to the process (an inherited descriptor), so that a second
     command right after this one sees it held. Its output goes to compiling.log in the cache folder."""
-    lock = _lock_path()
+    lock = lock_path()
     with open(lock, "a") as handle:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -126,7 +107,7 @@ def main(argv: list[str]) -> int:
         print(f"unknown fast-path method(s) {unknown}; expected some of {', '.join(FAST_METHODS)}", file=sys.stderr)
         return 2
     inherited = os.environ.pop(LOCK_VARIABLE, None)
-    with (os.fdopen(int(inherited), "a") if inherited else open(_lock_path(), "a")) as handle:
+    with (os.fdopen(int(inherited), "a") if inherited else open(lock_path(), "a")) as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         compile_steppers(methods, lambda line: print(line, flush=True))
     return 0

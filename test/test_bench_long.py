@@ -1,0 +1,26 @@
+"""`mech-regulator bench long` (bench/long.py): a row per run of the matrix, parsed; its options checked before
+anything runs. A short duration here: what the rows mean is in docs/hard_cases.md, "Long runs"."""
+
+from __future__ import annotations
+
+from support import run_cli
+
+
+def test_bench_long_prints_a_row_per_run_with_its_figures(capsys):
+    code, out, err = run_cli(capsys, "bench", "long", "--scenes", "lathe", "--paths", "reference", "--methods",
+                             "DOP853,Radau", "--modes", "simulate", "--duration", "2")
+    assert code == 0, err
+    header, rule, *rows = out.splitlines()
+    assert header.startswith("| scene | path | method | mode | status (2 s) |") and rule.startswith("|---|")
+    assert [row.split(" | ")[:5] for row in rows] == [["| lathe", "reference", method, "simulate", "complete"]
+                                                      for method in ("DOP853", "Radau")]
+    for row in rows:
+        cells = row.strip("| ").split(" | ")
+        assert int(cells[6]) > 10 and abs(float(cells[7])) < 1e-6, row  # steps, energy residual
+        assert cells[8] != "-" and abs(float(cells[9])) < 1e-3, row  # omega_m against the scene's own duration
+
+
+def test_bench_long_refuses_an_unknown_name_before_anything_runs(capsys):
+    code, out, err = run_cli(capsys, "bench", "long", "--methods", "DOP853,Euler")
+    assert code == 2 and out == ""
+    assert "--methods 'DOP853,Euler': Euler is not one of DOP853, RK45, RK4, Radau, energy" in err
