@@ -52,6 +52,7 @@ from test_recording import events
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
 from mech_regulator.nodes.launch import viewer_command
+from mech_regulator.nodes.trust import BadMessage
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers import simulate
@@ -487,6 +488,40 @@ def test_recorder_summary_of_a_tripped_run(overspeed_run):
         f"overspeed trip at t = {run.tripped_at:.6g} s: throttle closed from then on"
     last_event = events(output)[-1]
     assert last_event[:2] == (to_nanoseconds(0.4), "WARN") and last_event[2].startswith("end: tripped at t = 0.400 s")
+
+
+def _governor_batch(times_ns: list[int], throttle: float) -> JointState:
+    """A governor/state batch (common.Batch) of the constant-inertia scene's governor at times_ns, one group each."""
+    message = JointState()
+    for when in times_ns:
+        for name, position, velocity in (("stamp", float(when), math.nan), ("sleeve", 0.01, 0.0), ("arm", 0.3, 0.0),
+                                         ("throttle", throttle, 0.0)):
+            message.name.append(name)
+            message.position.append(position)
+            message.velocity.append(velocity)
+            message.effort.append(math.nan)
+    return message
+
+
+def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
+    # (once a bug: a loaded machine publishes an exchange time again, its governor answers it twice, and the repeat
+    # opening the next batch was recorded again: 1002 throttle samples for 1001 exchanges)
+    from unittest import mock
+
+    from mech_regulator.nodes.recorder import RecorderNode
+
+    recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
+    _, recorder.model = constant_inertia_scene(tmp_path)
+    recorder.recording = mock.Mock()
+    recorder.governor, recorder.machine, recorder.moments = {}, {}, {}
+    recorder.completed, recorder.completed_until = set(), None
+    recorder.on_governor(_governor_batch([0, 2_000_000, 2_000_000], throttle=0.5))  # the repeat in the batch
+    recorder.on_governor(_governor_batch([2_000_000, 4_000_000], throttle=0.25))  # the repeat opening the next
+    recorded = [call.args[0] for call in recorder.recording.add_governor.call_args_list]
+    assert recorded == [0, 2_000_000, 4_000_000]
+    assert list(recorder.governor) == recorded and recorder.governor[2_000_000]["throttle"] == 0.5  # the first answer
+    with pytest.raises(BadMessage, match="out of order"):  # before the newest: refused, as before
+        recorder.on_governor(_governor_batch([2_000_000], throttle=0.5))
 
 
 # -------------------------------------------------------------------------------------------------
