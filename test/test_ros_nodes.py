@@ -51,7 +51,7 @@ from test_recording import events
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
-from mech_regulator.nodes.launch import viewer_command
+from mech_regulator.nodes.launch import DOMAIN_IDS, viewer_command
 from mech_regulator.nodes.trust import BadMessage
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
@@ -646,6 +646,15 @@ class MainJob:
 
     def describe(self) -> str:
         return f"--- launcher (exit {self.process.poll()})\n{self.log[-3000:]}\n--- nodes\n{self.node_log[-3000:]}"
+
+
+def test_run_takes_a_domain_no_other_process_holds():
+    # (once a cause of a failure: `run` without --domain-id took a random domain, one a test held at times)
+    held = next_domain_id()  # held by this process until it ends, as a test's or another run's
+    chosen = subprocess.run([sys.executable, "-c", "import sys; from mech_regulator.nodes.launch import claim_domain; "
+                             "print(claim_domain(int(sys.argv[1])))", str(DOMAIN_IDS.index(held))],
+                            capture_output=True, text=True, timeout=WAIT, check=True)
+    assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
 
 
 def _short_engine_arguments() -> list[str]:
