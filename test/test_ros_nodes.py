@@ -379,8 +379,14 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
                      and probe.node.count_publishers("throttle") >= 1, "the governor node", describe=processes.logs)
     listener = RunListener(probe, governed=False, diagnostics_publishers=1, describe=processes.logs)
     listener.open_gate()  # (a realtime machine waits for no one)
-    processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 1.0,
-                               "exchange_step": 0.005, "throttle_timeout": 0.05, "fail_safe": "close"})
+    # made for a loaded machine (two cores, a tenth of one per process; once failed at 1 x real time and a 0.05 s
+    # timeout): at a quarter of real time with a 0.5 s throttle timeout the governor has 2 s of wall time to answer, so
+    # a late answer does not keep the machine on its fail-safe, nor does a throttle still on its way when the governor
+    # dies end it; the machine waits up to its peer timeout (60 s) for the governor's throttle publisher (not for a
+    # load's: no scenario node here)
+    processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 0.25,
+                               "exchange_step": 0.005, "throttle_timeout": 0.5, "fail_safe": "close",
+                               "peer_timeout": 60.0, "lockstep_inputs": ["throttle"]})
 
     def governed_after(time_ns: int) -> bool:  # the governor's throttle drives the machine at time_ns
         return bool(listener.statuses()) and any(when >= time_ns and values["drive"] > 0.0
