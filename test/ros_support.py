@@ -8,13 +8,11 @@ that only turns a hang into a failure.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import itertools
 import os
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -29,19 +27,21 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
-from mech_regulator.nodes.launch import private_environment, wait_for_a_quiet_graph  # noqa: E402
+from mech_regulator.nodes.launch import (  # noqa: E402
+    DOMAIN_IDS,
+    claim_domain,
+    private_environment,
+    wait_for_a_quiet_graph,
+)
 
 WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a test measures)
 ANSWER_WAIT = 10.0  # [s] of wall time before a service request that got no answer is sent again
 STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
 
-# Domains where no ports collide with the ephemeral range: 1..101 and 215..232. A test run takes
-# consecutive ones from a base derived from its pid, and claims each with a lock file that it holds
-# until it exits, so that two test runs side by side (two pytest processes) never share a domain.
-DOMAIN_IDS = [*range(1, 102), *range(215, 233)]
+# A test run takes consecutive domains (nodes.launch.DOMAIN_IDS) from a base derived from its pid, each claimed with
+# the lock file `run` claims its own with (nodes.launch.claim_domain) and held until the run exits, so that two test
+# runs side by side (two pytest processes, two xdist workers) and `run` without --domain-id never share a domain.
 _domains = itertools.count((os.getpid() * 37) % len(DOMAIN_IDS))
-_claimed: list = []  # the open lock files (closed, and so released, when this process ends)
-LOCK_FOLDER = Path(tempfile.gettempdir()) / "mech_regulator_ros_domains"
 
 # What the test node listens with: reliable, deep enough never to drop a sample of a short run. State
 # streams (joint_states, machine/moments, governor/state) are transient local: the test node gets what
@@ -58,19 +58,8 @@ NANOSECONDS = 1_000_000_000
 
 
 def next_domain_id() -> int:
-    """A ROS domain no other test of this run, nor any other test run on this machine, uses."""
-    LOCK_FOLDER.mkdir(exist_ok=True)
-    for _ in DOMAIN_IDS:
-        domain = DOMAIN_IDS[next(_domains) % len(DOMAIN_IDS)]
-        lock = open(LOCK_FOLDER / f"{domain}.lock", "a")
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:  # another test run has it
-            lock.close()
-            continue
-        _claimed.append(lock)
-        return domain
-    raise RuntimeError(f"every ROS domain is claimed by other test runs (lock files in {LOCK_FOLDER})")
+    """A ROS domain no other test of this run, nor any other test run or `run` on this machine, uses."""
+    return claim_domain(next(_domains))
 
 
 def ros_environment(domain_id: int) -> dict[str, str]:

@@ -9,7 +9,6 @@ in mech_regulator/scene/limits.py and docs/scenes.md ("Limits").
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -426,12 +425,13 @@ def test_the_launcher_quotes_the_reason_of_a_node():
 ])
 def test_a_node_ends_with_a_message_on_a_hostile_scene(tmp_path, parameters, fragments):
     pytest.importorskip("rclpy")
+    from ros_support import next_domain_id, ros_environment
+
     files = {"bomb": plain(tmp_path, BOMB + "machine: {inertia: *9}\nscenario: {duration: 1.0}\n", "bomb.yaml"),
              "slider_only": plain(tmp_path, SLIDER_ONLY, "slider_only.yaml")}
     arguments = [part for parameter in parameters for part in ("-p", parameter.format(**files))]
-    environment = dict(os.environ, ROS_DOMAIN_ID="97", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
     done = subprocess.run([sys.executable, "-m", "mech_regulator.nodes.machine", "--ros-args", *arguments],
-                          capture_output=True, text=True, timeout=120, env=environment)
+                          capture_output=True, text=True, timeout=120, env=ros_environment(next_domain_id()))
     output = done.stdout + done.stderr
     assert done.returncode == 2, output
     assert "Traceback" not in output

@@ -51,7 +51,8 @@ from test_recording import events
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
-from mech_regulator.nodes.launch import viewer_command
+from mech_regulator.nodes.launch import DOMAIN_IDS, viewer_command
+from mech_regulator.nodes.trust import BadMessage
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers import simulate
@@ -378,8 +379,14 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
                      and probe.node.count_publishers("throttle") >= 1, "the governor node", describe=processes.logs)
     listener = RunListener(probe, governed=False, diagnostics_publishers=1, describe=processes.logs)
     listener.open_gate()  # (a realtime machine waits for no one)
-    processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 1.0,
-                               "exchange_step": 0.005, "throttle_timeout": 0.05, "fail_safe": "close"})
+    # made for a loaded machine (two cores, a tenth of one per process; once failed at 1 x real time and a 0.05 s
+    # timeout): at a quarter of real time with a 0.5 s throttle timeout the governor has 2 s of wall time to answer, so
+    # a late answer does not keep the machine on its fail-safe, nor does a throttle still on its way when the governor
+    # dies end it; the machine waits up to its peer timeout (60 s) for the governor's throttle publisher (not for a
+    # load's: no scenario node here)
+    processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 0.25,
+                               "exchange_step": 0.005, "throttle_timeout": 0.5, "fail_safe": "close",
+                               "peer_timeout": 60.0, "lockstep_inputs": ["throttle"]})
 
     def governed_after(time_ns: int) -> bool:  # the governor's throttle drives the machine at time_ns
         return bool(listener.statuses()) and any(when >= time_ns and values["drive"] > 0.0
@@ -487,6 +494,40 @@ def test_recorder_summary_of_a_tripped_run(overspeed_run):
         f"overspeed trip at t = {run.tripped_at:.6g} s: throttle closed from then on"
     last_event = events(output)[-1]
     assert last_event[:2] == (to_nanoseconds(0.4), "WARN") and last_event[2].startswith("end: tripped at t = 0.400 s")
+
+
+def _governor_batch(times_ns: list[int], throttle: float) -> JointState:
+    """A governor/state batch (common.Batch) of the constant-inertia scene's governor at times_ns, one group each."""
+    message = JointState()
+    for when in times_ns:
+        for name, position, velocity in (("stamp", float(when), math.nan), ("sleeve", 0.01, 0.0), ("arm", 0.3, 0.0),
+                                         ("throttle", throttle, 0.0)):
+            message.name.append(name)
+            message.position.append(position)
+            message.velocity.append(velocity)
+            message.effort.append(math.nan)
+    return message
+
+
+def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
+    # (once a bug: a loaded machine publishes an exchange time again, its governor answers it twice, and the repeat
+    # opening the next batch was recorded again: 1002 throttle samples for 1001 exchanges)
+    from unittest import mock
+
+    from mech_regulator.nodes.recorder import RecorderNode
+
+    recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
+    _, recorder.model = constant_inertia_scene(tmp_path)
+    recorder.recording = mock.Mock()
+    recorder.governor, recorder.machine, recorder.moments = {}, {}, {}
+    recorder.completed, recorder.completed_until = set(), None
+    recorder.on_governor(_governor_batch([0, 2_000_000, 2_000_000], throttle=0.5))  # the repeat in the batch
+    recorder.on_governor(_governor_batch([2_000_000, 4_000_000], throttle=0.25))  # the repeat opening the next
+    recorded = [call.args[0] for call in recorder.recording.add_governor.call_args_list]
+    assert recorded == [0, 2_000_000, 4_000_000]
+    assert list(recorder.governor) == recorded and recorder.governor[2_000_000]["throttle"] == 0.5  # the first answer
+    with pytest.raises(BadMessage, match="out of order"):  # before the newest: refused, as before
+        recorder.on_governor(_governor_batch([2_000_000], throttle=0.5))
 
 
 # -------------------------------------------------------------------------------------------------
@@ -611,6 +652,15 @@ class MainJob:
 
     def describe(self) -> str:
         return f"--- launcher (exit {self.process.poll()})\n{self.log[-3000:]}\n--- nodes\n{self.node_log[-3000:]}"
+
+
+def test_run_takes_a_domain_no_other_process_holds():
+    # (once a cause of a failure: `run` without --domain-id took a random domain, one a test held at times)
+    held = next_domain_id()  # held by this process until it ends, as a test's or another run's
+    chosen = subprocess.run([sys.executable, "-c", "import sys; from mech_regulator.nodes.launch import claim_domain; "
+                             "print(claim_domain(int(sys.argv[1])))", str(DOMAIN_IDS.index(held))],
+                            capture_output=True, text=True, timeout=WAIT, check=True)
+    assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
 
 
 def _short_engine_arguments() -> list[str]:

@@ -162,7 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
                           help="lockstep: wall-clock seconds the machine waits for a node and for each answer "
                                "(default 10); a governor silent that long puts it on its fail-safe, an external "
                                "controller ends the run")
-    main_job.add_argument("--domain-id", type=int, help="ROS domain of the run (default: a random one in 1..101)")
+    main_job.add_argument("--domain-id", type=int,
+                          help="ROS domain of the run (default: a random one no other run on this machine holds)")
     main_job.add_argument("--quiet", action="store_true", help="no progress bar")
     schema = commands.add_parser("schema", help="print the JSON Schema of scene files (for editors)")
     schema.add_argument("--format", choices=("json", "markdown"), default="json",

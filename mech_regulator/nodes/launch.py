@@ -12,6 +12,7 @@ from the launcher after it has imported what they all import (NodeProcess), so t
 
 from __future__ import annotations
 
+import fcntl
 import functools
 import gc
 import importlib
@@ -22,6 +23,7 @@ import random
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -41,6 +43,30 @@ GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
 NOTHING_SIMULATED = "interrupted before the nodes were up: nothing was simulated"
+# ROS domains whose ports do not collide with the ephemeral range: 1..101 and 215..232. A process takes one by holding
+# a lock file on it until it ends (claim_domain): `run` without --domain-id, and the test suite for each test.
+DOMAIN_IDS = (*range(1, 102), *range(215, 233))
+DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "mech_regulator_ros_domains"
+_claimed_domains: list = []  # the open lock files of this process (closed, and so released, when it ends)
+
+
+def claim_domain(start: int) -> int:
+    """The first ROS domain of DOMAIN_IDS from index `start` on (going round) that no process on this machine holds,
+    held by this one until it ends (an exclusive lock on DOMAIN_LOCKS/<domain>.lock; a domain this process holds
+    already is skipped too). Raises SceneError when every domain is held."""
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    for offset in range(len(DOMAIN_IDS)):
+        domain = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
+        lock = open(DOMAIN_LOCKS / f"{domain}.lock", "a")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # another process (or this one) holds it
+            lock.close()
+            continue
+        _claimed_domains.append(lock)
+        return domain
+    raise SceneError(f"every ROS domain is taken by other runs on this machine (lock files in {DOMAIN_LOCKS}); "
+                     "expected --domain-id N")
 
 
 def private_environment(domain_id: int) -> dict[str, str]:
@@ -127,7 +153,7 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
-    domain_id = domain_id if domain_id is not None else random.randint(1, 101)
+    domain_id = domain_id if domain_id is not None else claim_domain(random.randrange(len(DOMAIN_IDS)))
     environment = private_environment(domain_id)
     names = node_names(governed)
     trip = f", overspeed trip at {overspeed_trip:g} rad/s" if overspeed_trip > 0.0 else ""

@@ -178,11 +178,7 @@ class RecorderNode(Node):
         needed = ["crank", "drive", "resistance", "external", "net", "load"]
         needed += ["coupling"] if self.model.coupling is not None else []
         needed += ["driven"] if self.model.driven is not None else []
-        groups = batch_groups(message, tuple(needed))
-        newest = next(reversed(self.machine), None)  # (the dict's order is its times')
-        if groups and newest is not None and groups[0][0] < newest:
-            raise BadMessage("out of order", f"machine/moments from {seconds(groups[0][0]):.9g} s after "
-                             f"{seconds(newest):.9g} s")
+        groups = unrecorded(batch_groups(message, tuple(needed)), self.machine, "machine/moments")
         for when, joints in groups:
             checks = [(joints["crank"][0], "crank position [rad]"), (joints["crank"][1], "crank velocity [rad/s]")]
             checks += [(joints[name][2], f"{name} effort [N m]") for name in needed[1:6]]
@@ -216,11 +212,8 @@ class RecorderNode(Node):
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
         pi = self.model.governor.kind == "pi"  # its joints: throttle and integral
         extra = tuple(name for name in ("servo", "feedback_shift") if name in self.model.governor.state_names)
-        groups = batch_groups(message, ("throttle", "integral") if pi else ("sleeve", "arm", "throttle", *extra))
-        newest = next(reversed(self.governor), None)  # (the dict's order is its times')
-        if groups and newest is not None and groups[0][0] < newest:
-            raise BadMessage("out of order", f"governor/state from {seconds(groups[0][0]):.9g} s after "
-                             f"{seconds(newest):.9g} s")
+        groups = unrecorded(batch_groups(message, ("throttle", "integral") if pi else
+                                         ("sleeve", "arm", "throttle", *extra)), self.governor, "governor/state")
         for when, joints in groups:
             values = [joints["integral"][0]] if pi else [*joints["sleeve"][:2], *joints["arm"][:2],
                                                           *(joints[name][0] for name in extra)]
@@ -451,6 +444,22 @@ class RecorderNode(Node):
         self.close()
         if self.write_failures:  # said one by one already; the node ends with exit code 1
             raise OutputError(f"{len(self.write_failures)} output(s) could not be written: {self.write_failures[-1]}")
+
+
+def unrecorded(groups: list[tuple[int, dict]], recorded: dict[int, object], topic: str) -> list[tuple[int, dict]]:
+    """The groups of a batch (common.batch_groups) at exchange times not in `recorded` (a stream's samples by time
+    [ns], in the order of their times), each time once: the machine publishes an exchange time again when no answer
+    came within machine.RESEND_PERIOD (a loaded machine), and its governor then answers that time twice, the repeat in the
+    same batch or opening the next; the first answer is the one recorded. A batch from before the newest time
+    recorded is refused (trust.BadMessage)."""
+    newest = next(reversed(recorded), None)  # (the dict's order is its times')
+    if groups and newest is not None and groups[0][0] < newest:
+        raise BadMessage("out of order", f"{topic} from {seconds(groups[0][0]):.9g} s after {seconds(newest):.9g} s")
+    fresh: list[tuple[int, dict]] = []
+    for when, joints in groups:
+        if when != newest and (not fresh or when != fresh[-1][0]):
+            fresh.append((when, joints))
+    return fresh
 
 
 def write_empty_run(model: MachineModel, path: Path, exchange_step: float,
