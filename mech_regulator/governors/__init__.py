@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -84,7 +85,7 @@ class Governor:
     @property
     def state_names(self) -> tuple[str, ...]:
         """Names of the governor's states in y[2:]."""
-        names = ("arm_angle", "arm_rate")
+        names: tuple[str, ...] = ("arm_angle", "arm_rate")
         if self.kind == "indirect":
             names += ("servo",)
             if self.feedback == "isodromic":
@@ -105,6 +106,7 @@ class Governor:
         """y -> throttle 0..1 of a valve table continued along the piece that holds the sleeve position anchor [m]
         (between two of its breakpoints valve_breaks: smooth in y, the breakpoint met only by restarting on it)."""
         valve, sleeve = self.valve, self.sensor.sleeve
+        assert valve is not None, "held_throttle reads a direct-action governor's valve"
         return lambda y: valve(sleeve(y[ARM]), anchor)
 
     def set_speed(self) -> float:
@@ -325,10 +327,25 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
         feedback_time_constant=feedback.time_constant or math.inf, feedback_reference=reference or 0.0)
 
 
+class _SensorArguments(TypedDict):
+    """The arguments every centrifugal sensor takes (governors.sensor.CentrifugalSensor's and the spring's)."""
+
+    ball_mass: float
+    sleeve_mass: float
+    stiffness: float
+    free_position: float
+    damping: float
+    kinetic_friction: float
+    static_friction: float
+    ratio: float
+    gravity: float
+    stroke: tuple[float, float]
+
+
 def build_sensor(spec: schema.DirectGovernor | schema.IndirectGovernor | schema.HartnellGovernor) -> CentrifugalSensor:
     """The centrifugal sensor of a scene's governor: Hartnell's for type 'hartnell', Porter's otherwise."""
     spring = spec.spring or schema.SleeveSpring(stiffness=0.0)
-    common = dict(ball_mass=spec.ball_mass, sleeve_mass=spec.sleeve_mass, stiffness=spring.stiffness,
+    common = _SensorArguments(ball_mass=spec.ball_mass, sleeve_mass=spec.sleeve_mass, stiffness=spring.stiffness,
                   free_position=spring.free_position, damping=spec.damping, kinetic_friction=spec.friction,
                   static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
                   ratio=spec.ratio, gravity=spec.gravity, stroke=(spec.stroke[0], spec.stroke[1]))
