@@ -32,6 +32,9 @@ from mech_regulator.governors.valve import ValveCharacteristic, build_valve
 from mech_regulator.scene import schema
 
 Mode = tuple[str, str]
+# A machine's mode (model.machine): its governor's Mode, if it has a governor, then its drive train's, if any; None
+# for a machine with neither.
+MachineMode = tuple[str, ...]
 ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5  # indices of the governor's states in the full state vector
 
 
@@ -44,14 +47,14 @@ class Guard:
 
     name: str
     value: Callable[..., float]
-    transition: Callable[..., tuple[Mode, np.ndarray]]
+    transition: Callable[..., tuple[MachineMode | None, np.ndarray]]
     timed: bool = False
 
     def level(self, t: float, y: np.ndarray) -> float:
         """The guard's value at time t [s] and state y."""
         return self.value(t, y) if self.timed else self.value(y)
 
-    def apply(self, t: float, y: np.ndarray) -> tuple[Mode, np.ndarray]:
+    def apply(self, t: float, y: np.ndarray) -> tuple[MachineMode | None, np.ndarray]:
         """The guard's transition at time t [s] from state y: (new mode, state to restart from)."""
         return self.transition(t, y) if self.timed else self.transition(y)
 
@@ -177,16 +180,20 @@ class Governor:
             return "high"
         return "free"
 
-    def derivatives(self, mode: Mode, ideal: bool = False) -> Callable[[np.ndarray], list[float]]:
+    def derivatives(self, mode: Mode | None, ideal: bool = False) -> Callable[[np.ndarray], list[float]]:
         """Time derivatives of the governor's states in a mode, as a function of the full state y.
 
         Sleeve: a' = arm_rate, a'' from the sensor's arm_acceleration with friction +F_k ('up'),
         -F_k ('down') or none ('free'); frozen when stuck or on a stop. Servo: s' = servo_command, 0 on a
         stop; isodromic dashpot: T_i zeta' + zeta = rho T_i s'. ideal: frictionless, no dead band, no
-        speed limit, no stops (the smooth model that is linearised).
+        speed limit, no stops (the smooth model that is linearised); mode None only with ideal.
         """
         sensor = self.sensor
-        sleeve_mode, servo_mode = ("free", "free" if self.kind == "indirect" else "") if ideal else mode
+        if ideal:
+            sleeve_mode, servo_mode = "free", "free" if self.kind == "indirect" else ""
+        else:
+            assert mode is not None, "Governor.derivatives reads a mode unless ideal"
+            sleeve_mode, servo_mode = mode
         friction = {"up": sensor.kinetic_friction, "down": -sensor.kinetic_friction, "free": 0.0}.get(sleeve_mode)
         moving_servo = servo_mode == "free"
         rho, time_constant = self.feedback_gain, self.feedback_time_constant
