@@ -22,7 +22,8 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.statics import OperatingPoint
-from mech_regulator.governors.pi import pi_loop_coefficients
+from mech_regulator.governors import Governor
+from mech_regulator.governors.pi import ElectronicGovernor, pi_loop_coefficients
 from mech_regulator.model import LoadPiece, MachineModel
 
 SHOOTING_TOLERANCE = 1e-8  # the periodic orbit is found when |P(x) - x| is below this, relative to x's scale
@@ -53,10 +54,16 @@ class LinearStability:
     pi_loop: tuple[float, float] | None = None
 
 
+def _governor_of(model: MachineModel) -> Governor | ElectronicGovernor:
+    """The governor of a governed machine (the analyses here need one)."""
+    assert model.governor is not None, "the stability analysis reads a machine with a governor"
+    return model.governor
+
+
 def averaged_rhs(model: MachineModel, external_load: float):
     """The cycle-averaged governed machine x' = F(x), x = [omega, governor states...]:
     omega' = (throttle M_d(omega) + M_c(omega)) / J_m, the governor in its smooth (ideal) form."""
-    governor = model.governor
+    governor = _governor_of(model)
     rates = governor.derivatives(("free", "free"), ideal=True)
     inertia = model.cycle_averages(1.0, external_load)[0]
 
@@ -71,20 +78,21 @@ def averaged_rhs(model: MachineModel, external_load: float):
 def equilibrium_state(model: MachineModel, point: OperatingPoint) -> np.ndarray:
     """The averaged model's state at an operating point: [omega, a, 0, (s, (0))], or for a PI governor [omega, x] with
     the integral part x = throttle - K_p e (governors/pi.py)."""
-    governor = model.governor
-    if governor.kind == "pi":
+    governor = _governor_of(model)
+    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
         error = (governor.set_point - point.speed) / governor.set_point
         return np.array([point.speed, point.throttle - governor.gain * error])
-    x = [point.speed, model.governor.sensor.arm_angle(point.sleeve), 0.0]
-    if model.governor.kind == "indirect":
+    x = [point.speed, governor.sensor.arm_angle(point.sleeve), 0.0]
+    if governor.kind == "indirect":
         x.append(point.servo)
-        if model.governor.feedback == "isodromic":
+        if governor.feedback == "isodromic":
             x.append(0.0)
     return np.array(x)
 
 
 def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStability:
     """Linearise the averaged model at the operating point and analyse its eigenvalues."""
+    governor = _governor_of(model)
     F = averaged_rhs(model, point.external_load)
     x0 = equilibrium_state(model, point)
     scale = _state_scale(model, point, x0.size)
@@ -98,24 +106,24 @@ def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStabil
     dominant = eigenvalues[np.argmax(eigenvalues.real)]
     polynomial = np.real(np.poly(jacobian))
     vyshnegradsky = None
-    if model.governor.kind == "direct" and np.all(polynomial > 0.0):
+    if governor.kind == "direct" and np.all(polynomial > 0.0):
         a2, a1, a0 = polynomial[1:]
         vyshnegradsky = (a2 / a0 ** (1.0 / 3.0), a1 / a0 ** (2.0 / 3.0))
     magnitude = abs(dominant)
-    loop = _pi_loop(model, point) if model.governor.kind == "pi" else None
+    loop = _pi_loop(model, point, governor) if isinstance(governor, ElectronicGovernor) else None
     return LinearStability(
-        state_names=("omega",) + model.governor.state_names, jacobian=jacobian, eigenvalues=eigenvalues,
+        state_names=("omega",) + governor.state_names, jacobian=jacobian, eigenvalues=eigenvalues,
         dominant=complex(dominant), damping_ratio=-dominant.real / magnitude if magnitude > 0 else math.nan,
         period=2.0 * math.pi / abs(dominant.imag) if dominant.imag != 0.0 else math.inf,
         stable=bool(np.all(eigenvalues.real < 0.0)), polynomial=polynomial, vyshnegradsky=vyshnegradsky,
         pi_loop=loop)
 
 
-def _pi_loop(model: MachineModel, point: OperatingPoint) -> tuple[float, float]:
+def _pi_loop(model: MachineModel, point: OperatingPoint, governor: ElectronicGovernor) -> tuple[float, float]:
     """(a1, a0) of the PI loop at an operating point (governors/pi.py pi_loop_coefficients, docs/theory.md §8.10): the
     averaged machine's drive M_d and inertia J_m at the point's speed, its self-regulation D = d(throttle M_d +
     M_c)/d omega at the point's throttle by central differences."""
-    governor, load = model.governor, point.external_load
+    load = point.external_load
     inertia, drive, _ = model.cycle_averages(point.speed, load)
 
     def net(omega: float) -> float:
@@ -131,11 +139,13 @@ def critical_damping(model: MachineModel, point: OperatingPoint, upper: float = 
     """Sleeve damping [N s/m] at which the averaged model's dominant eigenvalue crosses the imaginary
     axis (stable above it), or None if the stability does not change between 0 and `upper` or the governor has no
     sleeve (PI)."""
-    if model.governor.kind == "pi":
+    governor = _governor_of(model)
+    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
         return None
     def growth(damping: float) -> float:
-        sensor = dataclasses.replace(model.governor.sensor, damping=damping)
-        varied = dataclasses.replace(model, governor=dataclasses.replace(model.governor, sensor=sensor))
+        # every CentrifugalSensor is a dataclass (PorterSensor, HartnellSensor); the ABC itself is not one
+        sensor = dataclasses.replace(governor.sensor, damping=damping)  # type: ignore[type-var]
+        varied = dataclasses.replace(model, governor=dataclasses.replace(governor, sensor=sensor))
         return linear_stability(varied, point).dominant.real
 
     if growth(0.0) * growth(upper) > 0.0:
@@ -204,9 +214,10 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
 def _state_scale(model: MachineModel, point: OperatingPoint, size: int) -> np.ndarray:
     """Typical size of each averaged-model state (omega, a, a', s, zeta; a PI governor's omega, x) for difference
     steps and tolerances."""
-    if model.governor.kind == "pi":
+    governor = _governor_of(model)
+    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
         return np.array([max(abs(point.speed), 1.0), 1.0])
-    return np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, model.governor.sensor.stroke[1]])[:size]
+    return np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, governor.sensor.stroke[1]])[:size]
 
 
 def _map_jacobian(cycle, x: np.ndarray, steps: np.ndarray) -> np.ndarray:

@@ -15,6 +15,7 @@ import numpy as np
 from scipy import optimize
 
 from mech_regulator.governors import Governor
+from mech_regulator.governors.pi import ElectronicGovernor
 from mech_regulator.model import MachineModel
 
 
@@ -77,9 +78,11 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
     follows from the machine's own balance at that throttle.
     """
     governor = model.governor
-    if governor.kind == "pi":
+    assert governor is not None, "operating_point reads a machine with a governor"
+    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
         return _pi_operating_point(model, external_load)
     sensor = governor.sensor
+    valve = governor.valve  # throttle(z) for direct action, None for indirect (Governor)
     z_low, z_high = sensor.characteristic_range()
     mean_inertia = model.cycle_averages(sensor.equilibrium_speed(z_low), external_load)[0]
 
@@ -95,19 +98,19 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
                 return OperatingPoint(external_load, omega, z, throttle, servo,
                                       f"{limited}; no steady speed at that throttle", mean_inertia)
             z = sensor.equilibrium_sleeve(omega)
-            if governor.kind == "direct":
-                throttle = governor.valve(z)
+            if valve is not None:
+                throttle = valve(z)
         return OperatingPoint(external_load, omega, z, throttle, servo, limited, mean_inertia)
 
-    if governor.kind == "direct":
+    if valve is not None:
         def balance(z: float) -> float:
-            return surplus(governor.valve(z), sensor.equilibrium_speed(z))
+            return surplus(valve(z), sensor.equilibrium_speed(z))
         if balance(z_high) > 0.0:
-            return point(z_high, governor.valve(z_high), math.nan, "sleeve on its high stop")
+            return point(z_high, valve(z_high), math.nan, "sleeve on its high stop")
         if balance(z_low) < 0.0:
-            return point(z_low, governor.valve(z_low), math.nan, "sleeve on its low stop")
+            return point(z_low, valve(z_low), math.nan, "sleeve on its low stop")
         z = optimize.brentq(balance, z_low, z_high, xtol=1e-14)
-        return point(z, governor.valve(z), math.nan)
+        return point(z, valve(z), math.nan)
 
     s_low, s_high = governor.travel
     if governor.feedback == "rigid":
@@ -142,6 +145,7 @@ def _pi_operating_point(model: MachineModel, external_load: float) -> OperatingP
     valve's travel: then the valve sits on its stop and the speed follows from the machine's own balance. No sleeve,
     no servo (NaN)."""
     governor = model.governor
+    assert isinstance(governor, ElectronicGovernor), "_pi_operating_point reads a PI governor"
     omega = governor.set_speed()
     mean_inertia = model.cycle_averages(omega, external_load)[0]
     throttle = model.balance_throttle(omega, external_load)

@@ -104,24 +104,27 @@ def build_effect(definition: Definition, kinematic_period: float | None,
         kinks = knots if spec.shifts is None else _shifted_kinks(knots, spec.shifts, spec.period)
     elif spec is not None and spec.kind == INTERVALS:
         table = interval_indicator(spec.xs, spec.period)
-        switches = tuple(sorted({(edge - shift) % spec.period for edge in spec.xs for shift in spec.shifts}))
+        shifts = (0.0,) if spec.shifts is None else spec.shifts  # None: phi itself (Table)
+        switches = tuple(sorted({(edge - shift) % spec.period for edge in spec.xs for shift in shifts}))
     elif spec is not None:
         table = clamped_linear(spec.xs, spec.ys)
         if output_position and kinematic_period:
             kinks = position_kinks(spec.xs, output_position)
-        if kinks:
-            positions = held_positions(kinks, output_position)
+            if kinks:
+                positions = held_positions(kinks, output_position)
+                period_of_kinks = kinematic_period
 
-            def held(anchor: float) -> float:
-                """The slider position [m] held on the interval between the two kinks around anchor [rad]."""
-                return positions[bisect.bisect_right(kinks, anchor % kinematic_period)]
+                def held(anchor: float) -> float:
+                    """The slider position [m] held on the interval between the two kinks around anchor [rad]."""
+                    return positions[bisect.bisect_right(kinks, anchor % period_of_kinks)]
 
     def bound(function: Callable[..., float] | None, anchored: bool) -> Callable[..., float] | None:
         if function is None or (anchored and not kinks):
             return None
         return reference_function(definition, function, table, anchored, held)
 
-    return Effect(definition.name, definition.role, bound(definition.moment, False), definition.depends_on,
+    moment = reference_function(definition, definition.moment, table, False, held)
+    return Effect(definition.name, definition.role, moment, definition.depends_on,
                   definition.formula, period, switches, bound(definition.output_force, False), kinks,
                   bound(definition.moment, True), bound(definition.output_force, True), definition)
 

@@ -4,6 +4,7 @@ plain function numba compiles unchanged, its numbers and its table. Positive mom
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 from mech_regulator.effects.definition import PERIODIC, Definition, Table, define
 from mech_regulator.mechanisms.engine import firing_delays
@@ -64,13 +65,13 @@ def _engine(drive: schema.Engine, mechanism=None) -> Definition:
     mechanism's output i)."""
     area = math.pi * drive.bore ** 2 / 4.0
     cylinders = mechanism.cylinders if isinstance(mechanism, schema.CrankSlider) else None
-    pressure = {"kind": PERIODIC, "xs": tuple(math.radians(a) for a in drive.angle_deg), "ys": tuple(drive.pressure),
-                "period": math.radians(drive.cycle_deg)}
+    pressure = Table(PERIODIC, tuple(math.radians(a) for a in drive.angle_deg), tuple(drive.pressure),
+                     math.radians(drive.cycle_deg))
     cycle = f"{drive.cycle_deg:g} deg cycle"
     if cylinders is None:
         return Definition("drive", "drive", f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, {cycle}",
                           engine_gas, {"area": area}, frozenset({"phi"}),
-                          Table(**pressure, shifts=(math.radians(drive.phase_deg),)), output_force=engine_gas_force,
+                          replace(pressure, shifts=(math.radians(drive.phase_deg),)), output_force=engine_gas_force,
                           on_output=True)
     delays = firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], drive.cycle_deg,
                            drive.firing_order, drive.firing_deg)
@@ -78,5 +79,5 @@ def _engine(drive: schema.Engine, mechanism=None) -> Definition:
     return Definition("drive", "drive", f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, "
                       f"{len(cylinders)} cylinders, A = {area:.6g} m^2, {cycle}, firing {order} at "
                       f"{', '.join(f'{d:g}' for d in sorted(delays))} deg", engine_gas, {"area": area},
-                      frozenset({"phi"}), Table(**pressure, shifts=tuple(math.radians(drive.phase_deg - delay)
+                      frozenset({"phi"}), replace(pressure, shifts=tuple(math.radians(drive.phase_deg - delay)
                                                                          for delay in delays)), on_output=True)

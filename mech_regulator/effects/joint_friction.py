@@ -176,6 +176,7 @@ class JointFrictionModel:
         """The normal force N [N] of guide number `guide` (in guides' order; signed, the guard of its corner) at crank
         angle phi [rad], speed omega [rad/s], acceleration epsilon [rad/s^2] and output force Q [N or N m]; the
         machine must have that guide with friction."""
+        assert self.loads is not None, "guide_normal reads a mechanism's kinetostatics"
         loads = self.loads(phi, omega, force)
         index = self.indices[self.guides[guide]]
         return (loads.constant[index] + loads.per_epsilon[index] * epsilon).imag
@@ -206,6 +207,7 @@ class JointFrictionModel:
 def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
     """The JointFrictionModel of a scene's `machine.joint_friction`."""
     spec = machine.joint_friction
+    assert spec is not None, "build_joint_friction reads a machine with joint_friction"
     f = spec.coefficient
     collar = spec.thrust_collar
     collar_moment = 0.0 if collar is None else thrust_collar_moment(f, collar.axial_load, collar.inner_radius,
@@ -215,15 +217,18 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
     if mechanism is None or mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
         # no kinetostatics for these (scene.schema refuses their joints): the thrust collar alone
         return JointFrictionModel((), (), (), collar_moment, None, f"f = {f:g}: " + ", ".join(parts))
-    gravity = tuple(machine.gravity) if machine.gravity is not None else None
-    loads, joints = build_kinetostatics(machine.mechanism, gravity)
+    gravity = (machine.gravity[0], machine.gravity[1]) if machine.gravity is not None else None
+    loads, joints = build_kinetostatics(mechanism, gravity)
     if mechanism.type == "linkage":  # its journals by joint name; every prismatic joint slides with f_guide
         journals = dict(spec.journals)
         slides = {name for name, joint in mechanism.joints.items() if joint.type == "prismatic"}
     else:
         journals = {name: getattr(spec.joints, name) for name in type(spec.joints).model_fields}
         slides = {"guide"}
-    names, indices, arms, guides = [], [], [], []
+    names: list[str] = []
+    indices: list[int] = []
+    arms: list[float] = []
+    guides: list[int] = []
     for index, joint in enumerate(joints):
         journal = journals.get(joint)
         if journal is not None:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TypedDict
 
 import numpy as np
 
@@ -31,6 +32,9 @@ from mech_regulator.governors.valve import ValveCharacteristic, build_valve
 from mech_regulator.scene import schema
 
 Mode = tuple[str, str]
+# A machine's mode (model.machine): its governor's Mode, if it has a governor, then its drive train's, if any; None
+# for a machine with neither.
+MachineMode = tuple[str, ...]
 ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5  # indices of the governor's states in the full state vector
 
 
@@ -43,14 +47,14 @@ class Guard:
 
     name: str
     value: Callable[..., float]
-    transition: Callable[..., tuple[Mode, np.ndarray]]
+    transition: Callable[..., tuple[MachineMode | None, np.ndarray]]
     timed: bool = False
 
     def level(self, t: float, y: np.ndarray) -> float:
         """The guard's value at time t [s] and state y."""
         return self.value(t, y) if self.timed else self.value(y)
 
-    def apply(self, t: float, y: np.ndarray) -> tuple[Mode, np.ndarray]:
+    def apply(self, t: float, y: np.ndarray) -> tuple[MachineMode | None, np.ndarray]:
         """The guard's transition at time t [s] from state y: (new mode, state to restart from)."""
         return self.transition(t, y) if self.timed else self.transition(y)
 
@@ -84,7 +88,7 @@ class Governor:
     @property
     def state_names(self) -> tuple[str, ...]:
         """Names of the governor's states in y[2:]."""
-        names = ("arm_angle", "arm_rate")
+        names: tuple[str, ...] = ("arm_angle", "arm_rate")
         if self.kind == "indirect":
             names += ("servo",)
             if self.feedback == "isodromic":
@@ -105,6 +109,7 @@ class Governor:
         """y -> throttle 0..1 of a valve table continued along the piece that holds the sleeve position anchor [m]
         (between two of its breakpoints valve_breaks: smooth in y, the breakpoint met only by restarting on it)."""
         valve, sleeve = self.valve, self.sensor.sleeve
+        assert valve is not None, "held_throttle reads a direct-action governor's valve"
         return lambda y: valve(sleeve(y[ARM]), anchor)
 
     def set_speed(self) -> float:
@@ -175,16 +180,20 @@ class Governor:
             return "high"
         return "free"
 
-    def derivatives(self, mode: Mode, ideal: bool = False) -> Callable[[np.ndarray], list[float]]:
+    def derivatives(self, mode: Mode | None, ideal: bool = False) -> Callable[[np.ndarray], list[float]]:
         """Time derivatives of the governor's states in a mode, as a function of the full state y.
 
         Sleeve: a' = arm_rate, a'' from the sensor's arm_acceleration with friction +F_k ('up'),
         -F_k ('down') or none ('free'); frozen when stuck or on a stop. Servo: s' = servo_command, 0 on a
         stop; isodromic dashpot: T_i zeta' + zeta = rho T_i s'. ideal: frictionless, no dead band, no
-        speed limit, no stops (the smooth model that is linearised).
+        speed limit, no stops (the smooth model that is linearised); mode None only with ideal.
         """
         sensor = self.sensor
-        sleeve_mode, servo_mode = ("free", "free" if self.kind == "indirect" else "") if ideal else mode
+        if ideal:
+            sleeve_mode, servo_mode = "free", "free" if self.kind == "indirect" else ""
+        else:
+            assert mode is not None, "Governor.derivatives reads a mode unless ideal"
+            sleeve_mode, servo_mode = mode
         friction = {"up": sensor.kinetic_friction, "down": -sensor.kinetic_friction, "free": 0.0}.get(sleeve_mode)
         moving_servo = servo_mode == "free"
         rho, time_constant = self.feedback_gain, self.feedback_time_constant
@@ -325,10 +334,25 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
         feedback_time_constant=feedback.time_constant or math.inf, feedback_reference=reference or 0.0)
 
 
+class _SensorArguments(TypedDict):
+    """The arguments every centrifugal sensor takes (governors.sensor.CentrifugalSensor's and the spring's)."""
+
+    ball_mass: float
+    sleeve_mass: float
+    stiffness: float
+    free_position: float
+    damping: float
+    kinetic_friction: float
+    static_friction: float
+    ratio: float
+    gravity: float
+    stroke: tuple[float, float]
+
+
 def build_sensor(spec: schema.DirectGovernor | schema.IndirectGovernor | schema.HartnellGovernor) -> CentrifugalSensor:
     """The centrifugal sensor of a scene's governor: Hartnell's for type 'hartnell', Porter's otherwise."""
     spring = spec.spring or schema.SleeveSpring(stiffness=0.0)
-    common = dict(ball_mass=spec.ball_mass, sleeve_mass=spec.sleeve_mass, stiffness=spring.stiffness,
+    common = _SensorArguments(ball_mass=spec.ball_mass, sleeve_mass=spec.sleeve_mass, stiffness=spring.stiffness,
                   free_position=spring.free_position, damping=spec.damping, kinetic_friction=spec.friction,
                   static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
                   ratio=spec.ratio, gravity=spec.gravity, stroke=(spec.stroke[0], spec.stroke[1]))

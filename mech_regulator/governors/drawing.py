@@ -78,7 +78,8 @@ def porter_outline(arm_length: float, stroke: tuple[float, float], arm_angle: fl
     hinge = (0.0, 0.0)
     sleeve_y = porter_sleeve_height(l, arm_angle)
     balls = np.array([[reach, ball_y], [-reach, ball_y]])
-    stops = tuple(porter_sleeve_height(l, math.acos(1.0 - z / (2.0 * l))) for z in stroke)
+    low, high = (porter_sleeve_height(l, math.acos(1.0 - z / (2.0 * l))) for z in stroke)
+    stops = (low, high)
     return sensor_parts(l, stops, balls, np.array([[hinge, balls[0]], [hinge, balls[1]]]),
                         np.array([[balls[0], (0.0, sleeve_y)], [balls[1], (0.0, sleeve_y)]]), sleeve_y, spindle_angle,
                         -(2.0 + SPINDLE_BELOW_SLEEVE) * l)

@@ -4,7 +4,7 @@ position z and its table."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from typing import Protocol
 
 from mech_regulator.effects.definition import (
     CLAMPED,
@@ -18,7 +18,12 @@ from mech_regulator.effects.definition import (
 from mech_regulator.effects.tables import clamped_linear, slope_breaks
 from mech_regulator.scene import schema
 
-ValveCharacteristic = Callable[[float], float]
+
+class ValveCharacteristic(Protocol):
+    """throttle(z, anchor=None) -> throttle 0..1 at sleeve position z [m]; a table's continued along the piece that
+    holds z = anchor [m] (build_valve)."""
+
+    def __call__(self, z: float, anchor: float | None = None) -> float: ...
 
 
 def linear_valve(z, open_at, closed_at):

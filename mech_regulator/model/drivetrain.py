@@ -185,7 +185,7 @@ class ClutchModel:
     kinetic_torque: float
     driven: DrivenModel
 
-    def forces(self, mode: tuple[str, str], F1: float, J: float, smooth: float, resistance: float) -> Forces:
+    def forces(self, mode: tuple[str, ...], F1: float, J: float, smooth: float, resistance: float) -> Forces:
         """The accelerations and moments in a train mode (module docstring): F1 [N m] the crank's net moment
         apart from the clutch, J [kg m^2] its inertia, smooth [N m] the driven part's non-Coulomb moments,
         resistance R [N m] its Coulomb resistances."""

@@ -35,7 +35,7 @@ from scipy import optimize
 from mech_regulator.effects import Effect, build_drive, build_load, output_position_of
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
-from mech_regulator.governors import ARM, ElectronicGovernor, Governor, Guard, Mode, build_governor
+from mech_regulator.governors import ARM, ElectronicGovernor, Governor, Guard, MachineMode, build_governor
 from mech_regulator.mechanisms import build_reduced, cam_law_angles
 from mech_regulator.mechanisms.checks import refuse_unbuildable
 from mech_regulator.model.drivetrain import (
@@ -53,7 +53,7 @@ from mech_regulator.model.drivetrain import (
     train_guards,
 )
 from mech_regulator.scene import SceneError
-from mech_regulator.scene.schema import Scene
+from mech_regulator.scene.schema import Linkage, Scene
 
 CYCLE_POINTS_PER_TURN = 720  # samples per turn of the cycle averages of the governor's statics
 
@@ -98,10 +98,12 @@ class CouplingModel:
     table: tuple[np.ndarray, np.ndarray] | None = None
 
     @functools.cached_property
-    def elastic(self) -> Callable[[float], float]:
-        """twist [rad] -> M_elastic [N m] for one twist, for the hot path (elastic_moment takes arrays)."""
+    def elastic(self) -> Callable[..., float]:
+        """twist [rad] -> M_elastic [N m] for one twist, for the hot path (elastic_moment takes arrays); a table's
+        also takes anchor= (effects.tables.extrapolated_linear)."""
         if self.table is None:
             stiffness = self.stiffness
+            assert stiffness is not None, "a coupling without a table has a stiffness"
             return lambda twist: stiffness * twist
         return extrapolated_linear(self.table[0].tolist(), self.table[1].tolist())
 
@@ -156,6 +158,7 @@ class CouplingModel:
         """The twist [rad] at which the elastic moment equals `moment` [N m] (the characteristic is strictly
         increasing, so this is unique)."""
         if self.table is None:
+            assert self.stiffness is not None, "a coupling without a table has a stiffness"
             return moment / self.stiffness
         knots, values = self.table
         i = int(np.clip(np.searchsorted(values, moment, side="right") - 1, 0, knots.size - 2))
@@ -241,7 +244,7 @@ class MachineModel:
         """(angle, period) pairs [rad] where some moment jumps with phi (a cam follower's law changes segment: its
         s'' jumps, and dJ/dphi with it)."""
         cams = cam_law_angles(self.scene.machine.mechanism) if self.scene.machine.mechanism is not None else []
-        return ([(angle, effect.period) for effect in self.effects for angle in effect.switch_angles]
+        return ([(angle, _period_of(effect)) for effect in self.effects for angle in effect.switch_angles]
                 + [(angle, 2.0 * math.pi) for angle in cams])
 
     @functools.cached_property
@@ -254,7 +257,7 @@ class MachineModel:
         tables (schema.BranchLoad), nor has a driven part behind a clutch (no angle)."""
         tables = []
         governor = self.governor
-        if governor is not None and governor.valve_breaks:
+        if isinstance(governor, Governor) and governor.valve_breaks:  # a PI governor has no valve table
             sleeve, arm = governor.sensor.sleeve, ARM
             tables.append(StateTable("valve table", lambda y: sleeve(y[arm]), governor.valve_breaks))
         if self.coupling is not None:
@@ -265,7 +268,8 @@ class MachineModel:
                     tables.append(StateTable("coupling table", lambda y: y[twist], breaks))
             tables += [StateTable(f"driven part's {effect.name}", lambda y: y[0] - y[twist], effect.kink_angles,
                                   effect.period, angular=True)
-                       for effect in self.driven.effects if effect.kink_angles and effect.segment_moment is not None]
+                       for effect in self.coupling.driven.effects
+                       if effect.kink_angles and effect.segment_moment is not None]
         return tuple(tables)
 
     def kink_angles(self) -> list[tuple[float, float]]:
@@ -274,7 +278,7 @@ class MachineModel:
         on them as on switch angles, and between two of them see each table continued along one segment and the
         friction's |k_j| as s_j k_j with the signs of the window's middle (rhs's window)."""
         corners = self.joint_friction.corner_angles if self.joint_friction is not None else ()
-        return ([(angle, effect.period) for effect in self.effects for angle in effect.kink_angles]
+        return ([(angle, _period_of(effect)) for effect in self.effects for angle in effect.kink_angles]
                 + [(angle, 2.0 * math.pi) for angle in corners])
 
     def dynamic_period(self) -> float:
@@ -340,7 +344,7 @@ class MachineModel:
         return tuple(sorted(grid))
 
     def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-            mode: Mode | None = None, ideal: bool = False, kinks: bool = True,
+            mode: MachineMode | None = None, ideal: bool = False, kinks: bool = True,
             anchors: tuple[float, ...] | None = None, normal_signs: tuple[float, ...] = ()) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
@@ -373,7 +377,7 @@ class MachineModel:
                                      anchors=anchors, normal_signs=normal_signs)
 
     def guide_normal(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-                     mode: Mode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
+                     mode: MachineMode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
                      normal_signs: tuple[float, ...] = (), guide: int = 0
                      ) -> Callable[[float, np.ndarray], float] | None:
         """(t, y) -> the normal force N [N] of guide number `guide` with friction (joint_friction.guides' order: a
@@ -386,7 +390,7 @@ class MachineModel:
                                      anchors=anchors, normal_signs=normal_signs, normal=guide)
 
     def joint_reactions(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-                        mode: Mode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
+                        mode: MachineMode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
                         normal_signs: tuple[float, ...] = ()) -> Callable[[float, np.ndarray], list[float]] | None:
         """(t, y) -> the reaction magnitudes |R_j| [N] of the joints with friction (joint_friction.names' order) with
         the acceleration of rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_signs): the
@@ -406,7 +410,7 @@ class MachineModel:
         return self._right_hand_side(None, None, None, None, False, crank_only=True)
 
     def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
-                         window: tuple[float, float] | None, mode: Mode | None,
+                         window: tuple[float, float] | None, mode: MachineMode | None,
                          ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None,
                          normal_signs: tuple[float, ...] = (), normal: int | None = None,
                          reactions: bool = False) -> Callable:
@@ -417,7 +421,8 @@ class MachineModel:
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
         ramped = piece is not None and (piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0)
-        ramp = piece.throttle_at if ramped else None  # a co-simulated throttle's polynomial; None: held_throttle
+        # a co-simulated throttle's polynomial; None: held_throttle
+        ramp = piece.throttle_at if piece is not None and ramped else None
         scale_drive = governor is not None or held_throttle != 1.0 or ramped
 
         def moment_of(effect) -> Callable:
@@ -439,12 +444,12 @@ class MachineModel:
         offset, slope = (piece.offset, piece.slope) if piece is not None else (0.0, 0.0)
         J0 = self.inertia_constant
         reduced = self.reduced
-        throttle = governor.throttle if governor is not None else None
-        if "valve table" in held:
+        throttle: Callable[[np.ndarray], float] | None = governor.throttle if governor is not None else None
+        if isinstance(governor, Governor) and "valve table" in held:  # only a Governor has one (state_tables)
             throttle = governor.held_throttle(held["valve table"])
         governor_rates = None
         if governor is not None and not crank_only:
-            governor_rates = governor.derivatives(mode[:2] if mode is not None else mode, ideal)
+            governor_rates = governor.derivatives((mode[0], mode[1]) if mode is not None else None, ideal)
         train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode),
                                                                                    held.get("coupling table"), held)
         friction = None if crank_only else self.joint_friction
@@ -483,7 +488,8 @@ class MachineModel:
                 epsilon, train_rates = net / J, ()
             else:
                 epsilon, train_rates = train(t, y, J, net, offset + slope * t)
-            if friction is not None:  # J epsilon = J epsilon_0 - sign(omega) F(epsilon), effects.joint_friction
+            # J epsilon = J epsilon_0 - sign(omega) F(epsilon), effects.joint_friction (output_force: with friction)
+            if friction is not None and output_force is not None:
                 force = output_force(t, phi, omega, q, dq, share)
                 epsilon = friction.acceleration(phi, omega, force, J, J * epsilon, ratio_signs, normal_signs)
                 if normal is not None:
@@ -532,6 +538,7 @@ class MachineModel:
         friction_<joint> (journal: moment rho |R| [N m]; guide: force f |N| [N]) and reaction_<joint> |R| [N];
         friction_thrust_collar [N m] with a collar."""
         friction = self.joint_friction
+        assert friction is not None, "the joint friction columns read a machine with joint friction"
         output_force = self._output_force(True)
         n = t.size
         reduced = np.zeros(n)
@@ -559,6 +566,7 @@ class MachineModel:
         table load named in state_tables read along the segment that holds its anchor phi2 [rad] (in the solver's
         wrapped phi; absent: as it is)."""
         driven = self.driven
+        assert driven is not None, "the drive train's right-hand side reads a machine with a driven part"
         index = self.driven_speed_index
         resistance = driven.resistance
         anchored = driven_anchors or {}
@@ -589,6 +597,7 @@ class MachineModel:
                 return (net - passed) / J, [omega - omega2, driven_total / I2]
 
             return coupled
+        assert self.clutch is not None, "a driven part is behind a coupling or a clutch"
         clutch_forces = self.clutch.forces
         stuck = train_mode[0] == STUCK
 
@@ -602,7 +611,7 @@ class MachineModel:
 
         return clutched
 
-    def train_mode_of(self, mode: Mode | None) -> tuple[str, ...]:
+    def train_mode_of(self, mode: MachineMode | None) -> tuple[str, ...]:
         """The drive train's part of a machine's mode (its default when mode is None or carries none)."""
         train = tuple(mode[2:] if self.governor is not None else mode) if mode is not None else ()
         if train or self.driven is None:
@@ -616,6 +625,7 @@ class MachineModel:
         ClutchModel.mode_at); external: the external load's magnitude [N m] (default: the scenario's at t). Behind
         a coupling Forces.crank is NaN: nothing here needs the crank's acceleration (the right-hand side gives it)."""
         driven = self.driven
+        assert driven is not None, "drive_train_at reads a machine with a driven part"
         resistance = driven.resistance + (self.external_load(t) if external is None else external)
         index = self.driven_speed_index
         omega2 = y[index]
@@ -628,7 +638,9 @@ class MachineModel:
                 omega2 = y[1]
             return train_mode, self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2),
                                                   resistance), resistance
-        passed = float(self.coupling.elastic(y[index - 1]) + self.coupling.damping * (y[1] - omega2))
+        coupling = self.coupling
+        assert coupling is not None, "a driven part is behind a coupling or a clutch"
+        passed = float(coupling.elastic(y[index - 1]) + coupling.damping * (y[1] - omega2))
         inertia, smooth = driven.dynamics(t, y[0] - y[index - 1], omega2)
         push = passed + smooth
         if train_mode is None:
@@ -638,7 +650,7 @@ class MachineModel:
         return train_mode, Forces(math.nan, driven.acceleration(part, passed, smooth, resistance, inertia),
                                   0.0, push, coulomb_factor(part, push, resistance)), resistance
 
-    def constraint(self, mode: Mode | None) -> Callable[[np.ndarray], None] | None:
+    def constraint(self, mode: MachineMode | None) -> Callable[[np.ndarray], None] | None:
         """What a mode imposes on the states the solver gives, in place, or None: a stuck clutch sets omega2 =
         omega bit for bit (the solver holds its own omega2 frozen meanwhile)."""
         if self.clutch is None or mode is None or self.train_mode_of(mode)[0] != STUCK:
@@ -687,6 +699,7 @@ class MachineModel:
         at speed omega [rad/s] with the driven part at phi_driven = phi0 - twist (phi0 the initial crank angle):
         M_elastic(twist) = CouplingModel.required_moment, solved by Brent's method when it depends on phi_driven."""
         coupling, external, phi0 = self.coupling, self.external_load(0.0), self.scene.scenario.initial.phi
+        assert coupling is not None, "static_twist reads a machine with a coupling"
         if not coupling.driven.reads_angle:
             return coupling.twist_for(coupling.required_moment(0.0, phi0, omega, external))
         needed = [coupling.required_moment(0.0, angle, omega, external) for angle in np.linspace(0, 2 * math.pi, 361)]
@@ -696,7 +709,7 @@ class MachineModel:
         return optimize.brentq(lambda twist: float(coupling.elastic(twist)) - coupling.required_moment(
             0.0, phi0 - twist, omega, external), low, high, xtol=1e-15)
 
-    def initial_mode(self, y: np.ndarray) -> Mode | None:
+    def initial_mode(self, y: np.ndarray) -> MachineMode | None:
         """The mode at a state with the governor at rest: the governor's (None without a governor), followed by
         the drive train's mode of the state (drive_train_at)."""
         governor = self.governor.initial_mode(y) if self.governor is not None else None
@@ -704,7 +717,7 @@ class MachineModel:
             return governor
         return (governor or ()) + self.drive_train_at(0.0, y)[0]
 
-    def guards(self, mode: Mode | None, y: np.ndarray | None = None) -> list:
+    def guards(self, mode: MachineMode | None, y: np.ndarray | None = None) -> list:
         """The governor's guards in a mode, then the drive train's (none without either) and, with joint friction
         and given the state y the solver starts from, the crank's: 'crank stops' (omega reaches 0 from the sign
         it has in y: the solver restarts there exactly, omega = 0, where friction may hold the crank at rest) or,
@@ -725,7 +738,7 @@ class MachineModel:
         return {}
 
     @staticmethod
-    def _crank_guards(mode: Mode | None, direction: float | None) -> list:
+    def _crank_guards(mode: MachineMode | None, direction: float | None) -> list:
         """The crank's guard that guards ends with under joint friction: 'crank starts' from rest (direction 0),
         'crank stops' turning in the direction +-1; none for direction None (no joint friction, or no state given)."""
         if direction is None:
@@ -733,22 +746,24 @@ class MachineModel:
         if direction == 0.0:
             return [Guard("crank starts", lambda state: -abs(state[1]), lambda state: (mode, state))]
 
-        def stop(state: np.ndarray) -> tuple[Mode | None, np.ndarray]:
+        def stop(state: np.ndarray) -> tuple[MachineMode | None, np.ndarray]:
             state = np.array(state, dtype=float)
             state[1] = 0.0
             return mode, state
 
         return [Guard("crank stops", lambda state: direction * state[1], stop)]
 
-    def _mode_guards(self, mode: Mode | None) -> list:
+    def _mode_guards(self, mode: MachineMode | None) -> list:
         """The governor's guards in a mode, then the drive train's (none without either)."""
         if mode is None:
             return []
+        governor = self.governor
         if self.driven is None:
-            return self.governor.guards(mode) if self.governor is not None else []
+            return governor.guards((mode[0], mode[1])) if governor is not None else []
         train_mode = self.train_mode_of(mode)
-        governor_mode = tuple(mode[:2]) if self.governor is not None else ()
-        guards = [_carrying(guard, train_mode) for guard in self.governor.guards(governor_mode)] if governor_mode else []
+        governor_mode: MachineMode = (mode[0], mode[1]) if governor is not None else ()
+        guards = ([_carrying(guard, train_mode) for guard in governor.guards((mode[0], mode[1]))]
+                  if governor is not None else [])
         return guards + train_guards(train_mode, self.driven_speed_index,
                                      lambda t, y: self.drive_train_at(t, y, train_mode=train_mode)[1:],
                                      lambda t, y: self.drive_train_at(t, y)[0],
@@ -913,11 +928,13 @@ class MachineModel:
             if coupling is not None:
                 out["twist"], out["phi_driven"] = twist, phi_driven
                 out["I2"], out["dI2_dphi2"] = state[0], state[1]
-                kind = self.scene.machine.coupling.driven.mechanism
-                if kind is not None:
-                    slider = kind.type == "crank_slider" or getattr(kind, "output_kind", None) == "slider"
-                    names = ("x_driven", "v_driven") if slider else ("theta4_driven", "omega4_driven")
-                    out[names[0]], out[names[1]] = state[3], state[4] * omega_driven
+                assert self.scene.machine.coupling is not None, "the model's coupling is the scene's"
+                driven_mechanism = self.scene.machine.coupling.driven.mechanism
+                if driven_mechanism is not None:
+                    slider = (driven_mechanism.type == "crank_slider"
+                              or getattr(driven_mechanism, "output_kind", None) == "slider")
+                    position, speed = ("x_driven", "v_driven") if slider else ("theta4_driven", "omega4_driven")
+                    out[position], out[speed] = state[3], state[4] * omega_driven
             out["omega_driven"] = omega_driven
             out["epsilon_driven"] = forces["driven"]
             out["driven_mode"] = np.array([DIRECTION[state[0][-1]] for state in train])
@@ -931,7 +948,8 @@ class MachineModel:
             if self.load_pieces or given:
                 out["M_external"] = -external
             out["E_kinetic"] = 0.5 * J * omega ** 2
-        kind = self.scene.machine.mechanism.type if self.scene.machine.mechanism is not None else None
+        mechanism = self.scene.machine.mechanism
+        kind = mechanism.type if mechanism is not None else None
         if kind == "crank_slider" and cylinders:
             out["x_slider"], out["v_slider"] = q[:, 0], dq[:, 0] * omega  # piston 1
             for k in range(1, len(cylinders)):
@@ -942,10 +960,9 @@ class MachineModel:
             out["theta4"], out["omega4"] = q, dq * omega
         elif kind == "walking_beam":
             out["x_shuttle"], out["v_shuttle"] = q, dq * omega
-        elif kind == "linkage" and self.scene.machine.mechanism.output is not None:  # its output: a travel or an angle
-            names = ("x_output", "v_output") if self.scene.machine.mechanism.output.joint else ("theta_output",
-                                                                                              "omega_output")
-            out[names[0]], out[names[1]] = q, dq * omega
+        elif isinstance(mechanism, Linkage) and mechanism.output is not None:  # its output: a travel or an angle
+            position, speed = ("x_output", "v_output") if mechanism.output.joint else ("theta_output", "omega_output")
+            out[position], out[speed] = q, dq * omega
         if self.governor is not None:
             out["throttle"] = throttle
             out.update(self.governor.signals(y))
@@ -986,7 +1003,7 @@ def build_model(scene: Scene) -> MachineModel:
     mechanisms cannot be built is refused (SceneError, mechanisms/checks.py)."""
     machine = refuse_unbuildable(scene).machine
     flywheel = machine.flywheel.inertia * machine.flywheel.ratio ** 2 if machine.flywheel else 0.0
-    gravity = tuple(machine.gravity) if machine.gravity is not None else None
+    gravity = (machine.gravity[0], machine.gravity[1]) if machine.gravity is not None else None
     has_weight = machine.mechanism is not None and ((gravity is not None and any(gravity) and _has_mass(machine.mechanism))
                                                     or has_cam_springs(machine.mechanism))   # in M_weight too
     reduced = build_reduced(machine.mechanism, gravity if has_weight else None) if machine.mechanism else None
@@ -1049,8 +1066,9 @@ def _joint_friction(model: MachineModel) -> JointFrictionModel:
 
 def _carrying(guard: Guard, train_mode: tuple[str, ...]) -> Guard:
     """A governor's guard whose transition keeps the drive train's mode after the governor's new mode."""
-    def transition(y: np.ndarray) -> tuple[Mode, np.ndarray]:
+    def transition(y: np.ndarray) -> tuple[MachineMode, np.ndarray]:
         governor_mode, state = guard.transition(y)
+        assert governor_mode is not None, "a governor's guard gives the governor's new mode"
         return governor_mode + train_mode, state
 
     return Guard(guard.name, guard.value, transition)
@@ -1131,3 +1149,9 @@ def _unique_names(effects: list[Effect]) -> list[Effect]:
             effect = Effect(**{**effect.__dict__, "name": f"{effect.name}_{seen[effect.name]}"})
         unique.append(effect)
     return unique
+
+
+def _period_of(effect: Effect) -> float:
+    """The period in phi [rad] of an effect with switch or kink angles (build_effect gives such an effect one)."""
+    assert effect.period is not None, f"{effect.name} has angles in phi but no period"
+    return effect.period
