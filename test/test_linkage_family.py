@@ -211,13 +211,18 @@ def documented_six_bar() -> str:
 
 def test_the_documented_six_bar_shows_every_key_and_its_csv_j_holds_the_constant_part(tmp_path, capsys):
     """The scene file of docs/linkages.md validates, gives the key of every linkage setting (output: one of its
-    two, which exclude each other) and runs; its CSV's J is machine.inertia + flywheel.inertia ratio^2 + J_links(phi),
+    two, which exclude each other; a joint's gear keys are the geared scenes' of the page, "Gears") and runs; its CSV's J is machine.inertia + flywheel.inertia ratio^2 + J_links(phi),
     J_links counting the crank's constant m |c - p|^2 + I, as the page says (its number at phi = 0 too)."""
     data = yaml.safe_load(documented_six_bar())
     mechanism = data["machine"]["mechanism"]
     assert set(schema.Linkage.model_fields) <= set(mechanism)
     assert set(schema.LinkageLink.model_fields) <= {key for link in mechanism["links"].values() for key in link}
-    assert set(schema.LinkageJoint.model_fields) <= {key for joint in mechanism["joints"].values() for key in joint}
+    gear_keys = {"teeth", "radii", "internal", "centres", "carrier", "phase_deg"}
+    lower_pair_keys = set(schema.LinkageJoint.model_fields) - gear_keys
+    assert lower_pair_keys <= {key for joint in mechanism["joints"].values() for key in joint}
+    gears_section = (Path(__file__).resolve().parents[1] / "docs" / "linkages.md").read_text(encoding="utf-8")
+    gears_section = gears_section.split("\n### Gears", 1)[1].split("\n### ", 1)[0]
+    assert all(f"{key}:" in gears_section for key in gear_keys)
     assert len(mechanism["output"]) == 1 and set(mechanism["output"]) <= set(schema.LinkageOutput.model_fields)
     path, out = tmp_path / "my_six_bar.yaml", tmp_path / "run.csv"
     path.write_text(documented_six_bar(), encoding="utf-8")
