@@ -24,15 +24,17 @@ def main(path: str) -> None:
         model = build_model(load_scene(name))
         trajectory = simulate(model)
         times = np.linspace(0.0, model.scene.scenario.duration, 4001)
-        line, = speed.plot(times, cycle_mean_speed(model, trajectory, times), lw=1.2, label=label)
+        (line,) = speed.plot(times, cycle_mean_speed(model, trajectory, times), lw=1.2, label=label)
         columns = model.columns(times, trajectory(times))
         throttle.plot(times, columns["throttle"], lw=0.5, color=line.get_color(), alpha=0.8, label=label)
     for event in (2.0, 9.0):
         for axis in (speed, throttle):
             axis.axvline(event, color="0.6", lw=0.6, ls=":")
-    speed.set(ylabel="cycle-mean crank speed [rad/s]",
-              title="load 6 -> 8 N m at 2 s, thrown off at 9 s: the Porter and Hartnell sensors leave a static "
-                    "error, the PI none")
+    speed.set(
+        ylabel="cycle-mean crank speed [rad/s]",
+        title="load 6 -> 8 N m at 2 s, thrown off at 9 s: the Porter and Hartnell sensors leave a static "
+        "error, the PI none",
+    )
     throttle.set(xlabel="t [s]", ylabel="throttle [-] (within the cycle)", ylim=(-0.05, 1.05))
     speed.legend(loc="upper left")
     throttle.legend(loc="lower left")

@@ -43,27 +43,47 @@ def _nodes(context, *args, **kwargs):
     scene = load_scene(scene_file)
     overrides = governor_left_out(scene) if controller == "external" else []
     names = node_names(governed=scene.governor is not None and not overrides)
-    run_choices = {name: {"scene_file": scene_file, **({"overrides": overrides} if overrides else {})}
-                   for name in names}
+    run_choices = {
+        name: {"scene_file": scene_file, **({"overrides": overrides} if overrides else {})} for name in names
+    }
     for name in ("machine", "recorder"):
         run_choices[name].update(controller=controller)
     run_choices["machine"].update(peers=[name for name in names if name != "machine"])
-    profile = {} if FASTDDS_PROFILE_VARIABLE in os.environ else {
-        FASTDDS_PROFILE_VARIABLE: os.path.join(get_package_share_directory(PACKAGE), FASTDDS_PROFILE)}
-    return [Node(package=PACKAGE, executable=EXECUTABLES[name], name=name, output="screen",
-                 parameters=[params_file, run_choices[name]], additional_env=profile)
-            for name in names]
+    profile = (
+        {}
+        if FASTDDS_PROFILE_VARIABLE in os.environ
+        else {FASTDDS_PROFILE_VARIABLE: os.path.join(get_package_share_directory(PACKAGE), FASTDDS_PROFILE)}
+    )
+    return [
+        Node(
+            package=PACKAGE,
+            executable=EXECUTABLES[name],
+            name=name,
+            output="screen",
+            parameters=[params_file, run_choices[name]],
+            additional_env=profile,
+        )
+        for name in names
+    ]
 
 
 def generate_launch_description():
     default_params_file = os.path.join(get_package_share_directory(PACKAGE), PARAMS_FILE)
-    return LaunchDescription([
-        DeclareLaunchArgument("scene", default_value="engine_direct",
-                              description="a bundled scene name or the path of a scene file"),
-        DeclareLaunchArgument("params_file", default_value=default_params_file,
-                              description="node parameters in ros__parameters form"),
-        DeclareLaunchArgument("controller", default_value="governor", choices=list(CONTROLLERS),
-                              description="what gives the throttle: the scene's governor, or external: a node you "
-                                          "start (the scene's governor is then left out)"),
-        OpaqueFunction(function=_nodes),
-    ])
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument(
+                "scene", default_value="engine_direct", description="a bundled scene name or the path of a scene file"
+            ),
+            DeclareLaunchArgument(
+                "params_file", default_value=default_params_file, description="node parameters in ros__parameters form"
+            ),
+            DeclareLaunchArgument(
+                "controller",
+                default_value="governor",
+                choices=list(CONTROLLERS),
+                description="what gives the throttle: the scene's governor, or external: a node you "
+                "start (the scene's governor is then left out)",
+            ),
+            OpaqueFunction(function=_nodes),
+        ]
+    )

@@ -19,7 +19,7 @@ from pathlib import Path
 from mech_regulator.errors import SceneError
 
 CACHE_VARIABLE = "MECH_REGULATOR_CACHE"
-_UNCOMPILED = {"depth": 0}   # how many run_uncompiled blocks the process is in
+_UNCOMPILED = {"depth": 0}  # how many run_uncompiled blocks the process is in
 
 
 @contextlib.contextmanager
@@ -47,8 +47,10 @@ def folder() -> Path:
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as error:
-        raise SceneError(f"{CACHE_VARIABLE}: cannot make the fast path's cache folder '{path}': "
-                         f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})") from None
+        raise SceneError(
+            f"{CACHE_VARIABLE}: cannot make the fast path's cache folder '{path}': "
+            f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})"
+        ) from None
     return path
 
 
@@ -59,5 +61,7 @@ def write(path: Path, text: str) -> None:
         temporary.write_text(text, encoding="utf-8")
         os.replace(temporary, path)
     except OSError as error:
-        raise SceneError(f"{CACHE_VARIABLE}: cannot write the fast path's cache folder '{path.parent}': "
-                         f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})") from None
+        raise SceneError(
+            f"{CACHE_VARIABLE}: cannot write the fast path's cache folder '{path.parent}': "
+            f"{error.strerror or error}; expected a writable folder (set {CACHE_VARIABLE})"
+        ) from None

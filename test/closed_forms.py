@@ -18,8 +18,9 @@ from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
 from mech_regulator.mechanisms.walking_beam import WalkingBeamGeometry, _loop_points, arm, side
 
 
-def crank_slider_reduced(geometry: CrankSliderGeometry, gravity: tuple[float, float] | None
-                 ) -> Callable[[float], tuple[float, float, float, float, float]]:
+def crank_slider_reduced(
+    geometry: CrankSliderGeometry, gravity: tuple[float, float] | None
+) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, x, x')` for this crank–slider.
 
     J_links = m_rod |S'|^2 + J_rod theta'^2 + m_slider x'^2 (docs/theory.md §2.1), with the rod's
@@ -46,8 +47,9 @@ def crank_slider_reduced(geometry: CrankSliderGeometry, gravity: tuple[float, fl
         dJ = 2.0 * (m_rod * (dSx * ddSx + dSy * ddSy) + J_rod * dtheta * ddtheta + m_slider * dx * ddx)
         weight = 0.0
         if with_weight:
-            weight = (gx * (-m_crank_r * sin_phi + m_rod * dSx + m_slider * dx)
-                      + gy * (m_crank_r * cos_phi + m_rod * dSy))
+            weight = gx * (-m_crank_r * sin_phi + m_rod * dSx + m_slider * dx) + gy * (
+                m_crank_r * cos_phi + m_rod * dSy
+            )
         return J, dJ, weight, x, dx
 
     return reduced
@@ -67,14 +69,22 @@ def make_centre_motions(geometry: FourBarGeometry) -> Callable[[float], tuple[tu
         angles = link_angles(phi, a, b, c, d, th1, sign)
         th3, dth3, ddth3, th4, dth4, ddth4 = angles
         e2, e3, e4 = cmath.exp(1j * phi), cmath.exp(1j * th3), cmath.exp(1j * th4)
-        return angles, (e2, e3, e4, 1j * (a * e2 + u3 * dth3 * e3), -a * e2 + u3 * complex(-dth3 * dth3, ddth3) * e3,
-                        1j * u4 * dth4 * e4, u4 * complex(-dth4 * dth4, ddth4) * e4)
+        return angles, (
+            e2,
+            e3,
+            e4,
+            1j * (a * e2 + u3 * dth3 * e3),
+            -a * e2 + u3 * complex(-dth3 * dth3, ddth3) * e3,
+            1j * u4 * dth4 * e4,
+            u4 * complex(-dth4 * dth4, ddth4) * e4,
+        )
 
     return motions
 
 
-def four_bar_reduced(geometry: FourBarGeometry, gravity: tuple[float, float] | None
-                 ) -> Callable[[float], tuple[float, float, float, float, float]]:
+def four_bar_reduced(
+    geometry: FourBarGeometry, gravity: tuple[float, float] | None
+) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, th4, th4')` for this four-bar.
 
     With the centres' derivatives S3', S3'', S4', S4'' of `make_centre_motions`:
@@ -91,8 +101,12 @@ def four_bar_reduced(geometry: FourBarGeometry, gravity: tuple[float, float] | N
     def reduced(phi: float) -> tuple[float, float, float, float, float]:
         (_, dth3, ddth3, th4, dth4, ddth4), (e2, _, _, dS3, ddS3, dS4, ddS4) = motions(phi)
         J = m3 * abs(dS3) ** 2 + J3 * dth3 * dth3 + m4 * abs(dS4) ** 2 + J4 * dth4 * dth4
-        dJ = 2.0 * (m3 * (dS3.conjugate() * ddS3).real + J3 * dth3 * ddth3
-                    + m4 * (dS4.conjugate() * ddS4).real + J4 * dth4 * ddth4)
+        dJ = 2.0 * (
+            m3 * (dS3.conjugate() * ddS3).real
+            + J3 * dth3 * ddth3
+            + m4 * (dS4.conjugate() * ddS4).real
+            + J4 * dth4 * ddth4
+        )
         weight = 0.0
         if with_weight:
             weight = (gravity_c.conjugate() * (m2r * 1j * e2 + m3 * dS3 + m4 * dS4)).real
@@ -101,8 +115,9 @@ def four_bar_reduced(geometry: FourBarGeometry, gravity: tuple[float, float] | N
     return reduced
 
 
-def walking_beam_reduced(geometry: WalkingBeamGeometry, gravity: tuple[float, float] | None
-                 ) -> Callable[[float], tuple[float, float, float, float, float]]:
+def walking_beam_reduced(
+    geometry: WalkingBeamGeometry, gravity: tuple[float, float] | None
+) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, x_C, x_C')` for this walking beam.
 
     By the definition of the reduced inertia (docs/theory.md §2.1), J_links = sum_k m_k |S_k'|^2 + J_k th_k'^2:
@@ -131,15 +146,30 @@ def walking_beam_reduced(geometry: WalkingBeamGeometry, gravity: tuple[float, fl
         dS3, ddS3 = arm((O2, 0j, 0j), u3, th4, dth4, ddth4)[1:]
         dS6, ddS6 = arm(B, u6, th3 + side_angle, dth3, ddth3)[1:]  # about E = B + s: the derivatives of B's arm
         dB, ddB, dC, ddC = B[1], B[2], C[1], C[2]
-        J = (m2 * abs(dS2) ** 2 + m3 * abs(dS3) ** 2 + m4 * abs(dB) ** 2 + m6 * abs(dS6) ** 2 + m7 * abs(dC) ** 2
-             + J_coupler_side * dth3 * dth3 + J3 * dth4 * dth4)
-        dJ = 2.0 * (m2 * (dS2.conjugate() * ddS2).real + m3 * (dS3.conjugate() * ddS3).real
-                    + m4 * (dB.conjugate() * ddB).real + m6 * (dS6.conjugate() * ddS6).real
-                    + m7 * (dC.conjugate() * ddC).real + J_coupler_side * dth3 * ddth3 + J3 * dth4 * ddth4)
+        J = (
+            m2 * abs(dS2) ** 2
+            + m3 * abs(dS3) ** 2
+            + m4 * abs(dB) ** 2
+            + m6 * abs(dS6) ** 2
+            + m7 * abs(dC) ** 2
+            + J_coupler_side * dth3 * dth3
+            + J3 * dth4 * dth4
+        )
+        dJ = 2.0 * (
+            m2 * (dS2.conjugate() * ddS2).real
+            + m3 * (dS3.conjugate() * ddS3).real
+            + m4 * (dB.conjugate() * ddB).real
+            + m6 * (dS6.conjugate() * ddS6).real
+            + m7 * (dC.conjugate() * ddC).real
+            + J_coupler_side * dth3 * ddth3
+            + J3 * dth4 * ddth4
+        )
         weight = 0.0
         if with_weight:
-            weight = (gravity_c.conjugate() * (m1u1 * 1j * cmath.exp(1j * phi) + m2 * dS2 + m3 * dS3 + m4 * dB
-                                               + m6 * dS6 + m7 * dC)).real
+            weight = (
+                gravity_c.conjugate()
+                * (m1u1 * 1j * cmath.exp(1j * phi) + m2 * dS2 + m3 * dS3 + m4 * dB + m6 * dS6 + m7 * dC)
+            ).real
         return J, dJ, weight, C[0].real, dC.real
 
     return reduced
@@ -150,9 +180,12 @@ def cylinder_shifts(throws_deg: Sequence[float], banks_deg: Sequence[float]) -> 
     return tuple(math.radians(throw - bank) for throw, bank in zip(throws_deg, banks_deg))
 
 
-def multi_cylinder_reduced(geometry: crank_slider.CrankSliderGeometry, throws_deg: Sequence[float],
-                       banks_deg: Sequence[float], gravity: tuple[float, float] | None
-                       ) -> Callable[[float], tuple[float, float, float, tuple[float, ...], tuple[float, ...]]]:
+def multi_cylinder_reduced(
+    geometry: crank_slider.CrankSliderGeometry,
+    throws_deg: Sequence[float],
+    banks_deg: Sequence[float],
+    gravity: tuple[float, float] | None,
+) -> Callable[[float], tuple[float, float, float, tuple[float, ...], tuple[float, ...]]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, (x_1..x_n), (x_1'..x_n'))` of n identical
     cylinders on one crankshaft: each term is the single cylinder's at its own crank angle phi_i = phi +
     throw_i - bank_i (d phi_i / d phi = 1), its gravity turned into the cylinder's frame
@@ -252,8 +285,9 @@ def four_bar_kinetostatics(geometry: FourBarGeometry, gravity: tuple[float, floa
         det = _cross(rocker, coupler)
         w2 = omega * omega
 
-        def solve(a_S1: complex, a_S3: complex, alpha3: float, a_S4: complex, alpha4: float, gravity_: complex,
-                  q: float):
+        def solve(
+            a_S1: complex, a_S3: complex, alpha3: float, a_S4: complex, alpha4: float, gravity_: complex, q: float
+        ):
             H4 = _cross(u4 * e4, m4 * (a_S4 - gravity_)) + J4 * alpha4 - q
             H3 = _cross(u3 * e3, m3 * (a_S3 - gravity_)) + J3 * alpha3
             F23 = complex(H4 * coupler.real + rocker.real * H3, rocker.imag * H3 + coupler.imag * H4) / det
@@ -292,8 +326,10 @@ def preset_point_motions(mechanism) -> Callable[[float], dict]:
 
         def four_bar_motions(phi: float) -> dict:
             _, _, _, th4, dth4, ddth4 = link_angles(phi, a, b, c, d, th1, sign)
-            return {"B": arm((0j, 0j, 0j), a, phi, 1.0, 0.0),
-                    "C": arm((d * cmath.exp(1j * th1), 0j, 0j), c, th4, dth4, ddth4)}
+            return {
+                "B": arm((0j, 0j, 0j), a, phi, 1.0, 0.0),
+                "C": arm((d * cmath.exp(1j * th1), 0j, 0j), c, th4, dth4, ddth4),
+            }
 
         return four_bar_motions
     geometry = walking_beam.geometry_from_scene(mechanism)

@@ -26,11 +26,22 @@ os.environ["MECH_REGULATOR_SERVER"] = "off"
 
 # The modules of the physics core's own tests: no ROS node, no subprocess, no fast path (test_suite_markers.py
 # checks it); the machine's kinematics, dynamics, energy method, governor statics and dynamics, linkages
-PHYSICS_MODULES = frozenset({
-    "test_advice", "test_crank_slider", "test_dynamics", "test_energy_method", "test_energy_method_corners",
-    "test_engine_quadrature", "test_four_bar", "test_governor_dynamics", "test_governor_statics", "test_linkage",
-    "test_linkage_friction_corners", "test_output_link_loads",
-})
+PHYSICS_MODULES = frozenset(
+    {
+        "test_advice",
+        "test_crank_slider",
+        "test_dynamics",
+        "test_energy_method",
+        "test_energy_method_corners",
+        "test_engine_quadrature",
+        "test_four_bar",
+        "test_governor_dynamics",
+        "test_governor_statics",
+        "test_linkage",
+        "test_linkage_friction_corners",
+        "test_output_link_loads",
+    }
+)
 
 
 def mark_physics(items: list[pytest.Item]) -> None:

@@ -14,8 +14,9 @@ from pathlib import Path
 FAULT_TIME = 100_000_000  # [ns] of simulation time
 SLOW_ANSWER = 20.0  # [s] of wall time
 
-spec = importlib.util.spec_from_file_location("pid_governor",
-                                              Path(__file__).resolve().parents[1] / "examples" / "pid_governor.py")
+spec = importlib.util.spec_from_file_location(
+    "pid_governor", Path(__file__).resolve().parents[1] / "examples" / "pid_governor.py"
+)
 example = importlib.util.module_from_spec(spec)
 spec.loader.exec_module(example)
 

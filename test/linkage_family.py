@@ -16,10 +16,19 @@ import numpy as np
 
 from mech_regulator.scene import SceneError, validate_scene
 
-ATTEMPTS = 200   # draws per linkage before the generator gives up (a bug in it, not bad luck)
-DURATION = 0.3   # [s] of each scene's scenario
-GOVERNOR = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
-            "friction": 0.0, "ratio": 0.5, "stroke": [0.02, 0.08], "valve": {"open_at": 0.02, "closed_at": 0.08}}
+ATTEMPTS = 200  # draws per linkage before the generator gives up (a bug in it, not bad luck)
+DURATION = 0.3  # [s] of each scene's scenario
+GOVERNOR = {
+    "type": "direct",
+    "ball_mass": 1.0,
+    "arm_length": 0.2,
+    "sleeve_mass": 5.0,
+    "damping": 200.0,
+    "friction": 0.0,
+    "ratio": 0.5,
+    "stroke": [0.02, 0.08],
+    "valve": {"open_at": 0.02, "closed_at": 0.08},
+}
 # a Porter governor whose spindle at 0.5 x the crank speed holds it near 36 rad/s (its sleeve at 20..80 mm for
 # 35.2..38.4 rad/s); the linear motor below runs at up to 40 rad/s with the throttle open
 
@@ -43,8 +52,12 @@ def _link(rng, points: dict[str, complex], mass_scale: float = 5.0) -> dict:
     centre = sum(values) / len(values) + complex(*rng.uniform(-0.01, 0.01, 2))
     span = max((abs(a - b) for a in values for b in values), default=0.0)
     mass = float(rng.uniform(0.3, 1.0) * mass_scale)
-    link = {"points": {name: _point(z) for name, z in points.items()}, "mass": round(mass, 4),
-            "centre": _point(centre), "inertia": round(mass * (span * span / 12.0 + 1e-4), 6)}
+    link = {
+        "points": {name: _point(z) for name, z in points.items()},
+        "mass": round(mass, 4),
+        "centre": _point(centre),
+        "inertia": round(mass * (span * span / 12.0 + 1e-4), 6),
+    }
     return link
 
 
@@ -66,13 +79,20 @@ def _scene(name: str, mechanism: dict, governed: bool, groups: list[str]) -> dic
     elif "link" in output:
         loads.append({"type": "rocker_viscous", "coefficient": 0.2})
     sliders = any(joint["type"] == "prismatic" for joint in mechanism["joints"].values())
-    scene = {"name": name, "description": f"generated {'+'.join(groups)} linkage",
-             "machine": {"inertia": 0.5, "gravity": [0.0, -9.81], "mechanism": mechanism,
-                         "drive": {"type": "linear_motor", "stall_torque": 400.0, "no_load_speed": 40.0},
-                         "loads": loads},
-             "scenario": {"initial": {"phi": 0.0, "omega": 30.0}, "duration": DURATION},
-             "analysis": {"permitted_delta": 0.05},
-             "expected": {"groups": groups, "sliders": sliders, "governed": governed}}
+    scene = {
+        "name": name,
+        "description": f"generated {'+'.join(groups)} linkage",
+        "machine": {
+            "inertia": 0.5,
+            "gravity": [0.0, -9.81],
+            "mechanism": mechanism,
+            "drive": {"type": "linear_motor", "stall_torque": 400.0, "no_load_speed": 40.0},
+            "loads": loads,
+        },
+        "scenario": {"initial": {"phi": 0.0, "omega": 30.0}, "duration": DURATION},
+        "analysis": {"permitted_delta": 0.05},
+        "expected": {"groups": groups, "sliders": sliders, "governed": governed},
+    }
     if governed:
         scene["governor"] = dict(GOVERNOR)
         scene["scenario"]["initial"]["sleeve"] = 0.04
@@ -89,11 +109,17 @@ def _four_bar(rng) -> tuple[dict, dict, dict, complex, complex]:
     turn = complex(math.cos(t := rng.uniform(-0.5, 0.5)), math.sin(t))
     D = d * turn
     frame = {"A": 0j, "D": D}
-    links = {"crank": _link(rng, {"A": 0j, "B": a + 0j}),
-             "coupler": _link(rng, {"B": 0j, "C": b + 0j}),
-             "rocker": _link(rng, {"D": 0j, "C": c + 0j, "E": -rng.uniform(0.1, 0.25) + 0j}, mass_scale=8.0)}
-    joints = {"A": _revolute("frame", "crank"), "B": _revolute("crank", "coupler"),
-              "C": _revolute("coupler", "rocker"), "D": _revolute("frame", "rocker")}
+    links = {
+        "crank": _link(rng, {"A": 0j, "B": a + 0j}),
+        "coupler": _link(rng, {"B": 0j, "C": b + 0j}),
+        "rocker": _link(rng, {"D": 0j, "C": c + 0j, "E": -rng.uniform(0.1, 0.25) + 0j}, mass_scale=8.0),
+    }
+    joints = {
+        "A": _revolute("frame", "crank"),
+        "B": _revolute("crank", "coupler"),
+        "C": _revolute("coupler", "rocker"),
+        "D": _revolute("frame", "rocker"),
+    }
     return frame, links, joints, D, turn
 
 
@@ -104,8 +130,15 @@ def _branches(rng, *joints: str) -> dict:
 def four_bar(rng) -> dict:
     """RRR: a crank-rocker, its output the rocker (no slider)."""
     frame, links, joints, _, _ = _four_bar(rng)
-    return {"type": "linkage", "frame": {k: _point(v) for k, v in frame.items()}, "crank": "crank", "links": links,
-            "joints": joints, "branches": _branches(rng, "C"), "output": {"link": "rocker"}}
+    return {
+        "type": "linkage",
+        "frame": {k: _point(v) for k, v in frame.items()},
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "branches": _branches(rng, "C"),
+        "output": {"link": "rocker"},
+    }
 
 
 def watt_six_bar(rng) -> dict:
@@ -117,8 +150,15 @@ def watt_six_bar(rng) -> dict:
     links["rod"] = _link(rng, {"E": 0j, "F": rod + 0j})
     links["follower"] = _link(rng, {"F": 0j, "H": second + 0j})
     joints.update(E=_revolute("rocker", "rod"), F=_revolute("rod", "follower"), H=_revolute("frame", "follower"))
-    return {"type": "linkage", "frame": {k: _point(v) for k, v in frame.items()}, "crank": "crank", "links": links,
-            "joints": joints, "branches": _branches(rng, "C", "F"), "output": {"link": "follower"}}
+    return {
+        "type": "linkage",
+        "frame": {k: _point(v) for k, v in frame.items()},
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "branches": _branches(rng, "C", "F"),
+        "output": {"link": "follower"},
+    }
 
 
 def crank_slider(rng) -> dict:
@@ -128,25 +168,46 @@ def crank_slider(rng) -> dict:
     angle = rng.uniform(-180.0, 180.0)
     along = complex(math.cos(math.radians(angle)), math.sin(math.radians(angle)))
     G = 1j * along * rng.uniform(-0.5, 0.5) * r
-    links = {"crank": _link(rng, {"A": 0j, "B": r + 0j}), "rod": _link(rng, {"B": 0j, "C": rod + 0j}),
-             "piston": _link(rng, {"C": 0j, "G": 0j}, mass_scale=10.0)}
-    joints = {"A": _revolute("frame", "crank"), "B": _revolute("crank", "rod"), "C": _revolute("rod", "piston"),
-              "G": _prismatic("frame", "piston", angle)}
-    return {"type": "linkage", "frame": {"A": [0.0, 0.0], "G": _point(G)}, "crank": "crank", "links": links,
-            "joints": joints, "branches": _branches(rng, "C"), "output": {"joint": "G"}}
+    links = {
+        "crank": _link(rng, {"A": 0j, "B": r + 0j}),
+        "rod": _link(rng, {"B": 0j, "C": rod + 0j}),
+        "piston": _link(rng, {"C": 0j, "G": 0j}, mass_scale=10.0),
+    }
+    joints = {
+        "A": _revolute("frame", "crank"),
+        "B": _revolute("crank", "rod"),
+        "C": _revolute("rod", "piston"),
+        "G": _prismatic("frame", "piston", angle),
+    }
+    return {
+        "type": "linkage",
+        "frame": {"A": [0.0, 0.0], "G": _point(G)},
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "branches": _branches(rng, "C"),
+        "output": {"joint": "G"},
+    }
 
 
 def six_bar_ram(rng) -> dict:
     """RRR + RRP: the crank-rocker's rocker extended to E drives a ram on a vertical guide through the rod E-F;
     the output is the rocker, a link with no slider, while the ram slides."""
     frame, links, joints, D, turn = _four_bar(rng)
-    E = D + turn * complex(-rng.uniform(0.1, 0.25), 0.0)   # about where E swings
+    E = D + turn * complex(-rng.uniform(0.1, 0.25), 0.0)  # about where E swings
     frame["G"] = E + complex(rng.uniform(-0.05, 0.05), 0.0)
     links["rod"] = _link(rng, {"E": 0j, "F": rng.uniform(0.25, 0.4) + 0j})
     links["ram"] = _link(rng, {"F": 0j, "G": 0j}, mass_scale=20.0)
     joints.update(E=_revolute("rocker", "rod"), F=_revolute("rod", "ram"), G=_prismatic("frame", "ram", -90.0))
-    return {"type": "linkage", "frame": {k: _point(v) for k, v in frame.items()}, "crank": "crank", "links": links,
-            "joints": joints, "branches": _branches(rng, "C", "F"), "output": {"link": "rocker"}}
+    return {
+        "type": "linkage",
+        "frame": {k: _point(v) for k, v in frame.items()},
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "branches": _branches(rng, "C", "F"),
+        "output": {"link": "rocker"},
+    }
 
 
 def shaper(rng) -> dict:
@@ -157,17 +218,31 @@ def shaper(rng) -> dict:
     lever = rng.uniform(0.45, 0.6)
     offset = rng.uniform(-0.2, 0.2) * r
     height = lever - d + rng.uniform(-0.02, 0.03)
-    links = {"crank": _link(rng, {"O2": 0j, "A": r + 0j}),
-             "block": _link(rng, {"A": 0j, "S": 0j}, mass_scale=0.5),
-             "lever": _link(rng, {"O4": 0j, "S": complex(0.0, offset), "B": lever + 0j}, mass_scale=8.0),
-             "link": _link(rng, {"B": 0j, "C": rng.uniform(0.15, 0.25) + 0j}),
-             "ram": _link(rng, {"C": 0j, "G": 0j}, mass_scale=20.0)}
-    joints = {"O2": _revolute("frame", "crank"), "A": _revolute("crank", "block"),
-              "S": _prismatic("lever", "block"), "O4": _revolute("frame", "lever"),
-              "B": _revolute("lever", "link"), "C": _revolute("link", "ram"), "G": _prismatic("frame", "ram")}
-    return {"type": "linkage", "frame": {"O2": [0.0, 0.0], "O4": [0.0, -round(d, 6)], "G": [0.0, round(height, 6)]},
-            "crank": "crank", "links": links, "joints": joints, "branches": _branches(rng, "C"),
-            "output": {"joint": "G"}}
+    links = {
+        "crank": _link(rng, {"O2": 0j, "A": r + 0j}),
+        "block": _link(rng, {"A": 0j, "S": 0j}, mass_scale=0.5),
+        "lever": _link(rng, {"O4": 0j, "S": complex(0.0, offset), "B": lever + 0j}, mass_scale=8.0),
+        "link": _link(rng, {"B": 0j, "C": rng.uniform(0.15, 0.25) + 0j}),
+        "ram": _link(rng, {"C": 0j, "G": 0j}, mass_scale=20.0),
+    }
+    joints = {
+        "O2": _revolute("frame", "crank"),
+        "A": _revolute("crank", "block"),
+        "S": _prismatic("lever", "block"),
+        "O4": _revolute("frame", "lever"),
+        "B": _revolute("lever", "link"),
+        "C": _revolute("link", "ram"),
+        "G": _prismatic("frame", "ram"),
+    }
+    return {
+        "type": "linkage",
+        "frame": {"O2": [0.0, 0.0], "O4": [0.0, -round(d, 6)], "G": [0.0, round(height, 6)]},
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "branches": _branches(rng, "C"),
+        "output": {"joint": "G"},
+    }
 
 
 def yoke_and_wedge(rng) -> dict:
@@ -177,34 +252,65 @@ def yoke_and_wedge(rng) -> dict:
     r = rng.uniform(0.04, 0.1)
     incline = rng.uniform(25.0, 65.0) * rng.choice([-1, 1])
     x0 = rng.uniform(0.15, 0.3)
-    links = {"crank": _link(rng, {"A": 0j, "B": r + 0j}), "block": _link(rng, {"B": 0j, "K": 0j}, mass_scale=0.5),
-             "yoke": _link(rng, {"K": 0j, "Y": 0j, "W": complex(x0, 0.0)}, mass_scale=6.0),
-             "shoe": _link(rng, {"W": 0j, "C": 0j}, mass_scale=0.5),
-             "plunger": _link(rng, {"C": 0j, "P": 0j}, mass_scale=3.0)}
-    joints = {"A": _revolute("frame", "crank"), "B": _revolute("crank", "block"),
-              "K": _prismatic("yoke", "block", 90.0), "Y": _prismatic("frame", "yoke"),
-              "W": _prismatic("yoke", "shoe", incline), "C": _revolute("shoe", "plunger"),
-              "P": _prismatic("frame", "plunger", 90.0)}
-    return {"type": "linkage", "frame": {"A": [0.0, 0.0], "Y": [0.0, 0.0], "P": [round(x0, 6), 0.0]},
-            "crank": "crank", "links": links, "joints": joints, "output": {"joint": "P"}}
+    links = {
+        "crank": _link(rng, {"A": 0j, "B": r + 0j}),
+        "block": _link(rng, {"B": 0j, "K": 0j}, mass_scale=0.5),
+        "yoke": _link(rng, {"K": 0j, "Y": 0j, "W": complex(x0, 0.0)}, mass_scale=6.0),
+        "shoe": _link(rng, {"W": 0j, "C": 0j}, mass_scale=0.5),
+        "plunger": _link(rng, {"C": 0j, "P": 0j}, mass_scale=3.0),
+    }
+    joints = {
+        "A": _revolute("frame", "crank"),
+        "B": _revolute("crank", "block"),
+        "K": _prismatic("yoke", "block", 90.0),
+        "Y": _prismatic("frame", "yoke"),
+        "W": _prismatic("yoke", "shoe", incline),
+        "C": _revolute("shoe", "plunger"),
+        "P": _prismatic("frame", "plunger", 90.0),
+    }
+    return {
+        "type": "linkage",
+        "frame": {"A": [0.0, 0.0], "Y": [0.0, 0.0], "P": [round(x0, 6), 0.0]},
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "output": {"joint": "P"},
+    }
 
 
 def parallelogram(rng) -> dict:
     """Source 001's parallelogram A B C D with the redundant link EF (docs/linkages.md), scaled at random and
     rocked by a crank-rocker (crank O K, rod K B1); the output is the redundant link."""
     s = rng.uniform(0.2, 1.0)
-    links = {"crank": _link(rng, {"O": 0j, "K": 0.2 * s + 0j}),
-             "rod": _link(rng, {"K": 0j, "B1": 0.9 * s + 0j}),
-             "link1": _link(rng, {"A": 0j, "B": s + 0j, "B1": 0.5 * s + 0j}),
-             "link2": _link(rng, {"B": 0j, "C": 2 * s + 0j, "E": s + 0j}),
-             "link3": _link(rng, {"D": 0j, "C": s + 0j}),
-             "link5": _link(rng, {"F": 0j, "E": s + 0j})}
-    joints = {"O": _revolute("frame", "crank"), "K": _revolute("crank", "rod"), "B1": _revolute("rod", "link1"),
-              "A": _revolute("frame", "link1"), "B": _revolute("link1", "link2"), "C": _revolute("link2", "link3"),
-              "D": _revolute("frame", "link3"), "E": _revolute("link2", "link5"), "F": _revolute("frame", "link5")}
+    links = {
+        "crank": _link(rng, {"O": 0j, "K": 0.2 * s + 0j}),
+        "rod": _link(rng, {"K": 0j, "B1": 0.9 * s + 0j}),
+        "link1": _link(rng, {"A": 0j, "B": s + 0j, "B1": 0.5 * s + 0j}),
+        "link2": _link(rng, {"B": 0j, "C": 2 * s + 0j, "E": s + 0j}),
+        "link3": _link(rng, {"D": 0j, "C": s + 0j}),
+        "link5": _link(rng, {"F": 0j, "E": s + 0j}),
+    }
+    joints = {
+        "O": _revolute("frame", "crank"),
+        "K": _revolute("crank", "rod"),
+        "B1": _revolute("rod", "link1"),
+        "A": _revolute("frame", "link1"),
+        "B": _revolute("link1", "link2"),
+        "C": _revolute("link2", "link3"),
+        "D": _revolute("frame", "link3"),
+        "E": _revolute("link2", "link5"),
+        "F": _revolute("frame", "link5"),
+    }
     frame = {"O": [round(0.9 * s, 6), 0.0], "A": [0.0, 0.0], "D": [round(2 * s, 6), 0.0], "F": [round(s, 6), 0.0]}
-    return {"type": "linkage", "frame": frame, "crank": "crank", "links": links, "joints": joints,
-            "branches": {"B1": -1, "C": 1}, "output": {"link": "link5"}}
+    return {
+        "type": "linkage",
+        "frame": frame,
+        "crank": "crank",
+        "links": links,
+        "joints": joints,
+        "branches": {"B1": -1, "C": 1},
+        "output": {"link": "link5"},
+    }
 
 
 MEMBERS = {  # name -> (generator, the groups structure finds, governed)

@@ -46,13 +46,25 @@ _domains = itertools.count((os.getpid() * 37) % len(DOMAIN_IDS))
 # What the test node listens with: reliable, deep enough never to drop a sample of a short run. State
 # streams (joint_states, machine/moments, governor/state) are transient local: the test node gets what
 # was published before its subscription matched. /diagnostics is volatile (as its publishers).
-LISTEN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000, reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE)
-STATE_LISTEN_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=20000, reliability=ReliabilityPolicy.RELIABLE,
-                              durability=DurabilityPolicy.TRANSIENT_LOCAL)
+LISTEN_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=20000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+STATE_LISTEN_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=20000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 # What the test node publishes commands with (the nodes' COMMAND_QOS).
-SEND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+SEND_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 
 NANOSECONDS = 1_000_000_000
 
@@ -135,9 +147,16 @@ class Processes:
             signal.signal(signal.SIGINT, signal.default_int_handler)
         try:
             with open(log_path, "w") as log:
-                process = subprocess.Popen([str(part) for part in command], env=self.environment, stdout=log,
-                                           stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                           start_new_session=True, cwd=kwargs.pop("cwd", self.folder), **kwargs)
+                process = subprocess.Popen(
+                    [str(part) for part in command],
+                    env=self.environment,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    stdin=subprocess.DEVNULL,
+                    start_new_session=True,
+                    cwd=kwargs.pop("cwd", self.folder),
+                    **kwargs,
+                )
         finally:
             if ignored:
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -150,8 +169,10 @@ class Processes:
         name = name or module
         parameter_file = self.folder / f"{name}.params.yaml"
         parameter_file.write_text(yaml.safe_dump({"/**": {"ros__parameters": parameters}}))
-        return self.start([sys.executable, "-m", f"mech_regulator.nodes.{module}", "--ros-args", "--params-file",
-                           parameter_file], name)
+        return self.start(
+            [sys.executable, "-m", f"mech_regulator.nodes.{module}", "--ros-args", "--params-file", parameter_file],
+            name,
+        )
 
     def log(self, process: subprocess.Popen) -> str:
         """What a process wrote so far."""
@@ -194,8 +215,10 @@ class Processes:
         for pid, started in targets:  # the main job's nodes (sessions of their own): same pid, same process
             if started is not None and _start_time(pid) == started:
                 _signal(pid, signal.SIGINT)
-        while any(started is not None and _start_time(pid) == started for pid, started in targets) \
-                and time.monotonic() < deadline:
+        while (
+            any(started is not None and _start_time(pid) == started for pid, started in targets)
+            and time.monotonic() < deadline
+        ):
             time.sleep(0.1)
         for pid, started in targets:
             if started is not None and _start_time(pid) == started:
@@ -239,8 +262,13 @@ class Probe:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
-    def spin_until(self, condition: Callable[[], object], what: str, timeout: float = WAIT,
-                   describe: Callable[[], str] = lambda: ""):
+    def spin_until(
+        self,
+        condition: Callable[[], object],
+        what: str,
+        timeout: float = WAIT,
+        describe: Callable[[], str] = lambda: "",
+    ):
         """Spin until condition() is true (returns its value); failing after timeout [s] of wall time."""
         deadline = time.monotonic() + timeout
         while True:
@@ -251,8 +279,15 @@ class Probe:
                 pytest.fail(f"timed out after {timeout} s waiting for {what}\n{describe()}")
             self.executor.spin_once(timeout_sec=0.05)
 
-    def listen(self, message_type, topic: str, qos=LISTEN_QOS, callback: Callable | None = None,
-               publishers: int = 0, describe=lambda: "") -> list:
+    def listen(
+        self,
+        message_type,
+        topic: str,
+        qos=LISTEN_QOS,
+        callback: Callable | None = None,
+        publishers: int = 0,
+        describe=lambda: "",
+    ) -> list:
         """Subscribe to topic; returns the list every received message is appended to (and passed to
         callback). With publishers > 0, first wait until that many publishers have matched."""
         received: list = []
@@ -264,8 +299,11 @@ class Probe:
 
         subscription = self.node.create_subscription(message_type, topic, on_message, qos)
         if publishers:
-            self.spin_until(lambda: subscription.get_publisher_count() >= publishers,
-                            f"{publishers} publisher(s) of {topic}", describe=describe)
+            self.spin_until(
+                lambda: subscription.get_publisher_count() >= publishers,
+                f"{publishers} publisher(s) of {topic}",
+                describe=describe,
+            )
         return received
 
     def call(self, service_type, name: str, request, describe=lambda: ""):
@@ -279,8 +317,9 @@ class Probe:
         while True:
             future = client.call_async(request)
             answer_by = min(time.monotonic() + ANSWER_WAIT, deadline)
-            self.spin_until(lambda: future.done() or time.monotonic() > answer_by, f"the answer of {name}",
-                            describe=describe)
+            self.spin_until(
+                lambda: future.done() or time.monotonic() > answer_by, f"the answer of {name}", describe=describe
+            )
             if future.done():
                 break
             client.remove_pending_request(future)
@@ -292,8 +331,11 @@ class Probe:
     def publisher(self, message_type, topic: str, subscribers: int = 1, qos=SEND_QOS, describe=lambda: ""):
         """A publisher on topic, once it has matched `subscribers` subscriptions (so nothing is lost)."""
         publisher = self.node.create_publisher(message_type, topic, qos)
-        self.spin_until(lambda: publisher.get_subscription_count() >= subscribers,
-                        f"{subscribers} subscriber(s) of {topic}", describe=describe)
+        self.spin_until(
+            lambda: publisher.get_subscription_count() >= subscribers,
+            f"{subscribers} subscriber(s) of {topic}",
+            describe=describe,
+        )
         return publisher
 
     def close(self) -> None:
@@ -337,8 +379,9 @@ class RunListener:
 
         self.probe, self.describe = probe, describe
         self.JointState = JointState
-        self.diagnostics = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS,
-                                        publishers=diagnostics_publishers, describe=describe)
+        self.diagnostics = probe.listen(
+            DiagnosticArray, "/diagnostics", LISTEN_QOS, publishers=diagnostics_publishers, describe=describe
+        )
         self.moment_messages: list = []
         self.governor_messages = probe.listen(JointState, "governor/state", STATE_LISTEN_QOS) if governed else None
         self.joint_messages: list = []
@@ -349,8 +392,12 @@ class RunListener:
 
     def statuses(self, suffix: str = "/machine") -> list[tuple[bytes, str, dict[str, str]]]:
         """(level, message, values) of every status received from the node whose name ends with suffix."""
-        return [(status.level, status.message, diagnostic_values(status)) for array in self.diagnostics
-                for status in array.status if status.name.endswith(suffix)]
+        return [
+            (status.level, status.message, diagnostic_values(status))
+            for array in self.diagnostics
+            for status in array.status
+            if status.name.endswith(suffix)
+        ]
 
     def finished(self) -> dict[str, str] | None:
         """The machine's last diagnostics (with finished_at_ns), once received."""
@@ -377,8 +424,10 @@ class RunListener:
 
     @property
     def moments(self) -> dict[int, dict[str, float]]:
-        return {when: {name: effort for name, (_, _, effort) in joints.items()}
-                for when, joints in self.by_group(self.moment_messages).items()}
+        return {
+            when: {name: effort for name, (_, _, effort) in joints.items()}
+            for when, joints in self.by_group(self.moment_messages).items()
+        }
 
     @property
     def governor(self) -> dict[int, dict[str, tuple[float, float, float]]]:
@@ -387,10 +436,15 @@ class RunListener:
     def wait_finished(self) -> int:
         """Spin until the machine said it finished and its (and the governor's) last samples are in;
         returns the end time [ns]."""
-        finished = self.probe.spin_until(self.finished, "the machine's diagnostics saying it finished",
-                                         describe=self.describe)
+        finished = self.probe.spin_until(
+            self.finished, "the machine's diagnostics saying it finished", describe=self.describe
+        )
         end = int(finished["finished_at_ns"])
-        self.probe.spin_until(lambda: end in self.joints and end in self.moments
-                              and (self.governor_messages is None or end in self.governor),
-                              "the last samples of the run", describe=self.describe)
+        self.probe.spin_until(
+            lambda: (
+                end in self.joints and end in self.moments and (self.governor_messages is None or end in self.governor)
+            ),
+            "the last samples of the run",
+            describe=self.describe,
+        )
         return end

@@ -79,18 +79,36 @@ def setup_arguments() -> dict:
 def linkage_scene_entry(linkage) -> dict:
     """The scene's `type: linkage` mechanism entry (scene.schema.Linkage) of a mechanisms.linkage.Linkage whose frame
     is named 'frame': the inverse of mechanisms.presets.linkage_core (angles in degrees)."""
+
     def xy(point: complex) -> list[float]:
         return [point.real, point.imag]
 
-    entry = {"type": "linkage", "frame": {name: xy(p) for name, p in linkage.link("frame").points.items()},
-             "crank": linkage.crank,
-             "links": {link.name: {"points": {name: xy(p) for name, p in link.points.items()}, "mass": link.mass,
-                                   "centre": xy(link.centre), "inertia": link.inertia}
-                       for link in linkage.links if link.name != linkage.frame},
-             "joints": {joint.name: {"type": joint.kind, "links": list(joint.links),
-                                     "direction_deg": math.degrees(joint.direction),
-                                     "slider_angle_deg": math.degrees(joint.slider_angle)} for joint in linkage.joints},
-             "branches": dict(linkage.branches), "points": list(linkage.points)}
+    entry = {
+        "type": "linkage",
+        "frame": {name: xy(p) for name, p in linkage.link("frame").points.items()},
+        "crank": linkage.crank,
+        "links": {
+            link.name: {
+                "points": {name: xy(p) for name, p in link.points.items()},
+                "mass": link.mass,
+                "centre": xy(link.centre),
+                "inertia": link.inertia,
+            }
+            for link in linkage.links
+            if link.name != linkage.frame
+        },
+        "joints": {
+            joint.name: {
+                "type": joint.kind,
+                "links": list(joint.links),
+                "direction_deg": math.degrees(joint.direction),
+                "slider_angle_deg": math.degrees(joint.slider_angle),
+            }
+            for joint in linkage.joints
+        },
+        "branches": dict(linkage.branches),
+        "points": list(linkage.points),
+    }
     if linkage.output_joint is not None:
         entry["output"] = {"joint": linkage.output_joint}
     elif linkage.output_link is not None:
@@ -105,8 +123,10 @@ def preset_reduced(geometry, gravity):
     from mech_regulator.mechanisms import crank_slider, four_bar, presets, walking_beam
     from mech_regulator.mechanisms.linkage import checked, symbolic
 
-    build = {crank_slider.CrankSliderGeometry: presets.crank_slider_linkage,
-             four_bar.FourBarGeometry: presets.four_bar_linkage,
-             walking_beam.WalkingBeamGeometry: presets.walking_beam_linkage}[type(geometry)]
+    build = {
+        crank_slider.CrankSliderGeometry: presets.crank_slider_linkage,
+        four_bar.FourBarGeometry: presets.four_bar_linkage,
+        walking_beam.WalkingBeamGeometry: presets.walking_beam_linkage,
+    }[type(geometry)]
     linkage = build(geometry)
     return symbolic.make_reduced(linkage, checked(linkage), gravity)

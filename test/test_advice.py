@@ -12,9 +12,11 @@ from mech_regulator.scene.limits import MAX_STEPS
 from mech_regulator.solvers import advice
 
 FULL_FASTEST_MODE = advice.fastest_mode
-STIFF = [("engine_indirect_rigid", ["governor.servo.gain=1e15", "scenario.load_events=[]", "scenario.duration=1"]),
-         ("startup", ["machine.loads=[{type: fan, coefficient: 1e14}]"]),
-         ("two_mass", ["machine.coupling.stiffness=1e13", "scenario.duration=10"])]
+STIFF = [
+    ("engine_indirect_rigid", ["governor.servo.gain=1e15", "scenario.load_events=[]", "scenario.duration=1"]),
+    ("startup", ["machine.loads=[{type: fan, coefficient: 1e14}]"]),
+    ("two_mass", ["machine.coupling.stiffness=1e13", "scenario.duration=10"]),
+]
 
 
 def model_of(name: str, overrides: list[str]):

@@ -9,16 +9,29 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 
-FLOORS = ("mech_regulator", "mech_regulator.scene", "mech_regulator.mechanisms", "mech_regulator.effects",
-          "mech_regulator.governors", "mech_regulator.model", "mech_regulator.solvers", "mech_regulator.analysis",
-          "mech_regulator.bench", "mech_regulator.viz", "mech_regulator.cli.report", "mech_regulator.nodes",
-          "mech_regulator.cli", "mech_regulator.__main__", "launch")
+FLOORS = (
+    "mech_regulator",
+    "mech_regulator.scene",
+    "mech_regulator.mechanisms",
+    "mech_regulator.effects",
+    "mech_regulator.governors",
+    "mech_regulator.model",
+    "mech_regulator.solvers",
+    "mech_regulator.analysis",
+    "mech_regulator.bench",
+    "mech_regulator.viz",
+    "mech_regulator.cli.report",
+    "mech_regulator.nodes",
+    "mech_regulator.cli",
+    "mech_regulator.__main__",
+    "launch",
+)
 """The floors from the bottom up, each a module or package name: a module stands on the floor of the longest of
 these names it starts with. The bottom floor is the package's own modules (errors and exit codes, the on-disk
 cache, processes); cli/report.py (what a run shows and writes: summaries, progress, JSON and CSV) serves the nodes
 as well as the commands; the other commands stand above the nodes, since `run` starts them; `launch` is the ROS 2
 launch files (launch/*.launch.py). README.md, Layout, describes each floor."""
-CORE = FLOORS[:FLOORS.index("mech_regulator.analysis") + 1]
+CORE = FLOORS[: FLOORS.index("mech_regulator.analysis") + 1]
 """The physics core: the floors up to the analysis, free of rclpy and rerun."""
 
 
@@ -56,10 +69,12 @@ def import_graph(modules: dict[str, tuple[Path, bool]], package: str) -> dict[st
                 targets = [alias.name for alias in node.names]
             else:
                 here = name.split(".") if is_package else name.split(".")[:-1]
-                base = ".".join(here[:len(here) - node.level + 1] + [node.module or ""] if node.level
-                                else [node.module or ""]).strip(".")
-                targets = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base
-                           for alias in node.names]
+                base = ".".join(
+                    here[: len(here) - node.level + 1] + [node.module or ""] if node.level else [node.module or ""]
+                ).strip(".")
+                targets = [
+                    f"{base}.{alias.name}" if f"{base}.{alias.name}" in modules else base for alias in node.names
+                ]
             for target in targets:
                 while target not in modules and "." in target:
                     target = target.rsplit(".", 1)[0]
@@ -75,8 +90,12 @@ def floor(module: str, floors: tuple[str, ...]) -> int:
 
 def upward_imports(graph: dict[str, set[str]], floors: tuple[str, ...]) -> list[str]:
     """'a -> b' for each import of a module on a higher floor."""
-    return sorted(f"{module} -> {imported}" for module, imports in graph.items() for imported in imports
-                  if floor(imported, floors) > floor(module, floors))
+    return sorted(
+        f"{module} -> {imported}"
+        for module, imports in graph.items()
+        for imported in imports
+        if floor(imported, floors) > floor(module, floors)
+    )
 
 
 def import_circle(graph: dict[str, set[str]]) -> list[str]:
@@ -120,32 +139,40 @@ def test_the_checks_find_an_upward_import_and_a_circle(tmp_path):
     """On a package written here: a lazy import of an upper floor inside a function, and two modules of one floor
     importing each other (one relatively); plain downward imports are neither, nor is an import for the type
     checker only."""
-    modules = _synthetic_package(tmp_path, {
-        "toy/__init__.py": "",
-        "toy/low/__init__.py": "from toy.low.a import helper\n",
-        "toy/low/a.py": "import os\n\ndef helper():\n    from toy.high.top import shown\n    return shown\n",
-        "toy/low/b.py": "from . import c\n",
-        "toy/low/c.py": "from typing import TYPE_CHECKING\nfrom toy.low import b\n\n"
-                        "if TYPE_CHECKING:\n    from toy.high.top import shown\n",
-        "toy/high/__init__.py": "",
-        "toy/high/top.py": "from ..low import b\nfrom toy.low.c import nothing\nshown = 1\n",
-    })
+    modules = _synthetic_package(
+        tmp_path,
+        {
+            "toy/__init__.py": "",
+            "toy/low/__init__.py": "from toy.low.a import helper\n",
+            "toy/low/a.py": "import os\n\ndef helper():\n    from toy.high.top import shown\n    return shown\n",
+            "toy/low/b.py": "from . import c\n",
+            "toy/low/c.py": "from typing import TYPE_CHECKING\nfrom toy.low import b\n\n"
+            "if TYPE_CHECKING:\n    from toy.high.top import shown\n",
+            "toy/high/__init__.py": "",
+            "toy/high/top.py": "from ..low import b\nfrom toy.low.c import nothing\nshown = 1\n",
+        },
+    )
     graph = import_graph(modules, "toy")
     floors = ("toy", "toy.low", "toy.high")
     assert graph["toy.high.top"] == {"toy.low.b", "toy.low.c"}
     assert upward_imports(graph, floors) == ["toy.low.a -> toy.high.top"]
     assert upward_imports(graph, ("toy", "toy.high.top", "toy.low", "toy.high")) == [
-        "toy.high.top -> toy.low.b", "toy.high.top -> toy.low.c"]   # a module floor below its package's
+        "toy.high.top -> toy.low.b",
+        "toy.high.top -> toy.low.c",
+    ]  # a module floor below its package's
     assert sorted(import_circle(graph)[1:]) == ["toy.low.b", "toy.low.c"]
 
 
 def test_the_checks_pass_a_package_in_order(tmp_path):
-    modules = _synthetic_package(tmp_path, {
-        "toy/__init__.py": "",
-        "toy/low/__init__.py": "from .a import helper\n",
-        "toy/low/a.py": "def helper():\n    return 1\n",
-        "toy/high/top.py": "from toy.low import helper\n",
-    })
+    modules = _synthetic_package(
+        tmp_path,
+        {
+            "toy/__init__.py": "",
+            "toy/low/__init__.py": "from .a import helper\n",
+            "toy/low/a.py": "def helper():\n    return 1\n",
+            "toy/high/top.py": "from toy.low import helper\n",
+        },
+    )
     graph = import_graph(modules, "toy")
     assert upward_imports(graph, ("toy", "toy.low", "toy.high")) == []
     assert import_circle(graph) == []
@@ -153,15 +180,18 @@ def test_the_checks_pass_a_package_in_order(tmp_path):
 
 def test_the_core_imports_neither_rclpy_nor_rerun():
     imports = "; ".join(f"import {package}" for package in CORE)
-    script = (f"import sys; {imports}; "
-              "print(sorted(name for name in sys.modules if name.split('.')[0] in ('rclpy', 'rerun')))")
+    script = (
+        f"import sys; {imports}; "
+        "print(sorted(name for name in sys.modules if name.split('.')[0] in ('rclpy', 'rerun')))"
+    )
     found = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.strip()
     assert found == "[]"
 
 
 def test_the_check_sees_an_import_of_rerun():
     """The check above can fail: importing the recording layer does pull rerun in."""
-    script = ("import sys; import mech_regulator.viz.recording; "
-              "print('rerun' in sys.modules)")
-    assert subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          check=True).stdout.strip() == "True"
+    script = "import sys; import mech_regulator.viz.recording; print('rerun' in sys.modules)"
+    assert (
+        subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.strip()
+        == "True"
+    )

@@ -10,12 +10,26 @@ import pytest
 import yaml
 from support import run_cli
 
-SHORT_ENGINE = ["engine_direct", "--set", "scenario.duration=0.3", "--set", "scenario.load_events.0.time=0.1",
-                "--set", "scenario.load_events.1.time=0.2", "--set", "solver.path=reference"]
-TOPICS = {"/joint_states": "sensor_msgs/msg/JointState", "/throttle": "sensor_msgs/msg/JointState",
-          "/load_torque_stamped": "geometry_msgs/msg/WrenchStamped", "/governor/state": "sensor_msgs/msg/JointState",
-          "/machine/moments": "sensor_msgs/msg/JointState", "/clock": "rosgraph_msgs/msg/Clock",
-          "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
+SHORT_ENGINE = [
+    "engine_direct",
+    "--set",
+    "scenario.duration=0.3",
+    "--set",
+    "scenario.load_events.0.time=0.1",
+    "--set",
+    "scenario.load_events.1.time=0.2",
+    "--set",
+    "solver.path=reference",
+]
+TOPICS = {
+    "/joint_states": "sensor_msgs/msg/JointState",
+    "/throttle": "sensor_msgs/msg/JointState",
+    "/load_torque_stamped": "geometry_msgs/msg/WrenchStamped",
+    "/governor/state": "sensor_msgs/msg/JointState",
+    "/machine/moments": "sensor_msgs/msg/JointState",
+    "/clock": "rosgraph_msgs/msg/Clock",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
 
 
 def read_bag(folder: Path) -> tuple[dict, dict[str, list]]:
@@ -42,19 +56,25 @@ def joint(messages: list, name: str, field: str) -> np.ndarray:
     return np.array([getattr(message, field)[list(message.name).index(name)] for _, message in messages])
 
 
-@pytest.mark.parametrize("exchange, digits", [(["--exchange-step", "2e-3", "--coupling", "hold"], 17), ([], 12)],
-                         ids=["co-simulated", "monolithic"])
+@pytest.mark.parametrize(
+    "exchange, digits",
+    [(["--exchange-step", "2e-3", "--coupling", "hold"], 17), ([], 12)],
+    ids=["co-simulated", "monolithic"],
+)
 def test_simulate_bag_holds_the_csv_values(tmp_path, capsys, exchange, digits):
     """The CSV has 17 significant digits (every bit of a double) for a co-simulated run, 12 for a monolithic one."""
     csv_path, bag = tmp_path / "run.csv", tmp_path / "run_bag"
-    code, out, _ = run_cli(capsys, "simulate", *SHORT_ENGINE, *exchange, "--out", str(csv_path), "--bag", str(bag),
-                           "--quiet")
+    code, out, _ = run_cli(
+        capsys, "simulate", *SHORT_ENGINE, *exchange, "--out", str(csv_path), "--bag", str(bag), "--quiet"
+    )
     assert code == 0 and f"wrote {bag}" in out
     csv = np.genfromtxt(csv_path, delimiter=",", names=True)
     information, topics = read_bag(bag)
     assert information["storage_identifier"] == "mcap" and information["relative_file_paths"] == ["run_bag_0.mcap"]
-    listed = {item["topic_metadata"]["name"]: (item["topic_metadata"]["type"], item["message_count"])
-              for item in information["topics_with_message_count"]}
+    listed = {
+        item["topic_metadata"]["name"]: (item["topic_metadata"]["type"], item["message_count"])
+        for item in information["topics_with_message_count"]
+    }
     assert listed == {topic: (TOPICS[topic], len(messages)) for topic, messages in topics.items()}
     assert set(topics) == set(TOPICS)
     assert information["message_count"] == sum(len(messages) for messages in topics.values())
@@ -66,22 +86,23 @@ def test_simulate_bag_holds_the_csv_values(tmp_path, capsys, exchange, digits):
     times = np.round(csv["t"] * 1e9).astype(np.int64)
     states = topics["/joint_states"]
     np.testing.assert_array_equal([when for when, _ in states], times)  # log times: simulation time
-    np.testing.assert_array_equal([message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
-                                   for _, message in states], times)
+    np.testing.assert_array_equal(
+        [message.header.stamp.sec * 10**9 + message.header.stamp.nanosec for _, message in states], times
+    )
     same(joint(states, "crank", "position"), csv["phi"])
     same(joint(states, "crank", "velocity"), csv["omega"])
     same(joint(states, "slider", "position"), csv["x_slider"])
     same(joint(topics["/throttle"], "throttle", "position"), csv["throttle"])
-    same([message.wrench.torque.z for _, message in topics["/load_torque_stamped"]],
-                                  -csv["M_external"])
+    same([message.wrench.torque.z for _, message in topics["/load_torque_stamped"]], -csv["M_external"])
     assert {message.wrench.torque.z for _, message in topics["/load_torque_stamped"]} == {6.0, 8.0, 0.0}
     same(joint(topics["/governor/state"], "sleeve", "position"), csv["sleeve"])
     same(joint(topics["/governor/state"], "arm", "position"), csv["arm_angle"])
     moments = topics["/machine/moments"]
     same(joint(moments, "drive", "effort"), csv["M_drive"])
     same(joint(moments, "external", "effort"), csv["M_external"])
-    np.testing.assert_array_equal([message.clock.sec * 10**9 + message.clock.nanosec
-                                   for _, message in topics["/clock"]], times)
+    np.testing.assert_array_equal(
+        [message.clock.sec * 10**9 + message.clock.nanosec for _, message in topics["/clock"]], times
+    )
     (start, _), (end, last) = topics["/diagnostics"]
     assert start == 0 and end == times[-1] and last.status[0].message == "complete"
 

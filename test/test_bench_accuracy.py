@@ -26,8 +26,8 @@ from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 
 QUICK_SCENES = ("startup", "engine_direct")
-TOLERANCE_FACTOR = 30.0      # DOP853's achieved error stays below this many times the requested rtol ...
-RESOLVED_FACTOR = 10.0       # ... and this many times above the two references' disagreement
+TOLERANCE_FACTOR = 30.0  # DOP853's achieved error stays below this many times the requested rtol ...
+RESOLVED_FACTOR = 10.0  # ... and this many times above the two references' disagreement
 
 
 @pytest.fixture(scope="module")
@@ -62,16 +62,30 @@ def test_quick_benchmark_writes_the_files(quick):
     assert all(f"## {scene}" in readme and f"](work_precision_{scene}.png)" in readme for scene in QUICK_SCENES)
     assert "## What each effect costs" in readme and "| + elastic coupling | 6 |" in readme
     entities = set(RrdReader(out / "work_precision.rrd").store().schema().entity_paths())
-    assert {"/startup/methods/DOP853", "/startup/methods/RK4/points", "/engine_direct/methods/co-simulation",
-            "/engine_direct/reference_error", "/engine_direct/grid", "/about"} <= entities
+    assert {
+        "/startup/methods/DOP853",
+        "/startup/methods/RK4/points",
+        "/engine_direct/methods/co-simulation",
+        "/engine_direct/reference_error",
+        "/engine_direct/grid",
+        "/about",
+    } <= entities
 
 
 def test_csv_has_the_expected_columns_and_one_row_per_run(quick):
     _, out, rows = quick
     with open(out / "runs.csv", newline="", encoding="utf-8") as stream:
         header = next(csv.reader(stream))
-    states = ["phi_rms_rad", "phi_end_rad", "omega_rms_rel", "omega_end_rel", "arm_angle_rms_rel",
-              "arm_angle_end_rel", "arm_rate_rms_rel", "arm_rate_end_rel"]
+    states = [
+        "phi_rms_rad",
+        "phi_end_rad",
+        "omega_rms_rel",
+        "omega_end_rel",
+        "arm_angle_rms_rel",
+        "arm_angle_end_rel",
+        "arm_rate_rms_rel",
+        "arm_rate_end_rel",
+    ]
     assert header == [*CSV_COLUMNS, *states, "message"]
     assert {row["status"] for row in rows} == {"complete"}
     assert {row["method"] for row in rows if row["scene"] == "startup"} == {*ADAPTIVE, "RK4", "energy"}
@@ -81,7 +95,7 @@ def test_csv_has_the_expected_columns_and_one_row_per_run(quick):
         assert float(row["cpu_s"]) > 0.0 and int(row["steps"]) > 0
         assert row["nfev"] == "" if row["method"] == COSIM else int(row["nfev"]) > 0
         assert row["arm_angle_rms_rel"] == ("" if row["scene"] == "startup" else row["arm_angle_rms_rel"])
-    assert all(row["reference_error"] == "0" for row in rows if row["scene"] == "startup")   # closed form: exact
+    assert all(row["reference_error"] == "0" for row in rows if row["scene"] == "startup")  # closed form: exact
 
 
 @pytest.mark.parametrize("scene", QUICK_SCENES)
@@ -94,10 +108,11 @@ def test_dop853_error_falls_as_rtol_tightens_and_stays_resolved(quick, scene):
     assert np.all(np.diff(rtol) < 0) and np.all(np.diff(achieved) < 0), achieved
     assert np.all(achieved < TOLERANCE_FACTOR * rtol), achieved / rtol
     reference_error = float(dop853[0]["reference_error"])
-    assert np.all(achieved > RESOLVED_FACTOR * reference_error) and not any(int(row["below_reference"])
-                                                                             for row in dop853)
+    assert np.all(achieved > RESOLVED_FACTOR * reference_error) and not any(
+        int(row["below_reference"]) for row in dop853
+    )
     if scene == "engine_direct":
-        assert 0.0 < reference_error < 1e-9   # the check is a real second solution, and a close one
+        assert 0.0 < reference_error < 1e-9  # the check is a real second solution, and a close one
 
 
 def test_rk4_is_fourth_order_on_startup(quick):
@@ -145,11 +160,14 @@ def test_every_reference_scene_loads_with_its_overrides():
             assert scene.scenario.duration > max((event.time for event in scene.scenario.load_events), default=0.0)
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--scenes", "nosuch"], "no reference scene 'nosuch'"),
-    (["--scenes", ","], "expected scene names"),
-    (["--jobs", "0"], "--jobs 0"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--scenes", "nosuch"], "no reference scene 'nosuch'"),
+        (["--scenes", ","], "expected scene names"),
+        (["--jobs", "0"], "--jobs 0"),
+    ],
+)
 def test_bad_options_end_in_a_message_and_exit_2(capsys, tmp_path, argv, message):
     code, _, err = run_cli(capsys, "bench", "accuracy", "--quick", "--out", str(tmp_path), *argv)
     assert code == 2 and message in err
@@ -164,10 +182,25 @@ def test_an_out_that_is_a_file_exits_2(capsys, tmp_path):
 
 def test_ctrl_c_keeps_the_runs_measured(tmp_path):
     """SIGINT after a few runs: exit 130 and runs.csv with the rows measured so far, no traceback."""
-    process = subprocess.Popen([sys.executable, "-m", "mech_regulator", "bench", "accuracy", "--quick", "--scenes",
-                                "startup,engine_direct", "--out", str(tmp_path)], stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, cwd=Path(__file__).resolve().parents[1],
-                               env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mech_regulator",
+            "bench",
+            "accuracy",
+            "--quick",
+            "--scenes",
+            "startup,engine_direct",
+            "--out",
+            str(tmp_path),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=Path(__file__).resolve().parents[1],
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
     lines = [process.stdout.readline() for _ in range(4)]
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=60)
@@ -175,7 +208,7 @@ def test_ctrl_c_keeps_the_runs_measured(tmp_path):
     assert "Traceback" not in err and "interrupted" in err
     with open(tmp_path / "runs.csv", newline="", encoding="utf-8") as stream:
         rows = list(csv.DictReader(stream))
-    assert 1 <= len(rows) < 42, lines   # 42 runs in all: it stopped early
+    assert 1 <= len(rows) < 42, lines  # 42 runs in all: it stopped early
     assert not (tmp_path / "README.md").exists()
 
 
@@ -186,14 +219,16 @@ def test_ctrl_c_while_the_parent_works_stops_the_workers_at_the_next_measurement
     tasks = [Task("startup", True, Setting("RK45", rtol)) for rtol in (1e-3, 1e-4, 1e-5, 1e-6)]
     measurements = _measured(tasks, 2)
     assert next(measurements).task in tasks
-    os.kill(os.getpid(), signal.SIGINT)   # as if pressed while the parent adds the measurement
+    os.kill(os.getpid(), signal.SIGINT)  # as if pressed while the parent adds the measurement
     with pytest.raises(KeyboardInterrupt):
         next(measurements)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_the_measurement_imports_neither_rerun_nor_matplotlib_nor_rclpy():
-    script = ("import sys; import mech_regulator.bench.accuracy, mech_regulator.bench.report; "
-              "print(sorted({name.split('.')[0] for name in sys.modules} & {'rerun', 'matplotlib', 'rclpy'}))")
+    script = (
+        "import sys; import mech_regulator.bench.accuracy, mech_regulator.bench.report; "
+        "print(sorted({name.split('.')[0] for name in sys.modules} & {'rerun', 'matplotlib', 'rclpy'}))"
+    )
     found = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.strip()
     assert found == "[]"

@@ -25,8 +25,12 @@ def test_each_link_adds_exactly_its_effect():
     assert [model.joint_friction is not None for model in models] == [False] * 7 + [True]
     assert models[-1].joint_friction.names == ("crank_bearing", "crank_pin", "wrist_pin", "guide")
     # the same loads everywhere: the coupling moves the fan to the driven part, it does not drop it
-    fans = [sum(effect.name == "fan" for effect in model.effects + (model.coupling.driven_effects if model.coupling
-                                                                    else ())) for model in models]
+    fans = [
+        sum(
+            effect.name == "fan" for effect in model.effects + (model.coupling.driven_effects if model.coupling else ())
+        )
+        for model in models
+    ]
     assert fans == [1] * 8
 
 

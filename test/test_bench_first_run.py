@@ -31,7 +31,8 @@ def test_dry_run_prints_each_step_and_its_command_and_makes_nothing(capsys, tmp_
         f"first command: (in {folder}/clone) .venv/bin/mech-regulator scenes",
         f"first main job (empty compile caches): (in {folder}/clone) bash ./dev run lathe --out "
         f"{folder}/runs/first/lathe.rrd",
-        f"warm main job (the same again): (in {folder}/clone) bash ./dev run lathe --out {folder}/runs/warm/lathe.rrd"]
+        f"warm main job (the same again): (in {folder}/clone) bash ./dev run lathe --out {folder}/runs/warm/lathe.rrd",
+    ]
     assert not folder.exists()
 
 
@@ -69,14 +70,20 @@ def write_run(folder: Path, summary: dict, overrides: list[str]) -> Path:
     folder.mkdir()
     recording = folder / "run.rrd"
     recording.with_suffix(".json").write_text(json.dumps(summary))
-    recording.with_suffix(".params.yaml").write_text(yaml.safe_dump({"/**": {"ros__parameters": {
-        "overrides": overrides}}}))
+    recording.with_suffix(".params.yaml").write_text(
+        yaml.safe_dump({"/**": {"ros__parameters": {"overrides": overrides}}})
+    )
     return recording
 
 
 def test_a_main_jobs_pace_and_path_are_read_off_its_summary_and_parameters(tmp_path):
-    first = main_job_summary(write_run(tmp_path / "first", {"status": "complete", "real_time_factor": 4.0,
-                                                           "start_up_s": 3.25}, ["", "solver.path=fast"]))
+    first = main_job_summary(
+        write_run(
+            tmp_path / "first",
+            {"status": "complete", "real_time_factor": 4.0, "start_up_s": 3.25},
+            ["", "solver.path=fast"],
+        )
+    )
     assert describe_run(first) == "complete, fast path, 4 x real time, start-up 3.25 s"
     warm = main_job_summary(write_run(tmp_path / "warm", {"status": "complete", "real_time_factor": 5.0}, [""]))
     assert describe_run(warm) == "complete, scene's path, 5 x real time"

@@ -7,13 +7,27 @@ from support import run_cli
 
 
 def test_bench_long_prints_a_row_per_run_with_its_figures(capsys):
-    code, out, err = run_cli(capsys, "bench", "long", "--scenes", "lathe", "--paths", "reference", "--methods",
-                             "DOP853,Radau", "--modes", "simulate", "--duration", "2")
+    code, out, err = run_cli(
+        capsys,
+        "bench",
+        "long",
+        "--scenes",
+        "lathe",
+        "--paths",
+        "reference",
+        "--methods",
+        "DOP853,Radau",
+        "--modes",
+        "simulate",
+        "--duration",
+        "2",
+    )
     assert code == 0, err
     header, rule, *rows = out.splitlines()
     assert header.startswith("| scene | path | method | mode | status (2 s) |") and rule.startswith("|---|")
-    assert [row.split(" | ")[:5] for row in rows] == [["| lathe", "reference", method, "simulate", "complete"]
-                                                      for method in ("DOP853", "Radau")]
+    assert [row.split(" | ")[:5] for row in rows] == [
+        ["| lathe", "reference", method, "simulate", "complete"] for method in ("DOP853", "Radau")
+    ]
     for row in rows:
         cells = row.strip("| ").split(" | ")
         assert int(cells[6]) > 10 and abs(float(cells[7])) < 1e-6, row  # steps, energy residual

@@ -35,10 +35,15 @@ from mech_regulator.solvers.cosim import DEFAULT_COUPLING
 SHORT = "scenario.duration=0.5"
 # every MuJoCo-native form at once: constant drive, constant and viscous crank loads, a spring on the slider, a
 # crank with its own mass off the axis, gravity with both components
-VARIANT = (SHORT, "machine.drive={type: constant, torque: 30.0}", "machine.mechanism.crank_mass=0.8",
-           "machine.mechanism.crank_cg=0.02", "machine.gravity=[3.0, -9.81]",
-           "machine.loads=[{type: constant, torque: 5.0}, {type: viscous, coefficient: 0.05}, "
-           "{type: slider_spring, stiffness: 2000.0, free_position: 0.21}, {type: slider_viscous, coefficient: 2.0}]")
+VARIANT = (
+    SHORT,
+    "machine.drive={type: constant, torque: 30.0}",
+    "machine.mechanism.crank_mass=0.8",
+    "machine.mechanism.crank_cg=0.02",
+    "machine.gravity=[3.0, -9.81]",
+    "machine.loads=[{type: constant, torque: 5.0}, {type: viscous, coefficient: 0.05}, "
+    "{type: slider_spring, stiffness: 2000.0, free_position: 0.21}, {type: slider_viscous, coefficient: 2.0}]",
+)
 
 
 def reference_run(*overrides: str):
@@ -57,7 +62,7 @@ def test_mujoco_multibody_crank_slider_moves_as_the_reduced_model(overrides):
     run = MujocoCrankSlider(model.scene, 2.5e-4).run(model.scene.scenario.duration)
     assert run.times[-1] == pytest.approx(0.5)
     omega_ref = trajectory(run.times)[1]
-    assert np.max(omega_ref) > 30.0 and run.phi[-1] > 2 * math.pi   # run up through both dead centres
+    assert np.max(omega_ref) > 30.0 and run.phi[-1] > 2 * math.pi  # run up through both dead centres
     error = np.sqrt(np.mean((run.omega - omega_ref) ** 2)) / np.max(np.abs(omega_ref))
     assert error < 1e-6
     link = model.scene.machine.mechanism
@@ -70,15 +75,20 @@ def test_mujoco_model_refuses_what_it_cannot_express():
     assert "machine.loads[3] type 'slider_table'" in mujoco_refusal(compressor)
     with pytest.raises(SceneError, match="slider_table"):
         crank_slider_mjcf(compressor, 1e-3)
-    assert "loads[1] type 'fan'" in mujoco_refusal(load_scene("engine_direct", ["machine.drive={type: constant, "
-                                                                                  "torque: 10.0}"]))
+    assert "loads[1] type 'fan'" in mujoco_refusal(
+        load_scene("engine_direct", ["machine.drive={type: constant, torque: 10.0}"])
+    )
     assert "external load" in mujoco_refusal(load_scene("crank_slider_bench", ["scenario.external_load=3.0"]))
     assert mujoco_refusal(load_scene("crank_slider_bench")) is None
 
 
 def _omega(path: str, method: str, rtol: float, *overrides: str) -> tuple[np.ndarray, np.ndarray]:
-    model = build_model(load_scene("crank_slider_bench", [SHORT, *overrides, f"solver.method={method}",
-                                                          f"solver.rtol={rtol!r}", f"solver.atol={rtol!r}"]))
+    model = build_model(
+        load_scene(
+            "crank_slider_bench",
+            [SHORT, *overrides, f"solver.method={method}", f"solver.rtol={rtol!r}", f"solver.atol={rtol!r}"],
+        )
+    )
     outcome = ode_runner(path, method, model)()
     assert outcome.status == "complete"
     return outcome.times, outcome.omega
@@ -107,11 +117,11 @@ def _row(error: float, cpu: float) -> Row:
 def test_cost_at_the_target_error_is_interpolated_log_log_along_the_front():
     """cpu = 1e-3 error^-1/2 at 1e-5 and 1e-7 gives 1 s at 1e-6; a dearer run that is less accurate is off the
     front; a target looser than every run costs the cheapest run; one tighter than every run gives nan."""
-    rows = [_row(1e-5, 1e-3 * 1e-5 ** -0.5), _row(1e-7, 1e-3 * 1e-7 ** -0.5), _row(1e-4, 5.0)]
+    rows = [_row(1e-5, 1e-3 * 1e-5**-0.5), _row(1e-7, 1e-3 * 1e-7**-0.5), _row(1e-4, 5.0)]
     assert [row.error for row in work_precision_front(rows)] == [1e-5, 1e-7]
     assert at_error(rows, 1e-6) == pytest.approx(1.0, rel=1e-12)
     assert at_error(rows, 1e-6, "nfev") == pytest.approx(1e4, rel=1e-12)
-    assert at_error(rows, 1e-4) == pytest.approx(1e-3 * 1e-5 ** -0.5, rel=1e-12)
+    assert at_error(rows, 1e-4) == pytest.approx(1e-3 * 1e-5**-0.5, rel=1e-12)
     assert math.isnan(at_error(rows, 1e-9))
 
 
@@ -119,11 +129,16 @@ def test_ros_real_time_factors():
     """The nodes' real-time factor is the simulated time over the exchanges' wall time (16 s in 32 s: 0.5), the
     target's measure at run's default (the fast path, DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING); the in-process run's
     factor and largest error are passed on; a failed run (no time) gives none; another design is not the target's."""
+
     def row(path, method, wall, error=math.nan, coupling=DEFAULT_COUPLING, step=DEFAULT_EXCHANGE_STEP):
         return Row("ros", "engine_direct", path, method, coupling, step, 16.0, wall, steps=800, error=error)
 
-    rows = [row(REFERENCE, "nodes", 80.0), row(REFERENCE, "in process", 16.0, 6e-5), row(FAST, "nodes", 32.0),
-            row(FAST, "in process", 4.0, 2e-5)]
+    rows = [
+        row(REFERENCE, "nodes", 80.0),
+        row(REFERENCE, "in process", 16.0, 6e-5),
+        row(FAST, "nodes", 32.0),
+        row(FAST, "in process", 4.0, 2e-5),
+    ]
     benchmark = SpeedBenchmark(rows=rows)
     reference, fast = ros_summary(benchmark)
     assert reference["real_time_factor"] == pytest.approx(0.2, rel=1e-12) and not reference["default"]
@@ -142,9 +157,21 @@ def test_ros_real_time_factors():
 def test_the_ros_picture_is_drawn_only_when_the_main_job_was_measured(tmp_path):
     from mech_regulator.viz.speed import plot_ros_speed
 
-    rows = [Row("ros", "engine_direct", path, how, DEFAULT_COUPLING, DEFAULT_EXCHANGE_STEP, 16.0, wall, steps=800,
-                error=error) for path, how, wall, error in ((FAST, "nodes", 4.0, math.nan),
-                                                             (FAST, "in process", 2.0, 2e-5))]
+    rows = [
+        Row(
+            "ros",
+            "engine_direct",
+            path,
+            how,
+            DEFAULT_COUPLING,
+            DEFAULT_EXCHANGE_STEP,
+            16.0,
+            wall,
+            steps=800,
+            error=error,
+        )
+        for path, how, wall, error in ((FAST, "nodes", 4.0, math.nan), (FAST, "in process", 2.0, 2e-5))
+    ]
     assert plot_ros_speed(SpeedBenchmark(rows=rows), tmp_path / "ros.png")
     assert (tmp_path / "ros.png").read_bytes().startswith(b"\x89PNG")
     assert not plot_ros_speed(SpeedBenchmark(rows=[]), tmp_path / "none.png")
@@ -153,8 +180,9 @@ def test_the_ros_picture_is_drawn_only_when_the_main_job_was_measured(tmp_path):
 
 def test_quick_command_writes_its_files(capsys, tmp_path):
     pytest.importorskip("mujoco", reason="MuJoCo is an optional dependency (extra 'bench')")
-    code, out, err = run_cli(capsys, "bench", "speed", "--quick", "--scenes", "crank_slider_bench", "--out",
-                             str(tmp_path))
+    code, out, err = run_cli(
+        capsys, "bench", "speed", "--quick", "--scenes", "crank_slider_bench", "--out", str(tmp_path)
+    )
     assert code == 0, err
     assert "targets (on crank_slider_bench" in out and "fast : MuJoCo" in out
     with open(tmp_path / "speed.csv", newline="", encoding="utf-8") as stream:
@@ -163,18 +191,24 @@ def test_quick_command_writes_its_files(capsys, tmp_path):
     assert {REFERENCE, SOLVE_IVP, "MuJoCo"} <= measured
     for row in rows:
         if row["section"] == "precision" and row["error"]:
-            assert 0.0 < float(row["error"]) < 1e-3       # every path solved the same machine
+            assert 0.0 < float(row["error"]) < 1e-3  # every path solved the same machine
     assert {row["section"] for row in rows} >= {"precision", "duration", "effects", "sweep", "startup"}
     summary = json.loads((tmp_path / "speed.json").read_text())
-    assert [item["target"] for item in summary["targets"]] == ["fast : solve_ivp", "fast : MuJoCo",
-                                                               "ROS real-time factor"]
+    assert [item["target"] for item in summary["targets"]] == [
+        "fast : solve_ivp",
+        "fast : MuJoCo",
+        "ROS real-time factor",
+    ]
     assert (tmp_path / "speed.png").read_bytes().startswith(b"\x89PNG")
 
 
-@pytest.mark.parametrize("argv, message", [
-    (("--scenes", "nope"), "--scenes: no speed scene 'nope'; choose from crank_slider_bench"),
-    (("--scenes", ","), "--scenes: expected scene names"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (("--scenes", "nope"), "--scenes: no speed scene 'nope'; choose from crank_slider_bench"),
+        (("--scenes", ","), "--scenes: expected scene names"),
+    ],
+)
 def test_bad_option_exits_2_with_a_message(capsys, tmp_path, argv, message):
     code, _out, err = run_cli(capsys, "bench", "speed", "--quick", "--out", str(tmp_path), *argv)
     assert code == 2
@@ -185,11 +219,16 @@ def test_bad_option_exits_2_with_a_message(capsys, tmp_path, argv, message):
 def test_a_failed_ros_run_is_named_by_its_nodes_not_by_a_crash_dumps_last_line():
     """A node's crash ends the launcher's stderr with the log tail it prints, whose last line is the interpreter's list
     of extension modules: the row's note names the node, its exit code and the fatal error instead."""
-    stderr = ("mech-regulator: the machine node ended with exit code -11\n"
-              "mech-regulator: node(s) machine failed; the end of /tmp/x.log:\n"
-              "Fatal Python error: Segmentation fault\n\nCurrent thread 0x1 (most recent call first):\n"
-              "  File \"x.py\", line 1 in f\n\nExtension modules: yaml._yaml, numpy (total: 2)\n")
-    assert failure_text(stderr) == ("mech-regulator: the machine node ended with exit code -11; "
-                                    "Fatal Python error: Segmentation fault")
-    assert failure_text("usage: mech-regulator run\nmech-regulator run: error: bad option\n") == \
-        "mech-regulator run: error: bad option"
+    stderr = (
+        "mech-regulator: the machine node ended with exit code -11\n"
+        "mech-regulator: node(s) machine failed; the end of /tmp/x.log:\n"
+        "Fatal Python error: Segmentation fault\n\nCurrent thread 0x1 (most recent call first):\n"
+        '  File "x.py", line 1 in f\n\nExtension modules: yaml._yaml, numpy (total: 2)\n'
+    )
+    assert failure_text(stderr) == (
+        "mech-regulator: the machine node ended with exit code -11; Fatal Python error: Segmentation fault"
+    )
+    assert (
+        failure_text("usage: mech-regulator run\nmech-regulator run: error: bad option\n")
+        == "mech-regulator run: error: bad option"
+    )

@@ -24,9 +24,9 @@ from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cam_contact import _pairs
 
-BETA = math.radians(120.0)   # a rise's or return's angle [rad]
-LIFT = 0.008                 # its lift [m]
-X = np.linspace(0.0, 1.0, 41)[1:-1]   # inside the segment (a law's s'' jumps at its ends)
+BETA = math.radians(120.0)  # a rise's or return's angle [rad]
+LIFT = 0.008  # its lift [m]
+X = np.linspace(0.0, 1.0, 41)[1:-1]  # inside the segment (a law's s'' jumps at its ends)
 
 
 def closed_form(law: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -35,20 +35,35 @@ def closed_form(law: str, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     if law == "uniform":
         return h * theta / b, np.full_like(theta, h / b), np.zeros_like(theta)
     if law == "harmonic":
-        return (h / 2 * (1 - np.cos(np.pi * theta / b)), h * np.pi / (2 * b) * np.sin(np.pi * theta / b),
-                h * np.pi ** 2 / (2 * b ** 2) * np.cos(np.pi * theta / b))
+        return (
+            h / 2 * (1 - np.cos(np.pi * theta / b)),
+            h * np.pi / (2 * b) * np.sin(np.pi * theta / b),
+            h * np.pi**2 / (2 * b**2) * np.cos(np.pi * theta / b),
+        )
     if law == "cycloidal":
-        return (h * (theta / b - np.sin(2 * np.pi * theta / b) / (2 * np.pi)),
-                h / b * (1 - np.cos(2 * np.pi * theta / b)), 2 * np.pi * h / b ** 2 * np.sin(2 * np.pi * theta / b))
+        return (
+            h * (theta / b - np.sin(2 * np.pi * theta / b) / (2 * np.pi)),
+            h / b * (1 - np.cos(2 * np.pi * theta / b)),
+            2 * np.pi * h / b**2 * np.sin(2 * np.pi * theta / b),
+        )
     x = theta / b
-    return (h * (10 * x ** 3 - 15 * x ** 4 + 6 * x ** 5), h / b * (30 * x ** 2 - 60 * x ** 3 + 30 * x ** 4),
-            h / b ** 2 * (60 * x - 180 * x ** 2 + 120 * x ** 3))
+    return (
+        h * (10 * x**3 - 15 * x**4 + 6 * x**5),
+        h / b * (30 * x**2 - 60 * x**3 + 30 * x**4),
+        h / b**2 * (60 * x - 180 * x**2 + 120 * x**3),
+    )
 
 
 def rise_dwell_return(law: str) -> SegmentLaw:
     """Rise by `law` over BETA, dwell 20 deg, return by `law` over BETA, dwell the rest."""
-    return SegmentLaw((Segment("rise", BETA, law, LIFT), Segment("dwell", math.radians(20.0)),
-                       Segment("return", BETA, law, LIFT), Segment("dwell", math.radians(100.0))))
+    return SegmentLaw(
+        (
+            Segment("rise", BETA, law, LIFT),
+            Segment("dwell", math.radians(20.0)),
+            Segment("return", BETA, law, LIFT),
+            Segment("dwell", math.radians(100.0)),
+        )
+    )
 
 
 @pytest.mark.parametrize("law", ["uniform", "harmonic", "cycloidal", "polynomial_345"])
@@ -59,12 +74,13 @@ def test_follower_laws_give_their_closed_forms_on_the_rise_dwell_and_return(law)
         assert got == pytest.approx(expected, rel=1e-12, abs=1e-15)
     dwell = motion.evaluate(BETA + np.radians([1.0, 10.0, 19.0]))
     assert [list(part) for part in dwell] == [[LIFT] * 3, [0.0] * 3, [0.0] * 3]
-    back = BETA + math.radians(20.0) + theta   # the return mirrors the rise: s = h - s_rise, s' and s'' negated
+    back = BETA + math.radians(20.0) + theta  # the return mirrors the rise: s = h - s_rise, s' and s'' negated
     s, ds, dds = closed_form(law, theta)
     for got, expected in zip(motion.evaluate(back), (LIFT - s, -ds, -dds)):
         assert got == pytest.approx(expected, rel=1e-12, abs=1e-15)
     assert motion.evaluate(np.array([2 * math.pi + 0.5 * BETA]))[0][0] == pytest.approx(
-        motion.evaluate(np.array([0.5 * BETA]))[0][0], abs=1e-15)   # periodic over the turn
+        motion.evaluate(np.array([0.5 * BETA]))[0][0], abs=1e-15
+    )  # periodic over the turn
 
 
 def test_a_table_law_follows_the_smooth_law_it_was_sampled_from():
@@ -76,10 +92,13 @@ def test_a_table_law_follows_the_smooth_law_it_was_sampled_from():
         assert np.max(np.abs(got - expected)) < scale * np.max(np.abs(expected))
 
 
-@pytest.mark.parametrize("segments, expected", [
-    ((Segment("rise", math.pi, "harmonic", 0.01), Segment("return", math.pi / 2, "harmonic", 0.01)), "span 270"),
-    ((Segment("rise", math.pi, "harmonic", 0.01), Segment("return", math.pi, "harmonic", 0.02)), "rises 0.01"),
-])
+@pytest.mark.parametrize(
+    "segments, expected",
+    [
+        ((Segment("rise", math.pi, "harmonic", 0.01), Segment("return", math.pi / 2, "harmonic", 0.01)), "span 270"),
+        ((Segment("rise", math.pi, "harmonic", 0.01), Segment("return", math.pi, "harmonic", 0.02)), "rises 0.01"),
+    ],
+)
 def test_laws_that_do_not_close_the_turn_are_refused(segments, expected):
     with pytest.raises(ValueError, match=expected):
         SegmentLaw(segments)
@@ -96,7 +115,7 @@ class EccentricCam:
         theta = sympy.Symbol("theta")
         R, eps = disc + roller, eccentricity
         a = theta - sympy.pi / 2
-        y = eps * sympy.sin(a) + sympy.sqrt(R ** 2 - eps ** 2 * sympy.cos(a) ** 2) - (R - eps)
+        y = eps * sympy.sin(a) + sympy.sqrt(R**2 - eps**2 * sympy.cos(a) ** 2) - (R - eps)
         self.functions = [sympy.lambdify(theta, expr, "numpy") for expr in (y, y.diff(theta), y.diff(theta, 2))]
 
     def evaluate(self, theta):
@@ -106,14 +125,27 @@ class EccentricCam:
         return np.zeros(0)
 
 
-def translating_pair(law, contact: str = "roller", roller: float | None = 0.01, base: float = 0.03,
-                     stiffness: float = 0.0, preload: float = 0.0, masses=(0.4, 0.1), gravity=None) -> CamPair:
+def translating_pair(
+    law,
+    contact: str = "roller",
+    roller: float | None = 0.01,
+    base: float = 0.03,
+    stiffness: float = 0.0,
+    preload: float = 0.0,
+    masses=(0.4, 0.1),
+    gravity=None,
+) -> CamPair:
     """A cam pair on the crank 'cam' about (0, 0): a centred follower on a guide along +y, with a roller."""
     rolling = contact == "roller"
-    links = (Link("frame", {"A": 0j, "G": 0j}), Link("cam", {"A": 0j}, mass=1.0, inertia=1e-3),
-             Link("follower", {"G": 0j, "R": 0j, "K": 0j}, mass=masses[0], centre=0.05j))
-    joints = [Joint("A", "revolute", ("frame", "cam")), Joint("G", "prismatic", ("frame", "follower"),
-                                                               direction=math.pi / 2)]
+    links = (
+        Link("frame", {"A": 0j, "G": 0j}),
+        Link("cam", {"A": 0j}, mass=1.0, inertia=1e-3),
+        Link("follower", {"G": 0j, "R": 0j, "K": 0j}, mass=masses[0], centre=0.05j),
+    )
+    joints = [
+        Joint("A", "revolute", ("frame", "cam")),
+        Joint("G", "prismatic", ("frame", "follower"), direction=math.pi / 2),
+    ]
     if rolling:
         links += (Link("roller", {"R": 0j}, mass=masses[1], roller_radius=roller),)
         joints += [Joint("R", "revolute", ("follower", "roller"))]
@@ -134,7 +166,7 @@ def test_an_eccentric_cam_has_its_closed_form_pressure_angle_and_radius_of_curva
     expected = np.arcsin(eps * np.abs(np.cos(phi - math.pi / 2)) / (disc + roller))
     assert pair.pressure_angle(phi) == pytest.approx(expected, abs=1e-12)
     assert pair.profile_radius(phi) == pytest.approx(np.full_like(phi, disc), rel=1e-10)
-    profile = pair.profile(360)   # the disc in the cam's coordinates: its centre at -i eps
+    profile = pair.profile(360)  # the disc in the cam's coordinates: its centre at -i eps
     assert np.abs(profile + 1j * eps) == pytest.approx(np.full(360, disc), rel=1e-12)
 
 
@@ -149,12 +181,13 @@ def test_a_translating_followers_J_is_its_mass_times_s_prime_squared():
     assert J[rising] == pytest.approx(0.5 * ds[rising] ** 2, rel=1e-12)
     for k in range(len(phi)):
         poses = pair.poses(phi[k])
-        assert J[k] == pytest.approx(0.4 * abs(poses["follower"][2]) ** 2 + 0.1 * abs(poses["roller"][2]) ** 2,
-                                     rel=1e-12, abs=1e-18)
+        assert J[k] == pytest.approx(
+            0.4 * abs(poses["follower"][2]) ** 2 + 0.1 * abs(poses["roller"][2]) ** 2, rel=1e-12, abs=1e-18
+        )
     step = 1e-6
     central = (pair.reduced(phi + step)[0] - pair.reduced(phi - step)[0]) / (2 * step)
     assert dJ == pytest.approx(central, rel=1e-6, abs=1e-12)
-    assert list(weight) == [0.0] * len(phi) and list(spring) == [0.0] * len(phi)   # no gravity, no spring
+    assert list(weight) == [0.0] * len(phi) and list(spring) == [0.0] * len(phi)  # no gravity, no spring
 
 
 def test_the_jump_speed_of_a_harmonic_follower_with_a_preloaded_spring_is_its_closed_form():
@@ -166,20 +199,28 @@ def test_the_jump_speed_of_a_harmonic_follower_with_a_preloaded_spring_is_its_cl
     expected = BETA / math.pi * math.sqrt(2 * (k * LIFT + F0) / (m * LIFT))
     speed, where = pair.jump()
     assert speed == pytest.approx(expected, rel=1e-12)
-    assert math.degrees(where) % 360 == pytest.approx(120.0, abs=1e-6) or \
-        math.degrees(where) % 360 == pytest.approx(140.0, abs=1e-6)
+    assert math.degrees(where) % 360 == pytest.approx(120.0, abs=1e-6) or math.degrees(where) % 360 == pytest.approx(
+        140.0, abs=1e-6
+    )
     phi = np.linspace(0.0, 2 * math.pi, 3601)
     assert np.min(pair.contact_force(phi, 0.99 * expected)[0]) > 0.0
     assert np.min(pair.contact_force(phi, 1.01 * expected)[0]) < 0.0
-    needed, normal = pair.contact_force(np.array([math.radians(130.0)]), 0.0)   # at rest on the top dwell
+    needed, normal = pair.contact_force(np.array([math.radians(130.0)]), 0.0)  # at rest on the top dwell
     assert (needed[0], normal[0]) == pytest.approx((F0 + k * LIFT, F0 + k * LIFT), rel=1e-12)
 
 
 def test_a_roller_larger_than_the_pitch_curves_curvature_is_refused_with_the_angle():
-    law = SegmentLaw((Segment("rise", math.radians(40.0), "cycloidal", 0.03),
-                      Segment("return", math.radians(320.0), "cycloidal", 0.03)))
-    with pytest.raises(LinkageError, match=r"cam pair K at crank angle [\d.]+ deg: the roller's radius 0.02 m exceeds "
-                                           "the pitch curve's radius of curvature .* undercut"):
+    law = SegmentLaw(
+        (
+            Segment("rise", math.radians(40.0), "cycloidal", 0.03),
+            Segment("return", math.radians(320.0), "cycloidal", 0.03),
+        )
+    )
+    with pytest.raises(
+        LinkageError,
+        match=r"cam pair K at crank angle [\d.]+ deg: the roller's radius 0.02 m exceeds "
+        "the pitch curve's radius of curvature .* undercut",
+    ):
         translating_pair(law, roller=0.02, base=0.02)
 
 
@@ -244,14 +285,15 @@ def test_the_valve_gear_runs_below_its_jump_speed_and_stops_where_contact_is_los
     solvers/cam_contact.py)."""
     code, out, _ = run_cli(capsys, "structure", "valve_gear")
     assert code == 0
-    assert "the follower jumps above 587.822 rad/s" in out   # 586.9 without the weight of 0.1 kg along -y
+    assert "the follower jumps above 587.822 rad/s" in out  # 586.9 without the weight of 0.1 kg along -y
     below = build_model(load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.02"]))
     assert simulate(below).status == "complete"
-    above = build_model(load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.02",
-                                                  "scenario.initial.omega=700"]))
+    above = build_model(
+        load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.02", "scenario.initial.omega=700"])
+    )
     trajectory = simulate(above)
     assert trajectory.status == "failed" and "left its cam (cam pair K)" in trajectory.message
-    (t_lost, what), = trajectory.events
+    ((t_lost, what),) = trajectory.events
     assert what == "contact lost at cam pair K" and t_lost == trajectory.t_end < 0.02
     phi, omega = trajectory(t_lost)[:2]
     pair = _pairs(above.scene)[0]
@@ -266,16 +308,20 @@ def test_a_cam_run_keeps_its_energy_balance_and_the_spring_stores_what_it_takes(
     """Over a valve-gear run the works equal the change of kinetic energy (relative 1e-8), and the work of the
     position moments (weight and spring, the reduction's M_weight; the spring's also without gravity) is minus the
     change of the spring's and the weight's energy, F0 s + k s^2 / 2 + m g s, between the run's ends."""
-    model = build_model(load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.0368"]
-                                   + ([] if gravity else ["machine.gravity=null"])))
+    model = build_model(
+        load_scene(
+            "valve_gear",
+            ["solver.path=reference", "scenario.duration=0.0368"] + ([] if gravity else ["machine.gravity=null"]),
+        )
+    )
     trajectory = simulate(model)
     assert trajectory.status == "complete"
     balance = energy_balance(model, trajectory)
     assert abs(balance.relative_residual) < 1e-8
     pair = _pairs(model.scene)[0]
     s = pair.motion(trajectory(np.array([0.0, trajectory.t_end]))[0]).s
-    stored = pair.spec.preload * s + 0.5 * pair.spec.stiffness * s ** 2 + 0.1 * gravity * s
-    assert s[1] > 0.5 * LIFT   # the run ends with the valve open: the spring holds energy
+    stored = pair.spec.preload * s + 0.5 * pair.spec.stiffness * s**2 + 0.1 * gravity * s
+    assert s[1] > 0.5 * LIFT  # the run ends with the valve open: the spring holds energy
     assert balance.works["weight"] == pytest.approx(-(stored[1] - stored[0]), rel=1e-7)
 
 
@@ -303,23 +349,39 @@ def cam_scene(change) -> dict:
     return data
 
 
-@pytest.mark.parametrize("change, expected", [
-    (lambda m: m["joints"]["K"]["law"][1].update(lift=0.001), "a dwell segment takes no law and no lift"),
-    (lambda m: m["joints"]["K"]["law"][0].pop("law"), "a rise segment needs a law"),
-    (lambda m: m["joints"]["K"]["law"][3].update(angle_deg=90.0), "segments span 350 deg; expected 360 deg"),
-    (lambda m: m["joints"]["K"].pop("roller_radius"), "roller_radius is given exactly when contact is roller"),
-    (lambda m: m["joints"]["K"].update(law=[{"motion": "rise", "law": "cycloidal", "angle_deg": 40.0, "lift": 0.03},
-                                             {"motion": "return", "law": "cycloidal", "angle_deg": 320.0,
-                                              "lift": 0.03}], roller_radius=0.012), "would be undercut"),
-    (lambda m: m["frame"].update(guide=[0.05, 0.0]), "the follower's line passes 0.05 m from the cam's pivot"),
-    (lambda m: m.update(crank="tappet"), "the crank 'tappet' must turn about one revolute joint"),
-    (lambda m: m["joints"]["K"].update(law={"angle_deg": [0.0, 90.0, 180.0, 270.0, 300.0],
-                                             "lift": [0.0, 0.004, 0.008, 0.004]}),
-     "law: angle_deg has 5 entries but the values have 4"),
-    (lambda m: m["joints"]["K"].update(law={"angle_deg": [0.0, 90.0, 180.0, 270.0], "lift": [0.0, 0.004, -0.001,
-                                                                                              0.004]}),
-     "the follower table's lift has -0.001 < 0"),
-])
+@pytest.mark.parametrize(
+    "change, expected",
+    [
+        (lambda m: m["joints"]["K"]["law"][1].update(lift=0.001), "a dwell segment takes no law and no lift"),
+        (lambda m: m["joints"]["K"]["law"][0].pop("law"), "a rise segment needs a law"),
+        (lambda m: m["joints"]["K"]["law"][3].update(angle_deg=90.0), "segments span 350 deg; expected 360 deg"),
+        (lambda m: m["joints"]["K"].pop("roller_radius"), "roller_radius is given exactly when contact is roller"),
+        (
+            lambda m: m["joints"]["K"].update(
+                law=[
+                    {"motion": "rise", "law": "cycloidal", "angle_deg": 40.0, "lift": 0.03},
+                    {"motion": "return", "law": "cycloidal", "angle_deg": 320.0, "lift": 0.03},
+                ],
+                roller_radius=0.012,
+            ),
+            "would be undercut",
+        ),
+        (lambda m: m["frame"].update(guide=[0.05, 0.0]), "the follower's line passes 0.05 m from the cam's pivot"),
+        (lambda m: m.update(crank="tappet"), "the crank 'tappet' must turn about one revolute joint"),
+        (
+            lambda m: m["joints"]["K"].update(
+                law={"angle_deg": [0.0, 90.0, 180.0, 270.0, 300.0], "lift": [0.0, 0.004, 0.008, 0.004]}
+            ),
+            "law: angle_deg has 5 entries but the values have 4",
+        ),
+        (
+            lambda m: m["joints"]["K"].update(
+                law={"angle_deg": [0.0, 90.0, 180.0, 270.0], "lift": [0.0, 0.004, -0.001, 0.004]}
+            ),
+            "the follower table's lift has -0.001 < 0",
+        ),
+    ],
+)
 def test_bad_cam_pairs_are_refused_naming_what_is_wrong(change, expected):
     """Refused when the scene is read or, for what needs the cam's kinematics, when it becomes a machine."""
     with pytest.raises(SceneError) as error:
@@ -335,13 +397,17 @@ def test_an_oscillating_followers_generated_reduction_is_the_general_solvers_and
     from mech_regulator.mechanisms.linkage import make_reduced
 
     scene = tmp_path / "rocking.yaml"
-    scene.write_text(SOURCE_001_CAM.replace("mass: 0.05}", "mass: 0.05, inertia: 1.0e-5}")
-                     .replace("  inertia: 0.01\n", "  inertia: 0.01\n  gravity: [0.0, -9.81]\n"), encoding="utf-8")
+    scene.write_text(
+        SOURCE_001_CAM.replace("mass: 0.05}", "mass: 0.05, inertia: 1.0e-5}").replace(
+            "  inertia: 0.01\n", "  inertia: 0.01\n  gravity: [0.0, -9.81]\n"
+        ),
+        encoding="utf-8",
+    )
     machine = load_scene(str(scene)).machine
     generated = build_reduced(machine.mechanism, machine.gravity)
     general = make_reduced(*mechanism_geometry(machine.mechanism), machine.gravity)
-    pair, = cam_pairs_of(machine.mechanism, machine.gravity)
-    assert pair.generalised_mass == pytest.approx(2.5e-4 + 0.3 * 0.05 ** 2 + 0.05 * 0.1 ** 2 + 1e-5, rel=1e-12)
+    (pair,) = cam_pairs_of(machine.mechanism, machine.gravity)
+    assert pair.generalised_mass == pytest.approx(2.5e-4 + 0.3 * 0.05**2 + 0.05 * 0.1**2 + 1e-5, rel=1e-12)
     for phi in np.linspace(0.1, 2 * math.pi - 0.1, 23):
         values = generated(phi)
         assert general(phi) == pytest.approx(values, rel=1e-12, abs=1e-15)
@@ -354,8 +420,17 @@ def test_the_valve_gear_is_recorded_and_its_kinematics_print_the_cam(tmp_path, c
     assert code == 0 and "no joint reactions: the cam pair K's contact is not in the kinetostatics" in out
     assert "the follower jumps above 587.822 rad/s" in out
     record = tmp_path / "valve.rrd"
-    code, _, err = run_cli(capsys, "simulate", "valve_gear", "--set", "solver.path=reference", "--set",
-                           "scenario.duration=0.005", "--record", str(record))
+    code, _, err = run_cli(
+        capsys,
+        "simulate",
+        "valve_gear",
+        "--set",
+        "solver.path=reference",
+        "--set",
+        "scenario.duration=0.005",
+        "--record",
+        str(record),
+    )
     assert code == 0 and record.stat().st_size > 0, err
 
 
@@ -372,8 +447,9 @@ def test_a_flat_faced_follower_has_no_pressure_angle_and_its_profile_radius_is_R
     contact = flat.contact_point(phi)
     assert (contact.imag, contact.real) == (pytest.approx(0.03 + s, rel=1e-12), pytest.approx(ds, abs=1e-15))
     knife = translating_pair(law, contact="knife_edge", base=0.03)
-    assert np.abs(knife.profile(73)) == pytest.approx(0.03 + law.evaluate(np.linspace(0, 2 * math.pi, 73,
-                                                                                      endpoint=False))[0], rel=1e-12)
+    assert np.abs(knife.profile(73)) == pytest.approx(
+        0.03 + law.evaluate(np.linspace(0, 2 * math.pi, 73, endpoint=False))[0], rel=1e-12
+    )
 
 
 def test_the_fast_path_stops_at_the_same_jump_as_the_reference_path():
@@ -381,8 +457,9 @@ def test_the_fast_path_stops_at_the_same_jump_as_the_reference_path():
     is found at the same time (to the solvers' tolerance) and reported the same way."""
     times = {}
     for path in ("reference", "fast"):
-        model = build_model(load_scene("valve_gear", [f"solver.path={path}", "scenario.duration=0.01",
-                                                      "scenario.initial.omega=700"]))
+        model = build_model(
+            load_scene("valve_gear", [f"solver.path={path}", "scenario.duration=0.01", "scenario.initial.omega=700"])
+        )
         trajectory = simulate(model)
         assert trajectory.status == "failed" and trajectory.events[-1][1] == "contact lost at cam pair K"
         times[path] = trajectory.t_end
@@ -391,8 +468,9 @@ def test_the_fast_path_stops_at_the_same_jump_as_the_reference_path():
 
 def test_a_cam_behind_a_coupling_is_refused():
     data = load_scene("two_mass").model_dump(exclude_none=True)
-    data["machine"]["coupling"]["driven"]["mechanism"] = load_scene("valve_gear").model_dump(
-        exclude_none=True)["machine"]["mechanism"]
+    data["machine"]["coupling"]["driven"]["mechanism"] = load_scene("valve_gear").model_dump(exclude_none=True)[
+        "machine"
+    ]["mechanism"]
     with pytest.raises(SceneError, match="a cam behind a coupling is not supported yet"):
         build_model(validate_scene(data))
 
@@ -401,13 +479,16 @@ def test_a_table_law_in_a_scene_is_analysed_like_its_segments(capsys, tmp_path):
     """The valve gear with cycloidal segments (s'' continuous), and the same law as a table of 360 points (every
     degree): the table's spline gives the same lift and jump speed to 1e-3. (Through a law whose s'' jumps, as the
     harmonic's, a cubic spline overshoots s'' near the jump, and the table's jump speed is lower.)"""
-    cycloidal = cam_scene(lambda m: [part.update(law="cycloidal") for part in m["joints"]["K"]["law"]
-                                     if part["motion"] != "dwell"])
+    cycloidal = cam_scene(
+        lambda m: [part.update(law="cycloidal") for part in m["joints"]["K"]["law"] if part["motion"] != "dwell"]
+    )
     law = linkage_core(validate_scene(cycloidal).machine.mechanism).joint("K").cam.law
     angles = np.linspace(0.0, 360.0, 361)[:-1]
     table = copy.deepcopy(cycloidal)
-    table["machine"]["mechanism"]["joints"]["K"]["law"] = {"angle_deg": list(angles),
-                                                           "lift": list(law.evaluate(np.radians(angles))[0])}
+    table["machine"]["mechanism"]["joints"]["K"]["law"] = {
+        "angle_deg": list(angles),
+        "lift": list(law.evaluate(np.radians(angles))[0]),
+    }
     found = []
     for data in (cycloidal, table):
         path = tmp_path / "scene.yaml"
@@ -430,26 +511,35 @@ def test_a_cam_on_a_bull_gear_adds_its_followers_share_to_the_geared_linkages_re
     data["machine"]["gravity"] = [0.0, -9.81]
     mechanism = data["machine"]["mechanism"]
     mechanism["frame"]["T"] = [0.0, 0.0]
-    mechanism["links"].update(tappet={"points": {"T": [0.0, 0.0], "R": [0.0, 0.0]}, "mass": 0.5,
-                                      "centre": [0.0, 0.05]},
-                              roller={"points": {"R": [0.0, 0.0]}, "mass": 0.05})
+    mechanism["links"].update(
+        tappet={"points": {"T": [0.0, 0.0], "R": [0.0, 0.0]}, "mass": 0.5, "centre": [0.0, 0.05]},
+        roller={"points": {"R": [0.0, 0.0]}, "mass": 0.05},
+    )
     mechanism["joints"].update(
         T={"type": "prismatic", "links": ["frame", "tappet"], "direction_deg": 90.0},
         R={"type": "revolute", "links": ["tappet", "roller"]},
-        K={"type": "cam", "links": ["bull_gear", "roller"], "contact": "roller", "roller_radius": 0.01,
-           "base_radius": 0.05, "spring": {"stiffness": 2000.0, "preload": 50.0},
-           "law": [{"motion": "rise", "law": "cycloidal", "angle_deg": 120.0, "lift": 0.02},
-                   {"motion": "dwell", "angle_deg": 60.0},
-                   {"motion": "return", "law": "cycloidal", "angle_deg": 120.0, "lift": 0.02},
-                   {"motion": "dwell", "angle_deg": 60.0}]})
+        K={
+            "type": "cam",
+            "links": ["bull_gear", "roller"],
+            "contact": "roller",
+            "roller_radius": 0.01,
+            "base_radius": 0.05,
+            "spring": {"stiffness": 2000.0, "preload": 50.0},
+            "law": [
+                {"motion": "rise", "law": "cycloidal", "angle_deg": 120.0, "lift": 0.02},
+                {"motion": "dwell", "angle_deg": 60.0},
+                {"motion": "return", "law": "cycloidal", "angle_deg": 120.0, "lift": 0.02},
+                {"motion": "dwell", "angle_deg": 60.0},
+            ],
+        },
+    )
     machine = validate_scene(data).machine
-    assert [group.kind for group in mechanism_geometry(machine.mechanism)[1].groups] == ["cam follower", "gear",
-                                                                                         "RRP"]
+    assert [group.kind for group in mechanism_geometry(machine.mechanism)[1].groups] == ["cam follower", "gear", "RRP"]
     generated = build_reduced(machine.mechanism, machine.gravity)
     general = make_reduced(*mechanism_geometry(machine.mechanism), machine.gravity)
     shaker = load_scene("geared_shaker").machine.mechanism
     geared = build_reduced(shaker, (0.0, -9.81))
-    pair, = cam_pairs_of(machine.mechanism, machine.gravity)
+    (pair,) = cam_pairs_of(machine.mechanism, machine.gravity)
     for phi in np.linspace(0.1, 2 * math.pi - 0.1, 17):
         values = generated(phi)
         assert general(phi) == pytest.approx(values, rel=1e-12, abs=1e-12)

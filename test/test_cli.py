@@ -22,8 +22,6 @@ REQUIRED_COLUMNS = ["t", "phi", "omega", "epsilon", "J", "M_drive", "M_load"]
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
-
-
 def simulate_json(capsys, scene: str, *overrides: str) -> dict:
     argv = ["simulate", scene, "--quiet", "--json"]
     for assignment in overrides:
@@ -46,11 +44,34 @@ def bundled_data(name: str) -> dict:
 
 
 def test_bundled_scenes_present():
-    assert BUNDLED == ["clutch_start", "compressor", "compressor_friction", "crank_slider_bench", "engine",
-                       "engine_direct", "engine_hartnell", "engine_indirect_isodromic", "engine_indirect_none",
-                       "engine_indirect_rigid", "engine_inline4", "engine_pi", "four_bar_rocker", "geared_shaker", "lathe",
-                       "press", "press_coupling", "shaper", "sieve_shaker", "six_bar_press", "six_bar_press_friction",
-                       "startup", "two_mass", "valve_gear", "walking_beam", "walking_beam_linkage"]
+    assert BUNDLED == [
+        "clutch_start",
+        "compressor",
+        "compressor_friction",
+        "crank_slider_bench",
+        "engine",
+        "engine_direct",
+        "engine_hartnell",
+        "engine_indirect_isodromic",
+        "engine_indirect_none",
+        "engine_indirect_rigid",
+        "engine_inline4",
+        "engine_pi",
+        "four_bar_rocker",
+        "geared_shaker",
+        "lathe",
+        "press",
+        "press_coupling",
+        "shaper",
+        "sieve_shaker",
+        "six_bar_press",
+        "six_bar_press_friction",
+        "startup",
+        "two_mass",
+        "valve_gear",
+        "walking_beam",
+        "walking_beam_linkage",
+    ]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -63,10 +84,26 @@ def lathe_run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("lathe_run")
     csv_path, png_path = folder / "run.csv", folder / "run.png"
     duration = 0.5
-    code = main(["simulate", "lathe", "--quiet", "--set", f"scenario.duration={duration}",
-                 "--out", str(csv_path), "--plot", str(png_path)])
-    return {"code": code, "csv": csv_path, "png": png_path, "duration": duration,
-            "sample_rate": bundled_data("lathe")["solver"]["sample_rate"]}
+    code = main(
+        [
+            "simulate",
+            "lathe",
+            "--quiet",
+            "--set",
+            f"scenario.duration={duration}",
+            "--out",
+            str(csv_path),
+            "--plot",
+            str(png_path),
+        ]
+    )
+    return {
+        "code": code,
+        "csv": csv_path,
+        "png": png_path,
+        "duration": duration,
+        "sample_rate": bundled_data("lathe")["solver"]["sample_rate"],
+    }
 
 
 def test_simulate_exit_code(lathe_run):
@@ -107,19 +144,38 @@ def test_simulate_png(lathe_run):
 
 
 def test_plot_path_without_suffix_is_reported_correctly(tmp_path, capsys):
-    code, out, err = run(capsys, "simulate", "lathe", "--quiet", "--json", "--set", "scenario.duration=0.2",
-                         "--plot", str(tmp_path / "picture"))
+    code, out, err = run(
+        capsys,
+        "simulate",
+        "lathe",
+        "--quiet",
+        "--json",
+        "--set",
+        "scenario.duration=0.2",
+        "--plot",
+        str(tmp_path / "picture"),
+    )
     assert code == 0, err
     summary = json.loads(out)
     assert Path(summary["plot"]).is_file(), sorted(p.name for p in tmp_path.iterdir())
 
 
 def test_simulate_prints_summary(tmp_path, capsys):
-    code, out, err = run(capsys, "simulate", "lathe", "--quiet", "--set", "scenario.duration=0.5",
-                         "--out", str(tmp_path / "a.csv"))
+    code, out, err = run(
+        capsys, "simulate", "lathe", "--quiet", "--set", "scenario.duration=0.5", "--out", str(tmp_path / "a.csv")
+    )
     assert code == 0, err
-    for fragment in ("scene lathe", "omega_m =", "delta =", "energy:", "residual", "solver DOP853", "steps",
-                     "rhs evaluations", f"wrote {tmp_path / 'a.csv'}"):
+    for fragment in (
+        "scene lathe",
+        "omega_m =",
+        "delta =",
+        "energy:",
+        "residual",
+        "solver DOP853",
+        "steps",
+        "rhs evaluations",
+        f"wrote {tmp_path / 'a.csv'}",
+    ):
         assert fragment in out, (fragment, out)
 
 
@@ -146,9 +202,21 @@ def test_simulate_json_summary(capsys):
 def test_simulate_other_scenes_briefly(tmp_path, capsys, scene):
     csv_path = tmp_path / f"{scene}.csv"
     # load events later than the short duration are rejected, so they go too (the engine has one)
-    code, out, err = run(capsys, "simulate", scene, "--quiet", "--json", "--set", "scenario.duration=0.1",
-                         "--set", "scenario.load_events=[]", "--set", "solver.sample_rate=500",
-                         "--out", str(csv_path))
+    code, out, err = run(
+        capsys,
+        "simulate",
+        scene,
+        "--quiet",
+        "--json",
+        "--set",
+        "scenario.duration=0.1",
+        "--set",
+        "scenario.load_events=[]",
+        "--set",
+        "solver.sample_rate=500",
+        "--out",
+        str(csv_path),
+    )
     assert code == 0, err
     summary = json.loads(out)
     assert summary["status"] == "complete"
@@ -188,11 +256,20 @@ def test_set_list_item(capsys):
 # describe
 
 EFFECT_WORDS = {  # what `describe` calls each effect type
-    "constant": "constant", "linear_motor": "linear motor", "engine": "engine", "viscous": "viscous",
-    "fan": "fan", "cutting": "cutting", "table": "table", "slider_viscous": "viscous on the slider",
-    "slider_spring": "spring on the slider", "slider_table": "slider force table",
-    "rocker_viscous": "viscous on the rocker", "rocker_spring": "spring on the rocker",
-    "shuttle_viscous": "viscous on the shuttle bar", "slider_constant": "constant on the slider",
+    "constant": "constant",
+    "linear_motor": "linear motor",
+    "engine": "engine",
+    "viscous": "viscous",
+    "fan": "fan",
+    "cutting": "cutting",
+    "table": "table",
+    "slider_viscous": "viscous on the slider",
+    "slider_spring": "spring on the slider",
+    "slider_table": "slider force table",
+    "rocker_viscous": "viscous on the rocker",
+    "rocker_spring": "spring on the rocker",
+    "shuttle_viscous": "viscous on the shuttle bar",
+    "slider_constant": "constant on the slider",
 }
 
 
@@ -224,8 +301,17 @@ def test_describe_lists_effects_state_and_solver(capsys, scene):
 
 
 def test_describe_follows_set(capsys):
-    code, out, err = run(capsys, "describe", "lathe", "--set", "solver.method=RK4", "--set", "solver.step=2e-4",
-                         "--set", "scenario.duration=0.5")
+    code, out, err = run(
+        capsys,
+        "describe",
+        "lathe",
+        "--set",
+        "solver.method=RK4",
+        "--set",
+        "solver.step=2e-4",
+        "--set",
+        "scenario.duration=0.5",
+    )
     assert code == 0, err
     assert "solver: RK4 (fixed step 0.0002 s)" in out
     assert "scenario: 0.5 s" in out

@@ -49,8 +49,9 @@ class Served:
 
 
 def server_environment(folder: str) -> dict[str, str]:
-    env = dict(os.environ, XDG_RUNTIME_DIR=folder, MECH_REGULATOR_SERVER_IDLE="120",
-               MECH_REGULATOR_PROGRESS_INTERVAL="0")
+    env = dict(
+        os.environ, XDG_RUNTIME_DIR=folder, MECH_REGULATOR_SERVER_IDLE="120", MECH_REGULATOR_PROGRESS_INTERVAL="0"
+    )
     env.pop("MECH_REGULATOR_SERVER", None)  # conftest's off
     env.pop("CI", None)  # a CI job starts no server by itself (tested below)
     return env
@@ -85,7 +86,7 @@ def served():
     first = run(["describe", "lathe"], env)  # finds no server: runs here and starts one
     pid = None
     try:
-        pid, path, took = start(env)   # the server the first command started: running, or still starting
+        pid, path, took = start(env)  # the server the first command started: running, or still starting
         assert re.fullmatch(r"was running already( \(it answered after [0-9.]+ s: it was starting\))?", took), took
         yield Served(env, folder, pid, path, first)
     finally:
@@ -134,8 +135,14 @@ def test_ctrl_c_at_the_client_interrupts_the_child(served, tmp_path):
     """SIGINT to the client once the child simulates (its first progress line): the run stops as in-process, exit
     130, its summary says where, the CSV holds the run up to there."""
     before = served.served()
-    client = subprocess.Popen([*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000", "--out", "run.csv"],
-                              env=served.env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    client = subprocess.Popen(
+        [*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000", "--out", "run.csv"],
+        env=served.env,
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         first = client.stderr.readline()
         assert first.startswith("simulating lathe: t = "), first
@@ -166,8 +173,10 @@ def test_a_server_of_another_key_is_not_used(served):
     assert served.served() == before
 
 
-ROOT_AND_UNSHARE = pytest.mark.skipif(os.geteuid() != 0 or shutil.which("unshare") is None,
-                                      reason="another mount namespace (unshare -m) and other users need root")
+ROOT_AND_UNSHARE = pytest.mark.skipif(
+    os.geteuid() != 0 or shutil.which("unshare") is None,
+    reason="another mount namespace (unshare -m) and other users need root",
+)
 
 
 @ROOT_AND_UNSHARE
@@ -177,10 +186,18 @@ def test_a_client_in_another_mount_namespace_runs_the_command_itself(served, tmp
     command without server would, silently."""
     (tmp_path / "view").mkdir()
     before = served.served()
-    shell = 'mount -t tmpfs none view && "$0" -m mech_regulator simulate lathe --quiet --out view/run.csv && test -s ' \
-            'view/run.csv'
-    done = subprocess.run(["unshare", "-m", "sh", "-c", shell, sys.executable], cwd=tmp_path, env=served.env,
-                          capture_output=True, text=True, timeout=TIMEOUT)
+    shell = (
+        'mount -t tmpfs none view && "$0" -m mech_regulator simulate lathe --quiet --out view/run.csv && test -s '
+        "view/run.csv"
+    )
+    done = subprocess.run(
+        ["unshare", "-m", "sh", "-c", shell, sys.executable],
+        cwd=tmp_path,
+        env=served.env,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
     assert done.returncode == 0 and "wrote view/run.csv" in done.stdout, done.stdout + done.stderr
     assert done.stderr == ""
     assert served.served() == before and list((tmp_path / "view").iterdir()) == []
@@ -242,10 +259,14 @@ def test_a_server_folder_that_is_not_private_is_not_used(tmp_path, kind):
                 os.chown(folder, 65534, 65534)
         alone = run(["describe", "lathe"], server_environment(str(runtime)))
         assert alone.returncode == 0 and alone.stdout.startswith("scene: lathe\n"), alone.stderr
-        why = {"open": "its mode 0755 lets others in (expected 0700)", "a link": "it is not a folder",
-               "not mine": "it belongs to user id 65534, not to this user (0)"}[kind]
-        assert alone.stderr.startswith(f"mech-regulator: note: the command server's folder {folder} is not private: "
-                                       f"{why}"), alone.stderr
+        why = {
+            "open": "its mode 0755 lets others in (expected 0700)",
+            "a link": "it is not a folder",
+            "not mine": "it belongs to user id 65534, not to this user (0)",
+        }[kind]
+        assert alone.stderr.startswith(
+            f"mech-regulator: note: the command server's folder {folder} is not private: {why}"
+        ), alone.stderr
         assert len(alone.stderr.splitlines()) == 1 and "this command runs without the server" in alone.stderr
         assert list(folder.iterdir()) == []  # no lock, log or socket: no server started
         status = run(["server", "status"], server_environment(str(runtime)))
@@ -273,8 +294,13 @@ def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
     pid, _, took = start(env)
     try:
         assert re.fullmatch(r"started in [0-9.]+ s", took), took
-        client = subprocess.Popen([*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000"], env=env,
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        client = subprocess.Popen(
+            [*COMMAND, "simulate", "lathe", "--set", "scenario.duration=5000"],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             first = client.stderr.readline()
             assert first.startswith("simulating lathe: t = "), first
@@ -284,8 +310,11 @@ def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
             client.kill()
         assert client.returncode == 1
         # the last line (after the child's last progress line, which SIGTERM may have cut short)
-        found = re.search(r"mech-regulator: the command server ended during the command \(its child (\d+) was "
-                          r"stopped\); run it again, or without the server: MECH_REGULATOR_SERVER=off\n$", err)
+        found = re.search(
+            r"mech-regulator: the command server ended during the command \(its child (\d+) was "
+            r"stopped\); run it again, or without the server: MECH_REGULATOR_SERVER=off\n$",
+            err,
+        )
         assert found and out == "", err
         child = int(found[1])
         deadline = time.monotonic() + TIMEOUT
@@ -301,9 +330,17 @@ def test_a_command_while_the_server_starts_says_it_runs_on_its_own(tmp_path):
     command runs in its own process, starts no second server and says so in one line."""
     folder = tempfile.mkdtemp(prefix="mr-start-")
     env = server_environment(folder)
-    digest = subprocess.run([sys.executable, "-c", "from mech_regulator.cli.server import key_digest, server_key; "
-                             "print(key_digest(server_key()))"], env=env, capture_output=True, text=True,
-                            check=True).stdout.strip()
+    digest = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from mech_regulator.cli.server import key_digest, server_key; print(key_digest(server_key()))",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
     servers = Path(folder) / "mech_regulator"
     servers.mkdir(mode=0o700)
     try:
@@ -311,8 +348,10 @@ def test_a_command_while_the_server_starts_says_it_runs_on_its_own(tmp_path):
             fcntl.flock(lock, fcntl.LOCK_EX)
             alone = run(["describe", "lathe"], env)
         assert alone.returncode == 0 and alone.stdout.startswith("scene: lathe\n"), alone.stdout
-        assert alone.stderr == ("mech-regulator: the command server is still starting (it answers once its imports "
-                                "are loaded); this command runs on its own\n"), alone.stderr
+        assert alone.stderr == (
+            "mech-regulator: the command server is still starting (it answers once its imports "
+            "are loaded); this command runs on its own\n"
+        ), alone.stderr
         assert not any(servers.glob("*.sock")) and not any(servers.glob("*.log"))
     finally:
         shutil.rmtree(folder, ignore_errors=True)

@@ -16,31 +16,57 @@ from mech_regulator.bench.startup import MEASURES, PATHS, script_refusal, script
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 
-HEAVY = ("numpy", "scipy", "numba", "llvmlite", "pydantic", "pydantic_core", "matplotlib", "rerun", "tqdm", "yaml",
-         "rclpy", "mujoco", "dask")
+HEAVY = (
+    "numpy",
+    "scipy",
+    "numba",
+    "llvmlite",
+    "pydantic",
+    "pydantic_core",
+    "matplotlib",
+    "rerun",
+    "tqdm",
+    "yaml",
+    "rclpy",
+    "mujoco",
+    "dask",
+)
 """Top-level packages that building the parser must not import."""
 
 
 def modules_after(code: str) -> list[str]:
     """The heavy modules and the package's own core modules loaded in a fresh interpreter after `code`."""
-    script = (f"import sys\n{code}\n"
-              f"print(sorted(name for name in sys.modules if name.split('.')[0] in {HEAVY!r} or "
-              "name.startswith(('mech_regulator.scene', 'mech_regulator.model', 'mech_regulator.solvers', "
-              "'mech_regulator.analysis', 'mech_regulator.bench', 'mech_regulator.viz'))))")
+    script = (
+        f"import sys\n{code}\n"
+        f"print(sorted(name for name in sys.modules if name.split('.')[0] in {HEAVY!r} or "
+        "name.startswith(('mech_regulator.scene', 'mech_regulator.model', 'mech_regulator.solvers', "
+        "'mech_regulator.analysis', 'mech_regulator.bench', 'mech_regulator.viz'))))"
+    )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     return eval(done.stdout.strip().splitlines()[-1])  # a list of names printed by the child
 
 
 def after_main(*argv: str) -> str:
-    return ("from mech_regulator.cli.main import main\n"
-            f"try:\n    main({list(argv)!r})\nexcept SystemExit:\n    pass")
+    return f"from mech_regulator.cli.main import main\ntry:\n    main({list(argv)!r})\nexcept SystemExit:\n    pass"
 
 
-@pytest.mark.parametrize("argv", [("--help",), ("simulate", "--help"), ("sweep", "--help"), ("flywheel", "--help"),
-                                  ("bench", "speed", "--help"), ("bench", "startup", "--help"), ("bench", "soak", "--help"),
-                                  ("bench", "first-run", "--help"), ("bench", "long", "--help"),
-                                  ("run", "--help"), ("simulate", "lathe", "--no-such-option")],
-                         ids=lambda argv: " ".join(argv))
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ("--help",),
+        ("simulate", "--help"),
+        ("sweep", "--help"),
+        ("flywheel", "--help"),
+        ("bench", "speed", "--help"),
+        ("bench", "startup", "--help"),
+        ("bench", "soak", "--help"),
+        ("bench", "first-run", "--help"),
+        ("bench", "long", "--help"),
+        ("run", "--help"),
+        ("simulate", "lathe", "--no-such-option"),
+    ],
+    ids=lambda argv: " ".join(argv),
+)
 def test_the_parser_loads_no_heavy_library(argv):
     assert modules_after(after_main(*argv)) == []
 
@@ -51,8 +77,12 @@ def test_importing_the_command_line_loads_no_heavy_library():
 
 def test_the_entry_points_client_loads_no_heavy_library():
     """The entry point asks the command server first (cli/server.py's client): the standard library only."""
-    assert modules_after("from mech_regulator.cli import server\nserver.server_key()\n"
-                         "server.through_server(['simulate', '--help'])") == []
+    assert (
+        modules_after(
+            "from mech_regulator.cli import server\nserver.server_key()\nserver.through_server(['simulate', '--help'])"
+        )
+        == []
+    )
 
 
 def test_the_check_sees_a_heavy_import():
@@ -76,22 +106,28 @@ def test_the_parsers_choices_are_the_sweeps():
 
 def test_bench_speed_without_mujoco_names_the_extra(capsys, monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "mujoco", None)  # import mujoco now fails; find_spec says None
-    code, out, err = run_cli(capsys, "bench", "speed", "--quick", "--scenes", "crank_slider_bench", "--out",
-                             str(tmp_path))
+    code, out, err = run_cli(
+        capsys, "bench", "speed", "--quick", "--scenes", "crank_slider_bench", "--out", str(tmp_path)
+    )
     assert code == 2 and out == ""
-    assert err.startswith("mech-regulator: bench speed: crank_slider_bench runs on MuJoCo too, and MuJoCo is not "
-                          "installed: pip install 'mech_regulator[bench]'"), err
+    assert err.startswith(
+        "mech-regulator: bench speed: crank_slider_bench runs on MuJoCo too, and MuJoCo is not "
+        "installed: pip install 'mech_regulator[bench]'"
+    ), err
     assert "--no-mujoco" in err and not (tmp_path / "speed.csv").exists()
 
 
 def test_sweep_on_dask_without_dask_names_the_extra_before_any_work(capsys, monkeypatch, tmp_path):
     monkeypatch.setitem(sys.modules, "dask.distributed", None)
     out = tmp_path / "sweep"
-    code, stdout, err = run_cli(capsys, "sweep", "lathe", "--grid", "machine.flywheel.inertia=10,20", "--engine",
-                                "dask", "--out", str(out))
+    code, stdout, err = run_cli(
+        capsys, "sweep", "lathe", "--grid", "machine.flywheel.inertia=10,20", "--engine", "dask", "--out", str(out)
+    )
     assert code == 2 and stdout == ""
-    assert err == ("mech-regulator: --engine dask needs Dask distributed: pip install 'mech_regulator[distributed]' "
-                   "(or pip install 'dask[distributed]')\n")
+    assert err == (
+        "mech-regulator: --engine dask needs Dask distributed: pip install 'mech_regulator[distributed]' "
+        "(or pip install 'dask[distributed]')\n"
+    )
     assert not out.exists()
 
 
@@ -116,8 +152,9 @@ def test_the_script_refuses_what_it_cannot_write():
 
 
 def test_bench_startup_json(capsys):
-    code, out, err = run_cli(capsys, "bench", "startup", "--repeat", "1", "--scene", "lathe", "--skip-cold-fast",
-                             "--json")
+    code, out, err = run_cli(
+        capsys, "bench", "startup", "--repeat", "1", "--scene", "lathe", "--skip-cold-fast", "--json"
+    )
     assert code == 0, err
     found = json.loads(out)
     assert found["scene"] == "lathe" and found["repeat"] == 1 and found["cold_fast"] is False

@@ -21,10 +21,10 @@ from support import model_of, run_cli, scene, simulate_complete
 from mech_regulator.analysis import energy_balance, summarise
 from mech_regulator.scene import load_scene
 
-J, I = 0.1, 0.4          # motor side and machine [kg m^2]
-M, L = 20.0, 10.0        # motor moment, machine's constant resistance [N m]
+J, I = 0.1, 0.4  # motor side and machine [kg m^2]
+M, L = 20.0, 10.0  # motor moment, machine's constant resistance [N m]
 KINETIC, STATIC = 25.0, 28.0  # clutch [N m]
-W0 = 100.0               # motor speed when the clutch engages on the machine at rest [rad/s]
+W0 = 100.0  # motor speed when the clutch engages on the machine at rest [rad/s]
 A1, A2 = (M - KINETIC) / J, (KINETIC - L) / I  # accelerations while slipping [rad/s^2]
 T_LOCK = W0 / (A2 - A1)  # slip ends: W0 + A1 t = A2 t [s]
 A_STUCK = (M - L) / (J + I)  # common acceleration once locked [rad/s^2]
@@ -37,22 +37,31 @@ T_BREAK = RAMP_START + (R_BREAK - L) / RAMP_RATE
 def omega_stuck(t):
     """Common speed while locked [rad/s]: (J + I) omega' = M - L - 100 (t - 2)^+ from A2 T_LOCK at T_LOCK."""
     ramp = np.maximum(np.asarray(t) - RAMP_START, 0.0)
-    return A2 * T_LOCK + ((M - L) * (np.asarray(t) - T_LOCK) - 0.5 * RAMP_RATE * ramp ** 2) / (J + I)
+    return A2 * T_LOCK + ((M - L) * (np.asarray(t) - T_LOCK) - 0.5 * RAMP_RATE * ramp**2) / (J + I)
 
 
 OMEGA_BREAK = float(omega_stuck(T_BREAK))
 # Slipping again, I omega2' = T_k - L - 100 (t - 2): omega2 = OMEGA_BREAK - (87.5 s + 125 s^2) with s = t - T_BREAK
 # here, and the machine comes to rest where that is 0.
 SLOWING, SLOWING_RATE = (RAMP_RATE * (T_BREAK - RAMP_START) - (KINETIC - L)) / I, 0.5 * RAMP_RATE / I
-T_REST = T_BREAK + (-SLOWING + math.sqrt(SLOWING ** 2 + 4 * SLOWING_RATE * OMEGA_BREAK)) / (2 * SLOWING_RATE)
+T_REST = T_BREAK + (-SLOWING + math.sqrt(SLOWING**2 + 4 * SLOWING_RATE * OMEGA_BREAK)) / (2 * SLOWING_RATE)
 
 ENGAGEMENT = {
     "name": "engagement",
-    "machine": {"inertia": J, "drive": {"type": "constant", "torque": M},
-                "clutch": {"static_torque": STATIC, "kinetic_torque": KINETIC,
-                           "driven": {"inertia": I, "loads": [{"type": "constant", "torque": L}]}}},
-    "scenario": {"initial": {"omega": W0, "omega_driven": 0.0}, "duration": 3.0,
-                 "load_events": [{"time": RAMP_START, "torque": RAMP_RATE, "ramp": 1.0}]},
+    "machine": {
+        "inertia": J,
+        "drive": {"type": "constant", "torque": M},
+        "clutch": {
+            "static_torque": STATIC,
+            "kinetic_torque": KINETIC,
+            "driven": {"inertia": I, "loads": [{"type": "constant", "torque": L}]},
+        },
+    },
+    "scenario": {
+        "initial": {"omega": W0, "omega_driven": 0.0},
+        "duration": 3.0,
+        "load_events": [{"time": RAMP_START, "torque": RAMP_RATE, "ramp": 1.0}],
+    },
     "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12, "sample_rate": 200.0},
 }
 
@@ -69,7 +78,7 @@ def test_slip_ends_when_the_closed_form_says(engagement):
     closed form) with both at a2 t*; locked, both accelerate at (M - L) / (J + I) and the clutch passes
     (M I + J L) / (J + I) = 18 N m."""
     model, trajectory = engagement
-    (t_lock, what), = [event for event in trajectory.events if event[0] < RAMP_START]
+    ((t_lock, what),) = [event for event in trajectory.events if event[0] < RAMP_START]
     assert what == "clutch locks (slip ends)"
     assert t_lock == pytest.approx(T_LOCK, abs=1e-9)
     slipping = np.linspace(0.0, 0.99 * T_LOCK, 50)
@@ -96,8 +105,11 @@ def test_stuck_is_exact_and_slip_resumes_at_the_static_torque(engagement):
     runs on the closed-form speeds until the machine, braked by the growing load, comes to rest at T_REST =
     2.8446 s and stays held; exactly these three events, no chattering."""
     model, trajectory = engagement
-    assert [name for _, name in trajectory.events] == ["clutch locks (slip ends)", "clutch breaks away, motor ahead",
-                                                       "driven part comes to rest"]
+    assert [name for _, name in trajectory.events] == [
+        "clutch locks (slip ends)",
+        "clutch breaks away, motor ahead",
+        "driven part comes to rest",
+    ]
     assert trajectory.modes[-1][1] == ("slip+", "held")
     assert trajectory.events[2][0] == pytest.approx(T_REST, abs=1e-9)
     assert np.all(trajectory(np.linspace(trajectory.events[2][0] + 1e-9, 3.0, 50))[2] == 0.0)
@@ -113,7 +125,7 @@ def test_stuck_is_exact_and_slip_resumes_at_the_static_torque(engagement):
     assert np.allclose(states[1], OMEGA_BREAK + A1 * (after - T_BREAK), rtol=0, atol=1e-7)
     slipping = after < T_REST
     s = after[slipping] - T_BREAK
-    assert np.allclose(states[2][slipping], OMEGA_BREAK - SLOWING * s - SLOWING_RATE * s ** 2, rtol=0, atol=1e-7)
+    assert np.allclose(states[2][slipping], OMEGA_BREAK - SLOWING * s - SLOWING_RATE * s**2, rtol=0, atol=1e-7)
     summary = summarise(model, trajectory)["drive_train"]["clutch"]
     assert summary["lock_times"] == [trajectory.events[0][0]]
     assert [mode for _, _, mode in summary["slip_phases"]] == ["slip+", "slip+"]
@@ -149,8 +161,14 @@ def test_machine_held_while_the_clutch_slips():
     and its kinetic torque (8 N m) cannot overcome the machine's resistance (10 N m) never moves it:
     omega_driven stays exactly 0, the motor runs up at (M - T_k) / J, and the resistances take the clutch's
     torque (M_driven_constant = -8 N m); no event."""
-    model = model_of(scene(ENGAGEMENT, machine__clutch__kinetic_torque=8.0, machine__clutch__static_torque=9.0,
-                           scenario={"initial": {"omega": 0.0}, "duration": 0.5}))
+    model = model_of(
+        scene(
+            ENGAGEMENT,
+            machine__clutch__kinetic_torque=8.0,
+            machine__clutch__static_torque=9.0,
+            scenario={"initial": {"omega": 0.0}, "duration": 0.5},
+        )
+    )
     trajectory = simulate_complete(model)
     times = np.linspace(0.0, 0.5, 101)
     columns = model.columns(times, trajectory(times))
@@ -177,12 +195,21 @@ def test_coupled_driven_part_held_until_break_away():
     when k twist = R, at t = arccos(1 - R / M) / w (oracle: the closed form); until then omega_driven = 0
     exactly; the summary reports the held stretch."""
     k, J1, I2, drive, resistance = 2000.0, 0.2, 0.5, 30.0, 40.0
-    model = model_of({
-        "name": "held", "machine": {"inertia": J1, "drive": {"type": "constant", "torque": drive},
-                                     "coupling": {"stiffness": k, "driven": {
-                                         "inertia": I2, "loads": [{"type": "constant", "torque": resistance}]}}},
-        "scenario": {"initial": {"omega": 0.0, "twist": 0.0}, "duration": 0.1},
-        "solver": {"rtol": 1e-11, "atol": 1e-13}})
+    model = model_of(
+        {
+            "name": "held",
+            "machine": {
+                "inertia": J1,
+                "drive": {"type": "constant", "torque": drive},
+                "coupling": {
+                    "stiffness": k,
+                    "driven": {"inertia": I2, "loads": [{"type": "constant", "torque": resistance}]},
+                },
+            },
+            "scenario": {"initial": {"omega": 0.0, "twist": 0.0}, "duration": 0.1},
+            "solver": {"rtol": 1e-11, "atol": 1e-13},
+        }
+    )
     trajectory = simulate_complete(model)
     w = math.sqrt(k / J1)
     t_break = math.acos(1.0 - resistance / drive) / w
@@ -213,14 +240,19 @@ def test_section_torques_against_each_branch_on_its_own_shaft(branched):
     columns = model.columns(times, trajectory(times))
     h = 1e-5
     for name, inertia, ratio, resisting in (
-            ("conveyor", 8.0, 10.0, lambda w: 80.0 + 0.0 * w),
-            ("mixer", 1.5, 4.0, lambda w: 10.0 + 0.026 * w * np.abs(w))):
+        ("conveyor", 8.0, 10.0, lambda w: 80.0 + 0.0 * w),
+        ("mixer", 1.5, 4.0, lambda w: 10.0 + 0.026 * w * np.abs(w)),
+    ):
         speed = columns["omega_driven"] / ratio
         acceleration = (trajectory(times + h)[2] - trajectory(times - h)[2]) / (2 * h) / ratio
         expected = resisting(speed) + inertia * acceleration
         assert np.allclose(columns[f"M_section_{name}"], expected, rtol=1e-6, atol=1e-6)
-    kinetic = (0.5 * 0.05 * columns["omega"] ** 2 + 0.5 * 0.1 * columns["omega_driven"] ** 2
-               + 0.5 * 8.0 * (columns["omega_driven"] / 10) ** 2 + 0.5 * 1.5 * (columns["omega_driven"] / 4) ** 2)
+    kinetic = (
+        0.5 * 0.05 * columns["omega"] ** 2
+        + 0.5 * 0.1 * columns["omega_driven"] ** 2
+        + 0.5 * 8.0 * (columns["omega_driven"] / 10) ** 2
+        + 0.5 * 1.5 * (columns["omega_driven"] / 4) ** 2
+    )
     assert np.allclose(columns["E_kinetic"], kinetic, rtol=1e-12)
     balance = energy_balance(model, trajectory)
     assert abs(balance.relative_residual) < 1e-6
@@ -252,12 +284,19 @@ def test_clutch_that_never_slips_is_the_rigid_machine_and_keeps_the_governor_mod
     on the crank (oracle: the one-mass model, to the solvers' own accuracy at rtol 1e-8: about 1e-5 relative
     after 1 s of this engine, 1e-4 on the sleeve's rate), modes are the governor's (sleeve, servo) followed by the drive train's, and
     the governor's mode changes (sleeve breaks away, stops rising, ...) are the same."""
-    overrides = ["scenario.duration=1.0", "scenario.load_events=[{time: 0.3, torque: 0.0}]",
-                 "governor.friction=1.0", "governor.static_friction=1.5"]
+    overrides = [
+        "scenario.duration=1.0",
+        "scenario.load_events=[{time: 0.3, torque: 0.0}]",
+        "governor.friction=1.0",
+        "governor.static_friction=1.5",
+    ]
     rigid = model_of(load_scene("engine_direct", overrides + ["machine.inertia=0.12"]).model_dump(exclude_none=True))
-    clutched = model_of(load_scene("engine_direct", overrides + [
-        "machine.clutch={static_torque: 1000.0, kinetic_torque: 900.0, driven: {inertia: 0.1}}"]
-    ).model_dump(exclude_none=True))
+    clutched = model_of(
+        load_scene(
+            "engine_direct",
+            overrides + ["machine.clutch={static_torque: 1000.0, kinetic_torque: 900.0, driven: {inertia: 0.1}}"],
+        ).model_dump(exclude_none=True)
+    )
     expected = simulate_complete(rigid)
     trajectory = simulate_complete(clutched)
     assert all(len(mode) == 4 and mode[2:] == ("stuck", "forward") for _, mode in trajectory.modes)
@@ -276,8 +315,19 @@ def test_cli_end_to_end(tmp_path, capsys):
     """simulate the bundled clutch_start with CSV, PNG and JSON: the summary reports the lock time, slip
     phase and section maxima; the CSV has the clutch's and the sections' columns."""
     out, plot = tmp_path / "run.csv", tmp_path / "run.png"
-    code, stdout, err = run_cli(capsys, "simulate", "clutch_start", "--quiet", "--json", "--out", str(out),
-                                "--plot", str(plot), "--set", "scenario.duration=2.5")
+    code, stdout, err = run_cli(
+        capsys,
+        "simulate",
+        "clutch_start",
+        "--quiet",
+        "--json",
+        "--out",
+        str(out),
+        "--plot",
+        str(plot),
+        "--set",
+        "scenario.duration=2.5",
+    )
     assert code == 0, err
     summary = json.loads(stdout)
     clutch = summary["drive_train"]["clutch"]
@@ -287,23 +337,36 @@ def test_cli_end_to_end(tmp_path, capsys):
     assert summary["energy"]["works"]["clutch_slip"] < 0.0
     with out.open() as handle:
         header = next(csv.reader(handle))
-    for column in ("clutch_torque", "slip_speed", "clutch_mode", "omega_driven", "driven_mode",
-                   "M_section_conveyor", "M_section_mixer", "M_driven_conveyor_constant"):
+    for column in (
+        "clutch_torque",
+        "slip_speed",
+        "clutch_mode",
+        "omega_driven",
+        "driven_mode",
+        "M_section_conveyor",
+        "M_section_mixer",
+        "M_driven_conveyor_constant",
+    ):
         assert column in header
     assert plot.read_bytes().startswith(b"\x89PNG")
     code, stdout, _ = run_cli(capsys, "simulate", "clutch_start", "--quiet", "--set", "scenario.duration=2.5")
     assert code == 0 and "slip ends (locks) at 1.79" in stdout and "conveyor: max" in stdout
 
 
-@pytest.mark.parametrize("options, shown", [
-    (["--set", "machine.clutch.kinetic_torque=50"], "kinetic_torque = 50.0 N m exceeds static_torque = 40.0 N m"),
-    (["--set", "machine.coupling={stiffness: 1000.0, driven: {inertia: 1.0}}"],
-     "machine.coupling and machine.clutch are both set"),
-    (["--set", "machine.clutch.driven.branches.1.name=conveyor"], "['conveyor'] appear more than once"),
-    (["--set", "machine.clutch.driven.branches.0.ratio=0"], "ratio"),
-    (["--set", "machine.clutch.driven.branches.0.name=belt conveyor"], "name"),
-    (["--set", "solver.method=energy"], "a machine with a clutch has two masses"),
-])
+@pytest.mark.parametrize(
+    "options, shown",
+    [
+        (["--set", "machine.clutch.kinetic_torque=50"], "kinetic_torque = 50.0 N m exceeds static_torque = 40.0 N m"),
+        (
+            ["--set", "machine.coupling={stiffness: 1000.0, driven: {inertia: 1.0}}"],
+            "machine.coupling and machine.clutch are both set",
+        ),
+        (["--set", "machine.clutch.driven.branches.1.name=conveyor"], "['conveyor'] appear more than once"),
+        (["--set", "machine.clutch.driven.branches.0.ratio=0"], "ratio"),
+        (["--set", "machine.clutch.driven.branches.0.name=belt conveyor"], "name"),
+        (["--set", "solver.method=energy"], "a machine with a clutch has two masses"),
+    ],
+)
 def test_bad_input_gets_a_clear_message(capsys, options, shown):
     """Bad clutch or branch data and unsupported runs end in exit code 2 with a message naming the key."""
     code, _, err = run_cli(capsys, "simulate", "clutch_start", "--quiet", *options)
@@ -339,13 +402,21 @@ def test_the_co_simulated_clutch_slips_and_locks_as_the_monolithic_run():
 def short_slip(static: float, rtol: float) -> dict:
     """Constant 5 N m drive on 0.05 kg m^2 and a crank-slider (0.1 m crank, 0.4 m rod, 3 kg slider), a clutch of
     `static` N m (kinetic 0.1 N m below) to a 0.5 kg m^2 shaft with a viscous load, both at 30 rad/s, for 0.5 s."""
-    return {"name": "short_slip",
-            "machine": {"inertia": 0.05, "drive": {"type": "constant", "torque": 5.0},
-                        "mechanism": {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 3.0},
-                        "clutch": {"static_torque": static, "kinetic_torque": static - 0.1,
-                                   "driven": {"inertia": 0.5, "loads": [{"type": "viscous", "coefficient": 0.05}]}}},
-            "scenario": {"initial": {"omega": 30.0, "omega_driven": 30.0}, "duration": 0.5},
-            "solver": {"method": "DOP853", "rtol": rtol, "atol": rtol * 1e-2}}
+    return {
+        "name": "short_slip",
+        "machine": {
+            "inertia": 0.05,
+            "drive": {"type": "constant", "torque": 5.0},
+            "mechanism": {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 3.0},
+            "clutch": {
+                "static_torque": static,
+                "kinetic_torque": static - 0.1,
+                "driven": {"inertia": 0.5, "loads": [{"type": "viscous", "coefficient": 0.05}]},
+            },
+        },
+        "scenario": {"initial": {"omega": 30.0, "omega_driven": 30.0}, "duration": 0.5},
+        "solver": {"method": "DOP853", "rtol": rtol, "atol": rtol * 1e-2},
+    }
 
 
 def test_a_slip_shorter_than_a_step_is_seen():
@@ -364,7 +435,7 @@ def test_a_slip_shorter_than_a_step_is_seen():
 
     samples = np.linspace(0.0, 0.5, 5001)
     over = np.array([over_static(t) for t in samples])
-    (first, second), = [np.flatnonzero(np.diff(np.sign(over)))]  # exactly one episode above the static torque
+    ((first, second),) = [np.flatnonzero(np.diff(np.sign(over)))]  # exactly one episode above the static torque
     t1 = optimize.brentq(over_static, samples[first], samples[first + 1], xtol=1e-14)
     t2 = optimize.brentq(over_static, samples[second], samples[second + 1], xtol=1e-14)
     tight = simulate_complete(model_of(short_slip(static, 1e-12)))

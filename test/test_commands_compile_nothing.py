@@ -42,13 +42,26 @@ def test_reading_and_listing_commands_compile_nothing(tmp_path):
     caches = {name: tmp_path / name for name in ("numba", "compiled", "runtime")}
     for folder in caches.values():
         folder.mkdir()
-    environment = dict(os.environ, NUMBA_CACHE_DIR=str(caches["numba"]), MECH_REGULATOR_CACHE=str(caches["compiled"]),
-                       XDG_RUNTIME_DIR=str(caches["runtime"]))
-    commands = ([["scenes"], ["schema"], ["schema", "--format", "markdown"], ["server", "status"]]
-                + [["describe", scene] for scene in DESCRIBED] + [[*name.split(), "--help"] for name in subcommands()])
-    assert len(commands) > 20, commands   # every subcommand found
-    result = subprocess.run([sys.executable, "-c", RUN_COMMANDS, json.dumps(commands)], capture_output=True,
-                            text=True, timeout=300, env=environment, cwd=tmp_path)
+    environment = dict(
+        os.environ,
+        NUMBA_CACHE_DIR=str(caches["numba"]),
+        MECH_REGULATOR_CACHE=str(caches["compiled"]),
+        XDG_RUNTIME_DIR=str(caches["runtime"]),
+    )
+    commands = (
+        [["scenes"], ["schema"], ["schema", "--format", "markdown"], ["server", "status"]]
+        + [["describe", scene] for scene in DESCRIBED]
+        + [[*name.split(), "--help"] for name in subcommands()]
+    )
+    assert len(commands) > 20, commands  # every subcommand found
+    result = subprocess.run(
+        [sys.executable, "-c", RUN_COMMANDS, json.dumps(commands)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=environment,
+        cwd=tmp_path,
+    )
     assert result.returncode == 0, result.stderr
     ran = json.loads(result.stdout)
     assert ran["codes"] == [0] * len(commands), list(zip(commands, ran["codes"]))

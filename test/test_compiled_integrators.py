@@ -98,23 +98,89 @@ POSITION_LINE = np.array([[1.0, 0.0, 1.0, 0.0]])  # flag, c0, c_x, c_v: the guar
 TWO_GUARD_LINES = np.array([[1.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 0.0]])
 
 
-def adaptive(method, rhs, y0, t_end, p, rtol=1e-6, atol=1e-9, guards=position, lines=NO_LINES,
-             thresholds=None, max_step=np.inf, first_step=0.0, wrap_limit=np.inf, wrap_period=0.0, max_steps=100000,
-             reactions=position, n_journals=0, run_steps=100000, restarts=NO_RESTARTS):
+def adaptive(
+    method,
+    rhs,
+    y0,
+    t_end,
+    p,
+    rtol=1e-6,
+    atol=1e-9,
+    guards=position,
+    lines=NO_LINES,
+    thresholds=None,
+    max_step=np.inf,
+    first_step=0.0,
+    wrap_limit=np.inf,
+    wrap_period=0.0,
+    max_steps=100000,
+    reactions=position,
+    n_journals=0,
+    run_steps=100000,
+    restarts=NO_RESTARTS,
+):
     y0 = np.asarray(y0, dtype=float)
     thresholds = np.zeros(len(lines)) if thresholds is None else np.asarray(thresholds, dtype=float)
-    return CompiledRun.from_result(method(rhs, guards, len(lines), np.ascontiguousarray(lines), thresholds, reactions,
-                                          n_journals, 0.0, y0, t_end, np.asarray(p, dtype=float), rtol,
-                                          np.full(y0.size, atol), max_step, first_step, wrap_limit, wrap_period,
-                                          max_steps, run_steps, *restarts))
+    return CompiledRun.from_result(
+        method(
+            rhs,
+            guards,
+            len(lines),
+            np.ascontiguousarray(lines),
+            thresholds,
+            reactions,
+            n_journals,
+            0.0,
+            y0,
+            t_end,
+            np.asarray(p, dtype=float),
+            rtol,
+            np.full(y0.size, atol),
+            max_step,
+            first_step,
+            wrap_limit,
+            wrap_period,
+            max_steps,
+            run_steps,
+            *restarts,
+        )
+    )
 
 
-def fixed(rhs, y0, t_end, p, step, guards=position, lines=NO_LINES, wrap_limit=np.inf, wrap_period=0.0,
-          max_steps=100000, run_steps=100000, restarts=NO_RESTARTS):
+def fixed(
+    rhs,
+    y0,
+    t_end,
+    p,
+    step,
+    guards=position,
+    lines=NO_LINES,
+    wrap_limit=np.inf,
+    wrap_period=0.0,
+    max_steps=100000,
+    run_steps=100000,
+    restarts=NO_RESTARTS,
+):
     y0 = np.asarray(y0, dtype=float)
-    return CompiledRun.from_result(rk4(rhs, guards, len(lines), np.ascontiguousarray(lines),
-                                                np.zeros(len(lines)), 0.0, y0, t_end, np.asarray(p, dtype=float),
-                                                step, wrap_limit, wrap_period, max_steps, run_steps, *restarts))
+    return CompiledRun.from_result(
+        rk4(
+            rhs,
+            guards,
+            len(lines),
+            np.ascontiguousarray(lines),
+            np.zeros(len(lines)),
+            0.0,
+            y0,
+            t_end,
+            np.asarray(p, dtype=float),
+            step,
+            wrap_limit,
+            wrap_period,
+            max_steps,
+            run_steps,
+            *restarts,
+        )
+    )
 
 
 def stepped(solver):
@@ -132,8 +198,7 @@ def vdp_python(t, y):
     return np.array([y[1], (1.0 - y[0] ** 2) * y[1] - y[0]])
 
 
-@pytest.mark.parametrize("method, scipy_method, same_solution", [(rk45, RK45, 5e-12),
-                                                                 (dop853, DOP853, 1e-12)])
+@pytest.mark.parametrize("method, scipy_method, same_solution", [(rk45, RK45, 5e-12), (dop853, DOP853, 1e-12)])
 def test_the_same_steps_as_scipy(method, scipy_method, same_solution):
     """Van der Pol at mu = 1 over [0, 20]: scipy's solver stepped by hand takes the same steps and the same rhs
     calls (scipy's DOP853 spends its 3 dense-output calls when asked, here every step). The step edges agree to
@@ -160,8 +225,7 @@ def test_dop853_dense_output_in_powers_of_theta_is_scipys():
     """One DOP853 step of 0.8 s on Van der Pol: the 7th-degree power form equals scipy's nested
     Dop853DenseOutput inside the step to round-off."""
     run = adaptive(dop853, van_der_pol, [2.0, 0.0], 0.8, [1.0], rtol=1e-2, atol=1e-2, first_step=0.8)
-    times, _, dense = stepped(DOP853(vdp_python, 0.0, np.array([2.0, 0.0]), 0.8, rtol=1e-2, atol=1e-2,
-                                     first_step=0.8))
+    times, _, dense = stepped(DOP853(vdp_python, 0.0, np.array([2.0, 0.0]), 0.8, rtol=1e-2, atol=1e-2, first_step=0.8))
     assert run.n_steps == len(dense) == 1 and run.coefficients.shape == (1, 2, 7)
     t = np.linspace(0.0, 0.8, 9)
     np.testing.assert_allclose(run.dense(t), dense[0](t), rtol=0, atol=1e-14)
@@ -174,8 +238,7 @@ def test_a_warm_start_takes_scipys_first_step():
     np.testing.assert_allclose(run.times, times, rtol=1e-7)  # round-off carried by the controller, as above
 
 
-@pytest.mark.parametrize("method, rtol, error", [(rk45, 1e-9, 1e-7), (dop853, 1e-9, 1e-8),
-                                                 (rosenbrock23, 1e-7, 5e-4)])
+@pytest.mark.parametrize("method, rtol, error", [(rk45, 1e-9, 1e-7), (dop853, 1e-9, 1e-8), (rosenbrock23, 1e-7, 5e-4)])
 def test_the_oscillator_against_its_closed_form(method, rtol, error):
     """x'' = -4 x from x = 1: x = cos 2t, v = -2 sin 2t over 3 periods, ends and dense output."""
     run = adaptive(method, oscillator, [1.0, 0.0], 3 * np.pi, [4.0], rtol=rtol, atol=rtol * 1e-2)
@@ -208,8 +271,9 @@ def test_the_rosenbrock_steps_are_second_order():
     """All steps accepted at max_step (a huge rtol): halving the step divides the global error by ~4."""
     errors = []
     for step in (0.1, 0.05):
-        run = adaptive(rosenbrock23, oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10,
-                       max_step=step, first_step=step)
+        run = adaptive(
+            rosenbrock23, oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10, max_step=step, first_step=step
+        )
         errors.append(np.max(np.abs(run.y_end - [np.cos(2.0), -np.sin(2.0)])))
     assert errors[0] / errors[1] == pytest.approx(4.0, rel=0.1)
 
@@ -217,16 +281,19 @@ def test_the_rosenbrock_steps_are_second_order():
 def test_rk4_is_fourth_order_and_the_reference_rk4():
     """Halving the step divides the error by ~16; the same steps, states and Hermite dense output as
     solvers/rk4.py (the step 0.3 shortened to divide [0, 4.1] evenly)."""
-    errors = [np.max(np.abs(fixed(oscillator, [1.0, 0.0], 2.0, [1.0], step).y_end - [np.cos(2.0), -np.sin(2.0)]))
-              for step in (0.1, 0.05)]
+    errors = [
+        np.max(np.abs(fixed(oscillator, [1.0, 0.0], 2.0, [1.0], step).y_end - [np.cos(2.0), -np.sin(2.0)]))
+        for step in (0.1, 0.05)
+    ]
     assert errors[0] / errors[1] == pytest.approx(16.0, rel=0.05)
     run = fixed(van_der_pol, [2.0, 0.0], 4.1, [1.0], 0.3)
     times, starts, dense = stepped(RK4(vdp_python, 0.0, np.array([2.0, 0.0]), 4.1, step=0.3))
     np.testing.assert_allclose(run.times, times, rtol=1e-13)
     np.testing.assert_allclose(run.y_old, starts, rtol=1e-13, atol=1e-13)
     inside = times[:-1] + 0.37 * np.diff(times)
-    np.testing.assert_allclose(run.dense(inside), np.column_stack([d(s) for d, s in zip(dense, inside)]),
-                               rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(
+        run.dense(inside), np.column_stack([d(s) for d, s in zip(dense, inside)]), rtol=1e-13, atol=1e-13
+    )
     assert run.nfev == 1 + 4 * run.n_steps
 
 
@@ -234,8 +301,7 @@ def test_an_event_is_located_to_round_off():
     """x = cos t reaches 0.5 at t = pi/3 (to 1e-12, DOP853 at a tight tolerance); the step ends there."""
     lines = POSITION_LINE.copy()
     lines[0, 1] = -0.5
-    run = adaptive(dop853, oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15,
-                   lines=lines)
+    run = adaptive(dop853, oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15, lines=lines)
     assert run.status == compiled.EVENT and run.event_guard == 0
     assert run.event_time == pytest.approx(np.pi / 3, abs=1e-12)
     assert run.t_end == run.event_time
@@ -251,11 +317,20 @@ def reference_misses(start: float, step: float, x) -> bool:
 def test_a_dip_inside_one_step_is_caught_for_a_linear_guard():
     """x = (t - 0.5)^2 - 0.001 dips below 0 on 0.5 -/+ 0.0316 inside the first step [0, 1] of RK45 (exact
     on a parabola, so the step is accepted) between the reference's probes; the polynomial roots find it."""
+
     def x(t):
         return (t - 0.5) ** 2 - 0.001
 
-    run = adaptive(rk45, constant_acceleration, [0.249, -1.0], 10.0, [2.0, 0.0, np.inf], rtol=1e-3,
-                   lines=POSITION_LINE, first_step=1.0)
+    run = adaptive(
+        rk45,
+        constant_acceleration,
+        [0.249, -1.0],
+        10.0,
+        [2.0, 0.0, np.inf],
+        rtol=1e-3,
+        lines=POSITION_LINE,
+        first_step=1.0,
+    )
     assert run.n_steps == 1 and run.last_step == 1.0 and reference_misses(0.0, 1.0, x)
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.5 - np.sqrt(0.001), abs=1e-12)
 
@@ -265,8 +340,9 @@ def test_a_near_tangency_fires_only_when_it_dips(level, fires):
     """x = (t - 0.5)^2 against the guard x - level: a parabola that stays 1e-10 above the level holds the mode
     (the exact polynomial roots do not take a near-tangency for a crossing), one that dips 1e-10 below it fires
     where it crosses, t = 0.5 - 1e-5."""
-    run = adaptive(rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, level, np.inf],
-                   lines=np.array([[1.0, -level, 1.0, 0.0]]))
+    run = adaptive(
+        rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, level, np.inf], lines=np.array([[1.0, -level, 1.0, 0.0]])
+    )
     assert run.status == (compiled.EVENT if fires else compiled.REACHED)
     if fires:
         assert run.event_time == pytest.approx(0.5 - 1e-5, abs=1e-9)
@@ -278,11 +354,13 @@ def test_a_dip_between_the_reference_probes_is_caught_for_a_nonlinear_guard(dept
     one RK4 step [0, 1]: all of them between the switch probes (PROBES_PER_STEP) and the two narrower ones between
     any 9 evenly spaced points; the guard's polynomial over the step finds each, Brent's method locates
     t = 0.5 - sqrt(depth)."""
+
     def x(t):
         return (t - 0.5) ** 2 - depth
 
-    run = fixed(constant_acceleration, [x(0.0), -1.0], 1.0, [2.0], 1.0, guards=exponential_position,
-                lines=np.zeros((1, 4)))
+    run = fixed(
+        constant_acceleration, [x(0.0), -1.0], 1.0, [2.0], 1.0, guards=exponential_position, lines=np.zeros((1, 4))
+    )
     assert run.n_steps == 1 and reference_misses(0.0, 1.0, x)
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(0.5 - math.sqrt(depth), abs=1e-12)
 
@@ -294,11 +372,13 @@ def test_a_guard_at_its_boundary_fires_only_past_the_tolerance():
     slow = [0.0, -1e-13]
     run = adaptive(rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE)
     assert run.status == compiled.EVENT and run.n_steps > 0 and run.event_time == pytest.approx(10.0, rel=1e-6)
-    run = adaptive(rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
-                   thresholds=[-1e-12])
+    run = adaptive(
+        rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE, thresholds=[-1e-12]
+    )
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(20.0, rel=1e-6)
-    run = adaptive(rk45, constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE,
-                   thresholds=[0.5])
+    run = adaptive(
+        rk45, constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE, thresholds=[0.5]
+    )
     assert run.event_time == pytest.approx(0.5, abs=1e-12)
 
 
@@ -313,8 +393,18 @@ def test_the_earliest_of_two_guards_wins(clock, guard, time):
     """x = cos t reaches 0.5 at pi/3 = 1.047 s; the clock guard fires at 1.0 s or 1.1 s."""
     lines = TWO_GUARD_LINES.copy()
     lines[0, 1] = -0.5
-    run = adaptive(rk45, oscillator, [1.0, 0.0], 5.0, [1.0, 0.5, clock], rtol=1e-10, atol=1e-12,
-                   guards=position_and_clock, lines=lines, max_step=0.5)
+    run = adaptive(
+        rk45,
+        oscillator,
+        [1.0, 0.0],
+        5.0,
+        [1.0, 0.5, clock],
+        rtol=1e-10,
+        atol=1e-12,
+        guards=position_and_clock,
+        lines=lines,
+        max_step=0.5,
+    )
     assert run.status == compiled.EVENT and run.event_guard == guard
     assert run.event_time == pytest.approx(time, abs=1e-9)
 
@@ -334,13 +424,36 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
 
     def call(y, t0, first_step, wrap_period):
         y = np.asarray(y, dtype=float)
-        arguments = (rotating_pendulum, position, 0, np.zeros((0, 4)), np.zeros(0), t0, y, t_end,
-                     np.asarray(p, dtype=float))
+        arguments = (
+            rotating_pendulum,
+            position,
+            0,
+            np.zeros((0, 4)),
+            np.zeros(0),
+            t0,
+            y,
+            t_end,
+            np.asarray(p, dtype=float),
+        )
         if method == "RK4":
             return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000, 100000, *NO_RESTARTS))
-        return CompiledRun.from_result(compiled.stepper(method)(*arguments[:5], position, 0, *arguments[5:], 1e-8,
-                                                                np.full(2, 1e-10), np.inf, first_step, limit,
-                                                                wrap_period, 100000, 100000, *NO_RESTARTS))
+        return CompiledRun.from_result(
+            compiled.stepper(method)(
+                *arguments[:5],
+                position,
+                0,
+                *arguments[5:],
+                1e-8,
+                np.full(2, 1e-10),
+                np.inf,
+                first_step,
+                limit,
+                wrap_period,
+                100000,
+                100000,
+                *NO_RESTARTS,
+            )
+        )
 
     inside = call(y0, 0.0, 0.0, period)
     times, starts, t, y, first_step, offset, restarts = [0.0], [], 0.0, y0, 0.0, 0.0, -1
@@ -371,7 +484,11 @@ def test_failures_keep_what_was_computed():
     limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
     assert (limited.status, limited.failure, limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 5)
     run_limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], run_steps=7)
-    assert (run_limited.status, run_limited.failure, run_limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 7)
+    assert (run_limited.status, run_limited.failure, run_limited.n_steps) == (
+        compiled.FAILED,
+        compiled.TOO_MANY_STEPS,
+        7,
+    )
 
 
 @pytest.mark.parametrize("method", ["RK45", "DOP853", "RK4"])
@@ -381,16 +498,19 @@ def test_a_speed_beyond_the_limit_stops_the_call_at_that_step(method):
     watched = list(NO_RESTARTS)
     watched[4] = np.zeros(1, dtype=np.int64)  # speed_indices
     if method == "RK4":
-        free, stopped = (fixed(blow_up, [1.0], 2.0, [0.0], 1e-4, restarts=restarts)
-                         for restarts in (NO_RESTARTS, tuple(watched)))
+        free, stopped = (
+            fixed(blow_up, [1.0], 2.0, [0.0], 1e-4, restarts=restarts) for restarts in (NO_RESTARTS, tuple(watched))
+        )
     else:
-        free, stopped = (adaptive(compiled.stepper(method), blow_up, [1.0], 2.0, [0.0], restarts=restarts)
-                         for restarts in (NO_RESTARTS, tuple(watched)))
+        free, stopped = (
+            adaptive(compiled.stepper(method), blow_up, [1.0], 2.0, [0.0], restarts=restarts)
+            for restarts in (NO_RESTARTS, tuple(watched))
+        )
     ends = np.append(free.y_old[1:, 0], free.y_end[0])
     first = int(np.argmax(ends > 1e6))  # the first step end beyond the limit
     assert 0 < first < free.n_steps - 1 and free.beyond == -1
     assert (stopped.status, stopped.failure, stopped.beyond) == (compiled.FAILED, compiled.BLOWN_UP, 0)
-    assert stopped.n_steps == first + 1 and np.array_equal(stopped.times, free.times[:first + 2])
+    assert stopped.n_steps == first + 1 and np.array_equal(stopped.times, free.times[: first + 2])
     assert stopped.y_end[0] == ends[first] > 1e6 >= stopped.y_old[-1, 0]
 
 
@@ -426,8 +546,7 @@ def test_the_steps_keep_their_reach_from_a_reaction_passing_near_zero(method):
         beside = (starts <= p[2]) & (p[2] <= ends)
         return np.where(beside, a, np.minimum(np.hypot(starts - p[2], a), np.hypot(ends - p[2], a))) / (ends - starts)
 
-    run = adaptive(method, reaction_size, [0.0], 0.3, p, rtol=rtol, atol=rtol, reactions=reaction_square,
-                   n_journals=1)
+    run = adaptive(method, reaction_size, [0.0], 0.3, p, rtol=rtol, atol=rtol, reactions=reaction_square, n_journals=1)
     assert run.status == compiled.REACHED and np.min(distance_over_length(run)) >= 1.0 - 1e-7
     assert abs(run.y_end[0] - (exact(0.3) - exact(0.0))) <= rtol * (exact(0.3) - exact(0.0))
     if method is not rosenbrock23:  # its third-order steps stay short enough there on their own

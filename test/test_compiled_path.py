@@ -33,14 +33,21 @@ def bundled(name: str) -> dict:
 
 
 # Scenes whose structures, together with the bundled ones, call every kernel.
-PLAIN = {"name": "plain", "machine": {
-    "inertia": 0.4,
-    "drive": {"type": "table", "angle_deg": [0.0, 90.0, 200.0], "torque": [30.0, 50.0, 10.0], "period_deg": 360.0},
-    "loads": [{"type": "constant", "torque": 3.0}, {"type": "viscous", "coefficient": 0.05},
-              {"type": "fan", "coefficient": 1e-3},
-              {"type": "table", "angle_deg": [10.0, 100.0, 150.0], "torque": [5.0, 25.0, 0.0], "period_deg": 180.0},
-              {"type": "cutting", "torque": 12.0, "intervals_deg": [[20.0, 90.0], [200.0, 260.0]]}]},
-    "scenario": {"initial": {"omega": 20.0}, "duration": 1.0, "external_load": 2.0}}
+PLAIN = {
+    "name": "plain",
+    "machine": {
+        "inertia": 0.4,
+        "drive": {"type": "table", "angle_deg": [0.0, 90.0, 200.0], "torque": [30.0, 50.0, 10.0], "period_deg": 360.0},
+        "loads": [
+            {"type": "constant", "torque": 3.0},
+            {"type": "viscous", "coefficient": 0.05},
+            {"type": "fan", "coefficient": 1e-3},
+            {"type": "table", "angle_deg": [10.0, 100.0, 150.0], "torque": [5.0, 25.0, 0.0], "period_deg": 180.0},
+            {"type": "cutting", "torque": 12.0, "intervals_deg": [[20.0, 90.0], [200.0, 260.0]]},
+        ],
+    },
+    "scenario": {"initial": {"omega": 20.0}, "duration": 1.0, "external_load": 2.0},
+}
 
 
 def four_bar_governed(feedback: dict) -> dict:
@@ -48,10 +55,20 @@ def four_bar_governed(feedback: dict) -> dict:
     sleeve friction."""
     data = bundled("four_bar_rocker")
     data["machine"]["loads"].append({"type": "rocker_constant", "torque": -0.4})
-    data["governor"] = {"type": "indirect", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 100.0,
-                        "friction": 2.0, "static_friction": 3.0, "ratio": 0.8, "stroke": [0.02, 0.08],
-                        "pilot_neutral": 0.05, "servo": {"gain": 100.0, "max_speed": 2.0, "dead_band": 0.002,
-                                                         "travel": [0.0, 1.0]}, "feedback": feedback}
+    data["governor"] = {
+        "type": "indirect",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 5.0,
+        "damping": 100.0,
+        "friction": 2.0,
+        "static_friction": 3.0,
+        "ratio": 0.8,
+        "stroke": [0.02, 0.08],
+        "pilot_neutral": 0.05,
+        "servo": {"gain": 100.0, "max_speed": 2.0, "dead_band": 0.002, "travel": [0.0, 1.0]},
+        "feedback": feedback,
+    }
     data["scenario"]["initial"] = {"omega": 70.0}
     return data
 
@@ -60,9 +77,17 @@ def compressor_direct() -> dict:
     """The compressor with every slider load and a direct governor on a table valve, with sleeve friction."""
     data = bundled("compressor")
     data["machine"]["loads"].append({"type": "slider_constant", "force": -40.0})
-    data["governor"] = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
-                        "friction": 2.0, "ratio": 0.8, "stroke": [0.02, 0.08],
-                        "valve": {"type": "table", "sleeve": [0.02, 0.05, 0.08], "throttle": [1.0, 0.6, 0.0]}}
+    data["governor"] = {
+        "type": "direct",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 5.0,
+        "damping": 200.0,
+        "friction": 2.0,
+        "ratio": 0.8,
+        "stroke": [0.02, 0.08],
+        "valve": {"type": "table", "sleeve": [0.02, 0.05, 0.08], "throttle": [1.0, 0.6, 0.0]},
+    }
     data["scenario"]["initial"] = {"omega": 120.0}
     return data
 
@@ -73,11 +98,16 @@ def driven_four_bar() -> dict:
     mechanism = {key: value for key, value in bundled("four_bar_rocker")["machine"]["mechanism"].items()}
     data["machine"]["gravity"] = [0.0, -9.81]
     data["machine"]["coupling"]["driven"] = {
-        "inertia": 0.1, "mechanism": mechanism,
-        "loads": [{"type": "fan", "coefficient": 2.56e-4}, {"type": "constant", "torque": 1.5},
-                  {"type": "rocker_viscous", "coefficient": 0.05}, {"type": "rocker_spring", "stiffness": 5.0,
-                                                                    "free_position": 1.6},
-                  {"type": "table", "angle_deg": [0.0, 180.0], "torque": [0.0, 2.0]}]}
+        "inertia": 0.1,
+        "mechanism": mechanism,
+        "loads": [
+            {"type": "fan", "coefficient": 2.56e-4},
+            {"type": "constant", "torque": 1.5},
+            {"type": "rocker_viscous", "coefficient": 0.05},
+            {"type": "rocker_spring", "stiffness": 5.0, "free_position": 1.6},
+            {"type": "table", "angle_deg": [0.0, 180.0], "torque": [0.0, 2.0]},
+        ],
+    }
     return data
 
 
@@ -168,8 +198,9 @@ def test_plain_kernels_equal_reference_in_and_out_of_a_switch_window():
     assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=piece)
 
 
-@pytest.mark.parametrize("name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine", "engine_inline4",
-                                  "walking_beam"])
+@pytest.mark.parametrize(
+    "name", ["startup", "lathe", "compressor", "four_bar_rocker", "engine", "engine_inline4", "walking_beam"]
+)
 def test_bundled_machines_equal_reference(name):
     model = model_of(bundled(name))
     grid = model.switch_grid()
@@ -191,8 +222,12 @@ def v_twin(name: str) -> dict:
     gravity is turned), with offset, every mass, gravity with both components and a firing delay of 450 deg."""
     data = bundled(name)
     data["machine"]["gravity"] = [1.5, -9.81]
-    data["machine"]["mechanism"].update(offset=0.006, crank_mass=1.2, crank_cg=0.01,
-                                        cylinders=[{"throw_deg": 0.0}, {"throw_deg": 0.0, "bank_deg": 90.0}])
+    data["machine"]["mechanism"].update(
+        offset=0.006,
+        crank_mass=1.2,
+        crank_cg=0.01,
+        cylinders=[{"throw_deg": 0.0}, {"throw_deg": 0.0, "bank_deg": 90.0}],
+    )
     data["machine"]["drive"].update(firing_deg=[0.0, 450.0], phase_deg=30.0)
     return data
 
@@ -211,8 +246,10 @@ def driven_walking_beam() -> dict:
     data["machine"]["gravity"] = [0.0, -9.81]
     data["machine"]["coupling"]["driven"]["mechanism"] = bundled("walking_beam")["machine"]["mechanism"]
     data["machine"]["coupling"]["driven"]["loads"] += [
-        {"type": "shuttle_viscous", "coefficient": 150.0}, {"type": "shuttle_constant", "force": -20.0},
-        {"type": "shuttle_spring", "stiffness": 400.0, "free_position": 0.1}]
+        {"type": "shuttle_viscous", "coefficient": 150.0},
+        {"type": "shuttle_constant", "force": -20.0},
+        {"type": "shuttle_spring", "stiffness": 400.0, "free_position": 0.1},
+    ]
     return data
 
 
@@ -242,9 +279,20 @@ def governed_clutch() -> dict:
     """engine_direct's governed engine driving clutch_start's branched machine through its clutch, with a viscous
     and a fan load on the main shaft."""
     data = bundled("engine_direct")
-    data["machine"]["clutch"] = {"static_torque": 40.0, "kinetic_torque": 32.0, "driven": branched(
-        {"inertia": 0.1, "loads": [{"type": "constant", "torque": 2.0}, {"type": "viscous", "coefficient": 0.01},
-                                   {"type": "fan", "coefficient": 1e-4}]})}
+    data["machine"]["clutch"] = {
+        "static_torque": 40.0,
+        "kinetic_torque": 32.0,
+        "driven": branched(
+            {
+                "inertia": 0.1,
+                "loads": [
+                    {"type": "constant", "torque": 2.0},
+                    {"type": "viscous", "coefficient": 0.01},
+                    {"type": "fan", "coefficient": 1e-4},
+                ],
+            }
+        ),
+    }
     return data
 
 
@@ -272,35 +320,51 @@ def test_multi_cylinder_engines_equal_reference():
     assert model.has_weight and len(model.reduced(0.3)[4]) == 2
     assert_same_rhs(model, governor_modes(model), states=3)
     source = compile_scene(model).source
-    assert re.search(r"total, q, dq, q_2, dq_2 = linkage_reduced_\w+\(phi, ", source)   # one call, both pistons
+    assert re.search(r"total, q, dq, q_2, dq_2 = linkage_reduced_\w+\(phi, ", source)  # one call, both pistons
     assert source.count("drives_engine_gas(") == 2
     driven = model_of(driven_inline4())
     assert_same_rhs(driven, [("forward",), ("backward",), ("held",)], states=4)
     assert len(re.findall(r"q2_4, dq2_4 = linkage_reduced_\w+\(phi2, ", compile_scene(driven).source)) == 2
 
 
-JOURNALS = {"crank_bearing": {"radius": 0.02, "fit": "run_in"}, "crank_pin": {"radius": 0.015},
-            "rocker_pin": {"radius": 0.01, "fit": "new"}, "rocker_bearing": {"radius": 0.012}}
+JOURNALS = {
+    "crank_bearing": {"radius": 0.02, "fit": "run_in"},
+    "crank_pin": {"radius": 0.015},
+    "rocker_pin": {"radius": 0.01, "fit": "new"},
+    "rocker_bearing": {"radius": 0.012},
+}
 COLLAR = {"inner_radius": 0.02, "outer_radius": 0.035, "axial_load": 200.0, "state": "new"}
 
 
 def with_joint_friction(data: dict, journals: list[str], guide: float = 0.0, collar: bool = True) -> dict:
     """Scene data with joint friction (f = 0.08) in the named journals, the guide and a thrust collar."""
-    data["machine"]["joint_friction"] = {"coefficient": 0.08, "joints": {name: JOURNALS[name] for name in journals},
-                                         "guide": guide, **({"thrust_collar": COLLAR} if collar else {})}
+    data["machine"]["joint_friction"] = {
+        "coefficient": 0.08,
+        "joints": {name: JOURNALS[name] for name in journals},
+        "guide": guide,
+        **({"thrust_collar": COLLAR} if collar else {}),
+    }
     return data
 
 
 def crank_at_rest(torque: float) -> dict:
     """test_joint_friction's crank–slider at rest in gravity, held by its crank bearing and collar (F(0) = 3 +
     0.1 / sqrt(1.01) 0.03 30 9.81 = 3.878 N m) or not, under a constant drive [N m]."""
-    return {"machine": {"inertia": 0.2, "gravity": [0.0, -9.81], "drive": {"type": "constant", "torque": torque},
-                        "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": 30.0,
-                                      "slider_mass": 2.0},
-                        "joint_friction": {"coefficient": 0.1, "joints": {"crank_bearing": {"radius": 0.03}},
-                                           "thrust_collar": {"inner_radius": 0.02, "outer_radius": 0.04,
-                                                             "axial_load": 1000.0}}},
-            "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 0.5}, "solver": {}}
+    return {
+        "machine": {
+            "inertia": 0.2,
+            "gravity": [0.0, -9.81],
+            "drive": {"type": "constant", "torque": torque},
+            "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": 30.0, "slider_mass": 2.0},
+            "joint_friction": {
+                "coefficient": 0.1,
+                "joints": {"crank_bearing": {"radius": 0.03}},
+                "thrust_collar": {"inner_radius": 0.02, "outer_radius": 0.04, "axial_load": 1000.0},
+            },
+        },
+        "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 0.5},
+        "solver": {},
+    }
 
 
 @pytest.mark.parametrize("speed", [None, 0.0], ids=["turning", "at_rest"])
@@ -332,8 +396,13 @@ def test_joint_friction_equals_reference(speed):
     # the crank's guard follows the sign of omega at the segment's start: 'crank starts' (-|omega|) from rest,
     # 'crank stops' (s omega) when turning, as model.guards(mode, y); only the latter is linear in the state
     levels, compiled = np.zeros(1), compile_scene(held)
-    for start, state, level in ((0.0, 1e-6, -1e-6), (0.0, -2.0, -2.0), (3.0, 2.0, 2.0), (3.0, -1.0, -1.0),
-                                (-3.0, 2.0, -2.0)):
+    for start, state, level in (
+        (0.0, 1e-6, -1e-6),
+        (0.0, -2.0, -2.0),
+        (3.0, 2.0, 2.0),
+        (3.0, -1.0, -1.0),
+        (-3.0, 2.0, -2.0),
+    ):
         compiled.guards(0.0, np.array([0.0, state]), compiled.parameters_for(None, None, None, start), levels)
         (guard,) = held.guards(None, np.array([0.0, start]))
         assert levels[0] == level == guard.level(0.0, np.array([0.0, state]))
@@ -341,8 +410,10 @@ def test_joint_friction_equals_reference(speed):
         assert (rows[0] is None) == (start == 0.0)
 
 
-@pytest.mark.parametrize("feedback", [{"type": "none"}, {"type": "rigid", "gain": 0.12},
-                                      {"type": "isodromic", "gain": 0.3, "time_constant": 1.5}])
+@pytest.mark.parametrize(
+    "feedback",
+    [{"type": "none"}, {"type": "rigid", "gain": 0.12}, {"type": "isodromic", "gain": 0.3, "time_constant": 1.5}],
+)
 def test_indirect_governor_every_feedback_and_mode(feedback):
     model = model_of(four_bar_governed(feedback))
     assert_same_rhs(model, governor_modes(model), states=3)
@@ -354,8 +425,11 @@ def test_engine_governors_every_mode(name):
     assert_same_rhs(model, governor_modes(model), states=3)
 
 
-@pytest.mark.parametrize("data", [bundled("two_mass"), bundled("press_coupling"), driven_four_bar()],
-                         ids=["linear", "table", "driven_four_bar"])
+@pytest.mark.parametrize(
+    "data",
+    [bundled("two_mass"), bundled("press_coupling"), driven_four_bar()],
+    ids=["linear", "table", "driven_four_bar"],
+)
 def test_coupling_in_every_driven_mode(data):
     model = model_of(data)
     assert_same_rhs(model, [("forward",), ("backward",), ("held",)], states=5)
@@ -402,14 +476,17 @@ def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
     compiled = compile_scene(model)
     files = scene_cache_files(compiled)
     assert files, sorted(os.listdir(compiled.path.parent / "__pycache__"))
-    script = ("import json\nfrom mech_regulator.model import build_model\nfrom mech_regulator.scene import load_scene\n"
-              "from mech_regulator.solvers.compiled.codegen import compile_scene\n"
-              "c = compile_scene(build_model(load_scene('startup')))\n"
-              "print(json.dumps([sum(c.rhs.stats.cache_hits.values()), sum(c.rhs.stats.cache_misses.values()), "
-              "sum(c.guards.stats.cache_hits.values())]))\nprint(c.path)\n")
+    script = (
+        "import json\nfrom mech_regulator.model import build_model\nfrom mech_regulator.scene import load_scene\n"
+        "from mech_regulator.solvers.compiled.codegen import compile_scene\n"
+        "c = compile_scene(build_model(load_scene('startup')))\n"
+        "print(json.dumps([sum(c.rhs.stats.cache_hits.values()), sum(c.rhs.stats.cache_misses.values()), "
+        "sum(c.guards.stats.cache_hits.values())]))\nprint(c.path)\n"
+    )
     environment = dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path))
-    output = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True,
-                            env=environment).stdout
+    output = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True, env=environment
+    ).stdout
     counts, path = output.splitlines()[-2:]
     assert (json.loads(counts), path) == ([1, 0, 1], str(compiled.path)), sorted(os.listdir(compiled.path.parent))
     assert scene_cache_files(compiled) == files  # nothing compiled anew
@@ -428,9 +505,13 @@ def test_refusals_name_the_key():
     assert not runs_compiled(load_scene("startup").solver)  # auto is the reference path in the core
 
 
-@pytest.mark.parametrize("name, overrides, expected", [
-    ("clutch_start", ["solver.method=LSODA"], "does not run solver.method: 'LSODA'"),
-    ("startup", ["solver.method=BDF"], "does not run solver.method: 'BDF'")])
+@pytest.mark.parametrize(
+    "name, overrides, expected",
+    [
+        ("clutch_start", ["solver.method=LSODA"], "does not run solver.method: 'LSODA'"),
+        ("startup", ["solver.method=BDF"], "does not run solver.method: 'BDF'"),
+    ],
+)
 def test_cli_falls_back_to_the_reference_path_with_a_note(capsys, name, overrides, expected):
     sets = [item for override in ["solver.path=fast"] + overrides for item in ("--set", override)]
     code, out, err = run_cli(capsys, "simulate", name, "--quiet", "--json", *sets)
@@ -439,13 +520,22 @@ def test_cli_falls_back_to_the_reference_path_with_a_note(capsys, name, override
 
 
 def test_cli_refuses_rosenbrock23_on_the_reference_path(capsys):
-    code, _, err = run_cli(capsys, "simulate", "startup", "--quiet", "--set", "solver.method=Rosenbrock23", "--set",
-                           "solver.path=reference")
+    code, _, err = run_cli(
+        capsys,
+        "simulate",
+        "startup",
+        "--quiet",
+        "--set",
+        "solver.method=Rosenbrock23",
+        "--set",
+        "solver.path=reference",
+    )
     assert code == 2 and "runs only on the compiled fast path" in err
 
 
 # ---------------------------------------------------------------------------------------------------------------
 # Whole runs: fast path against the reference path
+
 
 def run_pair(data: dict):
     """(reference run, fast run) of scene data; both must complete."""
@@ -470,20 +560,36 @@ def assert_same_events(reference, fast, within: float = 1e-9):
 def shortened(name: str, duration: float, **changes) -> dict:
     """A bundled scene run for `duration` [s] (load events after it dropped), with scene() changes."""
     data = bundled(name)
-    events = [event for event in data["scenario"].get("load_events", []) if event["time"] + event.get("ramp", 0.0)
-              <= duration]
+    events = [
+        event for event in data["scenario"].get("load_events", []) if event["time"] + event.get("ramp", 0.0) <= duration
+    ]
     return scene(data, **{"scenario__duration": duration, "scenario__load_events": events, **changes})
 
 
 # Where the compiled integrator reproduces scipy's arithmetic step for step, the runs agree to round-off.
-@pytest.mark.parametrize("data", [
-    scene(bundled("startup"), solver__method="DOP853"), scene(bundled("startup"), solver__method="RK45"),
-    scene(bundled("startup"), solver__method="RK4", solver__step=1e-3),
-    shortened("lathe", 3.0), shortened("lathe", 3.0, solver__method="RK45"),
-    shortened("lathe", 2.0, solver__method="RK4", solver__step=1e-3),
-    shortened("four_bar_rocker", 1.0, solver__method="RK45"), shortened("walking_beam", 1.0)],
-    ids=["startup-DOP853", "startup-RK45", "startup-RK4", "lathe-DOP853", "lathe-RK45", "lathe-RK4", "four_bar-RK45",
-         "walking_beam"])
+@pytest.mark.parametrize(
+    "data",
+    [
+        scene(bundled("startup"), solver__method="DOP853"),
+        scene(bundled("startup"), solver__method="RK45"),
+        scene(bundled("startup"), solver__method="RK4", solver__step=1e-3),
+        shortened("lathe", 3.0),
+        shortened("lathe", 3.0, solver__method="RK45"),
+        shortened("lathe", 2.0, solver__method="RK4", solver__step=1e-3),
+        shortened("four_bar_rocker", 1.0, solver__method="RK45"),
+        shortened("walking_beam", 1.0),
+    ],
+    ids=[
+        "startup-DOP853",
+        "startup-RK45",
+        "startup-RK4",
+        "lathe-DOP853",
+        "lathe-RK45",
+        "lathe-RK4",
+        "four_bar-RK45",
+        "walking_beam",
+    ],
+)
 def test_runs_equal_reference_step_for_step(data):
     reference, fast = run_pair(data)
     assert np.all(relative_difference(reference, fast) < 1e-12)
@@ -496,21 +602,43 @@ def test_runs_equal_reference_step_for_step(data):
 # test above) and the runs differ by the method's own error: the difference stays within 10 times the fast run's
 # error (its distance to a fast run at 1/100 of the tolerances); a wrong moment, sign or mode would exceed it by
 # orders of magnitude.
-@pytest.mark.parametrize("data", [
-    shortened("compressor", 1.0), shortened("four_bar_rocker", 1.0),
-    shortened("engine_direct", 2.2), shortened("engine_indirect_isodromic", 2.2),
-    shortened("engine_indirect_rigid", 2.2, solver__method="RK45"), shortened("two_mass", 1.2),
-    shortened("press_coupling", 1.0), shortened("press_coupling", 1.0, solver__method="RK45"),
-    bundled("engine_inline4"),
-    shortened("engine", 0.6, machine=v_twin("engine")["machine"]),
-    shortened("two_mass", 0.6, machine=driven_walking_beam()["machine"])],
-    ids=["compressor", "four_bar", "engine_direct", "isodromic", "rigid-RK45", "two_mass", "press_coupling",
-         "press_coupling-RK45", "engine_inline4", "v_twin", "driven_walking_beam"])
+@pytest.mark.parametrize(
+    "data",
+    [
+        shortened("compressor", 1.0),
+        shortened("four_bar_rocker", 1.0),
+        shortened("engine_direct", 2.2),
+        shortened("engine_indirect_isodromic", 2.2),
+        shortened("engine_indirect_rigid", 2.2, solver__method="RK45"),
+        shortened("two_mass", 1.2),
+        shortened("press_coupling", 1.0),
+        shortened("press_coupling", 1.0, solver__method="RK45"),
+        bundled("engine_inline4"),
+        shortened("engine", 0.6, machine=v_twin("engine")["machine"]),
+        shortened("two_mass", 0.6, machine=driven_walking_beam()["machine"]),
+    ],
+    ids=[
+        "compressor",
+        "four_bar",
+        "engine_direct",
+        "isodromic",
+        "rigid-RK45",
+        "two_mass",
+        "press_coupling",
+        "press_coupling-RK45",
+        "engine_inline4",
+        "v_twin",
+        "driven_walking_beam",
+    ],
+)
 def test_runs_equal_reference_within_their_accuracy(data):
     reference, fast = run_pair(data)
     settings = data.get("solver", {})
-    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings["rtol"] / 100,
-                                             solver__atol=settings["atol"] / 100)))
+    tight = simulate_complete(
+        model_of(
+            scene(data, solver__path="fast", solver__rtol=settings["rtol"] / 100, solver__atol=settings["atol"] / 100)
+        )
+    )
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
     assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps
     # each MAX_STEPS_PER_CALL chunk of the fast path starts with the angle wrapped into one period, which can move
@@ -525,8 +653,11 @@ def test_crank_stops_and_starts_as_on_the_reference_path():
     stays under 0.9 F(0) and starts under 1.1 F(0) with the reference's 'crank starts' event, and then runs as on the
     reference path."""
     collar = {"inner_radius": 0.02, "outer_radius": 0.04, "axial_load": 1000.0}
-    run_down = {"machine": {"inertia": 0.5, "joint_friction": {"coefficient": 0.1, "thrust_collar": collar}},
-                "scenario": {"initial": {"omega": 10.0}, "duration": 2.0}, "solver": {}}
+    run_down = {
+        "machine": {"inertia": 0.5, "joint_friction": {"coefficient": 0.1, "thrust_collar": collar}},
+        "scenario": {"initial": {"omega": 10.0}, "duration": 2.0},
+        "solver": {},
+    }
     at_rest = 3.0 + 0.1 / np.sqrt(1.01) * 0.03 * 30.0 * 9.81
     reference, fast = run_pair(run_down)
     assert_same_events(reference, fast)
@@ -543,8 +674,11 @@ def test_crank_stops_and_starts_as_on_the_reference_path():
         assert [name for _, name in reference.events] == ["crank starts"]
         assert_same_events(reference, fast)
         settings = model_of(data).scene.solver
-        tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
-                                                 solver__atol=settings.atol / 100)))
+        tight = simulate_complete(
+            model_of(
+                scene(data, solver__path="fast", solver__rtol=settings.rtol / 100, solver__atol=settings.atol / 100)
+            )
+        )
         assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
         # the same restarts (the start, and on compressor_friction the crossings of its slider table's breakpoints);
         # the step sequences after each restart part at round-off (measured: 137 against 151 steps on
@@ -562,9 +696,13 @@ def test_governed_engine_with_coupling_and_joint_friction_as_on_the_reference_pa
     falls on a table knot (the corners every 90 deg of the crank, the indicator diagram's knots every 720 deg) is one
     switch on both paths (the reference path counted it twice, a second restart at the same point). Same events,
     switches, restarts and steps; states within 10 times the fast run's own error."""
+
     def run(*changes):
-        return simulate_complete(build_model(load_scene(BASE_SCENE, [*SCENARIO, *EFFECT_CHAIN[-1].overrides,
-                                                                     "scenario.duration=0.6", *changes])))
+        return simulate_complete(
+            build_model(
+                load_scene(BASE_SCENE, [*SCENARIO, *EFFECT_CHAIN[-1].overrides, "scenario.duration=0.6", *changes])
+            )
+        )
 
     reference, fast = run(), run("solver.path=fast")
     tight = run("solver.path=fast", "solver.rtol=1e-10", "solver.atol=1e-12")
@@ -574,9 +712,15 @@ def test_governed_engine_with_coupling_and_joint_friction_as_on_the_reference_pa
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
 
 
-@pytest.mark.parametrize("data", [bundled("clutch_start"), shortened("clutch_start", 2.5, solver__method="RK45"),
-                                  scene(governed_clutch(), scenario__duration=1.0, scenario__load_events=[])],
-                         ids=["clutch_start", "clutch_start-RK45", "governed_clutch"])
+@pytest.mark.parametrize(
+    "data",
+    [
+        bundled("clutch_start"),
+        shortened("clutch_start", 2.5, solver__method="RK45"),
+        scene(governed_clutch(), scenario__duration=1.0, scenario__load_events=[]),
+    ],
+    ids=["clutch_start", "clutch_start-RK45", "governed_clutch"],
+)
 def test_clutch_runs_equal_reference_within_their_accuracy(data):
     """The clutch's stick-slip events on both paths: states within 10 times the fast run's own error (its distance
     to a run at 1/100 of the tolerances), the same events, their times within 10 times the fast run's own largest
@@ -584,12 +728,16 @@ def test_clutch_runs_equal_reference_within_their_accuracy(data):
     governed engine's clutch sticks and slips with the firing pulses)."""
     reference, fast = run_pair(data)
     settings = model_of(data).scene.solver
-    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
-                                             solver__atol=settings.atol / 100)))
+    tight = simulate_complete(
+        model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100, solver__atol=settings.atol / 100))
+    )
     assert "clutch locks (slip ends)" in [name for _, name in reference.events]
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
-    assert [name for _, name in fast.events] == [name for _, name in reference.events] == [
-        name for _, name in tight.events]
+    assert (
+        [name for _, name in fast.events]
+        == [name for _, name in reference.events]
+        == [name for _, name in tight.events]
+    )
     times = [np.array([time for time, _ in run.events]) for run in (reference, fast, tight)]
     assert np.max(np.abs(times[1] - times[0])) <= 10.0 * np.max(np.abs(times[1] - times[2])) + 1e-9
     assert abs(fast.stats.steps - reference.stats.steps) <= 0.03 * reference.stats.steps
@@ -600,11 +748,23 @@ def governed_lathe() -> dict:
     the sleeve sticks, breaks away, hits both stops and leaves them as the load steps up and is thrown off."""
     data = bundled("lathe")
     data["machine"]["drive"] = {"type": "constant", "torque": 150.0}
-    data["governor"] = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 20.0,
-                        "friction": 3.0, "static_friction": 4.0, "ratio": 1.22, "stroke": [0.03, 0.06],
-                        "valve": {"open_at": 0.02, "closed_at": 0.08}}
-    data["scenario"] = {"initial": {"omega": 15.0}, "duration": 3.0,
-                        "load_events": [{"time": 1.0, "torque": 60.0}, {"time": 2.0, "torque": -40.0}]}
+    data["governor"] = {
+        "type": "direct",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 5.0,
+        "damping": 20.0,
+        "friction": 3.0,
+        "static_friction": 4.0,
+        "ratio": 1.22,
+        "stroke": [0.03, 0.06],
+        "valve": {"open_at": 0.02, "closed_at": 0.08},
+    }
+    data["scenario"] = {
+        "initial": {"omega": 15.0},
+        "duration": 3.0,
+        "load_events": [{"time": 1.0, "torque": 60.0}, {"time": 2.0, "torque": -40.0}],
+    }
     return data
 
 
@@ -612,8 +772,11 @@ def governed_lathe() -> dict:
 def test_switches_and_governor_events_equal_reference(method):
     reference, fast = run_pair(scene(governed_lathe(), solver__method=method))
     assert {name for _, name in reference.events} == {
-        "sleeve breaks away downwards", "sleeve reaches the low stop", "sleeve leaves the low stop",
-        "sleeve reaches the high stop"}
+        "sleeve breaks away downwards",
+        "sleeve reaches the low stop",
+        "sleeve leaves the low stop",
+        "sleeve reaches the high stop",
+    }
     assert reference.stats.switches > 20
     assert_same_events(reference, fast, within=1e-9)
     assert fast.modes == [(pytest.approx(t, abs=1e-9), mode) for t, mode in reference.modes]
@@ -622,11 +785,17 @@ def test_switches_and_governor_events_equal_reference(method):
 
 def test_rosenbrock23_on_a_stiff_coupling_equals_radau():
     """k = 1e7 N m/rad: a coupling vibrating at about 1.9 kHz; Rosenbrock23 at rtol 1e-6 against Radau at 1e-10."""
-    data = shortened("two_mass", 0.15, machine__coupling__stiffness=1e7, machine__coupling__damping=200.0,
-                     scenario__load_events=[{"time": 0.05, "torque": 8.0}])
+    data = shortened(
+        "two_mass",
+        0.15,
+        machine__coupling__stiffness=1e7,
+        machine__coupling__damping=200.0,
+        scenario__load_events=[{"time": 0.05, "torque": 8.0}],
+    )
     radau = simulate_complete(model_of(scene(data, solver__method="Radau", solver__rtol=1e-10, solver__atol=1e-12)))
-    fast = simulate_complete(model_of(scene(data, solver__path="fast", solver__method="Rosenbrock23",
-                                            solver__rtol=1e-6, solver__atol=1e-12)))
+    fast = simulate_complete(
+        model_of(scene(data, solver__path="fast", solver__method="Rosenbrock23", solver__rtol=1e-6, solver__atol=1e-12))
+    )
     times = np.linspace(0.0, 0.15, 501)
     a, b = radau(times), fast(times)
     speeds = [0, 1, 3]  # phi, omega, omega_driven to 1e-6 of their range
@@ -663,6 +832,16 @@ def test_failure_and_interruption_keep_what_was_computed():
 
 def test_cli_fast_path_run(capsys, tmp_path):
     # (the co-simulation, --exchange-step, on the fast path: test_cosim_fast.py)
-    code, out, _ = run_cli(capsys, "simulate", "lathe", "--quiet", "--set", "solver.path=fast", "--set",
-                           "scenario.duration=1.0", "--out", str(tmp_path / "lathe.csv"))
+    code, out, _ = run_cli(
+        capsys,
+        "simulate",
+        "lathe",
+        "--quiet",
+        "--set",
+        "solver.path=fast",
+        "--set",
+        "scenario.duration=1.0",
+        "--out",
+        str(tmp_path / "lathe.csv"),
+    )
     assert code == 0 and (tmp_path / "lathe.csv").exists()

@@ -30,12 +30,28 @@ from mech_regulator.solvers.cosim import (
 
 SMOOTH_GOVERNED = {  # constant inertia, a direct governor without friction or stops reached, a load step at 0.2 s
     "name": "smooth_governed",
-    "machine": {"inertia": 0.5, "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-                "loads": [{"type": "viscous", "coefficient": 0.3}]},
-    "governor": {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
-                 "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08], "valve": {"open_at": 0.02, "closed_at": 0.08}},
-    "scenario": {"initial": {"omega": 100.0}, "duration": 1.0, "external_load": 6.0,
-                 "load_events": [{"time": 0.2, "torque": 8.0}]},
+    "machine": {
+        "inertia": 0.5,
+        "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+        "loads": [{"type": "viscous", "coefficient": 0.3}],
+    },
+    "governor": {
+        "type": "direct",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 5.0,
+        "damping": 200.0,
+        "friction": 0.0,
+        "ratio": 0.16,
+        "stroke": [0.02, 0.08],
+        "valve": {"open_at": 0.02, "closed_at": 0.08},
+    },
+    "scenario": {
+        "initial": {"omega": 100.0},
+        "duration": 1.0,
+        "external_load": 6.0,
+        "load_events": [{"time": 0.2, "torque": 8.0}],
+    },
     "solver": {"method": "DOP853", "rtol": 1e-11, "atol": 1e-12},
 }
 
@@ -73,8 +89,12 @@ def test_waveform_is_third_order_and_far_closer(smooth_model):
 def test_waveform_on_the_engine_is_closer_at_twice_the_step():
     """engine_direct shortened (a load step and a full load rejection; its sleeve meets a stop, which no polynomial
     follows): the waveform coupling at 2 ms is still several times closer to the monolithic run than hold at 1 ms."""
-    model = build_model(load_scene("engine_direct", ["scenario.duration=1", "scenario.load_events.0.time=0.4",
-                                                     "scenario.load_events.1.time=0.7"]))
+    model = build_model(
+        load_scene(
+            "engine_direct",
+            ["scenario.duration=1", "scenario.load_events.0.time=0.4", "scenario.load_events.1.time=0.7"],
+        )
+    )
     waveform = omega_errors(model, "waveform", (0.002,))[0.002]
     held = omega_errors(model, "hold", (0.001,))[0.001]
     assert waveform < held / 5.0, (waveform, held)
@@ -92,8 +112,12 @@ def test_corrected_keeps_the_engine_within_the_bound_at_20_ms():
     """engine_direct shortened (its speed ripples with every firing, which the governor follows through the speed
     sampled every 0.625 ms): the corrected coupling at 20 ms stays within 1e-4 of the monolithic run (max relative to
     max |omega|), ten times closer than hold at 1 ms."""
-    model = build_model(load_scene("engine_direct", ["scenario.duration=1", "scenario.load_events.0.time=0.4",
-                                                     "scenario.load_events.1.time=0.7"]))
+    model = build_model(
+        load_scene(
+            "engine_direct",
+            ["scenario.duration=1", "scenario.load_events.0.time=0.4", "scenario.load_events.1.time=0.7"],
+        )
+    )
     monolithic = simulate(model)
     run = cosimulate(model, 0.02, coupling="corrected")
     assert run.status == "complete", run.message
@@ -121,8 +145,12 @@ def test_the_step_predicted_ahead_is_close_to_the_step_predicted_from_its_start(
     samples sent are within 0.1 % of the speed change over the step, in the median over the exchanges, of a prediction
     made from the step's start (without the move: 0.2 %, the crank's phase drifting); at the exchange after a load
     event, which no prediction made before it knew, the step is predicted again from its start, to the bit."""
-    model = build_model(load_scene("engine_direct", ["scenario.duration=1", "scenario.load_events.0.time=0.4",
-                                                     "scenario.load_events.1.time=0.7"]))
+    model = build_model(
+        load_scene(
+            "engine_direct",
+            ["scenario.duration=1", "scenario.load_events.0.time=0.4", "scenario.load_events.1.time=0.7"],
+        )
+    )
     machine, governor = MachineStepper(model), GovernorStepper(model)
     corrected, tentative, differences = None, governor.throttle, {}
     for tick in range(50):
@@ -132,12 +160,14 @@ def test_the_step_predicted_ahead_is_close_to_the_step_predicted_from_its_start(
         expected = from_start.predict(following, tentative)
         predicted = machine.predict(following, tentative)
         differences[tick] = max(abs(a - b) for a, b in zip(predicted[1], expected[1])) / abs(
-            expected[1][-1] - expected[1][0])
+            expected[1][-1] - expected[1][0]
+        )
         assert predicted[0] == expected[0]
         machine.predict_ahead(after, tentative)
         throttle, waveform = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
-        corrected = machine.correct(machine.applied_throttle(throttle), waveform, model.external_load(now),
-                                    load_rate(model, now))
+        corrected = machine.correct(
+            machine.applied_throttle(throttle), waveform, model.external_load(now), load_rate(model, now)
+        )
         tentative = waveform[1][-1]
     assert statistics.median(differences.values()) < 1e-3, differences
     assert differences[21] == differences[36] == 0.0, differences  # the load changed at 0.4 s and 0.7 s
@@ -158,7 +188,7 @@ def test_the_tentative_throttle_breaks_where_the_sleeve_reaches_its_stop():
     final = GovernorStepper(model)
     final.answer(0.0, at_rest)
     final.follow(0.02, fast)
-    (event_time, event, _), = final.events
+    ((event_time, event, _),) = final.events
     assert event == "sleeve reaches the high stop" and 0.0 < event_time < 0.02
     assert times == pytest.approx([event_time / 2, event_time, (event_time + 0.02) / 2, 0.02], abs=1e-15)
     assert values[1] == pytest.approx(final.governor.valve(0.08), abs=1e-9) == values[3]  # closed from the stop on
@@ -171,8 +201,11 @@ def test_a_held_load_is_the_same_number_up_to_the_next_event_and_no_further():
     and at the returned one the next piece's (events at times whose nanoseconds are not whole in binary: 0.1 + 0.2,
     0.7); on a ramp the asked time itself; on the last piece, held, to the end."""
     data = copy.deepcopy(SMOOTH_GOVERNED)
-    data["scenario"]["load_events"] = [{"time": 0.1 + 0.2, "torque": 8.0}, {"time": 0.7, "torque": 4.0, "ramp": 0.1},
-                                       {"time": 0.9, "torque": 5.0}]
+    data["scenario"]["load_events"] = [
+        {"time": 0.1 + 0.2, "torque": 8.0},
+        {"time": 0.7, "torque": 4.0, "ramp": 0.1},
+        {"time": 0.9, "torque": 5.0},
+    ]
     model = build_model(validate_scene(data))
     for asked, next_event in ((0.0, 0.1 + 0.2), (0.5, 0.7)):
         until = held_load_until(model, asked)
@@ -196,7 +229,8 @@ def test_throttle_extrapolation_is_exact_on_a_quadratic():
     assert throttle_extrapolation(answers[-1:]) == (throttle(0.15), 0.0, 0.0)
     value, slope, curvature = throttle_extrapolation(answers[-2:])
     assert (value, curvature) == (throttle(0.15), 0.0) and slope == pytest.approx(
-        (throttle(0.15) - throttle(0.12)) / 0.03, abs=1e-12)
+        (throttle(0.15) - throttle(0.12)) / 0.03, abs=1e-12
+    )
 
 
 def test_speed_waveform_is_the_quadratic_through_three_speeds():

@@ -30,15 +30,19 @@ CASES = {
 EXPECTED_EVENTS = {
     "engine_direct": ["sleeve reaches the high stop", "sleeve leaves the high stop"],
     "engine_indirect_none": ["sleeve reaches the high stop", "servo reaches its low stop"],
-    "two_mass": [], "press_coupling": [],
+    "two_mass": [],
+    "press_coupling": [],
 }
 
 
 def co_simulations(data: dict) -> tuple:
     """(reference model, reference co-simulation, fast co-simulation) of a scene at EXCHANGE."""
     reference = model_of(scene(data, solver__path="reference"))
-    return (reference, cosimulate(reference, EXCHANGE),
-            cosimulate(model_of(scene(data, solver__path="fast")), EXCHANGE))
+    return (
+        reference,
+        cosimulate(reference, EXCHANGE),
+        cosimulate(model_of(scene(data, solver__path="fast")), EXCHANGE),
+    )
 
 
 @pytest.mark.parametrize("name", CASES)
@@ -52,8 +56,7 @@ def test_fast_co_simulation_equals_the_reference(name):
     np.testing.assert_array_equal(fast.times, reference.times)
     assert [what for _, what, _ in reference.events] == EXPECTED_EVENTS[name]
     assert [(what, mode) for _, what, mode in fast.events] == [(what, mode) for _, what, mode in reference.events]
-    np.testing.assert_allclose([t for t, _, _ in fast.events], [t for t, _, _ in reference.events], rtol=0,
-                               atol=1e-6)
+    np.testing.assert_allclose([t for t, _, _ in fast.events], [t for t, _, _ in reference.events], rtol=0, atol=1e-6)
     scale = np.max(np.abs(reference.states), axis=1, keepdims=True)
     difference = np.abs(fast.states - reference.states) / scale
     rtol = model.scene.solver.rtol
@@ -75,8 +78,9 @@ def test_the_tentative_throttle_stays_an_opening_when_the_servo_reaches_its_stop
         return throttle, waveform
 
     monkeypatch.setattr(GovernorStepper, "answer_corrected", kept)
-    run = cosimulate(model_of(scene(CASES["engine_indirect_none"], solver__path="reference")), 0.01,
-                     coupling="corrected")
+    run = cosimulate(
+        model_of(scene(CASES["engine_indirect_none"], solver__path="reference")), 0.01, coupling="corrected"
+    )
     assert run.status == "complete" and "servo reaches its low stop" in [what for _, what, _ in run.events]
     samples = [value for waveform in answers if waveform is not None for value in waveform[1]]
     assert len(samples) >= 2 * 49 and min(samples) == 0.0 and max(samples) <= 1.0, min(samples)
@@ -117,13 +121,20 @@ def test_the_co_simulated_governor_compiles_without_the_machine():
         p = compiled.parameters_for(None, mode, None)
         assert p[3] == SLEEVE_CODE[mode[0]]
         for _ in range(5):
-            y = np.array([random.uniform(-10.0, 10.0), random.uniform(-300.0, 300.0), random.uniform(0.2, 1.2),
-                          random.uniform(-2.0, 2.0)])
+            y = np.array(
+                [
+                    random.uniform(-10.0, 10.0),
+                    random.uniform(-300.0, 300.0),
+                    random.uniform(0.2, 1.2),
+                    random.uniform(-2.0, 2.0),
+                ]
+            )
             rates = np.full(4, np.nan)
             compiled.rhs(0.3, y, p, rates)
             assert rates[1] == 0.0 and rates[0] == y[1], (mode, y, rates)
-            np.testing.assert_allclose(rates[2:], stepper.regulator.rhs(None, None, mode)(0.3, y)[2:], rtol=1e-12,
-                                       atol=1e-12)
+            np.testing.assert_allclose(
+                rates[2:], stepper.regulator.rhs(None, None, mode)(0.3, y)[2:], rtol=1e-12, atol=1e-12
+            )
     before = stepper.state.copy()
     stepper.answer(0.01, 250.0)
     stepper.answer(0.02, 250.0)  # advanced over [0.01, 0.02] with 250 rad/s held: phi moves by 2.5 rad
@@ -164,8 +175,20 @@ def test_cli_co_simulation_on_the_fast_path(capsys):
     """`simulate --exchange-step 1e-3 --set solver.path=fast` runs and gives the reference's summary (final speed,
     the governor's events); a scene the fast path does not cover runs on the reference path, with a note naming the
     key."""
-    arguments = ["simulate", "engine_direct", "--quiet", "--json", "--exchange-step", "1e-3", "--set",
-                 "scenario.duration=0.5", "--set", "scenario.load_events=[]", "--set", "scenario.initial.omega=300"]
+    arguments = [
+        "simulate",
+        "engine_direct",
+        "--quiet",
+        "--json",
+        "--exchange-step",
+        "1e-3",
+        "--set",
+        "scenario.duration=0.5",
+        "--set",
+        "scenario.load_events=[]",
+        "--set",
+        "scenario.initial.omega=300",
+    ]
     summaries = {}
     for path in ("reference", "fast"):
         code, out, err = run_cli(capsys, *arguments, "--set", f"solver.path={path}")
@@ -175,8 +198,22 @@ def test_cli_co_simulation_on_the_fast_path(capsys):
     assert fast["samples"] == reference["samples"] == 501 and fast["t_end"] == reference["t_end"] == 0.5
     assert fast["status"] == "complete" and fast["governor"]["events"] == reference["governor"]["events"] == 2
     assert fast["omega_end"] == pytest.approx(reference["omega_end"], rel=1e-7)
-    code, out, err = run_cli(capsys, "simulate", "engine_direct", "--quiet", "--json", "--exchange-step", "1e-2",
-                             "--set", "scenario.duration=0.05", "--set", "scenario.load_events=[]", "--set",
-                             "solver.path=fast", "--set", "solver.method=Radau")
+    code, out, err = run_cli(
+        capsys,
+        "simulate",
+        "engine_direct",
+        "--quiet",
+        "--json",
+        "--exchange-step",
+        "1e-2",
+        "--set",
+        "scenario.duration=0.05",
+        "--set",
+        "scenario.load_events=[]",
+        "--set",
+        "solver.path=fast",
+        "--set",
+        "solver.method=Radau",
+    )
     assert code == 0 and "does not run solver.method: 'Radau'" in err and "uses the reference path" in err, err
     assert json.loads(out)["status"] == "complete"

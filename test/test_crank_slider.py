@@ -50,18 +50,18 @@ GRID = np.linspace(0.0, 2.0 * math.pi, 2881)  # 0.125 deg
 
 # ----------------------------------------------------------------------------- independent references
 
+
 def x_src_exact(alpha, R, l, a):
     """Source 002 (1-11): displacement from the outer dead centre, l sin beta = R sin alpha - a."""
     sin_beta = (R * math.sin(alpha) - a) / l
-    return math.sqrt((l + R) ** 2 - a * a) - (R * math.cos(alpha) + l * math.sqrt(1.0 - sin_beta ** 2))
+    return math.sqrt((l + R) ** 2 - a * a) - (R * math.cos(alpha) + l * math.sqrt(1.0 - sin_beta**2))
 
 
 def x_src_approx(alpha, R, lam, k, signs=(1, 1, 1)):
     """Source (1-3)/(1-13); `signs` flips the sign of individual correction terms (for the
     'the bound is tight enough to catch a sign error' checks)."""
     s1, s2, s3 = signs
-    return R * (s1 * (1 - math.cos(alpha)) + s2 * lam / 4 * (1 - math.cos(2 * alpha))
-                - s3 * lam * k * math.sin(alpha))
+    return R * (s1 * (1 - math.cos(alpha)) + s2 * lam / 4 * (1 - math.cos(2 * alpha)) - s3 * lam * k * math.sin(alpha))
 
 
 def v_src_approx(alpha, R, w, lam, k, signs=(1, 1, 1)):
@@ -74,8 +74,7 @@ def j_src_approx(alpha, R, w, lam, k, k_sign=+1.0, signs=(1, 1)):
     """d v_src/dt of (1-14): R w^2 (cos a + lambda cos 2a + k_sign * lambda k sin a).
     k_sign = +1 is the correct derivative; k_sign = -1 is what source 002 prints as (1-15)."""
     s1, s2 = signs
-    return R * w * w * (s1 * math.cos(alpha) + s2 * lam * math.cos(2 * alpha)
-                        + k_sign * lam * k * math.sin(alpha))
+    return R * w * w * (s1 * math.cos(alpha) + s2 * lam * math.cos(2 * alpha) + k_sign * lam * k * math.sin(alpha))
 
 
 def _T(u):
@@ -105,11 +104,11 @@ def approximation_bounds(R, l, e, w=1.0):
     |u'| <= 2 lambda^2 (1 + |k|), |u''| <= 2 lambda^2 (2 + |k|), u <= u_max = lambda^2 (1 + |k|)^2.
     """
     lam, k = R / l, e / R
-    u_max = lam ** 2 * (1 + abs(k)) ** 2
+    u_max = lam**2 * (1 + abs(k)) ** 2
     W = e * e / (l + R) ** 2
-    bx = R * lam ** 2 * k ** 2 / (2 * (1 + lam)) + l * _T(u_max) + (l + R) * _T(W)
-    du = 2 * lam ** 2 * (1 + abs(k))
-    ddu = 2 * lam ** 2 * (2 + abs(k))
+    bx = R * lam**2 * k**2 / (2 * (1 + lam)) + l * _T(u_max) + (l + R) * _T(W)
+    du = 2 * lam**2 * (1 + abs(k))
+    ddu = 2 * lam**2 * (2 + abs(k))
     bv = w * l * _T1(u_max) * du
     bj = w * w * l * (_T2(u_max) * du * du + _T1(u_max) * ddu)
     return bx, bv, bj
@@ -130,6 +129,7 @@ def central_diff(f, phi, h=H):
 
 # ----------------------------------------------------------------------------- exact position
 
+
 @pytest.mark.parametrize("R, l, e", GEOMETRIES)
 def test_position_matches_source_exact_formula(R, l, e):
     """x_src (source 002, measured from the outer dead centre) = sqrt((l+R)^2 - e^2) - x(phi)."""
@@ -144,6 +144,7 @@ def test_position_matches_source_exact_formula(R, l, e):
 
 # ----------------------------------------------------------------------------- approximate formulas
 
+
 @pytest.mark.parametrize("R, l, e", APPROX_GEOMETRIES)
 def test_source_approximations_within_neglected_order(R, l, e):
     """Source (1-3)/(1-4)/(1-5) (central) and (1-13)/(1-14)/(corrected 1-15) (offset) agree with the
@@ -153,7 +154,7 @@ def test_source_approximations_within_neglected_order(R, l, e):
     lam, k = R / l, e / R
     bx, bv, bj = approximation_bounds(R, l, e, w)
     # the bound itself is of the neglected order: O(R lambda^3 (1+|k|)^4 + R lambda^2 k^2)
-    assert bx <= R * (lam ** 3 * (1 + abs(k)) ** 4 / 8 * 1.2 + lam ** 2 * k ** 2) + 1e-15
+    assert bx <= R * (lam**3 * (1 + abs(k)) ** 4 / 8 * 1.2 + lam**2 * k**2) + 1e-15
     S1 = math.sqrt((l + R) ** 2 - e * e)
     flipped_x = {s: 0.0 for s in [(-1, 1, 1), (1, -1, 1), (1, 1, -1)]}
     flipped_v = {s: 0.0 for s in flipped_x}
@@ -229,10 +230,13 @@ def test_extreme_accelerations_central(R, l):
     else:
         _, _, bj = approximation_bounds(R, l, 0.0, w)
         assert js.min() < jpi - 1e-6
-        assert js.min() == pytest.approx(-R * w * w * (lam + 1 / (8 * lam)), abs=bj + 1e-5)  # + grid error max|j''| dphi^2/8 ~ 2e-6
+        assert js.min() == pytest.approx(
+            -R * w * w * (lam + 1 / (8 * lam)), abs=bj + 1e-5
+        )  # + grid error max|j''| dphi^2/8 ~ 2e-6
 
 
 # ----------------------------------------------------------------------------- dead centres and stroke
+
 
 @pytest.mark.parametrize("R, l, e", GEOMETRIES)
 def test_dead_centres_and_stroke(R, l, e):
@@ -276,6 +280,7 @@ def test_dead_centres_and_stroke(R, l, e):
 
 # ----------------------------------------------------------------------------- derivatives
 
+
 @pytest.mark.parametrize("R, l, e", GEOMETRIES)
 def test_derivatives_against_finite_differences(R, l, e):
     scale = l + R
@@ -292,15 +297,25 @@ def test_derivatives_against_finite_differences(R, l, e):
         # and a direct second difference of x (h = 1e-3: truncation h^2/12 |x''''| ~ 1e-7 x scale,
         # rounding 4 EPS |x| / h^2 ~ 1e-9)
         h2 = 1e-3
-        fd2 = (slider_x(phi + h2, R, l, e) - 2 * x + slider_x(phi - h2, R, l, e)) / h2 ** 2
+        fd2 = (slider_x(phi + h2, R, l, e) - 2 * x + slider_x(phi - h2, R, l, e)) / h2**2
         assert ddx == pytest.approx(fd2, abs=1e-6 * scale)
 
 
 # ----------------------------------------------------------------------------- reduced inertia and weight
 
+
 def _geometry(R, l, e, **over):
-    g = dict(crank=R, rod=l, offset=e, crank_mass=2.0, crank_cg=-0.3 * R, rod_mass=1.5, rod_cg=0.35 * l,
-             rod_inertia=0.02, slider_mass=0.8)
+    g = dict(
+        crank=R,
+        rod=l,
+        offset=e,
+        crank_mass=2.0,
+        crank_cg=-0.3 * R,
+        rod_mass=1.5,
+        rod_cg=0.35 * l,
+        rod_inertia=0.02,
+        slider_mass=0.8,
+    )
     g.update(over)
     return CrankSliderGeometry(**g)
 
@@ -323,7 +338,7 @@ def _J_independent(phi, g):
     dS2 = (S2p - S2m) / (2 * H)
     dC = (Cp - Cm) / (2 * H)
     dth = (thp - thm) / (2 * H)
-    return g.rod_mass * dS2 @ dS2 + g.rod_inertia * dth ** 2 + g.slider_mass * dC @ dC
+    return g.rod_mass * dS2 @ dS2 + g.rod_inertia * dth**2 + g.slider_mass * dC @ dC
 
 
 def _potential(phi, g, gravity):
@@ -338,7 +353,7 @@ def _potential(phi, g, gravity):
 def test_make_reduced_inertia_and_weight(R, l, e, gravity):
     g = _geometry(R, l, e)
     reduced = preset_reduced(g, gravity)
-    J_scale = g.rod_mass * (l + R) ** 2 + g.rod_inertia + g.slider_mass * R ** 2  # dominant size of J
+    J_scale = g.rod_mass * (l + R) ** 2 + g.rod_inertia + g.slider_mass * R**2  # dominant size of J
     M_scale = (g.crank_mass + g.rod_mass + g.slider_mass) * math.hypot(*gravity) * (l + R)
     for phi in ANGLES:
         J, dJ, Mw, x, dx = reduced(phi)
@@ -367,8 +382,9 @@ def test_make_reduced_weight_integrates_to_zero_over_a_turn():
     half = phis <= math.pi + 1e-12
     work_half = np.trapezoid(M[half], phis[half])
     # trapezoid error on a non-periodic interval: (b - a) h^2 / 12 max|M''|, M'' = O(M) here -> ~1e-5 relative
-    assert work_half == pytest.approx(-(_potential(math.pi, g, gravity) - _potential(0.0, g, gravity)),
-                                      abs=1e-4 * np.abs(M).max())
+    assert work_half == pytest.approx(
+        -(_potential(math.pi, g, gravity) - _potential(0.0, g, gravity)), abs=1e-4 * np.abs(M).max()
+    )
 
 
 @pytest.mark.parametrize("gravity", [None, (0.0, 0.0)])
@@ -390,8 +406,9 @@ def test_make_reduced_massless_links():
     moment of a point mass on a circle (M = m g . r' = m r_cg (-gx sin phi + gy cos phi))."""
     R, l, e = 0.08, 0.3, 0.01
     slider_only = preset_reduced(_geometry(R, l, e, crank_mass=0.0, rod_mass=0.0, rod_inertia=0.0), None)
-    crank_only = preset_reduced(_geometry(R, l, e, rod_mass=0.0, rod_inertia=0.0, slider_mass=0.0,
-                                        crank_mass=3.0, crank_cg=0.05), (0.5, -9.81))
+    crank_only = preset_reduced(
+        _geometry(R, l, e, rod_mass=0.0, rod_inertia=0.0, slider_mass=0.0, crank_mass=3.0, crank_cg=0.05), (0.5, -9.81)
+    )
     for phi in ANGLES:
         dx = slider_kinematics(phi, R, l, e)[1]
         assert slider_only(phi)[0] == pytest.approx(0.8 * dx * dx, rel=1e-14, abs=1e-300)

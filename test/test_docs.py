@@ -31,7 +31,8 @@ def test_generated_reference_matches_schema():
     assert generated, "docs/scenes.md lost its generated-reference markers"
     assert generated.group(1) == schema_markdown(), (
         "docs/scenes.md is out of date: regenerate the part between the markers with "
-        "'mech-regulator schema --format markdown'")
+        "'mech-regulator schema --format markdown'"
+    )
 
 
 def test_every_key_has_a_description_with_its_meaning():
@@ -76,21 +77,28 @@ def _models(annotation):
 
 def comments_and_docstrings(source: str) -> list[tuple[int, str]]:
     """(line, text) of every comment and every module, class and function docstring of a Python source."""
-    found = [(token.start[0], token.string) for token in tokenize.generate_tokens(io.StringIO(source).readline)
-             if token.type == tokenize.COMMENT]
+    found = [
+        (token.start[0], token.string)
+        for token in tokenize.generate_tokens(io.StringIO(source).readline)
+        if token.type == tokenize.COMMENT
+    ]
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
             first = node.body[0]
-            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) \
-                    and isinstance(first.value.value, str):
+            if (
+                isinstance(first, ast.Expr)
+                and isinstance(first.value, ast.Constant)
+                and isinstance(first.value.value, str)
+            ):
                 found.append((first.lineno, first.value.value))
     return found
 
 
 def outside_references(source: str) -> list[tuple[int, str]]:
     """(line, what) of each reference outside the repository or to an issue number in the comments and docstrings."""
-    return [(line, match.group(0)) for line, text in comments_and_docstrings(source)
-            for match in OUTSIDE.finditer(text)]
+    return [
+        (line, match.group(0)) for line, text in comments_and_docstrings(source) for match in OUTSIDE.finditer(text)
+    ]
 
 
 def code_files() -> list[Path]:
@@ -108,15 +116,20 @@ def theory_anchors() -> set[str]:
 
 
 def test_the_scan_finds_what_it_looks_for():
-    source = ('"""Module (see ../shared/physics.md section 2)."""\n'
-              "x = 'physics.md in a string is no comment'\n"
-              "def f():\n    \"\"\"Fixed in Issue 19.\"\"\"\n    return 1  # issue #7\n")
+    source = (
+        '"""Module (see ../shared/physics.md section 2)."""\n'
+        "x = 'physics.md in a string is no comment'\n"
+        'def f():\n    """Fixed in Issue 19."""\n    return 1  # issue #7\n'
+    )
     assert outside_references(source) == [(5, "issue #7"), (1, "../shared"), (1, "physics.md"), (4, "Issue 19")]
 
 
 def test_no_comment_or_docstring_points_outside_the_repository():
-    found = [f"{path.relative_to(ROOT)}:{line}: {what}" for path in code_files()
-             for line, what in outside_references(path.read_text(encoding="utf-8"))]
+    found = [
+        f"{path.relative_to(ROOT)}:{line}: {what}"
+        for path in code_files()
+        for line, what in outside_references(path.read_text(encoding="utf-8"))
+    ]
     assert not found, "cite docs/theory.md or docs/ instead of:\n" + "\n".join(found)
 
 
@@ -132,10 +145,14 @@ def test_every_citation_of_theory_names_a_section_it_has(folder):
     missing = []
     for path in sorted((ROOT / folder).rglob("*.py")):
         text = path.read_text(encoding="utf-8")
-        missing += [f"{path.relative_to(ROOT)}: §{number}" for number in SECTION_CITATION.findall(text)
-                    if number not in sections]
-        missing += [f"{path.relative_to(ROOT)}: #{anchor}" for anchor in ANCHOR_CITATION.findall(text)
-                    if anchor not in anchors]
+        missing += [
+            f"{path.relative_to(ROOT)}: §{number}"
+            for number in SECTION_CITATION.findall(text)
+            if number not in sections
+        ]
+        missing += [
+            f"{path.relative_to(ROOT)}: #{anchor}" for anchor in ANCHOR_CITATION.findall(text) if anchor not in anchors
+        ]
     assert not missing, f"docs/theory.md has no such section: {missing}"
 
 
@@ -148,8 +165,12 @@ def test_the_docs_cite_sections_of_theory_it_has():
         if path == THEORY:
             cited = SECTION_CITATION.findall(text)
         missing += [f"{path.relative_to(ROOT)}: §{number}" for number in cited if number not in sections]
-        missing += [f"{path.relative_to(ROOT)}: #{anchor}" for anchor in re.findall(r"\(#([\w-]+)\)", text)
-                    if path == THEORY and anchor not in anchors]
-        missing += [f"{path.relative_to(ROOT)}: #{anchor}" for anchor in ANCHOR_CITATION.findall(text)
-                    if anchor not in anchors]
+        missing += [
+            f"{path.relative_to(ROOT)}: #{anchor}"
+            for anchor in re.findall(r"\(#([\w-]+)\)", text)
+            if path == THEORY and anchor not in anchors
+        ]
+        missing += [
+            f"{path.relative_to(ROOT)}: #{anchor}" for anchor in ANCHOR_CITATION.findall(text) if anchor not in anchors
+        ]
     assert not missing, f"docs/theory.md has no such section: {missing}"

@@ -37,10 +37,13 @@ CRANK_SLIDERS = [
 ]
 FOUR_BARS = [
     pytest.param(FourBar(type="four_bar", crank=0.04, coupler=0.12, rocker=0.08, frame=0.10), id="rocker_open"),
-    pytest.param(FourBar(type="four_bar", crank=0.04, coupler=0.12, rocker=0.08, frame=0.10, branch="crossed"),
-                 id="rocker_crossed"),
-    pytest.param(FourBar(type="four_bar", crank=1.0, coupler=2.6, rocker=2.2, frame=3.0, frame_angle_deg=40.0),
-                 id="tilted_frame"),
+    pytest.param(
+        FourBar(type="four_bar", crank=0.04, coupler=0.12, rocker=0.08, frame=0.10, branch="crossed"),
+        id="rocker_crossed",
+    ),
+    pytest.param(
+        FourBar(type="four_bar", crank=1.0, coupler=2.6, rocker=2.2, frame=3.0, frame_angle_deg=40.0), id="tilted_frame"
+    ),
 ]
 
 
@@ -51,8 +54,12 @@ def length(p, q) -> float:
 def inside(part: np.ndarray, bounds, grow: float = 0.0) -> bool:
     xmin, xmax, ymin, ymax = bounds
     points = part.reshape(-1, 2)
-    return bool(np.all(points[:, 0] - grow >= xmin) and np.all(points[:, 0] + grow <= xmax)
-                and np.all(points[:, 1] - grow >= ymin) and np.all(points[:, 1] + grow <= ymax))
+    return bool(
+        np.all(points[:, 0] - grow >= xmin)
+        and np.all(points[:, 0] + grow <= xmax)
+        and np.all(points[:, 1] - grow >= ymin)
+        and np.all(points[:, 1] + grow <= ymax)
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -67,17 +74,17 @@ def test_crank_slider_links_keep_their_lengths_and_the_slider_its_guide(spec):
         B_rod, C = outline["rod"]
         assert np.allclose(O, 0.0, atol=TOL)
         assert np.allclose(B, [spec.crank * math.cos(phi), spec.crank * math.sin(phi)], atol=TOL)
-        assert np.array_equal(B, B_rod)                        # rod hinged at the crank pin
+        assert np.array_equal(B, B_rod)  # rod hinged at the crank pin
         assert length(B, C) == pytest.approx(spec.rod, abs=TOL)
-        assert C[0] > B[0]                                     # the slider's assembly on the +x side
-        assert C[1] == pytest.approx(spec.offset, abs=TOL)     # on the line y = e
+        assert C[0] > B[0]  # the slider's assembly on the +x side
+        assert C[1] == pytest.approx(spec.offset, abs=TOL)  # on the line y = e
         (x0, y0), (x1, y1) = outline["guide"]
         assert y0 == y1 == pytest.approx(spec.offset, abs=TOL)
         block = outline["slider"]
-        assert np.allclose(block[:4].mean(axis=0), C, atol=TOL)   # the block is centred on C
+        assert np.allclose(block[:4].mean(axis=0), C, atol=TOL)  # the block is centred on C
         assert np.ptp(block[:, 0]) == pytest.approx(BLOCK_LENGTH_PER_CRANK * spec.crank, abs=TOL)
         assert np.ptp(block[:, 1]) == pytest.approx(BLOCK_HEIGHT_PER_CRANK * spec.crank, abs=TOL)
-        assert x0 <= block[:, 0].min() + TOL and block[:, 0].max() <= x1 + TOL   # the block never leaves the guide
+        assert x0 <= block[:, 0].min() + TOL and block[:, 0].max() <= x1 + TOL  # the block never leaves the guide
         assert np.allclose(outline["joints"], [O, B, C], atol=TOL)
 
 
@@ -161,14 +168,27 @@ def test_mechanism_bounds_contain_every_outline_and_frame_it_tightly(spec):
 
 def porter(**changes) -> PorterSensor:
     """engine_direct's sensor (l = 0.2 m, stroke 20..80 mm), with changes."""
-    values = dict(ball_mass=1.0, arm_length=0.2, sleeve_mass=5.0, stiffness=0.0, free_position=0.0, damping=200.0,
-                  kinetic_friction=0.0, static_friction=0.0, ratio=0.08, gravity=9.81, stroke=(0.02, 0.08))
+    values = dict(
+        ball_mass=1.0,
+        arm_length=0.2,
+        sleeve_mass=5.0,
+        stiffness=0.0,
+        free_position=0.0,
+        damping=200.0,
+        kinetic_friction=0.0,
+        static_friction=0.0,
+        ratio=0.08,
+        gravity=9.81,
+        stroke=(0.02, 0.08),
+    )
     values.update(changes)
     return PorterSensor(**values)
 
 
-SENSORS = [pytest.param(porter(), id="engine_direct"),
-           pytest.param(porter(arm_length=0.35, ball_mass=4.0, stroke=(0.05, 0.6)), id="wide_stroke")]
+SENSORS = [
+    pytest.param(porter(), id="engine_direct"),
+    pytest.param(porter(arm_length=0.35, ball_mass=4.0, stroke=(0.05, 0.6)), id="wide_stroke"),
+]
 SPINDLE_ANGLES = np.linspace(0.0, 2.0 * math.pi, 37) + 0.05
 
 
@@ -196,7 +216,7 @@ def test_governor_linkage_lengths_and_sleeve_lift(sensor):
                 # the lower link is as long as the arm (Porter)
                 assert math.hypot(*(ball - sleeve_end)) == pytest.approx(l, abs=TOL)
             assert balls[0, 0] == pytest.approx(-balls[1, 0], abs=TOL)
-            assert balls[0, 0] >= 0.0   # ball 0 is the one on the +x side
+            assert balls[0, 0] >= 0.0  # ball 0 is the one on the +x side
             assert sleeve_centre[0] == pytest.approx(0.0, abs=TOL)
             # the sleeve's lift above its lowest possible position (arms along the spindle, centre at -2 l)
             assert sleeve_centre[1] + 2.0 * l == pytest.approx(sensor.sleeve(a), abs=TOL)
@@ -210,7 +230,7 @@ def test_governor_spindle_mark_goes_round_with_the_spindle(sensor):
     marks = np.array([sensor.outline(a, psi)["spindle_mark"][0] for psi in SPINDLE_ANGLES])
     radius = COLLAR_RADIUS * sensor.arm_length
     assert np.allclose(marks[:, 0], radius * np.cos(SPINDLE_ANGLES), atol=TOL)
-    assert np.ptp(marks[:, 1]) > 0.0   # it goes round an ellipse, not along a line
+    assert np.ptp(marks[:, 1]) > 0.0  # it goes round an ellipse, not along a line
 
 
 @pytest.mark.parametrize("sensor", SENSORS)
@@ -220,7 +240,7 @@ def test_governor_sleeve_moves_between_its_stops_and_touches_them_at_the_ends(se
     for a in stroke_angles(sensor):
         outline = sensor.outline(a, 0.0)
         (low_stop, high_stop) = outline["stops"][:, 0, 1]
-        assert np.all(outline["stops"][:, 0, 1] == outline["stops"][:, 1, 1])   # the stops are horizontal
+        assert np.all(outline["stops"][:, 0, 1] == outline["stops"][:, 1, 1])  # the stops are horizontal
         assert outline["sleeve"][:, 1].min() >= low_stop - TOL
         assert outline["sleeve"][:, 1].max() <= high_stop + TOL
     bottom_at_low = sensor.outline(low_angle, 0.0)["sleeve"][:, 1].min()
@@ -233,7 +253,7 @@ def test_governor_sleeve_moves_between_its_stops_and_touches_them_at_the_ends(se
 def test_ball_radius_is_a_steel_sphere_of_the_ball_mass():
     for mass in (0.5, 1.0, 4.0):
         r = porter(ball_mass=mass).ball_radius()
-        assert 4.0 / 3.0 * math.pi * r ** 3 * 7850.0 == pytest.approx(mass, rel=1e-12)
+        assert 4.0 / 3.0 * math.pi * r**3 * 7850.0 == pytest.approx(mass, rel=1e-12)
 
 
 @pytest.mark.parametrize("sensor", SENSORS)

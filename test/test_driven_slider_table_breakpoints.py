@@ -35,8 +35,16 @@ from mech_regulator.solvers.compiled.run import integrate_compiled
 from mech_regulator.solvers.time_domain import _anchors
 
 CRANK, ROD = 0.05, 0.2  # the driven crank-slider [m]: x runs over [ROD - CRANK, ROD + CRANK] = [0.15, 0.25]
-MECHANISM = {"type": "crank_slider", "crank": CRANK, "rod": ROD, "offset": 0.0, "rod_mass": 0.3, "rod_cg": 0.08,
-             "rod_inertia": 0.0015, "slider_mass": 0.5}
+MECHANISM = {
+    "type": "crank_slider",
+    "crank": CRANK,
+    "rod": ROD,
+    "offset": 0.0,
+    "rod_mass": 0.3,
+    "rod_cg": 0.08,
+    "rod_inertia": 0.0015,
+    "slider_mass": 0.5,
+}
 POSITIONS, FORCES = [0.14, 0.18, 0.20, 0.23, 0.26], [0.0, -60.0, -150.0, -200.0, -260.0]  # [m], [N]
 TABLE = {"type": "slider_table", "position": POSITIONS, "force": FORCES}  # ends beyond the stroke: 3 breakpoints
 DURATION = 0.3  # [s]: phi2 turns about 11 times, 66 breakpoint crossings
@@ -47,10 +55,19 @@ def driven_slider_model(*overrides: str):
     rad/s no-load) on the engine's crank and, on the generator's shaft, the crank-slider MECHANISM loaded by TABLE
     (its only load), for DURATION."""
     drive = {"type": "linear_motor", "stall_torque": 60.0, "no_load_speed": 300.0}
-    return build_model(load_scene("two_mass", [f"scenario.duration={DURATION}", "scenario.load_events=[]",
-                                               f"machine.drive={json.dumps(drive)}",
-                                               f"machine.coupling.driven.mechanism={json.dumps(MECHANISM)}",
-                                               f"machine.coupling.driven.loads=[{json.dumps(TABLE)}]", *overrides]))
+    return build_model(
+        load_scene(
+            "two_mass",
+            [
+                f"scenario.duration={DURATION}",
+                "scenario.load_events=[]",
+                f"machine.drive={json.dumps(drive)}",
+                f"machine.coupling.driven.mechanism={json.dumps(MECHANISM)}",
+                f"machine.coupling.driven.loads=[{json.dumps(TABLE)}]",
+                *overrides,
+            ],
+        )
+    )
 
 
 @functools.cache
@@ -92,11 +109,20 @@ def test_the_kinks_are_the_crank_slider_s_closed_form_crossings_located_on_phi2(
     assert driven_slider_reference()[0].size - 2 == 66
 
 
-@pytest.mark.parametrize("method, rtol, path", [("DOP853", 1e-8, "reference"), ("DOP853", 1e-10, "reference"),
-                                                ("Radau", 1e-8, "reference"), ("RK4", 1e-8, "reference"),
-                                                ("DOP853", 1e-10, "fast"), ("RK45", 1e-8, "fast")])
+@pytest.mark.parametrize(
+    "method, rtol, path",
+    [
+        ("DOP853", 1e-8, "reference"),
+        ("DOP853", 1e-10, "reference"),
+        ("Radau", 1e-8, "reference"),
+        ("RK4", 1e-8, "reference"),
+        ("DOP853", 1e-10, "fast"),
+        ("RK45", 1e-8, "fast"),
+    ],
+)
 def test_a_slider_table_on_the_driven_mechanism_meets_its_rtol_against_a_reference_restarted_at_every_crossing(
-        method, rtol, path):
+    method, rtol, path
+):
     """The two-mass machine at rtol = requested, atol = rtol x 0.01 (RK4: its default step): omega at every crossing
     within 3 rtol of the reference (relative to the mean speed); see docs/hard_cases.md "Tables in the state"."""
     times, reference = driven_slider_reference()

@@ -34,9 +34,18 @@ def driven_table_model(*overrides: str):
     """two_mass (elastic coupling 5000 N m/rad, generator rotor 0.1 kg m^2) with a linear motor (60 N m stall, 300
     rad/s no-load) on the engine's crank and the table TABLE as the generator's only load, for DURATION."""
     drive = {"type": "linear_motor", "stall_torque": 60.0, "no_load_speed": 300.0}
-    return build_model(load_scene("two_mass", [f"scenario.duration={DURATION}", "scenario.load_events=[]",
-                                               f"machine.drive={json.dumps(drive)}",
-                                               f"machine.coupling.driven.loads=[{json.dumps(TABLE)}]", *overrides]))
+    return build_model(
+        load_scene(
+            "two_mass",
+            [
+                f"scenario.duration={DURATION}",
+                "scenario.load_events=[]",
+                f"machine.drive={json.dumps(drive)}",
+                f"machine.coupling.driven.loads=[{json.dumps(TABLE)}]",
+                *overrides,
+            ],
+        )
+    )
 
 
 def table_line(segment_at: float, phi2: float) -> float:
@@ -79,15 +88,23 @@ def test_the_reference_crosses_the_knots_and_the_model_locates_them_on_phi2():
     model = driven_table_model()
     y = model.initial_state()
     assert [(table.breaks, table.period, table.value(y)) for table in model.state_tables] == [
-        (tuple(math.radians(a) for a in KNOTS_DEG), 2.0 * math.pi, y[0] - y[2])]
+        (tuple(math.radians(a) for a in KNOTS_DEG), 2.0 * math.pi, y[0] - y[2])
+    ]
     assert model.kink_angles() == []
 
 
-@pytest.mark.parametrize("method, rtol, path", [("DOP853", 1e-8, "reference"), ("DOP853", 1e-10, "reference"),
-                                                ("Radau", 1e-8, "reference"), ("RK4", 1e-8, "reference"),
-                                                ("DOP853", 1e-10, "fast"), ("RK45", 1e-8, "fast")])
-def test_a_table_load_on_the_driven_part_meets_its_rtol_against_a_reference_restarted_at_every_knot(method, rtol,
-                                                                                                   path):
+@pytest.mark.parametrize(
+    "method, rtol, path",
+    [
+        ("DOP853", 1e-8, "reference"),
+        ("DOP853", 1e-10, "reference"),
+        ("Radau", 1e-8, "reference"),
+        ("RK4", 1e-8, "reference"),
+        ("DOP853", 1e-10, "fast"),
+        ("RK45", 1e-8, "fast"),
+    ],
+)
+def test_a_table_load_on_the_driven_part_meets_its_rtol_against_a_reference_restarted_at_every_knot(method, rtol, path):
     """The two-mass machine at rtol = requested, atol = rtol x 0.01 (RK4: its default step): omega at every crossing
     within 3 rtol of the reference (relative to the mean speed); see docs/hard_cases.md "Tables in the state"."""
     times, reference = driven_table_reference()

@@ -38,7 +38,7 @@ def _table(rng, torque: str, period: float) -> dict:
 
 def _intervals(rng) -> list[list[float]]:
     edges = _sorted(rng, 2 * int(rng.integers(1, 4)), 0.0, 360.0)
-    return [edges[i:i + 2] for i in range(0, len(edges) - 1, 2)]
+    return [edges[i : i + 2] for i in range(0, len(edges) - 1, 2)]
 
 
 def _positions(rng) -> list[float]:
@@ -48,13 +48,18 @@ def _positions(rng) -> list[float]:
 # A random valid scene entry of each kind (its type given): a new member of a union needs one here.
 EXAMPLES = {
     schema.ConstantDrive: lambda rng, kind: {"torque": rng.uniform(-100.0, 100.0)},
-    schema.LinearMotor: lambda rng, kind: {"stall_torque": rng.uniform(1.0, 1e3),
-                                           "no_load_speed": rng.uniform(1.0, 300.0)},
+    schema.LinearMotor: lambda rng, kind: {
+        "stall_torque": rng.uniform(1.0, 1e3),
+        "no_load_speed": rng.uniform(1.0, 300.0),
+    },
     schema.TableDrive: lambda rng, kind: _table(rng, "torque", float(rng.choice([360.0, 720.0]))),
-    schema.Engine: lambda rng, kind: {"bore": rng.uniform(0.02, 0.2), "cycle_deg": 720.0, "firing_order": [1, 3, 4, 2],
-                                      "phase_deg": rng.uniform(-360.0, 360.0),
-                                      **{key: value for key, value in _table(rng, "pressure", 720.0).items()
-                                         if key != "period_deg"}},
+    schema.Engine: lambda rng, kind: {
+        "bore": rng.uniform(0.02, 0.2),
+        "cycle_deg": 720.0,
+        "firing_order": [1, 3, 4, 2],
+        "phase_deg": rng.uniform(-360.0, 360.0),
+        **{key: value for key, value in _table(rng, "pressure", 720.0).items() if key != "period_deg"},
+    },
     schema.ConstantLoad: lambda rng, kind: {"torque": rng.uniform(0.0, 100.0)},
     schema.ViscousLoad: lambda rng, kind: {"coefficient": rng.uniform(0.0, 5.0)},
     schema.FanLoad: lambda rng, kind: {"coefficient": rng.uniform(0.0, 1e-2)},
@@ -63,20 +68,29 @@ EXAMPLES = {
     schema.SliderConstant: lambda rng, kind: {"force": rng.uniform(-1e3, 1e3)},
     schema.RockerConstant: lambda rng, kind: {"torque": rng.uniform(-1e2, 1e2)},
     schema.OutputViscous: lambda rng, kind: {"coefficient": rng.uniform(0.0, 50.0)},
-    schema.OutputSpring: lambda rng, kind: {"stiffness": rng.uniform(0.0, 5e3),
-                                            "free_position": rng.uniform(-0.1, 0.2)},
-    schema.SliderTable: lambda rng, kind: {"position": (x := _positions(rng)),
-                                           "force": list(rng.uniform(-1e3, 1e3, len(x)))},
+    schema.OutputSpring: lambda rng, kind: {
+        "stiffness": rng.uniform(0.0, 5e3),
+        "free_position": rng.uniform(-0.1, 0.2),
+    },
+    schema.SliderTable: lambda rng, kind: {
+        "position": (x := _positions(rng)),
+        "force": list(rng.uniform(-1e3, 1e3, len(x))),
+    },
     schema.LinearValve: lambda rng, kind: {"open_at": rng.uniform(0.0, 0.04), "closed_at": rng.uniform(0.05, 0.1)},
-    schema.TableValve: lambda rng, kind: {"sleeve": (z := _sorted(rng, int(rng.integers(2, 7)), 0.0, 0.1)),
-                                          "throttle": list(rng.uniform(0.0, 1.0, len(z)))},
+    schema.TableValve: lambda rng, kind: {
+        "sleeve": (z := _sorted(rng, int(rng.integers(2, 7)), 0.0, 0.1)),
+        "throttle": list(rng.uniform(0.0, 1.0, len(z))),
+    },
 }
 
 
 def _entries(union) -> list[tuple[type, str]]:
     """(class, type) of every member of a scene union and every value of its `type` literal."""
-    return [(member, kind) for member in union_members(union)
-            for kind in typing.get_args(member.model_fields["type"].annotation)]
+    return [
+        (member, kind)
+        for member in union_members(union)
+        for kind in typing.get_args(member.model_fields["type"].annotation)
+    ]
 
 
 def _example(member: type, kind: str, seed: int):
@@ -104,13 +118,16 @@ def _same(reference: float, fast: float) -> bool:
     return np.float64(reference).tobytes() == np.float64(fast).tobytes()
 
 
-@pytest.mark.parametrize(("member", "kind"), _entries(schema.Drive) + _entries(schema.Load),
-                         ids=lambda value: value if isinstance(value, str) else value.__name__)
+@pytest.mark.parametrize(
+    ("member", "kind"),
+    _entries(schema.Drive) + _entries(schema.Load),
+    ids=lambda value: value if isinstance(value, str) else value.__name__,
+)
 def test_both_paths_give_each_drive_and_load_alike(member, kind):
     engine_mechanism = load_scene("engine_inline4").machine.mechanism
     mechanisms = [None, engine_mechanism] if member is schema.Engine else [None]
     for seed, mechanism in ((seed, mechanism) for seed in SEEDS for mechanism in mechanisms):  # an engine on one
-        spec = _example(member, kind, seed)                                                  # cylinder and on four
+        spec = _example(member, kind, seed)  # cylinder and on four
         definition = definition_of(spec, mechanism)
         if member in union_members(schema.Drive):
             effect = build_drive(spec, mechanism)
@@ -126,14 +143,18 @@ def test_both_paths_give_each_drive_and_load_alike(member, kind):
             fast, p = codegen.effect_kernel(definition, function, anchored)
             for t, phi, omega, anchor, q, dq in _states(seed, definition.outputs):
                 outputs = [value for pair in zip(q, dq) for value in pair]
-                expected = (reference(anchor, t, phi, omega, q if several else q[0], dq if several else dq[0])
-                            if anchored else reference(t, phi, omega, q if several else q[0], dq if several else dq[0]))
+                expected = (
+                    reference(anchor, t, phi, omega, q if several else q[0], dq if several else dq[0])
+                    if anchored
+                    else reference(t, phi, omega, q if several else q[0], dq if several else dq[0])
+                )
                 got = fast(t, phi, omega, anchor, q[0], p, *outputs)
                 assert _same(expected, got), (spec, function.__name__, anchored, t, phi, omega, q, dq, expected, got)
 
 
-@pytest.mark.parametrize(("member", "kind"), _entries(schema.Valve),
-                         ids=lambda value: value if isinstance(value, str) else value.__name__)
+@pytest.mark.parametrize(
+    ("member", "kind"), _entries(schema.Valve), ids=lambda value: value if isinstance(value, str) else value.__name__
+)
 def test_both_paths_give_each_valve_alike(member, kind):
     spec = _example(member, kind, 3)
     throttle, _, breaks = build_valve(spec)
@@ -157,7 +178,7 @@ def test_both_paths_give_the_servo_and_its_feedback_alike():
         fast = kernels.compiled(function.__module__, function.__name__)
         for _ in range(STATES):
             arguments = [float(v) for v in rng.uniform(-0.05, 0.05, function.__code__.co_argcount)]
-            if function is servo_motor.servo_command:   # gain, max speed (also unlimited), dead band
+            if function is servo_motor.servo_command:  # gain, max speed (also unlimited), dead band
                 arguments[1:] = [rng.uniform(1.0, 100.0), float(rng.choice([0.2, math.inf])), abs(arguments[3])]
             assert _same(function(*arguments), fast(*arguments)), (function.__name__, arguments)
 
@@ -180,11 +201,20 @@ def test_both_paths_solve_joint_friction_alike():
         arguments = (omega, *(float(v) for v in (rng.uniform(-300.0, 300.0), rng.uniform(0.5, 5.0), rng.uniform(0, 5))))
         numbers = (joint_friction.NEWTON_TOLERANCE, joint_friction.NEWTON_ITERATIONS)
         expected = solve(*arguments, arms, ratios, constant, per_epsilon, True, *numbers, ratio_signs, normal_signs)
-        got = fast(*arguments, tuple(arms), tuple(ratios), tuple(constant), tuple(per_epsilon), True, *numbers,
-                   tuple(ratio_signs), tuple(normal_signs))
+        got = fast(
+            *arguments,
+            tuple(arms),
+            tuple(ratios),
+            tuple(constant),
+            tuple(per_epsilon),
+            True,
+            *numbers,
+            tuple(ratio_signs),
+            tuple(normal_signs),
+        )
         assert _same(expected, got), (i, expected, got)
     collar_only = solve(3.0, 10.0, 2.0, 1.0, (), (), (), (), False, *numbers, (), ())
-    assert collar_only == (10.0 - 1.0) / 2.0   # moving forward: (M - F) / J
+    assert collar_only == (10.0 - 1.0) / 2.0  # moving forward: (M - F) / J
 
 
 def test_a_union_member_without_a_definition_fails_naming_it():

@@ -18,17 +18,32 @@ from mech_regulator.model import build_model
 from mech_regulator.scene import validate_scene
 from mech_regulator.solvers import simulate
 
-CRANK_SLIDER = {"type": "crank_slider", "crank": 0.08, "rod": 0.3, "offset": 0.01, "rod_mass": 1.2, "rod_cg": 0.11,
-                "rod_inertia": 0.01, "slider_mass": 2.5}
+CRANK_SLIDER = {
+    "type": "crank_slider",
+    "crank": 0.08,
+    "rod": 0.3,
+    "offset": 0.01,
+    "rod_mass": 1.2,
+    "rod_cg": 0.11,
+    "rod_inertia": 0.01,
+    "slider_mass": 2.5,
+}
 
-TABLE_AND_SPRING = {"inertia": 0.05, "mechanism": CRANK_SLIDER,
-                    "drive": {"type": "table", "angle_deg": [0, 90, 180, 270], "torque": [40.0, 10.0, 25.0, 5.0]},
-                    "loads": [{"type": "slider_spring", "stiffness": 2000.0, "free_position": 0.3},
-                              {"type": "constant", "torque": 20.0}]}
-MOTOR_AND_VISCOUS = {"inertia": 0.05, "mechanism": CRANK_SLIDER,
-                     "drive": {"type": "linear_motor", "stall_torque": 30.0, "no_load_speed": 100.0},
-                     "loads": [{"type": "viscous", "coefficient": 0.05},
-                               {"type": "slider_viscous", "coefficient": 3.0}]}
+TABLE_AND_SPRING = {
+    "inertia": 0.05,
+    "mechanism": CRANK_SLIDER,
+    "drive": {"type": "table", "angle_deg": [0, 90, 180, 270], "torque": [40.0, 10.0, 25.0, 5.0]},
+    "loads": [
+        {"type": "slider_spring", "stiffness": 2000.0, "free_position": 0.3},
+        {"type": "constant", "torque": 20.0},
+    ],
+}
+MOTOR_AND_VISCOUS = {
+    "inertia": 0.05,
+    "mechanism": CRANK_SLIDER,
+    "drive": {"type": "linear_motor", "stall_torque": 30.0, "no_load_speed": 100.0},
+    "loads": [{"type": "viscous", "coefficient": 0.05}, {"type": "slider_viscous", "coefficient": 3.0}],
+}
 
 
 def make_model(machine: dict, scenario: dict, solver: dict):
@@ -59,8 +74,11 @@ def errors_against_dop853(machine: dict, scenario: dict, steps_deg):
     return errors
 
 
-@pytest.mark.parametrize("machine, omega0", [(TABLE_AND_SPRING, 30.0), (MOTOR_AND_VISCOUS, 10.0)],
-                         ids=["omega-independent", "omega-dependent"])
+@pytest.mark.parametrize(
+    "machine, omega0",
+    [(TABLE_AND_SPRING, 30.0), (MOTOR_AND_VISCOUS, 10.0)],
+    ids=["omega-independent", "omega-dependent"],
+)
 def test_converges_second_order_to_time_domain_solution(machine, omega0):
     scenario = {"initial": {"phi": 0.0, "omega": omega0}, "duration": 1.0}
     errors = errors_against_dop853(machine, scenario, [2.0, 1.0, 0.5])
@@ -75,10 +93,11 @@ def test_converges_second_order_to_time_domain_solution(machine, omega0):
 
 def test_start_from_rest_with_constant_moment_is_exact():
     J, M = 2.0, 6.0
-    model = make_model({"inertia": J, "drive": {"type": "constant", "torque": 10.0},
-                        "loads": [{"type": "constant", "torque": 4.0}]},
-                       {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 3.0},
-                       {"method": "energy", "phi_step_deg": 5.0})
+    model = make_model(
+        {"inertia": J, "drive": {"type": "constant", "torque": 10.0}, "loads": [{"type": "constant", "torque": 4.0}]},
+        {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 3.0},
+        {"method": "energy", "phi_step_deg": 5.0},
+    )
     tr = simulate(model)
     times, (phi, omega) = energy_nodes(tr)
     assert times.size > 50
@@ -95,8 +114,9 @@ RUN_DOWN = {"inertia": 1.0, "loads": [{"type": "viscous", "coefficient": 0.1}, {
 def test_refuses_to_follow_a_stop():
     # omega(t) = (omega0 + M/c) exp(-c t / J) - M/c reaches 0 at t = J/c ln(1 + c omega0 / M) = 1.823 s
     t_stop = 1.0 / 0.1 * math.log(1.0 + 0.1 * 10.0 / 5.0)
-    model = make_model(RUN_DOWN, {"initial": {"omega": 10.0}, "duration": 5.0},
-                       {"method": "energy", "phi_step_deg": 1.0})
+    model = make_model(
+        RUN_DOWN, {"initial": {"omega": 10.0}, "duration": 5.0}, {"method": "energy", "phi_step_deg": 1.0}
+    )
     tr = simulate(model)
     assert tr.status == "failed"
     assert "stops" in tr.message and "time-domain" in tr.message
@@ -113,8 +133,12 @@ def test_refuses_negative_initial_speed():
 
 
 def test_cli_exit_code_message_and_csv_on_failure(tmp_path, capsys):
-    scene = {"name": "run_down", "machine": RUN_DOWN, "scenario": {"initial": {"omega": 10.0}, "duration": 5.0},
-             "solver": {"method": "energy", "phi_step_deg": 1.0, "sample_rate": 100.0}}
+    scene = {
+        "name": "run_down",
+        "machine": RUN_DOWN,
+        "scenario": {"initial": {"omega": 10.0}, "duration": 5.0},
+        "solver": {"method": "energy", "phi_step_deg": 1.0, "sample_rate": 100.0},
+    }
     path = tmp_path / "run_down.yaml"
     path.write_text(yaml.safe_dump(scene))
     out = tmp_path / "run.csv"
@@ -123,14 +147,17 @@ def test_cli_exit_code_message_and_csv_on_failure(tmp_path, capsys):
     assert code == 1
     assert "stops" in captured.err and "time-domain" in captured.err
     data = np.genfromtxt(out, delimiter=",", names=True)
-    assert data.size > 100                                     # ~1.7 s at 100 Hz
+    assert data.size > 100  # ~1.7 s at 100 Hz
     assert data["t"][0] == 0.0 and 1.5 < data["t"][-1] < 1.83  # up to just before the stop (see above)
     assert np.all(data["omega"] > 0) and data["omega"][0] == pytest.approx(10.0)
 
 
 def test_cli_negative_initial_speed_exits_with_code_1(tmp_path, capsys):
-    scene = {"machine": RUN_DOWN, "scenario": {"initial": {"omega": -3.0}, "duration": 1.0},
-             "solver": {"method": "energy"}}
+    scene = {
+        "machine": RUN_DOWN,
+        "scenario": {"initial": {"omega": -3.0}, "duration": 1.0},
+        "solver": {"method": "energy"},
+    }
     path = tmp_path / "negative.yaml"
     path.write_text(yaml.safe_dump(scene))
     code = main(["simulate", str(path), "--out", str(tmp_path / "run.csv"), "--quiet"])

@@ -55,6 +55,7 @@ def test_exact_velocity_and_acceleration_are_time_derivatives_of_x(R, l, e):
     phi(t) = phi0 + omega t + epsilon t^2 / 2 (so the x' epsilon term of a is checked too)."""
     omega, epsilon, h = 200.0, 3.0e4, 1e-6
     for phi0 in (0.3, 1.9, 4.0):
+
         def x(t, phi0=phi0):
             return slider_x(phi0 + omega * t + 0.5 * epsilon * t * t, R, l, e)
 
@@ -63,7 +64,7 @@ def test_exact_velocity_and_acceleration_are_time_derivatives_of_x(R, l, e):
         # truncation h^2/6 |x'''| ~ 1e-12 R w^3 h^2 ~ 1e-7 m/s; rounding EPS l / h ~ 3e-11 m/s
         assert motion.v == pytest.approx((x(h) - x(-h)) / (2 * h), abs=1e-6)
         # second difference: rounding 4 EPS l / h^2 ~ 1e-4 m/s^2 against a ~ R w^2 = 2e3 m/s^2
-        assert motion.a == pytest.approx((x(h) - 2 * x(0.0) + x(-h)) / h ** 2, abs=2e-3 * R * omega ** 2)
+        assert motion.a == pytest.approx((x(h) - 2 * x(0.0) + x(-h)) / h**2, abs=2e-3 * R * omega**2)
     # epsilon really enters (the check above could not tell a missing x' epsilon otherwise)
     assert piston_motion(1.0, omega, R, l, e, epsilon).a != piston_motion(1.0, omega, R, l, e).a
 
@@ -81,7 +82,7 @@ def test_source_approximation_error_shrinks_like_lambda_cubed_central_and_square
         assert orders == pytest.approx(expected_orders, abs=0.4)
         # and the size: central x error ~ R lambda^3 / 8 (the next term of the expansion)
         if k == 0.0:
-            assert errors[0][0] == pytest.approx(R * 0.05 ** 3 / 8, rel=0.02)
+            assert errors[0][0] == pytest.approx(R * 0.05**3 / 8, rel=0.02)
 
 
 def test_offset_acceleration_sign_corrected():
@@ -93,15 +94,17 @@ def test_offset_acceleration_sign_corrected():
     h = 1e-7
     for alpha in (0.4, math.pi / 2, 2.5, 4.4):
         j = source_approximation(alpha, omega, R, l, e).a
-        dv = (source_approximation(alpha + omega * h, omega, R, l, e).v
-              - source_approximation(alpha - omega * h, omega, R, l, e).v) / (2 * h)
-        assert j == pytest.approx(dv, abs=1e-6 * R * omega ** 2)
+        dv = (
+            source_approximation(alpha + omega * h, omega, R, l, e).v
+            - source_approximation(alpha - omega * h, omega, R, l, e).v
+        ) / (2 * h)
+        assert j == pytest.approx(dv, abs=1e-6 * R * omega**2)
     alpha = math.pi / 2
     exact = source_from_exact(piston_motion(alpha, omega, R, l, e), R, l, e).a
     ours = source_approximation(alpha, omega, R, l, e).a
-    printed = ours - 2 * lam * k * R * omega ** 2 * math.sin(alpha)
+    printed = ours - 2 * lam * k * R * omega**2 * math.sin(alpha)
     assert abs(ours - exact) < 0.2 * abs(printed - exact)
-    assert abs(printed - exact) == pytest.approx(2 * lam * k * R * omega ** 2, rel=0.2)
+    assert abs(printed - exact) == pytest.approx(2 * lam * k * R * omega**2, rel=0.2)
 
 
 @pytest.mark.parametrize("R, l, e", [(0.04, 0.14, 0.0), (0.05, 0.2, 0.03), (0.05, 0.2, -0.03)])
@@ -135,8 +138,8 @@ def test_acceleration_at_dead_centres_central():
     lam = R / l
     top = source_from_exact(piston_motion(0.0, omega, R, l, 0.0), R, l, 0.0)
     bottom = source_from_exact(piston_motion(math.pi, omega, R, l, 0.0), R, l, 0.0)
-    assert top.a == pytest.approx(R * omega ** 2 * (1 + lam), rel=1e-13)
-    assert bottom.a == pytest.approx(-R * omega ** 2 * (1 - lam), rel=1e-13)
+    assert top.a == pytest.approx(R * omega**2 * (1 + lam), rel=1e-13)
+    assert bottom.a == pytest.approx(-R * omega**2 * (1 - lam), rel=1e-13)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -149,8 +152,12 @@ INLINE4 = load_scene("engine_inline4").model_dump(exclude_none=True)
 def v_twin(firing_deg):
     """A 90 deg V-twin on one throw (cylinder 2's axis at 90 deg), with gravity, offset and every mass."""
     data = scene(ENGINE, machine__gravity=[1.5, -9.81])
-    data["machine"]["mechanism"].update(offset=0.006, crank_mass=1.2, crank_cg=0.01,
-                                        cylinders=[{"throw_deg": 0.0}, {"throw_deg": 0.0, "bank_deg": 90.0}])
+    data["machine"]["mechanism"].update(
+        offset=0.006,
+        crank_mass=1.2,
+        crank_cg=0.01,
+        cylinders=[{"throw_deg": 0.0}, {"throw_deg": 0.0, "bank_deg": 90.0}],
+    )
     data["machine"]["drive"]["firing_deg"] = firing_deg
     data["machine"]["drive"]["phase_deg"] = 30.0
     data["scenario"]["load_events"] = []
@@ -193,11 +200,22 @@ def test_multi_cylinder_is_the_sum_of_phase_shifted_single_cylinders(data):
     singles = []
     for throw, bank, delay in zip(throws, banks, delays):
         b = math.radians(bank)
-        turned = None if gravity is None else (gravity[0] * math.cos(b) + gravity[1] * math.sin(b),
-                                               -gravity[0] * math.sin(b) + gravity[1] * math.cos(b))
+        turned = (
+            None
+            if gravity is None
+            else (
+                gravity[0] * math.cos(b) + gravity[1] * math.sin(b),
+                -gravity[0] * math.sin(b) + gravity[1] * math.cos(b),
+            )
+        )
         shift = throw - bank
-        singles.append((math.radians(shift), preset_reduced(CrankSliderGeometry(**fields), turned),
-                        single_cylinder_moment(data, -delay - shift)))
+        singles.append(
+            (
+                math.radians(shift),
+                preset_reduced(CrankSliderGeometry(**fields), turned),
+                single_cylinder_moment(data, -delay - shift),
+            )
+        )
     drive_effect = model.effects[0]
     for phi in np.linspace(0.0, 4 * math.pi, 97) + 0.011:
         J, dJ, weight, xs, dxs = model.reduced(phi)
@@ -230,8 +248,11 @@ def test_v_twin_weight_is_minus_the_slope_of_the_potential():
             piston = np.array([slider_x(local, R, l, e), e])
             rod_centre = pin + mechanism["rod_cg"] / l * (piston - pin)
             crank_centre = mechanism["crank_cg"] / R * pin
-            for mass, point in ((mechanism["crank_mass"], crank_centre), (mechanism["rod_mass"], rod_centre),
-                                (mechanism["slider_mass"], piston)):
+            for mass, point in (
+                (mechanism["crank_mass"], crank_centre),
+                (mechanism["rod_mass"], rod_centre),
+                (mechanism["slider_mass"], piston),
+            ):
                 total -= mass * g @ (turn @ point)
         return total
 
@@ -243,13 +264,17 @@ def test_v_twin_weight_is_minus_the_slope_of_the_potential():
 
 
 def test_scene_errors_name_the_key_and_what_is_expected():
-    bad = [(scene(INLINE4, machine__drive__firing_order=[1, 2, 3, 4]), "firing_order 1-2-3-4 does not fit"),
-           (scene(INLINE4, machine__drive__firing_order=[2, 1, 3, 4]), "starting with 1"),
-           (scene(INLINE4, machine__drive__firing_order=None), "give drive.firing_order"),
-           (scene(INLINE4, machine__loads=[{"type": "slider_viscous", "coefficient": 1.0}]),
-            "acts on the slider, but the crank–slider has 4 cylinders"),
-           (scene(ENGINE, machine__drive__firing_order=[1]), "need several cylinders"),
-           (scene(INLINE4, machine__drive__firing_deg=[0, 540, 180, 360]), "either firing_order or firing_deg")]
+    bad = [
+        (scene(INLINE4, machine__drive__firing_order=[1, 2, 3, 4]), "firing_order 1-2-3-4 does not fit"),
+        (scene(INLINE4, machine__drive__firing_order=[2, 1, 3, 4]), "starting with 1"),
+        (scene(INLINE4, machine__drive__firing_order=None), "give drive.firing_order"),
+        (
+            scene(INLINE4, machine__loads=[{"type": "slider_viscous", "coefficient": 1.0}]),
+            "acts on the slider, but the crank–slider has 4 cylinders",
+        ),
+        (scene(ENGINE, machine__drive__firing_order=[1]), "need several cylinders"),
+        (scene(INLINE4, machine__drive__firing_deg=[0, 540, 180, 360]), "either firing_order or firing_deg"),
+    ]
     bad_first = scene(INLINE4)
     bad_first["machine"]["mechanism"]["cylinders"][0] = {"throw_deg": 90.0}
     bad.append((bad_first, "cylinder 1 is the reference"))
@@ -283,9 +308,10 @@ def indicated_work(data, cylinders=1):
     R, l, e = mech["crank"], mech["rod"], mech.get("offset", 0.0)
     cycle = drive["cycle_deg"]
     phi = np.radians(np.linspace(0.0, cycle, int(cycle) * 200 + 1))
-    x = R * np.cos(phi) + np.sqrt(l ** 2 - (e - R * np.sin(phi)) ** 2)
-    p = np.interp((np.degrees(phi) + drive.get("phase_deg", 0.0)) % cycle, drive["angle_deg"], drive["pressure"],
-                  period=cycle)
+    x = R * np.cos(phi) + np.sqrt(l**2 - (e - R * np.sin(phi)) ** 2)
+    p = np.interp(
+        (np.degrees(phi) + drive.get("phase_deg", 0.0)) % cycle, drive["angle_deg"], drive["pressure"], period=cycle
+    )
     return cylinders * float(np.sum(0.5 * (p[1:] + p[:-1]) * np.diff(-area * x)))
 
 
@@ -293,13 +319,14 @@ OFFSET_ENGINE = scene(ENGINE)
 OFFSET_ENGINE["machine"]["mechanism"]["offset"] = 0.012
 
 
-@pytest.mark.parametrize("data, cylinders", [(ENGINE, 1), (INLINE4, 4), (OFFSET_ENGINE, 1)],
-                         ids=["single", "inline4", "offset"])
+@pytest.mark.parametrize(
+    "data, cylinders", [(ENGINE, 1), (INLINE4, 4), (OFFSET_ENGINE, 1)], ids=["single", "inline4", "offset"]
+)
 def test_mean_gas_torque_is_indicated_work_over_cycle_angle(data, cylinders):
     curves = torque_curves(model_of(data), 250.0)
     work = indicated_work(data, cylinders)
     if data is not OFFSET_ENGINE:  # the scene says "IMEP about 6.6 bar"
-        assert work / (cylinders * math.pi * 0.08 ** 2 / 4 * 0.08) == pytest.approx(6.6e5, rel=0.05)
+        assert work / (cylinders * math.pi * 0.08**2 / 4 * 0.08) == pytest.approx(6.6e5, rel=0.05)
     # rectangle rule on a periodic curve with kinks at the table's knots: O(dphi^2) ~ 1e-5 relative
     assert np.mean(curves.gas_total) == pytest.approx(work / math.radians(720.0), rel=1e-4)
     assert abs(np.mean(curves.inertia)) < 1e-12 * np.abs(curves.inertia).max()  # J is periodic: no mean
@@ -325,7 +352,7 @@ def test_fourier_series_reproduces_the_curves():
     fourier = harmonics(single.inertia, single.cycle)
     model = model_of(ENGINE)
     middles = single.phi[:200] + 0.5 * (single.phi[1] - single.phi[0])
-    expected = [-0.5 * model.reduced(p)[1] * 300.0 ** 2 for p in middles]
+    expected = [-0.5 * model.reduced(p)[1] * 300.0**2 for p in middles]
     np.testing.assert_allclose(fourier(middles), expected, rtol=0, atol=1e-9 * np.abs(single.inertia).max())
 
 
@@ -360,11 +387,11 @@ def test_inertia_torque_harmonics_of_a_piston_match_the_classic_first_order_form
     data = scene(ENGINE)
     data["machine"]["mechanism"] = {"type": "crank_slider", "crank": R, "rod": R / lam, "slider_mass": m}
     fourier = harmonics(torque_curves(model_of(data), omega).inertia, 4 * math.pi)
-    unit = m * R ** 2 * omega ** 2
+    unit = m * R**2 * omega**2
     for order, amplitude, phase in ((1.0, lam / 4, -90.0), (2.0, 0.5, 90.0), (3.0, 3 * lam / 4, 90.0)):
         k = np.flatnonzero(np.isclose(fourier.orders, order))[0]
         # neglected: O(lambda^3) here (measured 5e-4, 5e-5, 2.3e-3 at lambda 0.2); a wrong factor is O(lambda)
-        assert fourier.amplitudes[k] / unit == pytest.approx(amplitude, abs=0.1 * lam ** 2)
+        assert fourier.amplitudes[k] / unit == pytest.approx(amplitude, abs=0.1 * lam**2)
         assert math.degrees(fourier.phases[k]) == pytest.approx(phase, abs=1e-6)
 
 
@@ -374,21 +401,33 @@ def test_inertia_torque_harmonics_of_a_piston_match_the_classic_first_order_form
 
 def test_engine_command_end_to_end(tmp_path, capsys):
     csv_path, png_path = tmp_path / "curves.csv", tmp_path / "engine.png"
-    code, out, err = run_cli(capsys, "engine", "engine_inline4", "--omega", "300", "--json", "--out", str(csv_path),
-                             "--plot", str(png_path))
+    code, out, err = run_cli(
+        capsys, "engine", "engine_inline4", "--omega", "300", "--json", "--out", str(csv_path), "--plot", str(png_path)
+    )
     assert code == 0, err
     report = json.loads(out)
     assert report["cylinders"]["firing_order"] == [1, 3, 4, 2]
     assert report["geometry"]["stroke"] == pytest.approx(0.08, rel=1e-14)
-    assert report["piston"]["j_top"] == pytest.approx(0.04 * 300 ** 2 * (1 + 0.04 / 0.14), rel=1e-13)
+    assert report["piston"]["j_top"] == pytest.approx(0.04 * 300**2 * (1 + 0.04 / 0.14), rel=1e-13)
     work = indicated_work(INLINE4, 4)
     assert report["torque"]["mean_gas"] == pytest.approx(work / (4 * math.pi), rel=1e-4)
     assert report["torque"]["indicated_power"] == pytest.approx(300 * work / (4 * math.pi), rel=1e-4)
     assert report["torque"]["gas_harmonics"][0]["order"] == 2.0
     with csv_path.open() as handle:
         rows = list(csv.reader(handle))
-    assert rows[0] == ["phi_deg", "x", "v", "a", "M_gas_1", "M_gas_2", "M_gas_3", "M_gas_4", "M_gas", "M_inertia",
-                       "M_total"]
+    assert rows[0] == [
+        "phi_deg",
+        "x",
+        "v",
+        "a",
+        "M_gas_1",
+        "M_gas_2",
+        "M_gas_3",
+        "M_gas_4",
+        "M_gas",
+        "M_inertia",
+        "M_total",
+    ]
     assert len(rows) == 1 + 720 * 4
     assert png_path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     code, out, err = run_cli(capsys, "engine", "engine")
@@ -397,14 +436,25 @@ def test_engine_command_end_to_end(tmp_path, capsys):
     assert "mean indicated moment" in out and "largest harmonics" in out
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["engine", "lathe"], "scene 'lathe' is not an engine: expected mechanism.type crank_slider and drive.type engine"),
-    (["engine", "engine", "--omega", "-5"], "--omega = -5 rad/s: expected a crank speed > 0"),
-    (["engine", "engine", "--set", "scenario.initial.omega=0"], "scenario.initial.omega = 0 rad/s: expected"),
-    (["engine", "engine", "--plot", "/nonexistent/folder/e.png"], "the folder '/nonexistent/folder' does not exist"),
-    (["engine", "engine_inline4", "--set", "machine.drive.firing_order=[1,2,3,4]"],
-     "firing_order 1-2-3-4 does not fit the crankshaft"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (
+            ["engine", "lathe"],
+            "scene 'lathe' is not an engine: expected mechanism.type crank_slider and drive.type engine",
+        ),
+        (["engine", "engine", "--omega", "-5"], "--omega = -5 rad/s: expected a crank speed > 0"),
+        (["engine", "engine", "--set", "scenario.initial.omega=0"], "scenario.initial.omega = 0 rad/s: expected"),
+        (
+            ["engine", "engine", "--plot", "/nonexistent/folder/e.png"],
+            "the folder '/nonexistent/folder' does not exist",
+        ),
+        (
+            ["engine", "engine_inline4", "--set", "machine.drive.firing_order=[1,2,3,4]"],
+            "firing_order 1-2-3-4 does not fit the crankshaft",
+        ),
+    ],
+)
 def test_engine_command_bad_input(capsys, argv, message):
     code, out, err = run_cli(capsys, *argv)
     assert code == 2

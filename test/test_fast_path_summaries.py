@@ -42,8 +42,15 @@ from mech_regulator.scene import Scene, bundled_scenes, load_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal
 
-SHORTENED = {"engine": 4.5, "engine_direct": 3.0, "engine_indirect_isodromic": 3.0, "engine_indirect_none": 3.0,
-             "engine_indirect_rigid": 3.0, "compressor": 3.0, "two_mass": 1.5}  # durations [s]
+SHORTENED = {
+    "engine": 4.5,
+    "engine_direct": 3.0,
+    "engine_indirect_isodromic": 3.0,
+    "engine_indirect_none": 3.0,
+    "engine_indirect_rigid": 3.0,
+    "compressor": 3.0,
+    "two_mass": 1.5,
+}  # durations [s]
 TIGHTER = 10.0  # the error-measuring runs use rtol / TIGHTER and atol / TIGHTER
 MARGIN = 10.0  # allowed: MARGIN times the runs' measured errors, plus MARGIN rtol times the figure's scale
 RESIDUAL_LIMIT = 1e-4  # largest |energy residual| / largest |work|
@@ -72,8 +79,11 @@ def shortening(name: str) -> list[str]:
     if name not in SHORTENED:
         return []
     duration = SHORTENED[name]
-    events = [event.model_dump(exclude_none=True) for event in load_scene(name).scenario.load_events
-              if event.time + (event.ramp or 0.0) <= duration]
+    events = [
+        event.model_dump(exclude_none=True)
+        for event in load_scene(name).scenario.load_events
+        if event.time + (event.ramp or 0.0) <= duration
+    ]
     return [f"scenario.duration={duration}", f"scenario.load_events={json.dumps(events)}"]
 
 
@@ -85,8 +95,13 @@ def run(name: str, path: str, tighter: float = 1.0) -> Run:
     model = build_model(load_scene(name, [*shortening(name), f"solver.path={path}", *tolerances]))
     trajectory = simulate(model)
     times = trajectory.samples(model.scene.solver.sample_rate)
-    return Run(model.scene, summarise(model, trajectory), model.columns(times, trajectory(times)), trajectory.events,
-               len(trajectory.interpolants))
+    return Run(
+        model.scene,
+        summarise(model, trajectory),
+        model.columns(times, trajectory(times)),
+        trajectory.events,
+        len(trajectory.interpolants),
+    )
 
 
 def runs(name: str) -> tuple[Run, Run, Run, Run]:
@@ -94,8 +109,15 @@ def runs(name: str) -> tuple[Run, Run, Run, Run]:
     return run(name, "reference"), run(name, "fast"), run(name, "reference", TIGHTER), run(name, "fast", TIGHTER)
 
 
-def allowed(reference: float, fast: float, reference_tight: float, fast_tight: float, scale: float, rtol: float,
-            grid: float = 0.0) -> float:
+def allowed(
+    reference: float,
+    fast: float,
+    reference_tight: float,
+    fast_tight: float,
+    scale: float,
+    rtol: float,
+    grid: float = 0.0,
+) -> float:
     """The bound of the module docstring for one figure, from its values on both paths at the scene's tolerances and
     at the tighter ones, its scale, the scene's rtol and the step [s] of the grid it is read off (0: none)."""
     measured = abs(reference - reference_tight) + abs(fast - fast_tight)
@@ -152,8 +174,10 @@ def test_summary_field_by_field(name):
     reference, fast, reference_tight, fast_tight = runs(name)
     # the fast path's pieces are compiled calls of many steps, the reference path's single steps
     assert fast.pieces < fast.summary["solver"]["steps"]
-    figures = [leaves({key: value for key, value in run.summary.items() if key != "solver"})
-               for run in (reference, fast, reference_tight, fast_tight)]
+    figures = [
+        leaves({key: value for key, value in run.summary.items() if key != "solver"})
+        for run in (reference, fast, reference_tight, fast_tight)
+    ]
     assert figures[0].keys() == figures[1].keys() == figures[2].keys() == figures[3].keys()
     energy_scale = largest_work(reference.summary)
     failures = [disagreement(key, [tree[key] for tree in figures], reference.scene, energy_scale) for key in figures[0]]
@@ -185,8 +209,9 @@ def test_sampled_columns(name):
     failures = []
     for column, values in reference.columns.items():
         difference = np.max(np.abs(values - fast.columns[column]))
-        measured = (np.max(np.abs(values - reference_tight.columns[column]))
-                    + np.max(np.abs(fast.columns[column] - fast_tight.columns[column])))
+        measured = np.max(np.abs(values - reference_tight.columns[column])) + np.max(
+            np.abs(fast.columns[column] - fast_tight.columns[column])
+        )
         bound = MARGIN * measured + MARGIN * rtol * np.max(np.abs(values))
         if not difference <= bound:
             failures.append(f"{column}: differs by {difference:.3g}, allowed {bound:.3g}")

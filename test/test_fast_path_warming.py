@@ -35,8 +35,14 @@ print(json.dumps({"path": model.scene.solver.path, "notes": notes, "cached": ste
 
 def choose(environment: dict[str, str], *overrides: str) -> dict:
     """What on_path_for_a_command chose for the lathe with these overrides, in a fresh Python."""
-    result = subprocess.run([sys.executable, "-c", CHOOSE, *overrides], capture_output=True, text=True, timeout=120,
-                            env=environment, check=True)
+    result = subprocess.run(
+        [sys.executable, "-c", CHOOSE, *overrides],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=environment,
+        check=True,
+    )
     return json.loads(result.stdout)
 
 
@@ -44,8 +50,9 @@ def choose(environment: dict[str, str], *overrides: str) -> dict:
 def empty_caches(tmp_path) -> dict[str, str]:
     (tmp_path / "numba").mkdir()
     (tmp_path / "compiled").mkdir()
-    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"),
-                       MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
+    environment = dict(
+        os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), MECH_REGULATOR_CACHE=str(tmp_path / "compiled")
+    )
     environment.pop("MECH_REGULATOR_AUTO_PATH", None)  # the product's default, not the suite's (conftest.py)
     return environment
 
@@ -84,11 +91,19 @@ def test_auto_and_fast_fall_back_alike_for_a_method_the_fast_path_lacks(empty_ca
 
 def test_the_auto_path_variable_fixes_what_auto_means(empty_caches):
     pinned = dict(empty_caches, MECH_REGULATOR_AUTO_PATH="reference")
-    assert choose(pinned, "solver.method=RK4", "solver.step=0.001") == {"path": "reference", "notes": [],
-                                                                          "cached": False}
+    assert choose(pinned, "solver.method=RK4", "solver.step=0.001") == {
+        "path": "reference",
+        "notes": [],
+        "cached": False,
+    }
     assert not os.path.exists(os.path.join(empty_caches["MECH_REGULATOR_CACHE"], "compiling.log"))
-    wrong = subprocess.run([sys.executable, "-m", "mech_regulator", "simulate", "lathe", "--quiet"], text=True,
-                           capture_output=True, timeout=120, env=dict(empty_caches, MECH_REGULATOR_AUTO_PATH="quick"))
+    wrong = subprocess.run(
+        [sys.executable, "-m", "mech_regulator", "simulate", "lathe", "--quiet"],
+        text=True,
+        capture_output=True,
+        timeout=120,
+        env=dict(empty_caches, MECH_REGULATOR_AUTO_PATH="quick"),
+    )
     assert wrong.returncode == 2, wrong.stderr
     assert "MECH_REGULATOR_AUTO_PATH='quick': expected reference or fast" in wrong.stderr
     assert "Traceback" not in wrong.stderr
@@ -132,7 +147,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
     lines = []
     warm.compile_before_the_run("RK4", lines.append)
     assert lines[0].startswith("compiling the fast path's RK4 stepper (once, about 50 s"), lines
-    with open(tmp_path / locks.LOCK_NAME, "a") as other:   # another process's background compile
+    with open(tmp_path / locks.LOCK_NAME, "a") as other:  # another process's background compile
         fcntl.flock(other, fcntl.LOCK_EX)
         warm.compile_before_the_run("RK4", lines.append)
     assert lines[2].startswith("waiting for the fast path's RK4 stepper that another process is compiling"), lines
@@ -160,28 +175,37 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
 
     seen = []
 
-    def compiling(signature, cache):   # numba's njit, looking at the locks instead of compiling
+    def compiling(signature, cache):  # numba's njit, looking at the locks instead of compiling
         def compile_(function):
             seen.append([held(name) for name in ("compiling-RK4.lock", "compiling-DOP853.lock", locks.LOCK_NAME)])
             return function
+
         return compile_
 
     monkeypatch.setattr(integrators, "njit", compiling)
-    integrators.stepper.__wrapped__("RK4")   # not functools.cache's: this process's compiled stepper is left alone
+    integrators.stepper.__wrapped__("RK4")  # not functools.cache's: this process's compiled stepper is left alone
     assert seen == [[True, False, False]]
-    assert not held("compiling-RK4.lock")   # released once loaded
+    assert not held("compiling-RK4.lock")  # released once loaded
 
 
 def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):
     """A scene's generated module new to the cache folder: a note before numba compiles it; none once it is there.
     In a fresh Python with empty caches (numba reads NUMBA_CACHE_DIR as it is imported)."""
-    script = ("from mech_regulator.model import build_model; from mech_regulator.scene import load_scene; "
-              "from mech_regulator.solvers.compiled.codegen import compile_scene; "
-              "compile_scene(build_model(load_scene('lathe')))")
-    environment = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"),
-                       MECH_REGULATOR_CACHE=str(tmp_path / "compiled"))
-    notes = [subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300,
-                            env=environment, check=True).stderr for _ in range(2)]
-    assert notes[0] == ("note: compiling the fast path's module of scene 'lathe' once (a few seconds; later runs load "
-                        "it at once)\n"), notes[0]
+    script = (
+        "from mech_regulator.model import build_model; from mech_regulator.scene import load_scene; "
+        "from mech_regulator.solvers.compiled.codegen import compile_scene; "
+        "compile_scene(build_model(load_scene('lathe')))"
+    )
+    environment = dict(
+        os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), MECH_REGULATOR_CACHE=str(tmp_path / "compiled")
+    )
+    notes = [
+        subprocess.run(
+            [sys.executable, "-c", script], capture_output=True, text=True, timeout=300, env=environment, check=True
+        ).stderr
+        for _ in range(2)
+    ]
+    assert notes[0] == (
+        "note: compiling the fast path's module of scene 'lathe' once (a few seconds; later runs load it at once)\n"
+    ), notes[0]
     assert notes[1] == "", notes[1]

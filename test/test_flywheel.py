@@ -32,7 +32,7 @@ def lathe():
 
 def test_lathe_formula_and_wittenbauer_agree_exactly(lathe):
     F_r, omega_m, delta, J_tt = 100.0, 15.0, 1.0 / 50.0, 2.0
-    expected = math.pi * F_r / (4.0 * omega_m ** 2 * delta) - J_tt        # 15.4533 kg m^2
+    expected = math.pi * F_r / (4.0 * omega_m**2 * delta) - J_tt  # 15.4533 kg m^2
     # omega_m: the scene's own steady motion through omega = 15.15 at phi = 0 has max 15.15 and min 14.85
     assert lathe.omega_m == pytest.approx(omega_m, rel=1e-13)
     # the on-off cutting load switches on grid points: the swing is exact to round-off
@@ -40,8 +40,8 @@ def test_lathe_formula_and_wittenbauer_agree_exactly(lathe):
     assert lathe.energy_swing == pytest.approx(expected, rel=1e-12)
     assert lathe.wittenbauer == pytest.approx(expected, rel=1e-12)
     construction = lathe.construction
-    assert construction.k_max == pytest.approx(omega_m ** 2 * (1 + delta) / 2, rel=1e-14)
-    assert construction.k_min == pytest.approx(omega_m ** 2 * (1 - delta) / 2, rel=1e-14)
+    assert construction.k_max == pytest.approx(omega_m**2 * (1 + delta) / 2, rel=1e-14)
+    assert construction.k_min == pytest.approx(omega_m**2 * (1 - delta) / 2, rel=1e-14)
     # the rays touch the vertical E(J) segment at its ends: dE = 0 at phi = 0, dE = -25 pi at phi = 270 deg
     assert construction.a == pytest.approx(-construction.k_max * J_tt, rel=1e-12)
     assert construction.b == pytest.approx(-25.0 * math.pi - construction.k_min * J_tt, rel=1e-12)
@@ -81,9 +81,16 @@ def conservative_scene(J0: float = 0.1, rod_inertia: float = 0.4, crank: float =
     """A crank-slider whose only moving inertia is the rod's rotation: J = J0 + J_rod (R cos phi)^2 / (l^2 -
     R^2 sin^2 phi), largest J0 + J_rod (R/l)^2 at phi = 0 and 180 deg, smallest J0 at 90 and 270 deg (grid points
     of the energy diagram: the construction is exact there)."""
-    return validate_scene({"name": "conservative", "machine": {"inertia": J0, "mechanism": {
-        "type": "crank_slider", "crank": crank, "rod": rod, "rod_inertia": rod_inertia}},
-        "scenario": {"initial": {"omega": 10.0}, "duration": 1.0}})
+    return validate_scene(
+        {
+            "name": "conservative",
+            "machine": {
+                "inertia": J0,
+                "mechanism": {"type": "crank_slider", "crank": crank, "rod": rod, "rod_inertia": rod_inertia},
+            },
+            "scenario": {"initial": {"omega": 10.0}, "duration": 1.0},
+        }
+    )
 
 
 def test_conservative_machine_closed_form():
@@ -108,7 +115,7 @@ def test_conservative_machine_closed_form():
     run = design.runs["refined"]
     model = build_model(conservative_scene(J0, rod_inertia, crank, rod))
     total = np.array([model.inertia(phi)[0] for phi in run.phi]) + run.flywheel
-    energy = run.omega ** 2 * total
+    energy = run.omega**2 * total
     assert np.ptp(energy) / energy.mean() < 1e-8
 
 
@@ -131,14 +138,14 @@ def test_press_methods_agree_within_their_bounds(press):
     # and it is not negligible here: the ram's inertia varies by half the machine's own
     assert abs(press.energy_swing / press.wittenbauer - 1.0) > 0.02
     # Wittenbauer's flywheel gives [delta] up to the O(delta^2) term (and the motor's answer to the speed)
-    assert abs(press.runs["wittenbauer"].speeds.delta / delta - 1.0) < delta ** 2
+    assert abs(press.runs["wittenbauer"].speeds.delta / delta - 1.0) < delta**2
     # the constant-J formula errs by more than that: its flywheel is too big here
-    assert press.runs["energy_swing"].speeds.delta < delta * (1.0 - delta ** 2)
+    assert press.runs["energy_swing"].speeds.delta < delta * (1.0 - delta**2)
     # the refinement reproduces [delta] in simulation
     assert press.runs["refined"].speeds.delta == pytest.approx(delta, rel=1e-6)
-    assert abs(press.refined / press.wittenbauer - 1.0) < delta ** 2
+    assert abs(press.refined / press.wittenbauer - 1.0) < delta**2
     # the bundled scene carries the refined flywheel (rounded up to 1.0168 on the motor shaft)
-    assert press.scene_flywheel / press.ratio ** 2 == pytest.approx(press.on_shaft(press.refined), rel=1e-4)
+    assert press.scene_flywheel / press.ratio**2 == pytest.approx(press.on_shaft(press.refined), rel=1e-4)
     assert press.scene_flywheel >= press.refined
 
 
@@ -157,17 +164,18 @@ def test_press_orbit_by_an_independent_integration_in_phi(press):
     kinks = np.radians([290.0, 305.0, 335.0, 350.0, 360.0])  # the punching table's corners: integrate between them
     omega, start, phis, omegas = run.omega_start, 0.0, [], []
     for end in kinks:
-        solution = integrate.solve_ivp(in_phi, (start, end), [omega], method="DOP853", rtol=1e-12, atol=1e-12,
-                                       dense_output=True)
+        solution = integrate.solve_ivp(
+            in_phi, (start, end), [omega], method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True
+        )
         grid = np.linspace(start, end, 2000)
         phis.append(grid)
         omegas.append(solution.sol(grid)[0])
         omega, start = solution.y[0, -1], end
-    assert omega == pytest.approx(run.omega_start, rel=1e-7)          # periodic
+    assert omega == pytest.approx(run.omega_start, rel=1e-7)  # periodic
     assert start == pytest.approx(period)
     omegas = np.concatenate(omegas)
     delta = (omegas.max() - omegas.min()) / (0.5 * (omegas.max() + omegas.min()))
-    assert delta == pytest.approx(run.speeds.delta, rel=1e-5)        # sampled extrema: O(h^2) ~ 1e-6
+    assert delta == pytest.approx(run.speeds.delta, rel=1e-5)  # sampled extrema: O(h^2) ~ 1e-6
 
 
 def test_bundled_press_runs_steadily_at_its_permitted_delta():
@@ -188,7 +196,7 @@ def test_flywheel_on_a_geared_shaft_gives_the_same_motion(press):
     J_fw = press.refined
     on_crank = PeriodicMotion(_bare(load_scene("press")), press.diagram, 1.0, True)
     geared = PeriodicMotion(_bare(load_scene("press")), press.diagram, 14.0, True)
-    assert geared.model(J_fw).scene.machine.flywheel.inertia == pytest.approx(J_fw / 14.0 ** 2, rel=1e-15)
+    assert geared.model(J_fw).scene.machine.flywheel.inertia == pytest.approx(J_fw / 14.0**2, rel=1e-15)
     assert geared.model(J_fw).inertia_constant == pytest.approx(on_crank.model(J_fw).inertia_constant, rel=1e-14)
     assert geared.run(J_fw).speeds.delta == pytest.approx(on_crank.run(J_fw).speeds.delta, rel=1e-9)
     assert press.on_shaft(J_fw) == pytest.approx(J_fw / 196.0, rel=1e-15)
@@ -212,11 +220,24 @@ def test_energy_diagram_is_the_machine_without_its_flywheel():
 
 def test_command_end_to_end(capsys, tmp_path):
     png, rrd = tmp_path / "lathe.png", tmp_path / "lathe.rrd"
-    code, out, err = run_cli(capsys, "flywheel", "lathe", "--delta", "1/50", "--ratio", "2", "--json", "--quiet",
-                             "--plot", str(png), "--record", str(rrd))
+    code, out, err = run_cli(
+        capsys,
+        "flywheel",
+        "lathe",
+        "--delta",
+        "1/50",
+        "--ratio",
+        "2",
+        "--json",
+        "--quiet",
+        "--plot",
+        str(png),
+        "--record",
+        str(rrd),
+    )
     assert code == 0, err
     data = json.loads(out)
-    expected = math.pi * 100.0 / (4.0 * 15.0 ** 2 / 50.0) - 2.0
+    expected = math.pi * 100.0 / (4.0 * 15.0**2 / 50.0) - 2.0
     assert data["delta"] == 0.02 and data["ratio"] == 2.0
     for name in ("energy_swing", "wittenbauer", "refined"):
         method = data["methods"][name]
@@ -225,8 +246,16 @@ def test_command_end_to_end(capsys, tmp_path):
         assert method["simulated"]["delta"] == pytest.approx(0.02, rel=1e-8)
     assert png.read_bytes().startswith(PNG_SIGNATURE)
     entities = {str(chunk.entity_path) for chunk in RrdReader(rrd).store().stream()}
-    assert {"/speed/refined", "/speed/none", "/energy/dE", "/inertia/J", "/curve/E_of_J", "/curve/ray_k_max",
-            "/construction/points", "/about"} <= entities
+    assert {
+        "/speed/refined",
+        "/speed/none",
+        "/energy/dE",
+        "/inertia/J",
+        "/curve/E_of_J",
+        "/curve/ray_k_max",
+        "/construction/points",
+        "/about",
+    } <= entities
 
 
 def test_command_text_report(capsys):
@@ -245,19 +274,22 @@ def test_class_takes_its_strictest_delta(capsys):
     assert code == 0 and "generator" in out and "1/100 to 1/300" in out
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["--delta", "abc"], "--delta 'abc'"),
-    (["--delta", "1/0"], "--delta '1/0'"),
-    (["--delta", "0"], "between 0 and 1"),
-    (["--delta", "1.5"], "between 0 and 1"),
-    (["--delta=-1/80"], "--delta '-1/80'"),
-    (["--class", "lawnmower"], "pump, agricultural, machine_tool, engine, generator"),
-    (["--delta", "1/80", "--class", "engine"], "not both"),
-    ([], "no [delta]"),
-    (["--delta", "1/50", "--set", "machine.drive.torque=90"], "net work"),
-    (["--delta", "1/50", "--omega-m", "-3"], "--omega-m -3"),
-    (["--delta", "1/50", "--ratio", "0"], "--ratio 0"),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--delta", "abc"], "--delta 'abc'"),
+        (["--delta", "1/0"], "--delta '1/0'"),
+        (["--delta", "0"], "between 0 and 1"),
+        (["--delta", "1.5"], "between 0 and 1"),
+        (["--delta=-1/80"], "--delta '-1/80'"),
+        (["--class", "lawnmower"], "pump, agricultural, machine_tool, engine, generator"),
+        (["--delta", "1/80", "--class", "engine"], "not both"),
+        ([], "no [delta]"),
+        (["--delta", "1/50", "--set", "machine.drive.torque=90"], "net work"),
+        (["--delta", "1/50", "--omega-m", "-3"], "--omega-m -3"),
+        (["--delta", "1/50", "--ratio", "0"], "--ratio 0"),
+    ],
+)
 def test_bad_input_is_a_clear_message(capsys, argv, expected):
     code, out, err = run_cli(capsys, "flywheel", "lathe", *argv)
     assert code == 2

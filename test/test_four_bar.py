@@ -82,13 +82,14 @@ def angles(phi, geo, branch):
 def source_accelerations(phi, th3, th4, w3, w4, a, b, c, w2=1.0, al2=0.0):
     """Source 004 eqs (14)-(16): al3 = (I K - G M)/(G L - H K), al4 = (I L - H M)/(G L - H K)."""
     G, Hh, K, L = c * math.sin(th4), b * math.sin(th3), c * math.cos(th4), b * math.cos(th3)
-    I = a * al2 * math.sin(phi) + a * w2 ** 2 * math.cos(phi) + b * w3 ** 2 * math.cos(th3) - c * w4 ** 2 * math.cos(th4)
-    M = a * al2 * math.cos(phi) - a * w2 ** 2 * math.sin(phi) - b * w3 ** 2 * math.sin(th3) + c * w4 ** 2 * math.sin(th4)
+    I = a * al2 * math.sin(phi) + a * w2**2 * math.cos(phi) + b * w3**2 * math.cos(th3) - c * w4**2 * math.cos(th4)
+    M = a * al2 * math.cos(phi) - a * w2**2 * math.sin(phi) - b * w3**2 * math.sin(th3) + c * w4**2 * math.sin(th4)
     den = G * L - Hh * K
     return (I * K - G * M) / den, (I * L - Hh * M) / den
 
 
 # ----------------------------------------------------------------------------- positions and branches
+
 
 def test_branch_sign_constants():
     assert BRANCH_SIGN == {"open": -1.0, "crossed": 1.0}
@@ -133,6 +134,7 @@ def test_branches_are_mirror_images_about_DB(a, b, c, d, th1):
 
 # ----------------------------------------------------------------------------- velocities and accelerations
 
+
 def _fd(f, phi, h):
     """Central difference of an angle-valued function (difference wrapped to (-pi, pi])."""
     return wrap(f(phi + h) - f(phi - h)) / (2.0 * h)
@@ -160,8 +162,12 @@ def test_velocity_ratios(a, b, c, d, th1, branch):
         vloop = a * cmath.exp(1j * phi) + b * dth3 * cmath.exp(1j * th3) - c * dth4 * cmath.exp(1j * th4)
         assert abs(vloop) <= 1e-13 * (a + b + c)
         # finite differences of the independent circle-intersection positions (h = 1e-5, see header)
-        fd3 = _fd(lambda p: cmath.phase((lambda B, C, D: C - B)(*circle_intersection(p, a, b, c, d, th1, branch))), phi, H)
-        fd4 = _fd(lambda p: cmath.phase((lambda B, C, D: C - D)(*circle_intersection(p, a, b, c, d, th1, branch))), phi, H)
+        fd3 = _fd(
+            lambda p: cmath.phase((lambda B, C, D: C - B)(*circle_intersection(p, a, b, c, d, th1, branch))), phi, H
+        )
+        fd4 = _fd(
+            lambda p: cmath.phase((lambda B, C, D: C - D)(*circle_intersection(p, a, b, c, d, th1, branch))), phi, H
+        )
         assert dth3 == pytest.approx(fd3, abs=1e-8)
         assert dth4 == pytest.approx(fd4, abs=1e-8)
 
@@ -194,11 +200,12 @@ def test_source_numbers_crank_point():
         assert abs(aA) == pytest.approx(1e4, rel=1e-15)
         vC = vA + 1j * b * dth3 * w * cmath.exp(1j * th3)
         assert abs(vC - 1j * c * dth4 * w * cmath.exp(1j * th4)) <= 1e-12 * 1000.0
-        aC = aA + b * w * w * (1j * ddth3 - dth3 ** 2) * cmath.exp(1j * th3)
-        assert abs(aC - c * w * w * (1j * ddth4 - dth4 ** 2) * cmath.exp(1j * th4)) <= 1e-12 * 1e4
+        aC = aA + b * w * w * (1j * ddth3 - dth3**2) * cmath.exp(1j * th3)
+        assert abs(aC - c * w * w * (1j * ddth4 - dth4**2) * cmath.exp(1j * th4)) <= 1e-12 * 1e4
 
 
 # ----------------------------------------------------------------------------- branch continuity
+
 
 @pytest.mark.parametrize("branch", BRANCHES)
 @pytest.mark.parametrize("a, b, c, d, th1", CRANK_ROCKERS)
@@ -213,7 +220,7 @@ def test_branch_never_flips_over_a_full_turn(a, b, c, d, th1, branch):
     # itself only sampled on the grid.  A branch jump would be O(1) rad, ~1e4 times this bound.
     for th, dth, ddth in ((th4, dth4, ddth4), (th3, dth3, ddth3)):
         steps = np.array([wrap(x) for x in np.diff(th)])
-        bound = 1.5 * np.abs(ddth).max() * dphi ** 2 / 2
+        bound = 1.5 * np.abs(ddth).max() * dphi**2 / 2
         assert np.all(np.abs(steps - dth[:-1] * dphi) <= bound + 1e-13)
         # the rocker and the coupler oscillate: no net rotation over a crank turn
         assert abs(steps.sum()) <= 1e-9
@@ -265,7 +272,10 @@ def test_near_toggle_velocities_finite_and_consistent(th1, branch):
 
 # ----------------------------------------------------------------------------- assemblability
 
-@pytest.mark.parametrize("a, b, c, d, th1", CRANK_ROCKERS + [pytest.param(1.0, 2.5, 1.5005, 3.0, 0.3, id="near_toggle")])
+
+@pytest.mark.parametrize(
+    "a, b, c, d, th1", CRANK_ROCKERS + [pytest.param(1.0, 2.5, 1.5005, 3.0, 0.3, id="near_toggle")]
+)
 def test_grashof_crank_turns_fully(a, b, c, d, th1):
     assert unassemblable_crank_ranges(a, b, c, d, th1) == []
     for branch in ("open", "crossed"):
@@ -348,10 +358,24 @@ def test_crank_pin_on_rocker_pivot_raises_value_error():
 
 # ----------------------------------------------------------------------------- reduced inertia and weight
 
+
 def _geometry(a, b, c, d, th1, branch, **over):
-    g = dict(crank=a, coupler=b, rocker=c, frame=d, frame_angle=th1, branch_sign=BRANCH_SIGN[branch],
-             crank_mass=2.0, crank_cg=-0.25 * a, coupler_mass=1.5, coupler_cg=0.4 * b, coupler_inertia=0.3 * b * b,
-             rocker_mass=1.2, rocker_cg=0.6 * c, rocker_inertia=0.1 * c * c)
+    g = dict(
+        crank=a,
+        coupler=b,
+        rocker=c,
+        frame=d,
+        frame_angle=th1,
+        branch_sign=BRANCH_SIGN[branch],
+        crank_mass=2.0,
+        crank_cg=-0.25 * a,
+        coupler_mass=1.5,
+        coupler_cg=0.4 * b,
+        coupler_inertia=0.3 * b * b,
+        rocker_mass=1.2,
+        rocker_cg=0.6 * c,
+        rocker_inertia=0.1 * c * c,
+    )
     g.update(over)
     return FourBarGeometry(**g)
 
@@ -369,8 +393,12 @@ def _J_independent(phi, g, branch):
     p, m = _points(phi + H, g, branch), _points(phi - H, g, branch)
     dS3, dS4 = (p[1] - m[1]) / (2 * H), (p[2] - m[2]) / (2 * H)
     dth3, dth4 = wrap(p[3] - m[3]) / (2 * H), wrap(p[4] - m[4]) / (2 * H)
-    return (g.coupler_mass * abs(dS3) ** 2 + g.coupler_inertia * dth3 ** 2
-            + g.rocker_mass * abs(dS4) ** 2 + g.rocker_inertia * dth4 ** 2)
+    return (
+        g.coupler_mass * abs(dS3) ** 2
+        + g.coupler_inertia * dth3**2
+        + g.rocker_mass * abs(dS4) ** 2
+        + g.rocker_inertia * dth4**2
+    )
 
 
 def _potential(phi, g, branch, gravity):
@@ -388,7 +416,7 @@ def test_make_reduced_inertia_and_weight(a, b, c, d, th1, branch, gravity):
     g = _geometry(a, b, c, d, th1, branch)
     reduced = preset_reduced(g, gravity)
     L = a + b + c + d
-    J_scale = (g.coupler_mass + g.rocker_mass) * L ** 2 + g.coupler_inertia + g.rocker_inertia
+    J_scale = (g.coupler_mass + g.rocker_mass) * L**2 + g.coupler_inertia + g.rocker_inertia
     M_scale = (g.crank_mass + g.coupler_mass + g.rocker_mass) * math.hypot(*gravity) * L
     for phi in ANGLES[::2]:
         J, dJ, Mw, th4, dth4 = reduced(phi)

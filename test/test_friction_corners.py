@@ -58,7 +58,9 @@ def test_the_rhs_between_corners_is_the_friction_continued():
         beyond = np.array([window[1] + 0.1, 40.0])
         if any(abs(window[1] - corner) < 1e-9 for corner in (0.5 * math.pi, math.pi, 1.5 * math.pi, 2.0 * math.pi)):
             side = 1.0 if model.guide_normal()(0.0, beyond) >= 0.0 else -1.0  # N's own sign there: only k_j continued
-            before_corners.append(model.rhs(None, window, normal_signs=(side,))(0.0, beyond)[1] != true_rhs(0.0, beyond)[1])
+            before_corners.append(
+                model.rhs(None, window, normal_signs=(side,))(0.0, beyond)[1] != true_rhs(0.0, beyond)[1]
+            )
     assert len(before_corners) >= 20 and all(before_corners)
 
 
@@ -70,8 +72,10 @@ def test_compressor_friction_meets_its_rtol_on_both_paths():
     tight = simulate_complete(compressor(0.3, "solver.rtol=1e-13", "solver.atol=1e-15"))
     times = np.linspace(0.0, 0.3, 3001)
     omega = tight(times)[1]
-    runs = [simulate_complete(compressor(0.3, "solver.rtol=1e-11", "solver.atol=1e-13", f"solver.path={path}"))
-            for path in ("reference", "fast")]
+    runs = [
+        simulate_complete(compressor(0.3, "solver.rtol=1e-11", "solver.atol=1e-13", f"solver.path={path}"))
+        for path in ("reference", "fast")
+    ]
     for run in runs:
         assert np.max(np.abs(run(times)[1] - omega)) <= 5.0 * 1e-11 * np.max(np.abs(omega))
     model = compressor(0.3)
@@ -118,8 +122,10 @@ def test_compressor_friction_meets_its_rtol_where_a_reaction_passes_near_zero():
     fall to 12 N of 40 N at 199 deg, the wrist pin's to 1.4 N of 145 N at 129.5 deg, and single DOP853 steps across
     them had 14-22 times their tolerance)."""
     tight = simulate_complete(compressor(0.5, "solver.rtol=1e-13", "solver.atol=1e-15"))
-    runs = [simulate_complete(compressor(0.5, "solver.rtol=1e-9", "solver.atol=1e-11", f"solver.path={path}"))
-            for path in ("reference", "fast")]
+    runs = [
+        simulate_complete(compressor(0.5, "solver.rtol=1e-9", "solver.atol=1e-11", f"solver.path={path}"))
+        for path in ("reference", "fast")
+    ]
     times = np.linspace(0.0, 0.5, 2001)
     omega = tight(times)[1]
     for run in runs:

@@ -57,9 +57,11 @@ solver: {method: DOP853, rtol: 1.0e-9, atol: 1.0e-11, sample_rate: 200.0}
 
 GOVERNOR_TYPE_LINE = "  type: direct\n"
 VALVE_LINE = "  valve: {open_at: 0.02, closed_at: 0.08}\n"
-INDIRECT_PART = ("  pilot_neutral: 0.05\n"
-                 "  servo: {gain: 100.0, max_speed: 2.0}\n"
-                 "  feedback: {type: isodromic, gain: 0.2, time_constant: 1.0}\n")
+INDIRECT_PART = (
+    "  pilot_neutral: 0.05\n"
+    "  servo: {gain: 100.0, max_speed: 2.0}\n"
+    "  feedback: {type: isodromic, gain: 0.2, time_constant: 1.0}\n"
+)
 SERVO_LINE = "  servo: {gain: 100.0, max_speed: 2.0}\n"
 FEEDBACK_LINE = "  feedback: {type: isodromic, gain: 0.2, time_constant: 1.0}\n"
 
@@ -76,14 +78,15 @@ def edited(*replacements: tuple[str, str], text: str = DIRECT) -> str:
     return text
 
 
-INDIRECT = edited(("name: small_direct", "name: small_isodromic"), ("  type: direct", "  type: indirect"),
-                  (VALVE_LINE, INDIRECT_PART), ("damping: 200.0", "damping: 100.0"))
-UNGOVERNED = edited((DIRECT[DIRECT.index("governor:"):DIRECT.index("scenario:")], ""),
-                    ("name: small_direct", "name: small_plain"))
-
-
-
-
+INDIRECT = edited(
+    ("name: small_direct", "name: small_isodromic"),
+    ("  type: direct", "  type: indirect"),
+    (VALVE_LINE, INDIRECT_PART),
+    ("damping: 200.0", "damping: 100.0"),
+)
+UNGOVERNED = edited(
+    (DIRECT[DIRECT.index("governor:") : DIRECT.index("scenario:")], ""), ("name: small_direct", "name: small_plain")
+)
 
 
 def run_quietly(*argv: str) -> tuple[int, str, str]:
@@ -133,11 +136,12 @@ def direct_analysis(tmp_path_factory) -> dict:
 def test_governor_json_keys(direct_analysis):
     analysis = direct_analysis
     assert {"scene", "kind", "statism", "operating_points", "linear", "floquet", "droop", "characteristic"} <= set(
-        analysis)
+        analysis
+    )
     assert analysis["scene"] == "small_direct"
     assert analysis["kind"] == "direct"
     assert analysis["feedback"] is None
-    assert analysis["floquet"] is None          # constant J: nothing periodic in phi
+    assert analysis["floquet"] is None  # constant J: nothing periodic in phi
     linear = analysis["linear"]
     assert {"eigenvalues", "vyshnegradsky", "stable", "dominant", "damping_ratio", "polynomial"} <= set(linear)
     assert linear["state_names"] == ["omega", "arm_angle", "arm_rate"]
@@ -168,12 +172,11 @@ def test_governor_operating_points_balance(direct_analysis):
         assert STROKE[0] < z < STROKE[1]
         assert speed == pytest.approx(equilibrium_speed(z), rel=1e-6)
         assert throttle == pytest.approx(float(valve_throttle(z)), abs=1e-9)
-        assert throttle * 200.0 * (1.0 - speed / 150.0) == pytest.approx(0.3 * speed + point["external_load"],
-                                                                           rel=1e-6)
+        assert throttle * 200.0 * (1.0 - speed / 150.0) == pytest.approx(0.3 * speed + point["external_load"], rel=1e-6)
         assert point["mean_inertia"] == pytest.approx(0.5)
     first, loaded, _ = direct_analysis["operating_points"]
-    assert first["speed"] == pytest.approx(112.86, abs=0.01)   # the scene starts at its operating point
-    assert loaded["speed"] < first["speed"] and loaded["sleeve"] < first["sleeve"]   # droop of a direct governor
+    assert first["speed"] == pytest.approx(112.86, abs=0.01)  # the scene starts at its operating point
+    assert loaded["speed"] < first["speed"] and loaded["sleeve"] < first["sleeve"]  # droop of a direct governor
     droop = direct_analysis["droop"]
     assert droop["per_unit_load"] < 0
     assert droop["per_event"][0] == pytest.approx(loaded["speed"] - first["speed"], rel=1e-6)
@@ -184,11 +187,12 @@ def test_governor_linear_stability_consistent(direct_analysis):
     eigenvalues = np.array([complex(re, im) for re, im in linear["eigenvalues"]])
     roots = np.roots(linear["polynomial"])
     assert sorted(roots, key=lambda v: (v.real, v.imag)) == pytest.approx(
-        sorted(eigenvalues, key=lambda v: (v.real, v.imag)), rel=1e-6)
+        sorted(eigenvalues, key=lambda v: (v.real, v.imag)), rel=1e-6
+    )
     assert linear["stable"] == bool(np.all(eigenvalues.real < 0))
     A, B = linear["vyshnegradsky"]
     assert A > 0 and B > 0
-    assert (A * B > 1) == linear["stable"]        # Vyshnegradsky's criterion for the third-order system
+    assert (A * B > 1) == linear["stable"]  # Vyshnegradsky's criterion for the third-order system
     assert linear["stable"]
     # less sleeve damping than the critical value makes the governor unstable
     assert 0 < linear["critical_damping"] < 200.0
@@ -200,10 +204,15 @@ def test_governor_text(tmp_path, capsys, direct_analysis):
     assert code == 0, err
     linear = direct_analysis["linear"]
     A, B = linear["vyshnegradsky"]
-    assert_all_in(out, "scene small_direct: direct governor",
-                  f"statism (degree of non-uniformity) {direct_analysis['statism']:.4g}",
-                  "operating points", "eigenvalues [1/s]: ", "stable",
-                  f"Vyshnegradsky: A = {A:.4g}, B = {B:.4g}, A B = {A * B:.4g} (> 1: stable)")
+    assert_all_in(
+        out,
+        "scene small_direct: direct governor",
+        f"statism (degree of non-uniformity) {direct_analysis['statism']:.4g}",
+        "operating points",
+        "eigenvalues [1/s]: ",
+        "stable",
+        f"Vyshnegradsky: A = {A:.4g}, B = {B:.4g}, A B = {A * B:.4g} (> 1: stable)",
+    )
     point_lines = [line for line in out.splitlines() if line.startswith("  load ")]
     assert len(point_lines) == 3, out
     for line, point in zip(point_lines, direct_analysis["operating_points"]):
@@ -270,7 +279,7 @@ def engine_direct_analysis() -> dict:
 
 def test_engine_direct_floquet(engine_direct_analysis):
     floquet = engine_direct_analysis["floquet"]
-    assert floquet is not None                  # the engine's J and drive are periodic in phi
+    assert floquet is not None  # the engine's J and drive are periodic in phi
     assert len(floquet["multipliers"]) == len(engine_direct_analysis["linear"]["eigenvalues"]) == 3
     moduli = [math.hypot(re, im) for re, im in floquet["multipliers"]]
     assert floquet["stable"] == (max(moduli) < 1)
@@ -284,7 +293,7 @@ def test_engine_direct_floquet(engine_direct_analysis):
 def test_engine_direct_load_levels(engine_direct_analysis):
     points = engine_direct_analysis["operating_points"]
     assert [point["external_load"] for point in points] == [6.0, 8.0, 0.0]
-    assert points[1]["speed"] < points[0]["speed"] < points[2]["speed"]   # direct action: droop
+    assert points[1]["speed"] < points[0]["speed"] < points[2]["speed"]  # direct action: droop
     # the averaged model's operating point is the mean speed of the true periodic orbit
     floquet = engine_direct_analysis["floquet"]
     assert points[0]["speed"] == pytest.approx(floquet["mean_speed"], rel=1e-3)
@@ -326,8 +335,20 @@ def test_simulate_governed_json_load_responses(direct_run, direct_analysis):
     governed = summary["governor"]
     responses = governed["load_responses"]
     assert len(responses) == 2
-    fields = {"time", "load_before", "load_after", "speed_before", "peak_deviation", "peak_time", "speed_after",
-              "static_error", "predicted_static_error", "settling_time", "overshoot", "limits"}
+    fields = {
+        "time",
+        "load_before",
+        "load_after",
+        "speed_before",
+        "peak_deviation",
+        "peak_time",
+        "speed_after",
+        "static_error",
+        "predicted_static_error",
+        "settling_time",
+        "overshoot",
+        "limits",
+    }
     for response in responses:
         assert fields <= set(response), set(response)
         assert response["static_error"] == pytest.approx(response["speed_after"] - response["speed_before"])
@@ -350,7 +371,7 @@ def test_simulate_governed_json_load_responses(direct_run, direct_analysis):
 def test_simulate_governed_csv_columns(direct_run):
     columns = read_csv(direct_run["csv"])
     assert {"throttle", "sleeve", "sleeve_velocity", "arm_angle"} <= set(columns)
-    assert "servo" not in columns and "feedback_shift" not in columns   # direct action
+    assert "servo" not in columns and "feedback_shift" not in columns  # direct action
     assert all(np.all(np.isfinite(values)) for values in columns.values())
     assert len(columns["t"]) == round(1.6 * 200) + 1
     sleeve = columns["sleeve"]
@@ -374,7 +395,7 @@ def test_simulate_indirect_csv_has_servo(tmp_path, capsys):
     assert len(json.loads(out)["governor"]["load_responses"]) == 1
     columns = read_csv(csv_path)
     assert {"throttle", "sleeve", "sleeve_velocity", "arm_angle", "servo", "feedback_shift"} <= set(columns)
-    assert columns["throttle"] == pytest.approx(columns["servo"])   # the servo position is the throttle
+    assert columns["throttle"] == pytest.approx(columns["servo"])  # the servo position is the throttle
     assert np.all((columns["servo"] >= 0.0) & (columns["servo"] <= 1.0))
     assert columns["feedback_shift"][0] == 0.0
     # the servo opens the throttle after the load rises at 0.4 s
@@ -388,10 +409,10 @@ def test_simulate_indirect_csv_has_servo(tmp_path, capsys):
 def test_describe_indirect_isodromic(tmp_path, capsys):
     code, out, err = run(capsys, "describe", str(write(tmp_path, INDIRECT)))
     assert code == 0, err
-    assert ("state vector: phi [rad], omega [rad/s], arm_angle [rad], arm_rate [rad/s], servo [-], "
-            "feedback_shift [m]") in out
-    assert_all_in(out, "indirect governor", "isodromic feedback", "pilot neutral at z = 0.05 m",
-                  "s' = -100 * opening")
+    assert (
+        "state vector: phi [rad], omega [rad/s], arm_angle [rad], arm_rate [rad/s], servo [-], feedback_shift [m]"
+    ) in out
+    assert_all_in(out, "indirect governor", "isodromic feedback", "pilot neutral at z = 0.05 m", "s' = -100 * opening")
 
 
 def test_describe_direct_has_no_servo_state(tmp_path, capsys):
@@ -417,42 +438,115 @@ DRIVE_LINE = "  drive: {type: linear_motor, stall_torque: 200.0, no_load_speed: 
 TABLE_VALVE = "  valve: {type: table, sleeve: [0.02, 0.05, 0.08], throttle: [1.0, 1.5, 0.0]}\n"
 
 
-@pytest.mark.parametrize("base, old, new, fragments", [
-    ("direct", "stroke: [0.02, 0.08]", "stroke: [0.0, 0.08]",
-     ["governor", "stroke = [0.0, 0.08] m", "expected 0 < z_low < z_high"]),
-    ("direct", "stroke: [0.02, 0.08]", "stroke: [0.02, 0.5]",
-     ["governor", "stroke = [0.02, 0.5] m", "2 arm_length = 0.4 m"]),
-    ("direct", "  friction: 0.0\n", "  friction: 5.0\n  static_friction: 2.0\n",
-     ["governor", "static_friction = 2.0 N", "friction = 5.0 N", "expected static_friction >= friction"]),
-    ("indirect", "pilot_neutral: 0.05", "pilot_neutral: 0.09",
-     ["governor", "pilot_neutral = 0.09 m", "outside the stroke [0.02, 0.08] m"]),
-    ("indirect", FEEDBACK_LINE, "  feedback: {type: rigid, gain: 0.0}\n",
-     ["governor.feedback", "'rigid'", "gain > 0", "got 0.0"]),
-    ("indirect", FEEDBACK_LINE, "  feedback: {type: isodromic, gain: 0.2}\n",
-     ["governor.feedback", "'isodromic'", "needs time_constant"]),
-    ("direct", "method: DOP853", "method: energy",
-     ["solver.method 'energy'", "governed scene needs a method in time"]),
-    ("direct", "initial: {omega: 112.86}", "initial: {omega: 112.86, servo: 0.5}",
-     ["scenario.initial.servo", "'direct'", "no servo-motor"]),
-    ("indirect", "initial: {omega: 112.86}", "initial: {omega: 112.86, servo: 1.5}",
-     ["scenario.initial.servo = 1.5", "outside the servo travel [0.0, 1.0]"]),
-    ("direct", "initial: {omega: 112.86}", "initial: {omega: 112.86, sleeve: 0.1}",
-     ["scenario.initial.sleeve = 0.1 m", "outside the governor's stroke [0.02, 0.08] m"]),
-    ("direct", DRIVE_LINE, "", ["machine.drive is missing", "governor"]),
-    ("direct", VALVE_LINE, "  valve: {open_at: 0.05, closed_at: 0.05}\n",
-     ["governor.valve", "open_at = closed_at = 0.05 m", "two different sleeve positions"]),
-    ("direct", VALVE_LINE, "  valve: {type: linear, open_at: 0.05, closed_at: 0.05}\n",
-     ["governor.valve: open_at = closed_at = 0.05 m"]),
-    ("direct", VALVE_LINE, TABLE_VALVE,
-     ["governor.valve", "throttle = [1.0, 1.5, 0.0]", "between 0 and 1"]),
-    ("indirect", SERVO_LINE, "  servo: {gain: 100.0, max_sped: 2.0}\n",
-     ["governor.servo.max_sped: unknown key", "did you mean 'max_speed'?", "gain, max_speed, dead_band, travel"]),
-    ("direct", "  type: direct", "  type: indirec",
-     ["governor.type = 'indirec'", "unknown type", "'direct', 'indirect'"]),
-], ids=["stroke_z_low_0", "stroke_beyond_arms", "static_below_kinetic_friction", "pilot_outside_stroke",
-        "rigid_gain_0", "isodromic_without_time_constant", "energy_solver", "initial_servo_direct",
-        "initial_servo_outside_travel", "initial_sleeve_outside_stroke", "no_drive", "valve_open_eq_closed",
-        "linear_valve_open_eq_closed", "table_valve_throttle_range", "servo_unknown_key", "unknown_governor_type"])
+@pytest.mark.parametrize(
+    "base, old, new, fragments",
+    [
+        (
+            "direct",
+            "stroke: [0.02, 0.08]",
+            "stroke: [0.0, 0.08]",
+            ["governor", "stroke = [0.0, 0.08] m", "expected 0 < z_low < z_high"],
+        ),
+        (
+            "direct",
+            "stroke: [0.02, 0.08]",
+            "stroke: [0.02, 0.5]",
+            ["governor", "stroke = [0.02, 0.5] m", "2 arm_length = 0.4 m"],
+        ),
+        (
+            "direct",
+            "  friction: 0.0\n",
+            "  friction: 5.0\n  static_friction: 2.0\n",
+            ["governor", "static_friction = 2.0 N", "friction = 5.0 N", "expected static_friction >= friction"],
+        ),
+        (
+            "indirect",
+            "pilot_neutral: 0.05",
+            "pilot_neutral: 0.09",
+            ["governor", "pilot_neutral = 0.09 m", "outside the stroke [0.02, 0.08] m"],
+        ),
+        (
+            "indirect",
+            FEEDBACK_LINE,
+            "  feedback: {type: rigid, gain: 0.0}\n",
+            ["governor.feedback", "'rigid'", "gain > 0", "got 0.0"],
+        ),
+        (
+            "indirect",
+            FEEDBACK_LINE,
+            "  feedback: {type: isodromic, gain: 0.2}\n",
+            ["governor.feedback", "'isodromic'", "needs time_constant"],
+        ),
+        (
+            "direct",
+            "method: DOP853",
+            "method: energy",
+            ["solver.method 'energy'", "governed scene needs a method in time"],
+        ),
+        (
+            "direct",
+            "initial: {omega: 112.86}",
+            "initial: {omega: 112.86, servo: 0.5}",
+            ["scenario.initial.servo", "'direct'", "no servo-motor"],
+        ),
+        (
+            "indirect",
+            "initial: {omega: 112.86}",
+            "initial: {omega: 112.86, servo: 1.5}",
+            ["scenario.initial.servo = 1.5", "outside the servo travel [0.0, 1.0]"],
+        ),
+        (
+            "direct",
+            "initial: {omega: 112.86}",
+            "initial: {omega: 112.86, sleeve: 0.1}",
+            ["scenario.initial.sleeve = 0.1 m", "outside the governor's stroke [0.02, 0.08] m"],
+        ),
+        ("direct", DRIVE_LINE, "", ["machine.drive is missing", "governor"]),
+        (
+            "direct",
+            VALVE_LINE,
+            "  valve: {open_at: 0.05, closed_at: 0.05}\n",
+            ["governor.valve", "open_at = closed_at = 0.05 m", "two different sleeve positions"],
+        ),
+        (
+            "direct",
+            VALVE_LINE,
+            "  valve: {type: linear, open_at: 0.05, closed_at: 0.05}\n",
+            ["governor.valve: open_at = closed_at = 0.05 m"],
+        ),
+        ("direct", VALVE_LINE, TABLE_VALVE, ["governor.valve", "throttle = [1.0, 1.5, 0.0]", "between 0 and 1"]),
+        (
+            "indirect",
+            SERVO_LINE,
+            "  servo: {gain: 100.0, max_sped: 2.0}\n",
+            ["governor.servo.max_sped: unknown key", "did you mean 'max_speed'?", "gain, max_speed, dead_band, travel"],
+        ),
+        (
+            "direct",
+            "  type: direct",
+            "  type: indirec",
+            ["governor.type = 'indirec'", "unknown type", "'direct', 'indirect'"],
+        ),
+    ],
+    ids=[
+        "stroke_z_low_0",
+        "stroke_beyond_arms",
+        "static_below_kinetic_friction",
+        "pilot_outside_stroke",
+        "rigid_gain_0",
+        "isodromic_without_time_constant",
+        "energy_solver",
+        "initial_servo_direct",
+        "initial_servo_outside_travel",
+        "initial_sleeve_outside_stroke",
+        "no_drive",
+        "valve_open_eq_closed",
+        "linear_valve_open_eq_closed",
+        "table_valve_throttle_range",
+        "servo_unknown_key",
+        "unknown_governor_type",
+    ],
+)
 def test_governor_validation(tmp_path, capsys, base, old, new, fragments):
     text = edited((old, new), text=DIRECT if base == "direct" else INDIRECT)
     err = run_bad(capsys, tmp_path, text)
@@ -460,26 +554,37 @@ def test_governor_validation(tmp_path, capsys, base, old, new, fragments):
 
 
 def test_initial_sleeve_without_governor(tmp_path, capsys):
-    err = run_bad(capsys, tmp_path, edited(("initial: {omega: 112.86}", "initial: {omega: 112.86, sleeve: 0.05}"),
-                                           text=UNGOVERNED))
+    err = run_bad(
+        capsys,
+        tmp_path,
+        edited(("initial: {omega: 112.86}", "initial: {omega: 112.86, sleeve: 0.05}"), text=UNGOVERNED),
+    )
     assert_all_in(err, "scenario.initial.sleeve is set", "no governor")
 
 
 def test_scene_level_checks_run_after_section_checks(tmp_path, capsys):
     """A broken governor section is reported as such, not hidden behind (or crashing) the scene's cross-checks."""
-    err = run_bad(capsys, tmp_path, edited(("stroke: [0.02, 0.08]", "stroke: [0.0, 0.08]"),
-                                           ("method: DOP853", "method: energy")))
+    err = run_bad(
+        capsys, tmp_path, edited(("stroke: [0.02, 0.08]", "stroke: [0.0, 0.08]"), ("method: DOP853", "method: energy"))
+    )
     assert "stroke = [0.0, 0.08]" in err
 
 
 def test_linear_valve_misspelt_key(tmp_path, capsys):
     err = run_bad(capsys, tmp_path, edited((VALVE_LINE, "  valve: {open_at: 0.02, closed_att: 0.08}\n")))
     assert ".linear" not in err
-    assert_all_in(err, "governor.valve.closed_att: unknown key", "did you mean 'closed_at'?",
-                  "governor.valve.closed_at: missing; sleeve position with the valve closed")
+    assert_all_in(
+        err,
+        "governor.valve.closed_att: unknown key",
+        "did you mean 'closed_at'?",
+        "governor.valve.closed_at: missing; sleeve position with the valve closed",
+    )
 
 
 def test_table_valve_misspelt_key(tmp_path, capsys):
-    err = run_bad(capsys, tmp_path, edited((VALVE_LINE, "  valve: {type: table, sleeve: [0.02, 0.08], "
-                                                        "throttle: [1.0, 0.0], throtle: 1}\n")))
+    err = run_bad(
+        capsys,
+        tmp_path,
+        edited((VALVE_LINE, "  valve: {type: table, sleeve: [0.02, 0.08], throttle: [1.0, 0.0], throtle: 1}\n")),
+    )
     assert_all_in(err, "governor.valve.throtle: unknown key", "did you mean 'throttle'?", "sleeve, throttle")

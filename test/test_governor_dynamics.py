@@ -47,12 +47,22 @@ TIGHT = {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
 
 # The example of notes/governor_api.md: linear motor + viscous load, direct Porter governor.
 DIRECT = {
-    "machine": {"inertia": 0.5,
-                "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-                "loads": [{"type": "viscous", "coefficient": 0.3}]},
-    "governor": {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0,
-                 "damping": 200.0, "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08],
-                 "valve": {"open_at": 0.02, "closed_at": 0.08}},
+    "machine": {
+        "inertia": 0.5,
+        "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+        "loads": [{"type": "viscous", "coefficient": 0.3}],
+    },
+    "governor": {
+        "type": "direct",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 5.0,
+        "damping": 200.0,
+        "friction": 0.0,
+        "ratio": 0.16,
+        "stroke": [0.02, 0.08],
+        "valve": {"open_at": 0.02, "closed_at": 0.08},
+    },
     "scenario": {"initial": {"omega": 112.86}, "duration": 5.0, "external_load": 0.0},
     "solver": TIGHT,
 }
@@ -61,9 +71,18 @@ DIRECT = {
 # |lambda| ~ 53 1/s, ~25x the hunting frequency) and a servo; pilot neutral at the spring's free position.
 INDIRECT = {
     "machine": {"inertia": 0.5, "drive": {"type": "constant", "torque": 100.0}},
-    "governor": {"type": "indirect", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 1.0,
-                 "damping": 300.0, "ratio": 0.16, "spring": {"stiffness": 10000.0, "free_position": 0.04},
-                 "stroke": [0.02, 0.08], "pilot_neutral": 0.04, "servo": {"gain": 400.0}},
+    "governor": {
+        "type": "indirect",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 1.0,
+        "damping": 300.0,
+        "ratio": 0.16,
+        "spring": {"stiffness": 10000.0, "free_position": 0.04},
+        "stroke": [0.02, 0.08],
+        "pilot_neutral": 0.04,
+        "servo": {"gain": 400.0},
+    },
     "scenario": {"initial": {"omega": 65.0}, "duration": 30.0, "external_load": 50.0},
     "solver": TIGHT,
 }
@@ -109,23 +128,29 @@ def test_direct_governor_stability_boundary_growth_rate_and_period(factor):
     critical = critical_damping(base, point)
     assert critical is not None and 10.0 < critical < 200.0
     duration = 25.0
-    model = model_of(scene(DIRECT, governor__damping=factor * critical, scenario__duration=duration,
-                           scenario__initial={"omega": 1.002 * point.speed, "sleeve": point.sleeve}))
+    model = model_of(
+        scene(
+            DIRECT,
+            governor__damping=factor * critical,
+            scenario__duration=duration,
+            scenario__initial={"omega": 1.002 * point.speed, "sleeve": point.sleeve},
+        )
+    )
     # the operating point does not depend on the damping
     assert operating_point(model, 0.0).speed == pytest.approx(point.speed, rel=1e-12)
     linear = linear_stability(model, point)
     assert linear.stable == (factor > 1.0)
     fast = [value for value in linear.eigenvalues if value.imag == 0.0]
-    assert len(fast) == 1 and fast[0].real < -5.0               # a fast real mode, gone after 3 s
+    assert len(fast) == 1 and fast[0].real < -5.0  # a fast real mode, gone after 3 s
     tr = simulate_complete(model)
     t = np.arange(3.0, duration, 1e-3)
     states = tr(t)
     rate, period, count = envelope(t, states[1] - point.speed)
     assert count >= 30
     if factor < 1.0:
-        assert rate > 0.02                                        # grows below the critical damping
+        assert rate > 0.02  # grows below the critical damping
     else:
-        assert rate < -0.02                                       # decays above it
+        assert rate < -0.02  # decays above it
     assert rate == pytest.approx(linear.dominant.real, abs=0.05 * abs(linear.dominant.real) + 2e-3)
     assert period == pytest.approx(linear.period, rel=0.01)
     assert period == pytest.approx(2.0 * math.pi / abs(linear.dominant.imag), rel=0.01)
@@ -148,7 +173,12 @@ def hand_polynomial(model, point) -> np.ndarray:
         a''    = [2 l sin a (F - c_s 2 l sin a a') - 2 M l^2 sin 2a a'^2] / (2 m l^2 + 4 M l^2 sin^2 a)
         F      = m l (n omega)^2 cos a - (m + M) g."""
     machine, gov = model.scene.machine, model.scene.governor
-    J, M0, w0, c = machine.inertia, machine.drive.stall_torque, machine.drive.no_load_speed, machine.loads[0].coefficient
+    J, M0, w0, c = (
+        machine.inertia,
+        machine.drive.stall_torque,
+        machine.drive.no_load_speed,
+        machine.loads[0].coefficient,
+    )
     m, l, M, n, cs = gov.ball_mass, gov.arm_length, gov.sleeve_mass, gov.ratio, gov.damping
     slope = -1.0 / (gov.valve.closed_at - gov.valve.open_at)
     w, z = point.speed, point.sleeve
@@ -158,7 +188,7 @@ def hand_polynomial(model, point) -> np.ndarray:
     j11 = (point.throttle * (-M0 / w0) - c) / J
     j12 = slope * lever * M0 * (1.0 - w / w0) / J
     j31 = lever * 2.0 * m * l * n * n * w * math.cos(a) / mass
-    j32 = lever * (-m * l * (n * w) ** 2 * math.sin(a)) / mass            # F = 0 at the equilibrium
+    j32 = lever * (-m * l * (n * w) ** 2 * math.sin(a)) / mass  # F = 0 at the equilibrium
     j33 = -cs * lever * lever / mass
     # det(p I - J) for J = [[j11, j12, 0], [0, 0, 1], [j31, j32, j33]]
     return np.array([1.0, -(j11 + j33), j11 * j33 - j32, j11 * j32 - j12 * j31])
@@ -180,8 +210,12 @@ def test_vyshnegradsky_criterion_matches_eigenvalues_and_hand_cubic(factor):
     assert A == pytest.approx(a2 / a0 ** (1.0 / 3.0), rel=1e-7)
     assert B == pytest.approx(a1 / a0 ** (2.0 / 3.0), rel=1e-7)
     # the normalised cubic q^3 + A q^2 + B q + 1 has the roots lambda / a0^(1/3)
-    np.testing.assert_allclose(np.sort_complex(np.roots([1.0, A, B, 1.0]) * a0 ** (1.0 / 3.0)),
-                               np.sort_complex(linear.eigenvalues), rtol=1e-7, atol=1e-9)
+    np.testing.assert_allclose(
+        np.sort_complex(np.roots([1.0, A, B, 1.0]) * a0 ** (1.0 / 3.0)),
+        np.sort_complex(linear.eigenvalues),
+        rtol=1e-7,
+        atol=1e-9,
+    )
     # A B > 1 exactly on the stable side (margin: 1 % off the boundary moves A B by ~1e-3)
     assert (A * B > 1.0) == linear.stable == (factor > 1.0)
     assert abs(A * B - 1.0) > 1e-4
@@ -221,7 +255,7 @@ def test_indirect_without_feedback_hunts_with_the_predicted_period():
     assert linear.state_names == ("omega", "arm_angle", "arm_rate", "servo")
     assert not linear.stable and linear.dominant.real > 0.0
     _, _, p2, p1, p0 = linear.polynomial
-    assert abs(p1) < 1e-9 * math.sqrt(p2 * p0)                 # no p^1 coefficient (k_c = 0)
+    assert abs(p1) < 1e-9 * math.sqrt(p2 * p0)  # no p^1 coefficient (k_c = 0)
     assert linear.dominant.real < 0.05 * abs(linear.dominant.imag)  # slow growth: nearly neutral
     # the ideal-sensor formula
     sensor = model.governor.sensor
@@ -236,23 +270,32 @@ def test_indirect_without_feedback_hunts_with_the_predicted_period():
     states = tr(t)
     rate, period, count = envelope(t, states[1] - set_speed)
     assert count >= 15
-    assert rate > 0.0                                          # hunting does not die out
+    assert rate > 0.0  # hunting does not die out
     assert period == pytest.approx(linear.period, rel=0.01)
     assert period == pytest.approx(ideal, rel=0.03)
     assert rate == pytest.approx(linear.dominant.real, abs=0.05 * abs(linear.dominant.real) + 2e-3)
-    assert {mode for _, mode in tr.modes} == {("free", "free")}   # no stop reached, sleeve or servo
+    assert {mode for _, mode in tr.modes} == {("free", "free")}  # no stop reached, sleeve or servo
 
 
 # ---------------------------------------------------------------------------------------------
 # 4: isodromic feedback is astatic
 
 
-ISODROMIC = scene(INDIRECT, machine={"inertia": 0.5,
-                                     "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-                                     "loads": [{"type": "viscous", "coefficient": 0.3}]},
-                  governor__feedback={"type": "isodromic", "gain": 0.002, "time_constant": 0.5},
-                  scenario={"initial": {"omega": 65.0}, "duration": 10.0, "external_load": 30.0,
-                            "load_events": [{"time": 0.5, "torque": 40.0}]})
+ISODROMIC = scene(
+    INDIRECT,
+    machine={
+        "inertia": 0.5,
+        "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+        "loads": [{"type": "viscous", "coefficient": 0.3}],
+    },
+    governor__feedback={"type": "isodromic", "gain": 0.002, "time_constant": 0.5},
+    scenario={
+        "initial": {"omega": 65.0},
+        "duration": 10.0,
+        "external_load": 30.0,
+        "load_events": [{"time": 0.5, "torque": 40.0}],
+    },
+)
 
 
 def test_isodromic_feedback_returns_to_the_set_speed_with_decaying_oscillation():
@@ -260,7 +303,7 @@ def test_isodromic_feedback_returns_to_the_set_speed_with_decaying_oscillation()
     set_speed = base.governor.set_speed()
     model = model_of(scene(ISODROMIC, scenario__initial={"omega": set_speed}))
     before, after = operating_point(model, 30.0), operating_point(model, 40.0)
-    assert before.speed == after.speed == pytest.approx(set_speed, rel=1e-12)     # astatic statics
+    assert before.speed == after.speed == pytest.approx(set_speed, rel=1e-12)  # astatic statics
     assert after.servo > before.servo + 0.05
     linear = linear_stability(model, after)
     assert linear.stable and linear.period < 5.0
@@ -270,18 +313,18 @@ def test_isodromic_feedback_returns_to_the_set_speed_with_decaying_oscillation()
     # before the step the machine sits at the set speed
     assert tr(0.5)[1] == pytest.approx(set_speed, abs=1e-9)
     times, magnitudes, signs = extrema(t, states[1] - set_speed)
-    keep = magnitudes > 1e-6                                   # above the integration noise
+    keep = magnitudes > 1e-6  # above the integration noise
     times, magnitudes, signs = times[keep], magnitudes[keep], signs[keep]
     assert times.size >= 4
-    assert signs[0] < 0                                        # more load: the speed dips first
-    assert np.all(signs[1:] * signs[:-1] < 0)                  # it oscillates ...
-    assert np.all(np.diff(magnitudes) < 0.0)                   # ... with decreasing peaks
+    assert signs[0] < 0  # more load: the speed dips first
+    assert np.all(signs[1:] * signs[:-1] < 0)  # it oscillates ...
+    assert np.all(np.diff(magnitudes) < 0.0)  # ... with decreasing peaks
     assert magnitudes[0] > 1.0
     # back at the set speed: the envelope exp(Re lambda t) predicts ~5e-5 rad/s after 9 s
     end = tr(10.0)
     assert end[1] == pytest.approx(set_speed, abs=1e-3)
     columns = model.columns(np.array([10.0]), end[:, None])
-    assert columns["sleeve"][0] == pytest.approx(0.04, abs=1e-6)   # sleeve back at the pilot neutral
+    assert columns["sleeve"][0] == pytest.approx(0.04, abs=1e-6)  # sleeve back at the pilot neutral
     assert columns["feedback_shift"][0] == pytest.approx(0.0, abs=1e-6)
     assert columns["servo"][0] == pytest.approx(after.servo, abs=1e-4)
     assert sleeve_modes(tr) == {"free"} and tr.stats.events == 0
@@ -300,7 +343,7 @@ def test_rigid_feedback_counterpart_leaves_the_predicted_droop():
     assert droop < -0.5
     tr = simulate_complete(model)
     assert tr(10.0)[1] == pytest.approx(after.speed, abs=1e-3)
-    assert sleeve_modes(tr) == {"free"}                         # the shortened stroke was not reached
+    assert sleeve_modes(tr) == {"free"}  # the shortened stroke was not reached
 
 
 # ---------------------------------------------------------------------------------------------
@@ -311,7 +354,12 @@ def stuck_speed(model, throttle: float, load: float) -> tuple[float, float]:
     """Steady speed and time constant of DIRECT's machine at a fixed throttle:
     J omega' = throttle M0 (1 - omega / w0) - c omega - L."""
     machine = model.scene.machine
-    J, M0, w0, c = machine.inertia, machine.drive.stall_torque, machine.drive.no_load_speed, machine.loads[0].coefficient
+    J, M0, w0, c = (
+        machine.inertia,
+        machine.drive.stall_torque,
+        machine.drive.no_load_speed,
+        machine.loads[0].coefficient,
+    )
     slope = throttle * M0 / w0 + c
     return (throttle * M0 - load) / slope, J / slope
 
@@ -327,7 +375,7 @@ def test_sleeve_sticks_inside_the_insensitivity_band(size):
     base = model_of(data)
     point = operating_point(base, 0.0)
     sensor = base.governor.sensor
-    band_low = sensor.equilibrium_speed(point.sleeve, -friction)     # lower edge of the insensitivity band
+    band_low = sensor.equilibrium_speed(point.sleeve, -friction)  # lower edge of the insensitivity band
     assert band_low < point.speed - 0.5
     # the load that takes the stuck machine a given distance towards (or beyond) the band's edge
     omega_unloaded, tau = stuck_speed(base, point.throttle, 0.0)
@@ -336,9 +384,14 @@ def test_sleeve_sticks_inside_the_insensitivity_band(size):
     target = point.speed + (0.4 if size == "inside-band" else 3.0) * (band_low - point.speed)
     load = (target - point.speed) / per_load
     duration = 0.2 + 8.0 * tau
-    model = model_of(scene(data, scenario__duration=duration,
-                           scenario__initial={"omega": point.speed, "sleeve": point.sleeve},
-                           scenario__load_events=[{"time": 0.2, "torque": load}]))
+    model = model_of(
+        scene(
+            data,
+            scenario__duration=duration,
+            scenario__initial={"omega": point.speed, "sleeve": point.sleeve},
+            scenario__load_events=[{"time": 0.2, "torque": load}],
+        )
+    )
     tr = simulate_complete(model)
     assert tr.modes[0] == (0.0, ("stuck", ""))
     t = np.linspace(0.0, duration, 20001)
@@ -366,29 +419,40 @@ def test_sleeve_sticks_inside_the_insensitivity_band(size):
 
 def test_static_friction_breakaway_time():
     kinetic, static = 1.0, 2.0
-    data = scene(DIRECT, governor__friction=kinetic, governor__static_friction=static,
-                 solver={"method": "DOP853", "rtol": 1e-11, "atol": 1e-12})
+    data = scene(
+        DIRECT,
+        governor__friction=kinetic,
+        governor__static_friction=static,
+        solver={"method": "DOP853", "rtol": 1e-11, "atol": 1e-12},
+    )
     point = operating_point(model_of(data), 0.0)
     t_step, load, duration = 0.2, 6.0, 2.0
-    model = model_of(scene(data, scenario__duration=duration,
-                           scenario__initial={"omega": point.speed, "sleeve": point.sleeve},
-                           scenario__load_events=[{"time": t_step, "torque": load}]))
+    model = model_of(
+        scene(
+            data,
+            scenario__duration=duration,
+            scenario__initial={"omega": point.speed, "sleeve": point.sleeve},
+            scenario__load_events=[{"time": t_step, "torque": load}],
+        )
+    )
     sensor = model.governor.sensor
     a0 = sensor.arm_angle(point.sleeve)
     omega_inf, tau = stuck_speed(model, point.throttle, load)
-    omega_static = sensor.equilibrium_speed(point.sleeve, -static)   # lift(a0, omega) = -F_s
+    omega_static = sensor.equilibrium_speed(point.sleeve, -static)  # lift(a0, omega) = -F_s
     omega_kinetic = sensor.equilibrium_speed(point.sleeve, -kinetic)
     assert sensor.lift(a0, omega_static) == pytest.approx(-static, abs=1e-10)
     assert omega_inf < omega_static < omega_kinetic < point.speed
+
     # stuck trajectory: omega = omega_inf + (omega_0 - omega_inf) exp(-(t - t_step) / tau)
     def crossing(omega):
         return t_step + tau * math.log((point.speed - omega_inf) / (omega - omega_inf))
+
     tr = simulate_complete(model)
     t_event, name = tr.events[0]
     assert name == "sleeve breaks away downwards"
     assert tr.modes[1] == (t_event, ("down", ""))
     assert t_event == pytest.approx(crossing(omega_static), abs=1e-6)
-    assert t_event - crossing(omega_kinetic) > 1e-2           # not at the kinetic friction level
+    assert t_event - crossing(omega_kinetic) > 1e-2  # not at the kinetic friction level
     assert sensor.lift(a0, tr(t_event)[1]) == pytest.approx(-static, abs=1e-6)
     # until then the sleeve did not move at all
     before = tr(np.linspace(0.0, t_event, 2001))
@@ -398,20 +462,34 @@ def test_static_friction_breakaway_time():
 # ---------------------------------------------------------------------------------------------
 # 6: hard stops of the sleeve
 
-STOPS = scene(DIRECT, machine={"inertia": 0.5, "drive": {"type": "constant", "torque": 100.0},
-                               "loads": [{"type": "viscous", "coefficient": 0.3}]},
-              governor__valve={"open_at": 0.02, "closed_at": 0.14},        # still half open at the high stop
-              scenario={"initial": {"omega": 114.0}, "duration": 12.0, "external_load": 40.0,
-                        "load_events": [{"time": 0.5, "torque": 0.0}, {"time": 8.0, "torque": 40.0}]})
+STOPS = scene(
+    DIRECT,
+    machine={
+        "inertia": 0.5,
+        "drive": {"type": "constant", "torque": 100.0},
+        "loads": [{"type": "viscous", "coefficient": 0.3}],
+    },
+    governor__valve={"open_at": 0.02, "closed_at": 0.14},  # still half open at the high stop
+    scenario={
+        "initial": {"omega": 114.0},
+        "duration": 12.0,
+        "external_load": 40.0,
+        "load_events": [{"time": 0.5, "torque": 0.0}, {"time": 8.0, "torque": 40.0}],
+    },
+)
 
 
 def stops_run(stop: str, kinetic: float = 0.0, static: float = 0.0, solver: dict = TIGHT):
     """STOPS from its loaded operating point (40 N m); the load then drops to 0 (stop='high': the sleeve
     rests on its high stop, where the valve still passes enough to overspeed) or rises to 80 N m
     (stop='low': more than the open valve can carry), and returns to 40 N m at t = 8 s."""
-    data = scene(STOPS, governor__friction=kinetic, governor__static_friction=static, solver=solver,
-                 scenario__load_events=[{"time": 0.5, "torque": 0.0 if stop == "high" else 80.0},
-                                        {"time": 8.0, "torque": 40.0}])
+    data = scene(
+        STOPS,
+        governor__friction=kinetic,
+        governor__static_friction=static,
+        solver=solver,
+        scenario__load_events=[{"time": 0.5, "torque": 0.0 if stop == "high" else 80.0}, {"time": 8.0, "torque": 40.0}],
+    )
     base = model_of(data)
     loaded = operating_point(base, 40.0)
     assert loaded.limited == ""
@@ -427,14 +505,14 @@ def test_sleeve_rests_on_its_stop_without_chattering_and_leaves_when_pulled_off(
     sensor = model.governor.sensor
     z_low, z_high = sensor.stroke
     z_stop, a_stop = (z_high, sensor.stop_angles()[1]) if stop == "high" else (z_low, sensor.stop_angles()[0])
-    sign = 1.0 if stop == "high" else -1.0                        # direction of the stop from the stroke
+    sign = 1.0 if stop == "high" else -1.0  # direction of the stop from the stroke
     assert tr.stats.events < 20
     hits = [time for time, name in tr.events if name == f"sleeve reaches the {stop} stop"]
     leaves = [time for time, name in tr.events if name == f"sleeve leaves the {stop} stop"]
     assert len(hits) >= 1 and len(leaves) >= 1
     t_hit = hits[0]
     t_leave = next(time for time in leaves if time > t_hit)
-    assert 0.5 < t_hit < 3.0 and 8.0 < t_leave < 10.0          # leaves only once the load is back
+    assert 0.5 < t_hit < 3.0 and 8.0 < t_leave < 10.0  # leaves only once the load is back
     # one long rest on the stop: no mode changes in between
     assert [time for time, _ in tr.events if t_hit < time < t_leave] == []
     assert mode_at(tr, 0.5 * (t_hit + t_leave))[0] == stop
@@ -453,9 +531,9 @@ def test_sleeve_rests_on_its_stop_without_chattering_and_leaves_when_pulled_off(
     # the guard is located on the dense output, so this holds to the root finder's precision
     omega_leave = sensor.equilibrium_speed(z_stop, -sign * static)
     assert tr(t_leave)[1] == pytest.approx(omega_leave, rel=1e-12)
-    assert np.all(sign * (states[1, on & (t < 8.0)] - omega_leave) > 0.0)   # held there until the load returns
+    assert np.all(sign * (states[1, on & (t < 8.0)] - omega_leave) > 0.0)  # held there until the load returns
     assert mode_at(tr, t_leave)[0] == ("free" if static == 0.0 else {"high": "down", "low": "up"}[stop])
-    assert sign * (columns["sleeve"][-1] - z_stop) < -1e-2       # and really moves off
+    assert sign * (columns["sleeve"][-1] - z_stop) < -1e-2  # and really moves off
 
 
 def test_rk4_rest_on_the_high_stop_is_exact_and_has_the_same_events():
@@ -465,11 +543,12 @@ def test_rk4_rest_on_the_high_stop_is_exact_and_has_the_same_events():
     t = np.arange(t_hit, 8.0, 1e-4)[1:]
     states = tr(t)
     assert np.all(states[3] == 0.0)
-    assert np.all(states[2] == model.governor.sensor.stop_angles()[1])   # as DOP853 delivers
+    assert np.all(states[2] == model.governor.sensor.stop_angles()[1])  # as DOP853 delivers
     # the same events at the same times (RK4 error ~(h |lambda|)^4 ~ 1e-8 relative, measured 3e-10 s)
     assert [name for _, name in tr.events] == [name for _, name in reference.events]
-    np.testing.assert_allclose([time for time, _ in tr.events], [time for time, _ in reference.events],
-                               rtol=0, atol=1e-7)
+    np.testing.assert_allclose(
+        [time for time, _ in tr.events], [time for time, _ in reference.events], rtol=0, atol=1e-7
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -477,9 +556,16 @@ def test_rk4_rest_on_the_high_stop_is_exact_and_has_the_same_events():
 
 
 def test_servo_saturates_on_its_high_stop_under_a_big_load():
-    data = scene(ISODROMIC, governor__servo={"gain": 400.0, "max_speed": 0.5},
-                 scenario={"initial": {"omega": 65.0}, "duration": 10.0, "external_load": 30.0,
-                           "load_events": [{"time": 0.5, "torque": 100.0}, {"time": 6.0, "torque": 30.0}]})
+    data = scene(
+        ISODROMIC,
+        governor__servo={"gain": 400.0, "max_speed": 0.5},
+        scenario={
+            "initial": {"omega": 65.0},
+            "duration": 10.0,
+            "external_load": 30.0,
+            "load_events": [{"time": 0.5, "torque": 100.0}, {"time": 6.0, "torque": 30.0}],
+        },
+    )
     base = model_of(data)
     model = model_of(scene(data, scenario__initial={"omega": base.governor.set_speed()}))
     overloaded = operating_point(model, 100.0)
@@ -514,8 +600,15 @@ def test_servo_saturates_on_its_high_stop_under_a_big_load():
 
 
 def test_rk4_converges_to_dop853_at_fourth_order():
-    data = scene(DIRECT, scenario={"initial": {"omega": 112.86}, "duration": 3.0, "external_load": 0.0,
-                                   "load_events": [{"time": 0.5, "torque": 10.0}]})
+    data = scene(
+        DIRECT,
+        scenario={
+            "initial": {"omega": 112.86},
+            "duration": 3.0,
+            "external_load": 0.0,
+            "load_events": [{"time": 0.5, "torque": 10.0}],
+        },
+    )
     reference = simulate_complete(model_of(scene(data, solver=TIGHT)))
     t = np.linspace(0.0, 3.0, 3001)
     exact = reference(t)
@@ -526,7 +619,7 @@ def test_rk4_converges_to_dop853_at_fourth_order():
         # the run is governed for real: the sleeve moves by millimetres after the load step
         assert np.ptp(model_of(data).columns(t, tr(t))["sleeve"]) > 1e-3
     coarse, fine = errors
-    np.testing.assert_array_less(fine, [1e-10, 2e-9, 1e-10, 4e-9])   # phi, omega, a, a'
+    np.testing.assert_array_less(fine, [1e-10, 2e-9, 1e-10, 4e-9])  # phi, omega, a, a'
     ratio = coarse / fine
     assert np.all((12.0 < ratio) & (ratio < 20.0)), ratio
 
@@ -539,9 +632,12 @@ def table_drive_scene(ripple: float, damping: float = 200.0) -> dict:
     """STOPS' machine with the constant drive replaced by a table over one turn with a relative ripple."""
     angles = [float(a) for a in np.arange(0.0, 360.0, 15.0)]
     torques = [100.0 * (1.0 + ripple * math.cos(math.radians(a))) for a in angles]
-    return scene(STOPS, machine__drive={"type": "table", "angle_deg": angles, "torque": torques},
-                 governor__damping=damping,
-                 scenario={"initial": {"omega": 114.7}, "duration": 1.0, "external_load": 40.0})
+    return scene(
+        STOPS,
+        machine__drive={"type": "table", "angle_deg": angles, "torque": torques},
+        governor__damping=damping,
+        scenario={"initial": {"omega": 114.7}, "duration": 1.0, "external_load": 40.0},
+    )
 
 
 def match(multipliers: np.ndarray, reference: np.ndarray) -> np.ndarray:
@@ -561,17 +657,27 @@ def test_floquet_multipliers_close_to_averaged_model():
     floquet = floquet_stability(model, point, linear, rtol=1e-13)
     assert floquet.residual < 1e-8
     assert floquet.cycle_time == pytest.approx(2.0 * math.pi / point.speed, rel=1e-3)
-    np.testing.assert_allclose(floquet.averaged_multipliers, np.exp(linear.eigenvalues * floquet.cycle_time),
-                               rtol=1e-14)
-    np.testing.assert_allclose(match(floquet.multipliers, floquet.averaged_multipliers),
-                               floquet.averaged_multipliers, rtol=0, atol=2e-5)
+    np.testing.assert_allclose(
+        floquet.averaged_multipliers, np.exp(linear.eigenvalues * floquet.cycle_time), rtol=1e-14
+    )
+    np.testing.assert_allclose(
+        match(floquet.multipliers, floquet.averaged_multipliers), floquet.averaged_multipliers, rtol=0, atol=2e-5
+    )
     assert floquet.stable == linear.stable
     # the orbit: integrating the machine in time from it for one turn comes back to it
     rhs = model.rhs(LoadPiece(0.0, math.inf, 40.0, 0.0), None, ("free", ""))
-    turn = lambda t, y: y[0] - 2.0 * math.pi                  # noqa: E731
+    turn = lambda t, y: y[0] - 2.0 * math.pi  # noqa: E731
     turn.terminal, turn.direction = True, 1.0
-    solution = integrate.solve_ivp(rhs, (0.0, 1.0), np.concatenate([[0.0], floquet.orbit]), method="DOP853",
-                                   rtol=1e-12, atol=1e-13, events=turn, dense_output=True)
+    solution = integrate.solve_ivp(
+        rhs,
+        (0.0, 1.0),
+        np.concatenate([[0.0], floquet.orbit]),
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-13,
+        events=turn,
+        dense_output=True,
+    )
     assert solution.t_events[0].size == 1
     assert solution.t_events[0][0] == pytest.approx(floquet.cycle_time, rel=1e-9)
     end = solution.y_events[0][0][1:]
@@ -586,8 +692,9 @@ def test_floquet_default_tolerance_multipliers_close_to_averaged_model():
     point = operating_point(model, 40.0)
     linear = linear_stability(model, point)
     floquet = floquet_stability(model, point, linear)
-    np.testing.assert_allclose(match(floquet.multipliers, floquet.averaged_multipliers),
-                               floquet.averaged_multipliers, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(
+        match(floquet.multipliers, floquet.averaged_multipliers), floquet.averaged_multipliers, rtol=0, atol=1e-4
+    )
 
 
 def test_floquet_default_tolerance_verdict_near_the_boundary():

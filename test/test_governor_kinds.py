@@ -29,19 +29,34 @@ from mech_regulator.scene import SceneError, validate_scene
 G = 9.81  # [m/s^2]
 M0, W0, C = 200.0, 150.0, 0.3  # linear motor M_d = M0 (1 - omega / W0) [N m], [rad/s]; viscous load C omega [N m s]
 
-HARTNELL = {"type": "hartnell", "ball_mass": 1.0, "ball_arm": 0.1, "sleeve_arm": 0.08, "pivot_radius": 0.12,
-            "sleeve_mass": 2.0, "spring": {"stiffness": 3000.0, "free_position": -0.03}, "damping": 100.0,
-            "ratio": 0.2, "stroke": [-0.02, 0.03], "valve": {"open_at": -0.02, "closed_at": 0.03}}
+HARTNELL = {
+    "type": "hartnell",
+    "ball_mass": 1.0,
+    "ball_arm": 0.1,
+    "sleeve_arm": 0.08,
+    "pivot_radius": 0.12,
+    "sleeve_mass": 2.0,
+    "spring": {"stiffness": 3000.0, "free_position": -0.03},
+    "damping": 100.0,
+    "ratio": 0.2,
+    "stroke": [-0.02, 0.03],
+    "valve": {"open_at": -0.02, "closed_at": 0.03},
+}
 PI = {"type": "pi", "set_speed": 100.0, "gain": 2.0, "integral_time": 0.5}  # [rad/s], [-], [s]
 
 
 def machine_with(governor: dict, scenario: dict | None = None) -> dict:
     """A constant-J machine (linear motor, viscous load) with the given governor."""
-    return {"machine": {"inertia": 0.5, "drive": {"type": "linear_motor", "stall_torque": M0, "no_load_speed": W0},
-                        "loads": [{"type": "viscous", "coefficient": C}]},
-            "governor": governor,
-            "scenario": scenario or {"initial": {"omega": 100.0}, "duration": 1.0, "external_load": 5.0},
-            "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12, "sample_rate": 100.0, "path": "reference"}}
+    return {
+        "machine": {
+            "inertia": 0.5,
+            "drive": {"type": "linear_motor", "stall_torque": M0, "no_load_speed": W0},
+            "loads": [{"type": "viscous", "coefficient": C}],
+        },
+        "governor": governor,
+        "scenario": scenario or {"initial": {"omega": 100.0}, "duration": 1.0, "external_load": 5.0},
+        "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12, "sample_rate": 100.0, "path": "reference"},
+    }
 
 
 def hartnell_speed(governor: dict, z: float) -> float:
@@ -75,14 +90,26 @@ def jacobi_terms(sensor, theta: float, rate: float, omega: float) -> list[float]
     m, a, b, r0, M = sensor.ball_mass, sensor.ball_arm, sensor.sleeve_arm, sensor.pivot_radius, sensor.sleeve_mass
     omega_g, z = sensor.ratio * omega, b * math.sin(theta)
     radius = r0 + a * math.sin(theta)
-    return [(m * a * a + 0.5 * M * b * b * math.cos(theta) ** 2) * rate * rate, -m * radius ** 2 * omega_g ** 2,
-            2 * m * G * a * math.cos(theta), M * G * z, 0.5 * sensor.stiffness * (z - sensor.free_position) ** 2]
+    return [
+        (m * a * a + 0.5 * M * b * b * math.cos(theta) ** 2) * rate * rate,
+        -m * radius**2 * omega_g**2,
+        2 * m * G * a * math.cos(theta),
+        M * G * z,
+        0.5 * sensor.stiffness * (z - sensor.free_position) ** 2,
+    ]
 
 
 def jacobi_drift(sensor, acceleration, omega: float, theta0: float, rate0: float) -> tuple[float, np.ndarray]:
     """Largest |E(t) - E(0)| over 2 s relative to the sum of |terms of E| at t = 0, and the angles visited."""
-    solution = integrate.solve_ivp(lambda t, y: [y[1], acceleration(y[0], y[1])], (0.0, 2.0), [theta0, rate0],
-                                   method="DOP853", rtol=1e-11, atol=1e-13, dense_output=True)
+    solution = integrate.solve_ivp(
+        lambda t, y: [y[1], acceleration(y[0], y[1])],
+        (0.0, 2.0),
+        [theta0, rate0],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-13,
+        dense_output=True,
+    )
     assert solution.success
     theta, rate = solution.sol(np.linspace(0.0, 2.0, 2001))
     energies = np.array([sum(jacobi_terms(sensor, t, r, omega)) for t, r in zip(theta, rate)])
@@ -99,8 +126,8 @@ def test_hartnell_equation_of_motion_conserves_the_jacobi_integral():
     assert drift < 1e-9
 
     def without_the_sleeve_inertia_term(theta, rate):  # the same test has power: drop M b^2 sin cos t'^2
-        mass = 2 * sensor.ball_mass * sensor.ball_arm ** 2 + sensor.sleeve_mass * sensor.sleeve_lever(theta) ** 2
-        extra = sensor.sleeve_mass * sensor.sleeve_arm ** 2 * math.sin(theta) * math.cos(theta) * rate * rate
+        mass = 2 * sensor.ball_mass * sensor.ball_arm**2 + sensor.sleeve_mass * sensor.sleeve_lever(theta) ** 2
+        extra = sensor.sleeve_mass * sensor.sleeve_arm**2 * math.sin(theta) * math.cos(theta) * rate * rate
         return sensor.arm_acceleration(theta, rate, omega, 0.0) - extra / mass
 
     assert jacobi_drift(sensor, without_the_sleeve_inertia_term, omega, theta0, 5.0)[0] > 1e-4
@@ -123,8 +150,12 @@ def test_hartnell_outline_keeps_its_arms_and_lifts_the_sleeve_by_z():
 
 
 def test_pi_governor_leaves_no_speed_error_after_a_load_step():
-    scenario = {"initial": {"omega": 100.0}, "duration": 15.0, "external_load": 5.0,
-                "load_events": [{"time": 1.0, "torque": 20.0}]}
+    scenario = {
+        "initial": {"omega": 100.0},
+        "duration": 15.0,
+        "external_load": 5.0,
+        "load_events": [{"time": 1.0, "torque": 20.0}],
+    }
     speed = simulate_complete(model_of(machine_with(PI, scenario)))(15.0)[1]
     assert speed == pytest.approx(PI["set_speed"], abs=1e-6)
     # the same law without its integral part (T_i huge) is a proportional governor: it leaves the droop
@@ -157,13 +188,20 @@ def test_pi_operating_point_beyond_the_valve_s_travel_sits_on_its_stop():
     assert M0 * (1.0 - point.speed / W0) - C * point.speed - 60.0 == pytest.approx(0.0, abs=1e-9)
 
 
-@pytest.mark.parametrize("governor, key, expected", [
-    ({**HARTNELL, "stroke": [-0.02, 0.09]}, "stroke", "-sleeve_arm < z_low < z_high < sleeve_arm"),
-    ({**HARTNELL, "pivot_radius": 0.05}, "pivot_radius", "expected more than ball_arm"),
-    ({**HARTNELL, "sleeve_mass": 0.1, "spring": {"stiffness": 1000.0, "free_position": 0.05}}, "spring",
-     "does not hold the sleeve down"),
-    ({**PI, "travel": [0.5, 0.2]}, "travel", "expected 0 <= low < high <= 1"),
-], ids=["hartnell stroke", "hartnell pivot", "hartnell spring", "pi travel"])
+@pytest.mark.parametrize(
+    "governor, key, expected",
+    [
+        ({**HARTNELL, "stroke": [-0.02, 0.09]}, "stroke", "-sleeve_arm < z_low < z_high < sleeve_arm"),
+        ({**HARTNELL, "pivot_radius": 0.05}, "pivot_radius", "expected more than ball_arm"),
+        (
+            {**HARTNELL, "sleeve_mass": 0.1, "spring": {"stiffness": 1000.0, "free_position": 0.05}},
+            "spring",
+            "does not hold the sleeve down",
+        ),
+        ({**PI, "travel": [0.5, 0.2]}, "travel", "expected 0 <= low < high <= 1"),
+    ],
+    ids=["hartnell stroke", "hartnell pivot", "hartnell spring", "pi travel"],
+)
 def test_bad_governor_entries_are_named(governor, key, expected):
     with pytest.raises(SceneError) as error:
         validate_scene(machine_with(governor))

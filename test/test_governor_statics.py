@@ -44,22 +44,38 @@ G = 9.81  # [m/s^2]
 # The machine of the governor notes: constant J, linear motor M_d = M0 (1 - omega / W0), viscous load C omega.
 M0, W0, C = 200.0, 150.0, 0.3  # [N m], [rad/s], [N m s]
 
-PORTER = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0,  # [kg], [m], [kg]
-          "damping": 200.0, "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08],    # [N s/m], [N], [-], [m]
-          "valve": {"open_at": 0.02, "closed_at": 0.08}}                                # [m]
-SPRUNG = {**PORTER, "sleeve_mass": 2.0, "spring": {"stiffness": 800.0, "free_position": 0.01},  # [kg], [N/m], [m]
-          "ratio": 0.2}
+PORTER = {
+    "type": "direct",
+    "ball_mass": 1.0,
+    "arm_length": 0.2,
+    "sleeve_mass": 5.0,  # [kg], [m], [kg]
+    "damping": 200.0,
+    "friction": 0.0,
+    "ratio": 0.16,
+    "stroke": [0.02, 0.08],  # [N s/m], [N], [-], [m]
+    "valve": {"open_at": 0.02, "closed_at": 0.08},
+}  # [m]
+SPRUNG = {
+    **PORTER,
+    "sleeve_mass": 2.0,
+    "spring": {"stiffness": 800.0, "free_position": 0.01},  # [kg], [N/m], [m]
+    "ratio": 0.2,
+}
 WATT = {**PORTER, "sleeve_mass": 0.0, "ratio": 0.05}
 
 
 def governed_model(governor: dict, inertia: float = 0.5, scenario: dict | None = None, solver: dict | None = None):
     """A constant-J machine (linear motor, viscous load) with the given governor."""
-    scene = {"machine": {"inertia": inertia,
-                         "drive": {"type": "linear_motor", "stall_torque": M0, "no_load_speed": W0},
-                         "loads": [{"type": "viscous", "coefficient": C}]},
-             "governor": governor,
-             "scenario": scenario or {"initial": {"omega": 100.0}, "duration": 1.0},
-             "solver": solver or {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11}}
+    scene = {
+        "machine": {
+            "inertia": inertia,
+            "drive": {"type": "linear_motor", "stall_torque": M0, "no_load_speed": W0},
+            "loads": [{"type": "viscous", "coefficient": C}],
+        },
+        "governor": governor,
+        "scenario": scenario or {"initial": {"omega": 100.0}, "duration": 1.0},
+        "solver": solver or {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11},
+    }
     return build_model(validate_scene(scene))
 
 
@@ -148,7 +164,7 @@ def test_equilibrium_speed_matches_closed_form_over_the_stroke(governor):
         assert math.cos(a) == pytest.approx(1.0 - z / (2 * l), rel=1e-14)
         assert abs(sensor.lift(a, omega)) <= 1e-12 * pull(governor, z)
         # and the lift grows with omega as m l cos a omega_g^2: at 1 % more speed it is m h ratio^2 omega^2 (1.01^2 - 1)
-        expected = m * (l - z / 2) * (ratio * omega) ** 2 * (1.01 ** 2 - 1.0)
+        expected = m * (l - z / 2) * (ratio * omega) ** 2 * (1.01**2 - 1.0)
         assert sensor.lift(a, 1.01 * omega) == pytest.approx(expected, rel=1e-10)
         # the inverse: the sleeve position for that speed
         assert sensor.equilibrium_sleeve(omega) == pytest.approx(z, abs=1e-12)
@@ -156,7 +172,7 @@ def test_equilibrium_speed_matches_closed_form_over_the_stroke(governor):
         # Watt: the cone height is h = g / omega_g^2 whatever the ball mass
         z = 0.05
         omega_g = ratio * sensor.equilibrium_speed(z)
-        assert G / omega_g ** 2 == pytest.approx(l - z / 2, rel=1e-13)
+        assert G / omega_g**2 == pytest.approx(l - z / 2, rel=1e-13)
 
 
 def test_equilibrium_sleeve_is_clipped_to_the_stroke():
@@ -189,8 +205,13 @@ def jacobi_terms(sensor, a: float, a_dot: float, omega: float) -> list[float]:
     g, omega_g = sensor.gravity, sensor.ratio * omega
     z = 2 * l * (1 - math.cos(a))
     s = math.sin(a)
-    return [(m * l ** 2 + 2 * M * l ** 2 * s ** 2) * a_dot ** 2, -m * l ** 2 * omega_g ** 2 * s ** 2,
-            -2 * m * g * l * math.cos(a), 2 * M * g * l * (1 - math.cos(a)), 0.5 * k * (z - sensor.free_position) ** 2]
+    return [
+        (m * l**2 + 2 * M * l**2 * s**2) * a_dot**2,
+        -m * l**2 * omega_g**2 * s**2,
+        -2 * m * g * l * math.cos(a),
+        2 * M * g * l * (1 - math.cos(a)),
+        0.5 * k * (z - sensor.free_position) ** 2,
+    ]
 
 
 def jacobi_rate(sensor, a: float, a_dot: float, a_ddot: float, omega: float) -> tuple[float, float]:
@@ -199,17 +220,30 @@ def jacobi_rate(sensor, a: float, a_dot: float, a_ddot: float, omega: float) -> 
     g, omega_g = sensor.gravity, sensor.ratio * omega
     s, c = math.sin(a), math.cos(a)
     z = 2 * l * (1 - c)
-    dE_da = (4 * M * l ** 2 * s * c * a_dot ** 2 - 2 * m * l ** 2 * omega_g ** 2 * s * c + 2 * m * g * l * s
-             + 2 * M * g * l * s + k * (z - sensor.free_position) * 2 * l * s)
-    dE_dadot = 2 * (m * l ** 2 + 2 * M * l ** 2 * s ** 2) * a_dot
+    dE_da = (
+        4 * M * l**2 * s * c * a_dot**2
+        - 2 * m * l**2 * omega_g**2 * s * c
+        + 2 * m * g * l * s
+        + 2 * M * g * l * s
+        + k * (z - sensor.free_position) * 2 * l * s
+    )
+    dE_dadot = 2 * (m * l**2 + 2 * M * l**2 * s**2) * a_dot
     return dE_da * a_dot + dE_dadot * a_ddot, abs(dE_da * a_dot) + abs(dE_dadot * a_ddot)
 
 
-def energy_drift(sensor, acceleration, omega: float, a0: float, a_dot0: float,
-                 duration: float) -> tuple[float, np.ndarray]:
+def energy_drift(
+    sensor, acceleration, omega: float, a0: float, a_dot0: float, duration: float
+) -> tuple[float, np.ndarray]:
     """Largest |E(t) - E(0)| relative to the sum of |terms of E| at t = 0, and the arm angles visited."""
-    solution = integrate.solve_ivp(lambda t, y: [y[1], acceleration(y[0], y[1])], (0.0, duration), [a0, a_dot0],
-                                   method="DOP853", rtol=1e-11, atol=1e-13, dense_output=True)
+    solution = integrate.solve_ivp(
+        lambda t, y: [y[1], acceleration(y[0], y[1])],
+        (0.0, duration),
+        [a0, a_dot0],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-13,
+        dense_output=True,
+    )
     assert solution.success
     t = np.linspace(0.0, duration, 2001)
     a, a_dot = solution.sol(t)
@@ -236,7 +270,7 @@ def test_arm_acceleration_conserves_the_jacobi_integral(governor, a_dot0):
 
     drift, angles = energy_drift(sensor, acceleration, omega, a0, a_dot0, 2.0)
     assert 0.05 < angles.min() and angles.max() < 0.5 * math.pi  # stays a governor (arms neither hang nor flip)
-    assert np.ptp(angles) > 0.2                                    # and swings widely [rad]
+    assert np.ptp(angles) > 0.2  # and swings widely [rad]
     assert drift < 1e-9
 
 
@@ -250,8 +284,8 @@ def test_jacobi_test_catches_a_wrong_factor_on_the_sleeve_inertia_term():
 
     def wrong(a, a_dot):
         right = sensor.arm_acceleration(a, a_dot, omega, 0.0)
-        mass = 2 * m * l ** 2 + 4 * M * l ** 2 * math.sin(a) ** 2
-        return right - 2 * M * l ** 2 * math.sin(2 * a) * a_dot ** 2 / mass
+        mass = 2 * m * l**2 + 4 * M * l**2 * math.sin(a) ** 2
+        return right - 2 * M * l**2 * math.sin(2 * a) * a_dot**2 / mass
 
     drift, _ = energy_drift(sensor, wrong, omega, a0, a_dot0, 2.0)
     assert drift > 1e-3
@@ -266,9 +300,9 @@ def test_arm_acceleration_dissipation_is_damping_and_friction_power(governor):
     rng = np.random.default_rng(3)
     for _ in range(50):
         a, a_dot = rng.uniform(0.2, 1.2), rng.uniform(-10.0, 10.0)  # [rad], [rad/s]
-        omega = rng.uniform(60.0, 140.0)                             # [rad/s]
+        omega = rng.uniform(60.0, 140.0)  # [rad/s]
         z_dot = 2 * sensor.arm_length * math.sin(a) * a_dot
-        friction = math.copysign(rng.uniform(0.0, 20.0), z_dot)     # opposing the motion [N]
+        friction = math.copysign(rng.uniform(0.0, 20.0), z_dot)  # opposing the motion [N]
         rate, scale = jacobi_rate(sensor, a, a_dot, sensor.arm_acceleration(a, a_dot, omega, friction), omega)
         assert rate == pytest.approx(-(c * z_dot + friction) * z_dot, abs=1e-12 * scale)
         assert rate < 0.0
@@ -291,10 +325,10 @@ def test_insensitivity_band_uses_static_friction(governor):
         # correction x^2/8 ~ 3e-4 here), all further terms are positive and below x^5
         x = F_s / pull(governor, z)
         band = characteristic.insensitivity[i]
-        assert x ** 3 / 8 * (1 - 1e-6) <= band - x <= x ** 3 / 8 + x ** 5
+        assert x**3 / 8 * (1 - 1e-6) <= band - x <= x**3 / 8 + x**5
     if "spring" not in governor:
         x = F_s / ((governor["ball_mass"] + governor["sleeve_mass"]) * G)
-        np.testing.assert_allclose(characteristic.insensitivity, x, rtol=x ** 2 / 8 + x ** 4)
+        np.testing.assert_allclose(characteristic.insensitivity, x, rtol=x**2 / 8 + x**4)
 
 
 @pytest.mark.parametrize("governor", [PORTER, SPRUNG, WATT], ids=["porter", "spring", "watt"])
@@ -364,9 +398,11 @@ def test_drive_is_scaled_by_the_valve():
 TABLE_VALVE = {"type": "table", "sleeve": [0.02, 0.04, 0.06, 0.08], "throttle": [1.0, 0.8, 0.3, 0.0]}  # [m], [-]
 
 
-@pytest.mark.parametrize("governor", [PORTER, {**SPRUNG, "valve": {"open_at": 0.03, "closed_at": 0.07}},
-                                      {**WATT, "ratio": 0.07, "valve": TABLE_VALVE}],
-                         ids=["porter", "spring-narrow-valve", "watt-table-valve"])
+@pytest.mark.parametrize(
+    "governor",
+    [PORTER, {**SPRUNG, "valve": {"open_at": 0.03, "closed_at": 0.07}}, {**WATT, "ratio": 0.07, "valve": TABLE_VALVE}],
+    ids=["porter", "spring-narrow-valve", "watt-table-valve"],
+)
 @pytest.mark.parametrize("load", [0.0, 5.0, 10.0])  # [N m]
 def test_direct_operating_point_matches_hand_solution(governor, load):
     model = governed_model(governor)
@@ -394,16 +430,22 @@ def test_droop_slope_matches_implicit_derivative():
     assert droop(model).per_unit_load == pytest.approx(dw_dz / f_z, rel=1e-6)
 
 
-@pytest.mark.parametrize("load, stop, throttle", [
-    (25.0, "low", 1.0),    # [N m]: more than the motor carries at the speed that lifts the sleeve off its low stop
-    (-40.0, "high", 0.0),  # [N m]: an overhauling load; throttle 0 leaves C w = -L
-])
+@pytest.mark.parametrize(
+    "load, stop, throttle",
+    [
+        (25.0, "low", 1.0),  # [N m]: more than the motor carries at the speed that lifts the sleeve off its low stop
+        (-40.0, "high", 0.0),  # [N m]: an overhauling load; throttle 0 leaves C w = -L
+    ],
+)
 def test_direct_operating_point_on_a_stop(load, stop, throttle):
     model = governed_model(PORTER)
     stroke_end = PORTER["stroke"][0 if stop == "low" else 1]
     expected = full_throttle_speed(load) if stop == "low" else -load / C  # M0 (1 - w/W0) = C w + L, or C w = -L
-    beyond = expected < speed_closed_form(PORTER, stroke_end) if stop == "low" else \
-        expected > speed_closed_form(PORTER, stroke_end)
+    beyond = (
+        expected < speed_closed_form(PORTER, stroke_end)
+        if stop == "low"
+        else expected > speed_closed_form(PORTER, stroke_end)
+    )
     assert beyond
     point = operating_point(model, load)
     assert point.limited == f"sleeve on its {stop} stop"
@@ -421,9 +463,15 @@ def test_direct_governor_settles_with_the_predicted_static_error():
     speed_0, sleeve_0, _ = hand_direct_point(PORTER, load_0)
     speed_1, sleeve_1, _ = hand_direct_point(PORTER, load_1)
     kick = 2.0  # start 2 rad/s fast with the sleeve where it belongs at the operating point [rad/s]
-    model = governed_model(PORTER, scenario={
-        "initial": {"omega": speed_0 + kick, "sleeve": sleeve_0}, "duration": duration, "external_load": load_0,
-        "load_events": [{"time": t_step, "torque": load_1}]})
+    model = governed_model(
+        PORTER,
+        scenario={
+            "initial": {"omega": speed_0 + kick, "sleeve": sleeve_0},
+            "duration": duration,
+            "external_load": load_0,
+            "load_events": [{"time": t_step, "torque": load_1}],
+        },
+    )
     trajectory = simulate_complete(model)
     assert trajectory.events == []  # frictionless and well inside the stroke: no stops, no mode changes
 
@@ -432,8 +480,11 @@ def test_direct_governor_settles_with_the_predicted_static_error():
     assert linear_0.stable and linear_1.stable and linear_1.dominant.real < -1.0
     arm_0, arm_1 = model.governor.sensor.arm_angle(sleeve_0), model.governor.sensor.arm_angle(sleeve_1)
     tol_0 = 2 * envelope(linear_0.jacobian, np.array([kick, 0.0, 0.0]), t_step) + 1e-6
-    tol_1 = 2 * envelope(linear_1.jacobian, np.array([speed_0 - speed_1, arm_0 - arm_1, 0.0]),
-                         duration - t_step) + tol_0 + 1e-6
+    tol_1 = (
+        2 * envelope(linear_1.jacobian, np.array([speed_0 - speed_1, arm_0 - arm_1, 0.0]), duration - t_step)
+        + tol_0
+        + 1e-6
+    )
     static_error = speed_1 - speed_0  # about -1.47 rad/s
     assert tol_0 < 1e-2 * abs(static_error) and tol_1 < 1e-2 * abs(static_error)
 
@@ -452,11 +503,20 @@ def test_direct_governor_settles_with_the_predicted_static_error():
 # 8. Indirect action
 
 
-INDIRECT = {"type": "indirect", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0,  # [kg], [m], [kg]
-            "damping": 100.0, "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08],     # [N s/m], [N], [-], [m]
-            "pilot_neutral": 0.04, "servo": {"gain": 200.0}}                             # [m], [1/(m s)]
+INDIRECT = {
+    "type": "indirect",
+    "ball_mass": 1.0,
+    "arm_length": 0.2,
+    "sleeve_mass": 5.0,  # [kg], [m], [kg]
+    "damping": 100.0,
+    "friction": 0.0,
+    "ratio": 0.16,
+    "stroke": [0.02, 0.08],  # [N s/m], [N], [-], [m]
+    "pilot_neutral": 0.04,
+    "servo": {"gain": 200.0},
+}  # [m], [1/(m s)]
 ISODROMIC = {**INDIRECT, "feedback": {"type": "isodromic", "gain": 0.2, "time_constant": 0.5}}  # [m], [s]
-RIGID = {**INDIRECT, "feedback": {"type": "rigid", "gain": 0.2}}                             # [m]
+RIGID = {**INDIRECT, "feedback": {"type": "rigid", "gain": 0.2}}  # [m]
 NO_FEEDBACK = {**INDIRECT, "feedback": {"type": "none"}}
 INDIRECT_J = 0.2  # a light machine [kg m^2]: fast enough that the isodromic loop settles in a few seconds
 
@@ -509,8 +569,11 @@ def test_astatic_operating_point_with_servo_saturated():
 def test_rigid_feedback_droop_matches_hand_solution(reference):
     rho, initial_load = RIGID["feedback"]["gain"], 2.0  # [m], [N m]
     feedback = {**RIGID["feedback"], **({"reference": reference} if reference is not None else {})}
-    model = governed_model({**RIGID, "feedback": feedback}, inertia=INDIRECT_J,
-                           scenario={"initial": {"omega": 110.0}, "duration": 1.0, "external_load": initial_load})
+    model = governed_model(
+        {**RIGID, "feedback": feedback},
+        inertia=INDIRECT_J,
+        scenario={"initial": {"omega": 110.0}, "duration": 1.0, "external_load": initial_load},
+    )
     set_speed = set_speed_closed_form()
     if reference is None:  # default: the throttle that balances the initial load at the set speed
         reference = balance_throttle(set_speed, initial_load)
@@ -530,9 +593,16 @@ def test_rigid_feedback_droop_matches_hand_solution(reference):
 
 def indirect_run(governor: dict, load_0: float, load_1: float, t_step: float, duration: float):
     """A run that starts at rest in the operating point of load_0 and steps to load_1."""
-    model = governed_model(governor, inertia=INDIRECT_J, scenario={
-        "initial": {"omega": set_speed_closed_form()}, "duration": duration, "external_load": load_0,
-        "load_events": [{"time": t_step, "torque": load_1}]})
+    model = governed_model(
+        governor,
+        inertia=INDIRECT_J,
+        scenario={
+            "initial": {"omega": set_speed_closed_form()},
+            "duration": duration,
+            "external_load": load_0,
+            "load_events": [{"time": t_step, "torque": load_1}],
+        },
+    )
     return model, simulate_complete(model)
 
 
@@ -553,11 +623,11 @@ def test_isodromic_feedback_returns_to_the_set_speed():
     t = np.linspace(t_step, duration, 1401)
     speed = trajectory(t)[1]
     dip = set_speed - speed.min()
-    assert dip > 0.1                # the load step does pull the speed down [rad/s]
+    assert dip > 0.1  # the load step does pull the speed down [rad/s]
     assert tol_speed < 1e-3 * dip
     end = trajectory(duration)
-    assert end[1] == pytest.approx(set_speed, abs=tol_speed)       # no static error
-    assert end[4] == pytest.approx(servo_1, abs=tol_servo)          # the servo carries the new load
+    assert end[1] == pytest.approx(set_speed, abs=tol_speed)  # no static error
+    assert end[4] == pytest.approx(servo_1, abs=tol_servo)  # the servo carries the new load
     assert abs(end[5]) < 2 * envelope(linear.jacobian, dx0, remaining, index=4) + 1e-9  # dashpot relaxed [m]
     assert trajectory(t_step)[1] == pytest.approx(set_speed, abs=1e-6)  # it started in equilibrium
 
@@ -573,8 +643,7 @@ def test_rigid_feedback_run_settles_at_the_predicted_droop():
     linear = linear_stability(model, operating_point(model, load_1))
     assert linear.stable and linear.dominant.real < -1.0  # about -2.7 1/s
     sensor = model.governor.sensor
-    dx0 = np.array([speed_0 - speed_1, sensor.arm_angle(sleeve_0) - sensor.arm_angle(sleeve_1), 0.0,
-                    servo_0 - servo_1])
+    dx0 = np.array([speed_0 - speed_1, sensor.arm_angle(sleeve_0) - sensor.arm_angle(sleeve_1), 0.0, servo_0 - servo_1])
     tol = 2 * envelope(linear.jacobian, dx0, duration - t_step) + 1e-6
     tol_servo = 2 * envelope(linear.jacobian, dx0, duration - t_step, index=3) + 1e-8
     assert tol < 1e-3 * abs(speed_1 - speed_0)
@@ -589,9 +658,16 @@ def test_a_load_event_within_the_first_cycle_is_not_analysed():
     traceback, an all-NaN argmax), the two others have theirs, at their times."""
     from mech_regulator.scene import load_scene
 
-    model = build_model(load_scene("engine_direct", [
-        "scenario.duration=0.5", "scenario.load_events=[{time: 0.05, torque: 8.0}, {time: 0.09, torque: 6.0}, "
-        "{time: 0.13, torque: 8.0}]"]))
+    model = build_model(
+        load_scene(
+            "engine_direct",
+            [
+                "scenario.duration=0.5",
+                "scenario.load_events=[{time: 0.05, torque: 8.0}, {time: 0.09, torque: 6.0}, "
+                "{time: 0.13, torque: 8.0}]",
+            ],
+        )
+    )
     assert model.dynamic_period() / 224.0 > 0.05
     responses = load_responses(model, simulate_complete(model))
     assert [response.time for response in responses] == [0.09, 0.13]

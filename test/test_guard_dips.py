@@ -19,9 +19,11 @@ from mech_regulator.solvers.time_domain import PROBES_PER_STEP, _first_event
 
 def parabola(depth: float):
     """A dense output y(t) = [(t - 0.5)^2 - depth, 2 (t - 0.5)]: below 0 on 0.5 -/+ sqrt(depth)."""
+
     def dense(t):
         t = np.asarray(t, dtype=float)
         return np.array([(t - 0.5) ** 2 - depth, 2.0 * (t - 0.5)])
+
     return dense
 
 
@@ -57,10 +59,12 @@ def test_a_near_tangency_fires_only_when_it_dips(depth, fires):
 def test_a_guard_released_at_its_boundary_fires_only_past_the_tolerance():
     """A guard that starts the step at 0 (just released) and dips to -5e-13, within GUARD_TOLERANCE (1e-12), keeps
     its mode; one that dips to -1e-9 (a sleeve grazing back into its stop) fires where it passes -1e-12."""
+
     def dense_of(depth):
         def dense(t):
             t = np.asarray(t, dtype=float)
             return np.array([-4.0 * depth * t * (1.0 - t)])  # 0 at both ends, -depth at t = 0.5
+
         return dense
 
     guard = Guard("grazes", lambda y: y[0], no_transition)

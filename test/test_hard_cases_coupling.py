@@ -37,10 +37,16 @@ def linear_scene(stiffness: float, damping: float, method: str = "Radau", durati
     """Constant drive on J1, viscous loads on both parts, a constant external load on the driven part."""
     return {
         "name": "linear_two_mass",
-        "machine": {"inertia": J1, "drive": {"type": "constant", "torque": DRIVE},
-                    "loads": [{"type": "viscous", "coefficient": VISCOUS_1}],
-                    "coupling": {"stiffness": stiffness, "damping": damping,
-                                 "driven": {"inertia": I2, "loads": [{"type": "viscous", "coefficient": VISCOUS_2}]}}},
+        "machine": {
+            "inertia": J1,
+            "drive": {"type": "constant", "torque": DRIVE},
+            "loads": [{"type": "viscous", "coefficient": VISCOUS_1}],
+            "coupling": {
+                "stiffness": stiffness,
+                "damping": damping,
+                "driven": {"inertia": I2, "loads": [{"type": "viscous", "coefficient": VISCOUS_2}]},
+            },
+        },
         "scenario": {"initial": {"omega": 10.0, "twist": 0.0}, "duration": duration, "external_load": LOAD},
         "solver": {"method": method, "rtol": 1e-8, "atol": 1e-10, **solver},
     }
@@ -51,10 +57,15 @@ def exact_linear(stiffness: float, damping: float, times: np.ndarray) -> np.ndar
     of the augmented system x' = A x + b: J1 omega' = M - c1 omega - M_m, I2 omega2' = M_m - c2 omega2 - L,
     M_m = k twist + c (omega - omega2)."""
     k, c = stiffness, damping
-    A = np.array([[0, 1, 0, 0],
-                  [0, -(VISCOUS_1 + c) / J1, -k / J1, c / J1],
-                  [0, 1, 0, -1],
-                  [0, c / I2, k / I2, -(VISCOUS_2 + c) / I2]], dtype=float)
+    A = np.array(
+        [
+            [0, 1, 0, 0],
+            [0, -(VISCOUS_1 + c) / J1, -k / J1, c / J1],
+            [0, 1, 0, -1],
+            [0, c / I2, k / I2, -(VISCOUS_2 + c) / I2],
+        ],
+        dtype=float,
+    )
     b = np.array([0.0, DRIVE / J1, 0.0, -LOAD / I2])
     augmented = np.zeros((5, 5))
     augmented[:4, :4], augmented[:4, 4] = A, b
@@ -99,7 +110,9 @@ def test_explicit_method_on_a_stiff_coupling_stays_stable_but_pays_in_steps_and_
     long_run = build_model(validate_scene(linear_scene(stiffness, damping, "DOP853", duration=10.0)))
     advice = stiffness_advice(long_run)
     assert advice is not None and "Radau" in advice and "stiff" in advice
-    assert stiffness_advice(build_model(validate_scene(linear_scene(stiffness, damping, "Radau", duration=10.0)))) is None
+    assert (
+        stiffness_advice(build_model(validate_scene(linear_scene(stiffness, damping, "Radau", duration=10.0)))) is None
+    )
 
 
 def test_relative_mode_frequency_and_damping_ratio():
@@ -121,25 +134,43 @@ def test_relative_mode_frequency_and_damping_ratio():
     times = np.linspace(0.0, 0.2, 4001)
     twist = simulate_complete(model)(times)[2]
     zeta, natural = modes.damping_ratio, modes.natural_frequency
-    damped = natural * math.sqrt(1 - zeta ** 2)
-    exact = 0.01 * np.exp(-zeta * natural * times) * (np.cos(damped * times)
-                                                      + zeta / math.sqrt(1 - zeta ** 2) * np.sin(damped * times))
+    damped = natural * math.sqrt(1 - zeta**2)
+    exact = (
+        0.01
+        * np.exp(-zeta * natural * times)
+        * (np.cos(damped * times) + zeta / math.sqrt(1 - zeta**2) * np.sin(damped * times))
+    )
     assert np.max(np.abs(twist - exact)) < 1e-8
 
 
 def test_stiff_limit_is_the_rigid_machine():
     """As k grows the two-mass engine-generator of two_mass tends to the one-mass machine with J = J1 + I2
     and the generator's fan on the crank (oracle: the rigid model): the cycle-mean speed differs by O(1/k)."""
-    overrides = ["scenario.duration=0.6", "scenario.load_events.0.time=0.3", "solver.method=Radau",
-                 "solver.rtol=1e-9", "solver.atol=1e-9"]
-    rigid_scene = load_scene("two_mass", overrides + ["machine.coupling=null", "machine.inertia=0.12",
-                                                      "machine.loads=[{type: viscous, coefficient: 0.02}, {type: fan, coefficient: 2.56e-4}]"])
+    overrides = [
+        "scenario.duration=0.6",
+        "scenario.load_events.0.time=0.3",
+        "solver.method=Radau",
+        "solver.rtol=1e-9",
+        "solver.atol=1e-9",
+    ]
+    rigid_scene = load_scene(
+        "two_mass",
+        overrides
+        + [
+            "machine.coupling=null",
+            "machine.inertia=0.12",
+            "machine.loads=[{type: viscous, coefficient: 0.02}, {type: fan, coefficient: 2.56e-4}]",
+        ],
+    )
     rigid = simulate_complete(build_model(rigid_scene))
     times = np.linspace(0.0, 0.6, 601)
     differences = []
     for stiffness in (1e6, 1e7):
-        coupled = build_model(load_scene("two_mass", overrides + [f"machine.coupling.stiffness={stiffness}",
-                                                                   "machine.coupling.damping=200"]))
+        coupled = build_model(
+            load_scene(
+                "two_mass", overrides + [f"machine.coupling.stiffness={stiffness}", "machine.coupling.damping=200"]
+            )
+        )
         run = simulate_complete(coupled)
         differences.append(np.max(np.abs(run(times)[1] - rigid(times)[1])))
     assert differences[1] < differences[0] / 5  # ten times stiffer: about ten times closer
@@ -149,8 +180,7 @@ def test_stiff_limit_is_the_rigid_machine():
 def test_energy_balance_includes_the_coupling():
     """Works of the drive, both parts' loads, the external load and the coupling damper equal the change of
     kinetic plus elastic energy (oracle: conservation of energy); the damper's work is -c integral dw^2 < 0."""
-    model = build_model(load_scene("two_mass", ["scenario.duration=1.5", "solver.rtol=1e-10",
-                                                "solver.atol=1e-12"]))
+    model = build_model(load_scene("two_mass", ["scenario.duration=1.5", "solver.rtol=1e-10", "solver.atol=1e-12"]))
     balance = energy_balance(model, simulate_complete(model))
     assert abs(balance.relative_residual) < 1e-7
     assert balance.works["coupling_damping"] < 0.0
@@ -163,7 +193,7 @@ def test_default_twist_carries_the_driven_loads():
     model = build_model(load_scene("two_mass"))
     y = model.initial_state()
     twist = y[model.coupling_index]
-    assert twist == pytest.approx((6.0 + 2.56e-4 * 230.0 ** 2) / 5000.0, rel=1e-12)
+    assert twist == pytest.approx((6.0 + 2.56e-4 * 230.0**2) / 5000.0, rel=1e-12)
     rates = model.rhs(model.piece_at(0.0))(0.0, y)
     assert rates[3] == pytest.approx(0.0, abs=1e-12)
     assert rates[2] == 0.0
@@ -229,7 +259,9 @@ def test_rk4_beyond_its_stability_limit_is_refused_and_would_blow_up(capsys, tmp
     assert grown.status == "failed" or np.max(np.abs(grown(times)[2])) > 1e3 * np.max(np.abs(exact[2]))
     with pytest.raises(SceneError, match=r"solver.step = .*: RK4 is unstable .* expected solver.step <= "):
         simulate(unstable)
-    with pytest.raises(SceneError, match="RK4 is unstable"):  # the co-simulated machine too (the nodes, --exchange-step)
+    with pytest.raises(
+        SceneError, match="RK4 is unstable"
+    ):  # the co-simulated machine too (the nodes, --exchange-step)
         cosimulate(unstable, 1e-3)
     path = write_scene(tmp_path, yaml.safe_dump(linear_scene(stiffness, damping, "RK4", step=1.1 * largest)))
     code, _, err = run_cli(capsys, "simulate", str(path), "--quiet")

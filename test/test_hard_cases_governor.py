@@ -49,8 +49,11 @@ def lift_of(model, y: np.ndarray) -> np.ndarray:
     spring = gov.spring
     z = 2.0 * gov.arm_length * (1.0 - np.cos(y[2]))
     k, z_free = (spring.stiffness, spring.free_position) if spring is not None else (0.0, 0.0)
-    return (gov.ball_mass * gov.arm_length * (gov.ratio * y[1]) ** 2 * np.cos(y[2])
-            - (gov.ball_mass + gov.sleeve_mass) * gov.gravity - k * (z - z_free))
+    return (
+        gov.ball_mass * gov.arm_length * (gov.ratio * y[1]) ** 2 * np.cos(y[2])
+        - (gov.ball_mass + gov.sleeve_mass) * gov.gravity
+        - k * (z - z_free)
+    )
 
 
 def sleeve_of(model, y: np.ndarray) -> np.ndarray:
@@ -89,10 +92,19 @@ def stick_point():
 
 def stick_scene(solver: dict) -> dict:
     point = stick_point()
-    return scene(STICK_BASE, solver=solver, scenario={
-        "initial": {"omega": point.speed, "sleeve": point.sleeve}, "duration": 16.0, "external_load": 0.0,
-        "load_events": [{"time": RAMP_START, "torque": RAMP_LOAD, "ramp": RAMP_TIME},
-                        {"time": 8.5, "torque": 0.0, "ramp": 7.0}]})
+    return scene(
+        STICK_BASE,
+        solver=solver,
+        scenario={
+            "initial": {"omega": point.speed, "sleeve": point.sleeve},
+            "duration": 16.0,
+            "external_load": 0.0,
+            "load_events": [
+                {"time": RAMP_START, "torque": RAMP_LOAD, "ramp": RAMP_TIME},
+                {"time": 8.5, "torque": 0.0, "ramp": 7.0},
+            ],
+        },
+    )
 
 
 @functools.cache
@@ -132,18 +144,23 @@ def hybrid_consistency(model, trajectory, spacing: float = 1e-4) -> list[str]:
         z = sleeve_of(model, y)
         z_low, z_high = sensor.stroke
         if z.min() < z_low - 1e-13 or z.max() > z_high + 1e-13:
-            problems.append(f"penetration: {where}, sleeve {z.min() - z_low:.3g} / {z.max() - z_high:.3g} m "
-                            "beyond the stroke")
+            problems.append(
+                f"penetration: {where}, sleeve {z.min() - z_low:.3g} / {z.max() - z_high:.3g} m beyond the stroke"
+            )
     return problems
 
 
-@pytest.mark.parametrize("solver, time_tolerance", [
-    ({"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}, 1e-7),
-    ({"method": "DOP853", "rtol": 1e-6, "atol": 1e-8}, 1e-4),
-    ({"method": "Radau", "rtol": 1e-6, "atol": 1e-8}, 1e-4),
-    ({"method": "BDF", "rtol": 1e-6, "atol": 1e-8}, 1e-3),
-    ({"method": "LSODA", "rtol": 1e-6, "atol": 1e-8}, 1e-4),
-], ids=["DOP853-unlimited-step", "DOP853-rtol1e-6", "Radau-rtol1e-6", "BDF-rtol1e-6", "LSODA-rtol1e-6"])
+@pytest.mark.parametrize(
+    "solver, time_tolerance",
+    [
+        ({"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}, 1e-7),
+        ({"method": "DOP853", "rtol": 1e-6, "atol": 1e-8}, 1e-4),
+        ({"method": "Radau", "rtol": 1e-6, "atol": 1e-8}, 1e-4),
+        ({"method": "BDF", "rtol": 1e-6, "atol": 1e-8}, 1e-3),
+        ({"method": "LSODA", "rtol": 1e-6, "atol": 1e-8}, 1e-4),
+    ],
+    ids=["DOP853-unlimited-step", "DOP853-rtol1e-6", "Radau-rtol1e-6", "BDF-rtol1e-6", "LSODA-rtol1e-6"],
+)
 def test_stick_slip_events_do_not_depend_on_the_step_size(solver, time_tolerance):
     """Oracle: the same scene run with max_step 5 ms (DOP853, rtol 1e-10), 20-200x smaller than the steps taken
     here, plus the independent dense check `hybrid_consistency` on both runs. With unlimited max_step the solver
@@ -158,7 +175,7 @@ def test_stick_slip_events_do_not_depend_on_the_step_size(solver, time_tolerance
     assert names.count("sleeve breaks away downwards") >= 3 and names.count("sleeve breaks away upwards") >= 1
     assert names.count("sleeve stops falling") >= 2 and "sleeve reaches the low stop" in names
     assert largest_step(reference) <= 5e-3 * (1 + 1e-12)
-    assert largest_step(trajectory) > 0.1                      # the run under test stepped across stuck stretches
+    assert largest_step(trajectory) > 0.1  # the run under test stepped across stuck stretches
     assert [name for _, name in trajectory.events] == names
     times = np.array([time for time, _ in trajectory.events])
     np.testing.assert_allclose(times, [time for time, _ in reference.events], rtol=0, atol=time_tolerance)
@@ -208,11 +225,19 @@ def test_stick_slip_breakaway_and_rest_at_the_force_balance():
 # A machine with a torque ripple (table drive 100 (1 + 0.05 cos phi) N m): the lift ripples with the drive, so a
 # stuck sleeve first breaks away in a trough of the ripple that may dip past F_s for a few milliseconds only.
 RIPPLE_ANGLES = [float(a) for a in np.arange(0.0, 360.0, 15.0)]
-RIPPLE = scene(DIRECT, machine={"inertia": 0.5, "loads": [{"type": "viscous", "coefficient": 0.3}],
-                                "drive": {"type": "table", "angle_deg": RIPPLE_ANGLES,
-                                          "torque": [100.0 * (1.0 + 0.05 * math.cos(math.radians(a)))
-                                                     for a in RIPPLE_ANGLES]}},
-               governor__valve={"open_at": 0.02, "closed_at": 0.14})
+RIPPLE = scene(
+    DIRECT,
+    machine={
+        "inertia": 0.5,
+        "loads": [{"type": "viscous", "coefficient": 0.3}],
+        "drive": {
+            "type": "table",
+            "angle_deg": RIPPLE_ANGLES,
+            "torque": [100.0 * (1.0 + 0.05 * math.cos(math.radians(a))) for a in RIPPLE_ANGLES],
+        },
+    },
+    governor__valve={"open_at": 0.02, "closed_at": 0.14},
+)
 
 
 def test_ripple_stick_slip_no_missed_breakaway_at_loose_tolerance():
@@ -226,13 +251,26 @@ def test_ripple_stick_slip_no_missed_breakaway_at_loose_tolerance():
     data = scene(RIPPLE, governor__friction=KINETIC, governor__static_friction=STATIC, governor__damping=100.0)
     point = operating_point(model_of(data), 40.0)
     problems = []
-    for method, rtol, atol in (("DOP853", 1e-4, 1e-6), ("DOP853", 3e-4, 3e-4 * 1e-2), ("RK45", 3e-5, 3e-5 * 1e-2),
-                               ("LSODA", 1e-3, 1e-3 * 1e-2)):
-        model = model_of(scene(data, solver={"method": method, "rtol": rtol, "atol": atol}, scenario={
-            "initial": {"omega": point.speed, "sleeve": point.sleeve}, "duration": 16.0, "external_load": 40.0,
-            "load_events": [{"time": 0.5, "torque": 60.0, "ramp": 15.0}]}))
+    for method, rtol, atol in (
+        ("DOP853", 1e-4, 1e-6),
+        ("DOP853", 3e-4, 3e-4 * 1e-2),
+        ("RK45", 3e-5, 3e-5 * 1e-2),
+        ("LSODA", 1e-3, 1e-3 * 1e-2),
+    ):
+        model = model_of(
+            scene(
+                data,
+                solver={"method": method, "rtol": rtol, "atol": atol},
+                scenario={
+                    "initial": {"omega": point.speed, "sleeve": point.sleeve},
+                    "duration": 16.0,
+                    "external_load": 40.0,
+                    "load_events": [{"time": 0.5, "torque": 60.0, "ramp": 15.0}],
+                },
+            )
+        )
         trajectory = simulate_complete(model)
-        assert len(trajectory.events) >= 15                    # stick-slip, both ways
+        assert len(trajectory.events) >= 15  # stick-slip, both ways
         problems += [f"{method} rtol {rtol}: {problem}" for problem in hybrid_consistency(model, trajectory, 1e-4)]
     assert problems == []
 
@@ -246,13 +284,17 @@ def test_ripple_stick_slip_no_missed_breakaway_at_loose_tolerance():
 GRAZING_LOAD = 14.035
 
 
-@pytest.mark.parametrize("solver, penetration", [
-    ({"method": "DOP853", "rtol": 1e-8, "atol": 1e-10}, 1e-13),
-    ({"method": "BDF", "rtol": 1e-6, "atol": 1e-8}, 1e-13),
-    ({"method": "LSODA", "rtol": 1e-6, "atol": 1e-8}, 1e-13),
-    ({"method": "RK4", "step": 1e-3}, 1e-13),
-    ({"method": "Radau", "rtol": 1e-6, "atol": 1e-8}, 1e-11),
-], ids=["DOP853", "BDF", "LSODA", "RK4", "Radau"])
+@pytest.mark.parametrize(
+    "solver, penetration",
+    [
+        ({"method": "DOP853", "rtol": 1e-8, "atol": 1e-10}, 1e-13),
+        ({"method": "BDF", "rtol": 1e-6, "atol": 1e-8}, 1e-13),
+        ({"method": "LSODA", "rtol": 1e-6, "atol": 1e-8}, 1e-13),
+        ({"method": "RK4", "step": 1e-3}, 1e-13),
+        ({"method": "Radau", "rtol": 1e-6, "atol": 1e-8}, 1e-11),
+    ],
+    ids=["DOP853", "BDF", "LSODA", "RK4", "Radau"],
+)
 def test_grazing_contact_with_the_high_stop_is_inelastic_and_not_zeno(solver, penetration):
     """Oracle: bounds and the contact law. Inelastic stop: each contact is one 'reaches' and one 'leaves' (a
     contact at a moment the lift already pulls down is released at the same instant: a touch), at most one
@@ -263,22 +305,31 @@ def test_grazing_contact_with_the_high_stop_is_inelastic_and_not_zeno(solver, pe
     for 0.2 ms after a release; measured 75 events in 38.2 turns with every method)."""
     base = model_of(RIPPLE)
     point = operating_point(base, GRAZING_LOAD)
-    assert point.limited == "sleeve on its high stop"          # just: at 14.0374 N m it leaves the stop
-    model = model_of(scene(RIPPLE, solver=solver, scenario={
-        "initial": {"omega": point.speed, "sleeve": 0.08}, "duration": 2.0, "external_load": GRAZING_LOAD}))
+    assert point.limited == "sleeve on its high stop"  # just: at 14.0374 N m it leaves the stop
+    model = model_of(
+        scene(
+            RIPPLE,
+            solver=solver,
+            scenario={
+                "initial": {"omega": point.speed, "sleeve": 0.08},
+                "duration": 2.0,
+                "external_load": GRAZING_LOAD,
+            },
+        )
+    )
     trajectory = simulate_complete(model)
     sensor = model.governor.sensor
     turns = (trajectory(2.0)[0] - trajectory(0.0)[0]) / (2.0 * math.pi)
     names = [name for _, name in trajectory.events]
     contacts = names.count("sleeve reaches the high stop")
     assert set(names) == {"sleeve reaches the high stop", "sleeve leaves the high stop"}
-    assert all(a != b for a, b in zip(names, names[1:]))      # reach, leave, reach, ...: one of each per contact
-    assert turns - 3 <= contacts <= turns + 1                  # grazing once per turn, no Zeno accumulation
+    assert all(a != b for a, b in zip(names, names[1:]))  # reach, leave, reach, ...: one of each per contact
+    assert turns - 3 <= contacts <= turns + 1  # grazing once per turn, no Zeno accumulation
     assert len(names) <= 2 * turns + 2
     touches = 0
     for start, end, (sleeve_mode, _) in mode_spans(trajectory):
         if end - start <= 1e-9:
-            touches += 1                                       # released at the instant of contact
+            touches += 1  # released at the instant of contact
             continue
         y = trajectory(inside(start, end, 2e-5))
         if sleeve_mode == "high":
@@ -287,18 +338,30 @@ def test_grazing_contact_with_the_high_stop_is_inelastic_and_not_zeno(solver, pe
         else:
             assert sleeve_mode == "free"
             assert np.max(sleeve_of(model, y)) <= 0.08 + penetration
-    assert touches >= contacts - 2                             # nearly all contacts are touches (measured 37 of 37)
+    assert touches >= contacts - 2  # nearly all contacts are touches (measured 37 of 37)
     for time, name in trajectory.events:
-        if name == "sleeve leaves the high stop":              # released only when the lift pulls it down
+        if name == "sleeve leaves the high stop":  # released only when the lift pulls it down
             assert lift_of(model, trajectory(time)[:, None])[0] <= 1e-9
 
 
 INDIRECT = {
-    "machine": {"inertia": 0.5, "drive": {"type": "constant", "torque": 100.0},
-                "loads": [{"type": "viscous", "coefficient": 0.3}]},
-    "governor": {"type": "indirect", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 1.0,
-                 "damping": 300.0, "ratio": 0.16, "spring": {"stiffness": 10000.0, "free_position": 0.04},
-                 "stroke": [0.0396, 0.0404], "pilot_neutral": 0.04, "servo": {"gain": 10000.0}},
+    "machine": {
+        "inertia": 0.5,
+        "drive": {"type": "constant", "torque": 100.0},
+        "loads": [{"type": "viscous", "coefficient": 0.3}],
+    },
+    "governor": {
+        "type": "indirect",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 1.0,
+        "damping": 300.0,
+        "ratio": 0.16,
+        "spring": {"stiffness": 10000.0, "free_position": 0.04},
+        "stroke": [0.0396, 0.0404],
+        "pilot_neutral": 0.04,
+        "servo": {"gain": 10000.0},
+    },
     "scenario": {"initial": {"omega": 65.0}, "duration": 6.0, "external_load": 30.0},
     "solver": TIGHT,
 }
@@ -307,16 +370,21 @@ INDIRECT = {
 @functools.cache
 def bang_bang_reference():
     point = operating_point(model_of(INDIRECT), 30.0)
-    data = scene(INDIRECT, scenario__initial={"omega": 1.1 * point.speed, "sleeve": point.sleeve,
-                                              "servo": float(point.servo)})
+    data = scene(
+        INDIRECT, scenario__initial={"omega": 1.1 * point.speed, "sleeve": point.sleeve, "servo": float(point.servo)}
+    )
     return data, point, simulate_complete(model_of(data))
 
 
-@pytest.mark.parametrize("solver, penetration", [
-    (TIGHT, 1e-13),
-    ({"method": "BDF", "rtol": 1e-6, "atol": 1e-8}, 1e-13),
-    ({"method": "Radau", "rtol": 1e-6, "atol": 1e-8}, 2e-11),
-], ids=["DOP853", "BDF", "Radau"])
+@pytest.mark.parametrize(
+    "solver, penetration",
+    [
+        (TIGHT, 1e-13),
+        ({"method": "BDF", "rtol": 1e-6, "atol": 1e-8}, 1e-13),
+        ({"method": "Radau", "rtol": 1e-6, "atol": 1e-8}, 2e-11),
+    ],
+    ids=["DOP853", "BDF", "Radau"],
+)
 def test_unstable_indirect_governor_runs_bang_bang_between_stops(solver, penetration):
     """Indirect action without feedback and a fast servo (gain 1e4 1/(m s); the linearisation grows at
     Re lambda = +1.36 1/s) on a sleeve with a 0.8 mm stroke: the hunting grows until servo and sleeve both run from
@@ -334,8 +402,9 @@ def test_unstable_indirect_governor_runs_bang_bang_between_stops(solver, penetra
     assert linear_stability(model, point).dominant.real > 1.0
     names = [name for _, name in trajectory.events]
     assert names == [name for _, name in reference.events]
-    np.testing.assert_allclose([time for time, _ in trajectory.events], [time for time, _ in reference.events],
-                               rtol=0, atol=5e-4)
+    np.testing.assert_allclose(
+        [time for time, _ in trajectory.events], [time for time, _ in reference.events], rtol=0, atol=5e-4
+    )
     t = np.linspace(0.0, 6.0, 60001)
     y = trajectory(t)
     assert y[4].min() >= 0.0 and y[4].max() <= 1.0
@@ -346,12 +415,12 @@ def test_unstable_indirect_governor_runs_bang_bang_between_stops(solver, penetra
     for device in ("sleeve", "servo"):
         own = [(time, name) for time, name in trajectory.events if name.startswith(device)]
         landings = [name for _, name in own if "reaches" in name]
-        assert len(landings) >= 5                               # both devices really saturate, repeatedly
+        assert len(landings) >= 5  # both devices really saturate, repeatedly
         assert len(landings) <= half_periods + 1
         kinds = ["reach" if "reaches" in name else "leave" for _, name in own]
         assert all(a != b for a, b in zip(kinds, kinds[1:]))
         for (t_hit, hit), (t_off, off) in zip(own[::2], own[1::2]):
-            assert hit.split()[-2:] == off.split()[-2:]          # leaves the stop it reached
+            assert hit.split()[-2:] == off.split()[-2:]  # leaves the stop it reached
             assert [time for time, name in trajectory.events if t_hit < time < t_off and name.startswith(device)] == []
             resting = trajectory(inside(t_hit, t_off, 1e-4))
             if device == "servo":
@@ -388,10 +457,16 @@ def test_release_at_a_grazing_point_does_not_livelock(case):
     -3e-14 N past -F_s with F_s = F_k = 1 N, the default), grows at once: the sleeve should stay on the stop (or
     stuck) with at most a release and a re-contact at t = 0, and the run must complete. Measured: the solver
     repeats the same two events at t = 0 until the progress callback stops it."""
-    data = scene(DIRECT, machine={"inertia": 0.5, "drive": {"type": "constant", "torque": 100.0},
-                                  "loads": [{"type": "viscous", "coefficient": 0.3}]},
-                 governor__valve={"open_at": 0.02, "closed_at": 0.14},
-                 scenario={"initial": {"omega": 100.0}, "duration": 0.5, "external_load": 0.0})
+    data = scene(
+        DIRECT,
+        machine={
+            "inertia": 0.5,
+            "drive": {"type": "constant", "torque": 100.0},
+            "loads": [{"type": "viscous", "coefficient": 0.3}],
+        },
+        governor__valve={"open_at": 0.02, "closed_at": 0.14},
+        scenario={"initial": {"omega": 100.0}, "duration": 0.5, "external_load": 0.0},
+    )
     if case == "high-stop":
         sleeve, threshold = 0.08, 0.0
     else:
@@ -400,7 +475,7 @@ def test_release_at_a_grazing_point_does_not_livelock(case):
     sensor = model_of(data).governor.sensor
     arm = sensor.arm_angle(sleeve)
     omega = sensor.equilibrium_speed(sleeve, threshold)
-    while sensor.lift(arm, omega) >= threshold:               # one ulp past the threshold, towards release
+    while sensor.lift(arm, omega) >= threshold:  # one ulp past the threshold, towards release
         omega = float(np.nextafter(omega, 0.0))
     assert -1e-13 < sensor.lift(arm, omega) - threshold < 0.0
     model = model_of(scene(data, scenario__initial={"omega": omega, "sleeve": sleeve}))
@@ -420,8 +495,17 @@ def test_grazing_contact_no_unlogged_penetration_at_loose_tolerance():
     stop, each starting 8.6 us after a touch and lasting about 2 ms, between two probes of a 10 ms step: the dense
     output's error (atol 1e-5) pushes the released sleeve back into the stop; each push is now a touch, logged."""
     point = operating_point(model_of(RIPPLE), GRAZING_LOAD)
-    model = model_of(scene(RIPPLE, solver={"method": "DOP853", "rtol": 1e-3, "atol": 1e-5}, scenario={
-        "initial": {"omega": point.speed, "sleeve": 0.08}, "duration": 2.0, "external_load": GRAZING_LOAD}))
+    model = model_of(
+        scene(
+            RIPPLE,
+            solver={"method": "DOP853", "rtol": 1e-3, "atol": 1e-5},
+            scenario={
+                "initial": {"omega": point.speed, "sleeve": 0.08},
+                "duration": 2.0,
+                "external_load": GRAZING_LOAD,
+            },
+        )
+    )
     trajectory = simulate_complete(model)
     z = sleeve_of(model, trajectory(np.linspace(0.0, 2.0, 2000001)))
     high = model.governor.sensor.stop_angles()[1]
@@ -459,8 +543,17 @@ def boundary_run(factor: float, perturbation: float, solver: dict):
     x critical, started at rest on the operating point's sleeve with omega (1 + perturbation) omega_op; returns
     (linear stability, measured growth rate, measured period) over 3-25 s."""
     point, critical = boundary_base()
-    model = model_of(scene(DIRECT, governor__damping=factor * critical, solver=solver, scenario={
-        "initial": {"omega": (1.0 + perturbation) * point.speed, "sleeve": point.sleeve}, "duration": 25.0}))
+    model = model_of(
+        scene(
+            DIRECT,
+            governor__damping=factor * critical,
+            solver=solver,
+            scenario={
+                "initial": {"omega": (1.0 + perturbation) * point.speed, "sleeve": point.sleeve},
+                "duration": 25.0,
+            },
+        )
+    )
     trajectory = simulate_complete(model)
     assert trajectory.events == []
     t = np.arange(3.0, 25.0, 1e-3)
@@ -469,8 +562,11 @@ def boundary_run(factor: float, perturbation: float, solver: dict):
 
 
 @pytest.mark.parametrize("factor", [0.99, 1.01], ids=["1%-below-critical", "1%-above-critical"])
-@pytest.mark.parametrize("solver", [TIGHT, {"method": "Radau", "rtol": 1e-8, "atol": 1e-10},
-                                    {"method": "BDF", "rtol": 1e-8, "atol": 1e-10}], ids=["DOP853", "Radau", "BDF"])
+@pytest.mark.parametrize(
+    "solver",
+    [TIGHT, {"method": "Radau", "rtol": 1e-8, "atol": 1e-10}, {"method": "BDF", "rtol": 1e-8, "atol": 1e-10}],
+    ids=["DOP853", "Radau", "BDF"],
+)
 def test_growth_rate_and_period_match_the_dominant_eigenvalue_on_both_sides(solver, factor):
     """Oracle: analysis.linear_stability of the same machine (Re lambda = +0.01526 / -0.01518 1/s, period 1.0668 /
     1.0701 s at 0.99 / 1.01 x the critical damping 42.56 N s/m): the measured envelope of a 0.05 % speed
@@ -485,9 +581,11 @@ def test_growth_rate_and_period_match_the_dominant_eigenvalue_on_both_sides(solv
     assert period == pytest.approx(linear.period, rel=1e-4)
 
 
-@pytest.mark.parametrize("factor, perturbation, verdict", [(0.995, 5e-4, "hides the growth"),
-                                                           (1.005, 2e-4, "invents a growth")],
-                         ids=["unstable-0.995", "stable-1.005"])
+@pytest.mark.parametrize(
+    "factor, perturbation, verdict",
+    [(0.995, 5e-4, "hides the growth"), (1.005, 2e-4, "invents a growth")],
+    ids=["unstable-0.995", "stable-1.005"],
+)
 def test_loose_bdf_gets_the_stability_verdict_wrong_near_the_boundary(factor, perturbation, verdict):
     """Measured facts, oracle linear_stability (Re lambda = +-0.0076 1/s at 0.5 % from the critical damping).
     At rtol 1e-3 the error control allows ~1e-3 x 113 rad/s = 0.11 rad/s per step, more than the perturbation
@@ -498,7 +596,7 @@ def test_loose_bdf_gets_the_stability_verdict_wrong_near_the_boundary(factor, pe
     linear, loose, _ = boundary_run(factor, perturbation, {"method": "BDF", "rtol": 1e-3, "atol": 1e-5})
     expected = linear.dominant.real
     assert 0.005 < abs(expected) < 0.01 and linear.stable == (factor > 1.0)
-    assert np.sign(loose) == -np.sign(expected)                # the verdict is wrong
+    assert np.sign(loose) == -np.sign(expected)  # the verdict is wrong
     assert abs(loose - expected) > 0.01
     _, radau, _ = boundary_run(factor, perturbation, {"method": "Radau", "rtol": 1e-3, "atol": 1e-5})
     assert radau == pytest.approx(expected, rel=0.3)
@@ -514,13 +612,18 @@ def rejection_run(name: str, extra: list[str], duration: float, load: float = 8.
     """The bundled scene with the external load `load` [N m] until 0.5 s and 0 after, started ON the periodic orbit
     for that load (analysis.floquet_stability; the sleeve at rest: the orbit's arm rate ~0.008 rad/s is dropped).
     The model is built with the final load settings first: rigid feedback's reference depends on the load at t = 0."""
-    settings = extra + [f"scenario.external_load={load}", "scenario.load_events=[{time: 0.5, torque: 0.0}]",
-                        f"scenario.duration={duration}"]
+    settings = extra + [
+        f"scenario.external_load={load}",
+        "scenario.load_events=[{time: 0.5, torque: 0.0}]",
+        f"scenario.duration={duration}",
+    ]
     base = build_model(load_scene(name, settings))
     before = operating_point(base, load)
     orbit = floquet_stability(base, before, linear_stability(base, before), rtol=1e-8).orbit
-    initial = [f"scenario.initial.omega={float(orbit[0])!r}",
-               f"scenario.initial.sleeve={base.governor.sensor.sleeve(orbit[1])!r}"]
+    initial = [
+        f"scenario.initial.omega={float(orbit[0])!r}",
+        f"scenario.initial.sleeve={base.governor.sensor.sleeve(orbit[1])!r}",
+    ]
     if base.governor.kind == "indirect":
         initial.append(f"scenario.initial.servo={float(orbit[3])!r}")
     model = build_model(load_scene(name, settings + initial))
@@ -531,9 +634,9 @@ def rejection_run(name: str, extra: list[str], duration: float, load: float = 8.
     assert all(np.all(np.isfinite(value)) for value in columns.values())
     assert np.all(np.isfinite(y))
     mean = cycle_mean_speed(model, trajectory, t)
-    assert np.all(np.isfinite(mean[t > 0.1]))                  # NaN only in the first cycle, by definition
+    assert np.all(np.isfinite(mean[t > 0.1]))  # NaN only in the first cycle, by definition
     pre = (t > 0.5 - 4.0 * math.pi / before.speed) & (t <= 0.5)  # the last engine cycle before the rejection
-    assert np.nanmean(mean[pre]) == pytest.approx(before.speed, abs=0.05)   # really started on the orbit
+    assert np.nanmean(mean[pre]) == pytest.approx(before.speed, abs=0.05)  # really started on the orbit
     ripple = float(np.max(y[1, pre]) - np.mean(y[1, pre]))
     return model, trajectory, t, y, columns, mean, before, ripple
 
@@ -558,17 +661,20 @@ def averaged_direct_rejection(model, before) -> tuple[float, float | None]:
         throttle = min(max((closed_at - z) / (closed_at - open_at), 0.0), 1.0)
         lift = m * l * (n * omega) ** 2 * math.cos(a) - (m + M) * g
         lever = 2.0 * l * math.sin(a)
-        arm = ((lever * (lift - damping * lever * rate) - 2.0 * M * l * l * math.sin(2.0 * a) * rate * rate)
-               / (2.0 * m * l * l + 4.0 * M * l * l * math.sin(a) ** 2))
+        arm = (lever * (lift - damping * lever * rate) - 2.0 * M * l * l * math.sin(2.0 * a) * rate * rate) / (
+            2.0 * m * l * l + 4.0 * M * l * l * math.sin(a) ** 2
+        )
         return [(throttle * M_d - c * omega - k * omega * abs(omega)) / J_m, rate, arm]
 
     def lands(t, x):
         return a_high - x[1]
+
     lands.terminal, lands.direction = True, -1.0
     x0 = [before.speed, math.acos(1.0 - before.sleeve / (2.0 * l)), 0.0]
-    assert rhs(0.5, x0)[0] * J_m == pytest.approx(before.external_load, abs=1e-9)   # it balanced the old load
-    solution = integrate.solve_ivp(rhs, (0.5, 4.0), x0, method="DOP853", rtol=1e-11, atol=1e-12, events=lands,
-                                   dense_output=True)
+    assert rhs(0.5, x0)[0] * J_m == pytest.approx(before.external_load, abs=1e-9)  # it balanced the old load
+    solution = integrate.solve_ivp(
+        rhs, (0.5, 4.0), x0, method="DOP853", rtol=1e-11, atol=1e-12, events=lands, dense_output=True
+    )
     t = np.linspace(0.5, solution.t[-1], 35001)
     landing = float(solution.t_events[0][0]) if solution.t_events[0].size else None
     return float(np.max(solution.sol(t)[0])), landing
@@ -581,8 +687,9 @@ def settled_speed(t, mean, linear, after: float) -> tuple[float, float]:
     keep = t > after
     t, x = t[keep], mean[keep]
     lam = linear.dominant
-    basis = np.vstack([np.ones_like(t), np.exp(lam.real * t) * np.cos(lam.imag * t),
-                       np.exp(lam.real * t) * np.sin(lam.imag * t)]).T
+    basis = np.vstack(
+        [np.ones_like(t), np.exp(lam.real * t) * np.cos(lam.imag * t), np.exp(lam.real * t) * np.sin(lam.imag * t)]
+    ).T
     coefficients, *_ = np.linalg.lstsq(basis, x, rcond=None)
     return float(coefficients[0]), float(np.sqrt(np.mean((basis @ coefficients - x) ** 2)))
 
@@ -602,7 +709,7 @@ def test_full_load_rejection_engine_direct_bundled():
     assert landing is None
     assert np.nanmax(mean) == pytest.approx(peak, abs=0.1)
     assert np.max(y[1]) <= peak + ripple
-    assert peak > before.speed + 15.0                          # a real overspeed: 20 rad/s
+    assert peak > before.speed + 15.0  # a real overspeed: 20 rad/s
     assert trajectory.events == []
     assert columns["sleeve"].max() < 0.06 and columns["throttle"].min() > 0.35
     settled, residual = settled_speed(t, mean, linear_stability(model, after), 3.0)
@@ -619,7 +726,8 @@ def test_full_load_rejection_engine_direct_saturates_without_the_fan():
     long, 0.5 s later, from the in-cycle ripple); the operating point for 0 N m (234.956 rad/s) for the settled
     speed (fitted 234.939)."""
     model, trajectory, t, y, columns, mean, before, ripple = rejection_run(
-        "engine_direct", ["machine.loads=[{type: viscous, coefficient: 0.02}]"], 8.0, load=14.0)
+        "engine_direct", ["machine.loads=[{type: viscous, coefficient: 0.02}]"], 8.0, load=14.0
+    )
     after = operating_point(model, 0.0)
     assert after.limited == "" and after.throttle < 0.3
     peak, landing = averaged_direct_rejection(model, before)
@@ -632,7 +740,7 @@ def test_full_load_rejection_engine_direct_saturates_without_the_fan():
     assert np.max(y[1]) <= peak + ripple
     for start, end, (sleeve_mode, _) in mode_spans(trajectory):
         if sleeve_mode == "high" and end > start:
-            assert np.all(columns["throttle"][(t > start) & (t < end)] <= 1e-12)   # saturated: valve shut
+            assert np.all(columns["throttle"][(t > start) & (t < end)] <= 1e-12)  # saturated: valve shut
     assert columns["sleeve"].max() <= model.governor.sensor.stroke[1] + 1e-15
     settled, residual = settled_speed(t, mean, linear_stability(model, after), 3.0)
     assert settled == pytest.approx(after.speed, abs=0.05)
@@ -664,8 +772,9 @@ def test_full_load_rejection_engine_indirect_rigid():
     c = sum(load.coefficient for load in loads if load.type == "viscous")
     k = sum(load.coefficient for load in loads if load.type == "fan")
     keep = t > 2.5
-    (settled, amplitude, rate), _ = optimize.curve_fit(lambda s, c0, a, r: c0 - a * np.exp(-r * (s - 2.5)),
-                                                       t[keep], mean[keep], p0=[after.speed, 1.0, 0.7])
-    assert amplitude > 0.5                                      # approached from below, still 1.6 rad/s off at 2.5 s
+    (settled, amplitude, rate), _ = optimize.curve_fit(
+        lambda s, c0, a, r: c0 - a * np.exp(-r * (s - 2.5)), t[keep], mean[keep], p0=[after.speed, 1.0, 0.7]
+    )
+    assert amplitude > 0.5  # approached from below, still 1.6 rad/s off at 2.5 s
     assert rate == pytest.approx((c + 2.0 * k * after.speed) / J_m, rel=0.03)
     assert settled == pytest.approx(after.speed, abs=0.05)

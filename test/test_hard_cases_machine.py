@@ -53,7 +53,7 @@ def start_up_exact(t, omega_inf: float, T: float):
     small = s <= 0.5
     term = np.where(small, s * s / 2.0, 0.0)
     series = term.copy()
-    for k in range(3, 30):                                     # s^29 / 29! < 1e-40: converged
+    for k in range(3, 30):  # s^29 / 29! < 1e-40: converged
         term = term * (-s) / k
         series += term
     g = np.where(small, series, s + np.expm1(-np.where(small, 1.0, s)))
@@ -65,14 +65,15 @@ def start_up_time_at(phi: float, omega_inf: float, T: float) -> float:
     if phi == 0.0:
         return 0.0
     upper = T * (phi / (omega_inf * T) + 1.0 + math.sqrt(2.0 * phi / (omega_inf * T)))
-    return optimize.brentq(lambda s: float(start_up_exact(s, omega_inf, T)[0]) - phi, 0.0, upper,
-                           xtol=1e-300, rtol=1e-15)
+    return optimize.brentq(
+        lambda s: float(start_up_exact(s, omega_inf, T)[0]) - phi, 0.0, upper, xtol=1e-300, rtol=1e-15
+    )
 
 
 # The start-up of test_dynamics, here followed down to t = 1e-9 T:
 J_SU, M0_SU, W0_SU, C_SU = 0.5, 60.0, 150.0, 0.3
-OMEGA_INF_SU = M0_SU / (M0_SU / W0_SU + C_SU)                  # 85.714 rad/s
-T_SU = J_SU / (M0_SU / W0_SU + C_SU)                           # 0.714 s
+OMEGA_INF_SU = M0_SU / (M0_SU / W0_SU + C_SU)  # 85.714 rad/s
+T_SU = J_SU / (M0_SU / W0_SU + C_SU)  # 0.714 s
 
 
 # =============================================================================================
@@ -90,8 +91,9 @@ def test_start_from_rest_time_domain_within_the_mixed_tolerance(method, rtol):
     relative to w_inf is measured 0.13-0.71 rtol; bound 2 rtol."""
     atol = 1e-2 * rtol
     duration = 5.0 * T_SU
-    model = make_model(motor_machine(J_SU, M0_SU, W0_SU, C_SU), {"duration": duration},
-                       {"method": method, "rtol": rtol, "atol": atol})
+    model = make_model(
+        motor_machine(J_SU, M0_SU, W0_SU, C_SU), {"duration": duration}, {"method": method, "rtol": rtol, "atol": atol}
+    )
     tr = simulate_complete(model)
     t = np.unique(np.concatenate([T_SU * np.logspace(-9, 0, 91), np.linspace(0.0, duration, 501)]))
     phi, omega = tr(t)
@@ -112,8 +114,9 @@ def test_start_from_rest_rk4_order_and_dense_output_near_rest():
     errors = []
     for divisions in (20, 40, 80):
         h = T_SU / divisions
-        model = make_model(motor_machine(J_SU, M0_SU, W0_SU, C_SU), {"duration": 5.0 * T_SU},
-                           {"method": "RK4", "step": h})
+        model = make_model(
+            motor_machine(J_SU, M0_SU, W0_SU, C_SU), {"duration": 5.0 * T_SU}, {"method": "RK4", "step": h}
+        )
         tr = simulate_complete(model)
         nodes = np.arange(1, 5 * divisions + 1) * h
         phi, omega = tr(nodes)
@@ -139,8 +142,9 @@ def test_energy_method_linear_motor_from_rest_converges_at_order_one_and_a_half(
     the first node, O(dphi). Errors at 1 deg: 8.9e-5 rad/s and 7.4e-7 s at 1024 deg (omega ~ 20 rad/s)."""
     errors = {8.0: [], 64.0: [], 1024.0: []}
     for step in (2.0, 1.0, 0.5):
-        model = make_model(motor_machine(J_SU, M0_SU, W0_SU, C_SU), {"duration": T_SU},
-                           {"method": "energy", "phi_step_deg": step})
+        model = make_model(
+            motor_machine(J_SU, M0_SU, W0_SU, C_SU), {"duration": T_SU}, {"method": "energy", "phi_step_deg": step}
+        )
         tr = simulate_complete(model)
         times = np.asarray(tr.interpolants[0].x)
         phi, omega = tr(times)
@@ -155,15 +159,23 @@ def test_energy_method_linear_motor_from_rest_converges_at_order_one_and_a_half(
         for which in (0, 1):
             orders = [math.log2(a[which] / b[which]) for a, b in zip(values, values[1:])]
             assert all(1.35 < order < 1.65 for order in orders), (angle, which, values, orders)
-    assert errors[1024.0][1][0] < 2e-4 and errors[1024.0][1][1] < 2e-6   # 1 deg: 8.9e-5 rad/s, 7.4e-7 s
+    assert errors[1024.0][1][0] < 2e-4 and errors[1024.0][1][1] < 2e-6  # 1 deg: 8.9e-5 rad/s, 7.4e-7 s
 
 
 NOT_DRIVEN_AT_REST = {
-    "load_exceeds_drive": ({"inertia": 2.0, "drive": {"type": "constant", "torque": 5.0},
-                            "loads": [{"type": "constant", "torque": 10.0}]}, -5.0),
+    "load_exceeds_drive": (
+        {"inertia": 2.0, "drive": {"type": "constant", "torque": 5.0}, "loads": [{"type": "constant", "torque": 10.0}]},
+        -5.0,
+    ),
     "no_moment": ({"inertia": 2.0}, 0.0),
-    "stalled_motor": ({"inertia": 2.0, "drive": {"type": "linear_motor", "stall_torque": 4.0, "no_load_speed": 10.0},
-                       "loads": [{"type": "constant", "torque": 4.0}]}, 0.0),
+    "stalled_motor": (
+        {
+            "inertia": 2.0,
+            "drive": {"type": "linear_motor", "stall_torque": 4.0, "no_load_speed": 10.0},
+            "loads": [{"type": "constant", "torque": 4.0}],
+        },
+        0.0,
+    ),
 }
 
 
@@ -184,7 +196,7 @@ def test_energy_method_refuses_a_machine_its_moment_does_not_start(case):
     t = np.linspace(0.0, 3.0, 31)
     phi, omega = reference(t)
     np.testing.assert_allclose(omega, net / 2.0 * t, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(phi, net / 4.0 * t ** 2, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(phi, net / 4.0 * t**2, rtol=0, atol=1e-12)
 
 
 def test_trajectory_refused_at_rest_still_gives_the_initial_state():
@@ -219,15 +231,16 @@ def test_start_from_rest_to_a_reversal_energy_method_stops_and_keeps_its_nodes()
     phi, omega = tr(times)
     np.testing.assert_allclose(phi, np.radians(7.0 * np.arange(26)), rtol=1e-13, atol=0)  # 0 .. 175 deg
     assert tr.t_end == pytest.approx(times[-1], abs=0) and times[-1] < math.pi / w
-    energy = M0 * (phi - phi ** 2 / math.pi)
+    energy = M0 * (phi - phi**2 / math.pi)
     np.testing.assert_allclose(omega, np.sqrt(2.0 * energy / J), rtol=1e-13, atol=1e-14)
     t_exact = np.arccos(1.0 - 2.0 * phi / math.pi) / w
-    assert np.max(np.abs(times - t_exact)) < 1e-2               # measured 4.4e-3 s, at the last node (175 deg)
-    reference = simulate_complete(make_model(machine, {"duration": 3.0},
-                                             {"method": "DOP853", "rtol": 1e-11, "atol": 1e-12}))
+    assert np.max(np.abs(times - t_exact)) < 1e-2  # measured 4.4e-3 s, at the last node (175 deg)
+    reference = simulate_complete(
+        make_model(machine, {"duration": 3.0}, {"method": "DOP853", "rtol": 1e-11, "atol": 1e-12})
+    )
     t = np.linspace(0.0, 3.0, 301)
     phi_ref, omega_ref = reference(t)
-    assert omega_ref[-1] < -1.0                                # it did turn back
+    assert omega_ref[-1] < -1.0  # it did turn back
     # measured 6.6e-11 rad and 5.7e-11 rad/s at rtol 1e-11
     np.testing.assert_allclose(phi_ref, 0.5 * math.pi * (1.0 - np.cos(w * t)), rtol=0, atol=5e-10)
     np.testing.assert_allclose(omega_ref, 0.5 * math.pi * w * np.sin(w * t), rtol=0, atol=5e-10)
@@ -252,8 +265,16 @@ def _fd5(f, x: float, h: float) -> float:
     return (f(x - 2 * h) - 8 * f(x - h) + 8 * f(x + h) - f(x + 2 * h)) / (12 * h)
 
 
-OFFSET_SLIDER = {"type": "crank_slider", "crank": 0.08, "rod": 0.3, "offset": 0.03, "rod_mass": 1.2, "rod_cg": 0.11,
-                 "rod_inertia": 0.01, "slider_mass": 2.5}
+OFFSET_SLIDER = {
+    "type": "crank_slider",
+    "crank": 0.08,
+    "rod": 0.3,
+    "offset": 0.03,
+    "rod_mass": 1.2,
+    "rod_cg": 0.11,
+    "rod_inertia": 0.01,
+    "slider_mass": 2.5,
+}
 
 
 def test_offset_crank_slider_runs_through_its_dead_centres():
@@ -271,10 +292,15 @@ def test_offset_crank_slider_runs_through_its_dead_centres():
     R, l, e = OFFSET_SLIDER["crank"], OFFSET_SLIDER["rod"], OFFSET_SLIDER["offset"]
     lam, k = R / l, e / R
     J0 = 0.01
-    machine = {"inertia": J0, "mechanism": OFFSET_SLIDER, "drive": {"type": "constant", "torque": 3.0},
-               "loads": [{"type": "viscous", "coefficient": 0.1}, {"type": "slider_viscous", "coefficient": 2.0}]}
-    model = make_model(machine, {"initial": {"omega": 25.0}, "duration": 23.5},
-                       {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12})
+    machine = {
+        "inertia": J0,
+        "mechanism": OFFSET_SLIDER,
+        "drive": {"type": "constant", "torque": 3.0},
+        "loads": [{"type": "viscous", "coefficient": 0.1}, {"type": "slider_viscous", "coefficient": 2.0}],
+    }
+    model = make_model(
+        machine, {"initial": {"omega": 25.0}, "duration": 23.5}, {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
+    )
     tr = simulate_complete(model)
     turns = tr(tr.t_end)[0] / TWO_PI
     assert turns > 100.0
@@ -293,18 +319,20 @@ def test_offset_crank_slider_runs_through_its_dead_centres():
     # measured 2.4e-13 rad: the roots are located in t to round-off
     np.testing.assert_allclose(phi_dead[is_outer], outer, rtol=0, atol=1e-11)
     np.testing.assert_allclose(phi_dead[~is_outer], inner, rtol=0, atol=1e-11)
-    x_outer, x_inner = math.sqrt((l + R) ** 2 - e ** 2), math.sqrt((l - R) ** 2 - e ** 2)
-    np.testing.assert_allclose(x_dead[is_outer], x_outer, rtol=0, atol=1e-14)   # measured 5.6e-17 m
+    x_outer, x_inner = math.sqrt((l + R) ** 2 - e**2), math.sqrt((l - R) ** 2 - e**2)
+    np.testing.assert_allclose(x_dead[is_outer], x_outer, rtol=0, atol=1e-14)  # measured 5.6e-17 m
     np.testing.assert_allclose(x_dead[~is_outer], x_inner, rtol=0, atol=1e-14)
     stroke = np.max(columns["x_slider"]) - np.min(columns["x_slider"])
     assert stroke <= x_outer - x_inner + 1e-15
-    assert stroke == pytest.approx(R * (math.sqrt((1 / lam + 1) ** 2 - k * k) - math.sqrt((1 / lam - 1) ** 2 - k * k)),
-                                   abs=1e-5)                   # sampled 64 per turn: the extremes are within 1e-5 m
+    assert stroke == pytest.approx(
+        R * (math.sqrt((1 / lam + 1) ** 2 - k * k) - math.sqrt((1 / lam - 1) ** 2 - k * k)), abs=1e-5
+    )  # sampled 64 per turn: the extremes are within 1e-5 m
     # at the exact dead-centre angles the slider is at rest, J takes its closed form
     n_turns = int(turns) - 1
     targets = np.concatenate([outer + TWO_PI * np.arange(n_turns), inner + TWO_PI * np.arange(n_turns)])
-    at = np.array([optimize.brentq(lambda s: tr(s)[0] - target, 0.0, tr.t_end, xtol=1e-300, rtol=1e-15)
-                   for target in targets])
+    at = np.array(
+        [optimize.brentq(lambda s: tr(s)[0] - target, 0.0, tr.t_end, xtol=1e-300, rtol=1e-15) for target in targets]
+    )
     dead_columns = model.columns(at, tr(at))
     np.testing.assert_allclose(dead_columns["phi"], targets, rtol=1e-15, atol=0)
     # zero up to the round-off of the angle itself (EPS |phi|, 1.4e-13 rad after 100 turns): measured 7.8e-13 m/s,
@@ -312,7 +340,7 @@ def test_offset_crank_slider_runs_through_its_dead_centres():
     round_off = np.finfo(float).eps * np.max(np.abs(targets))
     assert np.max(np.abs(dead_columns["v_slider"])) <= 10.0 * round_off * R * np.max(dead_columns["omega"])
     rho = OFFSET_SLIDER["rod_cg"] / l
-    J_dead = J0 + OFFSET_SLIDER["rod_mass"] * (1 - rho) ** 2 * R ** 2 + OFFSET_SLIDER["rod_inertia"] * (R / l) ** 2
+    J_dead = J0 + OFFSET_SLIDER["rod_mass"] * (1 - rho) ** 2 * R**2 + OFFSET_SLIDER["rod_inertia"] * (R / l) ** 2
     np.testing.assert_allclose(dead_columns["J"], J_dead, rtol=1e-13)
     # J and dJ/dphi along the run (and at the dead centres) are finite and consistent
     J_all = np.concatenate([columns["J"], dead_columns["J"]])
@@ -321,8 +349,8 @@ def test_offset_crank_slider_runs_through_its_dead_centres():
     assert np.all(np.isfinite(J_all)) and np.all(np.isfinite(dJ_all)) and np.all(J_all > J0)
     scale = np.max(np.abs(dJ_all))
     fd = np.array([_fd5(lambda p: model.inertia(p)[0], p, 1e-3) for p in phi_all[::7]])
-    np.testing.assert_allclose(dJ_all[::7], fd, rtol=0, atol=1e-10 * scale)   # measured 3.4e-11 of max|dJ|
-    assert abs(energy_balance(model, tr).relative_residual) < 2e-10       # measured 4.4e-11
+    np.testing.assert_allclose(dJ_all[::7], fd, rtol=0, atol=1e-10 * scale)  # measured 3.4e-11 of max|dJ|
+    assert abs(energy_balance(model, tr).relative_residual) < 2e-10  # measured 4.4e-11
 
 
 def _four_bar_point_C(phi, a, b, c, d, branch_sign):
@@ -331,14 +359,25 @@ def _four_bar_point_C(phi, a, b, c, d, branch_sign):
     B = a * np.exp(1j * np.asarray(phi, dtype=float))
     u = (B - d) / np.abs(B - d)
     f = np.abs(B - d)
-    along = (c * c - b * b + f * f) / (2.0 * f)               # from D along D->B
+    along = (c * c - b * b + f * f) / (2.0 * f)  # from D along D->B
     across = np.sqrt(c * c - along * along)
-    return B, d + u * (along + branch_sign * 1j * across)      # -i u points to the right of D->B
+    return B, d + u * (along + branch_sign * 1j * across)  # -i u points to the right of D->B
 
 
-NEAR_TOGGLE = {"type": "four_bar", "crank": 0.1, "coupler": 0.25, "rocker": 0.150005, "frame": 0.3, "branch": "open",
-               "coupler_mass": 1.0, "coupler_cg": 0.12, "coupler_inertia": 0.005, "rocker_mass": 0.8,
-               "rocker_cg": 0.07, "rocker_inertia": 0.002}
+NEAR_TOGGLE = {
+    "type": "four_bar",
+    "crank": 0.1,
+    "coupler": 0.25,
+    "rocker": 0.150005,
+    "frame": 0.3,
+    "branch": "open",
+    "coupler_mass": 1.0,
+    "coupler_cg": 0.12,
+    "coupler_inertia": 0.005,
+    "rocker_mass": 0.8,
+    "rocker_cg": 0.07,
+    "rocker_inertia": 0.002,
+}
 
 
 def _rocker_limit_positions(a, b, c, d, branch_sign):
@@ -371,8 +410,13 @@ def _four_bar_J(phi, mechanism, J0, h=1e-4):
         return np.array([S3, S4, np.angle(C - B), np.angle(C - d)])
 
     rates = _fd5(points, phi, h)
-    return (J0 + mechanism["coupler_mass"] * abs(rates[0]) ** 2 + mechanism["coupler_inertia"] * rates[2].real ** 2
-            + mechanism["rocker_mass"] * abs(rates[1]) ** 2 + mechanism["rocker_inertia"] * rates[3].real ** 2)
+    return (
+        J0
+        + mechanism["coupler_mass"] * abs(rates[0]) ** 2
+        + mechanism["coupler_inertia"] * rates[2].real ** 2
+        + mechanism["rocker_mass"] * abs(rates[1]) ** 2
+        + mechanism["rocker_inertia"] * rates[3].real ** 2
+    )
 
 
 def test_four_bar_near_toggle_keeps_its_branch_over_many_turns():
@@ -388,10 +432,15 @@ def test_four_bar_near_toggle_keeps_its_branch_over_many_turns():
     mechanism = NEAR_TOGGLE
     a, b, c, d = (mechanism[k] for k in ("crank", "coupler", "rocker", "frame"))
     J0 = 0.01
-    machine = {"inertia": J0, "mechanism": mechanism, "drive": {"type": "constant", "torque": 3.0},
-               "loads": [{"type": "viscous", "coefficient": 0.1}, {"type": "rocker_viscous", "coefficient": 0.02}]}
-    model = make_model(machine, {"initial": {"omega": 25.0}, "duration": 9.5},
-                       {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12})
+    machine = {
+        "inertia": J0,
+        "mechanism": mechanism,
+        "drive": {"type": "constant", "torque": 3.0},
+        "loads": [{"type": "viscous", "coefficient": 0.1}, {"type": "rocker_viscous", "coefficient": 0.02}],
+    }
+    model = make_model(
+        machine, {"initial": {"omega": 25.0}, "duration": 9.5}, {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}
+    )
     tr = simulate_complete(model)
     turns = tr(tr.t_end)[0] / TWO_PI
     assert turns > 40.0
@@ -400,10 +449,11 @@ def test_four_bar_near_toggle_keeps_its_branch_over_many_turns():
     phi, theta4 = columns["phi"], columns["theta4"]
     B, C = _four_bar_point_C(phi, a, b, c, d, -1.0)
     transmission = np.degrees(np.abs(np.angle((B - C) / (d - C))))
-    assert transmission.max() > 179.0                          # the run passes the near-toggle 40 times
+    assert transmission.max() > 179.0  # the run passes the near-toggle 40 times
     # the rocker angle is the open branch's, at every sample, and the column itself never jumps
-    np.testing.assert_allclose(np.remainder(theta4 - np.angle(C - d) + math.pi, TWO_PI) - math.pi, 0.0,
-                               rtol=0, atol=1e-12)                                 # measured 7e-14 rad
+    np.testing.assert_allclose(
+        np.remainder(theta4 - np.angle(C - d) + math.pi, TWO_PI) - math.pi, 0.0, rtol=0, atol=1e-12
+    )  # measured 7e-14 rad
     rate = np.max(np.abs(columns["omega4"] / columns["omega"]))
     assert np.max(np.abs(np.diff(theta4))) <= 1.01 * rate * np.max(np.diff(phi))
     C_sim = d + c * np.exp(1j * theta4)
@@ -418,37 +468,48 @@ def test_four_bar_near_toggle_keeps_its_branch_over_many_turns():
     for crank_angle, rocker_angle in limits:
         near = np.abs(np.remainder(state[0] - crank_angle + math.pi, TWO_PI) - math.pi) < 0.01
         matched += near.sum()
-        np.testing.assert_allclose(np.remainder(state[0][near] - crank_angle + math.pi, TWO_PI) - math.pi, 0.0,
-                                   rtol=0, atol=1e-11)                             # measured 8e-14 rad
-        np.testing.assert_allclose(np.remainder(theta_back[near] - rocker_angle + math.pi, TWO_PI) - math.pi, 0.0,
-                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(
+            np.remainder(state[0][near] - crank_angle + math.pi, TWO_PI) - math.pi, 0.0, rtol=0, atol=1e-11
+        )  # measured 8e-14 rad
+        np.testing.assert_allclose(
+            np.remainder(theta_back[near] - rocker_angle + math.pi, TWO_PI) - math.pi, 0.0, rtol=0, atol=1e-12
+        )
     assert matched == backs.size
     # J and dJ/dphi: finite; J against independent positions, dJ against differences of J, near the toggle too
     assert np.all(np.isfinite(columns["J"])) and np.all(np.isfinite(columns["dJ_dphi"]))
     wrapped = np.remainder(phi, TWO_PI)
     picks = np.concatenate([np.nonzero(np.abs(wrapped - math.pi) < 0.02)[0][::5], np.arange(0, t.size, 97)])
     J_independent = np.array([_four_bar_J(phi[i], mechanism, J0) for i in picks])
-    np.testing.assert_allclose(columns["J"][picks], J_independent, rtol=3e-9)           # measured 1.0e-9
+    np.testing.assert_allclose(columns["J"][picks], J_independent, rtol=3e-9)  # measured 1.0e-9
     scale = np.max(np.abs(columns["dJ_dphi"]))
     # h = 3e-5: near the toggle J^(5) is large (h = 1e-4 leaves 1.3e-8 of max|dJ|); measured 1.4e-9 of max|dJ|
     fd = np.array([_fd5(lambda p: model.inertia(p)[0], phi[i], 3e-5) for i in picks])
     np.testing.assert_allclose(columns["dJ_dphi"][picks], fd, rtol=0, atol=5e-9 * scale)
-    assert abs(energy_balance(model, tr).relative_residual) < 2e-10      # measured 6.0e-11
+    assert abs(energy_balance(model, tr).relative_residual) < 2e-10  # measured 6.0e-11
 
 
 # =============================================================================================
 # 3. Long run of a conservative variable-J machine
 
-LONG_SLIDER = {"type": "crank_slider", "crank": 0.08, "rod": 0.3, "offset": 0.02, "rod_mass": 1.2, "rod_cg": 0.11,
-               "rod_inertia": 0.01, "slider_mass": 2.5}
-LONG_MACHINE = {"inertia": 0.02, "mechanism": LONG_SLIDER}     # no drive, no loads, no gravity: E is conserved
-LONG_OMEGA0 = TWO_PI                                           # rad/s at phi = 0; J varies 0.024-0.046 kg m^2
+LONG_SLIDER = {
+    "type": "crank_slider",
+    "crank": 0.08,
+    "rod": 0.3,
+    "offset": 0.02,
+    "rod_mass": 1.2,
+    "rod_cg": 0.11,
+    "rod_inertia": 0.01,
+    "slider_mass": 2.5,
+}
+LONG_MACHINE = {"inertia": 0.02, "mechanism": LONG_SLIDER}  # no drive, no loads, no gravity: E is conserved
+LONG_OMEGA0 = TWO_PI  # rad/s at phi = 0; J varies 0.024-0.046 kg m^2
 
 
 def _revolution_time(model, energy: float) -> float:
     """Oracle: time of one revolution at kinetic energy E, t = integral_0^{2 pi} sqrt(J(phi) / (2 E)) dphi [s]."""
-    value, _ = integrate.quad(lambda p: math.sqrt(model.inertia(p)[0] / (2.0 * energy)), 0.0, TWO_PI,
-                              epsabs=0.0, epsrel=1e-13, limit=200)
+    value, _ = integrate.quad(
+        lambda p: math.sqrt(model.inertia(p)[0] / (2.0 * energy)), 0.0, TWO_PI, epsabs=0.0, epsrel=1e-13, limit=200
+    )
     return value
 
 
@@ -456,8 +517,8 @@ def _long_model(solver: dict, duration: float):
     return make_model(LONG_MACHINE, {"initial": {"omega": LONG_OMEGA0}, "duration": duration}, solver)
 
 
-_LONG_E0 = 0.5 * _long_model({}, 1.0).inertia(0.0)[0] * LONG_OMEGA0 ** 2
-_LONG_T0 = _revolution_time(_long_model({}, 1.0), _LONG_E0)   # 1.185 s: 10^4 revolutions take 3.3 h
+_LONG_E0 = 0.5 * _long_model({}, 1.0).inertia(0.0)[0] * LONG_OMEGA0**2
+_LONG_T0 = _revolution_time(_long_model({}, 1.0), _LONG_E0)  # 1.185 s: 10^4 revolutions take 3.3 h
 
 # method: (solver settings, revolutions, bound on max |E/E0 - 1|, bound on the last turn's time against the
 # quadrature at its energy). CPU of each 10^4-revolution test on this machine (simulation and checks): energy
@@ -497,7 +558,7 @@ def test_long_conservative_run_energy_drift(method):
     edges = np.append(edges[::7], edges[-1])
     phi, omega = tr(edges)
     J = np.array([model.inertia(p)[0] for p in phi])
-    drift = 0.5 * J * omega ** 2 / _LONG_E0 - 1.0
+    drift = 0.5 * J * omega**2 / _LONG_E0 - 1.0
     assert np.all(np.isfinite(drift)) and np.all(omega > 0.0)
     assert np.max(np.abs(drift)) <= bound
     turns = int(phi[-1] // TWO_PI)
@@ -516,7 +577,7 @@ def test_long_conservative_run_energy_drift(method):
         omega_nodes = np.sqrt(2.0 * _LONG_E0 / np.array([model.inertia(p)[0] for p in nodes]))
         per_turn = float(np.sum(2.0 * np.radians(10.0) / (omega_nodes[:-1] + omega_nodes[1:])))
         assert t_N == pytest.approx(turns * per_turn, rel=1e-9)
-        assert abs(per_turn / _LONG_T0 - 1.0) < 1e-3            # -3.9e-4: second order in the 10 deg step
+        assert abs(per_turn / _LONG_T0 - 1.0) < 1e-3  # -3.9e-4: second order in the 10 deg step
         return
     # drift that grows no faster than linearly (checked on the 10^4-revolution runs)
     if revolutions == 10_000:
@@ -531,8 +592,15 @@ def test_long_conservative_run_energy_drift(method):
 # 4. Extreme scales
 
 # (J [kg m^2], omega_inf [rad/s], T [s]): 8 decades of J, 5 of speed, from 1 ms to 1 h time constants (5 h runs)
-SCALED_FAMILY = [(1e-4, 0.1, 1e-3), (1.0, 100.0, 1.0), (1e4, 1e4, 3600.0), (1e-4, 1e4, 3600.0), (1e4, 0.1, 1e-3),
-                 (1e-4, 0.1, 3600.0), (1e4, 1e4, 1e-3)]
+SCALED_FAMILY = [
+    (1e-4, 0.1, 1e-3),
+    (1.0, 100.0, 1.0),
+    (1e4, 1e4, 3600.0),
+    (1e-4, 1e4, 3600.0),
+    (1e4, 0.1, 1e-3),
+    (1e-4, 0.1, 3600.0),
+    (1e4, 1e4, 1e-3),
+]
 
 
 def _scaled_start_up(J, omega_inf, T, solver):
@@ -585,18 +653,22 @@ def test_fixed_step_methods_are_exactly_scale_invariant(solver):
             t = np.asarray(tr.interpolants[0].x)[1:]
             t = t[t <= 5.0 * T]
         else:
-            t = T * np.arange(1, 251) / 50.0                  # the step ends
+            t = T * np.arange(1, 251) / 50.0  # the step ends
         errors.append(_relative_errors(tr, omega_inf, T, t))
     errors = np.array(errors)
-    assert np.all(errors > 1e-10)                              # real truncation errors, not round-off
+    assert np.all(errors > 1e-10)  # real truncation errors, not round-off
     np.testing.assert_allclose(errors, np.broadcast_to(errors[0], errors.shape), rtol=1e-6)
 
 
 def _scaled_slider_machine(J_mean: float) -> dict:
     """LONG_MACHINE with every inertia and mass scaled so that the mean J is J_mean [kg m^2]."""
     scale = J_mean / 0.0357
-    mechanism = dict(LONG_SLIDER, rod_mass=LONG_SLIDER["rod_mass"] * scale,
-                     rod_inertia=LONG_SLIDER["rod_inertia"] * scale, slider_mass=LONG_SLIDER["slider_mass"] * scale)
+    mechanism = dict(
+        LONG_SLIDER,
+        rod_mass=LONG_SLIDER["rod_mass"] * scale,
+        rod_inertia=LONG_SLIDER["rod_inertia"] * scale,
+        slider_mass=LONG_SLIDER["slider_mass"] * scale,
+    )
     return {"inertia": LONG_MACHINE["inertia"] * scale, "mechanism": mechanism}
 
 
@@ -619,16 +691,19 @@ def test_conservative_crank_slider_slow_and_fast_with_the_default_atol(method):
         for omega0 in (0.1, 1e4):
             machine = _scaled_slider_machine(J_mean)
             probe = make_model(machine, {"initial": {"omega": omega0}, "duration": 1.0})
-            E0 = 0.5 * probe.inertia(0.0)[0] * omega0 ** 2
+            E0 = 0.5 * probe.inertia(0.0)[0] * omega0**2
             T_turn = _revolution_time(probe, E0)
-            model = make_model(machine, {"initial": {"omega": omega0}, "duration": (turns + 0.5) * T_turn},
-                               {"method": method, "rtol": rtol})
+            model = make_model(
+                machine,
+                {"initial": {"omega": omega0}, "duration": (turns + 0.5) * T_turn},
+                {"method": method, "rtol": rtol},
+            )
             assert model.scene.solver.atol == 1e-10
             tr = simulate_complete(model)
             edges = np.asarray(tr.piece_edges)
             phi, omega = tr(edges)
             J = np.array([model.inertia(p)[0] for p in phi])
-            energy_errors.append(np.max(np.abs(0.5 * J * omega ** 2 / E0 - 1.0)))
+            energy_errors.append(np.max(np.abs(0.5 * J * omega**2 / E0 - 1.0)))
             k = int(np.searchsorted(phi, TWO_PI * turns))
             t_N = optimize.brentq(lambda s: tr(s)[0] - TWO_PI * turns, edges[k - 1], edges[k], xtol=1e-300, rtol=1e-15)
             time_errors.append(abs(t_N / (turns * T_turn) - 1.0))
@@ -654,8 +729,9 @@ def test_default_atol_governs_a_small_angle_start_up(method, worse):
     J, omega_inf, T, rtol = 1e-4, 0.1, 1e-3, 1e-8
     t = T * np.linspace(0.025, 5.0, 200)
     default = simulate_complete(_scaled_start_up(J, omega_inf, T, {"method": method, "rtol": rtol}))
-    scaled = simulate_complete(_scaled_start_up(J, omega_inf, T, {"method": method, "rtol": rtol,
-                                                                  "atol": 1e-6 * rtol * omega_inf * T}))
+    scaled = simulate_complete(
+        _scaled_start_up(J, omega_inf, T, {"method": method, "rtol": rtol, "atol": 1e-6 * rtol * omega_inf * T})
+    )
     phi_default = _relative_errors(default, omega_inf, T, t)[1]
     phi_scaled = _relative_errors(scaled, omega_inf, T, t)[1]
     assert phi_scaled <= 2.0 * rtol
@@ -673,11 +749,11 @@ def test_energy_method_large_step_is_not_reported_as_a_stop():
     J, omega_inf, T = 1.0, 1.0, 1.0
     dphi = math.radians(200.0)
     M0 = J * omega_inf / T
-    a, b, c = 0.5 * J, 0.5 * M0 * dphi / omega_inf, -M0 * dphi   # a w^2 + b w + c = 0
+    a, b, c = 0.5 * J, 0.5 * M0 * dphi / omega_inf, -M0 * dphi  # a w^2 + b w + c = 0
     root = (-b + math.sqrt(b * b - 4 * a * c)) / (2 * a)
-    assert root > 0.0 and 0.5 * J * root ** 2 == pytest.approx(0.5 * M0 * (2.0 - root / omega_inf) * dphi, rel=1e-12)
+    assert root > 0.0 and 0.5 * J * root**2 == pytest.approx(0.5 * M0 * (2.0 - root / omega_inf) * dphi, rel=1e-12)
     phi_exact, _ = start_up_exact(np.linspace(0.0, 5.0 * T, 51), omega_inf, T)
-    assert np.all(np.diff(phi_exact) > 0.0)                   # the exact motion never stops
+    assert np.all(np.diff(phi_exact) > 0.0)  # the exact motion never stops
     tr = simulate(_scaled_start_up(J, omega_inf, T, {"method": "energy", "phi_step_deg": 200.0}))
     assert tr.status == "complete", tr.message
     nodes = np.asarray(tr.interpolants[0].x)

@@ -105,14 +105,16 @@ def plain(tmp_path: Path, text: str = PLAIN, name: str = "plain.yaml") -> str:
 
 @pytest.mark.parametrize("where", ["machine.inertia", "scenario.duration", "name", "top level key"])
 def test_alias_bomb_in_any_value_is_refused_while_reading(tmp_path, capsys, composed, where):
-    keys = {"machine.inertia": "machine: {inertia: *9}\nscenario: {duration: 1.0}\n",
-            "scenario.duration": "machine: {inertia: 1.0}\nscenario: {duration: *9}\n",
-            "name": "name: *9\nmachine: {inertia: 1.0}\nscenario: {duration: 1.0}\n",
-            "top level key": "machine: {inertia: 1.0}\nscenario: {duration: 1.0}\nlaughs: *9\n"}
+    keys = {
+        "machine.inertia": "machine: {inertia: *9}\nscenario: {duration: 1.0}\n",
+        "scenario.duration": "machine: {inertia: 1.0}\nscenario: {duration: *9}\n",
+        "name": "name: *9\nmachine: {inertia: 1.0}\nscenario: {duration: 1.0}\n",
+        "top level key": "machine: {inertia: 1.0}\nscenario: {duration: 1.0}\nlaughs: *9\n",
+    }
     path = plain(tmp_path, BOMB + keys[where], "bomb.yaml")
     err = refused(capsys, path, command="describe")
     assert "aliases expanded" in err and str(MAX_YAML_NODES) in err and "line 7" in err, err
-    assert composed[0] < 200           # the bomb's ~100 nodes as written, never its 9^9 expanded values
+    assert composed[0] < 200  # the bomb's ~100 nodes as written, never its 9^9 expanded values
     assert len(err) < 1000
 
 
@@ -120,21 +122,26 @@ def test_alias_bomb_in_an_override(capsys, composed):
     bomb = "[" + ", ".join(["&a [" + ", ".join(["x"] * 600) + "]"] + ["*a"] * 600) + "]"
     err = refused(capsys, "lathe", "--set", f"machine.loads={bomb}", command="describe")
     assert err.startswith("mech-regulator: --set machine.loads: refused") and "aliases expanded" in err, err
-    assert composed[0] < 2000 + 100    # the lathe and the override as written
+    assert composed[0] < 2000 + 100  # the lathe and the override as written
 
 
 def test_a_recursive_alias_is_refused(tmp_path, capsys, composed):
     err = refused(capsys, plain(tmp_path, PLAIN + "laughs: &a [1, *a]\n"), command="describe")
     assert "recursive" in err and "*a" in err, err
-    assert composed[0] < 60            # the scene as written
+    assert composed[0] < 60  # the scene as written
 
 
-@pytest.mark.parametrize("text", ["machine: " + "[" * 100_000 + "]" * 100_000 + "\n",
-                                  "machine:\n" + "".join("  " * level + f"k{level}:\n" for level in range(1, 200))])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "machine: " + "[" * 100_000 + "]" * 100_000 + "\n",
+        "machine:\n" + "".join("  " * level + f"k{level}:\n" for level in range(1, 200)),
+    ],
+)
 def test_deep_nesting_is_refused_at_the_limit(tmp_path, capsys, composed, text):
     err = refused(capsys, plain(tmp_path, text, "deep.yaml"), command="describe")
     assert f"nested deeper than {MAX_YAML_DEPTH} levels" in err, err
-    assert composed[0] <= 2 * MAX_YAML_DEPTH + 5   # a key and a value per level of a mapping
+    assert composed[0] <= 2 * MAX_YAML_DEPTH + 5  # a key and a value per level of a mapping
 
 
 def test_nesting_that_aliases_make_deep_is_refused(tmp_path, capsys, composed):
@@ -159,36 +166,61 @@ def test_python_tags_are_refused(capsys):
 # Numbers that make a run impossible: refused before it starts, naming the key, the value and what is allowed
 
 
-@pytest.mark.parametrize("overrides, fragments", [
-    (["solver.method=RK4", "solver.step=1e-300"], ["solver.step = 1e-300 s would take 2e+300 steps for 2 s",
-                                                   "solver.step >= 2e-07 s"]),
-    (["solver.max_step=1e-300"], ["solver.max_step = 1e-300 s would take at least 2e+300 steps"]),
-    (["solver.method=energy", "solver.phi_step_deg=1e-300"], ["solver.phi_step_deg = 1e-300 deg would take 3.6e+302 "
-                                                              "steps per turn"]),
-    (["solver.method=energy", "solver.phi_step_deg=1e-4"], ["solver.phi_step_deg = 0.0001 deg", "initial speed 10"]),
-    (["solver.method=energy", "solver.phi_step_deg=5e-5", "scenario.initial.omega=0"],
-     ["solver.phi_step_deg = 5e-05 deg would take about 1.4e+07 steps", "the crank turns some 12 rad"]),
-    (["solver.sample_rate=1e12"], ["solver.sample_rate = 1e+12 Hz gives 2e+12 output samples",
-                                   "solver.sample_rate <= 1e+07 Hz"]),
-    (["machine.flywheel={inertia: 1.0, ratio: 1e200}"], ["machine.flywheel.ratio = 1e+200: beyond the limit",
-                                                         "1e+15"]),
-    (["machine.drive.torque=1e150"], ["machine.drive.torque = 1e+150: beyond the limit"]),
-    ([f"machine.inertia={10 ** 400}"], ["machine.inertia = 1000000000", "..."]),
-    (["scenario.duration=1e9"], ["scenario.duration = 1e+09 s: longer than the limit of 1e+07 s"]),
-    (["scenario.initial.omega=2e6"], ["scenario.initial.omega = 2e+06 rad/s: beyond the limit of 1e+06 rad/s"]),
-    (["machine.inertia=1e-300"], ["machine.inertia = 1e-300 kg m^2", "below the limit of 1e-12 kg m^2"]),
-    (["machine.loads=[{type: fan, coefficient: 1e14}]"], ["solver.method = RK45", "Radau or BDF"]),
-])
+@pytest.mark.parametrize(
+    "overrides, fragments",
+    [
+        (
+            ["solver.method=RK4", "solver.step=1e-300"],
+            ["solver.step = 1e-300 s would take 2e+300 steps for 2 s", "solver.step >= 2e-07 s"],
+        ),
+        (["solver.max_step=1e-300"], ["solver.max_step = 1e-300 s would take at least 2e+300 steps"]),
+        (
+            ["solver.method=energy", "solver.phi_step_deg=1e-300"],
+            ["solver.phi_step_deg = 1e-300 deg would take 3.6e+302 steps per turn"],
+        ),
+        (
+            ["solver.method=energy", "solver.phi_step_deg=1e-4"],
+            ["solver.phi_step_deg = 0.0001 deg", "initial speed 10"],
+        ),
+        (
+            ["solver.method=energy", "solver.phi_step_deg=5e-5", "scenario.initial.omega=0"],
+            ["solver.phi_step_deg = 5e-05 deg would take about 1.4e+07 steps", "the crank turns some 12 rad"],
+        ),
+        (
+            ["solver.sample_rate=1e12"],
+            ["solver.sample_rate = 1e+12 Hz gives 2e+12 output samples", "solver.sample_rate <= 1e+07 Hz"],
+        ),
+        (
+            ["machine.flywheel={inertia: 1.0, ratio: 1e200}"],
+            ["machine.flywheel.ratio = 1e+200: beyond the limit", "1e+15"],
+        ),
+        (["machine.drive.torque=1e150"], ["machine.drive.torque = 1e+150: beyond the limit"]),
+        ([f"machine.inertia={10**400}"], ["machine.inertia = 1000000000", "..."]),
+        (["scenario.duration=1e9"], ["scenario.duration = 1e+09 s: longer than the limit of 1e+07 s"]),
+        (["scenario.initial.omega=2e6"], ["scenario.initial.omega = 2e+06 rad/s: beyond the limit of 1e+06 rad/s"]),
+        (["machine.inertia=1e-300"], ["machine.inertia = 1e-300 kg m^2", "below the limit of 1e-12 kg m^2"]),
+        (["machine.loads=[{type: fan, coefficient: 1e14}]"], ["solver.method = RK45", "Radau or BDF"]),
+    ],
+)
 def test_impossible_numbers_are_refused_up_front(tmp_path, capsys, evaluations, overrides, fragments):
     err = refused(capsys, plain(tmp_path), "--quiet", *[part for item in overrides for part in ("--set", item)])
     for fragment in fragments:
         assert fragment in err, (fragment, err)
-    assert evaluations[0] <= 50        # at most the few evaluations of the refusal's own estimate; no step
+    assert evaluations[0] <= 50  # at most the few evaluations of the refusal's own estimate; no step
 
 
 def test_a_stiff_governor_is_refused_for_an_explicit_method(capsys, evaluations):
-    err = refused(capsys, "engine_indirect_rigid", "--quiet", "--set", "governor.servo.gain=1e15", "--set",
-                  "scenario.load_events=[]", "--set", "scenario.duration=1")
+    err = refused(
+        capsys,
+        "engine_indirect_rigid",
+        "--quiet",
+        "--set",
+        "governor.servo.gain=1e15",
+        "--set",
+        "scenario.load_events=[]",
+        "--set",
+        "scenario.duration=1",
+    )
     assert "solver.method = DOP853" in err and "state servo (governor.servo.gain" in err, err
     assert evaluations[0] <= 200
 
@@ -212,8 +244,9 @@ def test_an_overspeed_trip_that_is_not_a_speed(capsys, tmp_path, command, trip):
 def test_an_overspeed_trip_without_the_exchanges_it_acts_at(capsys):
     """simulate without --exchange-step has no trip: one asked for is refused rather than ignored."""
     err = refused(capsys, "lathe", "--quiet", "--overspeed-trip", "20")
-    assert "--overspeed-trip 20: the trip acts at the exchanges of the co-simulation; expected --exchange-step H" \
-        in err, err
+    assert (
+        "--overspeed-trip 20: the trip acts at the exchanges of the co-simulation; expected --exchange-step H" in err
+    ), err
 
 
 # ----------------------------------------------------------------------------------------------
@@ -231,22 +264,34 @@ scenario:
 """
 
 
-@pytest.mark.parametrize("overrides", [[], ["machine.inertia=1e-14"], ["solver.method=energy"],
-                                       ["solver.path=fast"]])
+@pytest.mark.parametrize("overrides", [[], ["machine.inertia=1e-14"], ["solver.method=energy"], ["solver.path=fast"]])
 def test_inertia_reaching_zero_is_refused(tmp_path, capsys, evaluations, overrides):
     err = refused(capsys, plain(tmp_path, SLIDER_ONLY), "--quiet", *[p for item in overrides for p in ("--set", item)])
-    for fragment in ("the reduced inertia J(phi) falls to", "type crank_slider: crank 0.05, rod 0.2, offset 0.01",
-                     "slider_mass 2", "give machine.inertia > 0"):
+    for fragment in (
+        "the reduced inertia J(phi) falls to",
+        "type crank_slider: crank 0.05, rod 0.2, offset 0.01",
+        "slider_mass 2",
+        "give machine.inertia > 0",
+    ):
         assert fragment in err, (fragment, err)
     assert evaluations[0] == 0
 
 
 def test_four_bar_with_only_a_rocker_inertia_is_refused():
     with pytest.raises(SceneError, match="reduced inertia J.phi. falls to .* type four_bar"):
-        build_model(load_scene("four_bar_rocker", ["machine.inertia=0", "machine.flywheel=null",
-                                                   "machine.mechanism.crank_mass=0", "machine.mechanism.coupler_mass=0",
-                                                   "machine.mechanism.coupler_inertia=0",
-                                                   "machine.mechanism.rocker_mass=0"]))
+        build_model(
+            load_scene(
+                "four_bar_rocker",
+                [
+                    "machine.inertia=0",
+                    "machine.flywheel=null",
+                    "machine.mechanism.crank_mass=0",
+                    "machine.mechanism.coupler_mass=0",
+                    "machine.mechanism.coupler_inertia=0",
+                    "machine.mechanism.rocker_mass=0",
+                ],
+            )
+        )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -256,19 +301,32 @@ def test_four_bar_with_only_a_rocker_inertia_is_refused():
 @pytest.mark.parametrize("method", ["RK45", "DOP853", "RK4"])
 def test_a_blow_up_stops_the_run_at_once_and_keeps_it(tmp_path, capsys, method):
     overrides = ["machine.drive.torque=1e14", f"solver.method={method}"]
-    code, out, err = run_cli(capsys, "simulate", plain(tmp_path), "--quiet", "--json", "--out",
-                             str(tmp_path / "run.csv"), *[p for item in overrides for p in ("--set", item)])
+    code, out, err = run_cli(
+        capsys,
+        "simulate",
+        plain(tmp_path),
+        "--quiet",
+        "--json",
+        "--out",
+        str(tmp_path / "run.csv"),
+        *[p for item in overrides for p in ("--set", item)],
+    )
     assert code == 1, err
     summary = json.loads(out)
     assert summary["status"] == "failed"
     message = summary["message"]
-    for fragment in (f"{method}: the run blew up at t = ", "omega = ", f"is beyond {MAX_SPEED:g} rad/s",
-                     "the state: phi = ", "likely cause: the crank's net moment 1e+14 N m on J = 0.5 kg m^2"):
+    for fragment in (
+        f"{method}: the run blew up at t = ",
+        "omega = ",
+        f"is beyond {MAX_SPEED:g} rad/s",
+        "the state: phi = ",
+        "likely cause: the crank's net moment 1e+14 N m on J = 0.5 kg m^2",
+    ):
         assert fragment in message, (fragment, message)
     assert message in err
-    assert summary["solver"]["steps"] <= 50        # it stops at the first step beyond the bound
-    assert abs(summary["omega_end"]) > MAX_SPEED   # the step that carried it there is kept...
-    assert (tmp_path / "run.csv").exists()         # ...and written
+    assert summary["solver"]["steps"] <= 50  # it stops at the first step beyond the bound
+    assert abs(summary["omega_end"]) > MAX_SPEED  # the step that carried it there is kept...
+    assert (tmp_path / "run.csv").exists()  # ...and written
 
 
 def test_the_energy_method_stops_at_a_blow_up_too(tmp_path):
@@ -290,14 +348,18 @@ def test_a_blow_up_stops_the_fast_path_at_the_reference_path_s_step(tmp_path, me
     assert reference.status == fast.status == "failed" and fast.message == reference.message
     assert fast.stats.steps == reference.stats.steps <= 50
     assert fast.t_end == pytest.approx(reference.t_end, rel=1e-12)
-    assert abs(fast(fast.t_end)[1]) > MAX_SPEED >= abs(fast(fast.step_ends[-1][-2] if fast.step_ends[-1].size > 1
-                                                               else fast.piece_edges[-2])[1])
+    assert (
+        abs(fast(fast.t_end)[1])
+        > MAX_SPEED
+        >= abs(fast(fast.step_ends[-1][-2] if fast.step_ends[-1].size > 1 else fast.piece_edges[-2])[1])
+    )
 
 
 @pytest.mark.parametrize("path", ["reference", "fast"])
 def test_an_unstable_rk4_step_is_named_as_the_cause(path):
-    scene = load_scene("startup", ["scenario.duration=2000", "solver.method=RK4", "solver.step=1.0",
-                                   f"solver.path={path}"])
+    scene = load_scene(
+        "startup", ["scenario.duration=2000", "solver.method=RK4", "solver.step=1.0", f"solver.path={path}"]
+    )
     trajectory = simulate(build_model(scene))
     assert trajectory.status == "failed" and trajectory.t_end == 17.0, trajectory.message
     assert "an RK4 step too long to be stable: solver.step = 1 s" in trajectory.message
@@ -314,8 +376,19 @@ def test_a_run_stops_at_the_step_limit(monkeypatch, path):
 
 
 def test_a_co_simulated_blow_up_stops_at_the_exchange(capsys):
-    code, out, err = run_cli(capsys, "simulate", "lathe", "--quiet", "--json", "--exchange-step", "0.01", "--set",
-                             "machine.drive.torque=1e14", "--set", "machine.loads=[]")
+    code, out, err = run_cli(
+        capsys,
+        "simulate",
+        "lathe",
+        "--quiet",
+        "--json",
+        "--exchange-step",
+        "0.01",
+        "--set",
+        "machine.drive.torque=1e14",
+        "--set",
+        "machine.loads=[]",
+    )
     assert code == 1, err
     summary = json.loads(out)
     assert summary["status"] == "failed" and "the run blew up at t = " in summary["message"]
@@ -326,11 +399,24 @@ def test_a_co_simulated_blow_up_stops_at_the_exchange(capsys):
 # Names made into file names: nothing outside the output folder
 
 
-@pytest.mark.parametrize("name, stem", [
-    ("../../somewhere/evil", "somewhere_evil"), ("/etc/passwd", "etc_passwd"), ("..", "scene"), ("", "scene"),
-    (None, "scene"), ("a\nb\x00c\x1b[31m", "a_b_c_31m"), (".hidden", "hidden"), ("my lathe (v2)", "my_lathe_v2_"),
-    ("lathe", "lathe"), ("x..y", "x.y"), ("C:\\Windows\\evil", "C_Windows_evil"), ("-rf", "rf"), ("ü" * 5, "scene"),
-])
+@pytest.mark.parametrize(
+    "name, stem",
+    [
+        ("../../somewhere/evil", "somewhere_evil"),
+        ("/etc/passwd", "etc_passwd"),
+        ("..", "scene"),
+        ("", "scene"),
+        (None, "scene"),
+        ("a\nb\x00c\x1b[31m", "a_b_c_31m"),
+        (".hidden", "hidden"),
+        ("my lathe (v2)", "my_lathe_v2_"),
+        ("lathe", "lathe"),
+        ("x..y", "x.y"),
+        ("C:\\Windows\\evil", "C_Windows_evil"),
+        ("-rf", "rf"),
+        ("ü" * 5, "scene"),
+    ],
+)
 def test_output_stem(name, stem):
     assert output_stem(name) == stem
 
@@ -354,8 +440,9 @@ def test_a_sweep_writes_in_its_own_folder(tmp_path, monkeypatch, capsys):
     work = tmp_path / "a" / "b"
     work.mkdir(parents=True)
     monkeypatch.chdir(work)
-    code, _, err = run_cli(capsys, "sweep", scene, "--grid", "machine.inertia=0.5,1.0", "--jobs", "1", "--path",
-                           "reference", "--quiet")
+    code, _, err = run_cli(
+        capsys, "sweep", scene, "--grid", "machine.inertia=0.5,1.0", "--jobs", "1", "--path", "reference", "--quiet"
+    )
     assert code == 0, err
     written = sorted(str(path.relative_to(tmp_path)) for path in tmp_path.rglob("*") if path.is_file())
     assert all(path.startswith("a/b/runs/sweep-somewhere_evil/") or path == "plain.yaml" for path in written), written
@@ -368,15 +455,18 @@ def test_a_sweep_writes_in_its_own_folder(tmp_path, monkeypatch, capsys):
 SECRET = "db_password: hunter2\nmachine: {api_key: s3cr3t}\n"
 
 
-@pytest.mark.parametrize("base, fragment", [
-    ("/etc/passwd", "not a relative path"),
-    ("../outside/secret.yaml", "'..' leaves this scene's folder"),
-    ("sub/../../outside/secret.yaml", "'..' leaves this scene's folder"),
-    ("notes.txt", "a base file is a .yaml file"),
-    ("sub/link.yaml", "a link that leads outside this scene's folder"),
-    ("sub/secret.yaml", "is not a scene file"),
-    ("sub/broken.yaml", "is not a valid YAML scene file"),
-])
+@pytest.mark.parametrize(
+    "base, fragment",
+    [
+        ("/etc/passwd", "not a relative path"),
+        ("../outside/secret.yaml", "'..' leaves this scene's folder"),
+        ("sub/../../outside/secret.yaml", "'..' leaves this scene's folder"),
+        ("notes.txt", "a base file is a .yaml file"),
+        ("sub/link.yaml", "a link that leads outside this scene's folder"),
+        ("sub/secret.yaml", "is not a scene file"),
+        ("sub/broken.yaml", "is not a valid YAML scene file"),
+    ],
+)
 def test_base_outside_the_scene_folder_or_not_a_scene_is_refused(tmp_path, capsys, composed, base, fragment):
     write_scene(tmp_path, SECRET, "outside/secret.yaml")
     write_scene(tmp_path, SECRET, "scenes/sub/secret.yaml")
@@ -388,7 +478,7 @@ def test_base_outside_the_scene_folder_or_not_a_scene_is_refused(tmp_path, capsy
     assert f"base = '{base}'" in err and fragment in err, err
     for secret in ("db_password", "hunter2", "api_key", "s3cr3t"):
         assert secret not in err, err
-    assert composed[0] <= 20           # the child, and a base inside the folder (not a scene) at most
+    assert composed[0] <= 20  # the child, and a base inside the folder (not a scene) at most
 
 
 def test_base_inside_the_folder_and_bundled_still_work(tmp_path):
@@ -411,27 +501,41 @@ def test_a_chain_of_bases_has_a_limit(tmp_path, capsys, composed):
 
 
 def test_the_launcher_quotes_the_reason_of_a_node():
-    log = ("[INFO] [recorder]: recording\nmech_regulator: machine_node: scene.yaml: 1 problem:\n"
-           "  solver.step = 1e-300 s would take 2e+300 steps\n[INFO] [governor]: waiting\n")
+    log = (
+        "[INFO] [recorder]: recording\nmech_regulator: machine_node: scene.yaml: 1 problem:\n"
+        "  solver.step = 1e-300 s would take 2e+300 steps\n[INFO] [governor]: waiting\n"
+    )
     assert node_reason(log, "machine") == ": scene.yaml: 1 problem:\n  solver.step = 1e-300 s would take 2e+300 steps"
     assert node_reason(log, "governor") == ""
 
 
-@pytest.mark.parametrize("parameters, fragments", [
-    (["scene_file:={bomb}"], ["machine_node: ", "aliases expanded"]),
-    (["scene_file:={slider_only}"], ["machine_node: ", "reduced inertia J(phi) falls to"]),
-    (["scene_file:=lathe", "overrides:=[solver.method=RK4,solver.step=1e-300]"],
-     ["machine_node: ", "solver.step = 1e-300 s would take"]),
-])
+@pytest.mark.parametrize(
+    "parameters, fragments",
+    [
+        (["scene_file:={bomb}"], ["machine_node: ", "aliases expanded"]),
+        (["scene_file:={slider_only}"], ["machine_node: ", "reduced inertia J(phi) falls to"]),
+        (
+            ["scene_file:=lathe", "overrides:=[solver.method=RK4,solver.step=1e-300]"],
+            ["machine_node: ", "solver.step = 1e-300 s would take"],
+        ),
+    ],
+)
 def test_a_node_ends_with_a_message_on_a_hostile_scene(tmp_path, parameters, fragments):
     pytest.importorskip("rclpy")
     from ros_support import next_domain_id, ros_environment
 
-    files = {"bomb": plain(tmp_path, BOMB + "machine: {inertia: *9}\nscenario: {duration: 1.0}\n", "bomb.yaml"),
-             "slider_only": plain(tmp_path, SLIDER_ONLY, "slider_only.yaml")}
+    files = {
+        "bomb": plain(tmp_path, BOMB + "machine: {inertia: *9}\nscenario: {duration: 1.0}\n", "bomb.yaml"),
+        "slider_only": plain(tmp_path, SLIDER_ONLY, "slider_only.yaml"),
+    }
     arguments = [part for parameter in parameters for part in ("-p", parameter.format(**files))]
-    done = subprocess.run([sys.executable, "-m", "mech_regulator.nodes.machine", "--ros-args", *arguments],
-                          capture_output=True, text=True, timeout=120, env=ros_environment(next_domain_id()))
+    done = subprocess.run(
+        [sys.executable, "-m", "mech_regulator.nodes.machine", "--ros-args", *arguments],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=ros_environment(next_domain_id()),
+    )
     output = done.stdout + done.stderr
     assert done.returncode == 2, output
     assert "Traceback" not in output

@@ -51,8 +51,19 @@ from mech_regulator.solvers.cosim import cosimulate
 RESEND = 0.3  # [s] of wall time between two sendings of a message whose refusal a test waits for
 # engine_direct shortened to 1.5 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s), exchanged every 1 ms (some seconds of
 # wall time: a second run has time to start while the first runs)
-SCENE = ["engine_direct", "--set", "scenario.duration=1.5", "--set", "scenario.load_events.0.time=0.4", "--set",
-         "scenario.load_events.1.time=0.7", "--coupling", "hold", "--exchange-step", "1e-3"]
+SCENE = [
+    "engine_direct",
+    "--set",
+    "scenario.duration=1.5",
+    "--set",
+    "scenario.load_events.0.time=0.4",
+    "--set",
+    "scenario.load_events.1.time=0.7",
+    "--coupling",
+    "hold",
+    "--exchange-step",
+    "1e-3",
+]
 
 
 def batch(when_ns: int, joints: dict[str, tuple[float, float, float]]) -> JointState:
@@ -68,15 +79,28 @@ def batch(when_ns: int, joints: dict[str, tuple[float, float, float]]) -> JointS
 
 def forged_finish() -> String:
     """machine/status saying the run finished at 1.28 s."""
-    return String(data=json.dumps({"state": "finished", "time": 1.28, "trial": 1, "status": "complete",
-                                   "tripped_at": None, "finished_at_ns": 1_280_000_000}))
+    return String(
+        data=json.dumps(
+            {
+                "state": "finished",
+                "time": 1.28,
+                "trial": 1,
+                "status": "complete",
+                "tripped_at": None,
+                "finished_at_ns": 1_280_000_000,
+            }
+        )
+    )
 
 
 def garbage_diagnostics(node: str) -> DiagnosticArray:
     """/diagnostics claiming to be `node`'s, with a value that is no number."""
-    status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f"mech_regulator: /{node}", message="running",
-                              values=[KeyValue(key="sim_time", value="garbage"),
-                                      KeyValue(key="tripped_at", value="garbage")])
+    status = DiagnosticStatus(
+        level=DiagnosticStatus.OK,
+        name=f"mech_regulator: /{node}",
+        message="running",
+        values=[KeyValue(key="sim_time", value="garbage"), KeyValue(key="tripped_at", value="garbage")],
+    )
     return DiagnosticArray(status=[status])
 
 
@@ -90,9 +114,12 @@ def load(when_ns: int, torque: float, rate: float = 0.0, until: float = 0.0) -> 
 
 def speed(when_ns: int, omega: float, **extra: tuple[float, float]) -> JointState:
     """joint_states with the crank at `omega` [rad/s] and `extra` joints (name: position, velocity)."""
-    message = JointState(name=["crank", *extra], position=[0.0, *(value[0] for value in extra.values())],
-                         velocity=[omega, *(value[1] for value in extra.values())],
-                         effort=[0.0] * (1 + len(extra)))
+    message = JointState(
+        name=["crank", *extra],
+        position=[0.0, *(value[0] for value in extra.values())],
+        velocity=[omega, *(value[1] for value in extra.values())],
+        effort=[0.0] * (1 + len(extra)),
+    )
     message.header.stamp = stamp(when_ns)
     return message
 
@@ -163,8 +190,11 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         # the run paused from outside at 0.2 s (so that it is still there, whatever the attacks take); the clients
         # made early: the machine names a caller from the graph, which learns of a new client a moment after it
         pause, resume = (probe.node.create_client(Trigger, f"/machine/{name}") for name in ("pause", "resume"))
-        probe.spin_until(lambda: pause.service_is_ready() and resume.service_is_ready(), "the machine's services",
-                         describe=job.describe)
+        probe.spin_until(
+            lambda: pause.service_is_ready() and resume.service_is_ready(),
+            "the machine's services",
+            describe=job.describe,
+        )
         paused = []
 
         def pause_at(message: JointState) -> None:
@@ -176,23 +206,51 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         assert paused[0].result().success
         # (matched to each node that subscribes: the attacks below reach every one; joint_states: this test node
         # too; /diagnostics: this test node and the launcher too)
-        subscribers = {"throttle": 1, "joint_states": 3, "machine/status": 3, "governor/events": 1,
-                       "/diagnostics": 3, "machine/moments": 1, "governor/state": 1, "load_torque_stamped": 1}
-        types = {"throttle": JointState, "joint_states": JointState, "machine/status": String,
-                 "governor/events": String, "/diagnostics": DiagnosticArray, "machine/moments": JointState,
-                 "governor/state": JointState, "load_torque_stamped": WrenchStamped}
+        subscribers = {
+            "throttle": 1,
+            "joint_states": 3,
+            "machine/status": 3,
+            "governor/events": 1,
+            "/diagnostics": 3,
+            "machine/moments": 1,
+            "governor/state": 1,
+            "load_torque_stamped": 1,
+        }
+        types = {
+            "throttle": JointState,
+            "joint_states": JointState,
+            "machine/status": String,
+            "governor/events": String,
+            "/diagnostics": DiagnosticArray,
+            "machine/moments": JointState,
+            "governor/state": JointState,
+            "load_torque_stamped": WrenchStamped,
+        }
         durable = {"machine/status", "governor/events", "machine/moments", "governor/state"}  # (as their readers)
-        publishers = {topic: probe.publisher(types[topic], topic, count, **({"qos": STATE_QOS} if topic in durable
-                                                                           else {}), describe=job.describe)
-                      for topic, count in subscribers.items()}
+        publishers = {
+            topic: probe.publisher(
+                types[topic], topic, count, **({"qos": STATE_QOS} if topic in durable else {}), describe=job.describe
+            )
+            for topic, count in subscribers.items()
+        }
         at = 1_000_000_000 * 1000  # [ns] 1000 s: far beyond the run
         attacks = [
-            ("throttle", JointState(name=["throttle"], position=[0.0], velocity=[math.nan], effort=[math.nan],
-                                    header=speed(at, 0.0).header)),  # a future-stamped throttle, closed
+            (
+                "throttle",
+                JointState(
+                    name=["throttle"],
+                    position=[0.0],
+                    velocity=[math.nan],
+                    effort=[math.nan],
+                    header=speed(at, 0.0).header,
+                ),
+            ),  # a future-stamped throttle, closed
             ("joint_states", speed(0, 0.0)),  # stamped 0 mid-run: a reset, were it the machine's
             ("joint_states", speed(200_000_000, -50.0)),  # a second joint_states publisher, other numbers
-            ("joint_states", JointState(name=["crank", "crank_midstep"], position=[0.0], velocity=[200.0, 1.0],
-                                        effort=[0.0])),  # crank_midstep: arrays shorter than the names
+            (
+                "joint_states",
+                JointState(name=["crank", "crank_midstep"], position=[0.0], velocity=[200.0, 1.0], effort=[0.0]),
+            ),  # crank_midstep: arrays shorter than the names
             ("machine/status", forged_finish()),
             ("machine/status", String(data="{not json")),
             ("governor/events", String(data="{not json")),
@@ -216,18 +274,26 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
     assert job.csv.read_bytes() == clean_run.csv.read_bytes(), "the attacked run's CSV differs from the clean run's"
     summary = json.loads(job.json.read_text())
     assert summary["status"] == "complete", summary
-    from_whom = {"throttle": "governor", "joint_states": "machine", "machine/status": "machine",
-                 "governor/events": "governor", "machine/moments": "machine", "governor/state": "governor",
-                 "load_torque_stamped": "scenario"}
+    from_whom = {
+        "throttle": "governor",
+        "joint_states": "machine",
+        "machine/status": "machine",
+        "governor/events": "governor",
+        "machine/moments": "machine",
+        "governor/state": "governor",
+        "load_torque_stamped": "scenario",
+    }
     for topic, peer in from_whom.items():
         assert summary["refused"].get(topic, {}).get(f"not from {peer}", 0) >= 1, (topic, summary["refused"])
     assert "/diagnostics" in summary["refused"], summary["refused"]
-    calls = [text for text in summary["disturbances"] if "/machine/pause called" in text
-             or "/machine/resume called" in text]
+    calls = [
+        text for text in summary["disturbances"] if "/machine/pause called" in text or "/machine/resume called" in text
+    ]
     # each call recorded, by the probe's name, or (when the machine's graph did not list the probe's client yet:
     # rclpy does not tell a service who called) as a caller the graph does not name
-    assert len(calls) == 2 and all(f"probe_{domain_id}" in text or "by a node the graph does not name" in text
-                                   for text in calls), summary["disturbances"]
+    assert len(calls) == 2 and all(
+        f"probe_{domain_id}" in text or "by a node the graph does not name" in text for text in calls
+    ), summary["disturbances"]
     assert "refused on throttle: " in job.log and "disturbance: machine: /machine/pause called" in job.log
 
 
@@ -243,12 +309,22 @@ def test_a_governor_refuses_what_its_machine_could_not_have_sent(tmp_path, proce
         answers = machine.listen(JointState, "throttle", LISTEN_QOS, publishers=1, describe=processes.logs)
         speeds = machine.publisher(JointState, "joint_states", describe=processes.logs)
         status = machine.publisher(String, "machine/status", qos=STATE_QOS, describe=processes.logs)
-        until_counted(machine, status, String(data="{not json"), statuses, "/governor",
-                      "refused: machine/status: bad JSON", processes.logs)  # (the governor knows the name now)
+        until_counted(
+            machine,
+            status,
+            String(data="{not json"),
+            statuses,
+            "/governor",
+            "refused: machine/status: bad JSON",
+            processes.logs,
+        )  # (the governor knows the name now)
         speeds.publish(speed(0, 100.0))  # the first publisher named machine: pinned
         machine.spin_until(lambda: answers, "the governor's answer", describe=processes.logs)
-        attacks = [JointState(name=["crank", "crank_midstep"], position=[0.0], velocity=[100.0], effort=[0.0]),
-                   speed(2_000_000, math.nan), speed(2_000_000, 100.0, crank_midstep=(math.nan, math.inf))]
+        attacks = [
+            JointState(name=["crank", "crank_midstep"], position=[0.0], velocity=[100.0], effort=[0.0]),
+            speed(2_000_000, math.nan),
+            speed(2_000_000, 100.0, crank_midstep=(math.nan, math.inf)),
+        ]
         for message in attacks:
             speeds.publish(message)
         status.publish(String(data=json.dumps({"state": "finished", "time": "soon", "trial": 1})))
@@ -258,17 +334,29 @@ def test_a_governor_refuses_what_its_machine_could_not_have_sent(tmp_path, proce
             assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
         speeds.publish(speed(2_000_000, 100.0))  # still answered: nothing above reached its state
         machine.spin_until(lambda: len(answers) == 2, "the governor's second answer", describe=processes.logs)
-        keys = ["refused: joint_states: array lengths", "refused: joint_states: not finite",
-                "refused: machine/status: bad fields"]
-        machine.spin_until(lambda: counted(statuses, "/governor", keys), f"the governor's diagnostics counting {keys}",
-                           describe=processes.logs)
-        latest = [diagnostic_values(item) for array in statuses for item in array.status
-                  if item.name.endswith("/governor")][-1]
+        keys = [
+            "refused: joint_states: array lengths",
+            "refused: joint_states: not finite",
+            "refused: machine/status: bad fields",
+        ]
+        machine.spin_until(
+            lambda: counted(statuses, "/governor", keys),
+            f"the governor's diagnostics counting {keys}",
+            describe=processes.logs,
+        )
+        latest = [
+            diagnostic_values(item) for array in statuses for item in array.status if item.name.endswith("/governor")
+        ][-1]
         assert latest["refused: joint_states: not finite"] == "2", latest
         # the intruder: a second publisher, or (its name not yet heard of) not from the machine
-        machine.spin_until(lambda: counted(statuses, "/governor", ["refused: joint_states: second publisher"])
-                           or counted(statuses, "/governor", ["refused: joint_states: not from machine"]),
-                           "the governor counting the intruder", describe=processes.logs)
+        machine.spin_until(
+            lambda: (
+                counted(statuses, "/governor", ["refused: joint_states: second publisher"])
+                or counted(statuses, "/governor", ["refused: joint_states: not from machine"])
+            ),
+            "the governor counting the intruder",
+            describe=processes.logs,
+        )
         assert governor.poll() is None, processes.logs()
         assert stamp_ns(answers[1].header.stamp) == 2_000_000
     assert_no_traceback(processes.log(governor))
@@ -282,33 +370,56 @@ def test_a_recorder_refuses_what_its_peers_could_not_have_sent(tmp_path, process
         recorded = machine.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS, publishers=1, describe=processes.logs)
         states = governor.publisher(JointState, "governor/state", qos=STATE_QOS, describe=processes.logs)
         events = governor.publisher(String, "governor/events", qos=STATE_QOS, describe=processes.logs)
-        moments = machine.publisher(JointState, "machine/moments", qos=STATE_QOS,
-                                    describe=processes.logs)  # (once the governor's
+        moments = machine.publisher(
+            JointState, "machine/moments", qos=STATE_QOS, describe=processes.logs
+        )  # (once the governor's
         # state has matched: subscribe_to_the_machine)
         status = machine.publisher(String, "machine/status", qos=STATE_QOS, describe=processes.logs)
         diagnostics = machine.publisher(DiagnosticArray, "/diagnostics", subscribers=2, describe=processes.logs)
-        until_counted(machine, events, String(data="{not json"), recorded, "/recorder",
-                      "refused: governor/events: bad JSON", processes.logs)  # (names heard of: see until_counted)
-        until_counted(machine, status, String(data="[1, 2"), recorded, "/recorder",
-                      "refused: machine/status: bad JSON", processes.logs)
+        until_counted(
+            machine,
+            events,
+            String(data="{not json"),
+            recorded,
+            "/recorder",
+            "refused: governor/events: bad JSON",
+            processes.logs,
+        )  # (names heard of: see until_counted)
+        until_counted(
+            machine,
+            status,
+            String(data="[1, 2"),
+            recorded,
+            "/recorder",
+            "refused: machine/status: bad JSON",
+            processes.logs,
+        )
         moments.publish(batch(0, {"drive": (math.nan, math.nan, 1.0)}))  # without crank
         states.publish(batch(0, {"arm": (0.1, 0.0, math.nan)}))  # without sleeve
         diagnostics.publish(garbage_diagnostics("machine"))
         for publisher in (states, moments, diagnostics):
             assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
-        keys = ["refused: machine/moments: missing joint", "refused: governor/state: missing joint",
-                "refused: /diagnostics: bad value"]
-        machine.spin_until(lambda: counted(recorded, "/recorder", keys), f"the recorder counting {keys}",
-                           describe=processes.logs)
+        keys = [
+            "refused: machine/moments: missing joint",
+            "refused: governor/state: missing joint",
+            "refused: /diagnostics: bad value",
+        ]
+        machine.spin_until(
+            lambda: counted(recorded, "/recorder", keys), f"the recorder counting {keys}", describe=processes.logs
+        )
         recorder.send_signal(signal.SIGINT)
         code = processes.wait(recorder)
     assert code == 0, processes.logs()
     assert_no_traceback(processes.log(recorder))
     summary = json.loads(output.with_suffix(".json").read_text())
     assert summary["status"] == "interrupted" and summary["samples"] == 0, summary
-    for topic, reason in (("machine/moments", "missing joint"), ("governor/state", "missing joint"),
-                          ("governor/events", "bad JSON"), ("/diagnostics", "bad value"),
-                          ("machine/status", "bad JSON")):
+    for topic, reason in (
+        ("machine/moments", "missing joint"),
+        ("governor/state", "missing joint"),
+        ("governor/events", "bad JSON"),
+        ("/diagnostics", "bad value"),
+        ("machine/status", "bad JSON"),
+    ):
         assert summary["refused"][topic][reason] >= 1, summary
 
 
@@ -346,21 +457,27 @@ def test_a_second_run_on_the_same_domain_is_refused_at_start(clean_run, tmp_path
     first = MainJob(processes, tmp_path, [*SCENE, "--duration", "30"], "first", domain_id)
     with probe_on(domain_id) as probe:
         listener = RunListener(probe, governed=False, diagnostics_publishers=0, describe=first.describe)
-        probe.spin_until(lambda: any(float(values["sim_time"]) > 0.0 for _, _, values in listener.statuses()),
-                         "the first run under way", describe=first.describe)
+        probe.spin_until(
+            lambda: any(float(values["sim_time"]) > 0.0 for _, _, values in listener.statuses()),
+            "the first run under way",
+            describe=first.describe,
+        )
         second = MainJob(processes, tmp_path, SCENE, "second", domain_id)
         code = processes.wait(second.process, 4 * WAIT)
         assert code == 2, second.describe()
         assert "another node named 'machine'" in second.log or "another node named" in second.log, second.describe()
         assert "domain" in second.log and first.process.poll() is None, second.describe()
-        probe.spin_until(lambda: any(float(values["sim_time"]) > 1.5 for _, _, values in listener.statuses()),
-                         "the first run past the clean run's end", describe=first.describe)
+        probe.spin_until(
+            lambda: any(float(values["sim_time"]) > 1.5 for _, _, values in listener.statuses()),
+            "the first run past the clean run's end",
+            describe=first.describe,
+        )
     first.process.send_signal(signal.SIGINT)
     assert processes.wait(first.process, 4 * WAIT) == 130, first.describe()
     assert_no_traceback(first.log, first.node_log, second.log, second.node_log)
     # the first run kept its own numbers: its rows up to the clean run's end are the clean run's
     clean = clean_run.csv.read_bytes().splitlines(keepends=True)
-    assert first.csv.read_bytes().splitlines(keepends=True)[:len(clean)] == clean
+    assert first.csv.read_bytes().splitlines(keepends=True)[: len(clean)] == clean
     assert json.loads(first.json.read_text())["status"] == "interrupted"
 
 
@@ -403,18 +520,24 @@ def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domai
     # the scenario's first answer holds the load up to the load event at 1.5 s: killed then, it is missed there
     scene, _ = constant_inertia_scene(tmp_path, duration=2.0, load_events=[{"time": 1.5, "torque": 8.0}])
     output = tmp_path / "lost.rrd"
-    recorder = processes.node("recorder", {"scene_file": str(scene), "output": str(output), "coupling": "hold",
-                                           "exchange_step": 0.002})
+    recorder = processes.node(
+        "recorder", {"scene_file": str(scene), "output": str(output), "coupling": "hold", "exchange_step": 0.002}
+    )
     governor = processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
     scenario = processes.node("scenario", {"scene_file": str(scene)})
     with probe_on(domain_id) as probe:
-        probe.spin_until(lambda: probe.node.count_subscribers("joint_states") >= 2
-                         and probe.node.count_subscribers("machine/moments") >= 1, "the peers listening",
-                         describe=processes.logs)  # (then the machine's short peer_timeout is for the run only)
-        answers = probe.listen(WrenchStamped, "load_torque_stamped", LISTEN_QOS, publishers=1,
-                               describe=processes.logs)
-        machine = processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", "recorder"],
-                                                               peer_timeout=2.0))
+        probe.spin_until(
+            lambda: (
+                probe.node.count_subscribers("joint_states") >= 2
+                and probe.node.count_subscribers("machine/moments") >= 1
+            ),
+            "the peers listening",
+            describe=processes.logs,
+        )  # (then the machine's short peer_timeout is for the run only)
+        answers = probe.listen(WrenchStamped, "load_torque_stamped", LISTEN_QOS, publishers=1, describe=processes.logs)
+        machine = processes.node(
+            "machine", machine_parameters(scene, peers=["governor", "scenario", "recorder"], peer_timeout=2.0)
+        )
         probe.spin_until(lambda: answers, "the scenario's first answer", describe=processes.logs)
         scenario.kill()  # lost: no load at the event
         assert answers[0].wrench.force.x == 1.5 and stamp_ns(answers[0].header.stamp) == 0, answers
@@ -424,6 +547,7 @@ def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domai
     summary = json.loads(output.with_suffix(".json").read_text())
     assert summary["status"] == "disturbed" and summary["t_end"] == 2.0, summary
     # (at the load event, or at once should the machine not have had the answer the test node saw before the kill)
-    assert any(text.startswith("machine: no load for t = ") for text in summary["disturbances"]), \
-        summary["disturbances"]
+    assert any(text.startswith("machine: no load for t = ") for text in summary["disturbances"]), summary[
+        "disturbances"
+    ]
     assert "no load for t = " in summary["message"], summary

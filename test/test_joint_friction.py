@@ -26,18 +26,45 @@ from mech_regulator.scene import load_scene, schema
 from mech_regulator.solvers.cosim import GovernorStepper
 
 GRAVITY = (0.7, -9.81)
-CRANK_SLIDER = schema.CrankSlider(type="crank_slider", crank=0.05, rod=0.2, offset=0.012, crank_mass=1.1,
-                                  crank_cg=0.02, rod_mass=1.2, rod_cg=0.08, rod_inertia=0.006, slider_mass=2.0)
-FOUR_BAR = schema.FourBar(type="four_bar", crank=0.04, coupler=0.12, rocker=0.08, frame=0.10, frame_angle_deg=12.0,
-                          crank_mass=0.2, crank_cg=0.02, coupler_mass=0.5, coupler_cg=0.05, coupler_inertia=6e-4,
-                          rocker_mass=0.4, rocker_cg=0.03, rocker_inertia=2.1e-4)
+CRANK_SLIDER = schema.CrankSlider(
+    type="crank_slider",
+    crank=0.05,
+    rod=0.2,
+    offset=0.012,
+    crank_mass=1.1,
+    crank_cg=0.02,
+    rod_mass=1.2,
+    rod_cg=0.08,
+    rod_inertia=0.006,
+    slider_mass=2.0,
+)
+FOUR_BAR = schema.FourBar(
+    type="four_bar",
+    crank=0.04,
+    coupler=0.12,
+    rocker=0.08,
+    frame=0.10,
+    frame_angle_deg=12.0,
+    crank_mass=0.2,
+    crank_cg=0.02,
+    coupler_mass=0.5,
+    coupler_cg=0.05,
+    coupler_inertia=6e-4,
+    rocker_mass=0.4,
+    rocker_cg=0.03,
+    rocker_inertia=2.1e-4,
+)
 
 
 def random_states(count: int, seed: int):
     """(phi [rad], omega [rad/s], epsilon [rad/s^2], output force Q) at random."""
     rng = np.random.default_rng(seed)
-    return zip(rng.uniform(0, 2 * math.pi, count), rng.uniform(-80, 80, count), rng.uniform(-3000, 3000, count),
-               rng.uniform(-800, 800, count))
+    return zip(
+        rng.uniform(0, 2 * math.pi, count),
+        rng.uniform(-80, 80, count),
+        rng.uniform(-3000, 3000, count),
+        rng.uniform(-800, 800, count),
+    )
 
 
 # ----------------------------------------------------------------------------------------------
@@ -52,7 +79,7 @@ def test_balancing_moment_equals_the_reduced_moment(mechanism):
     for phi, omega, epsilon, force in random_states(200, 1):
         parts = loads(phi, omega, force)
         J, dJ, weight, _, dq = reduced(phi)
-        expected = J * epsilon + 0.5 * dJ * omega ** 2 - weight - force * dq
+        expected = J * epsilon + 0.5 * dJ * omega**2 - weight - force * dq
         balancing = parts.balancing[0] + parts.balancing[1] * epsilon
         assert balancing == pytest.approx(expected, rel=1e-9, abs=1e-9)
 
@@ -61,7 +88,7 @@ def _accelerations(positions, phi: float, omega: float, epsilon: float, h: float
     """Positions and second time derivatives (central differences) of positions(phi) along phi(t) = phi +
     omega t + epsilon t^2 / 2 at t = 0."""
     at = [np.asarray(positions(phi + omega * t + 0.5 * epsilon * t * t)) for t in (-h, 0.0, h)]
-    return at[1], (at[0] - 2 * at[1] + at[2]) / h ** 2
+    return at[1], (at[0] - 2 * at[1] + at[2]) / h**2
 
 
 def _newton_euler(links, unknown_count: int) -> np.ndarray:
@@ -102,9 +129,20 @@ def _unknown(index: int, count: int, sign: float = 1.0) -> np.ndarray:
 def _crank(mass: float, S1, a_S1, B, balancing_row, n: int, g):
     """The crank's equations, moments about A: its rotational inertia about A (J_S1 + m1 |S1|^2) belongs to the
     machine's J0, so only its weight acts at S1; its inertia force -m1 a_S1 loads the bearing (applied at A)."""
-    return (0.0, 0.0, np.zeros(2), np.zeros(2), 0.0,
-            [((0, 0), _unknown(0, n), -mass * np.asarray(a_S1)), (B, _unknown(2, n, -1.0), np.zeros(2)),
-             (S1, np.zeros((2, n)), mass * g)], [(balancing_row, 0.0)], g)
+    return (
+        0.0,
+        0.0,
+        np.zeros(2),
+        np.zeros(2),
+        0.0,
+        [
+            ((0, 0), _unknown(0, n), -mass * np.asarray(a_S1)),
+            (B, _unknown(2, n, -1.0), np.zeros(2)),
+            (S1, np.zeros((2, n)), mass * g),
+        ],
+        [(balancing_row, 0.0)],
+        g,
+    )
 
 
 def test_crank_slider_reactions_match_newton_euler_system():
@@ -131,10 +169,17 @@ def test_crank_slider_reactions_match_newton_euler_system():
         balancing = np.zeros(n)
         balancing[7] = 1.0
         crank = _crank(spec.crank_mass, S1, a[0:2], B, balancing, n, g)
-        rod = (spec.rod_mass, spec.rod_inertia, S2, a[2:4], a[6],
-               [(B, _unknown(2, n), np.zeros(2)), (C, _unknown(4, n, -1.0), np.zeros(2))], [], g)
-        slider = (spec.slider_mass, None, C, a[4:6], 0.0,
-                  [(C, _unknown(4, n) + normal, np.array([force, 0.0]))], [], g)
+        rod = (
+            spec.rod_mass,
+            spec.rod_inertia,
+            S2,
+            a[2:4],
+            a[6],
+            [(B, _unknown(2, n), np.zeros(2)), (C, _unknown(4, n, -1.0), np.zeros(2))],
+            [],
+            g,
+        )
+        slider = (spec.slider_mass, None, C, a[4:6], 0.0, [(C, _unknown(4, n) + normal, np.array([force, 0.0]))], [], g)
         solution = _newton_euler([crank, rod, slider], n)
         expected = [complex(*solution[0:2]), complex(*solution[2:4]), complex(*solution[4:6]), 1j * solution[6]]
         parts = loads(phi, omega, force)
@@ -156,8 +201,11 @@ def test_four_bar_reactions_match_newton_euler_system():
     def angles(phi, guess):
         def closure(x):
             th3, th4 = x
-            return [a_ * math.cos(phi) + b * math.cos(th3) - d * math.cos(th1) - c * math.cos(th4),
-                    a_ * math.sin(phi) + b * math.sin(th3) - d * math.sin(th1) - c * math.sin(th4)]
+            return [
+                a_ * math.cos(phi) + b * math.cos(th3) - d * math.cos(th1) - c * math.cos(th4),
+                a_ * math.sin(phi) + b * math.sin(th3) - d * math.sin(th1) - c * math.sin(th4),
+            ]
+
         return optimize.fsolve(closure, guess, xtol=1e-12)
 
     n = 9
@@ -168,8 +216,13 @@ def test_four_bar_reactions_match_newton_euler_system():
         def positions(angle):
             th3, th4 = angles(angle, start)
             B = np.array([a_ * math.cos(angle), a_ * math.sin(angle)])
-            return [*(spec.crank_cg / a_ * B), *(B + spec.coupler_cg * np.array([math.cos(th3), math.sin(th3)])),
-                    *(D + spec.rocker_cg * np.array([math.cos(th4), math.sin(th4)])), th3, th4]
+            return [
+                *(spec.crank_cg / a_ * B),
+                *(B + spec.coupler_cg * np.array([math.cos(th3), math.sin(th3)])),
+                *(D + spec.rocker_cg * np.array([math.cos(th4), math.sin(th4)])),
+                th3,
+                th4,
+            ]
 
         p, acc = _accelerations(positions, phi, omega, epsilon)
         th3 = p[6]
@@ -180,13 +233,28 @@ def test_four_bar_reactions_match_newton_euler_system():
         balancing[8] = 1.0
         rocker_moment = np.zeros(n)
         crank = _crank(spec.crank_mass, S1, acc[0:2], B, balancing, n, g)
-        coupler = (spec.coupler_mass, spec.coupler_inertia, S3, acc[2:4], acc[6],
-                   [(B, _unknown(2, n), np.zeros(2)), (C, _unknown(4, n, -1.0), np.zeros(2))], [], g)
-        rocker = (spec.rocker_mass, spec.rocker_inertia, S4, acc[4:6], acc[7],
-                  [(C, _unknown(4, n), np.zeros(2)), (D, _unknown(6, n), np.zeros(2))],
-                  [(rocker_moment, moment)], g)
+        coupler = (
+            spec.coupler_mass,
+            spec.coupler_inertia,
+            S3,
+            acc[2:4],
+            acc[6],
+            [(B, _unknown(2, n), np.zeros(2)), (C, _unknown(4, n, -1.0), np.zeros(2))],
+            [],
+            g,
+        )
+        rocker = (
+            spec.rocker_mass,
+            spec.rocker_inertia,
+            S4,
+            acc[4:6],
+            acc[7],
+            [(C, _unknown(4, n), np.zeros(2)), (D, _unknown(6, n), np.zeros(2))],
+            [(rocker_moment, moment)],
+            g,
+        )
         solution = _newton_euler([crank, coupler, rocker], n)
-        expected = [complex(*solution[i:i + 2]) for i in (0, 2, 4, 6)]
+        expected = [complex(*solution[i : i + 2]) for i in (0, 2, 4, 6)]
         parts = loads(phi, omega, moment)
         for r0, r1, reference in zip(parts.constant, parts.per_epsilon, expected):
             assert abs(r0 + r1 * epsilon - reference) <= 1e-5 * (abs(reference) + 10.0)
@@ -203,13 +271,16 @@ def test_relative_speed_ratios_by_finite_differences():
         for phi in np.linspace(0.1, 6.2, 13):
             ratios = loads(phi, 0.0, 0.0).ratios
             if spec is CRANK_SLIDER:
+
                 def angle(p):
                     x, _, _, theta, _, _ = slider_kinematics(p, spec.crank, spec.rod, spec.offset)
                     return np.array([p, theta - p, -theta, x])
             else:
+
                 def angle(p):
                     th3, _, _, th4, _, _ = link_angles(p, 0.04, 0.12, 0.08, 0.10, math.radians(12.0), -1.0)
                     return np.array([p, th3 - p, th4 - th3, th4])
+
             difference = (angle(phi + h) - angle(phi - h)) / (2 * h)
             assert np.allclose(ratios, difference, rtol=1e-6, atol=1e-7)
 
@@ -231,7 +302,7 @@ def test_thrust_collar_against_quadrature(inner, outer):
     """New: uniform pressure p = Q / (pi (r2^2 - r1^2)); run-in: uniform wear p r = Q / (2 pi (r2 - r1));
     M = integral f p r 2 pi r dr over the ring."""
     f, Q = 0.12, 1500.0
-    uniform = Q / (math.pi * (outer ** 2 - inner ** 2))
+    uniform = Q / (math.pi * (outer**2 - inner**2))
     new = integrate.quad(lambda r: f * uniform * r * 2 * math.pi * r, inner, outer)[0]
     worn = Q / (2 * math.pi * (outer - inner))
     run_in = integrate.quad(lambda r: f * worn / r * r * 2 * math.pi * r, inner, outer)[0]
@@ -255,8 +326,10 @@ COLLAR = {"inner_radius": 0.02, "outer_radius": 0.04, "axial_load": 1000.0, "sta
 
 
 def collar_machine(omega: float = 10.0, duration: float = 2.0, **machine) -> dict:
-    return {"machine": {"inertia": 0.5, "joint_friction": {"coefficient": 0.1, "thrust_collar": COLLAR}, **machine},
-            "scenario": {"initial": {"omega": omega}, "duration": duration}}
+    return {
+        "machine": {"inertia": 0.5, "joint_friction": {"coefficient": 0.1, "thrust_collar": COLLAR}, **machine},
+        "scenario": {"initial": {"omega": omega}, "duration": duration},
+    }
 
 
 def test_thrust_collar_run_down_in_closed_form_time_then_rest():
@@ -281,10 +354,15 @@ def test_crank_bearing_carrying_the_crank_weight_runs_down_in_closed_form_time()
     the crank bearing carries the weight m1 g whatever the motion, so M_f = (pi/2) f' r m1 g (new fit) is
     constant and the constant-J machine stops at t = J omega0 / M_f."""
     m1, r, f, J, omega0 = 20.0, 0.03, 0.2, 0.05, 30.0
-    data = {"machine": {"inertia": J, "gravity": [0.0, -9.81],
-                        "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": m1},
-                        "joint_friction": {"coefficient": f, "joints": {"crank_bearing": {"radius": r, "fit": "new"}}}},
-            "scenario": {"initial": {"omega": omega0}, "duration": 1.0}}
+    data = {
+        "machine": {
+            "inertia": J,
+            "gravity": [0.0, -9.81],
+            "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": m1},
+            "joint_friction": {"coefficient": f, "joints": {"crank_bearing": {"radius": r, "fit": "new"}}},
+        },
+        "scenario": {"initial": {"omega": omega0}, "duration": 1.0},
+    }
     model = model_of(data)
     trajectory = simulate_complete(model)
     moment = math.pi / 2 * f / math.sqrt(1 + f * f) * r * m1 * 9.81
@@ -308,10 +386,18 @@ def test_epsilon_solves_the_implicit_equation_with_reactions_of_that_epsilon():
         epsilon = rhs(0.0, states[:, i])[1]
         assert columns["epsilon"][i] == pytest.approx(epsilon, rel=1e-12, abs=1e-9)
         J = columns["J"][i]
-        other = columns["M_drive"][i] + columns["M_load"][i] - columns["M_joint_friction"][i] \
-            + columns["M_weight"][i] - 0.5 * columns["dJ_dphi"][i] * omega ** 2
-        force = -4000.0 * (columns["x_slider"][i] - 0.2) - 5.0 * columns["v_slider"][i] + np.interp(
-            columns["x_slider"][i], [0.15, 0.20, 0.22, 0.24, 0.25], [0.0, -300.0, -900.0, -2000.0, -2600.0])
+        other = (
+            columns["M_drive"][i]
+            + columns["M_load"][i]
+            - columns["M_joint_friction"][i]
+            + columns["M_weight"][i]
+            - 0.5 * columns["dJ_dphi"][i] * omega**2
+        )
+        force = (
+            -4000.0 * (columns["x_slider"][i] - 0.2)
+            - 5.0 * columns["v_slider"][i]
+            + np.interp(columns["x_slider"][i], [0.15, 0.20, 0.22, 0.24, 0.25], [0.0, -300.0, -900.0, -2000.0, -2600.0])
+        )
         _, _, reduced = friction.joint_values(phi, omega, epsilon, force)
         assert J * epsilon == pytest.approx(other - reduced, rel=1e-12, abs=1e-9)
         assert reduced > friction.collar
@@ -331,12 +417,16 @@ def test_joint_friction_dissipates_the_work_of_the_joint_moments():
     columns = model.columns(t, trajectory(t))
     R, l = 0.05, 0.20
     phi = columns["phi"]
-    x = R * np.cos(phi) + np.sqrt(l ** 2 - (R * np.sin(phi)) ** 2)
+    x = R * np.cos(phi) + np.sqrt(l**2 - (R * np.sin(phi)) ** 2)
     theta = np.unwrap(np.arctan2(-R * np.sin(phi), x - R * np.cos(phi)))
     omega, omega_rod, v = columns["omega"], np.gradient(theta, t), np.gradient(x, t)
-    power = (columns["friction_crank_bearing"] * np.abs(omega) + columns["friction_crank_pin"] * np.abs(omega - omega_rod)
-             + columns["friction_wrist_pin"] * np.abs(omega_rod) + columns["friction_guide"] * np.abs(v)
-             + columns["friction_thrust_collar"] * np.abs(omega))
+    power = (
+        columns["friction_crank_bearing"] * np.abs(omega)
+        + columns["friction_crank_pin"] * np.abs(omega - omega_rod)
+        + columns["friction_wrist_pin"] * np.abs(omega_rod)
+        + columns["friction_guide"] * np.abs(v)
+        + columns["friction_thrust_collar"] * np.abs(omega)
+    )
     assert integrate.trapezoid(power, t) == pytest.approx(dissipated, rel=2e-5)
     assert np.all(columns["M_joint_friction"] * omega <= 0.0)
 
@@ -346,12 +436,19 @@ def test_machine_below_break_away_stays_at_rest_and_above_it_starts():
     they were; 1.1 F(0) starts the machine with epsilon = 0.1 F(0) / J. F(0) of a crank–slider at rest in
     gravity comes from its static reactions: the collar's 3 N m plus the crank bearing's friction under the
     crank's weight (at phi = 0 the massless rod carries nothing: the slider's weight rests on the guide)."""
-    base = {"machine": {"inertia": 0.2, "gravity": [0.0, -9.81],
-                        "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": 30.0,
-                                      "slider_mass": 2.0},
-                        "joint_friction": {"coefficient": 0.1, "thrust_collar": COLLAR,
-                                           "joints": {"crank_bearing": {"radius": 0.03}}}},
-            "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 0.5}}
+    base = {
+        "machine": {
+            "inertia": 0.2,
+            "gravity": [0.0, -9.81],
+            "mechanism": {"type": "crank_slider", "crank": 0.05, "rod": 0.2, "crank_mass": 30.0, "slider_mass": 2.0},
+            "joint_friction": {
+                "coefficient": 0.1,
+                "thrust_collar": COLLAR,
+                "joints": {"crank_bearing": {"radius": 0.03}},
+            },
+        },
+        "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": 0.5},
+    }
     probe = model_of(base)
     at_rest = probe.joint_friction.joint_values(0.0, 0.0, 0.0, 0.0)[2]
     assert at_rest == pytest.approx(3.0 + 0.1 / math.sqrt(1.01) * 0.03 * 30.0 * 9.81, rel=1e-12)
@@ -367,48 +464,72 @@ def test_machine_below_break_away_stays_at_rest_and_above_it_starts():
 
 def test_self_locking_machine_is_refused_with_a_clear_message(capsys):
     """Journals so large that the friction grows with epsilon faster than the inertia: exit 2, the key named."""
-    code, _, err = run_cli(capsys, "simulate", "compressor_friction", "--set", "machine.inertia=0.0", "--set",
-                           "machine.flywheel=null", "--set", "machine.joint_friction.coefficient=1.0", "--set",
-                           "machine.joint_friction.joints.crank_pin.radius=0.045", "--set",
-                           "machine.joint_friction.joints.wrist_pin.radius=0.045")
+    code, _, err = run_cli(
+        capsys,
+        "simulate",
+        "compressor_friction",
+        "--set",
+        "machine.inertia=0.0",
+        "--set",
+        "machine.flywheel=null",
+        "--set",
+        "machine.joint_friction.coefficient=1.0",
+        "--set",
+        "machine.joint_friction.joints.crank_pin.radius=0.045",
+        "--set",
+        "machine.joint_friction.joints.wrist_pin.radius=0.045",
+    )
     assert code == 2
     assert "machine.joint_friction: the machine self-locks at phi =" in err and "expected smaller joint radii" in err
 
 
-@pytest.mark.parametrize("setting, message", [
-    ("machine.joint_friction.joints.rocker_pin={radius: 0.01}", "does not have; expected some of ['crank_bearing'"),
-    ("machine.joint_friction.joints.crank_pin.fit=loose", "'clearance', 'new' or 'run_in'"),
-    ("machine.joint_friction.thrust_collar.inner_radius=0.05", "inner_radius = 0.05 m must be smaller"),
-    ("machine.joint_friction={coefficient: 0.1}", "no joints, no guide and no thrust_collar"),
-])
+@pytest.mark.parametrize(
+    "setting, message",
+    [
+        ("machine.joint_friction.joints.rocker_pin={radius: 0.01}", "does not have; expected some of ['crank_bearing'"),
+        ("machine.joint_friction.joints.crank_pin.fit=loose", "'clearance', 'new' or 'run_in'"),
+        ("machine.joint_friction.thrust_collar.inner_radius=0.05", "inner_radius = 0.05 m must be smaller"),
+        ("machine.joint_friction={coefficient: 0.1}", "no joints, no guide and no thrust_collar"),
+    ],
+)
 def test_bad_joint_friction_keys_name_key_value_and_expectation(capsys, setting, message):
     code, _, err = run_cli(capsys, "describe", "compressor_friction", "--set", setting)
     assert code == 2 and message in err, err
 
 
 def test_guide_needs_a_crank_slider(capsys):
-    code, _, err = run_cli(capsys, "describe", "four_bar_rocker", "--set",
-                           "machine.joint_friction={coefficient: 0.1, guide: 0.1}")
+    code, _, err = run_cli(
+        capsys, "describe", "four_bar_rocker", "--set", "machine.joint_friction={coefficient: 0.1, guide: 0.1}"
+    )
     assert code == 2 and "only a crank_slider has a guide" in err, err
 
 
-ENGINE_JOINT_FRICTION = ("machine.joint_friction={coefficient: 0.02, joints: {crank_bearing: {radius: 0.025, fit: "
-                         "run_in}, crank_pin: {radius: 0.02, fit: run_in}}, guide: 0.02}")
-COLLAR_ONLY = ("machine.joint_friction={coefficient: 0.1, thrust_collar: {inner_radius: 0.01, outer_radius: 0.02, "
-               "axial_load: 100.0, state: new}}")
+ENGINE_JOINT_FRICTION = (
+    "machine.joint_friction={coefficient: 0.02, joints: {crank_bearing: {radius: 0.025, fit: "
+    "run_in}, crank_pin: {radius: 0.02, fit: run_in}}, guide: 0.02}"
+)
+COLLAR_ONLY = (
+    "machine.joint_friction={coefficient: 0.1, thrust_collar: {inner_radius: 0.01, outer_radius: 0.02, "
+    "axial_load: 100.0, state: new}}"
+)
 
 
 @pytest.mark.parametrize("name", ["walking_beam", "engine_inline4"])
 def test_mechanisms_without_kinetostatics_take_a_thrust_collar_but_no_journals(capsys, name):
     """The walking beam and a multi-cylinder crank-slider have no kinetostatics: their journals are refused with
     a message, a thrust collar alone is the constant moment 2/3 f Q (r2^3 - r1^3) / (r2^2 - r1^2)."""
-    code, _, err = run_cli(capsys, "describe", name, "--set",
-                           "machine.joint_friction={coefficient: 0.1, joints: {crank_bearing: {radius: 0.01, fit: new}}}")
+    code, _, err = run_cli(
+        capsys,
+        "describe",
+        name,
+        "--set",
+        "machine.joint_friction={coefficient: 0.1, joints: {crank_bearing: {radius: 0.01, fit: new}}}",
+    )
     assert code == 2 and "joint reactions of a" in err and "only a thrust_collar can have friction" in err, err
     model = build_model(load_scene(name, [COLLAR_ONLY, "scenario.duration=0.02"]))
     trajectory = simulate_complete(model)
     moment = model.columns(np.array([trajectory.t_end]), trajectory(np.array([trajectory.t_end])))["M_joint_friction"]
-    assert moment[0] == pytest.approx(-2.0 / 3.0 * 0.1 * 100.0 * (0.02 ** 3 - 0.01 ** 3) / (0.02 ** 2 - 0.01 ** 2), rel=1e-12)
+    assert moment[0] == pytest.approx(-2.0 / 3.0 * 0.1 * 100.0 * (0.02**3 - 0.01**3) / (0.02**2 - 0.01**2), rel=1e-12)
 
 
 def test_governor_stepper_of_a_machine_with_joint_friction_holds_the_crank_speed():
@@ -428,11 +549,17 @@ def test_governor_stepper_of_a_machine_with_joint_friction_holds_the_crank_speed
 # scenes without joint friction
 
 
-@pytest.mark.parametrize("name, overrides, expected", [
-    ("compressor", ["scenario.duration=0.3"], ["0x1.1e97e20db19b5p+3", "0x1.9fed43e1f9d82p+5"]),
-    ("engine_direct", ["scenario.duration=0.1", "scenario.load_events=[]"],
-     ["0x1.643cad47dec89p+4", "0x1.c3df427415441p+7", "0x1.8cd15065eee4ap-2", "-0x1.ae450b2b7a6b0p-11"]),
-])
+@pytest.mark.parametrize(
+    "name, overrides, expected",
+    [
+        ("compressor", ["scenario.duration=0.3"], ["0x1.1e97e20db19b5p+3", "0x1.9fed43e1f9d82p+5"]),
+        (
+            "engine_direct",
+            ["scenario.duration=0.1", "scenario.load_events=[]"],
+            ["0x1.643cad47dec89p+4", "0x1.c3df427415441p+7", "0x1.8cd15065eee4ap-2", "-0x1.ae450b2b7a6b0p-11"],
+        ),
+    ],
+)
 def test_scenes_without_joint_friction_run_bit_for_bit_as_before(name, overrides, expected):
     """The final state of short runs, bit for bit as main (9c13bc8) computed it before joint friction existed,
     and their right-hand side is the frictionless closure itself. (Both pinned again when the knots of tables became
@@ -459,8 +586,10 @@ def test_scenes_without_joint_friction_run_bit_for_bit_as_before(name, overrides
 def test_describe_lists_joint_friction(capsys):
     code, out, _ = run_cli(capsys, "describe", "compressor_friction")
     assert code == 0
-    assert ("joint friction (kinetostatics per right-hand side; epsilon solved from the implicit equation): f = 0.05: "
-            "thrust collar 0.275 N m (run_in), crank_bearing rho = 1.272 mm (run_in)") in out
+    assert (
+        "joint friction (kinetostatics per right-hand side; epsilon solved from the implicit equation): f = 0.05: "
+        "thrust collar 0.275 N m (run_in), crank_bearing rho = 1.272 mm (run_in)"
+    ) in out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -483,8 +612,11 @@ def test_slotted_lever_friction_is_that_of_its_reactions_and_sliding_speeds():
     lever = data["machine"]["mechanism"]["links"]["lever"]
     lever["points"] = {name: [x, y + 0.05] for name, (x, y) in lever["points"].items()}
     lever["centre"] = [lever["centre"][0], lever["centre"][1] + 0.05]
-    data["machine"]["joint_friction"] = {"coefficient": f, "guide": 0.12,
-                                         "journals": {key: {"radius": value} for key, value in radii.items()}}
+    data["machine"]["joint_friction"] = {
+        "coefficient": f,
+        "guide": 0.12,
+        "journals": {key: {"radius": value} for key, value in radii.items()},
+    }
     model = model_of(data)
     friction = model.joint_friction
     assert set(friction.names) == {"O2", "A", "O4", "S", "G"}
@@ -495,8 +627,12 @@ def test_slotted_lever_friction_is_that_of_its_reactions_and_sliding_speeds():
     def geometry(phi):
         poses = solve(core, structure, phi, derivatives=False)
         A = poses["crank"][0] + 0.1 * cmath.exp(1j * phi)
-        return {"crank": phi, "block": poses["block"][1], "lever": poses["lever"][1]}, abs(A - complex(0.0, -0.3)), \
-            poses["ram"][0].real
+        return (
+            {"crank": phi, "block": poses["block"][1], "lever": poses["lever"][1]},
+            abs(A - complex(0.0, -0.3)),
+            poses["ram"][0].real,
+        )
+
     for phi in np.linspace(0.0, 2.0 * math.pi, 9)[:-1] + 0.2:
         (angles_1, s_1, x_1), (angles_2, s_2, x_2) = geometry(phi - h), geometry(phi + h)
         rate = {name: (angles_2[name] - angles_1[name]) / (2 * h) for name in angles_1}
@@ -508,13 +644,32 @@ def test_slotted_lever_friction_is_that_of_its_reactions_and_sliding_speeds():
 
 
 def test_linkage_journals_must_name_its_revolute_joints(capsys):
-    code, _, err = run_cli(capsys, "describe", "shaper", "--set",
-                           "machine.joint_friction={coefficient: 0.1, journals: {S: {radius: 0.01}, Q: {radius: 0.01}}}")
-    assert code == 2 and "joint_friction.journals names ['S', 'Q'], which are not revolute joints of the linkage; " \
-                         "expected some of ['O2', 'A', 'O4', 'B', 'C']" in err, err
-    code, _, err = run_cli(capsys, "describe", "shaper", "--set",
-                           "machine.joint_friction={coefficient: 0.1, joints: {crank_pin: {radius: 0.01}}}")
+    code, _, err = run_cli(
+        capsys,
+        "describe",
+        "shaper",
+        "--set",
+        "machine.joint_friction={coefficient: 0.1, journals: {S: {radius: 0.01}, Q: {radius: 0.01}}}",
+    )
+    assert (
+        code == 2
+        and "joint_friction.journals names ['S', 'Q'], which are not revolute joints of the linkage; "
+        "expected some of ['O2', 'A', 'O4', 'B', 'C']"
+        in err
+    ), err
+    code, _, err = run_cli(
+        capsys,
+        "describe",
+        "shaper",
+        "--set",
+        "machine.joint_friction={coefficient: 0.1, joints: {crank_pin: {radius: 0.01}}}",
+    )
     assert code == 2 and "a linkage's journals are joint_friction.journals" in err, err
-    code, _, err = run_cli(capsys, "describe", "four_bar_rocker", "--set",
-                           "machine.joint_friction={coefficient: 0.1, journals: {A: {radius: 0.01}}}")
+    code, _, err = run_cli(
+        capsys,
+        "describe",
+        "four_bar_rocker",
+        "--set",
+        "machine.joint_friction={coefficient: 0.1, journals: {A: {radius: 0.01}}}",
+    )
     assert code == 2 and "journals by joint name are a linkage's" in err, err

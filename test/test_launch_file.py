@@ -48,8 +48,11 @@ def nodes_run_starts(governed: bool = True) -> set[str]:
 
 
 def launch_file_strings() -> set[str]:
-    return {node.value for node in ast.walk(ast.parse(LAUNCH_FILE.read_text(encoding="utf-8")))
-            if isinstance(node, ast.Constant) and isinstance(node.value, str)}
+    return {
+        node.value
+        for node in ast.walk(ast.parse(LAUNCH_FILE.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Constant) and isinstance(node.value, str)
+    }
 
 
 def test_launch_file_compiles():
@@ -62,8 +65,9 @@ def test_launch_file_compiles():
 def test_launch_file_names_the_node_executables_that_setup_py_installs_and_run_starts():
     scripts = node_console_scripts()
     assert set(scripts) == {"machine_node", "governor_node", "scenario_node", "recorder_node"}, scripts
-    assert set(scripts.values()) == nodes_run_starts(), \
+    assert set(scripts.values()) == nodes_run_starts(), (
         f"setup.py's node scripts run {sorted(scripts.values())}; `mech-regulator run` starts {sorted(nodes_run_starts())}"
+    )
     named = {text for text in launch_file_strings() if re.fullmatch(r"\w+_node", text)}
     assert named == set(scripts), f"the launch file names {sorted(named)}; setup.py installs {sorted(scripts)}"
 
@@ -71,8 +75,11 @@ def test_launch_file_names_the_node_executables_that_setup_py_installs_and_run_s
 def test_launch_file_and_run_read_the_shipped_params_file():
     assert PARAMS_FILE in launch_file_strings(), f"the launch file does not refer to {PARAMS_FILE}"
     assert (ROOT / PARAMS_FILE).is_file()
-    run_strings = {node.value for node in ast.walk(ast.parse(RUN_LAUNCHER.read_text(encoding="utf-8")))
-                   if isinstance(node, ast.Constant) and isinstance(node.value, str)}
+    run_strings = {
+        node.value
+        for node in ast.walk(ast.parse(RUN_LAUNCHER.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Constant) and isinstance(node.value, str)
+    }
     assert {"params", "main_job.yaml"} <= run_strings, f"{RUN_LAUNCHER} no longer reads params/main_job.yaml"
 
 
@@ -120,8 +127,20 @@ def _launch_stand_ins() -> dict[str, types.ModuleType]:
             return context.launch_configurations[self.variable_name]
 
     class Node:
-        def __init__(self, *, executable, package=None, name=None, namespace=None, exec_name=None,
-                     parameters=None, remappings=None, ros_arguments=None, arguments=None, **kwargs):
+        def __init__(
+            self,
+            *,
+            executable,
+            package=None,
+            name=None,
+            namespace=None,
+            exec_name=None,
+            parameters=None,
+            remappings=None,
+            ros_arguments=None,
+            arguments=None,
+            **kwargs,
+        ):
             self.executable, self.package, self.name = executable, package, name
             self.parameters = list(parameters or [])
             self.options = kwargs
@@ -130,9 +149,18 @@ def _launch_stand_ins() -> dict[str, types.ModuleType]:
         assert package_name == PACKAGE
         return SHARE
 
-    modules = {name: types.ModuleType(name) for name in (
-        "launch", "launch.actions", "launch.substitutions", "launch_ros", "launch_ros.actions",
-        "ament_index_python", "ament_index_python.packages")}
+    modules = {
+        name: types.ModuleType(name)
+        for name in (
+            "launch",
+            "launch.actions",
+            "launch.substitutions",
+            "launch_ros",
+            "launch_ros.actions",
+            "ament_index_python",
+            "ament_index_python.packages",
+        )
+    }
     modules["launch"].LaunchDescription = LaunchDescription
     modules["launch.actions"].DeclareLaunchArgument = DeclareLaunchArgument
     modules["launch.actions"].OpaqueFunction = OpaqueFunction
@@ -172,10 +200,13 @@ def test_launch_file_arguments_default_to_engine_direct_and_the_installed_params
     assert declared["params_file"].default_value == f"{SHARE}/{PARAMS_FILE}"
 
 
-@pytest.mark.parametrize("scene, expected", [
-    ("engine_direct", ["recorder_node", "governor_node", "scenario_node", "machine_node"]),
-    ("lathe", ["recorder_node", "scenario_node", "machine_node"]),  # no governor
-])
+@pytest.mark.parametrize(
+    "scene, expected",
+    [
+        ("engine_direct", ["recorder_node", "governor_node", "scenario_node", "machine_node"]),
+        ("lathe", ["recorder_node", "scenario_node", "machine_node"]),  # no governor
+    ],
+)
 def test_launch_file_starts_the_governor_only_for_a_governed_scene(scene, expected):
     from mech_regulator.scene import load_scene
 
@@ -192,21 +223,24 @@ def test_launch_file_starts_the_governor_only_for_a_governed_scene(scene, expect
         assert overrides.get("scene_file") == scene, f"{node.executable} is not given the scene: {node.parameters}"
     machine = next(node for node in nodes if node.executable == "machine_node")
     peers = next(extra["peers"] for extra in machine.parameters[1:] if "peers" in extra)
-    assert sorted(peers) == sorted(node.name for node in nodes if node is not machine), \
+    assert sorted(peers) == sorted(node.name for node in nodes if node is not machine), (
         "the machine must wait for every other node started (the recorder too, so that it records from t = 0)"
+    )
 
 
 def test_launch_file_with_an_external_controller_leaves_the_governor_out():
-    _, nodes = launched_nodes({"scene": "engine_direct", "params_file": str(ROOT / PARAMS_FILE),
-                               "controller": "external"})
+    _, nodes = launched_nodes(
+        {"scene": "engine_direct", "params_file": str(ROOT / PARAMS_FILE), "controller": "external"}
+    )
     assert [node.executable for node in nodes] == ["recorder_node", "scenario_node", "machine_node"]
     for node in nodes:
         overrides = {key: value for extra in node.parameters[1:] for key, value in extra.items()}
         assert overrides["overrides"] == ["governor=null", "scenario.initial.sleeve=null"], node.parameters
         assert overrides.get("controller", "external") == "external", node.parameters
     machine = nodes[-1]
-    assert {"controller": "external"}.items() <= {key: value for extra in machine.parameters[1:]
-                                                  for key, value in extra.items()}.items()
+    assert {"controller": "external"}.items() <= {
+        key: value for extra in machine.parameters[1:] for key, value in extra.items()
+    }.items()
 
 
 # -------------------------------------------------------------------------------------------------
@@ -215,8 +249,9 @@ def test_launch_file_with_an_external_controller_leaves_the_governor_out():
 
 def test_params_file_sets_use_sim_time_for_the_nodes_that_follow_the_machine_clock():
     parameters = yaml.safe_load((ROOT / PARAMS_FILE).read_text())
-    following = {section for section, values in parameters.items()
-                 if values["ros__parameters"].get("use_sim_time") is True}
+    following = {
+        section for section, values in parameters.items() if values["ros__parameters"].get("use_sim_time") is True
+    }
     assert following == SIM_TIME_NODES
     assert "use_sim_time" not in parameters["/**"]["ros__parameters"]
     machine = parameters["machine"]["ros__parameters"]
@@ -252,8 +287,12 @@ def test_nodes_started_with_the_params_file_follow_a_published_clock(ros_domain)
             if key.startswith(("ROS_", "RMW_", "AMENT_")):
                 patch.setenv(key, value)
         context = Context()
-        rclpy.init(args=["--ros-args", "--params-file", str(ROOT / PARAMS_FILE)], context=context,
-                   domain_id=ros_domain, signal_handler_options=SignalHandlerOptions.NO)
+        rclpy.init(
+            args=["--ros-args", "--params-file", str(ROOT / PARAMS_FILE)],
+            context=context,
+            domain_id=ros_domain,
+            signal_handler_options=SignalHandlerOptions.NO,
+        )
         executor = SingleThreadedExecutor(context=context)
         try:
             nodes = {name: rclpy.create_node(name, context=context) for name in ("machine", *sorted(SIM_TIME_NODES))}
@@ -271,8 +310,9 @@ def test_nodes_started_with_the_params_file_follow_a_published_clock(ros_domain)
             while followers() != SIM_TIME_NODES and time.monotonic() < deadline:
                 clock_publisher.publish(Clock(clock=published))
                 executor.spin_once(timeout_sec=0.05)
-            assert followers() == SIM_TIME_NODES, \
+            assert followers() == SIM_TIME_NODES, (
                 f"after {WAIT} s of /clock at {published_ns} ns, the nodes on it: {sorted(followers())}"
+            )
             machine_clock = nodes["machine"].get_clock()
             assert not machine_clock.ros_time_is_active
             assert machine_clock.now().nanoseconds != published_ns

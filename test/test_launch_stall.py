@@ -31,16 +31,22 @@ def test_a_machine_that_stops_exchanging_is_reported_and_again_when_it_goes_on(t
     for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "AMENT_PREFIX_PATH"):
         monkeypatch.setenv(key, environment[key])  # (_follow sets them in this process; restored after the test)
     go_on, done = tmp_path / "go_on", tmp_path / "done"
-    machine = subprocess.Popen([sys.executable, str(Path(__file__).with_name("stalling_machine.py")), str(go_on),
-                                str(done)], env=environment)
+    machine = subprocess.Popen(
+        [sys.executable, str(Path(__file__).with_name("stalling_machine.py")), str(go_on), str(done)], env=environment
+    )
     stderr = io.StringIO()
     monkeypatch.setattr(sys, "stderr", stderr)
-    follower = threading.Thread(target=launch._follow, args=({"machine": machine}, environment, 10.0, True, "stall",
-                                                             time.monotonic()), kwargs={"stall_report": 0.5})
+    follower = threading.Thread(
+        target=launch._follow,
+        args=({"machine": machine}, environment, 10.0, True, "stall", time.monotonic()),
+        kwargs={"stall_report": 0.5},
+    )
     try:
         follower.start()
-        wait_for(lambda: "has not advanced from t = 1 s for 0.5 s of wall time" in stderr.getvalue(),
-                 "the report of the machine standing at t = 1 s")
+        wait_for(
+            lambda: "has not advanced from t = 1 s for 0.5 s of wall time" in stderr.getvalue(),
+            "the report of the machine standing at t = 1 s",
+        )
         go_on.touch()
         wait_for(lambda: "the machine goes on at t = 2 s" in stderr.getvalue(), "the report that it goes on")
         done.touch()
@@ -51,6 +57,8 @@ def test_a_machine_that_stops_exchanging_is_reported_and_again_when_it_goes_on(t
         if machine.poll() is None:
             machine.kill()
     text = stderr.getvalue()
-    stood = text.index("has not advanced from t = 1 s for 0.5 s of wall time (paused through its ~/pause service, or "
-                       "stuck); Ctrl-C ends the run with its summary")
+    stood = text.index(
+        "has not advanced from t = 1 s for 0.5 s of wall time (paused through its ~/pause service, or "
+        "stuck); Ctrl-C ends the run with its summary"
+    )
     assert stood < text.index("the machine goes on at t = 2 s"), text

@@ -54,11 +54,17 @@ def prismatic(name, guide, slider, direction=0.0, slider_angle=0.0):
 def four_bar_linkage(a=1.0, b=3.0, c=2.5, d=3.5, th1=0.3, branch=1):
     """The preset four-bar (presets.four_bar_linkage: crank, coupler, rocker; joints crank_bearing A, crank_pin B,
     rocker_pin C, rocker_bearing D) with masses on every link and a coupler point P; branch +1 is 'open'."""
-    linkage = presets.four_bar_linkage(four_bar.FourBarGeometry(a, b, c, d, th1, -float(branch), 2.0, 0.4, 3.0, 1.2,
-                                                                0.7, 1.5, 1.0, 0.3))
-    return replace(linkage, links=tuple(replace(link, points={**link.points, "P": 1.0 + 0.8j})
-                                        if link.name == "coupler" else link for link in linkage.links),
-                   points=linkage.points + ("P",))
+    linkage = presets.four_bar_linkage(
+        four_bar.FourBarGeometry(a, b, c, d, th1, -float(branch), 2.0, 0.4, 3.0, 1.2, 0.7, 1.5, 1.0, 0.3)
+    )
+    return replace(
+        linkage,
+        links=tuple(
+            replace(link, points={**link.points, "P": 1.0 + 0.8j}) if link.name == "coupler" else link
+            for link in linkage.links
+        ),
+        points=linkage.points + ("P",),
+    )
 
 
 def crank_slider_linkage(R=0.1, rod=0.35, e=0.03):
@@ -71,68 +77,117 @@ def slotted_lever_linkage(r=0.3, d=0.8, offset=0.05, branch=1):
     """A shaper's slotted lever (RPR group): the block pinned at the crank pin B slides in the lever's slot, a line
     `offset` beside the lever's axis through its pivot O = (0, -d)."""
     return Linkage(
-        links=(Link("frame", {"A": 0j, "O": -1j * d}),
-               Link("crank", {"A": 0j, "B": r + 0j}),
-               Link("block", {"B": 0j, "S": 0j}, mass=0.5, centre=0.01 + 0j, inertia=0.001),
-               Link("lever", {"O": 0j, "S": complex(0.0, offset), "T": 1.5 + 0j}, mass=4.0, centre=0.6 + 0j,
-                    inertia=0.5)),
-        joints=(revolute("A", "frame", "crank"), revolute("B", "crank", "block"), prismatic("S", "lever", "block"),
-                revolute("O", "frame", "lever")),
-        frame="frame", crank="crank", branches={"S": branch}, points=("T",), output_link="lever")
+        links=(
+            Link("frame", {"A": 0j, "O": -1j * d}),
+            Link("crank", {"A": 0j, "B": r + 0j}),
+            Link("block", {"B": 0j, "S": 0j}, mass=0.5, centre=0.01 + 0j, inertia=0.001),
+            Link("lever", {"O": 0j, "S": complex(0.0, offset), "T": 1.5 + 0j}, mass=4.0, centre=0.6 + 0j, inertia=0.5),
+        ),
+        joints=(
+            revolute("A", "frame", "crank"),
+            revolute("B", "crank", "block"),
+            prismatic("S", "lever", "block"),
+            revolute("O", "frame", "lever"),
+        ),
+        frame="frame",
+        crank="crank",
+        branches={"S": branch},
+        points=("T",),
+        output_link="lever",
+    )
 
 
 def crank_line_linkage(x0=0.6):
     """A PRP group: a sleeve slides along the crank's line and is pinned at C to a block on the frame's vertical
     guide x = x0, so C = x0 + i x0 tan(phi)."""
     return Linkage(
-        links=(Link("frame", {"A": 0j, "G": complex(x0, 0.0)}),
-               Link("crank", {"A": 0j, "S": 0j}, mass=1.0, centre=0.2 + 0j, inertia=0.01),
-               Link("sleeve", {"S": 0j, "C": 0j}, mass=0.4, centre=0.02 + 0j, inertia=0.002),
-               Link("block", {"C": 0j, "G": 0j}, mass=0.9, centre=0.01j, inertia=0.003)),
-        joints=(revolute("A", "frame", "crank"), prismatic("S", "crank", "sleeve"), revolute("C", "sleeve", "block"),
-                prismatic("G", "frame", "block", direction=math.pi / 2)),
-        frame="frame", crank="crank", output_joint="G")
+        links=(
+            Link("frame", {"A": 0j, "G": complex(x0, 0.0)}),
+            Link("crank", {"A": 0j, "S": 0j}, mass=1.0, centre=0.2 + 0j, inertia=0.01),
+            Link("sleeve", {"S": 0j, "C": 0j}, mass=0.4, centre=0.02 + 0j, inertia=0.002),
+            Link("block", {"C": 0j, "G": 0j}, mass=0.9, centre=0.01j, inertia=0.003),
+        ),
+        joints=(
+            revolute("A", "frame", "crank"),
+            prismatic("S", "crank", "sleeve"),
+            revolute("C", "sleeve", "block"),
+            prismatic("G", "frame", "block", direction=math.pi / 2),
+        ),
+        frame="frame",
+        crank="crank",
+        output_joint="G",
+    )
 
 
 def scotch_yoke_linkage(r=0.25):
     """An RPP group: the block pinned at the crank pin B slides in the yoke's vertical slot; the yoke slides on
     the frame's horizontal guide: x_yoke = r cos(phi)."""
     return Linkage(
-        links=(Link("frame", {"A": 0j, "Y": 0j}),
-               Link("crank", {"A": 0j, "B": r + 0j}),
-               Link("block", {"B": 0j, "K": 0j}, mass=0.3, centre=0.01 + 0j, inertia=0.001),
-               Link("yoke", {"K": 0j, "Y": 0j}, mass=5.0, centre=0.1 + 0.05j, inertia=0.2)),
-        joints=(revolute("A", "frame", "crank"), revolute("B", "crank", "block"),
-                prismatic("K", "yoke", "block", direction=math.pi / 2), prismatic("Y", "frame", "yoke")),
-        frame="frame", crank="crank", output_joint="Y")
+        links=(
+            Link("frame", {"A": 0j, "Y": 0j}),
+            Link("crank", {"A": 0j, "B": r + 0j}),
+            Link("block", {"B": 0j, "K": 0j}, mass=0.3, centre=0.01 + 0j, inertia=0.001),
+            Link("yoke", {"K": 0j, "Y": 0j}, mass=5.0, centre=0.1 + 0.05j, inertia=0.2),
+        ),
+        joints=(
+            revolute("A", "frame", "crank"),
+            revolute("B", "crank", "block"),
+            prismatic("K", "yoke", "block", direction=math.pi / 2),
+            prismatic("Y", "frame", "yoke"),
+        ),
+        frame="frame",
+        crank="crank",
+        output_joint="Y",
+    )
 
 
 def turned_block_linkage():
     """The slotted lever with a block turned by slider_angle 0.4 rad to the lever and its sliding point S off its
     pin B (RPR with the offset term (p_s[S] - p_s[B]) e^{i alpha})."""
     base = slotted_lever_linkage()
-    return Linkage(links=base.links[:2] + (Link("block", {"B": 0j, "S": 0.02 + 0.01j}, mass=0.5, centre=0.01 + 0j,
-                                                 inertia=0.001),) + base.links[3:],
-                   joints=base.joints[:2] + (prismatic("S", "lever", "block", slider_angle=0.4),) + base.joints[3:],
-                   frame="frame", crank="crank", points=("T",), output_link="lever")
+    return Linkage(
+        links=base.links[:2]
+        + (Link("block", {"B": 0j, "S": 0.02 + 0.01j}, mass=0.5, centre=0.01 + 0j, inertia=0.001),)
+        + base.links[3:],
+        joints=base.joints[:2] + (prismatic("S", "lever", "block", slider_angle=0.4),) + base.joints[3:],
+        frame="frame",
+        crank="crank",
+        points=("T",),
+        output_link="lever",
+    )
 
 
 def sliding_sleeve_linkage():
     """An RRP group whose prismatic joint has its guide on the group's link: a sleeve pinned to the rod at C slides
     over the frame's fixed point G (the sleeve is the guide, the frame the slider), so theta_sleeve = -alpha."""
     return Linkage(
-        links=(Link("frame", {"A": 0j, "G": 0.3 + 0j}),
-               Link("crank", {"A": 0j, "B": 0.1 + 0j}, mass=1.0, centre=0.05 + 0j, inertia=0.002),
-               Link("rod", {"B": 0j, "C": 0.35 + 0j}, mass=2.0, centre=0.15 + 0.02j, inertia=0.03),
-               Link("sleeve", {"C": 0.05j, "G": 0j}, mass=1.5, centre=0.1 + 0j, inertia=0.01)),
-        joints=(revolute("A", "frame", "crank"), revolute("B", "crank", "rod"), revolute("C", "rod", "sleeve"),
-                prismatic("G", "sleeve", "frame", slider_angle=0.2)),
-        frame="frame", crank="crank", output_joint="G")
+        links=(
+            Link("frame", {"A": 0j, "G": 0.3 + 0j}),
+            Link("crank", {"A": 0j, "B": 0.1 + 0j}, mass=1.0, centre=0.05 + 0j, inertia=0.002),
+            Link("rod", {"B": 0j, "C": 0.35 + 0j}, mass=2.0, centre=0.15 + 0.02j, inertia=0.03),
+            Link("sleeve", {"C": 0.05j, "G": 0j}, mass=1.5, centre=0.1 + 0j, inertia=0.01),
+        ),
+        joints=(
+            revolute("A", "frame", "crank"),
+            revolute("B", "crank", "rod"),
+            revolute("C", "rod", "sleeve"),
+            prismatic("G", "sleeve", "frame", slider_angle=0.2),
+        ),
+        frame="frame",
+        crank="crank",
+        output_joint="G",
+    )
 
 
-DYADS = {"RRR": four_bar_linkage, "RRP": crank_slider_linkage, "RPR": slotted_lever_linkage,
-         "PRP": crank_line_linkage, "RPP": scotch_yoke_linkage, "RPR-turned": turned_block_linkage,
-         "RRP-moving-guide": sliding_sleeve_linkage}
+DYADS = {
+    "RRR": four_bar_linkage,
+    "RRP": crank_slider_linkage,
+    "RPR": slotted_lever_linkage,
+    "PRP": crank_line_linkage,
+    "RPP": scotch_yoke_linkage,
+    "RPR-turned": turned_block_linkage,
+    "RRP-moving-guide": sliding_sleeve_linkage,
+}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -149,11 +204,20 @@ def test_four_bar_has_one_freedom_and_one_rrr_group():
 def test_triangle_of_three_sliders_has_one_repeated_constraint():
     """Source 001, fig. 1.23: links 1 and 2 and the frame 3 joined by three prismatic joints: n = 2, p5 = 3,
     R_repeated = 1, W = 3*2 - (2*3 - 1) = 1 (no crank: the count only)."""
-    linkage = Linkage(links=(Link("3", {"A": 0j, "C": 1 + 0j}), Link("1", {"A": 0j, "B": 0.5 + 0.5j}),
-                             Link("2", {"C": 0j, "B": -0.5 + 0.5j})),
-                      joints=(prismatic("A", "3", "1"), prismatic("C", "3", "2", direction=2.0),
-                              prismatic("B", "1", "2", direction=1.0)),
-                      frame="3", crank=None)
+    linkage = Linkage(
+        links=(
+            Link("3", {"A": 0j, "C": 1 + 0j}),
+            Link("1", {"A": 0j, "B": 0.5 + 0.5j}),
+            Link("2", {"C": 0j, "B": -0.5 + 0.5j}),
+        ),
+        joints=(
+            prismatic("A", "3", "1"),
+            prismatic("C", "3", "2", direction=2.0),
+            prismatic("B", "1", "2", direction=1.0),
+        ),
+        frame="3",
+        crank=None,
+    )
     structure = analyse(linkage)
     assert (structure.moving_links, structure.lower_pairs, len(structure.repeated)) == (2, 3, 1)
     assert structure.freedom == 1
@@ -174,7 +238,8 @@ def test_parallelogram_with_an_extra_link_has_one_redundant_constraint():
         poses = solve(parallelogram_linkage(1.0), structure, phi)
         assert 0.0 < poses["1"][1] < math.pi
         assert (poses["5"][1], poses["5"][3], poses["5"][5]) == pytest.approx(
-            (poses["1"][1], poses["1"][3], poses["1"][5]), abs=1e-12)   # EF stays parallel to AB
+            (poses["1"][1], poses["1"][3], poses["1"][5]), abs=1e-12
+        )  # EF stays parallel to AB
     wrong = analyse(parallelogram_linkage(1.1))
     assert wrong.freedom == 0 and "W = 3*6 - (2*9 + 0 - 0 - 0) - 0 = 0" in wrong.refusal()
 
@@ -182,11 +247,22 @@ def test_parallelogram_with_an_extra_link_has_one_redundant_constraint():
 def test_cam_follower_roller_has_one_passive_freedom():
     """Source 001, fig. 1.27: cam 1, roller 2, rocking follower 3: n = 3, p5 = 3, p4 = 1, W_passive = 1,
     W = 3*3 - (2*3 + 1) - 1 = 1; the follower 3 with its roller 2 is one cam follower group (3*2 - 2*2 - 1 - 1 = 0)."""
-    linkage = Linkage(links=(Link("0", {"O1": 0j, "O2": 2 + 0j}), Link("1", {"O1": 0j}),
-                             Link("2", {"R": 0j}, roller_radius=0.1), Link("3", {"O2": 0j, "R": -1 + 0.5j})),
-                      joints=(revolute("O1", "0", "1"), Joint("K", "cam", ("1", "2")), revolute("R", "2", "3"),
-                              revolute("O2", "0", "3")),
-                      frame="0", crank="1")
+    linkage = Linkage(
+        links=(
+            Link("0", {"O1": 0j, "O2": 2 + 0j}),
+            Link("1", {"O1": 0j}),
+            Link("2", {"R": 0j}, roller_radius=0.1),
+            Link("3", {"O2": 0j, "R": -1 + 0.5j}),
+        ),
+        joints=(
+            revolute("O1", "0", "1"),
+            Joint("K", "cam", ("1", "2")),
+            revolute("R", "2", "3"),
+            revolute("O2", "0", "3"),
+        ),
+        frame="0",
+        crank="1",
+    )
     structure = analyse(linkage)
     assert (structure.moving_links, structure.lower_pairs, structure.higher_pairs) == (3, 3, 1)
     assert len(structure.passive) == 1 and "roller 2" in structure.passive[0]
@@ -194,22 +270,42 @@ def test_cam_follower_roller_has_one_passive_freedom():
     assert structure.refusal() is None
     (group,) = structure.groups
     assert (group.kind, group.follower, group.roller, group.guide.name, group.roller_joint.name) == (
-        "cam follower", "3", "2", "O2", "R")
-    assert "group 1: cam follower 3 (cam pair K) (links 3 + 2, joints O2 (revolute), K (cam), R (revolute))" in \
-        structure.report()
+        "cam follower",
+        "3",
+        "2",
+        "O2",
+        "R",
+    )
+    assert (
+        "group 1: cam follower 3 (cam pair K) (links 3 + 2, joints O2 (revolute), K (cam), R (revolute))"
+        in structure.report()
+    )
 
 
 def test_a_class_three_group_is_named_and_refused():
     """A ternary link T joined to three binary links X, Y, Z pinned to the crank and the frame: n = 5, p5 = 7,
     W = 1, but the four links form one class-III group, which is not supported."""
     linkage = Linkage(
-        links=(Link("frame", {"A": 0j, "E": 3 + 0j, "F": 1.5 - 2j}), Link("crank", {"A": 0j, "B": 0.5 + 0j}),
-               Link("X", {"B": 0j, "G": 1.5 + 0j}), Link("Y", {"E": 0j, "H": 1.5 + 0j}),
-               Link("Z", {"F": 0j, "K": 1.5 + 0j}), Link("T", {"G": 0j, "H": 1 + 0j, "K": 0.5 - 0.8j})),
-        joints=(revolute("A", "frame", "crank"), revolute("B", "crank", "X"), revolute("E", "frame", "Y"),
-                revolute("F", "frame", "Z"), revolute("G", "X", "T"), revolute("H", "Y", "T"),
-                revolute("K", "Z", "T")),
-        frame="frame", crank="crank")
+        links=(
+            Link("frame", {"A": 0j, "E": 3 + 0j, "F": 1.5 - 2j}),
+            Link("crank", {"A": 0j, "B": 0.5 + 0j}),
+            Link("X", {"B": 0j, "G": 1.5 + 0j}),
+            Link("Y", {"E": 0j, "H": 1.5 + 0j}),
+            Link("Z", {"F": 0j, "K": 1.5 + 0j}),
+            Link("T", {"G": 0j, "H": 1 + 0j, "K": 0.5 - 0.8j}),
+        ),
+        joints=(
+            revolute("A", "frame", "crank"),
+            revolute("B", "crank", "X"),
+            revolute("E", "frame", "Y"),
+            revolute("F", "frame", "Z"),
+            revolute("G", "X", "T"),
+            revolute("H", "Y", "T"),
+            revolute("K", "Z", "T"),
+        ),
+        frame="frame",
+        crank="crank",
+    )
     structure = analyse(linkage)
     assert structure.freedom == 1
     with pytest.raises(LinkageError, match=r"\['X', 'Y', 'Z', 'T'\].*class III or higher"):
@@ -218,8 +314,12 @@ def test_a_class_three_group_is_named_and_refused():
 
 def test_a_joint_naming_an_unknown_link_is_refused():
     linkage = four_bar_linkage()
-    broken = Linkage(links=linkage.links, joints=linkage.joints[:-1] + (revolute("rocker_bearing", "frame", "rocket"),),
-                     frame="frame", crank="crank")
+    broken = Linkage(
+        links=linkage.links,
+        joints=linkage.joints[:-1] + (revolute("rocker_bearing", "frame", "rocket"),),
+        frame="frame",
+        crank="crank",
+    )
     with pytest.raises(LinkageError, match="joint 'rocker_bearing' names the link 'rocket'"):
         analyse(broken)
 
@@ -228,7 +328,7 @@ def test_a_group_that_cannot_assemble_is_located_on_the_crank_angle():
     """A non-Grashof four-bar (a + d > b + c): the RRR group rocker_pin fails where |B - D| > b + c, i.e. around
     phi = 180 deg (th1 = 0): cos(psi) <= (a^2 + d^2 - (b + c)^2) / (2 a d)."""
     linkage = four_bar_linkage(a=1.5, b=2.0, c=2.0, d=3.0, th1=0.0)
-    half = math.degrees(math.acos((1.5 ** 2 + 3.0 ** 2 - 4.0 ** 2) / (2 * 1.5 * 3.0)))
+    half = math.degrees(math.acos((1.5**2 + 3.0**2 - 4.0**2) / (2 * 1.5 * 3.0)))
     [failure] = assembly_failures(linkage, checked(linkage))
     assert "RRR group rocker_pin" in failure
     span = failure.split("crank angles ")[1].split(" deg")[0]
@@ -253,8 +353,10 @@ def _residuals(linkage, poses):
             values += [abs(Pa - Pb)]
         else:
             w = cmath.exp(1j * (joint.direction + poses[a][1]))
-            values += [((Pb - Pa) * w.conjugate()).imag, math.remainder(poses[b][1] - poses[a][1] - joint.slider_angle,
-                                                                        2 * math.pi)]
+            values += [
+                ((Pb - Pa) * w.conjugate()).imag,
+                math.remainder(poses[b][1] - poses[a][1] - joint.slider_angle, 2 * math.pi),
+            ]
     return values
 
 
@@ -283,7 +385,7 @@ def test_dyad_positions_satisfy_every_joint_and_their_closed_form(kind):
             assert poses["block"][0] == pytest.approx(complex(0.6, 0.6 * math.tan(phi)), abs=1e-12)
         elif kind == "RPP":
             assert poses["yoke"][0] == pytest.approx(0.25 * math.cos(phi), abs=1e-14)
-        elif kind == "RRP-moving-guide":   # the sleeve keeps -alpha; its line through C passes through G
+        elif kind == "RRP-moving-guide":  # the sleeve keeps -alpha; its line through C passes through G
             C = 0.1 * cmath.exp(1j * phi) + 0.35 * cmath.exp(1j * poses["rod"][1])
             assert poses["sleeve"][1] == pytest.approx(-0.2, abs=1e-15)
             assert ((C - 0.05j * cmath.exp(-0.2j) - 0.3) * cmath.exp(0.2j)).imag == pytest.approx(0.0, abs=1e-14)
@@ -298,11 +400,14 @@ def test_branches_are_the_two_assemblies():
         th4 = four_bar.link_angles(phi, 1.0, 3.0, 2.5, 3.5, 0.3, four_bar.BRANCH_SIGN[name])[3]
         rocker = solve(linkage, checked(linkage), phi)["rocker"][1]
         assert math.remainder(rocker - th4, 2 * math.pi) == pytest.approx(0.0, abs=1e-12)
-    plus, minus = (solve(slotted_lever_linkage(branch=b), checked(slotted_lever_linkage(branch=b)), phi)["lever"][1]
-                   for b in (1, -1))
+    plus, minus = (
+        solve(slotted_lever_linkage(branch=b), checked(slotted_lever_linkage(branch=b)), phi)["lever"][1]
+        for b in (1, -1)
+    )
     rho = abs(0.3 * cmath.exp(1j * phi) + 0.8j)
     assert math.remainder(plus - minus - (math.pi - 2 * math.asin(0.05 / rho)), 2 * math.pi) == pytest.approx(
-        0.0, abs=1e-12)
+        0.0, abs=1e-12
+    )
 
 
 def _stencil(values):
@@ -338,15 +443,30 @@ def parallelogram_linkage(ef_length: float = 1.0):
     """Source 001, fig. 1.26: the parallelogram A B C D (link 1 = AB, 2 = BCE, 3 = DC) with the link 5 = EF (a
     redundant link at ef_length 1), link 1 rocked by a crank-rocker (crank O K, rod K B1)."""
     return Linkage(
-        links=(Link("0", {"O": 0.9 + 0j, "A": 0j, "D": 2 + 0j, "F": 1 + 0j}),
-               Link("crank", {"O": 0j, "K": 0.2 + 0j}),
-               Link("rod", {"K": 0j, "B1": 0.9 + 0j}), Link("1", {"A": 0j, "B": 1 + 0j, "B1": 0.5 + 0j}),
-               Link("2", {"B": 0j, "C": 2 + 0j, "E": 1 + 0j}), Link("3", {"D": 0j, "C": 1 + 0j}),
-               Link("5", {"F": 0j, "E": ef_length + 0j})),
-        joints=(revolute("O", "0", "crank"), revolute("K", "crank", "rod"), revolute("B1", "rod", "1"),
-                revolute("A", "0", "1"), revolute("B", "1", "2"), revolute("C", "2", "3"), revolute("D", "0", "3"),
-                revolute("E", "2", "5"), revolute("F", "0", "5")),
-        frame="0", crank="crank", branches={"B1": -1, "C": 1})
+        links=(
+            Link("0", {"O": 0.9 + 0j, "A": 0j, "D": 2 + 0j, "F": 1 + 0j}),
+            Link("crank", {"O": 0j, "K": 0.2 + 0j}),
+            Link("rod", {"K": 0j, "B1": 0.9 + 0j}),
+            Link("1", {"A": 0j, "B": 1 + 0j, "B1": 0.5 + 0j}),
+            Link("2", {"B": 0j, "C": 2 + 0j, "E": 1 + 0j}),
+            Link("3", {"D": 0j, "C": 1 + 0j}),
+            Link("5", {"F": 0j, "E": ef_length + 0j}),
+        ),
+        joints=(
+            revolute("O", "0", "crank"),
+            revolute("K", "crank", "rod"),
+            revolute("B1", "rod", "1"),
+            revolute("A", "0", "1"),
+            revolute("B", "1", "2"),
+            revolute("C", "2", "3"),
+            revolute("D", "0", "3"),
+            revolute("E", "2", "5"),
+            revolute("F", "0", "5"),
+        ),
+        frame="0",
+        crank="crank",
+        branches={"B1": -1, "C": 1},
+    )
 
 
 def six_bar_linkage():
@@ -354,12 +474,22 @@ def six_bar_linkage():
     vertical guide x = 1.2 (RRR then RRP)."""
     base = four_bar_linkage()
     return Linkage(
-        links=(Link("frame", {**base.links[0].points, "G": 1.2 + 0j}),) + base.links[1:]
-        + (Link("rod", {"P": 0j, "F": 2.4 + 0j}, mass=2.0, centre=1.1 + 0.1j, inertia=0.9),
-           Link("ram", {"F": 0j, "G": 0j}, mass=6.0, centre=0.05j, inertia=0.2)),
-        joints=base.joints + (revolute("P", "coupler", "rod"), revolute("F", "rod", "ram"),
-                              prismatic("G", "frame", "ram", direction=-math.pi / 2)),
-        frame="frame", crank="crank", output_joint="G")
+        links=(Link("frame", {**base.links[0].points, "G": 1.2 + 0j}),)
+        + base.links[1:]
+        + (
+            Link("rod", {"P": 0j, "F": 2.4 + 0j}, mass=2.0, centre=1.1 + 0.1j, inertia=0.9),
+            Link("ram", {"F": 0j, "G": 0j}, mass=6.0, centre=0.05j, inertia=0.2),
+        ),
+        joints=base.joints
+        + (
+            revolute("P", "coupler", "rod"),
+            revolute("F", "rod", "ram"),
+            prismatic("G", "frame", "ram", direction=-math.pi / 2),
+        ),
+        frame="frame",
+        crank="crank",
+        output_joint="G",
+    )
 
 
 def test_six_bar_reduced_inertia_matches_an_independent_loop_closure():
@@ -385,9 +515,13 @@ def test_six_bar_reduced_inertia_matches_an_independent_loop_closure():
         th3, th4, th5, y = x
         B = a * cmath.exp(1j * phi)
         P = B + P_local * cmath.exp(1j * th3)
-        return x, {"crank": (0.4 * cmath.exp(1j * phi), phi), "coupler": (B + 1.2 * cmath.exp(1j * th3), th3),
-                   "rocker": (D + 1.0 * cmath.exp(1j * th4), th4),
-                   "rod": (P + (1.1 + 0.1j) * cmath.exp(1j * th5), th5), "ram": (complex(1.2, y) + 0.05j, 0.0)}
+        return x, {
+            "crank": (0.4 * cmath.exp(1j * phi), phi),
+            "coupler": (B + 1.2 * cmath.exp(1j * th3), th3),
+            "rocker": (D + 1.0 * cmath.exp(1j * th4), th4),
+            "rod": (P + (1.1 + 0.1j) * cmath.exp(1j * th5), th5),
+            "ram": (complex(1.2, y) + 0.05j, 0.0),
+        }
 
     masses = {link.name: (link.mass, link.inertia) for link in linkage.links[1:]}
     for phi in ANGLES[::3]:
@@ -400,7 +534,7 @@ def test_six_bar_reduced_inertia_matches_an_independent_loop_closure():
             dth = _stencil([sample[name][1] for sample in samples])
             J += m * abs(dS) ** 2 + inertia * dth * dth
         assert reduced(phi)[0] == pytest.approx(J, rel=1e-8)
-        assert reduced(phi)[3] == pytest.approx(-centres(phi, guess)[0][3], abs=1e-10)   # q: travel downwards
+        assert reduced(phi)[3] == pytest.approx(-centres(phi, guess)[0][3], abs=1e-10)  # q: travel downwards
 
 
 def test_rows_are_the_partial_derivatives_of_the_constraints():
@@ -427,8 +561,18 @@ def test_rows_are_the_partial_derivatives_of_the_constraints():
 # Kinetostatics by groups
 
 
-@pytest.mark.parametrize("build", [six_bar_linkage, slotted_lever_linkage, crank_line_linkage, scotch_yoke_linkage,
-                                   crank_slider_linkage, turned_block_linkage, sliding_sleeve_linkage])
+@pytest.mark.parametrize(
+    "build",
+    [
+        six_bar_linkage,
+        slotted_lever_linkage,
+        crank_line_linkage,
+        scotch_yoke_linkage,
+        crank_slider_linkage,
+        turned_block_linkage,
+        sliding_sleeve_linkage,
+    ],
+)
 def test_balancing_moment_equals_the_reduced_moment(build):
     """M_b = J epsilon + 1/2 J' omega^2 - M_weight - Q q' (J with the crank's own m cg^2 + I), from the reactions
     solved group by group from the farthest inward: an independent check of the reactions and of J, J', q'."""
@@ -438,6 +582,6 @@ def test_balancing_moment_equals_the_reduced_moment(build):
     reduced = make_reduced(linkage, structure, GRAVITY)
     for phi, omega, epsilon, force in ((0.4, 7.0, 30.0, 150.0), (2.2, -3.0, -12.0, -40.0), (4.9, 11.0, 0.0, 75.0)):
         J, dJ, weight, q, dq = reduced(phi)
-        expected = J * epsilon + 0.5 * dJ * omega ** 2 - weight - force * dq
-        scale = abs(J * epsilon) + abs(0.5 * dJ * omega ** 2) + abs(weight) + abs(force * dq)
+        expected = J * epsilon + 0.5 * dJ * omega**2 - weight - force * dq
+        scale = abs(J * epsilon) + abs(0.5 * dJ * omega**2) + abs(weight) + abs(force * dq)
         assert loads(phi, omega, epsilon, force).balancing == pytest.approx(expected, abs=1e-11 * scale)

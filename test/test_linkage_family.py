@@ -83,8 +83,20 @@ def test_kinematics_tables_every_point_and_the_reactions_where_determinate(scene
     constant speed (M_b = 1/2 J' omega^2 - M_weight); for the redundant link, none, and why."""
     path, expected = scenes[name]
     out, plot = tmp_path / "k.csv", tmp_path / "k.png"
-    code, stdout, err = run_cli(capsys, "kinematics", str(path), "--points", "25", "--omega", "12", "--out", str(out),
-                                "--plot", str(plot), "--json")
+    code, stdout, err = run_cli(
+        capsys,
+        "kinematics",
+        str(path),
+        "--points",
+        "25",
+        "--omega",
+        "12",
+        "--out",
+        str(out),
+        "--plot",
+        str(plot),
+        "--json",
+    )
     assert code == 0, err
     summary = json.loads(stdout)
     columns = read_csv(out)
@@ -97,11 +109,12 @@ def test_kinematics_tables_every_point_and_the_reactions_where_determinate(scene
     scene = load_scene(str(path))
     mechanism, gravity = scene.machine.mechanism, tuple(scene.machine.gravity)
     reduced = build_reduced(mechanism, gravity)
-    wanted = [0.5 * reduced(phi)[1] * 12.0 ** 2 - reduced(phi)[2] for phi in columns["phi"]]
+    wanted = [0.5 * reduced(phi)[1] * 12.0**2 - reduced(phi)[2] for phi in columns["phi"]]
     scale = np.max(np.abs(wanted))
     assert scale > 0.0 and np.max(np.abs(columns["M_balancing"] - wanted)) <= 1e-9 * scale
-    assert reactions_table(mechanism, gravity, 12.0, columns["phi"][:1]).keys() == \
-        {key for key in columns if key.startswith("R_")} | {"M_balancing"}
+    assert reactions_table(mechanism, gravity, 12.0, columns["phi"][:1]).keys() == {
+        key for key in columns if key.startswith("R_")
+    } | {"M_balancing"}
 
 
 @pytest.mark.parametrize("name", NAMES)
@@ -110,8 +123,9 @@ def test_simulate_records_plots_and_writes_the_run(scenes, name, tmp_path, capsy
     the crank and one block per prismatic joint (none without sliders)."""
     path, expected = scenes[name]
     out, plot, rrd = tmp_path / "run.csv", tmp_path / "run.png", tmp_path / "run.rrd"
-    code, stdout, err = run_cli(capsys, "simulate", str(path), "--quiet", "--json", "--out", str(out),
-                                "--plot", str(plot), "--record", str(rrd))
+    code, stdout, err = run_cli(
+        capsys, "simulate", str(path), "--quiet", "--json", "--out", str(out), "--plot", str(plot), "--record", str(rrd)
+    )
     assert code == 0, err
     assert json.loads(stdout)["status"] == "complete"
     columns = read_csv(out)
@@ -136,8 +150,9 @@ def test_the_lockstep_co_simulation_plays_it_without_a_trip(scenes, name, capsys
     assert code == 0, err
     summary = json.loads(stdout)
     assert summary["status"] == "complete" and summary["tripped_at"] is None and summary["t_end"] == pytest.approx(0.3)
-    code, stdout, err = run_cli(capsys, "simulate", str(path), "--quiet", "--json", "--exchange-step", "0.01",
-                                "--overspeed-trip", "30.001")
+    code, stdout, err = run_cli(
+        capsys, "simulate", str(path), "--quiet", "--json", "--exchange-step", "0.01", "--overspeed-trip", "30.001"
+    )
     summary = json.loads(stdout)
     assert code == 0 and summary["tripped_at"] is not None, err
     assert summary["status"] == "tripped" and summary["message"].startswith("overspeed trip at t = "), summary
@@ -153,8 +168,9 @@ def test_flywheel_or_governor_and_the_other_refused_with_the_reason(scenes, name
         return
     code, stdout, err = run_cli(capsys, "governor", str(path))
     assert code == 2 and "has no governor" in err, err
-    code, stdout, err = run_cli(capsys, "flywheel", str(path), "--delta", "1/20", "--quiet", "--json",
-                                "--plot", str(tmp_path / "f.png"))
+    code, stdout, err = run_cli(
+        capsys, "flywheel", str(path), "--delta", "1/20", "--quiet", "--json", "--plot", str(tmp_path / "f.png")
+    )
     assert code == 0, err
     answer = json.loads(stdout)
     assert answer and (tmp_path / "f.png").stat().st_size > 0
@@ -163,8 +179,20 @@ def test_flywheel_or_governor_and_the_other_refused_with_the_reason(scenes, name
 @pytest.mark.parametrize("name", NAMES)
 def test_a_sweep_runs_the_linkage(scenes, name, tmp_path, capsys):
     path, _ = scenes[name]
-    code, stdout, err = run_cli(capsys, "sweep", str(path), "--grid", "machine.inertia=0.5,1.0", "--jobs", "1",
-                                "--path", "reference", "--out", str(tmp_path / "sweep"), "--quiet")
+    code, stdout, err = run_cli(
+        capsys,
+        "sweep",
+        str(path),
+        "--grid",
+        "machine.inertia=0.5,1.0",
+        "--jobs",
+        "1",
+        "--path",
+        "reference",
+        "--out",
+        str(tmp_path / "sweep"),
+        "--quiet",
+    )
     assert code == 0, err
     with open(tmp_path / "sweep" / "sweep.csv", newline="") as handle:
         rows = list(csv.DictReader(handle))
@@ -198,8 +226,9 @@ def test_a_branch_on_a_group_with_one_assembly_is_refused(scenes, tmp_path, caps
     changed = tmp_path / "branch.yaml"
     changed.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
     code, _, err = run_cli(capsys, "structure", str(changed))
-    assert code == 2 and "branches names ['C'], which are not the internal joint of a group with two assemblies" \
-        in err, err
+    assert (
+        code == 2 and "branches names ['C'], which are not the internal joint of a group with two assemblies" in err
+    ), err
 
 
 def documented_six_bar() -> str:
@@ -226,17 +255,18 @@ def test_the_documented_six_bar_shows_every_key_and_its_csv_j_holds_the_constant
     assert len(mechanism["output"]) == 1 and set(mechanism["output"]) <= set(schema.LinkageOutput.model_fields)
     path, out = tmp_path / "my_six_bar.yaml", tmp_path / "run.csv"
     path.write_text(documented_six_bar(), encoding="utf-8")
-    code, _, err = run_cli(capsys, "simulate", str(path), "--quiet", "--set", "scenario.duration=0.1",
-                           "--out", str(out))
+    code, _, err = run_cli(
+        capsys, "simulate", str(path), "--quiet", "--set", "scenario.duration=0.1", "--out", str(out)
+    )
     assert code == 0, err
     columns = read_csv(out)
     scene = load_scene(str(path))
     machine = scene.machine
-    constant = machine.inertia + machine.flywheel.inertia * machine.flywheel.ratio ** 2
+    constant = machine.inertia + machine.flywheel.inertia * machine.flywheel.ratio**2
     reduced = build_reduced(machine.mechanism, tuple(machine.gravity))
     links = np.array([reduced(phi)[0] for phi in columns["phi"]])
     np.testing.assert_allclose(columns["J"], constant + links, rtol=1e-9)
-    assert round(float(columns["J"][0]), 4) == 21.0892   # docs/linkages.md, "J in the run's CSV"
+    assert round(float(columns["J"][0]), 4) == 21.0892  # docs/linkages.md, "J in the run's CSV"
     crank = data["machine"]["mechanism"]["links"]["crank"]
     without = load_scene(str(path), ["machine.mechanism.links.crank.mass=0", "machine.mechanism.links.crank.inertia=0"])
     bare = build_reduced(without.machine.mechanism, tuple(machine.gravity))

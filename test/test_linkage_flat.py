@@ -93,9 +93,18 @@ def test_weight_moment_is_minus_the_rate_of_potential_energy():
 
     def potential(phi: float) -> float:
         poses = solve(core, structure, phi, derivatives=False)
-        return -sum(link.mass * (g.conjugate() * (poses[link.name][0] + link.centre * complex(
-            math.cos(poses[link.name][1]), math.sin(poses[link.name][1])))).real
-            for link in core.links if link.name != core.frame)
+        return -sum(
+            link.mass
+            * (
+                g.conjugate()
+                * (
+                    poses[link.name][0]
+                    + link.centre * complex(math.cos(poses[link.name][1]), math.sin(poses[link.name][1]))
+                )
+            ).real
+            for link in core.links
+            if link.name != core.frame
+        )
 
     step = 1e-5
     for phi in ANGLES:
@@ -106,7 +115,7 @@ def test_weight_moment_is_minus_the_rate_of_potential_energy():
 def test_a_group_that_cannot_assemble_gives_the_same_clear_message_from_reduced_and_solve():
     """A four-bar whose rocker cannot reach over part of the turn: reduced(phi) (compiled, NaN there) raises the
     LinkageError of the dict solve, naming the RRR group, its links, the angle and the distances."""
-    linkage = four_bar_linkage(c=0.8)   # crank 1, coupler 3, frame 3.5: |D - B| up to 4.5 > 3 + 0.8
+    linkage = four_bar_linkage(c=0.8)  # crank 1, coupler 3, frame 3.5: |D - B| up to 4.5 > 3 + 0.8
     structure = analyse(linkage)
     reduced = make_reduced(linkage, structure, None)
     with pytest.raises(LinkageError) as from_solve:
@@ -114,8 +123,9 @@ def test_a_group_that_cannot_assemble_gives_the_same_clear_message_from_reduced_
     with pytest.raises(LinkageError) as from_reduced:
         reduced(math.pi)
     assert str(from_reduced.value) == str(from_solve.value)
-    assert str(from_solve.value).startswith("RRR group rocker_pin (links coupler, rocker) at crank angle 180.000 deg cannot "
-                                            "be assembled: the distance ")
+    assert str(from_solve.value).startswith(
+        "RRR group rocker_pin (links coupler, rocker) at crank angle 180.000 deg cannot be assembled: the distance "
+    )
 
 
 def test_a_slider_table_on_a_linkage_output_runs_the_same_on_both_paths():
@@ -173,8 +183,10 @@ def test_a_group_at_a_dead_point_is_named_with_its_angle():
     reduced = make_reduced(linkage, structure, None)
     program = flat.encode(linkage, structure.groups, None)
     for phi, degrees in ((math.pi, "180.000"), (0.0, "0.000")):
-        expected = (f"RRR group rocker_pin (links coupler, rocker) is at a dead point at crank angle {degrees} deg: its "
-                    "links are aligned and its velocity ratios infinite")
+        expected = (
+            f"RRR group rocker_pin (links coupler, rocker) is at a dead point at crank angle {degrees} deg: its "
+            "links are aligned and its velocity ratios infinite"
+        )
         with pytest.raises(LinkageError) as from_solve:
             solve(linkage, structure, phi)
         with pytest.raises(LinkageError) as from_reduced:

@@ -19,17 +19,25 @@ from mech_regulator.mechanisms.linkage.kinetostatics import make_kinetostatics
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 
-FRICTION = ["machine.joint_friction.coefficient=0.05", "machine.joint_friction.guide=0.05",
-            "machine.joint_friction.journals={" + ", ".join(f"{joint}: {{radius: 0.03, fit: run_in}}"
-                                                           for joint in ("O2", "A", "O4", "B", "C")) + "}"]
+FRICTION = [
+    "machine.joint_friction.coefficient=0.05",
+    "machine.joint_friction.guide=0.05",
+    "machine.joint_friction.journals={"
+    + ", ".join(f"{joint}: {{radius: 0.03, fit: run_in}}" for joint in ("O2", "A", "O4", "B", "C"))
+    + "}",
+]
 
 
 def six_bar_press(duration: float, *settings: str):
     """The bundled six-bar press with f = 0.05 in every joint (journals A-F 30 mm run in, the ram's guide G) over
     duration [s], with --set style settings."""
     journals = "{" + ", ".join(f"{joint}: {{radius: 0.03, fit: run_in}}" for joint in "ABCDEF") + "}"
-    return build_model(load_scene("six_bar_press", [f"scenario.duration={duration}", *FRICTION[:2],
-                                                    f"machine.joint_friction.journals={journals}", *settings]))
+    return build_model(
+        load_scene(
+            "six_bar_press",
+            [f"scenario.duration={duration}", *FRICTION[:2], f"machine.joint_friction.journals={journals}", *settings],
+        )
+    )
 
 
 def shaper(duration: float, *settings: str):
@@ -72,8 +80,9 @@ def test_shaper_with_joint_friction_meets_its_rtol():
         signs = np.sign([normal(t, states[:, k]) for k, t in enumerate(times)])
         crossings += int(np.count_nonzero(signs[1:] != signs[:-1]))
     grid, period = model.switch_grid(), model.dynamic_period()
-    passed = sum(math.floor((states[0, -1] - angle) / period) - math.floor((states[0, 0] - angle) / period)
-                 for angle in grid)
+    passed = sum(
+        math.floor((states[0, -1] - angle) / period) - math.floor((states[0, 0] - angle) / period) for angle in grid
+    )
     assert crossings >= 1
     assert run.stats.switches == tight.stats.switches == passed + crossings
 

@@ -26,7 +26,7 @@ from mech_regulator.solvers.compiled import fast_path_refusal
 from mech_regulator.solvers.compiled.codegen import compile_scene
 
 LINKAGES = ["shaper", "sieve_shaker", "six_bar_press", "walking_beam_linkage"]
-GRAVITY = (1.5, -9.81)   # with a component along x, so that the weights' terms of both axes count
+GRAVITY = (1.5, -9.81)  # with a component along x, so that the weights' terms of both axes count
 
 
 @pytest.mark.parametrize("name", LINKAGES)
@@ -43,8 +43,8 @@ def test_balancing_moment_equals_the_reduced_moment_at_many_angles(name):
     for phi in np.linspace(0.0, 2.0 * math.pi, 98)[:-1] + 0.013:
         omega, epsilon, force = rng.uniform(-15.0, 15.0), rng.uniform(-60.0, 60.0), rng.uniform(-2000.0, 2000.0)
         J, dJ, weight, _, dq = flat.reduced(phi, program, 0)
-        expected = J * epsilon + 0.5 * dJ * omega ** 2 - weight - force * dq
-        scale = abs(J * epsilon) + abs(0.5 * dJ * omega ** 2) + abs(weight) + abs(force * dq)
+        expected = J * epsilon + 0.5 * dJ * omega**2 - weight - force * dq
+        scale = abs(J * epsilon) + abs(0.5 * dJ * omega**2) + abs(weight) + abs(force * dq)
         balancing, rate = loads(phi, omega, force).balancing
         assert balancing + rate * epsilon == pytest.approx(expected, abs=1e-9 * scale)
 
@@ -80,7 +80,7 @@ def test_compiled_right_hand_side_and_reactions_equal_the_model():
     compiled = compile_scene(model)
     reactions = sys.modules[f"mech_regulator_compiled_{compiled.path.stem.removeprefix('scene_')}"].reactions
     rng = np.random.default_rng(5)
-    window = (0.2, 0.6)   # the rate signs held at its middle, the tables read on its middle's segment
+    window = (0.2, 0.6)  # the rate signs held at its middle, the tables read on its middle's segment
     for k in range(12):
         y = np.array([rng.uniform(0.2, 0.6), rng.uniform(2.0, 14.0)])
         held = k % 2 == 1
@@ -108,14 +108,15 @@ def test_press_with_joint_friction_runs_the_same_on_both_paths():
     reference = simulate_complete(model_of(data))
     fast = simulate_complete(model_of(scene(data, solver__path="fast")))
     settings = model_of(data).scene.solver
-    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
-                                             solver__atol=settings.atol / 100)))
+    tight = simulate_complete(
+        model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100, solver__atol=settings.atol / 100))
+    )
     assert_same_events(reference, fast)
     assert fast.stats.switches == reference.stats.switches > 0 and fast.stats.restarts == reference.stats.restarts
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
     frictionless = simulate_complete(model_of(scene(data, machine__joint_friction=None)))
-    assert fast(fast.t_end)[1] < frictionless(frictionless.t_end)[1]   # friction takes energy
-    for run in (reference, fast):   # 3.7e-5 (0.225 J, at any rtol) while the corner of |k_C| at 0 was missed
+    assert fast(fast.t_end)[1] < frictionless(frictionless.t_end)[1]  # friction takes energy
+    for run in (reference, fast):  # 3.7e-5 (0.225 J, at any rtol) while the corner of |k_C| at 0 was missed
         balance = energy_balance(model_of(data), run)
         assert balance.works["joint_friction"] < 0.0 and abs(balance.relative_residual) < 1e-8
 
@@ -128,17 +129,25 @@ def test_shaper_with_guide_friction_in_both_prismatic_joints_runs_the_same_on_bo
     sign change of both N (counted on 4000 samples of the tight run), and its states within 10 times the fast run's
     own distance to one at 1/100 of the tolerances."""
     journals = "{" + ", ".join(f"{joint}: {{radius: 0.03, fit: run_in}}" for joint in ("O2", "A", "O4", "B", "C")) + "}"
-    data = load_scene("shaper", ["scenario.duration=1.2", "machine.gravity=[0.0, 0.0]",
-                                 "machine.joint_friction.coefficient=0.05", "machine.joint_friction.guide=0.05",
-                                 f"machine.joint_friction.journals={journals}"]).model_dump(exclude_none=True)
+    data = load_scene(
+        "shaper",
+        [
+            "scenario.duration=1.2",
+            "machine.gravity=[0.0, 0.0]",
+            "machine.joint_friction.coefficient=0.05",
+            "machine.joint_friction.guide=0.05",
+            f"machine.joint_friction.journals={journals}",
+        ],
+    ).model_dump(exclude_none=True)
     model = model_of(data)
     assert [model.joint_friction.names[k] for k in model.joint_friction.guides] == ["S", "G"]
     assert fast_path_refusal(model) is None
     reference = simulate_complete(model)
     fast = simulate_complete(model_of(scene(data, solver__path="fast")))
     settings = model.scene.solver
-    tight = simulate_complete(model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100,
-                                             solver__atol=settings.atol / 100)))
+    tight = simulate_complete(
+        model_of(scene(data, solver__path="fast", solver__rtol=settings.rtol / 100, solver__atol=settings.atol / 100))
+    )
     assert_same_events(reference, fast)
     assert fast.stats.restarts == reference.stats.restarts
     times = np.linspace(0.0, 1.2, 4001)
@@ -150,8 +159,9 @@ def test_shaper_with_guide_friction_in_both_prismatic_joints_runs_the_same_on_bo
         crossings.append(int(np.count_nonzero(signs[1:] != signs[:-1])))
     assert min(crossings) >= 1
     grid, period = model.switch_grid(), model.dynamic_period()
-    passed = sum(math.floor((states[0, -1] - angle) / period) - math.floor((states[0, 0] - angle) / period)
-                 for angle in grid)
+    passed = sum(
+        math.floor((states[0, -1] - angle) / period) - math.floor((states[0, 0] - angle) / period) for angle in grid
+    )
     assert fast.stats.switches == tight.stats.switches == passed + sum(crossings)
     assert np.all(relative_difference(reference, fast) <= 10.0 * relative_difference(tight, fast) + 1e-12)
 
@@ -187,7 +197,7 @@ def test_a_crank_at_rest_under_friction_stays_at_rest_on_both_paths():
     model = model_of(at_rest(0.0))
     weight = model.reduced(1.0)[2]
     friction = model.joint_friction.joint_values(1.0, 0.0, 0.0, 0.0)[2]
-    assert friction > 1.0   # the weights' reactions
+    assert friction > 1.0  # the weights' reactions
     for share, moving in ((0.9, False), (1.1, True)):
         data = at_rest(-weight + share * friction)
         held = model_of(data)

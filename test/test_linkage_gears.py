@@ -40,11 +40,16 @@ GRAVITY = (0.3, -9.81)
 def gear_pair(z1: int, z2: int, internal: bool = False, distance: float = 0.3) -> Linkage:
     """A crank gear of z1 teeth about A driving a gear of z2 teeth about B on the frame, `distance` apart; each gear
     with an off-axis centre of mass (so that its J term is m c^2 + I times its rate squared)."""
-    links = (Link("frame", {"A": 0j, "B": complex(distance, 0.0)}),
-             Link("crank", {"A": 0j}, mass=2.0, centre=0.01j, inertia=0.5),
-             Link("gear", {"B": 0j}, mass=1.0, centre=0.02 + 0j, inertia=0.2))
-    joints = (Joint("A", "revolute", ("frame", "crank")), Joint("B", "revolute", ("frame", "gear")),
-              Joint("M", "gear", ("crank", "gear"), gear=GearMesh(("A", "B"), teeth=(z1, z2), internal=internal)))
+    links = (
+        Link("frame", {"A": 0j, "B": complex(distance, 0.0)}),
+        Link("crank", {"A": 0j}, mass=2.0, centre=0.01j, inertia=0.5),
+        Link("gear", {"B": 0j}, mass=1.0, centre=0.02 + 0j, inertia=0.2),
+    )
+    joints = (
+        Joint("A", "revolute", ("frame", "crank")),
+        Joint("B", "revolute", ("frame", "gear")),
+        Joint("M", "gear", ("crank", "gear"), gear=GearMesh(("A", "B"), teeth=(z1, z2), internal=internal)),
+    )
     return Linkage(links, joints, "frame", "crank", output_link="gear")
 
 
@@ -52,36 +57,52 @@ def epicyclic(z_sun: int, z_planet: int, z_ring: int) -> Linkage:
     """An arm (the crank) about A carrying a planet at P that meshes with the fixed sun (the frame's gear about A)
     and with a ring about A (internal)."""
     arm = 0.2 * (z_sun + z_planet) / (z_sun + 2 * z_planet)
-    links = (Link("frame", {"A": 0j, "R": 0j}),
-             Link("arm", {"A": 0j, "P": complex(arm, 0.0)}, mass=1.0, centre=complex(arm / 2, 0.0), inertia=0.01),
-             Link("planet", {"P": 0j}, mass=0.5, inertia=0.001),
-             Link("ring", {"R": 0j}, mass=2.0, inertia=0.05))
-    joints = (Joint("A", "revolute", ("frame", "arm")), Joint("P", "revolute", ("arm", "planet")),
-              Joint("S", "gear", ("frame", "planet"), gear=GearMesh(("A", "P"), teeth=(z_sun, z_planet),
-                                                                      carrier="arm")),
-              Joint("R", "revolute", ("frame", "ring")),
-              Joint("Q", "gear", ("planet", "ring"), gear=GearMesh(("P", "R"), teeth=(z_planet, z_ring),
-                                                                     internal=True, carrier="arm")))
+    links = (
+        Link("frame", {"A": 0j, "R": 0j}),
+        Link("arm", {"A": 0j, "P": complex(arm, 0.0)}, mass=1.0, centre=complex(arm / 2, 0.0), inertia=0.01),
+        Link("planet", {"P": 0j}, mass=0.5, inertia=0.001),
+        Link("ring", {"R": 0j}, mass=2.0, inertia=0.05),
+    )
+    joints = (
+        Joint("A", "revolute", ("frame", "arm")),
+        Joint("P", "revolute", ("arm", "planet")),
+        Joint("S", "gear", ("frame", "planet"), gear=GearMesh(("A", "P"), teeth=(z_sun, z_planet), carrier="arm")),
+        Joint("R", "revolute", ("frame", "ring")),
+        Joint(
+            "Q",
+            "gear",
+            ("planet", "ring"),
+            gear=GearMesh(("P", "R"), teeth=(z_planet, z_ring), internal=True, carrier="arm"),
+        ),
+    )
     return Linkage(links, joints, "frame", "arm", output_link="ring")
 
 
 def geared_press() -> Linkage:
     """A crank gear (60 teeth) driving a pinion (30) that is the crank of a slider-crank: the pinion turns twice
     per crank turn, its crank pin C 0.05 m off its axis."""
-    links = (Link("frame", {"A": 0j, "B": 0.3 + 0j, "G": 0.3 + 0j}),
-             Link("crank", {"A": 0j}, mass=2.0, inertia=0.5),
-             Link("pinion", {"B": 0j, "C": 0.05 + 0j}, mass=1.0, inertia=0.02),
-             Link("rod", {"C": 0j, "D": 0.25 + 0j}, mass=1.5, centre=0.125 + 0j, inertia=0.01),
-             Link("ram", {"D": 0j, "G": 0j}, mass=3.0))
-    joints = (Joint("A", "revolute", ("frame", "crank")), Joint("B", "revolute", ("frame", "pinion")),
-              Joint("M", "gear", ("crank", "pinion"), gear=GearMesh(("A", "B"), teeth=(60, 30))),
-              Joint("C", "revolute", ("pinion", "rod")), Joint("D", "revolute", ("rod", "ram")),
-              Joint("G", "prismatic", ("frame", "ram")))
+    links = (
+        Link("frame", {"A": 0j, "B": 0.3 + 0j, "G": 0.3 + 0j}),
+        Link("crank", {"A": 0j}, mass=2.0, inertia=0.5),
+        Link("pinion", {"B": 0j, "C": 0.05 + 0j}, mass=1.0, inertia=0.02),
+        Link("rod", {"C": 0j, "D": 0.25 + 0j}, mass=1.5, centre=0.125 + 0j, inertia=0.01),
+        Link("ram", {"D": 0j, "G": 0j}, mass=3.0),
+    )
+    joints = (
+        Joint("A", "revolute", ("frame", "crank")),
+        Joint("B", "revolute", ("frame", "pinion")),
+        Joint("M", "gear", ("crank", "pinion"), gear=GearMesh(("A", "B"), teeth=(60, 30))),
+        Joint("C", "revolute", ("pinion", "rod")),
+        Joint("D", "revolute", ("rod", "ram")),
+        Joint("G", "prismatic", ("frame", "ram")),
+    )
     return Linkage(links, joints, "frame", "crank", output_joint="G")
 
 
-@pytest.mark.parametrize("z1, z2, internal, ratio", [(40, 20, False, -2.0), (20, 50, False, -0.4),
-                                                       (20, 60, True, 1.0 / 3.0), (60, 24, True, 2.5)])
+@pytest.mark.parametrize(
+    "z1, z2, internal, ratio",
+    [(40, 20, False, -2.0), (20, 50, False, -0.4), (20, 60, True, 1.0 / 3.0), (60, 24, True, 2.5)],
+)
 def test_gear_pair_ratio_and_geared_crank_inertia(z1, z2, internal, ratio):
     """theta_2 = -z1/z2 phi (external), +z1/z2 phi (internal), with theta_2' and theta_2'' = 0; the structure counts
     the mesh as p4 (n = 2, p5 = 2, p4 = 1, W = 1); J = J1 + J2 (z1/z2)^2 with J_k = m_k c_k^2 + I_k, dJ/dphi = 0."""
@@ -90,9 +111,10 @@ def test_gear_pair_ratio_and_geared_crank_inertia(z1, z2, internal, ratio):
     assert (structure.moving_links, structure.lower_pairs, structure.higher_pairs, structure.freedom) == (2, 2, 1, 1)
     for phi in ANGLES:
         poses = solve(linkage, structure, phi)
-        assert (poses["gear"][1], poses["gear"][3], poses["gear"][5]) == pytest.approx((ratio * phi, ratio, 0.0),
-                                                                                        abs=1e-12)
-    J1, J2 = 2.0 * 0.01 ** 2 + 0.5, 1.0 * 0.02 ** 2 + 0.2
+        assert (poses["gear"][1], poses["gear"][3], poses["gear"][5]) == pytest.approx(
+            (ratio * phi, ratio, 0.0), abs=1e-12
+        )
+    J1, J2 = 2.0 * 0.01**2 + 0.5, 1.0 * 0.02**2 + 0.2
     for reduced in (make_reduced(linkage, structure, GRAVITY), symbolic.make_reduced(linkage, structure, GRAVITY)):
         for phi in ANGLES:
             J, dJ, _, angle, rate = reduced(phi)
@@ -114,7 +136,7 @@ def test_epicyclic_train_ratios_by_willis():
         poses = solve(linkage, structure, phi)
         assert (poses["planet"][1], poses["planet"][3]) == pytest.approx((planet_rate * phi, planet_rate), abs=1e-12)
         assert (poses["ring"][1], poses["ring"][3]) == pytest.approx((ring_rate * phi, ring_rate), abs=1e-12)
-    J = (0.01 + 1.0 * (arm / 2) ** 2) + 0.5 * arm ** 2 + 0.001 * planet_rate ** 2 + 0.05 * ring_rate ** 2
+    J = (0.01 + 1.0 * (arm / 2) ** 2) + 0.5 * arm**2 + 0.001 * planet_rate**2 + 0.05 * ring_rate**2
     for reduced in (make_reduced(linkage, structure, GRAVITY), symbolic.make_reduced(linkage, structure, GRAVITY)):
         for phi in ANGLES:
             assert reduced(phi)[:2] == pytest.approx((J, 0.0), abs=1e-12)
@@ -134,7 +156,8 @@ def test_geared_press_generated_code_equals_the_general_solver_and_balances():
     for phi, (J, dJ, weight, _, dq) in zip(ANGLES, table):
         omega, epsilon, force = 7.0, -3.0, 150.0
         assert loads(phi, omega, epsilon, force).balancing == pytest.approx(
-            J * epsilon + 0.5 * dJ * omega ** 2 - weight - force * dq, abs=1e-10 * (1 + abs(J * epsilon)))
+            J * epsilon + 0.5 * dJ * omega**2 - weight - force * dq, abs=1e-10 * (1 + abs(J * epsilon))
+        )
 
 
 def test_tooth_force_is_the_driven_torque_over_the_pitch_radius():
@@ -190,11 +213,27 @@ def test_the_geared_scene_through_structure_and_simulate(tmp_path, capsys):
     summary = json.loads(out)
     assert (summary["p4"], [group["class"] for group in summary["groups"]]) == (1, ["gear", "II"])
     record = tmp_path / "run.rrd"
-    code, out, _ = run_cli(capsys, "simulate", "geared_shaker", "--set", "solver.path=reference", "--set",
-                           "scenario.duration=0.3", "--record", str(record))
+    code, out, _ = run_cli(
+        capsys,
+        "simulate",
+        "geared_shaker",
+        "--set",
+        "solver.path=reference",
+        "--set",
+        "scenario.duration=0.3",
+        "--record",
+        str(record),
+    )
     assert code == 0 and "complete at t = 0.3 s" in out and record.stat().st_size > 0
-    code, _, err = run_cli(capsys, "structure", "geared_shaker", "--set", "machine.mechanism.joints.M.teeth=null",
-                           "--set", "machine.mechanism.joints.M.radii=[0.2,0.2]")
+    code, _, err = run_cli(
+        capsys,
+        "structure",
+        "geared_shaker",
+        "--set",
+        "machine.mechanism.joints.M.teeth=null",
+        "--set",
+        "machine.mechanism.joints.M.radii=[0.2,0.2]",
+    )
     assert code == 2 and "the gear mesh M: pitch radii 0.2 and 0.2 m (external) need the centres 0.4 m apart" in err
 
 

@@ -30,15 +30,27 @@ FOUR_BAR_LINKAGE = {
     "type": "linkage",
     "frame": {"A": [0.0, 0.0], "D": [0.10, 0.0]},
     "crank": "crank",
-    "links": {"crank": {"points": {"A": [0.0, 0.0], "B": [0.04, 0.0]}, "mass": 0.2, "centre": [0.02, 0.0]},
-              "coupler": {"points": {"B": [0.0, 0.0], "C": [0.12, 0.0]}, "mass": 0.5, "centre": [0.06, 0.0],
-                          "inertia": 6.0e-4},
-              "rocker": {"points": {"D": [0.0, 0.0], "C": [0.08, 0.0]}, "mass": 0.4, "centre": [0.04, 0.0],
-                         "inertia": 2.1e-4}},
-    "joints": {"A": {"type": "revolute", "links": ["frame", "crank"]},
-               "B": {"type": "revolute", "links": ["crank", "coupler"]},
-               "C": {"type": "revolute", "links": ["coupler", "rocker"]},
-               "D": {"type": "revolute", "links": ["frame", "rocker"]}},
+    "links": {
+        "crank": {"points": {"A": [0.0, 0.0], "B": [0.04, 0.0]}, "mass": 0.2, "centre": [0.02, 0.0]},
+        "coupler": {
+            "points": {"B": [0.0, 0.0], "C": [0.12, 0.0]},
+            "mass": 0.5,
+            "centre": [0.06, 0.0],
+            "inertia": 6.0e-4,
+        },
+        "rocker": {
+            "points": {"D": [0.0, 0.0], "C": [0.08, 0.0]},
+            "mass": 0.4,
+            "centre": [0.04, 0.0],
+            "inertia": 2.1e-4,
+        },
+    },
+    "joints": {
+        "A": {"type": "revolute", "links": ["frame", "crank"]},
+        "B": {"type": "revolute", "links": ["crank", "coupler"]},
+        "C": {"type": "revolute", "links": ["coupler", "rocker"]},
+        "D": {"type": "revolute", "links": ["frame", "rocker"]},
+    },
     "output": {"link": "rocker"},
 }
 
@@ -48,7 +60,7 @@ def as_linkage(scene_name: str = "four_bar_rocker", mechanism: dict | None = Non
     inertia lowered by the crank's m cg^2 = 0.2 * 0.02^2."""
     data = load_scene(scene_name).model_dump(exclude_none=True)
     data["machine"]["mechanism"] = copy.deepcopy(mechanism or FOUR_BAR_LINKAGE)
-    data["machine"]["inertia"] -= 0.2 * 0.02 ** 2
+    data["machine"]["inertia"] -= 0.2 * 0.02**2
     return data
 
 
@@ -62,13 +74,16 @@ def refusal(data: dict) -> str:
 def test_four_bar_as_a_linkage_runs_as_the_four_bar():
     overrides = ["scenario.duration=0.6", "solver.path=reference"]
     reference = build_model(load_scene("four_bar_rocker", overrides))
-    linkage = build_model(validate_scene(as_linkage()).model_copy(
-        update={"scenario": reference.scene.scenario, "solver": reference.scene.solver}))
+    linkage = build_model(
+        validate_scene(as_linkage()).model_copy(
+            update={"scenario": reference.scene.scenario, "solver": reference.scene.solver}
+        )
+    )
     first, second = simulate(reference), simulate(linkage)
     times = np.linspace(0.0, 0.6, 61)
     omega_four_bar, omega_linkage = first(times)[1], second(times)[1]
     assert np.max(np.abs(omega_linkage - omega_four_bar)) < 1e-6 * np.max(np.abs(omega_four_bar))
-    assert np.ptp(omega_four_bar) > 1.0   # the run is not trivial: the machine speeds up from rest
+    assert np.ptp(omega_four_bar) > 1.0  # the run is not trivial: the machine speeds up from rest
 
 
 def test_four_bar_as_a_linkage_has_the_four_bars_kinematics():
@@ -78,22 +93,35 @@ def test_four_bar_as_a_linkage_has_the_four_bars_kinematics():
         assert linkage[key] == pytest.approx(four_bar[key], rel=1e-12, abs=1e-14)
 
 
-@pytest.mark.parametrize("change, expected", [
-    (lambda m: m["joints"]["D"].update(links=["frame", "rocket"]), "joint 'D' names the link 'rocket'"),
-    (lambda m: m["joints"].pop("D"), r"W = 3\*3 - \(2\*3 \+ 0 - 0 - 0\) - 0 = 3; expected W = 1"),
-    (lambda m: m["links"]["rocker"]["points"].pop("C"), "needs the point 'C' on the link 'rocker'"),
-    (lambda m: m["links"]["crank"]["points"].update(B=[0.07, 0.0]),
-     r"RRR group C \(links coupler, rocker\) fails for crank angles 342 to 378 deg \(checked every 0.5 deg; at "
-     r"0.000 deg cannot be assembled: the distance 0.03 m between B and D is outside \[0.04, 0.2\] m\)"),
-    (lambda m: m["links"]["coupler"]["points"].update(C=[0.0, 0.0]),
-     r"the link coupler of the RRR group C has its joints B and C at one point \[0, 0\] m"),
-    (lambda m: m.update(branches={"B": -1}), r"branches names \['B'\], which are not the internal joint of a group "
-                                             r"with two assemblies \(RRR, RRP, RPR; PRP and RPP have one\); "
-                                             r"expected some of \['C'\]"),
-    (lambda m: m.update(crank="rocker"), r"RRR group B \(links crank, coupler\) fails for crank angles 129 to 231 deg, "
-                                          r"305.5 to 414.5 deg"),
-    (lambda m: m["links"].update(frame={"points": {"A": [0.0, 0.0]}}), "links has a link named 'frame'"),
-])
+@pytest.mark.parametrize(
+    "change, expected",
+    [
+        (lambda m: m["joints"]["D"].update(links=["frame", "rocket"]), "joint 'D' names the link 'rocket'"),
+        (lambda m: m["joints"].pop("D"), r"W = 3\*3 - \(2\*3 \+ 0 - 0 - 0\) - 0 = 3; expected W = 1"),
+        (lambda m: m["links"]["rocker"]["points"].pop("C"), "needs the point 'C' on the link 'rocker'"),
+        (
+            lambda m: m["links"]["crank"]["points"].update(B=[0.07, 0.0]),
+            r"RRR group C \(links coupler, rocker\) fails for crank angles 342 to 378 deg \(checked every 0.5 deg; at "
+            r"0.000 deg cannot be assembled: the distance 0.03 m between B and D is outside \[0.04, 0.2\] m\)",
+        ),
+        (
+            lambda m: m["links"]["coupler"]["points"].update(C=[0.0, 0.0]),
+            r"the link coupler of the RRR group C has its joints B and C at one point \[0, 0\] m",
+        ),
+        (
+            lambda m: m.update(branches={"B": -1}),
+            r"branches names \['B'\], which are not the internal joint of a group "
+            r"with two assemblies \(RRR, RRP, RPR; PRP and RPP have one\); "
+            r"expected some of \['C'\]",
+        ),
+        (
+            lambda m: m.update(crank="rocker"),
+            r"RRR group B \(links crank, coupler\) fails for crank angles 129 to 231 deg, "
+            r"305.5 to 414.5 deg",
+        ),
+        (lambda m: m["links"].update(frame={"points": {"A": [0.0, 0.0]}}), "links has a link named 'frame'"),
+    ],
+)
 def test_bad_linkages_are_refused_with_what_was_found(change, expected):
     mechanism = copy.deepcopy(FOUR_BAR_LINKAGE)
     change(mechanism)
@@ -103,8 +131,10 @@ def test_bad_linkages_are_refused_with_what_was_found(change, expected):
 def test_output_loads_need_the_linkages_output():
     data = as_linkage()
     del data["machine"]["mechanism"]["output"]
-    assert "loads[0] type 'rocker_viscous' acts on the rocker: the linkage needs mechanism.output.link (it has no " \
-           "output)" in refusal(data)
+    assert (
+        "loads[0] type 'rocker_viscous' acts on the rocker: the linkage needs mechanism.output.link (it has no "
+        "output)" in refusal(data)
+    )
     data["machine"]["mechanism"]["output"] = {"link": "rocker"}
     data["machine"]["loads"] = [{"type": "slider_viscous", "coefficient": 1.0}]
     assert "mechanism.output.joint (a prismatic joint)" in refusal(data)
@@ -129,7 +159,7 @@ def test_structure_command_refuses_what_it_cannot_analyse(tmp_path, capsys):
     assert "structure analyses machine.mechanism.type: linkage" in capsys.readouterr().err
     data = load_scene("shaper").model_dump(exclude_none=True)
     del data["machine"]["mechanism"]["joints"]["G"], data["machine"]["mechanism"]["output"]
-    data["machine"]["loads"] = data["machine"]["loads"][1:]   # the ram's guide is gone, and its load with it
+    data["machine"]["loads"] = data["machine"]["loads"][1:]  # the ram's guide is gone, and its load with it
     path = tmp_path / "free_ram.yaml"
     path.write_text(json.dumps(data), encoding="utf-8")
     assert main(["structure", str(path)]) == 2
@@ -139,7 +169,7 @@ def test_structure_command_refuses_what_it_cannot_analyse(tmp_path, capsys):
 
 
 def test_the_shaper_runs_on_the_reference_path_and_the_fast_path_takes_it():
-    assert fast_path_refusal(load_scene("shaper")) is None   # compiled too (test/test_linkage_flat.py)
+    assert fast_path_refusal(load_scene("shaper")) is None  # compiled too (test/test_linkage_flat.py)
     model = build_model(load_scene("shaper", ["scenario.duration=0.3", "solver.path=reference"]))
     trajectory = simulate(model)
     times = np.linspace(0.0, 0.3, 31)
@@ -163,7 +193,7 @@ def test_the_walking_beam_linkage_scene_reproduces_the_walking_beam_scene():
     preset = build_reduced(load_scene("walking_beam").machine.mechanism, gravity)
     for phi in np.linspace(0.0, 2.0 * np.pi, 25)[:-1] + 0.05:
         (J, dJ, weight, q, dq), (J0, dJ0, weight0, x_C, dx_C) = linkage(phi), preset(phi)
-        assert J - 1.0 * 0.03 ** 2 == pytest.approx(J0, rel=1e-12)
+        assert J - 1.0 * 0.03**2 == pytest.approx(J0, rel=1e-12)
         assert (dJ, q, dq) == pytest.approx((dJ0, x_C, dx_C), abs=1e-12)
         assert weight == pytest.approx(weight0, abs=1e-12 * 10.0 * 9.81)
     overrides = ["scenario.duration=0.4", "solver.path=reference"]
@@ -172,7 +202,7 @@ def test_the_walking_beam_linkage_scene_reproduces_the_walking_beam_scene():
     assert second.inertia_constant == pytest.approx(first.inertia_constant - 0.0009, abs=1e-15)
     times = np.linspace(0.0, 0.4, 41)
     omega_preset, omega_linkage = simulate(first)(times)[1], simulate(second)(times)[1]
-    assert np.ptp(omega_preset) > 0.2   # the speed swings: the comparison is not of constants
+    assert np.ptp(omega_preset) > 0.2  # the speed swings: the comparison is not of constants
     assert np.max(np.abs(omega_linkage - omega_preset)) < 1e-9 * np.ptp(omega_preset)
 
 
@@ -181,9 +211,21 @@ def test_the_sieve_shaker_gives_source_001s_velocities_and_accelerations():
     velocity and acceleration polygons give v_C = v_B = 2 m/s, a_C = a_C^n = 2^2/0.2 = 20 m/s^2, E the middle of CD:
     v_E = 1 m/s, a_E = 10 m/s^2, and the sieve v_F = 1 m/s, a_F = 5 m/s^2 (the guide's height was chosen for
     the last one: the source does not give it)."""
-    table = kinematics_table(load_scene("sieve_shaker").machine.mechanism, 20.0, 5)   # 0, 90, 180, 270, 360 deg
-    expected = {"B_v": 2.0, "B_a": 40.0, "C_v": 2.0, "C_a": 20.0, "E_v": 1.0, "E_a": 10.0, "F_v": 1.0, "F_a": 5.0,
-                "C_x": 0.2, "C_y": 0.1, "E_x": 0.2, "E_y": 0.0}
+    table = kinematics_table(load_scene("sieve_shaker").machine.mechanism, 20.0, 5)  # 0, 90, 180, 270, 360 deg
+    expected = {
+        "B_v": 2.0,
+        "B_a": 40.0,
+        "C_v": 2.0,
+        "C_a": 20.0,
+        "E_v": 1.0,
+        "E_a": 10.0,
+        "F_v": 1.0,
+        "F_a": 5.0,
+        "C_x": 0.2,
+        "C_y": 0.1,
+        "E_x": 0.2,
+        "E_y": 0.0,
+    }
     assert {key: table[key][1] for key in expected} == pytest.approx(expected, abs=1e-12)
 
 
@@ -195,7 +237,7 @@ def test_the_six_bar_press_table_is_its_pressing_force_reduced_to_the_crank():
     machine = load_scene("six_bar_press").machine
     reduced = build_reduced(machine.mechanism, None)
     bottom = max(reduced(phi)[3] for phi in np.radians(np.arange(0.0, 360.0, 0.25)))
-    assert bottom == pytest.approx(reduced(np.radians(24.0))[3], abs=1e-6)   # the bottom dead centre near 24 deg
+    assert bottom == pytest.approx(reduced(np.radians(24.0))[3], abs=1e-6)  # the bottom dead centre near 24 deg
     table = machine.loads[2]
     for angle, torque in zip(table.angle_deg, table.torque):
         _, _, _, q, dq = reduced(np.radians(angle))
@@ -213,13 +255,14 @@ def test_kinematics_gives_the_reactions_and_a_balancing_moment_that_keeps_the_sp
     mechanism, gravity = scene.machine.mechanism, tuple(scene.machine.gravity or (0.0, 0.0))
     columns = reactions_table(mechanism, gravity, 7.0, np.linspace(0.0, 2.0 * np.pi, 13))
     reduced = build_reduced(mechanism, gravity)
-    expected = [0.5 * reduced(phi)[1] * 7.0 ** 2 - reduced(phi)[2] for phi in np.linspace(0.0, 2.0 * np.pi, 13)]
+    expected = [0.5 * reduced(phi)[1] * 7.0**2 - reduced(phi)[2] for phi in np.linspace(0.0, 2.0 * np.pi, 13)]
     scale = np.max(np.abs(expected))
     assert scale > 0.0 and np.max(np.abs(columns["M_balancing"] - expected)) <= 1e-9 * scale
     assert all(np.all(columns[key] >= 0.0) and np.any(columns[key] > 0.0) for key in columns if key.startswith("R_"))
     out, plot = tmp_path / "k.csv", tmp_path / "k.png"
-    code, stdout, err = run_cli(capsys, "kinematics", name, "--points", "13", "--omega", "7", "--out", str(out),
-                                "--plot", str(plot))
+    code, stdout, err = run_cli(
+        capsys, "kinematics", name, "--points", "13", "--omega", "7", "--out", str(out), "--plot", str(plot)
+    )
     assert code == 0, err
     assert "balancing moment on the crank" in stdout and plot.stat().st_size > 0
     header = out.read_text().splitlines()[0].split(",")

@@ -24,22 +24,35 @@ from mech_regulator.scene import load_scene
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 73)[:-1] + 0.0071
 GRAVITY = (0.4, -9.81)
-BUNDLED = ["shaper", "sieve_shaker", "six_bar_press", "walking_beam_linkage", "crank_slider_bench", "engine_inline4",
-           "four_bar_rocker", "walking_beam"]
+BUNDLED = [
+    "shaper",
+    "sieve_shaker",
+    "six_bar_press",
+    "walking_beam_linkage",
+    "crank_slider_bench",
+    "engine_inline4",
+    "four_bar_rocker",
+    "walking_beam",
+]
 
 
 def _weighted(linkage):
     """The linkage with a mass, an off-axis centre and an inertia on every moving link (so that every term counts)."""
-    links = tuple(link if link.name == linkage.frame else
-                  replace(link, mass=1.0 + 0.3 * k, centre=complex(0.05 * k, 0.02), inertia=0.01 * (k + 1))
-                  for k, link in enumerate(linkage.links))
+    links = tuple(
+        link
+        if link.name == linkage.frame
+        else replace(link, mass=1.0 + 0.3 * k, centre=complex(0.05 * k, 0.02), inertia=0.01 * (k + 1))
+        for k, link in enumerate(linkage.links)
+    )
     return replace(linkage, links=links)
 
 
 def _cases():
     cases = [(f"dyad-{name}", _weighted(build())) for name, build in DYADS.items()]
-    cases += [("redundant-link", _weighted(replace(parallelogram_linkage(1.0), output_link="5"))),
-              ("six-bar", six_bar_linkage())]
+    cases += [
+        ("redundant-link", _weighted(replace(parallelogram_linkage(1.0), output_link="5"))),
+        ("six-bar", six_bar_linkage()),
+    ]
     return cases + [(name, load_scene(name).machine.mechanism) for name in BUNDLED]
 
 
@@ -54,8 +67,10 @@ def _linkage_and_outputs(case):
 def test_generated_reduced_equals_the_general_solver(name, case, gravity):
     linkage, structure, outputs = _linkage_and_outputs(case)
     ours = symbolic.make_reduced(linkage, structure, gravity, outputs)
-    general = [make_reduced(replace(linkage, output_joint=joint) if joint else linkage, structure, gravity)
-               for joint in (outputs or (None,))]
+    general = [
+        make_reduced(replace(linkage, output_joint=joint) if joint else linkage, structure, gravity)
+        for joint in (outputs or (None,))
+    ]
     rows, theirs = [], []
     for phi in ANGLES:
         rows.append(ours(phi))
@@ -64,7 +79,7 @@ def test_generated_reduced_equals_the_general_solver(name, case, gravity):
     rows, theirs = np.array(rows), np.array(theirs)
     scales = np.maximum(np.abs(theirs).max(axis=0), np.finfo(float).tiny)
     assert np.all(np.abs(rows - theirs) <= 1e-12 * scales), np.abs(rows - theirs).max(axis=0) / scales
-    assert np.ptp(theirs[:, 0]) > 0.0 and np.ptp(theirs[:, 3]) > 0.0   # J and q vary: the comparison is not of constants
+    assert np.ptp(theirs[:, 0]) > 0.0 and np.ptp(theirs[:, 3]) > 0.0  # J and q vary: the comparison is not of constants
 
 
 def test_compiled_code_gives_the_plain_python_numbers():
@@ -85,6 +100,7 @@ def test_compiled_code_gives_the_plain_python_numbers():
 def test_the_source_depends_on_structure_and_exact_zeros_only():
     """Two crank-sliders of other lengths and masses share one source; an offset (the guide off the crank's line: a
     number no longer exactly 0) or another branch changes it."""
+
     def key(linkage):
         return symbolic.program_key(flat.encode(linkage, checked(linkage).groups, GRAVITY), ())
 

@@ -23,8 +23,17 @@ from mech_regulator.mechanisms.linkage import checked, flat, symbolic
 from mech_regulator.mechanisms.linkage.model import Linkage
 from mech_regulator.scene import load_scene
 
-SCENES = ["compressor_friction", "press", "four_bar_rocker", "six_bar_press_friction", "shaper", "sieve_shaker",
-          "walking_beam_linkage", "walking_beam", "engine_inline4"]
+SCENES = [
+    "compressor_friction",
+    "press",
+    "four_bar_rocker",
+    "six_bar_press_friction",
+    "shaper",
+    "sieve_shaker",
+    "walking_beam_linkage",
+    "walking_beam",
+    "engine_inline4",
+]
 STATES = 24
 
 
@@ -46,8 +55,10 @@ def _program(case, gravity):
 def _states(seed: int):
     """Random (phi [rad], omega [rad/s], Q) over the turn, Q zero in one of four."""
     rng = np.random.default_rng(seed)
-    return [(rng.uniform(0.0, 2.0 * math.pi), rng.uniform(-20.0, 20.0), 0.0 if k % 4 == 0 else rng.uniform(-900, 900))
-            for k in range(STATES)]
+    return [
+        (rng.uniform(0.0, 2.0 * math.pi), rng.uniform(-20.0, 20.0), 0.0 if k % 4 == 0 else rng.uniform(-900, 900))
+        for k in range(STATES)
+    ]
 
 
 def _generated(program):
@@ -79,14 +90,15 @@ def test_generated_joint_loads_equal_the_general_solver(name, build, gravity):
         theirs.append(_table(flat.joint_loads(phi, omega, force, program, 0)))
     ours, theirs = np.array(ours), np.array(theirs)
     n = len(flat.joint_loads(0.0, 0.0, 0.0, program, 0)[0])
-    reaction = np.abs(theirs[:, :4 * n]).max()   # the reactions against the largest reaction
-    assert np.all(np.abs(ours[:, :4 * n] - theirs[:, :4 * n]) <= 1e-12 * reaction), \
-        np.abs(ours[:, :4 * n] - theirs[:, :4 * n]).max() / reaction
-    ratio = np.abs(theirs[:, 4 * n:5 * n]).max()   # the ratios against the largest ratio (some are zero throughout)
-    assert np.all(np.abs(ours[:, 4 * n:5 * n] - theirs[:, 4 * n:5 * n]) <= 1e-12 * ratio)
-    scales = np.abs(theirs[:, 5 * n:]).max(axis=0)   # M_b0 and M_b1 each against its largest
-    assert np.all(np.abs(ours[:, 5 * n:] - theirs[:, 5 * n:]) <= 1e-12 * scales)
-    assert reaction > 0.0 and np.ptp(theirs[:, -2]) > 0.0   # reactions and M_b0 vary: not a comparison of zeros
+    reaction = np.abs(theirs[:, : 4 * n]).max()  # the reactions against the largest reaction
+    assert np.all(np.abs(ours[:, : 4 * n] - theirs[:, : 4 * n]) <= 1e-12 * reaction), (
+        np.abs(ours[:, : 4 * n] - theirs[:, : 4 * n]).max() / reaction
+    )
+    ratio = np.abs(theirs[:, 4 * n : 5 * n]).max()  # the ratios against the largest ratio (some are zero throughout)
+    assert np.all(np.abs(ours[:, 4 * n : 5 * n] - theirs[:, 4 * n : 5 * n]) <= 1e-12 * ratio)
+    scales = np.abs(theirs[:, 5 * n :]).max(axis=0)  # M_b0 and M_b1 each against its largest
+    assert np.all(np.abs(ours[:, 5 * n :] - theirs[:, 5 * n :]) <= 1e-12 * scales)
+    assert reaction > 0.0 and np.ptp(theirs[:, -2]) > 0.0  # reactions and M_b0 vary: not a comparison of zeros
 
 
 def test_compiled_code_gives_the_plain_python_numbers():
@@ -115,8 +127,12 @@ def test_the_reference_path_runs_the_generated_code():
     phi, omega, force = 1.1, 9.0, 300.0
     result = loads(phi, omega, force)
     generated = _generated(program)(phi, omega, force, program, 0)
-    assert (result.constant, result.per_epsilon, result.ratios, result.balancing) == \
-        (generated[0], generated[1], generated[2], generated[3:])
+    assert (result.constant, result.per_epsilon, result.ratios, result.balancing) == (
+        generated[0],
+        generated[1],
+        generated[2],
+        generated[3:],
+    )
     assert len(names) == len(result.constant)
     general = _table(flat.joint_loads(phi, omega, force, program, 0))
     reordered = _table((result.constant, result.per_epsilon, result.ratios, *result.balancing))

@@ -64,8 +64,11 @@ CASES = [
 
 
 @pytest.mark.parametrize("path", ["fast", "reference"])
-@pytest.mark.parametrize("name, duration, changes", CASES,
-                         ids=[f"{name}-{changes.get('solver__method', 'DOP853')}" for name, _, changes in CASES])
+@pytest.mark.parametrize(
+    "name, duration, changes",
+    CASES,
+    ids=[f"{name}-{changes.get('solver__method', 'DOP853')}" for name, _, changes in CASES],
+)
 def test_a_run_started_at_1e7_rad_is_the_run_started_at_0(name, duration, changes, path):
     near, far, start = near_and_far(name, duration, solver__path=path, **changes)
     assert near.status == far.status == "complete", (near.message, far.message)
@@ -101,8 +104,9 @@ def test_the_energy_method_started_at_1e7_rad_is_the_run_started_at_0(name, dura
     times = np.linspace(0.0, duration, 201)
     near_states, far_states = near(times), far(times)
     np.testing.assert_array_equal(far_states[1:], near_states[1:])
-    np.testing.assert_allclose(far_states[0] - start, near_states[0], rtol=0.0,
-                               atol=2.0 * math.ulp(start + near_states[0].max()))
+    np.testing.assert_allclose(
+        far_states[0] - start, near_states[0], rtol=0.0, atol=2.0 * math.ulp(start + near_states[0].max())
+    )
 
 
 @pytest.mark.parametrize("path", ["fast", "reference"])
@@ -170,8 +174,9 @@ def test_a_restart_that_makes_no_progress_ends_the_reference_run_failed(monkeypa
     assert 0.01 <= trajectory.t_end < 0.3
 
 
-@pytest.mark.parametrize("phi, period", [(0.0, 4 * math.pi), (1e7, 4 * math.pi), (-3.0, 2 * math.pi),
-                                         (123456.789, 0.7)])
+@pytest.mark.parametrize(
+    "phi, period", [(0.0, 4 * math.pi), (1e7, 4 * math.pi), (-3.0, 2 * math.pi), (123456.789, 0.7)]
+)
 def test_turns_and_phase_split_the_angle_into_whole_periods_and_the_rest(phi, period):
     turns, phase = turns_and_phase(phi, period)
     assert isinstance(turns, int)
@@ -182,8 +187,18 @@ def test_turns_and_phase_split_the_angle_into_whole_periods_and_the_rest(phi, pe
 def test_a_run_the_step_limit_cannot_finish_is_refused_before_it_starts(capsys):
     """RK45 on engine_direct takes some 1 500 steps a second: 10 000 s would stop at MAX_STEPS after some 6 400 s.
     Its first second, probed, says so at once: exit code 2, the key, the value, the estimate and the limit."""
-    code, out, err = run_cli(capsys, "simulate", "engine_direct", "--set", "scenario.duration=10000", "--set",
-                             "solver.method=RK45", "--set", "solver.path=reference", "--quiet")
+    code, out, err = run_cli(
+        capsys,
+        "simulate",
+        "engine_direct",
+        "--set",
+        "scenario.duration=10000",
+        "--set",
+        "solver.method=RK45",
+        "--set",
+        "solver.path=reference",
+        "--quiet",
+    )
     assert code == 2 and out == "", (out, err)
     assert "scenario.duration = 10000 s: solver.method = RK45 took " in err and "steps over the run's first 1 s" in err
     assert f"beyond the limit of {MAX_STEPS:g} steps of one run; expected scenario.duration <= " in err, err
@@ -194,8 +209,9 @@ def test_a_run_the_step_limit_cannot_finish_is_refused_before_it_starts(capsys):
 def test_an_rk4_run_whose_restarts_pass_the_step_limit_is_refused_before_it_starts():
     """The lathe with RK4's step of 1e-4 s for 1000 s: duration / step is the limit itself, but every switch of its
     cutting adds a step (it stopped at t = 999.47 s after 1e7 steps). Its first second, probed, says so at once."""
-    reason = step_limit_refusal(model_of(shortened("lathe", 1000.0, solver__path="fast", solver__method="RK4",
-                                                   solver__step=1e-4)))
+    reason = step_limit_refusal(
+        model_of(shortened("lathe", 1000.0, solver__path="fast", solver__method="RK4", solver__step=1e-4))
+    )
     assert reason.startswith("scenario.duration = 1000 s: solver.method = RK4 took 100"), reason
     assert "beyond the limit of 1e+07 steps of one run; expected scenario.duration <= 99" in reason, reason
     assert "s, or a longer solver.step (docs/scenes.md, Limits)" in reason, reason

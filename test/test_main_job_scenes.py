@@ -59,8 +59,11 @@ def node_processes(marker: str) -> list[str]:
     folder): started by hand (python -m mech_regulator.nodes.<name>), or forked by `run` (named <name>_node, with
     the launcher's command line)."""
     listing = subprocess.run(["ps", "-ww", "-eo", "comm=,args="], capture_output=True, text=True, check=True).stdout
-    return [line for line in listing.splitlines()
-            if marker in line and ("mech_regulator.nodes" in line or line.split(maxsplit=1)[0].endswith("_node"))]
+    return [
+        line
+        for line in listing.splitlines()
+        if marker in line and ("mech_regulator.nodes" in line or line.split(maxsplit=1)[0].endswith("_node"))
+    ]
 
 
 def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedProcess, Path]:
@@ -68,20 +71,41 @@ def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedP
     recording's path."""
     folder.mkdir(parents=True, exist_ok=True)
     rrd = folder / "run.rrd"
-    result = subprocess.run([sys.executable, "-m", "mech_regulator", "run", scene, "--duration", str(PLAYED),
-                             "--out", str(rrd), "--domain-id", str(next_domain_id()), "--quiet", *options],
-                            capture_output=True, text=True, timeout=4 * WAIT, cwd=folder,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mech_regulator",
+            "run",
+            scene,
+            "--duration",
+            str(PLAYED),
+            "--out",
+            str(rrd),
+            "--domain-id",
+            str(next_domain_id()),
+            "--quiet",
+            *options,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=4 * WAIT,
+        cwd=folder,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )
     return result, rrd
 
 
-def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: Path, tmp_path: Path,
-                  coupling: str = DEFAULT_COUPLING) -> None:
+def assert_played(
+    scene: str, model, result: subprocess.CompletedProcess, rrd: Path, tmp_path: Path, coupling: str = DEFAULT_COUPLING
+) -> None:
     """The run ended by itself with exit 0 and status complete, wrote every exchange to its CSV exactly as the
     in-process co-simulation does, and left no node running."""
     log = rrd.with_suffix(".log")
-    described = f"{scene}: exit {result.returncode}\n{result.stdout}\n{result.stderr}\n" \
-                f"{log.read_text() if log.exists() else ''}"
+    described = (
+        f"{scene}: exit {result.returncode}\n{result.stdout}\n{result.stderr}\n"
+        f"{log.read_text() if log.exists() else ''}"
+    )
     assert result.returncode == 0, described
     summary = json.loads(rrd.with_suffix(".json").read_text())
     assert summary["status"] == "complete" and summary["t_end"] == PLAYED, described
@@ -89,8 +113,9 @@ def assert_played(scene: str, model, result: subprocess.CompletedProcess, rrd: P
     assert "s from the command to the first exchange" in result.stdout, described
     rows = rrd.with_suffix(".csv").read_bytes()
     assert rows.count(b"\n") == 1 + round(PLAYED / model.scene.solver.exchange_step) + 1, described  # header, exchanges
-    assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv", coupling), \
+    assert rows == in_process_csv(model, PLAYED, tmp_path / f"{scene}.in_process.csv", coupling), (
         f"{scene}: the nodes' CSV differs from the in-process co-simulation"
+    )
     assert node_processes(str(rrd.parent)) == [], f"{scene}: nodes left running"
 
 
@@ -132,12 +157,23 @@ def four_bar_from_rest() -> dict:
     from rest by an induction motor against a viscous load."""
     return {
         "name": "my_four_bar",
-        "machine": {"inertia": 0.2,
-                    "mechanism": {"type": "four_bar", "crank": 0.1, "coupler": 0.4, "rocker": 0.3, "frame": 0.35,
-                                  "branch": "open", "coupler_mass": 2.0, "coupler_cg": 0.2, "rocker_mass": 3.0,
-                                  "rocker_cg": 0.15},
-                    "drive": {"type": "linear_motor", "stall_torque": 60.0, "no_load_speed": 100.0},
-                    "loads": [{"type": "viscous", "coefficient": 0.2}]},
+        "machine": {
+            "inertia": 0.2,
+            "mechanism": {
+                "type": "four_bar",
+                "crank": 0.1,
+                "coupler": 0.4,
+                "rocker": 0.3,
+                "frame": 0.35,
+                "branch": "open",
+                "coupler_mass": 2.0,
+                "coupler_cg": 0.2,
+                "rocker_mass": 3.0,
+                "rocker_cg": 0.15,
+            },
+            "drive": {"type": "linear_motor", "stall_torque": 60.0, "no_load_speed": 100.0},
+            "loads": [{"type": "viscous", "coefficient": 0.2}],
+        },
         "scenario": {"initial": {"phi": 0.0, "omega": 0.0}, "duration": PLAYED},
         "solver": {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11},
     }
@@ -193,12 +229,13 @@ def test_a_scene_the_nodes_cannot_play_is_refused_at_once(tmp_path):
 
 
 def test_a_missing_peer_is_named_and_the_machine_ends(tmp_path, processes):
-    machine = processes.node("machine", {"scene_file": "lathe", "peers": ["scenario", "recorder"],
-                                         "peer_timeout": 3.0})
+    machine = processes.node("machine", {"scene_file": "lathe", "peers": ["scenario", "recorder"], "peer_timeout": 3.0})
     processes.node("scenario", {"scene_file": "lathe"})
     assert processes.wait(machine) == 1, processes.logs()
     log = processes.log(machine)
-    assert "no recorder node subscribed to /joint_states (or /machine/moments) within 3 s" in log and "peers" in log, log
+    assert "no recorder node subscribed to /joint_states (or /machine/moments) within 3 s" in log and "peers" in log, (
+        log
+    )
     assert "scenario" not in log.split("no ")[1].split(" node")[0], log
 
 
@@ -232,9 +269,17 @@ def test_the_services_pause_step_resume_and_reset_between_trials(tmp_path, proce
     parameters = {"scene_file": scene, "overrides": overrides, "exchange_step": 0.002}
     processes.node("governor", parameters)
     processes.node("scenario", parameters)
-    machine = processes.node("machine", parameters | {"peer_timeout": 60.0, "start_paused": True,
-                                                      "step_exchanges": 5, "at_end": "hold",
-                                                      "peers": ["governor", "scenario", probe.node.get_name()]})
+    machine = processes.node(
+        "machine",
+        parameters
+        | {
+            "peer_timeout": 60.0,
+            "start_paused": True,
+            "step_exchanges": 5,
+            "at_end": "hold",
+            "peers": ["governor", "scenario", probe.node.get_name()],
+        },
+    )
     listener = RunListener(probe, governed=True, diagnostics_publishers=0, describe=processes.logs)
     trials: list[dict[int, float]] = [{}]  # per trial: exchange time [ns] -> omega [rad/s] (a state sent again
     # while the machine waits counts once)
@@ -251,17 +296,18 @@ def test_the_services_pause_step_resume_and_reset_between_trials(tmp_path, proce
     probe.spin_until(lambda: time.monotonic() > later, "a second of listening")
     assert len(times(0)) == 6, "the machine went on after its steps while paused"
     _call(probe, "resume", processes.logs)
-    probe.spin_until(lambda: times(0)[-1] == to_nanoseconds(0.1), "the end of the first trial",
-                     describe=processes.logs)
+    probe.spin_until(lambda: times(0)[-1] == to_nanoseconds(0.1), "the end of the first trial", describe=processes.logs)
     assert machine.poll() is None, "at_end: hold, but the machine ended"
     trials.append({})
     _call(probe, "reset", processes.logs)
-    probe.spin_until(lambda: times(1) and times(1)[-1] == to_nanoseconds(0.1), "the end of the second trial",
-                     describe=processes.logs)
+    probe.spin_until(
+        lambda: times(1) and times(1)[-1] == to_nanoseconds(0.1), "the end of the second trial", describe=processes.logs
+    )
     for trial in trials:
         assert times(trials.index(trial)) == [to_nanoseconds(t) for t in run.times]
-        np.testing.assert_array_equal([trial[when] for when in sorted(trial)], run.states[1],
-                                      err_msg="a trial differs from the in-process run")
+        np.testing.assert_array_equal(
+            [trial[when] for when in sorted(trial)], run.states[1], err_msg="a trial differs from the in-process run"
+        )
 
 
 def test_a_killed_launcher_leaves_no_node_behind(tmp_path, processes):
@@ -269,8 +315,21 @@ def test_a_killed_launcher_leaves_no_node_behind(tmp_path, processes):
     their parent dies), closing the recording."""
     rrd = tmp_path / "killed" / "run.rrd"
     rrd.parent.mkdir()
-    launcher = processes.start([sys.executable, "-m", "mech_regulator", "run", "engine_direct", "--out", rrd,
-                                "--domain-id", next_domain_id(), "--quiet"], "launcher")
+    launcher = processes.start(
+        [
+            sys.executable,
+            "-m",
+            "mech_regulator",
+            "run",
+            "engine_direct",
+            "--out",
+            rrd,
+            "--domain-id",
+            next_domain_id(),
+            "--quiet",
+        ],
+        "launcher",
+    )
 
     def nodes_running() -> bool:  # the machine stepping: the scenario gave its first load
         log = rrd.with_suffix(".log")
@@ -295,8 +354,14 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     """A load that drives the engine backwards past its trip (9.9e4 N m from 0.1 s, trip 300 rad/s both ways): the
     machine's run fails there, and the summary says `failed` with why (not `interrupted`, as the recorder once wrote
     over it); `run` exits 1, and the CSV keeps the exchanges up to there."""
-    result, rrd = play("engine_direct", tmp_path / "run", "--overspeed-trip", "300",
-                       "--set", "scenario.load_events=[{time: 0.1, torque: 99000.0}]")
+    result, rrd = play(
+        "engine_direct",
+        tmp_path / "run",
+        "--overspeed-trip",
+        "300",
+        "--set",
+        "scenario.load_events=[{time: 0.1, torque: 99000.0}]",
+    )
     described = f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
     assert result.returncode == 1 and "Traceback" not in result.stderr, described
     summary = json.loads(rrd.with_suffix(".json").read_text())

@@ -91,8 +91,9 @@ def test_the_kernel_s_files_a_pipe_and_two_outputs_in_one_file_are_refused(capsy
     os.mkfifo(tmp_path / "pipe.csv")
     line = refused_line(*run_cli(capsys, "simulate", "lathe", "--out", str(tmp_path / "pipe.csv")))
     assert f"'{tmp_path / 'pipe.csv'}': it is a device, a pipe or a socket, not a regular file" in line
-    line = refused_line(*run_cli(capsys, "simulate", "lathe", "--plot", str(tmp_path / "a.png"),
-                                 "--record", str(tmp_path / "a.png")))
+    line = refused_line(
+        *run_cli(capsys, "simulate", "lathe", "--plot", str(tmp_path / "a.png"), "--record", str(tmp_path / "a.png"))
+    )
     assert "two of the command's outputs would be this one file" in line
     assert sorted(path.name for path in tmp_path.iterdir()) == ["pipe.csv"]
 
@@ -144,8 +145,14 @@ def in_private_mounts(tmp_path: Path, commands: list[list[str]], mounts: str) ->
         pytest.skip(f"unshare -m does not work here: {probe.stderr.decode(errors='replace').strip()}")
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(SOURCE_TREE), os.environ.get("PYTHONPATH")])))
     shell = f'{mounts} && exec "$0" -c "$1" "$2"'
-    done = subprocess.run(["unshare", "-m", "sh", "-c", shell, sys.executable, NAMESPACE_SCRIPT, json.dumps(commands)],
-                          cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+    done = subprocess.run(
+        ["unshare", "-m", "sh", "-c", shell, sys.executable, NAMESPACE_SCRIPT, json.dumps(commands)],
+        cwd=tmp_path,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr
     return [tuple(result) for result in json.loads(done.stdout.splitlines()[-1])]
 
@@ -156,9 +163,14 @@ READ_ONLY = "mkdir -p ro && mount --bind ro ro && mount -o remount,bind,ro ro"
 def test_every_output_in_a_read_only_folder_is_refused_before_any_work(tmp_path):
     import importlib.util
 
-    cases = [(argv, option, folder) for argv, option, folder in OUTPUTS
-             if argv[0] != "run" or importlib.util.find_spec("rclpy") is not None]
-    commands = [[*argv, option, str(tmp_path / "ro" / ("sub" if folder else "x.out"))] for argv, option, folder in cases]
+    cases = [
+        (argv, option, folder)
+        for argv, option, folder in OUTPUTS
+        if argv[0] != "run" or importlib.util.find_spec("rclpy") is not None
+    ]
+    commands = [
+        [*argv, option, str(tmp_path / "ro" / ("sub" if folder else "x.out"))] for argv, option, folder in cases
+    ]
     commands.append(["sweep", "lathe", "--out", str(tmp_path / "ro")])  # an existing folder, read-only
     for (code, out, err), command in zip(in_private_mounts(tmp_path, commands, READ_ONLY), commands):
         line = refused_line(code, out, err)
@@ -169,16 +181,22 @@ def test_every_output_in_a_read_only_folder_is_refused_before_any_work(tmp_path)
 def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_keeps_the_rest(tmp_path):
     """full/: a tmpfs of one page, filled; small/ and tiny/: tmpfs of 40 and 12 kB, which the lathe's CSV (about
     1 MB) and recording (about 200 kB) overflow. The other output goes to a folder with room."""
-    mounts = ("mkdir -p full small tiny && mount -t tmpfs -o size=4k none full && head -c 4096 /dev/zero > full/filler"
-              " && mount -t tmpfs -o size=40k none small && mount -t tmpfs -o size=12k none tiny")
-    commands = [["simulate", "lathe", "--quiet", "--out", "full/run.csv"],
-                ["simulate", "lathe", "--quiet", "--json", "--out", "small/run.csv", "--plot", "run.png"],
-                ["simulate", "lathe", "--quiet", "--json", "--record", "tiny/run.rrd", "--out", "run.csv"]]
+    mounts = (
+        "mkdir -p full small tiny && mount -t tmpfs -o size=4k none full && head -c 4096 /dev/zero > full/filler"
+        " && mount -t tmpfs -o size=40k none small && mount -t tmpfs -o size=12k none tiny"
+    )
+    commands = [
+        ["simulate", "lathe", "--quiet", "--out", "full/run.csv"],
+        ["simulate", "lathe", "--quiet", "--json", "--out", "small/run.csv", "--plot", "run.png"],
+        ["simulate", "lathe", "--quiet", "--json", "--record", "tiny/run.rrd", "--out", "run.csv"],
+    ]
     refused, csv_full, recording_full = in_private_mounts(tmp_path, commands, mounts)
     line = refused_line(*refused)
     assert "cannot write 'full/run.csv': No space left on device" in line, line
-    for (code, out, err), failed, kept, key in ((csv_full, "small/run.csv", "run.png", "plot"),
-                                                (recording_full, "tiny/run.rrd", "run.csv", "csv")):
+    for (code, out, err), failed, kept, key in (
+        (csv_full, "small/run.csv", "run.png", "plot"),
+        (recording_full, "tiny/run.rrd", "run.csv", "csv"),
+    ):
         assert code == 1, err
         summary = json.loads(out)  # the summary still printed
         assert summary["status"] == "complete" and summary[key] == kept and failed not in out
@@ -198,11 +216,34 @@ def test_a_run_of_the_nodes_whose_disk_fills_up_ends_with_exit_1_and_says_which_
     if os.geteuid() != 0 or shutil.which("unshare") is None:
         pytest.skip("a private tmpfs needs root and unshare (util-linux)")
     shell = 'mkdir -p small && mount -t tmpfs -o size=64k none small && exec "$0" "$@"'
-    done = subprocess.run(["unshare", "-m", "sh", "-c", shell, sys.executable, "-m", "mech_regulator", "run",
-                           "engine_direct", "--duration", "0.3", "--quiet", "--domain-id", str(next_domain_id()),
-                           "--out", "small/run.rrd"], cwd=tmp_path, capture_output=True, text=True, timeout=300,
-                          env=dict(os.environ, PYTHONPATH=os.pathsep.join(
-                              filter(None, [str(SOURCE_TREE), os.environ.get("PYTHONPATH")]))))
+    done = subprocess.run(
+        [
+            "unshare",
+            "-m",
+            "sh",
+            "-c",
+            shell,
+            sys.executable,
+            "-m",
+            "mech_regulator",
+            "run",
+            "engine_direct",
+            "--duration",
+            "0.3",
+            "--quiet",
+            "--domain-id",
+            str(next_domain_id()),
+            "--out",
+            "small/run.rrd",
+        ],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env=dict(
+            os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(SOURCE_TREE), os.environ.get("PYTHONPATH")]))
+        ),
+    )
     code, out, err = done.returncode, done.stdout, done.stderr
     assert code == 1, err
     assert "Traceback" not in out + err, err
@@ -215,13 +256,25 @@ def test_a_failed_write_after_the_run_keeps_the_summary_and_the_other_outputs(ca
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
     monkeypatch.setattr(report, "write_csv", full_disk)
-    code, out, err = run_cli(capsys, "simulate", "lathe", "--quiet", "--set", "scenario.duration=1",
-                             "--out", str(tmp_path / "run.csv"), "--plot", str(tmp_path / "run.png"))
+    code, out, err = run_cli(
+        capsys,
+        "simulate",
+        "lathe",
+        "--quiet",
+        "--set",
+        "scenario.duration=1",
+        "--out",
+        str(tmp_path / "run.csv"),
+        "--plot",
+        str(tmp_path / "run.png"),
+    )
     assert code == 1
     assert out.startswith("scene lathe: complete at t = 1 s") and f"wrote {tmp_path / 'run.png'}" in out
     assert "run.csv" not in out
-    assert err == f"mech-regulator: writing '{tmp_path / 'run.csv'}' failed: No space left on device; that file is " \
-                  "incomplete\n"
+    assert (
+        err == f"mech-regulator: writing '{tmp_path / 'run.csv'}' failed: No space left on device; that file is "
+        "incomplete\n"
+    )
     assert (tmp_path / "run.png").stat().st_size > 1000
 
 
@@ -230,20 +283,29 @@ def test_a_failed_write_after_the_run_keeps_the_summary_and_the_other_outputs(ca
 
 
 def test_a_key_given_twice_is_an_error_naming_it_and_both_lines(tmp_path):
-    path = write_scene(tmp_path, "name: twice\nbase: lathe\nscenario:\n  duration: 2.0\n  initial: {omega: 1.0}\n"
-                                 "  duration: 3.0\n")
+    path = write_scene(
+        tmp_path, "name: twice\nbase: lathe\nscenario:\n  duration: 2.0\n  initial: {omega: 1.0}\n  duration: 3.0\n"
+    )
     with pytest.raises(SceneError) as caught:
         load_scene(str(path))
-    assert str(caught.value) == (f"{path}: the key 'duration' is given twice in one mapping, at line 4, column 3 and at "
-                                 "line 6, column 3; expected it once (YAML would keep only the last)")
-    with pytest.raises(SceneError, match=r"--set scenario.initial: the key 'omega' is given twice in one mapping, at "
-                                         r"line 1, column 2 and at line 1, column 12"):
+    assert str(caught.value) == (
+        f"{path}: the key 'duration' is given twice in one mapping, at line 4, column 3 and at "
+        "line 6, column 3; expected it once (YAML would keep only the last)"
+    )
+    with pytest.raises(
+        SceneError,
+        match=r"--set scenario.initial: the key 'omega' is given twice in one mapping, at "
+        r"line 1, column 2 and at line 1, column 12",
+    ):
         load_scene("lathe", ["scenario.initial={omega: 1, omega: 2}"])
 
 
 def test_a_merge_may_still_bring_keys_the_mapping_sets_itself(tmp_path):
-    path = write_scene(tmp_path, "name: merged\nbase: lathe\nx-start: &start {phi: 0.5, omega: 3.0}\n"
-                                 "scenario:\n  initial:\n    <<: *start\n    omega: 4.0\n")
+    path = write_scene(
+        tmp_path,
+        "name: merged\nbase: lathe\nx-start: &start {phi: 0.5, omega: 3.0}\n"
+        "scenario:\n  initial:\n    <<: *start\n    omega: 4.0\n",
+    )
     with pytest.raises(SceneError, match="x-start") as caught:  # the unknown top-level key, not a duplicate
         load_scene(str(path))
     assert "twice" not in str(caught.value)
@@ -254,8 +316,10 @@ ESCAPED = "lathe\\x1b[2J\\x07\\r\\u202eevil\\u2066"
 
 
 def evil_scene(tmp_path: Path, governed: bool = False) -> Path:
-    return write_scene(tmp_path, f"name: {json.dumps(EVIL)}\nbase: {'engine_direct' if governed else 'lathe'}\n"
-                                 "scenario: {duration: 0.5}\n")
+    return write_scene(
+        tmp_path,
+        f"name: {json.dumps(EVIL)}\nbase: {'engine_direct' if governed else 'lathe'}\nscenario: {{duration: 0.5}}\n",
+    )
 
 
 def shown_raw(text: str) -> bool:
@@ -269,8 +333,11 @@ def test_a_scene_name_is_escaped_in_the_summary_the_progress_lines_and_errors(ca
     assert out.startswith(f"scene {ESCAPED}: complete") and not shown_raw(out), out
     assert f"simulating {ESCAPED}: " in err and not shown_raw(err), err
     code, out, err = run_cli(capsys, "governor", str(evil_scene(tmp_path)))
-    assert code == 2 and err == f"mech-regulator: scene '{ESCAPED}' has no governor: add a 'governor:' section " \
-                                "(see docs/scenes.md)\n", err
+    assert (
+        code == 2
+        and err
+        == f"mech-regulator: scene '{ESCAPED}' has no governor: add a 'governor:' section (see docs/scenes.md)\n"
+    ), err
     code, out, err = run_cli(capsys, "simulate", str(evil_scene(tmp_path)), "--quiet", "--exchange-step", "0.05")
     assert code == 0 and out.startswith(f"scene {ESCAPED}: complete") and not shown_raw(out + err), out + err
     code, out, err = run_cli(capsys, "describe", str(evil_scene(tmp_path)))
@@ -281,8 +348,10 @@ def test_a_scene_name_is_escaped_in_the_summary_the_progress_lines_and_errors(ca
 
 def test_terminal_text_keeps_lines_and_tabs_and_escapes_the_rest():
     assert report.terminal_text("a\tb\nc") == "a\tb\nc"
-    assert report.terminal_text("\x00\x1b\x7f\x9b\u200e\u200f\u202a\u202d\u2067\u2069\u061c") == \
-        "\\x00\\x1b\\x7f\\x9b\\u200e\\u200f\\u202a\\u202d\\u2067\\u2069\\u061c"
+    assert (
+        report.terminal_text("\x00\x1b\x7f\x9b\u200e\u200f\u202a\u202d\u2067\u2069\u061c")
+        == "\\x00\\x1b\\x7f\\x9b\\u200e\\u200f\\u202a\\u202d\\u2067\\u2069\\u061c"
+    )
     assert report.terminal_text("Drehzahl ω ü") == "Drehzahl ω ü"
 
 
@@ -294,8 +363,11 @@ def test_terminal_text_keeps_lines_and_tabs_and_escapes_the_rest():
 def test_a_load_driving_the_machine_backwards_beyond_the_trip_speed_ends_the_run(path):
     """The lathe (15 rad/s) under a load of 5000 N m from 1 s on turns backwards within 0.1 s; with a trip speed of
     20 rad/s the run fails at the first exchange beyond -20 rad/s, instead of running on backwards to its end."""
-    model = build_model(load_scene("lathe", ["scenario.load_events=[{time: 1.0, torque: 5000}]",
-                                             "scenario.duration=2", f"solver.path={path}"]))
+    model = build_model(
+        load_scene(
+            "lathe", ["scenario.load_events=[{time: 1.0, torque: 5000}]", "scenario.duration=2", f"solver.path={path}"]
+        )
+    )
     run = cosimulate(model, 0.01, overspeed_trip=20.0)
     assert run.status == "failed", run.message
     assert run.message.startswith(f"driven backwards at t = {run.times[-1]:.6g} s: omega = ")
@@ -307,9 +379,11 @@ def test_a_load_driving_the_machine_backwards_beyond_the_trip_speed_ends_the_run
 
 @pytest.mark.parametrize("path", ["reference", "fast"])
 def test_a_blow_up_backwards_stops_at_max_speed_as_one_forwards(tmp_path, path):
-    text = ("name: backwards\nmachine:\n  inertia: 0.5\n  drive: {type: constant, torque: -1.0e14}\n"
-            "scenario:\n  initial: {phi: 0.0, omega: 10.0}\n  duration: 2.0\n"
-            f"solver: {{method: RK45, rtol: 1.0e-6, sample_rate: 100.0, path: {path}}}\n")
+    text = (
+        "name: backwards\nmachine:\n  inertia: 0.5\n  drive: {type: constant, torque: -1.0e14}\n"
+        "scenario:\n  initial: {phi: 0.0, omega: 10.0}\n  duration: 2.0\n"
+        f"solver: {{method: RK45, rtol: 1.0e-6, sample_rate: 100.0, path: {path}}}\n"
+    )
     trajectory = simulate(build_model(load_scene(str(write_scene(tmp_path, text)))))
     assert trajectory.status == "failed" and "the run blew up at t = " in trajectory.message
     assert f"is beyond {MAX_SPEED:g} rad/s" in trajectory.message and trajectory.stats.steps <= 50

@@ -39,14 +39,21 @@ PEER_TIMEOUT = 5.0  # [s] of wall time, for the faulty controllers (faulty_contr
 
 def write_scene(folder: Path) -> Path:
     """The machine above as a scene file (no governor: the controller drives the bare machine)."""
-    scene = {"name": "constant_inertia",
-             "machine": {"inertia": INERTIA,
-                         "drive": {"type": "linear_motor", "stall_torque": STALL_TORQUE,
-                                   "no_load_speed": NO_LOAD_SPEED},
-                         "loads": [{"type": "viscous", "coefficient": VISCOUS}]},
-             "scenario": {"initial": {"omega": SET_SPEED}, "duration": DURATION, "external_load": LOAD_BEFORE,
-                          "load_events": [{"time": LOAD_STEP_TIME, "torque": LOAD_AFTER}]},
-             "solver": {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11, "path": "reference"}}
+    scene = {
+        "name": "constant_inertia",
+        "machine": {
+            "inertia": INERTIA,
+            "drive": {"type": "linear_motor", "stall_torque": STALL_TORQUE, "no_load_speed": NO_LOAD_SPEED},
+            "loads": [{"type": "viscous", "coefficient": VISCOUS}],
+        },
+        "scenario": {
+            "initial": {"omega": SET_SPEED},
+            "duration": DURATION,
+            "external_load": LOAD_BEFORE,
+            "load_events": [{"time": LOAD_STEP_TIME, "torque": LOAD_AFTER}],
+        },
+        "solver": {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11, "path": "reference"},
+    }
     path = folder / "scene.yaml"
     path.write_text(yaml.safe_dump(scene, sort_keys=False))
     return path
@@ -55,21 +62,39 @@ def write_scene(folder: Path) -> Path:
 def continuous_loop(times: np.ndarray) -> np.ndarray:
     """omega [rad/s] at `times` of the machine above under the continuous PI controller u = BIAS + KP e + KI z,
     z' = e = SET_SPEED - omega (scipy's DOP853, in two pieces at the load step)."""
+
     def right_hand_side(load):
         def derivatives(t, y):
             omega, integral = y
             error = SET_SPEED - omega
             throttle = BIAS + KP * error + KI * integral
-            return [(throttle * STALL_TORQUE * (1.0 - omega / NO_LOAD_SPEED) - VISCOUS * omega - load) / INERTIA,
-                    error]
+            return [(throttle * STALL_TORQUE * (1.0 - omega / NO_LOAD_SPEED) - VISCOUS * omega - load) / INERTIA, error]
+
         return derivatives
 
-    before = solve_ivp(right_hand_side(LOAD_BEFORE), (0.0, LOAD_STEP_TIME), [SET_SPEED, 0.0], method="DOP853",
-                       rtol=1e-11, atol=1e-12, dense_output=True)
-    after = solve_ivp(right_hand_side(LOAD_AFTER), (LOAD_STEP_TIME, DURATION), before.y[:, -1], method="DOP853",
-                      rtol=1e-11, atol=1e-12, dense_output=True)
-    return np.where(times < LOAD_STEP_TIME, before.sol(np.minimum(times, LOAD_STEP_TIME))[0],
-                    after.sol(np.maximum(times, LOAD_STEP_TIME))[0])
+    before = solve_ivp(
+        right_hand_side(LOAD_BEFORE),
+        (0.0, LOAD_STEP_TIME),
+        [SET_SPEED, 0.0],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+        dense_output=True,
+    )
+    after = solve_ivp(
+        right_hand_side(LOAD_AFTER),
+        (LOAD_STEP_TIME, DURATION),
+        before.y[:, -1],
+        method="DOP853",
+        rtol=1e-11,
+        atol=1e-12,
+        dense_output=True,
+    )
+    return np.where(
+        times < LOAD_STEP_TIME,
+        before.sol(np.minimum(times, LOAD_STEP_TIME))[0],
+        after.sol(np.maximum(times, LOAD_STEP_TIME))[0],
+    )
 
 
 class ExternalRun:
@@ -79,10 +104,30 @@ class ExternalRun:
         self.processes = processes
         self.rrd = folder / "run.rrd"
         self.csv, self.json, self.bag = self.rrd.with_suffix(".csv"), self.rrd.with_suffix(".json"), folder / "bag"
-        self.launcher = processes.start([sys.executable, "-m", "mech_regulator", "run", write_scene(folder),
-                                         "--controller", "external", "--exchange-step", EXCHANGE_STEP,
-                                         "--coupling", "hold", "--domain-id", domain, "--out", self.rrd,
-                                         "--bag", self.bag, "--quiet", *options], "launcher")
+        self.launcher = processes.start(
+            [
+                sys.executable,
+                "-m",
+                "mech_regulator",
+                "run",
+                write_scene(folder),
+                "--controller",
+                "external",
+                "--exchange-step",
+                EXCHANGE_STEP,
+                "--coupling",
+                "hold",
+                "--domain-id",
+                domain,
+                "--out",
+                self.rrd,
+                "--bag",
+                self.bag,
+                "--quiet",
+                *options,
+            ],
+            "launcher",
+        )
         self.controller = processes.start([sys.executable, *controller], "controller") if controller else None
 
     def finish(self) -> int:
@@ -106,11 +151,13 @@ def bag_messages(folder: Path) -> dict[str, list]:
     (relative,) = information["relative_file_paths"]
     topics: dict[str, list] = {}
     with open(folder / relative, "rb") as stream:
-        for _, channel, message, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]) \
-                .iter_decoded_messages():
+        for _, channel, message, decoded in make_reader(
+            stream, decoder_factories=[DecoderFactory()]
+        ).iter_decoded_messages():
             topics.setdefault(channel.topic, []).append((message.log_time, decoded))
-    counts = {item["topic_metadata"]["name"]: item["message_count"]
-              for item in information["topics_with_message_count"]}
+    counts = {
+        item["topic_metadata"]["name"]: item["message_count"] for item in information["topics_with_message_count"]
+    }
     assert counts == {topic: len(messages) for topic, messages in topics.items()}, "metadata.yaml's counts"
     return topics
 
@@ -136,8 +183,9 @@ def test_the_example_controller_in_lockstep_follows_the_continuous_loop(tmp_path
     omega = [message.velocity[list(message.name).index("crank")] for _, message in topics["/joint_states"]]
     np.testing.assert_array_equal(omega, csv["omega"])
     np.testing.assert_array_equal([message.position[0] for _, message in topics["/throttle"]], csv["throttle"])
-    np.testing.assert_array_equal([message.wrench.torque.z for _, message in topics["/load_torque_stamped"]],
-                                  -csv["M_external"])
+    np.testing.assert_array_equal(
+        [message.wrench.torque.z for _, message in topics["/load_torque_stamped"]], -csv["M_external"]
+    )
     drive = [message.effort[list(message.name).index("drive")] for _, message in topics["/machine/moments"]]
     np.testing.assert_array_equal(drive, csv["M_drive"])
     assert [message.clock.sec * 10**9 + message.clock.nanosec for _, message in topics["/clock"]] == times
@@ -154,9 +202,13 @@ def recorded_throttle(rrd: Path) -> np.ndarray:
     for chunk in RrdReader(str(rrd)).stream().to_chunks():
         batch = chunk.to_record_batch()
         if chunk.entity_path == "/throttle" and "Scalars:scalars" in batch.schema.names:
-            samples += [(when, value[0]) for when, value in zip(batch.column("sim_time").cast("int64").to_pylist(),
-                                                                batch.column("Scalars:scalars").to_pylist())
-                        if value is not None]
+            samples += [
+                (when, value[0])
+                for when, value in zip(
+                    batch.column("sim_time").cast("int64").to_pylist(), batch.column("Scalars:scalars").to_pylist()
+                )
+                if value is not None
+            ]
     return np.array([value for _, value in sorted(samples)])
 
 
@@ -173,8 +225,10 @@ def test_a_controller_that_stops_answering_ends_the_run_loudly(tmp_path, process
     assert run.finish() == 1, run.log
     assert "Traceback" not in run.log, run.log
     launcher = processes.log(run.launcher)
-    assert "the machine node ended with exit code 1: controller pid_governor gave no throttle for t = 0.1 s within " \
-           f"{PEER_TIMEOUT:g} s" in launcher, launcher
+    assert (
+        "the machine node ended with exit code 1: controller pid_governor gave no throttle for t = 0.1 s within "
+        f"{PEER_TIMEOUT:g} s" in launcher
+    ), launcher
     assert ("its last throttle was stamped" in launcher) == (fault == "wrong_stamp"), launcher
     summary = json.loads(run.json.read_text())
     assert summary["status"] == "interrupted" and summary["t_end"] == pytest.approx(0.1 - EXCHANGE_STEP), summary
@@ -182,12 +236,24 @@ def test_a_controller_that_stops_answering_ends_the_run_loudly(tmp_path, process
     assert csv["t"][-1] == summary["t_end"]  # what was computed up to the silence is kept
 
 
-@pytest.mark.parametrize("options, expected", [
-    (["--time-mode", "realtime"], "--controller external: only with --time-mode lockstep"),
-    (["--peer-timeout", "0"], "--peer-timeout 0: expected 0.01 to 3600 s"),
-])
+@pytest.mark.parametrize(
+    "options, expected",
+    [
+        (["--time-mode", "realtime"], "--controller external: only with --time-mode lockstep"),
+        (["--peer-timeout", "0"], "--peer-timeout 0: expected 0.01 to 3600 s"),
+    ],
+)
 def test_run_refuses_what_an_external_controller_cannot_have(tmp_path, capsys, options, expected):
-    code, _, err = run_cli(capsys, "run", str(write_scene(tmp_path)), "--controller", "external", *options,
-                           "--out", str(tmp_path / "run.rrd"), "--quiet")
+    code, _, err = run_cli(
+        capsys,
+        "run",
+        str(write_scene(tmp_path)),
+        "--controller",
+        "external",
+        *options,
+        "--out",
+        str(tmp_path / "run.rrd"),
+        "--quiet",
+    )
     assert code == 2 and expected in err, err
     assert not (tmp_path / "run.log").exists()  # refused before any node started

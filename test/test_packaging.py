@@ -29,8 +29,10 @@ BUNDLED = sorted(path.stem for path in (ROOT / "config" / "scenes").glob("*.yaml
 def _run(command: list[str], timeout: float = 60, **kwargs) -> subprocess.CompletedProcess:
     """Run a command, failing the test with its output when it exits non-zero."""
     result = subprocess.run(command, capture_output=True, text=True, timeout=timeout, **kwargs)
-    assert result.returncode == 0, (f"{' '.join(map(str, command))} exited {result.returncode}\n"
-                                    f"--- stdout\n{result.stdout[-3000:]}\n--- stderr\n{result.stderr[-3000:]}")
+    assert result.returncode == 0, (
+        f"{' '.join(map(str, command))} exited {result.returncode}\n"
+        f"--- stdout\n{result.stdout[-3000:]}\n--- stderr\n{result.stderr[-3000:]}"
+    )
     return result
 
 
@@ -42,11 +44,16 @@ def _assert_lists_bundled_scenes(output: str) -> None:
 
 def _colcon() -> str:
     """The colcon command of this Python environment; skip the test when it is not installed."""
-    missing = [name for name in ("colcon_core", "colcon_ros", "catkin_pkg", "ament_package")
-               if importlib.util.find_spec(name) is None]
+    missing = [
+        name
+        for name in ("colcon_core", "colcon_ros", "catkin_pkg", "ament_package")
+        if importlib.util.find_spec(name) is None
+    ]
     if missing:
-        pytest.skip(f"colcon is not installed in this Python ({', '.join(missing)} not importable); "
-                    f"install it with: pip install -e '.[test,colcon]'")
+        pytest.skip(
+            f"colcon is not installed in this Python ({', '.join(missing)} not importable); "
+            f"install it with: pip install -e '.[test,colcon]'"
+        )
     colcon = shutil.which("colcon", path=str(Path(sys.executable).parent)) or shutil.which("colcon")
     if colcon is None:
         pytest.skip("colcon_core is importable but no `colcon` executable is next to sys.executable or on PATH")
@@ -58,12 +65,31 @@ def colcon_install(tmp_path_factory) -> Path:
     """The package built by colcon (ament_python) into a temporary install base; returns its prefix."""
     colcon = _colcon()
     folder = tmp_path_factory.mktemp("colcon")
-    env = dict(os.environ, COLCON_HOME=str(folder / "colcon_home"),  # no user defaults.yaml
-               PATH=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]))
+    env = dict(
+        os.environ,
+        COLCON_HOME=str(folder / "colcon_home"),  # no user defaults.yaml
+        PATH=os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]),
+    )
     install = folder / "install"
-    _run([colcon, "--log-base", str(folder / "log"), "build", "--base-paths", str(ROOT),
-          "--packages-select", PACKAGE, "--build-base", str(folder / "build"), "--install-base", str(install)],
-         timeout=180, cwd=folder, env=env)
+    _run(
+        [
+            colcon,
+            "--log-base",
+            str(folder / "log"),
+            "build",
+            "--base-paths",
+            str(ROOT),
+            "--packages-select",
+            PACKAGE,
+            "--build-base",
+            str(folder / "build"),
+            "--install-base",
+            str(install),
+        ],
+        timeout=180,
+        cwd=folder,
+        env=env,
+    )
     return install / PACKAGE
 
 
@@ -77,8 +103,9 @@ def _install_python_path(prefix: Path) -> str:
 def test_colcon_build_installs_a_working_executable(colcon_install, tmp_path):
     prefix = colcon_install
     executable = prefix / "lib" / PACKAGE / EXECUTABLE  # where `ros2 run mech_regulator mech-regulator` looks
-    assert executable.is_file() and os.access(executable, os.X_OK), \
+    assert executable.is_file() and os.access(executable, os.X_OK), (
         f"no executable {executable}; lib/ holds {sorted(str(p.relative_to(prefix)) for p in (prefix / 'lib').rglob('*'))}"
+    )
     assert (prefix / "share" / "ament_index" / "resource_index" / "packages" / PACKAGE).is_file()
     assert (prefix / "share" / PACKAGE / "package.xml").is_file()
     share_config = prefix / "share" / PACKAGE / "config"
@@ -99,8 +126,11 @@ def test_colcon_build_installs_a_working_executable(colcon_install, tmp_path):
     describe = _run([str(executable), "describe", "lathe"], cwd=tmp_path, env=run_env).stdout
     assert "scene: lathe" in describe
     _assert_lists_bundled_scenes(_run([str(executable), "scenes"], cwd=tmp_path, env=run_env).stdout)
-    where = _run([sys.executable, "-c", "import mech_regulator.scene.loading as m; print(m.__file__); print(m.config_dir())"],
-                 cwd=tmp_path, env=run_env).stdout.split("\n")
+    where = _run(
+        [sys.executable, "-c", "import mech_regulator.scene.loading as m; print(m.__file__); print(m.config_dir())"],
+        cwd=tmp_path,
+        env=run_env,
+    ).stdout.split("\n")
     assert Path(where[0]).is_relative_to(site_packages[0]), f"imported {where[0]}, not the colcon install"
     assert Path(where[1]) == share_config, f"bundled config read from {where[1]}, not {share_config}"
 
@@ -132,13 +162,14 @@ def _setup_py_version() -> str:
 
 def test_package_xml_matches_setup_py():
     root = ET.parse(ROOT / "package.xml").getroot()
-    assert root.tag == "package" and root.get("format") == "3", "package.xml must be <package format=\"3\">"
+    assert root.tag == "package" and root.get("format") == "3", 'package.xml must be <package format="3">'
     assert root.findtext("name") == PACKAGE
     assert root.findtext("export/build_type") == "ament_python"
     version = root.findtext("version")
     assert version == _setup_py_version() == mech_regulator.__version__, (
         f"versions differ: package.xml {version}, setup.py {_setup_py_version()}, "
-        f"mech_regulator.__version__ {mech_regulator.__version__}")
+        f"mech_regulator.__version__ {mech_regulator.__version__}"
+    )
     assert (ROOT / "resource" / PACKAGE).is_file(), "resource/mech_regulator is the ament index marker"
 
 
@@ -151,24 +182,49 @@ def test_colcon_install_runs_the_nodes(colcon_install, tmp_path):
 
     lib = colcon_install / "lib" / PACKAGE  # where `ros2 run mech_regulator machine_node` looks
     for node in NODES:
-        assert (lib / node).is_file() and os.access(lib / node, os.X_OK), \
+        assert (lib / node).is_file() and os.access(lib / node, os.X_OK), (
             f"no executable {lib / node}; {lib} holds {sorted(path.name for path in lib.iterdir())}"
+        )
     example = lib / "pid_governor.py"  # `ros2 run mech_regulator pid_governor.py` (docs/ros.md, Your own controller)
     assert os.access(example, os.X_OK) and example.read_text().startswith("#!/usr/bin/env python3"), example
     env = dict(ros_environment(next_domain_id()), PYTHONPATH=_install_python_path(colcon_install))
     machine = str(lib / "machine_node")
     missing = tmp_path / "missing.yaml"
-    result = subprocess.run([machine, "--ros-args", "-p", f"scene_file:={missing}"], capture_output=True, text=True,
-                            timeout=60, cwd=tmp_path, env=env, start_new_session=True)
-    assert result.returncode == 2 and f"scene '{missing}': no such file" in result.stderr, \
+    result = subprocess.run(
+        [machine, "--ros-args", "-p", f"scene_file:={missing}"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env=env,
+        start_new_session=True,
+    )
+    assert result.returncode == 2 and f"scene '{missing}': no such file" in result.stderr, (
         f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    )
     assert "Traceback" not in result.stderr
     # a short run of the ungoverned lathe, waiting for nobody
-    result = _run([machine, "--ros-args", "-p", "scene_file:=lathe", "-p", "lockstep_inputs:=['']", "-p",
-                   "peers:=['']", "-p", "duration:=0.01"], cwd=tmp_path, env=env, start_new_session=True)
+    result = _run(
+        [
+            machine,
+            "--ros-args",
+            "-p",
+            "scene_file:=lathe",
+            "-p",
+            "lockstep_inputs:=['']",
+            "-p",
+            "peers:=['']",
+            "-p",
+            "duration:=0.01",
+        ],
+        cwd=tmp_path,
+        env=env,
+        start_new_session=True,
+    )
     assert "finished at t = 0.01 s: complete" in result.stdout + result.stderr, result.stderr
-    where = _run([sys.executable, "-c", "import mech_regulator.nodes.machine as m; print(m.__file__)"],
-                 cwd=tmp_path, env=env).stdout.strip()
+    where = _run(
+        [sys.executable, "-c", "import mech_regulator.nodes.machine as m; print(m.__file__)"], cwd=tmp_path, env=env
+    ).stdout.strip()
     assert Path(where).is_relative_to(colcon_install), f"machine_node imported {where}, not the colcon install"
 
 
@@ -197,8 +253,13 @@ OPTIONAL_IMPORTS = {
 }
 # declared but never imported: the `ros2 launch` command, for launch/main_job.launch.py
 NOT_IMPORTED = {"ros2launch"}
-VERSION_ATTRIBUTES = {">=": "version_gte", ">": "version_gt", "<=": "version_lte", "<": "version_lt",
-                      "==": "version_eq"}
+VERSION_ATTRIBUTES = {
+    ">=": "version_gte",
+    ">": "version_gt",
+    "<=": "version_lte",
+    "<": "version_lt",
+    "==": "version_eq",
+}
 
 
 def _third_party_imports() -> dict[str, set[str]]:
@@ -230,8 +291,11 @@ def test_package_xml_declares_every_third_party_import():
     imports = _third_party_imports()
     assert {"numpy", "rclpy", "launch_ros"} <= set(imports), f"the import scan found only {sorted(imports)}"
     declared = _exec_depends()
-    expected = {PYTHON_DEPENDENCIES[module][1] if module in PYTHON_DEPENDENCIES else module: module
-                for module in imports if module not in OPTIONAL_IMPORTS}
+    expected = {
+        PYTHON_DEPENDENCIES[module][1] if module in PYTHON_DEPENDENCIES else module: module
+        for module in imports
+        if module not in OPTIONAL_IMPORTS
+    }
     missing = {key: sorted(imports[module]) for key, module in expected.items() if key not in declared}
     assert not missing, f"imported but not an exec_depend of package.xml (key: importing files): {missing}"
     unused = set(declared) - set(expected) - NOT_IMPORTED
@@ -249,8 +313,9 @@ def test_package_xml_version_floors_equal_setup_py():
     for requirement in requirements:
         key = by_requirement[requirement.name]
         expected = {VERSION_ATTRIBUTES[specifier.operator]: specifier.version for specifier in requirement.specifier}
-        assert declared.get(key) == expected, \
+        assert declared.get(key) == expected, (
             f"{requirement}: package.xml should have <exec_depend {expected}>{key}</exec_depend>, has {declared.get(key)}"
+        )
 
 
 def test_imported_ros_interfaces_come_with_the_ros_extra():
@@ -277,8 +342,11 @@ def test_package_xml_is_valid_for_catkin_pkg():
 
 def test_dev_is_valid_bash_and_ci_runs_the_checks_then_dev_test():
     _run(["bash", "-n", str(ROOT / "dev")])
-    commands = [line.strip() for line in (ROOT / ".ci" / "run").read_text().splitlines()
-                if line.strip() and not line.lstrip().startswith(("#", "set ", "cd "))]
+    commands = [
+        line.strip()
+        for line in (ROOT / ".ci" / "run").read_text().splitlines()
+        if line.strip() and not line.lstrip().startswith(("#", "set ", "cd "))
+    ]
     assert commands == ["./dev check", "./dev test"], f".ci/run runs {commands}"
 
 
@@ -312,7 +380,7 @@ def test_dev_installs_each_commands_extras_once_and_again_when_packaging_changes
         """Run ./dev; returns the calls it made and what it told on stderr."""
         before = log.read_text().splitlines()
         result = _run(["bash", str(tmp_path / "dev"), *arguments], cwd=tmp_path)
-        return log.read_text().splitlines()[len(before):], result.stderr
+        return log.read_text().splitlines()[len(before) :], result.stderr
 
     calls, told = dev("run", "lathe", "--quiet")
     assert calls == ["python -m pip install -e .[ros]", "mech-regulator run lathe --quiet"]
@@ -322,13 +390,15 @@ def test_dev_installs_each_commands_extras_once_and_again_when_packaging_changes
     calls, told = dev("rerun", "runs/lathe.rrd")  # core is in already
     assert calls == ["rerun runs/lathe.rrd"]
     calls, told = dev("test", "-k", "packaging")  # completes the venv of ./dev run
-    assert calls == ["python -m pip install -e .[ros,test,colcon,bench,distributed]",
-                     "python -m pytest -q -n auto --dist loadfile -k packaging"]
+    assert calls == [
+        "python -m pip install -e .[ros,test,colcon,bench,distributed]",
+        "python -m pytest -q -n auto --dist loadfile -k packaging",
+    ]
     assert told.startswith("completing .venv for ./dev test: installing the extras test colcon bench distributed"), told
     calls, _ = dev("test")
     assert calls == ["python -m pytest -q -n auto --dist loadfile"]
     calls, _ = dev("check")  # the same extras as test: nothing to install
-    assert calls == ["python -m ruff check .", "python -m mypy"]
+    assert calls == ["python -m ruff check .", "python -m ruff format --check .", "python -m mypy"]
     calls, _ = dev("run")
     assert calls == ["mech-regulator run engine_direct"]
 

@@ -35,8 +35,16 @@ from mech_regulator.scene import load_scene, schema
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 37)[:-1] + 0.0123
 GRAVITY = (0.7, -9.81)
 TOLERANCE = 1e-12
-BUNDLED = ["compressor", "crank_slider_bench", "engine", "engine_inline4", "four_bar_rocker", "press",
-           "press_coupling", "walking_beam"]
+BUNDLED = [
+    "compressor",
+    "crank_slider_bench",
+    "engine",
+    "engine_inline4",
+    "four_bar_rocker",
+    "press",
+    "press_coupling",
+    "walking_beam",
+]
 
 
 def bundled_mechanism(name: str):
@@ -48,11 +56,19 @@ def bundled_mechanism(name: str):
 def random_crank_slider(rng, cylinders=None) -> schema.CrankSlider:
     crank = rng.uniform(0.03, 0.1)
     offset = rng.uniform(-0.4, 0.4) * crank
-    return schema.CrankSlider(type="crank_slider", crank=crank, rod=(abs(offset) + crank) * rng.uniform(1.3, 4.0),
-                              offset=offset, crank_mass=rng.uniform(0.5, 3.0), crank_cg=rng.uniform(-0.5, 0.8) * crank,
-                              rod_mass=rng.uniform(0.2, 5.0), rod_cg=rng.uniform(0.1, 0.6) * 0.1,
-                              rod_inertia=rng.uniform(1e-4, 0.05), slider_mass=rng.uniform(0.1, 10.0),
-                              cylinders=cylinders)
+    return schema.CrankSlider(
+        type="crank_slider",
+        crank=crank,
+        rod=(abs(offset) + crank) * rng.uniform(1.3, 4.0),
+        offset=offset,
+        crank_mass=rng.uniform(0.5, 3.0),
+        crank_cg=rng.uniform(-0.5, 0.8) * crank,
+        rod_mass=rng.uniform(0.2, 5.0),
+        rod_cg=rng.uniform(0.1, 0.6) * 0.1,
+        rod_inertia=rng.uniform(1e-4, 0.05),
+        slider_mass=rng.uniform(0.1, 10.0),
+        cylinders=cylinders,
+    )
 
 
 def random_four_bar(rng, branch: str) -> schema.FourBar:
@@ -62,12 +78,23 @@ def random_four_bar(rng, branch: str) -> schema.FourBar:
         coupler, rocker, frame = rng.uniform(0.06, 0.2, 3)
         lengths = sorted((crank, coupler, rocker, frame))
         if lengths[0] == crank and lengths[0] + lengths[3] < lengths[1] + lengths[2] - 0.01:
-            return schema.FourBar(type="four_bar", crank=crank, coupler=coupler, rocker=rocker, frame=frame,
-                                  frame_angle_deg=rng.uniform(-180.0, 180.0), branch=branch,
-                                  crank_mass=rng.uniform(0.1, 1.0), crank_cg=rng.uniform(-0.5, 1.0) * crank,
-                                  coupler_mass=rng.uniform(0.1, 2.0), coupler_cg=rng.uniform(-0.2, 1.0) * coupler,
-                                  coupler_inertia=rng.uniform(1e-5, 1e-3), rocker_mass=rng.uniform(0.1, 2.0),
-                                  rocker_cg=rng.uniform(-0.2, 1.0) * rocker, rocker_inertia=rng.uniform(1e-5, 1e-3))
+            return schema.FourBar(
+                type="four_bar",
+                crank=crank,
+                coupler=coupler,
+                rocker=rocker,
+                frame=frame,
+                frame_angle_deg=rng.uniform(-180.0, 180.0),
+                branch=branch,
+                crank_mass=rng.uniform(0.1, 1.0),
+                crank_cg=rng.uniform(-0.5, 1.0) * crank,
+                coupler_mass=rng.uniform(0.1, 2.0),
+                coupler_cg=rng.uniform(-0.2, 1.0) * coupler,
+                coupler_inertia=rng.uniform(1e-5, 1e-3),
+                rocker_mass=rng.uniform(0.1, 2.0),
+                rocker_cg=rng.uniform(-0.2, 1.0) * rocker,
+                rocker_inertia=rng.uniform(1e-5, 1e-3),
+            )
 
 
 def random_walking_beam(rng) -> schema.WalkingBeam:
@@ -77,8 +104,17 @@ def random_walking_beam(rng) -> schema.WalkingBeam:
     turn = rng.uniform(-40.0, 40.0)
     data["frame_angle_deg"] += turn
     data["beam_angle_deg"] += turn
-    for key in ("crank_mass", "coupler_mass", "rocker_mass", "tie_mass", "side_mass", "shuttle_mass",
-                "coupler_inertia", "rocker_inertia", "side_inertia"):
+    for key in (
+        "crank_mass",
+        "coupler_mass",
+        "rocker_mass",
+        "tie_mass",
+        "side_mass",
+        "shuttle_mass",
+        "coupler_inertia",
+        "rocker_inertia",
+        "side_inertia",
+    ):
         data[key] = data[key] * rng.uniform(0.3, 3.0)
     for key in ("crank_cg", "coupler_cg", "rocker_cg", "side_cg"):
         data[key] = data[key] * rng.uniform(-1.0, 2.0) if key != "coupler_cg" else data[key] * rng.uniform(0.0, 2.0)
@@ -89,17 +125,24 @@ def random_walking_beam(rng) -> schema.WalkingBeam:
 def random_mechanisms():
     rng = np.random.default_rng(21)
     mechanisms = [random_crank_slider(rng) for _ in range(3)]
-    mechanisms.append(random_crank_slider(rng, [schema.Cylinder(), schema.Cylinder(throw_deg=rng.uniform(0, 360),
-                                                                                   bank_deg=rng.uniform(-90, 90)),
-                                                schema.Cylinder(throw_deg=rng.uniform(0, 360),
-                                                                bank_deg=rng.uniform(-90, 90))]))
+    mechanisms.append(
+        random_crank_slider(
+            rng,
+            [
+                schema.Cylinder(),
+                schema.Cylinder(throw_deg=rng.uniform(0, 360), bank_deg=rng.uniform(-90, 90)),
+                schema.Cylinder(throw_deg=rng.uniform(0, 360), bank_deg=rng.uniform(-90, 90)),
+            ],
+        )
+    )
     mechanisms += [random_four_bar(rng, branch) for branch in ("open", "crossed", "open", "crossed")]
     mechanisms += [random_walking_beam(rng) for _ in range(2)]
     return mechanisms
 
 
 CASES = [(name, bundled_mechanism(name)) for name in BUNDLED] + [
-    (f"random-{k}-{m.type}", m) for k, m in enumerate(random_mechanisms())]
+    (f"random-{k}-{m.type}", m) for k, m in enumerate(random_mechanisms())
+]
 
 
 def _scales(rows: np.ndarray) -> np.ndarray:
@@ -118,10 +161,14 @@ def closed_form_reduced(mechanism, gravity):
     """The preset's hand-written reduced(phi) (closed_forms.py); a multi-cylinder engine's with the pistons' tuples."""
     geometry = mechanism_geometry(mechanism)
     if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None:
-        return closed_forms.multi_cylinder_reduced(geometry, [c.throw_deg for c in mechanism.cylinders],
-                                                   [c.bank_deg for c in mechanism.cylinders], gravity)
-    build = {schema.CrankSlider: closed_forms.crank_slider_reduced, schema.FourBar: closed_forms.four_bar_reduced,
-             schema.WalkingBeam: closed_forms.walking_beam_reduced}[type(mechanism)]
+        return closed_forms.multi_cylinder_reduced(
+            geometry, [c.throw_deg for c in mechanism.cylinders], [c.bank_deg for c in mechanism.cylinders], gravity
+        )
+    build = {
+        schema.CrankSlider: closed_forms.crank_slider_reduced,
+        schema.FourBar: closed_forms.four_bar_reduced,
+        schema.WalkingBeam: closed_forms.walking_beam_reduced,
+    }[type(mechanism)]
     return build(geometry, gravity)
 
 
@@ -138,15 +185,18 @@ def test_preset_linkage_reduces_as_the_preset(name, mechanism, gravity):
     several = isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
     general = make_reduced(linkage, structure, gravity)
     pistons = _pistons(linkage, structure, presets.guide_joints(mechanism)) if several else None
-    products = [build_reduced(mechanism, gravity),
-                (lambda phi: (*general(phi)[:3], tuple(x for x, _ in pistons(phi)), tuple(dx for _, dx in pistons(phi))))
-                if several else general]
+    products = [
+        build_reduced(mechanism, gravity),
+        (lambda phi: (*general(phi)[:3], tuple(x for x, _ in pistons(phi)), tuple(dx for _, dx in pistons(phi))))
+        if several
+        else general,
+    ]
     rows = np.array([np.array(_flat(theirs(phi))) for phi in ANGLES])
     scales = _scales(rows)
     for ours in products:
         differences = np.array([_flat(ours(phi)) for phi in ANGLES]) - rows
         assert np.all(np.abs(differences) <= TOLERANCE * scales), (np.max(np.abs(differences), axis=0), scales)
-    assert np.all(rows[:, 2] == 0.0) if gravity is None else np.any(rows[:, 2] != 0.0)   # weights compared, not zeros
+    assert np.all(rows[:, 2] == 0.0) if gravity is None else np.any(rows[:, 2] != 0.0)  # weights compared, not zeros
 
 
 def _flat(values) -> list[float]:
@@ -198,7 +248,10 @@ def test_preset_linkage_joint_loads_are_the_presets(mechanism, gravity):
     ours, names = build_kinetostatics(mechanism, gravity)
     geometry, weight = mechanism_geometry(mechanism), gravity if gravity is not None else (0.0, 0.0)
     if isinstance(mechanism, schema.CrankSlider):
-        theirs, preset_names = closed_forms.crank_slider_kinetostatics(geometry, weight), kinetostatics.CRANK_SLIDER_JOINTS
+        theirs, preset_names = (
+            closed_forms.crank_slider_kinetostatics(geometry, weight),
+            kinetostatics.CRANK_SLIDER_JOINTS,
+        )
     else:
         theirs, preset_names = closed_forms.four_bar_kinetostatics(geometry, weight), kinetostatics.FOUR_BAR_JOINTS
     assert names == preset_names
@@ -210,8 +263,9 @@ def test_preset_linkage_joint_loads_are_the_presets(mechanism, gravity):
         rate_scale = max(abs(value) for value in second.per_epsilon)
         assert np.abs(np.subtract(first.constant, second.constant)).max() <= TOLERANCE * scale
         assert np.abs(np.subtract(first.per_epsilon, second.per_epsilon)).max() <= TOLERANCE * rate_scale
-        assert first.balancing[0] == pytest.approx(second.balancing[0], abs=TOLERANCE * (abs(second.balancing[0])
-                                                                                          + scale * 0.1))
+        assert first.balancing[0] == pytest.approx(
+            second.balancing[0], abs=TOLERANCE * (abs(second.balancing[0]) + scale * 0.1)
+        )
         assert first.balancing[1] == pytest.approx(second.balancing[1], abs=TOLERANCE * rate_scale * 0.1)
         assert np.abs(np.array(first.ratios) - signs * second.ratios).max() <= TOLERANCE * max(map(abs, second.ratios))
 
@@ -258,7 +312,6 @@ def _same_friction(preset, linkage, seed: int) -> None:
         assert ours[2] == pytest.approx(theirs[2], rel=1e-12)
 
 
-
 def test_compressor_friction_on_the_preset_linkage_is_the_preset_machine():
     """compressor_friction with its crank-slider replaced by presets.preset_linkage's linkage (written as the scene's
     `type: linkage` entry), its journals named as the preset's joints (crank_bearing, crank_pin, wrist_pin) and the
@@ -278,16 +331,18 @@ def test_four_bar_friction_on_the_preset_linkage_is_the_preset_machine():
     (-m cg^2), so the crank's inertia is set to 0 there and machine.inertia lowered by m cg^2 (the same J)."""
     radii = {"crank_bearing": 0.012, "crank_pin": 0.008, "rocker_pin": 0.006, "rocker_bearing": 0.01}
     data = load_scene("four_bar_rocker").model_dump(exclude_none=True)
-    data["machine"]["joint_friction"] = {"coefficient": 0.08, "joints": {name: {"radius": radius, "fit": "new"}
-                                                                         for name, radius in radii.items()}}
+    data["machine"]["joint_friction"] = {
+        "coefficient": 0.08,
+        "joints": {name: {"radius": radius, "fit": "new"} for name, radius in radii.items()},
+    }
     preset = model_of(data)
     mechanism = preset.scene.machine.mechanism
     linkage = presets.preset_linkage(mechanism)
     crank = linkage.link("crank")
-    linkage = replace(linkage, links=tuple(replace(link, inertia=0.0) if link is crank else link
-                                           for link in linkage.links))
+    linkage = replace(
+        linkage, links=tuple(replace(link, inertia=0.0) if link is crank else link for link in linkage.links)
+    )
     data["machine"]["mechanism"] = linkage_scene_entry(linkage)
-    data["machine"]["inertia"] -= mechanism.crank_mass * mechanism.crank_cg ** 2
+    data["machine"]["inertia"] -= mechanism.crank_mass * mechanism.crank_cg**2
     data["machine"]["joint_friction"]["journals"] = data["machine"]["joint_friction"].pop("joints")
     _same_friction(preset, model_of(data), seed=7)
-

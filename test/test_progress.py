@@ -18,8 +18,10 @@ from support import run_cli
 from mech_regulator.cli.report import PROGRESS_INTERVAL, ProgressLines, progress_bar, progress_interval
 
 DURATION = r"(?:[0-9.]+ s|\d+ min \d+ s|\d+ h \d+ min)"  # report._duration: '4.1 s', '2 min 05 s', '1 h 02 min'
-LINE = re.compile(rf"^simulating lathe: t = ([0-9.e+-]+) / 20 s \((\d+) %\), ({DURATION}) elapsed, "
-                  rf"ETA ({DURATION}|unknown)$")
+LINE = re.compile(
+    rf"^simulating lathe: t = ([0-9.e+-]+) / 20 s \((\d+) %\), ({DURATION}) elapsed, "
+    rf"ETA ({DURATION}|unknown)$"
+)
 FINAL = re.compile(rf"^simulating lathe: done: t = 20 / 20 s in ({DURATION})$")
 
 
@@ -29,8 +31,13 @@ def simulate(*options: str, interval: str | None = "0") -> subprocess.CompletedP
     env.pop("MECH_REGULATOR_PROGRESS_INTERVAL", None)
     if interval is not None:
         env["MECH_REGULATOR_PROGRESS_INTERVAL"] = interval
-    return subprocess.run([sys.executable, "-m", "mech_regulator", "simulate", "lathe", "--set",
-                           "scenario.duration=20", *options], capture_output=True, text=True, env=env, check=True)
+    return subprocess.run(
+        [sys.executable, "-m", "mech_regulator", "simulate", "lathe", "--set", "scenario.duration=20", *options],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
 
 
 def test_piped_simulate_prints_progress_lines_and_a_final_line():
@@ -60,12 +67,14 @@ def test_a_line_names_time_share_elapsed_and_eta():
     clock = iter([0.0, 4.1, 4.2, 5.0, 12.3]).__next__
     out = io.StringIO()
     bar = ProgressLines(10.0, "simulating lathe", "t", "s", 3.0, file=out, clock=clock)
-    bar.update(3.2)   # 4.1 s after the start: a line
-    bar.update(0.1)   # 0.1 s after that line: none
+    bar.update(3.2)  # 4.1 s after the start: a line
+    bar.update(0.1)  # 0.1 s after that line: none
     bar.update(6.7)
     bar.close()
-    assert out.getvalue().splitlines() == ["simulating lathe: t = 3.2 / 10 s (32 %), 4.1 s elapsed, ETA 8.7 s",
-                                           "simulating lathe: done: t = 10 / 10 s in 5.0 s"]   # the last update
+    assert out.getvalue().splitlines() == [
+        "simulating lathe: t = 3.2 / 10 s (32 %), 4.1 s elapsed, ETA 8.7 s",
+        "simulating lathe: done: t = 10 / 10 s in 5.0 s",
+    ]  # the last update
 
 
 def test_work_ended_short_says_where_it_stopped():
@@ -74,37 +83,42 @@ def test_work_ended_short_says_where_it_stopped():
     with ProgressLines(10.0, "simulating lathe", "t", "s", 3.0, file=out, clock=clock) as bar:
         bar.update(0.0)
         bar.update(4.0)
-    assert out.getvalue().splitlines() == ["simulating lathe: t = 0 / 10 s (0 %), 0.0 s elapsed, ETA unknown",
-                                           "simulating lathe: t = 4 / 10 s (40 %), 5.0 s elapsed, ETA 7.5 s",
-                                           "simulating lathe: stopped at t = 4 / 10 s after 5.0 s; start-up 5.0 s"]
+    assert out.getvalue().splitlines() == [
+        "simulating lathe: t = 0 / 10 s (0 %), 0.0 s elapsed, ETA unknown",
+        "simulating lathe: t = 4 / 10 s (40 %), 5.0 s elapsed, ETA 7.5 s",
+        "simulating lathe: stopped at t = 4 / 10 s after 5.0 s; start-up 5.0 s",
+    ]
 
 
 def test_a_count_without_total_and_its_stage():
     clock = itertools.count(0.0, 130.0).__next__
     out = io.StringIO()
-    with ProgressLines(None, "flywheel for lathe", None, "dynamic periods simulated", 3.0, file=out,
-                       clock=clock) as bar:
+    with ProgressLines(
+        None, "flywheel for lathe", None, "dynamic periods simulated", 3.0, file=out, clock=clock
+    ) as bar:
         bar.set_description_str("J_fw = 18.9 kg m^2")
         bar.update(1)
     assert out.getvalue().splitlines() == [
         "flywheel for lathe (J_fw = 18.9 kg m^2): 1 dynamic periods simulated, 2 min 10 s elapsed",
-        "flywheel for lathe: done: 1 dynamic periods simulated in 2 min 10 s"]
+        "flywheel for lathe: done: 1 dynamic periods simulated in 2 min 10 s",
+    ]
 
 
 def test_a_start_up_is_neither_in_the_eta_nor_in_the_duration():
     """The nodes: 4 s from the command to the first diagnostics (t = 0), then 16 s simulated at an even 3 s of wall
     time per simulated second; after 10 % of the run the ETA is the time left, and the final line gives the run's
     wall time over the exchanges and the start-up from the command, as the summary does."""
-    wall = {"now": 1.0}   # the bar is made 1 s after the command
+    wall = {"now": 1.0}  # the bar is made 1 s after the command
     out = io.StringIO()
-    bar = ProgressLines(16.0, "engine_direct on the nodes", "t", "s", 0.0, file=out, clock=lambda: wall["now"],
-                        started=0.0)
+    bar = ProgressLines(
+        16.0, "engine_direct on the nodes", "t", "s", 0.0, file=out, clock=lambda: wall["now"], started=0.0
+    )
     wall["now"] = 4.0
-    bar.update(0.0)   # the machine's first diagnostics, as its exchanges start
+    bar.update(0.0)  # the machine's first diagnostics, as its exchanges start
     for step in range(1, 17):
         wall["now"] = 4.0 + 3.0 * step
         bar.update(1.0)
-    wall["now"] = 60.0   # the nodes' graph settling before the bar closes
+    wall["now"] = 60.0  # the nodes' graph settling before the bar closes
     bar.close()
     lines = out.getvalue().splitlines()
     assert lines[2] == "engine_direct on the nodes: t = 2 / 16 s (12 %), 6.0 s elapsed, ETA 42.0 s"
@@ -118,9 +132,17 @@ def test_silent_when_quiet():
     assert bar.n == 10.0 and out.getvalue() == ""
 
 
-@pytest.mark.parametrize("value, expected", [("0.5", 0.5), ("0", 0.0), ("", PROGRESS_INTERVAL),
-                                             ("soon", PROGRESS_INTERVAL), ("-1", PROGRESS_INTERVAL),
-                                             ("nan", PROGRESS_INTERVAL)])
+@pytest.mark.parametrize(
+    "value, expected",
+    [
+        ("0.5", 0.5),
+        ("0", 0.0),
+        ("", PROGRESS_INTERVAL),
+        ("soon", PROGRESS_INTERVAL),
+        ("-1", PROGRESS_INTERVAL),
+        ("nan", PROGRESS_INTERVAL),
+    ],
+)
 def test_interval_from_the_environment(monkeypatch, value, expected):
     monkeypatch.setenv("MECH_REGULATOR_PROGRESS_INTERVAL", value)
     assert progress_interval() == expected
@@ -145,8 +167,19 @@ def test_a_terminal_gets_tqdms_bar(monkeypatch):
 
 def test_sweep_and_flywheel_report_progress_in_a_log(capsys, monkeypatch, tmp_path):
     monkeypatch.setenv("MECH_REGULATOR_PROGRESS_INTERVAL", "0")
-    code, _out, err = run_cli(capsys, "sweep", "lathe", "--grid", "machine.flywheel.inertia=10,20", "--jobs", "1",
-                              "--set", "scenario.duration=2", "--out", str(tmp_path))
+    code, _out, err = run_cli(
+        capsys,
+        "sweep",
+        "lathe",
+        "--grid",
+        "machine.flywheel.inertia=10,20",
+        "--jobs",
+        "1",
+        "--set",
+        "scenario.duration=2",
+        "--out",
+        str(tmp_path),
+    )
     assert code == 0
     lines = err.splitlines()
     assert re.fullmatch(r"sweep of 2 points: 2 / 4 s simulated \(50 %\), [0-9.]+ s elapsed, ETA [0-9.]+ s", lines[0])

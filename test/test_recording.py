@@ -31,21 +31,28 @@ from mech_regulator.viz import recording
 from mech_regulator.viz.recording import LoadChanges, RunRecording, record_run
 
 RERUN = Path(sys.executable).with_name("rerun")
-SAMPLE_RATE = 1000.0        # [Hz] of the samples fed
-DURATION = 0.5              # [s] simulated
+SAMPLE_RATE = 1000.0  # [Hz] of the samples fed
+DURATION = 0.5  # [s] simulated
 NS = 1_000_000_000
 
 SHORT_ENGINE = ["scenario.duration=0.5", "scenario.load_events.0.time=0.2", "scenario.load_events.1.time=0.4"]
 # engine_indirect_isodromic in 0.6 s: 6 -> 8 N m at 0.1 s, then ramped down to 4 N m over 0.3-0.5 s
-SHORT_ISODROMIC = ["scenario.duration=0.6", "scenario.load_events.0.time=0.1", "scenario.load_events.1.time=0.3",
-                   "scenario.load_events.1.ramp=0.2"]
-SHORT_TWO_MASS = ["scenario.duration=0.3", "scenario.load_events.0.time=0.1"]   # 6 -> 8 N m at 0.1 s
+SHORT_ISODROMIC = [
+    "scenario.duration=0.6",
+    "scenario.load_events.0.time=0.1",
+    "scenario.load_events.1.time=0.3",
+    "scenario.load_events.1.ramp=0.2",
+]
+SHORT_TWO_MASS = ["scenario.duration=0.3", "scenario.load_events.0.time=0.1"]  # 6 -> 8 N m at 0.1 s
 
 
 def chunks(path: Path, entity: str, static: bool = False) -> list:
     """Record batches of one entity's static or temporal chunks."""
-    return [chunk.to_record_batch() for chunk in RrdReader(path).store().stream()
-            if chunk.entity_path == entity and chunk.is_static == static]
+    return [
+        chunk.to_record_batch()
+        for chunk in RrdReader(path).store().stream()
+        if chunk.entity_path == entity and chunk.is_static == static
+    ]
 
 
 def temporal(path: Path, entity: str, component: str) -> tuple[np.ndarray, list]:
@@ -90,8 +97,11 @@ def blueprint_views(path: Path) -> list[dict[str, dict]]:
                 continue
             batch = chunk.to_record_batch()
             view = views.setdefault(parts[1], {})
-            for column, key in (("ViewBlueprint:display_name", "name"), ("ScalarAxis:range", "range"),
-                                ("PlotLegend:visible", "legend_visible")):
+            for column, key in (
+                ("ViewBlueprint:display_name", "name"),
+                ("ScalarAxis:range", "range"),
+                ("PlotLegend:visible", "legend_visible"),
+            ):
                 if column in batch.schema.names:
                     view[key] = batch.column(column).to_pylist()[-1][0]
         blueprints.append(views)
@@ -113,8 +123,9 @@ def engine_run(tmp_path_factory):
     times = trajectory.samples(SAMPLE_RATE)
     states = trajectory(times)
     path = tmp_path_factory.mktemp("recording") / "engine_direct.rrd"
-    record_run(model, times, states, path, mode_changes=trajectory.events, status=trajectory.status,
-               message=trajectory.message)
+    record_run(
+        model, times, states, path, mode_changes=trajectory.events, status=trajectory.status, message=trajectory.message
+    )
     return model, times, states, path, trajectory.events
 
 
@@ -131,17 +142,36 @@ def test_recording_has_the_entities_one_time_line_and_a_blueprint(engine_run):
     # the blueprint of the start (a recording cut short keeps a layout) and the final one of close()
     assert len(reader.recordings()) == 1 and len(reader.blueprints()) == 2
     schema = reader.store().schema()
-    expected = {"/speed/omega", "/speed/set_point", "/speed/band_high", "/speed/band_low", "/throttle",
-                "/governor/sleeve", "/moments/drive", "/moments/resistance", "/moments/external", "/moments/net",
-                "/events", "/about", "/mechanism/crank", "/mechanism/rod", "/mechanism/slider", "/mechanism/guide",
-                "/mechanism/joints", "/governor/drawing/spindle", "/governor/drawing/upper_arms",
-                "/governor/drawing/lower_links", "/governor/drawing/balls", "/governor/drawing/sleeve",
-                "/governor/drawing/stops"}
+    expected = {
+        "/speed/omega",
+        "/speed/set_point",
+        "/speed/band_high",
+        "/speed/band_low",
+        "/throttle",
+        "/governor/sleeve",
+        "/moments/drive",
+        "/moments/resistance",
+        "/moments/external",
+        "/moments/net",
+        "/events",
+        "/about",
+        "/mechanism/crank",
+        "/mechanism/rod",
+        "/mechanism/slider",
+        "/mechanism/guide",
+        "/mechanism/joints",
+        "/governor/drawing/spindle",
+        "/governor/drawing/upper_arms",
+        "/governor/drawing/lower_links",
+        "/governor/drawing/balls",
+        "/governor/drawing/sleeve",
+        "/governor/drawing/stops",
+    }
     entities = set(schema.entity_paths())
     assert expected <= entities, expected - entities
-    assert "/governor/servo" not in entities          # a direct governor has no servo-motor
-    assert not any(entity.startswith(("/speed/driven", "/coupling")) for entity in entities)   # nor a driven part
-    assert [index.name for index in schema.index_columns()] == ["sim_time"]   # no wall-clock log_time
+    assert "/governor/servo" not in entities  # a direct governor has no servo-motor
+    assert not any(entity.startswith(("/speed/driven", "/coupling")) for entity in entities)  # nor a driven part
+    assert [index.name for index in schema.index_columns()] == ["sim_time"]  # no wall-clock log_time
 
 
 def test_every_sample_fed_is_recorded_at_its_time_with_its_value(engine_run):
@@ -154,21 +184,22 @@ def test_every_sample_fed_is_recorded_at_its_time_with_its_value(engine_run):
     columns = model.columns(times, states)
     sleeve_times, sleeve = scalars(path, "/governor/sleeve")
     assert np.array_equal(sleeve_times, stamps)
-    assert np.allclose(sleeve, 1000.0 * columns["sleeve"], rtol=1e-15, atol=0.0)   # plotted in mm
+    assert np.allclose(sleeve, 1000.0 * columns["sleeve"], rtol=1e-15, atol=0.0)  # plotted in mm
     assert "[mm]" in static_value(path, "/governor/sleeve", "SeriesLines:names")[0]
     assert np.array_equal(scalars(path, "/throttle")[1], columns["throttle"])
 
 
 def test_moments_add_up_to_the_net_moment(engine_run):
     model, times, states, path, _ = engine_run
-    drive, resistance, external, net = (scalars(path, f"/moments/{name}")[1]
-                                        for name in ("drive", "resistance", "external", "net"))
+    drive, resistance, external, net = (
+        scalars(path, f"/moments/{name}")[1] for name in ("drive", "resistance", "external", "net")
+    )
     assert drive.size == times.size
     scale = np.max(np.abs(drive))
     assert np.max(np.abs(drive + resistance + external - net)) <= 1e-12 * scale
     loads = np.array([model.external_load(t) for t in times])
     assert np.array_equal(external, -loads)
-    assert np.all(resistance < 0.0)                   # viscous and fan loads resist a turning crank
+    assert np.all(resistance < 0.0)  # viscous and fan loads resist a turning crank
 
 
 def test_set_point_follows_the_load_and_the_band_is_the_permitted_delta(engine_run):
@@ -188,7 +219,7 @@ def test_set_point_follows_the_load_and_the_band_is_the_permitted_delta(engine_r
 
 def test_animation_is_decimated_to_the_animation_rate_and_flipped(engine_run):
     model, times, states, path, _ = engine_run
-    rate = 200.0                                          # RunRecording's default [Hz]
+    rate = 200.0  # RunRecording's default [Hz]
     frame_times, strips = temporal(path, "/mechanism/crank", "LineStrips2D:strips")
     assert abs(len(frame_times) - DURATION * rate) <= 1
     assert np.allclose(np.diff(frame_times), NS / rate)
@@ -212,9 +243,12 @@ def test_animation_is_decimated_to_the_animation_rate_and_flipped(engine_run):
 
 def test_text_log_has_the_start_the_load_steps_the_mode_changes_and_the_end(engine_run):
     model, _, _, path, mode_changes = engine_run
-    expected = [(0, "INFO", "start: ω = 224.17 rad/s, load 6 N m; engine_direct, direct governor"),
-                (int(0.2 * NS), "INFO", "load step 6 -> 8 N m"), (int(0.4 * NS), "INFO", "load step 8 -> 0 N m"),
-                (int(DURATION * NS), "INFO", "end: complete at t = 0.500 s")]
+    expected = [
+        (0, "INFO", "start: ω = 224.17 rad/s, load 6 N m; engine_direct, direct governor"),
+        (int(0.2 * NS), "INFO", "load step 6 -> 8 N m"),
+        (int(0.4 * NS), "INFO", "load step 8 -> 0 N m"),
+        (int(DURATION * NS), "INFO", "end: complete at t = 0.500 s"),
+    ]
     expected += [(int(round(time * NS)), "INFO", what) for time, what in mode_changes]
     assert model.scene.scenario.initial.omega == 224.17
     assert sorted(events(path)) == sorted(expected)
@@ -226,10 +260,13 @@ def test_final_blueprint_hides_the_legends_and_spans_the_data(engine_run):
     model, _, _, path, _ = engine_run
     views = final_blueprint(path)
     plots = {name: view for name, view in views.items() if "range" in view}
-    assert set(plots) == {"speed [rad/s]: ω crank (blue) · ω_set (white) · band (orange) ±δ/2, permitted δ = 0.05",
-                          "throttle [-]", "sleeve z [mm]",
-                          f"moments [N m], last {recording.moments_window(model):.2g} s: drive (green) · "
-                          "resistance (red) · external (violet) · net (white)"}
+    assert set(plots) == {
+        "speed [rad/s]: ω crank (blue) · ω_set (white) · band (orange) ±δ/2, permitted δ = 0.05",
+        "throttle [-]",
+        "sleeve z [mm]",
+        f"moments [N m], last {recording.moments_window(model):.2g} s: drive (green) · "
+        "resistance (red) · external (violet) · net (white)",
+    }
     assert all(view["legend_visible"] is False for view in plots.values())
     omega = scalars(path, "/speed/omega")[1]
     band = scalars(path, "/speed/band_high")[1], scalars(path, "/speed/band_low")[1]
@@ -257,17 +294,33 @@ def test_rerun_verifies_the_file(engine_run):
 
 def governed_model(load_events: list[dict], indirect: bool = False):
     """The constant-J machine of docs' governor example (fast statics), direct or indirect."""
-    governor = {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
-                "ratio": 0.16, "stroke": [0.02, 0.08], "valve": {"open_at": 0.02, "closed_at": 0.08}}
+    governor = {
+        "type": "direct",
+        "ball_mass": 1.0,
+        "arm_length": 0.2,
+        "sleeve_mass": 5.0,
+        "damping": 200.0,
+        "ratio": 0.16,
+        "stroke": [0.02, 0.08],
+        "valve": {"open_at": 0.02, "closed_at": 0.08},
+    }
     if indirect:
-        governor = {**{k: v for k, v in governor.items() if k != "valve"}, "type": "indirect",
-                    "pilot_neutral": 0.05, "servo": {"gain": 20.0},
-                    "feedback": {"type": "isodromic", "gain": 0.3, "time_constant": 1.5}}
-    scene = {"machine": {"inertia": 0.5, "drive": {"type": "linear_motor", "stall_torque": 200.0,
-                                                     "no_load_speed": 150.0},
-                         "loads": [{"type": "viscous", "coefficient": 0.3}]},
-             "governor": governor,
-             "scenario": {"initial": {"omega": 112.86}, "duration": 2.0, "load_events": load_events}}
+        governor = {
+            **{k: v for k, v in governor.items() if k != "valve"},
+            "type": "indirect",
+            "pilot_neutral": 0.05,
+            "servo": {"gain": 20.0},
+            "feedback": {"type": "isodromic", "gain": 0.3, "time_constant": 1.5},
+        }
+    scene = {
+        "machine": {
+            "inertia": 0.5,
+            "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+            "loads": [{"type": "viscous", "coefficient": 0.3}],
+        },
+        "governor": governor,
+        "scenario": {"initial": {"omega": 112.86}, "duration": 2.0, "load_events": load_events},
+    }
     return build_model(validate_scene(scene))
 
 
@@ -278,10 +331,18 @@ def test_interleaved_streams_flushed_in_pieces_and_closed_twice(tmp_path):
     run = RunRecording(model, path=path, animation_rate=50.0)
     count = 400
     for i in range(count):
-        t_ns = i * 1_000_000                              # 1 kHz for 0.4 s
-        run.add_governor(t_ns, {"sleeve": 0.05, "sleeve_velocity": 0.0, "throttle": 0.5, "servo": 0.5,
-                                "arm_angle": model.governor.sensor.arm_angle(0.05),
-                                "feedback_shift": 0.001 * i / count})
+        t_ns = i * 1_000_000  # 1 kHz for 0.4 s
+        run.add_governor(
+            t_ns,
+            {
+                "sleeve": 0.05,
+                "sleeve_velocity": 0.0,
+                "throttle": 0.5,
+                "servo": 0.5,
+                "arm_angle": model.governor.sensor.arm_angle(0.05),
+                "feedback_shift": 0.001 * i / count,
+            },
+        )
         run.add_machine(t_ns, 0.1 * i, 110.0)
         run.add_moments(t_ns, 10.0, -9.0, 0.0, 1.0)
         if i % 97 == 0:
@@ -291,14 +352,14 @@ def test_interleaved_streams_flushed_in_pieces_and_closed_twice(tmp_path):
     run.add_machine(count * 1_000_000, 0.0, 1.0)
     assert scalars(path, "/speed/omega")[1].size == count
     assert scalars(path, "/throttle")[1].size == count
-    assert "/governor/servo" not in RrdReader(path).store().schema().entity_paths()   # the servo is the throttle
+    assert "/governor/servo" not in RrdReader(path).store().schema().entity_paths()  # the servo is the throttle
     # no status given: the end row says only where the recording ends (the latest machine sample)
     assert events(path)[-1] == ((count - 1) * 1_000_000, "INFO", "end of the recording at t = 0.399 s")
     shift = scalars(path, "/governor/feedback_shift")[1]
-    assert shift[-1] == pytest.approx(1000.0 * 0.001 * (count - 1) / count)    # in mm
+    assert shift[-1] == pytest.approx(1000.0 * 0.001 * (count - 1) / count)  # in mm
     set_point = scalars(path, "/speed/set_point")[1]
-    assert np.all(set_point == model.governor.set_speed())                      # indirect: constant
-    assert len(temporal(path, "/mechanism/spoke", "LineStrips2D:strips")[0]) == 20   # 0.4 s at 50 Hz
+    assert np.all(set_point == model.governor.set_speed())  # indirect: constant
+    assert len(temporal(path, "/mechanism/spoke", "LineStrips2D:strips")[0]) == 20  # 0.4 s at 50 Hz
     assert len(temporal(path, "/governor/drawing/upper_arms", "LineStrips2D:strips")[0]) == 20
     result = subprocess.run([str(RERUN), "rrd", "verify", str(path)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -320,7 +381,7 @@ def test_direct_set_point_follows_a_ramp_at_most_every_10_ms(tmp_path, monkeypat
     model = governed_model([{"time": 0.5, "torque": 10.0, "ramp": 1.0}])
     calls = counting_operating_point(monkeypatch)
     run = RunRecording(model, path=tmp_path / "ramp.rrd")
-    for i in range(2001):                                # 2 s at 1 kHz: 0.5 s still, 1 s ramp, 0.5 s still
+    for i in range(2001):  # 2 s at 1 kHz: 0.5 s still, 1 s ramp, 0.5 s still
         run.add_machine(i * 1_000_000, 0.0, 112.0)
         run.add_external_load(i * 1_000_000, model.external_load(i / 1000.0))
     run.close("complete")
@@ -332,7 +393,9 @@ def test_direct_set_point_follows_a_ramp_at_most_every_10_ms(tmp_path, monkeypat
     assert set_point[-1] == operating_point(model, 10.0).speed
     # the ramp over 1000 samples is one row, at its start, with its end
     assert [text for _, _, text in events(tmp_path / "ramp.rrd")][1:] == [
-        "load ramp 0 -> 10 N m over 0.500-1.500 s", "end: complete at t = 2.000 s"]
+        "load ramp 0 -> 10 N m over 0.500-1.500 s",
+        "end: complete at t = 2.000 s",
+    ]
     assert events(tmp_path / "ramp.rrd")[1][0] == int(0.5 * NS)
 
 
@@ -349,11 +412,13 @@ def test_direct_set_point_is_cached_by_load(tmp_path, monkeypatch):
     assert calls == [0.0, 10.0]
     set_point = scalars(tmp_path / "steps.rrd", "/speed/set_point")[1]
     speeds = {load: operating_point(model, load).speed for load in (0.0, 10.0)}
-    assert speeds[0.0] > speeds[10.0]                    # a direct governor droops under load
+    assert speeds[0.0] > speeds[10.0]  # a direct governor droops under load
     assert np.array_equal(set_point, [speeds[loads[i // 100]] for i in range(400)])
-    assert events(tmp_path / "steps.rrd")[1:4] == [(int(0.1 * NS), "INFO", "load step 0 -> 10 N m"),
-                                                   (int(0.2 * NS), "INFO", "load step 10 -> 0 N m"),
-                                                   (int(0.3 * NS), "INFO", "load step 0 -> 10 N m")]
+    assert events(tmp_path / "steps.rrd")[1:4] == [
+        (int(0.1 * NS), "INFO", "load step 0 -> 10 N m"),
+        (int(0.2 * NS), "INFO", "load step 10 -> 0 N m"),
+        (int(0.3 * NS), "INFO", "load step 0 -> 10 N m"),
+    ]
 
 
 def test_machine_without_governor_has_no_set_point_and_draws_its_four_bar(tmp_path):
@@ -365,14 +430,24 @@ def test_machine_without_governor_has_no_set_point_and_draws_its_four_bar(tmp_pa
     record_run(model, times, trajectory(times), path, progress=progress.append, status=trajectory.status)
     assert progress[-1] == times[-1]
     entities = set(RrdReader(path).store().schema().entity_paths())
-    assert {"/speed/omega", "/moments/net", "/mechanism/crank", "/mechanism/coupler", "/mechanism/rocker",
-            "/mechanism/frame", "/mechanism/joints"} <= entities
-    assert not any(entity.startswith(("/speed/set_point", "/speed/band", "/governor", "/throttle"))
-                   for entity in entities)
+    assert {
+        "/speed/omega",
+        "/moments/net",
+        "/mechanism/crank",
+        "/mechanism/coupler",
+        "/mechanism/rocker",
+        "/mechanism/frame",
+        "/mechanism/joints",
+    } <= entities
+    assert not any(
+        entity.startswith(("/speed/set_point", "/speed/band", "/governor", "/throttle")) for entity in entities
+    )
     assert scalars(path, "/speed/omega")[1].size == times.size
     # nothing happens but the start and the end
-    assert events(path) == [(0, "INFO", "start: ω = 0 rad/s; four_bar_rocker, no governor"),
-                            (int(0.2 * NS), "INFO", "end: complete at t = 0.200 s")]
+    assert events(path) == [
+        (0, "INFO", "start: ω = 0 rad/s; four_bar_rocker, no governor"),
+        (int(0.2 * NS), "INFO", "end: complete at t = 0.200 s"),
+    ]
     names = set(final_blueprint(path))
     assert "four-bar linkage" in names
     assert not any(word in name for name in names for word in ("throttle", "governor", "sleeve", "slider", "ω_set"))
@@ -387,31 +462,49 @@ def two_mass_recordings(tmp_path) -> tuple:
     trajectory = simulate(model)
     times = trajectory.samples(SAMPLE_RATE)
     monolithic = tmp_path / "two_mass.rrd"
-    record_run(model, times, trajectory(times), monolithic, mode_changes=trajectory.events,
-               status=trajectory.status, message=trajectory.message)
+    record_run(
+        model,
+        times,
+        trajectory(times),
+        monolithic,
+        mode_changes=trajectory.events,
+        status=trajectory.status,
+        message=trajectory.message,
+    )
     run = cosimulate(model, 1e-3)
     cosimulated = tmp_path / "two_mass_cosim.rrd"
-    record_run(model, run.times, run.states, cosimulated, mode_changes=[(t, what) for t, what, _ in run.events],
-               status=run.status, message=run.message)
+    record_run(
+        model,
+        run.times,
+        run.states,
+        cosimulated,
+        mode_changes=[(t, what) for t, what, _ in run.events],
+        status=run.status,
+        message=run.message,
+    )
     return model, monolithic, cosimulated, (times, trajectory(times))
 
 
 def test_ungoverned_two_mass_machine_logs_start_load_change_and_end_and_shows_its_driven_part(tmp_path):
     model, monolithic, cosimulated, (times, states) = two_mass_recordings(tmp_path)
-    expected = [(0, "INFO", "start: ω = 230 rad/s, load 6 N m on the driven part; two_mass, no governor"),
-                (int(0.1 * NS), "INFO", "load step 6 -> 8 N m"), (int(0.3 * NS), "INFO", "end: complete at t = 0.300 s")]
+    expected = [
+        (0, "INFO", "start: ω = 230 rad/s, load 6 N m on the driven part; two_mass, no governor"),
+        (int(0.1 * NS), "INFO", "load step 6 -> 8 N m"),
+        (int(0.3 * NS), "INFO", "end: complete at t = 0.300 s"),
+    ]
     assert events(monolithic) == expected
-    assert events(cosimulated) == expected                 # the co-simulation's recording says the same
+    assert events(cosimulated) == expected  # the co-simulation's recording says the same
     for path in (monolithic, cosimulated):
         entities = set(RrdReader(path).store().schema().entity_paths())
         assert {"/speed/omega", "/speed/driven", "/coupling/twist", "/moments/resistance"} <= entities
-        assert not any(entity.startswith(("/throttle", "/governor", "/speed/set_point", "/speed/band"))
-                       for entity in entities)
-        assert "/moments/external" not in entities         # the load acts on the driven part, not on the crank
+        assert not any(
+            entity.startswith(("/throttle", "/governor", "/speed/set_point", "/speed/band")) for entity in entities
+        )
+        assert "/moments/external" not in entities  # the load acts on the driven part, not on the crank
     names = model.state_names()
     assert names == ("phi", "omega", "twist", "omega_driven")
     assert np.array_equal(scalars(monolithic, "/speed/driven")[1], states[names.index("omega_driven")])
-    assert np.array_equal(scalars(monolithic, "/coupling/twist")[1], 1000.0 * states[names.index("twist")])   # mrad
+    assert np.array_equal(scalars(monolithic, "/coupling/twist")[1], 1000.0 * states[names.index("twist")])  # mrad
     views = set(final_blueprint(monolithic))
     assert "speed [rad/s]: ω crank (blue) · ω₂ driven part (pink)" in views
     assert "coupling twist φ − φ₂ [mrad]" in views
@@ -445,16 +538,26 @@ def test_a_ramp_is_one_event_from_a_monolithic_and_a_cosimulated_run(tmp_path):
     record_run(model, times, trajectory(times), monolithic, mode_changes=trajectory.events, status=trajectory.status)
     run = cosimulate(model, 1e-3)
     cosimulated = tmp_path / "isodromic_cosim.rrd"
-    record_run(model, run.times, run.states, cosimulated, mode_changes=[(t, what) for t, what, _ in run.events],
-               status=run.status)
+    record_run(
+        model,
+        run.times,
+        run.states,
+        cosimulated,
+        mode_changes=[(t, what) for t, what, _ in run.events],
+        status=run.status,
+    )
     for path, mode_changes in ((monolithic, trajectory.events), (cosimulated, [(t, w) for t, w, _ in run.events])):
         rows = events(path)
         assert [row for row in rows if not row[2].startswith("sleeve")] == [
-            (0, "INFO", "start: ω = 230.55 rad/s, load 6 N m; engine_indirect_isodromic, indirect governor, "
-                        "isodromic feedback"),
+            (
+                0,
+                "INFO",
+                "start: ω = 230.55 rad/s, load 6 N m; engine_indirect_isodromic, indirect governor, isodromic feedback",
+            ),
             (int(0.1 * NS), "INFO", "load step 6 -> 8 N m"),
             (int(0.3 * NS), "INFO", "load ramp 8 -> 4 N m over 0.300-0.500 s"),
-            (int(0.6 * NS), "INFO", "end: complete at t = 0.600 s")]
+            (int(0.6 * NS), "INFO", "end: complete at t = 0.600 s"),
+        ]
         assert sorted(text for _, _, text in rows if text.startswith("sleeve")) == sorted(w for _, w in mode_changes)
         entities = set(RrdReader(path).store().schema().entity_paths())
         assert {"/throttle", "/governor/sleeve", "/governor/feedback_shift"} <= entities
@@ -463,34 +566,42 @@ def test_a_ramp_is_one_event_from_a_monolithic_and_a_cosimulated_run(tmp_path):
 def test_mode_changes_are_in_the_text_log_from_a_monolithic_and_a_cosimulated_run(tmp_path):
     """engine_direct started at 300 rad/s (about 224 on its orbit): the sleeve flies to its high stop and leaves
     it; both runs' recordings log the two mode changes at their times, between the start and the end."""
-    model = build_model(load_scene("engine_direct", ["scenario.duration=0.5", "scenario.initial.omega=300",
-                                                     "scenario.load_events=[]"]))
+    model = build_model(
+        load_scene("engine_direct", ["scenario.duration=0.5", "scenario.initial.omega=300", "scenario.load_events=[]"])
+    )
     trajectory = simulate(model)
     times = trajectory.samples(SAMPLE_RATE)
     run = cosimulate(model, 1e-3)
-    runs = {"monolithic": (times, trajectory(times), trajectory.events),
-            "cosimulated": (run.times, run.states, [(t, what) for t, what, _ in run.events])}
+    runs = {
+        "monolithic": (times, trajectory(times), trajectory.events),
+        "cosimulated": (run.times, run.states, [(t, what) for t, what, _ in run.events]),
+    }
     for name, (times, states, mode_changes) in runs.items():
         path = tmp_path / f"{name}.rrd"
         record_run(model, times, states, path, mode_changes=mode_changes, status="complete")
         assert [what for _, what in mode_changes] == ["sleeve reaches the high stop", "sleeve leaves the high stop"]
         rows = events(path)
-        assert [text for _, _, text in rows] == ["start: ω = 300 rad/s, load 6 N m; engine_direct, direct governor",
-                                                 "sleeve reaches the high stop", "sleeve leaves the high stop",
-                                                 "end: complete at t = 0.500 s"], name
+        assert [text for _, _, text in rows] == [
+            "start: ω = 300 rad/s, load 6 N m; engine_direct, direct governor",
+            "sleeve reaches the high stop",
+            "sleeve leaves the high stop",
+            "end: complete at t = 0.500 s",
+        ], name
         assert [stamp for stamp, _, _ in rows[1:3]] == [int(round(t * NS)) for t, _ in mode_changes]
 
 
 def test_load_changes_merge_consecutive_samples_and_split_at_a_reversal():
     """Steps, a ramp, a ramp down then up at once (two ramps), a new trial (time goes back), a ramp going on."""
     changes = LoadChanges(8.0)
-    loads = [8.0, 8.0, 6.0, 6.0, 5.0, 4.0, 3.0, 3.0, 2.0, 1.0, 2.0, 3.0, 3.0]     # one every 0.1 s
+    loads = [8.0, 8.0, 6.0, 6.0, 5.0, 4.0, 3.0, 3.0, 2.0, 1.0, 2.0, 3.0, 3.0]  # one every 0.1 s
     logged = [event for i, load in enumerate(loads) for event in changes.sample(i * NS // 10, load)]
-    assert logged == [(int(0.2 * NS), "load step 8 -> 6 N m"),
-                      (int(0.3 * NS), "load ramp 6 -> 3 N m over 0.300-0.600 s"),
-                      (int(0.7 * NS), "load ramp 3 -> 1 N m over 0.700-0.900 s"),
-                      (int(0.9 * NS), "load ramp 1 -> 3 N m over 0.900-1.100 s")]
-    assert changes.sample(0, 3.0) == []                  # time goes back: a new trial from this sample on
+    assert logged == [
+        (int(0.2 * NS), "load step 8 -> 6 N m"),
+        (int(0.3 * NS), "load ramp 6 -> 3 N m over 0.300-0.600 s"),
+        (int(0.7 * NS), "load ramp 3 -> 1 N m over 0.700-0.900 s"),
+        (int(0.9 * NS), "load ramp 1 -> 3 N m over 0.900-1.100 s"),
+    ]
+    assert changes.sample(0, 3.0) == []  # time goes back: a new trial from this sample on
     assert changes.sample(NS // 10, 4.0) == [] and changes.sample(2 * NS // 10, 5.0) == []
     assert changes.finish() == [(0, "load ramp 3 -> 5 N m over 0.000-0.200 s")]
     assert changes.finish() == []
@@ -504,7 +615,8 @@ def test_close_logs_a_ramp_still_going_and_how_the_run_failed(tmp_path):
         run.add_machine(i * NS // 10, 0.0, 112.0)
         run.add_external_load(i * NS // 10, float(i))
     run.close("failed", "the governor changed mode 100 times")
-    assert sorted(events(path)) == [(0, "INFO", "load ramp 0 -> 4 N m over 0.000-0.400 s"),
-                                    (0, "INFO", "start: ω = 112.86 rad/s; run, direct governor"),
-                                    (int(0.4 * NS), "ERROR",
-                                     "end: failed at t = 0.400 s: the governor changed mode 100 times")]
+    assert sorted(events(path)) == [
+        (0, "INFO", "load ramp 0 -> 4 N m over 0.000-0.400 s"),
+        (0, "INFO", "start: ω = 112.86 rad/s; run, direct governor"),
+        (int(0.4 * NS), "ERROR", "end: failed at t = 0.400 s: the governor changed mode 100 times"),
+    ]

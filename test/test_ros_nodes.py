@@ -79,14 +79,29 @@ def _constant_inertia_data(omega: float, **scenario) -> dict:
     """A governed machine of constant inertia (cheap per step) with a direct-action Porter governor."""
     return {
         "name": "constant_inertia",
-        "machine": {"inertia": 0.5,
-                    "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-                    "loads": [{"type": "viscous", "coefficient": 0.3}]},
-        "governor": {"type": "direct", "ball_mass": 1.0, "arm_length": 0.2, "sleeve_mass": 5.0, "damping": 200.0,
-                     "friction": 0.0, "ratio": 0.16, "stroke": [0.02, 0.08],
-                     "valve": {"open_at": 0.02, "closed_at": 0.08}},
-        "scenario": {"initial": {"omega": omega}, "duration": 0.4, "external_load": BASE_LOAD,
-                     "load_events": [], **scenario},
+        "machine": {
+            "inertia": 0.5,
+            "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+            "loads": [{"type": "viscous", "coefficient": 0.3}],
+        },
+        "governor": {
+            "type": "direct",
+            "ball_mass": 1.0,
+            "arm_length": 0.2,
+            "sleeve_mass": 5.0,
+            "damping": 200.0,
+            "friction": 0.0,
+            "ratio": 0.16,
+            "stroke": [0.02, 0.08],
+            "valve": {"open_at": 0.02, "closed_at": 0.08},
+        },
+        "scenario": {
+            "initial": {"omega": omega},
+            "duration": 0.4,
+            "external_load": BASE_LOAD,
+            "load_events": [],
+            **scenario,
+        },
         "solver": {"method": "DOP853", "rtol": 1e-9, "atol": 1e-11},
     }
 
@@ -101,8 +116,15 @@ def constant_inertia_scene(folder: Path, name: str = "scene.yaml", **scenario):
 
 def machine_parameters(scene: Path, **changes) -> dict:
     """machine_node's parameters for a lockstep run of scene with the test node as one subscriber."""
-    return {"scene_file": str(scene), "time_mode": "lockstep", "exchange_step": 0.002, "coupling": "hold",
-            "lockstep_inputs": ["throttle", "load"], "peer_timeout": 60.0, **changes}
+    return {
+        "scene_file": str(scene),
+        "time_mode": "lockstep",
+        "exchange_step": 0.002,
+        "coupling": "hold",
+        "lockstep_inputs": ["throttle", "load"],
+        "peer_timeout": 60.0,
+        **changes,
+    }
 
 
 # -------------------------------------------------------------------------------------------------
@@ -137,8 +159,9 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
     for when in range(BATCH_SIZE):  # a full batch goes out when due, however little wall time has passed (and an
         batch.add(when, ["drive"], [], [], [float(when)])  # older group waiting 0.1 s sends it earlier)
         batch.send_when_due()
-    assert batch.groups == 0 and [when for message in published[1:] for when, _ in batch_groups(message)] == \
-        list(range(BATCH_SIZE))
+    assert batch.groups == 0 and [when for message in published[1:] for when, _ in batch_groups(message)] == list(
+        range(BATCH_SIZE)
+    )
 
 
 def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
@@ -175,12 +198,17 @@ def received_run(listener: RunListener, end: int):
     arm rate), governor throttle, moments by name."""
     joints, moments, governor = listener.joints, listener.moments, listener.governor
     times = sorted(joints)
-    assert times[-1] == end and sorted(moments) == times and sorted(governor) == times, \
+    assert times[-1] == end and sorted(moments) == times and sorted(governor) == times, (
         "joint_states, machine/moments and governor/state have different exchange times"
+    )
     rows = np.array([[joints[t].position[0], joints[t].velocity[0], *governor[t]["arm"][:2]] for t in times]).T
     throttle = np.array([governor[t]["throttle"][0] for t in times])
-    return times, rows, throttle, {name: np.array([moments[t][name] for t in times])
-                                   for name in ("drive", "resistance", "external", "net")}
+    return (
+        times,
+        rows,
+        throttle,
+        {name: np.array([moments[t][name] for t in times]) for name in ("drive", "resistance", "external", "net")},
+    )
 
 
 def assert_equals_cosimulation(listener: RunListener, end: int, model, run) -> None:
@@ -193,12 +221,16 @@ def assert_equals_cosimulation(listener: RunListener, end: int, model, run) -> N
     if run.tripped_at is not None:
         throttle[run.times >= run.tripped_at] = 0.0
     np.testing.assert_array_equal(throttle, run.throttle, err_msg="the throttle differs from cosimulate")
-    np.testing.assert_array_equal(-moments["external"], run.external_load,
-                                  err_msg="the external load differs from cosimulate")
+    np.testing.assert_array_equal(
+        -moments["external"], run.external_load, err_msg="the external load differs from cosimulate"
+    )
     columns = model.columns(run.times, run.states, run.throttle, run.external_load)
-    expected = {"drive": columns["M_drive"], "resistance": columns["M_load"] - columns["M_external"],
-                "external": columns["M_external"],
-                "net": columns["J"] * columns["epsilon"] + 0.5 * columns["dJ_dphi"] * columns["omega"] ** 2}
+    expected = {
+        "drive": columns["M_drive"],
+        "resistance": columns["M_load"] - columns["M_external"],
+        "external": columns["M_external"],
+        "net": columns["J"] * columns["epsilon"] + 0.5 * columns["dJ_dphi"] * columns["omega"] ** 2,
+    }
     for name, values in expected.items():  # at t_k: with the inputs held from t_k on
         np.testing.assert_array_equal(moments[name], values, err_msg=f"machine/moments {name} differs from cosimulate")
 
@@ -227,8 +259,9 @@ def test_lockstep_error_is_first_order_in_the_exchange_step():
         mean_error[step] = np.nanmax(np.abs(cosimulated_mean - cycle_mean_speed(model, monolithic, run.times)))
         # ... and against the monolithic run sampled at the same times (the interpolation, second order
         # in h, is then the same on both sides: what is left is the exchange's error)
-        sampled = SampledTrajectory(method="monolithic sampled", t_start=0.0, times=run.times, states=reference,
-                                    status="complete", message="")
+        sampled = SampledTrajectory(
+            method="monolithic sampled", t_start=0.0, times=run.times, states=reference, status="complete", message=""
+        )
         fair_mean_error[step] = np.nanmax(np.abs(cosimulated_mean - cycle_mean_speed(model, sampled, run.times)))
         assert omega_error[step] <= 120.0 * step, f"h = {step}: omega error {omega_error[step]} > 120 h"
         assert mean_error[step] <= 45.0 * step, f"h = {step}: cycle-mean speed error {mean_error[step]} > 45 h"
@@ -277,8 +310,10 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
     # the test node is the machine's `load` input (the scenario's constant BASE_LOAD, stamped: the machine takes it
     # as its scenario's), so the machine waits for it at every exchange time; the step itself goes on load_torque
     # (Float64, from anyone)
-    processes.node("machine", machine_parameters(scene, peers=["governor", probe.node.get_name()],
-                                                 scenario_node=probe.node.get_name()))
+    processes.node(
+        "machine",
+        machine_parameters(scene, peers=["governor", probe.node.get_name()], scenario_node=probe.node.get_name()),
+    )
     processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
     stamped = probe.publisher(WrenchStamped, "load_torque_stamped", describe=processes.logs)
     load = probe.publisher(Float64, "load_torque", describe=processes.logs)
@@ -306,8 +341,9 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
     assert step >= sent[0], "the load applied before it was sent"
     assert all((external[when]["external"] == -8.0) == (when >= step) for when in external)
     # the same run in process, with the load event at that exchange time exactly
-    _, stepped_model = constant_inertia_scene(tmp_path, "stepped.yaml", duration=0.6,
-                                              load_events=[{"time": seconds(step), "torque": 8.0}])
+    _, stepped_model = constant_inertia_scene(
+        tmp_path, "stepped.yaml", duration=0.6, load_events=[{"time": seconds(step), "torque": 8.0}]
+    )
     run = cosimulate(stepped_model, 0.002)
     assert_equals_cosimulation(listener, end, stepped_model, run)
     # the governor lets the speed sag after the step (a direct governor's static error)
@@ -330,14 +366,18 @@ def bad_messages_run(tmp_path_factory):
     domain = next_domain_id()
     with processes_on(folder, domain) as processes, probe_on(domain) as probe:
         scene, model = constant_inertia_scene(folder, duration=0.3, load_events=[{"time": 0.1, "torque": 8.0}])
-        processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", probe.node.get_name()],
-                                                     max_load_torque=1e3))
+        processes.node(
+            "machine",
+            machine_parameters(scene, peers=["governor", "scenario", probe.node.get_name()], max_load_torque=1e3),
+        )
         processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
         processes.node("scenario", {"scene_file": str(scene)})
         listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
         load = probe.publisher(Float64, "load_torque", describe=processes.logs)
         throttle = probe.publisher(JointState, "throttle", describe=processes.logs)
-        speed = probe.publisher(JointState, "joint_states", subscribers=2, describe=processes.logs)  # governor, scenario
+        speed = probe.publisher(
+            JointState, "joint_states", subscribers=2, describe=processes.logs
+        )  # governor, scenario
         for value in (math.nan, math.inf, 1e9):
             load.publish(Float64(data=value))
         throttle.publish(JointState(name=["valve"], position=[0.5]))
@@ -348,9 +388,13 @@ def bad_messages_run(tmp_path_factory):
         probe.node.destroy_publisher(speed)  # (volatile: it would only warn of the test node's own listener)
         listener.open_gate()  # the machine's third subscriber: the run starts
         end = listener.wait_finished()
-        governor = probe.spin_until(lambda: [values for _, _, values in listener.statuses("/governor")
-                                             if values.get("refused_messages", "0") != "0"],
-                                    "the governor's diagnostics counting the bad message", describe=processes.logs)
+        governor = probe.spin_until(
+            lambda: [
+                values for _, _, values in listener.statuses("/governor") if values.get("refused_messages", "0") != "0"
+            ],
+            "the governor's diagnostics counting the bad message",
+            describe=processes.logs,
+        )
     yield listener, end, model, governor[-1]  # (the nodes are stopped: the listener keeps what it received)
 
 
@@ -359,10 +403,12 @@ def test_bad_messages_are_rejected_and_counted(bad_messages_run):
     level, message, values = listener.final_status()
     assert level == DiagnosticStatus.WARN and message == "5 messages refused", (level, message)
     assert {key: value for key, value in values.items() if key.startswith("refused")} == {
-        "refused_messages": "5", "refused: load_torque: not finite": "2", "refused: load_torque: out of range": "1",
-        "refused: throttle: not from governor": "2"}
-    assert governor["refused_messages"] == "1" and governor["refused: joint_states: not from machine"] == "1", \
-        governor
+        "refused_messages": "5",
+        "refused: load_torque: not finite": "2",
+        "refused: load_torque: out of range": "1",
+        "refused: throttle: not from governor": "2",
+    }
+    assert governor["refused_messages"] == "1" and governor["refused: joint_states: not from machine"] == "1", governor
     # the state never saw them: the run is the in-process co-simulation to the last bit
     assert_equals_cosimulation(listener, end, model, cosimulate(model, 0.002))
 
@@ -375,8 +421,11 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
     scene, _ = constant_inertia_scene(tmp_path, duration=120.0)  # ended by the test, long before that
     governor = processes.node("governor", {"scene_file": str(scene)})
     # the governor first (a realtime machine does not wait for anyone): it listens and can answer
-    probe.spin_until(lambda: probe.node.count_subscribers("joint_states") >= 1
-                     and probe.node.count_publishers("throttle") >= 1, "the governor node", describe=processes.logs)
+    probe.spin_until(
+        lambda: probe.node.count_subscribers("joint_states") >= 1 and probe.node.count_publishers("throttle") >= 1,
+        "the governor node",
+        describe=processes.logs,
+    )
     listener = RunListener(probe, governed=False, diagnostics_publishers=1, describe=processes.logs)
     listener.open_gate()  # (a realtime machine waits for no one)
     # made for a loaded machine (two cores, a tenth of one per process; once failed at 1 x real time and a 0.05 s
@@ -384,13 +433,24 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
     # a late answer does not keep the machine on its fail-safe, nor does a throttle still on its way when the governor
     # dies end it; the machine waits up to its peer timeout (60 s) for the governor's throttle publisher (not for a
     # load's: no scenario node here)
-    processes.node("machine", {"scene_file": str(scene), "time_mode": "realtime", "real_time_factor": 0.25,
-                               "exchange_step": 0.005, "throttle_timeout": 0.5, "fail_safe": "close",
-                               "peer_timeout": 60.0, "lockstep_inputs": ["throttle"]})
+    processes.node(
+        "machine",
+        {
+            "scene_file": str(scene),
+            "time_mode": "realtime",
+            "real_time_factor": 0.25,
+            "exchange_step": 0.005,
+            "throttle_timeout": 0.5,
+            "fail_safe": "close",
+            "peer_timeout": 60.0,
+            "lockstep_inputs": ["throttle"],
+        },
+    )
 
     def governed_after(time_ns: int) -> bool:  # the governor's throttle drives the machine at time_ns
-        return bool(listener.statuses()) and any(when >= time_ns and values["drive"] > 0.0
-                                                 for when, values in listener.moments.items())
+        return bool(listener.statuses()) and any(
+            when >= time_ns and values["drive"] > 0.0 for when, values in listener.moments.items()
+        )
 
     probe.spin_until(lambda: governed_after(500_000_000), "the governed machine at 0.5 s", describe=processes.logs)
     governor.kill()
@@ -408,16 +468,21 @@ def test_realtime_machine_closes_the_throttle_when_the_governor_dies(tmp_path, p
             since -= 1
         return to_nanoseconds(float(statuses[since][2]["sim_time"]))
 
-    probe.spin_until(lambda: closed_since() is not None and max(listener.moments) >= closed_since() + 300_000_000,
-                     "the machine on its fail-safe for 0.3 s", describe=processes.logs)
+    probe.spin_until(
+        lambda: closed_since() is not None and max(listener.moments) >= closed_since() + 300_000_000,
+        "the machine on its fail-safe for 0.3 s",
+        describe=processes.logs,
+    )
     since = closed_since()
-    level, message, values = [status for status in listener.statuses()
-                              if to_nanoseconds(float(status[2]["sim_time"])) >= since][0]
+    level, message, values = [
+        status for status in listener.statuses() if to_nanoseconds(float(status[2]["sim_time"])) >= since
+    ][0]
     assert level == DiagnosticStatus.WARN and message.startswith("fail-safe (close)"), (level, message)
     assert values["throttle"] == "0.0", values
     late = {when: values["drive"] for when, values in listener.moments.items() if when > since}
-    assert len(late) >= 50 and all(drive == 0.0 for drive in late.values()), \
+    assert len(late) >= 50 and all(drive == 0.0 for drive in late.values()), (
         f"the throttle did not stay closed after {since} ns: {late}"
+    )
 
 
 TRIP_STEP = 0.002
@@ -434,14 +499,22 @@ def overspeed_run(tmp_path_factory):
         trip = _steady_speed() + 0.3  # the full load rejection reaches it
         run = cosimulate(model, TRIP_STEP, overspeed_trip=trip)
         assert run.tripped_at is not None and 0.1 < run.tripped_at < 0.4
-        processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", "recorder",
-                                                            probe.node.get_name()], overspeed_trip=trip,
-                                                     exchange_step=TRIP_STEP))
+        processes.node(
+            "machine",
+            machine_parameters(
+                scene,
+                peers=["governor", "scenario", "recorder", probe.node.get_name()],
+                overspeed_trip=trip,
+                exchange_step=TRIP_STEP,
+            ),
+        )
         processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
         processes.node("scenario", {"scene_file": str(scene)})
         output = folder / "trip.rrd"
-        recorder = processes.node("recorder", {"scene_file": str(scene), "output": str(output),
-                                               "exchange_step": TRIP_STEP, "coupling": "hold"})
+        recorder = processes.node(
+            "recorder",
+            {"scene_file": str(scene), "output": str(output), "exchange_step": TRIP_STEP, "coupling": "hold"},
+        )
         listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
         listener.open_gate()
         end = listener.wait_finished()
@@ -490,8 +563,10 @@ def test_recorder_summary_of_a_tripped_run(overspeed_run):
     assert summary.pop("recording") == str(output) and summary.pop("csv") == str(output.with_suffix(".csv"))
     assert _without_pace(summary) == _in_process_summary(model, run)
     assert summary["tripped_at"] == run.tripped_at
-    assert summary["status"] == "tripped" and summary["message"] == \
-        f"overspeed trip at t = {run.tripped_at:.6g} s: throttle closed from then on"
+    assert (
+        summary["status"] == "tripped"
+        and summary["message"] == f"overspeed trip at t = {run.tripped_at:.6g} s: throttle closed from then on"
+    )
     last_event = events(output)[-1]
     assert last_event[:2] == (to_nanoseconds(0.4), "WARN") and last_event[2].startswith("end: tripped at t = 0.400 s")
 
@@ -500,8 +575,12 @@ def _governor_batch(times_ns: list[int], throttle: float) -> JointState:
     """A governor/state batch (common.Batch) of the constant-inertia scene's governor at times_ns, one group each."""
     message = JointState()
     for when in times_ns:
-        for name, position, velocity in (("stamp", float(when), math.nan), ("sleeve", 0.01, 0.0), ("arm", 0.3, 0.0),
-                                         ("throttle", throttle, 0.0)):
+        for name, position, velocity in (
+            ("stamp", float(when), math.nan),
+            ("sleeve", 0.01, 0.0),
+            ("arm", 0.3, 0.0),
+            ("throttle", throttle, 0.0),
+        ):
             message.name.append(name)
             message.position.append(position)
             message.velocity.append(velocity)
@@ -537,9 +616,19 @@ def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
 def _assert_bad_input(processes, cases: dict[str, tuple[str, list[str], list[str]]]) -> None:
     """Start each node with its bad `-p` arguments (side by side): each must end with exit code 2 and a
     message saying what is wrong, without a traceback."""
-    started = {name: processes.start([sys.executable, "-m", f"mech_regulator.nodes.{node}", "--ros-args",
-                                      *[part for argument in arguments for part in ("-p", argument)]], name)
-               for name, (node, arguments, _) in cases.items()}
+    started = {
+        name: processes.start(
+            [
+                sys.executable,
+                "-m",
+                f"mech_regulator.nodes.{node}",
+                "--ros-args",
+                *[part for argument in arguments for part in ("-p", argument)],
+            ],
+            name,
+        )
+        for name, (node, arguments, _) in cases.items()
+    }
     for name, process in started.items():
         code = processes.wait(process)
         output = processes.log(process)
@@ -550,25 +639,32 @@ def _assert_bad_input(processes, cases: dict[str, tuple[str, list[str], list[str
 
 def test_bad_scene_settings_end_the_node_with_a_message(tmp_path, processes):
     missing = tmp_path / "missing.yaml"
-    _assert_bad_input(processes, {  # name: (node, arguments, what the message must say)
-        "scene": ("machine", [f"scene_file:={missing}"], [str(missing), "no such file"]),
-        "inputs": ("machine", ["lockstep_inputs:=[throttle,speed]"], ["lockstep_inputs", "speed"]),
-        "ungoverned": ("governor", ["scene_file:=lathe"], ["lathe", "no governor"]),
-    })
+    _assert_bad_input(
+        processes,
+        {  # name: (node, arguments, what the message must say)
+            "scene": ("machine", [f"scene_file:={missing}"], [str(missing), "no such file"]),
+            "inputs": ("machine", ["lockstep_inputs:=[throttle,speed]"], ["lockstep_inputs", "speed"]),
+            "ungoverned": ("governor", ["scene_file:=lathe"], ["lathe", "no governor"]),
+        },
+    )
 
 
 def test_bad_parameters_end_the_node_with_a_message(processes):
-    _assert_bad_input(processes, {
-        "step": ("machine", ["exchange_step:=-1.0"], ["exchange_step", "out of range"]),
-        "mode": ("machine", ["time_mode:=fast"], ["time_mode", "'fast'", "lockstep, realtime"]),
-        "type": ("machine", ["duration:=abc"], ["duration", "DOUBLE"]),
-    })
+    _assert_bad_input(
+        processes,
+        {
+            "step": ("machine", ["exchange_step:=-1.0"], ["exchange_step", "out of range"]),
+            "mode": ("machine", ["time_mode:=fast"], ["time_mode", "'fast'", "lockstep, realtime"]),
+            "type": ("machine", ["duration:=abc"], ["duration", "DOUBLE"]),
+        },
+    )
 
 
 def _parameter(name: str, value) -> ParameterMessage:
     if isinstance(value, float):
-        return ParameterMessage(name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE,
-                                                                double_value=value))
+        return ParameterMessage(
+            name=name, value=ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+        )
     return ParameterMessage(name=name, value=ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value))
 
 
@@ -578,10 +674,13 @@ def _set_parameter(probe, name: str, value, describe):
 
 
 def _get_parameters(probe, names: list[str], describe) -> list:
-    response = probe.call(GetParameters, "/machine/get_parameters", GetParameters.Request(names=names),
-                          describe=describe)
-    return [value.double_value if value.type == ParameterType.PARAMETER_DOUBLE else value.string_value
-            for value in response.values]
+    response = probe.call(
+        GetParameters, "/machine/get_parameters", GetParameters.Request(names=names), describe=describe
+    )
+    return [
+        value.double_value if value.type == ParameterType.PARAMETER_DOUBLE else value.string_value
+        for value in response.values
+    ]
 
 
 def test_parameters_set_at_run_time_are_checked(tmp_path, processes, probe):
@@ -592,15 +691,12 @@ def test_parameters_set_at_run_time_are_checked(tmp_path, processes, probe):
     accepted = _set_parameter(probe, "real_time_factor", 2.0, describe)
     assert accepted.successful, accepted.reason
     refused = _set_parameter(probe, "real_time_factor", 1e6, describe)
-    assert not refused.successful and "real_time_factor" in refused.reason and "range" in refused.reason, \
-        refused.reason
+    assert not refused.successful and "real_time_factor" in refused.reason and "range" in refused.reason, refused.reason
     refused = _set_parameter(probe, "exchange_step", 0.01, describe)
     assert not refused.successful and "read-only" in refused.reason, refused.reason
     refused = _set_parameter(probe, "fail_safe", "open", describe)
-    assert not refused.successful and "fail_safe" in refused.reason and "hold, close" in refused.reason, \
-        refused.reason
-    assert _get_parameters(probe, ["real_time_factor", "exchange_step", "fail_safe"], describe) == [2.0, 0.002,
-                                                                                                  "close"]
+    assert not refused.successful and "fail_safe" in refused.reason and "hold, close" in refused.reason, refused.reason
+    assert _get_parameters(probe, ["real_time_factor", "exchange_step", "fail_safe"], describe) == [2.0, 0.002, "close"]
 
 
 def test_a_refused_fail_safe_is_not_applied(tmp_path, processes, probe):
@@ -610,8 +706,17 @@ def test_a_refused_fail_safe_is_not_applied(tmp_path, processes, probe):
     # that the parameter is refused before the first step
     listener = RunListener(probe, governed=False, diagnostics_publishers=0, describe=processes.logs)
     listener.open_gate()
-    processes.node("machine", machine_parameters(scene, lockstep_inputs=["throttle"], peers=[probe.node.get_name()],
-                                                 peer_timeout=5.0, exchange_step=0.01, start_paused=True))
+    processes.node(
+        "machine",
+        machine_parameters(
+            scene,
+            lockstep_inputs=["throttle"],
+            peers=[probe.node.get_name()],
+            peer_timeout=5.0,
+            exchange_step=0.01,
+            start_paused=True,
+        ),
+    )
     refused = _set_parameter(probe, "fail_safe", "open", processes.logs)
     assert not refused.successful, "ROS accepted fail_safe = 'open'"
     resumed = probe.call(Trigger, "/machine/resume", Trigger.Request(), describe=processes.logs)
@@ -629,15 +734,29 @@ def test_a_refused_fail_safe_is_not_applied(tmp_path, processes, probe):
 class MainJob:
     """A `mech-regulator run` (its process, log and output paths)."""
 
-    def __init__(self, processes: Processes, folder: Path, scene_arguments: list[str], name: str,
-                 domain: int | None = None):
+    def __init__(
+        self, processes: Processes, folder: Path, scene_arguments: list[str], name: str, domain: int | None = None
+    ):
         self.rrd = folder / name / "run.rrd"
         self.rrd.parent.mkdir()
         self.csv, self.json = self.rrd.with_suffix(".csv"), self.rrd.with_suffix(".json")
         self.domain_id = domain if domain is not None else next_domain_id()
         self.processes = processes
-        self.process = processes.start([sys.executable, "-m", "mech_regulator", "run", *scene_arguments,
-                                        "--out", self.rrd, "--domain-id", self.domain_id, "--quiet"], name)
+        self.process = processes.start(
+            [
+                sys.executable,
+                "-m",
+                "mech_regulator",
+                "run",
+                *scene_arguments,
+                "--out",
+                self.rrd,
+                "--domain-id",
+                self.domain_id,
+                "--quiet",
+            ],
+            name,
+        )
 
     @property
     def log(self) -> str:
@@ -657,9 +776,18 @@ class MainJob:
 def test_run_takes_a_domain_no_other_process_holds():
     # (once a cause of a failure: `run` without --domain-id took a random domain, one a test held at times)
     held = next_domain_id()  # held by this process until it ends, as a test's or another run's
-    chosen = subprocess.run([sys.executable, "-c", "import sys; from mech_regulator.nodes.launch import claim_domain; "
-                             "print(claim_domain(int(sys.argv[1])))", str(DOMAIN_IDS.index(held))],
-                            capture_output=True, text=True, timeout=WAIT, check=True)
+    chosen = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import sys; from mech_regulator.nodes.launch import claim_domain; print(claim_domain(int(sys.argv[1])))",
+            str(DOMAIN_IDS.index(held)),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=WAIT,
+        check=True,
+    )
     assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
 
 
@@ -674,9 +802,20 @@ def main_jobs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("main_job")
     started = Processes(folder, dict(os.environ, PYTHONUNBUFFERED="1"))  # each run sets its domain
     try:
-        jobs = [MainJob(started, folder, [*_short_engine_arguments(), "--exchange-step", "1e-3",
-                                          *(["--bag", folder / "first_bag"] if name == "first" else [])], name)
-                for name in ("first", "second")]
+        jobs = [
+            MainJob(
+                started,
+                folder,
+                [
+                    *_short_engine_arguments(),
+                    "--exchange-step",
+                    "1e-3",
+                    *(["--bag", folder / "first_bag"] if name == "first" else []),
+                ],
+                name,
+            )
+            for name in ("first", "second")
+        ]
         for job in jobs:
             started.wait(job.process, 4 * WAIT)
     finally:
@@ -690,8 +829,17 @@ def test_main_job_reproduces_the_in_process_cosimulation(main_jobs, tmp_path, ca
         assert "Traceback" not in job.log + job.node_log, job.describe()
     first, second = main_jobs
     csv = tmp_path / "in_process.csv"
-    code, out, _ = run_cli(capsys, "simulate", *_short_engine_arguments(), "--exchange-step", "1e-3", "--out",
-                           str(csv), "--json", "--quiet")
+    code, out, _ = run_cli(
+        capsys,
+        "simulate",
+        *_short_engine_arguments(),
+        "--exchange-step",
+        "1e-3",
+        "--out",
+        str(csv),
+        "--json",
+        "--quiet",
+    )
     assert code == 0
     expected = csv.read_bytes()
     assert expected.count(b"\n") == 1002  # the header and every exchange time
@@ -704,8 +852,10 @@ def test_main_job_reproduces_the_in_process_cosimulation(main_jobs, tmp_path, ca
     assert "x real time over the exchanges" in first.log
     assert _without_pace(summary) == in_process
     responses = summary["governor"]["load_responses"]
-    assert [(item["time"], item["load_before"], item["load_after"]) for item in responses] == [(0.4, 6.0, 8.0),
-                                                                                               (0.7, 8.0, 0.0)]
+    assert [(item["time"], item["load_before"], item["load_after"]) for item in responses] == [
+        (0.4, 6.0, 8.0),
+        (0.7, 8.0, 0.0),
+    ]
     assert responses[0]["static_error"] < 0.0 < responses[1]["static_error"]
     assert summary["status"] == "complete" and summary["samples"] == 1001 and summary["tripped_at"] is None
     assert f"open the recording with: {viewer_command(first.rrd)}" in first.log
@@ -719,8 +869,9 @@ def _rerun() -> str:
 
 def _verify(rrd: Path) -> None:
     result = subprocess.run([_rerun(), "rrd", "verify", str(rrd)], capture_output=True, text=True, timeout=WAIT)
-    assert result.returncode == 0 and "1 file verified" in result.stdout + result.stderr, \
+    assert result.returncode == 0 and "1 file verified" in result.stdout + result.stderr, (
         f"rerun rrd verify {rrd}: exit {result.returncode}\n{result.stdout}\n{result.stderr}"
+    )
 
 
 def _recorded_scalars(rrd: Path) -> tuple[dict[str, tuple[np.ndarray, np.ndarray]], set[str], set[str]]:
@@ -740,9 +891,13 @@ def _recorded_scalars(rrd: Path) -> tuple[dict[str, tuple[np.ndarray, np.ndarray
         times = batch.column("sim_time").cast("int64").to_pylist()
         values = batch.column("Scalars:scalars").to_pylist()
         series.setdefault(chunk.entity_path, []).extend(
-            (when, value[0]) for when, value in zip(times, values) if value is not None)
-    return ({entity: tuple(np.array(column) for column in zip(*sorted(samples)))
-             for entity, samples in series.items()}, entities, timelines)
+            (when, value[0]) for when, value in zip(times, values) if value is not None
+        )
+    return (
+        {entity: tuple(np.array(column) for column in zip(*sorted(samples))) for entity, samples in series.items()},
+        entities,
+        timelines,
+    )
 
 
 def test_main_job_recording_holds_every_exchange(main_jobs):
@@ -751,8 +906,15 @@ def test_main_job_recording_holds_every_exchange(main_jobs):
     _verify(first.rrd)
     scalars, entities, timelines = _recorded_scalars(first.rrd)
     assert "sim_time" in timelines
-    for entity in ("/speed/omega", "/throttle", "/governor/sleeve", "/moments/drive", "/moments/resistance",
-                   "/moments/external", "/moments/net"):
+    for entity in (
+        "/speed/omega",
+        "/throttle",
+        "/governor/sleeve",
+        "/moments/drive",
+        "/moments/resistance",
+        "/moments/external",
+        "/moments/net",
+    ):
         assert entity in scalars, f"no scalars at {entity}; the recording has {sorted(entities)}"
     assert any(entity.startswith("/mechanism/") for entity in entities), sorted(entities)
     assert any(entity.startswith("/governor/drawing") for entity in entities), sorted(entities)
@@ -783,12 +945,20 @@ def test_main_job_bag_holds_what_simulate_writes(main_jobs, tmp_path, capsys):
     first = main_jobs[0]
     assert first.process.returncode == 0, first.describe()
     bag = tmp_path / "in_process_bag"
-    code, _, _ = run_cli(capsys, "simulate", *_short_engine_arguments(), "--exchange-step", "1e-3", "--bag", str(bag),
-                         "--quiet")
+    code, _, _ = run_cli(
+        capsys, "simulate", *_short_engine_arguments(), "--exchange-step", "1e-3", "--bag", str(bag), "--quiet"
+    )
     assert code == 0
     recorded, expected = _bag_messages(first.rrd.parent.parent / "first_bag"), _bag_messages(bag)
-    assert set(recorded) == {"/joint_states", "/throttle", "/load_torque_stamped", "/governor/state",
-                             "/machine/moments", "/clock", "/diagnostics"}
+    assert set(recorded) == {
+        "/joint_states",
+        "/throttle",
+        "/load_torque_stamped",
+        "/governor/state",
+        "/machine/moments",
+        "/clock",
+        "/diagnostics",
+    }
     assert len(recorded["/joint_states"]) == 1001
     assert recorded == expected, "the ROS run's bag differs from simulate --bag"
 
@@ -798,15 +968,19 @@ def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe
     listener = RunListener(probe, governed=False, diagnostics_publishers=0, describe=job.describe)
 
     def running(after: float) -> bool:
-        return any(float(values["sim_time"]) >= after for _, _, values in listener.statuses()) \
-            and job.rrd.exists() and job.rrd.stat().st_size > 0
+        return (
+            any(float(values["sim_time"]) >= after for _, _, values in listener.statuses())
+            and job.rrd.exists()
+            and job.rrd.stat().st_size > 0
+        )
 
     def recorded(exchanges: int) -> bool:  # (once flaky: a Ctrl-C before the recorder had a complete exchange)
         return any(int(values["recorded_exchanges"]) >= exchanges for _, _, values in listener.statuses("/recorder"))
 
     probe.spin_until(lambda: running(0.5), "the main job running past 0.5 s", describe=job.describe)
-    probe.spin_until(lambda: recorded(2), "the recorder's diagnostics counting 2 complete exchanges",
-                     describe=job.describe)
+    probe.spin_until(
+        lambda: recorded(2), "the recorder's diagnostics counting 2 complete exchanges", describe=job.describe
+    )
     size = job.rrd.stat().st_size
     probe.spin_until(lambda: job.rrd.stat().st_size > size, "the recording growing", describe=job.describe)
     assert job.process.poll() is None, job.describe()
@@ -821,17 +995,18 @@ def test_main_job_interrupted_keeps_a_valid_recording(tmp_path, processes, probe
     scalars, _, _ = _recorded_scalars(job.rrd)
     times, omega = scalars["/speed/omega"]
     assert times.size >= csv.size  # the recording may hold a sample or two more than the complete rows
-    np.testing.assert_array_equal(omega[:csv.size], csv["omega"])
+    np.testing.assert_array_equal(omega[: csv.size], csv["omega"])
     # what was run is the co-simulation of the scene: its start, in process
     prefix = csv[csv["t"] <= 0.3]
     model = build_model(load_scene("engine_direct", ["scenario.duration=0.3", "scenario.load_events=[]"]))
     run = cosimulate(model, DEFAULT_EXCHANGE_STEP, coupling=DEFAULT_COUPLING)  # run's defaults
-    np.testing.assert_array_equal(prefix["omega"], run.states[1, :prefix.size])
-    np.testing.assert_array_equal(prefix["throttle"], run.throttle[:prefix.size])
+    np.testing.assert_array_equal(prefix["omega"], run.states[1, : prefix.size])
+    np.testing.assert_array_equal(prefix["throttle"], run.throttle[: prefix.size])
     assert code == 130 and "Traceback" not in without_rclpy_noise(job.log + job.node_log), job.describe()
     assert "failed" not in job.log, job.describe()  # every node stopped on the interrupt, none was killed
     listing = subprocess.run(["ps", "-ww", "-eo", "args"], capture_output=True, text=True, check=True).stdout
     assert not [line for line in listing.splitlines() if "mech_regulator.nodes" in line and str(tmp_path) in line]
+
 
 INTERRUPTED_AFTER_THE_CHECK = """
 import sys
@@ -855,8 +1030,19 @@ sys.exit(recorder.main())
 
 def test_ctrl_c_right_after_the_loop_check_is_a_normal_stop(tmp_path, processes):
     # (once a bug, about 1 interrupt of the main job in 6: a node ended with a traceback and exit 1)
-    recorder = processes.start([sys.executable, "-c", INTERRUPTED_AFTER_THE_CHECK, "--ros-args", "-p",
-                                "scene_file:=lathe", "-p", f"output:={tmp_path / 'lathe.rrd'}"], "recorder")
+    recorder = processes.start(
+        [
+            sys.executable,
+            "-c",
+            INTERRUPTED_AFTER_THE_CHECK,
+            "--ros-args",
+            "-p",
+            "scene_file:=lathe",
+            "-p",
+            f"output:={tmp_path / 'lathe.rrd'}",
+        ],
+        "recorder",
+    )
     code = processes.wait(recorder)
     output = processes.log(recorder)
     assert "recording to" in output, output  # it got as far as its loop
@@ -908,8 +1094,9 @@ sys.exit(governor.main())
 
 def test_ctrl_c_inside_a_call_into_rclpy_is_a_normal_stop(processes):
     # (once a flaky failure of the main job's interruption in CI: the governor ended with this traceback)
-    node = processes.start([sys.executable, "-c", INTERRUPTED_IN_A_CONVERSION, "--ros-args", "-p",
-                            "scene_file:=engine_direct"], "governor")
+    node = processes.start(
+        [sys.executable, "-c", INTERRUPTED_IN_A_CONVERSION, "--ros-args", "-p", "scene_file:=engine_direct"], "governor"
+    )
     code = processes.wait(node)
     output = processes.log(node)
     assert "interrupted in the third spin" in output, output

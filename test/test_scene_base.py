@@ -38,8 +38,6 @@ def write(folder: Path, name: str, text: str) -> Path:
     return write_scene(folder, text, name)
 
 
-
-
 def scene_error(path: Path) -> str:
     with pytest.raises(SceneError) as caught:
         load_scene(str(path))
@@ -78,12 +76,13 @@ def test_bundled_base_with_a_change(tmp_path, capsys):
     scene = load_scene(str(path))
     lathe = load_scene("lathe")
     assert scene.machine.flywheel.inertia == 40.0
-    assert scene.machine.flywheel.ratio == 1.0                # the rest of machine.flywheel stays
-    assert scene.name == "heavy_lathe"                        # the derived file's stem, not 'lathe'
+    assert scene.machine.flywheel.ratio == 1.0  # the rest of machine.flywheel stays
+    assert scene.name == "heavy_lathe"  # the derived file's stem, not 'lathe'
     assert lathe.name == "lathe"
     # everything else is the lathe's
-    assert without(scene.model_dump(), "name", "description", "machine.flywheel") == \
-        without(lathe.model_dump(), "name", "description", "machine.flywheel")
+    assert without(scene.model_dump(), "name", "description", "machine.flywheel") == without(
+        lathe.model_dump(), "name", "description", "machine.flywheel"
+    )
     assert scene.machine.drive == lathe.machine.drive and scene.machine.loads == lathe.machine.loads
     code, out, err = run(capsys, "describe", str(path))
     assert code == 0, err
@@ -96,7 +95,7 @@ def test_derived_file_may_name_itself(tmp_path):
     scene = load_scene(str(path))
     assert scene.name == "my lathe"
     assert scene.scenario.duration == 1.0
-    assert scene.scenario.initial.omega == 15.15             # scenario.initial kept
+    assert scene.scenario.initial.omega == 15.15  # scenario.initial kept
 
 
 def test_set_applies_after_the_base(tmp_path):
@@ -116,8 +115,15 @@ def test_changes_are_validated(tmp_path, capsys):
 
 def test_nested_mapping_merges(tmp_path):
     write(tmp_path, "parent.yaml", PARENT)
-    scene = load_scene(str(write(tmp_path, "child.yaml", "base: parent.yaml\nmachine:\n  flywheel: {ratio: 3.0}\n"
-                                                         "solver: {rtol: 1.0e-9}\n")))
+    scene = load_scene(
+        str(
+            write(
+                tmp_path,
+                "child.yaml",
+                "base: parent.yaml\nmachine:\n  flywheel: {ratio: 3.0}\nsolver: {rtol: 1.0e-9}\n",
+            )
+        )
+    )
     assert (scene.machine.flywheel.inertia, scene.machine.flywheel.ratio) == (0.2, 3.0)
     assert scene.machine.inertia == 0.5 and scene.machine.drive.torque == 3.0
     assert (scene.solver.method, scene.solver.rtol, scene.solver.sample_rate) == ("RK45", 1e-9, 100.0)
@@ -125,8 +131,15 @@ def test_nested_mapping_merges(tmp_path):
 
 def test_lists_replace(tmp_path):
     write(tmp_path, "parent.yaml", PARENT)
-    scene = load_scene(str(write(tmp_path, "child.yaml", "base: parent.yaml\nmachine:\n  loads:\n"
-                                                         "    - {type: viscous, coefficient: 0.5}\n")))
+    scene = load_scene(
+        str(
+            write(
+                tmp_path,
+                "child.yaml",
+                "base: parent.yaml\nmachine:\n  loads:\n    - {type: viscous, coefficient: 0.5}\n",
+            )
+        )
+    )
     assert len(scene.machine.loads) == 1
     assert (scene.machine.loads[0].type, scene.machine.loads[0].coefficient) == ("viscous", 0.5)
     lathe = load_scene(str(write(tmp_path, "lathe2.yaml", "base: lathe\nmachine:\n  loads: []\n")))
@@ -143,8 +156,9 @@ def test_null_removes_a_key(tmp_path, capsys):
     assert code == 0, err
     assert "constant J = 0.5 kg m^2" in out
     # from the bundled lathe too: no flywheel leaves J = 2
-    code, out, err = run(capsys, "describe", str(write(tmp_path, "bare.yaml", "base: lathe\nmachine: "
-                                                                               "{flywheel: null}\n")))
+    code, out, err = run(
+        capsys, "describe", str(write(tmp_path, "bare.yaml", "base: lathe\nmachine: {flywheel: null}\n"))
+    )
     assert code == 0, err
     assert "constant J = 2 kg m^2" in out
 
@@ -152,7 +166,7 @@ def test_null_removes_a_key(tmp_path, capsys):
 def test_null_removes_a_key_inside_a_section_and_defaults_return(tmp_path):
     write(tmp_path, "parent.yaml", PARENT)
     scene = load_scene(str(write(tmp_path, "child.yaml", "base: parent.yaml\nsolver: {method: null, rtol: null}\n")))
-    assert scene.solver.method == "DOP853" and scene.solver.rtol == 1e-8   # the schema's defaults
+    assert scene.solver.method == "DOP853" and scene.solver.rtol == 1e-8  # the schema's defaults
     assert scene.solver.sample_rate == 100.0
 
 
@@ -183,7 +197,7 @@ def test_base_relative_to_the_file_not_the_working_folder(tmp_path, monkeypatch)
     assert scene.machine.inertia == 0.7
     assert scene.machine.flywheel.inertia == 0.2
     assert scene.name == "child"
-    assert scene.description is None                         # the base's description is not inherited
+    assert scene.description is None  # the base's description is not inherited
 
 
 def test_relative_base_next_to_the_file(tmp_path, capsys):
@@ -196,16 +210,20 @@ def test_relative_base_next_to_the_file(tmp_path, capsys):
 
 def test_chain_of_two_bases(tmp_path):
     write(tmp_path, "grand.yaml", PARENT)
-    write(tmp_path, "mid.yaml", "base: grand.yaml\nname: middle\nmachine:\n  flywheel: {inertia: 0.4}\n"
-                                "scenario: {duration: 0.3}\n")
-    child = write(tmp_path, "child.yaml", "base: mid.yaml\nmachine:\n  flywheel: {ratio: 1.5}\n"
-                                          "  drive: {torque: 4.0}\n")
+    write(
+        tmp_path,
+        "mid.yaml",
+        "base: grand.yaml\nname: middle\nmachine:\n  flywheel: {inertia: 0.4}\nscenario: {duration: 0.3}\n",
+    )
+    child = write(
+        tmp_path, "child.yaml", "base: mid.yaml\nmachine:\n  flywheel: {ratio: 1.5}\n  drive: {torque: 4.0}\n"
+    )
     scene = load_scene(str(child))
     assert (scene.machine.flywheel.inertia, scene.machine.flywheel.ratio) == (0.4, 1.5)
     assert scene.machine.drive.type == "constant" and scene.machine.drive.torque == 4.0
-    assert scene.scenario.duration == 0.3                    # from mid
-    assert scene.solver.method == "RK45"                     # from grand
-    assert scene.name == "child"                             # neither 'middle' nor 'parent'
+    assert scene.scenario.duration == 0.3  # from mid
+    assert scene.solver.method == "RK45"  # from grand
+    assert scene.name == "child"  # neither 'middle' nor 'parent'
     assert load_scene(str(tmp_path / "mid.yaml")).name == "middle"
 
 
@@ -258,15 +276,16 @@ def test_missing_base_names_the_file_that_refers_to_it(tmp_path):
 
 
 def test_base_is_not_looked_up_in_the_working_folder(tmp_path, monkeypatch):
-    write(tmp_path, "parent.yaml", PARENT)                   # in the working folder, not next to child.yaml
+    write(tmp_path, "parent.yaml", PARENT)  # in the working folder, not next to child.yaml
     child = write(tmp_path, "sub/child.yaml", "base: parent.yaml\n")
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SceneError):
         load_scene(str(child))
 
 
-@pytest.mark.parametrize("written, shown", [("3", "3"), ("[lathe]", "['lathe']"), ("{name: lathe}", "{'name': 'lathe'}"),
-                                            ("true", "True")])
+@pytest.mark.parametrize(
+    "written, shown", [("3", "3"), ("[lathe]", "['lathe']"), ("{name: lathe}", "{'name': 'lathe'}"), ("true", "True")]
+)
 def test_base_not_a_string(tmp_path, capsys, written, shown):
     path = write(tmp_path, "child.yaml", f"base: {written}\nmachine: {{inertia: 1.0}}\n")
     message = scene_error(path)
@@ -284,12 +303,15 @@ def test_base_null_means_no_base(tmp_path):
 # The bundled governed scenes
 
 
-@pytest.mark.parametrize("name, kind, feedback", [
-    ("engine_direct", "direct", None),
-    ("engine_indirect_none", "indirect", "none"),
-    ("engine_indirect_rigid", "indirect", "rigid"),
-    ("engine_indirect_isodromic", "indirect", "isodromic"),
-])
+@pytest.mark.parametrize(
+    "name, kind, feedback",
+    [
+        ("engine_direct", "direct", None),
+        ("engine_indirect_none", "indirect", "none"),
+        ("engine_indirect_rigid", "indirect", "rigid"),
+        ("engine_indirect_isodromic", "indirect", "isodromic"),
+    ],
+)
 def test_bundled_governed_scenes(name, kind, feedback):
     scene = load_scene(name)
     engine = load_scene("engine")
@@ -300,7 +322,7 @@ def test_bundled_governed_scenes(name, kind, feedback):
         assert governor.valve.type == "linear"
     else:
         assert governor.feedback.type == feedback
-        assert not hasattr(governor, "valve")                # 'valve: null' removed engine_direct's valve
+        assert not hasattr(governor, "valve")  # 'valve: null' removed engine_direct's valve
         assert governor.stroke[0] < governor.pilot_neutral < governor.stroke[1]
         if feedback != "none":
             assert governor.feedback.gain > 0

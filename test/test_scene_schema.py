@@ -44,13 +44,15 @@ def file_data(path: Path) -> dict:
 
 
 def errors(validator, data) -> list[str]:
-    return [f"{'.'.join(map(str, error.absolute_path)) or '(top level)'}: {error.message}"
-            for error in validator.iter_errors(data)]
+    return [
+        f"{'.'.join(map(str, error.absolute_path)) or '(top level)'}: {error.message}"
+        for error in validator.iter_errors(data)
+    ]
 
 
 def write_scene(folder: Path, data: dict, name: str = "user_scene") -> Path:
     path = folder / f"{name}.yaml"
-    path.write_text(json.dumps(data), encoding="utf-8")   # JSON is YAML
+    path.write_text(json.dumps(data), encoding="utf-8")  # JSON is YAML
     return path
 
 
@@ -85,7 +87,8 @@ def test_committed_schema_file_is_what_the_command_prints():
 
     assert SCHEMA_FILE.read_text(encoding="utf-8") == schema_json(), (
         "config/schema/scene.schema.json is out of date: regenerate it with "
-        "'mech-regulator schema > config/schema/scene.schema.json'")
+        "'mech-regulator schema > config/schema/scene.schema.json'"
+    )
     buffer = io.StringIO()
     with contextlib.redirect_stdout(buffer):
         assert main(["schema"]) == 0
@@ -170,8 +173,7 @@ WRONG_TYPES = [
 ]
 
 
-@pytest.mark.parametrize("data, key", [(make, key) for _, make, key in MISSPELT],
-                         ids=[case for case, _, _ in MISSPELT])
+@pytest.mark.parametrize("data, key", [(make, key) for _, make, key in MISSPELT], ids=[case for case, _, _ in MISSPELT])
 def test_misspelt_key_is_rejected_by_schema_and_loader(validator, tmp_path, data, key):
     data = data()
     found = errors(validator, data)
@@ -191,9 +193,11 @@ def test_wrong_value_is_rejected_by_schema_and_loader(validator, tmp_path, data)
 
 def test_the_misspelt_key_is_named_where_it_is(validator):
     assert "machine: Additional properties are not allowed ('inertai' was unexpected)" in errors(
-        validator, renamed(lathe(), "machine.inertia", "inertai"))   # and machine.inertia is missing
+        validator, renamed(lathe(), "machine.inertia", "inertai")
+    )  # and machine.inertia is missing
     assert errors(validator, {"base": "engine", "machine": {"inertai": 1}}) == [
-        "machine: Additional properties are not allowed ('inertai' was unexpected)"]
+        "machine: Additional properties are not allowed ('inertai' was unexpected)"
+    ]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -202,13 +206,25 @@ def test_the_misspelt_key_is_named_where_it_is(validator):
 
 PARTIAL = [
     ("one nested key", {"base": "engine_indirect_none", "governor": {"feedback": {"type": "rigid", "gain": 0.1}}}),
-    ("several sections", {"base": "engine", "name": "mine", "machine": {"flywheel": {"inertia": 0.2}},
-                          "scenario": {"duration": 5.0}, "solver": {"rtol": 1e-6}}),
+    (
+        "several sections",
+        {
+            "base": "engine",
+            "name": "mine",
+            "machine": {"flywheel": {"inertia": 0.2}},
+            "scenario": {"duration": 5.0},
+            "solver": {"rtol": 1e-6},
+        },
+    ),
     ("a key removed", {"base": "engine_direct", "governor": {"damping": None}, "scenario": {"load_events": None}}),
     ("a section removed", {"base": "engine_direct", "governor": None, "scenario": {"initial": {"sleeve": None}}}),
-    ("a type changed", {"base": "engine_direct",
-                        "governor": {"type": "indirect", "pilot_neutral": 0.05, "servo": {"gain": 100.0},
-                                     "valve": None}}),
+    (
+        "a type changed",
+        {
+            "base": "engine_direct",
+            "governor": {"type": "indirect", "pilot_neutral": 0.05, "servo": {"gain": 100.0}, "valve": None},
+        },
+    ),
     ("a list replaced", {"base": "engine", "machine": {"loads": [{"type": "viscous", "coefficient": 0.01}]}}),
     ("only the base", {"base": "lathe"}),
 ]
@@ -217,7 +233,7 @@ PARTIAL = [
 @pytest.mark.parametrize("data", [data for _, data in PARTIAL], ids=[case for case, _ in PARTIAL])
 def test_scene_with_base_and_a_partial_override_validates(validator, tmp_path, data):
     assert errors(validator, data) == []
-    load_scene(str(write_scene(tmp_path, data)))   # and it is a valid scene once merged
+    load_scene(str(write_scene(tmp_path, data)))  # and it is a valid scene once merged
 
 
 def test_partial_scene_with_a_base_file_next_to_it(validator, tmp_path):
@@ -231,4 +247,4 @@ def test_base_makes_keys_optional_only_for_a_partial_scene(validator):
     partial = {"base": "engine", "machine": {"flywheel": {"inertia": 0.2}}}
     assert errors(validator, partial) == []
     complete = {key: value for key, value in partial.items() if key != "base"}
-    assert errors(validator, complete)   # the same keys without base: machine.inertia and scenario missing
+    assert errors(validator, complete)  # the same keys without base: machine.inertia and scenario missing

@@ -36,8 +36,10 @@ scenario:
 solver: {method: DOP853, sample_rate: 100.0}
 """
 
-MECHANISM_LINE = ("  mechanism: {type: crank_slider, crank: 0.05, rod: 0.2, offset: 0.0, rod_mass: 0.3, "
-                  "rod_inertia: 0.001, slider_mass: 1.0}")
+MECHANISM_LINE = (
+    "  mechanism: {type: crank_slider, crank: 0.05, rod: 0.2, offset: 0.0, rod_mass: 0.3, "
+    "rod_inertia: 0.001, slider_mass: 1.0}"
+)
 assert MECHANISM_LINE in BASE
 
 
@@ -50,12 +52,9 @@ def edited(*replacements: tuple[str, str], text: str = BASE) -> str:
 
 
 def four_bar_line(crank, coupler, rocker, frame, extra="") -> str:
-    return (f"  mechanism: {{type: four_bar, crank: {crank}, coupler: {coupler}, rocker: {rocker}, "
-            f"frame: {frame}{extra}}}")
-
-
-
-
+    return (
+        f"  mechanism: {{type: four_bar, crank: {crank}, coupler: {coupler}, rocker: {rocker}, frame: {frame}{extra}}}"
+    )
 
 
 def run_bad(capsys, tmp_path: Path, text: str, *options: str, command: str = "simulate") -> str:
@@ -110,18 +109,38 @@ def test_unknown_key_inside_list_item(tmp_path, capsys):
 
 def test_unknown_key_spelt_like_the_type_tag(tmp_path, capsys):
     err = run_bad(capsys, tmp_path, edited(("{type: viscous, coefficient: 0.01}", "{type: fan, fan: 0.01}")))
-    assert_all_in(err, "machine.loads.0.fan:", "machine.loads.0.coefficient: missing", "valid keys here: type, coefficient")
+    assert_all_in(
+        err, "machine.loads.0.fan:", "machine.loads.0.coefficient: missing", "valid keys here: type, coefficient"
+    )
     assert "machine.loads.0.fan.fan" not in err
 
 
-@pytest.mark.parametrize("old, new, path, bad, valid", [
-    ("type: viscous", "type: viscus", "machine.loads.0.type", "'viscus'",
-     ["'viscous'", "'fan'", "'cutting'", "'slider_table'", "'rocker_spring'"]),
-    ("type: constant", "type: konstant", "machine.drive.type", "'konstant'",
-     ["'constant'", "'linear_motor'", "'table'", "'engine'"]),
-    ("type: crank_slider", "type: crank_slder", "machine.mechanism.type", "'crank_slder'",
-     ["'crank_slider'", "'four_bar'"]),
-])
+@pytest.mark.parametrize(
+    "old, new, path, bad, valid",
+    [
+        (
+            "type: viscous",
+            "type: viscus",
+            "machine.loads.0.type",
+            "'viscus'",
+            ["'viscous'", "'fan'", "'cutting'", "'slider_table'", "'rocker_spring'"],
+        ),
+        (
+            "type: constant",
+            "type: konstant",
+            "machine.drive.type",
+            "'konstant'",
+            ["'constant'", "'linear_motor'", "'table'", "'engine'"],
+        ),
+        (
+            "type: crank_slider",
+            "type: crank_slder",
+            "machine.mechanism.type",
+            "'crank_slder'",
+            ["'crank_slider'", "'four_bar'"],
+        ),
+    ],
+)
 def test_unknown_type_lists_valid_types(tmp_path, capsys, old, new, path, bad, valid):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, path, bad, "unknown type", "expected one of", *valid)
@@ -136,13 +155,16 @@ def test_missing_type_lists_valid_types(tmp_path, capsys):
 # Wrong types
 
 
-@pytest.mark.parametrize("old, new, path, shown", [
-    ("inertia: 0.1", "inertia: heavy", "machine.inertia", "'heavy'"),
-    ("duration: 0.2", 'duration: "0.2"', "scenario.duration", "'0.2'"),
-    ("slider_mass: 1.0", "slider_mass: true", "machine.mechanism.slider_mass", "True"),
-    ("coefficient: 0.01", "coefficient: [0.01]", "machine.loads.0.coefficient", "[0.01]"),
-    ("inertia: 0.1", "inertia: 0.1\n  gravity: [0.0, down]", "machine.gravity.1", "'down'"),
-])
+@pytest.mark.parametrize(
+    "old, new, path, shown",
+    [
+        ("inertia: 0.1", "inertia: heavy", "machine.inertia", "'heavy'"),
+        ("duration: 0.2", 'duration: "0.2"', "scenario.duration", "'0.2'"),
+        ("slider_mass: 1.0", "slider_mass: true", "machine.mechanism.slider_mass", "True"),
+        ("coefficient: 0.01", "coefficient: [0.01]", "machine.loads.0.coefficient", "[0.01]"),
+        ("inertia: 0.1", "inertia: 0.1\n  gravity: [0.0, down]", "machine.gravity.1", "'down'"),
+    ],
+)
 def test_wrong_type(tmp_path, capsys, old, new, path, shown):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, f"{path} = {shown}", "valid number")
@@ -157,32 +179,41 @@ def test_section_given_as_a_scalar(tmp_path, capsys):
 # Non-physical values
 
 
-@pytest.mark.parametrize("old, new, path, value", [
-    ("slider_mass: 1.0", "slider_mass: -1.0", "machine.mechanism.slider_mass", "-1.0"),
-    ("rod_mass: 0.3", "rod_mass: -0.3", "machine.mechanism.rod_mass", "-0.3"),
-])
+@pytest.mark.parametrize(
+    "old, new, path, value",
+    [
+        ("slider_mass: 1.0", "slider_mass: -1.0", "machine.mechanism.slider_mass", "-1.0"),
+        ("rod_mass: 0.3", "rod_mass: -0.3", "machine.mechanism.rod_mass", "-0.3"),
+    ],
+)
 def test_negative_mass(tmp_path, capsys, old, new, path, value):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, f"{path} = {value}", "greater than or equal to 0", "[kg]")
 
 
-@pytest.mark.parametrize("old, new, path, value", [
-    ("inertia: 0.1", "inertia: -0.1", "machine.inertia", "-0.1"),
-    ("{inertia: 0.2, ratio", "{inertia: -0.2, ratio", "machine.flywheel.inertia", "-0.2"),
-    ("rod_inertia: 0.001", "rod_inertia: -0.001", "machine.mechanism.rod_inertia", "-0.001"),
-])
+@pytest.mark.parametrize(
+    "old, new, path, value",
+    [
+        ("inertia: 0.1", "inertia: -0.1", "machine.inertia", "-0.1"),
+        ("{inertia: 0.2, ratio", "{inertia: -0.2, ratio", "machine.flywheel.inertia", "-0.2"),
+        ("rod_inertia: 0.001", "rod_inertia: -0.001", "machine.mechanism.rod_inertia", "-0.001"),
+    ],
+)
 def test_negative_inertia(tmp_path, capsys, old, new, path, value):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, f"{path} = {value}", "greater than or equal to 0", "[kg m^2]")
 
 
-@pytest.mark.parametrize("old, new, path, value", [
-    ("crank: 0.05", "crank: 0", "machine.mechanism.crank", "0"),
-    ("crank: 0.05", "crank: -0.05", "machine.mechanism.crank", "-0.05"),
-    ("rod: 0.2", "rod: 0.0", "machine.mechanism.rod", "0.0"),
-    ("rod: 0.2", "rod: -0.2", "machine.mechanism.rod", "-0.2"),
-    ("duration: 0.2", "duration: 0", "scenario.duration", "0"),
-])
+@pytest.mark.parametrize(
+    "old, new, path, value",
+    [
+        ("crank: 0.05", "crank: 0", "machine.mechanism.crank", "0"),
+        ("crank: 0.05", "crank: -0.05", "machine.mechanism.crank", "-0.05"),
+        ("rod: 0.2", "rod: 0.0", "machine.mechanism.rod", "0.0"),
+        ("rod: 0.2", "rod: -0.2", "machine.mechanism.rod", "-0.2"),
+        ("duration: 0.2", "duration: 0", "scenario.duration", "0"),
+    ],
+)
 def test_zero_or_negative_length(tmp_path, capsys, old, new, path, value):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, f"{path} = {value}", "greater than 0")
@@ -213,12 +244,21 @@ def _unassemblable_range_deg(a: float, b: float, c: float, d: float) -> tuple[fl
 
 
 def test_non_grashof_four_bar_states_crank_angle_range(tmp_path, capsys):
-    a, b, c, d = 0.05, 0.08, 0.06, 0.10   # a + d = 0.15 > b + c = 0.14: cannot pass phi = 180 deg
+    a, b, c, d = 0.05, 0.08, 0.06, 0.10  # a + d = 0.15 > b + c = 0.14: cannot pass phi = 180 deg
     err = run_bad(capsys, tmp_path, edited((MECHANISM_LINE, four_bar_line(a, b, c, d))))
     lo, hi = _unassemblable_range_deg(a, b, c, d)
     assert 90 < lo < 180 < hi < 270
-    assert_all_in(err, "machine.mechanism", "cannot be assembled", f"{lo:.2f} to {hi:.2f} deg", "Grashof",
-                  f"crank {a}", f"coupler {b}", f"rocker {c}", f"frame {d}")
+    assert_all_in(
+        err,
+        "machine.mechanism",
+        "cannot be assembled",
+        f"{lo:.2f} to {hi:.2f} deg",
+        "Grashof",
+        f"crank {a}",
+        f"coupler {b}",
+        f"rocker {c}",
+        f"frame {d}",
+    )
     # the breaking point itself: |B - D| = b + c exactly at the ends of the range
     for angle in (lo, hi):
         phi = math.radians(angle)
@@ -236,14 +276,17 @@ def test_non_grashof_four_bar_range_follows_frame_angle(tmp_path, capsys):
 # NaN and infinity
 
 
-@pytest.mark.parametrize("old, new, path, shown", [
-    ("inertia: 0.1", "inertia: .nan", "machine.inertia", "nan"),
-    ("torque: 1.0", "torque: .inf", "machine.drive.torque", "inf"),
-    ("torque: 1.0", "torque: -.inf", "machine.drive.torque", "-inf"),
-    ("omega: 10.0", "omega: .NaN", "scenario.initial.omega", "nan"),
-    ("sample_rate: 100.0", "sample_rate: .Inf", "solver.sample_rate", "inf"),
-    ("inertia: 0.1", "inertia: 0.1\n  gravity: [0.0, .nan]", "machine.gravity.1", "nan"),
-])
+@pytest.mark.parametrize(
+    "old, new, path, shown",
+    [
+        ("inertia: 0.1", "inertia: .nan", "machine.inertia", "nan"),
+        ("torque: 1.0", "torque: .inf", "machine.drive.torque", "inf"),
+        ("torque: 1.0", "torque: -.inf", "machine.drive.torque", "-inf"),
+        ("omega: 10.0", "omega: .NaN", "scenario.initial.omega", "nan"),
+        ("sample_rate: 100.0", "sample_rate: .Inf", "solver.sample_rate", "inf"),
+        ("inertia: 0.1", "inertia: 0.1\n  gravity: [0.0, .nan]", "machine.gravity.1", "nan"),
+    ],
+)
 def test_nan_and_infinity(tmp_path, capsys, old, new, path, shown):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, f"{path} = {shown}", "finite number")
@@ -253,8 +296,9 @@ def test_nan_and_infinity(tmp_path, capsys, old, new, path, shown):
 # YAML reading
 
 
-@pytest.mark.parametrize("written, value", [("1e-3", 1e-3), ("1E-3", 1e-3), ("2e2", 200.0), ("+5e-3", 5e-3),
-                                             ("1.5e-2", 0.015)])
+@pytest.mark.parametrize(
+    "written, value", [("1e-3", 1e-3), ("1E-3", 1e-3), ("2e2", 200.0), ("+5e-3", 5e-3), ("1.5e-2", 0.015)]
+)
 def test_exponent_without_dot_is_a_number(tmp_path, capsys, written, value):
     """PyYAML (YAML 1.1) reads 1e-3 as a string; the scene loader reads it as a number."""
     path = write(tmp_path, edited(("coefficient: 0.01", f"coefficient: {written}")))
@@ -279,8 +323,12 @@ def test_yaml_syntax_error_names_line(tmp_path, capsys):
 
 
 def test_yaml_unclosed_bracket_names_line(tmp_path, capsys):
-    text = edited(("solver: {method: DOP853, sample_rate: 100.0}", "solver: {method: DOP853, sample_rate: 100.0\n"
-                                                                   "analysis: {steady_tolerance: 1.0e-4}"))
+    text = edited(
+        (
+            "solver: {method: DOP853, sample_rate: 100.0}",
+            "solver: {method: DOP853, sample_rate: 100.0\nanalysis: {steady_tolerance: 1.0e-4}",
+        )
+    )
     err = run_bad(capsys, tmp_path, text)
     assert_all_in(err, "not valid YAML", "line ")
 
@@ -322,22 +370,25 @@ def test_missing_required_key_in_mechanism(tmp_path, capsys):
     assert_all_in(err, "machine.mechanism.crank", "missing", "crank radius")
 
 
-@pytest.mark.parametrize("mechanism, load, needs, has", [
-    (four_bar_line(0.04, 0.12, 0.08, 0.10), "slider_viscous", "crank_slider", "four_bar"),
-    (MECHANISM_LINE, "rocker_viscous", "four_bar", "crank_slider"),
-    ("", "slider_viscous", "crank_slider", "no mechanism"),
-])
+@pytest.mark.parametrize(
+    "mechanism, load, needs, has",
+    [
+        (four_bar_line(0.04, 0.12, 0.08, 0.10), "slider_viscous", "crank_slider", "four_bar"),
+        (MECHANISM_LINE, "rocker_viscous", "four_bar", "crank_slider"),
+        ("", "slider_viscous", "crank_slider", "no mechanism"),
+    ],
+)
 def test_output_load_on_wrong_mechanism(tmp_path, capsys, mechanism, load, needs, has):
-    text = edited((MECHANISM_LINE + "\n", mechanism + "\n" if mechanism else ""),
-                  ("type: viscous", f"type: {load}"))
+    text = edited((MECHANISM_LINE + "\n", mechanism + "\n" if mechanism else ""), ("type: viscous", f"type: {load}"))
     err = run_bad(capsys, tmp_path, text)
     assert_all_in(err, "machine", "loads[0]", f"'{load}'", f"needs mechanism.type: {needs}", has)
 
 
 def test_engine_drive_needs_crank_slider(tmp_path, capsys):
     engine = "  drive: {type: engine, bore: 0.08, angle_deg: [0, 360], pressure: [0, 1.0e5]}"
-    text = edited((MECHANISM_LINE, four_bar_line(0.04, 0.12, 0.08, 0.10)),
-                  ("  drive: {type: constant, torque: 1.0}", engine))
+    text = edited(
+        (MECHANISM_LINE, four_bar_line(0.04, 0.12, 0.08, 0.10)), ("  drive: {type: constant, torque: 1.0}", engine)
+    )
     err = run_bad(capsys, tmp_path, text)
     assert_all_in(err, "engine", "needs mechanism.type: crank_slider", "four_bar")
 
@@ -361,30 +412,57 @@ def test_load_event_beyond_duration(tmp_path, capsys, event):
 
 
 def test_load_event_negative_time(tmp_path, capsys):
-    err = run_bad(capsys, tmp_path, edited(("  duration: 0.2\n", "  duration: 0.2\n  load_events: "
-                                                                  "[{time: -0.1, torque: 1.0}]\n")))
+    err = run_bad(
+        capsys, tmp_path, edited(("  duration: 0.2\n", "  duration: 0.2\n  load_events: [{time: -0.1, torque: 1.0}]\n"))
+    )
     assert_all_in(err, "scenario.load_events.0.time = -0.1", "greater than or equal to 0")
 
 
-@pytest.mark.parametrize("old, new, path, fragments", [
-    ("  drive: {type: constant, torque: 1.0}", "  drive: {type: table, angle_deg: [0, 90, 180], torque: [1, 2]}",
-     "machine.drive", ["angle_deg has 3 entries", "values have 2"]),
-    ("{type: viscous, coefficient: 0.01}", "{type: table, angle_deg: [0, 90], torque: [1, 2, 3]}",
-     "machine.loads.0", ["angle_deg has 2 entries", "values have 3"]),
-    ("{type: viscous, coefficient: 0.01}", "{type: slider_table, position: [0.1, 0.2, 0.3], force: [1, 2]}",
-     "machine.loads.0", ["3 positions", "2 forces"]),
-    ("  drive: {type: constant, torque: 1.0}",
-     "  drive: {type: engine, bore: 0.08, angle_deg: [0, 180, 360], pressure: [0, 1.0e5]}",
-     "machine.drive", ["engine pressure", "angle_deg has 3 entries", "values have 2"]),
-])
+@pytest.mark.parametrize(
+    "old, new, path, fragments",
+    [
+        (
+            "  drive: {type: constant, torque: 1.0}",
+            "  drive: {type: table, angle_deg: [0, 90, 180], torque: [1, 2]}",
+            "machine.drive",
+            ["angle_deg has 3 entries", "values have 2"],
+        ),
+        (
+            "{type: viscous, coefficient: 0.01}",
+            "{type: table, angle_deg: [0, 90], torque: [1, 2, 3]}",
+            "machine.loads.0",
+            ["angle_deg has 2 entries", "values have 3"],
+        ),
+        (
+            "{type: viscous, coefficient: 0.01}",
+            "{type: slider_table, position: [0.1, 0.2, 0.3], force: [1, 2]}",
+            "machine.loads.0",
+            ["3 positions", "2 forces"],
+        ),
+        (
+            "  drive: {type: constant, torque: 1.0}",
+            "  drive: {type: engine, bore: 0.08, angle_deg: [0, 180, 360], pressure: [0, 1.0e5]}",
+            "machine.drive",
+            ["engine pressure", "angle_deg has 3 entries", "values have 2"],
+        ),
+    ],
+)
 def test_table_length_mismatch(tmp_path, capsys, old, new, path, fragments):
     err = run_bad(capsys, tmp_path, edited((old, new)))
     assert_all_in(err, path, "expected one", *fragments)
 
 
 def test_table_angles_not_increasing(tmp_path, capsys):
-    err = run_bad(capsys, tmp_path, edited(("  drive: {type: constant, torque: 1.0}",
-                                            "  drive: {type: table, angle_deg: [0, 180, 90], torque: [1, 2, 3]}")))
+    err = run_bad(
+        capsys,
+        tmp_path,
+        edited(
+            (
+                "  drive: {type: constant, torque: 1.0}",
+                "  drive: {type: table, angle_deg: [0, 180, 90], torque: [1, 2, 3]}",
+            )
+        ),
+    )
     assert_all_in(err, "machine.drive", "[0.0, 180.0, 90.0]", "strictly increasing")
 
 
@@ -393,14 +471,22 @@ def test_table_angles_not_increasing(tmp_path, capsys):
 
 
 def test_several_problems_reported_one_per_line(tmp_path, capsys):
-    text = edited(("inertia: 0.1", "inertia: -1"), ("torque: 1.0", "torque: .nan"),
-                  ("coefficient: 0.01", "coeficient: 0.01"), ("duration: 0.2", "duration: soon"))
+    text = edited(
+        ("inertia: 0.1", "inertia: -1"),
+        ("torque: 1.0", "torque: .nan"),
+        ("coefficient: 0.01", "coeficient: 0.01"),
+        ("duration: 0.2", "duration: soon"),
+    )
     err = run_bad(capsys, tmp_path, text)
     lines = err.rstrip("\n").splitlines()
     assert "problems:" in lines[0]
     problems = lines[1:]
-    expected = ["machine.inertia = -1", "machine.drive.torque = nan", "machine.loads.0.coeficient",
-                "scenario.duration = 'soon'"]
+    expected = [
+        "machine.inertia = -1",
+        "machine.drive.torque = nan",
+        "machine.loads.0.coeficient",
+        "scenario.duration = 'soon'",
+    ]
     for fragment in expected:
         assert sum(fragment in line for line in problems) == 1, (fragment, err)
     assert f"{len(problems)} problems" in lines[0]
@@ -412,16 +498,19 @@ def test_several_problems_reported_one_per_line(tmp_path, capsys):
 # --set overrides
 
 
-@pytest.mark.parametrize("assignment, fragments", [
-    ("machine.inertia", ["--set 'machine.inertia'", "expected dotted.key=value"]),
-    ("machine.loads.5.coefficient=1", ["machine.loads.5", "0 to 0", "'5'"]),
-    ("machine.loads.first.coefficient=1", ["machine.loads.first", "must index the list", "'first'"]),
-    ("machine.loads.-1.coefficient=1", ["machine.loads.-1", "must index the list"]),
-    ("machine.inertia.value=1", ["'machine.inertia' holds 0.1", "not a section"]),
-    ("scenario.duration.x.y=1", ["'scenario.duration' holds 0.2", "not a section"]),
-    ("machine..inertia=1", ["empty part"]),
-    ("machine.inertia=[1", ["--set machine.inertia", "not valid YAML"]),
-])
+@pytest.mark.parametrize(
+    "assignment, fragments",
+    [
+        ("machine.inertia", ["--set 'machine.inertia'", "expected dotted.key=value"]),
+        ("machine.loads.5.coefficient=1", ["machine.loads.5", "0 to 0", "'5'"]),
+        ("machine.loads.first.coefficient=1", ["machine.loads.first", "must index the list", "'first'"]),
+        ("machine.loads.-1.coefficient=1", ["machine.loads.-1", "must index the list"]),
+        ("machine.inertia.value=1", ["'machine.inertia' holds 0.1", "not a section"]),
+        ("scenario.duration.x.y=1", ["'scenario.duration' holds 0.2", "not a section"]),
+        ("machine..inertia=1", ["empty part"]),
+        ("machine.inertia=[1", ["--set machine.inertia", "not valid YAML"]),
+    ],
+)
 def test_set_errors(tmp_path, capsys, assignment, fragments):
     err = run_bad(capsys, tmp_path, BASE, "--set", assignment)
     assert_all_in(err, *fragments)
@@ -450,14 +539,20 @@ def test_set_can_fix_a_broken_scene(tmp_path, capsys):
 # Scene files and output paths
 
 
-@pytest.mark.parametrize("name, suggestion", [("lathee", "lathe"), ("four_bar", "four_bar_rocker"),
-                                              ("compresor.yaml", "compressor")])
+@pytest.mark.parametrize(
+    "name, suggestion", [("lathee", "lathe"), ("four_bar", "four_bar_rocker"), ("compresor.yaml", "compressor")]
+)
 def test_missing_scene_suggests_bundled(capsys, name, suggestion):
     code, out, err = run(capsys, "simulate", name)
     assert code == 2
     assert "Traceback" not in out + err
-    assert_all_in(err, f"scene '{name}'", "no such file", f"did you mean the bundled scene '{suggestion}'?",
-                  "bundled: " + ", ".join(bundled_scenes()) + ")")
+    assert_all_in(
+        err,
+        f"scene '{name}'",
+        "no such file",
+        f"did you mean the bundled scene '{suggestion}'?",
+        "bundled: " + ", ".join(bundled_scenes()) + ")",
+    )
 
 
 def test_missing_scene_path(tmp_path, capsys):
@@ -507,10 +602,16 @@ def test_output_folder_not_writable(tmp_path, capsys):
 
 def test_python_m_exits_2_without_traceback(tmp_path):
     path = write(tmp_path, edited(("rod: 0.2", "rodd: 0.2"), ("inertia: 0.1", "inertia: .nan")))
-    source_root = str(Path(mech_regulator.__file__).resolve().parents[1])   # works without an install too
+    source_root = str(Path(mech_regulator.__file__).resolve().parents[1])  # works without an install too
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [source_root, os.environ.get("PYTHONPATH")]))}
-    result = subprocess.run([sys.executable, "-m", "mech_regulator", "simulate", str(path), "--quiet"],
-                            capture_output=True, text=True, timeout=60, cwd=tmp_path, env=env)
+    result = subprocess.run(
+        [sys.executable, "-m", "mech_regulator", "simulate", str(path), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=tmp_path,
+        env=env,
+    )
     assert result.returncode == 2, result.stderr
     assert "Traceback" not in result.stderr
     assert_all_in(result.stderr, "machine.mechanism.rodd", "did you mean 'rod'?", "machine.inertia = nan")

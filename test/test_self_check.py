@@ -30,9 +30,18 @@ from mech_regulator.scene import load_scene
 
 PULSED_LOAD = {
     "name": "pulsed_load",
-    "machine": {"inertia": 2.0, "drive": {"type": "linear_motor", "stall_torque": 400.0, "no_load_speed": 20.0},
-                "loads": [{"type": "table", "angle_deg": [0.0, 100.0, 100.01, 103.0, 103.01], "period_deg": 360.0,
-                           "torque": [0.0, 0.0, 300.0, 300.0, 0.0]}]},
+    "machine": {
+        "inertia": 2.0,
+        "drive": {"type": "linear_motor", "stall_torque": 400.0, "no_load_speed": 20.0},
+        "loads": [
+            {
+                "type": "table",
+                "angle_deg": [0.0, 100.0, 100.01, 103.0, 103.01],
+                "period_deg": 360.0,
+                "torque": [0.0, 0.0, 300.0, 300.0, 0.0],
+            }
+        ],
+    },
     "scenario": {"initial": {"phi": 0.0, "omega": 15.0}, "duration": 2.0},
     "solver": {"method": "LSODA", "rtol": 1e-10, "atol": 1e-12},
 }
@@ -58,17 +67,24 @@ def test_a_loose_run_is_reported_inaccurate(capsys, pulsed):
 def test_strict_makes_it_exit_3_and_the_advised_fix_makes_it_complete(capsys, pulsed):
     code, out, _ = run_cli(capsys, "simulate", pulsed, "--quiet", "--strict")
     assert code == 3 and out.startswith("scene pulsed_load: inaccurate at t = 2 s")
-    code, out, err = run_cli(capsys, "simulate", pulsed, "--quiet", "--strict", "--json", "--set",
-                             "solver.max_step=0.0001")
+    code, out, err = run_cli(
+        capsys, "simulate", pulsed, "--quiet", "--strict", "--json", "--set", "solver.max_step=0.0001"
+    )
     summary = json.loads(out)
     assert code == 0 and summary["status"] == "complete" and summary["self_checks"] == [], err
 
 
 @pytest.mark.parametrize("name", ["lathe", "startup", "press", "engine"])
 def test_bundled_scenes_pass_their_own_check(capsys, name):
-    code, out, _ = run_cli(capsys, "simulate", name, "--quiet", "--strict", "--json",
-                           *(["--set", "scenario.duration=2", "--set", "scenario.load_events=[]"]
-                             if name == "engine" else []))
+    code, out, _ = run_cli(
+        capsys,
+        "simulate",
+        name,
+        "--quiet",
+        "--strict",
+        "--json",
+        *(["--set", "scenario.duration=2", "--set", "scenario.load_events=[]"] if name == "engine" else []),
+    )
     assert code == 0 and json.loads(out)["self_checks"] == []
 
 
@@ -85,10 +101,14 @@ def test_the_fixed_step_methods_have_their_own_bound():
 # (test_hard_cases_governor.py's stick-slip base). A run's own mode log passes; the same run with one logged mode
 # change taken out (its stretch merged into the one before) claims the sleeve kept a mode whose guard went below 0
 # — what a missed event looks like — and is caught, naming the guard.
-STICK_SLIP = scene(DIRECT, governor__friction=1.0, governor__static_friction=3.0, governor__damping=100.0,
-                   scenario={"duration": 3.0, "external_load": 0.0,
-                             "load_events": [{"time": 0.5, "torque": 30.0, "ramp": 2.0}]},
-                   solver={"method": "DOP853", "rtol": 1e-8, "atol": 1e-10})
+STICK_SLIP = scene(
+    DIRECT,
+    governor__friction=1.0,
+    governor__static_friction=3.0,
+    governor__damping=100.0,
+    scenario={"duration": 3.0, "external_load": 0.0, "load_events": [{"time": 0.5, "torque": 30.0, "ramp": 2.0}]},
+    solver={"method": "DOP853", "rtol": 1e-8, "atol": 1e-10},
+)
 
 
 def test_a_run_passes_its_own_mode_log_and_a_missed_event_is_caught():
@@ -98,10 +118,12 @@ def test_a_run_passes_its_own_mode_log_and_a_missed_event_is_caught():
     assert mode_log_check(model, trajectory) is None
     assert self_checks(model, summarise(model, trajectory), trajectory) == []
     # the longest stretch after the first: its start taken out of the log, as if the solver had not seen it
-    lengths = [(end - start, index) for index, ((start, _), (end, _)) in
-               enumerate(zip(trajectory.modes[1:], trajectory.modes[2:]), start=1)]
+    lengths = [
+        (end - start, index)
+        for index, ((start, _), (end, _)) in enumerate(zip(trajectory.modes[1:], trajectory.modes[2:]), start=1)
+    ]
     _, missed = max(lengths)
-    doctored = dataclasses.replace(trajectory, modes=trajectory.modes[:missed] + trajectory.modes[missed + 1:])
+    doctored = dataclasses.replace(trajectory, modes=trajectory.modes[:missed] + trajectory.modes[missed + 1 :])
     check = mode_log_check(model, doctored)
     assert check is not None and check["value"] > check["allowed"] == MODE_PER_RTOL * 1e-8
     left_mode = trajectory.modes[missed - 1][1]

@@ -28,8 +28,9 @@ RUN_TIME = 0.3  # [s]: about 5 turns at 104 rad/s, 6 breakpoint crossings a turn
 
 def compressor_model(*overrides: str):
     """The compressor scene started at 100 rad/s (near its steady speed), for RUN_TIME."""
-    return build_model(load_scene("compressor", ["scenario.initial.omega=100.0", f"scenario.duration={RUN_TIME}",
-                                                 *overrides]))
+    return build_model(
+        load_scene("compressor", ["scenario.initial.omega=100.0", f"scenario.duration={RUN_TIME}", *overrides])
+    )
 
 
 @functools.cache
@@ -53,16 +54,19 @@ def crossing_reference() -> tuple[np.ndarray, np.ndarray]:
             line = forces[k] + slopes[k] * (x - positions[k])
             omega, epsilon = plain(t, y)
             return [omega, epsilon + (line - np.interp(x, positions, forces)) * dx / model.inertia(y[0])[0]]
+
         return rhs
 
     def piece(y):
         ahead = slider(y[0] + 1e-6)[0]  # x just after the restart: which segment the piece is on
         k = int(np.clip(np.searchsorted(positions, ahead, side="right") - 1, 0, len(slopes) - 1))
         events = []
-        for x_k, direction in zip(positions[k:k + 2], (-1.0, 1.0)):  # leaving the segment down or up
+        for x_k, direction in zip(positions[k : k + 2], (-1.0, 1.0)):  # leaving the segment down or up
             if positions[0] < x_k < positions[-1]:
+
                 def event(t, y, x_k=x_k):
                     return slider(y[0])[0] - x_k
+
                 event.terminal, event.direction = True, direction
                 events.append(event)
         return piece_rhs(k), events, None
@@ -71,8 +75,15 @@ def crossing_reference() -> tuple[np.ndarray, np.ndarray]:
     return restarted_reference(piece, np.array([initial.phi, initial.omega]), RUN_TIME)
 
 
-@pytest.mark.parametrize("method, rtol, path", [("DOP853", 1e-8, "reference"), ("DOP853", 1e-10, "reference"),
-                                                ("Radau", 1e-8, "reference"), ("DOP853", 1e-10, "fast")])
+@pytest.mark.parametrize(
+    "method, rtol, path",
+    [
+        ("DOP853", 1e-8, "reference"),
+        ("DOP853", 1e-10, "reference"),
+        ("Radau", 1e-8, "reference"),
+        ("DOP853", 1e-10, "fast"),
+    ],
+)
 def test_a_compressor_meets_its_rtol_against_a_reference_restarted_at_every_breakpoint(method, rtol, path):
     """The compressor (slider force table of 5 points over the stroke, motor, viscous and spring loads) at rtol =
     requested, atol = rtol x 0.01 rad/s: omega at every crossing within 3 rtol of the reference (relative to the mean

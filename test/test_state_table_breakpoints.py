@@ -26,8 +26,11 @@ from test_table_knots import assert_meets_rtol
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 
-VALVE = {"type": "table", "sleeve": [0.02, 0.027, 0.028, 0.03, 0.032, 0.08],
-         "throttle": [1.0, 0.8, 0.75, 0.62, 0.55, 0.0]}  # [m] -> [-]: kinks at every point (ends held beyond)
+VALVE = {
+    "type": "table",
+    "sleeve": [0.02, 0.027, 0.028, 0.03, 0.032, 0.08],
+    "throttle": [1.0, 0.8, 0.75, 0.62, 0.55, 0.0],
+}  # [m] -> [-]: kinks at every point (ends held beyond)
 STALL_TORQUE, NO_LOAD_SPEED = 60.0, 400.0  # the governed machine's linear motor [N m], [rad/s]
 GOVERNED_TIME = 1.0  # [s]: the sleeve falls from 0.033 m through 0.032, 0.03, 0.028, 0.027 m and back up past two
 COUPLING_KINKS = [-0.1, -0.05, 0.05, 0.1]  # press_coupling's table points where the slope jumps [rad] (not 0)
@@ -38,16 +41,27 @@ def governed_model(*overrides: str):
     """engine_direct's crank-slider, flywheel and governor with a linear motor (no kinks in phi) and the valve table
     VALVE, the sleeve started at 0.033 m, constant 6 N m load, for GOVERNED_TIME."""
     drive = {"type": "linear_motor", "stall_torque": STALL_TORQUE, "no_load_speed": NO_LOAD_SPEED}
-    return build_model(load_scene("engine_direct", [
-        f"scenario.duration={GOVERNED_TIME}", "scenario.load_events=[]", f"machine.drive={json.dumps(drive)}",
-        f"governor.valve={json.dumps(VALVE)}", "scenario.initial.sleeve=0.033", *overrides]))
+    return build_model(
+        load_scene(
+            "engine_direct",
+            [
+                f"scenario.duration={GOVERNED_TIME}",
+                "scenario.load_events=[]",
+                f"machine.drive={json.dumps(drive)}",
+                f"governor.valve={json.dumps(VALVE)}",
+                "scenario.initial.sleeve=0.033",
+                *overrides,
+            ],
+        )
+    )
 
 
 def coupled_model(*overrides: str):
     """press_coupling (rubber coupling table of 7 points, kinks at -0.1, -0.05, 0.05, 0.1 rad) started turning at
     150 rad/s untwisted, for COUPLED_TIME."""
-    return build_model(load_scene("press_coupling", [f"scenario.duration={COUPLED_TIME}",
-                                                     "scenario.initial.omega=150.0", *overrides]))
+    return build_model(
+        load_scene("press_coupling", [f"scenario.duration={COUPLED_TIME}", "scenario.initial.omega=150.0", *overrides])
+    )
 
 
 def restarted_reference(model, breaks: list[float], value, correction, t_end: float) -> tuple[np.ndarray, np.ndarray]:
@@ -60,14 +74,17 @@ def restarted_reference(model, breaks: list[float], value, correction, t_end: fl
     t, piece = 0.0, int(np.searchsorted(breaks, value(y), side="right"))
     times, omegas = [t], [y[1]]
     while t < t_end:
+
         def rhs(t, y, piece=piece):
             return np.asarray(plain(t, y)) + correction(piece, t, y)
 
         events = []
         for index, direction in ((piece - 1, -1.0), (piece, 1.0)):  # leaving the piece down or up
             if 0 <= index < len(breaks):
+
                 def event(t, y, level=breaks[index]):
                     return value(y) - level
+
                 event.terminal, event.direction = True, direction
                 events.append((event, index))
         found = solve_ivp(rhs, (t, t_end), y, events=[event for event, _ in events], **options)
@@ -102,8 +119,13 @@ def valve_reference() -> tuple[np.ndarray, np.ndarray]:
 
     def correction(piece, t, y):
         position = z(y)
-        held = throttle[0] if piece == 0 else throttle[-1] if piece == len(sleeve) else line(sleeve, throttle,
-                                                                                            piece - 1, position)
+        held = (
+            throttle[0]
+            if piece == 0
+            else throttle[-1]
+            if piece == len(sleeve)
+            else line(sleeve, throttle, piece - 1, position)
+        )
         moment = STALL_TORQUE * (1.0 - y[1] / NO_LOAD_SPEED)
         rates = np.zeros(len(y))
         rates[1] = (held - np.interp(position, sleeve, throttle)) * moment / model.inertia(y[0])[0]
@@ -124,8 +146,11 @@ def coupling_reference() -> tuple[np.ndarray, np.ndarray]:
     def segment(twist: float) -> int:
         return int(np.clip(np.searchsorted(twists, twist, side="right") - 1, 0, len(twists) - 2))
 
-    inside = [COUPLING_KINKS[0] - 1.0] + [0.5 * (a + b) for a, b in zip(COUPLING_KINKS, COUPLING_KINKS[1:])] + [
-        COUPLING_KINKS[-1] + 1.0]
+    inside = (
+        [COUPLING_KINKS[0] - 1.0]
+        + [0.5 * (a + b) for a, b in zip(COUPLING_KINKS, COUPLING_KINKS[1:])]
+        + [COUPLING_KINKS[-1] + 1.0]
+    )
 
     def correction(piece, t, y):
         difference = line(twists, moments, segment(inside[piece]), y[2]) - line(twists, moments, segment(y[2]), y[2])
@@ -145,13 +170,18 @@ def test_the_references_cross_the_breakpoints_and_the_coupling_table_has_its_int
     assert [table.breaks for table in coupled_model().state_tables] == [tuple(COUPLING_KINKS)]
 
 
-PATHS = [("DOP853", 1e-8, "reference"), ("DOP853", 1e-10, "reference"), ("Radau", 1e-8, "reference"),
-         ("DOP853", 1e-10, "fast")]
+PATHS = [
+    ("DOP853", 1e-8, "reference"),
+    ("DOP853", 1e-10, "reference"),
+    ("Radau", 1e-8, "reference"),
+    ("DOP853", 1e-10, "fast"),
+]
 
 
 @pytest.mark.parametrize("method, rtol, path", PATHS)
-def test_a_governor_with_a_valve_table_meets_its_rtol_against_a_reference_restarted_at_every_breakpoint(method, rtol,
-                                                                                                       path):
+def test_a_governor_with_a_valve_table_meets_its_rtol_against_a_reference_restarted_at_every_breakpoint(
+    method, rtol, path
+):
     """The governed machine at rtol = requested, atol = rtol x 0.01: omega at every crossing within 3 rtol of the
     reference (relative to the mean speed); see docs/hard_cases.md "Tables in the state"."""
     times, reference = valve_reference()

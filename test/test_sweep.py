@@ -33,8 +33,9 @@ def lathe_points(values: str = "4,15.453292519943295,40", *overrides: str):
 
 def same_rows(rows: list[dict], expected: list[dict]) -> None:
     """Equal rows but for the wall time: the same scenes, grid values and numbers, bit for bit."""
-    assert [{key: row[key] for key in ("scene", "machine.flywheel.inertia", *COMPARED)} for row in rows] == \
-           [{key: row[key] for key in ("scene", "machine.flywheel.inertia", *COMPARED)} for row in expected]
+    assert [{key: row[key] for key in ("scene", "machine.flywheel.inertia", *COMPARED)} for row in rows] == [
+        {key: row[key] for key in ("scene", "machine.flywheel.inertia", *COMPARED)} for row in expected
+    ]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -57,27 +58,44 @@ def test_grid_cartesian_product_sets_the_scene_keys():
     axes = [parse_grid("machine.flywheel.inertia=4,8"), parse_grid("machine.drive.torque=80:90:3")]
     points = sweep_points(["lathe"], LATHE_SHORT, axes)
     assert [tuple(point.values.values()) for point in points] == [
-        (4, 80.0), (4, 85.0), (4, 90.0), (8, 80.0), (8, 85.0), (8, 90.0)]
+        (4, 80.0),
+        (4, 85.0),
+        (4, 90.0),
+        (8, 80.0),
+        (8, 85.0),
+        (8, 90.0),
+    ]
     for point in points:
         assert point.scene["machine"]["flywheel"]["inertia"] == point.values["machine.flywheel.inertia"]
         assert point.scene["machine"]["drive"]["torque"] == point.values["machine.drive.torque"]
         assert point.scene["scenario"]["duration"] == 1.0
 
 
-@pytest.mark.parametrize("grid, expected", [
-    ("machine.flywheel.inertia", ["--grid 'machine.flywheel.inertia'", "expected KEY=START:STOP:N"]),
-    ("machine.flywheel.inertia=1:2:0", ["N = '0'", "whole number of values >= 1"]),
-    ("machine.flywheel.inertia=1:2:two", ["N = 'two'"]),
-    ("machine.flywheel.inertia=a:2:3", ["START and STOP must be numbers", "'a'"]),
-    ("machine.flywheel.inertia=0:2:3:log", ["geometric (log) grid needs START > 0"]),
-    ("machine.flywheel.inertia=1:2:3:lin", ["expected START:STOP:N or START:STOP:N:log"]),
-    ("machine.flywheel.inertai=1,2", ["--grid 'machine.flywheel.inertai=1,2'", "inertai: unknown key",
-                                      "did you mean 'inertia'"]),
-    ("machine.flywheel.inertia=5,-1", ["--grid 'machine.flywheel.inertia=5,-1'", "machine.flywheel.inertia = -1: input",
-                                       "greater than or equal to 0"]),
-    ("machine.loads.3.torque=1,2", ["--grid 'machine.loads.3.torque=1,2'", "must index the list (0 to 0)"]),
-    ("machine.flywheel.inertia=1,,2", ["an empty value in the list"]),
-])
+@pytest.mark.parametrize(
+    "grid, expected",
+    [
+        ("machine.flywheel.inertia", ["--grid 'machine.flywheel.inertia'", "expected KEY=START:STOP:N"]),
+        ("machine.flywheel.inertia=1:2:0", ["N = '0'", "whole number of values >= 1"]),
+        ("machine.flywheel.inertia=1:2:two", ["N = 'two'"]),
+        ("machine.flywheel.inertia=a:2:3", ["START and STOP must be numbers", "'a'"]),
+        ("machine.flywheel.inertia=0:2:3:log", ["geometric (log) grid needs START > 0"]),
+        ("machine.flywheel.inertia=1:2:3:lin", ["expected START:STOP:N or START:STOP:N:log"]),
+        (
+            "machine.flywheel.inertai=1,2",
+            ["--grid 'machine.flywheel.inertai=1,2'", "inertai: unknown key", "did you mean 'inertia'"],
+        ),
+        (
+            "machine.flywheel.inertia=5,-1",
+            [
+                "--grid 'machine.flywheel.inertia=5,-1'",
+                "machine.flywheel.inertia = -1: input",
+                "greater than or equal to 0",
+            ],
+        ),
+        ("machine.loads.3.torque=1,2", ["--grid 'machine.loads.3.torque=1,2'", "must index the list (0 to 0)"]),
+        ("machine.flywheel.inertia=1,,2", ["an empty value in the list"]),
+    ],
+)
 def test_bad_grid_is_a_clear_message_before_anything_runs(capsys, tmp_path, grid, expected):
     out = tmp_path / "sweep"
     code, stdout, stderr = run_cli(capsys, "sweep", "lathe", "--grid", grid, "--out", str(out), "--quiet")
@@ -87,11 +105,14 @@ def test_bad_grid_is_a_clear_message_before_anything_runs(capsys, tmp_path, grid
     assert not out.exists()  # refused before the output folder, let alone a run
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["--grid", "machine.flywheel.inertia=1,2", "--grid", "machine.flywheel.inertia=3"], "given more than once"),
-    (["--jobs", "0"], "--jobs 0: expected at least 1"),
-    (["--scheduler", "tcp://127.0.0.1:1"], "needs --engine dask"),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--grid", "machine.flywheel.inertia=1,2", "--grid", "machine.flywheel.inertia=3"], "given more than once"),
+        (["--jobs", "0"], "--jobs 0: expected at least 1"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "needs --engine dask"),
+    ],
+)
 def test_bad_sweep_options(capsys, tmp_path, argv, expected):
     code, _, stderr = run_cli(capsys, "sweep", "lathe", *argv, "--out", str(tmp_path / "out"), "--quiet")
     assert code == 2 and expected in stderr
@@ -134,9 +155,22 @@ def test_local_rows_equal_single_runs_in_point_order(single_runs, jobs):
 def test_a_failing_point_is_a_row_and_the_others_run(capsys, tmp_path):
     """The energy method refuses a negative initial speed at run time: that point's row says so."""
     out = tmp_path / "failing"
-    code, stdout, stderr = run_cli(capsys, "sweep", "lathe", "--set", "solver.method=energy", "--set",
-                                   "scenario.duration=0.5", "--grid", "scenario.initial.omega=15.15,-1,15",
-                                   "--jobs", "1", "--out", str(out), "--quiet")
+    code, stdout, stderr = run_cli(
+        capsys,
+        "sweep",
+        "lathe",
+        "--set",
+        "solver.method=energy",
+        "--set",
+        "scenario.duration=0.5",
+        "--grid",
+        "scenario.initial.omega=15.15,-1,15",
+        "--jobs",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert code == 0, stderr
     with (out / "sweep.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
@@ -164,8 +198,20 @@ def test_ctrl_c_keeps_the_finished_rows(capsys, tmp_path, monkeypatch):
 
     monkeypatch.setattr(sweep_module, "run_point", interrupted)
     out = tmp_path / "interrupted"
-    code, stdout, stderr = run_cli(capsys, "sweep", "lathe", "--set", "scenario.duration=0.5", "--grid",
-                                   "machine.flywheel.inertia=4,8,16", "--jobs", "1", "--out", str(out), "--quiet")
+    code, stdout, stderr = run_cli(
+        capsys,
+        "sweep",
+        "lathe",
+        "--set",
+        "scenario.duration=0.5",
+        "--grid",
+        "machine.flywheel.inertia=4,8,16",
+        "--jobs",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert code == 130 and "interrupted" in stderr
     with (out / "sweep.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
@@ -180,26 +226,42 @@ def test_ctrl_c_keeps_the_finished_rows(capsys, tmp_path, monkeypatch):
 @pytest.fixture(scope="module")
 def dask_cluster():
     """A Dask LocalCluster of one worker process, started by the test (as a user starts `dask scheduler`)."""
-    distributed = pytest.importorskip("dask.distributed", reason="the Dask tests need dask[distributed] "
-                                                                "(pip install 'mech_regulator[distributed]')")
+    distributed = pytest.importorskip(
+        "dask.distributed", reason="the Dask tests need dask[distributed] (pip install 'mech_regulator[distributed]')"
+    )
     cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None)
     yield cluster
     cluster.close()
 
 
 def test_dask_local_cluster_gives_the_local_rows(single_runs):
-    pytest.importorskip("dask.distributed", reason="the Dask tests need dask[distributed] "
-                                                   "(pip install 'mech_regulator[distributed]')")
+    pytest.importorskip(
+        "dask.distributed", reason="the Dask tests need dask[distributed] (pip install 'mech_regulator[distributed]')"
+    )
     same_rows(run_sweep(lathe_points(), jobs=2, engine="dask"), single_runs)
 
 
 def test_dask_scheduler_address_gives_the_local_rows(single_runs, dask_cluster, capsys, tmp_path):
     same_rows(run_sweep(lathe_points(), engine="dask", scheduler=dask_cluster.scheduler_address), single_runs)
     out = tmp_path / "dask"
-    code, stdout, stderr = run_cli(capsys, "sweep", "lathe", "--set", "scenario.duration=1.0", "--grid",
-                                   "machine.flywheel.inertia=4,15.453292519943295,40", "--engine", "dask",
-                                   "--scheduler", dask_cluster.scheduler_address, "--path", "reference", "--out", str(out),
-                                   "--quiet")
+    code, stdout, stderr = run_cli(
+        capsys,
+        "sweep",
+        "lathe",
+        "--set",
+        "scenario.duration=1.0",
+        "--grid",
+        "machine.flywheel.inertia=4,15.453292519943295,40",
+        "--engine",
+        "dask",
+        "--scheduler",
+        dask_cluster.scheduler_address,
+        "--path",
+        "reference",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert code == 0, stderr
     assert f"on a Dask cluster at {dask_cluster.scheduler_address}" in stdout
     with (out / "sweep.csv").open(newline="") as handle:
@@ -209,8 +271,18 @@ def test_dask_scheduler_address_gives_the_local_rows(single_runs, dask_cluster, 
 
 def test_dask_scheduler_that_does_not_answer(capsys, tmp_path):
     pytest.importorskip("dask.distributed", reason="the Dask tests need dask[distributed]")
-    code, _, stderr = run_cli(capsys, "sweep", "lathe", "--engine", "dask", "--scheduler", "tcp://127.0.0.1:9",
-                              "--out", str(tmp_path / "none"), "--quiet")
+    code, _, stderr = run_cli(
+        capsys,
+        "sweep",
+        "lathe",
+        "--engine",
+        "dask",
+        "--scheduler",
+        "tcp://127.0.0.1:9",
+        "--out",
+        str(tmp_path / "none"),
+        "--quiet",
+    )
     assert code == 2 and "--scheduler tcp://127.0.0.1:9: no Dask scheduler answers there" in stderr
 
 
@@ -227,9 +299,16 @@ def test_without_dask_the_message_gives_the_pip_command(capsys, tmp_path, monkey
 def test_stability_by_simulation_agrees_with_vyshnegradsky_away_from_the_boundary():
     """engine_direct (critical sleeve damping ~57 N s/m at 8 N m) with 10 and 300 N s/m: the oscillation after the
     load step grows into the sleeve's stops / decays, as A B < 1 / A B > 1 predicts."""
-    points = sweep_points(["engine_direct"], ["scenario.duration=4.5", "scenario.load_events=[{time: 0.5, torque: 8}]",
-                                              "solver.rtol=1e-6", "solver.atol=1e-8"],
-                          [parse_grid("governor.damping=10,300")])
+    points = sweep_points(
+        ["engine_direct"],
+        [
+            "scenario.duration=4.5",
+            "scenario.load_events=[{time: 0.5, torque: 8}]",
+            "solver.rtol=1e-6",
+            "solver.atol=1e-8",
+        ],
+        [parse_grid("governor.damping=10,300")],
+    )
     little, plenty = run_sweep(points, jobs=2)
     for row in (little, plenty):
         assert row["status"] == "complete", row["message"]
@@ -244,8 +323,18 @@ def test_flywheel_sweep_delta_falls_with_inertia_as_the_energy_swing_says(capsys
     """lathe (constant J, source 000): delta falls with the flywheel; for constant J the energy swing gives
     omega_max^2 - omega_min^2 = 2 dE_max / J, i.e. delta = dE_max / (J omega_m^2) exactly (pi F r / 4 = 78.54 J)."""
     out = tmp_path / "flywheel"
-    code, stdout, stderr = run_cli(capsys, "sweep", "lathe", "--set", "scenario.duration=2.0", "--grid",
-                                   "machine.flywheel.inertia=2:60:4:log", "--out", str(out), "--quiet")
+    code, stdout, stderr = run_cli(
+        capsys,
+        "sweep",
+        "lathe",
+        "--set",
+        "scenario.duration=2.0",
+        "--grid",
+        "machine.flywheel.inertia=2:60:4:log",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert code == 0, stderr
     with (out / "sweep.csv").open(newline="") as handle:
         reader = csv.DictReader(handle)
@@ -264,13 +353,25 @@ def test_flywheel_sweep_delta_falls_with_inertia_as_the_energy_swing_says(capsys
         assert swing == pytest.approx(math.pi * 100.0 / 4.0, rel=1e-9)
         inertia = model.inertia(0.0)[0]
         assert inertia == pytest.approx(2.0 + float(row["machine.flywheel.inertia"]), rel=1e-12)
-        assert float(row["delta"]) == pytest.approx(swing / (inertia * omega_m ** 2), rel=1e-4)
+        assert float(row["delta"]) == pytest.approx(swing / (inertia * omega_m**2), rel=1e-4)
 
 
 def test_a_list_of_scenes(capsys, tmp_path):
     out = tmp_path / "scenes"
-    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", "startup", "--set", "scenario.duration=0.5",
-                                   "--jobs", "1", "--out", str(out), "--quiet")
+    code, stdout, stderr = run_cli(
+        capsys,
+        "sweep",
+        "--scenes",
+        "lathe",
+        "startup",
+        "--set",
+        "scenario.duration=0.5",
+        "--jobs",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert code == 0, stderr
     with (out / "sweep.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
@@ -282,15 +383,30 @@ def test_fast_path_by_default_where_the_scene_compiles(capsys, tmp_path, single_
     out = tmp_path / "paths"
     # every machine compiles; a solver method without a compiled stepper stays on the reference path
     lsoda = write_scene(tmp_path, "name: lathe_lsoda\nbase: lathe\nsolver: {method: LSODA}\n", "lathe_lsoda.yaml")
-    code, stdout, stderr = run_cli(capsys, "sweep", "--scenes", "lathe", str(lsoda), "--set",
-                                   "scenario.duration=1.0", "--grid", "machine.flywheel.inertia=15.453292519943295",
-                                   "--jobs", "1", "--out", str(out), "--quiet")
+    code, stdout, stderr = run_cli(
+        capsys,
+        "sweep",
+        "--scenes",
+        "lathe",
+        str(lsoda),
+        "--set",
+        "scenario.duration=1.0",
+        "--grid",
+        "machine.flywheel.inertia=15.453292519943295",
+        "--jobs",
+        "1",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert code == 0, stderr
     with (out / "sweep.csv").open(newline="") as handle:
         rows = list(csv.DictReader(handle))
     # LSODA is not compiled: that scene runs on the reference path, and the row says so
     assert [(row["scene"], row["status"], row["path"]) for row in rows] == [
-        ("lathe", "complete", "fast"), ("lathe_lsoda", "complete", "reference")]
+        ("lathe", "complete", "fast"),
+        ("lathe_lsoda", "complete", "reference"),
+    ]
     assert float(rows[0]["omega_end"]) == pytest.approx(single_runs[1]["omega_end"], rel=1e-9)
     assert single_runs[1]["path"] == "reference"
 

@@ -28,8 +28,9 @@ ENGINE_TIME = 0.25  # [s]: 9 turns of the engine at 230 rad/s, 120 knots of its 
 
 
 def engine_model(*overrides: str):
-    return build_model(load_scene("engine", ["scenario.load_events=[]", f"scenario.duration={ENGINE_TIME}",
-                                             *overrides]))
+    return build_model(
+        load_scene("engine", ["scenario.load_events=[]", f"scenario.duration={ENGINE_TIME}", *overrides])
+    )
 
 
 @functools.cache
@@ -46,7 +47,7 @@ def knot_reference() -> tuple[np.ndarray, np.ndarray]:
     pressures = np.asarray(drive.pressure, dtype=float)
     ends, values = np.append(knots, cycle), np.append(pressures, pressures[0])
     slopes = np.diff(values) / np.diff(ends)
-    area = math.pi * drive.bore ** 2 / 4.0
+    area = math.pi * drive.bore**2 / 4.0
     plain = model.rhs()
 
     def piece_rhs(base: float, k: int):
@@ -58,6 +59,7 @@ def knot_reference() -> tuple[np.ndarray, np.ndarray]:
             line = values[k] + slopes[k] * (u - ends[k])
             omega, epsilon = plain(t, y)
             return [omega, epsilon - area * dq * (line - table) / J]
+
         return rhs
 
     def piece(y):
@@ -67,11 +69,13 @@ def knot_reference() -> tuple[np.ndarray, np.ndarray]:
 
         def knot(t, y):
             return y[0] - phi_next
+
         knot.terminal, knot.direction = True, 1.0
 
         def land(y):
             y[0] = phi_next
             return y
+
         return piece_rhs(base, k), [knot], land
 
     return restarted_reference(piece, np.array([0.0, model.scene.scenario.initial.omega]), ENGINE_TIME)
@@ -100,8 +104,15 @@ def restarted_reference(piece, y0: np.ndarray, t_end: float) -> tuple[np.ndarray
     return np.array(times), np.array(omegas)
 
 
-@pytest.mark.parametrize("method, rtol, path", [("DOP853", 1e-8, "reference"), ("DOP853", 1e-10, "reference"),
-                                                ("Radau", 1e-8, "reference"), ("DOP853", 1e-10, "fast")])
+@pytest.mark.parametrize(
+    "method, rtol, path",
+    [
+        ("DOP853", 1e-8, "reference"),
+        ("DOP853", 1e-10, "reference"),
+        ("Radau", 1e-8, "reference"),
+        ("DOP853", 1e-10, "fast"),
+    ],
+)
 def test_an_engine_meets_its_rtol_against_a_reference_restarted_at_every_knot(method, rtol, path):
     """The engine (one cylinder, an indicator diagram of 48 points per 720 deg, fan and viscous loads) at
     rtol = requested, atol = rtol x 0.01 rad/s: omega at every knot within 3 rtol of the reference (relative to
@@ -122,8 +133,9 @@ def test_rk45_meets_its_rtol_where_it_restarts(rtol):
     ends RK45's trajectory is scipy's free fourth-order interpolant, whose error the fifth-order step's error estimate
     does not control (docs/hard_cases.md, "RK45 on the engine")."""
     times, reference = knot_reference()
-    model = engine_model("solver.method=RK45", f"solver.rtol={rtol!r}", f"solver.atol={rtol * 1e-2!r}",
-                         "solver.path=reference")
+    model = engine_model(
+        "solver.method=RK45", f"solver.rtol={rtol!r}", f"solver.atol={rtol * 1e-2!r}", "solver.path=reference"
+    )
     trajectory = simulate_complete(model)
     grid, period = np.array(model.switch_grid()), model.dynamic_period()
     states = trajectory(times)
@@ -134,13 +146,15 @@ def test_rk45_meets_its_rtol_where_it_restarts(rtol):
     assert error <= 3.0 * rtol, f"{error / rtol:.2f} x rtol"
 
 
-def assert_meets_rtol(build, method: str, rtol: float, path: str, times: np.ndarray, reference: np.ndarray,
-                      min_switches: int) -> None:
+def assert_meets_rtol(
+    build, method: str, rtol: float, path: str, times: np.ndarray, reference: np.ndarray, min_switches: int
+) -> None:
     """The model build(*overrides) run at rtol = requested, atol = rtol x 0.01 rad/s on `path` restarts at least
     min_switches times (on knots or crossings) and keeps omega within 3 rtol of the reference at its times (relative
     to its mean)."""
-    model = build(f"solver.method={method}", f"solver.rtol={rtol!r}", f"solver.atol={rtol * 1e-2!r}",
-                  f"solver.path={path}")
+    model = build(
+        f"solver.method={method}", f"solver.rtol={rtol!r}", f"solver.atol={rtol * 1e-2!r}", f"solver.path={path}"
+    )
     trajectory = integrate_compiled(model) if path == "fast" else simulate_complete(model)
     assert trajectory.status == "complete"
     assert trajectory.stats.switches >= min_switches
@@ -151,10 +165,15 @@ def assert_meets_rtol(build, method: str, rtol: float, path: str, times: np.ndar
 def on_off_scene(load: dict) -> dict:
     """A lathe-like machine: constant inertia 2 kg m^2, linear motor 200 N m stall, 100 rad/s no-load, and `load`
     (on 20-90 and 200-260 deg of each turn), started at 90 rad/s for 2 s, DOP853 at rtol 1e-10."""
-    return {"machine": {"inertia": 2.0, "drive": {"type": "linear_motor", "stall_torque": 200.0,
-                                                  "no_load_speed": 100.0}, "loads": [load]},
-            "scenario": {"initial": {"omega": 90.0}, "duration": 2.0},
-            "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}}
+    return {
+        "machine": {
+            "inertia": 2.0,
+            "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 100.0},
+            "loads": [load],
+        },
+        "scenario": {"initial": {"omega": 90.0}, "duration": 2.0},
+        "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12},
+    }
 
 
 CUT_DEG = [(20.0, 90.0), (200.0, 260.0)]
@@ -176,8 +195,7 @@ def last_turn_motion(trajectory) -> tuple[float, float]:
     """(omega_m [rad/s], delta) over the last full turn of the run: omega_m = 2 pi / (the turn's time), delta =
     (omega_max - omega_min) / omega_m from samples every 1e-6 s."""
     phi_end = float(trajectory(trajectory.t_end)[0])
-    t_turn = optimize.brentq(lambda t: trajectory(t)[0] - (phi_end - 2.0 * math.pi), 0.0, trajectory.t_end,
-                             xtol=1e-15)
+    t_turn = optimize.brentq(lambda t: trajectory(t)[0] - (phi_end - 2.0 * math.pi), 0.0, trajectory.t_end, xtol=1e-15)
     omega = trajectory(np.linspace(t_turn, trajectory.t_end, int((trajectory.t_end - t_turn) / 1e-6) + 1))[1]
     omega_m = 2.0 * math.pi / (trajectory.t_end - t_turn)
     return omega_m, (omega.max() - omega.min()) / omega_m
@@ -193,9 +211,14 @@ def test_a_step_like_table_load_moves_the_machine_as_the_cutting_load(method, ra
     DOP853 takes 435 steps, 232 of them onto knots, against the cutting run's 120 (before: 1994 steps, omega at 2 s
     off by 3e-9 relative; Radau 2902 steps, 3e-8)."""
     solver = {"method": method, "rtol": 1e-10, "atol": 1e-12}
-    cutting = simulate_complete(model_of({**on_off_scene({"type": "cutting", "torque": CUT_TORQUE,
-                                                         "intervals_deg": [list(c) for c in CUT_DEG]}),
-                                         "solver": solver}))
+    cutting = simulate_complete(
+        model_of(
+            {
+                **on_off_scene({"type": "cutting", "torque": CUT_TORQUE, "intervals_deg": [list(c) for c in CUT_DEG]}),
+                "solver": solver,
+            }
+        )
+    )
     table = simulate_complete(model_of({**on_off_scene(step_like_table(ramp_deg)), "solver": solver}))
     assert table.stats.switches >= 8 * 25  # the 8 knots of every turn are restarts
     assert table.stats.steps <= 2 * cutting.stats.steps + table.stats.switches
@@ -209,8 +232,14 @@ def test_a_step_like_table_load_moves_the_machine_as_the_cutting_load(method, ra
 
 def test_knots_where_the_slope_does_not_change_are_not_switches():
     """A table drive with points on one straight line between its corners restarts only at the corners."""
-    model = model_of({"machine": {"inertia": 1.0, "drive": {"type": "table", "angle_deg": [0.0, 90.0, 120.0, 180.0],
-                                                            "torque": [10.0, 10.0, 20.0, 40.0]},
-                                  "loads": [{"type": "viscous", "coefficient": 0.1}]},
-                      "scenario": {"initial": {"omega": 10.0}, "duration": 0.1}})
+    model = model_of(
+        {
+            "machine": {
+                "inertia": 1.0,
+                "drive": {"type": "table", "angle_deg": [0.0, 90.0, 120.0, 180.0], "torque": [10.0, 10.0, 20.0, 40.0]},
+                "loads": [{"type": "viscous", "coefficient": 0.1}],
+            },
+            "scenario": {"initial": {"omega": 10.0}, "duration": 0.1},
+        }
+    )
     assert [round(math.degrees(angle), 9) for angle, _ in model.kink_angles()] == [0.0, 90.0, 180.0]

@@ -25,29 +25,36 @@ from mech_regulator.scene import load_scene
 J1, I2 = 0.5, 0.2  # [kg m^2]
 
 
-def two_mass(coupling: dict, driven_loads: list, duration: float = 0.3, drive: float = 40.0, omega: float = 10.0,
-             **driven) -> dict:
+def two_mass(
+    coupling: dict, driven_loads: list, duration: float = 0.3, drive: float = 40.0, omega: float = 10.0, **driven
+) -> dict:
     """Constant drive on J1, a viscous load on the crank, the driven part with `driven_loads`."""
-    return {"name": "two_mass_test",
-            "machine": {"inertia": J1, "drive": {"type": "constant", "torque": drive},
-                        "loads": [{"type": "viscous", "coefficient": 0.05}],
-                        "coupling": {**coupling, "driven": {"inertia": I2, "loads": driven_loads, **driven}}},
-            "scenario": {"initial": {"omega": omega, "twist": 0.0}, "duration": duration},
-            "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12}}
+    return {
+        "name": "two_mass_test",
+        "machine": {
+            "inertia": J1,
+            "drive": {"type": "constant", "torque": drive},
+            "loads": [{"type": "viscous", "coefficient": 0.05}],
+            "coupling": {**coupling, "driven": {"inertia": I2, "loads": driven_loads, **driven}},
+        },
+        "scenario": {"initial": {"omega": omega, "twist": 0.0}, "duration": duration},
+        "solver": {"method": "DOP853", "rtol": 1e-10, "atol": 1e-12},
+    }
 
 
 def cubic_table(k1: float, k3: float, span: float = 0.1, points: int = 2001) -> dict:
     """The hardening characteristic M = k1 twist + k3 twist^3 sampled on `points` twists over +-span [rad]."""
     twist = np.linspace(-span, span, points)
-    return {"twist": twist.tolist(), "moment": (k1 * twist + k3 * twist ** 3).tolist()}
+    return {"twist": twist.tolist(), "moment": (k1 * twist + k3 * twist**3).tolist()}
 
 
 def test_linear_table_gives_the_stiffness_run():
     """A table through (-1, -k), (0, 0), (1, k) is the linear coupling: same trajectory to solver tolerance."""
     loads = [{"type": "viscous", "coefficient": 0.1}, {"type": "constant", "torque": 10.0}]
     linear = model_of(two_mass({"stiffness": 2e4, "damping": 3.0}, loads))
-    table = model_of(two_mass({"characteristic": {"twist": [-1.0, 0.0, 1.0], "moment": [-2e4, 0.0, 2e4]},
-                               "damping": 3.0}, loads))
+    table = model_of(
+        two_mass({"characteristic": {"twist": [-1.0, 0.0, 1.0], "moment": [-2e4, 0.0, 2e4]}, "damping": 3.0}, loads)
+    )
     times = np.linspace(0.0, 0.3, 301)
     a, b = simulate_complete(linear)(times), simulate_complete(table)(times)
     assert np.max(np.abs(a - b), axis=1) == pytest.approx(np.zeros(4), abs=1e-9)
@@ -60,25 +67,30 @@ def test_hardening_characteristic_against_an_independent_ode():
     moment, so 1e-4 of the range), E_elastic = k1 tw^2 / 2 + k3 tw^4 / 4 (oracle: its integral), and the energy
     balance closes with it."""
     k1, k3, c, c2, load = 500.0, 5e5, 2.0, 0.1, 10.0
-    model = model_of(two_mass({"characteristic": cubic_table(k1, k3), "damping": c},
-                              [{"type": "viscous", "coefficient": c2}, {"type": "constant", "torque": load}]))
+    model = model_of(
+        two_mass(
+            {"characteristic": cubic_table(k1, k3), "damping": c},
+            [{"type": "viscous", "coefficient": c2}, {"type": "constant", "torque": load}],
+        )
+    )
     trajectory = simulate_complete(model)
 
     def exact(t, y):
         phi, omega, twist, omega2 = y
-        passed = k1 * twist + k3 * twist ** 3 + c * (omega - omega2)
+        passed = k1 * twist + k3 * twist**3 + c * (omega - omega2)
         return [omega, (40.0 - 0.05 * omega - passed) / J1, omega - omega2, (passed - c2 * omega2 - load) / I2]
 
     times = np.linspace(0.0, 0.3, 301)
-    reference = integrate.solve_ivp(exact, (0.0, 0.3), [0.0, 10.0, 0.0, 10.0], method="DOP853", t_eval=times,
-                                    rtol=1e-11, atol=1e-13).y
+    reference = integrate.solve_ivp(
+        exact, (0.0, 0.3), [0.0, 10.0, 0.0, 10.0], method="DOP853", t_eval=times, rtol=1e-11, atol=1e-13
+    ).y
     states = trajectory(times)
     assert np.max(np.abs(states[2] - reference[2])) < 1e-4 * np.ptp(reference[2])
     assert np.max(np.abs(states[3] - reference[3])) < 1e-4 * np.ptp(reference[3])
     assert np.max(np.abs(reference[2])) > 0.02  # the cubic term matters: k3 tw^2 / k1 > 0.4
     twist = model.columns(times, states)["twist"]
     energy = model.columns(times, states)["E_elastic"]
-    assert np.max(np.abs(energy - (k1 * twist ** 2 / 2 + k3 * twist ** 4 / 4))) < 1e-5 * np.max(energy)
+    assert np.max(np.abs(energy - (k1 * twist**2 / 2 + k3 * twist**4 / 4))) < 1e-5 * np.max(energy)
     assert abs(energy_balance(model, trajectory).relative_residual) < 1e-8
 
 
@@ -86,12 +98,13 @@ def crank_slider_inertia(phi2: np.ndarray, crank: float, rod: float, mass: float
     """A central crank-slider with a massless rod: the slider's x = R cos phi + sqrt(l^2 - R^2 sin^2 phi) and
     its reduced inertia m (dx/dphi)^2 with the velocity ratio dx/dphi by central differences of x (written here
     from the geometry, independently of mechanisms/)."""
+
     def position(angle):
-        return crank * np.cos(angle) + np.sqrt(rod ** 2 - (crank * np.sin(angle)) ** 2)
+        return crank * np.cos(angle) + np.sqrt(rod**2 - (crank * np.sin(angle)) ** 2)
 
     h = 1e-5
     ratio = (position(phi2 + h) - position(phi2 - h)) / (2 * h)
-    return mass * ratio ** 2, ratio
+    return mass * ratio**2, ratio
 
 
 def test_position_dependent_driven_part_against_an_independent_ode_and_the_energy_balance():
@@ -107,8 +120,12 @@ def test_position_dependent_driven_part_against_an_independent_ode_and_the_energ
     trajectory = simulate_complete(model)
 
     def inertia(angle: float) -> float:  # scalar form of crank_slider_inertia, for speed
-        ratio = (math.cos(angle + 1e-5) * crank + math.sqrt(rod ** 2 - (crank * math.sin(angle + 1e-5)) ** 2)
-                 - math.cos(angle - 1e-5) * crank - math.sqrt(rod ** 2 - (crank * math.sin(angle - 1e-5)) ** 2)) / 2e-5
+        ratio = (
+            math.cos(angle + 1e-5) * crank
+            + math.sqrt(rod**2 - (crank * math.sin(angle + 1e-5)) ** 2)
+            - math.cos(angle - 1e-5) * crank
+            - math.sqrt(rod**2 - (crank * math.sin(angle - 1e-5)) ** 2)
+        ) / 2e-5
         return mass * ratio * ratio
 
     def exact(t, y):
@@ -116,13 +133,14 @@ def test_position_dependent_driven_part_against_an_independent_ode_and_the_energ
         phi2 = phi - twist
         links = inertia(phi2)
         slope = (inertia(phi2 + 1e-4) - inertia(phi2 - 1e-4)) / 2e-4
-        passed = k1 * twist + k3 * twist ** 3
-        driven = passed - c_slider * links / mass * omega2 - 5.0 - 0.5 * slope * omega2 ** 2
+        passed = k1 * twist + k3 * twist**3
+        driven = passed - c_slider * links / mass * omega2 - 5.0 - 0.5 * slope * omega2**2
         return [omega, (40.0 - 0.05 * omega - passed) / J1, omega - omega2, driven / (I2 + links)]
 
     times = np.linspace(0.0, 0.4, 201)
-    reference = integrate.solve_ivp(exact, (0.0, 0.4), [0.0, 10.0, 0.0, 10.0], method="DOP853", t_eval=times,
-                                    rtol=1e-9, atol=1e-11).y
+    reference = integrate.solve_ivp(
+        exact, (0.0, 0.4), [0.0, 10.0, 0.0, 10.0], method="DOP853", t_eval=times, rtol=1e-9, atol=1e-11
+    ).y
     states = trajectory(times)
     assert np.max(np.abs(states[3] - reference[3])) < 1e-4 * np.max(np.abs(reference[3]))
     assert np.max(np.abs(states[2] - reference[2])) < 1e-4 * np.ptp(reference[2])  # the table's h^2 error
@@ -174,11 +192,20 @@ def test_held_driven_mechanism_with_a_branch_breaks_away_and_balances_energy():
     section torque M_n + (I_n / i_1n) epsilon_driven, and the energy balance closes with I2(phi2)."""
     k, drive, load, branch_load, ratio, branch_inertia = 2e4, 40.0, 5.0, 12.0, 2.0, 0.4
     mechanism = {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 30.0}
-    data = start_from_rest(k, [{"type": "constant", "torque": load}, {"type": "slider_viscous", "coefficient": 50.0}],
-                           drive, duration=0.3)
-    data["machine"]["coupling"]["driven"].update(mechanism=mechanism, branches=[
-        {"name": "feed", "inertia": branch_inertia, "ratio": ratio,
-         "loads": [{"type": "constant", "torque": branch_load}]}])
+    data = start_from_rest(
+        k, [{"type": "constant", "torque": load}, {"type": "slider_viscous", "coefficient": 50.0}], drive, duration=0.3
+    )
+    data["machine"]["coupling"]["driven"].update(
+        mechanism=mechanism,
+        branches=[
+            {
+                "name": "feed",
+                "inertia": branch_inertia,
+                "ratio": ratio,
+                "loads": [{"type": "constant", "torque": branch_load}],
+            }
+        ],
+    )
     model = model_of(data)
     trajectory = simulate_complete(model)
     resistance = load + branch_load / ratio
@@ -196,26 +223,50 @@ def test_held_driven_mechanism_with_a_branch_breaks_away_and_balances_energy():
     assert abs(energy_balance(model, trajectory).relative_residual) < 1e-8
 
 
-@pytest.mark.parametrize("driven, message", [
-    ({"mechanism": {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 3.0}},
-     "clutch.driven.mechanism (crank_slider)"),
-    ({"loads": [{"type": "table", "angle_deg": [0.0, 180.0], "torque": [1.0, 2.0]}],},
-     "clutch.driven.loads[0] type 'table' reads the driven part's angle"),
-])
+@pytest.mark.parametrize(
+    "driven, message",
+    [
+        (
+            {"mechanism": {"type": "crank_slider", "crank": 0.1, "rod": 0.4, "slider_mass": 3.0}},
+            "clutch.driven.mechanism (crank_slider)",
+        ),
+        (
+            {
+                "loads": [{"type": "table", "angle_deg": [0.0, 180.0], "torque": [1.0, 2.0]}],
+            },
+            "clutch.driven.loads[0] type 'table' reads the driven part's angle",
+        ),
+    ],
+)
 def test_clutch_refuses_an_angle_dependent_driven_part(tmp_path, capsys, driven, message):
     """Behind a clutch the driven part has no angle state: its mechanism and angle loads are refused by name."""
-    data = {"name": "clutch_angle", "machine": {"inertia": 0.5, "drive": {"type": "constant", "torque": 40.0},
-                                                "clutch": {"static_torque": 30.0, "kinetic_torque": 25.0,
-                                                           "driven": {"inertia": 1.0, **driven}}},
-            "scenario": {"duration": 0.1}}
+    data = {
+        "name": "clutch_angle",
+        "machine": {
+            "inertia": 0.5,
+            "drive": {"type": "constant", "torque": 40.0},
+            "clutch": {"static_torque": 30.0, "kinetic_torque": 25.0, "driven": {"inertia": 1.0, **driven}},
+        },
+        "scenario": {"duration": 0.1},
+    }
     code, _, err = run_cli(capsys, "simulate", str(write_scene(tmp_path, yaml.safe_dump(data))), "--quiet")
     assert code == 2 and message in err
 
 
 def test_branch_loads_are_rotor_loads_only(tmp_path, capsys):
     """A branch is reduced by its ratio alone: a table in the driven angle on a branch is refused by the schema."""
-    data = two_mass({"stiffness": 1e3}, [], branches=[{"name": "b", "inertia": 1.0, "ratio": 2.0, "loads": [
-        {"type": "table", "angle_deg": [0.0, 180.0], "torque": [1.0, 2.0]}]}])
+    data = two_mass(
+        {"stiffness": 1e3},
+        [],
+        branches=[
+            {
+                "name": "b",
+                "inertia": 1.0,
+                "ratio": 2.0,
+                "loads": [{"type": "table", "angle_deg": [0.0, 180.0], "torque": [1.0, 2.0]}],
+            }
+        ],
+    )
     code, _, err = run_cli(capsys, "simulate", str(write_scene(tmp_path, yaml.safe_dump(data))), "--quiet")
     assert code == 2 and "branches" in err and "table" in err
 
@@ -231,8 +282,9 @@ def test_no_period_1_when_the_driven_part_moves_at_once():
 
 def test_largest_coupling_moment_is_located_on_the_dense_output():
     """The peak of M_m found by the summary is the maximum of M_m on a 100x finer grid around it, to 1e-9."""
-    model = model_of(start_from_rest(2e4, [{"type": "viscous", "coefficient": 0.5}, {"type": "constant",
-                                                                                    "torque": 5.0}]))
+    model = model_of(
+        start_from_rest(2e4, [{"type": "viscous", "coefficient": 0.5}, {"type": "constant", "torque": 5.0}])
+    )
     trajectory = simulate_complete(model)
     peak = motion_periods(model, trajectory, analyse_steady_state(model, trajectory)).peak
     fine = np.linspace(peak.time - 1e-3, peak.time + 1e-3, 20001)
@@ -245,13 +297,16 @@ def test_largest_coupling_moment_is_located_on_the_dense_output():
 # ----------------------------------------------------------------------------------------------------------------
 # The inverse problem
 
-MOTOR_SCENE = {"name": "motor_two_mass",
-               "machine": {"inertia": 5.0, "drive": {"type": "linear_motor", "stall_torque": 200.0,
-                                                     "no_load_speed": 120.0},
-                           "coupling": {"stiffness": 1000.0,
-                                        "driven": {"inertia": 0.2, "loads": [{"type": "constant", "torque": 20.0}]}}},
-               "scenario": {"duration": 4.0},
-               "solver": {"rtol": 1e-10, "atol": 1e-12}}
+MOTOR_SCENE = {
+    "name": "motor_two_mass",
+    "machine": {
+        "inertia": 5.0,
+        "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 120.0},
+        "coupling": {"stiffness": 1000.0, "driven": {"inertia": 0.2, "loads": [{"type": "constant", "torque": 20.0}]}},
+    },
+    "scenario": {"duration": 4.0},
+    "solver": {"rtol": 1e-10, "atol": 1e-12},
+}
 
 
 @pytest.fixture(scope="module")
@@ -272,10 +327,14 @@ def test_inverse_problem_run_forward_reproduces_the_law(inverse):
     assert result.law.amplitude == pytest.approx(2.7, rel=1e-10)
     assert result.realisable and result.stretch == "steady motion"
     assert result.jump == pytest.approx(0.2 * (2.7 * 108.0 - 108.0 / 1.0), rel=1e-9)  # I2 (A k - omega_m / T)
-    forward = scene(MOTOR_SCENE, machine__coupling={"characteristic": {"twist": result.table_twist.tolist(),
-                                                                       "moment": result.table_moment.tolist()},
-                                                    "driven": MOTOR_SCENE["machine"]["coupling"]["driven"]},
-                    scenario={"duration": 5 * 2 * math.pi / 108.0, "initial": result.initial})
+    forward = scene(
+        MOTOR_SCENE,
+        machine__coupling={
+            "characteristic": {"twist": result.table_twist.tolist(), "moment": result.table_moment.tolist()},
+            "driven": MOTOR_SCENE["machine"]["coupling"]["driven"],
+        },
+        scenario={"duration": 5 * 2 * math.pi / 108.0, "initial": result.initial},
+    )
     forward_model = model_of(forward)
     trajectory = simulate_complete(forward_model)
     times = np.linspace(0.0, forward["scenario"]["duration"], 501)
@@ -291,7 +350,7 @@ def test_inverse_problem_characteristic_is_the_reduced_stiffness(inverse):
     _, result = inverse
     twist, moment = result.table_twist, result.table_moment
     slope = np.ptp(moment[1:]) / np.ptp(twist[1:])
-    assert slope == pytest.approx(5.0 * 0.2 / 5.2 * 108.0 ** 2, rel=0.01)
+    assert slope == pytest.approx(5.0 * 0.2 / 5.2 * 108.0**2, rel=0.01)
 
 
 def test_inverse_problem_with_a_viscous_driven_load_needs_more_than_a_spring():
@@ -308,8 +367,22 @@ def test_coupling_command_end_to_end(tmp_path, capsys):
     """coupling writes the table, a scene that uses it (it loads and runs), the picture and JSON."""
     path = write_scene(tmp_path, yaml.safe_dump(MOTOR_SCENE))
     table, forward, picture = tmp_path / "table.csv", tmp_path / "forward.yaml", tmp_path / "inverse.png"
-    code, out, err = run_cli(capsys, "coupling", str(path), "--run-up", "1", "--delta", "0.05", "--out", str(table),
-                             "--scene-out", str(forward), "--plot", str(picture), "--json")
+    code, out, err = run_cli(
+        capsys,
+        "coupling",
+        str(path),
+        "--run-up",
+        "1",
+        "--delta",
+        "0.05",
+        "--out",
+        str(table),
+        "--scene-out",
+        str(forward),
+        "--plot",
+        str(picture),
+        "--json",
+    )
     assert code == 0, err
     answer = json.loads(out)
     assert answer["realisable"] and answer["law"]["omega_m"] == pytest.approx(108.0)
@@ -322,11 +395,14 @@ def test_coupling_command_end_to_end(tmp_path, capsys):
     assert code == 0 and "periods: 1 start-up none" in out and "largest coupling moment" in out
 
 
-@pytest.mark.parametrize("options, message", [
-    (["--delta", "3"], "--delta 3: expected a value between 0 and 2"),
-    (["--run-up", "-1"], "--run-up -1"),
-    (["--points", "2"], "--points 2"),
-])
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        (["--delta", "3"], "--delta 3: expected a value between 0 and 2"),
+        (["--run-up", "-1"], "--run-up -1"),
+        (["--points", "2"], "--points 2"),
+    ],
+)
 def test_coupling_command_bad_options(tmp_path, capsys, options, message):
     path = write_scene(tmp_path, yaml.safe_dump(MOTOR_SCENE))
     arguments = {"--run-up": "1", "--delta": "0.05"}
@@ -343,12 +419,15 @@ def test_coupling_command_refuses_scenes_it_does_not_cover(capsys):
     assert code == 2 and "crank angle" in err and "motor" in err
 
 
-@pytest.mark.parametrize("characteristic, message", [
-    ({"twist": [0.0, 0.1, 0.05], "moment": [0.0, 1.0, 2.0]}, "must be strictly increasing"),
-    ({"twist": [0.01, 0.1], "moment": [1.0, 2.0]}, "expected the point twist 0 -> moment 0"),
-    ({"twist": [0.0, 0.1, 0.2], "moment": [0.0, 5.0, 4.0]}, "does not rise from twist 0.1 to 0.2"),
-    ({"twist": [0.0, 0.1, 0.2], "moment": [0.0, 1.0]}, "expected one moment per twist"),
-])
+@pytest.mark.parametrize(
+    "characteristic, message",
+    [
+        ({"twist": [0.0, 0.1, 0.05], "moment": [0.0, 1.0, 2.0]}, "must be strictly increasing"),
+        ({"twist": [0.01, 0.1], "moment": [1.0, 2.0]}, "expected the point twist 0 -> moment 0"),
+        ({"twist": [0.0, 0.1, 0.2], "moment": [0.0, 5.0, 4.0]}, "does not rise from twist 0.1 to 0.2"),
+        ({"twist": [0.0, 0.1, 0.2], "moment": [0.0, 1.0]}, "expected one moment per twist"),
+    ],
+)
 def test_bad_characteristic_tables_get_clear_messages(tmp_path, capsys, characteristic, message):
     data = two_mass({"characteristic": characteristic}, [])
     path = write_scene(tmp_path, yaml.safe_dump(data))

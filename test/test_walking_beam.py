@@ -163,9 +163,22 @@ def test_velocities_scale_with_omega_and_accelerations_with_its_square():
 # Reduced inertia and weight moment
 
 
-MASSES = dict(crank_mass=1.2, crank_cg=0.04, coupler_mass=3.0, coupler_cg=0.16, coupler_cg_angle=math.radians(20),
-              coupler_inertia=0.025, rocker_mass=1.5, rocker_cg=0.11, rocker_inertia=0.0068, tie_mass=2.0,
-              side_mass=1.0, side_cg=0.08, side_inertia=0.0023, shuttle_mass=10.0)
+MASSES = dict(
+    crank_mass=1.2,
+    crank_cg=0.04,
+    coupler_mass=3.0,
+    coupler_cg=0.16,
+    coupler_cg_angle=math.radians(20),
+    coupler_inertia=0.025,
+    rocker_mass=1.5,
+    rocker_cg=0.11,
+    rocker_inertia=0.0068,
+    tie_mass=2.0,
+    side_mass=1.0,
+    side_cg=0.08,
+    side_inertia=0.0023,
+    shuttle_mass=10.0,
+)
 GRAVITY = (0.3, -9.81)
 
 
@@ -185,12 +198,18 @@ def test_reduced_inertia_is_the_definition_with_numerical_velocities(numerical):
             points["S5"] = points["S3"] + s
             points["S6"] = points["E"] + g.side_cg * cmath.exp(1j * (th3 + bc_angle))
         v = {key: first_difference(entry, key) for key in ("S2", "S3", "S5", "B", "S6", "C")}
-        w3 = ((entry[1e-4]["th3"] - entry[-1e-4]["th3"]) / 2e-4)
-        w4 = ((entry[1e-4]["th4"] - entry[-1e-4]["th4"]) / 2e-4)
-        expected = (g.coupler_mass * abs(v["S2"]) ** 2 + g.coupler_inertia * w3 ** 2
-                    + g.rocker_mass * (abs(v["S3"]) ** 2 + abs(v["S5"]) ** 2) + 2.0 * g.rocker_inertia * w4 ** 2
-                    + g.tie_mass * abs(v["B"]) ** 2 + g.side_mass * abs(v["S6"]) ** 2 + g.side_inertia * w3 ** 2
-                    + g.shuttle_mass * abs(v["C"]) ** 2)
+        w3 = (entry[1e-4]["th3"] - entry[-1e-4]["th3"]) / 2e-4
+        w4 = (entry[1e-4]["th4"] - entry[-1e-4]["th4"]) / 2e-4
+        expected = (
+            g.coupler_mass * abs(v["S2"]) ** 2
+            + g.coupler_inertia * w3**2
+            + g.rocker_mass * (abs(v["S3"]) ** 2 + abs(v["S5"]) ** 2)
+            + 2.0 * g.rocker_inertia * w4**2
+            + g.tie_mass * abs(v["B"]) ** 2
+            + g.side_mass * abs(v["S6"]) ** 2
+            + g.side_inertia * w3**2
+            + g.shuttle_mass * abs(v["C"]) ** 2
+        )
         assert reduced(phi)[0] == pytest.approx(expected, rel=1e-7)
 
 
@@ -205,28 +224,38 @@ def test_inertia_derivative_and_weight_moment_match_differences():
 
     def potential(phi):
         (th3, _, _, th4, _, _), points = walking_beam.solve(phi, g)
-        centres = [(g.crank_mass, g.crank_cg * cmath.exp(1j * phi)),
-                   (g.coupler_mass, points["A"][0] + g.coupler_cg * cmath.exp(1j * (th3 + g.coupler_cg_angle))),
-                   (2.0 * g.rocker_mass, O2 + g.rocker_cg * cmath.exp(1j * th4)), (g.tie_mass, points["B"][0]),
-                   (g.side_mass, points["E"][0] + g.side_cg * cmath.exp(1j * (th3 + bc_angle))),
-                   (g.shuttle_mass, points["C"][0])]
+        centres = [
+            (g.crank_mass, g.crank_cg * cmath.exp(1j * phi)),
+            (g.coupler_mass, points["A"][0] + g.coupler_cg * cmath.exp(1j * (th3 + g.coupler_cg_angle))),
+            (2.0 * g.rocker_mass, O2 + g.rocker_cg * cmath.exp(1j * th4)),
+            (g.tie_mass, points["B"][0]),
+            (g.side_mass, points["E"][0] + g.side_cg * cmath.exp(1j * (th3 + bc_angle))),
+            (g.shuttle_mass, points["C"][0]),
+        ]
         return -sum(m * (gravity.conjugate() * S).real for m, S in centres)
 
     h = 1e-5
     for phi in ANGLES:
         J_plus, J_minus = reduced(phi + h)[0], reduced(phi - h)[0]
         assert reduced(phi)[1] == pytest.approx((J_plus - J_minus) / (2 * h), rel=1e-6, abs=1e-9)
-        assert reduced(phi)[2] == pytest.approx(-(potential(phi + h) - potential(phi - h)) / (2 * h), rel=1e-6,
-                                                abs=1e-8)
-        assert reduced(phi)[3:] == pytest.approx((walking_beam.solve(phi, g)[1]["C"][0].real,
-                                                  walking_beam.solve(phi, g)[1]["C"][1].real), abs=1e-15)
+        assert reduced(phi)[2] == pytest.approx(
+            -(potential(phi + h) - potential(phi - h)) / (2 * h), rel=1e-6, abs=1e-8
+        )
+        assert reduced(phi)[3:] == pytest.approx(
+            (walking_beam.solve(phi, g)[1]["C"][0].real, walking_beam.solve(phi, g)[1]["C"][1].real), abs=1e-15
+        )
 
 
 def coasting(**mechanism_changes):
     """The bundled walking beam coasting from 10 rad/s: no drive, no loads (conservative), 0.7 s."""
-    data = scene(SCENE, machine__drive=None, machine__loads=[], scenario__duration=0.7,
-                 scenario__initial={"phi": 0.3, "omega": 10.0}, solver={"method": "DOP853", "rtol": 1e-10,
-                                                                        "atol": 1e-12})
+    data = scene(
+        SCENE,
+        machine__drive=None,
+        machine__loads=[],
+        scenario__duration=0.7,
+        scenario__initial={"phi": 0.3, "omega": 10.0},
+        solver={"method": "DOP853", "rtol": 1e-10, "atol": 1e-12},
+    )
     data["machine"]["mechanism"].update(mechanism_changes)
     return data
 
@@ -263,9 +292,11 @@ def test_coasting_under_gravity_keeps_kinetic_plus_potential_energy():
 def test_shuttle_loads_are_forces_on_the_shuttle_bar_reduced_through_dx_dphi():
     """M = F dx_C/dphi, -c v_x dx_C/dphi and -k (x_C - x0) dx_C/dphi."""
     data = scene(SCENE, scenario__duration=0.1)
-    data["machine"]["loads"] = [{"type": "shuttle_constant", "force": 25.0},
-                                {"type": "shuttle_viscous", "coefficient": 150.0},
-                                {"type": "shuttle_spring", "stiffness": 400.0, "free_position": 0.3}]
+    data["machine"]["loads"] = [
+        {"type": "shuttle_constant", "force": 25.0},
+        {"type": "shuttle_viscous", "coefficient": 150.0},
+        {"type": "shuttle_spring", "stiffness": 400.0, "free_position": 0.3},
+    ]
     model = model_of(data)
     trajectory = simulate_complete(model)
     times = np.linspace(0.0, 0.1, 51)
@@ -305,8 +336,9 @@ def test_drawing_keeps_every_link_length():
 
 def test_kinematics_command_writes_csv_png_and_json(tmp_path, capsys):
     out, plot = tmp_path / "kin.csv", tmp_path / "kin"
-    code, stdout, err = run_cli(capsys, "kinematics", "walking_beam", "--points", "73", "--out", str(out),
-                                "--plot", str(plot), "--json")
+    code, stdout, err = run_cli(
+        capsys, "kinematics", "walking_beam", "--points", "73", "--out", str(out), "--plot", str(plot), "--json"
+    )
     assert code == 0, err
     summary = json.loads(stdout)
     assert summary["mechanism"] == "walking_beam" and set(summary["joints"]) == {"A", "B", "C", "D", "E"}
@@ -331,16 +363,21 @@ def test_kinematics_command_for_the_other_mechanisms(capsys, scene_name, columns
     assert joints["B"]["v_max"] == pytest.approx(crank * 5.0) and joints["B"]["a_max"] == pytest.approx(crank * 25.0)
 
 
-@pytest.mark.parametrize("argv, expected", [
-    (["--omega", "0"], ["--omega 0", "> 0 rad/s"]),
-    (["--omega", "nan"], ["--omega nan", "> 0 rad/s"]),
-    (["--points", "2"], ["--points 2", "3 to 100000"]),
-    (["--set", "machine.mechanism.crank=0.25"], ["cannot be assembled for crank angles", "Grashof"]),
-    (["--set", "machine.mechanism.beam_angle_deg=0"], ["machine.mechanism", "parallelogram B-C-D-E flattens",
-                                                       "coupler side BC", "beam direction 0 deg"]),
-    (["--set", "machine.mechanism.beam_angle_deg=-100"], ["parallelogram O2-B-E-O3 flattens", "rocker O2B"]),
-    (["--set", "machine.mechanism.coupler_point=-0.3"], ["coupler_point", "greater than 0"]),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["--omega", "0"], ["--omega 0", "> 0 rad/s"]),
+        (["--omega", "nan"], ["--omega nan", "> 0 rad/s"]),
+        (["--points", "2"], ["--points 2", "3 to 100000"]),
+        (["--set", "machine.mechanism.crank=0.25"], ["cannot be assembled for crank angles", "Grashof"]),
+        (
+            ["--set", "machine.mechanism.beam_angle_deg=0"],
+            ["machine.mechanism", "parallelogram B-C-D-E flattens", "coupler side BC", "beam direction 0 deg"],
+        ),
+        (["--set", "machine.mechanism.beam_angle_deg=-100"], ["parallelogram O2-B-E-O3 flattens", "rocker O2B"]),
+        (["--set", "machine.mechanism.coupler_point=-0.3"], ["coupler_point", "greater than 0"]),
+    ],
+)
 def test_kinematics_bad_input_is_a_clear_message(capsys, argv, expected):
     code, stdout, err = run_cli(capsys, "kinematics", "walking_beam", *argv)
     assert code == 2
@@ -373,13 +410,20 @@ def test_recording_animates_the_eight_links(tmp_path):
     record_run(model, times, trajectory(times), path)
     store = RrdReader(path).store()
     entities = set(store.schema().entity_paths())
-    assert {f"/mechanism/{part}" for part in ("crank", "coupler", "rocker", "tie", "side", "shuttle", "frame",
-                                              "joints")} <= entities
+    assert {
+        f"/mechanism/{part}" for part in ("crank", "coupler", "rocker", "tie", "side", "shuttle", "frame", "joints")
+    } <= entities
     frames = {}
     for part in ("shuttle", "rocker"):
-        frames[part] = [strips for chunk in store.stream() if chunk.entity_path == f"/mechanism/{part}"
-                        and not chunk.is_static for strips in chunk.to_record_batch().column(
-                            "LineStrips2D:strips").cast(pa.list_(pa.list_(pa.list_(pa.float64())))).to_pylist()]
+        frames[part] = [
+            strips
+            for chunk in store.stream()
+            if chunk.entity_path == f"/mechanism/{part}" and not chunk.is_static
+            for strips in chunk.to_record_batch()
+            .column("LineStrips2D:strips")
+            .cast(pa.list_(pa.list_(pa.list_(pa.float64()))))
+            .to_pylist()
+        ]
     assert len(frames["shuttle"]) > 5
     s = GEOMETRY.beam_length * cmath.exp(1j * GEOMETRY.beam_angle)
     for (strip,) in frames["shuttle"]:

@@ -36,12 +36,20 @@ from mech_regulator.solvers.cosim import CoSimulation
 def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
     """Everything the summary reports, as plain data (JSON-ready)."""
     if not trajectory.interpolants:  # the solver refused before its first step
-        return {"scene": model.scene.name, "status": trajectory.status, "message": trajectory.message,
-                "t_end": trajectory.t_start, "phi_end": model.scene.scenario.initial.phi,
-                "omega_end": model.scene.scenario.initial.omega, "steady": None, "energy": None, "governor": None,
-                "two_mass": None,
-                "drive_train": None,
-                "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)}}
+        return {
+            "scene": model.scene.name,
+            "status": trajectory.status,
+            "message": trajectory.message,
+            "t_end": trajectory.t_start,
+            "phi_end": model.scene.scenario.initial.phi,
+            "omega_end": model.scene.scenario.initial.omega,
+            "steady": None,
+            "energy": None,
+            "governor": None,
+            "two_mass": None,
+            "drive_train": None,
+            "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
+        }
     steady = analyse_steady_state(model, trajectory)
     balance = energy_balance(model, trajectory)
     end = trajectory(trajectory.t_end)
@@ -63,8 +71,9 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         "energy": dataclasses.asdict(balance),
         "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
         "governor": _governed_run(model, trajectory) if model.governor is not None else None,
-        "two_mass": (dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None
-                     else None),
+        "two_mass": (
+            dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None else None
+        ),
         "drive_train": drive_train_summary(model, trajectory) if model.driven is not None else None,
     }
 
@@ -78,8 +87,9 @@ def cosimulation_ending(run: CoSimulation) -> tuple[str, str]:
     return run.status, run.message
 
 
-def summarise_cosimulation(model: MachineModel, run: CoSimulation, exchange_step: float, coupling: str = "hold"
-                           ) -> dict:
+def summarise_cosimulation(
+    model: MachineModel, run: CoSimulation, exchange_step: float, coupling: str = "hold"
+) -> dict:
     """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended
     (cosimulation_ending), the exchange step [s] and coupling (solvers.cosim), the final speed, the governor's answer
     to each load change (from the run sampled at its exchange times) and the overspeed trip."""
@@ -125,17 +135,22 @@ def analyse_governor(model: MachineModel) -> dict:
     else:
         characteristic = static_characteristic(governor)
         statism, sensor = characteristic.statism, governor.sensor
-        insensitivity = (sensor.equilibrium_speed(point.sleeve, sensor.static_friction)
-                         - sensor.equilibrium_speed(point.sleeve, -sensor.static_friction)) / point.speed
+        insensitivity = (
+            sensor.equilibrium_speed(point.sleeve, sensor.static_friction)
+            - sensor.equilibrium_speed(point.sleeve, -sensor.static_friction)
+        ) / point.speed
     result = {
         "scene": model.scene.name,
         "kind": governor.kind,
         "sensor": None if characteristic is None else governor.sensor.name,
         "feedback": governor.feedback if governor.kind == "indirect" else None,
         "set_speed": governor.set_speed(),
-        "characteristic": None if characteristic is None else {
+        "characteristic": None
+        if characteristic is None
+        else {
             key: value.tolist() if hasattr(value, "tolist") else value
-            for key, value in dataclasses.asdict(characteristic).items()},
+            for key, value in dataclasses.asdict(characteristic).items()
+        },
         "statism": statism,
         "insensitivity_at_operating_point": insensitivity,
         "operating_points": [dataclasses.asdict(operating_point(model, level)) for level in levels],
@@ -157,16 +172,46 @@ def analyse_governor(model: MachineModel) -> dict:
     if is_periodic(model) and model.driven is None:  # the period map carries the crank's and governor's states only
         floquet = floquet_stability(model, point, linear)
         result["floquet"] = {
-            "cycle_time": floquet.cycle_time, "mean_speed": floquet.mean_speed, "residual": floquet.residual,
+            "cycle_time": floquet.cycle_time,
+            "mean_speed": floquet.mean_speed,
+            "residual": floquet.residual,
             "multipliers": [[value.real, value.imag] for value in floquet.multipliers],
             "averaged_multipliers": [[value.real, value.imag] for value in floquet.averaged_multipliers],
-            "stable": floquet.stable, "orbit": floquet.orbit.tolist()}
+            "stable": floquet.stable,
+            "orbit": floquet.orbit.tolist(),
+        }
     return result
 
 
-__all__ = ["Droop", "EnergyBalance", "FloquetStability", "LinearStability", "LoadResponse", "MotionPeriods",
-           "OperatingPoint", "RequiredCoupling", "motion_periods", "required_coupling",
-           "PeriodSpeeds", "StaticCharacteristic", "SteadyState", "analyse_governor", "analyse_steady_state",
-           "critical_damping", "cycle_mean_speed", "drive_train_summary", "droop", "energy_balance", "energy_swing",
-           "flywheel_for_constant_inertia", "floquet_stability", "is_periodic", "linear_stability", "load_responses",
-           "operating_point", "static_characteristic", "summarise", "summarise_cosimulation"]
+__all__ = [
+    "Droop",
+    "EnergyBalance",
+    "FloquetStability",
+    "LinearStability",
+    "LoadResponse",
+    "MotionPeriods",
+    "OperatingPoint",
+    "RequiredCoupling",
+    "motion_periods",
+    "required_coupling",
+    "PeriodSpeeds",
+    "StaticCharacteristic",
+    "SteadyState",
+    "analyse_governor",
+    "analyse_steady_state",
+    "critical_damping",
+    "cycle_mean_speed",
+    "drive_train_summary",
+    "droop",
+    "energy_balance",
+    "energy_swing",
+    "flywheel_for_constant_inertia",
+    "floquet_stability",
+    "is_periodic",
+    "linear_stability",
+    "load_responses",
+    "operating_point",
+    "static_characteristic",
+    "summarise",
+    "summarise_cosimulation",
+]

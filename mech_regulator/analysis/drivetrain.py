@@ -39,8 +39,10 @@ def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
         }
     if not driven.branches:
         return result
-    times = np.union1d(trajectory.samples(model.scene.solver.sample_rate),
-                       [t for t, _ in trajectory.events if trajectory.t_start <= t <= trajectory.t_end])
+    times = np.union1d(
+        trajectory.samples(model.scene.solver.sample_rate),
+        [t for t, _ in trajectory.events if trajectory.t_start <= t <= trajectory.t_end],
+    )
     columns = model.columns(times, trajectory(times))
     end = {name: values[-1] for name, values in columns.items()}
     nominal = -(end["M_driven_external"] + sum(end[f"M_driven_{effect.name}"] for effect in driven.effects))
@@ -54,8 +56,12 @@ def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
         estimate = None
         if beta is not None:
             estimate = branch_nominal + branch.inertia / branch.ratio * (beta - 1.0) * nominal / driven.inertia
-        result["sections"][branch.name] = {"max": float(section[peak]), "time": float(times[peak]),
-                                           "nominal": float(branch_nominal), "paper_estimate": estimate}
+        result["sections"][branch.name] = {
+            "max": float(section[peak]),
+            "time": float(times[peak]),
+            "nominal": float(branch_nominal),
+            "paper_estimate": estimate,
+        }
     return result
 
 

@@ -46,7 +46,7 @@ def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance
     edges = step_edges(trajectory)
     works: dict[str, float] = {}
     for first in range(0, max(edges.size - 1, 1), BALANCE_CHUNK_STEPS):
-        chunk = edges[first:first + BALANCE_CHUNK_STEPS + 1]
+        chunk = edges[first : first + BALANCE_CHUNK_STEPS + 1]
         left, width = chunk[:-1], np.diff(chunk)
         nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
         weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
@@ -86,8 +86,9 @@ def step_edges(trajectory: Trajectory) -> np.ndarray:
     return np.concatenate([trajectory.piece_edges[:1], *trajectory.step_ends])
 
 
-def energy_swing(model: MachineModel, omega: float, phi_start: float = 0.0, points: int = 7200
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def energy_swing(
+    model: MachineModel, omega: float, phi_start: float = 0.0, points: int = 7200
+) -> tuple[np.ndarray, np.ndarray]:
     """dE(phi) = integral_{phi_start}^{phi} (M_d + M_c) dphi over one dynamic period [J] at a fixed speed
     omega [rad/s] and t = 0 (for moments that read omega, the swing at that speed). A coupled driven part
     turns at omega too, at phi_driven = phi, its moments added to the crank's.
@@ -120,4 +121,4 @@ def flywheel_for_constant_inertia(energy_swing_max: float, omega_m: float, delta
     """Flywheel inertia [kg m^2] for a constant-J machine: `J_fw = dE_max / (omega_m^2 [delta]) - J0`
     (docs/theory.md §3.3); exact when the moments do not depend on omega, since
     omega_max^2 - omega_min^2 = 2 delta omega_m^2 with omega_m = (omega_max + omega_min) / 2."""
-    return energy_swing_max / (omega_m ** 2 * delta) - inertia
+    return energy_swing_max / (omega_m**2 * delta) - inertia

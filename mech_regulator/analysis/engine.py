@@ -68,14 +68,21 @@ class Harmonics:
     def __call__(self, phi: np.ndarray) -> np.ndarray:
         """The series summed at crank angles phi [rad]."""
         phi = np.asarray(phi, dtype=float)
-        return self.mean + np.sum(self.amplitudes[:, None] * np.cos(np.outer(self.orders, phi.ravel())
-                                                                     + self.phases[:, None]), axis=0).reshape(phi.shape)
+        return self.mean + np.sum(
+            self.amplitudes[:, None] * np.cos(np.outer(self.orders, phi.ravel()) + self.phases[:, None]), axis=0
+        ).reshape(phi.shape)
 
     def largest(self, count: int) -> list[dict]:
         """The count harmonics of largest amplitude, largest first: order, amplitude [N m], phase [deg]."""
         ranked = np.argsort(-self.amplitudes, kind="stable")[:count]
-        return [{"order": float(self.orders[k]), "amplitude": float(self.amplitudes[k]),
-                 "phase_deg": float(np.degrees(self.phases[k]))} for k in ranked]
+        return [
+            {
+                "order": float(self.orders[k]),
+                "amplitude": float(self.amplitudes[k]),
+                "phase_deg": float(np.degrees(self.phases[k])),
+            }
+            for k in ranked
+        ]
 
 
 def harmonics(values: np.ndarray, cycle: float) -> Harmonics:
@@ -88,8 +95,7 @@ def harmonics(values: np.ndarray, cycle: float) -> Harmonics:
     amplitudes = 2.0 * np.abs(coefficients[1:])
     if count % 2 == 0:
         amplitudes[-1] /= 2.0
-    return Harmonics(float(coefficients[0].real), k * (2.0 * math.pi / cycle), amplitudes,
-                     np.angle(coefficients[1:]))
+    return Harmonics(float(coefficients[0].real), k * (2.0 * math.pi / cycle), amplitudes, np.angle(coefficients[1:]))
 
 
 def cylinder_count(model: MachineModel) -> int:
@@ -142,13 +148,19 @@ def indicated_work(model: MachineModel) -> float:
     drive, mechanism = model.scene.machine.drive, model.scene.machine.mechanism
     cycle = math.radians(drive.cycle_deg)
     if mechanism.cylinders:
-        delays = firing_delays([c.throw_deg for c in mechanism.cylinders], [c.bank_deg for c in mechanism.cylinders],
-                               drive.cycle_deg, drive.firing_order, drive.firing_deg)
+        delays = firing_delays(
+            [c.throw_deg for c in mechanism.cylinders],
+            [c.bank_deg for c in mechanism.cylinders],
+            drive.cycle_deg,
+            drive.firing_order,
+            drive.firing_deg,
+        )
         shifts = [math.radians(drive.phase_deg - delay) for delay in delays]
     else:
         shifts = [math.radians(drive.phase_deg)]
-    knots = sorted({(math.radians(angle) - shift) % cycle for angle in drive.angle_deg for shift in shifts}
-                   | {0.0, cycle})
+    knots = sorted(
+        {(math.radians(angle) - shift) % cycle for angle in drive.angle_deg for shift in shifts} | {0.0, cycle}
+    )
     effect = next(effect for effect in model.effects if effect.role == "drive")
     nodes, weights = np.polynomial.legendre.leggauss(8)
     work = 0.0
@@ -161,8 +173,9 @@ def indicated_work(model: MachineModel) -> float:
     return work
 
 
-def piston_extremes(omega: float, crank: float, rod: float, offset: float, phis: np.ndarray,
-                    exact: np.ndarray) -> dict[str, float]:
+def piston_extremes(
+    omega: float, crank: float, rod: float, offset: float, phis: np.ndarray, exact: np.ndarray
+) -> dict[str, float]:
     """The piston's largest |v| [m/s], largest and smallest a [m/s^2] at constant omega [rad/s] (source 002's
     convention), each located exactly: bounded Brent's method on the closed-form motion within one grid step of
     the grid's extremum (phis [rad], exact: piston_table's (x, v, a) rows on that grid)."""
@@ -173,13 +186,16 @@ def piston_extremes(omega: float, crank: float, rod: float, offset: float, phis:
 
     def refined(values: np.ndarray, value: Callable[[float], float]) -> float:
         centre = float(phis[int(np.argmax(values))])
-        found = optimize.minimize_scalar(lambda phi: -value(phi), bounds=(centre - step, centre + step),
-                                         method="bounded", options={"xatol": 1e-13})
+        found = optimize.minimize_scalar(
+            lambda phi: -value(phi), bounds=(centre - step, centre + step), method="bounded", options={"xatol": 1e-13}
+        )
         return max(-float(found.fun), float(values.max()))
 
-    return {"v_max": refined(np.abs(exact[1]), lambda phi: abs(motion(phi).v)),
-            "a_max": refined(exact[2], lambda phi: motion(phi).a),
-            "a_min": -refined(-exact[2], lambda phi: -motion(phi).a)}
+    return {
+        "v_max": refined(np.abs(exact[1]), lambda phi: abs(motion(phi).v)),
+        "a_max": refined(exact[2], lambda phi: motion(phi).a),
+        "a_min": -refined(-exact[2], lambda phi: -motion(phi).a),
+    }
 
 
 def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
@@ -201,33 +217,62 @@ def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
     banks = [c.bank_deg for c in cylinders] or [0.0]
     delays = firing_delays(throws, banks, drive.cycle_deg, drive.firing_order, drive.firing_deg)
     curves = torque_curves(model, omega)
-    area = math.pi * drive.bore ** 2 / 4.0
-    gas, inertia, total = (harmonics(values, curves.cycle) for values in
-                           (curves.gas_total, curves.inertia, curves.total))
+    area = math.pi * drive.bore**2 / 4.0
+    gas, inertia, total = (
+        harmonics(values, curves.cycle) for values in (curves.gas_total, curves.inertia, curves.total)
+    )
     work = indicated_work(model)
     extremes = piston_extremes(omega, R, l, e, phis, exact)
     return {
-        "scene": scene.name, "omega": omega, "rpm": omega * 30.0 / math.pi,
-        "geometry": {"crank": R, "rod": l, "offset": e, "lambda": R / l, "k": e / R, "stroke": stroke,
-                     "bore": drive.bore, "displacement": area * stroke * len(throws),
-                     "top_dead_centre_deg": math.degrees(top), "bottom_dead_centre_deg": math.degrees(bottom),
-                     "source_alpha1_deg": math.degrees(alpha1), "source_alpha2_deg": math.degrees(alpha2)},
-        "piston": {"x_min": float(exact[0].min()), "x_max": float(exact[0].max()),
-                   **extremes,
-                   "j_top": -at_top.a, "j_bottom": -at_bottom.a,
-                   "j_top_central_formula": R * omega ** 2 * (1.0 + R / l),
-                   "j_bottom_central_formula": -R * omega ** 2 * (1.0 - R / l),
-                   "mean_speed": mean_piston_speed(stroke, omega),
-                   "approximation_error": dict(zip(PistonMotion._fields, map(float, error)))},
-        "cylinders": {"count": len(throws), "throw_deg": throws, "bank_deg": banks, "cycle_deg": drive.cycle_deg,
-                      "firing_delay_deg": delays,
-                      "firing_order": [i + 1 for i in sorted(range(len(delays)), key=delays.__getitem__)]},
-        "torque": {"mean_gas": work / curves.cycle, "mean_inertia": inertia.mean, "mean_total": total.mean,
-                   "indicated_power": work / curves.cycle * omega, "indicated_work_per_cycle": work,
-                   "mean_effective_pressure": work / (area * stroke * len(throws)),
-                   "total_max": float(curves.total.max()), "total_min": float(curves.total.min()),
-                   "gas_harmonics": gas.largest(largest), "inertia_harmonics": inertia.largest(largest),
-                   "total_harmonics": total.largest(largest)},
+        "scene": scene.name,
+        "omega": omega,
+        "rpm": omega * 30.0 / math.pi,
+        "geometry": {
+            "crank": R,
+            "rod": l,
+            "offset": e,
+            "lambda": R / l,
+            "k": e / R,
+            "stroke": stroke,
+            "bore": drive.bore,
+            "displacement": area * stroke * len(throws),
+            "top_dead_centre_deg": math.degrees(top),
+            "bottom_dead_centre_deg": math.degrees(bottom),
+            "source_alpha1_deg": math.degrees(alpha1),
+            "source_alpha2_deg": math.degrees(alpha2),
+        },
+        "piston": {
+            "x_min": float(exact[0].min()),
+            "x_max": float(exact[0].max()),
+            **extremes,
+            "j_top": -at_top.a,
+            "j_bottom": -at_bottom.a,
+            "j_top_central_formula": R * omega**2 * (1.0 + R / l),
+            "j_bottom_central_formula": -R * omega**2 * (1.0 - R / l),
+            "mean_speed": mean_piston_speed(stroke, omega),
+            "approximation_error": dict(zip(PistonMotion._fields, map(float, error))),
+        },
+        "cylinders": {
+            "count": len(throws),
+            "throw_deg": throws,
+            "bank_deg": banks,
+            "cycle_deg": drive.cycle_deg,
+            "firing_delay_deg": delays,
+            "firing_order": [i + 1 for i in sorted(range(len(delays)), key=delays.__getitem__)],
+        },
+        "torque": {
+            "mean_gas": work / curves.cycle,
+            "mean_inertia": inertia.mean,
+            "mean_total": total.mean,
+            "indicated_power": work / curves.cycle * omega,
+            "indicated_work_per_cycle": work,
+            "mean_effective_pressure": work / (area * stroke * len(throws)),
+            "total_max": float(curves.total.max()),
+            "total_min": float(curves.total.min()),
+            "gas_harmonics": gas.largest(largest),
+            "inertia_harmonics": inertia.largest(largest),
+            "total_harmonics": total.largest(largest),
+        },
     }
 
 
@@ -237,8 +282,9 @@ def engine_curve_columns(model: MachineModel, omega: float) -> dict[str, np.ndar
     M_inertia and M_total [N m]."""
     mechanism = model.scene.machine.mechanism
     curves = torque_curves(model, omega)
-    piston = np.array([piston_motion(phi, omega, mechanism.crank, mechanism.rod, mechanism.offset)
-                       for phi in curves.phi]).T
+    piston = np.array(
+        [piston_motion(phi, omega, mechanism.crank, mechanism.rod, mechanism.offset) for phi in curves.phi]
+    ).T
     columns = {"phi_deg": np.degrees(curves.phi), "x": piston[0], "v": piston[1], "a": piston[2]}
     columns.update({f"M_gas_{i + 1}": row for i, row in enumerate(curves.gas)})
     columns.update({"M_gas": curves.gas_total, "M_inertia": curves.inertia, "M_total": curves.total})

@@ -53,18 +53,21 @@ class MachineClass:
 
 # docs/theory.md §3.1: the list in source 000 is garbled in the OCR; these are the common textbook ranges
 # quoted there (Artobolevsky's table and its Vietnamese copies).
-MACHINE_CLASSES = {machine.name: machine for machine in (
-    MachineClass("pump", "pumps", 1 / 5, 1 / 30),
-    MachineClass("agricultural", "agricultural machines", 1 / 5, 1 / 50),
-    MachineClass("machine_tool", "machine tools", 1 / 20, 1 / 50),
-    MachineClass("engine", "internal combustion engines", 1 / 80, 1 / 150),
-    MachineClass("generator", "electric generators", 1 / 100, 1 / 300),
-)}
+MACHINE_CLASSES = {
+    machine.name: machine
+    for machine in (
+        MachineClass("pump", "pumps", 1 / 5, 1 / 30),
+        MachineClass("agricultural", "agricultural machines", 1 / 5, 1 / 50),
+        MachineClass("machine_tool", "machine tools", 1 / 20, 1 / 50),
+        MachineClass("engine", "internal combustion engines", 1 / 80, 1 / 150),
+        MachineClass("generator", "electric generators", 1 / 100, 1 / 300),
+    )
+}
 
 VERIFY_RTOL, VERIFY_ATOL = 1e-10, 1e-12  # the verification runs tighten an adaptive solver to at least these
-REFINE_RTOL = 1e-9                        # brentq's relative tolerance on J_fw (delta to ~1e-9 relative)
-SHOOTING_XTOL = 1e-12                     # brentq's relative tolerance on the orbit's speed at phi = 0
-PERIOD_MARGIN = 1.05                      # a run lasts this times the predicted time of one dynamic period
+REFINE_RTOL = 1e-9  # brentq's relative tolerance on J_fw (delta to ~1e-9 relative)
+SHOOTING_XTOL = 1e-12  # brentq's relative tolerance on the orbit's speed at phi = 0
+PERIOD_MARGIN = 1.05  # a run lasts this times the predicted time of one dynamic period
 
 Progress = Callable[[str], None]
 
@@ -150,7 +153,7 @@ class FlywheelDesign:
 
     def on_shaft(self, flywheel: float) -> float:
         """J_x = J_fw (omega / omega_x)^2 [kg m^2] of a flywheel J_fw reduced to the crank, on the ratio-N shaft."""
-        return flywheel / self.ratio ** 2
+        return flywheel / self.ratio**2
 
 
 def energy_diagram(model: MachineModel, omega_m: float) -> EnergyDiagram:
@@ -164,8 +167,8 @@ def energy_diagram(model: MachineModel, omega_m: float) -> EnergyDiagram:
 def wittenbauer(diagram: EnergyDiagram, delta: float) -> WittenbauerConstruction:
     """The exact numerical form of the Wittenbauer construction (docs/theory.md §3.4):
     a = max_phi[dE - k_max J], b = min_phi[dE - k_min J], J_fw = (a - b) / (k_max - k_min)."""
-    k_max = diagram.omega_m ** 2 * (1.0 + delta) / 2.0
-    k_min = diagram.omega_m ** 2 * (1.0 - delta) / 2.0
+    k_max = diagram.omega_m**2 * (1.0 + delta) / 2.0
+    k_min = diagram.omega_m**2 * (1.0 - delta) / 2.0
     above = diagram.energy - k_max * diagram.inertia
     below = diagram.energy - k_min * diagram.inertia
     i_max, i_min = int(np.argmax(above)), int(np.argmin(below))
@@ -177,8 +180,13 @@ def wittenbauer(diagram: EnergyDiagram, delta: float) -> WittenbauerConstruction
     return WittenbauerConstruction(k_max, k_min, a, b, point(i_max), point(i_min), (a - b) / (k_max - k_min))
 
 
-def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ratio: float | None = None,
-                    progress: Progress | None = None) -> FlywheelDesign:
+def design_flywheel(
+    scene: Scene,
+    delta: float,
+    omega_m: float | None = None,
+    ratio: float | None = None,
+    progress: Progress | None = None,
+) -> FlywheelDesign:
     """Size the flywheel of a one-mass machine for [delta] three ways and verify each by simulation.
 
     omega_m [rad/s]: the design mean speed; None = the machine's own (see `design_speed`). ratio: N of the
@@ -193,8 +201,10 @@ def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ra
     speed_dependent = "omega" in model.depends_on()
     notes = []
     if scene.scenario.load_events:
-        notes.append(f"designed for the external load at t = 0 ({scene.scenario.external_load:g} N m); "
-                     "the scenario's load events are left out")
+        notes.append(
+            f"designed for the external load at t = 0 ({scene.scenario.external_load:g} N m); "
+            "the scenario's load events are left out"
+        )
     if not speed_dependent:
         _check_balanced(energy_swing(model, 1.0)[1])  # omega is not read: any speed gives the same swing
     omega_m, source = design_speed(scene, model, omega_m)
@@ -202,22 +212,31 @@ def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ra
     construction = wittenbauer(diagram, delta)
     by_energy_swing = flywheel_for_constant_inertia(diagram.swing, omega_m, delta, diagram.mean_inertia)
     motion = PeriodicMotion(bare, diagram, ratio, speed_dependent, progress)
-    scene_flywheel = (scene.machine.flywheel.inertia * scene.machine.flywheel.ratio ** 2
-                      if scene.machine.flywheel else None)
+    scene_flywheel = (
+        scene.machine.flywheel.inertia * scene.machine.flywheel.ratio**2 if scene.machine.flywheel else None
+    )
     runs: dict[str, SteadyRun] = {}
-    for name, flywheel in (("none", 0.0), ("scene", scene_flywheel), ("energy_swing", by_energy_swing),
-                           ("wittenbauer", construction.flywheel)):
+    for name, flywheel in (
+        ("none", 0.0),
+        ("scene", scene_flywheel),
+        ("energy_swing", by_energy_swing),
+        ("wittenbauer", construction.flywheel),
+    ):
         if flywheel is None:
             continue
         if flywheel < 0.0:
-            notes.append(f"{name.replace('_', ' ')}: J_fw = {flywheel:.6g} kg m^2 < 0: by this formula the "
-                         "machine needs no flywheel; not simulated")
+            notes.append(
+                f"{name.replace('_', ' ')}: J_fw = {flywheel:.6g} kg m^2 < 0: by this formula the "
+                "machine needs no flywheel; not simulated"
+            )
             continue
         run = motion.run(flywheel)
         if run is None:
-            notes.append(f"{'without a flywheel' if name == 'none' else name.replace('_', ' ')}: the machine has "
-                         "no periodic steady motion near omega_m (its kinetic energy cannot carry it through the "
-                         "energy swing: it stalls or turns back); not simulated")
+            notes.append(
+                f"{'without a flywheel' if name == 'none' else name.replace('_', ' ')}: the machine has "
+                "no periodic steady motion near omega_m (its kinetic energy cannot carry it through the "
+                "energy swing: it stalls or turns back); not simulated"
+            )
         else:
             runs[name] = run
     refined = motion.refine(delta, construction.flywheel, runs)
@@ -228,8 +247,21 @@ def design_flywheel(scene: Scene, delta: float, omega_m: float | None = None, ra
     refined_run = motion.run(refined) if refined is not None else None
     if refined_run is not None:
         runs["refined"] = refined_run
-    return FlywheelDesign(scene.name or "scene", delta, omega_m, source, ratio, speed_dependent, diagram,
-                          construction, by_energy_swing, refined, scene_flywheel, runs, notes)
+    return FlywheelDesign(
+        scene.name or "scene",
+        delta,
+        omega_m,
+        source,
+        ratio,
+        speed_dependent,
+        diagram,
+        construction,
+        by_energy_swing,
+        refined,
+        scene_flywheel,
+        runs,
+        notes,
+    )
 
 
 def design_speed(scene: Scene, model: MachineModel, omega_m: float | None) -> tuple[float, str]:
@@ -243,9 +275,11 @@ def design_speed(scene: Scene, model: MachineModel, omega_m: float | None) -> tu
     if "omega" in model.depends_on():
         balance = balance_speed(model)
         if omega_m is not None:
-            raise SceneError(f"--omega-m {omega_m:g}: the moments of scene '{scene.name}' depend on omega, so the "
-                             f"machine sets its own mean speed ({balance:.6g} rad/s, where the cycle-mean moments "
-                             "balance); change the drive or the loads to move it")
+            raise SceneError(
+                f"--omega-m {omega_m:g}: the moments of scene '{scene.name}' depend on omega, so the "
+                f"machine sets its own mean speed ({balance:.6g} rad/s, where the cycle-mean moments "
+                "balance); change the drive or the loads to move it"
+            )
         return balance, "the speed at which the cycle-mean moments balance (the motor's characteristic sets it)"
     if omega_m is not None:
         if not (math.isfinite(omega_m) and omega_m > 0.0):
@@ -255,14 +289,17 @@ def design_speed(scene: Scene, model: MachineModel, omega_m: float | None) -> tu
     with_flywheel = build_model(scene)
     diagram = energy_diagram(with_flywheel, 1.0)  # omega is not read: any speed gives the same swing
     J0 = with_flywheel.inertia(initial.phi)[0]
-    start = 0.5 * J0 * initial.omega ** 2 - np.interp(initial.phi % diagram.phi[-1], diagram.phi, diagram.energy)
+    start = 0.5 * J0 * initial.omega**2 - np.interp(initial.phi % diagram.phi[-1], diagram.phi, diagram.energy)
     kinetic = start + diagram.energy
     if initial.omega <= 0.0 or np.min(kinetic) <= 0.0:
-        raise SceneError(f"scene '{scene.name}' starts at omega = {initial.omega:g} rad/s and does not turn steadily "
-                         "through its initial state: give the design mean speed with --omega-m")
+        raise SceneError(
+            f"scene '{scene.name}' starts at omega = {initial.omega:g} rad/s and does not turn steadily "
+            "through its initial state: give the design mean speed with --omega-m"
+        )
     omega = np.sqrt(2.0 * kinetic / diagram.inertia)
-    return 0.5 * float(omega.max() + omega.min()), "the mean speed of the scene's own steady motion through its " \
-                                                   "initial state (moments independent of omega)"
+    return 0.5 * float(
+        omega.max() + omega.min()
+    ), "the mean speed of the scene's own steady motion through its initial state (moments independent of omega)"
 
 
 class PeriodicMotion:
@@ -271,8 +308,9 @@ class PeriodicMotion:
     bare: the scene without a flywheel; diagram: its energy diagram at the design speed; ratio: N of the
     flywheel's shaft; speed_dependent: whether the moments read omega (then the orbit is found by shooting)."""
 
-    def __init__(self, bare: Scene, diagram: EnergyDiagram, ratio: float, speed_dependent: bool,
-                 progress: Progress | None = None):
+    def __init__(
+        self, bare: Scene, diagram: EnergyDiagram, ratio: float, speed_dependent: bool, progress: Progress | None = None
+    ):
         self.bare = bare
         self.diagram = diagram
         self.ratio = ratio
@@ -285,7 +323,7 @@ class PeriodicMotion:
         """The machine with a flywheel J_fw [kg m^2] reduced to the crank, written as the scene format does:
         machine.flywheel = {inertia: J_fw / N^2, ratio: N}; the solver tightened for the verification."""
         data = self.bare.model_dump(exclude_none=True)
-        data["machine"]["flywheel"] = {"inertia": flywheel / self.ratio ** 2, "ratio": self.ratio}
+        data["machine"]["flywheel"] = {"inertia": flywheel / self.ratio**2, "ratio": self.ratio}
         solver = data["solver"]
         if solver["method"] not in ("RK4", "energy"):
             solver["rtol"], solver["atol"] = min(solver["rtol"], VERIFY_RTOL), min(solver["atol"], VERIFY_ATOL)
@@ -365,7 +403,7 @@ class PeriodicMotion:
             omega = self._predicted(total, start_energy)
             return 0.5 * (np.max(omega) + np.min(omega)) - target
 
-        high = 0.5 * float(np.max(total)) * target ** 2 + max(lowest, 0.0) + self.diagram.swing
+        high = 0.5 * float(np.max(total)) * target**2 + max(lowest, 0.0) + self.diagram.swing
         low = max(lowest, 0.0) * (1.0 + 1e-12) + 1e-300
         if mean_error(low) >= 0.0:
             return None
@@ -401,13 +439,16 @@ class PeriodicMotion:
         """Simulate from phi = 0 at omega_start [rad/s] a little longer than one dynamic period (the energy
         relation predicts its time); None if the machine does not get round (stops or turns back)."""
         total = self.diagram.inertia + flywheel
-        omega = self._predicted(total, 0.5 * total[0] * omega_start ** 2)
+        omega = self._predicted(total, 0.5 * total[0] * omega_start**2)
         predicted = integrate.trapezoid(1.0 / omega, self.diagram.phi) if np.all(omega > 0.0) else math.nan
         duration = PERIOD_MARGIN * (predicted if math.isfinite(predicted) else 2.0 * self.period / omega_start)
         for _ in range(3):
             scene = model.scene
-            scenario = Scenario(initial=InitialState(phi=0.0, omega=omega_start), duration=duration,
-                                external_load=scene.scenario.external_load)
+            scenario = Scenario(
+                initial=InitialState(phi=0.0, omega=omega_start),
+                duration=duration,
+                external_load=scene.scenario.external_load,
+            )
             # the same model with another scenario: the solver reads the initial state and duration from the scene
             timed = dataclasses.replace(model, scene=scene.model_copy(update={"scenario": scenario}))
             trajectory = simulate(timed)
@@ -438,11 +479,15 @@ def _check_designable(scene: Scene, delta: float, ratio: float | None) -> None:
     if ratio is not None and not (math.isfinite(ratio) and ratio != 0.0):
         raise SceneError(f"--ratio {ratio:g}: expected omega_x / omega, a finite non-zero number")
     if scene.governor is not None:
-        raise SceneError(f"scene '{scene.name}' has a governor: a flywheel is sized for the machine alone at a fixed "
-                         "drive; remove the governor (--set governor=null) or design on the ungoverned scene")
+        raise SceneError(
+            f"scene '{scene.name}' has a governor: a flywheel is sized for the machine alone at a fixed "
+            "drive; remove the governor (--set governor=null) or design on the ungoverned scene"
+        )
     if scene.machine.coupling is not None:
-        raise SceneError(f"scene '{scene.name}' is a two-mass machine (machine.coupling): the flywheel design covers "
-                         "one-mass machines reduced to the crank")
+        raise SceneError(
+            f"scene '{scene.name}' is a two-mass machine (machine.coupling): the flywheel design covers "
+            "one-mass machines reduced to the crank"
+        )
 
 
 def _check_balanced(energy: np.ndarray) -> None:
@@ -451,6 +496,8 @@ def _check_balanced(energy: np.ndarray) -> None:
     net = float(energy[-1])
     scale = max(float(np.ptp(energy)), 1e-300)
     if abs(net) > 1e-6 * scale:
-        raise SceneError(f"the net work of the moments over the dynamic period is {net:.6g} J (A_d != A_c): the machine "
-                         f"{'accelerates' if net > 0 else 'slows down'} and has no periodic steady motion; balance "
-                         "the drive against the loads")
+        raise SceneError(
+            f"the net work of the moments over the dynamic period is {net:.6g} J (A_d != A_c): the machine "
+            f"{'accelerates' if net > 0 else 'slows down'} and has no periodic steady motion; balance "
+            "the drive against the loads"
+        )

@@ -29,10 +29,18 @@ def kinematics_table(mechanism: schema.Mechanism, omega: float, count: int) -> d
     for name in samples[0]:
         position, first, second = (np.array([sample[name][k] for sample in samples]) for k in range(3))
         velocity, acceleration = first * omega, second * omega * omega
-        columns.update({f"{name}_x": position.real, f"{name}_y": position.imag,
-                        f"{name}_vx": velocity.real, f"{name}_vy": velocity.imag, f"{name}_v": np.abs(velocity),
-                        f"{name}_ax": acceleration.real, f"{name}_ay": acceleration.imag,
-                        f"{name}_a": np.abs(acceleration)})
+        columns.update(
+            {
+                f"{name}_x": position.real,
+                f"{name}_y": position.imag,
+                f"{name}_vx": velocity.real,
+                f"{name}_vy": velocity.imag,
+                f"{name}_v": np.abs(velocity),
+                f"{name}_ax": acceleration.real,
+                f"{name}_ay": acceleration.imag,
+                f"{name}_a": np.abs(acceleration),
+            }
+        )
     return columns
 
 
@@ -50,8 +58,9 @@ def reactions_unavailable(mechanism: schema.Mechanism) -> str | None:
     return None
 
 
-def reactions_table(mechanism: schema.Mechanism, gravity: tuple[float, float] | None, omega: float,
-                    phis: np.ndarray) -> dict[str, np.ndarray]:
+def reactions_table(
+    mechanism: schema.Mechanism, gravity: tuple[float, float] | None, omega: float, phis: np.ndarray
+) -> dict[str, np.ndarray]:
     """Kinetostatics at constant crank speed omega [rad/s] (epsilon = 0) with the links' weights (gravity [m/s^2],
     None: weightless) and no load on the output, at the crank angles phis [rad]: R_<joint> = |R| [N], the magnitude of
     every joint's reaction (a guide's: its normal force), and M_balancing [N m], the moment on the crank that keeps
@@ -62,8 +71,10 @@ def reactions_table(mechanism: schema.Mechanism, gravity: tuple[float, float] | 
         return {}
     loads, joints = build_kinetostatics(mechanism, gravity)
     samples = [loads(float(phi), omega, 0.0) for phi in phis]
-    columns = {f"R_{joint}": np.array([abs(sample.constant[index]) for sample in samples])
-               for index, joint in enumerate(joints)}
+    columns = {
+        f"R_{joint}": np.array([abs(sample.constant[index]) for sample in samples])
+        for index, joint in enumerate(joints)
+    }
     columns["M_balancing"] = np.array([sample.balancing[0] for sample in samples])
     return columns
 
@@ -72,11 +83,18 @@ def reactions_summary(columns: dict[str, np.ndarray]) -> dict[str, dict[str, flo
     """Per joint of a reactions_table: the largest reaction R_max [N] over the turn and the crank angle where it
     occurs [deg]; and for the balancing moment its least and largest values [N m] with their crank angles."""
     phi_deg = np.degrees(columns["phi"])
-    summary = {key[2:]: {"R_max": float(columns[key].max()), "R_max_at_deg": float(phi_deg[columns[key].argmax()])}
-               for key in columns if key.startswith("R_")}
+    summary = {
+        key[2:]: {"R_max": float(columns[key].max()), "R_max_at_deg": float(phi_deg[columns[key].argmax()])}
+        for key in columns
+        if key.startswith("R_")
+    }
     moment = columns["M_balancing"]
-    summary["balancing_moment"] = {"min": float(moment.min()), "min_at_deg": float(phi_deg[moment.argmin()]),
-                                   "max": float(moment.max()), "max_at_deg": float(phi_deg[moment.argmax()])}
+    summary["balancing_moment"] = {
+        "min": float(moment.min()),
+        "min_at_deg": float(phi_deg[moment.argmin()]),
+        "max": float(moment.max()),
+        "max_at_deg": float(phi_deg[moment.argmax()]),
+    }
     return summary
 
 
@@ -92,7 +110,14 @@ def kinematics_summary(columns: dict[str, np.ndarray]) -> dict[str, dict[str, fl
     summary = {}
     for name in point_names(columns):
         x, y, v, a = (columns[f"{name}_{key}"] for key in ("x", "y", "v", "a"))
-        summary[name] = {"x_min": float(x.min()), "x_max": float(x.max()), "y_min": float(y.min()),
-                         "y_max": float(y.max()), "v_max": float(v.max()), "v_max_at_deg": float(phi_deg[v.argmax()]),
-                         "a_max": float(a.max()), "a_max_at_deg": float(phi_deg[a.argmax()])}
+        summary[name] = {
+            "x_min": float(x.min()),
+            "x_max": float(x.max()),
+            "y_min": float(y.min()),
+            "y_max": float(y.max()),
+            "v_max": float(v.max()),
+            "v_max_at_deg": float(phi_deg[v.argmax()]),
+            "a_max": float(a.max()),
+            "a_max_at_deg": float(phi_deg[a.argmax()]),
+        }
     return summary

@@ -36,14 +36,14 @@ def cycle_mean_speed(model: MachineModel, trajectory: Trajectory, times: np.ndar
     period = model.dynamic_period()
     speed = np.empty(np.size(times))
     for first in range(0, speed.size, CYCLE_CHUNK):
-        chunk = np.asarray(times[first:first + CYCLE_CHUNK])
+        chunk = np.asarray(times[first : first + CYCLE_CHUNK])
         start, end = _period_before(trajectory, float(chunk.min()), period), float(chunk.max())
         turns = abs(trajectory(end)[0] - trajectory(start)[0]) / period
         grid = np.linspace(start, end, max(2000, int(GRID_PER_CYCLE * turns)))
         phi = np.maximum.accumulate(trajectory(grid)[0])  # the angle of a turning crank; flat where it stops
         earlier = np.interp(trajectory(chunk)[0] - period, phi, grid, left=math.nan)
         with np.errstate(invalid="ignore", divide="ignore"):
-            speed[first:first + CYCLE_CHUNK] = period / (chunk - earlier)
+            speed[first : first + CYCLE_CHUNK] = period / (chunk - earlier)
     return speed
 
 
@@ -102,7 +102,7 @@ def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: flo
             break
         times = np.linspace(start, end, min(max(int((end - start) * sample_rate), 50), MAX_RESPONSE_SAMPLES) + 1)
         speed = cycle_mean_speed(model, trajectory, times)
-        if math.isnan(speed[0]):   # within the first cycle: no speed before the change to measure from
+        if math.isnan(speed[0]):  # within the first cycle: no speed before the change to measure from
             continue
         before = speed[0]
         after = speed[-1]
@@ -119,12 +119,22 @@ def load_responses(model: MachineModel, trajectory: Trajectory, sample_rate: flo
         overshoot = max(0.0, float(np.nanmax(-direction * from_final[peak:])))
         overshoot_percent = 100.0 * overshoot / abs(from_final[peak]) if from_final[peak] != 0.0 else 0.0
         predicted = new_point.speed - old_point.speed
-        responses.append(LoadResponse(
-            time=start, load_before=loads[index], load_after=loads[index + 1], speed_before=float(before),
-            peak_deviation=float(deviation[peak]), peak_time=float(times[peak] - start), speed_after=float(after),
-            static_error=float(after - before), predicted_static_error=float(predicted),
-            settling_time=None if settling is None else float(settling), overshoot=overshoot_percent,
-            limits=_limits(model, trajectory, start, end, times)))
+        responses.append(
+            LoadResponse(
+                time=start,
+                load_before=loads[index],
+                load_after=loads[index + 1],
+                speed_before=float(before),
+                peak_deviation=float(deviation[peak]),
+                peak_time=float(times[peak] - start),
+                speed_after=float(after),
+                static_error=float(after - before),
+                predicted_static_error=float(predicted),
+                settling_time=None if settling is None else float(settling),
+                overshoot=overshoot_percent,
+                limits=_limits(model, trajectory, start, end, times),
+            )
+        )
     return responses
 
 

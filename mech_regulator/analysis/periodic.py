@@ -68,7 +68,9 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     phi, omega = trajectory(times)[:2]
     if np.any(omega[1:] <= 0.0):  # a start from rest is not a stop
         t_stop = times[1 + np.argmax(omega[1:] <= 0.0)]
-        return SteadyState(False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)")
+        return SteadyState(
+            False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)"
+        )
     # Periods start at whole multiples of Phi_omega, so each one begins at the same phase of the cycle
     # (for an engine: cycle angle 0 at phi = 0).
     last_level = math.floor(phi[-1] / period)
@@ -76,7 +78,9 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     starts = np.array([_time_at_angle(trajectory, times, phi, level) for level in levels])
     periods = max(starts.size - 1, 0)
     if periods < 1:
-        return SteadyState(None, None, period, 0, None, "less than one dynamic period simulated after the last load change")
+        return SteadyState(
+            None, None, period, 0, None, "less than one dynamic period simulated after the last load change"
+        )
     last = _period_speeds(trajectory, starts[-2], starts[-1], period)
     if periods < 2:
         return SteadyState(None, None, period, periods, last, "only one dynamic period simulated: too short to judge")
@@ -84,8 +88,14 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     repeats = np.abs(np.diff(omega_starts)) <= tolerance * last.omega_m
     if not repeats[-1]:
         change = abs(omega_starts[-1] - omega_starts[-2]) / last.omega_m
-        return SteadyState(False, None, period, periods, last,
-                           f"omega still changes by {change:.3g} of omega_m per dynamic period (tolerance {tolerance:g})")
+        return SteadyState(
+            False,
+            None,
+            period,
+            periods,
+            last,
+            f"omega still changes by {change:.3g} of omega_m per dynamic period (tolerance {tolerance:g})",
+        )
     first = periods - 1
     while first > 0 and repeats[first - 1]:
         first -= 1
@@ -108,8 +118,16 @@ def _period_speeds(trajectory: Trajectory, t_start: float, t_end: float, period:
     omega_max = _refine(trajectory, times, int(np.argmax(omega)), sign=-1.0)
     omega_min = _refine(trajectory, times, int(np.argmin(omega)), sign=1.0)
     omega_m = 0.5 * (omega_max + omega_min)
-    return PeriodSpeeds(t_start, t_end, float(omega[0]), omega_max, omega_min, omega_m,
-                        (omega_max - omega_min) / omega_m, period / (t_end - t_start))
+    return PeriodSpeeds(
+        t_start,
+        t_end,
+        float(omega[0]),
+        omega_max,
+        omega_min,
+        omega_m,
+        (omega_max - omega_min) / omega_m,
+        period / (t_end - t_start),
+    )
 
 
 def _refine(trajectory: Trajectory, times: np.ndarray, index: int, sign: float) -> float:
@@ -118,7 +136,11 @@ def _refine(trajectory: Trajectory, times: np.ndarray, index: int, sign: float) 
     Minimised over tau = t - lo, so the tolerance is relative to the bracket, not to the run's time."""
     lo, hi = times[max(index - 1, 0)], times[min(index + 1, times.size - 1)]
     sampled = trajectory(times[index])[1]
-    result = optimize.minimize_scalar(lambda tau: sign * trajectory(lo + tau)[1], bounds=(0.0, hi - lo),
-                                      method="bounded", options={"xatol": 1e-10 * (hi - lo)})
+    result = optimize.minimize_scalar(
+        lambda tau: sign * trajectory(lo + tau)[1],
+        bounds=(0.0, hi - lo),
+        method="bounded",
+        options={"xatol": 1e-10 * (hi - lo)},
+    )
     refined = sign * result.fun
     return float(refined if sign * refined < sign * sampled else sampled)

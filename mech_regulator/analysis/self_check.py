@@ -30,17 +30,24 @@ FIXED_STEP_METHODS = ("RK4", "energy")
 MODE_PER_RTOL = 100.0  # [-] how far below 0 a mode's guard may dip, relative to its largest |value|, per unit of rtol
 FIXED_STEP_MODE = 1e-4  # [-] the same for RK4 and the energy method
 MODE_SAMPLES_PER_RUN = 5_000  # dense samples the mode-log check reads at most (its cost: about 0.1 s)
-FIX_ADAPTIVE = ("tighten solver.rtol, limit solver.max_step (a load switched on and off within a step needs it), "
-                "or choose another method (Radau or BDF for a stiff scene)")
+FIX_ADAPTIVE = (
+    "tighten solver.rtol, limit solver.max_step (a load switched on and off within a step needs it), "
+    "or choose another method (Radau or BDF for a stiff scene)"
+)
 
 
 def self_checks(model: MachineModel, summary: dict, trajectory: Trajectory | None = None) -> list[dict]:
     """The checks a run fails, each {check, value, allowed, fix}: the energy balance of its summary
     (analysis.summarise; none when nothing was computed) and, given its dense trajectory, its mode log
     (mode_log_check). Empty when it passes."""
-    return [check for check in (_energy_check(model, summary),
-                                 mode_log_check(model, trajectory) if trajectory is not None else None)
-            if check is not None]
+    return [
+        check
+        for check in (
+            _energy_check(model, summary),
+            mode_log_check(model, trajectory) if trajectory is not None else None,
+        )
+        if check is not None
+    ]
 
 
 def _energy_check(model: MachineModel, summary: dict) -> dict | None:
@@ -51,8 +58,9 @@ def _energy_check(model: MachineModel, summary: dict) -> dict | None:
     solver = model.scene.solver
     if solver.method in FIXED_STEP_METHODS:
         allowed = FIXED_STEP_RESIDUAL
-        fix = ("shorten solver.step" if solver.method == "RK4" else "shorten solver.phi_step_deg") + \
-            ", or choose an adaptive method (e.g. DOP853)"
+        fix = (
+            "shorten solver.step" if solver.method == "RK4" else "shorten solver.phi_step_deg"
+        ) + ", or choose an adaptive method (e.g. DOP853)"
     else:
         allowed, fix = ENERGY_PER_RTOL * solver.rtol, FIX_ADAPTIVE
     value = abs(energy["relative_residual"])
@@ -89,7 +97,10 @@ def mode_log_check(model: MachineModel, trajectory: Trajectory) -> dict | None:
     if worst is None or worst[0] <= allowed:
         return None
     depth, name, time = worst
-    fix = ("shorten " + ("solver.step" if solver.method == "RK4" else "solver.phi_step_deg") if fixed
-           else FIX_ADAPTIVE)
-    return {"check": f"missed event ('{name}' below 0 at t = {time:.6g} s, relative to its range)", "value": depth,
-            "allowed": allowed, "fix": fix}
+    fix = "shorten " + ("solver.step" if solver.method == "RK4" else "solver.phi_step_deg") if fixed else FIX_ADAPTIVE
+    return {
+        "check": f"missed event ('{name}' below 0 at t = {time:.6g} s, relative to its range)",
+        "value": depth,
+        "allowed": allowed,
+        "fix": fix,
+    }

@@ -112,11 +112,17 @@ def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStabil
     magnitude = abs(dominant)
     loop = _pi_loop(model, point, governor) if isinstance(governor, ElectronicGovernor) else None
     return LinearStability(
-        state_names=("omega",) + governor.state_names, jacobian=jacobian, eigenvalues=eigenvalues,
-        dominant=complex(dominant), damping_ratio=-dominant.real / magnitude if magnitude > 0 else math.nan,
+        state_names=("omega",) + governor.state_names,
+        jacobian=jacobian,
+        eigenvalues=eigenvalues,
+        dominant=complex(dominant),
+        damping_ratio=-dominant.real / magnitude if magnitude > 0 else math.nan,
         period=2.0 * math.pi / abs(dominant.imag) if dominant.imag != 0.0 else math.inf,
-        stable=bool(np.all(eigenvalues.real < 0.0)), polynomial=polynomial, vyshnegradsky=vyshnegradsky,
-        pi_loop=loop)
+        stable=bool(np.all(eigenvalues.real < 0.0)),
+        polynomial=polynomial,
+        vyshnegradsky=vyshnegradsky,
+        pi_loop=loop,
+    )
 
 
 def _pi_loop(model: MachineModel, point: OperatingPoint, governor: ElectronicGovernor) -> tuple[float, float]:
@@ -142,6 +148,7 @@ def critical_damping(model: MachineModel, point: OperatingPoint, upper: float = 
     governor = _governor_of(model)
     if isinstance(governor, ElectronicGovernor):  # kind 'pi'
         return None
+
     def growth(damping: float) -> float:
         # every CentrifugalSensor is a dataclass (PorterSensor, HartnellSensor); the ABC itself is not one
         sensor = dataclasses.replace(governor.sensor, damping=damping)  # type: ignore[type-var]
@@ -177,8 +184,9 @@ def is_periodic(model: MachineModel) -> bool:
     return model.reduced is not None or "phi" in model.depends_on()
 
 
-def floquet_stability(model: MachineModel, point: OperatingPoint, linear: LinearStability,
-                      rtol: float = 1e-10) -> FloquetStability:
+def floquet_stability(
+    model: MachineModel, point: OperatingPoint, linear: LinearStability, rtol: float = 1e-10
+) -> FloquetStability:
     """Find the periodic orbit by Newton shooting on the map over one dynamic period Phi in phi,
     x(phi + Phi) = P(x(phi)), integrating dx/dphi = f(x) / omega; multipliers = eig(dP/dx)."""
     period = model.dynamic_period()
@@ -189,8 +197,9 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
         return [rate / x[0] for rate in rates[1:]] + [1.0 / x[0]]
 
     def cycle(x: np.ndarray) -> tuple[np.ndarray, float]:
-        solution = integrate.solve_ivp(in_phi, (0.0, period), np.append(x, 0.0), method="DOP853",
-                                       rtol=rtol, atol=rtol * 1e-2)
+        solution = integrate.solve_ivp(
+            in_phi, (0.0, period), np.append(x, 0.0), method="DOP853", rtol=rtol, atol=rtol * 1e-2
+        )
         return solution.y[:-1, -1], solution.y[-1, -1]
 
     x = equilibrium_state(model, point)
@@ -206,9 +215,14 @@ def floquet_stability(model: MachineModel, point: OperatingPoint, linear: Linear
     end, cycle_time = cycle(x)
     multipliers = np.linalg.eigvals(monodromy)
     return FloquetStability(
-        orbit=x, cycle_time=cycle_time, mean_speed=period / cycle_time, multipliers=multipliers,
+        orbit=x,
+        cycle_time=cycle_time,
+        mean_speed=period / cycle_time,
+        multipliers=multipliers,
         averaged_multipliers=np.exp(linear.eigenvalues * cycle_time),
-        stable=bool(np.all(np.abs(multipliers) < 1.0)), residual=float(np.max(np.abs(end - x) / scale)))
+        stable=bool(np.all(np.abs(multipliers) < 1.0)),
+        residual=float(np.max(np.abs(end - x) / scale)),
+    )
 
 
 def _state_scale(model: MachineModel, point: OperatingPoint, size: int) -> np.ndarray:

@@ -95,16 +95,25 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
         if limited:
             omega = _machine_speed(lambda w: surplus(throttle, w), omega)
             if math.isnan(omega):
-                return OperatingPoint(external_load, omega, z, throttle, servo,
-                                      f"{limited}; no steady speed at that throttle", mean_inertia)
+                return OperatingPoint(
+                    external_load,
+                    omega,
+                    z,
+                    throttle,
+                    servo,
+                    f"{limited}; no steady speed at that throttle",
+                    mean_inertia,
+                )
             z = sensor.equilibrium_sleeve(omega)
             if valve is not None:
                 throttle = valve(z)
         return OperatingPoint(external_load, omega, z, throttle, servo, limited, mean_inertia)
 
     if valve is not None:
+
         def balance(z: float) -> float:
             return surplus(valve(z), sensor.equilibrium_speed(z))
+
         if balance(z_high) > 0.0:
             return point(z_high, valve(z_high), math.nan, "sleeve on its high stop")
         if balance(z_low) < 0.0:
@@ -114,9 +123,11 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
 
     s_low, s_high = governor.travel
     if governor.feedback == "rigid":
+
         def servo_at(z: float) -> float:
             return governor.feedback_reference - (z - governor.pilot_neutral) / governor.feedback_gain
     else:
+
         def servo_at(z: float) -> float:
             return model.balance_throttle(sensor.equilibrium_speed(z), external_load)
 
@@ -125,8 +136,10 @@ def operating_point(model: MachineModel, external_load: float) -> OperatingPoint
 
     z = governor.pilot_neutral
     if governor.feedback == "rigid":
-        for stop, name, outside in ((z_high, "high", balance_servo(z_high) > 0.0),
-                                    (z_low, "low", balance_servo(z_low) < 0.0)):
+        for stop, name, outside in (
+            (z_high, "high", balance_servo(z_high) > 0.0),
+            (z_low, "low", balance_servo(z_low) < 0.0),
+        ):
             if outside:
                 servo = min(max(servo_at(stop), s_low), s_high)
                 return point(stop, servo, servo, f"sleeve on its {name} stop")

@@ -42,12 +42,39 @@ from mech_regulator.solvers.compiled import fast_path_refusal
 DECAY_RATIO = 0.9  # stable by simulation: the cycle-mean speed's swing in the last third <= this x the middle third's
 VERDICT_SAMPLES = 3000  # samples of the cycle-mean speed over the window after the last load change
 ENGINES = ("local", "dask")
-ROW_COLUMNS = ("status", "message", "path", "t_end", "omega_end", "steady", "omega_m", "omega_average", "delta",
-               "stable_by_simulation", "oscillation_ratio", "stop_arrivals", "stable_linear", "vyshnegradsky_A",
-               "vyshnegradsky_B", "wall_time", "rhs_evaluations")
+ROW_COLUMNS = (
+    "status",
+    "message",
+    "path",
+    "t_end",
+    "omega_end",
+    "steady",
+    "omega_m",
+    "omega_average",
+    "delta",
+    "stable_by_simulation",
+    "oscillation_ratio",
+    "stop_arrivals",
+    "stable_linear",
+    "vyshnegradsky_A",
+    "vyshnegradsky_B",
+    "wall_time",
+    "rhs_evaluations",
+)
 """The columns of a row after the scene's name and its grid values (None where they do not apply)."""
-METRICS = ("delta", "omega_m", "omega_average", "omega_end", "oscillation_ratio", "stop_arrivals", "vyshnegradsky_A",
-           "vyshnegradsky_B", "t_end", "wall_time", "rhs_evaluations")
+METRICS = (
+    "delta",
+    "omega_m",
+    "omega_average",
+    "omega_end",
+    "oscillation_ratio",
+    "stop_arrivals",
+    "vyshnegradsky_A",
+    "vyshnegradsky_B",
+    "t_end",
+    "wall_time",
+    "rhs_evaluations",
+)
 """The numeric columns a sweep's picture can draw (--metric)."""
 
 
@@ -78,12 +105,15 @@ def parse_grid(spec: str) -> GridAxis:
     stop > 0) or `key=v1,v2,...` (each value read as YAML); SceneError naming the option when it does not parse."""
     option = f"--grid '{spec}'"
     if "=" not in spec:
-        raise SceneError(f"{option}: expected KEY=START:STOP:N, KEY=START:STOP:N:log or KEY=V1,V2,..., e.g. "
-                         "governor.damping=20:300:5:log")
+        raise SceneError(
+            f"{option}: expected KEY=START:STOP:N, KEY=START:STOP:N:log or KEY=V1,V2,..., e.g. "
+            "governor.damping=20:300:5:log"
+        )
     key, text = (part.strip() for part in spec.split("=", 1))
     if not key or not all(key.split(".")):
-        raise SceneError(f"{option}: the key '{key}' has an empty part; expected a dotted scene key such as "
-                         "machine.flywheel.inertia")
+        raise SceneError(
+            f"{option}: the key '{key}' has an empty part; expected a dotted scene key such as machine.flywheel.inertia"
+        )
     if ":" not in text:
         texts = tuple(item.strip() for item in text.split(","))
         if not all(texts):
@@ -108,8 +138,9 @@ def parse_grid(spec: str) -> GridAxis:
     return GridAxis(key, values, tuple(repr(value) for value in values), geometric, option)
 
 
-def sweep_points(scenes: list[str], overrides: list[str], axes: list[GridAxis], solver_path: str = "scene"
-                 ) -> list[SweepPoint]:
+def sweep_points(
+    scenes: list[str], overrides: list[str], axes: list[GridAxis], solver_path: str = "scene"
+) -> list[SweepPoint]:
     """Every scene x every combination of the grid values (the Cartesian product, the last axis varying fastest),
     each validated by the scene loading: a value the scene refuses raises SceneError naming the --grid option.
     solver_path 'fast': every point the fast path compiles (solvers.compiled.fast_path_refusal) runs on it, the others on
@@ -184,8 +215,11 @@ def run_point(scene: dict, values: dict | None = None) -> dict:
         steady = analyse_steady_state(model, trajectory)
         row["steady"] = steady.steady
         if steady.last is not None:
-            row.update(omega_m=float(steady.last.omega_m), omega_average=float(steady.last.omega_average),
-                       delta=float(steady.last.delta))
+            row.update(
+                omega_m=float(steady.last.omega_m),
+                omega_average=float(steady.last.omega_average),
+                delta=float(steady.last.delta),
+            )
         if model.governor is not None:
             row.update(governor_stability(model, trajectory))
     except SceneError as error:
@@ -203,14 +237,18 @@ def governor_stability(model, trajectory) -> dict:
 
     t_from = max([0.0] + [piece.start for piece in model.load_pieces])
     linear = linear_stability(model, operating_point(model, model.external_load(t_from)))
-    answer: dict[str, float | bool | int | None] = {"stable_linear": linear.stable, "vyshnegradsky_A": None,
-                                                    "vyshnegradsky_B": None}
+    answer: dict[str, float | bool | int | None] = {
+        "stable_linear": linear.stable,
+        "vyshnegradsky_A": None,
+        "vyshnegradsky_B": None,
+    }
     if linear.vyshnegradsky is not None:
         answer["vyshnegradsky_A"], answer["vyshnegradsky_B"] = (float(value) for value in linear.vyshnegradsky)
     ratio, settled, arrivals = oscillation_measures(model, trajectory, t_from)
     answer["oscillation_ratio"], answer["stop_arrivals"] = ratio, arrivals
-    answer["stable_by_simulation"] = (None if math.isnan(ratio) else
-                                      bool(settled or (ratio <= DECAY_RATIO and arrivals <= 1)))
+    answer["stable_by_simulation"] = (
+        None if math.isnan(ratio) else bool(settled or (ratio <= DECAY_RATIO and arrivals <= 1))
+    )
     return answer
 
 
@@ -225,8 +263,13 @@ def oscillation_measures(model, trajectory, t_from: float) -> tuple[float, bool,
     t_to = trajectory.t_end
     third = (t_to - t_from) / 3.0
     modes = trajectory.modes
-    arrivals = sum(1 for (_, before), (t, mode) in zip(modes, modes[1:]) if t >= t_from + 2.0 * third
-                   for part, previous in zip(mode, before) if part in ("low", "high") and part != previous)
+    arrivals = sum(
+        1
+        for (_, before), (t, mode) in zip(modes, modes[1:])
+        if t >= t_from + 2.0 * third
+        for part, previous in zip(mode, before)
+        if part in ("low", "high") and part != previous
+    )
     cycle_time = model.dynamic_period() / max(abs(float(trajectory(t_to)[1])), 1e-12)
     if t_to - t_from < 3.0 * cycle_time:
         return math.nan, False, arrivals
@@ -252,8 +295,13 @@ def check_executor(jobs: int | None, engine: str, scheduler: str | None) -> int:
     return jobs
 
 
-def run_sweep(points: list[SweepPoint], jobs: int | None = None, engine: str = "local", scheduler: str | None = None,
-              progress: Callable[[SweepPoint, dict], None] | None = None) -> list[dict]:
+def run_sweep(
+    points: list[SweepPoint],
+    jobs: int | None = None,
+    engine: str = "local",
+    scheduler: str | None = None,
+    progress: Callable[[SweepPoint, dict], None] | None = None,
+) -> list[dict]:
     """Run every point and return the rows in the order of the points.
 
     engine 'local': jobs = 1 runs in this process, jobs > 1 on that many worker processes (default: the number
@@ -279,10 +327,18 @@ def run_sweep(points: list[SweepPoint], jobs: int | None = None, engine: str = "
             _run_on_processes(points, jobs, finished)
     except KeyboardInterrupt:
         pass
-    return [row if row is not None else {"scene": point.scene.get("name"), **point.values, **dict.fromkeys(ROW_COLUMNS),
-                                         "status": "not run",
-                                         "message": "the sweep was interrupted before this point ran"}
-            for point, row in zip(points, rows)]
+    return [
+        row
+        if row is not None
+        else {
+            "scene": point.scene.get("name"),
+            **point.values,
+            **dict.fromkeys(ROW_COLUMNS),
+            "status": "not run",
+            "message": "the sweep was interrupted before this point ran",
+        }
+        for point, row in zip(points, rows)
+    ]
 
 
 def _run_on_processes(points: list[SweepPoint], jobs: int, finished: Callable[[int, dict], None]) -> None:
@@ -301,31 +357,42 @@ def _run_indexed(item: tuple[int, SweepPoint]) -> tuple[int, dict]:
     return index, run_point(point.scene, point.values)
 
 
-def _run_on_dask(points: list[SweepPoint], jobs: int, scheduler: str | None,
-                 finished: Callable[[int, dict], None]) -> None:
+def _run_on_dask(
+    points: list[SweepPoint], jobs: int, scheduler: str | None, finished: Callable[[int, dict], None]
+) -> None:
     """The points as tasks on a Dask cluster (client.map, as_completed): a LocalCluster of `jobs` processes with
     one thread each, or the running cluster at the scheduler address."""
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise SceneError("--engine dask needs Dask distributed: pip install 'mech_regulator[distributed]' "
-                         "(or pip install 'dask[distributed]')") from None
+        raise SceneError(
+            "--engine dask needs Dask distributed: pip install 'mech_regulator[distributed]' "
+            "(or pip install 'dask[distributed]')"
+        ) from None
     cluster = None
     try:
         if scheduler is None:
             # its workers' logs stay quiet: a Ctrl-C reaches them too, and their shutdown reports are no news
-            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.CRITICAL)
+            cluster = LocalCluster(
+                n_workers=jobs,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.CRITICAL,
+            )
             client = Client(cluster)
         else:
             try:
                 client = Client(scheduler, timeout="10s")
             except (OSError, TimeoutError, ValueError) as error:
-                raise SceneError(f"--scheduler {scheduler}: no Dask scheduler answers there ({error}); start one "
-                                 "with `dask scheduler` and workers with `dask worker ADDRESS`") from None
+                raise SceneError(
+                    f"--scheduler {scheduler}: no Dask scheduler answers there ({error}); start one "
+                    "with `dask scheduler` and workers with `dask worker ADDRESS`"
+                ) from None
         with client:
-            futures = client.map(run_point, [point.scene for point in points], [point.values for point in points],
-                                 pure=False)
+            futures = client.map(
+                run_point, [point.scene for point in points], [point.values for point in points], pure=False
+            )
             index_of = {future.key: index for index, future in enumerate(futures)}
             try:
                 for future in as_completed(futures):

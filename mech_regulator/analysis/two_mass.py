@@ -78,17 +78,22 @@ def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadySt
     mean = None
     if t3 is not None and steady.last is not None:
         window = np.linspace(steady.last.t_start, steady.last.t_end, 2001)
-        mean = float(integrate.trapezoid(-model.columns(window, trajectory(window))["M_coupling"], window)
-                     / (window[-1] - window[0]))
+        mean = float(
+            integrate.trapezoid(-model.columns(window, trajectory(window))["M_coupling"], window)
+            / (window[-1] - window[0])
+        )
     ratio = moment / mean if mean else None
     twist = columns["twist"]
     note = ""
     table = model.coupling.table
     if table is not None and (twist.min() < table[0][0] or twist.max() > table[0][-1]):
-        note = (f"the twist ranged over {twist.min():.4g} to {twist.max():.4g} rad, beyond the characteristic's table "
-                f"({table[0][0]:g} to {table[0][-1]:g} rad): its end slopes were continued")
-    return MotionPeriods(t1, t3, CouplingPeak(moment, time, period, mean, ratio), float(twist.min()),
-                         float(twist.max()), note)
+        note = (
+            f"the twist ranged over {twist.min():.4g} to {twist.max():.4g} rad, beyond the characteristic's table "
+            f"({table[0][0]:g} to {table[0][-1]:g} rad): its end slopes were continued"
+        )
+    return MotionPeriods(
+        t1, t3, CouplingPeak(moment, time, period, mean, ratio), float(twist.min()), float(twist.max()), note
+    )
 
 
 def _start_up_end(model: MachineModel, trajectory: Trajectory) -> float | None:
@@ -105,6 +110,7 @@ def _start_up_end(model: MachineModel, trajectory: Trajectory) -> float | None:
 def _refine_peak(model: MachineModel, trajectory: Trajectory, times: np.ndarray, index: int) -> tuple[float, float]:
     """The extremum of M_m(t) near times[index], by bounded scalar minimisation of -|M_m| on the dense output;
     returns (time [s], M_m [N m])."""
+
     def passed(t: float) -> float:
         return float(-model.columns(np.array([t]), trajectory(np.array([t])))["M_coupling"][0])
 
@@ -112,8 +118,12 @@ def _refine_peak(model: MachineModel, trajectory: Trajectory, times: np.ndarray,
     sampled = (float(times[index]), passed(times[index]))
     if hi == lo:
         return sampled
-    result = optimize.minimize_scalar(lambda tau: -abs(passed(lo + tau)), bounds=(0.0, hi - lo), method="bounded",
-                                      options={"xatol": 1e-10 * (hi - lo)})
+    result = optimize.minimize_scalar(
+        lambda tau: -abs(passed(lo + tau)),
+        bounds=(0.0, hi - lo),
+        method="bounded",
+        options={"xatol": 1e-10 * (hi - lo)},
+    )
     refined = (float(lo + result.x), passed(lo + result.x))
     return refined if abs(refined[1]) > abs(sampled[1]) else sampled
 
@@ -138,8 +148,9 @@ class SpeedLaw:
         a, T, A, k = self.omega_m / self.run_up, self.run_up, self.amplitude, self.frequency
         after = np.maximum(t - T, 0.0)
         running = t < T
-        angle = np.where(running, 0.5 * a * t * t, 0.5 * a * T * T + self.omega_m * after
-                         + A / k * (1.0 - np.cos(k * after)))
+        angle = np.where(
+            running, 0.5 * a * t * t, 0.5 * a * T * T + self.omega_m * after + A / k * (1.0 - np.cos(k * after))
+        )
         omega = np.where(running, a * t, self.omega_m + A * np.sin(k * after))
         epsilon = np.where(running, a, A * k * np.cos(k * after))
         return angle, omega, epsilon
@@ -183,8 +194,14 @@ class RequiredCoupling:
     periodic_from: int
 
 
-def required_coupling(model: MachineModel, run_up: float, delta: float, frequency: float | None = None,
-                      speed: float | None = None, points: int = 201) -> RequiredCoupling:
+def required_coupling(
+    model: MachineModel,
+    run_up: float,
+    delta: float,
+    frequency: float | None = None,
+    speed: float | None = None,
+    points: int = 201,
+) -> RequiredCoupling:
     """Solve the inverse problem (module docstring) over the scene's duration; the driven part starts at rest at
     phi_driven = scenario.initial.phi, the driving part at rest. speed: omega_m [rad/s] (None: the speed at
     which the cycle-averaged drive balances all loads); frequency: k [rad/s] (None: once per dynamic period at
@@ -196,8 +213,10 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     period = 2.0 * math.pi / frequency
     duration = model.scene.scenario.duration
     if duration < run_up + 2.0 * period:
-        raise SceneError(f"scenario.duration = {duration:g} s is too short for the inverse problem: expected at least "
-                         f"the run-up plus two periods of the law, {run_up + 2 * period:.4g} s")
+        raise SceneError(
+            f"scenario.duration = {duration:g} s is too short for the inverse problem: expected at least "
+            f"the run-up plus two periods of the law, {run_up + 2 * period:.4g} s"
+        )
     coupling = model.coupling
     external = model.external_load(0.0)
     phi2_start = model.scene.scenario.initial.phi
@@ -205,9 +224,12 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     def needed(t: np.ndarray) -> np.ndarray:
         """M_m(t) from the driven part's equation [N m]."""
         angle, omega2, epsilon2 = law(np.atleast_1d(t))
-        return np.array([coupling.driven.state(phi2_start + a)[0] * e
-                         + coupling.required_moment(ti, phi2_start + a, w, external)
-                         for ti, a, w, e in zip(np.atleast_1d(t), angle, omega2, epsilon2)])
+        return np.array(
+            [
+                coupling.driven.state(phi2_start + a)[0] * e + coupling.required_moment(ti, phi2_start + a, w, external)
+                for ti, a, w, e in zip(np.atleast_1d(t), angle, omega2, epsilon2)
+            ]
+        )
 
     driving = dataclasses.replace(model, coupling=None, load_pieces=())
     rates, inertia = driving.rhs(), driving.inertia_constant
@@ -219,20 +241,33 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     def drive(y: np.ndarray, start: float, end: float, at: np.ndarray, dense: bool = False):
         """The driving part's (phi1, omega1) at times `at` within [start, end] from y at start (and its dense
         output)."""
-        solution = integrate.solve_ivp(motion, (start, end), y, method="DOP853", t_eval=at, rtol=1e-11, atol=1e-12,
-                                       max_step=period / 20.0, dense_output=dense)
+        solution = integrate.solve_ivp(
+            motion,
+            (start, end),
+            y,
+            method="DOP853",
+            t_eval=at,
+            rtol=1e-11,
+            atol=1e-12,
+            max_step=period / 20.0,
+            dense_output=dense,
+        )
         return (solution.y, solution.sol) if dense else solution.y
 
     samples = max(4000, int(200 * (duration - run_up) / period))
     times = np.union1d(np.linspace(0.0, run_up, 400), np.linspace(run_up, duration - period, samples))
     run_up_part = drive(np.zeros(2), 0.0, run_up, times[times <= run_up])  # no step across the law's kink at T
-    phi1, omega1 = np.hstack([run_up_part, drive(run_up_part[:, -1], run_up, duration - period,
-                                                 times[times >= run_up])[:, 1:]])
+    phi1, omega1 = np.hstack(
+        [run_up_part, drive(run_up_part[:, -1], run_up, duration - period, times[times >= run_up])[:, 1:]]
+    )
     # The last period of the law: the driving part's periodic motion (omega1 repeats over it), by the secant
     # method on its speed at the period's start, in place of a transient that may decay slowly.
     start = times[-1]
-    repeat = optimize.newton(lambda w: drive(np.array([phi1[-1], w]), start, duration, [duration])[1, -1] - w,
-                             omega1[-1], tol=1e-12 * law.omega_m)
+    repeat = optimize.newton(
+        lambda w: drive(np.array([phi1[-1], w]), start, duration, [duration])[1, -1] - w,
+        omega1[-1],
+        tol=1e-12 * law.omega_m,
+    )
     steady_times = np.linspace(start, duration, 201)
     (steady_phi1, steady_omega1), dense = drive(np.array([phi1[-1], repeat]), start, duration, steady_times, True)
     times = np.concatenate([times, steady_times])  # start appears twice: the transient's end, the periodic start
@@ -241,8 +276,9 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     twist = phi1 - angle
     moment = needed(times)
     elastic = moment - coupling.damping * (omega1 - omega2)
-    jump = coupling.driven.state(phi2_start + law(np.array([run_up]))[0][0])[0] * (law.amplitude * frequency
-                                                                                   - omega_m / run_up)
+    jump = coupling.driven.state(phi2_start + law(np.array([run_up]))[0][0])[0] * (
+        law.amplitude * frequency - omega_m / run_up
+    )
     scale = float(np.ptp(elastic)) or 1.0
     whole_grid, whole_curve, whole_width = _characteristic(twist, elastic, points)
     whole_rising = bool(np.all(np.diff(whole_curve) > 0.0))
@@ -262,32 +298,61 @@ def required_coupling(model: MachineModel, run_up: float, delta: float, frequenc
     looped = width > LOOP_TOLERANCE * (float(np.ptp(curve)) or 1.0)
     rising = bool(np.all(np.diff(curve) > 0.0))
     shift, table_twist, table_moment = _through_origin(grid, curve)
-    initial = {"phi": float(phi2_start + angle[start] + twist[start] + shift), "omega": float(omega2[start]),
-               "twist": float(twist[start] + shift)}
+    initial = {
+        "phi": float(phi2_start + angle[start] + twist[start] + shift),
+        "omega": float(omega2[start]),
+        "twist": float(twist[start] + shift),
+    }
     driving_delta = float(np.ptp(omega1[last]) / np.mean(omega1[last]))
     notes = () if whole_ok else _whole_run_advice(law, jump, scale, whole_width, whole_rising)
     notes += _advice(width, looped, rising, driving_delta)
-    return RequiredCoupling(law, times, omega1, omega2, twist + shift, moment, elastic, stretch, float(times[start]),
-                            table_twist, table_moment, width, whole_width, jump, not looped and rising, initial,
-                            driving_delta, notes, times.size - steady_times.size)
+    return RequiredCoupling(
+        law,
+        times,
+        omega1,
+        omega2,
+        twist + shift,
+        moment,
+        elastic,
+        stretch,
+        float(times[start]),
+        table_twist,
+        table_moment,
+        width,
+        whole_width,
+        jump,
+        not looped and rising,
+        initial,
+        driving_delta,
+        notes,
+        times.size - steady_times.size,
+    )
 
 
 def _check_inverse(model: MachineModel) -> None:
     """Refuse, with a message naming the key, a scene the inverse problem does not cover."""
     scene = model.scene
     if model.coupling is None:
-        raise SceneError(f"scene '{scene.name}' has no machine.coupling: the inverse problem computes a coupling's "
-                         "characteristic between a driving and a driven part")
+        raise SceneError(
+            f"scene '{scene.name}' has no machine.coupling: the inverse problem computes a coupling's "
+            "characteristic between a driving and a driven part"
+        )
     if model.governor is not None:
-        raise SceneError(f"scene '{scene.name}' has a governor: the inverse problem takes the drive as it is "
-                         "(remove the governor with --set governor=null)")
+        raise SceneError(
+            f"scene '{scene.name}' has a governor: the inverse problem takes the drive as it is "
+            "(remove the governor with --set governor=null)"
+        )
     if model.reduced is not None or any("phi" in effect.depends_on for effect in model.effects):
-        raise SceneError(f"scene '{scene.name}': the driving part's moments or inertia depend on the crank angle "
-                         "(machine.mechanism, a table or engine drive, a table or cutting load); the inverse "
-                         "problem takes the driving part as a motor with its rotor: moments of omega only")
+        raise SceneError(
+            f"scene '{scene.name}': the driving part's moments or inertia depend on the crank angle "
+            "(machine.mechanism, a table or engine drive, a table or cutting load); the inverse "
+            "problem takes the driving part as a motor with its rotor: moments of omega only"
+        )
     if scene.scenario.load_events:
-        raise SceneError(f"scene '{scene.name}' has scenario.load_events: the inverse problem takes a constant "
-                         "external load (scenario.external_load)")
+        raise SceneError(
+            f"scene '{scene.name}' has scenario.load_events: the inverse problem takes a constant "
+            "external load (scenario.external_load)"
+        )
 
 
 def _characteristic(twist: np.ndarray, moment: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -300,7 +365,7 @@ def _characteristic(twist: np.ndarray, moment: np.ndarray, points: int) -> tuple
     grid = np.linspace(twist.min(), twist.max(), points)
     curves = []
     for lo, hi in zip(edges[:-1], edges[1:]):
-        x, y = twist[lo:hi + 1], moment[lo:hi + 1]
+        x, y = twist[lo : hi + 1], moment[lo : hi + 1]
         order = np.argsort(x)
         x, y = x[order], y[order]
         if x[-1] > x[0]:
@@ -333,24 +398,29 @@ def _through_origin(grid: np.ndarray, curve: np.ndarray) -> tuple[float, np.ndar
 def _equal_speeds(relative: np.ndarray, start: int) -> int:
     """Index of the first sample from index `start` at which omega1 - omega2 changes sign (a twist extremum,
     where a forward run can start with both parts at one speed)."""
-    crossings = np.flatnonzero(np.sign(relative[start:-1]) != np.sign(relative[start + 1:]))
+    crossings = np.flatnonzero(np.sign(relative[start:-1]) != np.sign(relative[start + 1 :]))
     return start + (int(crossings[0]) + 1 if crossings.size else 0)
 
 
-def _whole_run_advice(law: SpeedLaw, jump: float, scale: float, whole_width: float, whole_rising: bool
-                      ) -> tuple[str, ...]:
+def _whole_run_advice(
+    law: SpeedLaw, jump: float, scale: float, whole_width: float, whole_rising: bool
+) -> tuple[str, ...]:
     """Why the whole run (run-up and transient) has no characteristic, so that only steady motion is tabulated."""
     reasons = []
     if abs(jump) > LOOP_TOLERANCE * scale:
         continuous = 2.0 / ((2.0 * law.amplitude / law.omega_m) * law.frequency)
-        reasons.append(f"the needed moment jumps by {jump:.4g} N m at the end of the run-up (the acceleration jumps "
-                       f"from omega_m / T to A k) while the twist cannot; run-up T = 2 / (delta k) = "
-                       f"{continuous:.4g} s makes it continuous")
+        reasons.append(
+            f"the needed moment jumps by {jump:.4g} N m at the end of the run-up (the acceleration jumps "
+            f"from omega_m / T to A k) while the twist cannot; run-up T = 2 / (delta k) = "
+            f"{continuous:.4g} s makes it continuous"
+        )
     if whole_width > LOOP_TOLERANCE * scale:
         reasons.append(f"one twist needs moments up to {whole_width:.4g} N m apart")
     if not whole_rising:
-        reasons.append("the needed moment falls somewhere as the twist moves on (the driving part's own run-up, "
-                       "not the law, sets the twist)")
+        reasons.append(
+            "the needed moment falls somewhere as the twist moves on (the driving part's own run-up, "
+            "not the law, sets the twist)"
+        )
     return (f"the whole run has no characteristic: {'; '.join(reasons)}; only the steady motion is tabulated",)
 
 
@@ -358,8 +428,12 @@ def _advice(width: float, looped: bool, rising: bool, driving_delta: float) -> t
     """Why no elastic coupling gives the steady law, and the paper's remedy (none when one does)."""
     if not looped and rising:
         return ()
-    why = " and ".join(([f"one twist needs moments up to {width:.4g} N m apart (a loop)"] if looped else [])
-                       + ([] if rising else ["the moment falls somewhere as the twist grows (negative stiffness)"]))
-    return (f"no elastic coupling gives this law: {why}; the driving part's speed fluctuates by {driving_delta:.3g} "
-            "of its mean. The paper's remedy: a flywheel on one shaft (e.g. --set machine.flywheel.inertia=...) "
-            "steadies the driving part so that the twist follows the law",)
+    why = " and ".join(
+        ([f"one twist needs moments up to {width:.4g} N m apart (a loop)"] if looped else [])
+        + ([] if rising else ["the moment falls somewhere as the twist grows (negative stiffness)"])
+    )
+    return (
+        f"no elastic coupling gives this law: {why}; the driving part's speed fluctuates by {driving_delta:.3g} "
+        "of its mean. The paper's remedy: a flywheel on one shaft (e.g. --set machine.flywheel.inertia=...) "
+        "steadies the driving part so that the twist follows the law",
+    )

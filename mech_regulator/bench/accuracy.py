@@ -46,21 +46,21 @@ IMPLICIT = ("Radau", "BDF")
 COSIM = "co-simulation"
 METHODS = ADAPTIVE + ("RK4", "energy", COSIM)
 
-TOLERANCES = tuple(10.0 ** -k for k in range(3, 11))     # requested rtol of the explicit adaptive methods [-]
-IMPLICIT_TIGHTEST = 1e-9                                  # Radau and BDF stop here: tighter costs minutes
+TOLERANCES = tuple(10.0**-k for k in range(3, 11))  # requested rtol of the explicit adaptive methods [-]
+IMPLICIT_TIGHTEST = 1e-9  # Radau and BDF stop here: tighter costs minutes
 QUICK_TOLERANCES = (1e-4, 1e-6, 1e-8)
-RK4_HALVINGS, QUICK_RK4_HALVINGS = 5, 3                   # RK4 steps: the scene's rk4_step halved this often
-PHI_STEPS_DEG = (2.0, 1.0, 0.5, 0.25, 0.125)              # energy method [deg]
+RK4_HALVINGS, QUICK_RK4_HALVINGS = 5, 3  # RK4 steps: the scene's rk4_step halved this often
+PHI_STEPS_DEG = (2.0, 1.0, 0.5, 0.25, 0.125)  # energy method [deg]
 QUICK_PHI_STEPS_DEG = (1.0, 0.5, 0.25)
-EXCHANGE_STEPS = (0.01, 0.005, 0.002, 0.001, 0.0005)      # co-simulation [s]
+EXCHANGE_STEPS = (0.01, 0.005, 0.002, 0.001, 0.0005)  # co-simulation [s]
 QUICK_EXCHANGE_STEPS = (0.004, 0.002, 0.001)
 REFERENCE_METHOD, REFERENCE_RTOL = "DOP853", 1e-13
 CHECK_METHOD, CHECK_RTOL = "Radau", 1e-12
 QUICK_CHECK_RTOL = 1e-10
-COSIM_RTOL = 1e-10         # rtol of the subsystems' own DOP853 inside the co-simulation: far below its hold error
-GRID_RATE = 20_000.0       # [Hz] of the uniform time grid on which dense outputs are compared
+COSIM_RTOL = 1e-10  # rtol of the subsystems' own DOP853 inside the co-simulation: far below its hold error
+GRID_RATE = 20_000.0  # [Hz] of the uniform time grid on which dense outputs are compared
 MIN_GRID_POINTS = 2001
-REPEAT_BUDGET_S, MAX_REPEATS = 1.0, 15   # a run is repeated to about this much CPU time [s], at most this often
+REPEAT_BUDGET_S, MAX_REPEATS = 1.0, 15  # a run is repeated to about this much CPU time [s], at most this often
 
 
 def startup_closed_form(model: MachineModel) -> Callable[[np.ndarray], np.ndarray]:
@@ -75,18 +75,31 @@ def startup_closed_form(model: MachineModel) -> Callable[[np.ndarray], np.ndarra
     scene = model.scene
     machine = scene.machine
     drive = machine.drive
-    if (model.reduced is not None or model.governor is not None or model.load_pieces or machine.coupling is not None
-            or drive is None or drive.type != "linear_motor" or any(load.type != "viscous" for load in machine.loads)):
-        raise ValueError(f"scene '{scene.name}': the closed form needs a constant J, a linear motor, viscous loads "
-                         "only, no external load, no governor and no coupling")
+    if (
+        model.reduced is not None
+        or model.governor is not None
+        or model.load_pieces
+        or machine.coupling is not None
+        or drive is None
+        or drive.type != "linear_motor"
+        or any(load.type != "viscous" for load in machine.loads)
+    ):
+        raise ValueError(
+            f"scene '{scene.name}': the closed form needs a constant J, a linear motor, viscous loads "
+            "only, no external load, no governor and no coupling"
+        )
     k = drive.stall_torque / drive.no_load_speed + sum(load.coefficient for load in machine.loads)
     omega_inf, T = drive.stall_torque / k, model.inertia_constant / k
     phi_i, omega_i = scene.scenario.initial.phi, scene.scenario.initial.omega
 
     def states(t: np.ndarray) -> np.ndarray:
         decay = np.exp(-np.asarray(t) / T)
-        return np.vstack([phi_i + omega_inf * t + (omega_i - omega_inf) * T * (1.0 - decay),
-                          omega_inf + (omega_i - omega_inf) * decay])
+        return np.vstack(
+            [
+                phi_i + omega_inf * t + (omega_i - omega_inf) * T * (1.0 - decay),
+                omega_inf + (omega_i - omega_inf) * decay,
+            ]
+        )
 
     return states
 
@@ -123,27 +136,73 @@ class BenchScene:
 
 
 SCENES = (
-    BenchScene("startup", "startup", (), ("scenario.duration=0.5",), "start-up from rest over 2 s", 1.0, 0.04,
-               startup_closed_form),
+    BenchScene(
+        "startup",
+        "startup",
+        (),
+        ("scenario.duration=0.5",),
+        "start-up from rest over 2 s",
+        1.0,
+        0.04,
+        startup_closed_form,
+    ),
     # 150.2347 rad/s: the speed at phi = 2 pi k on the periodic orbit, from a 40 s run from rest (rtol 1e-12)
-    BenchScene("compressor", "compressor", ("scenario.initial.omega=150.2347", "scenario.duration=1.0"),
-               ("scenario.duration=0.1",), "steady motion (started on its periodic orbit) for 1 s; the gas force is "
-               "a table in the slider position, linear between points, so the moment has kinks in phi that the solvers "
-               "step over (breakpoints in x are not located; those of tables in phi are)", 1.0, 1e-3),
-    BenchScene("engine_direct", "engine_direct", ("scenario.duration=2.0", _load_step(0.5, 8.0)),
-               ("scenario.duration=0.2", _load_step(0.1, 8.0)), "direct governor, load step 6 -> 8 N m at 0.5 s, "
-               "2 s; the indicator diagram is a table in phi (kinks every 15 deg)", 1e-2, 1e-3),
-    BenchScene("engine_indirect_isodromic", "engine_indirect_isodromic",
-               ("scenario.duration=1.0", _load_step(0.25, 8.0)), ("scenario.duration=0.2", _load_step(0.1, 8.0)),
-               "indirect governor with isodromic feedback, load step 6 -> 8 N m at 0.25 s, 1 s", 1e-2, 1e-3),
-    BenchScene("two_mass", "two_mass", ("scenario.duration=1.0", _load_step(0.3, 8.0)),
-               ("scenario.duration=0.2", _load_step(0.1, 8.0)), "engine and generator on an elastic coupling (the "
-               "engine's indicator-diagram table), load step 6 -> 8 N m at 0.3 s, 1 s", 1e-3, 1e-3),
-    BenchScene("two_mass_stiff", "two_mass", ("scenario.duration=1.0", _load_step(0.3, 8.0),
-                                              "machine.coupling.stiffness=1e7", "machine.coupling.damping=400.0"),
-               ("scenario.duration=0.2", _load_step(0.1, 8.0)), "two_mass with a stiff steel shaft, k = 1e7 N m/rad, "
-               "c = 400 N m s/rad: relative mode at 1.2e4 rad/s, damping ratio 0.23, which limits the explicit "
-               "methods' step for stability", 1e-3, 1e-4),
+    BenchScene(
+        "compressor",
+        "compressor",
+        ("scenario.initial.omega=150.2347", "scenario.duration=1.0"),
+        ("scenario.duration=0.1",),
+        "steady motion (started on its periodic orbit) for 1 s; the gas force is "
+        "a table in the slider position, linear between points, so the moment has kinks in phi that the solvers "
+        "step over (breakpoints in x are not located; those of tables in phi are)",
+        1.0,
+        1e-3,
+    ),
+    BenchScene(
+        "engine_direct",
+        "engine_direct",
+        ("scenario.duration=2.0", _load_step(0.5, 8.0)),
+        ("scenario.duration=0.2", _load_step(0.1, 8.0)),
+        "direct governor, load step 6 -> 8 N m at 0.5 s, "
+        "2 s; the indicator diagram is a table in phi (kinks every 15 deg)",
+        1e-2,
+        1e-3,
+    ),
+    BenchScene(
+        "engine_indirect_isodromic",
+        "engine_indirect_isodromic",
+        ("scenario.duration=1.0", _load_step(0.25, 8.0)),
+        ("scenario.duration=0.2", _load_step(0.1, 8.0)),
+        "indirect governor with isodromic feedback, load step 6 -> 8 N m at 0.25 s, 1 s",
+        1e-2,
+        1e-3,
+    ),
+    BenchScene(
+        "two_mass",
+        "two_mass",
+        ("scenario.duration=1.0", _load_step(0.3, 8.0)),
+        ("scenario.duration=0.2", _load_step(0.1, 8.0)),
+        "engine and generator on an elastic coupling (the "
+        "engine's indicator-diagram table), load step 6 -> 8 N m at 0.3 s, 1 s",
+        1e-3,
+        1e-3,
+    ),
+    BenchScene(
+        "two_mass_stiff",
+        "two_mass",
+        (
+            "scenario.duration=1.0",
+            _load_step(0.3, 8.0),
+            "machine.coupling.stiffness=1e7",
+            "machine.coupling.damping=400.0",
+        ),
+        ("scenario.duration=0.2", _load_step(0.1, 8.0)),
+        "two_mass with a stiff steel shaft, k = 1e7 N m/rad, "
+        "c = 400 N m s/rad: relative mode at 1.2e4 rad/s, damping ratio 0.23, which limits the explicit "
+        "methods' step for stability",
+        1e-3,
+        1e-4,
+    ),
 )
 
 
@@ -195,10 +254,14 @@ def sweep(bench: BenchScene, model: MachineModel, quick: bool) -> list[Setting]:
     IMPLICIT_TIGHTEST), RK4 over halvings of the scene's rk4_step, the energy method where it applies
     (no governor, no coupling) and the co-simulation for governed scenes."""
     tolerances = QUICK_TOLERANCES if quick else TOLERANCES
-    settings = [Setting(method, rtol) for method in ADAPTIVE for rtol in tolerances
-                if method not in IMPLICIT or rtol >= IMPLICIT_TIGHTEST]
+    settings = [
+        Setting(method, rtol)
+        for method in ADAPTIVE
+        for rtol in tolerances
+        if method not in IMPLICIT or rtol >= IMPLICIT_TIGHTEST
+    ]
     halvings = QUICK_RK4_HALVINGS if quick else RK4_HALVINGS
-    settings += [Setting("RK4", bench.rk4_step / 2 ** k) for k in range(halvings)]
+    settings += [Setting("RK4", bench.rk4_step / 2**k) for k in range(halvings)]
     if model.governor is None and model.scene.machine.coupling is None:
         settings += [Setting("energy", step) for step in (QUICK_PHI_STEPS_DEG if quick else PHI_STEPS_DEG)]
     if model.governor is not None:
@@ -227,12 +290,13 @@ def error_scale(name: str, reference: np.ndarray) -> float:
     return spread if spread > 0.0 else largest if largest > 0.0 else 1.0
 
 
-def achieved_errors(names: tuple[str, ...], scales: np.ndarray, states: np.ndarray, reference: np.ndarray
-                    ) -> dict[str, tuple[float, float]]:
+def achieved_errors(
+    names: tuple[str, ...], scales: np.ndarray, states: np.ndarray, reference: np.ndarray
+) -> dict[str, tuple[float, float]]:
     """Per state: (RMS error over the samples, error at the last sample), each divided by its scale
     (see error_scale); states and reference of shape n_states x n at the same times."""
     difference = np.abs(states - reference) / scales[:, None]
-    rms = np.sqrt(np.mean(difference ** 2, axis=1))
+    rms = np.sqrt(np.mean(difference**2, axis=1))
     return {name: (float(rms[i]), float(difference[i, -1])) for i, name in enumerate(names)}
 
 
@@ -305,9 +369,18 @@ def measure(task: Task) -> Measurement:
         sample_times = time_grid(model.scene.scenario.duration)
         states = result(sample_times) if complete else np.zeros((len(model.state_names()), 0))
         nfev, steps = result.stats.nfev, result.stats.steps
-    return Measurement(task, result.status, result.message, statistics.median(times), len(times), nfev, steps,
-                       sample_times if complete else np.zeros(0), states,
-                       result if task.role == "reference" else None)
+    return Measurement(
+        task,
+        result.status,
+        result.message,
+        statistics.median(times),
+        len(times),
+        nfev,
+        steps,
+        sample_times if complete else np.zeros(0),
+        states,
+        result if task.role == "reference" else None,
+    )
 
 
 def _ignore_interrupts() -> None:
@@ -408,8 +481,11 @@ class SceneResult:
 
     def runs_of(self, method: str) -> list[Run]:
         """The completed runs of a method with a known error, loosest setting first."""
-        return [run for run in self.runs if run.setting.method == method and run.status == "complete"
-                and math.isfinite(run.error)]
+        return [
+            run
+            for run in self.runs
+            if run.setting.method == method and run.status == "complete" and math.isfinite(run.error)
+        ]
 
 
 @dataclass
@@ -450,20 +526,27 @@ class _Collector:
         result = self.scenes[name]
         if measurement.status != "complete":
             if task.role != "run":
-                raise RuntimeError(f"{name}: the reference run {setting.method} rtol {setting.value:g} "
-                                   f"{measurement.status}: {measurement.message}")
+                raise RuntimeError(
+                    f"{name}: the reference run {setting.method} rtol {setting.value:g} "
+                    f"{measurement.status}: {measurement.message}"
+                )
             result.runs.append(self._run(measurement))
             return f"{name:<26} {setting.method:<13} {setting.label:>8}  {measurement.status}: {measurement.message}"
         if task.role == "reference":
             self._set_reference(name, measurement.trajectory)
             while self.waiting[name]:
                 self._add_measured(self.waiting[name].pop())
-            return (f"{name:<26} reference {setting.method} rtol {setting.value:g}: {measurement.steps} steps, "
-                    f"CPU {measurement.cpu:.3g} s")
+            return (
+                f"{name:<26} reference {setting.method} rtol {setting.value:g}: {measurement.steps} steps, "
+                f"CPU {measurement.cpu:.3g} s"
+            )
         if name not in self.reference:
             self.waiting[name].append(measurement)
-            what = (f"check {setting.method} rtol {setting.value:g}" if task.role == "check"
-                    else f"{setting.method:<13} {setting.label:>8} ")
+            what = (
+                f"check {setting.method} rtol {setting.value:g}"
+                if task.role == "check"
+                else f"{setting.method:<13} {setting.label:>8} "
+            )
             return f"{name:<26} {what} CPU {measurement.cpu:.4g} s (compared when the reference is in)"
         return self._add_measured(measurement)
 
@@ -475,23 +558,36 @@ class _Collector:
         errors = achieved_errors(result.state_names, self.scales[name], measurement.states, reference)
         if task.role == "check":
             result.reference_errors = errors
-            return (f"{name:<26} check {setting.method} rtol {setting.value:g}: the references differ by "
-                    f"{errors['omega'][0]:.2g} (omega RMS, relative), CPU {measurement.cpu:.3g} s")
+            return (
+                f"{name:<26} check {setting.method} rtol {setting.value:g}: the references differ by "
+                f"{errors['omega'][0]:.2g} (omega RMS, relative), CPU {measurement.cpu:.3g} s"
+            )
         run = self._run(measurement, errors)
         result.runs.append(run)
-        return (f"{name:<26} {setting.method:<13} {setting.label:>8}  error {run.error:9.3g}  CPU {run.cpu:9.4g} s  "
-                f"{run.steps} steps")
+        return (
+            f"{name:<26} {setting.method:<13} {setting.label:>8}  error {run.error:9.3g}  CPU {run.cpu:9.4g} s  "
+            f"{run.steps} steps"
+        )
 
     def _run(self, measurement: Measurement, errors: dict | None = None) -> Run:
-        return Run(measurement.task.setting, measurement.status, measurement.message, measurement.cpu,
-                   measurement.repeats, measurement.nfev, measurement.steps, errors or {})
+        return Run(
+            measurement.task.setting,
+            measurement.status,
+            measurement.message,
+            measurement.cpu,
+            measurement.repeats,
+            measurement.nfev,
+            measurement.steps,
+            errors or {},
+        )
 
     def finish(self) -> None:
         """Keep the runs still waiting for a reference (without errors) and sort every scene's runs by
         method, then from the loosest setting to the finest."""
         for name, waiting in self.waiting.items():
-            self.scenes[name].runs += [self._run(measurement) for measurement in waiting
-                                       if measurement.task.role == "run"]
+            self.scenes[name].runs += [
+                self._run(measurement) for measurement in waiting if measurement.task.role == "run"
+            ]
         for result in self.scenes.values():
             result.runs.sort(key=lambda run: (METHODS.index(run.setting.method), -run.setting.value))
 
@@ -501,8 +597,9 @@ def processor_name() -> str:
     processor = platform.processor() or platform.machine()
     cpuinfo = Path("/proc/cpuinfo")
     if cpuinfo.is_file():
-        names = [line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines()
-                 if line.startswith("model name")]
+        names = [
+            line.split(":", 1)[1].strip() for line in cpuinfo.read_text().splitlines() if line.startswith("model name")
+        ]
         processor = names[0] if names else processor
     return processor
 
@@ -512,12 +609,19 @@ def environment(jobs: int) -> dict[str, str]:
     import scipy
 
     processor = processor_name()
-    return {"processor": processor, "python": platform.python_version(), "numpy": np.__version__,
-            "scipy": scipy.__version__, "jobs": str(jobs), "date": time.strftime("%Y-%m-%d")}
+    return {
+        "processor": processor,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "jobs": str(jobs),
+        "date": time.strftime("%Y-%m-%d"),
+    }
 
 
-def run_benchmark(scenes: list[BenchScene], quick: bool = False, jobs: int = 2,
-                  report: Callable[[str], None] = print) -> Benchmark:
+def run_benchmark(
+    scenes: list[BenchScene], quick: bool = False, jobs: int = 2, report: Callable[[str], None] = print
+) -> Benchmark:
     """Measure every scene's sweep (see the module docstring) in `jobs` worker processes; report(line)
     is called once per finished run. Ctrl-C stops the workers and returns what was measured, with
     `interrupted` set."""
@@ -526,13 +630,25 @@ def run_benchmark(scenes: list[BenchScene], quick: bool = False, jobs: int = 2,
     for bench in scenes:
         scene = bench.load(quick)
         models[bench.name] = model = build_model(scene)
-        reference = ("closed form" if bench.closed_form is not None else
-                     f"{REFERENCE_METHOD} rtol {REFERENCE_RTOL:g}, checked by {CHECK_METHOD} rtol {check_rtol:g}")
-        results.append(SceneResult(bench, " ".join((scene.description or "").split()), scene.scenario.duration,
-                                   model.state_names(), reference))
+        reference = (
+            "closed form"
+            if bench.closed_form is not None
+            else f"{REFERENCE_METHOD} rtol {REFERENCE_RTOL:g}, checked by {CHECK_METHOD} rtol {check_rtol:g}"
+        )
+        results.append(
+            SceneResult(
+                bench,
+                " ".join((scene.description or "").split()),
+                scene.scenario.duration,
+                model.state_names(),
+                reference,
+            )
+        )
         if bench.closed_form is None:
-            tasks += [Task(bench.name, quick, Setting(REFERENCE_METHOD, REFERENCE_RTOL), "reference"),
-                      Task(bench.name, quick, Setting(CHECK_METHOD, check_rtol), "check")]
+            tasks += [
+                Task(bench.name, quick, Setting(REFERENCE_METHOD, REFERENCE_RTOL), "reference"),
+                Task(bench.name, quick, Setting(CHECK_METHOD, check_rtol), "check"),
+            ]
     runs = [Task(bench.name, quick, setting) for bench in scenes for setting in sweep(bench, models[bench.name], quick)]
     tasks += sorted(runs, key=_expected_cost, reverse=True)
     collector = _Collector(results, models)
@@ -555,5 +671,15 @@ def _expected_cost(task: Task) -> tuple[int, float]:
     return setting.method in IMPLICIT, -math.log10(setting.value)
 
 
-__all__ = ["Benchmark", "BenchScene", "Run", "SCENES", "SceneResult", "Setting", "run_benchmark", "select_scenes",
-           "startup_closed_form", "timed"]
+__all__ = [
+    "Benchmark",
+    "BenchScene",
+    "Run",
+    "SCENES",
+    "SceneResult",
+    "Setting",
+    "run_benchmark",
+    "select_scenes",
+    "startup_closed_form",
+    "timed",
+]

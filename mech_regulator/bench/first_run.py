@@ -64,20 +64,26 @@ def repository_root() -> Path:
     for folder in (package.parent, *package.parent.parents):
         if (folder / ".git").exists() and (folder / "dev").is_file():
             return folder
-    raise ValueError(f"{package} is not in a git checkout of the project (with ./dev): bench first-run clones the "
-                     "checkout it runs from; run it from a clone's .venv")
+    raise ValueError(
+        f"{package} is not in a git checkout of the project (with ./dev): bench first-run clones the "
+        "checkout it runs from; run it from a clone's .venv"
+    )
 
 
 def clean_environment(home: Path, pip_cache: Path | None) -> dict[str, str]:
     """A new user's shell: this environment less the project's, numba's, pip's and XDG's variables and any venv
     (module docstring), HOME=home, XDG_CACHE_HOME and XDG_RUNTIME_DIR under it, and pip's cache off (pip_cache None)
     or that folder."""
-    environment = {key: value for key, value in os.environ.items()
-                   if not key.startswith(DROPPED_PREFIXES) and key not in DROPPED_VARIABLES}
+    environment = {
+        key: value
+        for key, value in os.environ.items()
+        if not key.startswith(DROPPED_PREFIXES) and key not in DROPPED_VARIABLES
+    }
     venv_bin = str(Path(sys.prefix) / "bin")
     if sys.prefix != sys.base_prefix:
-        environment["PATH"] = os.pathsep.join(part for part in environment.get("PATH", "").split(os.pathsep)
-                                              if part.rstrip("/") != venv_bin)
+        environment["PATH"] = os.pathsep.join(
+            part for part in environment.get("PATH", "").split(os.pathsep) if part.rstrip("/") != venv_bin
+        )
     environment.update(HOME=str(home), XDG_CACHE_HOME=str(home / ".cache"), XDG_RUNTIME_DIR=str(home / "run"))
     if pip_cache is None:
         environment["PIP_NO_CACHE_DIR"] = "1"
@@ -90,13 +96,21 @@ def plan(folder: Path, scene: str) -> list[Step]:
     """The steps (module docstring) in `folder`: the clone in folder/clone, the runs' outputs in folder/runs."""
     clone = folder / "clone"
     runs = folder / "runs"
-    return [Step("clone", ["git", "clone", "--quiet", str(repository_root()), str(clone)], folder),
-            Step("set-up (./dev's venv, the main job's packages)", ["bash", "./dev", "run", "--help"], clone),
-            Step("first command", [".venv/bin/mech-regulator", "scenes"], clone),
-            Step("first main job (empty compile caches)",
-                 ["bash", "./dev", "run", scene, "--out", str(runs / "first" / f"{scene}.rrd")], clone),
-            Step("warm main job (the same again)",
-                 ["bash", "./dev", "run", scene, "--out", str(runs / "warm" / f"{scene}.rrd")], clone)]
+    return [
+        Step("clone", ["git", "clone", "--quiet", str(repository_root()), str(clone)], folder),
+        Step("set-up (./dev's venv, the main job's packages)", ["bash", "./dev", "run", "--help"], clone),
+        Step("first command", [".venv/bin/mech-regulator", "scenes"], clone),
+        Step(
+            "first main job (empty compile caches)",
+            ["bash", "./dev", "run", scene, "--out", str(runs / "first" / f"{scene}.rrd")],
+            clone,
+        ),
+        Step(
+            "warm main job (the same again)",
+            ["bash", "./dev", "run", scene, "--out", str(runs / "warm" / f"{scene}.rrd")],
+            clone,
+        ),
+    ]
 
 
 def main_job_summary(recording: Path) -> dict | None:
@@ -125,8 +139,9 @@ def describe_run(summary: dict | None) -> str:
     return f"{summary.get('status')}, {summary['path']} path, {pace}{start_up}"
 
 
-def measure_first_run(folder: Path, scene: str, pip_cache: Path | None,
-                      report: Callable[[str], None] = print) -> FirstRun:
+def measure_first_run(
+    folder: Path, scene: str, pip_cache: Path | None, report: Callable[[str], None] = print
+) -> FirstRun:
     """Clone, set up and run (module docstring) in `folder` (made here), each step's output in folder/STEP.log;
     report(line) before and after each step. Stops at the first step that fails (its exit code and log kept); Ctrl-C
     stops the step under way and returns what was measured (interrupted)."""
@@ -145,8 +160,15 @@ def measure_first_run(folder: Path, scene: str, pip_cache: Path | None,
         report(f"bench first-run: {step.title}: `{' '.join(step.command)}` (output in {log}) ...")
         started = time.perf_counter()
         with open(log, "w") as output:
-            process = subprocess.Popen(step.command, cwd=step.cwd, env=environment, stdin=subprocess.DEVNULL,
-                                       stdout=output, stderr=subprocess.STDOUT, start_new_session=True)
+            process = subprocess.Popen(
+                step.command,
+                cwd=step.cwd,
+                env=environment,
+                stdin=subprocess.DEVNULL,
+                stdout=output,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
             try:
                 step.exit_code = process.wait()
             except KeyboardInterrupt:
@@ -158,8 +180,10 @@ def measure_first_run(folder: Path, scene: str, pip_cache: Path | None,
         if recording is not None:
             step.summary = main_job_summary(recording)
             step.found = describe_run(step.summary)
-        report(f"bench first-run: {step.title}: {step.wall_s:.1f} s, exit {step.exit_code}"
-               f"{f'; {step.found}' if step.found else ''}")
+        report(
+            f"bench first-run: {step.title}: {step.wall_s:.1f} s, exit {step.exit_code}"
+            f"{f'; {step.found}' if step.found else ''}"
+        )
         if step.exit_code != 0:
             break
     _stop_server(folder / "clone", environment)
@@ -191,10 +215,14 @@ def format_table(result: FirstRun, pip_cache: Path | None) -> str:
     the warm run's."""
     machine = result.machine
     cache = "no pip cache" if pip_cache is None else f"pip cache {pip_cache}"
-    lines = [f"first run of a fresh clone, empty HOME, {cache}; {machine['processor']}, {machine['cores']} cores, "
-             f"load {os.getloadavg()[0]:.1f} at the end, {platform.system()} {platform.release()}, Python "
-             f"{platform.python_version()}, {machine['date']}", "",
-             "| step | command | wall time [s] | |", "| --- | --- | ---: | --- |"]
+    lines = [
+        f"first run of a fresh clone, empty HOME, {cache}; {machine['processor']}, {machine['cores']} cores, "
+        f"load {os.getloadavg()[0]:.1f} at the end, {platform.system()} {platform.release()}, Python "
+        f"{platform.python_version()}, {machine['date']}",
+        "",
+        "| step | command | wall time [s] | |",
+        "| --- | --- | ---: | --- |",
+    ]
     for step in result.steps:
         if step.wall_s is None:
             continue

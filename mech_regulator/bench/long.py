@@ -59,14 +59,24 @@ class _Budget:
             raise KeyboardInterrupt
 
 
-def matrix(scenes: list[str] | None = None, paths: tuple[str, ...] = PATHS, methods: tuple[str, ...] = METHODS,
-           modes: tuple[str, ...] = MODES) -> list[tuple[str, str, str, str]]:
+def matrix(
+    scenes: list[str] | None = None,
+    paths: tuple[str, ...] = PATHS,
+    methods: tuple[str, ...] = METHODS,
+    modes: tuple[str, ...] = MODES,
+) -> list[tuple[str, str, str, str]]:
     """The rows asked for, (scene, path, method, mode), every bundled scene by default; the methods a path does not
     run are left out."""
     from mech_regulator.scene import bundled_scenes
 
-    return [(scene, path, method, mode) for scene in (scenes or list(bundled_scenes())) for path in paths
-            for method in methods for mode in modes if not (path == "fast" and method in REFERENCE_ONLY)]
+    return [
+        (scene, path, method, mode)
+        for scene in (scenes or list(bundled_scenes()))
+        for path in paths
+        for method in methods
+        for mode in modes
+        if not (path == "fast" and method in REFERENCE_ONLY)
+    ]
 
 
 def run_row(scene: str, path: str, method: str, mode: str, duration: float, budget: float) -> Row:
@@ -89,8 +99,19 @@ def run_row(scene: str, path: str, method: str, mode: str, duration: float, budg
     if stopper.spent:
         status, message = "stopped (wall-time budget)", f"at t = {run['t_end']:.6g} s"
     figures = _run(short, mode, _Budget(budget)) if run["steady"] is not None else {"steady": None}
-    return Row(scene, path, method, mode, status, message, wall, run["steps"], run["residual"],
-               *(run["steady"] or (None, None)), *(figures["steady"] or (None, None)))
+    return Row(
+        scene,
+        path,
+        method,
+        mode,
+        status,
+        message,
+        wall,
+        run["steps"],
+        run["residual"],
+        *(run["steady"] or (None, None)),
+        *(figures["steady"] or (None, None)),
+    )
 
 
 def _run(model, mode: str, progress: Callable[[float], None]) -> dict:
@@ -118,19 +139,28 @@ def _run(model, mode: str, progress: Callable[[float], None]) -> dict:
         status, message = cosimulation_ending(run)
     steady = analyse_steady_state(model, trajectory) if trajectory.t_end > trajectory.t_start else None
     last = steady.last if steady is not None and steady.steady else None
-    return {"status": status, "message": message, "t_end": trajectory.t_end, "steps": steps, "residual": residual,
-            "steady": (last.omega_m, last.delta) if last is not None else None}
+    return {
+        "status": status,
+        "message": message,
+        "t_end": trajectory.t_end,
+        "steps": steps,
+        "residual": residual,
+        "steady": (last.omega_m, last.delta) if last is not None else None,
+    }
 
 
 def format_header(duration: float) -> str:
     """The table's header (Markdown), for rows of `duration` [s]."""
-    return (f"| scene | path | method | mode | status ({duration:g} s) | wall [s] | steps | energy residual | "
-            "omega_m [rad/s] | vs own duration | delta | vs own duration |\n"
-            "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|")
+    return (
+        f"| scene | path | method | mode | status ({duration:g} s) | wall [s] | steps | energy residual | "
+        "omega_m [rad/s] | vs own duration | delta | vs own duration |\n"
+        "|---|---|---|---|---|---:|---:|---:|---:|---:|---:|---:|"
+    )
 
 
 def format_row(row: Row) -> str:
     """A row of the table (Markdown): the figures against the short run's as differences relative to them."""
+
     def number(value: float | None, spec: str) -> str:
         return "-" if value is None else format(value, spec)
 
@@ -138,7 +168,9 @@ def format_row(row: Row) -> str:
         return "-" if value is None or short is None or short == 0.0 else f"{value / short - 1.0:+.1e}"
 
     status = row.status if row.status == "complete" else f"{row.status}: {row.message[:90]}"
-    return (f"| {row.scene} | {row.path} | {row.method} | {row.mode} | {status} | {row.wall:.0f} | "
-            f"{number(row.steps, 'd')} | {number(row.residual, '.1e')} | {number(row.omega_m, '.6g')} | "
-            f"{relative(row.omega_m, row.omega_m_short)} | {number(row.delta, '.4g')} | "
-            f"{relative(row.delta, row.delta_short)} |")
+    return (
+        f"| {row.scene} | {row.path} | {row.method} | {row.mode} | {status} | {row.wall:.0f} | "
+        f"{number(row.steps, 'd')} | {number(row.residual, '.1e')} | {number(row.omega_m, '.6g')} | "
+        f"{relative(row.omega_m, row.omega_m_short)} | {number(row.delta, '.4g')} | "
+        f"{relative(row.delta, row.delta_short)} |"
+    )

@@ -38,9 +38,9 @@ from mech_regulator.scene import Scene, SceneError
 
 NATIVE_DRIVES = ("constant", "linear_motor")
 NATIVE_LOADS = ("constant", "viscous", "slider_constant", "slider_viscous", "slider_spring")
-CONSTRAINT_IMPEDANCE = 0.9999   # solimp dmin = dmax: MuJoCo's largest (hardest) impedance
-CONSTRAINT_TIME_STEPS = 4.0     # solref time constant in timesteps: of 2, 4, 8, 16 the most accurate on crank_slider_bench
-SOLVER_TOLERANCE = 1e-12        # Newton solver's tolerance on the constraint forces [-]
+CONSTRAINT_IMPEDANCE = 0.9999  # solimp dmin = dmax: MuJoCo's largest (hardest) impedance
+CONSTRAINT_TIME_STEPS = 4.0  # solref time constant in timesteps: of 2, 4, 8, 16 the most accurate on crank_slider_bench
+SOLVER_TOLERANCE = 1e-12  # Newton solver's tolerance on the constraint forces [-]
 
 
 def mujoco_refusal(scene: Scene) -> str | None:
@@ -56,8 +56,10 @@ def mujoco_refusal(scene: Scene) -> str | None:
         return f"machine.drive type '{found}' has no MuJoCo-native form; expected one of {', '.join(NATIVE_DRIVES)}"
     for index, load in enumerate(machine.loads):
         if load.type not in NATIVE_LOADS:
-            return (f"machine.loads[{index}] type '{load.type}' has no MuJoCo-native form; expected one of "
-                    f"{', '.join(NATIVE_LOADS)}")
+            return (
+                f"machine.loads[{index}] type '{load.type}' has no MuJoCo-native form; expected one of "
+                f"{', '.join(NATIVE_LOADS)}"
+            )
     for key in ("coupling", "clutch", "joint_friction"):
         if getattr(machine, key) is not None:
             return f"machine.{key} is set; the MuJoCo model is the crank–slider alone"
@@ -73,8 +75,11 @@ def _affine_bias(scene: Scene) -> tuple[float, float, float, float]:
     (crank constant [N m], crank per omega [N m s/rad], crank damping [N m s/rad], slider constant [N])."""
     machine = scene.machine
     drive = machine.drive
-    constant, per_speed = (drive.torque, 0.0) if drive.type == "constant" else (
-        drive.stall_torque, -drive.stall_torque / drive.no_load_speed)
+    constant, per_speed = (
+        (drive.torque, 0.0)
+        if drive.type == "constant"
+        else (drive.stall_torque, -drive.stall_torque / drive.no_load_speed)
+    )
     damping = slider_force = 0.0
     for load in machine.loads:
         if load.type == "constant":
@@ -94,7 +99,7 @@ def crank_slider_mjcf(scene: Scene, timestep: float) -> str:
         raise SceneError(f"scene '{scene.name}': {refusal}")
     machine, link = scene.machine, scene.machine.mechanism
     R, l, e = link.crank, link.rod, link.offset
-    J_crank = machine.inertia + (machine.flywheel.inertia * machine.flywheel.ratio ** 2 if machine.flywheel else 0.0)
+    J_crank = machine.inertia + (machine.flywheel.inertia * machine.flywheel.ratio**2 if machine.flywheel else 0.0)
     gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
     # at the model's reference pose (every joint 0, so phi = 0) the rod runs from B = (R, 0) to C = (x_C, e)
     x_C, _dx, _ddx, theta_ref, _dtheta, _ddtheta = slider_kinematics(0.0, R, l, e)
@@ -104,11 +109,13 @@ def crank_slider_mjcf(scene: Scene, timestep: float) -> str:
     # a body needs a positive mass: a massless crank gets 1 kg on its axis (no moment, no inertia about z);
     # a massless rod or slider 1 ug (forces of order 1e-8 N against the solver's tolerance)
     crank_mass, crank_cg = (link.crank_mass, link.crank_cg) if link.crank_mass > 0.0 else (1.0, 0.0)
-    crank_z = J_crank - crank_mass * crank_cg ** 2   # about its centre of mass, so J_crank about the axis
+    crank_z = J_crank - crank_mass * crank_cg**2  # about its centre of mass, so J_crank about the axis
     if crank_z <= 0.0:
-        raise SceneError(f"scene '{scene.name}': machine.inertia {machine.inertia:g} kg m^2 is less than the crank's "
-                         f"crank_mass crank_cg^2 = {crank_mass * crank_cg ** 2:g} kg m^2; MuJoCo needs the crank's "
-                         "inertia about its centre of mass to be positive")
+        raise SceneError(
+            f"scene '{scene.name}': machine.inertia {machine.inertia:g} kg m^2 is less than the crank's "
+            f"crank_mass crank_cg^2 = {crank_mass * crank_cg**2:g} kg m^2; MuJoCo needs the crank's "
+            "inertia about its centre of mass to be positive"
+        )
     rod_mass, slider_mass = max(link.rod_mass, 1e-9), max(link.slider_mass, 1e-9)
     rod_z = max(link.rod_inertia, 1e-12)
 
@@ -117,11 +124,12 @@ def crank_slider_mjcf(scene: Scene, timestep: float) -> str:
         return f'<inertial pos="{x!r} 0 0" mass="{mass!r}" diaginertia="{z!r} {z!r} {z!r}"/>'
 
     half_angle = 0.5 * theta_ref
-    spring_attributes = (f' stiffness="{spring.stiffness!r}" springref="{spring.free_position!r}"'
-                         if spring is not None else "")
+    spring_attributes = (
+        f' stiffness="{spring.stiffness!r}" springref="{spring.free_position!r}"' if spring is not None else ""
+    )
     from mech_regulator.scene.limits import output_stem  # (a name with '"' or '<' would break the XML)
 
-    return f"""<mujoco model="{output_stem(scene.name, 'crank_slider')}">
+    return f"""<mujoco model="{output_stem(scene.name, "crank_slider")}">
   <compiler angle="radian"/>
   <option timestep="{timestep!r}" integrator="RK4" gravity="{gx!r} {gy!r} 0" solver="Newton"
           tolerance="{SOLVER_TOLERANCE!r}" iterations="100" ls_tolerance="1e-6">
@@ -181,8 +189,9 @@ class MujocoCrankSlider:
         self.data = mujoco.MjData(self.model)
         self._rollout = rollout
         self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        self.data.qpos[:], self.data.qvel[:] = self.joint_state(scene.scenario.initial.phi,
-                                                                scene.scenario.initial.omega)
+        self.data.qpos[:], self.data.qvel[:] = self.joint_state(
+            scene.scenario.initial.phi, scene.scenario.initial.omega
+        )
         mujoco.mj_forward(self.model, self.data)
         self.initial_state = np.empty(mujoco.mj_stateSize(self.model, self._spec))
         mujoco.mj_getState(self.model, self.data, self.initial_state, self._spec)
@@ -194,8 +203,7 @@ class MujocoCrankSlider:
         link = self.scene.machine.mechanism
         x, dx, _ddx, theta, dtheta, _ddtheta = slider_kinematics(phi, link.crank, link.rod, link.offset)
         theta_ref = slider_kinematics(0.0, link.crank, link.rod, link.offset)[3]
-        return (np.array([phi, theta - phi - theta_ref, x]),
-                np.array([omega, (dtheta - 1.0) * omega, dx * omega]))
+        return (np.array([phi, theta - phi - theta_ref, x]), np.array([omega, (dtheta - 1.0) * omega, dx * omega]))
 
     def run(self, duration: float) -> MujocoRun:
         """Step the model over duration [s] (rounded to whole steps) with one mujoco.rollout call."""

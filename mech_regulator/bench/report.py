@@ -29,11 +29,25 @@ from mech_regulator.bench.accuracy import (
     power_of_ten,
 )
 
-TARGETS = (1e-4, 1e-7, 1e-10)   # headline errors at which the cheapest method is named
-FINEST_POINTS = 4               # the cost of one more digit is fitted over a method's finest resolved runs
+TARGETS = (1e-4, 1e-7, 1e-10)  # headline errors at which the cheapest method is named
+FINEST_POINTS = 4  # the cost of one more digit is fitted over a method's finest resolved runs
 FIXED_STEP = ("RK4", "energy", COSIM)
-CSV_COLUMNS = ("scene", "method", "parameter", "value", "label", "atol", "status", "cpu_s", "repeats", "nfev", "steps",
-               "error", "reference_error", "below_reference")
+CSV_COLUMNS = (
+    "scene",
+    "method",
+    "parameter",
+    "value",
+    "label",
+    "atol",
+    "status",
+    "cpu_s",
+    "repeats",
+    "nfev",
+    "steps",
+    "error",
+    "reference_error",
+    "below_reference",
+)
 
 # ---------------------------------------------------------------------------------------------
 # CSV
@@ -59,14 +73,31 @@ def write_runs_csv(benchmark: Benchmark, path: Path) -> None:
             scale = result.bench.state_scale
             for run in result.runs:
                 setting = run.setting
-                errors = {f"{name}_{which}_{error_kind(name)}": pair[i] for name, pair in run.errors.items()
-                          for i, which in enumerate(("rms", "end"))}
-                writer.writerow([result.bench.name, setting.method, setting.parameter, f"{setting.value:g}",
-                                 setting.label, _number(setting.value * scale if setting.method in ADAPTIVE else None),
-                                 run.status, _number(run.cpu), run.repeats, "" if run.nfev is None else run.nfev,
-                                 run.steps, _number(run.error), _number(result.reference_error),
-                                 int(result.below_reference(run)), *(_number(errors.get(column)) for column in columns),
-                                 run.message])
+                errors = {
+                    f"{name}_{which}_{error_kind(name)}": pair[i]
+                    for name, pair in run.errors.items()
+                    for i, which in enumerate(("rms", "end"))
+                }
+                writer.writerow(
+                    [
+                        result.bench.name,
+                        setting.method,
+                        setting.parameter,
+                        f"{setting.value:g}",
+                        setting.label,
+                        _number(setting.value * scale if setting.method in ADAPTIVE else None),
+                        run.status,
+                        _number(run.cpu),
+                        run.repeats,
+                        "" if run.nfev is None else run.nfev,
+                        run.steps,
+                        _number(run.error),
+                        _number(result.reference_error),
+                        int(result.below_reference(run)),
+                        *(_number(errors.get(column)) for column in columns),
+                        run.message,
+                    ]
+                )
 
 
 def _number(value: float | None) -> str:
@@ -102,7 +133,7 @@ def cost_per_digit(result: SceneResult, method: str) -> float | None:
     if np.ptp(digits) < 0.5:
         return None
     slope = np.polyfit(digits, np.log10([run.cpu for run in runs]), 1)[0]
-    return float(10.0 ** slope)
+    return float(10.0**slope)
 
 
 def observed_order(result: SceneResult, method: str) -> float | None:
@@ -140,8 +171,9 @@ def _duration(seconds: float) -> str:
 def digit_costs(result: SceneResult) -> dict[str, float]:
     """Cost of one more digit per method with enough resolved runs, cheapest first."""
     factors = {method: cost_per_digit(result, method) for method in METHODS}
-    return dict(sorted(((method, factor) for method, factor in factors.items() if factor is not None),
-                       key=lambda item: item[1]))
+    return dict(
+        sorted(((method, factor) for method, factor in factors.items() if factor is not None), key=lambda item: item[1])
+    )
 
 
 def findings(result: SceneResult) -> list[str]:
@@ -151,39 +183,58 @@ def findings(result: SceneResult) -> list[str]:
     if result.bench.closed_form is not None:
         lines.append("The reference is exact (closed form): every error is the method's own.")
     elif math.isfinite(reference):
-        lines.append(f"The reference ({result.reference}) agrees with its check to {reference:.1g} (omega RMS, "
-                     "relative): errors below that are not resolved and are drawn hollow.")
+        lines.append(
+            f"The reference ({result.reference}) agrees with its check to {reference:.1g} (omega RMS, "
+            "relative): errors below that are not resolved and are drawn hollow."
+        )
     for target in TARGETS:
         if target < reference:
             lines.append(f"Error {power_of_ten(target)}: below the reference's own error, not measurable here.")
             continue
         best = cheapest(result, target)
-        lines.append(f"Cheapest to an error of {power_of_ten(target)}: {describe_run(best)}."
-                     if best is not None else f"No run reached an error of {power_of_ten(target)}.")
+        lines.append(
+            f"Cheapest to an error of {power_of_ten(target)}: {describe_run(best)}."
+            if best is not None
+            else f"No run reached an error of {power_of_ten(target)}."
+        )
     factors = digit_costs(result)
     if factors:
-        lines.append("One more digit (10x smaller error) costs, in CPU time, over each method's finest resolved "
-                     "runs: " + ", ".join(f"{method} x{factor:.2g}" for method, factor in factors.items()) + ".")
+        lines.append(
+            "One more digit (10x smaller error) costs, in CPU time, over each method's finest resolved "
+            "runs: " + ", ".join(f"{method} x{factor:.2g}" for method, factor in factors.items()) + "."
+        )
     orders = {method: observed_order(result, method) for method in FIXED_STEP}
     orders = {method: order for method, order in orders.items() if order is not None}
     if orders:
-        lines.append("Observed order of the fixed-step methods (error ~ step^p): "
-                     + ", ".join(f"{method} p = {order:.2g}" for method, order in orders.items()) + ".")
+        lines.append(
+            "Observed order of the fixed-step methods (error ~ step^p): "
+            + ", ".join(f"{method} p = {order:.2g}" for method, order in orders.items())
+            + "."
+        )
     spans = {method: proportionality(result, method) for method in ADAPTIVE}
     spans = {method: span for method, span in spans.items() if span is not None}
     if spans:
-        lines.append("Tolerance proportionality, achieved error / requested rtol: "
-                     + ", ".join(f"{method} {low:.2g}–{high:.2g}" + (f" ({reversals} reversal{'s' * (reversals > 1)})"
-                                                                    if reversals else "")
-                                 for method, (low, high, reversals) in spans.items()) + ".")
+        lines.append(
+            "Tolerance proportionality, achieved error / requested rtol: "
+            + ", ".join(
+                f"{method} {low:.2g}–{high:.2g}"
+                + (f" ({reversals} reversal{'s' * (reversals > 1)})" if reversals else "")
+                for method, (low, high, reversals) in spans.items()
+            )
+            + "."
+        )
     flagged = [run for run in result.runs if result.below_reference(run)]
     if flagged:
-        lines.append(f"{len(flagged)} run{'s lie' if len(flagged) > 1 else ' lies'} below the reference's own error: "
-                     + ", ".join(f"{run.setting.method} {run.setting.label}" for run in flagged) + ".")
+        lines.append(
+            f"{len(flagged)} run{'s lie' if len(flagged) > 1 else ' lies'} below the reference's own error: "
+            + ", ".join(f"{run.setting.method} {run.setting.label}" for run in flagged)
+            + "."
+        )
     failed = [run for run in result.runs if run.status != "complete"]
     if failed:
-        lines.append("Failed: " + "; ".join(f"{run.setting.method} {run.setting.label}: {run.message}"
-                                            for run in failed) + ".")
+        lines.append(
+            "Failed: " + "; ".join(f"{run.setting.method} {run.setting.label}: {run.message}" for run in failed) + "."
+        )
     return [f"- {line}" for line in lines]
 
 
@@ -225,23 +276,34 @@ def markdown(benchmark: Benchmark, wall_seconds: float) -> str:
         "",
         "## Key findings",
         "",
-        "| scene | reference's own error | " + " | ".join(f"cheapest to {power_of_ten(target)}" for target in TARGETS)
+        "| scene | reference's own error | "
+        + " | ".join(f"cheapest to {power_of_ten(target)}" for target in TARGETS)
         + " | one more digit costs (CPU, cheapest three) |",
         "| --- | ---: | " + " | ".join("---" for _ in TARGETS) + " | --- |",
     ]
     for result in benchmark.scenes:
         cells = []
         for target in TARGETS:
-            cells.append("below the reference" if target < result.reference_error
-                         else describe_run(cheapest(result, target)))
+            cells.append(
+                "below the reference" if target < result.reference_error else describe_run(cheapest(result, target))
+            )
         factors = ", ".join(f"{method} x{factor:.2g}" for method, factor in list(digit_costs(result).items())[:3])
         reference = "exact" if result.bench.closed_form is not None else f"{result.reference_error:.1g}"
-        lines.append(f"| [{result.bench.name}](#{result.bench.name}) | {reference} | " + " | ".join(cells)
-                     + f" | {factors or '—'} |")
-    lines += ["", "## Tolerance proportionality", "",
-              "Achieved error against the requested rtol, per adaptive method: on the dashed diagonal the error is "
-              "what was asked for; below the dotted line (the reference's own error) nothing is resolved.", "",
-              "![achieved error against requested rtol](tolerance_proportionality.png)", ""]
+        lines.append(
+            f"| [{result.bench.name}](#{result.bench.name}) | {reference} | "
+            + " | ".join(cells)
+            + f" | {factors or '—'} |"
+        )
+    lines += [
+        "",
+        "## Tolerance proportionality",
+        "",
+        "Achieved error against the requested rtol, per adaptive method: on the dashed diagonal the error is "
+        "what was asked for; below the dotted line (the reference's own error) nothing is resolved.",
+        "",
+        "![achieved error against requested rtol](tolerance_proportionality.png)",
+        "",
+    ]
     for result in benchmark.scenes:
         lines += _scene_section(result)
     return "\n".join(lines) + "\n"
@@ -250,22 +312,38 @@ def markdown(benchmark: Benchmark, wall_seconds: float) -> str:
 def _scene_section(result: SceneResult) -> list[str]:
     bench = result.bench
     others = [name for name in result.state_names if name not in ("phi", "omega")]
-    lines = [f"## {bench.name}", "", f"{result.description}", "",
-             f"Benchmark run: {bench.what}; reference: {result.reference}; states {', '.join(result.state_names)}.",
-             "", f"![work-precision diagram of {bench.name}](work_precision_{bench.name}.png)", "",
-             *findings(result), "",
-             "| method | setting | omega RMS [-] | omega end [-] | phi end [rad] |"
-             + (f" {', '.join(others)}: worst RMS [-] |" if others else "") + " CPU [ms] | RHS evaluations | steps | |",
-             "| --- | ---: | ---: | ---: | ---: |" + (" ---: |" if others else "") + " ---: | ---: | ---: | --- |"]
+    lines = [
+        f"## {bench.name}",
+        "",
+        f"{result.description}",
+        "",
+        f"Benchmark run: {bench.what}; reference: {result.reference}; states {', '.join(result.state_names)}.",
+        "",
+        f"![work-precision diagram of {bench.name}](work_precision_{bench.name}.png)",
+        "",
+        *findings(result),
+        "",
+        "| method | setting | omega RMS [-] | omega end [-] | phi end [rad] |"
+        + (f" {', '.join(others)}: worst RMS [-] |" if others else "")
+        + " CPU [ms] | RHS evaluations | steps | |",
+        "| --- | ---: | ---: | ---: | ---: |" + (" ---: |" if others else "") + " ---: | ---: | ---: | --- |",
+    ]
     for run in result.runs:
         errors = run.errors
-        note = ("below the reference's error" if result.below_reference(run) else
-                run.status if run.status != "complete" else "")
+        note = (
+            "below the reference's error"
+            if result.below_reference(run)
+            else run.status
+            if run.status != "complete"
+            else ""
+        )
         worst = max((errors[name][0] for name in others if name in errors), default=math.nan)
-        lines.append(f"| {run.setting.method} | {run.setting.label} | {_cell(errors.get('omega', (math.nan,))[0])} | "
-                     f"{_cell(errors.get('omega', (0, math.nan))[1])} | {_cell(errors.get('phi', (0, math.nan))[1])} |"
-                     + (f" {_cell(worst)} |" if others else "")
-                     + f" {_milliseconds(run.cpu)} | {'' if run.nfev is None else run.nfev} | {run.steps} | {note} |")
+        lines.append(
+            f"| {run.setting.method} | {run.setting.label} | {_cell(errors.get('omega', (math.nan,))[0])} | "
+            f"{_cell(errors.get('omega', (0, math.nan))[1])} | {_cell(errors.get('phi', (0, math.nan))[1])} |"
+            + (f" {_cell(worst)} |" if others else "")
+            + f" {_milliseconds(run.cpu)} | {'' if run.nfev is None else run.nfev} | {run.steps} | {note} |"
+        )
     return lines + [""]
 
 
@@ -279,5 +357,4 @@ def _cell(value: float) -> str:
     return f"{value:.2e}" if math.isfinite(value) else "—"
 
 
-__all__ = ["cheapest", "cost_per_digit", "findings", "markdown", "observed_order", "proportionality",
-           "write_runs_csv"]
+__all__ = ["cheapest", "cost_per_digit", "findings", "markdown", "observed_order", "proportionality", "write_runs_csv"]

@@ -135,8 +135,11 @@ def process_memory(launcher) -> dict[str, float]:
     scenario, recorder, launcher); a process that has ended is left out."""
     memory = {}
     try:
-        processes = [("launcher", launcher)] + [(child.name().removesuffix(NODE_SUFFIX), child)
-                                                for child in launcher.children() if child.name().endswith(NODE_SUFFIX)]
+        processes = [("launcher", launcher)] + [
+            (child.name().removesuffix(NODE_SUFFIX), child)
+            for child in launcher.children()
+            if child.name().endswith(NODE_SUFFIX)
+        ]
     except psutil.Error:  # the launcher has ended
         return memory
     for name, process in processes:
@@ -148,8 +151,9 @@ def process_memory(launcher) -> dict[str, float]:
     return memory
 
 
-def run_command(scene: str, duration: float, overrides: list[str], out: Path | None, domain_id: int | None
-                ) -> list[str]:
+def run_command(
+    scene: str, duration: float, overrides: list[str], out: Path | None, domain_id: int | None
+) -> list[str]:
     """The `mech-regulator run` command line of the soak (no --quiet: its progress lines are what the soak reads)."""
     command = [sys.executable, "-m", "mech_regulator", "run", scene, "--duration", repr(duration)]
     for override in overrides:
@@ -161,9 +165,16 @@ def run_command(scene: str, duration: float, overrides: list[str], out: Path | N
     return command
 
 
-def run_soak(scene: str, duration: float, interval: float, overrides: list[str], out: Path | None = None,
-             domain_id: int | None = None, report: Callable[[str], None] = print,
-             passed_on: Callable[[str], None] = print) -> Soak:
+def run_soak(
+    scene: str,
+    duration: float,
+    interval: float,
+    overrides: list[str],
+    out: Path | None = None,
+    domain_id: int | None = None,
+    report: Callable[[str], None] = print,
+    passed_on: Callable[[str], None] = print,
+) -> Soak:
     """Play `scene` on the nodes for `duration` [s] of simulated time (`mech-regulator run` with `overrides` as --set,
     `out` its recording, `domain_id` its ROS domain; None: run's defaults) and report a memory row and a rate row
     (format_row) every `interval` [s] of wall time while it runs; the launcher's other lines (its summary, its
@@ -174,9 +185,16 @@ def run_soak(scene: str, duration: float, interval: float, overrides: list[str],
     soak = Soak(scene, duration)
     environment = dict(os.environ, MECH_REGULATOR_PROGRESS_INTERVAL="0", PYTHONUNBUFFERED="1")
     # its own session, so that a Ctrl-C at the terminal reaches the soak only, which passes it on once
-    process = subprocess.Popen(run_command(scene, duration, overrides, out, domain_id), stdin=subprocess.DEVNULL,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment,
-                               start_new_session=True, preexec_fn=die_with_parent)
+    process = subprocess.Popen(
+        run_command(scene, duration, overrides, out, domain_id),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=environment,
+        start_new_session=True,
+        preexec_fn=die_with_parent,
+    )
     watch = _Watch(soak, psutil.Process(process.pid), interval, report)
     for stream, destination in ((process.stdout, report), (process.stderr, passed_on)):
         threading.Thread(target=_read_lines, args=(stream, destination, watch.lines), daemon=True).start()
@@ -271,8 +289,13 @@ class _Watch:
             rate = (self.latest.sim_time - self.anchor.sim_time) / span if span > 0.0 else 0.0
             exchanges = rate / self.soak.exchange_step if self.soak.exchange_step else None
         self.anchor, self.anchored_by_a_row = self.latest, self.latest is not None
-        row = Row(now - self.start, process_memory(self.launcher),
-                  self.latest.sim_time if self.latest is not None else None, rate, exchanges)
+        row = Row(
+            now - self.start,
+            process_memory(self.launcher),
+            self.latest.sim_time if self.latest is not None else None,
+            rate,
+            exchanges,
+        )
         self.soak.rows.append(row)
         for line in format_row(row):
             self.report(line)
@@ -301,17 +324,22 @@ def energy_spans(model, columns: dict, share: float = ENERGY_SPAN_SHARE) -> list
     t = columns["t"]
     if t.size < 2:
         return []
-    works = {name: np.concatenate([[0.0], np.cumsum(steps)])  # [J] from the first sample to each
-             for name, steps in exchange_step_works(model, columns).items()}
+    works = {
+        name: np.concatenate([[0.0], np.cumsum(steps)])  # [J] from the first sample to each
+        for name, steps in exchange_step_works(model, columns).items()
+    }
     stored = columns["E_kinetic"] + columns.get("E_elastic", 0.0)
     first_end = int(np.searchsorted(t, t[0] + share * (t[-1] - t[0]), side="right")) - 1
     last_start = int(np.searchsorted(t, t[-1] - share * (t[-1] - t[0]), side="left"))
     spans = []
-    for label, start, end in (("whole run", 0, t.size - 1), (f"first {share:.0%}", 0, max(first_end, 1)),
-                              (f"last {share:.0%}", min(last_start, t.size - 2), t.size - 1)):
+    for label, start, end in (
+        ("whole run", 0, t.size - 1),
+        (f"first {share:.0%}", 0, max(first_end, 1)),
+        (f"last {share:.0%}", min(last_start, t.size - 2), t.size - 1),
+    ):
         work = [float(done[end] - done[start]) for done in works.values()]
         residual = sum(work) - float(stored[end] - stored[start])
-        scale = max(sum(abs(value) for value in work), float(np.max(stored[start:end + 1])), 1e-300)
+        scale = max(sum(abs(value) for value in work), float(np.max(stored[start : end + 1])), 1e-300)
         spans.append(EnergySpan(label, float(t[start]), float(t[end]), sum(work), residual, residual / scale))
     return spans
 
@@ -328,11 +356,15 @@ def exchange_step_works(model, columns: dict) -> dict[str, np.ndarray]:
     weights = (0.5 * np.diff(edges)[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
     parts = []
     for first in range(0, columns["t"].size - 1, CHUNK_STEPS):  # a chunk at a time: an hour has 180 000 steps
-        chunk = {name: values[first:first + CHUNK_STEPS + 1] for name, values in columns.items()}
+        chunk = {name: values[first : first + CHUNK_STEPS + 1] for name, values in columns.items()}
         times, states, throttle = between_samples(model, chunk, fractions)
         width = np.diff(chunk["t"])
-        parts.append({name: power.reshape(width.size, fractions.size) @ weights * width
-                      for name, power in powers(model, model.columns(times, states, throttle)).items()})
+        parts.append(
+            {
+                name: power.reshape(width.size, fractions.size) @ weights * width
+                for name, power in powers(model, model.columns(times, states, throttle)).items()
+            }
+        )
     return {name: np.concatenate([part[name] for part in parts]) for name in parts[0]}
 
 
@@ -357,8 +389,12 @@ def between_samples(model, columns: dict, fractions: np.ndarray) -> tuple[np.nda
         if name not in rates:
             return (start + (end - start) * s).ravel()
         rate = rates[name]
-        return ((2 * s ** 3 - 3 * s ** 2 + 1) * start + (s ** 3 - 2 * s ** 2 + s) * width * rate[:-1, None]
-                + (3 * s ** 2 - 2 * s ** 3) * end + (s ** 3 - s ** 2) * width * rate[1:, None]).ravel()
+        return (
+            (2 * s**3 - 3 * s**2 + 1) * start
+            + (s**3 - 2 * s**2 + s) * width * rate[:-1, None]
+            + (3 * s**2 - 2 * s**3) * end
+            + (s**3 - s**2) * width * rate[1:, None]
+        ).ravel()
 
     times = (t[:-1, None] + width * s).ravel()
     states = np.array([between(name) if name in columns else np.zeros(times.size) for name in model.state_names()])
@@ -400,18 +436,26 @@ def format_soak(soak: Soak) -> str:
     if summary is None:
         lines = [f"soak of {soak.scene}: the run wrote no summary (exit code {soak.exit_code})"]
     else:
-        lines = [f"soak of {soak.scene}: {summary['status']} at t = {summary['t_end']:.6g} s of {soak.duration:g} s "
-                 f"({summary['samples']} exchanges)"]
+        lines = [
+            f"soak of {soak.scene}: {summary['status']} at t = {summary['t_end']:.6g} s of {soak.duration:g} s "
+            f"({summary['samples']} exchanges)"
+        ]
         if "wall_time_s" in summary:
-            lines.append(f"whole run (the run's summary): {summary['samples'] / summary['wall_time_s']:.1f} "
-                         f"exchanges/s, real-time factor {summary['real_time_factor']:.3g} over "
-                         f"{summary['wall_time_s']:.1f} s of wall time between the first and the last exchange")
+            lines.append(
+                f"whole run (the run's summary): {summary['samples'] / summary['wall_time_s']:.1f} "
+                f"exchanges/s, real-time factor {summary['real_time_factor']:.3g} over "
+                f"{summary['wall_time_s']:.1f} s of wall time between the first and the last exchange"
+            )
     if soak.energy:
-        lines.append("energy balance of the run's samples (its CSV; the works along the motion rebuilt between the "
-                     "exchanges, docs/speed.md#soak--bench-soak):")
-        lines += [f"  {span.label} ({span.t_start:.6g}-{span.t_end:.6g} s): work {span.work:.6g} J, residual "
-                  f"{span.residual:.4g} J ({span.relative_residual:.3g} of the energy involved)"
-                  for span in soak.energy]
+        lines.append(
+            "energy balance of the run's samples (its CSV; the works along the motion rebuilt between the "
+            "exchanges, docs/speed.md#soak--bench-soak):"
+        )
+        lines += [
+            f"  {span.label} ({span.t_start:.6g}-{span.t_end:.6g} s): work {span.work:.6g} J, residual "
+            f"{span.residual:.4g} J ({span.relative_residual:.3g} of the energy involved)"
+            for span in soak.energy
+        ]
     else:
         lines.append("energy balance: none (the run wrote no CSV, or Ctrl-C came while it was computed)")
     lines.append("verdict: " + verdict(soak))
@@ -425,8 +469,9 @@ def verdict(soak: Soak) -> str:
     for name in PROCESS_NAMES:
         if name in soak.memory_start and name in soak.memory_end:
             start, end = soak.memory_start[name], soak.memory_end[name]
-            growth.append(f"{name} {start:.1f} -> {end:.1f} MB ({end - start:+.1f} MB, "
-                          f"{100.0 * (end - start) / start:+.1f} %)")
+            growth.append(
+                f"{name} {start:.1f} -> {end:.1f} MB ({end - start:+.1f} MB, {100.0 * (end - start) / start:+.1f} %)"
+            )
     memory = "memory " + ", ".join(growth) if growth else "memory: no reading while the nodes ran"
     rates = [row.real_time_factor for row in soak.rows if row.real_time_factor is not None]
     if not rates:

@@ -67,36 +67,69 @@ from mech_regulator.solvers.compiled import fast_path_refusal
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate
 
 BENCH_SCENE = "crank_slider_bench"
-SPEED_SCENES = (BenchScene(BENCH_SCENE, BENCH_SCENE, (), ("scenario.duration=0.5",),
-                           "motor-driven crank-slider from rest, 2 s: the machine MuJoCo also simulates", 1.0, 1e-3),
-                ) + tuple(bench for bench in SCENES if bench.name in ("startup", "compressor"))
+SPEED_SCENES = (
+    BenchScene(
+        BENCH_SCENE,
+        BENCH_SCENE,
+        (),
+        ("scenario.duration=0.5",),
+        "motor-driven crank-slider from rest, 2 s: the machine MuJoCo also simulates",
+        1.0,
+        1e-3,
+    ),
+) + tuple(bench for bench in SCENES if bench.name in ("startup", "compressor"))
 # general linkages (docs/linkages.md), solved group by group per right-hand side by mechanisms/linkage/flat.py, the same
 # functions on both paths: nine links in four groups, and the shaper's four links in two (RPR, RRP)
-LINKAGE_SCENE = BenchScene("walking_beam_linkage", "walking_beam_linkage", ("scenario.duration=0.5",),
-                           ("scenario.duration=0.1",), "source 004's walking beam as a general linkage, 0.5 s",
-                           1.0, 1e-3)
-SHAPER_SCENE = BenchScene("shaper", "shaper", ("scenario.duration=0.5",), ("scenario.duration=0.1",),
-                          "the shaper, a general linkage (slotted lever, RPR + RRP) with a cutting table, 0.5 s",
-                          1.0, 1e-3)
+LINKAGE_SCENE = BenchScene(
+    "walking_beam_linkage",
+    "walking_beam_linkage",
+    ("scenario.duration=0.5",),
+    ("scenario.duration=0.1",),
+    "source 004's walking beam as a general linkage, 0.5 s",
+    1.0,
+    1e-3,
+)
+SHAPER_SCENE = BenchScene(
+    "shaper",
+    "shaper",
+    ("scenario.duration=0.5",),
+    ("scenario.duration=0.1",),
+    "the shaper, a general linkage (slotted lever, RPR + RRP) with a cutting table, 0.5 s",
+    1.0,
+    1e-3,
+)
 SPEED_SCENES += (LINKAGE_SCENE, SHAPER_SCENE)
-DEFAULT_SCENES = (BENCH_SCENE, "startup", LINKAGE_SCENE.name)   # the shaper by --scenes shaper
-TARGET_ERROR = 1e-6                      # common achieved error of the comparison (omega RMS, relative) [-]
+DEFAULT_SCENES = (BENCH_SCENE, "startup", LINKAGE_SCENE.name)  # the shaper by --scenes shaper
+TARGET_ERROR = 1e-6  # common achieved error of the comparison (omega RMS, relative) [-]
 TARGETS = {"fast : solve_ivp": 30.0, "fast : MuJoCo": 100.0, "ROS real-time factor": 10.0}
 FAST, REFERENCE, SOLVE_IVP, MUJOCO = "fast", "reference", "solve_ivp", "MuJoCo"
-PATHS = ((FAST, "RK45"), (FAST, "DOP853"), (REFERENCE, "DOP853"), (SOLVE_IVP, "RK45"), (SOLVE_IVP, "DOP853"),
-         (MUJOCO, "RK4"))
-TOLERANCES, QUICK_TOLERANCES = tuple(10.0 ** -k for k in range(4, 12)), (1e-5, 1e-7, 1e-9)
-MUJOCO_STEPS = (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5)        # [s]
+PATHS = (
+    (FAST, "RK45"),
+    (FAST, "DOP853"),
+    (REFERENCE, "DOP853"),
+    (SOLVE_IVP, "RK45"),
+    (SOLVE_IVP, "DOP853"),
+    (MUJOCO, "RK4"),
+)
+TOLERANCES, QUICK_TOLERANCES = tuple(10.0**-k for k in range(4, 12)), (1e-5, 1e-7, 1e-9)
+MUJOCO_STEPS = (4e-3, 2e-3, 1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5)  # [s]
 QUICK_MUJOCO_STEPS = (1e-3, 5e-4, 2.5e-4)
 DURATIONS, QUICK_DURATIONS = (1.0, 2.0, 4.0, 8.0, 16.0), (0.25, 0.5)  # simulated time [s]
-SCALING_RTOL = 1e-9                      # rtol of the cost-vs-duration and cost-vs-sweep runs
+SCALING_RTOL = 1e-9  # rtol of the cost-vs-duration and cost-vs-sweep runs
 SWEEP_SIZES, QUICK_SWEEP_SIZES = (1, 2, 4, 8, 16), (1, 2)
 SWEEP_JOBS = (1, 2)
-REPEAT_BUDGET_S, MAX_REPEATS = 0.3, 7    # a run is repeated to about this much CPU time [s], at most this often
-MAX_ERROR_SAMPLES = 40_001               # MuJoCo's step times are thinned to at most this many for the error
+REPEAT_BUDGET_S, MAX_REPEATS = 0.3, 7  # a run is repeated to about this much CPU time [s], at most this often
+MAX_ERROR_SAMPLES = 40_001  # MuJoCo's step times are thinned to at most this many for the error
 ROS_SCENE = "engine_direct"  # the whole scene (16 s), as `run` plays it
-ROS_RUNS = ((REFERENCE, 1e-3, "hold"), (FAST, 1e-3, "hold"), (FAST, 2e-3, "waveform"), (FAST, 1e-2, "waveform"),
-            (FAST, 1e-2, "corrected"), (FAST, 2e-2, "corrected"), (FAST, 4e-2, "corrected"))  # (path, exchange
+ROS_RUNS = (
+    (REFERENCE, 1e-3, "hold"),
+    (FAST, 1e-3, "hold"),
+    (FAST, 2e-3, "waveform"),
+    (FAST, 1e-2, "waveform"),
+    (FAST, 1e-2, "corrected"),
+    (FAST, 2e-2, "corrected"),
+    (FAST, 4e-2, "corrected"),
+)  # (path, exchange
 # step [s], coupling: solvers.cosim); run's default (solvers.cosim.DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING) among them
 ROS_OTHER_SCENES = ("engine_indirect_rigid", "engine_indirect_isodromic", "engine_indirect_none")  # the other
 # governed bundled scenes, at run's default only
@@ -144,22 +177,41 @@ def ode_runner(path: str, method: str, model: MachineModel) -> Callable[[], Outc
     solve_ivp on its plain-Python right-hand side, sampled on accuracy.time_grid."""
     grid = time_grid(model.scene.scenario.duration)
     if path != SOLVE_IVP:
+
         def run() -> Outcome:
             trajectory = simulate(model)
             complete = trajectory.status == "complete"
-            return Outcome(grid, lambda times: trajectory(times)[1], trajectory.stats.nfev,
-                           trajectory.stats.steps, "complete" if complete else f"{trajectory.status}: "
-                                                                               f"{trajectory.message}")
+            return Outcome(
+                grid,
+                lambda times: trajectory(times)[1],
+                trajectory.stats.nfev,
+                trajectory.stats.steps,
+                "complete" if complete else f"{trajectory.status}: {trajectory.message}",
+            )
+
         return run
     y0 = model.initial_state()
     rhs = model.rhs(model.piece_at(0.0), None, model.initial_mode(y0))
     solver = model.scene.solver
 
     def run_ivp() -> Outcome:
-        solution = solve_ivp(rhs, (0.0, model.scene.scenario.duration), y0, method=method, rtol=solver.rtol,
-                             atol=solver.atol, dense_output=True)
-        return Outcome(grid, lambda times: solution.sol(times)[1], solution.nfev,
-                       len(solution.t) - 1, "complete" if solution.success else f"failed: {solution.message}")
+        solution = solve_ivp(
+            rhs,
+            (0.0, model.scene.scenario.duration),
+            y0,
+            method=method,
+            rtol=solver.rtol,
+            atol=solver.atol,
+            dense_output=True,
+        )
+        return Outcome(
+            grid,
+            lambda times: solution.sol(times)[1],
+            solution.nfev,
+            len(solution.t) - 1,
+            "complete" if solution.success else f"failed: {solution.message}",
+        )
+
     return run_ivp
 
 
@@ -172,6 +224,7 @@ def mujoco_runner(model: MachineModel, timestep: float) -> Callable[[], Outcome]
         result = multibody.run(duration)
         every = max(1, math.ceil(result.steps / MAX_ERROR_SAMPLES))
         return Outcome(result.times[::every], result.omega[::every], 4 * result.steps, result.steps)
+
     return run
 
 
@@ -229,8 +282,11 @@ class SpeedBenchmark:
 
     def of(self, section: str, **where) -> list[Row]:
         """The rows of a section whose fields equal `where`."""
-        return [row for row in self.rows if row.section == section
-                and all(getattr(row, key) == value for key, value in where.items())]
+        return [
+            row
+            for row in self.rows
+            if row.section == section and all(getattr(row, key) == value for key, value in where.items())
+        ]
 
 
 def work_precision_front(rows: list[Row]) -> list[Row]:
@@ -278,8 +334,9 @@ def at_target(benchmark: SpeedBenchmark, scene: str, duration: float) -> list[Pa
         if not rows:
             continue
         cpu = at_error(rows, TARGET_ERROR)
-        results.append(PathAtTarget(scene, path, method, cpu, at_error(rows, TARGET_ERROR, "nfev") / cpu,
-                                    duration / cpu))
+        results.append(
+            PathAtTarget(scene, path, method, cpu, at_error(rows, TARGET_ERROR, "nfev") / cpu, duration / cpu)
+        )
     return results
 
 
@@ -306,8 +363,13 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
     if bench.closed_form is not None:
         reference = bench.closed_form(build_model(scene))
     else:
-        reference = simulate(build_model(bench.load(quick, tuple(_solver_overrides(
-            REFERENCE, REFERENCE_METHOD, REFERENCE_RTOL, bench.state_scale)))))
+        reference = simulate(
+            build_model(
+                bench.load(
+                    quick, tuple(_solver_overrides(REFERENCE, REFERENCE_METHOD, REFERENCE_RTOL, bench.state_scale))
+                )
+            )
+        )
     rows = []
 
     def add(path: str, method: str, setting: str, value: float, run: Callable[[], Outcome]) -> None:
@@ -329,9 +391,16 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
 
     for path, method in PATHS:
         if path == MUJOCO:
-            refusal = ("left out (--no-mujoco)" if not mujoco else mujoco_refusal(scene)
-                       or (None if importlib.util.find_spec("mujoco") else
-                           "mujoco is not installed: pip install 'mech_regulator[bench]'"))
+            refusal = (
+                "left out (--no-mujoco)"
+                if not mujoco
+                else mujoco_refusal(scene)
+                or (
+                    None
+                    if importlib.util.find_spec("mujoco")
+                    else "mujoco is not installed: pip install 'mech_regulator[bench]'"
+                )
+            )
             steps = () if refusal is not None else QUICK_MUJOCO_STEPS if quick else MUJOCO_STEPS
             for timestep in steps:
                 add(path, method, "timestep", timestep, mujoco_runner(build_model(scene), timestep))
@@ -340,8 +409,9 @@ def measure_precision(bench: BenchScene, quick: bool, report: Callable[[Row], No
             continue
         for rtol in QUICK_TOLERANCES if quick else TOLERANCES:
             model = build_model(bench.load(quick, tuple(_solver_overrides(path, method, rtol, bench.state_scale))))
-            refusal = (solve_ivp_refusal(model) if path == SOLVE_IVP else fast_path_refusal(model) if path == FAST
-                       else None)
+            refusal = (
+                solve_ivp_refusal(model) if path == SOLVE_IVP else fast_path_refusal(model) if path == FAST else None
+            )
             if refusal is not None:
                 refused(path, method, "rtol", refusal)
                 break
@@ -355,11 +425,28 @@ def measure_durations(quick: bool, report: Callable[[Row], None]) -> list[Row]:
     rows = []
     for duration in QUICK_DURATIONS if quick else DURATIONS:
         for path in (FAST, REFERENCE):
-            model = build_model(load_scene(BENCH_SCENE, [f"scenario.duration={duration!r}",
-                                                         *_solver_overrides(path, "DOP853", SCALING_RTOL, 1.0)]))
+            model = build_model(
+                load_scene(
+                    BENCH_SCENE,
+                    [f"scenario.duration={duration!r}", *_solver_overrides(path, "DOP853", SCALING_RTOL, 1.0)],
+                )
+            )
             outcome, cpu, _repeats = median_cpu(ode_runner(path, "DOP853", model), quick)
-            rows.append(Row("duration", BENCH_SCENE, path, "DOP853", "duration", duration, duration, cpu,
-                            outcome.nfev, outcome.steps, note="" if outcome.status == "complete" else outcome.status))
+            rows.append(
+                Row(
+                    "duration",
+                    BENCH_SCENE,
+                    path,
+                    "DOP853",
+                    "duration",
+                    duration,
+                    duration,
+                    cpu,
+                    outcome.nfev,
+                    outcome.steps,
+                    note="" if outcome.status == "complete" else outcome.status,
+                )
+            )
             report(rows[-1])
     return rows
 
@@ -393,18 +480,37 @@ def measure_sweeps(quick: bool, report: Callable[[Row], None]) -> list[Row]:
 
     rows = []
     for size in QUICK_SWEEP_SIZES if quick else SWEEP_SIZES:
-        points = sweep_points([BENCH_SCENE], _solver_overrides(REFERENCE, "DOP853", SCALING_RTOL, 1.0),
-                              [parse_grid(f"machine.flywheel.inertia=0.2:0.4:{size}")])
+        points = sweep_points(
+            [BENCH_SCENE],
+            _solver_overrides(REFERENCE, "DOP853", SCALING_RTOL, 1.0),
+            [parse_grid(f"machine.flywheel.inertia=0.2:0.4:{size}")],
+        )
         for path in (FAST, REFERENCE):
-            path_points = [dataclasses.replace(point, scene={**point.scene, "solver": {**point.scene["solver"],
-                                                                                        "path": path}})
-                           for point in points] if path == FAST else points
+            path_points = (
+                [
+                    dataclasses.replace(point, scene={**point.scene, "solver": {**point.scene["solver"], "path": path}})
+                    for point in points
+                ]
+                if path == FAST
+                else points
+            )
             for jobs in SWEEP_JOBS:
                 start = time.perf_counter()
                 results = run_sweep(path_points, jobs=jobs)
                 failed = [result["message"] for result in results if result["status"] != "complete"]
-                rows.append(Row("sweep", BENCH_SCENE, path, "DOP853", f"{jobs} process(es)", size, size * 2.0,
-                                time.perf_counter() - start, note=failed[0] if failed else ""))
+                rows.append(
+                    Row(
+                        "sweep",
+                        BENCH_SCENE,
+                        path,
+                        "DOP853",
+                        f"{jobs} process(es)",
+                        size,
+                        size * 2.0,
+                        time.perf_counter() - start,
+                        note=failed[0] if failed else "",
+                    )
+                )
                 report(rows[-1])
     return rows
 
@@ -428,10 +534,22 @@ def measure_startup(report: Callable[[Row], None]) -> list[Row]:
         env = dict(os.environ, MECH_REGULATOR_CACHE=cache, NUMBA_CACHE_DIR=cache)
         runs = [(REFERENCE, "warm", []), (FAST, "cold", ["solver.path=fast"]), (FAST, "warm", ["solver.path=fast"])]
         for path, phase, overrides in runs:
-            (imported, first, status), wall = _python_wall(STARTUP_PROGRAM.format(scene=BENCH_SCENE,
-                                                                                  overrides=overrides), env)
-            rows.append(Row("startup", BENCH_SCENE, path, "DOP853", phase, float(imported), 2.0, float(first),
-                            note=f"import {float(imported):.3g} s, process {wall:.3g} s, run {status}"))
+            (imported, first, status), wall = _python_wall(
+                STARTUP_PROGRAM.format(scene=BENCH_SCENE, overrides=overrides), env
+            )
+            rows.append(
+                Row(
+                    "startup",
+                    BENCH_SCENE,
+                    path,
+                    "DOP853",
+                    phase,
+                    float(imported),
+                    2.0,
+                    float(first),
+                    note=f"import {float(imported):.3g} s, process {wall:.3g} s, run {status}",
+                )
+            )
             report(rows[-1])
     return rows
 
@@ -448,8 +566,11 @@ def failure_text(stderr: str) -> str:
     ended and how, and a fatal error's first line from the nodes' log it prints (a crash's traceback ends in the list
     of extension modules, which says nothing); else its last line."""
     lines = stderr.strip().splitlines()
-    telling = [line.strip() for line in lines
-               if line.startswith("mech-regulator: the ") or line.startswith("Fatal Python error")]
+    telling = [
+        line.strip()
+        for line in lines
+        if line.startswith("mech-regulator: the ") or line.startswith("Fatal Python error")
+    ]
     return "; ".join(telling) or (lines or [""])[-1]
 
 
@@ -469,18 +590,41 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
         for scene, path, exchange, coupling in runs:
             settings = ["solver.path=fast"] if path == FAST else ["solver.path=reference"]
             output = os.path.join(folder, f"{scene}{path}{exchange:g}{coupling}.rrd")
-            command = [sys.executable, "-m", "mech_regulator", "run", scene, "--quiet", "--exchange-step",
-                       repr(exchange), "--coupling", coupling, "--out", output] + [
-                item for setting in settings for item in ("--set", setting)]
+            command = [
+                sys.executable,
+                "-m",
+                "mech_regulator",
+                "run",
+                scene,
+                "--quiet",
+                "--exchange-step",
+                repr(exchange),
+                "--coupling",
+                coupling,
+                "--out",
+                output,
+            ] + [item for setting in settings for item in ("--set", setting)]
             start = time.perf_counter()
             done = subprocess.run(command, capture_output=True, text=True, check=False)
             process_wall = time.perf_counter() - start
             model = build_model(load_scene(scene, settings))
             duration = model.scene.scenario.duration
-            default = " (run's default)" if (path, exchange, coupling) == (FAST, default_exchange_step(scene),
-                                                                          DEFAULT_COUPLING) else ""
-            row = Row("ros", scene, path, "nodes", coupling, exchange, duration, steps=round(duration / exchange),
-                      note=f"process {process_wall:.3g} s with start-up{default}")
+            default = (
+                " (run's default)"
+                if (path, exchange, coupling) == (FAST, default_exchange_step(scene), DEFAULT_COUPLING)
+                else ""
+            )
+            row = Row(
+                "ros",
+                scene,
+                path,
+                "nodes",
+                coupling,
+                exchange,
+                duration,
+                steps=round(duration / exchange),
+                note=f"process {process_wall:.3g} s with start-up{default}",
+            )
             summary_path = Path(output).with_suffix(".json")
             pace = json.loads(summary_path.read_text()) if summary_path.exists() else {}
             if done.returncode != 0 or "wall_time_s" not in pace:
@@ -491,14 +635,37 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
             report(row)
             run, cpu = timed(lambda: cosimulate(model, exchange, coupling=coupling))
             if scene not in exact:
-                exact[scene] = simulate(build_model(load_scene(scene, [
-                    "solver.path=fast", f"solver.rtol={REFERENCE_RTOL!r}", f"solver.atol={REFERENCE_RTOL * 1e2!r}"])))
+                exact[scene] = simulate(
+                    build_model(
+                        load_scene(
+                            scene,
+                            [
+                                "solver.path=fast",
+                                f"solver.rtol={REFERENCE_RTOL!r}",
+                                f"solver.atol={REFERENCE_RTOL * 1e2!r}",
+                            ],
+                        )
+                    )
+                )
             reference = exact[scene](run.times)[1]
             scale = np.max(np.abs(reference))
             largest = float(np.max(np.abs(run.states[1] - reference)) / scale)
             rms = float(np.sqrt(np.mean((run.states[1] - reference) ** 2)) / scale)
-            rows.append(Row("ros", scene, path, "in process", coupling, exchange, duration, cpu,
-                            steps=run.times.size - 1, error=largest, note=f"RMS error {rms:.2g}{default}"))
+            rows.append(
+                Row(
+                    "ros",
+                    scene,
+                    path,
+                    "in process",
+                    coupling,
+                    exchange,
+                    duration,
+                    cpu,
+                    steps=run.times.size - 1,
+                    error=largest,
+                    note=f"RMS error {rms:.2g}{default}",
+                )
+            )
             report(rows[-1])
     return rows
 
@@ -508,10 +675,10 @@ def ros_summary(benchmark: SpeedBenchmark) -> list[dict[str, float | str]]:
     excluded; missing when the run failed) and the in-process co-simulation's real-time factor (CPU) and achieved
     error."""
     found = []
-    for scene, path, exchange, coupling in dict.fromkeys((row.scene, row.path, row.value, row.setting)
-                                                         for row in benchmark.of("ros")):
-        item: dict[str, float | str] = {"scene": scene, "path": path, "exchange_step_s": exchange,
-                                        "coupling": coupling}
+    for scene, path, exchange, coupling in dict.fromkeys(
+        (row.scene, row.path, row.value, row.setting) for row in benchmark.of("ros")
+    ):
+        item: dict[str, float | str] = {"scene": scene, "path": path, "exchange_step_s": exchange, "coupling": coupling}
         for row in benchmark.of("ros", scene=scene, path=path, value=exchange, setting=coupling):
             if row.method == "nodes" and math.isfinite(row.cpu_s):
                 item["real_time_factor"] = row.simulated_s / row.cpu_s
@@ -531,8 +698,13 @@ def ros_target(benchmark: SpeedBenchmark) -> float:
     return math.nan
 
 
-def run_speed_benchmark(scenes: list[BenchScene], quick: bool = False, ros: bool = False,
-                        report: Callable[[Row], None] = print, mujoco: bool = True) -> SpeedBenchmark:
+def run_speed_benchmark(
+    scenes: list[BenchScene],
+    quick: bool = False,
+    ros: bool = False,
+    report: Callable[[Row], None] = print,
+    mujoco: bool = True,
+) -> SpeedBenchmark:
     """Measure everything (see the module docstring; MuJoCo's path only when `mujoco`); report(row) is called as
     each row is measured. Ctrl-C returns what was measured, with `interrupted` set."""
     benchmark = SpeedBenchmark(quick=quick, environment=environment(1))
@@ -542,8 +714,12 @@ def run_speed_benchmark(scenes: list[BenchScene], quick: bool = False, ros: bool
         report(row)
 
     parts = [lambda bench=bench: measure_precision(bench, quick, keep, mujoco) for bench in scenes]
-    parts += [lambda: measure_durations(quick, keep), lambda: measure_effects(quick, keep),
-              lambda: measure_sweeps(quick, keep), lambda: measure_startup(keep)]
+    parts += [
+        lambda: measure_durations(quick, keep),
+        lambda: measure_effects(quick, keep),
+        lambda: measure_sweeps(quick, keep),
+        lambda: measure_startup(keep),
+    ]
     if ros:
         parts.append(lambda: measure_ros(keep))
     try:
@@ -564,9 +740,27 @@ def select_speed_scenes(names: list[str] | None) -> list[BenchScene]:
     return [by_name[name] for name in dict.fromkeys(names)]
 
 
-__all__ = ["FAST", "MUJOCO", "PATHS", "REFERENCE", "SOLVE_IVP", "SPEED_SCENES", "TARGETS", "TARGET_ERROR",
-           "PathAtTarget", "Row", "SpeedBenchmark", "at_error", "at_target", "ratios", "ros_summary", "ros_target",
-           "run_speed_benchmark", "select_speed_scenes", "work_precision_front"]
+__all__ = [
+    "FAST",
+    "MUJOCO",
+    "PATHS",
+    "REFERENCE",
+    "SOLVE_IVP",
+    "SPEED_SCENES",
+    "TARGETS",
+    "TARGET_ERROR",
+    "PathAtTarget",
+    "Row",
+    "SpeedBenchmark",
+    "at_error",
+    "at_target",
+    "ratios",
+    "ros_summary",
+    "ros_target",
+    "run_speed_benchmark",
+    "select_speed_scenes",
+    "work_precision_front",
+]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -599,11 +793,20 @@ def summary(benchmark: SpeedBenchmark) -> dict:
     for scene in dict.fromkeys(row.scene for row in benchmark.of("precision")):
         results = at_target(benchmark, scene, _scene_duration(benchmark, scene))
         scenes[scene] = {"at_target": [vars(result) for result in results], "ratios": ratios(results)}
-    startup = {f"{row.path} {row.setting}": {"first_result_s": row.cpu_s, "import_s": row.value}
-               for row in benchmark.of("startup")}
-    return {"target_error": TARGET_ERROR, "quick": benchmark.quick, "interrupted": benchmark.interrupted,
-            "environment": benchmark.environment, "scenes": scenes,
-            "targets": targets(benchmark), "startup": startup, "ros": ros_summary(benchmark)}
+    startup = {
+        f"{row.path} {row.setting}": {"first_result_s": row.cpu_s, "import_s": row.value}
+        for row in benchmark.of("startup")
+    }
+    return {
+        "target_error": TARGET_ERROR,
+        "quick": benchmark.quick,
+        "interrupted": benchmark.interrupted,
+        "environment": benchmark.environment,
+        "scenes": scenes,
+        "targets": targets(benchmark),
+        "startup": startup,
+        "ros": ros_summary(benchmark),
+    }
 
 
 def _number(value: float, digits: int = 3) -> str:
@@ -616,44 +819,94 @@ def tables(benchmark: SpeedBenchmark) -> str:
     lines = []
     for scene, found in summary(benchmark)["scenes"].items():
         best_fast = min((item["cpu_s"] for item in found["at_target"] if item["path"] == FAST), default=math.nan)
-        lines += ["", f"{scene}: at achieved error {TARGET_ERROR:g} (omega RMS, relative)", "",
-                  "| path | method | CPU [ms] | RHS evaluations / CPU s | real-time factor | x fast |",
-                  "| --- | --- | ---: | ---: | ---: | ---: |"]
-        lines += [f"| {item['path']} | {item['method']} | {_number(item['cpu_s'] * 1e3)} | "
-                  f"{_number(item['rhs_per_s'])} | {_number(item['real_time_factor'])} | "
-                  f"{_number(item['cpu_s'] / best_fast)} |" for item in found["at_target"]]
+        lines += [
+            "",
+            f"{scene}: at achieved error {TARGET_ERROR:g} (omega RMS, relative)",
+            "",
+            "| path | method | CPU [ms] | RHS evaluations / CPU s | real-time factor | x fast |",
+            "| --- | --- | ---: | ---: | ---: | ---: |",
+        ]
+        lines += [
+            f"| {item['path']} | {item['method']} | {_number(item['cpu_s'] * 1e3)} | "
+            f"{_number(item['rhs_per_s'])} | {_number(item['real_time_factor'])} | "
+            f"{_number(item['cpu_s'] / best_fast)} |"
+            for item in found["at_target"]
+        ]
         notes = {row.note for row in benchmark.of("precision", scene=scene) if row.note}
         lines += [f"- {note}" for note in sorted(notes)]
-    lines += ["", f"targets (on {BENCH_SCENE}; a report, not a test)", "", "| target | at least | measured | |",
-              "| --- | ---: | ---: | --- |"]
-    lines += [f"| {item['target']} | {item['at_least']:g} | {_number(item['measured'])} | {item['status']} |"
-              for item in targets(benchmark)]
-    lines += ["", f"cost against simulated time ({BENCH_SCENE}, DOP853, rtol {SCALING_RTOL:g})", "",
-              "| simulated [s] | path | CPU [s] | CPU / simulated s | RHS evaluations |", "| ---: | --- | ---: | ---: | ---: |"]
-    lines += [f"| {row.value:g} | {row.path} | {_number(row.cpu_s)} | {_number(row.cpu_s / row.value)} | "
-              f"{_number(row.nfev, 6)} |" for row in benchmark.of("duration")]
-    lines += ["", f"cost against the effects ({BASE_SCENE} built up one effect at a time, DOP853, rtol 1e-8)", "",
-              "| effects | path | CPU / simulated s | note |", "| --- | --- | ---: | --- |"]
-    lines += [f"| {row.setting} | {row.path} | {_number(row.cpu_s / row.simulated_s)} | {row.note} |"
-              for row in benchmark.of("effects")]
-    lines += ["", "cost against the number of scenes in a sweep (wall time)", "",
-              "| path | points | processes | wall [s] | note |", "| --- | ---: | --- | ---: | --- |"]
-    lines += [f"| {row.path} | {_number(row.value)} | {row.setting} | {_number(row.cpu_s)} | {row.note} |"
-              for row in benchmark.of("sweep")]
-    lines += ["", f"start-up: a fresh Python process to the first result of {BENCH_SCENE} (wall time)", "",
-              "| path | caches | import [s] | first result [s] | note |", "| --- | --- | ---: | ---: | --- |"]
-    lines += [f"| {row.path} | {row.setting} | {_number(row.value)} | {_number(row.cpu_s)} | {row.note} |"
-              for row in benchmark.of("startup")]
+    lines += [
+        "",
+        f"targets (on {BENCH_SCENE}; a report, not a test)",
+        "",
+        "| target | at least | measured | |",
+        "| --- | ---: | ---: | --- |",
+    ]
+    lines += [
+        f"| {item['target']} | {item['at_least']:g} | {_number(item['measured'])} | {item['status']} |"
+        for item in targets(benchmark)
+    ]
+    lines += [
+        "",
+        f"cost against simulated time ({BENCH_SCENE}, DOP853, rtol {SCALING_RTOL:g})",
+        "",
+        "| simulated [s] | path | CPU [s] | CPU / simulated s | RHS evaluations |",
+        "| ---: | --- | ---: | ---: | ---: |",
+    ]
+    lines += [
+        f"| {row.value:g} | {row.path} | {_number(row.cpu_s)} | {_number(row.cpu_s / row.value)} | "
+        f"{_number(row.nfev, 6)} |"
+        for row in benchmark.of("duration")
+    ]
+    lines += [
+        "",
+        f"cost against the effects ({BASE_SCENE} built up one effect at a time, DOP853, rtol 1e-8)",
+        "",
+        "| effects | path | CPU / simulated s | note |",
+        "| --- | --- | ---: | --- |",
+    ]
+    lines += [
+        f"| {row.setting} | {row.path} | {_number(row.cpu_s / row.simulated_s)} | {row.note} |"
+        for row in benchmark.of("effects")
+    ]
+    lines += [
+        "",
+        "cost against the number of scenes in a sweep (wall time)",
+        "",
+        "| path | points | processes | wall [s] | note |",
+        "| --- | ---: | --- | ---: | --- |",
+    ]
+    lines += [
+        f"| {row.path} | {_number(row.value)} | {row.setting} | {_number(row.cpu_s)} | {row.note} |"
+        for row in benchmark.of("sweep")
+    ]
+    lines += [
+        "",
+        f"start-up: a fresh Python process to the first result of {BENCH_SCENE} (wall time)",
+        "",
+        "| path | caches | import [s] | first result [s] | note |",
+        "| --- | --- | ---: | ---: | --- |",
+    ]
+    lines += [
+        f"| {row.path} | {row.setting} | {_number(row.value)} | {_number(row.cpu_s)} | {row.note} |"
+        for row in benchmark.of("startup")
+    ]
     if benchmark.of("ros"):
-        lines += ["", "lockstep ROS main job (four node processes: wall time of the exchanges, start-up excluded) "
-                  "and the same co-simulation in one process (CPU time); omega's error against the monolithic run "
-                  "(max, relative to max |omega|; the nodes' numbers are the in-process ones)", "",
-                  "| scene | path | coupling | exchange step [ms] | simulated [s] | how | time [s] | real-time factor "
-                  "| omega error (max) | note |",
-                  "| --- | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | --- |"]
-        lines += [f"| {row.scene} | {row.path} | {row.setting} | {row.value * 1e3:g} | {row.simulated_s:g} | "
-                  f"{row.method} | {_number(row.cpu_s)} | {_number(row.simulated_s / row.cpu_s)} | "
-                  f"{_number(row.error)} | {row.note} |" for row in benchmark.of("ros")]
+        lines += [
+            "",
+            "lockstep ROS main job (four node processes: wall time of the exchanges, start-up excluded) "
+            "and the same co-simulation in one process (CPU time); omega's error against the monolithic run "
+            "(max, relative to max |omega|; the nodes' numbers are the in-process ones)",
+            "",
+            "| scene | path | coupling | exchange step [ms] | simulated [s] | how | time [s] | real-time factor "
+            "| omega error (max) | note |",
+            "| --- | --- | --- | ---: | ---: | --- | ---: | ---: | ---: | --- |",
+        ]
+        lines += [
+            f"| {row.scene} | {row.path} | {row.setting} | {row.value * 1e3:g} | {row.simulated_s:g} | "
+            f"{row.method} | {_number(row.cpu_s)} | {_number(row.simulated_s / row.cpu_s)} | "
+            f"{_number(row.error)} | {row.note} |"
+            for row in benchmark.of("ros")
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -673,5 +926,9 @@ def write_rows_csv(benchmark: SpeedBenchmark, path) -> None:
         writer = csv.DictWriter(stream, fieldnames=names)
         writer.writeheader()
         for row in benchmark.rows:
-            writer.writerow({name: "" if isinstance(value, float) and not math.isfinite(value) else value
-                             for name, value in vars(row).items()})
+            writer.writerow(
+                {
+                    name: "" if isinstance(value, float) and not math.isfinite(value) else value
+                    for name, value in vars(row).items()
+                }
+            )

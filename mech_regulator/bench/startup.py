@@ -53,9 +53,13 @@ REFERENCE, FAST, SCRIPT = "reference", "fast", "solve_ivp"
 PATHS = (REFERENCE, FAST, SCRIPT)
 PATH_TITLES = {REFERENCE: "reference", FAST: "fast", SCRIPT: "solve_ivp script"}
 MEASURES = ("import", "help", "cold", "warm", "served")
-MEASURE_TITLES = {"import": "import of the command line", "help": "mech-regulator --help",
-                  "cold": "cold first run (empty caches)", "warm": "warm run, no server",
-                  "served": "warm run through the command server"}
+MEASURE_TITLES = {
+    "import": "import of the command line",
+    "help": "mech-regulator --help",
+    "cold": "cold first run (empty caches)",
+    "warm": "warm run, no server",
+    "served": "warm run through the command server",
+}
 SCRIPT_MEASURE = {"served": "warm"}  # the script's row a measure is compared with, when not its own
 CACHE_VARIABLES = ("MECH_REGULATOR_CACHE", "NUMBA_CACHE_DIR")
 SCRIPT_IMPORT = "import numpy, scipy.integrate"
@@ -78,8 +82,12 @@ class Timing:
         return min(self.wall)
 
     def as_data(self) -> dict:
-        return {"median_s": self.median, "min_s": self.minimum, "cpu_median_s": statistics.median(self.cpu),
-                "runs_s": list(self.wall)}
+        return {
+            "median_s": self.median,
+            "min_s": self.minimum,
+            "cpu_median_s": statistics.median(self.cpu),
+            "runs_s": list(self.wall),
+        }
 
 
 @dataclasses.dataclass
@@ -108,8 +116,13 @@ def script_refusal(scene) -> str | None:
 
     machine = scene.machine
     model = build_model(scene)
-    if (model.governor is not None or model.driven is not None or model.joint_friction is not None
-            or model.coupling is not None or model.clutch is not None):
+    if (
+        model.governor is not None
+        or model.driven is not None
+        or model.joint_friction is not None
+        or model.coupling is not None
+        or model.clutch is not None
+    ):
         return "a governor, drive train or joint friction has modes and events"
     if model.load_pieces or model.breakpoints():
         return "an external load that changes in time needs restarts"
@@ -137,8 +150,10 @@ def _load_term(load) -> str | None:
     if kind == "fan":
         return f"-{load.coefficient!r} * omega * abs(omega)"
     if kind == "cutting":
-        return (f"cutting(phi, {load.torque!r}, {[[float(a), float(b)] for a, b in load.intervals_deg]!r}, "
-                f"{load.period_deg!r})")
+        return (
+            f"cutting(phi, {load.torque!r}, {[[float(a), float(b)] for a, b in load.intervals_deg]!r}, "
+            f"{load.period_deg!r})"
+        )
     if kind == "slider_constant":
         return f"{load.force!r} * dx"
     if kind == "slider_viscous":
@@ -264,22 +279,40 @@ def script_text(scene) -> str:
         text += CONSTANT_INERTIA
     else:
         gx, gy = (float(g) for g in machine.gravity) if machine.gravity is not None else (0.0, 0.0)
-        text += CRANK_SLIDER.format(crank=mechanism.crank, rod=mechanism.rod, offset=mechanism.offset,
-                                    rod_mass=mechanism.rod_mass, rho=mechanism.rod_cg / mechanism.rod,
-                                    rod_inertia=mechanism.rod_inertia, slider_mass=mechanism.slider_mass,
-                                    crank_moment=mechanism.crank_mass * mechanism.crank_cg, gx=gx, gy=gy)
+        text += CRANK_SLIDER.format(
+            crank=mechanism.crank,
+            rod=mechanism.rod,
+            offset=mechanism.offset,
+            rod_mass=mechanism.rod_mass,
+            rho=mechanism.rod_cg / mechanism.rod,
+            rod_inertia=mechanism.rod_inertia,
+            slider_mass=mechanism.slider_mass,
+            crank_moment=mechanism.crank_mass * mechanism.crank_cg,
+            gx=gx,
+            gy=gy,
+        )
     if any(load.type == "cutting" for load in machine.loads):
         text += CUTTING
     drive = machine.drive
-    smooth = [f"{drive.torque!r}" if drive.type == "constant" else
-              f"{drive.stall_torque!r} * (1.0 - omega / {drive.no_load_speed!r})"]
+    smooth = [
+        f"{drive.torque!r}"
+        if drive.type == "constant"
+        else f"{drive.stall_torque!r} * (1.0 - omega / {drive.no_load_speed!r})"
+    ]
     smooth += [_load_term(load) for load in machine.loads if load.type != "cutting"]
     switched = [_load_term(load) for load in machine.loads if load.type == "cutting"] or ["0.0"]
     method = solver.method if solver.method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") else "DOP853"
-    return text + SCRIPT_TAIL.format(smooth=" + ".join(smooth + ["weight"]), switched=" + ".join(switched),
-                                     duration=float(scenario.duration), sample_rate=float(solver.sample_rate),
-                                     phi0=float(scenario.initial.phi), omega0=float(scenario.initial.omega),
-                                     method=method, rtol=float(solver.rtol), atol=float(solver.atol))
+    return text + SCRIPT_TAIL.format(
+        smooth=" + ".join(smooth + ["weight"]),
+        switched=" + ".join(switched),
+        duration=float(scenario.duration),
+        sample_rate=float(solver.sample_rate),
+        phi0=float(scenario.initial.phi),
+        omega0=float(scenario.initial.omega),
+        method=method,
+        rtol=float(solver.rtol),
+        atol=float(solver.atol),
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -308,16 +341,16 @@ def run_process(command: list[str], env: dict[str, str]) -> tuple[float, float, 
     return wall, cpu, done.stdout
 
 
-def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
-                    report: Callable[[str], None] = print) -> StartupBenchmark:
+def measure_startup(
+    scene_name: str, repeat: int = 3, cold_fast: bool = True, report: Callable[[str], None] = print
+) -> StartupBenchmark:
     """Measure (see the module docstring); report(line) is called after every run."""
     from mech_regulator.scene import load_scene
     from mech_regulator.scene.limits import output_stem
 
     scene = load_scene(scene_name)
     cli = cli_command()
-    timings: dict[str, dict[str, Timing | None]] = {measure: {path: Timing() for path in PATHS}
-                                                   for measure in MEASURES}
+    timings: dict[str, dict[str, Timing | None]] = {measure: {path: Timing() for path in PATHS} for measure in MEASURES}
     timings["help"][SCRIPT] = timings["served"][SCRIPT] = None
     if not cold_fast:
         timings["cold"][FAST] = None
@@ -335,7 +368,7 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
         return out
 
     def final_speed(path: str, out: str) -> None:
-        found = (re.search(r"omega_end (\S+)", out) if path == SCRIPT else OMEGA_PATTERN.search(out))
+        found = re.search(r"omega_end (\S+)", out) if path == SCRIPT else OMEGA_PATTERN.search(out)
         if found:
             omega_end[path] = float(found.group(1))
 
@@ -344,12 +377,18 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
         script.write_text(script_text(scene), encoding="utf-8")
         base = dict(os.environ, MECH_REGULATOR_SERVER="off")
         base.pop("MECH_REGULATOR_PROGRESS_INTERVAL", None)
-        commands = {"import": {REFERENCE: [sys.executable, "-c", "import mech_regulator.cli.main"],
-                               SCRIPT: [sys.executable, "-c", SCRIPT_IMPORT]},
-                    "help": {REFERENCE: [*cli, "--help"]}}
+        commands = {
+            "import": {
+                REFERENCE: [sys.executable, "-c", "import mech_regulator.cli.main"],
+                SCRIPT: [sys.executable, "-c", SCRIPT_IMPORT],
+            },
+            "help": {REFERENCE: [*cli, "--help"]},
+        }
         report("bench startup: one run of each command first, not counted (the files into the system's cache)")
-        for command in (*(command for measure in commands.values() for command in measure.values()),
-                        [sys.executable, str(script)]):
+        for command in (
+            *(command for measure in commands.values() for command in measure.values()),
+            [sys.executable, str(script)],
+        ):
             run_process(command, base)
         for _ in range(repeat):
             record(python, "python -c pass", [sys.executable, "-c", "pass"], base)
@@ -378,8 +417,9 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
         for _ in range(repeat):
             for path in PATHS:
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
-                final_speed(path, record(timings["warm"][path], f"warm {PATH_TITLES[path]}", command,
-                                         warm_caches[path]))
+                final_speed(
+                    path, record(timings["warm"][path], f"warm {PATH_TITLES[path]}", command, warm_caches[path])
+                )
         served = dict(warm_caches[FAST], XDG_RUNTIME_DIR=os.path.join(folder, "servers"))
         served.pop("MECH_REGULATOR_SERVER")
         report("bench startup: starting a command server, one run of each path through it (not counted)")
@@ -389,8 +429,15 @@ def measure_startup(scene_name: str, repeat: int = 3, cold_fast: bool = True,
                 run_process(simulate_command(path), served)
             for _ in range(repeat):
                 for path in (REFERENCE, FAST):
-                    final_speed(path, record(timings["served"][path], f"warm {PATH_TITLES[path]} through the "
-                                             "server", simulate_command(path), served))
+                    final_speed(
+                        path,
+                        record(
+                            timings["served"][path],
+                            f"warm {PATH_TITLES[path]} through the server",
+                            simulate_command(path),
+                            served,
+                        ),
+                    )
         finally:
             _stop_servers(cli, served, int(server[1]) if server else None)
     return StartupBenchmark(scene_name, repeat, cold_fast, timings, python, omega_end, environment())
@@ -404,8 +451,10 @@ def _wait_for_background_compile(cache: str, report: Callable[[str], None]) -> N
 
     lock = Path(cache) / LOCK_NAME
     if lock.exists():
-        report("bench startup: waiting for the stepper's compile in the background that the cold fast run started "
-               "(not counted)")
+        report(
+            "bench startup: waiting for the stepper's compile in the background that the cold fast run started "
+            "(not counted)"
+        )
         with open(lock, "a") as handle:
             fcntl.flock(handle, fcntl.LOCK_EX)
 
@@ -425,8 +474,12 @@ def environment() -> dict[str, str]:
     """Where it ran: processor, cores, Python, date."""
     from mech_regulator.bench.accuracy import processor_name
 
-    return {"processor": processor_name(), "cores": str(os.cpu_count()), "python": platform.python_version(),
-            "date": time.strftime("%Y-%m-%d")}
+    return {
+        "processor": processor_name(),
+        "cores": str(os.cpu_count()),
+        "python": platform.python_version(),
+        "date": time.strftime("%Y-%m-%d"),
+    }
 
 
 # ---------------------------------------------------------------------------------------------
@@ -439,20 +492,30 @@ def ratios(benchmark: StartupBenchmark) -> dict[str, dict[str, float | None]]:
     found = {}
     for measure, timings in benchmark.timings.items():
         script = benchmark.timings[SCRIPT_MEASURE.get(measure, measure)][SCRIPT]
-        found[measure] = {f"{path} / {SCRIPT}": (timings[path].median / script.median
-                                                 if timings[path] is not None and script is not None else None)
-                          for path in (REFERENCE, FAST)}
+        found[measure] = {
+            f"{path} / {SCRIPT}": (
+                timings[path].median / script.median if timings[path] is not None and script is not None else None
+            )
+            for path in (REFERENCE, FAST)
+        }
     return found
 
 
 def startup_summary(benchmark: StartupBenchmark) -> dict:
     """Everything as plain data (JSON-ready): times in seconds, per measure and path."""
-    return {"scene": benchmark.scene, "repeat": benchmark.repeat, "cold_fast": benchmark.cold_fast,
-            "environment": benchmark.environment, "python_startup": benchmark.python.as_data(),
-            "measures": {measure: {path: None if timing is None else timing.as_data()
-                                   for path, timing in timings.items()}
-                         for measure, timings in benchmark.timings.items()},
-            "ratios": ratios(benchmark), "omega_end": benchmark.omega_end}
+    return {
+        "scene": benchmark.scene,
+        "repeat": benchmark.repeat,
+        "cold_fast": benchmark.cold_fast,
+        "environment": benchmark.environment,
+        "python_startup": benchmark.python.as_data(),
+        "measures": {
+            measure: {path: None if timing is None else timing.as_data() for path, timing in timings.items()}
+            for measure, timings in benchmark.timings.items()
+        },
+        "ratios": ratios(benchmark),
+        "omega_end": benchmark.omega_end,
+    }
 
 
 def _cell(timing: Timing | None) -> str:
@@ -462,22 +525,32 @@ def _cell(timing: Timing | None) -> str:
 def format_table(benchmark: StartupBenchmark) -> str:
     """The measurements as a markdown table: median (min) wall time per path, the ratios to the script."""
     found = ratios(benchmark)
-    lines = [f"start-up of {benchmark.scene}: whole processes, wall time [s], median (min) of {benchmark.repeat} "
-             f"run(s); {benchmark.environment['processor']}, {benchmark.environment['cores']} cores, Python "
-             f"{benchmark.environment['python']}", "",
-             "| | reference | fast | solve_ivp script | reference / script | fast / script |",
-             "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    lines = [
+        f"start-up of {benchmark.scene}: whole processes, wall time [s], median (min) of {benchmark.repeat} "
+        f"run(s); {benchmark.environment['processor']}, {benchmark.environment['cores']} cores, Python "
+        f"{benchmark.environment['python']}",
+        "",
+        "| | reference | fast | solve_ivp script | reference / script | fast / script |",
+        "| --- | ---: | ---: | ---: | ---: | ---: |",
+    ]
     for measure, timings in benchmark.timings.items():
         shown = [f"{value:.3g}" if value is not None else "-" for value in found[measure].values()]
-        lines.append(f"| {MEASURE_TITLES[measure]} | {_cell(timings[REFERENCE])} | {_cell(timings[FAST])} | "
-                     f"{_cell(timings[SCRIPT])} | {' | '.join(shown)} |")
-    omega = ", ".join(f"{PATH_TITLES[path]} {value:.10g}" if value is not None else f"{PATH_TITLES[path]} -"
-                      for path, value in benchmark.omega_end.items())
-    lines += ["", f"Python itself (python -c pass): {_cell(benchmark.python)} s. The import and --help rows are one "
-              "process for both paths of the command line; the script's import row is numpy and scipy.integrate. "
-              "The server row's ratios are to the script's warm run (a script has no server); its CPU time (--json) "
-              "is the client's alone, the server's child is not the benchmark's.",
-              f"final speed omega [rad/s] (the same machine on each): {omega}"]
+        lines.append(
+            f"| {MEASURE_TITLES[measure]} | {_cell(timings[REFERENCE])} | {_cell(timings[FAST])} | "
+            f"{_cell(timings[SCRIPT])} | {' | '.join(shown)} |"
+        )
+    omega = ", ".join(
+        f"{PATH_TITLES[path]} {value:.10g}" if value is not None else f"{PATH_TITLES[path]} -"
+        for path, value in benchmark.omega_end.items()
+    )
+    lines += [
+        "",
+        f"Python itself (python -c pass): {_cell(benchmark.python)} s. The import and --help rows are one "
+        "process for both paths of the command line; the script's import row is numpy and scipy.integrate. "
+        "The server row's ratios are to the script's warm run (a script has no server); its CPU time (--json) "
+        "is the client's alone, the server's child is not the benchmark's.",
+        f"final speed omega [rad/s] (the same machine on each): {omega}",
+    ]
     if not benchmark.cold_fast:
         lines.append("cold fast runs left out (--skip-cold-fast): the warm fast runs used this machine's caches")
     return "\n".join(lines)

@@ -18,23 +18,38 @@ ROW_BUDGET = 3600.0  # [s] of wall time a row may take by default before it is s
 def add_bench_long_command(benchmarks) -> None:
     """The `bench long` subcommand and its options, under `bench`'s subparsers."""
     long = benchmarks.add_parser(
-        "long", help="long-run matrix: bundled scenes x paths x methods, through simulate and the co-simulation, "
-                     "for a long simulated time",
+        "long",
+        help="long-run matrix: bundled scenes x paths x methods, through simulate and the co-simulation, "
+        "for a long simulated time",
         description="Run every bundled scene (or those given) on each path with each method, through simulate and "
-                    "through the in-process co-simulation (exchange step 0.02 s), for a long simulated time, and "
-                    "print a Markdown row per run: how it ended (complete, failed, refused before the start, or "
-                    "stopped when its wall-time budget ran out), wall time, steps (exchanges), the energy balance's "
-                    "relative residual and the last dynamic period's omega_m and delta against the scene's own "
-                    "duration. Numbers to read, never asserted.")
-    long.add_argument("--duration", type=float, default=LONG_DURATION, metavar="T",
-                      help=f"simulated time of each row [s] (default {LONG_DURATION:g})")
+        "through the in-process co-simulation (exchange step 0.02 s), for a long simulated time, and "
+        "print a Markdown row per run: how it ended (complete, failed, refused before the start, or "
+        "stopped when its wall-time budget ran out), wall time, steps (exchanges), the energy balance's "
+        "relative residual and the last dynamic period's omega_m and delta against the scene's own "
+        "duration. Numbers to read, never asserted.",
+    )
+    long.add_argument(
+        "--duration",
+        type=float,
+        default=LONG_DURATION,
+        metavar="T",
+        help=f"simulated time of each row [s] (default {LONG_DURATION:g})",
+    )
     long.add_argument("--scenes", help="comma-separated bundled scenes (default: every one)")
     long.add_argument("--paths", help="comma-separated paths: fast, reference (default both)")
-    long.add_argument("--methods", help="comma-separated methods (default DOP853,RK45,RK4,Radau,energy; the fast path "
-                                        "runs no Radau nor energy method)")
+    long.add_argument(
+        "--methods",
+        help="comma-separated methods (default DOP853,RK45,RK4,Radau,energy; the fast path "
+        "runs no Radau nor energy method)",
+    )
     long.add_argument("--modes", help="comma-separated: simulate, cosim (default both)")
-    long.add_argument("--budget", type=float, default=ROW_BUDGET, metavar="S",
-                      help=f"wall time a row may take before it is stopped [s] (default {ROW_BUDGET:g})")
+    long.add_argument(
+        "--budget",
+        type=float,
+        default=ROW_BUDGET,
+        metavar="S",
+        help=f"wall time a row may take before it is stopped [s] (default {ROW_BUDGET:g})",
+    )
 
 
 def run_bench_long(args: argparse.Namespace) -> int:
@@ -48,13 +63,16 @@ def run_bench_long(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.budget) and args.budget > 0.0):
         raise SceneError(f"--budget {args.budget:g}: expected a wall time > 0 s")
     chosen = {}
-    for option, text, allowed in (("--scenes", args.scenes, list(bundled_scenes())), ("--paths", args.paths, PATHS),
-                                  ("--methods", args.methods, METHODS), ("--modes", args.modes, MODES)):
+    for option, text, allowed in (
+        ("--scenes", args.scenes, list(bundled_scenes())),
+        ("--paths", args.paths, PATHS),
+        ("--methods", args.methods, METHODS),
+        ("--modes", args.modes, MODES),
+    ):
         names = [name.strip() for name in text.split(",") if name.strip()] if text else list(allowed)
         unknown = [name for name in names if name not in allowed]
         if unknown or not names:
-            raise SceneError(f"{option} {text!r}: {', '.join(unknown) or 'nothing'} is not one of "
-                             f"{', '.join(allowed)}")
+            raise SceneError(f"{option} {text!r}: {', '.join(unknown) or 'nothing'} is not one of {', '.join(allowed)}")
         chosen[option] = names
     rows = matrix(chosen["--scenes"], tuple(chosen["--paths"]), tuple(chosen["--methods"]), tuple(chosen["--modes"]))
     print(format_header(args.duration), flush=True)

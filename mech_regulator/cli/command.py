@@ -41,8 +41,18 @@ def summary_before_start(argv: list[str]) -> Path | None:
         output = args.out or default_recording(Path(args.scene).stem)
         summary_path = output.with_suffix(".json")
         output.parent.mkdir(parents=True, exist_ok=True)
-        summary_path.write_text(to_json({"scene": args.scene, "status": "interrupted", "message": NOTHING_SIMULATED,
-                                         "samples": 0, "t_end": 0.0, "recording": None}))
+        summary_path.write_text(
+            to_json(
+                {
+                    "scene": args.scene,
+                    "status": "interrupted",
+                    "message": NOTHING_SIMULATED,
+                    "samples": 0,
+                    "t_end": 0.0,
+                    "recording": None,
+                }
+            )
+        )
     except (SystemExit, OSError):
         return None
     return summary_path

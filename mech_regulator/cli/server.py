@@ -72,20 +72,38 @@ KEYED_NAMES = ("LANG", "HOME", "XDG_CACHE_HOME")
 UNKEYED = ("MECH_REGULATOR_SERVER", "MECH_REGULATOR_PROGRESS_INTERVAL", "MECH_REGULATOR_AUTO_PATH")
 """Variables left out of the key: the server's own, and those a command reads afresh where it uses them (from the
 client's environment in the child)."""
-PRELOADED = ("numpy", "scipy.integrate", "numba", "yaml", "tqdm", "mech_regulator.cli.main",
-             "mech_regulator.cli.report", "mech_regulator.scene", "mech_regulator.model", "mech_regulator.solvers",
-             "mech_regulator.solvers.advice", "mech_regulator.solvers.cosim", "mech_regulator.solvers.compiled.run",
-             "mech_regulator.solvers.compiled.warm", "mech_regulator.analysis", "mech_regulator.analysis.self_check",
-             "mech_regulator.analysis.kinematics", "mech_regulator.analysis.engine", "mech_regulator.viz.plots")
+PRELOADED = (
+    "numpy",
+    "scipy.integrate",
+    "numba",
+    "yaml",
+    "tqdm",
+    "mech_regulator.cli.main",
+    "mech_regulator.cli.report",
+    "mech_regulator.scene",
+    "mech_regulator.model",
+    "mech_regulator.solvers",
+    "mech_regulator.solvers.advice",
+    "mech_regulator.solvers.cosim",
+    "mech_regulator.solvers.compiled.run",
+    "mech_regulator.solvers.compiled.warm",
+    "mech_regulator.analysis",
+    "mech_regulator.analysis.self_check",
+    "mech_regulator.analysis.kinematics",
+    "mech_regulator.analysis.engine",
+    "mech_regulator.viz.plots",
+)
 """What the server imports before its first command: what simulate and the analysis commands import, and their
 pictures (matplotlib with its Agg backend: --plot)."""
 READY_WAIT = 120.0  # [s] `server start` waits at most this for the server to answer
 STOP_WAIT = 30.0  # [s] `server stop` waits at most this for a server to end (it finishes its running commands)
 SOURCE_CHECK = 10.0  # [s] between two checks of the package's source by the server
 SOCKET_PATH_MAX = 100  # bytes: a Unix socket's path must fit in sun_path (108 on Linux)
-BOOTSTRAP = ("import sys, json; sys.path[:] = json.loads(sys.argv[1]); from mech_regulator.cli.server import serve; "
-             "from mech_regulator.cli.command import run_command; sys.exit(serve(int(sys.argv[2]), sys.argv[3], "
-             "run_command))")
+BOOTSTRAP = (
+    "import sys, json; sys.path[:] = json.loads(sys.argv[1]); from mech_regulator.cli.server import serve; "
+    "from mech_regulator.cli.command import run_command; sys.exit(serve(int(sys.argv[2]), sys.argv[3], "
+    "run_command))"
+)
 """The server's program (python -c): the client's sys.path first, so that it imports what the client imports; its
 children run the command line with cli.command.run_command, which this module does not import (the command line
 imports this module for its `server` command)."""
@@ -118,15 +136,29 @@ def server_key() -> str:
     import mech_regulator
 
     package = os.path.dirname(os.path.abspath(mech_regulator.__file__))
-    installed = {entry: os.stat(entry).st_mtime_ns for entry in sys.path[1:]
-                 if entry.endswith(("site-packages", "dist-packages")) and os.path.isdir(entry)}
-    environment = {name: value for name, value in os.environ.items()
-                   if (name.startswith(KEYED_PREFIXES) or name in KEYED_NAMES)
-                   and not name.startswith(UNKEYED)}
-    return json.dumps({"version": mech_regulator.__version__, "package": package,
-                       "source": source_fingerprint(package), "executable": sys.executable,
-                       "flags": [list(sys.flags), sys.warnoptions, sorted(map(str, sys._xoptions.items()))],
-                       "path": sys.path[1:], "installed": installed, "environment": environment}, sort_keys=True)
+    installed = {
+        entry: os.stat(entry).st_mtime_ns
+        for entry in sys.path[1:]
+        if entry.endswith(("site-packages", "dist-packages")) and os.path.isdir(entry)
+    }
+    environment = {
+        name: value
+        for name, value in os.environ.items()
+        if (name.startswith(KEYED_PREFIXES) or name in KEYED_NAMES) and not name.startswith(UNKEYED)
+    }
+    return json.dumps(
+        {
+            "version": mech_regulator.__version__,
+            "package": package,
+            "source": source_fingerprint(package),
+            "executable": sys.executable,
+            "flags": [list(sys.flags), sys.warnoptions, sorted(map(str, sys._xoptions.items()))],
+            "path": sys.path[1:],
+            "installed": installed,
+            "environment": environment,
+        },
+        sort_keys=True,
+    )
 
 
 def key_digest(key: str) -> str:
@@ -183,8 +215,10 @@ def peer_refusal(connection: socket.socket) -> str | None:
             groups = next(line.split()[1:] for line in status if line.startswith("Groups:"))
         if sorted(map(int, groups)) != sorted(os.getgroups()):
             return "other groups"
-        for theirs, mine, what in ((f"/proc/{pid}/ns/mnt", "/proc/self/ns/mnt", "another mount namespace"),
-                                   (f"/proc/{pid}/root", "/", "another root folder")):
+        for theirs, mine, what in (
+            (f"/proc/{pid}/ns/mnt", "/proc/self/ns/mnt", "another mount namespace"),
+            (f"/proc/{pid}/root", "/", "another root folder"),
+        ):
             their, my = os.stat(theirs), os.stat(mine)
             if (their.st_dev, their.st_ino) != (my.st_dev, my.st_ino):
                 return what
@@ -206,8 +240,11 @@ def idle_limit() -> float:
     except ValueError:
         value = -1.0
     if not 0.0 < value < float("inf"):
-        print(f"mech-regulator: note: {IDLE_VARIABLE}={text!r}: expected seconds > 0; the server stops after "
-              f"{IDLE_DEFAULT:g} s idle", file=sys.stderr)
+        print(
+            f"mech-regulator: note: {IDLE_VARIABLE}={text!r}: expected seconds > 0; the server stops after "
+            f"{IDLE_DEFAULT:g} s idle",
+            file=sys.stderr,
+        )
         return IDLE_DEFAULT
     return value
 
@@ -225,14 +262,20 @@ def through_server(argv: list[str]) -> int | None:
     if setting == "off":
         return None
     if setting not in ("", "on"):
-        print(f"mech-regulator: note: {SERVER_VARIABLE}={setting!r}: expected on or off; this command runs without "
-              "the command server", file=sys.stderr)
+        print(
+            f"mech-regulator: note: {SERVER_VARIABLE}={setting!r}: expected on or off; this command runs without "
+            "the command server",
+            file=sys.stderr,
+        )
         return None
     folder = server_folder()
     problem = folder_refusal(folder)
     if problem is not None:
-        print(f"mech-regulator: note: the command server's folder {folder} is not private: {problem}; this command "
-              f"runs without the server (chmod 700 it if it is yours, or set {SERVER_VARIABLE}=off)", file=sys.stderr)
+        print(
+            f"mech-regulator: note: the command server's folder {folder} is not private: {problem}; this command "
+            f"runs without the server (chmod 700 it if it is yours, or set {SERVER_VARIABLE}=off)",
+            file=sys.stderr,
+        )
         return None
     key = server_key()
     path = _socket_path(key_digest(key))
@@ -245,12 +288,18 @@ def through_server(argv: list[str]) -> int | None:
             return None  # a CI job's commands leave no resident process behind unless asked to
         pid = start_server(key)
         if pid is not None:
-            print(f"mech-regulator: started a command server (pid {pid}) that answers the next commands without "
-                  f"their imports; it stops after {idle_limit() / 60.0:g} min idle (stop it: `mech-regulator server "
-                  f"stop`; never use one: {SERVER_VARIABLE}=off)", file=sys.stderr)
+            print(
+                f"mech-regulator: started a command server (pid {pid}) that answers the next commands without "
+                f"their imports; it stops after {idle_limit() / 60.0:g} min idle (stop it: `mech-regulator server "
+                f"stop`; never use one: {SERVER_VARIABLE}=off)",
+                file=sys.stderr,
+            )
         elif server_starting(key):
-            print("mech-regulator: the command server is still starting (it answers once its imports are loaded); "
-                  "this command runs on its own", file=sys.stderr)
+            print(
+                "mech-regulator: the command server is still starting (it answers once its imports are loaded); "
+                "this command runs on its own",
+                file=sys.stderr,
+            )
         return None
     except OSError:
         return None
@@ -284,8 +333,16 @@ def run_request(connection: socket.socket, key: str, argv: list[str]) -> int | N
     umask = os.umask(0)
     os.umask(umask)
     try:
-        request = {"op": "run", "key": key, "argv": argv, "argv0": sys.argv[0], "cwd": os.getcwd(),
-                   "environment": dict(os.environ), "path": sys.path, "umask": umask}
+        request = {
+            "op": "run",
+            "key": key,
+            "argv": argv,
+            "argv0": sys.argv[0],
+            "cwd": os.getcwd(),
+            "environment": dict(os.environ),
+            "path": sys.path,
+            "umask": umask,
+        }
     except OSError:  # the working folder is gone
         return None
     child: list[int] = []
@@ -323,8 +380,11 @@ def run_request(connection: socket.socket, key: str, argv: list[str]) -> int | N
     except (OSError, ServerGone):
         if child:
             _signal(child[0], signal.SIGTERM)
-            print(f"mech-regulator: the command server ended during the command (its child {child[0]} was stopped); "
-                  f"run it again, or without the server: {SERVER_VARIABLE}=off", file=sys.stderr)
+            print(
+                f"mech-regulator: the command server ended during the command (its child {child[0]} was stopped); "
+                f"run it again, or without the server: {SERVER_VARIABLE}=off",
+                file=sys.stderr,
+            )
             answer = {"exit": 1}
     finally:
         for number, handler in before.items():
@@ -365,7 +425,7 @@ def server_starting(key: str) -> bool:
     """Whether the server of `key` holds its lock (it is starting: it has not answered yet)."""
     try:
         with open(server_folder() / f"{key_digest(key)}.lock", "a") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)   # released as the file closes
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # released as the file closes
     except BlockingIOError:
         return True
     except OSError:
@@ -399,10 +459,15 @@ def start_server(key: str) -> int | None:
         with open(folder / f"{digest}.log", "w") as log:
             # the interpreter's flags (-O, -X ...) as this one's, as multiprocessing starts its processes
             flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
-            process = subprocess.Popen([sys.executable, *flags, "-c", BOOTSTRAP,
-                                        json.dumps(sys.path), str(lock.fileno()), key],
-                                       stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT, cwd="/",
-                                       start_new_session=True, pass_fds=(lock.fileno(),))
+            process = subprocess.Popen(
+                [sys.executable, *flags, "-c", BOOTSTRAP, json.dumps(sys.path), str(lock.fileno()), key],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                cwd="/",
+                start_new_session=True,
+                pass_fds=(lock.fileno(),),
+            )
     return process.pid
 
 
@@ -417,15 +482,21 @@ def server_command(action: str) -> int:
     until each has ended."""
     problem = folder_refusal(server_folder())
     if problem is not None:
-        print(f"mech-regulator: the command server's folder {server_folder()} is not private: {problem}; no server "
-              "is started, asked or stopped there (chmod 700 it if it is yours)", file=sys.stderr)
+        print(
+            f"mech-regulator: the command server's folder {server_folder()} is not private: {problem}; no server "
+            "is started, asked or stopped there (chmod 700 it if it is yours)",
+            file=sys.stderr,
+        )
         return 1
     if action == "start":
         key = server_key()
         path = _socket_path(key_digest(key))
         if len(os.fsencode(path)) > SOCKET_PATH_MAX:
-            print(f"mech-regulator: the server's folder {server_folder()} is too deep for a Unix socket (at most "
-                  f"{SOCKET_PATH_MAX} bytes); set XDG_RUNTIME_DIR to a shorter folder", file=sys.stderr)
+            print(
+                f"mech-regulator: the server's folder {server_folder()} is too deep for a Unix socket (at most "
+                f"{SOCKET_PATH_MAX} bytes); set XDG_RUNTIME_DIR to a shorter folder",
+                file=sys.stderr,
+            )
             return 1
         began = time.monotonic()
         started = start_server(key)
@@ -433,24 +504,35 @@ def server_command(action: str) -> int:
         while (status := ask_server(path, {"op": "status"})) is None:
             ended = started is not None and not process_alive(started)
             if ended or time.monotonic() > deadline:
-                print(f"mech-regulator: the command server {'ended' if ended else 'did not answer'} within "
-                      f"{READY_WAIT:g} s; see {path.with_suffix('.log')}", file=sys.stderr)
+                print(
+                    f"mech-regulator: the command server {'ended' if ended else 'did not answer'} within "
+                    f"{READY_WAIT:g} s; see {path.with_suffix('.log')}",
+                    file=sys.stderr,
+                )
                 return 1
             time.sleep(0.05)
         print(_status_line(status, key))
         waited = time.monotonic() - began
-        print(f"started in {waited:.1f} s" if started is not None else
-              f"was running already{'' if waited < 0.1 else f' (it answered after {waited:.1f} s: it was starting)'}")
+        print(
+            f"started in {waited:.1f} s"
+            if started is not None
+            else f"was running already{'' if waited < 0.1 else f' (it answered after {waited:.1f} s: it was starting)'}"
+        )
         return 0
-    servers = [(path, status) for path in sorted(server_folder().glob("*.sock"))
-               if (status := ask_server(path, {"op": "status"})) is not None]
+    servers = [
+        (path, status)
+        for path in sorted(server_folder().glob("*.sock"))
+        if (status := ask_server(path, {"op": "status"})) is not None
+    ]
     if action == "status":
         key = server_key()
         for _, status in servers:
             print(_status_line(status, key))
         if not servers:
-            print(f"no command server in {server_folder()}; the next served command starts one "
-                  f"({', '.join(sorted(SERVED_COMMANDS))}), unless {SERVER_VARIABLE}=off")
+            print(
+                f"no command server in {server_folder()}; the next served command starts one "
+                f"({', '.join(sorted(SERVED_COMMANDS))}), unless {SERVER_VARIABLE}=off"
+            )
         return 0
     for path, status in servers:
         ask_server(path, {"op": "stop"})
@@ -478,11 +560,13 @@ def ask_server(path: Path, message: dict) -> dict | None:
 
 def _status_line(status: dict, key: str) -> str:
     mine = "this environment's" if status["key"] == key else "another environment's (not used here)"
-    return (f"command server pid {status['pid']}, key {status['digest']} ({mine}): idle {status['idle_s']:.0f} s "
-            f"(stops after {status['idle_limit_s']:g} s), served {status['served']} command(s), "
-            f"{status['running']} running; loaded {status['modules']} modules, steppers "
-            f"{', '.join(status['steppers']) or 'none'}, {status['scene_modules']} scene module(s); "
-            f"socket {status['socket']}")
+    return (
+        f"command server pid {status['pid']}, key {status['digest']} ({mine}): idle {status['idle_s']:.0f} s "
+        f"(stops after {status['idle_limit_s']:g} s), served {status['served']} command(s), "
+        f"{status['running']} running; loaded {status['modules']} modules, steppers "
+        f"{', '.join(status['steppers']) or 'none'}, {status['scene_modules']} scene module(s); "
+        f"socket {status['socket']}"
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -516,8 +600,9 @@ class _Request:
         try:
             os.chdir(message["cwd"])
         except OSError as error:  # the working folder is gone
-            print(f"mech-regulator: cannot enter the working folder {message['cwd']}: {error.strerror}",
-                  file=sys.stderr)
+            print(
+                f"mech-regulator: cannot enter the working folder {message['cwd']}: {error.strerror}", file=sys.stderr
+            )
             return 1
         try:
             return run_command(message["argv"])
@@ -541,11 +626,15 @@ def _fresh_standard_streams() -> None:
     for descriptor, name in enumerate(("stdin", "stdout", "stderr")):
         old = getattr(sys, name)
         writing = descriptor > 0
-        raw = open(descriptor, "wb" if writing else "rb", buffering=-1 if buffered or not writing else 0,
-                   closefd=False)
-        stream = io.TextIOWrapper(raw, encoding=old.encoding, errors=old.errors, newline="\n",
-                                  line_buffering=buffered and writing and (descriptor == 2 or os.isatty(descriptor)),
-                                  write_through=writing and not buffered)
+        raw = open(descriptor, "wb" if writing else "rb", buffering=-1 if buffered or not writing else 0, closefd=False)
+        stream = io.TextIOWrapper(
+            raw,
+            encoding=old.encoding,
+            errors=old.errors,
+            newline="\n",
+            line_buffering=buffered and writing and (descriptor == 2 or os.isatty(descriptor)),
+            write_through=writing and not buffered,
+        )
         setattr(sys, name, stream)
         setattr(sys, f"__{name}__", stream)
 
@@ -727,10 +816,19 @@ class _Server:
     def status(self) -> dict:
         from mech_regulator.solvers.compiled.codegen import loaded_scene_modules
 
-        return {"pid": self.pid, "key": self.key, "digest": self.digest, "socket": os.fspath(self.path),
-                "idle_s": 0.0 if self.children else time.monotonic() - self.last, "idle_limit_s": self.idle_limit,
-                "served": self.served, "running": len(self.children), "modules": len(sys.modules),
-                "steppers": self.steppers, "scene_modules": len(loaded_scene_modules())}
+        return {
+            "pid": self.pid,
+            "key": self.key,
+            "digest": self.digest,
+            "socket": os.fspath(self.path),
+            "idle_s": 0.0 if self.children else time.monotonic() - self.last,
+            "idle_limit_s": self.idle_limit,
+            "served": self.served,
+            "running": len(self.children),
+            "modules": len(sys.modules),
+            "steppers": self.steppers,
+            "scene_modules": len(loaded_scene_modules()),
+        }
 
 
 def _receive(connection: socket.socket) -> tuple[dict, list[int]]:

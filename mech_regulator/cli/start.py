@@ -4,7 +4,19 @@ which commands the command server runs."""
 import time
 
 STARTED = time.monotonic()  # [s] when the command line began (its first import): `run`'s start-up counts from it
-SERVED_COMMANDS = frozenset({"simulate", "describe", "governor", "coupling", "kinematics", "engine", "structure",
-                             "flywheel", "scenes", "schema"})
+SERVED_COMMANDS = frozenset(
+    {
+        "simulate",
+        "describe",
+        "governor",
+        "coupling",
+        "kinematics",
+        "engine",
+        "structure",
+        "flywheel",
+        "scenes",
+        "schema",
+    }
+)
 """Commands the command server (cli/server.py) runs: the physics core in one thread (not run: ROS; sweep: worker
 processes or Dask; bench: processes of its own; compile: numba compiling for tens of seconds; server)."""

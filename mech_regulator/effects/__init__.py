@@ -77,24 +77,33 @@ def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) 
     return build_effect(definition_of(drive, mechanism), None)
 
 
-def build_load(load: schema.Load, kinematic_period: float | None,
-               output_position: Callable[[float], tuple[float, float]] | None = None) -> Effect:
+def build_load(
+    load: schema.Load,
+    kinematic_period: float | None,
+    output_position: Callable[[float], tuple[float, float]] | None = None,
+) -> Effect:
     """A resisting moment or force of a scene's `machine.loads` entry; loads on the output link are
     periodic with the mechanism (kinematic_period [rad]); output_position(phi) -> (q, dq/dphi) of the mechanism
     places the kinks of a slider force table (None: the table has none, a solver steps over its breakpoints)."""
     return build_effect(definition_of(load), kinematic_period, output_position)
 
 
-def build_effect(definition: Definition, kinematic_period: float | None,
-                 output_position: Callable[[float], tuple[float, float]] | None = None) -> Effect:
+def build_effect(
+    definition: Definition,
+    kinematic_period: float | None,
+    output_position: Callable[[float], tuple[float, float]] | None = None,
+) -> Effect:
     """The reference path's Effect of a drive's or load's definition (its formulas bound to its numbers,
     definition.reference_function): a periodic table in phi has its knots as kinks (shifted per output), an interval
     table its edges as switches, a clamped table in the output position q the crank angles where q crosses one of its
     breakpoints (position_kinks, with output_position and kinematic_period [rad]; between two of them it is read on
     the piece of q held there, held_positions)."""
     spec = definition.table
-    period = spec.period if spec is not None and spec.kind != CLAMPED else (
-        kinematic_period if definition.on_output else None)
+    period = (
+        spec.period
+        if spec is not None and spec.kind != CLAMPED
+        else (kinematic_period if definition.on_output else None)
+    )
     table = held = None
     kinks: tuple[float, ...] = ()
     switches: tuple[float, ...] = ()
@@ -124,9 +133,20 @@ def build_effect(definition: Definition, kinematic_period: float | None,
         return reference_function(definition, function, table, anchored, held)
 
     moment = reference_function(definition, definition.moment, table, False, held)
-    return Effect(definition.name, definition.role, moment, definition.depends_on,
-                  definition.formula, period, switches, bound(definition.output_force, False), kinks,
-                  bound(definition.moment, True), bound(definition.output_force, True), definition)
+    return Effect(
+        definition.name,
+        definition.role,
+        moment,
+        definition.depends_on,
+        definition.formula,
+        period,
+        switches,
+        bound(definition.output_force, False),
+        kinks,
+        bound(definition.moment, True),
+        bound(definition.output_force, True),
+        definition,
+    )
 
 
 def _shifted_kinks(knots: tuple[float, ...], shifts: tuple[float, ...], period: float) -> tuple[float, ...]:
@@ -147,20 +167,26 @@ def held_positions(kinks: tuple[float, ...], output_position: Callable[[float], 
     a dead centre (at the interval's middle for a centred crank-slider)."""
     starts = [kinks[-1] - TWO_PI] + list(kinks)
     ends = list(kinks) + [kinks[0] + TWO_PI]
-    return [(output_position((2.0 * a + b) / 3.0)[0] + output_position((a + 2.0 * b) / 3.0)[0]) / 2.0
-            for a, b in zip(starts, ends)]
+    return [
+        (output_position((2.0 * a + b) / 3.0)[0] + output_position((a + 2.0 * b) / 3.0)[0]) / 2.0
+        for a, b in zip(starts, ends)
+    ]
 
 
-def position_kinks(breakpoints, output_position: Callable[[float], tuple[float, float]],
-                   samples: int = 720) -> tuple[float, ...]:
+def position_kinks(
+    breakpoints, output_position: Callable[[float], tuple[float, float]], samples: int = 720
+) -> tuple[float, ...]:
     """The crank angles [rad] in [0, 2 pi) where the output position x(phi) crosses one of the breakpoints [m]:
     x is split into monotone pieces at the roots of dx/dphi (sign changes on `samples` points, refined by brentq),
     and on each piece x - x_k changes sign at most once (root by brentq). A breakpoint that x only touches at a dead
     centre is no kink (F(x(phi)) stays on one segment there)."""
     grid = [TWO_PI * i / samples for i in range(samples + 1)]
     ratios = [output_position(angle)[1] for angle in grid]
-    extrema = [a if ra == 0.0 else brentq(lambda angle: output_position(angle)[1], a, b, xtol=1e-15)
-               for a, b, ra, rb in zip(grid, grid[1:], ratios, ratios[1:]) if ra == 0.0 or ra * rb < 0.0]
+    extrema = [
+        a if ra == 0.0 else brentq(lambda angle: output_position(angle)[1], a, b, xtol=1e-15)
+        for a, b, ra, rb in zip(grid, grid[1:], ratios, ratios[1:])
+        if ra == 0.0 or ra * rb < 0.0
+    ]
     if not extrema:
         return ()
     ends = extrema + [extrema[0] + TWO_PI]

@@ -85,10 +85,12 @@ _DEFINITIONS: dict[type, Callable[..., Definition]] = {}
 
 def define(*kinds: type) -> Callable:
     """Register the decorated `definition(spec, mechanism) -> Definition` for the scene classes `kinds`."""
+
     def register(build: Callable[..., Definition]) -> Callable[..., Definition]:
         for kind in kinds:
             _DEFINITIONS[kind] = build
         return build
+
     return register
 
 
@@ -96,9 +98,11 @@ def definition_of(spec, mechanism=None) -> Definition:
     """The definition of a scene's drive, load or valve entry (an engine reads the mechanism's cylinders)."""
     build = _DEFINITIONS.get(type(spec))
     if build is None:
-        raise DefinitionError(f"no definition for the scene entry {type(spec).__name__} (type '{spec.type}'); each "
-                              "drive, load and valve kind registers one with effects.definition.define "
-                              "(docs/effects.md)")
+        raise DefinitionError(
+            f"no definition for the scene entry {type(spec).__name__} (type '{spec.type}'); each "
+            "drive, load and valve kind registers one with effects.definition.define "
+            "(docs/effects.md)"
+        )
     return build(spec, mechanism)
 
 
@@ -106,42 +110,59 @@ def union_members(union) -> tuple[type, ...]:
     """The scene classes of a scene union (schema.Drive, schema.Load, schema.Valve, ...): the members of its Union,
     each unwrapped from its Annotated."""
     members = typing.get_args(union)[0] if typing.get_origin(union) is typing.Annotated else union
-    return tuple(typing.get_args(member)[0] if typing.get_origin(member) is typing.Annotated else member
-                 for member in typing.get_args(members))
+    return tuple(
+        typing.get_args(member)[0] if typing.get_origin(member) is typing.Annotated else member
+        for member in typing.get_args(members)
+    )
 
 
 def check_covered(*unions) -> None:
     """Raise DefinitionError naming the members of the scene unions that no definition is registered for."""
     missing = [kind.__name__ for union in unions for kind in union_members(union) if kind not in _DEFINITIONS]
     if missing:
-        raise DefinitionError(f"no definition for the scene entries {', '.join(missing)}; each drive, load and valve "
-                              "kind registers one with effects.definition.define (docs/effects.md)")
+        raise DefinitionError(
+            f"no definition for the scene entries {', '.join(missing)}; each drive, load and valve "
+            "kind registers one with effects.definition.define (docs/effects.md)"
+        )
 
 
-def call_source(function: Callable[..., float], name: str, inputs: Mapping[str, str],
-                numbers: Mapping[str, str]) -> str:
+def call_source(
+    function: Callable[..., float], name: str, inputs: Mapping[str, str], numbers: Mapping[str, str]
+) -> str:
     """The source `name(arguments)` of a call of a formula function: each argument, by its name, the expression
     inputs[name] or numbers[name]; the one way both paths write it."""
     arguments = []
     for argument in inspect.signature(function).parameters:
         expression = inputs.get(argument, numbers.get(argument))
         if expression is None:
-            raise DefinitionError(f"{function.__module__}.{function.__name__} reads '{argument}', which is neither "
-                                  f"an input ({', '.join(inputs)}) nor one of its numbers ({', '.join(numbers)})")
+            raise DefinitionError(
+                f"{function.__module__}.{function.__name__} reads '{argument}', which is neither "
+                f"an input ({', '.join(inputs)}) nor one of its numbers ({', '.join(numbers)})"
+            )
         arguments.append(expression)
     return f"{name}({', '.join(arguments)})"
 
 
-def summed_source(definition: Definition, function: Callable[..., float], name: str,
-                  inputs: Callable[[int], Mapping[str, str]], numbers: Mapping[str, str]) -> str:
+def summed_source(
+    definition: Definition,
+    function: Callable[..., float],
+    name: str,
+    inputs: Callable[[int], Mapping[str, str]],
+    numbers: Mapping[str, str],
+) -> str:
     """call_source of a formula function once per output of the mechanism (inputs(i): output i's input expressions),
     summed left to right in parentheses when there are several."""
     terms = [call_source(function, name, inputs(i), numbers) for i in range(definition.outputs)]
     return terms[0] if len(terms) == 1 else "(" + " + ".join(terms) + ")"
 
 
-def reference_closure(definition: Definition, function: Callable[..., float], arguments: str,
-                      inputs: Callable[[int], Mapping[str, str]], namespace: dict) -> Callable[..., float]:
+def reference_closure(
+    definition: Definition,
+    function: Callable[..., float],
+    arguments: str,
+    inputs: Callable[[int], Mapping[str, str]],
+    namespace: dict,
+) -> Callable[..., float]:
     """The reference path's closure `lambda arguments: ...` of a formula function, its numbers bound, the call
     written by summed_source (as the fast path's) from the input expressions inputs(i) over the names in namespace
     (the closures the inputs call: a table, ...)."""
@@ -153,8 +174,13 @@ def reference_closure(definition: Definition, function: Callable[..., float], ar
     return eval(f"lambda {arguments}: {call}", namespace)
 
 
-def reference_function(definition: Definition, function: Callable[..., float], table: Callable[..., float] | None,
-                       anchored: bool, held: Callable[[float], float] | None = None) -> Callable[..., float]:
+def reference_function(
+    definition: Definition,
+    function: Callable[..., float],
+    table: Callable[..., float] | None,
+    anchored: bool,
+    held: Callable[[float], float] | None = None,
+) -> Callable[..., float]:
     """The reference path's closure of a drive's or load's formula function: `(t, phi, omega, q, dq) -> value`, or
     with anchored `(anchor, t, phi, omega, q, dq)`, the table read on the piece that holds the anchor [rad] (a periodic
     table: the segment of phi = anchor; a clamped one in q: the piece of x = held(anchor) [m]). With several outputs q
@@ -165,8 +191,13 @@ def reference_function(definition: Definition, function: Callable[..., float], t
     several = definition.outputs > 1
 
     def inputs(i: int) -> dict[str, str]:
-        given = {"t": "t", "phi": "phi", "omega": "omega", "q": f"q[{i}]" if several else "q",
-                 "dq": f"dq[{i}]" if several else "dq"}
+        given = {
+            "t": "t",
+            "phi": "phi",
+            "omega": "omega",
+            "q": f"q[{i}]" if several else "q",
+            "dq": f"dq[{i}]" if several else "dq",
+        }
         if spec is not None and spec.kind == CLAMPED:
             given["table"] = f"table({given['q']}, held(anchor))" if anchored else f"table({given['q']})"
         elif spec is not None:

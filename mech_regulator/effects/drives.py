@@ -39,23 +39,38 @@ def engine_gas(table, dq, area):
 
 @define(schema.ConstantDrive)
 def _constant(drive: schema.ConstantDrive, mechanism=None) -> Definition:
-    return Definition("drive", "drive", f"constant: M_d = {drive.torque:g} N m", constant_drive,
-                      {"torque": drive.torque})
+    return Definition(
+        "drive", "drive", f"constant: M_d = {drive.torque:g} N m", constant_drive, {"torque": drive.torque}
+    )
 
 
 @define(schema.LinearMotor)
 def _linear_motor(drive: schema.LinearMotor, mechanism=None) -> Definition:
-    return Definition("drive", "drive", f"linear motor: M_d = {drive.stall_torque:g} (1 - omega / "
-                      f"{drive.no_load_speed:g}) N m", linear_motor,
-                      {"stall": drive.stall_torque, "no_load": drive.no_load_speed}, frozenset({"omega"}))
+    return Definition(
+        "drive",
+        "drive",
+        f"linear motor: M_d = {drive.stall_torque:g} (1 - omega / {drive.no_load_speed:g}) N m",
+        linear_motor,
+        {"stall": drive.stall_torque, "no_load": drive.no_load_speed},
+        frozenset({"omega"}),
+    )
 
 
 @define(schema.TableDrive)
 def _table(drive: schema.TableDrive, mechanism=None) -> Definition:
-    return Definition("drive", "drive", f"table M_d(phi), {len(drive.torque)} points over {drive.period_deg:g} deg",
-                      table_drive, depends_on=frozenset({"phi"}),
-                      table=Table(PERIODIC, tuple(math.radians(a) for a in drive.angle_deg), tuple(drive.torque),
-                                  math.radians(drive.period_deg)))
+    return Definition(
+        "drive",
+        "drive",
+        f"table M_d(phi), {len(drive.torque)} points over {drive.period_deg:g} deg",
+        table_drive,
+        depends_on=frozenset({"phi"}),
+        table=Table(
+            PERIODIC,
+            tuple(math.radians(a) for a in drive.angle_deg),
+            tuple(drive.torque),
+            math.radians(drive.period_deg),
+        ),
+    )
 
 
 @define(schema.Engine)
@@ -63,21 +78,41 @@ def _engine(drive: schema.Engine, mechanism=None) -> Definition:
     """An engine's cylinders on the crank: `M_d = -A sum_i p(phi + phase - d_i) x_i'` with cylinder i's firing delay
     d_i (mechanisms.engine.firing_delays, 0 for a single cylinder) and its piston's x_i' = dx_i/dphi (the
     mechanism's output i)."""
-    area = math.pi * drive.bore ** 2 / 4.0
+    area = math.pi * drive.bore**2 / 4.0
     cylinders = mechanism.cylinders if isinstance(mechanism, schema.CrankSlider) else None
-    pressure = Table(PERIODIC, tuple(math.radians(a) for a in drive.angle_deg), tuple(drive.pressure),
-                     math.radians(drive.cycle_deg))
+    pressure = Table(
+        PERIODIC, tuple(math.radians(a) for a in drive.angle_deg), tuple(drive.pressure), math.radians(drive.cycle_deg)
+    )
     cycle = f"{drive.cycle_deg:g} deg cycle"
     if cylinders is None:
-        return Definition("drive", "drive", f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, {cycle}",
-                          engine_gas, {"area": area}, frozenset({"phi"}),
-                          replace(pressure, shifts=(math.radians(drive.phase_deg),)), output_force=engine_gas_force,
-                          on_output=True)
-    delays = firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], drive.cycle_deg,
-                           drive.firing_order, drive.firing_deg)
+        return Definition(
+            "drive",
+            "drive",
+            f"engine: M_d = -p(phi) A dx/dphi, A = {area:.6g} m^2, {cycle}",
+            engine_gas,
+            {"area": area},
+            frozenset({"phi"}),
+            replace(pressure, shifts=(math.radians(drive.phase_deg),)),
+            output_force=engine_gas_force,
+            on_output=True,
+        )
+    delays = firing_delays(
+        [c.throw_deg for c in cylinders],
+        [c.bank_deg for c in cylinders],
+        drive.cycle_deg,
+        drive.firing_order,
+        drive.firing_deg,
+    )
     order = "-".join(str(i + 1) for i in sorted(range(len(delays)), key=delays.__getitem__))
-    return Definition("drive", "drive", f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, "
-                      f"{len(cylinders)} cylinders, A = {area:.6g} m^2, {cycle}, firing {order} at "
-                      f"{', '.join(f'{d:g}' for d in sorted(delays))} deg", engine_gas, {"area": area},
-                      frozenset({"phi"}), replace(pressure, shifts=tuple(math.radians(drive.phase_deg - delay)
-                                                                         for delay in delays)), on_output=True)
+    return Definition(
+        "drive",
+        "drive",
+        f"engine: M_d = -A sum_i p(phi + {drive.phase_deg:g} deg - d_i) dx_i/dphi, "
+        f"{len(cylinders)} cylinders, A = {area:.6g} m^2, {cycle}, firing {order} at "
+        f"{', '.join(f'{d:g}' for d in sorted(delays))} deg",
+        engine_gas,
+        {"area": area},
+        frozenset({"phi"}),
+        replace(pressure, shifts=tuple(math.radians(drive.phase_deg - delay) for delay in delays)),
+        on_output=True,
+    )

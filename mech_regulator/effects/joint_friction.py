@@ -48,11 +48,11 @@ from mech_regulator.mechanisms.kinetostatics import Kinetostatics
 from mech_regulator.scene import schema
 
 FIT_FACTOR = {"clearance": 1.0, "new": math.pi / 2.0, "run_in": 4.0 / math.pi}  # lambda_p [-]
-NEWTON_TOLERANCE = 1e-14   # relative size of the last Newton step on epsilon [-]
-NEWTON_ITERATIONS = 50     # more means the equation in epsilon has no root (self-locking)
-LOCKING_SAMPLES = 720      # crank angles per turn at which build_model checks for self-locking
-CORNER_SAMPLES = 720       # crank angles per turn at which a joint's relative rate is checked for a sign change
-SAME_CORNER = 1e-9         # corner angles of several joints closer than this [rad] are one corner
+NEWTON_TOLERANCE = 1e-14  # relative size of the last Newton step on epsilon [-]
+NEWTON_ITERATIONS = 50  # more means the equation in epsilon has no root (self-locking)
+LOCKING_SAMPLES = 720  # crank angles per turn at which build_model checks for self-locking
+CORNER_SAMPLES = 720  # crank angles per turn at which a joint's relative rate is checked for a sign change
+SAME_CORNER = 1e-9  # corner angles of several joints closer than this [rad] are one corner
 
 
 def reduced_friction_coefficient(f: float) -> float:
@@ -70,12 +70,25 @@ def thrust_collar_moment(f: float, axial_load: float, inner: float, outer: float
     """Friction moment of an annular thrust collar [N m]: new (uniform pressure)
     `2/3 f Q (r2^3 - r1^3)/(r2^2 - r1^2)`, run-in (uniform wear) `f Q (r1 + r2)/2`; Q [N], radii [m]."""
     if state == "new":
-        return 2.0 / 3.0 * f * axial_load * (outer ** 3 - inner ** 3) / (outer ** 2 - inner ** 2)
+        return 2.0 / 3.0 * f * axial_load * (outer**3 - inner**3) / (outer**2 - inner**2)
     return f * axial_load * (inner + outer) / 2.0
 
 
-def friction_acceleration(omega, moment, inertia, collar, arms, ratios, constant, per_epsilon, with_joints, tolerance,
-                          iterations, ratio_signs, normal_signs):
+def friction_acceleration(
+    omega,
+    moment,
+    inertia,
+    collar,
+    arms,
+    ratios,
+    constant,
+    per_epsilon,
+    with_joints,
+    tolerance,
+    iterations,
+    ratio_signs,
+    normal_signs,
+):
     """epsilon [rad/s^2] solving J epsilon = M - sign(omega) F(epsilon), F = M_collar + sum_j rho_j |k_j| |R0_j +
     R1_j epsilon| (module docstring), by Newton's method from the friction at rest; at rest (omega = 0) 0 while
     |M| <= F(0), else breaking away in the direction of M; NaN without convergence. Both paths run this one function
@@ -152,8 +165,16 @@ class JointFrictionModel:
         read rho_j s_j k_j for rho_j |k_j|."""
         return self.corner_signs[bisect.bisect_right(self.corner_angles, phi % (2.0 * math.pi)) - 1]
 
-    def acceleration(self, phi: float, omega: float, force: float, inertia: float, moment: float,
-                     ratio_signs: tuple[float, ...] | None = None, normal_signs: tuple[float, ...] = ()) -> float:
+    def acceleration(
+        self,
+        phi: float,
+        omega: float,
+        force: float,
+        inertia: float,
+        moment: float,
+        ratio_signs: tuple[float, ...] | None = None,
+        normal_signs: tuple[float, ...] = (),
+    ) -> float:
         """epsilon [rad/s^2] solving `J epsilon = M - sign(omega) F(epsilon)` (module docstring) at crank angle
         phi [rad], speed omega [rad/s], output-link force Q [N or N m], reduced inertia J [kg m^2] and every
         other moment M [N m]; at rest, 0 while |M| <= F(0). NaN if Newton's method does not converge.
@@ -161,16 +182,28 @@ class JointFrictionModel:
         |k_j|, one per joint in names' order; a guide's |R_j| read as s_N N = s_N Im R_j, one per guide in guides'
         order); None and (): F itself. Solved by friction_acceleration, the function the fast path compiles."""
         if self.loads is None:
-            return friction_acceleration(omega, moment, inertia, self.collar, (), (), (), (), False, NEWTON_TOLERANCE,
-                                         NEWTON_ITERATIONS, (), ())
+            return friction_acceleration(
+                omega, moment, inertia, self.collar, (), (), (), (), False, NEWTON_TOLERANCE, NEWTON_ITERATIONS, (), ()
+            )
         normals = [0.0] * len(self.names)
         for k, position in enumerate(self.guides if normal_signs else ()):
             normals[position] = normal_signs[k]
         loads = self.loads(phi, omega, force)
-        return friction_acceleration(omega, moment, inertia, self.collar, self.arms,
-                                     [loads.ratios[i] for i in self.indices], [loads.constant[i] for i in self.indices],
-                                     [loads.per_epsilon[i] for i in self.indices], True, NEWTON_TOLERANCE,
-                                     NEWTON_ITERATIONS, ratio_signs or (0.0,) * len(self.names), normals)
+        return friction_acceleration(
+            omega,
+            moment,
+            inertia,
+            self.collar,
+            self.arms,
+            [loads.ratios[i] for i in self.indices],
+            [loads.constant[i] for i in self.indices],
+            [loads.per_epsilon[i] for i in self.indices],
+            True,
+            NEWTON_TOLERANCE,
+            NEWTON_ITERATIONS,
+            ratio_signs or (0.0,) * len(self.names),
+            normals,
+        )
 
     def guide_normal(self, phi: float, omega: float, epsilon: float, force: float, guide: int = 0) -> float:
         """The normal force N [N] of guide number `guide` (in guides' order; signed, the guard of its corner) at crank
@@ -181,8 +214,9 @@ class JointFrictionModel:
         index = self.indices[self.guides[guide]]
         return (loads.constant[index] + loads.per_epsilon[index] * epsilon).imag
 
-    def joint_values(self, phi: float, omega: float, epsilon: float, force: float
-                     ) -> tuple[list[float], list[float], float]:
+    def joint_values(
+        self, phi: float, omega: float, epsilon: float, force: float
+    ) -> tuple[list[float], list[float], float]:
         """At a state with crank acceleration epsilon [rad/s^2]: the friction in each joint of `names` (moment
         rho |R| [N m] of a journal, force f |N| [N] of the guide), the reaction magnitudes |R| [N], and the
         friction F reduced to the crank [N m] (module docstring; the sign is left to the caller)."""
@@ -200,8 +234,10 @@ class JointFrictionModel:
         if self.loads is None:
             return 0.0
         loads = self.loads(phi, 0.0, 0.0)
-        return sum(arm * abs(loads.ratios[i]) * abs(loads.per_epsilon[i])
-                   for i, arm in zip(self.indices, self.arms)) / inertia
+        return (
+            sum(arm * abs(loads.ratios[i]) * abs(loads.per_epsilon[i]) for i, arm in zip(self.indices, self.arms))
+            / inertia
+        )
 
 
 def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
@@ -210,8 +246,11 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
     assert spec is not None, "build_joint_friction reads a machine with joint_friction"
     f = spec.coefficient
     collar = spec.thrust_collar
-    collar_moment = 0.0 if collar is None else thrust_collar_moment(f, collar.axial_load, collar.inner_radius,
-                                                                   collar.outer_radius, collar.state)
+    collar_moment = (
+        0.0
+        if collar is None
+        else thrust_collar_moment(f, collar.axial_load, collar.inner_radius, collar.outer_radius, collar.state)
+    )
     parts = [f"thrust collar {collar_moment:.4g} N m ({collar.state})"] if collar is not None else []
     mechanism = machine.mechanism
     if mechanism is None or mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
@@ -246,8 +285,17 @@ def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
     corners = _corner_angles(loads, indices)
     middles = [0.5 * (a + b) for a, b in zip(corners, corners[1:] + (corners[0] + 2.0 * math.pi,))] if corners else []
     signs = tuple(tuple(1.0 if loads(phi, 0.0, 0.0).ratios[i] >= 0.0 else -1.0 for i in indices) for phi in middles)
-    return JointFrictionModel(tuple(names), tuple(indices), tuple(arms), collar_moment, loads,
-                              f"f = {f:g}: " + ", ".join(parts), tuple(guides), corners, signs)
+    return JointFrictionModel(
+        tuple(names),
+        tuple(indices),
+        tuple(arms),
+        collar_moment,
+        loads,
+        f"f = {f:g}: " + ", ".join(parts),
+        tuple(guides),
+        corners,
+        signs,
+    )
 
 
 def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...]:
@@ -259,8 +307,10 @@ def _corner_angles(loads: Kinetostatics, indices: list[int]) -> tuple[float, ...
     angles = np.linspace(0.0, 2.0 * math.pi, CORNER_SAMPLES + 1)
     corners = set()
     for index in indices:
+
         def rate(phi: float, index: int = index) -> float:
             return loads(phi, 0.0, 0.0).ratios[index]
+
         ahead = [rate(phi) >= 0.0 for phi in angles]
         for k in np.flatnonzero(np.array(ahead[:-1]) != np.array(ahead[1:])):
             root = optimize.brentq(rate, angles[k], angles[k + 1], xtol=1e-15, rtol=4.0 * np.finfo(float).eps)

@@ -78,28 +78,47 @@ def slider_table_force(table):
 
 @define(schema.ConstantLoad)
 def _constant(load: schema.ConstantLoad, mechanism=None) -> Definition:
-    return Definition("constant", "load", f"constant: M_c = -{load.torque:g} N m", constant_load,
-                      {"torque": load.torque}, dry=True)
+    return Definition(
+        "constant", "load", f"constant: M_c = -{load.torque:g} N m", constant_load, {"torque": load.torque}, dry=True
+    )
 
 
 @define(schema.ViscousLoad)
 def _viscous(load: schema.ViscousLoad, mechanism=None) -> Definition:
-    return Definition("viscous", "load", f"viscous: M_c = -{load.coefficient:g} omega", viscous_load,
-                      {"c": load.coefficient}, frozenset({"omega"}))
+    return Definition(
+        "viscous",
+        "load",
+        f"viscous: M_c = -{load.coefficient:g} omega",
+        viscous_load,
+        {"c": load.coefficient},
+        frozenset({"omega"}),
+    )
 
 
 @define(schema.FanLoad)
 def _fan(load: schema.FanLoad, mechanism=None) -> Definition:
-    return Definition("fan", "load", f"fan: M_c = -{load.coefficient:g} omega |omega|", fan_load,
-                      {"k": load.coefficient}, frozenset({"omega"}))
+    return Definition(
+        "fan",
+        "load",
+        f"fan: M_c = -{load.coefficient:g} omega |omega|",
+        fan_load,
+        {"k": load.coefficient},
+        frozenset({"omega"}),
+    )
 
 
 @define(schema.TableLoad)
 def _table(load: schema.TableLoad, mechanism=None) -> Definition:
-    return Definition("table", "load", f"table: M_c = -M(phi), {len(load.torque)} points over {load.period_deg:g} deg",
-                      table_load, depends_on=frozenset({"phi"}),
-                      table=Table(PERIODIC, tuple(math.radians(a) for a in load.angle_deg), tuple(load.torque),
-                                  math.radians(load.period_deg)))
+    return Definition(
+        "table",
+        "load",
+        f"table: M_c = -M(phi), {len(load.torque)} points over {load.period_deg:g} deg",
+        table_load,
+        depends_on=frozenset({"phi"}),
+        table=Table(
+            PERIODIC, tuple(math.radians(a) for a in load.angle_deg), tuple(load.torque), math.radians(load.period_deg)
+        ),
+    )
 
 
 @define(schema.CuttingLoad)
@@ -107,9 +126,15 @@ def _cutting(load: schema.CuttingLoad, mechanism=None) -> Definition:
     """The intervals' edges from the first one's start, read at phi - start (mod the period)."""
     start = math.radians(load.intervals_deg[0][0])
     edges = tuple(math.radians(edge) - start for interval in load.intervals_deg for edge in interval)
-    return Definition("cutting", "load", f"cutting: M_c = -{load.torque:g} N m over {load.intervals_deg} deg",
-                      cutting_load, {"torque": load.torque}, frozenset({"phi"}),
-                      Table(INTERVALS, edges, period=math.radians(load.period_deg), shifts=(-start,)))
+    return Definition(
+        "cutting",
+        "load",
+        f"cutting: M_c = -{load.torque:g} N m over {load.intervals_deg} deg",
+        cutting_load,
+        {"torque": load.torque},
+        frozenset({"phi"}),
+        Table(INTERVALS, edges, period=math.radians(load.period_deg), shifts=(-start,)),
+    )
 
 
 def _on(load) -> str:
@@ -120,28 +145,55 @@ def _on(load) -> str:
 @define(schema.SliderConstant, schema.RockerConstant)
 def _output_constant(load: schema.SliderConstant | schema.RockerConstant, mechanism=None) -> Definition:
     value = load.force if isinstance(load, schema.SliderConstant) else load.torque
-    return Definition(load.type, "load", f"constant on the {_on(load)}: M = {value:g} dq/dphi", output_constant,
-                      {"value": value}, frozenset({"phi"}), output_force=output_constant_force, on_output=True)
+    return Definition(
+        load.type,
+        "load",
+        f"constant on the {_on(load)}: M = {value:g} dq/dphi",
+        output_constant,
+        {"value": value},
+        frozenset({"phi"}),
+        output_force=output_constant_force,
+        on_output=True,
+    )
 
 
 @define(schema.OutputViscous)
 def _output_viscous(load: schema.OutputViscous, mechanism=None) -> Definition:
-    return Definition(load.type, "load", f"viscous on the {_on(load)}: M = -{load.coefficient:g} (dq/dphi)^2 omega",
-                      output_viscous, {"c": load.coefficient}, frozenset({"phi", "omega"}),
-                      output_force=output_viscous_force, on_output=True)
+    return Definition(
+        load.type,
+        "load",
+        f"viscous on the {_on(load)}: M = -{load.coefficient:g} (dq/dphi)^2 omega",
+        output_viscous,
+        {"c": load.coefficient},
+        frozenset({"phi", "omega"}),
+        output_force=output_viscous_force,
+        on_output=True,
+    )
 
 
 @define(schema.OutputSpring)
 def _output_spring(load: schema.OutputSpring, mechanism=None) -> Definition:
-    return Definition(load.type, "load", f"spring on the {_on(load)}: M = -{load.stiffness:g} (q - "
-                      f"{load.free_position:g}) dq/dphi", output_spring,
-                      {"k": load.stiffness, "free": load.free_position}, frozenset({"phi"}),
-                      output_force=output_spring_force, on_output=True)
+    return Definition(
+        load.type,
+        "load",
+        f"spring on the {_on(load)}: M = -{load.stiffness:g} (q - {load.free_position:g}) dq/dphi",
+        output_spring,
+        {"k": load.stiffness, "free": load.free_position},
+        frozenset({"phi"}),
+        output_force=output_spring_force,
+        on_output=True,
+    )
 
 
 @define(schema.SliderTable)
 def _slider_table(load: schema.SliderTable, mechanism=None) -> Definition:
-    return Definition("slider_table", "load", f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi",
-                      slider_table, depends_on=frozenset({"phi"}),
-                      table=Table(CLAMPED, tuple(load.position), tuple(load.force)),
-                      output_force=slider_table_force, on_output=True)
+    return Definition(
+        "slider_table",
+        "load",
+        f"slider force table F(x), {len(load.force)} points: M = F(x) dx/dphi",
+        slider_table,
+        depends_on=frozenset({"phi"}),
+        table=Table(CLAMPED, tuple(load.position), tuple(load.force)),
+        output_force=slider_table_force,
+        on_output=True,
+    )

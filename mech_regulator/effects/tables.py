@@ -41,8 +41,15 @@ def periodic_kinks(xs: Sequence[float], ys: Sequence[float], period: float) -> t
     knots = list(xs) + [xs[0] + period]
     values = list(ys) + [ys[0]]
     slopes = [(values[i + 1] - values[i]) / (knots[i + 1] - knots[i]) for i in range(n)]
-    return tuple(sorted({xs[i] % period for i in range(n)
-                         if abs(slopes[i] - slopes[i - 1]) > 1e-12 * max(abs(slopes[i]), abs(slopes[i - 1]))}))
+    return tuple(
+        sorted(
+            {
+                xs[i] % period
+                for i in range(n)
+                if abs(slopes[i] - slopes[i - 1]) > 1e-12 * max(abs(slopes[i]), abs(slopes[i - 1]))
+            }
+        )
+    )
 
 
 def clamped_linear(xs: Sequence[float], ys: Sequence[float]) -> Callable[..., float]:
@@ -85,8 +92,12 @@ def slope_breaks(xs: Sequence[float], ys: Sequence[float], ends: bool) -> tuple[
     of the slopes): the interior points, and with `ends` (a table held constant beyond its ends, clamped_linear) also
     the end points next to a sloped segment [units of x]."""
     slopes = [0.0] + [(ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]) for i in range(len(xs) - 1)] + [0.0]
-    return tuple(x for i, x in enumerate(xs) if (ends or 0 < i < len(xs) - 1)
-                 and abs(slopes[i + 1] - slopes[i]) > 1e-12 * max(abs(slopes[i + 1]), abs(slopes[i])))
+    return tuple(
+        x
+        for i, x in enumerate(xs)
+        if (ends or 0 < i < len(xs) - 1)
+        and abs(slopes[i + 1] - slopes[i]) > 1e-12 * max(abs(slopes[i + 1]), abs(slopes[i]))
+    )
 
 
 def interval_indicator(edges: Sequence[float], period: float) -> Callable[[float], float]:

@@ -135,8 +135,9 @@ class Governor:
             return -self.servo_gain * opening
         return servo_motor.servo_command(opening, self.servo_gain, self.servo_max_speed, self.dead_band)
 
-    def initial_state(self, omega: float, sleeve: float | None, servo: float | None,
-                      balance_throttle: Callable[[float], float]) -> np.ndarray:
+    def initial_state(
+        self, omega: float, sleeve: float | None, servo: float | None, balance_throttle: Callable[[float], float]
+    ) -> np.ndarray:
         """The governor's states at t = 0: the sleeve at rest at `sleeve` or, by default, at its equilibrium
         for the initial speed; the servo at `servo` or at the throttle that balances the load at that
         speed (clipped to its travel); no dashpot shift."""
@@ -232,6 +233,7 @@ class Governor:
                 y = y.copy()
                 y[ARM], y[ARM_RATE] = angle, 0.0
                 return (stop_mode, mode[1]), y
+
             return transition
 
         def start(new_mode: str) -> Callable:
@@ -239,6 +241,7 @@ class Governor:
                 y = y.copy()
                 y[ARM_RATE] = 0.0
                 return (new_mode, mode[1]), y
+
             return transition
 
         def come_to_rest(y: np.ndarray) -> tuple[Mode, np.ndarray]:
@@ -252,8 +255,10 @@ class Governor:
             "free": [hit_low, hit_high],
             "up": [Guard("sleeve stops rising", lambda y: y[ARM_RATE], come_to_rest), hit_high],
             "down": [Guard("sleeve stops falling", lambda y: -y[ARM_RATE], come_to_rest), hit_low],
-            "stuck": [Guard("sleeve breaks away upwards", lambda y: static - lift(y), start(sliding_up)),
-                      Guard("sleeve breaks away downwards", lambda y: static + lift(y), start(sliding_down))],
+            "stuck": [
+                Guard("sleeve breaks away upwards", lambda y: static - lift(y), start(sliding_up)),
+                Guard("sleeve breaks away downwards", lambda y: static + lift(y), start(sliding_down)),
+            ],
             "low": [Guard("sleeve leaves the low stop", lambda y: static - lift(y), start(sliding_up))],
             "high": [Guard("sleeve leaves the high stop", lambda y: static + lift(y), start(sliding_down))],
         }[mode[0]]
@@ -266,12 +271,15 @@ class Governor:
                 if position is not None:
                     y[SERVO] = position
                 return (mode[0], new_mode), y
+
             return transition
 
         s_low, s_high = self.travel
         servo_guards = {
-            "free": [Guard("servo reaches its low stop", lambda y: y[SERVO] - s_low, servo_to("low", s_low)),
-                     Guard("servo reaches its high stop", lambda y: s_high - y[SERVO], servo_to("high", s_high))],
+            "free": [
+                Guard("servo reaches its low stop", lambda y: y[SERVO] - s_low, servo_to("low", s_low)),
+                Guard("servo reaches its high stop", lambda y: s_high - y[SERVO], servo_to("high", s_high)),
+            ],
             "low": [Guard("servo leaves its low stop", lambda y: -self.servo_command(y), servo_to("free", None))],
             "high": [Guard("servo leaves its high stop", lambda y: self.servo_command(y), servo_to("free", None))],
         }[mode[1]]
@@ -283,9 +291,12 @@ class Governor:
         (servo [-], feedback_shift [m])."""
         sensor = self.sensor
         arm, arm_rate = y[ARM], y[ARM_RATE]
-        values = {"sleeve": np.vectorize(sensor.sleeve, otypes=[float])(arm),
-                  "sleeve_velocity": np.vectorize(sensor.sleeve_rate, otypes=[float])(arm, arm_rate),
-                  "arm_angle": arm, "arm_rate": arm_rate}
+        values = {
+            "sleeve": np.vectorize(sensor.sleeve, otypes=[float])(arm),
+            "sleeve_velocity": np.vectorize(sensor.sleeve_rate, otypes=[float])(arm, arm_rate),
+            "arm_angle": arm,
+            "arm_rate": arm_rate,
+        }
         for index, name in enumerate(self.state_names[2:], start=SERVO):
             values[name] = y[index]
         return values
@@ -293,20 +304,26 @@ class Governor:
     def describe(self) -> list[str]:
         """Lines for `describe`: the governor's parts and equations."""
         sensor = self.sensor
-        lines = [f"{self.kind} governor, {sensor.describe()}",
-                 f"  sleeve: stroke {sensor.stroke[0]:g} to {sensor.stroke[1]:g} m (inelastic stops), damping "
-                 f"{sensor.damping:g} N s/m, friction {sensor.kinetic_friction:g} N (static {sensor.static_friction:g} N)"]
+        lines = [
+            f"{self.kind} governor, {sensor.describe()}",
+            f"  sleeve: stroke {sensor.stroke[0]:g} to {sensor.stroke[1]:g} m (inelastic stops), damping "
+            f"{sensor.damping:g} N s/m, friction {sensor.kinetic_friction:g} N (static {sensor.static_friction:g} N)",
+        ]
         if self.kind == "direct":
             lines.append(f"  valve: {self.valve_formula}")
         else:
-            lines.append(f"  pilot neutral at z = {self.pilot_neutral:g} m (set speed {self.set_speed():.4g} rad/s); "
-                         f"servo s' = -{self.servo_gain:g} * opening, |s'| <= {self.servo_max_speed:g} 1/s, dead band "
-                         f"{self.dead_band:g} m, travel {self.travel[0]:g}..{self.travel[1]:g}")
+            lines.append(
+                f"  pilot neutral at z = {self.pilot_neutral:g} m (set speed {self.set_speed():.4g} rad/s); "
+                f"servo s' = -{self.servo_gain:g} * opening, |s'| <= {self.servo_max_speed:g} 1/s, dead band "
+                f"{self.dead_band:g} m, travel {self.travel[0]:g}..{self.travel[1]:g}"
+            )
             if self.feedback == "rigid":
                 lines.append(f"  rigid feedback: opening += {self.feedback_gain:g} (s - {self.feedback_reference:.4g})")
             elif self.feedback == "isodromic":
-                lines.append(f"  isodromic feedback: opening += zeta, {self.feedback_time_constant:g} zeta' + zeta = "
-                             f"{self.feedback_gain:g} * {self.feedback_time_constant:g} s'")
+                lines.append(
+                    f"  isodromic feedback: opening += zeta, {self.feedback_time_constant:g} zeta' + zeta = "
+                    f"{self.feedback_gain:g} * {self.feedback_time_constant:g} s'"
+                )
             else:
                 lines.append("  no feedback (expect hunting)")
         return lines
@@ -317,8 +334,12 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
     drive balances the initial load at crank speed omega; rigid feedback's default reference is its
     value at the set speed."""
     if isinstance(spec, schema.PIGovernor):
-        return ElectronicGovernor(set_point=spec.set_speed, gain=spec.gain, integral_time=spec.integral_time,
-                                  travel=(spec.travel[0], spec.travel[1]))
+        return ElectronicGovernor(
+            set_point=spec.set_speed,
+            gain=spec.gain,
+            integral_time=spec.integral_time,
+            travel=(spec.travel[0], spec.travel[1]),
+        )
     sensor = build_sensor(spec)
     if not isinstance(spec, schema.IndirectGovernor):
         valve, formula, breaks = build_valve(spec.valve)
@@ -328,10 +349,20 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
     if feedback.type == "rigid" and reference is None:
         reference = balance_throttle(sensor.equilibrium_speed(spec.pilot_neutral))
     return Governor(
-        kind="indirect", sensor=sensor, valve=None, valve_formula="", pilot_neutral=spec.pilot_neutral,
-        servo_gain=servo.gain, servo_max_speed=servo.max_speed or math.inf, dead_band=servo.dead_band,
-        travel=(servo.travel[0], servo.travel[1]), feedback=feedback.type, feedback_gain=feedback.gain,
-        feedback_time_constant=feedback.time_constant or math.inf, feedback_reference=reference or 0.0)
+        kind="indirect",
+        sensor=sensor,
+        valve=None,
+        valve_formula="",
+        pilot_neutral=spec.pilot_neutral,
+        servo_gain=servo.gain,
+        servo_max_speed=servo.max_speed or math.inf,
+        dead_band=servo.dead_band,
+        travel=(servo.travel[0], servo.travel[1]),
+        feedback=feedback.type,
+        feedback_gain=feedback.gain,
+        feedback_time_constant=feedback.time_constant or math.inf,
+        feedback_reference=reference or 0.0,
+    )
 
 
 class _SensorArguments(TypedDict):
@@ -352,11 +383,20 @@ class _SensorArguments(TypedDict):
 def build_sensor(spec: schema.DirectGovernor | schema.IndirectGovernor | schema.HartnellGovernor) -> CentrifugalSensor:
     """The centrifugal sensor of a scene's governor: Hartnell's for type 'hartnell', Porter's otherwise."""
     spring = spec.spring or schema.SleeveSpring(stiffness=0.0)
-    common = _SensorArguments(ball_mass=spec.ball_mass, sleeve_mass=spec.sleeve_mass, stiffness=spring.stiffness,
-                  free_position=spring.free_position, damping=spec.damping, kinetic_friction=spec.friction,
-                  static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
-                  ratio=spec.ratio, gravity=spec.gravity, stroke=(spec.stroke[0], spec.stroke[1]))
+    common = _SensorArguments(
+        ball_mass=spec.ball_mass,
+        sleeve_mass=spec.sleeve_mass,
+        stiffness=spring.stiffness,
+        free_position=spring.free_position,
+        damping=spec.damping,
+        kinetic_friction=spec.friction,
+        static_friction=spec.friction if spec.static_friction is None else spec.static_friction,
+        ratio=spec.ratio,
+        gravity=spec.gravity,
+        stroke=(spec.stroke[0], spec.stroke[1]),
+    )
     if isinstance(spec, schema.HartnellGovernor):
-        return HartnellSensor(ball_arm=spec.ball_arm, sleeve_arm=spec.sleeve_arm, pivot_radius=spec.pivot_radius,
-                              **common)
+        return HartnellSensor(
+            ball_arm=spec.ball_arm, sleeve_arm=spec.sleeve_arm, pivot_radius=spec.pivot_radius, **common
+        )
     return PorterSensor(arm_length=spec.arm_length, **common)

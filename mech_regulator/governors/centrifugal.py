@@ -72,8 +72,16 @@ class PorterSensor(CentrifugalSensor):
 
     def kernel_parameters(self) -> tuple[float, ...]:
         """(m, l, M, k, z_free, c, g, ratio)."""
-        return (self.ball_mass, self.arm_length, self.sleeve_mass, self.stiffness, self.free_position, self.damping,
-                self.gravity, self.ratio)
+        return (
+            self.ball_mass,
+            self.arm_length,
+            self.sleeve_mass,
+            self.stiffness,
+            self.free_position,
+            self.damping,
+            self.gravity,
+            self.ratio,
+        )
 
     def arm_angle(self, sleeve: float) -> float:
         """Arm angle a = arccos(1 - z / (2 l)) [rad] for a sleeve position z [m]."""
@@ -107,8 +115,10 @@ class PorterSensor(CentrifugalSensor):
 
     def describe(self) -> str:
         """The Porter sensor's numbers."""
-        return (f"Porter sensor: m = {self.ball_mass:g} kg, l = {self.arm_length:g} m, M = {self.sleeve_mass:g} kg, "
-                f"spindle ratio {self.ratio:g}")
+        return (
+            f"Porter sensor: m = {self.ball_mass:g} kg, l = {self.arm_length:g} m, M = {self.sleeve_mass:g} kg, "
+            f"spindle ratio {self.ratio:g}"
+        )
 
     def outline(self, arm_angle: float, spindle_angle: float) -> dict[str, np.ndarray]:
         """governors/drawing.py's porter_outline."""

@@ -17,23 +17,30 @@ import numpy as np
 
 from mech_regulator.mechanisms.drawing import rectangle
 
-STEEL_DENSITY = 7850.0          # density of the drawn balls, which are steel spheres of the ball mass [kg/m^3]
-SPINDLE_ABOVE_HINGE = 0.25      # spindle drawn above the top hinge, per arm length [-]
-SPINDLE_BELOW_SLEEVE = 0.25     # spindle drawn below the lowest sleeve position (z = 0), per arm length [-]
-SLEEVE_HALF_WIDTH = 0.12        # per arm length [-]
-SLEEVE_HALF_HEIGHT = 0.06       # per arm length [-]
-STOP_HALF_WIDTH = 0.2           # half length of the stop collars, per arm length [-]
-BOUNDS_SAMPLES = 50             # arm angles sampled over the stroke to find the swept outline [-]
+STEEL_DENSITY = 7850.0  # density of the drawn balls, which are steel spheres of the ball mass [kg/m^3]
+SPINDLE_ABOVE_HINGE = 0.25  # spindle drawn above the top hinge, per arm length [-]
+SPINDLE_BELOW_SLEEVE = 0.25  # spindle drawn below the lowest sleeve position (z = 0), per arm length [-]
+SLEEVE_HALF_WIDTH = 0.12  # per arm length [-]
+SLEEVE_HALF_HEIGHT = 0.06  # per arm length [-]
+STOP_HALF_WIDTH = 0.2  # half length of the stop collars, per arm length [-]
+BOUNDS_SAMPLES = 50  # arm angles sampled over the stroke to find the swept outline [-]
 
-COLLAR_RADIUS = 0.12            # radius of the collar that carries the spindle mark, per arm length [-]
-COLLAR_TILT = 0.35              # apparent height / width of the collar's ellipse (seen from above) [-]
+COLLAR_RADIUS = 0.12  # radius of the collar that carries the spindle mark, per arm length [-]
+COLLAR_TILT = 0.35  # apparent height / width of the collar's ellipse (seen from above) [-]
 
 MOVING_PARTS = ("upper_arms", "lower_links", "sleeve", "balls", "spindle_mark")
 
 
-def sensor_parts(scale: float, stop_heights: tuple[float, float], balls: np.ndarray, upper_arms: np.ndarray,
-                 lower_links: np.ndarray, sleeve_y: float, spindle_angle: float,
-                 bottom: float) -> dict[str, np.ndarray]:
+def sensor_parts(
+    scale: float,
+    stop_heights: tuple[float, float],
+    balls: np.ndarray,
+    upper_arms: np.ndarray,
+    lower_links: np.ndarray,
+    sleeve_y: float,
+    spindle_angle: float,
+    bottom: float,
+) -> dict[str, np.ndarray]:
     """The drawing's parts (MOVING_PARTS and the fixed spindle and stops) from a sensor's own geometry, metres, y up:
     scale [m] (the arm length the relative sizes above are per), the heights [m] of the sleeve's centre at its two
     stops, the two balls (2, 2), the upper arms and lower links (2, 2, 2), the sleeve's centre height [m], the spindle
@@ -52,9 +59,14 @@ def sensor_parts(scale: float, stop_heights: tuple[float, float], balls: np.ndar
         "lower_links": lower_links,
         "sleeve": rectangle((0.0, sleeve_y), SLEEVE_HALF_WIDTH * scale, half_height),
         "balls": balls,
-        "spindle_mark": np.array([[collar * math.cos(spindle_angle),
-                                   (0.5 * SPINDLE_ABOVE_HINGE * scale
-                                    + COLLAR_TILT * collar * math.sin(spindle_angle))]]),
+        "spindle_mark": np.array(
+            [
+                [
+                    collar * math.cos(spindle_angle),
+                    (0.5 * SPINDLE_ABOVE_HINGE * scale + COLLAR_TILT * collar * math.sin(spindle_angle)),
+                ]
+            ]
+        ),
     }
 
 
@@ -64,8 +76,9 @@ def porter_sleeve_height(arm_length: float, arm_angle: float) -> float:
     return -2.0 * arm_length * math.cos(arm_angle)
 
 
-def porter_outline(arm_length: float, stroke: tuple[float, float], arm_angle: float,
-                   spindle_angle: float) -> dict[str, np.ndarray]:
+def porter_outline(
+    arm_length: float, stroke: tuple[float, float], arm_angle: float, spindle_angle: float
+) -> dict[str, np.ndarray]:
     """The Porter governor's parts at arm angle a [rad] (from the spindle) and spindle angle psi [rad], arm length
     l [m] and stroke (z_low, z_high) [m], metres, y up (sensor_parts).
 
@@ -80,6 +93,13 @@ def porter_outline(arm_length: float, stroke: tuple[float, float], arm_angle: fl
     balls = np.array([[reach, ball_y], [-reach, ball_y]])
     low, high = (porter_sleeve_height(l, math.acos(1.0 - z / (2.0 * l))) for z in stroke)
     stops = (low, high)
-    return sensor_parts(l, stops, balls, np.array([[hinge, balls[0]], [hinge, balls[1]]]),
-                        np.array([[balls[0], (0.0, sleeve_y)], [balls[1], (0.0, sleeve_y)]]), sleeve_y, spindle_angle,
-                        -(2.0 + SPINDLE_BELOW_SLEEVE) * l)
+    return sensor_parts(
+        l,
+        stops,
+        balls,
+        np.array([[hinge, balls[0]], [hinge, balls[1]]]),
+        np.array([[balls[0], (0.0, sleeve_y)], [balls[1], (0.0, sleeve_y)]]),
+        sleeve_y,
+        spindle_angle,
+        -(2.0 + SPINDLE_BELOW_SLEEVE) * l,
+    )

@@ -81,8 +81,18 @@ class HartnellSensor(CentrifugalSensor):
 
     def kernel_parameters(self) -> tuple[float, ...]:
         """(m, a, b, r0, M, k, z_free, c, g, ratio)."""
-        return (self.ball_mass, self.ball_arm, self.sleeve_arm, self.pivot_radius, self.sleeve_mass, self.stiffness,
-                self.free_position, self.damping, self.gravity, self.ratio)
+        return (
+            self.ball_mass,
+            self.ball_arm,
+            self.sleeve_arm,
+            self.pivot_radius,
+            self.sleeve_mass,
+            self.stiffness,
+            self.free_position,
+            self.damping,
+            self.gravity,
+            self.ratio,
+        )
 
     def arm_angle(self, sleeve: float) -> float:
         """Bell crank angle theta = arcsin(z / b) [rad] for a sleeve position z [m]."""
@@ -101,17 +111,20 @@ class HartnellSensor(CentrifugalSensor):
         m, a, b = self.ball_mass, self.ball_arm, self.sleeve_arm
         theta = self.arm_angle(sleeve)
         radius = self.pivot_radius + a * sleeve / b
-        pull = (b * (self.sleeve_mass * self.gravity + self.stiffness * (sleeve - self.free_position) + friction)
-                - 2.0 * m * self.gravity * a * math.tan(theta))
+        pull = b * (
+            self.sleeve_mass * self.gravity + self.stiffness * (sleeve - self.free_position) + friction
+        ) - 2.0 * m * self.gravity * a * math.tan(theta)
         if pull <= 0.0 or radius <= 0.0:
             return math.nan
         return math.sqrt(pull / (2.0 * m * a * radius)) / self.ratio
 
     def describe(self) -> str:
         """The Hartnell sensor's numbers."""
-        return (f"Hartnell sensor: m = {self.ball_mass:g} kg, ball arm a = {self.ball_arm:g} m, sleeve arm b = "
-                f"{self.sleeve_arm:g} m, pivots at r0 = {self.pivot_radius:g} m, M = {self.sleeve_mass:g} kg, spring "
-                f"k = {self.stiffness:g} N/m free at {self.free_position:g} m, spindle ratio {self.ratio:g}")
+        return (
+            f"Hartnell sensor: m = {self.ball_mass:g} kg, ball arm a = {self.ball_arm:g} m, sleeve arm b = "
+            f"{self.sleeve_arm:g} m, pivots at r0 = {self.pivot_radius:g} m, M = {self.sleeve_mass:g} kg, spring "
+            f"k = {self.stiffness:g} N/m free at {self.free_position:g} m, spindle ratio {self.ratio:g}"
+        )
 
     def outline(self, arm_angle: float, spindle_angle: float) -> dict[str, np.ndarray]:
         """The bell cranks at theta [rad]: pivots at (+-r0, -a), balls at (+-(r0 + a sin theta), -a + a cos theta) on
@@ -124,5 +137,13 @@ class HartnellSensor(CentrifugalSensor):
         sleeve_y = -a + b * sin_t
         tips = np.array([[r0 - b * cos_t, sleeve_y], [-(r0 - b * cos_t), sleeve_y]])
         stops = (-a + self.stroke[0], -a + self.stroke[1])
-        return sensor_parts(a, stops, balls, np.stack([pivots, balls], axis=1), np.stack([pivots, tips], axis=1),
-                            sleeve_y, spindle_angle, -a - b - SPINDLE_BELOW_SLEEVE * a)
+        return sensor_parts(
+            a,
+            stops,
+            balls,
+            np.stack([pivots, balls], axis=1),
+            np.stack([pivots, tips], axis=1),
+            sleeve_y,
+            spindle_angle,
+            -a - b - SPINDLE_BELOW_SLEEVE * a,
+        )

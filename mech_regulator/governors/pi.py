@@ -36,8 +36,9 @@ def pi_integral_rate(integral, omega, set_speed, gain, integral_time, low, high)
     return (pi_throttle(integral, omega, set_speed, gain, integral_time, low, high) - integral) / integral_time
 
 
-def pi_loop_coefficients(gain: float, integral_time: float, set_speed: float, drive: float, self_regulation: float,
-                         inertia: float) -> tuple[float, float]:
+def pi_loop_coefficients(
+    gain: float, integral_time: float, set_speed: float, drive: float, self_regulation: float, inertia: float
+) -> tuple[float, float]:
     """(a1, a0) of the closed loop's characteristic polynomial p^2 + a1 p + a0 at the set speed (docs/theory.md
     §8.10): the cycle-averaged machine J_m omega' = throttle M_d + M_c with drive = M_d [N m] and self_regulation D =
     d(throttle M_d + M_c)/d omega at a fixed throttle [N m s], inertia J_m [kg m^2]; a1 = (K_p M_d / omega_s - D) / J_m,
@@ -75,8 +76,9 @@ class ElectronicGovernor:
         """The crank speed [rad/s] the governor holds: its set point, at every load within the valve's travel."""
         return self.set_point
 
-    def initial_state(self, omega: float, sleeve: float | None, servo: float | None,
-                      balance_throttle: Callable[[float], float]) -> np.ndarray:
+    def initial_state(
+        self, omega: float, sleeve: float | None, servo: float | None, balance_throttle: Callable[[float], float]
+    ) -> np.ndarray:
         """The integral part at t = 0: the throttle that balances the load at the initial speed omega [rad/s], less
         the proportional part there (sleeve and servo: none, the scene's schema refuses them)."""
         balance = min(max(balance_throttle(omega), self.travel[0]), self.travel[1])
@@ -101,6 +103,10 @@ class ElectronicGovernor:
 
     def describe(self) -> list[str]:
         """Lines for `describe`: the PI law."""
-        return [(f"electronic PI governor: throttle = x + {self.gain:g} (omega_s - omega) / omega_s within "
-                 f"{self.travel[0]:g}..{self.travel[1]:g}, omega_s = {self.set_point:g} rad/s, x' = {self.gain:g} e / "
-                 f"{self.integral_time:g} s (tracking the travel's stops)")]
+        return [
+            (
+                f"electronic PI governor: throttle = x + {self.gain:g} (omega_s - omega) / omega_s within "
+                f"{self.travel[0]:g}..{self.travel[1]:g}, omega_s = {self.set_point:g} rad/s, x' = {self.gain:g} e / "
+                f"{self.integral_time:g} s (tracking the travel's stops)"
+            )
+        ]

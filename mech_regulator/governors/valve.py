@@ -38,16 +38,24 @@ def table_valve(table):
 
 @define(schema.LinearValve)
 def _linear(valve: schema.LinearValve, mechanism=None) -> Definition:
-    return Definition("valve", "valve", f"throttle = ({valve.closed_at:g} - z) / ({valve.closed_at:g} - "
-                      f"{valve.open_at:g}), clipped to 0..1", linear_valve,
-                      {"open_at": valve.open_at, "closed_at": valve.closed_at})
+    return Definition(
+        "valve",
+        "valve",
+        f"throttle = ({valve.closed_at:g} - z) / ({valve.closed_at:g} - {valve.open_at:g}), clipped to 0..1",
+        linear_valve,
+        {"open_at": valve.open_at, "closed_at": valve.closed_at},
+    )
 
 
 @define(schema.TableValve)
 def _table(valve: schema.TableValve, mechanism=None) -> Definition:
-    return Definition("valve", "valve", f"throttle table over z, {len(valve.sleeve)} points from {valve.sleeve[0]:g} "
-                      f"to {valve.sleeve[-1]:g} m", table_valve,
-                      table=Table(CLAMPED, tuple(valve.sleeve), tuple(valve.throttle)))
+    return Definition(
+        "valve",
+        "valve",
+        f"throttle table over z, {len(valve.sleeve)} points from {valve.sleeve[0]:g} to {valve.sleeve[-1]:g} m",
+        table_valve,
+        table=Table(CLAMPED, tuple(valve.sleeve), tuple(valve.throttle)),
+    )
 
 
 check_covered(schema.Valve)
@@ -61,6 +69,11 @@ def build_valve(valve: schema.Valve) -> tuple[ValveCharacteristic, str, tuple[fl
     definition = definition_of(valve)
     spec = definition.table
     table = clamped_linear(spec.xs, spec.ys) if spec is not None else None
-    throttle = reference_closure(definition, definition.moment, "z, anchor=None",
-                                 lambda i: {"z": "z", "table": "table(z, anchor)"}, {"table": table})
+    throttle = reference_closure(
+        definition,
+        definition.moment,
+        "z, anchor=None",
+        lambda i: {"z": "z", "table": "table(z, anchor)"},
+        {"table": table},
+    )
     return throttle, definition.formula, slope_breaks(spec.xs, spec.ys, ends=True) if spec is not None else ()

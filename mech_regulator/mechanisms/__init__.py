@@ -47,8 +47,11 @@ def linkage_of(mechanism: schema.Mechanism) -> tuple[linkage.Linkage, linkage.St
         core, structure = mechanism_geometry(mechanism)
         return core, structure, ()
     core = presets.preset_linkage(mechanism)
-    guides = (tuple(presets.guide_joints(mechanism))
-              if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None else ())
+    guides = (
+        tuple(presets.guide_joints(mechanism))
+        if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
+        else ()
+    )
     return core, linkage.checked(core), guides
 
 

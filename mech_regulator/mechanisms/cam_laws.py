@@ -24,7 +24,7 @@ from mech_regulator.mechanisms.linkage.flat import law_at
 
 TWO_PI = 2.0 * math.pi
 CODES = {"dwell": 0.0, "uniform": 1.0, "harmonic": 2.0, "cycloidal": 3.0, "polynomial_345": 4.0, "cubic": 5.0}
-TURN_TOLERANCE = 1e-9   # how far the segments' angles may sum away from a full turn [rad]
+TURN_TOLERANCE = 1e-9  # how far the segments' angles may sum away from a full turn [rad]
 
 
 @dataclass(frozen=True)
@@ -42,7 +42,7 @@ class MotionLaw:
     """s(theta), s'(theta), s''(theta) of a follower (module docstring), theta the cam angle from the law's start
     [rad] (any value: taken modulo the turn), from its pieces."""
 
-    _pieces: list[list[float]]   # set by each kind of law (pieces())
+    _pieces: list[list[float]]  # set by each kind of law (pieces())
 
     def pieces(self) -> list[list[float]]:
         """The law as flat.law_at's pieces [start, length, code, a, b, c, d], in order of start from 0 to the turn."""
@@ -66,21 +66,36 @@ class SegmentLaw(MotionLaw):
     def __init__(self, segments: tuple[Segment, ...]):
         total = sum(segment.angle for segment in segments)
         if abs(total - TWO_PI) > TURN_TOLERANCE:
-            raise ValueError(f"the follower law's segments span {math.degrees(total):.6g} deg; expected 360 deg "
-                             "(one turn of the cam)")
+            raise ValueError(
+                f"the follower law's segments span {math.degrees(total):.6g} deg; expected 360 deg "
+                "(one turn of the cam)"
+            )
         heights = np.cumsum([0.0] + [_signed_lift(segment) for segment in segments])
         scale = max(1.0, float(np.max(np.abs(heights))))
         if abs(heights[-1]) > 1e-12 * scale:
-            raise ValueError(f"the follower law rises {sum(s.lift for s in segments if s.motion == 'rise'):.6g} "
-                             f"but returns {sum(s.lift for s in segments if s.motion == 'return'):.6g} over the turn; "
-                             "expected the returns to bring the follower back to where it started")
+            raise ValueError(
+                f"the follower law rises {sum(s.lift for s in segments if s.motion == 'rise'):.6g} "
+                f"but returns {sum(s.lift for s in segments if s.motion == 'return'):.6g} over the turn; "
+                "expected the returns to bring the follower back to where it started"
+            )
         if np.min(heights) < -1e-12 * scale:
-            raise ValueError("the follower law returns below its start (s < 0); expected s >= 0 over the turn, "
-                             "s = 0 on the base circle")
+            raise ValueError(
+                "the follower law returns below its start (s < 0); expected s >= 0 over the turn, "
+                "s = 0 on the base circle"
+            )
         starts = np.cumsum([0.0] + [segment.angle for segment in segments[:-1]])
-        self._pieces = [[float(start), segment.angle, CODES["dwell" if segment.motion == "dwell" else segment.law],
-                         float(height), _signed_lift(segment), 0.0, 0.0]
-                        for start, segment, height in zip(starts, segments, heights)]
+        self._pieces = [
+            [
+                float(start),
+                segment.angle,
+                CODES["dwell" if segment.motion == "dwell" else segment.law],
+                float(height),
+                _signed_lift(segment),
+                0.0,
+                0.0,
+            ]
+            for start, segment, height in zip(starts, segments, heights)
+        ]
 
 
 class TableLaw(MotionLaw):
@@ -94,17 +109,18 @@ class TableLaw(MotionLaw):
         if np.any(np.diff(angles) <= 0.0) or angles[-1] - angles[0] >= TWO_PI:
             raise ValueError("the follower table's angles must increase strictly within one turn (360 deg)")
         if min(lifts) < 0.0:
-            raise ValueError(f"the follower table's lift has {min(lifts):.6g} < 0; expected s >= 0 (s = 0 on the "
-                             "base circle)")
+            raise ValueError(
+                f"the follower table's lift has {min(lifts):.6g} < 0; expected s >= 0 (s = 0 on the base circle)"
+            )
         knots = np.append(angles, angles[0] + TWO_PI)
         spline = CubicSpline(knots, list(lifts) + [lifts[0]], bc_type="periodic")
         starts = np.mod(angles, TWO_PI)
-        if starts[0] != 0.0 or np.any(np.diff(starts) < 0.0):   # the piece across theta = 0 starts again at 0
+        if starts[0] != 0.0 or np.any(np.diff(starts) < 0.0):  # the piece across theta = 0 starts again at 0
             starts = np.sort(np.append(starts, 0.0))
         ends = np.append(starts[1:], TWO_PI)
         self._pieces = []
         for start, end in zip(starts, ends):
-            at = angles[0] + np.mod(start - angles[0], TWO_PI)   # the same angle on the spline's domain
+            at = angles[0] + np.mod(start - angles[0], TWO_PI)  # the same angle on the spline's domain
             a, b, c, d = (float(spline(at, order)) / math.factorial(order) for order in range(4))
             self._pieces.append([float(start), float(end - start), CODES["cubic"], a, b, c, d])
 

@@ -19,7 +19,7 @@ from mech_regulator.mechanisms.presets import linkage_core
 from mech_regulator.scene import schema
 from mech_regulator.scene.loading import problems_message
 
-BRANCHED_GROUPS = ("RRR", "RRP", "RPR")   # the group types with two assemblies, chosen by a branch
+BRANCHED_GROUPS = ("RRR", "RRP", "RPR")  # the group types with two assemblies, chosen by a branch
 
 
 def refuse_unbuildable(scene: schema.Scene, source: str | None = None) -> schema.Scene:
@@ -36,9 +36,16 @@ def mechanism_problems(machine: schema.Machine) -> list[str]:
     part's) and of what rests on their kinematics (an engine's firing, joint friction's reactions)."""
     parts = [("machine.mechanism", machine.mechanism)] + [
         (f"machine.{key}.driven.mechanism", part.driven.mechanism)
-        for key, part in (("coupling", machine.coupling), ("clutch", machine.clutch)) if part is not None]
-    problems = [f"{key}: {problem}" for key, mechanism in parts if mechanism is not None
-                for problem in [_refusal(_check_mechanism, mechanism)] if problem is not None]
+        for key, part in (("coupling", machine.coupling), ("clutch", machine.clutch))
+        if part is not None
+    ]
+    problems = [
+        f"{key}: {problem}"
+        for key, mechanism in parts
+        if mechanism is not None
+        for problem in [_refusal(_check_mechanism, mechanism)]
+        if problem is not None
+    ]
     if problems:
         return problems
     for check in (_check_firing, _check_reactions):
@@ -55,8 +62,9 @@ def _refusal(check, subject) -> str | None:
     except ValueError as error:
         return str(error)
     except (ArithmeticError, RecursionError) as error:  # a check computing with extreme numbers
-        return (f"its numbers cannot be computed with ({type(error).__name__}: {error}); expected values of a real "
-                "machine")
+        return (
+            f"its numbers cannot be computed with ({type(error).__name__}: {error}); expected values of a real machine"
+        )
     return None
 
 
@@ -67,8 +75,10 @@ def _check_mechanism(mechanism: schema.Mechanism) -> None:
     if isinstance(mechanism, schema.WalkingBeam):
         flattening = walking_beam.change_point(walking_beam.geometry_from_scene(mechanism))
         if flattening is not None:
-            raise ValueError(f"{flattening}; expected a beam direction (or its opposite) outside the swing "
-                             "of both links, so that the parallelograms never fold")
+            raise ValueError(
+                f"{flattening}; expected a beam direction (or its opposite) outside the swing "
+                "of both links, so that the parallelograms never fold"
+            )
     if isinstance(mechanism, schema.Linkage):
         _check_drivable(mechanism)
 
@@ -76,15 +86,16 @@ def _check_mechanism(mechanism: schema.Mechanism) -> None:
 def _check_crank_turns(linkage: schema.FourBar | schema.WalkingBeam) -> None:
     """Raise ValueError naming the crank angles where the four-bar loop (crank, coupler, rocker, frame,
     frame_angle_deg) of a linkage cannot be assembled."""
-    ranges = unassemblable_crank_ranges(linkage.crank, linkage.coupler, linkage.rocker, linkage.frame,
-                                        math.radians(linkage.frame_angle_deg))
+    ranges = unassemblable_crank_ranges(
+        linkage.crank, linkage.coupler, linkage.rocker, linkage.frame, math.radians(linkage.frame_angle_deg)
+    )
     if ranges:
         spans = ", ".join(f"{math.degrees(lo):.2f} to {math.degrees(hi):.2f} deg" for lo, hi in ranges)
         raise ValueError(
             f"the four-bar (crank {linkage.crank}, coupler {linkage.coupler}, rocker {linkage.rocker}, frame "
             f"{linkage.frame} m) cannot be assembled for crank angles {spans}; the crank must turn fully: expected a "
-            "Grashof crank (shortest link = crank, and shortest + longest < sum of the other two)")
-
+            "Grashof crank (shortest link = crank, and shortest + longest < sum of the other two)"
+        )
 
 
 def _check_drivable(mechanism: schema.Linkage) -> None:
@@ -94,19 +105,26 @@ def _check_drivable(mechanism: schema.Linkage) -> None:
     core = linkage_core(mechanism)
     structure = checked(core)
     check_cams(core, structure)
-    internal = {group.internal.name for group in structure.groups
-                if isinstance(group, Dyad) and group.kind in BRANCHED_GROUPS}
-    internal |= {group.pair.name for group in structure.groups if isinstance(group, CamFollower)
-                 and group.guide.kind == "revolute"}   # an oscillating follower's side of the cam
+    internal = {
+        group.internal.name for group in structure.groups if isinstance(group, Dyad) and group.kind in BRANCHED_GROUPS
+    }
+    internal |= {
+        group.pair.name
+        for group in structure.groups
+        if isinstance(group, CamFollower) and group.guide.kind == "revolute"
+    }  # an oscillating follower's side of the cam
     foreign = sorted(set(mechanism.branches) - internal)
     if foreign:
-        raise ValueError(f"branches names {foreign}, which are not the internal joint of a group with two "
-                         f"assemblies ({', '.join(BRANCHED_GROUPS)}; PRP and RPP have one); expected some of "
-                         f"{sorted(internal)}")
+        raise ValueError(
+            f"branches names {foreign}, which are not the internal joint of a group with two "
+            f"assemblies ({', '.join(BRANCHED_GROUPS)}; PRP and RPP have one); expected some of "
+            f"{sorted(internal)}"
+        )
     failures = assembly_failures(core, structure)
     if failures:
-        raise ValueError("; ".join(failures) + "; expected a linkage whose crank turns fully (check the lengths "
-                                               "and the branches)")
+        raise ValueError(
+            "; ".join(failures) + "; expected a linkage whose crank turns fully (check the lengths and the branches)"
+        )
 
 
 def _check_firing(machine: schema.Machine) -> None:
@@ -114,8 +132,13 @@ def _check_firing(machine: schema.Machine) -> None:
     mechanism, engine = machine.mechanism, machine.drive
     if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders and isinstance(engine, schema.Engine):
         cylinders = mechanism.cylinders
-        firing_delays([c.throw_deg for c in cylinders], [c.bank_deg for c in cylinders], engine.cycle_deg,
-                      engine.firing_order, engine.firing_deg)
+        firing_delays(
+            [c.throw_deg for c in cylinders],
+            [c.bank_deg for c in cylinders],
+            engine.cycle_deg,
+            engine.firing_order,
+            engine.firing_deg,
+        )
 
 
 def _check_reactions(machine: schema.Machine) -> None:
@@ -128,5 +151,7 @@ def _check_reactions(machine: schema.Machine) -> None:
     if gear_joints:
         reason = f"the gear pairs {gear_joints} have no joint friction yet"
     if reason is not None:
-        raise ValueError(f"joint_friction needs the joint reactions, but {reason}; expected no joint_friction on this "
-                         "linkage (only a thrust_collar)")
+        raise ValueError(
+            f"joint_friction needs the joint reactions, but {reason}; expected no joint_friction on this "
+            "linkage (only a thrust_collar)"
+        )

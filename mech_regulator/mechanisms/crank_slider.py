@@ -43,8 +43,7 @@ def slider_kinematics(phi: float, crank: float, rod: float, offset: float) -> tu
     ddw = -(ds * ds + s * dds + dw * dw) / w
     dtheta = ds / w
     ddtheta = (dds * w - ds * dw) / (w * w)
-    return (crank * cos_phi + w, -crank * sin_phi + dw, -crank * cos_phi + ddw,
-            math.atan2(s, w), dtheta, ddtheta)
+    return (crank * cos_phi + w, -crank * sin_phi + dw, -crank * cos_phi + ddw, math.atan2(s, w), dtheta, ddtheta)
 
 
 def dead_centres(crank: float, rod: float, offset: float) -> tuple[float, float]:
@@ -58,4 +57,4 @@ def dead_centres(crank: float, rod: float, offset: float) -> tuple[float, float]
 
 def stroke(crank: float, rod: float, offset: float) -> float:
     """Piston stroke [m]: `S = sqrt((l + R)^2 - e^2) - sqrt((l - R)^2 - e^2)` (source 002, eq. 1-10)."""
-    return math.sqrt((rod + crank) ** 2 - offset ** 2) - math.sqrt((rod - crank) ** 2 - offset ** 2)
+    return math.sqrt((rod + crank) ** 2 - offset**2) - math.sqrt((rod - crank) ** 2 - offset**2)

@@ -18,11 +18,11 @@ from mech_regulator.mechanisms.linkage import drawing as linkage_drawing
 from mech_regulator.mechanisms.linkage.drawing import circle
 from mech_regulator.scene import schema
 
-BLOCK_LENGTH_PER_CRANK = 1.0    # slider block length along the guide, per crank radius [-]
-BLOCK_HEIGHT_PER_CRANK = 0.6    # slider block height across the guide, per crank radius [-]
-DISC_RADIUS = 1.0               # radius of the schematic disc of a machine without mechanism [m]
-BOUNDS_MARGIN = 0.08            # margin around the swept outline, per its larger span [-]
-BOUNDS_SAMPLES = 360            # crank angles sampled over a turn to find the swept outline [-]
+BLOCK_LENGTH_PER_CRANK = 1.0  # slider block length along the guide, per crank radius [-]
+BLOCK_HEIGHT_PER_CRANK = 0.6  # slider block height across the guide, per crank radius [-]
+DISC_RADIUS = 1.0  # radius of the schematic disc of a machine without mechanism [m]
+BOUNDS_MARGIN = 0.08  # margin around the swept outline, per its larger span [-]
+BOUNDS_SAMPLES = 360  # crank angles sampled over a turn to find the swept outline [-]
 
 MOVING_PARTS = {
     "crank_slider": ("crank", "rod", "slider", "joints"),
@@ -41,9 +41,15 @@ def mechanism_kind(mechanism_spec: schema.Mechanism | None) -> str | None:
 def rectangle(centre: tuple[float, float], half_width: float, half_height: float) -> np.ndarray:
     """Closed polyline of an axis-aligned rectangle around centre [m], shape (5, 2)."""
     x, y = centre
-    return np.array([[x - half_width, y - half_height], [x + half_width, y - half_height],
-                     [x + half_width, y + half_height], [x - half_width, y + half_height],
-                     [x - half_width, y - half_height]])
+    return np.array(
+        [
+            [x - half_width, y - half_height],
+            [x + half_width, y - half_height],
+            [x + half_width, y + half_height],
+            [x - half_width, y + half_height],
+            [x - half_width, y - half_height],
+        ]
+    )
 
 
 def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> dict[str, np.ndarray]:
@@ -76,8 +82,11 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
 
         return linkage_drawing.linkage_outline(*mechanism_geometry(mechanism_spec), phi)
     tip = (DISC_RADIUS * math.cos(phi), DISC_RADIUS * math.sin(phi))
-    return {"disc": circle((0.0, 0.0), DISC_RADIUS), "spoke": np.array([[0.0, 0.0], tip]),
-            "joints": np.array([[0.0, 0.0]])}
+    return {
+        "disc": circle((0.0, 0.0), DISC_RADIUS),
+        "spoke": np.array([[0.0, 0.0], tip]),
+        "joints": np.array([[0.0, 0.0]]),
+    }
 
 
 def _crank_slider_outline(spec: schema.CrankSlider, phi: float) -> dict[str, np.ndarray]:
@@ -138,8 +147,9 @@ def _walking_beam_outline(spec: schema.WalkingBeam, phi: float) -> dict[str, np.
     }
 
 
-def outline_extent(outlines: list[dict[str, np.ndarray]], point_radius: float = 0.0
-                   ) -> tuple[float, float, float, float]:
+def outline_extent(
+    outlines: list[dict[str, np.ndarray]], point_radius: float = 0.0
+) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) [m] of every part of every outline; points (parts of shape (n, 2) whose
     name says `joints` or `balls`) are grown by point_radius; an empty part (a linkage without sliders has no
     slider blocks) adds nothing."""
@@ -156,8 +166,9 @@ def outline_extent(outlines: list[dict[str, np.ndarray]], point_radius: float = 
     return float(low[0]), float(high[0]), float(low[1]), float(high[1])
 
 
-def with_margin(extent: tuple[float, float, float, float], margin: float = BOUNDS_MARGIN
-                ) -> tuple[float, float, float, float]:
+def with_margin(
+    extent: tuple[float, float, float, float], margin: float = BOUNDS_MARGIN
+) -> tuple[float, float, float, float]:
     """extent (xmin, xmax, ymin, ymax) [m] grown on every side by margin times its larger span."""
     xmin, xmax, ymin, ymax = extent
     pad = margin * max(xmax - xmin, ymax - ymin)

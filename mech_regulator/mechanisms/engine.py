@@ -35,8 +35,9 @@ class PistonMotion(NamedTuple):
     a: float
 
 
-def piston_motion(phi: float, omega: float, crank: float, rod: float, offset: float,
-                  epsilon: float = 0.0) -> PistonMotion:
+def piston_motion(
+    phi: float, omega: float, crank: float, rod: float, offset: float, epsilon: float = 0.0
+) -> PistonMotion:
     """Exact piston motion at crank angle phi [rad], crank speed omega [rad/s] and crank angular
     acceleration epsilon [rad/s^2]: `v = x' omega`, `a = x'' omega^2 + x' epsilon` (x' = dx/dphi)."""
     x, dx, ddx, *_ = crank_slider.slider_kinematics(phi, crank, rod, offset)
@@ -56,15 +57,17 @@ def source_approximation(alpha: float, omega: float, crank: float, rod: float, o
     lam, k = crank / rod, offset / crank
     sin_a, cos_a = math.sin(alpha), math.cos(alpha)
     sin_2a, cos_2a = math.sin(2.0 * alpha), math.cos(2.0 * alpha)
-    return PistonMotion(crank * ((1.0 - cos_a) + lam / 4.0 * (1.0 - cos_2a) - lam * k * sin_a),
-                        crank * omega * (sin_a + lam / 2.0 * sin_2a - lam * k * cos_a),
-                        crank * omega * omega * (cos_a + lam * cos_2a + lam * k * sin_a))
+    return PistonMotion(
+        crank * ((1.0 - cos_a) + lam / 4.0 * (1.0 - cos_2a) - lam * k * sin_a),
+        crank * omega * (sin_a + lam / 2.0 * sin_2a - lam * k * cos_a),
+        crank * omega * omega * (cos_a + lam * cos_2a + lam * k * sin_a),
+    )
 
 
 def source_from_exact(motion: PistonMotion, crank: float, rod: float, offset: float) -> PistonMotion:
     """Exact motion in source 002's convention: displacement from the top dead centre towards the crank
     axis, `x_src = sqrt((l + R)^2 - e^2) - x`, `v_src = -v`, `j_src = -a`."""
-    return PistonMotion(math.sqrt((rod + crank) ** 2 - offset ** 2) - motion.x, -motion.v, -motion.a)
+    return PistonMotion(math.sqrt((rod + crank) ** 2 - offset**2) - motion.x, -motion.v, -motion.a)
 
 
 def source_dead_centre_angles(crank: float, rod: float, offset: float) -> tuple[float, float]:
@@ -81,9 +84,13 @@ def mean_piston_speed(stroke: float, omega: float) -> float:
     return stroke * (30.0 * omega / math.pi) / 30.0
 
 
-def firing_delays(throws_deg: Sequence[float], banks_deg: Sequence[float], cycle_deg: float,
-                  firing_order: Sequence[int] | None = None, firing_deg: Sequence[float] | None = None
-                  ) -> list[float]:
+def firing_delays(
+    throws_deg: Sequence[float],
+    banks_deg: Sequence[float],
+    cycle_deg: float,
+    firing_order: Sequence[int] | None = None,
+    firing_deg: Sequence[float] | None = None,
+) -> list[float]:
     """Each cylinder's firing delay d_i after cylinder 1 [deg], in [0, cycle_deg).
 
     Cylinder i is at a top dead centre when phi_i = 0 (mod 360), i.e. at crank angles `bank_i - throw_i
@@ -100,13 +107,17 @@ def firing_delays(throws_deg: Sequence[float], banks_deg: Sequence[float], cycle
         return [tdc[i] + 360.0 * turn for turn in range(turns)]
 
     def where(i: int) -> str:
-        return (f"cylinder {i + 1} (throw_deg {throws_deg[i]:g}, bank_deg {banks_deg[i]:g}) is at a top dead centre "
-                f"{' or '.join(f'{angle:g}' for angle in fitting(i))} deg after cylinder 1 in the {cycle_deg:g} deg cycle")
+        return (
+            f"cylinder {i + 1} (throw_deg {throws_deg[i]:g}, bank_deg {banks_deg[i]:g}) is at a top dead centre "
+            f"{' or '.join(f'{angle:g}' for angle in fitting(i))} deg after cylinder 1 in the {cycle_deg:g} deg cycle"
+        )
 
     if firing_deg is not None:
         if len(firing_deg) != count:
-            raise ValueError(f"firing_deg has {len(firing_deg)} entries for {count} cylinders; expected one delay "
-                             "per cylinder, the first 0")
+            raise ValueError(
+                f"firing_deg has {len(firing_deg)} entries for {count} cylinders; expected one delay "
+                "per cylinder, the first 0"
+            )
         if firing_deg[0] != 0.0:
             raise ValueError(f"firing_deg[0] = {firing_deg[0]:g}: cylinder 1 is the reference, expected 0")
         for i, delay in enumerate(firing_deg):
@@ -116,11 +127,14 @@ def firing_delays(throws_deg: Sequence[float], banks_deg: Sequence[float], cycle
     if firing_order is None:
         if count == 1:
             return [0.0]
-        raise ValueError(f"the engine has {count} cylinders: give drive.firing_order (e.g. "
-                         f"{[1] + list(range(2, count + 1))}) or drive.firing_deg (each cylinder's firing delay)")
+        raise ValueError(
+            f"the engine has {count} cylinders: give drive.firing_order (e.g. "
+            f"{[1] + list(range(2, count + 1))}) or drive.firing_deg (each cylinder's firing delay)"
+        )
     if sorted(firing_order) != list(range(1, count + 1)) or firing_order[0] != 1:
-        raise ValueError(f"firing_order = {list(firing_order)}: expected each cylinder number 1..{count} once, "
-                         "starting with 1")
+        raise ValueError(
+            f"firing_order = {list(firing_order)}: expected each cylinder number 1..{count} once, starting with 1"
+        )
     delays = [0.0] * count
     previous = 0.0
     for number in firing_order[1:]:
@@ -128,7 +142,9 @@ def firing_delays(throws_deg: Sequence[float], banks_deg: Sequence[float], cycle
         later = [angle for angle in fitting(i) if angle > previous + 1e-9]
         if not later:
             order = "-".join(str(n) for n in firing_order)
-            raise ValueError(f"firing_order {order} does not fit the crankshaft: {where(i)}, none after the previous "
-                             f"cylinder fires at {previous:g} deg")
+            raise ValueError(
+                f"firing_order {order} does not fit the crankshaft: {where(i)}, none after the previous "
+                f"cylinder fires at {previous:g} deg"
+            )
         delays[i] = previous = later[0]
     return delays

@@ -51,8 +51,9 @@ def rocker_angle(phi: float, a: float, b: float, c: float, d: float, th1: float,
     return towards_A + cmath.phase(p * cmath.exp(-1j * towards_A)) + branch_sign * math.acos(cos_gamma)
 
 
-def link_angles(phi: float, a: float, b: float, c: float, d: float, th1: float, branch_sign: float
-                ) -> tuple[float, ...]:
+def link_angles(
+    phi: float, a: float, b: float, c: float, d: float, th1: float, branch_sign: float
+) -> tuple[float, ...]:
     """Coupler and rocker angles with their first two derivatives with respect to phi.
 
     Position: with p = B - D, f = |p|, the rocker angle is `th4 = arg p + sign * acos((c^2 + f^2 - b^2) / (2 c f))`,
@@ -85,7 +86,7 @@ def unassemblable_crank_ranges(a: float, b: float, c: float, d: float, th1: floa
     ratios are infinite. Returns an empty list for a crank that turns fully.
     """
     ranges = []
-    cos_far = (a * a + d * d - (b + c) ** 2) / (2.0 * a * d)   # |B - D| >= b + c  <=>  cos psi <= cos_far
+    cos_far = (a * a + d * d - (b + c) ** 2) / (2.0 * a * d)  # |B - D| >= b + c  <=>  cos psi <= cos_far
     cos_near = (a * a + d * d - (b - c) ** 2) / (2.0 * a * d)  # |B - D| <= |b - c|  <=>  cos psi >= cos_near
     if cos_far >= 1.0 or cos_near <= -1.0:
         return [(th1 - math.pi, th1 + math.pi)]

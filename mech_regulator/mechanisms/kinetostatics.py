@@ -33,4 +33,3 @@ class JointLoads(NamedTuple):
 
 
 Kinetostatics = Callable[[float, float, float], JointLoads]
-

@@ -49,8 +49,13 @@ _, _, ROCKER_PIN, ROCKER_BEARING = kinetostatics.FOUR_BAR_JOINTS
 def _crank(points: dict[str, complex], mass: float, centre: complex) -> Link:
     """The crank link (its pivot at its origin, among `points`) with mass [kg] at `centre` [m] and no moment of
     inertia about its pivot: I_S = -m |centre|^2 (module docstring)."""
-    return Link(CRANK, points, mass=mass, centre=centre,
-                inertia=0.0 - mass * (centre.real * centre.real + centre.imag * centre.imag))  # as the code writes it
+    return Link(
+        CRANK,
+        points,
+        mass=mass,
+        centre=centre,
+        inertia=0.0 - mass * (centre.real * centre.real + centre.imag * centre.imag),
+    )  # as the code writes it
 
 
 def _revolute(name: str, outer: str, inner: str) -> Joint:
@@ -73,8 +78,9 @@ def guide_joints(mechanism: schema.CrankSlider) -> list[str]:
     return [guide for _, _, guide in cylinder_names(count)]
 
 
-def crank_slider_linkage(g: crank_slider.CrankSliderGeometry, cylinders: list[schema.Cylinder] | None = None
-                         ) -> Linkage:
+def crank_slider_linkage(
+    g: crank_slider.CrankSliderGeometry, cylinders: list[schema.Cylinder] | None = None
+) -> Linkage:
     """A crank–slider (one or several cylinders) as a linkage: per cylinder i with throw tau_i and bank b_i, the
     crank pin at R e^{i tau_i} on the crank, a rod (crank pin at 0, wrist pin at l, centre rod_cg, mass and
     inertia) and a piston (a point mass at its wrist pin) on the frame's guide through e i e^{i b_i}, direction b_i:
@@ -87,20 +93,29 @@ def crank_slider_linkage(g: crank_slider.CrankSliderGeometry, cylinders: list[sc
     names = cylinder_names(len(cylinders))
     for (pin, wrist, guide), cylinder, throw in zip(names, cylinders, throws):
         bank = math.radians(cylinder.bank_deg)
-        suffix = pin[len(CRANK_PIN):]
+        suffix = pin[len(CRANK_PIN) :]
         rod, piston = "rod" + suffix, "piston" + suffix
         frame[guide] = g.offset * 1j * cmath.exp(1j * bank)
         crank_points[pin] = g.crank * throw
-        links += [Link(rod, {pin: 0j, wrist: g.rod + 0j}, mass=g.rod_mass, centre=g.rod_cg + 0j,
-                       inertia=g.rod_inertia),
-                  Link(piston, {wrist: 0j, guide: 0j}, mass=g.slider_mass)]
-        joints += [_revolute(pin, rod, CRANK), _revolute(wrist, piston, rod),
-                   Joint(guide, "prismatic", (FRAME, piston), direction=bank, slider_angle=bank)]
+        links += [
+            Link(rod, {pin: 0j, wrist: g.rod + 0j}, mass=g.rod_mass, centre=g.rod_cg + 0j, inertia=g.rod_inertia),
+            Link(piston, {wrist: 0j, guide: 0j}, mass=g.slider_mass),
+        ]
+        joints += [
+            _revolute(pin, rod, CRANK),
+            _revolute(wrist, piston, rod),
+            Joint(guide, "prismatic", (FRAME, piston), direction=bank, slider_angle=bank),
+        ]
     links[1] = replace(links[1], points={**links[1].points, "C": 0j})
     crank = _crank(crank_points, len(cylinders) * g.crank_mass, g.crank_cg * sum(throws) / len(throws))
-    return Linkage(links=(Link(FRAME, frame), crank, *links),
-                   joints=(_revolute(CRANK_BEARING, CRANK, FRAME), *joints), frame=FRAME, crank=CRANK,
-                   points=("B", "C"), output_joint=names[0][2])
+    return Linkage(
+        links=(Link(FRAME, frame), crank, *links),
+        joints=(_revolute(CRANK_BEARING, CRANK, FRAME), *joints),
+        frame=FRAME,
+        crank=CRANK,
+        points=("B", "C"),
+        output_joint=names[0][2],
+    )
 
 
 def four_bar_linkage(g: four_bar.FourBarGeometry) -> Linkage:
@@ -108,18 +123,39 @@ def four_bar_linkage(g: four_bar.FourBarGeometry) -> Linkage:
     e^{i th1} on the frame; one RRR group whose branch is the preset's: +1 (C left of B->D) for 'open', -1 for
     'crossed'. Output: the rocker's angle."""
     return Linkage(
-        links=(Link(FRAME, {CRANK_BEARING: 0j, ROCKER_BEARING: g.frame * cmath.exp(1j * g.frame_angle)}),
-               _crank({CRANK_BEARING: 0j, CRANK_PIN: g.crank + 0j, "B": g.crank + 0j}, g.crank_mass, g.crank_cg + 0j),
-               Link("coupler", {CRANK_PIN: 0j, ROCKER_PIN: g.coupler + 0j}, mass=g.coupler_mass,
-                    centre=g.coupler_cg + 0j, inertia=g.coupler_inertia),
-               Link("rocker", {ROCKER_BEARING: 0j, ROCKER_PIN: g.rocker + 0j, "C": g.rocker + 0j},
-                    mass=g.rocker_mass, centre=g.rocker_cg + 0j, inertia=g.rocker_inertia)),
-        joints=(_revolute(CRANK_BEARING, CRANK, FRAME), _revolute(CRANK_PIN, "coupler", CRANK),
-                _revolute(ROCKER_PIN, "rocker", "coupler"), _revolute(ROCKER_BEARING, "rocker", FRAME)),
-        frame=FRAME, crank=CRANK, branches={ROCKER_PIN: -int(g.branch_sign)}, points=("B", "C"),
+        links=(
+            Link(FRAME, {CRANK_BEARING: 0j, ROCKER_BEARING: g.frame * cmath.exp(1j * g.frame_angle)}),
+            _crank({CRANK_BEARING: 0j, CRANK_PIN: g.crank + 0j, "B": g.crank + 0j}, g.crank_mass, g.crank_cg + 0j),
+            Link(
+                "coupler",
+                {CRANK_PIN: 0j, ROCKER_PIN: g.coupler + 0j},
+                mass=g.coupler_mass,
+                centre=g.coupler_cg + 0j,
+                inertia=g.coupler_inertia,
+            ),
+            Link(
+                "rocker",
+                {ROCKER_BEARING: 0j, ROCKER_PIN: g.rocker + 0j, "C": g.rocker + 0j},
+                mass=g.rocker_mass,
+                centre=g.rocker_cg + 0j,
+                inertia=g.rocker_inertia,
+            ),
+        ),
+        joints=(
+            _revolute(CRANK_BEARING, CRANK, FRAME),
+            _revolute(CRANK_PIN, "coupler", CRANK),
+            _revolute(ROCKER_PIN, "rocker", "coupler"),
+            _revolute(ROCKER_BEARING, "rocker", FRAME),
+        ),
+        frame=FRAME,
+        crank=CRANK,
+        branches={ROCKER_PIN: -int(g.branch_sign)},
+        points=("B", "C"),
         output_link="rocker",
-        output_reference=four_bar.rocker_angle(0.0, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle,
-                                               g.branch_sign))
+        output_reference=four_bar.rocker_angle(
+            0.0, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign
+        ),
+    )
 
 
 def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:
@@ -141,32 +177,59 @@ def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:
 
     coupler_point = g.coupler_point * cmath.exp(1j * g.coupler_point_angle)
     return Linkage(
-        links=(Link(FRAME, {"O1": 0j, "O2": O2, "O3": O2 + s, "X": 0j}),
-               _crank({"O1": 0j, "A": g.crank + 0j}, g.crank_mass, g.crank_cg + 0j),
-               Link("coupler", {"A": 0j, "B": g.coupler + 0j, "C": coupler_point},
-                    mass=g.coupler_mass, centre=g.coupler_cg * cmath.exp(1j * g.coupler_cg_angle),
-                    inertia=g.coupler_inertia),
-               Link("rocker", {"O2": 0j, "B": g.rocker + 0j, "Bt": g.rocker + 0j}, mass=g.rocker_mass,
-                    centre=g.rocker_cg + 0j, inertia=g.rocker_inertia),
-               Link("tie", {"Bt": 0j, "E": s, "Es": s}, mass=g.tie_mass),
-               Link("rocker5", {"O3": 0j, "E": g.rocker + 0j}, mass=g.rocker_mass, centre=g.rocker_cg + 0j,
-                    inertia=g.rocker_inertia),
-               Link("side", {"Es": 0j, "D": bc}, mass=g.side_mass, centre=g.side_cg * bc / abs(bc),
-                    inertia=g.side_inertia),
-               Link("shuttle", {"C": 0j, "D": s, "Cp": 0j}, mass=g.shuttle_mass),
-               Link("block", {"Cp": 0j, "slot": 0j}),
-               Link("yoke", {"slot": 0j, "X": 0j})),
-        joints=(Joint("O1", "revolute", (FRAME, CRANK)), Joint("A", "revolute", (CRANK, "coupler")),
-                Joint("B", "revolute", ("coupler", "rocker")), Joint("O2", "revolute", (FRAME, "rocker")),
-                Joint("Bt", "revolute", ("rocker", "tie")), Joint("E", "revolute", ("tie", "rocker5")),
-                Joint("O3", "revolute", (FRAME, "rocker5")), Joint("Es", "revolute", ("tie", "side")),
-                Joint("D", "revolute", ("side", "shuttle")), Joint("C", "revolute", ("coupler", "shuttle")),
-                Joint("Cp", "revolute", ("shuttle", "block")),
-                Joint("slot", "prismatic", ("yoke", "block"), direction=math.pi / 2),
-                Joint("X", "prismatic", (FRAME, "yoke"))),
-        frame=FRAME, crank=CRANK,
+        links=(
+            Link(FRAME, {"O1": 0j, "O2": O2, "O3": O2 + s, "X": 0j}),
+            _crank({"O1": 0j, "A": g.crank + 0j}, g.crank_mass, g.crank_cg + 0j),
+            Link(
+                "coupler",
+                {"A": 0j, "B": g.coupler + 0j, "C": coupler_point},
+                mass=g.coupler_mass,
+                centre=g.coupler_cg * cmath.exp(1j * g.coupler_cg_angle),
+                inertia=g.coupler_inertia,
+            ),
+            Link(
+                "rocker",
+                {"O2": 0j, "B": g.rocker + 0j, "Bt": g.rocker + 0j},
+                mass=g.rocker_mass,
+                centre=g.rocker_cg + 0j,
+                inertia=g.rocker_inertia,
+            ),
+            Link("tie", {"Bt": 0j, "E": s, "Es": s}, mass=g.tie_mass),
+            Link(
+                "rocker5",
+                {"O3": 0j, "E": g.rocker + 0j},
+                mass=g.rocker_mass,
+                centre=g.rocker_cg + 0j,
+                inertia=g.rocker_inertia,
+            ),
+            Link(
+                "side", {"Es": 0j, "D": bc}, mass=g.side_mass, centre=g.side_cg * bc / abs(bc), inertia=g.side_inertia
+            ),
+            Link("shuttle", {"C": 0j, "D": s, "Cp": 0j}, mass=g.shuttle_mass),
+            Link("block", {"Cp": 0j, "slot": 0j}),
+            Link("yoke", {"slot": 0j, "X": 0j}),
+        ),
+        joints=(
+            Joint("O1", "revolute", (FRAME, CRANK)),
+            Joint("A", "revolute", (CRANK, "coupler")),
+            Joint("B", "revolute", ("coupler", "rocker")),
+            Joint("O2", "revolute", (FRAME, "rocker")),
+            Joint("Bt", "revolute", ("rocker", "tie")),
+            Joint("E", "revolute", ("tie", "rocker5")),
+            Joint("O3", "revolute", (FRAME, "rocker5")),
+            Joint("Es", "revolute", ("tie", "side")),
+            Joint("D", "revolute", ("side", "shuttle")),
+            Joint("C", "revolute", ("coupler", "shuttle")),
+            Joint("Cp", "revolute", ("shuttle", "block")),
+            Joint("slot", "prismatic", ("yoke", "block"), direction=math.pi / 2),
+            Joint("X", "prismatic", (FRAME, "yoke")),
+        ),
+        frame=FRAME,
+        crank=CRANK,
         branches={"B": -int(g.branch_sign), "E": side_of(B, O2 + s, B + s), "D": side_of(B + s, C, C + s)},
-        points=tuple("ABCDE"), output_joint="X")
+        points=tuple("ABCDE"),
+        output_joint="X",
+    )
 
 
 def linkage_core(mechanism: schema.Linkage) -> Linkage:
@@ -178,15 +241,32 @@ def linkage_core(mechanism: schema.Linkage) -> Linkage:
     rollers = {joint.links[1]: joint.roller_radius for joint in mechanism.joints.values() if joint.type == "cam"}
     links = (Link("frame", complex_points(mechanism.frame)),) + tuple(
         Link(name, complex_points(link.points), link.mass, complex(*link.centre), link.inertia, rollers.get(name))
-        for name, link in mechanism.links.items())
-    joints = tuple(Joint(name, joint.type, (joint.links[0], joint.links[1]), cam=cam_spec(joint))
-                   if isinstance(joint, schema.CamJoint) else
-                   Joint(name, joint.type, (joint.links[0], joint.links[1]), math.radians(joint.direction_deg),
-                         math.radians(joint.slider_angle_deg), gear=_gear_mesh(joint))
-                   for name, joint in mechanism.joints.items())
+        for name, link in mechanism.links.items()
+    )
+    joints = tuple(
+        Joint(name, joint.type, (joint.links[0], joint.links[1]), cam=cam_spec(joint))
+        if isinstance(joint, schema.CamJoint)
+        else Joint(
+            name,
+            joint.type,
+            (joint.links[0], joint.links[1]),
+            math.radians(joint.direction_deg),
+            math.radians(joint.slider_angle_deg),
+            gear=_gear_mesh(joint),
+        )
+        for name, joint in mechanism.joints.items()
+    )
     output = mechanism.output or schema.LinkageOutput.model_construct(joint=None, link=None)
-    return Linkage(links, joints, "frame", mechanism.crank, dict(mechanism.branches), tuple(mechanism.points),
-                   output.joint, output.link)
+    return Linkage(
+        links,
+        joints,
+        "frame",
+        mechanism.crank,
+        dict(mechanism.branches),
+        tuple(mechanism.points),
+        output.joint,
+        output.link,
+    )
 
 
 def cam_spec(joint: schema.CamJoint) -> CamSpec:
@@ -195,21 +275,31 @@ def cam_spec(joint: schema.CamJoint) -> CamSpec:
     if isinstance(joint.law, schema.CamTable):
         law: TableLaw | SegmentLaw = TableLaw([math.radians(a) for a in joint.law.angle_deg], joint.law.lift)
     else:
-        law = SegmentLaw(tuple(Segment(part.motion, math.radians(part.angle_deg), part.law or "uniform", part.lift)
-                               for part in joint.law))
+        law = SegmentLaw(
+            tuple(
+                Segment(part.motion, math.radians(part.angle_deg), part.law or "uniform", part.lift)
+                for part in joint.law
+            )
+        )
     spring = joint.spring or schema.FollowerSpring(stiffness=0.0, preload=0.0)
-    return CamSpec(law, joint.contact, joint.base_radius, math.radians(joint.start_deg), spring.stiffness,
-                   spring.preload)
+    return CamSpec(
+        law, joint.contact, joint.base_radius, math.radians(joint.start_deg), spring.stiffness, spring.preload
+    )
 
 
 def _gear_mesh(joint: schema.LinkageJoint) -> GearMesh | None:
     """The gear pair of a scene's linkage joint (None for a lower pair)."""
     if joint.type != "gear":
         return None
-    assert joint.centres is not None   # schema.LinkageJoint: a gear has its two centres
-    return GearMesh((joint.centres[0], joint.centres[1]), (joint.teeth[0], joint.teeth[1]) if joint.teeth else None,
-                    (joint.radii[0], joint.radii[1]) if joint.radii else None, joint.internal, joint.carrier,
-                    math.radians(joint.phase_deg))
+    assert joint.centres is not None  # schema.LinkageJoint: a gear has its two centres
+    return GearMesh(
+        (joint.centres[0], joint.centres[1]),
+        (joint.teeth[0], joint.teeth[1]) if joint.teeth else None,
+        (joint.radii[0], joint.radii[1]) if joint.radii else None,
+        joint.internal,
+        joint.carrier,
+        math.radians(joint.phase_deg),
+    )
 
 
 def mechanism_geometry(mechanism: schema.Mechanism):
@@ -219,13 +309,20 @@ def mechanism_geometry(mechanism: schema.Mechanism):
         core = linkage_core(mechanism)
         return core, checked(core)
     if isinstance(mechanism, schema.CrankSlider):
-        return crank_slider.CrankSliderGeometry(**{k: getattr(mechanism, k)
-                                                   for k in crank_slider.CrankSliderGeometry._fields})
+        return crank_slider.CrankSliderGeometry(
+            **{k: getattr(mechanism, k) for k in crank_slider.CrankSliderGeometry._fields}
+        )
     if isinstance(mechanism, schema.FourBar):
-        fields = {k: getattr(mechanism, k) for k in four_bar.FourBarGeometry._fields
-                  if k not in ("frame_angle", "branch_sign")}
-        return four_bar.FourBarGeometry(frame_angle=math.radians(mechanism.frame_angle_deg),
-                                        branch_sign=four_bar.BRANCH_SIGN[mechanism.branch], **fields)
+        fields = {
+            k: getattr(mechanism, k)
+            for k in four_bar.FourBarGeometry._fields
+            if k not in ("frame_angle", "branch_sign")
+        }
+        return four_bar.FourBarGeometry(
+            frame_angle=math.radians(mechanism.frame_angle_deg),
+            branch_sign=four_bar.BRANCH_SIGN[mechanism.branch],
+            **fields,
+        )
     if isinstance(mechanism, schema.WalkingBeam):
         return walking_beam.geometry_from_scene(mechanism)
     raise TypeError(f"no kinematics for {type(mechanism).__name__}")
@@ -240,5 +337,6 @@ def preset_linkage(mechanism: schema.CrankSlider | schema.FourBar | schema.Walki
         return four_bar_linkage(mechanism_geometry(mechanism))
     if isinstance(mechanism, schema.WalkingBeam):
         return walking_beam_linkage(mechanism_geometry(mechanism))
-    raise TypeError(f"no preset linkage for {type(mechanism).__name__}; expected a crank_slider, four_bar or "
-                    "walking_beam")
+    raise TypeError(
+        f"no preset linkage for {type(mechanism).__name__}; expected a crank_slider, four_bar or walking_beam"
+    )

@@ -59,7 +59,7 @@ def geometry_from_scene(spec) -> WalkingBeamGeometry:
     `_deg` angles in radians and the branch as a sign."""
     fields = type(spec).model_fields
     values = {key: getattr(spec, key) for key in WalkingBeamGeometry._fields if key in fields}
-    values.update({key[:-len("_deg")]: math.radians(getattr(spec, key)) for key in fields if key.endswith("_deg")})
+    values.update({key[: -len("_deg")]: math.radians(getattr(spec, key)) for key in fields if key.endswith("_deg")})
     return WalkingBeamGeometry(branch_sign=BRANCH_SIGN[spec.branch], **values)
 
 
@@ -81,8 +81,9 @@ def beam(geometry: WalkingBeamGeometry) -> complex:
     return geometry.beam_length * cmath.exp(1j * geometry.beam_angle)
 
 
-def _loop_points(phi: float, geometry: WalkingBeamGeometry, O2: complex
-                 ) -> tuple[tuple[float, ...], Motion, Motion, Motion]:
+def _loop_points(
+    phi: float, geometry: WalkingBeamGeometry, O2: complex
+) -> tuple[tuple[float, ...], Motion, Motion, Motion]:
     """Link angles of `four_bar.link_angles` and the motions of A, B, C at crank angle phi [rad] (see `solve`),
     the rocker pivot O2 [m] given."""
     g = geometry
@@ -118,13 +119,17 @@ def change_point(geometry: WalkingBeamGeometry, samples: int = 720) -> str | Non
     side_angle = cmath.phase(side(g))
     phis = [2.0 * math.pi * k / samples for k in range(samples + 1)]
     angles = [link_angles(phi, g.crank, g.coupler, g.rocker, g.frame, g.frame_angle, g.branch_sign) for phi in phis]
-    for name, link, offset, index in (("O2-B-E-O3", "rocker O2B", 0.0, 3), ("B-C-D-E", "coupler side BC",
-                                                                              side_angle, 0)):
+    for name, link, offset, index in (
+        ("O2-B-E-O3", "rocker O2B", 0.0, 3),
+        ("B-C-D-E", "coupler side BC", side_angle, 0),
+    ):
         sines = [math.sin(a[index] + offset - g.beam_angle) for a in angles]
         for k in range(samples):
             if abs(sines[k]) < 1e-3 or sines[k] * sines[k + 1] < 0.0:
                 directions = [math.degrees(math.remainder(a[index] + offset, 2.0 * math.pi)) for a in angles]
-                return (f"the parallelogram {name} flattens near crank angle {math.degrees(phis[k]):.1f} deg: the "
-                        f"{link} (directions {min(directions):.1f} to {max(directions):.1f} deg over a turn) lies "
-                        f"along the beam direction {math.degrees(g.beam_angle):g} deg")
+                return (
+                    f"the parallelogram {name} flattens near crank angle {math.degrees(phis[k]):.1f} deg: the "
+                    f"{link} (directions {min(directions):.1f} to {max(directions):.1f} deg over a turn) lies "
+                    f"along the beam direction {math.degrees(g.beam_angle):g} deg"
+                )
     return None

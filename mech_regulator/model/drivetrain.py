@@ -108,23 +108,27 @@ class DrivenModel:
     def _smooth_at(self, t: float, phi_driven: float, omega_driven: float, state: tuple) -> float:
         """smooth_moment [N m] given state = self.state(phi_driven) (its kinematics evaluated once)."""
         _, _, weight, q, dq = state
-        return weight + sum(effect.moment(t, phi_driven, omega_driven, q, dq)
-                            for effect, dry in zip(self.effects, self.coulomb) if not dry)
+        return weight + sum(
+            effect.moment(t, phi_driven, omega_driven, q, dq)
+            for effect, dry in zip(self.effects, self.coulomb)
+            if not dry
+        )
 
     def dynamics(self, t: float, phi_driven: float, omega_driven: float) -> tuple[float, float]:
         """(I(phi2) [kg m^2], M_smooth - 1/2 I'(phi2) omega2^2 [N m]) at phi_driven [rad], omega_driven [rad/s]:
         the inertia and the non-Coulomb side of the driven part's equation."""
         state = self.state(phi_driven)
         inertia, slope = state[0], state[1]
-        return inertia, self._smooth_at(t, phi_driven, omega_driven, state) - 0.5 * slope * omega_driven ** 2
+        return inertia, self._smooth_at(t, phi_driven, omega_driven, state) - 0.5 * slope * omega_driven**2
 
     def forward_moment(self, t: float, omega_driven: float, phi_driven: float = 0.0) -> float:
         """Sum of all its moments turning forward at omega_driven [rad/s] and phi_driven [rad] [N m] (Coulomb
         ones at -R0)."""
         return self.smooth_moment(t, omega_driven, phi_driven) - self.resistance
 
-    def acceleration(self, mode: str, push: float, smooth: float, resistance: float,
-                     inertia: float | None = None) -> float:
+    def acceleration(
+        self, mode: str, push: float, smooth: float, resistance: float, inertia: float | None = None
+    ) -> float:
         """domega_driven/dt [rad/s^2] = (push + smooth - s R) / I turning, 0 held; inertia: I(phi2) (default:
         the constant I)."""
         if mode == HELD:
@@ -147,13 +151,19 @@ def coulomb_factor(mode: str, push: float, resistance: float) -> float:
     return push / resistance if resistance > 0.0 else 0.0
 
 
-def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]], list[Effect]],
-                 reduced: Callable | None = None, has_weight: bool = False) -> DrivenModel:
+def build_driven(
+    spec: schema.DrivenPart,
+    unique_names: Callable[[list[Effect]], list[Effect]],
+    reduced: Callable | None = None,
+    has_weight: bool = False,
+) -> DrivenModel:
     """Assemble a scene's driven part, its branches reduced to the main shaft (module docstring); reduced and
     has_weight: its mechanism's reduced inertia and weight (mechanisms.build_reduced), if it has one (its output
     position places the kinks in phi_driven of a slider table, effects.build_load)."""
-    effects = [build_load(load, 2.0 * math.pi if spec.mechanism is not None else None, output_position_of(reduced))
-               for load in spec.loads]  # a slider table's kinks: where its mechanism's x crosses a breakpoint
+    effects = [
+        build_load(load, 2.0 * math.pi if spec.mechanism is not None else None, output_position_of(reduced))
+        for load in spec.loads
+    ]  # a slider table's kinks: where its mechanism's x crosses a breakpoint
     coulomb = [effect.definition.dry for effect in effects]  # constant loads: Coulomb resistances
     effects = unique_names(effects)
     branches = []
@@ -163,7 +173,7 @@ def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]],
         effects += [_reduced(effect, branch.name, branch.ratio) for effect in own]
         coulomb += [effect.definition.dry for effect in own]
         branches.append(BranchModel(branch.name, branch.inertia, branch.ratio, tuple(range(first, len(effects)))))
-    inertia = spec.inertia + sum(branch.inertia / branch.ratio ** 2 for branch in spec.branches)
+    inertia = spec.inertia + sum(branch.inertia / branch.ratio**2 for branch in spec.branches)
     resistance = -sum(effect.moment(0.0, 0.0, 0.0, 0.0, 0.0) for effect, dry in zip(effects, coulomb) if dry)
     return DrivenModel(inertia, tuple(effects), tuple(coulomb), resistance, tuple(branches), reduced, has_weight)
 
@@ -171,10 +181,13 @@ def build_driven(spec: schema.DrivenPart, unique_names: Callable[[list[Effect]],
 def _reduced(effect: Effect, branch: str, ratio: float) -> Effect:
     """A branch's effect reduced to the main shaft: M(omega_driven / i) / i (equal power)."""
     moment = effect.moment
-    return Effect(f"{branch}_{effect.name}", effect.role,
-                  lambda t, phi, omega, q, dq: moment(t, phi, omega / ratio, q, dq) / ratio, effect.depends_on,
-                  f"{branch}: ({effect.formula.replace('omega', 'omega_n')}) / {ratio:g}, omega_n = omega_driven / "
-                  f"{ratio:g}")
+    return Effect(
+        f"{branch}_{effect.name}",
+        effect.role,
+        lambda t, phi, omega, q, dq: moment(t, phi, omega / ratio, q, dq) / ratio,
+        effect.depends_on,
+        f"{branch}: ({effect.formula.replace('omega', 'omega_n')}) / {ratio:g}, omega_n = omega_driven / {ratio:g}",
+    )
 
 
 @dataclass(frozen=True)
@@ -200,11 +213,17 @@ class ClutchModel:
             return Forces(acceleration, acceleration, torque, torque + smooth, s)
         torque = self.kinetic_torque if clutch == SLIP_AHEAD else -self.kinetic_torque
         push = torque + smooth
-        return Forces((F1 - torque) / J, driven.acceleration(held_or_moving, torque, smooth, resistance), torque,
-                      push, coulomb_factor(held_or_moving, push, resistance))
+        return Forces(
+            (F1 - torque) / J,
+            driven.acceleration(held_or_moving, torque, smooth, resistance),
+            torque,
+            push,
+            coulomb_factor(held_or_moving, push, resistance),
+        )
 
-    def mode_at(self, slip: float, omega_driven: float, F1: float, J: float, smooth: float, resistance: float
-                ) -> tuple[str, str]:
+    def mode_at(
+        self, slip: float, omega_driven: float, F1: float, J: float, smooth: float, resistance: float
+    ) -> tuple[str, str]:
         """The consistent train mode of a state: a clutch that is not at rest (slip = omega - omega_driven
         [rad/s] != 0) slips the way it slips and a driven part that turns keeps turning; a clutch at rest
         sticks while the moment that keeps it stuck is within static_torque, else slips the way the
@@ -234,8 +253,9 @@ class ClutchModel:
         return best
 
 
-def train_guards(mode: tuple[str, ...], index: int, forces: Callable, decide: Callable, wrap: Callable,
-                 clutch: ClutchModel | None) -> list[Guard]:
+def train_guards(
+    mode: tuple[str, ...], index: int, forces: Callable, decide: Callable, wrap: Callable, clutch: ClutchModel | None
+) -> list[Guard]:
     """The guards of a train mode (timed: the external load in the resistances changes in time).
 
     index: position of omega_driven in the state; forces(t, y) -> (Forces, R) in this mode; decide(t, y) ->
@@ -252,11 +272,13 @@ def train_guards(mode: tuple[str, ...], index: int, forces: Callable, decide: Ca
             y = y.copy()
             fix(y)
             return wrap(decide(t, y)), y
+
         return transition
 
     def switch_to(new_clutch: str | None, new_part: str) -> Callable:
         def transition(t: float, y: np.ndarray):
             return wrap((new_clutch, new_part) if clutch is not None else (new_part,)), y.copy()
+
         return transition
 
     def lock(y: np.ndarray) -> None:
@@ -268,19 +290,40 @@ def train_guards(mode: tuple[str, ...], index: int, forces: Callable, decide: Ca
             y[1] = 0.0
 
     if clutch_mode == STUCK:
-        guards += [Guard("clutch breaks away, motor ahead", lambda t, y: static - forces(t, y)[0].clutch,
-                         switch_to(SLIP_AHEAD, part), timed=True),
-                   Guard("clutch breaks away, machine ahead", lambda t, y: static + forces(t, y)[0].clutch,
-                         switch_to(SLIP_BEHIND, part), timed=True)]
+        guards += [
+            Guard(
+                "clutch breaks away, motor ahead",
+                lambda t, y: static - forces(t, y)[0].clutch,
+                switch_to(SLIP_AHEAD, part),
+                timed=True,
+            ),
+            Guard(
+                "clutch breaks away, machine ahead",
+                lambda t, y: static + forces(t, y)[0].clutch,
+                switch_to(SLIP_BEHIND, part),
+                timed=True,
+            ),
+        ]
     elif clutch_mode is not None:
         slip_sign = 1.0 if clutch_mode == SLIP_AHEAD else -1.0
-        guards.append(Guard("clutch locks (slip ends)", lambda t, y: slip_sign * (y[1] - y[index]), settle(lock),
-                            timed=True))
+        guards.append(
+            Guard("clutch locks (slip ends)", lambda t, y: slip_sign * (y[1] - y[index]), settle(lock), timed=True)
+        )
     if part == HELD:
-        guards += [Guard("driven part breaks away forwards", lambda t, y: _margin(forces(t, y), -1.0),
-                         switch_to(clutch_mode, FORWARD), timed=True),
-                   Guard("driven part breaks away backwards", lambda t, y: _margin(forces(t, y), 1.0),
-                         switch_to(clutch_mode, BACKWARD), timed=True)]
+        guards += [
+            Guard(
+                "driven part breaks away forwards",
+                lambda t, y: _margin(forces(t, y), -1.0),
+                switch_to(clutch_mode, FORWARD),
+                timed=True,
+            ),
+            Guard(
+                "driven part breaks away backwards",
+                lambda t, y: _margin(forces(t, y), 1.0),
+                switch_to(clutch_mode, BACKWARD),
+                timed=True,
+            ),
+        ]
     else:
         sign = DIRECTION[part]
         guards.append(Guard("driven part comes to rest", lambda t, y: sign * y[index], settle(stop), timed=True))

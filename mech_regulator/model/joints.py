@@ -13,8 +13,11 @@ def output_joints(model, values: dict) -> list[tuple[str, float, float]]:
     omega - omega_driven [rad/s]) and driven part (phi_driven [rad], NaN behind a clutch, which does not follow the
     driven part's angle; omega_driven [rad/s])."""
     kind = model.scene.machine.mechanism.type if model.scene.machine.mechanism else None
-    columns = {"crank_slider": [("slider", "x_slider", "v_slider")], "four_bar": [("rocker", "theta4", "omega4")],
-               "walking_beam": [("shuttle", "x_shuttle", "v_shuttle")]}.get(kind or "", [])
+    columns = {
+        "crank_slider": [("slider", "x_slider", "v_slider")],
+        "four_bar": [("rocker", "theta4", "omega4")],
+        "walking_beam": [("shuttle", "x_shuttle", "v_shuttle")],
+    }.get(kind or "", [])
     joints = [(name, values[position], values[velocity]) for name, position, velocity in columns]
     if model.coupling is not None:
         joints.append(("coupling", values["twist"], values["omega"] - values["omega_driven"]))

@@ -152,7 +152,7 @@ class CouplingModel:
         at_knots = np.concatenate([[0.0], np.cumsum(0.5 * (values[1:] + values[:-1]) * np.diff(knots))])
         at_knots -= at_knots[int(np.flatnonzero(knots == 0.0)[0])]
         step = twist - knots[i]
-        return at_knots[i] + values[i] * step + 0.5 * slopes[i] * step ** 2
+        return at_knots[i] + values[i] * step + 0.5 * slopes[i] * step**2
 
     def twist_for(self, moment: float) -> float:
         """The twist [rad] at which the elastic moment equals `moment` [N m] (the characteristic is strictly
@@ -244,8 +244,9 @@ class MachineModel:
         """(angle, period) pairs [rad] where some moment jumps with phi (a cam follower's law changes segment: its
         s'' jumps, and dJ/dphi with it)."""
         cams = cam_law_angles(self.scene.machine.mechanism) if self.scene.machine.mechanism is not None else []
-        return ([(angle, _period_of(effect)) for effect in self.effects for angle in effect.switch_angles]
-                + [(angle, 2.0 * math.pi) for angle in cams])
+        return [(angle, _period_of(effect)) for effect in self.effects for angle in effect.switch_angles] + [
+            (angle, 2.0 * math.pi) for angle in cams
+        ]
 
     @functools.cached_property
     def state_tables(self) -> tuple[StateTable, ...]:
@@ -266,10 +267,17 @@ class MachineModel:
                 breaks = slope_breaks(self.coupling.table[0].tolist(), self.coupling.table[1].tolist(), ends=False)
                 if breaks:
                     tables.append(StateTable("coupling table", lambda y: y[twist], breaks))
-            tables += [StateTable(f"driven part's {effect.name}", lambda y: y[0] - y[twist], effect.kink_angles,
-                                  effect.period, angular=True)
-                       for effect in self.coupling.driven.effects
-                       if effect.kink_angles and effect.segment_moment is not None]
+            tables += [
+                StateTable(
+                    f"driven part's {effect.name}",
+                    lambda y: y[0] - y[twist],
+                    effect.kink_angles,
+                    effect.period,
+                    angular=True,
+                )
+                for effect in self.coupling.driven.effects
+                if effect.kink_angles and effect.segment_moment is not None
+            ]
         return tuple(tables)
 
     def kink_angles(self) -> list[tuple[float, float]]:
@@ -278,8 +286,9 @@ class MachineModel:
         on them as on switch angles, and between two of them see each table continued along one segment and the
         friction's |k_j| as s_j k_j with the signs of the window's middle (rhs's window)."""
         corners = self.joint_friction.corner_angles if self.joint_friction is not None else ()
-        return ([(angle, _period_of(effect)) for effect in self.effects for angle in effect.kink_angles]
-                + [(angle, 2.0 * math.pi) for angle in corners])
+        return [(angle, _period_of(effect)) for effect in self.effects for angle in effect.kink_angles] + [
+            (angle, 2.0 * math.pi) for angle in corners
+        ]
 
     def dynamic_period(self) -> float:
         """Phi_omega = lcm of the kinematic period and the effects' periods [rad] (docs/theory.md §2.5).
@@ -293,8 +302,11 @@ class MachineModel:
         """dynamic_period, worked out once per model (the solvers ask for it at every segment)."""
         turns = [Fraction(1)]
         driven = self.driven.effects if self.driven is not None else ()
-        turns += [Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
-                  for effect in self.effects + driven if effect.period is not None]
+        turns += [
+            Fraction(effect.period / (2.0 * math.pi)).limit_denominator(360)
+            for effect in self.effects + driven
+            if effect.period is not None
+        ]
         lcm = turns[0]
         for turn in turns[1:]:
             numerator = math.lcm(lcm.numerator * turn.denominator, turn.numerator * lcm.denominator)
@@ -343,9 +355,16 @@ class MachineModel:
                 grid.add(round((angle + k * switch_period) % period, 12))
         return tuple(sorted(grid))
 
-    def rhs(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-            mode: MachineMode | None = None, ideal: bool = False, kinks: bool = True,
-            anchors: tuple[float, ...] | None = None, normal_signs: tuple[float, ...] = ()) -> RightHandSide:
+    def rhs(
+        self,
+        piece: LoadPiece | None = None,
+        window: tuple[float, float] | None = None,
+        mode: MachineMode | None = None,
+        ideal: bool = False,
+        kinks: bool = True,
+        anchors: tuple[float, ...] | None = None,
+        normal_signs: tuple[float, ...] = (),
+    ) -> RightHandSide:
         """The right-hand side `f(t, y) = dy/dt` for one external-load piece and mode.
 
         y = [phi, omega] or, governed, [phi, omega, governor states...]. The machine's part is epsilon =
@@ -373,25 +392,54 @@ class MachineModel:
         friction f |x'| |N| (a crank–slider's guide, a linkage's prismatic joints) read as f |x'| s_N N, continued
         across N = 0 between two crossings of the guard guide_normal locates (effects.joint_friction).
         """
-        return self._right_hand_side(piece, window if kinks else None, window, mode, ideal, crank_only=False,
-                                     anchors=anchors, normal_signs=normal_signs)
+        return self._right_hand_side(
+            piece,
+            window if kinks else None,
+            window,
+            mode,
+            ideal,
+            crank_only=False,
+            anchors=anchors,
+            normal_signs=normal_signs,
+        )
 
-    def guide_normal(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-                     mode: MachineMode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
-                     normal_signs: tuple[float, ...] = (), guide: int = 0
-                     ) -> Callable[[float, np.ndarray], float] | None:
+    def guide_normal(
+        self,
+        piece: LoadPiece | None = None,
+        window: tuple[float, float] | None = None,
+        mode: MachineMode | None = None,
+        kinks: bool = True,
+        anchors: tuple[float, ...] | None = None,
+        normal_signs: tuple[float, ...] = (),
+        guide: int = 0,
+    ) -> Callable[[float, np.ndarray], float] | None:
         """(t, y) -> the normal force N [N] of guide number `guide` with friction (joint_friction.guides' order: a
         crank–slider's guide, a linkage's prismatic joints) with the acceleration of rhs(piece, window, mode,
         kinks=kinks, anchors=anchors, normal_signs=normal_signs) (the guard of the corner of its friction f |x'| |N|),
         or None for a machine without that guide with friction."""
         if self.joint_friction is None or guide >= len(self.joint_friction.guides):
             return None
-        return self._right_hand_side(piece, window if kinks else None, window, mode, False, crank_only=False,
-                                     anchors=anchors, normal_signs=normal_signs, normal=guide)
+        return self._right_hand_side(
+            piece,
+            window if kinks else None,
+            window,
+            mode,
+            False,
+            crank_only=False,
+            anchors=anchors,
+            normal_signs=normal_signs,
+            normal=guide,
+        )
 
-    def joint_reactions(self, piece: LoadPiece | None = None, window: tuple[float, float] | None = None,
-                        mode: MachineMode | None = None, kinks: bool = True, anchors: tuple[float, ...] | None = None,
-                        normal_signs: tuple[float, ...] = ()) -> Callable[[float, np.ndarray], list[float]] | None:
+    def joint_reactions(
+        self,
+        piece: LoadPiece | None = None,
+        window: tuple[float, float] | None = None,
+        mode: MachineMode | None = None,
+        kinks: bool = True,
+        anchors: tuple[float, ...] | None = None,
+        normal_signs: tuple[float, ...] = (),
+    ) -> Callable[[float, np.ndarray], list[float]] | None:
         """(t, y) -> the reaction magnitudes |R_j| [N] of the joints with friction (joint_friction.names' order) with
         the acceleration of rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_signs): the
         reactions the rhs reads, continued along its segment as it is (the solvers keep their steps away from the
@@ -399,8 +447,17 @@ class MachineModel:
         mechanism."""
         if self.joint_friction is None or self.joint_friction.loads is None:
             return None
-        return self._right_hand_side(piece, window if kinks else None, window, mode, False, crank_only=False,
-                                     anchors=anchors, normal_signs=normal_signs, reactions=True)
+        return self._right_hand_side(
+            piece,
+            window if kinks else None,
+            window,
+            mode,
+            False,
+            crank_only=False,
+            anchors=anchors,
+            normal_signs=normal_signs,
+            reactions=True,
+        )
 
     @functools.cached_property
     def crank_side(self) -> Callable[[float, np.ndarray], tuple[float, float]]:
@@ -409,11 +466,19 @@ class MachineModel:
         governor's state in y; joint friction, which depends on the acceleration, is not in it)."""
         return self._right_hand_side(None, None, None, None, False, crank_only=True)
 
-    def _right_hand_side(self, piece: LoadPiece | None, segment: tuple[float, float] | None,
-                         window: tuple[float, float] | None, mode: MachineMode | None,
-                         ideal: bool, crank_only: bool, anchors: tuple[float, ...] | None = None,
-                         normal_signs: tuple[float, ...] = (), normal: int | None = None,
-                         reactions: bool = False) -> Callable:
+    def _right_hand_side(
+        self,
+        piece: LoadPiece | None,
+        segment: tuple[float, float] | None,
+        window: tuple[float, float] | None,
+        mode: MachineMode | None,
+        ideal: bool,
+        crank_only: bool,
+        anchors: tuple[float, ...] | None = None,
+        normal_signs: tuple[float, ...] = (),
+        normal: int | None = None,
+        reactions: bool = False,
+    ) -> Callable:
         """rhs (see there) or, crank_only, crank_side, or, normal (a guide's number), guide_normal, or, reactions,
         joint_reactions; segment: the window when its tables continue along one segment (rhs's kinks), else None;
         anchors, normal_signs: rhs's."""
@@ -450,8 +515,11 @@ class MachineModel:
         governor_rates = None
         if governor is not None and not crank_only:
             governor_rates = governor.derivatives((mode[0], mode[1]) if mode is not None else None, ideal)
-        train = None if crank_only or self.driven is None else self._train(self.train_mode_of(mode),
-                                                                                   held.get("coupling table"), held)
+        train = (
+            None
+            if crank_only or self.driven is None
+            else self._train(self.train_mode_of(mode), held.get("coupling table"), held)
+        )
         friction = None if crank_only else self.joint_friction
         output_force = self._output_force(scale_drive, segment) if friction is not None else None
         ratio_signs = None  # between two corners of the friction (segment), |k_j| continued as s_j k_j
@@ -516,10 +584,16 @@ class MachineModel:
                 return effect.output_force
             return functools.partial(effect.segment_output_force, 0.5 * (segment[0] + segment[1]))
 
-        scaled = tuple(force_of(effect) for effect in self.effects
-                       if effect.output_force is not None and scale_drive and effect.role == "drive")
-        fixed = tuple(force_of(effect) for effect in self.effects
-                      if effect.output_force is not None and not (scale_drive and effect.role == "drive"))
+        scaled = tuple(
+            force_of(effect)
+            for effect in self.effects
+            if effect.output_force is not None and scale_drive and effect.role == "drive"
+        )
+        fixed = tuple(
+            force_of(effect)
+            for effect in self.effects
+            if effect.output_force is not None and not (scale_drive and effect.role == "drive")
+        )
 
         def force(t: float, phi: float, omega: float, q: float, dq: float, share: float) -> float:
             total = 0.0
@@ -531,8 +605,16 @@ class MachineModel:
 
         return force
 
-    def _joint_friction_columns(self, t: np.ndarray, y: np.ndarray, J: np.ndarray, moment: np.ndarray,
-                                q: np.ndarray, dq: np.ndarray, throttle: np.ndarray) -> dict[str, np.ndarray]:
+    def _joint_friction_columns(
+        self,
+        t: np.ndarray,
+        y: np.ndarray,
+        J: np.ndarray,
+        moment: np.ndarray,
+        q: np.ndarray,
+        dq: np.ndarray,
+        throttle: np.ndarray,
+    ) -> dict[str, np.ndarray]:
         """Joint friction at the samples, given J [kg m^2] and every other moment M = M_d + M_c - 1/2 J' omega^2
         [N m]: M_joint_friction, the friction reduced to the crank (J epsilon - M) [N m], and for each joint
         friction_<joint> (journal: moment rho |R| [N m]; guide: force f |N| [N]) and reaction_<joint> |R| [N];
@@ -557,8 +639,12 @@ class MachineModel:
             out["friction_thrust_collar"] = np.full(n, friction.collar)
         return out
 
-    def _train(self, train_mode: tuple[str, ...], twist_anchor: float | None = None,
-               driven_anchors: dict[str, float] | None = None) -> Callable:
+    def _train(
+        self,
+        train_mode: tuple[str, ...],
+        twist_anchor: float | None = None,
+        driven_anchors: dict[str, float] | None = None,
+    ) -> Callable:
         """The drive train's part of the right-hand side in a train mode: (t, y, J, F1, external) -> (domega/dt,
         rates of the train's states), F1 the crank's net moment apart from the train (crank_side), external the
         external load's magnitude [N m], a Coulomb resistance of the driven part; twist_anchor [rad]: a coupling
@@ -618,8 +704,9 @@ class MachineModel:
             return train
         return (STUCK, FORWARD) if self.clutch is not None else (FORWARD,)
 
-    def drive_train_at(self, t: float, y: np.ndarray, external: float | None = None,
-                       train_mode: tuple[str, ...] | None = None) -> tuple[tuple[str, ...], Forces, float]:
+    def drive_train_at(
+        self, t: float, y: np.ndarray, external: float | None = None, train_mode: tuple[str, ...] | None = None
+    ) -> tuple[tuple[str, ...], Forces, float]:
         """(train mode, Forces, Coulomb resistance R [N m]) at time t [s] and state y, in `train_mode` or, if None,
         in the mode the state is in (a clutch or driven part at rest decided by the forces, as
         ClutchModel.mode_at); external: the external load's magnitude [N m] (default: the scenario's at t). Behind
@@ -632,23 +719,35 @@ class MachineModel:
         if self.clutch is not None:
             J, F1 = self.crank_side(t, y)
             if train_mode is None:
-                train_mode = self.clutch.mode_at(y[1] - omega2, omega2, F1, J, driven.smooth_moment(t, omega2),
-                                                 resistance)
+                train_mode = self.clutch.mode_at(
+                    y[1] - omega2, omega2, F1, J, driven.smooth_moment(t, omega2), resistance
+                )
             if train_mode[0] == STUCK:
                 omega2 = y[1]
-            return train_mode, self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2),
-                                                  resistance), resistance
+            return (
+                train_mode,
+                self.clutch.forces(train_mode, F1, J, driven.smooth_moment(t, omega2), resistance),
+                resistance,
+            )
         coupling = self.coupling
         assert coupling is not None, "a driven part is behind a coupling or a clutch"
         passed = float(coupling.elastic(y[index - 1]) + coupling.damping * (y[1] - omega2))
         inertia, smooth = driven.dynamics(t, y[0] - y[index - 1], omega2)
         push = passed + smooth
         if train_mode is None:
-            train_mode = (driven.at_rest(push, resistance) if omega2 == 0.0 else FORWARD if omega2 > 0.0
-                          else BACKWARD,)
+            train_mode = (driven.at_rest(push, resistance) if omega2 == 0.0 else FORWARD if omega2 > 0.0 else BACKWARD,)
         part = train_mode[0]
-        return train_mode, Forces(math.nan, driven.acceleration(part, passed, smooth, resistance, inertia),
-                                  0.0, push, coulomb_factor(part, push, resistance)), resistance
+        return (
+            train_mode,
+            Forces(
+                math.nan,
+                driven.acceleration(part, passed, smooth, resistance, inertia),
+                0.0,
+                push,
+                coulomb_factor(part, push, resistance),
+            ),
+            resistance,
+        )
 
     def constraint(self, mode: MachineMode | None) -> Callable[[np.ndarray], None] | None:
         """What a mode imposes on the states the solver gives, in place, or None: a stuck clutch sets omega2 =
@@ -675,21 +774,26 @@ class MachineModel:
 
     def state_names(self) -> tuple[str, ...]:
         """Names of the entries of the state vector y."""
-        return (("phi", "omega") + (self.governor.state_names if self.governor is not None else ())
-                + (("twist", "omega_driven") if self.coupling is not None else ())
-                + (("omega_driven",) if self.clutch is not None else ()))
+        return (
+            ("phi", "omega")
+            + (self.governor.state_names if self.governor is not None else ())
+            + (("twist", "omega_driven") if self.coupling is not None else ())
+            + (("omega_driven",) if self.clutch is not None else ())
+        )
 
     def initial_state(self) -> np.ndarray:
         """The state at t = 0 from the scenario (governor at rest in equilibrium unless the scene says)."""
         initial = self.scene.scenario.initial
         parts = [np.array([initial.phi, initial.omega], dtype=float)]
         if self.governor is not None:
-            parts.append(self.governor.initial_state(initial.omega, initial.sleeve, initial.servo,
-                                                     self.initial_balance_throttle))
+            parts.append(
+                self.governor.initial_state(initial.omega, initial.sleeve, initial.servo, self.initial_balance_throttle)
+            )
         omega_driven = initial.omega if initial.omega_driven is None else initial.omega_driven
         if self.coupling is not None:
-            parts.append(np.array([self.static_twist(initial.omega) if initial.twist is None else initial.twist,
-                                   omega_driven]))
+            parts.append(
+                np.array([self.static_twist(initial.omega) if initial.twist is None else initial.twist, omega_driven])
+            )
         if self.clutch is not None:
             parts.append(np.array([omega_driven]))
         return np.concatenate(parts)
@@ -706,8 +810,12 @@ class MachineModel:
         low, high = coupling.twist_for(min(needed)), coupling.twist_for(max(needed))
         if low == high:
             return low
-        return optimize.brentq(lambda twist: float(coupling.elastic(twist)) - coupling.required_moment(
-            0.0, phi0 - twist, omega, external), low, high, xtol=1e-15)
+        return optimize.brentq(
+            lambda twist: float(coupling.elastic(twist)) - coupling.required_moment(0.0, phi0 - twist, omega, external),
+            low,
+            high,
+            xtol=1e-15,
+        )
 
     def initial_mode(self, y: np.ndarray) -> MachineMode | None:
         """The mode at a state with the governor at rest: the governor's (None without a governor), followed by
@@ -728,8 +836,9 @@ class MachineModel:
             direction = 0.0 if y[1] == 0.0 else 1.0 if y[1] > 0.0 else -1.0
         built = self._built_guards.get((mode, direction))
         if built is None:
-            built = self._built_guards[mode, direction] = tuple(self._mode_guards(mode)
-                                                                + self._crank_guards(mode, direction))
+            built = self._built_guards[mode, direction] = tuple(
+                self._mode_guards(mode) + self._crank_guards(mode, direction)
+            )
         return list(built)
 
     @functools.cached_property
@@ -762,12 +871,19 @@ class MachineModel:
             return governor.guards((mode[0], mode[1])) if governor is not None else []
         train_mode = self.train_mode_of(mode)
         governor_mode: MachineMode = (mode[0], mode[1]) if governor is not None else ()
-        guards = ([_carrying(guard, train_mode) for guard in governor.guards((mode[0], mode[1]))]
-                  if governor is not None else [])
-        return guards + train_guards(train_mode, self.driven_speed_index,
-                                     lambda t, y: self.drive_train_at(t, y, train_mode=train_mode)[1:],
-                                     lambda t, y: self.drive_train_at(t, y)[0],
-                                     lambda train: governor_mode + tuple(train), self.clutch)
+        guards = (
+            [_carrying(guard, train_mode) for guard in governor.guards((mode[0], mode[1]))]
+            if governor is not None
+            else []
+        )
+        return guards + train_guards(
+            train_mode,
+            self.driven_speed_index,
+            lambda t, y: self.drive_train_at(t, y, train_mode=train_mode)[1:],
+            lambda t, y: self.drive_train_at(t, y)[0],
+            lambda train: governor_mode + tuple(train),
+            self.clutch,
+        )
 
     def cycle_averages(self, omega: float, external: float = 0.0) -> tuple[float, float, float]:
         """Cycle averages at constant crank speed omega [rad/s] over one dynamic period: (mean J [kg m^2],
@@ -826,8 +942,9 @@ class MachineModel:
         _, drive, other = self.cycle_averages(omega, external)
         return -other / drive if drive != 0.0 else math.nan
 
-    def columns(self, t: np.ndarray, y: np.ndarray, throttle: np.ndarray | None = None,
-                external: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    def columns(
+        self, t: np.ndarray, y: np.ndarray, throttle: np.ndarray | None = None, external: np.ndarray | None = None
+    ) -> dict[str, np.ndarray]:
         """Output columns at sample times t [s] for states y (shape n_states x n). throttle [-] and external
         [N m] (the load's magnitude): inputs given from outside the model (co-simulation) at each sample,
         in place of the governor's throttle and the scenario's load.
@@ -884,8 +1001,9 @@ class MachineModel:
         driven = self.driven
         if driven is not None:
             train = [self.drive_train_at(ti, y[:, i], external[i]) for i, ti in enumerate(t)]
-            forces = {key: np.array([getattr(state[1], key) for state in train])
-                      for key in ("driven", "clutch", "factor")}
+            forces = {
+                key: np.array([getattr(state[1], key) for state in train]) for key in ("driven", "clutch", "factor")
+            }
             omega_driven = y[self.driven_speed_index]
         if driven is None:
             load = load - external
@@ -897,11 +1015,19 @@ class MachineModel:
             load = load - forces["clutch"]
         net = drive + load + weight
         if self.joint_friction is not None:
-            friction_columns = self._joint_friction_columns(t, y, J, net - 0.5 * dJ * omega ** 2, q, dq, throttle)
+            friction_columns = self._joint_friction_columns(t, y, J, net - 0.5 * dJ * omega**2, q, dq, throttle)
             load = load + friction_columns["M_joint_friction"]
             net = net + friction_columns["M_joint_friction"]
-        out = {"t": t, "phi": y[0], "omega": omega, "epsilon": (net - 0.5 * dJ * omega ** 2) / J, "J": J,
-               "dJ_dphi": dJ, "M_drive": drive, "M_load": load}
+        out = {
+            "t": t,
+            "phi": y[0],
+            "omega": omega,
+            "epsilon": (net - 0.5 * dJ * omega**2) / J,
+            "J": J,
+            "dJ_dphi": dJ,
+            "M_drive": drive,
+            "M_load": load,
+        }
         for k, name in enumerate(names):
             if self.effects[k].role == "load":
                 out[f"M_{name}"] = per_effect[k]
@@ -919,8 +1045,12 @@ class MachineModel:
             phi_driven = y[0] - twist if coupling is not None else np.zeros(n)
             state = np.array([driven.state(p) for p in phi_driven]).T.reshape(5, n)
             for effect, dry in zip(driven.effects, driven.coulomb):
-                moment = np.array([effect.moment(ti, p, w, q2, dq2) for ti, p, w, q2, dq2
-                                   in zip(t, phi_driven, omega_driven, state[3], state[4])])
+                moment = np.array(
+                    [
+                        effect.moment(ti, p, w, q2, dq2)
+                        for ti, p, w, q2, dq2 in zip(t, phi_driven, omega_driven, state[3], state[4])
+                    ]
+                )
                 out[f"M_driven_{effect.name}"] = moment * forces["factor"] if dry else moment
             if driven.has_weight:
                 out["M_driven_weight"] = state[2]
@@ -931,8 +1061,10 @@ class MachineModel:
                 assert self.scene.machine.coupling is not None, "the model's coupling is the scene's"
                 driven_mechanism = self.scene.machine.coupling.driven.mechanism
                 if driven_mechanism is not None:
-                    slider = (driven_mechanism.type == "crank_slider"
-                              or getattr(driven_mechanism, "output_kind", None) == "slider")
+                    slider = (
+                        driven_mechanism.type == "crank_slider"
+                        or getattr(driven_mechanism, "output_kind", None) == "slider"
+                    )
                     position, speed = ("x_driven", "v_driven") if slider else ("theta4_driven", "omega4_driven")
                     out[position], out[speed] = state[3], state[4] * omega_driven
             out["omega_driven"] = omega_driven
@@ -941,13 +1073,13 @@ class MachineModel:
             for branch in driven.branches:
                 resisting = -branch.ratio * sum(out[f"M_driven_{driven.effects[i].name}"] for i in branch.effects)
                 out[f"M_section_{branch.name}"] = resisting + branch.inertia / branch.ratio * forces["driven"]
-            out["E_kinetic"] = 0.5 * J * omega ** 2 + 0.5 * state[0] * omega_driven ** 2
+            out["E_kinetic"] = 0.5 * J * omega**2 + 0.5 * state[0] * omega_driven**2
             if coupling is not None:
                 out["E_elastic"] = coupling.elastic_energy(twist)
         else:
             if self.load_pieces or given:
                 out["M_external"] = -external
-            out["E_kinetic"] = 0.5 * J * omega ** 2
+            out["E_kinetic"] = 0.5 * J * omega**2
         mechanism = self.scene.machine.mechanism
         kind = mechanism.type if mechanism is not None else None
         if kind == "crank_slider" and cylinders:
@@ -974,9 +1106,12 @@ def crank_moments(columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     resistance (the machine's own loads and the links' weight), external (minus the external load) and
     net = M_d + M_c = J epsilon + 1/2 J' omega^2 (docs/theory.md §2.3)."""
     external = columns.get("M_external", np.zeros_like(columns["omega"]))
-    return {"drive": columns["M_drive"], "resistance": columns["M_load"] - external + columns.get("M_weight", 0.0),
-            "external": external,
-            "net": columns["J"] * columns["epsilon"] + 0.5 * columns["dJ_dphi"] * columns["omega"] ** 2}
+    return {
+        "drive": columns["M_drive"],
+        "resistance": columns["M_load"] - external + columns.get("M_weight", 0.0),
+        "external": external,
+        "net": columns["J"] * columns["epsilon"] + 0.5 * columns["dJ_dphi"] * columns["omega"] ** 2,
+    }
 
 
 def _load_pieces(scene: Scene) -> tuple[LoadPiece, ...]:
@@ -1002,10 +1137,11 @@ def build_model(scene: Scene) -> MachineModel:
     """Assemble a validated scene into a MachineModel: only the effects the scene names are built; a scene whose
     mechanisms cannot be built is refused (SceneError, mechanisms/checks.py)."""
     machine = refuse_unbuildable(scene).machine
-    flywheel = machine.flywheel.inertia * machine.flywheel.ratio ** 2 if machine.flywheel else 0.0
+    flywheel = machine.flywheel.inertia * machine.flywheel.ratio**2 if machine.flywheel else 0.0
     gravity = (machine.gravity[0], machine.gravity[1]) if machine.gravity is not None else None
-    has_weight = machine.mechanism is not None and ((gravity is not None and any(gravity) and _has_mass(machine.mechanism))
-                                                    or has_cam_springs(machine.mechanism))   # in M_weight too
+    has_weight = machine.mechanism is not None and (
+        (gravity is not None and any(gravity) and _has_mass(machine.mechanism)) or has_cam_springs(machine.mechanism)
+    )  # in M_weight too
     reduced = build_reduced(machine.mechanism, gravity if has_weight else None) if machine.mechanism else None
     _check_inertia(machine, machine.inertia + flywheel, reduced)
     kinematic_period = 2.0 * math.pi if machine.mechanism is not None else None
@@ -1017,11 +1153,21 @@ def build_model(scene: Scene) -> MachineModel:
     coupling = _coupling_model(machine, gravity)
     clutch = None
     if machine.clutch is not None:
-        clutch = ClutchModel(machine.clutch.static_torque, machine.clutch.kinetic_torque,
-                             build_driven(machine.clutch.driven, _unique_names))
-    model = MachineModel(scene=scene, inertia_constant=machine.inertia + flywheel, reduced=reduced,
-                         has_weight=has_weight, effects=tuple(effects), load_pieces=_load_pieces(scene),
-                         coupling=coupling, clutch=clutch)
+        clutch = ClutchModel(
+            machine.clutch.static_torque,
+            machine.clutch.kinetic_torque,
+            build_driven(machine.clutch.driven, _unique_names),
+        )
+    model = MachineModel(
+        scene=scene,
+        inertia_constant=machine.inertia + flywheel,
+        reduced=reduced,
+        has_weight=has_weight,
+        effects=tuple(effects),
+        load_pieces=_load_pieces(scene),
+        coupling=coupling,
+        clutch=clutch,
+    )
     if machine.joint_friction is not None:
         model = dataclasses.replace(model, joint_friction=_joint_friction(model))
     if scene.governor is None:
@@ -1037,11 +1183,16 @@ def _coupling_model(machine, gravity: tuple[float, float] | None) -> CouplingMod
     if coupling is None:
         return None
     mechanism = coupling.driven.mechanism
-    if mechanism is not None and mechanism.type == "linkage" and any(joint.type == "cam"
-                                                                     for joint in mechanism.joints.values()):
-        raise SceneError("machine.coupling.driven.mechanism has a cam pair: a cam behind a coupling is not supported "
-                         "yet (its contact is checked on the machine's own mechanism only); expected the cam on "
-                         "machine.mechanism")
+    if (
+        mechanism is not None
+        and mechanism.type == "linkage"
+        and any(joint.type == "cam" for joint in mechanism.joints.values())
+    ):
+        raise SceneError(
+            "machine.coupling.driven.mechanism has a cam pair: a cam behind a coupling is not supported "
+            "yet (its contact is checked on the machine's own mechanism only); expected the cam on "
+            "machine.mechanism"
+        )
     weighs = mechanism is not None and gravity is not None and any(gravity) and _has_mass(mechanism)
     reduced = build_reduced(mechanism, gravity if weighs else None) if mechanism is not None else None
     driven = build_driven(coupling.driven, _unique_names, reduced, weighs)
@@ -1057,15 +1208,18 @@ def _joint_friction(model: MachineModel) -> JointFrictionModel:
     friction = build_joint_friction(model.scene.machine)
     phi, ratio = worst_locking(friction, lambda angle: model.inertia(angle)[0])
     if ratio >= 1.0:
-        raise SceneError(f"machine.joint_friction: the machine self-locks at phi = {math.degrees(phi):.1f} deg: there "
-                         f"the joint friction grows with the crank's acceleration {ratio:.3g} times as fast as the "
-                         "inertia resists it (sum rho_j |k_j| |dR_j/d epsilon| >= J), so the equation of motion has "
-                         "no unique acceleration; expected smaller joint radii or coefficient, or more inertia")
+        raise SceneError(
+            f"machine.joint_friction: the machine self-locks at phi = {math.degrees(phi):.1f} deg: there "
+            f"the joint friction grows with the crank's acceleration {ratio:.3g} times as fast as the "
+            "inertia resists it (sum rho_j |k_j| |dR_j/d epsilon| >= J), so the equation of motion has "
+            "no unique acceleration; expected smaller joint radii or coefficient, or more inertia"
+        )
     return friction
 
 
 def _carrying(guard: Guard, train_mode: tuple[str, ...]) -> Guard:
     """A governor's guard whose transition keeps the drive train's mode after the governor's new mode."""
+
     def transition(y: np.ndarray) -> tuple[MachineMode, np.ndarray]:
         governor_mode, state = guard.transition(y)
         assert governor_mode is not None, "a governor's guard gives the governor's new mode"
@@ -1089,14 +1243,18 @@ def _check_inertia(machine, J0: float, reduced: Reduced | None) -> None:
     for key in ("coupling", "clutch"):
         part = getattr(machine, key)
         if part is not None and part.driven.inertia < MIN_INERTIA:
-            raise SceneError(f"machine.{key}.driven.inertia = {part.driven.inertia:g} kg m^2: below the limit of "
-                             f"{MIN_INERTIA:g} kg m^2 for an inertia (moments divided by it would overflow)")
+            raise SceneError(
+                f"machine.{key}.driven.inertia = {part.driven.inertia:g} kg m^2: below the limit of "
+                f"{MIN_INERTIA:g} kg m^2 for an inertia (moments divided by it would overflow)"
+            )
     advice = "give machine.inertia > 0 (the rotor's, the crank's) or a flywheel"
     if reduced is None:
         if J0 < MIN_INERTIA:
-            raise SceneError(f"machine.inertia = {machine.inertia:g} kg m^2 (with the flywheel's, J = {J0:g} kg m^2): "
-                             f"below the limit of {MIN_INERTIA:g} kg m^2 for an inertia (moments divided by it "
-                             "would overflow)")
+            raise SceneError(
+                f"machine.inertia = {machine.inertia:g} kg m^2 (with the flywheel's, J = {J0:g} kg m^2): "
+                f"below the limit of {MIN_INERTIA:g} kg m^2 for an inertia (moments divided by it "
+                "would overflow)"
+            )
         return
 
     def inertia(phi: float) -> float:
@@ -1107,30 +1265,41 @@ def _check_inertia(machine, J0: float, reduced: Reduced | None) -> None:
         J = np.array([inertia(phi) for phi in phis], dtype=float)
     mechanism = machine.mechanism
     values = ", ".join(f"{key} {value:g}" for key, value in mechanism.model_dump().items() if isinstance(value, float))
-    keys = (f"(J0 = machine.inertia + flywheel = {J0:g} kg m^2; machine.mechanism, type {mechanism.type}: {values}; "
-            "lengths in m, masses in kg, inertias in kg m^2)")
+    keys = (
+        f"(J0 = machine.inertia + flywheel = {J0:g} kg m^2; machine.mechanism, type {mechanism.type}: {values}; "
+        "lengths in m, masses in kg, inertias in kg m^2)"
+    )
     if not np.all(np.isfinite(J)):
         where = math.degrees(phis[int(np.argmax(~np.isfinite(J)))])
-        raise SceneError(f"machine: the reduced inertia J(phi) is not finite at phi = {where:.1f} deg {keys}; "
-                         "expected the lengths and masses of a real mechanism")
+        raise SceneError(
+            f"machine: the reduced inertia J(phi) is not finite at phi = {where:.1f} deg {keys}; "
+            "expected the lengths and masses of a real mechanism"
+        )
     index, step = int(np.argmin(J)), phis[1] - phis[0]
-    found = optimize.minimize_scalar(inertia, bounds=(phis[index] - step, phis[index] + step), method="bounded",
-                                     options={"xatol": 1e-12})
+    found = optimize.minimize_scalar(
+        inertia, bounds=(phis[index] - step, phis[index] + step), method="bounded", options={"xatol": 1e-12}
+    )
     J_min, phi_min = min((float(found.fun), float(found.x)), (float(J[index]), float(phis[index])))
     J_max = float(np.max(J))
     if J_min > MIN_INERTIA_FRACTION * J_max and J_min >= MIN_INERTIA:
         return
-    limit = (f"above {MIN_INERTIA_FRACTION:g} of its largest value" if J_min <= MIN_INERTIA_FRACTION * J_max else
-             f"at least {MIN_INERTIA:g} kg m^2 (the limit for an inertia)")
-    raise SceneError(f"machine: the reduced inertia J(phi) falls to {J_min:.3g} kg m^2 at phi = "
-                     f"{math.degrees(phi_min) % 360.0:.2f} deg (its largest: {J_max:.3g} kg m^2) {keys}; there the "
-                     f"crank's acceleration M / J has no bound: expected J(phi) {limit} over the whole turn: {advice}")
+    limit = (
+        f"above {MIN_INERTIA_FRACTION:g} of its largest value"
+        if J_min <= MIN_INERTIA_FRACTION * J_max
+        else f"at least {MIN_INERTIA:g} kg m^2 (the limit for an inertia)"
+    )
+    raise SceneError(
+        f"machine: the reduced inertia J(phi) falls to {J_min:.3g} kg m^2 at phi = "
+        f"{math.degrees(phi_min) % 360.0:.2f} deg (its largest: {J_max:.3g} kg m^2) {keys}; there the "
+        f"crank's acceleration M / J has no bound: expected J(phi) {limit} over the whole turn: {advice}"
+    )
 
 
 def has_cam_springs(mechanism) -> bool:
     """Whether a linkage has a cam follower's spring (its moment is carried in the reduction's M_weight)."""
-    return mechanism.type == "linkage" and any(joint.type == "cam" and joint.spring is not None
-                                               for joint in mechanism.joints.values())
+    return mechanism.type == "linkage" and any(
+        joint.type == "cam" and joint.spring is not None for joint in mechanism.joints.values()
+    )
 
 
 def _has_mass(mechanism) -> bool:

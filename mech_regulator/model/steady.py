@@ -24,9 +24,13 @@ def balance_speed(model: MachineModel, hint: str = "") -> float:
     while mean_moment(high) > 0.0:
         low, high = high, 2.0 * high
         if high > 1e7:
-            raise SceneError(f"scene '{model.scene.name}': the cycle-mean drive exceeds the resisting moments at every "
-                             f"speed up to 1e7 rad/s: the machine has no steady mean speed{hint}")
+            raise SceneError(
+                f"scene '{model.scene.name}': the cycle-mean drive exceeds the resisting moments at every "
+                f"speed up to 1e7 rad/s: the machine has no steady mean speed{hint}"
+            )
     if mean_moment(low) <= 0.0:
-        raise SceneError(f"scene '{model.scene.name}': the cycle-mean drive does not overcome the resisting moments "
-                         f"even at rest: the machine has no steady mean speed{hint}")
+        raise SceneError(
+            f"scene '{model.scene.name}': the cycle-mean drive does not overcome the resisting moments "
+            f"even at rest: the machine has no steady mean speed{hint}"
+        )
     return optimize.brentq(mean_moment, low, high, xtol=1e-13, rtol=1e-14)

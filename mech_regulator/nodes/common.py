@@ -53,15 +53,27 @@ MATCH_WAIT = 1.0  # [s] of wall time a publisher waits at most to match what the
 MATCH_POLL = 0.01  # [s] between two looks at whether a publisher has matched the subscriptions the graph knows
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
-COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.VOLATILE)
+COMMAND_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 # State streams (joint states, moments, governor state): reliable, and a subscriber that joins late (the
 # recorder) still receives the last HISTORY_DEPTH messages. Volatile subscribers match them too.
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=HISTORY_DEPTH, reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STATE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=HISTORY_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 # The machine's run state (RunState): the latest only, kept for nodes that join late.
-STATUS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STATUS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 
 
 class PeerError(Exception):
@@ -82,39 +94,56 @@ def nanoseconds(time: Time) -> int:
     return time.sec * NANOSECONDS + time.nanosec
 
 
-def float_parameter(node: Node, name: str, value: float, description: str, low: float, high: float,
-                    read_only: bool = False) -> float:
+def float_parameter(
+    node: Node, name: str, value: float, description: str, low: float, high: float, read_only: bool = False
+) -> float:
     """Declare a double parameter with its range (ROS refuses values outside it) and return its value."""
-    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_DOUBLE, description=description,
-                                     read_only=read_only,
-                                     floating_point_range=[FloatingPointRange(from_value=low, to_value=high)])
+    descriptor = ParameterDescriptor(
+        name=name,
+        type=ParameterType.PARAMETER_DOUBLE,
+        description=description,
+        read_only=read_only,
+        floating_point_range=[FloatingPointRange(from_value=low, to_value=high)],
+    )
     return node.declare_parameter(name, float(value), descriptor).value
 
 
-def int_parameter(node: Node, name: str, value: int, description: str, low: int, high: int,
-                  read_only: bool = True) -> int:
+def int_parameter(
+    node: Node, name: str, value: int, description: str, low: int, high: int, read_only: bool = True
+) -> int:
     """Declare an integer parameter with its range and return its value."""
-    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_INTEGER, description=description,
-                                     read_only=read_only, integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
+    descriptor = ParameterDescriptor(
+        name=name,
+        type=ParameterType.PARAMETER_INTEGER,
+        description=description,
+        read_only=read_only,
+        integer_range=[IntegerRange(from_value=low, to_value=high, step=1)],
+    )
     return node.declare_parameter(name, int(value), descriptor).value
 
 
-def text_parameter(node: Node, name: str, value: str, description: str, choices: tuple[str, ...] = (),
-                   read_only: bool = True) -> str:
+def text_parameter(
+    node: Node, name: str, value: str, description: str, choices: tuple[str, ...] = (), read_only: bool = True
+) -> str:
     """Declare a string parameter (choices: the allowed values, checked on every set) and return its value."""
     if choices:
         description += f" (one of: {', '.join(choices)})"
         node.add_on_set_parameters_callback(_choice_check(name, choices))
-    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_STRING, description=description,
-                                     read_only=read_only, additional_constraints=
-                                     f"one of {', '.join(choices)}" if choices else "")
+    descriptor = ParameterDescriptor(
+        name=name,
+        type=ParameterType.PARAMETER_STRING,
+        description=description,
+        read_only=read_only,
+        additional_constraints=f"one of {', '.join(choices)}" if choices else "",
+    )
     return node.declare_parameter(name, value, descriptor).value
 
 
 def list_parameter(node: Node, name: str, value: list[str], description: str) -> list[str]:
     """Declare a read-only string-array parameter and return its value."""
-    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_STRING_ARRAY, description=description,
-                                     read_only=True)
+    descriptor = ParameterDescriptor(
+        name=name, type=ParameterType.PARAMETER_STRING_ARRAY, description=description, read_only=True
+    )
     return list(node.declare_parameter(name, value, descriptor).value)
 
 
@@ -127,8 +156,9 @@ def peer_parameter(node: Node, role: str) -> str:
 
 def bool_parameter(node: Node, name: str, value: bool, description: str) -> bool:
     """Declare a read-only boolean parameter and return its value."""
-    descriptor = ParameterDescriptor(name=name, type=ParameterType.PARAMETER_BOOL, description=description,
-                                     read_only=True)
+    descriptor = ParameterDescriptor(
+        name=name, type=ParameterType.PARAMETER_BOOL, description=description, read_only=True
+    )
     return node.declare_parameter(name, value, descriptor).value
 
 
@@ -136,19 +166,27 @@ def _choice_check(name: str, choices: tuple[str, ...]) -> Callable:
     def check(parameters) -> SetParametersResult:
         for parameter in parameters:
             if parameter.name == name and parameter.value not in choices:
-                return SetParametersResult(successful=False, reason=f"{name} = {parameter.value!r}: expected one of "
-                                                                    f"{', '.join(choices)}")
+                return SetParametersResult(
+                    successful=False, reason=f"{name} = {parameter.value!r}: expected one of {', '.join(choices)}"
+                )
         return SetParametersResult(successful=True)
+
     return check
 
 
 def coupling_parameter(node: Node) -> str:
     """Declare the `coupling` parameter (solvers.cosim.COUPLINGS: how machine and governor see each other over an
     exchange step; machine, governor and recorder must have the same) and return it."""
-    return text_parameter(node, "coupling", DEFAULT_COUPLING, "how machine and governor see each other over an "
-                          "exchange step: hold, waveform (the governor follows the machine's speed over the step, the machine the "
-                          "throttle extrapolated from the governor's last answers) or corrected (each step predicted, "
-                          "then done again with the governor's own throttle over it)", COUPLINGS)
+    return text_parameter(
+        node,
+        "coupling",
+        DEFAULT_COUPLING,
+        "how machine and governor see each other over an "
+        "exchange step: hold, waveform (the governor follows the machine's speed over the step, the machine the "
+        "throttle extrapolated from the governor's last answers) or corrected (each step predicted, "
+        "then done again with the governor's own throttle over it)",
+        COUPLINGS,
+    )
 
 
 def add_samples(message, joint: str, field: str, samples: tuple | None) -> None:
@@ -168,10 +206,16 @@ def add_samples(message, joint: str, field: str, samples: tuple | None) -> None:
 def samples(message, joint: str, field: str) -> tuple[list[float], list[float]] | None:
     """The samples (times [s], values) that add_samples put in a sensor_msgs/JointState under `joint`; None when
     there are fewer than two, they are not finite or their times do not increase."""
-    rows = [(effort, value) for name, value, effort in zip(message.name, getattr(message, field), message.effort)
-            if name == joint]
-    if len(rows) < 2 or not all(math.isfinite(sample_time) and math.isfinite(value) for sample_time, value in rows) \
-            or any(later <= earlier for (earlier, _), (later, _) in zip(rows, rows[1:])):
+    rows = [
+        (effort, value)
+        for name, value, effort in zip(message.name, getattr(message, field), message.effort)
+        if name == joint
+    ]
+    if (
+        len(rows) < 2
+        or not all(math.isfinite(sample_time) and math.isfinite(value) for sample_time, value in rows)
+        or any(later <= earlier for (earlier, _), (later, _) in zip(rows, rows[1:]))
+    ):
         return None
     times, values = zip(*rows)
     return list(times), list(values)
@@ -185,8 +229,10 @@ def sent_samples(message, joint: str, field: str, low: float, high: float) -> tu
         return None
     found = samples(message, joint, field)
     if found is None or not all(low <= value <= high for value in found[1]):
-        raise BadMessage("bad samples", f"the {joint} samples are not at least two finite values within "
-                         f"[{low:g}, {high:g}] at increasing times")
+        raise BadMessage(
+            "bad samples",
+            f"the {joint} samples are not at least two finite values within [{low:g}, {high:g}] at increasing times",
+        )
     return found
 
 
@@ -211,15 +257,23 @@ class Batch:
         self.complete = complete
         self.deferred: list = []  # what `complete` turns into groups when the batch goes out
 
-    def add(self, when: int, names: list[str], positions: list[float], velocities: list[float],
-            efforts: list[float], wall: float = math.nan) -> None:
+    def add(
+        self,
+        when: int,
+        names: list[str],
+        positions: list[float],
+        velocities: list[float],
+        efforts: list[float],
+        wall: float = math.nan,
+    ) -> None:
         """Add the joints of exchange time `when` [ns] (a field left empty: NaN for each joint), with a wall-clock
         time [s] in the "stamp" joint's velocity."""
         if not self.groups and not self.deferred:
             self.oldest_wall = time.monotonic()
         missing = [math.nan] * len(names)
-        for gathered, values, first in zip(self.fields, (names, positions, velocities, efforts),
-                                           ("stamp", float(when), wall, math.nan)):
+        for gathered, values, first in zip(
+            self.fields, (names, positions, velocities, efforts), ("stamp", float(when), wall, math.nan)
+        ):
             gathered.append(first)
             gathered.extend(values or missing)
         self.groups, self.last = self.groups + 1, when
@@ -262,19 +316,22 @@ def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dic
     for name, position, velocity, effort in zip(names, message.position, message.velocity, message.effort):
         if name == "stamp":
             if not (math.isfinite(position) and 0.0 <= position <= LARGEST_STAMP and position == int(position)):
-                raise BadMessage("bad stamp", f"a batch's exchange time {position!r} ns, expected a whole number in "
-                                 f"0..{LARGEST_STAMP}")
+                raise BadMessage(
+                    "bad stamp",
+                    f"a batch's exchange time {position!r} ns, expected a whole number in 0..{LARGEST_STAMP}",
+                )
             if groups and int(position) < groups[-1][0]:  # (a repeat: a peer answered an exchange time twice)
-                raise BadMessage("out of order", f"a batch's exchange time {position:.0f} ns after "
-                                 f"{groups[-1][0]} ns")
+                raise BadMessage("out of order", f"a batch's exchange time {position:.0f} ns after {groups[-1][0]} ns")
             groups.append((int(position), {"stamp": (position, velocity, effort)}))
         else:
             groups[-1][1][name] = (position, velocity, effort)
     for when, joints in groups:
         missing = [joint for joint in required if joint not in joints]
         if missing:
-            raise BadMessage("missing joint", f"the group at {seconds(when):.9g} s has no {', '.join(missing)} "
-                             f"(it has {', '.join(joints)})")
+            raise BadMessage(
+                "missing joint",
+                f"the group at {seconds(when):.9g} s has no {', '.join(missing)} (it has {', '.join(joints)})",
+            )
     return groups
 
 
@@ -283,12 +340,15 @@ def scene_model(node: Node) -> MachineModel:
     `overrides` parameter's KEY=VALUE changes, assembled by the core, its solver.path decided as a command decides
     it (solvers.on_path_for_a_command; `run` passes its decision to every node). Raises SceneError, also for a
     scene that cannot be co-simulated (solvers.cosim.cosimulation_refusal)."""
-    scene_file = text_parameter(node, "scene_file", "engine_direct",
-                                "scene file (YAML path) or the name of a bundled scene")
-    overrides = list_parameter(node, "overrides", [""],
-                               "scene changes KEY=VALUE, as `mech-regulator --set` (e.g. governor.damping=300)")
-    model = on_path_for_a_command(build_model(load_scene(scene_file, [item for item in overrides if item])),
-                                  node.get_logger().info)  # solver.path auto: fast once compiled (`run` decides it)
+    scene_file = text_parameter(
+        node, "scene_file", "engine_direct", "scene file (YAML path) or the name of a bundled scene"
+    )
+    overrides = list_parameter(
+        node, "overrides", [""], "scene changes KEY=VALUE, as `mech-regulator --set` (e.g. governor.damping=300)"
+    )
+    model = on_path_for_a_command(
+        build_model(load_scene(scene_file, [item for item in overrides if item])), node.get_logger().info
+    )  # solver.path auto: fast once compiled (`run` decides it)
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"{scene_file}: the nodes cannot play this scene: {reason}")
@@ -305,20 +365,32 @@ class RunState:
     RUNNING, PAUSED, HOLDING, FINISHED = "running", "paused", "holding", "finished"
 
 
-def follow_run_state(node: Node, on_state: Callable[[RunStateMessage], None], refusals: Refusals,
-                     speakers: Speakers) -> None:
+def follow_run_state(
+    node: Node, on_state: Callable[[RunStateMessage], None], refusals: Refusals, speakers: Speakers
+) -> None:
     """Subscribe `node` to the machine's run state (RunState), taken from the node speakers allow on machine/status
     only; on_state gets it checked (trust.RunStateMessage). A node that follows the machine sets `node.done = True`
     when the state is finished, so `run` ends it by itself."""
-    receive(node, String, "machine/status", lambda message: on_state(json_message(message.data, RunStateMessage)),
-            STATUS_QOS, refusals, speakers)
+    receive(
+        node,
+        String,
+        "machine/status",
+        lambda message: on_state(json_message(message.data, RunStateMessage)),
+        STATUS_QOS,
+        refusals,
+        speakers,
+    )
 
 
 def diagnostics(node: Node, level: bytes, message: str, values: dict[str, object]) -> DiagnosticArray:
     """A DiagnosticArray with this node's status (hardware_id: the scene)."""
-    status = DiagnosticStatus(level=level, name=f"mech_regulator: {node.get_fully_qualified_name()}",
-                              message=message, hardware_id=str(values.pop("scene", "")),
-                              values=[KeyValue(key=key, value=str(value)) for key, value in values.items()])
+    status = DiagnosticStatus(
+        level=level,
+        name=f"mech_regulator: {node.get_fully_qualified_name()}",
+        message=message,
+        hardware_id=str(values.pop("scene", "")),
+        values=[KeyValue(key=key, value=str(value)) for key, value in values.items()],
+    )
     array = DiagnosticArray(status=[status])
     array.header.stamp = node.get_clock().now().to_msg()
     return array
@@ -347,7 +419,7 @@ def remember_ctrl_c() -> Callable[[], bool]:
 def node_label(node_factory: Callable[[], Node]) -> str:
     """The name a node's messages start with: machine_node for MachineNode (the launcher finds them by it)."""
     label = getattr(node_factory, "__name__", "node")
-    return label[:-len("Node")].lower() + "_node" if label.endswith("Node") else label
+    return label[: -len("Node")].lower() + "_node" if label.endswith("Node") else label
 
 
 def deliver_all(node: Node, publishers: list | None = None) -> None:
@@ -359,8 +431,10 @@ def deliver_all(node: Node, publishers: list | None = None) -> None:
     for publisher in node.publishers if publishers is None else publishers:
         deadline = time.monotonic() + MATCH_WAIT  # a subscription the graph still lists may never match (its node
         # was killed and its lease has not run out yet, or its QoS does not fit)
-        while publisher.get_subscription_count() < node.count_subscribers(publisher.topic_name) \
-                and time.monotonic() < deadline:
+        while (
+            publisher.get_subscription_count() < node.count_subscribers(publisher.topic_name)
+            and time.monotonic() < deadline
+        ):
             time.sleep(MATCH_POLL)
         publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
 
@@ -404,8 +478,11 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
         if interrupted() or not rclpy.ok():  # Ctrl-C in the middle of a call into rclpy
             code = 0
         elif node is None and isinstance(error, (ArithmeticError, RecursionError, MemoryError)):
-            print(f"mech_regulator: {name}: the scene cannot be computed with ({type(error).__name__}: {error}); "
-                  "expected the values of a real machine", file=sys.stderr)  # a scene beyond the limits' reach
+            print(
+                f"mech_regulator: {name}: the scene cannot be computed with ({type(error).__name__}: {error}); "
+                "expected the values of a real machine",
+                file=sys.stderr,
+            )  # a scene beyond the limits' reach
             code = EXIT_BAD_INPUT
         else:
             raise
@@ -429,6 +506,7 @@ def end_if_stuck(code: int) -> None:
     DESTROY_WAIT s: Fast DDS can deadlock when a participant is destroyed while it handles another's leaving
     (eProsima/Fast-DDS#6193 and kin; seen as a node that never ended after its run), and by then everything the node
     owes is sent and acknowledged, and its files closed."""
+
     def end() -> None:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -77,12 +77,14 @@ class GovernorNode(Node):
         super().__init__("governor")
         model = scene_model(self)
         if model.governor is None:
-            raise SceneError(f"scene '{model.scene.name}' has no governor: governor_node needs a scene with a "
-                             "'governor:' section")
+            raise SceneError(
+                f"scene '{model.scene.name}' has no governor: governor_node needs a scene with a 'governor:' section"
+            )
         self.model = model
         self.coupling = coupling_parameter(self)
-        self.max_speed = float_parameter(self, "max_speed", 1e4, "crank speeds beyond +- this [rad/s] are rejected",
-                                         0.0, 1e9)
+        self.max_speed = float_parameter(
+            self, "max_speed", 1e4, "crank speeds beyond +- this [rad/s] are rejected", 0.0, 1e9
+        )
         self.start_trial()
         self.done = False
         self.refusals = Refusals(self, self.report)
@@ -123,10 +125,13 @@ class GovernorNode(Node):
             raise BadMessage("wrong joint name", f"JointState names {names}, expected a joint 'crank'")
         speed = (-self.max_speed, self.max_speed, "crank velocity [rad/s] (parameter max_speed)")
         omega = bounded(message.velocity[names.index("crank")], *speed)
-        omega_middle = bounded(message.velocity[names.index("crank_midstep")], *speed) \
-            if "crank_midstep" in names else None
-        corrected, predicted = (sent_samples(message, name, "velocity", -self.max_speed, self.max_speed)
-                                for name in ("crank_corrected", "crank_predicted"))
+        omega_middle = (
+            bounded(message.velocity[names.index("crank_midstep")], *speed) if "crank_midstep" in names else None
+        )
+        corrected, predicted = (
+            sent_samples(message, name, "velocity", -self.max_speed, self.max_speed)
+            for name in ("crank_corrected", "crank_predicted")
+        )
         when = stamp_of(message.header.stamp)
         if when == 0 and self.time_ns:  # the machine's ~/reset (only the machine speaks here): a new trial
             self.states.send()
@@ -143,7 +148,7 @@ class GovernorNode(Node):
         add_samples(answer, "throttle_tentative", "position", waveform)
         answer.header.stamp = stamp(when)
         self.throttle_publisher.publish(answer)  # first: the machine waits for it
-        for t, event, mode in self.stepper.events[self.reported_events:]:
+        for t, event, mode in self.stepper.events[self.reported_events :]:
             self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
         self.reported_events = len(self.stepper.events)
         values = self.stepper.outputs()
@@ -151,10 +156,13 @@ class GovernorNode(Node):
             self.states.add(when, ["throttle", "integral"], [values["throttle"], values["integral"]], [0.0, 0.0], [])
         else:
             extra = [name for name in ("servo", "feedback_shift") if name in values]
-            self.states.add(when, ["sleeve", "arm", "throttle", *extra],
-                            [values["sleeve"], values["arm_angle"], values["throttle"],
-                             *(values[name] for name in extra)],
-                            [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)], [])
+            self.states.add(
+                when,
+                ["sleeve", "arm", "throttle", *extra],
+                [values["sleeve"], values["arm_angle"], values["throttle"], *(values[name] for name in extra)],
+                [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)],
+                [],
+            )
         self.states.send_when_due()  # after the answer, while the machine integrates
         if self.stepper.status != "complete":
             self.report()
@@ -167,8 +175,13 @@ class GovernorNode(Node):
         if self.stepper.status != "complete":
             level, text = ERROR, self.stepper.message
         level, text = self.refusals.status(level, text)
-        values = {"scene": self.model.scene.name, "sim_time": seconds(self.time_ns or 0), "throttle": self.throttle,
-                  "mode": "/".join(part for part in self.stepper.mode if part), "events": len(self.stepper.events)}
+        values = {
+            "scene": self.model.scene.name,
+            "sim_time": seconds(self.time_ns or 0),
+            "throttle": self.throttle,
+            "mode": "/".join(part for part in self.stepper.mode if part),
+            "events": len(self.stepper.events),
+        }
         array = diagnostics(self, level, text, values)
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)

@@ -65,8 +65,10 @@ def claim_domain(start: int) -> int:
             continue
         _claimed_domains.append(lock)
         return domain
-    raise SceneError(f"every ROS domain is taken by other runs on this machine (lock files in {DOMAIN_LOCKS}); "
-                     "expected --domain-id N")
+    raise SceneError(
+        f"every ROS domain is taken by other runs on this machine (lock files in {DOMAIN_LOCKS}); "
+        "expected --domain-id N"
+    )
 
 
 def private_environment(domain_id: int) -> dict[str, str]:
@@ -94,10 +96,22 @@ def node_names(governed: bool) -> list[str]:
     return ["recorder"] + (["governor"] if governed else []) + ["scenario", "machine"]
 
 
-def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
-                   overspeed_trip: float, output: Path, real_time_factor: float, governed: bool,
-                   duration: float | None, coupling: str, started: float, controller: str = "governor",
-                   bag: Path | None = None, peer_timeout: float | None = None) -> dict:
+def run_parameters(
+    scene_file: str,
+    overrides: list[str],
+    exchange_step: float,
+    time_mode: str,
+    overspeed_trip: float,
+    output: Path,
+    real_time_factor: float,
+    governed: bool,
+    duration: float | None,
+    coupling: str,
+    started: float,
+    controller: str = "governor",
+    bag: Path | None = None,
+    peer_timeout: float | None = None,
+) -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
     other nodes started (in realtime too, before the clock starts: a governor still starting would miss the run; the
     inputs are then the newest, not awaited);
@@ -107,12 +121,16 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     (None: the file's)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
     common = parameters["/**"]["ros__parameters"]
-    common.update(scene_file=scene_file, overrides=overrides or [""], exchange_step=exchange_step, time_mode=time_mode,
-                  coupling=coupling)
+    common.update(
+        scene_file=scene_file,
+        overrides=overrides or [""],
+        exchange_step=exchange_step,
+        time_mode=time_mode,
+        coupling=coupling,
+    )
     machine = parameters.setdefault("machine", {}).setdefault("ros__parameters", {})
     peers = [name for name in node_names(governed) if name != "machine"]
-    machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor, peers=peers,
-                   controller=controller)
+    machine.update(overspeed_trip=overspeed_trip, real_time_factor=real_time_factor, peers=peers, controller=controller)
     if peer_timeout is not None:
         machine.update(peer_timeout=peer_timeout)
     if duration is not None:
@@ -120,14 +138,29 @@ def run_parameters(scene_file: str, overrides: list[str], exchange_step: float, 
     if time_mode == "realtime":
         machine.update(lockstep_inputs=[""])  # the newest inputs, not awaited; the peers still are, before the clock
     parameters.setdefault("recorder", {}).setdefault("ros__parameters", {}).update(
-        output=str(output), launched_at=started, controller=controller, bag=str(bag) if bag is not None else "")
+        output=str(output), launched_at=started, controller=controller, bag=str(bag) if bag is not None else ""
+    )
     return parameters
 
 
-def main_job(model, scene_file: str, overrides: list[str], exchange_step: float, time_mode: str,
-             real_time_factor: float, overspeed_trip: float, output: Path | None, domain_id: int | None,
-             quiet: bool, duration: float | None, coupling: str, started: float | None = None,
-             controller: str = "governor", bag: Path | None = None, peer_timeout: float | None = None) -> int:
+def main_job(
+    model,
+    scene_file: str,
+    overrides: list[str],
+    exchange_step: float,
+    time_mode: str,
+    real_time_factor: float,
+    overspeed_trip: float,
+    output: Path | None,
+    domain_id: int | None,
+    quiet: bool,
+    duration: float | None,
+    coupling: str,
+    started: float | None = None,
+    controller: str = "governor",
+    bag: Path | None = None,
+    peer_timeout: float | None = None,
+) -> int:
     """Run the nodes on the model's scene (its solver.path decided: fast or reference) for `duration` [s] of
     simulated time (None: the scene's), the machine tripping above overspeed_trip [rad/s] (0: no trip, the default:
     nothing else sets one), `started` the command's
@@ -147,9 +180,22 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     output.parent.mkdir(parents=True, exist_ok=True)
     governed = scene.governor is not None
     started = started if started is not None else time.monotonic()
-    parameters = run_parameters(scene_file, overrides, exchange_step, time_mode, overspeed_trip, output,
-                                real_time_factor, governed, duration, coupling, started, controller, bag,
-                                peer_timeout)
+    parameters = run_parameters(
+        scene_file,
+        overrides,
+        exchange_step,
+        time_mode,
+        overspeed_trip,
+        output,
+        real_time_factor,
+        governed,
+        duration,
+        coupling,
+        started,
+        controller,
+        bag,
+        peer_timeout,
+    )
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
@@ -157,14 +203,20 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
     environment = private_environment(domain_id)
     names = node_names(governed)
     trip = f", overspeed trip at {overspeed_trip:g} rad/s" if overspeed_trip > 0.0 else ""
-    print(f"running {', '.join(names)} nodes on ROS domain {domain_id} ({time_mode}, exchange step "
-          f"{exchange_step:g} s{trip}); node logs in {log_file}", file=sys.stderr)
+    print(
+        f"running {', '.join(names)} nodes on ROS domain {domain_id} ({time_mode}, exchange step "
+        f"{exchange_step:g} s{trip}); node logs in {log_file}",
+        file=sys.stderr,
+    )
     if controller == "external":
         from mech_regulator.nodes.controller import contract
 
-        print(f"{contract(machine_peer_timeout(parameters))}\nstart it with ROS_DOMAIN_ID={domain_id} "
-              f"ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, e.g. ROS_DOMAIN_ID={domain_id} "
-              "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python examples/pid_governor.py", file=sys.stderr)
+        print(
+            f"{contract(machine_peer_timeout(parameters))}\nstart it with ROS_DOMAIN_ID={domain_id} "
+            f"ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, e.g. ROS_DOMAIN_ID={domain_id} "
+            "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python examples/pid_governor.py",
+            file=sys.stderr,
+        )
     processes: dict[str, subprocess.Popen] = {}
     interrupted = False
     ctrl_c: list[int] = []  # a Ctrl-C that came (an import of a C extension it interrupts fails with ImportError)
@@ -182,8 +234,14 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
             for name in names:
                 processes[name] = NodeProcess(name, parameter_file, environment, log)
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
-            _follow(processes, environment, duration or scene.scenario.duration, quiet,
-                    f"{scene.name} on the nodes", started)
+            _follow(
+                processes,
+                environment,
+                duration or scene.scenario.duration,
+                quiet,
+                f"{scene.name} on the nodes",
+                started,
+            )
             if processes["machine"].returncode == 0:
                 _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
         except (KeyboardInterrupt, ImportError) as error:
@@ -217,8 +275,10 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
             print(f"realtime: the simulation time fell behind the wall clock by {summary['max_lag_s']:.3g} s at most")
         print(f"open the recording with: {viewer_command(output)}")
     elif summary_path.exists():
-        print(f"mech-regulator: the summary {summary_path} cannot be read (written only in part: a full disk?)",
-              file=sys.stderr)
+        print(
+            f"mech-regulator: the summary {summary_path} cannot be read (written only in part: a full disk?)",
+            file=sys.stderr,
+        )
     else:
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)
     if failed:
@@ -227,8 +287,11 @@ def main_job(model, scene_file: str, overrides: list[str], exchange_step: float,
         for name in failed:
             endings.setdefault((processes[name].returncode, node_reason(log_text, name)), []).append(name)
         for (code, reason), names in endings.items():
-            print(f"mech-regulator: the {', '.join(names)} node{'s' if len(names) > 1 else ''} ended with exit code "
-                  f"{code}{reason}", file=sys.stderr)
+            print(
+                f"mech-regulator: the {', '.join(names)} node{'s' if len(names) > 1 else ''} ended with exit code "
+                f"{code}{reason}",
+                file=sys.stderr,
+            )
         print(f"mech-regulator: node(s) {', '.join(failed)} failed; the end of {log_file}:", file=sys.stderr)
         print("".join(log_text.splitlines(keepends=True)[-20:]), file=sys.stderr)
         bad_input = all(processes[name].returncode == 2 for name in failed)  # nodes.common.EXIT_BAD_INPUT
@@ -260,8 +323,8 @@ def node_reason(log_text: str, name: str) -> str:
     starts = [index for index, line in enumerate(lines) if line.startswith(prefix)]
     if not starts:
         return ""
-    reason = [lines[starts[-1]][len(prefix):]]
-    for line in lines[starts[-1] + 1:]:
+    reason = [lines[starts[-1]][len(prefix) :]]
+    for line in lines[starts[-1] + 1 :]:
         if not line.startswith("  "):
             break
         reason.append(line)
@@ -285,16 +348,24 @@ def _remember_interrupt(received: list[int], signal_number, frame) -> None:
     raise KeyboardInterrupt
 
 
-def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str], duration: float,
-            quiet: bool, label: str, started: float, stall_report: float = STALL_REPORT) -> None:
+def _follow(
+    processes: dict[str, subprocess.Popen],
+    environment: dict[str, str],
+    duration: float,
+    quiet: bool,
+    label: str,
+    started: float,
+    stall_report: float = STALL_REPORT,
+) -> None:
     """Show the machine's progress (its /diagnostics sim_time; `label` names the work; `started`: the command's start,
     time.monotonic() [s], from which its start-up counts) until its process ends, or until another node fails first
     (the launcher then stops the others). A machine whose simulated time has not advanced for stall_report s of wall
     time (paused from outside, or stuck) is reported once on stderr, with the time it stands at, and again when it
     goes on."""
     machine = processes["machine"]
-    os.environ.update({key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE",
-                                                          "AMENT_PREFIX_PATH")})
+    os.environ.update(
+        {key: environment[key] for key in ("ROS_DOMAIN_ID", "ROS_AUTOMATIC_DISCOVERY_RANGE", "AMENT_PREFIX_PATH")}
+    )
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.signals import SignalHandlerOptions
@@ -305,6 +376,7 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
     node = rclpy.create_node("main_job")
     advanced = {"sim_time": -1.0, "at": time.monotonic(), "reported": False}  # the machine's time and when it moved
     with progress_bar(duration, quiet, label, started=started) as bar:
+
         def on_diagnostics(message: DiagnosticArray, speaker: str) -> None:
             for status in message.status:
                 if speaker == "machine" and status.name.endswith("/machine"):
@@ -318,20 +390,34 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
 
         speakers = Speakers(node)  # the progress is the machine's; the recorder counts what others say
         speakers.allow("/diagnostics", *node_names(True))
-        receive(node, DiagnosticArray, "/diagnostics", on_diagnostics, 50, Refusals(node), speakers,
-                pass_speaker=True, concerns=about_the_nodes)
+        receive(
+            node,
+            DiagnosticArray,
+            "/diagnostics",
+            on_diagnostics,
+            50,
+            Refusals(node),
+            speakers,
+            pass_speaker=True,
+            concerns=about_the_nodes,
+        )
         try:
             while machine.poll() is None:
                 rclpy.spin_once(node, timeout_sec=0.2)
                 if not advanced["reported"] and time.monotonic() - advanced["at"] > stall_report:
                     advanced["reported"] = True
-                    print(f"\nmech-regulator: the machine has not advanced from t = {max(advanced['sim_time'], 0.0):.6g} "
-                          f"s for {stall_report:g} s of wall time (paused through its ~/pause service, or stuck); "
-                          "Ctrl-C ends the run with its summary", file=sys.stderr)
+                    print(
+                        f"\nmech-regulator: the machine has not advanced from t = {max(advanced['sim_time'], 0.0):.6g} "
+                        f"s for {stall_report:g} s of wall time (paused through its ~/pause service, or stuck); "
+                        "Ctrl-C ends the run with its summary",
+                        file=sys.stderr,
+                    )
                 ended = [name for name, process in processes.items() if process.poll() not in (None, 0)]
                 if ended and machine.poll() is None:
-                    print(f"\nmech-regulator: the {', '.join(ended)} node ended early; stopping the others",
-                          file=sys.stderr)
+                    print(
+                        f"\nmech-regulator: the {', '.join(ended)} node ended early; stopping the others",
+                        file=sys.stderr,
+                    )
                     return
         finally:
             wait_for_a_quiet_graph(node, lambda timeout: rclpy.spin_once(node, timeout_sec=timeout))
@@ -339,8 +425,9 @@ def _follow(processes: dict[str, subprocess.Popen], environment: dict[str, str],
             rclpy.try_shutdown()
 
 
-def wait_for_a_quiet_graph(node, spin: Callable[[float], None], quiet: float = GRAPH_QUIET,
-                           limit: float = GRAPH_QUIET_LIMIT) -> None:
+def wait_for_a_quiet_graph(
+    node, spin: Callable[[float], None], quiet: float = GRAPH_QUIET, limit: float = GRAPH_QUIET_LIMIT
+) -> None:
     """Spin (`spin(timeout [s])`) until the nodes `node` sees on its domain have not changed for `quiet` s of wall
     time, at most `limit` s. Fast DDS can deadlock when a participant is destroyed while it handles another's leaving
     (eProsima/Fast-DDS#6193 and kin; seen here once as a hang), so a node is destroyed once the nodes that were ending
@@ -374,7 +461,8 @@ class NodeProcess:
 
     def __init__(self, name: str, parameter_file: Path, environment: dict[str, str], log):
         self.process = multiprocessing.get_context("fork").Process(
-            target=_node_main, args=(name, parameter_file, environment, log.fileno()), name=f"{name}_node")
+            target=_node_main, args=(name, parameter_file, environment, log.fileno()), name=f"{name}_node"
+        )
         self.process.start()
 
     @property

@@ -117,59 +117,121 @@ class MachineNode(Node):
         super().__init__("machine")
         self.model = scene_model(self)
         governed = self.model.governor is not None
-        self.time_mode = text_parameter(self, "time_mode", "lockstep", "how simulation time advances",
-                                        ("lockstep", "realtime"))
-        self.step_ns = to_nanoseconds(float_parameter(self, "exchange_step", self.model.scene.solver.exchange_step,
-                                                      "exchange step h [s]: inputs are held and outputs published "
-                                                      "every h of simulation time (default: the scene's "
-                                                      "solver.exchange_step)",
-                                                      1e-6, 1.0, read_only=True))
-        duration = float_parameter(self, "duration", 0.0, "simulated time [s] to run; 0: the scene's duration",
-                                   0.0, 1e7, read_only=True)
+        self.time_mode = text_parameter(
+            self, "time_mode", "lockstep", "how simulation time advances", ("lockstep", "realtime")
+        )
+        self.step_ns = to_nanoseconds(
+            float_parameter(
+                self,
+                "exchange_step",
+                self.model.scene.solver.exchange_step,
+                "exchange step h [s]: inputs are held and outputs published "
+                "every h of simulation time (default: the scene's "
+                "solver.exchange_step)",
+                1e-6,
+                1.0,
+                read_only=True,
+            )
+        )
+        duration = float_parameter(
+            self, "duration", 0.0, "simulated time [s] to run; 0: the scene's duration", 0.0, 1e7, read_only=True
+        )
         self.end_ns = to_nanoseconds(duration or self.model.scene.scenario.duration)
-        self.real_time_factor = float_parameter(self, "real_time_factor", 1.0, "realtime: simulated seconds per "
-                                                "wall-clock second", 1e-3, 1e3)
-        self.throttle_timeout = float_parameter(self, "throttle_timeout", 0.1, "realtime: fail-safe when the newest "
-                                                "throttle is older than this [s of simulation time]", 1e-6, 3600.0)
-        self.peer_timeout = float_parameter(self, "peer_timeout", 10.0, "lockstep: wall-clock seconds to wait for an "
-                                            "input before going on without it (fail-safe)", 0.01, 3600.0)
-        self.fail_safe = text_parameter(self, "fail_safe", "close", "throttle while the governor is silent",
-                                        ("hold", "close"), read_only=False)
-        self.max_load_torque = float_parameter(self, "max_load_torque", 1e5, "load messages beyond +- this [N m] "
-                                               "are rejected", 0.0, 1e12)
-        overspeed = float_parameter(self, "overspeed_trip", 0.0, "trip speed [rad/s]: above it the throttle closes "
-                                    "for good; 0: no trip", 0.0, 1e9, read_only=True)
-        self.controller = text_parameter(self, "controller", "governor", "what gives the throttle: the scene's "
-                                         "governor (governor_node) or external, a node the user starts (the machine "
-                                         "waits for it by topic, not by name; docs/ros.md, Your own controller)",
-                                         CONTROLLERS)
+        self.real_time_factor = float_parameter(
+            self, "real_time_factor", 1.0, "realtime: simulated seconds per wall-clock second", 1e-3, 1e3
+        )
+        self.throttle_timeout = float_parameter(
+            self,
+            "throttle_timeout",
+            0.1,
+            "realtime: fail-safe when the newest throttle is older than this [s of simulation time]",
+            1e-6,
+            3600.0,
+        )
+        self.peer_timeout = float_parameter(
+            self,
+            "peer_timeout",
+            10.0,
+            "lockstep: wall-clock seconds to wait for an input before going on without it (fail-safe)",
+            0.01,
+            3600.0,
+        )
+        self.fail_safe = text_parameter(
+            self, "fail_safe", "close", "throttle while the governor is silent", ("hold", "close"), read_only=False
+        )
+        self.max_load_torque = float_parameter(
+            self, "max_load_torque", 1e5, "load messages beyond +- this [N m] are rejected", 0.0, 1e12
+        )
+        overspeed = float_parameter(
+            self,
+            "overspeed_trip",
+            0.0,
+            "trip speed [rad/s]: above it the throttle closes for good; 0: no trip",
+            0.0,
+            1e9,
+            read_only=True,
+        )
+        self.controller = text_parameter(
+            self,
+            "controller",
+            "governor",
+            "what gives the throttle: the scene's "
+            "governor (governor_node) or external, a node the user starts (the machine "
+            "waits for it by topic, not by name; docs/ros.md, Your own controller)",
+            CONTROLLERS,
+        )
         external = self.controller == "external"
         self.controllers: list[str] = []  # the nodes that publish throttle at the start (external controller)
-        inputs = list_parameter(self, "lockstep_inputs", ["throttle", "load"] if governed or external else ["load"],
-                                "lockstep: inputs to wait for at every exchange time: throttle, load (default: the "
-                                "throttle when the scene has a governor or controller is external, and the "
-                                "scenario's load)")
+        inputs = list_parameter(
+            self,
+            "lockstep_inputs",
+            ["throttle", "load"] if governed or external else ["load"],
+            "lockstep: inputs to wait for at every exchange time: throttle, load (default: the "
+            "throttle when the scene has a governor or controller is external, and the "
+            "scenario's load)",
+        )
         self.lockstep_inputs = [item for item in inputs if item]
         unknown = [item for item in self.lockstep_inputs if item not in LOCKSTEP_INPUTS]
         if unknown:
-            raise SceneError(f"parameter lockstep_inputs = {inputs}: unknown {unknown}; expected a list of "
-                             f"{', '.join(LOCKSTEP_INPUTS)}")
+            raise SceneError(
+                f"parameter lockstep_inputs = {inputs}: unknown {unknown}; expected a list of "
+                f"{', '.join(LOCKSTEP_INPUTS)}"
+            )
         if "throttle" in self.lockstep_inputs and not governed and not external:
-            raise SceneError(f"parameter lockstep_inputs = {inputs}: scene '{self.model.scene.name}' has no governor "
-                             "to give a throttle; leave 'throttle' out, or set controller to external")
-        default_peers = [LOCKSTEP_INPUTS[item][0] for item in self.lockstep_inputs
-                         if not (external and item == "throttle")] if self.time_mode == "lockstep" else []
-        peers = list_parameter(self, "peers", default_peers or [""], "node names that must subscribe to joint_states "
-                               "before the first step (default: those giving the lockstep inputs)")
+            raise SceneError(
+                f"parameter lockstep_inputs = {inputs}: scene '{self.model.scene.name}' has no governor "
+                "to give a throttle; leave 'throttle' out, or set controller to external"
+            )
+        default_peers = (
+            [LOCKSTEP_INPUTS[item][0] for item in self.lockstep_inputs if not (external and item == "throttle")]
+            if self.time_mode == "lockstep"
+            else []
+        )
+        peers = list_parameter(
+            self,
+            "peers",
+            default_peers or [""],
+            "node names that must subscribe to joint_states "
+            "before the first step (default: those giving the lockstep inputs)",
+        )
         self.peers = [item for item in peers if item]
-        self.at_end = text_parameter(self, "at_end", "exit", "at the end of the scenario: exit, or hold (paused) "
-                                     "until ~/reset", ("exit", "hold"))
-        self.step_exchanges = int_parameter(self, "step_exchanges", 1, "exchanges advanced by one ~/step call", 1,
-                                            10**9, read_only=False)
+        self.at_end = text_parameter(
+            self, "at_end", "exit", "at the end of the scenario: exit, or hold (paused) until ~/reset", ("exit", "hold")
+        )
+        self.step_exchanges = int_parameter(
+            self, "step_exchanges", 1, "exchanges advanced by one ~/step call", 1, 10**9, read_only=False
+        )
         self.publish_clock = bool_parameter(self, "publish_clock", True, "publish the simulation time on /clock")
-        self.clock_period = float_parameter(self, "clock_period", 0.02, "wall-clock seconds between /clock messages "
-                                            "(at most; the first and last exchange times are always published); 0: "
-                                            "every exchange time", 0.0, 3600.0)
+        self.clock_period = float_parameter(
+            self,
+            "clock_period",
+            0.02,
+            "wall-clock seconds between /clock messages "
+            "(at most; the first and last exchange times are always published); 0: "
+            "every exchange time",
+            0.0,
+            3600.0,
+        )
         self.last_clock = -math.inf  # wall-clock time [s] of the last /clock message
 
         self.overspeed = overspeed
@@ -179,8 +241,9 @@ class MachineNode(Node):
         self.follows_ramps = coupling == "corrected"  # the load's rate over a step (force.z of the stamped load)
         self.trial = 0
         self.start_trial()
-        MachineStepper(self.model, self.overspeed).advance(seconds(min(self.step_ns, self.end_ns)), self.throttle,
-                                                           self.load)  # thrown away: see run()
+        MachineStepper(self.model, self.overspeed).advance(
+            seconds(min(self.step_ns, self.end_ns)), self.throttle, self.load
+        )  # thrown away: see run()
         self.paused = bool_parameter(self, "start_paused", False, "start paused (~/resume or ~/step to go on)")
         self.steps_left = 0  # exchanges ~/step still allows while paused
         self.reset_requested = False
@@ -196,12 +259,18 @@ class MachineNode(Node):
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.status_publisher = self.create_publisher(String, "machine/status", STATUS_QOS)
-        for name, callback in (("reset", self.on_reset), ("pause", self.on_pause), ("resume", self.on_resume),
-                               ("step", self.on_step)):
+        for name, callback in (
+            ("reset", self.on_reset),
+            ("pause", self.on_pause),
+            ("resume", self.on_resume),
+            ("step", self.on_step),
+        ):
             self.create_service(Trigger, f"~/{name}", callback)
-        for message_type, topic, handle in ((JointState, "throttle", self.on_throttle),
-                                            (Float64, "load_torque", self.on_load),  # from anyone
-                                            (WrenchStamped, "load_torque_stamped", self.on_stamped_load)):
+        for message_type, topic, handle in (
+            (JointState, "throttle", self.on_throttle),
+            (Float64, "load_torque", self.on_load),  # from anyone
+            (WrenchStamped, "load_torque_stamped", self.on_stamped_load),
+        ):
             receive(self, message_type, topic, handle, COMMAND_QOS, self.refusals, self.speakers)
         self.add_post_set_parameters_callback(self.on_parameters)
         self.now_ns = 0
@@ -246,20 +315,30 @@ class MachineNode(Node):
         client of it: who may have called (a service request does not name its sender in rclpy)."""
         name = f"{self.get_fully_qualified_name()}/{service}"
         try:
-            callers = [node for node, namespace in self.get_node_names_and_namespaces() if node != self.get_name()
-                       and any(client == name for client, _ in
-                               self.get_client_names_and_types_by_node(node, namespace))]
+            callers = [
+                node
+                for node, namespace in self.get_node_names_and_namespaces()
+                if node != self.get_name()
+                and any(client == name for client, _ in self.get_client_names_and_types_by_node(node, namespace))
+            ]
         except Exception:  # a node that left while the graph was read
             callers = []
-        self.refusals.disturb(f"{name} called at t = {seconds(self.now_ns):.9g} s (trial {self.trial}) by "
-                              f"{' or '.join(callers) or 'a node the graph does not name (yet, or any more)'}",
-                              alters_results=False)
+        self.refusals.disturb(
+            f"{name} called at t = {seconds(self.now_ns):.9g} s (trial {self.trial}) by "
+            f"{' or '.join(callers) or 'a node the graph does not name (yet, or any more)'}",
+            alters_results=False,
+        )
 
     def on_reset(self, request, response):
         self.called_from_outside("reset")
         self.reset_requested = True
-        response.success, response.message = True, (f"trial {self.trial} stops at t = {seconds(self.now_ns):.9g} s; "
-                                                     f"trial {self.trial + 1} starts from the initial state at t = 0")
+        response.success, response.message = (
+            True,
+            (
+                f"trial {self.trial} stops at t = {seconds(self.now_ns):.9g} s; "
+                f"trial {self.trial + 1} starts from the initial state at t = 0"
+            ),
+        )
         return response
 
     def on_pause(self, request, response):
@@ -280,8 +359,10 @@ class MachineNode(Node):
         self.called_from_outside("step")
         self.paused = True
         self.steps_left += self.step_exchanges
-        response.success, response.message = True, (f"advancing {self.steps_left} exchange(s) from "
-                                                     f"t = {seconds(self.now_ns):.9g} s, then paused")
+        response.success, response.message = (
+            True,
+            (f"advancing {self.steps_left} exchange(s) from t = {seconds(self.now_ns):.9g} s, then paused"),
+        )
         return response
 
     # ---------------------------------------------------------------------------------------------
@@ -300,8 +381,9 @@ class MachineNode(Node):
             sent = message.header.stamp.sec * NANOSECONDS + message.header.stamp.nanosec
             if sent != self.now_ns:  # said when the controller times out (controller.silent), even a wall-clock one
                 self.wrong_stamp = sent
-        when = in_order(not_ahead(stamp_of(message.header.stamp), self.now_ns, "throttle"), self.throttle_stamp,
-                        "throttle")
+        when = in_order(
+            not_ahead(stamp_of(message.header.stamp), self.now_ns, "throttle"), self.throttle_stamp, "throttle"
+        )
         waveform = sent_samples(message, "throttle_tentative", "position", 0.0, 1.0)
         self.throttle_stamp = when
         self.stamped_throttle[when] = value
@@ -311,8 +393,9 @@ class MachineNode(Node):
 
     def on_load(self, message: Float64) -> None:
         """A load from anyone (load_torque: the documented way to poke a run), within +-max_load_torque."""
-        self.pending_load = bounded(message.data, -self.max_load_torque, self.max_load_torque,
-                                    "load_torque [N m] (parameter max_load_torque)")
+        self.pending_load = bounded(
+            message.data, -self.max_load_torque, self.max_load_torque, "load_torque [N m] (parameter max_load_torque)"
+        )
 
     def on_stamped_load(self, message: WrenchStamped) -> None:
         """The scenario's load (speakers: from the scenario node only) for an exchange time the machine has published,
@@ -321,13 +404,17 @@ class MachineNode(Node):
         value, rate, until = message.wrench.torque.z, message.wrench.force.z, message.wrench.force.x
         bounds = (-self.max_load_torque, self.max_load_torque)
         bounded(value, *bounds, "load_torque_stamped torque.z [N m] (parameter max_load_torque)")
-        bounded(value + rate * seconds(self.step_ns), *bounds, "load_torque_stamped torque.z + force.z (its rate) * "
-                "the exchange step [N m] (parameter max_load_torque)")
+        bounded(
+            value + rate * seconds(self.step_ns),
+            *bounds,
+            "load_torque_stamped torque.z + force.z (its rate) * the exchange step [N m] (parameter max_load_torque)",
+        )
         if math.isnan(until):
             raise BadMessage("not finite", "load_torque_stamped force.x (held until) = nan, expected a time [s] or inf")
         newest = max(self.stamped_load, default=None)
-        when = in_order(not_ahead(stamp_of(message.header.stamp), self.now_ns, "load_torque_stamped"), newest,
-                        "load_torque_stamped")
+        when = in_order(
+            not_ahead(stamp_of(message.header.stamp), self.now_ns, "load_torque_stamped"), newest, "load_torque_stamped"
+        )
         self.stamped_load[when] = (value, rate)
         if until > seconds(when):  # beyond the run's end: to the end
             self.load_holds = (when, to_nanoseconds(until) if until <= seconds(self.end_ns) else math.inf, value, rate)
@@ -337,8 +424,15 @@ class MachineNode(Node):
         """Apply the accepted changes (ranges and choices already checked) of the parameters that may
         change while running."""
         for parameter in parameters:
-            if parameter.name in ("real_time_factor", "throttle_timeout", "peer_timeout", "max_load_torque",
-                                  "fail_safe", "step_exchanges", "clock_period"):
+            if parameter.name in (
+                "real_time_factor",
+                "throttle_timeout",
+                "peer_timeout",
+                "max_load_torque",
+                "fail_safe",
+                "step_exchanges",
+                "clock_period",
+            ):
                 if parameter.name == "real_time_factor":  # keep the simulation time continuous
                     self.wall_start = time.monotonic() - seconds(self.now_ns) / parameter.value
                 setattr(self, parameter.name, parameter.value)
@@ -357,8 +451,10 @@ class MachineNode(Node):
         # The first log line and the first diagnostics take up to a tenth of a second each (so does the first
         # integration: done in __init__ on a stepper thrown away): before the clock starts, so that a realtime run does
         # not start behind it.
-        self.get_logger().info(f"{self.time_mode} run starts: peers ({', '.join(self.peers) or 'none'}) there after "
-                               f"{time.monotonic() - waited:.3g} s")
+        self.get_logger().info(
+            f"{self.time_mode} run starts: peers ({', '.join(self.peers) or 'none'}) there after "
+            f"{time.monotonic() - waited:.3g} s"
+        )
         self.report(force=True)
         self.wall_start = time.monotonic()
         self.publish_status()
@@ -367,8 +463,9 @@ class MachineNode(Node):
             self.now_ns = min(tick * self.step_ns, self.end_ns)
             next_ns = min((tick + 1) * self.step_ns, self.end_ns)
             if self.corrects:  # the step predicted with the last step's load: the new one comes with the throttle
-                self.predicted = self.stepper.predict(seconds(next_ns), self.tentative) if next_ns > self.now_ns \
-                    else None
+                self.predicted = (
+                    self.stepper.predict(seconds(next_ns), self.tentative) if next_ns > self.now_ns else None
+                )
             self.publish_state()
             self.moments.send_when_due()  # the last exchanges', sent while the peers answer this one
             if self.corrects and next_ns < self.end_ns:  # the next step's predictor, while the governor answers
@@ -411,8 +508,9 @@ class MachineNode(Node):
         elif self.waveform:
             self.omega_middle = self.stepper.advance_following(seconds(next_ns), throttle, self.load)
         else:  # corrected without a governor: only the load's ramp is followed
-            self.stepper.advance(seconds(next_ns), throttle, self.load,
-                                 load_rate=self.load_rate if self.follows_ramps else 0.0)
+            self.stepper.advance(
+                seconds(next_ns), throttle, self.load, load_rate=self.load_rate if self.follows_ramps else 0.0
+            )
 
     def wait_while_paused(self, holding: bool) -> None:
         """Between exchanges: spin (serving the services) while paused with no ~/step left, or while holding at
@@ -444,24 +542,34 @@ class MachineNode(Node):
         topic = self.joint_publisher.topic_name
         namespace = self.get_namespace()
         while rclpy.ok():
-            subscribed = {info.node_name for name in (topic, self.moments.publisher.topic_name)
-                          for info in self.get_subscriptions_info_by_topic(name) if info.node_namespace == namespace}
+            subscribed = {
+                info.node_name
+                for name in (topic, self.moments.publisher.topic_name)
+                for info in self.get_subscriptions_info_by_topic(name)
+                if info.node_namespace == namespace
+            }
             missing = [name for name in self.peers if name not in subscribed]
             twice = namesakes(self, [self.get_name(), *self.peers])
             if twice:
                 named = ", ".join(repr(name) for name in twice)
-                raise SceneError(f"another node named {named} is on this ROS domain already (another run on the same "
-                                 "--domain-id?): this run would take its messages and it this run's; use another "
-                                 "domain, or end the other run")
-            unpublished = [item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0]
+                raise SceneError(
+                    f"another node named {named} is on this ROS domain already (another run on the same "
+                    "--domain-id?): this run would take its messages and it this run's; use another "
+                    "domain, or end the other run"
+                )
+            unpublished = [
+                item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0
+            ]
             timed_out = time.monotonic() - waited > self.peer_timeout
             if self.controller == "external" and "throttle" in unpublished and timed_out:
                 raise PeerError(controller.absent(self.peer_timeout))
             if missing and timed_out:
-                raise PeerError(f"machine: no {', '.join(missing)} node subscribed to {topic} (or "
-                                f"{self.moments.publisher.topic_name}) within "
-                                f"{self.peer_timeout:g} s (parameter peer_timeout): start it, or leave it out of the "
-                                "parameter peers")
+                raise PeerError(
+                    f"machine: no {', '.join(missing)} node subscribed to {topic} (or "
+                    f"{self.moments.publisher.topic_name}) within "
+                    f"{self.peer_timeout:g} s (parameter peer_timeout): start it, or leave it out of the "
+                    "parameter peers"
+                )
             if not missing and (timed_out or not unpublished and self.matched_every_subscription()):
                 return
             self.executor.spin_once(timeout_sec=SPIN_SLICE)
@@ -470,8 +578,10 @@ class MachineNode(Node):
         """Whether the state streams the recorder reads (joint_states, machine/moments, machine/status) have matched
         every subscription the graph knows on their topics: a stream a peer subscribes to but that has not matched it
         yet would not deliver to it (common.deliver_all)."""
-        return all(publisher.get_subscription_count() >= self.count_subscribers(publisher.topic_name)
-                   for publisher in (self.joint_publisher, self.moments.publisher, self.status_publisher))
+        return all(
+            publisher.get_subscription_count() >= self.count_subscribers(publisher.topic_name)
+            for publisher in (self.joint_publisher, self.moments.publisher, self.status_publisher)
+        )
 
     def collect_inputs(self) -> None:
         """Take the inputs for the current exchange time: in lockstep, wait for each listed input stamped
@@ -488,9 +598,12 @@ class MachineNode(Node):
                     if self.controller == "external" and "throttle" in missing:
                         self.end_without_controller()
                     self.silent.update(missing)
-                    self.refusals.disturb(f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
-                                          f"{self.peer_timeout:g} s (parameter peer_timeout: a lost or stalled peer); "
-                                          "going on without waiting, fail-safe applies", alters_results=True)
+                    self.refusals.disturb(
+                        f"no {' or '.join(missing)} for t = {seconds(self.now_ns):.9g} s within "
+                        f"{self.peer_timeout:g} s (parameter peer_timeout: a lost or stalled peer); "
+                        "going on without waiting, fail-safe applies",
+                        alters_results=True,
+                    )
                     self.report(force=True)
         else:
             self.executor.spin_once(timeout_sec=0.0)
@@ -510,17 +623,30 @@ class MachineNode(Node):
         self.send_moments()
         deliver_all(self, [self.joint_publisher, self.moments.publisher])
         names = controller.publisher_names(self) or self.controllers
-        raise PeerError(controller.silent(names, seconds(self.now_ns), self.peer_timeout,
-                                          None if self.wrong_stamp is None else seconds(self.wrong_stamp)))
+        raise PeerError(
+            controller.silent(
+                names,
+                seconds(self.now_ns),
+                self.peer_timeout,
+                None if self.wrong_stamp is None else seconds(self.wrong_stamp),
+            )
+        )
 
     def missing_inputs(self) -> list[str]:
         """The lockstep inputs not yet received for the current exchange time (and not given up on)."""
         missing = []
-        if "throttle" in self.lockstep_inputs and "throttle" not in self.silent \
-                and self.now_ns not in self.stamped_throttle:
+        if (
+            "throttle" in self.lockstep_inputs
+            and "throttle" not in self.silent
+            and self.now_ns not in self.stamped_throttle
+        ):
             missing.append("throttle")
-        if "load" in self.lockstep_inputs and "load" not in self.silent and self.now_ns not in self.stamped_load \
-                and self.held_load() is None:
+        if (
+            "load" in self.lockstep_inputs
+            and "load" not in self.silent
+            and self.now_ns not in self.stamped_load
+            and self.held_load() is None
+        ):
             missing.append("load")
         return missing
 
@@ -543,14 +669,16 @@ class MachineNode(Node):
         for when in [when for when in self.stamped_throttle if when < self.now_ns]:
             self.stamped_throttle.pop(when)
             self.stamped_waveform.pop(when, None)
-        expects_governor = "throttle" in self.lockstep_inputs or self.time_mode == "realtime" and \
-            self.model.governor is not None
+        expects_governor = (
+            "throttle" in self.lockstep_inputs or self.time_mode == "realtime" and self.model.governor is not None
+        )
         if fresh is not None:
             self.throttle = fresh
         elif expects_governor:
             if not self.failing_safe:
-                self.get_logger().error(f"no throttle for t = {seconds(self.now_ns):.6g} s: fail-safe "
-                                        f"'{self.fail_safe}'")
+                self.get_logger().error(
+                    f"no throttle for t = {seconds(self.now_ns):.6g} s: fail-safe '{self.fail_safe}'"
+                )
             if self.fail_safe == "close":
                 self.throttle = 0.0
         failing_safe = fresh is None and expects_governor
@@ -581,13 +709,18 @@ class MachineNode(Node):
         wall = time.monotonic()
         if self.time_mode == "realtime":  # the wall clock's simulation time less the state's, at its publication
             self.max_lag = max(self.max_lag, (wall - self.wall_start) * self.real_time_factor - seconds(self.now_ns))
-        if self.clock_publisher is not None and (wall - self.last_clock >= self.clock_period or self.now_ns == 0
-                                                 or self.now_ns >= self.end_ns):
+        if self.clock_publisher is not None and (
+            wall - self.last_clock >= self.clock_period or self.now_ns == 0 or self.now_ns >= self.end_ns
+        ):
             self.clock_publisher.publish(Clock(clock=header_stamp))  # the others' timers need not every exchange
             self.last_clock = wall
         values = self.stepper.outputs(self.throttle, self.load)
-        message = JointState(name=["crank"], position=[float(self.stepper.state[0])],
-                             velocity=[float(self.stepper.state[1])], effort=[values["net"]])
+        message = JointState(
+            name=["crank"],
+            position=[float(self.stepper.state[0])],
+            velocity=[float(self.stepper.state[1])],
+            effort=[values["net"]],
+        )
         message.header.stamp = header_stamp
         joints = output_joints(self.model, values)
         if self.omega_middle is not None:  # waveform coupling: the speed at the middle of the step that ended here
@@ -620,11 +753,13 @@ class MachineNode(Node):
         the crank's `external` is 0), and the state as joint_states had it (crank phi, omega; a two-mass machine's
         twist and omega_driven)."""
         whens, held_times, states, throttles, loads, published = zip(*held)
-        outputs = self.stepper.outputs_over(np.array(held_times), np.column_stack(states), np.array(throttles),
-                                            np.array(loads))
+        outputs = self.stepper.outputs_over(
+            np.array(held_times), np.column_stack(states), np.array(throttles), np.array(loads)
+        )
         names = ["drive", "resistance", "external", "net", "load", "crank", "throttle"]
-        for index, (when, state, throttle, load, published_at) in enumerate(zip(whens, states, throttles, loads,
-                                                                                published)):
+        for index, (when, state, throttle, load, published_at) in enumerate(
+            zip(whens, states, throttles, loads, published)
+        ):
             efforts = [float(outputs[name][index]) for name in names[:4]] + [load, math.nan, math.nan]
             positions = [math.nan] * 5 + [float(state[0]), throttle]
             velocities = [math.nan] * 5 + [float(state[1]), math.nan]
@@ -655,8 +790,11 @@ class MachineNode(Node):
         self.last_diagnostics = wall
         for name in set(namesakes(self, [self.get_name(), *self.peers])) - self.namesakes:
             self.namesakes.add(name)
-            self.refusals.disturb(f"a second node named '{name}' appeared on the domain at t = "
-                                  f"{seconds(self.now_ns):.9g} s; its messages are refused", alters_results=False)
+            self.refusals.disturb(
+                f"a second node named '{name}' appeared on the domain at t = "
+                f"{seconds(self.now_ns):.9g} s; its messages are refused",
+                alters_results=False,
+            )
         self.diagnostics_publisher.publish(self.diagnostics())
 
     def diagnostics(self, finished: bool = False) -> DiagnosticArray:
@@ -667,14 +805,25 @@ class MachineNode(Node):
         elif self.stepper.tripped_at is not None:
             level, message = ERROR, f"overspeed trip at t = {self.stepper.tripped_at:.6g} s: throttle closed"
         elif self.failing_safe or self.silent:
-            level, message = WARN, f"fail-safe ({self.fail_safe}): no input from {', '.join(sorted(self.silent)) or 'the governor'}"
+            level, message = (
+                WARN,
+                f"fail-safe ({self.fail_safe}): no input from {', '.join(sorted(self.silent)) or 'the governor'}",
+            )
         level, message = self.refusals.status(level, message)
         if finished and level == OK:
             message = "finished"
-        values = {"scene": self.model.scene.name, "time_mode": self.time_mode, "sim_time": seconds(self.now_ns),
-                  "end_time": seconds(self.end_ns), "real_time_factor": f"{seconds(self.now_ns) / elapsed:.4g}",
-                  "throttle": self.throttle, "external_load": self.load, "rhs_evaluations": self.stepper.stats.nfev,
-                  "fail_safe_active": self.failing_safe, "tripped_at": self.stepper.tripped_at}
+        values = {
+            "scene": self.model.scene.name,
+            "time_mode": self.time_mode,
+            "sim_time": seconds(self.now_ns),
+            "end_time": seconds(self.end_ns),
+            "real_time_factor": f"{seconds(self.now_ns) / elapsed:.4g}",
+            "throttle": self.throttle,
+            "external_load": self.load,
+            "rhs_evaluations": self.stepper.stats.nfev,
+            "fail_safe_active": self.failing_safe,
+            "tripped_at": self.stepper.tripped_at,
+        }
         if self.time_mode == "realtime":
             values["max_lag_s"] = self.max_lag
         if finished:
@@ -687,8 +836,13 @@ class MachineNode(Node):
         """machine/status: the run's state (RunState; by default running or paused), time, trial and solver
         status."""
         state = state or (RunState.PAUSED if self.paused and self.steps_left == 0 else RunState.RUNNING)
-        status = {"state": state, "time": seconds(self.now_ns), "trial": self.trial, "status": self.stepper.status,
-                  "tripped_at": self.stepper.tripped_at}
+        status = {
+            "state": state,
+            "time": seconds(self.now_ns),
+            "trial": self.trial,
+            "status": self.stepper.status,
+            "tripped_at": self.stepper.tripped_at,
+        }
         if self.time_mode == "realtime":
             status["max_lag_s"] = self.max_lag
         if state == RunState.FINISHED:

@@ -85,22 +85,54 @@ class RecorderNode(Node):
     def __init__(self):
         super().__init__("recorder")
         self.model = scene_model(self)
-        output = text_parameter(self, "output", "", "the .rrd file to write ('' : runs/<scene>-<time>.rrd; 'none': "
-                                                    "no file)")
-        connect = text_parameter(self, "connect", "", "URL of a live Rerun viewer to stream to, e.g. "
-                                                      "rerun+http://127.0.0.1:9876/proxy ('' : none)")
-        rate = float_parameter(self, "animation_rate", 200.0, "frames of the animation per second of simulation "
-                                                              "time [Hz]", 1.0, 1e5, read_only=True)
-        self.exchange_step = float_parameter(self, "exchange_step", self.model.scene.solver.exchange_step,
-                                             "the machine's exchange step [s], for the summary (default: the scene's "
-                                             "solver.exchange_step)", 1e-6, 1.0, read_only=True)
+        output = text_parameter(
+            self, "output", "", "the .rrd file to write ('' : runs/<scene>-<time>.rrd; 'none': no file)"
+        )
+        connect = text_parameter(
+            self,
+            "connect",
+            "",
+            "URL of a live Rerun viewer to stream to, e.g. rerun+http://127.0.0.1:9876/proxy ('' : none)",
+        )
+        rate = float_parameter(
+            self,
+            "animation_rate",
+            200.0,
+            "frames of the animation per second of simulation time [Hz]",
+            1.0,
+            1e5,
+            read_only=True,
+        )
+        self.exchange_step = float_parameter(
+            self,
+            "exchange_step",
+            self.model.scene.solver.exchange_step,
+            "the machine's exchange step [s], for the summary (default: the scene's solver.exchange_step)",
+            1e-6,
+            1.0,
+            read_only=True,
+        )
         self.coupling = coupling_parameter(self)
-        self.launched_at = float_parameter(self, "launched_at", 0.0, "time.monotonic() [s] at which the command that "
-                                           "started the run started (`run` sets it), for the start-up time in the "
-                                           "summary; 0: not known", 0.0, 1e12, read_only=True)
-        self.controller = text_parameter(self, "controller", "governor", "what gives the throttle: the scene's "
-                                         "governor, or external (its throttle is read from machine/moments and "
-                                         "written to the CSV)", CONTROLLERS)
+        self.launched_at = float_parameter(
+            self,
+            "launched_at",
+            0.0,
+            "time.monotonic() [s] at which the command that "
+            "started the run started (`run` sets it), for the start-up time in the "
+            "summary; 0: not known",
+            0.0,
+            1e12,
+            read_only=True,
+        )
+        self.controller = text_parameter(
+            self,
+            "controller",
+            "governor",
+            "what gives the throttle: the scene's "
+            "governor, or external (its throttle is read from machine/moments and "
+            "written to the CSV)",
+            CONTROLLERS,
+        )
         bag = text_parameter(self, "bag", "", "a rosbag2 folder to write the run to at the end (viz/bag.py; '': none)")
         self.bag = Path(bag) if bag else None
         self.max_lag: float | None = None  # realtime: the machine's largest lag [s] behind the wall clock
@@ -109,8 +141,13 @@ class RecorderNode(Node):
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.recording = RunRecording(self.model, path=self.path, connect=connect or None, animation_rate=rate,
-                                      outside_throttle=self.controller == "external")
+        self.recording = RunRecording(
+            self.model,
+            path=self.path,
+            connect=connect or None,
+            animation_rate=rate,
+            outside_throttle=self.controller == "external",
+        )
         self.machine: dict[int, list[float]] = {}  # stamp -> the machine's state (phi, omega, then a two-mass
         # machine's twist and omega_driven or a clutch's omega_driven, as MachineModel.state_names)
         self.trial = 1
@@ -141,12 +178,22 @@ class RecorderNode(Node):
         self.speakers.allow("/diagnostics", self.own_name, *self.peer_names.values())
         self.reports: dict[str, tuple[dict, list[str], bool]] = {}  # peer node -> its refusals, disturbances and
         # whether they alter the results (trust.report_of), from its latest diagnostics
-        governor_states = receive(self, JointState, "governor/state", self.on_governor, STATE_QOS, self.refusals,
-                                  self.speakers)
+        governor_states = receive(
+            self, JointState, "governor/state", self.on_governor, STATE_QOS, self.refusals, self.speakers
+        )
         self.streams = [governor_states] if self.model.governor is not None else []
         receive(self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers)
-        receive(self, DiagnosticArray, "/diagnostics", self.on_diagnostics, 50, self.refusals, self.speakers,
-                pass_speaker=True, concerns=about_the_nodes)
+        receive(
+            self,
+            DiagnosticArray,
+            "/diagnostics",
+            self.on_diagnostics,
+            50,
+            self.refusals,
+            self.speakers,
+            pass_speaker=True,
+            concerns=about_the_nodes,
+        )
         follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
@@ -197,8 +244,9 @@ class RecorderNode(Node):
             self.state_walls[1:] = [joints["stamp"][1]]  # when the machine published that state
             self.recording.add_machine(when, phi, omega, driven or None)
             moments = {name: effort for name, (_, _, effort) in joints.items()}
-            self.recording.add_moments(when, moments["drive"], moments["resistance"], moments["external"],
-                                       moments["net"])
+            self.recording.add_moments(
+                when, moments["drive"], moments["resistance"], moments["external"], moments["net"]
+            )
             self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
             self.moments[when] = (moments["drive"], moments["load"], joints["throttle"][0])
             self.part_arrived(when)
@@ -212,20 +260,33 @@ class RecorderNode(Node):
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
         pi = self.model.governor.kind == "pi"  # its joints: throttle and integral
         extra = tuple(name for name in ("servo", "feedback_shift") if name in self.model.governor.state_names)
-        groups = unrecorded(batch_groups(message, ("throttle", "integral") if pi else
-                                         ("sleeve", "arm", "throttle", *extra)), self.governor, "governor/state")
+        groups = unrecorded(
+            batch_groups(message, ("throttle", "integral") if pi else ("sleeve", "arm", "throttle", *extra)),
+            self.governor,
+            "governor/state",
+        )
         for when, joints in groups:
-            values = [joints["integral"][0]] if pi else [*joints["sleeve"][:2], *joints["arm"][:2],
-                                                          *(joints[name][0] for name in extra)]
+            values = (
+                [joints["integral"][0]]
+                if pi
+                else [*joints["sleeve"][:2], *joints["arm"][:2], *(joints[name][0] for name in extra)]
+            )
             for value in values:
                 bounded(value, -math.inf, math.inf, f"governor/state at {seconds(when):.9g} s")
             bounded(joints["throttle"][0], 0.0, 1.0, f"governor/state at {seconds(when):.9g} s: throttle")
         for when, joints in groups:
-            values = {name: joints[name][0] for name in ("throttle", "integral", "servo", "feedback_shift")
-                      if name in joints}
+            values = {
+                name: joints[name][0] for name in ("throttle", "integral", "servo", "feedback_shift") if name in joints
+            }
             if not pi:
-                values.update({"sleeve": joints["sleeve"][0], "sleeve_velocity": joints["sleeve"][1],
-                               "arm_angle": joints["arm"][0], "arm_rate": joints["arm"][1]})
+                values.update(
+                    {
+                        "sleeve": joints["sleeve"][0],
+                        "sleeve_velocity": joints["sleeve"][1],
+                        "arm_angle": joints["arm"][0],
+                        "arm_rate": joints["arm"][1],
+                    }
+                )
             self.governor[when] = values
             self.recording.add_governor(when, values)
             self.part_arrived(when)
@@ -251,8 +312,9 @@ class RecorderNode(Node):
             report = report_of(values)
             machine = speaker == self.peer_names["machine"]
             when = real_number(values.get("sim_time", "0"), "sim_time") if machine else None
-            tripped_at = real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True) if machine \
-                else None
+            tripped_at = (
+                real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True) if machine else None
+            )
             self.reports[speaker] = report
             if not machine:
                 continue
@@ -280,8 +342,11 @@ class RecorderNode(Node):
         run_data = self.run_data()
         status, message = "interrupted", "before the first complete exchange"
         if run_data is not None:
-            status, message = cosimulation_ending(run_data) if self.complete() else \
-                ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
+            status, message = (
+                cosimulation_ending(run_data)
+                if self.complete()
+                else ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
+            )
             if self.machine_result[0] not in ("complete", "interrupted"):  # the machine's own end (failed, ...)
                 status, message = self.machine_result
         self._write("recording", self.path, lambda: self.recording.close(status, message))
@@ -289,8 +354,13 @@ class RecorderNode(Node):
             return
         summary_path = self.path.with_suffix(".json")
         if run_data is None:  # stopped before all parts of a first exchange were in: no samples, no CSV
-            self._write("summary", summary_path, lambda: write_empty_run(
-                self.model, self.path, self.exchange_step, extra=self.trust_summary("interrupted")))
+            self._write(
+                "summary",
+                summary_path,
+                lambda: write_empty_run(
+                    self.model, self.path, self.exchange_step, extra=self.trust_summary("interrupted")
+                ),
+            )
             return
         summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
         summary.update(self.pace())
@@ -304,9 +374,20 @@ class RecorderNode(Node):
         summary["recording"] = str(self.path)
         if self._write("CSV", csv_path, lambda: write_csv(csv_path, columns, digits=17)):
             summary["csv"] = str(csv_path)
-        if self.bag is not None and self._write("bag", self.bag, lambda: write_bag(
-                self.bag, self.model, run_data.times, run_data.states, run_data.throttle, run_data.external_load,
-                summary["status"], summary.get("message", ""))):
+        if self.bag is not None and self._write(
+            "bag",
+            self.bag,
+            lambda: write_bag(
+                self.bag,
+                self.model,
+                run_data.times,
+                run_data.states,
+                run_data.throttle,
+                run_data.external_load,
+                summary["status"],
+                summary.get("message", ""),
+            ),
+        ):
             summary["bag"] = str(self.bag)
         if self.write_failures:
             summary["not_written"] = list(self.write_failures)
@@ -319,8 +400,10 @@ class RecorderNode(Node):
             write()
             return True
         except OSError as error:
-            line = (f"writing the {what} '{path}' failed: {error.strerror or error}; what was computed is in the "
-                    "outputs that were written")
+            line = (
+                f"writing the {what} '{path}' failed: {error.strerror or error}; what was computed is in the "
+                "outputs that were written"
+            )
             self.write_failures.append(line)
             print(f"mech_regulator: recorder_node: {line}", file=sys.stderr)
             return False
@@ -329,8 +412,10 @@ class RecorderNode(Node):
         """The summary's `refused` (topic -> reason -> count, summed over the nodes that refused) and `disturbances`
         ('<node>: <what>') when there are any; status `disturbed` (and the first such disturbance as its message) when
         one may have changed the numbers of a run that was otherwise complete."""
-        reports = {**self.reports, self.own_name: (self.refusals.counts, self.refusals.disturbances,
-                                                   self.refusals.alters_results)}
+        reports = {
+            **self.reports,
+            self.own_name: (self.refusals.counts, self.refusals.disturbances, self.refusals.alters_results),
+        }
         refused: dict[str, dict[str, int]] = {}
         disturbances: list[str] = []
         alters = False
@@ -344,8 +429,10 @@ class RecorderNode(Node):
         if disturbances:
             summary["disturbances"] = disturbances
         if alters and status == "complete":
-            summary.update(status="disturbed", message="the run was disturbed, its numbers may not be the scene's: "
-                           + "; ".join(disturbances))
+            summary.update(
+                status="disturbed",
+                message="the run was disturbed, its numbers may not be the scene's: " + "; ".join(disturbances),
+            )
         return summary
 
     def pace(self) -> dict[str, float]:
@@ -358,8 +445,10 @@ class RecorderNode(Node):
         if len(self.state_walls) < 2 or self.state_walls[1] <= self.state_walls[0]:
             return {}
         wall = self.state_walls[1] - self.state_walls[0]
-        pace = {"wall_time_s": wall,
-                "real_time_factor": (seconds(max(self.machine)) - seconds(min(self.machine))) / wall}
+        pace = {
+            "wall_time_s": wall,
+            "real_time_factor": (seconds(max(self.machine)) - seconds(min(self.machine))) / wall,
+        }
         if self.launched_at > 0.0 and self.trial == 1:
             pace["start_up_s"] = self.state_walls[0] - self.launched_at
         if self.max_lag is not None:
@@ -372,8 +461,10 @@ class RecorderNode(Node):
         streams = {"machine states": self.machine, "machine moments": self.moments}
         if self.model.governor is not None:
             streams["governor states"] = self.governor
-        return "; ".join(f"{name}: {len(samples)}" + (f" up to {seconds(max(samples)):.6g} s" if samples else "")
-                         for name, samples in streams.items())
+        return "; ".join(
+            f"{name}: {len(samples)}" + (f" up to {seconds(max(samples)):.6g} s" if samples else "")
+            for name, samples in streams.items()
+        )
 
     def part_arrived(self, when: int) -> None:
         """A part of the exchange at `when` [ns] came: the exchange is complete once the machine's state and
@@ -384,13 +475,19 @@ class RecorderNode(Node):
 
     def complete_times(self) -> list[int]:
         """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""
-        return sorted(when for when in self.machine if when in self.moments
-                      and (self.model.governor is None or when in self.governor))
+        return sorted(
+            when
+            for when in self.machine
+            if when in self.moments and (self.model.governor is None or when in self.governor)
+        )
 
     def report(self) -> None:
         """Publish /diagnostics: how many complete exchanges are recorded and up to which time."""
-        values = {"scene": self.model.scene.name, "recorded_exchanges": len(self.completed),
-                  "recorded_until": seconds(self.completed_until) if self.completed_until is not None else None}
+        values = {
+            "scene": self.model.scene.name,
+            "recorded_exchanges": len(self.completed),
+            "recorded_until": seconds(self.completed_until) if self.completed_until is not None else None,
+        }
         array = diagnostics(self, *self.refusals.status(OK, "recording"), values)
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
@@ -409,11 +506,26 @@ class RecorderNode(Node):
                 row += [values[name] for name in self.model.governor.state_names]
             rows.append(row + machine[2:])
         tripped = self.tripped_at if self.tripped_at is not None else np.inf
-        throttle = [self.moments[when][2] if self.controller == "external" else 0.0 if seconds(when) >= tripped else
-                    self.governor[when]["throttle"] if self.model.governor is not None else 1.0 for when in times]
-        return CoSimulation(times=np.array([seconds(when) for when in times]), states=np.array(rows).T,
-                            throttle=np.array(throttle), external_load=np.array([self.moments[w][1] for w in times]),
-                            events=self.events, status="complete", message="", tripped_at=self.tripped_at)
+        throttle = [
+            self.moments[when][2]
+            if self.controller == "external"
+            else 0.0
+            if seconds(when) >= tripped
+            else self.governor[when]["throttle"]
+            if self.model.governor is not None
+            else 1.0
+            for when in times
+        ]
+        return CoSimulation(
+            times=np.array([seconds(when) for when in times]),
+            states=np.array(rows).T,
+            throttle=np.array(throttle),
+            external_load=np.array([self.moments[w][1] for w in times]),
+            events=self.events,
+            status="complete",
+            message="",
+            tripped_at=self.tripped_at,
+        )
 
     def subscribe_to_the_machine(self) -> None:
         """Subscribe to the machine's states and moments (machine/moments) once the other stream the run needs (a
@@ -421,8 +533,11 @@ class RecorderNode(Node):
         subscribe (the recorder: to machine/moments), and a short run could otherwise end before a stream has matched
         the recorder, its samples lost with the node that sent them."""
         waited = time.monotonic()
-        while rclpy.ok() and any(stream.get_publisher_count() == 0 for stream in self.streams) \
-                and time.monotonic() - waited < STREAMS_WAIT:
+        while (
+            rclpy.ok()
+            and any(stream.get_publisher_count() == 0 for stream in self.streams)
+            and time.monotonic() - waited < STREAMS_WAIT
+        ):
             self.executor.spin_once(timeout_sec=MATCH_POLL)
         receive(self, JointState, "machine/moments", self.on_moments, STATE_QOS, self.refusals, self.speakers)
 
@@ -437,9 +552,11 @@ class RecorderNode(Node):
             if self.finished_at is not None:
                 finished_seen = finished_seen or time.monotonic()
                 if time.monotonic() - finished_seen > FINISH_GRACE:
-                    self.get_logger().warning(f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
-                                              f"its last samples did not come within {FINISH_GRACE:g} s: closing "
-                                              f"with what was received ({self.received()})")
+                    self.get_logger().warning(
+                        f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
+                        f"its last samples did not come within {FINISH_GRACE:g} s: closing "
+                        f"with what was received ({self.received()})"
+                    )
                     break
         self.close()
         if self.write_failures:  # said one by one already; the node ends with exit code 1
@@ -462,18 +579,31 @@ def unrecorded(groups: list[tuple[int, dict]], recorded: dict[int, object], topi
     return fresh
 
 
-def write_empty_run(model: MachineModel, path: Path, exchange_step: float,
-                    message: str = "interrupted before the first complete exchange: nothing recorded yet",
-                    extra: dict | None = None) -> None:
+def write_empty_run(
+    model: MachineModel,
+    path: Path,
+    exchange_step: float,
+    message: str = "interrupted before the first complete exchange: nothing recorded yet",
+    extra: dict | None = None,
+) -> None:
     """The files of a run stopped before its first complete exchange: the recording at `path` with its layout and
     no samples (unless one was written already) and the summary next to it (status interrupted, samples 0, `message`
     saying when it stopped, and `extra`: what was refused, what disturbed it)."""
     if not path.exists():
         RunRecording(model, path=path).close()
-    summary = {"scene": model.scene.name, "status": "interrupted", "message": message,
-               "exchange_step": exchange_step, "samples": 0, "t_end": 0.0,
-               "omega_end": model.scene.scenario.initial.omega, "tripped_at": None, "governor": None,
-               "recording": str(path), **(extra or {})}
+    summary = {
+        "scene": model.scene.name,
+        "status": "interrupted",
+        "message": message,
+        "exchange_step": exchange_step,
+        "samples": 0,
+        "t_end": 0.0,
+        "omega_end": model.scene.scenario.initial.omega,
+        "tripped_at": None,
+        "governor": None,
+        "recording": str(path),
+        **(extra or {}),
+    }
     path.with_suffix(".json").write_text(to_json(summary))
 
 

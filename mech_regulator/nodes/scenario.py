@@ -48,8 +48,13 @@ class ScenarioNode(Node):
     def __init__(self):
         super().__init__("scenario")
         self.model = scene_model(self)
-        self.time_mode = text_parameter(self, "time_mode", "lockstep", "lockstep: answer every exchange time; "
-                                        "realtime: publish load changes", ("lockstep", "realtime"))
+        self.time_mode = text_parameter(
+            self,
+            "time_mode",
+            "lockstep",
+            "lockstep: answer every exchange time; realtime: publish load changes",
+            ("lockstep", "realtime"),
+        )
         self.stamped_publisher = self.create_publisher(WrenchStamped, "load_torque_stamped", COMMAND_QOS)
         self.load_publisher = self.create_publisher(Float64, "load_torque", COMMAND_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)

@@ -59,8 +59,10 @@ class Refusals:
         reasons = self.counts.setdefault(topic, {})
         news = reason not in reasons
         reasons[reason] = reasons.get(reason, 0) + 1
-        self.node.get_logger().warning(f"refused a message on {topic} ({reason}): {detail}; the state is unchanged "
-                                       f"({reasons[reason]} so far)", throttle_duration_sec=WARNING_PERIOD)
+        self.node.get_logger().warning(
+            f"refused a message on {topic} ({reason}): {detail}; the state is unchanged ({reasons[reason]} so far)",
+            throttle_duration_sec=WARNING_PERIOD,
+        )
         if news and self.report is not None:
             self.report()
 
@@ -69,8 +71,9 @@ class Refusals:
         an error."""
         if text in self.disturbances:
             return
-        self.node.get_logger().error(f"disturbance: {text}" + ("; this run's numbers may no longer be the scene's"
-                                                               if alters_results else ""))
+        self.node.get_logger().error(
+            f"disturbance: {text}" + ("; this run's numbers may no longer be the scene's" if alters_results else "")
+        )
         news = len(self.disturbances) <= MAX_DISTURBANCES or alters_results and not self.alters_results
         if len(self.disturbances) < MAX_DISTURBANCES:
             self.disturbances.append(text)
@@ -99,8 +102,11 @@ class Refusals:
         """The diagnostics' entries: refused_messages (the total), 'refused: <topic>: <reason>' (each count),
         'disturbance: <n>' (each text) and alters_results."""
         values = [KeyValue(key="refused_messages", value=str(self.total))]
-        values += [KeyValue(key=f"refused: {topic}: {reason}", value=str(count))
-                   for topic, reasons in sorted(self.counts.items()) for reason, count in sorted(reasons.items())]
+        values += [
+            KeyValue(key=f"refused: {topic}: {reason}", value=str(count))
+            for topic, reasons in sorted(self.counts.items())
+            for reason, count in sorted(reasons.items())
+        ]
         values += [KeyValue(key=f"disturbance: {index}", value=text) for index, text in enumerate(self.disturbances)]
         return values + [KeyValue(key="alters_results", value=str(self.alters_results))]
 
@@ -112,7 +118,7 @@ def report_of(values: dict[str, str]) -> tuple[dict[str, dict[str, int]], list[s
     disturbances = []
     for key, value in values.items():
         if key.startswith("refused: "):
-            topic, _, reason = key[len("refused: "):].partition(": ")
+            topic, _, reason = key[len("refused: ") :].partition(": ")
             counts.setdefault(topic, {})[reason] = whole_number(value, key)
         elif key.startswith("disturbance: "):
             disturbances.append(value)
@@ -138,8 +144,9 @@ def real_number(text: str, what: str, allow_none: bool = False) -> float | None:
     except ValueError:
         value = math.nan
     if not math.isfinite(value):
-        raise BadMessage("bad value", f"{what} = {text!r}, expected a finite number" + (" or None" if allow_none
-                                                                                        else ""))
+        raise BadMessage(
+            "bad value", f"{what} = {text!r}, expected a finite number" + (" or None" if allow_none else "")
+        )
     return value
 
 
@@ -191,12 +198,17 @@ class Speakers:
         name = self.publisher_name(topic, gid) if gid else ""
         if expected and name not in expected:
             sender = name or "a publisher the graph does not name"
-            raise BadMessage("not from " + " or ".join(expected),
-                             f"sent by {sender}; this node takes {topic} from {' or '.join(expected)} only")
+            raise BadMessage(
+                "not from " + " or ".join(expected),
+                f"sent by {sender}; this node takes {topic} from {' or '.join(expected)} only",
+            )
         if self.pinned.setdefault((topic, name if expected else ""), gid) != gid:
             first = f"node '{name}'" if expected else "the first publisher"
-            raise BadMessage("second publisher", f"a second publisher of {first} on {topic} (another node of "
-                             "that name on the domain?); the first one is kept")
+            raise BadMessage(
+                "second publisher",
+                f"a second publisher of {first} on {topic} (another node of "
+                "that name on the domain?); the first one is kept",
+            )
         return name
 
 
@@ -214,9 +226,17 @@ def namesakes(node: Node, names: list[str]) -> list[str]:
     return [name for name in dict.fromkeys(names) if seen.count(name) > 1]
 
 
-def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusals: Refusals,
-            speakers: Speakers | None = None, pass_speaker: bool = False,
-            concerns: Callable[[object], bool] | None = None):
+def receive(
+    node: Node,
+    message_type,
+    topic: str,
+    handle: Callable,
+    qos,
+    refusals: Refusals,
+    speakers: Speakers | None = None,
+    pass_speaker: bool = False,
+    concerns: Callable[[object], bool] | None = None,
+):
     """Subscribe `node` to `topic`: each message that `concerns` the node (default: all; a shared topic such as
     /diagnostics also carries others' messages, passed over) is checked for its speaker (speakers.check) and handed
     to `handle` (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a
@@ -226,6 +246,7 @@ def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusal
     rclpy 9.1's EventsExecutor calls a callback that takes message info with one argument, the (message, info)
     tuple, where the other executors pass them as two: the callback takes both forms (its signature says two, so
     that rclpy hands it the info)."""
+
     def on_message(*received) -> None:
         message, info = received if len(received) == 2 else received[0]
         if concerns is not None and not concerns(message):
@@ -239,13 +260,17 @@ def receive(node: Node, message_type, topic: str, handle: Callable, qos, refusal
         except BadMessage as refused:
             refusals.refuse(topic, refused.reason, refused.detail)
         except Exception as error:  # what no check foresaw: the message may have changed the state half way
-            node.get_logger().error(f"a message on {topic} raised {type(error).__name__}: {error}\n"
-                                    f"{traceback.format_exc()}")
+            node.get_logger().error(
+                f"a message on {topic} raised {type(error).__name__}: {error}\n{traceback.format_exc()}"
+            )
             refusals.disturb(f"a message on {topic} raised {type(error).__name__}: {error}", alters_results=True)
 
-    on_message.__signature__ = inspect.Signature([
-        inspect.Parameter("message", inspect.Parameter.POSITIONAL_ONLY),
-        inspect.Parameter("info", inspect.Parameter.POSITIONAL_ONLY)])
+    on_message.__signature__ = inspect.Signature(
+        [
+            inspect.Parameter("message", inspect.Parameter.POSITIONAL_ONLY),
+            inspect.Parameter("info", inspect.Parameter.POSITIONAL_ONLY),
+        ]
+    )
     return node.create_subscription(message_type, topic, on_message, qos)
 
 
@@ -257,8 +282,11 @@ def stamp_of(stamp) -> int:
     """Whole nanoseconds of a builtin_interfaces/Time, checked: seconds >= 0, nanoseconds < 1e9, at most
     LARGEST_STAMP; BadMessage otherwise."""
     if stamp.sec < 0 or stamp.nanosec >= NANOSECONDS or stamp.sec * NANOSECONDS + stamp.nanosec > LARGEST_STAMP:
-        raise BadMessage("bad stamp", f"stamp {stamp.sec} s {stamp.nanosec} ns, expected a time >= 0 with nanoseconds "
-                         f"below 1e9, at most {LARGEST_STAMP} ns")
+        raise BadMessage(
+            "bad stamp",
+            f"stamp {stamp.sec} s {stamp.nanosec} ns, expected a time >= 0 with nanoseconds "
+            f"below 1e9, at most {LARGEST_STAMP} ns",
+        )
     return stamp.sec * NANOSECONDS + stamp.nanosec
 
 
@@ -269,9 +297,13 @@ def joint_fields(message, *needed: str) -> list[str]:
     names = list(message.name)
     lengths = {field: len(getattr(message, field)) for field in ("position", "velocity", "effort")}
     if any(length != len(names) and (length or field in needed) for field, length in lengths.items()):
-        raise BadMessage("array lengths", f"{len(names)} names but " + ", ".join(
-            f"{length} {field}s" for field, length in lengths.items()) + "; expected one of each per name" +
-            (f" ({', '.join(needed)} needed here, the others may be empty)" if needed else " (or none)"))
+        raise BadMessage(
+            "array lengths",
+            f"{len(names)} names but "
+            + ", ".join(f"{length} {field}s" for field, length in lengths.items())
+            + "; expected one of each per name"
+            + (f" ({', '.join(needed)} needed here, the others may be empty)" if needed else " (or none)"),
+        )
     return names
 
 
@@ -287,8 +319,9 @@ def bounded(value: float, low: float, high: float, what: str) -> float:
 def in_order(when: int, newest: int | None, what: str) -> int:
     """`when` [ns] unless it is behind `newest` [ns] (what was taken already): BadMessage 'out of order'."""
     if newest is not None and when < newest:
-        raise BadMessage("out of order", f"{what} stamped {when / NANOSECONDS:.9g} s after one stamped "
-                         f"{newest / NANOSECONDS:.9g} s")
+        raise BadMessage(
+            "out of order", f"{what} stamped {when / NANOSECONDS:.9g} s after one stamped {newest / NANOSECONDS:.9g} s"
+        )
     return when
 
 
@@ -296,8 +329,10 @@ def not_ahead(when: int, latest: int, what: str) -> int:
     """`when` [ns] unless it is ahead of `latest` [ns] (the newest exchange time the machine has published: nothing
     can answer a time not asked yet): BadMessage 'ahead of the machine'."""
     if when > latest:
-        raise BadMessage("ahead of the machine", f"{what} stamped {when / NANOSECONDS:.9g} s, the machine is at "
-                         f"{latest / NANOSECONDS:.9g} s")
+        raise BadMessage(
+            "ahead of the machine",
+            f"{what} stamped {when / NANOSECONDS:.9g} s, the machine is at {latest / NANOSECONDS:.9g} s",
+        )
     return when
 
 
@@ -343,6 +378,7 @@ def json_message(text: str, model: type[pydantic.BaseModel]):
     try:
         return model.model_validate(data)
     except pydantic.ValidationError as error:
-        problems = "; ".join(f"{'.'.join(map(str, item['loc'])) or 'the message'}: {item['msg']}"
-                             for item in error.errors()[:3])
+        problems = "; ".join(
+            f"{'.'.join(map(str, item['loc'])) or 'the message'}: {item['msg']}" for item in error.errors()[:3]
+        )
         raise BadMessage("bad fields", f"{text[:80]!r}: {problems}") from None

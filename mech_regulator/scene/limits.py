@@ -72,7 +72,7 @@ def shown(value: Any, limit: int = 300) -> str:
         short.maxlist = short.maxtuple = short.maxdict = short.maxset = 8
         short.maxlevel = 3
         text = short.repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _small(value: Any, budget: int = 200) -> bool:
@@ -84,7 +84,7 @@ def _small(value: Any, budget: int = 200) -> bool:
         if isinstance(node, dict):
             pending += list(node.keys())[:budget] + list(node.values())[:budget]
         elif isinstance(node, (list, tuple, set)):
-            pending += list(node)[:budget + 1]
+            pending += list(node)[: budget + 1]
         elif isinstance(node, str):
             budget -= len(node) // 40
         elif isinstance(node, int) and not isinstance(node, bool):
@@ -104,12 +104,16 @@ def number_refusals(data: Any, path: str = "") -> list[str]:
         if isinstance(node, dict):
             pending += [(f"{key}.{child}" if key else str(child), value) for child, value in reversed(node.items())]
         elif isinstance(node, list):
-            pending += [(f"{key}.{index}" if key else str(index), value)
-                        for index, value in reversed(list(enumerate(node)))]
-        elif (isinstance(node, int) and not isinstance(node, bool) or isinstance(node, float) and math.isfinite(node)) \
-                and abs(node) > MAX_MAGNITUDE:  # (NaN and infinities: the schema says "a finite number")
-            problems.append(f"{key or '(top level)'} = {shown(node)}: beyond the limit on any number of a scene, "
-                            f"|value| <= {MAX_MAGNITUDE:g} (in the key's SI unit)")
+            pending += [
+                (f"{key}.{index}" if key else str(index), value) for index, value in reversed(list(enumerate(node)))
+            ]
+        elif (
+            isinstance(node, int) and not isinstance(node, bool) or isinstance(node, float) and math.isfinite(node)
+        ) and abs(node) > MAX_MAGNITUDE:  # (NaN and infinities: the schema says "a finite number")
+            problems.append(
+                f"{key or '(top level)'} = {shown(node)}: beyond the limit on any number of a scene, "
+                f"|value| <= {MAX_MAGNITUDE:g} (in the key's SI unit)"
+            )
     return problems
 
 
@@ -126,34 +130,46 @@ def run_refusals(scene) -> list[str]:
     initial = scenario.initial
     for key, value in (("omega", initial.omega), ("omega_driven", initial.omega_driven)):
         if value is not None and abs(value) > MAX_SPEED:
-            problems.append(f"scenario.initial.{key} = {value:g} rad/s: beyond the limit of {MAX_SPEED:g} rad/s on "
-                            "any speed (about 10 million rpm)")
+            problems.append(
+                f"scenario.initial.{key} = {value:g} rad/s: beyond the limit of {MAX_SPEED:g} rad/s on "
+                "any speed (about 10 million rpm)"
+            )
     if solver.method == "RK4":
         steps = duration / solver.step
         if steps > MAX_STEPS:
-            problems.append(f"solver.step = {solver.step:g} s would take {steps:.3g} steps for {duration:g} s; "
-                            f"expected at most {MAX_STEPS:g} steps: solver.step >= {duration / MAX_STEPS:.3g} s")
+            problems.append(
+                f"solver.step = {solver.step:g} s would take {steps:.3g} steps for {duration:g} s; "
+                f"expected at most {MAX_STEPS:g} steps: solver.step >= {duration / MAX_STEPS:.3g} s"
+            )
     elif solver.method == "energy":
         dphi = math.radians(solver.phi_step_deg)
         per_turn = 2.0 * math.pi / dphi
         turned = abs(initial.omega) * duration
         if per_turn > MAX_STEPS:
-            problems.append(f"solver.phi_step_deg = {solver.phi_step_deg:g} deg would take {per_turn:.3g} steps per "
-                            f"turn; expected at most {MAX_STEPS:g} steps: solver.phi_step_deg >= "
-                            f"{360.0 / MAX_STEPS:.3g} deg")
+            problems.append(
+                f"solver.phi_step_deg = {solver.phi_step_deg:g} deg would take {per_turn:.3g} steps per "
+                f"turn; expected at most {MAX_STEPS:g} steps: solver.phi_step_deg >= "
+                f"{360.0 / MAX_STEPS:.3g} deg"
+            )
         elif turned / dphi > MAX_STEPS:
-            problems.append(f"solver.phi_step_deg = {solver.phi_step_deg:g} deg would take {turned / dphi:.3g} steps "
-                            f"for {duration:g} s at the initial speed {initial.omega:g} rad/s; expected at most "
-                            f"{MAX_STEPS:g} steps: solver.phi_step_deg >= {math.degrees(turned / MAX_STEPS):.3g} deg")
+            problems.append(
+                f"solver.phi_step_deg = {solver.phi_step_deg:g} deg would take {turned / dphi:.3g} steps "
+                f"for {duration:g} s at the initial speed {initial.omega:g} rad/s; expected at most "
+                f"{MAX_STEPS:g} steps: solver.phi_step_deg >= {math.degrees(turned / MAX_STEPS):.3g} deg"
+            )
     elif solver.max_step is not None and duration / solver.max_step > MAX_STEPS:
-        problems.append(f"solver.max_step = {solver.max_step:g} s would take at least {duration / solver.max_step:.3g} "
-                        f"steps for {duration:g} s; expected at most {MAX_STEPS:g} steps: solver.max_step >= "
-                        f"{duration / MAX_STEPS:.3g} s (or none)")
+        problems.append(
+            f"solver.max_step = {solver.max_step:g} s would take at least {duration / solver.max_step:.3g} "
+            f"steps for {duration:g} s; expected at most {MAX_STEPS:g} steps: solver.max_step >= "
+            f"{duration / MAX_STEPS:.3g} s (or none)"
+        )
     samples = duration * solver.sample_rate
     if samples > MAX_SAMPLES:
-        problems.append(f"solver.sample_rate = {solver.sample_rate:g} Hz gives {samples:.3g} output samples over "
-                        f"{duration:g} s; expected at most {MAX_SAMPLES:g}: solver.sample_rate <= "
-                        f"{MAX_SAMPLES / duration:.3g} Hz")
+        problems.append(
+            f"solver.sample_rate = {solver.sample_rate:g} Hz gives {samples:.3g} output samples over "
+            f"{duration:g} s; expected at most {MAX_SAMPLES:g}: solver.sample_rate <= "
+            f"{MAX_SAMPLES / duration:.3g} Hz"
+        )
     return problems
 
 
@@ -161,8 +177,10 @@ def exchange_refusal(option: str, exchange_step: float, duration: float) -> str 
     """Why a co-simulation's exchange step [s] over `duration` [s] would take too many exchanges (None if not)."""
     exchanges = duration / exchange_step
     if exchanges > MAX_STEPS:
-        return (f"{option} {exchange_step:g} s would take {exchanges:.3g} exchanges for {duration:g} s; expected at "
-                f"most {MAX_STEPS:g}: an exchange step >= {duration / MAX_STEPS:.3g} s")
+        return (
+            f"{option} {exchange_step:g} s would take {exchanges:.3g} exchanges for {duration:g} s; expected at "
+            f"most {MAX_STEPS:g}: an exchange step >= {duration / MAX_STEPS:.3g} s"
+        )
     return None
 
 

@@ -71,9 +71,11 @@ class _Loader(yaml.SafeLoader):
                 except TypeError:  # an unhashable key: SafeLoader's own message follows
                     continue
                 if earlier is not key_node.start_mark:
-                    raise _Duplicate(f"the key {shown(key)} is given twice in one mapping, at {_place(earlier)} and "
-                                     f"at {_place(key_node.start_mark)}; expected it once (YAML would keep only the "
-                                     "last)")
+                    raise _Duplicate(
+                        f"the key {shown(key)} is given twice in one mapping, at {_place(earlier)} and "
+                        f"at {_place(key_node.start_mark)}; expected it once (YAML would keep only the "
+                        "last)"
+                    )
         return super().construct_mapping(node, deep)
 
     def __init__(self, stream):
@@ -86,12 +88,18 @@ class _Loader(yaml.SafeLoader):
         if isinstance(event, yaml.AliasEvent):
             node = self.anchors.get(event.anchor)
             if node is not None and id(node) not in self._sizes:
-                raise _Refused(f"the alias *{event.anchor[:40]} repeats a node that contains it: a recursive "
-                               "structure, which a scene never needs", event.start_mark)
+                raise _Refused(
+                    f"the alias *{event.anchor[:40]} repeats a node that contains it: a recursive "
+                    "structure, which a scene never needs",
+                    event.start_mark,
+                )
             return super().compose_node(parent, index)
         if self._depth >= MAX_YAML_DEPTH:
-            raise _Refused(f"mappings and lists nested deeper than {MAX_YAML_DEPTH} levels (the limit; a scene needs "
-                           "fewer than 10)", event.start_mark)
+            raise _Refused(
+                f"mappings and lists nested deeper than {MAX_YAML_DEPTH} levels (the limit; a scene needs "
+                "fewer than 10)",
+                event.start_mark,
+            )
         self._depth += 1
         try:
             node = super().compose_node(parent, index)
@@ -100,21 +108,30 @@ class _Loader(yaml.SafeLoader):
         if isinstance(node, yaml.ScalarNode):
             size = (1, len(node.value), 1)
         else:
-            children = [part for pair in node.value for part in pair] if isinstance(node, yaml.MappingNode) \
-                else node.value
+            children = (
+                [part for pair in node.value for part in pair] if isinstance(node, yaml.MappingNode) else node.value
+            )
             sizes = [self._sizes[id(child)] for child in children]
             size = (1 + sum(s[0] for s in sizes), sum(s[1] for s in sizes), 1 + max((s[2] for s in sizes), default=0))
         self._sizes[id(node)] = size
         values, characters, depth = size
         if values > MAX_YAML_NODES:
-            raise _Refused(f"with its aliases expanded the document holds more than {MAX_YAML_NODES} values (the "
-                           f"limit; this node alone {values:.3g}): an alias bomb?", event.start_mark)
+            raise _Refused(
+                f"with its aliases expanded the document holds more than {MAX_YAML_NODES} values (the "
+                f"limit; this node alone {values:.3g}): an alias bomb?",
+                event.start_mark,
+            )
         if characters > MAX_YAML_CHARACTERS:
-            raise _Refused(f"with its aliases expanded the document's values hold more than {MAX_YAML_CHARACTERS} "
-                           f"characters (the limit; this node alone {characters:.3g})", event.start_mark)
+            raise _Refused(
+                f"with its aliases expanded the document's values hold more than {MAX_YAML_CHARACTERS} "
+                f"characters (the limit; this node alone {characters:.3g})",
+                event.start_mark,
+            )
         if depth > MAX_YAML_DEPTH:
-            raise _Refused(f"with its aliases expanded, mappings and lists nest deeper than {MAX_YAML_DEPTH} levels "
-                           "(the limit)", event.start_mark)
+            raise _Refused(
+                f"with its aliases expanded, mappings and lists nest deeper than {MAX_YAML_DEPTH} levels (the limit)",
+                event.start_mark,
+            )
         return node
 
 
@@ -125,12 +142,16 @@ def _place(mark) -> str:
 
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+    re.compile(
+        r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
                    |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
                    |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
                    |[-+]?\.(?:inf|Inf|INF)
-                   |\.(?:nan|NaN|NAN))$""", re.X),
-    list("-+0123456789."))
+                   |\.(?:nan|NaN|NAN))$""",
+        re.X,
+    ),
+    list("-+0123456789."),
+)
 
 
 def parse_yaml(text: str, source: str) -> Any:
@@ -139,8 +160,9 @@ def parse_yaml(text: str, source: str) -> Any:
         return yaml.load(text, Loader=_Loader)
     except _Refused as error:
         mark = error.problem_mark
-        raise SceneError(f"{source}: refused at line {mark.line + 1}, column {mark.column + 1}: {error.problem}") \
-            from None
+        raise SceneError(
+            f"{source}: refused at line {mark.line + 1}, column {mark.column + 1}: {error.problem}"
+        ) from None
     except _Duplicate as error:
         raise SceneError(f"{source}: {error.problem}") from None
     except yaml.YAMLError as error:
@@ -166,6 +188,7 @@ def config_dir() -> Path:
             return candidate
     try:
         from ament_index_python.packages import get_package_share_directory
+
         candidates.append(Path(get_package_share_directory("mech_regulator")) / "config")
     except (ImportError, LookupError, OSError):  # no ROS index (plain pip), or AMENT_PREFIX_PATH unset
         pass
@@ -190,8 +213,7 @@ def resolve_scene_path(name_or_path: str) -> Path:
         return bundled[stem]
     close = difflib.get_close_matches(stem, bundled, n=1)
     hint = f"; did you mean the bundled scene '{close[0]}'?" if close else ""
-    raise SceneError(f"scene '{name_or_path}': no such file, nor a bundled scene (bundled: "
-                     f"{', '.join(bundled)}){hint}")
+    raise SceneError(f"scene '{name_or_path}': no such file, nor a bundled scene (bundled: {', '.join(bundled)}){hint}")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -225,8 +247,9 @@ def apply_override(data: dict, assignment: str, option: str = "--set") -> None:
 
 def _index(node: list, key: str, path: list[str], assignment: str, option: str) -> int:
     if not key.isdigit() or int(key) >= len(node):
-        raise SceneError(f"{option} '{assignment}': '{'.'.join(path)}' must index the list "
-                         f"(0 to {len(node) - 1}), got '{key}'")
+        raise SceneError(
+            f"{option} '{assignment}': '{'.'.join(path)}' must index the list (0 to {len(node) - 1}), got '{key}'"
+        )
     return int(key)
 
 
@@ -272,32 +295,41 @@ def read_scene_data(path: Path, derived_from: tuple[Path, ...] = (), referrer: s
         try:
             data = parse_yaml(text, str(path))
         except SceneError:
-            raise SceneError(f"{referrer}: {path} is not a valid YAML scene file; check it with `mech-regulator "
-                             f"describe {path}`") from None
+            raise SceneError(
+                f"{referrer}: {path} is not a valid YAML scene file; check it with `mech-regulator describe {path}`"
+            ) from None
     else:
         data = parse_yaml(text, str(path))
     if data is None:
         data = {}
     if not isinstance(data, dict):
         what = f"{referrer}: {path}" if referrer else str(path)
-        raise SceneError(f"{what}: expected a mapping of sections (machine, scenario, solver), got "
-                         f"{type(data).__name__}")
+        raise SceneError(
+            f"{what}: expected a mapping of sections (machine, scenario, solver), got {type(data).__name__}"
+        )
     if referrer and not set(data) <= SCENE_KEYS:
-        raise SceneError(f"{referrer}: {path} is not a scene file: its top level has keys that a scene does not have "
-                         f"(a scene's: {', '.join(sorted(SCENE_KEYS))})")
+        raise SceneError(
+            f"{referrer}: {path} is not a scene file: its top level has keys that a scene does not have "
+            f"(a scene's: {', '.join(sorted(SCENE_KEYS))})"
+        )
     base = data.pop("base", None)
     if base is None:
         return data
     if not isinstance(base, str):
-        raise SceneError(f"{path}: base = {shown(base)}; expected the name of a bundled scene or a path to a scene "
-                         "file")
+        raise SceneError(
+            f"{path}: base = {shown(base)}; expected the name of a bundled scene or a path to a scene file"
+        )
     if len(derived_from) >= MAX_BASE_CHAIN:
-        raise SceneError(f"{path}: base = '{base}': a chain of more than {MAX_BASE_CHAIN} bases (the "
-                         "limit); expected a short chain of scenes that ends in a scene without base")
+        raise SceneError(
+            f"{path}: base = '{base}': a chain of more than {MAX_BASE_CHAIN} bases (the "
+            "limit); expected a short chain of scenes that ends in a scene without base"
+        )
     base_file = base_path(path, base)
     if base_file.resolve() in derived_from + (path.resolve(),):
-        raise SceneError(f"{path}: base = '{base}' closes a loop of bases; expected a chain of scenes that ends "
-                         "in a scene without base")
+        raise SceneError(
+            f"{path}: base = '{base}' closes a loop of bases; expected a chain of scenes that ends "
+            "in a scene without base"
+        )
     merged = read_scene_data(base_file, derived_from + (path.resolve(),), f"{path}: base = '{base}'")
     merged.pop("name", None)
     merged.pop("description", None)
@@ -313,13 +345,16 @@ def _scene_text(path: Path, referrer: str = "") -> str:
     except OSError as error:
         raise SceneError(f"{what}: cannot be read: {error.strerror}") from None
     if len(raw) > MAX_SCENE_BYTES:
-        raise SceneError(f"{what}: larger than {MAX_SCENE_BYTES} bytes, the limit for a scene file (a scene is a few "
-                         "kB; long tables belong in fewer points)")
+        raise SceneError(
+            f"{what}: larger than {MAX_SCENE_BYTES} bytes, the limit for a scene file (a scene is a few "
+            "kB; long tables belong in fewer points)"
+        )
     try:
         return raw.decode("utf-8")
     except UnicodeDecodeError as error:
-        raise SceneError(f"{what}: not UTF-8 text (byte {error.start}: {error.reason}); save the file as UTF-8") \
-            from None
+        raise SceneError(
+            f"{what}: not UTF-8 text (byte {error.start}: {error.reason}); save the file as UTF-8"
+        ) from None
 
 
 def base_path(path: Path, base: str) -> Path:
@@ -330,8 +365,10 @@ def base_path(path: Path, base: str) -> Path:
     bundled = bundled_scenes()
     folder = path.parent
     relative = Path(base)
-    expected = (f"expected the name of a bundled scene ({', '.join(bundled)}) or the relative path of a .yaml scene "
-                f"file inside this scene's folder ({folder})")
+    expected = (
+        f"expected the name of a bundled scene ({', '.join(bundled)}) or the relative path of a .yaml scene "
+        f"file inside this scene's folder ({folder})"
+    )
     if relative.is_absolute():
         raise SceneError(f"{path}: base = '{base}': not a relative path; {expected}")
     if ".." in relative.parts:
@@ -344,10 +381,14 @@ def base_path(path: Path, base: str) -> Path:
     if base.removesuffix(".yaml") in bundled and len(relative.parts) == 1:
         return bundled[base.removesuffix(".yaml")]
     if relative.suffix != ".yaml":
-        raise SceneError(f"{path}: base = '{base}': no such file: not a bundled scene's name, and a base file is a "
-                         f".yaml file; {expected}")
-    raise SceneError(f"{path}: base = '{base}': no such file next to this scene ({candidate}), nor a bundled "
-                     f"scene (bundled: {', '.join(bundled)})")
+        raise SceneError(
+            f"{path}: base = '{base}': no such file: not a bundled scene's name, and a base file is a "
+            f".yaml file; {expected}"
+        )
+    raise SceneError(
+        f"{path}: base = '{base}': no such file next to this scene ({candidate}), nor a bundled "
+        f"scene (bundled: {', '.join(bundled)})"
+    )
 
 
 def _merge(base: dict, changes: dict) -> dict:
@@ -376,8 +417,10 @@ def validate_scene(data: dict, source: str = "scene") -> Scene:
         lines = [describe_error(item, data) for item in error.errors(include_url=False)]
         raise SceneError(problems_message(source, list(dict.fromkeys(lines)))) from None
     except (ArithmeticError, RecursionError) as error:  # a check of the schema computing with extreme numbers
-        raise SceneError(f"{source}: its numbers cannot be computed with ({type(error).__name__}: {error}); expected "
-                         "values of a real machine") from None
+        raise SceneError(
+            f"{source}: its numbers cannot be computed with ({type(error).__name__}: {error}); expected "
+            "values of a real machine"
+        ) from None
     problems = run_refusals(scene)
     if problems:
         raise SceneError(problems_message(source, problems))
@@ -413,7 +456,7 @@ def describe_error(item: Mapping[str, Any], data: Any) -> str:
             return f"{key}: missing 'type'; expected one of {expected}"
         return f"{key}.type = {shown(item['input'].get('type'))}: unknown type; expected one of {expected}"
     if message.startswith("Value error, "):
-        return f"{key}: {message[len('Value error, '):]}"
+        return f"{key}: {message[len('Value error, ') :]}"
     if kind == "finite_number":
         message = "expected a finite number (not NaN or infinity)"
     description = _field_description(loc, data)
@@ -427,8 +470,13 @@ def _data_path(loc: tuple, data: Any) -> list:
     path, node, tag_skipped = [], data, False
     for index, part in enumerate(loc):
         # a tag: the node's own type, or the default type of a node that gives none (a valve)
-        default_tag = (isinstance(node, dict) and "type" not in node and isinstance(part, str) and part not in node
-                       and index < len(loc) - 1)
+        default_tag = (
+            isinstance(node, dict)
+            and "type" not in node
+            and isinstance(part, str)
+            and part not in node
+            and index < len(loc) - 1
+        )
         if isinstance(node, dict) and (node.get("type") == part or default_tag) and not tag_skipped:
             tag_skipped = True
             continue
@@ -469,8 +517,11 @@ def _model_at(loc: list, data: Any) -> type[pydantic.BaseModel] | None:
     """The pydantic model class that validates the section at loc."""
     node: Any = data
     for part in loc:
-        node = node.get(part) if isinstance(node, dict) else (
-            node[part] if isinstance(node, list) and isinstance(part, int) and part < len(node) else None)
+        node = (
+            node.get(part)
+            if isinstance(node, dict)
+            else (node[part] if isinstance(node, list) and isinstance(part, int) and part < len(node) else None)
+        )
     annotation = _resolve(_annotation_at(loc, data), node)
     return annotation if isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel) else None
 

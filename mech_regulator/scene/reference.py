@@ -34,22 +34,30 @@ def scene_json_schema() -> dict:
     defs = full.pop("$defs")
     partial = _PartialSchemas(defs)
     required = set(full["required"])
-    partial_keys = {key: partial.value(value, nullable=key not in required)
-                    for key, value in full["properties"].items()}
+    partial_keys = {
+        key: partial.value(value, nullable=key not in required) for key, value in full["properties"].items()
+    }
     descriptions = {key: _annotations(value) for key, value in full["properties"].items()}
-    base = {"type": "string", "title": "Base",
-            "description": "the scene this one changes (a bundled scene's name, or the relative path of a .yaml scene "
-                           "file inside this file's folder, no '..'); "
-                           "with base, every key is optional: mappings merge key by key, lists and plain values "
-                           "replace, and null removes a key of the base"}
+    base = {
+        "type": "string",
+        "title": "Base",
+        "description": "the scene this one changes (a bundled scene's name, or the relative path of a .yaml scene "
+        "file inside this file's folder, no '..'); "
+        "with base, every key is optional: mappings merge key by key, lists and plain values "
+        "replace, and null removes a key of the base",
+    }
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "mech_regulator scene",
         "description": " ".join(inspect.cleandoc(Scene.__doc__ or "").split()) + " A scene with `base:` holds only "
-                       "its changes to another scene.",
+        "its changes to another scene.",
         "type": "object",
-        "properties": {"name": descriptions["name"], "description": descriptions["description"], "base": base,
-                       **{key: value for key, value in descriptions.items() if key not in ("name", "description")}},
+        "properties": {
+            "name": descriptions["name"],
+            "description": descriptions["description"],
+            "base": base,
+            **{key: value for key, value in descriptions.items() if key not in ("name", "description")},
+        },
         "additionalProperties": False,
         "if": {"required": ["base"]},
         "then": {"properties": partial_keys},
@@ -104,10 +112,13 @@ class _PartialSchemas:
         if partial_name not in self.defs:
             model = self.full[name]
             required = set(model.get("required", ()))
-            self.defs[partial_name] = definition = {key: item for key, item in model.items()
-                                                    if key not in ("properties", "required")}
-            definition["description"] = (f"{model.get('description', name)}\n\nPartial form (a scene with base): "
-                                         "every key optional; null removes a key of the base.")
+            self.defs[partial_name] = definition = {
+                key: item for key, item in model.items() if key not in ("properties", "required")
+            }
+            definition["description"] = (
+                f"{model.get('description', name)}\n\nPartial form (a scene with base): "
+                "every key optional; null removes a key of the base."
+            )
             definition["properties"] = {}
             for key, item in model["properties"].items():
                 definition["properties"][key] = self.value(item, nullable=key not in required)
@@ -123,9 +134,13 @@ class _PartialSchemas:
             properties = self.defs[f"Partial{name}"]["properties"]
             for other in names:
                 for key in self.full[other]["properties"]:
-                    properties.setdefault(key, {"type": "null", "description": f"null removes this key of the "
-                                                                               f"base scene (a key of {other}, "
-                                                                               f"not of {name})"})
+                    properties.setdefault(
+                        key,
+                        {
+                            "type": "null",
+                            "description": f"null removes this key of the base scene (a key of {other}, not of {name})",
+                        },
+                    )
 
 
 def _accepts_null(schema: dict) -> bool:
@@ -145,8 +160,10 @@ def schema_markdown() -> str:
         nested: list[tuple[type, str]] = []
         for name, field in model.model_fields.items():
             default = "required" if field.is_required() else _format_default(field)
-            rows.append(f"| `{name}` | {_type_name(field.annotation)} | {default} | "
-                        f"{(field.description or '').replace('|', chr(92) + '|')} |")
+            rows.append(
+                f"| `{name}` | {_type_name(field.annotation)} | {default} | "
+                f"{(field.description or '').replace('|', chr(92) + '|')} |"
+            )
             for child in _models_in(field.annotation):
                 suffix = {list: "[]", dict: ".<name>"}.get(typing.get_origin(_strip(field.annotation)), "")
                 nested.append((child, f"{path}.{name}{suffix}" if path else name + suffix))

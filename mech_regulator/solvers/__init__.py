@@ -46,8 +46,9 @@ def _integrate(model: MachineModel, progress: Progress | None = None) -> Traject
     return integrate_time_domain(model, progress)
 
 
-def on_path_for_a_command(model: MachineModel, report: Callable[[str], None],
-                          compile_now: bool = False) -> MachineModel:
+def on_path_for_a_command(
+    model: MachineModel, report: Callable[[str], None], compile_now: bool = False
+) -> MachineModel:
     """The model a command (simulate, sweep, flywheel, run and the nodes) runs, its solver.path decided: fast or
     reference, never auto.
 
@@ -85,12 +86,13 @@ def on_path_for_a_command(model: MachineModel, report: Callable[[str], None],
         compile_before_the_run(method, lambda line: report(f"note: {line.strip()}"))
         return on_path(model, "fast")
     if method == "Rosenbrock23":
-        report(f"note: compiling the fast path's {method} stepper once ({COMPILE_ESTIMATE}); later runs start at "
-               "once")
+        report(f"note: compiling the fast path's {method} stepper once ({COMPILE_ESTIMATE}); later runs start at once")
         return on_path(model, "fast")
     started = compile_in_background([method])
-    report(f"note: the fast path's {method} stepper is {'now compiling' if started else 'compiling'} in the "
-           f"background (once, {COMPILE_ESTIMATE}); this run uses the reference path, later runs the fast path")
+    report(
+        f"note: the fast path's {method} stepper is {'now compiling' if started else 'compiling'} in the "
+        f"background (once, {COMPILE_ESTIMATE}); this run uses the reference path, later runs the fast path"
+    )
     return on_path(model, "reference")
 
 
@@ -99,8 +101,10 @@ def auto_path() -> str:
     (reference or fast) when set, else fast (where it covers the scene and is compiled: on_path_for_a_command)."""
     chosen = os.environ.get(AUTO_PATH_VARIABLE, "")
     if chosen not in ("", "reference", "fast"):
-        raise SceneError(f"{AUTO_PATH_VARIABLE}={chosen!r}: expected reference or fast (what solver.path auto "
-                         "means), or leave it unset")
+        raise SceneError(
+            f"{AUTO_PATH_VARIABLE}={chosen!r}: expected reference or fast (what solver.path auto "
+            "means), or leave it unset"
+        )
     return chosen or "fast"
 
 
@@ -136,13 +140,24 @@ def step_limit_refusal(model: MachineModel) -> str | Trajectory | None:
     if probe.status != "complete" or steps <= MAX_STEPS:
         return None  # (a probe that failed: the run fails the same way, and says why)
     longest = MAX_STEPS * PROBE_DURATION / probe.stats.steps
-    fixes = {"RK4": "a longer solver.step", "energy": "a longer solver.phi_step_deg"}.get(method, (
-        "" if method == "DOP853" else "a method that takes longer steps (DOP853), or ") + "a looser solver.rtol")
-    return (f"scenario.duration = {duration:g} s: solver.method = {method} took {probe.stats.steps} steps over the "
-            f"run's first {PROBE_DURATION:g} s, so some {steps:.4g} steps over {duration:g} s, beyond the limit of "
-            f"{MAX_STEPS:g} steps of one run; expected scenario.duration <= {longest:.3g} s, or {fixes} (docs/scenes.md, "
-            "Limits)")
+    fixes = {"RK4": "a longer solver.step", "energy": "a longer solver.phi_step_deg"}.get(
+        method,
+        ("" if method == "DOP853" else "a method that takes longer steps (DOP853), or ") + "a looser solver.rtol",
+    )
+    return (
+        f"scenario.duration = {duration:g} s: solver.method = {method} took {probe.stats.steps} steps over the "
+        f"run's first {PROBE_DURATION:g} s, so some {steps:.4g} steps over {duration:g} s, beyond the limit of "
+        f"{MAX_STEPS:g} steps of one run; expected scenario.duration <= {longest:.3g} s, or {fixes} (docs/scenes.md, "
+        "Limits)"
+    )
 
 
-__all__ = ["SolverStats", "Trajectory", "auto_path", "on_path", "on_path_for_a_command", "simulate",
-           "step_limit_refusal"]
+__all__ = [
+    "SolverStats",
+    "Trajectory",
+    "auto_path",
+    "on_path",
+    "on_path_for_a_command",
+    "simulate",
+    "step_limit_refusal",
+]

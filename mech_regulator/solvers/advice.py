@@ -50,8 +50,9 @@ def coupling_modes(model: MachineModel) -> CouplingModes | None:
     if coupling is None:
         return None
     crank_inertia = model.mean_crank_inertia
-    driven_inertia = float(np.mean([coupling.driven.state(angle)[0] for angle in np.linspace(0.0, 2.0 * math.pi, 360,
-                                                                                                 endpoint=False)]))
+    driven_inertia = float(
+        np.mean([coupling.driven.state(angle)[0] for angle in np.linspace(0.0, 2.0 * math.pi, 360, endpoint=False)])
+    )
     reduced = crank_inertia * driven_inertia / (crank_inertia + driven_inertia)
     twist = model.static_twist(model.scene.scenario.initial.omega)
     stiffness = float(coupling.local_stiffness(twist))
@@ -73,11 +74,13 @@ def stiffness_advice(model: MachineModel) -> str | None:
     steps = model.scene.scenario.duration / largest_step
     if steps <= STIFF_STEPS:
         return None
-    return (f"the coupling is stiff: its fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s (natural frequency "
-            f"{modes.natural_frequency:.3g} rad/s, damping ratio {modes.damping_ratio:.3g}), so {method} needs steps "
-            f"below about {largest_step:.2g} s for stability alone, some {steps:.2g} steps; an implicit method is "
-            "not limited by it: set solver.method: Radau (or BDF; with steps longer than the vibration's period "
-            "they damp it out, keeping the mean motion and the mean coupling moment)")
+    return (
+        f"the coupling is stiff: its fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s (natural frequency "
+        f"{modes.natural_frequency:.3g} rad/s, damping ratio {modes.damping_ratio:.3g}), so {method} needs steps "
+        f"below about {largest_step:.2g} s for stability alone, some {steps:.2g} steps; an implicit method is "
+        "not limited by it: set solver.method: Radau (or BDF; with steps longer than the vibration's period "
+        "they damp it out, keeping the mean motion and the mean coupling moment)"
+    )
 
 
 def speed_relaxation_rate(model: MachineModel) -> float:
@@ -113,31 +116,38 @@ def stiffness_refusal(model: MachineModel) -> str | None:
     method, duration = model.scene.solver.method, model.scene.scenario.duration
     if method not in ("RK45", "RK23", "DOP853"):
         return None
-    expected = ("expected solver.method: Radau or BDF (implicit, not limited by it)" +
-                (", or Rosenbrock23 with solver.path: fast" if model.scene.solver.path == "fast" else ""))
+    expected = "expected solver.method: Radau or BDF (implicit, not limited by it)" + (
+        ", or Rosenbrock23 with solver.path: fast" if model.scene.solver.path == "fast" else ""
+    )
     rate = speed_relaxation_rate(model)
     steps = duration * rate / STABILITY_LIMIT
     if steps > MAX_STEPS:
         J = model.crank_side(0.0, np.array(model.initial_state(), dtype=float))[0]
-        return (f"solver.method = {method}: the crank's speed settles in {1.0 / rate:.3g} s (J = {J:.3g} kg m^2 "
-                f"against d M / d omega = {-rate * J:.3g} N m s/rad at the start), so over {duration:g} s an explicit method "
-                f"needs some {steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}, "
-                "or an inertia that fits the moments (machine.inertia)")
+        return (
+            f"solver.method = {method}: the crank's speed settles in {1.0 / rate:.3g} s (J = {J:.3g} kg m^2 "
+            f"against d M / d omega = {-rate * J:.3g} N m s/rad at the start), so over {duration:g} s an explicit method "
+            f"needs some {steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}, "
+            "or an inertia that fits the moments (machine.inertia)"
+        )
     modes = coupling_modes(model)
     if modes is not None and duration * abs(modes.fastest) / STABILITY_LIMIT > MAX_STEPS:
         steps = duration * abs(modes.fastest) / STABILITY_LIMIT
-        return (f"solver.method = {method}: the coupling's fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s "
-                f"(machine.coupling stiffness {modes.stiffness:.3g} N m/rad on a reduced inertia of "
-                f"{modes.reduced_inertia:.3g} kg m^2), so over {duration:g} s an explicit method needs some "
-                f"{steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}")
+        return (
+            f"solver.method = {method}: the coupling's fastest mode has |lambda| = {abs(modes.fastest):.3g} 1/s "
+            f"(machine.coupling stiffness {modes.stiffness:.3g} N m/rad on a reduced inertia of "
+            f"{modes.reduced_inertia:.3g} kg m^2), so over {duration:g} s an explicit method needs some "
+            f"{steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}"
+        )
     fastest = fastest_mode(model, at_least=STABILITY_LIMIT * MAX_STEPS / duration)
     if fastest is not None and duration * abs(fastest[0]) / STABILITY_LIMIT > MAX_STEPS:
         steps = duration * abs(fastest[0]) / STABILITY_LIMIT
         name = fastest[1]
         keys = STATE_KEYS.get(name, "the scene's values")
-        return (f"solver.method = {method}: the scene's fastest mode at the start has |lambda| = {abs(fastest[0]):.3g} "
-                f"1/s, mostly in the state {name} ({keys}), so over {duration:g} s an explicit method needs some "
-                f"{steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}")
+        return (
+            f"solver.method = {method}: the scene's fastest mode at the start has |lambda| = {abs(fastest[0]):.3g} "
+            f"1/s, mostly in the state {name} ({keys}), so over {duration:g} s an explicit method needs some "
+            f"{steps:.2g} steps for stability alone, beyond the limit of {MAX_STEPS:g}; {expected}"
+        )
     return None
 
 
@@ -168,20 +178,27 @@ def energy_step_refusal(model: MachineModel) -> str | None:
     steps = turned / math.radians(scene.solver.phi_step_deg)
     if not steps > MAX_STEPS:
         return None
-    return (f"solver.phi_step_deg = {scene.solver.phi_step_deg:g} deg would take about {steps:.2g} steps: over "
-            f"{duration:g} s the crank turns some {turned:.3g} rad (from omega = {omega:g} rad/s, mean epsilon = "
-            f"{epsilon:.3g} rad/s^2 at the start); expected at most {MAX_STEPS:g} steps: solver.phi_step_deg >= "
-            f"{math.degrees(turned / MAX_STEPS):.3g} deg")
+    return (
+        f"solver.phi_step_deg = {scene.solver.phi_step_deg:g} deg would take about {steps:.2g} steps: over "
+        f"{duration:g} s the crank turns some {turned:.3g} rad (from omega = {omega:g} rad/s, mean epsilon = "
+        f"{epsilon:.3g} rad/s^2 at the start); expected at most {MAX_STEPS:g} steps: solver.phi_step_deg >= "
+        f"{math.degrees(turned / MAX_STEPS):.3g} deg"
+    )
 
 
 # The keys that set how fast each state moves (for stiffness_refusal's message).
-STATE_KEYS = {"phi": "machine.inertia, machine.loads", "omega": "machine.inertia, machine.drive, machine.loads",
-              "arm_angle": "governor.ball_mass, governor.arm_length (Hartnell: ball_arm, sleeve_arm), governor.spring, "
-                           "governor.damping",
-              "arm_rate": "governor.ball_mass, governor.sleeve_mass, governor.damping, governor.spring",
-              "servo": "governor.servo.gain, governor.feedback", "feedback": "governor.feedback",
-              "integral": "governor.gain, governor.integral_time",
-              "twist": "machine.coupling", "omega_driven": "machine.coupling, machine.clutch, the driven part's loads"}
+STATE_KEYS = {
+    "phi": "machine.inertia, machine.loads",
+    "omega": "machine.inertia, machine.drive, machine.loads",
+    "arm_angle": "governor.ball_mass, governor.arm_length (Hartnell: ball_arm, sleeve_arm), governor.spring, "
+    "governor.damping",
+    "arm_rate": "governor.ball_mass, governor.sleeve_mass, governor.damping, governor.spring",
+    "servo": "governor.servo.gain, governor.feedback",
+    "feedback": "governor.feedback",
+    "integral": "governor.gain, governor.integral_time",
+    "twist": "machine.coupling",
+    "omega_driven": "machine.coupling, machine.clutch, the driven part's loads",
+}
 
 
 NORM_MARGIN = 1e-9  # relative: covers the round-off of the computed eigenvalues and of the norm (fastest_mode)
@@ -209,8 +226,12 @@ def fastest_mode(model: MachineModel, at_least: float = 0.0) -> tuple[float, str
                 near, far = y0.copy(), y0.copy()
                 near[index] += delta
                 far[index] += 2.0 * delta
-                columns.append([(float(high) - float(low)) / delta
-                                for high, low in zip(rhs(0.0, far), rhs(0.0, near), strict=True)])
+                columns.append(
+                    [
+                        (float(high) - float(low)) / delta
+                        for high, low in zip(rhs(0.0, far), rhs(0.0, near), strict=True)
+                    ]
+                )
             rows = [list(row) for row in zip(*columns)]  # the Jacobian's
             if not all(math.isfinite(value) for row in rows for value in row):
                 return None
@@ -254,8 +275,10 @@ def rk4_stability_refusal(model: MachineModel) -> str | None:
     if modes is None or rk4_amplification(settings.step * modes.fastest) <= 1.0:
         return None
     largest = rk4_largest_stable_step(modes.fastest)
-    return (f"solver.step = {settings.step:g} s: RK4 is unstable on the coupling's fastest mode (|lambda| = "
-            f"{abs(modes.fastest):.4g} 1/s, natural frequency {modes.natural_frequency:.4g} rad/s, damping ratio "
-            f"{modes.damping_ratio:.3g}; one step multiplies it by {rk4_amplification(settings.step * modes.fastest):.3g}); "
-            f"expected solver.step <= {largest:.3g} s, or an implicit method (solver.method: Radau or BDF, or "
-            "Rosenbrock23 with solver.path: fast)")
+    return (
+        f"solver.step = {settings.step:g} s: RK4 is unstable on the coupling's fastest mode (|lambda| = "
+        f"{abs(modes.fastest):.4g} 1/s, natural frequency {modes.natural_frequency:.4g} rad/s, damping ratio "
+        f"{modes.damping_ratio:.3g}; one step multiplies it by {rk4_amplification(settings.step * modes.fastest):.3g}); "
+        f"expected solver.step <= {largest:.3g} s, or an implicit method (solver.method: Radau or BDF, or "
+        "Rosenbrock23 with solver.path: fast)"
+    )

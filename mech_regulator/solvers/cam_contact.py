@@ -18,28 +18,35 @@ from scipy import optimize
 
 from mech_regulator.solvers.trajectory import Trajectory
 
-SAMPLES_PER_STEP = 8            # points on each solver step at which the contact is checked
-DIFFERENCE_FRACTION = 1e-6      # the central difference's half-width, as a fraction of the stretch [-]
+SAMPLES_PER_STEP = 8  # points on each solver step at which the contact is checked
+DIFFERENCE_FRACTION = 1e-6  # the central difference's half-width, as a fraction of the stretch [-]
 
 
-KEPT_SCENES = 8   # the scenes with cams whose CamPairs are kept (built once per scene, not per stretch)
-_PAIRS: dict[int, tuple] = {}   # id(scene) -> (scene, its CamPairs), the newest KEPT_SCENES
+KEPT_SCENES = 8  # the scenes with cams whose CamPairs are kept (built once per scene, not per stretch)
+_PAIRS: dict[int, tuple] = {}  # id(scene) -> (scene, its CamPairs), the newest KEPT_SCENES
 
 
 def _pairs(scene) -> tuple:
     """The CamPairs of a scene's machine mechanism (with its gravity; the scene checked their profiles), () without
     cam pairs."""
     mechanism = scene.machine.mechanism
-    if getattr(mechanism, "type", None) != "linkage" or not any(joint.type == "cam"
-                                                                for joint in mechanism.joints.values()):
+    if getattr(mechanism, "type", None) != "linkage" or not any(
+        joint.type == "cam" for joint in mechanism.joints.values()
+    ):
         return ()
     if id(scene) not in _PAIRS:
         from mech_regulator.mechanisms import mechanism_geometry
         from mech_regulator.mechanisms.linkage.cam import CamFollower, CamPair
 
         core, structure = mechanism_geometry(mechanism)
-        _PAIRS[id(scene)] = (scene, tuple(CamPair(core, group, scene.machine.gravity, check=False)
-                                          for group in structure.groups if isinstance(group, CamFollower)))
+        _PAIRS[id(scene)] = (
+            scene,
+            tuple(
+                CamPair(core, group, scene.machine.gravity, check=False)
+                for group in structure.groups
+                if isinstance(group, CamFollower)
+            ),
+        )
         while len(_PAIRS) > KEPT_SCENES:
             del _PAIRS[next(iter(_PAIRS))]
     return _PAIRS[id(scene)][1]
@@ -69,18 +76,25 @@ def check_contact(model, trajectory: Trajectory, t_from: float, y: np.ndarray) -
         return y
     k = int(lost[0])
     pair = pairs[int(np.argmin(values[:, k]))]
-    t_lost = times[0] if k == 0 else optimize.brentq(lambda t: float(needed(np.array([t]), pair)[0]), times[k - 1],
-                                                     times[k], xtol=1e-12 * max(1.0, times[k]))
+    t_lost = (
+        times[0]
+        if k == 0
+        else optimize.brentq(
+            lambda t: float(needed(np.array([t]), pair)[0]), times[k - 1], times[k], xtol=1e-12 * max(1.0, times[k])
+        )
+    )
     state = trajectory(t_lost)
     trajectory.cut(t_lost)
     speed, _ = pair.jump()
     name = pair.group.pair.name
     trajectory.events.append((t_lost, f"contact lost at cam pair {name}"))
     trajectory.status = "failed"
-    trajectory.message = (f"the follower {pair.group.follower} left its cam (cam pair {name}) at t = {t_lost:.6g} s, "
-                          f"crank angle {math.degrees(state[0]) % 360.0:.2f} deg, omega = {state[1]:.6g} rad/s: the "
-                          "contact force needed there turns negative (at steady speed this spring holds the follower "
-                          f"up to {speed:.6g} rad/s); the run stops there, as the follower no longer follows the cam")
+    trajectory.message = (
+        f"the follower {pair.group.follower} left its cam (cam pair {name}) at t = {t_lost:.6g} s, "
+        f"crank angle {math.degrees(state[0]) % 360.0:.2f} deg, omega = {state[1]:.6g} rad/s: the "
+        "contact force needed there turns negative (at steady speed this spring holds the follower "
+        f"up to {speed:.6g} rad/s); the run stops there, as the follower no longer follows the cam"
+    )
     return np.array(state, dtype=float)
 
 

@@ -106,7 +106,9 @@ class MachineStepper:
         self.plant = machine_subsystem(model)
         self._segment = segment_for(self.plant)
         initial = model.initial_state()
-        self.state = np.concatenate([initial[:2], initial[model.coupling_index:]]) if model.driven is not None else initial[:2]
+        self.state = (
+            np.concatenate([initial[:2], initial[model.coupling_index :]]) if model.driven is not None else initial[:2]
+        )
         self.mode = self.plant.initial_mode(self.state)
         self.time = 0.0
         self.overspeed_trip = overspeed_trip
@@ -126,8 +128,15 @@ class MachineStepper:
             self.tripped_at = self.time
         return 0.0 if self.tripped_at is not None else throttle
 
-    def advance(self, t_end: float, throttle: float, external_load: float, throttle_slope: float = 0.0,
-                throttle_curvature: float = 0.0, load_rate: float = 0.0) -> Trajectory:
+    def advance(
+        self,
+        t_end: float,
+        throttle: float,
+        external_load: float,
+        throttle_slope: float = 0.0,
+        throttle_curvature: float = 0.0,
+        load_rate: float = 0.0,
+    ) -> Trajectory:
         """Integrate from the current time to t_end [s] with the external load [N m] held or, with a rate [N m/s],
         changing at that rate from now, and the throttle [-] (as applied_throttle gives it) held or, with a slope
         [1/s] and curvature [1/s^2], following that polynomial in the time since now (LoadPiece.throttle_at; none once
@@ -137,25 +146,40 @@ class MachineStepper:
             throttle_slope = throttle_curvature = 0.0
         return self._integrate(t_end, throttle, external_load, throttle_slope, throttle_curvature, load_rate)
 
-    def _integrate(self, t_end: float, throttle: float, external_load: float, throttle_slope: float,
-                   throttle_curvature: float, load_rate: float) -> Trajectory:
+    def _integrate(
+        self,
+        t_end: float,
+        throttle: float,
+        external_load: float,
+        throttle_slope: float,
+        throttle_curvature: float,
+        load_rate: float,
+    ) -> Trajectory:
         """advance's integration, with the throttle [-] as given (no trip checked)."""
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
-        piece = LoadPiece(self.time, t_end, external_load - load_rate * self.time if load_rate else external_load,
-                          load_rate, throttle, throttle_slope, throttle_curvature)
-        self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch,
-                                              None)
-        self.state = check_contact(self.plant, stretch, self.time, self.state)   # a cam follower's jump ends it
+        piece = LoadPiece(
+            self.time,
+            t_end,
+            external_load - load_rate * self.time if load_rate else external_load,
+            load_rate,
+            throttle,
+            throttle_slope,
+            throttle_curvature,
+        )
+        self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch, None)
+        self.state = check_contact(self.plant, stretch, self.time, self.state)  # a cam follower's jump ends it
         self.time = stretch.t_end
         beyond = speed_beyond_limit(self.plant.state_names(), self.state) if stretch.status == "complete" else None
         if beyond is not None:  # a blow-up (limits.py; the fast path's segment does not look at every step)
             fail_blown_up(self.plant, stretch, self.time, self.state, *beyond)
         elif stretch.status == "complete" and self.overspeed_trip > 0.0 and self.state[1] < -self.overspeed_trip:
             stretch.status = "failed"
-            stretch.message = (f"driven backwards at t = {self.time:.6g} s: omega = {self.state[1]:.6g} rad/s, beyond "
-                               f"the trip speed {self.overspeed_trip:g} rad/s in reverse (the state: "
-                               f"{state_text(self.plant.state_names(), self.state)}); likely cause: a load larger than "
-                               "the machine can carry, which no closing of the throttle stops")
+            stretch.message = (
+                f"driven backwards at t = {self.time:.6g} s: omega = {self.state[1]:.6g} rad/s, beyond "
+                f"the trip speed {self.overspeed_trip:g} rad/s in reverse (the state: "
+                f"{state_text(self.plant.state_names(), self.state)}); likely cause: a load larger than "
+                "the machine can carry, which no closing of the throttle stops"
+            )
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
 
@@ -180,9 +204,13 @@ class MachineStepper:
         self._step_end = t_end
         prediction = self._prediction
         load, load_rate = self._continued_load(self.time)
-        if prediction is None or prediction.t_start != self.time or prediction.t_end != t_end \
-                or prediction.load_line[1] != load_rate or not math.isclose(prediction.load_line[0], load,
-                                                                            rel_tol=LOAD_LINE_TOLERANCE):
+        if (
+            prediction is None
+            or prediction.t_start != self.time
+            or prediction.t_end != t_end
+            or prediction.load_line[1] != load_rate
+            or not math.isclose(prediction.load_line[0], load, rel_tol=LOAD_LINE_TOLERANCE)
+        ):
             prediction = self._prediction = self._predicted_step(self.state, self.mode, self.time, t_end, throttle_end)
         shift = float(self.state[1]) - float(prediction.start[1])
         times, speeds = prediction.samples
@@ -201,8 +229,9 @@ class MachineStepper:
         current = self._prediction
         if current is None or current.t_start != self.time:
             return
-        prediction = self._predicted_step(current.end + (self.state - current.start), current.end_mode, current.t_end,
-                                          t_end, throttle_end)
+        prediction = self._predicted_step(
+            current.end + (self.state - current.start), current.end_mode, current.t_end, t_end, throttle_end
+        )
         self._prediction = prediction if prediction.status == "complete" else None
 
     def _continued_load(self, time: float) -> tuple[float, float]:
@@ -210,8 +239,7 @@ class MachineStepper:
         load, load_rate = self._load_line
         return load + load_rate * (time - self._load_line_time), load_rate
 
-    def _predicted_step(self, state: np.ndarray, mode, t_start: float, t_end: float, throttle_end: float
-                        ) -> Prediction:
+    def _predicted_step(self, state: np.ndarray, mode, t_start: float, t_end: float, throttle_end: float) -> Prediction:
         """Integrate from `state` in `mode` at t_start to t_end [s] with the throttle [-] extrapolated (the quadratic
         through the last two answers and throttle_end now: throttle_extrapolation, taken from t_start on; closed once
         tripped) and the last step's load continued (its value [N m] and rate [N m/s]: the new one comes with the
@@ -225,13 +253,22 @@ class MachineStepper:
         load_line = self._continued_load(t_start)
         self.state, self.mode, self.time = state.copy(), mode, t_start
         stretch = self._integrate(t_end, throttle, load_line[0], slope, curvature, load_line[1])
-        prediction = Prediction(t_start, np.array(state), t_end, self.state, self.mode, load_line, stretch.status,
-                                speed_samples([stretch], t_start, t_end, math.inf))
+        prediction = Prediction(
+            t_start,
+            np.array(state),
+            t_end,
+            self.state,
+            self.mode,
+            load_line,
+            stretch.status,
+            speed_samples([stretch], t_start, t_end, math.inf),
+        )
         self.state, self.mode, self.time, self.status, self.message = before
         return prediction
 
-    def correct(self, throttle: float, waveform: Samples | None, external_load: float, load_rate: float = 0.0
-                ) -> Samples:
+    def correct(
+        self, throttle: float, waveform: Samples | None, external_load: float, load_rate: float = 0.0
+    ) -> Samples:
         """The corrected coupling's corrector: integrate the step `predict` did again, from the same state, with the
         load [N m] changing at load_rate [N m/s] from now (a ramp of the scenario; held at 0) and the throttle the
         governor answered: `throttle` [-] at the step's start (as applied_throttle gives it), then its tentative
@@ -266,8 +303,9 @@ class MachineStepper:
         columns = self.outputs_over(np.array([time]), state[:, None], np.array([throttle]), np.array([external_load]))
         return {name: float(values[0]) for name, values in columns.items()}
 
-    def outputs_over(self, times: np.ndarray, states: np.ndarray, throttles: np.ndarray, external_loads: np.ndarray
-                     ) -> dict[str, np.ndarray]:
+    def outputs_over(
+        self, times: np.ndarray, states: np.ndarray, throttles: np.ndarray, external_loads: np.ndarray
+    ) -> dict[str, np.ndarray]:
         """The machine's outputs at n times [s] in states (n_states x n), with the throttles [-] as applied (no trip
         checked here) and the external loads [N m] held, in one vectorised call: the columns of MachineModel.columns
         (omega, epsilon, J, M_drive as applied, M_load, x_slider, ...) and the moments on the crank by source (drive,
@@ -299,7 +337,7 @@ class GovernorStepper:
         self._segment = segment_for(self.regulator)
         self._follow_pieces = pieces_for(self.regulator)
         self.governor = model.governor
-        self.state = model.initial_state()[:model.coupling_index]
+        self.state = model.initial_state()[: model.coupling_index]
         self.mode = self.regulator.initial_mode(self.state)
         self.time = 0.0
         self.events: list[tuple[float, str, tuple[str, str]]] = []
@@ -316,13 +354,18 @@ class GovernorStepper:
         again to `time`: the numbers never depend on anticipating."""
         if self._before_anticipation is not None:
             if time != self.time:
-                (self.state, self.mode, self.time, events, self.stats, self.status,
-                 self.message) = self._before_anticipation
+                (self.state, self.mode, self.time, events, self.stats, self.status, self.message) = (
+                    self._before_anticipation
+                )
                 del self.events[events:]
             self._before_anticipation = None
         if time > self.time:
-            self.follow(time, None if omega_middle is None else
-                        ([self.time, 0.5 * (self.time + time), time], [float(self.state[1]), omega_middle, omega]))
+            self.follow(
+                time,
+                None
+                if omega_middle is None
+                else ([self.time, 0.5 * (self.time + time), time], [float(self.state[1]), omega_middle, omega]),
+            )
         self.state = self.state.copy()
         self.state[1] = omega
         return self.throttle
@@ -333,20 +376,29 @@ class GovernorStepper:
         speed_waveform); the mode changes go to `events`. Returns the stretch's dense trajectory."""
         stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
         if samples is None:
-            self.state, self.mode = self._segment(self.regulator, None, self.time, t_end, self.state, self.mode,
-                                                  stretch, None)
+            self.state, self.mode = self._segment(
+                self.regulator, None, self.time, t_end, self.state, self.mode, stretch, None
+            )
         else:
             times, speeds = samples
-            pieces = [(speed_waveform(times[index], times[index + 2], *speeds[index:index + 3]), times[index],
-                       times[index + 2], speeds[index]) for index in range(0, len(times) - 2, 2)]
+            pieces = [
+                (
+                    speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
+                    times[index],
+                    times[index + 2],
+                    speeds[index],
+                )
+                for index in range(0, len(times) - 2, 2)
+            ]
             self.state, self.mode = self._follow_pieces(self.regulator, pieces, self.state, self.mode, stretch)
         self.time = stretch.t_end
         self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
 
-    def answer_corrected(self, time: float, omega: float, corrected: Samples | None, predicted: Samples | None
-                         ) -> tuple[float, Samples | None]:
+    def answer_corrected(
+        self, time: float, omega: float, corrected: Samples | None, predicted: Samples | None
+    ) -> tuple[float, Samples | None]:
         """The corrected coupling's answer to the crank speed omega [rad/s] at `time` [s]: integrate the step that
         ends there for good following the machine's corrected speed samples over it (times [s], omega [rad/s]; with the
         previous speed held when they do not span it: a missed exchange, realtime), hold omega from here on, then
@@ -355,8 +407,12 @@ class GovernorStepper:
         the middle and the end of each piece, the step split at every mode change inside it (a kink: a stop reached
         or left, the sleeve sticking or slipping); None without predicted samples (the run's end)."""
         if time > self.time:
-            following = corrected is not None and len(corrected[0]) >= 3 and corrected[0][0] == self.time \
+            following = (
+                corrected is not None
+                and len(corrected[0]) >= 3
+                and corrected[0][0] == self.time
                 and corrected[0][-1] == time
+            )
             self.follow(time, corrected if following else None)
         self.state = self.state.copy()
         self.state[1] = omega
@@ -373,15 +429,27 @@ class GovernorStepper:
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
         times = [float(t) for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
         states = stretch(np.array(times))  # at a stop the dense output may round past it (servo -3e-16): an opening
-        return throttle, (times, [min(max(self.governor.throttle(states[:, index]), 0.0), 1.0)  # is 0..1, and the
-                                  for index in range(len(times))])  # machine node refuses other samples
+        return throttle, (
+            times,
+            [
+                min(max(self.governor.throttle(states[:, index]), 0.0), 1.0)  # is 0..1, and the
+                for index in range(len(times))
+            ],
+        )  # machine node refuses other samples
 
     def anticipate(self, time: float) -> None:
         """Advance now, with the speed held, to `time` [s], the next exchange time as expected, so that the
         answer there is immediate (a governor node does this while the machine integrates the same
         step: the two run in parallel). Keeps the state before it for `answer` at another time."""
-        before = (self.state.copy(), self.mode, self.time, len(self.events), dataclasses.replace(self.stats),
-                  self.status, self.message)
+        before = (
+            self.state.copy(),
+            self.mode,
+            self.time,
+            len(self.events),
+            dataclasses.replace(self.stats),
+            self.status,
+            self.message,
+        )
         self.answer(time, float(self.state[1]))
         self._before_anticipation = before
 
@@ -411,7 +479,6 @@ LOAD_LINE_TOLERANCE = 1e-9  # [-] a prediction made ahead is kept while the load
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
 
 
-
 def quadratic_through(duration: float, start: float, middle: float, end: float) -> tuple[float, float]:
     """(a, b) of the quadratic q(s) = start + a s + b s^2 with q(duration / 2) = middle and q(duration) = end
     (duration [s] > 0)."""
@@ -419,8 +486,9 @@ def quadratic_through(duration: float, start: float, middle: float, end: float) 
     return (end - start) / duration - b * duration, b
 
 
-def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE
-                  ) -> Samples:
+def speed_samples(
+    stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE
+) -> Samples:
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
     ends included, m the fewest pieces no longer than `longest` [s]."""
@@ -435,8 +503,9 @@ def speed_samples(stretches: list[Trajectory], t_start: float, t_end: float, lon
     return times.tolist(), speeds.tolist()
 
 
-def speed_waveform(t_start: float, t_end: float, omega_start: float, omega_middle: float, omega_end: float
-                   ) -> LoadPiece:
+def speed_waveform(
+    t_start: float, t_end: float, omega_start: float, omega_middle: float, omega_end: float
+) -> LoadPiece:
     """The governor subsystem's input over [t_start, t_end] [s] that makes its omega state follow the quadratic
     q(s) = omega_start + a s + b s^2, s = t - t_start, through the machine's speeds [rad/s] at the start, the middle
     and the end: on its unit free inertia omega' = -L(t), so L(t) = -(a + 2 b s), an external load with
@@ -495,8 +564,17 @@ def machine_subsystem(model: MachineModel) -> MachineModel:
 
 def governor_subsystem(model: MachineModel) -> MachineModel:
     """The governor without the machine: unit constant inertia and no moments, so that omega' = 0 exactly."""
-    return dataclasses.replace(model, inertia_constant=1.0, reduced=None, has_weight=False, effects=(), load_pieces=(),
-                               coupling=None, clutch=None, joint_friction=None)
+    return dataclasses.replace(
+        model,
+        inertia_constant=1.0,
+        reduced=None,
+        has_weight=False,
+        effects=(),
+        load_pieces=(),
+        coupling=None,
+        clutch=None,
+        joint_friction=None,
+    )
 
 
 def cosimulation_refusal(model: MachineModel) -> str | None:
@@ -506,8 +584,10 @@ def cosimulation_refusal(model: MachineModel) -> str | None:
     the fast path has no stepper for on solver.path: fast."""
     solver = model.scene.solver
     if solver.method == "energy":
-        return ("solver.method: 'energy' integrates in the crank angle, but the co-simulation exchanges signals at "
-                "times; choose a method in time, e.g. --set solver.method=DOP853")
+        return (
+            "solver.method: 'energy' integrates in the crank angle, but the co-simulation exchanges signals at "
+            "times; choose a method in time, e.g. --set solver.method=DOP853"
+        )
     subsystems = [machine_subsystem(model)] + ([governor_subsystem(model)] if model.governor is not None else [])
     for subsystem in subsystems:
         reason = rk4_stability_refusal(subsystem) or stiffness_refusal(subsystem)
@@ -583,15 +663,26 @@ class CoSimulation:
     def trajectory(self, model: MachineModel) -> SampledTrajectory:
         """The run as a trajectory for the analysis functions (linear between exchange times)."""
         initial = model.initial_mode(model.initial_state())
-        run = SampledTrajectory(method=f"co-simulation ({model.scene.solver.method})", t_start=float(self.times[0]),
-                                times=self.times, states=self.states, status=self.status, message=self.message)
+        run = SampledTrajectory(
+            method=f"co-simulation ({model.scene.solver.method})",
+            t_start=float(self.times[0]),
+            times=self.times,
+            states=self.states,
+            status=self.status,
+            message=self.message,
+        )
         run.modes = ([(0.0, initial)] if initial is not None else []) + [(t, mode) for t, _, mode in self.events]
         run.events = [(t, name) for t, name, _ in self.events]
         return run
 
 
-def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float = 0.0,
-               progress: Progress | None = None, coupling: str = "hold") -> CoSimulation:
+def cosimulate(
+    model: MachineModel,
+    exchange_step: float,
+    overspeed_trip: float = 0.0,
+    progress: Progress | None = None,
+    coupling: str = "hold",
+) -> CoSimulation:
     """Run the scene's scenario as the nodes do in lockstep: machine and governor exchange omega and the
     throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns), with the
     coupling `hold`, `waveform` or `corrected` (module docstring)."""
@@ -616,18 +707,21 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
         while True:
             now = seconds(min(tick * step, end))
             if corrects:
-                predicted = machine.predict(seconds(min((tick + 1) * step, end)), tentative) if tick * step < end \
-                    else None
+                predicted = (
+                    machine.predict(seconds(min((tick + 1) * step, end)), tentative) if tick * step < end else None
+                )
                 if (tick + 1) * step < end:  # the nodes' machine does this while the governor answers
                     machine.predict_ahead(seconds(min((tick + 2) * step, end)), tentative)
                 throttle, waveform = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
             else:
-                throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None \
-                    else 1.0
+                throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None else 1.0
             throttle = machine.applied_throttle(throttle)
             load = model.external_load(now)
-            rows.append(np.concatenate([machine.state[:2], governor.state[2:], machine.state[2:]])
-                        if governor is not None else machine.state.copy())
+            rows.append(
+                np.concatenate([machine.state[:2], governor.state[2:], machine.state[2:]])
+                if governor is not None
+                else machine.state.copy()
+            )
             inputs.append((now, throttle, load))
             if tick * step >= end or machine.status != "complete" or (governor and governor.status != "complete"):
                 break
@@ -639,8 +733,9 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
             elif coupling == "waveform" and governor is not None:
                 omega_middle = machine.advance_following(following, throttle, load)
             else:  # corrected without a governor: only the load's ramp is followed
-                machine.advance(following, throttle, load, load_rate=load_rate(model, now) if coupling == "corrected"
-                                else 0.0)
+                machine.advance(
+                    following, throttle, load, load_rate=load_rate(model, now) if coupling == "corrected" else 0.0
+                )
             if progress is not None:
                 progress(machine.time)
         status, message = "complete", ""
@@ -650,6 +745,13 @@ def cosimulate(model: MachineModel, exchange_step: float, overspeed_trip: float 
         if part is not None and part.status != "complete":
             status, message = part.status, part.message
     times, throttles, loads = (np.array(column) for column in zip(*inputs))
-    return CoSimulation(times=times, states=np.array(rows).T, throttle=throttles, external_load=loads,
-                        events=governor.events if governor is not None else [], status=status, message=message,
-                        tripped_at=machine.tripped_at)
+    return CoSimulation(
+        times=times,
+        states=np.array(rows).T,
+        throttle=throttles,
+        external_load=loads,
+        events=governor.events if governor is not None else [],
+        status=status,
+        message=message,
+        tripped_at=machine.tripped_at,
+    )

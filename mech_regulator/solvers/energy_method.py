@@ -40,15 +40,18 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     trajectory = Trajectory(method="energy", t_start=0.0, y_start=np.array([phi, omega]))
     if omega < 0.0:
         trajectory.status = "failed"
-        trajectory.message = (f"energy method: initial omega = {omega} rad/s; the method steps forward in phi and "
-                              "needs omega >= 0 (use a time-domain method such as DOP853)")
+        trajectory.message = (
+            f"energy method: initial omega = {omega} rad/s; the method steps forward in phi and "
+            "needs omega >= 0 (use a time-domain method such as DOP853)"
+        )
         return trajectory
 
     grid, period = np.array(model.switch_grid(), dtype=float), model.dynamic_period()
     right_hand_sides: dict = {}
 
-    def moment_and_derivative(t: float, phase: float, omega: float, window: tuple | None = None
-                              ) -> tuple[float, float, float]:
+    def moment_and_derivative(
+        t: float, phase: float, omega: float, window: tuple | None = None
+    ) -> tuple[float, float, float]:
         """(net moment M [N m], J [kg m^2], epsilon [rad/s^2]) from the model's right-hand side:
         M = J epsilon + 1/2 J' omega^2; within a window (lo, hi) [rad] between two switch or kink angles, at the
         crank's phase (phi less whole dynamic periods [rad], the window's coordinates: the machine is periodic in
@@ -83,8 +86,9 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
 
             def energy_after(speed: float) -> tuple[float, float, float]:
                 """(E_{i+1} [J], M_{i+1} [N m], epsilon_{i+1}) if the step ends at speed [rad/s]."""
-                M_next, _, epsilon_next = moment_and_derivative(t + 2.0 * step / (omega + speed), phase_next, speed,
-                                                                window)
+                M_next, _, epsilon_next = moment_and_derivative(
+                    t + 2.0 * step / (omega + speed), phase_next, speed, window
+                )
                 return energy + 0.5 * (M + M_next) * step, M_next, epsilon_next
 
             step_end = _step_end(energy_after, J_next, omega, energy + M * step, implicit)
@@ -111,28 +115,38 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     except _Stopped as stop:
         trajectory.status = "failed"
         if stop.omega == 0.0:
-            what = (f"the net moment at rest (M = {M:.6g} N m at t = {stop.t:.6g} s, phi = {stop.phi:.6g} rad) "
-                    "does not start the machine; stepping in phi cannot follow a machine that stays at rest or "
-                    "turns back")
+            what = (
+                f"the net moment at rest (M = {M:.6g} N m at t = {stop.t:.6g} s, phi = {stop.phi:.6g} rad) "
+                "does not start the machine; stepping in phi cannot follow a machine that stays at rest or "
+                "turns back"
+            )
         else:
-            what = (f"the machine stops (kinetic energy reaches 0) just after t = {stop.t:.6g} s, phi = {stop.phi:.6g} "
-                    f"rad, omega = {stop.omega:.6g} rad/s; stepping in phi cannot follow a stop or a reversal")
+            what = (
+                f"the machine stops (kinetic energy reaches 0) just after t = {stop.t:.6g} s, phi = {stop.phi:.6g} "
+                f"rad, omega = {stop.omega:.6g} rad/s; stepping in phi cannot follow a stop or a reversal"
+            )
         trajectory.message = f"energy method: {what}: use a time-domain method such as DOP853"
     except _NoConvergence:
         trajectory.status = "failed"
-        trajectory.message = (f"energy method: no end speed satisfies the step's energy equation at phi = {phi:.6g} rad "
-                              f"(t = {t:.6g} s); use a smaller solver.phi_step_deg or a time-domain method")
+        trajectory.message = (
+            f"energy method: no end speed satisfies the step's energy equation at phi = {phi:.6g} rad "
+            f"(t = {t:.6g} s); use a smaller solver.phi_step_deg or a time-domain method"
+        )
     except KeyboardInterrupt:
         trajectory.status = "interrupted"
         trajectory.message = f"interrupted by the user at t = {t:.6g} s"
     if len(times) > 1:
-        trajectory.add_piece(times[0], min(times[-1], scenario.duration), CubicHermiteSpline(np.array(times), np.array(states).T,
-                                                                      np.array(slopes).T, axis=1))
+        trajectory.add_piece(
+            times[0],
+            min(times[-1], scenario.duration),
+            CubicHermiteSpline(np.array(times), np.array(states).T, np.array(slopes).T, axis=1),
+        )
     return trajectory
 
 
-def _step_end(energy_after, J_next: float, omega: float, explicit_energy: float, implicit: bool
-              ) -> tuple[float, float, float, float] | None:
+def _step_end(
+    energy_after, J_next: float, omega: float, explicit_energy: float, implicit: bool
+) -> tuple[float, float, float, float] | None:
     """The end of a step, (omega_{i+1} [rad/s], E_{i+1} [J], M_{i+1} [N m], epsilon_{i+1} [rad/s^2]):
     omega_{i+1} is the positive root of 1/2 J_{i+1} w^2 = E_{i+1}(w), the trapezoidal energy with the moment
     at the step's end evaluated at w (and at the time the step ends at). None when no positive speed

@@ -57,4 +57,4 @@ class HermiteStep(DenseOutput):
         change = self.y1 - self.y0
         if np.ndim(s) == 0:
             return self.y0 + h01 * change + self.h * (h10 * self.f0 + h11 * self.f1)
-        return (self.y0[:, None] + np.outer(change, h01) + self.h * (np.outer(self.f0, h10) + np.outer(self.f1, h11)))
+        return self.y0[:, None] + np.outer(change, h01) + self.h * (np.outer(self.f0, h10) + np.outer(self.f1, h11))

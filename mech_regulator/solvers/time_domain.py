@@ -67,7 +67,7 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
             y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
-            y = check_contact(model, trajectory, t_start, y)   # a cam follower that jumps ends the run there
+            y = check_contact(model, trajectory, t_start, y)  # a cam follower that jumps ends the run there
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2
@@ -77,8 +77,16 @@ def integrate_time_domain(model: MachineModel, progress: Progress | None = None,
     return trajectory
 
 
-def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.ndarray, mode, trajectory: Trajectory,
-             progress: Progress | None) -> tuple[np.ndarray, tuple | None]:
+def _segment(
+    model: MachineModel,
+    piece,
+    t_start: float,
+    t_end: float,
+    y: np.ndarray,
+    mode,
+    trajectory: Trajectory,
+    progress: Progress | None,
+) -> tuple[np.ndarray, tuple | None]:
     """Step the scene's solver over [t_start, t_end], restarting it exactly at every switch crossing and
     every governor event; returns the state and mode at the end.
 
@@ -121,13 +129,16 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
         breakpoints = _breakpoint_guards(tables, held, mode, y, offset)
         guards = model.guards(mode, y) + list(breakpoints)
         window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
-        anchors = tuple(anchor - offset if table.angular else anchor  # in the solver's wrapped phi
-                        for table, anchor in zip(tables, _anchors(tables, held)))
+        anchors = tuple(
+            anchor - offset if table.angular else anchor  # in the solver's wrapped phi
+            for table, anchor in zip(tables, _anchors(tables, held))
+        )
         anchors = anchors if tables else None
         y_wrapped = y.copy()
         y_wrapped[0] = phase
-        normal_sides, normal_guards = _normal_guards(model, piece, window, mode, kinks, anchors, t, y_wrapped,
-                                                     normal_sides, crossed_normal)
+        normal_sides, normal_guards = _normal_guards(
+            model, piece, window, mode, kinks, anchors, t, y_wrapped, normal_sides, crossed_normal
+        )
         crossed_normal = None
         guards += list(normal_guards)
         rhs = model.rhs(piece, window, mode, kinks=kinks, anchors=anchors, normal_signs=normal_sides)
@@ -143,8 +154,10 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                 message = solver.step()
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:  # e.g. an implicit method's
                 trajectory.status = "failed"  # Jacobian overflowing: a numerical breakdown, reported as a failure
-                trajectory.message = (f"{settings.method} failed at t = {solver.t:.6g} s: {error} (the state: "
-                                      f"{state_text(names, y)}); the numbers of the machine overflow the method")
+                trajectory.message = (
+                    f"{settings.method} failed at t = {solver.t:.6g} s: {error} (the state: "
+                    f"{state_text(names, y)}); the numbers of the machine overflow the method"
+                )
                 break
             if solver.status == "failed":
                 trajectory.status = "failed"
@@ -153,8 +166,10 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
             if not np.all(np.isfinite(solver.y)):
                 trajectory.status = "failed"
                 advice = "use a smaller step" if settings.method == "RK4" else "tighten rtol/atol or limit max_step"
-                trajectory.message = (f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s; "
-                                      f"{advice} (the last finite state, at t = {t:.6g} s: {state_text(names, y)})")
+                trajectory.message = (
+                    f"{settings.method}: the state became non-finite at t = {solver.t:.6g} s; "
+                    f"{advice} (the last finite state, at t = {t:.6g} s: {state_text(names, y)})"
+                )
                 break
             wrapped = _Shifted(solver.dense_output(), 0.0, constraint)
             dense = _Shifted(wrapped.dense, offset, constraint)
@@ -176,30 +191,44 @@ def _segment(model: MachineModel, piece, t_start: float, t_end: float, y: np.nda
                     redone = True
                     continue
                 redone = False
-                solver.max_step = min(settings.max_step or np.inf,
-                                      max(_reach(branches, solver.t), _smallest_limit(solver.t)))
+                solver.max_step = min(
+                    settings.max_step or np.inf, max(_reach(branches, solver.t), _smallest_limit(solver.t))
+                )
             if switches or guards:
-                crossing = _first_event(dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise,
-                                        wrapped=wrapped)
+                crossing = _first_event(
+                    dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise, wrapped=wrapped
+                )
                 if crossing is not None:
                     t_step, y_step, counts, guard, name, phase_step = crossing
                     if guard is None:
                         trajectory.stats.switches += 1
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
-                            dense, y_step, phase_step = _step_onto(settings, rhs, solver.t_old, y, phase, t_step,
-                                                                   offset, constraint, phase_step, trajectory)
+                            dense, y_step, phase_step = _step_onto(
+                                settings,
+                                rhs,
+                                solver.t_old,
+                                y,
+                                phase,
+                                t_step,
+                                offset,
+                                constraint,
+                                phase_step,
+                                trajectory,
+                            )
                     elif guard in breakpoints or guard in normal_guards:  # a table's breakpoint or a guide's N = 0:
-                        trajectory.stats.switches += 1                  # the next piece, mode and state kept
+                        trajectory.stats.switches += 1  # the next piece, mode and state kept
                         if guard in normal_guards:
                             crossed_normal = normal_guards[guard]
-                            normal_sides = tuple(-side if k == crossed_normal else side
-                                                 for k, side in enumerate(normal_sides))
+                            normal_sides = tuple(
+                                -side if k == crossed_normal else side for k, side in enumerate(normal_sides)
+                            )
                         else:
                             table, step = breakpoints[guard]
                             held[table] += step
                         if settings.method in STEPS_ONTO_SWITCHES and t_step > solver.t_old:
-                            dense, y_step, phase_step = _step_onto(settings, rhs, solver.t_old, y, phase, t_step,
-                                                                   offset, constraint, None, trajectory)
+                            dense, y_step, phase_step = _step_onto(
+                                settings, rhs, solver.t_old, y, phase, t_step, offset, constraint, None, trajectory
+                            )
                     else:
                         mode, y_step = guard.apply(t_step, y_step)
                         y_step = np.array(y_step, dtype=float)
@@ -282,19 +311,37 @@ def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray, offset: flo
         shift = offset if table.angular else 0.0
         if below > -math.inf:
             low = min(below, start) - shift
-            guards[Guard(f"{table.name} breakpoint {below:g}",
-                         lambda state, value=table.value, low=low: value(state) - low,
-                         lambda state: (mode, state))] = (k, -1)
+            guards[
+                Guard(
+                    f"{table.name} breakpoint {below:g}",
+                    lambda state, value=table.value, low=low: value(state) - low,
+                    lambda state: (mode, state),
+                )
+            ] = (k, -1)
         if above < math.inf:
             high = max(above, start) - shift
-            guards[Guard(f"{table.name} breakpoint {above:g}",
-                         lambda state, value=table.value, high=high: high - value(state),
-                         lambda state: (mode, state))] = (k, +1)
+            guards[
+                Guard(
+                    f"{table.name} breakpoint {above:g}",
+                    lambda state, value=table.value, high=high: high - value(state),
+                    lambda state: (mode, state),
+                )
+            ] = (k, +1)
     return guards
 
 
-def _normal_guards(model: MachineModel, piece, window, mode, kinks: bool, anchors, t: float, y: np.ndarray,
-                   sides: tuple[float, ...], crossed: int | None) -> tuple[tuple[float, ...], dict[Guard, int]]:
+def _normal_guards(
+    model: MachineModel,
+    piece,
+    window,
+    mode,
+    kinks: bool,
+    anchors,
+    t: float,
+    y: np.ndarray,
+    sides: tuple[float, ...],
+    crossed: int | None,
+) -> tuple[tuple[float, ...], dict[Guard, int]]:
     """Joint friction's guides at a restart (t [s], y with phi in the phase, as the solver steps it and the guards read
     it): (the signs s of their normal
     forces N that the rhs holds, normal_signs, and the guards s N >= 0 whose crossing flips one, each with its
@@ -305,9 +352,14 @@ def _normal_guards(model: MachineModel, piece, window, mode, kinks: bool, anchor
     count = len(model.joint_friction.guides) if kinks and model.joint_friction is not None else 0
     if count == 0:
         return (), {}
-    sides = tuple(side if k == crossed else
-                  1.0 if model.guide_normal(piece, window, mode, kinks, anchors, guide=k)(t, y) >= 0.0 else -1.0
-                  for k, side in enumerate(sides or (0.0,) * count))
+    sides = tuple(
+        side
+        if k == crossed
+        else 1.0
+        if model.guide_normal(piece, window, mode, kinks, anchors, guide=k)(t, y) >= 0.0
+        else -1.0
+        for k, side in enumerate(sides or (0.0,) * count)
+    )
     guards = {}
     for k, side in enumerate(sides):
         normal = model.guide_normal(piece, window, mode, kinks, anchors, normal_signs=sides, guide=k)
@@ -325,8 +377,16 @@ def _solver(settings, rhs, t: float, y: np.ndarray, t_bound: float, first_step: 
     """The scene's solver (scipy's OdeSolver class of settings.method, or RK4) started at (t [s], y) towards t_bound."""
     if settings.method == "RK4":
         return RK4(rhs, t, y, t_bound, step=settings.step)
-    return getattr(integrate, settings.method)(rhs, t, y, t_bound, rtol=settings.rtol, atol=settings.atol,
-                                              max_step=settings.max_step or np.inf, first_step=first_step)
+    return getattr(integrate, settings.method)(
+        rhs,
+        t,
+        y,
+        t_bound,
+        rtol=settings.rtol,
+        atol=settings.atol,
+        max_step=settings.max_step or np.inf,
+        first_step=first_step,
+    )
 
 
 def _count_evaluations(trajectory: Trajectory, solver) -> None:
@@ -408,8 +468,18 @@ def _smallest_limit(t: float) -> float:
     return 100.0 * float(np.spacing(abs(t) + 1.0))
 
 
-def _step_onto(settings, rhs, t_old: float, y_old: np.ndarray, phase_old: float, t_switch: float, offset: float,
-               constraint, phase_switch: float | None, trajectory: Trajectory) -> tuple:
+def _step_onto(
+    settings,
+    rhs,
+    t_old: float,
+    y_old: np.ndarray,
+    phase_old: float,
+    t_switch: float,
+    offset: float,
+    constraint,
+    phase_switch: float | None,
+    trajectory: Trajectory,
+) -> tuple:
     """Step from the accepted step's start (t_old [s], y_old unwrapped, its crank phase phase_old = phi less offset
     [rad]) exactly onto the switch crossing located at
     t_switch [s] (a step of t_switch - t_old, with the same rhs: RK4 one step, an adaptive method its own steps,
@@ -447,8 +517,9 @@ class _Joined:
         return columns[:, 0] if np.ndim(t) == 0 else columns
 
 
-def settle_mode_in_phase(model: MachineModel, t: float, y: np.ndarray, phase: float, offset: float, mode,
-                         trajectory: Trajectory) -> tuple[np.ndarray, tuple | None, float]:
+def settle_mode_in_phase(
+    model: MachineModel, t: float, y: np.ndarray, phase: float, offset: float, mode, trajectory: Trajectory
+) -> tuple[np.ndarray, tuple | None, float]:
     """_settle_mode on the state y at t [s] with its crank angle as the phase (phi less offset [rad]: the guards read
     the angle as the solver steps it, turns_and_phase); returns the settled state (phi = offset + phase), mode and
     phase."""
@@ -460,8 +531,9 @@ def settle_mode_in_phase(model: MachineModel, t: float, y: np.ndarray, phase: fl
     return settled, mode, float(in_phase[0])
 
 
-def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory: Trajectory
-                 ) -> tuple[np.ndarray, tuple | None]:
+def _settle_mode(
+    model: MachineModel, t: float, y: np.ndarray, mode, trajectory: Trajectory
+) -> tuple[np.ndarray, tuple | None]:
     """Apply, at one instant, the transitions of guards that are already violated on entering a mode
     (a sleeve that comes to rest exactly where the forces pull it off, a stop reached as the motion
     reverses). More than MAX_INSTANT_EVENTS in a row means the governor's modes contradict each other."""
@@ -478,9 +550,11 @@ def _settle_mode(model: MachineModel, t: float, y: np.ndarray, mode, trajectory:
 def _fail_stuck(trajectory: Trajectory, t: float) -> None:
     """End a run whose governor changes mode over and over at one instant."""
     trajectory.status = "failed"
-    trajectory.message = (f"the governor changed mode {MAX_INSTANT_EVENTS} times at t = {t:.6g} s without moving "
-                          f"(last: {trajectory.events[-1][1]}); its friction, stops or limits contradict each other, "
-                          "or the sleeve is released exactly where the forces turn back (a grazing release)")
+    trajectory.message = (
+        f"the governor changed mode {MAX_INSTANT_EVENTS} times at t = {t:.6g} s without moving "
+        f"(last: {trajectory.events[-1][1]}); its friction, stops or limits contradict each other, "
+        "or the sleeve is released exactly where the forces turn back (a grazing release)"
+    )
 
 
 def _log_event(trajectory: Trajectory, t: float, name: str, mode) -> None:
@@ -503,9 +577,11 @@ def fail_no_progress(model: MachineModel, trajectory: Trajectory, t: float, y, w
     advancing: status failed, with the time, the restart that repeats (what) and the state y; what was computed up to
     t stays."""
     trajectory.status = "failed"
-    trajectory.message = (f"{model.scene.solver.method}: no progress at t = {t:.9g} s: {MAX_RESTARTS_WITHOUT_PROGRESS} "
-                          f"restarts in a row without the time advancing (the last at {what}; the state: "
-                          f"{state_text(model.state_names(), y)}); please report this scene")
+    trajectory.message = (
+        f"{model.scene.solver.method}: no progress at t = {t:.9g} s: {MAX_RESTARTS_WITHOUT_PROGRESS} "
+        f"restarts in a row without the time advancing (the last at {what}; the state: "
+        f"{state_text(model.state_names(), y)}); please report this scene"
+    )
 
 
 def state_text(names: tuple[str, ...], y) -> str:
@@ -526,37 +602,47 @@ def blown_up_message(model: MachineModel, t: float, y, name: str, value: float) 
     solver = model.scene.solver
     cause = "a drive or load far too large for the machine's inertia (machine.inertia, machine.drive, machine.loads)"
     if name == "omega_driven":
-        cause = ("moments far too large for the driven part's inertia, or a coupling too stiff for the method (its "
-                 "stiffness, damping; try Radau or BDF)")
+        cause = (
+            "moments far too large for the driven part's inertia, or a coupling too stiff for the method (its "
+            "stiffness, damping; try Radau or BDF)"
+        )
     else:
         try:
             state = np.array(y, dtype=float)
             J, moment = model.crank_side(t, state)
-            cause = (f"the crank's net moment {moment:.3g} N m on J = {J:.3g} kg m^2 (an acceleration of "
-                     f"{moment / J:.3g} rad/s^2): {cause}")
+            cause = (
+                f"the crank's net moment {moment:.3g} N m on J = {J:.3g} kg m^2 (an acceleration of "
+                f"{moment / J:.3g} rad/s^2): {cause}"
+            )
             state[1] *= 1.0 + 1e-6
             rate = -(model.crank_side(t, state)[1] - moment) / (J * 1e-6 * float(y[1]))  # -d epsilon/d omega [1/s]
             if solver.method == "RK4" and solver.step * rate > 2.785:  # outside RK4's region on the real axis
-                cause = (f"an RK4 step too long to be stable: solver.step = {solver.step:g} s against the crank "
-                         f"speed's time constant J / |dM/domega| = {1.0 / rate:.3g} s (RK4 is stable below 2.79 of them); "
-                         "expected a smaller solver.step")
+                cause = (
+                    f"an RK4 step too long to be stable: solver.step = {solver.step:g} s against the crank "
+                    f"speed's time constant J / |dM/domega| = {1.0 / rate:.3g} s (RK4 is stable below 2.79 of them); "
+                    "expected a smaller solver.step"
+                )
         except (ArithmeticError, ValueError, IndexError, TypeError):
             pass
     if solver.method == "RK4" and "RK4 step" not in cause:
         cause += f", or an RK4 step too long to be stable (solver.step = {solver.step:g} s)"
-    return (f"{solver.method}: the run blew up at t = {t:.6g} s: {name} = {value:.6g} rad/s is beyond "
-            f"{MAX_SPEED:g} rad/s, the limit on any machine's speed (the state: {state_text(model.state_names(), y)}); "
-            f"likely cause: {cause}")
+    return (
+        f"{solver.method}: the run blew up at t = {t:.6g} s: {name} = {value:.6g} rad/s is beyond "
+        f"{MAX_SPEED:g} rad/s, the limit on any machine's speed (the state: {state_text(model.state_names(), y)}); "
+        f"likely cause: {cause}"
+    )
 
 
 def fail_too_many_steps(model: MachineModel, trajectory: Trajectory, t: float, y) -> None:
     """End a run that has taken MAX_STEPS steps (limits.py) at t [s] in the state y: status failed, with why."""
     trajectory.status = "failed"
-    trajectory.message = (f"{model.scene.solver.method}: stopped at t = {t:.6g} s of {model.scene.scenario.duration:g} "
-                          f"s after {trajectory.stats.steps} steps, the limit of {MAX_STEPS:g} steps for one run (the "
-                          f"state: {state_text(model.state_names(), y)}); likely cause: a stiff machine for an "
-                          "explicit method (try Radau or BDF), tolerances tighter than needed (solver.rtol, "
-                          "solver.atol) or a motion that runs away")
+    trajectory.message = (
+        f"{model.scene.solver.method}: stopped at t = {t:.6g} s of {model.scene.scenario.duration:g} "
+        f"s after {trajectory.stats.steps} steps, the limit of {MAX_STEPS:g} steps for one run (the "
+        f"state: {state_text(model.state_names(), y)}); likely cause: a stiff machine for an "
+        "explicit method (try Radau or BDF), tolerances tighter than needed (solver.rtol, "
+        "solver.atol) or a motion that runs away"
+    )
 
 
 class _Shifted:
@@ -596,8 +682,16 @@ def _switch_counts(phi: float, switches: list[tuple[float, float]]) -> list[int]
     return [math.floor((phi - angle) / period) for angle, period in switches]
 
 
-def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switches: list[tuple[float, float]],
-                 guards: list, interpolant_noise: np.ndarray | None = None, wrapped=None) -> tuple | None:
+def _first_event(
+    dense,
+    t_old: float,
+    t_new: float,
+    counts_old: list[int],
+    switches: list[tuple[float, float]],
+    guards: list,
+    interpolant_noise: np.ndarray | None = None,
+    wrapped=None,
+) -> tuple | None:
     """The earliest event in (t_old, t_new]: phi reaching a switch angle or a governor guard turning negative.
 
     Returns (time, state, switch counts after it, the guard or None for a switch, what happened, the crank's phase
@@ -628,8 +722,7 @@ def _first_event(dense, t_old: float, t_new: float, counts_old: list[int], switc
             level = 0.0
             if samples[0] <= GUARD_TOLERANCE:
                 level = -_release_level(guard, t_old, node_states[:, 0], interpolant_noise)
-            t_cross = _guard_crossing(lambda tau: guard.level(tau, wrapped(tau)) - level, t_old, t_new,
-                                      samples - level)
+            t_cross = _guard_crossing(lambda tau: guard.level(tau, wrapped(tau)) - level, t_old, t_new, samples - level)
             if t_cross is not None and (first_guard is None or t_cross < first_guard[0]):
                 first_guard = (t_cross, guard)
     if switches:
@@ -716,8 +809,12 @@ def _guard_crossing(excess, t_old: float, t_new: float, samples: np.ndarray) -> 
             t_low = t_old + upper * h
             low = excess(t_low)
             if low >= 0.0 and upper < 1.0:
-                found = optimize.minimize_scalar(excess, bounds=(t_old + lower * h, t_old + cuts[i + 1] * h),
-                                                 method="bounded", options={"xatol": 1e-12 * h})
+                found = optimize.minimize_scalar(
+                    excess,
+                    bounds=(t_old + lower * h, t_old + cuts[i + 1] * h),
+                    method="bounded",
+                    options={"xatol": 1e-12 * h},
+                )
                 if found.fun < low:
                     t_low, low = float(found.x), float(found.fun)
             if low < 0.0:

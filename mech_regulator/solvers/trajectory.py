@@ -56,8 +56,9 @@ class Trajectory:
     step_ends: list[np.ndarray] = field(default_factory=list)
     _solution: OdeSolution | None = field(default=None, repr=False)
 
-    def add_piece(self, t_start: float, t_end: float, interpolant: Callable,
-                  step_ends: np.ndarray | None = None) -> None:
+    def add_piece(
+        self, t_start: float, t_end: float, interpolant: Callable, step_ends: np.ndarray | None = None
+    ) -> None:
         """Append the interpolant valid on [t_start, t_end] [s] (pieces are contiguous in time) and record the ends of
         the solver steps it spans: step_ends [s] ascending when it spans several; by default the knots `x` of a scipy
         piecewise polynomial (the energy method's spline), else one step. Ends at or beyond t_end are cut to t_end."""
@@ -80,7 +81,7 @@ class Trajectory:
         """End the trajectory at t [s] (t_start < t <= t_end): the pieces after it dropped, the last one ending at t
         (what a run found no longer valid beyond t is not reported)."""
         keep = max(1, int(np.searchsorted(self.piece_edges, t, side="left")))
-        del self.interpolants[keep:], self.step_ends[keep:], self.piece_edges[keep + 1:]
+        del self.interpolants[keep:], self.step_ends[keep:], self.piece_edges[keep + 1 :]
         self.piece_edges[-1] = t
         ends = self.step_ends[-1]
         self.step_ends[-1] = np.append(ends[ends < t], t)
@@ -101,7 +102,7 @@ class Trajectory:
             states = np.empty((first.shape[0], t.size))
             states[:, :EVALUATION_CHUNK] = first
             for start in range(EVALUATION_CHUNK, t.size, EVALUATION_CHUNK):
-                states[:, start:start + EVALUATION_CHUNK] = self(t[start:start + EVALUATION_CHUNK])
+                states[:, start : start + EVALUATION_CHUNK] = self(t[start : start + EVALUATION_CHUNK])
             return states
         if len(self.interpolants) == 1:  # what scipy's OdeSolution would call, without its sorting and grouping
             return self.interpolants[0](np.asarray(t))
@@ -112,8 +113,10 @@ class Trajectory:
     def _start_only(self, t: float | np.ndarray) -> np.ndarray:
         """The state of a run that made no step: y_start at t_start, nothing elsewhere."""
         if self.y_start is None or np.any(np.asarray(t) != self.t_start):
-            raise ValueError(f"the run made no step: it covers only t = {self.t_start} s"
-                             + (" and its initial state is unknown" if self.y_start is None else ""))
+            raise ValueError(
+                f"the run made no step: it covers only t = {self.t_start} s"
+                + (" and its initial state is unknown" if self.y_start is None else "")
+            )
         if np.ndim(t) == 0:
             return np.array(self.y_start, dtype=float)
         return np.repeat(np.asarray(self.y_start, dtype=float)[:, None], np.size(t), axis=1)

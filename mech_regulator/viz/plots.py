@@ -37,8 +37,9 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     speed.plot(times, columns["omega"], color="tab:blue", lw=1.0, label="omega")
     if last is not None:
         speed.axhline(last["omega_m"], color="k", lw=0.8, ls="--", label=f"omega_m = {last['omega_m']:.4g} rad/s")
-        speed.axhspan(last["omega_min"], last["omega_max"], color="tab:orange", alpha=0.25,
-                      label=f"delta = {last['delta']:.3g}")
+        speed.axhspan(
+            last["omega_min"], last["omega_max"], color="tab:orange", alpha=0.25, label=f"delta = {last['delta']:.3g}"
+        )
     for t in model.breakpoints():
         speed.axvline(t, color="tab:red", lw=0.8, ls=":")
     speed.set(xlabel="t [s]", ylabel="omega [rad/s]", title="crank speed")
@@ -56,8 +57,11 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
         if "M_joint_friction" in period_columns:
             moments.plot(angle, period_columns["M_joint_friction"], lw=1.0, label="M_joint_friction (part of M_load)")
         moments.legend(loc="best", fontsize="small")
-    moments.set(xlabel="crank angle within the last dynamic period [deg]", ylabel="reduced moment [N m]",
-                title="moments on the crank")
+    moments.set(
+        xlabel="crank angle within the last dynamic period [deg]",
+        ylabel="reduced moment [N m]",
+        title="moments on the crank",
+    )
 
     cycle = axes[1, 0]
     if last is not None:
@@ -67,8 +71,11 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
         cycle.axhline(last["omega_max"], color="tab:orange", lw=0.8, ls="--", label="omega_max, omega_min")
         cycle.axhline(last["omega_min"], color="tab:orange", lw=0.8, ls="--")
         cycle.legend(loc="lower right")
-    cycle.set(xlabel="crank angle within the last dynamic period [deg]", ylabel="omega [rad/s]",
-              title="speed over the last dynamic period")
+    cycle.set(
+        xlabel="crank angle within the last dynamic period [deg]",
+        ylabel="omega [rad/s]",
+        title="speed over the last dynamic period",
+    )
 
     right = axes[1, 1]
     if summary.get("two_mass"):
@@ -86,8 +93,10 @@ def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: P
     else:
         works = summary["energy"]["works"]
         right.barh(list(works), list(works.values()), color="tab:green")
-        right.set(xlabel="work over the run [J]", title=f"works (energy residual "
-                                                         f"{summary['energy']['relative_residual']:.1g} relative)")
+        right.set(
+            xlabel="work over the run [J]",
+            title=f"works (energy residual {summary['energy']['relative_residual']:.1g} relative)",
+        )
     figure.savefig(path, dpi=100)
     plt.close(figure)
 
@@ -103,18 +112,34 @@ def _plot_two_mass_run(periods: dict, times: np.ndarray, columns: dict, speed, p
     passed = -columns["M_coupling"]
     panel.plot(times, passed, color="tab:blue", lw=0.8, label="M_m (coupling to the driven part)")
     peak = periods["peak"]
-    panel.plot(peak["time"], peak["moment"], "v", color="k", ms=8,
-               label=f"largest {peak['moment']:.4g} N m at {peak['time']:.3g} s (period {peak['period']})")
+    panel.plot(
+        peak["time"],
+        peak["moment"],
+        "v",
+        color="k",
+        ms=8,
+        label=f"largest {peak['moment']:.4g} N m at {peak['time']:.3g} s (period {peak['period']})",
+    )
     if peak["steady_mean"] is not None:
-        panel.axhline(peak["steady_mean"], color="k", lw=0.8, ls="--",
-                      label=f"steady mean {peak['steady_mean']:.4g} N m (peak x{peak['ratio']:.3g})")
+        panel.axhline(
+            peak["steady_mean"],
+            color="k",
+            lw=0.8,
+            ls="--",
+            label=f"steady mean {peak['steady_mean']:.4g} N m (peak x{peak['ratio']:.3g})",
+        )
     start = periods["start_up_end"] if periods["start_up_end"] is not None else times[-1]
     steady = periods["steady_from"] if periods["steady_from"] is not None else times[-1]
     for axis in (speed, panel):
         for number, (lo, hi) in enumerate(((times[0], start), (start, steady), (steady, times[-1])), start=1):
             if hi > lo:
-                axis.axvspan(lo, hi, color=PERIOD_COLOURS[number - 1], alpha=0.08,
-                             label=f"period {number}" if axis is panel else None)
+                axis.axvspan(
+                    lo,
+                    hi,
+                    color=PERIOD_COLOURS[number - 1],
+                    alpha=0.08,
+                    label=f"period {number}" if axis is panel else None,
+                )
     panel.set(xlabel="t [s]", ylabel="coupling moment M_m [N m]", title="coupling moment and periods of motion")
     room_for_legend(panel, 0.45)
     panel.legend(loc="upper right", fontsize=8, ncol=2)
@@ -125,15 +150,27 @@ def plot_required_coupling(result, name: str, path: Path) -> None:
     speed it implies, the twist and the needed coupling moment over the tabulated stretch, and the required
     characteristic with its table."""
     figure, axes = plt.subplots(1, 3, figsize=(16, 5), constrained_layout=True)
-    figure.suptitle(f"{name}: coupling characteristic for the prescribed speed law "
-                    f"({'realisable' if result.realisable else 'NOT realisable'} by an elastic coupling)")
+    figure.suptitle(
+        f"{name}: coupling characteristic for the prescribed speed law "
+        f"({'realisable' if result.realisable else 'NOT realisable'} by an elastic coupling)"
+    )
     times, periodic = result.times, result.periodic_from
     law = axes[0]
     law.plot(times, result.omega_driven, color="tab:purple", lw=1.0, label="omega_driven (prescribed)")
-    law.plot(times[:periodic], result.omega_driving[:periodic], color="tab:blue", lw=1.0,
-             label="omega, driving part (from rest)")
-    law.plot(times[periodic:], result.omega_driving[periodic:], color="tab:cyan", lw=1.5,
-             label="omega, driving part's periodic motion")
+    law.plot(
+        times[:periodic],
+        result.omega_driving[:periodic],
+        color="tab:blue",
+        lw=1.0,
+        label="omega, driving part (from rest)",
+    )
+    law.plot(
+        times[periodic:],
+        result.omega_driving[periodic:],
+        color="tab:cyan",
+        lw=1.5,
+        label="omega, driving part's periodic motion",
+    )
     law.axvline(result.law.run_up, color="k", lw=0.8, ls=":", label=f"end of run-up T = {result.law.run_up:g} s")
     law.set(xlabel="t [s]", ylabel="speed [rad/s]", title="speeds")
     law.legend(loc="lower right", fontsize=8)
@@ -146,22 +183,31 @@ def plot_required_coupling(result, name: str, path: Path) -> None:
     moment.plot(times[stretch], result.moment[stretch], color="tab:red", lw=1.0)
     moment.set_ylabel("needed coupling moment M_m [N m]", color="tab:red")
     characteristic = axes[2]
-    characteristic.plot(result.table_twist, result.table_moment, "k.-", lw=0.6, ms=3,
-                        label="table (continued to 0, 0)")
-    characteristic.plot(result.twist[stretch], result.elastic[stretch], color="tab:blue", lw=1.5, alpha=0.7,
-                        label=f"{result.stretch}: loop width {result.loop_width:.2g} N m")
+    characteristic.plot(result.table_twist, result.table_moment, "k.-", lw=0.6, ms=3, label="table (continued to 0, 0)")
+    characteristic.plot(
+        result.twist[stretch],
+        result.elastic[stretch],
+        color="tab:blue",
+        lw=1.5,
+        alpha=0.7,
+        label=f"{result.stretch}: loop width {result.loop_width:.2g} N m",
+    )
     characteristic.axhline(0.0, color="k", lw=0.5)
     characteristic.axvline(0.0, color="k", lw=0.5)
-    characteristic.set(xlabel="twist [rad]", ylabel="elastic moment M_m - c (omega - omega_driven) [N m]",
-                       title="required characteristic")
+    characteristic.set(
+        xlabel="twist [rad]",
+        ylabel="elastic moment M_m - c (omega - omega_driven) [N m]",
+        title="required characteristic",
+    )
     characteristic.grid(alpha=0.3)
     characteristic.legend(loc="upper left", fontsize=8)
     figure.savefig(path, dpi=100)
     plt.close(figure)
 
 
-def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray,
-                       columns: dict, speed, panel) -> None:
+def _plot_governor_run(
+    model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray, columns: dict, speed, panel
+) -> None:
     """Governed run: the cycle-mean speed and predicted operating speeds on the speed panel; sleeve
     position and throttle against time, with the governor's mode changes, on `panel`."""
     from mech_regulator.analysis import cycle_mean_speed, operating_point
@@ -171,8 +217,14 @@ def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dic
     for level in dict.fromkeys(levels):
         predicted = operating_point(model, level).speed
         speed.axhline(predicted, color="tab:green", lw=0.8, ls="-.")
-        speed.annotate(f"statics, load {level:g} N m", (times[-1], predicted), fontsize=7, color="tab:green",
-                       va="bottom", ha="right")
+        speed.annotate(
+            f"statics, load {level:g} N m",
+            (times[-1], predicted),
+            fontsize=7,
+            color="tab:green",
+            va="bottom",
+            ha="right",
+        )
     speed.legend(loc="lower right")
     if model.governor.kind == "pi":  # no sleeve: the integral part of the throttle
         signal = columns["integral"]
@@ -190,8 +242,7 @@ def _plot_governor_run(model: MachineModel, trajectory: Trajectory, summary: dic
     throttle.set_ylabel("throttle [-]", color="tab:red")
     events = [t for t, _ in trajectory.events]
     if events:
-        panel.plot(events, np.interp(events, times, signal), "k|", ms=6,
-                   label=f"mode changes ({len(events)})")
+        panel.plot(events, np.interp(events, times, signal), "k|", ms=6, label=f"mode changes ({len(events)})")
     panel.legend(loc="upper left")
 
 
@@ -204,16 +255,25 @@ def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, 
     train = summary["drive_train"]
     clutch = model.clutch
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
-    figure.suptitle(f"{model.scene.name}: start-up through a friction clutch ({model.scene.solver.method}, "
-                    f"{summary['status']})")
+    figure.suptitle(
+        f"{model.scene.name}: start-up through a friction clutch ({model.scene.solver.method}, {summary['status']})"
+    )
 
     def shade(panel) -> None:
         for index, (start, end, _) in enumerate(train["clutch"]["slip_phases"]):
-            panel.axvspan(start, end, color="tab:orange", alpha=0.15, lw=0,
-                          label=("clutch slips" if index == 0 else None))
+            panel.axvspan(
+                start, end, color="tab:orange", alpha=0.15, lw=0, label=("clutch slips" if index == 0 else None)
+            )
         for index, (start, end) in enumerate(train["held"]):
-            panel.axvspan(start, end, facecolor="none", edgecolor="tab:gray", hatch="//", lw=0,
-                          label=("machine held at rest" if index == 0 else None))
+            panel.axvspan(
+                start,
+                end,
+                facecolor="none",
+                edgecolor="tab:gray",
+                hatch="//",
+                lw=0,
+                label=("machine held at rest" if index == 0 else None),
+            )
 
     speed = axes[0, 0]
     shade(speed)
@@ -221,8 +281,9 @@ def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, 
     speed.plot(times, columns["omega_driven"], color="tab:green", lw=1.2, label="machine omega_driven")
     for t in train["clutch"]["lock_times"]:
         speed.axvline(t, color="k", lw=0.8, ls=":")
-        speed.annotate(f"locks at {t:.4g} s", (t, speed.get_ylim()[0]), xytext=(4, 6), textcoords="offset points",
-                       fontsize=8)
+        speed.annotate(
+            f"locks at {t:.4g} s", (t, speed.get_ylim()[0]), xytext=(4, 6), textcoords="offset points", fontsize=8
+        )
     speed.set(xlabel="t [s]", ylabel="speed [rad/s]", title="motor and machine (main shaft) speeds")
     speed.legend(loc="lower right", fontsize=8)
 
@@ -230,8 +291,12 @@ def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, 
     shade(torque)
     torque.plot(times, columns["M_drive"], color="tab:blue", lw=1.0, label="motor moment M_d")
     torque.plot(times, columns["clutch_torque"], color="tab:red", lw=1.4, label="clutch torque (to the machine)")
-    torque.axhline(clutch.static_torque, color="tab:red", lw=0.8, ls="--", label=f"static limit {clutch.static_torque:g} N m")
-    torque.axhline(clutch.kinetic_torque, color="tab:red", lw=0.8, ls=":", label=f"kinetic {clutch.kinetic_torque:g} N m")
+    torque.axhline(
+        clutch.static_torque, color="tab:red", lw=0.8, ls="--", label=f"static limit {clutch.static_torque:g} N m"
+    )
+    torque.axhline(
+        clutch.kinetic_torque, color="tab:red", lw=0.8, ls=":", label=f"kinetic {clutch.kinetic_torque:g} N m"
+    )
     torque.set(xlabel="t [s]", ylabel="moment [N m]", title="clutch torque and motor moment")
     torque.legend(loc="upper right", fontsize=8)
 
@@ -240,20 +305,36 @@ def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, 
     for index, (name, section) in enumerate(train["sections"].items()):
         color = f"C{index + 4}"
         sections.plot(times, columns[f"M_section_{name}"], color=color, lw=1.2, label=f"{name} section")
-        sections.plot(section["time"], section["max"], "o", color=color, ms=5,
-                      label=f"max {section['max']:.4g} N m at {section['time']:.3g} s")
+        sections.plot(
+            section["time"],
+            section["max"],
+            "o",
+            color=color,
+            ms=5,
+            label=f"max {section['max']:.4g} N m at {section['time']:.3g} s",
+        )
         if section["paper_estimate"] is not None:
-            sections.axhline(section["paper_estimate"], color=color, lw=0.8, ls="--",
-                             label=f"paper's estimate {section['paper_estimate']:.4g} N m")
-    sections.set(xlabel="t [s]", ylabel="torque in the section [N m]",
-                 title="branch sections: M_kr = M_n,c + (I_n / i_1n) domega/dt")
+            sections.axhline(
+                section["paper_estimate"],
+                color=color,
+                lw=0.8,
+                ls="--",
+                label=f"paper's estimate {section['paper_estimate']:.4g} N m",
+            )
+    sections.set(
+        xlabel="t [s]",
+        ylabel="torque in the section [N m]",
+        title="branch sections: M_kr = M_n,c + (I_n / i_1n) domega/dt",
+    )
     sections.legend(loc="upper right", fontsize=8)
 
     works = summary["energy"]["works"]
     bars = axes[1, 1]
     bars.barh(list(works), list(works.values()), color="tab:green")
-    bars.set(xlabel="work over the run [J]", title=f"works (energy residual {summary['energy']['relative_residual']:.1g} "
-                                                   "relative)")
+    bars.set(
+        xlabel="work over the run [J]",
+        title=f"works (energy residual {summary['energy']['relative_residual']:.1g} relative)",
+    )
     figure.savefig(path, dpi=100)
     plt.close(figure)
 
@@ -264,27 +345,43 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
     and (periodic machines) the Floquet multipliers against exp(lambda T)."""
     characteristic = analysis["characteristic"]
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
-    figure.suptitle(f"{model.scene.name}: {analysis['kind']} governor"
-                    + (f", {analysis['feedback']} feedback" if analysis["feedback"] else ""))
+    figure.suptitle(
+        f"{model.scene.name}: {analysis['kind']} governor"
+        + (f", {analysis['feedback']} feedback" if analysis["feedback"] else "")
+    )
 
     static = axes[0, 0]
     if characteristic is None:  # PI: isochronous, no sleeve; the throttle at each operating point
         set_speed = analysis["set_speed"]
         characteristic = {"speed_low": [0.95 * set_speed], "speed_high": [1.05 * set_speed]}
         static.axvline(set_speed, color="tab:blue", label=f"set speed, statism {analysis['statism']:.3g}")
-        values, axis_label, title = [point["throttle"] for point in analysis["operating_points"]], "throttle [-]", \
-            "isochronous (PI): the set speed at every load"
+        values, axis_label, title = (
+            [point["throttle"] for point in analysis["operating_points"]],
+            "throttle [-]",
+            "isochronous (PI): the set speed at every load",
+        )
     else:
         sleeve = np.array(characteristic["sleeve"]) * 1000.0
-        static.fill_betweenx(sleeve, characteristic["speed_low"], characteristic["speed_high"], color="tab:orange",
-                             alpha=0.3, label="insensitivity band (static friction)")
-        static.plot(characteristic["speed"], sleeve, color="tab:blue",
-                    label=f"equilibrium, statism {analysis['statism']:.3g}")
-        values, axis_label, title = [point["sleeve"] * 1000.0 for point in analysis["operating_points"]], \
-            "sleeve z [mm]", "static characteristic"
+        static.fill_betweenx(
+            sleeve,
+            characteristic["speed_low"],
+            characteristic["speed_high"],
+            color="tab:orange",
+            alpha=0.3,
+            label="insensitivity band (static friction)",
+        )
+        static.plot(
+            characteristic["speed"], sleeve, color="tab:blue", label=f"equilibrium, statism {analysis['statism']:.3g}"
+        )
+        values, axis_label, title = (
+            [point["sleeve"] * 1000.0 for point in analysis["operating_points"]],
+            "sleeve z [mm]",
+            "static characteristic",
+        )
     for point, value in zip(analysis["operating_points"], values):
-        static.plot(point["speed"], value, "o", ms=6,
-                    label=f"load {point['external_load']:g} N m: {point['speed']:.4g} rad/s")
+        static.plot(
+            point["speed"], value, "o", ms=6, label=f"load {point['external_load']:g} N m: {point['speed']:.4g} rad/s"
+        )
     static.set(xlabel="crank speed omega [rad/s]", ylabel=axis_label, title=title)
     static.legend(loc="upper left", fontsize=8)
 
@@ -293,14 +390,23 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
     averages = np.array([model.cycle_averages(w)[1:] for w in speeds])
     for point in analysis["operating_points"]:
         load = np.array([-model.cycle_averages(w, point["external_load"])[2] for w in speeds])
-        line, = balance.plot(speeds, load / averages[:, 0], lw=1.0,
-                             label=f"throttle needed, load {point['external_load']:g} N m")
+        (line,) = balance.plot(
+            speeds, load / averages[:, 0], lw=1.0, label=f"throttle needed, load {point['external_load']:g} N m"
+        )
         balance.plot(point["speed"], point["throttle"], "o", ms=6, color=line.get_color())
     if model.governor.kind == "direct":
-        balance.plot(characteristic["speed"], [model.governor.valve(z / 1000.0) for z in sleeve], color="k",
-                     label="valve on the static characteristic")
-    balance.set(xlabel="crank speed omega [rad/s]", ylabel="throttle [-]", ylim=(-0.05, 1.1),
-                title="balance of the cycle-averaged machine")
+        balance.plot(
+            characteristic["speed"],
+            [model.governor.valve(z / 1000.0) for z in sleeve],
+            color="k",
+            label="valve on the static characteristic",
+        )
+    balance.set(
+        xlabel="crank speed omega [rad/s]",
+        ylabel="throttle [-]",
+        ylim=(-0.05, 1.1),
+        title="balance of the cycle-averaged machine",
+    )
     balance.legend(loc="best", fontsize=8)
 
     linear = analysis["linear"]
@@ -325,8 +431,10 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
         circle.plot(multipliers[:, 0], multipliers[:, 1], "x", ms=9, mew=2, label="Floquet multipliers")
         circle.plot(averaged[:, 0], averaged[:, 1], "o", mfc="none", ms=10, label="exp(lambda T), averaged model")
         circle.legend(loc="lower left", fontsize=8)
-        circle.set_title(f"periodic orbit ({'stable' if floquet['stable'] else 'unstable'}), "
-                         f"T = {floquet['cycle_time'] * 1000:.3g} ms")
+        circle.set_title(
+            f"periodic orbit ({'stable' if floquet['stable'] else 'unstable'}), "
+            f"T = {floquet['cycle_time'] * 1000:.3g} ms"
+        )
     else:
         circle.set_title("Floquet multipliers: the machine is not periodic in phi")
     circle.set(xlabel="Re mu", ylabel="Im mu", aspect="equal")
@@ -353,8 +461,11 @@ def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, tit
     joints = [key for key in columns if key.startswith("R_")]
     figure = plt.figure(figsize=(14, 10 if joints else 7), constrained_layout=True)
     grid = figure.add_gridspec(3 if joints else 2, 2, width_ratios=[1.25, 1.0])
-    paths, speed, acceleration = figure.add_subplot(grid[:, 0]), figure.add_subplot(grid[0, 1]), \
-        figure.add_subplot(grid[1, 1])
+    paths, speed, acceleration = (
+        figure.add_subplot(grid[:, 0]),
+        figure.add_subplot(grid[0, 1]),
+        figure.add_subplot(grid[1, 1]),
+    )
     figure.suptitle(f"{title}: kinematics over one turn at omega = {omega:g} rad/s")
     colours = dict(zip(names, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
     for index, phi in enumerate(np.linspace(0.0, 2.0 * math.pi, KINEMATICS_POSES, endpoint=False)):
@@ -364,30 +475,56 @@ def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, tit
             if part_name == "joints":
                 paths.plot(part[:, 0], part[:, 1], "o", ms=4 if index == 0 else 2.5, color=shade, zorder=3)
             elif part_name != "crank_path":
-                for strip in (part if part.ndim == 3 else [part]):
+                for strip in part if part.ndim == 3 else [part]:
                     paths.plot(strip[:, 0], strip[:, 1], color=shade, lw=width, zorder=2 if index == 0 else 1)
-        paths.annotate(f"{math.degrees(phi):.0f}°", outline["crank"][-1], fontsize=8, color=shade,
-                       xytext=(4, 4), textcoords="offset points")
+        paths.annotate(
+            f"{math.degrees(phi):.0f}°",
+            outline["crank"][-1],
+            fontsize=8,
+            color=shade,
+            xytext=(4, 4),
+            textcoords="offset points",
+        )
     first = point_motions(mechanism)(0.0)
     for name in names:
-        paths.annotate(name, (first[name][0].real, first[name][0].imag), fontsize=10, fontweight="bold",
-                       color=colours[name], xytext=(-12, 5), textcoords="offset points")
+        paths.annotate(
+            name,
+            (first[name][0].real, first[name][0].imag),
+            fontsize=10,
+            fontweight="bold",
+            color=colours[name],
+            xytext=(-12, 5),
+            textcoords="offset points",
+        )
     dphi = np.degrees(columns["phi"])
     for index, name in enumerate(names):
-        twin = next((other for other in names[:index] if all(
-            np.allclose(columns[f"{name}_{key}"], columns[f"{other}_{key}"], rtol=1e-9, atol=1e-12)
-            for key in ("vx", "vy"))), None)
+        twin = next(
+            (
+                other
+                for other in names[:index]
+                if all(
+                    np.allclose(columns[f"{name}_{key}"], columns[f"{other}_{key}"], rtol=1e-9, atol=1e-12)
+                    for key in ("vx", "vy")
+                )
+            ),
+            None,
+        )
         style = {"color": colours[name], "ls": "--" if twin else "-", "lw": 1.6 if twin else 1.2}
         label = f"{name} (moves as {twin})" if twin else name
         paths.plot(columns[f"{name}_x"], columns[f"{name}_y"], label=f"path of {label}", **style)
         speed.plot(dphi, columns[f"{name}_v"], label=label, **style)
         acceleration.plot(dphi, columns[f"{name}_a"], label=label, **style)
-    paths.set(xlabel="x [m]", ylabel="y [m]", aspect="equal",
-              title=f"paths of the joints; the mechanism at phi = 0 (dark) and {KINEMATICS_POSES - 1} more crank angles")
+    paths.set(
+        xlabel="x [m]",
+        ylabel="y [m]",
+        aspect="equal",
+        title=f"paths of the joints; the mechanism at phi = 0 (dark) and {KINEMATICS_POSES - 1} more crank angles",
+    )
     paths.legend(loc="best", fontsize=8)
     speed.set(ylabel="speed |v| [m/s]", title="speeds of the points")
-    acceleration.set(xlabel="crank angle phi [deg]", ylabel="acceleration |a| [m/s^2]",
-                     title="accelerations of the points")
+    acceleration.set(
+        xlabel="crank angle phi [deg]", ylabel="acceleration |a| [m/s^2]", title="accelerations of the points"
+    )
     panels = [speed, acceleration]
     if joints:
         reactions = figure.add_subplot(grid[2, 1])
@@ -396,10 +533,14 @@ def plot_kinematics(mechanism, columns: dict[str, np.ndarray], omega: float, tit
         balancing = reactions.twinx()
         balancing.plot(dphi, columns["M_balancing"], color="k", lw=1.0, ls=":", label="balancing moment (right axis)")
         balancing.set_ylabel("balancing moment M_b [N m]")
-        reactions.set(xlabel="crank angle phi [deg]", ylabel="reaction |R| [N]",
-                      title="joint reactions and the balancing moment\n(kinetostatics at constant speed, with weights)")
-        handles, labels = (sum(pair, []) for pair in zip(reactions.get_legend_handles_labels(),
-                                                         balancing.get_legend_handles_labels()))
+        reactions.set(
+            xlabel="crank angle phi [deg]",
+            ylabel="reaction |R| [N]",
+            title="joint reactions and the balancing moment\n(kinetostatics at constant speed, with weights)",
+        )
+        handles, labels = (
+            sum(pair, []) for pair in zip(reactions.get_legend_handles_labels(), balancing.get_legend_handles_labels())
+        )
         reactions.legend(handles, labels, loc="upper right", fontsize=8, ncol=3)
         panels.append(reactions)
     for axes in panels:
@@ -421,10 +562,16 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
     mechanism = model.scene.machine.mechanism
     phis, exact, approximate = piston_table(model, omega)
     curves = torque_curves(model, omega)
-    figure, axes = plt.subplot_mosaic([["x", "torque"], ["v", "torque"], ["a", "spectrum"]], figsize=(14, 9),
-                                      constrained_layout=True, gridspec_kw={"width_ratios": [1.0, 1.5]})
-    figure.suptitle(f"{model.scene.name}: engine at omega = {omega:.5g} rad/s ({omega * 30 / math.pi:.5g} rpm), "
-                    f"lambda = {mechanism.crank / mechanism.rod:.3g}, k = {mechanism.offset / mechanism.crank:.3g}")
+    figure, axes = plt.subplot_mosaic(
+        [["x", "torque"], ["v", "torque"], ["a", "spectrum"]],
+        figsize=(14, 9),
+        constrained_layout=True,
+        gridspec_kw={"width_ratios": [1.0, 1.5]},
+    )
+    figure.suptitle(
+        f"{model.scene.name}: engine at omega = {omega:.5g} rad/s ({omega * 30 / math.pi:.5g} rpm), "
+        f"lambda = {mechanism.crank / mechanism.rod:.3g}, k = {mechanism.offset / mechanism.crank:.3g}"
+    )
     from mech_regulator.mechanisms.crank_slider import dead_centres
 
     degrees = np.degrees(phis)
@@ -433,9 +580,16 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
     for row, (key, ylabel) in enumerate((("x", "x [mm]"), ("v", "v [m/s]"), ("a", "j [m/s^2]"))):
         axis = axes[key]
         axis.plot(degrees, exact[row] * scales[row], color="tab:blue", lw=1.5, label="exact")
-        axis.plot(degrees, approximate[row] * scales[row], color="tab:orange", lw=1.0, ls="--",
-                  label="source 002, first order in lambda\n(largest errors {:.3g} mm, {:.3g} m/s, {:.3g} m/s^2)"
-                  .format(*errors))
+        axis.plot(
+            degrees,
+            approximate[row] * scales[row],
+            color="tab:orange",
+            lw=1.0,
+            ls="--",
+            label="source 002, first order in lambda\n(largest errors {:.3g} mm, {:.3g} m/s, {:.3g} m/s^2)".format(
+                *errors
+            ),
+        )
         for dead_centre in dead_centres(mechanism.crank, mechanism.rod, mechanism.offset):
             axis.axvline(math.degrees(dead_centre) % 360.0, color="grey", lw=0.6, ls=":")
         axis.set(ylabel=ylabel, xlim=(0.0, 360.0), xticks=np.arange(0, 361, 60))
@@ -448,34 +602,46 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
     cycle_degrees = np.degrees(curves.phi)
     cylinder_colors = ["C0", "C1", "C4", "C6", "C8", "C9", "C5", "C7"]
     for i, row in enumerate(curves.gas if len(curves.gas) > 1 else []):
-        torque.plot(cycle_degrees, row, lw=0.7, color=cylinder_colors[i % len(cylinder_colors)],
-                    label=f"gas, cylinder {i + 1}")
+        torque.plot(
+            cycle_degrees, row, lw=0.7, color=cylinder_colors[i % len(cylinder_colors)], label=f"gas, cylinder {i + 1}"
+        )
     torque.plot(cycle_degrees, curves.gas_total, color="tab:red", lw=1.6, label="gas, total")
     torque.plot(cycle_degrees, curves.inertia, color="tab:green", lw=1.2, label="inertia -1/2 J' omega^2")
     torque.plot(cycle_degrees, curves.total, color="k", lw=1.8, label="total")
     mean = float(np.mean(curves.gas_total))
     torque.axhline(mean, color="tab:red", lw=0.8, ls="--", label=f"mean {mean:.4g} N m")
-    torque.set(xlabel="crank angle phi [deg]", ylabel="moment on the crank [N m]", xlim=(0.0, cycle_degrees[-1] + 0.25),
-               xticks=np.arange(0, cycle_degrees[-1] + 1, 90),
-               title=f"moments over the working cycle ({len(curves.gas)} cylinder"
-                     f"{'s' if len(curves.gas) > 1 else ''})")
+    torque.set(
+        xlabel="crank angle phi [deg]",
+        ylabel="moment on the crank [N m]",
+        xlim=(0.0, cycle_degrees[-1] + 0.25),
+        xticks=np.arange(0, cycle_degrees[-1] + 1, 90),
+        title=f"moments over the working cycle ({len(curves.gas)} cylinder{'s' if len(curves.gas) > 1 else ''})",
+    )
     torque.grid(alpha=0.3)
     room_for_legend(torque, 0.3)
     torque.legend(loc="upper center", fontsize=8, ncols=4)
 
     spectrum = axes["spectrum"]
-    series = [("gas", curves.gas_total, "tab:red"), ("inertia", curves.inertia, "tab:green"),
-              ("total", curves.total, "k")]
+    series = [
+        ("gas", curves.gas_total, "tab:red"),
+        ("inertia", curves.inertia, "tab:green"),
+        ("total", curves.total, "k"),
+    ]
     step = 2.0 * math.pi / curves.cycle
     width = 0.8 * step / len(series)
     for index, (name, values, color) in enumerate(series):
         fourier = harmonics(values, curves.cycle)
         shown = fourier.orders <= max_order + 1e-9
-        spectrum.bar(fourier.orders[shown] + (index - 1) * width, fourier.amplitudes[shown], width=width,
-                     color=color, label=name)
-    spectrum.set(xlabel="order (multiples of the crank speed)", ylabel="amplitude [N m]",
-                 xticks=np.arange(0.0, max_order + 0.5, 1.0), xlim=(0.0, max_order + 0.5),
-                 title="harmonics: M = mean + sum A_k cos(order_k phi + phase_k)")
+        spectrum.bar(
+            fourier.orders[shown] + (index - 1) * width, fourier.amplitudes[shown], width=width, color=color, label=name
+        )
+    spectrum.set(
+        xlabel="order (multiples of the crank speed)",
+        ylabel="amplitude [N m]",
+        xticks=np.arange(0.0, max_order + 0.5, 1.0),
+        xlim=(0.0, max_order + 0.5),
+        title="harmonics: M = mean + sum A_k cos(order_k phi + phase_k)",
+    )
     spectrum.grid(alpha=0.3, axis="y")
     spectrum.legend(loc="upper right", fontsize=8)
     figure.savefig(path, dpi=100)

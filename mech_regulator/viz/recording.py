@@ -56,20 +56,28 @@ from mech_regulator.solvers.trajectory import Progress
 APPLICATION_ID = "mech_regulator"
 TIMELINE = "sim_time"
 NANOSECONDS = 1_000_000_000
-SET_POINT_REFRESH_NS = 10_000_000   # a direct governor's set point follows a changing load at most every 10 ms
-RECORD_RUN_FLUSH_SAMPLES = 20_000   # record_run sends the buffered columns every this many samples
-MOMENTS_PERIODS = 4                 # dynamic periods at the initial speed shown by a cyclic machine's moments view
-MOMENTS_WINDOW = 0.5                # [s] of simulated time shown instead when the machine starts from rest
-MOMENTS_WINDOW_LIMITS = (0.05, 10.0)    # [s] shortest and longest window of the moments view
-MILLIMETRES = 1000.0                # [mm/m]: the sleeve and the dashpot's shift are plotted in mm
-MILLIRADIANS = 1000.0               # [mrad/rad]: the coupling's twist is plotted in mrad
-Y_MARGIN = 0.08                     # the final blueprint's plots span the data and this fraction of it above and below
+SET_POINT_REFRESH_NS = 10_000_000  # a direct governor's set point follows a changing load at most every 10 ms
+RECORD_RUN_FLUSH_SAMPLES = 20_000  # record_run sends the buffered columns every this many samples
+MOMENTS_PERIODS = 4  # dynamic periods at the initial speed shown by a cyclic machine's moments view
+MOMENTS_WINDOW = 0.5  # [s] of simulated time shown instead when the machine starts from rest
+MOMENTS_WINDOW_LIMITS = (0.05, 10.0)  # [s] shortest and longest window of the moments view
+MILLIMETRES = 1000.0  # [mm/m]: the sleeve and the dashpot's shift are plotted in mm
+MILLIRADIANS = 1000.0  # [mrad/rad]: the coupling's twist is plotted in mrad
+Y_MARGIN = 0.08  # the final blueprint's plots span the data and this fraction of it above and below
 
 WHITE, GREY, DARK_GREY = (235, 235, 235), (150, 150, 150), (95, 95, 95)
 BLUE, ORANGE, GREEN = (80, 160, 255), (255, 165, 50), (110, 215, 110)
 RED, VIOLET, YELLOW, PINK = (255, 95, 95), (195, 125, 255), (250, 210, 60), (255, 120, 190)
-COLOUR_NAMES = {WHITE: "white", BLUE: "blue", ORANGE: "orange", GREEN: "green", RED: "red", VIOLET: "violet",
-                YELLOW: "yellow", PINK: "pink"}
+COLOUR_NAMES = {
+    WHITE: "white",
+    BLUE: "blue",
+    ORANGE: "orange",
+    GREEN: "green",
+    RED: "red",
+    VIOLET: "violet",
+    YELLOW: "yellow",
+    PINK: "pink",
+}
 
 # entity -> (label in the plot's title, colour, line width [ui points]); the full names: series_names
 SERIES_STYLE = {
@@ -88,30 +96,56 @@ SERIES_STYLE = {
     "moments/external": ("external", VIOLET, 1.5),
     "moments/net": ("net", WHITE, 1.0),
 }
-SERIES_NAMES = {   # entity -> name of the series (hover, selection) unless series_names gives the scene's own
-    "speed/omega": "ω crank speed", "speed/driven": "ω₂ driven part's speed", "speed/set_point": "ω_set",
-    "throttle": "throttle", "governor/sleeve": "sleeve z [mm]", "governor/integral": "PI's integral part x [-]",
+SERIES_NAMES = {  # entity -> name of the series (hover, selection) unless series_names gives the scene's own
+    "speed/omega": "ω crank speed",
+    "speed/driven": "ω₂ driven part's speed",
+    "speed/set_point": "ω_set",
+    "throttle": "throttle",
+    "governor/sleeve": "sleeve z [mm]",
+    "governor/integral": "PI's integral part x [-]",
     "governor/feedback_shift": "dashpot's shift ζ [mm]",
-    "coupling/twist": "twist φ − φ₂ [mrad]", "moments/external": "external load moment",
+    "coupling/twist": "twist φ − φ₂ [mrad]",
+    "moments/external": "external load moment",
     "moments/net": "net = J ε + J' ω² / 2",
 }
 
 # drawing part -> (colour, line width or point radius [ui points]; None: the point radius is in metres)
 MECHANISM_STYLE = {
-    "guide": (GREY, 1.5), "frame": (GREY, 2.0), "crank_path": (DARK_GREY, 1.0), "disc": (GREY, 1.5),
-    "crank": (ORANGE, 3.0), "spoke": (ORANGE, 3.0), "rod": (BLUE, 3.0), "coupler": (BLUE, 3.0),
-    "rocker": (GREEN, 3.0), "slider": (WHITE, 2.0), "joints": (WHITE, 4.0),
-    "tie": (VIOLET, 2.5), "side": (PINK, 2.5), "shuttle": (YELLOW, 4.0), "links": (BLUE, 3.0), "sliders": (WHITE, 2.0),
+    "guide": (GREY, 1.5),
+    "frame": (GREY, 2.0),
+    "crank_path": (DARK_GREY, 1.0),
+    "disc": (GREY, 1.5),
+    "crank": (ORANGE, 3.0),
+    "spoke": (ORANGE, 3.0),
+    "rod": (BLUE, 3.0),
+    "coupler": (BLUE, 3.0),
+    "rocker": (GREEN, 3.0),
+    "slider": (WHITE, 2.0),
+    "joints": (WHITE, 4.0),
+    "tie": (VIOLET, 2.5),
+    "side": (PINK, 2.5),
+    "shuttle": (YELLOW, 4.0),
+    "links": (BLUE, 3.0),
+    "sliders": (WHITE, 2.0),
     "gears": (GREEN, 1.5),
 }
 GOVERNOR_STYLE = {
-    "spindle": (GREY, 2.5), "stops": (RED, 2.5), "upper_arms": (ORANGE, 2.5), "lower_links": (BLUE, 2.0),
-    "sleeve": (YELLOW, 2.0), "balls": ((200, 200, 215), None), "spindle_mark": (ORANGE, 4.0),
+    "spindle": (GREY, 2.5),
+    "stops": (RED, 2.5),
+    "upper_arms": (ORANGE, 2.5),
+    "lower_links": (BLUE, 2.0),
+    "sleeve": (YELLOW, 2.0),
+    "balls": ((200, 200, 215), None),
+    "spindle_mark": (ORANGE, 4.0),
 }
 POINT_PARTS = ("joints", "balls", "spindle_mark")
-FLIP_Y = np.array([1.0, -1.0])       # drawings have y up, Rerun's 2-D views y down
-MECHANISM_NAMES = {"crank_slider": "crank–slider", "four_bar": "four-bar linkage", "walking_beam": "walking beam",
-                   "linkage": "linkage"}
+FLIP_Y = np.array([1.0, -1.0])  # drawings have y up, Rerun's 2-D views y down
+MECHANISM_NAMES = {
+    "crank_slider": "crank–slider",
+    "four_bar": "four-bar linkage",
+    "walking_beam": "walking beam",
+    "linkage": "linkage",
+}
 END_LEVELS = {"complete": "INFO", "tripped": "WARN", "interrupted": "WARN", "failed": "ERROR"}
 
 
@@ -123,8 +157,15 @@ class RunRecording:
     A sample time earlier than the one before on the machine's or the load's stream starts a new trial
     (the machine was reset): the load's changes are then followed from that sample on."""
 
-    def __init__(self, model: MachineModel, path: Path | None = None, connect: str | None = None,
-                 animation_rate: float = 200.0, recording_name: str | None = None, outside_throttle: bool = False):
+    def __init__(
+        self,
+        model: MachineModel,
+        path: Path | None = None,
+        connect: str | None = None,
+        animation_rate: float = 200.0,
+        recording_name: str | None = None,
+        outside_throttle: bool = False,
+    ):
         if path is None and connect is None:
             raise ValueError("RunRecording needs a file (path) or a viewer to connect to (connect), or both")
         if not animation_rate > 0.0:
@@ -142,7 +183,7 @@ class RunRecording:
         self._external_load = model.external_load(0.0)
         self._load_changes = LoadChanges(self._external_load)
         self._delta, self._delta_source = speed_band_delta(model)
-        self._set_points: dict[float, float] = {}    # external load [N m] -> direct governor's set point [rad/s]
+        self._set_points: dict[float, float] = {}  # external load [N m] -> direct governor's set point [rad/s]
         self._set_point_load = math.nan
         self._set_point_time = -SET_POINT_REFRESH_NS
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
@@ -156,13 +197,14 @@ class RunRecording:
                 self._extents["governor/sleeve"] = (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])
         if self.outside_throttle:
             self._extents = {"throttle": (0.0, 1.0)}
-        self._frames: dict[str, tuple[list[int], list[np.ndarray]]] = {}   # entity -> (times, parts y down)
+        self._frames: dict[str, tuple[list[int], list[np.ndarray]]] = {}  # entity -> (times, parts y down)
         self._stream = rr.RecordingStream(APPLICATION_ID)
-        self._stream.set_log_time_enabled(False)   # one time line: simulated time, not the wall clock
+        self._stream.set_log_time_enabled(False)  # one time line: simulated time, not the wall clock
         sinks = ([rr.FileSink(str(path))] if path is not None else []) + ([rr.GrpcSink(connect)] if connect else [])
         self._stream.set_sinks(*sinks)
-        self._stream.send_blueprint(run_blueprint(model, outside_throttle=self.outside_throttle), make_active=True,
-                                    make_default=True)
+        self._stream.send_blueprint(
+            run_blueprint(model, outside_throttle=self.outside_throttle), make_active=True, make_default=True
+        )
         self._stream.send_recording_name(recording_name or model.scene.name or "run")
         self._log_static()
         self._log_event(0, start_text(model))
@@ -197,8 +239,12 @@ class RunRecording:
             if frame != self._mechanism_frame:
                 self._mechanism_frame = frame
                 angle = phi - driven["twist"] if self._drawn_driven else phi
-                self._add_frame("mechanism", t_ns, mechanism_outline(self._drawing, angle),
-                                MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)])
+                self._add_frame(
+                    "mechanism",
+                    t_ns,
+                    mechanism_outline(self._drawing, angle),
+                    MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)],
+                )
 
     def add_moments(self, t_ns: int, drive: float, resistance: float, external: float, net: float) -> None:
         """Moments on the crank [N m] at t_ns [ns]: the drive as applied (throttle included), the machine's
@@ -208,8 +254,12 @@ class RunRecording:
         with self._lock:
             if self._closed:
                 return
-            for entity, value in (("moments/drive", drive), ("moments/resistance", resistance),
-                                  ("moments/external", external), ("moments/net", net)):
+            for entity, value in (
+                ("moments/drive", drive),
+                ("moments/resistance", resistance),
+                ("moments/external", external),
+                ("moments/net", net),
+            ):
                 if entity in self._series:
                     self._append(entity, t_ns, value)
 
@@ -242,9 +292,12 @@ class RunRecording:
             if self.model.governor.kind != "pi" and frame != self._governor_frame:
                 self._governor_frame = frame
                 sensor = self.model.governor.sensor
-                self._add_frame("governor/drawing", t_ns,
-                                sensor.outline(values["arm_angle"], sensor.ratio * self._phi),
-                                GOVERNOR_MOVING_PARTS)
+                self._add_frame(
+                    "governor/drawing",
+                    t_ns,
+                    sensor.outline(values["arm_angle"], sensor.ratio * self._phi),
+                    GOVERNOR_MOVING_PARTS,
+                )
 
     def add_throttle(self, t_ns: int, throttle: float) -> None:
         """The throttle [-] a controller outside the model applied from t_ns [ns] (outside_throttle; a governor's
@@ -281,12 +334,14 @@ class RunRecording:
                 return
             for when, text in self._load_changes.finish():
                 self._log_event(when, text)
-            self._log_event(self._last_machine_ns, end_text(self._last_machine_ns, status, message),
-                            END_LEVELS.get(status, "INFO"))
+            self._log_event(
+                self._last_machine_ns, end_text(self._last_machine_ns, status, message), END_LEVELS.get(status, "INFO")
+            )
             self._closed = True
             self._send_buffers()
-            self._stream.send_blueprint(run_blueprint(self.model, self._extents, self.outside_throttle),
-                                        make_active=True, make_default=True)
+            self._stream.send_blueprint(
+                run_blueprint(self.model, self._extents, self.outside_throttle), make_active=True, make_default=True
+            )
             finish_stream(self._stream)
 
     # ---------------------------------------------------------------------------------------------
@@ -326,8 +381,9 @@ class RunRecording:
                 columns = rr.Points2D.columns(positions=np.concatenate(frames))
                 lengths = [len(frame) for frame in frames]
             else:
-                columns = rr.LineStrips2D.columns(strips=[strip for frame in frames
-                                                          for strip in (frame if frame.ndim == 3 else [frame])])
+                columns = rr.LineStrips2D.columns(
+                    strips=[strip for frame in frames for strip in (frame if frame.ndim == 3 else [frame])]
+                )
                 lengths = [len(frame) if frame.ndim == 3 else 1 for frame in frames]
             self._send(entity, times, columns.partition(lengths))
             frames.clear()
@@ -362,8 +418,12 @@ class RunRecording:
                 archetype = rr.Points2D.from_fields(positions=geometry, radii=radius, colors=colour, draw_order=40.0)
             else:
                 strips = None if geometry is None else list(geometry) if geometry.ndim == 3 else [geometry]
-                archetype = rr.LineStrips2D.from_fields(strips=strips, radii=rr.Radius.ui_points(0.5 * size),
-                                                        colors=colour, draw_order=30.0 if name in moving else 10.0)
+                archetype = rr.LineStrips2D.from_fields(
+                    strips=strips,
+                    radii=rr.Radius.ui_points(0.5 * size),
+                    colors=colour,
+                    draw_order=30.0 if name in moving else 10.0,
+                )
             self._stream.log(f"{root}/{name}", archetype, static=True)
 
     def _log_static(self) -> None:
@@ -371,19 +431,30 @@ class RunRecording:
         names = series_names(self.model, self.outside_throttle)
         for entity in self._series:
             _, colour, width = SERIES_STYLE[entity]
-            self._stream.log(entity, rr.SeriesLines(colors=[colour], names=[names[entity]], widths=[width]),
-                             static=True)
+            self._stream.log(
+                entity, rr.SeriesLines(colors=[colour], names=[names[entity]], widths=[width]), static=True
+            )
         initial = self.model.initial_state()
         angle = initial[0] - initial[self.model.coupling_index] if self._drawn_driven else initial[0]
-        self._log_styles("mechanism", mechanism_outline(self._drawing, angle), MECHANISM_STYLE,
-                         MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)])
+        self._log_styles(
+            "mechanism",
+            mechanism_outline(self._drawing, angle),
+            MECHANISM_STYLE,
+            MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)],
+        )
         if self.model.governor is not None and self.model.governor.kind != "pi":  # a PI governor is not drawn
             sensor = self.model.governor.sensor
-            self._log_styles("governor/drawing", sensor.outline(sensor.stop_angles()[0], 0.0),
-                             GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS)
-        self._stream.log("about", rr.TextDocument(about_text(self.model, self._delta, self._delta_source,
-                                                             self.outside_throttle),
-                                                  media_type=rr.MediaType.MARKDOWN), static=True)
+            self._log_styles(
+                "governor/drawing", sensor.outline(sensor.stop_angles()[0], 0.0), GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS
+            )
+        self._stream.log(
+            "about",
+            rr.TextDocument(
+                about_text(self.model, self._delta, self._delta_source, self.outside_throttle),
+                media_type=rr.MediaType.MARKDOWN,
+            ),
+            static=True,
+        )
 
 
 @dataclass
@@ -407,14 +478,14 @@ class LoadChanges:
     'load step a -> b N m', at that sample. A sample earlier than the one before starts afresh (a new trial)."""
 
     def __init__(self, load: float):
-        self._load = load                   # [N m] at the latest sample (at first: the scene's at t = 0)
-        self._time: int | None = None       # [ns] of the latest sample
+        self._load = load  # [N m] at the latest sample (at first: the scene's at t = 0)
+        self._time: int | None = None  # [ns] of the latest sample
         self._change: _Change | None = None
 
     def sample(self, t_ns: int, load: float) -> list[tuple[int, str]]:
         """Take the load [N m] at t_ns [ns]; returns the events (time [ns], text) that it completes."""
         events: list[tuple[int, str]] = []
-        if self._time is not None and t_ns < self._time:   # time went back: a new trial starts here
+        if self._time is not None and t_ns < self._time:  # time went back: a new trial starts here
             events, self._time, self._load = self.finish(), t_ns, load
             return events
         if load == self._load:
@@ -438,8 +509,13 @@ class LoadChanges:
             return []
         if change.samples == 1:
             return [(change.end_ns, f"load step {change.start_load:.6g} -> {change.end_load:.6g} N m")]
-        return [(change.start_ns, f"load ramp {change.start_load:.6g} -> {change.end_load:.6g} N m over "
-                                  f"{change.start_ns / NANOSECONDS:.3f}-{change.end_ns / NANOSECONDS:.3f} s")]
+        return [
+            (
+                change.start_ns,
+                f"load ramp {change.start_load:.6g} -> {change.end_load:.6g} N m over "
+                f"{change.start_ns / NANOSECONDS:.3f}-{change.end_ns / NANOSECONDS:.3f} s",
+            )
+        ]
 
 
 def start_text(model: MachineModel) -> str:
@@ -582,47 +658,68 @@ def about_text(model: MachineModel, delta: float, source: str, outside_throttle:
     scene = model.scene
     governor = model.governor
     paragraphs = [f"# {scene.name or 'run'}"] + ([scene.description] if scene.description else [])
-    paragraphs.append("Time line `sim_time`: simulated time. Crank speed ω in rad/s; moments on the crank in N m: "
-                      "drive as applied (throttle included), resistance = the machine's loads and link weights (and "
-                      "what a coupling or a clutch takes), external = minus the external load (when it acts on the "
-                      "crank), net = their sum = J ε + J' ω² / 2.")
+    paragraphs.append(
+        "Time line `sim_time`: simulated time. Crank speed ω in rad/s; moments on the crank in N m: "
+        "drive as applied (throttle included), resistance = the machine's loads and link weights (and "
+        "what a coupling or a clutch takes), external = minus the external load (when it acts on the "
+        "crank), net = their sum = J ε + J' ω² / 2."
+    )
     if model.driven is not None:
         where = "coupling" if model.coupling is not None else "clutch"
-        paragraphs.append(f"Behind the {where}: the driven part's speed ω₂ in rad/s; it carries the external load."
-                          + (" The coupling's twist φ − φ₂ in mrad." if model.coupling is not None else ""))
+        paragraphs.append(
+            f"Behind the {where}: the driven part's speed ω₂ in rad/s; it carries the external load."
+            + (" The coupling's twist φ − φ₂ in mrad." if model.coupling is not None else "")
+        )
     if governor is None:
-        paragraphs.append("No governor: the throttle (0..1) comes from a controller outside the model; no set speed "
-                          "and no band are drawn." if outside_throttle else
-                          "No governor: no throttle, no set speed and no band are drawn.")
+        paragraphs.append(
+            "No governor: the throttle (0..1) comes from a controller outside the model; no set speed "
+            "and no band are drawn."
+            if outside_throttle
+            else "No governor: no throttle, no set speed and no band are drawn."
+        )
     else:
         if governor.kind == "indirect":
-            paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
-                              "(sleeve at the pilot valve's neutral). Throttle in 0..1: the servo position s.")
+            paragraphs.append(
+                f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
+                "(sleeve at the pilot valve's neutral). Throttle in 0..1: the servo position s."
+            )
         elif governor.kind == "pi":
-            paragraphs.append(f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the electronic PI governor's, "
-                              "held at every load the valve can balance. Throttle in 0..1; below it the integral "
-                              "part x of the PI law.")
+            paragraphs.append(
+                f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the electronic PI governor's, "
+                "held at every load the valve can balance. Throttle in 0..1; below it the integral "
+                "part x of the PI law."
+            )
         else:
-            paragraphs.append("Set speed ω_set: where the direct governor settles under the present external load "
-                              "(operating point of the cycle-averaged machine; it moves with the load: the static "
-                              "error). Throttle in 0..1.")
+            paragraphs.append(
+                "Set speed ω_set: where the direct governor settles under the present external load "
+                "(operating point of the cycle-averaged machine; it moves with the load: the static "
+                "error). Throttle in 0..1."
+            )
         if source == "permitted":
-            paragraphs.append(f"Band ω_set (1 ± δ/2) with the permitted coefficient of speed fluctuation "
-                              f"δ = {delta:.4g} (analysis.permitted_delta).")
+            paragraphs.append(
+                f"Band ω_set (1 ± δ/2) with the permitted coefficient of speed fluctuation "
+                f"δ = {delta:.4g} (analysis.permitted_delta)."
+            )
         else:
-            paragraphs.append(f"Band ω_set (1 ± {delta / 2:.3g}): the settling band (analysis.settling_band); the "
-                              "scene gives no analysis.permitted_delta.")
-        paragraphs.append("Sleeve rise z (and the dashpot's shift ζ of isodromic feedback) in mm. The governor is "
-                          "drawn to scale, its balls as steel spheres of the ball mass, projected on a plane "
-                          "through the turning spindle.")
+            paragraphs.append(
+                f"Band ω_set (1 ± {delta / 2:.3g}): the settling band (analysis.settling_band); the "
+                "scene gives no analysis.permitted_delta."
+            )
+        paragraphs.append(
+            "Sleeve rise z (and the dashpot's shift ζ of isodromic feedback) in mm. The governor is "
+            "drawn to scale, its balls as steel spheres of the ball mass, projected on a plane "
+            "through the turning spindle."
+        )
     drawing, driven = drawn_mechanism(model)
     if drawing is None:
         paragraphs.append("The machine has no mechanism: a schematic disc with a spoke shows the crank angle.")
     else:
         where = ", on the driven shaft at φ₂ = φ − twist." if driven else "."
         paragraphs.append(f"The mechanism is drawn to scale in metres{where}")
-    paragraphs.append("Events: the start, each change of the external load (a ramp as one line with its start and "
-                      "end), the mode changes of the governor or the clutch, and the end.")
+    paragraphs.append(
+        "Events: the start, each change of the external load (a ramp as one line with its start and "
+        "end), the mode changes of the governor or the clutch, and the end."
+    )
     return "\n\n".join(paragraphs)
 
 
@@ -635,8 +732,9 @@ def _caption(entities: Iterable[str]) -> str:
     return " · ".join(f"{label} ({colour})" for label, colour in shown.items())
 
 
-def _plot(title: str, entities: list[str], extents: dict[str, tuple[float, float]],
-          window: rrb.VisibleTimeRange | None = None) -> rrb.TimeSeriesView:
+def _plot(
+    title: str, entities: list[str], extents: dict[str, tuple[float, float]], window: rrb.VisibleTimeRange | None = None
+) -> rrb.TimeSeriesView:
     """A time series view of these entities with its legend hidden (the title names the series) and, when any
     of them has an extent (lowest, highest value), its y axis over their extents widened by Y_MARGIN (a
     constant by 5 % of its size, at least 0.05) on each side; else the viewer fits the y axis to the data."""
@@ -646,8 +744,13 @@ def _plot(title: str, entities: list[str], extents: dict[str, tuple[float, float
         low, high = min(extent[0] for extent in known), max(extent[1] for extent in known)
         margin = Y_MARGIN * (high - low) if high > low else 0.05 * max(abs(high), 1.0)
         axis = rrb.ScalarAxis(range=(low - margin, high + margin))
-    return rrb.TimeSeriesView(name=title, contents=[f"/{entity}" for entity in entities], time_ranges=window,
-                              axis_y=axis, plot_legend=rrb.PlotLegend(visible=False))
+    return rrb.TimeSeriesView(
+        name=title,
+        contents=[f"/{entity}" for entity in entities],
+        time_ranges=window,
+        axis_y=axis,
+        plot_legend=rrb.PlotLegend(visible=False),
+    )
 
 
 def _single_plot(entity: str, unit: str, extents: dict[str, tuple[float, float]]) -> rrb.TimeSeriesView:
@@ -655,8 +758,9 @@ def _single_plot(entity: str, unit: str, extents: dict[str, tuple[float, float]]
     return _plot(f"{SERIES_STYLE[entity][0]} [{unit}]", [entity], extents)
 
 
-def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] | None = None,
-                  outside_throttle: bool = False) -> rrb.Blueprint:
+def run_blueprint(
+    model: MachineModel, extents: dict[str, tuple[float, float]] | None = None, outside_throttle: bool = False
+) -> rrb.Blueprint:
     """The layout: time series on the left (speeds, throttle, sleeve, the coupling's twist, moments), each titled
     with its series and their colours; on the right the mechanism over the governor beside the events log (with
     the `about` document in a tab). Each 2-D view is framed by the drawing's bounds (y flipped). A machine
@@ -687,27 +791,43 @@ def run_blueprint(model: MachineModel, extents: dict[str, tuple[float, float]] |
         shares.append(1.0)
     moments = [entity for entity in series if entity.startswith("moments/")]
     window = moments_window(model)
-    time_range = None if window is None else rrb.VisibleTimeRange(
-        TIMELINE, start=rrb.TimeRangeBoundary.cursor_relative(seconds=-window),
-        end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0))
+    time_range = (
+        None
+        if window is None
+        else rrb.VisibleTimeRange(
+            TIMELINE,
+            start=rrb.TimeRangeBoundary.cursor_relative(seconds=-window),
+            end=rrb.TimeRangeBoundary.cursor_relative(seconds=0.0),
+        )
+    )
     span = "" if window is None else f", last {window:.2g} s"
     plots.append(_plot(f"moments [N m]{span}: {_caption(moments)}", moments, extents, time_range))
     shares.append(1.6)
-    logs = rrb.Tabs(rrb.TextLogView(name="events", origin="events",
-                                    columns=rrb.TextLogColumns(text_log_columns=["LogLevel", "Body"])),
-                    rrb.TextDocumentView(name="about", origin="about"))
-    mechanism = rrb.Spatial2DView(name=mechanism_title(model), origin="mechanism",
-                                  visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])))
+    logs = rrb.Tabs(
+        rrb.TextLogView(
+            name="events", origin="events", columns=rrb.TextLogColumns(text_log_columns=["LogLevel", "Body"])
+        ),
+        rrb.TextDocumentView(name="about", origin="about"),
+    )
+    mechanism = rrb.Spatial2DView(
+        name=mechanism_title(model),
+        origin="mechanism",
+        visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])),
+    )
     if model.governor is not None and model.governor.kind != "pi":  # a centrifugal governor's drawing
-        governor = rrb.Spatial2DView(name="governor", origin="governor/drawing",
-                                     visual_bounds=_bounds_y_down(model.governor.sensor.bounds()))
-        right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]),
-                             row_shares=[1.0, 1.8])
+        governor = rrb.Spatial2DView(
+            name="governor", origin="governor/drawing", visual_bounds=_bounds_y_down(model.governor.sensor.bounds())
+        )
+        right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]), row_shares=[1.0, 1.8])
     else:
         right = rrb.Vertical(mechanism, logs, row_shares=[1.6, 1.0])
     layout = rrb.Horizontal(rrb.Vertical(*plots, row_shares=shares), right)
-    return rrb.Blueprint(layout, rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
-                         rrb.TimePanel(state="collapsed", timeline=TIMELINE))
+    return rrb.Blueprint(
+        layout,
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(state="collapsed", timeline=TIMELINE),
+    )
 
 
 def _bounds_y_down(bounds: tuple[float, float, float, float]) -> rrb.VisualBounds2D:
@@ -722,15 +842,22 @@ def finish_stream(stream: rr.RecordingStream) -> None:
     try:
         stream.flush()
     except RuntimeError as error:
-        raise OSError(errno.EIO, f"the recording's writer stopped ({error}; Rerun's message above says why)") \
-            from None
+        raise OSError(errno.EIO, f"the recording's writer stopped ({error}; Rerun's message above says why)") from None
     finally:
         stream.disconnect()
 
 
-def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path: Path,
-               progress: Progress | None = None, *, mode_changes: Iterable[tuple[float, str]] = (),
-               status: str | None = None, message: str = "") -> None:
+def record_run(
+    model: MachineModel,
+    times: np.ndarray,
+    states: np.ndarray,
+    path: Path,
+    progress: Progress | None = None,
+    *,
+    mode_changes: Iterable[tuple[float, str]] = (),
+    status: str | None = None,
+    message: str = "",
+) -> None:
     """Record a run sampled at `times` [s] with its states (n_states x n, as `trajectory(times)` gives, or a
     co-simulation's exchange times and states) into the .rrd file `path`, with the same events as the ROS
     recorder logs: the start, the external load's changes as its samples show them (the scenario's load at
@@ -744,8 +871,11 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
     columns = model.columns(times, states)
     count = times.size
     moments = crank_moments(columns)
-    governor_keys = [key for key in ("sleeve", "sleeve_velocity", "arm_angle", "integral", "throttle", "feedback_shift")
-                     if key in columns]
+    governor_keys = [
+        key
+        for key in ("sleeve", "sleeve_velocity", "arm_angle", "integral", "throttle", "feedback_shift")
+        if key in columns
+    ]
     driven_keys = [key for key in ("twist", "omega_driven") if key in columns]
     stamps = np.round(np.asarray(times) * NANOSECONDS).astype(np.int64)
     recording = RunRecording(model, path=path)
@@ -754,8 +884,12 @@ def record_run(model: MachineModel, times: np.ndarray, states: np.ndarray, path:
     for i in range(count):
         t_ns = int(stamps[i])
         recording.add_external_load(t_ns, model.external_load(float(times[i])))
-        recording.add_machine(t_ns, float(columns["phi"][i]), float(columns["omega"][i]),
-                              {key: float(columns[key][i]) for key in driven_keys})
+        recording.add_machine(
+            t_ns,
+            float(columns["phi"][i]),
+            float(columns["omega"][i]),
+            {key: float(columns[key][i]) for key in driven_keys},
+        )
         recording.add_moments(t_ns, *(float(moments[name][i]) for name in ("drive", "resistance", "external", "net")))
         if governor_keys:
             recording.add_governor(t_ns, {key: float(columns[key][i]) for key in governor_keys})

@@ -34,8 +34,13 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
     for number, group in enumerate(structure.groups, start=1):
         for link in group.links:
             colour[link] = GROUP_COLOURS[(number - 1) % len(GROUP_COLOURS)]
-        kind = (f"class II {group.kind}" if isinstance(group, Dyad) else
-                f"gear about {group.pivot.name}" if isinstance(group, GearGroup) else group.kind)
+        kind = (
+            f"class II {group.kind}"
+            if isinstance(group, Dyad)
+            else f"gear about {group.pivot.name}"
+            if isinstance(group, GearGroup)
+            else group.kind
+        )
         labels[group.links[0]] = f"group {number}: {kind} ({' + '.join(group.links)})"
     figure, axes = plt.subplots(figsize=(9, 7), constrained_layout=True)
     cams = cam_pairs(linkage, structure.groups, None)
@@ -44,26 +49,43 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
         _draw_cam(axes, pair, phi, poses, colour)
     for name in linkage.moving_links():
         points = np.array([[p.real, p.imag] for p in link_polygon(linkage, poses, name)])
-        axes.plot(points[:, 0], points[:, 1], color=colour[name], lw=3.5, solid_capstyle="round",
-                  label=labels.get(name), zorder=2)
+        axes.plot(
+            points[:, 0],
+            points[:, 1],
+            color=colour[name],
+            lw=3.5,
+            solid_capstyle="round",
+            label=labels.get(name),
+            zorder=2,
+        )
         if len(points) > 3:
             axes.fill(points[:, 0], points[:, 1], color=colour[name], alpha=0.15, zorder=1)
         # the name below the middle of the link's longest side, or below a block (a link whose points coincide)
         sides = [(np.hypot(*(b - a)), a, b) for a, b in zip(points, points[1:])]
         length, start, end = max(sides, key=lambda side: side[0]) if sides else (0.0, points[0], points[0])
         where, offset = (0.5 * (start + end), (0, -14)) if length > 1e-9 * size else (points[0], (10, -24))
-        axes.annotate(name, where, color=colour[name], fontsize=9, fontstyle="italic", xytext=offset,
-                      textcoords="offset points", ha="center")
+        axes.annotate(
+            name,
+            where,
+            color=colour[name],
+            fontsize=9,
+            fontstyle="italic",
+            xytext=offset,
+            textcoords="offset points",
+            ha="center",
+        )
     for link, centre, radius, theta in pitch_circles(linkage, structure, poses):
         ring = centre + radius * np.exp(1j * (theta + np.linspace(0.0, 2.0 * np.pi, 145)))
         axes.plot(ring.real, ring.imag, "-.", color=colour[link], lw=1.5, zorder=2)
         tick = [centre, centre + radius * cmath.exp(1j * theta)]
         axes.plot([p.real for p in tick], [p.imag for p in tick], color=colour[link], lw=1.0, zorder=2)
     names_at: dict[tuple[float, float], list[str]] = {}
-    for group in structure.groups:   # a mesh is named at its pitch point, O_a + rho_a u
+    for group in structure.groups:  # a mesh is named at its pitch point, O_a + rho_a u
         if isinstance(group, GearGroup):
-            a, b = (poses[link][0] + linkage.link(link).points[centre] * cmath.exp(1j * poses[link][1])
-                    for link, centre in zip(group.mesh.links, gear_of(group.mesh).centres))
+            a, b = (
+                poses[link][0] + linkage.link(link).points[centre] * cmath.exp(1j * poses[link][1])
+                for link, centre in zip(group.mesh.links, gear_of(group.mesh).centres)
+            )
             pitch = a + group.pitch[0] * (b - a) / abs(b - a)
             axes.plot(pitch.real, pitch.imag, "D", ms=5, color="black", zorder=4)
             names_at.setdefault((round(pitch.real, 9), round(pitch.imag, 9)), []).append(group.mesh.name)
@@ -76,19 +98,35 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
             axes.plot([e.real for e in ends], [e.imag for e in ends], "--", color=colour[guide], lw=1.2, zorder=1)
             half = 0.5 * BLOCK_PER_CRANK * size
             corners = [where + half * along * complex(x, 0.5 * y) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-            axes.fill([c.real for c in corners], [c.imag for c in corners], facecolor="white",
-                      edgecolor=colour[slider], lw=2.0, zorder=3)
+            axes.fill(
+                [c.real for c in corners],
+                [c.imag for c in corners],
+                facecolor="white",
+                edgecolor=colour[slider],
+                lw=2.0,
+                zorder=3,
+            )
         else:
             if linkage.frame in joint.links:
-                axes.plot(where.real, where.imag - 0.12 * size, marker=(3, 0, 0), ms=14, color=FRAME_COLOUR,
-                          zorder=2)
+                axes.plot(where.real, where.imag - 0.12 * size, marker=(3, 0, 0), ms=14, color=FRAME_COLOUR, zorder=2)
             axes.plot(where.real, where.imag, "o", ms=7, mfc="white", mec="black", zorder=4)
         names_at.setdefault((round(where.real, 9), round(where.imag, 9)), []).append(joint.name)
-    for (x, y), names in names_at.items():   # joints at one place (a pin and its slider) share one label
-        axes.annotate(", ".join(names), (x, y), fontsize=10, fontweight="bold", xytext=(5, 5),
-                      textcoords="offset points", zorder=5)
-    axes.set(aspect="equal", xlabel="x [m]", ylabel="y [m]",
-             title=f"{title}: structure at phi = {np.degrees(phi):g} deg\n{structure.formula()}")
+    for (x, y), names in names_at.items():  # joints at one place (a pin and its slider) share one label
+        axes.annotate(
+            ", ".join(names),
+            (x, y),
+            fontsize=10,
+            fontweight="bold",
+            xytext=(5, 5),
+            textcoords="offset points",
+            zorder=5,
+        )
+    axes.set(
+        aspect="equal",
+        xlabel="x [m]",
+        ylabel="y [m]",
+        title=f"{title}: structure at phi = {np.degrees(phi):g} deg\n{structure.formula()}",
+    )
     axes.grid(alpha=0.25)
     axes.legend(loc="best", fontsize=8)
     figure.savefig(path, dpi=100)
@@ -110,5 +148,12 @@ def _draw_cam(axes, pair, phi: float, poses: dict, colour: dict) -> None:
         axes.plot(circle.real, circle.imag, color=colour[pair.group.roller], lw=2.0, zorder=3)
     contact = complex(pair.contact_point(phi)[0])
     axes.plot(contact.real, contact.imag, "o", ms=5, color="black", zorder=4)
-    axes.annotate(pair.group.pair.name, (contact.real, contact.imag), fontsize=10, fontweight="bold",
-                  xytext=(6, -14), textcoords="offset points", zorder=5)
+    axes.annotate(
+        pair.group.pair.name,
+        (contact.real, contact.imag),
+        fontsize=10,
+        fontweight="bold",
+        xytext=(6, -14),
+        textcoords="offset points",
+        zorder=5,
+    )

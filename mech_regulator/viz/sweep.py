@@ -15,12 +15,21 @@ import numpy as np  # noqa: E402
 from mech_regulator.analysis.sweep import GridAxis  # noqa: E402
 from mech_regulator.viz.plots import room_for_legend  # noqa: E402
 
-VERDICT_STYLES = {True: dict(marker="o", color="tab:green", label="stable by simulation"),
-                  False: dict(marker="X", color="tab:red", label="unstable by simulation")}
+VERDICT_STYLES = {
+    True: dict(marker="o", color="tab:green", label="stable by simulation"),
+    False: dict(marker="X", color="tab:red", label="unstable by simulation"),
+}
 
 
-def plot_sweep(rows: list[dict], axes: list[GridAxis], metric: str, title: str, path: Path,
-               permitted_delta: float | None = None, labels: dict[str, str] | None = None) -> None:
+def plot_sweep(
+    rows: list[dict],
+    axes: list[GridAxis],
+    metric: str,
+    title: str,
+    path: Path,
+    permitted_delta: float | None = None,
+    labels: dict[str, str] | None = None,
+) -> None:
     """One grid key: the metric against it (log axes for a geometric grid, the permitted delta as a line);
     two grid keys: a map of the metric over the grid; no grid (a list of scenes) or more keys: the metric per
     point. Points of a governed scene are marked stable / unstable by simulation. When the rows hold
@@ -28,8 +37,9 @@ def plot_sweep(rows: list[dict], axes: list[GridAxis], metric: str, title: str, 
     boundary A B = 1 of the averaged linear model. labels: axis label per grid key (e.g. with its unit)."""
     labels = {axis.key: axis.key for axis in axes} | (labels or {})
     diagram = any(row.get("vyshnegradsky_A") is not None for row in rows)
-    figure, panels = plt.subplots(1, 2 if diagram else 1, figsize=(14 if diagram else 8, 6), constrained_layout=True,
-                                  squeeze=False)
+    figure, panels = plt.subplots(
+        1, 2 if diagram else 1, figsize=(14 if diagram else 8, 6), constrained_layout=True, squeeze=False
+    )
     figure.suptitle(title)
     values = _column(rows, metric)
     if len(axes) == 1:
@@ -66,8 +76,9 @@ def _mark_verdicts(panel, x: np.ndarray, y: np.ndarray, rows: list[dict]) -> Non
             panel.scatter(x[chosen], y[chosen], s=70, zorder=3, edgecolors="k", linewidths=0.6, **style)
 
 
-def _plot_against_key(panel, rows, axis: GridAxis, label: str, metric: str, values: np.ndarray,
-                      permitted: float | None) -> None:
+def _plot_against_key(
+    panel, rows, axis: GridAxis, label: str, metric: str, values: np.ndarray, permitted: float | None
+) -> None:
     x, labels = _positions(axis, rows)
     panel.plot(x, values, color="tab:blue", lw=1.2, marker=".", ms=8, label=metric)
     _mark_verdicts(panel, x, values, rows)
@@ -93,14 +104,17 @@ def _plot_map(figure, panel, rows, axes: list[GridAxis], labels: list[str], metr
     y, y_labels = _positions(axes[1], rows)
     shape = (len(axes[0].values), len(axes[1].values))
     if len(rows) == shape[0] * shape[1]:
-        mesh = panel.pcolormesh(x.reshape(shape), y.reshape(shape), values.reshape(shape), shading="nearest",
-                                cmap="viridis")
+        mesh = panel.pcolormesh(
+            x.reshape(shape), y.reshape(shape), values.reshape(shape), shading="nearest", cmap="viridis"
+        )
     else:  # several scenes: one point per row
         mesh = panel.scatter(x, y, c=values, s=200, cmap="viridis")
     figure.colorbar(mesh, ax=panel, label=metric)
     _mark_verdicts(panel, x, y, rows)
-    for axis, set_scale, ticks, set_ticks in ((axes[0], panel.set_xscale, x_labels, panel.set_xticks),
-                                              (axes[1], panel.set_yscale, y_labels, panel.set_yticks)):
+    for axis, set_scale, ticks, set_ticks in (
+        (axes[0], panel.set_xscale, x_labels, panel.set_xticks),
+        (axes[1], panel.set_yscale, y_labels, panel.set_yticks),
+    ):
         if axis.geometric:
             set_scale("log")
         if ticks is not None:
@@ -115,11 +129,21 @@ def _plot_per_point(panel, rows, axes: list[GridAxis], metric: str, values: np.n
     index = np.arange(len(rows))
     panel.plot(index, values, color="tab:blue", marker="o", lw=1.0, label=metric)
     _mark_verdicts(panel, index, values, rows)
-    labels = [" ".join([str(row["scene"])] + [f"{axis.key.split('.')[-1]}={row[axis.key]:.4g}"
-                                              if isinstance(row[axis.key], float) else f"{row[axis.key]}"
-                                              for axis in axes]) for row in rows]
-    panel.set_xticks(index, labels, rotation=60 if len(rows) > 4 else 0, ha="right" if len(rows) > 4 else "center",
-                     fontsize="small")
+    labels = [
+        " ".join(
+            [str(row["scene"])]
+            + [
+                f"{axis.key.split('.')[-1]}={row[axis.key]:.4g}"
+                if isinstance(row[axis.key], float)
+                else f"{row[axis.key]}"
+                for axis in axes
+            ]
+        )
+        for row in rows
+    ]
+    panel.set_xticks(
+        index, labels, rotation=60 if len(rows) > 4 else 0, ha="right" if len(rows) > 4 else "center", fontsize="small"
+    )
     panel.set(ylabel=metric, title=f"{metric} per point")
     panel.grid(True, alpha=0.3)
     panel.legend(loc="best")
@@ -140,8 +164,15 @@ def plot_vyshnegradsky(panel, rows: list[dict]) -> None:
     undecided = known & np.array([row.get("stable_by_simulation") is None for row in rows])
     if np.any(undecided):
         panel.scatter(a[undecided], b[undecided], s=50, color="0.6", label="no verdict (run too short or failed)")
-    panel.set(xscale="log", yscale="log", xlim=(low, high), ylim=(low, high), xlabel="A = a2 / a0^(1/3)",
-              ylabel="B = a1 / a0^(2/3)", title="Vyshnegradsky diagram by simulation")
+    panel.set(
+        xscale="log",
+        yscale="log",
+        xlim=(low, high),
+        ylim=(low, high),
+        xlabel="A = a2 / a0^(1/3)",
+        ylabel="B = a1 / a0^(2/3)",
+        title="Vyshnegradsky diagram by simulation",
+    )
     panel.text(0.97, 0.97, "stable region", transform=panel.transAxes, ha="right", va="top", color="tab:green")
     panel.text(0.03, 0.03, "unstable region", transform=panel.transAxes, ha="left", va="bottom", color="tab:red")
     panel.grid(True, which="both", alpha=0.3)

@@ -24,13 +24,20 @@ from mech_regulator.bench.accuracy import ADAPTIVE, COSIM, METHODS, Benchmark, S
 from mech_regulator.viz.recording import APPLICATION_ID  # noqa: E402
 
 # method -> (matplotlib colour, marker): one family of markers per kind of method
-STYLE = {"RK45": ("tab:blue", "o"), "DOP853": ("tab:orange", "o"), "Radau": ("tab:green", "o"),
-         "BDF": ("tab:red", "o"), "LSODA": ("tab:purple", "o"), "RK4": ("tab:brown", "s"),
-         "energy": ("tab:pink", "D"), COSIM: ("tab:gray", "^")}
+STYLE = {
+    "RK45": ("tab:blue", "o"),
+    "DOP853": ("tab:orange", "o"),
+    "Radau": ("tab:green", "o"),
+    "BDF": ("tab:red", "o"),
+    "LSODA": ("tab:purple", "o"),
+    "RK4": ("tab:brown", "s"),
+    "energy": ("tab:pink", "D"),
+    COSIM: ("tab:gray", "^"),
+}
 X_LABEL = "achieved error: RMS of omega - omega_ref, relative to max |omega_ref| [-]"
 Y_LABEL = "CPU time of the integration [s] (median of repeats)"
 GRID_GREY, TEXT_GREY, REFERENCE_RED = (90, 90, 90), (200, 200, 200), (255, 95, 95)
-CPU_STRETCH = 2.5      # recording: units per decade of CPU time (errors: 1 per decade), so the curves spread out
+CPU_STRETCH = 2.5  # recording: units per decade of CPU time (errors: 1 per decade), so the curves spread out
 
 
 def _rgb(colour: str) -> tuple[int, int, int]:
@@ -43,8 +50,12 @@ def _curve(result: SceneResult, method: str) -> tuple[np.ndarray, np.ndarray, li
     """A method's completed runs with a known positive error: errors [-], CPU times [s], setting labels
     and whether each lies below the reference's own error."""
     runs = [run for run in result.runs_of(method) if run.error > 0.0]
-    return (np.array([run.error for run in runs]), np.array([run.cpu for run in runs]),
-            [run.setting.label for run in runs], [result.below_reference(run) for run in runs])
+    return (
+        np.array([run.error for run in runs]),
+        np.array([run.cpu for run in runs]),
+        [run.setting.label for run in runs],
+        [result.below_reference(run) for run in runs],
+    )
 
 
 def plot_work_precision(result: SceneResult, path: Path) -> None:
@@ -62,18 +73,31 @@ def plot_work_precision(result: SceneResult, path: Path) -> None:
             axes.plot(x, y, marker=marker, ms=6, color=colour, mfc="white" if hollow else colour)
             axes.annotate(label, (x, y), xytext=(4, 3), textcoords="offset points", fontsize=7, color=colour)
     if result.reference_error > 0.0:
-        axes.axvline(result.reference_error, color="k", lw=0.9, ls=":",
-                     label=f"reference's own error ({result.reference_error:.1g})")
+        axes.axvline(
+            result.reference_error,
+            color="k",
+            lw=0.9,
+            ls=":",
+            label=f"reference's own error ({result.reference_error:.1g})",
+        )
     axes.set_xscale("log")
     axes.set_yscale("log")
     axes.invert_xaxis()
     axes.grid(which="major", alpha=0.35)
     axes.grid(which="minor", alpha=0.1)
-    axes.set(xlabel=X_LABEL + "  (more accurate to the right)", ylabel=Y_LABEL,
-             title=f"{result.bench.name}: {result.bench.what}\nreference: {result.reference}")
-    axes.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, title_fontsize=8,
-                title="method; points labelled with\nrtol (adaptive), step (RK4),\ncrank-angle step (energy),\n"
-                      "exchange step (co-simulation);\nhollow: below the reference's\nown error")
+    axes.set(
+        xlabel=X_LABEL + "  (more accurate to the right)",
+        ylabel=Y_LABEL,
+        title=f"{result.bench.name}: {result.bench.what}\nreference: {result.reference}",
+    )
+    axes.legend(
+        loc="upper left",
+        bbox_to_anchor=(1.01, 1.0),
+        fontsize=9,
+        title_fontsize=8,
+        title="method; points labelled with\nrtol (adaptive), step (RK4),\ncrank-angle step (energy),\n"
+        "exchange step (co-simulation);\nhollow: below the reference's\nown error",
+    )
     figure.savefig(path, dpi=110)
     plt.close(figure)
 
@@ -84,16 +108,24 @@ def plot_tolerance_proportionality(benchmark: Benchmark, path: Path) -> None:
     count = len(benchmark.scenes)
     columns = min(3, count)
     rows = math.ceil(count / columns)
-    figure, grid = plt.subplots(rows, columns, figsize=(5.2 * columns, 4.4 * rows), squeeze=False,
-                                constrained_layout=True)
+    figure, grid = plt.subplots(
+        rows, columns, figsize=(5.2 * columns, 4.4 * rows), squeeze=False, constrained_layout=True
+    )
     for axes, result in zip(grid.flat, benchmark.scenes):
         tolerances = [run.setting.value for method in ADAPTIVE for run in result.runs_of(method)]
         for method in ADAPTIVE:
             runs = [run for run in result.runs_of(method) if run.error > 0.0]
             if runs:
                 colour, marker = STYLE[method]
-                axes.plot([run.setting.value for run in runs], [run.error for run in runs], color=colour,
-                          marker=marker, ms=4, lw=1.2, label=method)
+                axes.plot(
+                    [run.setting.value for run in runs],
+                    [run.error for run in runs],
+                    color=colour,
+                    marker=marker,
+                    ms=4,
+                    lw=1.2,
+                    label=method,
+                )
         if tolerances:
             span = np.array([min(tolerances), max(tolerances)])
             axes.plot(span, span, color="k", lw=0.8, ls="--", label="error = rtol")
@@ -103,8 +135,11 @@ def plot_tolerance_proportionality(benchmark: Benchmark, path: Path) -> None:
         axes.set_yscale("log")
         axes.invert_xaxis()
         axes.grid(which="major", alpha=0.35)
-        axes.set(title=result.bench.name, xlabel="requested rtol [-] (tighter to the right)",
-                 ylabel="achieved error, omega RMS relative [-]")
+        axes.set(
+            title=result.bench.name,
+            xlabel="requested rtol [-] (tighter to the right)",
+            ylabel="achieved error, omega RMS relative [-]",
+        )
         axes.legend(fontsize=7, loc="lower left")
     for axes in list(grid.flat)[count:]:
         axes.set_visible(False)
@@ -127,7 +162,7 @@ def _decade_label(exponent: int, seconds: bool) -> str:
     """Tick text of a decade: 1e-6 for errors; 1 ms, 10 s ... for CPU times."""
     if not seconds:
         return f"1e{exponent}"
-    value = 10.0 ** exponent
+    value = 10.0**exponent
     return f"{value * 1e3:g} ms" if value < 1.0 else f"{value:g} s"
 
 
@@ -147,41 +182,89 @@ def _log_scene(stream: rr.RecordingStream, result: SceneResult) -> tuple[float, 
     left, right, top, bottom = -error_high, -error_low, -CPU_STRETCH * cpu_high, -CPU_STRETCH * cpu_low
     root = result.bench.name
     error_decades, cpu_decades = range(error_low, error_high + 1), range(cpu_low, cpu_high + 1)
-    grid = ([[[-e, top], [-e, bottom]] for e in error_decades]
-            + [[[left, -CPU_STRETCH * c], [right, -CPU_STRETCH * c]] for c in cpu_decades])
-    stream.log(f"{root}/grid", rr.LineStrips2D(grid, colors=GRID_GREY, radii=rr.Radius.ui_points(0.5),
-                                               draw_order=1.0), static=True)
+    grid = [[[-e, top], [-e, bottom]] for e in error_decades] + [
+        [[left, -CPU_STRETCH * c], [right, -CPU_STRETCH * c]] for c in cpu_decades
+    ]
+    stream.log(
+        f"{root}/grid",
+        rr.LineStrips2D(grid, colors=GRID_GREY, radii=rr.Radius.ui_points(0.5), draw_order=1.0),
+        static=True,
+    )
     ticks = [[-e, bottom + 0.4] for e in error_decades] + [[left - 0.45, -CPU_STRETCH * c] for c in cpu_decades]
     labels = [_decade_label(e, False) for e in error_decades] + [_decade_label(c, True) for c in cpu_decades]
     _labels(stream, f"{root}/ticks", ticks, labels, TEXT_GREY)
-    _labels(stream, f"{root}/axis_titles", [[(left + right) / 2, bottom + 1.2], [left, top - 0.7]],
-            ["achieved error: omega RMS, relative (more accurate to the right)", "CPU time per run"], TEXT_GREY)
+    _labels(
+        stream,
+        f"{root}/axis_titles",
+        [[(left + right) / 2, bottom + 1.2], [left, top - 0.7]],
+        ["achieved error: omega RMS, relative (more accurate to the right)", "CPU time per run"],
+        TEXT_GREY,
+    )
     if result.reference_error > 0.0:
         x = -math.log10(result.reference_error)
-        stream.log(f"{root}/reference_error", rr.LineStrips2D([[[x, top], [x, bottom]]], colors=REFERENCE_RED,
-                                                              radii=rr.Radius.ui_points(1.0), draw_order=5.0),
-                   static=True)
-        _labels(stream, f"{root}/reference_error/label", [[x, top - 0.7]],
-                [f"reference's own error {result.reference_error:.1g}"], REFERENCE_RED)
+        stream.log(
+            f"{root}/reference_error",
+            rr.LineStrips2D(
+                [[[x, top], [x, bottom]]], colors=REFERENCE_RED, radii=rr.Radius.ui_points(1.0), draw_order=5.0
+            ),
+            static=True,
+        )
+        _labels(
+            stream,
+            f"{root}/reference_error/label",
+            [[x, top - 0.7]],
+            [f"reference's own error {result.reference_error:.1g}"],
+            REFERENCE_RED,
+        )
     for method, (method_errors, method_cpu, point_labels, below) in curves.items():
         points = np.column_stack([-np.log10(method_errors), -CPU_STRETCH * np.log10(method_cpu)])
         colour = _rgb(STYLE[method][0])
-        stream.log(f"{root}/methods/{method}", rr.LineStrips2D([points], colors=colour, labels=[method],
-                                                             show_labels=False, radii=rr.Radius.ui_points(1.5),
-                                                             draw_order=10.0), static=True)
-        stream.log(f"{root}/methods/{method}/points", rr.Points2D(
-            points, labels=point_labels, colors=[(255, 255, 255) if hollow else colour for hollow in below],
-            radii=rr.Radius.ui_points(3.0), show_labels=True, draw_order=20.0), static=True)
+        stream.log(
+            f"{root}/methods/{method}",
+            rr.LineStrips2D(
+                [points],
+                colors=colour,
+                labels=[method],
+                show_labels=False,
+                radii=rr.Radius.ui_points(1.5),
+                draw_order=10.0,
+            ),
+            static=True,
+        )
+        stream.log(
+            f"{root}/methods/{method}/points",
+            rr.Points2D(
+                points,
+                labels=point_labels,
+                colors=[(255, 255, 255) if hollow else colour for hollow in below],
+                radii=rr.Radius.ui_points(3.0),
+                show_labels=True,
+                draw_order=20.0,
+            ),
+            static=True,
+        )
     legend = [[right + 0.6, top + 0.9 * i] for i in range(len(curves))]
-    stream.log(f"{root}/legend", rr.Points2D(legend, labels=list(curves), colors=[_rgb(STYLE[m][0]) for m in curves],
-                                             radii=rr.Radius.ui_points(4.0), show_labels=True), static=True)
+    stream.log(
+        f"{root}/legend",
+        rr.Points2D(
+            legend,
+            labels=list(curves),
+            colors=[_rgb(STYLE[m][0]) for m in curves],
+            radii=rr.Radius.ui_points(4.0),
+            show_labels=True,
+        ),
+        static=True,
+    )
     return left - 1.2, right + 2.2, top - 1.4, bottom + 1.8
 
 
 def _labels(stream: rr.RecordingStream, entity: str, positions: list, labels: list[str], colour) -> None:
     """Text at positions (decade coordinates), drawn as the labels of invisible points."""
-    stream.log(entity, rr.Points2D(positions, labels=labels, colors=colour, radii=rr.Radius.ui_points(0.0),
-                                   show_labels=True), static=True)
+    stream.log(
+        entity,
+        rr.Points2D(positions, labels=labels, colors=colour, radii=rr.Radius.ui_points(0.0), show_labels=True),
+        static=True,
+    )
 
 
 def record_work_precision(benchmark: Benchmark, path: Path) -> None:
@@ -196,20 +279,37 @@ def record_work_precision(benchmark: Benchmark, path: Path) -> None:
         if bounds is None:
             continue
         left, right, top, bottom = bounds
-        views.append(rrb.Spatial2DView(name=f"{result.bench.name}: CPU time against achieved error",
-                                       origin=result.bench.name,
-                                       visual_bounds=rrb.VisualBounds2D(x_range=[left, right], y_range=[top, bottom])))
-    stream.log("about", rr.TextDocument(
-        "# Work–precision benchmark\n\nOne view per scene, in decades: x = achieved error (RMS of omega - "
-        "omega_ref relative to max |omega_ref|), more accurate to the right; y = CPU time per run, slower "
-        "higher. One line per "
-        "method, its points labelled with their setting (rtol, RK4 step, energy-method crank-angle step, "
-        "co-simulation exchange step); white points lie below the reference's own error (red line). "
-        "Tables and findings: docs/accuracy/README.md.", media_type=rr.MediaType.MARKDOWN), static=True)
+        views.append(
+            rrb.Spatial2DView(
+                name=f"{result.bench.name}: CPU time against achieved error",
+                origin=result.bench.name,
+                visual_bounds=rrb.VisualBounds2D(x_range=[left, right], y_range=[top, bottom]),
+            )
+        )
+    stream.log(
+        "about",
+        rr.TextDocument(
+            "# Work–precision benchmark\n\nOne view per scene, in decades: x = achieved error (RMS of omega - "
+            "omega_ref relative to max |omega_ref|), more accurate to the right; y = CPU time per run, slower "
+            "higher. One line per "
+            "method, its points labelled with their setting (rtol, RK4 step, energy-method crank-angle step, "
+            "co-simulation exchange step); white points lie below the reference's own error (red line). "
+            "Tables and findings: docs/accuracy/README.md.",
+            media_type=rr.MediaType.MARKDOWN,
+        ),
+        static=True,
+    )
     views.append(rrb.TextDocumentView(name="about", origin="about"))
-    stream.send_blueprint(rrb.Blueprint(rrb.Grid(*views), rrb.BlueprintPanel(state="collapsed"),
-                                        rrb.SelectionPanel(state="collapsed"), rrb.TimePanel(state="collapsed")),
-                          make_active=True, make_default=True)
+    stream.send_blueprint(
+        rrb.Blueprint(
+            rrb.Grid(*views),
+            rrb.BlueprintPanel(state="collapsed"),
+            rrb.SelectionPanel(state="collapsed"),
+            rrb.TimePanel(state="collapsed"),
+        ),
+        make_active=True,
+        make_default=True,
+    )
     stream.send_recording_name("work–precision benchmark")
     stream.flush()
     stream.disconnect()

@@ -12,7 +12,24 @@ from mech_regulator.mechanisms.linkage.kinetostatics import LinkageLoads, make_j
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Joint, Link, Linkage, LinkageError
 from mech_regulator.mechanisms.linkage.structure import Structure, analyse, checked
 
-__all__ = ["CAM", "PRISMATIC", "REVOLUTE", "Dyad", "Joint", "Link", "Linkage", "LinkageError", "RedundantLink",
-           "LinkageLoads", "Structure", "analyse", "assembly_failures", "checked", "make_joint_loads",
-           "make_kinetostatics",
-           "make_point_motions", "make_reduced", "solve"]
+__all__ = [
+    "CAM",
+    "PRISMATIC",
+    "REVOLUTE",
+    "Dyad",
+    "Joint",
+    "Link",
+    "Linkage",
+    "LinkageError",
+    "RedundantLink",
+    "LinkageLoads",
+    "Structure",
+    "analyse",
+    "assembly_failures",
+    "checked",
+    "make_joint_loads",
+    "make_kinetostatics",
+    "make_point_motions",
+    "make_reduced",
+    "solve",
+]

@@ -43,8 +43,8 @@ import numpy as np
 from mech_regulator.mechanisms.cam_laws import TWO_PI, MotionLaw
 from mech_regulator.mechanisms.linkage.model import CAM, PRISMATIC, REVOLUTE, Joint, Linkage, LinkageError
 
-SAMPLES = 3600             # cam angles over a turn at which the profile is checked (every 0.1 deg)
-KINK_APPROACH = 1e-9       # a law's segment ends are also checked this close before them [rad]
+SAMPLES = 3600  # cam angles over a turn at which the profile is checked (every 0.1 deg)
+KINK_APPROACH = 1e-9  # a law's segment ends are also checked this close before them [rad]
 
 
 @dataclass(frozen=True)
@@ -98,27 +98,35 @@ def next_cam_follower(linkage: Linkage, known: set[str]) -> CamFollower | None:
             continue
         cam, toucher = pair.links
         if cam != linkage.crank:
-            raise LinkageError(f"the cam pair {pair.name}'s cam '{cam}' is not the crank '{linkage.crank}'; only a cam "
-                               "on the crank is supported (list the cam first in links: [cam, follower])")
+            raise LinkageError(
+                f"the cam pair {pair.name}'s cam '{cam}' is not the crank '{linkage.crank}'; only a cam "
+                "on the crank is supported (list the cam first in links: [cam, follower])"
+            )
         roller, roller_joint, follower = None, None, toucher
         if linkage.link(toucher).roller_radius is not None:
             others = [j for j in linkage.joints_of(toucher) if j is not pair]
             if len(others) != 1 or others[0].kind != REVOLUTE:
-                raise LinkageError(f"the roller '{toucher}' of the cam pair {pair.name} has the joints "
-                                   f"{[j.name for j in others]} besides it; expected one revolute joint with its "
-                                   "follower")
+                raise LinkageError(
+                    f"the roller '{toucher}' of the cam pair {pair.name} has the joints "
+                    f"{[j.name for j in others]} besides it; expected one revolute joint with its "
+                    "follower"
+                )
             roller, roller_joint, follower = toucher, others[0], others[0].other(toucher)
         lower = [j for j in linkage.joints_of(follower) if j.kind != CAM and j is not roller_joint]
         if len(lower) != 1 or linkage.frame not in lower[0].links:
-            raise LinkageError(f"the follower '{follower}' of the cam pair {pair.name} has the lower pairs "
-                               f"{[j.name for j in lower]} besides its roller; expected exactly one, with the frame "
-                               "(prismatic: translating, revolute: oscillating)")
+            raise LinkageError(
+                f"the follower '{follower}' of the cam pair {pair.name} has the lower pairs "
+                f"{[j.name for j in lower]} besides its roller; expected exactly one, with the frame "
+                "(prismatic: translating, revolute: oscillating)"
+            )
         guide = lower[0]
         if guide.kind == PRISMATIC and guide.links[0] != linkage.frame:
-            raise LinkageError(f"the follower '{follower}''s guide {guide.name} lists it first; expected links: "
-                               f"[{linkage.frame}, {follower}] (guide, slider)")
+            raise LinkageError(
+                f"the follower '{follower}''s guide {guide.name} lists it first; expected links: "
+                f"[{linkage.frame}, {follower}] (guide, slider)"
+            )
         group = CamFollower(follower, roller, guide, pair, roller_joint)
-        if pair.cam is None:   # a structure alone (no law): nothing to place
+        if pair.cam is None:  # a structure alone (no law): nothing to place
             return group
         return dataclasses.replace(group, at_base=follower_zero(linkage, group))
     return None
@@ -163,31 +171,36 @@ class CamPair:
     cusped (naming the crank angle; `check` False: the profile is not checked), a point the contact needs that the
     follower lacks."""
 
-    def __init__(self, linkage: Linkage, group: CamFollower, gravity: tuple[float, float] | None,
-                 check: bool = True):
+    def __init__(self, linkage: Linkage, group: CamFollower, gravity: tuple[float, float] | None, check: bool = True):
         self.group = group
-        assert group.pair.cam is not None   # a cam pair carries its CamSpec (presets.cam_spec)
+        assert group.pair.cam is not None  # a cam pair carries its CamSpec (presets.cam_spec)
         self.spec: CamSpec = group.pair.cam
         spec = self.spec
         self.translating = group.guide.kind == PRISMATIC
         roller_link = linkage.link(group.roller) if group.roller is not None else None
         self.roller_radius = 0.0
         if roller_link is not None:
-            assert roller_link.roller_radius is not None   # next_cam_follower takes a link with a roller_radius
+            assert roller_link.roller_radius is not None  # next_cam_follower takes a link with a roller_radius
             self.roller_radius = roller_link.roller_radius
         if (spec.contact == "roller") != (roller_link is not None):
-            raise LinkageError(f"the cam pair {group.pair.name} has contact {spec.contact} but touches the link "
-                               f"'{group.pair.links[1]}', which is {'a' if roller_link else 'not a'} roller; expected "
-                               "contact: roller exactly when the touching link has a roller_radius")
+            raise LinkageError(
+                f"the cam pair {group.pair.name} has contact {spec.contact} but touches the link "
+                f"'{group.pair.links[1]}', which is {'a' if roller_link else 'not a'} roller; expected "
+                "contact: roller exactly when the touching link has a roller_radius"
+            )
         if spec.contact == "flat_face" and not self.translating:
-            raise LinkageError(f"the cam pair {group.pair.name}: a flat face on an oscillating follower is not "
-                               "supported yet; expected a knife_edge or roller contact, or a translating follower")
+            raise LinkageError(
+                f"the cam pair {group.pair.name}: a flat face on an oscillating follower is not "
+                "supported yet; expected a knife_edge or roller contact, or a translating follower"
+            )
         follower = linkage.link(group.follower)
         contact_name = group.roller_joint.name if group.roller_joint is not None else group.pair.name
         if contact_name not in follower.points:
-            raise LinkageError(f"the follower '{group.follower}' needs the point '{contact_name}' (its "
-                               f"{'roller centre' if group.roller else 'contact point'}); it has only "
-                               f"{sorted(follower.points)}")
+            raise LinkageError(
+                f"the follower '{group.follower}' needs the point '{contact_name}' (its "
+                f"{'roller centre' if group.roller else 'contact point'}); it has only "
+                f"{sorted(follower.points)}"
+            )
         frame = linkage.link(linkage.frame).points
         self.centre = frame[linkage.crank_pivot().name]
         self.pitch_radius = spec.base_radius + self.roller_radius
@@ -195,7 +208,11 @@ class CamPair:
         self.guide_local = follower.points[group.guide.name]
         self.gravity = complex(*gravity) if gravity is not None else 0j
         roller_mass = roller_link.mass if roller_link is not None else 0.0
-        self.follower_mass, self.follower_inertia, self.follower_centre = follower.mass, follower.inertia, follower.centre
+        self.follower_mass, self.follower_inertia, self.follower_centre = (
+            follower.mass,
+            follower.inertia,
+            follower.centre,
+        )
         self.roller_mass = roller_mass
         if self.translating:
             self.slider_angle = group.guide.slider_angle
@@ -207,12 +224,14 @@ class CamPair:
             if spec.contact == "flat_face":
                 self.travel0 = self.pitch_radius - along
             else:
-                discriminant = along * along - abs(m) ** 2 + self.pitch_radius ** 2
+                discriminant = along * along - abs(m) ** 2 + self.pitch_radius**2
                 if discriminant < 0.0:
-                    raise LinkageError(f"the cam pair {group.pair.name}: the follower's line passes "
-                                       f"{abs((m * self.direction.conjugate()).imag):.6g} m from the cam's pivot, "
-                                       f"farther than the base circle's {self.pitch_radius:.6g} m "
-                                       "(with the roller); expected a smaller offset or a larger base circle")
+                    raise LinkageError(
+                        f"the cam pair {group.pair.name}: the follower's line passes "
+                        f"{abs((m * self.direction.conjugate()).imag):.6g} m from the cam's pivot, "
+                        f"farther than the base circle's {self.pitch_radius:.6g} m "
+                        "(with the roller); expected a smaller offset or a larger base circle"
+                    )
                 self.travel0 = -along + math.sqrt(discriminant)
             self.offset = (m * self.direction.conjugate()).imag
             self.generalised_mass = self.follower_mass + roller_mass
@@ -222,16 +241,22 @@ class CamPair:
             self.arm, self.arm_angle = abs(arm), cmath.phase(arm)
             span = self.centre - self.pivot
             distance = abs(span)
-            cosine = (self.arm ** 2 + distance ** 2 - self.pitch_radius ** 2) / (2.0 * self.arm * distance)
+            cosine = (self.arm**2 + distance**2 - self.pitch_radius**2) / (2.0 * self.arm * distance)
             if not -1.0 <= cosine <= 1.0:
-                raise LinkageError(f"the cam pair {group.pair.name}: the follower's arm {self.arm:.6g} m about "
-                                   f"{group.guide.name} cannot reach the base circle of radius {self.pitch_radius:.6g} "
-                                   f"m (with the roller) {distance:.6g} m away; expected |d - l| <= R <= d + l")
+                raise LinkageError(
+                    f"the cam pair {group.pair.name}: the follower's arm {self.arm:.6g} m about "
+                    f"{group.guide.name} cannot reach the base circle of radius {self.pitch_radius:.6g} "
+                    f"m (with the roller) {distance:.6g} m away; expected |d - l| <= R <= d + l"
+                )
             self.sigma = float(linkage.branches.get(group.pair.name, 1))
             self.psi0 = cmath.phase(span) + self.sigma * math.acos(cosine)
             centre_arm = self.follower_centre - self.guide_local
-            self.generalised_mass = (self.follower_inertia + self.follower_mass * abs(centre_arm) ** 2
-                                     + roller_mass * self.arm ** 2 + (roller_link.inertia if roller_link is not None else 0.0))
+            self.generalised_mass = (
+                self.follower_inertia
+                + self.follower_mass * abs(centre_arm) ** 2
+                + roller_mass * self.arm**2
+                + (roller_link.inertia if roller_link is not None else 0.0)
+            )
         if check:
             self._check_profile()
 
@@ -248,8 +273,17 @@ class CamPair:
         psi = self.psi0 + self.sigma * s
         arm = self.arm * np.exp(1j * psi)
         P = self.pivot + arm
-        return FollowerMotion(s, ds, dds, P, 1j * self.sigma * ds * arm, (1j * self.sigma * dds - ds * ds) * arm,
-                              1j * self.sigma * arm, psi - self.arm_angle, self.sigma * ds)
+        return FollowerMotion(
+            s,
+            ds,
+            dds,
+            P,
+            1j * self.sigma * ds * arm,
+            (1j * self.sigma * dds - ds * ds) * arm,
+            1j * self.sigma * arm,
+            psi - self.arm_angle,
+            self.sigma * ds,
+        )
 
     def poses(self, phi: float) -> dict[str, list]:
         """The follower's (and roller's) pose [r, theta, r', theta', r'', theta''] at crank angle phi [rad], as
@@ -261,7 +295,7 @@ class CamPair:
         P, dP, ddP = complex(m.P[0]), complex(m.dP[0]), complex(m.ddP[0])
         r = P - q
         dr = dP - 1j * dtheta * q
-        ddr = ddP - (1j * ddtheta - dtheta ** 2) * q
+        ddr = ddP - (1j * ddtheta - dtheta**2) * q
         found = {self.group.follower: [r, theta, dr, dtheta, ddr, ddtheta]}
         if self.group.roller is not None:
             found[self.group.roller] = [P, theta, dP, dtheta, ddP, ddtheta]
@@ -289,7 +323,7 @@ class CamPair:
         if self.spec.contact == "flat_face":
             return self.pitch_radius + m.s + m.dds
         T, T2 = self._relative(m, phi)
-        return -np.abs(T) ** 3 / (T.conjugate() * T2).imag - self.roller_radius
+        return -(np.abs(T) ** 3) / (T.conjugate() * T2).imag - self.roller_radius
 
     def contact_point(self, phi) -> np.ndarray:
         """The point where the cam touches its follower (or roller) at crank angles phi [rad] [m, complex]."""
@@ -317,12 +351,16 @@ class CamPair:
         bad = np.flatnonzero(radius <= 0.0 if self.spec.contact == "flat_face" else convex_pitch & (radius <= 0.0))
         if bad.size:
             k = bad[np.argmin(radius[bad])]
-            what = (f"the roller's radius {self.roller_radius:.6g} m exceeds the pitch curve's radius of curvature "
-                    f"{radius[k] + self.roller_radius:.6g} m: the profile would be undercut"
-                    if self.spec.contact == "roller" else
-                    f"the profile's radius of curvature R + s + s'' is {radius[k]:.6g} m: it would have a cusp")
-            raise LinkageError(f"the cam pair {self.group.pair.name} at crank angle {math.degrees(phi[k]) % 360:.2f} "
-                               f"deg: {what}; expected a larger base circle, a smaller roller or a gentler law")
+            what = (
+                f"the roller's radius {self.roller_radius:.6g} m exceeds the pitch curve's radius of curvature "
+                f"{radius[k] + self.roller_radius:.6g} m: the profile would be undercut"
+                if self.spec.contact == "roller"
+                else f"the profile's radius of curvature R + s + s'' is {radius[k]:.6g} m: it would have a cusp"
+            )
+            raise LinkageError(
+                f"the cam pair {self.group.pair.name} at crank angle {math.degrees(phi[k]) % 360:.2f} "
+                f"deg: {what}; expected a larger base circle, a smaller roller or a gentler law"
+            )
 
     def _angles(self) -> np.ndarray:
         """The crank angles at which the turn is checked: SAMPLES over the turn and just before each segment end."""
@@ -337,8 +375,10 @@ class CamPair:
             return self.generalised_mass * (self.gravity * m.along.conjugate()).real
         centre = self.pivot + (self.follower_centre - self.guide_local) * np.exp(1j * m.theta)
         along_centre = 1j * self.sigma * (centre - self.pivot)
-        return (self.follower_mass * (self.gravity * along_centre.conjugate()).real
-                + self.roller_mass * (self.gravity * m.along.conjugate()).real)
+        return (
+            self.follower_mass * (self.gravity * along_centre.conjugate()).real
+            + self.roller_mass * (self.gravity * m.along.conjugate()).real
+        )
 
     def reduced(self, phi) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(J_f [kg m^2], dJ_f/dphi [kg m^2/rad], the weight's reduced moment G_s s' [N m], the spring's
@@ -346,15 +386,19 @@ class CamPair:
         m = self.motion(phi)
         M = self.generalised_mass
         spring = -(self.spec.preload + self.spec.stiffness * m.s) * m.ds
-        return M * m.ds ** 2, 2.0 * M * m.ds * m.dds, self.weight_along(m) * m.ds, spring
+        return M * m.ds**2, 2.0 * M * m.ds * m.dds, self.weight_along(m) * m.ds, spring
 
     def contact_force(self, phi, omega, epsilon=0.0) -> tuple[np.ndarray, np.ndarray]:
         """(Q_c [N or N m], N [N]): what the cam must push along s, and the contact force along the normal, at
         crank angles phi [rad], speed omega [rad/s] and acceleration epsilon [rad/s^2] (module docstring)."""
         phi = np.atleast_1d(np.asarray(phi, dtype=float))
         m = self.motion(phi)
-        needed = (self.generalised_mass * (m.dds * omega ** 2 + m.ds * epsilon) + self.spec.preload
-                  + self.spec.stiffness * m.s - self.weight_along(m))
+        needed = (
+            self.generalised_mass * (m.dds * omega**2 + m.ds * epsilon)
+            + self.spec.preload
+            + self.spec.stiffness * m.s
+            - self.weight_along(m)
+        )
         if self.spec.contact == "flat_face":
             return needed, needed
         T, _ = self._relative(m, phi)
@@ -389,29 +433,45 @@ class CamPair:
         convex = np.flatnonzero(radius > 0.0)
         j = int(convex[np.argmin(radius[convex])]) if convex.size else None
         speed, where = self.jump()
-        return {"pair": self.group.pair.name, "follower": self.group.follower, "contact": self.spec.contact,
-                "motion": "translating" if self.translating else "oscillating",
-                "lift": float(np.max(self.motion(phi).s)),
-                "pressure_angle_max_deg": math.degrees(alpha[k]), "pressure_angle_max_at_deg": _degrees(phi[k]),
-                "least_radius": float(radius[j]) if j is not None else None,
-                "least_radius_at_deg": _degrees(phi[j]) if j is not None else None,
-                "jump_speed": None if math.isinf(speed) else speed,
-                "jump_at_deg": None if math.isinf(speed) else _degrees(where)}
+        return {
+            "pair": self.group.pair.name,
+            "follower": self.group.follower,
+            "contact": self.spec.contact,
+            "motion": "translating" if self.translating else "oscillating",
+            "lift": float(np.max(self.motion(phi).s)),
+            "pressure_angle_max_deg": math.degrees(alpha[k]),
+            "pressure_angle_max_at_deg": _degrees(phi[k]),
+            "least_radius": float(radius[j]) if j is not None else None,
+            "least_radius_at_deg": _degrees(phi[j]) if j is not None else None,
+            "jump_speed": None if math.isinf(speed) else speed,
+            "jump_at_deg": None if math.isinf(speed) else _degrees(where),
+        }
 
     def report(self) -> list[str]:
         """The cam pair's numbers as text lines (`structure`)."""
         found = self.numbers()
-        kind = (f"translating, offset {self.offset:.6g} m" if self.translating else
-                f"oscillating about {self.group.guide.name}, arm {self.arm:.6g} m")
+        kind = (
+            f"translating, offset {self.offset:.6g} m"
+            if self.translating
+            else f"oscillating about {self.group.guide.name}, arm {self.arm:.6g} m"
+        )
         unit = "m" if self.translating else "rad"
-        lines = [(f"cam pair {found['pair']}: cam {self.group.pair.links[0]}, {self.spec.contact.replace('_', ' ')} "
-                  f"follower {self.group.follower} ({kind}), base circle {self.spec.base_radius:.6g} m, lift "
-                  f"{found['lift']:.6g} {unit}"),
-                 (f"  pressure angle up to {found['pressure_angle_max_deg']:.3f} deg at crank angle "
-                  f"{found['pressure_angle_max_at_deg']:.2f} deg")]
+        lines = [
+            (
+                f"cam pair {found['pair']}: cam {self.group.pair.links[0]}, {self.spec.contact.replace('_', ' ')} "
+                f"follower {self.group.follower} ({kind}), base circle {self.spec.base_radius:.6g} m, lift "
+                f"{found['lift']:.6g} {unit}"
+            ),
+            (
+                f"  pressure angle up to {found['pressure_angle_max_deg']:.3f} deg at crank angle "
+                f"{found['pressure_angle_max_at_deg']:.2f} deg"
+            ),
+        ]
         if found["least_radius"] is not None:
-            lines.append(f"  least radius of curvature of the profile {found['least_radius']:.6g} m at crank angle "
-                         f"{found['least_radius_at_deg']:.2f} deg")
+            lines.append(
+                f"  least radius of curvature of the profile {found['least_radius']:.6g} m at crank angle "
+                f"{found['least_radius_at_deg']:.2f} deg"
+            )
         spring = f"spring {self.spec.stiffness:g}, preload {self.spec.preload:g}"
         speed = found["jump_speed"]
         if speed is None:
@@ -419,8 +479,10 @@ class CamPair:
         elif speed == 0.0:
             lines.append(f"  {spring}: contact is lost even at rest (crank angle {found['jump_at_deg']:.2f} deg)")
         else:
-            lines.append(f"  {spring}: the follower jumps above {speed:.6g} rad/s ({speed * 30 / math.pi:.5g} rpm), "
-                         f"first at crank angle {found['jump_at_deg']:.2f} deg")
+            lines.append(
+                f"  {spring}: the follower jumps above {speed:.6g} rad/s ({speed * 30 / math.pi:.5g} rpm), "
+                f"first at crank angle {found['jump_at_deg']:.2f} deg"
+            )
         return lines
 
 

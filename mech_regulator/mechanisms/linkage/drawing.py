@@ -26,10 +26,10 @@ from mech_regulator.mechanisms.linkage.model import GEAR, PRISMATIC, Linkage
 from mech_regulator.mechanisms.linkage.structure import Structure
 
 MOVING_PARTS = ("crank", "links", "sliders", "gears", "joints")
-GEAR_CIRCLE_POINTS = 73   # points of a pitch circle's polyline (after its radius)
-BLOCK_PER_CRANK = 0.6   # slider block length along the guide, per crank length [-]
-PROFILE_POINTS = 180    # points of a cam's profile as drawn
-CIRCLE_POINTS = 73      # points of a drawn circle (72 segments)
+GEAR_CIRCLE_POINTS = 73  # points of a pitch circle's polyline (after its radius)
+BLOCK_PER_CRANK = 0.6  # slider block length along the guide, per crank length [-]
+PROFILE_POINTS = 180  # points of a cam's profile as drawn
+CIRCLE_POINTS = 73  # points of a drawn circle (72 segments)
 
 
 def circle(centre: tuple[float, float], radius: float) -> np.ndarray:
@@ -77,8 +77,11 @@ def _gear_polyline(centre: complex, radius: float, theta: float) -> list[complex
 def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[str, np.ndarray]:
     """The linkage's parts at crank angle phi [rad] (module docstring)."""
     poses = solve(linkage, structure, phi, derivatives=False)
-    cams = {group.pair.name: CamPair(linkage, group, None, check=False) for group in structure.groups
-            if isinstance(group, CamFollower)}
+    cams = {
+        group.pair.name: CamPair(linkage, group, None, check=False)
+        for group in structure.groups
+        if isinstance(group, CamFollower)
+    }
     profiles = {name: pair.profile(PROFILE_POINTS) for name, pair in cams.items()}
     frame_points = list(linkage.link(linkage.frame).points.values())
     crank = linkage.link(linkage.crank)
@@ -88,8 +91,10 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
     pivot = linkage.link(linkage.frame).points[pivot_name]
     radius = max([crank_length(linkage)] + [float(np.max(np.abs(profile))) for profile in profiles.values()])
     others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != linkage.crank]
-    others += [list(cams[name].centre + np.append(profile, profile[:1]) * cmath.exp(1j * phi))
-               for name, profile in profiles.items()]
+    others += [
+        list(cams[name].centre + np.append(profile, profile[:1]) * cmath.exp(1j * phi))
+        for name, profile in profiles.items()
+    ]
     longest = max(len(points) for points in others)  # a linkage with W = 1 has at least one group
     half = 0.5 * BLOCK_PER_CRANK * radius
     blocks = []
@@ -102,7 +107,7 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
             blocks.append(_xy(corners + corners[:1]))
     joint_points = []
     for joint in linkage.joints:
-        if joint.name in cams:   # a cam pair's point: where the cam touches
+        if joint.name in cams:  # a cam pair's point: where the cam touches
             joint_points.append(complex(cams[joint.name].contact_point(phi)[0]))
             continue
         if joint.kind == GEAR:
@@ -115,9 +120,12 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
         "crank": _xy([pivot, pose[0] + tip * cmath.exp(1j * phi)]),
         "links": np.stack([_xy(points + points[-1:] * (longest - len(points))) for points in others]),
         "sliders": np.stack(blocks) if blocks else np.zeros((0, 5, 2)),
-        "gears": np.array([_xy(_gear_polyline(centre, radius, theta))
-                           for _, centre, radius, theta in pitch_circles(linkage, structure, poses)]).reshape(
-            (-1, GEAR_CIRCLE_POINTS + 1, 2)),
+        "gears": np.array(
+            [
+                _xy(_gear_polyline(centre, radius, theta))
+                for _, centre, radius, theta in pitch_circles(linkage, structure, poses)
+            ]
+        ).reshape((-1, GEAR_CIRCLE_POINTS + 1, 2)),
         "joints": _xy(joint_points),
     }
     return outline

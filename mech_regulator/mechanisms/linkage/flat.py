@@ -68,39 +68,50 @@ from mech_regulator import cache
 
 KIND_CODES = {"RRR": 0, "RRP": 1, "RPR": 2, "PRP": 3, "RPP": 4}
 REDUNDANT = 5
-GEAR = 6                # a gear group (gears.GearGroup): one link on its pivot, turned by its mesh
-CAM_FOLLOWER = 7        # a cam follower group (linkage/cam.py), placed by its law (law_at)
-GEAR_MESH = 2.0         # a gear mesh's joint record kind
-CAM_CONTACT = 3.0       # a cam pair's joint record kind
-PIECE_SIZE = 7          # a law piece: [start, length, code, a, b, c, d] (law_at)
+GEAR = 6  # a gear group (gears.GearGroup): one link on its pivot, turned by its mesh
+CAM_FOLLOWER = 7  # a cam follower group (linkage/cam.py), placed by its law (law_at)
+GEAR_MESH = 2.0  # a gear mesh's joint record kind
+CAM_CONTACT = 3.0  # a cam pair's joint record kind
+PIECE_SIZE = 7  # a law piece: [start, length, code, a, b, c, d] (law_at)
 JOINT_SIZE = 10
 LINK_SIZE = 4
 GROUP_SIZE = 4 + 3 * JOINT_SIZE
 POSE_SIZE = 11
 HEADER_SIZE = 5 + JOINT_SIZE + 7
-OUTPUT_REFERENCE = 7 + JOINT_SIZE   # the header's output reference angle (module docstring)
-SCRATCH_SHAPE = (14, 6)   # differentiate_group's A, A^-1, K k' and K k''
-DEAD_POINT_CONDITION = 1e10   # condition of a group's equations beyond which its ratios count as infinite [-]
+OUTPUT_REFERENCE = 7 + JOINT_SIZE  # the header's output reference angle (module docstring)
+SCRATCH_SHAPE = (14, 6)  # differentiate_group's A, A^-1, K k' and K k''
+DEAD_POINT_CONDITION = 1e10  # condition of a group's equations beyond which its ratios count as infinite [-]
 TWO_PI = 2.0 * math.pi
 
 # solve_poses' status: what stopped the solution at a group (the numbers returned with it in brackets)
 SOLVED = 0
-RRR_APART = 1          # [distance of the external joints, |l1 - l2|, l1 + l2] [m]
-RRP_GUIDE_FAR = 2      # [distance of the guide from E1, l1] [m]
-RPR_PIVOTS_CLOSE = 3   # [the guide's offset |h|, the pivots' distance rho] [m]
-GUIDES_PARALLEL = 4    # []
-DEAD_POINT = 5         # []
+RRR_APART = 1  # [distance of the external joints, |l1 - l2|, l1 + l2] [m]
+RRP_GUIDE_FAR = 2  # [distance of the guide from E1, l1] [m]
+RPR_PIVOTS_CLOSE = 3  # [the guide's offset |h|, the pivots' distance rho] [m]
+GUIDES_PARALLEL = 4  # []
+DEAD_POINT = 5  # []
 
 
 # ---------------------------------------------------------------------------------------------------------------
 # Encoding (plain Python: builds the program once per linkage)
 
+
 def joint_record(linkage, joint, index: dict[str, int]) -> list[float]:
     """A joint's JOINT_SIZE floats (module docstring)."""
     a, b = joint.links
     pa, pb = linkage.link(a).points[joint.name], linkage.link(b).points[joint.name]
-    return [0.0 if joint.kind == "revolute" else 1.0, float(index[a]), float(index[b]), pa.real, pa.imag, pb.real,
-            pb.imag, math.cos(joint.direction), math.sin(joint.direction), joint.slider_angle]
+    return [
+        0.0 if joint.kind == "revolute" else 1.0,
+        float(index[a]),
+        float(index[b]),
+        pa.real,
+        pa.imag,
+        pb.real,
+        pb.imag,
+        math.cos(joint.direction),
+        math.sin(joint.direction),
+        joint.slider_angle,
+    ]
 
 
 def gear_record(linkage, group, index: dict[str, int]) -> list[float]:
@@ -108,8 +119,17 @@ def gear_record(linkage, group, index: dict[str, int]) -> list[float]:
     mesh = group.mesh
     a, b = mesh.links
     O_a, O_b = (linkage.link(link).points[centre] for link, centre in zip(mesh.links, mesh.gear.centres))
-    return [GEAR_MESH, float(index[a]), float(index[b]), O_a.real, O_a.imag, O_b.real, O_b.imag, *group.pitch,
-            float(index[group.carrier])]
+    return [
+        GEAR_MESH,
+        float(index[a]),
+        float(index[b]),
+        O_a.real,
+        O_a.imag,
+        O_b.real,
+        O_b.imag,
+        *group.pitch,
+        float(index[group.carrier]),
+    ]
 
 
 def link_indices(linkage) -> dict[str, int]:
@@ -130,9 +150,21 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
     gx, gy = gravity if gravity is not None else (0.0, 0.0)
     on_frame = linkage.link(linkage.frame).points[pivot.name]
     on_crank = linkage.link(linkage.crank).points[pivot.name]
-    program = [float(len(index)), float(len(groups)), float(index[linkage.crank]), output_kind, output_link,
-               *output_joint, gx, gy, linkage.output_reference, on_frame.real, on_frame.imag, on_crank.real,
-               on_crank.imag]
+    program = [
+        float(len(index)),
+        float(len(groups)),
+        float(index[linkage.crank]),
+        output_kind,
+        output_link,
+        *output_joint,
+        gx,
+        gy,
+        linkage.output_reference,
+        on_frame.real,
+        on_frame.imag,
+        on_crank.real,
+        on_crank.imag,
+    ]
     for name in index:
         link = linkage.link(name)
         program += [link.mass, link.centre.real, link.centre.imag, link.inertia]
@@ -149,20 +181,27 @@ def encode(linkage, groups, gravity: tuple[float, float] | None) -> np.ndarray:
         else:
             joints = [joint_record(linkage, joint, index) for joint in group.joints]
             branch = float(group.branch)
-            if group.parallelogram is not None:   # B - P on B's known link, in the E1 record's unused u slots
+            if group.parallelogram is not None:  # B - P on B's known link, in the E1 record's unused u slots
                 known = linkage.link(group.externals[0].other(group.links[0])).points
                 side = known[group.externals[0].name] - known[group.parallelogram.name]
                 joints[0][7:9], branch = [side.real, side.imag], 0.0
-            program += [float(KIND_CODES[group.kind]), branch, float(index[group.links[0]]),
-                        float(index[group.links[1]])]
+            program += [
+                float(KIND_CODES[group.kind]),
+                branch,
+                float(index[group.links[0]]),
+                float(index[group.links[1]]),
+            ]
         program += [value for record in joints for value in record]
-    found = {joint.name: (len(program) - GROUP_SIZE * (len(groups) - number) + 4 + JOINT_SIZE * k, 3 * number + k)
-             for number, group in enumerate(groups) for k, joint in enumerate(group.joints)}
+    found = {
+        joint.name: (len(program) - GROUP_SIZE * (len(groups) - number) + 4 + JOINT_SIZE * k, 3 * number + k)
+        for number, group in enumerate(groups)
+        for k, joint in enumerate(group.joints)
+    }
     program += [float(len(linkage.joints)), *joint_record(linkage, pivot, index)]
     found[pivot.name] = (len(program) - JOINT_SIZE, 3 * len(groups))
     for joint in linkage.joints:
         program += [float(value) for value in found.get(joint.name, (-1, -1))]
-    for number, group in enumerate(groups):   # each cam follower's law, pointed to from its cam record
+    for number, group in enumerate(groups):  # each cam follower's law, pointed to from its cam record
         if group.kind == "cam follower":
             record = HEADER_SIZE + LINK_SIZE * len(index) + GROUP_SIZE * number + 4 + 2 * JOINT_SIZE
             program[record + 3] = float(len(program) - record)
@@ -176,15 +215,34 @@ def _cam_follower_records(linkage, group, index: dict[str, int]) -> list[float]:
     spec = group.pair.cam
     sigma, zero = group.at_base
     roller = [0.0] * JOINT_SIZE if group.roller_joint is None else joint_record(linkage, group.roller_joint, index)
-    cam = [CAM_CONTACT, float(index[group.pair.links[0]]), float(index[group.pair.links[1]]), 0.0, spec.start, zero,
-           spec.stiffness, spec.preload, 0.0, 0.0]
-    return ([float(CAM_FOLLOWER), sigma, float(index[group.follower]),
-             float(index[group.roller]) if group.roller is not None else -1.0]
-            + joint_record(linkage, group.guide, index) + roller + cam)
+    cam = [
+        CAM_CONTACT,
+        float(index[group.pair.links[0]]),
+        float(index[group.pair.links[1]]),
+        0.0,
+        spec.start,
+        zero,
+        spec.stiffness,
+        spec.preload,
+        0.0,
+        0.0,
+    ]
+    return (
+        [
+            float(CAM_FOLLOWER),
+            sigma,
+            float(index[group.follower]),
+            float(index[group.roller]) if group.roller is not None else -1.0,
+        ]
+        + joint_record(linkage, group.guide, index)
+        + roller
+        + cam
+    )
 
 
 # ---------------------------------------------------------------------------------------------------------------
 # A cam follower's law (mechanisms/cam_laws.py describes the laws; this is their one implementation)
+
 
 def law_at(theta, program, at):
     """(s, s', s'') of the law at `at` in the program [n, then n pieces of 7 floats: start [rad], length [rad], code,
@@ -195,7 +253,7 @@ def law_at(theta, program, at):
     two_pi = 2.0 * math.pi
     x = theta - two_pi * math.floor(theta / two_pi)
     low, high = 0, int(program[at]) - 1
-    while low < high:   # the last piece starting at or before x
+    while low < high:  # the last piece starting at or before x
         middle = (low + high + 1) // 2
         if program[at + 1 + 7 * middle] <= x:
             low = middle
@@ -233,7 +291,7 @@ def _place_cam_follower(program, g, poses):
     phi = poses[POSE_SIZE * int(program[cam + 1]) + 2]
     s, ds, dds = law_at(phi - program[cam + 4], program, cam + int(program[cam + 3]))
     k = POSE_SIZE * follower
-    if program[guide] != 0.0:   # translating
+    if program[guide] != 0.0:  # translating
         theta = program[guide + 9]
         turn = _unit(theta)
         u = _direction(program, guide)
@@ -278,6 +336,7 @@ def cam_springs(program, base, poses):
 
 # ---------------------------------------------------------------------------------------------------------------
 # Points and poses
+
 
 def _local(program, j, link):
     """The point of the joint record at j in the coordinates of `link` (one of its two links) [m]."""
@@ -370,30 +429,39 @@ def _lines_meet(c1, w1, c2, w2):
 # ---------------------------------------------------------------------------------------------------------------
 # Position of a group in closed form (groups.py's module docstring)
 
+
 def place_group(program, g, poses):
     """Set the positions of the links of the group at g, the links it joins being known; returns (status, three
     numbers explaining it) (module docstring: SOLVED, RRR_APART, ...)."""
     kind, sigma = int(program[g]), program[g + 1]
     L1, L2 = int(program[g + 2]), int(program[g + 3])
     E1, Ji, E2 = g + 4, g + 4 + JOINT_SIZE, g + 4 + 2 * JOINT_SIZE
-    if kind == CAM_FOLLOWER:   # placed with its derivatives (differentiate_group leaves it)
+    if kind == CAM_FOLLOWER:  # placed with its derivatives (differentiate_group leaves it)
         _place_cam_follower(program, g, poses)
         return SOLVED, 0.0, 0.0, 0.0
     if kind == REDUNDANT:
-        _swing(program, E1, Ji, poses, L1, _point(program, E1, poses, _other(program, E1, L1)),
-               _point(program, Ji, poses, _other(program, Ji, L1)))
+        _swing(
+            program,
+            E1,
+            Ji,
+            poses,
+            L1,
+            _point(program, E1, poses, _other(program, E1, L1)),
+            _point(program, Ji, poses, _other(program, Ji, L1)),
+        )
         return SOLVED, 0.0, 0.0, 0.0
-    if kind == GEAR:   # theta_L = theta_c + k (theta_G - theta_c) + phase_L, L's pivot on its known link
+    if kind == GEAR:  # theta_L = theta_c + k (theta_G - theta_c) + phase_L, L's pivot on its known link
         theta = _gear_angle(program, g, poses, 2)
         turn = _unit(theta)
-        _set_pose(poses, L1, _point(program, E1, poses, _other(program, E1, L1)) - _local(program, E1, L1) * turn,
-                  theta, turn)
+        _set_pose(
+            poses, L1, _point(program, E1, poses, _other(program, E1, L1)) - _local(program, E1, L1) * turn, theta, turn
+        )
         return SOLVED, 0.0, 0.0, 0.0
     K1, K2 = _other(program, E1, L1), _other(program, E2, L2)
-    if kind == 0 or kind == 1:   # RRR, RRP
+    if kind == 0 or kind == 1:  # RRR, RRP
         B = _point(program, E1, poses, K1)
         l1 = abs(_local(program, Ji, L1) - _local(program, E1, L1))
-        if kind == 0 and sigma == 0.0:   # the parallelogram P B C D: C = D + (B - P)
+        if kind == 0 and sigma == 0.0:  # the parallelogram P B C D: C = D + (B - P)
             D = _point(program, E2, poses, K2)
             C = D + complex(program[E1 + 7], program[E1 + 8]) * _turn(poses, K1)
             _swing(program, E2, Ji, poses, L2, D, C)
@@ -420,7 +488,7 @@ def place_group(program, g, poses):
             _pin(program, Ji, poses, L2, C, theta2)
         _swing(program, E1, Ji, poses, L1, B, C)
         return SOLVED, 0.0, 0.0, 0.0
-    if kind == 2:   # RPR
+    if kind == 2:  # RPR
         guide, slider = int(program[Ji + 1]), int(program[Ji + 2])
         pivot_g, pivot_s = (E1, E2) if guide == L1 else (E2, E1)
         Pg = _point(program, pivot_g, poses, _other(program, pivot_g, guide))
@@ -429,9 +497,14 @@ def place_group(program, g, poses):
         alpha = program[Ji + 9]
         # The line's offset from the pivots, in the guide's coordinates: h = Im((p_g[pivot] - p_g[J]
         # + (p_s[J] - p_s[pivot]) e^{i alpha}) conj u).
-        h = ((_local(program, pivot_g, guide) - _local(program, Ji, guide)
-              + (_local(program, Ji, slider) - _local(program, pivot_s, slider)) * _unit(alpha))
-             * u.conjugate()).imag
+        h = (
+            (
+                _local(program, pivot_g, guide)
+                - _local(program, Ji, guide)
+                + (_local(program, Ji, slider) - _local(program, pivot_s, slider)) * _unit(alpha)
+            )
+            * u.conjugate()
+        ).imag
         rho = abs(Ps - Pg)
         if rho < abs(h) or rho == 0.0:
             return RPR_PIVOTS_CLOSE, abs(h), rho, 0.0
@@ -442,7 +515,7 @@ def place_group(program, g, poses):
         return SOLVED, 0.0, 0.0, 0.0
     theta2 = _angle_across(program, E2, K2, poses[POSE_SIZE * K2 + 2])
     turn2 = _unit(theta2)
-    if kind == 3:   # PRP
+    if kind == 3:  # PRP
         theta1 = _angle_across(program, E1, K1, poses[POSE_SIZE * K1 + 2])
         turn1 = _unit(theta1)
         c1, w1 = _origin_line(program, E1, poses, L1, turn1)
@@ -485,6 +558,7 @@ def _gear_angle(program, g, poses, slot):
 # ---------------------------------------------------------------------------------------------------------------
 # Velocity and acceleration ratios
 
+
 def joint_rows(program, j, poses):
     """The partial derivatives of the joint j's two constraint equations by its links' (x, y, theta), 12 floats:
     row r at [6 r : 6 r + 6] = (by link a's x, y, theta, by link b's x, y, theta).
@@ -497,18 +571,40 @@ def joint_rows(program, j, poses):
     qa = _local(program, j, a) * _turn(poses, a)
     qb = _local(program, j, b) * _turn(poses, b)
     if program[j] == 0.0:
-        return (1.0, 0.0, -qa.imag, -1.0, 0.0, qb.imag,
-                0.0, 1.0, qa.real, 0.0, -1.0, -qb.real)
+        return (1.0, 0.0, -qa.imag, -1.0, 0.0, qb.imag, 0.0, 1.0, qa.real, 0.0, -1.0, -qb.real)
     if program[j] == GEAR_MESH:
         line = _origin(poses, b) + qb - _origin(poses, a) - qa
         u = line / abs(line)
-        return (-u.imag, u.real, program[j + 7] + (qa * u.conjugate()).real,
-                u.imag, -u.real, -program[j + 8] - (qb * u.conjugate()).real,
-                0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return (
+            -u.imag,
+            u.real,
+            program[j + 7] + (qa * u.conjugate()).real,
+            u.imag,
+            -u.real,
+            -program[j + 8] - (qb * u.conjugate()).real,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        )
     w = _direction(program, j) * _turn(poses, a)
     d = _origin(poses, b) + qb - _origin(poses, a) - qa
-    return (w.imag, -w.real, -((qa + d) * w.conjugate()).real, -w.imag, w.real, (qb * w.conjugate()).real,
-            0.0, 0.0, -1.0, 0.0, 0.0, 1.0)
+    return (
+        w.imag,
+        -w.real,
+        -((qa + d) * w.conjugate()).real,
+        -w.imag,
+        w.real,
+        (qb * w.conjugate()).real,
+        0.0,
+        0.0,
+        -1.0,
+        0.0,
+        0.0,
+        1.0,
+    )
 
 
 def joint_quadratic(program, j, poses):
@@ -622,8 +718,12 @@ def invert_dyad(A, inverse):
 
 def _column_dot(A, first, second):
     """The sum over a redundant link's four rows of A[row, first] A[row, second]: an entry of A^T A."""
-    return A[0, first] * A[0, second] + A[1, first] * A[1, second] + A[2, first] * A[2, second] \
+    return (
+        A[0, first] * A[0, second]
+        + A[1, first] * A[1, second]
+        + A[2, first] * A[2, second]
         + A[3, first] * A[3, second]
+    )
 
 
 def pseudo_invert_redundant(A, inverse):
@@ -676,13 +776,19 @@ def differentiate_group(program, g, poses, scratch):
     carrier's (_gear_angle), its origin from its pivot P's motion, r' = P' - i theta' q, r'' = P'' - (i theta'' -
     theta'^2) q (q = p e^{i theta}, p the pivot in the link); a parallelogram P B C D (an RRR group's branch 0):
     L1 turns with D's link and L2 with B's (C - B = D - P, C - D = B - P), each following its outer joint."""
-    if int(program[g]) == CAM_FOLLOWER:   # its derivatives are its law's (_place_cam_follower)
+    if int(program[g]) == CAM_FOLLOWER:  # its derivatives are its law's (_place_cam_follower)
         return True
     if int(program[g]) == GEAR:
-        _follow(program, g + 4, poses, int(program[g + 2]), _gear_angle(program, g, poses, 5),
-                _gear_angle(program, g, poses, 8))
+        _follow(
+            program,
+            g + 4,
+            poses,
+            int(program[g + 2]),
+            _gear_angle(program, g, poses, 5),
+            _gear_angle(program, g, poses, 8),
+        )
         return True
-    if int(program[g]) == 0 and program[g + 1] == 0.0:   # a parallelogram: L1 turns with K2, L2 with K1
+    if int(program[g]) == 0 and program[g + 1] == 0.0:  # a parallelogram: L1 turns with K2, L2 with K1
         L1, L2 = int(program[g + 2]), int(program[g + 3])
         K1, K2 = POSE_SIZE * _other(program, g + 4, L1), POSE_SIZE * _other(program, g + 4 + 2 * JOINT_SIZE, L2)
         _follow(program, g + 4, poses, L1, poses[K2 + 5], poses[K2 + 8])
@@ -695,12 +801,11 @@ def differentiate_group(program, g, poses, scratch):
     group_matrix(program, g, poses, A, known)
     if not (pseudo_invert_redundant(A, inverse) if redundant else invert_dyad(A, inverse)):
         return False
-    if _largest_magnitude(inverse, n_unknown, n_rows) * _largest_magnitude(A, n_rows, n_unknown) \
-            > DEAD_POINT_CONDITION:
+    if _largest_magnitude(inverse, n_unknown, n_rows) * _largest_magnitude(A, n_rows, n_unknown) > DEAD_POINT_CONDITION:
         return False
     links = (int(program[g + 2]), int(program[g + 3]))
     for order in range(1, 3):
-        if order == 2:   # the first derivatives are known now: the right-hand side -(K k'' + gamma)
+        if order == 2:  # the first derivatives are known now: the right-hand side -(K k'' + gamma)
             for joint in range(n_rows // 2):
                 line, other = joint_quadratic(program, g + 4 + JOINT_SIZE * joint, poses)
                 known[1, 2 * joint] += line
@@ -716,6 +821,7 @@ def differentiate_group(program, g, poses, scratch):
 # ---------------------------------------------------------------------------------------------------------------
 # The whole linkage
 
+
 def solve_poses(phi, program, base, poses, scratch, derivatives):
     """Fill poses (POSE_SIZE per link, zeros for the frame) at crank angle phi [rad]: the crank's, theta = phi,
     r = A - p_A e^{i phi}, r' = -i p_A e^{i phi}, r'' = p_A e^{i phi}, theta' = 1, then each group's (with the
@@ -723,7 +829,7 @@ def solve_poses(phi, program, base, poses, scratch, derivatives):
     three numbers) of the first group that fails (module docstring), (SOLVED, -1, 0, 0, 0) when all are solved."""
     for k in range(POSE_SIZE * int(program[base])):
         poses[k] = 0.0
-    poses[9] = 1.0   # the frame's e^{i 0}
+    poses[9] = 1.0  # the frame's e^{i 0}
     crank = int(program[base + 2])
     pivot_frame = complex(program[base + HEADER_SIZE - 4], program[base + HEADER_SIZE - 3])
     turn = _unit(phi)
@@ -749,8 +855,11 @@ def motion(poses, link, point):
     P'' = r'' + (i theta'' - theta'^2) q, q = point e^{i theta}."""
     k = POSE_SIZE * link
     q = point * _turn(poses, link)
-    return (complex(poses[k], poses[k + 1]) + q, complex(poses[k + 3], poses[k + 4]) + 1j * poses[k + 5] * q,
-            complex(poses[k + 6], poses[k + 7]) + complex(-poses[k + 5] * poses[k + 5], poses[k + 8]) * q)
+    return (
+        complex(poses[k], poses[k + 1]) + q,
+        complex(poses[k + 3], poses[k + 4]) + 1j * poses[k + 5] * q,
+        complex(poses[k + 6], poses[k + 7]) + complex(-poses[k + 5] * poses[k + 5], poses[k + 8]) * q,
+    )
 
 
 def near(angle, reference):
@@ -781,8 +890,13 @@ def reduced_from_poses(program, base, poses):
     output = program[base + 3]
     if output == 1.0:
         link = int(program[base + 4])
-        return J, dJ, weight, near(poses[POSE_SIZE * link + 2], program[base + OUTPUT_REFERENCE]), \
-            poses[POSE_SIZE * link + 5]
+        return (
+            J,
+            dJ,
+            weight,
+            near(poses[POSE_SIZE * link + 2], program[base + OUTPUT_REFERENCE]),
+            poses[POSE_SIZE * link + 5],
+        )
     if output == 0.0:
         return J, dJ, weight, 0.0, 0.0
     j = base + 5
@@ -791,8 +905,13 @@ def reduced_from_poses(program, base, poses):
     P_s, dP_s, _ = motion(poses, slider, _local(program, j, slider))
     w = _direction(program, j) * _turn(poses, guide)
     d, dd = P_s - P_g, dP_s - dP_g
-    return (J, dJ, weight, (d * w.conjugate()).real,
-            (dd * w.conjugate()).real + poses[POSE_SIZE * guide + 5] * (d * w.conjugate()).imag)
+    return (
+        J,
+        dJ,
+        weight,
+        (d * w.conjugate()).real,
+        (dd * w.conjugate()).real + poses[POSE_SIZE * guide + 5] * (d * w.conjugate()).imag,
+    )
 
 
 def reduced(phi, program, base):
@@ -809,6 +928,7 @@ def reduced(phi, program, base):
 
 # ---------------------------------------------------------------------------------------------------------------
 # Kinetostatics by groups (linkage/kinetostatics.py's module docstring)
+
 
 def _planar_cross(u, v):
     """z component of the planar cross product u x v = Im(conj(u) v)."""
@@ -901,8 +1021,9 @@ def _solve_group_reactions(program, g, group, poses, scratch, residual, multipli
                 for coordinate in range(3):
                     partial = rows[6 * row + 3 * side + coordinate]
                     for case in range(2):
-                        residual[3 * link + coordinate, case] -= partial * multipliers[6 * group + 2 * joint + row,
-                                                                                        case]
+                        residual[3 * link + coordinate, case] -= (
+                            partial * multipliers[6 * group + 2 * joint + row, case]
+                        )
     return True
 
 
@@ -959,15 +1080,16 @@ def kinetostatics(phi, omega, force, program, base, poses, scratch, residual, mu
     n_groups = int(program[base + 1])
     groups_at = base + HEADER_SIZE + LINK_SIZE * int(program[base])
     for group in range(n_groups - 1, -1, -1):
-        if not _solve_group_reactions(program, groups_at + GROUP_SIZE * group, group, poses, scratch, residual,
-                                      multipliers):
+        if not _solve_group_reactions(
+            program, groups_at + GROUP_SIZE * group, group, poses, scratch, residual, multipliers
+        ):
             return False, math.nan, math.nan
     crank = int(program[base + 2])
     pivot = joint_map(program, base) + 1
     rows = joint_rows(program, pivot, poses)
     side = 0 if int(program[pivot + 1]) == crank else 3
-    x1, y1, t1 = rows[side], rows[side + 1], rows[side + 2]        # the pivot's first row by the crank's (x, y, theta)
-    x2, y2, t2 = rows[6 + side], rows[7 + side], rows[8 + side]    # its second
+    x1, y1, t1 = rows[side], rows[side + 1], rows[side + 2]  # the pivot's first row by the crank's (x, y, theta)
+    x2, y2, t2 = rows[6 + side], rows[7 + side], rows[8 + side]  # its second
     determinant = x1 * y2 - x2 * y1
     slot = 6 * n_groups
     balancing = 0.0
@@ -995,7 +1117,7 @@ def joint_reactions(program, base, poses, multipliers, reactions, ratios):
         j, slot = base + int(program[entry]), 2 * int(program[entry + 1])
         a, b = int(program[j + 1]), int(program[j + 2])
         ka = POSE_SIZE * a
-        if program[j] == 0.0 or program[j] == GEAR_MESH:   # a mesh's second multiplier is 0
+        if program[j] == 0.0 or program[j] == GEAR_MESH:  # a mesh's second multiplier is 0
             reactions[0, joint] = complex(multipliers[slot, 0], multipliers[slot + 1, 0])
             reactions[1, joint] = complex(multipliers[slot, 1], multipliers[slot + 1, 1])
             ratios[joint] = poses[ka + 5] - poses[POSE_SIZE * b + 5]
@@ -1023,15 +1145,16 @@ def joint_loads(phi, omega, force, program, base):
     scratch_size = SCRATCH_SHAPE[0] * SCRATCH_SHAPE[1]
     workspace = np.empty(n_poses + scratch_size + 2 * (n_residual + n_multipliers))
     poses = workspace[:n_poses]
-    scratch = workspace[n_poses:n_poses + scratch_size].reshape(SCRATCH_SHAPE)
+    scratch = workspace[n_poses : n_poses + scratch_size].reshape(SCRATCH_SHAPE)
     start = n_poses + scratch_size
-    residual = workspace[start:start + 2 * n_residual].reshape((n_residual, 2))
-    multipliers = workspace[start + 2 * n_residual:].reshape((n_multipliers, 2))
+    residual = workspace[start : start + 2 * n_residual].reshape((n_residual, 2))
+    multipliers = workspace[start + 2 * n_residual :].reshape((n_multipliers, 2))
     n_joints = int(program[joint_map(program, base)])
     reactions = np.empty((2, n_joints), dtype=np.complex128)
     ratios = np.empty(n_joints)
-    solved, constant, per_epsilon = kinetostatics(phi, omega, force, program, base, poses, scratch, residual,
-                                                  multipliers)
+    solved, constant, per_epsilon = kinetostatics(
+        phi, omega, force, program, base, poses, scratch, residual, multipliers
+    )
     if solved:
         joint_reactions(program, base, poses, multipliers, reactions, ratios)
     else:
@@ -1049,13 +1172,56 @@ def _registered() -> None:
 
     register_jitable(reduced)
     register_jitable(joint_loads)
-    for function in (law_at, _place_cam_follower, cam_springs, _local, _other, _unit, _direction, _origin, _turn,
-                     _point, _set_pose, _pin, _swing, _angle_across, _origin_line, _lines_cross, _lines_meet,
-                     gear_ratio, _gear_angle, place_group, joint_rows, joint_quadratic, _solve_gear_reactions, _follow,
-                     _enter, group_matrix, _row3, _dot3, _cross3, _scaled3, _null_and_right_inverse, invert_dyad,
-                     _column_dot, pseudo_invert_redundant, _largest_magnitude, differentiate_group, solve_poses,
-                     motion, near, reduced_from_poses, _planar_cross, joint_map, _inertia_residuals, _output_load,
-                     _solve_group_reactions, kinetostatics, joint_reactions, workspace_sizes):
+    for function in (
+        law_at,
+        _place_cam_follower,
+        cam_springs,
+        _local,
+        _other,
+        _unit,
+        _direction,
+        _origin,
+        _turn,
+        _point,
+        _set_pose,
+        _pin,
+        _swing,
+        _angle_across,
+        _origin_line,
+        _lines_cross,
+        _lines_meet,
+        gear_ratio,
+        _gear_angle,
+        place_group,
+        joint_rows,
+        joint_quadratic,
+        _solve_gear_reactions,
+        _follow,
+        _enter,
+        group_matrix,
+        _row3,
+        _dot3,
+        _cross3,
+        _scaled3,
+        _null_and_right_inverse,
+        invert_dyad,
+        _column_dot,
+        pseudo_invert_redundant,
+        _largest_magnitude,
+        differentiate_group,
+        solve_poses,
+        motion,
+        near,
+        reduced_from_poses,
+        _planar_cross,
+        joint_map,
+        _inertia_residuals,
+        _output_load,
+        _solve_group_reactions,
+        kinetostatics,
+        joint_reactions,
+        workspace_sizes,
+    ):
         register_jitable(_nrt=False)(function)
 
 
@@ -1063,9 +1229,11 @@ def _registered() -> None:
 # `reduced` and `joint_loads` are not among them: a machine runs the code generated from its groups (symbolic.py),
 # and the general solver's reduction and joint loads are kept as the independent check of that code
 # (kinematics.make_reduced, the tests)
-COMPILED_FUNCTIONS = {"solve_poses": "(float64, float64[::1], int64, float64[::1], float64[:, ::1], boolean)",
-                      "kinetostatics": "(float64, float64, float64, float64[::1], int64, float64[::1], float64[:, ::1], "
-                                       "float64[:, ::1], float64[:, ::1])"}
+COMPILED_FUNCTIONS = {
+    "solve_poses": "(float64, float64[::1], int64, float64[::1], float64[:, ::1], boolean)",
+    "kinetostatics": "(float64, float64, float64, float64[::1], int64, float64[::1], float64[:, ::1], "
+    "float64[:, ::1], float64[:, ::1])",
+}
 
 
 @functools.cache
@@ -1089,8 +1257,11 @@ def compiled_announced(name: str):
 
     function = compiled(name)
     if not function.signatures and not FunctionCache(function.py_func)._cache_file._load_index():
-        print(f"note: compiling the linkage solver's {name} once (about 5-15 s; later runs load it at once)",
-              file=sys.stderr, flush=True)
+        print(
+            f"note: compiling the linkage solver's {name} once (about 5-15 s; later runs load it at once)",
+            file=sys.stderr,
+            flush=True,
+        )
     return function
 
 

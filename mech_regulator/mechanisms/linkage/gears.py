@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 from mech_regulator.mechanisms.linkage.model import GEAR, REVOLUTE, Joint, Linkage, LinkageError
 
-CENTRE_TOLERANCE = 1e-6   # relative mismatch of the centre distance and the given pitch radii still accepted [-]
-STEADY_TOLERANCE = 1e-9   # relative change of the centre distance (and of psi - theta_c, rad) over the turn [-]
-WHOLE_TOLERANCE = 1e-9    # distance of a gear's turns per crank turn from a whole number still called whole [-]
-CHECK_SAMPLES = 72        # crank angles over a turn at which the centres are checked
+CENTRE_TOLERANCE = 1e-6  # relative mismatch of the centre distance and the given pitch radii still accepted [-]
+STEADY_TOLERANCE = 1e-9  # relative change of the centre distance (and of psi - theta_c, rad) over the turn [-]
+WHOLE_TOLERANCE = 1e-9  # distance of a gear's turns per crank turn from a whole number still called whole [-]
+CHECK_SAMPLES = 72  # crank angles over a turn at which the centres are checked
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ class GearMesh:
         if self.radii is not None:
             r_a, r_b = self.radii
         else:
-            assert self.teeth is not None   # exactly one of teeth and radii
+            assert self.teeth is not None  # exactly one of teeth and radii
             z_a, z_b = self.teeth
             r_a, r_b = (distance * z / (abs(z_a - z_b) if self.internal else z_a + z_b) for z in (z_a, z_b))
         if not self.internal:
@@ -126,14 +126,18 @@ def next_gear(linkage: Linkage, known: set[str], rates: dict[str, float], solve_
         driver, carrier = mesh.other(name), carrier_of(linkage, mesh)
         for role, link in (("driven by", driver), ("on the carrier", carrier)):
             if link not in rates:
-                raise LinkageError(f"the gear {name} (mesh {mesh.name}) is {role} {link}, whose angle is not the "
-                                   "frame's, the crank's or another gear's; expected a gear meshing with the frame, "
-                                   "the crank or a gear, on such a carrier")
+                raise LinkageError(
+                    f"the gear {name} (mesh {mesh.name}) is {role} {link}, whose angle is not the "
+                    "frame's, the crank's or another gear's; expected a gear meshing with the frame, "
+                    "the crank or a gear, on such a carrier"
+                )
         gear = gear_of(mesh)
         own_centre = linkage.link(name).points[gear.centres[mesh.links.index(name)]]
         if own_centre != linkage.link(name).points[pivot.name]:
-            raise LinkageError(f"the gear {name} turns about {pivot.name} but its centre for the mesh {mesh.name} is "
-                               f"elsewhere; expected its centre point at its pivot {pivot.name}")
+            raise LinkageError(
+                f"the gear {name} turns about {pivot.name} but its centre for the mesh {mesh.name} is "
+                f"elsewhere; expected its centre point at its pivot {pivot.name}"
+            )
         pitch = _pitch(linkage, mesh, pivot, name, solve_at)
         k = pitch[0] / pitch[1] if mesh.links[1] == name else pitch[1] / pitch[0]
         phase = gear.phase if mesh.links[1] == name else -gear.phase * k
@@ -153,25 +157,35 @@ def _pitch(linkage: Linkage, mesh: Joint, pivot: Joint, name: str, solve_at) -> 
         poses = solve_at(2.0 * math.pi * k / CHECK_SAMPLES, False)
         centres = []
         for link, centre in zip(mesh.links, gear.centres):
-            on, point = ((pivot.other(name), linkage.link(pivot.other(name)).points[pivot.name]) if link == name
-                         else (link, linkage.link(link).points[centre]))
+            on, point = (
+                (pivot.other(name), linkage.link(pivot.other(name)).points[pivot.name])
+                if link == name
+                else (link, linkage.link(link).points[centre])
+            )
             centres.append(motion(poses[on], point)[0])
         line = centres[1] - centres[0]
         distances.append(abs(line))
         turns.append(cmath.phase(line) - poses[carrier][1])
     distance = distances[0]
     drift = max(abs(cmath.phase(cmath.exp(1j * (turn - turns[0])))) for turn in turns)
-    if distance == 0.0 or max(abs(d - distance) for d in distances) > STEADY_TOLERANCE * distance \
-            or drift > STEADY_TOLERANCE:
-        raise LinkageError(f"the gear mesh {mesh.name} ({mesh.links[0]}, {mesh.links[1]}): its centres "
-                           f"{', '.join(gear.centres)} are {min(distances):.6g} to {max(distances):.6g} m apart "
-                           f"and their line turns {drift:.3g} rad against the carrier {carrier} over the turn; "
-                           "expected centres a steady distance apart on the carrier (name it: carrier)")
+    if (
+        distance == 0.0
+        or max(abs(d - distance) for d in distances) > STEADY_TOLERANCE * distance
+        or drift > STEADY_TOLERANCE
+    ):
+        raise LinkageError(
+            f"the gear mesh {mesh.name} ({mesh.links[0]}, {mesh.links[1]}): its centres "
+            f"{', '.join(gear.centres)} are {min(distances):.6g} to {max(distances):.6g} m apart "
+            f"and their line turns {drift:.3g} rad against the carrier {carrier} over the turn; "
+            "expected centres a steady distance apart on the carrier (name it: carrier)"
+        )
     rho_a, rho_b = gear.signed_radii(distance)
     if abs(rho_a - rho_b - distance) > CENTRE_TOLERANCE * distance:
-        raise LinkageError(f"the gear mesh {mesh.name}: pitch radii {abs(rho_a):g} and {abs(rho_b):g} m "
-                           f"({'internal' if gear.internal else 'external'}) need the centres "
-                           f"{abs(rho_a - rho_b):g} m apart, but they are {distance:.6g} m apart")
+        raise LinkageError(
+            f"the gear mesh {mesh.name}: pitch radii {abs(rho_a):g} and {abs(rho_b):g} m "
+            f"({'internal' if gear.internal else 'external'}) need the centres "
+            f"{abs(rho_a - rho_b):g} m apart, but they are {distance:.6g} m apart"
+        )
     return rho_a, rho_b
 
 
@@ -184,6 +198,8 @@ def hanging_on_fractional_gears(linkage: Linkage, groups) -> list[str]:
             continue
         carried = [joint.name for joint in linkage.joints_of(group.link) if joint.kind != GEAR and joint != group.pivot]
         if carried:
-            found.append(f"the gear {group.link} turns {group.rate:.6g} times per crank turn and carries "
-                         f"{', '.join(carried)}: what hangs on it would not repeat each crank turn")
+            found.append(
+                f"the gear {group.link} turns {group.rate:.6g} times per crank turn and carries "
+                f"{', '.join(carried)}: what hangs on it would not repeat each crank turn"
+            )
     return found

@@ -41,7 +41,7 @@ from mech_regulator.mechanisms.linkage.model import Joint, Linkage, LinkageError
 Pose = list
 
 SUPPORTED_TYPES = ("RRR", "RRP", "RPR", "PRP", "RPP")
-PARALLELOGRAM_TOLERANCE = 1e-12   # relative difference of opposite sides still called equal (parallelogram_joint)
+PARALLELOGRAM_TOLERANCE = 1e-12  # relative difference of opposite sides still called equal (parallelogram_joint)
 
 
 @dataclass(frozen=True)
@@ -88,8 +88,9 @@ class RedundantLink:
         return (self.link,)
 
 
-def make_dyad(linkage: Linkage, links: tuple[str, str], internal: Joint, externals: tuple[Joint, Joint], branch: int
-              ) -> Dyad:
+def make_dyad(
+    linkage: Linkage, links: tuple[str, str], internal: Joint, externals: tuple[Joint, Joint], branch: int
+) -> Dyad:
     """The dyad of these links and joints in the stored order (PRR -> RRP, PPR -> RPP by swapping the ends);
     raises LinkageError for a PPP group (no position: its links can translate together) and for a link of an RRR
     group whose two joints are at one point (no direction)."""
@@ -97,15 +98,19 @@ def make_dyad(linkage: Linkage, links: tuple[str, str], internal: Joint, externa
     if letters in ("PRR", "PPR"):
         links, externals, letters = links[::-1], externals[::-1], letters[::-1]
     if letters not in SUPPORTED_TYPES:
-        raise LinkageError(f"the group of links {list(links)} has joints {letters} "
-                           f"({', '.join(j.name for j in (externals[0], internal, externals[1]))}); "
-                           f"expected a class-II group of type {', '.join(SUPPORTED_TYPES)}")
+        raise LinkageError(
+            f"the group of links {list(links)} has joints {letters} "
+            f"({', '.join(j.name for j in (externals[0], internal, externals[1]))}); "
+            f"expected a class-II group of type {', '.join(SUPPORTED_TYPES)}"
+        )
     for link, outer in zip(links, externals):
         points = linkage.link(link).points
         if letters == "RRR" and points[outer.name] == points[internal.name]:
-            raise LinkageError(f"the link {link} of the RRR group {internal.name} has its joints {outer.name} and "
-                               f"{internal.name} at one point [{points[outer.name].real:g}, "
-                               f"{points[outer.name].imag:g}] m; expected two distinct points")
+            raise LinkageError(
+                f"the link {link} of the RRR group {internal.name} has its joints {outer.name} and "
+                f"{internal.name} at one point [{points[outer.name].real:g}, "
+                f"{points[outer.name].imag:g}] m; expected two distinct points"
+            )
     return Dyad(links, internal, externals, letters, branch)
 
 
@@ -116,20 +121,23 @@ def parallelogram_joint(linkage: Linkage, dyad: Dyad) -> Joint | None:
         return None
     (L1, L2), (E1, E2), internal = dyad.links, dyad.externals, dyad.internal
     K1, K2 = E1.other(L1), E2.other(L2)
-    side1, side2 = (abs(linkage.link(link).points[internal.name] - linkage.link(link).points[outer.name])
-                    for link, outer in ((L1, E1), (L2, E2)))
+    side1, side2 = (
+        abs(linkage.link(link).points[internal.name] - linkage.link(link).points[outer.name])
+        for link, outer in ((L1, E1), (L2, E2))
+    )
     for joint in linkage.joints:
         if joint.kind == "revolute" and set(joint.links) == {K1, K2}:
             on_K1 = abs(linkage.link(K1).points[E1.name] - linkage.link(K1).points[joint.name])
             on_K2 = abs(linkage.link(K2).points[E2.name] - linkage.link(K2).points[joint.name])
-            if abs(on_K1 - side2) <= PARALLELOGRAM_TOLERANCE * side2 and \
-                    abs(on_K2 - side1) <= PARALLELOGRAM_TOLERANCE * side1:
+            if (
+                abs(on_K1 - side2) <= PARALLELOGRAM_TOLERANCE * side2
+                and abs(on_K2 - side1) <= PARALLELOGRAM_TOLERANCE * side1
+            ):
                 return joint
     return None
 
 
-def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[float, float, float], phi: float
-                    ) -> str:
+def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[float, float, float], phi: float) -> str:
     """The message of a group that flat.solve_poses could not solve at crank angle phi [rad] (its status and the
     numbers that explain it), naming the group, its links, the angle and why."""
     where = f"{group.name} (links {', '.join(group.links)})"
@@ -141,11 +149,12 @@ def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[flo
         return f"{where} {at}: its two guides are parallel, so the group has no single position"
     E1, E2 = group.externals
     if status == flat.RRR_APART:
-        why = (f"the distance {first:.6g} m between {E1.name} and {E2.name} is outside [{second:.6g}, {third:.6g}] "
-               "m")
+        why = f"the distance {first:.6g} m between {E1.name} and {E2.name} is outside [{second:.6g}, {third:.6g}] m"
     elif status == flat.RRP_GUIDE_FAR:
-        why = (f"the guide of {E2.name} passes {first:.6g} m from {E1.name}, farther than the link "
-               f"{group.links[0]}'s {second:.6g} m")
+        why = (
+            f"the guide of {E2.name} passes {first:.6g} m from {E1.name}, farther than the link "
+            f"{group.links[0]}'s {second:.6g} m"
+        )
     else:
         why = f"the guide passes {first:.6g} m from its pivot but the pivots are {second:.6g} m apart"
     return f"{where} {at} cannot be assembled: {why}"
@@ -154,9 +163,20 @@ def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[flo
 def packed(pose: Pose) -> list[float]:
     """A pose [r, theta, (r', theta', r'', theta'')] as flat.py's POSE_SIZE floats (missing derivatives: 0; then
     cos theta, sin theta)."""
-    r, theta, dr, dtheta, ddr, ddtheta = list(pose) + [0j, 0.0, 0j, 0.0][:6 - len(pose)]
-    return [r.real, r.imag, theta, dr.real, dr.imag, dtheta, ddr.real, ddr.imag, ddtheta, math.cos(theta),
-            math.sin(theta)]
+    r, theta, dr, dtheta, ddr, ddtheta = list(pose) + [0j, 0.0, 0j, 0.0][: 6 - len(pose)]
+    return [
+        r.real,
+        r.imag,
+        theta,
+        dr.real,
+        dr.imag,
+        dtheta,
+        ddr.real,
+        ddr.imag,
+        ddtheta,
+        math.cos(theta),
+        math.sin(theta),
+    ]
 
 
 def _rows(linkage: Linkage, poses: dict[str, Pose], joint: Joint) -> list[dict[str, tuple[float, float, float]]]:
@@ -165,4 +185,4 @@ def _rows(linkage: Linkage, poses: dict[str, Pose], joint: Joint) -> list[dict[s
     a, b = joint.links
     # plain lists: flat.joint_rows run as plain Python (a few µs)
     rows = flat.joint_rows(flat.joint_record(linkage, joint, {a: 0, b: 1}), 0, packed(poses[a]) + packed(poses[b]))
-    return [{a: tuple(rows[6 * r:6 * r + 3]), b: tuple(rows[6 * r + 3:6 * r + 6])} for r in range(2)]
+    return [{a: tuple(rows[6 * r : 6 * r + 3]), b: tuple(rows[6 * r + 3 : 6 * r + 6])} for r in range(2)]

@@ -28,8 +28,7 @@ Motion = tuple[complex, complex, complex]  # (P [m], dP/dphi [m/rad], d2P/dphi2 
 ASSEMBLY_SAMPLES = 720  # crank angles over a turn at which a linkage is checked to assemble (every 0.5 deg)
 
 
-def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]
-                ) -> Callable[[float, bool], dict[str, Pose]]:
+def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]) -> Callable[[float, bool], dict[str, Pose]]:
     """Build `solve_at(phi, derivatives=True) -> {link: pose}` placing the crank and these groups (a structure's,
     or the ones found so far) at crank angle phi [rad] (flat.solve_poses); raises LinkageError naming the group
     that cannot assemble, or is at a dead point, and the angle (groups.failure_message)."""
@@ -44,9 +43,17 @@ def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]
         if status != flat.SOLVED:
             raise LinkageError(failure_message(groups[group], status, tuple(numbers), phi))
         values = poses.tolist()
-        return {name: [complex(values[k], values[k + 1]), values[k + 2], complex(values[k + 3], values[k + 4]),
-                       values[k + 5], complex(values[k + 6], values[k + 7]), values[k + 8]]
-                for name, k in zip(names, range(0, len(values), flat.POSE_SIZE))}
+        return {
+            name: [
+                complex(values[k], values[k + 1]),
+                values[k + 2],
+                complex(values[k + 3], values[k + 4]),
+                values[k + 5],
+                complex(values[k + 6], values[k + 7]),
+                values[k + 8],
+            ]
+            for name, k in zip(names, range(0, len(values), flat.POSE_SIZE))
+        }
 
     return solve_at
 
@@ -62,8 +69,9 @@ def motion(pose: Pose, point: complex) -> Motion:
     return flat.motion(packed(pose), 0, point)
 
 
-def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
-                 ) -> Callable[[float], tuple[float, float, float, float, float]]:
+def make_reduced(
+    linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
+) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, q, q')` for this linkage by the general solver (the
     contract of mechanisms/__init__.py; flat.reduced_from_poses gives the sums): the compiled flat.reduced on the
     linkage's program; where it gives NaN (a group fails), the LinkageError of make_solver. A machine runs the code
@@ -75,7 +83,7 @@ def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, f
     def reduced(phi: float) -> tuple[float, float, float, float, float]:
         values = compiled(phi, program, 0)
         if math.isnan(values[0]):
-            make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
+            make_solver(linkage, structure.groups)(phi)  # raises the group's LinkageError
         return values
 
     return reduced
@@ -87,19 +95,21 @@ def moving_points(linkage: Linkage) -> list[tuple[str, str]]:
     joints' slider points that no revolute joint of the slider already marks, then the points of interest."""
     found: dict[str, str] = {}
     for joint in sorted(linkage.joints, key=lambda j: j.kind != "revolute"):
-        if joint.kind == "gear":   # a mesh has no point of its own (its gears' centres are pivots)
+        if joint.kind == "gear":  # a mesh has no point of its own (its gears' centres are pivots)
             continue
         link = joint.links[1]
-        if (linkage.frame in joint.links and joint.kind == "revolute") or joint.kind == "cam":   # a contact: no point
+        if (linkage.frame in joint.links and joint.kind == "revolute") or joint.kind == "cam":  # a contact: no point
             continue
         local = linkage.link(link).points[joint.name]
-        if joint.kind == "prismatic" and any(on == link and linkage.link(link).points[name] == local
-                                             for name, on in found.items()):
+        if joint.kind == "prismatic" and any(
+            on == link and linkage.link(link).points[name] == local for name, on in found.items()
+        ):
             continue
         found.setdefault(joint.name, link)
     for point in linkage.points:
-        found.setdefault(point, next(link.name for link in linkage.links
-                                     if link.name != linkage.frame and point in link.points))
+        found.setdefault(
+            point, next(link.name for link in linkage.links if link.name != linkage.frame and point in link.points)
+        )
     return list(found.items())
 
 
@@ -135,8 +145,11 @@ def assembly_failures(linkage: Linkage, structure: Structure, samples: int = ASS
                 group_spans[-1][1] = phi_deg
             else:
                 group_spans.append([phi_deg, phi_deg])
-    for group_spans in spans.values():   # a span through 0 deg is one: 342 to 378 deg, not 0 to 18 and 342 to 359.5
+    for group_spans in spans.values():  # a span through 0 deg is one: 342 to 378 deg, not 0 to 18 and 342 to 359.5
         if len(group_spans) > 1 and group_spans[0][0] == 0.0 and abs(group_spans[-1][1] - (360.0 - step)) < 1e-9:
             group_spans[-1][1] = group_spans.pop(0)[1] + 360.0
-    return [f"{what} fails for crank angles {', '.join(f'{lo:g} to {hi:g} deg' for lo, hi in group_spans)} "
-            f"(checked every {step:g} deg; at {first_reason[what]})" for what, group_spans in spans.items()]
+    return [
+        f"{what} fails for crank angles {', '.join(f'{lo:g} to {hi:g} deg' for lo, hi in group_spans)} "
+        f"(checked every {step:g} deg; at {first_reason[what]})"
+        for what, group_spans in spans.items()
+    ]

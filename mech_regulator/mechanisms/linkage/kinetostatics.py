@@ -59,12 +59,16 @@ def indeterminate(structure: Structure) -> str | None:
     groups' reactions yet (linkage/cam.py gives its contact force)."""
     cams = [group.pair.name for group in structure.groups if isinstance(group, CamFollower)]
     if cams:
-        return (f"the cam pair {cams[0]}'s contact is not in the kinetostatics by groups yet (its contact force is the "
-                "cam's own: `structure` prints the speed at which the follower jumps)")
+        return (
+            f"the cam pair {cams[0]}'s contact is not in the kinetostatics by groups yet (its contact force is the "
+            "cam's own: `structure` prints the speed at which the follower jumps)"
+        )
     if not any(isinstance(group, RedundantLink) for group in structure.groups):
         return None
-    return (f"a redundant constraint ({'; '.join(structure.redundant)}) makes the linkage statically indeterminate: "
-            "its joint reactions do not follow from equilibrium alone")
+    return (
+        f"a redundant constraint ({'; '.join(structure.redundant)}) makes the linkage statically indeterminate: "
+        "its joint reactions do not follow from equilibrium alone"
+    )
 
 
 def _program(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None) -> np.ndarray:
@@ -75,8 +79,9 @@ def _program(linkage: Linkage, structure: Structure, gravity: tuple[float, float
     return flat.encode(linkage, structure.groups, gravity)
 
 
-def make_kinetostatics(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
-                       ) -> Callable[[float, float, float, float], LinkageLoads]:
+def make_kinetostatics(
+    linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
+) -> Callable[[float, float, float, float], LinkageLoads]:
     """Build `loads(phi, omega, epsilon, Q) -> LinkageLoads` (module docstring; the compiled flat.kinetostatics), Q
     the generalised force on the output (a force along the output joint's guide on its slider [N], or a moment on
     the output link [N m]); raises the LinkageError of the group that fails at phi."""
@@ -85,27 +90,34 @@ def make_kinetostatics(linkage: Linkage, structure: Structure, gravity: tuple[fl
     n_poses, n_residual, n_multipliers = flat.workspace_sizes(program, 0)
     poses, scratch = np.empty(n_poses), np.empty(flat.SCRATCH_SHAPE)
     residual, multipliers = np.empty((n_residual, 2)), np.empty((n_multipliers, 2))
-    slots = {joint.name: int(program[flat.joint_map(program, 0) + 1 + flat.JOINT_SIZE + 2 * k + 1])
-             for k, joint in enumerate(linkage.joints)}
+    slots = {
+        joint.name: int(program[flat.joint_map(program, 0) + 1 + flat.JOINT_SIZE + 2 * k + 1])
+        for k, joint in enumerate(linkage.joints)
+    }
 
     def loads(phi: float, omega: float, epsilon: float, output_force: float = 0.0) -> LinkageLoads:
-        solved, constant, per_epsilon = kinetostatics(phi, omega, output_force, program, 0, poses, scratch, residual,
-                                                      multipliers)
+        solved, constant, per_epsilon = kinetostatics(
+            phi, omega, output_force, program, 0, poses, scratch, residual, multipliers
+        )
         if not solved:
-            make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
+            make_solver(linkage, structure.groups)(phi)  # raises the group's LinkageError
         first, second = multipliers[0::2] @ (1.0, epsilon), multipliers[1::2] @ (1.0, epsilon)
         reactions = {}
         for joint in linkage.joints:
             slot = slots[joint.name]
-            reactions[joint.name] = ((float(first[slot]), float(second[slot])) if joint.kind == PRISMATIC
-                                     else complex(first[slot], second[slot]))
+            reactions[joint.name] = (
+                (float(first[slot]), float(second[slot]))
+                if joint.kind == PRISMATIC
+                else complex(first[slot], second[slot])
+            )
         return LinkageLoads(reactions, float(constant + per_epsilon * epsilon))
 
     return loads
 
 
-def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
-                     ) -> tuple[Kinetostatics, tuple[str, ...]]:
+def make_joint_loads(
+    linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
+) -> tuple[Kinetostatics, tuple[str, ...]]:
     """The linkage's kinetostatics in the form joint friction reads (mechanisms.kinetostatics.JointLoads) and its
     joint names (the linkage's order): `loads(phi, omega, Q)` gives every joint's reaction
     affine in epsilon, `R = R0 + R1 epsilon`: a revolute joint's, the force on its first link from its second, Fx + i
@@ -126,10 +138,11 @@ def make_joint_loads(linkage: Linkage, structure: Structure, gravity: tuple[floa
 
     def loads(phi: float, omega: float, output_force: float) -> JointLoads:
         constant, per_epsilon, ratios, balancing, balancing_rate = joint_loads(phi, omega, output_force, program, 0)
-        if not math.isfinite(balancing):   # a square root of a negative number or a division by zero
-            make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
-            raise LinkageError(f"the linkage's joint reactions are not finite at crank angle {math.degrees(phi):.3f} "
-                               "deg")
+        if not math.isfinite(balancing):  # a square root of a negative number or a division by zero
+            make_solver(linkage, structure.groups)(phi)  # raises the group's LinkageError
+            raise LinkageError(
+                f"the linkage's joint reactions are not finite at crank angle {math.degrees(phi):.3f} deg"
+            )
         return JointLoads(constant, per_epsilon, (balancing, balancing_rate), ratios)
 
     return loads, tuple(joint.name for joint in linkage.joints)

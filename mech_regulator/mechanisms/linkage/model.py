@@ -126,37 +126,49 @@ class Linkage:
         for joint in self.joints:
             for link in joint.links:
                 if link not in names:
-                    raise LinkageError(f"joint '{joint.name}' names the link '{link}', which does not exist; "
-                                       f"expected one of {names}")
+                    raise LinkageError(
+                        f"joint '{joint.name}' names the link '{link}', which does not exist; expected one of {names}"
+                    )
             if joint.links[0] == joint.links[1]:
-                raise LinkageError(f"joint '{joint.name}' joins the link '{joint.links[0]}' to itself; expected two "
-                                   "different links")
+                raise LinkageError(
+                    f"joint '{joint.name}' joins the link '{joint.links[0]}' to itself; expected two different links"
+                )
             if joint.kind == GEAR:
                 if joint.gear.carrier is not None and joint.gear.carrier not in names:
-                    raise LinkageError(f"gear '{joint.name}' names the carrier '{joint.gear.carrier}', which does not "
-                                       f"exist; expected one of {names}")
+                    raise LinkageError(
+                        f"gear '{joint.name}' names the carrier '{joint.gear.carrier}', which does not "
+                        f"exist; expected one of {names}"
+                    )
                 for link, centre in zip(joint.links, joint.gear.centres):
                     if centre not in self.link(link).points:
-                        raise LinkageError(f"gear '{joint.name}' names the centre '{centre}' on the link '{link}', "
-                                           f"which has only {sorted(self.link(link).points)}")
+                        raise LinkageError(
+                            f"gear '{joint.name}' names the centre '{centre}' on the link '{link}', "
+                            f"which has only {sorted(self.link(link).points)}"
+                        )
             elif joint.kind != CAM:
                 for link in joint.links:
                     if joint.name not in self.link(link).points:
-                        raise LinkageError(f"joint '{joint.name}' ({joint.kind}) needs the point '{joint.name}' on the "
-                                           f"link '{link}', which has only {sorted(self.link(link).points)}")
+                        raise LinkageError(
+                            f"joint '{joint.name}' ({joint.kind}) needs the point '{joint.name}' on the "
+                            f"link '{link}', which has only {sorted(self.link(link).points)}"
+                        )
         if self.crank is not None:
             if self.crank not in names or self.crank == self.frame:
                 raise LinkageError(f"the crank '{self.crank}' must be a moving link, one of {self.moving_links()}")
             pivots = [j for j in self.joints_of(self.crank) if j.kind == REVOLUTE and self.frame in j.links]
             if len(pivots) != 1:
-                raise LinkageError(f"the crank '{self.crank}' must turn about one revolute joint with the frame "
-                                   f"'{self.frame}'; it has {len(pivots)}")
+                raise LinkageError(
+                    f"the crank '{self.crank}' must turn about one revolute joint with the frame "
+                    f"'{self.frame}'; it has {len(pivots)}"
+                )
         for point in self.points:
             if not any(point in link.points for link in self.links if link.name != self.frame):
                 raise LinkageError(f"the point of interest '{point}' is on no moving link")
         if self.output_joint is not None and self.joint(self.output_joint).kind != PRISMATIC:
-            raise LinkageError(f"the output joint '{self.output_joint}' is {self.joint(self.output_joint).kind}; "
-                               "expected a prismatic joint (its travel is the output coordinate)")
+            raise LinkageError(
+                f"the output joint '{self.output_joint}' is {self.joint(self.output_joint).kind}; "
+                "expected a prismatic joint (its travel is the output coordinate)"
+            )
         if self.output_link is not None and self.output_link not in self.moving_links():
             raise LinkageError(f"the output link '{self.output_link}' is not a moving link {self.moving_links()}")
 

@@ -32,8 +32,8 @@ from mech_regulator.mechanisms.linkage.groups import Dyad, RedundantLink, make_d
 from mech_regulator.mechanisms.linkage.kinematics import make_solver, motion
 from mech_regulator.mechanisms.linkage.model import CAM, GEAR, PRISMATIC, REVOLUTE, Linkage, LinkageError
 
-REDUNDANCY_SAMPLES = 72          # crank angles over a turn at which a redundant link's distance is checked
-REDUNDANCY_TOLERANCE = 1e-9      # relative change of that distance still called constant [-]
+REDUNDANCY_SAMPLES = 72  # crank angles over a turn at which a redundant link's distance is checked
+REDUNDANCY_TOLERANCE = 1e-9  # relative change of that distance still called constant [-]
 
 
 @dataclass(frozen=True)
@@ -58,42 +58,61 @@ class Structure:
 
     def formula(self) -> str:
         """The count written out, e.g. 'W = 3*3 - (2*4 + 0 - 0 - 0) - 0 = 1'."""
-        return (f"W = 3*{self.moving_links} - (2*{self.lower_pairs} + {self.higher_pairs} - {len(self.repeated)} - "
-                f"{len(self.redundant)}) - {len(self.passive)} = {self.freedom}")
+        return (
+            f"W = 3*{self.moving_links} - (2*{self.lower_pairs} + {self.higher_pairs} - {len(self.repeated)} - "
+            f"{len(self.redundant)}) - {len(self.passive)} = {self.freedom}"
+        )
 
     def refusal(self) -> str | None:
         """Why this linkage cannot be driven by its one crank and solved group by group; None when it can."""
         if self.freedom != 1:
-            return (f"the linkage has {self.formula()}; expected W = 1 (one driving crank): "
-                    + ("it moves with more freedoms than the crank fixes" if self.freedom > 1 else
-                       "it is a structure (or over-constrained): it cannot move"))
+            return f"the linkage has {self.formula()}; expected W = 1 (one driving crank): " + (
+                "it moves with more freedoms than the crank fixes"
+                if self.freedom > 1
+                else "it is a structure (or over-constrained): it cannot move"
+            )
         if self.undecomposed is not None:
             return self.undecomposed
         return None
 
     def report(self) -> list[str]:
         """The analysis as text lines (the `structure` command prints them)."""
-        lines = [f"moving links n = {self.moving_links}, lower pairs p5 = {self.lower_pairs}, higher pairs p4 = "
-                 f"{self.higher_pairs}", self.formula()]
-        for title, found in (("repeated constraint", self.repeated), ("redundant constraint", self.redundant),
-                             ("passive freedom", self.passive)):
+        lines = [
+            f"moving links n = {self.moving_links}, lower pairs p5 = {self.lower_pairs}, higher pairs p4 = "
+            f"{self.higher_pairs}",
+            self.formula(),
+        ]
+        for title, found in (
+            ("repeated constraint", self.repeated),
+            ("redundant constraint", self.redundant),
+            ("passive freedom", self.passive),
+        ):
             lines += [f"{title}: {item}" for item in found]
         for number, group in enumerate(self.groups, start=1):
             if isinstance(group, Dyad):
                 joints = ", ".join(f"{j.name} ({j.kind})" for j in group.joints)
-                branch = (f"the parallelogram {group.parallelogram.name} {group.externals[0].name} "
-                          f"{group.internal.name} {group.externals[1].name} through its change points"
-                          if group.parallelogram is not None else f"branch {group.branch:+d}")
-                lines.append(f"group {number}: class II, type {group.kind}, links {group.links[0]} + {group.links[1]}, "
-                             f"joints {joints}, {branch}")
+                branch = (
+                    f"the parallelogram {group.parallelogram.name} {group.externals[0].name} "
+                    f"{group.internal.name} {group.externals[1].name} through its change points"
+                    if group.parallelogram is not None
+                    else f"branch {group.branch:+d}"
+                )
+                lines.append(
+                    f"group {number}: class II, type {group.kind}, links {group.links[0]} + {group.links[1]}, "
+                    f"joints {joints}, {branch}"
+                )
             elif isinstance(group, gears.GearGroup):
-                lines.append(f"group {number}: gear {group.link} about {group.pivot.name}, mesh {group.mesh.name} with "
-                             f"{group.driver} on {group.carrier}: ratio {group.ratio:+.6g}, pitch radii "
-                             f"{abs(group.pitch[0]):.6g} and {abs(group.pitch[1]):.6g} m, {group.rate:+.6g} turns per "
-                             "crank turn")
+                lines.append(
+                    f"group {number}: gear {group.link} about {group.pivot.name}, mesh {group.mesh.name} with "
+                    f"{group.driver} on {group.carrier}: ratio {group.ratio:+.6g}, pitch radii "
+                    f"{abs(group.pitch[0]):.6g} and {abs(group.pitch[1]):.6g} m, {group.rate:+.6g} turns per "
+                    "crank turn"
+                )
             else:
-                lines.append(f"group {number}: {group.name} (links {' + '.join(group.links)}, joints "
-                             f"{', '.join(f'{j.name} ({j.kind})' for j in group.joints)})")
+                lines.append(
+                    f"group {number}: {group.name} (links {' + '.join(group.links)}, joints "
+                    f"{', '.join(f'{j.name} ({j.kind})' for j in group.joints)})"
+                )
         if self.undecomposed is not None:
             lines.append(f"not decomposed: {self.undecomposed}")
         return lines
@@ -110,8 +129,9 @@ def analyse(linkage: Linkage) -> Structure:
     undecomposed = None
     if linkage.crank is not None:
         undecomposed = _decompose(linkage, groups, redundant)
-    return Structure(len(moving), lower, higher, _repeated(linkage), tuple(redundant), _passive(linkage),
-                     tuple(groups), undecomposed)
+    return Structure(
+        len(moving), lower, higher, _repeated(linkage), tuple(redundant), _passive(linkage), tuple(groups), undecomposed
+    )
 
 
 def _repeated(linkage: Linkage) -> tuple[str, ...]:
@@ -119,15 +139,17 @@ def _repeated(linkage: Linkage) -> tuple[str, ...]:
     prismatic = {frozenset(joint.links): joint.name for joint in linkage.joints if joint.kind == PRISMATIC}
     order = {link.name: index for index, link in enumerate(linkage.links)}
     trios = set()
-    for first, second in itertools.combinations(prismatic, 2):   # two prismatic joints sharing a link ...
+    for first, second in itertools.combinations(prismatic, 2):  # two prismatic joints sharing a link ...
         trio = first | second
-        if len(trio) == 3 and frozenset(trio - (first & second)) in prismatic:   # ... closed by a third
+        if len(trio) == 3 and frozenset(trio - (first & second)) in prismatic:  # ... closed by a third
             trios.add(tuple(sorted(trio, key=order.__getitem__)))
     found = []
     for trio in sorted(trios, key=lambda names: [order[name] for name in names]):
         pairs = [frozenset(pair) for pair in itertools.combinations(trio, 2)]
-        found.append(f"links {', '.join(trio)} form a triangle of prismatic joints "
-                     f"{', '.join(prismatic[pair] for pair in pairs)}: their relative rotation is constrained twice")
+        found.append(
+            f"links {', '.join(trio)} form a triangle of prismatic joints "
+            f"{', '.join(prismatic[pair] for pair in pairs)}: their relative rotation is constrained twice"
+        )
     return tuple(found)
 
 
@@ -137,8 +159,12 @@ def _passive(linkage: Linkage) -> tuple[str, ...]:
     for link in linkage.links:
         joints = linkage.joints_of(link.name)
         revolute = [joint for joint in joints if joint.kind == REVOLUTE]
-        if (link.roller_radius is not None and len(revolute) == 1 and len(joints) > 1
-                and all(joint.kind == CAM for joint in joints if joint is not revolute[0])):
+        if (
+            link.roller_radius is not None
+            and len(revolute) == 1
+            and len(joints) > 1
+            and all(joint.kind == CAM for joint in joints if joint is not revolute[0])
+        ):
             found.append(f"the roller {link.name} spins about {revolute[0].name} without moving anything else")
     return tuple(found)
 
@@ -147,42 +173,52 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
     """Fill `groups` from the crank outward and `redundant` with the redundant links found; return a description
     of the links that remain undecomposed, or None."""
     known = {linkage.frame, linkage.crank}
-    rates = {linkage.frame: 0.0, linkage.crank: 1.0}   # turns per crank turn of the links whose angle is phi's
+    rates = {linkage.frame: 0.0, linkage.crank: 1.0}  # turns per crank turn of the links whose angle is phi's
     while True:
         remaining = [name for name in linkage.moving_links() if name not in known]
         if not remaining:
             _keep_held_parallelograms(groups)
             fractional = gears.hanging_on_fractional_gears(linkage, groups)
             if fractional:
-                raise LinkageError("; ".join(fractional) + "; expected gears that turn a whole number of times per "
-                                                           "crank turn wherever a mechanism hangs on them")
+                raise LinkageError(
+                    "; ".join(fractional) + "; expected gears that turn a whole number of times per "
+                    "crank turn wherever a mechanism hangs on them"
+                )
             return None
-        group = (_next_dyad(linkage, known, remaining) or next_cam_follower(linkage, known)
-                 or gears.next_gear(linkage, known, rates, make_solver(linkage, groups))
-                 or _next_redundant_link(linkage, known, remaining, groups))
+        group = (
+            _next_dyad(linkage, known, remaining)
+            or next_cam_follower(linkage, known)
+            or gears.next_gear(linkage, known, rates, make_solver(linkage, groups))
+            or _next_redundant_link(linkage, known, remaining, groups)
+        )
         if isinstance(group, gears.GearGroup):
             rates[group.link] = group.rate
-        if isinstance(group, Dyad):   # tried as the parallelogram it may be (module docstring)
+        if isinstance(group, Dyad):  # tried as the parallelogram it may be (module docstring)
             group = dataclasses.replace(group, parallelogram=parallelogram_joint(linkage, group))
         if group is None:
             joints = [j for j in linkage.joints if any(link in remaining for link in j.links)]
             letters = "".join(sorted(j.letter for j in joints))
             lower = sum(1 for j in joints if j.kind in (REVOLUTE, PRISMATIC))
-            return (f"the links {remaining} with their joints {[f'{j.name} ({j.kind})' for j in joints]} form no "
-                    f"class-II group (n = {len(remaining)}, p5 = {lower}, p4 = {len(joints) - lower}, joints "
-                    f"{letters}): a group of class III or higher, or one with a higher pair, which is not supported")
+            return (
+                f"the links {remaining} with their joints {[f'{j.name} ({j.kind})' for j in joints]} form no "
+                f"class-II group (n = {len(remaining)}, p5 = {lower}, p4 = {len(joints) - lower}, joints "
+                f"{letters}): a group of class III or higher, or one with a higher pair, which is not supported"
+            )
         groups.append(group)
         if isinstance(group, RedundantLink):
-            redundant.append(f"the link {group.link} joins {group.joints[0].name} and {group.joints[1].name}, whose "
-                             "distance the rest of the linkage already keeps")
+            redundant.append(
+                f"the link {group.link} joins {group.joints[0].name} and {group.joints[1].name}, whose "
+                "distance the rest of the linkage already keeps"
+            )
         known.update(group.links)
 
 
 def _keep_held_parallelograms(groups: list) -> None:
     """Turn back into a branch every parallelogram group on which no redundant link hangs (nothing holds it through
     its change points: there it could fold, so the assembly check refuses it if its crank reaches them)."""
-    held = {link for group in groups if isinstance(group, RedundantLink)
-            for joint in group.joints for link in joint.links}
+    held = {
+        link for group in groups if isinstance(group, RedundantLink) for joint in group.joints for link in joint.links
+    }
     for k, group in enumerate(groups):
         if isinstance(group, Dyad) and group.parallelogram is not None and not held & set(group.links):
             groups[k] = dataclasses.replace(group, parallelogram=None)
@@ -193,8 +229,10 @@ def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad 
     else) to known links."""
     unknown = set(remaining)
     order = {name: index for index, name in enumerate(remaining)}
-    pairs = sorted({tuple(sorted(joint.links, key=order.__getitem__)) for joint in linkage.joints
-                    if set(joint.links) <= unknown}, key=lambda pair: (order[pair[0]], order[pair[1]]))
+    pairs = sorted(
+        {tuple(sorted(joint.links, key=order.__getitem__)) for joint in linkage.joints if set(joint.links) <= unknown},
+        key=lambda pair: (order[pair[0]], order[pair[1]]),
+    )
     for first, second in pairs:
         between = [j for j in linkage.joints_of(first) if j.other(first) == second]
         outside = [[j for j in linkage.joints_of(link) if j.other(link) in known] for link in (first, second)]
@@ -202,16 +240,20 @@ def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad 
             joints = [between[0], outside[0][0], outside[1][0]]
             if any(joint.kind in (CAM, GEAR) for joint in joints):
                 continue
-            return make_dyad(linkage, (first, second), between[0], (outside[0][0], outside[1][0]),
-                             linkage.branches.get(between[0].name, 1))
+            return make_dyad(
+                linkage,
+                (first, second),
+                between[0],
+                (outside[0][0], outside[1][0]),
+                linkage.branches.get(between[0].name, 1),
+            )
     return None
 
 
-def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str], groups: list
-                         ) -> RedundantLink | None:
+def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str], groups: list) -> RedundantLink | None:
     """An unknown link with exactly two revolute joints, both to known links, whose two points stay at the link's
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
-    lower_groups = [group for group in groups if not isinstance(group, CamFollower)]   # placed by flat.py
+    lower_groups = [group for group in groups if not isinstance(group, CamFollower)]  # placed by flat.py
     solved = {linkage.frame, linkage.crank}.union(*(group.links for group in lower_groups))
     solve_at = make_solver(linkage, lower_groups)
     for name in remaining:

@@ -71,6 +71,7 @@ JOINT_LOADS_NAME = "linkage_joint_loads"
 # ---------------------------------------------------------------------------------------------------------------
 # The key: the program's structural entries exactly, its numbers as 0, 1, -1 or 'x'
 
+
 def _structural_positions(program: np.ndarray) -> set[int]:
     """The positions in a program (flat.encode's layout, base 0) of its counts, codes, link indices, branches and
     joint-map entries (everything that is not a length, angle, mass or gravity)."""
@@ -80,7 +81,7 @@ def _structural_positions(program: np.ndarray) -> set[int]:
     def joint(j):
         positions.update((j, j + 1, j + 2))
         if program[j] == flat.GEAR_MESH:
-            positions.add(j + 9)   # the carrier link
+            positions.add(j + 9)  # the carrier link
 
     joint(5)
     g = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
@@ -88,7 +89,7 @@ def _structural_positions(program: np.ndarray) -> set[int]:
         positions.update(range(g, g + 4))
         for k in range(3):
             joint(g + 4 + flat.JOINT_SIZE * k)
-        if int(program[g]) == flat.CAM_FOLLOWER:   # where its law is (a cam law's pieces are read at run time)
+        if int(program[g]) == flat.CAM_FOLLOWER:  # where its law is (a cam law's pieces are read at run time)
             positions.add(g + 4 + 2 * flat.JOINT_SIZE + 3)
         g += flat.GROUP_SIZE
     positions.add(g)
@@ -123,6 +124,7 @@ def program_key(program: np.ndarray, outputs: Sequence[int]) -> str:
 # ---------------------------------------------------------------------------------------------------------------
 # Generation (sympy is imported only here: a cached source needs none)
 
+
 class _Writer:
     """Builds the expressions group by group and writes them as assignments. Complex quantities are (re, im) pairs
     of sympy expressions. Every symbol that stands for a function of phi has its derivative with respect to phi in
@@ -137,7 +139,7 @@ class _Writer:
         self.rate: dict[object, object] = {}
         self.lines: list[str] = []
         self.count = 0
-        self.laws = False   # a cam follower's law is evaluated: the function nests flat.law_at
+        self.laws = False  # a cam follower's law is evaluated: the function nests flat.law_at
         cos_phi, sin_phi, phi = sympy.symbols("cos_phi sin_phi phi")
         self.rate[cos_phi], self.rate[sin_phi], self.rate[phi] = -sin_phi, cos_phi, sympy.Integer(1)
         self.crank_turn = (cos_phi, sin_phi)
@@ -189,8 +191,9 @@ class _Writer:
                 targets.append(symbol)
                 wanted.append((symbol, expr))
         if wanted:
-            common, reduced = sp.cse([expr for _, expr in wanted],
-                                     symbols=sp.numbered_symbols(f"t{self.count}_"), order="none")
+            common, reduced = sp.cse(
+                [expr for _, expr in wanted], symbols=sp.numbered_symbols(f"t{self.count}_"), order="none"
+            )
             self.lines += [f"{name} = {sp.pycode(value)}" for name, value in common]
             self.lines += [f"{symbol} = {sp.pycode(value)}" for (symbol, _), value in zip(wanted, reduced)]
         return targets
@@ -203,7 +206,7 @@ class _Writer:
         seconds = [self.rate_of(expr) for expr in firsts]
         symbols = self.assign(list(exprs) + firsts + seconds)
         n = len(exprs)
-        self._chain(symbols[:n], symbols[n:2 * n], symbols[2 * n:])
+        self._chain(symbols[:n], symbols[n : 2 * n], symbols[2 * n :])
         return symbols[:n]
 
     def _chain(self, values, firsts, seconds) -> None:
@@ -220,13 +223,13 @@ class _Writer:
         """sqrt(expr) with its derivatives written through the root itself, s' = a' / (2 s), s'' = (a'' - 2 s'^2)
         / (2 s) (a = expr), so that the code has one square root and no fractional power."""
         sp = self.sp
-        argument, = self.jets([expr])
+        (argument,) = self.jets([expr])
         rate = self.rate_of(argument)
         curvature = self.rate_of(rate)
-        value, = self.assign([sp.sqrt(argument)])
-        half_inverse, = self.assign([1 / (2 * value)])
-        first, = self.assign([rate * half_inverse])
-        second, = self.assign([(curvature - 2 * first * first) * half_inverse])
+        (value,) = self.assign([sp.sqrt(argument)])
+        (half_inverse,) = self.assign([1 / (2 * value)])
+        (first,) = self.assign([rate * half_inverse])
+        (second,) = self.assign([(curvature - 2 * first * first) * half_inverse])
         self._chain([value], [first], [second])
         return value
 
@@ -274,7 +277,7 @@ class _Poses:
         zero, one = writer.sp.Integer(0), writer.sp.Integer(1)
         self.origin = {0: (zero, zero)}
         self.turn = {0: (one, zero)}
-        self.cams: list = []   # (s, s', cam record) of each cam follower group (_place_cam_follower)
+        self.cams: list = []  # (s, s', cam record) of each cam follower group (_place_cam_follower)
         self.angle = {0: zero}
 
     def point(self, j: int, link: int):
@@ -335,19 +338,19 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     if kind == flat.REDUNDANT:
         poses.swing(E1, Ji, L1, poses.point(E1, w.other(E1, L1)), poses.point(Ji, w.other(Ji, L1)))
         return
-    if kind == flat.GEAR:   # flat.place_group's gear: theta_L = theta_c + k (theta_G - theta_c) + phase_L
+    if kind == flat.GEAR:  # flat.place_group's gear: theta_L = theta_c + k (theta_G - theta_c) + phase_L
         rho_a, rho_b = w.number(Ji + 7), w.number(Ji + 8)
         ratio = rho_a / rho_b if int(program[Ji + 2]) == L1 else rho_b / rho_a
         carrier = poses.angle[int(program[Ji + 9])]
-        angle, = w.jets([carrier + ratio * (poses.angle[w.other(Ji, L1)] - carrier) + w.number(g + 1)])
+        (angle,) = w.jets([carrier + ratio * (poses.angle[w.other(Ji, L1)] - carrier) + w.number(g + 1)])
         poses.angle[L1] = angle
         poses.pin(E1, L1, poses.point(E1, w.other(E1, L1)), (sp.cos(angle), sp.sin(angle)))
         return
     K1, K2 = w.other(E1, L1), w.other(E2, L2)
-    if kind in (0, 1):   # RRR, RRP
+    if kind in (0, 1):  # RRR, RRP
         B = poses.point(E1, K1)
         l1_square = _square(_sub(w.local(Ji, L1), w.local(E1, L1)))
-        if kind == 0 and sigma == 0:   # the parallelogram P B C D: C = D + (B - P), B - P on K1 (flat.place_group)
+        if kind == 0 and sigma == 0:  # the parallelogram P B C D: C = D + (B - P), B - P on K1 (flat.place_group)
             D = poses.point(E2, K2)
             C = tuple(w.jets(list(_add(D, _mul((w.number(E1 + 7), w.number(E1 + 8)), poses.turn[K1])))))
             poses.swing(E2, Ji, L2, D, C)
@@ -355,9 +358,9 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
             D = poses.point(E2, K2)
             l2_square = _square(_sub(w.local(Ji, L2), w.local(E2, L2)))
             v = tuple(w.jets(list(_sub(D, B))))
-            f_square, = w.jets([_square(v)])
-            along, = w.jets([(l1_square - l2_square + f_square) / (2 * f_square)])
-            height, = w.jets([sigma * w.root(l1_square / f_square - along * along)])
+            (f_square,) = w.jets([_square(v)])
+            (along,) = w.jets([(l1_square - l2_square + f_square) / (2 * f_square)])
+            (height,) = w.jets([sigma * w.root(l1_square / f_square - along * along)])
             C = _add(B, (along * v[0] - height * v[1], along * v[1] + height * v[0]))
             C = tuple(w.jets(list(C)))
             poses.swing(E2, Ji, L2, D, C)
@@ -365,33 +368,39 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
             turn2 = poses.across_turn(E2, K2, poses.turn[K2])
             c, direction = poses.line(E2, L2, turn2)
             m = tuple(w.jets(list(_sub(_add(c, _mul(w.local(Ji, L2), turn2)), B))))
-            along, = w.jets([_dot(m, direction)])
-            root, = w.jets([sigma * w.root(along * along - _square(m) + l1_square)])
+            (along,) = w.jets([_dot(m, direction)])
+            (root,) = w.jets([sigma * w.root(along * along - _square(m) + l1_square)])
             C = _add(_add(m, B), _scale(direction, root - along))
             C = tuple(w.jets(list(C)))
             poses.pin(Ji, L2, C, turn2)
         poses.swing(E1, Ji, L1, B, C)
         return
-    if kind == 2:   # RPR
+    if kind == 2:  # RPR
         guide, slider = int(program[Ji + 1]), int(program[Ji + 2])
         pivot_g, pivot_s = (E1, E2) if guide == L1 else (E2, E1)
         Pg = poses.point(pivot_g, w.other(pivot_g, guide))
         Ps = poses.point(pivot_s, w.other(pivot_s, slider))
         u = (w.number(Ji + 7), w.number(Ji + 8))
         alpha = float(program[Ji + 9])
-        rotation = (sp.Integer(1), sp.Integer(0)) if alpha == 0.0 else (sp.cos(w.number(Ji + 9)),
-                                                                       sp.sin(w.number(Ji + 9)))
-        offset = _cross(_add(_sub(w.local(pivot_g, guide), w.local(Ji, guide)),
-                             _mul(_sub(w.local(Ji, slider), w.local(pivot_s, slider)), rotation)), u)
+        rotation = (
+            (sp.Integer(1), sp.Integer(0)) if alpha == 0.0 else (sp.cos(w.number(Ji + 9)), sp.sin(w.number(Ji + 9)))
+        )
+        offset = _cross(
+            _add(
+                _sub(w.local(pivot_g, guide), w.local(Ji, guide)),
+                _mul(_sub(w.local(Ji, slider), w.local(pivot_s, slider)), rotation),
+            ),
+            u,
+        )
         span = tuple(w.jets(list(_sub(Ps, Pg))))
-        rho_square, = w.jets([_square(span)])
-        root, = w.jets([sigma * w.root(rho_square - offset * offset)])
+        (rho_square,) = w.jets([_square(span)])
+        (root,) = w.jets([sigma * w.root(rho_square - offset * offset)])
         turn_g = _scale(_mul(_mul(span, _conj(u)), (root, offset)), 1 / rho_square)
         poses.pin(pivot_g, guide, Pg, turn_g)
         poses.pin(pivot_s, slider, Ps, _mul(poses.turn[guide], rotation))
         return
     turn2 = poses.across_turn(E2, K2, poses.turn[K2])
-    if kind == 3:   # PRP
+    if kind == 3:  # PRP
         turn1 = poses.across_turn(E1, K1, poses.turn[K1])
         c1, w1 = poses.line(E1, L1, turn1)
         c2, w2 = poses.line(E2, L2, turn2)
@@ -419,14 +428,17 @@ def _place_cam_follower(poses: _Poses, program: np.ndarray, g: int) -> None:
     guide, pin, cam = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
     w.count += 1
     s, ds, dds = sp.symbols(f"s{w.count} ds{w.count} dds{w.count}")
-    w.lines.append(f"{s}, {ds}, {dds} = law_at(phi - {sp.pycode(w.number(cam + 4))}, p, int(at) + "
-                   f"{cam + int(program[cam + 3])})")
+    w.lines.append(
+        f"{s}, {ds}, {dds} = law_at(phi - {sp.pycode(w.number(cam + 4))}, p, int(at) + {cam + int(program[cam + 3])})"
+    )
     w.rate[s], w.rate[ds], w.rate[dds] = ds, dds, "unknown"
     w.laws = True
-    if float(program[guide]) != 0.0:   # translating
+    if float(program[guide]) != 0.0:  # translating
         turn = poses.across_turn(guide, 0, poses.turn[0])
         u = (w.number(guide + 7), w.number(guide + 8))
-        origin = _sub(_add(poses.point(guide, 0), _scale(u, w.number(cam + 5) + s)), _mul(w.local(guide, follower), turn))
+        origin = _sub(
+            _add(poses.point(guide, 0), _scale(u, w.number(cam + 5) + s)), _mul(w.local(guide, follower), turn)
+        )
         poses.set(follower, origin, turn)
     else:
         theta = w.number(cam + 5) + sigma * s
@@ -473,7 +485,7 @@ def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
         centre = _add(poses.origin[link], _mul(local_centre, turn))
         dS = (rate(centre[0]), rate(centre[1]))
         weight += mass * _dot(dS, gravity)
-        if link == crank:   # turning about its pivot at theta' = 1: a constant m |c - p_A|^2 + I, no dJ
+        if link == crank:  # turning about its pivot at theta' = 1: a constant m |c - p_A|^2 + I, no dJ
             J += mass * _square(_sub(local_centre, pivot_crank)) + inertia
             continue
         ddS = (rate(dS[0]), rate(dS[1]))
@@ -481,7 +493,7 @@ def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
         ddtheta = turn[0] * rate(rate(turn[1])) - turn[1] * rate(rate(turn[0]))
         J += mass * _square(dS) + inertia * dtheta * dtheta
         dJ += 2 * (mass * _dot(dS, ddS) + inertia * dtheta * ddtheta)
-    for s, ds, cam in poses.cams:   # the cam followers' springs, -(F0 + k s) s' (flat.cam_springs)
+    for s, ds, cam in poses.cams:  # the cam followers' springs, -(F0 + k s) s' (flat.cam_springs)
         weight -= (writer.number(cam + 7) + writer.number(cam + 6) * s) * ds
     results = [J, dJ, weight]
     kind = int(program[3])
@@ -498,17 +510,26 @@ def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
         results += [q, rate(q)]
     if not records and kind == 1:
         turn = poses.turn[int(program[4])]
-        angle, = writer.assign([sp.atan2(turn[1], turn[0])])
+        (angle,) = writer.assign([sp.atan2(turn[1], turn[0])])
         reference = writer.number(flat.OUTPUT_REFERENCE)
-        results += [angle - 2 * sp.pi * sp.floor((angle - reference) / (2 * sp.pi) + sp.Rational(1, 2)),
-                    turn[0] * rate(turn[1]) - turn[1] * rate(turn[0])]
+        results += [
+            angle - 2 * sp.pi * sp.floor((angle - reference) / (2 * sp.pi) + sp.Rational(1, 2)),
+            turn[0] * rate(turn[1]) - turn[1] * rate(turn[0]),
+        ]
     elif not records:
         results += [sp.Integer(0), sp.Integer(0)]
     final = writer.assign(results)
-    doc = ('"""Generated by mechanisms.linkage.symbolic: (J_links [kg m^2], dJ/dphi [kg m^2/rad], M_weight [N m], '
-           'then q, dq/dphi per output) at crank angle phi [rad], the program at p[offset:]."""')
-    return _function_source(writer, name, "phi, p, offset", doc,
-                            ", ".join(sp.pycode(value) if not value.is_Symbol else str(value) for value in final))
+    doc = (
+        '"""Generated by mechanisms.linkage.symbolic: (J_links [kg m^2], dJ/dphi [kg m^2/rad], M_weight [N m], '
+        'then q, dq/dphi per output) at crank angle phi [rad], the program at p[offset:]."""'
+    )
+    return _function_source(
+        writer,
+        name,
+        "phi, p, offset",
+        doc,
+        ", ".join(sp.pycode(value) if not value.is_Symbol else str(value) for value in final),
+    )
 
 
 def _function_source(writer: _Writer, name: str, arguments: str, doc: str, returned: str) -> str:
@@ -517,7 +538,7 @@ def _function_source(writer: _Writer, name: str, arguments: str, doc: str, retur
     # an unsigned offset: compiled, p[at + i] then needs no check for a negative index (some 2 ns a read)
     reads = [f"{symbol} = p[at + {i}]" for i, symbol in sorted(writer.read.items())]
     body = ["at = np.uint64(offset)", "cos_phi = math.cos(phi)", "sin_phi = math.sin(phi)"] + reads + writer.lines
-    if writer.laws:   # flat.law_at's own source, nested (numba compiles an inner function called in place)
+    if writer.laws:  # flat.law_at's own source, nested (numba compiles an inner function called in place)
         import inspect
 
         body = inspect.getsource(flat.law_at).rstrip().split("\n") + body
@@ -527,6 +548,7 @@ def _function_source(writer: _Writer, name: str, arguments: str, doc: str, retur
 
 # ---------------------------------------------------------------------------------------------------------------
 # The kinetostatics (flat.kinetostatics and flat.joint_reactions, written out per linkage)
+
 
 def _joint_rows(poses: _Poses, j: int):
     """flat.joint_rows of the joint record at j as expressions: its two constraint rows by (x, y, theta) of its
@@ -544,12 +566,19 @@ def _joint_rows(poses: _Poses, j: int):
     if float(w.program[j]) == flat.GEAR_MESH:
         line = _sub(_add(poses.origin[b], qb), _add(poses.origin[a], qa))
         u = _scale(line, 1 / sp.sqrt(_square(line)))
-        return (((-u[1], u[0], w.number(j + 7) + _dot(qa, u)), (u[1], -u[0], -w.number(j + 8) - _dot(qb, u))),
-                ((zero, zero, zero), (zero, zero, zero)))
+        return (
+            ((-u[1], u[0], w.number(j + 7) + _dot(qa, u)), (u[1], -u[0], -w.number(j + 8) - _dot(qb, u))),
+            ((zero, zero, zero), (zero, zero, zero)),
+        )
     direction = _mul((w.number(j + 7), w.number(j + 8)), poses.turn[a])
     d = _sub(_add(poses.origin[b], qb), _add(poses.origin[a], qa))
-    return (((direction[1], -direction[0], -_dot(_add(qa, d), direction)),
-             (-direction[1], direction[0], _dot(qb, direction))), ((zero, zero, -one), (zero, zero, one)))
+    return (
+        (
+            (direction[1], -direction[0], -_dot(_add(qa, d), direction)),
+            (-direction[1], direction[0], _dot(qb, direction)),
+        ),
+        ((zero, zero, -one), (zero, zero, one)),
+    )
 
 
 def _angular_rate(poses: _Poses, link: int, crank: int):
@@ -589,8 +618,10 @@ def _residuals(poses: _Poses, program: np.ndarray, omega, force) -> dict:
         dtheta = _angular_rate(poses, link, crank)
         net = tuple(mass * (rate(dS[k]) * square - gravity[k]) for k in range(2))
         moving = tuple(mass * dS[k] for k in range(2))
-        residual[link] = [[net[0], net[1], inertia * rate(dtheta) * square - _cross(to_centre, net)],
-                          [moving[0], moving[1], inertia * dtheta - _cross(to_centre, moving)]]
+        residual[link] = [
+            [net[0], net[1], inertia * rate(dtheta) * square - _cross(to_centre, net)],
+            [moving[0], moving[1], inertia * dtheta - _cross(to_centre, moving)],
+        ]
     kind = int(program[3])
     if kind == 1:
         residual[int(program[4])][0][2] -= force
@@ -634,30 +665,66 @@ def _group_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict)
         side = 0 if int(program[records[joint] + 1]) == link else 1
         return rows[joint][row][side]
 
-    entries = [by(0, 0, L1), by(0, 1, L1), by(1, 0, L1), by(1, 1, L1), by(1, 0, L2), by(1, 1, L2), by(2, 0, L2),
-               by(2, 1, L2)]
+    entries = [
+        by(0, 0, L1),
+        by(0, 1, L1),
+        by(1, 0, L1),
+        by(1, 1, L1),
+        by(1, 0, L2),
+        by(1, 1, L2),
+        by(2, 0, L2),
+        by(2, 1, L2),
+    ]
     values = iter(w.assign([value for entry in entries for value in entry]))
-    first1, second1, a1_first, a1_second, a2_first, a2_second, first2, second2 = \
-        [tuple(next(values) for _ in range(3)) for _ in entries]
+    first1, second1, a1_first, a1_second, a2_first, a2_second, first2, second2 = [
+        tuple(next(values) for _ in range(3)) for _ in entries
+    ]
     n1, n2 = _cross3(first1, second1), _cross3(first2, second2)
     m11, m12, m21, m22 = _dot3(a1_first, n1), _dot3(a2_first, n2), _dot3(a1_second, n1), _dot3(a2_second, n2)
     inverse_determinant = 1 / (m11 * m22 - m12 * m21)
     scale1, scale2 = 1 / _dot3(n1, n1), 1 / _dot3(n2, n2)
-    shared = w.assign([*n1, *n2, m11, m12, m21, m22, inverse_determinant, scale1, scale2,
-                       *_cross3(second1, n1), *_cross3(n1, first1), *_cross3(second2, n2), *_cross3(n2, first2)])
+    shared = w.assign(
+        [
+            *n1,
+            *n2,
+            m11,
+            m12,
+            m21,
+            m22,
+            inverse_determinant,
+            scale1,
+            scale2,
+            *_cross3(second1, n1),
+            *_cross3(n1, first1),
+            *_cross3(second2, n2),
+            *_cross3(n2, first2),
+        ]
+    )
     n1, n2, (m11, m12, m21, m22, inverse_determinant, scale1, scale2) = shared[0:3], shared[3:6], shared[6:13]
     c1, c2, d1, d2 = shared[13:16], shared[16:19], shared[19:22], shared[22:25]
     multipliers = []
     for case in range(2):
         b1, b2 = residual[L1][case], residual[L2][case]
         along1, along2 = _dot3(n1, b1), _dot3(n2, b2)
-        internal = ((m22 * along1 - m21 * along2) * inverse_determinant,
-                    (m11 * along2 - m12 * along1) * inverse_determinant)
+        internal = (
+            (m22 * along1 - m21 * along2) * inverse_determinant,
+            (m11 * along2 - m12 * along1) * inverse_determinant,
+        )
         internal = w.assign(list(internal))
         r1 = [b1[k] - internal[0] * a1_first[k] - internal[1] * a1_second[k] for k in range(3)]
         r2 = [b2[k] - internal[0] * a2_first[k] - internal[1] * a2_second[k] for k in range(3)]
-        multipliers.append(w.assign([_dot3(c1, r1) * scale1, _dot3(c2, r1) * scale1, internal[0], internal[1],
-                                     _dot3(d1, r2) * scale2, _dot3(d2, r2) * scale2]))
+        multipliers.append(
+            w.assign(
+                [
+                    _dot3(c1, r1) * scale1,
+                    _dot3(c2, r1) * scale1,
+                    internal[0],
+                    internal[1],
+                    _dot3(d1, r2) * scale2,
+                    _dot3(d2, r2) * scale2,
+                ]
+            )
+        )
     passed = set()
     for joint, j in enumerate(records):
         for side in range(2):
@@ -667,8 +734,9 @@ def _group_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict)
             passed.add(link)
             for case in range(2):
                 for coordinate in range(3):
-                    residual[link][case][coordinate] -= sum(rows[joint][row][side][coordinate]
-                                                            * multipliers[case][2 * joint + row] for row in range(2))
+                    residual[link][case][coordinate] -= sum(
+                        rows[joint][row][side][coordinate] * multipliers[case][2 * joint + row] for row in range(2)
+                    )
     _assign_residual(w, residual, sorted(passed))
     return multipliers
 
@@ -682,14 +750,17 @@ def _gear_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict) 
     records = (g + 4, g + 4 + flat.JOINT_SIZE)
     rows = [_joint_rows(poses, j) for j in records]
     sides = [0 if int(program[j + 1]) == link else 1 for j in records]
-    values = iter(w.assign([value for row in (rows[0][0][sides[0]], rows[0][1][sides[0]], rows[1][0][sides[1]])
-                            for value in row]))
+    values = iter(
+        w.assign([value for row in (rows[0][0][sides[0]], rows[0][1][sides[0]], rows[1][0][sides[1]]) for value in row])
+    )
     a1, a2, a3 = [tuple(next(values) for _ in range(3)) for _ in range(3)]
     columns = (_cross3(a2, a3), _cross3(a3, a1), _cross3(a1, a2))
-    inverse_determinant, = w.assign([1 / _dot3(a1, columns[0])])
+    (inverse_determinant,) = w.assign([1 / _dot3(a1, columns[0])])
     zero = sp.Integer(0)
-    multipliers = [w.assign([_dot3(column, residual[link][case]) * inverse_determinant for column in columns])
-                   + [zero, zero, zero] for case in range(2)]
+    multipliers = [
+        w.assign([_dot3(column, residual[link][case]) * inverse_determinant for column in columns]) + [zero, zero, zero]
+        for case in range(2)
+    ]
     passed = set()
     for joint, j in enumerate(records):
         side = 1 - sides[joint]
@@ -699,8 +770,9 @@ def _gear_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict) 
         passed.add(on)
         for case in range(2):
             for coordinate in range(3):
-                residual[on][case][coordinate] -= sum(rows[joint][row][side][coordinate]
-                                                      * multipliers[case][2 * joint + row] for row in range(2))
+                residual[on][case][coordinate] -= sum(
+                    rows[joint][row][side][coordinate] * multipliers[case][2 * joint + row] for row in range(2)
+                )
     _assign_residual(w, residual, sorted(passed))
     return multipliers
 
@@ -730,7 +802,9 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         if int(program[g]) == flat.REDUNDANT:
             raise ValueError("a linkage with a redundant link is statically indeterminate: no generated kinetostatics")
         if int(program[g]) == flat.CAM_FOLLOWER:
-            raise ValueError("a cam pair's contact is not in the kinetostatics by groups yet: no generated kinetostatics")
+            raise ValueError(
+                "a cam pair's contact is not in the kinetostatics by groups yet: no generated kinetostatics"
+            )
         found = (_gear_reactions if int(program[g]) == flat.GEAR else _group_reactions)(poses, program, g, residual)
         for case in range(2):
             for row in range(6):
@@ -744,8 +818,7 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
     balancing = []
     for case in range(2):
         fx, fy, moment = residual[crank][case]
-        first, second = w.assign([(fx * y2 - x2 * fy) * inverse_determinant,
-                                  (x1 * fy - fx * y1) * inverse_determinant])
+        first, second = w.assign([(fx * y2 - x2 * fy) * inverse_determinant, (x1 * fy - fx * y1) * inverse_determinant])
         multipliers[slot, case], multipliers[slot + 1, case] = first, second
         balancing.append(moment - t1 * first - t2 * second)
     at = flat.joint_map(program, 0)
@@ -754,16 +827,16 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         entry = at + 1 + flat.JOINT_SIZE + 2 * joint
         j, slot = int(program[entry]), 2 * int(program[entry + 1])
         a, b = int(program[j + 1]), int(program[j + 2])
-        if float(program[j]) in (0.0, flat.GEAR_MESH):   # a mesh's second multiplier is 0
+        if float(program[j]) in (0.0, flat.GEAR_MESH):  # a mesh's second multiplier is 0
             reactions.append([(multipliers[slot, case], multipliers[slot + 1, case]) for case in range(2)])
             ratios.append(_angular_rate(poses, a, crank) - _angular_rate(poses, b, crank))
         else:
             reactions.append([(sp.Integer(0), multipliers[slot, case]) for case in range(2)])
             P_s = poses.point(j, b)
-            sliding = _sub(_sub(tuple(w.rate_of(value) for value in P_s), tuple(w.rate_of(value)
-                                                                                 for value in poses.origin[a])),
-                           _scale((-(P_s[1] - poses.origin[a][1]), P_s[0] - poses.origin[a][0]),
-                                  _angular_rate(poses, a, crank)))
+            sliding = _sub(
+                _sub(tuple(w.rate_of(value) for value in P_s), tuple(w.rate_of(value) for value in poses.origin[a])),
+                _scale((-(P_s[1] - poses.origin[a][1]), P_s[0] - poses.origin[a][0]), _angular_rate(poses, a, crank)),
+            )
             ratios.append(_dot(sliding, _mul((w.number(j + 7), w.number(j + 8)), poses.turn[a])))
     values = iter(w.assign([part for joint in reactions for case in joint for part in case] + ratios + balancing))
     parts = [[(next(values), next(values)) for _ in range(2)] for _ in reactions]
@@ -771,14 +844,23 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
     balancing = [next(values), next(values)]
 
     def complex_tuple(case):
-        return "(" + "".join(f"complex({_float_code(sp, part[case][0])}, {_float_code(sp, part[case][1])}), "
-                             for part in parts) + ")"
+        return (
+            "("
+            + "".join(
+                f"complex({_float_code(sp, part[case][0])}, {_float_code(sp, part[case][1])}), " for part in parts
+            )
+            + ")"
+        )
 
-    returned = (f"{complex_tuple(0)}, {complex_tuple(1)}, ({''.join(_float_code(sp, v) + ', ' for v in rates)}), "
-                f"{_float_code(sp, balancing[0])}, {_float_code(sp, balancing[1])}")
-    doc = ('"""Generated by mechanisms.linkage.symbolic: flat.joint_loads (R0, R1 [N, N s^2/rad], ratios, M_b0 '
-           '[N m], M_b1 [kg m^2]) at crank angle phi [rad], speed omega [rad/s], output force Q, the program at '
-           'p[offset:]."""')
+    returned = (
+        f"{complex_tuple(0)}, {complex_tuple(1)}, ({''.join(_float_code(sp, v) + ', ' for v in rates)}), "
+        f"{_float_code(sp, balancing[0])}, {_float_code(sp, balancing[1])}"
+    )
+    doc = (
+        '"""Generated by mechanisms.linkage.symbolic: flat.joint_loads (R0, R1 [N, N s^2/rad], ratios, M_b0 '
+        "[N m], M_b1 [kg m^2]) at crank angle phi [rad], speed omega [rad/s], output force Q, the program at "
+        'p[offset:]."""'
+    )
     return _function_source(w, name, "phi, omega, force, p, offset", doc, returned)
 
 
@@ -793,7 +875,7 @@ def _source_by_key(file_name: str) -> str | None:
     if not path.exists():
         return None
     text = path.read_text(encoding="utf-8")
-    return text[len(MODULE_HEADER):] if text.startswith(MODULE_HEADER) else None
+    return text[len(MODULE_HEADER) :] if text.startswith(MODULE_HEADER) else None
 
 
 def _cached_source(file_name: str, generate: Callable[[], str]) -> str:
@@ -848,18 +930,21 @@ def _reference_function(name: str, plain: bool) -> Callable:
     path = cache.folder() / _file_name(name)
     spec = importlib.util.spec_from_file_location(f"mech_regulator_generated_{name}", path)
     module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module   # numba's cache finds the module's globals by its name
+    sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
     spec.loader.exec_module(module)
     if plain:
         return getattr(module, name)
     from numba import njit
     from numba.core.caching import FunctionCache
 
-    function = njit(cache=True, error_model="numpy")(getattr(module, name))   # as codegen compiles it
+    function = njit(cache=True, error_model="numpy")(getattr(module, name))  # as codegen compiles it
     if not FunctionCache(function.py_func)._cache_file._load_index():
         what = "joint reactions" if name.startswith(JOINT_LOADS_NAME) else "reduced inertia"
-        print(f"note: compiling the linkage's generated {what} code once (a few seconds; later runs load it at once)",
-              file=sys.stderr, flush=True)
+        print(
+            f"note: compiling the linkage's generated {what} code once (a few seconds; later runs load it at once)",
+            file=sys.stderr,
+            flush=True,
+        )
     return function
 
 
@@ -870,8 +955,9 @@ def output_records(program: np.ndarray, linkage: Linkage, joints: Sequence[str])
     return [int(program[first + 2 * index[name]]) for name in joints]
 
 
-def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None,
-                 outputs: Sequence[str] = ()) -> Callable[[float], tuple[float, ...]]:
+def make_reduced(
+    linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None, outputs: Sequence[str] = ()
+) -> Callable[[float], tuple[float, ...]]:
     """`reduced(phi) -> (J_links, dJ/dphi, M_weight, q, dq/dphi)` of a linkage by its generated code
     (reference_function: compiled, the source the fast path compiles; with `outputs`, prismatic joints' names: q,
     dq/dphi of each in turn); where a group cannot assemble or is at a dead point (the code gives NaN or an infinity:
@@ -891,10 +977,11 @@ def make_reduced(linkage: Linkage, structure: Structure, gravity: tuple[float, f
 
     def reduced(phi: float) -> tuple[float, ...]:
         values = function(phi, program, 0)
-        if not math.isfinite(sum(values)):   # a NaN or an infinity among them (one test, not one per value)
-            make_solver(linkage, structure.groups)(phi)   # raises the group's LinkageError
-            raise LinkageError(f"the linkage's reduced quantities are not finite at crank angle "
-                               f"{math.degrees(phi):.3f} deg")
+        if not math.isfinite(sum(values)):  # a NaN or an infinity among them (one test, not one per value)
+            make_solver(linkage, structure.groups)(phi)  # raises the group's LinkageError
+            raise LinkageError(
+                f"the linkage's reduced quantities are not finite at crank angle {math.degrees(phi):.3f} deg"
+            )
         return values
 
     return reduced

@@ -26,6 +26,8 @@ def fast_path_refusal(scene_or_model) -> str | None:
     scene = getattr(scene_or_model, "scene", scene_or_model)
     method = scene.solver.method
     if method not in FAST_METHODS:
-        return (f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "
-                f"{', '.join(FAST_METHODS)}, or solver.path: reference")
+        return (
+            f"solver.path: 'fast' does not run solver.method: '{method}'; expected one of "
+            f"{', '.join(FAST_METHODS)}, or solver.path: reference"
+        )
     return None

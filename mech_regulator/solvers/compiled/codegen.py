@@ -79,14 +79,23 @@ CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE, CRANK_DIRECTION = range(6
 THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START = range(12, 15)
 SEGMENT_SLOTS = 15
 # the slots a load piece and the crank's speed at its start set (CompiledScene.piece_values)
-PIECE_SLOTS = (EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START,
-               CRANK_DIRECTION)
+PIECE_SLOTS = (
+    EXTERNAL_OFFSET,
+    EXTERNAL_SLOPE,
+    HELD_THROTTLE,
+    THROTTLE_SLOPE,
+    THROTTLE_CURVATURE,
+    THROTTLE_START,
+    CRANK_DIRECTION,
+)
 PIECE_INDEX = np.array(PIECE_SLOTS, dtype=np.int64)
 # the throttle of a co-simulated machine: held, or the polynomial of LoadPiece.throttle_at
 NORMAL_SLOTS = 2  # joint friction's slots in p from friction_slot, per guide with friction: its normal sign s_N and
 #                  its guard's start level; then the signs s_j of the joints' relative rates
-HELD_THROTTLE_EXPRESSION = (f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
-                            f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)")
+HELD_THROTTLE_EXPRESSION = (
+    f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
+    f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)"
+)
 
 SLEEVE_CODE = {"": 0.0, "free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
@@ -138,8 +147,16 @@ class CompiledScene:
     _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega, window)
     # -> linear's rows before the breakpoints
 
-    def parameters_for(self, piece, mode, window: tuple[float, float] | None, omega: float = 0.0,
-                       held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
+    def parameters_for(
+        self,
+        piece,
+        mode,
+        window: tuple[float, float] | None,
+        omega: float = 0.0,
+        held: list[int] | None = None,
+        y: np.ndarray | None = None,
+        offset: float = 0.0,
+    ) -> np.ndarray:
         """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
         codes, the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
@@ -170,8 +187,9 @@ class CompiledScene:
         if held is not None:
             tables = self.model.state_tables
             anchors = _anchors(tables, held)
-            for table, slot, anchor, (low, high) in zip(tables, self.table_slots, anchors,
-                                                        self._held_bounds(held, y, offset)):
+            for table, slot, anchor, (low, high) in zip(
+                tables, self.table_slots, anchors, self._held_bounds(held, y, offset)
+            ):
                 p[slot], p[slot + 1], p[slot + 2] = anchor - offset if table.angular else anchor, low, high
         return p
 
@@ -182,11 +200,19 @@ class CompiledScene:
         of the crank's speed omega [rad/s] at the segment's start."""
         if piece is None:
             return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, sign_of(omega)
-        return (piece.offset, piece.slope, piece.throttle, piece.throttle_slope, piece.throttle_curvature, piece.start,
-                sign_of(omega))
+        return (
+            piece.offset,
+            piece.slope,
+            piece.throttle,
+            piece.throttle_slope,
+            piece.throttle_curvature,
+            piece.start,
+            sign_of(omega),
+        )
 
-    def hold_normal(self, p: np.ndarray, t: float, y: np.ndarray, sides: tuple[float, ...],
-                    crossed: int | None) -> tuple[float, ...]:
+    def hold_normal(
+        self, p: np.ndarray, t: float, y: np.ndarray, sides: tuple[float, ...], crossed: int | None
+    ) -> tuple[float, ...]:
         """Set in p (parameters_for's, every s_N 0) the guides' normal signs s_N that the segment from (t [s], y, phi
         wrapped as the stepper's) holds and their guards' start levels, as time_domain._normal_guards: the sign of
         each guide's N at the start (read with every |N| as it is), but for guide number `crossed`, whose guard just
@@ -197,12 +223,14 @@ class CompiledScene:
         signs = slice(self.friction_slot, self.friction_slot + NORMAL_SLOTS * self.n_normals, NORMAL_SLOTS)
         if crossed is None or self.n_normals > 1:  # a guide's guard reads N itself while its s_N is 0
             self.guards(t, y, p, levels)
-        sides = tuple(sides[k] if k == crossed else 1.0 if level >= 0.0 else -1.0
-                      for k, level in enumerate(levels[normals]))
+        sides = tuple(
+            sides[k] if k == crossed else 1.0 if level >= 0.0 else -1.0 for k, level in enumerate(levels[normals])
+        )
         p[signs] = sides
         self.guards(t, y, p, levels)
-        p[self.friction_slot + 1:self.friction_slot + NORMAL_SLOTS * self.n_normals:NORMAL_SLOTS] = np.minimum(
-            0.0, levels[normals])
+        p[self.friction_slot + 1 : self.friction_slot + NORMAL_SLOTS * self.n_normals : NORMAL_SLOTS] = np.minimum(
+            0.0, levels[normals]
+        )
         return sides
 
     def _held_bounds(self, held: list[int], y: np.ndarray, offset: float = 0.0) -> list[tuple[float, float]]:
@@ -217,8 +245,15 @@ class CompiledScene:
             bounds.append((min(_break(table, i - 1), start) - shift, max(_break(table, i), start) - shift))
         return bounds
 
-    def linear(self, mode, window: tuple[float, float] | None, omega: float = 0.0,
-               held: list[int] | None = None, y: np.ndarray | None = None, offset: float = 0.0) -> np.ndarray:
+    def linear(
+        self,
+        mode,
+        window: tuple[float, float] | None,
+        omega: float = 0.0,
+        held: list[int] | None = None,
+        y: np.ndarray | None = None,
+        offset: float = 0.0,
+    ) -> np.ndarray:
         """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
         linear (or unused); with held and the start state y, the breakpoint guards of the held pieces (STEP_ONTO)."""
@@ -233,9 +268,9 @@ class CompiledScene:
             if self.window_slot is not None and window is not None:
                 rows[self.window_slot] = _row(n, 0, 1.0, -window[0])
                 rows[self.window_slot + 1] = _row(n, 0, -1.0, window[1])
-                rows[self.window_slot:self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
+                rows[self.window_slot : self.window_slot + 2, 0] = STEP_ONTO  # a switch: the state by a step onto it
             if self.normal_slot is not None:  # a guide's N = 0: a nonlinear guard, also a step onto it
-                rows[self.normal_slot:self.normal_slot + self.n_normals, 0] = NONLINEAR_ONTO
+                rows[self.normal_slot : self.normal_slot + self.n_normals, 0] = NONLINEAR_ONTO
             self._mode_matrices[key] = rows
         matrix = rows.copy()  # the stepper writes the window's rows of its copy (integrators._kink_restart)
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
@@ -269,8 +304,9 @@ def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float]
     states = []
     for table in model.state_tables:
         if table.name == "valve table":
-            states.append((((ARM, 1.0),), replace(table, breaks=tuple(model.governor.sensor.arm_angle(z)
-                                                                       for z in table.breaks))))
+            states.append(
+                (((ARM, 1.0),), replace(table, breaks=tuple(model.governor.sensor.arm_angle(z) for z in table.breaks)))
+            )
         elif table.angular:
             states.append((((0, 1.0), (model.coupling_index, -1.0)), table))
         else:
@@ -278,7 +314,7 @@ def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float]
     return states
 
 
-_ANNOUNCED: set[str] = set()   # the scenes whose new module compile_scene has announced in this process
+_ANNOUNCED: set[str] = set()  # the scenes whose new module compile_scene has announced in this process
 
 
 def compile_scene(model: MachineModel) -> CompiledScene:
@@ -288,22 +324,52 @@ def compile_scene(model: MachineModel) -> CompiledScene:
     recent = _RECENT.get(id(model))
     if recent is not None and recent.model is model:
         return recent
-    (source, parameters, n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
-     n_journals, n_normals) = generate(model)
-    digest = hashlib.sha256("\n".join([source, _kernels_source(), mech_regulator.__version__,
-                                       numba.__version__]).encode()).hexdigest()[:20]
+    (
+        source,
+        parameters,
+        n_guards,
+        window_slot,
+        breakpoint_slot,
+        table_slots,
+        friction_slot,
+        normal_slot,
+        n_journals,
+        n_normals,
+    ) = generate(model)
+    digest = hashlib.sha256(
+        "\n".join([source, _kernels_source(), mech_regulator.__version__, numba.__version__]).encode()
+    ).hexdigest()[:20]
     path = _module_path(digest)
     if digest not in _LOADED and (not path.exists() or path.read_text(encoding="utf-8") != source):
-        if model.scene.name not in _ANNOUNCED:   # once per scene (its machine and its governor have a module each)
+        if model.scene.name not in _ANNOUNCED:  # once per scene (its machine and its governor have a module each)
             _ANNOUNCED.add(model.scene.name)
-            print(f"note: compiling the fast path's module of scene '{model.scene.name}' once (a few seconds; later "
-                  "runs load it at once)", file=sys.stderr, flush=True)
+            print(
+                f"note: compiling the fast path's module of scene '{model.scene.name}' once (a few seconds; later "
+                "runs load it at once)",
+                file=sys.stderr,
+                flush=True,
+            )
         _write(path, source)
     module = load_scene_module(digest)
-    compiled = CompiledScene(model, module.rhs, module.guards, module.rhs_callback, module.guards_callback, parameters,
-                             n_guards, window_slot, source, path, breakpoint_slot, table_slots, friction_slot,
-                             normal_slot, module.reactions_callback if n_journals else module.guards_callback,
-                             n_journals, n_normals)
+    compiled = CompiledScene(
+        model,
+        module.rhs,
+        module.guards,
+        module.rhs_callback,
+        module.guards_callback,
+        parameters,
+        n_guards,
+        window_slot,
+        source,
+        path,
+        breakpoint_slot,
+        table_slots,
+        friction_slot,
+        normal_slot,
+        module.reactions_callback if n_journals else module.guards_callback,
+        n_journals,
+        n_normals,
+    )
     if len(_RECENT) >= RECENT_MODELS:
         del _RECENT[next(iter(_RECENT))]
     _RECENT[id(model)] = compiled
@@ -361,12 +427,17 @@ def mode_rows(model: MachineModel, mode, omega: float = 0.0) -> list[np.ndarray 
     if governor is not None and governor.kind != "pi":
         low, high = governor.sensor.stop_angles()
         hit_low, hit_high = _row(n, ARM, 1.0, -low), _row(n, ARM, -1.0, high)
-        rows += {"free": [hit_low, hit_high], "up": [_row(n, ARM_RATE, 1.0, 0.0), hit_high],
-                 "down": [_row(n, ARM_RATE, -1.0, 0.0), hit_low], "stuck": [None, None], "low": [None],
-                 "high": [None]}[mode[0]]
+        rows += {
+            "free": [hit_low, hit_high],
+            "up": [_row(n, ARM_RATE, 1.0, 0.0), hit_high],
+            "down": [_row(n, ARM_RATE, -1.0, 0.0), hit_low],
+            "stuck": [None, None],
+            "low": [None],
+            "high": [None],
+        }[mode[0]]
         if governor.kind == "indirect":
             s_low, s_high = governor.travel
-            rows += ([_row(n, SERVO, 1.0, -s_low), _row(n, SERVO, -1.0, s_high)] if mode[1] == "free" else [None])
+            rows += [_row(n, SERVO, 1.0, -s_low), _row(n, SERVO, -1.0, s_high)] if mode[1] == "free" else [None]
     if model.driven is not None:
         train = model.train_mode_of(mode)
         index = model.driven_speed_index
@@ -389,8 +460,8 @@ class _Parameters:
         self.values: list[float] = [0.0] * SEGMENT_SLOTS
         self.values[HELD_THROTTLE] = 1.0
         self.tables: list[tuple[int, list[float]]] = []
-        self.functions: dict[str, str] = {}   # name -> source of the generated functions the module calls
-        self.formulas: dict[str, Callable] = {}   # name in the module -> a definition's formula the module calls
+        self.functions: dict[str, str] = {}  # name -> source of the generated functions the module calls
+        self.formulas: dict[str, Callable] = {}  # name in the module -> a definition's formula the module calls
 
     def scalar(self, value: float) -> str:
         return f"p[{self.slot(value)}]"
@@ -427,8 +498,17 @@ class _Parameters:
         return np.array(values, dtype=float)
 
 
-def _effect_call(definition: Definition, p: _Parameters, phi: str, omega: str, q: str, dq: str,
-                 anchor: str | None = None, held: str | None = None, function: Callable | None = None) -> str:
+def _effect_call(
+    definition: Definition,
+    p: _Parameters,
+    phi: str,
+    omega: str,
+    q: str,
+    dq: str,
+    anchor: str | None = None,
+    held: str | None = None,
+    function: Callable | None = None,
+) -> str:
     """The call of a drive's or load's formula (definition.moment, or `function`: its output_force) as source, its
     numbers and table stored in p: a periodic table in phi read on the segment that holds `anchor` (default phi: the
     table itself), a clamped table in the output position on the piece that holds the slider position `held` [m]
@@ -486,8 +566,17 @@ def effect_kernel(definition: Definition, function: Callable | None = None, anch
     piece that holds anchor [rad] (a periodic one) or the slider position q_anchor [m] (one in q). What the check
     that both paths agree compiles (test/test_effect_definitions.py)."""
     p = _Parameters()
-    call = _effect_call(definition, p, "phi", "omega", "q", "dq", "anchor" if anchored else None,
-                        "q_anchor" if anchored else None, function)
+    call = _effect_call(
+        definition,
+        p,
+        "phi",
+        "omega",
+        "q",
+        "dq",
+        "anchor" if anchored else None,
+        "q_anchor" if anchored else None,
+        function,
+    )
     outputs = "".join(f", q_{k}, dq_{k}" for k in range(2, definition.outputs + 1))
     return _kernel(f"t, phi, omega, anchor, q_anchor, p, q, dq{outputs}", call, p)
 
@@ -533,7 +622,7 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
     program = flat.encode(core, structure.groups, gravity)
     name, source = symbolic.reduced_source(program, symbolic.output_records(program, core, outputs))
     p.functions[name] = source
-    call = f"{name}({angle}, {p.table(program).rsplit(', ', 1)[0]})"   # 'p, int(p[slot])': the program's offset
+    call = f"{name}({angle}, {p.table(program).rsplit(', ', 1)[0]})"  # 'p, int(p[slot])': the program's offset
     if len(outputs) <= 1:
         return [f"{', '.join(names)} = {call}"]
     J, dJ, weight, q, dq = names
@@ -549,8 +638,9 @@ def _shared_functions(functions, p: _Parameters) -> tuple[str, ...]:
     return tuple(function.__name__ for function in functions)
 
 
-def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None,
-                                          int | None, int, int]:
+def generate(
+    model: MachineModel,
+) -> tuple[str, np.ndarray, int, int | None, int | None, tuple[int, ...], int | None, int | None, int, int]:
     """(module source, parameters p, number of guard slots, slot of the switch window's first guard or None, slot of
     the first breakpoint guard or None, CompiledScene.table_slots, friction_slot, normal_slot, number of journals
     with friction that `reactions` writes, number of guides with friction) of a scene's model (see the
@@ -593,8 +683,10 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         elif effect.role == "drive" and governor is not None:
             scaled.append(effect.definition)
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
-            body.append(f"total += {HELD_THROTTLE_EXPRESSION} * "
-                        f"{_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}")
+            body.append(
+                f"total += {HELD_THROTTLE_EXPRESSION} * "
+                f"{_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
+            )
         else:
             body.append(f"total += {_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}")
     if switched:
@@ -619,14 +711,21 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
             throttle = f"y[{SERVO}]"
             opening = [f"opening = {z} - {p.scalar(governor.pilot_neutral)}"]
             if governor.feedback == "rigid":
-                feedback = _formula_call(p, servo_motor.rigid_feedback, {"servo": f"y[{SERVO}]"},
-                                         {"gain": governor.feedback_gain, "reference": governor.feedback_reference})
+                feedback = _formula_call(
+                    p,
+                    servo_motor.rigid_feedback,
+                    {"servo": f"y[{SERVO}]"},
+                    {"gain": governor.feedback_gain, "reference": governor.feedback_reference},
+                )
                 opening.append(f"opening += {feedback}")
             elif governor.feedback == "isodromic":
                 opening.append(f"opening += y[{SHIFT}]")
-            command = _formula_call(p, servo_motor.servo_command, {"opening": "opening"},
-                                    {"gain": governor.servo_gain, "max_speed": governor.servo_max_speed,
-                                     "dead_band": governor.dead_band})
+            command = _formula_call(
+                p,
+                servo_motor.servo_command,
+                {"opening": "opening"},
+                {"gain": governor.servo_gain, "max_speed": governor.servo_max_speed, "dead_band": governor.dead_band},
+            )
         lift = f"{lift_kernel}(y[{ARM}], omega, {sensor_args})"
         governor_lines += [
             f"sleeve_mode = p[{SLEEVE_MODE}]",
@@ -636,40 +735,69 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
             f"    dydt[{ARM_RATE}] = {acceleration_kernel}(y[{ARM}], y[{ARM_RATE}], omega, friction, {sensor_args})",
             "else:",
             f"    dydt[{ARM}] = 0.0",
-            f"    dydt[{ARM_RATE}] = 0.0"]
+            f"    dydt[{ARM_RATE}] = 0.0",
+        ]
         guard_lines += [
             f"sleeve_mode = p[{SLEEVE_MODE}]",
             "if sleeve_mode == 0.0:",
-            f"    levels[0] = y[{ARM}] - {low}", f"    levels[1] = {high} - y[{ARM}]", "    g = 2",
+            f"    levels[0] = y[{ARM}] - {low}",
+            f"    levels[1] = {high} - y[{ARM}]",
+            "    g = 2",
             "elif sleeve_mode == 1.0:",
-            f"    levels[0] = y[{ARM_RATE}]", f"    levels[1] = {high} - y[{ARM}]", "    g = 2",
+            f"    levels[0] = y[{ARM_RATE}]",
+            f"    levels[1] = {high} - y[{ARM}]",
+            "    g = 2",
             "elif sleeve_mode == 2.0:",
-            f"    levels[0] = -y[{ARM_RATE}]", f"    levels[1] = y[{ARM}] - {low}", "    g = 2",
+            f"    levels[0] = -y[{ARM_RATE}]",
+            f"    levels[1] = y[{ARM}] - {low}",
+            "    g = 2",
             "elif sleeve_mode == 3.0:",
-            f"    force = {lift}", f"    levels[0] = {static} - force", f"    levels[1] = {static} + force", "    g = 2",
+            f"    force = {lift}",
+            f"    levels[0] = {static} - force",
+            f"    levels[1] = {static} + force",
+            "    g = 2",
             "elif sleeve_mode == 4.0:",
-            f"    levels[0] = {static} - {lift}", "    g = 1",
+            f"    levels[0] = {static} - {lift}",
+            "    g = 1",
             "else:",
-            f"    levels[0] = {static} + {lift}", "    g = 1"]
+            f"    levels[0] = {static} + {lift}",
+            "    g = 1",
+        ]
         if governor.kind == "indirect":
             s_low, s_high = (p.scalar(v) for v in governor.travel)
             governor_lines += opening + [
-                f"servo_rate = {command} if p[{SERVO_MODE}] == 0.0 else 0.0", f"dydt[{SERVO}] = servo_rate"]
+                f"servo_rate = {command} if p[{SERVO_MODE}] == 0.0 else 0.0",
+                f"dydt[{SERVO}] = servo_rate",
+            ]
             if governor.feedback == "isodromic":
-                rate = _formula_call(p, servo_motor.isodromic_rate,
-                                     {"servo_rate": "servo_rate", "shift": f"y[{SHIFT}]"},
-                                     {"gain": governor.feedback_gain, "time_constant": governor.feedback_time_constant})
+                rate = _formula_call(
+                    p,
+                    servo_motor.isodromic_rate,
+                    {"servo_rate": "servo_rate", "shift": f"y[{SHIFT}]"},
+                    {"gain": governor.feedback_gain, "time_constant": governor.feedback_time_constant},
+                )
                 governor_lines.append(f"dydt[{SHIFT}] = {rate}")
-            guard_lines += [
-                f"if p[{SERVO_MODE}] == 0.0:",
-                f"    levels[g] = y[{SERVO}] - {s_low}", f"    levels[g + 1] = {s_high} - y[{SERVO}]", "    g += 2",
-                "else:"] + [f"    {line}" for line in opening] + [
-                f"    command = {command}",
-                f"    levels[g] = -command if p[{SERVO_MODE}] == 1.0 else command", "    g += 1"]
+            guard_lines += (
+                [
+                    f"if p[{SERVO_MODE}] == 0.0:",
+                    f"    levels[g] = y[{SERVO}] - {s_low}",
+                    f"    levels[g + 1] = {s_high} - y[{SERVO}]",
+                    "    g += 2",
+                    "else:",
+                ]
+                + [f"    {line}" for line in opening]
+                + [
+                    f"    command = {command}",
+                    f"    levels[g] = -command if p[{SERVO_MODE}] == 1.0 else command",
+                    "    g += 1",
+                ]
+            )
     if governor is not None:
         body.append(f"share = {throttle}")
-        body += [f"total += share * {_effect_call(definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
-                 for definition in scaled]
+        body += [
+            f"total += share * {_effect_call(definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
+            for definition in scaled
+        ]
     body.append("net = total - 0.5 * dJ * omega * omega")
     body.append("dydt[0] = omega")
     n_mode_guards = 0
@@ -682,8 +810,11 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         guard_lines += train_guards
         n_mode_guards += 2
     elif model.clutch is not None:  # the crank's net moment again in guards, phi unclamped (MachineModel.crank_side)
-        crank = [line.split(" = ")[0] + " = phi" if line.startswith(("clamped = ", "anchor = ")) else line
-                 for line in body if line != "dydt[0] = omega"]
+        crank = [
+            line.split(" = ")[0] + " = phi" if line.startswith(("clamped = ", "anchor = ")) else line
+            for line in body
+            if line != "dydt[0] = omega"
+        ]
         train_lines, train_guards = _clutch_lines(model, p, crank)
         body += train_lines
         guard_lines += train_guards
@@ -698,38 +829,57 @@ def generate(model: MachineModel) -> tuple[str, np.ndarray, int, int | None, int
         copy = [line.replace("dydt[", "rates[") for line in body]  # the body up to here: R0, R1 and the rhs's epsilon
         journals = [friction.indices[k] for k in _journals(model)]
         if journals:  # |R0_j + R1_j epsilon|^2 of each journal
-            reaction_lines = [f"rates = k.np.empty({len(model.state_names())})"] + copy + [
-                f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
+            reaction_lines = (
+                [f"rates = k.np.empty({len(model.state_names())})"]
+                + copy
+                + [f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
+            )
         if friction.guides:  # per guide s_N N - its start level (N while s_N is 0), with the rhs's epsilon
             guard_lines += [f"rates = k.np.empty({len(model.state_names())})"] + copy
             normal_slot = n_mode_guards  # their own slots: the mode guards before them are fewer in some modes
             for k, position in enumerate(friction.guides):
                 side, low = f"p[{friction_slot + NORMAL_SLOTS * k}]", f"p[{friction_slot + NORMAL_SLOTS * k + 1}]"
                 normal = f"(R0[{friction.indices[position]}] + R1[{friction.indices[position]}] * rates[1]).imag"
-                guard_lines.append(f"levels[{normal_slot + k}] = {side} * {normal} - {low} if {side} != 0.0 "
-                                   f"else {normal}")
+                guard_lines.append(
+                    f"levels[{normal_slot + k}] = {side} * {normal} - {low} if {side} != 0.0 else {normal}"
+                )
             n_mode_guards += n_normals
     body += governor_lines
     n_guards = n_mode_guards
     breakpoint_slot = n_guards if table_slots else None
     for slot, (coefficients, _) in zip(table_slots, breakpoint_states(model)):  # -inf, inf bounds: +inf, inactive
         value = " + ".join(f"{c!r} * y[{index}]" for index, c in coefficients)
-        guard_lines += [f"levels[{n_guards}] = {value} - p[{slot + 1}]",
-                        f"levels[{n_guards + 1}] = p[{slot + 2}] - ({value})"]
+        guard_lines += [
+            f"levels[{n_guards}] = {value} - p[{slot + 1}]",
+            f"levels[{n_guards + 1}] = p[{slot + 2}] - ({value})",
+        ]
         n_guards += 2
     window_slot = None
     if switched or kinked or (friction is not None and friction.corner_angles):
         window_slot = n_guards
         n_guards += 2
-        guard_lines += [f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
-                        f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]"]
+        guard_lines += [
+            f"levels[{window_slot}] = y[0] - p[{WINDOW_LO}]",
+            f"levels[{window_slot + 1}] = p[{WINDOW_HI}] - y[0]",
+        ]
     source = _module(body, guard_lines, n_guards, reaction_lines, p.functions, p.formulas)
-    return (source, p.array(), n_guards, window_slot, breakpoint_slot, table_slots, friction_slot, normal_slot,
-            len(journals), n_normals)
+    return (
+        source,
+        p.array(),
+        n_guards,
+        window_slot,
+        breakpoint_slot,
+        table_slots,
+        friction_slot,
+        normal_slot,
+        len(journals),
+        n_normals,
+    )
 
 
-def _joint_friction_lines(model: MachineModel, p: _Parameters, share: str, anchor: str, held: str,
-                          friction_slot: int | None) -> list[str]:
+def _joint_friction_lines(
+    model: MachineModel, p: _Parameters, share: str, anchor: str, held: str, friction_slot: int | None
+) -> list[str]:
     """Source that turns the crank's frictionless dydt[1] = epsilon_0 into the root of J epsilon = J epsilon_0 -
     sign(omega) F(epsilon) (MachineModel.rhs, effects.joint_friction): the force Q on the output link (the effects'
     output forces, the drive's times the throttle `share`), the joint reactions R0 + R1 epsilon of the mechanism's
@@ -739,11 +889,13 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, share: str, ancho
     friction = model.joint_friction
     collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
     iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
-    solve = p.formula(joint_friction.friction_acceleration)   # the reference path's own Newton solve, compiled
+    solve = p.formula(joint_friction.friction_acceleration)  # the reference path's own Newton solve, compiled
     if friction.loads is None:
-        return [f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
-                f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations}, "
-                "(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))"]
+        return [
+            f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, (0.0, 0.0, 0.0, 0.0), "
+            f"(0.0, 0.0, 0.0, 0.0), (0j, 0j, 0j, 0j), (0j, 0j, 0j, 0j), False, {tolerance}, {iterations}, "
+            "(0.0, 0.0, 0.0, 0.0), (0.0, 0.0, 0.0, 0.0))"
+        ]
     lines = ["force = 0.0"]
     scaled = []
     for effect in model.effects:
@@ -758,7 +910,7 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, share: str, ancho
     lines += scaled
     machine = model.scene.machine
     joints = _kinetostatics_joints(machine.mechanism)
-    core, structure, _ = mechanisms.linkage_of(machine.mechanism)   # its generated kinetostatics, with gravity
+    core, structure, _ = mechanisms.linkage_of(machine.mechanism)  # its generated kinetostatics, with gravity
     program = flat.encode(core, structure.groups, machine.gravity)
     name, source = symbolic.joint_loads_source(program)
     p.functions[name] = source
@@ -771,9 +923,11 @@ def _joint_friction_lines(model: MachineModel, p: _Parameters, share: str, ancho
         normals[friction.indices[position]] = f"p[{friction_slot + NORMAL_SLOTS * k}]"
     first_rate = friction_slot + NORMAL_SLOTS * len(friction.guides)
     signs = "".join(f"p[{first_rate + j}], " for j in range(len(joints)))
-    lines.append(f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, "
-                 f"({''.join(p.scalar(v) + ', ' for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
-                 f"({signs}), ({''.join(sign + ', ' for sign in normals)}))")
+    lines.append(
+        f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, "
+        f"({''.join(p.scalar(v) + ', ' for v in arms)}), ratios, R0, R1, True, {tolerance}, {iterations}, "
+        f"({signs}), ({''.join(sign + ', ' for sign in normals)}))"
+    )
     return lines
 
 
@@ -786,13 +940,16 @@ def _crank_guard_lines() -> list[str]:
     """Source of the joint friction's crank guard (MachineModel.guards), after the mode's: with s the sign of the
     crank's speed at the segment's start (p's CRANK_DIRECTION), 'crank stops', s omega, or, starting at rest (s = 0),
     'crank starts', -|omega| (omega leaves 0: the solver restarts to watch for the next stop)."""
-    return [f"direction = p[{CRANK_DIRECTION}]",
-            "levels[g] = direction * omega if direction != 0.0 else -abs(omega)",
-            "g += 1"]
+    return [
+        f"direction = p[{CRANK_DIRECTION}]",
+        "levels[g] = direction * omega if direction != 0.0 else -abs(omega)",
+        "g += 1",
+    ]
 
 
-def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str, table_slots: tuple[int, ...]
-                    ) -> tuple[list[str], list[str]]:
+def _coupling_lines(
+    model: MachineModel, p: _Parameters, anchor: str, table_slots: tuple[int, ...]
+) -> tuple[list[str], list[str]]:
     """Source of the coupling and the driven part behind it (MachineModel._train, drive_train_at): the crank's
     dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
     (at rest: the holding margins R -+ push; turning: s omega2); anchor: ', p[slot]' of a coupling table's anchor
@@ -805,40 +962,68 @@ def _coupling_lines(model: MachineModel, p: _Parameters, anchor: str, table_slot
     else:
         elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])}{anchor})"
     driven = spec.driven
-    state = [f"twist = y[{twist_index}]", f"omega2 = y[{speed_index}]",
-             f"passed = {elastic} + {p.scalar(coupling.damping)} * (omega - omega2)"]
+    state = [
+        f"twist = y[{twist_index}]",
+        f"omega2 = y[{speed_index}]",
+        f"passed = {elastic} + {p.scalar(coupling.damping)} * (omega - omega2)",
+    ]
     dynamics = ["phi2 = y[0] - twist"]
     if driven.mechanism is not None:
-        dynamics += _reduced_lines(driven.mechanism, model.scene.machine.gravity, p, "phi2",
-                                   ("I_links", "dI", "weight2", "q2", "dq2"))
+        dynamics += _reduced_lines(
+            driven.mechanism, model.scene.machine.gravity, p, "phi2", ("I_links", "dI", "weight2", "q2", "dq2")
+        )
     else:
         dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
     dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
     located = {table.name: f"p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}
-    names = [f"driven part's {effect.name}" for effect in model.driven.effects[:len(driven.loads)]]
+    names = [f"driven part's {effect.name}" for effect in model.driven.effects[: len(driven.loads)]]
     anchors = {index: located[name] for index, name in enumerate(names) if name in located}
     dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2", anchors, model.driven)
     resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
-    rhs = state + [
-        "dydt[1] = (net - passed) / J",
-        f"dydt[{twist_index}] = omega - omega2",
-        f"if p[{DRIVEN_MODE}] == 2.0:",
-        f"    dydt[{speed_index}] = 0.0",
-        "else:"] + [f"    {line}" for line in dynamics] + [
-        f"    direction = 1.0 if p[{DRIVEN_MODE}] == 0.0 else -1.0",
-        f"    dydt[{speed_index}] = k.driven_acceleration(direction, passed, weight2, smooth, dI, omega2, I2, "
-        f"{resistance})"]
-    guards = [f"if p[{DRIVEN_MODE}] == 2.0:"] + [f"    {line}" for line in state + dynamics] + [
-        f"    levels[g] = k.driven_margin(passed, weight2, smooth, dI, omega2, {resistance}, -1.0)",
-        f"    levels[g + 1] = k.driven_margin(passed, weight2, smooth, dI, omega2, {resistance}, 1.0)",
-        "    g += 2",
-        f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{speed_index}]", "    g += 1",
-        "else:", f"    levels[g] = -y[{speed_index}]", "    g += 1"]
+    rhs = (
+        state
+        + [
+            "dydt[1] = (net - passed) / J",
+            f"dydt[{twist_index}] = omega - omega2",
+            f"if p[{DRIVEN_MODE}] == 2.0:",
+            f"    dydt[{speed_index}] = 0.0",
+            "else:",
+        ]
+        + [f"    {line}" for line in dynamics]
+        + [
+            f"    direction = 1.0 if p[{DRIVEN_MODE}] == 0.0 else -1.0",
+            f"    dydt[{speed_index}] = k.driven_acceleration(direction, passed, weight2, smooth, dI, omega2, I2, "
+            f"{resistance})",
+        ]
+    )
+    guards = (
+        [f"if p[{DRIVEN_MODE}] == 2.0:"]
+        + [f"    {line}" for line in state + dynamics]
+        + [
+            f"    levels[g] = k.driven_margin(passed, weight2, smooth, dI, omega2, {resistance}, -1.0)",
+            f"    levels[g + 1] = k.driven_margin(passed, weight2, smooth, dI, omega2, {resistance}, 1.0)",
+            "    g += 2",
+            f"elif p[{DRIVEN_MODE}] == 0.0:",
+            f"    levels[g] = y[{speed_index}]",
+            "    g += 1",
+            "else:",
+            f"    levels[g] = -y[{speed_index}]",
+            "    g += 1",
+        ]
+    )
     return rhs, guards
 
 
-def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, omega: str, q: str, dq: str,
-                         anchors: dict[int, str] | None = None, model: DrivenModel | None = None) -> list[str]:
+def _driven_smooth_lines(
+    driven: schema.DrivenPart,
+    p: _Parameters,
+    phi: str,
+    omega: str,
+    q: str,
+    dq: str,
+    anchors: dict[int, str] | None = None,
+    model: DrivenModel | None = None,
+) -> list[str]:
     """Source adding a driven part's non-Coulomb moments to `smooth` (DrivenModel.smooth_moment): its own loads,
     then each branch's reduced to the main shaft, M_n(omega / i_1n) / i_1n (drivetrain._reduced); constant loads
     are Coulomb resistances, in R. anchors: per index of an own load that is a located table, the slot p[k] of its
@@ -855,18 +1040,22 @@ def _driven_smooth_lines(driven: schema.DrivenPart, p: _Parameters, phi: str, om
             lines.append(f"smooth += {_effect_call(definition, p, phi, omega, q, dq)}")
         elif _reads_position(definition):
             held = f"{q}_anchor{index}"
-            position = _held_position_call(model.effects[index].kink_angles, output_position_of(model.reduced), p,
-                                           slot)
-            lines += [f"{held} = {position} if {slot} == {slot} else {q}",
-                      f"smooth += {_effect_call(definition, p, phi, omega, q, dq, held=held)}"]
+            position = _held_position_call(model.effects[index].kink_angles, output_position_of(model.reduced), p, slot)
+            lines += [
+                f"{held} = {position} if {slot} == {slot} else {q}",
+                f"smooth += {_effect_call(definition, p, phi, omega, q, dq, held=held)}",
+            ]
         else:
             anchor = f"({slot} if {slot} == {slot} else {phi})"  # NaN: the table as it is
             lines.append(f"smooth += {_effect_call(definition, p, phi, omega, q, dq, anchor=anchor)}")
     for branch in driven.branches:
         ratio = p.scalar(branch.ratio)
         definitions = [definition_of(load) for load in branch.loads]
-        lines += [f"smooth += {_effect_call(definition, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
-                  for definition in definitions if not definition.dry]
+        lines += [
+            f"smooth += {_effect_call(definition, p, phi, f'({omega} / {ratio})', q, dq)} / {ratio}"
+            for definition in definitions
+            if not definition.dry
+        ]
     return lines
 
 
@@ -885,30 +1074,53 @@ def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tupl
     clutch = model.clutch
     index = model.driven_speed_index
     omega2 = f"omega2 = y[1] if p[{CLUTCH_MODE}] == 0.0 else y[{index}]"
-    driven = ["smooth = 0.0"] + _driven_smooth_lines(model.scene.machine.clutch.driven, p, "0.0", "omega2", "0.0",
-                                                      "0.0")
+    driven = ["smooth = 0.0"] + _driven_smooth_lines(
+        model.scene.machine.clutch.driven, p, "0.0", "omega2", "0.0", "0.0"
+    )
     resistance = f"resistance = {p.scalar(clutch.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
-    forces = (f"epsilon, epsilon2, torque, push = k.clutch_forces(p[{CLUTCH_MODE}], p[{DRIVEN_MODE}], net, J, smooth, "
-              f"resistance, {p.scalar(clutch.driven.inertia)}, {p.scalar(clutch.kinetic_torque)})")
+    forces = (
+        f"epsilon, epsilon2, torque, push = k.clutch_forces(p[{CLUTCH_MODE}], p[{DRIVEN_MODE}], net, J, smooth, "
+        f"resistance, {p.scalar(clutch.driven.inertia)}, {p.scalar(clutch.kinetic_torque)})"
+    )
     rhs = [omega2] + driven + [resistance, forces, "dydt[1] = epsilon", f"dydt[{index}] = epsilon2"]
     static = p.scalar(clutch.static_torque)
-    guards = crank + rhs[:-2] + [
-        f"if p[{CLUTCH_MODE}] == 0.0:",
-        f"    levels[g] = {static} - torque", f"    levels[g + 1] = {static} + torque", "    g += 2",
-        "else:",
-        f"    levels[g] = p[{CLUTCH_MODE}] * (omega - y[{index}])", "    g += 1",
-        f"if p[{DRIVEN_MODE}] == 2.0:",
-        "    levels[g] = resistance - push", "    levels[g + 1] = resistance + push", "    g += 2",
-        f"elif p[{DRIVEN_MODE}] == 0.0:", f"    levels[g] = y[{index}]", "    g += 1",
-        "else:", f"    levels[g] = -y[{index}]", "    g += 1"]
+    guards = (
+        crank
+        + rhs[:-2]
+        + [
+            f"if p[{CLUTCH_MODE}] == 0.0:",
+            f"    levels[g] = {static} - torque",
+            f"    levels[g + 1] = {static} + torque",
+            "    g += 2",
+            "else:",
+            f"    levels[g] = p[{CLUTCH_MODE}] * (omega - y[{index}])",
+            "    g += 1",
+            f"if p[{DRIVEN_MODE}] == 2.0:",
+            "    levels[g] = resistance - push",
+            "    levels[g + 1] = resistance + push",
+            "    g += 2",
+            f"elif p[{DRIVEN_MODE}] == 0.0:",
+            f"    levels[g] = y[{index}]",
+            "    g += 1",
+            "else:",
+            f"    levels[g] = -y[{index}]",
+            "    g += 1",
+        ]
+    )
     return rhs, guards
 
 
 _INLINED = ", inline='always'"
 
 
-def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_body: list[str],
-            functions: dict[str, str], formulas: dict[str, Callable]) -> str:
+def _module(
+    rhs_body: list[str],
+    guard_body: list[str],
+    n_guards: int,
+    reaction_body: list[str],
+    functions: dict[str, str],
+    formulas: dict[str, Callable],
+) -> str:
     """The generated module's source (`reactions` only with a reaction_body), the definitions' `formulas` (name in
     the module -> function, compiled by kernels.compiled; with a hash of each one's module source, so that a changed
     formula makes a new module) and the generated `functions` (name -> source) compiled before the right-hand side
@@ -919,12 +1131,18 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
     indent = "\n    "
     guards = [f"for i in range({n_guards}):", "    levels[i] = math.inf", "omega = y[1]", "g = 0"] + guard_body
     signatures = f"GUARDS_SIGNATURE, {'REACTIONS_SIGNATURE, ' if reaction_body else ''}RHS_SIGNATURE"
-    reactions = ("\n\n@njit(REACTIONS_SIGNATURE, cache=True)\n"
-                 f"def reactions(t, y, p, squares):{indent}{indent.join(reaction_body)}\n\n\n"
-                 "reactions_callback = cfunc(REACTIONS_SIGNATURE, cache=True)(reactions.py_func)\n"
-                 if reaction_body else "")
-    compiled = "".join(f"{name} = k.compiled({function.__module__!r}, {function.__name__!r})  # source "
-                       f"{_module_source_hash(function.__module__)}\n" for name, function in sorted(formulas.items()))
+    reactions = (
+        "\n\n@njit(REACTIONS_SIGNATURE, cache=True)\n"
+        f"def reactions(t, y, p, squares):{indent}{indent.join(reaction_body)}\n\n\n"
+        "reactions_callback = cfunc(REACTIONS_SIGNATURE, cache=True)(reactions.py_func)\n"
+        if reaction_body
+        else ""
+    )
+    compiled = "".join(
+        f"{name} = k.compiled({function.__module__!r}, {function.__name__!r})  # source "
+        f"{_module_source_hash(function.__module__)}\n"
+        for name, function in sorted(formulas.items())
+    )
     return (
         '"""Generated by mech_regulator.solvers.compiled.codegen: a scene\'s right-hand side and guards (do not edit;\n'
         'the parameters are in p)."""\n\n'
@@ -933,15 +1151,20 @@ def _module(rhs_body: list[str], guard_body: list[str], n_guards: int, reaction_
         "from numba import cfunc, njit\n\n"
         "from mech_regulator.solvers.compiled import kernels as k\n"
         f"from mech_regulator.solvers.compiled.signatures import {signatures}\n\n"
-        + (f"{compiled}\n" if compiled else "") + "\n"
-        + "".join(f"@njit(cache=True, error_model='numpy'{_INLINED if name.startswith(symbolic.FUNCTION_NAME) else ''})"
-                  f"\n{source}\n\n" for name, source in functions.items()) +
-        "@njit(RHS_SIGNATURE, cache=True)\n"
+        + (f"{compiled}\n" if compiled else "")
+        + "\n"
+        + "".join(
+            f"@njit(cache=True, error_model='numpy'{_INLINED if name.startswith(symbolic.FUNCTION_NAME) else ''})"
+            f"\n{source}\n\n"
+            for name, source in functions.items()
+        )
+        + "@njit(RHS_SIGNATURE, cache=True)\n"
         f"def rhs(t, y, p, dydt):{indent}{indent.join(rhs_body)}\n\n\n"
         "@njit(GUARDS_SIGNATURE, cache=True)\n"
         f"def guards(t, y, p, levels):{indent}{indent.join(guards)}\n\n\n"
         "rhs_callback = cfunc(RHS_SIGNATURE, cache=True)(rhs.py_func)\n"
-        "guards_callback = cfunc(GUARDS_SIGNATURE, cache=True)(guards.py_func)\n" + reactions)
+        "guards_callback = cfunc(GUARDS_SIGNATURE, cache=True)(guards.py_func)\n" + reactions
+    )
 
 
 @functools.cache

@@ -135,8 +135,12 @@ from mech_regulator.solvers.time_domain import (
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
 NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS, BLOWN_UP = 1, 2, 3, 4
-FAILURES = {NONFINITE: "the state became non-finite", STEP_TOO_SMALL: "the step size fell below round-off",
-            TOO_MANY_STEPS: "the step limit (max_steps) was reached", BLOWN_UP: "a speed went beyond MAX_SPEED"}
+FAILURES = {
+    NONFINITE: "the state became non-finite",
+    STEP_TOO_SMALL: "the step size fell below round-off",
+    TOO_MANY_STEPS: "the step limit (max_steps) was reached",
+    BLOWN_UP: "a speed went beyond MAX_SPEED",
+}
 
 _RK4, _RK45, _DOP853, _ROSENBROCK23 = 0, 1, 2, 3
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0  # scipy's step-size controller (scipy.integrate._ivp.rk)
@@ -157,18 +161,64 @@ DOP853_D = np.ascontiguousarray(DOP853.D, dtype=np.float64)  # (4, 16)
 ROSENBROCK_D = 1.0 / (2.0 + np.sqrt(2.0))  # ode23s's gamma
 ROSENBROCK_E32 = 6.0 + np.sqrt(2.0)
 
-_RESTART_ARGS = (types.float64[::1], types.float64, types.float64, types.int64[::1], types.int64[::1],
-                 types.float64[:, ::1], types.int64[::1], types.int64)
-_ADAPTIVE_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1], REACTIONS_TYPE,
-                  types.int64, types.float64, types.float64[::1], types.float64, types.float64[::1],
-                  types.float64, types.float64[::1], types.float64, types.float64, types.float64, types.float64,
-                  types.int64, types.int64) + _RESTART_ARGS
-_FIXED_ARGS = (RHS_TYPE, GUARDS_TYPE, types.int64, types.float64[:, ::1], types.float64[::1],
-               types.float64, types.float64[::1], types.float64, types.float64[::1],
-               types.float64, types.float64, types.float64, types.int64, types.int64) + _RESTART_ARGS
+_RESTART_ARGS = (
+    types.float64[::1],
+    types.float64,
+    types.float64,
+    types.int64[::1],
+    types.int64[::1],
+    types.float64[:, ::1],
+    types.int64[::1],
+    types.int64,
+)
+_ADAPTIVE_ARGS = (
+    RHS_TYPE,
+    GUARDS_TYPE,
+    types.int64,
+    types.float64[:, ::1],
+    types.float64[::1],
+    REACTIONS_TYPE,
+    types.int64,
+    types.float64,
+    types.float64[::1],
+    types.float64,
+    types.float64[::1],
+    types.float64,
+    types.float64[::1],
+    types.float64,
+    types.float64,
+    types.float64,
+    types.float64,
+    types.int64,
+    types.int64,
+) + _RESTART_ARGS
+_FIXED_ARGS = (
+    RHS_TYPE,
+    GUARDS_TYPE,
+    types.int64,
+    types.float64[:, ::1],
+    types.float64[::1],
+    types.float64,
+    types.float64[::1],
+    types.float64,
+    types.float64[::1],
+    types.float64,
+    types.float64,
+    types.float64,
+    types.int64,
+    types.int64,
+) + _RESTART_ARGS
 # the restart arguments of a call that returns at every switch window's edge and at t_end (no restart inside)
-NO_RESTARTS = (np.zeros(0), 0.0, 0.0, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 2)),
-               np.zeros(0, dtype=np.int64), 0)
+NO_RESTARTS = (
+    np.zeros(0),
+    0.0,
+    0.0,
+    np.zeros(0, dtype=np.int64),
+    np.zeros(0, dtype=np.int64),
+    np.zeros((0, 2)),
+    np.zeros(0, dtype=np.int64),
+    0,
+)
 # kink_slots: the window's first guard slot, then the slots in p of the clamp (lo, hi), the window (lo, hi) and the
 # sign of the crank's speed at the segment's start (codegen's CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CRANK_DIRECTION)
 KINK_WINDOW_GUARD, KINK_CLAMP_LO, KINK_CLAMP_HI, KINK_WINDOW_LO, KINK_WINDOW_HI, KINK_DIRECTION = range(6)
@@ -176,9 +226,37 @@ RESTART_MARGIN = 1e-9  # a kink or piece is restarted inside only when every mod
 
 
 @njit(cache=True)
-def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
-               max_step, first_step, fixed_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period,
-               kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+def _integrate(
+    method,
+    rhs,
+    guards,
+    n_guards,
+    linear,
+    thresholds,
+    reactions,
+    n_journals,
+    t0,
+    y0,
+    t_end,
+    p,
+    rtol,
+    atol,
+    max_step,
+    first_step,
+    fixed_step,
+    wrap_limit,
+    wrap_period,
+    max_steps,
+    run_steps,
+    kink_grid,
+    kink_period,
+    kink_offset,
+    kink_slots,
+    speed_indices,
+    pieces,
+    piece_slots,
+    max_restarts,
+):
     """The stepping loop shared by the four methods: accepted steps with their dense output stored in
     arrays grown by doubling, an event check on every step, the speed, wrap and step limits, the journals' reach, and
     the restarts inside the loop on a switch window's edges (_kink_restart) and into the following pieces
@@ -274,12 +352,12 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
                     error = _error_norm(method, stage, h, y, y_new, rtol, atol)
                 finite = _finite(y_new)
                 if error < 1.0:
-                    factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error ** exponent)
+                    factor = MAX_FACTOR if error == 0.0 else min(MAX_FACTOR, SAFETY * error**exponent)
                     if rejected:
                         factor = min(1.0, factor)
                     h_abs *= factor
                     break
-                factor = SAFETY * error ** exponent
+                factor = SAFETY * error**exponent
                 h_abs *= factor if factor > MIN_FACTOR else MIN_FACTOR  # a nan error norm shrinks by MIN_FACTOR
                 rejected = True
             if status >= 0:
@@ -288,14 +366,13 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
             status, failure = FAILED, NONFINITE
             break
         if n_steps == capacity:
-            times, y_old, coefficients, step_offsets, restarted = _grown(times, y_old, coefficients, step_offsets,
-                                                                         restarted)
+            times, y_old, coefficients, step_offsets, restarted = _grown(
+                times, y_old, coefficients, step_offsets, restarted
+            )
             capacity *= 2
-        nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work,
-                                    coefficients[n_steps])
+        nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work, coefficients[n_steps])
         if n_journals > 0:
-            branches = _journal_branches(reactions, n_journals, t, h, y, coefficients[n_steps], p, squares,
-                                         node_state)
+            branches = _journal_branches(reactions, n_journals, t, h, y, coefficients[n_steps], p, squares, node_state)
             longest = _reach_from(branches, t)
             if h > longest and not redone:  # the step again from its start, within the reach
                 h_abs = max(longest, _smallest_step_limit(t))
@@ -312,8 +389,9 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
         h_previous = h
         n_steps += 1
         if n_guards > 0:
-            event_guard, event_time = _first_event(guards, n_guards, linear, thresholds, t, h, y,
-                                                   coefficients[n_steps - 1], p, levels, y_end)
+            event_guard, event_time = _first_event(
+                guards, n_guards, linear, thresholds, t, h, y, coefficients[n_steps - 1], p, levels, y_end
+            )
             if event_guard >= 0:
                 status = EVENT
                 if event_time <= t:  # at the step's very start: no step taken
@@ -330,8 +408,9 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
                     else:
                         nfev += _rk_step(method, rhs, t, y, f, h, p, stage, y_new, f_new)
                     coefficients[n_steps - 1] = 0.0
-                    nfev += _dense_coefficients(method, rhs, t, y, f, h, y_new, f_new, p, stage, work,
-                                                coefficients[n_steps - 1])
+                    nfev += _dense_coefficients(
+                        method, rhs, t, y, f, h, y_new, f_new, p, stage, work, coefficients[n_steps - 1]
+                    )
                     y_end[:] = y_new
                     times[n_steps] = event_time
                 else:
@@ -341,12 +420,33 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
                 y_end[0] += offset
                 if event_time > t:
                     beyond = _speed_beyond(y_end, speed_indices)
-                if (kink_grid.size > 0 and event_guard >= kink_slots[KINK_WINDOW_GUARD] and t < event_time < t_end
-                        and beyond < 0 and n_steps < max_steps and n_steps < run_steps
-                        and kinks + pieces_done < max_restarts):
-                    restart_offset = _kink_restart(guards, n_guards, linear, thresholds, event_time, y_end, p, levels,
-                                                   kink_grid, kink_period, kink_offset, kink_slots, event_guard,
-                                                   window_lo, window_hi, work)
+                if (
+                    kink_grid.size > 0
+                    and event_guard >= kink_slots[KINK_WINDOW_GUARD]
+                    and t < event_time < t_end
+                    and beyond < 0
+                    and n_steps < max_steps
+                    and n_steps < run_steps
+                    and kinks + pieces_done < max_restarts
+                ):
+                    restart_offset = _kink_restart(
+                        guards,
+                        n_guards,
+                        linear,
+                        thresholds,
+                        event_time,
+                        y_end,
+                        p,
+                        levels,
+                        kink_grid,
+                        kink_period,
+                        kink_offset,
+                        kink_slots,
+                        event_guard,
+                        window_lo,
+                        window_hi,
+                        work,
+                    )
                     if restart_offset == restart_offset:  # not nan: restarted on the next window, y its start
                         t = event_time
                         y[:] = work
@@ -375,10 +475,16 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
         if beyond >= 0:  # the step that carried it there is kept, the call stops
             status, failure = FAILED, BLOWN_UP
         elif t >= t_end:
-            if (pieces_done < pieces.shape[0] and pieces[pieces_done, 0] > t and n_steps < max_steps
-                    and n_steps < run_steps and kinks + pieces_done < max_restarts
-                    and _piece_restart(guards, n_guards, thresholds, t, y, p, levels, pieces[pieces_done], piece_slots,
-                                       work)):
+            if (
+                pieces_done < pieces.shape[0]
+                and pieces[pieces_done, 0] > t
+                and n_steps < max_steps
+                and n_steps < run_steps
+                and kinks + pieces_done < max_restarts
+                and _piece_restart(
+                    guards, n_guards, thresholds, t, y, p, levels, pieces[pieces_done], piece_slots, work
+                )
+            ):
                 # the caller's next piece, started here as it would: y[1] and p set, f anew, a fresh first step
                 y[:] = work
                 t_end = pieces[pieces_done, 0]
@@ -414,10 +520,31 @@ def _integrate(method, rhs, guards, n_guards, linear, thresholds, reactions, n_j
     if status != EVENT:
         y_end[:] = y
         y_end[0] += offset
-    return (status, n_steps, times[:n_steps + 1].copy(), y_old[:n_steps].copy(), coefficients[:n_steps].copy(),
-            event_guard, event_time, y_end, nfev, njev, nlu, abs(h_previous), failure, wraps, kinks,
-            step_offsets[:n_steps].copy(), restarted[:n_steps].copy(), kink_offset, window_lo, window_hi, pieces_done,
-            _step_limit(branches, times[n_steps]), beyond)
+    return (
+        status,
+        n_steps,
+        times[: n_steps + 1].copy(),
+        y_old[:n_steps].copy(),
+        coefficients[:n_steps].copy(),
+        event_guard,
+        event_time,
+        y_end,
+        nfev,
+        njev,
+        nlu,
+        abs(h_previous),
+        failure,
+        wraps,
+        kinks,
+        step_offsets[:n_steps].copy(),
+        restarted[:n_steps].copy(),
+        kink_offset,
+        window_lo,
+        window_hi,
+        pieces_done,
+        _step_limit(branches, times[n_steps]),
+        beyond,
+    )
 
 
 @njit(cache=True)
@@ -430,8 +557,24 @@ def _speed_beyond(y, speed_indices):
 
 
 @njit(cache=True)
-def _kink_restart(guards, n_guards, linear, thresholds, t, y_end, p, levels, grid, period, offset, slots, edge_guard,
-                  window_lo, window_hi, start):
+def _kink_restart(
+    guards,
+    n_guards,
+    linear,
+    thresholds,
+    t,
+    y_end,
+    p,
+    levels,
+    grid,
+    period,
+    offset,
+    slots,
+    edge_guard,
+    window_lo,
+    window_hi,
+    start,
+):
     """The outer loop's restart (run._compiled_pieces) on the edge of the switch window (window_lo, window_hi) [rad]
     that guard edge_guard reached at t [s] in the state y_end (phi less offset [rad]), when it changes nothing but the
     window: phi set onto the edge, wrapped anew into one period (the edge less whole periods: the phase is carried, never
@@ -502,7 +645,7 @@ def _grown(times, y_old, coefficients, step_offsets, restarted):
     """The output arrays with twice the room for steps, the stored steps copied."""
     capacity = y_old.shape[0]
     new_times = np.empty(2 * capacity + 1)
-    new_times[:capacity + 1] = times
+    new_times[: capacity + 1] = times
     new_y_old = np.empty((2 * capacity, y_old.shape[1]))
     new_y_old[:capacity] = y_old
     new_coefficients = np.zeros((2 * capacity, coefficients.shape[1], coefficients.shape[2]))
@@ -741,7 +884,7 @@ def _rescale(coefficients, ratio):
     """Re-express a step's polynomial for the step cut to ratio of its length: c_j <- c_j ratio^(j-1), so that
     h' sum c'_j theta'^j (h' = ratio h, theta' = theta / ratio) is the same function of time."""
     for j in range(1, coefficients.shape[1]):
-        coefficients[:, j] *= ratio ** j
+        coefficients[:, j] *= ratio**j
 
 
 @njit(cache=True)
@@ -888,7 +1031,7 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
         if linear[g, 0] == 0.0 or linear[g, 0] == NONLINEAR_ONTO:
             nonlinear = True
             continue
-        weights = linear[g, 2:2 + n].copy()
+        weights = linear[g, 2 : 2 + n].copy()
         line = np.zeros(coefficients.shape[1] + 1)  # level - threshold as powers of theta
         line[0] = linear[g, 1] + weights @ y_old - step_thresholds[g]
         line[1:] = h * (weights @ coefficients)
@@ -897,8 +1040,21 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
         lower = 0.0
         for upper in _monotone_ends(line):
             if _polynomial(upper, line) < 0.0:
-                time = _brent(t_old + lower * h, t_old + upper * h, g, line, t_old, h, y_old, coefficients, p,
-                              guards, levels, state, 0.0)
+                time = _brent(
+                    t_old + lower * h,
+                    t_old + upper * h,
+                    g,
+                    line,
+                    t_old,
+                    h,
+                    y_old,
+                    coefficients,
+                    p,
+                    guards,
+                    levels,
+                    state,
+                    0.0,
+                )
                 if time < best_time:
                     best_guard, best_time = g, time
                 break
@@ -924,17 +1080,42 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
                     break
                 if _polynomial(upper, line) < margin:
                     t_low = t_old + upper * h
-                    low = _excess(t_low, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state,
-                                  step_thresholds[g])
+                    low = _excess(
+                        t_low, g, no_line, t_old, h, y_old, coefficients, p, guards, levels, state, step_thresholds[g]
+                    )
                     if low >= 0.0 and upper < 1.0:
-                        t_min, v_min = _golden_minimum(t_old + lower * h, t_old + cuts[i + 1] * h, g, t_old, h,
-                                                       y_old, coefficients, p, guards, levels, state,
-                                                       step_thresholds[g])
+                        t_min, v_min = _golden_minimum(
+                            t_old + lower * h,
+                            t_old + cuts[i + 1] * h,
+                            g,
+                            t_old,
+                            h,
+                            y_old,
+                            coefficients,
+                            p,
+                            guards,
+                            levels,
+                            state,
+                            step_thresholds[g],
+                        )
                         if v_min < low:
                             t_low, low = t_min, v_min
                     if low < 0.0:
-                        time = _brent(t_old + lower * h, t_low, g, no_line, t_old, h, y_old, coefficients, p, guards,
-                                      levels, state, step_thresholds[g])
+                        time = _brent(
+                            t_old + lower * h,
+                            t_low,
+                            g,
+                            no_line,
+                            t_old,
+                            h,
+                            y_old,
+                            coefficients,
+                            p,
+                            guards,
+                            levels,
+                            state,
+                            step_thresholds[g],
+                        )
                         if time < best_time:
                             best_guard, best_time = g, time
                         break
@@ -943,29 +1124,163 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
 
 # the four steppers; stepper(method) compiles the one a run needs
-def _rk45(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol, max_step,
-          first_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period, kink_offset, kink_slots,
-          speed_indices, pieces, piece_slots, max_restarts):
+def _rk45(
+    rhs,
+    guards,
+    n_guards,
+    linear,
+    thresholds,
+    reactions,
+    n_journals,
+    t0,
+    y0,
+    t_end,
+    p,
+    rtol,
+    atol,
+    max_step,
+    first_step,
+    wrap_limit,
+    wrap_period,
+    max_steps,
+    run_steps,
+    kink_grid,
+    kink_period,
+    kink_offset,
+    kink_slots,
+    speed_indices,
+    pieces,
+    piece_slots,
+    max_restarts,
+):
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
-    return _integrate(_RK45, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol,
-                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
-                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+    return _integrate(
+        _RK45,
+        rhs,
+        guards,
+        n_guards,
+        linear,
+        thresholds,
+        reactions,
+        n_journals,
+        t0,
+        y0,
+        t_end,
+        p,
+        rtol,
+        atol,
+        max_step,
+        first_step,
+        0.0,
+        wrap_limit,
+        wrap_period,
+        max_steps,
+        run_steps,
+        kink_grid,
+        kink_period,
+        kink_offset,
+        kink_slots,
+        speed_indices,
+        pieces,
+        piece_slots,
+        max_restarts,
+    )
 
 
-def _dop853(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
-            max_step, first_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period, kink_offset,
-            kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+def _dop853(
+    rhs,
+    guards,
+    n_guards,
+    linear,
+    thresholds,
+    reactions,
+    n_journals,
+    t0,
+    y0,
+    t_end,
+    p,
+    rtol,
+    atol,
+    max_step,
+    first_step,
+    wrap_limit,
+    wrap_period,
+    max_steps,
+    run_steps,
+    kink_grid,
+    kink_period,
+    kink_offset,
+    kink_slots,
+    speed_indices,
+    pieces,
+    piece_slots,
+    max_restarts,
+):
     """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
     the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
-    return _integrate(_DOP853, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol,
-                      atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
-                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+    return _integrate(
+        _DOP853,
+        rhs,
+        guards,
+        n_guards,
+        linear,
+        thresholds,
+        reactions,
+        n_journals,
+        t0,
+        y0,
+        t_end,
+        p,
+        rtol,
+        atol,
+        max_step,
+        first_step,
+        0.0,
+        wrap_limit,
+        wrap_period,
+        max_steps,
+        run_steps,
+        kink_grid,
+        kink_period,
+        kink_offset,
+        kink_slots,
+        speed_indices,
+        pieces,
+        piece_slots,
+        max_restarts,
+    )
 
 
-def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p, rtol, atol,
-                  max_step, first_step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid, kink_period,
-                  kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+def _rosenbrock23(
+    rhs,
+    guards,
+    n_guards,
+    linear,
+    thresholds,
+    reactions,
+    n_journals,
+    t0,
+    y0,
+    t_end,
+    p,
+    rtol,
+    atol,
+    max_step,
+    first_step,
+    wrap_limit,
+    wrap_period,
+    max_steps,
+    run_steps,
+    kink_grid,
+    kink_period,
+    kink_offset,
+    kink_slots,
+    speed_indices,
+    pieces,
+    piece_slots,
+    max_restarts,
+):
     """Shampine & Reichelt's modified Rosenbrock (2, 3) pair (MATLAB's ode23s), L-stable, for stiff scenes:
     with d = 1/(2 + sqrt 2), e32 = 6 + sqrt 2, W = I - h d J,
         k1 = W^-1 (F0 + h d T),  F1 = f(t + h/2, y + h k1/2),  k2 = W^-1 (F1 - k1) + k1,
@@ -973,23 +1288,105 @@ def _rosenbrock23(rhs, guards, n_guards, linear, thresholds, reactions, n_journa
         error = h/6 (k1 - 2 k2 + k3),
     J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
     with exponent -1/3. Returns the result tuple of the module docstring."""
-    return _integrate(_ROSENBROCK23, rhs, guards, n_guards, linear, thresholds, reactions, n_journals, t0, y0, t_end, p,
-                      rtol, atol, max_step, first_step, 0.0, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
-                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+    return _integrate(
+        _ROSENBROCK23,
+        rhs,
+        guards,
+        n_guards,
+        linear,
+        thresholds,
+        reactions,
+        n_journals,
+        t0,
+        y0,
+        t_end,
+        p,
+        rtol,
+        atol,
+        max_step,
+        first_step,
+        0.0,
+        wrap_limit,
+        wrap_period,
+        max_steps,
+        run_steps,
+        kink_grid,
+        kink_period,
+        kink_offset,
+        kink_slots,
+        speed_indices,
+        pieces,
+        piece_slots,
+        max_restarts,
+    )
 
 
-def _rk4(rhs, guards, n_guards, linear, thresholds, t0, y0, t_end, p, step, wrap_limit, wrap_period, max_steps,
-         run_steps, kink_grid, kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts):
+def _rk4(
+    rhs,
+    guards,
+    n_guards,
+    linear,
+    thresholds,
+    t0,
+    y0,
+    t_end,
+    p,
+    step,
+    wrap_limit,
+    wrap_period,
+    max_steps,
+    run_steps,
+    kink_grid,
+    kink_period,
+    kink_offset,
+    kink_slots,
+    speed_indices,
+    pieces,
+    piece_slots,
+    max_restarts,
+):
     """Classic RK4, y_{n+1} = y_n + h/6 (k1 + 2 k2 + 2 k3 + k4), with step [s] shortened to divide
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
     the module docstring. Its step is kept: no journals' reach (guards stands in for reactions)."""
-    return _integrate(_RK4, rhs, guards, n_guards, linear, thresholds, guards, 0, t0, y0, t_end, p, 0.0,
-                      np.zeros(0), 0.0, 0.0, step, wrap_limit, wrap_period, max_steps, run_steps, kink_grid,
-                      kink_period, kink_offset, kink_slots, speed_indices, pieces, piece_slots, max_restarts)
+    return _integrate(
+        _RK4,
+        rhs,
+        guards,
+        n_guards,
+        linear,
+        thresholds,
+        guards,
+        0,
+        t0,
+        y0,
+        t_end,
+        p,
+        0.0,
+        np.zeros(0),
+        0.0,
+        0.0,
+        step,
+        wrap_limit,
+        wrap_period,
+        max_steps,
+        run_steps,
+        kink_grid,
+        kink_period,
+        kink_offset,
+        kink_slots,
+        speed_indices,
+        pieces,
+        piece_slots,
+        max_restarts,
+    )
 
 
-_STEPPERS = {"RK45": (_rk45, _ADAPTIVE_ARGS), "DOP853": (_dop853, _ADAPTIVE_ARGS),
-             "Rosenbrock23": (_rosenbrock23, _ADAPTIVE_ARGS), "RK4": (_rk4, _FIXED_ARGS)}
+_STEPPERS = {
+    "RK45": (_rk45, _ADAPTIVE_ARGS),
+    "DOP853": (_dop853, _ADAPTIVE_ARGS),
+    "Rosenbrock23": (_rosenbrock23, _ADAPTIVE_ARGS),
+    "RK4": (_rk4, _FIXED_ARGS),
+}
 
 
 @functools.cache
@@ -1012,8 +1409,14 @@ class StepsDense(DenseOutput):
     of a Trajectory (scipy's OdeSolution). Called with a scalar time [s] it gives shape (n_states,), with an array of
     m times shape (n_states, m)."""
 
-    def __init__(self, times: np.ndarray, y_old: np.ndarray, coefficients: np.ndarray,
-                 step_offsets: np.ndarray | None = None, restarted: np.ndarray | None = None):
+    def __init__(
+        self,
+        times: np.ndarray,
+        y_old: np.ndarray,
+        coefficients: np.ndarray,
+        step_offsets: np.ndarray | None = None,
+        restarted: np.ndarray | None = None,
+    ):
         super().__init__(times[0], times[-1])
         self.times, self.y_old, self.coefficients = times, y_old, coefficients
         self.step_offsets = step_offsets
@@ -1080,8 +1483,11 @@ class CompiledRun:
     def dense(self) -> StepsDense | None:
         """The dense output over [times[0], times[-1]], phi with the whole periods wrapped off it added back (the
         kink offsets), None when no step was taken."""
-        return (StepsDense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted)
-                if self.n_steps else None)
+        return (
+            StepsDense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted)
+            if self.n_steps
+            else None
+        )
 
     @property
     def message(self) -> str:

@@ -65,7 +65,8 @@ def clamped_linear(x, p, offset, n, anchor=np.nan):
     while p[offset + i] > at:
         i -= 1
     return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
-        x - p[offset + i])
+        x - p[offset + i]
+    )
 
 
 @njit(cache=True)
@@ -77,7 +78,8 @@ def extrapolated_linear(x, p, offset, n, anchor=np.nan):
     while i > 0 and p[offset + i] > at:
         i -= 1
     return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
-        x - p[offset + i])
+        x - p[offset + i]
+    )
 
 
 @njit(cache=True)

@@ -141,34 +141,70 @@ class _Layout(NamedTuple):
         """The layout of a model and its compiled scene."""
         grid = np.array(model.switch_grid(), dtype=float)
         wraps = model.reduced is not None or "phi" in model.depends_on()
-        window_only = (compiled.window_slot is not None and wraps and not model.state_tables
-                       and model.joint_friction is None and compiled.normal_slot is None)
+        window_only = (
+            compiled.window_slot is not None
+            and wraps
+            and not model.state_tables
+            and model.joint_friction is None
+            and compiled.normal_slot is None
+        )
         names = model.state_names()
-        return cls(grid=grid, period=model.dynamic_period(), wraps=wraps,
-                   atol=np.full(len(names), model.scene.solver.atol),
-                   thresholds=np.zeros(compiled.n_guards),  # the steppers apply time_domain's GUARD_TOLERANCE
-                   kink_grid=grid if window_only else np.empty(0),
-                   kink_slots=np.array([compiled.window_slot or 0, CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI,
-                                        CRANK_DIRECTION], dtype=np.int64),
-                   speed_indices=np.array([index for index, name in enumerate(names)
-                                           if name in ("omega", "omega_driven")], dtype=np.int64),
-                   pieces_inside=(not grid.size and not wraps and not model.state_tables and model.joint_friction is None
-                                  and compiled.normal_slot is None),
-                   callbacks=tuple(_Address(callback) for callback in (compiled.rhs_callback, compiled.guards_callback,
-                                                                       compiled.reactions_callback)))
+        return cls(
+            grid=grid,
+            period=model.dynamic_period(),
+            wraps=wraps,
+            atol=np.full(len(names), model.scene.solver.atol),
+            thresholds=np.zeros(compiled.n_guards),  # the steppers apply time_domain's GUARD_TOLERANCE
+            kink_grid=grid if window_only else np.empty(0),
+            kink_slots=np.array(
+                [compiled.window_slot or 0, CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CRANK_DIRECTION], dtype=np.int64
+            ),
+            speed_indices=np.array(
+                [index for index, name in enumerate(names) if name in ("omega", "omega_driven")], dtype=np.int64
+            ),
+            pieces_inside=(
+                not grid.size
+                and not wraps
+                and not model.state_tables
+                and model.joint_friction is None
+                and compiled.normal_slot is None
+            ),
+            callbacks=tuple(
+                _Address(callback)
+                for callback in (compiled.rhs_callback, compiled.guards_callback, compiled.reactions_callback)
+            ),
+        )
 
 
-def _compiled_segment(compiled: CompiledScene, layout: _Layout, model: MachineModel, piece, t_start: float,
-                      t_end: float, y: np.ndarray, mode, trajectory: Trajectory, progress: Progress | None):
+def _compiled_segment(
+    compiled: CompiledScene,
+    layout: _Layout,
+    model: MachineModel,
+    piece,
+    t_start: float,
+    t_end: float,
+    y: np.ndarray,
+    mode,
+    trajectory: Trajectory,
+    progress: Progress | None,
+):
     """time_domain._segment on the fast path: step [t_start, t_end] with the compiled stepper, restarting at every
     event (mode transition applied), switch angle and wrap of the crank angle; returns the state and mode at the
     end."""
-    return _compiled_pieces(compiled, layout, model, [(piece, t_start, t_end, y[1])], 0, y, mode, trajectory,
-                            progress)[:2]
+    return _compiled_pieces(compiled, layout, model, [(piece, t_start, t_end, y[1])], 0, y, mode, trajectory, progress)[
+        :2
+    ]
 
 
-def _follow_compiled(compiled: CompiledScene, layout: _Layout, model: MachineModel, pieces: list, y: np.ndarray, mode,
-                     trajectory: Trajectory):
+def _follow_compiled(
+    compiled: CompiledScene,
+    layout: _Layout,
+    model: MachineModel,
+    pieces: list,
+    y: np.ndarray,
+    mode,
+    trajectory: Trajectory,
+):
     """cosim.follow_pieces on the fast path: each piece (LoadPiece, t_start [s], t_end [s], the crank's speed at its
     start [rad/s]) stepped from the state so far with y[1] set to that speed, until one fails; returns the state and
     mode at the end."""
@@ -180,8 +216,17 @@ def _follow_compiled(compiled: CompiledScene, layout: _Layout, model: MachineMod
     return y, mode
 
 
-def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineModel, pieces: list, index: int,
-                     y: np.ndarray, mode, trajectory: Trajectory, progress: Progress | None):
+def _compiled_pieces(
+    compiled: CompiledScene,
+    layout: _Layout,
+    model: MachineModel,
+    pieces: list,
+    index: int,
+    y: np.ndarray,
+    mode,
+    trajectory: Trajectory,
+    progress: Progress | None,
+):
     """Step pieces[index] (as _follow_compiled's) from y with the compiled stepper, restarting at every event (mode
     transition applied), switch angle and wrap of the crank angle, and, where the layout allows it (pieces_inside),
     go on into the pieces after it inside the compiled calls (as _follow_compiled would start them); returns the
@@ -190,9 +235,12 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
     grid, period, wraps, atol, thresholds = layout[:5]
     wrap_limit = RESTART_PERIODS * period if wraps else math.inf
     piece, t, t_end, _ = pieces[index]
-    following = np.array([(end, omega, *compiled.piece_values(later, omega))
-                          for later, _, end, omega in pieces[index + 1:]] if layout.pieces_inside else [],
-                         dtype=float).reshape(-1, 2 + len(PIECE_SLOTS))
+    following = np.array(
+        [(end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]]
+        if layout.pieces_inside
+        else [],
+        dtype=float,
+    ).reshape(-1, 2 + len(PIECE_SLOTS))
     first_step = 0.0
     tables = model.state_tables
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
@@ -223,10 +271,33 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         # of returning to restart
         wrap_period = period if wraps and window is None and not turning else 0.0
         linear = compiled.linear(mode, window, start[1], held, start, offset)
-        restarts = (layout.kink_grid, period, offset, layout.kink_slots, layout.speed_indices, following, PIECE_INDEX,
-                    MAX_RESTARTS_PER_CALL)
-        run = _step(settings, compiled, layout.callbacks, linear, thresholds, t, y_wrapped, t_end, p, atol, first_step,
-                    wrap_limit, wrap_period, time_domain.MAX_STEPS - trajectory.stats.steps, restarts)
+        restarts = (
+            layout.kink_grid,
+            period,
+            offset,
+            layout.kink_slots,
+            layout.speed_indices,
+            following,
+            PIECE_INDEX,
+            MAX_RESTARTS_PER_CALL,
+        )
+        run = _step(
+            settings,
+            compiled,
+            layout.callbacks,
+            linear,
+            thresholds,
+            t,
+            y_wrapped,
+            t_end,
+            p,
+            atol,
+            first_step,
+            wrap_limit,
+            wrap_period,
+            time_domain.MAX_STEPS - trajectory.stats.steps,
+            restarts,
+        )
         if run.n_steps:
             trajectory.add_piece(t, run.t_end, run.dense, step_ends=run.times[1:])
         trajectory.stats.steps += int(run.n_steps)
@@ -241,7 +312,7 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
         if run.pieces_done:  # and into later pieces: the last is the one stepped now
             index += int(run.pieces_done)
             piece, _, t_end, _ = pieces[index]
-            following = following[run.pieces_done:]
+            following = following[run.pieces_done :]
         if run.last_step > 0.0:  # within the reach of the journals' branch points the last step saw (integrators)
             first_step = min(run.last_step, t_end - run.t_end, run.step_limit)
         t_old, t = t, run.t_end
@@ -302,9 +373,23 @@ def _compiled_pieces(compiled: CompiledScene, layout: _Layout, model: MachineMod
     return y, mode, index + 1
 
 
-def _step(settings: schema.Solver, compiled: CompiledScene, callbacks: tuple, linear: np.ndarray,
-          thresholds: np.ndarray, t: float, y: np.ndarray, t_end: float, p: np.ndarray, atol: np.ndarray,
-          first_step: float, wrap_limit: float, wrap_period: float, run_steps: int, restarts: tuple):
+def _step(
+    settings: schema.Solver,
+    compiled: CompiledScene,
+    callbacks: tuple,
+    linear: np.ndarray,
+    thresholds: np.ndarray,
+    t: float,
+    y: np.ndarray,
+    t_end: float,
+    p: np.ndarray,
+    atol: np.ndarray,
+    first_step: float,
+    wrap_limit: float,
+    wrap_period: float,
+    run_steps: int,
+    restarts: tuple,
+):
     """One call of the scene's compiled stepper, as an integrators.CompiledRun; callbacks: the scene's rhs, guards
     and reactions (_Layout.callbacks); run_steps: the most steps it may take (the run's left); restarts: its restart
     arguments (the kink grid, period, offset, slots, speed indices, following pieces and their slots, the most
@@ -314,12 +399,25 @@ def _step(settings: schema.Solver, compiled: CompiledScene, callbacks: tuple, li
     start = (t, y, t_end, p)
     stepper = _entry_point(settings.method)
     if settings.method == "RK4":
-        result = stepper(*scene, *start, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, run_steps,
-                         *restarts)
+        result = stepper(
+            *scene, *start, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, run_steps, *restarts
+        )
     else:  # the adaptive ones keep their steps within the reach of the journals' branch points
-        result = stepper(*scene, reactions, compiled.n_journals, *start, settings.rtol, atol,
-                         settings.max_step or math.inf, first_step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL,
-                         run_steps, *restarts)
+        result = stepper(
+            *scene,
+            reactions,
+            compiled.n_journals,
+            *start,
+            settings.rtol,
+            atol,
+            settings.max_step or math.inf,
+            first_step,
+            wrap_limit,
+            wrap_period,
+            MAX_STEPS_PER_CALL,
+            run_steps,
+            *restarts,
+        )
     return integrators.CompiledRun.from_result(result)
 
 

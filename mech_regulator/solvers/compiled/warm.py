@@ -32,7 +32,7 @@ from mech_regulator.solvers.compiled import FAST_METHODS
 from mech_regulator.solvers.compiled.locks import lock_path
 
 LOCK_VARIABLE = "MECH_REGULATOR_COMPILE_LOCK_FD"  # the lock's descriptor handed to the background process
-COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on a busy one"   # (docstring)
+COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on a busy one"  # (docstring)
 
 
 def stepper_cached(method: str) -> bool:
@@ -52,8 +52,10 @@ def compile_steppers(methods: Iterable[str], report: Callable[[str], None] = lam
 
     for method in methods:
         cached = stepper_cached(method)
-        report(f"{'loading' if cached else 'compiling'} the fast path's {method} stepper"
-               f"{'' if cached else f' (once, {COMPILE_ESTIMATE})'} ...")
+        report(
+            f"{'loading' if cached else 'compiling'} the fast path's {method} stepper"
+            f"{'' if cached else f' (once, {COMPILE_ESTIMATE})'} ..."
+        )
         started = time.perf_counter()
         stepper(method)
         report(f"  {method} ready in {time.perf_counter() - started:.1f} s")
@@ -70,12 +72,16 @@ def compile_before_the_run(method: str, report: Callable[[str], None]) -> None:
             busy = False
         except BlockingIOError:
             busy = True
-    report(f"waiting for the fast path's {method} stepper that another process is compiling (once, "
-           f"{COMPILE_ESTIMATE} in all) ..." if busy else
-           f"compiling the fast path's {method} stepper (once, {COMPILE_ESTIMATE}) ...")
+    report(
+        f"waiting for the fast path's {method} stepper that another process is compiling (once, "
+        f"{COMPILE_ESTIMATE} in all) ..."
+        if busy
+        else f"compiling the fast path's {method} stepper (once, {COMPILE_ESTIMATE}) ..."
+    )
     started = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", __name__, method], stdin=subprocess.DEVNULL, capture_output=True,
-                          text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", __name__, method], stdin=subprocess.DEVNULL, capture_output=True, text=True
+    )
     if done.returncode != 0:
         raise RuntimeError(f"compiling the fast path's {method} stepper failed:\n{done.stdout}{done.stderr}")
     report(f"{method} ready in {time.perf_counter() - started:.1f} s")
@@ -92,9 +98,15 @@ def compile_in_background(methods: Iterable[str]) -> bool:
         except BlockingIOError:
             return False  # another process is compiling
         with open(lock.with_name("compiling.log"), "a") as log:
-            subprocess.Popen([sys.executable, "-m", __name__, *methods], stdin=subprocess.DEVNULL, stdout=log,
-                             stderr=subprocess.STDOUT, start_new_session=True, pass_fds=(handle.fileno(),),
-                             env=dict(os.environ, **{LOCK_VARIABLE: str(handle.fileno())}))
+            subprocess.Popen(
+                [sys.executable, "-m", __name__, *methods],
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                pass_fds=(handle.fileno(),),
+                env=dict(os.environ, **{LOCK_VARIABLE: str(handle.fileno())}),
+            )
     return True  # the process holds the lock on its copy of the descriptor until it ends
 
 
@@ -107,7 +119,7 @@ def main(argv: list[str]) -> int:
         print(f"unknown fast-path method(s) {unknown}; expected some of {', '.join(FAST_METHODS)}", file=sys.stderr)
         return 2
     inherited = os.environ.pop(LOCK_VARIABLE, None)
-    with (os.fdopen(int(inherited), "a") if inherited else open(lock_path(), "a")) as handle:
+    with os.fdopen(int(inherited), "a") if inherited else open(lock_path(), "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         compile_steppers(methods, lambda line: print(line, flush=True))
     return 0
