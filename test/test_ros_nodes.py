@@ -1115,3 +1115,20 @@ def without_rclpy_noise(output: str) -> str:
         if not skipping:
             kept.append(line)
     return "\n".join(kept)
+
+
+def test_ctrl_c_while_rclpy_starts_is_a_normal_stop(monkeypatch):
+    """A node stopped while rclpy.init runs (the launcher stops the others when one refuses a second run on its
+    domain, and a node still starting got the SIGINT inside rclpy's Context()): exit code 0, no traceback; the
+    node's factory is never called."""
+    from mech_regulator.nodes import common
+
+    def interrupted_init(args=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(common.rclpy, "init", interrupted_init)
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        assert common.run(lambda: pytest.fail("a node built after the interrupt")) == 0
+    finally:
+        signal.signal(signal.SIGINT, previous)

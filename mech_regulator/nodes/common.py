@@ -6,6 +6,7 @@ The nodes are thin: every number they publish comes from the core (mech_regulato
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import signal
@@ -445,9 +446,14 @@ def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = 
     executor's), then `work(node)` or spin until the node says it is done (`node.done`, see follow_run_state).
     A bad scene or parameter ends with a message 'mech_regulator: <name>_node: <why>' (node_label; the launcher
     quotes it) and exit code 2, a missing peer or an output it could not write with exit code 1; Ctrl-C ends
-    with exit code 0 whatever call into rclpy it interrupts."""
+    with exit code 0 whatever call into rclpy it interrupts, rclpy.init included."""
     interrupted = remember_ctrl_c()
-    rclpy.init(args=sys.argv)
+    try:
+        rclpy.init(args=sys.argv)
+    except KeyboardInterrupt:  # stopped while rclpy starts (Ctrl-C, or the launcher ending a run another node refused)
+        with contextlib.suppress(Exception, KeyboardInterrupt):
+            rclpy.try_shutdown()
+        return 0
     node = None
     name = node_label(node_factory)
     code = EXIT_FAILED  # an unexpected error: it propagates, the process ends with 1
