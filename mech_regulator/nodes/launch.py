@@ -258,7 +258,7 @@ def main_job(
     disturbed = False  # the summary says something the run could not refuse may have changed its numbers
     failed = [name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT)]
     if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
-        from mech_regulator.nodes.recorder import write_empty_run
+        from mech_regulator.nodes.outputs import write_empty_run
 
         write_empty_run(model, output, exchange_step, NOTHING_SIMULATED)
     summary = _read_summary(summary_path)

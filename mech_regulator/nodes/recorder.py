@@ -33,7 +33,6 @@ from std_msgs.msg import String
 
 from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
 from mech_regulator.cli.report import to_json, write_csv
-from mech_regulator.model import MachineModel
 from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,
@@ -52,7 +51,7 @@ from mech_regulator.nodes.common import (
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
-from mech_regulator.nodes.outputs import default_recording
+from mech_regulator.nodes.outputs import default_recording, write_empty_run
 from mech_regulator.nodes.trust import (
     BadMessage,
     GovernorEvent,
@@ -577,34 +576,6 @@ def unrecorded(groups: list[tuple[int, dict]], recorded: dict[int, object], topi
         if when != newest and (not fresh or when != fresh[-1][0]):
             fresh.append((when, joints))
     return fresh
-
-
-def write_empty_run(
-    model: MachineModel,
-    path: Path,
-    exchange_step: float,
-    message: str = "interrupted before the first complete exchange: nothing recorded yet",
-    extra: dict | None = None,
-) -> None:
-    """The files of a run stopped before its first complete exchange: the recording at `path` with its layout and
-    no samples (unless one was written already) and the summary next to it (status interrupted, samples 0, `message`
-    saying when it stopped, and `extra`: what was refused, what disturbed it)."""
-    if not path.exists():
-        RunRecording(model, path=path).close()
-    summary = {
-        "scene": model.scene.name,
-        "status": "interrupted",
-        "message": message,
-        "exchange_step": exchange_step,
-        "samples": 0,
-        "t_end": 0.0,
-        "omega_end": model.scene.scenario.initial.omega,
-        "tripped_at": None,
-        "governor": None,
-        "recording": str(path),
-        **(extra or {}),
-    }
-    path.with_suffix(".json").write_text(to_json(summary))
 
 
 def main() -> int:
