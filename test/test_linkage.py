@@ -224,6 +224,17 @@ def test_triangle_of_three_sliders_has_one_repeated_constraint():
     assert "links 3, 1, 2 form a triangle of prismatic joints A, C, B" in structure.repeated[0]
 
 
+def test_no_crank_and_no_gear_data_are_refused_by_name():
+    """A linkage built for the count only has no crank to pivot about, a lower pair no gear data: asked for them
+    (Linkage.driving_crank, Joint.gear_mesh), they raise LinkageError saying what is missing."""
+    linkage = replace(four_bar_linkage(), crank=None)
+    with pytest.raises(LinkageError, match="the linkage has no crank; expected a driving link"):
+        linkage.crank_pivot()
+    joint = linkage.joints[0]
+    with pytest.raises(LinkageError, match=rf"the joint '{joint.name}' \(revolute\) has no gear data"):
+        joint.gear_mesh()
+
+
 def test_parallelogram_with_an_extra_link_has_one_redundant_constraint():
     """Source 001, fig. 1.26: the parallelogram A B C D (link 1 = AB, 2 = BCE, 3 = DC) with the link 5 = EF,
     l_AB = l_CD = l_EF, l_AF = l_BE, l_BC = l_AD: 4 links and 6 revolute joints of it give 3*4 - 2*6 = 0, yet it

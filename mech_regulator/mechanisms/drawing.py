@@ -70,17 +70,17 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
     No mechanism: a disc of radius DISC_RADIUS (schematic: the machine has no link lengths) and a spoke
     from its centre to DISC_RADIUS (cos phi, sin phi).
     """
-    kind = mechanism_kind(mechanism_spec)
-    if kind == "crank_slider":
+    if isinstance(mechanism_spec, schema.CrankSlider):
         return _crank_slider_outline(mechanism_spec, phi)
-    if kind == "four_bar":
+    if isinstance(mechanism_spec, schema.FourBar):
         return _four_bar_outline(mechanism_spec, phi)
-    if kind == "walking_beam":
+    if isinstance(mechanism_spec, schema.WalkingBeam):
         return _walking_beam_outline(mechanism_spec, phi)
-    if kind == "linkage":
+    if isinstance(mechanism_spec, schema.Linkage):
         from mech_regulator.mechanisms import mechanism_geometry
 
-        return linkage_drawing.linkage_outline(*mechanism_geometry(mechanism_spec), phi)
+        linkage, structure = mechanism_geometry(mechanism_spec)
+        return linkage_drawing.linkage_outline(linkage, structure, phi)
     tip = (DISC_RADIUS * math.cos(phi), DISC_RADIUS * math.sin(phi))
     return {
         "disc": circle((0.0, 0.0), DISC_RADIUS),

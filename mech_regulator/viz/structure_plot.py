@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 from mech_regulator.mechanisms.linkage import Dyad, Linkage, Structure, solve  # noqa: E402
 from mech_regulator.mechanisms.linkage.cam import cam_pairs  # noqa: E402
 from mech_regulator.mechanisms.linkage.drawing import BLOCK_PER_CRANK, crank_length, link_polygon, pitch_circles  # noqa: E402
-from mech_regulator.mechanisms.linkage.gears import GearGroup, gear_of  # noqa: E402
+from mech_regulator.mechanisms.linkage.gears import GearGroup  # noqa: E402
 
 FRAME_COLOUR, CRANK_COLOUR = "0.45", "black"
 GROUP_COLOURS = plt.rcParams["axes.prop_cycle"].by_key()["color"]
@@ -84,7 +84,7 @@ def plot_structure(linkage: Linkage, structure: Structure, phi: float, title: st
         if isinstance(group, GearGroup):
             a, b = (
                 poses[link][0] + linkage.link(link).points[centre] * cmath.exp(1j * poses[link][1])
-                for link, centre in zip(group.mesh.links, gear_of(group.mesh).centres)
+                for link, centre in zip(group.mesh.links, group.mesh.gear_mesh().centres)
             )
             pitch = a + group.pitch[0] * (b - a) / abs(b - a)
             axes.plot(pitch.real, pitch.imag, "D", ms=5, color="black", zorder=4)

@@ -40,7 +40,7 @@ def circle(centre: tuple[float, float], radius: float) -> np.ndarray:
 
 def crank_length(linkage: Linkage) -> float:
     """Distance from the crank's pivot to its farthest point [m]."""
-    points = linkage.link(linkage.crank).points
+    points = linkage.link(linkage.driving_crank()).points
     pivot = points[linkage.crank_pivot().name]
     return max(abs(p - pivot) for p in points.values())
 
@@ -62,7 +62,7 @@ def pitch_circles(linkage: Linkage, structure: Structure, poses: dict) -> list[t
     circles = []
     for group in structure.groups:
         if isinstance(group, GearGroup):
-            for link, centre, rho in zip(group.mesh.links, group.mesh.gear.centres, group.pitch):
+            for link, centre, rho in zip(group.mesh.links, group.mesh.gear_mesh().centres, group.pitch):
                 r, theta = poses[link][0], poses[link][1]
                 circles.append((link, r + linkage.link(link).points[centre] * cmath.exp(1j * theta), abs(rho), theta))
     return circles
@@ -84,13 +84,14 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
     }
     profiles = {name: pair.profile(PROFILE_POINTS) for name, pair in cams.items()}
     frame_points = list(linkage.link(linkage.frame).points.values())
-    crank = linkage.link(linkage.crank)
+    crank_name = linkage.driving_crank()
+    crank = linkage.link(crank_name)
     pivot_name = linkage.crank_pivot().name
-    pose = poses[linkage.crank]
+    pose = poses[crank_name]
     tip = max(crank.points.values(), key=lambda p: abs(p - crank.points[pivot_name]))
     pivot = linkage.link(linkage.frame).points[pivot_name]
     radius = max([crank_length(linkage)] + [float(np.max(np.abs(profile))) for profile in profiles.values()])
-    others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != linkage.crank]
+    others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != crank_name]
     others += [
         list(cams[name].centre + np.append(profile, profile[:1]) * cmath.exp(1j * phi))
         for name, profile in profiles.items()

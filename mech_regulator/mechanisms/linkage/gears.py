@@ -96,15 +96,9 @@ class GearGroup:
         return rho_a / rho_b if self.mesh.links[1] == self.link else rho_b / rho_a
 
 
-def gear_of(mesh: Joint) -> GearMesh:
-    """The GearMesh of a gear pair (model.Joint of kind GEAR, whose `gear` is always given)."""
-    assert mesh.gear is not None, f"the gear pair {mesh.name} has no GearMesh"
-    return mesh.gear
-
-
 def carrier_of(linkage: Linkage, mesh: Joint) -> str:
     """The carrier of a gear mesh: the link named, else the frame."""
-    return gear_of(mesh).carrier or linkage.frame
+    return mesh.gear_mesh().carrier or linkage.frame
 
 
 def next_gear(linkage: Linkage, known: set[str], rates: dict[str, float], solve_at) -> GearGroup | None:
@@ -131,7 +125,7 @@ def next_gear(linkage: Linkage, known: set[str], rates: dict[str, float], solve_
                     "frame's, the crank's or another gear's; expected a gear meshing with the frame, "
                     "the crank or a gear, on such a carrier"
                 )
-        gear = gear_of(mesh)
+        gear = mesh.gear_mesh()
         own_centre = linkage.link(name).points[gear.centres[mesh.links.index(name)]]
         if own_centre != linkage.link(name).points[pivot.name]:
             raise LinkageError(
@@ -151,7 +145,7 @@ def _pitch(linkage: Linkage, mesh: Joint, pivot: Joint, name: str, solve_at) -> 
     CHECK_SAMPLES crank angles (the gear `name`'s centre is its pivot's point on the link it turns about)."""
     from mech_regulator.mechanisms.linkage.kinematics import motion
 
-    carrier, gear = carrier_of(linkage, mesh), gear_of(mesh)
+    carrier, gear = carrier_of(linkage, mesh), mesh.gear_mesh()
     distances, turns = [], []
     for k in range(CHECK_SAMPLES):
         poses = solve_at(2.0 * math.pi * k / CHECK_SAMPLES, False)

@@ -33,9 +33,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from mech_regulator.mechanisms.linkage import flat
 from mech_regulator.mechanisms.linkage.model import Joint, Linkage, LinkageError
+
+if TYPE_CHECKING:  # structure.py gathers the groups of every kind
+    from mech_regulator.mechanisms.linkage.structure import Group
 
 # A link's pose and its derivatives with respect to phi: [r, theta, r', theta', r'', theta''] (r complex [m]).
 Pose = list
@@ -137,7 +141,7 @@ def parallelogram_joint(linkage: Linkage, dyad: Dyad) -> Joint | None:
     return None
 
 
-def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[float, float, float], phi: float) -> str:
+def failure_message(group: Group, status: int, numbers: tuple[float, float, float], phi: float) -> str:
     """The message of a group that flat.solve_poses could not solve at crank angle phi [rad] (its status and the
     numbers that explain it), naming the group, its links, the angle and why."""
     where = f"{group.name} (links {', '.join(group.links)})"
@@ -147,6 +151,7 @@ def failure_message(group: Dyad | RedundantLink, status: int, numbers: tuple[flo
         return f"{where} is at a dead point {at}: its links are aligned and its velocity ratios infinite"
     if status == flat.GUIDES_PARALLEL:
         return f"{where} {at}: its two guides are parallel, so the group has no single position"
+    assert isinstance(group, Dyad), f"{where}: status {status} is a dyad's (flat.place_group)"
     E1, E2 = group.externals
     if status == flat.RRR_APART:
         why = f"the distance {first:.6g} m between {E1.name} and {E2.name} is outside [{second:.6g}, {third:.6g}] m"

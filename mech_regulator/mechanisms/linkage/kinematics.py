@@ -13,22 +13,29 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from mech_regulator.mechanisms.linkage import flat
-from mech_regulator.mechanisms.linkage.groups import Dyad, Pose, RedundantLink, failure_message, packed
+from mech_regulator.mechanisms.linkage.groups import Pose, failure_message, packed
 from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
 
 if TYPE_CHECKING:  # structure.py finds redundant links with this module's solver
-    from mech_regulator.mechanisms.linkage.structure import Structure
+    from mech_regulator.mechanisms.linkage.structure import Group, Structure
 
 Motion = tuple[complex, complex, complex]  # (P [m], dP/dphi [m/rad], d2P/dphi2 [m/rad^2])
 ASSEMBLY_SAMPLES = 720  # crank angles over a turn at which a linkage is checked to assemble (every 0.5 deg)
 
 
-def make_solver(linkage: Linkage, groups: Sequence[Dyad | RedundantLink]) -> Callable[[float, bool], dict[str, Pose]]:
+class PoseSolver(Protocol):
+    """`solve_at(phi, derivatives=True) -> {link: pose}`: the poses of the links at crank angle phi [rad]
+    (make_solver)."""
+
+    def __call__(self, phi: float, derivatives: bool = True) -> dict[str, Pose]: ...
+
+
+def make_solver(linkage: Linkage, groups: Sequence[Group]) -> PoseSolver:
     """Build `solve_at(phi, derivatives=True) -> {link: pose}` placing the crank and these groups (a structure's,
     or the ones found so far) at crank angle phi [rad] (flat.solve_poses); raises LinkageError naming the group
     that cannot assemble, or is at a dead point, and the angle (groups.failure_message)."""

@@ -72,6 +72,12 @@ class Joint:
         """The link this joint joins to `link`."""
         return self.links[1] if self.links[0] == link else self.links[0]
 
+    def gear_mesh(self) -> GearMesh:
+        """The gear pair's data (`gear`); raises LinkageError naming the joint when it has none (not a gear pair)."""
+        if self.gear is None:
+            raise LinkageError(f"the joint '{self.name}' ({self.kind}) has no gear data; expected a gear pair")
+        return self.gear
+
 
 @dataclass(frozen=True)
 class Linkage:
@@ -92,7 +98,9 @@ class Linkage:
     output_link: str | None = None
     output_reference: float = 0.0
 
-    def __post_init__(self):
+    _by_name: dict[str, Link] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
         object.__setattr__(self, "_by_name", {link.name: link for link in self.links})
 
     def link(self, name: str) -> Link:
@@ -134,12 +142,13 @@ class Linkage:
                     f"joint '{joint.name}' joins the link '{joint.links[0]}' to itself; expected two different links"
                 )
             if joint.kind == GEAR:
-                if joint.gear.carrier is not None and joint.gear.carrier not in names:
+                gear = joint.gear_mesh()
+                if gear.carrier is not None and gear.carrier not in names:
                     raise LinkageError(
-                        f"gear '{joint.name}' names the carrier '{joint.gear.carrier}', which does not "
+                        f"gear '{joint.name}' names the carrier '{gear.carrier}', which does not "
                         f"exist; expected one of {names}"
                     )
-                for link, centre in zip(joint.links, joint.gear.centres):
+                for link, centre in zip(joint.links, gear.centres):
                     if centre not in self.link(link).points:
                         raise LinkageError(
                             f"gear '{joint.name}' names the centre '{centre}' on the link '{link}', "
@@ -172,6 +181,12 @@ class Linkage:
         if self.output_link is not None and self.output_link not in self.moving_links():
             raise LinkageError(f"the output link '{self.output_link}' is not a moving link {self.moving_links()}")
 
+    def driving_crank(self) -> str:
+        """The crank's name; raises LinkageError when the linkage has none (one built for the structural count only)."""
+        if self.crank is None:
+            raise LinkageError("the linkage has no crank; expected a driving link turning with the crank angle phi")
+        return self.crank
+
     def crank_pivot(self) -> Joint:
         """The revolute joint of the crank with the frame."""
-        return next(j for j in self.joints_of(self.crank) if j.kind == REVOLUTE and self.frame in j.links)
+        return next(j for j in self.joints_of(self.driving_crank()) if j.kind == REVOLUTE and self.frame in j.links)

@@ -36,6 +36,10 @@ REDUNDANCY_SAMPLES = 72  # crank angles over a turn at which a redundant link's 
 REDUNDANCY_TOLERANCE = 1e-9  # relative change of that distance still called constant [-]
 
 
+Group = Dyad | RedundantLink | CamFollower | gears.GearGroup
+"""A group of the decomposition: a class-II group (Dyad), a redundant link, a cam follower or a gear."""
+
+
 @dataclass(frozen=True)
 class Structure:
     """The structural analysis of a linkage: counts, the constraints and freedoms found (each a description), the
@@ -47,7 +51,7 @@ class Structure:
     repeated: tuple[str, ...]
     redundant: tuple[str, ...]
     passive: tuple[str, ...]
-    groups: tuple[Dyad | RedundantLink | CamFollower | gears.GearGroup, ...]
+    groups: tuple[Group, ...]
     undecomposed: str | None
 
     @property
@@ -124,11 +128,11 @@ def analyse(linkage: Linkage) -> Structure:
     moving = linkage.moving_links()
     lower = sum(1 for joint in linkage.joints if joint.kind in (REVOLUTE, PRISMATIC))
     higher = sum(1 for joint in linkage.joints if joint.kind in (CAM, GEAR))
-    groups: list = []
+    groups: list[Group] = []
     redundant: list[str] = []
     undecomposed = None
     if linkage.crank is not None:
-        undecomposed = _decompose(linkage, groups, redundant)
+        undecomposed = _decompose(linkage, linkage.crank, groups, redundant)
     return Structure(
         len(moving), lower, higher, _repeated(linkage), tuple(redundant), _passive(linkage), tuple(groups), undecomposed
     )
@@ -140,9 +144,9 @@ def _repeated(linkage: Linkage) -> tuple[str, ...]:
     order = {link.name: index for index, link in enumerate(linkage.links)}
     trios = set()
     for first, second in itertools.combinations(prismatic, 2):  # two prismatic joints sharing a link ...
-        trio = first | second
-        if len(trio) == 3 and frozenset(trio - (first & second)) in prismatic:  # ... closed by a third
-            trios.add(tuple(sorted(trio, key=order.__getitem__)))
+        joined = first | second
+        if len(joined) == 3 and frozenset(joined - (first & second)) in prismatic:  # ... closed by a third
+            trios.add(tuple(sorted(joined, key=order.__getitem__)))
     found = []
     for trio in sorted(trios, key=lambda names: [order[name] for name in names]):
         pairs = [frozenset(pair) for pair in itertools.combinations(trio, 2)]
@@ -169,11 +173,11 @@ def _passive(linkage: Linkage) -> tuple[str, ...]:
     return tuple(found)
 
 
-def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | None:
-    """Fill `groups` from the crank outward and `redundant` with the redundant links found; return a description
-    of the links that remain undecomposed, or None."""
-    known = {linkage.frame, linkage.crank}
-    rates = {linkage.frame: 0.0, linkage.crank: 1.0}  # turns per crank turn of the links whose angle is phi's
+def _decompose(linkage: Linkage, crank: str, groups: list[Group], redundant: list[str]) -> str | None:
+    """Fill `groups` from the crank (the linkage's, named `crank`) outward and `redundant` with the redundant links
+    found; return a description of the links that remain undecomposed, or None."""
+    known = {linkage.frame, crank}
+    rates = {linkage.frame: 0.0, crank: 1.0}  # turns per crank turn of the links whose angle is phi's
     while True:
         remaining = [name for name in linkage.moving_links() if name not in known]
         if not remaining:
@@ -213,7 +217,7 @@ def _decompose(linkage: Linkage, groups: list, redundant: list[str]) -> str | No
         known.update(group.links)
 
 
-def _keep_held_parallelograms(groups: list) -> None:
+def _keep_held_parallelograms(groups: list[Group]) -> None:
     """Turn back into a branch every parallelogram group on which no redundant link hangs (nothing holds it through
     its change points: there it could fold, so the assembly check refuses it if its crank reaches them)."""
     held = {
@@ -250,7 +254,9 @@ def _next_dyad(linkage: Linkage, known: set[str], remaining: list[str]) -> Dyad 
     return None
 
 
-def _next_redundant_link(linkage: Linkage, known: set[str], remaining: list[str], groups: list) -> RedundantLink | None:
+def _next_redundant_link(
+    linkage: Linkage, known: set[str], remaining: list[str], groups: list[Group]
+) -> RedundantLink | None:
     """An unknown link with exactly two revolute joints, both to known links, whose two points stay at the link's
     own distance over the turn (REDUNDANCY_SAMPLES crank angles, REDUNDANCY_TOLERANCE)."""
     lower_groups = [group for group in groups if not isinstance(group, CamFollower)]  # placed by flat.py

@@ -706,11 +706,12 @@ def _group_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict)
     for case in range(2):
         b1, b2 = residual[L1][case], residual[L2][case]
         along1, along2 = _dot3(n1, b1), _dot3(n2, b2)
-        internal = (
-            (m22 * along1 - m21 * along2) * inverse_determinant,
-            (m11 * along2 - m12 * along1) * inverse_determinant,
+        internal = w.assign(
+            [
+                (m22 * along1 - m21 * along2) * inverse_determinant,
+                (m11 * along2 - m12 * along1) * inverse_determinant,
+            ]
         )
-        internal = w.assign(list(internal))
         r1 = [b1[k] - internal[0] * a1_first[k] - internal[1] * a1_second[k] for k in range(3)]
         r2 = [b2[k] - internal[0] * a2_first[k] - internal[1] * a2_second[k] for k in range(3)]
         multipliers.append(
@@ -929,6 +930,7 @@ def _reference_function(name: str, plain: bool) -> Callable:
 
     path = cache.folder() / _file_name(name)
     spec = importlib.util.spec_from_file_location(f"mech_regulator_generated_{name}", path)
+    assert spec is not None and spec.loader is not None, f"{path}: a .py file has a source loader"
     module = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
     spec.loader.exec_module(module)
