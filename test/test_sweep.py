@@ -18,6 +18,7 @@ from support import run_cli, write_scene
 import mech_regulator.analysis.sweep as sweep_module
 from mech_regulator.analysis import energy_swing
 from mech_regulator.analysis.sweep import parse_grid, run_point, run_sweep, sweep_points
+from mech_regulator.cli.sweep import _unit_of
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, validate_scene
 from mech_regulator.solvers import simulate
@@ -52,6 +53,14 @@ def test_grid_linear_geometric_and_list():
     assert (listed.key, listed.values) == ("solver.method", ("RK45", "DOP853"))
     assert parse_grid("machine.loads.0.coefficient=1e-3,2").values == (1e-3, 2)
     assert parse_grid("governor.damping=7:9:1").values == (7.0,)
+
+
+@pytest.mark.parametrize(
+    "description, unit",
+    [("crank speed [rad/s]", "[rad/s]"), ("a count", ""), ("a [m] side note", ""), ("ratio [-] of [N m]", "[N m]")],
+)
+def test_the_plot_takes_the_unit_that_ends_a_keys_description(description, unit):
+    assert _unit_of(description) == unit
 
 
 def test_grid_cartesian_product_sets_the_scene_keys():

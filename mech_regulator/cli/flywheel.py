@@ -268,9 +268,8 @@ def format_flywheel(data: dict) -> str:
         )
         lines.append(f"  {label:<40} {row['flywheel']:14.7g} {on_shaft:>24} {tail}")
     methods = data["methods"]
-    witt, swing, refined = (
-        methods[key]["flywheel"] if methods[key] else None for key in ("wittenbauer", "energy_swing", "refined")
-    )
+    witt, swing = methods["wittenbauer"]["flywheel"], methods["energy_swing"]["flywheel"]  # always proposed
+    refined = methods["refined"]["flywheel"] if methods["refined"] else None
     lines.append(
         f"differences: energy swing vs Wittenbauer {swing / witt - 1.0:+.3%} (the constant-J approximation: "
         "J(phi) taken as its mean)"

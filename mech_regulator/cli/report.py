@@ -26,6 +26,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from mech_regulator.model import MachineModel
+    from mech_regulator.model.drivetrain import DrivenModel
 
 
 _UNSHOWABLE = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
@@ -67,7 +68,7 @@ def describe(model: MachineModel) -> str:
         "omega_driven": "rad/s",
     }
     lines.append("state vector: " + ", ".join(f"{name} [{units[name]}]" for name in model.state_names()))
-    if model.reduced is None:
+    if machine.mechanism is None:  # the model has a reduced(phi) exactly when the scene has a mechanism
         lines.append(f"inertia: constant J = {model.inertia_constant:g} kg m^2 (no mechanism: no dJ/dphi term)")
     else:
         lines.append(
@@ -103,6 +104,8 @@ def describe(model: MachineModel) -> str:
     if model.coupling is not None:
         coupling = model.coupling
         modes = coupling_modes(model)
+        assert modes is not None and machine.coupling is not None, "the model's coupling is the scene's"
+        driven_mechanism = machine.coupling.driven.mechanism  # the driven part has a reduced(phi) exactly with it
         elastic = (
             f"{coupling.stiffness:g} twist"
             if coupling.table is None
@@ -111,8 +114,8 @@ def describe(model: MachineModel) -> str:
         )
         driven = (
             f"I2 = {coupling.driven_inertia:g} kg m^2"
-            if coupling.driven.reduced is None
-            else f"I2(phi_driven) = {coupling.driven_inertia:g} kg m^2 + {machine.coupling.driven.mechanism.type} links"
+            if driven_mechanism is None
+            else f"I2(phi_driven) = {coupling.driven_inertia:g} kg m^2 + {driven_mechanism.type} links"
         )
         lines.append(
             f"coupling: M_m = {elastic} + {coupling.damping:g} (omega - omega_driven) N m to a driven part of "
@@ -120,7 +123,7 @@ def describe(model: MachineModel) -> str:
             f"{modes.stiffness:.4g} N m/rad, natural frequency {modes.natural_frequency:.4g} rad/s, damping "
             f"ratio {modes.damping_ratio:.3g})"
         )
-        lines += _driven_lines(model)
+        lines += _driven_lines(model, coupling.driven)
     if model.clutch is not None:
         clutch = model.clutch
         lines.append(
@@ -128,7 +131,7 @@ def describe(model: MachineModel) -> str:
             f"N m (exact stick/slip modes), to a driven part of I = {clutch.driven.inertia:g} kg m^2 "
             "reduced to its shaft"
         )
-        lines += _driven_lines(model)
+        lines += _driven_lines(model, clutch.driven)
     if model.governor is not None:
         lines.append(
             "governor (M_d = throttle * drive"
@@ -159,9 +162,9 @@ def describe(model: MachineModel) -> str:
     return terminal_text("\n".join(lines))
 
 
-def _driven_lines(model: MachineModel) -> list[str]:
-    """describe's lines for the driven part behind a coupling or clutch: loads, branches, resistance at rest."""
-    driven = model.driven
+def _driven_lines(model: MachineModel, driven: DrivenModel) -> list[str]:
+    """describe's lines for the driven part behind a coupling or clutch (`driven`, the model's): loads, branches,
+    resistance at rest."""
     in_branches = {index for branch in driven.branches for index in branch.effects}
     lines = [
         f"  driven part's load: {effect.formula.replace('omega', 'omega_driven').replace('phi', 'phi_driven')}"

@@ -195,9 +195,7 @@ def run_sweep_command(args: argparse.Namespace) -> int:
 
     permitted = points[0].scene.get("analysis", {}).get("permitted_delta")
     names = ", ".join(dict.fromkeys(str(point.scene["name"]) for point in points))
-    units = {
-        axis.key: re.search(r"(\[[^\]]*\])?$", key_description(axis.key, points[0].scene)).group(0) for axis in axes
-    }
+    units = {axis.key: _unit_of(key_description(axis.key, points[0].scene)) for axis in axes}
     try:
         outputs.write(
             "plot",
@@ -243,6 +241,12 @@ def dask_installed() -> bool:
         return False
 
 
+def _unit_of(description: str) -> str:
+    """The unit that ends a key's description, brackets and all ("[rad/s]"), or "" without one."""
+    unit = re.search(r"\[[^\]]*\]$", description)
+    return unit.group(0) if unit else ""
+
+
 def _label(row: dict, keys: list[str]) -> str:
     return " ".join([str(row["scene"])] + [f"{key}={_text(row[key])}" for key in keys])
 
@@ -261,7 +265,9 @@ def format_rows(rows: list[dict], keys: list[str]) -> str:
     columns = ["scene", *keys, "status", "omega_end", "delta"]
     if any(row.get("stable_by_simulation") is not None for row in rows):
         columns += ["stable_by_simulation", "oscillation_ratio", "stable_linear", "vyshnegradsky_A", "vyshnegradsky_B"]
-    shown = rows if len(rows) <= SHOWN_ROWS else rows[: SHOWN_ROWS // 2] + [None] + rows[-SHOWN_ROWS // 2 :]
+    shown: list[dict | None] = (
+        [*rows] if len(rows) <= SHOWN_ROWS else [*rows[: SHOWN_ROWS // 2], None, *rows[-SHOWN_ROWS // 2 :]]
+    )
     table = [[name.split(".")[-1] if name in keys else name.replace("vyshnegradsky_", "") for name in columns]]
     table += [
         ["..."] + [""] * (len(columns) - 1) if row is None else [terminal_text(_text(row[name])) for name in columns]
