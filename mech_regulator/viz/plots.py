@@ -11,7 +11,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 
+from mech_regulator.governors import Governor  # noqa: E402
+from mech_regulator.governors.pi import ElectronicGovernor  # noqa: E402
 from mech_regulator.model import MachineModel  # noqa: E402
+from mech_regulator.scene import schema  # noqa: E402
 from mech_regulator.solvers import Trajectory  # noqa: E402
 
 
@@ -226,14 +229,16 @@ def _plot_governor_run(
             ha="right",
         )
     speed.legend(loc="lower right")
-    if model.governor.kind == "pi":  # no sleeve: the integral part of the throttle
+    governor = model.governor
+    assert governor is not None, "plot_run draws a governor's panel for a governed model only"
+    if isinstance(governor, ElectronicGovernor):  # the PI governor: no sleeve, the integral part of the throttle
         signal = columns["integral"]
         panel.plot(times, signal, color="tab:purple", lw=1.0, label="integral part x")
         panel.set(xlabel="t [s]", ylabel="integral part x [-]", title="governor")
     else:
         signal = columns["sleeve"] * 1000.0
         panel.plot(times, signal, color="tab:purple", lw=1.0, label="sleeve z")
-        for stop in model.governor.sensor.stroke:
+        for stop in governor.sensor.stroke:
             panel.axhline(stop * 1000.0, color="tab:purple", lw=0.6, ls=":")
         panel.set(xlabel="t [s]", ylabel="sleeve z [mm] (dotted: stops)", title="governor")
     throttle = panel.twinx()
@@ -254,6 +259,7 @@ def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, 
     columns = model.columns(times, trajectory(times))
     train = summary["drive_train"]
     clutch = model.clutch
+    assert clutch is not None, "plot_clutch_run draws a model with a clutch"
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
     figure.suptitle(
         f"{model.scene.name}: start-up through a friction clutch ({model.scene.solver.method}, {summary['status']})"
@@ -394,10 +400,11 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
             speeds, load / averages[:, 0], lw=1.0, label=f"throttle needed, load {point['external_load']:g} N m"
         )
         balance.plot(point["speed"], point["throttle"], "o", ms=6, color=line.get_color())
-    if model.governor.kind == "direct":
+    valve = model.governor.valve if isinstance(model.governor, Governor) else None  # None: not direct-acting
+    if valve is not None:
         balance.plot(
             characteristic["speed"],
-            [model.governor.valve(z / 1000.0) for z in sleeve],
+            [valve(z / 1000.0) for z in sleeve],
             color="k",
             label="valve on the static characteristic",
         )
@@ -559,9 +566,10 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
     inertia and total moments over the working cycle; amplitudes of their harmonics up to max_order."""
     from mech_regulator.analysis.engine import harmonics, piston_table, torque_curves
 
-    mechanism = model.scene.machine.mechanism
     phis, exact, approximate = piston_table(model, omega)
     curves = torque_curves(model, omega)
+    mechanism = model.scene.machine.mechanism
+    assert isinstance(mechanism, schema.CrankSlider), "an engine scene's mechanism is a crank-slider (the schema's)"
     figure, axes = plt.subplot_mosaic(
         [["x", "torque"], ["v", "torque"], ["a", "spectrum"]],
         figsize=(14, 9),

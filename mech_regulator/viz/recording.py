@@ -46,6 +46,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from mech_regulator.analysis import operating_point
+from mech_regulator.governors import Governor
 from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
@@ -146,7 +147,7 @@ MECHANISM_NAMES = {
     "walking_beam": "walking beam",
     "linkage": "linkage",
 }
-END_LEVELS = {"complete": "INFO", "tripped": "WARN", "interrupted": "WARN", "failed": "ERROR"}
+END_LEVELS: dict[str | None, str] = {"complete": "INFO", "tripped": "WARN", "interrupted": "WARN", "failed": "ERROR"}
 
 
 class RunRecording:
@@ -187,12 +188,14 @@ class RunRecording:
         self._set_point_load = math.nan
         self._set_point_time = -SET_POINT_REFRESH_NS
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
-        self._series = {entity: ([], []) for entity in recorded_series(model, self.outside_throttle)}
+        self._series: dict[str, tuple[list[int], list[float]]] = {  # entity -> (times [ns], values)
+            entity: ([], []) for entity in recorded_series(model, self.outside_throttle)
+        }
         # entity -> (lowest, highest) value recorded; the throttle's plot spans 0..1, the sleeve's its stroke
         self._extents: dict[str, tuple[float, float]] = {}
         if model.governor is not None:
             self._extents = {"throttle": (0.0, 1.0)}
-            if model.governor.kind != "pi":  # the sleeve's plot spans its stroke
+            if isinstance(model.governor, Governor):  # the sleeve's plot spans its stroke (a PI governor has none)
                 stroke = model.governor.sensor.stroke
                 self._extents["governor/sleeve"] = (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])
         if self.outside_throttle:
@@ -289,7 +292,7 @@ class RunRecording:
             if "feedback_shift" in values:
                 self._append("governor/feedback_shift", t_ns, MILLIMETRES * values["feedback_shift"])
             frame = t_ns // self._frame_period_ns
-            if self.model.governor.kind != "pi" and frame != self._governor_frame:
+            if isinstance(self.model.governor, Governor) and frame != self._governor_frame:  # a PI one is not drawn
                 self._governor_frame = frame
                 sensor = self.model.governor.sensor
                 self._add_frame(
@@ -407,14 +410,18 @@ class RunRecording:
             self._set_point, self._set_point_load, self._set_point_time = self._set_points[load], load, t_ns
         return self._set_point
 
-    def _log_styles(self, root: str, outline: dict[str, np.ndarray], styles: dict, moving) -> None:
+    def _log_styles(
+        self, root: str, outline: dict[str, np.ndarray], styles: dict, moving, ball_radius: float | None = None
+    ) -> None:
         """Log the fixed parts of a drawing (metres, y up) whole and static under root/<part>, y flipped,
-        and the moving parts' colours and sizes static (their geometry comes frame by frame)."""
+        and the moving parts' colours and sizes static (their geometry comes frame by frame); ball_radius [m]: the
+        size of the points whose style gives none (a governor's balls)."""
         for name, part in outline.items():
             colour, size = styles[name]
             geometry = part * FLIP_Y if name not in moving else None
+            archetype: rr.Points2D | rr.LineStrips2D
             if name in POINT_PARTS:
-                radius = self.model.governor.sensor.ball_radius() if size is None else rr.Radius.ui_points(size)
+                radius = ball_radius if size is None else rr.Radius.ui_points(size)
                 archetype = rr.Points2D.from_fields(positions=geometry, radii=radius, colors=colour, draw_order=40.0)
             else:
                 strips = None if geometry is None else list(geometry) if geometry.ndim == 3 else [geometry]
@@ -442,10 +449,14 @@ class RunRecording:
             MECHANISM_STYLE,
             MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)],
         )
-        if self.model.governor is not None and self.model.governor.kind != "pi":  # a PI governor is not drawn
+        if isinstance(self.model.governor, Governor):  # a PI governor is not drawn
             sensor = self.model.governor.sensor
             self._log_styles(
-                "governor/drawing", sensor.outline(sensor.stop_angles()[0], 0.0), GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS
+                "governor/drawing",
+                sensor.outline(sensor.stop_angles()[0], 0.0),
+                GOVERNOR_STYLE,
+                GOVERNOR_MOVING_PARTS,
+                sensor.ball_radius(),
             )
         self._stream.log(
             "about",
@@ -524,10 +535,11 @@ def start_text(model: MachineModel) -> str:
     scene = model.scene
     if model.governor is None:
         governor = "no governor"
-    elif model.governor.kind == "indirect" and scene.governor.feedback.type == "none":
-        governor = "indirect governor without feedback"
-    elif model.governor.kind == "indirect":
-        governor = f"indirect governor, {scene.governor.feedback.type} feedback"
+    elif isinstance(scene.governor, schema.IndirectGovernor):  # the model's governor of kind "indirect"
+        feedback = scene.governor.feedback.type
+        governor = (
+            "indirect governor without feedback" if feedback == "none" else f"indirect governor, {feedback} feedback"
+        )
     elif model.governor.kind == "pi":
         governor = "electronic PI governor"
     else:
@@ -773,15 +785,15 @@ def run_blueprint(
     series = recorded_series(model, outside_throttle)
     speed = [entity for entity in series if entity.startswith("speed/")]
     band = f" {band_title(*speed_band_delta(model))}" if model.governor is not None else ""
-    plots = [_plot(f"speed [rad/s]: {_caption(speed)}{band}", speed, extents)]
+    plots: list[rrb.Container | rrb.View] = [_plot(f"speed [rad/s]: {_caption(speed)}{band}", speed, extents)]
     shares = [2.0]
     if model.governor is not None:
         # side by side, each tall enough for the viewer to label its y axis
         entity, _, _, unit = governor_signal(model.governor)
-        governor = [_single_plot("throttle", "-", extents), _single_plot(entity, unit, extents)]
+        governor_plots = [_single_plot("throttle", "-", extents), _single_plot(entity, unit, extents)]
         if "governor/feedback_shift" in series:
-            governor.append(_single_plot("governor/feedback_shift", "mm", extents))
-        plots.append(rrb.Horizontal(*governor))
+            governor_plots.append(_single_plot("governor/feedback_shift", "mm", extents))
+        plots.append(rrb.Horizontal(*governor_plots))
         shares.append(1.6)
     elif "throttle" in series:
         plots.append(_single_plot("throttle", "-", extents))
@@ -814,7 +826,7 @@ def run_blueprint(
         origin="mechanism",
         visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])),
     )
-    if model.governor is not None and model.governor.kind != "pi":  # a centrifugal governor's drawing
+    if isinstance(model.governor, Governor):  # a centrifugal governor's drawing (a PI governor has none)
         governor = rrb.Spatial2DView(
             name="governor", origin="governor/drawing", visual_bounds=_bounds_y_down(model.governor.sensor.bounds())
         )
