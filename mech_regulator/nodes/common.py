@@ -14,6 +14,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import TypeVar
 
 import rclpy
 from builtin_interfaces.msg import Time
@@ -52,6 +53,7 @@ ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknow
 DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the process ends anyway (end_if_stuck)
 MATCH_WAIT = 1.0  # [s] of wall time a publisher waits at most to match what the graph lists (deliver_all)
 MATCH_POLL = 0.01  # [s] between two looks at whether a publisher has matched the subscriptions the graph knows
+N = TypeVar("N", bound=Node)  # the kind of node `run` builds and hands to its work
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
 COMMAND_QOS = QoSProfile(
@@ -272,9 +274,8 @@ class Batch:
         if not self.groups and not self.deferred:
             self.oldest_wall = time.monotonic()
         missing = [math.nan] * len(names)
-        for gathered, values, first in zip(
-            self.fields, (names, positions, velocities, efforts), ("stamp", float(when), wall, math.nan)
-        ):
+        columns: tuple[list[str] | list[float], ...] = (names, positions, velocities, efforts)
+        for gathered, values, first in zip(self.fields, columns, ("stamp", float(when), wall, math.nan)):
             gathered.append(first)
             gathered.extend(values or missing)
         self.groups, self.last = self.groups + 1, when
@@ -295,6 +296,7 @@ class Batch:
         """Publish the waiting groups (nothing when there are none; the deferred ones completed first), stamped with
         the newest exchange time."""
         if self.deferred:
+            assert self.complete is not None, "only a sender that gave `complete` defers"
             deferred, self.deferred = self.deferred, []
             self.complete(deferred)
         if self.groups:
@@ -440,7 +442,15 @@ def deliver_all(node: Node, publishers: list | None = None) -> None:
         publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
 
 
-def run(node_factory: Callable[[], Node], work: Callable[[Node], None] | None = None) -> int:
+def spin_once(node: Node, timeout: float) -> None:
+    """Handle the node's callbacks that are ready, waiting up to `timeout` [s] of wall time for one, on the executor
+    `run` added the node to."""
+    executor = node.executor
+    assert executor is not None, "run adds the node to its executor before the node's work"
+    executor.spin_once(timeout_sec=timeout)
+
+
+def run(node_factory: Callable[[], N], work: Callable[[N], None] | None = None) -> int:
     """Run a node until it finishes or Ctrl-C: rclpy.init with the process's --ros-args, build the node,
     add it to rclpy's EventsExecutor (`node.executor`: an idle spin costs about a third of the default
     executor's), then `work(node)` or spin until the node says it is done (`node.done`, see follow_run_state).

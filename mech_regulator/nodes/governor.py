@@ -175,11 +175,13 @@ class GovernorNode(Node):
         if self.stepper.status != "complete":
             level, text = ERROR, self.stepper.message
         level, text = self.refusals.status(level, text)
+        mode = self.stepper.mode
+        assert mode is not None, "a governor's stepper has the governor's mode"
         values = {
             "scene": self.model.scene.name,
             "sim_time": seconds(self.time_ns or 0),
             "throttle": self.throttle,
-            "mode": "/".join(part for part in self.stepper.mode if part),
+            "mode": "/".join(part for part in mode if part),
             "events": len(self.stepper.events),
         }
         array = diagnostics(self, level, text, values)

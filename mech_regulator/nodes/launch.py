@@ -217,7 +217,7 @@ def main_job(
             "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST python examples/pid_governor.py",
             file=sys.stderr,
         )
-    processes: dict[str, subprocess.Popen] = {}
+    processes: dict[str, NodeProcess] = {}
     interrupted = False
     ctrl_c: list[int] = []  # a Ctrl-C that came (an import of a C extension it interrupts fails with ImportError)
     signal.signal(signal.SIGINT, functools.partial(_remember_interrupt, ctrl_c))
@@ -283,7 +283,7 @@ def main_job(
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)
     if failed:
         log_text = log_file.read_text(errors="replace")
-        endings: dict[tuple[int, str], list[str]] = {}  # (exit code, why) -> the nodes that ended so
+        endings: dict[tuple[int | None, str], list[str]] = {}  # (exit code, why) -> the nodes that ended so
         for name in failed:
             endings.setdefault((processes[name].returncode, node_reason(log_text, name)), []).append(name)
         for (code, reason), names in endings.items():
@@ -349,7 +349,7 @@ def _remember_interrupt(received: list[int], signal_number, frame) -> None:
 
 
 def _follow(
-    processes: dict[str, subprocess.Popen],
+    processes: dict[str, NodeProcess],
     environment: dict[str, str],
     duration: float,
     quiet: bool,
@@ -441,7 +441,7 @@ def wait_for_a_quiet_graph(
             seen, since = now, time.monotonic()
 
 
-def _wait_all(processes: dict[str, subprocess.Popen], timeout: float) -> None:
+def _wait_all(processes: dict[str, NodeProcess], timeout: float) -> None:
     """Wait for the nodes to end; kill those still running after timeout [s] of wall time in all."""
     deadline = time.monotonic() + timeout
     for process in processes.values():
@@ -476,12 +476,15 @@ class NodeProcess:
     def wait(self, timeout: float | None = None) -> int:
         """Wait at most timeout [s] for the end; raise subprocess.TimeoutExpired if it is still running then."""
         self.process.join(timeout)
-        if self.process.exitcode is None:
+        code = self.process.exitcode
+        if code is None:
+            assert timeout is not None, "join without a timeout returns once the process has ended"
             raise subprocess.TimeoutExpired(self.process.name, timeout)
-        return self.process.exitcode
+        return code
 
     def send_signal(self, number: int) -> None:
         if self.process.exitcode is None:
+            assert self.process.pid is not None, "__init__ started the process"
             os.kill(self.process.pid, number)
 
     def kill(self) -> None:

@@ -84,6 +84,7 @@ from mech_regulator.nodes.common import (
     run,
     scene_model,
     sent_samples,
+    spin_once,
     stamp,
     text_parameter,
 )
@@ -524,7 +525,7 @@ class MachineNode(Node):
         self.publish_status(RunState.HOLDING if holding else RunState.PAUSED)
         paused_at = time.monotonic()
         while rclpy.ok() and not self.reset_requested and (holding or self.paused and self.steps_left == 0):
-            self.executor.spin_once(timeout_sec=SPIN_SLICE)
+            spin_once(self, SPIN_SLICE)
             self.report()
         self.wall_start += time.monotonic() - paused_at  # realtime: the pause does not count
         if not self.reset_requested:
@@ -572,7 +573,7 @@ class MachineNode(Node):
                 )
             if not missing and (timed_out or not unpublished and self.matched_every_subscription()):
                 return
-            self.executor.spin_once(timeout_sec=SPIN_SLICE)
+            spin_once(self, SPIN_SLICE)
 
     def matched_every_subscription(self) -> bool:
         """Whether the state streams the recorder reads (joint_states, machine/moments, machine/status) have matched
@@ -589,7 +590,7 @@ class MachineNode(Node):
         if self.time_mode == "lockstep":
             waited = sent = time.monotonic()
             while rclpy.ok() and self.missing_inputs():
-                self.executor.spin_once(timeout_sec=SPIN_SLICE)
+                spin_once(self, SPIN_SLICE)
                 if time.monotonic() - sent > RESEND_PERIOD:  # a peer that matched late missed it: say it again
                     self.joint_publisher.publish(self.state_message)
                     sent = time.monotonic()
@@ -606,7 +607,7 @@ class MachineNode(Node):
                     )
                     self.report(force=True)
         else:
-            self.executor.spin_once(timeout_sec=0.0)
+            spin_once(self, 0.0)
         stamped = self.stamped_load.pop(self.now_ns, None) or self.held_load()
         if stamped is not None:
             value, self.load_rate = stamped
@@ -697,7 +698,7 @@ class MachineNode(Node):
             remaining = self.wall_start + seconds(target_ns) / self.real_time_factor - time.monotonic()
             if remaining <= 0.0:
                 return
-            self.executor.spin_once(timeout_sec=min(remaining, SPIN_SLICE))
+            spin_once(self, min(remaining, SPIN_SLICE))
 
     # ---------------------------------------------------------------------------------------------
     # Outputs

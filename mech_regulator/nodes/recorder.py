@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Mapping, Reversible
 from pathlib import Path
 
 import numpy as np
@@ -48,6 +49,7 @@ from mech_regulator.nodes.common import (
     peer_parameter,
     run,
     scene_model,
+    spin_once,
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
@@ -274,11 +276,11 @@ class RecorderNode(Node):
                 bounded(value, -math.inf, math.inf, f"governor/state at {seconds(when):.9g} s")
             bounded(joints["throttle"][0], 0.0, 1.0, f"governor/state at {seconds(when):.9g} s: throttle")
         for when, joints in groups:
-            values = {
+            state = {
                 name: joints[name][0] for name in ("throttle", "integral", "servo", "feedback_shift") if name in joints
             }
             if not pi:
-                values.update(
+                state.update(
                     {
                         "sleeve": joints["sleeve"][0],
                         "sleeve_velocity": joints["sleeve"][1],
@@ -286,8 +288,8 @@ class RecorderNode(Node):
                         "arm_rate": joints["arm"][1],
                     }
                 )
-            self.governor[when] = values
-            self.recording.add_governor(when, values)
+            self.governor[when] = state
+            self.recording.add_governor(when, state)
             self.part_arrived(when)
 
     def on_governor_event(self, message: String) -> None:
@@ -310,13 +312,18 @@ class RecorderNode(Node):
             values = {item.key: item.value for item in status.values}
             report = report_of(values)
             machine = speaker == self.peer_names["machine"]
-            when = real_number(values.get("sim_time", "0"), "sim_time") if machine else None
-            tripped_at = (
-                real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True) if machine else None
+            times = (  # the machine's, checked before anything is kept
+                (
+                    real_number(values.get("sim_time", "0"), "sim_time"),
+                    real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True),
+                )
+                if machine
+                else None
             )
             self.reports[speaker] = report
-            if not machine:
+            if times is None:
                 continue
+            when, tripped_at = times
             if (status.level, status.message) != self.machine_status and status.level in LEVELS:
                 self.recording.add_event(int(round(when * 1e9)), f"machine: {status.message}", LEVELS[status.level])
             self.machine_status = (status.level, status.message)
@@ -457,7 +464,7 @@ class RecorderNode(Node):
     def received(self) -> str:
         """What came of each stream: how many exchange times and the last one [s], e.g. 'machine states: 301 up to
         0.3 s; machine moments: 0; governor states: 301 up to 0.3 s'."""
-        streams = {"machine states": self.machine, "machine moments": self.moments}
+        streams: dict[str, Mapping[int, object]] = {"machine states": self.machine, "machine moments": self.moments}
         if self.model.governor is not None:
             streams["governor states"] = self.governor
         return "; ".join(
@@ -487,7 +494,8 @@ class RecorderNode(Node):
             "recorded_exchanges": len(self.completed),
             "recorded_until": seconds(self.completed_until) if self.completed_until is not None else None,
         }
-        array = diagnostics(self, *self.refusals.status(OK, "recording"), values)
+        level, text = self.refusals.status(OK, "recording")
+        array = diagnostics(self, level, text, values)
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
 
@@ -537,7 +545,7 @@ class RecorderNode(Node):
             and any(stream.get_publisher_count() == 0 for stream in self.streams)
             and time.monotonic() - waited < STREAMS_WAIT
         ):
-            self.executor.spin_once(timeout_sec=MATCH_POLL)
+            spin_once(self, MATCH_POLL)
         receive(self, JointState, "machine/moments", self.on_moments, STATE_QOS, self.refusals, self.speakers)
 
     def record(self) -> None:
@@ -547,7 +555,7 @@ class RecorderNode(Node):
         self.subscribe_to_the_machine()
         finished_seen = None
         while rclpy.ok() and not self.complete():
-            self.executor.spin_once(timeout_sec=IDLE_SPIN_SLICE)
+            spin_once(self, IDLE_SPIN_SLICE)
             if self.finished_at is not None:
                 finished_seen = finished_seen or time.monotonic()
                 if time.monotonic() - finished_seen > FINISH_GRACE:
@@ -562,7 +570,7 @@ class RecorderNode(Node):
             raise OutputError(f"{len(self.write_failures)} output(s) could not be written: {self.write_failures[-1]}")
 
 
-def unrecorded(groups: list[tuple[int, dict]], recorded: dict[int, object], topic: str) -> list[tuple[int, dict]]:
+def unrecorded(groups: list[tuple[int, dict]], recorded: Reversible[int], topic: str) -> list[tuple[int, dict]]:
     """The groups of a batch (common.batch_groups) at exchange times not in `recorded` (a stream's samples by time
     [ns], in the order of their times), each time once: the machine publishes an exchange time again when no answer
     came within machine.RESEND_PERIOD (a loaded machine), and its governor then answers that time twice, the repeat in the

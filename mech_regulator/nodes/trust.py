@@ -17,7 +17,7 @@ import json
 import math
 import traceback
 from collections.abc import Callable
-from typing import Literal
+from typing import Annotated, Literal, overload
 
 import pydantic
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -135,6 +135,10 @@ def whole_number(text: str, what: str) -> int:
     return int(text)
 
 
+@overload
+def real_number(text: str, what: str, allow_none: Literal[False] = False) -> float: ...
+@overload
+def real_number(text: str, what: str, allow_none: bool) -> float | None: ...
 def real_number(text: str, what: str, allow_none: bool = False) -> float | None:
     """A finite number written in a diagnostics value ('None' too when allow_none); BadMessage otherwise."""
     if allow_none and text == "None":
@@ -265,7 +269,8 @@ def receive(
             )
             refusals.disturb(f"a message on {topic} raised {type(error).__name__}: {error}", alters_results=True)
 
-    on_message.__signature__ = inspect.Signature(
+    # inspect.signature reads a function's __signature__, an attribute typeshed does not declare on functions
+    on_message.__signature__ = inspect.Signature(  # type: ignore[attr-defined]
         [
             inspect.Parameter("message", inspect.Parameter.POSITIONAL_ONLY),
             inspect.Parameter("info", inspect.Parameter.POSITIONAL_ONLY),
@@ -336,7 +341,7 @@ def not_ahead(when: int, latest: int, what: str) -> int:
     return when
 
 
-FiniteTime = pydantic.confloat(allow_inf_nan=False, ge=0.0)  # [s]
+FiniteTime = Annotated[float, pydantic.Field(allow_inf_nan=False, ge=0.0)]  # [s]
 
 
 class RunStateMessage(pydantic.BaseModel):
@@ -346,11 +351,11 @@ class RunStateMessage(pydantic.BaseModel):
 
     state: Literal["running", "paused", "holding", "finished"]
     time: FiniteTime
-    trial: pydantic.conint(ge=1)
+    trial: Annotated[int, pydantic.Field(ge=1)]
     status: str
     tripped_at: FiniteTime | None = None
-    max_lag_s: pydantic.confloat(allow_inf_nan=False) | None = None
-    finished_at_ns: pydantic.conint(ge=0, le=LARGEST_STAMP) | None = None
+    max_lag_s: Annotated[float, pydantic.Field(allow_inf_nan=False)] | None = None
+    finished_at_ns: Annotated[int, pydantic.Field(ge=0, le=LARGEST_STAMP)] | None = None
 
     @pydantic.model_validator(mode="after")
     def finished_says_when(self):
@@ -366,7 +371,7 @@ class GovernorEvent(pydantic.BaseModel):
 
     time: FiniteTime
     event: str
-    mode: pydantic.conlist(str | None, min_length=1, max_length=4)
+    mode: Annotated[list[str | None], pydantic.Field(min_length=1, max_length=4)]
 
 
 def json_message(text: str, model: type[pydantic.BaseModel]):

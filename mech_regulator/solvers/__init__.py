@@ -47,7 +47,7 @@ def _integrate(model: MachineModel, progress: Progress | None = None) -> Traject
 
 
 def on_path_for_a_command(
-    model: MachineModel, report: Callable[[str], None], compile_now: bool = False
+    model: MachineModel, report: Callable[[str], object], compile_now: bool = False
 ) -> MachineModel:
     """The model a command (simulate, sweep, flywheel, run and the nodes) runs, its solver.path decided: fast or
     reference, never auto.

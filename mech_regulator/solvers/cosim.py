@@ -64,9 +64,10 @@ NANOSECONDS = 1_000_000_000
 _STATISTICS = tuple(item.name for item in dataclasses.fields(SolverStats))
 
 
-def seconds(nanoseconds: int) -> float:
-    """A grid time in seconds from whole nanoseconds (the one conversion every party uses, so that a
-    time sent in a message stamp and the sender's own time are the same float)."""
+def seconds(nanoseconds: float) -> float:
+    """A grid time in seconds from whole nanoseconds, or math.inf from math.inf (a load held to the end: the one
+    conversion every party uses, so that a time sent in a message stamp and the sender's own time are the same
+    float)."""
     return nanoseconds / NANOSECONDS
 
 

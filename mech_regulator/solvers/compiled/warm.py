@@ -46,7 +46,7 @@ def stepper_cached(method: str) -> bool:
     return bool(FunctionCache(function)._cache_file._load_index())
 
 
-def compile_steppers(methods: Iterable[str], report: Callable[[str], None] = lambda line: None) -> None:
+def compile_steppers(methods: Iterable[str], report: Callable[[str], object] = lambda line: None) -> None:
     """Compile (or load from the disk cache) the steppers of `methods`, reporting a line before and after each."""
     from mech_regulator.solvers.compiled.integrators import stepper
 
@@ -61,7 +61,7 @@ def compile_steppers(methods: Iterable[str], report: Callable[[str], None] = lam
         report(f"  {method} ready in {time.perf_counter() - started:.1f} s")
 
 
-def compile_before_the_run(method: str, report: Callable[[str], None]) -> None:
+def compile_before_the_run(method: str, report: Callable[[str], object]) -> None:
     """Compile the stepper of `method` before a run, saying so with its estimate and then how long it took: in a
     child process (this module's main, under the lock: a compile another process has under way is waited for, said
     too, and then loaded), so that the compile's memory stays out of this process — the main job's nodes are forked
