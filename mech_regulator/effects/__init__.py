@@ -34,7 +34,8 @@ from mech_regulator.scene import schema
 
 check_covered(schema.Drive, schema.Load, schema.DrivenLoad, schema.BranchLoad)
 
-MomentFunction = Callable[[float, float, float, float, float], float]
+OutputCoordinate = float | tuple[float, ...]  # q [m or rad] or dq/dphi; several cylinders: one entry per piston
+MomentFunction = Callable[[float, float, float, OutputCoordinate, OutputCoordinate], float]
 
 TWO_PI = 2.0 * math.pi
 
