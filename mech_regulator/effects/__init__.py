@@ -72,6 +72,12 @@ class Effect:
     segment_output_force: Callable[..., float] | None = None
     definition: Definition | None = None
 
+    @property
+    def dry(self) -> bool:
+        """Whether it is a Coulomb resistance (a constant load: its definition's `dry`); False for an effect
+        derived from others."""
+        return self.definition is not None and self.definition.dry
+
 
 def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:
     """The driving moment M_d of a scene's `machine.drive` (an engine reads the mechanism's cylinders)."""
