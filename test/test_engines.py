@@ -341,6 +341,15 @@ def test_two_stroke_mean_gas_torque():
     assert np.mean(curves.gas_total) == pytest.approx(indicated_work(data) / (2 * math.pi), rel=1e-4)
 
 
+def test_one_cylinder_listed_gives_the_torque_curves_of_the_plain_engine():
+    """`cylinders: [one]` is the plain single-cylinder engine (its reduced mechanism has one slider, dq a float)."""
+    listed = scene(ENGINE, machine__mechanism__cylinders=[{"throw_deg": 0.0, "bank_deg": 0.0}])
+    plain, one = torque_curves(model_of(ENGINE), 250.0), torque_curves(model_of(listed), 250.0)
+    assert one.gas.shape == plain.gas.shape == (1, plain.phi.size)
+    np.testing.assert_allclose(one.gas, plain.gas, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(one.inertia, plain.inertia, rtol=1e-12, atol=1e-9)
+
+
 def test_fourier_series_reproduces_the_curves():
     curves = torque_curves(model_of(INLINE4), 300.0)
     for values in (curves.gas[0], curves.total):

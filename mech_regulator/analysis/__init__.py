@@ -28,6 +28,7 @@ from mech_regulator.analysis.statics import (
     static_characteristic,
 )
 from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
+from mech_regulator.governors import ElectronicGovernor
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 from mech_regulator.solvers.cosim import CoSimulation
@@ -126,12 +127,14 @@ def analyse_governor(model: MachineModel) -> dict:
     damping) and, for a machine periodic in phi without a driven part behind a coupling or clutch, the Floquet
     multipliers of the periodic orbit."""
     governor = model.governor
+    assert governor is not None, "analyse_governor is for a governed scene"
     load = model.external_load(0.0)
     point = operating_point(model, load)
     levels = [load] + [event.torque for event in model.scene.scenario.load_events]
     linear = linear_stability(model, point)
-    if governor.kind == "pi":  # isochronous within the valve's travel, no sleeve (docs/theory.md §8.10)
-        characteristic, statism, insensitivity = None, 0.0, 0.0
+    # the PI governor is isochronous within the valve's travel and has no sleeve (docs/theory.md §8.10)
+    if isinstance(governor, ElectronicGovernor):
+        characteristic, statism, insensitivity, sensor_name, feedback = None, 0.0, 0.0, None, None
     else:
         characteristic = static_characteristic(governor)
         statism, sensor = characteristic.statism, governor.sensor
@@ -139,11 +142,12 @@ def analyse_governor(model: MachineModel) -> dict:
             sensor.equilibrium_speed(point.sleeve, sensor.static_friction)
             - sensor.equilibrium_speed(point.sleeve, -sensor.static_friction)
         ) / point.speed
+        sensor_name, feedback = sensor.name, governor.feedback if governor.kind == "indirect" else None
     result = {
         "scene": model.scene.name,
         "kind": governor.kind,
-        "sensor": None if characteristic is None else governor.sensor.name,
-        "feedback": governor.feedback if governor.kind == "indirect" else None,
+        "sensor": sensor_name,
+        "feedback": feedback,
         "set_speed": governor.set_speed(),
         "characteristic": None
         if characteristic is None

@@ -14,6 +14,8 @@ while the clutch slips.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from mech_regulator.model import MachineModel
@@ -24,9 +26,10 @@ from mech_regulator.solvers import Trajectory
 def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
     """Slip phases [(start, end, 'slip+' | 'slip-')] and lock times [s] of a clutch, stretches [(start, end)]
     in which the driven part was held at rest, and per branch the largest section torque (value [N m], time
-    [s]) with the paper's estimate (module docstring), as plain data."""
+    [s]) with the paper's estimate (module docstring), as plain data; for a model with a drive train."""
     driven = model.driven
-    result = {
+    assert driven is not None, "drive_train_summary is for a model with a driven part"
+    result: dict[str, Any] = {
         "held": [[start, end] for start, end, mode in _spans(model, trajectory, -1) if mode == HELD],
         "events": [[t, name] for t, name in trajectory.events if "clutch" in name or "driven part" in name],
         "clutch": None,
@@ -69,7 +72,7 @@ def _spans(model: MachineModel, trajectory: Trajectory, part: int) -> list[tuple
     """(start, end, mode) of each stretch of the run in one mode of a drive-train part (0: the clutch, -1: the
     driven part)."""
     changes = [(t, model.train_mode_of(mode)[part]) for t, mode in trajectory.modes]
-    spans = []
+    spans: list[tuple[float, float, str]] = []
     for (start, mode), (end, _) in zip(changes, changes[1:] + [(trajectory.t_end, None)]):
         if spans and spans[-1][2] == mode:
             spans[-1] = (spans[-1][0], end, mode)

@@ -31,6 +31,9 @@ from mech_regulator.mechanisms.engine import (
     source_from_exact,
 )
 from mech_regulator.model import MachineModel
+from mech_regulator.model.machine import Reduced
+from mech_regulator.scene import SceneError
+from mech_regulator.scene.schema import CrankSlider, Engine, Scene
 
 POINTS_PER_DEGREE = 4  # samples of the curves per degree of crank angle (table knots every 0.25 deg fall on it)
 
@@ -98,9 +101,28 @@ def harmonics(values: np.ndarray, cycle: float) -> Harmonics:
     return Harmonics(float(coefficients[0].real), k * (2.0 * math.pi / cycle), amplitudes, np.angle(coefficients[1:]))
 
 
+def engine_parts(scene: Scene) -> tuple[CrankSlider, Engine]:
+    """The crank–slider and the engine drive of an engine scene (the schema gives an engine drive a crank–slider);
+    a SceneError naming the scene and what is expected for any other scene."""
+    mechanism, drive = scene.machine.mechanism, scene.machine.drive
+    if not isinstance(drive, Engine) or not isinstance(mechanism, CrankSlider):
+        raise SceneError(
+            f"scene '{scene.name}' is not an engine: expected mechanism.type crank_slider and drive.type "
+            "engine (see docs/engines.md)"
+        )
+    return mechanism, drive
+
+
+def _engine_reduced(model: MachineModel) -> Reduced:
+    """The model's reduced mechanism, phi [rad] -> (J_links, dJ/dphi, M_weight, q, dq/dphi); an engine scene's
+    model always has one (its crank–slider)."""
+    assert model.reduced is not None, "an engine scene's model has its crank-slider's reduced mechanism"
+    return model.reduced
+
+
 def cylinder_count(model: MachineModel) -> int:
     """Number of cylinders of the model's crank–slider (1 without `cylinders`)."""
-    cylinders = model.scene.machine.mechanism.cylinders
+    cylinders = engine_parts(model.scene)[0].cylinders
     return 1 if cylinders is None else len(cylinders)
 
 
@@ -108,17 +130,19 @@ def torque_curves(model: MachineModel, omega: float) -> TorqueCurves:
     """Gas moment per cylinder and inertia moment of an engine scene over one working cycle at constant omega
     [rad/s] (module docstring). Cylinder i's gas moment is the drive with every other piston's velocity ratio
     set to zero (the drive is linear in them)."""
+    engine = engine_parts(model.scene)[1]
+    reduced = _engine_reduced(model)
     drive = next(effect for effect in model.effects if effect.role == "drive")
-    cycle = math.radians(model.scene.machine.drive.cycle_deg)
-    count = int(round(model.scene.machine.drive.cycle_deg)) * POINTS_PER_DEGREE
+    cycle = math.radians(engine.cycle_deg)
+    count = int(round(engine.cycle_deg)) * POINTS_PER_DEGREE
     phis = np.arange(count) * (cycle / count)
     cylinders = cylinder_count(model)
     gas = np.empty((cylinders, count))
     inertia = np.empty(count)
     for j, phi in enumerate(phis):
-        _, dJ, _, q, dq = model.reduced(phi)
+        _, dJ, _, q, dq = reduced(phi)
         inertia[j] = -0.5 * dJ * omega * omega
-        if model.scene.machine.mechanism.cylinders is None:
+        if not isinstance(dq, tuple):  # one slider: dq is its dx/dphi
             gas[0, j] = drive.moment(0.0, phi, omega, q, dq)
             continue
         for i in range(cylinders):
@@ -131,7 +155,7 @@ def piston_table(model: MachineModel, omega: float) -> tuple[np.ndarray, np.ndar
     """Piston 1 over one turn at constant omega [rad/s]: phi [rad] (POINTS_PER_DEGREE per degree), the exact
     motion and source 002's approximation, both in the source's convention (from the top dead centre towards
     the crank axis), as arrays of shape (3, N): x [m], v [m/s], a [m/s^2]."""
-    mechanism = model.scene.machine.mechanism
+    mechanism = engine_parts(model.scene)[0]
     R, l, e = mechanism.crank, mechanism.rod, mechanism.offset
     phis = np.arange(360 * POINTS_PER_DEGREE) * (2.0 * math.pi / (360 * POINTS_PER_DEGREE))
     exact = np.array([source_from_exact(piston_motion(phi, omega, R, l, e), R, l, e) for phi in phis]).T
@@ -145,7 +169,8 @@ def indicated_work(model: MachineModel) -> float:
     knots of the pressure table as each cylinder sees it (table angle - phase + firing delay, mod the cycle): there
     the integrand is a straight piece of the table times the smooth dx_i/dphi, so the quadrature is exact to
     round-off (a sum over a uniform grid is not: the table's kinks cost it some 1e-6)."""
-    drive, mechanism = model.scene.machine.drive, model.scene.machine.mechanism
+    mechanism, drive = engine_parts(model.scene)
+    reduced = _engine_reduced(model)
     cycle = math.radians(drive.cycle_deg)
     if mechanism.cylinders:
         delays = firing_delays(
@@ -168,7 +193,7 @@ def indicated_work(model: MachineModel) -> float:
         half = 0.5 * (high - low)
         for node, weight in zip(nodes, weights):
             phi = low + half * (node + 1.0)
-            _, _, _, q, dq = model.reduced(phi)
+            _, _, _, q, dq = reduced(phi)
             work += weight * half * effect.moment(0.0, phi, 0.0, q, dq)
     return work
 
@@ -204,7 +229,7 @@ def engine_report(model: MachineModel, omega: float, largest: int = 8) -> dict:
     speed, error of source 002's approximation), cylinders and firing, mean indicated moment, power and mean
     effective pressure, and the largest harmonics of the gas, inertia and total moments."""
     scene = model.scene
-    mechanism, drive = scene.machine.mechanism, scene.machine.drive
+    mechanism, drive = engine_parts(scene)
     R, l, e = mechanism.crank, mechanism.rod, mechanism.offset
     stroke = crank_slider.stroke(R, l, e)
     top, bottom = crank_slider.dead_centres(R, l, e)
@@ -280,7 +305,7 @@ def engine_curve_columns(model: MachineModel, omega: float) -> dict[str, np.ndar
     """The curves over one working cycle at constant omega [rad/s], as output columns: phi_deg [deg], piston 1's
     exact x [m] (from the crank axis, as x_slider), v [m/s], a [m/s^2], M_gas_<i> per cylinder, M_gas,
     M_inertia and M_total [N m]."""
-    mechanism = model.scene.machine.mechanism
+    mechanism = engine_parts(model.scene)[0]
     curves = torque_curves(model, omega)
     piston = np.array(
         [piston_motion(phi, omega, mechanism.crank, mechanism.rod, mechanism.offset) for phi in curves.phi]

@@ -150,8 +150,10 @@ def _limits(model: MachineModel, trajectory: Trajectory, start: float, end: floa
         for part, label in zip(mode, ("sleeve", "servo")):
             if part in names and f"{label} {names[part]}" not in found:
                 found.append(f"{label} {names[part]}")
+    governor = model.governor
+    assert governor is not None, "_limits is for a governed run (load_responses)"
     states = trajectory(times)
-    throttle = np.array([model.governor.throttle(states[:, i]) for i in range(times.size)])
+    throttle = np.array([governor.throttle(states[:, i]) for i in range(times.size)])
     if np.any(throttle >= 1.0 - THROTTLE_LIMIT):
         found.append("throttle fully open")
     if np.any(throttle <= THROTTLE_LIMIT):

@@ -24,12 +24,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.energy import step_edges
 from mech_regulator.analysis.periodic import SteadyState
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import FORWARD
+from mech_regulator.model.machine import CouplingModel
 from mech_regulator.model.steady import balance_speed
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import Trajectory
@@ -67,6 +69,7 @@ class MotionPeriods:
 
 def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadyState) -> MotionPeriods:
     """The periods of a coupled run and its largest coupling moment, located on the dense output."""
+    assert model.coupling is not None, "motion_periods is for a model with a coupling"
     times = np.union1d(step_edges(trajectory), trajectory.samples(model.scene.solver.sample_rate))
     columns = model.columns(times, trajectory(times))
     t1 = _start_up_end(model, trajectory)
@@ -206,7 +209,7 @@ def required_coupling(
     phi_driven = scenario.initial.phi, the driving part at rest. speed: omega_m [rad/s] (None: the speed at
     which the cycle-averaged drive balances all loads); frequency: k [rad/s] (None: once per dynamic period at
     omega_m); points: table points over the stretch."""
-    _check_inverse(model)
+    coupling = _inverse_coupling(model)
     omega_m = speed if speed is not None else balance_speed(model, "; give the mean speed with --speed")
     frequency = frequency if frequency is not None else omega_m * 2.0 * math.pi / model.dynamic_period()
     law = SpeedLaw(omega_m, run_up, 0.5 * delta * omega_m, frequency)
@@ -217,11 +220,10 @@ def required_coupling(
             f"scenario.duration = {duration:g} s is too short for the inverse problem: expected at least "
             f"the run-up plus two periods of the law, {run_up + 2 * period:.4g} s"
         )
-    coupling = model.coupling
     external = model.external_load(0.0)
     phi2_start = model.scene.scenario.initial.phi
 
-    def needed(t: np.ndarray) -> np.ndarray:
+    def needed(t: float | np.ndarray) -> np.ndarray:
         """M_m(t) from the driven part's equation [N m]."""
         angle, omega2, epsilon2 = law(np.atleast_1d(t))
         return np.array(
@@ -238,7 +240,7 @@ def required_coupling(
         omega, epsilon = rates(t, y)
         return [omega, epsilon - needed(t)[0] / inertia]
 
-    def drive(y: np.ndarray, start: float, end: float, at: np.ndarray, dense: bool = False):
+    def drive(y: np.ndarray, start: float, end: float, at: ArrayLike, dense: bool = False):
         """The driving part's (phi1, omega1) at times `at` within [start, end] from y at start (and its dense
         output)."""
         solution = integrate.solve_ivp(
@@ -329,8 +331,9 @@ def required_coupling(
     )
 
 
-def _check_inverse(model: MachineModel) -> None:
-    """Refuse, with a message naming the key, a scene the inverse problem does not cover."""
+def _inverse_coupling(model: MachineModel) -> CouplingModel:
+    """The model's coupling, whose characteristic the inverse problem computes; refuse, with a message naming the
+    key, a scene the inverse problem does not cover."""
     scene = model.scene
     if model.coupling is None:
         raise SceneError(
@@ -353,6 +356,7 @@ def _check_inverse(model: MachineModel) -> None:
             f"scene '{scene.name}' has scenario.load_events: the inverse problem takes a constant "
             "external load (scenario.external_load)"
         )
+    return model.coupling
 
 
 def _characteristic(twist: np.ndarray, moment: np.ndarray, points: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -363,14 +367,14 @@ def _characteristic(twist: np.ndarray, moment: np.ndarray, points: int) -> tuple
     turns = [i + 1 for i in range(1, direction.size) if direction[i] != 0 and direction[i] != direction[i - 1]]
     edges = [0] + turns + [twist.size - 1]
     grid = np.linspace(twist.min(), twist.max(), points)
-    curves = []
+    stretches = []
     for lo, hi in zip(edges[:-1], edges[1:]):
         x, y = twist[lo : hi + 1], moment[lo : hi + 1]
         order = np.argsort(x)
         x, y = x[order], y[order]
         if x[-1] > x[0]:
-            curves.append(np.where((grid >= x[0]) & (grid <= x[-1]), np.interp(grid, x, y), np.nan))
-    curves = np.array(curves)
+            stretches.append(np.where((grid >= x[0]) & (grid <= x[-1]), np.interp(grid, x, y), np.nan))
+    curves = np.array(stretches)
     width = float(np.nanmax(np.nanmax(curves, axis=0) - np.nanmin(curves, axis=0)))
     return grid, np.nanmean(curves, axis=0), width
 

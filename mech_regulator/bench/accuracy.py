@@ -30,16 +30,18 @@ import signal
 import statistics
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
+from mech_regulator.scene.schema import ViscousLoad
 from mech_regulator.solvers import Trajectory, simulate
-from mech_regulator.solvers.cosim import cosimulate
+from mech_regulator.solvers.cosim import CoSimulation, cosimulate
 
 ADAPTIVE = ("RK45", "DOP853", "Radau", "BDF", "LSODA")
 IMPLICIT = ("Radau", "BDF")
@@ -75,6 +77,7 @@ def startup_closed_form(model: MachineModel) -> Callable[[np.ndarray], np.ndarra
     scene = model.scene
     machine = scene.machine
     drive = machine.drive
+    viscous = [load for load in machine.loads if isinstance(load, ViscousLoad)]
     if (
         model.reduced is not None
         or model.governor is not None
@@ -82,13 +85,13 @@ def startup_closed_form(model: MachineModel) -> Callable[[np.ndarray], np.ndarra
         or machine.coupling is not None
         or drive is None
         or drive.type != "linear_motor"
-        or any(load.type != "viscous" for load in machine.loads)
+        or len(viscous) != len(machine.loads)
     ):
         raise ValueError(
             f"scene '{scene.name}': the closed form needs a constant J, a linear motor, viscous loads "
             "only, no external load, no governor and no coupling"
         )
-    k = drive.stall_torque / drive.no_load_speed + sum(load.coefficient for load in machine.loads)
+    k = drive.stall_torque / drive.no_load_speed + sum(load.coefficient for load in viscous)
     omega_inf, T = drive.stall_torque / k, model.inertia_constant / k
     phi_i, omega_i = scene.scenario.initial.phi, scene.scenario.initial.omega
 
@@ -338,7 +341,10 @@ def _scene_named(name: str) -> BenchScene:
     return next(bench for bench in SCENES if bench.name == name)
 
 
-def timed(run: Callable[[], object]) -> tuple[object, float]:
+Result = TypeVar("Result")
+
+
+def timed(run: Callable[[], Result]) -> tuple[Result, float]:
     """(run's result, its CPU time [s])."""
     start = time.process_time()
     result = run()
@@ -353,7 +359,10 @@ def measure(task: Task) -> Measurement:
     bench = _scene_named(task.scene)
     setting = task.setting
     model = build_model(bench.load(task.quick, tuple(setting.overrides(bench.state_scale))))
-    run = (lambda: cosimulate(model, setting.value)) if setting.method == COSIM else (lambda: simulate(model))
+
+    def run() -> CoSimulation | Trajectory:
+        return cosimulate(model, setting.value) if setting.method == COSIM else simulate(model)
+
     result, cpu = timed(run)
     if result.status == "interrupted":
         raise KeyboardInterrupt
@@ -362,7 +371,7 @@ def measure(task: Task) -> Measurement:
         repeats = min(MAX_REPEATS, math.ceil(REPEAT_BUDGET_S / max(cpu, 1e-9)))
         times += [timed(run)[1] for _ in range(repeats - 1)]
     complete = result.status == "complete"
-    if setting.method == COSIM:
+    if isinstance(result, CoSimulation):
         sample_times, states = result.times, result.states
         nfev, steps = None, len(result.times) - 1
     else:
@@ -379,7 +388,7 @@ def measure(task: Task) -> Measurement:
         steps,
         sample_times if complete else np.zeros(0),
         states,
-        result if task.role == "reference" else None,
+        result if task.role == "reference" and isinstance(result, Trajectory) else None,
     )
 
 
@@ -404,7 +413,7 @@ def _ctrl_c_as_flag() -> Iterator[threading.Event]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _measured(tasks: list[Task], jobs: int) -> Iterator[Measurement]:
+def _measured(tasks: list[Task], jobs: int) -> Generator[Measurement, None, None]:
     """Measurements of the tasks as they finish, in `jobs` worker processes (in this process if 1); the
     workers are stopped when the iteration ends or is abandoned, and a Ctrl-C raises KeyboardInterrupt here,
     between two measurements (_ctrl_c_as_flag)."""
@@ -533,6 +542,7 @@ class _Collector:
             result.runs.append(self._run(measurement))
             return f"{name:<26} {setting.method:<13} {setting.label:>8}  {measurement.status}: {measurement.message}"
         if task.role == "reference":
+            assert measurement.trajectory is not None, "measure keeps a reference run's trajectory"
             self._set_reference(name, measurement.trajectory)
             while self.waiting[name]:
                 self._add_measured(self.waiting[name].pop())

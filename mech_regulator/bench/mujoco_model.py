@@ -35,6 +35,7 @@ import numpy as np
 
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.scene import Scene, SceneError
+from mech_regulator.scene.schema import ConstantDrive, CrankSlider, LinearMotor
 
 NATIVE_DRIVES = ("constant", "linear_motor")
 NATIVE_LOADS = ("constant", "viscous", "slider_constant", "slider_viscous", "slider_spring")
@@ -70,14 +71,25 @@ def mujoco_refusal(scene: Scene) -> str | None:
     return None
 
 
-def _affine_bias(scene: Scene) -> tuple[float, float, float, float]:
-    """Constant and speed terms of the crank's moment and the constant force on the slider as MuJoCo biases:
-    (crank constant [N m], crank per omega [N m s/rad], crank damping [N m s/rad], slider constant [N])."""
+def mujoco_parts(scene: Scene) -> tuple[CrankSlider, ConstantDrive | LinearMotor]:
+    """The crank–slider and the native drive of a scene the MuJoCo model can express (mujoco_refusal); a SceneError
+    naming the scene and the reason for any other."""
+    refusal = mujoco_refusal(scene)
+    if refusal is not None:
+        raise SceneError(f"scene '{scene.name}': {refusal}")
+    mechanism, drive = scene.machine.mechanism, scene.machine.drive
+    assert isinstance(mechanism, CrankSlider) and isinstance(drive, ConstantDrive | LinearMotor), "mujoco_refusal"
+    return mechanism, drive
+
+
+def _affine_bias(scene: Scene, drive: ConstantDrive | LinearMotor) -> tuple[float, float, float, float]:
+    """Constant and speed terms of the crank's moment (the drive's, less the constant loads) and the constant force
+    on the slider as MuJoCo biases: (crank constant [N m], crank per omega [N m s/rad], crank damping [N m s/rad],
+    slider constant [N])."""
     machine = scene.machine
-    drive = machine.drive
     constant, per_speed = (
         (drive.torque, 0.0)
-        if drive.type == "constant"
+        if isinstance(drive, ConstantDrive)
         else (drive.stall_torque, -drive.stall_torque / drive.no_load_speed)
     )
     damping = slider_force = 0.0
@@ -94,16 +106,14 @@ def _affine_bias(scene: Scene) -> tuple[float, float, float, float]:
 def crank_slider_mjcf(scene: Scene, timestep: float) -> str:
     """The MJCF text of the scene's crank–slider (see the module docstring) at a timestep [s]; the plane of the
     mechanism is MuJoCo's x-y plane and every hinge turns about z. A scene it cannot express is a SceneError."""
-    refusal = mujoco_refusal(scene)
-    if refusal is not None:
-        raise SceneError(f"scene '{scene.name}': {refusal}")
-    machine, link = scene.machine, scene.machine.mechanism
+    link, drive = mujoco_parts(scene)
+    machine = scene.machine
     R, l, e = link.crank, link.rod, link.offset
     J_crank = machine.inertia + (machine.flywheel.inertia * machine.flywheel.ratio**2 if machine.flywheel else 0.0)
     gx, gy = machine.gravity if machine.gravity is not None else (0.0, 0.0)
     # at the model's reference pose (every joint 0, so phi = 0) the rod runs from B = (R, 0) to C = (x_C, e)
     x_C, _dx, _ddx, theta_ref, _dtheta, _ddtheta = slider_kinematics(0.0, R, l, e)
-    constant, per_speed, damping, slider_force = _affine_bias(scene)
+    constant, per_speed, damping, slider_force = _affine_bias(scene, drive)
     spring = next((load for load in machine.loads if load.type == "slider_spring"), None)
     slider_damping = sum(load.coefficient for load in machine.loads if load.type == "slider_viscous")
     # a body needs a positive mass: a massless crank gets 1 kg on its axis (no moment, no inertia about z);
@@ -185,6 +195,7 @@ class MujocoCrankSlider:
         from mujoco import rollout
 
         self.scene, self.timestep = scene, timestep
+        self.crank_slider = mujoco_parts(scene)[0]
         self.model = mujoco.MjModel.from_xml_string(crank_slider_mjcf(scene, timestep))
         self.data = mujoco.MjData(self.model)
         self._rollout = rollout
@@ -200,7 +211,7 @@ class MujocoCrankSlider:
         """Joint positions (crank angle phi, the rod's angle relative to the crank, slider x) and speeds of the
         closed loop at crank angle phi [rad] and speed omega [rad/s], from the closed-form kinematics:
         rod angle theta(phi) - phi - theta(0), its speed (theta' - 1) omega, slider x(phi) and x' omega."""
-        link = self.scene.machine.mechanism
+        link = self.crank_slider
         x, dx, _ddx, theta, dtheta, _ddtheta = slider_kinematics(phi, link.crank, link.rod, link.offset)
         theta_ref = slider_kinematics(0.0, link.crank, link.rod, link.offset)[3]
         return (np.array([phi, theta - phi - theta_ref, x]), np.array([omega, (dtheta - 1.0) * omega, dx * omega]))
@@ -214,4 +225,12 @@ class MujocoCrankSlider:
         return MujocoRun(states[:, 0], states[:, 1], states[:, 1 + nq], states[:, 3], self.timestep, steps)
 
 
-__all__ = ["MujocoCrankSlider", "MujocoRun", "NATIVE_DRIVES", "NATIVE_LOADS", "crank_slider_mjcf", "mujoco_refusal"]
+__all__ = [
+    "MujocoCrankSlider",
+    "MujocoRun",
+    "NATIVE_DRIVES",
+    "NATIVE_LOADS",
+    "crank_slider_mjcf",
+    "mujoco_parts",
+    "mujoco_refusal",
+]

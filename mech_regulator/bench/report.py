@@ -211,8 +211,7 @@ def findings(result: SceneResult) -> list[str]:
             + ", ".join(f"{method} p = {order:.2g}" for method, order in orders.items())
             + "."
         )
-    spans = {method: proportionality(result, method) for method in ADAPTIVE}
-    spans = {method: span for method, span in spans.items() if span is not None}
+    spans = {method: span for method in ADAPTIVE if (span := proportionality(result, method)) is not None}
     if spans:
         lines.append(
             "Tolerance proportionality, achieved error / requested rtol: "

@@ -133,7 +133,7 @@ def parse_progress(line: str, wall: float) -> Progress | None:
 def process_memory(launcher) -> dict[str, float]:
     """RSS [MB] of the launcher (a psutil.Process) and of each node process it forked, by name (machine, governor,
     scenario, recorder, launcher); a process that has ended is left out."""
-    memory = {}
+    memory: dict[str, float] = {}
     try:
         processes = [("launcher", launcher)] + [
             (child.name().removesuffix(NODE_SUFFIX), child)
@@ -284,7 +284,11 @@ class _Watch:
         the last progress line before the interval (or the first line) and the last one in it, 0 without a new one;
         none before a second line."""
         rate = exchanges = None
-        if self.latest is not None and (self.latest is not self.anchor or self.anchored_by_a_row):
+        if (
+            self.latest is not None
+            and self.anchor is not None
+            and (self.latest is not self.anchor or self.anchored_by_a_row)
+        ):
             span = (self.latest.wall if self.latest is not self.anchor else now) - self.anchor.wall
             rate = (self.latest.sim_time - self.anchor.sim_time) / span if span > 0.0 else 0.0
             exchanges = rate / self.soak.exchange_step if self.soak.exchange_step else None

@@ -343,7 +343,7 @@ def at_target(benchmark: SpeedBenchmark, scene: str, duration: float) -> list[Pa
 def ratios(results: list[PathAtTarget]) -> dict[str, float]:
     """CPU time of each other path's best method at TARGET_ERROR over the fast path's best (nan if either is
     missing): 'fast : solve_ivp', 'fast : reference', 'fast : MuJoCo'."""
-    best = {}
+    best: dict[str, float] = {}
     for result in results:
         if math.isfinite(result.cpu_s):
             best[result.path] = min(best.get(result.path, math.inf), result.cpu_s)
@@ -713,15 +713,17 @@ def run_speed_benchmark(
         benchmark.rows.append(row)
         report(row)
 
-    parts = [lambda bench=bench: measure_precision(bench, quick, keep, mujoco) for bench in scenes]
+    parts: list[Callable[[], list[Row]]] = [
+        functools.partial(measure_precision, bench, quick, keep, mujoco) for bench in scenes
+    ]
     parts += [
-        lambda: measure_durations(quick, keep),
-        lambda: measure_effects(quick, keep),
-        lambda: measure_sweeps(quick, keep),
-        lambda: measure_startup(keep),
+        functools.partial(measure_durations, quick, keep),
+        functools.partial(measure_effects, quick, keep),
+        functools.partial(measure_sweeps, quick, keep),
+        functools.partial(measure_startup, keep),
     ]
     if ros:
-        parts.append(lambda: measure_ros(keep))
+        parts.append(functools.partial(measure_ros, keep))
     try:
         for part in parts:
             part()

@@ -163,6 +163,13 @@ def _load_term(load) -> str | None:
     return None
 
 
+def _written_term(load) -> str:
+    """_load_term of a load of a scene script_refusal accepts (it refuses a load without a term)."""
+    term = _load_term(load)
+    assert term is not None, f"script_refusal accepted a load of type '{load.type}' without a term"
+    return term
+
+
 SCRIPT_HEAD = '''"""{scene}: a plain scipy script of the same machine as `mech-regulator simulate {scene}` (written by
 `mech-regulator bench startup`): J(phi) d omega/dt + J'(phi) omega^2 / 2 = M(phi, omega), integrated by solve_ivp
 (from switch angle to switch angle where a moment jumps with phi: a step across a jump would go unnoticed)."""
@@ -299,8 +306,8 @@ def script_text(scene) -> str:
         if drive.type == "constant"
         else f"{drive.stall_torque!r} * (1.0 - omega / {drive.no_load_speed!r})"
     ]
-    smooth += [_load_term(load) for load in machine.loads if load.type != "cutting"]
-    switched = [_load_term(load) for load in machine.loads if load.type == "cutting"] or ["0.0"]
+    smooth += [_written_term(load) for load in machine.loads if load.type != "cutting"]
+    switched = [_written_term(load) for load in machine.loads if load.type == "cutting"] or ["0.0"]
     method = solver.method if solver.method in ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA") else "DOP853"
     return text + SCRIPT_TAIL.format(
         smooth=" + ".join(smooth + ["weight"]),
@@ -367,6 +374,12 @@ def measure_startup(
         report(f"bench startup: {label} run {len(timing.wall)}/{repeat}: {wall:.3g} s wall, {cpu:.3g} s CPU")
         return out
 
+    def measured(measure: str, path: str) -> Timing:
+        """The timing of a measure taken on a path (None in `timings` marks one not taken)."""
+        timing = timings[measure][path]
+        assert timing is not None, f"{measure} is not measured on {path}"
+        return timing
+
     def final_speed(path: str, out: str) -> None:
         found = re.search(r"omega_end (\S+)", out) if path == SCRIPT else OMEGA_PATTERN.search(out)
         if found:
@@ -394,7 +407,7 @@ def measure_startup(
             record(python, "python -c pass", [sys.executable, "-c", "pass"], base)
             for measure in ("import", "help"):
                 for path, command in commands[measure].items():
-                    record(timings[measure][path], f"{measure} ({PATH_TITLES[path]})", command, base)
+                    record(measured(measure, path), f"{measure} ({PATH_TITLES[path]})", command, base)
         for measure in ("import", "help"):  # one process serves both paths of the command line
             timings[measure][FAST] = timings[measure][REFERENCE]
         warm_caches: dict[str, dict[str, str]] = {}
@@ -405,7 +418,7 @@ def measure_startup(
                 cache = tempfile.mkdtemp(prefix=f"cold-{path}-{index}-", dir=folder)
                 env = dict(base, **{variable: cache for variable in CACHE_VARIABLES})
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
-                final_speed(path, record(timings["cold"][path], f"cold {PATH_TITLES[path]}", command, env))
+                final_speed(path, record(measured("cold", path), f"cold {PATH_TITLES[path]}", command, env))
                 warm_caches[path] = env
                 if path == FAST:
                     _wait_for_background_compile(cache, report)
@@ -418,7 +431,7 @@ def measure_startup(
             for path in PATHS:
                 command = [sys.executable, str(script)] if path == SCRIPT else simulate_command(path)
                 final_speed(
-                    path, record(timings["warm"][path], f"warm {PATH_TITLES[path]}", command, warm_caches[path])
+                    path, record(measured("warm", path), f"warm {PATH_TITLES[path]}", command, warm_caches[path])
                 )
         served = dict(warm_caches[FAST], XDG_RUNTIME_DIR=os.path.join(folder, "servers"))
         served.pop("MECH_REGULATOR_SERVER")
@@ -432,7 +445,7 @@ def measure_startup(
                     final_speed(
                         path,
                         record(
-                            timings["served"][path],
+                            measured("served", path),
                             f"warm {PATH_TITLES[path]} through the server",
                             simulate_command(path),
                             served,
@@ -489,15 +502,15 @@ def environment() -> dict[str, str]:
 def ratios(benchmark: StartupBenchmark) -> dict[str, dict[str, float | None]]:
     """Per measure, each path's median over the script's (its warm run's for the served one; None where either is
     missing)."""
-    found = {}
+    found: dict[str, dict[str, float | None]] = {}
     for measure, timings in benchmark.timings.items():
         script = benchmark.timings[SCRIPT_MEASURE.get(measure, measure)][SCRIPT]
-        found[measure] = {
-            f"{path} / {SCRIPT}": (
-                timings[path].median / script.median if timings[path] is not None and script is not None else None
+        found[measure] = {}
+        for path in (REFERENCE, FAST):
+            timing = timings[path]
+            found[measure][f"{path} / {SCRIPT}"] = (
+                timing.median / script.median if timing is not None and script is not None else None
             )
-            for path in (REFERENCE, FAST)
-        }
     return found
 
 

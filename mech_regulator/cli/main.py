@@ -773,16 +773,12 @@ def _kinematics(scene, args) -> int:
 
 def _engine(scene, args) -> int:
     """engine: the analysis of an engine scene at constant speed, printed, and optionally a PNG and a CSV."""
-    from mech_regulator.analysis.engine import engine_curve_columns, engine_report
+    from mech_regulator.analysis.engine import engine_curve_columns, engine_parts, engine_report
     from mech_regulator.cli.report import OutputWriter, format_engine, to_json, write_csv
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 
-    if scene.machine.drive is None or scene.machine.drive.type != "engine":  # the schema gives it a crank_slider
-        raise SceneError(
-            f"scene '{scene.name}' is not an engine: expected mechanism.type crank_slider and drive.type "
-            "engine (see docs/engines.md)"
-        )
+    engine_parts(scene)  # refuses a scene that is not an engine, before the model is built
     omega = scene.scenario.initial.omega if args.omega is None else args.omega
     if not (math.isfinite(omega) and omega > 0.0):
         source = "--omega" if args.omega is not None else "the scene's scenario.initial.omega"

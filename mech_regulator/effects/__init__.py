@@ -34,7 +34,8 @@ from mech_regulator.scene import schema
 
 check_covered(schema.Drive, schema.Load, schema.DrivenLoad, schema.BranchLoad)
 
-MomentFunction = Callable[[float, float, float, float, float], float]
+OutputCoordinate = float | tuple[float, ...]  # q [m or rad] or dq/dphi; several cylinders: one entry per piston
+MomentFunction = Callable[[float, float, float, OutputCoordinate, OutputCoordinate], float]
 
 TWO_PI = 2.0 * math.pi
 
@@ -70,6 +71,12 @@ class Effect:
     segment_moment: Callable[..., float] | None = None
     segment_output_force: Callable[..., float] | None = None
     definition: Definition | None = None
+
+    @property
+    def dry(self) -> bool:
+        """Whether it is a Coulomb resistance (a constant load: its definition's `dry`); False for an effect
+        derived from others."""
+        return self.definition is not None and self.definition.dry
 
 
 def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:

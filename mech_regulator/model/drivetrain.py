@@ -164,14 +164,14 @@ def build_driven(
         build_load(load, 2.0 * math.pi if spec.mechanism is not None else None, output_position_of(reduced))
         for load in spec.loads
     ]  # a slider table's kinks: where its mechanism's x crosses a breakpoint
-    coulomb = [effect.definition.dry for effect in effects]  # constant loads: Coulomb resistances
+    coulomb = [effect.dry for effect in effects]  # constant loads: Coulomb resistances
     effects = unique_names(effects)
     branches = []
     for branch in spec.branches:
         own = unique_names([build_load(load, None) for load in branch.loads])
         first = len(effects)
         effects += [_reduced(effect, branch.name, branch.ratio) for effect in own]
-        coulomb += [effect.definition.dry for effect in own]
+        coulomb += [effect.dry for effect in own]
         branches.append(BranchModel(branch.name, branch.inertia, branch.ratio, tuple(range(first, len(effects)))))
     inertia = spec.inertia + sum(branch.inertia / branch.ratio**2 for branch in spec.branches)
     resistance = -sum(effect.moment(0.0, 0.0, 0.0, 0.0, 0.0) for effect, dry in zip(effects, coulomb) if dry)
@@ -250,6 +250,7 @@ class ClutchModel:
                     return clutch, part
                 if violation < least:
                     best, least = (clutch, part), violation
+        assert best is not None, "a finite state's modes violate their conditions by finite amounts"
         return best
 
 

@@ -32,7 +32,7 @@ from fractions import Fraction
 import numpy as np
 from scipy import optimize
 
-from mech_regulator.effects import Effect, build_drive, build_load, output_position_of
+from mech_regulator.effects import Effect, OutputCoordinate, build_drive, build_load, output_position_of
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
 from mech_regulator.governors import ARM, ElectronicGovernor, Governor, Guard, MachineMode, build_governor
@@ -57,7 +57,7 @@ from mech_regulator.scene.schema import Linkage, Scene
 
 CYCLE_POINTS_PER_TURN = 720  # samples per turn of the cycle averages of the governor's statics
 
-Reduced = Callable[[float], tuple[float, float, float, float, float]]
+Reduced = Callable[[float], tuple[float, float, float, OutputCoordinate, OutputCoordinate]]
 RightHandSide = Callable[[float, np.ndarray], tuple[float, float] | list[float]]
 
 
@@ -530,6 +530,8 @@ class MachineModel:
 
         def machine(t: float, y: np.ndarray):
             phi, omega = y[0], y[1]
+            q: OutputCoordinate
+            dq: OutputCoordinate
             if reduced is None:
                 J, dJ, total, q, dq = J0, 0.0, 0.0, 0.0, 0.0
             else:

@@ -51,6 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mech_regulator.governors import Mode
 from mech_regulator.model import LoadPiece, MachineModel, crank_moments
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
@@ -341,7 +342,7 @@ class GovernorStepper:
         self.state = model.initial_state()[: model.coupling_index]
         self.mode = self.regulator.initial_mode(self.state)
         self.time = 0.0
-        self.events: list[tuple[float, str, tuple[str, str]]] = []
+        self.events: list[tuple[float, str, Mode]] = []
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
         self._before_anticipation: tuple | None = None
@@ -393,7 +394,7 @@ class GovernorStepper:
             ]
             self.state, self.mode = self._follow_pieces(self.regulator, pieces, self.state, self.mode, stretch)
         self.time = stretch.t_end
-        self.events += [(t, name, mode) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
+        self.events += [(t, name, _governor_mode(mode)) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
         self.status, self.message = _accumulate(self.stats, stretch)
         return stretch
 
@@ -639,6 +640,12 @@ def follow_pieces(segment, subsystem: MachineModel, pieces: list, y: np.ndarray,
     return y, mode
 
 
+def _governor_mode(mode: tuple[str, ...]) -> Mode:
+    """A mode of the governor's own trajectory as the governor's Mode, (sleeve's, servo's)."""
+    sleeve, servo = mode
+    return sleeve, servo
+
+
 def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
     """Add a stretch's solver statistics to the running totals; returns its status and message."""
     for name in _STATISTICS:
@@ -656,7 +663,7 @@ class CoSimulation:
     states: np.ndarray
     throttle: np.ndarray
     external_load: np.ndarray
-    events: list[tuple[float, str, tuple[str, str]]]
+    events: list[tuple[float, str, Mode]]
     status: str
     message: str
     tripped_at: float | None
@@ -701,19 +708,19 @@ def cosimulate(
     rows, inputs = [], []
     omega_middle = None  # the machine's speed at the middle of the last step (waveform coupling)
     corrected = waveform = None  # the corrected coupling's speed samples of the last step, throttle samples of the next
-    corrects = coupling == "corrected" and governor is not None
+    corrector = governor if coupling == "corrected" else None  # the governor answering the corrected coupling
     tentative = governor.throttle if governor is not None else 1.0
     tick = 0
     try:
         while True:
             now = seconds(min(tick * step, end))
-            if corrects:
+            if corrector is not None:
                 predicted = (
                     machine.predict(seconds(min((tick + 1) * step, end)), tentative) if tick * step < end else None
                 )
                 if (tick + 1) * step < end:  # the nodes' machine does this while the governor answers
                     machine.predict_ahead(seconds(min((tick + 2) * step, end)), tentative)
-                throttle, waveform = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
+                throttle, waveform = corrector.answer_corrected(now, float(machine.state[1]), corrected, predicted)
             else:
                 throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None else 1.0
             throttle = machine.applied_throttle(throttle)
@@ -728,7 +735,7 @@ def cosimulate(
                 break
             tick += 1
             following = seconds(min(tick * step, end))
-            if corrects:
+            if corrector is not None:
                 corrected = machine.correct(throttle, waveform, load, load_rate(model, now))
                 tentative = waveform[1][-1] if waveform is not None else throttle
             elif coupling == "waveform" and governor is not None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy import integrate, optimize
@@ -111,7 +112,8 @@ def _segment(
     counts = _switch_counts(phase, switches)
     tables = model.state_tables if kinks else ()
     held = _held_pieces(tables, y)
-    normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, and the one just crossed
+    normal_sides: tuple[float, ...] = ()  # joint friction's guides: the held signs of N,
+    crossed_normal: int | None = None  # and the one just crossed
     journals = _journals(model) if settings.method in STEPS_WITHIN_REACTIONS else ()
     branches = np.empty(0, dtype=complex)  # the branch points of the journals' |R_j| the last step saw [s]
     instant_events = 0  # mode changes in a row that the solver located at its own start: no time passed
@@ -129,7 +131,7 @@ def _segment(
         breakpoints = _breakpoint_guards(tables, held, mode, y, offset)
         guards = model.guards(mode, y) + list(breakpoints)
         window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
-        anchors = tuple(
+        anchors: tuple[float, ...] | None = tuple(
             anchor - offset if table.angular else anchor  # in the solver's wrapped phi
             for table, anchor in zip(tables, _anchors(tables, held))
         )
@@ -349,26 +351,30 @@ def _normal_guards(
     steps over kinks, N's too). A sign is N's at the start, or, for the guide whose guard just crossed (crossed, its
     number), the side it crossed to (sides, already flipped); that guard's level then starts at the start's value
     when that is within the method's error across 0 (as _breakpoint_guards), instead of firing again at once."""
-    count = len(model.joint_friction.guides) if kinks and model.joint_friction is not None else 0
-    if count == 0:
+    friction = model.joint_friction if kinks else None
+    count = len(friction.guides) if friction is not None else 0
+    if friction is None or count == 0:
         return (), {}
+
+    def normal_of(guide: int, signs: tuple[float, ...]) -> Callable[[float, np.ndarray], float]:
+        """(t, y) -> N [N] of a guide with friction (guide < count), the rhs holding the signs of N."""
+        normal = model.guide_normal(piece, window, mode, kinks, anchors, normal_signs=signs, guide=guide)
+        assert normal is not None, "a guide of joint_friction.guides has friction"
+        return normal
+
     sides = tuple(
-        side
-        if k == crossed
-        else 1.0
-        if model.guide_normal(piece, window, mode, kinks, anchors, guide=k)(t, y) >= 0.0
-        else -1.0
+        side if k == crossed else 1.0 if normal_of(k, ())(t, y) >= 0.0 else -1.0
         for k, side in enumerate(sides or (0.0,) * count)
     )
     guards = {}
     for k, side in enumerate(sides):
-        normal = model.guide_normal(piece, window, mode, kinks, anchors, normal_signs=sides, guide=k)
+        normal = normal_of(k, sides)
         low = min(0.0, side * normal(t, y))
 
         def level(tau: float, state: np.ndarray, side: float = side, normal=normal, low: float = low) -> float:
             return side * normal(tau, state) - low
 
-        name = f"{model.joint_friction.names[model.joint_friction.guides[k]]}'s normal force changes sign"
+        name = f"{friction.names[friction.guides[k]]}'s normal force changes sign"
         guards[Guard(name, level, lambda tau, state: (mode, state), timed=True)] = k
     return sides, guards
 

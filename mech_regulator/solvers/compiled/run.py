@@ -169,9 +169,10 @@ class _Layout(NamedTuple):
                 and model.joint_friction is None
                 and compiled.normal_slot is None
             ),
-            callbacks=tuple(
-                _Address(callback)
-                for callback in (compiled.rhs_callback, compiled.guards_callback, compiled.reactions_callback)
+            callbacks=(
+                _Address(compiled.rhs_callback),
+                _Address(compiled.guards_callback),
+                _Address(compiled.reactions_callback),
             ),
         )
 
@@ -245,7 +246,8 @@ def _compiled_pieces(
     tables = model.state_tables
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held = _held_pieces(tables, y)
-    normal_sides, crossed_normal = (), None  # joint friction's guides: the held signs of N, the one just crossed
+    normal_sides: tuple[float, ...] = ()  # joint friction's guides: the held signs of N,
+    crossed_normal: int | None = None  # the one just crossed
     instant_events = stalled = 0  # mode changes, and restarts of any kind, in a row that left the time where it was
     # the crank angle as whole periods and the phase within them (time_domain.turns_and_phase), carried exactly across
     # the restarts: phi = turns period + phase is only written out, never read back
@@ -320,7 +322,8 @@ def _compiled_pieces(
         phase = y[0]  # less offset (the stepper's own wraps added back)
         y[0] += offset
         y_stop = y.copy()  # the state where the call stopped, before an event's transition
-        what = ("the end of a call",)  # the restart this call ended in, put in words only should the run stall
+        # the restart this call ended in, (format, its arguments), put in words only should the run stall
+        what: tuple[str, tuple[object, ...]] = ("the end of a call", ())
         if run.status == integrators.FAILED and run.failure in (integrators.NONFINITE, integrators.STEP_TOO_SMALL):
             trajectory.status = "failed"
             if run.failure == integrators.NONFINITE:
@@ -332,22 +335,23 @@ def _compiled_pieces(
             g = int(run.event_guard)
             if compiled.window_slot is not None and g >= compiled.window_slot:
                 trajectory.stats.switches += 1
+                assert window is not None, "a switch angle's guard is armed only within a switch window"
                 phase = window[g - compiled.window_slot]
                 y[0] = offset + phase
                 trajectory.stats.restarts += int(t < t_end)
-                what = ("the switch angle phi = {:.12g} rad ({:.12g} rad in its period)", y[0], phase)
+                what = ("the switch angle phi = {:.12g} rad ({:.12g} rad in its period)", (y[0], phase))
             elif compiled.normal_slot is not None and 0 <= g - compiled.normal_slot < compiled.n_normals:
                 crossed_normal = g - compiled.normal_slot  # a guide's N = 0: its other sign held, mode and state kept
                 normal_sides = tuple(-side if k == crossed_normal else side for k, side in enumerate(normal_sides))
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
-                what = ("a guide's normal force N = 0 (guide {})", crossed_normal)
+                what = ("a guide's normal force N = 0 (guide {})", (crossed_normal,))
             elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
                 table, side = divmod(g - compiled.breakpoint_slot, 2)
                 held[table] += 1 if side else -1
                 trajectory.stats.switches += 1
                 trajectory.stats.restarts += int(t < t_end)
-                what = ("a breakpoint of the table {}", tables[table].name)
+                what = ("a breakpoint of the table {}", (tables[table].name,))
             else:
                 guard = model.guards(mode, start)[g]
                 mode, y = guard.apply(t, y)
@@ -357,17 +361,17 @@ def _compiled_pieces(
                 if instant_events > MAX_INSTANT_EVENTS:
                     _fail_stuck(trajectory, t)
                 trajectory.stats.restarts += 1
-                what = ("the guard '{}'", guard.name)
+                what = ("the guard '{}'", (guard.name,))
         elif run.status == integrators.WRAPPED and t < t_end:
             trajectory.stats.restarts += 1
-            what = ("a wrap of the crank angle",)
+            what = ("a wrap of the crank angle", ())
         stalled = stalled + 1 if t == t_old and not run.n_steps and not run.pieces_done else 0
         if run.beyond >= 0:  # a speed beyond MAX_SPEED at the last step's end: the run stops there (time_domain)
             fail_blown_up(model, trajectory, t, y_stop, model.state_names()[run.beyond], float(y_stop[run.beyond]))
         elif trajectory.status == "complete" and trajectory.stats.steps >= time_domain.MAX_STEPS:
             fail_too_many_steps(model, trajectory, t, y_stop)
         elif trajectory.status == "complete" and stalled >= MAX_RESTARTS_WITHOUT_PROGRESS:
-            fail_no_progress(model, trajectory, t, y_stop, what[0].format(*what[1:]))
+            fail_no_progress(model, trajectory, t, y_stop, what[0].format(*what[1]))
         if progress is not None:
             progress(t)
     return y, mode, index + 1
