@@ -14,7 +14,6 @@ import numpy as np  # noqa: E402
 from mech_regulator.governors import Governor  # noqa: E402
 from mech_regulator.governors.pi import ElectronicGovernor  # noqa: E402
 from mech_regulator.model import MachineModel  # noqa: E402
-from mech_regulator.scene import schema  # noqa: E402
 from mech_regulator.solvers import Trajectory  # noqa: E402
 
 
@@ -564,12 +563,11 @@ def plot_engine(model: MachineModel, omega: float, path: Path, max_order: float 
     """An engine at constant speed omega [rad/s]: piston 1's displacement, velocity and acceleration over the
     turn (exact and source 002's approximation, from the top dead centre); gas moment per cylinder, total gas,
     inertia and total moments over the working cycle; amplitudes of their harmonics up to max_order."""
-    from mech_regulator.analysis.engine import harmonics, piston_table, torque_curves
+    from mech_regulator.analysis.engine import engine_parts, harmonics, piston_table, torque_curves
 
     phis, exact, approximate = piston_table(model, omega)
     curves = torque_curves(model, omega)
-    mechanism = model.scene.machine.mechanism
-    assert isinstance(mechanism, schema.CrankSlider), "an engine scene's mechanism is a crank-slider (the schema's)"
+    mechanism, _ = engine_parts(model.scene)
     figure, axes = plt.subplot_mosaic(
         [["x", "torque"], ["v", "torque"], ["a", "spectrum"]],
         figsize=(14, 9),
