@@ -53,7 +53,8 @@ from mech_regulator.model.drivetrain import (
     train_guards,
 )
 from mech_regulator.scene import SceneError
-from mech_regulator.scene.schema import Linkage, Scene
+from mech_regulator.scene.mechanism_keys import Linkage
+from mech_regulator.scene.schema import Scene
 
 CYCLE_POINTS_PER_TURN = 720  # samples per turn of the cycle averages of the governor's statics
 
@@ -255,7 +256,7 @@ class MachineModel:
         kinks of a coupled driven part (periodic, at its angle phi2 = phi - twist [rad], named "driven part's <load>":
         a table in phi2 at its knots, a slider table of its mechanism where x(phi2) crosses a breakpoint; angular: its
         rhs anchor is in the solver's wrapped phi); the order of rhs's anchors. A driven part's branches have no
-        tables (schema.BranchLoad), nor has a driven part behind a clutch (no angle)."""
+        tables (effect_keys.BranchLoad), nor has a driven part behind a clutch (no angle)."""
         tables = []
         governor = self.governor
         if isinstance(governor, Governor) and governor.valve_breaks:  # a PI governor has no valve table

@@ -50,7 +50,7 @@ from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PAR
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
 from mech_regulator.model import MachineModel, crank_moments
-from mech_regulator.scene import schema
+from mech_regulator.scene import mechanism_keys
 from mech_regulator.solvers.trajectory import Progress
 
 APPLICATION_ID = "mech_regulator"
@@ -547,7 +547,7 @@ def end_text(t_ns: int, status: str | None, message: str) -> str:
     return f"end: {status} at {when}" + (f": {message}" if message else "")
 
 
-def drawn_mechanism(model: MachineModel) -> tuple[schema.Mechanism | None, bool]:
+def drawn_mechanism(model: MachineModel) -> tuple[mechanism_keys.Mechanism | None, bool]:
     """The mechanism the recording draws and whether it is the driven part's (turning at phi - twist behind a
     coupling): the machine's own, else the one behind a coupling, else None (a schematic disc)."""
     return model.scene.machine.analysed_mechanism()

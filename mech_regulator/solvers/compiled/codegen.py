@@ -68,7 +68,7 @@ from mech_regulator.mechanisms.linkage import flat, symbolic
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator.model.machine import StateTable
-from mech_regulator.scene import schema
+from mech_regulator.scene import machine_keys
 from mech_regulator.solvers.compiled import kernels
 from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
 from mech_regulator.solvers.time_domain import _anchors, _break, _journals
@@ -1015,7 +1015,7 @@ def _coupling_lines(
 
 
 def _driven_smooth_lines(
-    driven: schema.DrivenPart,
+    driven: machine_keys.DrivenPart,
     p: _Parameters,
     phi: str,
     omega: str,

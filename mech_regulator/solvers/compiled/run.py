@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 
 from mech_regulator.model import MachineModel
-from mech_regulator.scene import SceneError, schema
+from mech_regulator.scene import SceneError, scenario_keys
 from mech_regulator.solvers import time_domain
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators
 from mech_regulator.solvers.compiled.codegen import (
@@ -374,7 +374,7 @@ def _compiled_pieces(
 
 
 def _step(
-    settings: schema.Solver,
+    settings: scenario_keys.Solver,
     compiled: CompiledScene,
     callbacks: tuple,
     linear: np.ndarray,
