@@ -70,7 +70,7 @@ from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD
 from mech_regulator.model.machine import StateTable
 from mech_regulator.scene import machine_keys
 from mech_regulator.solvers.compiled import kernels
-from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
+from mech_regulator.solvers.compiled.events import NONLINEAR_ONTO, STEP_ONTO
 from mech_regulator.solvers.time_domain import _anchors, _break, _journals
 
 # Segment inputs: fixed slots at the start of p
