@@ -143,10 +143,7 @@ from mech_regulator.solvers.compiled.steps import (
     _rk_step,
     _rosenbrock_step,
 )
-from mech_regulator.solvers.time_domain import (
-    GUARD_NODES,
-    GUARD_TOLERANCE,
-)
+from mech_regulator.solvers.time_domain import GUARD_NODES, GUARD_TOLERANCE
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS, BLOWN_UP = 1, 2, 3, 4
