@@ -3,7 +3,7 @@
 
 For every bundled scene's mechanism and for random geometries (an offset, a crank mass and centre, V engines,
 four-bars open and crossed at any frame angle, walking beams with other masses and angles): the product's reduction
-(mechanisms.build_reduced: the code generated from the linkage's groups) and the general solver's (flat.reduced,
+(mechanisms.build_reduced: the code generated from the linkage's groups) and the general solver's (flat_poses.reduced,
 compiled) equal the closed forms (J_links, dJ/dphi, M_weight, q, dq/dphi) to 1e-12 of each quantity's largest size
 over the turn, with and without gravity; a multi-cylinder engine's every piston (its guide's travel) too; the
 preset's named point motions equal the closed forms'; the joint loads joint friction reads
@@ -151,7 +151,7 @@ def _scales(rows: np.ndarray) -> np.ndarray:
 
 
 def _pistons(linkage, structure, guides):
-    """Every piston's (x_i, x_i') from the built linkage: the travel of its guide (flat.reduced_from_poses's
+    """Every piston's (x_i, x_i') from the built linkage: the travel of its guide (flat_poses.reduced_from_poses's
     formula, the linkage with that guide as its output)."""
     reductions = [make_reduced(replace(linkage, output_joint=guide), structure, None) for guide in guides]
     return lambda phi: [reduced(phi)[3:] for reduced in reductions]
