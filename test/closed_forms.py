@@ -310,9 +310,9 @@ def preset_point_motions(mechanism) -> Callable[[float], dict]:
     C = d e^{i th1} + c e^{i th4} (link_angles); walking beam A..E (walking_beam.solve)."""
     from mech_regulator.mechanisms import walking_beam
     from mech_regulator.mechanisms.four_bar import BRANCH_SIGN
-    from mech_regulator.scene import schema
+    from mech_regulator.scene import mechanism_keys
 
-    if isinstance(mechanism, schema.CrankSlider):
+    if isinstance(mechanism, mechanism_keys.CrankSlider):
         R, rod, e = mechanism.crank, mechanism.rod, mechanism.offset
 
         def crank_slider_motions(phi: float) -> dict:
@@ -320,7 +320,7 @@ def preset_point_motions(mechanism) -> Callable[[float], dict]:
             return {"B": arm((0j, 0j, 0j), R, phi, 1.0, 0.0), "C": (complex(x, e), complex(dx), complex(ddx))}
 
         return crank_slider_motions
-    if isinstance(mechanism, schema.FourBar):
+    if isinstance(mechanism, mechanism_keys.FourBar):
         a, b, c, d = mechanism.crank, mechanism.coupler, mechanism.rocker, mechanism.frame
         th1, sign = math.radians(mechanism.frame_angle_deg), BRANCH_SIGN[mechanism.branch]
 

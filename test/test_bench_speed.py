@@ -29,7 +29,7 @@ from mech_regulator.bench.speed import (
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
+from mech_regulator.scene.scenario_keys import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING
 
 SHORT = "scenario.duration=0.5"

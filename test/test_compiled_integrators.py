@@ -12,12 +12,13 @@ from scipy.integrate import DOP853, RK45, OdeSolution
 from scipy.linalg import expm
 
 from mech_regulator.solvers.compiled import integrators as compiled
-from mech_regulator.solvers.compiled.integrators import NO_RESTARTS, CompiledRun, StepsDense
+from mech_regulator.solvers.compiled.results import CompiledRun, StepsDense
 from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, REACTIONS_SIGNATURE, RHS_SIGNATURE
+from mech_regulator.solvers.compiled.steppers import NO_RESTARTS, stepper
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.time_domain import PROBES_PER_STEP
 
-rk45, dop853, rosenbrock23, rk4 = (compiled.stepper(method) for method in ("RK45", "DOP853", "Rosenbrock23", "RK4"))
+rk45, dop853, rosenbrock23, rk4 = (stepper(method) for method in ("RK45", "DOP853", "Rosenbrock23", "RK4"))
 STIFF = np.array([[1.0, 1.0], [1.0, -1.0]]) @ np.diag([-1.0, -1e6]) @ np.linalg.inv([[1.0, 1.0], [1.0, -1.0]])
 
 
@@ -438,7 +439,7 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
         if method == "RK4":
             return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000, 100000, *NO_RESTARTS))
         return CompiledRun.from_result(
-            compiled.stepper(method)(
+            stepper(method)(
                 *arguments[:5],
                 position,
                 0,
@@ -503,7 +504,7 @@ def test_a_speed_beyond_the_limit_stops_the_call_at_that_step(method):
         )
     else:
         free, stopped = (
-            adaptive(compiled.stepper(method), blow_up, [1.0], 2.0, [0.0], restarts=restarts)
+            adaptive(stepper(method), blow_up, [1.0], 2.0, [0.0], restarts=restarts)
             for restarts in (NO_RESTARTS, tuple(watched))
         )
     ends = np.append(free.y_old[1:, 0], free.y_end[0])

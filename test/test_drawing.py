@@ -24,7 +24,7 @@ from mech_regulator.mechanisms.drawing import (
     mechanism_bounds,
     mechanism_outline,
 )
-from mech_regulator.scene.schema import CrankSlider, FourBar
+from mech_regulator.scene.mechanism_keys import CrankSlider, FourBar
 
 TOL = 1e-12
 # 997 crank angles over three turns (-2 pi to 4 pi), offset so that none lies on the bounds' 360-point grid

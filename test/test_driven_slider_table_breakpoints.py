@@ -6,8 +6,8 @@ as a guard phi2 - kink that changes no mode (a periodic entry of model.MachineMo
 between two crossings reads F on the piece x keeps there (effects.held_positions); the fast path the same with linear
 guards phi - twist - kink (codegen.breakpoint_states) and the same held positions (kernels.held_position).
 
-The driven part's branches carry only constant, viscous and fan loads (schema.BranchLoad) and a driven part behind a
-clutch has no angle (schema.Clutch): neither has a table with breakpoints to locate.
+The driven part's branches carry only constant, viscous and fan loads (effect_keys.BranchLoad) and a driven part
+behind a clutch has no angle (machine_keys.Clutch): neither has a table with breakpoints to locate.
 
 Oracle, written here: scipy's solve_ivp piece by piece between the crossings of x through the table's positions,
 located by solve_ivp's own events on x(phi2) - x_k (not by the package's kink angles), the table replaced on each

@@ -18,7 +18,7 @@ from mech_regulator.effects import build_drive, build_load, joint_friction
 from mech_regulator.effects.definition import DefinitionError, check_covered, definition_of, union_members
 from mech_regulator.governors import servo as servo_motor
 from mech_regulator.governors.valve import build_valve
-from mech_regulator.scene import schema
+from mech_regulator.scene import effect_keys, governor_keys, key_types
 from mech_regulator.scene.loading import load_scene
 from mech_regulator.solvers.compiled import codegen, kernels
 
@@ -47,37 +47,40 @@ def _positions(rng) -> list[float]:
 
 # A random valid scene entry of each kind (its type given): a new member of a union needs one here.
 EXAMPLES = {
-    schema.ConstantDrive: lambda rng, kind: {"torque": rng.uniform(-100.0, 100.0)},
-    schema.LinearMotor: lambda rng, kind: {
+    effect_keys.ConstantDrive: lambda rng, kind: {"torque": rng.uniform(-100.0, 100.0)},
+    effect_keys.LinearMotor: lambda rng, kind: {
         "stall_torque": rng.uniform(1.0, 1e3),
         "no_load_speed": rng.uniform(1.0, 300.0),
     },
-    schema.TableDrive: lambda rng, kind: _table(rng, "torque", float(rng.choice([360.0, 720.0]))),
-    schema.Engine: lambda rng, kind: {
+    effect_keys.TableDrive: lambda rng, kind: _table(rng, "torque", float(rng.choice([360.0, 720.0]))),
+    effect_keys.Engine: lambda rng, kind: {
         "bore": rng.uniform(0.02, 0.2),
         "cycle_deg": 720.0,
         "firing_order": [1, 3, 4, 2],
         "phase_deg": rng.uniform(-360.0, 360.0),
         **{key: value for key, value in _table(rng, "pressure", 720.0).items() if key != "period_deg"},
     },
-    schema.ConstantLoad: lambda rng, kind: {"torque": rng.uniform(0.0, 100.0)},
-    schema.ViscousLoad: lambda rng, kind: {"coefficient": rng.uniform(0.0, 5.0)},
-    schema.FanLoad: lambda rng, kind: {"coefficient": rng.uniform(0.0, 1e-2)},
-    schema.TableLoad: lambda rng, kind: _table(rng, "torque", 360.0),
-    schema.CuttingLoad: lambda rng, kind: {"torque": rng.uniform(0.0, 100.0), "intervals_deg": _intervals(rng)},
-    schema.SliderConstant: lambda rng, kind: {"force": rng.uniform(-1e3, 1e3)},
-    schema.RockerConstant: lambda rng, kind: {"torque": rng.uniform(-1e2, 1e2)},
-    schema.OutputViscous: lambda rng, kind: {"coefficient": rng.uniform(0.0, 50.0)},
-    schema.OutputSpring: lambda rng, kind: {
+    effect_keys.ConstantLoad: lambda rng, kind: {"torque": rng.uniform(0.0, 100.0)},
+    effect_keys.ViscousLoad: lambda rng, kind: {"coefficient": rng.uniform(0.0, 5.0)},
+    effect_keys.FanLoad: lambda rng, kind: {"coefficient": rng.uniform(0.0, 1e-2)},
+    effect_keys.TableLoad: lambda rng, kind: _table(rng, "torque", 360.0),
+    effect_keys.CuttingLoad: lambda rng, kind: {"torque": rng.uniform(0.0, 100.0), "intervals_deg": _intervals(rng)},
+    effect_keys.SliderConstant: lambda rng, kind: {"force": rng.uniform(-1e3, 1e3)},
+    effect_keys.RockerConstant: lambda rng, kind: {"torque": rng.uniform(-1e2, 1e2)},
+    effect_keys.OutputViscous: lambda rng, kind: {"coefficient": rng.uniform(0.0, 50.0)},
+    effect_keys.OutputSpring: lambda rng, kind: {
         "stiffness": rng.uniform(0.0, 5e3),
         "free_position": rng.uniform(-0.1, 0.2),
     },
-    schema.SliderTable: lambda rng, kind: {
+    effect_keys.SliderTable: lambda rng, kind: {
         "position": (x := _positions(rng)),
         "force": list(rng.uniform(-1e3, 1e3, len(x))),
     },
-    schema.LinearValve: lambda rng, kind: {"open_at": rng.uniform(0.0, 0.04), "closed_at": rng.uniform(0.05, 0.1)},
-    schema.TableValve: lambda rng, kind: {
+    governor_keys.LinearValve: lambda rng, kind: {
+        "open_at": rng.uniform(0.0, 0.04),
+        "closed_at": rng.uniform(0.05, 0.1),
+    },
+    governor_keys.TableValve: lambda rng, kind: {
         "sleeve": (z := _sorted(rng, int(rng.integers(2, 7)), 0.0, 0.1)),
         "throttle": list(rng.uniform(0.0, 1.0, len(z))),
     },
@@ -120,16 +123,16 @@ def _same(reference: float, fast: float) -> bool:
 
 @pytest.mark.parametrize(
     ("member", "kind"),
-    _entries(schema.Drive) + _entries(schema.Load),
+    _entries(effect_keys.Drive) + _entries(effect_keys.Load),
     ids=lambda value: value if isinstance(value, str) else value.__name__,
 )
 def test_both_paths_give_each_drive_and_load_alike(member, kind):
     engine_mechanism = load_scene("engine_inline4").machine.mechanism
-    mechanisms = [None, engine_mechanism] if member is schema.Engine else [None]
+    mechanisms = [None, engine_mechanism] if member is effect_keys.Engine else [None]
     for seed, mechanism in ((seed, mechanism) for seed in SEEDS for mechanism in mechanisms):  # an engine on one
         spec = _example(member, kind, seed)  # cylinder and on four
         definition = definition_of(spec, mechanism)
-        if member in union_members(schema.Drive):
+        if member in union_members(effect_keys.Drive):
             effect = build_drive(spec, mechanism)
         else:
             effect = build_load(spec, 2.0 * math.pi)
@@ -153,7 +156,9 @@ def test_both_paths_give_each_drive_and_load_alike(member, kind):
 
 
 @pytest.mark.parametrize(
-    ("member", "kind"), _entries(schema.Valve), ids=lambda value: value if isinstance(value, str) else value.__name__
+    ("member", "kind"),
+    _entries(governor_keys.Valve),
+    ids=lambda value: value if isinstance(value, str) else value.__name__,
 )
 def test_both_paths_give_each_valve_alike(member, kind):
     spec = _example(member, kind, 3)
@@ -218,10 +223,10 @@ def test_both_paths_solve_joint_friction_alike():
 
 
 def test_a_union_member_without_a_definition_fails_naming_it():
-    class NewLoad(schema.SceneModel):
+    class NewLoad(key_types.SceneModel):
         type: Literal["new"]
 
-    union = Annotated[schema.ViscousLoad | NewLoad, Field(discriminator="type")]
+    union = Annotated[effect_keys.ViscousLoad | NewLoad, Field(discriminator="type")]
     with pytest.raises(DefinitionError, match="NewLoad"):
         check_covered(union)
     with pytest.raises(DefinitionError, match="NewLoad"):

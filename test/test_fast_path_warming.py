@@ -156,12 +156,12 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
 
 
 def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch, tmp_path):
-    """integrators.stepper holds compiling-METHOD.lock while numba compiles or loads the stepper (so that a second
+    """steppers.stepper holds compiling-METHOD.lock while numba compiles or loads the stepper (so that a second
     process, a test worker beside this one, waits and loads it instead of compiling it again), and no other method's
     lock nor the background compile's."""
     import fcntl
 
-    from mech_regulator.solvers.compiled import integrators, locks
+    from mech_regulator.solvers.compiled import locks, steppers
 
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
 
@@ -182,8 +182,8 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
 
         return compile_
 
-    monkeypatch.setattr(integrators, "njit", compiling)
-    integrators.stepper.__wrapped__("RK4")  # not functools.cache's: this process's compiled stepper is left alone
+    monkeypatch.setattr(steppers, "njit", compiling)
+    steppers.stepper.__wrapped__("RK4")  # not functools.cache's: this process's compiled stepper is left alone
     assert seen == [[True, False, False]]
     assert not held("compiling-RK4.lock")  # released once loaded
 

@@ -22,11 +22,11 @@ from mech_regulator.mechanisms import build_kinetostatics, build_reduced
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.mechanisms.four_bar import link_angles
 from mech_regulator.model import build_model
-from mech_regulator.scene import load_scene, schema
+from mech_regulator.scene import load_scene, mechanism_keys
 from mech_regulator.solvers.cosim import GovernorStepper
 
 GRAVITY = (0.7, -9.81)
-CRANK_SLIDER = schema.CrankSlider(
+CRANK_SLIDER = mechanism_keys.CrankSlider(
     type="crank_slider",
     crank=0.05,
     rod=0.2,
@@ -38,7 +38,7 @@ CRANK_SLIDER = schema.CrankSlider(
     rod_inertia=0.006,
     slider_mass=2.0,
 )
-FOUR_BAR = schema.FourBar(
+FOUR_BAR = mechanism_keys.FourBar(
     type="four_bar",
     crank=0.04,
     coupler=0.12,

@@ -24,7 +24,7 @@ from test_recording import scalars
 
 from mech_regulator.analysis.kinematics import reactions_table
 from mech_regulator.mechanisms import build_reduced
-from mech_regulator.scene import config_dir, load_scene, schema
+from mech_regulator.scene import config_dir, load_scene, mechanism_keys
 
 SEED = 7
 NAMES = list(MEMBERS)
@@ -244,15 +244,15 @@ def test_the_documented_six_bar_shows_every_key_and_its_csv_j_holds_the_constant
     J_links counting the crank's constant m |c - p|^2 + I, as the page says (its number at phi = 0 too)."""
     data = yaml.safe_load(documented_six_bar())
     mechanism = data["machine"]["mechanism"]
-    assert set(schema.Linkage.model_fields) <= set(mechanism)
-    assert set(schema.LinkageLink.model_fields) <= {key for link in mechanism["links"].values() for key in link}
+    assert set(mechanism_keys.Linkage.model_fields) <= set(mechanism)
+    assert set(mechanism_keys.LinkageLink.model_fields) <= {key for link in mechanism["links"].values() for key in link}
     gear_keys = {"teeth", "radii", "internal", "centres", "carrier", "phase_deg"}
-    lower_pair_keys = set(schema.LinkageJoint.model_fields) - gear_keys
+    lower_pair_keys = set(mechanism_keys.LinkageJoint.model_fields) - gear_keys
     assert lower_pair_keys <= {key for joint in mechanism["joints"].values() for key in joint}
     gears_section = (Path(__file__).resolve().parents[1] / "docs" / "linkages.md").read_text(encoding="utf-8")
     gears_section = gears_section.split("\n### Gears", 1)[1].split("\n### ", 1)[0]
     assert all(f"{key}:" in gears_section for key in gear_keys)
-    assert len(mechanism["output"]) == 1 and set(mechanism["output"]) <= set(schema.LinkageOutput.model_fields)
+    assert len(mechanism["output"]) == 1 and set(mechanism["output"]) <= set(mechanism_keys.LinkageOutput.model_fields)
     path, out = tmp_path / "my_six_bar.yaml", tmp_path / "run.csv"
     path.write_text(documented_six_bar(), encoding="utf-8")
     code, _, err = run_cli(

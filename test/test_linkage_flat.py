@@ -15,7 +15,15 @@ from test_linkage import DYADS, four_bar_linkage
 from test_linkage_scene import FOUR_BAR_LINKAGE
 
 from mech_regulator import mechanisms
-from mech_regulator.mechanisms.linkage import LinkageError, analyse, flat, make_reduced, solve
+from mech_regulator.mechanisms.linkage import (
+    LinkageError,
+    analyse,
+    flat_derivatives,
+    flat_poses,
+    flat_program,
+    make_reduced,
+    solve,
+)
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers import on_path
@@ -30,13 +38,13 @@ def _program(name: str) -> tuple[np.ndarray, object]:
     """The flat program of a bundled scene's linkage (with its gravity) and its reference reduced(phi)."""
     machine = load_scene(name).machine
     core, structure = mechanisms.mechanism_geometry(machine.mechanism)
-    return flat.encode(core, structure.groups, machine.gravity), make_reduced(core, structure, machine.gravity)
+    return flat_program.encode(core, structure.groups, machine.gravity), make_reduced(core, structure, machine.gravity)
 
 
 @pytest.mark.parametrize("name", LINKAGE_SCENES)
 def test_reference_and_fast_paths_give_the_same_omega_trace(name):
     """A bundled linkage scene over 0.3 s: the fast path's omega trace equals the reference path's to 1e-12
-    (relative to the largest |omega|); both run flat.reduced, compiled once."""
+    (relative to the largest |omega|); both run flat_poses.reduced, compiled once."""
     model = build_model(load_scene(name, ["scenario.duration=0.3"]))
     reference, fast = (simulate_complete(on_path(model, path)) for path in ("reference", "fast"))
     times = np.linspace(0.0, 0.3, 61)
@@ -69,12 +77,12 @@ def test_a_linkage_as_the_driven_part_behind_a_coupling_compiles_to_the_referenc
 
 @pytest.mark.parametrize("name", LINKAGE_SCENES)
 def test_flat_reduced_plain_python_equals_compiled_and_its_derivatives_are_central_differences(name):
-    """flat.reduced run as plain Python equals the compiled one to 1e-13; its dJ/dphi and dq/dphi equal central
+    """flat_poses.reduced run as plain Python equals the compiled one to 1e-13; its dJ/dphi and dq/dphi equal central
     differences of J and q (step 1e-5 rad: truncation ~1e-10 relative, bound 1e-6)."""
     program, reduced = _program(name)
     step = 1e-5
     for phi in ANGLES:
-        plain = flat.reduced(phi, program, 0)
+        plain = flat_poses.reduced(phi, program, 0)
         compiled = reduced(phi)
         np.testing.assert_allclose(plain, compiled, rtol=1e-13, atol=1e-13 * max(map(abs, compiled)))
         J, dJ, weight, q, dq = compiled
@@ -155,19 +163,19 @@ def test_a_slider_table_on_a_linkage_output_runs_the_same_on_both_paths():
 
 @pytest.mark.parametrize("kind", sorted(DYADS))
 def test_a_dyads_inverse_by_elimination_is_numpys_inverse(kind):
-    """flat.invert_dyad (the external joints' 2 x 3 rows, then a 2 x 2 system for the internal joint) against
-    np.linalg.inv of the same group matrix, plain Python, at six crank angles: equal to 1e-12 of the largest entry
-    and A A^-1 = I."""
+    """flat_derivatives.invert_dyad (the external joints' 2 x 3 rows, then a 2 x 2 system for the internal joint)
+    against np.linalg.inv of the same group matrix, plain Python, at six crank angles: equal to 1e-12 of the largest
+    entry and A A^-1 = I."""
     linkage = DYADS[kind]()
     structure = analyse(linkage)
-    program = flat.encode(linkage, structure.groups, None)
-    g = flat.HEADER_SIZE + flat.LINK_SIZE * int(program[0])
-    poses, scratch = np.empty(flat.POSE_SIZE * int(program[0])), np.empty(flat.SCRATCH_SHAPE)
+    program = flat_program.encode(linkage, structure.groups, None)
+    g = flat_program.HEADER_SIZE + flat_program.LINK_SIZE * int(program[0])
+    poses, scratch = np.empty(flat_program.POSE_SIZE * int(program[0])), np.empty(flat_program.SCRATCH_SHAPE)
     for phi in np.linspace(0.3, 2.0 * math.pi, 6):
-        assert flat.solve_poses(phi, program, 0, poses, scratch, False)[0] == flat.SOLVED
+        assert flat_poses.solve_poses(phi, program, 0, poses, scratch, False)[0] == flat_program.SOLVED
         A, inverse, known = np.empty((6, 6)), np.empty((6, 6)), np.empty((2, 6))
-        flat.group_matrix(program, g, poses, A, known)
-        assert flat.invert_dyad(A, inverse)
+        flat_derivatives.group_matrix(program, g, poses, A, known)
+        assert flat_derivatives.invert_dyad(A, inverse)
         expected = np.linalg.inv(A)
         np.testing.assert_allclose(inverse, expected, rtol=0.0, atol=1e-12 * np.abs(expected).max())
         np.testing.assert_allclose(A @ inverse, np.eye(6), rtol=0.0, atol=1e-12)
@@ -176,12 +184,12 @@ def test_a_dyads_inverse_by_elimination_is_numpys_inverse(kind):
 def test_a_group_at_a_dead_point_is_named_with_its_angle():
     """A change-point four-bar (crank 1, coupler 3, rocker 1, frame 3): at phi = 180 deg its coupler and rocker lie
     stretched along one line (|B - D| = b + c), at 0 deg folded (|B - D| = b - c), where A is singular: solve and
-    reduced name the group's dead point, plain Python flat.solve_poses gives the same status; a degree away the
+    reduced name the group's dead point, plain Python flat_poses.solve_poses gives the same status; a degree away the
     group solves."""
     linkage = four_bar_linkage(a=1.0, b=3.0, c=1.0, d=3.0, th1=0.0)
     structure = analyse(linkage)
     reduced = make_reduced(linkage, structure, None)
-    program = flat.encode(linkage, structure.groups, None)
+    program = flat_program.encode(linkage, structure.groups, None)
     for phi, degrees in ((math.pi, "180.000"), (0.0, "0.000")):
         expected = (
             f"RRR group rocker_pin (links coupler, rocker) is at a dead point at crank angle {degrees} deg: its "
@@ -192,6 +200,8 @@ def test_a_group_at_a_dead_point_is_named_with_its_angle():
         with pytest.raises(LinkageError) as from_reduced:
             reduced(phi)
         assert str(from_solve.value) == str(from_reduced.value) == expected
-        plain = flat.solve_poses(phi, program, 0, np.empty(flat.POSE_SIZE * 4), np.empty(flat.SCRATCH_SHAPE), True)
-        assert plain[:2] == (flat.DEAD_POINT, 0)
+        plain = flat_poses.solve_poses(
+            phi, program, 0, np.empty(flat_program.POSE_SIZE * 4), np.empty(flat_program.SCRATCH_SHAPE), True
+        )
+        assert plain[:2] == (flat_program.DEAD_POINT, 0)
         assert all(math.isfinite(value) for value in reduced(phi + math.radians(1.0)))

@@ -20,7 +20,7 @@ from test_compiled_path import assert_same_events, bundled, relative_difference
 
 from mech_regulator.analysis.energy import energy_balance
 from mech_regulator.mechanisms import build_kinetostatics, mechanism_geometry
-from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage import flat, flat_kinetostatics, flat_poses, flat_program
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers.compiled import fast_path_refusal
 from mech_regulator.solvers.compiled.codegen import compile_scene
@@ -33,16 +33,16 @@ GRAVITY = (1.5, -9.81)  # with a component along x, so that the weights' terms o
 def test_balancing_moment_equals_the_reduced_moment_at_many_angles(name):
     """From the reactions (mechanisms.build_kinetostatics: the generated joint loads) at 97 crank angles and
     random (omega, epsilon, Q): M_b0 + M_b1 epsilon = J epsilon + 1/2 J' omega^2 - M_weight - Q q' (J, J', M_weight,
-    q' of flat.reduced, the crank's own inertia included) to 1e-9 of the terms' size: a check of every reaction the
-    crank's equilibrium sums, group by group inward."""
+    q' of flat_poses.reduced, the crank's own inertia included) to 1e-9 of the terms' size: a check of every reaction
+    the crank's equilibrium sums, group by group inward."""
     mechanism = load_scene(name).machine.mechanism
     loads, _ = build_kinetostatics(mechanism, GRAVITY)
     core, structure = mechanism_geometry(mechanism)
-    program = flat.encode(core, structure.groups, GRAVITY)
+    program = flat_program.encode(core, structure.groups, GRAVITY)
     rng = np.random.default_rng(21)
     for phi in np.linspace(0.0, 2.0 * math.pi, 98)[:-1] + 0.013:
         omega, epsilon, force = rng.uniform(-15.0, 15.0), rng.uniform(-60.0, 60.0), rng.uniform(-2000.0, 2000.0)
-        J, dJ, weight, _, dq = flat.reduced(phi, program, 0)
+        J, dJ, weight, _, dq = flat_poses.reduced(phi, program, 0)
         expected = J * epsilon + 0.5 * dJ * omega**2 - weight - force * dq
         scale = abs(J * epsilon) + abs(0.5 * dJ * omega**2) + abs(weight) + abs(force * dq)
         balancing, rate = loads(phi, omega, force).balancing
@@ -50,14 +50,17 @@ def test_balancing_moment_equals_the_reduced_moment_at_many_angles(name):
 
 
 def test_compiled_joint_loads_equal_plain_python():
-    """One implementation: flat.joint_loads run as plain Python (numba not involved) gives the compiled numbers to
-    1e-13 of the largest reaction, on the six-bar press (RRR, RRP) and the shaper (RPR, RRP)."""
+    """One implementation: flat_kinetostatics.joint_loads run as plain Python (numba not involved) gives the compiled
+    numbers to 1e-13 of the largest reaction, on the six-bar press (RRR, RRP) and the shaper (RPR, RRP)."""
     compiled = flat.compiled("joint_loads")
     for name in ("six_bar_press", "shaper"):
         core, structure = mechanism_geometry(load_scene(name).machine.mechanism)
-        program = flat.encode(core, structure.groups, GRAVITY)
+        program = flat_program.encode(core, structure.groups, GRAVITY)
         for phi, omega, force in ((0.3, 10.0, 400.0), (2.9, -6.0, -150.0), (5.1, 0.0, 0.0)):
-            plain, fast = flat.joint_loads(phi, omega, force, program, 0), compiled(phi, omega, force, program, 0)
+            plain, fast = (
+                flat_kinetostatics.joint_loads(phi, omega, force, program, 0),
+                compiled(phi, omega, force, program, 0),
+            )
             scale = max(np.max(np.abs(plain[0])), np.max(np.abs(plain[1])))
             for ours, theirs in zip(plain[:3], fast[:3]):
                 assert np.max(np.abs(ours - theirs)) <= 1e-13 * scale

@@ -24,7 +24,8 @@ from mech_regulator.mechanisms.linkage import (
     Linkage,
     LinkageError,
     checked,
-    flat,
+    flat_kinetostatics,
+    flat_program,
     make_reduced,
     solve,
     symbolic,
@@ -187,13 +188,14 @@ def test_refusals_name_the_mesh():
 
 
 def test_generated_joint_loads_equal_the_general_solvers():
-    """flat.joint_loads written out per linkage (symbolic.joint_loads_source, what `kinematics` and both paths run)
-    gives the general solver's reactions, tooth force included, rates and balancing moment (1e-10 of each size)."""
+    """flat_kinetostatics.joint_loads written out per linkage (symbolic.joint_loads_source, what `kinematics` and both
+    paths run) gives the general solver's reactions, tooth force included, rates and balancing moment (1e-10 of each
+    size)."""
     linkage = geared_press()
-    program = flat.encode(linkage, checked(linkage).groups, GRAVITY)
+    program = flat_program.encode(linkage, checked(linkage).groups, GRAVITY)
     generated = symbolic.reference_function(symbolic.joint_loads_source(program)[0])
     for phi in ANGLES:
-        expected = flat.joint_loads(phi, 7.0, 150.0, program, 0)
+        expected = flat_kinetostatics.joint_loads(phi, 7.0, 150.0, program, 0)
         found = generated(phi, 7.0, 150.0, program, 0)
         for wanted, got in zip(expected, found):
             wanted, got = np.atleast_1d(wanted), np.atleast_1d(np.array(got))

@@ -19,7 +19,15 @@ import pytest
 from test_linkage import DYADS, four_bar_linkage, parallelogram_linkage, six_bar_linkage
 
 from mech_regulator.mechanisms import linkage_of
-from mech_regulator.mechanisms.linkage import LinkageError, analyse, checked, flat, make_reduced, solve, symbolic
+from mech_regulator.mechanisms.linkage import (
+    LinkageError,
+    analyse,
+    checked,
+    flat_program,
+    make_reduced,
+    solve,
+    symbolic,
+)
 from mech_regulator.scene import load_scene
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 73)[:-1] + 0.0071
@@ -87,7 +95,7 @@ def test_compiled_code_gives_the_plain_python_numbers():
     from numba import njit
 
     linkage, structure, _ = linkage_of(load_scene("walking_beam_linkage").machine.mechanism)
-    program = flat.encode(linkage, structure.groups, GRAVITY)
+    program = flat_program.encode(linkage, structure.groups, GRAVITY)
     name, source = symbolic.reduced_source(program)
     namespace = {"math": math, "np": np}
     exec(source, namespace)
@@ -102,7 +110,7 @@ def test_the_source_depends_on_structure_and_exact_zeros_only():
     number no longer exactly 0) or another branch changes it."""
 
     def key(linkage):
-        return symbolic.program_key(flat.encode(linkage, checked(linkage).groups, GRAVITY), ())
+        return symbolic.program_key(flat_program.encode(linkage, checked(linkage).groups, GRAVITY), ())
 
     base = DYADS["RRP"]
     assert key(base(R=0.1, rod=0.35, e=0.03)) == key(base(R=0.2, rod=0.6, e=0.05))
@@ -116,7 +124,7 @@ def test_a_cached_source_is_read_back_without_generating(monkeypatch, tmp_path):
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
     symbolic._source_by_key.cache_clear()
     linkage = four_bar_linkage(a=0.8, b=2.9, c=2.4, d=3.3)
-    program = flat.encode(linkage, checked(linkage).groups, None)
+    program = flat_program.encode(linkage, checked(linkage).groups, None)
     name, source = symbolic.reduced_source(program)
     assert (tmp_path / f"{name}.py").read_text() == symbolic.MODULE_HEADER + source
 

@@ -1,6 +1,7 @@
 """A linkage's kinetostatics as generated straight-line code (mechanisms/linkage/symbolic.py, joint_loads_source)
-against the general solver (flat.joint_loads: each group's poses by its closed form with angles, its multipliers
-from A^T lambda = b with the inverse of its 6 x 6 constraint matrix, an independent way to the same numbers).
+against the general solver (flat_kinetostatics.joint_loads: each group's poses by its closed form with angles, its
+multipliers from A^T lambda = b with the inverse of its 6 x 6 constraint matrix, an independent way to the same
+numbers).
 
 Every dyad type with masses on every link, the six-bar, every bundled linkage scene and the presets: R0, R1, the
 ratios and the balancing moment's parts equal to 1e-12 of each quantity's largest size over random (phi, omega, Q),
@@ -19,7 +20,7 @@ from test_linkage import DYADS, parallelogram_linkage, six_bar_linkage
 from test_linkage_symbolic import GRAVITY, _weighted
 
 from mech_regulator.mechanisms import build_kinetostatics, linkage_of
-from mech_regulator.mechanisms.linkage import checked, flat, symbolic
+from mech_regulator.mechanisms.linkage import checked, flat_kinetostatics, flat_program, symbolic
 from mech_regulator.mechanisms.linkage.model import Linkage
 from mech_regulator.scene import load_scene
 
@@ -44,12 +45,12 @@ def _cases():
 
 
 def _program(case, gravity):
-    """The case's program (flat.encode) with this gravity."""
+    """The case's program (flat_program.encode) with this gravity."""
     if isinstance(case, Linkage):
         linkage, structure = case, checked(case)
     else:
         linkage, structure, _ = linkage_of(case)
-    return flat.encode(linkage, structure.groups, gravity)
+    return flat_program.encode(linkage, structure.groups, gravity)
 
 
 def _states(seed: int):
@@ -87,9 +88,9 @@ def test_generated_joint_loads_equal_the_general_solver(name, build, gravity):
     ours, theirs = [], []
     for phi, omega, force in _states(len(name)):
         ours.append(_table(generated(phi, omega, force, program, 0)))
-        theirs.append(_table(flat.joint_loads(phi, omega, force, program, 0)))
+        theirs.append(_table(flat_kinetostatics.joint_loads(phi, omega, force, program, 0)))
     ours, theirs = np.array(ours), np.array(theirs)
-    n = len(flat.joint_loads(0.0, 0.0, 0.0, program, 0)[0])
+    n = len(flat_kinetostatics.joint_loads(0.0, 0.0, 0.0, program, 0)[0])
     reaction = np.abs(theirs[:, : 4 * n]).max()  # the reactions against the largest reaction
     assert np.all(np.abs(ours[:, : 4 * n] - theirs[:, : 4 * n]) <= 1e-12 * reaction), (
         np.abs(ours[:, : 4 * n] - theirs[:, : 4 * n]).max() / reaction
@@ -120,7 +121,7 @@ def test_compiled_code_gives_the_plain_python_numbers():
 
 def test_the_reference_path_runs_the_generated_code():
     """mechanisms.build_kinetostatics (linkage.make_joint_loads) gives the generated function's numbers as
-    JointLoads, and flat.joint_loads' to 1e-12."""
+    JointLoads, and flat_kinetostatics.joint_loads' to 1e-12."""
     mechanism = load_scene("six_bar_press_friction").machine.mechanism
     loads, names = build_kinetostatics(mechanism, GRAVITY)
     program = _program(mechanism, GRAVITY)
@@ -134,7 +135,7 @@ def test_the_reference_path_runs_the_generated_code():
         generated[3:],
     )
     assert len(names) == len(result.constant)
-    general = _table(flat.joint_loads(phi, omega, force, program, 0))
+    general = _table(flat_kinetostatics.joint_loads(phi, omega, force, program, 0))
     reordered = _table((result.constant, result.per_epsilon, result.ratios, *result.balancing))
     assert np.all(np.abs(reordered - general) <= 1e-12 * np.abs(general).max())
 
@@ -142,4 +143,4 @@ def test_the_reference_path_runs_the_generated_code():
 def test_a_redundant_link_has_no_generated_kinetostatics():
     linkage = _weighted(replace(parallelogram_linkage(1.0), output_link="5"))
     with pytest.raises(ValueError, match="redundant link is statically indeterminate"):
-        symbolic.joint_loads_source(flat.encode(linkage, checked(linkage).groups, None))
+        symbolic.joint_loads_source(flat_program.encode(linkage, checked(linkage).groups, None))

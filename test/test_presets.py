@@ -3,7 +3,7 @@
 
 For every bundled scene's mechanism and for random geometries (an offset, a crank mass and centre, V engines,
 four-bars open and crossed at any frame angle, walking beams with other masses and angles): the product's reduction
-(mechanisms.build_reduced: the code generated from the linkage's groups) and the general solver's (flat.reduced,
+(mechanisms.build_reduced: the code generated from the linkage's groups) and the general solver's (flat_poses.reduced,
 compiled) equal the closed forms (J_links, dJ/dphi, M_weight, q, dq/dphi) to 1e-12 of each quantity's largest size
 over the turn, with and without gravity; a multi-cylinder engine's every piston (its guide's travel) too; the
 preset's named point motions equal the closed forms'; the joint loads joint friction reads
@@ -30,7 +30,7 @@ from mech_regulator.mechanisms import (
     presets,
 )
 from mech_regulator.mechanisms.linkage import checked, make_reduced
-from mech_regulator.scene import load_scene, schema
+from mech_regulator.scene import load_scene, mechanism_keys
 
 ANGLES = np.linspace(0.0, 2.0 * math.pi, 37)[:-1] + 0.0123
 GRAVITY = (0.7, -9.81)
@@ -53,10 +53,10 @@ def bundled_mechanism(name: str):
     return machine.mechanism if machine.mechanism is not None else machine.coupling.driven.mechanism
 
 
-def random_crank_slider(rng, cylinders=None) -> schema.CrankSlider:
+def random_crank_slider(rng, cylinders=None) -> mechanism_keys.CrankSlider:
     crank = rng.uniform(0.03, 0.1)
     offset = rng.uniform(-0.4, 0.4) * crank
-    return schema.CrankSlider(
+    return mechanism_keys.CrankSlider(
         type="crank_slider",
         crank=crank,
         rod=(abs(offset) + crank) * rng.uniform(1.3, 4.0),
@@ -71,14 +71,14 @@ def random_crank_slider(rng, cylinders=None) -> schema.CrankSlider:
     )
 
 
-def random_four_bar(rng, branch: str) -> schema.FourBar:
+def random_four_bar(rng, branch: str) -> mechanism_keys.FourBar:
     """A Grashof crank-rocker (the crank shortest, s + l < p + q) at a random frame angle."""
     while True:
         crank = rng.uniform(0.02, 0.05)
         coupler, rocker, frame = rng.uniform(0.06, 0.2, 3)
         lengths = sorted((crank, coupler, rocker, frame))
         if lengths[0] == crank and lengths[0] + lengths[3] < lengths[1] + lengths[2] - 0.01:
-            return schema.FourBar(
+            return mechanism_keys.FourBar(
                 type="four_bar",
                 crank=crank,
                 coupler=coupler,
@@ -97,7 +97,7 @@ def random_four_bar(rng, branch: str) -> schema.FourBar:
             )
 
 
-def random_walking_beam(rng) -> schema.WalkingBeam:
+def random_walking_beam(rng) -> mechanism_keys.WalkingBeam:
     """The bundled walking beam with random masses, centres and inertias, its frame and beam turned together by a
     random angle (the parallelograms then never flatten either)."""
     data = bundled_mechanism("walking_beam").model_dump()
@@ -119,7 +119,7 @@ def random_walking_beam(rng) -> schema.WalkingBeam:
     for key in ("crank_cg", "coupler_cg", "rocker_cg", "side_cg"):
         data[key] = data[key] * rng.uniform(-1.0, 2.0) if key != "coupler_cg" else data[key] * rng.uniform(0.0, 2.0)
     data["coupler_cg_angle_deg"] = rng.uniform(-180.0, 180.0)
-    return schema.WalkingBeam(**data)
+    return mechanism_keys.WalkingBeam(**data)
 
 
 def random_mechanisms():
@@ -129,9 +129,9 @@ def random_mechanisms():
         random_crank_slider(
             rng,
             [
-                schema.Cylinder(),
-                schema.Cylinder(throw_deg=rng.uniform(0, 360), bank_deg=rng.uniform(-90, 90)),
-                schema.Cylinder(throw_deg=rng.uniform(0, 360), bank_deg=rng.uniform(-90, 90)),
+                mechanism_keys.Cylinder(),
+                mechanism_keys.Cylinder(throw_deg=rng.uniform(0, 360), bank_deg=rng.uniform(-90, 90)),
+                mechanism_keys.Cylinder(throw_deg=rng.uniform(0, 360), bank_deg=rng.uniform(-90, 90)),
             ],
         )
     )
@@ -151,7 +151,7 @@ def _scales(rows: np.ndarray) -> np.ndarray:
 
 
 def _pistons(linkage, structure, guides):
-    """Every piston's (x_i, x_i') from the built linkage: the travel of its guide (flat.reduced_from_poses's
+    """Every piston's (x_i, x_i') from the built linkage: the travel of its guide (flat_poses.reduced_from_poses's
     formula, the linkage with that guide as its output)."""
     reductions = [make_reduced(replace(linkage, output_joint=guide), structure, None) for guide in guides]
     return lambda phi: [reduced(phi)[3:] for reduced in reductions]
@@ -160,14 +160,14 @@ def _pistons(linkage, structure, guides):
 def closed_form_reduced(mechanism, gravity):
     """The preset's hand-written reduced(phi) (closed_forms.py); a multi-cylinder engine's with the pistons' tuples."""
     geometry = mechanism_geometry(mechanism)
-    if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None:
+    if isinstance(mechanism, mechanism_keys.CrankSlider) and mechanism.cylinders is not None:
         return closed_forms.multi_cylinder_reduced(
             geometry, [c.throw_deg for c in mechanism.cylinders], [c.bank_deg for c in mechanism.cylinders], gravity
         )
     build = {
-        schema.CrankSlider: closed_forms.crank_slider_reduced,
-        schema.FourBar: closed_forms.four_bar_reduced,
-        schema.WalkingBeam: closed_forms.walking_beam_reduced,
+        mechanism_keys.CrankSlider: closed_forms.crank_slider_reduced,
+        mechanism_keys.FourBar: closed_forms.four_bar_reduced,
+        mechanism_keys.WalkingBeam: closed_forms.walking_beam_reduced,
     }[type(mechanism)]
     return build(geometry, gravity)
 
@@ -182,7 +182,7 @@ def test_preset_linkage_reduces_as_the_preset(name, mechanism, gravity):
     linkage = presets.preset_linkage(mechanism)
     structure = checked(linkage)
     theirs = closed_form_reduced(mechanism, gravity)
-    several = isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
+    several = isinstance(mechanism, mechanism_keys.CrankSlider) and mechanism.cylinders is not None
     general = make_reduced(linkage, structure, gravity)
     pistons = _pistons(linkage, structure, presets.guide_joints(mechanism)) if several else None
     products = [
@@ -247,7 +247,7 @@ def test_preset_linkage_joint_loads_are_the_presets(mechanism, gravity):
     theta_first' - theta_second' is the outer link's, the preset's the inner link's)."""
     ours, names = build_kinetostatics(mechanism, gravity)
     geometry, weight = mechanism_geometry(mechanism), gravity if gravity is not None else (0.0, 0.0)
-    if isinstance(mechanism, schema.CrankSlider):
+    if isinstance(mechanism, mechanism_keys.CrankSlider):
         theirs, preset_names = (
             closed_forms.crank_slider_kinetostatics(geometry, weight),
             kinetostatics.CRANK_SLIDER_JOINTS,

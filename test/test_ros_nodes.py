@@ -54,7 +54,7 @@ from mech_regulator.model import build_model
 from mech_regulator.nodes.launch import DOMAIN_IDS, viewer_command
 from mech_regulator.nodes.trust import BadMessage
 from mech_regulator.scene import load_scene, validate_scene
-from mech_regulator.scene.schema import DEFAULT_EXCHANGE_STEP
+from mech_regulator.scene.scenario_keys import DEFAULT_EXCHANGE_STEP
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, GovernorStepper, cosimulate, seconds, to_nanoseconds
 from mech_regulator.solvers.trajectory import SampledTrajectory

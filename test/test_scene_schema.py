@@ -104,7 +104,8 @@ def test_setup_installs_the_schema_under_share(monkeypatch):
 
 
 def test_schema_is_generated_from_the_models(schema):
-    from mech_regulator.scene.schema import Machine, Scene
+    from mech_regulator.scene.machine_keys import Machine
+    from mech_regulator.scene.schema import Scene
 
     definitions = schema["$defs"]
     assert set(schema["properties"]) == set(Scene.model_fields) | {"base"}

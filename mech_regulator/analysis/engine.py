@@ -33,7 +33,9 @@ from mech_regulator.mechanisms.engine import (
 from mech_regulator.model import MachineModel
 from mech_regulator.model.machine import Reduced
 from mech_regulator.scene import SceneError
-from mech_regulator.scene.schema import CrankSlider, Engine, Scene
+from mech_regulator.scene.effect_keys import Engine
+from mech_regulator.scene.mechanism_keys import CrankSlider
+from mech_regulator.scene.schema import Scene
 
 POINTS_PER_DEGREE = 4  # samples of the curves per degree of crank angle (table knots every 0.25 deg fall on it)
 

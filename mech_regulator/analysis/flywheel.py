@@ -37,7 +37,8 @@ from mech_regulator.analysis.periodic import PeriodSpeeds, analyse_steady_state
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.model.steady import balance_speed
 from mech_regulator.scene.loading import SceneError, validate_scene
-from mech_regulator.scene.schema import InitialState, Scenario, Scene
+from mech_regulator.scene.scenario_keys import InitialState, Scenario
+from mech_regulator.scene.schema import Scene
 from mech_regulator.solvers import Trajectory, simulate
 
 

@@ -15,10 +15,10 @@ import math
 import numpy as np
 
 from mech_regulator.mechanisms import point_motions
-from mech_regulator.scene import schema
+from mech_regulator.scene import mechanism_keys
 
 
-def kinematics_table(mechanism: schema.Mechanism, omega: float, count: int) -> dict[str, np.ndarray]:
+def kinematics_table(mechanism: mechanism_keys.Mechanism, omega: float, count: int) -> dict[str, np.ndarray]:
     """Columns over one turn, at `count` crank angles phi = 2 pi k / (count - 1), k = 0..count-1 (both ends):
     phi [rad], t = phi / omega [s], and for every moving point P: P_x, P_y [m], P_vx, P_vy, P_v = |v| [m/s],
     P_ax, P_ay, P_a = |a| [m/s^2], with v = P' omega and a = P'' omega^2."""
@@ -44,13 +44,13 @@ def kinematics_table(mechanism: schema.Mechanism, omega: float, count: int) -> d
     return columns
 
 
-def reactions_unavailable(mechanism: schema.Mechanism) -> str | None:
+def reactions_unavailable(mechanism: mechanism_keys.Mechanism) -> str | None:
     """Why the joint reactions of a mechanism are not computed, or None when they are: the walking beam preset and
     a multi-cylinder crank-slider have no kinetostatics (scene.schema.NO_KINETOSTATICS), and a linkage with a
     redundant link is statically indeterminate (its reactions do not follow from equilibrium alone)."""
     if mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
         return f"the kinetostatics of a {mechanism.type} is not built here"
-    if isinstance(mechanism, schema.Linkage):
+    if isinstance(mechanism, mechanism_keys.Linkage):
         from mech_regulator.mechanisms import mechanism_geometry
         from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
 
@@ -59,7 +59,7 @@ def reactions_unavailable(mechanism: schema.Mechanism) -> str | None:
 
 
 def reactions_table(
-    mechanism: schema.Mechanism, gravity: tuple[float, float] | None, omega: float, phis: np.ndarray
+    mechanism: mechanism_keys.Mechanism, gravity: tuple[float, float] | None, omega: float, phis: np.ndarray
 ) -> dict[str, np.ndarray]:
     """Kinetostatics at constant crank speed omega [rad/s] (epsilon = 0) with the links' weights (gravity [m/s^2],
     None: weightless) and no load on the output, at the crank angles phis [rad]: R_<joint> = |R| [N], the magnitude of

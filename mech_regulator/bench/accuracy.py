@@ -39,7 +39,7 @@ import numpy as np
 
 from mech_regulator.model import MachineModel, build_model
 from mech_regulator.scene import SceneError, load_scene
-from mech_regulator.scene.schema import ViscousLoad
+from mech_regulator.scene.effect_keys import ViscousLoad
 from mech_regulator.solvers import Trajectory, simulate
 from mech_regulator.solvers.cosim import CoSimulation, cosimulate
 

@@ -21,7 +21,7 @@ PATHS = ("fast", "reference")
 METHODS = ("DOP853", "RK45", "RK4", "Radau", "energy")
 MODES = ("simulate", "cosim")
 REFERENCE_ONLY = ("Radau", "energy")  # the methods the fast path does not run (solvers/compiled)
-EXCHANGE_STEP = 0.02  # [s] of the co-simulated rows: the nodes' default (schema.DEFAULT_EXCHANGE_STEP)
+EXCHANGE_STEP = 0.02  # [s] of the co-simulated rows: the nodes' default (scenario_keys.DEFAULT_EXCHANGE_STEP)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -35,7 +35,8 @@ import numpy as np
 
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.scene import Scene, SceneError
-from mech_regulator.scene.schema import ConstantDrive, CrankSlider, LinearMotor
+from mech_regulator.scene.effect_keys import ConstantDrive, LinearMotor
+from mech_regulator.scene.mechanism_keys import CrankSlider
 
 NATIVE_DRIVES = ("constant", "linear_motor")
 NATIVE_LOADS = ("constant", "viscous", "slider_constant", "slider_viscous", "slider_spring")

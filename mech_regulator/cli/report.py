@@ -80,7 +80,7 @@ def describe(model: MachineModel) -> str:
         reads = ", ".join(sorted(effect.depends_on)) or "nothing"
         lines.append(f"  - {effect.role:<5} {effect.formula}   [reads {reads}]")
     if model.has_weight:
-        from mech_regulator.model.machine import has_cam_springs
+        from mech_regulator.model.building import has_cam_springs
 
         parts = (
             [f"weight of the links, g = {machine.gravity} m/s^2"] if machine.gravity and any(machine.gravity) else []

@@ -671,7 +671,7 @@ class _Server:
 
     def load_cached_steppers(self) -> None:
         from mech_regulator.solvers.compiled import FAST_METHODS
-        from mech_regulator.solvers.compiled.integrators import stepper
+        from mech_regulator.solvers.compiled.steppers import stepper
         from mech_regulator.solvers.compiled.warm import stepper_cached
 
         for method in FAST_METHODS:

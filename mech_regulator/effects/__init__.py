@@ -30,9 +30,9 @@ from mech_regulator.effects.definition import (
     reference_function,
 )
 from mech_regulator.effects.tables import clamped_linear, interval_indicator, periodic_kinks, periodic_linear
-from mech_regulator.scene import schema
+from mech_regulator.scene import effect_keys, mechanism_keys
 
-check_covered(schema.Drive, schema.Load, schema.DrivenLoad, schema.BranchLoad)
+check_covered(effect_keys.Drive, effect_keys.Load, effect_keys.DrivenLoad, effect_keys.BranchLoad)
 
 OutputCoordinate = float | tuple[float, ...]  # q [m or rad] or dq/dphi; several cylinders: one entry per piston
 MomentFunction = Callable[[float, float, float, OutputCoordinate, OutputCoordinate], float]
@@ -79,13 +79,13 @@ class Effect:
         return self.definition is not None and self.definition.dry
 
 
-def build_drive(drive: schema.Drive, mechanism: schema.Mechanism | None = None) -> Effect:
+def build_drive(drive: effect_keys.Drive, mechanism: mechanism_keys.Mechanism | None = None) -> Effect:
     """The driving moment M_d of a scene's `machine.drive` (an engine reads the mechanism's cylinders)."""
     return build_effect(definition_of(drive, mechanism), None)
 
 
 def build_load(
-    load: schema.Load,
+    load: effect_keys.Load,
     kinematic_period: float | None,
     output_position: Callable[[float], tuple[float, float]] | None = None,
 ) -> Effect:

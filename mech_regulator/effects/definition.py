@@ -107,8 +107,8 @@ def definition_of(spec, mechanism=None) -> Definition:
 
 
 def union_members(union) -> tuple[type, ...]:
-    """The scene classes of a scene union (schema.Drive, schema.Load, schema.Valve, ...): the members of its Union,
-    each unwrapped from its Annotated."""
+    """The scene classes of a scene union (effect_keys.Drive, effect_keys.Load, governor_keys.Valve, ...): the
+    members of its Union, each unwrapped from its Annotated."""
     members = typing.get_args(union)[0] if typing.get_origin(union) is typing.Annotated else union
     return tuple(
         typing.get_args(member)[0] if typing.get_origin(member) is typing.Annotated else member

@@ -8,7 +8,7 @@ from dataclasses import replace
 
 from mech_regulator.effects.definition import PERIODIC, Definition, Table, define
 from mech_regulator.mechanisms.engine import firing_delays
-from mech_regulator.scene import schema
+from mech_regulator.scene import effect_keys, mechanism_keys
 
 
 def constant_drive(torque):
@@ -37,15 +37,15 @@ def engine_gas(table, dq, area):
     return -table * area * dq
 
 
-@define(schema.ConstantDrive)
-def _constant(drive: schema.ConstantDrive, mechanism=None) -> Definition:
+@define(effect_keys.ConstantDrive)
+def _constant(drive: effect_keys.ConstantDrive, mechanism=None) -> Definition:
     return Definition(
         "drive", "drive", f"constant: M_d = {drive.torque:g} N m", constant_drive, {"torque": drive.torque}
     )
 
 
-@define(schema.LinearMotor)
-def _linear_motor(drive: schema.LinearMotor, mechanism=None) -> Definition:
+@define(effect_keys.LinearMotor)
+def _linear_motor(drive: effect_keys.LinearMotor, mechanism=None) -> Definition:
     return Definition(
         "drive",
         "drive",
@@ -56,8 +56,8 @@ def _linear_motor(drive: schema.LinearMotor, mechanism=None) -> Definition:
     )
 
 
-@define(schema.TableDrive)
-def _table(drive: schema.TableDrive, mechanism=None) -> Definition:
+@define(effect_keys.TableDrive)
+def _table(drive: effect_keys.TableDrive, mechanism=None) -> Definition:
     return Definition(
         "drive",
         "drive",
@@ -73,13 +73,13 @@ def _table(drive: schema.TableDrive, mechanism=None) -> Definition:
     )
 
 
-@define(schema.Engine)
-def _engine(drive: schema.Engine, mechanism=None) -> Definition:
+@define(effect_keys.Engine)
+def _engine(drive: effect_keys.Engine, mechanism=None) -> Definition:
     """An engine's cylinders on the crank: `M_d = -A sum_i p(phi + phase - d_i) x_i'` with cylinder i's firing delay
     d_i (mechanisms.engine.firing_delays, 0 for a single cylinder) and its piston's x_i' = dx_i/dphi (the
     mechanism's output i)."""
     area = math.pi * drive.bore**2 / 4.0
-    cylinders = mechanism.cylinders if isinstance(mechanism, schema.CrankSlider) else None
+    cylinders = mechanism.cylinders if isinstance(mechanism, mechanism_keys.CrankSlider) else None
     pressure = Table(
         PERIODIC, tuple(math.radians(a) for a in drive.angle_deg), tuple(drive.pressure), math.radians(drive.cycle_deg)
     )

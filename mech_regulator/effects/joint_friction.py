@@ -45,7 +45,7 @@ from scipy import optimize
 
 from mech_regulator.mechanisms import build_kinetostatics
 from mech_regulator.mechanisms.kinetostatics import Kinetostatics
-from mech_regulator.scene import schema
+from mech_regulator.scene import machine_keys
 
 FIT_FACTOR = {"clearance": 1.0, "new": math.pi / 2.0, "run_in": 4.0 / math.pi}  # lambda_p [-]
 NEWTON_TOLERANCE = 1e-14  # relative size of the last Newton step on epsilon [-]
@@ -240,7 +240,7 @@ class JointFrictionModel:
         )
 
 
-def build_joint_friction(machine: schema.Machine) -> JointFrictionModel:
+def build_joint_friction(machine: machine_keys.Machine) -> JointFrictionModel:
     """The JointFrictionModel of a scene's `machine.joint_friction`."""
     spec = machine.joint_friction
     assert spec is not None, "build_joint_friction reads a machine with joint_friction"

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 
 from mech_regulator.effects.definition import CLAMPED, INTERVALS, PERIODIC, Definition, Table, define
-from mech_regulator.scene import schema
+from mech_regulator.scene import effect_keys
 
 
 def constant_load(torque):
@@ -76,15 +76,15 @@ def slider_table_force(table):
     return table
 
 
-@define(schema.ConstantLoad)
-def _constant(load: schema.ConstantLoad, mechanism=None) -> Definition:
+@define(effect_keys.ConstantLoad)
+def _constant(load: effect_keys.ConstantLoad, mechanism=None) -> Definition:
     return Definition(
         "constant", "load", f"constant: M_c = -{load.torque:g} N m", constant_load, {"torque": load.torque}, dry=True
     )
 
 
-@define(schema.ViscousLoad)
-def _viscous(load: schema.ViscousLoad, mechanism=None) -> Definition:
+@define(effect_keys.ViscousLoad)
+def _viscous(load: effect_keys.ViscousLoad, mechanism=None) -> Definition:
     return Definition(
         "viscous",
         "load",
@@ -95,8 +95,8 @@ def _viscous(load: schema.ViscousLoad, mechanism=None) -> Definition:
     )
 
 
-@define(schema.FanLoad)
-def _fan(load: schema.FanLoad, mechanism=None) -> Definition:
+@define(effect_keys.FanLoad)
+def _fan(load: effect_keys.FanLoad, mechanism=None) -> Definition:
     return Definition(
         "fan",
         "load",
@@ -107,8 +107,8 @@ def _fan(load: schema.FanLoad, mechanism=None) -> Definition:
     )
 
 
-@define(schema.TableLoad)
-def _table(load: schema.TableLoad, mechanism=None) -> Definition:
+@define(effect_keys.TableLoad)
+def _table(load: effect_keys.TableLoad, mechanism=None) -> Definition:
     return Definition(
         "table",
         "load",
@@ -121,8 +121,8 @@ def _table(load: schema.TableLoad, mechanism=None) -> Definition:
     )
 
 
-@define(schema.CuttingLoad)
-def _cutting(load: schema.CuttingLoad, mechanism=None) -> Definition:
+@define(effect_keys.CuttingLoad)
+def _cutting(load: effect_keys.CuttingLoad, mechanism=None) -> Definition:
     """The intervals' edges from the first one's start, read at phi - start (mod the period)."""
     start = math.radians(load.intervals_deg[0][0])
     edges = tuple(math.radians(edge) - start for interval in load.intervals_deg for edge in interval)
@@ -142,9 +142,9 @@ def _on(load) -> str:
     return {"slider": "slider", "rocker": "rocker", "shuttle": "shuttle bar"}[load.type.split("_")[0]]
 
 
-@define(schema.SliderConstant, schema.RockerConstant)
-def _output_constant(load: schema.SliderConstant | schema.RockerConstant, mechanism=None) -> Definition:
-    value = load.force if isinstance(load, schema.SliderConstant) else load.torque
+@define(effect_keys.SliderConstant, effect_keys.RockerConstant)
+def _output_constant(load: effect_keys.SliderConstant | effect_keys.RockerConstant, mechanism=None) -> Definition:
+    value = load.force if isinstance(load, effect_keys.SliderConstant) else load.torque
     return Definition(
         load.type,
         "load",
@@ -157,8 +157,8 @@ def _output_constant(load: schema.SliderConstant | schema.RockerConstant, mechan
     )
 
 
-@define(schema.OutputViscous)
-def _output_viscous(load: schema.OutputViscous, mechanism=None) -> Definition:
+@define(effect_keys.OutputViscous)
+def _output_viscous(load: effect_keys.OutputViscous, mechanism=None) -> Definition:
     return Definition(
         load.type,
         "load",
@@ -171,8 +171,8 @@ def _output_viscous(load: schema.OutputViscous, mechanism=None) -> Definition:
     )
 
 
-@define(schema.OutputSpring)
-def _output_spring(load: schema.OutputSpring, mechanism=None) -> Definition:
+@define(effect_keys.OutputSpring)
+def _output_spring(load: effect_keys.OutputSpring, mechanism=None) -> Definition:
     return Definition(
         load.type,
         "load",
@@ -185,8 +185,8 @@ def _output_spring(load: schema.OutputSpring, mechanism=None) -> Definition:
     )
 
 
-@define(schema.SliderTable)
-def _slider_table(load: schema.SliderTable, mechanism=None) -> Definition:
+@define(effect_keys.SliderTable)
+def _slider_table(load: effect_keys.SliderTable, mechanism=None) -> Definition:
     return Definition(
         "slider_table",
         "load",

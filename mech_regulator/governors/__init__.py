@@ -29,7 +29,7 @@ from mech_regulator.governors.hartnell import HartnellSensor
 from mech_regulator.governors.pi import ElectronicGovernor
 from mech_regulator.governors.sensor import CentrifugalSensor
 from mech_regulator.governors.valve import ValveCharacteristic, build_valve
-from mech_regulator.scene import schema
+from mech_regulator.scene import governor_keys
 
 Mode = tuple[str, str]
 # A machine's mode (model.machine): its governor's Mode, if it has a governor, then its drive train's, if any; None
@@ -329,11 +329,13 @@ class Governor:
         return lines
 
 
-def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], float]) -> Governor | ElectronicGovernor:
+def build_governor(
+    spec: governor_keys.Governor, balance_throttle: Callable[[float], float]
+) -> Governor | ElectronicGovernor:
     """Assemble a scene's governor. balance_throttle(omega) is the throttle at which the cycle-averaged
     drive balances the initial load at crank speed omega; rigid feedback's default reference is its
     value at the set speed."""
-    if isinstance(spec, schema.PIGovernor):
+    if isinstance(spec, governor_keys.PIGovernor):
         return ElectronicGovernor(
             set_point=spec.set_speed,
             gain=spec.gain,
@@ -341,7 +343,7 @@ def build_governor(spec: schema.Governor, balance_throttle: Callable[[float], fl
             travel=(spec.travel[0], spec.travel[1]),
         )
     sensor = build_sensor(spec)
-    if not isinstance(spec, schema.IndirectGovernor):
+    if not isinstance(spec, governor_keys.IndirectGovernor):
         valve, formula, breaks = build_valve(spec.valve)
         return Governor(kind="direct", sensor=sensor, valve=valve, valve_formula=formula, valve_breaks=breaks)
     servo, feedback = spec.servo, spec.feedback
@@ -380,9 +382,11 @@ class _SensorArguments(TypedDict):
     stroke: tuple[float, float]
 
 
-def build_sensor(spec: schema.DirectGovernor | schema.IndirectGovernor | schema.HartnellGovernor) -> CentrifugalSensor:
+def build_sensor(
+    spec: governor_keys.DirectGovernor | governor_keys.IndirectGovernor | governor_keys.HartnellGovernor,
+) -> CentrifugalSensor:
     """The centrifugal sensor of a scene's governor: Hartnell's for type 'hartnell', Porter's otherwise."""
-    spring = spec.spring or schema.SleeveSpring(stiffness=0.0)
+    spring = spec.spring or governor_keys.SleeveSpring(stiffness=0.0)
     common = _SensorArguments(
         ball_mass=spec.ball_mass,
         sleeve_mass=spec.sleeve_mass,
@@ -395,7 +399,7 @@ def build_sensor(spec: schema.DirectGovernor | schema.IndirectGovernor | schema.
         gravity=spec.gravity,
         stroke=(spec.stroke[0], spec.stroke[1]),
     )
-    if isinstance(spec, schema.HartnellGovernor):
+    if isinstance(spec, governor_keys.HartnellGovernor):
         return HartnellSensor(
             ball_arm=spec.ball_arm, sleeve_arm=spec.sleeve_arm, pivot_radius=spec.pivot_radius, **common
         )

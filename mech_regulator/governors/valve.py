@@ -16,7 +16,7 @@ from mech_regulator.effects.definition import (
     reference_closure,
 )
 from mech_regulator.effects.tables import clamped_linear, slope_breaks
-from mech_regulator.scene import schema
+from mech_regulator.scene import governor_keys
 
 
 class ValveCharacteristic(Protocol):
@@ -36,8 +36,8 @@ def table_valve(table):
     return table
 
 
-@define(schema.LinearValve)
-def _linear(valve: schema.LinearValve, mechanism=None) -> Definition:
+@define(governor_keys.LinearValve)
+def _linear(valve: governor_keys.LinearValve, mechanism=None) -> Definition:
     return Definition(
         "valve",
         "valve",
@@ -47,8 +47,8 @@ def _linear(valve: schema.LinearValve, mechanism=None) -> Definition:
     )
 
 
-@define(schema.TableValve)
-def _table(valve: schema.TableValve, mechanism=None) -> Definition:
+@define(governor_keys.TableValve)
+def _table(valve: governor_keys.TableValve, mechanism=None) -> Definition:
     return Definition(
         "valve",
         "valve",
@@ -58,10 +58,10 @@ def _table(valve: schema.TableValve, mechanism=None) -> Definition:
     )
 
 
-check_covered(schema.Valve)
+check_covered(governor_keys.Valve)
 
 
-def build_valve(valve: schema.Valve) -> tuple[ValveCharacteristic, str, tuple[float, ...]]:
+def build_valve(valve: governor_keys.Valve) -> tuple[ValveCharacteristic, str, tuple[float, ...]]:
     """The throttle as a function of the sleeve position z (a table's also of an anchor: throttle(z, anchor) continues
     the piece that holds z = anchor [m] to z), a formula for `describe`, and the sleeve positions [m] where a table's
     slope jumps (its breakpoints; () without a table): the valve's definition bound to its numbers, as the fast path

@@ -20,10 +20,10 @@ from mech_regulator.mechanisms import linkage, presets
 from mech_regulator.mechanisms.linkage import symbolic
 from mech_regulator.mechanisms.presets import mechanism_geometry
 from mech_regulator.mechanisms.walking_beam import Motion
-from mech_regulator.scene import schema
+from mech_regulator.scene import mechanism_keys
 
 
-def build_reduced(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
+def build_reduced(mechanism: mechanism_keys.Mechanism, gravity: tuple[float, float] | None):
     """The `reduced(phi)` closure of a scene's mechanism (gravity None: no weight moment is computed): the generated
     code of its linkage (linkage_of, linkage.symbolic), compiled as on the fast path; several outputs (a multi-cylinder
     engine's pistons): q and dq/dphi are the tuples of every piston's x and x' (engine.py)."""
@@ -39,33 +39,35 @@ def build_reduced(mechanism: schema.Mechanism, gravity: tuple[float, float] | No
     return multi_reduced
 
 
-def linkage_of(mechanism: schema.Mechanism) -> tuple[linkage.Linkage, linkage.Structure, tuple[str, ...]]:
+def linkage_of(mechanism: mechanism_keys.Mechanism) -> tuple[linkage.Linkage, linkage.Structure, tuple[str, ...]]:
     """The linkage a scene's mechanism is solved as (a preset's, presets.preset_linkage, or the scene's own), its
     structure, and the prismatic joints whose travels are its outputs (a multi-cylinder engine's piston guides in
     cylinder order; () : the linkage's own output)."""
-    if isinstance(mechanism, schema.Linkage):
+    if isinstance(mechanism, mechanism_keys.Linkage):
         core, structure = mechanism_geometry(mechanism)
         return core, structure, ()
     core = presets.preset_linkage(mechanism)
     guides = (
         tuple(presets.guide_joints(mechanism))
-        if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders is not None
+        if isinstance(mechanism, mechanism_keys.CrankSlider) and mechanism.cylinders is not None
         else ()
     )
     return core, linkage.checked(core), guides
 
 
-def cam_law_angles(mechanism: schema.Mechanism) -> list[float]:
+def cam_law_angles(mechanism: mechanism_keys.Mechanism) -> list[float]:
     """The crank angles [rad] in [0, 2 pi) where a cam follower's law changes piece (its s'' may jump there)."""
-    if not isinstance(mechanism, schema.Linkage):
+    if not isinstance(mechanism, mechanism_keys.Linkage):
         return []
-    specs = [presets.cam_spec(joint) for joint in mechanism.joints.values() if isinstance(joint, schema.CamJoint)]
+    specs = [
+        presets.cam_spec(joint) for joint in mechanism.joints.values() if isinstance(joint, mechanism_keys.CamJoint)
+    ]
     return [float(angle) % (2.0 * math.pi) for spec in specs for angle in spec.law.kinks() + spec.start]
 
 
-def cam_pairs_of(mechanism: schema.Mechanism, gravity) -> list:
+def cam_pairs_of(mechanism: mechanism_keys.Mechanism, gravity) -> list:
     """The linkage/cam.py CamPairs of a scene's mechanism (gravity (gx, gy) [m/s^2] or None); [] without cams."""
-    if not isinstance(mechanism, schema.Linkage):
+    if not isinstance(mechanism, mechanism_keys.Linkage):
         return []
     from mech_regulator.mechanisms.linkage.cam import cam_pairs
 
@@ -73,21 +75,21 @@ def cam_pairs_of(mechanism: schema.Mechanism, gravity) -> list:
     return cam_pairs(core, structure.groups, gravity)
 
 
-def build_kinetostatics(mechanism: schema.Mechanism, gravity: tuple[float, float] | None):
+def build_kinetostatics(mechanism: mechanism_keys.Mechanism, gravity: tuple[float, float] | None):
     """The `loads(phi, omega, Q)` closure of a scene's mechanism and its joint names: the kinetostatics by groups of
     its linkage (linkage_of, linkage.make_joint_loads); gravity None: the links are weightless."""
     core, structure, _ = linkage_of(mechanism)
     return linkage.make_joint_loads(core, structure, gravity)
 
 
-def point_motions(mechanism: schema.Mechanism) -> Callable[[float], dict[str, Motion]]:
+def point_motions(mechanism: mechanism_keys.Mechanism) -> Callable[[float], dict[str, Motion]]:
     """`motions(phi) -> {point: (P [m], dP/dphi [m/rad], d2P/dphi2 [m/rad^2])}` of the moving points of a scene's
     mechanism, as complex numbers x + i y (velocity P' omega, acceleration P'' omega^2 + P' epsilon), from its linkage
     (linkage_of; linkage.kinematics.moving_points): a scene's linkage's joints off the frame and its points of
     interest; a preset's named points only (presets.py: crank–slider and four-bar B, C; walking beam A..E)."""
     core, structure, _ = linkage_of(mechanism)
     motions = linkage.make_point_motions(core, structure)
-    if isinstance(mechanism, schema.Linkage):
+    if isinstance(mechanism, mechanism_keys.Linkage):
         return motions
     names = core.points
     return lambda phi: {name: motion for name, motion in motions(phi).items() if name in names}

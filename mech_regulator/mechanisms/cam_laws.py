@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mech_regulator.mechanisms.linkage.flat import law_at
+from mech_regulator.mechanisms.linkage.flat_positions import law_at
 
 TWO_PI = 2.0 * math.pi
 CODES = {"dwell": 0.0, "uniform": 1.0, "harmonic": 2.0, "cycloidal": 3.0, "polynomial_345": 4.0, "cubic": 5.0}
@@ -45,7 +45,8 @@ class MotionLaw:
     _pieces: list[list[float]]  # set by each kind of law (pieces())
 
     def pieces(self) -> list[list[float]]:
-        """The law as flat.law_at's pieces [start, length, code, a, b, c, d], in order of start from 0 to the turn."""
+        """The law as flat_positions.law_at's pieces [start, length, code, a, b, c, d], in order of start from 0 to
+        the turn."""
         return self._pieces
 
     def kinks(self) -> np.ndarray:
@@ -53,7 +54,8 @@ class MotionLaw:
         return np.array([piece[0] for piece in self._pieces])
 
     def evaluate(self, theta) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(s, s', s'') at the cam angles theta [rad]: [m, m/rad, m/rad^2] or [rad, -, 1/rad] (flat.law_at)."""
+        """(s, s', s'') at the cam angles theta [rad]: [m, m/rad, m/rad^2] or [rad, -, 1/rad]
+        (flat_positions.law_at)."""
         program = np.array([float(len(self._pieces))] + [v for piece in self._pieces for v in piece])
         theta = np.atleast_1d(np.asarray(theta, dtype=float))
         values = np.array([law_at(angle, program, 0) for angle in theta.ravel()]).reshape(theta.shape + (3,))

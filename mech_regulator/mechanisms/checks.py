@@ -16,7 +16,7 @@ from mech_regulator.mechanisms.linkage import Dyad, assembly_failures, checked
 from mech_regulator.mechanisms.linkage.cam import CamFollower, check_cams
 from mech_regulator.mechanisms.linkage.kinetostatics import indeterminate
 from mech_regulator.mechanisms.presets import linkage_core
-from mech_regulator.scene import schema
+from mech_regulator.scene import effect_keys, machine_keys, mechanism_keys, schema
 from mech_regulator.scene.loading import problems_message
 
 BRANCHED_GROUPS = ("RRR", "RRP", "RPR")  # the group types with two assemblies, chosen by a branch
@@ -31,7 +31,7 @@ def refuse_unbuildable(scene: schema.Scene, source: str | None = None) -> schema
     return scene
 
 
-def mechanism_problems(machine: schema.Machine) -> list[str]:
+def mechanism_problems(machine: machine_keys.Machine) -> list[str]:
     """'key: what is wrong; what is expected' for each problem of the machine's mechanisms (its own and its driven
     part's) and of what rests on their kinematics (an engine's firing, joint friction's reactions)."""
     parts = [("machine.mechanism", machine.mechanism)] + [
@@ -68,22 +68,22 @@ def _refusal(check, subject) -> str | None:
     return None
 
 
-def _check_mechanism(mechanism: schema.Mechanism) -> None:
+def _check_mechanism(mechanism: mechanism_keys.Mechanism) -> None:
     """Raise ValueError when the mechanism's crank cannot turn fully (or a linkage is not driven by it)."""
-    if isinstance(mechanism, (schema.FourBar, schema.WalkingBeam)):
+    if isinstance(mechanism, (mechanism_keys.FourBar, mechanism_keys.WalkingBeam)):
         _check_crank_turns(mechanism)
-    if isinstance(mechanism, schema.WalkingBeam):
+    if isinstance(mechanism, mechanism_keys.WalkingBeam):
         flattening = walking_beam.change_point(walking_beam.geometry_from_scene(mechanism))
         if flattening is not None:
             raise ValueError(
                 f"{flattening}; expected a beam direction (or its opposite) outside the swing "
                 "of both links, so that the parallelograms never fold"
             )
-    if isinstance(mechanism, schema.Linkage):
+    if isinstance(mechanism, mechanism_keys.Linkage):
         _check_drivable(mechanism)
 
 
-def _check_crank_turns(linkage: schema.FourBar | schema.WalkingBeam) -> None:
+def _check_crank_turns(linkage: mechanism_keys.FourBar | mechanism_keys.WalkingBeam) -> None:
     """Raise ValueError naming the crank angles where the four-bar loop (crank, coupler, rocker, frame,
     frame_angle_deg) of a linkage cannot be assembled."""
     ranges = unassemblable_crank_ranges(
@@ -98,7 +98,7 @@ def _check_crank_turns(linkage: schema.FourBar | schema.WalkingBeam) -> None:
         )
 
 
-def _check_drivable(mechanism: schema.Linkage) -> None:
+def _check_drivable(mechanism: mechanism_keys.Linkage) -> None:
     """Raise ValueError when the linkage is not driven by its crank through class-II groups (linkage.checked), its
     cams cannot be cut (linkage/cam.py check_cams: undercut, cam not the crank, ...), its branches name no group
     with two assemblies, or it does not assemble over the whole turn."""
@@ -127,10 +127,14 @@ def _check_drivable(mechanism: schema.Linkage) -> None:
         )
 
 
-def _check_firing(machine: schema.Machine) -> None:
+def _check_firing(machine: machine_keys.Machine) -> None:
     """Raise ValueError when a multi-cylinder engine's firing does not fit its crankshaft (engine.firing_delays)."""
     mechanism, engine = machine.mechanism, machine.drive
-    if isinstance(mechanism, schema.CrankSlider) and mechanism.cylinders and isinstance(engine, schema.Engine):
+    if (
+        isinstance(mechanism, mechanism_keys.CrankSlider)
+        and mechanism.cylinders
+        and isinstance(engine, effect_keys.Engine)
+    ):
         cylinders = mechanism.cylinders
         firing_delays(
             [c.throw_deg for c in cylinders],
@@ -141,10 +145,10 @@ def _check_firing(machine: schema.Machine) -> None:
         )
 
 
-def _check_reactions(machine: schema.Machine) -> None:
+def _check_reactions(machine: machine_keys.Machine) -> None:
     """Raise ValueError when joint friction is asked of a linkage whose joint reactions are indeterminate (a
     redundant link) or that has gear pairs (no mesh friction model)."""
-    if machine.joint_friction is None or not isinstance(machine.mechanism, schema.Linkage):
+    if machine.joint_friction is None or not isinstance(machine.mechanism, mechanism_keys.Linkage):
         return
     reason = indeterminate(checked(linkage_core(machine.mechanism)))
     gear_joints = [name for name, joint in machine.mechanism.joints.items() if joint.type == "gear"]

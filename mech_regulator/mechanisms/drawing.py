@@ -16,7 +16,7 @@ import numpy as np
 from mech_regulator.mechanisms import crank_slider, four_bar, walking_beam
 from mech_regulator.mechanisms.linkage import drawing as linkage_drawing
 from mech_regulator.mechanisms.linkage.drawing import circle
-from mech_regulator.scene import schema
+from mech_regulator.scene import mechanism_keys
 
 BLOCK_LENGTH_PER_CRANK = 1.0  # slider block length along the guide, per crank radius [-]
 BLOCK_HEIGHT_PER_CRANK = 0.6  # slider block height across the guide, per crank radius [-]
@@ -33,7 +33,7 @@ MOVING_PARTS = {
 }
 
 
-def mechanism_kind(mechanism_spec: schema.Mechanism | None) -> str | None:
+def mechanism_kind(mechanism_spec: mechanism_keys.Mechanism | None) -> str | None:
     """'crank_slider', 'four_bar', 'walking_beam', 'linkage', or None for a machine without a mechanism."""
     return None if mechanism_spec is None else mechanism_spec.type
 
@@ -52,7 +52,7 @@ def rectangle(centre: tuple[float, float], half_width: float, half_height: float
     )
 
 
-def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> dict[str, np.ndarray]:
+def mechanism_outline(mechanism_spec: mechanism_keys.Mechanism | None, phi: float) -> dict[str, np.ndarray]:
     """The mechanism's parts at crank angle phi [rad], in metres with y up.
 
     Crank–slider (crank R, rod l, offset e): crank O-B with the pin B = R (cos phi, sin phi), rod B-C with
@@ -70,13 +70,13 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
     No mechanism: a disc of radius DISC_RADIUS (schematic: the machine has no link lengths) and a spoke
     from its centre to DISC_RADIUS (cos phi, sin phi).
     """
-    if isinstance(mechanism_spec, schema.CrankSlider):
+    if isinstance(mechanism_spec, mechanism_keys.CrankSlider):
         return _crank_slider_outline(mechanism_spec, phi)
-    if isinstance(mechanism_spec, schema.FourBar):
+    if isinstance(mechanism_spec, mechanism_keys.FourBar):
         return _four_bar_outline(mechanism_spec, phi)
-    if isinstance(mechanism_spec, schema.WalkingBeam):
+    if isinstance(mechanism_spec, mechanism_keys.WalkingBeam):
         return _walking_beam_outline(mechanism_spec, phi)
-    if isinstance(mechanism_spec, schema.Linkage):
+    if isinstance(mechanism_spec, mechanism_keys.Linkage):
         from mech_regulator.mechanisms import mechanism_geometry
 
         linkage, structure = mechanism_geometry(mechanism_spec)
@@ -89,7 +89,7 @@ def mechanism_outline(mechanism_spec: schema.Mechanism | None, phi: float) -> di
     }
 
 
-def _crank_slider_outline(spec: schema.CrankSlider, phi: float) -> dict[str, np.ndarray]:
+def _crank_slider_outline(spec: mechanism_keys.CrankSlider, phi: float) -> dict[str, np.ndarray]:
     R, rod, e = spec.crank, spec.rod, spec.offset
     pin = (R * math.cos(phi), R * math.sin(phi))
     x = crank_slider.slider_kinematics(phi, R, rod, e)[0]
@@ -106,7 +106,7 @@ def _crank_slider_outline(spec: schema.CrankSlider, phi: float) -> dict[str, np.
     }
 
 
-def _four_bar_outline(spec: schema.FourBar, phi: float) -> dict[str, np.ndarray]:
+def _four_bar_outline(spec: mechanism_keys.FourBar, phi: float) -> dict[str, np.ndarray]:
     a, b, c, d = spec.crank, spec.coupler, spec.rocker, spec.frame
     th1 = math.radians(spec.frame_angle_deg)
     th4 = four_bar.link_angles(phi, a, b, c, d, th1, four_bar.BRANCH_SIGN[spec.branch])[3]
@@ -124,7 +124,7 @@ def _four_bar_outline(spec: schema.FourBar, phi: float) -> dict[str, np.ndarray]
     }
 
 
-def _walking_beam_outline(spec: schema.WalkingBeam, phi: float) -> dict[str, np.ndarray]:
+def _walking_beam_outline(spec: mechanism_keys.WalkingBeam, phi: float) -> dict[str, np.ndarray]:
     geometry = walking_beam.geometry_from_scene(spec)
     points = {name: motion[0] for name, motion in walking_beam.solve(phi, geometry)[1].items()}
     points["O1"] = 0j
@@ -175,7 +175,7 @@ def with_margin(
     return xmin - pad, xmax + pad, ymin - pad, ymax + pad
 
 
-def mechanism_bounds(mechanism_spec: schema.Mechanism | None) -> tuple[float, float, float, float]:
+def mechanism_bounds(mechanism_spec: mechanism_keys.Mechanism | None) -> tuple[float, float, float, float]:
     """(xmin, xmax, ymin, ymax) [m, y up] framing the mechanism over a whole turn: the extent of its
     outline at BOUNDS_SAMPLES crank angles, grown by BOUNDS_MARGIN of the larger span on every side."""
     angles = np.linspace(0.0, 2.0 * math.pi, BOUNDS_SAMPLES, endpoint=False)

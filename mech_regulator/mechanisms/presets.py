@@ -39,7 +39,7 @@ from mech_regulator.mechanisms.cam_laws import Segment, SegmentLaw, TableLaw
 from mech_regulator.mechanisms.linkage import Joint, Link, Linkage, checked
 from mech_regulator.mechanisms.linkage.cam import CamSpec
 from mech_regulator.mechanisms.linkage.gears import GearMesh
-from mech_regulator.scene import schema
+from mech_regulator.scene import mechanism_keys
 
 FRAME, CRANK = "frame", "crank"
 CRANK_BEARING, CRANK_PIN, WRIST_PIN, GUIDE = kinetostatics.CRANK_SLIDER_JOINTS
@@ -71,7 +71,7 @@ def cylinder_names(count: int) -> list[tuple[str, str, str]]:
     return [(f"{CRANK_PIN}_{i}", f"{WRIST_PIN}_{i}", f"{GUIDE}_{i}") for i in range(1, count + 1)]
 
 
-def guide_joints(mechanism: schema.CrankSlider) -> list[str]:
+def guide_joints(mechanism: mechanism_keys.CrankSlider) -> list[str]:
     """The names of a crank–slider's piston guides (prismatic joints) in cylinder order: cylinder i's travel along
     its guide is its piston position x_i [m]."""
     count = len(mechanism.cylinders) if mechanism.cylinders is not None else 1
@@ -79,7 +79,7 @@ def guide_joints(mechanism: schema.CrankSlider) -> list[str]:
 
 
 def crank_slider_linkage(
-    g: crank_slider.CrankSliderGeometry, cylinders: list[schema.Cylinder] | None = None
+    g: crank_slider.CrankSliderGeometry, cylinders: list[mechanism_keys.Cylinder] | None = None
 ) -> Linkage:
     """A crank–slider (one or several cylinders) as a linkage: per cylinder i with throw tau_i and bank b_i, the
     crank pin at R e^{i tau_i} on the crank, a rod (crank pin at 0, wrist pin at l, centre rod_cg, mass and
@@ -87,7 +87,7 @@ def crank_slider_linkage(
     in the cylinder's own frame the piston runs on y = e and its travel is the preset's x at phi + tau_i - b_i
     (engine.py). The crank carries the crank mass once per cylinder, at the mean of its throws' centres
     cg e^{i tau_i} (its weight moment is the preset's sum over cylinders)."""
-    cylinders = cylinders or [schema.Cylinder()]
+    cylinders = cylinders or [mechanism_keys.Cylinder()]
     throws = [cmath.exp(1j * math.radians(c.throw_deg)) for c in cylinders]
     frame, crank_points, links, joints = {CRANK_BEARING: 0j}, {CRANK_BEARING: 0j, "B": g.crank * throws[0]}, [], []
     names = cylinder_names(len(cylinders))
@@ -232,7 +232,7 @@ def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:
     )
 
 
-def linkage_core(mechanism: schema.Linkage) -> Linkage:
+def linkage_core(mechanism: mechanism_keys.Linkage) -> Linkage:
     """The mechanisms.linkage.Linkage of a scene's linkage entry (the frame is the link named 'frame')."""
 
     def complex_points(points: dict[str, list[float]]) -> dict[str, complex]:
@@ -245,7 +245,7 @@ def linkage_core(mechanism: schema.Linkage) -> Linkage:
     )
     joints = tuple(
         Joint(name, joint.type, (joint.links[0], joint.links[1]), cam=cam_spec(joint))
-        if isinstance(joint, schema.CamJoint)
+        if isinstance(joint, mechanism_keys.CamJoint)
         else Joint(
             name,
             joint.type,
@@ -256,7 +256,7 @@ def linkage_core(mechanism: schema.Linkage) -> Linkage:
         )
         for name, joint in mechanism.joints.items()
     )
-    output = mechanism.output or schema.LinkageOutput.model_construct(joint=None, link=None)
+    output = mechanism.output or mechanism_keys.LinkageOutput.model_construct(joint=None, link=None)
     return Linkage(
         links,
         joints,
@@ -269,10 +269,10 @@ def linkage_core(mechanism: schema.Linkage) -> Linkage:
     )
 
 
-def cam_spec(joint: schema.CamJoint) -> CamSpec:
+def cam_spec(joint: mechanism_keys.CamJoint) -> CamSpec:
     """The linkage/cam.py CamSpec of a scene's cam pair: its law (segments or a table, angles in rad), contact, base
     radius [m], start angle [rad] and spring (stiffness, preload; 0 without one)."""
-    if isinstance(joint.law, schema.CamTable):
+    if isinstance(joint.law, mechanism_keys.CamTable):
         law: TableLaw | SegmentLaw = TableLaw([math.radians(a) for a in joint.law.angle_deg], joint.law.lift)
     else:
         law = SegmentLaw(
@@ -281,17 +281,17 @@ def cam_spec(joint: schema.CamJoint) -> CamSpec:
                 for part in joint.law
             )
         )
-    spring = joint.spring or schema.FollowerSpring(stiffness=0.0, preload=0.0)
+    spring = joint.spring or mechanism_keys.FollowerSpring(stiffness=0.0, preload=0.0)
     return CamSpec(
         law, joint.contact, joint.base_radius, math.radians(joint.start_deg), spring.stiffness, spring.preload
     )
 
 
-def _gear_mesh(joint: schema.LinkageJoint) -> GearMesh | None:
+def _gear_mesh(joint: mechanism_keys.LinkageJoint) -> GearMesh | None:
     """The gear pair of a scene's linkage joint (None for a lower pair)."""
     if joint.type != "gear":
         return None
-    assert joint.centres is not None  # schema.LinkageJoint: a gear has its two centres
+    assert joint.centres is not None  # mechanism_keys.LinkageJoint: a gear has its two centres
     return GearMesh(
         (joint.centres[0], joint.centres[1]),
         (joint.teeth[0], joint.teeth[1]) if joint.teeth else None,
@@ -302,17 +302,17 @@ def _gear_mesh(joint: schema.LinkageJoint) -> GearMesh | None:
     )
 
 
-def mechanism_geometry(mechanism: schema.Mechanism):
+def mechanism_geometry(mechanism: mechanism_keys.Mechanism):
     """The geometry NamedTuple (lengths [m], angles [rad], masses [kg], inertias [kg m^2]) of a scene's mechanism;
     a linkage's: its mechanisms.linkage.Linkage and Structure (validated by the scene: W = 1, class-II groups)."""
-    if isinstance(mechanism, schema.Linkage):
+    if isinstance(mechanism, mechanism_keys.Linkage):
         core = linkage_core(mechanism)
         return core, checked(core)
-    if isinstance(mechanism, schema.CrankSlider):
+    if isinstance(mechanism, mechanism_keys.CrankSlider):
         return crank_slider.CrankSliderGeometry(
             **{k: getattr(mechanism, k) for k in crank_slider.CrankSliderGeometry._fields}
         )
-    if isinstance(mechanism, schema.FourBar):
+    if isinstance(mechanism, mechanism_keys.FourBar):
         fields = {
             k: getattr(mechanism, k)
             for k in four_bar.FourBarGeometry._fields
@@ -323,19 +323,21 @@ def mechanism_geometry(mechanism: schema.Mechanism):
             branch_sign=four_bar.BRANCH_SIGN[mechanism.branch],
             **fields,
         )
-    if isinstance(mechanism, schema.WalkingBeam):
+    if isinstance(mechanism, mechanism_keys.WalkingBeam):
         return walking_beam.geometry_from_scene(mechanism)
     raise TypeError(f"no kinematics for {type(mechanism).__name__}")
 
 
-def preset_linkage(mechanism: schema.CrankSlider | schema.FourBar | schema.WalkingBeam) -> Linkage:
+def preset_linkage(
+    mechanism: mechanism_keys.CrankSlider | mechanism_keys.FourBar | mechanism_keys.WalkingBeam,
+) -> Linkage:
     """The linkage of a scene's preset mechanism (module docstring): its reduction, point motions and joint
     reactions equal the preset's."""
-    if isinstance(mechanism, schema.CrankSlider):
+    if isinstance(mechanism, mechanism_keys.CrankSlider):
         return crank_slider_linkage(mechanism_geometry(mechanism), mechanism.cylinders)
-    if isinstance(mechanism, schema.FourBar):
+    if isinstance(mechanism, mechanism_keys.FourBar):
         return four_bar_linkage(mechanism_geometry(mechanism))
-    if isinstance(mechanism, schema.WalkingBeam):
+    if isinstance(mechanism, mechanism_keys.WalkingBeam):
         return walking_beam_linkage(mechanism_geometry(mechanism))
     raise TypeError(
         f"no preset linkage for {type(mechanism).__name__}; expected a crank_slider, four_bar or walking_beam"

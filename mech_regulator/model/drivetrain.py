@@ -39,7 +39,7 @@ import numpy as np
 
 from mech_regulator.effects import Effect, build_load, output_position_of
 from mech_regulator.governors import Guard
-from mech_regulator.scene import schema
+from mech_regulator.scene import machine_keys
 
 FORWARD, BACKWARD, HELD = "forward", "backward", "held"
 STUCK, SLIP_AHEAD, SLIP_BEHIND = "stuck", "slip+", "slip-"
@@ -152,7 +152,7 @@ def coulomb_factor(mode: str, push: float, resistance: float) -> float:
 
 
 def build_driven(
-    spec: schema.DrivenPart,
+    spec: machine_keys.DrivenPart,
     unique_names: Callable[[list[Effect]], list[Effect]],
     reduced: Callable | None = None,
     has_weight: bool = False,

@@ -172,7 +172,7 @@ def schema_markdown() -> str:
         if kind is not None:
             title += f" — type `{'` / `'.join(typing.get_args(kind.annotation))}`"
         doc = " ".join(inspect.cleandoc(model.__doc__ or "").split("\n\n")[0].split())
-        header = f"### {title}\n\n" + (f"{doc}\n\n" if doc and model.__module__.endswith("schema") else "")
+        header = f"### {title}\n\n" + (f"{doc}\n\n" if doc and model.__module__.startswith(f"{__package__}.") else "")
         sections.append(header + "\n".join(rows) + "\n")
         for child, child_path in nested:
             visit(child, child_path)

@@ -438,7 +438,7 @@ def _branch_points(squares: np.ndarray, t_old: float, h: float) -> np.ndarray:
     journal's interpolating polynomial in theta = (t - t_old) / h (np.roots), as times t_old + h theta. Zeros within
     REAL_ZERO of the real axis (a reaction through 0: a corner of |R_j|, nothing to step around) are left out, and so
     is a journal with a non-finite sample (the step fails on its own). Plain loops: the fast path compiles it
-    (solvers/compiled/integrators.py)."""
+    (solvers/compiled/events.py)."""
     found = np.empty(squares.shape[1] * (GUARD_NODES - 1), dtype=np.complex128)
     count = 0
     for j in range(squares.shape[1]):

@@ -24,8 +24,8 @@ import numpy as np
 import yaml
 
 from mech_regulator.model import MachineModel
+from mech_regulator.model.columns import crank_moments
 from mech_regulator.model.joints import output_joints
-from mech_regulator.model.machine import crank_moments
 
 NANOSECONDS = 1_000_000_000
 SEPARATOR = "=" * 80

@@ -51,7 +51,7 @@ from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PAR
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
 from mech_regulator.model import MachineModel, crank_moments
-from mech_regulator.scene import schema
+from mech_regulator.scene import governor_keys, mechanism_keys
 from mech_regulator.solvers.trajectory import Progress
 
 APPLICATION_ID = "mech_regulator"
@@ -535,7 +535,7 @@ def start_text(model: MachineModel) -> str:
     scene = model.scene
     if model.governor is None:
         governor = "no governor"
-    elif isinstance(scene.governor, schema.IndirectGovernor):  # the model's governor of kind "indirect"
+    elif isinstance(scene.governor, governor_keys.IndirectGovernor):  # the model's governor of kind "indirect"
         feedback = scene.governor.feedback.type
         governor = (
             "indirect governor without feedback" if feedback == "none" else f"indirect governor, {feedback} feedback"
@@ -559,7 +559,7 @@ def end_text(t_ns: int, status: str | None, message: str) -> str:
     return f"end: {status} at {when}" + (f": {message}" if message else "")
 
 
-def drawn_mechanism(model: MachineModel) -> tuple[schema.Mechanism | None, bool]:
+def drawn_mechanism(model: MachineModel) -> tuple[mechanism_keys.Mechanism | None, bool]:
     """The mechanism the recording draws and whether it is the driven part's (turning at phi - twist behind a
     coupling): the machine's own, else the one behind a coupling, else None (a schematic disc)."""
     return model.scene.machine.analysed_mechanism()

@@ -65,8 +65,8 @@ class CamSpec:
 class CamFollower:
     """A cam follower group: the follower link, its roller (or None), the follower's lower pair with the frame
     (guide), the cam pair and the roller's revolute joint (or None); at_base: (sigma, the follower's travel d0 [m]
-    (translating; sigma 1) or angle theta0 [rad] (oscillating) at s = 0), as flat.encode writes them into the cam
-    record (follower_zero; filled in by next_cam_follower)."""
+    (translating; sigma 1) or angle theta0 [rad] (oscillating) at s = 0), as flat_program.encode writes them into the
+    cam record (follower_zero; filled in by next_cam_follower)."""
 
     follower: str
     roller: str | None
@@ -493,7 +493,7 @@ def _degrees(angle: float) -> float:
 
 def follower_zero(linkage: Linkage, group: CamFollower) -> tuple[float, float]:
     """(sigma, the follower's travel d0 [m] (translating; sigma 1) or angle theta0 [rad] (oscillating) at s = 0), as
-    flat.encode writes them into the cam record."""
+    flat_program.encode writes them into the cam record."""
     pair = CamPair(linkage, group, None, check=False)
     if pair.translating:
         return 1.0, pair.travel0

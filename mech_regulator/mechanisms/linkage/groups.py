@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage import flat_derivatives, flat_program
 from mech_regulator.mechanisms.linkage.model import Joint, Linkage, LinkageError
 
 if TYPE_CHECKING:  # structure.py gathers the groups of every kind
@@ -142,20 +142,20 @@ def parallelogram_joint(linkage: Linkage, dyad: Dyad) -> Joint | None:
 
 
 def failure_message(group: Group, status: int, numbers: tuple[float, float, float], phi: float) -> str:
-    """The message of a group that flat.solve_poses could not solve at crank angle phi [rad] (its status and the
+    """The message of a group that flat_poses.solve_poses could not solve at crank angle phi [rad] (its status and the
     numbers that explain it), naming the group, its links, the angle and why."""
     where = f"{group.name} (links {', '.join(group.links)})"
     at = f"at crank angle {math.degrees(phi):.3f} deg"
     first, second, third = numbers
-    if status == flat.DEAD_POINT:
+    if status == flat_program.DEAD_POINT:
         return f"{where} is at a dead point {at}: its links are aligned and its velocity ratios infinite"
-    if status == flat.GUIDES_PARALLEL:
+    if status == flat_program.GUIDES_PARALLEL:
         return f"{where} {at}: its two guides are parallel, so the group has no single position"
     assert isinstance(group, Dyad), f"{where}: status {status} is a dyad's (flat.place_group)"
     E1, E2 = group.externals
-    if status == flat.RRR_APART:
+    if status == flat_program.RRR_APART:
         why = f"the distance {first:.6g} m between {E1.name} and {E2.name} is outside [{second:.6g}, {third:.6g}] m"
-    elif status == flat.RRP_GUIDE_FAR:
+    elif status == flat_program.RRP_GUIDE_FAR:
         why = (
             f"the guide of {E2.name} passes {first:.6g} m from {E1.name}, farther than the link "
             f"{group.links[0]}'s {second:.6g} m"
@@ -186,8 +186,10 @@ def packed(pose: Pose) -> list[float]:
 
 def _rows(linkage: Linkage, poses: dict[str, Pose], joint: Joint) -> list[dict[str, tuple[float, float, float]]]:
     """The partial derivatives of a joint's two constraint equations by each of its links' (x, y, theta)
-    (flat.joint_rows), as {link: (d/dx, d/dy, d/dtheta)} per equation."""
+    (flat_derivatives.joint_rows), as {link: (d/dx, d/dy, d/dtheta)} per equation."""
     a, b = joint.links
-    # plain lists: flat.joint_rows run as plain Python (a few µs)
-    rows = flat.joint_rows(flat.joint_record(linkage, joint, {a: 0, b: 1}), 0, packed(poses[a]) + packed(poses[b]))
+    # plain lists: flat_derivatives.joint_rows run as plain Python (a few µs)
+    rows = flat_derivatives.joint_rows(
+        flat_program.joint_record(linkage, joint, {a: 0, b: 1}), 0, packed(poses[a]) + packed(poses[b])
+    )
     return [{a: tuple(rows[6 * r : 6 * r + 3]), b: tuple(rows[6 * r + 3 : 6 * r + 6])} for r in range(2)]

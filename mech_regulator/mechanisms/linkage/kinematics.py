@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage import flat, flat_positions, flat_program
 from mech_regulator.mechanisms.linkage.groups import Pose, failure_message, packed
 from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
 
@@ -37,17 +37,17 @@ class PoseSolver(Protocol):
 
 def make_solver(linkage: Linkage, groups: Sequence[Group]) -> PoseSolver:
     """Build `solve_at(phi, derivatives=True) -> {link: pose}` placing the crank and these groups (a structure's,
-    or the ones found so far) at crank angle phi [rad] (flat.solve_poses); raises LinkageError naming the group
+    or the ones found so far) at crank angle phi [rad] (flat_poses.solve_poses); raises LinkageError naming the group
     that cannot assemble, or is at a dead point, and the angle (groups.failure_message)."""
-    program = flat.encode(linkage, groups, None)
-    names = list(flat.link_indices(linkage))
+    program = flat_program.encode(linkage, groups, None)
+    names = list(flat_program.link_indices(linkage))
     solve_poses = flat.compiled_announced("solve_poses")
-    scratch = np.empty(flat.SCRATCH_SHAPE)
+    scratch = np.empty(flat_program.SCRATCH_SHAPE)
 
     def solve_at(phi: float, derivatives: bool = True) -> dict[str, Pose]:
-        poses = np.empty(flat.POSE_SIZE * len(names))
+        poses = np.empty(flat_program.POSE_SIZE * len(names))
         status, group, *numbers = solve_poses(phi, program, 0, poses, scratch, derivatives)
-        if status != flat.SOLVED:
+        if status != flat_program.SOLVED:
             raise LinkageError(failure_message(groups[group], status, tuple(numbers), phi))
         values = poses.tolist()
         return {
@@ -59,7 +59,7 @@ def make_solver(linkage: Linkage, groups: Sequence[Group]) -> PoseSolver:
                 complex(values[k + 6], values[k + 7]),
                 values[k + 8],
             ]
-            for name, k in zip(names, range(0, len(values), flat.POSE_SIZE))
+            for name, k in zip(names, range(0, len(values), flat_program.POSE_SIZE))
         }
 
     return solve_at
@@ -72,19 +72,19 @@ def solve(linkage: Linkage, structure: Structure, phi: float, derivatives: bool 
 
 
 def motion(pose: Pose, point: complex) -> Motion:
-    """(P, P', P'') of the point `point` (link coordinates [m]) of a link with this pose (flat.motion)."""
-    return flat.motion(packed(pose), 0, point)
+    """(P, P', P'') of the point `point` (link coordinates [m]) of a link with this pose (flat_positions.motion)."""
+    return flat_positions.motion(packed(pose), 0, point)
 
 
 def make_reduced(
     linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
 ) -> Callable[[float], tuple[float, float, float, float, float]]:
     """Build `reduced(phi) -> (J_links, dJ_links/dphi, M_weight, q, q')` for this linkage by the general solver (the
-    contract of mechanisms/__init__.py; flat.reduced_from_poses gives the sums): the compiled flat.reduced on the
-    linkage's program; where it gives NaN (a group fails), the LinkageError of make_solver. A machine runs the code
-    generated from the groups instead (symbolic.make_reduced, mechanisms.build_reduced); this is its independent
+    contract of mechanisms/__init__.py; flat_poses.reduced_from_poses gives the sums): the compiled flat_poses.reduced
+    on the linkage's program; where it gives NaN (a group fails), the LinkageError of make_solver. A machine runs the
+    code generated from the groups instead (symbolic.make_reduced, mechanisms.build_reduced); this is its independent
     check (each group differentiated through its constraint system, not by the chain rule)."""
-    program = flat.encode(linkage, structure.groups, gravity)
+    program = flat_program.encode(linkage, structure.groups, gravity)
     compiled = flat.compiled_announced("reduced")
 
     def reduced(phi: float) -> tuple[float, float, float, float, float]:

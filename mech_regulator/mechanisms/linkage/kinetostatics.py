@@ -8,22 +8,22 @@ theta) its equations are
     m a_S = F,    I alpha + (S - r) x m a_S = M_r,
 
 F the forces on it and M_r their moment about r (gravity m g at S, an output load, the joints' reactions). The
-reactions of a joint are the multipliers lambda of its constraint equations (flat.joint_rows): a joint contributes
-`(dC/dx_link)^T lambda` to each of its links, so a group's links give `A^T lambda = (inertia - applied - reactions of
-the groups farther out)`, A the matrix of its kinematics (flat.group_matrix). A revolute joint's lambda is the
-force on its first link from its second [N] (its second link gets -lambda); a prismatic joint's are the normal
-force N on the slider along i w (w the guide's direction) [N] and the couple on the slider [N m] (the guide gets
-the opposite). Solving the groups from the last one to the first, each passes its outer joints' reactions inward;
-the crank's equilibrium then gives its bearing's reaction and the balancing moment M_b, which equals the reduced
+reactions of a joint are the multipliers lambda of its constraint equations (flat_derivatives.joint_rows): a joint
+contributes `(dC/dx_link)^T lambda` to each of its links, so a group's links give `A^T lambda = (inertia - applied -
+reactions of the groups farther out)`, A the matrix of its kinematics (flat_derivatives.group_matrix). A revolute
+joint's lambda is the force on its first link from its second [N] (its second link gets -lambda); a prismatic joint's
+are the normal force N on the slider along i w (w the guide's direction) [N] and the couple on the slider [N m] (the
+guide gets the opposite). Solving the groups from the last one to the first, each passes its outer joints' reactions
+inward; the crank's equilibrium then gives its bearing's reaction and the balancing moment M_b, which equals the reduced
 form `J epsilon + 1/2 J' omega^2 - M_weight - Q q'` (J of kinematics.make_reduced, the crank included) — a
 built-in check of both. The right-hand sides are linear in (omega^2, epsilon, g, Q), so two load cases share one
 position solution and one inverse per group: (omega, epsilon = 0, Q, with gravity) and (0, 1, 0, without), the
 reactions at epsilon = 0 and their rate with epsilon, whose sum weighted (1, epsilon) is any state's.
 
-The equations are written once, in flat.py (`flat.kinetostatics`, `flat.joint_loads`), which make_kinetostatics runs
-compiled; what joint friction reads (make_joint_loads) is the same solution written out per kind of linkage as
-straight-line code (symbolic.joint_loads_source), run here compiled (symbolic.reference_function) as the fast path
-runs it in a scene's right-hand side, with flat.joint_loads its independent check (the tests).
+The equations are written once, in flat.py (`flat_kinetostatics.kinetostatics`, `flat_kinetostatics.joint_loads`), which
+make_kinetostatics runs compiled; what joint friction reads (make_joint_loads) is the same solution written out per kind
+of linkage as straight-line code (symbolic.joint_loads_source), run here compiled (symbolic.reference_function) as the
+fast path runs it in a scene's right-hand side, with flat_kinetostatics.joint_loads its independent check (the tests).
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import numpy as np
 
 from mech_regulator import cache
 from mech_regulator.mechanisms.kinetostatics import JointLoads, Kinetostatics
-from mech_regulator.mechanisms.linkage import flat, symbolic
+from mech_regulator.mechanisms.linkage import flat, flat_kinetostatics, flat_program, symbolic
 from mech_regulator.mechanisms.linkage.cam import CamFollower
 from mech_regulator.mechanisms.linkage.groups import RedundantLink
 from mech_regulator.mechanisms.linkage.kinematics import make_solver
@@ -72,26 +72,26 @@ def indeterminate(structure: Structure) -> str | None:
 
 
 def _program(linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None) -> np.ndarray:
-    """The linkage's flat program (flat.encode); a redundant link is refused (indeterminate)."""
+    """The linkage's flat program (flat_program.encode); a redundant link is refused (indeterminate)."""
     reason = indeterminate(structure)
     if reason is not None:
         raise LinkageError(reason)
-    return flat.encode(linkage, structure.groups, gravity)
+    return flat_program.encode(linkage, structure.groups, gravity)
 
 
 def make_kinetostatics(
     linkage: Linkage, structure: Structure, gravity: tuple[float, float] | None
 ) -> Callable[[float, float, float, float], LinkageLoads]:
-    """Build `loads(phi, omega, epsilon, Q) -> LinkageLoads` (module docstring; the compiled flat.kinetostatics), Q
-    the generalised force on the output (a force along the output joint's guide on its slider [N], or a moment on
-    the output link [N m]); raises the LinkageError of the group that fails at phi."""
+    """Build `loads(phi, omega, epsilon, Q) -> LinkageLoads` (module docstring; the compiled
+    flat_kinetostatics.kinetostatics), Q the generalised force on the output (a force along the output joint's guide on
+    its slider [N], or a moment on the output link [N m]); raises the LinkageError of the group that fails at phi."""
     program = _program(linkage, structure, gravity)
     kinetostatics = flat.compiled_announced("kinetostatics")
-    n_poses, n_residual, n_multipliers = flat.workspace_sizes(program, 0)
-    poses, scratch = np.empty(n_poses), np.empty(flat.SCRATCH_SHAPE)
+    n_poses, n_residual, n_multipliers = flat_kinetostatics.workspace_sizes(program, 0)
+    poses, scratch = np.empty(n_poses), np.empty(flat_program.SCRATCH_SHAPE)
     residual, multipliers = np.empty((n_residual, 2)), np.empty((n_multipliers, 2))
     slots = {
-        joint.name: int(program[flat.joint_map(program, 0) + 1 + flat.JOINT_SIZE + 2 * k + 1])
+        joint.name: int(program[flat_kinetostatics.joint_map(program, 0) + 1 + flat_program.JOINT_SIZE + 2 * k + 1])
         for k, joint in enumerate(linkage.joints)
     }
 
@@ -126,13 +126,13 @@ def make_joint_loads(
     left out), so |R| = |N| and Im R = N, whose sign changes joint friction locates; the balancing moment (M_b0
     [N m], M_b1 [kg m^2]); and the ratios: a revolute joint's relative angular speed theta_a' - theta_b' [-], a
     prismatic joint's sliding speed over omega, `Re((P_s' - r_g' - i theta_g' (P_s - r_g)) conj w)` [m/rad]. It runs
-    the code generated from the linkage's groups (symbolic.joint_loads_source: flat.joint_loads written out per
-    kind of linkage) compiled (symbolic.reference_function), the very source the fast path compiles; within
-    cache.run_uncompiled, the general solver's plain flat.joint_loads (the same numbers). Raises the LinkageError of
-    the group that fails at phi."""
+    the code generated from the linkage's groups (symbolic.joint_loads_source: flat_kinetostatics.joint_loads written
+    out per kind of linkage) compiled (symbolic.reference_function), the very source the fast path compiles; within
+    cache.run_uncompiled, the general solver's plain flat_kinetostatics.joint_loads (the same numbers). Raises the
+    LinkageError of the group that fails at phi."""
     program = _program(linkage, structure, gravity)
     if cache.uncompiled():
-        joint_loads = flat.joint_loads
+        joint_loads = flat_kinetostatics.joint_loads
     else:
         joint_loads = symbolic.reference_function(symbolic.joint_loads_source(program)[0])
 

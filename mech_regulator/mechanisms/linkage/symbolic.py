@@ -10,12 +10,12 @@ The fast path compiles the source into a scene's module and the reference path c
 (reference_function), so both give the same numbers; flat.py stays the solver of everything else (structure, kinematics, the
 messages of a group that cannot assemble) and the tests hold the two to 1e-12.
 
-The kinetostatics joint friction reads (flat.joint_loads: joint reactions R0 + R1 epsilon, the joints' relative
-rates, the balancing moment) is written out the same way (`joint_loads_source`): from the same poses and their
+The kinetostatics joint friction reads (flat_kinetostatics.joint_loads: joint reactions R0 + R1 epsilon, the joints'
+relative rates, the balancing moment) is written out the same way (`joint_loads_source`): from the same poses and their
 derivatives, each moving link's d'Alembert terms for the two load cases (omega, epsilon = 0, Q, g) and (0, 1, 0, no
-g); per dyad from the last inward its six multipliers from `A^T lambda = b` (A flat.joint_rows' rows of its three
-joints) by flat.invert_dyad's block elimination written on A's entries, so that a joint's structural zeros and ones
-drop out (the external joints' null vectors n_k and right inverses, the internal joint's 2 x 2 system
+g); per dyad from the last inward its six multipliers from `A^T lambda = b` (A flat_derivatives.joint_rows' rows of its
+three joints) by flat_derivatives.invert_dyad's block elimination written on A's entries, so that a joint's structural
+zeros and ones drop out (the external joints' null vectors n_k and right inverses, the internal joint's 2 x 2 system
 `(a_1 n_1 | a_2 n_2)^T lambda_I = (n_1 . b_1, n_2 . b_2)`, then `lambda_Ek = c_k . (b_k - a_k^T lambda_I)`), the
 outer joints' reactions passed inward (a gear group: its link's 3 x 3 system by cofactors, _gear_reactions); the
 crank's bearing and balancing moment last. A redundant link (statically
@@ -34,17 +34,18 @@ The closed forms per group (groups.py's module docstring; sigma the group's bran
 - a gear (gears.py): its angle `theta_L = theta_c + k (theta_G - theta_c) + phase_L` from the angles of its driver
   and carrier, which are phi's (linear in phi: the frame, the crank, gears), `e^{i theta_L} = (cos theta_L, sin
   theta_L)` and r = P - p e^{i theta_L} from its pivot P;
-- a cam follower (linkage/cam.py): its law's s, s', s'' from flat.law_at, whose source the function nests (the
-  law's pieces are read from p at run time), then its pose in s (flat._place_cam_follower's formulas); its
+- a cam follower (linkage/cam.py): its law's s, s', s'' from flat_positions.law_at, whose source the function nests (the
+  law's pieces are read from p at run time), then its pose in s (flat_positions._place_cam_follower's formulas); its
   spring's -(F0 + k s) s' joins M_weight.
 Then, over the moving links k with centres S_k = r_k + c_k e^{i theta_k} and theta' = Re(e) Im(e)' - Im(e) Re(e)'
 (e = e^{i theta}): `J = sum m_k |S_k'|^2 + I_k theta_k'^2`, `dJ/dphi = 2 sum (m_k S_k'.S_k'' + I_k theta_k'
 theta_k'')` (the crank's term the constant m |c - p_A|^2 + I, p_A its pivot, written so: it is exactly zero for a
 preset's crank, whose inertia is in machine.inertia), `M_weight = sum m_k g.S_k'` and the outputs: a prismatic joint's travel `q = Re((P_s - P_g) conj w)` or
-a link's angle atan2(Im e, Re e) (within pi of the output reference, flat.near), with q' (flat.reduced_from_poses).
+a link's angle atan2(Im e, Re e) (within pi of the output reference, flat_poses.near), with q'
+(flat_poses.reduced_from_poses).
 
-The numbers are read from the linkage's program (flat.encode) in p at `offset`, so the source depends only on the
-linkage's structure and on which of its numbers are exactly 0, 1 or -1 (written as literals, so that a joint at a
+The numbers are read from the linkage's program (flat_program.encode) in p at `offset`, so the source depends only on
+the linkage's structure and on which of its numbers are exactly 0, 1 or -1 (written as literals, so that a joint at a
 link's origin or a guide along x costs nothing): two linkages of one kind share one source, kept in the cache folder
 (mech_regulator.cache) under a hash of that key, so sympy runs once per kind of linkage and machine.
 """
@@ -60,7 +61,14 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from mech_regulator import cache
-from mech_regulator.mechanisms.linkage import flat
+from mech_regulator.mechanisms.linkage import (
+    flat,
+    flat_derivatives,
+    flat_kinetostatics,
+    flat_poses,
+    flat_positions,
+    flat_program,
+)
 from mech_regulator.mechanisms.linkage.model import Linkage, LinkageError
 from mech_regulator.mechanisms.linkage.structure import Structure
 
@@ -73,28 +81,28 @@ JOINT_LOADS_NAME = "linkage_joint_loads"
 
 
 def _structural_positions(program: np.ndarray) -> set[int]:
-    """The positions in a program (flat.encode's layout, base 0) of its counts, codes, link indices, branches and
-    joint-map entries (everything that is not a length, angle, mass or gravity)."""
+    """The positions in a program (flat_program.encode's layout, base 0) of its counts, codes, link indices, branches
+    and joint-map entries (everything that is not a length, angle, mass or gravity)."""
     n_links, n_groups = int(program[0]), int(program[1])
     positions = {0, 1, 2, 3, 4}
 
     def joint(j):
         positions.update((j, j + 1, j + 2))
-        if program[j] == flat.GEAR_MESH:
+        if program[j] == flat_program.GEAR_MESH:
             positions.add(j + 9)  # the carrier link
 
     joint(5)
-    g = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
+    g = flat_program.HEADER_SIZE + flat_program.LINK_SIZE * n_links
     for _ in range(n_groups):
         positions.update(range(g, g + 4))
         for k in range(3):
-            joint(g + 4 + flat.JOINT_SIZE * k)
-        if int(program[g]) == flat.CAM_FOLLOWER:  # where its law is (a cam law's pieces are read at run time)
-            positions.add(g + 4 + 2 * flat.JOINT_SIZE + 3)
-        g += flat.GROUP_SIZE
+            joint(g + 4 + flat_program.JOINT_SIZE * k)
+        if int(program[g]) == flat_program.CAM_FOLLOWER:  # where its law is (a cam law's pieces are read at run time)
+            positions.add(g + 4 + 2 * flat_program.JOINT_SIZE + 3)
+        g += flat_program.GROUP_SIZE
     positions.add(g)
     joint(g + 1)
-    positions.update(range(g + 1 + flat.JOINT_SIZE, g + 1 + flat.JOINT_SIZE + 2 * int(program[g])))
+    positions.update(range(g + 1 + flat_program.JOINT_SIZE, g + 1 + flat_program.JOINT_SIZE + 2 * int(program[g])))
     return positions
 
 
@@ -105,10 +113,19 @@ def _literal(value: float):
 
 @functools.cache
 def _generator_source_hash() -> str:
-    """The hash of this module's and flat.py's source (program_key)."""
+    """The hash of this module's and the general solver's source (flat.py and its flat_*.py modules; program_key)."""
     import inspect
 
-    return hashlib.sha256((inspect.getsource(sys.modules[__name__]) + inspect.getsource(flat)).encode()).hexdigest()
+    modules = (
+        sys.modules[__name__],
+        flat,
+        flat_program,
+        flat_positions,
+        flat_derivatives,
+        flat_poses,
+        flat_kinetostatics,
+    )
+    return hashlib.sha256("".join(inspect.getsource(module) for module in modules).encode()).hexdigest()
 
 
 def program_key(program: np.ndarray, outputs: Sequence[int]) -> str:
@@ -139,7 +156,7 @@ class _Writer:
         self.rate: dict[object, object] = {}
         self.lines: list[str] = []
         self.count = 0
-        self.laws = False  # a cam follower's law is evaluated: the function nests flat.law_at
+        self.laws = False  # a cam follower's law is evaluated: the function nests flat_positions.law_at
         cos_phi, sin_phi, phi = sympy.symbols("cos_phi sin_phi phi")
         self.rate[cos_phi], self.rate[sin_phi], self.rate[phi] = -sin_phi, cos_phi, sympy.Integer(1)
         self.crank_turn = (cos_phi, sin_phi)
@@ -156,7 +173,7 @@ class _Writer:
         return self.read[i]
 
     def local(self, j: int, link: int):
-        """The point of the joint record at j in the coordinates of `link` (flat._local)."""
+        """The point of the joint record at j in the coordinates of `link` (flat_positions._local)."""
         k = 3 if int(self.program[j + 1]) == link else 5
         return self.number(j + k), self.number(j + k + 1)
 
@@ -313,7 +330,7 @@ class _Poses:
 
     def line(self, j: int, unknown: int, turn):
         """(c, w): the line c + s w on which the origin of `unknown` lies, its turn being `turn`, joined by the
-        prismatic joint j to a known link (flat._origin_line)."""
+        prismatic joint j to a known link (flat_positions._origin_line)."""
         guide, slider = int(self.w.program[j + 1]), int(self.w.program[j + 2])
         u = (self.w.number(j + 7), self.w.number(j + 8))
         if unknown == slider:
@@ -327,18 +344,20 @@ def _meet(c1, w1, c2, w2):
 
 
 def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
-    """Place the group at g (flat.place_group's closed forms, written without angles)."""
+    """Place the group at g (flat_positions.place_group's closed forms, written without angles)."""
     w, sp = poses.w, poses.w.sp
     kind, sigma = int(program[g]), int(program[g + 1])
     L1, L2 = int(program[g + 2]), int(program[g + 3])
-    E1, Ji, E2 = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
-    if kind == flat.CAM_FOLLOWER:
+    E1, Ji, E2 = g + 4, g + 4 + flat_program.JOINT_SIZE, g + 4 + 2 * flat_program.JOINT_SIZE
+    if kind == flat_program.CAM_FOLLOWER:
         _place_cam_follower(poses, program, g)
         return
-    if kind == flat.REDUNDANT:
+    if kind == flat_program.REDUNDANT:
         poses.swing(E1, Ji, L1, poses.point(E1, w.other(E1, L1)), poses.point(Ji, w.other(Ji, L1)))
         return
-    if kind == flat.GEAR:  # flat.place_group's gear: theta_L = theta_c + k (theta_G - theta_c) + phase_L
+    if (
+        kind == flat_program.GEAR
+    ):  # flat_positions.place_group's gear: theta_L = theta_c + k (theta_G - theta_c) + phase_L
         rho_a, rho_b = w.number(Ji + 7), w.number(Ji + 8)
         ratio = rho_a / rho_b if int(program[Ji + 2]) == L1 else rho_b / rho_a
         carrier = poses.angle[int(program[Ji + 9])]
@@ -350,7 +369,9 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
     if kind in (0, 1):  # RRR, RRP
         B = poses.point(E1, K1)
         l1_square = _square(_sub(w.local(Ji, L1), w.local(E1, L1)))
-        if kind == 0 and sigma == 0:  # the parallelogram P B C D: C = D + (B - P), B - P on K1 (flat.place_group)
+        if (
+            kind == 0 and sigma == 0
+        ):  # the parallelogram P B C D: C = D + (B - P), B - P on K1 (flat_positions.place_group)
             D = poses.point(E2, K2)
             C = tuple(w.jets(list(_add(D, _mul((w.number(E1 + 7), w.number(E1 + 8)), poses.turn[K1])))))
             poses.swing(E2, Ji, L2, D, C)
@@ -418,14 +439,14 @@ def _place(poses: _Poses, program: np.ndarray, g: int) -> None:
 
 
 def _place_cam_follower(poses: _Poses, program: np.ndarray, g: int) -> None:
-    """Place the cam follower group at g (flat._place_cam_follower's formulas): its law's s, s', s'' assigned by
-    flat.law_at (nested in the generated function, _function_source) as symbols whose rates are one another, then the
-    follower's pose (translating: turn e^{i alpha}, r = G + (d0 + s) u - p e^{i alpha}; oscillating: turn
-    e^{i (theta0 + sigma s)}, pinned at its pivot) and its roller's, pinned at their joint with the follower's turn;
-    (s, s', the cam record's position) kept in poses.cams for the springs."""
+    """Place the cam follower group at g (flat_positions._place_cam_follower's formulas): its law's s, s', s'' assigned
+    by flat_positions.law_at (nested in the generated function, _function_source) as symbols whose rates are one
+    another, then the follower's pose (translating: turn e^{i alpha}, r = G + (d0 + s) u - p e^{i alpha}; oscillating:
+    turn e^{i (theta0 + sigma s)}, pinned at its pivot) and its roller's, pinned at their joint with the follower's
+    turn; (s, s', the cam record's position) kept in poses.cams for the springs."""
     w, sp = poses.w, poses.w.sp
     sigma, follower, roller = int(program[g + 1]), int(program[g + 2]), int(program[g + 3])
-    guide, pin, cam = g + 4, g + 4 + flat.JOINT_SIZE, g + 4 + 2 * flat.JOINT_SIZE
+    guide, pin, cam = g + 4, g + 4 + flat_program.JOINT_SIZE, g + 4 + 2 * flat_program.JOINT_SIZE
     w.count += 1
     s, ds, dds = sp.symbols(f"s{w.count} ds{w.count} dds{w.count}")
     w.lines.append(
@@ -453,32 +474,32 @@ def _placed(program: np.ndarray) -> _Poses:
     `r = A - p_A e^{i phi}`, e = (cos phi, sin phi), then each group's closed form (_place) in turn."""
     poses = _Poses(_Writer(program))
     writer, crank = poses.w, int(program[2])
-    pivot_frame = writer.number(flat.HEADER_SIZE - 4), writer.number(flat.HEADER_SIZE - 3)
-    pivot_crank = writer.number(flat.HEADER_SIZE - 2), writer.number(flat.HEADER_SIZE - 1)
+    pivot_frame = writer.number(flat_program.HEADER_SIZE - 4), writer.number(flat_program.HEADER_SIZE - 3)
+    pivot_crank = writer.number(flat_program.HEADER_SIZE - 2), writer.number(flat_program.HEADER_SIZE - 1)
     poses.origin[crank] = _sub(pivot_frame, _mul(pivot_crank, writer.crank_turn))
     poses.turn[crank] = writer.crank_turn
     poses.angle[crank] = writer.phi
-    g = flat.HEADER_SIZE + flat.LINK_SIZE * int(program[0])
+    g = flat_program.HEADER_SIZE + flat_program.LINK_SIZE * int(program[0])
     for _ in range(int(program[1])):
         _place(poses, program, g)
-        g += flat.GROUP_SIZE
+        g += flat_program.GROUP_SIZE
     return poses
 
 
 def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
     """The source of `def name(phi, p, offset)` returning (J_links, dJ/dphi, M_weight, q_1, q_1', ...) of the
-    linkage whose program (flat.encode, base 0) is read from p at offset; `outputs`: the record positions of the
-    prismatic joints whose travels are the q's (none: the program's own output, flat.reduced_from_poses)."""
+    linkage whose program (flat_program.encode, base 0) is read from p at offset; `outputs`: the record positions of the
+    prismatic joints whose travels are the q's (none: the program's own output, flat_poses.reduced_from_poses)."""
     poses = _placed(program)
     writer = poses.w
     sp = writer.sp
     n_links, crank = int(program[0]), int(program[2])
-    pivot_crank = writer.number(flat.HEADER_SIZE - 2), writer.number(flat.HEADER_SIZE - 1)
-    gravity = writer.number(5 + flat.JOINT_SIZE), writer.number(6 + flat.JOINT_SIZE)
+    pivot_crank = writer.number(flat_program.HEADER_SIZE - 2), writer.number(flat_program.HEADER_SIZE - 1)
+    gravity = writer.number(5 + flat_program.JOINT_SIZE), writer.number(6 + flat_program.JOINT_SIZE)
     J = dJ = weight = sp.Integer(0)
     rate = writer.rate_of
     for link in range(1, n_links):
-        record = flat.HEADER_SIZE + flat.LINK_SIZE * link
+        record = flat_program.HEADER_SIZE + flat_program.LINK_SIZE * link
         mass, inertia = writer.number(record), writer.number(record + 3)
         turn = poses.turn[link]
         local_centre = (writer.number(record + 1), writer.number(record + 2))
@@ -493,7 +514,7 @@ def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
         ddtheta = turn[0] * rate(rate(turn[1])) - turn[1] * rate(rate(turn[0]))
         J += mass * _square(dS) + inertia * dtheta * dtheta
         dJ += 2 * (mass * _dot(dS, ddS) + inertia * dtheta * ddtheta)
-    for s, ds, cam in poses.cams:  # the cam followers' springs, -(F0 + k s) s' (flat.cam_springs)
+    for s, ds, cam in poses.cams:  # the cam followers' springs, -(F0 + k s) s' (flat_positions.cam_springs)
         weight -= (writer.number(cam + 7) + writer.number(cam + 6) * s) * ds
     results = [J, dJ, weight]
     kind = int(program[3])
@@ -511,7 +532,7 @@ def _generate(program: np.ndarray, outputs: Sequence[int], name: str) -> str:
     if not records and kind == 1:
         turn = poses.turn[int(program[4])]
         (angle,) = writer.assign([sp.atan2(turn[1], turn[0])])
-        reference = writer.number(flat.OUTPUT_REFERENCE)
+        reference = writer.number(flat_program.OUTPUT_REFERENCE)
         results += [
             angle - 2 * sp.pi * sp.floor((angle - reference) / (2 * sp.pi) + sp.Rational(1, 2)),
             turn[0] * rate(turn[1]) - turn[1] * rate(turn[0]),
@@ -538,21 +559,21 @@ def _function_source(writer: _Writer, name: str, arguments: str, doc: str, retur
     # an unsigned offset: compiled, p[at + i] then needs no check for a negative index (some 2 ns a read)
     reads = [f"{symbol} = p[at + {i}]" for i, symbol in sorted(writer.read.items())]
     body = ["at = np.uint64(offset)", "cos_phi = math.cos(phi)", "sin_phi = math.sin(phi)"] + reads + writer.lines
-    if writer.laws:  # flat.law_at's own source, nested (numba compiles an inner function called in place)
+    if writer.laws:  # flat_positions.law_at's own source, nested (numba compiles an inner function called in place)
         import inspect
 
-        body = inspect.getsource(flat.law_at).rstrip().split("\n") + body
+        body = inspect.getsource(flat_positions.law_at).rstrip().split("\n") + body
     body.append(f"return {returned}")
     return f"def {name}({arguments}):\n    {doc}\n    " + "\n    ".join(body) + "\n"
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# The kinetostatics (flat.kinetostatics and flat.joint_reactions, written out per linkage)
+# The kinetostatics (flat_kinetostatics.kinetostatics and flat_kinetostatics.joint_reactions, written out per linkage)
 
 
 def _joint_rows(poses: _Poses, j: int):
-    """flat.joint_rows of the joint record at j as expressions: its two constraint rows by (x, y, theta) of its
-    link a, then of its link b. Revolute, `r_a + q_a - r_b - q_b = 0` (q = p e): ((1, 0, -Im q_a), (-1, 0, Im q_b)),
+    """flat_derivatives.joint_rows of the joint record at j as expressions: its two constraint rows by (x, y, theta) of
+    its link a, then of its link b. Revolute, `r_a + q_a - r_b - q_b = 0` (q = p e): ((1, 0, -Im q_a), (-1, 0, Im q_b)),
     ((0, 1, Re q_a), (0, -1, -Re q_b)); prismatic (guide a, slider b), `Im(d conj w) = 0` (d = P_s - P_g, w = u e_a)
     and `theta_b - theta_a - alpha = 0`: ((Im w, -Re w, -Re((q_a + d) conj w)), (-Im w, Re w, Re(q_b conj w))),
     ((0, 0, -1), (0, 0, 1)); a gear mesh, rolling at the pitch point (u the unit vector from O_a to O_b, t = i u):
@@ -563,7 +584,7 @@ def _joint_rows(poses: _Poses, j: int):
     zero, one = sp.Integer(0), sp.Integer(1)
     if float(w.program[j]) == 0.0:
         return ((one, zero, -qa[1]), (-one, zero, qb[1])), ((zero, one, qa[0]), (zero, -one, -qb[0]))
-    if float(w.program[j]) == flat.GEAR_MESH:
+    if float(w.program[j]) == flat_program.GEAR_MESH:
         line = _sub(_add(poses.origin[b], qb), _add(poses.origin[a], qa))
         u = _scale(line, 1 / sp.sqrt(_square(line)))
         return (
@@ -601,17 +622,17 @@ def _cross3(u, v):
 
 
 def _residuals(poses: _Poses, program: np.ndarray, omega, force) -> dict:
-    """flat._inertia_residuals and flat._output_load as expressions: per moving link, per load case, its three
-    d'Alembert terms (x, y of r, theta): case 0 `m (S'' omega^2 - g)` and `I theta'' omega^2 + (S - r) x m (S''
-    omega^2 - g)`, less the output load Q (a moment on the output link; a force Q w on the output joint's slider at
-    its point, -Q w on the guide); case 1 `m S'`, `I theta' + (S - r) x m S'`."""
+    """flat_kinetostatics._inertia_residuals and flat_kinetostatics._output_load as expressions: per moving link, per
+    load case, its three d'Alembert terms (x, y of r, theta): case 0 `m (S'' omega^2 - g)` and `I theta'' omega^2 + (S -
+    r) x m (S'' omega^2 - g)`, less the output load Q (a moment on the output link; a force Q w on the output joint's
+    slider at its point, -Q w on the guide); case 1 `m S'`, `I theta' + (S - r) x m S'`."""
     w = poses.w
     rate, crank = w.rate_of, int(program[2])
-    gravity = w.number(5 + flat.JOINT_SIZE), w.number(6 + flat.JOINT_SIZE)
+    gravity = w.number(5 + flat_program.JOINT_SIZE), w.number(6 + flat_program.JOINT_SIZE)
     square = omega * omega
     residual = {}
     for link in range(1, int(program[0])):
-        record = flat.HEADER_SIZE + flat.LINK_SIZE * link
+        record = flat_program.HEADER_SIZE + flat_program.LINK_SIZE * link
         mass, inertia = w.number(record), w.number(record + 3)
         to_centre = _mul((w.number(record + 1), w.number(record + 2)), poses.turn[link])
         dS = tuple(rate(value) for value in _add(poses.origin[link], to_centre))
@@ -649,15 +670,15 @@ def _assign_residual(w: _Writer, residual: dict, links) -> None:
 
 def _group_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict) -> list:
     """The multipliers of the dyad at g for both load cases, [case][row] (joint k's rows 2 k, 2 k + 1: E1, internal,
-    E2), from `A^T lambda = b` (b the residuals of L1 then L2) by flat.invert_dyad's elimination: with the external
-    joints' rows on their links (first_k, second_k), their null vectors n_k = first_k x second_k and right inverses
-    c = (second x n, n x first) / |n|^2, the internal joint's rows a_1 (by L1), a_2 (by L2), the internal multipliers
-    solve `M^T lambda_I = (n_1 . b_1, n_2 . b_2)`, M = (a_1 n_1 | a_2 n_2), and each external joint's are
+    E2), from `A^T lambda = b` (b the residuals of L1 then L2) by flat_derivatives.invert_dyad's elimination: with the
+    external joints' rows on their links (first_k, second_k), their null vectors n_k = first_k x second_k and right
+    inverses c = (second x n, n x first) / |n|^2, the internal joint's rows a_1 (by L1), a_2 (by L2), the internal
+    multipliers solve `M^T lambda_I = (n_1 . b_1, n_2 . b_2)`, M = (a_1 n_1 | a_2 n_2), and each external joint's are
     `c . (b_k - a_k^T lambda_I)`; then the reactions of the joints on the links it hangs on pass inward,
     `residual[link] -= (dC/dx_link)^T lambda`."""
     w = poses.w
     L1, L2 = int(program[g + 2]), int(program[g + 3])
-    records = [g + 4 + flat.JOINT_SIZE * k for k in range(3)]
+    records = [g + 4 + flat_program.JOINT_SIZE * k for k in range(3)]
     rows = [_joint_rows(poses, j) for j in records]
 
     def by(joint, row, link):
@@ -744,11 +765,12 @@ def _group_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict)
 
 def _gear_reactions(poses: _Poses, program: np.ndarray, g: int, residual: dict) -> list:
     """The multipliers of the gear group at g for both load cases, [case][row] (its pivot's rows 0, 1, its mesh's
-    2 and a zero 3, then zeros to the dyads' six), from its link's `A^T lambda = b` by flat._solve_gear_reactions'
-    cofactors; then the pivot's and the mesh's reactions on the links they join passed inward."""
+    2 and a zero 3, then zeros to the dyads' six), from its link's `A^T lambda = b` by
+    flat_kinetostatics._solve_gear_reactions' cofactors; then the pivot's and the mesh's reactions on the links they
+    join passed inward."""
     w, sp = poses.w, poses.w.sp
     link = int(program[g + 2])
-    records = (g + 4, g + 4 + flat.JOINT_SIZE)
+    records = (g + 4, g + 4 + flat_program.JOINT_SIZE)
     rows = [_joint_rows(poses, j) for j in records]
     sides = [0 if int(program[j + 1]) == link else 1 for j in records]
     values = iter(
@@ -784,33 +806,35 @@ def _float_code(sp, value) -> str:
 
 
 def _generate_joint_loads(program: np.ndarray, name: str) -> str:
-    """The source of `def name(phi, omega, force, p, offset)` returning flat.joint_loads' (R0, R1, ratios, M_b0,
-    M_b1) of the linkage whose program is read from p at offset, the R's and ratios as tuples per joint in the
+    """The source of `def name(phi, omega, force, p, offset)` returning flat_kinetostatics.joint_loads' (R0, R1, ratios,
+    M_b0, M_b1) of the linkage whose program is read from p at offset, the R's and ratios as tuples per joint in the
     linkage's order (the program's joint map): the poses (_placed), the links' residuals (_residuals), each dyad's
     multipliers from the last inward (_group_reactions), the crank's bearing from its force equations and the
     balancing moment from its moment equation `M_b = residual_theta - (dC/dtheta_crank)^T lambda_pivot`, then
-    flat.joint_reactions' reactions and rates."""
+    flat_kinetostatics.joint_reactions' reactions and rates."""
     poses = _placed(program)
     w, sp = poses.w, poses.w.sp
     omega, force = sp.symbols("omega force")
     n_links, n_groups, crank = int(program[0]), int(program[1]), int(program[2])
     residual = _residuals(poses, program, omega, force)
     _assign_residual(w, residual, range(1, n_links))
-    groups_at = flat.HEADER_SIZE + flat.LINK_SIZE * n_links
+    groups_at = flat_program.HEADER_SIZE + flat_program.LINK_SIZE * n_links
     multipliers = {}
     for group in range(n_groups - 1, -1, -1):
-        g = groups_at + flat.GROUP_SIZE * group
-        if int(program[g]) == flat.REDUNDANT:
+        g = groups_at + flat_program.GROUP_SIZE * group
+        if int(program[g]) == flat_program.REDUNDANT:
             raise ValueError("a linkage with a redundant link is statically indeterminate: no generated kinetostatics")
-        if int(program[g]) == flat.CAM_FOLLOWER:
+        if int(program[g]) == flat_program.CAM_FOLLOWER:
             raise ValueError(
                 "a cam pair's contact is not in the kinetostatics by groups yet: no generated kinetostatics"
             )
-        found = (_gear_reactions if int(program[g]) == flat.GEAR else _group_reactions)(poses, program, g, residual)
+        found = (_gear_reactions if int(program[g]) == flat_program.GEAR else _group_reactions)(
+            poses, program, g, residual
+        )
         for case in range(2):
             for row in range(6):
                 multipliers[6 * group + row, case] = found[case][row]
-    pivot = flat.joint_map(program, 0) + 1
+    pivot = flat_kinetostatics.joint_map(program, 0) + 1
     rows = _joint_rows(poses, pivot)
     side = 0 if int(program[pivot + 1]) == crank else 1
     (x1, y1, t1), (x2, y2, t2) = rows[0][side], rows[1][side]
@@ -822,13 +846,13 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         first, second = w.assign([(fx * y2 - x2 * fy) * inverse_determinant, (x1 * fy - fx * y1) * inverse_determinant])
         multipliers[slot, case], multipliers[slot + 1, case] = first, second
         balancing.append(moment - t1 * first - t2 * second)
-    at = flat.joint_map(program, 0)
+    at = flat_kinetostatics.joint_map(program, 0)
     reactions, ratios = [], []
     for joint in range(int(program[at])):
-        entry = at + 1 + flat.JOINT_SIZE + 2 * joint
+        entry = at + 1 + flat_program.JOINT_SIZE + 2 * joint
         j, slot = int(program[entry]), 2 * int(program[entry + 1])
         a, b = int(program[j + 1]), int(program[j + 2])
-        if float(program[j]) in (0.0, flat.GEAR_MESH):  # a mesh's second multiplier is 0
+        if float(program[j]) in (0.0, flat_program.GEAR_MESH):  # a mesh's second multiplier is 0
             reactions.append([(multipliers[slot, case], multipliers[slot + 1, case]) for case in range(2)])
             ratios.append(_angular_rate(poses, a, crank) - _angular_rate(poses, b, crank))
         else:
@@ -858,7 +882,7 @@ def _generate_joint_loads(program: np.ndarray, name: str) -> str:
         f"{_float_code(sp, balancing[0])}, {_float_code(sp, balancing[1])}"
     )
     doc = (
-        '"""Generated by mechanisms.linkage.symbolic: flat.joint_loads (R0, R1 [N, N s^2/rad], ratios, M_b0 '
+        '"""Generated by mechanisms.linkage.symbolic: flat_kinetostatics.joint_loads (R0, R1 [N, N s^2/rad], ratios, M_b0 '
         "[N m], M_b1 [kg m^2]) at crank angle phi [rad], speed omega [rad/s], output force Q, the program at "
         'p[offset:]."""'
     )
@@ -891,7 +915,7 @@ def _cached_source(file_name: str, generate: Callable[[], str]) -> str:
 
 
 def reduced_source(program: np.ndarray, outputs: Sequence[int] = ()) -> tuple[str, str]:
-    """(function name, source) of the generated reduced function of a linkage program (flat.encode, base 0) with
+    """(function name, source) of the generated reduced function of a linkage program (flat_program.encode, base 0) with
     these output joint records (prismatic joints' record positions; empty: the program's output), from the cache
     folder if generated before, else generated now (sympy) and cached."""
     key = program_key(program, outputs)
@@ -900,10 +924,10 @@ def reduced_source(program: np.ndarray, outputs: Sequence[int] = ()) -> tuple[st
 
 
 def joint_loads_source(program: np.ndarray) -> tuple[str, str]:
-    """(function name, source) of the generated kinetostatics of a linkage program (flat.encode, base 0) without a
-    redundant link: `name(phi, omega, force, p, offset) -> (R0, R1, ratios, M_b0, M_b1)`, flat.joint_loads' numbers
-    with R0, R1 and ratios as tuples per joint in the linkage's order; from the cache folder if generated before,
-    else generated now (sympy) and cached."""
+    """(function name, source) of the generated kinetostatics of a linkage program (flat_program.encode, base 0) without
+    a redundant link: `name(phi, omega, force, p, offset) -> (R0, R1, ratios, M_b0, M_b1)`,
+    flat_kinetostatics.joint_loads' numbers with R0, R1 and ratios as tuples per joint in the linkage's order; from the
+    cache folder if generated before, else generated now (sympy) and cached."""
     key = program_key(program, ())
     name = f"{JOINT_LOADS_NAME}_{key}"
     return name, _cached_source(_file_name(name), lambda: _generate_joint_loads(program, name))
@@ -952,7 +976,7 @@ def _reference_function(name: str, plain: bool) -> Callable:
 
 def output_records(program: np.ndarray, linkage: Linkage, joints: Sequence[str]) -> list[int]:
     """The record positions (in the program's joint map) of the named joints, for `reduced_source`'s outputs."""
-    first = flat.joint_map(program, 0) + 1 + flat.JOINT_SIZE
+    first = flat_kinetostatics.joint_map(program, 0) + 1 + flat_program.JOINT_SIZE
     index = {joint.name: k for k, joint in enumerate(linkage.joints)}
     return [int(program[first + 2 * index[name]]) for name in joints]
 
@@ -965,7 +989,7 @@ def make_reduced(
     dq/dphi of each in turn); where a group cannot assemble or is at a dead point (the code gives NaN or an infinity:
     a square root of a negative number, a division by zero), the LinkageError of the general solver
     (kinematics.make_solver) naming the group and why. Within cache.run_uncompiled it is the general solver's
-    plain flat.reduced instead when there are no `outputs` (no sympy: the same numbers to rounding, the tests
+    plain flat_poses.reduced instead when there are no `outputs` (no sympy: the same numbers to rounding, the tests
     compare them), else the generated code as plain Python."""
     from mech_regulator.mechanisms.linkage.kinematics import make_solver
 
@@ -973,7 +997,7 @@ def make_reduced(
         from mech_regulator.mechanisms.linkage.kinematics import make_reduced as general_reduced
 
         return general_reduced(linkage, structure, gravity)
-    program = flat.encode(linkage, structure.groups, gravity)
+    program = flat_program.encode(linkage, structure.groups, gravity)
     name, _ = reduced_source(program, output_records(program, linkage, outputs))
     function = reference_function(name)
 

@@ -64,13 +64,13 @@ from mech_regulator.effects.definition import (
 )
 from mech_regulator.governors import pi
 from mech_regulator.governors import servo as servo_motor
-from mech_regulator.mechanisms.linkage import flat, symbolic
+from mech_regulator.mechanisms.linkage import flat_program, symbolic
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
 from mech_regulator.model.machine import StateTable
-from mech_regulator.scene import schema
+from mech_regulator.scene import machine_keys
 from mech_regulator.solvers.compiled import kernels
-from mech_regulator.solvers.compiled.integrators import NONLINEAR_ONTO, STEP_ONTO
+from mech_regulator.solvers.compiled.events import NONLINEAR_ONTO, STEP_ONTO
 from mech_regulator.solvers.time_domain import _anchors, _break, _journals
 
 # Segment inputs: fixed slots at the start of p
@@ -615,11 +615,11 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
     """Source assigning a mechanism's reduced(phi) (mechanisms.build_reduced) at `angle` to the five `names` (J_links,
     dJ, weight, q, dq): the generated function of its linkage (mechanisms.linkage_of: a preset's or the scene's own;
     mechanisms/linkage/symbolic.py), the very source the reference path runs, added to the module (p.functions), on
-    the linkage's program (flat.encode; gravity None: zero, no weight moment) stored as a table in p. Several outputs
-    (a multi-cylinder engine's pistons): the first assigns q, dq, output k (k >= 2) q_k, dq_k (what the engine's gas
-    moment reads)."""
+    the linkage's program (flat_program.encode; gravity None: zero, no weight moment) stored as a table in p. Several
+    outputs (a multi-cylinder engine's pistons): the first assigns q, dq, output k (k >= 2) q_k, dq_k (what the engine's
+    gas moment reads)."""
     core, structure, outputs = mechanisms.linkage_of(mechanism)
-    program = flat.encode(core, structure.groups, gravity)
+    program = flat_program.encode(core, structure.groups, gravity)
     name, source = symbolic.reduced_source(program, symbolic.output_records(program, core, outputs))
     p.functions[name] = source
     call = f"{name}({angle}, {p.table(program).rsplit(', ', 1)[0]})"  # 'p, int(p[slot])': the program's offset
@@ -911,7 +911,7 @@ def _joint_friction_lines(
     machine = model.scene.machine
     joints = _kinetostatics_joints(machine.mechanism)
     core, structure, _ = mechanisms.linkage_of(machine.mechanism)  # its generated kinetostatics, with gravity
-    program = flat.encode(core, structure.groups, machine.gravity)
+    program = flat_program.encode(core, structure.groups, machine.gravity)
     name, source = symbolic.joint_loads_source(program)
     p.functions[name] = source
     lines.append(f"R0, R1, ratios, _, _ = {name}(phi, omega, force, {p.table(program).rsplit(', ', 1)[0]})")
@@ -1015,7 +1015,7 @@ def _coupling_lines(
 
 
 def _driven_smooth_lines(
-    driven: schema.DrivenPart,
+    driven: machine_keys.DrivenPart,
     p: _Parameters,
     phi: str,
     omega: str,

@@ -1,5 +1,5 @@
 """The fast path's compile locks, files in the cache folder (mech_regulator.cache): one for the background compile of
-the steppers (warm.py) and one per method held while a stepper is compiled or loaded (integrators.stepper)."""
+the steppers (warm.py) and one per method held while a stepper is compiled or loaded (steppers.stepper)."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def lock_path() -> Path:
 @contextlib.contextmanager
 def method_lock(method: str) -> Iterator[None]:
     """Hold the lock of `method`'s stepper (compiling-METHOD.lock in the cache folder) while compiling or loading it
-    (integrators.stepper): one process at a time, so that two (two commands, two test workers) never compile the
+    (steppers.stepper): one process at a time, so that two (two commands, two test workers) never compile the
     same stepper side by side; the other one waits and loads it from numba's disk cache. Another method's compile does
     not hold it up."""
     with open(lock_path().with_name(f"compiling-{method}.lock"), "a") as handle:

@@ -27,9 +27,9 @@ from typing import NamedTuple
 import numpy as np
 
 from mech_regulator.model import MachineModel
-from mech_regulator.scene import SceneError, schema
+from mech_regulator.scene import SceneError, scenario_keys
 from mech_regulator.solvers import time_domain
-from mech_regulator.solvers.compiled import fast_path_refusal, integrators
+from mech_regulator.solvers.compiled import fast_path_refusal, integrators, results, steppers
 from mech_regulator.solvers.compiled.codegen import (
     CLAMP_HI,
     CLAMP_LO,
@@ -378,7 +378,7 @@ def _compiled_pieces(
 
 
 def _step(
-    settings: schema.Solver,
+    settings: scenario_keys.Solver,
     compiled: CompiledScene,
     callbacks: tuple,
     linear: np.ndarray,
@@ -394,7 +394,7 @@ def _step(
     run_steps: int,
     restarts: tuple,
 ):
-    """One call of the scene's compiled stepper, as an integrators.CompiledRun; callbacks: the scene's rhs, guards
+    """One call of the scene's compiled stepper, as a results.CompiledRun; callbacks: the scene's rhs, guards
     and reactions (_Layout.callbacks); run_steps: the most steps it may take (the run's left); restarts: its restart
     arguments (the kink grid, period, offset, slots, speed indices, following pieces and their slots, the most
     restarts; integrators' module docstring)."""
@@ -422,12 +422,12 @@ def _step(
             run_steps,
             *restarts,
         )
-    return integrators.CompiledRun.from_result(result)
+    return results.CompiledRun.from_result(result)
 
 
 @functools.cache
 def _entry_point(method: str):
     """The machine-code entry of the method's compiled stepper for its one explicit signature: calling it skips
     numba's type dispatch of the arguments (some 15 us per call, as much as a short call's integration)."""
-    (compiled,) = integrators.stepper(method).overloads.values()
+    (compiled,) = steppers.stepper(method).overloads.values()
     return compiled.entry_point

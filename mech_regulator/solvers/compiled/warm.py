@@ -1,4 +1,4 @@
-"""Warming the fast path: its compiled steppers (one per method, solvers/compiled/integrators.py) take some 40 to
+"""Warming the fast path: its compiled steppers (one per method, solvers/compiled/steppers.py) take some 40 to
 50 s of CPU each to compile on a fresh machine (COMPILE_ESTIMATE; DOP853's on the 2-core machine: 44 s at a load of
 about 2.5, 49.6 s idle in an earlier measurement; 147 s of wall time under a load of about 10, 305 s with a pip
 install beside it: `NUMBA_CACHE_DIR=$(mktemp -d) MECH_REGULATOR_CACHE=$(mktemp -d) mech-regulator compile --method
@@ -36,11 +36,11 @@ COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on 
 
 
 def stepper_cached(method: str) -> bool:
-    """Whether numba's disk cache holds the compiled stepper of `method` for the current source of integrators.py
+    """Whether numba's disk cache holds the compiled stepper of `method` for the current source of steppers.py
     (numba's index is empty when the source changed since)."""
     from numba.core.caching import FunctionCache
 
-    from mech_regulator.solvers.compiled.integrators import _STEPPERS
+    from mech_regulator.solvers.compiled.steppers import _STEPPERS
 
     function, _ = _STEPPERS[method]
     return bool(FunctionCache(function)._cache_file._load_index())
@@ -48,7 +48,7 @@ def stepper_cached(method: str) -> bool:
 
 def compile_steppers(methods: Iterable[str], report: Callable[[str], object] = lambda line: None) -> None:
     """Compile (or load from the disk cache) the steppers of `methods`, reporting a line before and after each."""
-    from mech_regulator.solvers.compiled.integrators import stepper
+    from mech_regulator.solvers.compiled.steppers import stepper
 
     for method in methods:
         cached = stepper_cached(method)

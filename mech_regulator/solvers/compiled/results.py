@@ -1,0 +1,105 @@
+"""What a call of a compiled stepper gives back: CompiledRun wraps its result tuple (integrators.py's docstring),
+StepsDense is the dense output of all its steps, for Trajectory.add_piece."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.integrate import DenseOutput
+
+from mech_regulator.solvers.compiled.integrators import FAILED, FAILURES
+
+
+class StepsDense(DenseOutput):
+    """The dense output of all the steps of one compiled call: y(t) = y_old[k] + h_k sum_j c[k, :, j-1]
+    theta^j on step k (found by np.searchsorted over times), theta = (t - times[k]) / h_k, then phi plus the whole
+    periods step_offsets[k] [rad] wrapped off it on that step (none by default). At the start of a step that begins a
+    restart inside the call (restarted[k], a switch window's edge) the step before it answers, as between two pieces
+    of a Trajectory (scipy's OdeSolution). Called with a scalar time [s] it gives shape (n_states,), with an array of
+    m times shape (n_states, m)."""
+
+    def __init__(
+        self,
+        times: np.ndarray,
+        y_old: np.ndarray,
+        coefficients: np.ndarray,
+        step_offsets: np.ndarray | None = None,
+        restarted: np.ndarray | None = None,
+    ):
+        super().__init__(times[0], times[-1])
+        self.times, self.y_old, self.coefficients = times, y_old, coefficients
+        self.step_offsets = step_offsets
+        self.restarted = restarted if restarted is not None and restarted.any() else None
+
+    def _call_impl(self, t):
+        times = np.atleast_1d(t)
+        k = np.minimum(np.maximum(np.searchsorted(self.times, times, side="right") - 1, 0), self.y_old.shape[0] - 1)
+        if self.restarted is not None:
+            k -= self.restarted[k] & (self.times[k] == times)
+        h = self.times[k + 1] - self.times[k]
+        theta = ((times - self.times[k]) / h)[:, None]
+        total = np.zeros((times.size, self.y_old.shape[1]))
+        coefficients = self.coefficients[k]  # the steps' (one gather; the loop then reads views, in place)
+        for j in range(coefficients.shape[2] - 1, -1, -1):
+            total += coefficients[:, :, j]
+            total *= theta
+        y = (self.y_old[k] + h[:, None] * total).T
+        if self.step_offsets is not None:
+            y[0] += self.step_offsets[k]
+        return y[:, 0] if np.ndim(t) == 0 else y
+
+
+@dataclass
+class CompiledRun:
+    """One compiled call's result (the tuple of the module docstring, by name)."""
+
+    status: int
+    n_steps: int
+    times: np.ndarray
+    y_old: np.ndarray
+    coefficients: np.ndarray
+    event_guard: int
+    event_time: float
+    y_end: np.ndarray
+    nfev: int
+    njev: int
+    nlu: int
+    last_step: float
+    failure: int
+    wraps: int
+    kinks: int
+    step_offsets: np.ndarray
+    restarted: np.ndarray
+    offset: float
+    window_lo: float
+    window_hi: float
+    pieces_done: int
+    step_limit: float
+    beyond: int
+
+    @classmethod
+    def from_result(cls, result: tuple) -> CompiledRun:
+        """Name the fields of a stepper's result tuple."""
+        return cls(*result)
+
+    @property
+    def t_end(self) -> float:
+        """Where the call stopped [s]: t_end, the event time, the first step end past the wrap limit or the
+        last good step end of a failed call."""
+        return float(self.times[-1])
+
+    @property
+    def dense(self) -> StepsDense | None:
+        """The dense output over [times[0], times[-1]], phi with the whole periods wrapped off it added back (the
+        kink offsets), None when no step was taken."""
+        return (
+            StepsDense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted)
+            if self.n_steps
+            else None
+        )
+
+    @property
+    def message(self) -> str:
+        """Why a failed call (status 3) stopped, '' otherwise."""
+        return FAILURES[self.failure] + f" at t = {self.t_end:.6g} s" if self.status == FAILED else ""
