@@ -16,12 +16,13 @@ from support import model_of, run_cli, scene, simulate_complete
 
 from mech_regulator.bench.effect_cost import BASE_SCENE, EFFECT_CHAIN, SCENARIO
 from mech_regulator.cache import CACHE_VARIABLE
+from mech_regulator.governors.mechanical import SLEEVE_CODE
 from mech_regulator.model import LoadPiece, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal, runs_compiled
-from mech_regulator.solvers.compiled.codegen import SLEEVE_CODE, compile_scene, generate, mode_rows
+from mech_regulator.solvers.compiled.codegen import compile_scene, generate, mode_rows
 from mech_regulator.solvers.compiled.run import MAX_STEPS_PER_CALL
 
 RNG = np.random.default_rng(7)

@@ -130,11 +130,12 @@ def analyse_governor(model: MachineModel) -> dict:
     point = operating_point(model, load)
     levels = [load] + [event.torque for event in model.scene.scenario.load_events]
     linear = linear_stability(model, point)
-    if governor.kind == "pi":  # isochronous within the valve's travel, no sleeve (docs/theory.md §8.10)
+    sensor = governor.sensor
+    if sensor is None:  # no sleeve (a PI governor: isochronous within the valve's travel, docs/theory.md §8.10)
         characteristic, statism, insensitivity = None, 0.0, 0.0
     else:
-        characteristic = static_characteristic(governor)
-        statism, sensor = characteristic.statism, governor.sensor
+        characteristic = static_characteristic(sensor)
+        statism = characteristic.statism
         insensitivity = (
             sensor.equilibrium_speed(point.sleeve, sensor.static_friction)
             - sensor.equilibrium_speed(point.sleeve, -sensor.static_friction)
@@ -142,8 +143,7 @@ def analyse_governor(model: MachineModel) -> dict:
     result = {
         "scene": model.scene.name,
         "kind": governor.kind,
-        "sensor": None if characteristic is None else governor.sensor.name,
-        "feedback": governor.feedback if governor.kind == "indirect" else None,
+        **governor.summary(),
         "set_speed": governor.set_speed(),
         "characteristic": None
         if characteristic is None

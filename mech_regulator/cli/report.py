@@ -132,7 +132,7 @@ def describe(model: MachineModel) -> str:
     if model.governor is not None:
         lines.append(
             "governor (M_d = throttle * drive"
-            + ("):" if model.governor.kind == "pi" else "; hybrid modes with exact stick, break-away and stops):")
+            + ("; hybrid modes with exact stick, break-away and stops):" if model.governor.hybrid else "):")
         )
         lines += [f"  {line}" for line in model.governor.describe()]
     lines.append(f"dynamic period: {math.degrees(model.dynamic_period()):g} deg of crank angle")

@@ -35,7 +35,7 @@ from scipy import optimize
 from mech_regulator.effects import Effect, build_drive, build_load, output_position_of
 from mech_regulator.effects.joint_friction import JointFrictionModel, build_joint_friction, worst_locking
 from mech_regulator.effects.tables import extrapolated_linear, slope_breaks
-from mech_regulator.governors import ARM, ElectronicGovernor, Governor, Guard, MachineMode, build_governor
+from mech_regulator.governors import GovernorKind, Guard, MachineMode, build_governor
 from mech_regulator.mechanisms import build_reduced, cam_law_angles
 from mech_regulator.mechanisms.checks import refuse_unbuildable
 from mech_regulator.model.drivetrain import (
@@ -212,7 +212,7 @@ class MachineModel:
     has_weight: bool
     effects: tuple[Effect, ...]
     load_pieces: tuple[LoadPiece, ...]
-    governor: Governor | ElectronicGovernor | None = None
+    governor: GovernorKind | None = None
     coupling: CouplingModel | None = None
     joint_friction: JointFrictionModel | None = None
     clutch: ClutchModel | None = None
@@ -258,9 +258,8 @@ class MachineModel:
         tables (schema.BranchLoad), nor has a driven part behind a clutch (no angle)."""
         tables = []
         governor = self.governor
-        if isinstance(governor, Governor) and governor.valve_breaks:  # a PI governor has no valve table
-            sleeve, arm = governor.sensor.sleeve, ARM
-            tables.append(StateTable("valve table", lambda y: sleeve(y[arm]), governor.valve_breaks))
+        if governor is not None and governor.valve_breaks:
+            tables.append(StateTable("valve table", governor.valve_position, governor.valve_breaks))
         if self.coupling is not None:
             twist = self.driven_speed_index - 1
             if self.coupling.table is not None:
@@ -510,7 +509,7 @@ class MachineModel:
         J0 = self.inertia_constant
         reduced = self.reduced
         throttle: Callable[[np.ndarray], float] | None = governor.throttle if governor is not None else None
-        if isinstance(governor, Governor) and "valve table" in held:  # only a Governor has one (state_tables)
+        if governor is not None and "valve table" in held:
             throttle = governor.held_throttle(held["valve table"])
         governor_rates = None
         if governor is not None and not crank_only:

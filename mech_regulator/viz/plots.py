@@ -226,16 +226,13 @@ def _plot_governor_run(
             ha="right",
         )
     speed.legend(loc="lower right")
-    if model.governor.kind == "pi":  # no sleeve: the integral part of the throttle
-        signal = columns["integral"]
-        panel.plot(times, signal, color="tab:purple", lw=1.0, label="integral part x")
-        panel.set(xlabel="t [s]", ylabel="integral part x [-]", title="governor")
-    else:
-        signal = columns["sleeve"] * 1000.0
-        panel.plot(times, signal, color="tab:purple", lw=1.0, label="sleeve z")
-        for stop in model.governor.sensor.stroke:
-            panel.axhline(stop * 1000.0, color="tab:purple", lw=0.6, ls=":")
-        panel.set(xlabel="t [s]", ylabel="sleeve z [mm] (dotted: stops)", title="governor")
+    key, label, factor, unit = model.governor.plotted()  # a sleeve z [mm], a PI governor's integral part x [-]
+    signal = columns[key] * factor
+    panel.plot(times, signal, color="tab:purple", lw=1.0, label=label)
+    stops = model.governor.sensor.stroke if model.governor.sensor is not None else ()
+    for stop in stops:
+        panel.axhline(stop * factor, color="tab:purple", lw=0.6, ls=":")
+    panel.set(xlabel="t [s]", ylabel=f"{label} [{unit}]" + (" (dotted: stops)" if stops else ""), title="governor")
     throttle = panel.twinx()
     throttle.plot(times, columns["throttle"], color="tab:red", lw=1.0, label="throttle")
     throttle.set_ylim(-0.05, 1.05)
@@ -394,10 +391,11 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
             speeds, load / averages[:, 0], lw=1.0, label=f"throttle needed, load {point['external_load']:g} N m"
         )
         balance.plot(point["speed"], point["throttle"], "o", ms=6, color=line.get_color())
-    if model.governor.kind == "direct":
+    valve = model.governor.valve
+    if valve is not None:  # direct action
         balance.plot(
             characteristic["speed"],
-            [model.governor.valve(z / 1000.0) for z in sleeve],
+            [valve(z / 1000.0) for z in sleeve],
             color="k",
             label="valve on the static characteristic",
         )

@@ -192,7 +192,7 @@ class RunRecording:
         self._extents: dict[str, tuple[float, float]] = {}
         if model.governor is not None:
             self._extents = {"throttle": (0.0, 1.0)}
-            if model.governor.kind != "pi":  # the sleeve's plot spans its stroke
+            if model.governor.sensor is not None:  # the sleeve's plot spans its stroke
                 stroke = model.governor.sensor.stroke
                 self._extents["governor/sleeve"] = (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])
         if self.outside_throttle:
@@ -289,9 +289,9 @@ class RunRecording:
             if "feedback_shift" in values:
                 self._append("governor/feedback_shift", t_ns, MILLIMETRES * values["feedback_shift"])
             frame = t_ns // self._frame_period_ns
-            if self.model.governor.kind != "pi" and frame != self._governor_frame:
+            sensor = self.model.governor.sensor
+            if sensor is not None and frame != self._governor_frame:
                 self._governor_frame = frame
-                sensor = self.model.governor.sensor
                 self._add_frame(
                     "governor/drawing",
                     t_ns,
@@ -398,7 +398,7 @@ class RunRecording:
         """omega_set [rad/s] at t_ns (see the module docstring); a direct governor's is recomputed when the
         external load changed and SET_POINT_REFRESH_NS passed since the last time, and cached by load."""
         governor = self.model.governor
-        if governor is None or governor.kind != "direct":
+        if governor is None or not math.isnan(self._set_point):  # only a set speed that moves with the load
             return self._set_point
         load = self._external_load
         if load != self._set_point_load and abs(t_ns - self._set_point_time) >= SET_POINT_REFRESH_NS:
@@ -442,8 +442,8 @@ class RunRecording:
             MECHANISM_STYLE,
             MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)],
         )
-        if self.model.governor is not None and self.model.governor.kind != "pi":  # a PI governor is not drawn
-            sensor = self.model.governor.sensor
+        sensor = self.model.governor.sensor if self.model.governor is not None else None
+        if sensor is not None:  # a governor without a centrifugal sensor is not drawn
             self._log_styles(
                 "governor/drawing", sensor.outline(sensor.stop_angles()[0], 0.0), GOVERNOR_STYLE, GOVERNOR_MOVING_PARTS
             )
@@ -524,14 +524,8 @@ def start_text(model: MachineModel) -> str:
     scene = model.scene
     if model.governor is None:
         governor = "no governor"
-    elif model.governor.kind == "indirect" and scene.governor.feedback.type == "none":
-        governor = "indirect governor without feedback"
-    elif model.governor.kind == "indirect":
-        governor = f"indirect governor, {scene.governor.feedback.type} feedback"
-    elif model.governor.kind == "pi":
-        governor = "electronic PI governor"
     else:
-        governor = "direct governor"
+        governor = model.governor.title()
     speed = f"start: ω = {scene.scenario.initial.omega:.6g} rad/s"
     if model.load_pieces:
         where = " on the driven part" if model.driven is not None else ""
@@ -598,10 +592,10 @@ def resistance_name(model: MachineModel) -> str:
 
 def governor_signal(governor) -> tuple[str, str, float, str]:
     """The governor's own plotted signal beside the throttle: (entity, its key in the governor's values, factor to
-    the plotted unit, unit): a centrifugal governor's sleeve z in mm, a PI governor's integral part x [-]."""
-    if governor.kind == "pi":
-        return "governor/integral", "integral", 1.0, "-"
-    return "governor/sleeve", "sleeve", MILLIMETRES, "mm"
+    the plotted unit, unit): GovernorKind.plotted, e.g. a centrifugal governor's sleeve z in mm, a PI governor's
+    integral part x [-]."""
+    key, _, factor, unit = governor.plotted()
+    return f"governor/{key}", key, factor, unit
 
 
 def series_names(model: MachineModel, outside_throttle: bool = False) -> dict[str, str]:
@@ -612,8 +606,7 @@ def series_names(model: MachineModel, outside_throttle: bool = False) -> dict[st
     if governor is not None:
         band = band_name(*speed_band_delta(model))
         names.update({"speed/band_high": band, "speed/band_low": band, "moments/drive": "drive = throttle × M_d"})
-        if governor.kind == "indirect":
-            names["throttle"] = "throttle = servo position s"
+        names["throttle"] = governor.throttle_label
     elif outside_throttle:
         names["moments/drive"] = "drive = throttle × M_d"
     else:
@@ -678,23 +671,7 @@ def about_text(model: MachineModel, delta: float, source: str, outside_throttle:
             else "No governor: no throttle, no set speed and no band are drawn."
         )
     else:
-        if governor.kind == "indirect":
-            paragraphs.append(
-                f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
-                "(sleeve at the pilot valve's neutral). Throttle in 0..1: the servo position s."
-            )
-        elif governor.kind == "pi":
-            paragraphs.append(
-                f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the electronic PI governor's, "
-                "held at every load the valve can balance. Throttle in 0..1; below it the integral "
-                "part x of the PI law."
-            )
-        else:
-            paragraphs.append(
-                "Set speed ω_set: where the direct governor settles under the present external load "
-                "(operating point of the cycle-averaged machine; it moves with the load: the static "
-                "error). Throttle in 0..1."
-            )
+        paragraphs.append(governor.set_speed_text())
         if source == "permitted":
             paragraphs.append(
                 f"Band ω_set (1 ± δ/2) with the permitted coefficient of speed fluctuation "
@@ -814,9 +791,10 @@ def run_blueprint(
         origin="mechanism",
         visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])),
     )
-    if model.governor is not None and model.governor.kind != "pi":  # a centrifugal governor's drawing
+    sensor = model.governor.sensor if model.governor is not None else None
+    if sensor is not None:  # a centrifugal governor's drawing
         governor = rrb.Spatial2DView(
-            name="governor", origin="governor/drawing", visual_bounds=_bounds_y_down(model.governor.sensor.bounds())
+            name="governor", origin="governor/drawing", visual_bounds=_bounds_y_down(sensor.bounds())
         )
         right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]), row_shares=[1.0, 1.8])
     else:

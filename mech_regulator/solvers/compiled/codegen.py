@@ -41,9 +41,10 @@ import importlib.util
 import inspect
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TypeVar
 
 import numba
 import numpy as np
@@ -52,7 +53,7 @@ import mech_regulator
 from mech_regulator import mechanisms
 from mech_regulator.cache import folder as cache_folder
 from mech_regulator.cache import write as _write
-from mech_regulator.effects import held_positions, joint_friction, output_position_of
+from mech_regulator.effects import Effect, held_positions, joint_friction, output_position_of
 from mech_regulator.effects.definition import (
     CLAMPED,
     INTERVALS,
@@ -62,8 +63,6 @@ from mech_regulator.effects.definition import (
     definition_of,
     summed_source,
 )
-from mech_regulator.governors import pi
-from mech_regulator.governors import servo as servo_motor
 from mech_regulator.mechanisms.linkage import flat, symbolic
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import BACKWARD, CLUTCH_CODE, FORWARD, HELD, STUCK, DrivenModel
@@ -97,11 +96,9 @@ HELD_THROTTLE_EXPRESSION = (
     f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)"
 )
 
-SLEEVE_CODE = {"": 0.0, "free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low": 4.0, "high": 5.0}
-SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
 DRIVEN_CODE = {FORWARD: 0.0, BACKWARD: 1.0, HELD: 2.0}
-ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5
 
+Part = TypeVar("Part")
 _LOADED: dict[str, object] = {}  # module hash -> imported module, for the whole process
 _RECENT: dict[int, CompiledScene] = {}  # id(model) -> its CompiledScene, the last RECENT_MODELS models compiled
 RECENT_MODELS = 64
@@ -128,8 +125,8 @@ class CompiledScene:
     called, when n_journals is 0)."""
 
     model: MachineModel
-    rhs: object
-    guards: object
+    rhs: Callable[..., None]
+    guards: Callable[..., None]
     rhs_callback: object
     guards_callback: object
     parameters: np.ndarray
@@ -169,7 +166,7 @@ class CompiledScene:
         p[PIECE_INDEX] = self.piece_values(piece, omega)
         model = self.model
         if model.governor is not None and mode is not None:
-            p[SLEEVE_MODE], p[SERVO_MODE] = SLEEVE_CODE[mode[0]], SERVO_CODE[mode[1]]
+            p[SLEEVE_MODE], p[SERVO_MODE] = model.governor.mode_codes((mode[0], mode[1]))
         if model.driven is not None:
             train = model.train_mode_of(mode)
             p[DRIVEN_MODE] = DRIVEN_CODE[train[-1]]
@@ -179,11 +176,12 @@ class CompiledScene:
             margin = 1e-9 * (window[1] - window[0])
             p[CLAMP_LO], p[CLAMP_HI] = window[0] + margin, window[1] - margin
             p[WINDOW_LO], p[WINDOW_HI] = window
-        friction = model.joint_friction
-        if self.friction_slot is not None and window is not None and friction.corner_angles:  # |k_j| as s_j k_j
-            first_rate = self.friction_slot + NORMAL_SLOTS * self.n_normals
-            for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
-                p[first_rate + index] = sign
+        if self.friction_slot is not None and window is not None:
+            friction = _present(model.joint_friction, "model's joint friction")
+            if friction.corner_angles:  # |k_j| as s_j k_j
+                first_rate = self.friction_slot + NORMAL_SLOTS * self.n_normals
+                for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
+                    p[first_rate + index] = sign
         if held is not None:
             tables = self.model.state_tables
             anchors = _anchors(tables, held)
@@ -219,8 +217,10 @@ class CompiledScene:
         crossed, its side in sides (already flipped); a guard's level starts at min(0, s_N N) there. Returns the
         signs, one per guide."""
         levels = np.zeros(self.n_guards)
-        normals = slice(self.normal_slot, self.normal_slot + self.n_normals)
-        signs = slice(self.friction_slot, self.friction_slot + NORMAL_SLOTS * self.n_normals, NORMAL_SLOTS)
+        normal_slot = _present(self.normal_slot, "compiled scene's normal slot")
+        friction_slot = _present(self.friction_slot, "compiled scene's friction slot")
+        normals = slice(normal_slot, normal_slot + self.n_normals)
+        signs = slice(friction_slot, friction_slot + NORMAL_SLOTS * self.n_normals, NORMAL_SLOTS)
         if crossed is None or self.n_normals > 1:  # a guide's guard reads N itself while its s_N is 0
             self.guards(t, y, p, levels)
         sides = tuple(
@@ -228,19 +228,22 @@ class CompiledScene:
         )
         p[signs] = sides
         self.guards(t, y, p, levels)
-        p[self.friction_slot + 1 : self.friction_slot + NORMAL_SLOTS * self.n_normals : NORMAL_SLOTS] = np.minimum(
+        p[friction_slot + 1 : friction_slot + NORMAL_SLOTS * self.n_normals : NORMAL_SLOTS] = np.minimum(
             0.0, levels[normals]
         )
         return sides
 
-    def _held_bounds(self, held: list[int], y: np.ndarray, offset: float = 0.0) -> list[tuple[float, float]]:
+    def _held_bounds(self, held: list[int], y: np.ndarray | None, offset: float = 0.0) -> list[tuple[float, float]]:
         """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
         valve table's sleeve positions, the twist [rad], phi - twist [rad] less offset for a driven part's table),
-        moved to the start state y where it is just across one (as time_domain._breakpoint_guards); -inf, inf where
-        the piece has none."""
+        moved to the start state y (given with held) where it is just across one (as time_domain._breakpoint_guards);
+        -inf, inf where the piece has none."""
+        if not held:
+            return []
         bounds = []
+        start_state = _present(y, "segment's start state")
         for (coefficients, table), i in zip(breakpoint_states(self.model), held):
-            start = sum(c * y[index] for index, c in coefficients)
+            start = sum(c * start_state[index] for index, c in coefficients)
             shift = offset if table.angular else 0.0
             bounds.append((min(_break(table, i - 1), start) - shift, max(_break(table, i), start) - shift))
         return bounds
@@ -291,6 +294,15 @@ class CompiledScene:
         return matrix
 
 
+def _present(part: Part | None, name: str) -> Part:
+    """An optional part (the model's governor, coupling, clutch or joint friction, a compiled scene's slot in p, a
+    segment's start state) that the code reading it is only reached with: its callers generate or call that code only
+    when it is there (run.fast_path_refusal, the model's builders, CompiledScene's docstring)."""
+    if part is None:
+        raise TypeError(f"the fast path's code generator read the {name}, which is not there")
+    return part
+
+
 def sign_of(value: float) -> float:
     """float(np.sign(value)) for a Python float (-1.0, 0.0, 1.0 or NaN), without numpy's call on a scalar."""
     return 1.0 if value > 0.0 else -1.0 if value < 0.0 else 0.0 if value == 0.0 else math.nan
@@ -303,10 +315,9 @@ def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float]
     for a driven part's table (its knots)."""
     states = []
     for table in model.state_tables:
-        if table.name == "valve table":
-            states.append(
-                (((ARM, 1.0),), replace(table, breaks=tuple(model.governor.sensor.arm_angle(z) for z in table.breaks)))
-            )
+        if table.name == "valve table":  # only a governor with valve_breaks has one
+            coefficients, breaks = _present(model.governor, "governor").valve_table_state(table.breaks)
+            states.append((coefficients, replace(table, breaks=breaks)))
         elif table.angular:
             states.append((((0, 1.0), (model.coupling_index, -1.0)), table))
         else:
@@ -314,7 +325,7 @@ def breakpoint_states(model: MachineModel) -> list[tuple[tuple[tuple[int, float]
     return states
 
 
-_ANNOUNCED: set[str] = set()  # the scenes whose new module compile_scene has announced in this process
+_ANNOUNCED: set[str | None] = set()  # the scenes whose new module compile_scene has announced in this process
 
 
 def compile_scene(model: MachineModel) -> CompiledScene:
@@ -383,6 +394,8 @@ def load_scene_module(digest: str):
     module = _LOADED.get(digest)
     if module is None:
         spec = importlib.util.spec_from_file_location(f"mech_regulator_compiled_{digest}", _module_path(digest))
+        if spec is None or spec.loader is None:
+            raise ImportError(f"cannot import the fast path's generated module {_module_path(digest)}")
         module = importlib.util.module_from_spec(spec)
         sys.modules[spec.name] = module  # numba's cache finds the module's globals by its name
         spec.loader.exec_module(module)
@@ -413,6 +426,15 @@ def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.n
     return row
 
 
+def _linear_row(n_states: int, coefficients: tuple[tuple[int, float], ...], constant: float) -> np.ndarray:
+    """A linear guard's row [1, c0, c1..c_n] of its (state index, coefficient) pairs and its constant c0."""
+    row = np.zeros(n_states + 2)
+    row[0], row[1] = 1.0, constant
+    for index, coefficient in coefficients:
+        row[2 + index] = coefficient
+    return row
+
+
 def mode_rows(model: MachineModel, mode, omega: float = 0.0) -> list[np.ndarray | None]:
     """For each guard of model.guards(mode, y) with y's crank speed omega [rad/s], in its order, its linear row
     [1, c0, c1..c_n] or None (not linear in the state: among others joint friction's 'crank starts', -|omega|)."""
@@ -423,21 +445,11 @@ def mode_rows(model: MachineModel, mode, omega: float = 0.0) -> list[np.ndarray 
         return crank
     n = len(model.state_names())
     rows: list[np.ndarray | None] = []
-    governor = model.governor
-    if governor is not None and governor.kind != "pi":
-        low, high = governor.sensor.stop_angles()
-        hit_low, hit_high = _row(n, ARM, 1.0, -low), _row(n, ARM, -1.0, high)
-        rows += {
-            "free": [hit_low, hit_high],
-            "up": [_row(n, ARM_RATE, 1.0, 0.0), hit_high],
-            "down": [_row(n, ARM_RATE, -1.0, 0.0), hit_low],
-            "stuck": [None, None],
-            "low": [None],
-            "high": [None],
-        }[mode[0]]
-        if governor.kind == "indirect":
-            s_low, s_high = governor.travel
-            rows += [_row(n, SERVO, 1.0, -s_low), _row(n, SERVO, -1.0, s_high)] if mode[1] == "free" else [None]
+    if model.governor is not None:
+        rows += [
+            None if linear is None else _linear_row(n, *linear)
+            for linear in model.governor.linear_guards((mode[0], mode[1]))
+        ]
     if model.driven is not None:
         train = model.train_mode_of(mode)
         index = model.driven_speed_index
@@ -498,6 +510,35 @@ class _Parameters:
         return np.array(values, dtype=float)
 
 
+@dataclass(frozen=True)
+class _Writer:
+    """The SourceWriter (governors/kind.py) a governor writes its part of the module with: p, and the scene
+    governor's valve entry (schema.Valve) if it has one."""
+
+    p: _Parameters
+    valve: schema.Valve | None
+    sleeve_mode: str = f"p[{SLEEVE_MODE}]"
+    servo_mode: str = f"p[{SERVO_MODE}]"
+
+    def scalar(self, value: float) -> str:
+        """p's new slot holding value, as source."""
+        return self.p.scalar(value)
+
+    def shared(self, *functions: Callable[..., float]) -> tuple[str, ...]:
+        """_shared_functions."""
+        return _shared_functions(functions, self.p)
+
+    def formula_call(
+        self, function: Callable[..., float], inputs: Mapping[str, str], numbers: Mapping[str, float]
+    ) -> str:
+        """_formula_call."""
+        return _formula_call(self.p, function, inputs, numbers)
+
+    def valve_call(self, z: str, anchor: str) -> str:
+        """_valve_call of the scene's valve."""
+        return _valve_call(definition_of(_present(self.valve, "scene governor's valve")), self.p, z, anchor)
+
+
 def _effect_call(
     definition: Definition,
     p: _Parameters,
@@ -544,7 +585,7 @@ def _effect_call(
     return summed_source(definition, function, p.formula(function), inputs, numbers)
 
 
-def _formula_call(p: _Parameters, function: Callable, inputs: dict[str, str], numbers: dict[str, float]) -> str:
+def _formula_call(p: _Parameters, function: Callable, inputs: Mapping[str, str], numbers: Mapping[str, float]) -> str:
     """The call of a formula function (a valve's, the servo's) as source, its numbers stored in p."""
     stored = {name: p.scalar(value) for name, value in numbers.items()}
     return call_source(function, p.formula(function), inputs, stored)
@@ -631,8 +672,8 @@ def _reduced_lines(mechanism, gravity, p: _Parameters, angle: str, names: tuple[
 
 
 def _shared_functions(functions, p: _Parameters) -> tuple[str, ...]:
-    """The names of functions the reference path runs (a sensor's formulas, CentrifugalSensor.kernels; the PI law,
-    governors/pi.py), their very source added to the module (p.functions) to be compiled."""
+    """The names of functions the reference path runs (a governor's: a sensor's formulas, CentrifugalSensor.kernels;
+    the PI law, governors/pi.py), their very source added to the module (p.functions) to be compiled."""
     for function in functions:
         p.functions[function.__name__] = inspect.getsource(function)
     return tuple(function.__name__ for function in functions)
@@ -679,131 +720,34 @@ def generate(
             body.append("q_anchor = q")
     for effect in model.effects:
         if effect.switch_angles:
-            switched.append(effect.definition)
+            switched.append(_definition(effect))
         elif effect.role == "drive" and governor is not None:
-            scaled.append(effect.definition)
+            scaled.append(_definition(effect))
         elif effect.role == "drive":  # times the held throttle, 1 unless co-simulated: exact
             body.append(
                 f"total += {HELD_THROTTLE_EXPRESSION} * "
-                f"{_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
+                f"{_effect_call(_definition(effect), p, 'phi', 'omega', 'q', 'dq', anchor)}"
             )
         else:
-            body.append(f"total += {_effect_call(effect.definition, p, 'phi', 'omega', 'q', 'dq', anchor)}")
+            body.append(f"total += {_effect_call(_definition(effect), p, 'phi', 'omega', 'q', 'dq', anchor)}")
     if switched:
         body.append(f"clamped = min(max(phi, p[{CLAMP_LO}]), p[{CLAMP_HI}])")
         body += [f"total += {_effect_call(definition, p, 'clamped', 'omega', 'q', 'dq')}" for definition in switched]
-    governor_lines, guard_lines, opening = [], [], []
-    if governor is not None and governor.kind == "pi":
-        throttle_name, rate_name = _shared_functions((pi.pi_throttle, pi.pi_integral_rate), p)
-        law = f"y[{pi.INTEGRAL}], omega, " + ", ".join(p.scalar(value) for value in governor.law())
-        throttle = f"{throttle_name}({law})"
-        governor_lines.append(f"dydt[{pi.INTEGRAL}] = {rate_name}({law})")
-    elif governor is not None:
-        sensor = governor.sensor
-        sleeve_kernel, lift_kernel, acceleration_kernel = _shared_functions(sensor.kernels(), p)
-        sensor_args = ", ".join(p.scalar(value) for value in sensor.kernel_parameters())
-        kinetic, static = p.scalar(sensor.kinetic_friction), p.scalar(sensor.static_friction)
-        low, high = (p.scalar(v) for v in sensor.stop_angles())
-        z = f"{sleeve_kernel}(y[{ARM}], {sensor_args})"
-        if governor.kind == "direct":
-            throttle = _valve_call(definition_of(model.scene.governor.valve), p, z, anchor_of.get("valve table", ""))
-        else:
-            throttle = f"y[{SERVO}]"
-            opening = [f"opening = {z} - {p.scalar(governor.pilot_neutral)}"]
-            if governor.feedback == "rigid":
-                feedback = _formula_call(
-                    p,
-                    servo_motor.rigid_feedback,
-                    {"servo": f"y[{SERVO}]"},
-                    {"gain": governor.feedback_gain, "reference": governor.feedback_reference},
-                )
-                opening.append(f"opening += {feedback}")
-            elif governor.feedback == "isodromic":
-                opening.append(f"opening += y[{SHIFT}]")
-            command = _formula_call(
-                p,
-                servo_motor.servo_command,
-                {"opening": "opening"},
-                {"gain": governor.servo_gain, "max_speed": governor.servo_max_speed, "dead_band": governor.dead_band},
-            )
-        lift = f"{lift_kernel}(y[{ARM}], omega, {sensor_args})"
-        governor_lines += [
-            f"sleeve_mode = p[{SLEEVE_MODE}]",
-            "if sleeve_mode <= 2.0:",
-            f"    friction = 0.0 if sleeve_mode == 0.0 else ({kinetic} if sleeve_mode == 1.0 else -{kinetic})",
-            f"    dydt[{ARM}] = y[{ARM_RATE}]",
-            f"    dydt[{ARM_RATE}] = {acceleration_kernel}(y[{ARM}], y[{ARM_RATE}], omega, friction, {sensor_args})",
-            "else:",
-            f"    dydt[{ARM}] = 0.0",
-            f"    dydt[{ARM_RATE}] = 0.0",
-        ]
-        guard_lines += [
-            f"sleeve_mode = p[{SLEEVE_MODE}]",
-            "if sleeve_mode == 0.0:",
-            f"    levels[0] = y[{ARM}] - {low}",
-            f"    levels[1] = {high} - y[{ARM}]",
-            "    g = 2",
-            "elif sleeve_mode == 1.0:",
-            f"    levels[0] = y[{ARM_RATE}]",
-            f"    levels[1] = {high} - y[{ARM}]",
-            "    g = 2",
-            "elif sleeve_mode == 2.0:",
-            f"    levels[0] = -y[{ARM_RATE}]",
-            f"    levels[1] = y[{ARM}] - {low}",
-            "    g = 2",
-            "elif sleeve_mode == 3.0:",
-            f"    force = {lift}",
-            f"    levels[0] = {static} - force",
-            f"    levels[1] = {static} + force",
-            "    g = 2",
-            "elif sleeve_mode == 4.0:",
-            f"    levels[0] = {static} - {lift}",
-            "    g = 1",
-            "else:",
-            f"    levels[0] = {static} + {lift}",
-            "    g = 1",
-        ]
-        if governor.kind == "indirect":
-            s_low, s_high = (p.scalar(v) for v in governor.travel)
-            governor_lines += opening + [
-                f"servo_rate = {command} if p[{SERVO_MODE}] == 0.0 else 0.0",
-                f"dydt[{SERVO}] = servo_rate",
-            ]
-            if governor.feedback == "isodromic":
-                rate = _formula_call(
-                    p,
-                    servo_motor.isodromic_rate,
-                    {"servo_rate": "servo_rate", "shift": f"y[{SHIFT}]"},
-                    {"gain": governor.feedback_gain, "time_constant": governor.feedback_time_constant},
-                )
-                governor_lines.append(f"dydt[{SHIFT}] = {rate}")
-            guard_lines += (
-                [
-                    f"if p[{SERVO_MODE}] == 0.0:",
-                    f"    levels[g] = y[{SERVO}] - {s_low}",
-                    f"    levels[g + 1] = {s_high} - y[{SERVO}]",
-                    "    g += 2",
-                    "else:",
-                ]
-                + [f"    {line}" for line in opening]
-                + [
-                    f"    command = {command}",
-                    f"    levels[g] = -command if p[{SERVO_MODE}] == 1.0 else command",
-                    "    g += 1",
-                ]
-            )
-    if governor is not None:
-        body.append(f"share = {throttle}")
+    governor_lines: list[str] = []
+    guard_lines: list[str] = []
+    n_mode_guards = 0
+    if governor is not None:  # the governor's own part (GovernorKind.source), its throttle scaling the drives
+        valve = getattr(model.scene.governor, "valve", None)  # a direct governor's entry has one
+        part = governor.source(_Writer(p, valve), anchor_of.get("valve table", ""))
+        governor_lines, guard_lines, n_mode_guards = part.rates, list(part.guards), part.n_guards
+        body.append(f"share = {part.throttle}")
         body += [
             f"total += share * {_effect_call(definition, p, 'phi', 'omega', 'q', 'dq', anchor)}"
             for definition in scaled
         ]
     body.append("net = total - 0.5 * dJ * omega * omega")
     body.append("dydt[0] = omega")
-    n_mode_guards = 0
     journals, reaction_lines = [], []  # the journals' positions in the kinetostatics; `reactions`' body
-    if governor is not None and governor.kind != "pi":
-        n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
     if model.coupling is not None:
         train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", ""), table_slots)
         body += train_lines
@@ -821,7 +765,7 @@ def generate(
         n_mode_guards += 4
     else:
         body.append("dydt[1] = net / J")
-    if model.joint_friction is not None:
+    if friction is not None:
         share = "share" if governor is not None else HELD_THROTTLE_EXPRESSION
         body += _joint_friction_lines(model, p, share, anchor, "q_anchor" if kinked else "q", friction_slot)
         guard_lines += _crank_guard_lines()
@@ -837,8 +781,9 @@ def generate(
         if friction.guides:  # per guide s_N N - its start level (N while s_N is 0), with the rhs's epsilon
             guard_lines += [f"rates = k.np.empty({len(model.state_names())})"] + copy
             normal_slot = n_mode_guards  # their own slots: the mode guards before them are fewer in some modes
+            first_sign = _present(friction_slot, "friction slot")  # guides' friction reads the kinetostatics' loads
             for k, position in enumerate(friction.guides):
-                side, low = f"p[{friction_slot + NORMAL_SLOTS * k}]", f"p[{friction_slot + NORMAL_SLOTS * k + 1}]"
+                side, low = f"p[{first_sign + NORMAL_SLOTS * k}]", f"p[{first_sign + NORMAL_SLOTS * k + 1}]"
                 normal = f"(R0[{friction.indices[position]}] + R1[{friction.indices[position]}] * rates[1]).imag"
                 guard_lines.append(
                     f"levels[{normal_slot + k}] = {side} * {normal} - {low} if {side} != 0.0 else {normal}"
@@ -886,7 +831,7 @@ def _joint_friction_lines(
     kinetostatics at (phi, omega, Q) and the Newton solve; a thrust collar alone needs no kinetostatics. anchor,
     held: the crank angle and slider position the tables in the output forces are read on (_effect_call);
     friction_slot: CompiledScene's (the guides' normal signs and the joints' rate signs between two corners)."""
-    friction = model.joint_friction
+    friction = _present(model.joint_friction, "model's joint friction")
     collar, tolerance = p.scalar(friction.collar), p.scalar(joint_friction.NEWTON_TOLERANCE)
     iterations = f"int({p.scalar(joint_friction.NEWTON_ITERATIONS)})"
     solve = p.formula(joint_friction.friction_acceleration)  # the reference path's own Newton solve, compiled
@@ -901,7 +846,7 @@ def _joint_friction_lines(
     for effect in model.effects:
         if effect.output_force is None:
             continue
-        definition = effect.definition
+        definition = _definition(effect)
         call = _effect_call(definition, p, "phi", "omega", "q", "dq", anchor, held, definition.output_force)
         if effect.role == "drive":
             scaled.append(f"force += {share} * {call}")
@@ -909,9 +854,13 @@ def _joint_friction_lines(
             lines.append(f"force += {call}")
     lines += scaled
     machine = model.scene.machine
-    joints = _kinetostatics_joints(machine.mechanism)
-    core, structure, _ = mechanisms.linkage_of(machine.mechanism)  # its generated kinetostatics, with gravity
-    program = flat.encode(core, structure.groups, machine.gravity)
+    mechanism = machine.mechanism
+    if mechanism is None:  # not _present: mypy joins a union's members in its type variable
+        raise TypeError("the fast path's code generator read the scene's mechanism, which is not there")
+    joints = _kinetostatics_joints(mechanism)
+    core, structure, _ = mechanisms.linkage_of(mechanism)  # its generated kinetostatics, with gravity
+    gravity = (machine.gravity[0], machine.gravity[1]) if machine.gravity is not None else None
+    program = flat.encode(core, structure.groups, gravity)
     name, source = symbolic.joint_loads_source(program)
     p.functions[name] = source
     lines.append(f"R0, R1, ratios, _, _ = {name}(phi, omega, force, {p.table(program).rsplit(', ', 1)[0]})")
@@ -919,9 +868,10 @@ def _joint_friction_lines(
     for index, arm_length in zip(friction.indices, friction.arms):
         arms[index] = arm_length
     normals = ["0.0"] * len(joints)  # a guide's |N| read as s_N N (its p slot), every other joint's |R|
+    first_sign = _present(friction_slot, "friction slot")  # generate gives one to friction with loads
     for k, position in enumerate(friction.guides):
-        normals[friction.indices[position]] = f"p[{friction_slot + NORMAL_SLOTS * k}]"
-    first_rate = friction_slot + NORMAL_SLOTS * len(friction.guides)
+        normals[friction.indices[position]] = f"p[{first_sign + NORMAL_SLOTS * k}]"
+    first_rate = first_sign + NORMAL_SLOTS * len(friction.guides)
     signs = "".join(f"p[{first_rate + j}], " for j in range(len(joints)))
     lines.append(
         f"dydt[1] = {solve}(omega, J * dydt[1], J, {collar}, "
@@ -954,11 +904,12 @@ def _coupling_lines(
     dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
     (at rest: the holding margins R -+ push; turning: s omega2); anchor: ', p[slot]' of a coupling table's anchor
     (the kernel's last argument), or ''; table_slots: generate's (a driven part's table loads' anchors)."""
-    coupling = model.coupling
-    spec = model.scene.machine.coupling
+    coupling = _present(model.coupling, "model's coupling")
+    spec = _present(model.scene.machine.coupling, "scene's coupling")
+    driven_model = _present(model.driven, "model's driven part")
     twist_index, speed_index = model.coupling_index, model.driven_speed_index
     if coupling.table is None:
-        elastic = f"{p.scalar(coupling.stiffness)} * twist"
+        elastic = f"{p.scalar(_present(coupling.stiffness, 'coupling stiffness'))} * twist"
     else:
         elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])}{anchor})"
     driven = spec.driven
@@ -976,9 +927,9 @@ def _coupling_lines(
         dynamics.append("I_links, dI, weight2, q2, dq2 = 0.0, 0.0, 0.0, 0.0, 0.0")
     dynamics += [f"I2 = {p.scalar(coupling.driven.inertia)} + I_links", "smooth = 0.0"]
     located = {table.name: f"p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}
-    names = [f"driven part's {effect.name}" for effect in model.driven.effects[: len(driven.loads)]]
+    names = [f"driven part's {effect.name}" for effect in driven_model.effects[: len(driven.loads)]]
     anchors = {index: located[name] for index, name in enumerate(names) if name in located}
-    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2", anchors, model.driven)
+    dynamics += _driven_smooth_lines(driven, p, "phi2", "omega2", "q2", "dq2", anchors, driven_model)
     resistance = f"{p.scalar(coupling.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
     rhs = (
         state
@@ -1040,7 +991,10 @@ def _driven_smooth_lines(
             lines.append(f"smooth += {_effect_call(definition, p, phi, omega, q, dq)}")
         elif _reads_position(definition):
             held = f"{q}_anchor{index}"
-            position = _held_position_call(model.effects[index].kink_angles, output_position_of(model.reduced), p, slot)
+            located = _present(model, "driven part's model")  # given with the anchors
+            position = _held_position_call(
+                located.effects[index].kink_angles, output_position_of(located.reduced), p, slot
+            )
             lines += [
                 f"{held} = {position} if {slot} == {slot} else {q}",
                 f"smooth += {_effect_call(definition, p, phi, omega, q, dq, held=held)}",
@@ -1059,6 +1013,12 @@ def _driven_smooth_lines(
     return lines
 
 
+def _definition(effect: Effect) -> Definition:
+    """The definition an effect was built from (effects.Effect.definition), which the fast path compiles: every
+    effect of a model that passes run.fast_path_refusal has one."""
+    return _present(effect.definition, f"definition of the effect '{effect.name}'")
+
+
 def _reads_position(definition: Definition | None) -> bool:
     """Whether a drive's or load's formula reads a table in the output position (a slider force table)."""
     return definition is not None and definition.table is not None and definition.table.kind == CLAMPED
@@ -1071,11 +1031,11 @@ def _clutch_lines(model: MachineModel, p: _Parameters, crank: list[str]) -> tupl
     in its outputs, MachineModel.constraint; equal starting values and equal rates keep them equal bit for bit here).
     Guards, in drivetrain.train_guards' order: stuck, static_torque -+ T (crank: the crank's net moment F1, phi
     unclamped); slipping, s (omega - omega2); then the driven part's margins R -+ push at rest or s omega2 turning."""
-    clutch = model.clutch
+    clutch = _present(model.clutch, "model's clutch")
     index = model.driven_speed_index
     omega2 = f"omega2 = y[1] if p[{CLUTCH_MODE}] == 0.0 else y[{index}]"
     driven = ["smooth = 0.0"] + _driven_smooth_lines(
-        model.scene.machine.clutch.driven, p, "0.0", "omega2", "0.0", "0.0"
+        _present(model.scene.machine.clutch, "scene's clutch").driven, p, "0.0", "omega2", "0.0", "0.0"
     )
     resistance = f"resistance = {p.scalar(clutch.driven.resistance)} + (p[{EXTERNAL_OFFSET}] + p[{EXTERNAL_SLOPE}] * t)"
     forces = (
