@@ -160,7 +160,7 @@ def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None, spee
                 y[1] = speed
             p = compiled.parameters_for(chosen, mode, window, y[1])
             expected = np.array(model.rhs(chosen, window, mode)(t, y), dtype=float)
-            if model.constraint(mode) is not None:  # a stuck clutch: omega2 follows omega (codegen._clutch_lines)
+            if model.constraint(mode) is not None:  # a stuck clutch: omega2 follows omega (train_source.clutch_lines)
                 expected[model.driven_speed_index] = expected[1]
             got = np.zeros(n)
             compiled.rhs(t, y, p, got)
