@@ -55,17 +55,9 @@ def describe(model: MachineModel) -> str:
     lines = [f"scene: {scene.name}"]
     if scene.description:
         lines.append(f"  {scene.description.strip()}")
-    units = {
-        "phi": "rad",
-        "omega": "rad/s",
-        "arm_angle": "rad",
-        "arm_rate": "rad/s",
-        "servo": "-",
-        "feedback_shift": "m",
-        "integral": "-",
-        "twist": "rad",
-        "omega_driven": "rad/s",
-    }
+    units = {"phi": "rad", "omega": "rad/s", "twist": "rad", "omega_driven": "rad/s"}
+    if model.governor is not None:  # its states' own (GovernorKind.state_units)
+        units.update(zip(model.governor.state_names, model.governor.state_units))
     lines.append("state vector: " + ", ".join(f"{name} [{units[name]}]" for name in model.state_names()))
     if model.reduced is None:
         lines.append(f"inertia: constant J = {model.inertia_constant:g} kg m^2 (no mechanism: no dJ/dphi term)")
