@@ -187,6 +187,8 @@ class RunRecording:
         self._set_point_load = math.nan
         self._set_point_time = -SET_POINT_REFRESH_NS
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
+        # a governor without a set speed (NaN: a direct one's) settles where the load puts it: its operating point
+        self._set_point_follows_load = model.governor is not None and math.isnan(self._set_point)
         self._series = {entity: ([], []) for entity in recorded_series(model, self.outside_throttle)}
         # entity -> (lowest, highest) value recorded; the throttle's plot spans 0..1, the sleeve's its stroke
         self._extents: dict[str, tuple[float, float]] = {}
@@ -397,8 +399,7 @@ class RunRecording:
     def _current_set_point(self, t_ns: int) -> float:
         """omega_set [rad/s] at t_ns (see the module docstring); a direct governor's is recomputed when the
         external load changed and SET_POINT_REFRESH_NS passed since the last time, and cached by load."""
-        governor = self.model.governor
-        if governor is None or not math.isnan(self._set_point):  # only a set speed that moves with the load
+        if not self._set_point_follows_load:
             return self._set_point
         load = self._external_load
         if load != self._set_point_load and abs(t_ns - self._set_point_time) >= SET_POINT_REFRESH_NS:
