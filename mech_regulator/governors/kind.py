@@ -150,10 +150,10 @@ class GovernorKind(ABC):
     statics and stability, its part of the fast path's module and what the report, plots, recording and nodes show
     of it.
 
-    kind: its kind ('direct', 'indirect', 'pi'; what the governor analysis reports); state_names, state_units: its states in y[2:] and their units; sensor: its centrifugal sensor (the static
-    characteristic, the insensitivity, the drawing), or None; valve: throttle(z) of a sleeve position z [m] for a
-    direct action, else None; valve_breaks: the sleeve positions [m] where a valve table's slope jumps; hybrid: whether
-    it has modes and guards.
+    kind: its kind ('direct', 'indirect', 'pi'; what the governor analysis reports, nothing branches on it); sensor:
+    its centrifugal sensor (the static characteristic, the insensitivity, the drawing), or None; valve: throttle(z) of a
+    sleeve position z [m] for a direct action, else None; valve_breaks: the sleeve positions [m] where a valve table's
+    slope jumps; hybrid: whether it has modes and guards.
     """
 
     kind: str
