@@ -16,12 +16,13 @@ from support import model_of, run_cli, scene, simulate_complete
 
 from mech_regulator.bench.effect_cost import BASE_SCENE, EFFECT_CHAIN, SCENARIO
 from mech_regulator.cache import CACHE_VARIABLE
+from mech_regulator.governors.mechanical import SLEEVE_CODE
 from mech_regulator.model import LoadPiece, build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.loading import read_scene_data, resolve_scene_path
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.compiled import fast_path_refusal, runs_compiled
-from mech_regulator.solvers.compiled.codegen import SLEEVE_CODE, compile_scene, generate, mode_rows
+from mech_regulator.solvers.compiled.codegen import compile_scene, generate, mode_rows
 from mech_regulator.solvers.compiled.run import MAX_STEPS_PER_CALL
 
 RNG = np.random.default_rng(7)
@@ -159,7 +160,7 @@ def assert_same_rhs(model, modes, states: int = 6, window=None, piece=None, spee
                 y[1] = speed
             p = compiled.parameters_for(chosen, mode, window, y[1])
             expected = np.array(model.rhs(chosen, window, mode)(t, y), dtype=float)
-            if model.constraint(mode) is not None:  # a stuck clutch: omega2 follows omega (codegen._clutch_lines)
+            if model.constraint(mode) is not None:  # a stuck clutch: omega2 follows omega (train_source.clutch_lines)
                 expected[model.driven_speed_index] = expected[1]
             got = np.zeros(n)
             compiled.rhs(t, y, p, got)

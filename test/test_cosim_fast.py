@@ -12,9 +12,10 @@ import pytest
 from support import model_of, run_cli, scene
 from test_compiled_path import shortened
 
+from mech_regulator.governors.mechanical import SLEEVE_CODE
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.compiled.codegen import SLEEVE_CODE, compile_scene
+from mech_regulator.solvers.compiled.codegen import compile_scene
 from mech_regulator.solvers.cosim import GovernorStepper, MachineStepper, cosimulate, seconds, to_nanoseconds
 
 EXCHANGE = 1e-3  # [s]

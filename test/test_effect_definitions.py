@@ -20,7 +20,7 @@ from mech_regulator.governors import servo as servo_motor
 from mech_regulator.governors.valve import build_valve
 from mech_regulator.scene import effect_keys, governor_keys, key_types
 from mech_regulator.scene.loading import load_scene
-from mech_regulator.solvers.compiled import codegen, kernels
+from mech_regulator.solvers.compiled import kernels, source
 
 STATES = 200
 SEEDS = (1, 2, 3)  # random scene entries of each kind
@@ -143,7 +143,7 @@ def test_both_paths_give_each_drive_and_load_alike(member, kind):
         if effect.segment_moment is not None and definition.table.kind != "clamped":  # a table in phi on a segment
             functions.append((effect.segment_moment, definition.moment, True))
         for reference, function, anchored in functions:
-            fast, p = codegen.effect_kernel(definition, function, anchored)
+            fast, p = source.effect_kernel(definition, function, anchored)
             for t, phi, omega, anchor, q, dq in _states(seed, definition.outputs):
                 outputs = [value for pair in zip(q, dq) for value in pair]
                 expected = (
@@ -169,7 +169,7 @@ def test_both_paths_give_each_valve_alike(member, kind):
     for anchored in (False, True):
         if anchored and definition.table is None:
             continue
-        fast, p = codegen.valve_kernel(definition, anchored)
+        fast, p = source.valve_kernel(definition, anchored)
         for z in sleeve:
             anchor = z + float(rng.uniform(-0.01, 0.01))
             expected = throttle(z, anchor) if anchored else throttle(z)

@@ -184,7 +184,7 @@ def test_equilibrium_sleeve_is_clipped_to_the_stroke():
 
 def test_static_characteristic_arrays_match_closed_form():
     governor = {**SPRUNG, "friction": 2.0, "static_friction": 3.0}  # [N]
-    characteristic = static_characteristic(governed_model(governor).governor, points=11)
+    characteristic = static_characteristic(governed_model(governor).governor.sensor, points=11)
     np.testing.assert_allclose(characteristic.sleeve, np.linspace(0.02, 0.08, 11), rtol=0, atol=1e-15)
     for i, z in enumerate(characteristic.sleeve):
         assert characteristic.speed[i] == pytest.approx(speed_closed_form(governor, z), rel=1e-13)
@@ -316,7 +316,7 @@ def test_arm_acceleration_dissipation_is_damping_and_friction_power(governor):
 def test_insensitivity_band_uses_static_friction(governor):
     F_k, F_s = 2.0, 3.0  # kinetic and static sleeve friction [N]
     governor = {**governor, "friction": F_k, "static_friction": F_s}
-    characteristic = static_characteristic(governed_model(governor).governor, points=7)
+    characteristic = static_characteristic(governed_model(governor).governor.sensor, points=7)
     for i, z in enumerate(characteristic.sleeve):
         assert characteristic.speed_high[i] == pytest.approx(speed_closed_form(governor, z, +F_s), rel=1e-13)
         assert characteristic.speed_low[i] == pytest.approx(speed_closed_form(governor, z, -F_s), rel=1e-13)
@@ -336,7 +336,7 @@ def test_statism_matches_closed_form(governor):
     z_low, z_high = governor["stroke"]
     low, high = speed_closed_form(governor, z_low), speed_closed_form(governor, z_high)
     expected = (high - low) / (0.5 * (high + low))
-    characteristic = static_characteristic(governed_model(governor).governor)
+    characteristic = static_characteristic(governed_model(governor).governor.sensor)
     assert characteristic.statism == pytest.approx(expected, rel=1e-12)
     assert characteristic.statism > 0.0
 

@@ -28,7 +28,6 @@ from mech_regulator.analysis.statics import (
     static_characteristic,
 )
 from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
-from mech_regulator.governors import ElectronicGovernor
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 from mech_regulator.solvers.cosim import CoSimulation
@@ -132,22 +131,20 @@ def analyse_governor(model: MachineModel) -> dict:
     point = operating_point(model, load)
     levels = [load] + [event.torque for event in model.scene.scenario.load_events]
     linear = linear_stability(model, point)
-    # the PI governor is isochronous within the valve's travel and has no sleeve (docs/theory.md §8.10)
-    if isinstance(governor, ElectronicGovernor):
-        characteristic, statism, insensitivity, sensor_name, feedback = None, 0.0, 0.0, None, None
+    sensor = governor.sensor
+    if sensor is None:  # no sleeve (a PI governor: isochronous within the valve's travel, docs/theory.md §8.10)
+        characteristic, statism, insensitivity = None, 0.0, 0.0
     else:
-        characteristic = static_characteristic(governor)
-        statism, sensor = characteristic.statism, governor.sensor
+        characteristic = static_characteristic(sensor)
+        statism = characteristic.statism
         insensitivity = (
             sensor.equilibrium_speed(point.sleeve, sensor.static_friction)
             - sensor.equilibrium_speed(point.sleeve, -sensor.static_friction)
         ) / point.speed
-        sensor_name, feedback = sensor.name, governor.feedback if governor.kind == "indirect" else None
     result = {
         "scene": model.scene.name,
         "kind": governor.kind,
-        "sensor": sensor_name,
-        "feedback": feedback,
+        **governor.summary(),
         "set_speed": governor.set_speed(),
         "characteristic": None
         if characteristic is None

@@ -22,8 +22,7 @@ import numpy as np
 from scipy import integrate, optimize
 
 from mech_regulator.analysis.statics import OperatingPoint
-from mech_regulator.governors import Governor
-from mech_regulator.governors.pi import ElectronicGovernor, pi_loop_coefficients
+from mech_regulator.governors import GovernorKind
 from mech_regulator.model import LoadPiece, MachineModel
 
 SHOOTING_TOLERANCE = 1e-8  # the periodic orbit is found when |P(x) - x| is below this, relative to x's scale
@@ -37,9 +36,9 @@ class LinearStability:
     dominant: the eigenvalue with the largest real part; damping_ratio = -Re/|lambda| of the dominant
     mode; period [s] of the dominant mode (inf if it does not oscillate); stable: all Re < 0;
     polynomial: characteristic polynomial coefficients, highest power first (leading 1);
-    vyshnegradsky: (A, B) for the direct governor's cubic when all its coefficients are positive, else None;
-    pi_loop: for a PI governor the closed forms (a1, a0) of its quadratic p^2 + a1 p + a0 (pi_loop_coefficients),
-    else None.
+    vyshnegradsky: (A, B) for a governor whose loop is Vyshnegradsky's cubic (a direct governor's) when all its
+    coefficients are positive, else None; pi_loop: the closed forms of the loop's polynomial where the governor has
+    them (GovernorKind.loop_coefficients: a PI governor's (a1, a0) of p^2 + a1 p + a0), else None.
     """
 
     state_names: tuple[str, ...]
@@ -54,7 +53,7 @@ class LinearStability:
     pi_loop: tuple[float, float] | None = None
 
 
-def _governor_of(model: MachineModel) -> Governor | ElectronicGovernor:
+def _governor_of(model: MachineModel) -> GovernorKind:
     """The governor of a governed machine (the analyses here need one)."""
     assert model.governor is not None, "the stability analysis reads a machine with a governor"
     return model.governor
@@ -76,18 +75,9 @@ def averaged_rhs(model: MachineModel, external_load: float):
 
 
 def equilibrium_state(model: MachineModel, point: OperatingPoint) -> np.ndarray:
-    """The averaged model's state at an operating point: [omega, a, 0, (s, (0))], or for a PI governor [omega, x] with
-    the integral part x = throttle - K_p e (governors/pi.py)."""
-    governor = _governor_of(model)
-    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
-        error = (governor.set_point - point.speed) / governor.set_point
-        return np.array([point.speed, point.throttle - governor.gain * error])
-    x = [point.speed, governor.sensor.arm_angle(point.sleeve), 0.0]
-    if governor.kind == "indirect":
-        x.append(point.servo)
-        if governor.feedback == "isodromic":
-            x.append(0.0)
-    return np.array(x)
+    """The averaged model's state at an operating point: [omega, the governor's states there
+    (GovernorKind.equilibrium_state)]."""
+    return np.concatenate([[point.speed], _governor_of(model).equilibrium_state(point)])
 
 
 def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStability:
@@ -106,11 +96,10 @@ def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStabil
     dominant = eigenvalues[np.argmax(eigenvalues.real)]
     polynomial = np.real(np.poly(jacobian))
     vyshnegradsky = None
-    if governor.kind == "direct" and np.all(polynomial > 0.0):
+    if governor.vyshnegradsky_cubic and np.all(polynomial > 0.0):
         a2, a1, a0 = polynomial[1:]
         vyshnegradsky = (a2 / a0 ** (1.0 / 3.0), a1 / a0 ** (2.0 / 3.0))
     magnitude = abs(dominant)
-    loop = _pi_loop(model, point, governor) if isinstance(governor, ElectronicGovernor) else None
     return LinearStability(
         state_names=("omega",) + governor.state_names,
         jacobian=jacobian,
@@ -121,38 +110,20 @@ def linear_stability(model: MachineModel, point: OperatingPoint) -> LinearStabil
         stable=bool(np.all(eigenvalues.real < 0.0)),
         polynomial=polynomial,
         vyshnegradsky=vyshnegradsky,
-        pi_loop=loop,
+        pi_loop=governor.loop_coefficients(model, point),
     )
-
-
-def _pi_loop(model: MachineModel, point: OperatingPoint, governor: ElectronicGovernor) -> tuple[float, float]:
-    """(a1, a0) of the PI loop at an operating point (governors/pi.py pi_loop_coefficients, docs/theory.md §8.10): the
-    averaged machine's drive M_d and inertia J_m at the point's speed, its self-regulation D = d(throttle M_d +
-    M_c)/d omega at the point's throttle by central differences."""
-    load = point.external_load
-    inertia, drive, _ = model.cycle_averages(point.speed, load)
-
-    def net(omega: float) -> float:
-        _, drive_at, other = model.cycle_averages(omega, load)
-        return point.throttle * drive_at + other
-
-    step = 1e-6 * max(abs(point.speed), 1.0)
-    regulation = (net(point.speed + step) - net(point.speed - step)) / (2.0 * step)
-    return pi_loop_coefficients(governor.gain, governor.integral_time, governor.set_point, drive, regulation, inertia)
 
 
 def critical_damping(model: MachineModel, point: OperatingPoint, upper: float = 1e7) -> float | None:
     """Sleeve damping [N s/m] at which the averaged model's dominant eigenvalue crosses the imaginary
     axis (stable above it), or None if the stability does not change between 0 and `upper` or the governor has no
-    sleeve (PI)."""
+    sleeve (GovernorKind.with_damping: a PI governor)."""
     governor = _governor_of(model)
-    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
+    if governor.with_damping(0.0) is None:
         return None
 
     def growth(damping: float) -> float:
-        # every CentrifugalSensor is a dataclass (PorterSensor, HartnellSensor); the ABC itself is not one
-        sensor = dataclasses.replace(governor.sensor, damping=damping)  # type: ignore[type-var]
-        varied = dataclasses.replace(model, governor=dataclasses.replace(governor, sensor=sensor))
+        varied = dataclasses.replace(model, governor=governor.with_damping(damping))
         return linear_stability(varied, point).dominant.real
 
     if growth(0.0) * growth(upper) > 0.0:
@@ -226,12 +197,9 @@ def floquet_stability(
 
 
 def _state_scale(model: MachineModel, point: OperatingPoint, size: int) -> np.ndarray:
-    """Typical size of each averaged-model state (omega, a, a', s, zeta; a PI governor's omega, x) for difference
+    """Typical size of each averaged-model state (omega, then the governor's: GovernorKind.state_scale) for difference
     steps and tolerances."""
-    governor = _governor_of(model)
-    if isinstance(governor, ElectronicGovernor):  # kind 'pi'
-        return np.array([max(abs(point.speed), 1.0), 1.0])
-    return np.array([max(abs(point.speed), 1.0), 1.0, 1.0, 1.0, governor.sensor.stroke[1]])[:size]
+    return np.concatenate([[max(abs(point.speed), 1.0)], _governor_of(model).state_scale(point)])[:size]
 
 
 def _map_jacobian(cycle, x: np.ndarray, steps: np.ndarray) -> np.ndarray:

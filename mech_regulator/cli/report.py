@@ -56,17 +56,9 @@ def describe(model: MachineModel) -> str:
     lines = [f"scene: {scene.name}"]
     if scene.description:
         lines.append(f"  {scene.description.strip()}")
-    units = {
-        "phi": "rad",
-        "omega": "rad/s",
-        "arm_angle": "rad",
-        "arm_rate": "rad/s",
-        "servo": "-",
-        "feedback_shift": "m",
-        "integral": "-",
-        "twist": "rad",
-        "omega_driven": "rad/s",
-    }
+    units = {"phi": "rad", "omega": "rad/s", "twist": "rad", "omega_driven": "rad/s"}
+    if model.governor is not None:  # its states' own (GovernorKind.state_units)
+        units.update(zip(model.governor.state_names, model.governor.state_units))
     lines.append("state vector: " + ", ".join(f"{name} [{units[name]}]" for name in model.state_names()))
     if machine.mechanism is None:  # the model has a reduced(phi) exactly when the scene has a mechanism
         lines.append(f"inertia: constant J = {model.inertia_constant:g} kg m^2 (no mechanism: no dJ/dphi term)")
@@ -135,7 +127,7 @@ def describe(model: MachineModel) -> str:
     if model.governor is not None:
         lines.append(
             "governor (M_d = throttle * drive"
-            + ("):" if model.governor.kind == "pi" else "; hybrid modes with exact stick, break-away and stops):")
+            + ("; hybrid modes with exact stick, break-away and stops):" if model.governor.hybrid else "):")
         )
         lines += [f"  {line}" for line in model.governor.describe()]
     lines.append(f"dynamic period: {math.degrees(model.dynamic_period()):g} deg of crank angle")

@@ -20,7 +20,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-Mode = tuple[str, str]
+from mech_regulator.governors.kind import (
+    AveragedMachine,
+    GovernorKind,
+    GovernorSource,
+    Guard,
+    Mode,
+    OperatingPoint,
+    SourceWriter,
+    builds,
+    machine_speed,
+)
+from mech_regulator.scene import governor_keys
+
 INTEGRAL = 2  # index of the integral part x in the full state vector
 
 
@@ -48,9 +60,10 @@ def pi_loop_coefficients(
 
 
 @dataclass(frozen=True)
-class ElectronicGovernor:
+class ElectronicGovernor(GovernorKind):
     """The PI governor assembled from its scene entry: set_speed omega_s [rad/s] (crank), gain K_p [-] (throttle per
-    relative speed error), integral_time T_i [s], travel (low, high) [-] of the valve."""
+    relative speed error), integral_time T_i [s], travel (low, high) [-] of the valve. No sensor, no valve table (the
+    throttle is the law's output itself), no modes."""
 
     set_point: float
     gain: float
@@ -58,9 +71,11 @@ class ElectronicGovernor:
     travel: tuple[float, float] = (0.0, 1.0)
 
     kind = "pi"
+    sensor = None
+    valve = None
     state_names = ("integral",)
-    has_friction = False
-    valve_breaks = ()  # no valve table: the throttle is the law's output itself
+    state_units = ("-",)
+    hybrid = False
 
     def law(self, ideal: bool = False) -> tuple[float, ...]:
         """The numbers pi_throttle and pi_integral_rate read after x and omega: (omega_s, K_p, T_i, low, high);
@@ -93,13 +108,86 @@ class ElectronicGovernor:
         law = self.law(ideal)
         return lambda y: [pi_integral_rate(y[INTEGRAL], y[1], *law)]
 
-    def guards(self, mode: Mode) -> list:
+    def guards(self, mode: Mode) -> list[Guard]:
         """None: the right-hand side is continuous."""
         return []
 
     def signals(self, y: np.ndarray) -> dict[str, np.ndarray | float]:
         """The governor's outputs at state(s) y besides the throttle: the integral part x [-]."""
         return {"integral": y[INTEGRAL]}
+
+    def source(self, writer: SourceWriter, valve_anchor: str) -> GovernorSource:
+        """pi_throttle and pi_integral_rate compiled, the law's numbers in p; no guards."""
+        throttle_name, rate_name = writer.shared(pi_throttle, pi_integral_rate)
+        law = f"y[{INTEGRAL}], omega, " + ", ".join(writer.scalar(value) for value in self.law())
+        return GovernorSource(f"{throttle_name}({law})", [f"dydt[{INTEGRAL}] = {rate_name}({law})"], [], 0)
+
+    def operating_point(self, machine: AveragedMachine, external_load: float) -> OperatingPoint:
+        """The steady state (docs/theory.md §8.10): the integral part removes any speed error, so the speed is the set
+        speed and the throttle the one that balances the load there, unless that throttle lies beyond the valve's
+        travel: then the valve sits on its stop and the speed follows from the machine's own balance. No sleeve, no
+        servo (NaN)."""
+        omega = self.set_speed()
+        mean_inertia = machine.cycle_averages(omega, external_load)[0]
+        throttle = machine.balance_throttle(omega, external_load)
+        low, high = self.travel
+        if low <= throttle <= high:
+            return OperatingPoint(external_load, omega, math.nan, throttle, math.nan, "", mean_inertia)
+        stop, name = (high, "high") if throttle > high else (low, "low")
+
+        def surplus(w: float) -> float:
+            _, drive, other = machine.cycle_averages(w, external_load)
+            return stop * drive + other
+
+        limited = f"valve on its {name} stop"
+        speed = machine_speed(surplus, omega)
+        if math.isnan(speed):
+            limited += "; no steady speed at that throttle"
+        return OperatingPoint(external_load, speed, math.nan, stop, math.nan, limited, mean_inertia)
+
+    def equilibrium_state(self, point: OperatingPoint) -> np.ndarray:
+        """[x]: the integral part x = throttle - K_p e at the point."""
+        error = (self.set_point - point.speed) / self.set_point
+        return np.array([point.throttle - self.gain * error])
+
+    def state_scale(self, point: OperatingPoint) -> np.ndarray:
+        """[1]: x is a throttle."""
+        return np.array([1.0])
+
+    def loop_coefficients(self, machine: AveragedMachine, point: OperatingPoint) -> tuple[float, float]:
+        """(a1, a0) of the PI loop at an operating point (pi_loop_coefficients, docs/theory.md §8.10): the averaged
+        machine's drive M_d and inertia J_m at the point's speed, its self-regulation D = d(throttle M_d + M_c)/d omega
+        at the point's throttle by central differences."""
+        load = point.external_load
+        inertia, drive, _ = machine.cycle_averages(point.speed, load)
+
+        def net(omega: float) -> float:
+            _, drive_at, other = machine.cycle_averages(omega, load)
+            return point.throttle * drive_at + other
+
+        step = 1e-6 * max(abs(point.speed), 1.0)
+        regulation = (net(point.speed + step) - net(point.speed - step)) / (2.0 * step)
+        return pi_loop_coefficients(self.gain, self.integral_time, self.set_point, drive, regulation, inertia)
+
+    def title(self) -> str:
+        """'electronic PI governor'."""
+        return "electronic PI governor"
+
+    def set_speed_text(self) -> str:
+        """Its set speed, held at every load within the valve's travel."""
+        return (
+            f"Set speed ω_set = {self.set_speed():.6g} rad/s: the electronic PI governor's, "
+            "held at every load the valve can balance. Throttle in 0..1; below it the integral "
+            "part x of the PI law."
+        )
+
+    def plotted(self) -> tuple[str, str, float, str]:
+        """The integral part x [-] (no sleeve)."""
+        return "integral", "integral part x", 1.0, "-"
+
+    def joints(self) -> tuple[tuple[str, str, str | None], ...]:
+        """throttle and integral."""
+        return ("throttle", "throttle", None), ("integral", "integral", None)
 
     def describe(self) -> list[str]:
         """Lines for `describe`: the PI law."""
@@ -110,3 +198,14 @@ class ElectronicGovernor:
                 f"{self.integral_time:g} s (tracking the travel's stops)"
             )
         ]
+
+
+@builds(governor_keys.PIGovernor)
+def build(spec: governor_keys.PIGovernor, balance_throttle: Callable[[float], float]) -> ElectronicGovernor:
+    """The PI governor of a scene's entry (type 'pi')."""
+    return ElectronicGovernor(
+        set_point=spec.set_speed,
+        gain=spec.gain,
+        integral_time=spec.integral_time,
+        travel=(spec.travel[0], spec.travel[1]),
+    )

@@ -1,5 +1,5 @@
 """The servo-motor of an indirect governor and its feedback, defined once for both paths: plain functions that numba
-compiles unchanged (as the effects' formulas, effects/definition.py), called by governors.Governor on the reference
+compiles unchanged (as the effects' formulas, effects/definition.py), called by governors.mechanical.Governor on the reference
 path and by the fast path's generated right-hand side (solvers/compiled/codegen.py)."""
 
 from __future__ import annotations

@@ -38,7 +38,7 @@ from scipy import optimize
 from mech_regulator.effects import Effect, OutputCoordinate
 from mech_regulator.effects.joint_friction import JointFrictionModel
 from mech_regulator.effects.tables import slope_breaks
-from mech_regulator.governors import ARM, ElectronicGovernor, Governor, MachineMode
+from mech_regulator.governors import GovernorKind, MachineMode
 from mech_regulator.mechanisms import cam_law_angles
 from mech_regulator.model.columns import MachineColumns
 from mech_regulator.model.coupling import CouplingModel
@@ -109,7 +109,7 @@ class MachineModel(MachineModes, MachineColumns):
     has_weight: bool
     effects: tuple[Effect, ...]
     load_pieces: tuple[LoadPiece, ...]
-    governor: Governor | ElectronicGovernor | None = None
+    governor: GovernorKind | None = None
     coupling: CouplingModel | None = None
     joint_friction: JointFrictionModel | None = None
     clutch: ClutchModel | None = None
@@ -155,9 +155,8 @@ class MachineModel(MachineModes, MachineColumns):
         tables (effect_keys.BranchLoad), nor has a driven part behind a clutch (no angle)."""
         tables = []
         governor = self.governor
-        if isinstance(governor, Governor) and governor.valve_breaks:  # a PI governor has no valve table
-            sleeve, arm = governor.sensor.sleeve, ARM
-            tables.append(StateTable("valve table", lambda y: sleeve(y[arm]), governor.valve_breaks))
+        if governor is not None and governor.valve_breaks:
+            tables.append(StateTable("valve table", governor.valve_position, governor.valve_breaks))
         if self.coupling is not None:
             twist = self.driven_speed_index - 1
             if self.coupling.table is not None:
@@ -407,7 +406,7 @@ class MachineModel(MachineModes, MachineColumns):
         J0 = self.inertia_constant
         reduced = self.reduced
         throttle: Callable[[np.ndarray], float] | None = governor.throttle if governor is not None else None
-        if isinstance(governor, Governor) and "valve table" in held:  # only a Governor has one (state_tables)
+        if governor is not None and "valve table" in held:
             throttle = governor.held_throttle(held["valve table"])
         governor_rates = None
         if governor is not None and not crank_only:

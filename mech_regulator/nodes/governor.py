@@ -152,17 +152,14 @@ class GovernorNode(Node):
             self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))
         self.reported_events = len(self.stepper.events)
         values = self.stepper.outputs()
-        if self.model.governor.kind == "pi":
-            self.states.add(when, ["throttle", "integral"], [values["throttle"], values["integral"]], [0.0, 0.0], [])
-        else:
-            extra = [name for name in ("servo", "feedback_shift") if name in values]
-            self.states.add(
-                when,
-                ["sleeve", "arm", "throttle", *extra],
-                [values["sleeve"], values["arm_angle"], values["throttle"], *(values[name] for name in extra)],
-                [values["sleeve_velocity"], values["arm_rate"], 0.0, *(0.0 for _ in extra)],
-                [],
-            )
+        joints = self.model.governor.joints()  # GovernorKind.joints
+        self.states.add(
+            when,
+            [name for name, _, _ in joints],
+            [values[position] for _, position, _ in joints],
+            [0.0 if velocity is None else values[velocity] for _, _, velocity in joints],
+            [],
+        )
         self.states.send_when_due()  # after the answer, while the machine integrates
         if self.stepper.status != "complete":
             self.report()

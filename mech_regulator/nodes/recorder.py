@@ -259,37 +259,23 @@ class RecorderNode(Node):
         every value read checked first (trust.BadMessage)."""
         if self.model.governor is None:
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
-        pi = self.model.governor.kind == "pi"  # its joints: throttle and integral
-        extra = tuple(name for name in ("servo", "feedback_shift") if name in self.model.governor.state_names)
-        groups = unrecorded(
-            batch_groups(message, ("throttle", "integral") if pi else ("sleeve", "arm", "throttle", *extra)),
-            self.governor,
-            "governor/state",
-        )
+        shown = self.model.governor.joints()  # GovernorKind.joints: (joint, position's key, velocity's key or None)
+        groups = unrecorded(batch_groups(message, tuple(name for name, _, _ in shown)), self.governor, "governor/state")
         for when, joints in groups:
-            values = (
-                [joints["integral"][0]]
-                if pi
-                else [*joints["sleeve"][:2], *joints["arm"][:2], *(joints[name][0] for name in extra)]
-            )
-            for value in values:
+            checked = [
+                value
+                for name, _, velocity in shown
+                if name != "throttle"
+                for value in (joints[name][:2] if velocity is not None else joints[name][:1])
+            ]
+            for value in checked:
                 bounded(value, -math.inf, math.inf, f"governor/state at {seconds(when):.9g} s")
             bounded(joints["throttle"][0], 0.0, 1.0, f"governor/state at {seconds(when):.9g} s: throttle")
         for when, joints in groups:
-            state = {
-                name: joints[name][0] for name in ("throttle", "integral", "servo", "feedback_shift") if name in joints
-            }
-            if not pi:
-                state.update(
-                    {
-                        "sleeve": joints["sleeve"][0],
-                        "sleeve_velocity": joints["sleeve"][1],
-                        "arm_angle": joints["arm"][0],
-                        "arm_rate": joints["arm"][1],
-                    }
-                )
-            self.governor[when] = state
-            self.recording.add_governor(when, state)
+            values = {position: joints[name][0] for name, position, _ in shown}
+            values.update({velocity: joints[name][1] for name, _, velocity in shown if velocity is not None})
+            self.governor[when] = values
+            self.recording.add_governor(when, values)
             self.part_arrived(when)
 
     def on_governor_event(self, message: String) -> None:

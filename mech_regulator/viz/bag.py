@@ -197,16 +197,15 @@ def run_messages(
                 ],
             ),
         )
-        if model.governor is not None and model.governor.kind == "pi":
-            governor = [("throttle", applied[i], 0.0), ("integral", columns["integral"][i], 0.0)]
-        elif model.governor is not None:
+        if model.governor is not None:  # its joints (GovernorKind.joints), the throttle the one applied
             governor = [
-                ("sleeve", columns["sleeve"][i], columns["sleeve_velocity"][i]),
-                ("arm", columns["arm_angle"][i], states[3][i]),
-                ("throttle", applied[i], 0.0),
+                (
+                    name,
+                    applied[i] if name == "throttle" else columns[position][i],
+                    0.0 if velocity is None else columns[velocity][i],
+                )
+                for name, position, velocity in model.governor.joints()
             ]
-            governor += [(name, columns[name][i], 0.0) for name in ("servo", "feedback_shift") if name in columns]
-        if model.governor is not None:
             yield "/governor/state", when, _joints(when, [(name, float(p), float(v), nan) for name, p, v in governor])
     yield (
         "/diagnostics",

@@ -11,8 +11,6 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 import numpy as np  # noqa: E402
 
-from mech_regulator.governors import Governor  # noqa: E402
-from mech_regulator.governors.pi import ElectronicGovernor  # noqa: E402
 from mech_regulator.model import MachineModel  # noqa: E402
 from mech_regulator.solvers import Trajectory  # noqa: E402
 
@@ -230,16 +228,13 @@ def _plot_governor_run(
     speed.legend(loc="lower right")
     governor = model.governor
     assert governor is not None, "plot_run draws a governor's panel for a governed model only"
-    if isinstance(governor, ElectronicGovernor):  # the PI governor: no sleeve, the integral part of the throttle
-        signal = columns["integral"]
-        panel.plot(times, signal, color="tab:purple", lw=1.0, label="integral part x")
-        panel.set(xlabel="t [s]", ylabel="integral part x [-]", title="governor")
-    else:
-        signal = columns["sleeve"] * 1000.0
-        panel.plot(times, signal, color="tab:purple", lw=1.0, label="sleeve z")
-        for stop in governor.sensor.stroke:
-            panel.axhline(stop * 1000.0, color="tab:purple", lw=0.6, ls=":")
-        panel.set(xlabel="t [s]", ylabel="sleeve z [mm] (dotted: stops)", title="governor")
+    key, label, factor, unit = governor.plotted()  # a sleeve z [mm], a PI governor's integral part x [-]
+    signal = columns[key] * factor
+    panel.plot(times, signal, color="tab:purple", lw=1.0, label=label)
+    stops = governor.sensor.stroke if governor.sensor is not None else ()
+    for stop in stops:
+        panel.axhline(stop * factor, color="tab:purple", lw=0.6, ls=":")
+    panel.set(xlabel="t [s]", ylabel=f"{label} [{unit}]" + (" (dotted: stops)" if stops else ""), title="governor")
     throttle = panel.twinx()
     throttle.plot(times, columns["throttle"], color="tab:red", lw=1.0, label="throttle")
     throttle.set_ylim(-0.05, 1.05)
@@ -399,8 +394,10 @@ def plot_governor(model: MachineModel, analysis: dict, path: Path) -> None:
             speeds, load / averages[:, 0], lw=1.0, label=f"throttle needed, load {point['external_load']:g} N m"
         )
         balance.plot(point["speed"], point["throttle"], "o", ms=6, color=line.get_color())
-    valve = model.governor.valve if isinstance(model.governor, Governor) else None  # None: not direct-acting
-    if valve is not None:
+    governor = model.governor
+    assert governor is not None, "plot_governor draws a governed model's statics"
+    valve = governor.valve
+    if valve is not None:  # direct action
         balance.plot(
             characteristic["speed"],
             [valve(z / 1000.0) for z in sleeve],

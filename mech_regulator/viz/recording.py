@@ -46,12 +46,11 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from mech_regulator.analysis import operating_point
-from mech_regulator.governors import Governor
 from mech_regulator.governors.drawing import MOVING_PARTS as GOVERNOR_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import MOVING_PARTS as MECHANISM_MOVING_PARTS
 from mech_regulator.mechanisms.drawing import mechanism_bounds, mechanism_kind, mechanism_outline
 from mech_regulator.model import MachineModel, crank_moments
-from mech_regulator.scene import governor_keys, mechanism_keys
+from mech_regulator.scene import mechanism_keys
 from mech_regulator.solvers.trajectory import Progress
 
 APPLICATION_ID = "mech_regulator"
@@ -188,6 +187,8 @@ class RunRecording:
         self._set_point_load = math.nan
         self._set_point_time = -SET_POINT_REFRESH_NS
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
+        # a governor without a set speed (NaN: a direct one's) settles where the load puts it: its operating point
+        self._set_point_follows_load = model.governor is not None and math.isnan(self._set_point)
         self._series: dict[str, tuple[list[int], list[float]]] = {  # entity -> (times [ns], values)
             entity: ([], []) for entity in recorded_series(model, self.outside_throttle)
         }
@@ -195,7 +196,7 @@ class RunRecording:
         self._extents: dict[str, tuple[float, float]] = {}
         if model.governor is not None:
             self._extents = {"throttle": (0.0, 1.0)}
-            if isinstance(model.governor, Governor):  # the sleeve's plot spans its stroke (a PI governor has none)
+            if model.governor.sensor is not None:  # the sleeve's plot spans its stroke
                 stroke = model.governor.sensor.stroke
                 self._extents["governor/sleeve"] = (MILLIMETRES * stroke[0], MILLIMETRES * stroke[1])
         if self.outside_throttle:
@@ -286,15 +287,17 @@ class RunRecording:
         with self._lock:
             if self._closed:
                 return
+            governor = self.model.governor
+            assert governor is not None, "add_governor records a governed model"
             self._append("throttle", t_ns, values["throttle"])
-            entity, key, factor, _ = governor_signal(self.model.governor)
+            entity, key, factor, _ = governor_signal(governor)
             self._append(entity, t_ns, factor * values[key])
             if "feedback_shift" in values:
                 self._append("governor/feedback_shift", t_ns, MILLIMETRES * values["feedback_shift"])
             frame = t_ns // self._frame_period_ns
-            if isinstance(self.model.governor, Governor) and frame != self._governor_frame:  # a PI one is not drawn
+            sensor = governor.sensor
+            if sensor is not None and frame != self._governor_frame:
                 self._governor_frame = frame
-                sensor = self.model.governor.sensor
                 self._add_frame(
                     "governor/drawing",
                     t_ns,
@@ -400,8 +403,7 @@ class RunRecording:
     def _current_set_point(self, t_ns: int) -> float:
         """omega_set [rad/s] at t_ns (see the module docstring); a direct governor's is recomputed when the
         external load changed and SET_POINT_REFRESH_NS passed since the last time, and cached by load."""
-        governor = self.model.governor
-        if governor is None or governor.kind != "direct":
+        if not self._set_point_follows_load:
             return self._set_point
         load = self._external_load
         if load != self._set_point_load and abs(t_ns - self._set_point_time) >= SET_POINT_REFRESH_NS:
@@ -449,8 +451,8 @@ class RunRecording:
             MECHANISM_STYLE,
             MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)],
         )
-        if isinstance(self.model.governor, Governor):  # a PI governor is not drawn
-            sensor = self.model.governor.sensor
+        sensor = self.model.governor.sensor if self.model.governor is not None else None
+        if sensor is not None:  # a governor without a centrifugal sensor is not drawn
             self._log_styles(
                 "governor/drawing",
                 sensor.outline(sensor.stop_angles()[0], 0.0),
@@ -535,15 +537,8 @@ def start_text(model: MachineModel) -> str:
     scene = model.scene
     if model.governor is None:
         governor = "no governor"
-    elif isinstance(scene.governor, governor_keys.IndirectGovernor):  # the model's governor of kind "indirect"
-        feedback = scene.governor.feedback.type
-        governor = (
-            "indirect governor without feedback" if feedback == "none" else f"indirect governor, {feedback} feedback"
-        )
-    elif model.governor.kind == "pi":
-        governor = "electronic PI governor"
     else:
-        governor = "direct governor"
+        governor = model.governor.title()
     speed = f"start: ω = {scene.scenario.initial.omega:.6g} rad/s"
     if model.load_pieces:
         where = " on the driven part" if model.driven is not None else ""
@@ -610,10 +605,10 @@ def resistance_name(model: MachineModel) -> str:
 
 def governor_signal(governor) -> tuple[str, str, float, str]:
     """The governor's own plotted signal beside the throttle: (entity, its key in the governor's values, factor to
-    the plotted unit, unit): a centrifugal governor's sleeve z in mm, a PI governor's integral part x [-]."""
-    if governor.kind == "pi":
-        return "governor/integral", "integral", 1.0, "-"
-    return "governor/sleeve", "sleeve", MILLIMETRES, "mm"
+    the plotted unit, unit): GovernorKind.plotted, e.g. a centrifugal governor's sleeve z in mm, a PI governor's
+    integral part x [-]."""
+    key, _, factor, unit = governor.plotted()
+    return f"governor/{key}", key, factor, unit
 
 
 def series_names(model: MachineModel, outside_throttle: bool = False) -> dict[str, str]:
@@ -624,8 +619,7 @@ def series_names(model: MachineModel, outside_throttle: bool = False) -> dict[st
     if governor is not None:
         band = band_name(*speed_band_delta(model))
         names.update({"speed/band_high": band, "speed/band_low": band, "moments/drive": "drive = throttle × M_d"})
-        if governor.kind == "indirect":
-            names["throttle"] = "throttle = servo position s"
+        names["throttle"] = governor.throttle_label
     elif outside_throttle:
         names["moments/drive"] = "drive = throttle × M_d"
     else:
@@ -690,23 +684,7 @@ def about_text(model: MachineModel, delta: float, source: str, outside_throttle:
             else "No governor: no throttle, no set speed and no band are drawn."
         )
     else:
-        if governor.kind == "indirect":
-            paragraphs.append(
-                f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the indirect governor's set speed "
-                "(sleeve at the pilot valve's neutral). Throttle in 0..1: the servo position s."
-            )
-        elif governor.kind == "pi":
-            paragraphs.append(
-                f"Set speed ω_set = {governor.set_speed():.6g} rad/s: the electronic PI governor's, "
-                "held at every load the valve can balance. Throttle in 0..1; below it the integral "
-                "part x of the PI law."
-            )
-        else:
-            paragraphs.append(
-                "Set speed ω_set: where the direct governor settles under the present external load "
-                "(operating point of the cycle-averaged machine; it moves with the load: the static "
-                "error). Throttle in 0..1."
-            )
+        paragraphs.append(governor.set_speed_text())
         if source == "permitted":
             paragraphs.append(
                 f"Band ω_set (1 ± δ/2) with the permitted coefficient of speed fluctuation "
@@ -826,9 +804,10 @@ def run_blueprint(
         origin="mechanism",
         visual_bounds=_bounds_y_down(mechanism_bounds(drawn_mechanism(model)[0])),
     )
-    if isinstance(model.governor, Governor):  # a centrifugal governor's drawing (a PI governor has none)
+    sensor = model.governor.sensor if model.governor is not None else None
+    if sensor is not None:  # a centrifugal governor's drawing
         governor = rrb.Spatial2DView(
-            name="governor", origin="governor/drawing", visual_bounds=_bounds_y_down(model.governor.sensor.bounds())
+            name="governor", origin="governor/drawing", visual_bounds=_bounds_y_down(sensor.bounds())
         )
         right = rrb.Vertical(mechanism, rrb.Horizontal(governor, logs, column_shares=[1.0, 1.3]), row_shares=[1.0, 1.8])
     else:

@@ -30,17 +30,15 @@ from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError, scenario_keys
 from mech_regulator.solvers import time_domain
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators, results, steppers
-from mech_regulator.solvers.compiled.codegen import (
+from mech_regulator.solvers.compiled.codegen import RECENT_MODELS, CompiledScene, compile_scene
+from mech_regulator.solvers.compiled.source import (
     CLAMP_HI,
     CLAMP_LO,
     CRANK_DIRECTION,
     PIECE_INDEX,
     PIECE_SLOTS,
-    RECENT_MODELS,
     WINDOW_HI,
     WINDOW_LO,
-    CompiledScene,
-    compile_scene,
 )
 from mech_regulator.solvers.time_domain import (
     MAX_INSTANT_EVENTS,
