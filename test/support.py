@@ -77,7 +77,7 @@ def setup_arguments() -> dict:
 
 
 def linkage_scene_entry(linkage) -> dict:
-    """The scene's `type: linkage` mechanism entry (scene.schema.Linkage) of a mechanisms.linkage.Linkage whose frame
+    """The scene's `type: linkage` mechanism entry (scene.mechanism_keys.Linkage) of a mechanisms.linkage.Linkage whose frame
     is named 'frame': the inverse of mechanisms.presets.linkage_core (angles in degrees)."""
 
     def xy(point: complex) -> list[float]:

@@ -15,7 +15,7 @@ from mech_regulator.analysis import operating_point
 from mech_regulator.effects.definition import union_members
 from mech_regulator.governors import GovernorKind, kind
 from mech_regulator.model import build_model
-from mech_regulator.scene import schema
+from mech_regulator.scene import governor_keys, key_types
 from mech_regulator.scene.loading import load_scene
 
 PACKAGE = Path(__file__).resolve().parent.parent / "mech_regulator"
@@ -36,7 +36,7 @@ KIND_READS = re.compile(
 
 
 def test_every_governor_entry_of_the_scene_has_a_registered_builder():
-    members = union_members(schema.Governor)
+    members = union_members(governor_keys.Governor)
     assert len(members) == 4  # direct, indirect, hartnell, pi
     for member in members:
         assert callable(kind.builder_of(member.model_construct()))
@@ -77,10 +77,10 @@ def test_no_module_above_the_governors_reads_a_governor_s_kind():
 
 
 def test_the_check_of_kinds_names_a_governor_entry_without_a_builder():
-    class Unbuilt(schema.SceneModel):
+    class Unbuilt(key_types.SceneModel):
         type: Literal["unbuilt"]
 
-    union = Annotated[schema.DirectGovernor | Unbuilt, Field(discriminator="type")]
+    union = Annotated[governor_keys.DirectGovernor | Unbuilt, Field(discriminator="type")]
     with pytest.raises(TypeError, match="Unbuilt"):
         kind.check_covered(union)
-    kind.check_covered(schema.Governor)
+    kind.check_covered(governor_keys.Governor)

@@ -46,7 +46,7 @@ def kinematics_table(mechanism: mechanism_keys.Mechanism, omega: float, count: i
 
 def reactions_unavailable(mechanism: mechanism_keys.Mechanism) -> str | None:
     """Why the joint reactions of a mechanism are not computed, or None when they are: the walking beam preset and
-    a multi-cylinder crank-slider have no kinetostatics (scene.schema.NO_KINETOSTATICS), and a linkage with a
+    a multi-cylinder crank-slider have no kinetostatics (scene.machine_keys.NO_KINETOSTATICS), and a linkage with a
     redundant link is statically indeterminate (its reactions do not follow from equilibrium alone)."""
     if mechanism.type == "walking_beam" or getattr(mechanism, "cylinders", None) is not None:
         return f"the kinetostatics of a {mechanism.type} is not built here"

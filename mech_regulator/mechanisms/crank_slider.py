@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 
 class CrankSliderGeometry(NamedTuple):
-    """Lengths [m], masses [kg] and inertias [kg m^2] of a crank–slider (see scene.schema.CrankSlider)."""
+    """Lengths [m], masses [kg] and inertias [kg m^2] of a crank–slider (see scene.mechanism_keys.CrankSlider)."""
 
     crank: float
     rod: float

@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 
 class FourBarGeometry(NamedTuple):
-    """Lengths [m], frame angle [rad], branch sign, masses [kg], inertias [kg m^2] (scene.schema.FourBar)."""
+    """Lengths [m], frame angle [rad], branch sign, masses [kg], inertias [kg m^2] (scene.mechanism_keys.FourBar)."""
 
     crank: float
     coupler: float

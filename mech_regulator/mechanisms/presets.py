@@ -6,7 +6,7 @@ mechanism_geometry) into a mechanisms.linkage.Linkage whose reduction, point mot
 (mechanisms.build_reduced, point_motions, build_kinetostatics) equal the presets' hand-written closed forms, kept as
 the tests' reference (test/closed_forms.py), to rounding. Its conventions:
 
-- The crank's own inertia belongs to machine.inertia (scene.schema.CrankSlider.crank_mass: "for its weight only"):
+- The crank's own inertia belongs to machine.inertia (scene.mechanism_keys.CrankSlider.crank_mass: "for its weight only"):
   the crank link has the crank's mass m at its centre cg (so its weight moment m g . S' and the crank bearing's
   share of its inertia force m a_S are the preset's) and the moment of inertia -m cg^2 about that centre, so that
   its moment of inertia about the pivot, I_S + m cg^2, is zero: J_links has no crank term and the balancing moment
@@ -166,7 +166,7 @@ def walking_beam_linkage(g: walking_beam.WalkingBeamGeometry) -> Linkage:
     origin: an RPP group whose travel is x_C). The tie, side link and shuttle carry second points Bt, Es and Cp at
     B, E and C (a joint's point has its name). The parallelograms' branches are those that close them (E = B + s,
     D = C + s) at phi = 0: the side of the outer joints' line the internal joint lies on; they cannot change while
-    the parallelograms do not flatten (scene.schema.WalkingBeam refuses that)."""
+    the parallelograms do not flatten (scene.mechanism_keys.WalkingBeam refuses that)."""
     s, bc = walking_beam.beam(g), walking_beam.side(g)
     O2 = g.frame * cmath.exp(1j * g.frame_angle)
     at_zero = walking_beam.solve(0.0, g)[1]

@@ -26,7 +26,7 @@ Motion = tuple[complex, complex, complex]  # (P [m], dP/dphi [m/rad], d2P/dphi2 
 
 
 class WalkingBeamGeometry(NamedTuple):
-    """Lengths [m], angles [rad], branch sign, masses [kg], inertias [kg m^2] (scene.schema.WalkingBeam)."""
+    """Lengths [m], angles [rad], branch sign, masses [kg], inertias [kg m^2] (scene.mechanism_keys.WalkingBeam)."""
 
     crank: float
     coupler: float
@@ -55,7 +55,7 @@ class WalkingBeamGeometry(NamedTuple):
 
 
 def geometry_from_scene(spec) -> WalkingBeamGeometry:
-    """The geometry of a scene's `type: walking_beam` mechanism (scene.schema.WalkingBeam): its keys, with the
+    """The geometry of a scene's `type: walking_beam` mechanism (scene.mechanism_keys.WalkingBeam): its keys, with the
     `_deg` angles in radians and the branch as a sign."""
     fields = type(spec).model_fields
     values = {key: getattr(spec, key) for key in WalkingBeamGeometry._fields if key in fields}
