@@ -44,3 +44,10 @@ def test_the_eigenvalues_are_skipped_on_the_benchmark_s_machine():
     model = model_of("crank_slider_bench", [])
     threshold = advice.STABILITY_LIMIT * MAX_STEPS / model.scene.scenario.duration
     assert FULL_FASTEST_MODE(model) is not None and FULL_FASTEST_MODE(model, at_least=threshold) is None
+
+
+@pytest.mark.parametrize("name", sorted(bundled_scenes()))
+def test_every_state_of_a_bundled_scene_names_the_keys_that_set_its_speed(name):
+    """The refusal names the keys behind the fastest state: every state a bundled scene's model has is listed."""
+    names = build_model(load_scene(name)).state_names()
+    assert [state for state in names if state not in advice.STATE_KEYS] == []

@@ -194,7 +194,7 @@ STATE_KEYS = {
     "governor.damping",
     "arm_rate": "governor.ball_mass, governor.sleeve_mass, governor.damping, governor.spring",
     "servo": "governor.servo.gain, governor.feedback",
-    "feedback": "governor.feedback",
+    "feedback_shift": "governor.feedback.gain, governor.feedback.time_constant",
     "integral": "governor.gain, governor.integral_time",
     "twist": "machine.coupling",
     "omega_driven": "machine.coupling, machine.clutch, the driven part's loads",
