@@ -18,8 +18,8 @@ kinematics call, an ungoverned one no governor — and the parameter vector p th
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
 share one module (a sweep compiles once). The module is written to the cache folder (env MECH_REGULATOR_CACHE,
 default $XDG_CACHE_HOME/mech_regulator/compiled or ~/.cache/mech_regulator/compiled) under a hash of its source,
-kernels.py's source and the package and numba versions, imported with importlib (numba caches the machine code
-in __pycache__ beside it), and kept in a process-wide dict.
+kernels.py's and effects/tables.py's source and the package and numba versions, imported with importlib (numba
+caches the machine code in __pycache__ beside it), and kept in a process-wide dict.
 
 With joint friction on a mechanism it also writes `reactions(t, y, p, squares)` (signatures.REACTIONS_SIGNATURE): the
 |R_j|^2 = |R0_j + R1_j epsilon|^2 [N^2] of the journals with friction (time_domain._journals: not the guides), at the
@@ -101,6 +101,7 @@ SLEEVE_CODE = {"": 0.0, "free": 0.0, "up": 1.0, "down": 2.0, "stuck": 3.0, "low"
 SERVO_CODE = {"": 0.0, "free": 0.0, "low": 1.0, "high": 2.0}
 DRIVEN_CODE = {FORWARD: 0.0, BACKWARD: 1.0, HELD: 2.0}
 ARM, ARM_RATE, SERVO, SHIFT = 2, 3, 4, 5
+NO_ANCHOR = "math.nan"  # a table lookup's anchor that reads the table itself (effects/tables.py)
 
 _LOADED: dict[str, object] = {}  # module hash -> imported module, for the whole process
 _RECENT: dict[int, CompiledScene] = {}  # id(model) -> its CompiledScene, the last RECENT_MODELS models compiled
@@ -401,9 +402,10 @@ def _module_path(digest: str) -> Path:
 
 @functools.cache
 def _kernels_source() -> str:
-    """kernels.py's source, part of every module's cache name: numba's cache would not notice a changed kernel (a
-    mechanism's generated functions are in the module's text itself)."""
-    return inspect.getsource(kernels)
+    """kernels.py's source and that of the tables' lookups it compiles (effects/tables.py), part of every module's
+    cache name: numba's cache would not notice a changed kernel (a mechanism's generated functions are in the
+    module's text itself)."""
+    return inspect.getsource(kernels) + inspect.getsource(kernels.tables)
 
 
 def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.ndarray:
@@ -532,7 +534,7 @@ def _effect_call(
                 return f"k.periodic_linear({phi}{shift}, {anchor}{shift}, {columns}, {period})"
             if spec.kind == INTERVALS:
                 return f"k.inside_intervals({phi}{shift}, {columns}, {period})"
-            return f"k.clamped_linear({position}, {columns}, {held})"
+            return f"k.clamped_linear({position}, {held}, {columns})"
 
     def inputs(i: int) -> dict[str, str]:
         position, ratio = (q, dq) if i == 0 else (f"{q}_{i + 1}", f"{dq}_{i + 1}")
@@ -550,12 +552,12 @@ def _formula_call(p: _Parameters, function: Callable, inputs: dict[str, str], nu
     return call_source(function, p.formula(function), inputs, stored)
 
 
-def _valve_call(definition: Definition, p: _Parameters, z: str, anchor: str = "") -> str:
+def _valve_call(definition: Definition, p: _Parameters, z: str, anchor: str = NO_ANCHOR) -> str:
     """The call of a valve's formula at the sleeve position z [m] as source, its table read on the piece that holds
-    the anchor (anchor: ', p[slot]' of the valve table's anchor, the kernel's last argument; '': z itself)."""
+    the anchor (anchor: 'p[slot]' of the valve table's anchor; NO_ANCHOR: z itself)."""
     inputs = {"z": z}
     if definition.table is not None:
-        inputs["table"] = f"k.clamped_linear({z}, {p.table(definition.table.xs, definition.table.ys)}{anchor})"
+        inputs["table"] = f"k.clamped_linear({z}, {anchor}, {p.table(definition.table.xs, definition.table.ys)})"
     return _formula_call(p, definition.moment, inputs, definition.numbers)
 
 
@@ -585,7 +587,7 @@ def valve_kernel(definition: Definition, anchored: bool = False):
     """The fast path's code of a valve's formula alone, as generate writes it (_valve_call), compiled: (f(z, anchor,
     p) -> throttle [-], p); anchored: its table read on the piece that holds the sleeve position anchor [m]."""
     p = _Parameters()
-    return _kernel("z, anchor, p", _valve_call(definition, p, "z", ", anchor" if anchored else ""), p)
+    return _kernel("z, anchor, p", _valve_call(definition, p, "z", "anchor" if anchored else NO_ANCHOR), p)
 
 
 def _kernel(arguments: str, call: str, p: _Parameters):
@@ -597,8 +599,11 @@ def _kernel(arguments: str, call: str, p: _Parameters):
 
 @functools.cache
 def _compiled_kernel(source: str, formulas: tuple[tuple[str, str, str], ...]):
-    """The function `kernel` of source compiled by numba, the formulas (name, module, function name) in its globals."""
-    namespace = {"k": kernels} | {name: kernels.compiled(module, function) for name, module, function in formulas}
+    """The function `kernel` of source compiled by numba, math, the kernels and the formulas (name, module, function
+    name) in its globals, as in a generated module."""
+    namespace = {"math": math, "k": kernels} | {
+        name: kernels.compiled(module, function) for name, module, function in formulas
+    }
     exec(source, namespace)
     return numba.njit(namespace["kernel"])
 
@@ -648,7 +653,7 @@ def generate(
     machine = model.scene.machine
     p = _Parameters()
     table_slots = tuple(p.slots(math.nan, -math.inf, math.inf) for _ in model.state_tables)  # anchor, low, high
-    anchor_of = {table.name: f", p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}  # kernels' anchor
+    anchor_of = {table.name: f"p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}  # kernels' anchor
     body: list[str] = ["phi = y[0]", "omega = y[1]"]
     if model.reduced is not None:  # the model's, not the scene's: a co-simulated governor has no mechanism
         gravity = machine.gravity if model.has_weight else None
@@ -706,7 +711,9 @@ def generate(
         low, high = (p.scalar(v) for v in sensor.stop_angles())
         z = f"{sleeve_kernel}(y[{ARM}], {sensor_args})"
         if governor.kind == "direct":
-            throttle = _valve_call(definition_of(model.scene.governor.valve), p, z, anchor_of.get("valve table", ""))
+            throttle = _valve_call(
+                definition_of(model.scene.governor.valve), p, z, anchor_of.get("valve table", NO_ANCHOR)
+            )
         else:
             throttle = f"y[{SERVO}]"
             opening = [f"opening = {z} - {p.scalar(governor.pilot_neutral)}"]
@@ -805,7 +812,7 @@ def generate(
     if governor is not None and governor.kind != "pi":
         n_mode_guards = 2 + (2 if governor.kind == "indirect" else 0)
     if model.coupling is not None:
-        train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", ""), table_slots)
+        train_lines, train_guards = _coupling_lines(model, p, anchor_of.get("coupling table", NO_ANCHOR), table_slots)
         body += train_lines
         guard_lines += train_guards
         n_mode_guards += 2
@@ -952,15 +959,15 @@ def _coupling_lines(
 ) -> tuple[list[str], list[str]]:
     """Source of the coupling and the driven part behind it (MachineModel._train, drive_train_at): the crank's
     dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
-    (at rest: the holding margins R -+ push; turning: s omega2); anchor: ', p[slot]' of a coupling table's anchor
-    (the kernel's last argument), or ''; table_slots: generate's (a driven part's table loads' anchors)."""
+    (at rest: the holding margins R -+ push; turning: s omega2); anchor: 'p[slot]' of a coupling table's anchor, or
+    NO_ANCHOR; table_slots: generate's (a driven part's table loads' anchors)."""
     coupling = model.coupling
     spec = model.scene.machine.coupling
     twist_index, speed_index = model.coupling_index, model.driven_speed_index
     if coupling.table is None:
         elastic = f"{p.scalar(coupling.stiffness)} * twist"
     else:
-        elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])}{anchor})"
+        elastic = f"k.extrapolated_linear(twist, {anchor}, {p.table(coupling.table[0], coupling.table[1])})"
     driven = spec.driven
     state = [
         f"twist = y[{twist_index}]",
