@@ -156,14 +156,13 @@ class CompiledScene:
         omega: float = 0.0,
         held: list[int] | None = None,
         y: np.ndarray | None = None,
-        offset: float = 0.0,
     ) -> np.ndarray:
         """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
         codes, the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
         joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
-        time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds (those
-        of a table that turns with phi in the stepper's phi, wrapped by offset [rad]); with joint friction's corner
+        time_domain._held_pieces) and the start state y as the stepper steps it (phi the phase), the tables' anchors and
+        their breakpoint guards' bounds (those of a table that turns with phi in the stepper's phi); with joint friction's corner
         angles and a window, the signs of the joints' relative rates at its middle (the guides' N signs:
         hold_normal)."""
         p = self.parameters.copy()
@@ -186,12 +185,9 @@ class CompiledScene:
             for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
                 p[first_rate + index] = sign
         if held is not None:
-            tables = self.model.state_tables
-            anchors = _anchors(tables, held)
-            for table, slot, anchor, (low, high) in zip(
-                tables, self.table_slots, anchors, self._held_bounds(held, y, offset)
-            ):
-                p[slot], p[slot + 1], p[slot + 2] = anchor - offset if table.angular else anchor, low, high
+            anchors = _anchors(self.model.state_tables, held)
+            for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):
+                p[slot], p[slot + 1], p[slot + 2] = anchor, low, high
         return p
 
     @staticmethod
@@ -234,16 +230,15 @@ class CompiledScene:
         )
         return sides
 
-    def _held_bounds(self, held: list[int], y: np.ndarray, offset: float = 0.0) -> list[tuple[float, float]]:
+    def _held_bounds(self, held: list[int], y: np.ndarray) -> list[tuple[float, float]]:
         """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
-        valve table's sleeve positions, the twist [rad], phi - twist [rad] less offset for a driven part's table),
-        moved to the start state y where it is just across one (as time_domain._breakpoint_guards); -inf, inf where
-        the piece has none."""
+        valve table's sleeve positions, the twist [rad], phi - twist [rad] for a driven part's table, phi the phase
+        of the state y the stepper starts from, time_domain._held_pieces), moved to y where it is just across one (as
+        time_domain._breakpoint_guards); -inf, inf where the piece has none."""
         bounds = []
         for (coefficients, table), i in zip(breakpoint_states(self.model), held):
             start = sum(c * y[index] for index, c in coefficients)
-            shift = offset if table.angular else 0.0
-            bounds.append((min(_break(table, i - 1), start) - shift, max(_break(table, i), start) - shift))
+            bounds.append((min(_break(table, i - 1), start), max(_break(table, i), start)))
         return bounds
 
     def linear(
@@ -253,7 +248,6 @@ class CompiledScene:
         omega: float = 0.0,
         held: list[int] | None = None,
         y: np.ndarray | None = None,
-        offset: float = 0.0,
     ) -> np.ndarray:
         """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
@@ -276,7 +270,7 @@ class CompiledScene:
         matrix = rows.copy()  # the stepper writes the window's rows of its copy (integrators._kink_restart)
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
             slot = self.breakpoint_slot
-            bounds = self._held_bounds(held, y, offset)
+            bounds = self._held_bounds(held, y)
             for (coefficients, _), (low, high) in zip(breakpoint_states(self.model), bounds):
                 if low > -math.inf:
                     matrix[slot] = _row(n, 0, 0.0, -low)
