@@ -21,9 +21,13 @@ def periodic_value(x: float, anchor: float, p, offset: int, n: int, period: floa
     (anchor = x: the table itself) [units of y]."""
     x0 = p[offset]
     u = (anchor - x0) % period
-    i = n - 1  # the last knot at or below u (u rounded up to exactly one period: the last segment)
-    while i > 0 and p[offset + i] - x0 > u:
-        i -= 1
+    i, last = 0, n - 1  # bisect for the last knot at or below u (u rounded up to one period: the last segment)
+    while i < last:
+        middle = (i + last + 1) // 2
+        if p[offset + middle] - x0 > u:
+            last = middle - 1
+        else:
+            i = middle
     lo = p[offset + i] - x0
     y_lo = p[offset + n + i]
     if i + 1 < n:
@@ -42,9 +46,13 @@ def clamped_value(x: float, anchor: float, p, offset: int, n: int) -> float:
         return p[offset + n]
     if at > p[offset + n - 1]:
         return p[offset + 2 * n - 1]
-    i = n - 2  # the last knot at or below at, the end segment's at the last knot
-    while p[offset + i] > at:
-        i -= 1
+    i, last = 0, n - 2  # bisect for the last knot at or below at, the end segment's at the last knot
+    while i < last:
+        middle = (i + last + 1) // 2
+        if p[offset + middle] > at:
+            last = middle - 1
+        else:
+            i = middle
     return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
         x - p[offset + i]
     )
@@ -55,9 +63,13 @@ def extrapolated_value(x: float, anchor: float, p, offset: int, n: int) -> float
     that keeps its end slopes); with an anchor (not NaN), the segment that holds the anchor continued to x
     [units of y]."""
     at = x if math.isnan(anchor) else anchor
-    i = n - 2
-    while i > 0 and p[offset + i] > at:
-        i -= 1
+    i, last = 0, n - 2  # bisect for the last knot at or below at (the first segment below the first knot)
+    while i < last:
+        middle = (i + last + 1) // 2
+        if p[offset + middle] > at:
+            last = middle - 1
+        else:
+            i = middle
     return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
         x - p[offset + i]
     )
@@ -67,9 +79,13 @@ def interval_value(x: float, p, offset: int, n: int, period: float) -> float:
     """1.0 while x mod period lies in one of the intervals [e_2k, e_2k+1) of the n edges at p[offset : offset + n]
     (from 0, ascending, within one period), else 0.0."""
     u = x % period
-    count = 0  # bisect_right(edges, u)
-    while count < n and p[offset + count] <= u:
-        count += 1
+    count, end = 0, n  # bisect_right(edges, u)
+    while count < end:
+        middle = (count + end) // 2
+        if p[offset + middle] <= u:
+            count = middle + 1
+        else:
+            end = middle
     return 1.0 if count % 2 == 1 else 0.0
 
 
@@ -79,9 +95,13 @@ def held_value(anchor: float, p, offset: int, n: int) -> float:
     table's held positions [m], indexed by bisect_right(kinks, anchor mod period))."""
     period = p[offset + n - 1]
     u = anchor % period
-    j = 0  # bisect_right(kinks, u)
-    while j < n - 1 and p[offset + j] <= u:
-        j += 1
+    j, end = 0, n - 1  # bisect_right(kinks, u)
+    while j < end:
+        middle = (j + end) // 2
+        if p[offset + middle] <= u:
+            j = middle + 1
+        else:
+            end = middle
     return p[offset + n + j]
 
 

@@ -831,12 +831,12 @@ def generate(
         journals = [friction.indices[k] for k in _journals(model)]
         if journals:  # |R0_j + R1_j epsilon|^2 of each journal
             reaction_lines = (
-                [f"rates = k.np.empty({len(model.state_names())})"]
+                [f"rates = np.empty({len(model.state_names())})"]
                 + copy
                 + [f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
             )
         if friction.guides:  # per guide s_N N - its start level (N while s_N is 0), with the rhs's epsilon
-            guard_lines += [f"rates = k.np.empty({len(model.state_names())})"] + copy
+            guard_lines += [f"rates = np.empty({len(model.state_names())})"] + copy
             normal_slot = n_mode_guards  # their own slots: the mode guards before them are fewer in some modes
             for k, position in enumerate(friction.guides):
                 side, low = f"p[{friction_slot + NORMAL_SLOTS * k}]", f"p[{friction_slot + NORMAL_SLOTS * k + 1}]"
