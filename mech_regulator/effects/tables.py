@@ -3,10 +3,11 @@ interval tables and the held pieces of a slider table; each lookup defined once 
 
 A lookup is a plain function of floats over a flat sequence `p` that holds the table at p[offset:] (xs at
 p[offset : offset + n], ys at p[offset + n : offset + 2 n]): no closures, no Python objects, no calls but `math`'s,
-as effects/definition.py asks of a formula (an angle is wrapped with Python's `%`, which numba computes alike). The reference path calls it over a list of the table's points (the
-closures below, `np.interp` for one scalar without array allocation: they run on every right-hand-side evaluation);
-the fast path compiles it unchanged with numba (solvers/compiled/kernels.py) and calls it over its parameter vector,
-so both paths do the same arithmetic and agree bit for bit (test/test_effect_definitions.py).
+as effects/definition.py asks of a formula (an angle is wrapped with Python's `%`, which numba computes alike; the
+segment is found by bisection). The reference path calls it over a list of the table's points (the closures below:
+`np.interp` for one scalar, without array allocation, as they run on every right-hand-side evaluation); the fast
+path compiles it unchanged with numba (solvers/compiled/kernels.py) and calls it over its parameter vector, so both
+paths do the same arithmetic and agree bit for bit (test/test_effect_definitions.py).
 """
 
 from __future__ import annotations

@@ -162,9 +162,9 @@ class CompiledScene:
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
         joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
         time_domain._held_pieces) and the start state y as the stepper steps it (phi the phase), the tables' anchors and
-        their breakpoint guards' bounds (those of a table that turns with phi in the stepper's phi); with joint friction's corner
-        angles and a window, the signs of the joints' relative rates at its middle (the guides' N signs:
-        hold_normal)."""
+        their breakpoint guards' bounds (those of a table that turns with phi in the stepper's phi); with joint
+        friction's corner angles and a window, the signs of the joints' relative rates at its middle (the guides' N
+        signs: hold_normal)."""
         p = self.parameters.copy()
         p[PIECE_INDEX] = self.piece_values(piece, omega)
         model = self.model
