@@ -8,6 +8,9 @@ Oracle, written here: scipy's solve_ivp piece by piece between the crossings, th
 line of the segment that holds the piece (the difference the line makes in the driven part's moment, over its
 inertia, added to the plain right-hand side's rates); the crossings are located by solve_ivp's own events on
 phi - twist - knot. Cost: about 3 s of CPU (a warm numba cache).
+
+Far out (docs/hard_cases.md, "Long runs"): the same machine started a whole number of dynamic periods on is the same
+run, its knots crossed at the same instants; the solvers read phi2 on the phase they carry, not on phi.
 """
 
 from __future__ import annotations
@@ -18,11 +21,13 @@ import math
 
 import numpy as np
 import pytest
+from test_long_runs import far_start
 from test_state_table_breakpoints import restarted_reference
 from test_table_knots import assert_meets_rtol
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
+from mech_regulator.solvers import simulate
 
 KNOTS_DEG, TORQUES = [0.0, 60.0, 150.0, 250.0], [2.0, 9.0, 4.0, 6.0]  # the driven part's load M(phi2) [deg], [N m]
 TABLE = {"type": "table", "angle_deg": KNOTS_DEG, "torque": TORQUES, "period_deg": 360.0}
@@ -109,3 +114,26 @@ def test_a_table_load_on_the_driven_part_meets_its_rtol_against_a_reference_rest
     within 3 rtol of the reference (relative to the mean speed); see docs/hard_cases.md "Tables in the state"."""
     times, reference = driven_table_reference()
     assert_meets_rtol(driven_table_model, method, rtol, path, times, reference, min_switches=times.size - 2)
+
+
+@pytest.mark.parametrize("path", ["fast", "reference"])
+@pytest.mark.parametrize("far", [1e7, 1e9])
+def test_a_table_load_on_the_driven_part_started_far_out_crosses_its_knots_as_near_0(far, path):
+    """Started K whole dynamic periods on, at phi of about 1e7 rad (10 000 s of an engine) and 1e9 rad (where a
+    double's last place, 1.2e-7 rad, is 20 times the 1e-9 of a period the pieces' slack allows), the two-mass machine
+    with the driven part's table is the run started at 0: the same 44 knot crossings, steps and restarts, every state
+    but phi bit for bit, phi K periods on to two last places. (Compared on phi itself, a knot at 1e9 rad is only
+    known to 1.2e-7 rad: the run restarted on it without end.) Both start from the same twist: the static twist
+    solved at phi far out differs in its last places."""
+    model = driven_table_model()
+    twist = f"scenario.initial.twist={model.initial_state()[2]:.17g}"
+    near = simulate(driven_table_model(f"solver.path={path}", twist))
+    start = far_start(model.dynamic_period(), far)
+    far_run = simulate(driven_table_model(f"solver.path={path}", twist, f"scenario.initial.phi={start!r}"))
+    assert near.status == far_run.status == "complete", (near.message, far_run.message)
+    assert near.stats.switches >= 44 and far_run.stats == near.stats, (near.stats, far_run.stats)
+    times = np.linspace(0.0, DURATION, 301)
+    near_states, far_states = near(times), far_run(times)
+    np.testing.assert_array_equal(far_states[1:], near_states[1:])
+    last_place = math.ulp(start + near_states[0].max())
+    np.testing.assert_allclose(far_states[0] - start, near_states[0], rtol=0.0, atol=2.0 * last_place)

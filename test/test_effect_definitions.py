@@ -2,7 +2,7 @@
 member of the scene's drive, load and valve unions (read from the pydantic unions, so a new member is walked without
 editing this file) the reference path's closure and the fast path's compiled code, as the code generator writes it
 into a scene's right-hand side, give the same numbers bit for bit on random states and random scene entries; so do
-joint friction's Newton solve and the servo's formulas."""
+each table lookup (effects/tables.py), joint friction's Newton solve and the servo's formulas."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from pydantic import Field
 
-from mech_regulator.effects import build_drive, build_load, joint_friction
+from mech_regulator.effects import build_drive, build_load, joint_friction, tables
 from mech_regulator.effects.definition import DefinitionError, check_covered, definition_of, union_members
 from mech_regulator.governors import servo as servo_motor
 from mech_regulator.governors.valve import build_valve
@@ -175,6 +175,68 @@ def test_both_paths_give_each_valve_alike(member, kind):
             expected = throttle(z, anchor) if anchored else throttle(z)
             assert _same(expected, fast(z, anchor, p)), (spec, z, anchor)
             assert 0.0 <= throttle(z) <= 1.0
+
+
+def _lookup_cases(rng) -> dict:
+    """Per table lookup of effects/tables.py, a random table (its points, its n, the numbers after n) and random
+    arguments before p (x [and anchor]): angles far from the table (negative, 1e7 rad), on its points, anchors NaN
+    or near x."""
+    period = float(rng.choice([2.0 * math.pi, 4.0 * math.pi]))
+    angles = [float(v) for v in np.sort(rng.uniform(0.0, period, int(rng.integers(2, 9))))]
+    knots = [float(v) for v in np.sort(rng.uniform(-0.2, 0.3, int(rng.integers(2, 9))))]
+    edges = [float(v) for v in np.sort(rng.uniform(0.0, period, 2 * int(rng.integers(1, 4))))]
+    start = float(rng.uniform(-1.0, 1.0))
+    values = [float(v) for v in rng.uniform(-50.0, 150.0, 8)]
+    xs = list(rng.uniform(-30.0, 60.0, STATES)) + angles + [1e7 + 0.1, -1e7 + 0.2, period, 0.0]
+    positions = list(rng.uniform(-0.5, 0.6, STATES)) + knots
+
+    def anchored(x: float, i: int) -> float:
+        return math.nan if i % 3 == 0 else x if i % 3 == 1 else x + float(rng.uniform(-0.1, 0.1))
+
+    return {
+        tables.periodic_value: (
+            [start + a for a in angles] + values[: len(angles)],
+            len(angles),
+            (period,),
+            [(x, anchored(x, i)) for i, x in enumerate(xs) if i % 3],  # its anchor is never NaN
+        ),
+        tables.clamped_value: (
+            knots + values[: len(knots)],
+            len(knots),
+            (),
+            [(x, anchored(x, i)) for i, x in enumerate(positions)],
+        ),
+        tables.extrapolated_value: (
+            knots + values[: len(knots)],
+            len(knots),
+            (),
+            [(x, anchored(x, i)) for i, x in enumerate(positions)],
+        ),
+        tables.interval_value: (edges, len(edges), (period,), [(x,) for x in xs + edges]),
+        tables.held_value: (
+            angles + [period] + values[: len(angles) + 1],
+            len(angles) + 1,
+            (),
+            [(x,) for x in xs + angles],
+        ),
+    }
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_both_paths_look_up_each_table_alike(seed):
+    """Each table lookup of effects/tables.py (all its `*_value` functions): in Python over a list of the table's
+    points (the reference path) and compiled over an array that holds the table after other numbers (the fast path's
+    p) give the same numbers bit for bit, on random tables and at angles far from them."""
+    cases = _lookup_cases(np.random.default_rng(seed))
+    assert {lookup.__name__ for lookup in cases} == {name for name in vars(tables) if name.endswith("_value")}
+    offset = 5
+    for lookup, (points, n, numbers, arguments) in cases.items():
+        fast = kernels.compiled(lookup.__module__, lookup.__name__)
+        p = np.array([math.nan] * offset + points)
+        for before in arguments:
+            expected = lookup(*before, points, 0, n, *numbers)
+            got = fast(*before, p, offset, n, *numbers)
+            assert _same(expected, got), (lookup.__name__, before, points, expected, got)
 
 
 def test_both_paths_give_the_servo_and_its_feedback_alike():

@@ -31,10 +31,10 @@ from mech_regulator.solvers.time_domain import MAX_RESTARTS_WITHOUT_PROGRESS, tu
 FAR = 1e7  # [rad]: about 10 000 s of the engines at 230 rad/s
 
 
-def far_start(period: float) -> float:
-    """A crank angle near FAR that is a whole number K of dynamic periods (period [rad]) as turns_and_phase reads it:
-    (K, 0.0), so that the run started there is the run started at 0, K periods on."""
-    turns = round(FAR / period)
+def far_start(period: float, far: float = FAR) -> float:
+    """A crank angle near `far` [rad] that is a whole number K of dynamic periods (period [rad]) as turns_and_phase
+    reads it: (K, 0.0), so that the run started there is the run started at 0, K periods on."""
+    turns = round(far / period)
     while turns_and_phase(turns * period, period) != (turns, 0.0):
         turns += 1
     return turns * period

@@ -12,7 +12,6 @@ Only the effects a scene names are built; the right-hand side calls exactly thes
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,7 +28,13 @@ from mech_regulator.effects.definition import (
     definition_of,
     reference_function,
 )
-from mech_regulator.effects.tables import clamped_linear, interval_indicator, periodic_kinks, periodic_linear
+from mech_regulator.effects.tables import (
+    clamped_linear,
+    held_lookup,
+    interval_indicator,
+    periodic_kinks,
+    periodic_linear,
+)
 from mech_regulator.scene import effect_keys, mechanism_keys
 
 check_covered(effect_keys.Drive, effect_keys.Load, effect_keys.DrivenLoad, effect_keys.BranchLoad)
@@ -126,13 +131,8 @@ def build_effect(
         table = clamped_linear(spec.xs, spec.ys)
         if output_position and kinematic_period:
             kinks = position_kinks(spec.xs, output_position)
-            if kinks:
-                positions = held_positions(kinks, output_position)
-                period_of_kinks = kinematic_period
-
-                def held(anchor: float) -> float:
-                    """The slider position [m] held on the interval between the two kinks around anchor [rad]."""
-                    return positions[bisect.bisect_right(kinks, anchor % period_of_kinks)]
+            if kinks:  # the slider position [m] held on the interval between the two kinks around an anchor [rad]
+                held = held_lookup(kinks, kinematic_period, held_positions(kinks, output_position))
 
     def bound(function: Callable[..., float] | None, anchored: bool) -> Callable[..., float] | None:
         if function is None or (anchored and not kinks):

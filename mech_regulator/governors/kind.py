@@ -129,7 +129,7 @@ class SourceWriter(Protocol):
 
     def valve_call(self, z: str, anchor: str) -> str:
         """Source of the scene's valve at the sleeve position z [m] (source), its table read on the piece that holds
-        the anchor (', p[slot]' of the valve table's anchor; '': z itself)."""
+        the anchor ('p[slot]' of the valve table's anchor; 'math.nan': z itself)."""
         ...
 
 
@@ -248,8 +248,8 @@ class GovernorKind(ABC):
 
     @abstractmethod
     def source(self, writer: SourceWriter, valve_anchor: str) -> GovernorSource:
-        """Its part of the fast path's module, the same formulas as its methods run; valve_anchor: ', p[slot]' of
-        its valve table's anchor, or ''."""
+        """Its part of the fast path's module, the same formulas as its methods run; valve_anchor: 'p[slot]' of
+        its valve table's anchor, or 'math.nan' (none)."""
 
     # ---------------------------------------------------------------------------------------------
     # Statics and stability

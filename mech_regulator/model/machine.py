@@ -80,8 +80,8 @@ class StateTable:
     [rad]): value(y) is where it is read, breaks the values where its slope jumps (sorted; with a period, those in
     [0, period), repeated every period). Each break is a guard value(y) - break that changes no mode: the solvers
     restart on its crossings and between two of them see the table continued along one piece (rhs's anchors).
-    angular: whether value turns with the crank angle phi (value(y) - phi independent of phi): the solvers give its
-    anchor in their wrapped phi."""
+    angular: whether value turns with the crank angle phi (value(y) - phi independent of phi): the solvers read it,
+    its pieces and its anchor on their wrapped phi (time_domain._held_pieces)."""
 
     name: str
     value: Callable[[np.ndarray], float]

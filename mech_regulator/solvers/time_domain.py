@@ -111,7 +111,7 @@ def _segment(
     turns, phase = turns_and_phase(y[0], period) if wraps else (0, float(y[0]))  # (phi only an output)
     counts = _switch_counts(phase, switches)
     tables = model.state_tables if kinks else ()
-    held = _held_pieces(tables, y)
+    held: list[int] = []  # per state table its piece, counted from the carried turns (_held_pieces; none yet)
     normal_sides: tuple[float, ...] = ()  # joint friction's guides: the held signs of N,
     crossed_normal: int | None = None  # and the one just crossed
     journals = _journals(model) if settings.method in STEPS_WITHIN_REACTIONS else ()
@@ -123,21 +123,18 @@ def _segment(
             whole = math.floor(phase / period)
             turns, phase = turns + whole, phase - whole * period
             counts = [count - whole for count in counts]
+            held = _unwound_pieces(tables, held, whole, period)
         offset = turns * period if wraps else 0.0
         y, mode, phase = settle_mode_in_phase(model, t, y, phase, offset, mode, trajectory)
         if trajectory.status != "complete":
             break
-        held = _held_pieces(tables, y, held)
-        breakpoints = _breakpoint_guards(tables, held, mode, y, offset)
-        guards = model.guards(mode, y) + list(breakpoints)
-        window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
-        anchors: tuple[float, ...] | None = tuple(
-            anchor - offset if table.angular else anchor  # in the solver's wrapped phi
-            for table, anchor in zip(tables, _anchors(tables, held))
-        )
-        anchors = anchors if tables else None
         y_wrapped = y.copy()
         y_wrapped[0] = phase
+        held = _held_pieces(tables, y_wrapped, held)
+        breakpoints = _breakpoint_guards(tables, held, mode, y_wrapped)
+        guards = model.guards(mode, y) + list(breakpoints)
+        window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
+        anchors = _anchors(tables, held) if tables else None  # those of an angular table in the solver's phi
         normal_sides, normal_guards = _normal_guards(
             model, piece, window, mode, kinks, anchors, t, y_wrapped, normal_sides, crossed_normal
         )
@@ -271,12 +268,16 @@ def _break(table, i: int) -> float:
 
 def _held_pieces(tables, y: np.ndarray, held: list[int] | None = None) -> list[int]:
     """For each StateTable, the piece its value(y) is in: i such that _break(i - 1) <= value < _break(i) (0 and
-    len(breaks) the ends of a table without period). A carried piece (held) is kept while the value stays in it to
-    within 1e-9 of the breaks' size: a restart just on a breakpoint then stays on the side the crossing went to."""
+    len(breaks) the ends of a table without period). y is the state as the solver steps it, phi the phase within
+    the carried turns (turns_and_phase): a table that turns with phi (angular, phi2 = phi - twist) is read on the
+    phase and its pieces counted from the turns, so its breakpoints keep their precision however far phi grows
+    (docs/hard_cases.md, "Long runs"). A carried piece (held) is kept while the value stays in it to within 1e-9 of
+    the breaks' size: a restart just on a breakpoint then stays on the side the crossing went to (None or []: none
+    carried)."""
     pieces = []
     for k, table in enumerate(tables):
         value, breaks = table.value(y), table.breaks
-        if held is not None:
+        if held:
             size = max(max(abs(b) for b in breaks), breaks[-1] - breaks[0], table.period or 0.0)
             slack = 1e-9 * size or 1e-15
             if _break(table, held[k] - 1) - slack <= value <= _break(table, held[k]) + slack:
@@ -290,6 +291,16 @@ def _held_pieces(tables, y: np.ndarray, held: list[int] | None = None) -> list[i
     return pieces
 
 
+def _unwound_pieces(tables, held: list[int], whole: int, period: float) -> list[int]:
+    """The held pieces (_held_pieces; [] none yet) once `whole` dynamic periods (period [rad]) came off the phase: an
+    angular table's (its period a whole part of the dynamic period, MachineModel.dynamic_period) counts back its
+    pieces in them, the others' stay."""
+    return [
+        i - whole * round(period / table.period) * len(table.breaks) if table.angular else i
+        for table, i in zip(tables, held)
+    ]
+
+
 def _anchors(tables, held: list[int]) -> tuple[float, ...]:
     """A value strictly inside each table's held piece (its middle, 1 unit beyond an end break for an end piece): the
     rhs's anchors."""
@@ -300,19 +311,18 @@ def _anchors(tables, held: list[int]) -> tuple[float, ...]:
     return tuple(anchors)
 
 
-def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray, offset: float = 0.0) -> dict:
+def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray) -> dict:
     """The guards of the breakpoints around each table's held piece, from the state y the solver starts at:
     value - breaks[i - 1] >= 0 and breaks[i] - value >= 0 (those that exist), each mapped to (table index, the piece
     step its crossing makes: -1 or +1). They change no mode; their crossing restarts the solver on the next piece. A
     start just across the breakpoint it was stepped onto (within _held_pieces' slack, the method's error) moves that
-    level to the start value: the guard starts at its boundary, instead of firing again at once. The guards read the
-    state as the solver steps it, phi less offset [rad]: the levels of a table that turns with phi less it too."""
+    level to the start value: the guard starts at its boundary, instead of firing again at once. The guards, y and
+    the pieces are those of the state as the solver steps it (phi the phase, _held_pieces)."""
     guards = {}
     for k, (table, i) in enumerate(zip(tables, held)):
         start, below, above = table.value(y), _break(table, i - 1), _break(table, i)
-        shift = offset if table.angular else 0.0
         if below > -math.inf:
-            low = min(below, start) - shift
+            low = min(below, start)
             guards[
                 Guard(
                     f"{table.name} breakpoint {below:g}",
@@ -321,7 +331,7 @@ def _breakpoint_guards(tables, held: list[int], mode, y: np.ndarray, offset: flo
                 )
             ] = (k, -1)
         if above < math.inf:
-            high = max(above, start) - shift
+            high = max(above, start)
             guards[
                 Guard(
                     f"{table.name} breakpoint {above:g}",

@@ -21,8 +21,8 @@ out as
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
 share one module (a sweep compiles once). The module is written to the cache folder (env MECH_REGULATOR_CACHE,
 default $XDG_CACHE_HOME/mech_regulator/compiled or ~/.cache/mech_regulator/compiled) under a hash of its source,
-kernels.py's source and the package and numba versions, imported with importlib (numba caches the machine code
-in __pycache__ beside it), and kept in a process-wide dict.
+kernels.py's and effects/tables.py's source and the package and numba versions, imported with importlib (numba
+caches the machine code in __pycache__ beside it), and kept in a process-wide dict.
 
 With joint friction on a mechanism it also writes `reactions(t, y, p, squares)` (signatures.REACTIONS_SIGNATURE): the
 |R_j|^2 = |R0_j + R1_j epsilon|^2 [N^2] of the journals with friction (time_domain._journals: not the guides), at the
@@ -68,6 +68,7 @@ from mech_regulator.solvers.compiled.source import (
     EXTERNAL_OFFSET,
     EXTERNAL_SLOPE,
     HELD_THROTTLE_EXPRESSION,
+    NO_ANCHOR,
     NORMAL_SLOTS,
     PIECE_INDEX,
     SERVO_MODE,
@@ -148,16 +149,15 @@ class CompiledScene:
         omega: float = 0.0,
         held: list[int] | None = None,
         y: np.ndarray | None = None,
-        offset: float = 0.0,
     ) -> np.ndarray:
         """p for one segment: the external-load piece (offset [N m], slope [N m/s], held throttle), the mode's
         codes, the switch window (lo, hi) [rad] (effects see phi clamped to it less a margin of 1e-9 of its
         width, as MachineModel.rhs) and the sign of the crank's speed omega [rad/s] at the segment's start (which
         joint friction's crank guard watches, as MachineModel.guards(mode, y)); with held (per state table its piece,
-        time_domain._held_pieces) and the start state y, the tables' anchors and their breakpoint guards' bounds (those
-        of a table that turns with phi in the stepper's phi, wrapped by offset [rad]); with joint friction's corner
-        angles and a window, the signs of the joints' relative rates at its middle (the guides' N signs:
-        hold_normal)."""
+        time_domain._held_pieces) and the start state y as the stepper steps it (phi the phase), the tables' anchors and
+        their breakpoint guards' bounds (those of a table that turns with phi in the stepper's phi); with joint
+        friction's corner angles and a window, the signs of the joints' relative rates at its middle (the guides' N
+        signs: hold_normal)."""
         p = self.parameters.copy()
         p[PIECE_INDEX] = self.piece_values(piece, omega)
         model = self.model
@@ -179,12 +179,9 @@ class CompiledScene:
                 for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
                     p[first_rate + index] = sign
         if held is not None:
-            tables = self.model.state_tables
-            anchors = _anchors(tables, held)
-            for table, slot, anchor, (low, high) in zip(
-                tables, self.table_slots, anchors, self._held_bounds(held, y, offset)
-            ):
-                p[slot], p[slot + 1], p[slot + 2] = anchor - offset if table.angular else anchor, low, high
+            anchors = _anchors(self.model.state_tables, held)
+            for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):
+                p[slot], p[slot + 1], p[slot + 2] = anchor, low, high
         return p
 
     @staticmethod
@@ -229,19 +226,18 @@ class CompiledScene:
         )
         return sides
 
-    def _held_bounds(self, held: list[int], y: np.ndarray | None, offset: float = 0.0) -> list[tuple[float, float]]:
+    def _held_bounds(self, held: list[int], y: np.ndarray | None) -> list[tuple[float, float]]:
         """Per state table, the held piece's lower and upper breakpoints in the guard's state (the arm angle [rad] of a
-        valve table's sleeve positions, the twist [rad], phi - twist [rad] less offset for a driven part's table),
-        moved to the start state y (given with held) where it is just across one (as time_domain._breakpoint_guards);
-        -inf, inf where the piece has none."""
+        valve table's sleeve positions, the twist [rad], phi - twist [rad] for a driven part's table, phi the phase
+        of the state y the stepper starts from, time_domain._held_pieces), moved to y (given with held) where it is
+        just across one (as time_domain._breakpoint_guards); -inf, inf where the piece has none."""
         if not held:
             return []
         bounds = []
         start_state = present(y, "segment's start state")
         for (coefficients, table), i in zip(breakpoint_states(self.model), held):
             start = sum(c * start_state[index] for index, c in coefficients)
-            shift = offset if table.angular else 0.0
-            bounds.append((min(_break(table, i - 1), start) - shift, max(_break(table, i), start) - shift))
+            bounds.append((min(_break(table, i - 1), start), max(_break(table, i), start)))
         return bounds
 
     def linear(
@@ -251,7 +247,6 @@ class CompiledScene:
         omega: float = 0.0,
         held: list[int] | None = None,
         y: np.ndarray | None = None,
-        offset: float = 0.0,
     ) -> np.ndarray:
         """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
@@ -274,7 +269,7 @@ class CompiledScene:
         matrix = rows.copy()  # the stepper writes the window's rows of its copy (integrators._kink_restart)
         if self.breakpoint_slot is not None and held is not None:  # a table's breakpoint: also a step onto it
             slot = self.breakpoint_slot
-            bounds = self._held_bounds(held, y, offset)
+            bounds = self._held_bounds(held, y)
             for (coefficients, _), (low, high) in zip(breakpoint_states(self.model), bounds):
                 if low > -math.inf:
                     matrix[slot] = _row(n, 0, 0.0, -low)
@@ -401,9 +396,10 @@ def _module_path(digest: str) -> Path:
 
 @functools.cache
 def _kernels_source() -> str:
-    """kernels.py's source, part of every module's cache name: numba's cache would not notice a changed kernel (a
-    mechanism's generated functions are in the module's text itself)."""
-    return inspect.getsource(kernels)
+    """kernels.py's source and that of the tables' lookups it compiles (effects/tables.py), part of every module's
+    cache name: numba's cache would not notice a changed kernel (a mechanism's generated functions are in the
+    module's text itself)."""
+    return inspect.getsource(kernels) + inspect.getsource(kernels.tables)
 
 
 def _row(n_states: int, index: int, coefficient: float, constant: float) -> np.ndarray:
@@ -461,7 +457,7 @@ def generate(
     machine = model.scene.machine
     p = Parameters()
     table_slots = tuple(p.slots(math.nan, -math.inf, math.inf) for _ in model.state_tables)  # anchor, low, high
-    anchor_of = {table.name: f", p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}  # kernels' anchor
+    anchor_of = {table.name: f"p[{slot}]" for table, slot in zip(model.state_tables, table_slots)}  # kernels' anchor
     body: list[str] = ["phi = y[0]", "omega = y[1]"]
     if model.reduced is not None:  # the model's, not the scene's: a co-simulated governor has no mechanism
         gravity = machine.gravity if model.has_weight else None
@@ -510,7 +506,7 @@ def generate(
     n_mode_guards = 0
     if governor is not None:  # the governor's own part (GovernorKind.source), its throttle scaling the drives
         valve = getattr(model.scene.governor, "valve", None)  # a direct governor's entry has one
-        part = governor.source(GovernorWriter(p, valve), anchor_of.get("valve table", ""))
+        part = governor.source(GovernorWriter(p, valve), anchor_of.get("valve table", NO_ANCHOR))
         governor_lines, guard_lines, n_mode_guards = part.rates, list(part.guards), part.n_guards
         body.append(f"share = {part.throttle}")
         body += [
@@ -520,7 +516,7 @@ def generate(
     body.append("dydt[0] = omega")
     journals, reaction_lines = [], []  # the journals' positions in the kinetostatics; `reactions`' body
     if model.coupling is not None:
-        train_lines, train_guards = coupling_lines(model, p, anchor_of.get("coupling table", ""), table_slots)
+        train_lines, train_guards = coupling_lines(model, p, anchor_of.get("coupling table", NO_ANCHOR), table_slots)
         body += train_lines
         guard_lines += train_guards
         n_mode_guards += 2
@@ -545,12 +541,12 @@ def generate(
         journals = [friction.indices[k] for k in _journals(model)]
         if journals:  # |R0_j + R1_j epsilon|^2 of each journal
             reaction_lines = (
-                [f"rates = k.np.empty({len(model.state_names())})"]
+                [f"rates = np.empty({len(model.state_names())})"]
                 + copy
                 + [f"squares[{k}] = abs(R0[{j}] + R1[{j}] * rates[1]) ** 2" for k, j in enumerate(journals)]
             )
         if friction.guides:  # per guide s_N N - its start level (N while s_N is 0), with the rhs's epsilon
-            guard_lines += [f"rates = k.np.empty({len(model.state_names())})"] + copy
+            guard_lines += [f"rates = np.empty({len(model.state_names())})"] + copy
             normal_slot = n_mode_guards  # their own slots: the mode guards before them are fewer in some modes
             first_sign = present(friction_slot, "friction slot")  # guides' friction reads the kinetostatics' loads
             for k, position in enumerate(friction.guides):

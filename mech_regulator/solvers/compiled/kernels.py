@@ -1,10 +1,10 @@
 """Scalar numba kernels of the compiled fast path, called by the right-hand side the code generator writes for a
 scene (solvers/compiled/codegen.py): the drives', loads', valves' and servo's formulas themselves, compiled from
-their one definition (`compiled`, effects/definition.py) as is joint friction's Newton solve
-(effects.joint_friction.friction_acceleration), and, for the pieces not yet defined once, a transcription of the
-pure-Python original (named in its docstring, with the same equation): the tables' lookups, the sensor, the drive
-train. Tables are read from the parameter vector p at (offset, length), so no
-number of a scene is compiled into the code. All arguments and results are SI, as in the originals.
+their one definition (`compiled`, effects/definition.py), as are the tables' lookups (effects/tables.py) and joint
+friction's Newton solve (effects.joint_friction.friction_acceleration), and, for the pieces not yet defined once, a
+transcription of the pure-Python original (named in its docstring, with the same equation): the drive train. Tables
+are read from the parameter vector p at (offset, length), so no number of a scene is compiled into the code. All
+arguments and results are SI, as in the originals.
 
 The generated module's cache name includes this file's source and the formulas' modules' (codegen writes their hash
 into the module): numba's own cache would not notice a changed kernel.
@@ -15,8 +15,9 @@ from __future__ import annotations
 import functools
 import importlib
 
-import numpy as np
 from numba import njit
+
+from mech_regulator.effects import tables
 
 
 @functools.cache
@@ -28,84 +29,14 @@ def compiled(module: str, name: str):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Tables (effects/tables.py) read from p: xs at p[offset : offset + n], ys at p[offset + n : offset + 2 n]
+# Tables: effects/tables.py's lookups compiled, read from p (xs at p[offset : offset + n], ys at
+# p[offset + n : offset + 2 n]); an anchor NaN reads the table itself
 
-
-@njit(cache=True)
-def periodic_linear(x, anchor, p, offset, n, period):
-    """effects.tables.periodic_linear: y(x) linear between the n points, periodic with `period`, the last point
-    joined to the first plus one period (np.interp(x, xs, ys, period=period)), here the line of the segment that holds
-    `anchor` continued to x (anchor = x: the table itself)."""
-    x0 = p[offset]
-    u = np.fmod(anchor - x0, period)
-    if u < 0.0:
-        u += period
-    i = n - 1
-    while i > 0 and p[offset + i] - x0 > u:
-        i -= 1
-    lo = p[offset + i] - x0
-    y_lo = p[offset + n + i]
-    if i + 1 < n:
-        hi, y_hi = p[offset + i + 1] - x0, p[offset + n + i + 1]
-    else:
-        hi, y_hi = period, p[offset + n]
-    return y_lo + (y_hi - y_lo) / (hi - lo) * (u - lo + (x - anchor))
-
-
-@njit(cache=True)
-def clamped_linear(x, p, offset, n, anchor=np.nan):
-    """effects.tables.clamped_linear: y(x) linear between the n points, held at the end values beyond them; with an
-    anchor (not NaN), the piece that holds the anchor continued to x (an anchor on an end point: the end segment)."""
-    at = x if np.isnan(anchor) else anchor
-    if at < p[offset]:
-        return p[offset + n]
-    if at > p[offset + n - 1]:
-        return p[offset + 2 * n - 1]
-    i = n - 2
-    while p[offset + i] > at:
-        i -= 1
-    return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
-        x - p[offset + i]
-    )
-
-
-@njit(cache=True)
-def extrapolated_linear(x, p, offset, n, anchor=np.nan):
-    """effects.tables.extrapolated_linear: y(x) linear between the n points, the end segments continued; with an
-    anchor (not NaN), the segment that holds the anchor continued to x."""
-    at = x if np.isnan(anchor) else anchor
-    i = n - 2
-    while i > 0 and p[offset + i] > at:
-        i -= 1
-    return p[offset + n + i] + (p[offset + n + i + 1] - p[offset + n + i]) / (p[offset + i + 1] - p[offset + i]) * (
-        x - p[offset + i]
-    )
-
-
-@njit(cache=True)
-def inside_intervals(x, p, offset, n, period):
-    """effects.tables.interval_indicator: 1.0 while x mod period lies in one of the intervals [e_2k, e_2k+1) of the n
-    edges at p[offset : offset + n] (from 0, ascending), else 0.0."""
-    u = np.fmod(x, period)
-    if u < 0.0:
-        u += period
-    count = 0  # bisect_right(edges, u)
-    while count < n and p[offset + count] <= u:
-        count += 1
-    return 1.0 if count % 2 == 1 else 0.0
-
-
-@njit(cache=True)
-def held_position(anchor, p, offset, n):
-    """effects.held_positions looked up: the n - 1 kink angles [rad] in [0, 2 pi) at p[offset:], then 2 pi, and the n
-    held slider positions [m] after them; the one of the interval that holds anchor mod 2 pi."""
-    u = np.fmod(anchor, p[offset + n - 1])
-    if u < 0.0:
-        u += p[offset + n - 1]
-    j = 0  # bisect_right(kinks, u)
-    while j < n - 1 and p[offset + j] <= u:
-        j += 1
-    return p[offset + n + j]
+periodic_linear = compiled(tables.__name__, "periodic_value")  # (x, anchor, p, offset, n, period)
+clamped_linear = compiled(tables.__name__, "clamped_value")  # (x, anchor, p, offset, n)
+extrapolated_linear = compiled(tables.__name__, "extrapolated_value")  # (x, anchor, p, offset, n)
+inside_intervals = compiled(tables.__name__, "interval_value")  # (x, p, offset, n, period)
+held_position = compiled(tables.__name__, "held_value")  # (anchor, p, offset, n)
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -47,6 +47,7 @@ from mech_regulator.solvers.time_domain import (
     _fail_stuck,
     _held_pieces,
     _log_event,
+    _unwound_pieces,
     fail_blown_up,
     fail_no_progress,
     fail_too_many_steps,
@@ -243,7 +244,7 @@ def _compiled_pieces(
     first_step = 0.0
     tables = model.state_tables
     turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
-    held = _held_pieces(tables, y)
+    held: list[int] = []  # per state table its piece, counted from the carried turns (_held_pieces; none yet)
     normal_sides: tuple[float, ...] = ()  # joint friction's guides: the held signs of N,
     crossed_normal: int | None = None  # the one just crossed
     instant_events = stalled = 0  # mode changes, and restarts of any kind, in a row that left the time where it was
@@ -254,23 +255,24 @@ def _compiled_pieces(
         if wraps:
             whole = math.floor(phase / period)
             turns, phase = turns + whole, phase - whole * period
+            held = _unwound_pieces(tables, held, whole, period)
         offset = turns * period if wraps else 0.0
         y, mode, phase = settle_mode_in_phase(model, t, y, phase, offset, mode, trajectory)
         if trajectory.status != "complete":
             break
         window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
         start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
-        held = _held_pieces(tables, start, held)
-        p = compiled.parameters_for(piece, mode, window, start[1], held, start, offset)
         y_wrapped = start.copy()
         y_wrapped[0] = phase
+        held = _held_pieces(tables, y_wrapped, held)
+        p = compiled.parameters_for(piece, mode, window, start[1], held, y_wrapped)
         if compiled.normal_slot is not None:
             normal_sides = compiled.hold_normal(p, t, y_wrapped, normal_sides, crossed_normal)
             crossed_normal = None
         # without a switch window or a driven part's table no guard reads phi: the stepper wraps it itself instead
         # of returning to restart
         wrap_period = period if wraps and window is None and not turning else 0.0
-        linear = compiled.linear(mode, window, start[1], held, start, offset)
+        linear = compiled.linear(mode, window, start[1], held, y_wrapped)
         restarts = (
             layout.kink_grid,
             period,
@@ -307,7 +309,8 @@ def _compiled_pieces(
         trajectory.stats.restarts += int(run.wraps) + int(run.kinks)
         trajectory.stats.switches += int(run.kinks)
         if run.kinks:  # the stepper went on into later windows: phi's offset and the window are those of the last
-            turns, window = round(run.offset / period), (run.window_lo, run.window_hi)
+            later, window = round(run.offset / period), (run.window_lo, run.window_hi)
+            turns, held = later, _unwound_pieces(tables, held, later - turns, period)
             offset = turns * period
         if run.pieces_done:  # and into later pieces: the last is the one stepped now
             index += int(run.pieces_done)

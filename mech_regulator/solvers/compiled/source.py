@@ -56,6 +56,7 @@ HELD_THROTTLE_EXPRESSION = (
     f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
     f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)"
 )
+NO_ANCHOR = "math.nan"  # a table lookup's anchor that reads the table itself (effects/tables.py)
 
 Part = TypeVar("Part")
 
@@ -178,7 +179,7 @@ def effect_call(
                 return f"k.periodic_linear({phi}{shift}, {anchor}{shift}, {columns}, {period})"
             if spec.kind == INTERVALS:
                 return f"k.inside_intervals({phi}{shift}, {columns}, {period})"
-            return f"k.clamped_linear({position}, {columns}, {held})"
+            return f"k.clamped_linear({position}, {held}, {columns})"
 
     def inputs(i: int) -> dict[str, str]:
         position, ratio = (q, dq) if i == 0 else (f"{q}_{i + 1}", f"{dq}_{i + 1}")
@@ -196,12 +197,12 @@ def formula_call(p: Parameters, function: Callable, inputs: Mapping[str, str], n
     return call_source(function, p.formula(function), inputs, stored)
 
 
-def valve_call(definition: Definition, p: Parameters, z: str, anchor: str = "") -> str:
+def valve_call(definition: Definition, p: Parameters, z: str, anchor: str = NO_ANCHOR) -> str:
     """The call of a valve's formula at the sleeve position z [m] as source, its table read on the piece that holds
-    the anchor (anchor: ', p[slot]' of the valve table's anchor, the kernel's last argument; '': z itself)."""
+    the anchor (anchor: 'p[slot]' of the valve table's anchor; NO_ANCHOR: z itself)."""
     inputs = {"z": z}
     if definition.table is not None:
-        inputs["table"] = f"k.clamped_linear({z}, {p.table(definition.table.xs, definition.table.ys)}{anchor})"
+        inputs["table"] = f"k.clamped_linear({z}, {anchor}, {p.table(definition.table.xs, definition.table.ys)})"
     return formula_call(p, definition.moment, inputs, definition.numbers)
 
 
@@ -231,7 +232,7 @@ def valve_kernel(definition: Definition, anchored: bool = False):
     """The fast path's code of a valve's formula alone, as generate writes it (valve_call), compiled: (f(z, anchor,
     p) -> throttle [-], p); anchored: its table read on the piece that holds the sleeve position anchor [m]."""
     p = Parameters()
-    return _kernel("z, anchor, p", valve_call(definition, p, "z", ", anchor" if anchored else ""), p)
+    return _kernel("z, anchor, p", valve_call(definition, p, "z", "anchor" if anchored else NO_ANCHOR), p)
 
 
 def _kernel(arguments: str, call: str, p: Parameters):
@@ -243,8 +244,11 @@ def _kernel(arguments: str, call: str, p: Parameters):
 
 @functools.cache
 def _compiled_kernel(source: str, formulas: tuple[tuple[str, str, str], ...]):
-    """The function `kernel` of source compiled by numba, the formulas (name, module, function name) in its globals."""
-    namespace = {"k": kernels} | {name: kernels.compiled(module, function) for name, module, function in formulas}
+    """The function `kernel` of source compiled by numba, math, the kernels and the formulas (name, module, function
+    name) in its globals, as in a generated module."""
+    namespace = {"math": math, "k": kernels} | {
+        name: kernels.compiled(module, function) for name, module, function in formulas
+    }
     exec(source, namespace)
     return numba.njit(namespace["kernel"])
 

@@ -108,8 +108,8 @@ def coupling_lines(
 ) -> tuple[list[str], list[str]]:
     """Source of the coupling and the driven part behind it (MachineModel._train, drive_train_at): the crank's
     dydt[1] = (net - M_m) / J, d twist/dt = omega - omega2 and domega2/dt in the driven part's mode; and its guards
-    (at rest: the holding margins R -+ push; turning: s omega2); anchor: ', p[slot]' of a coupling table's anchor
-    (the kernel's last argument), or ''; table_slots: generate's (a driven part's table loads' anchors)."""
+    (at rest: the holding margins R -+ push; turning: s omega2); anchor: 'p[slot]' of a coupling table's anchor, or
+    NO_ANCHOR; table_slots: generate's (a driven part's table loads' anchors)."""
     coupling = present(model.coupling, "model's coupling")
     spec = present(model.scene.machine.coupling, "scene's coupling")
     driven_model = present(model.driven, "model's driven part")
@@ -117,7 +117,7 @@ def coupling_lines(
     if coupling.table is None:
         elastic = f"{p.scalar(present(coupling.stiffness, 'coupling stiffness'))} * twist"
     else:
-        elastic = f"k.extrapolated_linear(twist, {p.table(coupling.table[0], coupling.table[1])}{anchor})"
+        elastic = f"k.extrapolated_linear(twist, {anchor}, {p.table(coupling.table[0], coupling.table[1])})"
     driven = spec.driven
     state = [
         f"twist = y[{twist_index}]",
