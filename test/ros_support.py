@@ -30,6 +30,7 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from mech_regulator.nodes.launch import (  # noqa: E402
     DOMAIN_IDS,
     claim_domain,
+    domain_lock_descriptor,
     private_environment,
     wait_for_a_quiet_graph,
 )
@@ -138,8 +139,12 @@ class Processes:
         self.started: list[tuple[subprocess.Popen, Path]] = []
 
     def start(self, command: list[str], name: str, **kwargs) -> subprocess.Popen:
-        """Start a command with the private environment; its output goes to <folder>/<name>.log."""
+        """Start a command with the private environment; its output goes to <folder>/<name>.log. The process holds
+        the lock on its domain that this one claimed (launch.domain_lock_descriptor), so that the domain stays
+        claimed until it ends, also if this test process dies first (killed by a timeout: no fixture stops it)."""
         log_path = self.folder / f"{name}.log"
+        domain = self.environment.get("ROS_DOMAIN_ID")
+        lock = domain_lock_descriptor(int(domain)) if domain is not None else None
         # A process inherits an ignored SIGINT (pytest started as a background job of a script): it could
         # then not be stopped as by Ctrl-C. A handled signal is reset to its default by exec.
         ignored = signal.getsignal(signal.SIGINT) == signal.SIG_IGN
@@ -154,6 +159,7 @@ class Processes:
                     stderr=subprocess.STDOUT,
                     stdin=subprocess.DEVNULL,
                     start_new_session=True,
+                    pass_fds=() if lock is None else (lock,),
                     cwd=kwargs.pop("cwd", self.folder),
                     **kwargs,
                 )

@@ -193,6 +193,10 @@ def test_quick_command_writes_its_files(capsys, tmp_path):
         if row["section"] == "precision" and row["error"]:
             assert 0.0 < float(row["error"]) < 1e-3  # every path solved the same machine
     assert {row["section"] for row in rows} >= {"precision", "duration", "effects", "sweep", "startup"}
+    # --quick measures the fast path's start-up warm only (a cold compile would take some 50 s of the quick run)
+    startup = [(row["path"], row["setting"], row["note"]) for row in rows if row["section"] == "startup"]
+    assert [(path, setting) for path, setting, _ in startup] == [(REFERENCE, "warm"), (FAST, "warm")]
+    assert all(note.endswith("run complete") for _, _, note in startup), startup
     summary = json.loads((tmp_path / "speed.json").read_text())
     assert [item["target"] for item in summary["targets"]] == [
         "fast : solve_ivp",

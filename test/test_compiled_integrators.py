@@ -18,7 +18,6 @@ from mech_regulator.solvers.compiled.steppers import NO_RESTARTS, stepper
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.time_domain import PROBES_PER_STEP
 
-rk45, dop853, rosenbrock23, rk4 = (stepper(method) for method in ("RK45", "DOP853", "Rosenbrock23", "RK4"))
 STIFF = np.array([[1.0, 1.0], [1.0, -1.0]]) @ np.diag([-1.0, -1e6]) @ np.linalg.inv([[1.0, 1.0], [1.0, -1.0]])
 
 
@@ -120,10 +119,12 @@ def adaptive(
     run_steps=100000,
     restarts=NO_RESTARTS,
 ):
+    """The compiled run of the adaptive stepper of `method` (its name: the stepper is compiled or loaded when a test
+    first runs it, not when the suite is collected, which every pytest-xdist worker does) from y0 at t = 0 to t_end."""
     y0 = np.asarray(y0, dtype=float)
     thresholds = np.zeros(len(lines)) if thresholds is None else np.asarray(thresholds, dtype=float)
     return CompiledRun.from_result(
-        method(
+        stepper(method)(
             rhs,
             guards,
             len(lines),
@@ -162,9 +163,10 @@ def fixed(
     run_steps=100000,
     restarts=NO_RESTARTS,
 ):
+    """The compiled run of the RK4 stepper at a fixed `step` from y0 at t = 0 to t_end."""
     y0 = np.asarray(y0, dtype=float)
     return CompiledRun.from_result(
-        rk4(
+        stepper("RK4")(
             rhs,
             guards,
             len(lines),
@@ -199,7 +201,7 @@ def vdp_python(t, y):
     return np.array([y[1], (1.0 - y[0] ** 2) * y[1] - y[0]])
 
 
-@pytest.mark.parametrize("method, scipy_method, same_solution", [(rk45, RK45, 5e-12), (dop853, DOP853, 1e-12)])
+@pytest.mark.parametrize("method, scipy_method, same_solution", [("RK45", RK45, 5e-12), ("DOP853", DOP853, 1e-12)])
 def test_the_same_steps_as_scipy(method, scipy_method, same_solution):
     """Van der Pol at mu = 1 over [0, 20]: scipy's solver stepped by hand takes the same steps and the same rhs
     calls (scipy's DOP853 spends its 3 dense-output calls when asked, here every step). The step edges agree to
@@ -225,7 +227,7 @@ def test_the_same_steps_as_scipy(method, scipy_method, same_solution):
 def test_dop853_dense_output_in_powers_of_theta_is_scipys():
     """One DOP853 step of 0.8 s on Van der Pol: the 7th-degree power form equals scipy's nested
     Dop853DenseOutput inside the step to round-off."""
-    run = adaptive(dop853, van_der_pol, [2.0, 0.0], 0.8, [1.0], rtol=1e-2, atol=1e-2, first_step=0.8)
+    run = adaptive("DOP853", van_der_pol, [2.0, 0.0], 0.8, [1.0], rtol=1e-2, atol=1e-2, first_step=0.8)
     times, _, dense = stepped(DOP853(vdp_python, 0.0, np.array([2.0, 0.0]), 0.8, rtol=1e-2, atol=1e-2, first_step=0.8))
     assert run.n_steps == len(dense) == 1 and run.coefficients.shape == (1, 2, 7)
     t = np.linspace(0.0, 0.8, 9)
@@ -234,12 +236,14 @@ def test_dop853_dense_output_in_powers_of_theta_is_scipys():
 
 def test_a_warm_start_takes_scipys_first_step():
     """first_step given: no initial-step selection (one rhs call fewer), scipy's steps with the same first_step."""
-    run = adaptive(rk45, van_der_pol, [2.0, 0.0], 3.0, [1.0], first_step=0.05)
+    run = adaptive("RK45", van_der_pol, [2.0, 0.0], 3.0, [1.0], first_step=0.05)
     times, _, _ = stepped(RK45(vdp_python, 0.0, np.array([2.0, 0.0]), 3.0, rtol=1e-6, atol=1e-9, first_step=0.05))
     np.testing.assert_allclose(run.times, times, rtol=1e-7)  # round-off carried by the controller, as above
 
 
-@pytest.mark.parametrize("method, rtol, error", [(rk45, 1e-9, 1e-7), (dop853, 1e-9, 1e-8), (rosenbrock23, 1e-7, 5e-4)])
+@pytest.mark.parametrize(
+    "method, rtol, error", [("RK45", 1e-9, 1e-7), ("DOP853", 1e-9, 1e-8), ("Rosenbrock23", 1e-7, 5e-4)]
+)
 def test_the_oscillator_against_its_closed_form(method, rtol, error):
     """x'' = -4 x from x = 1: x = cos 2t, v = -2 sin 2t over 3 periods, ends and dense output."""
     run = adaptive(method, oscillator, [1.0, 0.0], 3 * np.pi, [4.0], rtol=rtol, atol=rtol * 1e-2)
@@ -256,7 +260,7 @@ def test_the_stiff_method_is_stable_with_few_steps_and_converges():
     y0 = np.array([1.0, 0.0])
     errors = []
     for rtol in (1e-4, 1e-6):
-        run = adaptive(rosenbrock23, stiff_linear, y0, 10.0, STIFF.ravel(), rtol=rtol, atol=rtol * 1e-3)
+        run = adaptive("Rosenbrock23", stiff_linear, y0, 10.0, STIFF.ravel(), rtol=rtol, atol=rtol * 1e-3)
         assert run.status == compiled.REACHED
         t = np.linspace(0.01, 10.0, 50)
         exact = np.column_stack([expm(STIFF * s) @ y0 for s in t])
@@ -273,7 +277,7 @@ def test_the_rosenbrock_steps_are_second_order():
     errors = []
     for step in (0.1, 0.05):
         run = adaptive(
-            rosenbrock23, oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10, max_step=step, first_step=step
+            "Rosenbrock23", oscillator, [1.0, 0.0], 2.0, [1.0], rtol=1e10, atol=1e10, max_step=step, first_step=step
         )
         errors.append(np.max(np.abs(run.y_end - [np.cos(2.0), -np.sin(2.0)])))
     assert errors[0] / errors[1] == pytest.approx(4.0, rel=0.1)
@@ -302,7 +306,7 @@ def test_an_event_is_located_to_round_off():
     """x = cos t reaches 0.5 at t = pi/3 (to 1e-12, DOP853 at a tight tolerance); the step ends there."""
     lines = POSITION_LINE.copy()
     lines[0, 1] = -0.5
-    run = adaptive(dop853, oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15, lines=lines)
+    run = adaptive("DOP853", oscillator, [1.0, 0.0], 10.0, [1.0, 0.5, np.inf], rtol=1e-13, atol=1e-15, lines=lines)
     assert run.status == compiled.EVENT and run.event_guard == 0
     assert run.event_time == pytest.approx(np.pi / 3, abs=1e-12)
     assert run.t_end == run.event_time
@@ -323,7 +327,7 @@ def test_a_dip_inside_one_step_is_caught_for_a_linear_guard():
         return (t - 0.5) ** 2 - 0.001
 
     run = adaptive(
-        rk45,
+        "RK45",
         constant_acceleration,
         [0.249, -1.0],
         10.0,
@@ -342,7 +346,12 @@ def test_a_near_tangency_fires_only_when_it_dips(level, fires):
     (the exact polynomial roots do not take a near-tangency for a crossing), one that dips 1e-10 below it fires
     where it crosses, t = 0.5 - 1e-5."""
     run = adaptive(
-        rk45, constant_acceleration, [0.25, -1.0], 2.0, [2.0, level, np.inf], lines=np.array([[1.0, -level, 1.0, 0.0]])
+        "RK45",
+        constant_acceleration,
+        [0.25, -1.0],
+        2.0,
+        [2.0, level, np.inf],
+        lines=np.array([[1.0, -level, 1.0, 0.0]]),
     )
     assert run.status == (compiled.EVENT if fires else compiled.REACHED)
     if fires:
@@ -371,20 +380,20 @@ def test_a_guard_at_its_boundary_fires_only_past_the_tolerance():
     not fire at once but when x < -1e-12 (t = 10 s, or 20 s with the lowered threshold); a threshold of
     0.5 on x = 1 - t fires at t = 0.5."""
     slow = [0.0, -1e-13]
-    run = adaptive(rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE)
+    run = adaptive("RK45", constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE)
     assert run.status == compiled.EVENT and run.n_steps > 0 and run.event_time == pytest.approx(10.0, rel=1e-6)
     run = adaptive(
-        rk45, constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE, thresholds=[-1e-12]
+        "RK45", constant_acceleration, slow, 30.0, [0.0, 0.0, np.inf], lines=POSITION_LINE, thresholds=[-1e-12]
     )
     assert run.status == compiled.EVENT and run.event_time == pytest.approx(20.0, rel=1e-6)
     run = adaptive(
-        rk45, constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE, thresholds=[0.5]
+        "RK45", constant_acceleration, [1.0, -1.0], 3.0, [0.0, 0.0, np.inf], lines=POSITION_LINE, thresholds=[0.5]
     )
     assert run.event_time == pytest.approx(0.5, abs=1e-12)
 
 
 def test_a_guard_already_violated_is_an_event_without_a_step():
-    run = adaptive(rk45, oscillator, [-1.0, 0.0], 3.0, [1.0, 0.0, np.inf], lines=POSITION_LINE)
+    run = adaptive("RK45", oscillator, [-1.0, 0.0], 3.0, [1.0, 0.0, np.inf], lines=POSITION_LINE)
     assert (run.status, run.n_steps, run.event_guard, run.event_time, run.dense) == (compiled.EVENT, 0, 0, 0.0, None)
     np.testing.assert_array_equal(run.y_end, [-1.0, 0.0])
 
@@ -395,7 +404,7 @@ def test_the_earliest_of_two_guards_wins(clock, guard, time):
     lines = TWO_GUARD_LINES.copy()
     lines[0, 1] = -0.5
     run = adaptive(
-        rk45,
+        "RK45",
         oscillator,
         [1.0, 0.0],
         5.0,
@@ -437,7 +446,9 @@ def test_a_wrap_inside_the_stepper_is_the_caller_s_restart(method):
             np.asarray(p, dtype=float),
         )
         if method == "RK4":
-            return CompiledRun.from_result(rk4(*arguments, 0.01, limit, wrap_period, 100000, 100000, *NO_RESTARTS))
+            return CompiledRun.from_result(
+                stepper("RK4")(*arguments, 0.01, limit, wrap_period, 100000, 100000, *NO_RESTARTS)
+            )
         return CompiledRun.from_result(
             stepper(method)(
                 *arguments[:5],
@@ -479,12 +490,12 @@ def test_failures_keep_what_was_computed():
     fixed_run = fixed(blow_up, [1.0], 2.0, [0.0], 0.01)
     assert fixed_run.status == compiled.FAILED and fixed_run.failure == compiled.NONFINITE
     assert 0.99 < fixed_run.t_end < 1.1 and "non-finite" in fixed_run.message and np.all(np.isfinite(fixed_run.y_old))
-    adaptive_run = adaptive(rk45, blow_up, [1.0], 2.0, [0.0])
+    adaptive_run = adaptive("RK45", blow_up, [1.0], 2.0, [0.0])
     assert adaptive_run.status == compiled.FAILED and adaptive_run.failure == compiled.STEP_TOO_SMALL
     assert 0.99 < adaptive_run.t_end < 1.01 and "step size" in adaptive_run.message
-    limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
+    limited = adaptive("RK45", oscillator, [1.0, 0.0], 100.0, [1.0], max_steps=5)
     assert (limited.status, limited.failure, limited.n_steps) == (compiled.FAILED, compiled.TOO_MANY_STEPS, 5)
-    run_limited = adaptive(rk45, oscillator, [1.0, 0.0], 100.0, [1.0], run_steps=7)
+    run_limited = adaptive("RK45", oscillator, [1.0, 0.0], 100.0, [1.0], run_steps=7)
     assert (run_limited.status, run_limited.failure, run_limited.n_steps) == (
         compiled.FAILED,
         compiled.TOO_MANY_STEPS,
@@ -504,7 +515,7 @@ def test_a_speed_beyond_the_limit_stops_the_call_at_that_step(method):
         )
     else:
         free, stopped = (
-            adaptive(stepper(method), blow_up, [1.0], 2.0, [0.0], restarts=restarts)
+            adaptive(method, blow_up, [1.0], 2.0, [0.0], restarts=restarts)
             for restarts in (NO_RESTARTS, tuple(watched))
         )
     ends = np.append(free.y_old[1:, 0], free.y_end[0])
@@ -518,7 +529,7 @@ def test_a_speed_beyond_the_limit_stops_the_call_at_that_step(method):
 def test_the_dense_output_of_a_call_on_scalars_and_arrays():
     """StepsDense: shape (n,) for a scalar, (n, m) for m times; the step starts give y_old and the end y_end;
     the arrays grew past their first capacity."""
-    run = adaptive(rk45, oscillator, [1.0, 0.0], 6.0, [1.0], rtol=1e-8, atol=1e-10)
+    run = adaptive("RK45", oscillator, [1.0, 0.0], 6.0, [1.0], rtol=1e-8, atol=1e-10)
     assert run.n_steps > 16
     dense = run.dense
     assert isinstance(dense, StepsDense) and dense(1.0).shape == (2,) and dense(np.array([1.0, 2.0])).shape == (2, 2)
@@ -527,7 +538,7 @@ def test_the_dense_output_of_a_call_on_scalars_and_arrays():
     np.testing.assert_allclose(dense(1.0), [np.cos(1.0), -np.sin(1.0)], atol=1e-7)
 
 
-@pytest.mark.parametrize("method", [rk45, dop853, rosenbrock23], ids=["RK45", "DOP853", "Rosenbrock23"])
+@pytest.mark.parametrize("method", ["RK45", "DOP853", "Rosenbrock23"])
 def test_the_steps_keep_their_reach_from_a_reaction_passing_near_zero(method):
     """y' = |R(t)| with |R|^2 = R_m^2 + R'^2 (t - t_m)^2 (1.4 N at its minimum at t_m = 0.113 s, R' = 2e4 N/s, the
     compressor's wrist pin): |R| has branch points at t_m +- i a, a = R_m / R' = 70 us. With the journal's |R|^2 given
@@ -550,6 +561,6 @@ def test_the_steps_keep_their_reach_from_a_reaction_passing_near_zero(method):
     run = adaptive(method, reaction_size, [0.0], 0.3, p, rtol=rtol, atol=rtol, reactions=reaction_square, n_journals=1)
     assert run.status == compiled.REACHED and np.min(distance_over_length(run)) >= 1.0 - 1e-7
     assert abs(run.y_end[0] - (exact(0.3) - exact(0.0))) <= rtol * (exact(0.3) - exact(0.0))
-    if method is not rosenbrock23:  # its third-order steps stay short enough there on their own
+    if method != "Rosenbrock23":  # its third-order steps stay short enough there on their own
         free = adaptive(method, reaction_size, [0.0], 0.3, p, rtol=rtol, atol=rtol, reactions=reaction_square)
         assert np.min(distance_over_length(free)) < 0.1

@@ -146,7 +146,8 @@ def counted(arrays: list, suffix: str, keys: list[str]) -> bool:
 def until_counted(probe, publisher, message, arrays: list, suffix: str, key: str, describe) -> None:
     """Publish `message` (again every RESEND s of wall time) until the latest diagnostics of the node whose name ends
     with `suffix` count it under `key`: the node has then heard of the sender's name (a node learns the names of
-    another's publishers a moment after their messages can reach it; until then it refuses them as from no peer)."""
+    another's publishers a moment after their messages can reach it; it waits for them at most trust.NAME_WAIT, then
+    refuses them as from no peer)."""
     sent = [-math.inf]
 
     def counted_yet() -> bool:

@@ -10,6 +10,8 @@ nothing depends on how fast the machine runs.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import json
 import math
@@ -18,6 +20,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -51,7 +54,7 @@ from test_recording import events
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
-from mech_regulator.nodes.launch import DOMAIN_IDS, viewer_command
+from mech_regulator.nodes.launch import DOMAIN_IDS, DOMAIN_LOCKS, viewer_command
 from mech_regulator.nodes.trust import BadMessage
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.scene.scenario_keys import DEFAULT_EXCHANGE_STEP
@@ -789,6 +792,51 @@ def test_run_takes_a_domain_no_other_process_holds():
         check=True,
     )
     assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
+
+
+# A test process that claims a domain, starts a process on it and dies without stopping it (a timeout's kill)
+ORPHAN = """
+import os, sys
+sys.path.insert(0, sys.argv[1])
+from ros_support import Processes, next_domain_id, ros_environment
+from pathlib import Path
+domain = next_domain_id()
+child = Processes(Path(sys.argv[2]), ros_environment(domain)).start(
+    [sys.executable, "-c", "import time; time.sleep(600)"], "orphan"
+)
+print(domain, child.pid, flush=True)
+os._exit(0)
+"""
+
+
+def test_a_domain_stays_claimed_while_a_process_started_on_it_runs(tmp_path):
+    # (a gap: a test process killed by a timeout released its domains while the nodes it had started on them ran on,
+    # for the next test run that claimed one to meet)
+    started = subprocess.run(
+        [sys.executable, "-c", ORPHAN, str(Path(__file__).parent), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT,
+        check=True,
+    )
+    domain, orphan = (int(word) for word in started.stdout.split())
+    lock = open(DOMAIN_LOCKS / f"{domain}.lock", "a")
+    try:
+        with pytest.raises(BlockingIOError):
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # held by the orphan
+        os.kill(orphan, signal.SIGKILL)
+        deadline, free = time.monotonic() + WAIT, False
+        while not free and time.monotonic() < deadline:  # free once it has ended
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                free = True
+            except BlockingIOError:
+                time.sleep(0.05)
+        assert free
+    finally:
+        lock.close()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(orphan, signal.SIGKILL)  # (should the test have failed before)
 
 
 def _short_engine_arguments() -> list[str]:

@@ -525,14 +525,17 @@ def _python_wall(program: str, env: dict[str, str]) -> tuple[list[str], float]:
     return done.stdout.split(), wall
 
 
-def measure_startup(report: Callable[[Row], None]) -> list[Row]:
+def measure_startup(quick: bool, report: Callable[[Row], None]) -> list[Row]:
     """Time to the first result of crank_slider_bench (import + build + first run, wall time inside a fresh
     Python process) and the package's import time: reference path, and fast path cold (empty compile caches
-    MECH_REGULATOR_CACHE and NUMBA_CACHE_DIR) then warm (the caches the cold run filled)."""
+    MECH_REGULATOR_CACHE and NUMBA_CACHE_DIR) then warm (the caches the cold run filled). quick: the fast path warm
+    only, on this process's caches (where measure_durations compiled its DOP853 stepper), not the cold compile
+    of some 50 s (solvers/compiled/warm.py)."""
     rows = []
     with tempfile.TemporaryDirectory(prefix="mech-regulator-cache-") as cache:
-        env = dict(os.environ, MECH_REGULATOR_CACHE=cache, NUMBA_CACHE_DIR=cache)
-        runs = [(REFERENCE, "warm", []), (FAST, "cold", ["solver.path=fast"]), (FAST, "warm", ["solver.path=fast"])]
+        env = dict(os.environ) if quick else dict(os.environ, MECH_REGULATOR_CACHE=cache, NUMBA_CACHE_DIR=cache)
+        cold = [] if quick else [(FAST, "cold", ["solver.path=fast"])]
+        runs = [(REFERENCE, "warm", []), *cold, (FAST, "warm", ["solver.path=fast"])]
         for path, phase, overrides in runs:
             (imported, first, status), wall = _python_wall(
                 STARTUP_PROGRAM.format(scene=BENCH_SCENE, overrides=overrides), env
@@ -720,7 +723,7 @@ def run_speed_benchmark(
         functools.partial(measure_durations, quick, keep),
         functools.partial(measure_effects, quick, keep),
         functools.partial(measure_sweeps, quick, keep),
-        functools.partial(measure_startup, keep),
+        functools.partial(measure_startup, quick, keep),
     ]
     if ros:
         parts.append(functools.partial(measure_ros, keep))

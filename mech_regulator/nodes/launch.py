@@ -71,6 +71,16 @@ def claim_domain(start: int) -> int:
     )
 
 
+def domain_lock_descriptor(domain: int) -> int | None:
+    """The file descriptor of this process's lock on `domain` (claim_domain; None if it holds none): a child process
+    started with it (subprocess's pass_fds) holds the domain too, until the child ends, also should this process end
+    first (the lock is released when its last descriptor closes)."""
+    for lock in _claimed_domains:
+        if Path(lock.name).name == f"{domain}.lock":
+            return lock.fileno()
+    return None
+
+
 def private_environment(domain_id: int) -> dict[str, str]:
     """The environment of a run: its own ROS domain, discovery on this machine only, the message packages found
     in this Python's prefix when no ROS installation is sourced, and the bundled Fast DDS profile unless one is set

@@ -15,6 +15,7 @@ from __future__ import annotations
 import inspect
 import json
 import math
+import time
 import traceback
 from collections.abc import Callable
 from typing import Annotated, Literal, overload
@@ -29,6 +30,11 @@ WARNING_PERIOD = 2.0  # [s] of wall time between repeated warnings about refused
 MAX_DISTURBANCES = 20  # disturbances a node keeps the text of (the others: counted, and in its log)
 LARGEST_STAMP = 2**53  # [ns] the largest exchange time a Batch carries exactly (about 104 days)
 UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"  # the graph's node name of an endpoint whose node it has not heard of yet
+# [s] of wall time a node waits at most, once per publisher, for the graph to name the node of a publisher whose
+# message has come: a participant announces its nodes' names on a topic of its own (ros_discovery_info), which can
+# arrive a moment after the first messages of a publisher it has just matched
+NAME_WAIT = 2.0
+NAME_POLL = 0.005  # [s] of wall time between two looks at the graph meanwhile
 
 
 class BadMessage(Exception):
@@ -168,13 +174,15 @@ def merge_counts(into: dict[str, dict[str, int]], counts: dict[str, dict[str, in
 class Speakers:
     """Which nodes a node takes each topic from (`allow`), and the publisher of each it pinned on it: the first
     accepted message's GID. A publisher is known by its GID through the graph (Node.get_publishers_info_by_topic: node
-    name and namespace of each endpoint GID), looked up again whenever a GID is new."""
+    name and namespace of each endpoint GID), looked up again whenever a GID is new; a GID the graph does not name
+    yet is waited for, at most name_wait [s] of wall time once per GID (publisher_name)."""
 
-    def __init__(self, node: Node):
-        self.node = node
+    def __init__(self, node: Node, name_wait: float = NAME_WAIT):
+        self.node, self.name_wait = node, name_wait
         self.allowed: dict[str, tuple[str, ...]] = {}  # topic -> node names
         self.pinned: dict[tuple[str, str], bytes] = {}  # (topic, node name) -> GID of its accepted publisher
         self.names: dict[bytes, str] = {}  # GID -> node name (in this node's namespace; '' elsewhere)
+        self.waited: set[bytes] = set()  # GIDs waited name_wait for already
 
     def allow(self, topic: str, *node_names: str) -> None:
         """Take `topic` from these nodes only; with no names, from whichever publisher sends first (pinned: an
@@ -182,14 +190,25 @@ class Speakers:
         self.allowed[topic] = node_names
 
     def publisher_name(self, topic: str, gid: bytes) -> str:
-        """The name of the node that has the publisher `gid` on `topic` ('' when the graph does not list it with a
-        node name in this node's namespace yet)."""
+        """The name of the node that has the publisher `gid` on `topic` ('' when its node is in another namespace, or
+        when the graph does not name it within name_wait s of wall time: the graph learns a publisher's node a
+        moment after the publisher's first messages can arrive, so the first message of a new GID waits for it,
+        blocking the node's callbacks that long at most, once per GID)."""
+        deadline = time.monotonic() + (0.0 if gid in self.waited else self.name_wait)
+        while not self._look_up(topic, gid) and time.monotonic() < deadline:
+            time.sleep(NAME_POLL)
+        self.waited.add(gid)
+        return self.names.get(gid, "")
+
+    def _look_up(self, topic: str, gid: bytes) -> bool:
+        """Whether the graph names the node of publisher `gid` (self.names has it), reading the graph's publishers
+        of `topic` into self.names unless it did already."""
         if gid not in self.names:
             namespace = self.node.get_namespace()
             for info in self.node.get_publishers_info_by_topic(topic):
                 if info.node_name != UNKNOWN_NODE:
                     self.names[bytes(info.endpoint_gid)] = info.node_name if info.node_namespace == namespace else ""
-        return self.names.get(gid, "")
+        return gid in self.names
 
     def check(self, topic: str, info: dict | None) -> str:
         """The name of the node that sent a message on `topic` (info: its rclpy MessageInfo), '' for a topic open to
