@@ -18,6 +18,10 @@ import importlib
 import numpy as np
 from numba import njit
 
+from mech_regulator import numba_cache
+
+numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
+
 
 @functools.cache
 def compiled(module: str, name: str):
