@@ -95,21 +95,30 @@ def _cache_impl(caching: ModuleType) -> Any:
 
 def register(caching: ModuleType) -> bool:
     """Put PackageSourceLocator first in `caching`'s (numba.core.caching's) list of locators: True if done (or done
-    before); False, with a one-line warning, if that module lacks what it needs (numba's keying then stays)."""
-    impl = _cache_impl(caching)
-    locators = getattr(impl, "_locator_classes", None)
+    before); False, with a one-line warning, if that module lacks what it needs or asks a locator for more than
+    PackageSourceLocator gives (numba's keying then stays)."""
+    locators = getattr(_cache_impl(caching), "_locator_classes", None)
     if not isinstance(locators, list) or not isinstance(getattr(caching, "_CacheLocator", None), type):
-        warnings.warn(
-            f"mech_regulator: numba {getattr(sys.modules.get('numba'), '__version__', '?')}'s caching module has no "
-            "CacheImpl._locator_classes list or _CacheLocator class; its disk cache is keyed on each function's own "
-            "file only (after an edit of the package, delete its __pycache__/*.nb[ic] files to compile anew)",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-        return False
-    if not any(getattr(locator, "__name__", "") == "PackageSourceLocator" for locator in locators):
-        locators.insert(0, _locator_class(caching))
+        return _keyed_by_numba(caching, "no CacheImpl._locator_classes list or _CacheLocator class")
+    locator_class = _locator_class(caching)
+    missing = sorted(getattr(locator_class, "__abstractmethods__", ()))
+    if missing:
+        return _keyed_by_numba(caching, f"locators must have {', '.join(missing)}")
+    if not any(getattr(locator, "__name__", "") == locator_class.__name__ for locator in locators):
+        locators.insert(0, locator_class)
     return True
+
+
+def _keyed_by_numba(caching: ModuleType, reason: str) -> bool:
+    """Warn in one line that numba's own keying stays, and why (`reason`); False."""
+    warnings.warn(
+        f"mech_regulator: numba {getattr(sys.modules.get('numba'), '__version__', '?')}'s caching module "
+        f"({caching.__name__}): {reason}; its disk cache is keyed on each function's own file only (after an edit of "
+        "the package, delete its __pycache__/*.nb[ic] files to compile anew)",
+        RuntimeWarning,
+        stacklevel=3,
+    )
+    return False
 
 
 @functools.cache

@@ -4,6 +4,7 @@ folder), other functions keep numba's, and a numba whose caching module moved le
 
 from __future__ import annotations
 
+import abc
 import ast
 import shutil
 import types
@@ -141,6 +142,25 @@ def test_registering_twice_adds_one_locator():
 
 
 def test_a_moved_numba_api_warns_and_leaves_numba_keying():
-    moved = types.SimpleNamespace(CacheLocatorBase=caching._CacheLocator)
-    with pytest.warns(RuntimeWarning, match="keyed on each function's own file only"):
+    moved = types.ModuleType("moved")
+    moved.CacheLocatorBase = caching._CacheLocator
+    with pytest.warns(RuntimeWarning, match="no CacheImpl._locator_classes list.*keyed on each function's own file"):
         assert not numba_cache.register(moved)
+
+
+def test_a_locator_asked_for_more_warns_and_leaves_numba_keying():
+    class AskingMore(caching._CacheLocator):
+        @abc.abstractmethod
+        def get_source_digest(self):
+            """A method a later numba might ask of every locator."""
+
+    class Impl:
+        _locator_classes: list[type] = []
+
+    moved = types.ModuleType("moved")
+    moved._CacheLocator, moved.CacheImpl = AskingMore, Impl
+    with pytest.warns(
+        RuntimeWarning, match="must have get_source_digest; its disk cache is keyed on each function's own file"
+    ):
+        assert not numba_cache.register(moved)
+    assert Impl._locator_classes == []
