@@ -65,7 +65,7 @@ import functools
 import sys
 import time
 
-from mech_regulator import cache
+from mech_regulator import cache, numba_cache
 from mech_regulator.mechanisms.linkage.flat_derivatives import (
     _column_dot,
     _cross3,
@@ -201,6 +201,7 @@ def compiled(name: str):
     compiles it at its first call, or loads it from its disk cache)."""
     from numba import njit
 
+    numba_cache.install()  # keyed on the package's source: every flat_*.py module the function calls
     _registered()
     return njit(cache=True)(globals()[name])
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mech_regulator import numba_cache
 from mech_regulator.solvers.time_domain import (
     GUARD_NODE_FRACTIONS,
     GUARD_NODES,
@@ -20,6 +21,8 @@ from mech_regulator.solvers.time_domain import (
     monotone_ends,
     switch_window,
 )
+
+numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
 LINEAR, STEP_ONTO, NONLINEAR_ONTO = 1.0, 2.0, 3.0  # flags of guards with a row or a step onto (module docstring)
 

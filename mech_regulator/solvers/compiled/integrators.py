@@ -113,6 +113,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mech_regulator import numba_cache
 from mech_regulator.scene.limits import MAX_SPEED
 from mech_regulator.solvers.compiled.events import (
     STEP_ONTO,
@@ -144,6 +145,8 @@ from mech_regulator.solvers.compiled.steps import (
     _rosenbrock_step,
 )
 from mech_regulator.solvers.time_domain import GUARD_NODES, GUARD_TOLERANCE
+
+numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
 REACHED, EVENT, WRAPPED, FAILED = 0, 1, 2, 3
 NONFINITE, STEP_TOO_SMALL, TOO_MANY_STEPS, BLOWN_UP = 1, 2, 3, 4

@@ -17,7 +17,10 @@ import importlib
 
 from numba import njit
 
+from mech_regulator import numba_cache
 from mech_regulator.effects import tables
+
+numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
 
 @functools.cache

@@ -9,10 +9,13 @@ import functools
 import numpy as np
 from numba import njit, types
 
+from mech_regulator import numba_cache
 from mech_regulator.solvers.compiled.integrators import _integrate
 from mech_regulator.solvers.compiled.locks import method_lock
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, REACTIONS_TYPE, RHS_TYPE
 from mech_regulator.solvers.compiled.steps import _DOP853, _RK4, _RK45, _ROSENBROCK23
+
+numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
 _RESTART_ARGS = (
     types.float64[::1],

@@ -10,6 +10,10 @@ from numba import njit
 from scipy.integrate import DOP853, RK45
 from scipy.integrate._ivp import dop853_coefficients
 
+from mech_regulator import numba_cache
+
+numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
+
 _RK4, _RK45, _DOP853, _ROSENBROCK23 = 0, 1, 2, 3
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0  # scipy's step-size controller (scipy.integrate._ivp.rk)
 

@@ -36,8 +36,8 @@ COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on 
 
 
 def stepper_cached(method: str) -> bool:
-    """Whether numba's disk cache holds the compiled stepper of `method` for the current source of steppers.py
-    (numba's index is empty when the source changed since)."""
+    """Whether numba's disk cache holds the compiled stepper of `method` for the current source of steppers.py and
+    of every module compiled code can reach (mech_regulator/numba_cache.py; the index is empty when one changed)."""
     from numba.core.caching import FunctionCache
 
     from mech_regulator.solvers.compiled.steppers import _STEPPERS
