@@ -10,11 +10,11 @@ from numba import njit
 
 @njit(cache=True)
 def steps_dense(times, y_old, coefficients, step_offsets, restarted, at):
-    """The states (n_states x m) at the m times `at` [s] of the dense output of the steps ending at times[1:] (StepsDense,
-    in the same operations in the same order, so the same numbers to the bit): on step k (the last that starts at or
-    before the time, the first and the last step continued beyond the ends; at the start of a step with restarted[k]
-    the step before it), y = y_old[k] + h_k (((c_J theta + ...) theta + c_1) theta), theta = (t - times[k]) / h_k,
-    and phi plus step_offsets[k] [rad] (an empty step_offsets: none)."""
+    """The states (n_states x m) at the m times `at` [s] of the dense output of the steps ending at times[1:]
+    (StepsDense, in the same operations in the same order, so the same numbers to the bit): on step k (the last that
+    starts at or before the time, the first and the last step continued beyond the ends; at the start of a step with
+    restarted[k] the step before it), y = y_old[k] + h_k (((c_J theta + ...) theta + c_1) theta), theta = (t -
+    times[k]) / h_k, and phi plus step_offsets[k] [rad] (an empty step_offsets: none)."""
     n_steps, n_states, order = coefficients.shape
     states = np.empty((n_states, at.size))
     for i in range(at.size):
