@@ -538,6 +538,33 @@ def test_the_dense_output_of_a_call_on_scalars_and_arrays():
     np.testing.assert_allclose(dense(1.0), [np.cos(1.0), -np.sin(1.0)], atol=1e-7)
 
 
+def test_the_compiled_dense_output_gives_numpys_numbers_to_the_bit():
+    """StepsDense's evaluation (compiled: solvers/compiled/dense.py) is the numpy formula of its docstring to the bit,
+    Horner's scheme from the highest coefficient, at step starts with and without a restart there (a restarted step's
+    start answered by the step before), inside the steps, beyond both ends and with phi's whole periods added back."""
+    rng = np.random.default_rng(35)
+    n_steps, n_states, order = 9, 3, 7
+    times = np.cumsum(rng.uniform(1e-4, 2e-3, n_steps + 1))
+    y_old, coefficients = rng.normal(size=(n_steps, n_states)), rng.normal(size=(n_steps, n_states, order))
+    offsets, restarted = rng.choice([0.0, 2 * np.pi, 4 * np.pi], n_steps), np.arange(n_steps) % 3 == 2
+    at = np.concatenate([times, rng.uniform(times[0] - 1e-3, times[-1] + 1e-3, 40)])
+
+    k = np.clip(np.searchsorted(times, at, side="right") - 1, 0, n_steps - 1)
+    k -= restarted[k] & (times[k] == at)
+    h = times[k + 1] - times[k]
+    theta = ((at - times[k]) / h)[:, None]
+    total = np.zeros((at.size, n_states))
+    for j in range(order - 1, -1, -1):
+        total += coefficients[k][:, :, j]
+        total *= theta
+    expected = (y_old[k] + h[:, None] * total).T
+    expected[0] += offsets[k]
+
+    dense = StepsDense(times, y_old, coefficients, offsets, restarted)
+    assert np.array_equal(dense(at), expected) and np.array_equal(dense(at[3]), expected[:, 3])
+    assert not np.array_equal(expected, StepsDense(times, y_old, coefficients)(at))  # the offsets and restarts count
+
+
 @pytest.mark.parametrize("method", ["RK45", "DOP853", "Rosenbrock23"])
 def test_the_steps_keep_their_reach_from_a_reaction_passing_near_zero(method):
     """y' = |R(t)| with |R|^2 = R_m^2 + R'^2 (t - t_m)^2 (1.4 N at its minimum at t_m = 0.113 s, R' = 2e4 N/s, the

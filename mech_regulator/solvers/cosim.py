@@ -319,13 +319,14 @@ class MachineStepper:
 
 def load_steppers(model: MachineModel, exchange_step: float) -> None:
     """Do one exchange step of the machine's stepper (and one answer of the governor's) on `model` and throw them
-    away: what they load on first use (the scene's compiled modules and the compiled steppers of the fast path, the
-    first call's set-up of the reference path) is then in this process, and in processes forked from it (the
-    launcher's nodes, nodes.launch), so that their first exchange does not wait for it."""
+    away: what they load on first use (the scene's compiled modules, the compiled steppers of the fast path and the
+    evaluation of their dense output, the first call's set-up of the reference path) is then in this process, and in
+    processes forked from it (the launcher's nodes, nodes.launch), so that their first exchange does not wait for it."""
     duration = model.scene.scenario.duration
-    MachineStepper(model).advance(min(exchange_step, duration), 1.0, model.external_load(0.0))
+    step = min(exchange_step, duration)
+    speed_samples([MachineStepper(model).advance(step, 1.0, model.external_load(0.0))], 0.0, step)
     if model.governor is not None:
-        GovernorStepper(model).answer(min(exchange_step, duration), model.initial_state()[1])
+        GovernorStepper(model).answer(step, model.initial_state()[1])
 
 
 class GovernorStepper:

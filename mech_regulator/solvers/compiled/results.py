@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import DenseOutput
 
+from mech_regulator.solvers.compiled.dense import steps_dense
 from mech_regulator.solvers.compiled.integrators import FAILED, FAILURES
 
 
@@ -29,24 +30,11 @@ class StepsDense(DenseOutput):
     ):
         super().__init__(times[0], times[-1])
         self.times, self.y_old, self.coefficients = times, y_old, coefficients
-        self.step_offsets = step_offsets
-        self.restarted = restarted if restarted is not None and restarted.any() else None
+        self.step_offsets = np.empty(0) if step_offsets is None else step_offsets
+        self.restarted = np.zeros(times.size - 1, dtype=np.bool_) if restarted is None else restarted
 
     def _call_impl(self, t):
-        times = np.atleast_1d(t)
-        k = np.minimum(np.maximum(np.searchsorted(self.times, times, side="right") - 1, 0), self.y_old.shape[0] - 1)
-        if self.restarted is not None:
-            k -= self.restarted[k] & (self.times[k] == times)
-        h = self.times[k + 1] - self.times[k]
-        theta = ((times - self.times[k]) / h)[:, None]
-        total = np.zeros((times.size, self.y_old.shape[1]))
-        coefficients = self.coefficients[k]  # the steps' (one gather; the loop then reads views, in place)
-        for j in range(coefficients.shape[2] - 1, -1, -1):
-            total += coefficients[:, :, j]
-            total *= theta
-        y = (self.y_old[k] + h[:, None] * total).T
-        if self.step_offsets is not None:
-            y[0] += self.step_offsets[k]
+        y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, np.atleast_1d(t))
         return y[:, 0] if np.ndim(t) == 0 else y
 
 
