@@ -38,3 +38,12 @@ def test_bench_long_refuses_an_unknown_name_before_anything_runs(capsys):
     code, out, err = run_cli(capsys, "bench", "long", "--methods", "DOP853,Euler")
     assert code == 2 and out == ""
     assert "--methods 'DOP853,Euler': Euler is not one of DOP853, RK45, RK4, Radau, energy" in err
+
+
+def test_a_refusal_of_several_lines_is_one_row_of_the_table():
+    from mech_regulator.bench.long import Row, format_row
+
+    message = "lathe.yaml: 2 problems:\n  solver.step = 0.0001 s would take 1e+08 steps\n  solver.sample_rate = ..."
+    line = format_row(Row("lathe", "fast", "RK4", "simulate", "refused", message, 0.1))
+    assert "\n" not in line and line.count(" | ") == 11
+    assert "refused: lathe.yaml: 2 problems: solver.step = 0.0001 s would take 1e+08 steps" in line

@@ -159,7 +159,8 @@ def format_header(duration: float) -> str:
 
 
 def format_row(row: Row) -> str:
-    """A row of the table (Markdown): the figures against the short run's as differences relative to them."""
+    """A row of the table (Markdown), on one line: the figures against the short run's as differences relative to
+    them; a message of several lines (a scene's problems) is joined, its first 90 characters shown."""
 
     def number(value: float | None, spec: str) -> str:
         return "-" if value is None else format(value, spec)
@@ -167,7 +168,7 @@ def format_row(row: Row) -> str:
     def relative(value: float | None, short: float | None) -> str:
         return "-" if value is None or short is None or short == 0.0 else f"{value / short - 1.0:+.1e}"
 
-    status = row.status if row.status == "complete" else f"{row.status}: {row.message[:90]}"
+    status = row.status if row.status == "complete" else f"{row.status}: {' '.join(row.message.split())[:90]}"
     return (
         f"| {row.scene} | {row.path} | {row.method} | {row.mode} | {status} | {row.wall:.0f} | "
         f"{number(row.steps, 'd')} | {number(row.residual, '.1e')} | {number(row.omega_m, '.6g')} | "
