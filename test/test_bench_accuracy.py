@@ -215,14 +215,19 @@ def test_ctrl_c_keeps_the_runs_measured(tmp_path):
 def test_ctrl_c_while_the_parent_works_stops_the_workers_at_the_next_measurement():
     """Ctrl-C only marks the interrupt while the workers measure (never a KeyboardInterrupt inside the pool's own
     locks, which could leave terminate() waiting for ever); it is raised when the next measurement is asked for,
-    and Ctrl-C is Python's again afterwards."""
-    tasks = [Task("startup", True, Setting("RK45", rtol)) for rtol in (1e-3, 1e-4, 1e-5, 1e-6)]
-    measurements = _measured(tasks, 2)
-    assert next(measurements).task in tasks
-    os.kill(os.getpid(), signal.SIGINT)  # as if pressed while the parent adds the measurement
-    with pytest.raises(KeyboardInterrupt):
-        next(measurements)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    and Ctrl-C is what it was before again afterwards (Python's here: a pytest started as a background job of a
+    script inherits an ignored SIGINT, so the test sets Python's handler first)."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        tasks = [Task("startup", True, Setting("RK45", rtol)) for rtol in (1e-3, 1e-4, 1e-5, 1e-6)]
+        measurements = _measured(tasks, 2)
+        assert next(measurements).task in tasks
+        os.kill(os.getpid(), signal.SIGINT)  # as if pressed while the parent adds the measurement
+        with pytest.raises(KeyboardInterrupt):
+            next(measurements)
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def test_the_measurement_imports_neither_rerun_nor_matplotlib_nor_rclpy():
