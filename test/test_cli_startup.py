@@ -72,7 +72,7 @@ def test_the_parser_loads_no_heavy_library(argv):
 
 
 def test_importing_the_command_line_loads_no_heavy_library():
-    assert modules_after("import mech_regulator.cli.main; mech_regulator.cli.main.build_parser()") == []
+    assert modules_after("import mech_regulator.cli.main; mech_regulator.cli.parser.build_parser()") == []
 
 
 def test_the_entry_points_client_loads_no_heavy_library():

@@ -25,7 +25,7 @@ from mech_regulator.cli.report import (
 
 
 def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
-    """The `flywheel` subcommand and its options; scene_command (cli.main) makes a subcommand with the SCENE and
+    """The `flywheel` subcommand and its options; scene_command (cli.parser) makes a subcommand with the SCENE and
     --set arguments of every scene command (SCENE optional here: --classes needs none)."""
     text = (
         "size a flywheel for a permitted coefficient of speed fluctuation [delta]: the energy-swing formula, "

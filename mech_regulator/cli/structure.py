@@ -8,7 +8,7 @@ from pathlib import Path
 
 
 def add_structure_command(scene_command) -> None:
-    """Add the `structure` subcommand (scene_command: main.build_parser's helper)."""
+    """Add the `structure` subcommand (scene_command: parser.build_parser's helper)."""
     structure = scene_command(
         "structure",
         "structural analysis of a linkage scene (source 001): moving links n, "

@@ -42,7 +42,7 @@ DASK_EXTRA = "pip install 'mech_regulator[distributed]'"
 
 
 def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
-    """The `sweep` subcommand and its options; scene_command (cli.main) makes a subcommand with the SCENE and --set
+    """The `sweep` subcommand and its options; scene_command (cli.parser) makes a subcommand with the SCENE and --set
     arguments of every scene command (SCENE optional here: --scenes may name them all)."""
     text = (
         "run many scenes: a grid of scene values (the Cartesian product of the --grid options) and/or a list of "
