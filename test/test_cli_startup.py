@@ -92,7 +92,7 @@ def test_the_check_sees_a_heavy_import():
 
 
 def test_the_launcher_of_the_nodes_loads_no_numerics():
-    """nodes.launch imports cli.report (its progress and summary): that stays free of numpy, scipy and numba."""
+    """nodes.launch imports cli.report's terminal and machine_text (its progress and summary): that stays free of numpy, scipy and numba."""
     found = modules_after("import mech_regulator.nodes.launch")
     assert not [name for name in found if name.split(".")[0] in ("numpy", "scipy", "numba", "matplotlib", "rerun")]
 

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import math
 
-from mech_regulator.cli.report import terminal_text
+from mech_regulator.cli.report.terminal import terminal_text
 
 
 def run_governor(scene, args) -> int:
     from mech_regulator.analysis import analyse_governor
-    from mech_regulator.cli.report import OutputWriter, format_governor, to_json
+    from mech_regulator.cli.report.analysis_text import format_governor
+    from mech_regulator.cli.report.data import to_json
+    from mech_regulator.cli.report.outputs import OutputWriter
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 
@@ -35,7 +37,9 @@ def run_required_coupling(scene, args) -> int:
     import yaml
 
     from mech_regulator.analysis import required_coupling
-    from mech_regulator.cli.report import OutputWriter, format_required_coupling, to_json, write_csv, wrote_lines
+    from mech_regulator.cli.report.analysis_text import format_required_coupling
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.outputs import OutputWriter, wrote_lines
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 
@@ -105,7 +109,9 @@ def run_kinematics(scene, args) -> int:
         reactions_table,
         reactions_unavailable,
     )
-    from mech_regulator.cli.report import OutputWriter, format_kinematics, to_json, write_csv
+    from mech_regulator.cli.report.analysis_text import format_kinematics
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.outputs import OutputWriter
     from mech_regulator.mechanisms import cam_pairs_of
     from mech_regulator.scene import SceneError
 
@@ -160,7 +166,9 @@ def run_kinematics(scene, args) -> int:
 def run_engine(scene, args) -> int:
     """engine: the analysis of an engine scene at constant speed, printed, and optionally a PNG and a CSV."""
     from mech_regulator.analysis.engine import engine_curve_columns, engine_parts, engine_report
-    from mech_regulator.cli.report import OutputWriter, format_engine, to_json, write_csv
+    from mech_regulator.cli.report.analysis_text import format_engine
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.outputs import OutputWriter
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
 

@@ -14,7 +14,7 @@ def run_bench_accuracy(args) -> int:
 
     from mech_regulator.bench.accuracy import run_benchmark, select_scenes
     from mech_regulator.bench.report import findings, markdown, write_runs_csv
-    from mech_regulator.cli.report import bench_scenes_and_folder, check_output_paths
+    from mech_regulator.cli.report.outputs import bench_scenes_and_folder, check_output_paths
     from mech_regulator.scene import SceneError
 
     if args.jobs < 1:

@@ -13,15 +13,9 @@ from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
-from mech_regulator.cli.report import (
-    OutputWriter,
-    check_outputs,
-    note,
-    progress_bar,
-    terminal_text,
-    to_json,
-    wrote_lines,
-)
+from mech_regulator.cli.report.data import to_json
+from mech_regulator.cli.report.outputs import OutputWriter, check_outputs, wrote_lines
+from mech_regulator.cli.report.terminal import note, progress_bar, terminal_text
 
 
 def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:

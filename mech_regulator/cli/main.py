@@ -17,7 +17,7 @@ from mech_regulator.cli.analyses import run_engine, run_governor, run_kinematics
 from mech_regulator.cli.bench_accuracy import run_bench_accuracy
 from mech_regulator.cli.main_job import check_run_files, run_main_job
 from mech_regulator.cli.parser import build_parser
-from mech_regulator.cli.report import terminal_text
+from mech_regulator.cli.report.terminal import terminal_text
 from mech_regulator.cli.simulate import run_simulate
 
 EXIT_BAD_INPUT = 2
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
             from mech_regulator.cli.sweep import run_sweep_command
 
             return run_sweep_command(args)
-        from mech_regulator.cli.report import check_outputs
+        from mech_regulator.cli.report.outputs import check_outputs
         from mech_regulator.scene import load_scene
 
         if args.command != "run":  # every output checked before the scene is read (it may compile a linkage)
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
             check_run_files(args.out)
         if args.command == "describe":
             from mech_regulator import cache
-            from mech_regulator.cli.report import describe
+            from mech_regulator.cli.report.machine_text import describe
             from mech_regulator.model import build_model
 
             with cache.run_uncompiled():  # describing needs no compiled code (cache.py)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mech_regulator.cli.report import note
+from mech_regulator.cli.report.terminal import note
 from mech_regulator.cli.simulate import check_bag, check_overspeed_trip
 from mech_regulator.cli.start import STARTED
 
@@ -13,7 +13,7 @@ from mech_regulator.cli.start import STARTED
 def run_main_job(scene, args) -> int:
     import importlib.util
 
-    from mech_regulator.cli.report import output_folder
+    from mech_regulator.cli.report.outputs import output_folder
     from mech_regulator.scene import SceneError
 
     check_overspeed_trip(args)
@@ -99,7 +99,7 @@ def _without_governor(args):
 def check_run_files(recording: Path) -> None:
     """Refuse (SceneError) a recording for `run` whose files (nodes.outputs.run_files: it and the parameter file, log,
     summary and CSV next to it) cannot all be written, or one that is itself one of those files."""
-    from mech_regulator.cli.report import check_output_paths
+    from mech_regulator.cli.report.outputs import check_output_paths
     from mech_regulator.nodes.outputs import run_files
     from mech_regulator.scene import SceneError
 

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from mech_regulator.cli.report import note, terminal_text
+from mech_regulator.cli.report.terminal import note, terminal_text
 from mech_regulator.errors import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED
 
 if TYPE_CHECKING:
@@ -22,7 +22,10 @@ SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and wri
 def run_simulate(scene, args) -> int:
     from mech_regulator.analysis import summarise
     from mech_regulator.analysis.self_check import self_checks
-    from mech_regulator.cli.report import OutputWriter, format_summary, progress_bar, to_json, write_csv
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.machine_text import format_summary
+    from mech_regulator.cli.report.outputs import OutputWriter
+    from mech_regulator.cli.report.terminal import progress_bar
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
     from mech_regulator.solvers import on_path_for_a_command, simulate
@@ -103,7 +106,10 @@ def run_simulate(scene, args) -> int:
 def _cosimulate(model, args) -> int:
     """simulate --exchange-step: the lockstep co-simulation of the nodes, in this process."""
     from mech_regulator.analysis import summarise_cosimulation
-    from mech_regulator.cli.report import OutputWriter, format_cosimulation_summary, progress_bar, to_json, write_csv
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.machine_text import format_cosimulation_summary
+    from mech_regulator.cli.report.outputs import OutputWriter
+    from mech_regulator.cli.report.terminal import progress_bar
     from mech_regulator.scene import SceneError
     from mech_regulator.solvers.cosim import cosimulate
 
