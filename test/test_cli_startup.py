@@ -76,10 +76,11 @@ def test_importing_the_command_line_loads_no_heavy_library():
 
 
 def test_the_entry_points_client_loads_no_heavy_library():
-    """The entry point asks the command server first (cli/server.py's client): the standard library only."""
+    """The entry point asks the command server first (cli/server_client.py): the standard library only."""
     assert (
         modules_after(
-            "from mech_regulator.cli import server\nserver.server_key()\nserver.through_server(['simulate', '--help'])"
+            "from mech_regulator.cli.server_client import through_server\n"
+            "from mech_regulator.cli.server_key import server_key\nserver_key()\nthrough_server(['simulate', '--help'])"
         )
         == []
     )

@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.command == "scenes":
             return _list_scenes()
         if args.command == "server":
-            from mech_regulator.cli.server import server_command
+            from mech_regulator.cli.server_client import server_command
 
             return server_command(args.action)
         if args.command == "compile":
