@@ -10,6 +10,7 @@ from mech_regulator.cli.report.terminal import terminal_text
 
 
 def run_governor(scene, args) -> int:
+    """governor: the statics and stability of the scene's governor, printed (or JSON), and optionally a PNG."""
     from mech_regulator.analysis import analyse_governor
     from mech_regulator.cli.report.analysis_text import format_governor
     from mech_regulator.cli.report.data import to_json

@@ -11,6 +11,8 @@ from mech_regulator.cli.start import STARTED
 
 
 def run_main_job(scene, args) -> int:
+    """run: the options checked, the model built and put on its path, then the nodes started (nodes.launch.main_job);
+    the exit code."""
     import importlib.util
 
     from mech_regulator.cli.report.outputs import output_folder

@@ -35,6 +35,7 @@ COUPLING_HELP = (
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The parser of the `mech-regulator` command line: every command and its options."""
     parser = argparse.ArgumentParser(
         prog="mech-regulator",
         description="Real motion of machines and the regulation "

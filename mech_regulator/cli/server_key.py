@@ -167,6 +167,7 @@ def peer_refusal(connection: socket.socket) -> str | None:
 
 
 def socket_path(digest: str) -> Path:
+    """The Unix socket of the server whose key has this digest (key_digest), in server_folder."""
     return server_folder() / f"{digest}.sock"
 
 

@@ -20,6 +20,7 @@ SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and wri
 
 
 def run_simulate(scene, args) -> int:
+    """simulate: the run (monolithic, or co-simulated with --exchange-step), its summary and outputs; the exit code."""
     from mech_regulator.analysis import summarise
     from mech_regulator.analysis.self_check import self_checks
     from mech_regulator.cli.report.data import to_json, write_csv

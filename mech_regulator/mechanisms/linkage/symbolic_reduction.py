@@ -152,26 +152,32 @@ class Writer:
 
 
 def add(u, v):
+    """u + v of two complex quantities, (re, im) pairs."""
     return u[0] + v[0], u[1] + v[1]
 
 
 def sub(u, v):
+    """u - v."""
     return u[0] - v[0], u[1] - v[1]
 
 
 def mul(u, v):
+    """u v."""
     return u[0] * v[0] - u[1] * v[1], u[0] * v[1] + u[1] * v[0]
 
 
 def conj(u):
+    """conj(u)."""
     return u[0], -u[1]
 
 
 def scale(u, factor):
+    """u factor (factor real)."""
     return u[0] * factor, u[1] * factor
 
 
 def square(u):
+    """|u|^2."""
     return u[0] * u[0] + u[1] * u[1]
 
 
