@@ -28,7 +28,7 @@ FLOORS = (
 )
 """The floors from the bottom up, each a module or package name: a module stands on the floor of the longest of
 these names it starts with. The bottom floor is the package's own modules (errors and exit codes, the on-disk
-cache, processes); cli/report.py (what a run shows and writes: summaries, progress, JSON and CSV) serves the nodes
+cache, processes); cli/report/ (what a run shows and writes: summaries, progress, JSON and CSV) serves the nodes
 as well as the commands; the other commands stand above the nodes, since `run` starts them; `launch` is the ROS 2
 launch files (launch/*.launch.py). README.md, Layout, describes each floor."""
 CORE = FLOORS[: FLOORS.index("mech_regulator.analysis") + 1]

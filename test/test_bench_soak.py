@@ -35,7 +35,7 @@ from mech_regulator.bench.soak import (  # noqa: E402
     parse_progress,
     verdict,
 )
-from mech_regulator.cli.report import ProgressLines  # noqa: E402
+from mech_regulator.cli.report.terminal import ProgressLines  # noqa: E402
 from mech_regulator.model import build_model  # noqa: E402
 from mech_regulator.scene import load_scene  # noqa: E402
 

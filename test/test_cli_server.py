@@ -25,7 +25,8 @@ from pathlib import Path
 
 import pytest
 
-from mech_regulator.cli import server as command_server
+from mech_regulator.cli.server_client import ask_server, run_request
+from mech_regulator.cli.server_key import key_digest, peer_refusal, server_key, source_fingerprint
 from mech_regulator.errors import EXIT_INTERRUPTED
 from mech_regulator.processes import process_alive
 
@@ -45,7 +46,7 @@ class Served:
 
     def served(self) -> int:
         """How many commands the server has run."""
-        return command_server.ask_server(self.socket, {"op": "status"})["served"]
+        return ask_server(self.socket, {"op": "status"})["served"]
 
 
 def server_environment(folder: str) -> dict[str, str]:
@@ -161,15 +162,15 @@ def test_ctrl_c_at_the_client_interrupts_the_child(served, tmp_path):
 
 def test_a_server_of_another_key_is_not_used(served):
     """A stale source fingerprint: another socket name, and the server refuses the command (it runs nothing)."""
-    key = command_server.ask_server(served.socket, {"op": "status"})["key"]
+    key = ask_server(served.socket, {"op": "status"})["key"]
     stale = json.loads(key)
     stale["source"] = "0" * 16
     stale = json.dumps(stale, sort_keys=True)
-    assert command_server.key_digest(stale) != served.socket.stem == command_server.key_digest(key)
+    assert key_digest(stale) != served.socket.stem == key_digest(key)
     before = served.served()
     with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as connection:
         connection.connect(str(served.socket))
-        assert command_server.run_request(connection, stale, ["describe", "lathe"]) is None
+        assert run_request(connection, stale, ["describe", "lathe"]) is None
     assert served.served() == before
 
 
@@ -231,12 +232,12 @@ def test_the_server_refuses_a_client_of_another_user_or_other_groups(tmp_path, u
             try:
                 connection, _ = listener.accept()
                 with connection:
-                    assert command_server.peer_refusal(connection) == refusal
+                    assert peer_refusal(connection) == refusal
             finally:
                 os.waitpid(child, 0)
         mine, theirs = socket.socketpair()
         with mine, theirs:
-            assert command_server.peer_refusal(mine) is None  # this very process
+            assert peer_refusal(mine) is None  # this very process
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 
@@ -277,15 +278,15 @@ def test_a_server_folder_that_is_not_private_is_not_used(tmp_path, kind):
 
 def test_the_key_follows_the_source_and_the_environment(tmp_path, monkeypatch):
     (tmp_path / "a.py").write_text("x = 1\n")
-    first = command_server.source_fingerprint(str(tmp_path))
+    first = source_fingerprint(str(tmp_path))
     os.utime(tmp_path / "a.py", ns=(0, 10**9))
-    assert command_server.source_fingerprint(str(tmp_path)) != first
-    key = command_server.server_key()
+    assert source_fingerprint(str(tmp_path)) != first
+    key = server_key()
     monkeypatch.setenv("MECH_REGULATOR_PROGRESS_INTERVAL", "7")  # read where it is used: not keyed
     monkeypatch.setenv("MECH_REGULATOR_SERVER_IDLE", "7")
-    assert command_server.server_key() == key
+    assert server_key() == key
     monkeypatch.setenv("NUMBA_OPT", "1")
-    assert command_server.server_key() != key
+    assert server_key() != key
 
 
 def test_a_server_that_vanishes_mid_command_ends_it_with_exit_1(tmp_path):
@@ -334,7 +335,7 @@ def test_a_command_while_the_server_starts_says_it_runs_on_its_own(tmp_path):
         [
             sys.executable,
             "-c",
-            "from mech_regulator.cli.server import key_digest, server_key; print(key_digest(server_key()))",
+            "from mech_regulator.cli.server_key import key_digest, server_key; print(key_digest(server_key()))",
         ],
         env=env,
         capture_output=True,

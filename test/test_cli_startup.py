@@ -72,14 +72,15 @@ def test_the_parser_loads_no_heavy_library(argv):
 
 
 def test_importing_the_command_line_loads_no_heavy_library():
-    assert modules_after("import mech_regulator.cli.main; mech_regulator.cli.main.build_parser()") == []
+    assert modules_after("import mech_regulator.cli.main; mech_regulator.cli.parser.build_parser()") == []
 
 
 def test_the_entry_points_client_loads_no_heavy_library():
-    """The entry point asks the command server first (cli/server.py's client): the standard library only."""
+    """The entry point asks the command server first (cli/server_client.py): the standard library only."""
     assert (
         modules_after(
-            "from mech_regulator.cli import server\nserver.server_key()\nserver.through_server(['simulate', '--help'])"
+            "from mech_regulator.cli.server_client import through_server\n"
+            "from mech_regulator.cli.server_key import server_key\nserver_key()\nthrough_server(['simulate', '--help'])"
         )
         == []
     )
@@ -92,7 +93,7 @@ def test_the_check_sees_a_heavy_import():
 
 
 def test_the_launcher_of_the_nodes_loads_no_numerics():
-    """nodes.launch imports cli.report (its progress and summary): that stays free of numpy, scipy and numba."""
+    """nodes.launch imports cli.report's terminal and machine_text (its progress and summary): that stays free of numpy, scipy and numba."""
     found = modules_after("import mech_regulator.nodes.launch")
     assert not [name for name in found if name.split(".")[0] in ("numpy", "scipy", "numba", "matplotlib", "rerun")]
 

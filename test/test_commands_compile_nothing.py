@@ -9,7 +9,7 @@ import os
 import subprocess
 import sys
 
-from mech_regulator.cli.main import build_parser
+from mech_regulator.cli.parser import build_parser
 
 # a preset mechanism, general linkages (the scene checks solve their poses), joint friction (its kinetostatics)
 DESCRIBED = ("engine_direct", "walking_beam_linkage", "six_bar_press_friction", "lathe")

@@ -27,6 +27,7 @@ from mech_regulator.mechanisms.linkage import (
     make_reduced,
     solve,
     symbolic,
+    symbolic_reduction,
 )
 from mech_regulator.scene import load_scene
 
@@ -131,7 +132,7 @@ def test_a_cached_source_is_read_back_without_generating(monkeypatch, tmp_path):
     def no_sympy(*_):
         raise AssertionError("generated again")
 
-    monkeypatch.setattr(symbolic, "_generate", no_sympy)
+    monkeypatch.setattr(symbolic_reduction, "generate_reduced", no_sympy)
     symbolic._source_by_key.cache_clear()
     assert symbolic.reduced_source(program) == (name, source)
     symbolic._source_by_key.cache_clear()

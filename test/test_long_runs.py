@@ -21,7 +21,7 @@ from test_compiled_path import shortened
 from mech_regulator.analysis import load_response
 from mech_regulator.analysis.energy import step_edges
 from mech_regulator.analysis.load_response import cycle_mean_speed
-from mech_regulator.cli import main as cli_main
+from mech_regulator.cli import simulate as simulate_command
 from mech_regulator.scene.limits import MAX_STEPS
 from mech_regulator.solvers import simulate, step_limit_refusal, time_domain
 from mech_regulator.solvers import trajectory as trajectory_module
@@ -232,7 +232,7 @@ def test_a_long_runs_outputs_are_worked_out_in_chunks_with_the_same_numbers(tmp_
     arguments = ["simulate", "lathe", "--set", "solver.path=reference", "--set", "scenario.duration=1.0", "--quiet"]
     whole, chunked = tmp_path / "whole.csv", tmp_path / "chunked.csv"
     assert run_cli(capsys, *arguments, "--out", str(whole))[0] == 0
-    monkeypatch.setattr(cli_main, "SAMPLE_CHUNK", 7)
+    monkeypatch.setattr(simulate_command, "SAMPLE_CHUNK", 7)
     assert run_cli(capsys, *arguments, "--out", str(chunked))[0] == 0
     rows = whole.read_text().splitlines()
     assert len(rows) > 100 and rows[0].startswith("t,phi,omega")

@@ -37,7 +37,7 @@ from ros_support import (  # noqa: F401 (fixtures)
 from std_srvs.srv import Trigger
 from test_linkage_family import strip_counts
 
-from mech_regulator.cli.report import write_csv
+from mech_regulator.cli.report.data import write_csv
 from mech_regulator.model import build_model
 from mech_regulator.scene import bundled_scenes, load_scene, validate_scene
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, to_nanoseconds

@@ -1,13 +1,13 @@
 """Output files, scene text and the speed bound backwards.
 
-- Every output path of every command is checked before any work (cli/report.py, check_output_paths and
+- Every output path of every command is checked before any work (cli/report/outputs.py, check_output_paths and
   output_folder): a device or anything in /dev, a read-only folder (a private read-only bind mount in a mount
   namespace of its own: `unshare -m`, as root only), a full disk, a folder where a file is expected, two outputs
   that are one file: exit 2, one line naming the path and why, nothing written.
 - A write that fails after the work (a disk that fills up) ends with one line and exit 1; the summary is printed and
   the other outputs are written (OutputWriter).
 - A key given twice in a scene is an error naming the key and both places; control and bidirectional characters of a
-  scene's name are escaped wherever the name reaches the terminal (report.terminal_text).
+  scene's name are escaped wherever the name reaches the terminal (report.terminal.terminal_text).
 - A machine driven backwards beyond the trip speed ends its co-simulated run failed, on both paths; a blow-up
   backwards stops at MAX_SPEED as one forwards does.
 """
@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from support import SOURCE_TREE, run_cli, write_scene
 
-from mech_regulator.cli import report
+from mech_regulator.cli.report import data, outputs, terminal
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.scene.limits import MAX_SPEED
@@ -102,9 +102,9 @@ def test_an_existing_output_is_probed_without_being_changed(tmp_path):
     for content in (b"", b"keep me\n"):
         target = tmp_path / "old.csv"
         target.write_bytes(content)
-        assert report.output_refusal(target) is None
+        assert outputs.output_refusal(target) is None
         assert target.read_bytes() == content
-    assert report.output_refusal(tmp_path / "new.csv") is None and not (tmp_path / "new.csv").exists()
+    assert outputs.output_refusal(tmp_path / "new.csv") is None and not (tmp_path / "new.csv").exists()
 
 
 def test_run_checks_every_file_it_derives_from_out(capsys, tmp_path):
@@ -255,7 +255,7 @@ def test_a_failed_write_after_the_run_keeps_the_summary_and_the_other_outputs(ca
     def full_disk(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
 
-    monkeypatch.setattr(report, "write_csv", full_disk)
+    monkeypatch.setattr(data, "write_csv", full_disk)
     code, out, err = run_cli(
         capsys,
         "simulate",
@@ -347,12 +347,12 @@ def test_a_scene_name_is_escaped_in_the_summary_the_progress_lines_and_errors(ca
 
 
 def test_terminal_text_keeps_lines_and_tabs_and_escapes_the_rest():
-    assert report.terminal_text("a\tb\nc") == "a\tb\nc"
+    assert terminal.terminal_text("a\tb\nc") == "a\tb\nc"
     assert (
-        report.terminal_text("\x00\x1b\x7f\x9b\u200e\u200f\u202a\u202d\u2067\u2069\u061c")
+        terminal.terminal_text("\x00\x1b\x7f\x9b\u200e\u200f\u202a\u202d\u2067\u2069\u061c")
         == "\\x00\\x1b\\x7f\\x9b\\u200e\\u200f\\u202a\\u202d\\u2067\\u2069\\u061c"
     )
-    assert report.terminal_text("Drehzahl ω ü") == "Drehzahl ω ü"
+    assert terminal.terminal_text("Drehzahl ω ü") == "Drehzahl ω ü"
 
 
 # ----------------------------------------------------------------------------------------------

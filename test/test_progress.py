@@ -15,7 +15,7 @@ import sys
 import pytest
 from support import run_cli
 
-from mech_regulator.cli.report import PROGRESS_INTERVAL, ProgressLines, progress_bar, progress_interval
+from mech_regulator.cli.report.terminal import PROGRESS_INTERVAL, ProgressLines, progress_bar, progress_interval
 
 DURATION = r"(?:[0-9.]+ s|\d+ min \d+ s|\d+ h \d+ min)"  # report._duration: '4.1 s', '2 min 05 s', '1 h 02 min'
 LINE = re.compile(

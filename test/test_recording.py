@@ -27,7 +27,7 @@ from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import cosimulate
-from mech_regulator.viz import recording
+from mech_regulator.viz import recording, recording_layout
 from mech_regulator.viz.recording import LoadChanges, RunRecording, record_run
 
 RERUN = Path(sys.executable).with_name("rerun")
@@ -264,7 +264,7 @@ def test_final_blueprint_hides_the_legends_and_spans_the_data(engine_run):
         "speed [rad/s]: ω crank (blue) · ω_set (white) · band (orange) ±δ/2, permitted δ = 0.05",
         "throttle [-]",
         "sleeve z [mm]",
-        f"moments [N m], last {recording.moments_window(model):.2g} s: drive (green) · "
+        f"moments [N m], last {recording_layout.moments_window(model):.2g} s: drive (green) · "
         "resistance (red) · external (violet) · net (white)",
     }
     assert all(view["legend_visible"] is False for view in plots.values())
@@ -272,7 +272,7 @@ def test_final_blueprint_hides_the_legends_and_spans_the_data(engine_run):
     band = scalars(path, "/speed/band_high")[1], scalars(path, "/speed/band_low")[1]
     low, high = plots[next(name for name in plots if name.startswith("speed"))]["range"]
     data_low, data_high = min(omega.min(), band[1].min()), max(omega.max(), band[0].max())
-    margin = recording.Y_MARGIN * (data_high - data_low)
+    margin = recording_layout.Y_MARGIN * (data_high - data_low)
     assert (low, high) == pytest.approx((data_low - margin, data_high + margin), rel=1e-12)
     throttle = plots["throttle [-]"]["range"]
     assert throttle[0] < 0.0 and throttle[1] > 1.0

@@ -543,7 +543,7 @@ def test_overspeed_trip_closes_the_throttle_for_good(overspeed_run):
 
 def _in_process_summary(model, run) -> dict:
     from mech_regulator.analysis import summarise_cosimulation
-    from mech_regulator.cli.report import to_json
+    from mech_regulator.cli.report.data import to_json
 
     return json.loads(to_json(summarise_cosimulation(model, run, TRIP_STEP)))
 

@@ -7,7 +7,7 @@ What is read, and where from:
   each named by the name the launcher gives it (`<name>_node`, nodes/launch.py): machine, governor, scenario,
   recorder, launcher. Read at every row, and at every progress line of the run for the figures at its start (the
   first line: the nodes exchanging) and at its end (the last line, each process's last reading).
-- pace: the launcher's own progress lines (cli/report.py ProgressLines, the lines it prints when stderr is not a
+- pace: the launcher's own progress lines (cli/report/terminal.py ProgressLines, the lines it prints when stderr is not a
   terminal: the machine's simulated time from its /diagnostics, which it publishes about once a second of wall time;
   MECH_REGULATOR_PROGRESS_INTERVAL=0 so that the launcher prints each one), each timed as it arrives. Over each
   interval: simulated seconds per second of wall time (the real-time factor) and exchanges per second (simulated time
@@ -56,7 +56,7 @@ SUBSTEPS = 8  # equal parts of an exchange step, each with 4-point Gauss-Legendr
 CHUNK_STEPS = 2000  # exchange steps whose motion is rebuilt at once (the memory it takes)
 # The launcher's announcement (nodes/launch.py main_job): its exchange step and the log next to the run's files.
 LAUNCH_BANNER = re.compile(r"exchange step (?P<step>[^ ]+) s\); node logs in (?P<log>.+)$")
-# A progress line of the launcher (cli/report.py ProgressLines): "<label>: t = 312 / 3600 s (9 %), ..." while it runs,
+# A progress line of the launcher (cli/report/terminal.py ProgressLines): "<label>: t = 312 / 3600 s (9 %), ..." while it runs,
 # "<label>: done: t = 3600 / 3600 s in ..." or "<label>: stopped at t = 71.7 / 3600 s after ..." at the end.
 PROGRESS_LINE = re.compile(r": (?P<end>done: |stopped at )?t = (?P<t>[0-9.e+-]+) / [0-9.e+-]+ s\b")
 

@@ -9,12 +9,12 @@ from mech_regulator.errors import EXIT_INTERRUPTED
 
 def entry() -> int:
     """Entry point of `mech-regulator`: a served command through the command server when one serves it
-    (cli/server.py: no heavy import there), else the command in this process (run_command)."""
+    (cli/server_client.py: no heavy import there), else the command in this process (run_command)."""
     argv = sys.argv[1:]
     code = None
     if argv and argv[0] in SERVED_COMMANDS:
         try:
-            from mech_regulator.cli.server import through_server
+            from mech_regulator.cli.server_client import through_server
 
             code = through_server(argv)
         except KeyboardInterrupt:

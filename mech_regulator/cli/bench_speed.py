@@ -158,7 +158,8 @@ def run_bench_speed(args: argparse.Namespace) -> int:
         tables,
         write_rows_csv,
     )
-    from mech_regulator.cli.report import bench_scenes_and_folder, check_output_paths, to_json
+    from mech_regulator.cli.report.data import to_json
+    from mech_regulator.cli.report.outputs import bench_scenes_and_folder, check_output_paths
     from mech_regulator.scene import SceneError
 
     scenes = select_speed_scenes(bench_scenes_and_folder(args.scenes, args.out, "crank_slider_bench,startup"))
@@ -197,7 +198,7 @@ def run_bench_speed(args: argparse.Namespace) -> int:
 def run_bench_startup(args: argparse.Namespace) -> int:
     """bench startup: measure, printing each measurement on stderr as it comes, then the table (or JSON)."""
     from mech_regulator.bench.startup import format_table, measure_startup, script_refusal, startup_summary
-    from mech_regulator.cli.report import to_json
+    from mech_regulator.cli.report.data import to_json
     from mech_regulator.scene import SceneError, load_scene
 
     if not 1 <= args.repeat <= 100:

@@ -31,8 +31,8 @@ def summary_before_start(argv: list[str]) -> Path | None:
     scene loaded; argv: the command line, 'run' first): status interrupted, nothing simulated, written next to the
     recording `--out` names (default: runs/<scene argument>-<time>.rrd), and its path; None when argv does not parse
     or the file cannot be written (the interrupt is then all there is to say)."""
-    from mech_regulator.cli.main import build_parser
-    from mech_regulator.cli.report import to_json
+    from mech_regulator.cli.parser import build_parser
+    from mech_regulator.cli.report.data import to_json
     from mech_regulator.nodes.launch import NOTHING_SIMULATED
     from mech_regulator.nodes.outputs import default_recording
 

@@ -13,19 +13,13 @@ from collections.abc import Callable
 from fractions import Fraction
 from pathlib import Path
 
-from mech_regulator.cli.report import (
-    OutputWriter,
-    check_outputs,
-    note,
-    progress_bar,
-    terminal_text,
-    to_json,
-    wrote_lines,
-)
+from mech_regulator.cli.report.data import to_json
+from mech_regulator.cli.report.outputs import OutputWriter, check_outputs, wrote_lines
+from mech_regulator.cli.report.terminal import note, progress_bar, terminal_text
 
 
 def add_flywheel_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
-    """The `flywheel` subcommand and its options; scene_command (cli.main) makes a subcommand with the SCENE and
+    """The `flywheel` subcommand and its options; scene_command (cli.parser) makes a subcommand with the SCENE and
     --set arguments of every scene command (SCENE optional here: --classes needs none)."""
     text = (
         "size a flywheel for a permitted coefficient of speed fluctuation [delta]: the energy-swing formula, "

@@ -8,7 +8,7 @@ from pathlib import Path
 
 
 def add_structure_command(scene_command) -> None:
-    """Add the `structure` subcommand (scene_command: main.build_parser's helper)."""
+    """Add the `structure` subcommand (scene_command: parser.build_parser's helper)."""
     structure = scene_command(
         "structure",
         "structural analysis of a linkage scene (source 001): moving links n, "
@@ -23,7 +23,9 @@ def add_structure_command(scene_command) -> None:
 def run_structure(scene, args: argparse.Namespace) -> int:
     """structure: the analysis of the scene's linkage (the machine's, else the driven part's behind a coupling);
     a scene whose linkage has W != 1 or an unsupported group has already been refused (mechanisms/checks.py)."""
-    from mech_regulator.cli.report import OutputWriter, terminal_text, to_json
+    from mech_regulator.cli.report.data import to_json
+    from mech_regulator.cli.report.outputs import OutputWriter
+    from mech_regulator.cli.report.terminal import terminal_text
     from mech_regulator.mechanisms import cam_pairs_of, mechanism_geometry
     from mech_regulator.mechanisms.linkage import Dyad, RedundantLink
     from mech_regulator.scene import SceneError

@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from mech_regulator.cli.report import terminal_text
+from mech_regulator.cli.report.terminal import terminal_text
 from mech_regulator.errors import EXIT_INTERRUPTED
 
 SHOWN_ROWS = 12  # the printed table shows all rows up to this many, else the first and last half of it
@@ -42,7 +42,7 @@ DASK_EXTRA = "pip install 'mech_regulator[distributed]'"
 
 
 def add_sweep_command(scene_command: Callable[..., argparse.ArgumentParser]) -> None:
-    """The `sweep` subcommand and its options; scene_command (cli.main) makes a subcommand with the SCENE and --set
+    """The `sweep` subcommand and its options; scene_command (cli.parser) makes a subcommand with the SCENE and --set
     arguments of every scene command (SCENE optional here: --scenes may name them all)."""
     text = (
         "run many scenes: a grid of scene values (the Cartesian product of the --grid options) and/or a list of "
@@ -136,7 +136,9 @@ def run_sweep_command(args: argparse.Namespace) -> int:
     """Run the command; a user's mistake raises SceneError (exit 2 in cli.main) before any point runs, and so does
     --engine dask without Dask installed (the message names the pip extra)."""
     from mech_regulator.analysis.sweep import check_executor, parse_grid, run_sweep, sweep_points
-    from mech_regulator.cli.report import OutputWriter, check_output_paths, output_folder, progress_bar, write_rows_csv
+    from mech_regulator.cli.report.data import write_rows_csv
+    from mech_regulator.cli.report.outputs import OutputWriter, check_output_paths, output_folder
+    from mech_regulator.cli.report.terminal import progress_bar
     from mech_regulator.scene import SceneError
     from mech_regulator.scene.limits import output_stem
     from mech_regulator.scene.loading import key_description

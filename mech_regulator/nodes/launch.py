@@ -30,7 +30,8 @@ from pathlib import Path
 
 import yaml
 
-from mech_regulator.cli.report import format_cosimulation_summary, progress_bar
+from mech_regulator.cli.report.machine_text import format_cosimulation_summary
+from mech_regulator.cli.report.terminal import progress_bar
 from mech_regulator.nodes.outputs import default_recording
 from mech_regulator.processes import die_with_parent
 from mech_regulator.scene import SceneError, config_dir

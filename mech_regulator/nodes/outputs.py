@@ -36,7 +36,7 @@ def write_empty_run(
     no samples (unless one was written already) and the summary next to it (status interrupted, samples 0, `message`
     saying when it stopped, and `extra`: what was refused, what disturbed it). Free of rclpy: the launcher writes them
     when a Ctrl-C stopped the run early, perhaps while rclpy's C extension was loading (a second import of it fails)."""
-    from mech_regulator.cli.report import to_json
+    from mech_regulator.cli.report.data import to_json
     from mech_regulator.viz.recording import RunRecording
 
     if not path.exists():

@@ -33,7 +33,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
-from mech_regulator.cli.report import to_json, write_csv
+from mech_regulator.cli.report.data import to_json, write_csv
 from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,

@@ -1,0 +1,199 @@
+"""The `simulate` command in this process: the monolithic run (run_simulate) or, with --exchange-step, the
+lockstep co-simulation of the nodes; its summary, CSV, picture, recording and bag. The checks of --bag and
+--overspeed-trip serve `run` (main_job.py) too."""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from mech_regulator.cli.report.terminal import note, terminal_text
+from mech_regulator.errors import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FAILED
+
+if TYPE_CHECKING:
+    import numpy as np
+
+
+SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and writes at once (_sample_columns)
+
+
+def run_simulate(scene, args) -> int:
+    """simulate: the run (monolithic, or co-simulated with --exchange-step), its summary and outputs; the exit code."""
+    from mech_regulator.analysis import summarise
+    from mech_regulator.analysis.self_check import self_checks
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.machine_text import format_summary
+    from mech_regulator.cli.report.outputs import OutputWriter
+    from mech_regulator.cli.report.terminal import progress_bar
+    from mech_regulator.model import build_model
+    from mech_regulator.scene import SceneError
+    from mech_regulator.solvers import on_path_for_a_command, simulate
+    from mech_regulator.solvers.advice import stiffness_advice
+
+    if args.overspeed_trip and args.exchange_step is None:
+        raise SceneError(
+            f"--overspeed-trip {args.overspeed_trip:g}: the trip acts at the exchanges of the "
+            "co-simulation; expected --exchange-step H with it (the monolithic run has no trip)"
+        )
+    check_bag(args.bag)
+    model = on_path_for_a_command(build_model(scene), note)
+    if args.exchange_step is not None:
+        return _cosimulate(model, args)
+    advice = stiffness_advice(model)
+    if advice is not None:
+        print(f"mech-regulator: note: {advice}", file=sys.stderr)
+    duration = scene.scenario.duration
+    with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
+        trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
+        bar.update(min(trajectory.t_end, duration) - bar.n)
+    summary = summarise(model, trajectory)
+    checks = summary["self_checks"] = self_checks(model, summary, trajectory)
+    if checks and summary["status"] == "complete":
+        summary["status"] = "inaccurate"
+    if not trajectory.interpolants:
+        args.out = args.plot = args.record = None  # nothing to write
+    outputs = OutputWriter(summary)
+    outputs.write("csv", args.out, lambda path: write_csv(path, _sample_columns(model, trajectory)))
+    if args.plot is not None:
+        from mech_regulator.viz.plots import plot_run
+
+        outputs.write("plot", args.plot, lambda path: plot_run(model, trajectory, summary, path))
+    if args.record is not None:
+        from mech_regulator.viz.recording import record_run
+
+        outputs.write(
+            "recording",
+            args.record,
+            lambda path: record_run(
+                model,
+                *_samples(model, trajectory),
+                path,
+                mode_changes=trajectory.events,
+                status=trajectory.status,
+                message=trajectory.message,
+            ),
+        )
+    if args.bag is not None and trajectory.interpolants:
+        from mech_regulator.viz.bag import write_bag
+
+        outputs.write(
+            "bag",
+            args.bag,
+            lambda path: write_bag(
+                path, model, *_samples(model, trajectory), status=trajectory.status, message=trajectory.message
+            ),
+        )
+    print(to_json(summary) if args.json else format_summary(model, summary))
+    for check in checks:
+        print(
+            f"mech-regulator: warning: inaccurate run: {check['check']} {check['value']:.2g} exceeds the "
+            f"{check['allowed']:.2g} its tolerance allows; {check['fix']}",
+            file=sys.stderr,
+        )
+    if trajectory.status == "failed":
+        print(f"mech-regulator: {terminal_text(trajectory.message)}", file=sys.stderr)
+        return outputs.exit_code(EXIT_RUN_FAILED)
+    if trajectory.status == "interrupted":
+        print(
+            f"mech-regulator: {terminal_text(trajectory.message)}; the outputs hold the run up to there",
+            file=sys.stderr,
+        )
+        return outputs.exit_code(EXIT_INTERRUPTED)
+    return outputs.exit_code(EXIT_INACCURATE if checks and args.strict else 0)
+
+
+def _cosimulate(model, args) -> int:
+    """simulate --exchange-step: the lockstep co-simulation of the nodes, in this process."""
+    from mech_regulator.analysis import summarise_cosimulation
+    from mech_regulator.cli.report.data import to_json, write_csv
+    from mech_regulator.cli.report.machine_text import format_cosimulation_summary
+    from mech_regulator.cli.report.outputs import OutputWriter
+    from mech_regulator.cli.report.terminal import progress_bar
+    from mech_regulator.scene import SceneError
+    from mech_regulator.solvers.cosim import cosimulate
+
+    if not 1e-6 <= args.exchange_step <= 1.0:
+        raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
+    check_overspeed_trip(args)
+    duration = model.scene.scenario.duration
+    with progress_bar(duration, args.quiet, f"co-simulating {model.scene.name or args.scene}") as bar:
+        run = cosimulate(
+            model,
+            args.exchange_step,
+            args.overspeed_trip,
+            progress=lambda t: bar.update(min(t, duration) - bar.n),
+            coupling=args.coupling,
+        )
+    summary = summarise_cosimulation(model, run, args.exchange_step, args.coupling)
+    outputs = OutputWriter(summary)
+    outputs.write(
+        "csv",
+        args.out,
+        lambda path: write_csv(path, model.columns(run.times, run.states, run.throttle, run.external_load), digits=17),
+    )
+    if args.record is not None:
+        from mech_regulator.viz.recording import record_run
+
+        outputs.write(
+            "recording",
+            args.record,
+            lambda path: record_run(
+                model,
+                run.times,
+                run.states,
+                path,
+                mode_changes=[(t, what) for t, what, _ in run.events],
+                status=summary["status"],
+                message=summary["message"],
+            ),
+        )
+    if args.bag is not None:
+        from mech_regulator.viz.bag import write_bag
+
+        outputs.write(
+            "bag",
+            args.bag,
+            lambda path: write_bag(
+                path, model, run.times, run.states, run.throttle, run.external_load, run.status, run.message
+            ),
+        )
+    print(to_json(summary) if args.json else format_cosimulation_summary(summary))
+    if run.status == "failed":
+        print(f"mech-regulator: {terminal_text(run.message)}", file=sys.stderr)
+        return outputs.exit_code(EXIT_RUN_FAILED)
+    return outputs.exit_code(EXIT_INTERRUPTED if run.status == "interrupted" else 0)
+
+
+def check_overspeed_trip(args) -> None:
+    """Refuse a --overspeed-trip that is not a speed >= 0 rad/s (SceneError)."""
+    from mech_regulator.scene import SceneError
+
+    if not (math.isfinite(args.overspeed_trip) and args.overspeed_trip >= 0.0):
+        raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
+
+
+def check_bag(folder: Path | None) -> None:
+    """Refuse, before any work, a --bag folder that cannot be written (SceneError)."""
+    from mech_regulator.scene import SceneError
+    from mech_regulator.viz.bag import bag_refusal
+
+    reason = bag_refusal(folder) if folder is not None else None
+    if reason is not None:
+        raise SceneError(reason)
+
+
+def _sample_columns(model, trajectory):
+    """The output columns at the scene's sample rate, SAMPLE_CHUNK samples at a time (a generator: a long run's CSV
+    is written without all its rows in memory)."""
+    times = trajectory.samples(model.scene.solver.sample_rate)
+    for first in range(0, times.size, SAMPLE_CHUNK):
+        chunk = times[first : first + SAMPLE_CHUNK]
+        yield model.columns(chunk, trajectory(chunk))
+
+
+def _samples(model, trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Output sample times at the scene's sample rate and the states there."""
+    times = trajectory.samples(model.scene.solver.sample_rate)
+    return times, trajectory(times)
