@@ -13,19 +13,9 @@ import pytest
 from support import run_cli, simulate_complete
 
 from mech_regulator.bench.mujoco_model import MujocoCrankSlider, crank_slider_mjcf, mujoco_refusal
-from mech_regulator.bench.speed import (
-    FAST,
-    REFERENCE,
-    SOLVE_IVP,
-    Row,
-    SpeedBenchmark,
-    at_error,
-    failure_text,
-    ode_runner,
-    ros_summary,
-    ros_target,
-    work_precision_front,
-)
+from mech_regulator.bench.speed_precision import at_error, work_precision_front
+from mech_regulator.bench.speed_ros import failure_text, ros_summary, ros_target
+from mech_regulator.bench.speed_runs import FAST, REFERENCE, SOLVE_IVP, Row, SpeedBenchmark, ode_runner
 from mech_regulator.mechanisms.crank_slider import slider_kinematics
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene

@@ -11,21 +11,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (the backend must be chosen first)
 
-from mech_regulator.bench.speed import (  # noqa: E402
+from mech_regulator.bench.speed import TARGETS  # noqa: E402
+from mech_regulator.bench.speed_precision import TARGET_ERROR, work_precision_front  # noqa: E402
+from mech_regulator.bench.speed_ros import ROS_SCENE, ros_summary  # noqa: E402
+from mech_regulator.bench.speed_runs import (  # noqa: E402
     BENCH_SCENE,
     FAST,
     MUJOCO,
     PATHS,
     REFERENCE,
-    ROS_SCENE,
-    SCALING_RTOL,
     SOLVE_IVP,
-    TARGET_ERROR,
-    TARGETS,
     SpeedBenchmark,
-    ros_summary,
-    work_precision_front,
 )
+from mech_regulator.bench.speed_scaling import SCALING_RTOL  # noqa: E402
 from mech_regulator.viz.work_precision import X_LABEL  # noqa: E402
 
 # (path, method) -> (colour, marker, line style): a colour per path, a line style per method
