@@ -113,3 +113,10 @@ def test_a_bag_folder_that_exists_is_refused_before_the_run(tmp_path, capsys):
     assert code == 2 and f"cannot write the bag '{tmp_path / 'taken'}': it exists" in err
     code, _, err = run_cli(capsys, "simulate", *SHORT_ENGINE, "--bag", str(tmp_path / "no" / "bag"), "--quiet")
     assert code == 2 and f"the folder '{tmp_path / 'no'}' does not exist" in err
+
+
+def test_a_bag_in_a_folder_where_nothing_can_be_made_is_refused_before_the_run(capsys):
+    """/proc (the kernel's) takes no new folder, not even root's: refused at once with exit 2, before the run."""
+    code, out, err = run_cli(capsys, "simulate", *SHORT_ENGINE, "--bag", "/proc/bag", "--quiet")
+    assert code == 2 and "cannot write the bag '/proc/bag': no folder can be made in '/proc'" in err
+    assert "Traceback" not in err and out == ""

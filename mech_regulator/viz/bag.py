@@ -18,6 +18,8 @@ message. docs/ros.md, "Bags", says how to open one.
 from __future__ import annotations
 
 import math
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -215,13 +217,22 @@ def run_messages(
 
 
 def bag_refusal(folder: Path) -> str | None:
-    """Why a bag cannot be written to `folder` (None: it can): it exists already, or its parent folder does not."""
+    """Why a bag cannot be written to `folder` (None: it can): it exists already, its parent folder does not, or no
+    folder can be made in that parent (a kernel folder such as /proc, a read-only file system, no permission, a full
+    disk: tried by making an empty folder there and removing it)."""
     if folder.exists():
         return (
             f"cannot write the bag '{folder}': it exists; a rosbag2 recording is a new folder (as ros2 bag record -o)"
         )
     if not folder.parent.is_dir():
         return f"cannot write the bag '{folder}': the folder '{folder.parent}' does not exist"
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".bag-check-", dir=folder.parent))
+    except OSError as error:
+        return (
+            f"cannot write the bag '{folder}': no folder can be made in '{folder.parent}' "
+            f"({error.strerror or error}); expected a folder of yours"
+        )
     return None
 
 
