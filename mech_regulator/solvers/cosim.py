@@ -107,6 +107,7 @@ class MachineStepper:
     def __init__(self, model: MachineModel, overspeed_trip: float = 0.0):
         self.plant = machine_subsystem(model)
         self._segment = segment_for(self.plant)
+        self._state_names = self.plant.state_names()
         initial = model.initial_state()
         self.state = (
             np.concatenate([initial[:2], initial[model.coupling_index :]]) if model.driven is not None else initial[:2]
@@ -171,7 +172,7 @@ class MachineStepper:
         self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch, None)
         self.state = check_contact(self.plant, stretch, self.time, self.state)  # a cam follower's jump ends it
         self.time = stretch.t_end
-        beyond = speed_beyond_limit(self.plant.state_names(), self.state) if stretch.status == "complete" else None
+        beyond = speed_beyond_limit(self._state_names, self.state.tolist()) if stretch.status == "complete" else None
         if beyond is not None:  # a blow-up (limits.py; the fast path's segment does not look at every step)
             fail_blown_up(self.plant, stretch, self.time, self.state, *beyond)
         elif stretch.status == "complete" and self.overspeed_trip > 0.0 and self.state[1] < -self.overspeed_trip:

@@ -140,6 +140,8 @@ class CompiledScene:
     n_normals: int = 0
     _mode_matrices: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, sign of omega, window)
     # -> linear's rows before the breakpoints
+    _mode_parameters: dict = field(default_factory=dict, repr=False, compare=False)  # (mode, window) -> p before the
+    # piece and the tables (parameters_for)
 
     def parameters_for(
         self,
@@ -158,8 +160,22 @@ class CompiledScene:
         their breakpoint guards' bounds (those of a table that turns with phi in the stepper's phi); with joint
         friction's corner angles and a window, the signs of the joints' relative rates at its middle (the guides' N
         signs: hold_normal)."""
-        p = self.parameters.copy()
+        key = (mode, window)
+        in_mode = self._mode_parameters.get(key)
+        if in_mode is None:
+            in_mode = self._mode_parameters[key] = self._parameters_in(mode, window)
+        p = in_mode.copy()
         p[PIECE_INDEX] = self.piece_values(piece, omega)
+        if held:
+            anchors = _anchors(self.model.state_tables, held)
+            for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):
+                p[slot], p[slot + 1], p[slot + 2] = anchor, low, high
+        return p
+
+    def _parameters_in(self, mode, window: tuple[float, float] | None) -> np.ndarray:
+        """The part of parameters_for's p that depends on the mode and the switch window (lo, hi) [rad] alone: the
+        mode's codes, the clamp and the window, joint friction's signs of the relative rates."""
+        p = self.parameters.copy()
         model = self.model
         if model.governor is not None and mode is not None:
             p[SLEEVE_MODE], p[SERVO_MODE] = model.governor.mode_codes((mode[0], mode[1]))
@@ -178,10 +194,6 @@ class CompiledScene:
                 first_rate = self.friction_slot + NORMAL_SLOTS * self.n_normals
                 for index, sign in zip(friction.indices, friction.ratio_signs(0.5 * (window[0] + window[1]))):
                     p[first_rate + index] = sign
-        if held is not None:
-            anchors = _anchors(self.model.state_tables, held)
-            for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):
-                p[slot], p[slot + 1], p[slot + 2] = anchor, low, high
         return p
 
     @staticmethod
@@ -251,9 +263,9 @@ class CompiledScene:
         """The integrators' linear-guard matrix (n_guards rows of [flag, c0, c1..c_n]) for a mode, window and the
         crank's speed at the segment's start [rad/s]: flag 1 where the guard is c0 + sum c_i y_i, 0 where it is not
         linear (or unused); with held and the start state y, the breakpoint guards of the held pieces (STEP_ONTO)."""
-        n = len(self.model.state_names())
         key = (mode, sign_of(omega), window)  # mode_rows reads omega's sign only
         rows = self._mode_matrices.get(key)
+        n = len(self.model.state_names()) if rows is None else rows.shape[1] - 2
         if rows is None:
             rows = np.zeros((self.n_guards, n + 2))
             for slot, row in enumerate(mode_rows(self.model, mode, omega)):

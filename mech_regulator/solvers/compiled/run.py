@@ -122,7 +122,9 @@ class _Layout(NamedTuple):
     indices of the speeds the stepper keeps within MAX_SPEED (the run stops beyond it); whether the stepper may go on
     into the next of a sequence of load pieces itself (integrators._piece_restart: a scene whose p there depends on
     the piece and the crank's speed only, without switch angles or a wrapped angle); the scene's compiled rhs, guards
-    and reactions as the stepper takes them (_Address)."""
+    and reactions as the stepper takes them (_Address); the model's state tables (MachineModel.state_tables), whether
+    one turns with phi (a guard then reads phi: the stepper does not wrap it itself), the crank angle's wrap limit
+    [rad] (inf: never wrapped) and the empty array of following pieces a call without them passes."""
 
     grid: np.ndarray
     period: float
@@ -134,6 +136,10 @@ class _Layout(NamedTuple):
     speed_indices: np.ndarray
     pieces_inside: bool
     callbacks: tuple[_Address, _Address, _Address]
+    tables: tuple
+    turning: bool
+    wrap_limit: float
+    no_following: np.ndarray
 
     @classmethod
     def of(cls, model: MachineModel, compiled: CompiledScene) -> _Layout:
@@ -148,9 +154,10 @@ class _Layout(NamedTuple):
             and compiled.normal_slot is None
         )
         names = model.state_names()
+        period = model.dynamic_period()
         return cls(
             grid=grid,
-            period=model.dynamic_period(),
+            period=period,
             wraps=wraps,
             atol=np.full(len(names), model.scene.solver.atol),
             thresholds=np.zeros(compiled.n_guards),  # the steppers apply time_domain's GUARD_TOLERANCE
@@ -173,6 +180,10 @@ class _Layout(NamedTuple):
                 _Address(compiled.guards_callback),
                 _Address(compiled.reactions_callback),
             ),
+            tables=model.state_tables,
+            turning=any(table.angular for table in model.state_tables),
+            wrap_limit=RESTART_PERIODS * period if wraps else math.inf,
+            no_following=np.empty((0, 2 + len(PIECE_SLOTS))),
         )
 
 
@@ -233,17 +244,17 @@ def _compiled_pieces(
     state and mode at the end and the index of the next piece to start."""
     settings = model.scene.solver
     grid, period, wraps, atol, thresholds = layout[:5]
-    wrap_limit = RESTART_PERIODS * period if wraps else math.inf
+    wrap_limit, tables, stats = layout.wrap_limit, layout.tables, trajectory.stats
     piece, t, t_end, _ = pieces[index]
-    following = np.array(
-        [(end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]]
+    following = (
+        np.array(
+            [(end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]],
+            dtype=float,
+        ).reshape(-1, 2 + len(PIECE_SLOTS))
         if layout.pieces_inside
-        else [],
-        dtype=float,
-    ).reshape(-1, 2 + len(PIECE_SLOTS))
+        else layout.no_following
+    )
     first_step = 0.0
-    tables = model.state_tables
-    turning = any(table.angular for table in tables)  # a guard reads phi (a driven part's table at phi - twist)
     held: list[int] = []  # per state table its piece, counted from the carried turns (_held_pieces; none yet)
     normal_sides: tuple[float, ...] = ()  # joint friction's guides: the held signs of N,
     crossed_normal: int | None = None  # the one just crossed
@@ -255,23 +266,26 @@ def _compiled_pieces(
         if wraps:
             whole = math.floor(phase / period)
             turns, phase = turns + whole, phase - whole * period
-            held = _unwound_pieces(tables, held, whole, period)
+            if tables:
+                held = _unwound_pieces(tables, held, whole, period)
         offset = turns * period if wraps else 0.0
         y, mode, phase = settle_mode_in_phase(model, t, y, phase, offset, mode, trajectory)
         if trajectory.status != "complete":
             break
         window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
-        start = np.array(y, dtype=float)  # the guards are those of the mode at this start (time_domain._segment)
+        start = y  # settle_mode_in_phase's own array, never written: the guards are those of the mode at this start
+        # (time_domain._segment)
         y_wrapped = start.copy()
         y_wrapped[0] = phase
-        held = _held_pieces(tables, y_wrapped, held)
+        if tables:
+            held = _held_pieces(tables, y_wrapped, held)
         p = compiled.parameters_for(piece, mode, window, start[1], held, y_wrapped)
         if compiled.normal_slot is not None:
             normal_sides = compiled.hold_normal(p, t, y_wrapped, normal_sides, crossed_normal)
             crossed_normal = None
         # without a switch window or a driven part's table no guard reads phi: the stepper wraps it itself instead
         # of returning to restart
-        wrap_period = period if wraps and window is None and not turning else 0.0
+        wrap_period = period if wraps and window is None and not layout.turning else 0.0
         linear = compiled.linear(mode, window, start[1], held, y_wrapped)
         restarts = (
             layout.kink_grid,
@@ -297,17 +311,18 @@ def _compiled_pieces(
             first_step,
             wrap_limit,
             wrap_period,
-            time_domain.MAX_STEPS - trajectory.stats.steps,
+            time_domain.MAX_STEPS - stats.steps,
             restarts,
         )
+        t_stop = run.t_end
         if run.n_steps:
-            trajectory.add_piece(t, run.t_end, run.dense, step_ends=run.times[1:])
-        trajectory.stats.steps += int(run.n_steps)
-        trajectory.stats.nfev += int(run.nfev)
-        trajectory.stats.njev += int(run.njev)
-        trajectory.stats.nlu += int(run.nlu)
-        trajectory.stats.restarts += int(run.wraps) + int(run.kinks)
-        trajectory.stats.switches += int(run.kinks)
+            trajectory.add_piece(t, t_stop, run.dense, step_ends=run.times[1:])
+        stats.steps += int(run.n_steps)
+        stats.nfev += int(run.nfev)
+        stats.njev += int(run.njev)
+        stats.nlu += int(run.nlu)
+        stats.restarts += int(run.wraps) + int(run.kinks)
+        stats.switches += int(run.kinks)
         if run.kinks:  # the stepper went on into later windows: phi's offset and the window are those of the last
             later, window = round(run.offset / period), (run.window_lo, run.window_hi)
             turns, held = later, _unwound_pieces(tables, held, later - turns, period)
@@ -317,8 +332,8 @@ def _compiled_pieces(
             piece, _, t_end, _ = pieces[index]
             following = following[run.pieces_done :]
         if run.last_step > 0.0:  # within the reach of the journals' branch points the last step saw (integrators)
-            first_step = min(run.last_step, t_end - run.t_end, run.step_limit)
-        t_old, t = t, run.t_end
+            first_step = min(run.last_step, t_end - t_stop, run.step_limit)
+        t_old, t = t, t_stop
         y = np.array(run.y_end, dtype=float)
         phase = y[0]  # less offset (the stepper's own wraps added back)
         y[0] += offset
@@ -335,23 +350,23 @@ def _compiled_pieces(
         elif run.status == integrators.EVENT:
             g = int(run.event_guard)
             if compiled.window_slot is not None and g >= compiled.window_slot:
-                trajectory.stats.switches += 1
+                stats.switches += 1
                 assert window is not None, "a switch angle's guard is armed only within a switch window"
                 phase = window[g - compiled.window_slot]
                 y[0] = offset + phase
-                trajectory.stats.restarts += int(t < t_end)
+                stats.restarts += int(t < t_end)
                 what = ("the switch angle phi = {:.12g} rad ({:.12g} rad in its period)", (y[0], phase))
             elif compiled.normal_slot is not None and 0 <= g - compiled.normal_slot < compiled.n_normals:
                 crossed_normal = g - compiled.normal_slot  # a guide's N = 0: its other sign held, mode and state kept
                 normal_sides = tuple(-side if k == crossed_normal else side for k, side in enumerate(normal_sides))
-                trajectory.stats.switches += 1
-                trajectory.stats.restarts += int(t < t_end)
+                stats.switches += 1
+                stats.restarts += int(t < t_end)
                 what = ("a guide's normal force N = 0 (guide {})", (crossed_normal,))
             elif compiled.breakpoint_slot is not None and g >= compiled.breakpoint_slot:  # a table's: its next piece
                 table, side = divmod(g - compiled.breakpoint_slot, 2)
                 held[table] += 1 if side else -1
-                trajectory.stats.switches += 1
-                trajectory.stats.restarts += int(t < t_end)
+                stats.switches += 1
+                stats.restarts += int(t < t_end)
                 what = ("a breakpoint of the table {}", (tables[table].name,))
             else:
                 guard = model.guards(mode, start)[g]
@@ -361,15 +376,15 @@ def _compiled_pieces(
                 instant_events = instant_events + 1 if t == t_old else 0
                 if instant_events > MAX_INSTANT_EVENTS:
                     _fail_stuck(trajectory, t)
-                trajectory.stats.restarts += 1
+                stats.restarts += 1
                 what = ("the guard '{}'", (guard.name,))
         elif run.status == integrators.WRAPPED and t < t_end:
-            trajectory.stats.restarts += 1
+            stats.restarts += 1
             what = ("a wrap of the crank angle", ())
         stalled = stalled + 1 if t == t_old and not run.n_steps and not run.pieces_done else 0
         if run.beyond >= 0:  # a speed beyond MAX_SPEED at the last step's end: the run stops there (time_domain)
             fail_blown_up(model, trajectory, t, y_stop, model.state_names()[run.beyond], float(y_stop[run.beyond]))
-        elif trajectory.status == "complete" and trajectory.stats.steps >= time_domain.MAX_STEPS:
+        elif trajectory.status == "complete" and stats.steps >= time_domain.MAX_STEPS:
             fail_too_many_steps(model, trajectory, t, y_stop)
         elif trajectory.status == "complete" and stalled >= MAX_RESTARTS_WITHOUT_PROGRESS:
             fail_no_progress(model, trajectory, t, y_stop, what[0].format(*what[1]))
