@@ -130,3 +130,21 @@ def preset_reduced(geometry, gravity):
     }[type(geometry)]
     linkage = build(geometry)
     return symbolic.make_reduced(linkage, checked(linkage), gravity)
+
+
+SMOOTH_GOVERNED_MACHINE = {  # constant inertia (cheap per step), a linear motor and a viscous load
+    "inertia": 0.5,
+    "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
+    "loads": [{"type": "viscous", "coefficient": 0.3}],
+}
+SMOOTH_DIRECT_GOVERNOR = {  # a direct-action Porter governor without friction, its stops not reached
+    "type": "direct",
+    "ball_mass": 1.0,
+    "arm_length": 0.2,
+    "sleeve_mass": 5.0,
+    "damping": 200.0,
+    "friction": 0.0,
+    "ratio": 0.16,
+    "stroke": [0.02, 0.08],
+    "valve": {"open_at": 0.02, "closed_at": 0.08},
+}

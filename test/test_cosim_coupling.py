@@ -12,6 +12,7 @@ import statistics
 
 import numpy as np
 import pytest
+from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE
 
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene, validate_scene
@@ -30,22 +31,8 @@ from mech_regulator.solvers.cosim import (
 
 SMOOTH_GOVERNED = {  # constant inertia, a direct governor without friction or stops reached, a load step at 0.2 s
     "name": "smooth_governed",
-    "machine": {
-        "inertia": 0.5,
-        "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-        "loads": [{"type": "viscous", "coefficient": 0.3}],
-    },
-    "governor": {
-        "type": "direct",
-        "ball_mass": 1.0,
-        "arm_length": 0.2,
-        "sleeve_mass": 5.0,
-        "damping": 200.0,
-        "friction": 0.0,
-        "ratio": 0.16,
-        "stroke": [0.02, 0.08],
-        "valve": {"open_at": 0.02, "closed_at": 0.08},
-    },
+    "machine": SMOOTH_GOVERNED_MACHINE,
+    "governor": SMOOTH_DIRECT_GOVERNOR,
     "scenario": {
         "initial": {"omega": 100.0},
         "duration": 1.0,

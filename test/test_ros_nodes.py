@@ -49,7 +49,7 @@ from ros_support import (  # noqa: F401 (fixtures)
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
-from support import run_cli
+from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE, run_cli
 from test_recording import events
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
@@ -82,22 +82,8 @@ def _constant_inertia_data(omega: float, **scenario) -> dict:
     """A governed machine of constant inertia (cheap per step) with a direct-action Porter governor."""
     return {
         "name": "constant_inertia",
-        "machine": {
-            "inertia": 0.5,
-            "drive": {"type": "linear_motor", "stall_torque": 200.0, "no_load_speed": 150.0},
-            "loads": [{"type": "viscous", "coefficient": 0.3}],
-        },
-        "governor": {
-            "type": "direct",
-            "ball_mass": 1.0,
-            "arm_length": 0.2,
-            "sleeve_mass": 5.0,
-            "damping": 200.0,
-            "friction": 0.0,
-            "ratio": 0.16,
-            "stroke": [0.02, 0.08],
-            "valve": {"open_at": 0.02, "closed_at": 0.08},
-        },
+        "machine": SMOOTH_GOVERNED_MACHINE,
+        "governor": SMOOTH_DIRECT_GOVERNOR,
         "scenario": {
             "initial": {"omega": omega},
             "duration": 0.4,
