@@ -1,6 +1,6 @@
-"""Warming the fast path (solvers/compiled/warm.py, solvers.on_path_for_a_command): a first run whose method's stepper
-is not compiled yet is served by the reference path with a note, while a background process compiles the stepper;
-the next run is on the fast path. That is what the scene default solver.path auto does (test/conftest.py fixes auto to
+"""Warming the fast path (solvers/compiled/warm.py, solvers.on_path_for_a_command): a first run (solver.path auto)
+whose method's stepper is not compiled yet is served by the reference path with a note, while a background process
+compiles the stepper; the next run is on the fast path. A scene that names the fast path compiles first. That is what the scene default solver.path auto does (test/conftest.py fixes auto to
 the reference path for the rest of the suite; these cases take that away). A method the fast path does not have
 falls back with a note; a scene on the reference path is left alone; MECH_REGULATOR_AUTO_PATH fixes what auto means.
 
@@ -109,9 +109,15 @@ def test_the_auto_path_variable_fixes_what_auto_means(empty_caches):
     assert "Traceback" not in wrong.stderr
 
 
-def test_the_main_job_compiles_its_stepper_before_its_nodes_start(monkeypatch):
-    """compile_now (the main job): a stepper not compiled yet is compiled here, announced, and the run takes the fast
-    path; no background compile is started (it would compete with the nodes)."""
+@pytest.mark.parametrize(
+    ("path", "compile_now"),
+    [("auto", True), ("fast", False)],
+    ids=["the main job (compile_now)", "a scene that names the fast path"],
+)
+def test_a_stepper_is_compiled_before_the_run_that_needs_it(monkeypatch, path, compile_now):
+    """compile_now (the main job), or a scene that asks for the fast path by name: a stepper not compiled yet is
+    compiled here, announced, and the run takes the fast path the scene asked for; no background compile is started
+    (it would compete with the nodes) and the run is not moved to the reference path."""
     from mech_regulator.model import build_model
     from mech_regulator.scene import load_scene
     from mech_regulator.solvers import compiled, on_path_for_a_command
@@ -122,10 +128,10 @@ def test_the_main_job_compiles_its_stepper_before_its_nodes_start(monkeypatch):
     monkeypatch.setattr(warm, "stepper_cached", lambda method: False)
     monkeypatch.setattr(warm, "compile_before_the_run", lambda method, report: compiled_here.append(method))
     monkeypatch.setattr(warm, "compile_in_background", lambda methods: pytest.fail("a background compile"))
-    model = build_model(load_scene("lathe", ["solver.method=DOP853"]))
+    model = build_model(load_scene("lathe", ["solver.method=DOP853", f"solver.path={path}"]))
     assert compiled.fast_path_refusal(model) is None
     notes = []
-    chosen = on_path_for_a_command(model, notes.append, compile_now=True)
+    chosen = on_path_for_a_command(model, notes.append, compile_now=compile_now)
     assert chosen.scene.solver.path == "fast" and compiled_here == ["DOP853"], notes
 
 

@@ -30,6 +30,7 @@ from mech_regulator.analysis.statics import (
 from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
+from mech_regulator.solvers.compiled import runs_compiled
 from mech_regulator.solvers.cosim import CoSimulation
 
 
@@ -48,7 +49,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
             "governor": None,
             "two_mass": None,
             "drive_train": None,
-            "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
+            "solver": _solver_summary(model, trajectory),
         }
     steady = analyse_steady_state(model, trajectory)
     balance = energy_balance(model, trajectory)
@@ -69,7 +70,7 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
             "last_period": dataclasses.asdict(steady.last) if steady.last is not None else None,
         },
         "energy": dataclasses.asdict(balance),
-        "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
+        "solver": _solver_summary(model, trajectory),
         "governor": _governed_run(model, trajectory) if model.governor is not None else None,
         "two_mass": (
             dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None else None
@@ -216,3 +217,10 @@ __all__ = [
     "summarise",
     "summarise_cosimulation",
 ]
+
+
+def _solver_summary(model: MachineModel, trajectory: Trajectory) -> dict:
+    """The summary's solver entry: the method, the path that stepped it (fast: the compiled steppers; reference:
+    scipy and the model's Python right-hand side) and the trajectory's counts (steps, evaluations, switches, ...)."""
+    path = "fast" if runs_compiled(model.scene.solver) else "reference"
+    return {"method": trajectory.method, "path": path, **dataclasses.asdict(trajectory.stats)}

@@ -88,7 +88,10 @@ class Solver(SceneModel):
         "first); the library's "
         "simulate() runs auto on the reference path. reference: the pure-Python right-hand side "
         "stepped by scipy; fast: the scene's right-hand side compiled by numba (cached on disk) "
-        "and stepped by compiled RK45, DOP853, RK4 or Rosenbrock23 (docs/speed.md)",
+        "and stepped by compiled RK45, DOP853, RK4 or Rosenbrock23 (docs/speed.md); a command "
+        "compiles its stepper first when it is not compiled yet, announced with its estimate (a "
+        "method the fast path lacks runs on the reference path, with a note); the summary names "
+        "the path that ran",
     )
     rtol: Positive = Field(1e-8, description="relative tolerance of the adaptive methods [-]")
     atol: Positive = Field(

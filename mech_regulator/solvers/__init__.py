@@ -53,12 +53,13 @@ def on_path_for_a_command(
     reference, never auto.
 
     solver.path reference stays; fast and auto (the default) run the fast path where it covers the scene
-    (fast_path_refusal) and its method's stepper is compiled on this machine. Otherwise the reference path, with a
-    one-line note to `report`: where the fast path does not cover the scene, or while the stepper is not compiled
-    yet — it is then compiled by a background process for the next run (compiled/warm.py), so a first run is never a
-    wait of most of a minute. With `compile_now` (the main job, whose nodes the reference path slows to a tenth of
-    their pace) the stepper is compiled here first, announced with its estimate (warm.compile_before_the_run);
-    Rosenbrock23, which only the fast path has, is compiled in the foreground, announced.
+    (fast_path_refusal), else the reference path with a one-line note to `report`. Where the method's stepper is not
+    compiled on this machine yet, auto runs the reference path with a note while a background process compiles the
+    stepper for the next run (compiled/warm.py), so a first run is never a wait of most of a minute. A scene that
+    asks for the fast path by name (solver.path fast) gets it: the stepper is compiled here first, announced with its
+    estimate (warm.compile_before_the_run), as it is with `compile_now` (the main job, whose nodes the reference path
+    slows to a tenth of their pace); Rosenbrock23, which only the fast path has, is compiled in the foreground,
+    announced.
     The environment variable MECH_REGULATOR_AUTO_PATH (reference or fast) fixes what auto means on a machine that
     must not depend on what is compiled (a reproducible CI, the test suite)."""
     path: str = model.scene.solver.path
@@ -82,7 +83,7 @@ def on_path_for_a_command(
     method = model.scene.solver.method
     if stepper_cached(method):
         return on_path(model, "fast")
-    if compile_now:
+    if compile_now or model.scene.solver.path == "fast":
         compile_before_the_run(method, lambda line: report(f"note: {line.strip()}"))
         return on_path(model, "fast")
     if method == "Rosenbrock23":

@@ -184,7 +184,7 @@ def format_summary(model: MachineModel, summary: dict) -> str:
     )
     solver = summary["solver"]
     lines.append(
-        f"solver {solver['method']}: {solver['steps']} steps, {solver['nfev']} rhs evaluations"
+        f"solver {solver['method']} ({solver['path']} path): {solver['steps']} steps, {solver['nfev']} rhs evaluations"
         + (f", {solver['njev']} jacobians, {solver['nlu']} LU" if solver["njev"] else "")
         + (f", {solver['switches']} switches located" if solver["switches"] else "")
         + (f", {solver['restarts']} restarts" if solver["restarts"] else "")
