@@ -15,6 +15,7 @@ import re
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -153,7 +154,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
     lines = []
     warm.compile_before_the_run("RK4", lines.append)
     assert lines[0].startswith("compiling the fast path's RK4 stepper (once, about 50 s"), lines
-    with open(tmp_path / locks.LOCK_NAME, "a") as other:  # another process's background compile
+    with open(locks.lock_path(), "a") as other:  # another process's background compile
         fcntl.flock(other, fcntl.LOCK_EX)
         warm.compile_before_the_run("RK4", lines.append)
     assert lines[2].startswith("waiting for the fast path's RK4 stepper that another process is compiling"), lines
@@ -162,7 +163,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
 
 
 def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch, tmp_path):
-    """steppers.stepper holds compiling-METHOD.lock while numba compiles or loads the stepper (so that a second
+    """steppers.stepper holds its method's lock while numba compiles or loads the stepper (so that a second
     process, a test worker beside this one, waits and loads it instead of compiling it again), and no other method's
     lock nor the background compile's."""
     import fcntl
@@ -171,8 +172,8 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
 
     monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
 
-    def held(name: str) -> bool:
-        with open(tmp_path / name, "a") as other:
+    def held(path: Path) -> bool:
+        with open(path, "a") as other:
             try:
                 fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
@@ -183,15 +184,37 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
 
     def compiling(signature, cache):  # numba's njit, looking at the locks instead of compiling
         def compile_(function):
-            seen.append([held(name) for name in ("compiling-RK4.lock", "compiling-DOP853.lock", locks.LOCK_NAME)])
+            seen.append([held(path) for path in (rk4_lock, locks.method_lock_path("DOP853"), locks.lock_path())])
             return function
 
         return compile_
 
+    rk4_lock = locks.method_lock_path("RK4")
+    assert rk4_lock.parent == tmp_path
     monkeypatch.setattr(steppers, "njit", compiling)
     steppers.stepper.__wrapped__("RK4")  # not functools.cache's: this process's compiled stepper is left alone
     assert seen == [[True, False, False]]
-    assert not held("compiling-RK4.lock")  # released once loaded
+    assert not held(rk4_lock)  # released once loaded
+
+
+def test_another_versions_compile_does_not_hold_a_stepper_up(monkeypatch, tmp_path):
+    """Two versions of the package sharing a cache folder (two checkouts): the locks carry the stamp of the compiled
+    code's sources, so a stepper of this version is compiled or loaded while another version's compile of the same
+    method holds its own lock (before, the run waited minutes behind it, silently)."""
+    import fcntl
+
+    from mech_regulator.solvers.compiled import locks
+
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
+    monkeypatch.setattr(locks, "reach_source_hash", lambda: "a" * 64)
+    other_version = locks.method_lock_path("RK4"), locks.lock_path()
+    monkeypatch.setattr(locks, "reach_source_hash", lambda: "b" * 64)
+    assert other_version == (tmp_path / f"compiling-{'a' * 16}-RK4.lock", tmp_path / f"compiling-{'a' * 16}.lock")
+    with open(other_version[0], "a") as other:
+        fcntl.flock(other, fcntl.LOCK_EX)
+        with locks.method_lock("RK4"), open(locks.method_lock_path("RK4"), "a") as mine:
+            with pytest.raises(BlockingIOError):  # this version's lock is held here, by method_lock
+                fcntl.flock(mine, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
 def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):

@@ -179,18 +179,22 @@ def test_every_output_in_a_read_only_folder_is_refused_before_any_work(tmp_path)
 
 
 def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_keeps_the_rest(tmp_path):
-    """full/: a tmpfs of one page, filled; small/ and tiny/: tmpfs of 40 and 12 kB, which the lathe's CSV (about
-    1 MB) and recording (about 200 kB) overflow. The other output goes to a folder with room."""
+    """full/: a tmpfs of one page, filled; small/, tiny/ and both/: tmpfs of 40, 12 and 40 kB, which the lathe's
+    CSV (about 1 MB) and recording (about 200 kB) overflow. The other output goes to a folder with room, or, in
+    both/, to the same disk after the CSV filled it: the recording cannot write even its header (Rerun raises a
+    RuntimeError of its own there, which once ended the command in a traceback)."""
     mounts = (
-        "mkdir -p full small tiny && mount -t tmpfs -o size=4k none full && head -c 4096 /dev/zero > full/filler"
-        " && mount -t tmpfs -o size=40k none small && mount -t tmpfs -o size=12k none tiny"
+        "mkdir -p full small tiny both && mount -t tmpfs -o size=4k none full"
+        " && head -c 4096 /dev/zero > full/filler && mount -t tmpfs -o size=40k none small"
+        " && mount -t tmpfs -o size=12k none tiny && mount -t tmpfs -o size=40k none both"
     )
     commands = [
         ["simulate", "lathe", "--quiet", "--out", "full/run.csv"],
         ["simulate", "lathe", "--quiet", "--json", "--out", "small/run.csv", "--plot", "run.png"],
         ["simulate", "lathe", "--quiet", "--json", "--record", "tiny/run.rrd", "--out", "run.csv"],
+        ["simulate", "lathe", "--quiet", "--json", "--out", "both/run.csv", "--record", "both/run.rrd"],
     ]
-    refused, csv_full, recording_full = in_private_mounts(tmp_path, commands, mounts)
+    refused, csv_full, recording_full, both_full = in_private_mounts(tmp_path, commands, mounts)
     line = refused_line(*refused)
     assert "cannot write 'full/run.csv': No space left on device" in line, line
     for (code, out, err), failed, kept, key in (
@@ -204,6 +208,14 @@ def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_k
         ours = [line for line in err.splitlines() if line.startswith("mech-regulator: ")]
         assert len(ours) == 1, err  # one line of ours (Rerun logs its own reason before it)
         assert ours[0].startswith(f"mech-regulator: writing '{failed}' failed: ") and "incomplete" in ours[0], err
+    code, out, err = both_full
+    assert code == 1 and json.loads(out)["status"] == "complete", err
+    ours = [line for line in err.splitlines() if line.startswith("mech-regulator: ")]
+    assert [line.split("' failed: ")[0] for line in ours] == [
+        "mech-regulator: writing 'both/run.csv",
+        "mech-regulator: writing 'both/run.rrd",
+    ], err
+    assert all("No space left on device" in line and "incomplete" in line for line in ours), err
 
 
 def test_a_run_of_the_nodes_whose_disk_fills_up_ends_with_exit_1_and_says_which_outputs(tmp_path):

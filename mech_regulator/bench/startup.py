@@ -460,9 +460,9 @@ def _wait_for_background_compile(cache: str, report: Callable[[str], None]) -> N
     """Wait until the background process compiling the stepper that a cold fast run started (it ran on the
     reference path meanwhile: solvers/compiled/warm.py) has ended — it holds the lock in the cache folder — so that
     it neither slows the runs measured next nor leaves the warm fast runs on the reference path."""
-    from mech_regulator.solvers.compiled.locks import LOCK_NAME
+    from mech_regulator.solvers.compiled.locks import lock_path
 
-    lock = Path(cache) / LOCK_NAME
+    lock = Path(cache) / lock_path().name  # this version's lock, in the benchmark's cache folder
     if lock.exists():
         report(
             "bench startup: waiting for the stepper's compile in the background that the cold fast run started "

@@ -36,10 +36,11 @@ the end (`close(status, message)`).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import math
 import threading
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,7 +139,8 @@ class RunRecording:
         self._stream = rr.RecordingStream(APPLICATION_ID)
         self._stream.set_log_time_enabled(False)  # one time line: simulated time, not the wall clock
         sinks = ([rr.FileSink(str(path))] if path is not None else []) + ([rr.GrpcSink(connect)] if connect else [])
-        self._stream.set_sinks(*sinks)
+        with rerun_write_failures_as_os_errors():
+            self._stream.set_sinks(*sinks)
         self._stream.send_blueprint(
             run_blueprint(model, outside_throttle=self.outside_throttle), make_active=True, make_default=True
         )
@@ -458,13 +460,23 @@ def end_text(t_ns: int, status: str | None, message: str) -> str:
     return f"end: {status} at {when}" + (f": {message}" if message else "")
 
 
-def finish_stream(stream: rr.RecordingStream) -> None:
-    """Send what a Rerun stream holds and end its sinks. A file sink that could not write (a full disk; Rerun logs
-    why) raises OSError, not Rerun's RuntimeError, as any other failed write of a file does."""
+@contextlib.contextmanager
+def rerun_write_failures_as_os_errors() -> Iterator[None]:
+    """Raise a Rerun sink's failure to write (a full disk, a file that cannot be made; Rerun raises RuntimeError and
+    logs why) as OSError, as any other failed write of a file is raised, so a command keeps what it computed and
+    says which file is incomplete (cli/report/outputs.OutputWriter)."""
     try:
-        stream.flush()
+        yield
     except RuntimeError as error:
-        raise OSError(errno.EIO, f"the recording's writer stopped ({error}; Rerun's message above says why)") from None
+        raise OSError(errno.EIO, f"the recording's writer stopped ({error})") from None
+
+
+def finish_stream(stream: rr.RecordingStream) -> None:
+    """Send what a Rerun stream holds and end its sinks; a file sink that could not write raises OSError
+    (rerun_write_failures_as_os_errors)."""
+    try:
+        with rerun_write_failures_as_os_errors():
+            stream.flush()
     finally:
         stream.disconnect()
 

@@ -1,5 +1,8 @@
 """The fast path's compile locks, files in the cache folder (mech_regulator.cache): one for the background compile of
-the steppers (warm.py) and one per method held while a stepper is compiled or loaded (steppers.stepper)."""
+the steppers (warm.py) and one per method held while a stepper is compiled or loaded (steppers.stepper). Each is named
+with the stamp of the compiled code's sources (numba_cache.reach_source_hash), so two versions of the package sharing a
+cache folder (two checkouts, a `git pull` while a compile runs) never wait on each other's compile of other code: a
+process would otherwise sit behind a compile it cannot use, saying nothing."""
 
 from __future__ import annotations
 
@@ -9,21 +12,27 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from mech_regulator.cache import folder as cache_folder
+from mech_regulator.numba_cache import reach_source_hash
 
-LOCK_NAME = "compiling.lock"
+STAMP_DIGITS = 16  # [-] hex digits of the sources' SHA-256 in a lock's name
 
 
 def lock_path() -> Path:
-    """The background compile's lock file (compiling.lock in the cache folder)."""
-    return cache_folder() / LOCK_NAME
+    """The background compile's lock file: compiling-STAMP.lock in the cache folder."""
+    return cache_folder() / f"compiling-{reach_source_hash()[:STAMP_DIGITS]}.lock"
+
+
+def method_lock_path(method: str) -> Path:
+    """The lock file of `method`'s stepper: compiling-STAMP-METHOD.lock in the cache folder."""
+    return lock_path().with_name(f"{lock_path().stem}-{method}.lock")
 
 
 @contextlib.contextmanager
 def method_lock(method: str) -> Iterator[None]:
-    """Hold the lock of `method`'s stepper (compiling-METHOD.lock in the cache folder) while compiling or loading it
+    """Hold the lock of `method`'s stepper (method_lock_path) while compiling or loading it
     (steppers.stepper): one process at a time, so that two (two commands, two test workers) never compile the
     same stepper side by side; the other one waits and loads it from numba's disk cache. Another method's compile does
     not hold it up."""
-    with open(lock_path().with_name(f"compiling-{method}.lock"), "a") as handle:
+    with open(method_lock_path(method), "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         yield
