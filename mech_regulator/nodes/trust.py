@@ -6,9 +6,9 @@ gives a two-argument callback) and the graph's endpoint info (node name and name
 takes from named peers only is refused from anyone else, and from a second publisher of a peer's name (the first one
 accepted is pinned). Then the message's own checks run (they raise BadMessage); a refused message is counted per
 topic and reason, and one refused for who sent it also per sender and topic (Refusals, in /diagnostics and the
-recorder's summary), and never reaches the state. An error a check
-did not foresee is caught at the callback's boundary, logged with its traceback and reported as a disturbance that
-may have changed the run's numbers: no node raises out of a callback, and no such run ends `complete` unmarked.
+recorder's summary), and never reaches the state. An error a check did not foresee is caught at the callback's
+boundary, logged with its traceback and reported as a disturbance that may have changed the run's numbers: no node
+raises out of a callback, and no such run ends `complete` unmarked.
 """
 
 from __future__ import annotations
