@@ -24,6 +24,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.duration import Duration
 from ros_support import (  # noqa: F401 (fixtures)
     LISTEN_QOS,
+    SEND_QOS,
     WAIT,
     Processes,
     RunListener,
@@ -34,7 +35,7 @@ from ros_support import (  # noqa: F401 (fixtures)
     stamp_ns,
 )
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 from test_ros_nodes import (
     BASE_LOAD,
@@ -49,6 +50,7 @@ from mech_regulator.nodes.common import STATE_QOS, stamp
 from mech_regulator.solvers.cosim import cosimulate
 
 RESEND = 0.3  # [s] of wall time between two sendings of a message whose refusal a test waits for
+STRANGER_PERIOD = 0.05  # [s] of wall time between two rounds of a stranger's messages (20 Hz)
 # engine_direct shortened to 1.5 s (6 -> 8 N m at 0.4 s, thrown off at 0.7 s), exchanged every 1 ms (some seconds of
 # wall time: a second run has time to start while the first runs)
 SCENE = [
@@ -296,6 +298,56 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         f"probe_{domain_id}" in text or "by a node the graph does not name" in text for text in calls
     ), summary["disturbances"]
     assert "refused on throttle: " in job.log and "disturbance: machine: /machine/pause called" in job.log
+
+
+def test_a_stranger_publishing_all_along_is_refused_counted_and_named(clean_run, tmp_path, processes, domain_id):
+    # a node of another name on the run's domain, publishing at 20 Hz from before the nodes start to the run's end:
+    # chatter, a fake ERROR status named "machine" (once passed over uncounted: not named "mech_regulator: ..."), a
+    # forged finish (with a follower's history of one message it could take the place of the machine's: the run
+    # never ended) and a speed
+    with probe_on(domain_id, "stranger") as stranger:
+        fake_error = DiagnosticArray(
+            status=[DiagnosticStatus(level=DiagnosticStatus.ERROR, name="machine", message="overheated")]
+        )
+        rounds = [
+            (stranger.node.create_publisher(message_type, topic, qos), message)
+            for message_type, topic, qos, message in (
+                (String, "/chatter", SEND_QOS, String(data="hello")),
+                (DiagnosticArray, "/diagnostics", SEND_QOS, fake_error),
+                (String, "machine/status", STATE_QOS, forged_finish()),
+                (JointState, "joint_states", STATE_QOS, speed(0, 0.0)),
+            )
+        ]
+        stranger.node.create_timer(
+            STRANGER_PERIOD, lambda: [publisher.publish(message) for publisher, message in rounds]
+        )
+        job = MainJob(processes, tmp_path, SCENE, "strangered", domain_id)
+        stranger.spin_until(lambda: job.process.poll() is not None, "the run's end", 4 * WAIT, job.describe)
+    assert job.process.returncode == 0, job.describe()
+    assert_no_traceback(job.log, job.node_log)
+    assert job.csv.read_bytes() == clean_run.csv.read_bytes(), "the run's CSV differs from the clean run's"
+    summary = json.loads(job.json.read_text())
+    assert summary["status"] == "complete" and "disturbances" not in summary, summary
+    everyone = "not from recorder or machine or governor or scenario"
+    assert summary["refused"]["/diagnostics"][everyone] >= 1, summary["refused"]
+    foreign = summary["foreign"]  # (the graph names the stranger long before the run: it started first)
+    assert {"/diagnostics", "machine/status", "joint_states"} <= set(foreign["/stranger"]), foreign
+    assert foreign["/stranger"]["/diagnostics"] == summary["refused"]["/diagnostics"][everyone], summary
+    assert "refused from /stranger: " in job.log, job.log
+
+
+def test_a_load_poked_from_outside_leaves_the_run_disturbed(tmp_path, processes, domain_id):
+    # load_torque is open to anyone (the documented way to poke a run), but the run's numbers are then not the scene's
+    with probe_on(domain_id, "stranger") as stranger:
+        job = MainJob(processes, tmp_path, [*SCENE, "--duration", "0.3"], "poked", domain_id)
+        poke = stranger.publisher(Float64, "load_torque", describe=job.describe)  # (the machine subscribes at once)
+        poke.publish(Float64(data=8.0))
+        stranger.spin_until(lambda: job.process.poll() is not None, "the run's end", 4 * WAIT, job.describe)
+    assert job.process.returncode == 1, job.describe()
+    assert_no_traceback(job.log, job.node_log)
+    summary = json.loads(job.json.read_text())
+    assert summary["status"] == "disturbed", summary
+    assert any(text.startswith("machine: load_torque from 'stranger'") for text in summary["disturbances"]), summary
 
 
 # -------------------------------------------------------------------------------------------------

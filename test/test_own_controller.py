@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from ros_support import WAIT, domain_id, processes  # noqa: F401 (fixtures)
+from ros_support import LISTEN_QOS, WAIT, domain_id, probe_on, processes, stamp_ns  # noqa: F401 (fixtures)
 from scipy.integrate import solve_ivp
+from sensor_msgs.msg import JointState  # (after ros_support, which skips this module when rclpy is missing)
 from support import run_cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -234,6 +235,30 @@ def test_a_controller_that_stops_answering_ends_the_run_loudly(tmp_path, process
     assert summary["status"] == "interrupted" and summary["t_end"] == pytest.approx(0.1 - EXCHANGE_STEP), summary
     csv = np.genfromtxt(run.csv, delimiter=",", names=True)
     assert csv["t"][-1] == summary["t_end"]  # what was computed up to the silence is kept
+
+
+def test_a_second_throttle_publisher_leaves_the_run_disturbed(tmp_path, processes, domain_id):
+    # the machine takes the throttle of the node that published it first (the controller, once it has answered) and
+    # refuses a second one's, but which of the two is the user's controller it cannot tell (docs/ros.md, "Who may
+    # speak"): the run's numbers may be a stranger's
+    run = ExternalRun(processes, tmp_path, domain_id, [EXAMPLE])
+    with probe_on(domain_id, "stranger") as stranger:
+        states = stranger.listen(JointState, "joint_states", LISTEN_QOS)
+        stranger.spin_until(
+            lambda: any(stamp_ns(message.header.stamp) > 0 for message in states),
+            "the controller's first answer taken",
+            describe=lambda: run.log,
+        )
+        throttle = stranger.publisher(JointState, "throttle", describe=lambda: run.log)
+        throttle.publish(JointState(name=["throttle"], position=[1.0]))
+        assert run.finish() == 1, run.log
+    assert "Traceback" not in run.log, run.log
+    summary = json.loads(run.json.read_text())
+    assert summary["status"] == "disturbed" and summary["foreign"] == {"/stranger": {"throttle": 1}}, summary
+    assert summary["disturbances"] == [
+        "machine: throttle from /stranger (second publisher): the machine takes the throttle of the node that "
+        "published it first and cannot tell which of the two is your controller"
+    ], summary
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,7 @@
 """Who may speak (nodes/trust.py Speakers) against a stand-in for a node's view of the ROS graph: no ROS node, no
 domain. The graph names a publisher's node a moment after the publisher's first messages can arrive (its
-participant announces its nodes on a topic of its own); a peer's first message is not refused for that."""
+participant announces its nodes on a topic of its own); a peer's first message is not refused for that. What a node
+refused, and from whom, as its diagnostics carry it to the recorder (Refusals, report_of)."""
 
 from types import SimpleNamespace
 
@@ -8,7 +9,7 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 tests need rclpy (pip install 'mech_regulator[ros]')")
 
-from mech_regulator.nodes.trust import UNKNOWN_NODE, BadMessage, Speakers  # noqa: E402
+from mech_regulator.nodes.trust import UNKNOWN_NODE, BadMessage, Refusals, Speakers, report_of  # noqa: E402
 
 MACHINE_GID = bytes(range(16))
 OUTSIDER_GID = bytes(range(16, 32))
@@ -69,6 +70,56 @@ def test_a_publisher_of_another_namespace_is_refused_without_waiting():
     graph.get_namespace = lambda: "/elsewhere"
     speakers = Speakers(graph, name_wait=60.0)
     speakers.allow("/diagnostics", "machine")
-    with pytest.raises(BadMessage, match="a publisher the graph does not name"):
+    with pytest.raises(BadMessage, match="sent by /machine") as refused:
         speakers.check("/diagnostics", sent_by(MACHINE_GID))
     assert graph.looks == 1
+    assert refused.value.sender == "/machine"  # (the summary's `foreign` names it so)
+
+
+class SilentLogger:
+    """A node's logger that keeps what it is told (Refusals logs each refusal and disturbance)."""
+
+    def __init__(self):
+        self.lines: list[str] = []
+
+    def warning(self, text: str, **throttle) -> None:
+        self.lines.append(text)
+
+    def error(self, text: str) -> None:
+        self.lines.append(text)
+
+
+def refusals_of_a_node() -> Refusals:
+    logger = SilentLogger()
+    return Refusals(SimpleNamespace(get_logger=lambda: logger))
+
+
+def test_a_refusal_for_who_sent_it_is_counted_under_its_sender_too():
+    refusals = refusals_of_a_node()
+    speakers = Speakers(LateGraph(unknown_looks=0), name_wait=0.0)
+    speakers.allow("/diagnostics", "recorder")
+    for _ in range(3):
+        with pytest.raises(BadMessage) as refused:
+            speakers.check("/diagnostics", sent_by(MACHINE_GID))
+        refusals.refuse("/diagnostics", refused.value.reason, refused.value.detail, refused.value.sender)
+    refusals.refuse("throttle", "not finite", "throttle = nan")  # refused for what it says: no sender
+    report = report_of({item.key: item.value for item in refusals.key_values()})
+    assert report.counts == {"/diagnostics": {"not from recorder": 3}, "throttle": {"not finite": 1}}
+    assert report.foreign == {"/machine": {"/diagnostics": 3}}
+    assert not report.alters_results and report.disturbances == []
+
+
+def test_a_refusal_that_cannot_keep_the_scene_s_numbers_alters_the_results():
+    # an external controller's throttle: the machine takes the first publisher's and refuses a second one's, but
+    # cannot tell which of the two is the user's controller
+    refusals = refusals_of_a_node()
+    refusals.alters_when_refused("throttle", "second publisher", "which is your controller the machine cannot tell")
+    refusals.refuse("throttle", "not finite", "throttle = nan")
+    assert not refusals.alters_results
+    for _ in range(2):
+        refusals.refuse("throttle", "second publisher", "a second publisher", "/stranger")
+    report = report_of({item.key: item.value for item in refusals.key_values()})
+    assert report.alters_results
+    assert report.disturbances == [
+        "throttle from /stranger (second publisher): which is your controller the machine cannot tell"
+    ]

@@ -77,6 +77,15 @@ STATUS_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+# ... as its followers read it: each reader keeps 100 messages until its callback takes them, so that another
+# publisher's on the topic (refused: trust.Speakers) cannot push the machine's out first (with the publisher's depth
+# of 1, a stranger's status every 50 ms could take the place of the machine's `finished`: the run never ended).
+STATUS_READER_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 
 
 class PeerError(Exception):
@@ -379,7 +388,7 @@ def follow_run_state(
         String,
         "machine/status",
         lambda message: on_state(json_message(message.data, RunStateMessage)),
-        STATUS_QOS,
+        STATUS_READER_QOS,
         refusals,
         speakers,
     )

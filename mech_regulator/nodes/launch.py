@@ -277,6 +277,8 @@ def main_job(
         print(format_cosimulation_summary(summary))
         for topic, reasons in summary.get("refused", {}).items():
             print(f"refused on {topic}: " + ", ".join(f"{count} {reason}" for reason, count in reasons.items()))
+        for sender, topics in summary.get("foreign", {}).items():
+            print(f"refused from {sender}: " + ", ".join(f"{count} on {topic}" for topic, count in topics.items()))
         for disturbance in summary.get("disturbances", []):
             print(f"disturbance: {disturbance}")
         disturbed = summary["status"] in ("disturbed", "failed")  # numbers that are not the scene's whole run

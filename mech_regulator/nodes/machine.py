@@ -245,7 +245,15 @@ class MachineNode(MachineExchange, Node):
         self.speakers = Speakers(self)
         governor_name = peer_parameter(self, LOCKSTEP_INPUTS["throttle"][0])
         self.speakers.allow("throttle", *(() if self.controller == "external" else (governor_name,)))
-        self.speakers.allow("load_torque_stamped", peer_parameter(self, LOCKSTEP_INPUTS["load"][0]))
+        if self.controller == "external":  # (docs/ros.md, "Who may speak": what the machine cannot refuse)
+            self.refusals.alters_when_refused(
+                "throttle",
+                "second publisher",
+                "the machine takes the throttle of the node that published it first and cannot tell which of the two "
+                "is your controller",
+            )
+        self.scenario_name = peer_parameter(self, LOCKSTEP_INPUTS["load"][0])
+        self.speakers.allow("load_torque_stamped", self.scenario_name)
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
@@ -265,7 +273,16 @@ class MachineNode(MachineExchange, Node):
             (Float64, "load_torque", self.on_load),  # from anyone
             (WrenchStamped, "load_torque_stamped", self.on_stamped_load),
         ):
-            receive(self, message_type, topic, handle, COMMAND_QOS, self.refusals, self.speakers)
+            receive(
+                self,
+                message_type,
+                topic,
+                handle,
+                COMMAND_QOS,
+                self.refusals,
+                self.speakers,
+                pass_speaker=topic == "load_torque",  # (a load poked from outside: MachineExchange.on_load)
+            )
         self.add_post_set_parameters_callback(self.on_parameters)
         self.now_ns = 0
         self.state_message = JointState()

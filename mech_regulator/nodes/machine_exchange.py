@@ -86,11 +86,19 @@ class MachineExchange:
             self.stamped_waveform[when] = waveform
         self.silent.discard("throttle")
 
-    def on_load(self: MachineNode, message: Float64) -> None:  # type: ignore[misc]
-        """A load from anyone (load_torque: the documented way to poke a run), within +-max_load_torque."""
+    def on_load(self: MachineNode, message: Float64, speaker: str) -> None:  # type: ignore[misc]
+        """A load from anyone (load_torque: the documented way to poke a run), within +-max_load_torque; from another
+        node than the run's scenario (speaker: its node's name, '' when the graph does not name it in this namespace)
+        a disturbance that alters the results, once per node: the run's loads are no longer the scene's."""
         self.pending_load = bounded(
             message.data, -self.max_load_torque, self.max_load_torque, "load_torque [N m] (parameter max_load_torque)"
         )
+        if speaker != self.scenario_name:
+            self.refusals.disturb(
+                f"load_torque from {repr(speaker) if speaker else 'a node the graph does not name in this namespace'}:"
+                " a load the scene does not have, applied from the next exchange time on",
+                alters_results=True,
+            )
 
     def on_stamped_load(self: MachineNode, message: WrenchStamped) -> None:  # type: ignore[misc]
         """The scenario's load (speakers: from the scenario node only) for an exchange time the machine has published,

@@ -12,9 +12,10 @@ waits for the last samples, closes the recording and exits; on Ctrl-C it closes 
 recording stays valid. A new trial number in `machine/status` is a new trial (the machine's ~/reset):
 the CSV and the summary are of the last trial, the recording keeps every trial with an event at each reset.
 It takes the machine's topics from its machine only, the governor's from its governor, and reads on `/diagnostics`
-the statuses of the machine, governor and scenario from those nodes only (docs/ros.md, "Who may speak"); the summary
-adds what they and it refused (`refused`: topic -> reason -> count) and what disturbed the run (`disturbances`; status
-`disturbed` when one may have changed its numbers).
+the statuses of the machine, governor and scenario from those nodes only, refusing (and counting) every other
+publisher's (docs/ros.md, "Who may speak"); the summary adds what they and it refused (`refused`: topic -> reason ->
+count; `foreign`: sender -> topic -> count of those refused for who sent them) and what disturbed the run
+(`disturbances`; status `disturbed` when one may have changed its numbers).
 """
 
 from __future__ import annotations
@@ -58,9 +59,9 @@ from mech_regulator.nodes.trust import (
     BadMessage,
     GovernorEvent,
     Refusals,
+    Report,
     RunStateMessage,
     Speakers,
-    about_the_nodes,
     bounded,
     json_message,
     merge_counts,
@@ -177,8 +178,8 @@ class RecorderNode(Node):
             self.speakers.allow(topic, self.peer_names["governor"])
         self.own_name = self.get_name()  # (for the summary, written after Ctrl-C may have shut rclpy down)
         self.speakers.allow("/diagnostics", self.own_name, *self.peer_names.values())
-        self.reports: dict[str, tuple[dict, list[str], bool]] = {}  # peer node -> its refusals, disturbances and
-        # whether they alter the results (trust.report_of), from its latest diagnostics
+        self.reports: dict[str, Report] = {}  # peer node -> what it refused and what disturbed it, from its latest
+        # diagnostics
         governor_states = receive(
             self, JointState, "governor/state", self.on_governor, STATE_QOS, self.refusals, self.speakers
         )
@@ -193,8 +194,7 @@ class RecorderNode(Node):
             self.refusals,
             self.speakers,
             pass_speaker=True,
-            concerns=about_the_nodes,
-        )
+        )  # (every message: a stranger's status, whatever it names, is refused and counted by who sent it)
         follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
         self.create_timer(FLUSH_PERIOD, self.recording.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
@@ -401,23 +401,29 @@ class RecorderNode(Node):
             return False
 
     def trust_summary(self, status: str) -> dict:
-        """The summary's `refused` (topic -> reason -> count, summed over the nodes that refused) and `disturbances`
-        ('<node>: <what>') when there are any; status `disturbed` (and the first such disturbance as its message) when
-        one may have changed the numbers of a run that was otherwise complete."""
+        """The summary's `refused` (topic -> reason -> count), `foreign` (sender -> topic -> count of the messages
+        refused for who sent them; both summed over the nodes that refused) and `disturbances` ('<node>: <what>') when
+        there are any; status `disturbed` (and the disturbances as its message) when one may have changed the numbers
+        of a run that was otherwise complete."""
+        own = self.refusals
         reports = {
             **self.reports,
-            self.own_name: (self.refusals.counts, self.refusals.disturbances, self.refusals.alters_results),
+            self.own_name: Report(own.counts, own.foreign, own.disturbances, own.alters_results),
         }
         refused: dict[str, dict[str, int]] = {}
+        foreign: dict[str, dict[str, int]] = {}
         disturbances: list[str] = []
         alters = False
-        for node, (counts, texts, alters_results) in sorted(reports.items()):
-            merge_counts(refused, counts)
-            disturbances += [f"{node}: {text}" for text in texts]
-            alters = alters or alters_results
+        for node, report in sorted(reports.items()):
+            merge_counts(refused, report.counts)
+            merge_counts(foreign, report.foreign)
+            disturbances += [f"{node}: {text}" for text in report.disturbances]
+            alters = alters or report.alters_results
         summary: dict = {}
         if refused:
             summary["refused"] = refused
+        if foreign:
+            summary["foreign"] = foreign
         if disturbances:
             summary["disturbances"] = disturbances
         if alters and status == "complete":

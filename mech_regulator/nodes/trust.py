@@ -5,9 +5,10 @@ Every subscription of the nodes goes through `receive`: the publisher is identif
 gives a two-argument callback) and the graph's endpoint info (node name and namespace of that GID); a topic a node
 takes from named peers only is refused from anyone else, and from a second publisher of a peer's name (the first one
 accepted is pinned). Then the message's own checks run (they raise BadMessage); a refused message is counted per
-topic and reason (Refusals, in /diagnostics and the recorder's summary) and never reaches the state. An error a check
-did not foresee is caught at the callback's boundary, logged with its traceback and reported as a disturbance that
-may have changed the run's numbers: no node raises out of a callback, and no such run ends `complete` unmarked.
+topic and reason, and one refused for who sent it also per sender and topic (Refusals, in /diagnostics and the
+recorder's summary), and never reaches the state. An error a check did not foresee is caught at the callback's
+boundary, logged with its traceback and reported as a disturbance that may have changed the run's numbers: no node
+raises out of a callback, and no such run ends `complete` unmarked.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import math
 import time
 import traceback
 from collections.abc import Callable
-from typing import Annotated, Literal, overload
+from typing import Annotated, Literal, NamedTuple, overload
 
 import pydantic
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
@@ -38,37 +39,53 @@ NAME_POLL = 0.005  # [s] of wall time between two looks at the graph meanwhile
 
 
 class BadMessage(Exception):
-    """A message refused: `reason` (short: the counter's key, e.g. 'not finite') and `detail` (what was wrong)."""
+    """A message refused: `reason` (short: the counter's key, e.g. 'not finite') and `detail` (what was wrong);
+    `sender`: the fully qualified name of the publisher's node when it is refused for who sent it (Speakers.check),
+    None otherwise."""
 
-    def __init__(self, reason: str, detail: str):
+    def __init__(self, reason: str, detail: str, sender: str | None = None):
         super().__init__(f"{reason}: {detail}")
-        self.reason, self.detail = reason, detail
+        self.reason, self.detail, self.sender = reason, detail, sender
 
 
 class Refusals:
-    """What a node refused (counts per topic and reason) and what disturbed its run that it could not refuse (a lost
-    peer, a stall, a service called from outside, a namesake on the domain, an error in a callback): each logged,
-    both in the node's /diagnostics (key_values) and so in the recorder's summary. `alters_results`: whether a
-    disturbance may have changed the run's numbers (its summary is then not `complete`). `report`, when given, is
-    called at once for news: a topic and reason refused for the first time, or a disturbance (the recorder must have
-    them before the run ends; there are only so many of either, whatever a flood of bad messages does)."""
+    """What a node refused (counts per topic and reason; `foreign`: those refused for who sent them, per sender and
+    topic) and what disturbed its run that it could not refuse (a lost peer, a stall, a service called from outside,
+    a namesake on the domain, a load poked from outside, an error in a callback): each logged, both in the node's
+    /diagnostics (key_values) and so in the recorder's summary. `alters_results`: whether a disturbance may have
+    changed the run's numbers (its summary is then not `complete`). `report`, when given, is called at once for news:
+    a topic and reason refused for the first time, a new sender, or a disturbance (the recorder must have them before
+    the run ends; there are only so many of either, whatever a flood of bad messages does)."""
 
     def __init__(self, node: Node, report: Callable[[], None] | None = None):
         self.node, self.report = node, report
         self.counts: dict[str, dict[str, int]] = {}
+        self.foreign: dict[str, dict[str, int]] = {}  # sender (fully qualified node name) -> topic -> count
         self.disturbances: list[str] = []
         self.alters_results = False
+        self.altering: dict[tuple[str, str], str] = {}  # (topic, reason) -> why such a refusal may alter the results
 
-    def refuse(self, topic: str, reason: str, detail: str) -> None:
-        """Count a refused message on `topic` under `reason` and warn (at most every WARNING_PERIOD s per call site)
-        with what was wrong."""
+    def alters_when_refused(self, topic: str, reason: str, why: str) -> None:
+        """Count a refusal on `topic` under `reason` also as a disturbance that may alter the results (once per
+        sender), saying `why`: a refusal that does not keep the run's numbers the scene's."""
+        self.altering[(topic, reason)] = why
+
+    def refuse(self, topic: str, reason: str, detail: str, sender: str | None = None) -> None:
+        """Count a refused message on `topic` under `reason` (and under its `sender` when it was refused for who
+        sent it) and warn (at most every WARNING_PERIOD s per call site) with what was wrong."""
         reasons = self.counts.setdefault(topic, {})
         news = reason not in reasons
         reasons[reason] = reasons.get(reason, 0) + 1
+        if sender is not None:
+            topics = self.foreign.setdefault(sender, {})
+            news = news or topic not in topics
+            topics[topic] = topics.get(topic, 0) + 1
         self.node.get_logger().warning(
             f"refused a message on {topic} ({reason}): {detail}; the state is unchanged ({reasons[reason]} so far)",
             throttle_duration_sec=WARNING_PERIOD,
         )
+        if (topic, reason) in self.altering:
+            self.disturb(f"{topic} from {sender or 'a publisher'} ({reason}): {self.altering[topic, reason]}", True)
         if news and self.report is not None:
             self.report()
 
@@ -106,32 +123,46 @@ class Refusals:
 
     def key_values(self) -> list[KeyValue]:
         """The diagnostics' entries: refused_messages (the total), 'refused: <topic>: <reason>' (each count),
-        'disturbance: <n>' (each text) and alters_results."""
+        'foreign: <sender>: <topic>' (each count of a sender refused for who it is), 'disturbance: <n>' (each text)
+        and alters_results."""
         values = [KeyValue(key="refused_messages", value=str(self.total))]
         values += [
-            KeyValue(key=f"refused: {topic}: {reason}", value=str(count))
-            for topic, reasons in sorted(self.counts.items())
-            for reason, count in sorted(reasons.items())
+            KeyValue(key=f"{kind}: {first}: {second}", value=str(count))
+            for kind, table in (("refused", self.counts), ("foreign", self.foreign))
+            for first, inner in sorted(table.items())
+            for second, count in sorted(inner.items())
         ]
         values += [KeyValue(key=f"disturbance: {index}", value=text) for index, text in enumerate(self.disturbances)]
         return values + [KeyValue(key="alters_results", value=str(self.alters_results))]
 
 
-def report_of(values: dict[str, str]) -> tuple[dict[str, dict[str, int]], list[str], bool]:
-    """(refused counts per topic and reason, disturbances, alters_results) from a node's diagnostics values
-    (Refusals.key_values), checked; raises BadMessage when they do not read so."""
-    counts: dict[str, dict[str, int]] = {}
+class Report(NamedTuple):
+    """What a node refused and what disturbed it, as its diagnostics say (Refusals.key_values): refused counts per
+    topic and reason, foreign counts per sender and topic, the disturbances' texts, and whether one may have changed
+    the run's numbers."""
+
+    counts: dict[str, dict[str, int]]
+    foreign: dict[str, dict[str, int]]
+    disturbances: list[str]
+    alters_results: bool
+
+
+def report_of(values: dict[str, str]) -> Report:
+    """A node's Report from its diagnostics values (Refusals.key_values), checked; raises BadMessage when they do not
+    read so."""
+    tables: dict[str, dict[str, dict[str, int]]] = {"refused": {}, "foreign": {}}
     disturbances = []
     for key, value in values.items():
-        if key.startswith("refused: "):
-            topic, _, reason = key[len("refused: ") :].partition(": ")
-            counts.setdefault(topic, {})[reason] = whole_number(value, key)
-        elif key.startswith("disturbance: "):
+        kind, _, rest = key.partition(": ")
+        if kind in tables and rest:
+            first, _, second = rest.partition(": ")
+            tables[kind].setdefault(first, {})[second] = whole_number(value, key)
+        elif kind == "disturbance":
             disturbances.append(value)
     alters = values.get("alters_results", "False")
     if alters not in ("True", "False"):
         raise BadMessage("bad value", f"alters_results = {alters!r}, expected True or False")
-    return counts, disturbances, alters == "True"
+    return Report(tables["refused"], tables["foreign"], disturbances, alters == "True")
 
 
 def whole_number(text: str, what: str) -> int:
@@ -161,10 +192,10 @@ def real_number(text: str, what: str, allow_none: bool = False) -> float | None:
 
 
 def merge_counts(into: dict[str, dict[str, int]], counts: dict[str, dict[str, int]]) -> None:
-    """Add refusal counts (topic -> reason -> count) to `into`."""
-    for topic, reasons in counts.items():
-        for reason, count in reasons.items():
-            into.setdefault(topic, {})[reason] = into.get(topic, {}).get(reason, 0) + count
+    """Add refusal counts (topic -> reason -> count, or sender -> topic -> count) to `into`."""
+    for first, inner in counts.items():
+        for second, count in inner.items():
+            into.setdefault(first, {})[second] = into.get(first, {}).get(second, 0) + count
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -175,13 +206,15 @@ class Speakers:
     """Which nodes a node takes each topic from (`allow`), and the publisher of each it pinned on it: the first
     accepted message's GID. A publisher is known by its GID through the graph (Node.get_publishers_info_by_topic: node
     name and namespace of each endpoint GID), looked up again whenever a GID is new; a GID the graph does not name
-    yet is waited for, at most name_wait [s] of wall time once per GID (publisher_name)."""
+    yet is waited for, at most name_wait [s] of wall time once per GID (publisher_name). A message refused for who
+    sent it names its sender (BadMessage.sender: the node's fully qualified name, `sender`)."""
 
     def __init__(self, node: Node, name_wait: float = NAME_WAIT):
         self.node, self.name_wait = node, name_wait
         self.allowed: dict[str, tuple[str, ...]] = {}  # topic -> node names
         self.pinned: dict[tuple[str, str], bytes] = {}  # (topic, node name) -> GID of its accepted publisher
         self.names: dict[bytes, str] = {}  # GID -> node name (in this node's namespace; '' elsewhere)
+        self.qualified: dict[bytes, str] = {}  # GID -> fully qualified node name (namespace and name)
         self.waited: set[bytes] = set()  # GIDs waited name_wait for already
 
     def allow(self, topic: str, *node_names: str) -> None:
@@ -207,30 +240,39 @@ class Speakers:
             namespace = self.node.get_namespace()
             for info in self.node.get_publishers_info_by_topic(topic):
                 if info.node_name != UNKNOWN_NODE:
-                    self.names[bytes(info.endpoint_gid)] = info.node_name if info.node_namespace == namespace else ""
+                    endpoint = bytes(info.endpoint_gid)
+                    self.names[endpoint] = info.node_name if info.node_namespace == namespace else ""
+                    self.qualified[endpoint] = f"{info.node_namespace.rstrip('/')}/{info.node_name}"
         return gid in self.names
 
+    def sender(self, gid: bytes) -> str:
+        """The fully qualified name of the node of publisher `gid` as the graph named it (publisher_name looked it
+        up), or 'a publisher the graph does not name'."""
+        return self.qualified.get(gid, "a publisher the graph does not name")
+
     def check(self, topic: str, info: dict | None) -> str:
-        """The name of the node that sent a message on `topic` (info: its rclpy MessageInfo), '' for a topic open to
-        all; BadMessage unless it is an allowed node's pinned publisher, or an allowed node's first publisher on the
-        topic (then pinned)."""
+        """The name of the node that sent a message on `topic` (info: its rclpy MessageInfo; '' when the graph does
+        not name it in this node's namespace); BadMessage, naming the sender, unless the topic is open to all (not
+        allowed: anyone may send it), or the message is an allowed node's pinned publisher's, or an allowed node's
+        first publisher's on the topic (then pinned)."""
         expected = self.allowed.get(topic)
-        if expected is None:
-            return ""
         gid = bytes(((info or {}).get("publisher_gid") or {}).get("data") or b"")
         name = self.publisher_name(topic, gid) if gid else ""
+        if expected is None:
+            return name
         if expected and name not in expected:
-            sender = name or "a publisher the graph does not name"
             raise BadMessage(
                 "not from " + " or ".join(expected),
-                f"sent by {sender}; this node takes {topic} from {' or '.join(expected)} only",
+                f"sent by {self.sender(gid)}; this node takes {topic} from {' or '.join(expected)} only",
+                self.sender(gid),
             )
         if self.pinned.setdefault((topic, name if expected else ""), gid) != gid:
             first = f"node '{name}'" if expected else "the first publisher"
             raise BadMessage(
                 "second publisher",
-                f"a second publisher of {first} on {topic} (another node of "
+                f"a second publisher of {first} on {topic}, {self.sender(gid)} (another node of "
                 "that name on the domain?); the first one is kept",
+                self.sender(gid),
             )
         return name
 
@@ -281,7 +323,7 @@ def receive(
             else:
                 handle(message)
         except BadMessage as refused:
-            refusals.refuse(topic, refused.reason, refused.detail)
+            refusals.refuse(topic, refused.reason, refused.detail, refused.sender)
         except Exception as error:  # what no check foresaw: the message may have changed the state half way
             node.get_logger().error(
                 f"a message on {topic} raised {type(error).__name__}: {error}\n{traceback.format_exc()}"
