@@ -72,7 +72,10 @@ from mech_regulator.solvers.cosim import seconds
 from mech_regulator.viz.bag import write_bag
 from mech_regulator.viz.recording import RunRecording
 
-FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording and the CSV
+FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the CSV, and to the recording with a live viewer
+RECORDING_CHUNK = 5000  # exchanges gathered before they go to a recording file alone (no live viewer): Rerun keeps
+# an entry of about 1.5 kB per chunk it wrote (a series' samples of one send) for the file's footer until the end,
+# so that sends of 0.5 s would cost ~70 MB an hour of wall time; 5000 exchanges (100 s of engine_direct) ~1 MB an hour
 FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished
 STREAMS_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers (subscribe_to_the_machine)
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
@@ -141,6 +144,8 @@ class RecorderNode(Node):
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.live = bool(connect)  # a live viewer: the recording is sent every FLUSH_PERIOD
+        self.unsent = 0  # exchanges of the machine not yet sent to the recording
         self.recording = RunRecording(
             self.model,
             path=self.path,
@@ -206,8 +211,11 @@ class RecorderNode(Node):
         )
 
     def flush(self) -> None:
-        """Send the recording's buffered samples and write the exchanges whose throttle is settled to the CSV."""
-        self.recording.flush()
+        """Write the exchanges whose throttle is settled to the CSV, and send the recording's buffered samples to a
+        live viewer, or to the file alone once RECORDING_CHUNK exchanges are in."""
+        if self.live or self.unsent >= RECORDING_CHUNK:
+            self.recording.flush()
+            self.unsent = 0
         self.rows.write(self.throttle_settled_until(), self.tripped_at)
 
     def throttle_settled_until(self) -> float:
@@ -260,6 +268,7 @@ class RecorderNode(Node):
             if self.model.driven is not None:
                 driven["omega_driven"] = joints["driven"][1]
             self.state_walls[1:] = [joints["stamp"][1]]  # when the machine published that state
+            self.unsent += 1
             self.recording.add_machine(when, phi, omega, driven or None)
             moments = {name: effort for name, (_, _, effort) in joints.items()}
             self.recording.add_moments(
