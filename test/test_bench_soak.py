@@ -24,6 +24,8 @@ psutil = pytest.importorskip(
 )
 
 from mech_regulator.bench.soak import (  # noqa: E402
+    FLAT_MEMORY_BOUND,
+    FLAT_MEMORY_ROWS,
     PROCESS_NAMES,
     Progress,
     Row,
@@ -31,6 +33,8 @@ from mech_regulator.bench.soak import (  # noqa: E402
     _Watch,
     between_samples,
     format_row,
+    memory_flatness,
+    memory_slopes,
     parse_launch_banner,
     parse_progress,
     verdict,
@@ -151,8 +155,53 @@ def test_the_rows_and_the_verdict_carry_their_numbers():
     )
     assert verdict(soak) == (
         "memory machine 100.0 -> 101.0 MB (+1.0 MB, +1.0 %), recorder 200.0 -> 250.0 MB "
-        "(+50.0 MB, +25.0 %); real-time factor 10 in the first interval, 8 in the last (-20.0 %)"
+        "(+50.0 MB, +25.0 %); real-time factor 10 in the first interval, 8 in the last (-20.0 %); "
+        f"memory flat: no verdict (fewer than {FLAT_MEMORY_ROWS} rows in the second half of the run)"
     )
+
+
+def soak_rows(growth: dict[str, float], minutes: int = 60, wobble: float = 0.0) -> list[Row]:
+    """A row a simulated minute for `minutes`, each process's RSS [MB] growing by `growth` [kB per simulated minute]
+    from 150 MB, plus `wobble` [MB] up and down every other row (the allocator's steps)."""
+    return [
+        Row(
+            10.0 * minute,
+            {name: 150.0 + (rate * minute) / 1e3 + wobble * (minute % 2) for name, rate in growth.items()},
+            60.0 * minute,
+            7.0,
+            350.0,
+        )
+        for minute in range(minutes + 1)
+    ]
+
+
+def test_the_memory_verdict_reads_the_growth_over_the_second_half_of_the_run():
+    flat = {"machine": 10.0, "governor": 0.0, "scenario": 0.0, "recorder": 30.0, "launcher": 0.0}
+    slopes, start, end = memory_slopes(soak_rows(flat, wobble=0.5))
+    assert (start, end) == (1800.0, 3600.0)
+    assert slopes == pytest.approx(flat, abs=1.0)  # the wobble of half a megabyte does not tilt the line
+    assert memory_flatness(soak_rows(flat)).startswith(
+        "memory flat: machine +10, governor +0, scenario +0, recorder +30, launcher +0 kB per simulated minute over "
+        f"t = 1800-3600 s (bound {FLAT_MEMORY_BOUND:g})"
+    )
+    # the recorder keeping 1.1 kB of each of engine_direct's 3000 exchanges a minute
+    growing = soak_rows({**flat, "recorder": 3300.0})
+    assert memory_flatness(growing).startswith(
+        "memory GROWS (recorder): machine +10, governor +0, scenario +0, recorder +3300"
+    )
+    # a machine that grew only in its first half (caches warming) is flat
+    warming = [
+        Row(
+            row.wall,
+            {"machine": row.memory["machine"] + 20.0 * min(row.sim_time, 1800.0) / 1800.0},
+            row.sim_time,
+            7.0,
+            350.0,
+        )
+        for row in soak_rows({"machine": 0.0})
+    ]
+    assert memory_flatness(warming).startswith("memory flat: machine +0 kB")
+    assert memory_flatness(soak_rows(flat, minutes=4)).startswith("memory flat: no verdict")  # 3 rows in the half
 
 
 def test_the_rate_rows_follow_the_progress_lines_and_show_a_stall():

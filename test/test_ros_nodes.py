@@ -583,17 +583,17 @@ def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
     from unittest import mock
 
     from mech_regulator.nodes.recorder import RecorderNode
+    from mech_regulator.nodes.run_rows import RunRows
 
     recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
     _, recorder.model = constant_inertia_scene(tmp_path)
     recorder.recording = mock.Mock()
-    recorder.governor, recorder.machine, recorder.moments = {}, {}, {}
-    recorder.completed, recorder.completed_until = set(), None
+    recorder.rows = RunRows(recorder.model, False, None, None, mock.Mock(), mock.Mock())
     recorder.on_governor(_governor_batch([0, 2_000_000, 2_000_000], throttle=0.5))  # the repeat in the batch
     recorder.on_governor(_governor_batch([2_000_000, 4_000_000], throttle=0.25))  # the repeat opening the next
     recorded = [call.args[0] for call in recorder.recording.add_governor.call_args_list]
     assert recorded == [0, 2_000_000, 4_000_000]
-    assert list(recorder.governor) == recorded and recorder.governor[2_000_000]["throttle"] == 0.5  # the first answer
+    assert list(recorder.rows.governor) == recorded and recorder.rows.governor[2_000_000]["throttle"] == 0.5  # first
     with pytest.raises(BadMessage, match="out of order"):  # before the newest: refused, as before
         recorder.on_governor(_governor_batch([2_000_000], throttle=0.5))
 

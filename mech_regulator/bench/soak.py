@@ -54,6 +54,11 @@ MEGABYTE = 1e6  # [bytes]
 ENERGY_SPAN_SHARE = 0.1  # the first and the last tenth of the simulated time have their own energy balance
 SUBSTEPS = 8  # equal parts of an exchange step, each with 4-point Gauss-Legendre quadrature, for the works
 CHUNK_STEPS = 2000  # exchange steps whose motion is rebuilt at once (the memory it takes)
+KILOBYTE = 1e3  # [bytes]
+FLAT_MEMORY_BOUND = 100.0  # [kB per simulated minute] the largest growth of a process's RSS over the second half of
+# the run still called flat: 6 MB a simulated hour, where keeping the least of every exchange at engine_direct's 50 a
+# second (a few doubles) would take 200 kB a minute; above the steps of Python's allocator (its 1 MB arenas)
+FLAT_MEMORY_ROWS = 4  # rows in the second half of the run, at least, for a verdict on the memory
 # The launcher's announcement (nodes/launch.py main_job): its exchange step and the log next to the run's files.
 LAUNCH_BANNER = re.compile(r"exchange step (?P<step>[^ ]+) s\); node logs in (?P<log>.+)$")
 # A progress line of the launcher (cli/report/terminal.py ProgressLines): "<label>: t = 312 / 3600 s (9 %), ..." while it runs,
@@ -435,7 +440,8 @@ def format_row(row: Row) -> list[str]:
 
 def format_soak(soak: Soak) -> str:
     """The soak's closing lines: how the run ended, its pace over the whole run, its energy balance and the verdict
-    (memory at the start and at the end of each process, the real-time factor of the first and the last interval)."""
+    (memory at the start and at the end of each process, the real-time factor of the first and the last interval,
+    whether the memory stayed flat)."""
     summary = soak.summary
     if summary is None:
         lines = [f"soak of {soak.scene}: the run wrote no summary (exit code {soak.exit_code})"]
@@ -467,8 +473,9 @@ def format_soak(soak: Soak) -> str:
 
 
 def verdict(soak: Soak) -> str:
-    """Memory at the run's start and end per process (growth in MB and %) and the real-time factor of the first and
-    the last row with a pace (0 for an interval without progress), in one line."""
+    """Memory at the run's start and end per process (growth in MB and %), the real-time factor of the first and
+    the last row with a pace (0 for an interval without progress) and whether the memory stayed flat
+    (memory_flatness), in one line."""
     growth = []
     for name in PROCESS_NAMES:
         if name in soak.memory_start and name in soak.memory_end:
@@ -485,4 +492,38 @@ def verdict(soak: Soak) -> str:
     else:
         change = f" ({100.0 * (rates[-1] - rates[0]) / rates[0]:+.1f} %)" if rates[0] > 0.0 else ""
         pace = f"real-time factor {rates[0]:.3g} in the first interval, {rates[-1]:.3g} in the last{change}"
-    return f"{memory}; {pace}"
+    return f"{memory}; {pace}; {memory_flatness(soak.rows)}"
+
+
+def memory_slopes(rows: list[Row]) -> tuple[dict[str, float], float, float] | None:
+    """Each process's growth of RSS [kB per simulated minute] over the second half of the run's simulated time (the
+    least-squares line through the rows from the middle between the first and the last row's time on, against
+    the machine's simulated time), with that half's first and last time [s]; None with fewer than
+    FLAT_MEMORY_ROWS rows there or no simulated time between them."""
+    timed = [(row.sim_time, row.memory) for row in rows if row.sim_time is not None]
+    if not timed:
+        return None
+    middle = 0.5 * (timed[0][0] + timed[-1][0])
+    half = [(time, memory) for time, memory in timed if time >= middle]
+    if len(half) < FLAT_MEMORY_ROWS or half[-1][0] <= half[0][0]:
+        return None
+    slopes = {}
+    for name in PROCESS_NAMES:
+        read = [(time, memory[name]) for time, memory in half if name in memory]
+        if len(read) >= FLAT_MEMORY_ROWS and read[-1][0] > read[0][0]:
+            times, megabytes = np.array(read).T
+            slopes[name] = float(np.polyfit(times / 60.0, megabytes * MEGABYTE / KILOBYTE, 1)[0])
+    return slopes, half[0][0], half[-1][0]
+
+
+def memory_flatness(rows: list[Row], bound: float = FLAT_MEMORY_BOUND) -> str:
+    """'memory flat' when no process's RSS grew by more than `bound` [kB per simulated minute] over the second half
+    of the run (memory_slopes), else 'memory GROWS' naming those that did; with each slope and the span."""
+    found = memory_slopes(rows)
+    if found is None or not found[0]:
+        return f"memory flat: no verdict (fewer than {FLAT_MEMORY_ROWS} rows in the second half of the run)"
+    slopes, start, end = found
+    growing = [name for name, slope in slopes.items() if slope > bound]
+    head = f"memory GROWS ({', '.join(growing)})" if growing else "memory flat"
+    figures = ", ".join(f"{name} {round(slope):+d}" for name, slope in slopes.items())
+    return f"{head}: {figures} kB per simulated minute over t = {start:.6g}-{end:.6g} s (bound {bound:g})"

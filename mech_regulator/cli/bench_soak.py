@@ -29,8 +29,9 @@ def add_bench_soak_command(benchmarks) -> None:
         "(exchanges per second of wall time and the real-time factor); at the end the run's summary, "
         "the energy balance of its samples over the whole run and its first and last tenth, and a "
         "verdict: each process's memory at the start and the end of the run, the real-time factor in "
-        "the first and the last interval. Ctrl-C stops the run as it stops `run` and prints what was "
-        "measured. Needs rclpy (pip install 'mech_regulator[ros]'). Numbers to read, never asserted.",
+        "the first and the last interval, and 'memory flat' when no process's memory grew faster "
+        "than the bound it states (in kB per simulated minute) over the second half of the run. "
+        "Ctrl-C stops the run as it stops `run` and prints what was measured. Needs rclpy (pip install 'mech_regulator[ros]'). Numbers to read, never asserted.",
     )
     soak.add_argument(
         "--scene",

@@ -23,10 +23,8 @@ from __future__ import annotations
 import math
 import sys
 import time
-from collections.abc import Mapping, Reversible
 from pathlib import Path
 
-import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
@@ -34,7 +32,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
-from mech_regulator.cli.report.data import to_json, write_csv
+from mech_regulator.cli.report.data import to_json
 from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,
@@ -55,6 +53,7 @@ from mech_regulator.nodes.common import (
 )
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.outputs import default_recording, write_empty_run
+from mech_regulator.nodes.run_rows import GOVERNOR, MACHINE, RunRows
 from mech_regulator.nodes.trust import (
     BadMessage,
     GovernorEvent,
@@ -70,11 +69,14 @@ from mech_regulator.nodes.trust import (
     report_of,
 )
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import CoSimulation, seconds
+from mech_regulator.solvers.cosim import seconds
 from mech_regulator.viz.bag import write_bag
 from mech_regulator.viz.recording import RunRecording
 
-FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the recording
+FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the CSV, and to the recording with a live viewer
+RECORDING_CHUNK = 5000  # exchanges gathered before they go to a recording file alone (no live viewer): Rerun keeps
+# an entry of about 1.5 kB per chunk it wrote (a series' samples of one send) for the file's footer until the end,
+# so that sends of 0.5 s would cost ~70 MB an hour of wall time; 5000 exchanges (100 s of engine_direct) ~1 MB an hour
 FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished
 STREAMS_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers (subscribe_to_the_machine)
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
@@ -143,6 +145,8 @@ class RecorderNode(Node):
             raise SceneError("recorder_node: output = 'none' and no connect URL: nothing to record to")
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.live = bool(connect)  # a live viewer: the recording is sent every FLUSH_PERIOD
+        self.unsent = 0  # exchanges of the machine not yet sent to the recording
         self.recording = RunRecording(
             self.model,
             path=self.path,
@@ -150,23 +154,17 @@ class RecorderNode(Node):
             animation_rate=rate,
             outside_throttle=self.controller == "external",
         )
-        self.machine: dict[int, list[float]] = {}  # stamp -> the machine's state (phi, omega, then a two-mass
-        # machine's twist and omega_driven or a clutch's omega_driven, as MachineModel.state_names)
+        self.write_failures: list[str] = []  # one line per output that could not be written (close, rows)
+        self.rows = self.new_rows()  # the exchanges, written to the CSV as they complete (nodes/run_rows.py)
+        self.untripped_until = -math.inf  # [s] the machine's time in its latest diagnostics that had not tripped
         self.trial = 1
         self.machine_result = ("complete", "")  # the machine's solver status and its message
-        self.moments: dict[int, tuple[float, float, float]] = {}  # stamp -> (drive, external load) [N m], throttle [-]
-        self.governor: dict[int, dict[str, float]] = {}
-        # the exchange times all parts are in for, and the newest: kept as the parts come (the streams' dicts are in
-        # the order of their times), so that the report each second costs nothing however long the run
-        self.completed: set[int] = set()
-        self.completed_until: int | None = None
         self.events: list[tuple[float, str, tuple[str, str]]] = []
         self.machine_status = (DiagnosticStatus.OK, "")
         self.finished_at: int | None = None
         self.machine_reported_end = False  # its last diagnostics (with its refusals and disturbances) are in
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
         self.closed = False
-        self.write_failures: list[str] = []  # one line per output that could not be written (close)
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.refusals = Refusals(self, self.report)
@@ -196,17 +194,45 @@ class RecorderNode(Node):
             pass_speaker=True,
         )  # (every message: a stranger's status, whatever it names, is refused and counted by who sent it)
         follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
-        self.create_timer(FLUSH_PERIOD, self.recording.flush)
+        self.create_timer(FLUSH_PERIOD, self.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
 
+    def new_rows(self) -> RunRows:
+        """The store of a trial's exchanges: its CSV next to the recording (none without a recording file), its spool
+        in the recording's folder."""
+        return RunRows(
+            self.model,
+            self.controller == "external",
+            self.path.with_suffix(".csv") if self.path is not None else None,
+            self.path.parent if self.path is not None else None,
+            self._write,
+            lambda line: self.get_logger().warning(line),
+        )
+
+    def flush(self) -> None:
+        """Write the exchanges whose throttle is settled to the CSV, and send the recording's buffered samples to a
+        live viewer, or to the file alone once RECORDING_CHUNK exchanges are in."""
+        if self.live or self.unsent >= RECORDING_CHUNK:
+            self.recording.flush()
+            self.unsent = 0
+        self.rows.write(self.throttle_settled_until(), self.tripped_at)
+
+    def throttle_settled_until(self) -> float:
+        """[s] up to which the exchanges' throttle is settled (RunRows.write): all once it comes from outside, the
+        machine has tripped or has finished; else up to the machine's time in its latest diagnostics that said it
+        had not tripped."""
+        if self.controller == "external" or self.tripped_at is not None or self.finished_at is not None:
+            return math.inf
+        return self.untripped_until
+
     def start_trial(self, trial: int) -> None:
         """The machine's ~/reset (trial: the new trial's number): forget the samples of the trial before (the
-        recording keeps them)."""
+        recording keeps them; the CSV starts again with the new trial's first rows)."""
         self.trial = trial
-        for samples in (self.machine, self.moments, self.governor, self.completed):
-            samples.clear()
-        self.completed_until = None
+        self.rows.close()
+        self.rows = self.new_rows()
+        self.untripped_until = -math.inf
         self.events.clear()
         self.state_walls.clear()
         self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
@@ -226,7 +252,7 @@ class RecorderNode(Node):
         needed = ["crank", "drive", "resistance", "external", "net", "load"]
         needed += ["coupling"] if self.model.coupling is not None else []
         needed += ["driven"] if self.model.driven is not None else []
-        groups = unrecorded(batch_groups(message, tuple(needed)), self.machine, "machine/moments")
+        groups = unrecorded(batch_groups(message, tuple(needed)), self.rows.newest[MACHINE], "machine/moments")
         for when, joints in groups:
             checks = [(joints["crank"][0], "crank position [rad]"), (joints["crank"][1], "crank velocity [rad/s]")]
             checks += [(joints[name][2], f"{name} effort [N m]") for name in needed[1:6]]
@@ -241,16 +267,15 @@ class RecorderNode(Node):
                 driven["twist"] = joints["coupling"][0]
             if self.model.driven is not None:
                 driven["omega_driven"] = joints["driven"][1]
-            self.machine[when] = [phi, omega, *driven.values()]
             self.state_walls[1:] = [joints["stamp"][1]]  # when the machine published that state
+            self.unsent += 1
             self.recording.add_machine(when, phi, omega, driven or None)
             moments = {name: effort for name, (_, _, effort) in joints.items()}
             self.recording.add_moments(
                 when, moments["drive"], moments["resistance"], moments["external"], moments["net"]
             )
             self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
-            self.moments[when] = (moments["drive"], moments["load"], joints["throttle"][0])
-            self.part_arrived(when)
+            self.rows.add_machine(when, [phi, omega, *driven.values()], moments["load"], joints["throttle"][0])
             if self.controller == "external":
                 self.recording.add_throttle(when, joints["throttle"][0])
 
@@ -260,7 +285,9 @@ class RecorderNode(Node):
         if self.model.governor is None:
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
         shown = self.model.governor.joints()  # GovernorKind.joints: (joint, position's key, velocity's key or None)
-        groups = unrecorded(batch_groups(message, tuple(name for name, _, _ in shown)), self.governor, "governor/state")
+        groups = unrecorded(
+            batch_groups(message, tuple(name for name, _, _ in shown)), self.rows.newest[GOVERNOR], "governor/state"
+        )
         for when, joints in groups:
             checked = [
                 value
@@ -274,9 +301,8 @@ class RecorderNode(Node):
         for when, joints in groups:
             values = {position: joints[name][0] for name, position, _ in shown}
             values.update({velocity: joints[name][1] for name, _, velocity in shown if velocity is not None})
-            self.governor[when] = values
+            self.rows.add_governor(when, values)
             self.recording.add_governor(when, values)
-            self.part_arrived(when)
 
     def on_governor_event(self, message: String) -> None:
         event = json_message(message.data, GovernorEvent)
@@ -315,23 +341,30 @@ class RecorderNode(Node):
             self.machine_status = (status.level, status.message)
             if tripped_at is not None:
                 self.tripped_at = tripped_at
+            else:
+                self.untripped_until = max(self.untripped_until, when)
             self.machine_reported_end = self.machine_reported_end or "finished_at_ns" in values
 
     def complete(self) -> bool:
         """Whether the machine finished and its last samples (and the governor's) and its last diagnostics are in."""
-        if self.finished_at is None or self.finished_at not in self.machine or not self.machine_reported_end:
-            return False
-        return self.model.governor is None or self.finished_at in self.governor
+        return (
+            self.finished_at is not None
+            and self.machine_reported_end
+            and all(self.rows.received_until(stream, self.finished_at) for stream in (MACHINE, GOVERNOR))
+        )
 
     def close(self) -> None:
-        """Finish the recording, then write the samples (CSV), the bag and the summary (JSON) next to it; stopped
+        """Write the last complete exchanges to the CSV (the rows before are in it already), finish the recording,
+        then write the bag and the summary (JSON) next to it, from the run read back (RunRows.cosimulation); stopped
         before a first complete exchange, the summary alone (status interrupted, samples 0). Each output is written
         on its own: one that cannot be written (a disk that filled up) is said in one line on stderr and kept in
         write_failures, and the others are still written; nothing here raises."""
         if self.closed:
             return
         self.closed = True
-        run_data = self.run_data()
+        self.rows.write(math.inf, self.tripped_at)
+        run_data = self.rows.cosimulation(self.events, self.tripped_at)
+        self.rows.close()
         status, message = "interrupted", "before the first complete exchange"
         if run_data is not None:
             status, message = (
@@ -359,13 +392,9 @@ class RecorderNode(Node):
         if not self.complete() or self.machine_result[0] not in ("complete", "interrupted"):
             summary["status"], summary["message"] = status, message  # the recording's end, said the same way
         summary.update(self.trust_summary(summary["status"]))
-        csv_path = self.path.with_suffix(".csv")
-        columns = self.model.columns(run_data.times, run_data.states, run_data.throttle, run_data.external_load)
-        if self.controller == "external":
-            columns["throttle"] = run_data.throttle
         summary["recording"] = str(self.path)
-        if self._write("CSV", csv_path, lambda: write_csv(csv_path, columns, digits=17)):
-            summary["csv"] = str(csv_path)
+        if not self.rows.csv_failed:
+            summary["csv"] = str(self.path.with_suffix(".csv"))
         if self.bag is not None and self._write(
             "bag",
             self.bag,
@@ -440,13 +469,11 @@ class RecorderNode(Node):
         simulated time between those states / wall_time_s; empty before two states. Also start_up_s, the wall time
         [s] from the command's start (parameter launched_at) to the first machine state,
         and in realtime max_lag_s, the machine's largest lag [s] of simulation time behind the wall clock."""
-        if len(self.state_walls) < 2 or self.state_walls[1] <= self.state_walls[0]:
+        first, last = self.rows.first_machine, self.rows.newest[MACHINE]
+        if len(self.state_walls) < 2 or self.state_walls[1] <= self.state_walls[0] or first is None or last is None:
             return {}
         wall = self.state_walls[1] - self.state_walls[0]
-        pace = {
-            "wall_time_s": wall,
-            "real_time_factor": (seconds(max(self.machine)) - seconds(min(self.machine))) / wall,
-        }
+        pace = {"wall_time_s": wall, "real_time_factor": (seconds(last) - seconds(first)) / wall}
         if self.launched_at > 0.0 and self.trial == 1:
             pace["start_up_s"] = self.state_walls[0] - self.launched_at
         if self.max_lag is not None:
@@ -454,77 +481,28 @@ class RecorderNode(Node):
         return pace
 
     def received(self) -> str:
-        """What came of each stream: how many exchange times and the last one [s], e.g. 'machine states: 301 up to
-        0.3 s; machine moments: 0; governor states: 301 up to 0.3 s'."""
-        streams: dict[str, Mapping[int, object]] = {"machine states": self.machine, "machine moments": self.moments}
+        """What came of each stream: how many exchange times and the last one [s], e.g. 'machine states and
+        moments: 301 up to 0.3 s; governor states: 301 up to 0.3 s'."""
+        streams = {"machine states and moments": MACHINE}
         if self.model.governor is not None:
-            streams["governor states"] = self.governor
+            streams["governor states"] = GOVERNOR
         return "; ".join(
-            f"{name}: {len(samples)}" + (f" up to {seconds(max(samples)):.6g} s" if samples else "")
-            for name, samples in streams.items()
-        )
-
-    def part_arrived(self, when: int) -> None:
-        """A part of the exchange at `when` [ns] came: the exchange is complete once the machine's state and
-        moments and (with a governor) the governor's state are in."""
-        if when in self.machine and when in self.moments and (self.model.governor is None or when in self.governor):
-            self.completed.add(when)
-            self.completed_until = when if self.completed_until is None else max(self.completed_until, when)
-
-    def complete_times(self) -> list[int]:
-        """The exchange times [ns] all parts (machine state, moments, governor state) were received for."""
-        return sorted(
-            when
-            for when in self.machine
-            if when in self.moments and (self.model.governor is None or when in self.governor)
+            f"{name}: {self.rows.received[stream]}"
+            + (f" up to {seconds(newest):.6g} s" if (newest := self.rows.newest[stream]) is not None else "")
+            for name, stream in streams.items()
         )
 
     def report(self) -> None:
         """Publish /diagnostics: how many complete exchanges are recorded and up to which time."""
         values = {
             "scene": self.model.scene.name,
-            "recorded_exchanges": len(self.completed),
-            "recorded_until": seconds(self.completed_until) if self.completed_until is not None else None,
+            "recorded_exchanges": self.rows.completed,
+            "recorded_until": seconds(self.rows.completed_until) if self.rows.completed_until is not None else None,
         }
         level, text = self.refusals.status(OK, "recording")
         array = diagnostics(self, level, text, values)
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
-
-    def run_data(self) -> CoSimulation | None:
-        """The run as the core's CoSimulation, from the exchange times all parts were received for."""
-        times = self.complete_times()
-        if not times:
-            return None
-        rows = []
-        for when in times:
-            machine = self.machine[when]
-            row = machine[:2]
-            if self.model.governor is not None:
-                values = self.governor[when]  # its values are named as its states
-                row += [values[name] for name in self.model.governor.state_names]
-            rows.append(row + machine[2:])
-        tripped = self.tripped_at if self.tripped_at is not None else np.inf
-        throttle = [
-            self.moments[when][2]
-            if self.controller == "external"
-            else 0.0
-            if seconds(when) >= tripped
-            else self.governor[when]["throttle"]
-            if self.model.governor is not None
-            else 1.0
-            for when in times
-        ]
-        return CoSimulation(
-            times=np.array([seconds(when) for when in times]),
-            states=np.array(rows).T,
-            throttle=np.array(throttle),
-            external_load=np.array([self.moments[w][1] for w in times]),
-            events=self.events,
-            status="complete",
-            message="",
-            tripped_at=self.tripped_at,
-        )
 
     def subscribe_to_the_machine(self) -> None:
         """Subscribe to the machine's states and moments (machine/moments) once the other stream the run needs (a
@@ -562,13 +540,12 @@ class RecorderNode(Node):
             raise OutputError(f"{len(self.write_failures)} output(s) could not be written: {self.write_failures[-1]}")
 
 
-def unrecorded(groups: list[tuple[int, dict]], recorded: Reversible[int], topic: str) -> list[tuple[int, dict]]:
-    """The groups of a batch (common.batch_groups) at exchange times not in `recorded` (a stream's samples by time
-    [ns], in the order of their times), each time once: the machine publishes an exchange time again when no answer
+def unrecorded(groups: list[tuple[int, dict]], newest: int | None, topic: str) -> list[tuple[int, dict]]:
+    """The groups of a batch (common.batch_groups) at exchange times after `newest` [ns] (the newest of a stream
+    recorded, None: none yet), each time once: the machine publishes an exchange time again when no answer
     came within machine.RESEND_PERIOD (a loaded machine), and its governor then answers that time twice, the repeat in the
     same batch or opening the next; the first answer is the one recorded. A batch from before the newest time
     recorded is refused (trust.BadMessage)."""
-    newest = next(reversed(recorded), None)  # (the dict's order is its times')
     if groups and newest is not None and groups[0][0] < newest:
         raise BadMessage("out of order", f"{topic} from {seconds(groups[0][0]):.9g} s after {seconds(newest):.9g} s")
     fresh: list[tuple[int, dict]] = []

@@ -39,18 +39,24 @@ def write_csv(path, columns: dict[str, np.ndarray] | Iterable[dict[str, np.ndarr
     """Write output columns as CSV with a header line (digits significant digits; 17 round-trips a double
     exactly). columns: a dict of equal-length columns, or an iterable of such dicts whose rows follow one another
     (the header from the first; memory then holds one at a time)."""
-    import numpy as np
-
     with open(path, "w") as file:
         for index, chunk in enumerate([columns] if isinstance(columns, dict) else columns):
-            np.savetxt(
-                file,
-                np.column_stack(list(chunk.values())),
-                delimiter=",",
-                header=",".join(chunk) if index == 0 else "",
-                comments="",
-                fmt=f"%.{digits}g",
-            )
+            write_csv_rows(file, chunk, digits, header=index == 0)
+
+
+def write_csv_rows(file, columns: dict[str, np.ndarray], digits: int = 12, header: bool = True) -> None:
+    """Write output columns to the open text file `file` as CSV rows (digits significant digits), the header line
+    first when `header`: each row is formatted on its own, so that rows written in pieces make the same file."""
+    import numpy as np
+
+    np.savetxt(
+        file,
+        np.column_stack(list(columns.values())),
+        delimiter=",",
+        header=",".join(columns) if header else "",
+        comments="",
+        fmt=f"%.{digits}g",
+    )
 
 
 def write_rows_csv(path, rows: list[dict], digits: int = 17) -> None:
