@@ -45,6 +45,8 @@ from mech_regulator.solvers.compiled import fast_path_refusal
 SHORTENED = {
     "engine": 4.5,
     "engine_direct": 3.0,
+    "engine_hartnell": 4.5,  # the load step at 2 s and its response (settled in about 2 s), not the rejection at 9 s
+    "engine_pi": 4.5,
     "engine_indirect_isodromic": 3.0,
     "engine_indirect_none": 3.0,
     "engine_indirect_rigid": 3.0,
