@@ -21,7 +21,7 @@ note aside), flags and counts are equal. The energy residual, zero for the exact
 the largest work on both paths (measured: at most 5e-6; the fault above made it 5e-3 to 3 on the 16 scenes it touched).
 
 The slow reference runs are shortened (SHORTENED; the load changes that end within the shortened run are kept): the
-68 runs and their summaries take some 45 s of CPU, the fast path's compilation on a cold cache some 25 s more. The
+104 runs and their summaries take some 90 s of CPU, a cold DOP853 stepper some 45 s more (docs/speed.md). The
 solver's statistics (steps, evaluations) are not compared: the step sequences of the two paths part at round-off.
 """
 
@@ -45,6 +45,8 @@ from mech_regulator.solvers.compiled import fast_path_refusal
 SHORTENED = {
     "engine": 4.5,
     "engine_direct": 3.0,
+    "engine_hartnell": 4.5,  # the load step at 2 s and its response (settled in about 2 s), not the rejection at 9 s
+    "engine_pi": 4.5,
     "engine_indirect_isodromic": 3.0,
     "engine_indirect_none": 3.0,
     "engine_indirect_rigid": 3.0,

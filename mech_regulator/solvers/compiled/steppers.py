@@ -77,7 +77,10 @@ NO_RESTARTS = (
 )
 
 
-# the four steppers; stepper(method) compiles the one a run needs
+# the four steppers; stepper(method) compiles the one a run needs. Each hands _integrate its method (and RK4 its
+# n_journals) as a run-time np.int64, not as a constant, which numba would type as a literal and compile _integrate
+# and its steps for once per method: so _integrate is compiled, and cached, once for all four, and a further
+# method's stepper compiles in some 6 s of CPU rather than 21 s (docs/speed.md, "The test suite").
 def _rk45(
     rhs,
     guards,
@@ -110,7 +113,7 @@ def _rk45(
     """Dormand–Prince 5(4) exactly as scipy's RK45 (tableau, RMS error norm, controller, initial step, FSAL):
     the same steps up to round-off. Returns the result tuple of the module docstring."""
     return _integrate(
-        _RK45,
+        np.int64(_RK45),
         rhs,
         guards,
         n_guards,
@@ -174,7 +177,7 @@ def _dop853(
     """Dormand–Prince 8(5,3) exactly as scipy's DOP853 (its combined E5/E3 error norm, error exponent -1/8,
     the 7th-degree dense output from 3 extra stages). Returns the result tuple of the module docstring."""
     return _integrate(
-        _DOP853,
+        np.int64(_DOP853),
         rhs,
         guards,
         n_guards,
@@ -243,7 +246,7 @@ def _rosenbrock23(
     J = df/dy and T = df/dt by forward differences at each step's start; scipy's error norm and controller
     with exponent -1/3. Returns the result tuple of the module docstring."""
     return _integrate(
-        _ROSENBROCK23,
+        np.int64(_ROSENBROCK23),
         rhs,
         guards,
         n_guards,
@@ -303,14 +306,14 @@ def _rk4(
     [t0, t_end] evenly and the Hermite cubic dense output, as solvers/rk4.py. Returns the result tuple of
     the module docstring. Its step is kept: no journals' reach (guards stands in for reactions)."""
     return _integrate(
-        _RK4,
+        np.int64(_RK4),
         rhs,
         guards,
         n_guards,
         linear,
         thresholds,
         guards,
-        0,
+        np.int64(0),
         t0,
         y0,
         t_end,
@@ -347,9 +350,9 @@ _STEPPERS = {
 def stepper(method: str):
     """The compiled stepper of a method ('RK45', 'DOP853', 'Rosenbrock23', 'RK4'; call it as the module docstring
     says): compiled with its one explicit signature when first asked for, or loaded from numba's disk cache, so a
-    process compiles or loads only the methods it runs (some 50 s of CPU each to compile on a fresh machine: warm.py).
-    Under the method's lock (locks.method_lock): a process that finds another compiling the same stepper waits and then
-    loads it, rather than compiling it a second time beside it."""
+    process compiles or loads only the methods it runs (on a fresh machine some 50 s of CPU for the first to
+    compile, some 7 s each further one: warm.py). Under the method's lock (locks.method_lock): a process that finds
+    another compiling the same stepper waits and then loads it, rather than compiling it a second time beside it."""
     function, signature = _STEPPERS[method]
     with method_lock(method):
         return njit(signature, cache=True)(function)

@@ -1,5 +1,6 @@
 """Warming the fast path: its compiled steppers (one per method, solvers/compiled/steppers.py) take some 40 to
-50 s of CPU each to compile on a fresh machine (COMPILE_ESTIMATE; DOP853's on the 2-core machine: 44 s at a load of
+50 s of CPU to compile on a fresh machine, the first of them (the integration loop all four share), and some 7 s each
+further one (docs/speed.md, "The test suite") (COMPILE_ESTIMATE; DOP853's on the 2-core machine: 44 s at a load of
 about 2.5, 49.6 s idle in an earlier measurement; 147 s of wall time under a load of about 10, 305 s with a pip
 install beside it: `NUMBA_CACHE_DIR=$(mktemp -d) MECH_REGULATOR_CACHE=$(mktemp -d) mech-regulator compile --method
 DOP853`) — once per machine and numba version, then numba loads them from its disk cache in a fraction of a second
