@@ -758,13 +758,12 @@ class CoSimulation:
 
 
 def exchange_times_refusal(
-    model: MachineModel, exchange_step: float, exchange_tolerance: float | None, coupling: str
+    duration: float, exchange_step: float, exchange_tolerance: float | None, coupling: str
 ) -> str | None:
     """Why a co-simulation cannot exchange at these times, naming the option, its value and what would do (None when
     it can): too many exchanges over the scene's duration (at the adaptive step's smallest, with a tolerance), a
     tolerance that is not a number in (0, 1) or, since the adaptive step is set by the corrector's miss, a tolerance
-    without the corrected coupling."""
-    duration = model.scene.scenario.duration
+    without the corrected coupling; duration [s] the run's."""
     if exchange_tolerance is None:
         return exchange_refusal("--exchange-step", exchange_step, duration)
     if not 0.0 < exchange_tolerance < 1.0:
@@ -798,7 +797,7 @@ def cosimulate(
         raise ValueError(f"exchange_step = {exchange_step!r} s: expected at least 1 ns")
     if coupling not in COUPLINGS:
         raise ValueError(f"coupling = {coupling!r}: expected one of {', '.join(COUPLINGS)}")
-    refusal = exchange_times_refusal(model, exchange_step, exchange_tolerance, coupling)
+    refusal = exchange_times_refusal(model.scene.scenario.duration, exchange_step, exchange_tolerance, coupling)
     if refusal is not None:
         raise SceneError(refusal)
     end = to_nanoseconds(model.scene.scenario.duration)
