@@ -23,8 +23,9 @@ at its end or finished; the other nodes end by themselves when it is finished.
 
 Time modes: `lockstep` advances exchange step by exchange step, waiting at each exchange time for the
 inputs listed in `lockstep_inputs` stamped with that time (reproducible to the last digit, the same
-numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
-`real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
+numbers as mech_regulator.solvers.cosim.cosimulate; with `exchange_tolerance` > 0 the machine chooses each
+exchange time, solvers.cosim.ExchangeTimes, and sends it as the end of its predicted samples); `realtime` follows the
+wall clock scaled by `real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
 (`max_lag_s` [s of simulation time] in /diagnostics and machine/status; the recorder's summary has it). What it
 waits for comes from the scene: the throttle when it has a governor (or `controller` is external: a node the user
 starts, waited for by topic, not by name, and the run ends naming it when it does not answer within `peer_timeout`:

@@ -668,10 +668,10 @@ class ExchangeTimes:
     """The exchange times [ns] of a co-simulation, which the machine decides and sends with its state (the end of its
     predicted samples: both sides agree on them; the governor and the scenario answer whatever time it stamps). With a
     fixed step [ns] t_k = k step, the last at the end. With a tolerance [-] (the corrected coupling) the step is
-    adaptive (docs/speed.md, "The adaptive step tried again": it beats the fixed step on machines without a firing ripple,
-    not on the bundled engines): after each step the machine's predictor miss, how far its
-    predicted speed at the step's end lies from the corrected one relative to the largest speed so far, a local error
-    estimate of the coupling of order ERROR_ORDER in the step, sets the next step, h * SAFETY * (tolerance /
+    adaptive (docs/speed.md, "The adaptive step tried again": it beats the fixed step on machines without a firing
+    ripple, not on the bundled engines): after each step the machine's predictor miss, how far its predicted speed at
+    the step's end lies from the corrected one relative to the largest speed so far, a local error estimate of the
+    coupling of order ERROR_ORDER in the step, sets the next step, h * SAFETY * (tolerance /
     miss)^(1 / ERROR_ORDER) rounded down to the ladder step * 2^j (j from -ADAPTIVE_HALVINGS to ADAPTIVE_DOUBLINGS, so
     that the prediction the machine makes one step ahead is mostly for the step then taken); each load change of the
     scenario is an exchange time, and the step after it, as the first, starts RESTART_HALVINGS halvings small. A step
