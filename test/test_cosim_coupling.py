@@ -8,19 +8,25 @@ ahead. All are measured against the monolithic run, which has no exchange at all
 from __future__ import annotations
 
 import copy
+import math
 import statistics
 
 import numpy as np
 import pytest
 from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE
 
+from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.model import build_model
-from mech_regulator.scene import load_scene, validate_scene
+from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import (
+    ADAPTIVE_DOUBLINGS,
+    ADAPTIVE_HALVINGS,
+    RESTART_HALVINGS,
     GovernorStepper,
     MachineStepper,
     cosimulate,
+    first_nanosecond_at,
     held_load_until,
     load_rate,
     seconds,
@@ -93,6 +99,68 @@ def test_corrected_is_at_least_third_order_and_closer_at_five_times_the_step(smo
         assert errors[coarse] / errors[fine] >= 8.0, errors
     waveform = omega_errors(smooth_model, "waveform", (0.008,))[0.008]
     assert errors[0.04] < waveform, (errors, waveform)
+
+
+@pytest.fixture(scope="module")
+def settling_model():
+    """SMOOTH_GOVERNED over 2 s with its load step at 0.2 s and another at 1.3 s: transients and steady motion."""
+    scene = copy.deepcopy(SMOOTH_GOVERNED)
+    scene["scenario"].update(duration=2.0, load_events=[{"time": 0.2, "torque": 8.0}, {"time": 1.3, "torque": 5.0}])
+    return build_model(validate_scene(scene))
+
+
+def test_the_adaptive_step_keeps_its_tolerance_with_fewer_exchanges(settling_model):
+    """On a machine without a firing ripple the adaptive step stays within its tolerance of the monolithic run (max
+    |omega| difference at the exchange times over max |omega|) and spends fewer exchanges than the fixed step it
+    starts from, which it is also closer than."""
+    monolithic = simulate(settling_model)
+    errors, exchanges = {}, {}
+    for tolerance in (None, 1e-5):
+        run = cosimulate(settling_model, 0.02, coupling="corrected", exchange_tolerance=tolerance)
+        assert run.status == "complete", run.message
+        reference = monolithic(run.times)[1]
+        errors[tolerance] = np.max(np.abs(run.states[1] - reference)) / np.max(np.abs(reference))
+        exchanges[tolerance] = run.times.size - 1
+    assert errors[1e-5] <= 1e-5 and errors[1e-5] < errors[None], errors
+    assert exchanges[1e-5] < exchanges[None], exchanges
+
+
+def test_the_adaptive_step_lands_on_each_load_change_shrinks_there_and_grows_in_steady_motion(settling_model):
+    run = cosimulate(settling_model, 0.02, coupling="corrected", exchange_tolerance=1e-5)
+    ticks = np.round(run.times * 1e9).astype(np.int64)
+    steps = np.diff(ticks)
+    smallest, restart = 20_000_000 // 2**ADAPTIVE_HALVINGS, 20_000_000 // 2**RESTART_HALVINGS
+    for change in (0.2, 1.3):
+        at = int(np.flatnonzero(ticks == first_nanosecond_at(change))[0])  # an exchange exactly there
+        assert steps[at] == restart, steps[at - 2 : at + 3]  # small again after it
+        assert steps[at - 3 : at].max() > restart, steps[at - 3 : at + 1]  # larger before it: steady motion
+    assert steps.max() == 20_000_000 * 2**ADAPTIVE_DOUBLINGS and steps.min() >= smallest, (steps.min(), steps.max())
+    summary = summarise_cosimulation(settling_model, run, 0.02, "corrected", 1e-5)
+    assert summary["exchange_tolerance"] == 1e-5
+    assert summary["exchange_steps"]["count"] == steps.size == summary["samples"] - 1
+    assert (
+        summary["exchange_steps"]["max"] == pytest.approx(0.08) and summary["exchange_steps"]["min"] > 1.25e-3 - 1e-12
+    )
+
+
+@pytest.mark.parametrize(
+    ("tolerance", "coupling", "expected"),
+    [
+        (0.0, "corrected", "--exchange-tolerance 0: expected a relative error between 0 and 1"),
+        (1.0, "corrected", "--exchange-tolerance 1: expected a relative error between 0 and 1"),
+        (math.nan, "corrected", "--exchange-tolerance nan: expected a relative error between 0 and 1"),
+        (1e-6, "hold", "--exchange-tolerance 1e-06 with --coupling hold: .* expected --coupling corrected"),
+        (1e-6, "waveform", "with --coupling waveform"),
+    ],
+)
+def test_bad_exchange_tolerances_are_refused_naming_the_option(smooth_model, tolerance, coupling, expected):
+    with pytest.raises(SceneError, match=expected):
+        cosimulate(smooth_model, 0.02, coupling=coupling, exchange_tolerance=tolerance)
+
+
+def test_the_adaptive_steps_smallest_counts_against_the_exchange_limit(smooth_model):
+    with pytest.raises(SceneError, match="the adaptive exchange step's smallest .* would take"):
+        cosimulate(smooth_model, 1e-6, coupling="corrected", exchange_tolerance=1e-6)
 
 
 def test_corrected_keeps_the_engine_within_the_bound_at_20_ms():

@@ -241,6 +241,35 @@ def test_an_overspeed_trip_that_is_not_a_speed(capsys, tmp_path, command, trip):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("command", ["simulate", "run"])
+@pytest.mark.parametrize("tolerance", ["0", "-0.5", "nan", "2"])
+def test_an_exchange_tolerance_that_is_not_a_relative_error(capsys, tmp_path, command, tolerance):
+    """Refused before anything runs (no node started: run's output folder stays empty)."""
+    extra = ["--exchange-step", "0.01"] if command == "simulate" else ["--out", str(tmp_path / "run.rrd")]
+    err = refused(
+        capsys,
+        "lathe",
+        "--quiet",
+        "--set",
+        "solver.path=reference",
+        *extra,
+        "--exchange-tolerance",
+        tolerance,
+        command=command,
+    )
+    assert f"--exchange-tolerance {float(tolerance):g}: expected a relative error between 0 and 1" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_exchange_tolerance_without_the_exchanges_or_the_coupling_it_needs(capsys):
+    err = refused(capsys, "lathe", "--quiet", "--exchange-tolerance", "1e-6")
+    assert "--exchange-tolerance 1e-06: the adaptive step is the co-simulation's; expected --exchange-step H" in err
+    err = refused(
+        capsys, "lathe", "--quiet", "--exchange-step", "0.01", "--coupling", "hold", "--exchange-tolerance", "1e-6"
+    )
+    assert "--exchange-tolerance 1e-06 with --coupling hold" in err and "expected --coupling corrected" in err, err
+
+
 def test_an_overspeed_trip_without_the_exchanges_it_acts_at(capsys):
     """simulate without --exchange-step has no trip: one asked for is refused rather than ignored."""
     err = refused(capsys, "lathe", "--quiet", "--overspeed-trip", "20")

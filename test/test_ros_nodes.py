@@ -895,6 +895,36 @@ def test_main_job_reproduces_the_in_process_cosimulation(main_jobs, tmp_path, ca
     assert f"open the recording with: {viewer_command(first.rrd)}" in first.log
 
 
+def test_main_job_with_the_adaptive_exchange_step_reproduces_the_in_process_cosimulation(tmp_path, capsys):
+    """The adaptive exchange step (the machine decides the exchange times and sends each as the end of its predicted
+    samples; the governor and the scenario answer whatever time it stamps): the nodes' CSV is the in-process
+    co-simulation's byte for byte, and both summaries record the same steps."""
+    arguments = [
+        *_short_engine_arguments(),
+        "--coupling",
+        "corrected",
+        "--exchange-step",
+        "0.02",
+        "--exchange-tolerance",
+        "1e-6",
+    ]
+    started = Processes(tmp_path, dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        job = MainJob(started, tmp_path, arguments, "adaptive")
+        started.wait(job.process, 4 * WAIT)
+    finally:
+        started.stop_all()
+    assert job.process.returncode == 0, job.describe()
+    csv = tmp_path / "in_process.csv"
+    code, out, _ = run_cli(capsys, "simulate", *arguments, "--out", str(csv), "--json", "--quiet")
+    assert code == 0
+    assert job.csv.read_bytes() == csv.read_bytes(), "the ROS run's CSV differs from simulate --exchange-tolerance"
+    summary, in_process = json.loads(job.json.read_text()), json.loads(out)
+    assert summary["exchange_tolerance"] == in_process["exchange_tolerance"] == 1e-6
+    assert summary["exchange_steps"] == in_process["exchange_steps"]
+    assert in_process["exchange_steps"]["min"] < in_process["exchange_steps"]["max"]  # the steps did change
+
+
 def _rerun() -> str:
     rerun = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     assert rerun is not None, "no rerun executable next to this Python or on PATH (rerun-sdk installs it)"

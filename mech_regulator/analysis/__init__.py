@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
+
 from mech_regulator.analysis.drivetrain import drive_train_summary
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
 from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
@@ -89,18 +91,31 @@ def cosimulation_ending(run: CoSimulation) -> tuple[str, str]:
 
 
 def summarise_cosimulation(
-    model: MachineModel, run: CoSimulation, exchange_step: float, coupling: str = "hold"
+    model: MachineModel,
+    run: CoSimulation,
+    exchange_step: float,
+    coupling: str = "hold",
+    exchange_tolerance: float | None = None,
 ) -> dict:
     """The summary of a co-simulated run (in process or by the ROS nodes), as plain data: how it ended
-    (cosimulation_ending), the exchange step [s] and coupling (solvers.cosim), the final speed, the governor's answer
-    to each load change (from the run sampled at its exchange times) and the overspeed trip."""
+    (cosimulation_ending), the exchange step [s], the adaptive step's tolerance [-] (None: fixed) and coupling
+    (solvers.cosim), the steps taken between its exchange times (count, min, median, max [s]), the final speed, the
+    governor's answer to each load change (from the run sampled at its exchange times) and the overspeed trip."""
     trajectory = run.trajectory(model)
     status, message = cosimulation_ending(run)
+    steps = np.diff(run.times)
     return {
         "scene": model.scene.name,
         "status": status,
         "message": message,
         "exchange_step": exchange_step,
+        "exchange_tolerance": exchange_tolerance,
+        "exchange_steps": {
+            "count": int(steps.size),
+            "min": float(steps.min()) if steps.size else None,
+            "median": float(np.median(steps)) if steps.size else None,
+            "max": float(steps.max()) if steps.size else None,
+        },
         "coupling": coupling,
         "samples": int(run.times.size),
         "t_end": float(run.times[-1]),

@@ -78,6 +78,7 @@ def run_main_job(scene, args) -> int:
         args.coupling,
         STARTED,
         bag=args.bag,
+        exchange_tolerance=args.exchange_tolerance,
         controller=args.controller,
         peer_timeout=args.peer_timeout,
     )

@@ -32,6 +32,11 @@ def run_simulate(scene, args) -> int:
     from mech_regulator.solvers import on_path_for_a_command, simulate
     from mech_regulator.solvers.advice import stiffness_advice
 
+    if args.exchange_tolerance is not None and args.exchange_step is None:
+        raise SceneError(
+            f"--exchange-tolerance {args.exchange_tolerance:g}: the adaptive step is the co-simulation's; expected "
+            "--exchange-step H with it (its steps run from H/16 to 4 H)"
+        )
     if args.overspeed_trip and args.exchange_step is None:
         raise SceneError(
             f"--overspeed-trip {args.overspeed_trip:g}: the trip acts at the exchanges of the "
@@ -125,8 +130,9 @@ def _cosimulate(model, args) -> int:
             args.overspeed_trip,
             progress=lambda t: bar.update(min(t, duration) - bar.n),
             coupling=args.coupling,
+            exchange_tolerance=args.exchange_tolerance,
         )
-    summary = summarise_cosimulation(model, run, args.exchange_step, args.coupling)
+    summary = summarise_cosimulation(model, run, args.exchange_step, args.coupling, args.exchange_tolerance)
     outputs = OutputWriter(summary)
     outputs.write(
         "csv",

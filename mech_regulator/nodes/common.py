@@ -201,6 +201,23 @@ def coupling_parameter(node: Node) -> str:
     )
 
 
+def exchange_tolerance_parameter(node: Node) -> float | None:
+    """Declare the `exchange_tolerance` parameter (the adaptive exchange step's tolerance [-], 0: the fixed step;
+    solvers.cosim.ExchangeTimes; the machine decides the exchange times with it, the recorder's summary names it) and
+    return it, None for 0."""
+    tolerance = float_parameter(
+        node,
+        "exchange_tolerance",
+        0.0,
+        "the adaptive exchange step's tolerance on the corrected coupling's predictor miss, relative to the largest "
+        "speed [-]; 0: the fixed exchange_step (docs/speed.md, 'The adaptive step tried again')",
+        0.0,
+        1.0,
+        read_only=True,
+    )
+    return tolerance or None
+
+
 def add_samples(message, joint: str, field: str, samples: tuple | None) -> None:
     """Append a signal's samples over an exchange step (times [s], values; solvers.cosim.Samples) to a
     sensor_msgs/JointState as entries of `joint`, one per sample: the value in `field` ('position' or 'velocity'),

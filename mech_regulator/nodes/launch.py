@@ -35,7 +35,6 @@ from mech_regulator.cli.report.terminal import progress_bar
 from mech_regulator.nodes.outputs import default_recording
 from mech_regulator.processes import die_with_parent
 from mech_regulator.scene import SceneError, config_dir
-from mech_regulator.scene.limits import exchange_refusal
 
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
@@ -122,6 +121,7 @@ def run_parameters(
     controller: str = "governor",
     bag: Path | None = None,
     peer_timeout: float | None = None,
+    exchange_tolerance: float | None = None,
 ) -> dict:
     """The bundled config/params/main_job.yaml with this run's choices filled in; the machine's peers are the
     other nodes started (in realtime too, before the clock starts: a governor still starting would miss the run; the
@@ -129,13 +129,14 @@ def run_parameters(
     started: when the command began, on the clock of time.monotonic() [s] (the recorder's start_up_s counts from
     it); controller: what gives the throttle (nodes.controller.CONTROLLERS; external: a node the user starts, not a
     peer by name); bag: the rosbag2 folder the recorder also writes (None: none); peer_timeout: the machine's [s]
-    (None: the file's)."""
+    (None: the file's); exchange_tolerance: the adaptive exchange step's (None: the fixed step)."""
     parameters = yaml.safe_load((config_dir() / "params" / "main_job.yaml").read_text())
     common = parameters["/**"]["ros__parameters"]
     common.update(
         scene_file=scene_file,
         overrides=overrides or [""],
         exchange_step=exchange_step,
+        exchange_tolerance=exchange_tolerance or 0.0,
         time_mode=time_mode,
         coupling=coupling,
     )
@@ -171,6 +172,7 @@ def main_job(
     controller: str = "governor",
     bag: Path | None = None,
     peer_timeout: float | None = None,
+    exchange_tolerance: float | None = None,
 ) -> int:
     """Run the nodes on the model's scene (its solver.path decided: fast or reference) for `duration` [s] of
     simulated time (None: the scene's), the machine tripping above overspeed_trip [rad/s] (0: no trip, the default:
@@ -181,12 +183,15 @@ def main_job(
     (docs/ros.md, "Who may speak"), 2 if every node that failed refused its input, 130
     if interrupted; each failed node is named with its reason). controller external: no governor_node, the machine
     waits for a node the user starts (nodes.controller); bag: also a rosbag2 recording there (viz.bag);
-    peer_timeout: the machine's [s] (None: the parameter file's). An exchange step that would take more than
-    limits.MAX_STEPS exchanges raises SceneError."""
+    peer_timeout: the machine's [s] (None: the parameter file's); exchange_tolerance: the adaptive exchange step's
+    (None: the fixed step; solvers.cosim.ExchangeTimes). Exchange times refused by solvers.cosim.exchange_times_refusal
+    (more than limits.MAX_STEPS exchanges, a bad tolerance) raise SceneError."""
+    from mech_regulator.solvers.cosim import exchange_times_refusal  # the solvers load with the model (load_steppers)
+
     scene = model.scene
-    too_many = exchange_refusal("--exchange-step", exchange_step, duration or scene.scenario.duration)
-    if too_many is not None:
-        raise SceneError(too_many)
+    refusal = exchange_times_refusal(duration or scene.scenario.duration, exchange_step, exchange_tolerance, coupling)
+    if refusal is not None:
+        raise SceneError(refusal)
     output = output or default_recording(scene.name)
     output.parent.mkdir(parents=True, exist_ok=True)
     governed = scene.governor is not None
@@ -206,6 +211,7 @@ def main_job(
         controller,
         bag,
         peer_timeout,
+        exchange_tolerance,
     )
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))

@@ -23,8 +23,9 @@ at its end or finished; the other nodes end by themselves when it is finished.
 
 Time modes: `lockstep` advances exchange step by exchange step, waiting at each exchange time for the
 inputs listed in `lockstep_inputs` stamped with that time (reproducible to the last digit, the same
-numbers as mech_regulator.solvers.cosim.cosimulate); `realtime` follows the wall clock scaled by
-`real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
+numbers as mech_regulator.solvers.cosim.cosimulate; with `exchange_tolerance` > 0 the machine chooses each
+exchange time, solvers.cosim.ExchangeTimes, and sends it as the end of its predicted samples); `realtime` follows the
+wall clock scaled by `real_time_factor` with the newest inputs, and says how far its published state fell behind the wall clock at most
 (`max_lag_s` [s of simulation time] in /diagnostics and machine/status; the recorder's summary has it). What it
 waits for comes from the scene: the throttle when it has a governor (or `controller` is external: a node the user
 starts, waited for by topic, not by name, and the run ends naming it when it does not answer within `peer_timeout`:
@@ -76,6 +77,7 @@ from mech_regulator.nodes.common import (
     bool_parameter,
     coupling_parameter,
     deliver_all,
+    exchange_tolerance_parameter,
     float_parameter,
     int_parameter,
     list_parameter,
@@ -95,7 +97,7 @@ from mech_regulator.nodes.trust import (
     receive,
 )
 from mech_regulator.scene import SceneError
-from mech_regulator.solvers.cosim import MachineStepper, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import MachineStepper, exchange_times_refusal, seconds, to_nanoseconds
 
 LOCKSTEP_INPUTS = {"throttle": ("governor", "throttle"), "load": ("scenario", "load_torque_stamped")}  # input ->
 # (the node that gives it by default, its topic)
@@ -230,6 +232,10 @@ class MachineNode(MachineExchange, Node):
 
         self.overspeed = overspeed
         coupling = coupling_parameter(self)
+        self.exchange_tolerance = exchange_tolerance_parameter(self)
+        refusal = exchange_times_refusal(seconds(self.end_ns), seconds(self.step_ns), self.exchange_tolerance, coupling)
+        if refusal is not None:
+            raise SceneError(refusal)
         self.waveform = coupling == "waveform" and governed
         self.corrects = coupling == "corrected" and governed
         self.follows_ramps = coupling == "corrected"  # the load's rate over a step (force.z of the stamped load)
@@ -388,10 +394,8 @@ class MachineNode(MachineExchange, Node):
         self.report(force=True)
         self.wall_start = time.monotonic()
         self.publish_status()
-        tick = 0
         while rclpy.ok():
-            self.now_ns = min(tick * self.step_ns, self.end_ns)
-            next_ns = min((tick + 1) * self.step_ns, self.end_ns)
+            self.now_ns, next_ns = self.exchanges.now, self.exchanges.next
             if self.corrects:  # the step predicted with the last step's load: the new one comes with the throttle
                 self.predicted = (
                     self.stepper.predict(seconds(next_ns), self.tentative) if next_ns > self.now_ns else None
@@ -399,7 +403,7 @@ class MachineNode(MachineExchange, Node):
             self.publish_state()
             self.moments.send_when_due()  # the last exchanges', sent while the peers answer this one
             if self.corrects and next_ns < self.end_ns:  # the next step's predictor, while the governor answers
-                self.stepper.predict_ahead(seconds(min((tick + 2) * self.step_ns, self.end_ns)), self.tentative)
+                self.stepper.predict_ahead(seconds(self.exchanges.after_next()), self.tentative)
             self.add_moments()  # the last exchange's, while the peers answer this one
             if self.time_mode == "realtime" and next_ns > self.now_ns:
                 self.wait_until(next_ns)  # the inputs that hold over the step are the newest at its end
@@ -417,10 +421,9 @@ class MachineNode(MachineExchange, Node):
                 self.wall_start = time.monotonic()
                 self.publish_status()
                 self.get_logger().info(f"reset: trial {self.trial} starts from the initial state")
-                tick = 0
                 continue
-            tick += 1
             self.advance(next_ns, throttle)
+            self.exchanges.move_on(self.predicted, self.corrected, float(self.stepper.state[1]))
             self.report()
         if rclpy.ok():
             self.send_moments()

@@ -15,7 +15,7 @@ import numpy as np
 
 from mech_regulator.nodes.common import ERROR, OK, WARN, diagnostics, sent_samples
 from mech_regulator.nodes.trust import BadMessage, bounded, in_order, joint_fields, not_ahead, stamp_of
-from mech_regulator.solvers.cosim import NANOSECONDS, MachineStepper, Samples, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import NANOSECONDS, ExchangeTimes, MachineStepper, Samples, seconds, to_nanoseconds
 
 if TYPE_CHECKING:
     from diagnostic_msgs.msg import DiagnosticArray
@@ -35,6 +35,8 @@ class MachineExchange:
         """The scene's initial state at t = 0 with its initial inputs: at the start and at every ~/reset."""
         self.trial += 1
         self.stepper = MachineStepper(self.model, self.overspeed)
+        self.exchanges = ExchangeTimes(self.model, self.end_ns, self.step_ns, self.exchange_tolerance)  # the machine
+        # decides them and sends each with its state (the end of its predicted samples)
         self.throttle = self.model.governor.throttle(self.model.initial_state()) if self.model.governor else 1.0
         self.load = self.model.external_load(0.0)
         self.load_rate = 0.0  # [N m/s] the scenario's ramp over the next step (corrected coupling)
@@ -108,9 +110,10 @@ class MachineExchange:
         bounds = (-self.max_load_torque, self.max_load_torque)
         bounded(value, *bounds, "load_torque_stamped torque.z [N m] (parameter max_load_torque)")
         bounded(
-            value + rate * seconds(self.step_ns),
+            value + rate * seconds(self.exchanges.largest),
             *bounds,
-            "load_torque_stamped torque.z + force.z (its rate) * the exchange step [N m] (parameter max_load_torque)",
+            "load_torque_stamped torque.z + force.z (its rate) * the longest exchange step [N m] (parameter "
+            "max_load_torque)",
         )
         if math.isnan(until):
             raise BadMessage("not finite", "load_torque_stamped force.x (held until) = nan, expected a time [s] or inf")

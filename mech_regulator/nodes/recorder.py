@@ -43,6 +43,7 @@ from mech_regulator.nodes.common import (
     batch_groups,
     coupling_parameter,
     diagnostics,
+    exchange_tolerance_parameter,
     float_parameter,
     follow_run_state,
     peer_parameter,
@@ -117,6 +118,7 @@ class RecorderNode(Node):
             read_only=True,
         )
         self.coupling = coupling_parameter(self)
+        self.exchange_tolerance = exchange_tolerance_parameter(self)
         self.launched_at = float_parameter(
             self,
             "launched_at",
@@ -387,7 +389,9 @@ class RecorderNode(Node):
                 ),
             )
             return
-        summary = summarise_cosimulation(self.model, run_data, self.exchange_step, self.coupling)
+        summary = summarise_cosimulation(
+            self.model, run_data, self.exchange_step, self.coupling, self.exchange_tolerance
+        )
         summary.update(self.pace())
         if not self.complete() or self.machine_result[0] not in ("complete", "interrupted"):
             summary["status"], summary["message"] = status, message  # the recording's end, said the same way

@@ -481,6 +481,12 @@ MAX_SPEED_PIECE = 1.25e-3  # [s]: the corrected coupling samples the machine's s
 LOAD_LINE_TOLERANCE = 1e-9  # [-] a prediction made ahead is kept while the load it assumed is the last step's load
 # continued within this (rounding along a ramp); a load event in between (a change) drops it
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
+ADAPTIVE_HALVINGS = 4  # the adaptive exchange step's smallest: the exchange step / 2^this
+ADAPTIVE_DOUBLINGS = 2  # and its largest: the exchange step * 2^this
+RESTART_HALVINGS = 2  # its first step and the step after a load change: the exchange step / 2^this
+SAFETY = 0.9  # [-] the adaptive step aims at this share of the tolerance (to the power ERROR_ORDER)
+ERROR_ORDER = 3  # the predictor's miss grows about as the step to this power (engine_direct: 1e-5 of the speed at
+# 20 ms, 4-6e-5 at 40 ms; docs/speed.md, "The adaptive step tried again")
 
 
 def quadratic_through(duration: float, start: float, middle: float, end: float) -> tuple[float, float]:
@@ -550,15 +556,18 @@ def held_load_until(model: MachineModel, time: float) -> int | float:
     if piece is not None and piece.slope != 0.0:
         return to_nanoseconds(time)
     later = [candidate.start for candidate in model.load_pieces if candidate.start > time]
-    if not later:
-        return math.inf
-    start = later[0]
-    until = to_nanoseconds(start)  # then the smallest whole nanosecond whose time in seconds reaches the start
-    while seconds(until - 1) >= start:
-        until -= 1
-    while seconds(until) < start:
-        until += 1
-    return until
+    return first_nanosecond_at(later[0]) if later else math.inf
+
+
+def first_nanosecond_at(time: float) -> int:
+    """The smallest whole nanosecond [ns] whose time in seconds (`seconds`) reaches `time` [s]: the first exchange time
+    at which a load piece starting then is in force."""
+    nanoseconds = to_nanoseconds(time)
+    while seconds(nanoseconds - 1) >= time:
+        nanoseconds -= 1
+    while seconds(nanoseconds) < time:
+        nanoseconds += 1
+    return nanoseconds
 
 
 def machine_subsystem(model: MachineModel) -> MachineModel:
@@ -655,6 +664,68 @@ def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
     return stretch.status, stretch.message
 
 
+class ExchangeTimes:
+    """The exchange times [ns] of a co-simulation, which the machine decides and sends with its state (the end of its
+    predicted samples: both sides agree on them; the governor and the scenario answer whatever time it stamps). With a
+    fixed step [ns] t_k = k step, the last at the end. With a tolerance [-] (the corrected coupling) the step is
+    adaptive (docs/speed.md, "The adaptive step tried again": it beats the fixed step on machines without a firing
+    ripple, not on the bundled engines): after each step the machine's predictor miss, how far its predicted speed at
+    the step's end lies from the corrected one relative to the largest speed so far, a local error estimate of the
+    coupling of order ERROR_ORDER in the step, sets the next step, h * SAFETY * (tolerance /
+    miss)^(1 / ERROR_ORDER) rounded down to the ladder step * 2^j (j from -ADAPTIVE_HALVINGS to ADAPTIVE_DOUBLINGS, so
+    that the prediction the machine makes one step ahead is mostly for the step then taken); each load change of the
+    scenario is an exchange time, and the step after it, as the first, starts RESTART_HALVINGS halvings small. A step
+    whose miss is above the tolerance is not done again: the machine has sent the next time before it knows it."""
+
+    def __init__(self, model: MachineModel, end: int, step: int, tolerance: float | None = None):
+        self.end = end  # [ns]
+        self.tolerance = tolerance
+        self.smallest = step // 2**ADAPTIVE_HALVINGS if tolerance is not None else step  # [ns]
+        self.largest = step * 2**ADAPTIVE_DOUBLINGS if tolerance is not None else step  # [ns]
+        self._restart = step // 2**RESTART_HALVINGS if tolerance is not None else step  # [ns]
+        self.events = (
+            sorted({first_nanosecond_at(start) for start in model.breakpoints()} - {0}) if tolerance is not None else []
+        )  # [ns] the load changes, each an exchange time
+        self.nominal = self._restart  # [ns] the step as the error estimate sets it (before an event or the end cut it)
+        self.scale = 0.0  # [rad/s] the largest speed so far
+        self.now = 0  # [ns]
+        self.next = self._step_end(0)  # [ns]
+
+    def _step_end(self, start: int) -> int:
+        """The exchange time [ns] after `start` [ns] at the nominal step: on the next load change or the end when it
+        comes within the step, or halfway there when it would leave less than the smallest step after it."""
+        stop = min([event for event in self.events if event > start] + [self.end])
+        if stop - start <= self.nominal:
+            return stop
+        if self.tolerance is not None and stop - start < self.nominal + self.smallest:
+            return start + (stop - start) // 2
+        return start + self.nominal
+
+    def after_next(self) -> int:
+        """The exchange time [ns] expected after the next one: the next step at the nominal step as it is now (the
+        step the machine predicts ahead while the governor answers)."""
+        return self._step_end(self.next) if self.next < self.end else self.next
+
+    def move_on(self, predicted: Samples | None, corrected: Samples | None, omega: float) -> None:
+        """The step to `next` done: move there and, adaptive, set the nominal step from the predictor's miss, the
+        predicted speed samples' last value against the corrected ones' (corrected coupling; omega [rad/s] the speed
+        there), or start small again on a load change."""
+        landed_on_event = self.next in self.events
+        self.now = self.next
+        if self.tolerance is not None:
+            self.scale = max(self.scale, abs(omega))
+            miss = abs(predicted[1][-1] - corrected[1][-1]) / self.scale if predicted and corrected else math.inf
+            if landed_on_event or not math.isfinite(miss):  # a step that failed, or a load change
+                self.nominal = self._restart
+            else:
+                factor = min(max(SAFETY * (self.tolerance / max(miss, 1e-300)) ** (1.0 / ERROR_ORDER), 0.2), 2.0)
+                nominal = self.smallest
+                while nominal * 2 <= min(self.nominal * factor, self.largest):
+                    nominal *= 2
+                self.nominal = nominal
+        self.next = self._step_end(self.now) if self.now < self.end else self.now
+
+
 @dataclass
 class CoSimulation:
     """A co-simulated run sampled at its exchange times: times [s], the full state there (machine
@@ -686,25 +757,51 @@ class CoSimulation:
         return run
 
 
+def exchange_times_refusal(
+    duration: float, exchange_step: float, exchange_tolerance: float | None, coupling: str
+) -> str | None:
+    """Why a co-simulation cannot exchange at these times, naming the option, its value and what would do (None when
+    it can): too many exchanges over the scene's duration (at the adaptive step's smallest, with a tolerance), a
+    tolerance that is not a number in (0, 1) or, since the adaptive step is set by the corrector's miss, a tolerance
+    without the corrected coupling; duration [s] the run's."""
+    if exchange_tolerance is None:
+        return exchange_refusal("--exchange-step", exchange_step, duration)
+    if not 0.0 < exchange_tolerance < 1.0:
+        return f"--exchange-tolerance {exchange_tolerance:g}: expected a relative error between 0 and 1, e.g. 1e-6"
+    if coupling != "corrected":
+        return (
+            f"--exchange-tolerance {exchange_tolerance:g} with --coupling {coupling}: the adaptive exchange step is "
+            "set by the corrected coupling's predictor miss; expected --coupling corrected, or no tolerance"
+        )
+    return exchange_refusal(
+        f"the adaptive exchange step's smallest (--exchange-step / {2**ADAPTIVE_HALVINGS})",
+        exchange_step / 2**ADAPTIVE_HALVINGS,
+        duration,
+    )
+
+
 def cosimulate(
     model: MachineModel,
     exchange_step: float,
     overspeed_trip: float = 0.0,
     progress: Progress | None = None,
     coupling: str = "hold",
+    exchange_tolerance: float | None = None,
 ) -> CoSimulation:
     """Run the scene's scenario as the nodes do in lockstep: machine and governor exchange omega and the
-    throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns), with the
+    throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns) or, given
+    exchange_tolerance [-] (corrected coupling), at the adaptive exchange times (ExchangeTimes), with the
     coupling `hold`, `waveform` or `corrected` (module docstring)."""
     step = to_nanoseconds(exchange_step)
     if step <= 0:
         raise ValueError(f"exchange_step = {exchange_step!r} s: expected at least 1 ns")
-    too_many = exchange_refusal("--exchange-step", exchange_step, model.scene.scenario.duration)
-    if too_many is not None:
-        raise SceneError(too_many)
     if coupling not in COUPLINGS:
         raise ValueError(f"coupling = {coupling!r}: expected one of {', '.join(COUPLINGS)}")
+    refusal = exchange_times_refusal(model.scene.scenario.duration, exchange_step, exchange_tolerance, coupling)
+    if refusal is not None:
+        raise SceneError(refusal)
     end = to_nanoseconds(model.scene.scenario.duration)
+    exchanges = ExchangeTimes(model, end, step, exchange_tolerance)
     machine = MachineStepper(model, overspeed_trip)
     governor = GovernorStepper(model) if model.governor is not None else None
     rows, inputs = [], []
@@ -712,16 +809,14 @@ def cosimulate(
     corrected = waveform = None  # the corrected coupling's speed samples of the last step, throttle samples of the next
     corrector = governor if coupling == "corrected" else None  # the governor answering the corrected coupling
     tentative = governor.throttle if governor is not None else 1.0
-    tick = 0
+    predicted = None  # the corrected coupling's predicted speed samples over the next step
     try:
         while True:
-            now = seconds(min(tick * step, end))
+            now = seconds(exchanges.now)
             if corrector is not None:
-                predicted = (
-                    machine.predict(seconds(min((tick + 1) * step, end)), tentative) if tick * step < end else None
-                )
-                if (tick + 1) * step < end:  # the nodes' machine does this while the governor answers
-                    machine.predict_ahead(seconds(min((tick + 2) * step, end)), tentative)
+                predicted = machine.predict(seconds(exchanges.next), tentative) if exchanges.now < end else None
+                if exchanges.next < end:  # the nodes' machine does this while the governor answers
+                    machine.predict_ahead(seconds(exchanges.after_next()), tentative)
                 throttle, waveform = corrector.answer_corrected(now, float(machine.state[1]), corrected, predicted)
             else:
                 throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None else 1.0
@@ -733,10 +828,9 @@ def cosimulate(
                 else machine.state.copy()
             )
             inputs.append((now, throttle, load))
-            if tick * step >= end or machine.status != "complete" or (governor and governor.status != "complete"):
+            if exchanges.now >= end or machine.status != "complete" or (governor and governor.status != "complete"):
                 break
-            tick += 1
-            following = seconds(min(tick * step, end))
+            following = seconds(exchanges.next)
             if corrector is not None:
                 corrected = machine.correct(throttle, waveform, load, load_rate(model, now))
                 tentative = waveform[1][-1] if waveform is not None else throttle
@@ -746,6 +840,7 @@ def cosimulate(
                 machine.advance(
                     following, throttle, load, load_rate=load_rate(model, now) if coupling == "corrected" else 0.0
                 )
+            exchanges.move_on(predicted, corrected, float(machine.state[1]))
             if progress is not None:
                 progress(machine.time)
         status, message = "complete", ""

@@ -246,6 +246,12 @@ def format_cosimulation_summary(summary: dict) -> str:
         f"{summary['omega_end']:.6g} rad/s; co-simulated with exchange step {summary['exchange_step']:g} s "
         f"({summary['samples']} exchanges)"
     ]
+    steps = summary.get("exchange_steps")
+    if summary.get("exchange_tolerance") is not None and steps and steps["count"]:
+        lines.append(
+            f"adaptive exchange step (tolerance {summary['exchange_tolerance']:g}): {steps['count']} steps of "
+            f"{steps['min']:.4g} to {steps['max']:.4g} s, median {steps['median']:.4g} s"
+        )
     if summary["message"]:
         lines.append(summary["message"])
     if summary["tripped_at"] is not None and summary["status"] != "tripped":  # a run that failed after its trip
