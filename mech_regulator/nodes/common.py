@@ -1,5 +1,6 @@
 """What the nodes share: parameters with descriptors, QoS, stamps, the scene, the run state, batches, the messages
-refilled at every exchange (JointMessage) and their samples read back, diagnostics, and the `main` wrapper that turns a user's mistake into a message instead of a traceback.
+refilled at every exchange (JointMessage) and their samples read back, diagnostics, and the `main` wrapper that
+turns a user's mistake into a message instead of a traceback.
 
 The nodes are thin: every number they publish comes from the core (mech_regulator.solvers.cosim).
 """
