@@ -630,6 +630,38 @@ def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
         recorder.on_governor(_governor_batch([2_000_000], throttle=0.5))
 
 
+def test_the_recorder_counts_the_exchanges_the_machine_published_that_it_missed(tmp_path):
+    # (a recorder stalled past the publishers' histories misses the oldest batches: its summary must say so)
+    from unittest import mock
+
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from mech_regulator.nodes.recorder import RecorderNode
+
+    recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
+    _, recorder.model = constant_inertia_scene(tmp_path)
+    recorder.recording = mock.Mock()
+    recorder.get_namespace = lambda: "/"
+    recorder.own_name, recorder.peer_names = "recorder", {"machine": "machine"}
+    recorder.reports, recorder.machine_status, recorder.tripped_at = {}, (DiagnosticStatus.OK, ""), None
+    recorder.machine_reported_end, recorder.machine_exchanges = False, None
+    recorder.completed = {0, 2_000_000, 6_000_000}  # 4_000_000 never came
+    assert recorder.missed() == 0  # the machine has not said yet
+
+    def machine_says(values: dict[str, str]) -> None:
+        status = DiagnosticStatus(
+            name="mech_regulator: /machine", values=[KeyValue(key=key, value=value) for key, value in values.items()]
+        )
+        recorder.on_diagnostics(DiagnosticArray(status=[status]), "machine")
+
+    machine_says({"sim_time": "0.004"})
+    assert recorder.missed() == 0
+    machine_says({"sim_time": "0.006", "finished_at_ns": "6000000", "exchanges": "4"})
+    assert recorder.machine_reported_end and recorder.missed() == 1
+    with pytest.raises(BadMessage, match="exchanges"):
+        machine_says({"sim_time": "0.006", "exchanges": "nan"})
+
+
 # -------------------------------------------------------------------------------------------------
 # 6. Parameters
 

@@ -567,6 +567,7 @@ class MachineNode(MachineExchange, Node):
         )  # corrected coupling: the speed over the step that ended here and as predicted over the next
         self.joint_publisher.publish(message)
         self.published_at = time.monotonic()
+        self.exchanges += 1
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""
