@@ -210,10 +210,10 @@ class JointMessage:
     """A sensor_msgs/JointState built once and refilled at every exchange, for what a node publishes on the lockstep's
     critical path (the machine's joint_states, the governor's throttle): as long as the layout (the joints, and how
     many samples each signal has) is the exchange before's, `fill` writes the numbers into the message's arrays in
-    place (numpy views on them), no new message nor array; a new layout builds a new message. A signal's samples over an
-    exchange step (times [s], values; solvers.cosim.Samples) are entries of its joint, one per sample: the value in
-    its field ('position' or 'velocity'), the sample's time in effort, NaN in the other field (`samples` reads
-    them back)."""
+    place (numpy views on them), no new message nor array; a new layout builds a new message. A signal's samples
+    over an exchange step (times [s], values; solvers.cosim.Samples) are entries of its joint, one per sample: the
+    value in its field ('position' or 'velocity'), the sample's time in effort, NaN in the other field (`samples`
+    reads them back)."""
 
     def __init__(self) -> None:
         self.layout: tuple | None = None
