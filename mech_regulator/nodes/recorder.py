@@ -350,9 +350,9 @@ class RecorderNode(Node):
                 status, message = (
                     "interrupted",
                     (
-                        f"{self.missed()} of the {self.machine_exchanges} exchanges the machine published are incomplete "
-                        "here (a part never came: a peer fell silent, or the recorder fell behind more than the publishers "
-                        'keep, docs/speed.md, "The nodes\' side of an exchange")'
+                        f"{self.missed()} of the {self.machine_exchanges} exchanges the machine published are "
+                        "incomplete here (a part never came: a peer fell silent, or the recorder fell behind more "
+                        'than the publishers keep, docs/speed.md, "The nodes\' side of an exchange")'
                     ),
                 )
         self._write("recording", self.path, lambda: self.recording.close(status, message))
