@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -23,6 +24,7 @@ import pytest
 import yaml
 from linkage_family import member
 from ros_support import (  # noqa: F401 (fixtures)
+    STATE_LISTEN_QOS,
     WAIT,
     Processes,
     RunListener,
@@ -34,7 +36,10 @@ from ros_support import (  # noqa: F401 (fixtures)
 )
 
 # after ros_support, which skips this module when rclpy is missing
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
+from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE
 from test_linkage_family import strip_counts
 
 from mech_regulator.cli.report.data import write_csv
@@ -308,6 +313,67 @@ def test_the_services_pause_step_resume_and_reset_between_trials(tmp_path, proce
         np.testing.assert_array_equal(
             [trial[when] for when in sorted(trial)], run.states[1], err_msg="a trial differs from the in-process run"
         )
+
+
+def _process_state(process: subprocess.Popen) -> str:
+    """A process's state letter (Linux /proc/<pid>/stat): R running, S sleeping, T stopped, ..."""
+    return Path(f"/proc/{process.pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+
+
+def test_a_stopped_recorder_or_scenario_delays_no_exchange(tmp_path, processes, probe):
+    """The recorder and the scenario are off the lockstep's critical path (docs/ros.md, "Speed"): both stopped
+    (SIGSTOP) before the first step, the machine and the governor still play every exchange, more than the
+    publishers' history holds for a stopped subscriber; resumed, the recorder records every exchange, its CSV the
+    in-process co-simulation's. (The scenario's load is held from its answer at t = 0 to the end: a load event
+    would be waited for, as the machine must know the load it applies.)"""
+    duration, step = 0.3, 0.002  # 150 exchanges: beyond COMMAND_QOS's depth of 100
+    data = {
+        "name": "smooth",
+        "machine": SMOOTH_GOVERNED_MACHINE,
+        "governor": SMOOTH_DIRECT_GOVERNOR,
+        "scenario": {"initial": {"omega": 100.0}, "duration": duration, "external_load": 6.0, "load_events": []},
+        "solver": {"exchange_step": step},
+    }  # cheap per step on the reference path
+    scene = tmp_path / "smooth.yaml"
+    scene.write_text(yaml.safe_dump(data, sort_keys=False))
+    model = build_model(validate_scene(data))
+    parameters = {"scene_file": str(scene)}
+    rrd = tmp_path / "run.rrd"
+    recorder = processes.node("recorder", parameters | {"output": str(rrd)})
+    processes.node("governor", parameters)
+    scenario = processes.node("scenario", parameters)
+    processes.node(
+        "machine",
+        parameters | {"peer_timeout": 10 * WAIT, "start_paused": True, "peers": ["governor", "scenario", "recorder"]},
+    )  # (a peer waited for would fail the test by its WAIT, not end the wait after peer_timeout)
+    statuses = probe.listen(String, "machine/status", STATE_LISTEN_QOS)
+    joint_states = probe.listen(JointState, "joint_states", STATE_LISTEN_QOS)
+    probe.spin_until(
+        lambda: [json.loads(message.data)["state"] for message in statuses].count("paused") == 2,
+        "the machine paused with the inputs at t = 0 taken (its second status 'paused', the first at its start)",
+        describe=processes.logs,
+    )
+    stopped = (recorder, scenario)
+    try:
+        for process in stopped:
+            process.send_signal(signal.SIGSTOP)
+        wait_for(lambda: all(_process_state(process) == "T" for process in stopped), "both stopped", processes.logs)
+        _call(probe, "resume", processes.logs)
+        end = to_nanoseconds(duration)
+        probe.spin_until(
+            lambda: any(stamp_ns(message.header.stamp) == end for message in joint_states),
+            "the machine's state at the end of the run",
+            describe=processes.logs,
+        )
+        assert all(_process_state(process) == "T" for process in stopped), "a stopped node ran before the end"
+    finally:
+        for process in stopped:
+            process.send_signal(signal.SIGCONT)
+    for process, _ in processes.started:
+        assert processes.wait(process) == 0, processes.logs()
+    assert rrd.with_suffix(".csv").read_bytes() == in_process_csv(model, duration, tmp_path / "in_process.csv")
+    summary = json.loads(rrd.with_suffix(".json").read_text())
+    assert summary["status"] == "complete" and summary["samples"] == round(duration / step) + 1, summary
 
 
 def test_a_killed_launcher_leaves_no_node_behind(tmp_path, processes):

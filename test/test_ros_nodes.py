@@ -153,6 +153,38 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
     )
 
 
+def test_a_joint_message_is_built_once_per_layout_and_its_samples_read_back():
+    from mech_regulator.nodes.common import JointMessage, samples, sent_samples
+
+    message = JointMessage()
+    corrected = ([0.0, 0.01, 0.02], [100.0, 101.0, 102.5])
+    first = message.fill(
+        1_500_000_000, ("crank",), [1.0], [100.0], [3.0], (("crank_corrected", "velocity", corrected),)
+    )
+    assert stamp_ns(first.header.stamp) == 1_500_000_000 and list(first.name) == ["crank"] + ["crank_corrected"] * 3
+    assert list(first.effort) == [3.0, *corrected[0]] and list(first.velocity) == [100.0, *corrected[1]]
+    assert all(math.isnan(value) for value in first.position[1:])
+    again = ([0.02, 0.03, 0.04], [102.5, 103.0, 104.0])
+    second = message.fill(2_000_000, ("crank",), [2.0], [102.5], [4.0], (("crank_corrected", "velocity", again),))
+    assert second is first and stamp_ns(second.header.stamp) == 2_000_000  # the same layout: refilled in place
+    assert samples(second, "crank_corrected", "velocity") == again and list(second.position[:1]) == [2.0]
+    third = message.fill(4_000_000, ("crank",), [3.0], [104.0], [5.0], (("crank_corrected", "velocity", None),))
+    assert third is not first and list(third.name) == ["crank"]  # another layout: a new message
+    assert samples(third, "crank_corrected", "velocity") is None and sent_samples(third, "x", "position", 0, 1) is None
+    for times, values in (([0.0, 0.0, 0.1], [1.0, 2.0, 3.0]), ([0.0, 0.1, 0.2], [1.0, math.nan, 3.0]), ([0.0], [1.0])):
+        bad = JointMessage().fill(
+            0, ("throttle",), [0.5], [math.nan], [math.nan], (("tentative", "position", (times, values)),)
+        )
+        assert samples(bad, "tentative", "position") is None
+        with pytest.raises(BadMessage, match="bad samples"):
+            sent_samples(bad, "tentative", "position", 0.0, 1.0)
+    short = JointState(name=["tentative", "tentative"], position=[0.5, 0.6])  # no efforts: no sample times
+    assert samples(short, "tentative", "position") is None
+    beyond = JointMessage().fill(0, (), [], [], [], (("tentative", "position", ([0.0, 0.1], [0.5, 1.5])),))
+    with pytest.raises(BadMessage, match="within"):
+        sent_samples(beyond, "tentative", "position", 0.0, 1.0)
+
+
 def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
     from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
 
@@ -596,6 +628,38 @@ def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
     assert list(recorder.rows.governor) == recorded and recorder.rows.governor[2_000_000]["throttle"] == 0.5  # first
     with pytest.raises(BadMessage, match="out of order"):  # before the newest: refused, as before
         recorder.on_governor(_governor_batch([2_000_000], throttle=0.5))
+
+
+def test_the_recorder_counts_the_exchanges_the_machine_published_that_it_missed(tmp_path):
+    # (a recorder stalled past the publishers' histories misses the oldest batches: its summary must say so)
+    from unittest import mock
+
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from mech_regulator.nodes.recorder import RecorderNode
+
+    recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
+    _, recorder.model = constant_inertia_scene(tmp_path)
+    recorder.recording = mock.Mock()
+    recorder.get_namespace = lambda: "/"
+    recorder.own_name, recorder.peer_names = "recorder", {"machine": "machine"}
+    recorder.reports, recorder.machine_status, recorder.tripped_at = {}, (DiagnosticStatus.OK, ""), None
+    recorder.machine_reported_end, recorder.machine_exchanges = False, None
+    recorder.completed = {0, 2_000_000, 6_000_000}  # 4_000_000 never came
+    assert recorder.missed() == 0  # the machine has not said yet
+
+    def machine_says(values: dict[str, str]) -> None:
+        status = DiagnosticStatus(
+            name="mech_regulator: /machine", values=[KeyValue(key=key, value=value) for key, value in values.items()]
+        )
+        recorder.on_diagnostics(DiagnosticArray(status=[status]), "machine")
+
+    machine_says({"sim_time": "0.004"})
+    assert recorder.missed() == 0
+    machine_says({"sim_time": "0.006", "finished_at_ns": "6000000", "exchanges": "4"})
+    assert recorder.machine_reported_end and recorder.missed() == 1
+    with pytest.raises(BadMessage, match="exchanges"):
+        machine_says({"sim_time": "0.006", "exchanges": "nan"})
 
 
 # -------------------------------------------------------------------------------------------------

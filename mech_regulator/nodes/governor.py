@@ -41,8 +41,8 @@ from mech_regulator.nodes.common import (
     OK,
     STATE_QOS,
     Batch,
+    JointMessage,
     RunState,
-    add_samples,
     coupling_parameter,
     diagnostics,
     float_parameter,
@@ -51,7 +51,6 @@ from mech_regulator.nodes.common import (
     run,
     scene_model,
     sent_samples,
-    stamp,
 )
 from mech_regulator.nodes.trust import (
     BadMessage,
@@ -93,6 +92,7 @@ class GovernorNode(Node):
         for topic in ("joint_states", "machine/status"):
             self.speakers.allow(topic, machine)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
+        self.answer = JointMessage()  # throttle, refilled at every exchange
         self.states = Batch(self.create_publisher(JointState, "governor/state", STATE_QOS))
         self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -144,9 +144,9 @@ class GovernorNode(Node):
         else:
             throttle = self.stepper.answer(seconds(when), omega, omega_middle)
         self.throttle = throttle
-        answer = JointState(name=["throttle"], position=[throttle], velocity=[math.nan], effort=[math.nan])
-        add_samples(answer, "throttle_tentative", "position", waveform)
-        answer.header.stamp = stamp(when)
+        answer = self.answer.fill(
+            when, ("throttle",), [throttle], [math.nan], [math.nan], (("throttle_tentative", "position", waveform),)
+        )
         self.throttle_publisher.publish(answer)  # first: the machine waits for it
         for t, event, mode in self.stepper.events[self.reported_events :]:
             self.events_publisher.publish(String(data=json.dumps({"time": t, "event": event, "mode": list(mode)})))

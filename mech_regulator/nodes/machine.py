@@ -71,9 +71,9 @@ from mech_regulator.nodes.common import (
     STATE_QOS,
     STATUS_QOS,
     Batch,
+    JointMessage,
     PeerError,
     RunState,
-    add_samples,
     bool_parameter,
     coupling_parameter,
     deliver_all,
@@ -291,7 +291,7 @@ class MachineNode(MachineExchange, Node):
             )
         self.add_post_set_parameters_callback(self.on_parameters)
         self.now_ns = 0
-        self.state_message = JointState()
+        self.state_message = JointMessage()  # joint_states, refilled at every exchange
         self.wall_start = time.monotonic()
         self.last_diagnostics = -math.inf
 
@@ -508,7 +508,7 @@ class MachineNode(MachineExchange, Node):
             while rclpy.ok() and self.missing_inputs():
                 spin_once(self, SPIN_SLICE)
                 if time.monotonic() - sent > RESEND_PERIOD:  # a peer that matched late missed it: say it again
-                    self.joint_publisher.publish(self.state_message)
+                    self.joint_publisher.publish(self.state_message.message)
                     sent = time.monotonic()
                 if time.monotonic() - waited > self.peer_timeout:
                     missing = self.missing_inputs()
@@ -563,36 +563,31 @@ class MachineNode(MachineExchange, Node):
     def publish_state(self) -> None:
         """/clock and joint_states at the current exchange time (effort: the net moment with the inputs
         held over the step that ended here)."""
-        header_stamp = stamp(self.now_ns)
         wall = time.monotonic()
         if self.time_mode == "realtime":  # the wall clock's simulation time less the state's, at its publication
             self.max_lag = max(self.max_lag, (wall - self.wall_start) * self.real_time_factor - seconds(self.now_ns))
         if self.clock_publisher is not None and (
             wall - self.last_clock >= self.clock_period or self.now_ns == 0 or self.now_ns >= self.end_ns
         ):
-            self.clock_publisher.publish(Clock(clock=header_stamp))  # the others' timers need not every exchange
+            self.clock_publisher.publish(Clock(clock=stamp(self.now_ns)))  # the others' timers need not every exchange
             self.last_clock = wall
         values = self.stepper.outputs(self.throttle, self.load)
-        message = JointState(
-            name=["crank"],
-            position=[float(self.stepper.state[0])],
-            velocity=[float(self.stepper.state[1])],
-            effort=[values["net"]],
-        )
-        message.header.stamp = header_stamp
-        joints = output_joints(self.model, values)
+        joints = [("crank", float(self.stepper.state[0]), float(self.stepper.state[1]))]
+        joints += output_joints(self.model, values)
         if self.omega_middle is not None:  # waveform coupling: the speed at the middle of the step that ended here
             joints.append(("crank_midstep", math.nan, self.omega_middle))
-        for name, position, velocity in joints:
-            message.name.append(name)
-            message.position.append(position)
-            message.velocity.append(velocity)
-            message.effort.append(math.nan)  # not computed
-        for name, waveform in (("crank_corrected", self.corrected), ("crank_predicted", self.predicted)):
-            add_samples(message, name, "velocity", waveform)  # corrected coupling
+        names, positions, velocities = zip(*joints)
+        message = self.state_message.fill(
+            self.now_ns,
+            names,
+            positions,
+            velocities,
+            [values["net"]] + [math.nan] * (len(joints) - 1),  # the others' not computed
+            (("crank_corrected", "velocity", self.corrected), ("crank_predicted", "velocity", self.predicted)),
+        )  # corrected coupling: the speed over the step that ended here and as predicted over the next
         self.joint_publisher.publish(message)
         self.published_at = time.monotonic()
-        self.state_message = message
+        self.published_exchanges += 1
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""

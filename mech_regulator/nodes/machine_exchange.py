@@ -60,6 +60,7 @@ class MachineExchange:
         self.held: tuple | None = None  # the last exchange's (time [ns], time [s], state, throttle applied [-], load
         # [N m], wall-clock time [s] its joint_states went out) for its machine/moments (add_moments, complete_moments)
         self.published_at = 0.0  # [s] time.monotonic() when the last joint_states went out
+        self.published_exchanges = 0  # exchange times published in this trial (the recorder counts what reached it)
         self.tentative = self.throttle  # [-] the governor's tentative throttle at the end of the last step
 
     # ---------------------------------------------------------------------------------------------
@@ -253,7 +254,8 @@ class MachineExchange:
 
     def diagnostics(self: MachineNode, finished: bool = False) -> DiagnosticArray:  # type: ignore[misc]
         """/diagnostics' contents: the run's level and message (the solver's failure, an overspeed trip, the
-        fail-safe, the refusals; `finished` at the end) and its values (time, inputs, RHS evaluations, lag)."""
+        fail-safe, the refusals; `finished` at the end) and its values (time, inputs, RHS evaluations, lag; at the end
+        finished_at_ns and `exchanges`, the exchange times published in the trial, which the recorder counts)."""
         elapsed = max(time.monotonic() - self.wall_start, 1e-9)
         level, message = OK, "running"
         if self.stepper.status != "complete":
@@ -284,6 +286,7 @@ class MachineExchange:
             values["max_lag_s"] = self.max_lag
         if finished:
             values["finished_at_ns"] = self.now_ns
+            values["exchanges"] = self.published_exchanges
         array = diagnostics(self, level, message, values)
         array.status[0].values += self.refusals.key_values()
         return array

@@ -166,6 +166,8 @@ class RecorderNode(Node):
         self.finished_at: int | None = None
         self.machine_reported_end = False  # its last diagnostics (with its refusals and disturbances) are in
         self.tripped_at: float | None = None  # [s], from the machine's diagnostics
+        self.machine_exchanges: int | None = None  # the exchange times the machine published in its last trial,
+        # from its last diagnostics (missed)
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -330,6 +332,7 @@ class RecorderNode(Node):
                 (
                     real_number(values.get("sim_time", "0"), "sim_time"),
                     real_number(values.get("tripped_at", "None"), "tripped_at", allow_none=True),
+                    real_number(values.get("exchanges", "None"), "exchanges", allow_none=True),
                 )
                 if machine
                 else None
@@ -337,7 +340,7 @@ class RecorderNode(Node):
             self.reports[speaker] = report
             if times is None:
                 continue
-            when, tripped_at = times
+            when, tripped_at, exchanges = times
             if (status.level, status.message) != self.machine_status and status.level in LEVELS:
                 self.recording.add_event(int(round(when * 1e9)), f"machine: {status.message}", LEVELS[status.level])
             self.machine_status = (status.level, status.message)
@@ -346,6 +349,8 @@ class RecorderNode(Node):
             else:
                 self.untripped_until = max(self.untripped_until, when)
             self.machine_reported_end = self.machine_reported_end or "finished_at_ns" in values
+            if exchanges is not None:
+                self.machine_exchanges = int(exchanges)
 
     def complete(self) -> bool:
         """Whether the machine finished and its last samples (and the governor's) and its last diagnostics are in."""
@@ -376,6 +381,15 @@ class RecorderNode(Node):
             )
             if self.machine_result[0] not in ("complete", "interrupted"):  # the machine's own end (failed, ...)
                 status, message = self.machine_result
+            elif self.missed():
+                status, message = (
+                    "interrupted",
+                    (
+                        f"{self.missed()} of the {self.machine_exchanges} exchanges the machine published are "
+                        "incomplete here (a part never came: a peer fell silent, or the recorder fell behind more "
+                        'than the publishers keep, docs/speed.md, "The nodes\' side of an exchange")'
+                    ),
+                )
         self._write("recording", self.path, lambda: self.recording.close(status, message))
         if self.path is None:
             return
@@ -393,7 +407,7 @@ class RecorderNode(Node):
             self.model, run_data, self.exchange_step, self.coupling, self.exchange_tolerance
         )
         summary.update(self.pace())
-        if not self.complete() or self.machine_result[0] not in ("complete", "interrupted"):
+        if not self.complete() or self.machine_result[0] not in ("complete", "interrupted") or self.missed():
             summary["status"], summary["message"] = status, message  # the recording's end, said the same way
         summary.update(self.trust_summary(summary["status"]))
         summary["recording"] = str(self.path)
@@ -495,6 +509,14 @@ class RecorderNode(Node):
             + (f" up to {seconds(newest):.6g} s" if (newest := self.rows.newest[stream]) is not None else "")
             for name, stream in streams.items()
         )
+
+    def missed(self) -> int:
+        """How many of the exchanges the machine said it published in the trial (its last diagnostics) are not
+        complete here: a recorder stalled longer than the publishers' histories (common.HISTORY_DEPTH messages)
+        misses the oldest; 0 while the machine has not said."""
+        if self.machine_exchanges is None:
+            return 0
+        return max(self.machine_exchanges - self.rows.completed, 0)
 
     def report(self) -> None:
         """Publish /diagnostics: how many complete exchanges are recorded and up to which time."""
