@@ -9,7 +9,7 @@ import dataclasses
 
 from mech_regulator.analysis.drivetrain import drive_train_summary
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
-from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
+from mech_regulator.analysis.load_response import LoadResponse, ResponseWindow, cycle_mean_speed, load_responses
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
 from mech_regulator.analysis.stability import (
     FloquetStability,
@@ -27,14 +27,16 @@ from mech_regulator.analysis.statics import (
     operating_point,
     static_characteristic,
 )
+from mech_regulator.analysis.stream import RunDigest, streams
 from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
 from mech_regulator.solvers.cosim import CoSimulation
 
 
-def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
-    """Everything the summary reports, as plain data (JSON-ready)."""
+def summarise(model: MachineModel, trajectory: Trajectory, digest: RunDigest | None = None) -> dict:
+    """Everything the summary reports, as plain data (JSON-ready). digest: the run's stream (analysis/stream.py), what
+    it took of the dense output the trajectory dropped."""
     if not trajectory.interpolants:  # the solver refused before its first step
         return {
             "scene": model.scene.name,
@@ -50,8 +52,9 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
             "drive_train": None,
             "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
         }
-    steady = analyse_steady_state(model, trajectory)
-    balance = energy_balance(model, trajectory)
+    streamed = digest if digest is not None and trajectory.steps_dropped else None
+    steady = analyse_steady_state(model, trajectory, stopped_at=streamed.stopped_at if streamed else None)
+    balance = energy_balance(model, trajectory, streamed.works if streamed else None)
     end = trajectory(trajectory.t_end)
     return {
         "scene": model.scene.name,
@@ -70,7 +73,11 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         },
         "energy": dataclasses.asdict(balance),
         "solver": {"method": trajectory.method, **dataclasses.asdict(trajectory.stats)},
-        "governor": _governed_run(model, trajectory) if model.governor is not None else None,
+        "governor": (
+            _governed_run(model, trajectory, streamed.windows if streamed else None)
+            if model.governor is not None
+            else None
+        ),
         "two_mass": (
             dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None else None
         ),
@@ -109,12 +116,13 @@ def summarise_cosimulation(
     }
 
 
-def _governed_run(model: MachineModel, trajectory: Trajectory) -> dict:
+def _governed_run(model: MachineModel, trajectory: Trajectory, windows: list[ResponseWindow] | None = None) -> dict:
     """The governor's part of a run's summary: its predicted operating point, its answer to each load
-    change and how often it changed mode."""
+    change (windows: those a streamed run read in part) and how often it changed mode."""
+    responses = load_responses(model, trajectory, windows)
     return {
         "operating_point": dataclasses.asdict(operating_point(model, model.external_load(0.0))),
-        "load_responses": [dataclasses.asdict(response) for response in load_responses(model, trajectory)],
+        "load_responses": [dataclasses.asdict(response) for response in responses],
         "events": len(trajectory.events),
     }
 
@@ -193,6 +201,7 @@ __all__ = [
     "MotionPeriods",
     "OperatingPoint",
     "RequiredCoupling",
+    "RunDigest",
     "motion_periods",
     "required_coupling",
     "PeriodSpeeds",
@@ -213,6 +222,7 @@ __all__ = [
     "load_responses",
     "operating_point",
     "static_characteristic",
+    "streams",
     "summarise",
     "summarise_cosimulation",
 ]
