@@ -5,8 +5,8 @@ chunk of BALANCE_CHUNK_STEPS more, it hands the oldest chunk to what the summary
 the pieces no one needs any more. Each consumer reads the chunk as it would read the whole run, on the same sample
 times and in the same chunks, so a complete run's figures are the same numbers:
 - the energy balance's works (analysis/energy.py, WorksSoFar: the same chunks of steps, summed in the same order);
-- the output samples at the scene's sample rate, on the grid of the run's planned duration (their states are kept:
-  they are the product, duration x sample rate of them, a limit docs/scenes.md announces);
+- the output samples at the scene's sample rate, on the grid of the run's planned duration, when the CSV is asked for
+  (their states are kept: they are the product, duration x sample rate of them, a limit docs/scenes.md announces);
 - each load change's window (analysis/load_response.py, ResponseWindow: its cycle-mean speed and throttle, read
   CYCLE_CHUNK times at a time), and the mode log's check (analysis/self_check.py, ModeLogSoFar);
 - whether omega <= 0 after the last load change (the steady state's verdict on a machine that stops).
@@ -30,8 +30,8 @@ from mech_regulator.model import MachineModel
 from mech_regulator.solvers.cam_contact import has_cam_contacts
 from mech_regulator.solvers.trajectory import Trajectory, sample_times
 
-RETAINED_STEPS = 200_000  # solver steps a streamed run's trajectory keeps at its end (the steady state's tail):
-# some 60 MB of dense output on the fast path (DOP853), 220 MB on the reference path
+RETAINED_STEPS = 50_000  # solver steps a streamed run's trajectory keeps at its end (the steady state's tail):
+# about 70 s of engine_direct; a run streams once it has taken these and a chunk more (docs/speed.md, memory)
 
 
 def streams(model: MachineModel) -> bool:
@@ -41,16 +41,16 @@ def streams(model: MachineModel) -> bool:
 
 
 class RunDigest:
-    """What a streamed run (module docstring) took of its dropped dense output: works (WorksSoFar), samples (times
-    [s] of the planned run and the states at the first samples_done), windows (ResponseWindow, one per load change),
-    mode_log (ModeLogSoFar) and stopped_at, the first quadrature node [s] after the last load change with omega <= 0
-    (None if none)."""
+    """What a streamed run (module docstring) took of its dropped dense output: works (WorksSoFar), the output samples
+    when asked for (times [s] of the planned run and the states at the first samples_done; none kept without),
+    windows (ResponseWindow, one per load change), mode_log (ModeLogSoFar) and stopped_at, the first quadrature node
+    [s] after the last load change with omega <= 0 (None if none)."""
 
-    def __init__(self, model: MachineModel):
+    def __init__(self, model: MachineModel, samples: bool = True):
         self.model = model
         duration = model.scene.scenario.duration
         self.works = WorksSoFar()
-        self.times = sample_times(0.0, duration, model.scene.solver.sample_rate)
+        self.times = sample_times(0.0, duration, model.scene.solver.sample_rate) if samples else np.zeros(0)
         self.states: np.ndarray | None = None
         self.samples_done = 0
         self.windows = response_windows(model, duration) if model.governor is not None else []
@@ -97,7 +97,7 @@ class RunDigest:
 
     def _sample(self, trajectory: Trajectory, t_until: float) -> None:
         """Take the states at the planned samples up to t_until [s] not taken yet."""
-        last = int(np.searchsorted(self.times, t_until, side="right"))
+        last = int(np.searchsorted(self.times, t_until, side="right"))  # 0 when no samples are kept
         if last > self.samples_done:
             states = trajectory(self.times[self.samples_done : last])
             if self.states is None:

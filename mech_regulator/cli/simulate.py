@@ -46,7 +46,7 @@ def run_simulate(scene, args) -> int:
         print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
     whole_run = args.plot is not None or args.record is not None or args.bag is not None  # they read the whole run
-    digest = RunDigest(model) if streams(model) and not whole_run else None
+    digest = RunDigest(model, samples=args.out is not None) if streams(model) and not whole_run else None
     with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
         trajectory = simulate(
             model, progress=lambda t: bar.update(min(t, duration) - bar.n), stream=digest.take if digest else None
