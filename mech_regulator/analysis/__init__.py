@@ -11,7 +11,7 @@ import numpy as np
 
 from mech_regulator.analysis.drivetrain import drive_train_summary
 from mech_regulator.analysis.energy import EnergyBalance, energy_balance, energy_swing, flywheel_for_constant_inertia
-from mech_regulator.analysis.load_response import LoadResponse, cycle_mean_speed, load_responses
+from mech_regulator.analysis.load_response import LoadResponse, ResponseWindow, cycle_mean_speed, load_responses
 from mech_regulator.analysis.periodic import PeriodSpeeds, SteadyState, analyse_steady_state
 from mech_regulator.analysis.stability import (
     FloquetStability,
@@ -29,6 +29,7 @@ from mech_regulator.analysis.statics import (
     operating_point,
     static_characteristic,
 )
+from mech_regulator.analysis.stream import RunDigest, streams
 from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
@@ -36,8 +37,9 @@ from mech_regulator.solvers.compiled import runs_compiled
 from mech_regulator.solvers.cosim import CoSimulation
 
 
-def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
-    """Everything the summary reports, as plain data (JSON-ready)."""
+def summarise(model: MachineModel, trajectory: Trajectory, digest: RunDigest | None = None) -> dict:
+    """Everything the summary reports, as plain data (JSON-ready). digest: the run's stream (analysis/stream.py), what
+    it took of the dense output the trajectory dropped."""
     if not trajectory.interpolants:  # the solver refused before its first step
         return {
             "scene": model.scene.name,
@@ -53,8 +55,9 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
             "drive_train": None,
             "solver": _solver_summary(model, trajectory),
         }
-    steady = analyse_steady_state(model, trajectory)
-    balance = energy_balance(model, trajectory)
+    streamed = digest if digest is not None and trajectory.steps_dropped else None
+    steady = analyse_steady_state(model, trajectory, stopped_at=streamed.stopped_at if streamed else None)
+    balance = energy_balance(model, trajectory, streamed.works if streamed else None)
     end = trajectory(trajectory.t_end)
     return {
         "scene": model.scene.name,
@@ -73,7 +76,11 @@ def summarise(model: MachineModel, trajectory: Trajectory) -> dict:
         },
         "energy": dataclasses.asdict(balance),
         "solver": _solver_summary(model, trajectory),
-        "governor": _governed_run(model, trajectory) if model.governor is not None else None,
+        "governor": (
+            _governed_run(model, trajectory, streamed.windows if streamed else None)
+            if model.governor is not None
+            else None
+        ),
         "two_mass": (
             dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None else None
         ),
@@ -125,12 +132,13 @@ def summarise_cosimulation(
     }
 
 
-def _governed_run(model: MachineModel, trajectory: Trajectory) -> dict:
+def _governed_run(model: MachineModel, trajectory: Trajectory, windows: list[ResponseWindow] | None = None) -> dict:
     """The governor's part of a run's summary: its predicted operating point, its answer to each load
-    change and how often it changed mode."""
+    change (windows: those a streamed run read in part) and how often it changed mode."""
+    responses = load_responses(model, trajectory, windows)
     return {
         "operating_point": dataclasses.asdict(operating_point(model, model.external_load(0.0))),
-        "load_responses": [dataclasses.asdict(response) for response in load_responses(model, trajectory)],
+        "load_responses": [dataclasses.asdict(response) for response in responses],
         "events": len(trajectory.events),
     }
 
@@ -209,6 +217,7 @@ __all__ = [
     "MotionPeriods",
     "OperatingPoint",
     "RequiredCoupling",
+    "RunDigest",
     "motion_periods",
     "required_coupling",
     "PeriodSpeeds",
@@ -229,6 +238,7 @@ __all__ = [
     "load_responses",
     "operating_point",
     "static_characteristic",
+    "streams",
     "summarise",
     "summarise_cosimulation",
 ]

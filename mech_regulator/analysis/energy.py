@@ -14,7 +14,7 @@ the integration error of the run, not a sampling error.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,28 +37,53 @@ class EnergyBalance:
     relative_residual: float
 
 
-def energy_balance(model: MachineModel, trajectory: Trajectory) -> EnergyBalance:
+@dataclass
+class WorksSoFar:
+    """What a streamed run (analysis/stream.py) has summed of its energy balance before dropping the dense output:
+    works [J] by name over its first `steps` solver steps (whole chunks of BALANCE_CHUNK_STEPS), and the state at its
+    start (None until the first chunk)."""
+
+    works: dict[str, float] = field(default_factory=dict)
+    steps: int = 0
+    start: np.ndarray | None = None
+
+
+def energy_balance(model: MachineModel, trajectory: Trajectory, so_far: WorksSoFar | None = None) -> EnergyBalance:
     """The works [J] of the moments over the run, each the integral of its power (`powers`) by 4-point
     Gauss-Legendre quadrature on every solver step (step_edges: the dense output is one polynomial per step, so the
     quadrature's error stays far below the solver's), against the change of the stored energy between the run's
     ends [J]. The steps are taken BALANCE_CHUNK_STEPS at a time, so that its memory does not grow with the run's
-    steps (a 10 000-s run of an engine takes millions)."""
+    steps (a 10 000-s run of an engine takes millions); so_far: the chunks a streamed run summed already, before the
+    steps its trajectory still holds."""
+    so_far = so_far or WorksSoFar()
     edges = step_edges(trajectory)
-    works: dict[str, float] = {}
-    for first in range(0, max(edges.size - 1, 1), BALANCE_CHUNK_STEPS):
-        chunk = edges[first : first + BALANCE_CHUNK_STEPS + 1]
-        left, width = chunk[:-1], np.diff(chunk)
-        nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
-        weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
-        columns = model.columns(nodes, trajectory(nodes))
-        for name, power in powers(model, columns).items():
-            works[name] = works.get(name, 0.0) + float(np.sum(weights * power))
-    ends = model.columns(np.array([edges[0], edges[-1]]), trajectory(np.array([edges[0], edges[-1]])))
+    works = dict(so_far.works)
+    for first in range(so_far.steps - trajectory.steps_dropped, max(edges.size - 1, 1), BALANCE_CHUNK_STEPS):
+        add_works(model, trajectory, edges[first : first + BALANCE_CHUNK_STEPS + 1], works)
+    if so_far.start is None:
+        states = trajectory(np.array([edges[0], edges[-1]]))
+    else:
+        states = np.column_stack([so_far.start, trajectory(edges[-1:])[:, 0]])
+    ends = model.columns(np.array([trajectory.t_start, edges[-1]]), states)
     stored = ends["E_kinetic"] + ends.get("E_elastic", 0.0)
     delta_kinetic = float(stored[1] - stored[0])
     residual = sum(works.values()) - delta_kinetic
     scale = max(sum(abs(w) for w in works.values()), float(np.max(stored)), 1e-300)
     return EnergyBalance(works, delta_kinetic, residual, residual / scale)
+
+
+def add_works(
+    model: MachineModel, trajectory: Trajectory, edges: np.ndarray, works: dict[str, float]
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Add to works [J] the quadrature of each moment's power over the solver steps between consecutive edges [s]
+    (one chunk of energy_balance); returns the quadrature's nodes [s] and the output columns there."""
+    left, width = edges[:-1], np.diff(edges)
+    nodes = (left[:, None] + 0.5 * width[:, None] * (GAUSS_NODES[None, :] + 1.0)).ravel()
+    weights = (0.5 * width[:, None] * GAUSS_WEIGHTS[None, :]).ravel()
+    columns = model.columns(nodes, trajectory(nodes))
+    for name, power in powers(model, columns).items():
+        works[name] = works.get(name, 0.0) + float(np.sum(weights * power))
+    return nodes, columns
 
 
 def powers(model: MachineModel, columns: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

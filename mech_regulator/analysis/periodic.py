@@ -53,24 +53,27 @@ class SteadyState:
     note: str
 
 
-def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance: float | None = None) -> SteadyState:
-    """Split the run after the last load change into dynamic periods (at most its last MAX_PERIODS) and test them for
-    repetition."""
+def analyse_steady_state(
+    model: MachineModel, trajectory: Trajectory, tolerance: float | None = None, stopped_at: float | None = None
+) -> SteadyState:
+    """Split the run after the last load change into dynamic periods (at most its last MAX_PERIODS; of a streamed
+    run, those its trajectory still holds, analysis/stream.py) and test them for repetition. stopped_at: the first
+    time [s] after the last load change at which a streamed run found omega <= 0 in what it dropped, if any."""
     tolerance = tolerance if tolerance is not None else model.scene.analysis.steady_tolerance
     period = model.dynamic_period()
-    t_from = max([0.0] + [piece.start for piece in model.load_pieces])
+    t_from = steady_from(model)
     t_to = trajectory.t_end
     if t_to <= t_from:
         return SteadyState(None, None, period, 0, None, "the run ends before the last load change")
+    if stopped_at is not None:
+        return _stopped(period, stopped_at)
+    t_from = max(t_from, trajectory.t_kept)
     phi_from, phi_to = trajectory(np.array([t_from, t_to]))[0]
     count = int(min(2_000_000, max(4000, SAMPLES_PER_PERIOD * abs(phi_to - phi_from) / period)))
     times = np.linspace(t_from, t_to, count)
     phi, omega = trajectory(times)[:2]
     if np.any(omega[1:] <= 0.0):  # a start from rest is not a stop
-        t_stop = times[1 + np.argmax(omega[1:] <= 0.0)]
-        return SteadyState(
-            False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)"
-        )
+        return _stopped(period, times[1 + np.argmax(omega[1:] <= 0.0)])
     # Periods start at whole multiples of Phi_omega, so each one begins at the same phase of the cycle
     # (for an engine: cycle angle 0 at phi = 0).
     last_level = math.floor(phi[-1] / period)
@@ -100,6 +103,18 @@ def analyse_steady_state(model: MachineModel, trajectory: Trajectory, tolerance:
     while first > 0 and repeats[first - 1]:
         first -= 1
     return SteadyState(True, float(starts[first]), period, periods, last, "")
+
+
+def steady_from(model: MachineModel) -> float:
+    """Where the steady-state analysis starts [s]: the last load change (0 without one)."""
+    return max([0.0] + [piece.start for piece in model.load_pieces])
+
+
+def _stopped(period: float, t_stop: float) -> SteadyState:
+    """The verdict on a run whose machine stops or turns back at t_stop [s]: not steady."""
+    return SteadyState(
+        False, None, period, 0, None, f"the machine stops or turns back (omega <= 0 at t = {t_stop:.6g} s)"
+    )
 
 
 def _time_at_angle(trajectory: Trajectory, times: np.ndarray, phi: np.ndarray, level: float) -> float:

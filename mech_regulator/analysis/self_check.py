@@ -19,6 +19,8 @@ Two checks:
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from mech_regulator.model import MachineModel
@@ -36,15 +38,17 @@ FIX_ADAPTIVE = (
 )
 
 
-def self_checks(model: MachineModel, summary: dict, trajectory: Trajectory | None = None) -> list[dict]:
+def self_checks(
+    model: MachineModel, summary: dict, trajectory: Trajectory | None = None, mode_log: ModeLogSoFar | None = None
+) -> list[dict]:
     """The checks a run fails, each {check, value, allowed, fix}: the energy balance of its summary
     (analysis.summarise; none when nothing was computed) and, given its dense trajectory, its mode log
-    (mode_log_check). Empty when it passes."""
+    (mode_log_check; mode_log: what a streamed run checked already). Empty when it passes."""
     return [
         check
         for check in (
             _energy_check(model, summary),
-            mode_log_check(model, trajectory) if trajectory is not None else None,
+            mode_log_check(model, trajectory, mode_log) if trajectory is not None else None,
         )
         if check is not None
     ]
@@ -69,31 +73,36 @@ def _energy_check(model: MachineModel, summary: dict) -> dict | None:
     return {"check": "energy residual (relative)", "value": value, "allowed": allowed, "fix": fix}
 
 
-def mode_log_check(model: MachineModel, trajectory: Trajectory) -> dict | None:
+@dataclass
+class ModeLogSoFar:
+    """The mode-log check of a streamed run (analysis/stream.py) up to t_done [s]: the deepest guard found, (relative
+    depth, guard name, time [s]) or None, and the spacing [s] of its samples (mode_log_spacing of the planned run)."""
+
+    spacing: float
+    t_done: float
+    worst: tuple[float, str, float] | None = None
+
+
+def mode_log_spacing(model: MachineModel, duration: float) -> float:
+    """The spacing [s] of the mode-log check's samples over a run of duration [s]: MODE_SAMPLES_PER_RUN at most, the
+    scene's sample rate when that gives fewer."""
+    return max(1.0 / model.scene.solver.sample_rate, duration / MODE_SAMPLES_PER_RUN)
+
+
+def mode_log_check(model: MachineModel, trajectory: Trajectory, so_far: ModeLogSoFar | None = None) -> dict | None:
     """The missed-event check of a dense run (module docstring): None when every mode's guards stay >= 0 within the
     allowance inside every stretch of the run's mode log (and for runs without modes, or known only at samples: a
-    co-simulation's linear interpolation between exchanges is not the motion)."""
+    co-simulation's linear interpolation between exchanges is not the motion). so_far: what a streamed run checked
+    before the dense output its trajectory still holds."""
     if not trajectory.modes or not trajectory.interpolants or isinstance(trajectory, SampledTrajectory):
         return None
     solver = model.scene.solver
     fixed = solver.method in FIXED_STEP_METHODS
     allowed = FIXED_STEP_MODE if fixed else MODE_PER_RTOL * solver.rtol
-    duration = trajectory.t_end - trajectory.t_start
-    spacing = max(1.0 / model.scene.solver.sample_rate, duration / MODE_SAMPLES_PER_RUN)
-    ends = [start for start, _ in trajectory.modes[1:]] + [trajectory.t_end]
-    worst = None  # (relative depth, guard name, time)
-    for (start, mode), end in zip(trajectory.modes, ends):
-        guards = model.guards(mode)
-        if end - start <= spacing or not guards:
-            continue
-        times = np.linspace(start, end, int((end - start) / spacing) + 2)[1:-1]
-        states = trajectory(times)
-        for guard in guards:
-            levels = np.array([guard.level(t, states[:, i]) for i, t in enumerate(times)])
-            scale = float(np.max(np.abs(levels)))
-            lowest = int(np.argmin(levels))
-            if scale > 0.0 and levels[lowest] < 0.0 and (worst is None or -levels[lowest] / scale > worst[0]):
-                worst = (float(-levels[lowest] / scale), guard.name, float(times[lowest]))
+    if so_far is None:
+        spacing = mode_log_spacing(model, trajectory.t_end - trajectory.t_start)
+        so_far = ModeLogSoFar(spacing, trajectory.t_start)
+    worst = deepest_guard(model, trajectory, so_far, trajectory.t_end)
     if worst is None or worst[0] <= allowed:
         return None
     depth, name, time = worst
@@ -104,3 +113,26 @@ def mode_log_check(model: MachineModel, trajectory: Trajectory) -> dict | None:
         "allowed": allowed,
         "fix": fix,
     }
+
+
+def deepest_guard(
+    model: MachineModel, trajectory: Trajectory, so_far: ModeLogSoFar, t_to: float
+) -> tuple[float, str, float] | None:
+    """The deepest guard (relative depth, guard name, time [s]) below 0 in the stretches of the run's mode log, each
+    read from so_far.t_done to t_to [s] at so_far.spacing, or so_far.worst when none is deeper."""
+    worst = so_far.worst
+    ends = [start for start, _ in trajectory.modes[1:]] + [trajectory.t_end]
+    for (start, mode), end in zip(trajectory.modes, ends):
+        start, end = max(start, so_far.t_done), min(end, t_to)
+        guards = model.guards(mode)
+        if end - start <= so_far.spacing or not guards:
+            continue
+        times = np.linspace(start, end, int((end - start) / so_far.spacing) + 2)[1:-1]
+        states = trajectory(times)
+        for guard in guards:
+            levels = np.array([guard.level(t, states[:, i]) for i, t in enumerate(times)])
+            scale = float(np.max(np.abs(levels)))
+            lowest = int(np.argmin(levels))
+            if scale > 0.0 and levels[lowest] < 0.0 and (worst is None or -levels[lowest] / scale > worst[0]):
+                worst = (float(-levels[lowest] / scale), guard.name, float(times[lowest]))
+    return worst

@@ -21,7 +21,7 @@ SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and wri
 
 def run_simulate(scene, args) -> int:
     """simulate: the run (monolithic, or co-simulated with --exchange-step), its summary and outputs; the exit code."""
-    from mech_regulator.analysis import summarise
+    from mech_regulator.analysis import RunDigest, streams, summarise
     from mech_regulator.analysis.self_check import self_checks
     from mech_regulator.cli.report.data import to_json, write_csv
     from mech_regulator.cli.report.machine_text import format_summary
@@ -50,17 +50,22 @@ def run_simulate(scene, args) -> int:
     if advice is not None:
         print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
+    whole_run = args.plot is not None or args.record is not None or args.bag is not None  # they read the whole run
+    digest = RunDigest(model, samples=args.out is not None) if streams(model) and not whole_run else None
     with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
-        trajectory = simulate(model, progress=lambda t: bar.update(min(t, duration) - bar.n))
+        trajectory = simulate(
+            model, progress=lambda t: bar.update(min(t, duration) - bar.n), stream=digest.take if digest else None
+        )
         bar.update(min(trajectory.t_end, duration) - bar.n)
-    summary = summarise(model, trajectory)
-    checks = summary["self_checks"] = self_checks(model, summary, trajectory)
+    streamed = digest if digest is not None and trajectory.steps_dropped else None
+    summary = summarise(model, trajectory, streamed)
+    checks = summary["self_checks"] = self_checks(model, summary, trajectory, streamed.mode_log if streamed else None)
     if checks and summary["status"] == "complete":
         summary["status"] = "inaccurate"
     if not trajectory.interpolants:
         args.out = args.plot = args.record = None  # nothing to write
     outputs = OutputWriter(summary)
-    outputs.write("csv", args.out, lambda path: write_csv(path, _sample_columns(model, trajectory)))
+    outputs.write("csv", args.out, lambda path: write_csv(path, _sample_columns(model, trajectory, streamed)))
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_run
 
@@ -190,9 +195,16 @@ def check_bag(folder: Path | None) -> None:
         raise SceneError(reason)
 
 
-def _sample_columns(model, trajectory):
+def _sample_columns(model, trajectory, streamed=None):
     """The output columns at the scene's sample rate, SAMPLE_CHUNK samples at a time (a generator: a long run's CSV
-    is written without all its rows in memory)."""
+    is written without all its columns in memory); of a streamed run (streamed: its RunDigest), at the states it
+    sampled."""
+    if streamed is not None:
+        times, states = streamed.samples(trajectory)
+        for first in range(0, times.size, SAMPLE_CHUNK):
+            part = slice(first, first + SAMPLE_CHUNK)
+            yield model.columns(times[part], states[:, part])
+        return
     times = trajectory.samples(model.scene.solver.sample_rate)
     for first in range(0, times.size, SAMPLE_CHUNK):
         chunk = times[first : first + SAMPLE_CHUNK]

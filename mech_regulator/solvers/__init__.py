@@ -13,17 +13,18 @@ from mech_regulator.solvers.advice import energy_step_refusal, rk4_stability_ref
 from mech_regulator.solvers.compiled import AUTO_PATH_VARIABLE, fast_path_refusal, runs_compiled
 from mech_regulator.solvers.energy_method import integrate_energy_method
 from mech_regulator.solvers.time_domain import integrate_time_domain
-from mech_regulator.solvers.trajectory import Progress, SolverStats, Trajectory
+from mech_regulator.solvers.trajectory import Progress, SolverStats, Stream, Trajectory
 
 
-def simulate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
+def simulate(model: MachineModel, progress: Progress | None = None, stream: Stream | None = None) -> Trajectory:
     """Run the scene's scenario with the scene's solver (solver.method) on its path (solver.path: the reference
     path, or the compiled fast path, solvers/compiled/run.py, which refuses what it cannot run with a SceneError;
     auto runs on the reference path here, compiled.runs_compiled, a command resolves it first). An
     RK4 step outside the stability region of the scene's coupling, an explicit adaptive method that stability alone
     would hold to more steps than limits.MAX_STEPS, and an energy method's step that would take more, are refused
     with a SceneError (advice.py); so is a long run whose start, probed, takes steps at a rate that would pass
-    MAX_STEPS (step_limit_refusal; a probe the user interrupted is returned: the run's start)."""
+    MAX_STEPS (step_limit_refusal; a probe the user interrupted is returned: the run's start). stream: given the
+    trajectory after each piece it gains (Trajectory.stream; analysis/stream.py), not the probe's."""
     reason = rk4_stability_refusal(model) or stiffness_refusal(model) or energy_step_refusal(model)
     if reason is not None:
         raise SceneError(reason)
@@ -32,18 +33,18 @@ def simulate(model: MachineModel, progress: Progress | None = None) -> Trajector
         return probed
     if probed is not None:
         raise SceneError(probed)
-    return _integrate(model, progress)
+    return _integrate(model, progress, stream)
 
 
-def _integrate(model: MachineModel, progress: Progress | None = None) -> Trajectory:
+def _integrate(model: MachineModel, progress: Progress | None = None, stream: Stream | None = None) -> Trajectory:
     """The run of the scene's scenario on its path with its method (simulate, without the refusals)."""
     if runs_compiled(model.scene.solver):
         from mech_regulator.solvers.compiled.run import integrate_compiled
 
-        return integrate_compiled(model, progress)
+        return integrate_compiled(model, progress, stream)
     if model.scene.solver.method == "energy":
-        return integrate_energy_method(model, progress)
-    return integrate_time_domain(model, progress)
+        return integrate_energy_method(model, progress, stream)
+    return integrate_time_domain(model, progress, stream=stream)
 
 
 def on_path_for_a_command(

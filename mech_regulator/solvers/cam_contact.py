@@ -52,6 +52,11 @@ def _pairs(scene) -> tuple:
     return _PAIRS[id(scene)][1]
 
 
+def has_cam_contacts(scene) -> bool:
+    """Whether check_contact checks anything for the scene: its machine has cam pairs (it reads each stretch whole)."""
+    return bool(_pairs(scene))
+
+
 def check_contact(model, trajectory: Trajectory, t_from: float, y: np.ndarray) -> np.ndarray:
     """Check the cam contacts of the model's machine over trajectory from t_from [s] to its end (module docstring):
     where one is lost, cut the trajectory there, record the event, set status failed with the message and return

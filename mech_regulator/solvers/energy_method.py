@@ -23,13 +23,16 @@ from scipy.interpolate import CubicHermiteSpline
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS
 from mech_regulator.solvers.time_domain import fail_blown_up, fail_too_many_steps, switch_window, turns_and_phase
-from mech_regulator.solvers.trajectory import Progress, Trajectory
+from mech_regulator.solvers.trajectory import Progress, Stream, Trajectory
 
 MAX_ITERATIONS = 100
 
 
-def integrate_energy_method(model: MachineModel, progress: Progress | None = None) -> Trajectory:
-    """Step the scene in phi until its duration is reached; returns the (possibly partial) trajectory.
+def integrate_energy_method(
+    model: MachineModel, progress: Progress | None = None, stream: Stream | None = None
+) -> Trajectory:
+    """Step the scene in phi until its duration is reached; returns the (possibly partial) trajectory (stream: its
+    Trajectory.stream).
 
     Load events in time are resolved only to the phi step (the method has no time breakpoints).
     """
@@ -37,7 +40,7 @@ def integrate_energy_method(model: MachineModel, progress: Progress | None = Non
     dphi = math.radians(model.scene.solver.phi_step_deg)
     implicit = bool(model.depends_on() & {"omega", "t"})
     t, phi, omega = 0.0, scenario.initial.phi, scenario.initial.omega
-    trajectory = Trajectory(method="energy", t_start=0.0, y_start=np.array([phi, omega]))
+    trajectory = Trajectory(method="energy", t_start=0.0, y_start=np.array([phi, omega]), stream=stream)
     if omega < 0.0:
         trajectory.status = "failed"
         trajectory.message = (

@@ -25,7 +25,7 @@ from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS, speed_beyond_limit
 from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.rk4 import RK4
-from mech_regulator.solvers.trajectory import Progress, Trajectory
+from mech_regulator.solvers.trajectory import Progress, Stream, Trajectory
 
 PROBES_PER_STEP = 4  # interior points of each step checked for a switch crossing
 RESTART_PERIODS = 4  # the solver's wrapped crank angle stays within this many dynamic periods
@@ -52,15 +52,18 @@ REAL_ZERO = 1e-7
 LAST_CHEBYSHEV = (-1.0) ** np.arange(GUARD_NODES) * np.r_[0.5, np.ones(GUARD_NODES - 2), 0.5] / (GUARD_NODES - 1)
 
 
-def integrate_time_domain(model: MachineModel, progress: Progress | None = None, segment=None) -> Trajectory:
+def integrate_time_domain(
+    model: MachineModel, progress: Progress | None = None, segment=None, stream: Stream | None = None
+) -> Trajectory:
     """Integrate the scene's scenario with its solver settings; returns the (possibly partial) trajectory.
     segment: what steps one external-load piece, with _segment's arguments and result (default _segment, the
-    reference path; the fast path passes its compiled twin, solvers/compiled/run.py)."""
+    reference path; the fast path passes its compiled twin, solvers/compiled/run.py); stream: the trajectory's
+    (Trajectory.stream)."""
     segment = segment or _segment
     solver = model.scene.solver
     scenario = model.scene.scenario
     y = model.initial_state()
-    trajectory = Trajectory(method=solver.method, t_start=0.0, y_start=y.copy())
+    trajectory = Trajectory(method=solver.method, t_start=0.0, y_start=y.copy(), stream=stream)
     mode = model.initial_mode(y)
     if mode is not None:
         trajectory.modes.append((0.0, mode))

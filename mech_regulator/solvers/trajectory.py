@@ -9,6 +9,7 @@ import numpy as np
 from scipy.integrate import OdeSolution
 
 Progress = Callable[[float], None]
+Stream = Callable[["Trajectory"], None]  # called with the trajectory after each piece it gains (analysis/stream.py)
 EVALUATION_CHUNK = 100_000  # times a Trajectory evaluates at once: its temporaries (each time's step coefficients,
 # some 0.2 kB) stay bounded however many times it is asked for
 
@@ -41,6 +42,9 @@ class Trajectory:
     step_ends: for each piece, the ends [s] of the solver steps it spans, ascending, its last the piece's end (one
     for a piece of a single step; a compiled call's steps; the energy method's knots): the dense output is smooth
     within a step, which is what a quadrature over the run needs to know (analysis/energy.py).
+    stream: called after each added piece (a run's figures taken while it runs, analysis/stream.py), which may drop
+    the pieces it is done with from the front (drop_front): the trajectory then covers [t_kept, t_end] only;
+    held_steps counts the solver steps of the pieces held, steps_dropped those dropped.
     """
 
     method: str
@@ -54,6 +58,9 @@ class Trajectory:
     message: str = ""
     y_start: np.ndarray | None = None
     step_ends: list[np.ndarray] = field(default_factory=list)
+    stream: Stream | None = field(default=None, repr=False)
+    held_steps: int = 0
+    steps_dropped: int = 0
     _solution: OdeSolution | None = field(default=None, repr=False)
 
     def add_piece(
@@ -75,17 +82,36 @@ class Trajectory:
             self.step_ends.append(knots)  # already so (a compiled call's steps)
         else:
             self.step_ends.append(np.append(knots[(knots > t_start) & (knots < t_end)], t_end))
+        self.held_steps += self.step_ends[-1].size
         self._solution = None
+        if self.stream is not None:
+            self.stream(self)
 
     def cut(self, t: float) -> None:
         """End the trajectory at t [s] (t_start < t <= t_end): the pieces after it dropped, the last one ending at t
         (what a run found no longer valid beyond t is not reported)."""
         keep = max(1, int(np.searchsorted(self.piece_edges, t, side="left")))
+        self.held_steps -= sum(ends.size for ends in self.step_ends[keep - 1 :])
         del self.interpolants[keep:], self.step_ends[keep:], self.piece_edges[keep + 1 :]
         self.piece_edges[-1] = t
         ends = self.step_ends[-1]
         self.step_ends[-1] = np.append(ends[ends < t], t)
+        self.held_steps += self.step_ends[-1].size
         self._solution = None
+
+    def drop_front(self, count: int) -> None:
+        """Drop the first count pieces (fewer than held; what a stream is done with): the trajectory then starts at
+        t_kept, the end of the last piece dropped."""
+        dropped = sum(ends.size for ends in self.step_ends[:count])
+        del self.interpolants[:count], self.step_ends[:count], self.piece_edges[:count]
+        self.held_steps -= dropped
+        self.steps_dropped += dropped
+        self._solution = None
+
+    @property
+    def t_kept(self) -> float:
+        """The start [s] of what the trajectory holds: t_start, or where the pieces a stream dropped ended."""
+        return self.piece_edges[0] if self.piece_edges else self.t_start
 
     @property
     def t_end(self) -> float:
@@ -96,6 +122,8 @@ class Trajectory:
         (EVALUATION_CHUNK of them at a time)."""
         if not self.interpolants:
             return self._start_only(t)
+        if self.steps_dropped and np.min(t) < self.piece_edges[0]:
+            raise ValueError(f"t = {np.min(t)} s: the trajectory holds only t >= {self.piece_edges[0]} s (streamed)")
         if np.ndim(t) == 1 and np.size(t) > EVALUATION_CHUNK:
             t = np.asarray(t)
             first = self(t[:EVALUATION_CHUNK])
@@ -123,8 +151,12 @@ class Trajectory:
 
     def samples(self, sample_rate: float) -> np.ndarray:
         """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end, both ends included."""
-        count = max(2, int(round((self.t_end - self.t_start) * sample_rate)) + 1)
-        return np.linspace(self.t_start, self.t_end, count)
+        return sample_times(self.t_start, self.t_end, sample_rate)
+
+
+def sample_times(t_start: float, t_end: float, sample_rate: float) -> np.ndarray:
+    """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end [s], both ends included (at least 2)."""
+    return np.linspace(t_start, t_end, max(2, int(round((t_end - t_start) * sample_rate)) + 1))
 
 
 @dataclass

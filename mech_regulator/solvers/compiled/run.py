@@ -56,18 +56,20 @@ from mech_regulator.solvers.time_domain import (
     switch_window,
     turns_and_phase,
 )
-from mech_regulator.solvers.trajectory import Progress, Trajectory
+from mech_regulator.solvers.trajectory import Progress, Stream, Trajectory
 
 MAX_STEPS_PER_CALL = 2000  # a stepper call returns to Python after this many steps (progress moves, Ctrl-C is heard);
 # the next call warm-starts with the last step size
 MAX_RESTARTS_PER_CALL = 32  # and after this many restarts it made itself (kinks, pieces), for the same reasons
 
 
-def integrate_compiled(model: MachineModel, progress: Progress | None = None) -> Trajectory:
+def integrate_compiled(
+    model: MachineModel, progress: Progress | None = None, stream: Stream | None = None
+) -> Trajectory:
     """Integrate the scene's scenario on the fast path; returns the (possibly partial) trajectory, with the same
     statuses and messages as the reference path (time_domain.integrate_time_domain). A scene the fast path cannot
-    run raises SceneError (fast_path_refusal)."""
-    return integrate_time_domain(model, progress, compiled_segment(model))
+    run raises SceneError (fast_path_refusal). stream: as integrate_time_domain's."""
+    return integrate_time_domain(model, progress, compiled_segment(model), stream)
 
 
 def compiled_segment(model: MachineModel):

@@ -1,0 +1,74 @@
+"""A streamed run (analysis/stream.py; docs/hard_cases.md §4, memory): the trajectory hands its oldest steps to what
+the summary and the CSV need of them and drops them, so what it holds does not grow with the run's length, and the
+summary and CSV are those of the run kept whole.
+
+Oracles: the run kept whole (the streamed figures are read on the same sample times and in the same chunks, so they
+are the same numbers), and the run of a quarter of the length (the steps it holds at its end bound the longer run's).
+Here the chunks are made small (a few hundred steps) so that a few seconds of engine_direct stream.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import yaml
+from support import model_of, run_cli, write_scene
+from test_compiled_path import shortened
+
+from mech_regulator.analysis import RunDigest, energy, load_response, stream
+from mech_regulator.solvers import simulate
+
+RETAINED, CHUNK, WINDOW_SPAN = 300, 100, 0.05  # steps kept at the end, steps a chunk, a load window's chunk [s]
+
+
+@pytest.fixture
+def small_chunks(monkeypatch):
+    """Stream engine_direct after a few hundred steps (its load windows read WINDOW_SPAN at a time)."""
+    monkeypatch.setattr(stream, "RETAINED_STEPS", RETAINED)
+    monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", CHUNK)
+    monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", CHUNK)
+    monkeypatch.setattr(load_response, "WINDOW_CHUNK_SPAN", WINDOW_SPAN)
+
+
+@pytest.mark.parametrize("path", ["reference", "fast"])
+def test_a_streamed_run_holds_as_many_steps_after_4_t_as_after_t(small_chunks, path):
+    """engine_direct for 1 s and for 4 s (its load change at 2 s in the longer one): at their ends both trajectories
+    hold at most the retained steps, a chunk and the steps of a load window's chunk (some 40 at 700 steps a second),
+    though the longer run took some 2600 steps."""
+    held = {}
+    for duration in (1.0, 4.0):
+        model = model_of(shortened("engine_direct", duration, solver__path=path))
+        trajectory = simulate(model, stream=RunDigest(model).take)
+        assert trajectory.status == "complete"
+        held[duration] = trajectory.held_steps
+    bound = RETAINED + 2 * CHUNK + 100
+    assert held[4.0] <= bound and held[1.0] <= bound
+    assert trajectory.steps_dropped > 4 * held[4.0]  # the longer run streamed most of its steps
+
+
+@pytest.mark.parametrize("path", ["reference", "fast"])
+def test_a_streamed_run_gives_the_summary_and_csv_of_the_run_kept_whole(
+    small_chunks, monkeypatch, tmp_path, capsys, path
+):
+    """`simulate engine_direct` for 4 s (a load change at 2 s: its window, the energy balance, the mode log of the
+    governor's sleeve), streamed and kept whole (its trajectory keeping every step): the same JSON summary and the
+    same CSV, byte for byte, but the steady state, which the streamed run judges on the tail it keeps (fewer
+    periods; the last one's speeds located on a grid over the tail, to 1e-9)."""
+    scene_file = write_scene(tmp_path, yaml.safe_dump(shortened("engine_direct", 4.0, solver__path=path)))
+    arguments = ["simulate", str(scene_file)]
+    streamed_csv, whole_csv = tmp_path / "streamed.csv", tmp_path / "whole.csv"
+    code, streamed, _ = run_cli(capsys, *arguments, "--json", "--quiet", "--out", str(streamed_csv))
+    assert code == 0
+    monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    code, whole, _ = run_cli(capsys, *arguments, "--json", "--quiet", "--out", str(whole_csv))
+    assert code == 0
+    streamed_summary, whole_summary = json.loads(streamed), json.loads(whole)
+    assert streamed_summary.pop("csv") == str(streamed_csv) and whole_summary.pop("csv") == str(whole_csv)
+    streamed_steady, whole_steady = streamed_summary.pop("steady"), whole_summary.pop("steady")
+    assert streamed_summary == whole_summary
+    assert whole_summary["governor"]["load_responses"] and whole_summary["energy"]["works"]
+    assert streamed_steady["steady"] == whole_steady["steady"] and streamed_steady["periods"] < whole_steady["periods"]
+    for name, value in whole_steady["last_period"].items():
+        assert streamed_steady["last_period"][name] == pytest.approx(value, rel=1e-9, abs=1e-12)
+    assert streamed_csv.read_bytes() == whole_csv.read_bytes()
