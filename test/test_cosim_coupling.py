@@ -101,6 +101,29 @@ def test_corrected_is_at_least_third_order_and_closer_at_five_times_the_step(smo
     assert errors[0.04] < waveform, (errors, waveform)
 
 
+def test_a_fixed_step_lands_on_a_load_change_off_its_grid(smooth_model):
+    """A fixed step that does not divide the load change's time (42 ms, the change at 0.2 s) ends the step that would
+    cross it there and goes on on its grid: as close to the monolithic run as a step that divides it (40 ms)."""
+    errors = omega_errors(smooth_model, "corrected", (0.04, 0.042))
+    assert errors[0.042] < 3.0 * errors[0.04], errors
+    ticks = np.round(cosimulate(smooth_model, 0.042, coupling="corrected").times * 1e9).astype(np.int64)
+    change, end = first_nanosecond_at(0.2), to_nanoseconds(1.0)
+    assert change in ticks, ticks[:7]
+    assert set(ticks) - {change, end} == set(range(0, end, 42_000_000)), ticks
+
+
+def test_corrected_on_the_pi_engine_converges_to_the_monolithic_run():
+    """engine_pi for 0.3 s, no load change (reference path): the co-simulation has no model of its own, so its error
+    falls with the step; the PI law's proportional part hands the crank's firing ripple straight to the throttle, so
+    it falls fast only once the step resolves the ripple (docs/ros.md, "The PI governor's error"): 5 ms -> 1.25 ms at
+    least 4 times (measured 59)."""
+    model = build_model(
+        load_scene("engine_pi", ["solver.path=reference", "scenario.duration=0.3", "scenario.load_events=[]"])
+    )
+    errors = omega_errors(model, "corrected", (0.005, 0.00125))
+    assert errors[0.00125] < errors[0.005] / 4.0, errors
+
+
 @pytest.fixture(scope="module")
 def settling_model():
     """SMOOTH_GOVERNED over 2 s with its load step at 0.2 s and another at 1.3 s: transients and steady motion."""

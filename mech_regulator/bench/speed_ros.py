@@ -35,8 +35,13 @@ ROS_RUNS = (
     (FAST, 4e-2, "corrected"),
 )  # (path, exchange
 # step [s], coupling: solvers.cosim); run's default (solvers.cosim.DEFAULT_EXCHANGE_STEP, DEFAULT_COUPLING) among them
-ROS_OTHER_SCENES = ("engine_indirect_rigid", "engine_indirect_isodromic", "engine_indirect_none")  # the other
-# governed bundled scenes, at run's default only
+ROS_OTHER_SCENES = (  # the other governed bundled scenes, at run's default only
+    "engine_indirect_rigid",
+    "engine_indirect_isodromic",
+    "engine_indirect_none",
+    "engine_hartnell",
+    "engine_pi",
+)
 
 
 @functools.cache

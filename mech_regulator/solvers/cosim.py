@@ -2,7 +2,8 @@
 
 This is what the ROS nodes do (machine_node and governor_node in separate processes), written once in
 the core so that a node, the command line and a test compute the same numbers. Time advances in
-exchange steps h on a grid of whole nanoseconds, t_k = k h (the stamps of ROS messages):
+exchange steps h on a grid of whole nanoseconds, t_k = k h (the stamps of ROS messages), with an exchange on each
+load change of the scenario as well (ExchangeTimes):
 
 - at t_k the machine gives its speed omega_k; the governor answers with its throttle u_k = u(g_k);
   the scenario gives the external load L(t_k);
@@ -667,8 +668,9 @@ def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
 class ExchangeTimes:
     """The exchange times [ns] of a co-simulation, which the machine decides and sends with its state (the end of its
     predicted samples: both sides agree on them; the governor and the scenario answer whatever time it stamps). With a
-    fixed step [ns] t_k = k step, the last at the end. With a tolerance [-] (the corrected coupling) the step is
-    adaptive (docs/speed.md, "The adaptive step tried again": it beats the fixed step on machines without a firing
+    fixed step [ns] t_k = k step, the last at the end, and each load change of the scenario (the step that would
+    cross it ends on it; the bundled scenes' load changes lie on their grids). With a tolerance [-] (the corrected
+    coupling) the step is adaptive (docs/speed.md, "The adaptive step tried again": it beats the fixed step on machines without a firing
     ripple, not on the bundled engines): after each step the machine's predictor miss, how far its predicted speed at
     the step's end lies from the corrected one relative to the largest speed so far, a local error estimate of the
     coupling of order ERROR_ORDER in the step, sets the next step, h * SAFETY * (tolerance /
@@ -683,21 +685,25 @@ class ExchangeTimes:
         self.smallest = step // 2**ADAPTIVE_HALVINGS if tolerance is not None else step  # [ns]
         self.largest = step * 2**ADAPTIVE_DOUBLINGS if tolerance is not None else step  # [ns]
         self._restart = step // 2**RESTART_HALVINGS if tolerance is not None else step  # [ns]
-        self.events = (
-            sorted({first_nanosecond_at(start) for start in model.breakpoints()} - {0}) if tolerance is not None else []
-        )  # [ns] the load changes, each an exchange time
+        self.step = step  # [ns] the fixed step, or the adaptive step's ladder
+        self.events = sorted({first_nanosecond_at(start) for start in model.breakpoints()} - {0})  # [ns] the load
+        # changes, each an exchange time
         self.nominal = self._restart  # [ns] the step as the error estimate sets it (before an event or the end cut it)
         self.scale = 0.0  # [rad/s] the largest speed so far
         self.now = 0  # [ns]
         self.next = self._step_end(0)  # [ns]
 
     def _step_end(self, start: int) -> int:
-        """The exchange time [ns] after `start` [ns] at the nominal step: on the next load change or the end when it
-        comes within the step, or halfway there when it would leave less than the smallest step after it."""
+        """The exchange time [ns] after `start` [ns]: on the next load change or the end when it comes within the step;
+        fixed, else the next time k step on the grid (a step cut by a load change ends on it and the grid goes on);
+        adaptive, the nominal step, or halfway to the load change or the end when it would leave less than the
+        smallest step after it."""
         stop = min([event for event in self.events if event > start] + [self.end])
+        if self.tolerance is None:
+            return min(stop, (start // self.step + 1) * self.step)
         if stop - start <= self.nominal:
             return stop
-        if self.tolerance is not None and stop - start < self.nominal + self.smallest:
+        if stop - start < self.nominal + self.smallest:
             return start + (stop - start) // 2
         return start + self.nominal
 
@@ -789,9 +795,9 @@ def cosimulate(
     exchange_tolerance: float | None = None,
 ) -> CoSimulation:
     """Run the scene's scenario as the nodes do in lockstep: machine and governor exchange omega and the
-    throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns) or, given
-    exchange_tolerance [-] (corrected coupling), at the adaptive exchange times (ExchangeTimes), with the
-    coupling `hold`, `waveform` or `corrected` (module docstring)."""
+    throttle, and the scenario's load is sampled, every exchange_step [s] (rounded to whole ns; and at each load
+    change: ExchangeTimes) or, given exchange_tolerance [-] (corrected coupling), at the adaptive exchange times
+    (ExchangeTimes), with the coupling `hold`, `waveform` or `corrected` (module docstring)."""
     step = to_nanoseconds(exchange_step)
     if step <= 0:
         raise ValueError(f"exchange_step = {exchange_step!r} s: expected at least 1 ns")
