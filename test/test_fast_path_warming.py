@@ -182,7 +182,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
     monkeypatch.setattr(warm.subprocess, "run", child)
     lines = []
     warm.compile_before_the_run("RK4", lines.append)
-    assert lines[0].startswith("compiling the fast path's RK4 stepper (once, about 50 s"), lines
+    assert lines[0] == f"compiling the fast path's RK4 stepper (once, {warm.compile_estimate('RK4')}) ...", lines
     with open(locks.lock_path(), "a") as other:  # another process's background compile
         fcntl.flock(other, fcntl.LOCK_EX)
         warm.compile_before_the_run("RK4", lines.append)
@@ -224,6 +224,19 @@ def test_a_stepper_is_compiled_or_loaded_under_its_methods_lock_only(monkeypatch
     steppers.stepper.__wrapped__("RK4")  # not functools.cache's: this process's compiled stepper is left alone
     assert seen == [[True, False, False]]
     assert not held(rk4_lock)  # released once loaded
+
+
+@pytest.mark.parametrize(
+    ("cached", "expected"),
+    [((), "FIRST"), (("RK4",), "FIRST"), (("DOP853",), "FURTHER"), (("RK4", "RK45", "Rosenbrock23"), "FURTHER")],
+)
+def test_a_compile_is_announced_with_what_it_takes_here(monkeypatch, cached, expected):
+    """The first stepper compiles the integration loop the methods share (about 50 s), a further one not (about
+    10 s): the estimate a compile is announced with says which, from what numba's disk cache holds besides it."""
+    from mech_regulator.solvers.compiled import warm
+
+    monkeypatch.setattr(warm, "stepper_cached", lambda method: method in cached)
+    assert warm.compile_estimate("RK4") == getattr(warm, f"{expected}_COMPILE_ESTIMATE")
 
 
 def test_another_versions_compile_does_not_hold_a_stepper_up(monkeypatch, tmp_path):

@@ -241,15 +241,17 @@ def test_a_second_throttle_publisher_leaves_the_run_disturbed(tmp_path, processe
     # the machine takes the throttle of the node that published it first (the controller, once it has answered) and
     # refuses a second one's, but which of the two is the user's controller it cannot tell (docs/ros.md, "Who may
     # speak"): the run's numbers may be a stranger's
-    run = ExternalRun(processes, tmp_path, domain_id, [EXAMPLE])
+    run = ExternalRun(processes, tmp_path, domain_id, [EXAMPLE], "--duration", "5")
     with probe_on(domain_id, "stranger") as stranger:
         states = stranger.listen(JointState, "joint_states", LISTEN_QOS)
+        # matched to the machine while the run starts and plays its 5 s (its 1 s could be over before a participant
+        # that joined after it had found the machine's subscription)
+        throttle = stranger.publisher(JointState, "throttle", describe=lambda: run.log)
         stranger.spin_until(
             lambda: any(stamp_ns(message.header.stamp) > 0 for message in states),
             "the controller's first answer taken",
             describe=lambda: run.log,
         )
-        throttle = stranger.publisher(JointState, "throttle", describe=lambda: run.log)
         throttle.publish(JointState(name=["throttle"], position=[1.0]))
         assert run.finish() == 1, run.log
     assert "Traceback" not in run.log, run.log

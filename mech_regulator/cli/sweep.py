@@ -119,7 +119,7 @@ def warm_fast_path(points, engine: str, quiet: bool) -> None:
     )
     if not methods:
         return
-    from mech_regulator.solvers.compiled.warm import COMPILE_ESTIMATE, compile_steppers, stepper_cached
+    from mech_regulator.solvers.compiled.warm import FIRST_COMPILE_ESTIMATE, compile_steppers, stepper_cached
 
     cold = [method for method in methods if not stepper_cached(method)]
     report = (lambda line: None) if quiet else (lambda line: print(f"mech-regulator: {line}", file=sys.stderr))
@@ -128,7 +128,7 @@ def warm_fast_path(points, engine: str, quiet: bool) -> None:
     if engine == "dask":
         report(
             f"note: Dask workers on other machines compile the fast path's {', '.join(methods)} stepper(s) once "
-            f"each ({COMPILE_ESTIMATE}) before their first point"
+            f"each (the first {FIRST_COMPILE_ESTIMATE}) before their first point"
         )
 
 

@@ -75,8 +75,8 @@ def on_path_for_a_command(
         report(f"note: {refusal}; this run uses the reference path")
         return on_path(model, "reference")
     from mech_regulator.solvers.compiled.warm import (
-        COMPILE_ESTIMATE,
         compile_before_the_run,
+        compile_estimate,
         compile_in_background,
         stepper_cached,
     )
@@ -88,12 +88,14 @@ def on_path_for_a_command(
         compile_before_the_run(method, lambda line: report(f"note: {line.strip()}"))
         return on_path(model, "fast")
     if method == "Rosenbrock23":
-        report(f"note: compiling the fast path's {method} stepper once ({COMPILE_ESTIMATE}); later runs start at once")
+        report(
+            f"note: compiling the fast path's {method} stepper once ({compile_estimate(method)}); later runs start at once"
+        )
         return on_path(model, "fast")
     started = compile_in_background([method])
     report(
         f"note: the fast path's {method} stepper is {'now compiling' if started else 'compiling'} in the "
-        f"background (once, {COMPILE_ESTIMATE}); this run uses the reference path, later runs the fast path"
+        f"background (once, {compile_estimate(method)}); this run uses the reference path, later runs the fast path"
     )
     return on_path(model, "reference")
 

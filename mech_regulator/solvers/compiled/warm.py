@@ -1,6 +1,6 @@
 """Warming the fast path: its compiled steppers (one per method, solvers/compiled/steppers.py) take some 40 to
 50 s of CPU to compile on a fresh machine, the first of them (the integration loop all four share), and some 7 s each
-further one (docs/speed.md, "The test suite") (COMPILE_ESTIMATE; DOP853's on the 2-core machine: 44 s at a load of
+further one (docs/speed.md, "The test suite") (compile_estimate; DOP853's on the 2-core machine: 44 s at a load of
 about 2.5, 49.6 s idle in an earlier measurement; 147 s of wall time under a load of about 10, 305 s with a pip
 install beside it: `NUMBA_CACHE_DIR=$(mktemp -d) MECH_REGULATOR_CACHE=$(mktemp -d) mech-regulator compile --method
 DOP853`) — once per machine and numba version, then numba loads them from its disk cache in a fraction of a second
@@ -33,7 +33,21 @@ from mech_regulator.solvers.compiled import FAST_METHODS
 from mech_regulator.solvers.compiled.locks import lock_path
 
 LOCK_VARIABLE = "MECH_REGULATOR_COMPILE_LOCK_FD"  # the lock's descriptor handed to the background process
-COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on a busy one"  # (docstring)
+FIRST_COMPILE_ESTIMATE = "about 50 s on an idle 2-core machine, several times that on a busy one"  # (docstring)
+FURTHER_COMPILE_ESTIMATE = (
+    "about 10 s on an idle 2-core machine, the integration loop it shares with the compiled "
+    "methods being compiled already; several times that on a busy one"
+)
+
+
+def compile_estimate(method: str) -> str:
+    """What compiling `method`'s stepper takes here, for the line that announces it (module docstring): the first
+    stepper compiles the integration loop the methods share (FIRST_COMPILE_ESTIMATE), a further one does not
+    (FURTHER_COMPILE_ESTIMATE), as another method's stepper in numba's disk cache shows."""
+    from mech_regulator.solvers.compiled.steppers import _STEPPERS
+
+    further = any(stepper_cached(other) for other in _STEPPERS if other != method)
+    return FURTHER_COMPILE_ESTIMATE if further else FIRST_COMPILE_ESTIMATE
 
 
 def stepper_cached(method: str) -> bool:
@@ -55,7 +69,7 @@ def compile_steppers(methods: Iterable[str], report: Callable[[str], object] = l
         cached = stepper_cached(method)
         report(
             f"{'loading' if cached else 'compiling'} the fast path's {method} stepper"
-            f"{'' if cached else f' (once, {COMPILE_ESTIMATE})'} ..."
+            f"{'' if cached else f' (once, {compile_estimate(method)})'} ..."
         )
         started = time.perf_counter()
         stepper(method)
@@ -75,9 +89,9 @@ def compile_before_the_run(method: str, report: Callable[[str], object]) -> None
             busy = True
     report(
         f"waiting for the fast path's {method} stepper that another process is compiling (once, "
-        f"{COMPILE_ESTIMATE} in all) ..."
+        f"{compile_estimate(method)} in all) ..."
         if busy
-        else f"compiling the fast path's {method} stepper (once, {COMPILE_ESTIMATE}) ..."
+        else f"compiling the fast path's {method} stepper (once, {compile_estimate(method)}) ..."
     )
     started = time.perf_counter()
     done = subprocess.run(
