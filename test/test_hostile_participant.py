@@ -339,9 +339,10 @@ def test_a_stranger_publishing_all_along_is_refused_counted_and_named(clean_run,
 def test_a_load_poked_from_outside_leaves_the_run_disturbed(tmp_path, processes, domain_id):
     # load_torque is open to anyone (the documented way to poke a run), but the run's numbers are then not the scene's
     with probe_on(domain_id, "stranger") as stranger:
-        # in real time, 2 s: the poke, sent once the machine's subscription is matched, comes while the run plays
-        # (a lockstep run of 0.3 s could end before the match was found)
-        job = MainJob(processes, tmp_path, [*SCENE, "--duration", "2", "--time-mode", "realtime"], "poked", domain_id)
+        # in real time, 2 s at 10 ms: the poke, sent once the machine's subscription is matched, comes while the run
+        # plays (a lockstep run of 0.3 s could end before the match was found; 1 ms is too short a step for real time)
+        options = ["--duration", "2", "--time-mode", "realtime", "--exchange-step", "0.01"]
+        job = MainJob(processes, tmp_path, [*SCENE, *options], "poked", domain_id)
         poke = stranger.publisher(Float64, "load_torque", describe=job.describe)  # (the machine subscribes at once)
         poke.publish(Float64(data=8.0))
         stranger.spin_until(lambda: job.process.poll() is not None, "the run's end", 4 * WAIT, job.describe)
