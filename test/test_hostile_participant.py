@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
 import time
 
@@ -43,6 +42,7 @@ from test_ros_nodes import (
     assert_equals_cosimulation,
     constant_inertia_scene,
     machine_parameters,
+    played_main_job,
     without_rclpy_noise,
 )
 
@@ -169,14 +169,7 @@ def assert_no_traceback(*logs: str) -> None:
 @pytest.fixture(scope="module")
 def clean_run(tmp_path_factory) -> MainJob:
     """The reference: `run` on SCENE with nobody else on its domain."""
-    folder = tmp_path_factory.mktemp("clean")
-    started = Processes(folder, dict(os.environ, PYTHONUNBUFFERED="1"))
-    try:
-        job = MainJob(started, folder, SCENE, "clean")
-        started.wait(job.process, 4 * WAIT)
-    finally:
-        started.stop_all()
-    assert job.process.returncode == 0, job.describe()
+    job = played_main_job(tmp_path_factory.mktemp("clean"), SCENE, "clean")
     summary = json.loads(job.json.read_text())
     assert summary["status"] == "complete" and "refused" not in summary and "disturbances" not in summary, summary
     return job

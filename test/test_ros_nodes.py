@@ -827,6 +827,18 @@ class MainJob:
         return f"--- launcher (exit {self.process.poll()})\n{self.log[-3000:]}\n--- nodes\n{self.node_log[-3000:]}"
 
 
+def played_main_job(folder: Path, arguments: list, name: str) -> MainJob:
+    """`run` with `arguments` (processes of its own, the domain MainJob picks) played to its end, exit 0 asserted."""
+    started = Processes(folder, dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        job = MainJob(started, folder, arguments, name)
+        started.wait(job.process, 4 * WAIT)
+    finally:
+        started.stop_all()
+    assert job.process.returncode == 0, job.describe()
+    return job
+
+
 def test_run_takes_a_domain_no_other_process_holds():
     # (once a cause of a failure: `run` without --domain-id took a random domain, one a test held at times)
     held = next_domain_id()  # held by this process until it ends, as a test's or another run's
@@ -971,13 +983,7 @@ def test_main_job_with_irregular_exchange_times_reproduces_the_in_process_cosimu
     changes at 0.4 and 0.7 s (the step that would cross one ends on it): the nodes' CSV is the in-process
     co-simulation's byte for byte, and both summaries record the same steps."""
     arguments = [*_short_engine_arguments(), "--coupling", "corrected", *timing]
-    started = Processes(tmp_path, dict(os.environ, PYTHONUNBUFFERED="1"))
-    try:
-        job = MainJob(started, tmp_path, arguments, "adaptive")
-        started.wait(job.process, 4 * WAIT)
-    finally:
-        started.stop_all()
-    assert job.process.returncode == 0, job.describe()
+    job = played_main_job(tmp_path, arguments, "adaptive")
     csv = tmp_path / "in_process.csv"
     code, out, _ = run_cli(capsys, "simulate", *arguments, "--out", str(csv), "--json", "--quiet")
     assert code == 0
