@@ -237,3 +237,30 @@ def test_the_measurement_imports_neither_rerun_nor_matplotlib_nor_rclpy():
     )
     found = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.strip()
     assert found == "[]"
+
+
+def test_a_pool_that_does_not_terminate_has_its_workers_killed(monkeypatch):
+    """multiprocessing's terminate() can block for ever on a queue lock a stopped worker held: the benchmark gives it
+    STOP_WAIT_S, then kills the workers, and returns (it once hung a whole-suite run)."""
+    import threading
+
+    from mech_regulator.bench import accuracy
+
+    monkeypatch.setattr(accuracy, "STOP_WAIT_S", 0.1)
+    killed = []
+
+    class Worker:
+        def kill(self) -> None:
+            killed.append(self)
+
+    class StuckPool:
+        _pool = [Worker(), Worker()]
+
+        def terminate(self) -> None:
+            threading.Event().wait()  # never returns (a daemon thread of the benchmark's)
+
+        def join(self) -> None:
+            raise AssertionError("joined a pool whose terminate() never returned")
+
+    accuracy._stop_workers(StuckPool())
+    assert killed == StuckPool._pool

@@ -398,6 +398,7 @@ def _ignore_interrupts() -> None:
 
 
 INTERRUPT_POLL_S = 0.1  # [s] how often the parent looks for a Ctrl-C while it waits for the workers
+STOP_WAIT_S = 5.0  # [s] of wall time the pool's terminate() is given before its workers are killed outright
 
 
 @contextlib.contextmanager
@@ -434,8 +435,22 @@ def _measured(tasks: list[Task], jobs: int) -> Generator[Measurement, None, None
                 yield measurement
         pool.close()
     finally:
-        pool.terminate()
-        pool.join()
+        _stop_workers(pool)
+
+
+def _stop_workers(pool) -> None:
+    """Stop a pool's workers, in a bounded time: multiprocessing's terminate() can wait for ever on a queue lock
+    that a worker held when it was stopped (seen once in a whole-suite run: the parent blocked in the pool's
+    _terminate_pool), so it runs in a thread given STOP_WAIT_S, after which the worker processes are killed and the
+    pool's threads, daemons, are left to the interpreter's exit."""
+    stopper = threading.Thread(target=pool.terminate, daemon=True)
+    stopper.start()
+    stopper.join(STOP_WAIT_S)
+    if stopper.is_alive():
+        for worker in pool._pool:  # (private: the pool's worker processes)
+            worker.kill()
+        return
+    pool.join()
 
 
 # ---------------------------------------------------------------------------------------------
