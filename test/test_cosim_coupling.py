@@ -16,7 +16,7 @@ import pytest
 from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE
 
 from mech_regulator.analysis import summarise_cosimulation
-from mech_regulator.model import build_model
+from mech_regulator.model import LoadPiece, build_model
 from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import (
@@ -110,6 +110,61 @@ def test_a_fixed_step_lands_on_a_load_change_off_its_grid(smooth_model):
     change, end = first_nanosecond_at(0.2), to_nanoseconds(1.0)
     assert change in ticks, ticks[:7]
     assert set(ticks) - {change, end} == set(range(0, end, 42_000_000)), ticks
+
+
+def test_the_pi_engine_at_its_default_step_stays_within_1e_4_of_its_monolithic_run():
+    """engine_pi over 1.2 s with its load rise at 0.3 s (reference path), corrected at its default 20 ms: the PI law's
+    proportional part hands the firing ripple straight to the throttle, so the machine's corrector applies the
+    governor's command with the speed's direct action on it, its own speed in place of the predicted one (SpeedAction;
+    docs/ros.md, "The throttle's sensitivity to the speed"): within 1e-4 of the monolithic run (6e-6 measured; 1.3e-3
+    without the action), the throttle reaching its high stop on the way (the command clipped there)."""
+    model = build_model(
+        load_scene(
+            "engine_pi",
+            ["solver.path=reference", "scenario.duration=1.2", "scenario.load_events=[{time: 0.3, torque: 8.0}]"],
+        )
+    )
+    assert model.scene.solver.exchange_step == 0.02
+    run = cosimulate(model, model.scene.solver.exchange_step, coupling="corrected")
+    assert run.status == "complete", run.message
+    reference = simulate(model)(run.times)[1]
+    assert np.max(np.abs(run.states[1] - reference)) / np.max(np.abs(reference)) <= 1e-4
+    assert run.throttle.max() == 1.0
+
+
+def test_the_pi_governor_s_speed_action_is_its_law_s_derivative_and_the_machine_clips_it_at_the_stops():
+    """The PI command's sensitivity to the crank speed against a central difference of the governor's law within the
+    travel (a wrong sign or factor fails it); on the high stop the throttle stays there while the command goes on, and
+    the machine's throttle built from the command and that sensitivity (LoadPiece.throttle_at, as the corrector
+    applies it) is the law itself at every speed, stop or not. A sleeve-driven throttle has no direct action."""
+    governor = build_model(load_scene("engine_pi")).governor
+    inside, on_stop = np.array([0.0, 220.0, 0.8]), np.array([0.0, 200.0, 0.95])  # (phi, omega, integral part)
+    command, per_speed = governor.throttle_command(inside)
+    step = 1e-3  # [rad/s]
+    faster, slower = inside + [0.0, step, 0.0], inside - [0.0, step, 0.0]
+    assert per_speed == pytest.approx((governor.throttle(faster) - governor.throttle(slower)) / (2.0 * step), rel=1e-6)
+    assert per_speed < 0.0 and command == governor.throttle(inside) and governor.speed_action
+    stop_command, stop_per_speed = governor.throttle_command(on_stop)
+    assert governor.throttle(on_stop) == 1.0 < stop_command and stop_per_speed == per_speed
+    faster = on_stop + [0.0, step, 0.0]
+    assert governor.throttle(faster) == governor.throttle(on_stop)  # on the stop the speed does not move it
+    low, high = governor.throttle_range
+    piece = LoadPiece(
+        0.0,
+        1.0,
+        0.0,
+        0.0,
+        stop_command - per_speed * on_stop[1],
+        throttle_per_speed=per_speed,
+        throttle_low=low,
+        throttle_high=high,
+    )
+    for omega in (150.0, 200.0, 220.0, 230.0, 260.0, 300.0):
+        at = on_stop + [0.0, omega - on_stop[1], 0.0]
+        assert piece.throttle_at(0.5, omega) == pytest.approx(governor.throttle(at), abs=1e-12), omega
+    direct = build_model(load_scene("engine_direct")).governor
+    state = build_model(load_scene("engine_direct")).initial_state()
+    assert direct.throttle_command(state) == (direct.throttle(state), 0.0) and not direct.speed_action
 
 
 def test_corrected_on_the_pi_engine_converges_to_the_monolithic_run():
@@ -242,11 +297,13 @@ def test_the_step_predicted_ahead_is_close_to_the_step_predicted_from_its_start(
         )
         assert predicted[0] == expected[0]
         machine.predict_ahead(after, tentative)
-        throttle, waveform = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
+        throttle, waveform, action = governor.answer_corrected(now, float(machine.state[1]), corrected, predicted)
+        assert action is None  # a sleeve-driven throttle: no direct action of the speed
         corrected = machine.correct(
             machine.applied_throttle(throttle), waveform, model.external_load(now), load_rate(model, now)
         )
-        tentative = waveform[1][-1]
+        tentative = machine.tentative
+        assert tentative == waveform[1][-1]
     assert statistics.median(differences.values()) < 1e-3, differences
     assert differences[21] == differences[36] == 0.0, differences  # the load changed at 0.4 s and 0.7 s
 
@@ -261,7 +318,8 @@ def test_the_tentative_throttle_breaks_where_the_sleeve_reaches_its_stop():
     model = build_model(validate_scene(data))
     fast = ([0.0, 0.01, 0.02], [1.5 * at_rest] * 3)  # the speed over the step: far above the sleeve's equilibrium
     tentative = GovernorStepper(model)
-    throttle, (times, values) = tentative.answer_corrected(0.0, at_rest, None, fast)
+    throttle, (times, values), action = tentative.answer_corrected(0.0, at_rest, None, fast)
+    assert action is None
     assert tentative.time == 0.0 and tentative.events == [] and tentative.throttle == throttle
     final = GovernorStepper(model)
     final.answer(0.0, at_rest)

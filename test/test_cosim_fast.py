@@ -74,9 +74,9 @@ def test_the_tentative_throttle_stays_an_opening_when_the_servo_reaches_its_stop
     answer_corrected = GovernorStepper.answer_corrected
 
     def kept(self, *arguments):
-        throttle, waveform = answer_corrected(self, *arguments)
+        throttle, waveform, action = answer_corrected(self, *arguments)
         answers.append(waveform)
-        return throttle, waveform
+        return throttle, waveform, action
 
     monkeypatch.setattr(GovernorStepper, "answer_corrected", kept)
     run = cosimulate(

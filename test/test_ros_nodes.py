@@ -185,6 +185,29 @@ def test_a_joint_message_is_built_once_per_layout_and_its_samples_read_back():
         sent_samples(beyond, "tentative", "position", 0.0, 1.0)
 
 
+def test_the_speed_s_action_on_the_throttle_is_read_from_the_governor_s_answer_and_checked():
+    """The governor's answer with the speed's direct action (a PI governor): the command at the stamp and its
+    sensitivity to the speed, each a joint of its own, read back as sent; an answer without them has none; one of
+    the two alone, or a value beyond its bound or not finite, is refused naming the joint."""
+    from mech_regulator.nodes.common import JointMessage
+    from mech_regulator.nodes.governor import ACTION_JOINTS
+    from mech_regulator.nodes.machine_exchange import MAX_THROTTLE_PER_SPEED, speed_action
+    from mech_regulator.solvers.cosim import SpeedAction
+
+    def answer(joints, positions):
+        message = JointMessage().fill(0, joints, positions, [math.nan] * len(joints), [math.nan] * len(joints))
+        return speed_action(message, list(message.name))
+
+    assert answer(ACTION_JOINTS, [1.0, 1.27, -3.0 / 224.0]) == SpeedAction(1.27, -3.0 / 224.0)
+    assert answer(("throttle",), [0.5]) is None
+    with pytest.raises(BadMessage, match="throttle_per_speed only"):
+        answer(("throttle", "throttle_per_speed"), [0.5, -0.01])
+    with pytest.raises(BadMessage, match="throttle_per_speed position"):
+        answer(ACTION_JOINTS, [0.5, 0.5, -2.0 * MAX_THROTTLE_PER_SPEED])
+    with pytest.raises(BadMessage, match="not finite: throttle_command"):
+        answer(ACTION_JOINTS, [0.5, math.nan, -0.01])
+
+
 def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
     from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
 

@@ -157,6 +157,7 @@ class GovernorKind(ABC):
     """
 
     kind: str
+    speed_action = False  # whether throttle_command's sensitivity to the crank speed is other than 0
     sensor: CentrifugalSensor | None  # no defaults here: a dataclass kind's fields would take them as theirs
     valve: ValveCharacteristic | None
     valve_breaks: tuple[float, ...] = ()
@@ -188,6 +189,18 @@ class GovernorKind(ABC):
     @abstractmethod
     def throttle(self, y: np.ndarray) -> float:
         """Throttle 0..1 at state y."""
+
+    @property
+    def throttle_range(self) -> tuple[float, float]:
+        """The throttle's stops (low, high) [-] (within 0..1)."""
+        return 0.0, 1.0
+
+    def throttle_command(self, y: np.ndarray) -> tuple[float, float]:
+        """The throttle at state y before its stops clip it to throttle_range, and that command's sensitivity to the
+        crank speed omega with the governor's own states held, d command / d omega [s/rad] (what the corrected
+        coupling's corrector applies, docs/ros.md, "The throttle's sensitivity to the speed"): here the throttle
+        itself and 0, a throttle the crank speed moves only through the governor's states (a sleeve's, a servo's)."""
+        return self.throttle(y), 0.0
 
     @abstractmethod
     def set_speed(self) -> float:

@@ -71,6 +71,7 @@ class ElectronicGovernor(GovernorKind):
     travel: tuple[float, float] = (0.0, 1.0)
 
     kind = "pi"
+    speed_action = True  # the proportional part
     sensor = None
     valve = None
     state_names = ("integral",)
@@ -86,6 +87,16 @@ class ElectronicGovernor(GovernorKind):
     def throttle(self, y: np.ndarray, ideal: bool = False) -> float:
         """Throttle 0..1 at state y (pi_throttle)."""
         return pi_throttle(y[INTEGRAL], y[1], *self.law(ideal))
+
+    @property
+    def throttle_range(self) -> tuple[float, float]:
+        """The valve's travel (low, high) [-]."""
+        return self.travel
+
+    def throttle_command(self, y: np.ndarray) -> tuple[float, float]:
+        """The command x + K_p (omega_s - omega) / omega_s at state y [-] (pi_throttle without the travel's stops) and
+        its sensitivity to the crank speed, -K_p / omega_s [s/rad]."""
+        return self.throttle(y, ideal=True), -self.gain / self.set_point
 
     def set_speed(self) -> float:
         """The crank speed [rad/s] the governor holds: its set point, at every load within the valve's travel."""

@@ -56,8 +56,11 @@ RightHandSide = Callable[[float, np.ndarray], tuple[float, float] | list[float]]
 class LoadPiece:
     """The inputs on [start, end): the external load moment value(t) = offset + slope * t [N m], opposing motion,
     and, for a machine whose governor runs outside the model (co-simulation), the throttle [-] that scales its
-    drive (1 otherwise): u(t) = throttle + throttle_slope s + throttle_curvature s^2, s = t - start, clamped to
-    [0, 1] (held when both are 0; a polynomial extrapolated from the governor's last answers otherwise)."""
+    drive (1 otherwise): u(t, omega) = throttle + throttle_slope s + throttle_curvature s^2 + throttle_per_speed omega,
+    s = t - start, omega the crank's speed [rad/s], clamped to [throttle_low, throttle_high] (held when the three
+    rates are 0; a polynomial extrapolated from the governor's last answers, or the governor's tentative throttle
+    with its sensitivity to the crank's speed as the corrected coupling's corrector applies it, docs/ros.md, "The
+    throttle's sensitivity to the speed", otherwise)."""
 
     start: float
     end: float
@@ -66,11 +69,17 @@ class LoadPiece:
     throttle: float = 1.0
     throttle_slope: float = 0.0  # [1/s]
     throttle_curvature: float = 0.0  # [1/s^2]
+    throttle_per_speed: float = 0.0  # [s/rad]
+    throttle_low: float = 0.0  # [-] the throttle's stops
+    throttle_high: float = 1.0  # [-]
 
-    def throttle_at(self, t: float) -> float:
-        """u(t) [-] (see the class)."""
+    def throttle_at(self, t: float, omega: float) -> float:
+        """u(t, omega) [-] at time t [s] and crank speed omega [rad/s] (see the class)."""
         s = t - self.start
-        return min(max(self.throttle + s * (self.throttle_slope + s * self.throttle_curvature), 0.0), 1.0)
+        command = (
+            self.throttle + s * (self.throttle_slope + s * self.throttle_curvature) + self.throttle_per_speed * omega
+        )
+        return min(max(command, self.throttle_low), self.throttle_high)
 
 
 @dataclass(frozen=True)
@@ -381,7 +390,9 @@ class MachineModel(MachineModes, MachineColumns):
         held = dict(zip((table.name for table in self.state_tables), anchors)) if anchors is not None else {}
         governor = self.governor
         held_throttle = piece.throttle if piece is not None else 1.0
-        ramped = piece is not None and (piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0)
+        ramped = piece is not None and (
+            piece.throttle_slope != 0.0 or piece.throttle_curvature != 0.0 or piece.throttle_per_speed != 0.0
+        )
         # a co-simulated throttle's polynomial; None: held_throttle
         ramp = piece.throttle_at if piece is not None and ramped else None
         scale_drive = governor is not None or held_throttle != 1.0 or ramped
@@ -440,11 +451,11 @@ class MachineModel(MachineModes, MachineColumns):
             for moment in switched:
                 total += moment(t, min(max(phi, lo), hi), omega, q, dq)
             if plain:
-                share = held_throttle if ramp is None else ramp(t)
+                share = held_throttle if ramp is None else ramp(t, omega)
                 for moment in scaled:
                     total += share * moment(t, phi, omega, q, dq)
                 return omega, (total - 0.5 * dJ * omega * omega) / J
-            share = throttle(y) if throttle is not None else held_throttle if ramp is None else ramp(t)
+            share = throttle(y) if throttle is not None else held_throttle if ramp is None else ramp(t, omega)
             for moment in scaled:
                 total += share * moment(t, phi, omega, q, dq)
             net = total - 0.5 * dJ * omega * omega

@@ -15,7 +15,10 @@ JSON: time [s], event, mode). The same code as mech_regulator.solvers.cosim.cosi
 the step that ended for good following the machine's corrected speed samples ("crank_corrected" entries: the
 speed in velocity, the sample's time in effort), then the next step tentatively following the predicted ones
 ("crank_predicted"), and sends its tentative throttle over that step with its answer ("throttle_tentative"
-entries: the throttle in position, the time in effort; GovernorStepper.answer_corrected). With hold, having
+entries: the throttle in position, the time in effort; GovernorStepper.answer_corrected); a governor whose throttle the
+crank speed moves directly (the PI law's proportional part) sends its command before the stops there instead, with
+the command at the stamp ("throttle_command") and its sensitivity to the speed ("throttle_per_speed" [s/rad]), both in
+position (solvers.cosim.SpeedAction). With hold, having
 answered, it anticipates: it advances its states over the next step (as long as the last one), with
 the speed just received held, while the machine integrates that step, so that its next answer is
 immediate (GovernorStepper.anticipate: an exchange time other than the expected one is computed
@@ -67,6 +70,7 @@ from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time
+ACTION_JOINTS = ("throttle", "throttle_command", "throttle_per_speed")  # the answer's joints with the speed's action
 
 
 class GovernorNode(Node):
@@ -138,14 +142,23 @@ class GovernorNode(Node):
             self.start_trial()
         when = in_order(when, self.time_ns, "joint_states")
         self.previous_ns, self.time_ns = self.time_ns, when
-        waveform = None  # corrected coupling: the tentative throttle over the next step
+        waveform = action = None  # corrected coupling: the tentative throttle over the next step, the speed's action
         if self.coupling == "corrected":
-            throttle, waveform = self.stepper.answer_corrected(seconds(when), omega, corrected, predicted)
+            throttle, waveform, action = self.stepper.answer_corrected(seconds(when), omega, corrected, predicted)
         else:
             throttle = self.stepper.answer(seconds(when), omega, omega_middle)
         self.throttle = throttle
+        answered: tuple[str, ...] = ("throttle",)
+        positions = [throttle]
+        if action is not None:
+            answered, positions = ACTION_JOINTS, [throttle, action.command, action.per_speed]
         answer = self.answer.fill(
-            when, ("throttle",), [throttle], [math.nan], [math.nan], (("throttle_tentative", "position", waveform),)
+            when,
+            answered,
+            positions,
+            [math.nan] * len(answered),
+            [math.nan] * len(answered),
+            (("throttle_tentative", "position", waveform),),
         )
         self.throttle_publisher.publish(answer)  # first: the machine waits for it
         for t, event, mode in self.stepper.events[self.reported_events :]:

@@ -15,7 +15,15 @@ import numpy as np
 
 from mech_regulator.nodes.common import ERROR, OK, WARN, diagnostics, sent_samples
 from mech_regulator.nodes.trust import BadMessage, bounded, in_order, joint_fields, not_ahead, stamp_of
-from mech_regulator.solvers.cosim import NANOSECONDS, ExchangeTimes, MachineStepper, Samples, seconds, to_nanoseconds
+from mech_regulator.solvers.cosim import (
+    NANOSECONDS,
+    ExchangeTimes,
+    MachineStepper,
+    Samples,
+    SpeedAction,
+    seconds,
+    to_nanoseconds,
+)
 
 if TYPE_CHECKING:
     from diagnostic_msgs.msg import DiagnosticArray
@@ -56,7 +64,8 @@ class MachineExchange:
         self.omega_middle: float | None = None  # [rad/s] at the middle of the last step (waveform coupling)
         self.corrected: Samples | None = None  # corrected coupling: the speed over the last step, as done for good,
         self.predicted: Samples | None = None  # and as predicted over the next one
-        self.stamped_waveform: dict[int, Samples] = {}  # [ns] -> the governor's tentative throttle over that step
+        self.stamped_waveform: dict[int, tuple[Samples, SpeedAction | None]] = {}  # [ns] -> the governor's tentative
+        # throttle over that step and the speed's direct action on it
         self.held: tuple | None = None  # the last exchange's (time [ns], time [s], state, throttle applied [-], load
         # [N m], wall-clock time [s] its joint_states went out) for its machine/moments (add_moments, complete_moments)
         self.published_at = 0.0  # [s] time.monotonic() when the last joint_states went out
@@ -69,8 +78,9 @@ class MachineExchange:
     def on_throttle(self: MachineNode, message: JointState) -> None:  # type: ignore[misc]
         """The throttle's answer (speakers: the governor node; with controller external, whichever node publishes it
         first): the throttle in 0..1 for an exchange time the machine has published, not behind the newest taken;
-        with the corrected coupling, its tentative throttle over the step when it sends one. An external
-        controller's answer stamped other than the exchange it answers is kept to be named when it times out."""
+        with the corrected coupling, its tentative throttle over the step when it sends one, and the speed's direct
+        action on it (speed_action). An external controller's answer stamped other than the exchange it answers is
+        kept to be named when it times out."""
         names = joint_fields(message, "position")
         if "throttle" not in names:
             raise BadMessage("wrong joint name", f"JointState names {names}, expected a joint 'throttle'")
@@ -82,11 +92,13 @@ class MachineExchange:
         when = in_order(
             not_ahead(stamp_of(message.header.stamp), self.now_ns, "throttle"), self.throttle_stamp, "throttle"
         )
-        waveform = sent_samples(message, "throttle_tentative", "position", 0.0, 1.0)
+        action = speed_action(message, names)
+        low, high = (0.0, 1.0) if action is None else (-MAX_THROTTLE_COMMAND, MAX_THROTTLE_COMMAND)
+        waveform = sent_samples(message, "throttle_tentative", "position", low, high)
         self.throttle_stamp = when
         self.stamped_throttle[when] = value
         if self.corrects and waveform is not None:
-            self.stamped_waveform[when] = waveform
+            self.stamped_waveform[when] = (waveform, action)
         self.silent.discard("throttle")
 
     def on_load(self: MachineNode, message: Float64, speaker: str) -> None:  # type: ignore[misc]
@@ -196,9 +208,11 @@ class MachineExchange:
         following the governor's tentative throttle over the step (corrected coupling: MachineStepper.correct), as
         solvers.cosim.cosimulate."""
         if self.corrects:
-            waveform = self.stamped_waveform.get(self.now_ns) if not self.failing_safe else None
-            self.corrected = self.stepper.correct(throttle, waveform, self.load, self.load_rate)
-            self.tentative = waveform[1][-1] if waveform is not None else throttle
+            waveform, action = (
+                self.stamped_waveform.get(self.now_ns, (None, None)) if not self.failing_safe else (None, None)
+            )
+            self.corrected = self.stepper.correct(throttle, waveform, self.load, self.load_rate, action)
+            self.tentative = self.stepper.tentative
         elif self.waveform:
             self.omega_middle = self.stepper.advance_following(seconds(next_ns), throttle, self.load)
         else:  # corrected without a governor: only the load's ramp is followed
@@ -290,3 +304,35 @@ class MachineExchange:
         array = diagnostics(self, level, message, values)
         array.status[0].values += self.refusals.key_values()
         return array
+
+
+MAX_THROTTLE_PER_SPEED = 10.0  # [s/rad] the largest |d command / d omega| taken (a PI governor's K_p / omega_s: 3 /
+# 224 on engine_pi; this one swings the throttle's whole travel over 0.1 rad/s)
+MAX_THROTTLE_COMMAND = 1e3  # [-] the largest |command| taken in a tentative command (the throttle before its stops)
+
+
+def speed_action(message: JointState, names: list[str]) -> SpeedAction | None:
+    """The crank speed's direct action on the governor's throttle that a throttle message sends with its tentative
+    throttle (solvers.cosim.SpeedAction: joints "throttle_command", the command at the stamp [-], and
+    "throttle_per_speed", its sensitivity to the crank speed [s/rad], both in position), None without them; BadMessage
+    for one without the other or a value beyond MAX_THROTTLE_COMMAND or MAX_THROTTLE_PER_SPEED."""
+    given = [name for name in ("throttle_command", "throttle_per_speed") if name in names]
+    if not given:
+        return None
+    if len(given) == 1:
+        raise BadMessage(
+            "missing joint", f"a throttle with {given[0]} only: expected both throttle_command and throttle_per_speed"
+        )
+    command = bounded(
+        message.position[names.index("throttle_command")],
+        -MAX_THROTTLE_COMMAND,
+        MAX_THROTTLE_COMMAND,
+        "throttle_command position [-] (the throttle before its stops)",
+    )
+    per_speed = bounded(
+        message.position[names.index("throttle_per_speed")],
+        -MAX_THROTTLE_PER_SPEED,
+        MAX_THROTTLE_PER_SPEED,
+        "throttle_per_speed position [s/rad] (d command / d omega)",
+    )
+    return SpeedAction(command, per_speed)

@@ -35,6 +35,15 @@ sees the other over a step, the coupling:
   prediction of [t_k, t_k+1] moved by how far the state at t_k now differs from where that prediction started, so
   that between its corrector and its next message there is no predictor to wait for (in the nodes the two run in
   parallel; a step whose load changed is predicted again from its start).
+- a governor whose throttle the crank speed moves directly (the PI law's proportional part, K_p (omega_s - omega) /
+  omega_s: GovernorKind.throttle_command) would hand the predictor's miss of the firing ripple straight to the
+  corrector's throttle; it answers instead its tentative command before the stops, in pieces of at most
+  MAX_THROTTLE_PIECE, with the command's sensitivity to the speed k = d command / d omega (SpeedAction, an interface
+  Jacobian), and the machine's corrector applies clip(command(t) + k (omega(t) - omega_p(t))) within the throttle's
+  stops, omega its own speed and omega_p the predicted speed the governor answered to, so that inside its step the
+  throttle follows the machine's speed as the monolithic law does; its predictor does the same with the command less
+  k omega extrapolated (docs/ros.md, "The throttle's sensitivity to the speed"). For a sleeve-driven throttle k = 0
+  and nothing changes.
 
 The time of the governor's step enters the governor subsystem as an "external load" on its (unit, free)
 inertia: omega' = -L(t) with L(t) = -(a + 2 b (t - t_k-1)) makes its omega state follow the quadratic
@@ -45,6 +54,7 @@ subsystem compiled once when its stepper is made.
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import math
@@ -97,6 +107,16 @@ class Prediction:
     samples: Samples
 
 
+@dataclass(frozen=True)
+class SpeedAction:
+    """The crank speed's direct action on the governor's throttle over an exchange step (a PI law's proportional part:
+    GovernorKind.throttle_command), sent with the governor's tentative command over the step: the command at the
+    step's start [-] (the throttle before the stops) and its sensitivity to the crank speed, per_speed [s/rad]."""
+
+    command: float
+    per_speed: float
+
+
 class MachineStepper:
     """The machine without its governor: (phi, omega) and a coupling's (twist, omega_driven) advanced over
     exchange steps with the throttle and the external load held, in the drive train's mode (a driven part
@@ -116,11 +136,19 @@ class MachineStepper:
         self.mode = self.plant.initial_mode(self.state)
         self.time = 0.0
         self.overspeed_trip = overspeed_trip
+        self.throttle_range = model.governor.throttle_range if model.governor is not None else (0.0, 1.0)  # [-]
+        acts = model.governor is not None and model.governor.speed_action  # the speed acts on the throttle directly
+        self._prediction_piece = 0.5 * MAX_THROTTLE_PIECE if acts else math.inf  # [s] the predictor's speed samples'
+        # longest piece: the governor's tentative command then follows the predicted firing ripple
         self.tripped_at: float | None = None
         self.stats = SolverStats()
         self.status, self.message = "complete", ""
-        self._answers: list[tuple[float, float]] = []  # (time [s], throttle applied) of the last exchanges
+        self._answers: list[tuple[float, float]] = []  # (time [s], throttle applied) of the last exchanges, or
+        # with the speed's action on the throttle (corrected coupling, SpeedAction), its command less per_speed omega
+        self._per_speed = 0.0  # [s/rad] that action's sensitivity (0: none)
+        self.tentative = 1.0  # [-] the governor's tentative throttle at the end of the last step as _answers holds it
         self._step_end = 0.0  # [s] the end of the step `predict` did (corrected coupling)
+        self._predicted: Samples | None = None  # the speed samples `predict` gave for that step
         self._prediction: Prediction | None = None  # the predictor's latest step (corrected coupling)
         self._load_line = (model.external_load(0.0), 0.0)  # the last step's load [N m] at its start and rate [N m/s]
         self._load_line_time = 0.0  # [s] that step's start
@@ -140,15 +168,19 @@ class MachineStepper:
         throttle_slope: float = 0.0,
         throttle_curvature: float = 0.0,
         load_rate: float = 0.0,
+        throttle_per_speed: float = 0.0,
     ) -> Trajectory:
         """Integrate from the current time to t_end [s] with the external load [N m] held or, with a rate [N m/s],
         changing at that rate from now, and the throttle [-] (as applied_throttle gives it) held or, with a slope
-        [1/s] and curvature [1/s^2], following that polynomial in the time since now (LoadPiece.throttle_at; none once
-        tripped); returns that stretch's dense trajectory."""
+        [1/s], curvature [1/s^2] and sensitivity to the crank's speed [s/rad], following that polynomial in the time
+        since now plus throttle_per_speed omega (LoadPiece.throttle_at; none once tripped); returns that stretch's
+        dense trajectory."""
         throttle = self.applied_throttle(throttle)
         if self.tripped_at is not None:
-            throttle_slope = throttle_curvature = 0.0
-        return self._integrate(t_end, throttle, external_load, throttle_slope, throttle_curvature, load_rate)
+            throttle_slope = throttle_curvature = throttle_per_speed = 0.0
+        return self._integrate(
+            t_end, throttle, external_load, throttle_slope, throttle_curvature, load_rate, throttle_per_speed
+        )
 
     def _integrate(
         self,
@@ -158,6 +190,7 @@ class MachineStepper:
         throttle_slope: float,
         throttle_curvature: float,
         load_rate: float,
+        throttle_per_speed: float = 0.0,
     ) -> Trajectory:
         """advance's integration, with the throttle [-] as given (no trip checked)."""
         stretch = Trajectory(method=self.plant.scene.solver.method, t_start=self.time)
@@ -169,6 +202,8 @@ class MachineStepper:
             throttle,
             throttle_slope,
             throttle_curvature,
+            throttle_per_speed,
+            *self.throttle_range,
         )
         self.state, self.mode = self._segment(self.plant, piece, self.time, t_end, self.state, self.mode, stretch, None)
         self.state = check_contact(self.plant, stretch, self.time, self.state)  # a cam follower's jump ends it
@@ -218,7 +253,8 @@ class MachineStepper:
             prediction = self._prediction = self._predicted_step(self.state, self.mode, self.time, t_end, throttle_end)
         shift = float(self.state[1]) - float(prediction.start[1])
         times, speeds = prediction.samples
-        return times, [speed + shift for speed in speeds]
+        self._predicted = (times, [speed + shift for speed in speeds])
+        return self._predicted
 
     def predict_ahead(self, t_end: float, throttle_end: float) -> None:
         """The corrected coupling's predictor of the step after the current one (from the end of the step `predict`
@@ -252,11 +288,12 @@ class MachineStepper:
         throttle, slope, curvature = throttle_extrapolation(self._answers[-2:] + [(self.time, throttle_end)])
         ahead = t_start - self.time  # [s] from now to the predicted step's start
         throttle, slope = throttle + (slope + curvature * ahead) * ahead, slope + 2.0 * curvature * ahead
+        per_speed = self._per_speed
         if self.tripped_at is not None:
-            throttle = slope = curvature = 0.0
+            throttle = slope = curvature = per_speed = 0.0
         load_line = self._continued_load(t_start)
         self.state, self.mode, self.time = state.copy(), mode, t_start
-        stretch = self._integrate(t_end, throttle, load_line[0], slope, curvature, load_line[1])
+        stretch = self._integrate(t_end, throttle, load_line[0], slope, curvature, load_line[1], per_speed)
         prediction = Prediction(
             t_start,
             np.array(state),
@@ -265,36 +302,78 @@ class MachineStepper:
             self.mode,
             load_line,
             stretch.status,
-            speed_samples([stretch], t_start, t_end, math.inf),
+            speed_samples([stretch], t_start, t_end, self._prediction_piece),
         )
         self.state, self.mode, self.time, self.status, self.message = before
         return prediction
 
     def correct(
-        self, throttle: float, waveform: Samples | None, external_load: float, load_rate: float = 0.0
+        self,
+        throttle: float,
+        waveform: Samples | None,
+        external_load: float,
+        load_rate: float = 0.0,
+        action: SpeedAction | None = None,
     ) -> Samples:
         """The corrected coupling's corrector: integrate the step `predict` did again, from the same state, with the
         load [N m] changing at load_rate [N m/s] from now (a ramp of the scenario; held at 0) and the throttle the
         governor answered: `throttle` [-] at the step's start (as applied_throttle gives it), then its tentative
         throttle over the step, samples (times [s], throttle [-]) at the middle and the end of each piece
         (GovernorStepper.answer_corrected), the quadratic through a piece's start, middle and end; held without them
-        or when they do not end at the step's end (a silent governor: the fail-safe). Returns the step's speed
-        samples (speed_samples)."""
+        or when they do not end at the step's end (a silent governor: the fail-safe). With the speed's action on the
+        throttle (SpeedAction: the samples are then the governor's tentative command before the stops, starting from
+        action.command), the throttle on each piece is that quadratic plus action.per_speed (omega(t) - omega_p(t))
+        within throttle_range, omega the machine's own speed and omega_p the quadratic through the predicted speed
+        (`predict`'s samples) at the piece's start, middle and end: the speed the governor's tentative command
+        answered there (docs/ros.md, "The throttle's sensitivity to the speed"). Returns the step's speed samples
+        (speed_samples)."""
         t_start, t_end = self.time, self._step_end
-        self._answers = self._answers[-2:] + [(t_start, self.applied_throttle(throttle))]
+        predicted = self._predicted
+        per_speed = 0.0 if action is None or self.tripped_at is not None else action.per_speed
+        if predicted is None or predicted[0][0] != t_start or predicted[0][-1] != t_end:
+            per_speed = 0.0  # no prediction of this step to correct against
+        self._remember_answer(t_start, throttle, waveform, action, per_speed)
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
             return speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
-        stretches, value = [], throttle
+        stretches, value = [], throttle if action is None else action.command
         for index in range(0, len(waveform[0]) - 1, 2):
             end, middle_value, end_value = waveform[0][index + 1], waveform[1][index], waveform[1][index + 1]
             slope, curvature = quadratic_through(end - self.time, value, middle_value, end_value)
+            offset = value
+            if per_speed != 0.0 and predicted is not None:  # the command less per_speed omega_p: a quadratic in time
+                speeds = piecewise_quadratic_at(predicted, [self.time, 0.5 * (self.time + end), end])
+                speed_slope, speed_curvature = quadratic_through(end - self.time, *speeds)
+                offset -= per_speed * speeds[0]
+                slope -= per_speed * speed_slope
+                curvature -= per_speed * speed_curvature
             load = external_load + load_rate * (self.time - t_start)
-            stretches.append(self.advance(end, value, load, slope, curvature, load_rate))
+            stretches.append(self.advance(end, offset, load, slope, curvature, load_rate, per_speed))
             value = end_value
             if self.status != "complete":
                 break
         return speed_samples(stretches, t_start, t_end)
+
+    def _remember_answer(
+        self, t_start: float, throttle: float, waveform: Samples | None, action: SpeedAction | None, per_speed: float
+    ) -> None:
+        """Note the governor's answer at the step's start t_start [s] for the predictor (_predicted_step): the throttle
+        applied [-] and, as `tentative`, the tentative throttle's end (the answer without one); with the speed's
+        action (per_speed [s/rad] not 0) the command less per_speed omega instead, at the start with the machine's
+        speed there, at the end with the predicted one: a quadratic through them plus per_speed omega is then the
+        predictor's throttle, which follows the machine's own speed as the corrector's does. A change of per_speed
+        starts the answers anew."""
+        if per_speed != self._per_speed:
+            self._answers, self._per_speed = [], per_speed
+        if per_speed == 0.0:
+            self._answers = self._answers[-2:] + [(t_start, self.applied_throttle(throttle))]
+            self.tentative = waveform[1][-1] if waveform is not None else throttle
+            return
+        assert action is not None and self._predicted is not None  # per_speed comes with both (correct)
+        self._answers = self._answers[-2:] + [(t_start, action.command - per_speed * float(self.state[1]))]
+        self.tentative = (
+            waveform[1][-1] - per_speed * self._predicted[1][-1] if waveform is not None else self._answers[-1][1]
+        )
 
     def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
         """The machine's outputs at its current state with these inputs held (the throttle [-] as applied_throttle
@@ -403,14 +482,17 @@ class GovernorStepper:
 
     def answer_corrected(
         self, time: float, omega: float, corrected: Samples | None, predicted: Samples | None
-    ) -> tuple[float, Samples | None]:
+    ) -> tuple[float, Samples | None, SpeedAction | None]:
         """The corrected coupling's answer to the crank speed omega [rad/s] at `time` [s]: integrate the step that
         ends there for good following the machine's corrected speed samples over it (times [s], omega [rad/s]; with the
         previous speed held when they do not span it: a missed exchange, realtime), hold omega from here on, then
         integrate the next step tentatively following the machine's predicted samples, and go back. Returns the
-        throttle [-] at `time` and the tentative throttle over the next step: samples (times [s], throttle [-]) at
+        throttle [-] at `time`, the tentative throttle over the next step: samples (times [s], throttle [-]) at
         the middle and the end of each piece, the step split at every mode change inside it (a kink: a stop reached
-        or left, the sleeve sticking or slipping); None without predicted samples (the run's end)."""
+        or left, the sleeve sticking or slipping); None without predicted samples (the run's end), and the speed's
+        direct action on the throttle (SpeedAction, which the machine's corrector applies: MachineStepper.correct)
+        when the governor's law has one at `time` (GovernorKind.throttle_command), the tentative samples then its
+        command before the stops; else None and the throttle in 0..1."""
         if time > self.time:
             following = (
                 corrected is not None
@@ -423,24 +505,41 @@ class GovernorStepper:
         self.state[1] = omega
         throttle = self.throttle
         if predicted is None or len(predicted[0]) < 3 or predicted[0][0] != self.time:
-            return throttle, None
+            return throttle, None, None
         before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
         stretch = self.follow(predicted[0][-1], predicted)
         (self.state, self.mode, self.time, events, self.status, self.message) = before
         del self.events[events:]
         if stretch.status != "complete":
-            return throttle, None
+            return throttle, None, None
         start, end = stretch.t_start, stretch.t_end
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
+        command, per_speed = self.governor.throttle_command(self.state)
+        if per_speed != 0.0:  # pieces of at most MAX_THROTTLE_PIECE: the command's integral part follows the ripple
+            edges = [
+                float(t)
+                for start, end in zip(edges[:-1], edges[1:])
+                for t in np.linspace(start, end, math.ceil((end - start) / MAX_THROTTLE_PIECE - 1e-9) + 1)[:-1]
+            ] + [end]
         times = [float(t) for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
         states = stretch(np.array(times))  # at a stop the dense output may round past it (servo -3e-16): an opening
-        return throttle, (
-            times,
-            [
-                min(max(self.governor.throttle(states[:, index]), 0.0), 1.0)  # is 0..1, and the
-                for index in range(len(times))
-            ],
-        )  # machine node refuses other samples
+        if per_speed != 0.0:
+            return (
+                throttle,
+                (times, [self.governor.throttle_command(states[:, index])[0] for index in range(len(times))]),
+                SpeedAction(command, per_speed),
+            )
+        return (
+            throttle,
+            (
+                times,
+                [
+                    min(max(self.governor.throttle(states[:, index]), 0.0), 1.0)  # is 0..1, and the
+                    for index in range(len(times))
+                ],
+            ),  # machine node refuses other samples
+            None,
+        )
 
     def anticipate(self, time: float) -> None:
         """Advance now, with the speed held, to `time` [s], the next exchange time as expected, so that the
@@ -481,6 +580,10 @@ MAX_SPEED_PIECE = 1.25e-3  # [s]: the corrected coupling samples the machine's s
 # the hunting grew to 4.8e-3 over 16 s whatever the step; at 6.25e-4, 1.2e-5 at 10 ms, but the nodes ~9 % slower
 LOAD_LINE_TOLERANCE = 1e-9  # [-] a prediction made ahead is kept while the load it assumed is the last step's load
 # continued within this (rounding along a ramp); a load event in between (a change) drops it
+MAX_THROTTLE_PIECE = 5e-3  # [s]: a tentative command with the speed's action (SpeedAction) comes in pieces of at most
+# this, the machine's predicted speed in pieces of half of it: the PI governor's integral part integrates the firing
+# ripple, which one quadratic per step misses (engine_pi over 0.3 s at 20 ms: 0.012 rad/s off with one piece,
+# 2.9e-4 with these; docs/ros.md, "The throttle's sensitivity to the speed")
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
 ADAPTIVE_HALVINGS = 4  # the adaptive exchange step's smallest: the exchange step / 2^this
 ADAPTIVE_DOUBLINGS = 2  # and its largest: the exchange step * 2^this
@@ -512,6 +615,20 @@ def speed_samples(
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
     return times.tolist(), speeds.tolist()
+
+
+def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
+    """A signal's samples (times [s], values; an odd number, the quadratic through three on each piece, as the governor
+    follows the machine's speed: speed_waveform) evaluated at `times` [s] within their span."""
+    knots = samples[0][::2]
+    values = []
+    for time in times:
+        index = min(max(bisect.bisect_right(knots, time) - 1, 0), len(knots) - 2)
+        start, middle, end = samples[1][2 * index : 2 * index + 3]
+        a, b = quadratic_through(knots[index + 1] - knots[index], start, middle, end)
+        elapsed = time - knots[index]
+        values.append(start + elapsed * (a + elapsed * b))
+    return values
 
 
 def speed_waveform(
@@ -815,6 +932,7 @@ def cosimulate(
     corrected = waveform = None  # the corrected coupling's speed samples of the last step, throttle samples of the next
     corrector = governor if coupling == "corrected" else None  # the governor answering the corrected coupling
     tentative = governor.throttle if governor is not None else 1.0
+    action = None  # the speed's direct action on the governor's throttle over the next step (corrected coupling)
     predicted = None  # the corrected coupling's predicted speed samples over the next step
     try:
         while True:
@@ -823,7 +941,9 @@ def cosimulate(
                 predicted = machine.predict(seconds(exchanges.next), tentative) if exchanges.now < end else None
                 if exchanges.next < end:  # the nodes' machine does this while the governor answers
                     machine.predict_ahead(seconds(exchanges.after_next()), tentative)
-                throttle, waveform = corrector.answer_corrected(now, float(machine.state[1]), corrected, predicted)
+                throttle, waveform, action = corrector.answer_corrected(
+                    now, float(machine.state[1]), corrected, predicted
+                )
             else:
                 throttle = governor.answer(now, float(machine.state[1]), omega_middle) if governor is not None else 1.0
             throttle = machine.applied_throttle(throttle)
@@ -838,8 +958,8 @@ def cosimulate(
                 break
             following = seconds(exchanges.next)
             if corrector is not None:
-                corrected = machine.correct(throttle, waveform, load, load_rate(model, now))
-                tentative = waveform[1][-1] if waveform is not None else throttle
+                corrected = machine.correct(throttle, waveform, load, load_rate(model, now), action)
+                tentative = machine.tentative
             elif coupling == "waveform" and governor is not None:
                 omega_middle = machine.advance_following(following, throttle, load)
             else:  # corrected without a governor: only the load's ramp is followed

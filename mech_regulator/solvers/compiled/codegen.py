@@ -15,7 +15,8 @@ out as
                          the switch window (lo, hi) [rad] the effects see phi clamped into and its edges for the
                          window's guards [rad], the clutch's mode code, the sign of the crank's speed at the
                          segment's start (joint friction's crank guard), the co-simulated throttle's slope [1/s],
-                         curvature [1/s^2] and start time [s] (LoadPiece.throttle_at);
+                         curvature [1/s^2], start time [s], sensitivity to the crank's speed [s/rad] and stops
+                         (low, high) [-] (LoadPiece.throttle_at);
     p[SEGMENT_SLOTS:...] the scene's numbers (SI), then its tables (each: offset and length among the numbers).
 
 The source depends only on the scene's structure, never on its numbers: two scenes that differ only in values
@@ -199,10 +200,11 @@ class CompiledScene:
     @staticmethod
     def piece_values(piece, omega: float) -> tuple[float, ...]:
         """The values of p[PIECE_SLOTS] for an external-load piece (offset [N m], slope [N m/s], held throttle [-],
-        the throttle's slope [1/s], curvature [1/s^2] and start time [s]; None: no load, full throttle) and the sign
-        of the crank's speed omega [rad/s] at the segment's start."""
+        the throttle's slope [1/s], curvature [1/s^2], start time [s], sensitivity to the crank's speed [s/rad] and
+        stops (low, high) [-]; None: no load, full throttle) and the sign of the crank's speed omega [rad/s] at the
+        segment's start."""
         if piece is None:
-            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, sign_of(omega)
+            return 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, sign_of(omega)
         return (
             piece.offset,
             piece.slope,
@@ -210,6 +212,9 @@ class CompiledScene:
             piece.throttle_slope,
             piece.throttle_curvature,
             piece.start,
+            piece.throttle_per_speed,
+            piece.throttle_low,
+            piece.throttle_high,
             sign_of(omega),
         )
 

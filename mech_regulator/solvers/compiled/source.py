@@ -36,8 +36,8 @@ from mech_regulator.solvers.compiled import kernels
 # Segment inputs: fixed slots at the start of p
 EXTERNAL_OFFSET, EXTERNAL_SLOPE, HELD_THROTTLE, SLEEVE_MODE, SERVO_MODE, DRIVEN_MODE = range(6)
 CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CLUTCH_MODE, CRANK_DIRECTION = range(6, 12)
-THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START = range(12, 15)
-SEGMENT_SLOTS = 15
+THROTTLE_SLOPE, THROTTLE_CURVATURE, THROTTLE_START, THROTTLE_PER_SPEED, THROTTLE_LOW, THROTTLE_HIGH = range(12, 18)
+SEGMENT_SLOTS = 18
 # the slots a load piece and the crank's speed at its start set (CompiledScene.piece_values)
 PIECE_SLOTS = (
     EXTERNAL_OFFSET,
@@ -46,6 +46,9 @@ PIECE_SLOTS = (
     THROTTLE_SLOPE,
     THROTTLE_CURVATURE,
     THROTTLE_START,
+    THROTTLE_PER_SPEED,
+    THROTTLE_LOW,
+    THROTTLE_HIGH,
     CRANK_DIRECTION,
 )
 PIECE_INDEX = np.array(PIECE_SLOTS, dtype=np.int64)
@@ -54,7 +57,8 @@ NORMAL_SLOTS = 2  # joint friction's slots in p from friction_slot, per guide wi
 #                  its guard's start level; then the signs s_j of the joints' relative rates
 HELD_THROTTLE_EXPRESSION = (
     f"min(max(p[{HELD_THROTTLE}] + (t - p[{THROTTLE_START}]) * (p[{THROTTLE_SLOPE}] + "
-    f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]), 0.0), 1.0)"
+    f"(t - p[{THROTTLE_START}]) * p[{THROTTLE_CURVATURE}]) + p[{THROTTLE_PER_SPEED}] * omega, p[{THROTTLE_LOW}]), "
+    f"p[{THROTTLE_HIGH}])"
 )
 NO_ANCHOR = "math.nan"  # a table lookup's anchor that reads the table itself (effects/tables.py)
 
@@ -76,7 +80,7 @@ class Parameters:
 
     def __init__(self):
         self.values: list[float] = [0.0] * SEGMENT_SLOTS
-        self.values[HELD_THROTTLE] = 1.0
+        self.values[HELD_THROTTLE] = self.values[THROTTLE_HIGH] = 1.0
         self.tables: list[tuple[int, list[float]]] = []
         self.functions: dict[str, str] = {}  # name -> source of the generated functions the module calls
         self.formulas: dict[str, Callable] = {}  # name in the module -> a definition's formula the module calls
