@@ -169,9 +169,9 @@ def test_the_pi_governor_s_speed_action_is_its_law_s_derivative_and_the_machine_
 
 def test_corrected_on_the_pi_engine_converges_to_the_monolithic_run():
     """engine_pi for 0.3 s, no load change (reference path): the co-simulation has no model of its own, so its error
-    falls with the step; the PI law's proportional part hands the crank's firing ripple straight to the throttle, so
-    it falls fast only once the step resolves the ripple (docs/ros.md, "The PI governor's error"): 5 ms -> 1.25 ms at
-    least 4 times (measured 59)."""
+    falls with the step: 5 ms -> 1.25 ms at least 4 times (measured 22, 2.1e-4 -> 9.4e-6 rad/s; 59 before the speed's
+    action on the throttle, docs/ros.md, "The throttle's sensitivity to the speed", when the PI law's proportional
+    part handed the predictor's miss of the firing ripple to the throttle)."""
     model = build_model(
         load_scene("engine_pi", ["solver.path=reference", "scenario.duration=0.3", "scenario.load_events=[]"])
     )
