@@ -197,6 +197,14 @@ def test_plain_kernels_equal_reference_in_and_out_of_a_switch_window():
     # a held throttle (co-simulation) scales the drive only
     piece = LoadPiece(0.0, 1.0, 2.0, 0.0, throttle=0.6)
     assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=piece)
+    # the corrected coupling's throttle with the speed's action (a PI governor's command, clipped to its stops): on
+    # the high stop at 200 rad/s, within the travel at 230 rad/s (docs/ros.md, "The throttle's sensitivity to the speed")
+    commanded = LoadPiece(
+        0.0, 10.0, 2.0, 0.0, 3.6, 0.01, -0.002, throttle_per_speed=-3.0 / 224.0, throttle_low=0.1, throttle_high=0.9
+    )
+    for speed, throttle in ((200.0, 0.9), (230.0, 3.6 - 230.0 * 3.0 / 224.0)):
+        assert commanded.throttle_at(0.0, speed) == pytest.approx(throttle, abs=1e-12)
+        assert_same_rhs(model, [None], states=3, window=(0.4, 1.5), piece=commanded, speed=speed)
 
 
 @pytest.mark.parametrize(
