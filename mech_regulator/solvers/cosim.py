@@ -514,8 +514,10 @@ class GovernorStepper:
             return throttle, None, None
         start, end = stretch.t_start, stretch.t_end
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
-        command, per_speed = self.governor.throttle_command(self.state)
-        if per_speed != 0.0:  # pieces of at most MAX_THROTTLE_PIECE: the command's integral part follows the ripple
+        action = SpeedAction(*self.governor.throttle_command(self.state)) if self.governor.speed_action else None
+        if action is not None and action.per_speed == 0.0:
+            action = None
+        if action is not None:  # pieces of at most MAX_THROTTLE_PIECE: the command's integral part follows the ripple
             edges = [
                 float(t)
                 for start, end in zip(edges[:-1], edges[1:])
@@ -523,11 +525,11 @@ class GovernorStepper:
             ] + [end]
         times = [float(t) for start, end in zip(edges[:-1], edges[1:]) for t in (0.5 * (start + end), end)]
         states = stretch(np.array(times))  # at a stop the dense output may round past it (servo -3e-16): an opening
-        if per_speed != 0.0:
+        if action is not None:  # the command before the stops, which the machine applies (MachineStepper.correct)
             return (
                 throttle,
-                (times, [self.governor.throttle_command(states[:, index])[0] for index in range(len(times))]),
-                SpeedAction(command, per_speed),
+                (times, [self.governor.throttle_command(states[:, k])[0] for k in range(len(times))]),
+                action,
             )
         return (
             throttle,
