@@ -336,7 +336,9 @@ class MachineStepper:
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
             return speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
-        stretches, value = [], throttle if action is None else action.command
+        stretches, value = [], throttle  # the answer, within the stops; with the speed's action the command
+        if per_speed != 0.0 and action is not None:
+            value = action.command
         for index in range(0, len(waveform[0]) - 1, 2):
             end, middle_value, end_value = waveform[0][index + 1], waveform[1][index], waveform[1][index + 1]
             slope, curvature = quadratic_through(end - self.time, value, middle_value, end_value)
