@@ -601,6 +601,15 @@ def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domai
             describe=processes.logs,
         )  # (then the machine's short peer_timeout is for the run only)
         answers = probe.listen(WrenchStamped, "load_torque_stamped", LISTEN_QOS, publishers=1, describe=processes.logs)
+        # the scenario's answers are volatile: its first is seen only if its publisher has matched this node's reader
+        # before it. A participant learns of another's subscriptions in the order they were made, so the scenario's
+        # diagnostics reaching a later subscription of this node mean that it has matched this one
+        diagnostics = probe.listen(DiagnosticArray, "/diagnostics", LISTEN_QOS)
+        probe.spin_until(
+            lambda: any(status.name.endswith("/scenario") for array in diagnostics for status in array.status),
+            "the scenario's diagnostics",
+            describe=processes.logs,
+        )
         machine = processes.node(
             "machine", machine_parameters(scene, peers=["governor", "scenario", "recorder"], peer_timeout=2.0)
         )
