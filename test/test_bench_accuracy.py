@@ -7,7 +7,9 @@ asserted (convergence orders, tolerance proportionality, the reference check); i
 from __future__ import annotations
 
 import csv
+import multiprocessing
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -19,6 +21,7 @@ import pytest
 from rerun.chunk import RrdReader
 from support import run_cli, write_scene
 
+from mech_regulator.bench import accuracy
 from mech_regulator.bench.accuracy import ADAPTIVE, COSIM, SCENES, Setting, Task, _measured, startup_closed_form
 from mech_regulator.bench.report import CSV_COLUMNS
 from mech_regulator.cli.main import main
@@ -239,28 +242,35 @@ def test_the_measurement_imports_neither_rerun_nor_matplotlib_nor_rclpy():
     assert found == "[]"
 
 
-def test_a_pool_that_does_not_terminate_has_its_workers_killed(monkeypatch):
-    """multiprocessing's terminate() can block for ever on a queue lock a stopped worker held: the benchmark gives it
-    STOP_WAIT_S, then kills the workers, and returns (it once hung a whole-suite run)."""
-    import threading
+def test_workers_stopped_while_sending_a_measurement_leave_nothing_behind(monkeypatch):
+    """Stopped while a worker is in the middle of sending a measurement larger than a pipe's buffer (every real one
+    is: 160-340 kB), the benchmark neither waits for it nor leaves a worker running: each worker has a pipe of its own
+    (multiprocessing.Pool's terminate() once waited for ever on its shared result queue's write lock, held by such a
+    worker)."""
+    size = 4_000_000  # [B] some 60 pipe buffers
+    monkeypatch.setattr(accuracy, "measure", lambda task: bytes(size))  # (the workers are forked with it)
+    tasks = [Task("startup", True, Setting("RK45", rtol)) for rtol in (1e-3, 1e-4, 1e-5)]
+    before = set(multiprocessing.active_children())
+    measurements = _measured(tasks, 2)
+    assert len(next(measurements)) == size  # the other worker's measurement unread: it is blocked sending it
+    workers = set(multiprocessing.active_children()) - before
+    measurements.close()
+    assert len(workers) == 2 and not any(worker.is_alive() for worker in workers), workers
 
-    from mech_regulator.bench import accuracy
 
-    monkeypatch.setattr(accuracy, "STOP_WAIT_S", 0.1)
-    killed = []
+def _raises(task: Task):
+    raise ValueError(f"no such setting: {task.setting.value}")
 
-    class Worker:
-        def kill(self) -> None:
-            killed.append(self)
 
-    class StuckPool:
-        _pool = [Worker(), Worker()]
+def _ends(task: Task):
+    os._exit(3)
 
-        def terminate(self) -> None:
-            threading.Event().wait()  # never returns (a daemon thread of the benchmark's)
 
-        def join(self) -> None:
-            raise AssertionError("joined a pool whose terminate() never returned")
-
-    accuracy._stop_workers(StuckPool())
-    assert killed == StuckPool._pool
+@pytest.mark.parametrize(
+    "measure, error, message",
+    [(_raises, ValueError, "no such setting: 0.001"), (_ends, RuntimeError, "ended while measuring (exit code 3)")],
+)
+def test_a_worker_s_error_or_end_is_raised_in_the_parent(monkeypatch, measure, error, message):
+    monkeypatch.setattr(accuracy, "measure", measure)
+    with pytest.raises(error, match=re.escape(message)):
+        next(_measured([Task("startup", True, Setting("RK45", 1e-3))] * 2, 2))

@@ -37,7 +37,6 @@ from ros_support import (  # noqa: F401 (fixtures)
 
 # after ros_support, which skips this module when rclpy is missing
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE
 from test_linkage_family import strip_counts
@@ -343,9 +342,10 @@ def test_a_stopped_recorder_or_scenario_delays_no_exchange(tmp_path, processes, 
     model = build_model(validate_scene(data))
     parameters = {"scene_file": str(scene)}
     rrd = tmp_path / "run.rrd"
-    # listening before the machine starts: its status keeps only its latest message for a reader that joins late,
-    # which then saw one 'paused' and waited for ever
-    statuses = probe.listen(String, "machine/status", STATE_LISTEN_QOS)
+    # the moments at t = 0 go out once the inputs at t = 0 are taken, and machine/moments keeps every message for a
+    # reader it matches late (machine/status keeps its latest only: a reader matched after the machine's second
+    # 'paused', seen under load, saw one 'paused' and waited for it for ever)
+    moments = probe.listen(JointState, "machine/moments", STATE_LISTEN_QOS)
     joint_states = probe.listen(JointState, "joint_states", STATE_LISTEN_QOS)
     recorder = processes.node("recorder", parameters | {"output": str(rrd)})
     processes.node("governor", parameters)
@@ -355,8 +355,8 @@ def test_a_stopped_recorder_or_scenario_delays_no_exchange(tmp_path, processes, 
         parameters | {"peer_timeout": 10 * WAIT, "start_paused": True, "peers": ["governor", "scenario", "recorder"]},
     )  # (a peer waited for would fail the test by its WAIT, not end the wait after peer_timeout)
     probe.spin_until(
-        lambda: [json.loads(message.data)["state"] for message in statuses].count("paused") >= 2,
-        "the machine paused with the inputs at t = 0 taken (its second status 'paused', the first at its start)",
+        lambda: 0 in RunListener.by_group(moments),
+        "the machine paused with the inputs at t = 0 taken (its moments at t = 0)",
         describe=processes.logs,
     )
     stopped = (recorder, scenario)

@@ -880,6 +880,31 @@ def test_run_takes_a_domain_no_other_process_holds():
     assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
 
 
+# A domain no process holds but a run with --domain-id is on (here this process), then the run lock of a run without
+# --domain-id whose random choice starts there
+RUN_ON_A_DOMAIN = """
+import random
+from mech_regulator.nodes import launch
+free = launch.claim_domain(0)
+launch._claimed_domains.pop().close()  # released: no test holds it, as a domain a `run --domain-id` is on
+launch.claim_run(free)
+random.randrange = lambda count: launch.DOMAIN_IDS.index(free)
+print(free, launch.claim_run(None))
+"""
+
+
+def test_run_without_domain_id_takes_no_domain_another_run_is_on():
+    chosen = subprocess.run(
+        [sys.executable, "-c", RUN_ON_A_DOMAIN],
+        capture_output=True,
+        text=True,
+        timeout=WAIT,
+        check=True,
+    )
+    on, taken = (int(word) for word in chosen.stdout.split())
+    assert taken in DOMAIN_IDS and taken != on, chosen
+
+
 # A test process that claims a domain, starts a process on it and dies without stopping it (a timeout's kill)
 ORPHAN = """
 import os, sys

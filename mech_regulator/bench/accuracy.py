@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import math
 import multiprocessing
+import multiprocessing.connection
 import platform
 import signal
 import statistics
@@ -32,6 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TypeVar
 
@@ -398,14 +400,13 @@ def _ignore_interrupts() -> None:
 
 
 INTERRUPT_POLL_S = 0.1  # [s] how often the parent looks for a Ctrl-C while it waits for the workers
-STOP_WAIT_S = 5.0  # [s] of wall time the pool's terminate() is given before its workers are killed outright
+STOP_WAIT_S = 5.0  # [s] of wall time the killed workers are given to end before they are left to the system
 
 
 @contextlib.contextmanager
 def _ctrl_c_as_flag() -> Iterator[threading.Event]:
-    """Within the block, Ctrl-C sets the event instead of raising KeyboardInterrupt wherever the main thread is:
-    raised inside the pool's own code (between taking and releasing a lock its result thread also takes) it could
-    leave that lock held, and the pool's terminate() would then wait for that thread for ever."""
+    """Within the block, Ctrl-C sets the event instead of raising KeyboardInterrupt wherever the main thread is
+    (in the middle of receiving a measurement, say): the parent stops between two measurements."""
     pressed = threading.Event()
     previous = signal.signal(signal.SIGINT, lambda number, frame: pressed.set())
     try:
@@ -414,43 +415,72 @@ def _ctrl_c_as_flag() -> Iterator[threading.Event]:
         signal.signal(signal.SIGINT, previous)
 
 
+def _work(connection: Connection) -> None:
+    """A worker process: measure each task received on `connection` and send back its Measurement (or the exception
+    it raised), until the parent kills it (_stop_workers)."""
+    _ignore_interrupts()
+    while True:
+        task = connection.recv()
+        try:
+            result: Measurement | Exception = measure(task)
+        except Exception as error:  # raised in the parent, as by a call there
+            result = error
+        connection.send(result)
+
+
 def _measured(tasks: list[Task], jobs: int) -> Generator[Measurement, None, None]:
-    """Measurements of the tasks as they finish, in `jobs` worker processes (in this process if 1); the
-    workers are stopped when the iteration ends or is abandoned, and a Ctrl-C raises KeyboardInterrupt here,
-    between two measurements (_ctrl_c_as_flag)."""
+    """Measurements of the tasks as they finish, in `jobs` worker processes (in this process if 1), each given its
+    next task as it sends a measurement back; the workers are stopped when the iteration ends or is abandoned, and a
+    Ctrl-C raises KeyboardInterrupt here, between two measurements (_ctrl_c_as_flag). Each worker has a pipe of its
+    own, which nothing else writes to: a worker stopped in the middle of sending a measurement (160-340 kB, several
+    times a pipe's buffer) leaves no lock held that the parent needs (multiprocessing.Pool's workers share one result
+    queue, whose write lock such a worker held; Pool.terminate() then waited for it for ever)."""
     if jobs == 1:
         yield from map(measure, tasks)
         return
-    pool = multiprocessing.Pool(jobs, initializer=_ignore_interrupts)
+    waiting = list(reversed(tasks))
+    workers: dict[Connection, multiprocessing.Process] = {}
     try:
         with _ctrl_c_as_flag() as pressed:
-            results = pool.imap_unordered(measure, tasks)
+            for _ in range(min(jobs, len(tasks))):
+                parent_end, worker_end = multiprocessing.Pipe()
+                worker = multiprocessing.Process(target=_work, args=(worker_end,), daemon=True)
+                worker.start()
+                worker_end.close()  # the worker's only: its end closes with it (EOFError here, not a hang)
+                workers[parent_end] = worker
+                parent_end.send(waiting.pop())
             for _ in tasks:
-                measurement = None
-                while measurement is None:
+                ready: list = []
+                while not ready:
                     if pressed.is_set():
                         raise KeyboardInterrupt
-                    with contextlib.suppress(multiprocessing.TimeoutError):
-                        measurement = results.next(timeout=INTERRUPT_POLL_S)
-                yield measurement
-        pool.close()
+                    ready = multiprocessing.connection.wait(list(workers), timeout=INTERRUPT_POLL_S)
+                connection = ready[0]
+                try:
+                    result = connection.recv()
+                except EOFError:
+                    workers[connection].join(STOP_WAIT_S)
+                    raise RuntimeError(
+                        f"a benchmark worker ended while measuring (exit code {workers[connection].exitcode})"
+                    ) from None
+                if isinstance(result, Exception):
+                    raise result
+                if waiting:
+                    connection.send(waiting.pop())
+                yield result
     finally:
-        _stop_workers(pool)
+        _stop_workers(workers)
 
 
-def _stop_workers(pool) -> None:
-    """Stop a pool's workers, in a bounded time: multiprocessing's terminate() can wait for ever on a queue lock
-    that a worker held when it was stopped (seen once in a whole-suite run: the parent blocked in the pool's
-    _terminate_pool), so it runs in a thread given STOP_WAIT_S, after which the worker processes are killed and the
-    pool's threads, daemons, are left to the interpreter's exit."""
-    stopper = threading.Thread(target=pool.terminate, daemon=True)
-    stopper.start()
-    stopper.join(STOP_WAIT_S)
-    if stopper.is_alive():
-        for worker in pool._pool:  # (private: the pool's worker processes)
-            worker.kill()
-        return
-    pool.join()
+def _stop_workers(workers: dict[Connection, multiprocessing.Process]) -> None:
+    """Kill the workers (idle, or measuring, or sending a measurement: nothing they hold is the parent's), wait for
+    each to end, STOP_WAIT_S of wall time at most in all, and close their pipes."""
+    for worker in workers.values():
+        worker.kill()
+    deadline = time.monotonic() + STOP_WAIT_S
+    for connection, worker in workers.items():
+        worker.join(max(deadline - time.monotonic(), 0.0))
+        connection.close()
 
 
 # ---------------------------------------------------------------------------------------------

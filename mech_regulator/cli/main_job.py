@@ -25,8 +25,12 @@ def run_main_job(scene, args) -> int:
             "pip install 'mech_regulator[ros]' for the wheels from the package index"
         )
     from mech_regulator.model import build_model
-    from mech_regulator.nodes.launch import main_job
+    from mech_regulator.nodes.launch import claim_run, main_job
     from mech_regulator.nodes.outputs import default_recording
+
+    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
+        raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
+    args.domain_id = claim_run(args.domain_id)  # another run on the domain refused before anything compiles
 
     if args.out is None:  # runs/<scene>-<time>.rrd, its folder made now (a given --out is checked by main)
         args.out = default_recording(scene.name)
@@ -55,8 +59,6 @@ def run_main_job(scene, args) -> int:
         raise SceneError(f"--real-time-factor {args.real_time_factor:g}: expected 0.001 to 1000")
     if args.peer_timeout is not None and not 0.01 <= args.peer_timeout <= 3600.0:
         raise SceneError(f"--peer-timeout {args.peer_timeout:g}: expected 0.01 to 3600 s")
-    if args.domain_id is not None and not 0 <= args.domain_id <= 232:
-        raise SceneError(f"--domain-id {args.domain_id}: expected 0 to 232")
     check_bag(args.bag)
     if args.controller == "external" and args.time_mode != "lockstep":
         raise SceneError(

@@ -27,6 +27,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import TextIO
 
 import yaml
 
@@ -44,10 +45,25 @@ GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
 NOTHING_SIMULATED = "interrupted before the nodes were up: nothing was simulated"
 # ROS domains whose ports do not collide with the ephemeral range: 1..101 and 215..232. A process takes one by holding
-# a lock file on it until it ends (claim_domain): `run` without --domain-id, and the test suite for each test.
+# a lock file on it until it ends (claim_domain): `run` without --domain-id, and the test suite for each test. Every
+# `run` also holds its domain's run lock (claim_run), which only runs take: a test holds the domain lock of the domain
+# it passes to a `run` with --domain-id.
 DOMAIN_IDS = (*range(1, 102), *range(215, 233))
 DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "mech_regulator_ros_domains"
 _claimed_domains: list = []  # the open lock files of this process (closed, and so released, when it ends)
+_claimed_runs: dict[int, TextIO] = {}  # domain -> the open run lock file of this process on it
+
+
+def _lock(path: Path) -> TextIO | None:
+    """The file at `path` opened (created if need be) and locked exclusively by this process until it closes it or
+    ends, or None when another process (or this one, through another opening) holds the lock."""
+    lock = open(path, "a+")
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        lock.close()
+        return None
+    return lock
 
 
 def claim_domain(start: int) -> int:
@@ -57,18 +73,48 @@ def claim_domain(start: int) -> int:
     DOMAIN_LOCKS.mkdir(exist_ok=True)
     for offset in range(len(DOMAIN_IDS)):
         domain = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        lock = open(DOMAIN_LOCKS / f"{domain}.lock", "a")
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:  # another process (or this one) holds it
-            lock.close()
-            continue
-        _claimed_domains.append(lock)
-        return domain
+        lock = _lock(DOMAIN_LOCKS / f"{domain}.lock")
+        if lock is not None:
+            _claimed_domains.append(lock)
+            return domain
     raise SceneError(
         f"every ROS domain is taken by other runs on this machine (lock files in {DOMAIN_LOCKS}); "
         "expected --domain-id N"
     )
+
+
+def claim_run(domain: int | None) -> int:
+    """The ROS domain of a run, its run lock held by this process until it ends (DOMAIN_LOCKS/<domain>.run.lock, with
+    this process's pid in it; a domain whose run lock this process holds already is returned as it is): `domain`, or
+    when None, a random domain that no process holds (claim_domain) and no other run runs on. Two runs on one domain
+    would take each other's messages: raises SceneError naming the domain and the other run's pid when another
+    process on this machine holds the run lock of the given domain (another `run` with the same --domain-id), or
+    when every domain is taken. Deterministic, unlike the machine's check of the graph for namesakes at start, which
+    sees another program's nodes only once discovery has found them (docs/ros.md, "Who may speak")."""
+    if domain in _claimed_runs:
+        return domain
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    start = random.randrange(len(DOMAIN_IDS))
+    while True:
+        candidate = domain if domain is not None else claim_domain(start)
+        path = DOMAIN_LOCKS / f"{candidate}.run.lock"
+        lock = _lock(path)
+        if lock is not None:
+            lock.truncate(0)
+            lock.write(f"{os.getpid()}\n")
+            lock.flush()
+            _claimed_runs[candidate] = lock
+            return candidate
+        if domain is None:  # a run with --domain-id there, on a domain no test holds: the next one
+            start = DOMAIN_IDS.index(candidate) + 1
+            continue
+        holder = path.read_text().strip()
+        raise SceneError(
+            f"--domain-id {domain}: another run on this machine is on ROS domain {domain} "
+            f"({f'pid {holder}' if holder.isdigit() else 'its pid not written yet'}; lock file {path}): two runs on "
+            "one domain would take each other's messages; expected another --domain-id (or none: a free domain), or "
+            "the other run ended first"
+        )
 
 
 def domain_lock_descriptor(domain: int) -> int | None:
@@ -216,7 +262,7 @@ def main_job(
     parameter_file = output.with_suffix(".params.yaml")
     parameter_file.write_text(yaml.safe_dump(parameters, sort_keys=False))
     log_file = output.with_suffix(".log")
-    domain_id = domain_id if domain_id is not None else claim_domain(random.randrange(len(DOMAIN_IDS)))
+    domain_id = claim_run(domain_id)
     environment = private_environment(domain_id)
     names = node_names(governed)
     trip = f", overspeed trip at {overspeed_trip:g} rad/s" if overspeed_trip > 0.0 else ""
