@@ -14,6 +14,11 @@ compiled under its method's lock (solvers/compiled/warm.py). A module's tests al
 module-scoped fixture (a node run, a sweep) runs once. (Not `--dist loadgroup`: pytest-xdist 3.8 marks a group by
 rewriting a test's nodeid, which pytest 9 no longer reads, so no test is grouped.)
 
+The order of the files (order_files): pytest-xdist's loadfile hands out whole files, by default those with the most
+tests first, which left the longest files (a few long node runs or integrations each) to the suite's end, where one
+worker ran them while the other had finished; LONGEST_FILES are handed out first instead, longest first, and the many
+short files then fill both workers' ends (docs/speed.md, "The test suite").
+
 Markers (registered in setup.cfg): `physics`, the physics core's own tests (PHYSICS_MODULES): `pytest -m physics`
 runs them alone, in-process on the reference path (its time: docs/speed.md, The test suite)."""
 
@@ -52,6 +57,47 @@ def mark_physics(items: list[pytest.Item]) -> None:
             item.add_marker(pytest.mark.physics)
 
 
+# The files whose tests take longest on the 2-core machine (docs/speed.md, "The test suite": a fresh clone's whole run,
+# the sum of each file's --durations), longest first: node runs, long integrations, the fast path's first compiles
+LONGEST_FILES = (
+    "test_main_job_scenes",
+    "test_fast_path_summaries",
+    "test_hard_cases_machine",
+    "test_hostile_participant",
+    "test_hard_cases_governor",
+    "test_ros_nodes",
+    "test_own_controller",
+    "test_hostile_input",
+    "test_compiled_path",
+    "test_bench_accuracy",
+    "test_fast_path_warming",
+    "test_cli_startup",
+)
+
+
+def order_files(items: list[pytest.Item]) -> None:
+    """Order `items` in place by their files (module docstring): LONGEST_FILES first in that order, then the other
+    files by their number of tests, most first (pytest-xdist's own order); each file's tests in their own order."""
+    counts: dict[str, int] = {}
+    for item in items:
+        counts[item.path.stem] = counts.get(item.path.stem, 0) + 1
+
+    def rank(item: pytest.Item) -> tuple[int, int, str]:
+        name = item.path.stem
+        if name in LONGEST_FILES:
+            return LONGEST_FILES.index(name), 0, name
+        return len(LONGEST_FILES), -counts[name], name
+
+    items.sort(key=rank)
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Have pytest-xdist hand out the files in the order of order_files, not re-sorted by their number of tests."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark the physics tests (mark_physics)."""
+    """Mark the physics tests (mark_physics) and order the files (order_files)."""
     mark_physics(items)
+    order_files(items)

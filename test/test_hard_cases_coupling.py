@@ -145,13 +145,15 @@ def test_relative_mode_frequency_and_damping_ratio():
 
 def test_stiff_limit_is_the_rigid_machine():
     """As k grows the two-mass engine-generator of two_mass tends to the one-mass machine with J = J1 + I2
-    and the generator's fan on the crank (oracle: the rigid model): the cycle-mean speed differs by O(1/k)."""
+    and the generator's fan on the crank (oracle: the rigid model): the cycle-mean speed differs by O(1/k).
+    Measured: 0.01736 and 0.001762 rad/s at k = 1e6 and 1e7 N m/rad; at rtol 1e-8 they are those of rtol 1e-9 to
+    7e-7 rad/s (4e-4 of the smaller), the integration error far below what is compared, at 0.6 of the CPU."""
     overrides = [
         "scenario.duration=0.6",
         "scenario.load_events.0.time=0.3",
         "solver.method=Radau",
-        "solver.rtol=1e-9",
-        "solver.atol=1e-9",
+        "solver.rtol=1e-8",
+        "solver.atol=1e-8",
     ]
     rigid_scene = load_scene(
         "two_mass",

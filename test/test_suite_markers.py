@@ -1,5 +1,5 @@
 """The suite's own organisation (test/conftest.py): the `physics` marker names existing modules that start no ROS
-node, no subprocess and no fast path, and marks their tests only."""
+node, no subprocess and no fast path, and marks their tests only; the longest files come first."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import types
 from pathlib import Path
 
 import pytest
-from conftest import PHYSICS_MODULES, mark_physics
+from conftest import LONGEST_FILES, PHYSICS_MODULES, mark_physics, order_files
 
 TESTS = Path(__file__).resolve().parent
 NOT_PHYSICS = ("rclpy", "ros_support", "subprocess", "mech_regulator.solvers.compiled", "mech_regulator.nodes")
@@ -37,8 +37,10 @@ def test_a_physics_module_exists_and_imports_no_node_process_nor_compiled_path(m
 class _Item:
     """A stand-in of a collected test of a module: what mark_physics reads and calls."""
 
-    def __init__(self, module: str):
+    def __init__(self, module: str, name: str = "test"):
         self.module = types.SimpleNamespace(__name__=module)
+        self.path = TESTS / f"{module}.py"
+        self.name = name
         self.markers: list[str] = []
 
     def add_marker(self, marker) -> None:
@@ -49,3 +51,24 @@ def test_the_physics_marker_is_on_the_physics_modules_tests_only():
     physics, other = _Item("test_dynamics"), _Item("test_ros_nodes")
     mark_physics([physics, other])
     assert (physics.markers, other.markers) == (["physics"], [])
+
+
+def test_the_longest_files_exist_once_each():
+    missing = [name for name in LONGEST_FILES if not (TESTS / f"{name}.py").is_file()]
+    assert missing == [] and len(set(LONGEST_FILES)) == len(LONGEST_FILES), missing
+
+
+def test_the_longest_files_come_first_then_the_others_by_their_number_of_tests():
+    longest, second = LONGEST_FILES[:2]
+    items = [
+        _Item("test_dynamics", "a"),
+        _Item(second, "b"),
+        _Item("test_cli", "c"),
+        _Item("test_cli", "d"),
+        _Item(longest, "e"),
+        _Item("test_dynamics", "f"),
+        _Item("test_dynamics", "g"),
+        _Item(second, "h"),
+    ]
+    order_files(items)
+    assert [item.name for item in items] == ["e", "b", "h", "a", "f", "g", "c", "d"]
