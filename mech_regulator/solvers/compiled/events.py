@@ -55,6 +55,25 @@ def _polynomial(theta, values):
     return total
 
 
+ROUND_OFF_ROOM = 1e-13  # of the sum of a polynomial's |coefficients|: far above its round-off on [0, 1]
+
+
+@njit(cache=True)
+def _stays_above(line, level):
+    """Whether sum_j line[j] theta^j, evaluated anywhere on [0, 1], cannot come out below level [the guard's units],
+    told from the coefficients alone (no roots): there theta^j <= theta for j >= 1, so the polynomial is at least the
+    line from line[0] - level at theta = 0 to line[0] - level + line[1] - sum_{j >= 2} |line[j]| at 1; both ends at
+    least ROUND_OFF_ROOM of the sum of |line[j]| and |level| above 0, far more than the round-off of Horner's scheme
+    (about 2 x 7 eps of that sum) and of this sum. A guard that starts the step rising (line[1] > 0), as a switch
+    window's edge behind the crank, is told apart at once; so is one that falls but ends the step clearly above."""
+    tail = 0.0
+    for j in range(2, line.size):
+        tail += abs(line[j])
+    room = ROUND_OFF_ROOM * (abs(level) + abs(line[0]) + abs(line[1]) + tail)
+    start = line[0] - level
+    return start >= room and start + line[1] - tail >= room
+
+
 @njit(cache=True)
 def _excess(time, g, line, t_old, h, y_old, coefficients, p, guards, levels, state, threshold):
     """How far guard g is above its threshold at time inside the step: the polynomial line in theta for a
@@ -140,6 +159,22 @@ _monotone_ends = njit(cache=True)(monotone_ends)
 
 
 @njit(cache=True)
+def _monotone_pieces(line):
+    """The polynomial sum_j line[j] theta^j cut into pieces monotone on (0, 1]: their upper ends, sorted, 1 last, as
+    time_domain.monotone_ends gives them; but where its derivative cannot vanish on [0, 1] (|line[1]| above
+    sum_{j >= 2} j |line[j]|, with ROUND_OFF_ROOM to spare) the one piece (0, 1], without the roots (most steps that
+    reach a switch window's edge ahead of a turning crank). There monotone_ends would also cut at the real parts of
+    complex roots, harmless cuts of a monotone piece that move where the crossing's bracket starts, and so the last
+    bits of the crossing Brent's method finds, but never which crossing it finds."""
+    tail = 0.0
+    for j in range(2, line.size):
+        tail += j * abs(line[j])
+    if abs(line[1]) > tail * (1.0 + ROUND_OFF_ROOM) + ROUND_OFF_ROOM * abs(line[1]):
+        return np.ones(1)
+    return _monotone_ends(line)
+
+
+@njit(cache=True)
 def _golden_minimum(a, b, g, t_old, h, y_old, coefficients, p, guards, levels, state, threshold):
     """The minimum of guard g less threshold on [a, b] (a time interval inside the step) by golden-section search,
     to 1e-12 of the step: (time [s], value)."""
@@ -168,8 +203,11 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
 
     Thresholds for this step: thresholds[g], lowered by GUARD_TOLERANCE for a guard that starts the step
     within GUARD_TOLERANCE above it. A linear guard is the polynomial g0 + sum_j a_j theta^j along the step;
-    when g0 >= sum_j |a_j| it cannot fall below on [0, 1] and is done with at once (most steps); else the real
-    parts of its derivative's roots cut (0, 1) into monotone pieces, so the first piece that ends below the
+    when g0 >= sum_j |a_j|, or when it is told above its threshold by _stays_above (a guard rising from the step's
+    start, or ending it clearly above), it cannot fall below on [0, 1] and is done with at once (most steps, without
+    the roots, which cost more than the rest of a step); else it is cut into monotone pieces (_monotone_pieces: the
+    real parts of its derivative's roots in (0, 1), none where the derivative cannot vanish), so the first piece that
+    ends below the
     threshold holds the first crossing (exact; a near-tangency that stays above does not fire). The other guards are
     sampled at GUARD_NODES Chebyshev points and checked as the reference's time_domain._guard_crossing does: their
     interpolating polynomial (with its error bound) cut into monotone pieces, the first piece that ends within the
@@ -194,10 +232,10 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
         line = np.zeros(coefficients.shape[1] + 1)  # level - threshold as powers of theta
         line[0] = linear[g, 1] + weights @ y_old - step_thresholds[g]
         line[1:] = h * (weights @ coefficients)
-        if line[0] >= np.sum(np.abs(line[1:])):  # then line(theta) >= 0 on all of [0, 1]: no crossing (exact)
+        if line[0] >= np.sum(np.abs(line[1:])) or _stays_above(line, 0.0):  # >= 0 on all of [0, 1]: no crossing
             continue
         lower = 0.0
-        for upper in _monotone_ends(line):
+        for upper in _monotone_pieces(line):
             if _polynomial(upper, line) < 0.0:
                 time = _brent(
                     t_old + lower * h,
@@ -229,9 +267,9 @@ def _first_event(guards, n_guards, linear, thresholds, t_old, h, y_old, coeffici
             if start[g] == np.inf or linear[g, 0] == LINEAR or linear[g, 0] == STEP_ONTO:
                 continue
             line, margin = _guard_polynomial(samples[:, g] - step_thresholds[g])
-            if line[0] - margin >= np.sum(np.abs(line[1:])):  # the polynomial stays above the margin on [0, 1]
+            if line[0] - margin >= np.sum(np.abs(line[1:])) or _stays_above(line, margin):  # above it on [0, 1]
                 continue
-            cuts = _monotone_ends(line)
+            cuts = _monotone_pieces(line)
             lower = 0.0
             for i in range(cuts.size):
                 upper = cuts[i]
