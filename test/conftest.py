@@ -23,6 +23,7 @@ Markers (registered in setup.cfg): `physics`, the physics core's own tests (PHYS
 runs them alone, in-process on the reference path (its time: docs/speed.md, The test suite)."""
 
 import os
+import sys
 
 import pytest
 
@@ -101,3 +102,17 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """Mark the physics tests (mark_physics) and order the files (order_files)."""
     mark_physics(items)
     order_files(items)
+
+
+@pytest.fixture(autouse=True)
+def ros_domains_released():
+    """The ROS domains a test claimed (ros_support.next_domain_id) released once it and its fixtures have ended (an
+    autouse fixture is torn down after the test's others, so after its processes are stopped; a module fixture's runs
+    end within the fixture). A worker held every domain it had used until it ended: some 60 each, and a second suite
+    beside this one then found all 119 taken."""
+    launch = sys.modules.get("mech_regulator.nodes.launch")  # imported by the ROS tests only
+    held = len(launch._claimed_domains) if launch else 0
+    yield
+    launch = sys.modules.get("mech_regulator.nodes.launch")
+    if launch:
+        launch.release_domains(keep=held)

@@ -40,8 +40,9 @@ ANSWER_WAIT = 10.0  # [s] of wall time before a service request that got no answ
 STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
 
 # A test run takes consecutive domains (nodes.launch.DOMAIN_IDS) from a base derived from its pid, each claimed with
-# the lock file `run` claims its own with (nodes.launch.claim_domain) and held until the run exits, so that two test
-# runs side by side (two pytest processes, two xdist workers) and `run` without --domain-id never share a domain.
+# the lock file `run` claims its own with (nodes.launch.claim_domain) and held until the test has ended (conftest's
+# ros_domains_released), so that two test runs side by side (two pytest processes, two xdist workers) and `run`
+# without --domain-id never share a domain.
 _domains = itertools.count((os.getpid() * 37) % len(DOMAIN_IDS))
 
 # What the test node listens with: reliable, deep enough never to drop a sample of a short run. State

@@ -54,6 +54,7 @@ from test_recording import events
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
+from mech_regulator.nodes import launch as launch_domains
 from mech_regulator.nodes.launch import DOMAIN_IDS, DOMAIN_LOCKS, viewer_command
 from mech_regulator.nodes.trust import BadMessage
 from mech_regulator.scene import load_scene, validate_scene
@@ -878,6 +879,17 @@ def test_run_takes_a_domain_no_other_process_holds():
         check=True,
     )
     assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
+
+
+def test_a_released_domain_is_free_again_and_only_those_claimed_after_the_kept_ones():
+    """release_domains(keep): the claims after the first `keep` released (the suite's autouse fixture after each
+    test): a released domain is claimed again from the same start; one kept stays held (skipped)."""
+    kept = next_domain_id()
+    claims = len(launch_domains._claimed_domains)
+    used = next_domain_id()
+    launch_domains.release_domains(keep=claims)
+    assert launch_domains.claim_domain(DOMAIN_IDS.index(used)) == used  # free again
+    assert launch_domains.claim_domain(DOMAIN_IDS.index(kept)) != kept  # still held by this process
 
 
 # A domain no process holds but a run with --domain-id is on (here this process), then the run lock of a run without

@@ -83,6 +83,16 @@ def claim_domain(start: int) -> int:
     )
 
 
+def release_domains(keep: int = 0) -> None:
+    """Release the domains this process claimed (claim_domain) after its first `keep` claims: their lock files closed,
+    the newest first. For a process that plays many runs one after another, each on a domain of its own (the test
+    suite: a worker holding every domain it ever used took half of them, and two suites side by side all), so that a
+    domain is held only while it is used. A child process started with a lock's descriptor (domain_lock_descriptor)
+    holds that domain until it ends."""
+    while len(_claimed_domains) > keep:
+        _claimed_domains.pop().close()
+
+
 def claim_run(domain: int | None) -> int:
     """The ROS domain of a run, its run lock held by this process until it ends (DOMAIN_LOCKS/<domain>.run.lock, with
     this process's pid in it; a domain whose run lock this process holds already is returned as it is): `domain`, or
