@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 import yaml
 from support import model_of, run_cli, write_scene
@@ -72,3 +73,31 @@ def test_a_streamed_run_gives_the_summary_and_csv_of_the_run_kept_whole(
     for name, value in whole_steady["last_period"].items():
         assert streamed_steady["last_period"][name] == pytest.approx(value, rel=1e-9, abs=1e-12)
     assert streamed_csv.read_bytes() == whole_csv.read_bytes()
+
+
+def test_a_streamed_run_records_the_samples_of_the_run_kept_whole(small_chunks, monkeypatch, tmp_path, capsys):
+    """`simulate engine_direct --record` for 4 s on the fast path streams (a recording once kept the whole run in
+    memory) and hands the recording the sample times and states of the run kept whole, bit for bit."""
+    from mech_regulator.viz import recording
+
+    recorded = []
+    monkeypatch.setattr(
+        recording,
+        "record_run",
+        lambda model, times, states, path, **options: recorded.append((times, states)),
+    )
+    sampled = []
+    take_samples = RunDigest.samples
+    monkeypatch.setattr(
+        RunDigest, "samples", lambda digest, trajectory: sampled.append(1) or take_samples(digest, trajectory)
+    )
+    scene_file = write_scene(tmp_path, yaml.safe_dump(shortened("engine_direct", 4.0, solver__path="fast")))
+    arguments = ["simulate", str(scene_file), "--json", "--quiet", "--record", str(tmp_path / "run.rrd")]
+    assert run_cli(capsys, *arguments)[0] == 0
+    assert sampled  # streamed: the samples are the digest's
+    monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    assert run_cli(capsys, *arguments)[0] == 0
+    assert len(sampled) == 1  # kept whole: read off the trajectory
+    (streamed_times, streamed_states), (times, states) = recorded
+    assert streamed_times.size == 4 * 2000 + 1 and np.array_equal(streamed_times, times)
+    assert np.array_equal(streamed_states, states)

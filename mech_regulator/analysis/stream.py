@@ -5,7 +5,8 @@ chunk of BALANCE_CHUNK_STEPS more, it hands the oldest chunk to what the summary
 the pieces no one needs any more. Each consumer reads the chunk as it would read the whole run, on the same sample
 times and in the same chunks, so a complete run's figures are the same numbers:
 - the energy balance's works (analysis/energy.py, WorksSoFar: the same chunks of steps, summed in the same order);
-- the output samples at the scene's sample rate, on the grid of the run's planned duration, when the CSV is asked for
+- the output samples at the scene's sample rate, on the grid of the run's planned duration, when the CSV, a recording
+  or a bag is asked for
   (their states are kept: they are the product, duration x sample rate of them, a limit docs/scenes.md announces);
 - each load change's window (analysis/load_response.py, ResponseWindow: its cycle-mean speed and throttle, read
   CYCLE_CHUNK times at a time), and the mode log's check (analysis/self_check.py, ModeLogSoFar);

@@ -50,8 +50,8 @@ def run_simulate(scene, args) -> int:
     if advice is not None:
         print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
-    whole_run = args.plot is not None or args.record is not None or args.bag is not None  # they read the whole run
-    digest = RunDigest(model, samples=args.out is not None) if streams(model) and not whole_run else None
+    sampled = any(output is not None for output in (args.out, args.record, args.bag))  # they read the output samples
+    digest = RunDigest(model, samples=sampled) if streams(model) and args.plot is None else None  # the plot: the run
     with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
         trajectory = simulate(
             model, progress=lambda t: bar.update(min(t, duration) - bar.n), stream=digest.take if digest else None
@@ -78,7 +78,7 @@ def run_simulate(scene, args) -> int:
             args.record,
             lambda path: record_run(
                 model,
-                *_samples(model, trajectory),
+                *_samples(model, trajectory, streamed),
                 path,
                 mode_changes=trajectory.events,
                 status=trajectory.status,
@@ -92,7 +92,11 @@ def run_simulate(scene, args) -> int:
             "bag",
             args.bag,
             lambda path: write_bag(
-                path, model, *_samples(model, trajectory), status=trajectory.status, message=trajectory.message
+                path,
+                model,
+                *_samples(model, trajectory, streamed),
+                status=trajectory.status,
+                message=trajectory.message,
             ),
         )
     print(to_json(summary) if args.json else format_summary(model, summary))
@@ -211,7 +215,10 @@ def _sample_columns(model, trajectory, streamed=None):
         yield model.columns(chunk, trajectory(chunk))
 
 
-def _samples(model, trajectory) -> tuple[np.ndarray, np.ndarray]:
-    """Output sample times at the scene's sample rate and the states there."""
+def _samples(model, trajectory, streamed=None) -> tuple[np.ndarray, np.ndarray]:
+    """Output sample times at the scene's sample rate and the states there; of a streamed run (streamed: its
+    RunDigest), those it sampled."""
+    if streamed is not None:
+        return streamed.samples(trajectory)
     times = trajectory.samples(model.scene.solver.sample_rate)
     return times, trajectory(times)

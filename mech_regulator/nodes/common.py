@@ -58,6 +58,7 @@ EXIT_FAILED = 1
 EXIT_BAD_INPUT = 2
 IDLE_SPIN_SLICE = 0.1  # [s] of wall time per wait of a spin loop that only waits for callbacks
 HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining subscribers (the recorder)
+BATCH_HISTORY_DEPTH = 200  # batched messages (class Batch) kept by each of their publishers (BATCH_QOS)
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
@@ -78,6 +79,18 @@ COMMAND_QOS = QoSProfile(
 STATE_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=HISTORY_DEPTH,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+# The batched state streams (machine/moments, governor/state: class Batch), as STATE_QOS but with a history counted in
+# batches of up to BATCH_SIZE exchanges: 200 of them are 20 s of wall time at one batch every BATCH_PERIOD, up to
+# 10 000 exchanges. Fast DDS keeps each message of a history in a buffer that stays as large as the largest message
+# it has held, so a history's memory is its depth times the largest batch, reached slowly as batches of every size
+# pass: at 2000 (up to 100 000 exchanges; 30 MB of full batches in the machine) it still grew after an hour
+# (docs/speed.md, "Soak"). Subscribers read them with STATE_QOS: a subscriber's depth is its own memory.
+BATCH_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=BATCH_HISTORY_DEPTH,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )

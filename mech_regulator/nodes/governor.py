@@ -39,6 +39,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.nodes.common import (
+    BATCH_QOS,
     COMMAND_QOS,
     ERROR,
     OK,
@@ -97,7 +98,7 @@ class GovernorNode(Node):
             self.speakers.allow(topic, machine)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
         self.answer = JointMessage()  # throttle, refilled at every exchange
-        self.states = Batch(self.create_publisher(JointState, "governor/state", STATE_QOS))
+        self.states = Batch(self.create_publisher(JointState, "governor/state", BATCH_QOS))
         self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)

@@ -67,6 +67,7 @@ from std_srvs.srv import Trigger
 from mech_regulator.model.joints import output_joints
 from mech_regulator.nodes import controller
 from mech_regulator.nodes.common import (
+    BATCH_QOS,
     COMMAND_QOS,
     STATE_QOS,
     STATUS_QOS,
@@ -263,7 +264,7 @@ class MachineNode(MachineExchange, Node):
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
-        self.moments = Batch(self.create_publisher(JointState, "machine/moments", STATE_QOS), self.complete_moments)
+        self.moments = Batch(self.create_publisher(JointState, "machine/moments", BATCH_QOS), self.complete_moments)
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.status_publisher = self.create_publisher(String, "machine/status", STATUS_QOS)

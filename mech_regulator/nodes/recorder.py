@@ -512,7 +512,7 @@ class RecorderNode(Node):
 
     def missed(self) -> int:
         """How many of the exchanges the machine said it published in the trial (its last diagnostics) are not
-        complete here: a recorder stalled longer than the publishers' histories (common.HISTORY_DEPTH messages)
+        complete here: a recorder stalled longer than the publishers' histories (common.BATCH_HISTORY_DEPTH batches)
         misses the oldest; 0 while the machine has not said."""
         if self.machine_exchanges is None:
             return 0
