@@ -61,17 +61,18 @@ def mark_physics(items: list[pytest.Item]) -> None:
 # The files whose tests take longest on the 2-core machine (docs/speed.md, "The test suite": a fresh clone's whole run,
 # the sum of each file's --durations), longest first: node runs, long integrations, the fast path's first compiles
 LONGEST_FILES = (
-    "test_main_job_scenes",
     "test_fast_path_summaries",
+    "test_main_job_scenes",
     "test_hard_cases_machine",
-    "test_hostile_participant",
     "test_hard_cases_governor",
     "test_ros_nodes",
-    "test_own_controller",
-    "test_hostile_input",
     "test_compiled_path",
+    "test_hostile_participant",
     "test_bench_accuracy",
+    "test_linkage_family",
     "test_fast_path_warming",
+    "test_hostile_input",
+    "test_own_controller",
     "test_cli_startup",
 )
 
