@@ -892,6 +892,34 @@ def test_a_released_domain_is_free_again_and_only_those_claimed_after_the_kept_o
     assert launch_domains.claim_domain(DOMAIN_IDS.index(kept)) != kept  # still held by this process
 
 
+# A run's process on a domain (its run lock held), until its stdin closes
+RUN_STILL_ON = """
+import sys
+from mech_regulator.nodes import launch
+launch.claim_run(int(sys.argv[1]))
+print("on", flush=True)
+sys.stdin.read()
+"""
+
+
+def test_a_domain_a_run_is_still_on_is_not_released_until_the_run_has_left():
+    """A test's domain is not handed to the next test while a run it started is still on it (a run's nodes, forked,
+    hold its run lock as long as they live, also after their launcher ended; seen as the next test's `run` refused)."""
+    claims = len(launch_domains._claimed_domains)
+    domain = next_domain_id()
+    run = subprocess.Popen(
+        [sys.executable, "-c", RUN_STILL_ON, str(domain)], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert run.stdout.readline() == "on\n"
+        launch_domains.release_domains(keep=claims)
+        assert launch_domains.claim_domain(DOMAIN_IDS.index(domain)) != domain  # kept: the run is on it
+    finally:
+        run.communicate(timeout=WAIT)
+    launch_domains.release_domains(keep=claims)
+    assert launch_domains.claim_domain(DOMAIN_IDS.index(domain)) == domain  # the run has left: free
+
+
 # A domain no process holds but a run with --domain-id is on (here this process), then the run lock of a run without
 # --domain-id whose random choice starts there
 RUN_ON_A_DOMAIN = """

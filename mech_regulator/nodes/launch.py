@@ -52,6 +52,7 @@ DOMAIN_IDS = (*range(1, 102), *range(215, 233))
 DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "mech_regulator_ros_domains"
 _claimed_domains: list = []  # the open lock files of this process (closed, and so released, when it ends)
 _claimed_runs: dict[int, TextIO] = {}  # domain -> the open run lock file of this process on it
+_lingering_domains: list = []  # domains release_domains kept because a run was still on them (tried at its next call)
 
 
 def _lock(path: Path) -> TextIO | None:
@@ -84,13 +85,23 @@ def claim_domain(start: int) -> int:
 
 
 def release_domains(keep: int = 0) -> None:
-    """Release the domains this process claimed (claim_domain) after its first `keep` claims: their lock files closed,
-    the newest first. For a process that plays many runs one after another, each on a domain of its own (the test
-    suite: a worker holding every domain it ever used took half of them, and two suites side by side all), so that a
-    domain is held only while it is used. A child process started with a lock's descriptor (domain_lock_descriptor)
-    holds that domain until it ends."""
-    while len(_claimed_domains) > keep:
-        _claimed_domains.pop().close()
+    """Release the domains this process claimed (claim_domain) after its first `keep` claims: their lock files closed.
+    For a process that plays many runs one after another, each on a domain of its own (the test suite: a worker
+    holding every domain it ever used took half of them, and two suites side by side all), so that a domain is held
+    only while it is used. A domain a run is still on (its run lock held: claim_run; a run's node processes, forked,
+    hold it as long as they live, also after their launcher ended) stays held, and is tried again at the next call. A
+    child process started with a lock's descriptor (domain_lock_descriptor) holds that domain until it ends."""
+    candidates = _lingering_domains + _claimed_domains[keep:]
+    del _claimed_domains[keep:]
+    _lingering_domains.clear()
+    for lock in candidates:
+        domain = int(Path(lock.name).name.removesuffix(".lock"))
+        run_lock = None if domain in _claimed_runs else _lock(DOMAIN_LOCKS / f"{domain}.run.lock")
+        if run_lock is None:  # a run is still on it
+            _lingering_domains.append(lock)
+            continue
+        run_lock.close()
+        lock.close()
 
 
 def claim_run(domain: int | None) -> int:
