@@ -892,6 +892,23 @@ def test_a_released_domain_is_free_again_and_only_those_claimed_after_the_kept_o
     assert launch_domains.claim_domain(DOMAIN_IDS.index(kept)) != kept  # still held by this process
 
 
+# A node's process after its work ended normally (end_if_stuck(0)), then stuck in a C call that holds the GIL (as
+# Fast DDS's deadlock in destroying a participant): ctypes.PyDLL calls keep the GIL
+HUNG_IN_TEARDOWN = """
+import ctypes
+from mech_regulator.nodes.common import end_if_stuck
+end_if_stuck(0)
+ctypes.PyDLL(None).sleep(120)
+"""
+
+
+def test_a_node_hung_in_its_teardown_holding_the_gil_is_ended_by_its_alarm():
+    """The watchdog thread of end_if_stuck cannot run while a C call holds the GIL; SIGALRM ends the process (the
+    launcher reads that exit as launch.TEARDOWN_HANG, a teardown hang after finished work, not a failure)."""
+    hung = subprocess.run([sys.executable, "-c", HUNG_IN_TEARDOWN], capture_output=True, text=True, timeout=WAIT)
+    assert hung.returncode == launch_domains.TEARDOWN_HANG == -signal.SIGALRM, hung
+
+
 # A run's process on a domain (its run lock held), until its stdin closes
 RUN_STILL_ON = """
 import sys

@@ -63,6 +63,7 @@ BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most befo
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
 DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the process ends anyway (end_if_stuck)
+TEARDOWN_ALARM = 5  # [s] of wall time after which SIGALRM ends a node whose destruction hangs holding the GIL
 MATCH_WAIT = 1.0  # [s] of wall time a publisher waits at most to match what the graph lists (deliver_all)
 MATCH_POLL = 0.01  # [s] between two looks at whether a publisher has matched the subscriptions the graph knows
 N = TypeVar("N", bound=Node)  # the kind of node `run` builds and hands to its work
@@ -621,7 +622,10 @@ def end_if_stuck(code: int) -> None:
     """End the process with `code` (os._exit) should destroying its node and rclpy's context take longer than
     DESTROY_WAIT s: Fast DDS can deadlock when a participant is destroyed while it handles another's leaving
     (eProsima/Fast-DDS#6193 and kin; seen as a node that never ended after its run), and by then everything the node
-    owes is sent and acknowledged, and its files closed."""
+    owes is sent and acknowledged, and its files closed. A hang inside a call that holds the GIL (seen as a recorder
+    that had written its summary still there 30 s later, killed by the launcher) stops that watchdog too: after a
+    node's work ended normally (code 0), SIGALRM, unhandled, ends the process after TEARDOWN_ALARM s whatever it is
+    in, and the launcher reads that signal as a teardown hang after a finished node (launch.TEARDOWN_HANG)."""
 
     def end() -> None:
         sys.stdout.flush()
@@ -631,3 +635,5 @@ def end_if_stuck(code: int) -> None:
     watchdog = threading.Timer(DESTROY_WAIT, end)
     watchdog.daemon = True
     watchdog.start()
+    if code == 0:
+        signal.alarm(TEARDOWN_ALARM)

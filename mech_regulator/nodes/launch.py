@@ -44,6 +44,10 @@ GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
 NOTHING_SIMULATED = "interrupted before the nodes were up: nothing was simulated"
+# A node's exit by SIGALRM: its work had ended normally (exit code 0, everything sent and acknowledged, its files
+# closed), then destroying its ROS participant hung inside a call that holds the GIL and its alarm ended it
+# (nodes.common.end_if_stuck): not a failure of the run.
+TEARDOWN_HANG = -signal.SIGALRM
 # ROS domains whose ports do not collide with the ephemeral range: 1..101 and 215..232. A process takes one by holding
 # a lock file on it until it ends (claim_domain): `run` without --domain-id, and the test suite for each test. Every
 # `run` also holds its domain's run lock (claim_run), which only runs take: a test holds the domain lock of the domain
@@ -340,7 +344,16 @@ def main_job(
             _wait_all(processes, STOP_TIMEOUT)
     summary_path = output.with_suffix(".json")
     disturbed = False  # the summary says something the run could not refuse may have changed its numbers
-    failed = [name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT)]
+    failed = [
+        name for name, process in processes.items() if process.returncode not in (0, -signal.SIGINT, TEARDOWN_HANG)
+    ]
+    hung = [name for name, process in processes.items() if process.returncode == TEARDOWN_HANG]
+    if hung:
+        print(
+            f"mech-regulator: the {', '.join(hung)} node{'s' if len(hung) > 1 else ''} finished {'their' if len(hung) > 1 else 'its'} work, "
+            'then hung in ROS\'s teardown (a Fast DDS deadlock; docs/ros.md, "Ending a run") and ended by its alarm',
+            file=sys.stderr,
+        )
     if interrupted and not summary_path.exists():  # stopped before the recorder could write anything
         from mech_regulator.nodes.outputs import write_empty_run
 
