@@ -474,17 +474,23 @@ def test_cache_folder_that_cannot_be_made(tmp_path, monkeypatch):
         compile_scene(model)
 
 
+def scene_cache_folder(compiled) -> str:
+    """Where numba keeps the compiled scene's cache: the module's `__pycache__`, or a folder under NUMBA_CACHE_DIR
+    when that is set (numba's own locator, read off the dispatcher)."""
+    return compiled.rhs._cache.cache_path
+
+
 def scene_cache_files(compiled) -> set[str]:
     """The files of numba's cache for a compiled scene module (its stem's): other processes (another test worker,
     another checkout's tests) add their own modules' files to the same folder meanwhile."""
-    return {name for name in os.listdir(compiled.path.parent / "__pycache__") if name.startswith(compiled.path.stem)}
+    return {name for name in os.listdir(scene_cache_folder(compiled)) if name.startswith(compiled.path.stem)}
 
 
 def test_a_fresh_process_loads_the_compiled_scene_from_numba_s_cache():
     model = model_of(bundled("startup"))
     compiled = compile_scene(model)
     files = scene_cache_files(compiled)
-    assert files, sorted(os.listdir(compiled.path.parent / "__pycache__"))
+    assert files, sorted(os.listdir(scene_cache_folder(compiled)))
     script = (
         "import json\nfrom mech_regulator.model import build_model\nfrom mech_regulator.scene import load_scene\n"
         "from mech_regulator.solvers.compiled.codegen import compile_scene\n"
