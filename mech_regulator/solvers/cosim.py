@@ -34,7 +34,9 @@ sees the other over a step, the coupling:
   (MachineStepper.predict_ahead): while the governor answers at t_k, it predicts [t_k+1, t_k+2] from the end of its
   prediction of [t_k, t_k+1] moved by how far the state at t_k now differs from where that prediction started, so
   that between its corrector and its next message there is no predictor to wait for (in the nodes the two run in
-  parallel; a step whose load changed is predicted again from its start).
+  parallel; a step whose load changed is predicted again from its start). The governor's two passes at t_k, the
+  one for good over [t_k-1, t_k] and the tentative one over [t_k, t_k+1], follow one sequence of speed pieces in the
+  same compiled calls (GovernorStepper._follow_then_try; the same numbers as two calls).
 - a governor whose throttle the crank speed moves directly (the PI law's proportional part, K_p (omega_s - omega) /
   omega_s: GovernorKind.throttle_command) would hand the predictor's miss of the firing ripple straight to the
   corrector's throttle; it answers instead its tentative command before the stops, in pieces of at most
@@ -466,20 +468,40 @@ class GovernorStepper:
                 self.regulator, None, self.time, t_end, self.state, self.mode, stretch, None
             )
         else:
-            times, speeds = samples
-            pieces = [
-                (
-                    speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
-                    times[index],
-                    times[index + 2],
-                    speeds[index],
-                )
-                for index in range(0, len(times) - 2, 2)
-            ]
-            self.state, self.mode = self._follow_pieces(self.regulator, pieces, self.state, self.mode, stretch)
+            self.state, self.mode, _ = self._follow_pieces(
+                self.regulator, speed_pieces(samples), self.state, self.mode, stretch
+            )
         self.time = stretch.t_end
-        self.events += [(t, name, _governor_mode(mode)) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
+        self._note(stretch, len(stretch.events))
+        return stretch
+
+    def _note(self, stretch: Trajectory, events: int) -> None:
+        """Take a stretch's first `events` mode changes into `events`, its statistics into the totals and its status."""
+        self.events += [
+            (t, name, _governor_mode(mode)) for (t, name), (_, mode) in zip(stretch.events[:events], stretch.modes)
+        ]
         self.status, self.message = _accumulate(self.stats, stretch)
+
+    def _follow_then_try(self, corrected: Samples, predicted: Samples) -> Trajectory | None:
+        """The governor's two passes of a corrected exchange in the same compiled calls: from now for good along the
+        corrected speed samples to their end, where the predicted ones start, and on from there tentatively along the
+        predicted samples; leaves the state, mode, time, events and statistics as `follow` along the corrected samples
+        would (but for the speed, which answer_corrected sets) and returns the stretch over both, its part after the
+        corrected samples' end the one `follow` along the predicted samples from there gives (the same numbers: the
+        stepper starts each piece as a new call would, solvers/compiled/run.py). None when the pass for good did not
+        reach the end of its samples or no step of the tentative pass was taken in the call that went on into it:
+        then nothing is changed."""
+        split = len(corrected[0]) // 2
+        stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
+        _, _, at_split = self._follow_pieces(
+            self.regulator, speed_pieces(corrected) + speed_pieces(predicted), self.state, self.mode, stretch, split
+        )
+        if at_split is None:
+            return None
+        self.state, self.mode, events = at_split
+        self.time = corrected[0][-1]
+        self._note(stretch, events)
+        self.status, self.message = "complete", ""  # the tentative pass's end is not the governor's
         return stretch
 
     def answer_corrected(
@@ -495,6 +517,7 @@ class GovernorStepper:
         direct action on the throttle (SpeedAction, which the machine's corrector applies: MachineStepper.correct)
         when the governor's law has one at `time` (GovernorKind.throttle_command), the tentative samples then its
         command before the stops; else None and the throttle in 0..1."""
+        stretch = None  # the tentative pass's (with the pass for good before it when both were made in one)
         if time > self.time:
             following = (
                 corrected is not None
@@ -502,19 +525,23 @@ class GovernorStepper:
                 and corrected[0][0] == self.time
                 and corrected[0][-1] == time
             )
-            self.follow(time, corrected if following else None)
+            if following and corrected is not None and predicted is not None and len(predicted[0]) >= 3:
+                stretch = self._follow_then_try(corrected, predicted) if predicted[0][0] == time else None
+            if stretch is None:
+                self.follow(time, corrected if following else None)
         self.state = self.state.copy()
         self.state[1] = omega
         throttle = self.throttle
         if predicted is None or len(predicted[0]) < 3 or predicted[0][0] != self.time:
             return throttle, None, None
-        before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
-        stretch = self.follow(predicted[0][-1], predicted)
-        (self.state, self.mode, self.time, events, self.status, self.message) = before
-        del self.events[events:]
+        if stretch is None:
+            before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
+            stretch = self.follow(predicted[0][-1], predicted)
+            (self.state, self.mode, self.time, events, self.status, self.message) = before
+            del self.events[events:]
         if stretch.status != "complete":
             return throttle, None, None
-        start, end = stretch.t_start, stretch.t_end
+        start, end = self.time, stretch.t_end
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
         action = SpeedAction(*self.governor.throttle_command(self.state)) if self.governor.speed_action else None
         if action is not None and action.per_speed == 0.0:
@@ -646,6 +673,21 @@ def speed_waveform(
     return LoadPiece(t_start, t_end, -a + 2.0 * b * t_start, -2.0 * b)
 
 
+def speed_pieces(samples: Samples) -> list:
+    """The governor subsystem's pieces along the machine's speed samples (times [s], omega [rad/s]; an odd number):
+    (speed_waveform, t_start [s], t_end [s], omega at the start [rad/s]) for each three samples, follow_pieces'."""
+    times, speeds = samples
+    return [
+        (
+            speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
+            times[index],
+            times[index + 2],
+            speeds[index],
+        )
+        for index in range(0, len(times) - 2, 2)
+    ]
+
+
 def throttle_extrapolation(answers: list[tuple[float, float]]) -> tuple[float, float, float]:
     """The throttle over the next step from the governor's last answers (time [s], throttle [-]), oldest first:
     (u, slope [1/s], curvature [1/s^2]) of the quadratic through the last three (Newton's form, taken at the last
@@ -760,17 +802,24 @@ def pieces_for(subsystem: MachineModel):
     return compiled_pieces(subsystem)
 
 
-def follow_pieces(segment, subsystem: MachineModel, pieces: list, y: np.ndarray, mode, trajectory: Trajectory):
+def follow_pieces(
+    segment, subsystem: MachineModel, pieces: list, y: np.ndarray, mode, trajectory: Trajectory, split: int = -1
+):
     """Step a subsystem over pieces (LoadPiece, t_start [s], t_end [s], the crank's speed at its start [rad/s]) one
     after the other with segment (time_domain._segment's arguments and result), each from the state so far with
-    y[1] set to its start speed, until one fails; returns the state and mode at the end."""
-    for piece, t_start, t_end, omega in pieces:
+    y[1] set to its start speed, until one fails; returns the state and mode at the end and, given split (an index),
+    how pieces[split] started: (the state there, its speed set, the mode before it, the trajectory's events so far),
+    None when the run did not get there."""
+    at_split = None
+    for index, (piece, t_start, t_end, omega) in enumerate(pieces):
         y = y.copy()
         y[1] = omega
+        if index == split:
+            at_split = (y.copy(), mode, len(trajectory.events))
         y, mode = segment(subsystem, piece, t_start, t_end, y, mode, trajectory, None)
         if trajectory.status != "complete":
             break
-    return y, mode
+    return y, mode, at_split
 
 
 def _governor_mode(mode: tuple[str, ...]) -> Mode:
