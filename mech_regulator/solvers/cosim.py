@@ -491,17 +491,17 @@ class GovernorStepper:
         stepper starts each piece as a new call would, solvers/compiled/run.py). None when the pass for good did not
         reach the end of its samples or no step of the tentative pass was taken in the call that went on into it:
         then nothing is changed."""
-        split = len(corrected[0]) // 2
+        for_good = speed_pieces(corrected)
         stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
         _, _, at_split = self._follow_pieces(
-            self.regulator, speed_pieces(corrected) + speed_pieces(predicted), self.state, self.mode, stretch, split
+            self.regulator, for_good + speed_pieces(predicted), self.state, self.mode, stretch, len(for_good)
         )
         if at_split is None:
             return None
         self.state, self.mode, events = at_split
         self.time = corrected[0][-1]
         self._note(stretch, events)
-        self.status, self.message = "complete", ""  # the tentative pass's end is not the governor's
+        self.status, self.message = "complete", ""  # the pass for good's: it reached its end
         return stretch
 
     def answer_corrected(
@@ -510,7 +510,8 @@ class GovernorStepper:
         """The corrected coupling's answer to the crank speed omega [rad/s] at `time` [s]: integrate the step that
         ends there for good following the machine's corrected speed samples over it (times [s], omega [rad/s]; with the
         previous speed held when they do not span it: a missed exchange, realtime), hold omega from here on, then
-        integrate the next step tentatively following the machine's predicted samples, and go back. Returns the
+        integrate the next step tentatively following the machine's predicted samples, and go back (the two passes in
+        the same compiled calls where they can be: _follow_then_try). Returns the
         throttle [-] at `time`, the tentative throttle over the next step: samples (times [s], throttle [-]) at
         the middle and the end of each piece, the step split at every mode change inside it (a kink: a stop reached
         or left, the sleeve sticking or slipping); None without predicted samples (the run's end), and the speed's
