@@ -154,6 +154,11 @@ class MachineStepper:
         self._prediction: Prediction | None = None  # the predictor's latest step (corrected coupling)
         self._load_line = (model.external_load(0.0), 0.0)  # the last step's load [N m] at its start and rate [N m/s]
         self._load_line_time = 0.0  # [s] that step's start
+        cycles = not acts and (model.reduced is not None or "phi" in model.depends_on())  # a speed periodic in phi
+        self._cycle = model.dynamic_period() if cycles else None  # [rad] the prediction's cycle (None: integrated)
+        self._history: list[Samples] = []  # the corrected speed samples of the last steps, consecutive, oldest first
+        self._history_starts: list[float] = []  # [s] their starts
+        self._history_ends: list[tuple[float, float]] = []  # their ends: (time [s], the crank angle phi [rad])
 
     def applied_throttle(self, throttle: float) -> float:
         """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
@@ -243,6 +248,10 @@ class MachineStepper:
         scenario's last answer), the step integrated now from the state now (_predicted_step, with the governor's tentative throttle
         for now, throttle_end [-])."""
         self._step_end = t_end
+        cycle_back = self._cycle_back(t_end)
+        if cycle_back is not None:
+            self._prediction, self._predicted = None, cycle_back
+            return cycle_back
         prediction = self._prediction
         load, load_rate = self._continued_load(self.time)
         if (
@@ -275,6 +284,44 @@ class MachineStepper:
             current.end + (self.state - current.start), current.end_mode, current.t_end, t_end, throttle_end
         )
         self._prediction = prediction if prediction.status == "complete" else None
+
+    def _cycle_back(self, t_end: float) -> Samples | None:
+        """The prediction of the step from now to t_end [s] one cycle of the crank back, for a machine whose speed is
+        periodic in phi and whose throttle the speed does not move directly: omega_p(t) = omega + omega_c(t - T) -
+        omega_c(now - T) at the times speed_samples takes, omega [rad/s] the speed now, omega_c the corrected speed of
+        the steps kept (the quadratic through three samples on each piece), T [s] the time since the crank angle was
+        phi - the dynamic period (interpolated between the kept steps' ends). None where the kept steps do not reach
+        back that far (the run's start), T is shorter than the step or the crank has not turned forwards all along
+        (docs/speed.md, "A fifth sitting")."""
+        omega = float(self.state[1])
+        if self._cycle is None or omega <= 0.0 or len(self._history_ends) < 2 or self._history_ends[-1][0] != self.time:
+            return None
+        ends, angles = zip(*self._history_ends)
+        target = float(self.state[0]) - self._cycle  # [rad]
+        if angles[0] > target or any(later <= earlier for earlier, later in zip(angles[:-1], angles[1:])):
+            return None
+        back = self.time - float(np.interp(target, angles, ends))  # [s] T
+        if self.time - back < self._history_starts[0] or t_end - back > self.time:
+            return None
+        times = speed_samples_times(self.time, t_end, self._prediction_piece)
+        values = []
+        for time in [self.time] + times:
+            before = time - back
+            step = min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1)
+            values.append(piecewise_quadratic_at(self._history[step], [before])[0])
+        return times, [omega + value - values[0] for value in values[1:]]
+
+    def _keep(self, samples: Samples) -> Samples:
+        """Keep a corrected step's speed samples, and the crank angle at its end (now), for _cycle_back (the last
+        CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them anew); returns
+        them."""
+        if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
+            if self._history_ends and self._history_ends[-1][0] != samples[0][0]:
+                self._history, self._history_starts, self._history_ends = [], [], []
+            self._history = self._history[1 - CYCLE_HISTORY :] + [samples]
+            self._history_starts = self._history_starts[1 - CYCLE_HISTORY :] + [samples[0][0]]
+            self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [(self.time, float(self.state[0]))]
+        return samples
 
     def _continued_load(self, time: float) -> tuple[float, float]:
         """The last step's load continued to `time` [s]: (its value then [N m], its rate [N m/s])."""
@@ -337,7 +384,9 @@ class MachineStepper:
         self._remember_answer(t_start, throttle, waveform, action, per_speed)
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
-            return speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
+            return self._keep(
+                speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
+            )
         stretches, value = [], throttle  # the answer, within the stops; with the speed's action the command
         if per_speed != 0.0 and action is not None:
             value = action.command
@@ -356,7 +405,7 @@ class MachineStepper:
             value = end_value
             if self.status != "complete":
                 break
-        return speed_samples(stretches, t_start, t_end)
+        return self._keep(speed_samples(stretches, t_start, t_end))
 
     def _remember_answer(
         self, t_start: float, throttle: float, waveform: Samples | None, action: SpeedAction | None, per_speed: float
@@ -616,6 +665,8 @@ MAX_THROTTLE_PIECE = 5e-3  # [s]: a tentative command with the speed's action (S
 # this, the machine's predicted speed in pieces of half of it: the PI governor's integral part integrates the firing
 # ripple, which one quadratic per step misses (engine_pi over 0.3 s at 20 ms: 0.012 rad/s off with one piece,
 # 2.9e-4 with these; docs/ros.md, "The throttle's sensitivity to the speed")
+CYCLE_HISTORY = 64  # the corrected steps the machine keeps for its prediction one cycle of the crank back
+# (MachineStepper._cycle_back): 80 ms at the adaptive step's smallest of 1.25 ms, more than the bundled engines' cycle
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
 ADAPTIVE_HALVINGS = 4  # the adaptive exchange step's smallest: the exchange step / 2^this
 ADAPTIVE_DOUBLINGS = 2  # and its largest: the exchange step * 2^this
@@ -638,7 +689,7 @@ def speed_samples(
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
     ends included, m the fewest pieces no longer than `longest` [s]."""
-    times = np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
+    times = np.array(speed_samples_times(t_start, t_end, longest))
     if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
         return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
@@ -647,6 +698,12 @@ def speed_samples(
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
     return times.tolist(), speeds.tolist()
+
+
+def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> list[float]:
+    """The times [s] at which speed_samples samples [t_start, t_end] [s]: 2 m + 1 evenly spaced, both ends included, m
+    the fewest pieces no longer than `longest` [s]."""
+    return np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1).tolist()
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
