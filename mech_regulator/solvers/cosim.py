@@ -34,7 +34,10 @@ sees the other over a step, the coupling:
   (MachineStepper.predict_ahead): while the governor answers at t_k, it predicts [t_k+1, t_k+2] from the end of its
   prediction of [t_k, t_k+1] moved by how far the state at t_k now differs from where that prediction started, so
   that between its corrector and its next message there is no predictor to wait for (in the nodes the two run in
-  parallel; a step whose load changed is predicted again from its start). The governor's two passes at t_k, the
+  parallel; a step whose load changed is predicted again from its start). A machine whose speed is periodic in its
+  crank angle (an engine's firing cycle) and whose throttle the speed does not move directly predicts without
+  integrating once it has run a cycle: its corrected speed one cycle of the crank back, moved to the speed now
+  (MachineStepper._cycle_back; docs/speed.md, "A fifth sitting"). The governor's two passes at t_k, the
   one for good over [t_k-1, t_k] and the tentative one over [t_k, t_k+1], follow one sequence of speed pieces in the
   same compiled calls (GovernorStepper._follow_then_try; the same numbers as two calls).
 - a governor whose throttle the crank speed moves directly (the PI law's proportional part, K_p (omega_s - omega) /
