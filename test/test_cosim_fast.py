@@ -15,6 +15,7 @@ from test_compiled_path import shortened
 from mech_regulator.governors.mechanical import SLEEVE_CODE
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import simulate
+from mech_regulator.solvers.compiled import run as compiled_run
 from mech_regulator.solvers.compiled.codegen import compile_scene
 from mech_regulator.solvers.cosim import GovernorStepper, MachineStepper, cosimulate, seconds, to_nanoseconds
 
@@ -218,3 +219,50 @@ def test_cli_co_simulation_on_the_fast_path(capsys):
     )
     assert code == 0 and "does not run solver.method: 'Radau'" in err and "uses the reference path" in err, err
     assert json.loads(out)["status"] == "complete"
+
+
+@pytest.mark.parametrize(
+    "data, path",
+    [
+        (CASES["engine_direct"], "fast"),
+        (CASES["engine_direct"], "reference"),
+        (CASES["engine_indirect_none"], "fast"),
+        (shortened("engine_pi", 0.3), "fast"),
+    ],
+)
+def test_the_governor_s_two_passes_in_one_call_give_the_two_calls_numbers(monkeypatch, data, path):
+    """The corrected coupling's governor steps its pass for good along the corrected speed and its tentative pass
+    along the predicted one in the same calls (GovernorStepper._follow_then_try): the co-simulation's times, states,
+    throttles, events and the governor's statistics are those of the two passes made one after the other, to the bit
+    (the sleeve and the servo reaching their stops on the engines started fast; engine_pi's command in pieces with its
+    speed action)."""
+    model = model_of(scene(data, solver__path=path))
+    merged, governors = [], []  # whether each exchange's two passes were made in one; the runs' governors
+    follow_then_try, init = GovernorStepper._follow_then_try, GovernorStepper.__init__
+
+    def noted(self, *arguments):
+        stretch = follow_then_try(self, *arguments)
+        merged.append(stretch is not None)
+        return stretch
+
+    def kept(self, *arguments):
+        init(self, *arguments)
+        governors.append(self)
+
+    monkeypatch.setattr(GovernorStepper, "__init__", kept)
+    monkeypatch.setattr(GovernorStepper, "_follow_then_try", noted)
+    calls = []  # the compiled calls (fast path)
+    step = compiled_run._step
+    monkeypatch.setattr(compiled_run, "_step", lambda *arguments: calls.append(1) or step(*arguments))
+    ours = cosimulate(model, 0.02, coupling="corrected")
+    ours_calls = len(calls)
+    monkeypatch.setattr(GovernorStepper, "_follow_then_try", lambda self, *arguments: None)
+    theirs = cosimulate(model, 0.02, coupling="corrected")
+    assert ours.status == theirs.status == "complete", (ours.message, theirs.message)
+    assert merged.count(True) >= len(ours.times) - 3  # every exchange but the first two and the last in one
+    for name in ("times", "states", "throttle", "external_load"):
+        np.testing.assert_array_equal(getattr(ours, name), getattr(theirs, name), err_msg=name)
+    assert ours.events == theirs.events and len(ours.events) >= (0 if "pi" in model.scene.name else 2), ours.events
+    assert governors[0].stats == governors[1].stats
+    if path == "fast":  # one compiled call fewer for most exchanges
+        assert ours_calls <= len(calls) - ours_calls - 0.9 * merged.count(True), (ours_calls, len(calls) - ours_calls)

@@ -34,7 +34,12 @@ sees the other over a step, the coupling:
   (MachineStepper.predict_ahead): while the governor answers at t_k, it predicts [t_k+1, t_k+2] from the end of its
   prediction of [t_k, t_k+1] moved by how far the state at t_k now differs from where that prediction started, so
   that between its corrector and its next message there is no predictor to wait for (in the nodes the two run in
-  parallel; a step whose load changed is predicted again from its start).
+  parallel; a step whose load changed is predicted again from its start). A machine whose speed is periodic in its
+  crank angle (an engine's firing cycle) and whose throttle the speed does not move directly predicts without
+  integrating once it has run a cycle: its corrected speed one cycle of the crank back, moved to the speed now
+  (MachineStepper._cycle_back; docs/speed.md, "A fifth sitting"). The governor's two passes at t_k, the
+  one for good over [t_k-1, t_k] and the tentative one over [t_k, t_k+1], follow one sequence of speed pieces in the
+  same compiled calls (GovernorStepper._follow_then_try; the same numbers as two calls).
 - a governor whose throttle the crank speed moves directly (the PI law's proportional part, K_p (omega_s - omega) /
   omega_s: GovernorKind.throttle_command) would hand the predictor's miss of the firing ripple straight to the
   corrector's throttle; it answers instead its tentative command before the stops, in pieces of at most
@@ -152,6 +157,11 @@ class MachineStepper:
         self._prediction: Prediction | None = None  # the predictor's latest step (corrected coupling)
         self._load_line = (model.external_load(0.0), 0.0)  # the last step's load [N m] at its start and rate [N m/s]
         self._load_line_time = 0.0  # [s] that step's start
+        cycles = not acts and (model.reduced is not None or "phi" in model.depends_on())  # a speed periodic in phi
+        self._cycle = model.dynamic_period() if cycles else None  # [rad] the prediction's cycle (None: integrated)
+        self._history: list[Samples] = []  # the corrected speed samples of the last steps, consecutive, oldest first
+        self._history_starts: list[float] = []  # [s] their starts
+        self._history_ends: list[tuple[float, float]] = []  # their ends: (time [s], the crank angle phi [rad])
 
     def applied_throttle(self, throttle: float) -> float:
         """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
@@ -241,6 +251,10 @@ class MachineStepper:
         scenario's last answer), the step integrated now from the state now (_predicted_step, with the governor's tentative throttle
         for now, throttle_end [-])."""
         self._step_end = t_end
+        cycle_back = self._cycle_back(t_end)
+        if cycle_back is not None:
+            self._prediction, self._predicted = None, cycle_back
+            return cycle_back
         prediction = self._prediction
         load, load_rate = self._continued_load(self.time)
         if (
@@ -273,6 +287,44 @@ class MachineStepper:
             current.end + (self.state - current.start), current.end_mode, current.t_end, t_end, throttle_end
         )
         self._prediction = prediction if prediction.status == "complete" else None
+
+    def _cycle_back(self, t_end: float) -> Samples | None:
+        """The prediction of the step from now to t_end [s] one cycle of the crank back, for a machine whose speed is
+        periodic in phi and whose throttle the speed does not move directly: omega_p(t) = omega + omega_c(t - T) -
+        omega_c(now - T) at the times speed_samples takes, omega [rad/s] the speed now, omega_c the corrected speed of
+        the steps kept (the quadratic through three samples on each piece), T [s] the time since the crank angle was
+        phi - the dynamic period (interpolated between the kept steps' ends). None where the kept steps do not reach
+        back that far (the run's start), T is shorter than the step or the crank has not turned forwards all along
+        (docs/speed.md, "A fifth sitting")."""
+        omega = float(self.state[1])
+        if self._cycle is None or omega <= 0.0 or len(self._history_ends) < 2 or self._history_ends[-1][0] != self.time:
+            return None
+        ends, angles = zip(*self._history_ends)
+        target = float(self.state[0]) - self._cycle  # [rad]
+        if angles[0] > target or any(later <= earlier for earlier, later in zip(angles[:-1], angles[1:])):
+            return None
+        back = self.time - float(np.interp(target, angles, ends))  # [s] T
+        if self.time - back < self._history_starts[0] or t_end - back > self.time:
+            return None
+        times = speed_samples_times(self.time, t_end, self._prediction_piece)
+        values = []
+        for time in [self.time] + times:
+            before = time - back
+            step = min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1)
+            values.append(piecewise_quadratic_at(self._history[step], [before])[0])
+        return times, [omega + value - values[0] for value in values[1:]]
+
+    def _keep(self, samples: Samples) -> Samples:
+        """Keep a corrected step's speed samples, and the crank angle at its end (now), for _cycle_back (the last
+        CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them anew); returns
+        them."""
+        if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
+            if self._history_ends and self._history_ends[-1][0] != samples[0][0]:
+                self._history, self._history_starts, self._history_ends = [], [], []
+            self._history = self._history[1 - CYCLE_HISTORY :] + [samples]
+            self._history_starts = self._history_starts[1 - CYCLE_HISTORY :] + [samples[0][0]]
+            self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [(self.time, float(self.state[0]))]
+        return samples
 
     def _continued_load(self, time: float) -> tuple[float, float]:
         """The last step's load continued to `time` [s]: (its value then [N m], its rate [N m/s])."""
@@ -335,7 +387,9 @@ class MachineStepper:
         self._remember_answer(t_start, throttle, waveform, action, per_speed)
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
-            return speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
+            return self._keep(
+                speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
+            )
         stretches, value = [], throttle  # the answer, within the stops; with the speed's action the command
         if per_speed != 0.0 and action is not None:
             value = action.command
@@ -354,7 +408,7 @@ class MachineStepper:
             value = end_value
             if self.status != "complete":
                 break
-        return speed_samples(stretches, t_start, t_end)
+        return self._keep(speed_samples(stretches, t_start, t_end))
 
     def _remember_answer(
         self, t_start: float, throttle: float, waveform: Samples | None, action: SpeedAction | None, per_speed: float
@@ -466,20 +520,40 @@ class GovernorStepper:
                 self.regulator, None, self.time, t_end, self.state, self.mode, stretch, None
             )
         else:
-            times, speeds = samples
-            pieces = [
-                (
-                    speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
-                    times[index],
-                    times[index + 2],
-                    speeds[index],
-                )
-                for index in range(0, len(times) - 2, 2)
-            ]
-            self.state, self.mode = self._follow_pieces(self.regulator, pieces, self.state, self.mode, stretch)
+            self.state, self.mode, _ = self._follow_pieces(
+                self.regulator, speed_pieces(samples), self.state, self.mode, stretch
+            )
         self.time = stretch.t_end
-        self.events += [(t, name, _governor_mode(mode)) for (t, name), (_, mode) in zip(stretch.events, stretch.modes)]
+        self._note(stretch, len(stretch.events))
+        return stretch
+
+    def _note(self, stretch: Trajectory, events: int) -> None:
+        """Take a stretch's first `events` mode changes into `events`, its statistics into the totals and its status."""
+        self.events += [
+            (t, name, _governor_mode(mode)) for (t, name), (_, mode) in zip(stretch.events[:events], stretch.modes)
+        ]
         self.status, self.message = _accumulate(self.stats, stretch)
+
+    def _follow_then_try(self, corrected: Samples, predicted: Samples) -> Trajectory | None:
+        """The governor's two passes of a corrected exchange in the same compiled calls: from now for good along the
+        corrected speed samples to their end, where the predicted ones start, and on from there tentatively along the
+        predicted samples; leaves the state, mode, time, events and statistics as `follow` along the corrected samples
+        would (but for the speed, which answer_corrected sets) and returns the stretch over both, its part after the
+        corrected samples' end the one `follow` along the predicted samples from there gives (the same numbers: the
+        stepper starts each piece as a new call would, solvers/compiled/run.py). None when the pass for good did not
+        reach the end of its samples or no step of the tentative pass was taken in the call that went on into it:
+        then nothing is changed."""
+        for_good = speed_pieces(corrected)
+        stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
+        _, _, at_split = self._follow_pieces(
+            self.regulator, for_good + speed_pieces(predicted), self.state, self.mode, stretch, len(for_good)
+        )
+        if at_split is None:
+            return None
+        self.state, self.mode, events = at_split
+        self.time = corrected[0][-1]
+        self._note(stretch, events)
+        self.status, self.message = "complete", ""  # the pass for good's: it reached its end
         return stretch
 
     def answer_corrected(
@@ -488,13 +562,15 @@ class GovernorStepper:
         """The corrected coupling's answer to the crank speed omega [rad/s] at `time` [s]: integrate the step that
         ends there for good following the machine's corrected speed samples over it (times [s], omega [rad/s]; with the
         previous speed held when they do not span it: a missed exchange, realtime), hold omega from here on, then
-        integrate the next step tentatively following the machine's predicted samples, and go back. Returns the
+        integrate the next step tentatively following the machine's predicted samples, and go back (the two passes in
+        the same compiled calls where they can be: _follow_then_try). Returns the
         throttle [-] at `time`, the tentative throttle over the next step: samples (times [s], throttle [-]) at
         the middle and the end of each piece, the step split at every mode change inside it (a kink: a stop reached
         or left, the sleeve sticking or slipping); None without predicted samples (the run's end), and the speed's
         direct action on the throttle (SpeedAction, which the machine's corrector applies: MachineStepper.correct)
         when the governor's law has one at `time` (GovernorKind.throttle_command), the tentative samples then its
         command before the stops; else None and the throttle in 0..1."""
+        stretch = None  # the tentative pass's (with the pass for good before it when both were made in one)
         if time > self.time:
             following = (
                 corrected is not None
@@ -502,19 +578,23 @@ class GovernorStepper:
                 and corrected[0][0] == self.time
                 and corrected[0][-1] == time
             )
-            self.follow(time, corrected if following else None)
+            if following and corrected is not None and predicted is not None and len(predicted[0]) >= 3:
+                stretch = self._follow_then_try(corrected, predicted) if predicted[0][0] == time else None
+            if stretch is None:
+                self.follow(time, corrected if following else None)
         self.state = self.state.copy()
         self.state[1] = omega
         throttle = self.throttle
         if predicted is None or len(predicted[0]) < 3 or predicted[0][0] != self.time:
             return throttle, None, None
-        before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
-        stretch = self.follow(predicted[0][-1], predicted)
-        (self.state, self.mode, self.time, events, self.status, self.message) = before
-        del self.events[events:]
+        if stretch is None:
+            before = (self.state.copy(), self.mode, self.time, len(self.events), self.status, self.message)
+            stretch = self.follow(predicted[0][-1], predicted)
+            (self.state, self.mode, self.time, events, self.status, self.message) = before
+            del self.events[events:]
         if stretch.status != "complete":
             return throttle, None, None
-        start, end = stretch.t_start, stretch.t_end
+        start, end = self.time, stretch.t_end
         edges = [start] + sorted({t for t, _ in stretch.events if start + MIN_PIECE < t < end - MIN_PIECE}) + [end]
         action = SpeedAction(*self.governor.throttle_command(self.state)) if self.governor.speed_action else None
         if action is not None and action.per_speed == 0.0:
@@ -588,6 +668,8 @@ MAX_THROTTLE_PIECE = 5e-3  # [s]: a tentative command with the speed's action (S
 # this, the machine's predicted speed in pieces of half of it: the PI governor's integral part integrates the firing
 # ripple, which one quadratic per step misses (engine_pi over 0.3 s at 20 ms: 0.012 rad/s off with one piece,
 # 2.9e-4 with these; docs/ros.md, "The throttle's sensitivity to the speed")
+CYCLE_HISTORY = 64  # the corrected steps the machine keeps for its prediction one cycle of the crank back
+# (MachineStepper._cycle_back): 80 ms at the adaptive step's smallest of 1.25 ms, more than the bundled engines' cycle
 MIN_PIECE = 1e-9  # [s]: a governor event closer than this to a step's end does not split its throttle waveform
 ADAPTIVE_HALVINGS = 4  # the adaptive exchange step's smallest: the exchange step / 2^this
 ADAPTIVE_DOUBLINGS = 2  # and its largest: the exchange step * 2^this
@@ -610,7 +692,7 @@ def speed_samples(
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
     ends included, m the fewest pieces no longer than `longest` [s]."""
-    times = np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
+    times = np.array(speed_samples_times(t_start, t_end, longest))
     if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
         return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
@@ -619,6 +701,12 @@ def speed_samples(
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
     return times.tolist(), speeds.tolist()
+
+
+def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> list[float]:
+    """The times [s] at which speed_samples samples [t_start, t_end] [s]: 2 m + 1 evenly spaced, both ends included, m
+    the fewest pieces no longer than `longest` [s]."""
+    return np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1).tolist()
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
@@ -644,6 +732,21 @@ def speed_waveform(
     offset a' and slope [N m/s] as LoadPiece's value(t) = offset + slope t."""
     a, b = quadratic_through(t_end - t_start, omega_start, omega_middle, omega_end)
     return LoadPiece(t_start, t_end, -a + 2.0 * b * t_start, -2.0 * b)
+
+
+def speed_pieces(samples: Samples) -> list:
+    """The governor subsystem's pieces along the machine's speed samples (times [s], omega [rad/s]; an odd number):
+    (speed_waveform, t_start [s], t_end [s], omega at the start [rad/s]) for each three samples, follow_pieces'."""
+    times, speeds = samples
+    return [
+        (
+            speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
+            times[index],
+            times[index + 2],
+            speeds[index],
+        )
+        for index in range(0, len(times) - 2, 2)
+    ]
 
 
 def throttle_extrapolation(answers: list[tuple[float, float]]) -> tuple[float, float, float]:
@@ -760,17 +863,24 @@ def pieces_for(subsystem: MachineModel):
     return compiled_pieces(subsystem)
 
 
-def follow_pieces(segment, subsystem: MachineModel, pieces: list, y: np.ndarray, mode, trajectory: Trajectory):
+def follow_pieces(
+    segment, subsystem: MachineModel, pieces: list, y: np.ndarray, mode, trajectory: Trajectory, split: int = -1
+):
     """Step a subsystem over pieces (LoadPiece, t_start [s], t_end [s], the crank's speed at its start [rad/s]) one
     after the other with segment (time_domain._segment's arguments and result), each from the state so far with
-    y[1] set to its start speed, until one fails; returns the state and mode at the end."""
-    for piece, t_start, t_end, omega in pieces:
+    y[1] set to its start speed, until one fails; returns the state and mode at the end and, given split (an index),
+    how pieces[split] started: (the state there, its speed set, the mode before it, the trajectory's events so far),
+    None when the run did not get there."""
+    at_split = None
+    for index, (piece, t_start, t_end, omega) in enumerate(pieces):
         y = y.copy()
         y[1] = omega
+        if index == split:
+            at_split = (y.copy(), mode, len(trajectory.events))
         y, mode = segment(subsystem, piece, t_start, t_end, y, mode, trajectory, None)
         if trajectory.status != "complete":
             break
-    return y, mode
+    return y, mode, at_split
 
 
 def _governor_mode(mode: tuple[str, ...]) -> Mode:

@@ -217,16 +217,22 @@ def _follow_compiled(
     y: np.ndarray,
     mode,
     trajectory: Trajectory,
+    split: int = -1,
 ):
     """cosim.follow_pieces on the fast path: each piece (LoadPiece, t_start [s], t_end [s], the crank's speed at its
     start [rad/s]) stepped from the state so far with y[1] set to that speed, until one fails; returns the state and
-    mode at the end."""
-    index = 0
+    mode at the end and, given split, the start of pieces[split] (as follow_pieces)."""
+    index, at_split = 0, None
     while index < len(pieces) and trajectory.status == "complete":
         y = np.array(y, dtype=float)
         y[1] = pieces[index][3]
-        y, mode, index = _compiled_pieces(compiled, layout, model, pieces, index, y, mode, trajectory, None)
-    return y, mode
+        if index == split:
+            at_split = (y.copy(), mode, len(trajectory.events))
+        y, mode, index, inside = _compiled_pieces(
+            compiled, layout, model, pieces, index, y, mode, trajectory, None, split
+        )
+        at_split = at_split or inside
+    return y, mode, at_split
 
 
 def _compiled_pieces(
@@ -239,11 +245,14 @@ def _compiled_pieces(
     mode,
     trajectory: Trajectory,
     progress: Progress | None,
+    split: int = -1,
 ):
     """Step pieces[index] (as _follow_compiled's) from y with the compiled stepper, restarting at every event (mode
     transition applied), switch angle and wrap of the crank angle, and, where the layout allows it (pieces_inside),
     go on into the pieces after it inside the compiled calls (as _follow_compiled would start them); returns the
-    state and mode at the end and the index of the next piece to start."""
+    state and mode at the end, the index of the next piece to start and, when a call went on into pieces[split]
+    and took a step in it, that piece's start as follow_pieces gives it (its first step's start state, the call's
+    mode, the events so far), else None."""
     settings = model.scene.solver
     grid, period, wraps, atol, thresholds = layout[:5]
     wrap_limit, tables, stats = layout.wrap_limit, layout.tables, trajectory.stats
@@ -257,6 +266,7 @@ def _compiled_pieces(
         else layout.no_following
     )
     first_step = 0.0
+    at_split = None
     held: list[int] = []  # per state table its piece, counted from the carried turns (_held_pieces; none yet)
     normal_sides: tuple[float, ...] = ()  # joint friction's guides: the held signs of N,
     crossed_normal: int | None = None  # the one just crossed
@@ -317,6 +327,10 @@ def _compiled_pieces(
             restarts,
         )
         t_stop = run.t_end
+        if index < split <= index + run.pieces_done:  # went on into pieces[split]: its start is a step's start
+            first = int(np.searchsorted(run.times[: run.n_steps], pieces[split][1]))
+            if first < run.n_steps and run.times[first] == pieces[split][1]:
+                at_split = (run.y_old[first].copy(), mode, len(trajectory.events))
         if run.n_steps:
             trajectory.add_piece(t, t_stop, run.dense, step_ends=run.times[1:])
         stats.steps += int(run.n_steps)
@@ -392,7 +406,7 @@ def _compiled_pieces(
             fail_no_progress(model, trajectory, t, y_stop, what[0].format(*what[1]))
         if progress is not None:
             progress(t)
-    return y, mode, index + 1
+    return y, mode, index + 1, at_split
 
 
 def _step(
