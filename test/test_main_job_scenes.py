@@ -49,11 +49,14 @@ from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, to_nanose
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
 
 
-def in_process_csv(model, duration: float, path: Path, coupling: str = DEFAULT_COUPLING) -> bytes:
-    """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write)."""
+def in_process_csv(
+    model, duration: float, path: Path, coupling: str = DEFAULT_COUPLING, overspeed_trip: float = 0.0
+) -> bytes:
+    """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write);
+    overspeed_trip [rad/s] as `run --overspeed-trip` (0: none)."""
     scenario = model.scene.scenario.model_copy(update={"duration": duration})
     shortened = dataclasses.replace(model, scene=model.scene.model_copy(update={"scenario": scenario}))
-    run = cosimulate(shortened, model.scene.solver.exchange_step, coupling=coupling)
+    run = cosimulate(shortened, model.scene.solver.exchange_step, overspeed_trip=overspeed_trip, coupling=coupling)
     write_csv(path, shortened.columns(run.times, run.states, run.throttle, run.external_load), digits=17)
     return path.read_bytes()
 
@@ -425,19 +428,20 @@ def wait_for(condition, what: str, describe) -> None:
 def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     """A load that drives the engine backwards past its trip (9.9e4 N m from 0.1 s, trip 300 rad/s both ways): the
     machine's run fails there, and the summary says `failed` with why (not `interrupted`, as the recorder once wrote
-    over it); `run` exits 1, and the CSV keeps the exchanges up to there."""
-    result, rrd = play(
-        "engine_direct",
-        tmp_path / "run",
-        "--overspeed-trip",
-        "300",
-        "--set",
-        "scenario.load_events=[{time: 0.1, torque: 99000.0}]",
-    )
+    over it); `run` exits 1, and the CSV keeps every exchange the governor answered: the in-process co-simulation's
+    but the last, whose state (beyond the governor's speed range) the governor refuses. The recorder closes as soon
+    as the governor has ended, not after its FINISH_GRACE (10 s) for that answer (once every such run ended 10 s
+    late)."""
+    load = "scenario.load_events=[{time: 0.1, torque: 99000.0}]"
+    result, rrd = play("engine_direct", tmp_path / "run", "--overspeed-trip", "300", "--set", load)
     described = f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
     assert result.returncode == 1 and "Traceback" not in result.stderr, described
     summary = json.loads(rrd.with_suffix(".json").read_text())
     assert summary["status"] == "failed" and "driven backwards at t = " in summary["message"], summary
     assert 0.1 <= summary["t_end"] < PLAYED, summary
-    assert rrd.with_suffix(".csv").read_bytes().count(b"\n") > 5
+    log = rrd.with_suffix(".log").read_text()
+    assert "closing with all that can still come" in log and "did not come within" not in log, log
+    model = build_model(load_scene("engine_direct", [load]))
+    in_process = in_process_csv(model, PLAYED, tmp_path / "in_process.csv", overspeed_trip=300.0)
+    assert rrd.with_suffix(".csv").read_bytes() == b"".join(in_process.splitlines(keepends=True)[:-1])
     assert node_processes(str(rrd.parent)) == []
