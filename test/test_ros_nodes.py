@@ -710,6 +710,7 @@ def _machine_batch(times_ns: list[int]) -> JointState:
         ("failed", [0], 0, True, False),  # an answered exchange is missing: wait (FINISH_GRACE)
         ("failed", [0, 2_000_000], 0, False, False),  # the machine's last diagnostics are not in
         ("complete", [0, 2_000_000], 0, True, False),  # a complete run: wait for every sample (FINISH_GRACE)
+        ("failed", [], 0, True, True),  # failed at its first exchange, refused: no earlier answer to wait for
     ],
 )
 def test_the_recorder_closes_a_failed_run_once_all_that_can_still_come_is_in(
@@ -730,10 +731,12 @@ def test_the_recorder_closes_a_failed_run_once_all_that_can_still_come_is_in(
     recorder.streams = [mock.Mock(**{"get_publisher_count.return_value": governor_publishers})]
     recorder.finished_at, recorder.machine_result = None, (machine_status, "")
     recorder.machine_reported_end = machine_reported_end
-    recorder.on_moments(_machine_batch([0, 2_000_000, 4_000_000]))
-    recorder.on_governor(_governor_batch(governor_times, throttle=0.5))
+    machine_times = [0, 2_000_000, 4_000_000] if governor_times else [0]
+    recorder.on_moments(_machine_batch(machine_times))
+    if governor_times:
+        recorder.on_governor(_governor_batch(governor_times, throttle=0.5))
     assert not recorder.all_that_can_come()  # the machine has not finished
-    recorder.finished_at = 4_000_000
+    recorder.finished_at = machine_times[-1]
     assert recorder.all_that_can_come() == closes
 
 

@@ -381,8 +381,8 @@ class RecorderNode(Node):
             return False
         if not self.rows.received_until(MACHINE, self.finished_at):
             return False
-        answered = self.last_exchanges[0] if len(self.last_exchanges) == 2 else self.finished_at
-        return self.rows.received_until(GOVERNOR, answered) and (
+        before = self.last_exchanges[0] if len(self.last_exchanges) == 2 else None  # the exchange before the last
+        return (before is None or self.rows.received_until(GOVERNOR, before)) and (
             self.rows.received_until(GOVERNOR, self.finished_at)
             or all(stream.get_publisher_count() == 0 for stream in self.streams)
         )
