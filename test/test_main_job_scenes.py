@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import yaml
 from linkage_family import member
+from preloaded_command import preloaded_command
 from ros_support import (  # noqa: F401 (fixtures)
     STATE_LISTEN_QOS,
     WAIT,
@@ -49,55 +50,46 @@ from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, to_nanose
 PLAYED = 0.3  # [s] of simulated time each bundled scene is played
 
 
-def in_process_csv(model, duration: float, path: Path, coupling: str = DEFAULT_COUPLING) -> bytes:
-    """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write)."""
+def in_process_csv(
+    model, duration: float, path: Path, coupling: str = DEFAULT_COUPLING, overspeed_trip: float = 0.0
+) -> bytes:
+    """The CSV the in-process co-simulation of `model` over `duration` [s] writes (what the nodes must write);
+    overspeed_trip [rad/s] as `run --overspeed-trip` (0: none)."""
     scenario = model.scene.scenario.model_copy(update={"duration": duration})
     shortened = dataclasses.replace(model, scene=model.scene.model_copy(update={"scenario": scenario}))
-    run = cosimulate(shortened, model.scene.solver.exchange_step, coupling=coupling)
+    run = cosimulate(shortened, model.scene.solver.exchange_step, overspeed_trip=overspeed_trip, coupling=coupling)
     write_csv(path, shortened.columns(run.times, run.states, run.throttle, run.external_load), digits=17)
     return path.read_bytes()
 
 
 def node_processes(marker: str) -> list[str]:
-    """The names and command lines of the running node processes whose arguments mention `marker` (a run's
-    folder): started by hand (python -m mech_regulator.nodes.<name>), or forked by `run` (named <name>_node, with
-    the launcher's command line)."""
-    listing = subprocess.run(["ps", "-ww", "-eo", "comm=,args="], capture_output=True, text=True, check=True).stdout
-    return [
-        line
-        for line in listing.splitlines()
-        if marker in line and ("mech_regulator.nodes" in line or line.split(maxsplit=1)[0].endswith("_node"))
-    ]
+    """The names and command lines of the running node processes whose arguments mention `marker` (a run's folder)
+    or that run in that folder: started by hand (python -m mech_regulator.nodes.<name>), or forked by `run` (named
+    <name>_node, with the command line of the process `run` ran in, and its folder: play starts `run` there)."""
+    listing = subprocess.run(
+        ["ps", "-ww", "-eo", "pid=,comm=,args="], capture_output=True, text=True, check=True
+    ).stdout
+    found = []
+    for line in listing.splitlines():
+        pid, name, arguments = (line.split(maxsplit=2) + [""])[:3]
+        if "mech_regulator.nodes" not in arguments and not name.endswith("_node"):
+            continue
+        try:
+            folder = os.readlink(f"/proc/{pid}/cwd")
+        except OSError:  # ended meanwhile, or another user's
+            folder = ""
+        if marker in arguments or folder == os.path.realpath(marker):
+            found.append(f"{name} {arguments}")
+    return found
 
 
 def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedProcess, Path]:
-    """`mech-regulator run SCENE --duration PLAYED` on a private domain; returns the finished process and the
-    recording's path."""
+    """`mech-regulator run SCENE --duration PLAYED` on a private domain, forked from a process that has imported what
+    `run` imports (preloaded_command); returns the finished process and the recording's path."""
     folder.mkdir(parents=True, exist_ok=True)
     rrd = folder / "run.rrd"
-    result = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "mech_regulator",
-            "run",
-            scene,
-            "--duration",
-            str(PLAYED),
-            "--out",
-            str(rrd),
-            "--domain-id",
-            str(next_domain_id()),
-            "--quiet",
-            *options,
-        ],
-        capture_output=True,
-        text=True,
-        timeout=4 * WAIT,
-        cwd=folder,
-        env=dict(os.environ, PYTHONUNBUFFERED="1"),
-    )
-    return result, rrd
+    argv = ["run", scene, "--duration", str(PLAYED), "--out", str(rrd), "--domain-id", str(next_domain_id()), "--quiet"]
+    return preloaded_command([*argv, *options], folder, 4 * WAIT), rrd
 
 
 def assert_played(
@@ -425,19 +417,20 @@ def wait_for(condition, what: str, describe) -> None:
 def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     """A load that drives the engine backwards past its trip (9.9e4 N m from 0.1 s, trip 300 rad/s both ways): the
     machine's run fails there, and the summary says `failed` with why (not `interrupted`, as the recorder once wrote
-    over it); `run` exits 1, and the CSV keeps the exchanges up to there."""
-    result, rrd = play(
-        "engine_direct",
-        tmp_path / "run",
-        "--overspeed-trip",
-        "300",
-        "--set",
-        "scenario.load_events=[{time: 0.1, torque: 99000.0}]",
-    )
+    over it); `run` exits 1, and the CSV keeps every exchange the governor answered: the in-process co-simulation's
+    but the last, whose state (beyond the governor's speed range) the governor refuses. The recorder closes as soon
+    as the governor has ended, not after its FINISH_GRACE (10 s) for that answer (once every such run ended 10 s
+    late)."""
+    load = "scenario.load_events=[{time: 0.1, torque: 99000.0}]"
+    result, rrd = play("engine_direct", tmp_path / "run", "--overspeed-trip", "300", "--set", load)
     described = f"exit {result.returncode}\n{result.stdout}\n{result.stderr}"
     assert result.returncode == 1 and "Traceback" not in result.stderr, described
     summary = json.loads(rrd.with_suffix(".json").read_text())
     assert summary["status"] == "failed" and "driven backwards at t = " in summary["message"], summary
     assert 0.1 <= summary["t_end"] < PLAYED, summary
-    assert rrd.with_suffix(".csv").read_bytes().count(b"\n") > 5
+    log = rrd.with_suffix(".log").read_text()
+    assert "closing with all that can still come" in log and "did not come within" not in log, log
+    model = build_model(load_scene("engine_direct", [load]))
+    in_process = in_process_csv(model, PLAYED, tmp_path / "in_process.csv", overspeed_trip=300.0)
+    assert rrd.with_suffix(".csv").read_bytes() == b"".join(in_process.splitlines(keepends=True)[:-1])
     assert node_processes(str(rrd.parent)) == []

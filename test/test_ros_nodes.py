@@ -687,6 +687,59 @@ def test_the_recorder_counts_the_exchanges_the_machine_published_that_it_missed(
         machine_says({"sim_time": "0.006", "exchanges": "nan"})
 
 
+def _machine_batch(times_ns: list[int]) -> JointState:
+    """A machine/moments batch (common.Batch) of the constant-inertia scene at times_ns, one group each."""
+    message = JointState()
+    joints = [("crank", 0.0, 10.0, 0.0), ("throttle", 0.5, 0.0, 0.0)]
+    joints += [(name, 0.0, 0.0, 1.0) for name in ("drive", "resistance", "external", "net", "load")]
+    for when in times_ns:
+        for name, position, velocity, effort in [("stamp", float(when), 0.0, math.nan), *joints]:
+            message.name.append(name)
+            message.position.append(position)
+            message.velocity.append(velocity)
+            message.effort.append(effort)
+    return message
+
+
+@pytest.mark.parametrize(
+    "machine_status, governor_times, governor_publishers, machine_reported_end, closes",
+    [
+        ("failed", [0, 2_000_000], 0, True, True),  # the governor refused the last state and ended
+        ("failed", [0, 2_000_000], 1, True, False),  # it may still answer the last state: wait
+        ("failed", [0, 2_000_000, 4_000_000], 1, True, True),  # it answered the last state too
+        ("failed", [0], 0, True, False),  # an answered exchange is missing: wait (FINISH_GRACE)
+        ("failed", [0, 2_000_000], 0, False, False),  # the machine's last diagnostics are not in
+        ("complete", [0, 2_000_000], 0, True, False),  # a complete run: wait for every sample (FINISH_GRACE)
+        ("failed", [], 0, True, True),  # failed at its first exchange, refused: no earlier answer to wait for
+    ],
+)
+def test_the_recorder_closes_a_failed_run_once_all_that_can_still_come_is_in(
+    tmp_path, machine_status, governor_times, governor_publishers, machine_reported_end, closes
+):
+    # (the governor never answers a state beyond its speed range, where a run driven backwards fails: the recorder
+    # waited its FINISH_GRACE, 10 s, for that answer after every such run)
+    from unittest import mock
+
+    from mech_regulator.nodes.recorder import RecorderNode
+    from mech_regulator.nodes.run_rows import RunRows
+
+    recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
+    _, recorder.model = constant_inertia_scene(tmp_path)
+    recorder.recording = mock.Mock()
+    recorder.rows = RunRows(recorder.model, False, None, None, mock.Mock(), mock.Mock())
+    recorder.controller, recorder.unsent, recorder.state_walls, recorder.last_exchanges = "governor", 0, [], []
+    recorder.streams = [mock.Mock(**{"get_publisher_count.return_value": governor_publishers})]
+    recorder.finished_at, recorder.machine_result = None, (machine_status, "")
+    recorder.machine_reported_end = machine_reported_end
+    machine_times = [0, 2_000_000, 4_000_000] if governor_times else [0]
+    recorder.on_moments(_machine_batch(machine_times))
+    if governor_times:
+        recorder.on_governor(_governor_batch(governor_times, throttle=0.5))
+    assert not recorder.all_that_can_come()  # the machine has not finished
+    recorder.finished_at = machine_times[-1]
+    assert recorder.all_that_can_come() == closes
+
+
 # -------------------------------------------------------------------------------------------------
 # 6. Parameters
 

@@ -8,7 +8,8 @@ publishes its own `/diagnostics` every second: `recorded_exchanges` (complete ex
 `recorded_until` [s].
 The text log gets every change of the applied load, the governor's mode changes and the machine's
 warnings (fail-safe, overspeed trip). When the machine says it finished (`machine/status`) the recorder
-waits for the last samples, closes the recording and exits; on Ctrl-C it closes what it has, so the
+waits for the last samples (after a failed run only for those that can still come: the governor does not answer a
+state it refuses), closes the recording and exits; on Ctrl-C it closes what it has, so the
 recording stays valid. A new trial number in `machine/status` is a new trial (the machine's ~/reset):
 the CSV and the summary are of the last trial, the recording keeps every trial with an event at each reset.
 It takes the machine's topics from its machine only, the governor's from its governor, and reads on `/diagnostics`
@@ -78,7 +79,8 @@ FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the CSV, and to the rec
 RECORDING_CHUNK = 5000  # exchanges gathered before they go to a recording file alone (no live viewer): Rerun keeps
 # an entry of about 1.5 kB per chunk it wrote (a series' samples of one send) for the file's footer until the end,
 # so that sends of 0.5 s would cost ~70 MB an hour of wall time; 5000 exchanges (100 s of engine_direct) ~1 MB an hour
-FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished
+FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished (a machine
+# that failed: only those that can still come, RecorderNode.all_that_can_come)
 STREAMS_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers (subscribe_to_the_machine)
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
@@ -170,6 +172,7 @@ class RecorderNode(Node):
         # from its last diagnostics (missed)
         self.closed = False
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
+        self.last_exchanges: list[int] = []  # [ns] the machine's two newest exchange times in the trial
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.refusals = Refusals(self, self.report)
         self.speakers = Speakers(self)
@@ -239,6 +242,7 @@ class RecorderNode(Node):
         self.untripped_until = -math.inf
         self.events.clear()
         self.state_walls.clear()
+        self.last_exchanges.clear()
         self.recording.add_event(0, f"reset: trial {self.trial} starts from the initial state")
 
     def on_run_state(self, state: RunStateMessage) -> None:
@@ -272,6 +276,7 @@ class RecorderNode(Node):
             if self.model.driven is not None:
                 driven["omega_driven"] = joints["driven"][1]
             self.state_walls[1:] = [joints["stamp"][1]]  # when the machine published that state
+            self.last_exchanges = [*self.last_exchanges[-1:], when]
             self.unsent += 1
             self.recording.add_machine(when, phi, omega, driven or None)
             moments = {name: effort for name, (_, _, effort) in joints.items()}
@@ -360,6 +365,28 @@ class RecorderNode(Node):
             and all(self.rows.received_until(stream, self.finished_at) for stream in (MACHINE, GOVERNOR))
         )
 
+    def machine_failed(self) -> bool:
+        """Whether the machine ended its run by itself other than complete (its solver status failed: a blow-up,
+        driven backwards, no progress)."""
+        return self.machine_result[0] not in ("complete", "interrupted")
+
+    def all_that_can_come(self) -> bool:
+        """Whether, the machine having failed (machine_failed), every sample that can still come is in: the machine's
+        own up to its end and its last diagnostics, the governor's of every exchange before the machine's last, and of
+        the last one too or else the governor's state stream has no publisher left (its node has ended, and a node
+        ends only once its subscribers have acknowledged what it sent: common.deliver_all). The governor does not
+        answer a state it refuses (beyond its speed range, where a run driven backwards fails), and a recorder that
+        waited FINISH_GRACE for it would end every such run 10 s late."""
+        if self.finished_at is None or not self.machine_failed() or not self.machine_reported_end:
+            return False
+        if not self.rows.received_until(MACHINE, self.finished_at):
+            return False
+        before = self.last_exchanges[0] if len(self.last_exchanges) == 2 else None  # the exchange before the last
+        return (before is None or self.rows.received_until(GOVERNOR, before)) and (
+            self.rows.received_until(GOVERNOR, self.finished_at)
+            or all(stream.get_publisher_count() == 0 for stream in self.streams)
+        )
+
     def close(self) -> None:
         """Write the last complete exchanges to the CSV (the rows before are in it already), finish the recording,
         then write the bag and the summary (JSON) next to it, from the run read back (RunRows.cosimulation); stopped
@@ -379,7 +406,7 @@ class RecorderNode(Node):
                 if self.complete()
                 else ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
             )
-            if self.machine_result[0] not in ("complete", "interrupted"):  # the machine's own end (failed, ...)
+            if self.machine_failed():  # the machine's own end
                 status, message = self.machine_result
             elif self.missed():
                 status, message = (
@@ -407,7 +434,7 @@ class RecorderNode(Node):
             self.model, run_data, self.exchange_step, self.coupling, self.exchange_tolerance
         )
         summary.update(self.pace())
-        if not self.complete() or self.machine_result[0] not in ("complete", "interrupted") or self.missed():
+        if not self.complete() or self.machine_failed() or self.missed():
             summary["status"], summary["message"] = status, message  # the recording's end, said the same way
         summary.update(self.trust_summary(summary["status"]))
         summary["recording"] = str(self.path)
@@ -546,21 +573,29 @@ class RecorderNode(Node):
 
     def record(self) -> None:
         """Subscribe to the machine (subscribe_to_the_machine), then spin until the machine has finished and
-        everything is in (or Ctrl-C); should the last samples not come within FINISH_GRACE s of the machine's end,
-        close with what there is (the summary says where it stops)."""
+        everything is in, after a failed run everything that can still come (all_that_can_come), or Ctrl-C; should
+        the last samples not come within FINISH_GRACE s of the machine's end, close with what there is (the summary
+        says where it stops)."""
         self.subscribe_to_the_machine()
         finished_seen = None
         while rclpy.ok() and not self.complete():
             spin_once(self, IDLE_SPIN_SLICE)
-            if self.finished_at is not None:
-                finished_seen = finished_seen or time.monotonic()
-                if time.monotonic() - finished_seen > FINISH_GRACE:
-                    self.get_logger().warning(
-                        f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
-                        f"its last samples did not come within {FINISH_GRACE:g} s: closing "
-                        f"with what was received ({self.received()})"
-                    )
-                    break
+            if self.finished_at is None:
+                continue
+            if self.all_that_can_come():
+                self.get_logger().info(
+                    f"the machine failed at t = {seconds(self.finished_at):.6g} s: closing with all that can "
+                    f"still come ({self.received()})"
+                )
+                break
+            finished_seen = finished_seen or time.monotonic()
+            if time.monotonic() - finished_seen > FINISH_GRACE:
+                self.get_logger().warning(
+                    f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
+                    f"its last samples did not come within {FINISH_GRACE:g} s: closing "
+                    f"with what was received ({self.received()})"
+                )
+                break
         self.close()
         if self.write_failures:  # said one by one already; the node ends with exit code 1
             raise OutputError(f"{len(self.write_failures)} output(s) could not be written: {self.write_failures[-1]}")
