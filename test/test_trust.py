@@ -9,7 +9,14 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 tests need rclpy (pip install 'mech_regulator[ros]')")
 
-from mech_regulator.nodes.trust import UNKNOWN_NODE, BadMessage, Refusals, Speakers, report_of  # noqa: E402
+from mech_regulator.nodes.trust import (  # noqa: E402
+    UNKNOWN_NODE,
+    UNNAMED_SENDER,
+    BadMessage,
+    Refusals,
+    Speakers,
+    report_of,
+)
 
 MACHINE_GID = bytes(range(16))
 OUTSIDER_GID = bytes(range(16, 32))
@@ -122,4 +129,27 @@ def test_a_refusal_that_cannot_keep_the_scene_s_numbers_alters_the_results():
     assert report.alters_results
     assert report.disturbances == [
         "throttle from /stranger (second publisher): which is your controller the machine cannot tell"
+    ]
+
+
+def test_a_recorded_stream_s_message_from_a_publisher_the_graph_never_named_alters_the_results():
+    # the recorder once refused the governor's only batch of a short run, its publisher not named within NAME_WAIT
+    # under load: the recording then lacks the governor's states, so the run cannot be `complete`
+    refusals = refusals_of_a_node()
+    refusals.alters_when_unnamed("governor/state", "its samples are then missing from the recording")
+    speakers = Speakers(LateGraph(unknown_looks=0), name_wait=0.0)
+    speakers.allow("governor/state", "governor")
+    speakers.allow("/diagnostics", "governor")
+    for topic, gid in (("governor/state", MACHINE_GID), ("/diagnostics", OUTSIDER_GID)):
+        with pytest.raises(BadMessage) as refused:
+            speakers.check(topic, sent_by(gid))
+        refusals.refuse(topic, refused.value.reason, refused.value.detail, refused.value.sender)
+    assert not refusals.alters_results  # a named stranger on it, an unnamed one on another topic: counted only
+    with pytest.raises(BadMessage) as refused:
+        speakers.check("governor/state", sent_by(OUTSIDER_GID))
+    refusals.refuse("governor/state", refused.value.reason, refused.value.detail, refused.value.sender)
+    report = report_of({item.key: item.value for item in refusals.key_values()})
+    assert report.alters_results
+    assert report.disturbances == [
+        f"governor/state from {UNNAMED_SENDER} (not from governor): its samples are then missing from the recording"
     ]

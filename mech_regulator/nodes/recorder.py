@@ -181,6 +181,12 @@ class RecorderNode(Node):
             self.speakers.allow(topic, self.peer_names["machine"])
         for topic in ("governor/state", "governor/events"):
             self.speakers.allow(topic, self.peer_names["governor"])
+        for topic in ("machine/moments", "governor/state"):  # what the recording and the CSV are made of
+            self.refusals.alters_when_unnamed(
+                topic,
+                "it may be the run's own node, named by the graph too late (nodes/trust.py NAME_WAIT): its samples "
+                "are then missing from the recording",
+            )
         self.own_name = self.get_name()  # (for the summary, written after Ctrl-C may have shut rclpy down)
         self.speakers.allow("/diagnostics", self.own_name, *self.peer_names.values())
         self.reports: dict[str, Report] = {}  # peer node -> what it refused and what disturbed it, from its latest

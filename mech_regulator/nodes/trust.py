@@ -35,6 +35,7 @@ UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"  # the graph's node name of an endpoint who
 # message has come: a participant announces its nodes' names on a topic of its own (ros_discovery_info), which can
 # arrive a moment after the first messages of a publisher it has just matched
 NAME_WAIT = 2.0
+UNNAMED_SENDER = "a publisher the graph does not name"  # Speakers.sender of a GID the graph named within no wait
 NAME_POLL = 0.005  # [s] of wall time between two looks at the graph meanwhile
 
 
@@ -64,11 +65,17 @@ class Refusals:
         self.disturbances: list[str] = []
         self.alters_results = False
         self.altering: dict[tuple[str, str], str] = {}  # (topic, reason) -> why such a refusal may alter the results
+        self.altering_unnamed: dict[str, str] = {}  # topic -> why refusing an unnamed publisher there may alter them
 
     def alters_when_refused(self, topic: str, reason: str, why: str) -> None:
         """Count a refusal on `topic` under `reason` also as a disturbance that may alter the results (once per
         sender), saying `why`: a refusal that does not keep the run's numbers the scene's."""
         self.altering[(topic, reason)] = why
+
+    def alters_when_unnamed(self, topic: str, why: str) -> None:
+        """Count a refusal on `topic` of a publisher the graph did not name (UNNAMED_SENDER: it may be the run's own
+        node, named too late) also as a disturbance that may alter the results, saying `why`."""
+        self.altering_unnamed[topic] = why
 
     def refuse(self, topic: str, reason: str, detail: str, sender: str | None = None) -> None:
         """Count a refused message on `topic` under `reason` (and under its `sender` when it was refused for who
@@ -86,6 +93,8 @@ class Refusals:
         )
         if (topic, reason) in self.altering:
             self.disturb(f"{topic} from {sender or 'a publisher'} ({reason}): {self.altering[topic, reason]}", True)
+        elif sender == UNNAMED_SENDER and topic in self.altering_unnamed:
+            self.disturb(f"{topic} from {sender} ({reason}): {self.altering_unnamed[topic]}", True)
         if news and self.report is not None:
             self.report()
 
@@ -248,7 +257,7 @@ class Speakers:
     def sender(self, gid: bytes) -> str:
         """The fully qualified name of the node of publisher `gid` as the graph named it (publisher_name looked it
         up), or 'a publisher the graph does not name'."""
-        return self.qualified.get(gid, "a publisher the graph does not name")
+        return self.qualified.get(gid, UNNAMED_SENDER)
 
     def check(self, topic: str, info: dict | None) -> str:
         """The name of the node that sent a message on `topic` (info: its rclpy MessageInfo; '' when the graph does
