@@ -47,3 +47,20 @@ def test_a_refusal_of_several_lines_is_one_row_of_the_table():
     line = format_row(Row("lathe", "fast", "RK4", "simulate", "refused", message, 0.1))
     assert "\n" not in line and line.count(" | ") == 11
     assert "refused: lathe.yaml: 2 problems: solver.step = 0.0001 s would take 1e+08 steps" in line
+
+
+def test_bench_long_applies_set_to_every_row_and_refuses_what_the_rows_set(capsys):
+    """`--set` reaches each row (the lathe at 5000 Hz over 10 000 s is refused for its 5e7 output samples, before it
+    runs; the budget of 5 s would stop the row that ran without it); a key the rows set themselves, or one a scene
+    does not take, is refused before anything runs."""
+    options = ["bench", "long", "--scenes", "lathe", "--paths", "fast", "--methods", "DOP853", "--modes", "simulate"]
+    code, out, err = run_cli(
+        capsys, *options, "--duration", "10000", "--budget", "5", "--set", "solver.sample_rate=5000"
+    )
+    assert code == 0, err
+    assert "| lathe | fast | DOP853 | simulate | refused: " in out and "solver.sample_rate = 5000 Hz" in out
+    code, out, err = run_cli(capsys, *options, "--set", "solver.path=reference")
+    assert code == 2 and out == ""
+    assert "--set 'solver.path=reference': each row sets solver.path; choose it with --paths" in err
+    code, out, err = run_cli(capsys, *options, "--set", "machine.flywheel.inertia=-1")
+    assert code == 2 and out == "" and "machine.flywheel.inertia" in err

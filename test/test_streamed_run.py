@@ -101,3 +101,31 @@ def test_a_streamed_run_records_the_samples_of_the_run_kept_whole(small_chunks, 
     (streamed_times, streamed_states), (times, states) = recorded
     assert streamed_times.size == 4 * 2000 + 1 and np.array_equal(streamed_times, times)
     assert np.array_equal(streamed_states, states)
+
+
+def test_a_streamed_bench_long_row_is_the_row_of_the_run_kept_whole(small_chunks, monkeypatch, tmp_path):
+    """`bench long`'s simulate row of engine_direct for 4 s on the fast path streams as `simulate` does (it once kept
+    the whole run: 2.8 GB at 10 000 s) and is the row of the run kept whole: the same status, steps and energy
+    residual, the last period's omega_m and delta to 1e-9 (judged on the tail), for the row and its own-duration
+    run alike."""
+    from mech_regulator import analysis
+    from mech_regulator.bench.long import run_row
+
+    dropped = []
+
+    def simulate_streamed(model, *arguments, **options):
+        trajectory, digest = stream.simulate_streamed(model, *arguments, **options)
+        dropped.append(trajectory.steps_dropped)
+        return trajectory, digest
+
+    monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
+    scene_file = str(write_scene(tmp_path, yaml.safe_dump(shortened("engine_direct", 4.0))))
+    streamed = run_row(scene_file, "fast", "DOP853", "simulate", 4.0, 600.0)
+    assert len(dropped) == 2 and min(dropped) > 0  # the row and its own-duration run streamed
+    monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    whole = run_row(scene_file, "fast", "DOP853", "simulate", 4.0, 600.0)
+    assert dropped[2:] == [0, 0]
+    assert streamed.status == whole.status == "complete"
+    assert (streamed.steps, streamed.residual) == (whole.steps, whole.residual)
+    for name in ("omega_m", "delta", "omega_m_short", "delta_short"):
+        assert getattr(streamed, name) == pytest.approx(getattr(whole, name), rel=1e-9), name

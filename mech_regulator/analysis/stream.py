@@ -28,8 +28,9 @@ from mech_regulator.analysis.periodic import steady_from
 from mech_regulator.analysis.self_check import ModeLogSoFar, deepest_guard, mode_log_spacing
 from mech_regulator.analysis.stability import is_periodic
 from mech_regulator.model import MachineModel
+from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cam_contact import has_cam_contacts
-from mech_regulator.solvers.trajectory import Trajectory, sample_times
+from mech_regulator.solvers.trajectory import Progress, Trajectory, sample_times
 
 RETAINED_STEPS = 50_000  # solver steps a streamed run's trajectory keeps at its end (the steady state's tail):
 # about 70 s of engine_direct; a run streams once it has taken these and a chunk more (docs/speed.md, memory)
@@ -39,6 +40,18 @@ def streams(model: MachineModel) -> bool:
     """Whether a run of the model can be streamed (RunDigest): not a two-mass machine or a drive train (their
     summaries read the whole run) nor a machine with cams (its contact check reads each load piece whole)."""
     return model.coupling is None and model.driven is None and not has_cam_contacts(model.scene)
+
+
+def simulate_streamed(
+    model: MachineModel, progress: Progress | None = None, samples: bool = False, whole: bool = False
+) -> tuple[Trajectory, RunDigest | None]:
+    """The monolithic run of the model (solvers.simulate), streamed when it can be (streams) and not asked whole:
+    its trajectory, and the digest of the dense output it dropped (None when it dropped none: the trajectory is then
+    the whole run, as summarise reads it). samples: whether the digest keeps the output samples (a CSV, a recording
+    or a bag reads them). Refusals raise SceneError, as simulate's."""
+    digest = RunDigest(model, samples=samples) if streams(model) and not whole else None
+    trajectory = simulate(model, progress, stream=digest.take if digest is not None else None)
+    return trajectory, digest if digest is not None and trajectory.steps_dropped else None
 
 
 class RunDigest:

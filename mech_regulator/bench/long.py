@@ -2,13 +2,15 @@
 monolithic run) and through the in-process co-simulation (`simulate --exchange-step`, what the nodes compute), for a
 long simulated time (docs/hard_cases.md, "Long runs").
 
-Each row runs the scene as it is (its load events kept) made to last `duration` s with solver.path and solver.method
-set, and prints how it ended (complete, failed, refused before the start with the refusal's message, or stopped when
-its wall-time budget ran out), its wall time (the run, its probe and its analysis), its steps (the co-simulation: its
-exchanges), the energy balance's relative residual (the monolithic run; the co-simulation keeps no dense output) and
-the steady-state figures of its last dynamic period (cycle-mean speed omega_m and coefficient of fluctuation delta)
-against the same row run for the scene's own duration (16 s for most). A row that a path does not run (Radau and the
-energy method on the fast path) is left out. Numbers to read, never asserted. The solvers load when a row runs.
+Each row runs the scene as it is (its load events kept, and the `--set` changes asked for) made to last `duration` s
+with solver.path and solver.method set, and prints how it ended (complete, failed, refused before the start with the
+refusal's message, or stopped when its wall-time budget ran out), its wall time (the run, its probe and its analysis),
+its steps (the co-simulation: its exchanges), the energy balance's relative residual (the monolithic run; the
+co-simulation keeps no dense output) and the steady-state figures of its last dynamic period (cycle-mean speed omega_m
+and coefficient of fluctuation delta) against the same row run for the scene's own duration (16 s for most). A
+`simulate` row is the `simulate` command's run, streamed as it streams (analysis/stream.py: its dense output is not kept
+whole), its figures its summary's. A row that a path does not run (Radau and the energy method on the fast path) is left
+out. Numbers to read, never asserted. The solvers load when a row runs.
 """
 
 from __future__ import annotations
@@ -79,13 +81,16 @@ def matrix(
     ]
 
 
-def run_row(scene: str, path: str, method: str, mode: str, duration: float, budget: float) -> Row:
+def run_row(
+    scene: str, path: str, method: str, mode: str, duration: float, budget: float, overrides: tuple[str, ...] = ()
+) -> Row:
     """The row (scene, path, method, mode) run for `duration` [s] of simulated time within `budget` [s] of wall time,
-    and again for the scene's own duration for its steady figures."""
+    and again for the scene's own duration for its steady figures; overrides: `KEY=VALUE` scene changes (`--set`)
+    applied to both, before the row's path and method."""
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError, load_scene
 
-    settings = [f"solver.path={path}", f"solver.method={method}"]
+    settings = [*overrides, f"solver.path={path}", f"solver.method={method}"]
     started = time.monotonic()
     try:
         model = build_model(load_scene(scene, settings + [f"scenario.duration={duration!r}"]))
@@ -115,37 +120,40 @@ def run_row(scene: str, path: str, method: str, mode: str, duration: float, budg
 
 
 def _run(model, mode: str, progress: Callable[[float], None]) -> dict:
-    """Run the model by simulate or by the co-simulation; its status, message, end [s], steps (exchanges), relative
-    energy residual and last period's (omega_m, delta) when steady. Refusals raise SceneError."""
-    from mech_regulator.analysis import analyse_steady_state, energy_balance
+    """Run the model by simulate (streamed, its figures its summary's, as the `simulate` command's) or by the
+    co-simulation; its status, message, end [s], steps (exchanges), relative energy residual and last period's
+    (omega_m, delta) when steady. Refusals raise SceneError."""
+    from mech_regulator.analysis import analyse_steady_state, cosimulation_ending, simulate_streamed, summarise
     from mech_regulator.scene import SceneError
+    from mech_regulator.solvers.cosim import cosimulate
 
     if mode == "simulate":
-        from mech_regulator.solvers import simulate
-
-        trajectory = simulate(model, progress)
-        steps = trajectory.stats.steps
-        residual = energy_balance(model, trajectory).relative_residual if trajectory.interpolants else None
-        status, message = trajectory.status, trajectory.message
-    else:
-        from mech_regulator.analysis import cosimulation_ending
-        from mech_regulator.solvers.cosim import cosimulate
-
-        try:
-            run = cosimulate(model, EXCHANGE_STEP, progress=progress)
-        except ValueError as error:  # a scene the co-simulation does not take
-            raise SceneError(str(error)) from None
-        trajectory, steps, residual = run.trajectory(model), int(run.times.size) - 1, None
-        status, message = cosimulation_ending(run)
-    steady = analyse_steady_state(model, trajectory) if trajectory.t_end > trajectory.t_start else None
-    last = steady.last if steady is not None and steady.steady else None
+        summary = summarise(model, *simulate_streamed(model, progress))
+        energy, steady = summary["energy"], summary["steady"]
+        last = steady["last_period"] if steady is not None and steady["steady"] else None
+        return {
+            "status": summary["status"],
+            "message": summary["message"],
+            "t_end": summary["t_end"],
+            "steps": summary["solver"]["steps"],
+            "residual": energy["relative_residual"] if energy is not None else None,
+            "steady": (last["omega_m"], last["delta"]) if last is not None else None,
+        }
+    try:
+        run = cosimulate(model, EXCHANGE_STEP, progress=progress)
+    except ValueError as error:  # a scene the co-simulation does not take
+        raise SceneError(str(error)) from None
+    trajectory = run.trajectory(model)
+    status, message = cosimulation_ending(run)
+    periods = analyse_steady_state(model, trajectory) if trajectory.t_end > trajectory.t_start else None
+    last_period = periods.last if periods is not None and periods.steady else None
     return {
         "status": status,
         "message": message,
         "t_end": trajectory.t_end,
-        "steps": steps,
-        "residual": residual,
-        "steady": (last.omega_m, last.delta) if last is not None else None,
+        "steps": int(run.times.size) - 1,
+        "residual": None,
+        "steady": (last_period.omega_m, last_period.delta) if last_period is not None else None,
     }
 
 

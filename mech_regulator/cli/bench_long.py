@@ -13,6 +13,8 @@ from mech_regulator.errors import EXIT_INTERRUPTED
 
 LONG_DURATION = 1000.0  # [s] of simulated time of each row by default
 ROW_BUDGET = 3600.0  # [s] of wall time a row may take by default before it is stopped
+ROW_KEYS = {"solver.path": "--paths", "solver.method": "--methods", "scenario.duration": "--duration"}
+"""The scene keys each row sets itself, and the option that chooses them (a `--set` of them is refused)."""
 
 
 def add_bench_long_command(benchmarks) -> None:
@@ -21,8 +23,9 @@ def add_bench_long_command(benchmarks) -> None:
         "long",
         help="long-run matrix: bundled scenes x paths x methods, through simulate and the co-simulation, "
         "for a long simulated time",
-        description="Run every bundled scene (or those given) on each path with each method, through simulate and "
-        "through the in-process co-simulation (exchange step 0.02 s), for a long simulated time, and "
+        description="Run every bundled scene (or those given) on each path with each method, through simulate "
+        "(streamed, as the simulate command runs it) and through the in-process co-simulation (exchange "
+        "step 0.02 s), for a long simulated time, its scene changed by the --set options, and "
         "print a Markdown row per run: how it ended (complete, failed, refused before the start, or "
         "stopped when its wall-time budget ran out), wall time, steps (exchanges), the energy balance's "
         "relative residual and the last dynamic period's omega_m and delta against the scene's own "
@@ -43,6 +46,15 @@ def add_bench_long_command(benchmarks) -> None:
         "runs no Radau nor energy method)",
     )
     long.add_argument("--modes", help="comma-separated: simulate, cosim (default both)")
+    long.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change a scene value in every row, as `simulate --set` (repeatable), e.g. "
+        "--set solver.sample_rate=2000; the rows set solver.path, solver.method and scenario.duration",
+    )
     long.add_argument(
         "--budget",
         type=float,
@@ -74,12 +86,27 @@ def run_bench_long(args: argparse.Namespace) -> int:
         if unknown or not names:
             raise SceneError(f"{option} {text!r}: {', '.join(unknown) or 'nothing'} is not one of {', '.join(allowed)}")
         chosen[option] = names
+    _check_overrides(args.overrides, chosen["--scenes"])
     rows = matrix(chosen["--scenes"], tuple(chosen["--paths"]), tuple(chosen["--methods"]), tuple(chosen["--modes"]))
     print(format_header(args.duration), flush=True)
     try:
         for row in rows:
-            print(format_row(run_row(*row, args.duration, args.budget)), flush=True)
+            print(format_row(run_row(*row, args.duration, args.budget, tuple(args.overrides))), flush=True)
     except KeyboardInterrupt:
         print("mech-regulator: interrupted; the rows above are what was measured", file=sys.stderr)
         return EXIT_INTERRUPTED
     return 0
+
+
+def _check_overrides(overrides: list[str], scenes: list[str]) -> None:
+    """Refuse, before any row runs, a `--set` of a key the rows set themselves (ROW_KEYS) and one that does not
+    load (SceneError naming it): each scene is loaded with the overrides, as `simulate --set` loads it."""
+    from mech_regulator.scene import SceneError, load_scene
+
+    for assignment in overrides:
+        key = assignment.split("=", 1)[0].strip()
+        if key in ROW_KEYS:
+            raise SceneError(f"--set {assignment!r}: each row sets {key}; choose it with {ROW_KEYS[key]}")
+    if overrides:
+        for scene in scenes:
+            load_scene(scene, overrides)

@@ -21,7 +21,7 @@ SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and wri
 
 def run_simulate(scene, args) -> int:
     """simulate: the run (monolithic, or co-simulated with --exchange-step), its summary and outputs; the exit code."""
-    from mech_regulator.analysis import RunDigest, streams, summarise
+    from mech_regulator.analysis import simulate_streamed, summarise
     from mech_regulator.analysis.self_check import self_checks
     from mech_regulator.cli.report.data import to_json, write_csv
     from mech_regulator.cli.report.machine_text import format_summary
@@ -29,7 +29,7 @@ def run_simulate(scene, args) -> int:
     from mech_regulator.cli.report.terminal import progress_bar
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError
-    from mech_regulator.solvers import on_path_for_a_command, simulate
+    from mech_regulator.solvers import on_path_for_a_command
     from mech_regulator.solvers.advice import stiffness_advice
 
     if args.exchange_tolerance is not None and args.exchange_step is None:
@@ -51,13 +51,14 @@ def run_simulate(scene, args) -> int:
         print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
     sampled = any(output is not None for output in (args.out, args.record, args.bag))  # they read the output samples
-    digest = RunDigest(model, samples=sampled) if streams(model) and args.plot is None else None  # the plot: the run
     with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
-        trajectory = simulate(
-            model, progress=lambda t: bar.update(min(t, duration) - bar.n), stream=digest.take if digest else None
+        trajectory, streamed = simulate_streamed(
+            model,
+            lambda t: bar.update(min(t, duration) - bar.n),
+            samples=sampled,
+            whole=args.plot is not None,  # the plot reads the whole run
         )
         bar.update(min(trajectory.t_end, duration) - bar.n)
-    streamed = digest if digest is not None and trajectory.steps_dropped else None
     summary = summarise(model, trajectory, streamed)
     checks = summary["self_checks"] = self_checks(model, summary, trajectory, streamed.mode_log if streamed else None)
     if checks and summary["status"] == "complete":
