@@ -8,6 +8,7 @@ that only turns a hang into a failure.
 from __future__ import annotations
 
 import contextlib
+import faulthandler
 import itertools
 import os
 import signal
@@ -36,6 +37,7 @@ from mech_regulator.nodes.launch import (  # noqa: E402
 )
 
 WAIT = 90.0  # [s] of wall time: the failure limit of every wait (never what a test measures)
+CLOSE_LIMIT = 60.0  # [s] of wall time a test node's close may take before its process is ended (Probe.close)
 ANSWER_WAIT = 10.0  # [s] of wall time before a service request that got no answer is sent again
 STOP_WAIT = 30.0  # [s] a process gets to end after SIGINT before it is killed
 
@@ -346,11 +348,21 @@ class Probe:
         return publisher
 
     def close(self) -> None:
-        """Destroy the node once the graph is quiet (nodes.launch.wait_for_a_quiet_graph: a Fast DDS deadlock)."""
-        wait_for_a_quiet_graph(self.node, lambda timeout: self.executor.spin_once(timeout_sec=timeout))
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+        """Destroy the node once the graph is quiet (nodes.launch.wait_for_a_quiet_graph: a Fast DDS deadlock). A
+        participant Fast DDS has deadlocked all the same (seen once in a suite run: its receive thread, handling
+        another participant's leaving under the discovery lock, waits for its event thread, which waits for that
+        lock; eProsima/Fast-DDS#6502, open) cannot be destroyed, and the call that tries holds the GIL: faulthandler's
+        watchdog, a thread of its own outside Python, then prints every thread's stack and ends this process after
+        CLOSE_LIMIT s, so that pytest-xdist reports the test's worker as crashed and goes on, where the suite hung
+        until its time limit."""
+        faulthandler.dump_traceback_later(CLOSE_LIMIT, exit=True)
+        try:
+            wait_for_a_quiet_graph(self.node, lambda timeout: self.executor.spin_once(timeout_sec=timeout))
+            self.executor.shutdown()
+            self.node.destroy_node()
+            rclpy.shutdown(context=self.context)
+        finally:
+            faulthandler.cancel_dump_traceback_later()
 
 
 @contextlib.contextmanager
