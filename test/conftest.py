@@ -7,7 +7,8 @@ No command of the suite starts or uses a command server (MECH_REGULATOR_SERVER=o
 subprocess): a test never depends on one nor leaves one behind. test/test_cli_server.py runs its own, in a folder of
 its own, and stops it.
 
-`./dev test` runs the suite on pytest-xdist's workers (`-n auto --dist loadfile`): each worker is a process of its
+`./dev test` runs the suite on pytest-xdist's workers (`-n auto --dist loadfile`, one more worker than cores:
+pytest_xdist_auto_num_workers): each worker is a process of its
 own, so that its ROS domains (ros_support.next_domain_id: a lock file per domain), tmp_path and command-server folders
 are its own; numba's cache and the fast path's cache folder are shared, written atomically (cache.write), a stepper
 compiled under its method's lock (solvers/compiled/warm.py). A module's tests all run on one worker, so that a
@@ -94,10 +95,10 @@ def order_files(items: list[pytest.Item]) -> None:
 
 
 def pytest_xdist_auto_num_workers(config: pytest.Config) -> int:
-    """`-n auto`'s number of workers: one more than the cores this process may run on. About a fifth of the suite's
-    wall time on two workers left the cores idle (its tests' CPU, 1061 s, against twice its 683 s of wall time: the
-    node runs wait on each other and on their timeouts), which a third worker fills (docs/speed.md, "The test
-    suite")."""
+    """`-n auto`'s number of workers: one more than the cores this process may run on. On two workers the suite left
+    the two cores idle a third to a half of the time for minutes together (vmstat: the node runs wait on each other
+    and on their timeouts), which a third worker fills: 11 min 21 s on two workers, 9 min 16 s on three, idle, with
+    995 s of CPU (docs/speed.md, "The test suite")."""
     return len(os.sched_getaffinity(0)) + 1
 
 

@@ -351,8 +351,8 @@ class Probe:
         """Destroy the node once the graph is quiet (nodes.launch.wait_for_a_quiet_graph: a Fast DDS deadlock). A
         participant Fast DDS has deadlocked all the same (seen once in a suite run: its receive thread, handling
         another participant's leaving under the discovery lock, waits for its event thread, which waits for that
-        lock; eProsima/Fast-DDS#6502, open) cannot be destroyed, and the call that tries holds the GIL: faulthandler's
-        watchdog, a thread of its own outside Python, then prints every thread's stack and ends this process after
+        lock; eProsima/Fast-DDS#6502, open) cannot be destroyed, and the call that tries never returns: faulthandler's
+        watchdog, a thread of its own outside Python that needs no GIL, prints every thread's stack and ends this process after
         CLOSE_LIMIT s, so that pytest-xdist reports the test's worker as crashed and goes on, where the suite hung
         until its time limit."""
         faulthandler.dump_traceback_later(CLOSE_LIMIT, exit=True)

@@ -962,6 +962,33 @@ def test_a_node_hung_in_its_teardown_holding_the_gil_is_ended_by_its_alarm():
     assert hung.returncode == launch_domains.TEARDOWN_HANG == -signal.SIGALRM, hung
 
 
+# A test node whose close is stuck in a C call that holds the GIL (as Fast DDS's deadlock, eProsima/Fast-DDS#6502):
+# its destroy_node sleeps in ctypes.PyDLL, with the watchdog's limit cut to 1 s
+PROBE_HUNG_IN_CLOSE = """
+import ctypes, sys, types
+sys.path.insert(0, sys.argv[1])
+import ros_support
+ros_support.CLOSE_LIMIT = 1.0
+ros_support.wait_for_a_quiet_graph = lambda node, spin: None
+probe = ros_support.Probe.__new__(ros_support.Probe)
+probe.executor = types.SimpleNamespace(shutdown=lambda: None)
+probe.node = types.SimpleNamespace(destroy_node=lambda: ctypes.PyDLL(None).sleep(120))
+probe.close()
+"""
+
+
+def test_a_test_node_whose_close_hangs_holding_the_gil_ends_its_process():
+    """Probe.close arms faulthandler's watchdog (no GIL needed): a close Fast DDS deadlocked ends the test worker after
+    CLOSE_LIMIT, with every thread's stack, instead of hanging the suite."""
+    hung = subprocess.run(
+        [sys.executable, "-c", PROBE_HUNG_IN_CLOSE, str(Path(__file__).parent)],
+        capture_output=True,
+        text=True,
+        timeout=WAIT,
+    )
+    assert hung.returncode == 1 and "Timeout (0:00:01)!" in hung.stderr and "in close" in hung.stderr, hung
+
+
 # A run's process on a domain (its run lock held), until its stdin closes
 RUN_STILL_ON = """
 import sys
