@@ -23,7 +23,6 @@ import numpy as np
 import pytest
 import yaml
 from linkage_family import member
-from preloaded_command import preloaded_command
 from ros_support import (  # noqa: F401 (fixtures)
     STATE_LISTEN_QOS,
     WAIT,
@@ -63,33 +62,45 @@ def in_process_csv(
 
 
 def node_processes(marker: str) -> list[str]:
-    """The names and command lines of the running node processes whose arguments mention `marker` (a run's folder)
-    or that run in that folder: started by hand (python -m mech_regulator.nodes.<name>), or forked by `run` (named
-    <name>_node, with the command line of the process `run` ran in, and its folder: play starts `run` there)."""
-    listing = subprocess.run(
-        ["ps", "-ww", "-eo", "pid=,comm=,args="], capture_output=True, text=True, check=True
-    ).stdout
-    found = []
-    for line in listing.splitlines():
-        pid, name, arguments = (line.split(maxsplit=2) + [""])[:3]
-        if "mech_regulator.nodes" not in arguments and not name.endswith("_node"):
-            continue
-        try:
-            folder = os.readlink(f"/proc/{pid}/cwd")
-        except OSError:  # ended meanwhile, or another user's
-            folder = ""
-        if marker in arguments or folder == os.path.realpath(marker):
-            found.append(f"{name} {arguments}")
-    return found
+    """The names and command lines of the running node processes whose arguments mention `marker` (a run's
+    folder): started by hand (python -m mech_regulator.nodes.<name>), or forked by `run` (named <name>_node, with
+    the launcher's command line)."""
+    listing = subprocess.run(["ps", "-ww", "-eo", "comm=,args="], capture_output=True, text=True, check=True).stdout
+    return [
+        line
+        for line in listing.splitlines()
+        if marker in line and ("mech_regulator.nodes" in line or line.split(maxsplit=1)[0].endswith("_node"))
+    ]
 
 
 def play(scene: str, folder: Path, *options: str) -> tuple[subprocess.CompletedProcess, Path]:
-    """`mech-regulator run SCENE --duration PLAYED` on a private domain, forked from a process that has imported what
-    `run` imports (preloaded_command); returns the finished process and the recording's path."""
+    """`mech-regulator run SCENE --duration PLAYED` on a private domain; returns the finished process and the
+    recording's path."""
     folder.mkdir(parents=True, exist_ok=True)
     rrd = folder / "run.rrd"
-    argv = ["run", scene, "--duration", str(PLAYED), "--out", str(rrd), "--domain-id", str(next_domain_id()), "--quiet"]
-    return preloaded_command([*argv, *options], folder, 4 * WAIT), rrd
+    result = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mech_regulator",
+            "run",
+            scene,
+            "--duration",
+            str(PLAYED),
+            "--out",
+            str(rrd),
+            "--domain-id",
+            str(next_domain_id()),
+            "--quiet",
+            *options,
+        ],
+        capture_output=True,
+        text=True,
+        timeout=4 * WAIT,
+        cwd=folder,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+    )
+    return result, rrd
 
 
 def assert_played(
