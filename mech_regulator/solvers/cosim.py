@@ -306,7 +306,7 @@ class MachineStepper:
         back = self.time - float(np.interp(target, angles, ends))  # [s] T
         if self.time - back < self._history_starts[0] or t_end - back > self.time:
             return None
-        times = speed_samples_times(self.time, t_end, self._prediction_piece)
+        times = speed_samples_times(self.time, t_end, self._prediction_piece).tolist()
         values = []
         for time in [self.time] + times:
             before = time - back
@@ -578,8 +578,8 @@ class GovernorStepper:
                 and corrected[0][0] == self.time
                 and corrected[0][-1] == time
             )
-            if following and corrected is not None and predicted is not None and len(predicted[0]) >= 3:
-                stretch = self._follow_then_try(corrected, predicted) if predicted[0][0] == time else None
+            if following and corrected is not None and predicted is not None and predicted[0][0] == time:
+                stretch = self._follow_then_try(corrected, predicted) if len(predicted[0]) >= 3 else None
             if stretch is None:
                 self.follow(time, corrected if following else None)
         self.state = self.state.copy()
@@ -692,7 +692,7 @@ def speed_samples(
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
     ends included, m the fewest pieces no longer than `longest` [s]."""
-    times = np.array(speed_samples_times(t_start, t_end, longest))
+    times = speed_samples_times(t_start, t_end, longest)
     if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
         return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
@@ -703,10 +703,10 @@ def speed_samples(
     return times.tolist(), speeds.tolist()
 
 
-def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> list[float]:
+def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> np.ndarray:
     """The times [s] at which speed_samples samples [t_start, t_end] [s]: 2 m + 1 evenly spaced, both ends included, m
     the fewest pieces no longer than `longest` [s]."""
-    return np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1).tolist()
+    return np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
