@@ -1,10 +1,14 @@
-"""Processes seen from Linux: whether one still runs, and a child that ends with its parent. The launcher's nodes,
-the command server and the benchmarks all start or watch processes."""
+"""Processes seen from Linux: whether one still runs, a child that ends with its parent, and the command line of a
+child Python that imports what this one imports. The launcher's nodes, the command server, the fast path's compile
+and the benchmarks all start or watch processes."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
+import subprocess
+import sys
 
 
 def process_alive(pid: int) -> bool:
@@ -31,3 +35,16 @@ def die_with_parent() -> None:
 
     PR_SET_PDEATHSIG = 1
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGINT)
+
+
+def python_child(program: str, *arguments: str) -> list[str]:
+    """The command line of a child Python that runs `program` (source, as `python -c` runs it; `arguments` are its
+    sys.argv[2:]) with this interpreter, its flags (-O, -X ..., as multiprocessing starts its processes) and this
+    process's sys.path, so that it imports the very modules this one imports. `python -m` or a bare `python -c` put
+    the child's working folder first on sys.path, where another copy of a package is imported when there is one (a
+    command run from a checkout while the package it runs is installed elsewhere): the main job's compile child
+    then compiled that copy's code, and the main job, finding nothing compiled for its own, compiled it again,
+    unannounced (docs/speed.md, "A fresh clone's first run, step by step")."""
+    flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
+    bootstrap = f"import json, sys; sys.path[:] = json.loads(sys.argv[1]); {program}"
+    return [sys.executable, *flags, "-c", bootstrap, json.dumps(sys.path), *arguments]

@@ -26,6 +26,7 @@ import pytest
 from numba.core.caching import _CacheLocator
 
 from mech_regulator import numba_cache
+from mech_regulator.processes import python_child
 
 WAIT = 300.0  # [s] of wall time: the failure limit of the background compile (never what the test measures)
 
@@ -180,6 +181,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
         return subprocess.CompletedProcess(argv, 0, "", "")
 
     monkeypatch.setattr(warm.subprocess, "run", child)
+    monkeypatch.setattr(warm, "stepper_cached", lambda method: True)  # as the child leaves it
     lines = []
     warm.compile_before_the_run("RK4", lines.append)
     assert lines[0] == f"compiling the fast path's RK4 stepper (once, {warm.compile_estimate('RK4')}) ...", lines
@@ -187,7 +189,7 @@ def test_a_compile_under_way_is_waited_for_not_run_twice(monkeypatch, tmp_path):
         fcntl.flock(other, fcntl.LOCK_EX)
         warm.compile_before_the_run("RK4", lines.append)
     assert lines[2].startswith("waiting for the fast path's RK4 stepper that another process is compiling"), lines
-    assert children == [[sys.executable, "-m", warm.__name__, "RK4"]] * 2
+    assert children == [python_child(warm.CHILD_PROGRAM, "RK4")] * 2
     assert re.fullmatch(r"RK4 ready in [0-9.]+ s", lines[3]), lines
 
 
@@ -280,3 +282,109 @@ def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):
         "note: compiling the fast path's module of scene 'lathe' once (a few seconds; later runs load it at once)\n"
     ), notes[0]
     assert notes[1] == "", notes[1]
+
+
+@pytest.fixture
+def decoy_checkout(tmp_path, monkeypatch) -> Path:
+    """A working folder holding another copy of the package (a checkout beside the installed package the command
+    runs), one that only says it was imported: the folder the processes under test start in, with a cache folder of
+    their own."""
+    decoy = tmp_path / "checkout" / "mech_regulator"
+    decoy.mkdir(parents=True)
+    (decoy / "__init__.py").write_text("import sys\nprint('the decoy copy was imported')\nsys.exit(3)\n")
+    monkeypatch.chdir(decoy.parent)
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path / "compiled"))
+    return decoy
+
+
+def test_the_compile_before_the_run_compiles_the_package_that_runs(decoy_checkout):
+    """The main job's compile child imports the package its parent runs, not another copy in the working folder
+    (`python -m` imported that one: the child compiled it, and the main job compiled its own stepper a second time
+    after the announced compile, silently, 45 s and more). A method no stepper has makes the real child answer at once
+    with its refusal."""
+    from mech_regulator.solvers.compiled import warm
+
+    with pytest.raises(RuntimeError) as failed:
+        warm.compile_before_the_run("Euler", lambda line: None)
+    assert "unknown fast-path method(s) ['Euler']" in str(failed.value), failed.value
+    assert "decoy" not in str(failed.value)
+
+
+def test_the_background_compile_compiles_the_package_that_runs(decoy_checkout):
+    """The same for the background compile (else every later run found its stepper still missing: the reference path
+    and another background compile, run after run)."""
+    import fcntl
+
+    from mech_regulator.solvers.compiled import locks, warm
+
+    assert warm.compile_in_background(["Euler"])
+    log = locks.lock_path().with_name("compiling.log")
+    deadline = time.monotonic() + WAIT
+    while not (log.exists() and log.read_text()):
+        assert time.monotonic() < deadline, "the background process wrote nothing"
+        time.sleep(0.1)
+    with open(locks.lock_path(), "a") as lock:  # held until the background process ends
+        fcntl.flock(lock, fcntl.LOCK_EX)
+    assert "unknown fast-path method(s) ['Euler']" in log.read_text(), log.read_text()
+    assert "decoy" not in log.read_text()
+
+
+def test_a_python_child_imports_what_this_process_imports(decoy_checkout):
+    """processes.python_child: the child's sys.path is this process's, whatever folder it starts in."""
+    import mech_regulator
+
+    child = subprocess.run(
+        python_child("import mech_regulator; print(mech_regulator.__file__)"),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert child.stdout == f"{mech_regulator.__file__}\n", child.stdout + child.stderr
+
+
+def test_a_stepper_the_child_compiled_out_of_this_process_reach_is_compiled_here_announced(monkeypatch, tmp_path):
+    """Should the main job still not find the stepper in numba's disk cache after the child's compile (the package's
+    sources changed since the main job read them), it says so and compiles it itself, announced with its
+    estimate, rather than leaving the compile to the first exchange, unannounced."""
+    from mech_regulator.solvers.compiled import steppers, warm
+
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
+    monkeypatch.setattr(warm.subprocess, "run", lambda argv, **options: subprocess.CompletedProcess(argv, 0, "", ""))
+    monkeypatch.setattr(warm, "stepper_cached", lambda method: False)
+    compiled_here = []
+    monkeypatch.setattr(steppers, "stepper", compiled_here.append)
+    lines = []
+    warm.compile_before_the_run("DOP853", lines.append)
+    assert compiled_here == ["DOP853"]
+    assert "is not in numba's disk cache as this process reads it" in lines[2], lines
+    assert lines[3] == f"compiling the fast path's DOP853 stepper (once, {warm.compile_estimate('DOP853')}) ...", lines
+    assert re.fullmatch(r"  DOP853 ready in [0-9.]+ s", lines[4]), lines
+
+
+EXCHANGE_WORK = """
+import json
+from numba.core.event import install_recorder
+from mech_regulator.model import build_model
+from mech_regulator.scene import load_scene
+from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, load_steppers
+
+model = build_model(load_scene("engine_direct", ["solver.path=fast"]))
+load_steppers(model, model.scene.solver.exchange_step)
+with install_recorder("numba:compiler_lock") as numba_work:
+    run = cosimulate(model, model.scene.solver.exchange_step, coupling=DEFAULT_COUPLING)
+print(json.dumps({"status": run.status, "numba_work": len(numba_work.buffer)}))
+"""
+
+
+def test_the_main_jobs_exchanges_compile_and_load_nothing_after_load_steppers():
+    """The main job's launcher calls load_steppers before it forks the nodes (nodes/launch.py): what the nodes'
+    exchanges then run must all be compiled and loaded by it, else each node compiles (cold: tens of seconds, two
+    nodes at once on two cores, unannounced) or loads it for itself. numba takes its compiler lock for every compile
+    and every load from its disk cache; in a fresh Python (nothing loaded by other tests), engine_direct's
+    co-simulation as the nodes run it (their default coupling, the scene's exchange step) takes it not once after
+    load_steppers.
+    Measured without the load_steppers call: 40 times."""
+    child = subprocess.run(
+        [sys.executable, "-c", EXCHANGE_WORK], capture_output=True, text=True, timeout=WAIT, check=True
+    )
+    assert json.loads(child.stdout) == {"status": "complete", "numba_work": 0}, child.stdout + child.stderr

@@ -35,7 +35,7 @@ from mech_regulator.cli.server_key import (
     socket_path,
 )
 from mech_regulator.cli.start import SERVED_COMMANDS
-from mech_regulator.processes import process_alive
+from mech_regulator.processes import process_alive, python_child
 
 READY_WAIT = 120.0  # [s] `server start` waits at most this for the server to answer
 
@@ -44,12 +44,11 @@ STOP_WAIT = 30.0  # [s] `server stop` waits at most this for a server to end (it
 
 
 BOOTSTRAP = (
-    "import sys, json; sys.path[:] = json.loads(sys.argv[1]); from mech_regulator.cli.server import serve; "
-    "from mech_regulator.cli.command import run_command; sys.exit(serve(int(sys.argv[2]), sys.argv[3], "
-    "run_command))"
+    "from mech_regulator.cli.server import serve; from mech_regulator.cli.command import run_command; "
+    "sys.exit(serve(int(sys.argv[2]), sys.argv[3], run_command))"
 )
-"""The server's program (python -c): the client's sys.path first, so that it imports what the client imports; its
-children run the command line with cli.command.run_command, which this module does not import (the command line
+"""The server's program (processes.python_child: the client's sys.path, so that it imports what the client imports);
+its children run the command line with cli.command.run_command, which this module does not import (the command line
 imports this module for its `server` command)."""
 
 
@@ -261,10 +260,8 @@ def start_server(key: str) -> int | None:
         except BlockingIOError:
             return None
         with open(folder / f"{digest}.log", "w") as log:
-            # the interpreter's flags (-O, -X ...) as this one's, as multiprocessing starts its processes
-            flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
             process = subprocess.Popen(
-                [sys.executable, *flags, "-c", BOOTSTRAP, json.dumps(sys.path), str(lock.fileno()), key],
+                python_child(BOOTSTRAP, str(lock.fileno()), key),
                 stdin=subprocess.DEVNULL,
                 stdout=log,
                 stderr=subprocess.STDOUT,

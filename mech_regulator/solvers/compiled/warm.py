@@ -17,7 +17,11 @@ DOP853`) — once per machine and numba version, then numba loads them from its 
   (`compile_in_background`; a lock in the cache folder keeps it to one such process at a time).
 
 Run as a module (`python -m mech_regulator.solvers.compiled.warm METHOD ...`) it compiles the methods named (all
-when none) under that lock: what the background process does.
+when none) under that lock: what the background process does. The processes started here run this module's main
+with the starting process's sys.path (processes.python_child), so that they compile the package that process runs:
+`python -m` imported the copy in the working folder when there was one (a checkout, the command's own package
+installed elsewhere), and the main job then compiled its own stepper a second time, silently, after the announced
+compile (docs/speed.md, "A fresh clone's first run, step by step").
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 
+from mech_regulator.processes import python_child
 from mech_regulator.solvers.compiled import FAST_METHODS
 from mech_regulator.solvers.compiled.locks import lock_path
 
@@ -38,6 +43,8 @@ FURTHER_COMPILE_ESTIMATE = (
     "about 10 s on an idle 2-core machine, the integration loop it shares with the compiled "
     "methods being compiled already; several times that on a busy one"
 )
+CHILD_PROGRAM = "from mech_regulator.solvers.compiled.warm import main; sys.exit(main(sys.argv[2:]))"
+"""What a compiling process runs (processes.python_child), its methods as its arguments."""
 
 
 def compile_estimate(method: str) -> str:
@@ -80,7 +87,9 @@ def compile_before_the_run(method: str, report: Callable[[str], object]) -> None
     """Compile the stepper of `method` before a run, saying so with its estimate and then how long it took: in a
     child process (this module's main, under the lock: a compile another process has under way is waited for, said
     too, and then loaded), so that the compile's memory stays out of this process — the main job's nodes are forked
-    from it — and the run that follows is a warm run. Raises RuntimeError with the child's output if it fails."""
+    from it — and the run that follows is a warm run. Should this process still not find the stepper in numba's disk
+    cache then (the package's sources changed since this process read them), it compiles it here, saying so.
+    Raises RuntimeError with the child's output if the child fails."""
     with open(lock_path(), "a") as handle:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -94,12 +103,16 @@ def compile_before_the_run(method: str, report: Callable[[str], object]) -> None
         else f"compiling the fast path's {method} stepper (once, {compile_estimate(method)}) ..."
     )
     started = time.perf_counter()
-    done = subprocess.run(
-        [sys.executable, "-m", __name__, method], stdin=subprocess.DEVNULL, capture_output=True, text=True
-    )
+    done = subprocess.run(python_child(CHILD_PROGRAM, method), stdin=subprocess.DEVNULL, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"compiling the fast path's {method} stepper failed:\n{done.stdout}{done.stderr}")
     report(f"{method} ready in {time.perf_counter() - started:.1f} s")
+    if not stepper_cached(method):
+        report(
+            f"the {method} stepper compiled in a child process is not in numba's disk cache as this process reads it "
+            "(the package's sources changed since this process read them): compiling it here"
+        )
+        compile_steppers([method], report)
 
 
 def compile_in_background(methods: Iterable[str]) -> bool:
@@ -114,7 +127,7 @@ def compile_in_background(methods: Iterable[str]) -> bool:
             return False  # another process is compiling
         with open(lock.with_name("compiling.log"), "a") as log:
             subprocess.Popen(
-                [sys.executable, "-m", __name__, *methods],
+                python_child(CHILD_PROGRAM, *methods),
                 stdin=subprocess.DEVNULL,
                 stdout=log,
                 stderr=subprocess.STDOUT,
