@@ -1,15 +1,28 @@
 """The compiled evaluation of a compiled call's dense output (results.StepsDense): the co-simulation reads it at
 every exchange (the machine's speed samples, the governor's throttle samples: solvers/cosim.py), where the same
-evaluation in numpy took some 60 us a call in some 30 array operations, more than the numbers themselves cost."""
+evaluation in numpy took some 60 us a call in some 30 array operations, more than the numbers themselves cost. It is
+compiled (about 1 s of CPU on a fresh machine) or loaded with a stepper (steppers.stepper), for the argument types
+its calls have (SIGNATURE), so that the compile announced for a stepper covers it: compiled at its first call, it took
+the main job's launcher a second or more after that compile, unannounced."""
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from mech_regulator import numba_cache
 
 numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
+
+SIGNATURE = (
+    types.float64[::1],
+    types.float64[:, ::1],
+    types.float64[:, :, ::1],
+    types.float64[::1],
+    types.boolean[::1],
+    types.float64[::1],
+)
+"""steps_dense's argument types as results.StepsDense passes them: a compiled call's arrays and the times asked for."""
 
 
 @njit(cache=True)

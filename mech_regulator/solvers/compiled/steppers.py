@@ -10,6 +10,8 @@ import numpy as np
 from numba import njit, types
 
 from mech_regulator import numba_cache
+from mech_regulator.solvers.compiled.dense import SIGNATURE as DENSE_SIGNATURE
+from mech_regulator.solvers.compiled.dense import steps_dense
 from mech_regulator.solvers.compiled.integrators import _integrate
 from mech_regulator.solvers.compiled.locks import method_lock
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, REACTIONS_TYPE, RHS_TYPE
@@ -352,7 +354,9 @@ def stepper(method: str):
     says): compiled with its one explicit signature when first asked for, or loaded from numba's disk cache, so a
     process compiles or loads only the methods it runs (on a fresh machine some 50 s of CPU for the first to
     compile, some 7 s each further one: warm.py). Under the method's lock (locks.method_lock): a process that finds
-    another compiling the same stepper waits and then loads it, rather than compiling it a second time beside it."""
+    another compiling the same stepper waits and then loads it, rather than compiling it a second time beside it. The
+    evaluation of the steppers' dense output (dense.steps_dense) is compiled or loaded with it."""
     function, signature = _STEPPERS[method]
+    steps_dense.compile(DENSE_SIGNATURE)
     with method_lock(method):
         return njit(signature, cache=True)(function)
