@@ -342,7 +342,7 @@ def test_a_python_child_imports_what_this_process_imports(decoy_checkout):
     assert child.stdout == f"{mech_regulator.__file__}\n", child.stdout + child.stderr
 
 
-def test_a_stepper_the_child_compiled_out_of_this_process_reach_is_compiled_here_announced(monkeypatch, tmp_path):
+def test_a_stepper_still_missing_after_the_childs_compile_is_compiled_here_announced(monkeypatch, tmp_path):
     """Should the main job still not find the stepper in numba's disk cache after the child's compile (the package's
     sources changed since the main job read them), it says so and compiles it itself, announced with its
     estimate, rather than leaving the compile to the first exchange, unannounced."""
