@@ -62,6 +62,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import functools
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -311,11 +312,12 @@ class MachineStepper:
         if self.time - back < self._history_starts[0] or t_end - back > self.time:
             return None
         times = speed_samples_times(self.time, t_end, self._prediction_piece).tolist()
-        values = []
-        for time in [self.time] + times:
-            before = time - back
-            step = min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1)
-            values.append(piecewise_quadratic_at(self._history[step], [before])[0])
+        values: list[float] = []
+        for step, befores in itertools.groupby(
+            (time - back for time in [self.time] + times),
+            lambda before: min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1),
+        ):  # the times before by the kept step they fall in: one evaluation each
+            values += piecewise_quadratic_at(self._history[step], list(befores))
         return times, [omega + value - values[0] for value in values[1:]]
 
     def _keep(self, samples: Samples) -> Samples:
@@ -760,13 +762,8 @@ def speed_pieces(samples: Samples) -> list:
     (speed_waveform, t_start [s], t_end [s], omega at the start [rad/s]) for each three samples, follow_pieces'."""
     times, speeds = samples
     return [
-        (
-            speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
-            times[index],
-            times[index + 2],
-            speeds[index],
-        )
-        for index in range(0, len(times) - 2, 2)
+        (speed_waveform(start, end, first, middle, last), start, end, first)
+        for start, end, first, middle, last in zip(times[:-2:2], times[2::2], speeds[:-2:2], speeds[1::2], speeds[2::2])
     ]
 
 
