@@ -30,6 +30,7 @@ from mech_regulator.solvers.cosim import (
     held_load_until,
     load_rate,
     seconds,
+    speed_samples_times,
     speed_waveform,
     throttle_extrapolation,
     to_nanoseconds,
@@ -344,6 +345,46 @@ def test_the_engine_s_step_predicted_one_cycle_back_is_close_to_the_step_integra
         tentative = machine.tentative
     assert sorted(differences) == list(range(4, 50)), differences
     assert statistics.median(differences.values()) < 2e-2, differences
+
+
+def test_the_speed_samples_times_are_np_linspace_s_to_the_bit():
+    """speed_samples_times works out np.linspace's numbers in its operations without its set-up (docs/speed.md, "A
+    sixth sitting"): the same floats on exchange steps of the grid, odd ones and a long adaptive one, and its cached
+    factors stay unwritten."""
+    rng = np.random.default_rng(35)
+    starts = [0.0, 0.02, 15.98, 1e4 - 0.02] + rng.uniform(0.0, 1e4, 40).tolist()
+    for start in starts:
+        for length in (0.02, 0.01, 0.00125, 0.0123456789, 0.08, 1.0 / 3.0):
+            for longest in (1.25e-3, 2.5e-3, math.inf):
+                count = 2 * max(1, math.ceil(length / longest - 1e-9)) + 1
+                times = speed_samples_times(start, start + length, longest)
+                assert np.array_equal(times, np.linspace(start, start + length, count)), (start, length, longest)
+    again = speed_samples_times(1.0, 1.02)
+    assert again[0] == 1.0 and again[-1] == 1.02 and again.size == 33
+
+
+def test_the_prediction_one_cycle_back_waits_while_a_backward_turn_is_kept():
+    """MachineStepper counts, as it keeps a step, how many of its kept steps' crank angles rise in a row, and predicts
+    one cycle back only while all of those kept do (the crank turned forwards all along): along 100 kept steps of a
+    steady speed with two backward turns, it predicts exactly when every kept angle is above the one before (and the
+    steps kept reach a cycle back), and then the steady speed itself."""
+    machine = MachineStepper(build_model(load_scene("engine_direct")))
+    cycle = machine._cycle  # noqa: SLF001 (the engine's dynamic period [rad])
+    assert cycle is not None
+    angle, speed, kept, backward = 0.0, 50.0, [], {30: 0.5, 70: 0.1}  # [rad], [rad/s], angles kept, turns back [rad]
+    for tick in range(1, 101):
+        start, end = (tick - 1) * 0.02, tick * 0.02
+        angle = angle - backward[tick] if tick in backward else angle + 1.0
+        machine.time, machine.state = end, np.array([angle, speed])
+        machine._keep(([start, 0.5 * (start + end), end], [speed] * 3))  # noqa: SLF001
+        kept = kept[-63:] + [angle]
+        prediction = machine._cycle_back((tick + 1) * 0.02)  # noqa: SLF001
+        reaches_back = kept[0] <= angle - cycle < kept[-1] and tick > 13
+        forwards = all(later > earlier for earlier, later in zip(kept[:-1], kept[1:]))
+        assert (prediction is not None) == (reaches_back and forwards), tick
+        if prediction is not None:
+            assert prediction[1] == [speed] * 3
+    assert machine._history_angles == kept  # noqa: SLF001
 
 
 def test_the_tentative_throttle_breaks_where_the_sleeve_reaches_its_stop():

@@ -62,6 +62,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import functools
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -161,7 +162,9 @@ class MachineStepper:
         self._cycle = model.dynamic_period() if cycles else None  # [rad] the prediction's cycle (None: integrated)
         self._history: list[Samples] = []  # the corrected speed samples of the last steps, consecutive, oldest first
         self._history_starts: list[float] = []  # [s] their starts
-        self._history_ends: list[tuple[float, float]] = []  # their ends: (time [s], the crank angle phi [rad])
+        self._history_ends: list[float] = []  # [s] their ends
+        self._history_angles: list[float] = []  # [rad] the crank angle phi at their ends
+        self._rising = 0  # how many of the last consecutive pairs of those angles rise (the crank turning forwards)
 
     def applied_throttle(self, throttle: float) -> float:
         """The throttle [-] the machine applies now when given `throttle`: 0 once tripped. The trip is
@@ -293,25 +296,28 @@ class MachineStepper:
         periodic in phi and whose throttle the speed does not move directly: omega_p(t) = omega + omega_c(t - T) -
         omega_c(now - T) at the times speed_samples takes, omega [rad/s] the speed now, omega_c the corrected speed of
         the steps kept (the quadratic through three samples on each piece), T [s] the time since the crank angle was
-        phi - the dynamic period (interpolated between the kept steps' ends). None where the kept steps do not reach
-        back that far (the run's start), T is shorter than the step or the crank has not turned forwards all along
-        (docs/speed.md, "A fifth sitting")."""
+        phi - the dynamic period (interpolated between the kept steps' ends, as np.interp). None where the kept steps
+        do not reach back that far (the run's start), T is shorter than the step or the crank has not turned forwards
+        all along (docs/speed.md, "A fifth sitting"); whether it has is counted as the steps are kept (_rising)."""
         omega = float(self.state[1])
-        if self._cycle is None or omega <= 0.0 or len(self._history_ends) < 2 or self._history_ends[-1][0] != self.time:
+        ends, angles = self._history_ends, self._history_angles
+        if self._cycle is None or omega <= 0.0 or len(ends) < 2 or ends[-1] != self.time:
             return None
-        ends, angles = zip(*self._history_ends)
         target = float(self.state[0]) - self._cycle  # [rad]
-        if angles[0] > target or any(later <= earlier for earlier, later in zip(angles[:-1], angles[1:])):
-            return None
-        back = self.time - float(np.interp(target, angles, ends))  # [s] T
+        if angles[0] > target or target >= angles[-1] or self._rising < len(angles) - 1:
+            return None  # (at or beyond the last angle T would be 0)
+        below = bisect.bisect_right(angles, target) - 1  # np.interp's interval, and its operations
+        slope = (ends[below + 1] - ends[below]) / (angles[below + 1] - angles[below])
+        back = self.time - (slope * (target - angles[below]) + ends[below])  # [s] T
         if self.time - back < self._history_starts[0] or t_end - back > self.time:
             return None
         times = speed_samples_times(self.time, t_end, self._prediction_piece).tolist()
-        values = []
-        for time in [self.time] + times:
-            before = time - back
-            step = min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1)
-            values.append(piecewise_quadratic_at(self._history[step], [before])[0])
+        values: list[float] = []
+        for step, befores in itertools.groupby(
+            (time - back for time in [self.time] + times),
+            lambda before: min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1),
+        ):  # the times before by the kept step they fall in: one evaluation each
+            values += piecewise_quadratic_at(self._history[step], list(befores))
         return times, [omega + value - values[0] for value in values[1:]]
 
     def _keep(self, samples: Samples) -> Samples:
@@ -319,11 +325,14 @@ class MachineStepper:
         CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them anew); returns
         them."""
         if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
-            if self._history_ends and self._history_ends[-1][0] != samples[0][0]:
-                self._history, self._history_starts, self._history_ends = [], [], []
+            if self._history_ends and self._history_ends[-1] != samples[0][0]:
+                self._history, self._history_starts, self._history_ends, self._history_angles = [], [], [], []
+            angle = float(self.state[0])
+            self._rising = self._rising + 1 if self._history_angles and not angle <= self._history_angles[-1] else 0
             self._history = self._history[1 - CYCLE_HISTORY :] + [samples]
             self._history_starts = self._history_starts[1 - CYCLE_HISTORY :] + [samples[0][0]]
-            self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [(self.time, float(self.state[0]))]
+            self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [self.time]
+            self._history_angles = self._history_angles[1 - CYCLE_HISTORY :] + [angle]
         return samples
 
     def _continued_load(self, time: float) -> tuple[float, float]:
@@ -705,8 +714,22 @@ def speed_samples(
 
 def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> np.ndarray:
     """The times [s] at which speed_samples samples [t_start, t_end] [s]: 2 m + 1 evenly spaced, both ends included, m
-    the fewest pieces no longer than `longest` [s]."""
-    return np.linspace(t_start, t_end, 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1)
+    the fewest pieces no longer than `longest` [s]; np.linspace's numbers in its operations (the steps times the
+    spacing, plus t_start, the last t_end) without its set-up, which cost as much as the rest of a speed sample
+    (docs/speed.md, "A sixth sitting")."""
+    count = 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1
+    times = _step_numbers(count) * ((t_end - t_start) / (count - 1))
+    times += t_start
+    times[-1] = t_end
+    return times
+
+
+@functools.cache
+def _step_numbers(count: int) -> np.ndarray:
+    """0, 1, ..., count - 1 as floats (read only: speed_samples_times' factors)."""
+    numbers = np.arange(count, dtype=float)
+    numbers.flags.writeable = False
+    return numbers
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
@@ -739,13 +762,8 @@ def speed_pieces(samples: Samples) -> list:
     (speed_waveform, t_start [s], t_end [s], omega at the start [rad/s]) for each three samples, follow_pieces'."""
     times, speeds = samples
     return [
-        (
-            speed_waveform(times[index], times[index + 2], *speeds[index : index + 3]),
-            times[index],
-            times[index + 2],
-            speeds[index],
-        )
-        for index in range(0, len(times) - 2, 2)
+        (speed_waveform(start, end, first, middle, last), start, end, first)
+        for start, end, first, middle, last in zip(times[:-2:2], times[2::2], speeds[:-2:2], speeds[1::2], speeds[2::2])
     ]
 
 
@@ -891,8 +909,9 @@ def _governor_mode(mode: tuple[str, ...]) -> Mode:
 
 def _accumulate(stats: SolverStats, stretch: Trajectory) -> tuple[str, str]:
     """Add a stretch's solver statistics to the running totals; returns its status and message."""
+    totals, added = vars(stats), vars(stretch.stats)
     for name in _STATISTICS:
-        setattr(stats, name, getattr(stats, name) + getattr(stretch.stats, name))
+        totals[name] += added[name]
     return stretch.status, stretch.message
 
 
