@@ -48,3 +48,15 @@ def python_child(program: str, *arguments: str) -> list[str]:
     flags = subprocess._args_from_interpreter_flags()  # type: ignore[attr-defined]
     bootstrap = f"import json, sys; sys.path[:] = json.loads(sys.argv[1]); {program}"
     return [sys.executable, *flags, "-c", bootstrap, json.dumps(sys.path), *arguments]
+
+
+COMMAND_LINE_PROGRAM = (
+    "from mech_regulator.cli import entry; sys.argv[:] = ['mech-regulator', *sys.argv[2:]]; sys.exit(entry())"
+)
+"""What a command-line child runs (python_child): `mech-regulator` with the child's arguments."""
+
+
+def command_line_child(*arguments: str) -> list[str]:
+    """The command line of a child `mech-regulator ARGUMENTS` run by this interpreter with this process's sys.path
+    (python_child), not `python -m mech_regulator`, which would import a copy of the package in the working folder."""
+    return python_child(COMMAND_LINE_PROGRAM, *arguments)

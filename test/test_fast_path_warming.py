@@ -26,7 +26,7 @@ import pytest
 from numba.core.caching import _CacheLocator
 
 from mech_regulator import numba_cache
-from mech_regulator.processes import python_child
+from mech_regulator.processes import command_line_child, python_child
 
 WAIT = 300.0  # [s] of wall time: the failure limit of the background compile (never what the test measures)
 
@@ -340,6 +340,18 @@ def test_a_python_child_imports_what_this_process_imports(decoy_checkout):
         timeout=60,
     )
     assert child.stdout == f"{mech_regulator.__file__}\n", child.stdout + child.stderr
+
+
+def test_a_command_line_child_runs_the_package_this_process_runs(decoy_checkout):
+    """processes.command_line_child (the benchmarks' `run` children): `mech-regulator ARGUMENTS` with this process's
+    package, not `python -m mech_regulator`'s copy in the working folder, and its argument list as given."""
+    child = subprocess.run(command_line_child("describe", "lathe"), capture_output=True, text=True, timeout=120)
+    assert child.returncode == 0, child.stdout + child.stderr
+    assert "decoy" not in child.stdout + child.stderr
+    assert "lathe" in child.stdout
+    wrong = subprocess.run(command_line_child("describe", "no_such_scene"), capture_output=True, text=True, timeout=120)
+    assert wrong.returncode == 2, wrong.stdout + wrong.stderr
+    assert "no_such_scene" in wrong.stderr
 
 
 def test_a_stepper_still_missing_after_the_childs_compile_is_compiled_here_announced(monkeypatch, tmp_path):

@@ -36,7 +36,6 @@ import queue
 import re
 import signal
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -46,7 +45,7 @@ import numpy as np
 import psutil
 
 from mech_regulator.analysis.energy import GAUSS_NODES, GAUSS_WEIGHTS, powers
-from mech_regulator.processes import die_with_parent
+from mech_regulator.processes import command_line_child, die_with_parent
 
 PROCESS_NAMES = ("machine", "governor", "scenario", "recorder", "launcher")  # the order of the memory rows
 NODE_SUFFIX = "_node"  # a forked node's process name is <name>_node (nodes/launch.py _name_process)
@@ -160,14 +159,14 @@ def run_command(
     scene: str, duration: float, overrides: list[str], out: Path | None, domain_id: int | None
 ) -> list[str]:
     """The `mech-regulator run` command line of the soak (no --quiet: its progress lines are what the soak reads)."""
-    command = [sys.executable, "-m", "mech_regulator", "run", scene, "--duration", repr(duration)]
+    command = ["run", scene, "--duration", repr(duration)]
     for override in overrides:
         command += ["--set", override]
     if out is not None:
         command += ["--out", str(out)]
     if domain_id is not None:
         command += ["--domain-id", str(domain_id)]
-    return command
+    return command_line_child(*command)
 
 
 def run_soak(

@@ -9,7 +9,6 @@ import json
 import math
 import os
 import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -20,6 +19,7 @@ import numpy as np
 from mech_regulator.bench.accuracy import REFERENCE_RTOL, timed
 from mech_regulator.bench.speed_runs import FAST, REFERENCE, Row, SpeedBenchmark
 from mech_regulator.model import build_model
+from mech_regulator.processes import command_line_child
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate
@@ -80,10 +80,7 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
         for scene, path, exchange, coupling in runs:
             settings = ["solver.path=fast"] if path == FAST else ["solver.path=reference"]
             output = os.path.join(folder, f"{scene}{path}{exchange:g}{coupling}.rrd")
-            command = [
-                sys.executable,
-                "-m",
-                "mech_regulator",
+            command = command_line_child(
                 "run",
                 scene,
                 "--quiet",
@@ -93,7 +90,8 @@ def measure_ros(report: Callable[[Row], None]) -> list[Row]:
                 coupling,
                 "--out",
                 output,
-            ] + [item for setting in settings for item in ("--set", setting)]
+                *(item for setting in settings for item in ("--set", setting)),
+            )
             start = time.perf_counter()
             done = subprocess.run(command, capture_output=True, text=True, check=False)
             process_wall = time.perf_counter() - start
