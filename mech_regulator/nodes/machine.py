@@ -562,16 +562,12 @@ class MachineNode(MachineExchange, Node):
     # Outputs
 
     def publish_state(self) -> None:
-        """/clock and joint_states at the current exchange time (effort: the net moment with the inputs
-        held over the step that ended here)."""
+        """joint_states and /clock at the current exchange time (effort: the net moment with the inputs held over the
+        step that ended here); joint_states first: the governor answers it, and a node that follows /clock (use_sim_time)
+        takes that message in Python before the next (docs/speed.md, "Where an exchange's 1.4 ms goes")."""
         wall = time.monotonic()
         if self.time_mode == "realtime":  # the wall clock's simulation time less the state's, at its publication
             self.max_lag = max(self.max_lag, (wall - self.wall_start) * self.real_time_factor - seconds(self.now_ns))
-        if self.clock_publisher is not None and (
-            wall - self.last_clock >= self.clock_period or self.now_ns == 0 or self.now_ns >= self.end_ns
-        ):
-            self.clock_publisher.publish(Clock(clock=stamp(self.now_ns)))  # the others' timers need not every exchange
-            self.last_clock = wall
         values = self.stepper.outputs(self.throttle, self.load)
         joints = [("crank", float(self.stepper.state[0]), float(self.stepper.state[1]))]
         joints += output_joints(self.model, values)
@@ -589,6 +585,11 @@ class MachineNode(MachineExchange, Node):
         self.joint_publisher.publish(message)
         self.published_at = time.monotonic()
         self.published_exchanges += 1
+        if self.clock_publisher is not None and (
+            wall - self.last_clock >= self.clock_period or self.now_ns == 0 or self.now_ns >= self.end_ns
+        ):
+            self.clock_publisher.publish(Clock(clock=stamp(self.now_ns)))  # the others' timers need not every exchange
+            self.last_clock = wall
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""
