@@ -129,3 +129,56 @@ def test_a_streamed_bench_long_row_is_the_row_of_the_run_kept_whole(small_chunks
     assert (streamed.steps, streamed.residual) == (whole.steps, whole.residual)
     for name in ("omega_m", "delta", "omega_m_short", "delta_short"):
         assert getattr(streamed, name) == pytest.approx(getattr(whole, name), rel=1e-9), name
+
+
+@pytest.mark.parametrize(
+    "name, duration, retained, chunk",
+    [
+        ("two_mass", 3.0, RETAINED, CHUNK),  # a coupling: its largest moment (refined) and the twist's range
+        ("press_coupling", 3.0, RETAINED, CHUNK),  # a hardening coupling, the press held by friction at the start
+        ("clutch_start", 4.0, 10, 5),  # a clutch and two branches: their largest section torques (34 steps)
+    ],
+)
+def test_a_streamed_two_mass_or_drive_train_run_gives_the_summary_of_the_run_kept_whole(
+    small_chunks, monkeypatch, tmp_path, capsys, name, duration, retained, chunk
+):
+    """`simulate` of a two-mass machine or a drive train on the reference path, streamed (the coupling's and the
+    sections' figures read chunk by chunk while the run drops its oldest steps) and kept whole: the same JSON summary
+    and CSV, but the steady state, which the streamed run judges on the tail it keeps, and the figures that follow
+    from it (the coupling peak's period, the steady mean moment and their ratio, to 1e-9)."""
+    from mech_regulator import analysis
+
+    monkeypatch.setattr(stream, "RETAINED_STEPS", retained)
+    monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", chunk)
+    monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", chunk)
+    dropped = []
+
+    def simulate_streamed(model, *arguments, **options):
+        trajectory, digest = stream.simulate_streamed(model, *arguments, **options)
+        dropped.append(trajectory.steps_dropped)
+        return trajectory, digest
+
+    monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
+    scene_file = write_scene(tmp_path, yaml.safe_dump(shortened(name, duration, solver__path="reference")))
+    summaries, csv_files = [], [tmp_path / "streamed.csv", tmp_path / "whole.csv"]
+    for csv_file in csv_files:
+        code, output, _ = run_cli(capsys, "simulate", str(scene_file), "--json", "--quiet", "--out", str(csv_file))
+        assert code == 0
+        summaries.append(json.loads(output))
+        monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    assert dropped[0] > 0 and dropped[1] == 0  # the first run streamed, the second kept every step
+    streamed, whole = summaries
+    assert streamed.pop("csv") == str(csv_files[0]) and whole.pop("csv") == str(csv_files[1])
+    streamed_steady, whole_steady = streamed.pop("steady"), whole.pop("steady")
+    assert streamed_steady["steady"] == whole_steady["steady"]
+    if whole["two_mass"] is not None:
+        streamed_peak, whole_peak = streamed["two_mass"].pop("peak"), whole["two_mass"].pop("peak")
+        assert (streamed_peak["moment"], streamed_peak["time"]) == (whole_peak["moment"], whole_peak["time"])
+        for figure in ("steady_mean", "ratio"):  # None where the run is not steady
+            value = whole_peak[figure]
+            assert streamed_peak[figure] == (value if value is None else pytest.approx(value, rel=1e-9)), figure
+        streamed["two_mass"].pop("steady_from"), whole["two_mass"].pop("steady_from")
+    assert streamed == whole
+    if name == "clutch_start":
+        assert all(section["max"] > section["nominal"] for section in whole["drive_train"]["sections"].values())
+    assert csv_files[0].read_bytes() == csv_files[1].read_bytes()
