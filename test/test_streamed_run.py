@@ -182,3 +182,40 @@ def test_a_streamed_two_mass_or_drive_train_run_gives_the_summary_of_the_run_kep
     if name == "clutch_start":
         assert all(section["max"] > section["nominal"] for section in whole["drive_train"]["sections"].values())
     assert csv_files[0].read_bytes() == csv_files[1].read_bytes()
+
+
+@pytest.mark.parametrize(
+    "name, duration, retained, chunk",
+    [("engine_direct", 4.0, RETAINED, CHUNK), ("clutch_start", 4.0, 10, 5)],  # a governor's panel, a clutch's
+)
+def test_a_streamed_run_plots_the_samples_of_the_run_kept_whole(
+    small_chunks, monkeypatch, tmp_path, capsys, name, duration, retained, chunk
+):
+    """`simulate --plot` on the reference path streams (the plot once kept the whole run) and draws the speed of the
+    run kept whole against time, bit for bit: the streamed output samples (and, for the clutch, the events)."""
+    from matplotlib.axes import Axes
+
+    monkeypatch.setattr(stream, "RETAINED_STEPS", retained)
+    monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", chunk)
+    monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", chunk)
+    drawn = []
+    draw = Axes.plot
+    monkeypatch.setattr(Axes, "plot", lambda axes, *data, **style: drawn.append(data) or draw(axes, *data, **style))
+    sampled = []
+    take_samples = RunDigest.samples
+    monkeypatch.setattr(
+        RunDigest, "samples", lambda digest, trajectory: sampled.append(1) or take_samples(digest, trajectory)
+    )
+    scene_file = write_scene(tmp_path, yaml.safe_dump(shortened(name, duration, solver__path="reference")))
+    speeds = []
+    for picture in ("streamed.png", "whole.png"):
+        drawn.clear()
+        arguments = ["simulate", str(scene_file), "--json", "--quiet", "--plot", str(tmp_path / picture)]
+        assert run_cli(capsys, *arguments)[0] == 0
+        assert (tmp_path / picture).stat().st_size > 0
+        speeds.append(drawn[0])  # omega against t, the first curve drawn
+        monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    assert sampled == [1]  # the first run streamed: its plot took the digest's samples
+    (streamed_times, streamed_omega), (times, omega) = speeds
+    assert streamed_times.size > 4 * 1000 and np.array_equal(streamed_times, times)
+    assert np.array_equal(streamed_omega, omega)

@@ -48,13 +48,13 @@ def streams(model: MachineModel) -> bool:
 
 
 def simulate_streamed(
-    model: MachineModel, progress: Progress | None = None, samples: bool = False, whole: bool = False
+    model: MachineModel, progress: Progress | None = None, samples: bool = False
 ) -> tuple[Trajectory, RunDigest | None]:
-    """The monolithic run of the model (solvers.simulate), streamed when it can be (streams) and not asked whole:
-    its trajectory, and the digest of the dense output it dropped (None when it dropped none: the trajectory is then
-    the whole run, as summarise reads it). samples: whether the digest keeps the output samples (a CSV, a recording
-    or a bag reads them). Refusals raise SceneError, as simulate's."""
-    digest = RunDigest(model, samples=samples) if streams(model) and not whole else None
+    """The monolithic run of the model (solvers.simulate), streamed when it can be (streams): its trajectory, and the
+    digest of the dense output it dropped (None when it dropped none: the trajectory is then the whole run, as
+    summarise reads it). samples: whether the digest keeps the output samples (a CSV, a plot, a recording or a bag
+    reads them). Refusals raise SceneError, as simulate's."""
+    digest = RunDigest(model, samples=samples) if streams(model) else None
     trajectory = simulate(model, progress, stream=digest.take if digest is not None else None)
     return trajectory, digest if digest is not None and trajectory.steps_dropped else None
 
