@@ -4,7 +4,8 @@ summary and CSV are those of the run kept whole.
 
 Oracles: the run kept whole (the streamed figures are read on the same sample times and in the same chunks, so they
 are the same numbers), and the run of a quarter of the length (the steps it holds at its end bound the longer run's).
-Here the chunks are made small (a few hundred steps) so that a few seconds of engine_direct stream.
+Here the chunks are made small (a few hundred steps; a few for clutch_start) so that a few seconds of engine_direct,
+of the two-mass machines and of a drive train stream.
 """
 
 from __future__ import annotations
