@@ -220,3 +220,19 @@ def test_a_streamed_run_plots_the_samples_of_the_run_kept_whole(
     (streamed_times, streamed_omega), (times, omega) = speeds
     assert streamed_times.size > 4 * 1000 and np.array_equal(streamed_times, times)
     assert np.array_equal(streamed_omega, omega)
+
+
+def test_the_samples_within_a_stretch_are_those_of_the_planned_grid():
+    """sample_times_within (what the two-mass and drive-train readers take of the output grid a chunk at a time) is
+    the planned grid, sample_times, cut to [low, high], bit for bit: at the ends, at grid points, outside the run."""
+    from mech_regulator.solvers.trajectory import sample_times, sample_times_within
+
+    rng = np.random.default_rng(29)
+    for duration, rate in ((3.0, 5000.0), (10_000.0, 100.0), (7.3, 333.3), (0.01, 100.0)):
+        grid = sample_times(0.0, duration, rate)
+        picks = list(grid[rng.integers(grid.size, size=20)]) + list(rng.uniform(-0.1, 1.1, 20) * duration)
+        for low, high in zip(picks[::2], picks[1::2]):
+            low, high = min(low, high), max(low, high)
+            inside = grid[(grid >= low) & (grid <= high)]
+            assert np.array_equal(sample_times_within(0.0, duration, rate, low, high), inside), (duration, low, high)
+        assert np.array_equal(sample_times_within(0.0, duration, rate, 0.0, duration), grid)
