@@ -4,7 +4,8 @@ summary and CSV are those of the run kept whole.
 
 Oracles: the run kept whole (the streamed figures are read on the same sample times and in the same chunks, so they
 are the same numbers), and the run of a quarter of the length (the steps it holds at its end bound the longer run's).
-Here the chunks are made small (a few hundred steps) so that a few seconds of engine_direct stream.
+Here the chunks are made small (a few hundred steps; a few for clutch_start) so that a few seconds of engine_direct,
+of the two-mass machines and of a drive train stream.
 """
 
 from __future__ import annotations
@@ -129,3 +130,109 @@ def test_a_streamed_bench_long_row_is_the_row_of_the_run_kept_whole(small_chunks
     assert (streamed.steps, streamed.residual) == (whole.steps, whole.residual)
     for name in ("omega_m", "delta", "omega_m_short", "delta_short"):
         assert getattr(streamed, name) == pytest.approx(getattr(whole, name), rel=1e-9), name
+
+
+@pytest.mark.parametrize(
+    "name, duration, retained, chunk",
+    [
+        ("two_mass", 3.0, RETAINED, CHUNK),  # a coupling: its largest moment (refined) and the twist's range
+        ("press_coupling", 3.0, RETAINED, CHUNK),  # a hardening coupling, the press held by friction at the start
+        ("clutch_start", 4.0, 10, 5),  # a clutch and two branches: their largest section torques (34 steps)
+    ],
+)
+def test_a_streamed_two_mass_or_drive_train_run_gives_the_summary_of_the_run_kept_whole(
+    small_chunks, monkeypatch, tmp_path, capsys, name, duration, retained, chunk
+):
+    """`simulate` of a two-mass machine or a drive train on the reference path, streamed (the coupling's and the
+    sections' figures read chunk by chunk while the run drops its oldest steps) and kept whole: the same JSON summary
+    and CSV, but the steady state, which the streamed run judges on the tail it keeps, and the figures that follow
+    from it (the coupling peak's period, the steady mean moment and their ratio, to 1e-9)."""
+    from mech_regulator import analysis
+
+    monkeypatch.setattr(stream, "RETAINED_STEPS", retained)
+    monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", chunk)
+    monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", chunk)
+    dropped = []
+
+    def simulate_streamed(model, *arguments, **options):
+        trajectory, digest = stream.simulate_streamed(model, *arguments, **options)
+        dropped.append(trajectory.steps_dropped)
+        return trajectory, digest
+
+    monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
+    scene_file = write_scene(tmp_path, yaml.safe_dump(shortened(name, duration, solver__path="reference")))
+    summaries, csv_files = [], [tmp_path / "streamed.csv", tmp_path / "whole.csv"]
+    for csv_file in csv_files:
+        code, output, _ = run_cli(capsys, "simulate", str(scene_file), "--json", "--quiet", "--out", str(csv_file))
+        assert code == 0
+        summaries.append(json.loads(output))
+        monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    assert dropped[0] > 0 and dropped[1] == 0  # the first run streamed, the second kept every step
+    streamed, whole = summaries
+    assert streamed.pop("csv") == str(csv_files[0]) and whole.pop("csv") == str(csv_files[1])
+    streamed_steady, whole_steady = streamed.pop("steady"), whole.pop("steady")
+    assert streamed_steady["steady"] == whole_steady["steady"]
+    if whole["two_mass"] is not None:
+        streamed_peak, whole_peak = streamed["two_mass"].pop("peak"), whole["two_mass"].pop("peak")
+        assert (streamed_peak["moment"], streamed_peak["time"]) == (whole_peak["moment"], whole_peak["time"])
+        for figure in ("steady_mean", "ratio"):  # None where the run is not steady
+            value = whole_peak[figure]
+            assert streamed_peak[figure] == (value if value is None else pytest.approx(value, rel=1e-9)), figure
+        streamed["two_mass"].pop("steady_from"), whole["two_mass"].pop("steady_from")
+    assert streamed == whole
+    if name == "clutch_start":
+        assert all(section["max"] > section["nominal"] for section in whole["drive_train"]["sections"].values())
+    assert csv_files[0].read_bytes() == csv_files[1].read_bytes()
+
+
+@pytest.mark.parametrize(
+    "name, duration, retained, chunk",
+    [("engine_direct", 4.0, RETAINED, CHUNK), ("clutch_start", 4.0, 10, 5)],  # a governor's panel, a clutch's
+)
+def test_a_streamed_run_plots_the_samples_of_the_run_kept_whole(
+    small_chunks, monkeypatch, tmp_path, capsys, name, duration, retained, chunk
+):
+    """`simulate --plot` on the reference path streams (the plot once kept the whole run) and draws the speed of the
+    run kept whole against time, bit for bit: the streamed output samples (and, for the clutch, the events)."""
+    from matplotlib.axes import Axes
+
+    monkeypatch.setattr(stream, "RETAINED_STEPS", retained)
+    monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", chunk)
+    monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", chunk)
+    drawn = []
+    draw = Axes.plot
+    monkeypatch.setattr(Axes, "plot", lambda axes, *data, **style: drawn.append(data) or draw(axes, *data, **style))
+    sampled = []
+    take_samples = RunDigest.samples
+    monkeypatch.setattr(
+        RunDigest, "samples", lambda digest, trajectory: sampled.append(1) or take_samples(digest, trajectory)
+    )
+    scene_file = write_scene(tmp_path, yaml.safe_dump(shortened(name, duration, solver__path="reference")))
+    speeds = []
+    for picture in ("streamed.png", "whole.png"):
+        drawn.clear()
+        arguments = ["simulate", str(scene_file), "--json", "--quiet", "--plot", str(tmp_path / picture)]
+        assert run_cli(capsys, *arguments)[0] == 0
+        assert (tmp_path / picture).stat().st_size > 0
+        speeds.append(drawn[0])  # omega against t, the first curve drawn
+        monkeypatch.setattr(stream, "RETAINED_STEPS", 10**9)
+    assert sampled == [1]  # the first run streamed: its plot took the digest's samples
+    (streamed_times, streamed_omega), (times, omega) = speeds
+    assert streamed_times.size > 4 * 1000 and np.array_equal(streamed_times, times)
+    assert np.array_equal(streamed_omega, omega)
+
+
+def test_the_samples_within_a_stretch_are_those_of_the_planned_grid():
+    """sample_times_within (what the two-mass and drive-train readers take of the output grid a chunk at a time) is
+    the planned grid, sample_times, cut to [low, high], bit for bit: at the ends, at grid points, outside the run."""
+    from mech_regulator.solvers.trajectory import sample_times, sample_times_within
+
+    rng = np.random.default_rng(29)
+    for duration, rate in ((3.0, 5000.0), (10_000.0, 100.0), (7.3, 333.3), (0.01, 100.0)):
+        grid = sample_times(0.0, duration, rate)
+        picks = list(grid[rng.integers(grid.size, size=20)]) + list(rng.uniform(-0.1, 1.1, 20) * duration)
+        for low, high in zip(picks[::2], picks[1::2]):
+            low, high = min(low, high), max(low, high)
+            inside = grid[(grid >= low) & (grid <= high)]
+            assert np.array_equal(sample_times_within(0.0, duration, rate, low, high), inside), (duration, low, high)
+        assert np.array_equal(sample_times_within(0.0, duration, rate, 0.0, duration), grid)

@@ -59,6 +59,7 @@ def summarise(model: MachineModel, trajectory: Trajectory, digest: RunDigest | N
     steady = analyse_steady_state(model, trajectory, stopped_at=streamed.stopped_at if streamed else None)
     balance = energy_balance(model, trajectory, streamed.works if streamed else None)
     end = trajectory(trajectory.t_end)
+    steps_read = streamed.works.steps if streamed else 0  # the solver steps the stream read and dropped
     return {
         "scene": model.scene.name,
         "status": trajectory.status,
@@ -82,9 +83,17 @@ def summarise(model: MachineModel, trajectory: Trajectory, digest: RunDigest | N
             else None
         ),
         "two_mass": (
-            dataclasses.asdict(motion_periods(model, trajectory, steady)) if model.coupling is not None else None
+            dataclasses.asdict(
+                motion_periods(model, trajectory, steady, streamed.coupling if streamed else None, steps_read)
+            )
+            if model.coupling is not None
+            else None
         ),
-        "drive_train": drive_train_summary(model, trajectory) if model.driven is not None else None,
+        "drive_train": (
+            drive_train_summary(model, trajectory, streamed.sections if streamed else None, steps_read)
+            if model.driven is not None
+            else None
+        ),
     }
 
 

@@ -14,19 +14,50 @@ while the clutch slips.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
+from mech_regulator.analysis.energy import planned_samples, step_chunks, step_edges
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import HELD, STUCK
 from mech_regulator.solvers import Trajectory
 
 
-def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
+@dataclass
+class SectionsSoFar:
+    """The largest section torque of each branch of a drive train over a run read so far (read_sections), chunk by
+    chunk: branch name -> (M_section [N m], its time [s])."""
+
+    peaks: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+def read_sections(model: MachineModel, trajectory: Trajectory, chunk: np.ndarray, so_far: SectionsSoFar) -> None:
+    """Add to so_far the branches' section torques over a chunk of solver steps (chunk: their edges [s]) at the
+    planned output samples and the events after its first edge (from the run's start on the first chunk); a larger
+    torque than any before (the first one on a tie, as one argmax over the run) replaces the branch's peak."""
+    driven = model.driven
+    assert driven is not None, "read_sections is for a model with a driven part"
+    low, high = float(chunk[0]), float(chunk[-1])
+    times = np.union1d(planned_samples(model, trajectory, low, high), [t for t, _ in trajectory.events])
+    times = times[((times > low) | (times == trajectory.t_start)) & (times <= high)]
+    columns = model.columns(times, trajectory(times))
+    for branch in driven.branches:
+        section = columns[f"M_section_{branch.name}"]
+        peak = int(np.argmax(section))
+        if branch.name not in so_far.peaks or section[peak] > so_far.peaks[branch.name][0]:
+            so_far.peaks[branch.name] = (float(section[peak]), float(times[peak]))
+
+
+def drive_train_summary(
+    model: MachineModel, trajectory: Trajectory, so_far: SectionsSoFar | None = None, steps_done: int = 0
+) -> dict:
     """Slip phases [(start, end, 'slip+' | 'slip-')] and lock times [s] of a clutch, stretches [(start, end)]
     in which the driven part was held at rest, and per branch the largest section torque (value [N m], time
-    [s]) with the paper's estimate (module docstring), as plain data; for a model with a drive train."""
+    [s]) with the paper's estimate (module docstring), as plain data; for a model with a drive train. The section
+    torques are read chunk by chunk (step_chunks; so_far: what a streamed run read of its first steps_done solver
+    steps, analysis/stream.py)."""
     driven = model.driven
     assert driven is not None, "drive_train_summary is for a model with a driven part"
     result: dict[str, Any] = {
@@ -42,26 +73,29 @@ def drive_train_summary(model: MachineModel, trajectory: Trajectory) -> dict:
         }
     if not driven.branches:
         return result
-    times = np.union1d(
-        trajectory.samples(model.scene.solver.sample_rate),
-        [t for t, _ in trajectory.events if trajectory.t_start <= t <= trajectory.t_end],
-    )
-    columns = model.columns(times, trajectory(times))
-    end = {name: values[-1] for name, values in columns.items()}
+    sections = SectionsSoFar(dict(so_far.peaks)) if so_far is not None else SectionsSoFar()
+    edges = step_edges(trajectory)
+    for chunk, _ in step_chunks(trajectory, edges, steps_done):
+        read_sections(model, trajectory, chunk, sections)
+    end = {
+        name: values[-1]
+        for name, values in model.columns(
+            np.array([trajectory.t_end]), trajectory(np.array([trajectory.t_end]))
+        ).items()
+    }
     nominal = -(end["M_driven_external"] + sum(end[f"M_driven_{effect.name}"] for effect in driven.effects))
     beta = model.clutch.kinetic_torque / nominal if model.clutch is not None and nominal > 0.0 else None
     if model.clutch is not None:
         result["clutch"].update(nominal_load=nominal, beta=beta)
     for branch in driven.branches:
-        section = columns[f"M_section_{branch.name}"]
-        peak = int(np.argmax(section))
         branch_nominal = -branch.ratio * sum(end[f"M_driven_{driven.effects[i].name}"] for i in branch.effects)
         estimate = None
         if beta is not None:
             estimate = branch_nominal + branch.inertia / branch.ratio * (beta - 1.0) * nominal / driven.inertia
+        peak, time = sections.peaks[branch.name]
         result["sections"][branch.name] = {
-            "max": float(section[peak]),
-            "time": float(times[peak]),
+            "max": peak,
+            "time": time,
             "nominal": float(branch_nominal),
             "paper_estimate": estimate,
         }

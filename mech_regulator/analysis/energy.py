@@ -14,12 +14,14 @@ the integration error of the run, not a sampling error.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
+from mech_regulator.solvers.trajectory import sample_times_within
 
 GAUSS_NODES, GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(4)
 BALANCE_CHUNK_STEPS = 50_000  # solver steps whose works energy_balance evaluates at once (some 100 MB of columns)
@@ -58,8 +60,8 @@ def energy_balance(model: MachineModel, trajectory: Trajectory, so_far: WorksSoF
     so_far = so_far or WorksSoFar()
     edges = step_edges(trajectory)
     works = dict(so_far.works)
-    for first in range(so_far.steps - trajectory.steps_dropped, max(edges.size - 1, 1), BALANCE_CHUNK_STEPS):
-        add_works(model, trajectory, edges[first : first + BALANCE_CHUNK_STEPS + 1], works)
+    for chunk, _ in step_chunks(trajectory, edges, so_far.steps):
+        add_works(model, trajectory, chunk, works)
     if so_far.start is None:
         states = trajectory(np.array([edges[0], edges[-1]]))
     else:
@@ -109,6 +111,25 @@ def step_edges(trajectory: Trajectory) -> np.ndarray:
     ends each piece recorded (Trajectory.step_ends; a piece of the fast path spans a whole compiled call's steps).
     Empty for a run without a step."""
     return np.concatenate([trajectory.piece_edges[:1], *trajectory.step_ends])
+
+
+def step_chunks(
+    trajectory: Trajectory, edges: np.ndarray, steps_done: int
+) -> Iterator[tuple[np.ndarray, float | None]]:
+    """The chunks of BALANCE_CHUNK_STEPS solver steps after the run's first steps_done, in order: each chunk's step
+    edges [s] (a slice of edges, step_edges of the trajectory) and the edge that follows it (None after the last).
+    A summary reads the rest of a run in these, after those a streamed run read (analysis/stream.py); one chunk for
+    a run without a step."""
+    for first in range(steps_done - trajectory.steps_dropped, max(edges.size - 1, 1), BALANCE_CHUNK_STEPS):
+        end = first + BALANCE_CHUNK_STEPS
+        yield edges[first : end + 1], float(edges[end + 1]) if end + 1 < edges.size else None
+
+
+def planned_samples(model: MachineModel, trajectory: Trajectory, low: float, high: float) -> np.ndarray:
+    """The output sample times [s] of the run's planned grid (its start to the scene's duration, at its sample
+    rate) in [low, high]."""
+    solver, duration = model.scene.solver, model.scene.scenario.duration
+    return sample_times_within(trajectory.t_start, duration, solver.sample_rate, low, high)
 
 
 def energy_swing(

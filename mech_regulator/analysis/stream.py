@@ -10,7 +10,10 @@ times and in the same chunks, so a complete run's figures are the same numbers:
   (their states are kept: they are the product, duration x sample rate of them, a limit docs/scenes.md announces);
 - each load change's window (analysis/load_response.py, ResponseWindow: its cycle-mean speed and throttle, read
   CYCLE_CHUNK times at a time), and the mode log's check (analysis/self_check.py, ModeLogSoFar);
-- whether omega <= 0 after the last load change (the steady state's verdict on a machine that stops).
+- whether omega <= 0 after the last load change (the steady state's verdict on a machine that stops);
+- a two-mass machine's largest coupling moment and twist range (analysis/two_mass.py, CouplingSoFar) and a drive
+  train's largest section torque per branch (analysis/drivetrain.py, SectionsSoFar), on the grids the run kept whole
+  reads them on.
 The steady state and last period are judged on the tail the trajectory keeps (at least RETAINED_STEPS steps).
 A run that ends before its planned duration (failed, interrupted) after dropping pieces keeps the samples and windows
 on the planned grid up to where it ended, and its end.
@@ -22,11 +25,13 @@ import math
 
 import numpy as np
 
-from mech_regulator.analysis.energy import BALANCE_CHUNK_STEPS, WorksSoFar, add_works, step_edges
+from mech_regulator.analysis.drivetrain import SectionsSoFar, read_sections
+from mech_regulator.analysis.energy import BALANCE_CHUNK_STEPS, WorksSoFar, add_works, step_chunks, step_edges
 from mech_regulator.analysis.load_response import period_before, response_windows
 from mech_regulator.analysis.periodic import steady_from
 from mech_regulator.analysis.self_check import ModeLogSoFar, deepest_guard, mode_log_spacing
 from mech_regulator.analysis.stability import is_periodic
+from mech_regulator.analysis.two_mass import CouplingSoFar, read_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cam_contact import has_cam_contacts
@@ -37,19 +42,19 @@ RETAINED_STEPS = 50_000  # solver steps a streamed run's trajectory keeps at its
 
 
 def streams(model: MachineModel) -> bool:
-    """Whether a run of the model can be streamed (RunDigest): not a two-mass machine or a drive train (their
-    summaries read the whole run) nor a machine with cams (its contact check reads each load piece whole)."""
-    return model.coupling is None and model.driven is None and not has_cam_contacts(model.scene)
+    """Whether a run of the model can be streamed (RunDigest): not a machine with cams (its contact check reads each
+    load piece whole)."""
+    return not has_cam_contacts(model.scene)
 
 
 def simulate_streamed(
-    model: MachineModel, progress: Progress | None = None, samples: bool = False, whole: bool = False
+    model: MachineModel, progress: Progress | None = None, samples: bool = False
 ) -> tuple[Trajectory, RunDigest | None]:
-    """The monolithic run of the model (solvers.simulate), streamed when it can be (streams) and not asked whole:
-    its trajectory, and the digest of the dense output it dropped (None when it dropped none: the trajectory is then
-    the whole run, as summarise reads it). samples: whether the digest keeps the output samples (a CSV, a recording
-    or a bag reads them). Refusals raise SceneError, as simulate's."""
-    digest = RunDigest(model, samples=samples) if streams(model) and not whole else None
+    """The monolithic run of the model (solvers.simulate), streamed when it can be (streams): its trajectory, and the
+    digest of the dense output it dropped (None when it dropped none: the trajectory is then the whole run, as
+    summarise reads it). samples: whether the digest keeps the output samples (a CSV, a plot, a recording or a bag
+    reads them). Refusals raise SceneError, as simulate's."""
+    digest = RunDigest(model, samples=samples) if streams(model) else None
     trajectory = simulate(model, progress, stream=digest.take if digest is not None else None)
     return trajectory, digest if digest is not None and trajectory.steps_dropped else None
 
@@ -58,7 +63,8 @@ class RunDigest:
     """What a streamed run (module docstring) took of its dropped dense output: works (WorksSoFar), the output samples
     when asked for (times [s] of the planned run and the states at the first samples_done; none kept without),
     windows (ResponseWindow, one per load change), mode_log (ModeLogSoFar) and stopped_at, the first quadrature node
-    [s] after the last load change with omega <= 0 (None if none)."""
+    [s] after the last load change with omega <= 0 (None if none), coupling (CouplingSoFar, with a coupling) and
+    sections (SectionsSoFar, with a drive train's branches)."""
 
     def __init__(self, model: MachineModel, samples: bool = True):
         self.model = model
@@ -70,6 +76,8 @@ class RunDigest:
         self.windows = response_windows(model, duration) if model.governor is not None else []
         self.mode_log = ModeLogSoFar(mode_log_spacing(model, duration), 0.0)
         self.stopped_at: float | None = None
+        self.coupling = CouplingSoFar() if model.coupling is not None else None
+        self.sections = SectionsSoFar() if model.driven is not None and model.driven.branches else None
 
     def take(self, trajectory: Trajectory) -> None:
         """The trajectory's stream: hand its oldest chunk of steps not taken yet to the consumers once RETAINED_STEPS
@@ -78,7 +86,7 @@ class RunDigest:
         if trajectory.held_steps - first < RETAINED_STEPS + BALANCE_CHUNK_STEPS:
             return
         model = self.model
-        chunk = step_edges(trajectory)[first : first + BALANCE_CHUNK_STEPS + 1]
+        chunk, following = next(step_chunks(trajectory, step_edges(trajectory), self.works.steps))
         if self.works.start is None:
             self.works.start = trajectory(np.array([trajectory.t_start]))[:, 0]
         nodes, columns = add_works(model, trajectory, chunk, self.works.works)
@@ -88,6 +96,10 @@ class RunDigest:
         if self.stopped_at is None and np.any(stops):
             self.stopped_at = float(nodes[np.argmax(stops)])
         self._sample(trajectory, t_done)
+        if self.coupling is not None:
+            read_coupling(model, trajectory, chunk, following, self.coupling)
+        if self.sections is not None:
+            read_sections(model, trajectory, chunk, self.sections)
         for window in self.windows:
             window.read(model, trajectory, t_done)
         self.mode_log.worst = deepest_guard(model, trajectory, self.mode_log, t_done)

@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import integrate, optimize
 
-from mech_regulator.analysis.energy import step_edges
+from mech_regulator.analysis.energy import planned_samples, step_chunks, step_edges
 from mech_regulator.analysis.periodic import SteadyState
 from mech_regulator.model import MachineModel
 from mech_regulator.model.drivetrain import FORWARD
@@ -67,16 +67,62 @@ class MotionPeriods:
     note: str
 
 
-def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadyState) -> MotionPeriods:
-    """The periods of a coupled run and its largest coupling moment, located on the dense output."""
+@dataclass
+class CouplingSoFar:
+    """The coupling's figures of a run read so far (read_coupling), chunk by chunk: the largest |M_m| [N m] on the
+    grid (step edges and output samples), the refined extremum near it (time [s], M_m [N m]; NaN before any chunk)
+    and the twist's range [rad]."""
+
+    largest: float = -math.inf
+    time: float = math.nan
+    moment: float = math.nan
+    twist_min: float = math.inf
+    twist_max: float = -math.inf
+
+
+def read_coupling(
+    model: MachineModel, trajectory: Trajectory, chunk: np.ndarray, following: float | None, so_far: CouplingSoFar
+) -> None:
+    """Add to so_far the coupling's grid over a chunk of solver steps (chunk: their edges [s]; following: the next
+    grid edge after it, None at the run's end): the step edges and the planned output samples after its first edge
+    (from the run's start on the first chunk). A larger |M_m| than any before (the first one on a tie, as one argmax
+    over the run) is refined on the dense output between its neighbours on the grid."""
+    low, high = float(chunk[0]), float(chunk[-1])
+    times = np.union1d(chunk, planned_samples(model, trajectory, low, high))
+    if following is not None:
+        after = planned_samples(model, trajectory, high, following)
+        times = np.append(times, min([following, *after[after > high][:1]]))
+    owned = slice(0 if low <= trajectory.t_start else 1, np.searchsorted(times, high, side="right"))
+    columns = model.columns(times[owned], trajectory(times[owned]))
+    twist = columns["twist"]
+    so_far.twist_min, so_far.twist_max = (
+        min(so_far.twist_min, float(twist.min())),
+        max(so_far.twist_max, float(twist.max())),
+    )
+    passed = np.abs(columns["M_coupling"])
+    i = int(np.argmax(passed))
+    if passed[i] > so_far.largest:
+        so_far.largest = float(passed[i])
+        so_far.time, so_far.moment = _refine_peak(model, trajectory, times, owned.start + i)
+
+
+def motion_periods(
+    model: MachineModel,
+    trajectory: Trajectory,
+    steady: SteadyState,
+    so_far: CouplingSoFar | None = None,
+    steps_done: int = 0,
+) -> MotionPeriods:
+    """The periods of a coupled run and its largest coupling moment, located on the dense output, read chunk by
+    chunk (step_chunks; so_far: what a streamed run read of its first steps_done solver steps, analysis/stream.py)."""
     assert model.coupling is not None, "motion_periods is for a model with a coupling"
-    times = np.union1d(step_edges(trajectory), trajectory.samples(model.scene.solver.sample_rate))
-    columns = model.columns(times, trajectory(times))
+    so_far = dataclasses.replace(so_far) if so_far is not None else CouplingSoFar()
+    edges = step_edges(trajectory)
+    for chunk, following in step_chunks(trajectory, edges, steps_done):
+        read_coupling(model, trajectory, chunk, following, so_far)
     t1 = _start_up_end(model, trajectory)
     t3 = steady.t_steady if steady.steady else None
-    passed = -columns["M_coupling"]
-    i = int(np.argmax(np.abs(passed)))
-    time, moment = _refine_peak(model, trajectory, times, i)
+    time, moment = so_far.time, so_far.moment
     period = 1 if t1 is None or time < t1 else 2 if t3 is None or time < t3 else 3
     mean = None
     if t3 is not None and steady.last is not None:
@@ -86,16 +132,15 @@ def motion_periods(model: MachineModel, trajectory: Trajectory, steady: SteadySt
             / (window[-1] - window[0])
         )
     ratio = moment / mean if mean else None
-    twist = columns["twist"]
     note = ""
     table = model.coupling.table
-    if table is not None and (twist.min() < table[0][0] or twist.max() > table[0][-1]):
+    if table is not None and (so_far.twist_min < table[0][0] or so_far.twist_max > table[0][-1]):
         note = (
-            f"the twist ranged over {twist.min():.4g} to {twist.max():.4g} rad, beyond the characteristic's table "
-            f"({table[0][0]:g} to {table[0][-1]:g} rad): its end slopes were continued"
+            f"the twist ranged over {so_far.twist_min:.4g} to {so_far.twist_max:.4g} rad, beyond the characteristic's "
+            f"table ({table[0][0]:g} to {table[0][-1]:g} rad): its end slopes were continued"
         )
     return MotionPeriods(
-        t1, t3, CouplingPeak(moment, time, period, mean, ratio), float(twist.min()), float(twist.max()), note
+        t1, t3, CouplingPeak(moment, time, period, mean, ratio), so_far.twist_min, so_far.twist_max, note
     )
 
 

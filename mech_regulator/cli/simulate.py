@@ -50,14 +50,10 @@ def run_simulate(scene, args) -> int:
     if advice is not None:
         print(f"mech-regulator: note: {advice}", file=sys.stderr)
     duration = scene.scenario.duration
-    sampled = any(output is not None for output in (args.out, args.record, args.bag))  # they read the output samples
+    # they read the output samples
+    sampled = any(output is not None for output in (args.out, args.plot, args.record, args.bag))
     with progress_bar(duration, args.quiet, f"simulating {scene.name or args.scene}") as bar:
-        trajectory, streamed = simulate_streamed(
-            model,
-            lambda t: bar.update(min(t, duration) - bar.n),
-            samples=sampled,
-            whole=args.plot is not None,  # the plot reads the whole run
-        )
+        trajectory, streamed = simulate_streamed(model, lambda t: bar.update(min(t, duration) - bar.n), samples=sampled)
         bar.update(min(trajectory.t_end, duration) - bar.n)
     summary = summarise(model, trajectory, streamed)
     checks = summary["self_checks"] = self_checks(model, summary, trajectory, streamed.mode_log if streamed else None)
@@ -70,7 +66,13 @@ def run_simulate(scene, args) -> int:
     if args.plot is not None:
         from mech_regulator.viz.plots import plot_run
 
-        outputs.write("plot", args.plot, lambda path: plot_run(model, trajectory, summary, path))
+        outputs.write(
+            "plot",
+            args.plot,
+            lambda path: plot_run(
+                model, trajectory, summary, path, streamed.samples(trajectory) if streamed is not None else None
+            ),
+        )
     if args.record is not None:
         from mech_regulator.viz.recording import record_run
 

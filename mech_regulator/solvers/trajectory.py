@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -157,6 +158,19 @@ class Trajectory:
 def sample_times(t_start: float, t_end: float, sample_rate: float) -> np.ndarray:
     """Uniform sample times [s] at sample_rate [Hz] from t_start to t_end [s], both ends included (at least 2)."""
     return np.linspace(t_start, t_end, max(2, int(round((t_end - t_start) * sample_rate)) + 1))
+
+
+def sample_times_within(t_start: float, t_end: float, sample_rate: float, low: float, high: float) -> np.ndarray:
+    """The sample times [s] of sample_times(t_start, t_end, sample_rate) in [low, high], the same numbers, without
+    the grid: a long run's grid (its planned duration x sample rate of times) is not built to read a stretch."""
+    count = max(2, int(round((t_end - t_start) * sample_rate)) + 1)
+    step = (t_end - t_start) / (count - 1)
+    first = min(max(math.floor((low - t_start) / step) - 1, 0), count - 1)
+    last = min(max(math.ceil((high - t_start) / step) + 1, first), count - 1)
+    times = np.arange(first, last + 1, dtype=float) * step + t_start  # as np.linspace computes them
+    if last == count - 1:
+        times[-1] = t_end
+    return times[(times >= low) & (times <= high)]
 
 
 @dataclass

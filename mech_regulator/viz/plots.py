@@ -21,14 +21,25 @@ def room_for_legend(axes, share: float = 0.35) -> None:
     axes.set_ylim(low, high + share * (high - low))
 
 
-def plot_run(model: MachineModel, trajectory: Trajectory, summary: dict, path: Path) -> None:
+def plot_run(
+    model: MachineModel,
+    trajectory: Trajectory,
+    summary: dict,
+    path: Path,
+    samples: tuple[np.ndarray, np.ndarray] | None = None,
+) -> None:
     """Four panels: omega(t) with the steady band, moments against t, omega over the last dynamic
-    period against the crank angle, and J(phi) with dJ/dphi (or the works of the moments)."""
-    times = trajectory.samples(max(model.scene.solver.sample_rate, 2000.0 / max(trajectory.t_end, 1e-9)))
+    period against the crank angle, and J(phi) with dJ/dphi (or the works of the moments). samples: the output
+    sample times [s] and states of a streamed run (analysis/stream.py, RunDigest.samples), whose trajectory holds
+    only its tail (the last period is drawn from it); None: the run sampled off its trajectory."""
+    if samples is None:
+        times = trajectory.samples(max(model.scene.solver.sample_rate, 2000.0 / max(trajectory.t_end, 1e-9)))
+        samples = times, trajectory(times)
+    times, states = samples
     if model.clutch is not None:
-        plot_clutch_run(model, trajectory, summary, times, path)
+        plot_clutch_run(model, trajectory, summary, times, states, path)
         return
-    columns = model.columns(times, trajectory(times))
+    columns = model.columns(times, states)
     last = summary["steady"]["last_period"]
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
     figure.suptitle(f"{model.scene.name}: {model.scene.solver.method}, {summary['status']}")
@@ -212,7 +223,14 @@ def _plot_governor_run(
     position and throttle against time, with the governor's mode changes, on `panel`."""
     from mech_regulator.analysis import cycle_mean_speed, operating_point
 
-    speed.plot(times, cycle_mean_speed(model, trajectory, times), color="k", lw=1.2, label="cycle mean")
+    held = times >= trajectory.t_kept  # a streamed run's tail (analysis/stream.py): the whole run when not streamed
+    speed.plot(
+        times[held],
+        cycle_mean_speed(model, trajectory, times[held]),
+        color="k",
+        lw=1.2,
+        label="cycle mean" if held[0] else f"cycle mean (from {trajectory.t_kept:.4g} s: the tail a long run keeps)",
+    )
     levels = [model.external_load(0.0)] + [event.torque for event in model.scene.scenario.load_events]
     for level in dict.fromkeys(levels):
         predicted = operating_point(model, level).speed
@@ -245,12 +263,18 @@ def _plot_governor_run(
     panel.legend(loc="upper left")
 
 
-def plot_clutch_run(model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray, path: Path) -> None:
+def plot_clutch_run(
+    model: MachineModel, trajectory: Trajectory, summary: dict, times: np.ndarray, states: np.ndarray, path: Path
+) -> None:
     """A start-up through a friction clutch: motor and machine speeds, the clutch's torque against its static
     and kinetic limits with the motor's moment, the torque in each branch's section with the paper's estimate,
-    and the works of the run; slip phases shaded (and stretches with the driven part held at rest hatched)."""
-    times = np.union1d(times, [t for t, _ in trajectory.events])
-    columns = model.columns(times, trajectory(times))
+    and the works of the run; slip phases shaded (and stretches with the driven part held at rest hatched). times,
+    states: the run's samples, to which the events the trajectory holds (all but a streamed run's early ones) are
+    added."""
+    events = np.array([t for t, _ in trajectory.events if trajectory.t_kept <= t <= trajectory.t_end])
+    times, order = np.unique(np.concatenate([times, events]), return_index=True)
+    states = np.hstack([states, trajectory(events)] if events.size else [states])[:, order]
+    columns = model.columns(times, states)
     train = summary["drive_train"]
     clutch = model.clutch
     assert clutch is not None, "plot_clutch_run draws a model with a clutch"
