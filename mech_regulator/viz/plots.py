@@ -14,6 +14,38 @@ import numpy as np  # noqa: E402
 from mech_regulator.model import MachineModel  # noqa: E402
 from mech_regulator.solvers import Trajectory  # noqa: E402
 
+PLOTTED_POINTS = 200_000
+"""The most points of a run's curve against time a plot draws. A 1300-pixel panel shows no more; past it (a long run:
+10 000 s at 2000 Hz is 2e7 samples) each of PLOTTED_POINTS / 2 stretches of samples is drawn as its least and greatest
+value (plotted_columns), which keeps the ripple's band a stride over the samples would alias."""
+
+
+def plotted_columns(
+    model: MachineModel, times: np.ndarray, states: np.ndarray
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The run's output columns (MachineModel.columns) at its sample times [s] and states, as a plot draws them: all of
+    them up to PLOTTED_POINTS samples; beyond, each stretch of `width` samples reduced, column by column, to its least
+    and greatest value in the order they come (its envelope), drawn at the stretch's first and last time. The columns
+    are computed a few hundred stretches at a time, so that the columns of every sample are never in memory at once."""
+    count = times.size
+    if count <= PLOTTED_POINTS:
+        return times, model.columns(times, states)
+    width = -(-count // (PLOTTED_POINTS // 2))
+    chunk = width * 256
+    edges, envelopes = [], {}
+    for start in range(0, count, chunk):
+        stop = min(start + chunk, count)
+        stretches = -(-(stop - start) // width)
+        index = np.minimum(np.arange(start, start + stretches * width), stop - 1).reshape(stretches, width)
+        edges.append(np.column_stack([times[index[:, 0]], times[index[:, -1]]]).ravel())
+        rows = np.arange(stretches)
+        for name, values in model.columns(times[start:stop], states[:, start:stop]).items():
+            grouped = np.asarray(values)[index - start]
+            least, greatest = grouped.argmin(axis=1), grouped.argmax(axis=1)
+            first, last = np.minimum(least, greatest), np.maximum(least, greatest)
+            envelopes.setdefault(name, []).append(np.column_stack([grouped[rows, first], grouped[rows, last]]).ravel())
+    return np.concatenate(edges), {name: np.concatenate(parts) for name, parts in envelopes.items()}
+
 
 def room_for_legend(axes, share: float = 0.35) -> None:
     """Raise the top of the y axis by `share` of its range so a legend at the top does not cover the curves."""
@@ -39,7 +71,7 @@ def plot_run(
     if model.clutch is not None:
         plot_clutch_run(model, trajectory, summary, times, states, path)
         return
-    columns = model.columns(times, states)
+    times, columns = plotted_columns(model, times, states)
     last = summary["steady"]["last_period"]
     figure, axes = plt.subplots(2, 2, figsize=(13, 8), constrained_layout=True)
     figure.suptitle(f"{model.scene.name}: {model.scene.solver.method}, {summary['status']}")
@@ -274,7 +306,7 @@ def plot_clutch_run(
     events = np.array([t for t, _ in trajectory.events if trajectory.t_kept <= t <= trajectory.t_end])
     times, order = np.unique(np.concatenate([times, events]), return_index=True)
     states = np.hstack([states, trajectory(events)] if events.size else [states])[:, order]
-    columns = model.columns(times, states)
+    times, columns = plotted_columns(model, times, states)
     train = summary["drive_train"]
     clutch = model.clutch
     assert clutch is not None, "plot_clutch_run draws a model with a clutch"
