@@ -32,7 +32,8 @@ def plotted_columns(
         return times, model.columns(times, states)
     width = -(-count // (PLOTTED_POINTS // 2))
     chunk = width * 256
-    edges, envelopes = [], {}
+    edges: list[np.ndarray] = []
+    envelopes: dict[str, list[np.ndarray]] = {}
     for start in range(0, count, chunk):
         stop = min(start + chunk, count)
         stretches = -(-(stop - start) // width)
