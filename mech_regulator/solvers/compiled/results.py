@@ -3,7 +3,7 @@ StepsDense is the dense output of all its steps, for Trajectory.add_piece."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.integrate import DenseOutput
@@ -38,9 +38,9 @@ class StepsDense(DenseOutput):
         return y[:, 0] if np.ndim(t) == 0 else y
 
 
-@dataclass
-class CompiledRun:
-    """One compiled call's result (the tuple of the module docstring, by name)."""
+class CompiledRun(NamedTuple):
+    """One compiled call's result (the tuple of the module docstring, by name: a named tuple, made without copying
+    the 23 fields one by one)."""
 
     status: int
     n_steps: int
@@ -69,7 +69,7 @@ class CompiledRun:
     @classmethod
     def from_result(cls, result: tuple) -> CompiledRun:
         """Name the fields of a stepper's result tuple."""
-        return cls(*result)
+        return cls._make(result)
 
     @property
     def t_end(self) -> float:
