@@ -33,9 +33,10 @@ class StepsDense(DenseOutput):
         self.step_offsets = np.empty(0) if step_offsets is None else step_offsets
         self.restarted = np.zeros(times.size - 1, dtype=np.bool_) if restarted is None else restarted
 
-    def _call_impl(self, t):
-        y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, np.atleast_1d(t))
-        return y[:, 0] if np.ndim(t) == 0 else y
+    def _call_impl(self, t: np.ndarray) -> np.ndarray:
+        """The state at t [s] (an array, as scipy's DenseOutput.__call__ passes it)."""
+        y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t.reshape(-1))
+        return y[:, 0] if t.ndim == 0 else y
 
 
 class CompiledRun(NamedTuple):

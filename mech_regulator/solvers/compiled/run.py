@@ -21,6 +21,7 @@ message) and once the run has taken MAX_STEPS steps (fail_too_many_steps).
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from typing import NamedTuple
 
@@ -286,9 +287,11 @@ def _compiled_pieces(
     tables, stats = layout.tables, trajectory.stats
     piece, t, t_end, _ = pieces[index]
     following = (
-        np.array(
-            [(end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]],
-            dtype=float,
+        np.fromiter(  # the rows' numbers in a row: np.array would first look for the nesting
+            itertools.chain.from_iterable(
+                (end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]
+            ),
+            float,
         ).reshape(-1, 2 + len(PIECE_SLOTS))
         if layout.pieces_inside
         else layout.no_following
@@ -342,7 +345,7 @@ def _compiled_pieces(
         )
         t_stop = run.t_end
         if index < split <= index + run.pieces_done:  # went on into pieces[split]: its start is a step's start
-            first = int(np.searchsorted(run.times[: run.n_steps], pieces[split][1]))
+            first = int(run.times[: run.n_steps].searchsorted(pieces[split][1]))
             if first < run.n_steps and run.times[first] == pieces[split][1]:
                 at_split = (run.y_old[first].copy(), mode, len(trajectory.events))
         dense = run.dense  # None when no step was taken
