@@ -8,7 +8,7 @@ passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper
 without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so
 that progress moves and Ctrl-C is heard). A switch window's edge (a switch or a kink of a table) is a restart that
 changes only the window: for a scene whose p depends on nothing else there (no state tables, no joint friction:
-_Layout.kink_grid) the stepper makes it itself, exactly as this loop would (integrators._kink_restart), and returns
+_FixedArguments.kink_grid) the stepper makes it itself, exactly as this loop would (integrators._kink_restart), and returns
 only when a mode guard is near its threshold there, a speed went beyond its limit, or MAX_STEPS_PER_CALL steps or
 MAX_RESTARTS_PER_CALL such restarts are done. A co-simulated governor's speed pieces (compiled_pieces) are gone on
 into in the same way (integrators._piece_restart). Every call's steps become one piece of the Trajectory, with the
