@@ -17,6 +17,7 @@ from mech_regulator.solvers.compiled.signatures import GUARDS_SIGNATURE, REACTIO
 from mech_regulator.solvers.compiled.steppers import NO_RESTARTS, stepper
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.time_domain import PROBES_PER_STEP
+from mech_regulator.solvers.trajectory import Trajectory
 
 STIFF = np.array([[1.0, 1.0], [1.0, -1.0]]) @ np.diag([-1.0, -1e6]) @ np.linalg.inv([[1.0, 1.0], [1.0, -1.0]])
 
@@ -591,3 +592,24 @@ def test_the_steps_keep_their_reach_from_a_reaction_passing_near_zero(method):
     if method != "Rosenbrock23":  # its third-order steps stay short enough there on their own
         free = adaptive(method, reaction_size, [0.0], 0.3, p, rtol=rtol, atol=rtol, reactions=reaction_square)
         assert np.min(distance_over_length(free)) < 0.1
+
+
+def test_a_trajectory_of_compiled_pieces_answers_scalars_lists_and_arrays_and_refuses_what_it_dropped():
+    """Trajectory's evaluation (solvers/trajectory.py) over compiled calls' pieces (StepsDense): a scalar time gives the
+    state, a list or an array of times one column each, with one piece as with several (scipy's OdeSolution); once a
+    stream dropped the first piece, a time before what is kept is refused with a message naming it."""
+    times = np.array([0.0, 1.0, 2.0])
+    y_old, coefficients = np.array([[1.0, 2.0], [3.0, 4.0]]), np.ones((2, 2, 1))  # y = y_old + h theta on each step
+    first = StepsDense(times, y_old, coefficients)
+    second = StepsDense(times + 2.0, y_old + 4.0, coefficients)
+    trajectory = Trajectory(method="DOP853", t_start=0.0)
+    trajectory.add_piece(0.0, 2.0, first, step_ends=times[1:])
+    assert np.array_equal(trajectory(0.5), [1.5, 2.5])
+    assert np.array_equal(trajectory([0.5, 1.5]), [[1.5, 3.5], [2.5, 4.5]])
+    trajectory.add_piece(2.0, 4.0, second, step_ends=times[1:] + 2.0)
+    assert np.array_equal(trajectory(3.5), [7.5, 8.5])
+    assert np.array_equal(trajectory(np.array([0.5, 3.5])), [[1.5, 7.5], [2.5, 8.5]])
+    trajectory.drop_front(1)
+    assert np.array_equal(trajectory([2.5]), [[5.5], [6.5]])
+    with pytest.raises(ValueError, match=r"t = 0.5 s: the trajectory holds only t >= 2.0 s"):
+        trajectory(0.5)

@@ -123,10 +123,10 @@ class Trajectory:
         (EVALUATION_CHUNK of them at a time)."""
         if not self.interpolants:
             return self._start_only(t)
-        if self.steps_dropped and np.min(t) < self.piece_edges[0]:
-            raise ValueError(f"t = {np.min(t)} s: the trajectory holds only t >= {self.piece_edges[0]} s (streamed)")
-        if np.ndim(t) == 1 and np.size(t) > EVALUATION_CHUNK:
-            t = np.asarray(t)
+        t = np.asarray(t)  # once here: numpy's functions on t would convert it at each
+        if self.steps_dropped and t.min() < self.piece_edges[0]:
+            raise ValueError(f"t = {t.min()} s: the trajectory holds only t >= {self.piece_edges[0]} s (streamed)")
+        if t.ndim == 1 and t.size > EVALUATION_CHUNK:
             first = self(t[:EVALUATION_CHUNK])
             states = np.empty((first.shape[0], t.size))
             states[:, :EVALUATION_CHUNK] = first
@@ -134,7 +134,7 @@ class Trajectory:
                 states[:, start : start + EVALUATION_CHUNK] = self(t[start : start + EVALUATION_CHUNK])
             return states
         if len(self.interpolants) == 1:  # what scipy's OdeSolution would call, without its sorting and grouping
-            return self.interpolants[0](np.asarray(t))
+            return self.interpolants[0](t)
         if self._solution is None:
             self._solution = OdeSolution(np.asarray(self.piece_edges), self.interpolants)
         return self._solution(t)

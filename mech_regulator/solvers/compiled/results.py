@@ -3,7 +3,7 @@ StepsDense is the dense output of all its steps, for Trajectory.add_piece."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.integrate import DenseOutput
@@ -33,14 +33,15 @@ class StepsDense(DenseOutput):
         self.step_offsets = np.empty(0) if step_offsets is None else step_offsets
         self.restarted = np.zeros(times.size - 1, dtype=np.bool_) if restarted is None else restarted
 
-    def _call_impl(self, t):
-        y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, np.atleast_1d(t))
-        return y[:, 0] if np.ndim(t) == 0 else y
+    def _call_impl(self, t: np.ndarray) -> np.ndarray:
+        """The state at t [s] (an array, as scipy's DenseOutput.__call__ passes it)."""
+        y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t.reshape(-1))
+        return y[:, 0] if t.ndim == 0 else y
 
 
-@dataclass
-class CompiledRun:
-    """One compiled call's result (the tuple of the module docstring, by name)."""
+class CompiledRun(NamedTuple):
+    """One compiled call's result (the tuple of the module docstring, by name: a named tuple, made without copying
+    the 23 fields one by one)."""
 
     status: int
     n_steps: int
@@ -69,7 +70,7 @@ class CompiledRun:
     @classmethod
     def from_result(cls, result: tuple) -> CompiledRun:
         """Name the fields of a stepper's result tuple."""
-        return cls(*result)
+        return cls._make(result)
 
     @property
     def t_end(self) -> float:

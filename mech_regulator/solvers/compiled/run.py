@@ -8,7 +8,7 @@ passes the wrap limit (it is re-wrapped by whole dynamic periods and the stepper
 without a switch window the stepper does that itself, without returning) or MAX_STEPS_PER_CALL steps are done (so
 that progress moves and Ctrl-C is heard). A switch window's edge (a switch or a kink of a table) is a restart that
 changes only the window: for a scene whose p depends on nothing else there (no state tables, no joint friction:
-_Layout.kink_grid) the stepper makes it itself, exactly as this loop would (integrators._kink_restart), and returns
+_FixedArguments.kink_grid) the stepper makes it itself, exactly as this loop would (integrators._kink_restart), and returns
 only when a mode guard is near its threshold there, a speed went beyond its limit, or MAX_STEPS_PER_CALL steps or
 MAX_RESTARTS_PER_CALL such restarts are done. A co-simulated governor's speed pieces (compiled_pieces) are gone on
 into in the same way (integrators._piece_restart). Every call's steps become one piece of the Trajectory, with the
@@ -21,13 +21,14 @@ message) and once the run has taken MAX_STEPS steps (fail_too_many_steps).
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from typing import NamedTuple
 
 import numpy as np
 
 from mech_regulator.model import MachineModel
-from mech_regulator.scene import SceneError, scenario_keys
+from mech_regulator.scene import SceneError
 from mech_regulator.solvers import time_domain
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators, results, steppers
 from mech_regulator.solvers.compiled.codegen import RECENT_MODELS, CompiledScene, compile_scene
@@ -116,31 +117,51 @@ class _Address:
         return self.address
 
 
+class _FixedArguments(NamedTuple):
+    """The arguments of a model's compiled stepper calls that are the same at every call, in the stepper's order
+    (integrators' module docstring), worked out once per model: the scene's compiled rhs and guards as the stepper
+    takes them (_Address), the number of guards and their thresholds (zero: the steppers apply time_domain's
+    GUARD_TOLERANCE), the reactions (_Address) and the number of journals, the solver's rtol, absolute tolerances,
+    max_step [s] (inf: none) and RK4's step [s], the crank angle's wrap limit [rad] (inf: never wrapped); for the
+    stepper's own restarts on the window's edges (integrators._kink_restart) the switch grid as an array (empty: the
+    scene's p depends on more than the window there, every edge returns to Python), the dynamic period [rad] and the
+    slots it writes; the indices of the speeds the stepper keeps within MAX_SPEED (the run stops beyond it); the
+    method."""
+
+    rhs: _Address
+    guards: _Address
+    n_guards: int
+    thresholds: np.ndarray
+    reactions: _Address
+    n_journals: int
+    rtol: float
+    atol: np.ndarray
+    max_step: float
+    step: float
+    wrap_limit: float
+    kink_grid: np.ndarray
+    period: float
+    kink_slots: np.ndarray
+    speed_indices: np.ndarray
+    method: str
+
+
 class _Layout(NamedTuple):
     """What every segment of a model reuses (a co-simulation steps thousands of short ones): its switch grid [rad],
-    dynamic period [rad], whether the crank angle is wrapped, the absolute tolerances and the guards' thresholds;
-    for the stepper's own restarts on the window's edges (integrators._kink_restart) the grid as an array (empty:
-    the scene's p depends on more than the window there, every edge returns here), the slots it writes and the
-    indices of the speeds the stepper keeps within MAX_SPEED (the run stops beyond it); whether the stepper may go on
-    into the next of a sequence of load pieces itself (integrators._piece_restart: a scene whose p there depends on
-    the piece and the crank's speed only, without switch angles or a wrapped angle); the scene's compiled rhs, guards
-    and reactions as the stepper takes them (_Address); the model's state tables (MachineModel.state_tables), whether
-    one turns with phi (a guard then reads phi: the stepper does not wrap it itself), the crank angle's wrap limit
-    [rad] (inf: never wrapped) and the empty array of following pieces a call without them passes."""
+    dynamic period [rad], whether the crank angle is wrapped; whether the stepper may go on into the next of a
+    sequence of load pieces itself (integrators._piece_restart: a scene whose p there depends on the piece and the
+    crank's speed only, without switch angles or a wrapped angle); the stepper's arguments that are the same at every
+    call (_FixedArguments); the model's state tables (MachineModel.state_tables), whether one turns with phi (a guard
+    then reads phi: the stepper does not wrap it itself) and the empty array of following pieces a call without them
+    passes."""
 
     grid: np.ndarray
     period: float
     wraps: bool
-    atol: np.ndarray
-    thresholds: np.ndarray
-    kink_grid: np.ndarray
-    kink_slots: np.ndarray
-    speed_indices: np.ndarray
     pieces_inside: bool
-    callbacks: tuple[_Address, _Address, _Address]
+    fixed: _FixedArguments
     tables: tuple
     turning: bool
-    wrap_limit: float
     no_following: np.ndarray
 
     @classmethod
@@ -157,19 +178,11 @@ class _Layout(NamedTuple):
         )
         names = model.state_names()
         period = model.dynamic_period()
+        settings = model.scene.solver
         return cls(
             grid=grid,
             period=period,
             wraps=wraps,
-            atol=np.full(len(names), model.scene.solver.atol),
-            thresholds=np.zeros(compiled.n_guards),  # the steppers apply time_domain's GUARD_TOLERANCE
-            kink_grid=grid if window_only else np.empty(0),
-            kink_slots=np.array(
-                [compiled.window_slot or 0, CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CRANK_DIRECTION], dtype=np.int64
-            ),
-            speed_indices=np.array(
-                [index for index, name in enumerate(names) if name in ("omega", "omega_driven")], dtype=np.int64
-            ),
             pieces_inside=(
                 not grid.size
                 and not wraps
@@ -177,14 +190,31 @@ class _Layout(NamedTuple):
                 and model.joint_friction is None
                 and compiled.normal_slot is None
             ),
-            callbacks=(
-                _Address(compiled.rhs_callback),
-                _Address(compiled.guards_callback),
-                _Address(compiled.reactions_callback),
+            fixed=_FixedArguments(
+                rhs=_Address(compiled.rhs_callback),
+                guards=_Address(compiled.guards_callback),
+                n_guards=compiled.n_guards,
+                thresholds=np.zeros(compiled.n_guards),
+                reactions=_Address(compiled.reactions_callback),
+                n_journals=compiled.n_journals,
+                rtol=settings.rtol,
+                atol=np.full(len(names), settings.atol),
+                max_step=settings.max_step or math.inf,
+                step=settings.step,
+                wrap_limit=RESTART_PERIODS * period if wraps else math.inf,
+                kink_grid=grid if window_only else np.empty(0),
+                period=period,
+                kink_slots=np.array(
+                    [compiled.window_slot or 0, CLAMP_LO, CLAMP_HI, WINDOW_LO, WINDOW_HI, CRANK_DIRECTION],
+                    dtype=np.int64,
+                ),
+                speed_indices=np.array(
+                    [index for index, name in enumerate(names) if name in ("omega", "omega_driven")], dtype=np.int64
+                ),
+                method=settings.method,
             ),
             tables=model.state_tables,
             turning=any(table.angular for table in model.state_tables),
-            wrap_limit=RESTART_PERIODS * period if wraps else math.inf,
             no_following=np.empty((0, 2 + len(PIECE_SLOTS))),
         )
 
@@ -253,14 +283,15 @@ def _compiled_pieces(
     state and mode at the end, the index of the next piece to start and, when a call went on into pieces[split]
     and took a step in it, that piece's start as follow_pieces gives it (its first step's start state, the call's
     mode, the events so far), else None."""
-    settings = model.scene.solver
-    grid, period, wraps, atol, thresholds = layout[:5]
-    wrap_limit, tables, stats = layout.wrap_limit, layout.tables, trajectory.stats
+    grid, period, wraps = layout[:3]
+    tables, stats = layout.tables, trajectory.stats
     piece, t, t_end, _ = pieces[index]
     following = (
-        np.array(
-            [(end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]],
-            dtype=float,
+        np.fromiter(  # the rows' numbers in a row: np.array would first look for the nesting
+            itertools.chain.from_iterable(
+                (end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]
+            ),
+            float,
         ).reshape(-1, 2 + len(PIECE_SLOTS))
         if layout.pieces_inside
         else layout.no_following
@@ -299,40 +330,27 @@ def _compiled_pieces(
         # of returning to restart
         wrap_period = period if wraps and window is None and not layout.turning else 0.0
         linear = compiled.linear(mode, window, start[1], held, y_wrapped)
-        restarts = (
-            layout.kink_grid,
-            period,
-            offset,
-            layout.kink_slots,
-            layout.speed_indices,
-            following,
-            PIECE_INDEX,
-            MAX_RESTARTS_PER_CALL,
-        )
         run = _step(
-            settings,
-            compiled,
-            layout.callbacks,
+            layout.fixed,
             linear,
-            thresholds,
             t,
             y_wrapped,
             t_end,
             p,
-            atol,
             first_step,
-            wrap_limit,
             wrap_period,
             time_domain.MAX_STEPS - stats.steps,
-            restarts,
+            offset,
+            following,
         )
         t_stop = run.t_end
         if index < split <= index + run.pieces_done:  # went on into pieces[split]: its start is a step's start
-            first = int(np.searchsorted(run.times[: run.n_steps], pieces[split][1]))
+            first = int(run.times[: run.n_steps].searchsorted(pieces[split][1]))
             if first < run.n_steps and run.times[first] == pieces[split][1]:
                 at_split = (run.y_old[first].copy(), mode, len(trajectory.events))
-        if run.n_steps:
-            trajectory.add_piece(t, t_stop, run.dense, step_ends=run.times[1:])
+        dense = run.dense  # None when no step was taken
+        if dense is not None:
+            trajectory.add_piece(t, t_stop, dense, step_ends=run.times[1:])
         stats.steps += int(run.n_steps)
         stats.nfev += int(run.nfev)
         stats.njev += int(run.njev)
@@ -357,6 +375,7 @@ def _compiled_pieces(
         # the restart this call ended in, (format, its arguments), put in words only should the run stall
         what: tuple[str, tuple[object, ...]] = ("the end of a call", ())
         if run.status == integrators.FAILED and run.failure in (integrators.NONFINITE, integrators.STEP_TOO_SMALL):
+            settings = model.scene.solver
             trajectory.status = "failed"
             if run.failure == integrators.NONFINITE:
                 advice = "use a smaller step" if settings.method == "RK4" else "tighten rtol/atol or limit max_step"
@@ -410,49 +429,95 @@ def _compiled_pieces(
 
 
 def _step(
-    settings: scenario_keys.Solver,
-    compiled: CompiledScene,
-    callbacks: tuple,
+    fixed: _FixedArguments,
     linear: np.ndarray,
-    thresholds: np.ndarray,
     t: float,
     y: np.ndarray,
     t_end: float,
     p: np.ndarray,
-    atol: np.ndarray,
     first_step: float,
-    wrap_limit: float,
     wrap_period: float,
     run_steps: int,
-    restarts: tuple,
-):
-    """One call of the scene's compiled stepper, as a results.CompiledRun; callbacks: the scene's rhs, guards
-    and reactions (_Layout.callbacks); run_steps: the most steps it may take (the run's left); restarts: its restart
-    arguments (the kink grid, period, offset, slots, speed indices, following pieces and their slots, the most
-    restarts; integrators' module docstring)."""
-    rhs, guards, reactions = callbacks
-    scene = (rhs, guards, compiled.n_guards, linear, thresholds)
-    start = (t, y, t_end, p)
-    stepper = _entry_point(settings.method)
-    if settings.method == "RK4":
+    offset: float,
+    following: np.ndarray,
+) -> results.CompiledRun:
+    """One call of the scene's compiled stepper from (t [s], y) to t_end [s] at most, as a results.CompiledRun: the
+    arguments that change from call to call here, the others the layout's (fixed); run_steps: the most steps it may
+    take (the run's left); offset: phi's whole periods [rad]; following: the pieces it may go on into (integrators'
+    module docstring)."""
+    (
+        rhs,
+        guards,
+        n_guards,
+        thresholds,
+        reactions,
+        n_journals,
+        rtol,
+        atol,
+        max_step,
+        step,
+        wrap_limit,
+        kink_grid,
+        period,
+        kink_slots,
+        speed_indices,
+        method,
+    ) = fixed
+    stepper = _entry_point(method)
+    if method == "RK4":
         result = stepper(
-            *scene, *start, settings.step, wrap_limit, wrap_period, MAX_STEPS_PER_CALL, run_steps, *restarts
+            rhs,
+            guards,
+            n_guards,
+            linear,
+            thresholds,
+            t,
+            y,
+            t_end,
+            p,
+            step,
+            wrap_limit,
+            wrap_period,
+            MAX_STEPS_PER_CALL,
+            run_steps,
+            kink_grid,
+            period,
+            offset,
+            kink_slots,
+            speed_indices,
+            following,
+            PIECE_INDEX,
+            MAX_RESTARTS_PER_CALL,
         )
     else:  # the adaptive ones keep their steps within the reach of the journals' branch points
         result = stepper(
-            *scene,
+            rhs,
+            guards,
+            n_guards,
+            linear,
+            thresholds,
             reactions,
-            compiled.n_journals,
-            *start,
-            settings.rtol,
+            n_journals,
+            t,
+            y,
+            t_end,
+            p,
+            rtol,
             atol,
-            settings.max_step or math.inf,
+            max_step,
             first_step,
             wrap_limit,
             wrap_period,
             MAX_STEPS_PER_CALL,
             run_steps,
-            *restarts,
+            kink_grid,
+            period,
+            offset,
+            kink_slots,
+            speed_indices,
+            following,
+            PIECE_INDEX,
+            MAX_RESTARTS_PER_CALL,
         )
     return results.CompiledRun.from_result(result)
 
