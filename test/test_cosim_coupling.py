@@ -461,3 +461,23 @@ def test_speed_waveform_is_the_quadratic_through_three_speeds():
 
     assert omega(0.5 * (t_start + t_end)) == pytest.approx(speeds[1], abs=1e-9)
     assert omega(t_end) == pytest.approx(speeds[2], abs=1e-9)
+
+
+def test_a_run_played_past_its_scene_s_end_keeps_the_scene_s_load_responses(smooth_model):
+    """`run --duration T` with T past the scene's end (docs/ros.md): the recorder summarises the longer run with the
+    scene's own scenario, so each load change's window ends where the scene ends and the responses are the scene's
+    own run's to every digit; with the scenario itself made as long, the last window runs to T."""
+    short = cosimulate(smooth_model, 0.02, coupling="corrected")
+    longer_scene = {**SMOOTH_GOVERNED, "scenario": {**SMOOTH_GOVERNED["scenario"], "duration": 3.0}}
+    longer_model = build_model(validate_scene(longer_scene))
+    longer = cosimulate(longer_model, 0.02, coupling="corrected")
+    overlap = short.times.size
+    assert np.array_equal(longer.times[:overlap], short.times) and np.array_equal(
+        longer.states[:, :overlap], short.states
+    )
+    own = summarise_cosimulation(smooth_model, short, 0.02, "corrected")["governor"]["load_responses"]
+    played_on = summarise_cosimulation(smooth_model, longer, 0.02, "corrected")
+    assert played_on["t_end"] == 3.0 and played_on["governor"]["load_responses"] == own
+    as_long = summarise_cosimulation(longer_model, longer, 0.02, "corrected")["governor"]["load_responses"]
+    assert as_long[0]["speed_after"] == pytest.approx(longer.states[1, -1], abs=1e-12)  # read at 3 s, not at 1 s
+    assert as_long[0]["speed_after"] != own[0]["speed_after"]
