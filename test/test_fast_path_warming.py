@@ -261,6 +261,33 @@ def test_another_versions_compile_does_not_hold_a_stepper_up(monkeypatch, tmp_pa
                 fcntl.flock(mine, fcntl.LOCK_EX | fcntl.LOCK_NB)
 
 
+def test_a_wait_for_another_process_s_compile_is_said_and_timed(monkeypatch, tmp_path, capsys):
+    """A stepper's lock held by another process (its compile): method_lock says on stderr that it waits, for what,
+    and, once the lock is free, how long it waited; a free lock is taken saying nothing."""
+    import fcntl
+    import threading
+
+    from mech_regulator.solvers.compiled import locks
+
+    monkeypatch.setenv("MECH_REGULATOR_CACHE", str(tmp_path))
+    with locks.method_lock("RK4"):
+        pass
+    assert capsys.readouterr().err == ""
+    held = threading.Event()
+    with open(locks.method_lock_path("RK4"), "a") as other:
+        fcntl.flock(other, fcntl.LOCK_EX)
+        release = threading.Timer(0.3, lambda: (fcntl.flock(other, fcntl.LOCK_UN), held.set()))
+        release.start()
+        with locks.method_lock("RK4"):
+            assert held.is_set()
+        release.join()
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2, lines
+    assert lines[0].startswith("mech-regulator: waiting for another process's compile of the fast path's RK4 stepper")
+    assert str(locks.method_lock_path("RK4")) in lines[0]
+    assert re.fullmatch(r"  RK4 stepper free after ([0-9.]+) s", lines[1]) and float(lines[1].split()[-2]) >= 0.25
+
+
 def test_a_scene_module_compiled_for_the_first_time_is_announced(tmp_path):
     """A scene's generated module new to the cache folder: a note before numba compiles it; none once it is there.
     In a fresh Python with empty caches (numba reads NUMBA_CACHE_DIR as it is imported)."""

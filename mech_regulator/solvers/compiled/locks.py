@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -32,7 +34,20 @@ def method_lock(method: str) -> Iterator[None]:
     """Hold the lock of `method`'s stepper (method_lock_path) while compiling or loading it
     (steppers.stepper): one process at a time, so that two (two commands, two test workers) never compile the
     same stepper side by side; the other one waits and loads it from numba's disk cache. Another method's compile does
-    not hold it up."""
-    with open(method_lock_path(method), "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
+    not hold it up. A wait is said on stderr when it starts and when it ends: another process's compile can take
+    minutes on a busy machine, and a command that waits for it must not sit there saying nothing."""
+    path = method_lock_path(method)
+    with open(path, "a") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            start = time.monotonic()
+            print(
+                f"mech-regulator: waiting for another process's compile of the fast path's {method} stepper "
+                f"(it holds {path}; a first compile takes some 50 s on an idle 2-core machine) ...",
+                file=sys.stderr,
+                flush=True,
+            )
+            fcntl.flock(handle, fcntl.LOCK_EX)
+            print(f"  {method} stepper free after {time.monotonic() - start:.1f} s", file=sys.stderr, flush=True)
         yield
