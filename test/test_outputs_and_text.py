@@ -124,6 +124,7 @@ def test_run_checks_every_file_it_derives_from_out(capsys, tmp_path):
 NAMESPACE_SCRIPT = """
 import contextlib, io, json, sys
 from mech_regulator.cli.main import main
+{preamble}
 results = []
 for argv in json.loads(sys.argv[1]):
     out, err = io.StringIO(), io.StringIO()
@@ -134,10 +135,12 @@ print(json.dumps(results))
 """
 
 
-def in_private_mounts(tmp_path: Path, commands: list[list[str]], mounts: str) -> list[tuple[int, str, str]]:
-    """Run the commands (argv lists of `mech-regulator`, in one process) in a mount namespace of their own, after
-    the shell commands `mounts` there (cwd tmp_path): what each returned (exit code, stdout, stderr). Skips unless
-    root and unshare work here."""
+def in_private_mounts(
+    tmp_path: Path, commands: list[list[str]], mounts: str, preamble: str = ""
+) -> list[tuple[int, str, str]]:
+    """Run the commands (argv lists of `mech-regulator`, in one process, after the Python `preamble`) in a mount
+    namespace of their own, after the shell commands `mounts` there (cwd tmp_path): what each returned (exit code,
+    stdout, stderr). Skips unless root and unshare work here."""
     if os.geteuid() != 0 or shutil.which("unshare") is None:
         pytest.skip("a private read-only mount needs root and unshare (util-linux)")
     probe = subprocess.run(["unshare", "-m", "true"], capture_output=True)
@@ -146,7 +149,16 @@ def in_private_mounts(tmp_path: Path, commands: list[list[str]], mounts: str) ->
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(SOURCE_TREE), os.environ.get("PYTHONPATH")])))
     shell = f'{mounts} && exec "$0" -c "$1" "$2"'
     done = subprocess.run(
-        ["unshare", "-m", "sh", "-c", shell, sys.executable, NAMESPACE_SCRIPT, json.dumps(commands)],
+        [
+            "unshare",
+            "-m",
+            "sh",
+            "-c",
+            shell,
+            sys.executable,
+            NAMESPACE_SCRIPT.format(preamble=preamble),
+            json.dumps(commands),
+        ],
         cwd=tmp_path,
         env=env,
         capture_output=True,
@@ -182,7 +194,8 @@ def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_k
     """full/: a tmpfs of one page, filled; small/, tiny/ and both/: tmpfs of 40, 12 and 40 kB, which the lathe's
     CSV (about 1 MB) and recording (about 200 kB) overflow. The other output goes to a folder with room, or, in
     both/, to the same disk after the CSV filled it: the recording cannot write even its header (Rerun raises a
-    RuntimeError of its own there, which once ended the command in a traceback)."""
+    RuntimeError of its own there, which once ended the command in a traceback). The disks fill up during the runs:
+    before them, the estimate of the outputs (check_free_space; test_disk_space.py) is told of free space enough."""
     mounts = (
         "mkdir -p full small tiny both && mount -t tmpfs -o size=4k none full"
         " && head -c 4096 /dev/zero > full/filler && mount -t tmpfs -o size=40k none small"
@@ -194,7 +207,11 @@ def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_k
         ["simulate", "lathe", "--quiet", "--json", "--record", "tiny/run.rrd", "--out", "run.csv"],
         ["simulate", "lathe", "--quiet", "--json", "--out", "both/run.csv", "--record", "both/run.rrd"],
     ]
-    refused, csv_full, recording_full, both_full = in_private_mounts(tmp_path, commands, mounts)
+    room = (
+        "import collections, shutil\n"
+        "shutil.disk_usage = lambda folder: collections.namedtuple('usage', 'total used free')(10**15, 0, 10**15)"
+    )
+    refused, csv_full, recording_full, both_full = in_private_mounts(tmp_path, commands, mounts, room)
     line = refused_line(*refused)
     assert "cannot write 'full/run.csv': No space left on device" in line, line
     for (code, out, err), failed, kept, key in (

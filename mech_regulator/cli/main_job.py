@@ -3,10 +3,11 @@ its options checked before any node starts."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from mech_regulator.cli.report.terminal import note
-from mech_regulator.cli.simulate import check_bag, check_overspeed_trip
+from mech_regulator.cli.simulate import check_bag, check_overspeed_trip, check_sample_space, exchange_count
 from mech_regulator.cli.start import STARTED
 
 
@@ -45,10 +46,6 @@ def run_main_job(scene, args) -> int:
     reason = cosimulation_refusal(model)
     if reason is not None:
         raise SceneError(f"scene '{scene.name}' cannot be played by the nodes: {reason}")
-    model = on_path_for_a_command(model, note, compile_now=True)  # compiled before the nodes start (warm.py)
-    path = model.scene.solver.path  # decided once, for every node
-    if path != scene.solver.path:
-        args.overrides = [*(args.overrides or []), f"solver.path={path}"]
     if args.exchange_step is None:
         args.exchange_step = model.scene.solver.exchange_step
     if not 1e-6 <= args.exchange_step <= 1.0:
@@ -65,6 +62,11 @@ def run_main_job(scene, args) -> int:
             "--controller external: only with --time-mode lockstep (in realtime any node may publish "
             "throttle to a governed scene's machine: docs/ros.md, Your own controller)"
         )
+    _check_run_space(model, args)
+    model = on_path_for_a_command(model, note, compile_now=True)  # compiled before the nodes start (warm.py)
+    path = model.scene.solver.path  # decided once, for every node
+    if path != scene.solver.path:
+        args.overrides = [*(args.overrides or []), f"solver.path={path}"]
     return main_job(
         model,
         args.scene,
@@ -83,6 +85,28 @@ def run_main_job(scene, args) -> int:
         exchange_tolerance=args.exchange_tolerance,
         controller=args.controller,
         peer_timeout=args.peer_timeout,
+    )
+
+
+def _check_run_space(model, args) -> None:
+    """Refuse, before the nodes start, a run whose recording, CSV (the columns of simulate --out with the applied
+    throttle and load, 17 digits), bag and recorder's spool would not fit on their disks, or announce them when large
+    (simulate.check_sample_space): one row an exchange."""
+    from mech_regulator.cli.report.outputs import SPOOL_BYTES_PER_EXCHANGE, OutputSize
+
+    duration = args.duration or model.scene.scenario.duration
+    spool_folder = Path(os.path.realpath(args.out)).parent
+    check_sample_space(
+        model,
+        exchange_count(duration, args.exchange_step, args.exchange_tolerance),
+        f"{duration:g} s at --exchange-step {args.exchange_step:g} s"
+        + (", at the adaptive step's smallest" if args.exchange_tolerance is not None else ""),
+        "a shorter --duration, a longer --exchange-step, or --out (and --bag) in a folder with more free space",
+        ((args.out.with_suffix(".csv"), 17), args.out, args.bag),
+        more_columns=2,
+        extra=lambda exchanges: [
+            OutputSize("the recorder's spool", spool_folder, exchanges * SPOOL_BYTES_PER_EXCHANGE)
+        ],
     )
 
 

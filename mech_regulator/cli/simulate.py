@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -14,6 +15,8 @@ from mech_regulator.errors import EXIT_INACCURATE, EXIT_INTERRUPTED, EXIT_RUN_FA
 
 if TYPE_CHECKING:
     import numpy as np
+
+    from mech_regulator.cli.report.outputs import OutputSize
 
 
 SAMPLE_CHUNK = 200_000  # output samples whose columns simulate computes and writes at once (_sample_columns)
@@ -43,7 +46,17 @@ def run_simulate(scene, args) -> int:
             "co-simulation; expected --exchange-step H with it (the monolithic run has no trip)"
         )
     check_bag(args.bag)
-    model = on_path_for_a_command(build_model(scene), note)
+    model = build_model(scene)
+    if args.exchange_step is None:  # the co-simulation's outputs are checked with its exchange step (_cosimulate)
+        rate = scene.solver.sample_rate
+        check_sample_space(
+            model,
+            scene.scenario.duration * rate + 1,
+            f"{scene.scenario.duration:g} s at solver.sample_rate {rate:g} Hz",
+            "a shorter scenario.duration, a lower solver.sample_rate, or the outputs in a folder with more free space",
+            ((args.out, 12) if args.out is not None else None, args.record, args.bag),
+        )
+    model = on_path_for_a_command(model, note)
     if args.exchange_step is not None:
         return _cosimulate(model, args)
     advice = stiffness_advice(model)
@@ -135,6 +148,13 @@ def _cosimulate(model, args) -> int:
         raise SceneError(f"--exchange-step {args.exchange_step:g}: expected 1e-6 to 1 s")
     check_overspeed_trip(args)
     duration = model.scene.scenario.duration
+    check_sample_space(
+        model,
+        exchange_count(duration, args.exchange_step, args.exchange_tolerance),
+        f"{duration:g} s at --exchange-step {args.exchange_step:g} s",
+        "a shorter scenario.duration, a longer --exchange-step, or the outputs in a folder with more free space",
+        ((args.out, 17) if args.out is not None else None, args.record, args.bag),
+    )
     with progress_bar(duration, args.quiet, f"co-simulating {model.scene.name or args.scene}") as bar:
         run = cosimulate(
             model,
@@ -190,6 +210,42 @@ def check_overspeed_trip(args) -> None:
 
     if not (math.isfinite(args.overspeed_trip) and args.overspeed_trip >= 0.0):
         raise SceneError(f"--overspeed-trip {args.overspeed_trip:g}: expected a speed >= 0 rad/s (0: none)")
+
+
+def exchange_count(duration: float, exchange_step: float, exchange_tolerance: float | None) -> float:
+    """The exchanges of a co-simulation over duration [s] at exchange_step [s], at most: with an exchange tolerance,
+    at the adaptive step's smallest (cosim.ADAPTIVE_HALVINGS); the first exchange at t = 0 included."""
+    from mech_regulator.solvers.cosim import ADAPTIVE_HALVINGS
+
+    smallest = exchange_step / 2**ADAPTIVE_HALVINGS if exchange_tolerance is not None else exchange_step
+    return duration / smallest + 1
+
+
+def check_sample_space(
+    model,
+    samples: float,
+    what: str,
+    way_out: str,
+    outputs: tuple[tuple[Path, int] | None, Path | None, Path | None],
+    more_columns: int = 0,
+    extra: Callable[[float], list[OutputSize]] | None = None,
+) -> None:
+    """Refuse, before the run, outputs (the CSV with its digits, the recording, the bag; None: not asked) of
+    `samples` rows of the model's output columns (and `more_columns`) that do not fit on their disks, or announce them
+    when large (outputs.check_free_space); `extra`(samples) adds others; `what` says the rows' span and rate,
+    `way_out` how to write less."""
+    from mech_regulator.cli.report.outputs import check_free_space, output_sizes
+
+    columns = output_column_count(model) + more_columns
+    sizes = output_sizes(columns, samples, *outputs) + (extra(samples) if extra is not None else [])
+    check_free_space(sizes, f"{samples:.3g} rows of {columns} columns ({what})", way_out)
+
+
+def output_column_count(model) -> int:
+    """The number of output columns of the model (model.columns at its initial state)."""
+    import numpy as np
+
+    return len(model.columns(np.zeros(1), model.initial_state()[:, None]))
 
 
 def check_bag(folder: Path | None) -> None:

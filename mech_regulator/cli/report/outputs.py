@@ -1,5 +1,5 @@
-"""The output files of a command: their paths checked before any work (check_output_paths, output_folder), each
-written after the work without losing the others when one fails (OutputWriter), and the lines naming them.
+"""The output files of a command: their paths checked before any work (check_output_paths, output_folder) and their
+estimated size against the free disk (check_free_space), each written after the work without losing the others when one fails (OutputWriter), and the lines naming them.
 
 Light to import (the standard library only at module level): numpy, the model and the scene load inside the
 functions that need them.
@@ -8,12 +8,13 @@ functions that need them.
 from __future__ import annotations
 
 import os
+import shutil
 import stat
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
-from mech_regulator.cli.report.terminal import terminal_text
+from mech_regulator.cli.report.terminal import note, terminal_text
 from mech_regulator.errors import EXIT_INACCURATE, EXIT_RUN_FAILED
 
 if TYPE_CHECKING:
@@ -56,6 +57,92 @@ def check_output_paths(*paths: Path | None) -> None:
 
 KERNEL_FOLDERS = (Path("/dev"), Path("/proc"), Path("/sys"))
 """The kernel's file systems (devices, processes, settings): no output is ever written there."""
+
+
+LARGE_OUTPUTS_BYTES = 100e6
+"""Outputs estimated to take more than this many bytes are announced before the work starts (check_free_space)."""
+
+RECORDING_BYTES_PER_COLUMN = 32.0
+"""[bytes] an upper-ish bound on a Rerun recording's size per sample and output column: measured 13 (lathe), 19
+(walking_beam), 21 (engine_direct through the nodes), 29 (shaper, whose mechanism's poses are recorded too); docs/ros.md,
+"Outputs against the free disk"."""
+
+BAG_BYTES_PER_COLUMN = 16.0
+"""[bytes] an upper-ish bound on a rosbag2 (MCAP) bag's size per sample and output column: measured 12.5 (lathe) and
+11.4 (shaper)."""
+
+SPOOL_BYTES_PER_EXCHANGE = 64.0
+"""[bytes] an upper-ish bound on the recorder's spool per exchange: measured 56 (engine_direct)."""
+
+
+def csv_bytes_per_row(columns: int, digits: int) -> float:
+    """[bytes] an upper bound on a CSV row of `columns` numbers written with `digits` significant digits: each takes at
+    most digits + 7 characters (a sign, a point, an exponent e-XXX) and its separator."""
+    return columns * (digits + 8.0)
+
+
+class OutputSize(NamedTuple):
+    """An output's estimated size: its name as the messages quote it, the folder it goes in and its size [bytes]."""
+
+    name: str
+    folder: Path
+    size: float
+
+
+def output_sizes(
+    columns: int, samples: float, csv: tuple[Path, int] | None, recording: Path | None, bag: Path | None
+) -> list[OutputSize]:
+    """The estimated size of each output asked for (None: not asked) holding `samples` rows of `columns` output
+    columns: the CSV (its path and digits: csv_bytes_per_row), the recording and the bag folder (*_BYTES_PER_COLUMN)."""
+    sizes = []
+    if csv is not None:
+        sizes.append(_output_size(csv[0], samples * csv_bytes_per_row(columns, csv[1])))
+    if recording is not None:
+        sizes.append(_output_size(recording, samples * columns * RECORDING_BYTES_PER_COLUMN))
+    if bag is not None:
+        sizes.append(_output_size(bag, samples * columns * BAG_BYTES_PER_COLUMN))
+    return sizes
+
+
+def _output_size(path: Path, size: float) -> OutputSize:
+    """The OutputSize of the file (or bag folder) `path`, quoted, in the folder it goes in."""
+    return OutputSize(f"'{path}'", Path(os.path.realpath(path)).parent, size)
+
+
+def byte_text(size: float) -> str:
+    """A size [bytes] as a person reads it: '420 MB', '8.1 GB' (powers of 1000)."""
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if size >= scale:
+            return f"{size / scale:.2g} {unit}" if size < 10 * scale else f"{size / scale:.0f} {unit}"
+    return f"{size:.0f} B"
+
+
+def check_free_space(sizes: list[OutputSize], what: str, way_out: str) -> None:
+    """Compare, before any work, the estimated sizes of a command's outputs (output_sizes) with the free space of
+    their file systems (shutil.disk_usage; outputs on one file system add up): SceneError naming the outputs, their
+    estimate, `what` they hold, the free space and `way_out` when they do not fit; when they fit and take more than
+    LARGE_OUTPUTS_BYTES in all, one note saying so."""
+    from mech_regulator.scene import SceneError
+
+    systems: dict[int, list[OutputSize]] = {}
+    for output in sizes:
+        systems.setdefault(os.stat(output.folder).st_dev, []).append(output)
+    for outputs in systems.values():
+        needed = sum(output.size for output in outputs)
+        free = shutil.disk_usage(outputs[0].folder).free
+        if needed > free:
+            raise SceneError(
+                f"not enough free disk for {_named(outputs)}: some {byte_text(needed)} for {what}, and the file "
+                f"system of '{outputs[0].folder}' has {byte_text(free)} free; expected {way_out}"
+            )
+    total = sum(output.size for output in sizes)
+    if total > LARGE_OUTPUTS_BYTES:
+        note(f"the outputs will take some {byte_text(total)} for {what}: {_named(sizes)}")
+
+
+def _named(sizes: list[OutputSize]) -> str:
+    """The outputs' names, each with its estimate."""
+    return ", ".join(f"{output.name} ({byte_text(output.size)})" for output in sizes)
 
 
 def output_refusal(path: Path) -> str | None:
