@@ -145,6 +145,8 @@ def test_ctrl_c_at_the_client_interrupts_the_child(served, tmp_path):
         text=True,
     )
     try:
+        estimate = client.stderr.readline()  # 1e7 rows of a CSV: large, said before the run
+        assert estimate.startswith("mech-regulator: the outputs will take some 2 GB"), estimate
         first = client.stderr.readline()
         assert first.startswith("simulating lathe: t = "), first
         client.send_signal(signal.SIGINT)
