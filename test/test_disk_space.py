@@ -94,6 +94,8 @@ def test_the_estimate_bounds_a_short_run_s_files_within_the_stated_factor(capsys
     assert "outputs will take" not in err  # small outputs: nothing new said
     model = build_model(load_scene("lathe", ["scenario.duration=2"]))
     samples = 2 * model.scene.solver.sample_rate + 1
-    for estimate in outputs.output_sizes(output_column_count(model), samples, (csv, 12), recording, None):
+    for estimate in outputs.output_sizes(
+        output_column_count(model), samples, (csv, 12), (recording, outputs.RECORDING_BYTES_PER_COLUMN), None
+    ):
         size = (tmp_path / estimate.name.strip("'")).stat().st_size
         assert estimate.size / ESTIMATE_FACTOR <= size <= estimate.size, (estimate, size)

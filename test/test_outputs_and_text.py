@@ -190,12 +190,20 @@ def test_every_output_in_a_read_only_folder_is_refused_before_any_work(tmp_path)
     assert list((tmp_path / "ro").iterdir()) == []
 
 
+ROOM_BEFORE_THE_RUN = (
+    "import collections, shutil\n"
+    "shutil.disk_usage = lambda folder: collections.namedtuple('usage', 'total used free')(10**15, 0, 10**15)"
+)
+"""Python that has the outputs' estimate (check_free_space) told of free space enough: a disk that fills up during a
+run had room before it (test_disk_space.py tests the estimate)."""
+
+
 def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_keeps_the_rest(tmp_path):
     """full/: a tmpfs of one page, filled; small/, tiny/ and both/: tmpfs of 40, 12 and 40 kB, which the lathe's
     CSV (about 1 MB) and recording (about 200 kB) overflow. The other output goes to a folder with room, or, in
     both/, to the same disk after the CSV filled it: the recording cannot write even its header (Rerun raises a
-    RuntimeError of its own there, which once ended the command in a traceback). The disks fill up during the runs:
-    before them, the estimate of the outputs (check_free_space; test_disk_space.py) is told of free space enough."""
+    RuntimeError of its own there, which once ended the command in a traceback). The disks fill up during the runs
+    (ROOM_BEFORE_THE_RUN)."""
     mounts = (
         "mkdir -p full small tiny both && mount -t tmpfs -o size=4k none full"
         " && head -c 4096 /dev/zero > full/filler && mount -t tmpfs -o size=40k none small"
@@ -207,11 +215,7 @@ def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_k
         ["simulate", "lathe", "--quiet", "--json", "--record", "tiny/run.rrd", "--out", "run.csv"],
         ["simulate", "lathe", "--quiet", "--json", "--out", "both/run.csv", "--record", "both/run.rrd"],
     ]
-    room = (
-        "import collections, shutil\n"
-        "shutil.disk_usage = lambda folder: collections.namedtuple('usage', 'total used free')(10**15, 0, 10**15)"
-    )
-    refused, csv_full, recording_full, both_full = in_private_mounts(tmp_path, commands, mounts, room)
+    refused, csv_full, recording_full, both_full = in_private_mounts(tmp_path, commands, mounts, ROOM_BEFORE_THE_RUN)
     line = refused_line(*refused)
     assert "cannot write 'full/run.csv': No space left on device" in line, line
     for (code, out, err), failed, kept, key in (
@@ -236,8 +240,8 @@ def test_a_full_disk_is_refused_before_the_run_and_a_disk_filling_up_during_it_k
 
 
 def test_a_run_of_the_nodes_whose_disk_fills_up_ends_with_exit_1_and_says_which_outputs(tmp_path):
-    """The ROS nodes' run on a tmpfs of 64 kB: the recording fills it during the run, then the recorder cannot write
-    the CSV or the summary either. Each failure is one line (the recorder's, quoted by the launcher), the run ends with
+    """The ROS nodes' run on a tmpfs of 64 kB (its estimate told of room: ROOM_BEFORE_THE_RUN): the recording fills it
+    during the run, then the recorder cannot write the CSV or the summary either. Each failure is one line (the recorder's, quoted by the launcher), the run ends with
     exit code 1, and nothing ends in a traceback."""
     pytest.importorskip("rclpy")
     from ros_support import next_domain_id
@@ -253,8 +257,8 @@ def test_a_run_of_the_nodes_whose_disk_fills_up_ends_with_exit_1_and_says_which_
             "-c",
             shell,
             sys.executable,
-            "-m",
-            "mech_regulator",
+            "-c",
+            f"{ROOM_BEFORE_THE_RUN}\nimport sys\nfrom mech_regulator.cli import entry\nsys.exit(entry())",
             "run",
             "engine_direct",
             "--duration",

@@ -92,7 +92,7 @@ def _check_run_space(model, args) -> None:
     """Refuse, before the nodes start, a run whose recording, CSV (the columns of simulate --out with the applied
     throttle and load, 17 digits), bag and recorder's spool would not fit on their disks, or announce them when large
     (simulate.check_sample_space): one row an exchange."""
-    from mech_regulator.cli.report.outputs import SPOOL_BYTES_PER_EXCHANGE, OutputSize
+    from mech_regulator.cli.report.outputs import RUN_RECORDING_BYTES_PER_COLUMN, SPOOL_BYTES_PER_EXCHANGE, OutputSize
 
     duration = args.duration or model.scene.scenario.duration
     spool_folder = Path(os.path.realpath(args.out)).parent
@@ -102,7 +102,7 @@ def _check_run_space(model, args) -> None:
         f"{duration:g} s at --exchange-step {args.exchange_step:g} s"
         + (", at the adaptive step's smallest" if args.exchange_tolerance is not None else ""),
         "a shorter --duration, a longer --exchange-step, or --out (and --bag) in a folder with more free space",
-        ((args.out.with_suffix(".csv"), 17), args.out, args.bag),
+        ((args.out.with_suffix(".csv"), 17), (args.out, RUN_RECORDING_BYTES_PER_COLUMN), args.bag),
         more_columns=2,
         extra=lambda exchanges: [
             OutputSize("the recorder's spool", spool_folder, exchanges * SPOOL_BYTES_PER_EXCHANGE)

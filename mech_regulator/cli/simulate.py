@@ -54,7 +54,7 @@ def run_simulate(scene, args) -> int:
             scene.scenario.duration * rate + 1,
             f"{scene.scenario.duration:g} s at solver.sample_rate {rate:g} Hz",
             "a shorter scenario.duration, a lower solver.sample_rate, or the outputs in a folder with more free space",
-            ((args.out, 12) if args.out is not None else None, args.record, args.bag),
+            _simulate_outputs(args, digits=12),
         )
     model = on_path_for_a_command(model, note)
     if args.exchange_step is not None:
@@ -153,7 +153,7 @@ def _cosimulate(model, args) -> int:
         exchange_count(duration, args.exchange_step, args.exchange_tolerance),
         f"{duration:g} s at --exchange-step {args.exchange_step:g} s",
         "a shorter scenario.duration, a longer --exchange-step, or the outputs in a folder with more free space",
-        ((args.out, 17) if args.out is not None else None, args.record, args.bag),
+        _simulate_outputs(args, digits=17),
     )
     with progress_bar(duration, args.quiet, f"co-simulating {model.scene.name or args.scene}") as bar:
         run = cosimulate(
@@ -226,19 +226,33 @@ def check_sample_space(
     samples: float,
     what: str,
     way_out: str,
-    outputs: tuple[tuple[Path, int] | None, Path | None, Path | None],
+    outputs: tuple[tuple[Path, int] | None, tuple[Path, float] | None, Path | None],
     more_columns: int = 0,
     extra: Callable[[float], list[OutputSize]] | None = None,
 ) -> None:
-    """Refuse, before the run, outputs (the CSV with its digits, the recording, the bag; None: not asked) of
+    """Refuse, before the run, outputs (the CSV with its digits, the recording with its bytes a sample and column, the
+    bag; None: not asked: outputs.output_sizes) of
     `samples` rows of the model's output columns (and `more_columns`) that do not fit on their disks, or announce them
     when large (outputs.check_free_space); `extra`(samples) adds others; `what` says the rows' span and rate,
     `way_out` how to write less."""
     from mech_regulator.cli.report.outputs import check_free_space, output_sizes
 
+    if outputs == (None, None, None) and extra is None:
+        return  # nothing written per row
     columns = output_column_count(model) + more_columns
     sizes = output_sizes(columns, samples, *outputs) + (extra(samples) if extra is not None else [])
     check_free_space(sizes, f"{samples:.3g} rows of {columns} columns ({what})", way_out)
+
+
+def _simulate_outputs(args, digits: int) -> tuple[tuple[Path, int] | None, tuple[Path, float] | None, Path | None]:
+    """simulate's outputs as check_sample_space takes them: its CSV written with `digits` significant digits."""
+    from mech_regulator.cli.report.outputs import RECORDING_BYTES_PER_COLUMN
+
+    return (
+        (args.out, digits) if args.out is not None else None,
+        (args.record, RECORDING_BYTES_PER_COLUMN) if args.record is not None else None,
+        args.bag,
+    )
 
 
 def output_column_count(model) -> int:

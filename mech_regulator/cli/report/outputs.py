@@ -62,14 +62,22 @@ KERNEL_FOLDERS = (Path("/dev"), Path("/proc"), Path("/sys"))
 LARGE_OUTPUTS_BYTES = 100e6
 """Outputs estimated to take more than this many bytes are announced before the work starts (check_free_space)."""
 
-RECORDING_BYTES_PER_COLUMN = 32.0
-"""[bytes] an upper-ish bound on a Rerun recording's size per sample and output column: measured 13 (lathe), 19
-(walking_beam), 21 (engine_direct through the nodes), 29 (shaper, whose mechanism's poses are recorded too); docs/ros.md,
-"Outputs against the free disk"."""
+RECORDING_BYTES_PER_COLUMN = 12.0
+"""[bytes] an upper-ish bound on the size of simulate's Rerun recording per sample and output column: measured 8.1
+(lathe), 8.2 (shaper, whose mechanism's poses are recorded too), 10 (lathe co-simulated); docs/ros.md, "Outputs
+against the free disk"."""
+
+RUN_RECORDING_BYTES_PER_COLUMN = 32.0
+"""[bytes] an upper-ish bound on the size of run's Rerun recording (the nodes' recorder) per exchange and output
+column: measured 21 (engine_direct at 10 000 s)."""
+
+RECORDING_LAYOUT_BYTES = 300e3
+"""[bytes] a Rerun recording's part that does not grow with its samples (its layout, the mechanism's drawing):
+measured 203 kB (lathe) and 259 kB (shaper)."""
 
 BAG_BYTES_PER_COLUMN = 16.0
-"""[bytes] an upper-ish bound on a rosbag2 (MCAP) bag's size per sample and output column: measured 12.5 (lathe) and
-11.4 (shaper)."""
+"""[bytes] an upper-ish bound on a rosbag2 (MCAP) bag's size per sample and output column: measured 12.2 (lathe) and
+10.5 (shaper), besides some 13 kB of its own."""
 
 SPOOL_BYTES_PER_EXCHANGE = 64.0
 """[bytes] an upper-ish bound on the recorder's spool per exchange: measured 56 (engine_direct)."""
@@ -90,15 +98,21 @@ class OutputSize(NamedTuple):
 
 
 def output_sizes(
-    columns: int, samples: float, csv: tuple[Path, int] | None, recording: Path | None, bag: Path | None
+    columns: int,
+    samples: float,
+    csv: tuple[Path, int] | None,
+    recording: tuple[Path, float] | None,
+    bag: Path | None,
 ) -> list[OutputSize]:
     """The estimated size of each output asked for (None: not asked) holding `samples` rows of `columns` output
-    columns: the CSV (its path and digits: csv_bytes_per_row), the recording and the bag folder (*_BYTES_PER_COLUMN)."""
+    columns: the CSV (its path and digits: csv_bytes_per_row), the recording (its path and bytes a sample and column,
+    RECORDING_BYTES_PER_COLUMN or RUN_RECORDING_BYTES_PER_COLUMN, and RECORDING_LAYOUT_BYTES) and the bag folder
+    (BAG_BYTES_PER_COLUMN)."""
     sizes = []
     if csv is not None:
         sizes.append(_output_size(csv[0], samples * csv_bytes_per_row(columns, csv[1])))
     if recording is not None:
-        sizes.append(_output_size(recording, samples * columns * RECORDING_BYTES_PER_COLUMN))
+        sizes.append(_output_size(recording[0], RECORDING_LAYOUT_BYTES + samples * columns * recording[1]))
     if bag is not None:
         sizes.append(_output_size(bag, samples * columns * BAG_BYTES_PER_COLUMN))
     return sizes
