@@ -27,7 +27,8 @@ ENGINE = shortened("engine_direct", 0.5, scenario__initial__omega=300.0)
 def outer_loop(model):
     """The model's compiled segment with every restart left to the outer loop (no kink grid, no pieces inside)."""
     compiled = compile_scene(model)
-    layout = run._Layout.of(model, compiled)._replace(kink_grid=np.zeros(0), pieces_inside=False)
+    layout = run._Layout.of(model, compiled)
+    layout = layout._replace(fixed=layout.fixed._replace(kink_grid=np.zeros(0)), pieces_inside=False)
     return functools.partial(run._compiled_segment, compiled, layout)
 
 
