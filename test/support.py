@@ -148,3 +148,12 @@ SMOOTH_DIRECT_GOVERNOR = {  # a direct-action Porter governor without friction, 
     "stroke": [0.02, 0.08],
     "valve": {"open_at": 0.02, "closed_at": 0.08},
 }
+
+
+def refused_line(code: int, out: str, err: str) -> str:
+    """The one line of a refusal: exit 2, nothing on stdout (no 'wrote'), a single line on stderr."""
+    assert code == 2, (code, out, err)
+    assert out == "", out
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("mech-regulator: "), err
+    return lines[0]

@@ -7,7 +7,7 @@ from __future__ import annotations
 from collections import namedtuple
 
 import pytest
-from support import run_cli
+from support import refused_line, run_cli
 
 from mech_regulator.cli.report import outputs
 from mech_regulator.cli.simulate import output_column_count
@@ -22,15 +22,6 @@ Usage = namedtuple("Usage", "total used free")
 def with_free_disk(monkeypatch, free: int) -> None:
     """shutil.disk_usage, as outputs.check_free_space calls it, says `free` bytes are free."""
     monkeypatch.setattr(outputs.shutil, "disk_usage", lambda folder: Usage(10**12, 10**12 - free, free))
-
-
-def refused_line(code: int, out: str, err: str) -> str:
-    """The one line of a refusal: exit 2, nothing on stdout, a single line on stderr."""
-    assert code == 2, (code, out, err)
-    assert out == "", out
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("mech-regulator: "), err
-    return lines[0]
 
 
 def test_simulate_s_outputs_beyond_the_free_disk_are_refused_before_the_run(capsys, monkeypatch, tmp_path):

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support import SOURCE_TREE, run_cli, write_scene
+from support import SOURCE_TREE, refused_line, run_cli, write_scene
 
 from mech_regulator.cli.report import data, outputs, terminal
 from mech_regulator.model import build_model
@@ -64,15 +64,6 @@ def needs_rclpy(argv: list[str]) -> None:
 
     if argv[0] == "run" and importlib.util.find_spec("rclpy") is None:
         pytest.skip("run needs rclpy")
-
-
-def refused_line(code: int, out: str, err: str) -> str:
-    """The one line of a refusal: exit 2, nothing on stdout (no 'wrote'), a single line on stderr."""
-    assert code == 2, (code, out, err)
-    assert out == "", out
-    lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("mech-regulator: "), err
-    return lines[0]
 
 
 @pytest.mark.parametrize("argv, option, folder", OUTPUTS, ids=IDS)

@@ -33,6 +33,21 @@ def small_chunks(monkeypatch):
     monkeypatch.setattr(load_response, "WINDOW_CHUNK_SPAN", WINDOW_SPAN)
 
 
+def steps_dropped_by_each_run(monkeypatch) -> list[int]:
+    """A list to which each run analysis.simulate_streamed makes from now on adds how many steps it dropped."""
+    from mech_regulator import analysis
+
+    dropped: list[int] = []
+
+    def simulate_streamed(model, *arguments, **options):
+        trajectory, digest = stream.simulate_streamed(model, *arguments, **options)
+        dropped.append(trajectory.steps_dropped)
+        return trajectory, digest
+
+    monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
+    return dropped
+
+
 @pytest.mark.parametrize("path", ["reference", "fast"])
 def test_a_streamed_run_holds_as_many_steps_after_4_t_as_after_t(small_chunks, path):
     """engine_direct for 1 s and for 4 s (its load change at 2 s in the longer one): at their ends both trajectories
@@ -109,17 +124,9 @@ def test_a_streamed_bench_long_row_is_the_row_of_the_run_kept_whole(small_chunks
     the whole run: 2.8 GB at 10 000 s) and is the row of the run kept whole: the same status, steps and energy
     residual, the last period's omega_m and delta to 1e-9 (judged on the tail), for the row and its own-duration
     run alike."""
-    from mech_regulator import analysis
     from mech_regulator.bench.long import run_row
 
-    dropped = []
-
-    def simulate_streamed(model, *arguments, **options):
-        trajectory, digest = stream.simulate_streamed(model, *arguments, **options)
-        dropped.append(trajectory.steps_dropped)
-        return trajectory, digest
-
-    monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
+    dropped = steps_dropped_by_each_run(monkeypatch)
     scene_file = str(write_scene(tmp_path, yaml.safe_dump(shortened("engine_direct", 4.0))))
     streamed = run_row(scene_file, "fast", "DOP853", "simulate", 4.0, 600.0)
     assert len(dropped) == 2 and min(dropped) > 0  # the row and its own-duration run streamed
@@ -147,19 +154,11 @@ def test_a_streamed_two_mass_or_drive_train_run_gives_the_summary_of_the_run_kep
     sections' figures read chunk by chunk while the run drops its oldest steps) and kept whole: the same JSON summary
     and CSV, but the steady state, which the streamed run judges on the tail it keeps, and the figures that follow
     from it (the coupling peak's period, the steady mean moment and their ratio, to 1e-9)."""
-    from mech_regulator import analysis
 
     monkeypatch.setattr(stream, "RETAINED_STEPS", retained)
     monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", chunk)
     monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", chunk)
-    dropped = []
-
-    def simulate_streamed(model, *arguments, **options):
-        trajectory, digest = stream.simulate_streamed(model, *arguments, **options)
-        dropped.append(trajectory.steps_dropped)
-        return trajectory, digest
-
-    monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
+    dropped = steps_dropped_by_each_run(monkeypatch)
     scene_file = write_scene(tmp_path, yaml.safe_dump(shortened(name, duration, solver__path="reference")))
     summaries, csv_files = [], [tmp_path / "streamed.csv", tmp_path / "whole.csv"]
     for csv_file in csv_files:
