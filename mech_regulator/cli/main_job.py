@@ -96,17 +96,16 @@ def _check_run_space(model, args) -> None:
 
     duration = args.duration or model.scene.scenario.duration
     spool_folder = Path(os.path.realpath(args.out)).parent
+    exchanges = exchange_count(duration, args.exchange_step, args.exchange_tolerance)
     check_sample_space(
         model,
-        exchange_count(duration, args.exchange_step, args.exchange_tolerance),
+        exchanges,
         f"{duration:g} s at --exchange-step {args.exchange_step:g} s"
         + (", at the adaptive step's smallest" if args.exchange_tolerance is not None else ""),
         "a shorter --duration, a longer --exchange-step, or --out (and --bag) in a folder with more free space",
         ((args.out.with_suffix(".csv"), 17), (args.out, RUN_RECORDING_BYTES_PER_COLUMN), args.bag),
         more_columns=2,
-        extra=lambda exchanges: [
-            OutputSize("the recorder's spool", spool_folder, exchanges * SPOOL_BYTES_PER_EXCHANGE)
-        ],
+        extra=[OutputSize("the recorder's spool", spool_folder, exchanges * SPOOL_BYTES_PER_EXCHANGE)],
     )
 
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 import sys
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -228,19 +227,19 @@ def check_sample_space(
     way_out: str,
     outputs: tuple[tuple[Path, int] | None, tuple[Path, float] | None, Path | None],
     more_columns: int = 0,
-    extra: Callable[[float], list[OutputSize]] | None = None,
+    extra: list[OutputSize] | None = None,
 ) -> None:
     """Refuse, before the run, outputs (the CSV with its digits, the recording with its bytes a sample and column, the
     bag; None: not asked: outputs.output_sizes) of
     `samples` rows of the model's output columns (and `more_columns`) that do not fit on their disks, or announce them
-    when large (outputs.check_free_space); `extra`(samples) adds others; `what` says the rows' span and rate,
+    when large (outputs.check_free_space); `extra`: other outputs' sizes; `what` says the rows' span and rate,
     `way_out` how to write less."""
     from mech_regulator.cli.report.outputs import check_free_space, output_sizes
 
-    if outputs == (None, None, None) and extra is None:
+    if outputs == (None, None, None) and not extra:
         return  # nothing written per row
     columns = output_column_count(model) + more_columns
-    sizes = output_sizes(columns, samples, *outputs) + (extra(samples) if extra is not None else [])
+    sizes = output_sizes(columns, samples, *outputs) + (extra or [])
     check_free_space(sizes, f"{samples:.3g} rows of {columns} columns ({what})", way_out)
 
 
