@@ -27,7 +27,9 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -66,6 +68,9 @@ DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the pro
 TEARDOWN_ALARM = 5  # [s] of wall time after which SIGALRM ends a node whose destruction hangs holding the GIL
 MATCH_WAIT = 1.0  # [s] of wall time a publisher waits at most to match what the graph lists (deliver_all)
 MATCH_POLL = 0.01  # [s] between two looks at whether a publisher has matched the subscriptions the graph knows
+PUBLISH_RETRY_LIMIT = 10.0  # [s] of wall time a message the middleware refuses is tried again (publish_steadily)
+PUBLISH_RETRY_PAUSE = 0.001  # [s] of wall time before the first new try, doubled up to PUBLISH_RETRY_LONGEST
+PUBLISH_RETRY_LONGEST = 0.05  # [s] of wall time between two tries at most
 N = TypeVar("N", bound=Node)  # the kind of node `run` builds and hands to its work
 
 # Commands (throttle, loads): reliable, only what arrives after subscribing counts.
@@ -119,6 +124,59 @@ class PeerError(Exception):
 
 class OutputError(Exception):
     """An output a node writes could not be written (a full disk); the node said which and ends with exit code 1."""
+
+
+def publish_steadily(send: Callable[[], None], topic: str, live: Callable[[], bool]) -> None:
+    """Send a message with `send` (one publish of it), trying again while the middleware refuses it for a moment.
+    On a loaded machine Fast DDS's write sometimes fails at once ("cannot publish data") and takes the same message
+    some 50 ms later: the lathe through the nodes for 10 000 s at a load average of 7-12 met it one to four times a
+    run, and the machine node ended there with a traceback (docs/ros.md, "A message the middleware refuses"). Each
+    new try comes after a pause of PUBLISH_RETRY_PAUSE s, doubled up to PUBLISH_RETRY_LONGEST; refused for
+    PUBLISH_RETRY_LIMIT s of wall time, PeerError naming the topic (the node ends with exit code 1). The message is
+    sent once, unchanged and in its order: the run's numbers are the same, only its pace is not. When `live()` is
+    false (the node's context shut down: Ctrl-C, the run's end) the error is raised at once, as before."""
+    refused = 0
+    deadline = time.monotonic() + PUBLISH_RETRY_LIMIT
+    pause = PUBLISH_RETRY_PAUSE
+    while True:
+        try:
+            send()
+            return
+        except rclpy_implementation.RCLError as error:
+            if not live():
+                raise
+            if time.monotonic() >= deadline:
+                raise PeerError(
+                    f"the middleware refused every message on {topic} for {PUBLISH_RETRY_LIMIT:g} s of wall time "
+                    f"({refused + 1} tries; the last: {error})"
+                ) from error
+        refused += 1
+        time.sleep(pause)
+        pause = min(2.0 * pause, PUBLISH_RETRY_LONGEST)
+
+
+class SteadyPublisher(Publisher):
+    """An rclpy Publisher whose publish tries again when the middleware refuses a message for a moment
+    (publish_steadily). Made by SteadyNode.create_publisher."""
+
+    context_ok: Callable[[], bool] = staticmethod(rclpy.ok)
+
+    def publish(self, msg) -> None:
+        """Publish `msg` (Publisher.publish), again while the middleware refuses it (publish_steadily)."""
+        publish_steadily(lambda: super(SteadyPublisher, self).publish(msg), self.topic, self.context_ok)
+
+
+class SteadyNode(Node):
+    """An rclpy Node whose create_publisher makes SteadyPublishers, their publish tried again while the middleware
+    refuses a message for a moment (publish_steadily). The base class of the run's nodes."""
+
+    def create_publisher(self, *args, **kwargs) -> Publisher:
+        """Node.create_publisher with publisher_class SteadyPublisher (unless given), its context this node's."""
+        kwargs.setdefault("publisher_class", SteadyPublisher)
+        publisher = super().create_publisher(*args, **kwargs)
+        if isinstance(publisher, SteadyPublisher):
+            publisher.context_ok = self.context.ok
+        return publisher
 
 
 def stamp(nanoseconds: int) -> Time:

@@ -34,7 +34,6 @@ import math
 import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -47,6 +46,7 @@ from mech_regulator.nodes.common import (
     Batch,
     JointMessage,
     RunState,
+    SteadyNode,
     coupling_parameter,
     diagnostics,
     float_parameter,
@@ -74,7 +74,7 @@ DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time
 ACTION_JOINTS = ("throttle", "throttle_command", "throttle_per_speed")  # the answer's joints with the speed's action
 
 
-class GovernorNode(Node):
+class GovernorNode(SteadyNode):
     """The governor of `scene_file` (see the module docstring)."""
 
     def __init__(self):

@@ -58,7 +58,6 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
@@ -75,6 +74,7 @@ from mech_regulator.nodes.common import (
     JointMessage,
     PeerError,
     RunState,
+    SteadyNode,
     bool_parameter,
     coupling_parameter,
     deliver_all,
@@ -107,7 +107,7 @@ SPIN_SLICE = 0.02  # [s] of wall time per wait for messages
 RESEND_PERIOD = 1.0  # [s] of wall time after which a lockstep exchange time is published again
 
 
-class MachineNode(MachineExchange, Node):
+class MachineNode(MachineExchange, SteadyNode):
     """The machine of `scene_file` (see the module docstring for topics and parameters)."""
 
     def __init__(self):

@@ -28,7 +28,6 @@ from pathlib import Path
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -41,6 +40,7 @@ from mech_regulator.nodes.common import (
     STATE_QOS,
     OutputError,
     RunState,
+    SteadyNode,
     batch_groups,
     coupling_parameter,
     diagnostics,
@@ -86,7 +86,7 @@ DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
 
 
-class RecorderNode(Node):
+class RecorderNode(SteadyNode):
     """Records the run (see the module docstring)."""
 
     def __init__(self):

@@ -21,7 +21,6 @@ import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64
 
@@ -29,6 +28,7 @@ from mech_regulator.nodes.common import (
     COMMAND_QOS,
     OK,
     RunState,
+    SteadyNode,
     diagnostics,
     follow_run_state,
     peer_parameter,
@@ -42,7 +42,7 @@ from mech_regulator.solvers.cosim import held_load_until, load_rate, seconds
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between diagnostics
 
 
-class ScenarioNode(Node):
+class ScenarioNode(SteadyNode):
     """The load scenario of `scene_file` (see the module docstring)."""
 
     def __init__(self):
