@@ -7,10 +7,10 @@ output inside that same step, STEP_FRACTION of the step apart (_accelerations). 
 holds the point alone, so a stretch gives the same numbers however long it is and however it is read in chunks. A
 monolithic run checks its steps as its trajectory grows (ContactWatch, CHECK_CHUNK_STEPS at a time, before a streamed
 run hands them off); a co-simulation's exchange step checks its stretch once stepped (check_contact). Where Q_c first
-turns negative the crossing is found (Brent's method on the dense output; at a step's start, where a load's jump
-began that step, the start itself), the trajectory is cut there, an event `contact lost at cam pair K` is recorded and
-the run ends `failed` with the time, crank angle and speed: beyond it the follower no longer follows the cam, which
-the machine's reduction assumes.
+turns negative the crossing is found (Brent's method on the dense output; at a step's start, where a jump began
+that step, a load's or s'' at a switch angle, the start itself), the trajectory is cut there, an event `contact lost
+at cam pair K` is recorded and the run ends `failed` with the time, crank angle and speed: beyond it the follower no
+longer follows the cam, which the machine's reduction assumes.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ def _first_loss(pairs: tuple, trajectory: Trajectory, t_from: float) -> tuple[fl
         return None
     k = int(lost[0])
     pair = pairs[int(np.argmin(values[:, k]))]
-    if times[k] == starts[k]:  # a step's start: negative from the step's start on (a load's jump began it)
+    if times[k] == starts[k]:  # a step's start: negative from it on (a jump began the step: a load's, s'''s)
         return float(times[k]), pair
     within = starts[k : k + 1], ends[k : k + 1]  # times[k - 1] is in the same step: its start or an inner point
     t_lost = optimize.brentq(
