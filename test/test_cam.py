@@ -24,6 +24,7 @@ from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import cam_contact, simulate
 from mech_regulator.solvers.cam_contact import _pairs, check_contact
+from mech_regulator.solvers.compiled import run as compiled_run
 from mech_regulator.solvers.cosim import cosimulate
 from mech_regulator.solvers.time_domain import _segment
 from mech_regulator.solvers.trajectory import Trajectory
@@ -456,13 +457,15 @@ def test_a_flat_faced_follower_has_no_pressure_angle_and_its_profile_radius_is_R
     )
 
 
-def test_a_jump_is_found_at_the_same_time_checked_in_chunks_and_streamed_as_checked_whole(monkeypatch):
+@pytest.mark.parametrize("path", ["reference", "fast"])
+def test_a_jump_is_found_at_the_same_time_checked_in_chunks_and_streamed_as_checked_whole(monkeypatch, path):
     """valve_gear driven past its jump speed (the motor's no-load speed 1000 rad/s: contact lost after some 60 steps):
-    checked 5 steps at a time while a stream drops the oldest steps (20 kept, 10 a chunk), and checked once at the
-    load piece's end, the run ends at the same time, where the contact was lost, with the one event and the same
-    message; the streamed run had dropped steps before it."""
+    checked 5 steps at a time (the fast path: after each compiled call, made 4 steps long) while a stream drops the
+    oldest steps (20 kept, 10 a chunk), and checked once at the load piece's end, the run ends at the same time, where
+    the contact was lost, with the one event and the same message; the streamed run had dropped steps before it."""
+    monkeypatch.setattr(compiled_run, "MAX_STEPS_PER_CALL", 4)  # else one call holds the run to its jump
     scene = load_scene(
-        "valve_gear", ["solver.path=reference", "scenario.duration=0.1", "machine.drive.no_load_speed=1000"]
+        "valve_gear", [f"solver.path={path}", "scenario.duration=0.1", "machine.drive.no_load_speed=1000"]
     )
     runs = {}
     for chunk in (5, 10**9):
