@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from support import run_cli
 
+from mech_regulator.analysis import RunDigest, energy, stream
 from mech_regulator.analysis.energy import energy_balance
 from mech_regulator.mechanisms.cam_laws import Segment, SegmentLaw, TableLaw
 from mech_regulator.mechanisms.linkage import Joint, Link, Linkage, LinkageError, analyse
@@ -21,8 +22,12 @@ from mech_regulator.mechanisms.linkage.cam import CamPair, CamSpec
 from mech_regulator.mechanisms.presets import linkage_core
 from mech_regulator.model import build_model
 from mech_regulator.scene import SceneError, load_scene, validate_scene
-from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cam_contact import _pairs
+from mech_regulator.solvers import cam_contact, simulate
+from mech_regulator.solvers.cam_contact import _pairs, check_contact
+from mech_regulator.solvers.compiled import run as compiled_run
+from mech_regulator.solvers.cosim import cosimulate
+from mech_regulator.solvers.time_domain import _segment
+from mech_regulator.solvers.trajectory import Trajectory
 
 BETA = math.radians(120.0)  # a rise's or return's angle [rad]
 LIFT = 0.008  # its lift [m]
@@ -450,6 +455,74 @@ def test_a_flat_faced_follower_has_no_pressure_angle_and_its_profile_radius_is_R
     assert np.abs(knife.profile(73)) == pytest.approx(
         0.03 + law.evaluate(np.linspace(0, 2 * math.pi, 73, endpoint=False))[0], rel=1e-12
     )
+
+
+@pytest.mark.parametrize("path", ["reference", "fast"])
+def test_a_jump_is_found_at_the_same_time_checked_in_chunks_and_streamed_as_checked_whole(monkeypatch, path):
+    """valve_gear driven past its jump speed (the motor's no-load speed 1000 rad/s: contact lost after some 60 steps):
+    checked 5 steps at a time (the fast path: after each compiled call, made 4 steps long) while a stream drops the
+    oldest steps (20 kept, 10 a chunk), and checked once at the load piece's end, the run ends at the same time, where
+    the contact was lost, with the one event and the same message; the streamed run had dropped steps before it."""
+    monkeypatch.setattr(compiled_run, "MAX_STEPS_PER_CALL", 4)  # else one call holds the run to its jump
+    scene = load_scene(
+        "valve_gear", [f"solver.path={path}", "scenario.duration=0.1", "machine.drive.no_load_speed=1000"]
+    )
+    runs = {}
+    for chunk in (5, 10**9):
+        monkeypatch.setattr(cam_contact, "CHECK_CHUNK_STEPS", chunk)
+        monkeypatch.setattr(stream, "RETAINED_STEPS", 20 if chunk == 5 else 10**9)
+        monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", 10)
+        monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", 10)
+        model = build_model(scene)
+        runs[chunk] = simulate(model, stream=RunDigest(model).take)
+    chunked, whole = runs[5], runs[10**9]
+    assert chunked.steps_dropped > 0 and whole.steps_dropped == 0
+    assert whole.status == chunked.status == "failed" and chunked.message == whole.message
+    ((t_lost, what),) = chunked.events
+    assert what == "contact lost at cam pair K" and chunked.events == whole.events
+    assert chunked.t_end == pytest.approx(whole.t_end, rel=1e-12) and t_lost == chunked.t_end
+    assert 0.0 < t_lost < 0.1 and chunked.stats.steps < whole.stats.steps  # found in its chunk, not at the end
+
+
+def test_the_contact_check_does_not_depend_on_the_stretch_s_length():
+    """valve_gear above its jump speed, one load piece stepped without a check: its contact is lost at the same time,
+    to the last bit, when the stretch checked is the piece (0.01 s) and when it goes on with a step 100 s long (a
+    central difference a millionth of the stretch wide gave another time)."""
+    model = build_model(
+        load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.01", "scenario.initial.omega=700"])
+    )
+    found = []
+    for extra in (0.0, 100.0):
+        stretch = Trajectory(method="DOP853", t_start=0.0)
+        y, _ = _segment(model, None, 0.0, 0.01, model.initial_state(), None, stretch, None)
+        if extra:
+            stretch.add_piece(0.01, 0.01 + extra, lambda t, end=y: np.multiply.outer(end, np.ones(np.shape(t))))
+        state = check_contact(model, stretch, 0.0, y)
+        assert stretch.status == "failed" and stretch.t_end < 0.01
+        found.append((stretch.t_end, stretch.message, tuple(state)))
+    assert found[0] == found[1]
+
+
+def test_the_co_simulation_s_exchange_steps_find_the_jump_the_monolithic_run_finds():
+    """valve_gear above its jump speed co-simulated in process (exchange steps of 0.5 ms, each stretch checked as it
+    is stepped: solvers/cosim.py) fails with the monolithic run's message: the same time, crank angle and speed."""
+    model = build_model(
+        load_scene("valve_gear", ["solver.path=reference", "scenario.duration=0.01", "scenario.initial.omega=700"])
+    )
+    monolithic, exchanged = simulate(model), cosimulate(model, 0.0005)
+    assert exchanged.status == monolithic.status == "failed" and exchanged.message == monolithic.message
+
+
+def test_a_cut_drops_the_events_and_modes_recorded_after_it():
+    """Trajectory.cut at 1.5 s of a run to 2 s: the events and modes after 1.5 s are gone, those up to it kept."""
+    trajectory = Trajectory(method="RK4", t_start=0.0)
+    for start in (0.0, 1.0):
+        trajectory.add_piece(start, start + 1.0, lambda t: np.vstack([np.asarray(t), np.ones(np.shape(t))]))
+    trajectory.events += [(0.5, "a"), (1.5, "b"), (1.75, "c")]
+    trajectory.modes += [(0.0, ("low",)), (1.5, ("high",)), (1.75, ("low",))]
+    trajectory.cut(1.5)
+    assert trajectory.t_end == 1.5 and trajectory.events == [(0.5, "a"), (1.5, "b")]
+    assert trajectory.modes == [(0.0, ("low",)), (1.5, ("high",))]
 
 
 def test_the_fast_path_stops_at_the_same_jump_as_the_reference_path():

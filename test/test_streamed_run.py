@@ -19,15 +19,18 @@ from support import model_of, run_cli, write_scene
 from test_compiled_path import shortened
 
 from mech_regulator.analysis import RunDigest, energy, load_response, stream
-from mech_regulator.solvers import simulate
+from mech_regulator.solvers import cam_contact, simulate
 
 RETAINED, CHUNK, WINDOW_SPAN = 300, 100, 0.05  # steps kept at the end, steps a chunk, a load window's chunk [s]
+CHECK_STEPS = 50  # steps whose cam contacts are checked at once
 
 
 @pytest.fixture
 def small_chunks(monkeypatch):
-    """Stream engine_direct after a few hundred steps (its load windows read WINDOW_SPAN at a time)."""
+    """Stream engine_direct after a few hundred steps (its load windows read WINDOW_SPAN at a time; a machine with cams
+    has its contacts checked CHECK_STEPS at a time)."""
     monkeypatch.setattr(stream, "RETAINED_STEPS", RETAINED)
+    monkeypatch.setattr(cam_contact, "CHECK_CHUNK_STEPS", CHECK_STEPS)
     monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", CHUNK)
     monkeypatch.setattr(energy, "BALANCE_CHUNK_STEPS", CHUNK)
     monkeypatch.setattr(load_response, "WINDOW_CHUNK_SPAN", WINDOW_SPAN)
@@ -46,6 +49,12 @@ def steps_dropped_by_each_run(monkeypatch) -> list[int]:
 
     monkeypatch.setattr(analysis, "simulate_streamed", simulate_streamed)
     return dropped
+
+
+def test_a_streamed_run_hands_off_only_steps_whose_cam_contacts_are_checked():
+    """The contact check reads its chunks (cam_contact.CHECK_CHUNK_STEPS) before the stream hands steps off: the
+    stream keeps more steps than a check's chunk."""
+    assert cam_contact.CHECK_CHUNK_STEPS < stream.RETAINED_STEPS
 
 
 @pytest.mark.parametrize("path", ["reference", "fast"])
@@ -145,15 +154,17 @@ def test_a_streamed_bench_long_row_is_the_row_of_the_run_kept_whole(small_chunks
         ("two_mass", 3.0, RETAINED, CHUNK),  # a coupling: its largest moment (refined) and the twist's range
         ("press_coupling", 3.0, RETAINED, CHUNK),  # a hardening coupling, the press held by friction at the start
         ("clutch_start", 4.0, 10, 5),  # a clutch and two branches: their largest section torques (34 steps)
+        ("valve_gear", 0.4, RETAINED, CHUNK),  # a cam: its contact checked as the steps come (some 740 steps)
     ],
 )
 def test_a_streamed_two_mass_or_drive_train_run_gives_the_summary_of_the_run_kept_whole(
     small_chunks, monkeypatch, tmp_path, capsys, name, duration, retained, chunk
 ):
-    """`simulate` of a two-mass machine or a drive train on the reference path, streamed (the coupling's and the
-    sections' figures read chunk by chunk while the run drops its oldest steps) and kept whole: the same JSON summary
-    and CSV, but the steady state, which the streamed run judges on the tail it keeps, and the figures that follow
-    from it (the coupling peak's period, the steady mean moment and their ratio, to 1e-9)."""
+    """`simulate` of a two-mass machine, a drive train or a machine with cams on the reference path, streamed (the
+    coupling's and the sections' figures read chunk by chunk, the cam's contact checked, while the run drops its
+    oldest steps) and kept whole: the same JSON summary and CSV, but the steady state, which the streamed run judges
+    on the tail it keeps, and the figures that follow from it (the coupling peak's period, the steady mean moment and
+    their ratio, to 1e-9)."""
 
     monkeypatch.setattr(stream, "RETAINED_STEPS", retained)
     monkeypatch.setattr(stream, "BALANCE_CHUNK_STEPS", chunk)

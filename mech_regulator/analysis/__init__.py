@@ -29,7 +29,7 @@ from mech_regulator.analysis.statics import (
     operating_point,
     static_characteristic,
 )
-from mech_regulator.analysis.stream import RunDigest, simulate_streamed, streams
+from mech_regulator.analysis.stream import RunDigest, simulate_streamed
 from mech_regulator.analysis.two_mass import MotionPeriods, RequiredCoupling, motion_periods, required_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import Trajectory
@@ -248,7 +248,6 @@ __all__ = [
     "operating_point",
     "simulate_streamed",
     "static_characteristic",
-    "streams",
     "summarise",
     "summarise_cosimulation",
 ]

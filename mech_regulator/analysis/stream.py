@@ -15,6 +15,8 @@ times and in the same chunks, so a complete run's figures are the same numbers:
   train's largest section torque per branch (analysis/drivetrain.py, SectionsSoFar), on the grids the run kept whole
   reads them on.
 The steady state and last period are judged on the tail the trajectory keeps (at least RETAINED_STEPS steps).
+A machine with cams has its contacts checked on the steps before they come here (solvers/cam_contact.py's
+ContactWatch, CHECK_CHUNK_STEPS at a time, fewer than RETAINED_STEPS).
 A run that ends before its planned duration (failed, interrupted) after dropping pieces keeps the samples and windows
 on the planned grid up to where it ended, and its end.
 """
@@ -34,29 +36,22 @@ from mech_regulator.analysis.stability import is_periodic
 from mech_regulator.analysis.two_mass import CouplingSoFar, read_coupling
 from mech_regulator.model import MachineModel
 from mech_regulator.solvers import simulate
-from mech_regulator.solvers.cam_contact import has_cam_contacts
 from mech_regulator.solvers.trajectory import Progress, Trajectory, sample_times
 
 RETAINED_STEPS = 50_000  # solver steps a streamed run's trajectory keeps at its end (the steady state's tail):
 # about 70 s of engine_direct; a run streams once it has taken these and a chunk more (docs/speed.md, memory)
 
 
-def streams(model: MachineModel) -> bool:
-    """Whether a run of the model can be streamed (RunDigest): not a machine with cams (its contact check reads each
-    load piece whole)."""
-    return not has_cam_contacts(model.scene)
-
-
 def simulate_streamed(
     model: MachineModel, progress: Progress | None = None, samples: bool = False
 ) -> tuple[Trajectory, RunDigest | None]:
-    """The monolithic run of the model (solvers.simulate), streamed when it can be (streams): its trajectory, and the
-    digest of the dense output it dropped (None when it dropped none: the trajectory is then the whole run, as
-    summarise reads it). samples: whether the digest keeps the output samples (a CSV, a plot, a recording or a bag
-    reads them). Refusals raise SceneError, as simulate's."""
-    digest = RunDigest(model, samples=samples) if streams(model) else None
-    trajectory = simulate(model, progress, stream=digest.take if digest is not None else None)
-    return trajectory, digest if digest is not None and trajectory.steps_dropped else None
+    """The monolithic run of the model (solvers.simulate), streamed: its trajectory, and the digest of the dense output
+    it dropped (None when it dropped none: the trajectory is then the whole run, as summarise reads it). samples:
+    whether the digest keeps the output samples (a CSV, a plot, a recording or a bag reads them). Refusals raise
+    SceneError, as simulate's."""
+    digest = RunDigest(model, samples=samples)
+    trajectory = simulate(model, progress, stream=digest.take)
+    return trajectory, digest if trajectory.steps_dropped else None
 
 
 class RunDigest:

@@ -23,7 +23,7 @@ from scipy import integrate, optimize
 from mech_regulator.governors import Guard
 from mech_regulator.model import MachineModel
 from mech_regulator.scene.limits import MAX_SPEED, MAX_STEPS, speed_beyond_limit
-from mech_regulator.solvers.cam_contact import check_contact
+from mech_regulator.solvers.cam_contact import ContactLost, ContactWatch
 from mech_regulator.solvers.rk4 import RK4
 from mech_regulator.solvers.trajectory import Progress, Stream, Trajectory
 
@@ -63,15 +63,19 @@ def integrate_time_domain(
     solver = model.scene.solver
     scenario = model.scene.scenario
     y = model.initial_state()
-    trajectory = Trajectory(method=solver.method, t_start=0.0, y_start=y.copy(), stream=stream)
+    watch = ContactWatch(model, stream)  # a cam follower that jumps ends the run there, found as the steps come
+    trajectory = Trajectory(method=solver.method, t_start=0.0, y_start=y.copy(), stream=watch.stream)
     mode = model.initial_mode(y)
     if mode is not None:
         trajectory.modes.append((0.0, mode))
     edges = [0.0] + [t for t in model.breakpoints() if 0.0 < t < scenario.duration] + [scenario.duration]
     try:
         for t_start, t_end in zip(edges[:-1], edges[1:]):
-            y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
-            y = check_contact(model, trajectory, t_start, y)  # a cam follower that jumps ends the run there
+            try:
+                y, mode = segment(model, model.piece_at(t_start), t_start, t_end, y, mode, trajectory, progress)
+                watch.check(trajectory)  # the piece's steps not checked yet
+            except ContactLost:  # the trajectory ends where the contact was lost (solvers/cam_contact.py)
+                break
             if trajectory.status != "complete":
                 break
         trajectory.stats.restarts += len(edges) - 2

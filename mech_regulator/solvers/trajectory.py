@@ -89,8 +89,8 @@ class Trajectory:
             self.stream(self)
 
     def cut(self, t: float) -> None:
-        """End the trajectory at t [s] (t_start < t <= t_end): the pieces after it dropped, the last one ending at t
-        (what a run found no longer valid beyond t is not reported)."""
+        """End the trajectory at t [s] (t_start < t <= t_end): the pieces after it dropped, the last one ending at t,
+        and the events and modes recorded after t (what a run found no longer valid beyond t is not reported)."""
         keep = max(1, int(np.searchsorted(self.piece_edges, t, side="left")))
         self.held_steps -= sum(ends.size for ends in self.step_ends[keep - 1 :])
         del self.interpolants[keep:], self.step_ends[keep:], self.piece_edges[keep + 1 :]
@@ -98,6 +98,8 @@ class Trajectory:
         ends = self.step_ends[-1]
         self.step_ends[-1] = np.append(ends[ends < t], t)
         self.held_steps += self.step_ends[-1].size
+        self.events[:] = [event for event in self.events if event[0] <= t]
+        self.modes[:] = [mode for mode in self.modes if mode[0] <= t]
         self._solution = None
 
     def drop_front(self, count: int) -> None:
