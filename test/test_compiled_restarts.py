@@ -16,7 +16,7 @@ from test_compiled_path import shortened
 from mech_regulator.analysis.energy import step_edges
 from mech_regulator.solvers.compiled import run
 from mech_regulator.solvers.compiled.codegen import compile_scene
-from mech_regulator.solvers.cosim import GovernorStepper, follow_pieces
+from mech_regulator.solvers.cosim import GovernorStepper, follow_samples
 from mech_regulator.solvers.time_domain import integrate_time_domain
 
 # started fast (300 rad/s against about 224 on the orbit): the sleeve flies to its high stop and leaves it again, so
@@ -56,7 +56,7 @@ def test_speed_pieces_followed_inside_the_stepper_are_the_outer_loop_s():
     model = model_of(scene(ENGINE, solver__path="fast"))
     engine = integrate_time_domain(model, None, run.compiled_segment(model))
     inside, outside = GovernorStepper(model), GovernorStepper(model)
-    outside._follow_pieces = functools.partial(follow_pieces, outer_loop(outside.regulator))
+    outside._follow_samples = functools.partial(follow_samples, outer_loop(outside.regulator))
     pieces_inside = pieces_outside = 0
     for start in np.arange(0.0, 0.5, 0.02):
         times = list(np.linspace(start, start + 0.02, 17))

@@ -75,6 +75,7 @@ from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.compiled import runs_compiled
+from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up, state_text
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -484,7 +485,7 @@ class GovernorStepper:
             raise ValueError(f"scene '{model.scene.name}' has no governor")
         self.regulator = governor_subsystem(model)
         self._segment = segment_for(self.regulator)
-        self._follow_pieces = pieces_for(self.regulator)
+        self._follow_samples = pieces_for(self.regulator)
         self.governor = model.governor
         self.state = model.initial_state()[: model.coupling_index]
         self.mode = self.regulator.initial_mode(self.state)
@@ -529,9 +530,7 @@ class GovernorStepper:
                 self.regulator, None, self.time, t_end, self.state, self.mode, stretch, None
             )
         else:
-            self.state, self.mode, _ = self._follow_pieces(
-                self.regulator, speed_pieces(samples), self.state, self.mode, stretch
-            )
+            self.state, self.mode, _ = self._follow_samples(self.regulator, [samples], self.state, self.mode, stretch)
         self.time = stretch.t_end
         self._note(stretch, len(stretch.events))
         return stretch
@@ -552,10 +551,9 @@ class GovernorStepper:
         stepper starts each piece as a new call would, solvers/compiled/run.py). None when the pass for good did not
         reach the end of its samples or no step of the tentative pass was taken in the call that went on into it:
         then nothing is changed."""
-        for_good = speed_pieces(corrected)
         stretch = Trajectory(method=self.regulator.scene.solver.method, t_start=self.time)
-        _, _, at_split = self._follow_pieces(
-            self.regulator, for_good + speed_pieces(predicted), self.state, self.mode, stretch, len(for_good)
+        _, _, at_split = self._follow_samples(
+            self.regulator, [corrected, predicted], self.state, self.mode, stretch, (len(corrected[0]) - 1) // 2
         )
         if at_split is None:
             return None
@@ -688,13 +686,6 @@ ERROR_ORDER = 3  # the predictor's miss grows about as the step to this power (e
 # 20 ms, 4-6e-5 at 40 ms; docs/speed.md, "The adaptive step tried again")
 
 
-def quadratic_through(duration: float, start: float, middle: float, end: float) -> tuple[float, float]:
-    """(a, b) of the quadratic q(s) = start + a s + b s^2 with q(duration / 2) = middle and q(duration) = end
-    (duration [s] > 0)."""
-    b = 2.0 * (end - 2.0 * middle + start) / (duration * duration)
-    return (end - start) / duration - b * duration, b
-
-
 def speed_samples(
     stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE
 ) -> Samples:
@@ -750,11 +741,10 @@ def speed_waveform(
     t_start: float, t_end: float, omega_start: float, omega_middle: float, omega_end: float
 ) -> LoadPiece:
     """The governor subsystem's input over [t_start, t_end] [s] that makes its omega state follow the quadratic
-    q(s) = omega_start + a s + b s^2, s = t - t_start, through the machine's speeds [rad/s] at the start, the middle
-    and the end: on its unit free inertia omega' = -L(t), so L(t) = -(a + 2 b s), an external load with
-    offset a' and slope [N m/s] as LoadPiece's value(t) = offset + slope t."""
+    through the machine's speeds [rad/s] at the start, the middle and the end (quadratic_through): the external load
+    of quadratics.speed_load_line as a LoadPiece."""
     a, b = quadratic_through(t_end - t_start, omega_start, omega_middle, omega_end)
-    return LoadPiece(t_start, t_end, -a + 2.0 * b * t_start, -2.0 * b)
+    return LoadPiece(t_start, t_end, *speed_load_line(a, b, t_start))
 
 
 def speed_pieces(samples: Samples) -> list:
@@ -871,14 +861,24 @@ def segment_for(subsystem: MachineModel):
 
 
 def pieces_for(subsystem: MachineModel):
-    """What steps a subsystem over a sequence of load pieces, each started with the crank's speed set (follow_pieces'
-    arguments and result): follow_pieces with the reference path's _segment, or on solver.path: fast its compiled
-    twin, which goes on from piece to piece inside its compiled calls (solvers/compiled/run.compiled_pieces)."""
+    """What steps a subsystem along the machine's speed samples, piece by piece, each piece started with the crank's
+    speed set (follow_samples' arguments and result): follow_samples with the reference path's _segment, or on
+    solver.path: fast its compiled twin, which works out the pieces in compiled code and goes on from piece to piece
+    inside its compiled calls (solvers/compiled/run.compiled_pieces)."""
     if not runs_compiled(subsystem.scene.solver):
-        return functools.partial(follow_pieces, _segment)
+        return functools.partial(follow_samples, _segment)
     from mech_regulator.solvers.compiled.run import compiled_pieces  # numba is imported only when needed
 
     return compiled_pieces(subsystem)
+
+
+def follow_samples(
+    segment, subsystem: MachineModel, samples: list, y: np.ndarray, mode, trajectory: Trajectory, split: int = -1
+):
+    """follow_pieces along the pieces of the speed samples (a list of (times [s], omega [rad/s]), each following on
+    where the one before ends; speed_pieces of each in turn); split: a piece's index in that sequence."""
+    pieces = [piece for part in samples for piece in speed_pieces(part)]
+    return follow_pieces(segment, subsystem, pieces, y, mode, trajectory, split)
 
 
 def follow_pieces(

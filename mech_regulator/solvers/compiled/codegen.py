@@ -161,12 +161,24 @@ class CompiledScene:
         their breakpoint guards' bounds (those of a table that turns with phi in the stepper's phi); with joint
         friction's corner angles and a window, the signs of the joints' relative rates at its middle (the guides' N
         signs: hold_normal)."""
+        return self.parameters_with(self.piece_values(piece, omega), mode, window, held, y)
+
+    def parameters_with(
+        self,
+        values,
+        mode,
+        window: tuple[float, float] | None,
+        held: list[int] | None = None,
+        y: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """parameters_for with the values of p[PIECE_SLOTS] given (piece_values', or a row of the stepper's pieces:
+        solvers/compiled/run.py)."""
         key = (mode, window)
         in_mode = self._mode_parameters.get(key)
         if in_mode is None:
             in_mode = self._mode_parameters[key] = self._parameters_in(mode, window)
         p = in_mode.copy()
-        p[PIECE_INDEX] = self.piece_values(piece, omega)
+        p[PIECE_INDEX] = values
         if held:
             anchors = _anchors(self.model.state_tables, held)
             for slot, anchor, (low, high) in zip(self.table_slots, anchors, self._held_bounds(held, y)):

@@ -21,7 +21,6 @@ message) and once the run has taken MAX_STEPS steps (fail_too_many_steps).
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 from typing import NamedTuple
 
@@ -30,8 +29,8 @@ import numpy as np
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers import time_domain
-from mech_regulator.solvers.compiled import fast_path_refusal, integrators, results, steppers
-from mech_regulator.solvers.compiled.codegen import RECENT_MODELS, CompiledScene, compile_scene
+from mech_regulator.solvers.compiled import fast_path_refusal, integrators, pieces, results, steppers
+from mech_regulator.solvers.compiled.codegen import RECENT_MODELS, CompiledScene, compile_scene, sign_of
 from mech_regulator.solvers.compiled.source import (
     CLAMP_HI,
     CLAMP_LO,
@@ -81,8 +80,9 @@ def compiled_segment(model: MachineModel):
 
 
 def compiled_pieces(model: MachineModel):
-    """cosim.follow_pieces' compiled twin for this model (same arguments and result): a sequence of load pieces, each
-    started with the crank's speed set, stepped in as few compiled calls as the pieces allow (_compiled_pieces)."""
+    """cosim.follow_samples' compiled twin for this model (same arguments and result): the governor's pieces along
+    sequences of the machine's speed samples, each started with the crank's speed set, stepped in as few compiled calls
+    as the pieces allow (_compiled_pieces)."""
     return functools.partial(_follow_compiled, *_compiled(model))
 
 
@@ -234,42 +234,57 @@ def _compiled_segment(
     """time_domain._segment on the fast path: step [t_start, t_end] with the compiled stepper, restarting at every
     event (mode transition applied), switch angle and wrap of the crank angle; returns the state and mode at the
     end."""
-    return _compiled_pieces(compiled, layout, model, [(piece, t_start, t_end, y[1])], 0, y, mode, trajectory, progress)[
-        :2
-    ]
+    rows = np.array([(t_end, y[1], *compiled.piece_values(piece, y[1]))])
+    return _compiled_pieces(compiled, layout, model, t_start, rows, 0, y, mode, trajectory, progress)[:2]
 
 
 def _follow_compiled(
     compiled: CompiledScene,
     layout: _Layout,
     model: MachineModel,
-    pieces: list,
+    samples: list,
     y: np.ndarray,
     mode,
     trajectory: Trajectory,
     split: int = -1,
 ):
-    """cosim.follow_pieces on the fast path: each piece (LoadPiece, t_start [s], t_end [s], the crank's speed at its
-    start [rad/s]) stepped from the state so far with y[1] set to that speed, until one fails; returns the state and
-    mode at the end and, given split, the start of pieces[split] (as follow_pieces)."""
-    index, at_split = 0, None
-    while index < len(pieces) and trajectory.status == "complete":
+    """cosim.follow_samples on the fast path: the pieces of the speed samples (a list of (times [s], omega [rad/s]),
+    each following on where the one before ends; cosim.speed_pieces of each, as the stepper's rows: speed_rows) each
+    stepped from the state so far with y[1] set to its start speed, until one fails; returns the state and mode at the
+    end and, given split (a piece's index), the start of that piece (as cosim.follow_pieces)."""
+    rows = speed_rows(samples)
+    index, at_split, t = 0, None, samples[0][0][0] if rows.size else 0.0
+    while index < len(rows) and trajectory.status == "complete":
         y = np.array(y, dtype=float)
-        y[1] = pieces[index][3]
+        y[1] = rows[index, 1]
         if index == split:
             at_split = (y.copy(), mode, len(trajectory.events))
         y, mode, index, inside = _compiled_pieces(
-            compiled, layout, model, pieces, index, y, mode, trajectory, None, split
+            compiled, layout, model, t, rows, index, y, mode, trajectory, None, split
         )
+        t = float(rows[index - 1, 0])
         at_split = at_split or inside
     return y, mode, at_split
+
+
+def speed_rows(samples: list) -> np.ndarray:
+    """The pieces of the speed samples (a list of (times [s], omega [rad/s]), each an odd number, the quadratic through
+    three on each piece) as the stepper's rows (pieces.speed_rows), one array."""
+    counts = [max(0, (len(times) - 1) // 2) for times, _ in samples]
+    rows = np.empty((sum(counts), 2 + len(PIECE_SLOTS)))
+    first = 0
+    for (times, speeds), count in zip(samples, counts):
+        pieces.speed_rows(np.array(times, dtype=float), np.array(speeds, dtype=float), rows[first : first + count])
+        first += count
+    return rows
 
 
 def _compiled_pieces(
     compiled: CompiledScene,
     layout: _Layout,
     model: MachineModel,
-    pieces: list,
+    t: float,
+    rows: np.ndarray,
     index: int,
     y: np.ndarray,
     mode,
@@ -277,25 +292,18 @@ def _compiled_pieces(
     progress: Progress | None,
     split: int = -1,
 ):
-    """Step pieces[index] (as _follow_compiled's) from y with the compiled stepper, restarting at every event (mode
+    """Step the piece rows[index] from t [s] and y with the compiled stepper, restarting at every event (mode
     transition applied), switch angle and wrap of the crank angle, and, where the layout allows it (pieces_inside),
-    go on into the pieces after it inside the compiled calls (as _follow_compiled would start them); returns the
-    state and mode at the end, the index of the next piece to start and, when a call went on into pieces[split]
-    and took a step in it, that piece's start as follow_pieces gives it (its first step's start state, the call's
-    mode, the events so far), else None."""
+    go on into the pieces after it inside the compiled calls (as _follow_compiled would start them); rows: one per
+    piece, each starting where the one before ends, as the stepper takes them ([its end [s], the crank's speed at its
+    start [rad/s], p[PIECE_SLOTS]]; of these the last, the sign of the crank's speed, is worked out anew from the state
+    at each start). Returns the state and mode at the end, the index of the next piece to start and, when a call went on into
+    rows[split] and took a step in it, that piece's start as follow_pieces gives it (its first step's start state, the
+    call's mode, the events so far), else None."""
     grid, period, wraps = layout[:3]
     tables, stats = layout.tables, trajectory.stats
-    piece, t, t_end, _ = pieces[index]
-    following = (
-        np.fromiter(  # the rows' numbers in a row: np.array would first look for the nesting
-            itertools.chain.from_iterable(
-                (end, omega, *compiled.piece_values(later, omega)) for later, _, end, omega in pieces[index + 1 :]
-            ),
-            float,
-        ).reshape(-1, 2 + len(PIECE_SLOTS))
-        if layout.pieces_inside
-        else layout.no_following
-    )
+    t_end = float(rows[index, 0])
+    following = rows[index + 1 :] if layout.pieces_inside else layout.no_following
     first_step = 0.0
     at_split = None
     held: list[int] = []  # per state table its piece, counted from the carried turns (_held_pieces; none yet)
@@ -322,7 +330,9 @@ def _compiled_pieces(
         y_wrapped[0] = phase
         if tables:
             held = _held_pieces(tables, y_wrapped, held)
-        p = compiled.parameters_for(piece, mode, window, start[1], held, y_wrapped)
+        values = rows[index, 2:].copy()
+        values[-1] = sign_of(start[1])  # the crank's direction at this start (CompiledScene.piece_values)
+        p = compiled.parameters_with(values, mode, window, held, y_wrapped)
         if compiled.normal_slot is not None:
             normal_sides = compiled.hold_normal(p, t, y_wrapped, normal_sides, crossed_normal)
             crossed_normal = None
@@ -345,8 +355,9 @@ def _compiled_pieces(
         )
         t_stop = run.t_end
         if index < split <= index + run.pieces_done:  # went on into pieces[split]: its start is a step's start
-            first = int(run.times[: run.n_steps].searchsorted(pieces[split][1]))
-            if first < run.n_steps and run.times[first] == pieces[split][1]:
+            split_start = rows[split - 1, 0]
+            first = int(run.times[: run.n_steps].searchsorted(split_start))
+            if first < run.n_steps and run.times[first] == split_start:
                 at_split = (run.y_old[first].copy(), mode, len(trajectory.events))
         dense = run.dense  # None when no step was taken
         if dense is not None:
@@ -363,7 +374,7 @@ def _compiled_pieces(
             offset = turns * period
         if run.pieces_done:  # and into later pieces: the last is the one stepped now
             index += int(run.pieces_done)
-            piece, _, t_end, _ = pieces[index]
+            t_end = float(rows[index, 0])
             following = following[run.pieces_done :]
         if run.last_step > 0.0:  # within the reach of the journals' branch points the last step saw (integrators)
             first_step = min(run.last_step, t_end - t_stop, run.step_limit)
