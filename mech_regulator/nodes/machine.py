@@ -64,7 +64,6 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, String
 from std_srvs.srv import Trigger
 
-from mech_regulator.model.joints import output_joints
 from mech_regulator.nodes import controller
 from mech_regulator.nodes.common import (
     BATCH_QOS,
@@ -568,9 +567,8 @@ class MachineNode(MachineExchange, Node):
         wall = time.monotonic()
         if self.time_mode == "realtime":  # the wall clock's simulation time less the state's, at its publication
             self.max_lag = max(self.max_lag, (wall - self.wall_start) * self.real_time_factor - seconds(self.now_ns))
-        values = self.stepper.outputs(self.throttle, self.load)
-        joints = [("crank", float(self.stepper.state[0]), float(self.stepper.state[1]))]
-        joints += output_joints(self.model, values)
+        net, others = self.stepper.message_outputs(self.throttle, self.load)
+        joints = [("crank", float(self.stepper.state[0]), float(self.stepper.state[1])), *others]
         if self.omega_middle is not None:  # waveform coupling: the speed at the middle of the step that ended here
             joints.append(("crank_midstep", math.nan, self.omega_middle))
         names, positions, velocities = zip(*joints)
@@ -579,7 +577,7 @@ class MachineNode(MachineExchange, Node):
             names,
             positions,
             velocities,
-            [values["net"]] + [math.nan] * (len(joints) - 1),  # the others' not computed
+            [net] + [math.nan] * (len(joints) - 1),  # the others' not computed
             (("crank_corrected", "velocity", self.corrected), ("crank_predicted", "velocity", self.predicted)),
         )  # corrected coupling: the speed over the step that ended here and as predicted over the next
         self.joint_publisher.publish(message)
