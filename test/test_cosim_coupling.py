@@ -17,6 +17,7 @@ from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE
 
 from mech_regulator.analysis import summarise_cosimulation
 from mech_regulator.model import LoadPiece, build_model
+from mech_regulator.model.joints import output_joints
 from mech_regulator.scene import SceneError, load_scene, validate_scene
 from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import (
@@ -481,3 +482,35 @@ def test_a_run_played_past_its_scene_s_end_keeps_the_scene_s_load_responses(smoo
     as_long = summarise_cosimulation(longer_model, longer, 0.02, "corrected")["governor"]["load_responses"]
     assert as_long[0]["speed_after"] == pytest.approx(longer.states[1, -1], abs=1e-12)  # read at 3 s, not at 1 s
     assert as_long[0]["speed_after"] != own[0]["speed_after"]
+
+
+@pytest.mark.parametrize(
+    "scene",
+    [
+        "engine_direct",  # a slider
+        "engine_inline4",  # several cylinders: piston 1's slider
+        "walking_beam",  # a shuttle
+        "two_mass",  # a slider, a coupling and its driven part
+        "clutch_start",  # a driven part behind a clutch: no phi_driven
+        "compressor_friction",  # joint friction: epsilon solved from the implicit equation
+    ],
+)
+def test_the_message_s_outputs_are_the_columns_at_one_state(scene):
+    """MachineStepper.message_outputs (joint_states' net moment and joints, for one state) gives what the output
+    columns (MachineStepper.outputs_over, MachineModel.columns) give at that state: the joints to the bit, the net
+    moment to rounding."""
+    model = build_model(load_scene(scene, ["solver.path=reference"]))
+    stepper = MachineStepper(model)
+    load = model.external_load(0.0)
+    stepper.advance(min(model.scene.solver.exchange_step, model.scene.scenario.duration), 0.7, load)
+    net, joints = stepper.message_outputs(0.7, load)
+    columns = stepper.outputs_over(
+        np.array([stepper.time]), stepper.state[:, None], np.array([stepper.applied_throttle(0.7)]), np.array([load])
+    )
+    values = {name: float(column[0]) for name, column in columns.items()}
+    assert net == pytest.approx(values["net"], rel=1e-12, abs=1e-12)
+    expected = output_joints(stepper.plant, values)
+    assert [name for name, _, _ in joints] == [name for name, _, _ in expected]
+    assert np.array_equal(
+        np.array(joints, dtype=object)[:, 1:].astype(float), [row[1:] for row in expected], equal_nan=True
+    )

@@ -3,7 +3,6 @@ waits for goes out before what nobody waits for: the scenario's answer before th
 (rclpy's logger costs about 0.4 ms a line), the machine's joint_states before /clock, which three nodes take in
 Python (docs/speed.md, "Where an exchange's 1.4 ms goes")."""
 
-from collections import defaultdict
 from types import SimpleNamespace
 
 import numpy as np
@@ -54,7 +53,7 @@ def test_the_machine_publishes_joint_states_before_clock():
         clock_period=0.02,
         clock_publisher=SimpleNamespace(publish=recorder_of(calls, "/clock")),
         joint_publisher=SimpleNamespace(publish=recorder_of(calls, "joint_states")),
-        stepper=SimpleNamespace(outputs=lambda throttle, load: defaultdict(float), state=np.array([0.0, 30.0])),
+        stepper=SimpleNamespace(message_outputs=lambda throttle, load: (0.0, []), state=np.array([0.0, 30.0])),
         throttle=1.0,
         load=0.0,
         omega_middle=None,

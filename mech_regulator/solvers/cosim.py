@@ -70,6 +70,7 @@ import numpy as np
 
 from mech_regulator.governors import Mode
 from mech_regulator.model import LoadPiece, MachineModel, crank_moments
+from mech_regulator.model.joints import joint_values, output_joints
 from mech_regulator.scene import SceneError
 from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
@@ -441,16 +442,19 @@ class MachineStepper:
             waveform[1][-1] - per_speed * self._predicted[1][-1] if waveform is not None else self._answers[-1][1]
         )
 
-    def outputs(self, throttle: float, external_load: float) -> dict[str, float]:
-        """The machine's outputs at its current state with these inputs held (the throttle [-] as applied_throttle
-        gives it, the external load [N m]): outputs_at."""
-        return self.outputs_at(self.time, self.state, self.applied_throttle(throttle), external_load)
-
-    def outputs_at(self, time: float, state: np.ndarray, throttle: float, external_load: float) -> dict[str, float]:
-        """The machine's outputs at `time` [s] in `state` with the throttle [-] as applied (no trip checked here) and
-        the external load [N m] held (outputs_over at one time)."""
-        columns = self.outputs_over(np.array([time]), state[:, None], np.array([throttle]), np.array([external_load]))
-        return {name: float(values[0]) for name, values in columns.items()}
+    def message_outputs(self, throttle: float, external_load: float) -> tuple[float, list[tuple[str, float, float]]]:
+        """What the machine node's joint_states carries at the current state with these inputs held (the throttle [-]
+        as applied_throttle gives it, the external load [N m]), worked out for this one state only: the net moment on
+        the crank M_d + M_c = J epsilon + 1/2 J' omega^2 [N m] (docs/theory.md §2.3, crank_moments' net), epsilon from
+        the right-hand side the stepper integrates in its mode, and the joints besides the crank (model.joints:
+        output_joints of joint_values). MachineModel.columns for the one row gave the same for 3-4 times the CPU
+        (docs/speed.md, "The nodes' critical path trimmed (seventh sitting)")."""
+        piece = LoadPiece(self.time, self.time, external_load, 0.0, self.applied_throttle(throttle))  # held
+        epsilon = self.plant.rhs(piece, mode=self.mode)(self.time, self.state)[1]
+        inertia, inertia_slope = self.plant.inertia(self.state[0])
+        omega = float(self.state[1])
+        net = float(inertia * epsilon + 0.5 * inertia_slope * omega**2)
+        return net, output_joints(self.plant, joint_values(self.plant, self.state))
 
     def outputs_over(
         self, times: np.ndarray, states: np.ndarray, throttles: np.ndarray, external_loads: np.ndarray
