@@ -276,7 +276,7 @@ def test_a_wait_for_another_process_s_compile_is_said_and_timed(monkeypatch, tmp
     held = threading.Event()
     with open(locks.method_lock_path("RK4"), "a") as other:
         fcntl.flock(other, fcntl.LOCK_EX)
-        release = threading.Timer(0.3, lambda: (fcntl.flock(other, fcntl.LOCK_UN), held.set()))
+        release = threading.Timer(0.3, lambda: (held.set(), fcntl.flock(other, fcntl.LOCK_UN)))  # set, then free
         release.start()
         with locks.method_lock("RK4"):
             assert held.is_set()
