@@ -211,10 +211,12 @@ class Governor(GovernorKind):
         moving_servo = servo_mode == "free"
         rho, time_constant = self.feedback_gain, self.feedback_time_constant
 
+        (_, _, arm_acceleration), parameters = sensor.bound_kernels  # sensor.arm_acceleration without its calls
+
         def sleeve_part(y: np.ndarray) -> list[float]:
             if friction is None:
                 return [0.0, 0.0]
-            return [y[ARM_RATE], sensor.arm_acceleration(y[ARM], y[ARM_RATE], y[1], friction)]
+            return [y[ARM_RATE], arm_acceleration(y[ARM], y[ARM_RATE], y[1], friction, *parameters)]
 
         if self.kind == "direct":
             return sleeve_part

@@ -11,6 +11,7 @@ fast path compiles their very source (solvers/compiled/codegen.py), so each form
 
 from __future__ import annotations
 
+import functools
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -69,18 +70,27 @@ class CentrifugalSensor(ABC):
         """The drawing's parts at arm angle a [rad] and spindle angle psi [rad], metres, y up (governors/drawing.py:
         spindle, stops, upper_arms, lower_links, sleeve as polylines; balls, spindle_mark as points; sensor_parts)."""
 
+    @functools.cached_property
+    def bound_kernels(self) -> tuple[tuple[Callable[..., float], Callable[..., float], Callable[..., float]], tuple]:
+        """(kernels(), kernel_parameters()) read once: the reference path's right-hand side calls the formulas on
+        every evaluation, the same functions on the same numbers (a sensor is frozen)."""
+        return self.kernels(), self.kernel_parameters()
+
     def sleeve(self, arm_angle: float) -> float:
         """Sleeve rise z(a) [m]."""
-        return self.kernels()[0](arm_angle, *self.kernel_parameters())
+        kernels, parameters = self.bound_kernels
+        return kernels[0](arm_angle, *parameters)
 
     def lift(self, arm_angle: float, omega: float) -> float:
         """Net upward force on the sleeve at rest at crank speed omega [rad/s] [N]."""
-        return self.kernels()[1](arm_angle, omega, *self.kernel_parameters())
+        kernels, parameters = self.bound_kernels
+        return kernels[1](arm_angle, omega, *parameters)
 
     def arm_acceleration(self, arm_angle: float, arm_rate: float, omega: float, friction: float) -> float:
         """Arm angular acceleration a'' [rad/s^2] from Lagrange's equation, friction the signed Coulomb force
         opposing the sleeve's motion [N]."""
-        return self.kernels()[2](arm_angle, arm_rate, omega, friction, *self.kernel_parameters())
+        kernels, parameters = self.bound_kernels
+        return kernels[2](arm_angle, arm_rate, omega, friction, *parameters)
 
     def sleeve_rate(self, arm_angle: float, arm_rate: float) -> float:
         """Sleeve velocity z' = dz/da a' [m/s]."""

@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy import integrate, optimize
+from scipy.integrate._ivp.rk import Dop853DenseOutput
 
 from mech_regulator.governors import Guard
 from mech_regulator.model import MachineModel
@@ -109,7 +110,7 @@ def _segment(
     period = model.dynamic_period()
     # each angle of the grid once per dynamic period: a friction corner on a table's knot (their own periods differ)
     # is one switch, as on the fast path, not two crossings at the same point
-    switches = [(angle, period) for angle in grid]
+    switches = np.column_stack((grid, np.full(grid.size, period)))
     wraps = model.reduced is not None or "phi" in model.depends_on()  # else phi is only an output
     names = model.state_names()
     t, first_step = t_start, None
@@ -200,7 +201,7 @@ def _segment(
                 solver.max_step = min(
                     settings.max_step or np.inf, max(_reach(branches, solver.t), _smallest_limit(solver.t))
                 )
-            if switches or guards:
+            if len(switches) or guards:
                 crossing = _first_event(
                     dense, solver.t_old, solver.t, counts, switches, guards, interpolant_noise, wrapped=wrapped
                 )
@@ -682,6 +683,20 @@ class _Shifted:
             self.constraint(y)
         return y
 
+    def phase(self, t: float) -> float:
+        """The crank angle alone at one time t [s] [rad], self(t)[0] to the bit (no constraint touches it): of a
+        DOP853 step, its interpolant's sum for phi alone in the order scipy's Dop853DenseOutput sums it, without
+        the arrays of the whole state a scalar call builds (Brent's method calls it about 8 times a switch)."""
+        dense = self.dense
+        if type(dense) is not Dop853DenseOutput:
+            return self(t)[0]
+        x = (t - dense.t_old) / dense.h
+        value = 0.0
+        for i, f in enumerate(reversed(dense.F)):
+            value += f[0]
+            value *= x if i % 2 == 0 else 1 - x
+        return value + dense.y_old[0] + self.offset
+
 
 def switch_window(grid: np.ndarray, period: float, phi: float, forward: bool) -> tuple[float, float]:
     """The interval (lo, hi) [rad] between consecutive switch angles of the grid (one period, sorted array) that the
@@ -700,9 +715,16 @@ def switch_window(grid: np.ndarray, period: float, phi: float, forward: bool) ->
     return float(lo + shift), float(hi + shift)
 
 
-def _switch_counts(phi: float, switches: list[tuple[float, float]]) -> list[int]:
-    """For each switch, how many of its angles (angle + k period) lie at or below phi."""
-    return [math.floor((phi - angle) / period) for angle, period in switches]
+def _switch_counts(phi: float, switches) -> list[int]:
+    """For each switch (a row (angle, period) [rad] of switches, or a pair), how many of its angles (angle + k period)
+    lie at or below phi [rad]."""
+    return _switch_counts_at(np.array([phi]), switches)[0]
+
+
+def _switch_counts_at(phis: np.ndarray, switches) -> list[list[int]]:
+    """_switch_counts at each of the angles phis [rad], at once: floor((phi - angle) / period), one list per phi."""
+    table = np.asarray(switches, dtype=float).reshape(-1, 2)
+    return np.floor((phis[:, None] - table[:, 0]) / table[:, 1]).astype(np.int64).tolist()
 
 
 def _first_event(
@@ -710,7 +732,7 @@ def _first_event(
     t_old: float,
     t_new: float,
     counts_old: list[int],
-    switches: list[tuple[float, float]],
+    switches,
     guards: list,
     interpolant_noise: np.ndarray | None = None,
     wrapped=None,
@@ -718,7 +740,8 @@ def _first_event(
     """The earliest event in (t_old, t_new]: phi reaching a switch angle or a governor guard turning negative.
 
     Returns (time, state, switch counts after it, the guard or None for a switch, what happened, the crank's phase
-    there), or None if the step has no event. wrapped: the same dense output in the phase, phi less whole periods
+    there), or None if the step has no event. switches: (angle, period) [rad] per switch (rows of an array, or
+    pairs). wrapped: the same dense output in the phase, phi less whole periods
     (dense by default); the guards read it and the switches are crossings of the phase, their counts the phase's, so
     that a switch angle is compared with a number that keeps its precision however far the crank has turned
     (turns_and_phase). Switch angles: the step is probed at interior points so a crossing and its
@@ -748,20 +771,21 @@ def _first_event(
             t_cross = _guard_crossing(lambda tau: guard.level(tau, wrapped(tau)) - level, t_old, t_new, samples - level)
             if t_cross is not None and (first_guard is None or t_cross < first_guard[0]):
                 first_guard = (t_cross, guard)
-    if switches:
+    if len(switches):
         probe_times = np.linspace(t_old, t_new, PROBES_PER_STEP + 2)
         phis = wrapped(probe_times)[0]
+        probe_counts = _switch_counts_at(phis[1:], switches)  # at every probe after the start, at once
         previous = counts_old
         for i in range(1, probe_times.size):
             if first_guard is not None and probe_times[i - 1] >= first_guard[0]:
                 break
-            current = _switch_counts(phis[i], switches)
+            current = probe_counts[i - 1]
             forward = phis[i] > phis[i - 1]
             earliest = None
-            for j in [j for j in range(len(switches)) if current[j] != previous[j]]:
+            for j in [j for j in range(len(switches)) if current[j] != previous[j]] if current != previous else []:
                 angle, period = switches[j]
                 boundary = angle + period * (previous[j] + 1 if forward else previous[j])
-                t_cross = _root(lambda tau: wrapped(tau)[0] - boundary, probe_times[i - 1], probe_times[i])
+                t_cross = _root(lambda tau: _phase_at(wrapped, tau) - boundary, probe_times[i - 1], probe_times[i])
                 if earliest is None or t_cross < earliest[0]:
                     earliest = (t_cross, j, boundary)
             if earliest is not None and (first_guard is None or earliest[0] < first_guard[0]):
@@ -769,14 +793,20 @@ def _first_event(
                 y = dense(t_cross)
                 after = list(previous)
                 after[j] += 1 if forward else -1
-                y[0] += boundary - wrapped(t_cross)[0]  # the whole periods (dense's) on the switch angle
+                y[0] += boundary - _phase_at(wrapped, t_cross)  # the whole periods (dense's) on the switch angle
                 return t_cross, y, after, None, "switch", boundary
             previous = current
     if first_guard is None:
         return None
     t_cross, guard = first_guard
     y, phase = dense(t_cross), wrapped(t_cross)[0]
-    return t_cross, y, _switch_counts(phase, switches) if switches else counts_old, guard, guard.name, phase
+    return t_cross, y, _switch_counts(phase, switches) if len(switches) else counts_old, guard, guard.name, phase
+
+
+def _phase_at(wrapped, t: float) -> float:
+    """The crank angle [rad] of a dense output (a function of time [s] giving the state) at one time t: its phase
+    (_Shifted.phase) or, for any other, the first entry of the state it gives."""
+    return wrapped.phase(t) if isinstance(wrapped, _Shifted) else wrapped(t)[0]
 
 
 def _release_level(guard, t: float, y: np.ndarray, noise: np.ndarray | None) -> float:
