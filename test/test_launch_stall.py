@@ -62,3 +62,21 @@ def test_a_machine_that_stops_exchanging_is_reported_and_again_when_it_goes_on(t
         "stuck); Ctrl-C ends the run with its summary"
     )
     assert stood < text.index("the machine goes on at t = 2 s"), text
+
+
+def test_the_end_waits_for_a_recorder_writing_a_long_run_s_outputs_and_says_so(monkeypatch, capsys):
+    """After the machine has finished, the nodes get END_TIMEOUT and CLOSE_TIME_PER_EXCHANGE for each exchange
+    (end_timeout): a node still writing past END_TIMEOUT is waited for, said once, and not killed; one past the
+    whole timeout is killed. Before, the walking beam's recorder was killed 30 s after its 10 000-s run, its summary
+    lost."""
+    assert launch.end_timeout(10_000.0, 0.02) == launch.END_TIMEOUT + 500_001 * launch.CLOSE_TIME_PER_EXCHANGE
+    monkeypatch.setattr(launch, "END_TIMEOUT", 0.2)
+    writing = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"])
+    launch._wait_all({"recorder": writing}, 5.0, quiet=False)
+    assert writing.returncode == 0  # ended by itself after 1 s: waited past END_TIMEOUT
+    said = capsys.readouterr().err.splitlines()
+    assert len(said) == 1 and said[0].startswith("mech-regulator: waiting for the recorder node to write its outputs")
+    hung = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60.0)"])
+    launch._wait_all({"recorder": hung}, 0.5)
+    assert hung.returncode == -9  # killed at the timeout
+    assert capsys.readouterr().err == ""  # quiet

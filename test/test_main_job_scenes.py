@@ -445,3 +445,43 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     in_process = in_process_csv(model, PLAYED, tmp_path / "in_process.csv", overspeed_trip=300.0)
     assert rrd.with_suffix(".csv").read_bytes() == b"".join(in_process.splitlines(keepends=True)[:-1])
     assert node_processes(str(rrd.parent)) == []
+
+
+def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
+    """The recorder stopped (SIGSTOP) for 12 s of wall time in the middle of a run whose exchanges go at some 2000 a
+    second: the machine's batches wait for its acknowledgements (nodes.common.Batch, ACKED_EVERY) instead of running
+    past what their publisher's history keeps, so the run ends `complete` with every exchange in its CSV. Before, the
+    recorder missed thousands of exchanges and the run ended `interrupted`, with exit code 0 (now 1: not a Ctrl-C)."""
+    played = 800.0
+    folder = tmp_path / "held"
+    folder.mkdir()
+    rrd = folder / "run.rrd"
+    run = subprocess.Popen(
+        [sys.executable, "-m", "mech_regulator", "run", "lathe", "--duration", str(played), "--out", str(rrd)]
+        + ["--domain-id", str(next_domain_id()), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=folder,
+    )
+    try:
+        deadline = time.monotonic() + 4 * WAIT
+        csv = rrd.with_suffix(".csv")
+        while not (csv.exists() and csv.stat().st_size > 100_000) and time.monotonic() < deadline:
+            time.sleep(0.05)  # the recorder has written its first rows: exchanges are under way
+        listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
+        pids = [int(pid) for pid in listing if str(folder) in Path(f"/proc/{pid}/cmdline").read_text(errors="replace")]
+        assert len(pids) == 1, listing
+        os.kill(pids[0], signal.SIGSTOP)
+        time.sleep(12.0)
+        os.kill(pids[0], signal.SIGCONT)
+        stdout, stderr = run.communicate(timeout=4 * WAIT)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    described = f"exit {run.returncode}\n{stdout}\n{stderr}"
+    assert run.returncode == 0, described
+    summary = json.loads(rrd.with_suffix(".json").read_text())
+    assert summary["status"] == "complete" and summary["t_end"] == played, described
+    exchanges = round(played / load_scene("lathe").solver.exchange_step) + 1  # the lathe's load is constant
+    assert summary["samples"] == exchanges and csv.read_bytes().count(b"\n") == 1 + exchanges, described

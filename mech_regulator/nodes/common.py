@@ -63,6 +63,8 @@ HISTORY_DEPTH = 2000  # state messages kept by each publisher for late-joining s
 BATCH_HISTORY_DEPTH = 200  # batched messages (class Batch) kept by each of their publishers (BATCH_QOS)
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
+ACKED_EVERY = BATCH_HISTORY_DEPTH // 2  # batches a Batch sends between two waits for its readers' acknowledgements
+ACK_CATCH_UP = 10.0  # [s] of wall time a Batch waits at most for its readers to acknowledge what it sent
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
 DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the process ends anyway (end_if_stuck)
 TEARDOWN_ALARM = 5  # [s] of wall time after which SIGALRM ends a node whose destruction hangs holding the GIL
@@ -408,7 +410,11 @@ class Batch:
     oldest BATCH_PERIOD s of wall time old, so the recorder still shows a live picture) at a moment it would
     otherwise wait, and at once (send) when the run ends, pauses or resets. A sender whose groups cost less computed
     together (the machine's moments: one vectorised call for the batch instead of one per exchange) defers them
-    (defer) and gives `complete`, which adds them (add) when the batch goes out; a batch holds either kind only."""
+    (defer) and gives `complete`, which adds them (add) when the batch goes out; a batch holds either kind only.
+    Every ACKED_EVERY batches it first waits, at most ACK_CATCH_UP s of wall time, until its readers (the recorder)
+    have acknowledged all it sent: a recorder held back (a loaded machine, a process stopped) slows the run instead of
+    losing the batches its publisher's history of BATCH_HISTORY_DEPTH no longer holds when it asks for them again
+    (docs/ros.md, "A recorder that falls behind")."""
 
     def __init__(self, publisher, complete: Callable[[list], None] | None = None):
         self.publisher = publisher
@@ -418,6 +424,7 @@ class Batch:
         self.oldest_wall = 0.0  # [s] of wall time (time.monotonic) the oldest waiting group was added
         self.complete = complete
         self.deferred: list = []  # what `complete` turns into groups when the batch goes out
+        self.unacknowledged = 0  # batches sent since the readers last acknowledged all (at most ACKED_EVERY)
 
     def add(
         self,
@@ -462,7 +469,11 @@ class Batch:
             names, positions, velocities, efforts = self.fields
             message = JointState(name=names, position=positions, velocity=velocities, effort=efforts)
             message.header.stamp = stamp(self.last)
+            if self.unacknowledged >= ACKED_EVERY:  # the publisher keeps BATCH_HISTORY_DEPTH: none lost unsent
+                self.publisher.wait_for_all_acked(Duration(seconds=ACK_CATCH_UP))
+                self.unacknowledged = 0
             self.publisher.publish(message)
+            self.unacknowledged += 1
             self.fields, self.groups = ([], [], [], []), 0
 
 

@@ -38,7 +38,8 @@ from mech_regulator.processes import die_with_parent
 from mech_regulator.scene import SceneError, config_dir
 
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
-END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished
+END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished, and
+CLOSE_TIME_PER_EXCHANGE = 0.001  # [s] of wall time more per exchange: the recorder's outputs written (end_timeout)
 STALL_REPORT = 30.0  # [s] of wall time without the machine's simulated time advancing before the launcher says so
 GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
@@ -251,7 +252,7 @@ def main_job(
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
     code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed or the
     summary's status is failed (the machine's run failed: a blow-up, driven backwards, no progress) or disturbed
-    (docs/ros.md, "Who may speak"), 2 if every node that failed refused its input, 130
+    (docs/ros.md, "Who may speak"), or interrupted without a Ctrl-C (exchanges the recorder never got), 2 if every node that failed refused its input, 130
     if interrupted; each failed node is named with its reason). controller external: no governor_node, the machine
     waits for a node the user starts (nodes.controller); bag: also a rosbag2 recording there (viz.bag);
     peer_timeout: the machine's [s] (None: the parameter file's); exchange_tolerance: the adaptive exchange step's
@@ -330,8 +331,8 @@ def main_job(
                 f"{scene.name} on the nodes",
                 started,
             )
-            if processes["machine"].returncode == 0:
-                _wait_all(processes, END_TIMEOUT)  # the others end by themselves once the machine has finished
+            if processes["machine"].returncode == 0:  # the others end by themselves once the machine has finished
+                _wait_all(processes, end_timeout(duration or scene.scenario.duration, exchange_step), quiet)
         except (KeyboardInterrupt, ImportError) as error:
             if isinstance(error, ImportError) and not ctrl_c:
                 raise
@@ -367,7 +368,9 @@ def main_job(
             print(f"refused from {sender}: " + ", ".join(f"{count} on {topic}" for topic, count in topics.items()))
         for disturbance in summary.get("disturbances", []):
             print(f"disturbance: {disturbance}")
-        disturbed = summary["status"] in ("disturbed", "failed")  # numbers that are not the scene's whole run
+        disturbed = summary["status"] in ("disturbed", "failed") or (
+            summary["status"] == "interrupted" and not interrupted  # exchanges missing, not a Ctrl-C
+        )  # numbers that are not the scene's whole run
         if "start_up_s" in summary:
             print(f"start-up: {summary['start_up_s']:.3g} s from the command to the first exchange")
         if "max_lag_s" in summary:
@@ -540,15 +543,39 @@ def wait_for_a_quiet_graph(
             seen, since = now, time.monotonic()
 
 
-def _wait_all(processes: dict[str, NodeProcess], timeout: float) -> None:
-    """Wait for the nodes to end; kill those still running after timeout [s] of wall time in all."""
+def end_timeout(duration: float, exchange_step: float) -> float:
+    """The wall time [s] the nodes get to end by themselves once the machine has finished a run of `duration` [s] at
+    `exchange_step` [s]: END_TIMEOUT, and CLOSE_TIME_PER_EXCHANGE for each exchange, what the recorder's outputs take
+    to write (the CSV's last rows, the recording closed, the summary of the run read back from its spool: the
+    walking beam through the nodes for 10 000 s, 500 001 exchanges, was killed after 30 s of it, its summary lost;
+    docs/ros.md, "Ends, Ctrl-C and no process left behind")."""
+    return END_TIMEOUT + CLOSE_TIME_PER_EXCHANGE * (duration / exchange_step + 1)
+
+
+def _wait_all(processes: dict[str, NodeProcess], timeout: float, quiet: bool = True) -> None:
+    """Wait for the nodes to end; kill those still running after timeout [s] of wall time in all. Not quiet: a wait
+    past END_TIMEOUT is said once, naming the nodes still running and how long they may still take."""
     deadline = time.monotonic() + timeout
+    said = quiet
     for process in processes.values():
-        try:
-            process.wait(max(deadline - time.monotonic(), 0.0))
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
+        while True:
+            try:
+                process.wait(max(min(deadline, time.monotonic() + END_TIMEOUT) - time.monotonic(), 0.0))
+                break
+            except subprocess.TimeoutExpired:
+                if time.monotonic() >= deadline:
+                    process.kill()
+                    process.wait()
+                    break
+                if not said:
+                    running = [name for name, other in processes.items() if other.poll() is None]
+                    print(
+                        f"mech-regulator: waiting for the {', '.join(running)} node{'s' if len(running) > 1 else ''} "
+                        f"to write {'their' if len(running) > 1 else 'its'} outputs (at most "
+                        f"{deadline - time.monotonic():.0f} s more) ...",
+                        file=sys.stderr,
+                    )
+                    said = True
 
 
 class NodeProcess:
