@@ -252,7 +252,7 @@ def main_job(
     start on the clock of time.monotonic() [s] (None: now; the summary's start_up_s counts from it); returns the exit
     code (0 if the run played to its end, its summary's status `complete` or `tripped`; 1 if a node failed or the
     summary's status is failed (the machine's run failed: a blow-up, driven backwards, no progress) or disturbed
-    (docs/ros.md, "Who may speak"), or interrupted without a Ctrl-C (exchanges the recorder never got), 2 if every node that failed refused its input, 130
+    (docs/ros.md, "Who may speak"), 2 if every node that failed refused its input, 130
     if interrupted; each failed node is named with its reason). controller external: no governor_node, the machine
     waits for a node the user starts (nodes.controller); bag: also a rosbag2 recording there (viz.bag);
     peer_timeout: the machine's [s] (None: the parameter file's); exchange_tolerance: the adaptive exchange step's
@@ -368,9 +368,7 @@ def main_job(
             print(f"refused from {sender}: " + ", ".join(f"{count} on {topic}" for topic, count in topics.items()))
         for disturbance in summary.get("disturbances", []):
             print(f"disturbance: {disturbance}")
-        disturbed = summary["status"] in ("disturbed", "failed") or (
-            summary["status"] == "interrupted" and not interrupted  # exchanges missing, not a Ctrl-C
-        )  # numbers that are not the scene's whole run
+        disturbed = summary["status"] in ("disturbed", "failed")  # numbers that are not the scene's whole run
         if "start_up_s" in summary:
             print(f"start-up: {summary['start_up_s']:.3g} s from the command to the first exchange")
         if "max_lag_s" in summary:
