@@ -62,7 +62,6 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import functools
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -76,7 +75,7 @@ from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.compiled import runs_compiled
-from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line
+from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line, speeds_one_cycle_back
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up, state_text
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -162,9 +161,11 @@ class MachineStepper:
         self._load_line_time = 0.0  # [s] that step's start
         cycles = not acts and (model.reduced is not None or "phi" in model.depends_on())  # a speed periodic in phi
         self._cycle = model.dynamic_period() if cycles else None  # [rad] the prediction's cycle (None: integrated)
-        self._history: list[Samples] = []  # the corrected speed samples of the last steps, consecutive, oldest first
-        self._history_starts: list[float] = []  # [s] their starts
+        self._history = np.empty((5, 0))  # the pieces of the corrected speed samples of the last steps, consecutive,
+        # oldest first, as speeds_one_cycle_back takes them (a piece's start and end [s], its three speeds [rad/s])
+        self._history_pieces: list[int] = []  # how many of those pieces each step has
         self._history_ends: list[float] = []  # [s] their ends
+        self._speeds_one_cycle_back = one_cycle_back_for(self.plant)
         self._history_angles: list[float] = []  # [rad] the crank angle phi at their ends
         self._rising = 0  # how many of the last consecutive pairs of those angles rise (the crank turning forwards)
 
@@ -298,9 +299,10 @@ class MachineStepper:
         periodic in phi and whose throttle the speed does not move directly: omega_p(t) = omega + omega_c(t - T) -
         omega_c(now - T) at the times speed_samples takes, omega [rad/s] the speed now, omega_c the corrected speed of
         the steps kept (the quadratic through three samples on each piece), T [s] the time since the crank angle was
-        phi - the dynamic period (interpolated between the kept steps' ends, as np.interp). None where the kept steps
-        do not reach back that far (the run's start), T is shorter than the step or the crank has not turned forwards
-        all along (docs/speed.md, "A fifth sitting"); whether it has is counted as the steps are kept (_rising)."""
+        phi - the dynamic period (interpolated between the kept steps' ends, as np.interp; quadratics.speeds_one_cycle_back,
+        compiled on the fast path). None where the kept steps do not reach back that far (the run's start), T is shorter
+        than the step or the crank has not turned forwards all along (docs/speed.md, "A fifth sitting"); whether it has
+        is counted as the steps are kept (_rising)."""
         omega = float(self.state[1])
         ends, angles = self._history_ends, self._history_angles
         if self._cycle is None or omega <= 0.0 or len(ends) < 2 or ends[-1] != self.time:
@@ -311,16 +313,12 @@ class MachineStepper:
         below = bisect.bisect_right(angles, target) - 1  # np.interp's interval, and its operations
         slope = (ends[below + 1] - ends[below]) / (angles[below + 1] - angles[below])
         back = self.time - (slope * (target - angles[below]) + ends[below])  # [s] T
-        if self.time - back < self._history_starts[0] or t_end - back > self.time:
+        if self.time - back < self._history[0, 0] or t_end - back > self.time:
             return None
-        times = speed_samples_times(self.time, t_end, self._prediction_piece).tolist()
-        values: list[float] = []
-        for step, befores in itertools.groupby(
-            (time - back for time in [self.time] + times),
-            lambda before: min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1),
-        ):  # the times before by the kept step they fall in: one evaluation each
-            values += piecewise_quadratic_at(self._history[step], list(befores))
-        return times, [omega + value - values[0] for value in values[1:]]
+        times, speeds = self._speeds_one_cycle_back(
+            self._history, self.time, t_end, self._prediction_piece, back, omega
+        )
+        return times.tolist(), speeds.tolist()
 
     def _keep(self, samples: Samples) -> Samples:
         """Keep a corrected step's speed samples, and the crank angle at its end (now), for _cycle_back (the last
@@ -328,11 +326,21 @@ class MachineStepper:
         them."""
         if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
             if self._history_ends and self._history_ends[-1] != samples[0][0]:
-                self._history, self._history_starts, self._history_ends, self._history_angles = [], [], [], []
+                self._history, self._history_pieces, self._history_ends, self._history_angles = (
+                    np.empty((5, 0)),
+                    [],
+                    [],
+                    [],
+                )
             angle = float(self.state[0])
             self._rising = self._rising + 1 if self._history_angles and not angle <= self._history_angles[-1] else 0
-            self._history = self._history[1 - CYCLE_HISTORY :] + [samples]
-            self._history_starts = self._history_starts[1 - CYCLE_HISTORY :] + [samples[0][0]]
+            times, speeds = samples
+            dropped = sum(self._history_pieces[: -CYCLE_HISTORY + 1])  # the oldest step's, once CYCLE_HISTORY are kept
+            self._history = np.concatenate(
+                (self._history[:, dropped:], [times[:-2:2], times[2::2], speeds[:-2:2], speeds[1::2], speeds[2::2]]),
+                axis=1,
+            )
+            self._history_pieces = self._history_pieces[1 - CYCLE_HISTORY :] + [(len(times) - 1) // 2]
             self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [self.time]
             self._history_angles = self._history_angles[1 - CYCLE_HISTORY :] + [angle]
         return samples
@@ -874,6 +882,16 @@ def pieces_for(subsystem: MachineModel):
     from mech_regulator.solvers.compiled.run import compiled_pieces  # numba is imported only when needed
 
     return compiled_pieces(subsystem)
+
+
+def one_cycle_back_for(subsystem: MachineModel):
+    """What predicts the machine's speed one cycle of the crank back (quadratics.speeds_one_cycle_back's arguments and
+    result): that function, or on solver.path: fast its compiled twin (solvers/compiled/pieces.py)."""
+    if not runs_compiled(subsystem.scene.solver):
+        return speeds_one_cycle_back
+    from mech_regulator.solvers.compiled.pieces import compiled_speeds_one_cycle_back  # numba only when needed
+
+    return compiled_speeds_one_cycle_back
 
 
 def follow_samples(

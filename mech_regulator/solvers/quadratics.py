@@ -1,8 +1,12 @@
-"""The quadratics of the co-simulation's coupling (solvers/cosim.py): plain Python on floats, which numba compiles as
-it is for the governor's speed pieces on the fast path (solvers/compiled/pieces.py), so that both paths work out the
-same numbers in the same operations."""
+"""The quadratics of the co-simulation's coupling (solvers/cosim.py): plain Python on floats and arrays, which numba
+compiles as it is on the fast path (solvers/compiled/pieces.py: the governor's speed pieces, the machine's prediction
+one cycle back), so that both paths work out the same numbers in the same operations."""
 
 from __future__ import annotations
+
+import math
+
+import numpy as np
 
 
 def quadratic_through(duration: float, start: float, middle: float, end: float) -> tuple[float, float]:
@@ -18,3 +22,32 @@ def speed_load_line(a: float, b: float, t_start: float) -> tuple[float, float]:
     machine's speeds): on its unit free inertia omega' = -L(t), so L(t) = -(a + 2 b s), an external load line
     offset + slope t, returned as (offset [N m], slope [N m/s]) (cosim.speed_waveform's LoadPiece)."""
     return -a + 2.0 * b * t_start, -2.0 * b
+
+
+def speeds_one_cycle_back(
+    kept: np.ndarray, t_start: float, t_end: float, longest: float, back: float, omega: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The machine's speed over [t_start, t_end] [s] predicted one cycle of the crank back (cosim.MachineStepper's
+    _cycle_back): at the times cosim.speed_samples takes (2 m + 1 evenly spaced, both ends included, m the fewest
+    pieces no longer than `longest` [s]; np.linspace's numbers, as cosim.speed_samples_times), omega + q(t - back) -
+    q(t_start - back), omega [rad/s] the speed at t_start, back [s] the time one cycle back, q the kept speed's pieces:
+    kept's columns, consecutive, are a piece's start and end [s] and the speeds [[rad/s]] at its start, middle and end,
+    q on it the quadratic through those three (quadratic_through), the first and the last piece continued beyond the
+    ends. Returns (times [s], speeds [rad/s])."""
+    count = 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1
+    spacing = (t_end - t_start) / (count - 1)
+    times = np.empty(count)
+    speeds = np.empty(count)
+    starts = kept[0]
+    first = 0.0  # q(t_start - back)
+    for k in range(count):
+        times[k] = t_end if k == count - 1 else k * spacing + t_start
+        before = times[k] - back
+        piece = min(max(np.searchsorted(starts, before, side="right") - 1, 0), starts.size - 1)
+        a, b = quadratic_through(kept[1, piece] - starts[piece], kept[2, piece], kept[3, piece], kept[4, piece])
+        elapsed = before - starts[piece]
+        value = kept[2, piece] + elapsed * (a + elapsed * b)
+        if k == 0:
+            first = value
+        speeds[k] = omega + value - first
+    return times, speeds

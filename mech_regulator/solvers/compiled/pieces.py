@@ -1,23 +1,38 @@
 """The governor's speed pieces as the compiled stepper's rows (solvers/compiled/run.py, integrators' `pieces`): a
 co-simulated governor follows the machine's speed in some 17 quadratic pieces an exchange (solvers/cosim.py), whose
 load pieces and p values built in Python one by one (cosim.speed_pieces, CompiledScene.piece_values) cost about half
-as much as the compiled call that steps them (docs/speed.md, "A seventh sitting"). Compiled or loaded with a stepper
-(steppers.stepper), for the argument types its calls have (SIGNATURE), as dense.steps_dense."""
+as much as the compiled call that steps them (docs/speed.md, "A seventh sitting"); and the machine's prediction one
+cycle back (quadratics.speeds_one_cycle_back compiled as it is: some 30 us an exchange in Python, docs/speed.md, "An
+eighth sitting"). Compiled or loaded with a stepper (steppers.stepper), for the argument types their calls have
+(SIGNATURE, CYCLE_BACK_SIGNATURE), as dense.steps_dense."""
 
 from __future__ import annotations
 
 from numba import njit, types
+from numba.extending import register_jitable
 
 from mech_regulator import numba_cache
-from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line
+from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line, speeds_one_cycle_back
 
 numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
 SIGNATURE = (types.float64[::1], types.float64[::1], types.float64[:, ::1])
 """speed_rows' argument types: the speed samples' times and speeds, and the rows it writes."""
 
+CYCLE_BACK_SIGNATURE = (
+    types.float64[:, ::1],
+    types.float64,
+    types.float64,
+    types.float64,
+    types.float64,
+    types.float64,
+)
+"""speeds_one_cycle_back's argument types: the kept pieces and five floats."""
+
 _quadratic_through = njit(cache=True)(quadratic_through)
 _speed_load_line = njit(cache=True)(speed_load_line)
+register_jitable(quadratic_through)  # the plain function, called from compiled code: compiled there
+compiled_speeds_one_cycle_back = njit(cache=True)(speeds_one_cycle_back)
 
 
 @njit(cache=True)
