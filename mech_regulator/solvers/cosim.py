@@ -75,7 +75,12 @@ from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.compiled import runs_compiled
-from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line, speeds_one_cycle_back
+from mech_regulator.solvers.quadratics import (
+    quadratic_through,
+    speed_load_line,
+    speed_samples_times,
+    speeds_one_cycle_back,
+)
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up, state_text
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -161,11 +166,12 @@ class MachineStepper:
         self._load_line_time = 0.0  # [s] that step's start
         cycles = not acts and (model.reduced is not None or "phi" in model.depends_on())  # a speed periodic in phi
         self._cycle = model.dynamic_period() if cycles else None  # [rad] the prediction's cycle (None: integrated)
-        self._history = np.empty((5, 0))  # the pieces of the corrected speed samples of the last steps, consecutive,
-        # oldest first, as speeds_one_cycle_back takes them (a piece's start and end [s], its three speeds [rad/s])
-        self._history_pieces: list[int] = []  # how many of those pieces each step has
+        self._history = np.empty((2, 0))  # the corrected speed samples of the last steps, consecutive, oldest first,
+        # as speeds_one_cycle_back takes them (times [s], speeds [rad/s]; each step's last repeated)
+        self._history_columns: list[int] = []  # how many columns each of those steps has
         self._history_ends: list[float] = []  # [s] their ends
         self._speeds_one_cycle_back = one_cycle_back_for(self.plant)
+        self._dense_speeds = dense_speeds_for(self.plant)
         self._history_angles: list[float] = []  # [rad] the crank angle phi at their ends
         self._rising = 0  # how many of the last consecutive pairs of those angles rise (the crank turning forwards)
 
@@ -326,21 +332,14 @@ class MachineStepper:
         them."""
         if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
             if self._history_ends and self._history_ends[-1] != samples[0][0]:
-                self._history, self._history_pieces, self._history_ends, self._history_angles = (
-                    np.empty((5, 0)),
-                    [],
-                    [],
-                    [],
-                )
+                self._history, self._history_columns = np.empty((2, 0)), []
+                self._history_ends, self._history_angles = [], []
             angle = float(self.state[0])
             self._rising = self._rising + 1 if self._history_angles and not angle <= self._history_angles[-1] else 0
-            times, speeds = samples
-            dropped = sum(self._history_pieces[: -CYCLE_HISTORY + 1])  # the oldest step's, once CYCLE_HISTORY are kept
-            self._history = np.concatenate(
-                (self._history[:, dropped:], [times[:-2:2], times[2::2], speeds[:-2:2], speeds[1::2], speeds[2::2]]),
-                axis=1,
-            )
-            self._history_pieces = self._history_pieces[1 - CYCLE_HISTORY :] + [(len(times) - 1) // 2]
+            dropped = sum(self._history_columns[: -CYCLE_HISTORY + 1])  # the oldest step's, once CYCLE_HISTORY are kept
+            step = np.array(samples)
+            self._history = np.concatenate((self._history[:, dropped:], step, step[:, -1:]), axis=1)
+            self._history_columns = self._history_columns[1 - CYCLE_HISTORY :] + [step.shape[1] + 1]
             self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [self.time]
             self._history_angles = self._history_angles[1 - CYCLE_HISTORY :] + [angle]
         return samples
@@ -373,7 +372,7 @@ class MachineStepper:
             self.mode,
             load_line,
             stretch.status,
-            speed_samples([stretch], t_start, t_end, self._prediction_piece),
+            speed_samples([stretch], t_start, t_end, self._prediction_piece, self._dense_speeds),
         )
         self.state, self.mode, self.time, self.status, self.message = before
         return prediction
@@ -407,7 +406,12 @@ class MachineStepper:
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
             return self._keep(
-                speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
+                speed_samples(
+                    [self.advance(t_end, throttle, external_load, load_rate=load_rate)],
+                    t_start,
+                    t_end,
+                    dense_speeds=self._dense_speeds,
+                )
             )
         stretches, value = [], throttle  # the answer, within the stops; with the speed's action the command
         if per_speed != 0.0 and action is not None:
@@ -427,7 +431,7 @@ class MachineStepper:
             value = end_value
             if self.status != "complete":
                 break
-        return self._keep(speed_samples(stretches, t_start, t_end))
+        return self._keep(speed_samples(stretches, t_start, t_end, dense_speeds=self._dense_speeds))
 
     def _remember_answer(
         self, t_start: float, throttle: float, waveform: Samples | None, action: SpeedAction | None, per_speed: float
@@ -699,40 +703,31 @@ ERROR_ORDER = 3  # the predictor's miss grows about as the step to this power (e
 
 
 def speed_samples(
-    stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE
+    stretches: list[Trajectory],
+    t_start: float,
+    t_end: float,
+    longest: float = MAX_SPEED_PIECE,
+    dense_speeds=None,
 ) -> Samples:
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
-    ends included, m the fewest pieces no longer than `longest` [s]."""
-    times = speed_samples_times(t_start, t_end, longest)
+    ends included, m the fewest pieces no longer than `longest` [s] (speed_samples_times). dense_speeds: on the fast
+    path what samples the dense output of one compiled call in one compiled call (dense_speeds_for), taken for a
+    stretch of one such piece over the whole step (most steps)."""
     if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
-        return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
+        if dense_speeds is not None and len(stretches[0].interpolants) == 1:  # the whole step (most steps): no masks
+            times, speeds = dense_speeds(stretches[0].interpolants[0], t_start, t_end, longest)
+        else:
+            times = speed_samples_times(t_start, t_end, longest)
+            speeds = stretches[0](times)[1]
+        return times.tolist(), speeds.tolist()
+    times = speed_samples_times(t_start, t_end, longest)
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
     for stretch in stretches:
         inside = (times >= stretch.t_start) & (times <= stretch.t_end)
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
     return times.tolist(), speeds.tolist()
-
-
-def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> np.ndarray:
-    """The times [s] at which speed_samples samples [t_start, t_end] [s]: 2 m + 1 evenly spaced, both ends included, m
-    the fewest pieces no longer than `longest` [s]; np.linspace's numbers in its operations (the steps times the
-    spacing, plus t_start, the last t_end) without its set-up, which cost as much as the rest of a speed sample
-    (docs/speed.md, "A sixth sitting")."""
-    count = 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1
-    times = _step_numbers(count) * ((t_end - t_start) / (count - 1))
-    times += t_start
-    times[-1] = t_end
-    return times
-
-
-@functools.cache
-def _step_numbers(count: int) -> np.ndarray:
-    """0, 1, ..., count - 1 as floats (read only: speed_samples_times' factors)."""
-    numbers = np.arange(count, dtype=float)
-    numbers.flags.writeable = False
-    return numbers
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
@@ -882,6 +877,16 @@ def pieces_for(subsystem: MachineModel):
     from mech_regulator.solvers.compiled.run import compiled_pieces  # numba is imported only when needed
 
     return compiled_pieces(subsystem)
+
+
+def dense_speeds_for(subsystem: MachineModel):
+    """What samples the speed of one compiled call's dense output in one compiled call (speed_samples' dense_speeds):
+    None on the reference path, on solver.path: fast results.StepsDense.speed_samples."""
+    if not runs_compiled(subsystem.scene.solver):
+        return None
+    from mech_regulator.solvers.compiled.results import StepsDense  # numba is imported only when needed
+
+    return StepsDense.speed_samples
 
 
 def one_cycle_back_for(subsystem: MachineModel):

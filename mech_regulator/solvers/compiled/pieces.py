@@ -1,10 +1,10 @@
 """The governor's speed pieces as the compiled stepper's rows (solvers/compiled/run.py, integrators' `pieces`): a
 co-simulated governor follows the machine's speed in some 17 quadratic pieces an exchange (solvers/cosim.py), whose
 load pieces and p values built in Python one by one (cosim.speed_pieces, CompiledScene.piece_values) cost about half
-as much as the compiled call that steps them (docs/speed.md, "A seventh sitting"); and the machine's prediction one
-cycle back (quadratics.speeds_one_cycle_back compiled as it is: some 30 us an exchange in Python, docs/speed.md, "An
-eighth sitting"). Compiled or loaded with a stepper (steppers.stepper), for the argument types their calls have
-(SIGNATURE, CYCLE_BACK_SIGNATURE), as dense.steps_dense."""
+as much as the compiled call that steps them (docs/speed.md, "A seventh sitting"); and the machine's speed samples
+and its prediction one cycle back (quadratics' functions compiled as they are: some 25 and 30 us an exchange in
+Python, docs/speed.md, "An eighth sitting"). Compiled or loaded with a stepper (steppers.stepper), for the argument
+types their calls have (SIGNATURE, SAMPLED_SPEEDS_SIGNATURE, CYCLE_BACK_SIGNATURE), as dense.steps_dense."""
 
 from __future__ import annotations
 
@@ -12,7 +12,14 @@ from numba import njit, types
 from numba.extending import register_jitable
 
 from mech_regulator import numba_cache
-from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line, speeds_one_cycle_back
+from mech_regulator.solvers.compiled.dense import SIGNATURE as DENSE_SIGNATURE
+from mech_regulator.solvers.compiled.dense import steps_dense
+from mech_regulator.solvers.quadratics import (
+    quadratic_through,
+    speed_load_line,
+    speed_samples_times,
+    speeds_one_cycle_back,
+)
 
 numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
@@ -27,11 +34,18 @@ CYCLE_BACK_SIGNATURE = (
     types.float64,
     types.float64,
 )
-"""speeds_one_cycle_back's argument types: the kept pieces and five floats."""
+"""speeds_one_cycle_back's argument types: the kept samples and five floats."""
+
+SAMPLED_SPEEDS_SIGNATURE = DENSE_SIGNATURE[:5] + (types.float64, types.float64, types.float64)
+"""sampled_speeds' argument types: a compiled call's arrays (results.StepsDense's), then three floats."""
 
 _quadratic_through = njit(cache=True)(quadratic_through)
 _speed_load_line = njit(cache=True)(speed_load_line)
-register_jitable(quadratic_through)  # the plain function, called from compiled code: compiled there
+for _plain in (
+    quadratic_through,
+    speed_samples_times,
+):  # the plain functions, called from compiled code: compiled there
+    register_jitable(_plain)
 compiled_speeds_one_cycle_back = njit(cache=True)(speeds_one_cycle_back)
 
 
@@ -52,3 +66,12 @@ def speed_rows(times, speeds, rows):
         row[0], row[1] = t_end, first
         row[2], row[3], row[4], row[5], row[6] = offset, slope, 1.0, 0.0, 0.0
         row[7], row[8], row[9], row[10], row[11] = t_start, 0.0, 0.0, 1.0, sign
+
+
+@njit(cache=True)
+def sampled_speeds(times, y_old, coefficients, step_offsets, restarted, t_start, t_end, longest):
+    """cosim.speed_samples of one compiled call's dense output (results.StepsDense: its arrays) over [t_start, t_end]
+    [s] within it, the pieces no longer than `longest` [s]: the times (quadratics.speed_samples_times) and the
+    crank's speed [rad/s] there (dense.steps_dense's), arrays, in one call."""
+    at = speed_samples_times(t_start, t_end, longest)
+    return at, steps_dense(times, y_old, coefficients, step_offsets, restarted, at)[1]
