@@ -32,7 +32,7 @@ from mech_regulator.solvers.cosim import (
     held_load_until,
     load_rate,
     seconds,
-    speed_samples,
+    speed_sample_rows,
     speed_samples_times,
     speed_waveform,
     throttle_extrapolation,
@@ -385,10 +385,9 @@ def test_the_machine_s_compiled_samples_are_the_plain_functions_to_the_bit():
         if compiled is not None:
             predicted.append(tick)
         stretch = machine.advance(end, 1.0, model.external_load(start))
-        samples = speed_samples([stretch], start, end, dense_speeds=machine._dense_speeds)  # noqa: SLF001
+        samples = speed_sample_rows([stretch], start, end, dense_speeds=machine._dense_speeds)  # noqa: SLF001
         times = speed_samples_times(start, end, MAX_SPEED_PIECE)
-        assert samples == (times.tolist(), stretch(times)[1].tolist()), tick
-        machine._keep(samples)  # noqa: SLF001
+        assert machine._keep(samples) == (times.tolist(), stretch(times)[1].tolist()), tick  # noqa: SLF001
     assert predicted and predicted[0] < 40 and predicted == list(range(predicted[0], 60)), predicted
 
 
@@ -405,7 +404,7 @@ def test_the_prediction_one_cycle_back_waits_while_a_backward_turn_is_kept():
         start, end = (tick - 1) * 0.02, tick * 0.02
         angle = angle - backward[tick] if tick in backward else angle + 1.0
         machine.time, machine.state = end, np.array([angle, speed])
-        machine._keep(([start, 0.5 * (start + end), end], [speed] * 3))  # noqa: SLF001
+        machine._keep(np.array([[start, 0.5 * (start + end), end], [speed] * 3]))  # noqa: SLF001
         kept = kept[-63:] + [angle]
         prediction = machine._cycle_back((tick + 1) * 0.02)  # noqa: SLF001
         reaches_back = kept[0] <= angle - cycle < kept[-1] and tick > 13

@@ -326,23 +326,23 @@ class MachineStepper:
         )
         return times.tolist(), speeds.tolist()
 
-    def _keep(self, samples: Samples) -> Samples:
-        """Keep a corrected step's speed samples, and the crank angle at its end (now), for _cycle_back (the last
-        CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them anew); returns
-        them."""
-        if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
-            if self._history_ends and self._history_ends[-1] != samples[0][0]:
+    def _keep(self, samples: np.ndarray) -> Samples:
+        """Keep a corrected step's speed samples (speed_sample_rows'), and the crank angle at its end (now), for
+        _cycle_back (the last CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them
+        anew); returns them as lists (speed_samples')."""
+        if self._cycle is not None and samples.shape[1] >= 3 and samples[0, -1] == self.time:
+            if self._history_ends and self._history_ends[-1] != samples[0, 0]:
                 self._history, self._history_columns = np.empty((2, 0)), []
                 self._history_ends, self._history_angles = [], []
             angle = float(self.state[0])
             self._rising = self._rising + 1 if self._history_angles and not angle <= self._history_angles[-1] else 0
             dropped = sum(self._history_columns[: -CYCLE_HISTORY + 1])  # the oldest step's, once CYCLE_HISTORY are kept
-            step = np.array(samples)
-            self._history = np.concatenate((self._history[:, dropped:], step, step[:, -1:]), axis=1)
-            self._history_columns = self._history_columns[1 - CYCLE_HISTORY :] + [step.shape[1] + 1]
+            self._history = np.concatenate((self._history[:, dropped:], samples, samples[:, -1:]), axis=1)
+            self._history_columns = self._history_columns[1 - CYCLE_HISTORY :] + [samples.shape[1] + 1]
             self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [self.time]
             self._history_angles = self._history_angles[1 - CYCLE_HISTORY :] + [angle]
-        return samples
+        times, speeds = samples.tolist()
+        return times, speeds
 
     def _continued_load(self, time: float) -> tuple[float, float]:
         """The last step's load continued to `time` [s]: (its value then [N m], its rate [N m/s])."""
@@ -406,7 +406,7 @@ class MachineStepper:
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
             return self._keep(
-                speed_samples(
+                speed_sample_rows(
                     [self.advance(t_end, throttle, external_load, load_rate=load_rate)],
                     t_start,
                     t_end,
@@ -431,7 +431,7 @@ class MachineStepper:
             value = end_value
             if self.status != "complete":
                 break
-        return self._keep(speed_samples(stretches, t_start, t_end, dense_speeds=self._dense_speeds))
+        return self._keep(speed_sample_rows(stretches, t_start, t_end, dense_speeds=self._dense_speeds))
 
     def _remember_answer(
         self, t_start: float, throttle: float, waveform: Samples | None, action: SpeedAction | None, per_speed: float
@@ -711,23 +711,30 @@ def speed_samples(
 ) -> Samples:
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
-    ends included, m the fewest pieces no longer than `longest` [s] (speed_samples_times). dense_speeds: on the fast
-    path what samples the dense output of one compiled call in one compiled call (dense_speeds_for), taken for a
-    stretch of one such piece over the whole step (most steps)."""
+    ends included, m the fewest pieces no longer than `longest` [s] (speed_samples_times): speed_sample_rows' rows as
+    lists."""
+    times, speeds = speed_sample_rows(stretches, t_start, t_end, longest, dense_speeds).tolist()
+    return times, speeds
+
+
+def speed_sample_rows(
+    stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE, dense_speeds=None
+) -> np.ndarray:
+    """speed_samples' times [s] and speeds [rad/s], the rows of one array. dense_speeds: on the fast path what samples
+    the dense output of one compiled call in one compiled call (dense_speeds_for), taken for a stretch of one such
+    piece over the whole step (most steps)."""
     if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
         if dense_speeds is not None and len(stretches[0].interpolants) == 1:  # the whole step (most steps): no masks
-            times, speeds = dense_speeds(stretches[0].interpolants[0], t_start, t_end, longest)
-        else:
-            times = speed_samples_times(t_start, t_end, longest)
-            speeds = stretches[0](times)[1]
-        return times.tolist(), speeds.tolist()
+            return dense_speeds(stretches[0].interpolants[0], t_start, t_end, longest)
+        times = speed_samples_times(t_start, t_end, longest)
+        return np.vstack((times, stretches[0](times)[1]))
     times = speed_samples_times(t_start, t_end, longest)
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
     for stretch in stretches:
         inside = (times >= stretch.t_start) & (times <= stretch.t_end)
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
-    return times.tolist(), speeds.tolist()
+    return np.vstack((times, speeds))
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:

@@ -8,6 +8,7 @@ types their calls have (SIGNATURE, SAMPLED_SPEEDS_SIGNATURE, CYCLE_BACK_SIGNATUR
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit, types
 from numba.extending import register_jitable
 
@@ -72,6 +73,9 @@ def speed_rows(times, speeds, rows):
 def sampled_speeds(times, y_old, coefficients, step_offsets, restarted, t_start, t_end, longest):
     """cosim.speed_samples of one compiled call's dense output (results.StepsDense: its arrays) over [t_start, t_end]
     [s] within it, the pieces no longer than `longest` [s]: the times (quadratics.speed_samples_times) and the
-    crank's speed [rad/s] there (dense.steps_dense's), arrays, in one call."""
+    crank's speed [rad/s] there (dense.steps_dense's), the rows of one array, in one call."""
     at = speed_samples_times(t_start, t_end, longest)
-    return at, steps_dense(times, y_old, coefficients, step_offsets, restarted, at)[1]
+    samples = np.empty((2, at.size))
+    samples[0] = at
+    samples[1] = steps_dense(times, y_old, coefficients, step_offsets, restarted, at)[1]
+    return samples

@@ -39,9 +39,10 @@ class StepsDense(DenseOutput):
         y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t.reshape(-1))
         return y[:, 0] if t.ndim == 0 else y
 
-    def speed_samples(self, t_start: float, t_end: float, longest: float) -> tuple[np.ndarray, np.ndarray]:
+    def speed_samples(self, t_start: float, t_end: float, longest: float) -> np.ndarray:
         """cosim.speed_samples over [t_start, t_end] [s] within this output, pieces no longer than `longest` [s]: the
-        times [s] and the crank's speed [rad/s] there, arrays, in one compiled call (pieces.sampled_speeds)."""
+        times [s] and the crank's speed [rad/s] there, the rows of one array, in one compiled call
+        (pieces.sampled_speeds)."""
         return sampled_speeds(
             self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t_start, t_end, longest
         )
