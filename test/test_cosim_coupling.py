@@ -23,6 +23,7 @@ from mech_regulator.solvers import simulate
 from mech_regulator.solvers.cosim import (
     ADAPTIVE_DOUBLINGS,
     ADAPTIVE_HALVINGS,
+    MAX_SPEED_PIECE,
     RESTART_HALVINGS,
     GovernorStepper,
     MachineStepper,
@@ -31,11 +32,13 @@ from mech_regulator.solvers.cosim import (
     held_load_until,
     load_rate,
     seconds,
+    speed_sample_rows,
     speed_samples_times,
     speed_waveform,
     throttle_extrapolation,
     to_nanoseconds,
 )
+from mech_regulator.solvers.quadratics import speeds_one_cycle_back
 
 SMOOTH_GOVERNED = {  # constant inertia, a direct governor without friction or stops reached, a load step at 0.2 s
     "name": "smooth_governed",
@@ -350,8 +353,7 @@ def test_the_engine_s_step_predicted_one_cycle_back_is_close_to_the_step_integra
 
 def test_the_speed_samples_times_are_np_linspace_s_to_the_bit():
     """speed_samples_times works out np.linspace's numbers in its operations without its set-up (docs/speed.md, "A
-    sixth sitting"): the same floats on exchange steps of the grid, odd ones and a long adaptive one, and its cached
-    factors stay unwritten."""
+    sixth sitting"): the same floats on exchange steps of the grid, odd ones and a long adaptive one."""
     rng = np.random.default_rng(35)
     starts = [0.0, 0.02, 15.98, 1e4 - 0.02] + rng.uniform(0.0, 1e4, 40).tolist()
     for start in starts:
@@ -360,8 +362,33 @@ def test_the_speed_samples_times_are_np_linspace_s_to_the_bit():
                 count = 2 * max(1, math.ceil(length / longest - 1e-9)) + 1
                 times = speed_samples_times(start, start + length, longest)
                 assert np.array_equal(times, np.linspace(start, start + length, count)), (start, length, longest)
-    again = speed_samples_times(1.0, 1.02)
+    again = speed_samples_times(1.0, 1.02, MAX_SPEED_PIECE)
     assert again[0] == 1.0 and again[-1] == 1.02 and again.size == 33
+
+
+def test_the_machine_s_compiled_samples_are_the_plain_functions_to_the_bit():
+    """On the fast path the machine's speed samples and its prediction one cycle back are compiled
+    (solvers/compiled/pieces.py; docs/speed.md, "An eighth sitting"): along 60 steps of engine_direct at full throttle,
+    its speed samples are the stretch's dense output at speed_samples_times, and its prediction one cycle back, made
+    from the 40th step on, is quadratics.speeds_one_cycle_back's as plain Python on the same kept samples."""
+    model = build_model(load_scene("engine_direct", ["solver.path=fast"]))
+    machine = MachineStepper(model)
+    compiled_cycle_back = machine._speeds_one_cycle_back  # noqa: SLF001
+    assert compiled_cycle_back is not speeds_one_cycle_back and machine._dense_speeds is not None  # noqa: SLF001
+    predicted = []
+    for tick in range(60):
+        start, end = seconds(tick * 20_000_000), seconds((tick + 1) * 20_000_000)
+        compiled = machine._cycle_back(end)  # noqa: SLF001
+        machine._speeds_one_cycle_back = speeds_one_cycle_back  # noqa: SLF001
+        assert machine._cycle_back(end) == compiled, tick  # noqa: SLF001
+        machine._speeds_one_cycle_back = compiled_cycle_back  # noqa: SLF001
+        if compiled is not None:
+            predicted.append(tick)
+        stretch = machine.advance(end, 1.0, model.external_load(start))
+        samples = speed_sample_rows([stretch], start, end, dense_speeds=machine._dense_speeds)  # noqa: SLF001
+        times = speed_samples_times(start, end, MAX_SPEED_PIECE)
+        assert machine._keep(samples) == (times.tolist(), stretch(times)[1].tolist()), tick  # noqa: SLF001
+    assert predicted and predicted[0] < 40 and predicted == list(range(predicted[0], 60)), predicted
 
 
 def test_the_prediction_one_cycle_back_waits_while_a_backward_turn_is_kept():
@@ -377,7 +404,7 @@ def test_the_prediction_one_cycle_back_waits_while_a_backward_turn_is_kept():
         start, end = (tick - 1) * 0.02, tick * 0.02
         angle = angle - backward[tick] if tick in backward else angle + 1.0
         machine.time, machine.state = end, np.array([angle, speed])
-        machine._keep(([start, 0.5 * (start + end), end], [speed] * 3))  # noqa: SLF001
+        machine._keep(np.array([[start, 0.5 * (start + end), end], [speed] * 3]))  # noqa: SLF001
         kept = kept[-63:] + [angle]
         prediction = machine._cycle_back((tick + 1) * 0.02)  # noqa: SLF001
         reaches_back = kept[0] <= angle - cycle < kept[-1] and tick > 13

@@ -406,7 +406,7 @@ from numba.core.event import install_recorder
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers.compiled.dense import steps_dense
-from mech_regulator.solvers.compiled.pieces import speed_rows
+from mech_regulator.solvers.compiled.pieces import compiled_speeds_one_cycle_back, sampled_speeds, speed_rows
 from mech_regulator.solvers.compiled.steppers import stepper
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, load_steppers
 
@@ -414,6 +414,9 @@ model = build_model(load_scene("engine_direct", ["solver.path=fast"]))
 stepper(model.scene.solver.method)  # what the announced compile compiles (warm.compile_before_the_run's child)
 dense_with_the_stepper = [str(signature) for signature in steps_dense.signatures]
 pieces_with_the_stepper = [str(signature) for signature in speed_rows.signatures]
+machine_with_the_stepper = [
+    str(signature) for kernel in (sampled_speeds, compiled_speeds_one_cycle_back) for signature in kernel.signatures
+]
 load_steppers(model, model.scene.solver.exchange_step)
 with install_recorder("numba:compiler_lock") as numba_work:
     run = cosimulate(model, model.scene.solver.exchange_step, coupling=DEFAULT_COUPLING)
@@ -423,6 +426,10 @@ print(json.dumps({
     "dense output at the end": [str(signature) for signature in steps_dense.signatures],
     "speed pieces with the stepper": pieces_with_the_stepper,
     "speed pieces at the end": [str(signature) for signature in speed_rows.signatures],
+    "machine's samples with the stepper": machine_with_the_stepper,
+    "machine's samples at the end": [
+        str(signature) for kernel in (sampled_speeds, compiled_speeds_one_cycle_back) for signature in kernel.signatures
+    ],
     "numba work at the exchanges": len(numba_work.buffer),
 }))
 """
@@ -434,7 +441,9 @@ def test_what_the_main_jobs_nodes_run_is_compiled_before_they_start():
     node compiles (cold: seconds to tens of seconds, two nodes at once on two cores, unannounced) or loads it for
     itself. In a fresh Python (nothing loaded by other tests), engine_direct's co-simulation as the nodes run it (their
     default coupling, the scene's exchange step): the evaluation of the dense output, which every exchange reads, and
-    the governor's speed pieces (pieces.speed_rows) are compiled with the stepper, for the argument types the run
+    the governor's speed pieces (pieces.speed_rows), the machine's speed samples and its prediction one cycle back
+    (pieces.sampled_speeds, pieces.compiled_speeds_one_cycle_back) are compiled with the stepper, for the argument
+    types the run
     gives them (the first compiled at its first call, some 1 s of CPU cold after the announced compile); and numba takes its compiler lock, which it takes for every compile and
     every load from its disk cache, not once at the exchanges after load_steppers (measured without the
     load_steppers call: 40 times)."""
@@ -447,4 +456,6 @@ def test_what_the_main_jobs_nodes_run_is_compiled_before_they_start():
     assert outcome["dense output at the end"] == outcome["dense output with the stepper"], outcome
     assert len(outcome["speed pieces with the stepper"]) == 1, outcome
     assert outcome["speed pieces at the end"] == outcome["speed pieces with the stepper"], outcome
+    assert len(outcome["machine's samples with the stepper"]) == 2, outcome
+    assert outcome["machine's samples at the end"] == outcome["machine's samples with the stepper"], outcome
     assert outcome["numba work at the exchanges"] == 0, outcome

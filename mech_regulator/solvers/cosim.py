@@ -62,7 +62,6 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import functools
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -76,7 +75,12 @@ from mech_regulator.scene.limits import exchange_refusal, speed_beyond_limit
 from mech_regulator.solvers.advice import rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.cam_contact import check_contact
 from mech_regulator.solvers.compiled import runs_compiled
-from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line
+from mech_regulator.solvers.quadratics import (
+    quadratic_through,
+    speed_load_line,
+    speed_samples_times,
+    speeds_one_cycle_back,
+)
 from mech_regulator.solvers.time_domain import _segment, fail_blown_up, state_text
 from mech_regulator.solvers.trajectory import Progress, SampledTrajectory, SolverStats, Trajectory
 
@@ -162,9 +166,12 @@ class MachineStepper:
         self._load_line_time = 0.0  # [s] that step's start
         cycles = not acts and (model.reduced is not None or "phi" in model.depends_on())  # a speed periodic in phi
         self._cycle = model.dynamic_period() if cycles else None  # [rad] the prediction's cycle (None: integrated)
-        self._history: list[Samples] = []  # the corrected speed samples of the last steps, consecutive, oldest first
-        self._history_starts: list[float] = []  # [s] their starts
+        self._history = np.empty((2, 0))  # the corrected speed samples of the last steps, consecutive, oldest first,
+        # as speeds_one_cycle_back takes them (times [s], speeds [rad/s]; each step's last repeated)
+        self._history_columns: list[int] = []  # how many columns each of those steps has
         self._history_ends: list[float] = []  # [s] their ends
+        self._speeds_one_cycle_back = one_cycle_back_for(self.plant)
+        self._dense_speeds = dense_speeds_for(self.plant)
         self._history_angles: list[float] = []  # [rad] the crank angle phi at their ends
         self._rising = 0  # how many of the last consecutive pairs of those angles rise (the crank turning forwards)
 
@@ -298,9 +305,10 @@ class MachineStepper:
         periodic in phi and whose throttle the speed does not move directly: omega_p(t) = omega + omega_c(t - T) -
         omega_c(now - T) at the times speed_samples takes, omega [rad/s] the speed now, omega_c the corrected speed of
         the steps kept (the quadratic through three samples on each piece), T [s] the time since the crank angle was
-        phi - the dynamic period (interpolated between the kept steps' ends, as np.interp). None where the kept steps
-        do not reach back that far (the run's start), T is shorter than the step or the crank has not turned forwards
-        all along (docs/speed.md, "A fifth sitting"); whether it has is counted as the steps are kept (_rising)."""
+        phi - the dynamic period (interpolated between the kept steps' ends, as np.interp; quadratics.speeds_one_cycle_back,
+        compiled on the fast path). None where the kept steps do not reach back that far (the run's start), T is shorter
+        than the step or the crank has not turned forwards all along (docs/speed.md, "A fifth sitting"); whether it has
+        is counted as the steps are kept (_rising)."""
         omega = float(self.state[1])
         ends, angles = self._history_ends, self._history_angles
         if self._cycle is None or omega <= 0.0 or len(ends) < 2 or ends[-1] != self.time:
@@ -311,31 +319,30 @@ class MachineStepper:
         below = bisect.bisect_right(angles, target) - 1  # np.interp's interval, and its operations
         slope = (ends[below + 1] - ends[below]) / (angles[below + 1] - angles[below])
         back = self.time - (slope * (target - angles[below]) + ends[below])  # [s] T
-        if self.time - back < self._history_starts[0] or t_end - back > self.time:
+        if self.time - back < self._history[0, 0] or t_end - back > self.time:
             return None
-        times = speed_samples_times(self.time, t_end, self._prediction_piece).tolist()
-        values: list[float] = []
-        for step, befores in itertools.groupby(
-            (time - back for time in [self.time] + times),
-            lambda before: min(max(bisect.bisect_right(self._history_starts, before) - 1, 0), len(self._history) - 1),
-        ):  # the times before by the kept step they fall in: one evaluation each
-            values += piecewise_quadratic_at(self._history[step], list(befores))
-        return times, [omega + value - values[0] for value in values[1:]]
+        times, speeds = self._speeds_one_cycle_back(
+            self._history, self.time, t_end, self._prediction_piece, back, omega
+        )
+        return times.tolist(), speeds.tolist()
 
-    def _keep(self, samples: Samples) -> Samples:
-        """Keep a corrected step's speed samples, and the crank angle at its end (now), for _cycle_back (the last
-        CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them anew); returns
-        them."""
-        if self._cycle is not None and len(samples[0]) >= 3 and samples[0][-1] == self.time:
-            if self._history_ends and self._history_ends[-1] != samples[0][0]:
-                self._history, self._history_starts, self._history_ends, self._history_angles = [], [], [], []
+    def _keep(self, samples: np.ndarray) -> Samples:
+        """Keep a corrected step's speed samples (speed_sample_rows'), and the crank angle at its end (now), for
+        _cycle_back (the last CYCLE_HISTORY steps; a step that does not start where the last one kept ended starts them
+        anew); returns them as lists (speed_samples')."""
+        if self._cycle is not None and samples.shape[1] >= 3 and samples[0, -1] == self.time:
+            if self._history_ends and self._history_ends[-1] != samples[0, 0]:
+                self._history, self._history_columns = np.empty((2, 0)), []
+                self._history_ends, self._history_angles = [], []
             angle = float(self.state[0])
             self._rising = self._rising + 1 if self._history_angles and not angle <= self._history_angles[-1] else 0
-            self._history = self._history[1 - CYCLE_HISTORY :] + [samples]
-            self._history_starts = self._history_starts[1 - CYCLE_HISTORY :] + [samples[0][0]]
+            dropped = sum(self._history_columns[: -CYCLE_HISTORY + 1])  # the oldest step's, once CYCLE_HISTORY are kept
+            self._history = np.concatenate((self._history[:, dropped:], samples, samples[:, -1:]), axis=1)
+            self._history_columns = self._history_columns[1 - CYCLE_HISTORY :] + [samples.shape[1] + 1]
             self._history_ends = self._history_ends[1 - CYCLE_HISTORY :] + [self.time]
             self._history_angles = self._history_angles[1 - CYCLE_HISTORY :] + [angle]
-        return samples
+        times, speeds = samples.tolist()
+        return times, speeds
 
     def _continued_load(self, time: float) -> tuple[float, float]:
         """The last step's load continued to `time` [s]: (its value then [N m], its rate [N m/s])."""
@@ -365,7 +372,7 @@ class MachineStepper:
             self.mode,
             load_line,
             stretch.status,
-            speed_samples([stretch], t_start, t_end, self._prediction_piece),
+            speed_samples([stretch], t_start, t_end, self._prediction_piece, self._dense_speeds),
         )
         self.state, self.mode, self.time, self.status, self.message = before
         return prediction
@@ -399,7 +406,12 @@ class MachineStepper:
         self._load_line, self._load_line_time = (external_load, load_rate), t_start
         if waveform is None or len(waveform[0]) % 2 or waveform[0][-1] != t_end or self.tripped_at is not None:
             return self._keep(
-                speed_samples([self.advance(t_end, throttle, external_load, load_rate=load_rate)], t_start, t_end)
+                speed_sample_rows(
+                    [self.advance(t_end, throttle, external_load, load_rate=load_rate)],
+                    t_start,
+                    t_end,
+                    dense_speeds=self._dense_speeds,
+                )
             )
         stretches, value = [], throttle  # the answer, within the stops; with the speed's action the command
         if per_speed != 0.0 and action is not None:
@@ -419,7 +431,7 @@ class MachineStepper:
             value = end_value
             if self.status != "complete":
                 break
-        return self._keep(speed_samples(stretches, t_start, t_end))
+        return self._keep(speed_sample_rows(stretches, t_start, t_end, dense_speeds=self._dense_speeds))
 
     def _remember_answer(
         self, t_start: float, throttle: float, waveform: Samples | None, action: SpeedAction | None, per_speed: float
@@ -691,40 +703,38 @@ ERROR_ORDER = 3  # the predictor's miss grows about as the step to this power (e
 
 
 def speed_samples(
-    stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE
+    stretches: list[Trajectory],
+    t_start: float,
+    t_end: float,
+    longest: float = MAX_SPEED_PIECE,
+    dense_speeds=None,
 ) -> Samples:
     """The machine's speed omega [rad/s] over [t_start, t_end] [s] from the dense trajectories of the step's stretches
     (consecutive; the last ends at t_end unless the run failed in it), sampled at 2 m + 1 evenly spaced times, both
-    ends included, m the fewest pieces no longer than `longest` [s]."""
-    times = speed_samples_times(t_start, t_end, longest)
+    ends included, m the fewest pieces no longer than `longest` [s] (speed_samples_times): speed_sample_rows' rows as
+    lists."""
+    times, speeds = speed_sample_rows(stretches, t_start, t_end, longest, dense_speeds).tolist()
+    return times, speeds
+
+
+def speed_sample_rows(
+    stretches: list[Trajectory], t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE, dense_speeds=None
+) -> np.ndarray:
+    """speed_samples' times [s] and speeds [rad/s], the rows of one array. dense_speeds: on the fast path what samples
+    the dense output of one compiled call in one compiled call (dense_speeds_for), taken for a stretch of one such
+    piece over the whole step (most steps)."""
     if len(stretches) == 1 and stretches[0].t_start <= t_start and stretches[0].t_end >= t_end:  # one stretch over
-        return times.tolist(), stretches[0](times)[1].tolist()  # the whole step (most steps): no masks
+        if dense_speeds is not None and len(stretches[0].interpolants) == 1:  # the whole step (most steps): no masks
+            return dense_speeds(stretches[0].interpolants[0], t_start, t_end, longest)
+        times = speed_samples_times(t_start, t_end, longest)
+        return np.vstack((times, stretches[0](times)[1]))
+    times = speed_samples_times(t_start, t_end, longest)
     speeds = np.full(times.size, math.nan)  # NaN beyond a failed stretch's end
     for stretch in stretches:
         inside = (times >= stretch.t_start) & (times <= stretch.t_end)
         if inside.any():
             speeds[inside] = stretch(times[inside])[1]
-    return times.tolist(), speeds.tolist()
-
-
-def speed_samples_times(t_start: float, t_end: float, longest: float = MAX_SPEED_PIECE) -> np.ndarray:
-    """The times [s] at which speed_samples samples [t_start, t_end] [s]: 2 m + 1 evenly spaced, both ends included, m
-    the fewest pieces no longer than `longest` [s]; np.linspace's numbers in its operations (the steps times the
-    spacing, plus t_start, the last t_end) without its set-up, which cost as much as the rest of a speed sample
-    (docs/speed.md, "A sixth sitting")."""
-    count = 2 * max(1, math.ceil((t_end - t_start) / longest - 1e-9)) + 1
-    times = _step_numbers(count) * ((t_end - t_start) / (count - 1))
-    times += t_start
-    times[-1] = t_end
-    return times
-
-
-@functools.cache
-def _step_numbers(count: int) -> np.ndarray:
-    """0, 1, ..., count - 1 as floats (read only: speed_samples_times' factors)."""
-    numbers = np.arange(count, dtype=float)
-    numbers.flags.writeable = False
-    return numbers
+    return np.vstack((times, speeds))
 
 
 def piecewise_quadratic_at(samples: Samples, times: list[float]) -> list[float]:
@@ -874,6 +884,26 @@ def pieces_for(subsystem: MachineModel):
     from mech_regulator.solvers.compiled.run import compiled_pieces  # numba is imported only when needed
 
     return compiled_pieces(subsystem)
+
+
+def dense_speeds_for(subsystem: MachineModel):
+    """What samples the speed of one compiled call's dense output in one compiled call (speed_samples' dense_speeds):
+    None on the reference path, on solver.path: fast results.StepsDense.speed_samples."""
+    if not runs_compiled(subsystem.scene.solver):
+        return None
+    from mech_regulator.solvers.compiled.results import StepsDense  # numba is imported only when needed
+
+    return StepsDense.speed_samples
+
+
+def one_cycle_back_for(subsystem: MachineModel):
+    """What predicts the machine's speed one cycle of the crank back (quadratics.speeds_one_cycle_back's arguments and
+    result): that function, or on solver.path: fast its compiled twin (solvers/compiled/pieces.py)."""
+    if not runs_compiled(subsystem.scene.solver):
+        return speeds_one_cycle_back
+    from mech_regulator.solvers.compiled.pieces import compiled_speeds_one_cycle_back  # numba only when needed
+
+    return compiled_speeds_one_cycle_back
 
 
 def follow_samples(

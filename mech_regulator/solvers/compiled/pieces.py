@@ -1,23 +1,53 @@
 """The governor's speed pieces as the compiled stepper's rows (solvers/compiled/run.py, integrators' `pieces`): a
 co-simulated governor follows the machine's speed in some 17 quadratic pieces an exchange (solvers/cosim.py), whose
 load pieces and p values built in Python one by one (cosim.speed_pieces, CompiledScene.piece_values) cost about half
-as much as the compiled call that steps them (docs/speed.md, "A seventh sitting"). Compiled or loaded with a stepper
-(steppers.stepper), for the argument types its calls have (SIGNATURE), as dense.steps_dense."""
+as much as the compiled call that steps them (docs/speed.md, "A seventh sitting"); and the machine's speed samples
+and its prediction one cycle back (quadratics' functions compiled as they are: some 25 and 30 us an exchange in
+Python, docs/speed.md, "An eighth sitting"). Compiled or loaded with a stepper (steppers.stepper), for the argument
+types their calls have (SIGNATURE, SAMPLED_SPEEDS_SIGNATURE, CYCLE_BACK_SIGNATURE), as dense.steps_dense."""
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit, types
+from numba.extending import register_jitable
 
 from mech_regulator import numba_cache
-from mech_regulator.solvers.quadratics import quadratic_through, speed_load_line
+from mech_regulator.solvers.compiled.dense import SIGNATURE as DENSE_SIGNATURE
+from mech_regulator.solvers.compiled.dense import steps_dense
+from mech_regulator.solvers.quadratics import (
+    quadratic_through,
+    speed_load_line,
+    speed_samples_times,
+    speeds_one_cycle_back,
+)
 
 numba_cache.install()  # before the first njit(cache=True): keyed on the package's source
 
 SIGNATURE = (types.float64[::1], types.float64[::1], types.float64[:, ::1])
 """speed_rows' argument types: the speed samples' times and speeds, and the rows it writes."""
 
+CYCLE_BACK_SIGNATURE = (
+    types.float64[:, ::1],
+    types.float64,
+    types.float64,
+    types.float64,
+    types.float64,
+    types.float64,
+)
+"""speeds_one_cycle_back's argument types: the kept samples and five floats."""
+
+SAMPLED_SPEEDS_SIGNATURE = DENSE_SIGNATURE[:5] + (types.float64, types.float64, types.float64)
+"""sampled_speeds' argument types: a compiled call's arrays (results.StepsDense's), then three floats."""
+
 _quadratic_through = njit(cache=True)(quadratic_through)
 _speed_load_line = njit(cache=True)(speed_load_line)
+for _plain in (
+    quadratic_through,
+    speed_samples_times,
+):  # the plain functions, called from compiled code: compiled there
+    register_jitable(_plain)
+compiled_speeds_one_cycle_back = njit(cache=True)(speeds_one_cycle_back)
 
 
 @njit(cache=True)
@@ -37,3 +67,15 @@ def speed_rows(times, speeds, rows):
         row[0], row[1] = t_end, first
         row[2], row[3], row[4], row[5], row[6] = offset, slope, 1.0, 0.0, 0.0
         row[7], row[8], row[9], row[10], row[11] = t_start, 0.0, 0.0, 1.0, sign
+
+
+@njit(cache=True)
+def sampled_speeds(times, y_old, coefficients, step_offsets, restarted, t_start, t_end, longest):
+    """cosim.speed_samples of one compiled call's dense output (results.StepsDense: its arrays) over [t_start, t_end]
+    [s] within it, the pieces no longer than `longest` [s]: the times (quadratics.speed_samples_times) and the
+    crank's speed [rad/s] there (dense.steps_dense's), the rows of one array, in one call."""
+    at = speed_samples_times(t_start, t_end, longest)
+    samples = np.empty((2, at.size))
+    samples[0] = at
+    samples[1] = steps_dense(times, y_old, coefficients, step_offsets, restarted, at)[1]
+    return samples

@@ -10,6 +10,7 @@ from scipy.integrate import DenseOutput
 
 from mech_regulator.solvers.compiled.dense import steps_dense
 from mech_regulator.solvers.compiled.integrators import FAILED, FAILURES
+from mech_regulator.solvers.compiled.pieces import sampled_speeds
 
 
 class StepsDense(DenseOutput):
@@ -37,6 +38,14 @@ class StepsDense(DenseOutput):
         """The state at t [s] (an array, as scipy's DenseOutput.__call__ passes it)."""
         y = steps_dense(self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t.reshape(-1))
         return y[:, 0] if t.ndim == 0 else y
+
+    def speed_samples(self, t_start: float, t_end: float, longest: float) -> np.ndarray:
+        """cosim.speed_samples over [t_start, t_end] [s] within this output, pieces no longer than `longest` [s]: the
+        times [s] and the crank's speed [rad/s] there, the rows of one array, in one compiled call
+        (pieces.sampled_speeds)."""
+        return sampled_speeds(
+            self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t_start, t_end, longest
+        )
 
 
 class CompiledRun(NamedTuple):

@@ -14,8 +14,14 @@ from mech_regulator.solvers.compiled.dense import SIGNATURE as DENSE_SIGNATURE
 from mech_regulator.solvers.compiled.dense import steps_dense
 from mech_regulator.solvers.compiled.integrators import _integrate
 from mech_regulator.solvers.compiled.locks import method_lock
+from mech_regulator.solvers.compiled.pieces import (
+    CYCLE_BACK_SIGNATURE,
+    SAMPLED_SPEEDS_SIGNATURE,
+    compiled_speeds_one_cycle_back,
+    sampled_speeds,
+    speed_rows,
+)
 from mech_regulator.solvers.compiled.pieces import SIGNATURE as PIECES_SIGNATURE
-from mech_regulator.solvers.compiled.pieces import speed_rows
 from mech_regulator.solvers.compiled.signatures import GUARDS_TYPE, REACTIONS_TYPE, RHS_TYPE
 from mech_regulator.solvers.compiled.steps import _DOP853, _RK4, _RK45, _ROSENBROCK23
 
@@ -357,10 +363,13 @@ def stepper(method: str):
     process compiles or loads only the methods it runs (on a fresh machine some 50 s of CPU for the first to
     compile, some 7 s each further one: warm.py). Under the method's lock (locks.method_lock): a process that finds
     another compiling the same stepper waits and then loads it, rather than compiling it a second time beside it. The
-    evaluation of the steppers' dense output (dense.steps_dense) and the co-simulated governor's speed pieces
-    (pieces.speed_rows) are compiled or loaded with it."""
+    evaluation of the steppers' dense output (dense.steps_dense), the co-simulated governor's speed pieces
+    (pieces.speed_rows), the machine's speed samples (pieces.sampled_speeds) and its prediction one cycle back
+    (pieces.compiled_speeds_one_cycle_back) are compiled or loaded with it."""
     function, signature = _STEPPERS[method]
     steps_dense.compile(DENSE_SIGNATURE)
     speed_rows.compile(PIECES_SIGNATURE)
+    sampled_speeds.compile(SAMPLED_SPEEDS_SIGNATURE)
+    compiled_speeds_one_cycle_back.compile(CYCLE_BACK_SIGNATURE)
     with method_lock(method):
         return njit(signature, cache=True)(function)
