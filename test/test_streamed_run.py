@@ -246,3 +246,17 @@ def test_the_samples_within_a_stretch_are_those_of_the_planned_grid():
             inside = grid[(grid >= low) & (grid <= high)]
             assert np.array_equal(sample_times_within(0.0, duration, rate, low, high), inside), (duration, low, high)
         assert np.array_equal(sample_times_within(0.0, duration, rate, 0.0, duration), grid)
+
+
+def test_a_drive_train_s_section_torques_read_a_few_samples_at_a_time_are_those_read_at_once(monkeypatch):
+    """The largest section torque of each branch (analysis/drivetrain.py read_sections), its samples evaluated 7 at a
+    time instead of EVALUATION_CHUNK: the same peak and time to the bit (a chunk of few long steps holds many
+    samples: clutch_start over 10 000 s is one chunk of 1e7 samples, which evaluated at once took 6.7 GB)."""
+    from mech_regulator.analysis import drivetrain
+
+    model = model_of(shortened("clutch_start", 4.0, solver__path="reference"))
+    trajectory = simulate(model)
+    at_once = drivetrain.drive_train_summary(model, trajectory)["sections"]
+    monkeypatch.setattr(drivetrain, "EVALUATION_CHUNK", 7)
+    a_few_at_a_time = drivetrain.drive_train_summary(model, trajectory)["sections"]
+    assert at_once and a_few_at_a_time == at_once

@@ -102,6 +102,16 @@ BATCH_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+# ... as the recorder reads them: every message kept until its callback takes it. A recorder slower than the machine
+# (the walking beam's 16 columns at 44 times real time: 77 402 of 500 001 exchanges dropped from a reader 2000 batches
+# deep over 10 000 s) then fills its reader, which holds back its acknowledgements until the callback takes messages,
+# and each Batch waits for them (ACKED_EVERY): the run goes at the recorder's pace and drops nothing
+# (docs/ros.md, "A recorder that falls behind").
+RECORD_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_ALL,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
 # The machine's run state (RunState): the latest only, kept for nodes that join late.
 STATUS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,

@@ -37,6 +37,7 @@ from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,
     OK,
+    RECORD_QOS,
     STATE_QOS,
     OutputError,
     RunState,
@@ -192,7 +193,7 @@ class RecorderNode(SteadyNode):
         self.reports: dict[str, Report] = {}  # peer node -> what it refused and what disturbed it, from its latest
         # diagnostics
         governor_states = receive(
-            self, JointState, "governor/state", self.on_governor, STATE_QOS, self.refusals, self.speakers
+            self, JointState, "governor/state", self.on_governor, RECORD_QOS, self.refusals, self.speakers
         )
         self.streams = [governor_states] if self.model.governor is not None else []
         receive(self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers)
@@ -575,7 +576,7 @@ class RecorderNode(SteadyNode):
             and time.monotonic() - waited < STREAMS_WAIT
         ):
             spin_once(self, MATCH_POLL)
-        receive(self, JointState, "machine/moments", self.on_moments, STATE_QOS, self.refusals, self.speakers)
+        receive(self, JointState, "machine/moments", self.on_moments, RECORD_QOS, self.refusals, self.speakers)
 
     def record(self) -> None:
         """Subscribe to the machine (subscribe_to_the_machine), then spin until the machine has finished and
