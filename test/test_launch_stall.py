@@ -5,6 +5,7 @@ stall_report, here half a second of wall time instead of STALL_REPORT (30 s)."""
 from __future__ import annotations
 
 import io
+import signal
 import subprocess
 import sys
 import threading
@@ -67,7 +68,8 @@ def test_a_machine_that_stops_exchanging_is_reported_and_again_when_it_goes_on(t
 def test_the_end_waits_for_a_recorder_writing_a_long_run_s_outputs_and_says_so(monkeypatch, capsys):
     """After the machine has finished, the nodes get END_TIMEOUT and CLOSE_TIME_PER_EXCHANGE for each exchange
     (end_timeout): a node still writing past END_TIMEOUT is waited for, said once, and not killed; one past the
-    whole timeout is killed. Before, the walking beam's recorder was killed 30 s after its 10 000-s run, its summary
+    whole timeout is stopped as Ctrl-C stops it (SIGINT: the recorder writes its summary with what it has), and
+    killed if it is still running `closing` s later. Before, the walking beam's recorder was killed 30 s after its 10 000-s run, its summary
     lost."""
     assert launch.end_timeout(10_000.0, 0.02) == launch.END_TIMEOUT + 500_001 * launch.CLOSE_TIME_PER_EXCHANGE
     monkeypatch.setattr(launch, "END_TIMEOUT", 0.2)
@@ -78,5 +80,10 @@ def test_the_end_waits_for_a_recorder_writing_a_long_run_s_outputs_and_says_so(m
     assert len(said) == 1 and said[0].startswith("mech-regulator: waiting for the recorder node to write its outputs")
     hung = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60.0)"])
     launch._wait_all({"recorder": hung}, 0.5)
-    assert hung.returncode == -9  # killed at the timeout
+    assert hung.returncode == -signal.SIGINT  # stopped at the timeout as Ctrl-C stops it (the recorder then closes)
+    deaf = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); print(flush=True); time.sleep(60.0)"
+    deaf_node = subprocess.Popen([sys.executable, "-c", deaf], stdout=subprocess.PIPE)
+    deaf_node.stdout.readline()  # its SIGINT handler is set
+    launch._wait_all({"recorder": deaf_node}, 0.5, closing=0.5)
+    assert deaf_node.returncode == -signal.SIGKILL  # still running `closing` s after the SIGINT: killed
     assert capsys.readouterr().err == ""  # quiet

@@ -448,10 +448,11 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
 
 
 def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
-    """The recorder stopped (SIGSTOP) for 12 s of wall time in the middle of a run whose exchanges go at some 2000 a
-    second: the machine's batches wait for its acknowledgements (nodes.common.Batch, ACKED_EVERY) instead of running
-    past what their publisher's history keeps, so the run ends `complete` with every exchange in its CSV. Before, the
-    recorder missed thousands of exchanges and the run ended `interrupted`."""
+    """The recorder stopped (SIGSTOP) for 18 s of wall time in the middle of a run whose exchanges go at some 2000 a
+    second: the machine's batches wait for its acknowledgements (nodes.common.Batch, ACKED_EVERY, wait_for_readers)
+    instead of running past what their publisher's history keeps, and say so on the log, so the run ends `complete`
+    with every exchange in its CSV. Before, the recorder missed thousands of exchanges and the run ended
+    `interrupted`: with no wait at all, and (a wait of at most 10 s) with a stop longer than that."""
     played = 800.0
     folder = tmp_path / "held"
     folder.mkdir()
@@ -473,7 +474,7 @@ def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
         pids = [int(pid) for pid in listing if str(folder) in Path(f"/proc/{pid}/cmdline").read_text(errors="replace")]
         assert len(pids) == 1, listing
         os.kill(pids[0], signal.SIGSTOP)
-        time.sleep(12.0)
+        time.sleep(18.0)  # (past the participant's lease, some 30 s here, the machine would no longer wait)
         os.kill(pids[0], signal.SIGCONT)
         stdout, stderr = run.communicate(timeout=4 * WAIT)
     finally:
@@ -485,3 +486,4 @@ def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
     assert summary["status"] == "complete" and summary["t_end"] == played, described
     exchanges = round(played / load_scene("lathe").solver.exchange_step) + 1  # the lathe's load is constant
     assert summary["samples"] == exchanges and csv.read_bytes().count(b"\n") == 1 + exchanges, described
+    assert "machine/moments (the recorder among them) have not acknowledged" in rrd.with_suffix(".log").read_text()

@@ -132,7 +132,7 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
     from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
 
     published = _Published()
-    batch = Batch(published)
+    batch = Batch(published, print)
     largest = 2**53  # [ns]: about 104 days, still exact in a double
     batch.add(0, ["drive", "load"], [], [], [1.5, -2.0], wall=12.5)  # wall: when the machine published t = 0 [s]
     batch.add(20_000_000, ["sleeve", "arm"], [0.03, 0.1], [0.0, -0.2], [])
@@ -219,7 +219,7 @@ def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
         for when, load in items:
             batch.add(when, ["load"], [], [], [load])
 
-    batch = Batch(published, complete)
+    batch = Batch(published, print, complete)
     for when in range(BATCH_SIZE - 1):
         batch.defer((when, 2.0 * when))
         batch.send_when_due()
@@ -232,6 +232,44 @@ def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
     batch.defer((BATCH_SIZE, 5.0))
     batch.send()  # the run ends: what was deferred goes out at once
     assert len(completions) == 2 and [when for when, _ in batch_groups(published[1])] == [BATCH_SIZE]
+
+
+class _Acknowledging(_Published):
+    """A stand-in publisher whose readers acknowledge what it sent after the waits `acknowledged` says (True: within
+    that wait), noting the length [s] of each wait asked for."""
+
+    topic_name = "/machine/moments"
+
+    def __init__(self, acknowledged: list[bool]):
+        super().__init__()
+        self.acknowledged, self.waits = acknowledged, []
+
+    def wait_for_all_acked(self, timeout) -> bool:
+        self.waits.append(timeout.nanoseconds * 1e-9)
+        return self.acknowledged.pop(0)
+
+
+def test_a_batch_waits_for_its_readers_and_says_so_once_they_are_late():
+    """wait_for_readers: at once when the readers have acknowledged everything; past ACK_PATIENCE s it says that
+    the run waits for the recorder and waits up to ACK_CATCH_UP in all; still unacknowledged, it says the run goes
+    on without them. Batch.deliver (the run's end) sends what waits, then waits."""
+    from mech_regulator.nodes.common import ACK_CATCH_UP, ACK_PATIENCE, Batch, wait_for_readers
+
+    for acknowledged, result, said in (
+        ([True], True, []),
+        ([False, True], True, ["waits for them, at most 50 s more"]),
+        ([False, False], False, ["waits for them", "goes on without them"]),
+    ):
+        publisher, lines = _Acknowledging(list(acknowledged)), []
+        assert wait_for_readers(publisher, lines.append) is result
+        assert publisher.waits == [ACK_PATIENCE, ACK_CATCH_UP - ACK_PATIENCE][: len(acknowledged)]
+        assert len(lines) == len(said) and all(part in line for part, line in zip(said, lines)), lines
+        assert all("/machine/moments (the recorder among them)" in line for line in lines[:1])
+    publisher = _Acknowledging([True])
+    batch = Batch(publisher, print)
+    batch.add(0, ["load"], [], [], [1.0])
+    batch.deliver()
+    assert len(publisher) == 1 and publisher.waits == [ACK_PATIENCE]
 
 
 # -------------------------------------------------------------------------------------------------

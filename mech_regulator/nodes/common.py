@@ -64,7 +64,8 @@ BATCH_HISTORY_DEPTH = 200  # batched messages (class Batch) kept by each of thei
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACKED_EVERY = BATCH_HISTORY_DEPTH // 2  # batches a Batch sends between two waits for its readers' acknowledgements
-ACK_CATCH_UP = 10.0  # [s] of wall time a Batch waits at most for its readers to acknowledge what it sent
+ACK_CATCH_UP = 60.0  # [s] of wall time a Batch waits at most for its readers to acknowledge what it sent
+ACK_PATIENCE = 10.0  # [s] of wall time of that wait before the node says it waits (wait_for_readers)
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
 DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the process ends anyway (end_if_stuck)
 TEARDOWN_ALARM = 5  # [s] of wall time after which SIGALRM ends a node whose destruction hangs holding the GIL
@@ -421,13 +422,14 @@ class Batch:
     otherwise wait, and at once (send) when the run ends, pauses or resets. A sender whose groups cost less computed
     together (the machine's moments: one vectorised call for the batch instead of one per exchange) defers them
     (defer) and gives `complete`, which adds them (add) when the batch goes out; a batch holds either kind only.
-    Every ACKED_EVERY batches it first waits, at most ACK_CATCH_UP s of wall time, until its readers (the recorder)
-    have acknowledged all it sent: a recorder held back (a loaded machine, a process stopped) slows the run instead of
-    losing the batches its publisher's history of BATCH_HISTORY_DEPTH no longer holds when it asks for them again
-    (docs/ros.md, "A recorder that falls behind")."""
+    Every ACKED_EVERY batches, and at the run's end (deliver), it first waits, at most ACK_CATCH_UP s of wall time,
+    until its readers (the recorder) have acknowledged all it sent (wait_for_readers): a recorder held back (a loaded
+    machine, a process stopped) slows the run instead of losing the batches its publisher's history of
+    BATCH_HISTORY_DEPTH no longer holds when it asks for them again (docs/ros.md, "A recorder that falls behind")."""
 
-    def __init__(self, publisher, complete: Callable[[list], None] | None = None):
+    def __init__(self, publisher, say: Callable[[str], object], complete: Callable[[list], None] | None = None):
         self.publisher = publisher
+        self.say = say  # a warning on the node's log (wait_for_readers)
         self.fields: tuple[list, list, list, list] = ([], [], [], [])  # names, positions, velocities, efforts
         self.groups = 0
         self.last = 0  # [ns] the newest exchange time waiting
@@ -480,11 +482,35 @@ class Batch:
             message = JointState(name=names, position=positions, velocity=velocities, effort=efforts)
             message.header.stamp = stamp(self.last)
             if self.unacknowledged >= ACKED_EVERY:  # the publisher keeps BATCH_HISTORY_DEPTH: none lost unsent
-                self.publisher.wait_for_all_acked(Duration(seconds=ACK_CATCH_UP))
+                wait_for_readers(self.publisher, self.say)
                 self.unacknowledged = 0
             self.publisher.publish(message)
             self.unacknowledged += 1
             self.fields, self.groups = ([], [], [], []), 0
+
+    def deliver(self) -> None:
+        """Send the waiting groups, then wait (wait_for_readers) until the readers have acknowledged every batch: the
+        end of a run, before the node ends and its publisher's history with it."""
+        self.send()
+        wait_for_readers(self.publisher, self.say)
+
+
+def wait_for_readers(publisher, say: Callable[[str], object]) -> bool:
+    """Whether every reader of `publisher` acknowledged all it sent within ACK_CATCH_UP s of wall time (waiting until
+    then). A wait past ACK_PATIENCE s is said (`say`: the node's log), and so is one that runs out: a recorder held
+    back that long (its process stopped) asks again for batches the publisher may no longer keep, and its summary
+    counts those it lost (or, at the end, misses the machine's last messages and says so). A reader that has gone
+    (its node ended, its lease ran out) is not waited for."""
+    if publisher.wait_for_all_acked(Duration(seconds=ACK_PATIENCE)):
+        return True
+    say(
+        f"the readers of {publisher.topic_name} (the recorder among them) have not acknowledged its messages for "
+        f"{ACK_PATIENCE:g} s of wall time: the run waits for them, at most {ACK_CATCH_UP - ACK_PATIENCE:g} s more"
+    )
+    if publisher.wait_for_all_acked(Duration(seconds=ACK_CATCH_UP - ACK_PATIENCE)):
+        return True
+    say(f"the readers of {publisher.topic_name} still have not acknowledged its messages: the run goes on without them")
+    return False
 
 
 def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
@@ -605,12 +631,13 @@ def node_label(node_factory: Callable[[], Node]) -> str:
     return label[: -len("Node")].lower() + "_node" if label.endswith("Node") else label
 
 
-def deliver_all(node: Node, publishers: list | None = None) -> None:
-    """Wait (at most ACK_WAIT s each) until every subscriber has acknowledged what the publishers (default: all the
-    node's) sent: a node that ends by itself right after its last message (the governor's last state) must not take
-    it with it. Acknowledgements count only the subscriptions a publisher has matched, and discovery tells a process
-    of a subscription (the graph) and matches its publisher to it (the middleware) separately: so each publisher
-    first waits (at most MATCH_WAIT s) until it has matched as many subscriptions as the graph knows on its topic."""
+def deliver_all(node: Node, publishers: list | None = None, say: Callable[[str], object] | None = None) -> None:
+    """Wait (at most ACK_WAIT s each; with `say`, as wait_for_readers: at most ACK_CATCH_UP s, a long wait said) until
+    every subscriber has acknowledged what the publishers (default: all the node's) sent: a node that ends by itself
+    right after its last message (the governor's last state, the machine's `finished`) must not take it with it.
+    Acknowledgements count only the subscriptions a publisher has matched, and discovery tells a process of a
+    subscription (the graph) and matches its publisher to it (the middleware) separately: so each publisher first
+    waits (at most MATCH_WAIT s) until it has matched as many subscriptions as the graph knows on its topic."""
     for publisher in node.publishers if publishers is None else publishers:
         deadline = time.monotonic() + MATCH_WAIT  # a subscription the graph still lists may never match (its node
         # was killed and its lease has not run out yet, or its QoS does not fit)
@@ -619,7 +646,10 @@ def deliver_all(node: Node, publishers: list | None = None) -> None:
             and time.monotonic() < deadline
         ):
             time.sleep(MATCH_POLL)
-        publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+        if say is None:
+            publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+        else:
+            wait_for_readers(publisher, say)
 
 
 def spin_once(node: Node, timeout: float) -> None:

@@ -98,7 +98,7 @@ class GovernorNode(SteadyNode):
             self.speakers.allow(topic, machine)
         self.throttle_publisher = self.create_publisher(JointState, "throttle", COMMAND_QOS)
         self.answer = JointMessage()  # throttle, refilled at every exchange
-        self.states = Batch(self.create_publisher(JointState, "governor/state", BATCH_QOS))
+        self.states = Batch(self.create_publisher(JointState, "governor/state", BATCH_QOS), self.get_logger().warning)
         self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)
@@ -115,12 +115,14 @@ class GovernorNode(SteadyNode):
 
     def on_run_state(self, state: RunStateMessage) -> None:
         """Send the states gathered so far (the machine stops, pauses or starts again), and end by itself when the
-        machine has finished, with its last diagnostics (what it rejected, even in a run shorter than their
-        period)."""
-        self.states.send()
+        machine has finished, once the recorder has them all (common.Batch.deliver), with its last diagnostics (what
+        it rejected, even in a run shorter than their period)."""
         self.done = state.state == RunState.FINISHED
         if self.done:
+            self.states.deliver()  # every state acknowledged by the recorder before the node ends
             self.report()
+        else:
+            self.states.send()
 
     def on_joint_states(self, message: JointState) -> None:
         """Answer the crank speed at a stamped time with the throttle at that time (speakers: from the machine only;

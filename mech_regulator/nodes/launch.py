@@ -332,7 +332,8 @@ def main_job(
                 started,
             )
             if processes["machine"].returncode == 0:  # the others end by themselves once the machine has finished
-                _wait_all(processes, end_timeout(duration or scene.scenario.duration, exchange_step), quiet)
+                timeout = end_timeout(duration or scene.scenario.duration, exchange_step)
+                _wait_all(processes, timeout, quiet, closing=timeout - END_TIMEOUT + STOP_TIMEOUT)
         except (KeyboardInterrupt, ImportError) as error:
             if isinstance(error, ImportError) and not ctrl_c:
                 raise
@@ -550,9 +551,13 @@ def end_timeout(duration: float, exchange_step: float) -> float:
     return END_TIMEOUT + CLOSE_TIME_PER_EXCHANGE * (duration / exchange_step + 1)
 
 
-def _wait_all(processes: dict[str, NodeProcess], timeout: float, quiet: bool = True) -> None:
-    """Wait for the nodes to end; kill those still running after timeout [s] of wall time in all. Not quiet: a wait
-    past END_TIMEOUT is said once, naming the nodes still running and how long they may still take."""
+def _wait_all(
+    processes: dict[str, NodeProcess], timeout: float, quiet: bool = True, closing: float = STOP_TIMEOUT
+) -> None:
+    """Wait for the nodes to end; stop those still running after timeout [s] of wall time in all as Ctrl-C does
+    (SIGINT: the recorder closes with what it has and writes its summary), and kill those still running `closing` s
+    of wall time later. Not quiet: a wait past END_TIMEOUT is said once, naming the nodes still running and how long
+    they may still take."""
     deadline = time.monotonic() + timeout
     said = quiet
     for process in processes.values():
@@ -562,8 +567,12 @@ def _wait_all(processes: dict[str, NodeProcess], timeout: float, quiet: bool = T
                 break
             except subprocess.TimeoutExpired:
                 if time.monotonic() >= deadline:
-                    process.kill()
-                    process.wait()
+                    process.send_signal(signal.SIGINT)
+                    try:
+                        process.wait(closing)
+                    except subprocess.TimeoutExpired:
+                        process.kill()
+                        process.wait()
                     break
                 if not said:
                     running = [name for name, other in processes.items() if other.poll() is None]

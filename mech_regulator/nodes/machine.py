@@ -263,7 +263,11 @@ class MachineNode(MachineExchange, SteadyNode):
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
-        self.moments = Batch(self.create_publisher(JointState, "machine/moments", BATCH_QOS), self.complete_moments)
+        self.moments = Batch(
+            self.create_publisher(JointState, "machine/moments", BATCH_QOS),
+            self.get_logger().warning,
+            self.complete_moments,
+        )
         self.clock_publisher = self.create_publisher(Clock, "/clock", 10) if self.publish_clock else None
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.status_publisher = self.create_publisher(String, "machine/status", STATUS_QOS)
@@ -538,7 +542,8 @@ class MachineNode(MachineExchange, SteadyNode):
         """An external controller gave no throttle within peer_timeout: send what was computed (the recorder keeps
         it), then end naming the controller (PeerError: exit code 1)."""
         self.send_moments()
-        deliver_all(self, [self.joint_publisher, self.moments.publisher])
+        self.moments.deliver()
+        deliver_all(self, [self.joint_publisher])
         names = controller.publisher_names(self) or self.controllers
         raise PeerError(
             controller.silent(
@@ -623,11 +628,14 @@ class MachineNode(MachineExchange, SteadyNode):
 
     def finish(self) -> None:
         """Say the run is over (machine/status finished, diagnostics with finished_at_ns) once every subscriber
-        has the last state."""
-        deliver_all(self, [self.joint_publisher, self.moments.publisher])
+        has the last state, and wait until the readers have both (as the recorder's batches: common.wait_for_readers;
+        a recorder held back past ACK_WAIT would miss them, and a run with every exchange in would end
+        `interrupted`)."""
+        self.moments.deliver()
+        deliver_all(self, [self.joint_publisher])
         self.publish_status(RunState.FINISHED)
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))
-        deliver_all(self, [self.status_publisher, self.diagnostics_publisher])
+        deliver_all(self, [self.status_publisher, self.diagnostics_publisher], say=self.get_logger().warning)
         self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
 
 

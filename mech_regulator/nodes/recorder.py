@@ -80,8 +80,11 @@ FLUSH_PERIOD = 0.5  # [s] of wall time between writes to the CSV, and to the rec
 RECORDING_CHUNK = 5000  # exchanges gathered before they go to a recording file alone (no live viewer): Rerun keeps
 # an entry of about 1.5 kB per chunk it wrote (a series' samples of one send) for the file's footer until the end,
 # so that sends of 0.5 s would cost ~70 MB an hour of wall time; 5000 exchanges (100 s of engine_direct) ~1 MB an hour
-FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished (a machine
-# that failed: only those that can still come, RecorderNode.all_that_can_come)
+FINISH_GRACE = 10.0  # [s] of wall time the last samples get to arrive after the machine has finished (or left without
+# its end reaching the recorder), counted from the latest sample taken: a recorder still taking the samples it fell
+# behind on is not cut short (a machine that failed: only those that can still come, RecorderNode.all_that_can_come)
+HELD_BACK = 1.0  # [s] of wall time a wait for callbacks (IDLE_SPIN_SLICE) may take before the recorder counts its
+# process as held back (stopped, starved): FINISH_GRACE then starts again
 STREAMS_WAIT = 10.0  # [s] of wall time the recorder waits for its streams' publishers (subscribe_to_the_machine)
 DIAGNOSTICS_PERIOD = 1.0  # [s] of wall time between the recorder's diagnostics
 LEVELS = {DiagnosticStatus.WARN: "WARN", DiagnosticStatus.ERROR: "ERROR"}
@@ -366,10 +369,19 @@ class RecorderNode(SteadyNode):
 
     def complete(self) -> bool:
         """Whether the machine finished and its last samples (and the governor's) and its last diagnostics are in."""
-        return (
-            self.finished_at is not None
-            and self.machine_reported_end
-            and all(self.rows.received_until(stream, self.finished_at) for stream in (MACHINE, GOVERNOR))
+        return self.machine_reported_end and self.last_samples_in()
+
+    def machine_gone(self) -> bool:
+        """Whether the machine has sent samples and no longer publishes them: its node ended, or its lease ran out
+        while this process was stopped (docs/ros.md, "A recorder that falls behind"), before its end (`finished` on
+        machine/status, kept for late readers) reached the recorder."""
+        return self.rows.received[MACHINE] > 0 and self.machine_moments.get_publisher_count() == 0
+
+    def last_samples_in(self) -> bool:
+        """Whether the machine has finished and its last samples (and the governor's) are in: complete() then waits
+        for its last diagnostics only, which say what it refused and what disturbed it."""
+        return self.finished_at is not None and all(
+            self.rows.received_until(stream, self.finished_at) for stream in (MACHINE, GOVERNOR)
         )
 
     def machine_failed(self) -> bool:
@@ -411,7 +423,16 @@ class RecorderNode(SteadyNode):
             status, message = (
                 cosimulation_ending(run_data)
                 if self.complete()
-                else ("interrupted", f"the recording stops at t = {run_data.times[-1]:.6g} s")
+                else (
+                    "interrupted",
+                    f"the recording stops at t = {run_data.times[-1]:.6g} s"
+                    + (
+                        ", every exchange in, but the machine's last diagnostics (what it refused, what disturbed "
+                        "it) did not come"
+                        if self.last_samples_in()
+                        else ""
+                    ),
+                )
             )
             if self.machine_failed():  # the machine's own end
                 status, message = self.machine_result
@@ -576,18 +597,36 @@ class RecorderNode(SteadyNode):
             and time.monotonic() - waited < STREAMS_WAIT
         ):
             spin_once(self, MATCH_POLL)
-        receive(self, JointState, "machine/moments", self.on_moments, RECORD_QOS, self.refusals, self.speakers)
+        self.machine_moments = receive(
+            self, JointState, "machine/moments", self.on_moments, RECORD_QOS, self.refusals, self.speakers
+        )
 
     def record(self) -> None:
         """Subscribe to the machine (subscribe_to_the_machine), then spin until the machine has finished and
         everything is in, after a failed run everything that can still come (all_that_can_come), or Ctrl-C; should
-        the last samples not come within FINISH_GRACE s of the machine's end, close with what there is (the summary
-        says where it stops)."""
+        the last samples not come within FINISH_GRACE s of wall time of the machine's end (or of its leaving without
+        its end reaching the recorder) and of the latest sample taken, close with what there is (the summary says where
+        it stops)."""
         self.subscribe_to_the_machine()
-        finished_seen = None
+        taken = 0  # the samples taken so far (of both streams)
+        waiting_since = time.monotonic()  # [s] wall time since which nothing came that the end waits for
         while rclpy.ok() and not self.complete():
+            before = time.monotonic()
             spin_once(self, IDLE_SPIN_SLICE)
+            now = time.monotonic()
+            if sum(self.rows.received.values()) != taken or now - before > HELD_BACK:
+                # samples still come (a recorder catching up), or this process was held back (stopped, starved):
+                # the grace starts again
+                taken, waiting_since = sum(self.rows.received.values()), now
             if self.finished_at is None:
+                if not self.machine_gone():
+                    waiting_since = now
+                elif now - waiting_since > FINISH_GRACE:
+                    self.get_logger().warning(
+                        f"the machine left without its end reaching the recorder: closing with what was received "
+                        f"({self.received()})"
+                    )
+                    break
                 continue
             if self.all_that_can_come():
                 self.get_logger().info(
@@ -595,12 +634,11 @@ class RecorderNode(SteadyNode):
                     f"still come ({self.received()})"
                 )
                 break
-            finished_seen = finished_seen or time.monotonic()
-            if time.monotonic() - finished_seen > FINISH_GRACE:
+            if now - waiting_since > FINISH_GRACE:
+                missing = "its last diagnostics" if self.last_samples_in() else "its last samples"
                 self.get_logger().warning(
-                    f"the machine finished at t = {seconds(self.finished_at):.6g} s but "
-                    f"its last samples did not come within {FINISH_GRACE:g} s: closing "
-                    f"with what was received ({self.received()})"
+                    f"the machine finished at t = {seconds(self.finished_at):.6g} s but {missing} did not come "
+                    f"within {FINISH_GRACE:g} s: closing with what was received ({self.received()})"
                 )
                 break
         self.close()
