@@ -769,10 +769,14 @@ def test_the_recorder_closes_a_failed_run_once_all_that_can_still_come_is_in(
     recorder.streams = [mock.Mock(**{"get_publisher_count.return_value": governor_publishers})]
     recorder.finished_at, recorder.machine_result = None, (machine_status, "")
     recorder.machine_reported_end = machine_reported_end
+    recorder.progress_publisher = mock.Mock()
     machine_times = [0, 2_000_000, 4_000_000] if governor_times else [0]
     recorder.on_moments(_machine_batch(machine_times))
+    assert not recorder.progress_publisher.publish.called  # no governor state yet: nothing taken of every stream
     if governor_times:
         recorder.on_governor(_governor_batch(governor_times, throttle=0.5))
+        progress = recorder.progress_publisher.publish.call_args.args[0].stamp  # recorder/progress: both streams'
+        assert progress.sec * 1_000_000_000 + progress.nanosec == min(machine_times[-1], governor_times[-1])
     assert not recorder.all_that_can_come()  # the machine has not finished
     recorder.finished_at = machine_times[-1]
     assert recorder.all_that_can_come() == closes

@@ -66,6 +66,8 @@ BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (clas
 ACKED_EVERY = BATCH_HISTORY_DEPTH // 2  # batches a Batch sends between two waits for its readers' acknowledgements
 ACK_CATCH_UP = 60.0  # [s] of wall time a Batch waits at most for its readers to acknowledge what it sent
 ACK_PATIENCE = 10.0  # [s] of wall time of that wait before the node says it waits (wait_for_readers)
+RECORDER_LEAD = 10_000  # exchanges the machine may run ahead of what its recorder has taken (recorder/progress)
+PROGRESS_EVERY = 100  # exchanges between two looks of the machine at recorder/progress
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
 DESTROY_WAIT = 3.0  # [s] of wall time destroying a node may take before the process ends anyway (end_if_stuck)
 TEARDOWN_ALARM = 5  # [s] of wall time after which SIGALRM ends a node whose destruction hangs holding the GIL
@@ -112,6 +114,13 @@ RECORD_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_ALL,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+# The recorder's progress (recorder/progress): the latest only.
+PROGRESS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
 )
 # The machine's run state (RunState): the latest only, kept for nodes that join late.
 STATUS_QOS = QoSProfile(

@@ -60,13 +60,17 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, String
+from std_msgs.msg import Float64, Header, String
 from std_srvs.srv import Trigger
 
 from mech_regulator.nodes import controller
 from mech_regulator.nodes.common import (
+    ACK_PATIENCE,
     BATCH_QOS,
     COMMAND_QOS,
+    PROGRESS_EVERY,
+    PROGRESS_QOS,
+    RECORDER_LEAD,
     STATE_QOS,
     STATUS_QOS,
     Batch,
@@ -91,10 +95,12 @@ from mech_regulator.nodes.common import (
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.machine_exchange import MachineExchange
 from mech_regulator.nodes.trust import (
+    BadMessage,
     Refusals,
     Speakers,
     namesakes,
     receive,
+    stamp_of,
 )
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import MachineStepper, exchange_times_refusal, seconds, to_nanoseconds
@@ -260,6 +266,8 @@ class MachineNode(MachineExchange, SteadyNode):
             )
         self.scenario_name = peer_parameter(self, LOCKSTEP_INPUTS["load"][0])
         self.speakers.allow("load_torque_stamped", self.scenario_name)
+        self.speakers.allow("recorder/progress", peer_parameter(self, "recorder"))
+        self.recorded_ns: int | None = None  # the newest exchange time the recorder has taken (recorder/progress)
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
@@ -293,6 +301,9 @@ class MachineNode(MachineExchange, SteadyNode):
                 self.speakers,
                 pass_speaker=topic == "load_torque",  # (a load poked from outside: MachineExchange.on_load)
             )
+        self.recorder_progress = receive(
+            self, Header, "recorder/progress", self.on_recorder_progress, PROGRESS_QOS, self.refusals, self.speakers
+        )
         self.add_post_set_parameters_callback(self.on_parameters)
         self.now_ns = 0
         self.state_message = JointMessage()  # joint_states, refilled at every exchange
@@ -400,6 +411,7 @@ class MachineNode(MachineExchange, SteadyNode):
         self.publish_status()
         while rclpy.ok():
             self.now_ns, next_ns = self.exchanges.now, self.exchanges.next
+            self.keep_pace_with_the_recorder()
             if self.corrects:  # the step predicted with the last step's load: the new one comes with the throttle
                 self.predicted = (
                     self.stepper.predict(seconds(next_ns), self.tentative) if next_ns > self.now_ns else None
@@ -432,6 +444,55 @@ class MachineNode(MachineExchange, SteadyNode):
         if rclpy.ok():
             self.send_moments()
             self.finish()
+
+    def on_recorder_progress(self, message: Header) -> None:
+        """recorder/progress (speaker checked): the newest exchange time [ns] up to which the recorder has taken every
+        stream."""
+        self.recorded_ns = stamp_of(message.stamp)
+
+    def read_recorder_progress(self) -> None:
+        """Take what recorder/progress holds (on_recorder_progress) straight from the subscription, its speaker
+        checked as `receive` checks it: in the machine node the EventsExecutor was seen not to call this
+        subscription's callback (its messages stayed in the reader; not traced), so the machine does not wait for the
+        executor to hand them over."""
+        while True:
+            with self.recorder_progress.handle:
+                taken = self.recorder_progress.handle.take_message(Header, False)
+            if taken is None:
+                return
+            message, info = taken
+            try:
+                self.speakers.check("recorder/progress", info)
+                self.on_recorder_progress(message)
+            except BadMessage as refused:
+                self.refusals.refuse("recorder/progress", refused.reason, refused.detail, refused.sender)
+
+    def keep_pace_with_the_recorder(self) -> None:
+        """Before the exchange at now_ns: while the recorder has taken less than what the machine sent RECORDER_LEAD
+        exchanges ago (recorder/progress), spin (serving the services) until it catches up, the run's time held; said
+        on the log past ACK_PATIENCE s of wall time. A recorder slower than the machine (a loaded machine: the shaper
+        through the nodes for 10 000 s ended with its recorder 5 minutes behind, 13 203 exchanges it had not yet taken
+        lost with the machine) so sets the run's pace, and what it has not taken stays bounded (docs/ros.md, "A
+        recorder that falls behind"). Not in realtime runs (the wall clock sets their pace), nor once the recorder has
+        gone (no publisher of recorder/progress)."""
+        if self.time_mode == "realtime" or self.published_exchanges % PROGRESS_EVERY:
+            return
+        self.read_recorder_progress()
+        lead = RECORDER_LEAD * self.step_ns
+        if self.recorded_ns is None or self.now_ns - self.recorded_ns <= lead:
+            return
+        waited, said = time.monotonic(), False
+        while rclpy.ok() and self.now_ns - self.recorded_ns > lead and self.recorder_progress.get_publisher_count():
+            self.moments.send_when_due()
+            spin_once(self, SPIN_SLICE)
+            self.read_recorder_progress()
+            self.report()
+            if not said and time.monotonic() - waited > ACK_PATIENCE:
+                self.get_logger().warning(
+                    f"the recorder has taken the exchanges up to t = {seconds(self.recorded_ns):.6g} s only: the run "
+                    f"waits at t = {seconds(self.now_ns):.6g} s until it is within {RECORDER_LEAD} exchanges"
+                )
+                said = True
 
     def wait_while_paused(self, holding: bool) -> None:
         """Between exchanges: spin (serving the services) while paused with no ~/step left, or while holding at

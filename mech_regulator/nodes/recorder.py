@@ -29,7 +29,7 @@ from pathlib import Path
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Header, String
 
 from mech_regulator.analysis import cosimulation_ending, summarise_cosimulation
 from mech_regulator.cli.report.data import to_json
@@ -37,6 +37,7 @@ from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,
     OK,
+    PROGRESS_QOS,
     RECORD_QOS,
     STATE_QOS,
     OutputError,
@@ -52,6 +53,7 @@ from mech_regulator.nodes.common import (
     run,
     scene_model,
     spin_once,
+    stamp,
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
@@ -178,6 +180,7 @@ class RecorderNode(SteadyNode):
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.last_exchanges: list[int] = []  # [ns] the machine's two newest exchange times in the trial
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.progress_publisher = self.create_publisher(Header, "recorder/progress", PROGRESS_QOS)
         self.refusals = Refusals(self, self.report)
         self.speakers = Speakers(self)
         self.peer_names = {role: peer_parameter(self, role) for role in ("machine", "governor", "scenario")}
@@ -297,6 +300,7 @@ class RecorderNode(SteadyNode):
             self.rows.add_machine(when, [phi, omega, *driven.values()], moments["load"], joints["throttle"][0])
             if self.controller == "external":
                 self.recording.add_throttle(when, joints["throttle"][0])
+        self.say_progress()
 
     def on_governor(self, message: JointState) -> None:
         """The governor's state at one or more exchange times (common.Batch), in order, after the last one recorded;
@@ -322,6 +326,15 @@ class RecorderNode(SteadyNode):
             values.update({velocity: joints[name][1] for name, _, velocity in shown if velocity is not None})
             self.rows.add_governor(when, values)
             self.recording.add_governor(when, values)
+        self.say_progress()
+
+    def say_progress(self) -> None:
+        """Publish recorder/progress: the newest exchange time [ns] up to which every stream the run needs has been
+        taken (its header's stamp), so that the machine keeps within RECORDER_LEAD exchanges of it
+        (MachineNode.keep_pace_with_the_recorder)."""
+        newest = [self.rows.newest[stream] for stream in ((MACHINE, GOVERNOR) if self.rows.governed else (MACHINE,))]
+        if None not in newest:
+            self.progress_publisher.publish(Header(stamp=stamp(min(newest))))
 
     def on_governor_event(self, message: String) -> None:
         event = json_message(message.data, GovernorEvent)
