@@ -551,7 +551,7 @@ def settle_mode_in_phase(
     in_phase[0] = phase
     settled, mode = _settle_mode(model, t, in_phase, mode, trajectory)
     phase = float(settled[0])
-    if settled is not in_phase:  # a transition's state: the guard's own array, not written
+    if settled is not in_phase:  # a transition's state, the guard's own array: copied before phi is written
         settled = np.array(settled, dtype=float)
     settled[0] = offset + phase
     return settled, mode, phase

@@ -389,7 +389,6 @@ _KERNELS = {
 def entry_point(kernel):
     """The machine-code entry of one of the kernels compiled with the steppers (_KERNELS) for its signature, compiled
     or loaded here when first asked for (stepper asks for all): calling it skips numba's type dispatch of the
-    arguments (about 1 us of a call of a few us: docs/speed.md, "A ninth sitting"), so its arguments must have
-    exactly those types (C-contiguous float64 arrays where it takes arrays; a float or an array of another layout
-    would be read as one of them)."""
+    arguments (some 0.5 us a call, the switch window's 1.2 us to 0.6: docs/speed.md, "A ninth sitting"), so its
+    arguments must have exactly those types: an array of another dtype or layout would be misread, not refused."""
     return kernel.compile(_KERNELS[kernel])
