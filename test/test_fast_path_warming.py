@@ -406,6 +406,7 @@ from numba.core.event import install_recorder
 from mech_regulator.model import build_model
 from mech_regulator.scene import load_scene
 from mech_regulator.solvers.compiled.dense import steps_dense
+from mech_regulator.solvers.compiled.events import _switch_window
 from mech_regulator.solvers.compiled.pieces import compiled_speeds_one_cycle_back, sampled_speeds, speed_rows
 from mech_regulator.solvers.compiled.steppers import stepper
 from mech_regulator.solvers.cosim import DEFAULT_COUPLING, cosimulate, load_steppers
@@ -417,6 +418,7 @@ pieces_with_the_stepper = [str(signature) for signature in speed_rows.signatures
 machine_with_the_stepper = [
     str(signature) for kernel in (sampled_speeds, compiled_speeds_one_cycle_back) for signature in kernel.signatures
 ]
+window_with_the_stepper = [str(signature) for signature in _switch_window.signatures]
 load_steppers(model, model.scene.solver.exchange_step)
 with install_recorder("numba:compiler_lock") as numba_work:
     run = cosimulate(model, model.scene.solver.exchange_step, coupling=DEFAULT_COUPLING)
@@ -430,6 +432,8 @@ print(json.dumps({
     "machine's samples at the end": [
         str(signature) for kernel in (sampled_speeds, compiled_speeds_one_cycle_back) for signature in kernel.signatures
     ],
+    "switch window with the stepper": window_with_the_stepper,
+    "switch window at the end": [str(signature) for signature in _switch_window.signatures],
     "numba work at the exchanges": len(numba_work.buffer),
 }))
 """
@@ -442,8 +446,8 @@ def test_what_the_main_jobs_nodes_run_is_compiled_before_they_start():
     itself. In a fresh Python (nothing loaded by other tests), engine_direct's co-simulation as the nodes run it (their
     default coupling, the scene's exchange step): the evaluation of the dense output, which every exchange reads, and
     the governor's speed pieces (pieces.speed_rows), the machine's speed samples and its prediction one cycle back
-    (pieces.sampled_speeds, pieces.compiled_speeds_one_cycle_back) are compiled with the stepper, for the argument
-    types the run
+    (pieces.sampled_speeds, pieces.compiled_speeds_one_cycle_back) and the switch window a compiled call starts in
+    (events._switch_window, called from Python) are compiled with the stepper, for the argument types the run
     gives them (the first compiled at its first call, some 1 s of CPU cold after the announced compile); and numba takes its compiler lock, which it takes for every compile and
     every load from its disk cache, not once at the exchanges after load_steppers (measured without the
     load_steppers call: 40 times)."""
@@ -458,4 +462,6 @@ def test_what_the_main_jobs_nodes_run_is_compiled_before_they_start():
     assert outcome["speed pieces at the end"] == outcome["speed pieces with the stepper"], outcome
     assert len(outcome["machine's samples with the stepper"]) == 2, outcome
     assert outcome["machine's samples at the end"] == outcome["machine's samples with the stepper"], outcome
+    assert len(outcome["switch window with the stepper"]) == 1, outcome
+    assert outcome["switch window at the end"] == outcome["switch window with the stepper"], outcome
     assert outcome["numba work at the exchanges"] == 0, outcome

@@ -142,13 +142,20 @@ def test_a_restart_that_makes_no_progress_ends_the_fast_run_failed(monkeypatch):
     """A switch window that the phase is always just below (the kind of restart that spun before): the stepper's
     window guard fires at its start, again and again; the run ends failed, naming the time, the restart and the
     state, after MAX_RESTARTS_WITHOUT_PROGRESS of them."""
-    true_window = run.switch_window
+    true_layout = run._Layout.of
 
-    def window_ahead(grid, period, phase, forward):
-        lo, hi = true_window(grid, period, phase, forward)
-        return (phase + 1e-9, hi) if phase > 0.5 else (lo, hi)  # the edge ahead of where the crank is
+    def with_window_ahead(model, compiled):
+        layout = true_layout(model, compiled)
+        true_window = layout.switch_window  # the compiled time_domain.switch_window a call starts in
 
-    monkeypatch.setattr(run, "switch_window", window_ahead)
+        def window_ahead(grid, period, phase, forward):
+            lo, hi = true_window(grid, period, phase, forward)
+            return (phase + 1e-9, hi) if phase > 0.5 else (lo, hi)  # the edge ahead of where the crank is
+
+        return layout._replace(switch_window=window_ahead)
+
+    monkeypatch.setattr(run, "_LAYOUTS", {})  # the layouts made anew here, and dropped after
+    monkeypatch.setattr(run._Layout, "of", with_window_ahead)
     trajectory = simulate(model_of(shortened("engine_direct", 0.3, solver__path="fast")))
     assert trajectory.status == "failed"
     assert "no progress at t = " in trajectory.message and "switch angle" in trajectory.message

@@ -898,12 +898,14 @@ def dense_speeds_for(subsystem: MachineModel):
 
 def one_cycle_back_for(subsystem: MachineModel):
     """What predicts the machine's speed one cycle of the crank back (quadratics.speeds_one_cycle_back's arguments and
-    result): that function, or on solver.path: fast its compiled twin (solvers/compiled/pieces.py)."""
+    result): that function, or on solver.path: fast its compiled twin (solvers/compiled/pieces.py), by its entry
+    (steppers.entry_point)."""
     if not runs_compiled(subsystem.scene.solver):
         return speeds_one_cycle_back
     from mech_regulator.solvers.compiled.pieces import compiled_speeds_one_cycle_back  # numba only when needed
+    from mech_regulator.solvers.compiled.steppers import entry_point
 
-    return compiled_speeds_one_cycle_back
+    return entry_point(compiled_speeds_one_cycle_back)
 
 
 def follow_samples(

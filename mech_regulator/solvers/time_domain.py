@@ -549,10 +549,12 @@ def settle_mode_in_phase(
     phase."""
     in_phase = np.array(y, dtype=float)
     in_phase[0] = phase
-    in_phase, mode = _settle_mode(model, t, in_phase, mode, trajectory)
-    settled = np.array(in_phase, dtype=float)
-    settled[0] = offset + in_phase[0]
-    return settled, mode, float(in_phase[0])
+    settled, mode = _settle_mode(model, t, in_phase, mode, trajectory)
+    phase = float(settled[0])
+    if settled is not in_phase:  # a transition's state, the guard's own array: copied before phi is written
+        settled = np.array(settled, dtype=float)
+    settled[0] = offset + phase
+    return settled, mode, phase
 
 
 def _settle_mode(

@@ -7,7 +7,7 @@ rows and flags."""
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from mech_regulator import numba_cache
 from mech_regulator.solvers.time_domain import (
@@ -131,6 +131,8 @@ def _brent(a, b, g, line, t_old, h, y_old, coefficients, p, guards, levels, stat
 
 _guard_polynomial = njit(cache=True)(guard_polynomial)
 _switch_window = njit(cache=True)(switch_window)
+SWITCH_WINDOW_SIGNATURE = (types.float64[::1], types.float64, types.float64, types.boolean)
+"""_switch_window's argument types as solvers/compiled/run.py calls it from Python: the grid, the period, phi, forward."""
 _branch_points_of = njit(cache=True)(_branch_points)
 _reach_from = njit(cache=True)(_reach)
 _smallest_step_limit = njit(cache=True)(_smallest_limit)

@@ -11,6 +11,7 @@ from scipy.integrate import DenseOutput
 from mech_regulator.solvers.compiled.dense import steps_dense
 from mech_regulator.solvers.compiled.integrators import FAILED, FAILURES
 from mech_regulator.solvers.compiled.pieces import sampled_speeds
+from mech_regulator.solvers.compiled.steppers import entry_point
 
 
 class StepsDense(DenseOutput):
@@ -42,8 +43,8 @@ class StepsDense(DenseOutput):
     def speed_samples(self, t_start: float, t_end: float, longest: float) -> np.ndarray:
         """cosim.speed_samples over [t_start, t_end] [s] within this output, pieces no longer than `longest` [s]: the
         times [s] and the crank's speed [rad/s] there, the rows of one array, in one compiled call
-        (pieces.sampled_speeds)."""
-        return sampled_speeds(
+        (pieces.sampled_speeds, by its entry: steppers.entry_point)."""
+        return entry_point(sampled_speeds)(
             self.times, self.y_old, self.coefficients, self.step_offsets, self.restarted, t_start, t_end, longest
         )
 

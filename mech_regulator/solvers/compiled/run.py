@@ -20,8 +20,10 @@ message) and once the run has taken MAX_STEPS steps (fail_too_many_steps).
 
 from __future__ import annotations
 
+import bisect
 import functools
 import math
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -31,6 +33,7 @@ from mech_regulator.scene import SceneError
 from mech_regulator.solvers import time_domain
 from mech_regulator.solvers.compiled import fast_path_refusal, integrators, pieces, results, steppers
 from mech_regulator.solvers.compiled.codegen import RECENT_MODELS, CompiledScene, compile_scene, sign_of
+from mech_regulator.solvers.compiled.events import _switch_window
 from mech_regulator.solvers.compiled.source import (
     CLAMP_HI,
     CLAMP_LO,
@@ -53,7 +56,6 @@ from mech_regulator.solvers.time_domain import (
     fail_too_many_steps,
     integrate_time_domain,
     settle_mode_in_phase,
-    switch_window,
     turns_and_phase,
 )
 from mech_regulator.solvers.trajectory import Progress, Stream, Trajectory
@@ -152,8 +154,10 @@ class _Layout(NamedTuple):
     sequence of load pieces itself (integrators._piece_restart: a scene whose p there depends on the piece and the
     crank's speed only, without switch angles or a wrapped angle); the stepper's arguments that are the same at every
     call (_FixedArguments); the model's state tables (MachineModel.state_tables), whether one turns with phi (a guard
-    then reads phi: the stepper does not wrap it itself) and the empty array of following pieces a call without them
-    passes."""
+    then reads phi: the stepper does not wrap it itself), the empty array of following pieces a call without them
+    passes and the machine-code entry of time_domain.switch_window compiled
+    (events._switch_window, steppers.entry_point: the same numbers, about 1 us a call against 5-8 in Python) that
+    finds the window a call starts in."""
 
     grid: np.ndarray
     period: float
@@ -163,6 +167,7 @@ class _Layout(NamedTuple):
     tables: tuple
     turning: bool
     no_following: np.ndarray
+    switch_window: Callable[..., tuple[float, float]]
 
     @classmethod
     def of(cls, model: MachineModel, compiled: CompiledScene) -> _Layout:
@@ -216,6 +221,7 @@ class _Layout(NamedTuple):
             tables=model.state_tables,
             turning=any(table.angular for table in model.state_tables),
             no_following=np.empty((0, 2 + len(PIECE_SLOTS))),
+            switch_window=steppers.entry_point(_switch_window),
         )
 
 
@@ -269,12 +275,13 @@ def _follow_compiled(
 
 def speed_rows(samples: list) -> np.ndarray:
     """The pieces of the speed samples (a list of (times [s], omega [rad/s]), each an odd number, the quadratic through
-    three on each piece) as the stepper's rows (pieces.speed_rows), one array."""
+    three on each piece) as the stepper's rows (pieces.speed_rows, by its entry: steppers.entry_point), one array."""
     counts = [max(0, (len(times) - 1) // 2) for times, _ in samples]
     rows = np.empty((sum(counts), 2 + len(PIECE_SLOTS)))
     first = 0
+    write_rows = steppers.entry_point(pieces.speed_rows)
     for (times, speeds), count in zip(samples, counts):
-        pieces.speed_rows(np.array(times, dtype=float), np.array(speeds, dtype=float), rows[first : first + count])
+        write_rows(np.array(times, dtype=float), np.array(speeds, dtype=float), rows[first : first + count])
         first += count
     return rows
 
@@ -323,7 +330,7 @@ def _compiled_pieces(
         y, mode, phase = settle_mode_in_phase(model, t, y, phase, offset, mode, trajectory)
         if trajectory.status != "complete":
             break
-        window = switch_window(grid, period, phase, forward=y[1] >= 0.0) if grid.size else None
+        window = layout.switch_window(grid, period, phase, y[1] >= 0.0) if grid.size else None
         start = y  # settle_mode_in_phase's own array, never written: the guards are those of the mode at this start
         # (time_domain._segment)
         y_wrapped = start.copy()
@@ -356,7 +363,7 @@ def _compiled_pieces(
         t_stop = run.t_end
         if index < split <= index + run.pieces_done:  # went on into pieces[split]: its start is a step's start
             split_start = rows[split - 1, 0]
-            first = int(run.times[: run.n_steps].searchsorted(split_start))
+            first = bisect.bisect_left(run.times, split_start, 0, run.n_steps)  # searchsorted's, without its set-up
             if first < run.n_steps and run.times[first] == split_start:
                 at_split = (run.y_old[first].copy(), mode, len(trajectory.events))
         dense = run.dense  # None when no step was taken
@@ -370,7 +377,9 @@ def _compiled_pieces(
         stats.switches += int(run.kinks)
         if run.kinks:  # the stepper went on into later windows: phi's offset and the window are those of the last
             later, window = round(run.offset / period), (run.window_lo, run.window_hi)
-            turns, held = later, _unwound_pieces(tables, held, later - turns, period)
+            if tables:
+                held = _unwound_pieces(tables, held, later - turns, period)
+            turns = later
             offset = turns * period
         if run.pieces_done:  # and into later pieces: the last is the one stepped now
             index += int(run.pieces_done)

@@ -12,6 +12,7 @@ from numba import njit, types
 from mech_regulator import numba_cache
 from mech_regulator.solvers.compiled.dense import SIGNATURE as DENSE_SIGNATURE
 from mech_regulator.solvers.compiled.dense import steps_dense
+from mech_regulator.solvers.compiled.events import SWITCH_WINDOW_SIGNATURE, _switch_window
 from mech_regulator.solvers.compiled.integrators import _integrate
 from mech_regulator.solvers.compiled.locks import method_lock
 from mech_regulator.solvers.compiled.pieces import (
@@ -364,12 +365,30 @@ def stepper(method: str):
     compile, some 7 s each further one: warm.py). Under the method's lock (locks.method_lock): a process that finds
     another compiling the same stepper waits and then loads it, rather than compiling it a second time beside it. The
     evaluation of the steppers' dense output (dense.steps_dense), the co-simulated governor's speed pieces
-    (pieces.speed_rows), the machine's speed samples (pieces.sampled_speeds) and its prediction one cycle back
-    (pieces.compiled_speeds_one_cycle_back) are compiled or loaded with it."""
+    (pieces.speed_rows), the machine's speed samples (pieces.sampled_speeds), its prediction one cycle back
+    (pieces.compiled_speeds_one_cycle_back) and the switch window a call starts in (events._switch_window, which
+    solvers/compiled/run.py calls from Python) are compiled or loaded with it (_KERNELS, entry_point)."""
     function, signature = _STEPPERS[method]
-    steps_dense.compile(DENSE_SIGNATURE)
-    speed_rows.compile(PIECES_SIGNATURE)
-    sampled_speeds.compile(SAMPLED_SPEEDS_SIGNATURE)
-    compiled_speeds_one_cycle_back.compile(CYCLE_BACK_SIGNATURE)
+    for kernel in _KERNELS:
+        entry_point(kernel)
     with method_lock(method):
         return njit(signature, cache=True)(function)
+
+
+_KERNELS = {
+    steps_dense: DENSE_SIGNATURE,
+    speed_rows: PIECES_SIGNATURE,
+    sampled_speeds: SAMPLED_SPEEDS_SIGNATURE,
+    compiled_speeds_one_cycle_back: CYCLE_BACK_SIGNATURE,
+    _switch_window: SWITCH_WINDOW_SIGNATURE,
+}
+"""The kernels compiled or loaded with every stepper, each for the one signature its calls have."""
+
+
+@functools.cache
+def entry_point(kernel):
+    """The machine-code entry of one of the kernels compiled with the steppers (_KERNELS) for its signature, compiled
+    or loaded here when first asked for (stepper asks for all): calling it skips numba's type dispatch of the
+    arguments (some 0.5 us a call, the switch window's 1.2 us to 0.6: docs/speed.md, "A ninth sitting"), so its
+    arguments must have exactly those types: an array of another dtype or layout would be misread, not refused."""
+    return kernel.compile(_KERNELS[kernel])
