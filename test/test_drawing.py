@@ -270,3 +270,25 @@ def test_governor_bounds_contain_every_outline_over_the_stroke(sensor):
     widest = sensor.arm_length * math.sin(sensor.stop_angles()[1]) + radius
     span = max(bounds[1] - bounds[0], bounds[3] - bounds[2])
     assert widest < xmax <= widest + BOUNDS_MARGIN * span
+
+
+def test_a_linkage_drawn_in_turn_with_another_keeps_its_own_outline():
+    """mechanism_outline keeps one linkage's outliner (the spec drawn last): two linkages drawn in turn, each at the
+    same angles, give each time the outline of a fresh outliner of its own spec, and their joints where the pose
+    solver puts them (the geared shaker's crank pin on its crank circle: |pin - pivot| = the crank's length)."""
+    from mech_regulator.mechanisms import mechanism_geometry
+    from mech_regulator.mechanisms.linkage.drawing import linkage_outliner
+    from mech_regulator.scene import load_scene
+
+    specs = [load_scene(name).machine.mechanism for name in ("geared_shaker", "six_bar_press")]
+    fresh = [linkage_outliner(*mechanism_geometry(spec)) for spec in specs]
+    for phi in (0.0, 1.1, 4.0):
+        for spec, outline_at in zip(specs * 2, fresh * 2):
+            drawn, expected = mechanism_outline(spec, phi), outline_at(phi)
+            assert drawn.keys() == expected.keys()
+            assert all(np.array_equal(drawn[part], expected[part]) for part in drawn)
+        pivot, pin = mechanism_outline(specs[0], phi)["crank"]
+        linkage = mechanism_geometry(specs[0])[0]
+        crank = linkage.link(linkage.driving_crank()).points
+        length = max(abs(point - crank[linkage.crank_pivot().name]) for point in crank.values())  # [m]
+        assert math.isclose(math.dist(pivot, pin), length, rel_tol=1e-12)

@@ -10,6 +10,7 @@ MOVING_PARTS; the others (guide, frame, path of the crank pin, disc) stay where 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -66,7 +67,7 @@ def mechanism_outline(mechanism_spec: mechanism_keys.Mechanism | None, phi: floa
     Walking beam (source 004's names, `walking_beam.solve`): crank O1-A, coupler triangle A-B-C, the two
     rockers O2-B and O3-E (a bundle), the tie B-E, the side link E-D, the shuttle bar C-D, the frame O1-O2-O3
     and the path of the pin A.
-    Linkage: the parts of `linkage.drawing.linkage_outline` (frame, crank, links, sliders, gears, joints).
+    Linkage: the parts of `linkage.drawing.linkage_outliner` (frame, crank, links, sliders, gears, joints).
     No mechanism: a disc of radius DISC_RADIUS (schematic: the machine has no link lengths) and a spoke
     from its centre to DISC_RADIUS (cos phi, sin phi).
     """
@@ -77,16 +78,29 @@ def mechanism_outline(mechanism_spec: mechanism_keys.Mechanism | None, phi: floa
     if isinstance(mechanism_spec, mechanism_keys.WalkingBeam):
         return _walking_beam_outline(mechanism_spec, phi)
     if isinstance(mechanism_spec, mechanism_keys.Linkage):
-        from mech_regulator.mechanisms import mechanism_geometry
-
-        linkage, structure = mechanism_geometry(mechanism_spec)
-        return linkage_drawing.linkage_outline(linkage, structure, phi)
+        return _linkage_outliner(mechanism_spec)(phi)
     tip = (DISC_RADIUS * math.cos(phi), DISC_RADIUS * math.sin(phi))
     return {
         "disc": circle((0.0, 0.0), DISC_RADIUS),
         "spoke": np.array([[0.0, 0.0], tip]),
         "joints": np.array([[0.0, 0.0]]),
     }
+
+
+_last_linkage: list = [None, None]  # the linkage spec drawn last and its outliner (linkage_drawing.linkage_outliner)
+
+
+def _linkage_outliner(spec: mechanism_keys.Linkage) -> Callable[[float], dict[str, np.ndarray]]:
+    """The outline at phi of a linkage's spec (linkage_drawing.linkage_outliner), made once for the spec drawn last:
+    a recording draws one mechanism at every frame, and its geometry (mechanisms.mechanism_geometry: the Assur
+    groups, a gear's pitch checked at sample angles), pose solver and cam profiles took 0.3-1.4 ms a frame on the
+    bundled linkages (the geared shaker's recorder through the nodes fell minutes behind its machine on it). A scene
+    section is frozen: the same object is the same spec."""
+    if _last_linkage[0] is not spec:
+        from mech_regulator.mechanisms import mechanism_geometry
+
+        _last_linkage[:] = [spec, linkage_drawing.linkage_outliner(*mechanism_geometry(spec))]
+    return _last_linkage[1]
 
 
 def _crank_slider_outline(spec: mechanism_keys.CrankSlider, phi: float) -> dict[str, np.ndarray]:

@@ -16,12 +16,13 @@ from __future__ import annotations
 
 import cmath
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from mech_regulator.mechanisms.linkage.cam import CamFollower, CamPair
 from mech_regulator.mechanisms.linkage.gears import GearGroup
-from mech_regulator.mechanisms.linkage.kinematics import solve
+from mech_regulator.mechanisms.linkage.kinematics import make_solver
 from mech_regulator.mechanisms.linkage.model import GEAR, PRISMATIC, Linkage
 from mech_regulator.mechanisms.linkage.structure import Structure
 
@@ -74,9 +75,10 @@ def _gear_polyline(centre: complex, radius: float, theta: float) -> list[complex
     return [centre] + list(centre + radius * np.exp(1j * angles))
 
 
-def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[str, np.ndarray]:
-    """The linkage's parts at crank angle phi [rad] (module docstring)."""
-    poses = solve(linkage, structure, phi, derivatives=False)
+def linkage_outliner(linkage: Linkage, structure: Structure) -> Callable[[float], dict[str, np.ndarray]]:
+    """`outline_at(phi)`: the linkage's parts at crank angle phi [rad] (module docstring), with what does not depend
+    on phi (the pose solver, the cams' profiles, the frame, the crank's radius) worked out once, here."""
+    solve_at = make_solver(linkage, structure.groups)
     cams = {
         group.pair.name: CamPair(linkage, group, None, check=False)
         for group in structure.groups
@@ -87,46 +89,50 @@ def linkage_outline(linkage: Linkage, structure: Structure, phi: float) -> dict[
     crank_name = linkage.driving_crank()
     crank = linkage.link(crank_name)
     pivot_name = linkage.crank_pivot().name
-    pose = poses[crank_name]
     tip = max(crank.points.values(), key=lambda p: abs(p - crank.points[pivot_name]))
     pivot = linkage.link(linkage.frame).points[pivot_name]
     radius = max([crank_length(linkage)] + [float(np.max(np.abs(profile))) for profile in profiles.values()])
-    others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != crank_name]
-    others += [
-        list(cams[name].centre + np.append(profile, profile[:1]) * cmath.exp(1j * phi))
-        for name, profile in profiles.items()
-    ]
-    longest = max(len(points) for points in others)  # a linkage with W = 1 has at least one group
     half = 0.5 * BLOCK_PER_CRANK * radius
-    blocks = []
-    for joint in linkage.joints:
-        if joint.kind == PRISMATIC:
-            guide, slider = joint.links
-            centre = poses[slider][0] + linkage.link(slider).points[joint.name] * cmath.exp(1j * poses[slider][1])
-            along = cmath.exp(1j * (joint.direction + poses[guide][1]))
-            corners = [centre + half * along * complex(x, 0.5 * y) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-            blocks.append(_xy(corners + corners[:1]))
-    joint_points = []
-    for joint in linkage.joints:
-        if joint.name in cams:  # a cam pair's point: where the cam touches
-            joint_points.append(complex(cams[joint.name].contact_point(phi)[0]))
-            continue
-        if joint.kind == GEAR:
-            continue
-        link = joint.links[1]
-        joint_points.append(poses[link][0] + linkage.link(link).points[joint.name] * cmath.exp(1j * poses[link][1]))
-    outline = {
-        "frame": _xy(frame_points),
-        "crank_path": circle((pivot.real, pivot.imag), radius),
-        "crank": _xy([pivot, pose[0] + tip * cmath.exp(1j * phi)]),
-        "links": np.stack([_xy(points + points[-1:] * (longest - len(points))) for points in others]),
-        "sliders": np.stack(blocks) if blocks else np.zeros((0, 5, 2)),
-        "gears": np.array(
-            [
-                _xy(_gear_polyline(centre, radius, theta))
-                for _, centre, radius, theta in pitch_circles(linkage, structure, poses)
-            ]
-        ).reshape((-1, GEAR_CIRCLE_POINTS + 1, 2)),
-        "joints": _xy(joint_points),
-    }
-    return outline
+
+    def outline_at(phi: float) -> dict[str, np.ndarray]:
+        poses = solve_at(phi, False)
+        pose = poses[crank_name]
+        others = [link_polygon(linkage, poses, name) for name in linkage.moving_links() if name != crank_name]
+        others += [
+            list(cams[name].centre + np.append(profile, profile[:1]) * cmath.exp(1j * phi))
+            for name, profile in profiles.items()
+        ]
+        longest = max(len(points) for points in others)  # a linkage with W = 1 has at least one group
+        blocks = []
+        for joint in linkage.joints:
+            if joint.kind == PRISMATIC:
+                guide, slider = joint.links
+                centre = poses[slider][0] + linkage.link(slider).points[joint.name] * cmath.exp(1j * poses[slider][1])
+                along = cmath.exp(1j * (joint.direction + poses[guide][1]))
+                corners = [centre + half * along * complex(x, 0.5 * y) for x, y in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+                blocks.append(_xy(corners + corners[:1]))
+        joint_points = []
+        for joint in linkage.joints:
+            if joint.name in cams:  # a cam pair's point: where the cam touches
+                joint_points.append(complex(cams[joint.name].contact_point(phi)[0]))
+                continue
+            if joint.kind == GEAR:
+                continue
+            link = joint.links[1]
+            joint_points.append(poses[link][0] + linkage.link(link).points[joint.name] * cmath.exp(1j * poses[link][1]))
+        return {
+            "frame": _xy(frame_points),
+            "crank_path": circle((pivot.real, pivot.imag), radius),
+            "crank": _xy([pivot, pose[0] + tip * cmath.exp(1j * phi)]),
+            "links": np.stack([_xy(points + points[-1:] * (longest - len(points))) for points in others]),
+            "sliders": np.stack(blocks) if blocks else np.zeros((0, 5, 2)),
+            "gears": np.array(
+                [
+                    _xy(_gear_polyline(centre, radius, theta))
+                    for _, centre, radius, theta in pitch_circles(linkage, structure, poses)
+                ]
+            ).reshape((-1, GEAR_CIRCLE_POINTS + 1, 2)),
+            "joints": _xy(joint_points),
+        }
+
+    return outline_at
