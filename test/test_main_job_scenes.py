@@ -9,6 +9,7 @@ the same scene over the same simulated time: the nodes only move messages.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import os
@@ -16,6 +17,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -447,6 +449,50 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     assert node_processes(str(rrd.parent)) == []
 
 
+def _play_holding_the_recorder(
+    folder: Path, scene: str, played: float, domain: int, hold: Callable, until_end: Callable = lambda run: None
+) -> tuple[str, Path]:
+    """Play `scene` through the nodes for `played` s (`run --out folder/run.rrd`), its recorder held back once it
+    runs by `hold(recorder's pid, run)` in a thread while `until_end(run)` waits here; assert the run `complete` with
+    every exchange in its summary and its CSV, and return what describes it and the recording's path."""
+    rrd = folder / "run.rrd"
+    run = subprocess.Popen(
+        [sys.executable, "-m", "mech_regulator", "run", scene, "--duration", str(played), "--out", str(rrd)]
+        + ["--domain-id", str(domain), "--quiet"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=folder,
+    )
+
+    def held() -> None:
+        deadline, recorder = time.monotonic() + 4 * WAIT, None
+        while recorder is None and run.poll() is None and time.monotonic() < deadline:
+            listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
+            ours = [int(pid) for pid in listing if Path(f"/proc/{pid}/cwd").resolve() == folder.resolve()]
+            recorder = ours[0] if ours else None
+            time.sleep(0.05)
+        assert recorder is not None, "no recorder_node of this run"
+        hold(recorder, run)
+
+    try:
+        with ThreadPoolExecutor(1) as pool:
+            holding = pool.submit(held)
+            until_end(run)
+            holding.result()
+        stdout, stderr = run.communicate(timeout=4 * WAIT)
+    finally:
+        if run.poll() is None:
+            run.kill()
+    described = f"exit {run.returncode}\n{stdout}\n{stderr}"
+    assert run.returncode == 0, described
+    summary = json.loads(rrd.with_suffix(".json").read_text())
+    exchanges = round(played / load_scene(scene).solver.exchange_step) + 1  # (constant loads: no exchange between)
+    assert summary["status"] == "complete" and summary["t_end"] == played, described
+    assert summary["samples"] == exchanges and rrd.with_suffix(".csv").read_bytes().count(b"\n") == 1 + exchanges
+    return described, rrd
+
+
 def test_a_recorder_slower_than_the_machine_sets_the_run_s_pace(tmp_path, probe, domain_id):
     """The recorder held back 0.4 s of every 0.5 s (SIGSTOP, SIGCONT) for a whole 600-s walking-beam run (16 columns,
     some 2500 exchanges a second otherwise): the machine keeps within RECORDER_LEAD exchanges of what the recorder
@@ -473,45 +519,27 @@ def test_a_recorder_slower_than_the_machine_sets_the_run_s_pace(tmp_path, probe,
                 newest["machine"] = max(newest["machine"], float(values.get("sim_time", 0.0)))
         newest["lead"] = max(newest["lead"], newest["machine"] - newest["recorded"])
 
+    def hold(recorder: int, run) -> None:
+        while run.poll() is None and newest["machine"] == 0.0:  # held from the first exchange on, not in discovery
+            time.sleep(0.05)
+        with contextlib.suppress(ProcessLookupError):  # (a recorder that ended: the asserts below say why)
+            while run.poll() is None and newest["machine"] < played:
+                os.kill(recorder, signal.SIGSTOP)
+                time.sleep(0.4)
+                os.kill(recorder, signal.SIGCONT)
+                time.sleep(0.1)
+
     probe.listen(Header, "recorder/progress", callback=on_progress)
     probe.listen(DiagnosticArray, "/diagnostics", callback=on_diagnostics)
-    rrd = tmp_path / "run.rrd"
-    run = subprocess.Popen(
-        [sys.executable, "-m", "mech_regulator", "run", "walking_beam", "--duration", str(played), "--out", str(rrd)]
-        + ["--domain-id", str(domain_id), "--quiet"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=tmp_path,
+    described, _ = _play_holding_the_recorder(
+        tmp_path,
+        "walking_beam",
+        played,
+        domain_id,
+        hold,
+        lambda run: probe.spin_until(lambda: run.poll() is not None, "the run's end", timeout=12 * WAIT),
     )
-
-    def hold_back_the_recorder() -> None:
-        deadline = time.monotonic() + 4 * WAIT
-        recorder = None
-        while recorder is None and run.poll() is None and time.monotonic() < deadline:
-            listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
-            ours = [int(pid) for pid in listing if Path(f"/proc/{pid}/cwd").resolve() == tmp_path.resolve()]
-            recorder = ours[0] if ours else None
-            time.sleep(0.05)
-        while recorder is not None and run.poll() is None and newest["machine"] < played:
-            os.kill(recorder, signal.SIGSTOP)
-            time.sleep(0.4)
-            os.kill(recorder, signal.SIGCONT)
-            time.sleep(0.1)
-
-    try:
-        with ThreadPoolExecutor(1) as pool:
-            held = pool.submit(hold_back_the_recorder)
-            probe.spin_until(lambda: run.poll() is not None, "the run's end", timeout=12 * WAIT)
-            held.result()
-        stdout, stderr = run.communicate(timeout=WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-    described = f"exit {run.returncode}\n{stdout}\n{stderr}\nlead {newest}"
-    assert run.returncode == 0, described
-    summary = json.loads(rrd.with_suffix(".json").read_text())
-    assert summary["status"] == "complete" and summary["samples"] == round(played / step) + 1, described
+    described += f"\nlead {newest}"
     assert newest["machine"] == played and newest["recorded"] == played, described  # both seen to the end
     delays = 50.0  # [s] of simulated time: the last progress sent before the recorder was stopped, a second of
     # the machine at 50 times real time (without the pace the lead reached 450 s)
@@ -524,37 +552,16 @@ def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
     instead of running past what their publisher's history keeps, and say so on the log, so the run ends `complete`
     with every exchange in its CSV. Before, the recorder missed thousands of exchanges and the run ended
     `interrupted`: with no wait at all, and (a wait of at most 10 s) with a stop longer than that."""
-    played = 800.0
-    folder = tmp_path / "held"
-    folder.mkdir()
-    rrd = folder / "run.rrd"
-    run = subprocess.Popen(
-        [sys.executable, "-m", "mech_regulator", "run", "lathe", "--duration", str(played), "--out", str(rrd)]
-        + ["--domain-id", str(next_domain_id()), "--quiet"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        cwd=folder,
-    )
-    try:
+
+    def hold(recorder: int, run) -> None:
+        csv = tmp_path / "run.csv"
         deadline = time.monotonic() + 4 * WAIT
-        csv = rrd.with_suffix(".csv")
         while not (csv.exists() and csv.stat().st_size > 100_000) and time.monotonic() < deadline:
             time.sleep(0.05)  # the recorder has written its first rows: exchanges are under way
-        listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
-        pids = [int(pid) for pid in listing if str(folder) in Path(f"/proc/{pid}/cmdline").read_text(errors="replace")]
-        assert len(pids) == 1, listing
-        os.kill(pids[0], signal.SIGSTOP)
+        os.kill(recorder, signal.SIGSTOP)
         time.sleep(18.0)  # (past the participant's lease, some 30 s here, the machine would no longer wait)
-        os.kill(pids[0], signal.SIGCONT)
-        stdout, stderr = run.communicate(timeout=4 * WAIT)
-    finally:
-        if run.poll() is None:
-            run.kill()
-    described = f"exit {run.returncode}\n{stdout}\n{stderr}"
-    assert run.returncode == 0, described
-    summary = json.loads(rrd.with_suffix(".json").read_text())
-    assert summary["status"] == "complete" and summary["t_end"] == played, described
-    exchanges = round(played / load_scene("lathe").solver.exchange_step) + 1  # the lathe's load is constant
-    assert summary["samples"] == exchanges and csv.read_bytes().count(b"\n") == 1 + exchanges, described
-    assert "machine/moments (the recorder among them) have not acknowledged" in rrd.with_suffix(".log").read_text()
+        os.kill(recorder, signal.SIGCONT)
+
+    described, rrd = _play_holding_the_recorder(tmp_path, "lathe", 800.0, next_domain_id(), hold)
+    log = rrd.with_suffix(".log").read_text()
+    assert "machine/moments (the recorder among them) have not acknowledged" in log, described
