@@ -115,7 +115,8 @@ RECORD_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
-# The recorder's progress (recorder/progress): the latest only.
+# The recorder's progress (recorder/progress): the machine reads the newest; a few are kept until it takes them, so
+# that a stranger's messages on the topic (refused: trust.Speakers) do not at once push the recorder's out.
 PROGRESS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=10,

@@ -627,10 +627,11 @@ class RecorderNode(SteadyNode):
             before = time.monotonic()
             spin_once(self, IDLE_SPIN_SLICE)
             now = time.monotonic()
-            if sum(self.rows.received.values()) != taken or now - before > HELD_BACK:
+            received = sum(self.rows.received.values())
+            if received != taken or now - before > HELD_BACK:
                 # samples still come (a recorder catching up), or this process was held back (stopped, starved):
                 # the grace starts again
-                taken, waiting_since = sum(self.rows.received.values()), now
+                taken, waiting_since = received, now
             if self.finished_at is None:
                 if not self.machine_gone():
                     waiting_since = now
