@@ -275,6 +275,27 @@ def test_a_run_of_the_nodes_whose_disk_fills_up_ends_with_exit_1_and_says_which_
     assert "No space left on device" in err and "cannot be read (written only in part" in err, err
 
 
+def test_the_nodes_last_words_reach_the_launcher_when_their_log_cannot_be_written(tmp_path):
+    """NodeLog on /dev/full (every write fails with ENOSPC): what the nodes write is still kept, in order, and the
+    failed write is remembered; on a writable file the log holds the same bytes."""
+    from mech_regulator.nodes.launch import NodeLog
+
+    lines = [f"mech_regulator: recorder_node: line {number}\n".encode() for number in range(3000)]
+    for target, fails in ((Path("/dev/full"), True), (tmp_path / "run.log", False)):
+        with NodeLog(target) as log:
+            writer = os.fork()
+            if writer == 0:  # a node: writes through its own copy of the pipe's end, as a forked node does
+                for line in lines:
+                    os.write(log.fileno(), line)
+                os._exit(0)
+            log.follow()
+            os.waitpid(writer, 0)
+        assert log.tail() == b"".join(lines).decode()
+        assert (log.error is not None and log.error.errno == errno.ENOSPC) == fails, log.error
+        if not fails:
+            assert target.read_bytes() == b"".join(lines)
+
+
 def test_a_failed_write_after_the_run_keeps_the_summary_and_the_other_outputs(capsys, monkeypatch, tmp_path):
     def full_disk(path, *args, **kwargs):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))

@@ -24,6 +24,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -40,6 +41,8 @@ from mech_regulator.scene import SceneError, config_dir
 STOP_TIMEOUT = 1.5  # [s] of wall time the nodes get together to stop after an interrupt before they are killed
 END_TIMEOUT = 30.0  # [s] of wall time the nodes get to end by themselves after the machine has finished, and
 CLOSE_TIME_PER_EXCHANGE = 0.001  # [s] of wall time more per exchange: the recorder's outputs written (end_timeout)
+LOG_TAIL_BYTES = 1 << 20  # the nodes' last output the launcher keeps in memory (NodeLog) [bytes]
+LOG_DRAIN = 5.0  # [s] of wall time the launcher waits at most for the nodes' last output once they have ended
 STALL_REPORT = 30.0  # [s] of wall time without the machine's simulated time advancing before the launcher says so
 GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
@@ -310,7 +313,7 @@ def main_job(
     interrupted = False
     ctrl_c: list[int] = []  # a Ctrl-C that came (an import of a C extension it interrupts fails with ImportError)
     signal.signal(signal.SIGINT, functools.partial(_remember_interrupt, ctrl_c))
-    with open(log_file, "w") as log:
+    with NodeLog(log_file) as log:
         try:
             importlib.import_module("mech_regulator.nodes.common")  # what every node imports (rclpy, the message
             # types, the core with scipy) and what the steppers load on first use, once here for the nodes forked below
@@ -322,6 +325,7 @@ def main_job(
             # each of the four at once before the first exchange
             for name in names:
                 processes[name] = NodeProcess(name, parameter_file, environment, log)
+            log.follow()
             signal.signal(signal.SIGTERM, _interrupt)  # `kill` or a timeout stops the nodes as Ctrl-C does
             _follow(
                 processes,
@@ -382,8 +386,14 @@ def main_job(
         )
     else:
         print(f"mech-regulator: no summary was written ({summary_path})", file=sys.stderr)
+    if log.error is not None:
+        print(
+            f"mech-regulator: the node log {log_file} could not be written whole ({log.error.strerror}); "
+            "the launcher kept its last lines",
+            file=sys.stderr,
+        )
     if failed:
-        log_text = log_file.read_text(errors="replace")
+        log_text = log.tail()
         endings: dict[tuple[int | None, str], list[str]] = {}  # (exit code, why) -> the nodes that ended so
         for name in failed:
             endings.setdefault((processes[name].returncode, node_reason(log_text, name)), []).append(name)
@@ -583,6 +593,56 @@ def _wait_all(
                         file=sys.stderr,
                     )
                     said = True
+
+
+class NodeLog:
+    """The nodes' output (stdout and stderr of every node, through one pipe) copied to the run's log file by a thread
+    of the launcher, its last LOG_TAIL_BYTES kept in memory as well: a node's last words (why it failed) reach the
+    launcher's summary even when the log cannot be written (a full disk). Use as a context manager; `follow` starts the
+    copying once the nodes are forked (no thread runs in the launcher while it forks); leaving the context closes
+    the launcher's end of the pipe and waits LOG_DRAIN s at most for the nodes' last output (the copying thread closes
+    the log file at the pipe's end)."""
+
+    def __init__(self, path: Path):
+        self.file = open(path, "wb", buffering=0)
+        self.read_end, self.write_end = os.pipe()
+        self.error: OSError | None = None  # the first failed write to the log file; the copying stops there
+        self._tail = bytearray()
+        self._copier = threading.Thread(target=self._copy, name="node log", daemon=True)
+
+    def fileno(self) -> int:
+        """The descriptor the nodes write to (their stdout and stderr)."""
+        return self.write_end
+
+    def follow(self) -> None:
+        if self._copier.ident is None:  # not started yet
+            self._copier.start()
+
+    def tail(self) -> str:
+        """The nodes' last output, at most LOG_TAIL_BYTES (what the log file holds at its end when it could be written)."""
+        return self._tail.decode(errors="replace")
+
+    def _copy(self) -> None:
+        with self.file:
+            while chunk := os.read(self.read_end, 65536):
+                self._tail += chunk
+                del self._tail[:-LOG_TAIL_BYTES]
+                if self.error is None:
+                    try:
+                        written = 0
+                        while written < len(chunk):
+                            written += self.file.write(chunk[written:]) or 0
+                    except OSError as error:
+                        self.error = error
+        os.close(self.read_end)
+
+    def __enter__(self) -> NodeLog:
+        return self
+
+    def __exit__(self, *exception) -> None:
+        os.close(self.write_end)
+        self.follow()
+        self._copier.join(LOG_DRAIN)  # a node not yet ended keeps it open: the thread then ends with the process
 
 
 class NodeProcess:
