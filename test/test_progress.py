@@ -125,6 +125,49 @@ def test_a_start_up_is_neither_in_the_eta_nor_in_the_duration():
     assert lines[-1] == "engine_direct on the nodes: done: t = 16 / 16 s in 48.0 s; start-up 4.0 s"
 
 
+def test_no_eta_from_the_first_instants_of_the_work():
+    """A line 3.6 s after the bar's creation, the work (after a start-up that reported nothing done) begun 0.02 s
+    before with 6.2e-5 s of 120 simulated: its pace would give an ETA of 11 h; it says unknown until the work has run
+    ETA_AFTER s (or done ETA_SHARE of the total: the sweep's lines below), then the time left at the pace so far."""
+    wall = {"now": 0.0}
+    out = io.StringIO()
+    bar = ProgressLines(120.0, "simulating engine_direct", "t", "s", 0.0, file=out, clock=lambda: wall["now"])
+    wall["now"] = 3.58
+    bar.update(0.0)  # the probe done: the run begins
+    wall["now"] = 3.6
+    bar.update(6.2e-5)
+    wall["now"] = 3.58 + 2.0
+    bar.update(1.0 - bar.n)
+    lines = out.getvalue().splitlines()
+    assert lines[1] == "simulating engine_direct: t = 6.2e-05 / 120 s (0 %), 0.0 s elapsed, ETA unknown"
+    assert lines[2] == "simulating engine_direct: t = 1 / 120 s (1 %), 2.0 s elapsed, ETA 3 min 58 s"
+
+
+def test_a_long_run_s_probe_is_its_start_up(monkeypatch):
+    """A run longer than LONG_RUN is probed before it starts (solvers.step_limit_refusal, without progress); the
+    progress callback is told that the work begins (0 s simulated) after the probe, before the run's own steps."""
+    import mech_regulator.solvers as solvers
+    from mech_regulator.model import build_model
+    from mech_regulator.scene import load_scene
+    from mech_regulator.scene.limits import LONG_RUN
+
+    events = []
+    integrate = solvers._integrate
+
+    def logged(model, progress=None, stream=None):
+        events.append("run" if progress is not None else "probe")
+        return integrate(model, progress, stream)
+
+    monkeypatch.setattr(solvers, "_integrate", logged)
+    model = build_model(
+        load_scene(
+            "lathe", ["solver.path=reference", f"scenario.duration={LONG_RUN + 1.0!r}", "scenario.load_events=[]"]
+        )
+    )
+    solvers.simulate(model, progress=lambda t: events.append(t) if not events or events[-1] != t else None)
+    assert events[:3] == ["probe", 0.0, "run"] and events[3] > 0.0 and events[-1] == pytest.approx(LONG_RUN + 1.0)
+
+
 def test_silent_when_quiet():
     out = io.StringIO()
     with ProgressLines(10.0, "x", "t", "s", 0.0, enabled=False, file=out) as bar:

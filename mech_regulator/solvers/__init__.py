@@ -9,6 +9,7 @@ from collections.abc import Callable
 
 from mech_regulator.model import MachineModel
 from mech_regulator.scene import SceneError
+from mech_regulator.scene.limits import LONG_RUN
 from mech_regulator.solvers.advice import energy_step_refusal, rk4_stability_refusal, stiffness_refusal
 from mech_regulator.solvers.compiled import AUTO_PATH_VARIABLE, fast_path_refusal, runs_compiled
 from mech_regulator.solvers.energy_method import integrate_energy_method
@@ -33,6 +34,8 @@ def simulate(model: MachineModel, progress: Progress | None = None, stream: Stre
         return probed
     if probed is not None:
         raise SceneError(probed)
+    if progress is not None and model.scene.scenario.duration > LONG_RUN:
+        progress(0.0)  # the run begins after its probe, which a progress bar then counts as start-up, not as work
     return _integrate(model, progress, stream)
 
 
@@ -130,7 +133,7 @@ def step_limit_refusal(model: MachineModel) -> str | Trajectory | None:
     steps are known only so, and RK4's and the energy method's (limits.run_refusals, advice.energy_step_refusal)
     grow by a step at each restart on a switch. None when the run fits or is short; the probe's trajectory when the
     user interrupted it."""
-    from mech_regulator.scene.limits import LONG_RUN, MAX_STEPS, PROBE_DURATION
+    from mech_regulator.scene.limits import MAX_STEPS, PROBE_DURATION
 
     scene = model.scene
     duration, method = scene.scenario.duration, scene.solver.method

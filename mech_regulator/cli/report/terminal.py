@@ -39,6 +39,8 @@ def note(line: str) -> None:
 PROGRESS_INTERVAL_VARIABLE = "MECH_REGULATOR_PROGRESS_INTERVAL"
 
 
+ETA_AFTER = 1.0  # [s] of wall time the work has run before a progress line gives an ETA (or ETA_SHARE of it done)
+ETA_SHARE = 0.01  # [-] of the total done before a progress line gives an ETA (or ETA_AFTER s run)
 PROGRESS_INTERVAL = 3.0  # [s] of wall time between two progress lines in a log (not a terminal), by default
 
 
@@ -173,10 +175,12 @@ class ProgressLines:
         return f" ({100.0 * self.n / self.total:.0f} %)" if self.total else ""
 
     def _eta(self, elapsed: float) -> str:
-        """', ETA ...' at the pace of the work so far ('' without a total)."""
+        """', ETA ...' at the pace of the work so far ('' without a total); unknown until the work has done ETA_SHARE
+        of the total or run ETA_AFTER s (a pace read off its first steps, first calls included, can be off by orders
+        of magnitude)."""
         if not self.total:
             return ""
-        if self.n <= 0.0:
+        if self.n <= 0.0 or (self.n < ETA_SHARE * self.total and elapsed < ETA_AFTER):
             return ", ETA unknown"
         return f", ETA {_duration(max(elapsed * (self.total - self.n) / self.n, 0.0))}"
 
