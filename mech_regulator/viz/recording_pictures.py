@@ -125,13 +125,20 @@ def log_drawing(
 
 def frame_columns(part: str, frames: list[np.ndarray]):
     """The animation frames of a drawing's moving part (y down) as Rerun columns partitioned by frame: Points2D (a
-    set of points per frame) for a part of POINT_PARTS, else LineStrips2D (one or a bundle of strips per frame)."""
+    set of points per frame) for a part of POINT_PARTS, else LineStrips2D (one or a bundle of strips per frame).
+
+    The strips go to Rerun as one array (strips x points x 2) when they all have as many points, as every bundled
+    drawing's do: given as a list of one small array per strip, Rerun's conversion cost 1 s and left some 45 MB of
+    the C heap free but not given back for a send of 10 000 frames of a bundle of 4 strips, which the recorder's
+    resident memory kept from then on (docs/ros.md, "The recorder's memory"); the column is the same either way."""
     if part in POINT_PARTS:
         columns = rr.Points2D.columns(positions=np.concatenate(frames))
         lengths = [len(frame) for frame in frames]
     else:
-        columns = rr.LineStrips2D.columns(
-            strips=[strip for frame in frames for strip in (frame if frame.ndim == 3 else [frame])]
-        )
-        lengths = [len(frame) if frame.ndim == 3 else 1 for frame in frames]
+        bundles = [frame if frame.ndim == 3 else frame[np.newaxis] for frame in frames]
+        lengths = [len(bundle) for bundle in bundles]
+        if len({bundle.shape[1] for bundle in bundles}) == 1:
+            columns = rr.LineStrips2D.columns(strips=np.concatenate(bundles))
+        else:
+            columns = rr.LineStrips2D.columns(strips=[strip for bundle in bundles for strip in bundle])
     return columns.partition(lengths)
