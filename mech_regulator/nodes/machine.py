@@ -58,6 +58,7 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
+from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Header, String
@@ -65,6 +66,7 @@ from std_srvs.srv import Trigger
 
 from mech_regulator.nodes import controller
 from mech_regulator.nodes.common import (
+    ACK_CATCH_UP,
     ACK_PATIENCE,
     BATCH_QOS,
     COMMAND_QOS,
@@ -266,7 +268,8 @@ class MachineNode(MachineExchange, SteadyNode):
             )
         self.scenario_name = peer_parameter(self, LOCKSTEP_INPUTS["load"][0])
         self.speakers.allow("load_torque_stamped", self.scenario_name)
-        self.speakers.allow("recorder/progress", peer_parameter(self, "recorder"))
+        self.recorder_name = peer_parameter(self, "recorder")
+        self.speakers.allow("recorder/progress", self.recorder_name)
         self.recorded_ns: int | None = None  # the newest exchange time the recorder has taken (recorder/progress)
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
@@ -689,15 +692,46 @@ class MachineNode(MachineExchange, SteadyNode):
 
     def finish(self) -> None:
         """Say the run is over (machine/status finished, diagnostics with finished_at_ns) once every subscriber
-        has the last state, and wait until the readers have both (as the recorder's batches: common.wait_for_readers;
-        a recorder held back past ACK_WAIT would miss them, and a run with every exchange in would end
-        `interrupted`)."""
+        has the last state, and wait until the readers have both (deliver_the_end: a recorder held back past ACK_WAIT
+        would miss them, and a run with every exchange in would end `interrupted`)."""
         self.moments.deliver()
         deliver_all(self, [self.joint_publisher])
         self.publish_status(RunState.FINISHED)
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))
-        deliver_all(self, [self.status_publisher, self.diagnostics_publisher], say=self.get_logger().warning)
+        self.deliver_the_end()
         self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
+
+    def deliver_the_end(self) -> None:
+        """Wait until the readers of machine/status and /diagnostics have acknowledged the run's end (`finished`, the
+        last diagnostics): every reader at most ACK_WAIT s per topic (deliver_all), then, should one still not have,
+        as long as the recorder is subscribed to machine/status, at most ACK_CATCH_UP s (said past ACK_PATIENCE s). A
+        recorder held back (its process stopped or starved) gets the end its `complete` summary needs, and it leaves
+        the graph once it has it; a reader that will never answer (a node killed without leaving the graph, taken for
+        there for the participants' lease: common.PARTICIPANT_LEASE) holds the machine no longer than the recorder
+        stays (docs/ros.md, "A recorder that falls behind")."""
+        publishers = [self.status_publisher, self.diagnostics_publisher]
+        deliver_all(self, publishers)
+        waited, said = time.monotonic(), False
+        while (
+            not all(publisher.wait_for_all_acked(Duration(seconds=SPIN_SLICE)) for publisher in publishers)
+            and self.recorder_follows()
+            and time.monotonic() - waited < ACK_CATCH_UP
+        ):
+            if not said and time.monotonic() - waited > ACK_PATIENCE:
+                self.get_logger().warning(
+                    f"the readers of {self.status_publisher.topic_name} (the recorder among them) have not "
+                    f"acknowledged the run's end for {ACK_PATIENCE:g} s of wall time: the machine waits while the "
+                    f"recorder is there, at most {ACK_CATCH_UP - ACK_PATIENCE:g} s more"
+                )
+                said = True
+
+    def recorder_follows(self) -> bool:
+        """Whether the recorder (parameter recorder_node, in this node's namespace) is subscribed to machine/status."""
+        namespace = self.get_namespace()
+        return any(
+            info.node_name == self.recorder_name and info.node_namespace == namespace
+            for info in self.get_subscriptions_info_by_topic(self.status_publisher.topic_name)
+        )
 
 
 def main() -> int:

@@ -37,6 +37,7 @@ from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,
     OK,
+    PARTICIPANT_LEASE,
     PROGRESS_QOS,
     RECORD_QOS,
     STATE_QOS,
@@ -177,6 +178,7 @@ class RecorderNode(SteadyNode):
         self.machine_exchanges: int | None = None  # the exchange times the machine published in its last trial,
         # from its last diagnostics (missed)
         self.closed = False
+        self.longest_hold = 0.0  # [s] of wall time the longest wait for callbacks took (its process stopped, starved)
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.last_exchanges: list[int] = []  # [ns] the machine's two newest exchange times in the trial
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -444,7 +446,8 @@ class RecorderNode(SteadyNode):
                         "it) did not come"
                         if self.last_samples_in()
                         else ""
-                    ),
+                    )
+                    + self.held_back(),
                 )
             )
             if self.machine_failed():  # the machine's own end
@@ -456,7 +459,8 @@ class RecorderNode(SteadyNode):
                         f"{self.missed()} of the {self.machine_exchanges} exchanges the machine published are "
                         "incomplete here (a part never came: a peer fell silent, or the recorder fell behind more "
                         'than the publishers keep, docs/speed.md, "The nodes\' side of an exchange")'
-                    ),
+                    )
+                    + self.held_back(),
                 )
         self._write("recording", self.path, lambda: self.recording.close(status, message))
         if self.path is None:
@@ -514,6 +518,19 @@ class RecorderNode(SteadyNode):
             self.write_failures.append(line)
             print(f"mech_regulator: recorder_node: {line}", file=sys.stderr)
             return False
+
+    def held_back(self) -> str:
+        """What an interrupted run's message adds when one wait of the recorder for its callbacks took more than
+        HELD_BACK s (its process stopped or starved): how long at most, and that a reader silent for longer than the
+        participants' lease (PARTICIPANT_LEASE) is taken for gone, the machine then going on without it (docs/ros.md,
+        "A recorder that falls behind"); else ''."""
+        if self.longest_hold <= HELD_BACK:
+            return ""
+        return (
+            f"; the recorder's process was held back (stopped or starved) for {self.longest_hold:.0f} s of wall time "
+            f"at once (a reader silent for longer than the participants' lease, {PARTICIPANT_LEASE:g} s in the run's "
+            "Fast DDS profile and 20 s by Fast DDS's default, is taken for gone and the machine goes on without it)"
+        )
 
     def trust_summary(self, status: str) -> dict:
         """The summary's `refused` (topic -> reason -> count), `foreign` (sender -> topic -> count of the messages
@@ -628,6 +645,7 @@ class RecorderNode(SteadyNode):
             spin_once(self, IDLE_SPIN_SLICE)
             now = time.monotonic()
             received = sum(self.rows.received.values())
+            self.longest_hold = max(self.longest_hold, now - before)
             if received != taken or now - before > HELD_BACK:
                 # samples still come (a recorder catching up), or this process was held back (stopped, starved):
                 # the grace starts again
@@ -638,7 +656,7 @@ class RecorderNode(SteadyNode):
                 elif now - waiting_since > FINISH_GRACE:
                     self.get_logger().warning(
                         f"the machine left without its end reaching the recorder: closing with what was received "
-                        f"({self.received()})"
+                        f"({self.received()}){self.held_back()}"
                     )
                     break
                 continue
