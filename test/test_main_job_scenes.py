@@ -449,6 +449,14 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     assert node_processes(str(rrd.parent)) == []
 
 
+def _working_folder(pid: int) -> Path | None:
+    """The working folder of process `pid`; None once it has ended (another run's node, listed a moment before)."""
+    try:
+        return Path(os.readlink(f"/proc/{pid}/cwd"))
+    except OSError:
+        return None
+
+
 def _play_holding_the_recorder(
     folder: Path, scene: str, played: float, domain: int, hold: Callable, until_end: Callable = lambda run: None
 ) -> tuple[str, Path]:
@@ -469,7 +477,7 @@ def _play_holding_the_recorder(
         deadline, recorder = time.monotonic() + 4 * WAIT, None
         while recorder is None and run.poll() is None and time.monotonic() < deadline:
             listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
-            ours = [int(pid) for pid in listing if Path(f"/proc/{pid}/cwd").resolve() == folder.resolve()]
+            ours = [int(pid) for pid in listing if _working_folder(int(pid)) == folder.resolve()]
             recorder = ours[0] if ours else None
             time.sleep(0.05)
         assert recorder is not None, "no recorder_node of this run"
@@ -547,11 +555,13 @@ def test_a_recorder_slower_than_the_machine_sets_the_run_s_pace(tmp_path, probe,
 
 
 def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
-    """The recorder stopped (SIGSTOP) for 18 s of wall time in the middle of a run whose exchanges go at some 2000 a
+    """The recorder stopped (SIGSTOP) for 30 s of wall time in the middle of a run whose exchanges go at some 2000 a
     second: the machine's batches wait for its acknowledgements (nodes.common.Batch, ACKED_EVERY, wait_for_readers)
     instead of running past what their publisher's history keeps, and say so on the log, so the run ends `complete`
     with every exchange in its CSV. Before, the recorder missed thousands of exchanges and the run ended
-    `interrupted`: with no wait at all, and (a wait of at most 10 s) with a stop longer than that."""
+    `interrupted`: with no wait at all, and (a wait of at most 10 s) with a stop longer than that. 30 s is past Fast
+    DDS's default participant lease, 20 s: with it (the run's profile without its leaseDuration) the machine took the
+    recorder for gone and went on, and the run ended without a summary; the run's profile sets PARTICIPANT_LEASE."""
 
     def hold(recorder: int, run) -> None:
         csv = tmp_path / "run.csv"
@@ -559,9 +569,10 @@ def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
         while not (csv.exists() and csv.stat().st_size > 100_000) and time.monotonic() < deadline:
             time.sleep(0.05)  # the recorder has written its first rows: exchanges are under way
         os.kill(recorder, signal.SIGSTOP)
-        time.sleep(18.0)  # (past the participant's lease, some 30 s here, the machine would no longer wait)
+        time.sleep(30.0)
         os.kill(recorder, signal.SIGCONT)
 
     described, rrd = _play_holding_the_recorder(tmp_path, "lathe", 800.0, next_domain_id(), hold)
     log = rrd.with_suffix(".log").read_text()
+    assert "left while the run waited" not in log, described
     assert "machine/moments (the recorder among them) have not acknowledged" in log, described
