@@ -256,28 +256,40 @@ class _Acknowledging(_Published):
 def test_a_batch_waits_for_its_readers_and_says_so_once_they_are_late():
     """wait_for_readers: at once when the readers have acknowledged everything; past ACK_PATIENCE s it says that
     the run waits for the recorder and waits up to ACK_CATCH_UP in all, longer than the participants' lease (a reader
-    stopped is waited for as long as it is taken for there); still unacknowledged, it says the run goes on without
-    them; a reader that left during the wait (taken for gone once its lease ran out) is said, what it missed lost to
-    it. Batch.deliver (the run's end) sends what waits, then waits."""
-    from mech_regulator.nodes.common import ACK_CATCH_UP, ACK_PATIENCE, PARTICIPANT_LEASE, Batch, wait_for_readers
+    stopped is waited for as long as it is taken for there); still unacknowledged (a reader there that takes nothing)
+    it ends the node naming the topic (PeerError) rather than wait that long again and again; a reader that left
+    during the wait (taken for gone once its lease ran out) is said, what it missed lost to it. Batch.deliver (the
+    run's end) sends what waits, then waits."""
+    from mech_regulator.nodes.common import (
+        ACK_CATCH_UP,
+        ACK_PATIENCE,
+        PARTICIPANT_LEASE,
+        Batch,
+        PeerError,
+        wait_for_readers,
+    )
 
     assert ACK_CATCH_UP > PARTICIPANT_LEASE
-    for acknowledged, readers, result, said in (
-        ([True], (1,), True, []),
+    for acknowledged, readers, ends, said in (
+        ([True], (1,), False, []),
         (
             [False, True],
             (1,),
-            True,
+            False,
             [
                 f"waits for them as long as they are there (a reader that announces nothing for "
                 f"{PARTICIPANT_LEASE:g} s is taken for gone), at most {PARTICIPANT_LEASE:g} s more"
             ],
         ),
-        ([False, False], (1,), False, ["waits for them", "goes on without them"]),
-        ([False, True], (2, 1), True, ["waits for them", "1 reader(s) of /machine/moments left while the run waited"]),
+        ([False, False], (1,), True, ["waits for them"]),
+        ([False, True], (2, 1), False, ["waits for them", "1 reader(s) of /machine/moments left while the run waited"]),
     ):
         publisher, lines = _Acknowledging(list(acknowledged), readers), []
-        assert wait_for_readers(publisher, lines.append) is result
+        if ends:
+            with pytest.raises(PeerError, match=f"/machine/moments .* acknowledged nothing more .* {ACK_CATCH_UP:g} s"):
+                wait_for_readers(publisher, lines.append)
+        else:
+            wait_for_readers(publisher, lines.append)
         assert publisher.waits == [ACK_PATIENCE, ACK_CATCH_UP - ACK_PATIENCE][: len(acknowledged)]
         assert len(lines) == len(said) and all(part in line for part, line in zip(said, lines)), lines
         assert all("/machine/moments (the recorder among them)" in line for line in lines[:1])
@@ -350,6 +362,46 @@ def test_the_machine_s_end_waits_for_its_readers_while_the_recorder_is_there(
     if looks is not None:  # (one look after each wait in vain past deliver_all's)
         assert seen["looks"] == looks
     assert bool(warnings) is warned and all("waits while the recorder is there" in line for line in warnings), warnings
+
+
+@pytest.mark.parametrize("recorder_takes", [False, True])
+def test_the_machine_keeps_pace_with_its_recorder_while_it_takes_and_ends_the_run_when_it_takes_nothing(
+    monkeypatch, recorder_takes
+):
+    """MachineNode.keep_pace_with_the_recorder holds the run while the recorder is more than RECORDER_LEAD exchanges
+    behind: until it catches up, and, should it be there and take nothing for ACK_CATCH_UP s (shortened here; a
+    recorder resumed after a 90-s stop was seen to receive nothing more, and the hold had no other end), ends the run
+    naming where the recorder stands (PeerError)."""
+    from types import SimpleNamespace
+
+    from mech_regulator.nodes import machine as machine_module
+    from mech_regulator.nodes.common import RECORDER_LEAD, PeerError
+    from mech_regulator.nodes.machine import MachineNode
+
+    monkeypatch.setattr(machine_module, "ACK_CATCH_UP", 0.2)
+    monkeypatch.setattr(machine_module, "spin_once", lambda node, timeout: None)
+    monkeypatch.setattr(machine_module.rclpy, "ok", lambda: True)
+    machine = MachineNode.__new__(MachineNode)  # its pace only: no ROS node
+    machine.time_mode, machine.published_exchanges, machine.step_ns = "lockstep", 0, 20_000_000
+    machine.now_ns, machine.recorded_ns = (RECORDER_LEAD + 500) * machine.step_ns, 0
+    machine.recorder_progress = SimpleNamespace(get_publisher_count=lambda: 1)
+    machine.moments = SimpleNamespace(send_when_due=lambda: None)
+    machine.report = lambda: None
+    machine.get_logger = lambda: SimpleNamespace(warning=print)
+    looks = {"count": 0}
+
+    def read_recorder_progress() -> None:  # the recorder takes 100 exchanges a look, or nothing
+        looks["count"] += 1
+        if recorder_takes:
+            machine.recorded_ns += 100 * machine.step_ns
+
+    machine.read_recorder_progress = read_recorder_progress
+    if recorder_takes:
+        machine.keep_pace_with_the_recorder()
+        assert machine.now_ns - machine.recorded_ns <= RECORDER_LEAD * machine.step_ns and looks["count"] == 5
+    else:
+        with pytest.raises(PeerError, match=r"has taken nothing more for 0.2 s .* up to t = 0 s"):
+            machine.keep_pace_with_the_recorder()
 
 
 def test_the_run_s_fast_dds_profile_sets_the_participants_lease_the_nodes_wait_for():

@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import TypeVar, cast
 
 import numpy as np
 import rclpy
@@ -31,6 +31,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -510,14 +511,16 @@ class Batch:
         wait_for_readers(self.publisher, self.say)
 
 
-def wait_for_readers(publisher, say: Callable[[str], object]) -> bool:
-    """Whether every reader of `publisher` acknowledged all it sent within ACK_CATCH_UP s of wall time (waiting until
-    then). A wait past ACK_PATIENCE s is said (`say`: the node's log), and so is one that runs out. A reader that has
-    gone is not waited for: its node ended, or it announced nothing for the participants' lease (PARTICIPANT_LEASE:
-    its process stopped or starved that long) and is taken for gone; one that left during a wait is said too, since
-    what it had not taken is lost to it (a recorder that comes back counts what it lost in its summary; docs/ros.md,
-    "A recorder that falls behind"). ACK_CATCH_UP outlasts the lease, so a reader stopped is waited for as long as it
-    is taken for there, and one there that takes nothing (alive, not spinning) ACK_CATCH_UP s."""
+def wait_for_readers(publisher, say: Callable[[str], object]) -> None:
+    """Wait until every reader of `publisher` has acknowledged all it sent, at most ACK_CATCH_UP s of wall time. A wait
+    past ACK_PATIENCE s is said (`say`: the node's log). A reader that has gone is not waited for: its node ended, or
+    it announced nothing for the participants' lease (PARTICIPANT_LEASE: its process stopped or starved that long)
+    and is taken for gone; one that left during a wait is said too, since what it had not taken is lost to it (a
+    recorder that comes back counts what it lost in its summary). ACK_CATCH_UP outlasts the lease, so a reader
+    stopped is waited for as long as it is taken for there; one still there that has acknowledged nothing for
+    ACK_CATCH_UP s (alive but not taking, or resumed after a long stop and no longer receiving: seen once after a
+    90-s stop) ends the node (PeerError: exit code 1, the topic named) rather than have the run wait that long again
+    at every ACKED_EVERY batches (docs/ros.md, "A recorder that falls behind")."""
     readers = publisher.get_subscription_count()
     acknowledged = publisher.wait_for_all_acked(Duration(seconds=ACK_PATIENCE))
     if not acknowledged:
@@ -531,16 +534,17 @@ def wait_for_readers(publisher, say: Callable[[str], object]) -> bool:
     left = readers - publisher.get_subscription_count()
     if left > 0:
         say(
-            f"{left} reader(s) of {publisher.topic_name} left while the run waited for their acknowledgements (a node ended, or one "
-            f"stopped or starved for longer than the participants' lease, {PARTICIPANT_LEASE:g} s in the run's Fast "
-            "DDS profile, was taken for gone): what they had not taken is lost to them, the run goes on"
+            f"{left} reader(s) of {publisher.topic_name} left while the run waited for their acknowledgements (a "
+            "node ended, or one stopped or starved for longer than the participants' lease, "
+            f"{PARTICIPANT_LEASE:g} s in the run's Fast DDS profile, was taken for gone): what they had not taken is "
+            "lost to them, the run goes on"
         )
     if not acknowledged:
-        say(
-            f"the readers of {publisher.topic_name} still have not acknowledged its messages: the run goes on "
-            "without them"
+        raise PeerError(
+            f"the readers of {publisher.topic_name} (the recorder among them) are there but have acknowledged "
+            f"nothing more it sent for {ACK_CATCH_UP:g} s of wall time (a node stopped, or one resumed that no longer "
+            "receives): the run ends; the recorder's summary says what it has"
         )
-    return acknowledged
 
 
 def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
@@ -606,11 +610,11 @@ class RunState:
 
 def follow_run_state(
     node: Node, on_state: Callable[[RunStateMessage], None], refusals: Refusals, speakers: Speakers
-) -> None:
+) -> Subscription:
     """Subscribe `node` to the machine's run state (RunState), taken from the node speakers allow on machine/status
-    only; on_state gets it checked (trust.RunStateMessage). A node that follows the machine sets `node.done = True`
-    when the state is finished, so `run` ends it by itself."""
-    receive(
+    only; on_state gets it checked (trust.RunStateMessage), and return the subscription. A node that follows the
+    machine sets `node.done = True` when the state is finished, so `run` ends it by itself."""
+    return receive(
         node,
         String,
         "machine/status",
@@ -677,6 +681,23 @@ def deliver_all(node: Node, publishers: list | None = None) -> None:
         ):
             time.sleep(MATCH_POLL)
         publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+
+
+def take_waiting(subscription: Subscription) -> int:
+    """Hand every message waiting in `subscription`'s reader, with its message info, to the subscription's callback
+    (one made by trust.receive, which checks its speaker), taken straight from the reader rather than through the
+    executor, and return how many there were. rclpy's EventsExecutor was seen to leave messages in a reader without calling its callback: the
+    machine's recorder/progress, and the recorder's machine/moments after its process had been stopped for 90 s (a
+    reader kept full acknowledges nothing more, and the run waited for it; docs/ros.md, "A recorder that falls
+    behind")."""
+    taken = 0
+    while True:
+        with subscription.handle:
+            received = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+        if received is None:
+            return taken
+        cast(Callable[..., None], subscription.callback)(*received)  # (message, info): trust.receive's callback
+        taken += 1
 
 
 def spin_once(node: Node, timeout: float) -> None:

@@ -92,12 +92,12 @@ from mech_regulator.nodes.common import (
     scene_model,
     spin_once,
     stamp,
+    take_waiting,
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.machine_exchange import MachineExchange
 from mech_regulator.nodes.trust import (
-    BadMessage,
     Refusals,
     Speakers,
     namesakes,
@@ -454,21 +454,10 @@ class MachineNode(MachineExchange, SteadyNode):
         self.recorded_ns = stamp_of(message.stamp)
 
     def read_recorder_progress(self) -> None:
-        """Take what recorder/progress holds (on_recorder_progress) straight from the subscription, its speaker
-        checked as `receive` checks it: in the machine node the EventsExecutor was seen not to call this
-        subscription's callback (its messages stayed in the reader; not traced), so the machine does not wait for the
-        executor to hand them over."""
-        while True:
-            with self.recorder_progress.handle:
-                taken = self.recorder_progress.handle.take_message(Header, False)
-            if taken is None:
-                return
-            message, info = taken
-            try:
-                self.speakers.check("recorder/progress", info)
-                self.on_recorder_progress(message)
-            except BadMessage as refused:
-                self.refusals.refuse("recorder/progress", refused.reason, refused.detail, refused.sender)
+        """Take what recorder/progress holds (on_recorder_progress) straight from the subscription (take_waiting): in
+        the machine node the EventsExecutor was seen not to call this subscription's callback (its messages stayed in
+        the reader; not traced), so the machine does not wait for the executor to hand them over."""
+        take_waiting(self.recorder_progress)
 
     def keep_pace_with_the_recorder(self) -> None:
         """Before the exchange at now_ns: while the recorder has taken less than what the machine sent RECORDER_LEAD
@@ -477,7 +466,8 @@ class MachineNode(MachineExchange, SteadyNode):
         through the nodes for 10 000 s ended with its recorder 5 minutes behind, 13 203 exchanges it had not yet taken
         lost with the machine) so sets the run's pace, and what it has not taken stays bounded (docs/ros.md, "A
         recorder that falls behind"). Not in realtime runs (the wall clock sets their pace), nor once the recorder has
-        gone (no publisher of recorder/progress)."""
+        gone (no publisher of recorder/progress). A recorder still there that takes nothing for ACK_CATCH_UP s ends
+        the run (PeerError: exit code 1, said), as a batch's wait for it does (common.wait_for_readers)."""
         if self.time_mode == "realtime" or self.published_exchanges % PROGRESS_EVERY:
             return
         self.read_recorder_progress()
@@ -485,11 +475,20 @@ class MachineNode(MachineExchange, SteadyNode):
         if self.recorded_ns is None or self.now_ns - self.recorded_ns <= lead:
             return
         waited, said = time.monotonic(), False
+        taken, taken_at = self.recorded_ns, waited  # the recorder's progress and when it last advanced
         while rclpy.ok() and self.now_ns - self.recorded_ns > lead and self.recorder_progress.get_publisher_count():
             self.moments.send_when_due()
             spin_once(self, SPIN_SLICE)
             self.read_recorder_progress()
             self.report()
+            if self.recorded_ns != taken:
+                taken, taken_at = self.recorded_ns, time.monotonic()
+            elif time.monotonic() - taken_at > ACK_CATCH_UP:
+                raise PeerError(
+                    f"the recorder is there but has taken nothing more for {ACK_CATCH_UP:g} s of wall time (it took "
+                    f"the exchanges up to t = {seconds(self.recorded_ns):.6g} s; stopped, or resumed and no longer "
+                    "receiving): the run ends; the recorder's summary says what it has"
+                )
             if not said and time.monotonic() - waited > ACK_PATIENCE:
                 self.get_logger().warning(
                     f"the recorder has taken the exchanges up to t = {seconds(self.recorded_ns):.6g} s only: the run "

@@ -55,6 +55,7 @@ from mech_regulator.nodes.common import (
     scene_model,
     spin_once,
     stamp,
+    take_waiting,
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
@@ -204,8 +205,10 @@ class RecorderNode(SteadyNode):
             self, JointState, "governor/state", self.on_governor, RECORD_QOS, self.refusals, self.speakers
         )
         self.streams = [governor_states] if self.model.governor is not None else []
-        receive(self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers)
-        receive(
+        events = receive(
+            self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers
+        )
+        diagnostics_subscription = receive(
             self,
             DiagnosticArray,
             "/diagnostics",
@@ -215,7 +218,8 @@ class RecorderNode(SteadyNode):
             self.speakers,
             pass_speaker=True,
         )  # (every message: a stranger's status, whatever it names, is refused and counted by who sent it)
-        follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
+        status = follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
+        self.checked = [*self.streams, events, diagnostics_subscription, status]  # (trust.receive's: take_what_waits)
         self.create_timer(FLUSH_PERIOD, self.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
@@ -615,6 +619,13 @@ class RecorderNode(SteadyNode):
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
 
+    def take_what_waits(self) -> None:
+        """Take what waits in every subscription's reader straight from it (common.take_waiting), after each spin:
+        after the recorder's process had been stopped for 90 s, rclpy's EventsExecutor was seen to hand over nothing
+        more (its reader filled, acknowledged nothing, and the machine waited for it)."""
+        for subscription in (self.machine_moments, *self.checked):
+            take_waiting(subscription)
+
     def subscribe_to_the_machine(self) -> None:
         """Subscribe to the machine's states and moments (machine/moments) once the other stream the run needs (a
         governor's state) has matched its publisher, or after STREAMS_WAIT s: the machine starts as soon as its peers
@@ -643,6 +654,7 @@ class RecorderNode(SteadyNode):
         while rclpy.ok() and not self.complete():
             before = time.monotonic()
             spin_once(self, IDLE_SPIN_SLICE)
+            self.take_what_waits()
             now = time.monotonic()
             received = sum(self.rows.received.values())
             self.longest_hold = max(self.longest_hold, now - before)
