@@ -364,6 +364,39 @@ def test_the_machine_s_end_waits_for_its_readers_while_the_recorder_is_there(
     assert bool(warnings) is warned and all("waits while the recorder is there" in line for line in warnings), warnings
 
 
+def test_take_waiting_hands_every_waiting_message_with_its_info_to_the_callback():
+    """common.take_waiting takes what waits in a subscription's reader straight from it (the handle held while it
+    takes), hands each (message, info) to the subscription's callback in order, and says how many: nothing when the
+    reader is empty."""
+    from unittest import mock
+
+    from mech_regulator.nodes.common import take_waiting
+
+    class Handle:
+        def __init__(self, waiting: list):
+            self.waiting, self.held, self.asked = waiting, 0, []
+
+        def __enter__(self):
+            self.held += 1
+
+        def __exit__(self, *exception):
+            self.held -= 1
+
+        def take_message(self, message_type, raw):
+            assert self.held == 1
+            self.asked.append((message_type, raw))
+            return self.waiting.pop(0) if self.waiting else None
+
+    handed: list = []
+    subscription = mock.Mock(
+        msg_type=JointState, raw=False, callback=lambda message, info: handed.append((message, info))
+    )
+    subscription.handle = Handle([("first", {"sender": 1}), ("second", {"sender": 2})])
+    assert take_waiting(subscription) == 2 and handed == [("first", {"sender": 1}), ("second", {"sender": 2})]
+    assert subscription.handle.asked == [(JointState, False)] * 3
+    assert take_waiting(subscription) == 0 and len(handed) == 2
+
+
 @pytest.mark.parametrize("recorder_takes", [False, True])
 def test_the_machine_keeps_pace_with_its_recorder_while_it_takes_and_ends_the_run_when_it_takes_nothing(
     monkeypatch, recorder_takes
