@@ -59,8 +59,8 @@ def test_a_machine_that_stops_exchanging_is_reported_and_again_when_it_goes_on(t
             machine.kill()
     text = stderr.getvalue()
     stood = text.index(
-        "has not advanced from t = 1 s for 0.5 s of wall time (paused through its ~/pause service, or "
-        "stuck); Ctrl-C ends the run with its summary"
+        "has not advanced from t = 1 s for 0.5 s of wall time (paused through its ~/pause service, waiting for its "
+        "recorder held back, or stuck); Ctrl-C ends the run with its summary"
     )
     assert stood < text.index("the machine goes on at t = 2 s"), text
 

@@ -555,11 +555,13 @@ def test_a_recorder_slower_than_the_machine_sets_the_run_s_pace(tmp_path, probe,
 
 
 def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
-    """The recorder stopped (SIGSTOP) for 18 s of wall time in the middle of a run whose exchanges go at some 2000 a
+    """The recorder stopped (SIGSTOP) for 30 s of wall time in the middle of a run whose exchanges go at some 2000 a
     second: the machine's batches wait for its acknowledgements (nodes.common.Batch, ACKED_EVERY, wait_for_readers)
     instead of running past what their publisher's history keeps, and say so on the log, so the run ends `complete`
     with every exchange in its CSV. Before, the recorder missed thousands of exchanges and the run ended
-    `interrupted`: with no wait at all, and (a wait of at most 10 s) with a stop longer than that."""
+    `interrupted`: with no wait at all, and (a wait of at most 10 s) with a stop longer than that. 30 s is past Fast
+    DDS's default participant lease, 20 s: with it (the run's profile without its leaseDuration) the machine took the
+    recorder for gone and went on, and the run ended without a summary; the run's profile sets PARTICIPANT_LEASE."""
 
     def hold(recorder: int, run) -> None:
         csv = tmp_path / "run.csv"
@@ -567,9 +569,10 @@ def test_a_recorder_held_back_slows_the_run_and_loses_no_exchange(tmp_path):
         while not (csv.exists() and csv.stat().st_size > 100_000) and time.monotonic() < deadline:
             time.sleep(0.05)  # the recorder has written its first rows: exchanges are under way
         os.kill(recorder, signal.SIGSTOP)
-        time.sleep(18.0)  # (past the participant's lease, some 30 s here, the machine would no longer wait)
+        time.sleep(30.0)
         os.kill(recorder, signal.SIGCONT)
 
     described, rrd = _play_holding_the_recorder(tmp_path, "lathe", 800.0, next_domain_id(), hold)
     log = rrd.with_suffix(".log").read_text()
+    assert "left while the run waited" not in log, described
     assert "machine/moments (the recorder among them) have not acknowledged" in log, described

@@ -236,32 +236,60 @@ def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
 
 class _Acknowledging(_Published):
     """A stand-in publisher whose readers acknowledge what it sent after the waits `acknowledged` says (True: within
-    that wait), noting the length [s] of each wait asked for."""
+    that wait, or every reader unacknowledged has gone), noting the length [s] of each wait asked for; `readers`: how
+    many readers it has matched, one entry per look (the last one repeats)."""
 
     topic_name = "/machine/moments"
 
-    def __init__(self, acknowledged: list[bool]):
+    def __init__(self, acknowledged: list[bool], readers: tuple[int, ...] = (1,)):
         super().__init__()
-        self.acknowledged, self.waits = acknowledged, []
+        self.acknowledged, self.waits, self.readers = acknowledged, [], list(readers)
 
     def wait_for_all_acked(self, timeout) -> bool:
         self.waits.append(timeout.nanoseconds * 1e-9)
         return self.acknowledged.pop(0)
 
+    def get_subscription_count(self) -> int:
+        return self.readers.pop(0) if len(self.readers) > 1 else self.readers[0]
+
 
 def test_a_batch_waits_for_its_readers_and_says_so_once_they_are_late():
     """wait_for_readers: at once when the readers have acknowledged everything; past ACK_PATIENCE s it says that
-    the run waits for the recorder and waits up to ACK_CATCH_UP in all; still unacknowledged, it says the run goes
-    on without them. Batch.deliver (the run's end) sends what waits, then waits."""
-    from mech_regulator.nodes.common import ACK_CATCH_UP, ACK_PATIENCE, Batch, wait_for_readers
+    the run waits for the recorder and waits up to ACK_CATCH_UP in all, longer than the participants' lease (a reader
+    stopped is waited for as long as it is taken for there); still unacknowledged (a reader there that takes nothing)
+    it ends the node naming the topic (PeerError) rather than wait that long again and again; a reader that left
+    during the wait (taken for gone once its lease ran out) is said, what it missed lost to it. Batch.deliver (the
+    run's end) sends what waits, then waits."""
+    from mech_regulator.nodes.common import (
+        ACK_CATCH_UP,
+        ACK_PATIENCE,
+        PARTICIPANT_LEASE,
+        Batch,
+        PeerError,
+        wait_for_readers,
+    )
 
-    for acknowledged, result, said in (
-        ([True], True, []),
-        ([False, True], True, ["waits for them, at most 50 s more"]),
-        ([False, False], False, ["waits for them", "goes on without them"]),
+    assert ACK_CATCH_UP > PARTICIPANT_LEASE
+    for acknowledged, readers, ends, said in (
+        ([True], (1,), False, []),
+        (
+            [False, True],
+            (1,),
+            False,
+            [
+                f"waits for them as long as they are there (a reader that announces nothing for "
+                f"{PARTICIPANT_LEASE:g} s is taken for gone), at most {PARTICIPANT_LEASE:g} s more"
+            ],
+        ),
+        ([False, False], (1,), True, ["waits for them"]),
+        ([False, True], (2, 1), False, ["waits for them", "1 reader(s) of /machine/moments left while the run waited"]),
     ):
-        publisher, lines = _Acknowledging(list(acknowledged)), []
-        assert wait_for_readers(publisher, lines.append) is result
+        publisher, lines = _Acknowledging(list(acknowledged), readers), []
+        if ends:
+            with pytest.raises(PeerError, match=f"/machine/moments .* acknowledged nothing more .* {ACK_CATCH_UP:g} s"):
+                wait_for_readers(publisher, lines.append)
+        else:
+            wait_for_readers(publisher, lines.append)
         assert publisher.waits == [ACK_PATIENCE, ACK_CATCH_UP - ACK_PATIENCE][: len(acknowledged)]
         assert len(lines) == len(said) and all(part in line for part, line in zip(said, lines)), lines
         assert all("/machine/moments (the recorder among them)" in line for line in lines[:1])
@@ -270,6 +298,166 @@ def test_a_batch_waits_for_its_readers_and_says_so_once_they_are_late():
     batch.add(0, ["load"], [], [], [1.0])
     batch.deliver()
     assert len(publisher) == 1 and publisher.waits == [ACK_PATIENCE]
+
+
+class _EndReaders:
+    """A stand-in publisher of the machine's end (machine/status or /diagnostics) with one matched reader, which
+    acknowledges what it sent at the `acknowledged_at`-th wait for it (None: never, a node killed without leaving
+    the graph); `waits` counts the waits."""
+
+    def __init__(self, topic_name: str, acknowledged_at: int | None):
+        self.topic_name, self.acknowledged_at, self.waits = topic_name, acknowledged_at, 0
+
+    def get_subscription_count(self) -> int:
+        return 1
+
+    def wait_for_all_acked(self, timeout) -> bool:
+        self.waits += 1
+        return self.acknowledged_at is not None and self.waits >= self.acknowledged_at
+
+
+@pytest.mark.parametrize(
+    "status_acknowledged_at, recorder_looks, looks, warned",
+    [
+        (1, 5, 0, False),  # acknowledged at once: no look at the recorder
+        (None, 3, 4, False),  # a reader that never answers (killed): waited for until the recorder has left
+        (None, 0, 1, False),  # ... and not at all when no recorder follows the run
+        (40, 100, 38, False),  # a recorder held back: waited for while it is there, past ACK_WAIT, until it answers
+        (None, 10**9, None, True),  # a reader there that never answers: at most ACK_CATCH_UP (shortened), said
+    ],
+)
+def test_the_machine_s_end_waits_for_its_readers_while_the_recorder_is_there(
+    monkeypatch, status_acknowledged_at, recorder_looks, looks, warned
+):
+    """MachineNode.deliver_the_end: every reader of machine/status and /diagnostics gets ACK_WAIT s (deliver_all);
+    one that has not acknowledged the end by then is waited for only while the recorder is subscribed to
+    machine/status (it leaves once it has the end), at most ACK_CATCH_UP s: a recorder held back still gets the end
+    its `complete` summary needs, and a node killed without leaving the graph (taken for there for the participants'
+    lease, 300 s) does not hold the machine's end after the recorder has gone."""
+    from types import SimpleNamespace
+
+    from mech_regulator.nodes import machine as machine_module
+    from mech_regulator.nodes.machine import MachineNode
+
+    if warned:
+        monkeypatch.setattr(machine_module, "ACK_CATCH_UP", 0.3)
+        monkeypatch.setattr(machine_module, "ACK_PATIENCE", 0.1)
+    machine = MachineNode.__new__(MachineNode)  # its end only: no ROS node
+    machine.status_publisher = _EndReaders("/machine/status", status_acknowledged_at)
+    machine.diagnostics_publisher = _EndReaders("/diagnostics", 1)
+    machine.recorder_name, machine.get_namespace = "recorder", lambda: "/"
+    machine.count_subscribers = lambda topic: 1
+    recorder = SimpleNamespace(node_name="recorder", node_namespace="/")
+    seen = {"looks": 0}
+
+    def subscriptions(topic: str) -> list:
+        assert topic == "/machine/status"
+        seen["looks"] += 1
+        return [recorder] if seen["looks"] <= recorder_looks else []
+
+    machine.get_subscriptions_info_by_topic = subscriptions
+    warnings: list[str] = []
+    machine.get_logger = lambda: SimpleNamespace(warning=warnings.append)
+    machine.deliver_the_end()
+    if looks is not None:  # (one look after each wait in vain past deliver_all's)
+        assert seen["looks"] == looks
+    assert bool(warnings) is warned and all("waits while the recorder is there" in line for line in warnings), warnings
+
+
+def test_take_waiting_hands_every_waiting_message_with_its_info_to_the_callback():
+    """common.take_waiting takes what waits in a subscription's reader straight from it (the handle held while it
+    takes), hands each (message, info) to the subscription's callback in order, and says how many: nothing when the
+    reader is empty."""
+    from unittest import mock
+
+    from mech_regulator.nodes.common import take_waiting
+
+    class Handle:
+        def __init__(self, waiting: list):
+            self.waiting, self.held, self.asked = waiting, 0, []
+
+        def __enter__(self):
+            self.held += 1
+
+        def __exit__(self, *exception):
+            self.held -= 1
+
+        def take_message(self, message_type, raw):
+            assert self.held == 1
+            self.asked.append((message_type, raw))
+            return self.waiting.pop(0) if self.waiting else None
+
+    handed: list = []
+    subscription = mock.Mock(
+        msg_type=JointState, raw=False, callback=lambda message, info: handed.append((message, info))
+    )
+    subscription.handle = Handle([("first", {"sender": 1}), ("second", {"sender": 2})])
+    assert take_waiting(subscription) == 2 and handed == [("first", {"sender": 1}), ("second", {"sender": 2})]
+    assert subscription.handle.asked == [(JointState, False)] * 3
+    assert take_waiting(subscription) == 0 and len(handed) == 2
+
+
+@pytest.mark.parametrize("recorder_takes", [False, True])
+def test_the_machine_keeps_pace_with_its_recorder_while_it_takes_and_ends_the_run_when_it_takes_nothing(
+    monkeypatch, recorder_takes
+):
+    """MachineNode.keep_pace_with_the_recorder holds the run while the recorder is more than RECORDER_LEAD exchanges
+    behind: until it catches up, and, should it be there and take nothing for ACK_CATCH_UP s (shortened here; a
+    recorder resumed after a 90-s stop was seen to receive nothing more, and the hold had no other end), ends the run
+    naming where the recorder stands (PeerError)."""
+    from types import SimpleNamespace
+
+    from mech_regulator.nodes import machine as machine_module
+    from mech_regulator.nodes.common import RECORDER_LEAD, PeerError
+    from mech_regulator.nodes.machine import MachineNode
+
+    monkeypatch.setattr(machine_module, "ACK_CATCH_UP", 0.2)
+    monkeypatch.setattr(machine_module, "spin_once", lambda node, timeout: None)
+    monkeypatch.setattr(machine_module.rclpy, "ok", lambda: True)
+    machine = MachineNode.__new__(MachineNode)  # its pace only: no ROS node
+    machine.time_mode, machine.published_exchanges, machine.step_ns = "lockstep", 0, 20_000_000
+    machine.now_ns, machine.recorded_ns = (RECORDER_LEAD + 500) * machine.step_ns, 0
+    machine.recorder_progress = SimpleNamespace(get_publisher_count=lambda: 1)
+    machine.moments = SimpleNamespace(send_when_due=lambda: None)
+    machine.report = lambda: None
+    machine.get_logger = lambda: SimpleNamespace(warning=print)
+    looks = {"count": 0}
+
+    def read_recorder_progress() -> None:  # the recorder takes 100 exchanges a look, or nothing
+        looks["count"] += 1
+        if recorder_takes:
+            machine.recorded_ns += 100 * machine.step_ns
+
+    machine.read_recorder_progress = read_recorder_progress
+    if recorder_takes:
+        machine.keep_pace_with_the_recorder()
+        assert machine.now_ns - machine.recorded_ns <= RECORDER_LEAD * machine.step_ns and looks["count"] == 5
+    else:
+        with pytest.raises(PeerError, match=r"has taken nothing more for 0.2 s .* up to t = 0 s"):
+            machine.keep_pace_with_the_recorder()
+
+
+def test_the_run_s_fast_dds_profile_sets_the_participants_lease_the_nodes_wait_for():
+    """The Fast DDS profile every node of a run reads (launch.fastdds_profile, set by launch.private_environment)
+    gives the participants the lease nodes.common.PARTICIPANT_LEASE says (Fast DDS's default, 20 s, took a recorder
+    stopped 20 s for gone: test_main_job_scenes' held recorder), and still announces them every 0.2 s."""
+    import xml.etree.ElementTree as ElementTree
+
+    from mech_regulator.nodes.common import PARTICIPANT_LEASE
+    from mech_regulator.nodes.launch import FASTDDS_PROFILE_VARIABLE, fastdds_profile, private_environment
+
+    profile = fastdds_profile()
+    assert private_environment(0)[FASTDDS_PROFILE_VARIABLE] == str(profile) or FASTDDS_PROFILE_VARIABLE in os.environ
+    space = {"dds": "http://www.eprosima.com"}
+    discovery = ElementTree.parse(profile).find(".//dds:participant/dds:rtps/dds:builtin/dds:discovery_config", space)
+    assert discovery is not None
+
+    def duration(name: str) -> float:
+        element = discovery.find(f"dds:{name}", space)
+        assert element is not None, name
+        return int(element.findtext("dds:sec", "0", space)) + 1e-9 * int(element.findtext("dds:nanosec", "0", space))
+
+    assert duration("leaseDuration") == PARTICIPANT_LEASE and duration("leaseAnnouncement") == 0.2
 
 
 # -------------------------------------------------------------------------------------------------
@@ -723,6 +911,20 @@ def test_the_recorder_counts_the_exchanges_the_machine_published_that_it_missed(
     assert recorder.machine_reported_end and recorder.missed() == 1
     with pytest.raises(BadMessage, match="exchanges"):
         machine_says({"sim_time": "0.006", "exchanges": "nan"})
+
+
+def test_the_recorder_says_how_long_it_was_held_back_when_its_run_is_interrupted():
+    # (a recorder stopped past the participants' lease is taken for gone: its summary says it was held back, how long)
+    from mech_regulator.nodes.common import PARTICIPANT_LEASE
+    from mech_regulator.nodes.recorder import HELD_BACK, RecorderNode
+
+    recorder = RecorderNode.__new__(RecorderNode)  # its bookkeeping only: no ROS node, no recording file
+    recorder.longest_hold = HELD_BACK  # a wait for callbacks no longer than that: not held back
+    assert recorder.held_back() == ""
+    recorder.longest_hold = 42.4
+    said = recorder.held_back()
+    assert "held back (stopped or starved) for 42 s of wall time at once" in said, said
+    assert f"the participants' lease, {PARTICIPANT_LEASE:g} s in the run's Fast DDS profile" in said, said
 
 
 def _machine_batch(times_ns: list[int]) -> JointState:

@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar
+from typing import TypeVar, cast
 
 import numpy as np
 import rclpy
@@ -31,6 +31,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -64,8 +65,13 @@ BATCH_HISTORY_DEPTH = 200  # batched messages (class Batch) kept by each of thei
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACKED_EVERY = BATCH_HISTORY_DEPTH // 2  # batches a Batch sends between two waits for its readers' acknowledgements
-ACK_CATCH_UP = 60.0  # [s] of wall time a Batch waits at most for its readers to acknowledge what it sent
-ACK_PATIENCE = 10.0  # [s] of wall time of that wait before the node says it waits (wait_for_readers)
+PARTICIPANT_LEASE = 300.0  # [s] of wall time a participant that announces nothing (its process stopped, starved,
+# killed) is still taken for there by the others: the leaseDuration of config/params/fastdds.xml (Fast DDS's default
+# is 20 s); a reader stopped longer is taken for gone, and its writers no longer wait for it
+ACK_PATIENCE = 10.0  # [s] of wall time of a Batch's wait for its readers before the node says it waits
+ACK_CATCH_UP = PARTICIPANT_LEASE + ACK_PATIENCE  # [s] of wall time a Batch waits at most for its readers to
+# acknowledge what it sent: longer than the lease, so that a reader stopped or starved is waited for as long as it is
+# taken for there (wait_for_readers)
 RECORDER_LEAD = 10_000  # exchanges the machine may run ahead of what its recorder has taken (recorder/progress)
 PROGRESS_EVERY = 100  # exchanges between two looks of the machine at recorder/progress
 ACK_WAIT = 5.0  # [s] of wall time a publisher waits for its subscribers' acknowledgements before its node ends
@@ -505,22 +511,40 @@ class Batch:
         wait_for_readers(self.publisher, self.say)
 
 
-def wait_for_readers(publisher, say: Callable[[str], object]) -> bool:
-    """Whether every reader of `publisher` acknowledged all it sent within ACK_CATCH_UP s of wall time (waiting until
-    then). A wait past ACK_PATIENCE s is said (`say`: the node's log), and so is one that runs out: a recorder held
-    back that long (its process stopped) asks again for batches the publisher may no longer keep, and its summary
-    counts those it lost (or, at the end, misses the machine's last messages and says so). A reader that has gone
-    (its node ended, its lease ran out) is not waited for."""
-    if publisher.wait_for_all_acked(Duration(seconds=ACK_PATIENCE)):
-        return True
-    say(
-        f"the readers of {publisher.topic_name} (the recorder among them) have not acknowledged its messages for "
-        f"{ACK_PATIENCE:g} s of wall time: the run waits for them, at most {ACK_CATCH_UP - ACK_PATIENCE:g} s more"
-    )
-    if publisher.wait_for_all_acked(Duration(seconds=ACK_CATCH_UP - ACK_PATIENCE)):
-        return True
-    say(f"the readers of {publisher.topic_name} still have not acknowledged its messages: the run goes on without them")
-    return False
+def wait_for_readers(publisher, say: Callable[[str], object]) -> None:
+    """Wait until every reader of `publisher` has acknowledged all it sent, at most ACK_CATCH_UP s of wall time. A wait
+    past ACK_PATIENCE s is said (`say`: the node's log). A reader that has gone is not waited for: its node ended, or
+    it announced nothing for the participants' lease (PARTICIPANT_LEASE: its process stopped or starved that long)
+    and is taken for gone; one that left during a wait is said too, since what it had not taken is lost to it (a
+    recorder that comes back counts what it lost in its summary). ACK_CATCH_UP outlasts the lease, so a reader
+    stopped is waited for as long as it is taken for there; one still there that has acknowledged nothing for
+    ACK_CATCH_UP s (alive but not taking, or resumed after a long stop and no longer receiving: seen once after a
+    90-s stop) ends the node (PeerError: exit code 1, the topic named) rather than have the run wait that long again
+    at every ACKED_EVERY batches (docs/ros.md, "A recorder that falls behind")."""
+    readers = publisher.get_subscription_count()
+    acknowledged = publisher.wait_for_all_acked(Duration(seconds=ACK_PATIENCE))
+    if not acknowledged:
+        say(
+            f"the readers of {publisher.topic_name} (the recorder among them) have not acknowledged its messages for "
+            f"{ACK_PATIENCE:g} s of wall time: the run waits for them as long as they are there (a reader that "
+            f"announces nothing for {PARTICIPANT_LEASE:g} s is taken for gone), at most "
+            f"{ACK_CATCH_UP - ACK_PATIENCE:g} s more"
+        )
+        acknowledged = publisher.wait_for_all_acked(Duration(seconds=ACK_CATCH_UP - ACK_PATIENCE))
+    left = readers - publisher.get_subscription_count()
+    if left > 0:
+        say(
+            f"{left} reader(s) of {publisher.topic_name} left while the run waited for their acknowledgements (a "
+            "node ended, or one stopped or starved for longer than the participants' lease, "
+            f"{PARTICIPANT_LEASE:g} s in the run's Fast DDS profile, was taken for gone): what they had not taken is "
+            "lost to them, the run goes on"
+        )
+    if not acknowledged:
+        raise PeerError(
+            f"the readers of {publisher.topic_name} (the recorder among them) are there but have acknowledged "
+            f"nothing more it sent for {ACK_CATCH_UP:g} s of wall time (a node stopped, or one resumed that no longer "
+            "receives): the run ends; the recorder's summary says what it has"
+        )
 
 
 def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
@@ -586,11 +610,11 @@ class RunState:
 
 def follow_run_state(
     node: Node, on_state: Callable[[RunStateMessage], None], refusals: Refusals, speakers: Speakers
-) -> None:
+) -> Subscription:
     """Subscribe `node` to the machine's run state (RunState), taken from the node speakers allow on machine/status
-    only; on_state gets it checked (trust.RunStateMessage). A node that follows the machine sets `node.done = True`
-    when the state is finished, so `run` ends it by itself."""
-    receive(
+    only; on_state gets it checked (trust.RunStateMessage), and return the subscription. A node that follows the
+    machine sets `node.done = True` when the state is finished, so `run` ends it by itself."""
+    return receive(
         node,
         String,
         "machine/status",
@@ -641,8 +665,8 @@ def node_label(node_factory: Callable[[], Node]) -> str:
     return label[: -len("Node")].lower() + "_node" if label.endswith("Node") else label
 
 
-def deliver_all(node: Node, publishers: list | None = None, say: Callable[[str], object] | None = None) -> None:
-    """Wait (at most ACK_WAIT s each; with `say`, as wait_for_readers: at most ACK_CATCH_UP s, a long wait said) until
+def deliver_all(node: Node, publishers: list | None = None) -> None:
+    """Wait (at most ACK_WAIT s each; the machine's end longer: MachineNode.deliver_the_end) until
     every subscriber has acknowledged what the publishers (default: all the node's) sent: a node that ends by itself
     right after its last message (the governor's last state, the machine's `finished`) must not take it with it.
     Acknowledgements count only the subscriptions a publisher has matched, and discovery tells a process of a
@@ -656,10 +680,24 @@ def deliver_all(node: Node, publishers: list | None = None, say: Callable[[str],
             and time.monotonic() < deadline
         ):
             time.sleep(MATCH_POLL)
-        if say is None:
-            publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
-        else:
-            wait_for_readers(publisher, say)
+        publisher.wait_for_all_acked(Duration(seconds=ACK_WAIT))
+
+
+def take_waiting(subscription: Subscription) -> int:
+    """Hand every message waiting in `subscription`'s reader, with its message info, to the subscription's callback
+    (one made by trust.receive, which checks its speaker), taken straight from the reader rather than through the
+    executor, and return how many there were. rclpy's EventsExecutor was seen to leave messages in a reader without calling its callback: the
+    machine's recorder/progress, and the recorder's machine/moments after its process had been stopped for 90 s (a
+    reader kept full acknowledges nothing more, and the run waited for it; docs/ros.md, "A recorder that falls
+    behind")."""
+    taken = 0
+    while True:
+        with subscription.handle:
+            received = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+        if received is None:
+            return taken
+        cast(Callable[..., None], subscription.callback)(*received)  # (message, info): trust.receive's callback
+        taken += 1
 
 
 def spin_once(node: Node, timeout: float) -> None:

@@ -471,7 +471,7 @@ def _follow(
     """Show the machine's progress (its /diagnostics sim_time; `label` names the work; `started`: the command's start,
     time.monotonic() [s], from which its start-up counts) until its process ends, or until another node fails first
     (the launcher then stops the others). A machine whose simulated time has not advanced for stall_report s of wall
-    time (paused from outside, or stuck) is reported once on stderr, with the time it stands at, and again when it
+    time (paused from outside, waiting for a recorder held back, or stuck) is reported once on stderr, with the time it stands at, and again when it
     goes on."""
     machine = processes["machine"]
     os.environ.update(
@@ -519,8 +519,8 @@ def _follow(
                     advanced["reported"] = True
                     print(
                         f"\nmech-regulator: the machine has not advanced from t = {max(advanced['sim_time'], 0.0):.6g} "
-                        f"s for {stall_report:g} s of wall time (paused through its ~/pause service, or stuck); "
-                        "Ctrl-C ends the run with its summary",
+                        f"s for {stall_report:g} s of wall time (paused through its ~/pause service, waiting for its recorder held "
+                        "back, or stuck); Ctrl-C ends the run with its summary",
                         file=sys.stderr,
                     )
                 ended = [name for name, process in processes.items() if process.poll() not in (None, 0)]

@@ -58,6 +58,7 @@ import time
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
+from rclpy.duration import Duration
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Header, String
@@ -65,6 +66,7 @@ from std_srvs.srv import Trigger
 
 from mech_regulator.nodes import controller
 from mech_regulator.nodes.common import (
+    ACK_CATCH_UP,
     ACK_PATIENCE,
     BATCH_QOS,
     COMMAND_QOS,
@@ -90,12 +92,12 @@ from mech_regulator.nodes.common import (
     scene_model,
     spin_once,
     stamp,
+    take_waiting,
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
 from mech_regulator.nodes.machine_exchange import MachineExchange
 from mech_regulator.nodes.trust import (
-    BadMessage,
     Refusals,
     Speakers,
     namesakes,
@@ -266,7 +268,8 @@ class MachineNode(MachineExchange, SteadyNode):
             )
         self.scenario_name = peer_parameter(self, LOCKSTEP_INPUTS["load"][0])
         self.speakers.allow("load_torque_stamped", self.scenario_name)
-        self.speakers.allow("recorder/progress", peer_parameter(self, "recorder"))
+        self.recorder_name = peer_parameter(self, "recorder")
+        self.speakers.allow("recorder/progress", self.recorder_name)
         self.recorded_ns: int | None = None  # the newest exchange time the recorder has taken (recorder/progress)
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
@@ -451,21 +454,10 @@ class MachineNode(MachineExchange, SteadyNode):
         self.recorded_ns = stamp_of(message.stamp)
 
     def read_recorder_progress(self) -> None:
-        """Take what recorder/progress holds (on_recorder_progress) straight from the subscription, its speaker
-        checked as `receive` checks it: in the machine node the EventsExecutor was seen not to call this
-        subscription's callback (its messages stayed in the reader; not traced), so the machine does not wait for the
-        executor to hand them over."""
-        while True:
-            with self.recorder_progress.handle:
-                taken = self.recorder_progress.handle.take_message(Header, False)
-            if taken is None:
-                return
-            message, info = taken
-            try:
-                self.speakers.check("recorder/progress", info)
-                self.on_recorder_progress(message)
-            except BadMessage as refused:
-                self.refusals.refuse("recorder/progress", refused.reason, refused.detail, refused.sender)
+        """Take what recorder/progress holds (on_recorder_progress) straight from the subscription (take_waiting): in
+        the machine node the EventsExecutor was seen not to call this subscription's callback (its messages stayed in
+        the reader; not traced), so the machine does not wait for the executor to hand them over."""
+        take_waiting(self.recorder_progress)
 
     def keep_pace_with_the_recorder(self) -> None:
         """Before the exchange at now_ns: while the recorder has taken less than what the machine sent RECORDER_LEAD
@@ -474,7 +466,8 @@ class MachineNode(MachineExchange, SteadyNode):
         through the nodes for 10 000 s ended with its recorder 5 minutes behind, 13 203 exchanges it had not yet taken
         lost with the machine) so sets the run's pace, and what it has not taken stays bounded (docs/ros.md, "A
         recorder that falls behind"). Not in realtime runs (the wall clock sets their pace), nor once the recorder has
-        gone (no publisher of recorder/progress)."""
+        gone (no publisher of recorder/progress). A recorder still there that takes nothing for ACK_CATCH_UP s ends
+        the run (PeerError: exit code 1, said), as a batch's wait for it does (common.wait_for_readers)."""
         if self.time_mode == "realtime" or self.published_exchanges % PROGRESS_EVERY:
             return
         self.read_recorder_progress()
@@ -482,11 +475,20 @@ class MachineNode(MachineExchange, SteadyNode):
         if self.recorded_ns is None or self.now_ns - self.recorded_ns <= lead:
             return
         waited, said = time.monotonic(), False
+        taken, taken_at = self.recorded_ns, waited  # the recorder's progress and when it last advanced
         while rclpy.ok() and self.now_ns - self.recorded_ns > lead and self.recorder_progress.get_publisher_count():
             self.moments.send_when_due()
             spin_once(self, SPIN_SLICE)
             self.read_recorder_progress()
             self.report()
+            if self.recorded_ns != taken:
+                taken, taken_at = self.recorded_ns, time.monotonic()
+            elif time.monotonic() - taken_at > ACK_CATCH_UP:
+                raise PeerError(
+                    f"the recorder is there but has taken nothing more for {ACK_CATCH_UP:g} s of wall time (it took "
+                    f"the exchanges up to t = {seconds(self.recorded_ns):.6g} s; stopped, or resumed and no longer "
+                    "receiving): the run ends; the recorder's summary says what it has"
+                )
             if not said and time.monotonic() - waited > ACK_PATIENCE:
                 self.get_logger().warning(
                     f"the recorder has taken the exchanges up to t = {seconds(self.recorded_ns):.6g} s only: the run "
@@ -689,15 +691,46 @@ class MachineNode(MachineExchange, SteadyNode):
 
     def finish(self) -> None:
         """Say the run is over (machine/status finished, diagnostics with finished_at_ns) once every subscriber
-        has the last state, and wait until the readers have both (as the recorder's batches: common.wait_for_readers;
-        a recorder held back past ACK_WAIT would miss them, and a run with every exchange in would end
-        `interrupted`)."""
+        has the last state, and wait until the readers have both (deliver_the_end: a recorder held back past ACK_WAIT
+        would miss them, and a run with every exchange in would end `interrupted`)."""
         self.moments.deliver()
         deliver_all(self, [self.joint_publisher])
         self.publish_status(RunState.FINISHED)
         self.diagnostics_publisher.publish(self.diagnostics(finished=True))
-        deliver_all(self, [self.status_publisher, self.diagnostics_publisher], say=self.get_logger().warning)
+        self.deliver_the_end()
         self.get_logger().info(f"finished at t = {seconds(self.now_ns):.6g} s: {self.stepper.status}")
+
+    def deliver_the_end(self) -> None:
+        """Wait until the readers of machine/status and /diagnostics have acknowledged the run's end (`finished`, the
+        last diagnostics): every reader at most ACK_WAIT s per topic (deliver_all), then, should one still not have,
+        as long as the recorder is subscribed to machine/status, at most ACK_CATCH_UP s (said past ACK_PATIENCE s). A
+        recorder held back (its process stopped or starved) gets the end its `complete` summary needs, and it leaves
+        the graph once it has it; a reader that will never answer (a node killed without leaving the graph, taken for
+        there for the participants' lease: common.PARTICIPANT_LEASE) holds the machine no longer than the recorder
+        stays (docs/ros.md, "A recorder that falls behind")."""
+        publishers = [self.status_publisher, self.diagnostics_publisher]
+        deliver_all(self, publishers)
+        waited, said = time.monotonic(), False
+        while (
+            not all(publisher.wait_for_all_acked(Duration(seconds=SPIN_SLICE)) for publisher in publishers)
+            and self.recorder_follows()
+            and time.monotonic() - waited < ACK_CATCH_UP
+        ):
+            if not said and time.monotonic() - waited > ACK_PATIENCE:
+                self.get_logger().warning(
+                    f"the readers of {self.status_publisher.topic_name} (the recorder among them) have not "
+                    f"acknowledged the run's end for {ACK_PATIENCE:g} s of wall time: the machine waits while the "
+                    f"recorder is there, at most {ACK_CATCH_UP - ACK_PATIENCE:g} s more"
+                )
+                said = True
+
+    def recorder_follows(self) -> bool:
+        """Whether the recorder (parameter recorder_node, in this node's namespace) is subscribed to machine/status."""
+        namespace = self.get_namespace()
+        return any(
+            info.node_name == self.recorder_name and info.node_namespace == namespace
+            for info in self.get_subscriptions_info_by_topic(self.status_publisher.topic_name)
+        )
 
 
 def main() -> int:

@@ -37,6 +37,7 @@ from mech_regulator.nodes.common import (
     IDLE_SPIN_SLICE,
     MATCH_POLL,
     OK,
+    PARTICIPANT_LEASE,
     PROGRESS_QOS,
     RECORD_QOS,
     STATE_QOS,
@@ -54,6 +55,7 @@ from mech_regulator.nodes.common import (
     scene_model,
     spin_once,
     stamp,
+    take_waiting,
     text_parameter,
 )
 from mech_regulator.nodes.controller import CONTROLLERS
@@ -177,6 +179,7 @@ class RecorderNode(SteadyNode):
         self.machine_exchanges: int | None = None  # the exchange times the machine published in its last trial,
         # from its last diagnostics (missed)
         self.closed = False
+        self.longest_hold = 0.0  # [s] of wall time the longest wait for callbacks took (its process stopped, starved)
         self.state_walls: list[float] = []  # wall-clock times [s] of the first and the latest machine state
         self.last_exchanges: list[int] = []  # [ns] the machine's two newest exchange times in the trial
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -202,8 +205,10 @@ class RecorderNode(SteadyNode):
             self, JointState, "governor/state", self.on_governor, RECORD_QOS, self.refusals, self.speakers
         )
         self.streams = [governor_states] if self.model.governor is not None else []
-        receive(self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers)
-        receive(
+        events = receive(
+            self, String, "governor/events", self.on_governor_event, STATE_QOS, self.refusals, self.speakers
+        )
+        diagnostics_subscription = receive(
             self,
             DiagnosticArray,
             "/diagnostics",
@@ -213,7 +218,8 @@ class RecorderNode(SteadyNode):
             self.speakers,
             pass_speaker=True,
         )  # (every message: a stranger's status, whatever it names, is refused and counted by who sent it)
-        follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
+        status = follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
+        self.checked = [*self.streams, events, diagnostics_subscription, status]  # (trust.receive's: take_what_waits)
         self.create_timer(FLUSH_PERIOD, self.flush)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.get_logger().info(f"recording to {self.path if self.path is not None else connect}")
@@ -444,7 +450,8 @@ class RecorderNode(SteadyNode):
                         "it) did not come"
                         if self.last_samples_in()
                         else ""
-                    ),
+                    )
+                    + self.held_back(),
                 )
             )
             if self.machine_failed():  # the machine's own end
@@ -456,7 +463,8 @@ class RecorderNode(SteadyNode):
                         f"{self.missed()} of the {self.machine_exchanges} exchanges the machine published are "
                         "incomplete here (a part never came: a peer fell silent, or the recorder fell behind more "
                         'than the publishers keep, docs/speed.md, "The nodes\' side of an exchange")'
-                    ),
+                    )
+                    + self.held_back(),
                 )
         self._write("recording", self.path, lambda: self.recording.close(status, message))
         if self.path is None:
@@ -514,6 +522,19 @@ class RecorderNode(SteadyNode):
             self.write_failures.append(line)
             print(f"mech_regulator: recorder_node: {line}", file=sys.stderr)
             return False
+
+    def held_back(self) -> str:
+        """What an interrupted run's message adds when one wait of the recorder for its callbacks took more than
+        HELD_BACK s (its process stopped or starved): how long at most, and that a reader silent for longer than the
+        participants' lease (PARTICIPANT_LEASE) is taken for gone, the machine then going on without it (docs/ros.md,
+        "A recorder that falls behind"); else ''."""
+        if self.longest_hold <= HELD_BACK:
+            return ""
+        return (
+            f"; the recorder's process was held back (stopped or starved) for {self.longest_hold:.0f} s of wall time "
+            f"at once (a reader silent for longer than the participants' lease, {PARTICIPANT_LEASE:g} s in the run's "
+            "Fast DDS profile and 20 s by Fast DDS's default, is taken for gone and the machine goes on without it)"
+        )
 
     def trust_summary(self, status: str) -> dict:
         """The summary's `refused` (topic -> reason -> count), `foreign` (sender -> topic -> count of the messages
@@ -598,6 +619,13 @@ class RecorderNode(SteadyNode):
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
 
+    def take_what_waits(self) -> None:
+        """Take what waits in every subscription's reader straight from it (common.take_waiting), after each spin:
+        after the recorder's process had been stopped for 90 s, rclpy's EventsExecutor was seen to hand over nothing
+        more (its reader filled, acknowledged nothing, and the machine waited for it)."""
+        for subscription in (self.machine_moments, *self.checked):
+            take_waiting(subscription)
+
     def subscribe_to_the_machine(self) -> None:
         """Subscribe to the machine's states and moments (machine/moments) once the other stream the run needs (a
         governor's state) has matched its publisher, or after STREAMS_WAIT s: the machine starts as soon as its peers
@@ -626,8 +654,10 @@ class RecorderNode(SteadyNode):
         while rclpy.ok() and not self.complete():
             before = time.monotonic()
             spin_once(self, IDLE_SPIN_SLICE)
+            self.take_what_waits()
             now = time.monotonic()
             received = sum(self.rows.received.values())
+            self.longest_hold = max(self.longest_hold, now - before)
             if received != taken or now - before > HELD_BACK:
                 # samples still come (a recorder catching up), or this process was held back (stopped, starved):
                 # the grace starts again
@@ -638,7 +668,7 @@ class RecorderNode(SteadyNode):
                 elif now - waiting_since > FINISH_GRACE:
                     self.get_logger().warning(
                         f"the machine left without its end reaching the recorder: closing with what was received "
-                        f"({self.received()})"
+                        f"({self.received()}){self.held_back()}"
                     )
                     break
                 continue
