@@ -449,6 +449,16 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     assert node_processes(str(rrd.parent)) == []
 
 
+def _working_directory(pid: int) -> Path | None:
+    """The working directory of process `pid`, None once it has ended: a recorder_node of another run on this machine
+    (another test's, on another pytest-xdist worker) may end between `pgrep` listing it and this look (seen in a loaded
+    run: FileNotFoundError on /proc/<pid>/cwd)."""
+    try:
+        return Path(os.readlink(f"/proc/{pid}/cwd")).resolve()
+    except OSError:
+        return None
+
+
 def _play_holding_the_recorder(
     folder: Path, scene: str, played: float, domain: int, hold: Callable, until_end: Callable = lambda run: None
 ) -> tuple[str, Path]:
@@ -469,7 +479,7 @@ def _play_holding_the_recorder(
         deadline, recorder = time.monotonic() + 4 * WAIT, None
         while recorder is None and run.poll() is None and time.monotonic() < deadline:
             listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
-            ours = [int(pid) for pid in listing if Path(f"/proc/{pid}/cwd").resolve() == folder.resolve()]
+            ours = [int(pid) for pid in listing if _working_directory(int(pid)) == folder.resolve()]
             recorder = ours[0] if ours else None
             time.sleep(0.05)
         assert recorder is not None, "no recorder_node of this run"
