@@ -450,9 +450,10 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
 
 
 def _working_directory(pid: int) -> Path | None:
-    """The working directory of process `pid`, None once it has ended: a recorder_node of another run on this machine
-    (another test's, on another pytest-xdist worker) may end between `pgrep` listing it and this look (seen in a loaded
-    run: FileNotFoundError on /proc/<pid>/cwd)."""
+    """The working directory of process `pid`, None once it has ended: `pgrep` lists a recorder_node of another run on
+    this machine (another test's, on another pytest-xdist worker) that has ended and not yet been waited for (a
+    zombie) or that ends before this look, and its /proc/<pid>/cwd is then gone (Path.resolve raised FileNotFoundError
+    in a loaded run; it does for any zombie)."""
     try:
         return Path(os.readlink(f"/proc/{pid}/cwd")).resolve()
     except OSError:
