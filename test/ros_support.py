@@ -30,8 +30,10 @@ from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
 from mech_regulator.nodes.launch import (  # noqa: E402
     DOMAIN_IDS,
+    FASTDDS_PROFILE_VARIABLE,
     claim_domain,
     domain_lock_descriptor,
+    fastdds_profile,
     private_environment,
     wait_for_a_quiet_graph,
 )
@@ -71,6 +73,13 @@ SEND_QOS = QoSProfile(
 )
 
 NANOSECONDS = 1_000_000_000
+
+# The test nodes' participants (Probe, in the pytest process) announce themselves as the nodes' do, with the run's Fast
+# DDS profile (nodes.launch.fastdds_profile: every 0.2 s): with Fast DDS's default (every 3 s), a node started after the
+# probe named it only 0-1.75 s after its start (6 tries; 0-0.34 s with the profile), and an announcement lost costs
+# 3 s, longer than a short run. Fast DDS reads the variable once, when the process's first participant is made: so
+# here, on import, before any test makes one (a profile the user set is kept, as `run` keeps it).
+os.environ.setdefault(FASTDDS_PROFILE_VARIABLE, str(fastdds_profile()))
 
 
 def next_domain_id() -> int:
@@ -270,6 +279,15 @@ class Probe:
         self.node = rclpy.create_node(name, context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.others: list = []  # nodes of this participant besides `node` (other_node)
+
+    def other_node(self, name: str):
+        """A second node of this test node's participant (its Context), named `name`, spun and closed with it: what it
+        subscribes to does not count as the test node's (a machine's `peers` gate names nodes)."""
+        node = rclpy.create_node(name, context=self.context)
+        self.executor.add_node(node)
+        self.others.append(node)
+        return node
 
     def spin_until(
         self,
@@ -296,9 +314,10 @@ class Probe:
         callback: Callable | None = None,
         publishers: int = 0,
         describe=lambda: "",
+        node=None,
     ) -> list:
-        """Subscribe to topic; returns the list every received message is appended to (and passed to
-        callback). With publishers > 0, first wait until that many publishers have matched."""
+        """Subscribe to topic (with `node`, default the test node); returns the list every received message is appended
+        to (and passed to callback). With publishers > 0, first wait until that many publishers have matched."""
         received: list = []
 
         def on_message(message) -> None:
@@ -306,7 +325,7 @@ class Probe:
             if callback is not None:
                 callback(message)
 
-        subscription = self.node.create_subscription(message_type, topic, on_message, qos)
+        subscription = (node or self.node).create_subscription(message_type, topic, on_message, qos)
         if publishers:
             self.spin_until(
                 lambda: subscription.get_publisher_count() >= publishers,
@@ -359,6 +378,8 @@ class Probe:
         try:
             wait_for_a_quiet_graph(self.node, lambda timeout: self.executor.spin_once(timeout_sec=timeout))
             self.executor.shutdown()
+            for node in self.others:
+                node.destroy_node()
             self.node.destroy_node()
             rclpy.shutdown(context=self.context)
         finally:
@@ -390,7 +411,17 @@ def probe(domain_id):
 class RunListener:
     """What the machine (and governor) publish, as the test node receives it. `open_gate` subscribes
     to the machine's streams (joint_states, machine/moments) last: a lockstep machine waiting for the test node as a
-    peer (subscribed to either) starts only then."""
+    peer (subscribed to either) starts only then.
+
+    The machine and the governor end by themselves after the run, and what they published goes with them: the test
+    node gets it only if their writers have matched its subscriptions by then. So every subscription is made before
+    an event that shows the writer's node knows it. Fast DDS's discovery hands a participant the other's
+    subscriptions reliably and in the order they were made, and a writer matches a subscription as its node learns
+    of it: the governor's /diagnostics reaching the test node show that the governor has taken the subscriptions made
+    before it, governor/state among them; the machine starts only once it names the test node on joint_states,
+    subscribed last, and once its writers have matched every subscription it knows (machine.matched_every_subscription),
+    machine/moments among them, subscribed before by a second node of the test node's participant (which the machine's
+    gate of named peers does not count)."""
 
     def __init__(self, probe: Probe, governed: bool, diagnostics_publishers: int = 1, describe=lambda: ""):
         from diagnostic_msgs.msg import DiagnosticArray
@@ -398,16 +429,24 @@ class RunListener:
 
         self.probe, self.describe = probe, describe
         self.JointState = JointState
+        self.governor_messages = probe.listen(JointState, "governor/state", STATE_LISTEN_QOS) if governed else None
         self.diagnostics = probe.listen(
             DiagnosticArray, "/diagnostics", LISTEN_QOS, publishers=diagnostics_publishers, describe=describe
         )
         self.moment_messages: list = []
-        self.governor_messages = probe.listen(JointState, "governor/state", STATE_LISTEN_QOS) if governed else None
         self.joint_messages: list = []
 
     def open_gate(self, callback: Callable | None = None) -> None:
+        """With a governor, wait for its diagnostics (it has then matched governor/state); subscribe to machine/moments
+        with a second node of the participant, then to joint_states with the test node (`callback` gets each
+        message): the machine waiting for the test node as a peer starts now."""
+        if self.governor_messages is not None:
+            self.probe.spin_until(
+                lambda: self.statuses("/governor"), "the governor's diagnostics", describe=self.describe
+            )
+        streams = self.probe.other_node(f"{self.probe.node.get_name()}_streams")
+        self.moment_messages = self.probe.listen(self.JointState, "machine/moments", STATE_LISTEN_QOS, node=streams)
         self.joint_messages = self.probe.listen(self.JointState, "joint_states", STATE_LISTEN_QOS, callback=callback)
-        self.moment_messages = self.probe.listen(self.JointState, "machine/moments", STATE_LISTEN_QOS)
 
     def statuses(self, suffix: str = "/machine") -> list[tuple[bytes, str, dict[str, str]]]:
         """(level, message, values) of every status received from the node whose name ends with suffix."""
@@ -460,10 +499,43 @@ class RunListener:
         )
         end = int(finished["finished_at_ns"])
         self.probe.spin_until(
-            lambda: (
-                end in self.joints and end in self.moments and (self.governor_messages is None or end in self.governor)
-            ),
-            "the last samples of the run",
-            describe=self.describe,
+            lambda: not self.streams_without(end),
+            f"the last samples of the run (stamped {end} ns)",
+            describe=lambda: f"{self.stream_report(end)}\n{self.describe()}",
         )
         return end
+
+    def received(self) -> dict[str, dict[int, object]]:
+        """The exchange times [ns] received so far on each stream the end waits for (governor/state when governed)."""
+        streams: dict[str, dict[int, object]] = {"joint_states": self.joints, "machine/moments": self.moments}
+        if self.governor_messages is not None:
+            streams["governor/state"] = self.governor
+        return streams
+
+    def streams_without(self, end: int) -> list[str]:
+        """The streams whose sample at exchange time `end` [ns] has not been received."""
+        return [topic for topic, samples in self.received().items() if end not in samples]
+
+    def stream_report(self, end: int) -> str:
+        """What each stream's wait for the end sample found, for a failure message: whether the end is in, how many
+        messages and exchange times came and the newest exchange time, and how many publishers the test node's
+        subscription has matched (0: the sender's writer never reached this node, its history lost with it)."""
+        lines = []
+        for topic, samples in self.received().items():
+            matched = [
+                subscription.get_publisher_count()
+                for node in (self.probe.node, *self.probe.others)
+                for subscription in node.subscriptions
+                if subscription.topic_name.lstrip("/") == topic
+            ]
+            messages = {
+                "joint_states": self.joint_messages,
+                "machine/moments": self.moment_messages,
+                "governor/state": self.governor_messages,
+            }[topic]
+            newest = f"{max(samples)} ns" if samples else "none"
+            lines.append(
+                f"{topic}: end {'in' if end in samples else 'MISSING'}; {len(messages or [])} messages, "
+                f"{len(samples)} exchange times, the newest {newest}; publishers matched {matched}"
+            )
+        return "\n".join(lines)

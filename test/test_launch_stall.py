@@ -78,7 +78,13 @@ def test_the_end_waits_for_a_recorder_writing_a_long_run_s_outputs_and_says_so(m
     assert writing.returncode == 0  # ended by itself after 1 s: waited past END_TIMEOUT
     said = capsys.readouterr().err.splitlines()
     assert len(said) == 1 and said[0].startswith("mech-regulator: waiting for the recorder node to write its outputs")
-    hung = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60.0)"])
+    # The stand-in says when it is under way, and the launcher's timeout starts only then: a SIGINT while its
+    # interpreter still imports the site module (0.4-0.7 s for this venv's Python at a load of 7, longer on a starved
+    # core) ends it with "Fatal Python error: init_import_site" and exit code 1, not as Ctrl-C ends it.
+    hung = subprocess.Popen(
+        [sys.executable, "-c", "import time; print(flush=True); time.sleep(60.0)"], stdout=subprocess.PIPE
+    )
+    hung.stdout.readline()  # under way
     launch._wait_all({"recorder": hung}, 0.5)
     assert hung.returncode == -signal.SIGINT  # stopped at the timeout as Ctrl-C stops it (the recorder then closes)
     deaf = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); print(flush=True); time.sleep(60.0)"

@@ -449,10 +449,13 @@ def test_a_run_driven_backwards_ends_failed_with_exit_1_and_says_why(tmp_path):
     assert node_processes(str(rrd.parent)) == []
 
 
-def _working_folder(pid: int) -> Path | None:
-    """The working folder of process pid, None once it has ended (other runs' nodes come and go on the machine)."""
+def _working_directory(pid: int) -> Path | None:
+    """The working directory of process `pid`, None once it has ended: `pgrep` lists a recorder_node of another run on
+    this machine (another test's, on another pytest-xdist worker) that has ended and not yet been waited for (a
+    zombie) or that ends before this look, and its /proc/<pid>/cwd is then gone (Path.resolve raised FileNotFoundError
+    in a loaded run; it does for any zombie)."""
     try:
-        return Path(f"/proc/{pid}/cwd").resolve(strict=True)
+        return Path(os.readlink(f"/proc/{pid}/cwd")).resolve()
     except OSError:
         return None
 
@@ -477,7 +480,7 @@ def _play_holding_the_recorder(
         deadline, recorder = time.monotonic() + 4 * WAIT, None
         while recorder is None and run.poll() is None and time.monotonic() < deadline:
             listing = subprocess.run(["pgrep", "-x", "recorder_node"], capture_output=True, text=True).stdout.split()
-            ours = [int(pid) for pid in listing if _working_folder(int(pid)) == folder.resolve()]
+            ours = [int(pid) for pid in listing if _working_directory(int(pid)) == folder.resolve()]
             recorder = ours[0] if ours else None
             time.sleep(0.05)
         assert recorder is not None, "no recorder_node of this run"

@@ -1215,7 +1215,7 @@ import ros_support
 ros_support.CLOSE_LIMIT = 1.0
 ros_support.wait_for_a_quiet_graph = lambda node, spin: None
 probe = ros_support.Probe.__new__(ros_support.Probe)
-probe.executor = types.SimpleNamespace(shutdown=lambda: None)
+probe.executor, probe.others = types.SimpleNamespace(shutdown=lambda: None), []
 probe.node = types.SimpleNamespace(destroy_node=lambda: ctypes.PyDLL(None).sleep(120))
 probe.close()
 """
