@@ -1178,13 +1178,22 @@ def test_run_takes_a_domain_no_other_process_holds():
     assert int(chosen.stdout) in DOMAIN_IDS and int(chosen.stdout) != held, chosen
 
 
+def rest_over(domain: int) -> None:
+    """Date the lock file of `domain` back past the participants' lease: as if last used long ago (claim_domain)."""
+    long_ago = time.time() - 2 * launch_domains.PARTICIPANT_LEASE
+    os.utime(launch_domains.DOMAIN_LOCKS / f"{domain}.lock", (long_ago, long_ago))
+
+
 def test_a_released_domain_is_free_again_and_only_those_claimed_after_the_kept_ones():
     """release_domains(keep): the claims after the first `keep` released (the suite's autouse fixture after each
-    test): a released domain is claimed again from the same start; one kept stays held (skipped)."""
+    test): a released domain rests for the participants' lease (another free one is taken from the same start: a
+    node killed there is remembered that long), then is claimed again from the same start; one kept stays held."""
     kept = next_domain_id()
     claims = len(launch_domains._claimed_domains)
     used = next_domain_id()
     launch_domains.release_domains(keep=claims)
+    assert launch_domains.claim_domain(DOMAIN_IDS.index(used)) != used  # resting
+    rest_over(used)
     assert launch_domains.claim_domain(DOMAIN_IDS.index(used)) == used  # free again
     assert launch_domains.claim_domain(DOMAIN_IDS.index(kept)) != kept  # still held by this process
 
@@ -1258,6 +1267,7 @@ def test_a_domain_a_run_is_still_on_is_not_released_until_the_run_has_left():
     finally:
         run.communicate(timeout=WAIT)
     launch_domains.release_domains(keep=claims)
+    rest_over(domain)
     assert launch_domains.claim_domain(DOMAIN_IDS.index(domain)) == domain  # the run has left: free
 
 
@@ -1266,8 +1276,11 @@ def test_a_domain_a_run_is_still_on_is_not_released_until_the_run_has_left():
 RUN_ON_A_DOMAIN = """
 import random
 from mech_regulator.nodes import launch
+import os, time
 free = launch.claim_domain(0)
 launch._claimed_domains.pop().close()  # released: no test holds it, as a domain a `run --domain-id` is on
+long_ago = time.time() - 2 * launch.PARTICIPANT_LEASE
+os.utime(launch.DOMAIN_LOCKS / f"{free}.lock", (long_ago, long_ago))  # rested: only the run lock keeps it
 launch.claim_run(free)
 random.randrange = lambda count: launch.DOMAIN_IDS.index(free)
 print(free, launch.claim_run(None))

@@ -36,6 +36,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
 from mech_regulator.model import MachineModel, build_model
+from mech_regulator.nodes.launch import PARTICIPANT_LEASE
 from mech_regulator.nodes.trust import (
     LARGEST_STAMP,
     BadMessage,
@@ -65,9 +66,6 @@ BATCH_HISTORY_DEPTH = 200  # batched messages (class Batch) kept by each of thei
 BATCH_PERIOD = 0.1  # [s] of wall time a recorder-only sample waits at most before it is sent (class Batch)
 BATCH_SIZE = 50  # exchanges gathered at most in one recorder-only message (class Batch)
 ACKED_EVERY = BATCH_HISTORY_DEPTH // 2  # batches a Batch sends between two waits for its readers' acknowledgements
-PARTICIPANT_LEASE = 300.0  # [s] of wall time a participant that announces nothing (its process stopped, starved,
-# killed) is still taken for there by the others: the leaseDuration of config/params/fastdds.xml (Fast DDS's default
-# is 20 s); a reader stopped longer is taken for gone, and its writers no longer wait for it
 ACK_PATIENCE = 10.0  # [s] of wall time of a Batch's wait for its readers before the node says it waits
 ACK_CATCH_UP = PARTICIPANT_LEASE + ACK_PATIENCE  # [s] of wall time a Batch waits at most for its readers to
 # acknowledge what it sent: longer than the lease, so that a reader stopped or starved is waited for as long as it is

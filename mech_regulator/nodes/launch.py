@@ -12,6 +12,7 @@ from the launcher after it has imported what they all import (NodeProcess), so t
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import functools
 import gc
@@ -44,6 +45,11 @@ CLOSE_TIME_PER_EXCHANGE = 0.001  # [s] of wall time more per exchange: the recor
 LOG_TAIL_BYTES = 1 << 20  # the nodes' last output the launcher keeps in memory (NodeLog) [bytes]
 LOG_DRAIN = 5.0  # [s] of wall time the launcher waits at most for the nodes' last output once they have ended
 STALL_REPORT = 30.0  # [s] of wall time without the machine's simulated time advancing before the launcher says so
+PARTICIPANT_LEASE = 300.0  # [s] of wall time a participant that announces nothing (its process stopped, starved,
+# killed) is still taken for there by the others: the leaseDuration of config/params/fastdds.xml (Fast DDS's default
+# is 20 s); a reader stopped longer is taken for gone, and its writers no longer wait for it. A node killed (or ended
+# by its alarm after a teardown hang) is remembered on its domain that long: claim_domain gives a domain used within
+# it only when no other is free
 GRAPH_QUIET = 0.3  # [s] of wall time without a node joining or leaving before a node of this process is destroyed
 GRAPH_QUIET_LIMIT = 3.0  # [s] of wall time waited at most for that quiet
 FASTDDS_PROFILE_VARIABLE = "FASTDDS_DEFAULT_PROFILES_FILE"  # Fast DDS reads its default profile from this file
@@ -75,17 +81,34 @@ def _lock(path: Path) -> TextIO | None:
     return lock
 
 
+def _last_used(lock_path: Path) -> float:
+    """When a domain was last claimed or released (its lock file's modification time, time.time() [s]; 0 for none)."""
+    try:
+        return lock_path.stat().st_mtime
+    except OSError:
+        return 0.0
+
+
 def claim_domain(start: int) -> int:
     """The first ROS domain of DOMAIN_IDS from index `start` on (going round) that no process on this machine holds,
     held by this one until it ends (an exclusive lock on DOMAIN_LOCKS/<domain>.lock; a domain this process holds
-    already is skipped too). Raises SceneError when every domain is held."""
+    already is skipped too). A domain claimed or released within PARTICIPANT_LEASE s (its lock file's time) is taken
+    only when no other is free: the participants of a run whose nodes were killed are remembered there that long, and
+    a run's machine refuses to start beside a namesake. Raises SceneError when every domain is held."""
     DOMAIN_LOCKS.mkdir(exist_ok=True)
-    for offset in range(len(DOMAIN_IDS)):
-        domain = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
-        lock = _lock(DOMAIN_LOCKS / f"{domain}.lock")
-        if lock is not None:
-            _claimed_domains.append(lock)
-            return domain
+    rested_since = time.time() - PARTICIPANT_LEASE
+    for rested_only in (True, False):
+        for offset in range(len(DOMAIN_IDS)):
+            domain = DOMAIN_IDS[(start + offset) % len(DOMAIN_IDS)]
+            path = DOMAIN_LOCKS / f"{domain}.lock"
+            if rested_only and _last_used(path) > rested_since:
+                continue
+            lock = _lock(path)
+            if lock is not None:
+                with contextlib.suppress(OSError):
+                    os.utime(path)  # used from now on
+                _claimed_domains.append(lock)
+                return domain
     raise SceneError(
         f"every ROS domain is taken by other runs on this machine (lock files in {DOMAIN_LOCKS}); "
         "expected --domain-id N"
@@ -109,6 +132,8 @@ def release_domains(keep: int = 0) -> None:
             _lingering_domains.append(lock)
             continue
         run_lock.close()
+        with contextlib.suppress(OSError):
+            os.utime(lock.name)  # used until now (claim_domain)
         lock.close()
 
 
