@@ -28,6 +28,8 @@ import sys
 
 import pytest
 
+import mech_regulator  # noqa: F401  (first: it fixes OpenBLAS's kernels before anything loads numpy)
+
 os.environ["MECH_REGULATOR_AUTO_PATH"] = "reference"
 os.environ["MECH_REGULATOR_SERVER"] = "off"
 

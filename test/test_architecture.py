@@ -3,6 +3,7 @@ other (directly or round a circle), and the physics core stays free of ROS and o
 
 import ast
 import graphlib
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -195,3 +196,25 @@ def test_the_check_sees_an_import_of_rerun():
         subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout.strip()
         == "True"
     )
+
+
+def test_the_package_imported_first_fixes_openblas_s_kernels_unless_they_are_set():
+    """mech_regulator/__init__.py: on an x86-64 CPU with AVX2 and FMA, OPENBLAS_CORETYPE=Haswell before numpy loads
+    OpenBLAS (the same rounding on AVX2 and AVX-512 machines: docs/speed.md, "The same numbers on every machine");
+    a value set before is kept."""
+    import platform
+
+    import mech_regulator
+
+    expected = (
+        "Haswell"
+        if platform.machine().lower() in ("x86_64", "amd64") and {"avx2", "fma"} <= mech_regulator._cpu_flags()
+        else "unset"
+    )
+    show = "import os, mech_regulator; print(os.environ.get('OPENBLAS_CORETYPE', 'unset'))"
+    environment = {key: value for key, value in os.environ.items() if key != "OPENBLAS_CORETYPE"}
+    for given, printed in ((None, expected), ("Zen", "Zen")):
+        if given is not None:
+            environment["OPENBLAS_CORETYPE"] = given
+        done = subprocess.run([sys.executable, "-c", show], env=environment, capture_output=True, text=True, check=True)
+        assert done.stdout.strip() == printed, done

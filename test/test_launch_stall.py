@@ -85,7 +85,7 @@ def test_the_end_waits_for_a_recorder_writing_a_long_run_s_outputs_and_says_so(m
         [sys.executable, "-c", "import time; print(flush=True); time.sleep(60.0)"], stdout=subprocess.PIPE
     )
     hung.stdout.readline()  # under way
-    launch._wait_all({"recorder": hung}, 0.5)
+    launch._wait_all({"recorder": hung}, 0.5, closing=WAIT)  # (its end after the SIGINT: 1.5 s were short in a CI run)
     assert hung.returncode == -signal.SIGINT  # stopped at the timeout as Ctrl-C stops it (the recorder then closes)
     deaf = "import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); print(flush=True); time.sleep(60.0)"
     deaf_node = subprocess.Popen([sys.executable, "-c", deaf], stdout=subprocess.PIPE)
