@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("rclpy", reason="the ROS 2 tests need rclpy (pip install 'mech_regulator[ros]')")
 
-from sensor_msgs.msg import JointState  # noqa: E402
+from builtin_interfaces.msg import Time  # noqa: E402
 
 from mech_regulator.model import build_model  # noqa: E402
 from mech_regulator.nodes.common import JointMessage  # noqa: E402
@@ -27,17 +27,14 @@ def recorder_of(calls: list[tuple[str, object]], kind: str):
 def test_the_scenario_answers_a_load_event_before_it_logs_it():
     calls: list[tuple[str, object]] = []
     logger = SimpleNamespace(info=recorder_of(calls, "log"))
-    scenario = SimpleNamespace(  # what ScenarioNode.on_joint_states reads, in lockstep on engine_direct, at first
+    scenario = SimpleNamespace(  # what ScenarioNode.answer reads, in lockstep on engine_direct, at first
         model=build_model(load_scene("engine_direct")),
         time_mode="lockstep",
-        last_ns=-1,
         last_load=None,
-        answered=(0, 0),
         stamped_publisher=SimpleNamespace(publish=recorder_of(calls, "publish")),
         get_logger=lambda: logger,
     )
-    exchange = JointState(name=["crank"], position=[0.0], velocity=[0.0], effort=[0.0])  # at t = 0: the first load
-    ScenarioNode.on_joint_states(scenario, exchange)
+    ScenarioNode.answer(scenario, 0, Time())  # the machine's request at t = 0: the first load
     assert [kind for kind, _ in calls] == ["publish", "log"], calls
     assert "load" in calls[1][1]
 

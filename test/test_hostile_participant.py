@@ -34,7 +34,7 @@ from ros_support import (  # noqa: F401 (fixtures)
     stamp_ns,
 )
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, String
+from std_msgs.msg import Float64, Header, String
 from std_srvs.srv import Trigger
 from test_ros_nodes import (
     BASE_LOAD,
@@ -200,11 +200,12 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         probe.listen(JointState, "joint_states", LISTEN_QOS, callback=pause_at)
         probe.spin_until(lambda: paused and paused[0].done(), "the run paused at 0.2 s", describe=job.describe)
         assert paused[0].result().success
-        # (matched to each node that subscribes: the attacks below reach every one; joint_states: this test node
-        # too; /diagnostics: this test node and the launcher too)
+        # (matched to each node that subscribes: the attacks below reach every one; joint_states: the governor and
+        # this test node; /diagnostics: this test node and the launcher too)
         subscribers = {
             "throttle": 1,
-            "joint_states": 3,
+            "joint_states": 2,
+            "load_request": 1,
             "machine/status": 3,
             "governor/events": 1,
             "/diagnostics": 3,
@@ -215,6 +216,7 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
         types = {
             "throttle": JointState,
             "joint_states": JointState,
+            "load_request": Header,
             "machine/status": String,
             "governor/events": String,
             "/diagnostics": DiagnosticArray,
@@ -247,6 +249,7 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
                 "joint_states",
                 JointState(name=["crank", "crank_midstep"], position=[0.0], velocity=[200.0, 1.0], effort=[0.0]),
             ),  # crank_midstep: arrays shorter than the names
+            ("load_request", Header()),  # the load at 0 mid-run: the scenario would start again, were it the machine's
             ("machine/status", forged_finish()),
             ("machine/status", String(data="{not json")),
             ("governor/events", String(data="{not json")),
@@ -273,6 +276,7 @@ def test_an_outsiders_messages_are_refused_and_its_service_calls_recorded(clean_
     from_whom = {
         "throttle": "governor",
         "joint_states": "machine",
+        "load_request": "machine",
         "machine/status": "machine",
         "governor/events": "governor",
         "machine/moments": "machine",
@@ -594,7 +598,8 @@ def test_a_run_that_lost_a_peer_does_not_end_complete(tmp_path, processes, domai
     with probe_on(domain_id) as probe:
         probe.spin_until(
             lambda: (
-                probe.node.count_subscribers("joint_states") >= 2
+                probe.node.count_subscribers("joint_states") >= 1  # the governor; the scenario asks on load_request
+                and probe.node.count_subscribers("load_request") >= 1
                 and probe.node.count_subscribers("machine/moments") >= 1
             ),
             "the peers listening",

@@ -47,7 +47,7 @@ from ros_support import (  # noqa: F401 (fixtures)
     stamp_ns,
 )
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Header
 from std_srvs.srv import Trigger
 from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE, run_cli
 from test_recording import events
@@ -624,6 +624,34 @@ def test_load_torque_from_any_publisher_applies_from_an_exchange_time(tmp_path, 
     assert listener.final_status()[0] == DiagnosticStatus.OK
 
 
+def test_the_scenario_is_asked_for_the_load_only_where_no_answer_covers_the_exchange_time(tmp_path, processes, probe):
+    # a step at 0.1 s (held up to the ramp's start), a ramp over 0.2-0.22 s (no answer covers the next exchange),
+    # then held to the end: asked at 0 and 0.1 s and at every exchange time of the ramp up to its end, and at no other
+    scene, model = constant_inertia_scene(
+        tmp_path,
+        duration=0.3,
+        load_events=[{"time": 0.1, "torque": 8.0}, {"time": 0.2, "torque": 6.0, "ramp": 0.02}],
+    )
+    processes.node("machine", machine_parameters(scene, peers=["governor", "scenario", probe.node.get_name()]))
+    processes.node("governor", {"scene_file": str(scene), "coupling": "hold"})
+    processes.node("scenario", {"scene_file": str(scene)})
+    asks = probe.other_node(f"{probe.node.get_name()}_asks")  # (a node the machine's gate of named peers ignores)
+    requests = probe.listen(Header, "load_request", describe=processes.logs, node=asks)
+    answers = probe.listen(WrenchStamped, "load_torque_stamped", publishers=1, describe=processes.logs)
+    listener = RunListener(probe, governed=True, diagnostics_publishers=2, describe=processes.logs)
+    readers = {info.node_name for info in probe.node.get_subscriptions_info_by_topic("/joint_states")}
+    listener.open_gate()
+    end = listener.wait_finished()
+    probe.spin_until(lambda: len(answers) >= len(requests), "an answer to every request", describe=processes.logs)
+    asked = [stamp_ns(request.stamp) for request in requests]
+    ramp = [to_nanoseconds(0.2) + k * to_nanoseconds(0.002) for k in range(11)]
+    assert asked == [0, to_nanoseconds(0.1), *ramp], asked
+    assert [stamp_ns(answer.header.stamp) for answer in answers] == asked
+    assert [answer.wrench.force.x for answer in answers[:2]] == [0.1, 0.2]  # held up to the next event
+    assert "scenario" not in readers and "governor" in readers, readers  # the scenario reads no joint_states
+    assert_equals_cosimulation(listener, end, model, cosimulate(model, 0.002))
+
+
 # -------------------------------------------------------------------------------------------------
 # 4. Bad messages are counted and change nothing (more in test_hostile_participant.py)
 
@@ -647,14 +675,16 @@ def bad_messages_run(tmp_path_factory):
         load = probe.publisher(Float64, "load_torque", describe=processes.logs)
         throttle = probe.publisher(JointState, "throttle", describe=processes.logs)
         speed = probe.publisher(
-            JointState, "joint_states", subscribers=2, describe=processes.logs
-        )  # governor, scenario
+            JointState, "joint_states", subscribers=1, describe=processes.logs
+        )  # the governor (the scenario asks on load_request)
+        request = probe.publisher(Header, "load_request", subscribers=1, describe=processes.logs)  # the scenario
         for value in (math.nan, math.inf, 1e9):
             load.publish(Float64(data=value))
         throttle.publish(JointState(name=["valve"], position=[0.5]))
         throttle.publish(JointState(name=["throttle"], position=[1.5]))
         speed.publish(JointState(name=["wheel"], position=[0.0], velocity=[100.0]))
-        for publisher in (load, throttle, speed):
+        request.publish(Header())  # the load at t = 0, asked by another node than the machine
+        for publisher in (load, throttle, speed, request):
             assert publisher.wait_for_all_acked(Duration(seconds=WAIT))
         probe.node.destroy_publisher(speed)  # (volatile: it would only warn of the test node's own listener)
         listener.open_gate()  # the machine's third subscriber: the run starts
@@ -666,11 +696,18 @@ def bad_messages_run(tmp_path_factory):
             "the governor's diagnostics counting the bad message",
             describe=processes.logs,
         )
-    yield listener, end, model, governor[-1]  # (the nodes are stopped: the listener keeps what it received)
+        scenario = probe.spin_until(
+            lambda: [
+                values for _, _, values in listener.statuses("/scenario") if values.get("refused_messages", "0") != "0"
+            ],
+            "the scenario's diagnostics counting the bad request",
+            describe=processes.logs,
+        )
+    yield listener, end, model, governor[-1], scenario[-1]  # (the nodes are stopped: the listener keeps what it got)
 
 
 def test_bad_messages_are_rejected_and_counted(bad_messages_run):
-    listener, end, model, governor = bad_messages_run
+    listener, end, model, governor, scenario = bad_messages_run
     level, message, values = listener.final_status()
     assert level == DiagnosticStatus.WARN and message == "5 messages refused", (level, message)
     assert {key: value for key, value in values.items() if key.startswith("refused")} == {
@@ -680,6 +717,8 @@ def test_bad_messages_are_rejected_and_counted(bad_messages_run):
         "refused: throttle: not from governor": "2",
     }
     assert governor["refused_messages"] == "1" and governor["refused: joint_states: not from machine"] == "1", governor
+    assert scenario["refused_messages"] == "1", scenario
+    assert scenario["refused: load_request: not from machine"] == "1", scenario
     # the state never saw them: the run is the in-process co-simulation to the last bit
     assert_equals_cosimulation(listener, end, model, cosimulate(model, 0.002))
 

@@ -14,7 +14,8 @@ scene has a mechanism), `machine/moments` (what the recorder reads, sensor_msgs/
 phi [rad], omega [rad/s], a two-mass machine's "coupling" twist [rad] and "driven" omega_driven [rad/s]; several exchange times in one message, each group opened by a joint "stamp"
 whose velocity is the wall-clock time [s, time.monotonic] at which that exchange's joint_states went out:
 common.Batch), `/clock` (at most every `clock_period` s of
-wall time: the other nodes' timers need no more) and `/diagnostics`.
+wall time: the other nodes' timers need no more), `load_request` (std_msgs/Header stamped with an exchange time
+whose load no answer of the scenario covers, in lockstep: the scenario answers it) and `/diagnostics`.
 
 A two-mass machine adds the joints "coupling" (position: twist [rad]) and "driven" (position: phi_driven
 [rad], NaN behind a clutch; velocity: omega_driven [rad/s]) to `joint_states`. `machine/status`
@@ -274,6 +275,7 @@ class MachineNode(MachineExchange, SteadyNode):
         self.namesakes: set[str] = set()  # names of this run's nodes seen twice on the domain (reported once)
 
         self.joint_publisher = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.load_request_publisher = self.create_publisher(Header, "load_request", COMMAND_QOS)
         self.moments = Batch(
             self.create_publisher(JointState, "machine/moments", BATCH_QOS),
             self.get_logger().warning,
@@ -420,6 +422,7 @@ class MachineNode(MachineExchange, SteadyNode):
                     self.stepper.predict(seconds(next_ns), self.tentative) if next_ns > self.now_ns else None
                 )
             self.publish_state()
+            self.request_load()
             self.moments.send_when_due()  # the last exchanges', sent while the peers answer this one
             if self.corrects and next_ns < self.end_ns:  # the next step's predictor, while the governor answers
                 self.stepper.predict_ahead(seconds(self.exchanges.after_next()), self.tentative)
@@ -516,8 +519,8 @@ class MachineNode(MachineExchange, SteadyNode):
             self.publish_status()
 
     def wait_for_peers(self) -> None:
-        """Spin until every peer node (parameter peers) subscribes to joint_states or (the recorder) machine/moments,
-        raising PeerError that names the
+        """Spin until every peer node (parameter peers) subscribes to joint_states, (the recorder) machine/moments or
+        (the scenario in lockstep) load_request, raising PeerError that names the
         missing ones after peer_timeout seconds, and, for at most peer_timeout, until each lockstep input has a
         publisher (one still missing then is waited for at the first exchange and, silent, put on its fail-safe) and
         the state streams have matched every subscription the graph knows (matched_every_subscription): a short run
@@ -528,7 +531,7 @@ class MachineNode(MachineExchange, SteadyNode):
         while rclpy.ok():
             subscribed = {
                 info.node_name
-                for name in (topic, self.moments.publisher.topic_name)
+                for name in (topic, self.moments.publisher.topic_name, self.load_request_publisher.topic_name)
                 for info in self.get_subscriptions_info_by_topic(name)
                 if info.node_namespace == namespace
             }
@@ -559,12 +562,18 @@ class MachineNode(MachineExchange, SteadyNode):
             spin_once(self, SPIN_SLICE)
 
     def matched_every_subscription(self) -> bool:
-        """Whether the state streams the recorder reads (joint_states, machine/moments, machine/status) have matched
-        every subscription the graph knows on their topics: a stream a peer subscribes to but that has not matched it
-        yet would not deliver to it (common.deliver_all)."""
+        """Whether the state streams the recorder reads (joint_states, machine/moments, machine/status) and the
+        scenario's load_request have matched every subscription the graph knows on their topics: a stream a peer
+        subscribes to but that has not matched it yet would not deliver to it (common.deliver_all; a request lost so
+        would be sent again only after RESEND_PERIOD)."""
         return all(
             publisher.get_subscription_count() >= self.count_subscribers(publisher.topic_name)
-            for publisher in (self.joint_publisher, self.moments.publisher, self.status_publisher)
+            for publisher in (
+                self.joint_publisher,
+                self.moments.publisher,
+                self.status_publisher,
+                self.load_request_publisher,
+            )
         )
 
     def collect_inputs(self) -> None:
@@ -576,6 +585,7 @@ class MachineNode(MachineExchange, SteadyNode):
                 spin_once(self, SPIN_SLICE)
                 if time.monotonic() - sent > RESEND_PERIOD:  # a peer that matched late missed it: say it again
                     self.joint_publisher.publish(self.state_message.message)
+                    self.request_load()
                     sent = time.monotonic()
                 if time.monotonic() - waited > self.peer_timeout:
                     missing = self.missing_inputs()
@@ -656,6 +666,13 @@ class MachineNode(MachineExchange, SteadyNode):
         ):
             self.clock_publisher.publish(Clock(clock=stamp(self.now_ns)))  # the others' timers need not every exchange
             self.last_clock = wall
+
+    def request_load(self) -> None:
+        """load_request stamped with the current exchange time, in lockstep when no load the scenario sent covers that
+        time (held_load): the scenario answers it on load_torque_stamped. So the scenario reads one message per load
+        event (at every exchange of a ramp), not every joint_states (docs/ros.md, "Time")."""
+        if self.time_mode == "lockstep" and self.now_ns not in self.stamped_load and self.held_load() is None:
+            self.load_request_publisher.publish(Header(stamp=stamp(self.now_ns), frame_id="crank"))
 
     def report(self, force: bool = False) -> None:
         """Publish /diagnostics every DIAGNOSTICS_PERIOD s of wall time (or now, when forced)."""

@@ -1,18 +1,17 @@
 """scenario_node: plays the load events of a scene in simulation time.
 
-Listens to `joint_states` for the machine's exchange times. In `lockstep` it answers an exchange
-time t with the scene's external load L(t) on `load_torque_stamped` (geometry_msgs/WrenchStamped,
-torque.z [N m], stamped t, in force.z the rate [N m/s] at which it changes then, a ramp's, and in force.x the
-time [s] up to which L stays that number, the next load event's, +inf: to the end; 0 on a ramp) — the machine
-waits for it, so the run is reproducible. An answer whose load is held covers the exchange times after it up to that
-time (solvers.cosim.held_load_until): those the scenario leaves unanswered, one message per load event instead of
-one per exchange. It reads every `joint_states` and passes over the covered ones in Python: a DDS content filter
-that kept them from reaching it (parameters changed after each answer) crashed the machine now and then, Fast DDS
-evaluating it inside the machine's publish (docs/ros.md, "Speed"). In `realtime` it
-publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other publisher
-would. Either way it logs each load event. It takes `joint_states` and `machine/status` from its machine only
-(parameter machine_node; docs/ros.md, "Who may speak") and says what it refused on `/diagnostics`. It ends by itself
-when the machine says the run is finished (`machine/status`).
+In `lockstep` it answers the machine's `load_request` (std_msgs/Header stamped with an exchange time t) with the
+scene's external load L(t) on `load_torque_stamped` (geometry_msgs/WrenchStamped, torque.z [N m], stamped t, in
+force.z the rate [N m/s] at which it changes then, a ramp's, and in force.x the time [s] up to which L stays that
+number, the next load event's, +inf: to the end; 0 on a ramp) — the machine waits for it, so the run is reproducible.
+An answer whose load is held covers the exchange times after it up to that time (solvers.cosim.held_load_until): the
+machine asks again only at an exchange time no answer covers, so the scenario reads one message per load event (at
+every exchange of a ramp), not every `joint_states` (taking each of those cost it 0.19 ms of CPU an exchange on the
+two cores the run shares: docs/speed.md, "The scenario off joint_states"). In `realtime` it reads `joint_states` for
+the machine's time and publishes each change of the load on `load_torque` (std_msgs/Float64 [N m]), as any other
+publisher would. Either way it logs each load event. It takes `load_request`, `joint_states` and `machine/status`
+from its machine only (parameter machine_node; docs/ros.md, "Who may speak") and says what it refused on
+`/diagnostics`. It ends by itself when the machine says the run is finished (`machine/status`).
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Header
 
 from mech_regulator.nodes.common import (
     COMMAND_QOS,
@@ -61,9 +60,12 @@ class ScenarioNode(SteadyNode):
         self.refusals = Refusals(self, self.report)
         self.speakers = Speakers(self)
         machine = peer_parameter(self, "machine")
-        for topic in ("joint_states", "machine/status"):
+        for topic in ("load_request", "joint_states", "machine/status"):
             self.speakers.allow(topic, machine)
-        receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)
+        if self.time_mode == "lockstep":
+            receive(self, Header, "load_request", self.on_load_request, COMMAND_QOS, self.refusals, self.speakers)
+        else:
+            receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         self.last_load: float | None = None
         self.last_ns = -1
@@ -88,25 +90,44 @@ class ScenarioNode(SteadyNode):
         array.status[0].values += self.refusals.key_values()
         self.diagnostics_publisher.publish(array)
 
+    def on_load_request(self, message: Header) -> None:
+        """Lockstep: answer the machine's request for the load at an exchange time (load_request). Every request is
+        answered, a repeat too (the machine asks again when an answer has not reached it). Checked first:
+        trust.BadMessage."""
+        when = stamp_of(message.stamp)
+        self.follow(when, "load_request")
+        self.answer(when, message.stamp)
+
     def on_joint_states(self, message: JointState) -> None:
-        """Give the load at the machine's exchange time (a time of 0 after later ones: the machine's ~/reset, the
-        scenario starts again; only the machine speaks here). Checked first: trust.BadMessage."""
+        """Realtime: the machine's time from joint_states, the load published when it changes (answer); nothing for a
+        time seen already or one the last answer's load holds over. Checked first: trust.BadMessage."""
         joint_fields(message)
         when = stamp_of(message.header.stamp)
+        if self.follow(when, "joint_states") or self.answered[0] < when < self.answered[1]:
+            return
+        self.answer(when, message.header.stamp)
+
+    def follow(self, when: int, topic: str) -> bool:
+        """Follow the machine's time `when` [ns] (a time of 0 after later ones: the machine's ~/reset, the scenario
+        starts again; only the machine speaks on `topic`): BadMessage when it goes back; whether it repeats the newest
+        time."""
         if when == 0 and self.last_ns > 0:
             self.last_load, self.last_ns, self.answered = None, -1, (0, 0)
-        in_order(when, self.last_ns if self.last_ns >= 0 else None, "joint_states")
-        if when == self.last_ns and self.time_mode == "realtime":
-            return
+        in_order(when, self.last_ns if self.last_ns >= 0 else None, topic)
+        repeat = when == self.last_ns
         self.last_ns = max(when, self.last_ns)
-        if self.answered[0] < when < self.answered[1]:  # the last answer's load holds (a repeat of its own exchange
-            return  # time, a peer that matched late, is answered again)
+        return repeat
+
+    def answer(self, when: int, stamp) -> None:
+        """The load at the machine's time `when` [ns] (stamp: the same, a builtin_interfaces/Time): in lockstep on
+        load_torque_stamped, with its rate and the time up to which it holds (held_load_until); in realtime on
+        load_torque when it changes."""
         until = held_load_until(self.model, seconds(when))
         self.answered = (when, until)
         load = self.model.external_load(seconds(when))
         if self.time_mode == "lockstep":
             answer = WrenchStamped()
-            answer.header.stamp = message.header.stamp
+            answer.header.stamp = stamp
             answer.header.frame_id = "crank"
             answer.wrench.torque.z = load
             answer.wrench.force.z = load_rate(self.model, seconds(when))  # [N m/s]: a ramp, followed over the step
