@@ -71,6 +71,7 @@ from mech_regulator.nodes.common import (
     ACK_PATIENCE,
     BATCH_QOS,
     COMMAND_QOS,
+    PARTICIPANT_LEASE,
     PROGRESS_EVERY,
     PROGRESS_QOS,
     RECORDER_LEAD,
@@ -541,8 +542,9 @@ class MachineNode(MachineExchange, SteadyNode):
                 named = ", ".join(repr(name) for name in twice)
                 raise SceneError(
                     f"another node named {named} is on this ROS domain already (another run on the same "
-                    "--domain-id?): this run would take its messages and it this run's; use another "
-                    "domain, or end the other run"
+                    f"--domain-id, or one killed there within the last {PARTICIPANT_LEASE:g} s: the domain forgets a "
+                    "killed node only when its lease has passed): this run would take its messages and it this "
+                    "run's; use another domain, or end the other run"
                 )
             unpublished = [
                 item for item in self.lockstep_inputs if self.count_publishers(LOCKSTEP_INPUTS[item][1]) == 0
