@@ -38,6 +38,7 @@ from ros_support import (  # noqa: F401 (fixtures)
     WAIT,
     Processes,
     RunListener,
+    batch_groups,
     domain_id,
     next_domain_id,
     probe,
@@ -50,7 +51,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Header
 from std_srvs.srv import Trigger
 from support import SMOOTH_DIRECT_GOVERNOR, SMOOTH_GOVERNED_MACHINE, run_cli
-from test_recording import events
+from test_recording import events, scalars
 
 from mech_regulator.analysis import cycle_mean_speed, load_responses, operating_point
 from mech_regulator.model import build_model
@@ -129,7 +130,7 @@ class _Published(list):
 
 
 def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
-    from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
+    from mech_regulator.nodes.common import BATCH_SIZE, Batch
 
     published = _Published()
     batch = Batch(published, print)
@@ -210,7 +211,7 @@ def test_the_speed_s_action_on_the_throttle_is_read_from_the_governor_s_answer_a
 
 
 def test_a_batch_completes_its_deferred_groups_together_when_it_goes_out():
-    from mech_regulator.nodes.common import BATCH_SIZE, Batch, batch_groups
+    from mech_regulator.nodes.common import BATCH_SIZE, Batch
 
     published, completions = _Published(), []
 
@@ -912,11 +913,192 @@ def test_the_recorder_records_an_exchange_answered_twice_once(tmp_path):
     recorder.rows = RunRows(recorder.model, False, None, None, mock.Mock(), mock.Mock())
     recorder.on_governor(_governor_batch([0, 2_000_000, 2_000_000], throttle=0.5))  # the repeat in the batch
     recorder.on_governor(_governor_batch([2_000_000, 4_000_000], throttle=0.25))  # the repeat opening the next
-    recorded = [call.args[0] for call in recorder.recording.add_governor.call_args_list]
+    recorded = [when for call in recorder.recording.add_governors.call_args_list for when in call.args[0].tolist()]
     assert recorded == [0, 2_000_000, 4_000_000]
     assert list(recorder.rows.governor) == recorded and recorder.rows.governor[2_000_000]["throttle"] == 0.5  # first
     with pytest.raises(BadMessage, match="out of order"):  # before the newest: refused, as before
         recorder.on_governor(_governor_batch([2_000_000], throttle=0.5))
+
+
+def _joint_batch(groups: list[tuple[int, dict[str, tuple[float, float, float]]]]) -> JointState:
+    """A Batch message (common.Batch) of `groups`: (exchange time [ns], {joint: (position, velocity, effort)})."""
+    message = JointState()
+    for when, joints in groups:
+        for name, (position, velocity, effort) in {"stamp": (float(when), 0.0, math.nan), **joints}.items():
+            message.name.append(name)
+            message.position.append(position)
+            message.velocity.append(velocity)
+            message.effort.append(effort)
+    return message
+
+
+def _engine_groups(count: int) -> tuple[list, list]:
+    """engine_direct's machine/moments and governor/state groups of `count` exchanges 20 ms apart, made up: the load
+    6 N m, then 8 N m from the 13th exchange (index 12) on."""
+    machine, governor = [], []
+    for index in range(count):
+        when, load = index * 20_000_000, 6.0 if index < 12 else 8.0
+        drive, resistance = 10.0 + index, -5.0 - 0.01 * index
+        machine.append(
+            (
+                when,
+                {
+                    "crank": (0.5 * index, 220.0 + 0.1 * index, math.nan),
+                    **{
+                        name: (math.nan, math.nan, effort)
+                        for name, effort in (
+                            ("drive", drive),
+                            ("resistance", resistance),
+                            ("external", -load),
+                            ("net", drive + resistance - load),
+                            ("load", load),
+                        )
+                    },
+                    "throttle": (0.8, math.nan, math.nan),
+                },
+            )
+        )
+        governor.append(
+            (
+                when,
+                {
+                    "sleeve": (0.03 + 1e-4 * index, 0.001, math.nan),
+                    "arm": (0.4 + 0.001 * index, 0.01, math.nan),
+                    "throttle": (0.8 - 0.001 * index, math.nan, math.nan),
+                },
+            )
+        )
+    return machine, governor
+
+
+def _bare_recorder(model, recording, csv: Path | None = None):
+    """A RecorderNode's bookkeeping without ROS (no node): its model, `recording`, a RunRows writing `csv`."""
+    from unittest import mock
+
+    from mech_regulator.nodes.recorder import RecorderNode
+    from mech_regulator.nodes.run_rows import RunRows
+
+    recorder = RecorderNode.__new__(RecorderNode)
+    recorder.model = model
+    recorder.recording, recorder.controller, recorder.unsent = recording, "governor", 0
+    recorder.rows = RunRows(model, False, csv, None, lambda what, path, write: write() or True, mock.Mock())
+    recorder.state_walls, recorder.last_exchanges, recorder.progress_publisher = [], [], _Published()
+    return recorder
+
+
+def test_the_recorder_records_a_batch_as_its_groups_one_by_one(tmp_path):
+    """engine_direct's streams, 30 exchanges: one batch each gives the recording (every entity's samples, the set
+    point of the load before each sample, the load's step as one event) and the CSV that 30 batches of one give."""
+    from test_recording import chunks
+
+    from mech_regulator.viz.recording import RunRecording
+    from mech_regulator.viz.recording_layout import recorded_series
+
+    model = build_model(load_scene("engine_direct"))
+    machine, governor = _engine_groups(30)
+    fed = {"batches": ([machine], [governor]), "one_by_one": ([[g] for g in machine], [[g] for g in governor])}
+    for name, (machine_batches, governor_batches) in fed.items():
+        recorder = _bare_recorder(model, RunRecording(model, path=tmp_path / f"{name}.rrd"), tmp_path / f"{name}.csv")
+        for groups in machine_batches:
+            recorder.on_moments(_joint_batch(groups))
+        for groups in governor_batches:
+            recorder.on_governor(_joint_batch(groups))
+        recorder.rows.write(math.inf, None)
+        recorder.rows.close()
+        recorder.recording.close("complete")
+        assert recorder.rows.written == 30 and recorder.state_walls == [0.0, 0.0]
+        assert recorder.last_exchanges == [560_000_000, 580_000_000] and recorder.unsent == 30
+    assert (tmp_path / "batches.csv").read_bytes() == (tmp_path / "one_by_one.csv").read_bytes()
+    for entity in [*recorded_series(model, False), "mechanism/rod", "governor/drawing/spindle_mark"]:
+        contents = [
+            [
+                {column: values for column, values in batch.to_pydict().items() if column != "rerun.controls.RowId"}
+                for batch in chunks(tmp_path / f"{name}.rrd", f"/{entity}")
+            ]
+            for name in fed
+        ]
+        assert contents[0] == contents[1] and contents[0], entity
+    speeds = [operating_point(model, load).speed for load in (6.0, 8.0)]
+    set_point = scalars(tmp_path / "batches.rrd", "/speed/set_point")[1]
+    assert np.array_equal(set_point, [speeds[0]] * 13 + [speeds[1]] * 17)  # (the load of the sample before)
+    assert events(tmp_path / "batches.rrd")[1] == (240_000_000, "INFO", "load step 6 -> 8 N m")
+
+
+def test_the_recorder_refuses_a_batch_naming_its_first_bad_value(tmp_path):
+    """A bad value in a batch's row k refuses the whole batch (nothing of it recorded), naming row k's exchange time
+    and the field as a batch of that row alone would: rows first, then the fields in the order checked."""
+    from unittest import mock
+
+    model = build_model(load_scene("engine_direct"))
+    machine, governor = _engine_groups(10)
+    recorder = _bare_recorder(model, mock.Mock())
+    machine[6][1]["crank"] = (0.5, math.nan, math.nan)  # row 6: the crank's speed, and further on its net moment
+    machine[6][1]["net"] = (math.nan, math.nan, math.inf)
+    machine[8][1]["crank"] = (math.nan, 1.0, math.nan)  # (a later row)
+    expected = "machine/moments at 0.12 s: crank velocity [rad/s] = nan, expected a finite number in [-inf, inf]"
+    for groups in (machine, machine[6:7]):
+        with pytest.raises(BadMessage) as refused:
+            recorder.on_moments(_joint_batch(groups))
+        assert (refused.value.reason, refused.value.detail) == ("not finite", expected)
+    governor[4][1]["throttle"] = (1.5, math.nan, math.nan)  # row 4: out of range
+    governor[7][1]["sleeve"] = (math.nan, 0.0, math.nan)  # (a later row)
+    with pytest.raises(BadMessage) as refused:
+        recorder.on_governor(_joint_batch(governor))
+    assert (refused.value.reason, refused.value.detail) == (
+        "out of range",
+        "governor/state at 0.08 s: throttle = 1.5, expected a finite number in [0, 1]",
+    )
+    governor[4][1]["arm"] = (0.4, math.inf, math.nan)  # the same row's arm rate: checked before its throttle
+    with pytest.raises(BadMessage) as refused:
+        recorder.on_governor(_joint_batch(governor))
+    assert (refused.value.reason, refused.value.detail) == (
+        "not finite",
+        "governor/state at 0.08 s = inf, expected a finite number in [-inf, inf]",
+    )
+    assert recorder.rows.received == {"machine": 0, "governor": 0} and not recorder.recording.method_calls
+
+
+def test_a_batch_read_as_columns_is_checked_in_the_order_of_the_message():
+    """batch_columns: the later of a joint given twice in a group; the first bad stamp or stamp out of order, and the
+    first group without a joint asked for, named as a reading group by group names them."""
+    from mech_regulator.nodes.common import batch_columns
+
+    message = _joint_batch([(0, {"a": (1.0, 2.0, 3.0), "b": (4.0, 5.0, 6.0)}), (5, {"b": (7.0, 8.0, 9.0)})])
+    message.name.append("a")  # a second "a" in the second group
+    for field, value in (("position", 10.0), ("velocity", 11.0), ("effort", 12.0)):
+        getattr(message, field).append(value)
+    with pytest.raises(BadMessage) as refused:
+        batch_columns(
+            _joint_batch([(0, {"a": (1.0, 2.0, 3.0), "b": (1.0, 2.0, 3.0)}), (5, {"b": (7.0, 8.0, 9.0)})]), ("b", "a")
+        )
+    assert (refused.value.reason, refused.value.detail) == (
+        "missing joint",
+        "the group at 5e-09 s has no a (it has stamp, b)",
+    )
+    columns = batch_columns(message, ("a", "b"))
+    assert columns.times.tolist() == [0, 5] and columns.walls.tolist() == [0.0, 0.0]
+    assert [field.tolist() for field in columns.joints["a"]] == [[1.0, 10.0], [2.0, 11.0], [3.0, 12.0]]
+    assert columns.joints["b"].effort.tolist() == [6.0, 9.0]
+    for stamps, reason, detail in (
+        ([3.0, 1.0, 0.5], "out of order", "a batch's exchange time 1 ns after 3 ns"),
+        ([3.0, 3.0, 1.0], "out of order", "a batch's exchange time 1 ns after 3 ns"),
+        (
+            [3.0, 2.5, 1.0],
+            "bad stamp",
+            "a batch's exchange time 2.5 ns, expected a whole number in 0..9007199254740992",
+        ),
+        (
+            [-1.0, 1.0, 0.0],
+            "bad stamp",
+            "a batch's exchange time -1.0 ns, expected a whole number in 0..9007199254740992",
+        ),
+    ):
+        bad = _joint_batch([(0, {"a": (1.0, 2.0, 3.0)})] * 3)
+        for index, value in enumerate(stamps):
+            bad.position[2 * index] = value
+        with pytest.raises(BadMessage) as refused:
+            batch_columns(bad, ("a",))
+        assert (refused.value.reason, refused.value.detail) == (reason, detail), stamps
 
 
 def test_the_recorder_counts_the_exchanges_the_machine_published_that_it_missed(tmp_path):

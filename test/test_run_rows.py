@@ -36,28 +36,33 @@ def guarded(what: str, path: Path | None, write) -> bool:
     return True
 
 
-def feed(rows: RunRows, model, run, indices, skip_governor: int | None = None) -> None:
-    """The parts of the exchanges `indices` of `run`, the machine's then the governor's (but at `skip_governor`)."""
+def feed(rows: RunRows, model, run, indices, skip_governor: int | None = None, batch: int = 1) -> None:
+    """The parts of the exchanges `indices` of `run`, `batch` exchanges at a time as the recorder's batches bring them:
+    the machine's, then the governor's (but at `skip_governor`)."""
     governor_names = list(model.governor.state_names)
-    for index in indices:
-        when = to_nanoseconds(run.times[index])
-        state = list(run.states[:, index])
-        rows.add_machine(when, state[:2] + state[2 + len(governor_names) :], run.external_load[index], 0.5)
-        if index != skip_governor:
-            values = dict(zip(governor_names, state[2 : 2 + len(governor_names)]))
-            rows.add_governor(when, {**values, "throttle": run.throttle[index]})
+    indices = list(indices)
+    for start in range(0, len(indices), batch):
+        taken = np.array(indices[start : start + batch])
+        times = np.array([to_nanoseconds(run.times[index]) for index in taken], dtype=np.int64)
+        states = run.states[:, taken].T
+        machine = np.column_stack([states[:, :2], states[:, 2 + len(governor_names) :]])
+        rows.add_machines(times, machine, run.external_load[taken], np.full(taken.size, 0.5))
+        answered = taken != skip_governor
+        values = {name: states[answered, 2 + column] for column, name in enumerate(governor_names)}
+        rows.add_governors(times[answered], {**values, "throttle": run.throttle[taken][answered]})
 
 
-def test_rows_written_in_pieces_make_the_csv_of_the_whole_run(engine_run, tmp_path):
+@pytest.mark.parametrize("batch", [1, 7])  # one by one, and in batches (the last one shorter)
+def test_rows_written_in_pieces_make_the_csv_of_the_whole_run(engine_run, tmp_path, batch):
     model, run = engine_run
     csv = tmp_path / "run.csv"
     rows = RunRows(model, False, csv, tmp_path, guarded, print)
     count = run.times.size
-    feed(rows, model, run, range(0, 10))
+    feed(rows, model, run, range(0, 10), batch=batch)
     rows.write(seconds(to_nanoseconds(run.times[6])), None)  # the machine said it had not tripped by then
     assert rows.written == 7 and sorted(rows.machine) == sorted(rows.governor) == rows.ready  # 7 to 9 kept
     assert csv.read_text().count("\n") == 8  # the header and the rows written, on disk
-    feed(rows, model, run, range(10, count))
+    feed(rows, model, run, range(10, count), batch=batch)
     rows.write(-np.inf, None)  # nothing settled: nothing written
     assert rows.written == 7
     rows.write(np.inf, None)
@@ -73,10 +78,11 @@ def test_rows_written_in_pieces_make_the_csv_of_the_whole_run(engine_run, tmp_pa
     assert sorted(path.name for path in tmp_path.iterdir()) == ["run.csv", "whole.csv"]  # the spool had no name
 
 
-def test_the_throttle_is_closed_from_the_trip_and_an_incomplete_exchange_is_dropped(engine_run, tmp_path):
+@pytest.mark.parametrize("batch", [1, 7])
+def test_the_throttle_is_closed_from_the_trip_and_an_incomplete_exchange_is_dropped(engine_run, tmp_path, batch):
     model, run = engine_run
     rows = RunRows(model, False, None, None, guarded, print)
-    feed(rows, model, run, range(run.times.size), skip_governor=3)
+    feed(rows, model, run, range(run.times.size), skip_governor=3, batch=batch)
     tripped_at = float(run.times[20])
     rows.write(np.inf, tripped_at)
     back = rows.cosimulation([], tripped_at)

@@ -17,7 +17,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import TypeVar, cast
+from typing import NamedTuple, TypeVar, cast
 
 import numpy as np
 import rclpy
@@ -545,35 +545,82 @@ def wait_for_readers(publisher, say: Callable[[str], object]) -> None:
         )
 
 
-def batch_groups(message, required: tuple[str, ...] = ()) -> list[tuple[int, dict[str, tuple[float, float, float]]]]:
-    """The groups of a Batch message: (exchange time [ns], {joint: (position, velocity, effort)}), in order; the
-    group's "stamp" joint among them (its velocity: the wall-clock time the sender gave). Checked (trust.BadMessage
-    otherwise): the arrays as long as the names, a "stamp" first, exchange times whole, within 0..2^53 ns and
-    not decreasing, and every group with the joints `required`."""
+class JointColumns(NamedTuple):
+    """One joint's fields over a batch's groups (batch_columns), each an array with one value per group."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+
+
+class BatchColumns(NamedTuple):
+    """A Batch message read column by column (batch_columns): `times` [ns] (int64) the groups' exchange times, in
+    order; `walls` [s] the wall-clock times their senders gave (the "stamp" joint's velocity); `joints` the joints
+    asked for, each over the groups."""
+
+    times: np.ndarray
+    walls: np.ndarray
+    joints: dict[str, JointColumns]
+
+    def rows(self, taken: np.ndarray) -> BatchColumns:
+        """The groups at the indices or where the mask `taken` says, in the same layout."""
+        return BatchColumns(
+            self.times[taken],
+            self.walls[taken],
+            {name: JointColumns(*(field[taken] for field in joint)) for name, joint in self.joints.items()},
+        )
+
+
+def batch_columns(message, required: tuple[str, ...]) -> BatchColumns:
+    """A Batch message as columns (BatchColumns): the exchange times, the senders' wall-clock times and, for each
+    joint `required`, its position, velocity and effort at each group (a joint given twice in a group: the later
+    one). Checked (trust.BadMessage otherwise), in the order of the message: the arrays as long as the names, a
+    "stamp" first, exchange times whole, within 0..2^53 ns and not decreasing, and every group with the joints
+    `required`. One pass of numpy over the message, whatever its number of groups."""
     names = joint_fields(message, "position", "velocity", "effort")
     if names and names[0] != "stamp":
         raise BadMessage("no stamp", f"a batch starting with joint {names[0]!r}, expected 'stamp'")
-    groups: list[tuple[int, dict[str, tuple[float, float, float]]]] = []
-    for name, position, velocity, effort in zip(names, message.position, message.velocity, message.effort):
-        if name == "stamp":
-            if not (math.isfinite(position) and 0.0 <= position <= LARGEST_STAMP and position == int(position)):
-                raise BadMessage(
-                    "bad stamp",
-                    f"a batch's exchange time {position!r} ns, expected a whole number in 0..{LARGEST_STAMP}",
-                )
-            if groups and int(position) < groups[-1][0]:  # (a repeat: a peer answered an exchange time twice)
-                raise BadMessage("out of order", f"a batch's exchange time {position:.0f} ns after {groups[-1][0]} ns")
-            groups.append((int(position), {"stamp": (position, velocity, effort)}))
-        else:
-            groups[-1][1][name] = (position, velocity, effort)
-    for when, joints in groups:
-        missing = [joint for joint in required if joint not in joints]
-        if missing:
-            raise BadMessage(
-                "missing joint",
-                f"the group at {seconds(when):.9g} s has no {', '.join(missing)} (it has {', '.join(joints)})",
-            )
-    return groups
+    fields = [np.asarray(getattr(message, field), dtype=float) for field in ("position", "velocity", "effort")]
+    named = np.array(names, dtype=str)
+    opens = np.flatnonzero(named == "stamp")  # the entries that open a group
+    stamps = fields[0][opens]
+    with np.errstate(invalid="ignore"):
+        whole = np.isfinite(stamps) & (stamps >= 0.0) & (stamps <= LARGEST_STAMP) & (stamps == np.floor(stamps))
+        back = np.flatnonzero(stamps[1:] < stamps[:-1]) + 1  # (a repeat: a peer answered an exchange time twice)
+    bad = np.flatnonzero(~whole)
+    if bad.size and (not back.size or bad[0] <= back[0]):
+        raise BadMessage(
+            "bad stamp",
+            f"a batch's exchange time {float(stamps[bad[0]])!r} ns, expected a whole number in 0..{LARGEST_STAMP}",
+        )
+    if back.size:
+        raise BadMessage(
+            "out of order",
+            f"a batch's exchange time {stamps[back[0]]:.0f} ns after {int(stamps[back[0] - 1])} ns",
+        )
+    times = stamps.astype(np.int64)
+    group_of = np.cumsum(named == "stamp") - 1  # each entry's group
+    entries = {}  # joint -> the entry holding it in each group (-1: none)
+    for joint in required:
+        at = np.flatnonzero(named == joint)
+        last = np.append(group_of[at][1:] != group_of[at][:-1], True) if at.size else at.astype(bool)
+        entries[joint] = np.full(times.size, -1)
+        entries[joint][group_of[at][last]] = at[last]
+    lacking = [int(np.argmax(entry < 0)) for entry in entries.values() if (entry < 0).any()]
+    if lacking:
+        group = min(lacking)
+        end = opens[group + 1] if group + 1 < opens.size else len(names)
+        missing = [joint for joint, entry in entries.items() if entry[group] < 0]
+        raise BadMessage(
+            "missing joint",
+            f"the group at {seconds(int(times[group])):.9g} s has no {', '.join(missing)} "
+            f"(it has {', '.join(dict.fromkeys(names[opens[group] : end]))})",
+        )
+    return BatchColumns(
+        times,
+        fields[1][opens],
+        {joint: JointColumns(*(field[entry] for field in fields)) for joint, entry in entries.items()},
+    )
 
 
 def scene_model(node: Node) -> MachineModel:

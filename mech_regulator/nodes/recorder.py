@@ -26,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from sensor_msgs.msg import JointState
@@ -41,10 +42,11 @@ from mech_regulator.nodes.common import (
     PROGRESS_QOS,
     RECORD_QOS,
     STATE_QOS,
+    BatchColumns,
     OutputError,
     RunState,
     SteadyNode,
-    batch_groups,
+    batch_columns,
     coupling_parameter,
     diagnostics,
     exchange_tolerance_parameter,
@@ -68,7 +70,7 @@ from mech_regulator.nodes.trust import (
     Report,
     RunStateMessage,
     Speakers,
-    bounded,
+    bounded_rows,
     json_message,
     merge_counts,
     real_number,
@@ -275,63 +277,89 @@ class RecorderNode(SteadyNode):
 
     def on_moments(self, message: JointState) -> None:
         """The machine's states and moments of one or more exchange times (common.Batch), in order, after the last
-        one recorded; every value read checked first (trust.BadMessage)."""
-        needed = ["crank", "drive", "resistance", "external", "net", "load"]
+        one recorded, read and checked as columns (common.batch_columns; every value read checked first,
+        trust.BadMessage) and handed on a batch at a time."""
+        needed = ["crank", "drive", "resistance", "external", "net", "load", "throttle"]
         needed += ["coupling"] if self.model.coupling is not None else []
         needed += ["driven"] if self.model.driven is not None else []
-        groups = unrecorded(batch_groups(message, tuple(needed)), self.rows.newest[MACHINE], "machine/moments")
-        for when, joints in groups:
-            checks = [(joints["crank"][0], "crank position [rad]"), (joints["crank"][1], "crank velocity [rad/s]")]
-            checks += [(joints[name][2], f"{name} effort [N m]") for name in needed[1:6]]
-            checks += [(joints["coupling"][0], "coupling position [rad]")] if "coupling" in needed else []
-            checks += [(joints["driven"][1], "driven velocity [rad/s]")] if "driven" in needed else []
-            for value, what in checks:
-                bounded(value, -math.inf, math.inf, f"machine/moments at {seconds(when):.9g} s: {what}")
-        for when, joints in groups:
-            phi, omega = joints["crank"][:2]
+        batch = unrecorded(batch_columns(message, tuple(needed)), self.rows.newest[MACHINE], "machine/moments")
+        joints, times = batch.joints, batch.times
+        checked = [
+            (joints["crank"].position, "crank position [rad]"),
+            (joints["crank"].velocity, "crank velocity [rad/s]"),
+        ]
+        checked += [(joints[name].effort, f"{name} effort [N m]") for name in needed[1:6]]
+        checked += [(joints["coupling"].position, "coupling position [rad]")] if "coupling" in joints else []
+        checked += [(joints["driven"].velocity, "driven velocity [rad/s]")] if "driven" in joints else []
+        everywhere = np.full(len(checked), math.inf)
+        bounded_rows(
+            np.column_stack([values for values, _ in checked]),
+            -everywhere,
+            everywhere,
+            lambda row, field: f"machine/moments at {seconds(int(times[row])):.9g} s: {checked[field][1]}",
+        )
+        if times.size:
+            phi, omega = joints["crank"].position, joints["crank"].velocity
             driven = {}
-            if self.model.coupling is not None:
-                driven["twist"] = joints["coupling"][0]
-            if self.model.driven is not None:
-                driven["omega_driven"] = joints["driven"][1]
-            self.state_walls[1:] = [joints["stamp"][1]]  # when the machine published that state
-            self.last_exchanges = [*self.last_exchanges[-1:], when]
-            self.unsent += 1
-            self.recording.add_machine(when, phi, omega, driven or None)
-            moments = {name: effort for name, (_, _, effort) in joints.items()}
-            self.recording.add_moments(
-                when, moments["drive"], moments["resistance"], moments["external"], moments["net"]
+            if "coupling" in joints:
+                driven["twist"] = joints["coupling"].position
+            if "driven" in joints:
+                driven["omega_driven"] = joints["driven"].velocity
+            walls = self.state_walls[:1] + batch.walls.tolist()  # when the machine published those states
+            self.state_walls = walls[:1] + walls[1:][-1:]  # the first and the latest
+            self.last_exchanges = (self.last_exchanges + times[-2:].tolist())[-2:]
+            self.unsent += times.size
+            loads, throttle = joints["load"].effort, joints["throttle"].position
+            self.recording.add_machines(  # each set point at the load of the sample before (as one by one)
+                times, phi, omega, driven or None, np.append(self.recording.external_load, loads[:-1])
             )
-            self.recording.add_external_load(when, moments["load"])  # a ramp becomes one event, a jump a step
-            self.rows.add_machine(when, [phi, omega, *driven.values()], moments["load"], joints["throttle"][0])
+            self.recording.add_moments(
+                times,
+                joints["drive"].effort,
+                joints["resistance"].effort,
+                joints["external"].effort,
+                joints["net"].effort,
+            )
+            self.recording.add_external_loads(times, loads)  # a ramp becomes one event, a jump a step
+            self.rows.add_machines(times, np.column_stack([phi, omega, *driven.values()]), loads, throttle)
             if self.controller == "external":
-                self.recording.add_throttle(when, joints["throttle"][0])
+                self.recording.add_throttles(times, throttle)
         self.say_progress()
 
     def on_governor(self, message: JointState) -> None:
-        """The governor's state at one or more exchange times (common.Batch), in order, after the last one recorded;
-        every value read checked first (trust.BadMessage)."""
+        """The governor's state at one or more exchange times (common.Batch), in order, after the last one recorded,
+        read and checked as columns (common.batch_columns; every value read checked first, trust.BadMessage) and
+        handed on a batch at a time."""
         if self.model.governor is None:
             raise BadMessage("no governor", f"scene '{self.model.scene.name}' has no governor")
         shown = self.model.governor.joints()  # GovernorKind.joints: (joint, position's key, velocity's key or None)
-        groups = unrecorded(
-            batch_groups(message, tuple(name for name, _, _ in shown)), self.rows.newest[GOVERNOR], "governor/state"
+        batch = unrecorded(
+            batch_columns(message, tuple(name for name, _, _ in shown)), self.rows.newest[GOVERNOR], "governor/state"
         )
-        for when, joints in groups:
-            checked = [
-                value
-                for name, _, velocity in shown
-                if name != "throttle"
-                for value in (joints[name][:2] if velocity is not None else joints[name][:1])
-            ]
-            for value in checked:
-                bounded(value, -math.inf, math.inf, f"governor/state at {seconds(when):.9g} s")
-            bounded(joints["throttle"][0], 0.0, 1.0, f"governor/state at {seconds(when):.9g} s: throttle")
-        for when, joints in groups:
-            values = {position: joints[name][0] for name, position, _ in shown}
-            values.update({velocity: joints[name][1] for name, _, velocity in shown if velocity is not None})
-            self.rows.add_governor(when, values)
-            self.recording.add_governor(when, values)
+        joints, times = batch.joints, batch.times
+        checked = [
+            values
+            for name, _, velocity in shown
+            if name != "throttle"
+            for values in (
+                (joints[name].position, joints[name].velocity) if velocity is not None else (joints[name].position,)
+            )
+        ]
+        low, high = np.full(len(checked) + 1, -math.inf), np.full(len(checked) + 1, math.inf)
+        low[-1], high[-1] = 0.0, 1.0  # the throttle [-], checked after the others of its row
+        bounded_rows(
+            np.column_stack([*checked, joints["throttle"].position]),
+            low,
+            high,
+            lambda row, field: (
+                f"governor/state at {seconds(int(times[row])):.9g} s" + (": throttle" if field == len(checked) else "")
+            ),
+        )
+        if times.size:
+            values = {position: joints[name].position for name, position, _ in shown}
+            values.update({velocity: joints[name].velocity for name, _, velocity in shown if velocity is not None})
+            self.rows.add_governors(times, values)
+            self.recording.add_governors(times, values)
         self.say_progress()
 
     def say_progress(self) -> None:
@@ -690,19 +718,18 @@ class RecorderNode(SteadyNode):
             raise OutputError(f"{len(self.write_failures)} output(s) could not be written: {self.write_failures[-1]}")
 
 
-def unrecorded(groups: list[tuple[int, dict]], newest: int | None, topic: str) -> list[tuple[int, dict]]:
-    """The groups of a batch (common.batch_groups) at exchange times after `newest` [ns] (the newest of a stream
+def unrecorded(batch: BatchColumns, newest: int | None, topic: str) -> BatchColumns:
+    """The groups of a batch (common.batch_columns) at exchange times after `newest` [ns] (the newest of a stream
     recorded, None: none yet), each time once: the machine publishes an exchange time again when no answer
     came within machine.RESEND_PERIOD (a loaded machine), and its governor then answers that time twice, the repeat in the
     same batch or opening the next; the first answer is the one recorded. A batch from before the newest time
     recorded is refused (trust.BadMessage)."""
-    if groups and newest is not None and groups[0][0] < newest:
-        raise BadMessage("out of order", f"{topic} from {seconds(groups[0][0]):.9g} s after {seconds(newest):.9g} s")
-    fresh: list[tuple[int, dict]] = []
-    for when, joints in groups:
-        if when != newest and (not fresh or when != fresh[-1][0]):
-            fresh.append((when, joints))
-    return fresh
+    times = batch.times
+    if times.size and newest is not None and times[0] < newest:
+        raise BadMessage("out of order", f"{topic} from {seconds(int(times[0])):.9g} s after {seconds(newest):.9g} s")
+    fresh = times != (newest if newest is not None else -1)  # (the times are not decreasing: batch_columns)
+    fresh[1:] &= times[1:] != times[:-1]
+    return batch if fresh.all() else batch.rows(fresh)
 
 
 def main() -> int:

@@ -76,28 +76,38 @@ class RunRows:
         self.spooled = 0  # rows in the spool
         self.kept: list[np.ndarray] = []  # rows the spool could not take (it failed): kept in memory
 
-    def add_machine(self, when: int, state: list[float], external_load: float, throttle: float) -> None:
-        """The machine's part of the exchange at `when` [ns]: its state (MachineModel.state_names without the
-        governor's), the external load [N m] and the throttle it applied [-]."""
-        self.machine[when] = (state, external_load, throttle)
-        self.first_machine = when if self.first_machine is None else self.first_machine
+    def add_machines(
+        self, times: np.ndarray, states: np.ndarray, external_loads: np.ndarray, throttles: np.ndarray
+    ) -> None:
+        """The machine's parts of the exchanges at `times` [ns] (in order, after its newest): at each, its state
+        (a row of `states`: MachineModel.state_names without the governor's), the external load [N m] and the
+        throttle it applied [-]."""
+        when = times.tolist()
+        self.machine.update(zip(when, zip(states.tolist(), external_loads.tolist(), throttles.tolist())))
+        self.first_machine = when[0] if self.first_machine is None and when else self.first_machine
         self._arrived(MACHINE, when)
 
-    def add_governor(self, when: int, values: dict[str, float]) -> None:
-        """The governor's part of the exchange at `when` [ns]: its values by name (its states and its throttle)."""
-        self.governor[when] = values
+    def add_governors(self, times: np.ndarray, values: dict[str, np.ndarray]) -> None:
+        """The governor's parts of the exchanges at `times` [ns] (in order, after its newest): its values by name
+        (its states and its throttle), each an array over the times."""
+        names, columns = list(values), [column.tolist() for column in values.values()]
+        when = times.tolist()
+        self.governor.update(zip(when, (dict(zip(names, row)) for row in zip(*columns))))
         self._arrived(GOVERNOR, when)
 
-    def _arrived(self, stream: str, when: int) -> None:
-        """A part came on `stream`: the exchange at `when` [ns] is complete once the machine's part and (with a
-        governor) the governor's are in. Exchanges complete in the order of their times: each stream's parts come
-        in that order."""
-        self.newest[stream] = when
-        self.received[stream] += 1
-        if when in self.machine and (not self.governed or when in self.governor):
-            self.completed += 1
-            self.completed_until = when
-            self.ready.append(when)
+    def _arrived(self, stream: str, times: list[int]) -> None:
+        """Parts came on `stream` at `times` [ns] (in order): the exchange at each is complete once the machine's part
+        and (with a governor) the governor's are in. Exchanges complete in the order of their times: each stream's
+        parts come in that order."""
+        if not times:
+            return
+        self.newest[stream] = times[-1]
+        self.received[stream] += len(times)
+        complete = [when for when in times if when in self.machine and (not self.governed or when in self.governor)]
+        if complete:
+            self.completed += len(complete)
+            self.completed_until = complete[-1]
+            self.ready += complete
 
     def received_until(self, stream: str, when: int) -> bool:
         """Whether `stream` has brought its part of the exchange at `when` [ns] or a later one (the governor's stream

@@ -21,6 +21,7 @@ import traceback
 from collections.abc import Callable
 from typing import Annotated, Literal, NamedTuple, overload
 
+import numpy as np
 import pydantic
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from rclpy.node import Node
@@ -389,6 +390,17 @@ def bounded(value: float, low: float, high: float, what: str) -> float:
     if not low <= value <= high:
         raise BadMessage("out of range", f"{what} = {value!r}, expected a finite number in [{low:g}, {high:g}]")
     return value
+
+
+def bounded_rows(values: np.ndarray, low: np.ndarray, high: np.ndarray, what: Callable[[int, int], str]) -> None:
+    """Check `values` (rows x fields) as `bounded` checks one value, each field against its bounds `low` and `high`
+    (one per field), vectorised; the first bad value, rows first, raises bounded's BadMessage with what(row, field)
+    naming it."""
+    with np.errstate(invalid="ignore"):
+        bad = ~(np.isfinite(values) & (values >= low) & (values <= high))
+    if bad.any():
+        row, field = divmod(int(np.argmax(bad)), values.shape[1])
+        bounded(float(values[row, field]), float(low[field]), float(high[field]), what(row, field))
 
 
 def in_order(when: int, newest: int | None, what: str) -> int:

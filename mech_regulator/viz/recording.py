@@ -3,11 +3,11 @@ animation of the mechanism and the governor, and a text log of events, laid out 
 live recorder (RunRecording, the load's changes and the text log, record_run); recording_layout.py holds the series
 and the blueprint, recording_pictures.py the drawings.
 
-A RunRecording is fed sample by sample (the ROS recorder's callbacks, or `record_run` from a monolithic or
-co-simulated run). Times are whole nanoseconds of SIMULATED time on the duration timeline `sim_time`. Scalar
-samples are only appended to lists; `flush()` sends them as columns. The animation is decimated to
-`animation_rate` frames per second of simulated time. Rerun's 2-D views have y pointing down, so the
-drawings (y up, mechanisms.drawing and governors.drawing) are flipped on the way in.
+A RunRecording is fed samples a batch at a time (add_machines, add_governors, ...: the ROS recorder's batches, or
+`record_run`'s pieces of a monolithic or co-simulated run), or one by one. Times are whole nanoseconds of SIMULATED
+time on the duration timeline `sim_time`. Scalar samples are only appended to lists; `flush()` sends them as
+columns. The animation is decimated to `animation_rate` frames per second of simulated time. Rerun's 2-D views have
+y pointing down, so the drawings (y up, mechanisms.drawing and governors.drawing) are flipped on the way in.
 
 Only what the scene has is recorded and shown: a throttle, a governor and a set point only with a governor,
 the driven part's speed omega_driven with a coupling or a clutch, the coupling's twist with a coupling, the
@@ -106,7 +106,7 @@ class RunRecording:
             raise ValueError(f"animation_rate = {animation_rate} Hz; expected a positive rate")
         self.model = model
         self.outside_throttle = outside_throttle and model.governor is None  # a throttle without a governor: a
-        # controller's outside the model (add_throttle), recorded and shown
+        # controller's outside the model (add_throttles), recorded and shown
         self._lock = threading.Lock()
         self._closed = False
         self._frame_period_ns = max(1, round(NANOSECONDS / animation_rate))
@@ -123,6 +123,11 @@ class RunRecording:
         self._set_point = model.governor.set_speed() if model.governor is not None else math.nan
         # a governor without a set speed (NaN: a direct one's) settles where the load puts it: its operating point
         self._set_point_follows_load = model.governor is not None and math.isnan(self._set_point)
+        if self._set_point_follows_load:  # the loads the scene holds, computed before the samples come (the ROS
+            # recorder's: before the run starts), ~30 ms of CPU each
+            held = [model.external_load(piece.start) for piece in model.load_pieces if not piece.slope]
+            for load in dict.fromkeys([model.external_load(0.0), *held]):
+                self._set_points[load] = operating_point(model, load).speed
         self._series: dict[str, tuple[list[int], list[float]]] = {  # entity -> (times [ns], values)
             entity: ([], []) for entity in recorded_series(model, self.outside_throttle)
         }
@@ -151,101 +156,139 @@ class RunRecording:
     # ---------------------------------------------------------------------------------------------
     # Samples
 
-    def add_machine(self, t_ns: int, phi: float, omega: float, driven: dict[str, float] | None = None) -> None:
-        """A sample of the machine at t_ns [ns]: crank angle phi [rad] and speed omega [rad/s] and, behind a
-        coupling or a clutch, the driven part's `omega_driven` [rad/s] and a coupling's `twist` = phi -
-        phi_driven [rad] (driven; other keys are ignored). Also the set point and band at that time and, when
-        a frame is due, the mechanism's picture (a driven part's mechanism only when the twist is given)."""
+    def add_machines(
+        self,
+        times: np.ndarray,
+        phi: np.ndarray,
+        omega: np.ndarray,
+        driven: dict[str, np.ndarray] | None = None,
+        set_point_loads: np.ndarray | None = None,
+    ) -> None:
+        """Samples of the machine at `times` [ns] (int64, in order): crank angle phi [rad] and speed omega [rad/s]
+        and, behind a coupling or a clutch, the driven part's `omega_driven` [rad/s] and a coupling's `twist` = phi -
+        phi_driven [rad] (driven, each an array over the times; other keys are ignored). Also the set point and band
+        at each time (a direct governor's at the external load [N m] in force there, `set_point_loads`; None: the
+        latest add_external_loads gave) and, when a frame is due, the mechanism's picture (a driven part's mechanism
+        only when the twist is given)."""
         with self._lock:
-            if self._closed:
+            if self._closed or not times.size:
                 return
             driven = driven or {}
-            self._last_machine_ns = t_ns
-            self._append("speed/omega", t_ns, omega)
+            stamps = times.tolist()
+            self._last_machine_ns = stamps[-1]
+            self._extend("speed/omega", times, omega)
             if "omega_driven" in driven and self.model.driven is not None:
-                self._append("speed/driven", t_ns, driven["omega_driven"])
+                self._extend("speed/driven", times, driven["omega_driven"])
             if "twist" in driven and self.model.coupling is not None:
-                self._append("coupling/twist", t_ns, MILLIRADIANS * driven["twist"])
-            set_point = self._current_set_point(t_ns)
-            if math.isfinite(set_point):
-                self._append("speed/set_point", t_ns, set_point)
-                self._append("speed/band_high", t_ns, set_point * (1.0 + 0.5 * self._delta))
-                self._append("speed/band_low", t_ns, set_point * (1.0 - 0.5 * self._delta))
-            self._phi = phi
+                self._extend("coupling/twist", times, MILLIRADIANS * driven["twist"])
+            loads = set_point_loads.tolist() if set_point_loads is not None else [self._external_load] * len(stamps)
+            set_points = np.array([self._current_set_point(when, load) for when, load in zip(stamps, loads)])
+            shown = np.isfinite(set_points)
+            if shown.any():
+                self._extend("speed/set_point", times[shown], set_points[shown])
+                self._extend("speed/band_high", times[shown], set_points[shown] * (1.0 + 0.5 * self._delta))
+                self._extend("speed/band_low", times[shown], set_points[shown] * (1.0 - 0.5 * self._delta))
+            self._phi = float(phi[-1])
             if self._drawn_driven and "twist" not in driven:
                 return
-            frame = t_ns // self._frame_period_ns
-            if frame != self._mechanism_frame:
-                self._mechanism_frame = frame
-                angle = phi - driven["twist"] if self._drawn_driven else phi
-                self._add_frame(
-                    "mechanism",
-                    t_ns,
-                    mechanism_outline(self._drawing, angle),
-                    MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)],
-                )
+            angles = (phi - driven["twist"] if self._drawn_driven else phi).tolist()
+            outline_kind = MECHANISM_MOVING_PARTS[mechanism_kind(self._drawing)]
+            for row in self._frames_due(times, "_mechanism_frame"):
+                self._add_frame("mechanism", stamps[row], mechanism_outline(self._drawing, angles[row]), outline_kind)
 
-    def add_moments(self, t_ns: int, drive: float, resistance: float, external: float, net: float) -> None:
-        """Moments on the crank [N m] at t_ns [ns]: the drive as applied (throttle included), the machine's
-        resisting moments (loads, link weight, what a coupling or clutch takes; not the external load), the
-        external moment (minus the external load; not recorded behind a coupling or a clutch, where the load acts
-        on the driven part) and their sum, the net moment J epsilon + 1/2 J' omega^2."""
+    def add_machine(self, t_ns: int, phi: float, omega: float, driven: dict[str, float] | None = None) -> None:
+        """One sample of the machine at t_ns [ns] (add_machines), its set point at the latest external load."""
+        self.add_machines(
+            np.array([t_ns]),
+            np.array([phi]),
+            np.array([omega]),
+            {key: np.array([value]) for key, value in (driven or {}).items()},
+        )
+
+    @property
+    def external_load(self) -> float:
+        """The external load [N m] given last (add_external_loads; at first the scene's at t = 0), in force until the
+        next."""
+        return self._external_load
+
+    def add_moments(
+        self, times: np.ndarray, drive: np.ndarray, resistance: np.ndarray, external: np.ndarray, net: np.ndarray
+    ) -> None:
+        """Moments on the crank [N m] at `times` [ns] (int64, in order), each an array over the times: the drive as
+        applied (throttle included), the machine's resisting moments (loads, link weight, what a coupling or clutch
+        takes; not the external load), the external moment (minus the external load; not recorded behind a coupling
+        or a clutch, where the load acts on the driven part) and their sum, the net moment J epsilon + 1/2 J'
+        omega^2."""
         with self._lock:
             if self._closed:
                 return
-            for entity, value in (
+            for entity, values in (
                 ("moments/drive", drive),
                 ("moments/resistance", resistance),
                 ("moments/external", external),
                 ("moments/net", net),
             ):
                 if entity in self._series:
-                    self._append(entity, t_ns, value)
+                    self._extend(entity, times, values)
+
+    def add_external_loads(self, times: np.ndarray, loads: np.ndarray) -> None:
+        """The external load [N m] (its magnitude, opposing motion) applied from each of `times` [ns] (int64, in
+        order) on, as samples: the latest sets a direct governor's set point (add_machines), and their changes become
+        events (see LoadChanges: a ramp over consecutive samples is one event with its start and end, a change at one
+        sample a step)."""
+        with self._lock:
+            if self._closed or not times.size:
+                return
+            for when, load in zip(times.tolist(), loads.tolist()):
+                for change, text in self._load_changes.sample(when, load):
+                    self._log_event(change, text)
+            self._external_load = float(loads[-1])
 
     def add_external_load(self, t_ns: int, load: float) -> None:
-        """The external load [N m] (its magnitude, opposing motion) applied from t_ns [ns] on, as a sample:
-        it sets a direct governor's set point, and its changes become events (see LoadChanges: a ramp over
-        consecutive samples is one event with its start and end, a change at one sample a step)."""
-        with self._lock:
-            if self._closed:
-                return
-            self._external_load = load
-            for when, text in self._load_changes.sample(t_ns, load):
-                self._log_event(when, text)
+        """The external load [N m] applied from t_ns [ns] on, one sample (add_external_loads)."""
+        self.add_external_loads(np.array([t_ns]), np.array([load]))
 
-    def add_governor(self, t_ns: int, values: dict[str, float]) -> None:
-        """A sample of the governor at t_ns [ns]: throttle [-] and its signal (governor_signal: a centrifugal
-        governor's sleeve [m], with arm_angle [rad], and with isodromic feedback feedback_shift [m]; a PI governor's
-        integral part [-]; other keys, such as an indirect governor's servo, which is its throttle, are ignored);
-        also a centrifugal governor's picture when a frame is due, its spindle at ratio * (the latest crank
-        angle)."""
+    def add_governors(
+        self, times: np.ndarray, values: dict[str, np.ndarray], crank_angles: np.ndarray | None = None
+    ) -> None:
+        """Samples of the governor at `times` [ns] (int64, in order), each value an array over the times: throttle [-]
+        and its signal (governor_signal: a centrifugal governor's sleeve [m], with arm_angle [rad], and with isodromic
+        feedback feedback_shift [m]; a PI governor's integral part [-]; other keys, such as an indirect governor's
+        servo, which is its throttle, are ignored); also a centrifugal governor's picture when a frame is due, its
+        spindle at ratio * the crank angle (`crank_angles` [rad] at each time; None: the latest machine sample's)."""
         with self._lock:
-            if self._closed:
+            if self._closed or not times.size:
                 return
             governor = self.model.governor
-            assert governor is not None, "add_governor records a governed model"
-            self._append("throttle", t_ns, values["throttle"])
+            assert governor is not None, "add_governors records a governed model"
+            self._extend("throttle", times, values["throttle"])
             entity, key, factor, _ = governor_signal(governor)
-            self._append(entity, t_ns, factor * values[key])
+            self._extend(entity, times, factor * values[key])
             if "feedback_shift" in values:
-                self._append("governor/feedback_shift", t_ns, MILLIMETRES * values["feedback_shift"])
-            frame = t_ns // self._frame_period_ns
+                self._extend("governor/feedback_shift", times, MILLIMETRES * values["feedback_shift"])
             sensor = governor.sensor
-            if sensor is not None and frame != self._governor_frame:
-                self._governor_frame = frame
+            if sensor is None:
+                return
+            stamps = times.tolist()
+            for row in self._frames_due(times, "_governor_frame"):
+                crank = self._phi if crank_angles is None else float(crank_angles[row])
                 self._add_frame(
                     "governor/drawing",
-                    t_ns,
-                    sensor.outline(values["arm_angle"], sensor.ratio * self._phi),
+                    stamps[row],
+                    sensor.outline(float(values["arm_angle"][row]), sensor.ratio * crank),
                     GOVERNOR_MOVING_PARTS,
                 )
 
-    def add_throttle(self, t_ns: int, throttle: float) -> None:
-        """The throttle [-] a controller outside the model applied from t_ns [ns] (outside_throttle; a governor's
-        comes with add_governor)."""
+    def add_governor(self, t_ns: int, values: dict[str, float]) -> None:
+        """One sample of the governor at t_ns [ns] (add_governors), its spindle at the latest crank angle."""
+        self.add_governors(np.array([t_ns]), {key: np.array([value]) for key, value in values.items()})
+
+    def add_throttles(self, times: np.ndarray, throttle: np.ndarray) -> None:
+        """The throttle [-] a controller outside the model applied from each of `times` [ns] (outside_throttle; a
+        governor's comes with add_governors)."""
         with self._lock:
             if not self._closed:
-                self._append("throttle", t_ns, throttle)
+                self._extend("throttle", times, throttle)
 
     def add_mode_change(self, t_ns: int, what: str) -> None:
         """A mode change at t_ns [ns] in the text log: the governor's (a stop reached, the sleeve sticking or
@@ -287,14 +330,25 @@ class RunRecording:
 
     # ---------------------------------------------------------------------------------------------
 
-    def _append(self, entity: str, t_ns: int, value: float) -> None:
-        """Buffer a sample of a series and widen the series' extent to it (a NaN or infinite one leaves it)."""
-        times, values = self._series[entity]
-        times.append(t_ns)
-        values.append(value)
-        if math.isfinite(value):
-            low, high = self._extents.get(entity, (value, value))
-            self._extents[entity] = (min(low, value), max(high, value))
+    def _extend(self, entity: str, times: np.ndarray, values: np.ndarray) -> None:
+        """Buffer samples of a series at `times` [ns] and widen the series' extent to them (NaN or infinite ones
+        leave it)."""
+        series_times, series_values = self._series[entity]
+        series_times.extend(times.tolist())
+        series_values.extend(values.tolist())
+        finite = values[np.isfinite(values)]
+        if finite.size:
+            lowest, highest = float(finite.min()), float(finite.max())
+            low, high = self._extents.get(entity, (lowest, highest))
+            self._extents[entity] = (min(low, lowest), max(high, highest))
+
+    def _frames_due(self, times: np.ndarray, latest: str) -> list[int]:
+        """The rows of `times` [ns] at which a frame of the animation is due (a new frame period begins, the first
+        against the frame of the attribute `latest`), which is then set to the last row's frame."""
+        frames = times // self._frame_period_ns
+        due = np.flatnonzero(frames != np.append(getattr(self, latest), frames[:-1]))
+        setattr(self, latest, int(frames[-1]))
+        return due.tolist()
 
     def _log_event(self, t_ns: int, text: str, level: str = "INFO") -> None:
         """Log a line of the text log at t_ns [ns] (the caller holds the lock)."""
@@ -327,12 +381,12 @@ class RunRecording:
         self._stream.send_columns(entity, indexes=[stamps], columns=columns)
         times.clear()
 
-    def _current_set_point(self, t_ns: int) -> float:
-        """omega_set [rad/s] at t_ns (see the module docstring); a direct governor's is recomputed when the
-        external load changed and SET_POINT_REFRESH_NS passed since the last time, and cached by load."""
+    def _current_set_point(self, t_ns: int, load: float) -> float:
+        """omega_set [rad/s] at t_ns with the external load `load` [N m] in force (see the module docstring); a
+        direct governor's is recomputed when the load changed and SET_POINT_REFRESH_NS passed since the last time,
+        and cached by load."""
         if not self._set_point_follows_load:
             return self._set_point
-        load = self._external_load
         if load != self._set_point_load and abs(t_ns - self._set_point_time) >= SET_POINT_REFRESH_NS:
             if load not in self._set_points:
                 self._set_points[load] = operating_point(self.model, load).speed
@@ -515,22 +569,28 @@ def record_run(
     recording = RunRecording(model, path=path)
     for time, what in mode_changes:
         recording.add_mode_change(int(round(time * NANOSECONDS)), what)
-    for i in range(count):
-        t_ns = int(stamps[i])
-        recording.add_external_load(t_ns, model.external_load(float(times[i])))
-        recording.add_machine(
-            t_ns,
-            float(columns["phi"][i]),
-            float(columns["omega"][i]),
-            {key: float(columns[key][i]) for key in driven_keys},
+    for start in range(0, count, RECORD_RUN_FLUSH_SAMPLES):
+        rows = slice(start, start + RECORD_RUN_FLUSH_SAMPLES)
+        loads = np.array([model.external_load(float(time)) for time in times[rows]])
+        recording.add_external_loads(stamps[rows], loads)
+        recording.add_machines(
+            stamps[rows],
+            columns["phi"][rows],
+            columns["omega"][rows],
+            {key: columns[key][rows] for key in driven_keys},
+            set_point_loads=loads,
         )
-        recording.add_moments(t_ns, *(float(moments[name][i]) for name in ("drive", "resistance", "external", "net")))
+        recording.add_moments(
+            stamps[rows], *(moments[name][rows] for name in ("drive", "resistance", "external", "net"))
+        )
         if governor_keys:
-            recording.add_governor(t_ns, {key: float(columns[key][i]) for key in governor_keys})
-        if (i + 1) % RECORD_RUN_FLUSH_SAMPLES == 0:
+            recording.add_governors(
+                stamps[rows], {key: columns[key][rows] for key in governor_keys}, crank_angles=columns["phi"][rows]
+            )
+        if stamps[rows].size == RECORD_RUN_FLUSH_SAMPLES:
             recording.flush()
             if progress is not None:
-                progress(float(times[i]))
+                progress(float(times[rows][-1]))
     recording.close(status, message)
     if progress is not None and count:
         progress(float(times[-1]))
