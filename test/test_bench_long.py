@@ -64,3 +64,17 @@ def test_bench_long_applies_set_to_every_row_and_refuses_what_the_rows_set(capsy
     assert "--set 'solver.path=reference': each row sets solver.path; choose it with --paths" in err
     code, out, err = run_cli(capsys, *options, "--set", "machine.flywheel.inertia=-1")
     assert code == 2 and out == "" and "machine.flywheel.inertia" in err
+
+
+def test_bench_long_shows_each_row_s_progress_on_stderr_in_a_log(capsys, monkeypatch):
+    # a row can run for an hour: its progress goes to stderr (here not a terminal: plain lines, one at every update
+    # with the interval 0), the table alone to stdout
+    monkeypatch.setenv("MECH_REGULATOR_PROGRESS_INTERVAL", "0")
+    options = ["--scenes", "lathe", "--paths", "fast", "--methods", "DOP853", "--modes", "simulate,cosim"]
+    code, out, err = run_cli(capsys, "bench", "long", *options, "--duration", "2")
+    assert code == 0, err
+    assert len(out.splitlines()) == 4 and "t = " not in out, out
+    for mode in ("simulate", "cosim"):
+        lines = [line for line in err.splitlines() if line.startswith(f"lathe fast DOP853 {mode}: ")]
+        assert len(lines) >= 2 and " t = " in lines[0] and "/ 2 s (" in lines[0], err  # as the run goes
+        assert lines[-1].startswith(f"lathe fast DOP853 {mode}: done: t = 2 / 2 s in "), err

@@ -50,15 +50,17 @@ class Row:
 
 class _Budget:
     """A progress callback that stops a run (KeyboardInterrupt, which the solvers end `interrupted` on) once its wall
-    time passes `seconds`, and remembers that it did."""
+    time passes `seconds`, and remembers that it did; else hands the simulated time t [s] on to `report`."""
 
-    def __init__(self, seconds: float):
-        self.deadline, self.spent = time.monotonic() + seconds, False
+    def __init__(self, seconds: float, report: Callable[[float], None] | None = None):
+        self.deadline, self.spent, self.report = time.monotonic() + seconds, False, report
 
     def __call__(self, t: float) -> None:
         if time.monotonic() > self.deadline:
             self.spent = True
             raise KeyboardInterrupt
+        if self.report is not None:
+            self.report(t)
 
 
 def matrix(
@@ -82,11 +84,19 @@ def matrix(
 
 
 def run_row(
-    scene: str, path: str, method: str, mode: str, duration: float, budget: float, overrides: tuple[str, ...] = ()
+    scene: str,
+    path: str,
+    method: str,
+    mode: str,
+    duration: float,
+    budget: float,
+    overrides: tuple[str, ...] = (),
+    progress: Callable[[float], None] | None = None,
 ) -> Row:
     """The row (scene, path, method, mode) run for `duration` [s] of simulated time within `budget` [s] of wall time,
     and again for the scene's own duration for its steady figures; overrides: `KEY=VALUE` scene changes (`--set`)
-    applied to both, before the row's path and method."""
+    applied to both, before the row's path and method; progress: called with the long run's simulated time [s] as it
+    goes (not the short run's)."""
     from mech_regulator.model import build_model
     from mech_regulator.scene import SceneError, load_scene
 
@@ -95,7 +105,7 @@ def run_row(
     try:
         model = build_model(load_scene(scene, settings + [f"scenario.duration={duration!r}"]))
         short = build_model(load_scene(scene, settings))
-        stopper = _Budget(budget)
+        stopper = _Budget(budget, progress)
         run = _run(model, mode, stopper)
     except SceneError as refusal:
         return Row(scene, path, method, mode, "refused", str(refusal), time.monotonic() - started)

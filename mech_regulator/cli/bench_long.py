@@ -65,8 +65,11 @@ def add_bench_long_command(benchmarks) -> None:
 
 
 def run_bench_long(args: argparse.Namespace) -> int:
-    """bench long: the rows asked for, each printed as it ends; 130 when interrupted (the rows so far printed)."""
+    """bench long: the rows asked for, each printed as it ends, each row's progress on stderr as it runs (a bar on a
+    terminal, a line every few seconds in a log: report.terminal.progress_bar); 130 when interrupted (the rows so far
+    printed)."""
     from mech_regulator.bench.long import METHODS, MODES, PATHS, format_header, format_row, matrix, run_row
+    from mech_regulator.cli.report.terminal import progress_bar
     from mech_regulator.scene import SceneError, bundled_scenes
     from mech_regulator.scene.limits import MAX_DURATION
 
@@ -91,7 +94,15 @@ def run_bench_long(args: argparse.Namespace) -> int:
     print(format_header(args.duration), flush=True)
     try:
         for row in rows:
-            print(format_row(run_row(*row, args.duration, args.budget, tuple(args.overrides))), flush=True)
+            with progress_bar(args.duration, False, " ".join(row)) as bar:
+                result = run_row(
+                    *row,
+                    args.duration,
+                    args.budget,
+                    tuple(args.overrides),
+                    lambda t: bar.update(min(t, args.duration) - bar.n),
+                )
+            print(format_row(result), flush=True)
     except KeyboardInterrupt:
         print("mech-regulator: interrupted; the rows above are what was measured", file=sys.stderr)
         return EXIT_INTERRUPTED
