@@ -1392,6 +1392,18 @@ def played_main_job(folder: Path, arguments: list, name: str) -> MainJob:
     return job
 
 
+@pytest.mark.skipif(not Path("/proc/self/autogroup").exists(), reason="the kernel has no autogroups")
+def test_a_node_s_own_session_keeps_the_niceness_it_was_started_with():
+    # `nice mech-regulator run`: each node is forked into a session of its own, an autogroup, between which the
+    # kernel shares the CPU before niceness counts inside one; the session gets the node's niceness
+    script = (
+        "import os; os.nice(7); os.setsid(); from mech_regulator.nodes.launch import keep_niceness_in_own_session; "
+        "keep_niceness_in_own_session(); print(open('/proc/self/autogroup').read())"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert out.strip().endswith("nice 7"), out
+
+
 def test_run_takes_a_domain_no_other_process_holds():
     # (once a cause of a failure: `run` without --domain-id took a random domain, one a test held at times)
     held = next_domain_id()  # held by this process until it ends, as a test's or another run's

@@ -709,11 +709,25 @@ class NodeProcess:
         self.process.kill()
 
 
+def keep_niceness_in_own_session() -> None:
+    """Give this process's session the process's niceness. A new session (os.setsid) is a new autogroup on Linux, and
+    the kernel shares the CPU between autogroups before niceness counts inside one: without this, `nice
+    mech-regulator run` would lower the launcher and not its nodes. Written to /proc/self/autogroup when the niceness
+    is above 0 (raising an autogroup's niceness needs no privilege); nothing where the kernel has no autogroups."""
+    niceness = os.getpriority(os.PRIO_PROCESS, 0)
+    if niceness > 0:
+        try:
+            Path("/proc/self/autogroup").write_text(str(niceness))
+        except OSError:  # no autogroups (the file missing, or refused)
+            pass
+
+
 def _node_main(name: str, parameter_file: Path, environment: dict[str, str], log_descriptor: int) -> None:
     """In a node's forked process: its own session, the launcher's death passed on (die_with_parent), its name
     (<name>_node, _name_process), output to the log, the run's environment and command line, then the node's main;
     its return value is the exit code."""
     os.setsid()
+    keep_niceness_in_own_session()
     die_with_parent()
     _name_process(f"{name}_node")
     os.dup2(log_descriptor, sys.stdout.fileno())
