@@ -63,6 +63,31 @@ def test_each_bundled_governor_goes_through_the_interface(name):
     assert len(governor.linear_guards(governor.initial_mode(y))) == len(governor.guards(governor.initial_mode(y)))
 
 
+@pytest.mark.parametrize("name", GOVERNED_SCENES)
+def test_a_governor_s_signals_of_one_state_are_those_of_the_same_state_among_many(name):
+    """signals(y) of one state (a node's every exchange) and of states along the last axis (the recording's columns)
+    are computed apart: for the sleeve z(a) and its velocity z' = dz/da a' they agree, and z' is the derivative of
+    z(a(t)) along a' (a central difference of the sleeve)."""
+    governor = build_model(load_scene(name)).governor
+    states = np.repeat(build_model(load_scene(name)).initial_state()[:, None], 3, axis=1)
+    states[2] += np.array([-0.05, 0.0, 0.05])  # a centrifugal governor's arm angle a [rad], a PI's integral part
+    if states.shape[0] > 3:
+        states[3] = np.array([0.3, -1.2, 2.0])  # the arm's rate a' [rad/s]
+    many = governor.signals(states)
+    for index in range(3):
+        one = governor.signals(states[:, index])
+        assert set(one) == set(many)
+        assert all(float(one[key]) == float(np.asarray(many[key])[index]) for key in one)
+    if "sleeve" in many:
+        step = 1e-6
+        moved = states.copy()
+        moved[2] += step * states[3]
+        back = states.copy()
+        back[2] -= step * states[3]
+        rate = (governor.signals(moved)["sleeve"] - governor.signals(back)["sleeve"]) / (2 * step)
+        assert np.allclose(many["sleeve_velocity"], rate, rtol=1e-6, atol=1e-12)
+
+
 def test_no_module_above_the_governors_reads_a_governor_s_kind():
     """The floors above governors/ (model, solvers, analysis, bench, viz, cli, nodes): the scene's schema below them
     holds the governor entries themselves (and checks the scenario's initial sleeve and servo against them)."""

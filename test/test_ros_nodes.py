@@ -156,33 +156,49 @@ def test_a_batch_carries_each_exchange_time_and_its_joints_in_order():
 
 
 def test_a_joint_message_is_built_once_per_layout_and_its_samples_read_back():
+    from rclpy.serialization import deserialize_message
+
     from mech_regulator.nodes.common import JointMessage, samples, sent_samples
+    from mech_regulator.nodes.wire import JointStateReader
 
     message = JointMessage()
     corrected = ([0.0, 0.01, 0.02], [100.0, 101.0, 102.5])
-    first = message.fill(
-        1_500_000_000, ("crank",), [1.0], [100.0], [3.0], (("crank_corrected", "velocity", corrected),)
-    )
+    first = deserialize_message(
+        message.fill(1_500_000_000, ("crank",), [1.0], [100.0], [3.0], (("crank_corrected", "velocity", corrected),)),
+        JointState,
+    )  # the bytes a node publishes: rclpy's own serialization of the message
+    codec = message.codec
     assert stamp_ns(first.header.stamp) == 1_500_000_000 and list(first.name) == ["crank"] + ["crank_corrected"] * 3
     assert list(first.effort) == [3.0, *corrected[0]] and list(first.velocity) == [100.0, *corrected[1]]
     assert all(math.isnan(value) for value in first.position[1:])
     again = ([0.02, 0.03, 0.04], [102.5, 103.0, 104.0])
-    second = message.fill(2_000_000, ("crank",), [2.0], [102.5], [4.0], (("crank_corrected", "velocity", again),))
-    assert second is first and stamp_ns(second.header.stamp) == 2_000_000  # the same layout: refilled in place
-    assert samples(second, "crank_corrected", "velocity") == again and list(second.position[:1]) == [2.0]
-    third = message.fill(4_000_000, ("crank",), [3.0], [104.0], [5.0], (("crank_corrected", "velocity", None),))
-    assert third is not first and list(third.name) == ["crank"]  # another layout: a new message
+    second = deserialize_message(
+        message.fill(2_000_000, ("crank",), [2.0], [102.5], [4.0], (("crank_corrected", "velocity", again),)),
+        JointState,
+    )
+    assert codec is not None and message.codec is codec  # the same layout: its bytes refilled in place
+    assert stamp_ns(second.header.stamp) == 2_000_000 and list(second.position[:1]) == [2.0]
+    assert samples(second, "crank_corrected", "velocity") == again
+    third = deserialize_message(
+        message.fill(4_000_000, ("crank",), [3.0], [104.0], [5.0], (("crank_corrected", "velocity", None),)),
+        JointState,
+    )
+    assert message.codec is not codec and list(third.name) == ["crank"]  # another layout: a new message
     assert samples(third, "crank_corrected", "velocity") is None and sent_samples(third, "x", "position", 0, 1) is None
     for times, values in (([0.0, 0.0, 0.1], [1.0, 2.0, 3.0]), ([0.0, 0.1, 0.2], [1.0, math.nan, 3.0]), ([0.0], [1.0])):
-        bad = JointMessage().fill(
-            0, ("throttle",), [0.5], [math.nan], [math.nan], (("tentative", "position", (times, values)),)
+        bad = JointStateReader()(
+            JointMessage().fill(
+                0, ("throttle",), [0.5], [math.nan], [math.nan], (("tentative", "position", (times, values)),)
+            )
         )
         assert samples(bad, "tentative", "position") is None
         with pytest.raises(BadMessage, match="bad samples"):
             sent_samples(bad, "tentative", "position", 0.0, 1.0)
     short = JointState(name=["tentative", "tentative"], position=[0.5, 0.6])  # no efforts: no sample times
     assert samples(short, "tentative", "position") is None
-    beyond = JointMessage().fill(0, (), [], [], [], (("tentative", "position", ([0.0, 0.1], [0.5, 1.5])),))
+    beyond = JointStateReader()(
+        JointMessage().fill(0, (), [], [], [], (("tentative", "position", ([0.0, 0.1], [0.5, 1.5])),))
+    )
     with pytest.raises(BadMessage, match="within"):
         sent_samples(beyond, "tentative", "position", 0.0, 1.0)
 
@@ -194,10 +210,13 @@ def test_the_speed_s_action_on_the_throttle_is_read_from_the_governor_s_answer_a
     from mech_regulator.nodes.common import JointMessage
     from mech_regulator.nodes.governor import ACTION_JOINTS
     from mech_regulator.nodes.machine_exchange import MAX_THROTTLE_PER_SPEED, speed_action
+    from mech_regulator.nodes.wire import JointStateReader
     from mech_regulator.solvers.cosim import SpeedAction
 
     def answer(joints, positions):
-        message = JointMessage().fill(0, joints, positions, [math.nan] * len(joints), [math.nan] * len(joints))
+        message = JointStateReader()(
+            JointMessage().fill(0, joints, positions, [math.nan] * len(joints), [math.nan] * len(joints))
+        )
         return speed_action(message, list(message.name))
 
     assert answer(ACTION_JOINTS, [1.0, 1.27, -3.0 / 224.0]) == SpeedAction(1.27, -3.0 / 224.0)

@@ -47,6 +47,7 @@ from mech_regulator.nodes.trust import (
     json_message,
     receive,
 )
+from mech_regulator.nodes.wire import FIELDS, JointStateCodec
 from mech_regulator.scene import SceneError, load_scene
 from mech_regulator.solvers import on_path_for_a_command
 from mech_regulator.solvers.cosim import (
@@ -328,22 +329,24 @@ def exchange_tolerance_parameter(node: Node) -> float | None:
     return tolerance or None
 
 
-FIELDS = ("position", "velocity", "effort")  # a sensor_msgs/JointState's arrays, one entry per name each
-
-
 class JointMessage:
     """A sensor_msgs/JointState built once and refilled at every exchange, for what a node publishes on the lockstep's
-    critical path (the machine's joint_states, the governor's throttle): as long as the layout (the joints, and how
-    many samples each signal has) is the exchange before's, `fill` writes the numbers into the message's arrays in
-    place (numpy views on them), no new message nor array; a new layout builds a new message. A signal's samples
-    over an exchange step (times [s], values; solvers.cosim.Samples) are entries of its joint, one per sample: the
-    value in its field ('position' or 'velocity'), the sample's time in effort, NaN in the other field (`samples`
-    reads them back)."""
+    critical path (the machine's joint_states, the governor's throttle), sent as its serialized bytes
+    (wire.JointStateCodec): as long as the layout (the joints, and how many samples each signal has) is the exchange
+    before's, `fill` writes the stamp and the numbers into the bytes in place (numpy views on them), no new message nor
+    array, and rclpy publishes the bytes without converting the names; a new layout builds a new message. (A layout
+    whose codec cannot be found is filled into the JointState itself and published as one.) A signal's samples over an
+    exchange step (times [s], values; solvers.cosim.Samples) are entries of its joint, one per sample: the value in its
+    field ('position' or 'velocity'), the sample's time in effort, NaN in the other field (`samples` reads them
+    back)."""
 
     def __init__(self) -> None:
         self.layout: tuple | None = None
-        self.message = JointState()
-        self.arrays: dict[str, np.ndarray] = {}  # field -> a view on the message's array of that field
+        self.joint_state = JointState()
+        self.codec: JointStateCodec | None = None
+        self.buffer = bytearray()  # the codec's template with this exchange's stamp and numbers
+        self.message: JointState | bytes = self.joint_state  # what fill gave last, to publish
+        self.arrays: dict[str, np.ndarray] = {}  # field -> a view on that field's numbers (in buffer, or joint_state)
         self.spans: list[tuple[str, slice]] = []  # each signal's field and its entries
 
     def fill(
@@ -354,9 +357,10 @@ class JointMessage:
         velocities: list[float],
         efforts: list[float],
         signals: tuple[tuple[str, str, Samples | None], ...] = (),
-    ) -> JointState:
+    ) -> JointState | bytes:
         """The message stamped `when` [ns] with the joints `names` (one entry each: positions, velocities, efforts),
-        then the samples of each signal (joint, field, samples; none when samples is None)."""
+        then the samples of each signal (joint, field, samples; none when samples is None): its bytes, or the
+        JointState for a layout without a codec."""
         layout = (
             names,
             tuple((joint, field, 0 if found is None else len(found[0])) for joint, field, found in signals),
@@ -369,18 +373,28 @@ class JointMessage:
             if found is not None:
                 self.arrays[field][span] = found[1]
                 self.arrays["effort"][span] = found[0]
-        header_stamp = self.message.header.stamp
-        header_stamp.sec, header_stamp.nanosec = divmod(when, NANOSECONDS)
+        sec, nanosec = divmod(when, NANOSECONDS)
+        if self.codec is None:
+            self.joint_state.header.stamp.sec, self.joint_state.header.stamp.nanosec = sec, nanosec
+            self.message = self.joint_state
+        else:
+            self.codec.write(self.buffer, sec, nanosec)
+            self.message = bytes(self.buffer)
         return self.message
 
     def build(self, layout: tuple) -> None:
-        """A new message for `layout` (fill's), the other field of each signal's entries NaN."""
+        """A new message for `layout` (fill's), the other field of each signal's entries NaN, and its codec."""
         names, counts = layout
-        self.message = JointState(name=[*names, *(joint for joint, _, count in counts for _ in range(count))])
-        size = len(self.message.name)
+        self.joint_state = JointState(name=[*names, *(joint for joint, _, count in counts for _ in range(count))])
+        size = len(self.joint_state.name)
         for field in FIELDS:
-            setattr(self.message, field, array.array("d", bytes(8 * size)))
-        self.arrays = {field: np.frombuffer(getattr(self.message, field), dtype=np.float64) for field in FIELDS}
+            setattr(self.joint_state, field, array.array("d", bytes(8 * size)))
+        self.codec = JointStateCodec.of(self.joint_state)
+        if self.codec is None:
+            self.arrays = {field: np.frombuffer(getattr(self.joint_state, field), dtype=np.float64) for field in FIELDS}
+        else:
+            self.buffer = bytearray(self.codec.template)
+            self.arrays = self.codec.arrays(self.buffer)
         self.spans, start = [], len(names)
         for _, field, count in counts:
             span = slice(start, start + count)

@@ -67,6 +67,7 @@ from mech_regulator.nodes.trust import (
     receive,
     stamp_of,
 )
+from mech_regulator.nodes.wire import JointStateReader
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import GovernorStepper, seconds
 
@@ -101,7 +102,16 @@ class GovernorNode(SteadyNode):
         self.states = Batch(self.create_publisher(JointState, "governor/state", BATCH_QOS), self.get_logger().warning)
         self.events_publisher = self.create_publisher(String, "governor/events", STATE_QOS)
         self.diagnostics_publisher = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        receive(self, JointState, "joint_states", self.on_joint_states, COMMAND_QOS, self.refusals, self.speakers)
+        receive(
+            self,
+            JointState,
+            "joint_states",
+            self.on_joint_states,
+            COMMAND_QOS,
+            self.refusals,
+            self.speakers,
+            reader=JointStateReader(),  # the critical path's message as bytes (wire)
+        )
         self.create_timer(DIAGNOSTICS_PERIOD, self.report)
         follow_run_state(self, self.on_run_state, self.refusals, self.speakers)
 

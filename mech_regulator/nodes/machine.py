@@ -106,6 +106,7 @@ from mech_regulator.nodes.trust import (
     receive,
     stamp_of,
 )
+from mech_regulator.nodes.wire import JointStateReader
 from mech_regulator.scene import SceneError
 from mech_regulator.solvers.cosim import MachineStepper, exchange_times_refusal, seconds, to_nanoseconds
 
@@ -306,6 +307,7 @@ class MachineNode(MachineExchange, SteadyNode):
                 self.refusals,
                 self.speakers,
                 pass_speaker=topic == "load_torque",  # (a load poked from outside: MachineExchange.on_load)
+                reader=JointStateReader() if topic == "throttle" else None,  # the critical path's answer as bytes
             )
         self.recorder_progress = receive(
             self, Header, "recorder/progress", self.on_recorder_progress, PROGRESS_QOS, self.refusals, self.speakers

@@ -311,12 +311,15 @@ def receive(
     speakers: Speakers | None = None,
     pass_speaker: bool = False,
     concerns: Callable[[object], bool] | None = None,
+    reader: Callable[[bytes], object] | None = None,
 ):
     """Subscribe `node` to `topic`: each message that `concerns` the node (default: all; a shared topic such as
     /diagnostics also carries others' messages, passed over) is checked for its speaker (speakers.check) and handed
     to `handle` (with the speaker's node name too when pass_speaker), which raises BadMessage to refuse it; a
     refusal is counted (refusals.refuse), any other error logged with its traceback and reported as a disturbance
-    that may alter the results. Nothing raises out of the callback.
+    that may alter the results. Nothing raises out of the callback. With a `reader` the subscription is raw (the
+    message's serialized bytes, rclpy converting nothing) and `reader` makes the message of them (wire.JointStateReader;
+    BadMessage for bytes it cannot read).
 
     rclpy 9.1's EventsExecutor calls a callback that takes message info with one argument, the (message, info)
     tuple, where the other executors pass them as two: the callback takes both forms (its signature says two, so
@@ -328,6 +331,8 @@ def receive(
             return
         try:
             speaker = speakers.check(topic, info) if speakers is not None else ""
+            if reader is not None:
+                message = reader(message)
             if pass_speaker:
                 handle(message, speaker)
             else:
@@ -347,7 +352,7 @@ def receive(
             inspect.Parameter("info", inspect.Parameter.POSITIONAL_ONLY),
         ]
     )
-    return node.create_subscription(message_type, topic, on_message, qos)
+    return node.create_subscription(message_type, topic, on_message, qos, raw=reader is not None)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
