@@ -387,8 +387,8 @@ class JointMessage:
         names, counts = layout
         self.joint_state = JointState(name=[*names, *(joint for joint, _, count in counts for _ in range(count))])
         size = len(self.joint_state.name)
-        for field in FIELDS:
-            setattr(self.joint_state, field, array.array("d", bytes(8 * size)))
+        for index, field in enumerate(FIELDS):  # distinct numbers, for the codec's check to find each in its place
+            setattr(self.joint_state, field, array.array("d", np.arange(size) + 0.5 + index * size))
         self.codec = JointStateCodec.of(self.joint_state)
         if self.codec is None:
             self.arrays = {field: np.frombuffer(getattr(self.joint_state, field), dtype=np.float64) for field in FIELDS}
