@@ -2,8 +2,9 @@
 `throttle`, both sensor_msgs/JointState of one layout exchange after exchange (the same joints, the same number of
 samples), only their stamp and numbers changing.
 
-rclpy converts every field of a message between Python and C on each publish and each take: for the machine's 70
-entries, 70 names as strings each way, though they never change. A JointStateCodec knows where a layout's stamp and
+rclpy converts every field of a message between Python and C on each publish and each take: for the machine's 38
+to 70 entries (the crank, the slider, the corrected and the predicted speed samples), a name as a string for each,
+each way, though they never change. A JointStateCodec knows where a layout's stamp and
 numbers lie in the message's serialized bytes (CDR, as rclpy's serialize_message writes them and the middleware
 carries them), so that a node publishes the bytes of its message with the numbers written in place (rclpy's
 Publisher.publish takes bytes), and a node reading a raw subscription (`raw=True`: the bytes as they came) reads a
